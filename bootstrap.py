@@ -1,0 +1,59 @@
+#!/usr/bin/env python3
+"""Set up a local virtualenv (.venv) with every dependency, then run the main job or the tests.
+
+    python3 bootstrap.py run      # the simulation on config/umbrella.yaml
+    python3 bootstrap.py test     # the test suite
+
+Needs only python3 (3.11); everything else comes from PyPI.  Idempotent: a venv whose
+requirements are unchanged is reused.
+"""
+import hashlib
+import os
+import subprocess
+import sys
+
+ROOT = os.path.dirname(os.path.abspath(__file__))
+VENV = os.environ.get("UMBRELLA_VENV", os.path.join(ROOT, ".venv"))
+PY = os.path.join(VENV, "bin", "python")
+
+
+def run(cmd, **kw):
+    print("+", " ".join(cmd), flush=True)
+    subprocess.run(cmd, check=True, **kw)
+
+
+def setup() -> None:
+    req = os.path.join(ROOT, "requirements.txt")
+    with open(req, "rb") as fh:
+        digest = hashlib.sha256(fh.read() + open(os.path.join(ROOT, "setup.py"), "rb").read()).hexdigest()
+    stamp = os.path.join(VENV, ".umbrella_sim-installed")
+    if os.path.exists(stamp) and open(stamp).read() == digest and os.path.exists(PY):
+        return
+    if not os.path.exists(PY):
+        run([sys.executable, "-m", "venv", VENV])
+    run([PY, "-m", "pip", "install", "--disable-pip-version-check", "-q", "--upgrade", "pip"])
+    run([PY, "-m", "pip", "install", "--disable-pip-version-check", "-q", "-r", req])
+    run([PY, "-m", "pip", "install", "--disable-pip-version-check", "-q", "--no-deps", "-e", ROOT])
+    with open(stamp, "w") as fh:
+        fh.write(digest)
+
+
+def main(argv) -> int:
+    if len(argv) < 1 or argv[0] not in ("run", "test", "setup"):
+        print(__doc__, file=sys.stderr)
+        return 2
+    setup()
+    env = dict(os.environ, AMENT_PREFIX_PATH=VENV)
+    if argv[0] == "run":
+        cmd = [PY, "-m", "umbrella_sim", "simulate", "--params",
+               os.path.join(ROOT, "config", "umbrella.yaml")] + argv[1:]
+    elif argv[0] == "test":
+        cmd = [PY, "-m", "pytest", "-q", os.path.join(ROOT, "tests")] + argv[1:]
+    else:
+        return 0
+    print("+", " ".join(cmd), flush=True)
+    return subprocess.call(cmd, cwd=ROOT, env=env)
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

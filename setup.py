@@ -1,0 +1,29 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "umbrella_sim"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["tests", "tests.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/msg_docs", glob("msg_docs/*.md")),
+    ],
+    install_requires=["setuptools", "numpy", "scipy", "PyYAML"],
+    zip_safe=True,
+    maintainer="umbrella_sim developers",
+    maintainer_email="dev@umbrella-sim.invalid",
+    description="Real-time flexible umbrella-frame deployment simulator (ROS 2 Jazzy)",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "umbrella-sim = umbrella_sim.cli:main",
+        ],
+    },
+)

@@ -1,0 +1,169 @@
+"""The flexible model: thesis numbers, energy balance, constraints, the lock, mesh convergence.
+
+Tolerances (stated in the closing note of the physics issue):
+  * deployment time, N = 1: within 0.5 % of Table 6.1 (0.09040 / 0.04525 / 0.02343 s);
+  * V0 = -0.2 stage-1 peak tip deflection within 3 % of 0.665 mm, its time within 5 ms of
+    0.08 s (the thesis reads it off a plot);
+  * stage-2 tip amplitude within 10 % of "about 60 mm", period within 10 % of "about 0.05 s".
+"""
+import math
+
+import numpy as np
+import pytest
+
+from umbrella_sim.model import ConstraintSet
+from umbrella_sim.outputs import energy_balance_error
+from umbrella_sim.params import UmbrellaParams
+from umbrella_sim.rigid import deployment_time_by_quadrature
+from umbrella_sim.solver import UmbrellaSimulator, simulate
+
+THESIS_DEFORMABLE = {-0.5: 0.09040, -1.0: 0.04525, -2.0: 0.02343}
+
+
+@pytest.fixture(scope="module")
+def thesis_run():
+    """V0 = -0.2, N = 1, energy lock, through the lock and 1 s of stage 2."""
+    p = UmbrellaParams(v0=-0.2)
+    r = simulate(p, 1.0 + 0.2259)
+    assert r.error is None
+    return r
+
+
+@pytest.mark.parametrize("v0", sorted(THESIS_DEFORMABLE))
+def test_deployment_time_matches_table_6_1(v0):
+    p = UmbrellaParams(v0=v0)
+    r = simulate(p, 0.2, stop_after_lock=0.0)
+    assert r.lock.time == pytest.approx(THESIS_DEFORMABLE[v0], rel=5e-3)
+    # deformation delays deployment: never earlier than the rigid mechanism
+    assert r.lock.time > deployment_time_by_quadrature(p)
+
+
+def test_three_and_six_element_models_agree_at_v0_minus_1():
+    times = [simulate(UmbrellaParams(v0=-1.0, elements_per_segment=n), 0.1,
+                      stop_after_lock=0.0).lock.time for n in (1, 2)]
+    for t in times:
+        assert t == pytest.approx(0.0452, abs=0.00005)   # the thesis: "0.0452 s" for both
+    # at the default step; the mesh-convergence test below checks 1e-4 at a fine step
+    assert times[0] == pytest.approx(times[1], rel=5e-4)
+
+
+def test_stage_one_tip_deflection(thesis_run):
+    s = thesis_run.summary()
+    assert s["tip_deflection_max"] == pytest.approx(0.665e-3, rel=0.03)
+    assert s["tip_deflection_max_time"] == pytest.approx(0.08, abs=0.005)
+
+
+def test_stage_two_vibration(thesis_run):
+    s = thesis_run.summary()
+    assert s["stage2_tip_amplitude"] == pytest.approx(0.060, rel=0.10)
+    assert s["stage2_tip_period"] == pytest.approx(0.05, rel=0.10)
+
+
+def test_peak_stresses_leaf_above_link(thesis_run):
+    """Fig. 6.3 / 6.5: the leaf carries the higher stress, its peak at O''."""
+    s = thesis_run.summary()
+    assert s["peak_stress_leaf"] > s["peak_stress_link"] > 0
+    assert s["peak_stress_leaf_x"] == pytest.approx(0.5, abs=1e-12)   # O'' = l1 along the leaf
+
+
+def test_energy_conserved_without_force(thesis_run):
+    """F_H = 0: total energy drifts < 1e-4 through stage 1 and 1 s of stage 2 (energy lock)."""
+    assert thesis_run.lock.kind == "energy"
+    assert thesis_run.samples[-1].time >= thesis_run.lock.time + 1.0 - 1e-9
+    assert thesis_run.summary()["energy_drift"] < 1e-4
+    e = np.array([s.kinetic_energy + s.strain_energy for s in thesis_run.samples])
+    assert np.abs(e - e[0]).max() / e[0] < 1e-4
+
+
+def test_constraint_residuals_over_one_second(thesis_run):
+    assert thesis_run.summary()["constraint_residual_max"] < 1e-10
+
+
+def test_energy_equals_work_with_force():
+    p = UmbrellaParams(v0=-0.2, sleeve_force=3.0)
+    r = simulate(p, 0.4)
+    assert r.error is None and r.lock is not None
+    err = energy_balance_error(r)
+    work = r.column("work")
+    assert work.max() > 0.1                              # the force did real work
+    assert np.abs(err).max() / (2.107 + work.max()) < 1e-4
+
+
+def test_lock_is_found_on_the_trajectory_not_at_the_next_step():
+    sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5))
+    while sim.lock_event is None:
+        sim.step()
+    t_lock = sim.lock_event.time
+    assert t_lock % sim.h > 1e-6          # not a grid point: the crossing was root-found
+    # re-run to the lock instant with a step ending exactly there: the sleeve is at S
+    sim2 = UmbrellaSimulator(UmbrellaParams(v0=-0.5))
+    k = int(t_lock / sim2.h)
+    sim2.advance_to(k * sim2.h, record=False)
+    s = sim2.engine.step(sim2.state, t_lock - k * sim2.h, 0.0, "deploying")
+    gap = sim2.model.sleeve_height(s.q) - sim2.model.y_stop
+    speed = abs(sim2.model.sleeve_height_gradient(s.q) @ s.qd)
+    assert abs(gap) / speed < 1e-9                      # crossing time error, seconds
+
+
+@pytest.mark.parametrize("lock", ["energy", "plastic"])
+def test_lock_velocity_redistribution(lock):
+    p = UmbrellaParams(v0=-0.5, lock=lock)
+    sim = UmbrellaSimulator(p)
+    out = []
+    while sim.lock_event is None:
+        out = sim.step()
+    ev = sim.lock_event
+    locked_sample = out[0]
+    m = sim.model
+    cs = ConstraintSet(locked=True, rigid=False)
+    assert np.abs(m.constraint_jacobian(locked_sample.q, cs) @ locked_sample.qd).max() < 1e-12
+    assert abs(locked_sample.sleeve_velocity) < 1e-12
+    if lock == "energy":
+        assert ev.energy_after == pytest.approx(ev.energy_before, rel=1e-12)
+        assert set(ev.free_velocities) == {"alpha1", "alpha2", "R2x", "R2y", "link.u1"}
+    else:
+        assert ev.energy_after < ev.energy_before
+    # after the lock the sleeve stays at S and a force has no effect on the motion
+    sim.set_sleeve_force(50.0)
+    sim.advance_to(sim.time + 0.05)
+    y = sim.model.sleeve_height(sim.state.q)
+    assert y == pytest.approx(sim.model.y_stop, abs=1e-12)
+
+
+def test_mesh_convergence_of_deployment_time_and_period():
+    """N = 1, 2, 4, 8 (small step to isolate the spatial error)."""
+    deploy, period = {}, {}
+    for n in (1, 2, 4, 8):
+        deploy[n] = simulate(UmbrellaParams(v0=-1.0, elements_per_segment=n, time_step=2.5e-4),
+                             0.1, stop_after_lock=0.0).lock.time
+        r = simulate(UmbrellaParams(v0=-0.2, elements_per_segment=n, time_step=5e-4),
+                     0.6, stop_after_lock=0.35)
+        period[n] = r.summary()["stage2_tip_period"]
+    for n in (1, 2, 4):
+        assert deploy[n] == pytest.approx(deploy[8], rel=1e-4)
+        assert period[n] == pytest.approx(period[8], rel=5e-3)
+    assert abs(period[4] - period[8]) < abs(period[1] - period[8])
+
+
+def test_time_step_convergence():
+    """The default step's error in the thesis figures is small against the tolerances."""
+    fine = simulate(UmbrellaParams(v0=-0.2, time_step=2.5e-4), 0.6).summary()
+    coarse = simulate(UmbrellaParams(v0=-0.2), 0.6).summary()
+    assert coarse["deploy_time"] == pytest.approx(fine["deploy_time"], rel=1e-5)
+    assert coarse["tip_deflection_max"] == pytest.approx(fine["tip_deflection_max"], rel=0.01)
+    assert coarse["stage2_tip_period"] == pytest.approx(fine["stage2_tip_period"], rel=0.01)
+    assert coarse["stage2_tip_amplitude"] == pytest.approx(fine["stage2_tip_amplitude"], rel=0.03)
+
+
+def test_stress_recovery_sign_and_fibres():
+    """Top and bottom fibres carry u' -/+ c v'': their mean is the axial stress E u'."""
+    r = simulate(UmbrellaParams(v0=-0.5), 0.05)
+    s = r.samples[-1]
+    top, bottom = s.leaf_stress
+    mean = 0.5 * (top + bottom)
+    m = UmbrellaSimulator(UmbrellaParams()).model
+    e = s.q[m.s_leaf]
+    # axial stress of the element O-O'' from its end displacements
+    u_joint = e[m.leaf.elastic_index(1, "u")]
+    assert mean[0] == pytest.approx(72e9 * u_joint / 0.5, rel=1e-9)
+    assert s.peak_stress_leaf == pytest.approx(np.abs(s.leaf_stress).max())

@@ -1,0 +1,155 @@
+"""Offline command line: ``umbrella-sim simulate`` (also ``python -m umbrella_sim``)."""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import sys
+
+from . import __version__
+from .params import NODE_ONLY_PARAMS, UmbrellaParams, load_params_file
+from .solver import simulate, validate_force
+
+
+def default_params_file() -> str | None:
+    """config/umbrella.yaml of a source checkout, or of the installed share/ directory."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    candidates = [os.path.join(here, "..", "config", "umbrella.yaml"),
+                  os.path.join(sys.prefix, "share", "umbrella_sim", "config", "umbrella.yaml")]
+    for path in candidates:
+        if os.path.isfile(path):
+            return os.path.normpath(path)
+    return None
+
+
+def read_force_profile(path: str) -> list[tuple[float, float]]:
+    """CSV of (t, F) rows, an optional header line; times non-decreasing, F >= 0."""
+    rows: list[tuple[float, float]] = []
+    try:
+        fh = open(path, newline="", encoding="utf-8")
+    except OSError as exc:
+        raise ValueError(f"force profile {path}: {exc.strerror}") from None
+    with fh:
+        for lineno, row in enumerate(csv.reader(fh), start=1):
+            if not row or row[0].strip().startswith("#"):
+                continue
+            if len(row) < 2:
+                raise ValueError(f"force profile {path}:{lineno}: expected two columns t,F")
+            try:
+                t, f = float(row[0]), float(row[1])
+            except ValueError:
+                if lineno == 1:
+                    continue  # header
+                raise ValueError(f"force profile {path}:{lineno}: not numbers: {row[:2]}") from None
+            if not math.isfinite(t) or t < 0.0:
+                raise ValueError(f"force profile {path}:{lineno}: time {t} must be finite and >= 0")
+            if rows and t < rows[-1][0]:
+                raise ValueError(f"force profile {path}:{lineno}: time {t} goes backwards")
+            try:
+                validate_force(f)
+            except ValueError as exc:
+                raise ValueError(f"force profile {path}:{lineno}: {exc}") from None
+            rows.append((t, f))
+    if not rows:
+        raise ValueError(f"force profile {path}: no (t, F) rows")
+    return rows
+
+
+def build_params(args) -> UmbrellaParams:
+    values: dict = {}
+    params_file = args.params or default_params_file()
+    if params_file:
+        values.update(load_params_file(params_file))
+    for item in args.set or []:
+        if "=" not in item:
+            raise ValueError(f"--set {item!r}: expected name=value")
+        name, value = item.split("=", 1)
+        values[name.strip()] = value.strip()
+    for name in NODE_ONLY_PARAMS:
+        values.pop(name, None)
+    for flag, name in (("model", "model"), ("elements_per_segment", "elements_per_segment"),
+                       ("v0", "v0"), ("force", "sleeve_force"), ("lock", "lock"),
+                       ("time_step", "time_step")):
+        if getattr(args, flag) is not None:
+            values[name] = getattr(args, flag)
+    return UmbrellaParams.from_mapping(values).validated()
+
+
+class Progress:
+    def __init__(self, duration: float, stream=sys.stderr):
+        self.duration = duration
+        self.stream = stream
+
+    def __call__(self, t: float) -> None:
+        frac = min(1.0, t / self.duration) if self.duration > 0 else 1.0
+        bar = "#" * int(30 * frac)
+        self.stream.write(f"\r[{bar:<30}] {100 * frac:5.1f}%  t = {t:.3f} s")
+        self.stream.flush()
+
+    def close(self) -> None:
+        self.stream.write("\n")
+
+
+def make_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="umbrella-sim",
+                                 description="Flexible umbrella-frame deployment simulator.")
+    ap.add_argument("--version", action="version", version=f"umbrella_sim {__version__}")
+    sub = ap.add_subparsers(dest="command", required=True)
+    sp = sub.add_parser("simulate", help="run one simulation offline",
+                        description="Run the physics core offline and report the result. "
+                                    "Units SI (m, s, N, Pa, rad).")
+    sp.add_argument("--params", metavar="FILE",
+                    help="ROS 2 params YAML (default: config/umbrella.yaml)")
+    sp.add_argument("--set", action="append", metavar="NAME=VALUE",
+                    help="override one parameter (repeatable)")
+    sp.add_argument("--model", choices=["flexible", "rigid-fe", "rigid"])
+    sp.add_argument("--elements-per-segment", type=int, dest="elements_per_segment")
+    sp.add_argument("--v0", type=float, help="initial sleeve velocity along Y (m/s)")
+    force = sp.add_mutually_exclusive_group()
+    force.add_argument("--force", type=float, help="constant sleeve force F_H >= 0 (N)")
+    force.add_argument("--force-profile", metavar="CSV",
+                       help="CSV of t,F rows: F_H held from each t until the next")
+    sp.add_argument("--lock", choices=["energy", "plastic"])
+    sp.add_argument("--time-step", type=float, dest="time_step", help="physics step (s)")
+    sp.add_argument("--duration", type=float, default=1.0, help="simulated time (s)")
+    sp.add_argument("--csv", metavar="FILE", help="write the time series")
+    sp.add_argument("--csv-state", action="store_true", help="add q and qd to the CSV")
+    sp.add_argument("--json", action="store_true", help="print one JSON summary")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = make_parser()
+    args = ap.parse_args(argv)
+    try:
+        params = build_params(args)
+        profile = read_force_profile(args.force_profile) if args.force_profile else None
+        if not (math.isfinite(args.duration) and args.duration > 0):
+            raise ValueError(f"--duration {args.duration}: must be > 0")
+        if args.csv and os.path.exists(args.csv):
+            raise ValueError(f"--csv {args.csv}: file exists, not overwriting")
+    except ValueError as exc:
+        ap.exit(2, f"umbrella-sim: error: {exc}\n")
+    progress = Progress(args.duration) if sys.stderr.isatty() and not args.json else None
+    result = simulate(params, args.duration, force_profile=profile, progress=progress)
+    if progress:
+        progress.close()
+    if args.csv:
+        result.write_csv(args.csv, with_state=args.csv_state)
+    summary = result.summary()
+    if args.json:
+        print(json.dumps(summary, indent=2, sort_keys=True))
+    else:
+        for key in sorted(summary):
+            print(f"{key:28s} {summary[key]}")
+    if result.error:
+        print(f"umbrella-sim: error: {result.error} (kept {len(result.samples)} samples"
+              + (f" in {args.csv}" if args.csv else "") + ")", file=sys.stderr)
+        return 3
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

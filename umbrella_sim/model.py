@@ -1,0 +1,492 @@
+"""Floating-frame finite-element model of the planar leaf + link umbrella frame.
+
+Model layer: parameters -> geometry, mesh, constant shape-function integrals, and the
+state-dependent matrices of the constrained Lagrangian DAE (thesis ch. 3-4)
+
+    M(q) q'' + K q = Qv(q, q') + Qe(q, F_H) + J(q)^T lambda,     Phi(q) = 0      (4.87)
+
+Generalised coordinates (3.25), generalised to N elements per segment:
+
+    q = [alpha1, e_leaf (6N), R2x, R2y, alpha2, e_link (3N)]
+
+The leaf frame has its origin at O and its X' axis through O'' (u = v = 0 at O, v = 0 at O''),
+the link frame its origin at O'' and its X'' axis through H (u = v = 0 at O'', v = 0 at H)
+(3.9, 3.13).  Every matrix is derived from its definition (M = int rho C^T C dx, Eq. 4.7;
+K from Eq. 4.37) by exact Gauss quadrature of the Hermite/linear shape functions, so none of
+the printed errata of the thesis enters.  Nothing here imports rclpy.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .params import UmbrellaParams
+
+DEFORMING, LOCKED = "deploying", "locked"
+_GAUSS_ETA, _GAUSS_W = np.polynomial.legendre.leggauss(5)  # exact to degree 9
+_GAUSS_ETA = 0.5 * (_GAUSS_ETA + 1.0)
+_GAUSS_W = 0.5 * _GAUSS_W
+_DOF = {"u": 0, "v": 1, "theta": 2}
+
+
+def _cos_sin(alpha):
+    if isinstance(alpha, complex) or np.iscomplexobj(alpha):
+        return np.cos(alpha), np.sin(alpha)
+    return math.cos(alpha), math.sin(alpha)
+
+
+def rotation(alpha):
+    """[A] of Eq. 3.6 (works for complex alpha, for complex-step tests)."""
+    c, s = np.cos(alpha), np.sin(alpha)
+    return np.array([[c, -s], [s, c]])
+
+
+def shape_functions(eta: np.ndarray, le: float):
+    """[N] (3.4), d[N]/dx and d2[N]/dx2 (corrected Eq. 5.40) at local coordinates eta.
+
+    Returns three arrays of shape (len(eta), 2, 6), element dofs (u_i v_i th_i u_j v_j th_j).
+    """
+    eta = np.asarray(eta, dtype=float)
+    z = np.zeros_like(eta)
+    one = np.ones_like(eta)
+    n = np.stack([
+        np.stack([1 - eta, z, z, eta, z, z], -1),
+        np.stack([z, 1 - 3 * eta**2 + 2 * eta**3, le * (eta - 2 * eta**2 + eta**3),
+                  z, 3 * eta**2 - 2 * eta**3, le * (eta**3 - eta**2)], -1)], -2)
+    dn = np.stack([
+        np.stack([-one / le, z, z, one / le, z, z], -1),
+        np.stack([z, (-6 * eta + 6 * eta**2) / le, 1 - 4 * eta + 3 * eta**2,
+                  z, (6 * eta - 6 * eta**2) / le, 3 * eta**2 - 2 * eta], -1)], -2)
+    d2n = np.stack([
+        np.stack([z, z, z, z, z, z], -1),
+        np.stack([z, (-6 + 12 * eta) / le**2, (-4 + 6 * eta) / le,
+                  z, (6 - 12 * eta) / le**2, (6 * eta - 2) / le], -1)], -2)
+    return n, dn, d2n
+
+
+class BeamBody:
+    """One Euler-Bernoulli body in its floating frame: mesh, invariants, stiffness, stress.
+
+    segments: [(length, n_elements), ...] laid end to end from the frame origin;
+    fixed: [(node, 'u'|'v'|'theta'), ...] nodal coordinates removed by the frame choice.
+    The elastic coordinates e are the remaining nodal (u, v, theta), node by node.
+    """
+
+    def __init__(self, name: str, segments, fixed, mass_per_length: float, ea: float, ei: float,
+                 youngs_modulus: float, fibre: float):
+        self.name = name
+        lengths = [seg_len / n for seg_len, n in segments for _ in range(n)]
+        self.element_length = np.array(lengths)
+        self.node_x = np.concatenate([[0.0], np.cumsum(lengths)])
+        self.length = float(self.node_x[-1])
+        n_nodes = len(self.node_x)
+        removed = {3 * node + _DOF[c] for node, c in fixed}
+        free = [d for d in range(3 * n_nodes) if d not in removed]
+        self.n_elastic = len(free)
+        full_to_e = -np.ones(3 * n_nodes, dtype=int)
+        full_to_e[free] = np.arange(self.n_elastic)
+        self._full_to_e = full_to_e
+        ne = self.n_elastic
+        # [B_j] of Eq. 3.15 for every element: (n_el, 6, ne)
+        n_el = len(lengths)
+        self.element_dof_maps = np.zeros((n_el, 6, ne))
+        for j in range(n_el):
+            for k, full in enumerate(range(3 * j, 3 * j + 6)):
+                if full_to_e[full] >= 0:
+                    self.element_dof_maps[j, k, full_to_e[full]] = 1.0
+
+        # --- quadrature points of the whole body: S(x) maps e to (u, v) at x
+        xs, ws, shapes = [], [], []
+        for j, le in enumerate(lengths):
+            n, _, _ = shape_functions(_GAUSS_ETA, le)
+            shapes.append(n @ self.element_dof_maps[j])
+            xs.append(self.node_x[j] + le * _GAUSS_ETA)
+            ws.append(le * _GAUSS_W)
+        self.quad_x = np.concatenate(xs)
+        self.quad_w = np.concatenate(ws) * mass_per_length      # rho A dx
+        self.quad_shape = np.concatenate(shapes)                 # (nq, 2, ne)
+
+        # --- invariants (state independent): kinetic energy is at most quadratic in e
+        w, x, s = self.quad_w, self.quad_x, self.quad_shape
+        su, sv = s[:, 0, :], s[:, 1, :]
+        self.mass = float(w.sum())
+        self.first_moment = float(w @ x)                          # int rho x
+        self.j0 = float(w @ x**2)                                 # int rho x^2
+        self.s_bar = np.einsum("q,qie->ie", w, s)                 # int rho S      (2, ne)
+        self.c = np.einsum("q,q,qe->e", w, x, su)                 # int rho x S_u  (ne)
+        self.g = np.einsum("q,q,qe->e", w, x, sv)                 # int rho x S_v  (ne)
+        self.m_ff = np.einsum("q,qie,qif->ef", w, s, s)           # int rho S^T S  (ne, ne)
+        self.w_skew = (np.einsum("q,qe,qf->ef", w, su, sv)
+                       - np.einsum("q,qe,qf->ef", w, sv, su))     # int rho (Su^T Sv - Sv^T Su)
+        self.p_bar = np.array([self.first_moment, 0.0])
+
+        # --- stiffness (4.37, 4.42): EI v''^2 + EA u'^2, exact quadrature
+        k = np.zeros((ne, ne))
+        for j, le in enumerate(lengths):
+            _, dn, d2n = shape_functions(_GAUSS_ETA, le)
+            b = self.element_dof_maps[j]
+            ke = (ei * np.einsum("q,qi,qj->ij", le * _GAUSS_W, d2n[:, 1], d2n[:, 1])
+                  + ea * np.einsum("q,qi,qj->ij", le * _GAUSS_W, dn[:, 0], dn[:, 0]))
+            k += b.T @ ke @ b
+        self.stiffness = k
+
+        # --- stress recovery at both ends of every element (sigma is linear in an element)
+        axial, curvature, px = [], [], []
+        for j, le in enumerate(lengths):
+            _, dn, d2n = shape_functions(np.array([0.0, 1.0]), le)
+            b = self.element_dof_maps[j]
+            axial.append(dn[:, 0] @ b)
+            curvature.append(d2n[:, 1] @ b)
+            px.append(self.node_x[j] + np.array([0.0, le]))
+        self.stress_x = np.concatenate(px)
+        # sigma_top/bottom = E (u' -/+ c v'') (Eq. 5.43-5.44, y = +c is the top fibre)
+        ax, cu = np.concatenate(axial), np.concatenate(curvature)
+        self.stress_top = youngs_modulus * (ax - fibre * cu)
+        self.stress_bottom = youngs_modulus * (ax + fibre * cu)
+
+    def elastic_index(self, node: int, dof: str) -> int:
+        idx = int(self._full_to_e[3 * node + _DOF[dof]])
+        if idx < 0:
+            raise KeyError(f"{self.name} node {node} {dof} is fixed by the frame")
+        return idx
+
+    def displacement(self, e: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """(u, v) at body abscissae x (Eq. 3.16): shape (len(x), 2)."""
+        x = np.atleast_1d(np.asarray(x, dtype=float))
+        j = np.clip(np.searchsorted(self.node_x, x, side="right") - 1, 0, len(self.element_length) - 1)
+        out = np.empty((len(x), 2))
+        for i, (xi, ji) in enumerate(zip(x, j)):
+            le = self.element_length[ji]
+            n, _, _ = shape_functions(np.array([(xi - self.node_x[ji]) / le]), le)
+            out[i] = (n[0] @ self.element_dof_maps[ji]) @ e
+        return out
+
+
+@dataclass(frozen=True)
+class ConstraintSet:
+    """Which constraints hold: Phi1-3 always (4.60), Phi4 when locked (4.63),
+    Phi5-6 (all elastic coordinates) in the rigid-FE mode (4.71)."""
+
+    locked: bool
+    rigid: bool
+
+
+class UmbrellaModel:
+    """Assembled system: M(q), K, Qv, Qe, constraints and outputs, for any mesh."""
+
+    def __init__(self, params: UmbrellaParams):
+        p = params.validated()
+        self.params = p
+        n = p.elements_per_segment
+        area, inertia = p.cross_section_area, p.cross_section_inertia
+        rho_a, e_mod = p.mass_per_length, p.youngs_modulus
+        common = dict(mass_per_length=rho_a, ea=e_mod * area, ei=e_mod * inertia,
+                      youngs_modulus=e_mod, fibre=p.fibre_distance)
+        self.leaf = BeamBody("leaf", [(p.l1, n), (p.l2, n)],
+                             [(0, "u"), (0, "v"), (n, "v")], **common)
+        self.link = BeamBody("link", [(p.l3, n)], [(0, "u"), (0, "v"), (n, "v")], **common)
+        n1, n2 = self.leaf.n_elastic, self.link.n_elastic
+        self.i_alpha1 = 0
+        self.s_leaf = slice(1, 1 + n1)
+        self.i_r2x, self.i_r2y, self.i_alpha2 = 1 + n1, 2 + n1, 3 + n1
+        self.s_link = slice(4 + n1, 4 + n1 + n2)
+        self.n = 4 + n1 + n2
+        # coordinates used by the joints
+        self.i_u_joint = 1 + self.leaf.elastic_index(n, "u")        # leaf u at O''
+        self.i_u_sleeve = 4 + n1 + self.link.elastic_index(n, "u")  # link u at H
+        tip = 2 * n
+        self.i_tip_u = 1 + self.leaf.elastic_index(tip, "u")
+        self.i_tip_v = 1 + self.leaf.elastic_index(tip, "v")
+        self.elastic_indices = np.r_[np.arange(1, 1 + n1), np.arange(4 + n1, 4 + n1 + n2)]
+        self.y_stop = p.sleeve_stop_height
+
+        self.stiffness = np.zeros((self.n, self.n))
+        self.stiffness[self.s_leaf, self.s_leaf] = self.leaf.stiffness
+        self.stiffness[self.s_link, self.s_link] = self.link.stiffness
+        m0 = np.zeros((self.n, self.n))
+        m0[self.s_leaf, self.s_leaf] = self.leaf.m_ff
+        m0[self.s_link, self.s_link] = self.link.m_ff
+        m0[self.i_r2x, self.i_r2x] = m0[self.i_r2y, self.i_r2y] = self.link.mass
+        self._mass_template = m0
+        # full-length (n) copies of the body invariants, so the hot kernels are a few
+        # vector operations whatever the mesh: zero outside each body's elastic slice
+        n_all = self.n
+        self._c_full = np.zeros(n_all)
+        self._g_full = np.zeros(n_all)
+        self._mff_full = np.zeros((n_all, n_all))
+        self._w_full = np.zeros((n_all, n_all))
+        self._body_rows = np.zeros((2, n_all))
+        self._body_angle = np.zeros(n_all, dtype=int)
+        for row, (s_e, ia, body) in enumerate(((self.s_leaf, 0, self.leaf),
+                                               (self.s_link, self.i_alpha2, self.link))):
+            self._c_full[s_e] = body.c
+            self._g_full[s_e] = body.g
+            self._mff_full[s_e, s_e] = body.m_ff
+            self._w_full[s_e, s_e] = body.w_skew
+            self._body_rows[row, s_e] = 1.0
+            self._body_angle[s_e] = ia
+        self._j0 = np.array([self.leaf.j0, self.link.j0])
+        self._link_sbar = self.link.s_bar
+        self._link_isbar = np.array([-self.link.s_bar[1], self.link.s_bar[0]])  # I~ S_bar
+        self._link_pbar = self.link.p_bar
+
+    def coordinate_labels(self) -> list[str]:
+        """Names of the entries of q, e.g. 'leaf.u2' = axial displacement of leaf node 2."""
+        labels = ["alpha1"]
+        for body in (self.leaf, self.link):
+            names = [""] * body.n_elastic
+            for node in range(len(body.node_x)):
+                for dof in ("u", "v", "theta"):
+                    try:
+                        names[body.elastic_index(node, dof)] = f"{body.name}.{dof}{node}"
+                    except KeyError:
+                        pass
+            labels += names
+            if body is self.leaf:
+                labels += ["R2x", "R2y", "alpha2"]
+        return labels
+
+    # ---------------------------------------------------------------- inertia
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """M(q) = int rho C^T C dx (4.7, 4.35), from the invariants:
+
+        per body M_aa = J0 + 2 c.e + e.Mff e, M_af = g + e W (rotation-deformation),
+        link M_Ra = A I~ (p_bar + S_bar e), M_Rf = A S_bar (translation couplings).
+        """
+        h = self._c_full + self._mff_full @ q
+        m_aa = self._j0 + self._body_rows @ ((self._c_full + h) * q)
+        m_af = self._g_full + q @ self._w_full
+        m = self._mass_template.astype(m_af.dtype, copy=True)
+        sl, sk, ia, ix, iy = self.s_leaf, self.s_link, self.i_alpha2, self.i_r2x, self.i_r2y
+        m[0, 0] = m_aa[0]
+        m[ia, ia] = m_aa[1]
+        m[0, sl] = m[sl, 0] = m_af[sl]
+        m[ia, sk] = m[sk, ia] = m_af[sk]
+        c, s = _cos_sin(q[ia])
+        ub = self._link_pbar + self._link_sbar @ q[sk]
+        m[ix, ia] = m[ia, ix] = -c * ub[1] - s * ub[0]          # A I~ u_bar
+        m[iy, ia] = m[ia, iy] = -s * ub[1] + c * ub[0]
+        m_rf = c * self._link_sbar + s * self._link_isbar          # A S_bar
+        m[ix:iy + 1, sk] = m_rf
+        m[sk, ix:iy + 1] = m_rf.T
+        return m
+
+    def quadratic_velocity_forces(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """Qv = -Mdot q' + (dT/dq)^T (4.84), in closed form from the invariants."""
+        lf, lk = self.leaf, self.link
+        out = np.zeros(self.n, dtype=np.result_type(q, qd, float))
+        e1, ed1, w1 = q[self.s_leaf], qd[self.s_leaf], qd[0]
+        h1 = lf.c + lf.m_ff @ e1
+        out[0] = -2.0 * w1 * (h1 @ ed1)
+        out[self.s_leaf] = w1 * w1 * h1 + 2.0 * w1 * (lf.w_skew @ ed1)
+        e2, ed2, w2 = q[self.s_link], qd[self.s_link], qd[self.i_alpha2]
+        h2 = lk.c + lk.m_ff @ e2
+        a2 = rotation(q[self.i_alpha2])
+        ubar = lk.p_bar + lk.s_bar @ e2
+        sd = lk.s_bar @ ed2
+        out[self.i_r2x:self.i_r2y + 1] = a2 @ (w2 * w2 * ubar - 2.0 * w2 * np.array([-sd[1], sd[0]]))
+        out[self.i_alpha2] = -2.0 * w2 * (h2 @ ed2)
+        out[self.s_link] = w2 * w2 * h2 + 2.0 * w2 * (lk.w_skew @ ed2)
+        return out
+
+    def kinetic_bilinear_gradient(self, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """d/dq [1/2 a^T M(q) b]; with a = b = q' it is (dT/dq)^T of Eq. 4.86."""
+        h = self._c_full + self._mff_full @ q
+        wa, wb = a[self._body_angle], b[self._body_angle]
+        out = wa * wb * h + 0.5 * (wa * (self._w_full @ b) + wb * (self._w_full @ a))
+        sk, ia, i2 = self.s_link, self.i_alpha2, slice(self.i_r2x, self.i_r2y + 1)
+        c, s = _cos_sin(q[ia])
+        ub = self._link_pbar + self._link_sbar @ q[sk]
+        a_ub = np.array([c * ub[0] - s * ub[1], s * ub[0] + c * ub[1]])   # A u_bar
+        a_is = c * self._link_isbar - s * self._link_sbar                  # A I~ S_bar
+        ar, br = a[i2], b[i2]
+        ar_is, br_is = ar @ a_is, br @ a_is
+        out[ia] = (-0.5 * ((ar @ a_ub) * b[ia] + (br @ a_ub) * a[ia])
+                   + 0.5 * (ar_is @ b[sk] + br_is @ a[sk]))
+        out[sk] += 0.5 * (b[ia] * ar_is + a[ia] * br_is)
+        return out
+
+    def gyroscopic_matrix(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """-dQv/dq' (used only in the Newton iteration matrix)."""
+        lf, lk = self.leaf, self.link
+        g = np.zeros((self.n, self.n))
+        for s_e, ia, body in ((self.s_leaf, 0, lf), (self.s_link, self.i_alpha2, lk)):
+            e, ed, w = q[s_e], qd[s_e], qd[ia]
+            h = body.c + body.m_ff @ e
+            g[ia, ia] = 2.0 * (h @ ed)
+            g[ia, s_e] = 2.0 * w * h
+            g[s_e, ia] = -2.0 * w * h - 2.0 * (body.w_skew @ ed)
+            g[s_e, s_e] = -2.0 * w * body.w_skew
+        a2 = rotation(q[self.i_alpha2])
+        w2 = qd[self.i_alpha2]
+        ubar = lk.p_bar + lk.s_bar @ q[self.s_link]
+        sd = lk.s_bar @ qd[self.s_link]
+        i2 = slice(self.i_r2x, self.i_r2y + 1)
+        g[i2, self.i_alpha2] = -a2 @ (2.0 * w2 * ubar - 2.0 * np.array([-sd[1], sd[0]]))
+        g[i2, self.s_link] = 2.0 * w2 * a2 @ np.array([-lk.s_bar[1], lk.s_bar[0]])
+        return g
+
+    # reference path (tests only): analytic directional derivative of M
+    def mass_matrix_derivative(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """dM(q + eps dq)/deps at eps = 0; Mdot = this with dq = q'."""
+        lf, lk = self.leaf, self.link
+        dm = np.zeros((self.n, self.n))
+        for s_e, ia, body in ((self.s_leaf, 0, lf), (self.s_link, self.i_alpha2, lk)):
+            e, de = q[s_e], dq[s_e]
+            dm[ia, ia] = 2.0 * body.c @ de + 2.0 * e @ body.m_ff @ de
+            dm[ia, s_e] = de @ body.w_skew
+            dm[s_e, ia] = de @ body.w_skew
+        a2, da = rotation(q[self.i_alpha2]), dq[self.i_alpha2]
+        ubar = lk.p_bar + lk.s_bar @ q[self.s_link]
+        dubar = lk.s_bar @ dq[self.s_link]
+        i2 = slice(self.i_r2x, self.i_r2y + 1)
+        d_ra = a2 @ np.array([-dubar[1], dubar[0]]) - da * (a2 @ ubar)
+        d_rf = da * (a2 @ np.array([-lk.s_bar[1], lk.s_bar[0]]))
+        dm[i2, self.i_alpha2] = d_ra
+        dm[self.i_alpha2, i2] = d_ra
+        dm[i2, self.s_link] = d_rf
+        dm[self.s_link, i2] = d_rf.T
+        return dm
+
+    def kinetic_energy_gradient(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """(dT/dq)^T = 1/2 q'^T dM/dq_k q' (4.86), reference path (tests only)."""
+        eye = np.eye(self.n)
+        return np.array([0.5 * qd @ self.mass_matrix_derivative(q, eye[k]) @ qd
+                         for k in range(self.n)])
+
+    # ---------------------------------------------------------------- energy
+    def kinetic_energy(self, q, qd) -> float:
+        return 0.5 * qd @ self.mass_matrix(q) @ qd
+
+    def strain_energy(self, q) -> float:
+        return 0.5 * q @ self.stiffness @ q
+
+    # ----------------------------------------------------------- constraints
+    def sleeve_height(self, q) -> float:
+        """y_H (4.58)."""
+        return q[self.i_r2y] + (self.params.l3 + q[self.i_u_sleeve]) * np.sin(q[self.i_alpha2])
+
+    def sleeve_height_gradient(self, q) -> np.ndarray:
+        g = np.zeros(self.n)
+        a2, lu = q[self.i_alpha2], self.params.l3 + q[self.i_u_sleeve]
+        g[self.i_r2y] = 1.0
+        g[self.i_alpha2] = lu * math.cos(a2)
+        g[self.i_u_sleeve] = math.sin(a2)
+        return g
+
+    def applied_forces(self, q, sleeve_force: float) -> np.ndarray:
+        """Q^{appl} for F = (0, -F_H) at H (4.81)."""
+        return -sleeve_force * self.sleeve_height_gradient(q)
+
+    def n_constraints(self, cs: ConstraintSet) -> int:
+        return 3 + int(cs.locked) + (len(self.elastic_indices) if cs.rigid else 0)
+
+    def constraint_residual(self, q, cs: ConstraintSet) -> np.ndarray:
+        """Phi(q): joint O'' (4.53-4.54), H on the axle (4.59), H at S (4.63), e = 0 (4.71)."""
+        l1, l3 = self.params.l1, self.params.l3
+        a1, a2 = q[0], q[self.i_alpha2]
+        r1 = l1 + q[self.i_u_joint]
+        r3 = l3 + q[self.i_u_sleeve]
+        phi = [r1 * np.cos(a1) - q[self.i_r2x], r1 * np.sin(a1) - q[self.i_r2y],
+               q[self.i_r2x] + r3 * np.cos(a2)]
+        if cs.locked:
+            phi.append(q[self.i_r2y] + r3 * np.sin(a2) - self.y_stop)
+        out = np.array(phi)
+        if cs.rigid:
+            out = np.concatenate([out, q[self.elastic_indices]])
+        return out
+
+    def constraint_jacobian(self, q, cs: ConstraintSet) -> np.ndarray:
+        l1, l3 = self.params.l1, self.params.l3
+        a1, a2 = q[0], q[self.i_alpha2]
+        c1, s1, c2, s2 = math.cos(a1), math.sin(a1), math.cos(a2), math.sin(a2)
+        r1, r3 = l1 + q[self.i_u_joint], l3 + q[self.i_u_sleeve]
+        j = np.zeros((self.n_constraints(cs), self.n))
+        j[0, 0], j[0, self.i_u_joint], j[0, self.i_r2x] = -r1 * s1, c1, -1.0
+        j[1, 0], j[1, self.i_u_joint], j[1, self.i_r2y] = r1 * c1, s1, -1.0
+        j[2, self.i_r2x], j[2, self.i_alpha2], j[2, self.i_u_sleeve] = 1.0, -r3 * s2, c2
+        row = 3
+        if cs.locked:
+            j[3, self.i_r2y], j[3, self.i_alpha2], j[3, self.i_u_sleeve] = 1.0, r3 * c2, s2
+            row = 4
+        if cs.rigid:
+            j[row + np.arange(len(self.elastic_indices)), self.elastic_indices] = 1.0
+        return j
+
+    def constraint_bias(self, q, qd, cs: ConstraintSet) -> np.ndarray:
+        """-Jdot q' (right-hand side of J q'' = -Jdot q', Eq. 4.62)."""
+        l1, l3 = self.params.l1, self.params.l3
+        a1, a2 = q[0], q[self.i_alpha2]
+        w1, w2 = qd[0], qd[self.i_alpha2]
+        c1, s1, c2, s2 = math.cos(a1), math.sin(a1), math.cos(a2), math.sin(a2)
+        r1, r3 = l1 + q[self.i_u_joint], l3 + q[self.i_u_sleeve]
+        d1, d3 = qd[self.i_u_joint], qd[self.i_u_sleeve]
+        jd = [-2 * d1 * w1 * s1 - r1 * w1 * w1 * c1, 2 * d1 * w1 * c1 - r1 * w1 * w1 * s1,
+              -2 * d3 * w2 * s2 - r3 * w2 * w2 * c2]
+        if cs.locked:
+            jd.append(2 * d3 * w2 * c2 - r3 * w2 * w2 * s2)
+        out = -np.array(jd)
+        if cs.rigid:
+            out = np.concatenate([out, np.zeros(len(self.elastic_indices))])
+        return out
+
+    # ------------------------------------------------------- initial state
+    def rigid_configuration(self, alpha1: float) -> np.ndarray:
+        """q of the undeformed mechanism at leaf angle alpha1 (5.21)."""
+        p = self.params
+        q = np.zeros(self.n)
+        q[0] = alpha1
+        q[self.i_r2x] = p.l1 * math.cos(alpha1)
+        q[self.i_r2y] = p.l1 * math.sin(alpha1)
+        q[self.i_alpha2] = math.acos(-p.l1 / p.l3 * math.cos(alpha1))
+        return q
+
+    def rigid_velocity(self, q: np.ndarray, alpha1_rate: float) -> np.ndarray:
+        p = self.params
+        a1, a2 = q[0], q[self.i_alpha2]
+        qd = np.zeros(self.n)
+        qd[0] = alpha1_rate
+        qd[self.i_r2x] = -p.l1 * math.sin(a1) * alpha1_rate
+        qd[self.i_r2y] = p.l1 * math.cos(a1) * alpha1_rate
+        qd[self.i_alpha2] = -p.l1 * math.sin(a1) * alpha1_rate / (p.l3 * math.sin(a2))
+        return qd
+
+    def initial_state(self, v0: float | None = None):
+        """Undeformed at alpha0 with the sleeve moving at v0 along Y (5.21, 5.30-5.33)."""
+        p = self.params
+        v0 = p.v0 if v0 is None else v0
+        q = self.rigid_configuration(p.alpha0)
+        unit = self.rigid_velocity(q, 1.0)
+        qd = unit * (v0 / (self.sleeve_height_gradient(q) @ unit))
+        return q, qd
+
+    # --------------------------------------------------------------- outputs
+    def tip_displacement(self, q) -> tuple[float, float]:
+        """(axial, transverse) displacement of G in the leaf frame."""
+        return float(q[self.i_tip_u]), float(q[self.i_tip_v])
+
+    def stresses(self, q):
+        """Top/bottom fibre stress at both ends of every element, per body (Pa)."""
+        e1, e2 = q[self.s_leaf], q[self.s_link]
+        return ((self.leaf.stress_top @ e1, self.leaf.stress_bottom @ e1),
+                (self.link.stress_top @ e2, self.link.stress_bottom @ e2))
+
+    def node_positions(self, q, magnification: float = 1.0):
+        """Inertial (X, Y) of the leaf and link nodes, deformation magnified."""
+        out = []
+        for body, s_e, origin, alpha in ((self.leaf, self.s_leaf, np.zeros(2), q[0]),
+                                         (self.link, self.s_link,
+                                          q[[self.i_r2x, self.i_r2y]], q[self.i_alpha2])):
+            e = np.asarray(q[s_e])
+            disp = np.zeros((len(body.node_x), 2))
+            for node in range(len(body.node_x)):
+                for k, dof in enumerate(("u", "v")):
+                    try:
+                        disp[node, k] = e[body.elastic_index(node, dof)]
+                    except KeyError:
+                        pass
+            local = np.column_stack([body.node_x, np.zeros_like(body.node_x)]) + magnification * disp
+            out.append(origin + local @ rotation(alpha).T)
+        return out

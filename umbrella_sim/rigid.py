@@ -1,0 +1,137 @@
+"""Closed-form rigid two-angle model (thesis 4.6, Eq. 4.120-4.125, re-derived) and the
+independent work-energy quadrature of its deployment time.
+
+Leaf: uniform bar O-G of length l1 + l2 hinged at O; link: uniform bar O''-H of length l3.
+Coordinates (alpha1, alpha2), one constraint Phi = l1 cos(alpha1) + l3 cos(alpha2) = 0 (4.123).
+
+    T = 1/2 (I1' + m2 l1^2) a1'^2 + 1/2 I2' a2'^2 + 1/2 m2 l1 l3 a1' a2' cos(a1 - a2)   (4.120)
+
+with I1' = rho A (l1+l2)^3 / 3, I2' = m2 l3^2 / 3 (so the printed (3/2)(l1/l3) I2' is
+1/2 m2 l1 l3, and the (2,2) entry of 4.125 is I2', not I2'(l2/l3)^3).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import integrate
+
+from .params import UmbrellaParams
+
+
+class RigidMechanism:
+    def __init__(self, params: UmbrellaParams):
+        p = params.validated()
+        self.params = p
+        rho_a = p.mass_per_length
+        self.m2 = rho_a * p.l3
+        self.i1 = rho_a * (p.l1 + p.l2) ** 3 / 3.0
+        self.i2 = self.m2 * p.l3 ** 2 / 3.0
+        self.coupling = 0.5 * self.m2 * p.l1 * p.l3
+
+    def alpha2(self, alpha1: float) -> float:
+        p = self.params
+        return math.acos(-p.l1 / p.l3 * math.cos(alpha1))
+
+    def alpha2_rate_ratio(self, alpha1: float, alpha2: float) -> float:
+        """d alpha2 / d alpha1 from the velocity constraint J q' = 0 (4.124)."""
+        p = self.params
+        return -p.l1 * math.sin(alpha1) / (p.l3 * math.sin(alpha2))
+
+    def sleeve_height(self, alpha1: float, alpha2: float) -> float:
+        p = self.params
+        return p.l1 * math.sin(alpha1) + p.l3 * math.sin(alpha2)
+
+    def mass_matrix(self, alpha1: float, alpha2: float) -> np.ndarray:
+        m12 = self.coupling * math.cos(alpha1 - alpha2)
+        return np.array([[self.i1 + self.m2 * self.params.l1 ** 2, m12], [m12, self.i2]])
+
+    def kinetic_energy(self, a1, a2, w1, w2) -> float:
+        w = np.array([w1, w2])
+        return 0.5 * w @ self.mass_matrix(a1, a2) @ w
+
+    def accelerations(self, a1, a2, w1, w2, force: float):
+        """Solve Eq. 4.125 (corrected) for (alpha1'', alpha2'', lambda)."""
+        p = self.params
+        s12 = math.sin(a1 - a2)
+        kkt = np.zeros((3, 3))
+        kkt[:2, :2] = self.mass_matrix(a1, a2)
+        jac = np.array([-p.l1 * math.sin(a1), -p.l3 * math.sin(a2)])
+        kkt[:2, 2] = -jac
+        kkt[2, :2] = jac
+        rhs = np.array([
+            -self.coupling * w2 * w2 * s12 - force * p.l1 * math.cos(a1),
+            self.coupling * w1 * w1 * s12 - force * p.l3 * math.cos(a2),
+            p.l1 * w1 * w1 * math.cos(a1) + p.l3 * w2 * w2 * math.cos(a2)])
+        return np.linalg.solve(kkt, rhs)
+
+    def initial_state(self, v0: float) -> np.ndarray:
+        p = self.params
+        a1 = p.alpha0
+        a2 = self.alpha2(a1)
+        ratio = self.alpha2_rate_ratio(a1, a2)
+        dy = p.l1 * math.cos(a1) + p.l3 * math.cos(a2) * ratio
+        w1 = v0 / dy
+        return np.array([a1, a2, w1, ratio * w1])
+
+    def project(self, y: np.ndarray) -> np.ndarray:
+        """Back onto Phi = 0 and J q' = 0 (alpha1 is the independent coordinate)."""
+        a1, w1 = y[0], y[2]
+        a2 = self.alpha2(a1)
+        return np.array([a1, a2, w1, self.alpha2_rate_ratio(a1, a2) * w1])
+
+    def rk4_step(self, y: np.ndarray, h: float, force: float) -> np.ndarray:
+        def f(s):
+            acc = self.accelerations(s[0], s[1], s[2], s[3], force)
+            return np.array([s[2], s[3], acc[0], acc[1]])
+
+        k1 = f(y)
+        k2 = f(y + 0.5 * h * k1)
+        k3 = f(y + 0.5 * h * k2)
+        k4 = f(y + h * k3)
+        return self.project(y + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4))
+
+
+def deployment_time_by_quadrature(params: UmbrellaParams, v0: float | None = None,
+                                  sleeve_force: float | None = None) -> float:
+    """t = int d(alpha1) / |alpha1'(alpha1)| with alpha1' from work-energy:
+
+        1/2 m(alpha1) alpha1'^2 = T0 + F_H (y_H(alpha0) - y_H(alpha1)).
+
+    Independent of any time integrator; handles V0 = 0 (inverse-square-root start).
+    """
+    p = params.validated()
+    v0 = p.v0 if v0 is None else v0
+    force = p.sleeve_force if sleeve_force is None else sleeve_force
+    mech = RigidMechanism(p)
+    a0, ad = p.alpha0, p.alpha_deployed
+    y0 = mech.initial_state(v0)
+    t0 = mech.kinetic_energy(*y0)
+    h0 = mech.sleeve_height(a0, mech.alpha2(a0))
+
+    def generalized_mass(a1):
+        a2 = mech.alpha2(a1)
+        r = mech.alpha2_rate_ratio(a1, a2)
+        return 2.0 * mech.kinetic_energy(a1, a2, 1.0, r)
+
+    def energy(a1):
+        return t0 + force * (h0 - mech.sleeve_height(a1, mech.alpha2(a1)))
+
+    if t0 > 0.0:
+        val, _ = integrate.quad(lambda a: math.sqrt(generalized_mass(a) / (2.0 * energy(a))),
+                                ad, a0, epsabs=0.0, epsrel=1e-12, limit=200)
+        return val
+    if force <= 0.0:
+        return math.inf
+    # energy ~ F dy_H/da (a0 - a) near the start: integrate g(a) (a0 - a)^(-1/2), alg weight
+    a20 = mech.alpha2(a0)
+    dy0 = p.l1 * math.cos(a0) + p.l3 * math.cos(a20) * mech.alpha2_rate_ratio(a0, a20)
+
+    def g(a):
+        if a0 - a < 1e-12:
+            return math.sqrt(generalized_mass(a0) / (2.0 * force * dy0))
+        return math.sqrt(generalized_mass(a) * (a0 - a) / (2.0 * energy(a)))
+
+    val, _ = integrate.quad(g, ad, a0, weight="alg", wvar=(0.0, -0.5),
+                            epsabs=0.0, epsrel=1e-12, limit=200)
+    return val

@@ -1,0 +1,400 @@
+"""Solver layer: the stepping simulator (stage 1, lock event, stage 2) and a whole-run helper.
+
+``UmbrellaSimulator`` advances on a fixed grid t_k = k h (h = params.time_step).  The sleeve
+force is a zero-order hold: the value set with ``set_sleeve_force`` acts from the start of
+the next step.  ``step()`` and ``advance_to(t)`` therefore give identical results however the
+calls are split.  When the sleeve reaches the stop S inside a step, the crossing time is
+root-found by re-taking the step from its start with a shorter length (Illinois method,
+|dt| < 1e-12 s), the lock is applied there, and the step is completed under Case 2, so the
+grid is kept.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import replace
+from typing import Callable, Iterable
+
+import numpy as np
+
+from .integrators import ConvergenceError, DynamicState, NewmarkDAE
+from .model import DEFORMING, LOCKED, ConstraintSet, UmbrellaModel
+from .outputs import LockEvent, RunResult, Sample
+from .params import UmbrellaParams
+from .rigid import RigidMechanism
+
+#: residual above which a run is declared diverged (m, m/s)
+DIVERGENCE_RESIDUAL = 1e-6
+EVENT_TIME_TOLERANCE = 1e-12
+
+
+class SimulationDiverged(RuntimeError):
+    """The state became non-finite or left the constraint manifold; nothing was advanced."""
+
+
+def validate_force(force: float) -> float:
+    try:
+        f = float(force)
+    except (TypeError, ValueError):
+        raise ValueError(f"sleeve force {force!r}: not a number") from None
+    if math.isnan(f) or math.isinf(f):
+        raise ValueError(f"sleeve force {f}: must be finite")
+    if f < 0.0:
+        raise ValueError(f"sleeve force {f} N: must be >= 0 (F_H pushes the sleeve along -Y; "
+                         "the sleeve cannot be pulled)")
+    return f
+
+
+# --------------------------------------------------------------------- engines
+class FiniteElementEngine:
+    """Flexible (Case 1 -> Case 2) or rigid-FE (Case 3) model on the Newmark integrator."""
+
+    def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
+        self.model = model
+        self.rigid = params.model == "rigid-fe"
+        self.lock_kind = "plastic" if self.rigid else params.lock
+        self.integrator = NewmarkDAE(model)
+        self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
+                    for stage in (DEFORMING, LOCKED)}
+
+    def initial(self, force: float) -> DynamicState:
+        q, qd = self.model.initial_state()
+        qdd, lam = self.integrator.consistent_acceleration(q, qd, force, self._cs[DEFORMING])
+        return DynamicState(0.0, q, qd, qdd, lam)
+
+    def step(self, s: DynamicState, h: float, force: float, stage: str) -> DynamicState:
+        return self.integrator.step(s, h, force, self._cs[stage])
+
+    def fe_state(self, s: DynamicState):
+        return s.q, s.qd, s.qdd
+
+    def multipliers(self, s: DynamicState, force: float, stage: str) -> np.ndarray:
+        return s.multipliers
+
+    def residual(self, s: DynamicState, stage: str) -> float:
+        cs = self._cs[stage]
+        m = self.model
+        return max(float(np.max(np.abs(m.constraint_residual(s.q, cs)))),
+                   float(np.max(np.abs(m.constraint_jacobian(s.q, cs) @ s.qd))))
+
+    def sleeve_height(self, s: DynamicState) -> float:
+        return float(self.model.sleeve_height(s.q))
+
+    def lock(self, s: DynamicState, force: float) -> tuple[DynamicState, LockEvent]:
+        m = self.model
+        cs = self._cs[LOCKED]
+        before = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
+        free: tuple = ()
+        if self.lock_kind == "energy":
+            qd, free = self._energy_redistribution(s.q, s.qd, cs)
+        else:
+            qd = self.integrator.project_velocity(s.q, s.qd, cs)
+        s = self.integrator.with_constraints(replace(s, qd=qd), force, cs)
+        after = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
+        return s, LockEvent(s.t, self.lock_kind, float(before), float(after), free)
+
+    def _energy_redistribution(self, q, qd, cs):
+        """Thesis 5.2.2 for any mesh: only the rigid velocities (R2x', R2y', alpha1',
+        alpha2') and the link's axial velocity at H change; they satisfy J2 qd = 0 (5.36-5.39)
+        and keep the kinetic energy (5.35).  Of the two energy roots, the one closest to the
+        pre-lock velocities in the mass metric is taken."""
+        m = self.model
+        free = [m.i_alpha1, m.i_r2x, m.i_r2y, m.i_alpha2, m.i_u_sleeve]
+        fixed = np.setdiff1d(np.arange(m.n), free)
+        jac = m.constraint_jacobian(q, cs)
+        a_free = jac[:, free]
+        rhs = -jac[:, fixed] @ qd[fixed]
+        particular = np.linalg.lstsq(a_free, rhs, rcond=None)[0]
+        null = np.linalg.svd(a_free)[2][-1]
+        base = qd.copy()
+        base[free] = particular
+        z = np.zeros(m.n)
+        z[free] = null
+        mass = m.mass_matrix(q)
+        t_target = 0.5 * qd @ mass @ qd
+        a = 0.5 * z @ mass @ z
+        b = z @ mass @ base
+        c = 0.5 * base @ mass @ base - t_target
+        disc = b * b - 4 * a * c
+        if disc < 0.0:
+            raise SimulationDiverged("energy lock impossible: the kinetic energy before the lock "
+                                     "is below the least energy compatible with the lock "
+                                     f"({c + t_target - b * b / (4 * a):.6g} J > {t_target:.6g} J)")
+        roots = [(-b + sgn * math.sqrt(disc)) / (2 * a) for sgn in (1.0, -1.0)]
+        candidates = [base + r * z for r in roots]
+        best = min(candidates, key=lambda v: (v - qd) @ mass @ (v - qd))
+        labels = m.coordinate_labels()
+        return best, tuple(labels[i] for i in free)
+
+
+class RigidEngine:
+    """Closed-form two-angle model (4.120-4.125), RK4 with projection, sub-stepped."""
+
+    max_substep = 1e-4
+
+    def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
+        self.model = model
+        self.mech = RigidMechanism(params)
+        self.lock_kind = "plastic"
+
+    def initial(self, force: float) -> DynamicState:
+        y = self.mech.initial_state(self.model.params.v0)
+        return self._state(0.0, y, force, DEFORMING)
+
+    def _state(self, t, y, force, stage) -> DynamicState:
+        if stage == LOCKED:
+            return DynamicState(t, y[:2], np.zeros(2), np.zeros(2), np.array([0.0, force]))
+        acc = self.mech.accelerations(y[0], y[1], y[2], y[3], force)
+        return DynamicState(t, y[:2], y[2:], acc[:2], np.array([acc[2], 0.0]))
+
+    def step(self, s: DynamicState, h: float, force: float, stage: str) -> DynamicState:
+        if stage == LOCKED:
+            return replace(s, t=s.t + h, multipliers=np.array([0.0, force]))
+        y = np.concatenate([s.q, s.qd])
+        n_sub = max(1, math.ceil(h / self.max_substep - 1e-9))
+        for _ in range(n_sub):
+            y = self.mech.rk4_step(y, h / n_sub, force)
+        return self._state(s.t + h, y, force, stage)
+
+    def fe_state(self, s: DynamicState):
+        m = self.model
+        q = m.rigid_configuration(float(s.q[0]))
+        qd = m.rigid_velocity(q, float(s.qd[0]))
+        qdd = np.zeros(m.n)
+        qdd[0] = s.qdd[0]
+        qdd[m.i_alpha2] = s.qdd[1]
+        return q, qd, qdd
+
+    def multipliers(self, s, force, stage):
+        return s.multipliers
+
+    def residual(self, s: DynamicState, stage: str) -> float:
+        p = self.model.params
+        a1, a2 = s.q
+        w1, w2 = s.qd
+        return max(abs(p.l1 * math.cos(a1) + p.l3 * math.cos(a2)),
+                   abs(p.l1 * math.sin(a1) * w1 + p.l3 * math.sin(a2) * w2))
+
+    def sleeve_height(self, s: DynamicState) -> float:
+        return self.mech.sleeve_height(float(s.q[0]), float(s.q[1]))
+
+    def lock(self, s: DynamicState, force: float):
+        before = self.mech.kinetic_energy(*s.q, *s.qd)
+        s = DynamicState(s.t, s.q, np.zeros(2), np.zeros(2), np.array([0.0, force]))
+        return s, LockEvent(s.t, "plastic", float(before), 0.0, ())
+
+
+# ------------------------------------------------------------------- simulator
+class UmbrellaSimulator:
+    """Steps one model in time; see the module docstring for the time grid and the lock."""
+
+    def __init__(self, params: UmbrellaParams):
+        self.reset(params)
+
+    # -- lifecycle
+    def reset(self, params: UmbrellaParams | None = None) -> None:
+        if params is not None:
+            self.params = params.validated()
+        p = self.params
+        self.model = UmbrellaModel(p)
+        self.engine = (RigidEngine if p.model == "rigid" else FiniteElementEngine)(p, self.model)
+        self.h = p.time_step
+        self._force = validate_force(p.sleeve_force)
+        self._k = 0
+        self._stage = DEFORMING
+        self._state = self.engine.initial(self._force)
+        self._applied_force = self._force
+        self._work = 0.0
+        self._lock_loss = 0.0
+        self.lock_event: LockEvent | None = None
+        self.steps = 0
+
+    # -- inputs
+    def set_sleeve_force(self, force: float) -> None:
+        """F_H >= 0 (N, along -Y); acts from the start of the next step (zero-order hold)."""
+        self._force = validate_force(force)
+
+    @property
+    def sleeve_force(self) -> float:
+        return self._force
+
+    # -- state
+    @property
+    def time(self) -> float:
+        return self._state.t
+
+    @property
+    def stage(self) -> str:
+        return self._stage
+
+    @property
+    def state(self) -> DynamicState:
+        return self._state
+
+    # -- stepping
+    def step(self, record: bool = True) -> list[Sample]:
+        """Advance one grid step; returns the samples produced (two if the lock happened;
+        none with record=False, for callers that sample at their own rate)."""
+        eng, s0, force = self.engine, self._state, self._force
+        t_next = (self._k + 1) * self.h
+        out: list[Sample] = []
+        stage = self._stage
+        s1 = self._checked(lambda: eng.step(s0, t_next - s0.t, force, stage), stage)
+        work = force * (eng.sleeve_height(s0) - eng.sleeve_height(s1))
+        lock_loss = 0.0
+        lock_event = None
+        if stage == DEFORMING and eng.sleeve_height(s1) - self.model.y_stop <= 0.0:
+            s_hit = self._find_lock(s0, t_next - s0.t, force)
+            work = force * (eng.sleeve_height(s0) - eng.sleeve_height(s_hit))
+            s_locked, lock_event = eng.lock(s_hit, force)
+            lock_loss = lock_event.energy_before - lock_event.energy_after
+            stage = LOCKED
+            if record:
+                out.append(self._sample(s_locked, stage, force, self._work + work,
+                                        self._lock_loss + lock_loss))
+            remaining = t_next - s_locked.t
+            if remaining > EVENT_TIME_TOLERANCE:
+                s1 = self._checked(lambda: eng.step(s_locked, remaining, force, LOCKED), LOCKED)
+            else:
+                s1 = replace(s_locked, t=t_next)
+        # commit only after everything succeeded: a failure leaves the last good state
+        self._state, self._stage, self._k = s1, stage, self._k + 1
+        self._work += work
+        self._lock_loss += lock_loss
+        self._applied_force = force
+        if lock_event is not None:
+            self.lock_event = lock_event
+        self.steps += 1
+        if record:
+            out.append(self.sample())
+        return out
+
+    def advance_to(self, t: float, record: bool = True) -> list[Sample]:
+        """Take every grid step that ends at or before t."""
+        out: list[Sample] = []
+        while (self._k + 1) * self.h <= t + 1e-12 * max(1.0, abs(t)):
+            out.extend(self.step(record))
+        return out
+
+    def _checked(self, fn: Callable[[], DynamicState], stage: str) -> DynamicState:
+        try:
+            s = fn()
+        except (ConvergenceError, np.linalg.LinAlgError) as exc:
+            raise SimulationDiverged(f"solver failed at t = {self.time:.9g} s: {exc}") from None
+        if not (np.all(np.isfinite(s.q)) and np.all(np.isfinite(s.qd))):
+            raise SimulationDiverged(f"state became non-finite at t = {s.t:.9g} s")
+        res = self.engine.residual(s, stage)
+        if not res <= DIVERGENCE_RESIDUAL:
+            raise SimulationDiverged(f"constraint residual {res:.3g} past tolerance "
+                                     f"{DIVERGENCE_RESIDUAL:g} at t = {s.t:.9g} s")
+        return s
+
+    def _find_lock(self, s0: DynamicState, h: float, force: float) -> DynamicState:
+        """Illinois root-finding of y_H(t0 + dt) = y_S over the step length dt: the sleeve
+        reaches the stop on the integrator's own trajectory, to |dt| < 1e-12 s."""
+        eng, y_stop = self.engine, self.model.y_stop
+
+        def at(dt):
+            s = self._checked(lambda: eng.step(s0, dt, force, DEFORMING), DEFORMING)
+            return s, eng.sleeve_height(s) - y_stop
+
+        a, fa = 0.0, eng.sleeve_height(s0) - y_stop
+        b = h
+        sb, fb = at(b)
+        best, f_best = sb, fb
+        side = 0
+        for _ in range(200):
+            if b - a < EVENT_TIME_TOLERANCE or f_best == 0.0:
+                break
+            c = b - fb * (b - a) / (fb - fa)
+            if not a < c < b:
+                c = 0.5 * (a + b)
+            sc, fc = at(c)
+            if abs(fc) < abs(f_best):
+                best, f_best = sc, fc
+            if fc > 0.0:
+                a, fa = c, fc
+                if side == -1:
+                    fb *= 0.5
+                side = -1
+            else:
+                b, fb = c, fc
+                if side == 1:
+                    fa *= 0.5
+                side = 1
+        return best
+
+    # -- outputs
+    def sample(self) -> Sample:
+        return self._sample(self._state, self._stage, self._applied_force, self._work,
+                            self._lock_loss)
+
+    def _sample(self, s: DynamicState, stage: str, force: float, work: float,
+                lock_loss: float) -> Sample:
+        m = self.model
+        q, qd, qdd = self.engine.fe_state(s)
+        lam = np.asarray(self.engine.multipliers(s, force, stage), dtype=float)
+        (lt, lb), (kt, kb) = m.stresses(q)
+        leaf_abs = np.maximum(np.abs(lt), np.abs(lb))
+        link_abs = np.maximum(np.abs(kt), np.abs(kb))
+        il, ik = int(np.argmax(leaf_abs)), int(np.argmax(link_abs))
+        tip_u, tip_v = m.tip_displacement(q)
+        if isinstance(self.engine, RigidEngine):
+            reaction = (float(lam[0]), float(lam[1]))
+            kinetic = self.engine.mech.kinetic_energy(*s.q, *s.qd)
+        else:
+            reaction = (float(lam[2]), float(lam[3]) if stage == LOCKED else 0.0)
+            kinetic = m.kinetic_energy(q, qd)
+        cs = ConstraintSet(locked=stage == LOCKED, rigid=False)
+        return Sample(
+            time=s.t, stage=stage, q=q.copy(), qd=qd.copy(),
+            alpha1=float(q[0]), alpha2=float(q[m.i_alpha2]),
+            alpha1_rate=float(qd[0]), alpha2_rate=float(qd[m.i_alpha2]),
+            alpha1_accel=float(qdd[0]),
+            sleeve_position=float(m.sleeve_height(q)),
+            sleeve_velocity=float(m.sleeve_height_gradient(q) @ qd),
+            sleeve_force=force, tip_axial=tip_u, tip_transverse=tip_v,
+            leaf_stress=np.vstack([lt, lb]), link_stress=np.vstack([kt, kb]),
+            peak_stress_leaf=float(leaf_abs[il]), peak_stress_leaf_x=float(m.leaf.stress_x[il]),
+            peak_stress_link=float(link_abs[ik]), peak_stress_link_x=float(m.link.stress_x[ik]),
+            multipliers=lam.copy(), sleeve_reaction=reaction,
+            kinetic_energy=float(kinetic), strain_energy=float(m.strain_energy(q)),
+            work=float(work), lock_energy_loss=float(lock_loss),
+            constraint_residual=self.engine.residual(s, stage) if stage == DEFORMING or
+            not isinstance(self.engine, RigidEngine) else 0.0,
+        )
+
+
+def simulate(params: UmbrellaParams, duration: float,
+             force_profile: Iterable[tuple[float, float]] | None = None,
+             stop_after_lock: float | None = None,
+             progress: Callable[[float], None] | None = None) -> RunResult:
+    """Whole run on top of the simulator.  force_profile: (t, F) pairs, zero-order hold,
+    each value acting from the first step that starts at or after its time.  On a diverged
+    run the samples computed before the failure are kept and ``result.error`` says why."""
+    sim = UmbrellaSimulator(params)
+    result = RunResult(params=params.as_dict(), q_labels=sim.model.coordinate_labels())
+    result.samples.append(sim.sample())
+    profile = sorted(force_profile or [], key=lambda tf: tf[0])
+    for t_cmd, f_cmd in profile:
+        validate_force(f_cmd)
+    i_cmd = 0
+    wall0 = _time.perf_counter()
+    n_steps = int(round(duration / sim.h))
+    try:
+        for k in range(n_steps):
+            while i_cmd < len(profile) and profile[i_cmd][0] <= sim.time + 1e-12:
+                sim.set_sleeve_force(profile[i_cmd][1])
+                i_cmd += 1
+            result.samples.extend(sim.step())
+            if progress is not None and k % 50 == 0:
+                progress(sim.time)
+            if (stop_after_lock is not None and sim.lock_event is not None
+                    and sim.time >= sim.lock_event.time + stop_after_lock):
+                break
+    except SimulationDiverged as exc:
+        result.error = str(exc)
+    result.wall_time = _time.perf_counter() - wall0
+    result.steps = sim.steps
+    result.lock = sim.lock_event
+    return result
