@@ -1,0 +1,124 @@
+"""Parameter validation and the offline CLI."""
+import json
+import math
+import os
+import subprocess
+import sys
+
+import pytest
+
+from umbrella_sim.params import UmbrellaParams, load_params_file
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG = os.path.join(ROOT, "config", "umbrella.yaml")
+
+
+@pytest.mark.parametrize("changes, culprit, rule", [
+    ({"l1": 0.0}, "l1", "> 0"),
+    ({"l2": -0.1}, "l2", "> 0"),
+    ({"youngs_modulus": -1.0}, "youngs_modulus", "> 0"),
+    ({"density": 0.0}, "density", "> 0"),
+    ({"section_height": 0.0}, "section_height", "> 0"),
+    ({"area": 1e-4}, "area", "both or neither"),
+    ({"l3": 0.01}, "alpha", "cannot close"),
+    ({"alpha0": 0.2}, "alpha0", "above alpha_deployed"),
+    ({"elements_per_segment": 0}, "elements_per_segment", "between"),
+    ({"v0": math.nan}, "v0", "finite"),
+    ({"l1": math.inf}, "l1", "finite"),
+    ({"model": "elastic"}, "model", "one of"),
+    ({"lock": "sticky"}, "lock", "one of"),
+    ({"sleeve_force": -3.0}, "sleeve_force", ">= 0"),
+])
+def test_bad_parameters_name_culprit_and_rule(changes, culprit, rule):
+    with pytest.raises(ValueError) as exc:
+        UmbrellaParams().replace(**changes).validated()
+    assert culprit in str(exc.value) and rule in str(exc.value)
+
+
+def test_non_numeric_value_names_parameter():
+    with pytest.raises(ValueError, match="parameter l1='abc'"):
+        UmbrellaParams().replace(l1="abc")
+
+
+def test_default_config_is_the_thesis_data():
+    p = UmbrellaParams.from_mapping(load_params_file(CONFIG)).validated()
+    assert p == UmbrellaParams()
+    assert p.cross_section_area == pytest.approx(1e-4)
+    assert p.cross_section_inertia == pytest.approx(1e-8 / 12)
+    assert p.mass_per_length == pytest.approx(0.277)
+    assert p.sleeve_stop_height == pytest.approx(2 * 0.5 * math.sin(math.pi / 12))
+
+
+def test_bad_params_file(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("foo: [1, 2\n")
+    with pytest.raises(ValueError, match="not valid YAML"):
+        load_params_file(str(bad))
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("other_node:\n  ros__parameters: {a: 1}\n")
+    with pytest.raises(ValueError, match="no '/\\*\\*'"):
+        load_params_file(str(empty))
+
+
+def cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "umbrella_sim", *args], capture_output=True,
+                          text=True, cwd=cwd or ROOT, timeout=300)
+
+
+def test_cli_json_summary():
+    r = cli("simulate", "--params", CONFIG, "--v0", "-1.0", "--duration", "0.1", "--json")
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    for key in ("deploy_time", "tip_deflection_max", "tip_deflection_max_time",
+                "stage2_tip_amplitude", "stage2_tip_period", "peak_stress_leaf",
+                "peak_stress_link", "energy_drift", "constraint_residual_max", "steps",
+                "wall_time", "real_time_factor"):
+        assert key in s
+    assert s["deploy_time"] == pytest.approx(0.04525, rel=5e-3)
+
+
+def test_cli_models_and_csv(tmp_path):
+    out = tmp_path / "run.csv"
+    r = cli("simulate", "--model", "rigid", "--v0", "-2", "--duration", "0.03",
+            "--csv", str(out), "--csv-state", "--json")
+    assert r.returncode == 0, r.stderr
+    lines = out.read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[0] == "time" and "q[alpha1]" in header and "qd[link.u1]" in header
+    assert len(lines) == 1 + 1 + 15 + 1    # header, t = 0, 15 steps, the lock instant
+    again = cli("simulate", "--duration", "0.01", "--csv", str(out))
+    assert again.returncode == 2 and "exists" in again.stderr
+
+
+def test_cli_force_profile(tmp_path):
+    prof = tmp_path / "force.csv"
+    prof.write_text("t,F\n0.0,0.0\n0.01,20.0\n")
+    r = cli("simulate", "--v0", "0", "--force-profile", str(prof), "--duration", "0.6",
+            "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["deploy_time"] > 0.01
+    prof.write_text("t,F\n0.0,1.0\n0.01,-5.0\n")
+    bad = cli("simulate", "--force-profile", str(prof))
+    assert bad.returncode == 2 and "force.csv:3" in bad.stderr and ">= 0" in bad.stderr
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--set", "l1=-1"], "l1"),
+    (["--set", "alpha0=0.1"], "alpha0"),
+    (["--set", "nonsense=1"], "unknown parameter"),
+    (["--force", "nan"], "sleeve_force"),
+    (["--elements-per-segment", "0"], "elements_per_segment"),
+    (["--params", "/nonexistent.yaml"], "/nonexistent.yaml"),
+])
+def test_cli_rejects_bad_input(args, words):
+    r = cli("simulate", *args)
+    assert r.returncode == 2
+    assert words in r.stderr and "Traceback" not in r.stderr
+
+
+def test_cli_diverging_run_keeps_csv(tmp_path):
+    out = tmp_path / "div.csv"
+    r = cli("simulate", "--v0", "0", "--force", "1e4", "--duration", "0.5", "--csv", str(out))
+    assert r.returncode == 3
+    assert "error" in r.stderr and "kept" in r.stderr
+    assert len(out.read_text().splitlines()) > 3
