@@ -1,6 +1,6 @@
 from glob import glob
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 package_name = "umbrella_sim"
 
@@ -14,6 +14,11 @@ setup(
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/msg_docs", glob("msg_docs/*.md")),
     ],
+    # the compiled integrator step (plain C, loaded with ctypes); optional: without a C
+    # compiler the numpy path runs instead
+    ext_modules=[Extension("umbrella_sim._kernel", ["umbrella_sim/_kernel.c"],
+                           extra_compile_args=["-O3", "-std=c99"], libraries=["m"],
+                           optional=True)],
     install_requires=["setuptools", "numpy", "scipy", "PyYAML"],
     zip_safe=True,
     maintainer="umbrella_sim developers",

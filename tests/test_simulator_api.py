@@ -4,6 +4,7 @@ import math
 import numpy as np
 import pytest
 
+from umbrella_sim.integrators import PHI_TOLERANCE
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.solver import SimulationDiverged, UmbrellaSimulator, simulate
 
@@ -95,5 +96,7 @@ def test_outputs_are_consistent():
             * math.sin(s.alpha2), abs=1e-15)
         assert s.kinetic_energy > 0
     locked = [s for s in r.samples if s.stage == "locked"]
-    assert locked and all(abs(s.sleeve_position - p.sleeve_stop_height) < 1e-12 for s in locked)
+    # the sleeve is at the stop to the solver's constraint tolerance (1e-11 m, issue: 1e-10)
+    assert locked and all(abs(s.sleeve_position - p.sleeve_stop_height) < PHI_TOLERANCE
+                          for s in locked)
     assert all(s.sleeve_reaction[1] != 0.0 for s in locked)

@@ -17,7 +17,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from .integrators import ConvergenceError, DynamicState, NewmarkDAE
+from .integrators import ConvergenceError, DynamicState, MidpointDAE
 from .model import DEFORMING, LOCKED, ConstraintSet, UmbrellaModel
 from .outputs import LockEvent, RunResult, Sample
 from .params import UmbrellaParams
@@ -53,7 +53,7 @@ class FiniteElementEngine:
         self.model = model
         self.rigid = params.model == "rigid-fe"
         self.lock_kind = "plastic" if self.rigid else params.lock
-        self.integrator = NewmarkDAE(model)
+        self.integrator = MidpointDAE(model)
         self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
                     for stage in (DEFORMING, LOCKED)}
 
