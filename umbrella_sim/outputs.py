@@ -77,22 +77,30 @@ class RunResult:
     wall_time: float = 0.0
     error: str | None = None
     q_labels: list = field(default_factory=list)
+    leaf_stress_x: list = field(default_factory=list)   # m from O, per stress point
+    link_stress_x: list = field(default_factory=list)   # m from O''
 
     def column(self, name: str) -> np.ndarray:
         return np.array([getattr(s, name) for s in self.samples], dtype=float)
 
     def write_csv(self, path: str, with_state: bool = False) -> None:
+        """Time series; with_state adds q, qd and the fibre stresses along both bodies
+        (columns 'sigma_top[leaf@0.25]' = top-fibre stress at 0.25 m from O, Pa)."""
         with open(path, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             header = list(CSV_COLUMNS)
             if with_state and self.samples:
                 header += [f"q[{lab}]" for lab in self.q_labels]
                 header += [f"qd[{lab}]" for lab in self.q_labels]
+                for body, xs in (("leaf", self.leaf_stress_x), ("link", self.link_stress_x)):
+                    for fibre in ("top", "bottom"):
+                        header += [f"sigma_{fibre}[{body}@{x:.6g}]" for x in xs]
             w.writerow(header)
             for s in self.samples:
                 row = sample_row(s)
                 if with_state:
                     row += list(s.q) + list(s.qd)
+                    row += list(s.leaf_stress.ravel()) + list(s.link_stress.ravel())
                 w.writerow(row)
 
     def summary(self) -> dict:
@@ -159,6 +167,7 @@ def summarize(r: RunResult) -> dict:
         out["lock"] = r.lock.kind
         out["lock_energy_before"] = r.lock.energy_before
         out["lock_energy_after"] = r.lock.energy_after
+        out["lock_free_velocities"] = list(r.lock.free_velocities)
     out["constraint_residual_max"] = float(r.column("constraint_residual").max())
     out["final_time"] = float(t[-1])
     out["steps"] = r.steps

@@ -373,7 +373,9 @@ def simulate(params: UmbrellaParams, duration: float,
     each value acting from the first step that starts at or after its time.  On a diverged
     run the samples computed before the failure are kept and ``result.error`` says why."""
     sim = UmbrellaSimulator(params)
-    result = RunResult(params=params.as_dict(), q_labels=sim.model.coordinate_labels())
+    result = RunResult(params=params.as_dict(), q_labels=sim.model.coordinate_labels(),
+                       leaf_stress_x=list(sim.model.leaf.stress_x),
+                       link_stress_x=list(sim.model.link.stress_x))
     result.samples.append(sim.sample())
     profile = sorted(force_profile or [], key=lambda tf: tf[0])
     for t_cmd, f_cmd in profile:
