@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
 """Set up a local virtualenv (.venv) with every dependency, then run the main job or the tests.
 
-    python3 bootstrap.py run      # the simulation on config/umbrella.yaml
+    python3 bootstrap.py run      # umbrella_node on config/umbrella.yaml (Ctrl-C stops it)
     python3 bootstrap.py test     # the test suite
+
+Arguments after run go to the node: python3 bootstrap.py run -p v0:=-0.5
 
 Needs only python3 (3.11); everything else comes from PyPI.  Idempotent: a venv whose
 requirements are unchanged is reused.
@@ -44,8 +46,9 @@ def main(argv) -> int:
         return 2
     setup()
     env = dict(os.environ, AMENT_PREFIX_PATH=VENV)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if argv[0] == "run":
-        cmd = [PY, "-m", "umbrella_sim", "simulate", "--params",
+        cmd = [PY, "-m", "umbrella_sim.node", "--ros-args", "--params-file",
                os.path.join(ROOT, "config", "umbrella.yaml")] + argv[1:]
     elif argv[0] == "test":
         cmd = [PY, "-m", "pytest", "-q", os.path.join(ROOT, "tests")] + argv[1:]

@@ -29,6 +29,7 @@ setup(
     entry_points={
         "console_scripts": [
             "umbrella-sim = umbrella_sim.cli:main",
+            "umbrella_node = umbrella_sim.node:main",
         ],
     },
 )

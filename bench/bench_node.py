@@ -1,0 +1,98 @@
+#!/usr/bin/env python3
+"""umbrella_node timing, measured from a separate subscriber process over DDS (N = 2, default
+config).  Prints:
+  * the achieved real-time factor with real_time_factor = 0 (as fast as possible);
+  * at real_time_factor = 1, publish_rate 200 Hz and 1 kHz: p50 / p99 of |interval - period|
+    of /clock arrivals, and the sim-time vs wall-time drift over the run (--seconds, 60).
+The arrival times include DDS transport, so they bound the node's own publication jitter.
+
+    python bench/bench_node.py [--seconds 60] [--elements 2]
+"""
+import argparse
+import os
+import re
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+sys.path.insert(0, ROOT)
+
+from tests.ros_helpers import NodeProcess, Probe  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+
+
+def wall_stamp(line_match) -> float:
+    return float(line_match.group(1))
+
+
+def as_fast_as_possible(n_el: int, sim_seconds: float) -> float:
+    with NodeProcess("-p", f"elements_per_segment:={n_el}", "-p", "real_time_factor:=0.0",
+                     "-p", f"duration:={sim_seconds}") as node:
+        start = wall_stamp(node.wait_for_log(r"\[INFO\] \[([0-9.]+)\] \[umbrella_node\]: umbrella_sim"))
+        end = wall_stamp(node.wait_for_log(r"\[INFO\] \[([0-9.]+)\] \[umbrella_node\]: duration",
+                                           timeout=600))
+        node.proc.wait(60)
+    return sim_seconds / (end - start)
+
+
+def paced(probe: Probe, n_el: int, rate: float, seconds: float):
+    topic = "/clock"
+    probe.received[topic] = []
+    probe.received["/diagnostics"] = []
+    with NodeProcess("-p", f"elements_per_segment:={n_el}", "-p", f"publish_rate:={rate}",
+                     "-p", "real_time_factor:=1.0") as node:
+        node.wait_for_log("physics step")
+        probe.wait_for(topic, timeout=30)
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < seconds + 2.0:
+            time.sleep(0.5)
+        behind = "cannot keep up" in node.output()
+    data = probe.timed(topic)
+    wall = np.array([w for w, _ in data])
+    sim = np.array([m.clock.sec + 1e-9 * m.clock.nanosec for _, m in data])
+    keep = wall >= wall[0] + 1.0            # skip the first second (discovery, warm-up)
+    wall, sim = wall[keep], sim[keep]
+    wall, sim = wall[wall <= wall[0] + seconds], sim[wall <= wall[0] + seconds]
+    period = 1.0 / rate
+    jitter = np.abs(np.diff(wall) - period)
+    drift = (sim - sim[0]) - (wall - wall[0])
+    expected = int(round((sim[-1] - sim[0]) / period)) + 1
+    node_lag = max(float({kv.key: kv.value for kv in m.status[0].values}["max_lag_s"])
+                   for m in probe.messages("/diagnostics")[1:])
+    return dict(node_max_lag=node_lag, p50=np.percentile(jitter, 50), p99=np.percentile(jitter, 99),
+                drift_end=drift[-1], drift_max=np.abs(drift).max(), span=wall[-1] - wall[0],
+                received=len(sim), expected=expected, behind=behind)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--elements", type=int, default=2)
+    ap.add_argument("--fast-seconds", type=float, default=20.0)
+    args = ap.parse_args()
+    rtf = as_fast_as_possible(args.elements, args.fast_seconds)
+    print(f"N = {args.elements}, real_time_factor = 0 (publish 100 Hz): achieved {rtf:.1f}x "
+          f"real time over {args.fast_seconds:g} s of sim time")
+    probe = Probe("bench_probe")
+    probe.subscribe("/clock", Clock)
+    probe.subscribe("/diagnostics", DiagnosticArray)
+    try:
+        for rate in (200.0, 1000.0):
+            r = paced(probe, args.elements, rate, args.seconds)
+            print(f"N = {args.elements}, real_time_factor = 1, {rate:g} Hz over {r['span']:.1f} s: "
+                  f"interval jitter p50 {r['p50'] * 1e6:.0f} us, p99 {r['p99'] * 1e6:.0f} us; "
+                  f"sim - wall drift at end {r['drift_end'] * 1e3:+.3f} ms, max |drift| "
+                  f"{r['drift_max'] * 1e3:.3f} ms at the subscriber, node-side max lag "
+                  f"{r['node_max_lag'] * 1e3:.3f} ms (one period = {1e3 / rate:g} ms); "
+                  f"received {r['received']}/{r['expected']}"
+                  + ("; node reported falling behind" if r["behind"] else ""))
+    finally:
+        probe.close()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,176 @@
+"""umbrella_node over real DDS: topic-driven actuation, validation, services, namespaces."""
+import math
+import re
+import subprocess
+import sys
+import time
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, String
+from std_srvs.srv import SetBool, Trigger
+
+from tests.ros_helpers import NodeProcess, Probe, ros_env
+from umbrella_sim.params import UmbrellaParams
+from umbrella_sim.ros_io import LATCHED
+from umbrella_sim.solver import simulate
+
+ALPHA0 = UmbrellaParams().alpha0
+DEPLOYED = math.pi / 12
+
+
+@pytest.fixture
+def probe():
+    p = Probe()
+    yield p
+    p.close()
+
+
+def stamp_s(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def diag_values(msg: DiagnosticArray) -> dict:
+    return {kv.key: kv.value for kv in msg.status[0].values}
+
+
+def test_topic_driven_deployment_matches_offline_core(probe):
+    """V0 = 0: nothing moves until a sleeve_force command; then deploying -> locked, the leaf
+    reaches pi/12, and the lock time equals the offline core's under the force history
+    read from the node's own log (same grid, same code: tolerance 1e-9 s)."""
+    probe.subscribe("/joint_states", JointState)
+    probe.subscribe("/deployment_phase", String, LATCHED)
+    with NodeProcess("-p", "v0:=0.0", "-p", "publish_rate:=100.0") as node:
+        step = float(node.wait_for_log(r"physics step ([0-9.e-]+) s").group(1))
+        probe.wait_for("/deployment_phase", lambda m: m.data == "deploying")
+        while len(probe.messages("/joint_states")) < 30:          # 0.3 s of rest observed
+            time.sleep(0.02)
+        pub = probe.publisher("/sleeve_force", Float64)
+        probe.wait_for_subscribers(pub)
+        for _ in range(3):
+            pub.publish(Float64(data=20.0))
+            time.sleep(0.05)
+        probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=30)
+        lock_t = float(node.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
+        probe.wait_for("/joint_states", lambda m: stamp_s(m) > lock_t + 0.1)
+        assert node.stop() == 0
+        log = node.output()
+    applied = [(float(t), float(f)) for f, t in
+               re.findall(r"sleeve force ([0-9.e+-]+) N applied from t = ([0-9.]+) s", log)]
+    assert applied and applied[0][1] == 20.0
+    t_cmd = applied[0][0]
+    states = probe.messages("/joint_states")
+    before = [m for m in states if stamp_s(m) <= t_cmd + 1e-9]
+    after = [m for m in states if stamp_s(m) > lock_t]
+    # at rest with no force the state is static to round-off (|dq| ~ 1e-12)
+    assert len(before) > 10 and all(abs(m.position[0] - ALPHA0) < 1e-9 for m in before)
+    assert all(m.effort[2] == 0.0 for m in before)
+    assert any(m.position[0] != ALPHA0 for m in states if lock_t > stamp_s(m) > t_cmd)
+    assert min(abs(m.position[0] - DEPLOYED) for m in after) < 1e-3
+    assert all(abs(m.position[0] - DEPLOYED) < 5e-3 for m in after)
+    assert [m.data for m in probe.messages("/deployment_phase")][-2:] == ["deploying", "locked"]
+    offline = simulate(UmbrellaParams(v0=0.0, time_step=step), lock_t + 0.05,
+                       force_profile=applied, stop_after_lock=0.0)
+    assert offline.lock.time == pytest.approx(lock_t, abs=1e-9)
+
+
+@pytest.mark.parametrize("args, culprit", [
+    (["-p", "l1:=-1.0"], "l1"),
+    (["-p", "alpha0:=0.1"], "alpha0"),
+    (["-p", "model:=elastic"], "model"),
+    (["-p", "elements_per_segment:=0"], "elements_per_segment"),
+    (["-p", "publish_rate:=0.0"], "publish_rate"),
+    (["-p", "v0:=fast"], "v0"),
+])
+def test_invalid_start_parameters_exit_nonzero_naming_the_parameter(args, culprit):
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args", *args],
+                       capture_output=True, text=True, env=ros_env(), timeout=60)
+    assert r.returncode == 2
+    assert culprit in r.stderr and "Traceback" not in r.stderr
+
+
+def test_invalid_commands_refused_counted_and_never_applied(probe):
+    probe.subscribe("/joint_states", JointState)
+    probe.subscribe("/diagnostics", DiagnosticArray)
+    with NodeProcess("-p", "v0:=0.0") as node:
+        node.wait_for_log("physics step")
+        pub = probe.publisher("/sleeve_force", Float64)
+        probe.wait_for_subscribers(pub)
+        for bad in (float("nan"), -1.0, float("inf"), -float("inf")):
+            pub.publish(Float64(data=bad))
+        probe.wait_for("/diagnostics", lambda m: diag_values(m)["refused_commands"] == "4",
+                       timeout=10)
+        t_seen = stamp_s(probe.messages("/joint_states")[-1])
+        probe.wait_for("/joint_states", lambda m: stamp_s(m) > t_seen + 0.3)
+        assert "refused sleeve_force command" in node.output()
+    states = probe.messages("/joint_states")
+    assert all(m.effort[2] == 0.0 and abs(m.position[0] - ALPHA0) < 1e-9 for m in states)
+    assert diag_values(probe.messages("/diagnostics")[-1])["accepted_commands"] == "0"
+
+
+def test_pause_and_reset(probe):
+    probe.subscribe("/clock", Clock)
+    probe.subscribe("/deployment_phase", String, LATCHED)
+    with NodeProcess("-p", "v0:=-0.5") as node:
+        node.wait_for_log("physics step")
+        probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
+        assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=True)).success
+        time.sleep(0.1)
+        frozen = probe.messages("/clock")[-1].clock
+        time.sleep(0.4)
+        assert probe.messages("/clock")[-1].clock == frozen          # sim time stopped
+        assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=False)).success
+        t_frozen = frozen.sec + 1e-9 * frozen.nanosec
+        probe.wait_for("/clock", lambda m: m.clock.sec + 1e-9 * m.clock.nanosec > t_frozen + 0.1)
+        n_before = len(probe.messages("/deployment_phase"))
+        assert probe.call(Trigger, "/umbrella_node/reset", Trigger.Request()).success
+        probe.wait_for("/clock", lambda m: m.clock.sec == 0 and m.clock.nanosec < 50_000_000)
+        phases = [m.data for m in probe.messages("/deployment_phase")][n_before:]
+        assert phases and phases[0] == "deploying"
+        probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
+        node.wait_for_log(r"locked at t = 0.0904", count=2)      # the same run again
+
+
+def test_runtime_parameter_sets(probe):
+    probe.subscribe("/deployment_phase", String, LATCHED)
+    with NodeProcess("-p", "v0:=0.0") as node:
+        node.wait_for_log("physics step")
+
+        def set_param(name, value):
+            v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+            req = SetParameters.Request(parameters=[Parameter(name=name, value=v)])
+            return probe.call(SetParameters, "/umbrella_node/set_parameters", req).results[0]
+
+        bad = set_param("l1", -1.0)
+        assert not bad.successful and "l1" in bad.reason           # rclpy range or ours
+        bad = set_param("alpha0", 0.1)
+        assert not bad.successful and "alpha0" in bad.reason
+        assert set_param("v0", -1.0).successful                     # structural: on reset
+        time.sleep(0.3)
+        assert "locked" not in [m.data for m in probe.messages("/deployment_phase")]
+        probe.call(Trigger, "/umbrella_node/reset", Trigger.Request())
+        probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
+        node.wait_for_log(r"locked at t = 0.0452")
+
+
+def test_namespaced_nodes_do_not_cross_talk(probe):
+    for ns in ("a1", "a2"):
+        probe.subscribe(f"/{ns}/joint_states", JointState)
+        probe.subscribe(f"/{ns}/deployment_phase", String, LATCHED)
+    with NodeProcess("-r", "__ns:=/a1", "-p", "v0:=0.0") as a1, \
+            NodeProcess("-r", "__ns:=/a2", "-p", "v0:=0.0") as a2:
+        a1.wait_for_log("physics step")
+        a2.wait_for_log("physics step")
+        pub = probe.publisher("/a1/sleeve_force", Float64)
+        probe.wait_for_subscribers(pub)
+        pub.publish(Float64(data=30.0))
+        probe.wait_for("/a1/deployment_phase", lambda m: m.data == "locked", timeout=20)
+        t_lock = float(a1.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
+        probe.wait_for("/a2/joint_states", lambda m: stamp_s(m) > t_lock + 0.2)
+        assert "sleeve force" not in a2.output()
+    assert all(abs(m.position[0] - ALPHA0) < 1e-9 for m in probe.messages("/a2/joint_states"))
+    assert [m.data for m in probe.messages("/a2/deployment_phase")] == ["deploying"]

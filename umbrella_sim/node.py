@@ -1,0 +1,338 @@
+"""umbrella_node: the ROS 2 face of the simulator (a thin adapter around UmbrellaSimulator).
+
+Threads, chosen deliberately:
+  * the physics thread steps the DAE and publishes; it is paced against time.monotonic()
+    (not a ROS timer: this node is the /clock source, and a timer on sim time would wait on
+    itself).  Sim time is anchored to the wall time of the last (re)start, so it does not
+    accumulate drift;
+  * the executor thread (SingleThreadedExecutor) serves the sleeve_force subscription, the
+    ~/reset and ~/pause services and parameter sets.  The compiled step is a ctypes call,
+    which releases the GIL, so commands are taken while physics runs.  A command is handed
+    over under a lock and applied at the next step boundary; every applied value is logged
+    with its sim time, which is the exact force history for an offline re-run.
+"""
+from __future__ import annotations
+
+import gc
+import math
+import sys
+import threading
+import time
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.task import Future
+from rcl_interfaces.msg import SetParametersResult
+from std_srvs.srv import SetBool, Trigger
+
+from . import __version__
+from . import ros_io
+from .params import SPECS, UmbrellaParams
+from .solver import SimulationDiverged, UmbrellaSimulator, validate_force
+
+
+class StartupError(RuntimeError):
+    pass
+
+
+def physics_step(time_step: float, publish_rate: float) -> float:
+    """The largest step <= time_step that divides the publication period."""
+    period = 1.0 / publish_rate
+    return period / math.ceil(period / time_step - 1e-9)
+
+
+class UmbrellaNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__("umbrella_node", **kwargs)
+        defaults = ros_io.parameter_defaults()
+        values = {}
+        for name, default in defaults.items():
+            try:
+                values[name] = self.declare_parameter(name, default,
+                                                      ros_io.descriptor(name)).value
+            except Exception as exc:  # rclpy names the parameter in its exceptions
+                raise StartupError(f"parameter {name}: {exc}") from None
+        try:
+            self.model_params = UmbrellaParams.from_mapping(
+                {k: v for k, v in values.items() if k in SPECS}).validated()
+            self.node_cfg = self._node_config(values)
+        except ValueError as exc:
+            raise StartupError(str(exc)) from None
+        self.pending_params = self.model_params
+        self._sim_lock = threading.RLock()
+        self._cmd_lock = threading.Lock()
+        self._commanded_force = self.model_params.sleeve_force
+        self.accepted_commands = 0
+        self.refused_commands = 0
+        self.fault: str | None = None
+        self.paused = False
+        self.finished = Future()
+        self._stop = threading.Event()
+        self._wake = threading.Event()
+
+        self.pub = {key: self.create_publisher(t.type, t.name, t.qos)
+                    for key, t in ros_io.TOPICS.items()}
+        self.create_subscription(ros_io.COMMAND.type, ros_io.COMMAND.name, self._on_force,
+                                 ros_io.COMMAND.qos)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(SetBool, "~/pause", self._on_pause)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._marker_ns = self.get_namespace().strip("/") or "umbrella"
+        self._build_simulator()
+        self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
+
+    # ------------------------------------------------------------------ config
+    @staticmethod
+    def _node_config(values: dict) -> dict:
+        cfg = {}
+        for name, (_, _, rng, _) in ros_io.NODE_PARAMETERS.items():
+            v = values[name]
+            if rng is not None:
+                try:
+                    v = float(v)
+                except (TypeError, ValueError):
+                    raise ValueError(f"parameter {name}={v!r}: must be a number") from None
+                if not (math.isfinite(v) and rng[0] <= v <= rng[1]):
+                    raise ValueError(f"parameter {name}={v}: must be in [{rng[0]:g}, {rng[1]:g}]")
+            cfg[name] = v
+        return cfg
+
+    def _build_simulator(self) -> None:
+        p = self.model_params
+        h = physics_step(p.time_step, self.node_cfg["publish_rate"])
+        self.sim = UmbrellaSimulator(p.replace(time_step=h))
+        self.publish_every = round((1.0 / self.node_cfg["publish_rate"]) / h)
+        with self._cmd_lock:
+            self._commanded_force = p.sleeve_force
+        self.fault = None
+        self._phase = "deploying"
+        self.get_logger().info(
+            f"umbrella_sim {__version__}: model {p.model}, N = {p.elements_per_segment}, "
+            f"v0 = {p.v0:g} m/s, physics step {h:.9g} s ({self.publish_every} per publication "
+            f"at {self.node_cfg['publish_rate']:g} Hz), kernel "
+            f"{getattr(self.sim.engine, 'integrator', None) and self.sim.engine.integrator.backend or 'rigid'}")
+
+    # ---------------------------------------------------------------- callbacks
+    def _on_force(self, msg) -> None:
+        try:
+            force = validate_force(msg.data)
+        except ValueError as exc:
+            self.refused_commands += 1
+            self.get_logger().warn(f"refused sleeve_force command: {exc} "
+                                   f"(refused so far: {self.refused_commands})",
+                                   throttle_duration_sec=1.0)
+            return
+        self.accepted_commands += 1
+        with self._cmd_lock:
+            self._commanded_force = force
+
+    def _on_reset(self, request, response):
+        with self._sim_lock:
+            self.model_params = self.pending_params
+            self._build_simulator()
+            self._anchor()
+            self._publish_phase("deploying")
+        self._wake.set()
+        response.success = True
+        response.message = "reset to t = 0"
+        self.get_logger().info("reset: simulation restarted at t = 0 s")
+        return response
+
+    def _on_pause(self, request, response):
+        with self._sim_lock:
+            self.paused = bool(request.data)
+            self._anchor()
+        self._wake.set()
+        response.success = True
+        response.message = "paused" if self.paused else "running"
+        self.get_logger().info(f"{response.message} at t = {self.sim.time:.9f} s")
+        return response
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        core = {p.name: p.value for p in params if p.name in SPECS}
+        node = {p.name: p.value for p in params if p.name in ros_io.NODE_PARAMETERS}
+        try:
+            candidate = self.pending_params.replace(**core).validated() if core else \
+                self.pending_params
+            cfg = dict(self.node_cfg)
+            cfg.update(node)
+            cfg = self._node_config(cfg)
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.pending_params = candidate
+        with self._sim_lock:
+            rate_changed = cfg["publish_rate"] != self.node_cfg["publish_rate"]
+            self.node_cfg = cfg
+            if "real_time_factor" in node:
+                self._anchor()
+        if core or rate_changed:
+            self.get_logger().info(f"parameters {', '.join(sorted({**core, **node}))} set; "
+                                   "model changes apply on ~/reset")
+        return SetParametersResult(successful=True)
+
+    # --------------------------------------------------------------- physics
+    def start(self) -> None:
+        self._publish_phase("deploying")
+        self._anchor()
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+
+    def _anchor(self) -> None:
+        self._wall_anchor = time.monotonic()
+        self._sim_anchor = self.sim.time
+
+    def _publish_phase(self, phase: str) -> None:
+        self._phase = phase
+        self.pub["deployment_phase"].publish(ros_io.phase_msg(phase))
+
+    def _publish_sample(self) -> None:
+        s = self.sim.sample()
+        positions = self.sim.model.node_positions(s.q, self.node_cfg["marker_magnification"])
+        for key, msg in ros_io.sample_messages(s, self.sim.params, positions,
+                                               self._marker_ns).items():
+            self.pub[key].publish(msg)
+
+    def _apply_command(self) -> None:
+        with self._cmd_lock:
+            force = self._commanded_force
+        if force != self.sim.sleeve_force:
+            self.sim.set_sleeve_force(force)
+            note = " (locked: no effect on motion)" if self.sim.stage == "locked" else ""
+            self.get_logger().info(f"sleeve force {force:.17g} N applied from "
+                                   f"t = {self.sim.time:.9f} s{note}")
+
+    def _advance_one_publication(self) -> None:
+        for _ in range(self.publish_every):
+            self._apply_command()
+            stage = self.sim.stage
+            self.sim.step(record=False)
+            if stage != self.sim.stage:
+                self.get_logger().info(f"locked at t = {self.sim.lock_event.time:.9f} s "
+                                       f"(energy {self.sim.lock_event.energy_before:.6g} J -> "
+                                       f"{self.sim.lock_event.energy_after:.6g} J, "
+                                       f"{self.sim.lock_event.kind} lock)")
+                self._publish_phase("locked")
+
+    def _physics_loop(self) -> None:
+        # everything allocated so far (modules, model, publishers) lives for the whole run:
+        # keep it out of the collector's full passes, which otherwise stall this loop by
+        # ~20 ms now and then (measured with bench/bench_node.py)
+        gc.freeze()
+        log = self.get_logger()
+        diag_wall, diag_sim = time.monotonic(), self.sim.time
+        lag = 0.0
+        self._max_lag = 0.0
+        try:
+            self._publish_sample()
+            while not self._stop.is_set():
+                with self._sim_lock:
+                    idle = self.paused or self.fault is not None
+                    if not idle:
+                        try:
+                            self._advance_one_publication()
+                        except SimulationDiverged as exc:
+                            self.fault = str(exc)
+                            log.error(f"simulation fault: {exc}; call ~/reset to restart")
+                            self._publish_phase("fault")
+                        self._publish_sample()
+                    sim_t, rtf = self.sim.time, self.node_cfg["real_time_factor"]
+                    target = (self._wall_anchor + (sim_t - self._sim_anchor) / rtf) if rtf > 0 \
+                        else None
+                    duration = self.node_cfg["duration"]
+                now = time.monotonic()
+                if now - diag_wall >= 1.0:
+                    measured = (sim_t - diag_sim) / (now - diag_wall)
+                    self._publish_diagnostics(sim_t, measured, lag)
+                    diag_wall, diag_sim = now, sim_t
+                    self._max_lag = 0.0
+                if duration > 0 and sim_t >= duration - 1e-12:
+                    log.info(f"duration {duration:g} s reached at t = {sim_t:.9f} s")
+                    break
+                if idle:
+                    self._wake.wait(0.05)
+                    self._wake.clear()
+                    continue
+                if target is not None:
+                    lag = now - target
+                    self._max_lag = max(self._max_lag, lag)
+                    if lag < 0:
+                        self._sleep_until(target)
+                    elif lag > max(0.05, 2.0 / self.node_cfg["publish_rate"]):
+                        log.warn(f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
+                                 f"time x real_time_factor (see diagnostics)",
+                                 throttle_duration_sec=5.0)
+        except Exception as exc:  # keep the process informative, never silent
+            log.error(f"physics thread stopped: {exc!r}")
+            self.fault = repr(exc)
+        finally:
+            if not self.finished.done():
+                self.finished.set_result(self.fault is None)
+
+    def _sleep_until(self, target: float) -> None:
+        """Sleep, then spin the last 0.3 ms for a punctual publication."""
+        while True:
+            remaining = target - time.monotonic()
+            if remaining <= 0 or self._stop.is_set():
+                return
+            if remaining > 3e-4:
+                self._wake.wait(remaining - 3e-4)
+                self._wake.clear()
+
+    def _publish_diagnostics(self, sim_t: float, measured: float, lag: float) -> None:
+        rtf = self.node_cfg["real_time_factor"]
+        if self.fault:
+            level, message = 2, f"fault: {self.fault}"
+        elif rtf > 0 and lag > max(0.05, 2.0 / self.node_cfg["publish_rate"]):
+            level, message = 1, f"behind real time: measured {measured:.3f}x of {rtf:g}x"
+        else:
+            level, message = 0, self._phase
+        values = {"sim_time_s": f"{sim_t:.6f}", "measured_real_time_factor": f"{measured:.4f}",
+                  "requested_real_time_factor": rtf, "lag_s": f"{max(lag, 0.0):.6f}",
+                  "max_lag_s": f"{max(self._max_lag, 0.0):.6f}",
+                  "phase": self._phase, "paused": self.paused,
+                  "accepted_commands": self.accepted_commands,
+                  "refused_commands": self.refused_commands, "steps": self.sim.steps,
+                  "physics_step_s": self.sim.h}
+        self.pub["diagnostics"].publish(
+            ros_io.diagnostics_msg(sim_t, f"{self.get_name()}: physics", level, message, values))
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv if argv is None else argv)
+    rclpy.init(args=argv)
+    leftover = rclpy.utilities.remove_ros_args(argv)[1:]
+    if leftover:
+        print(f"umbrella_node: error: unexpected arguments {leftover}; parameters go after "
+              "--ros-args as -p name:=value or --params-file FILE", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        node = UmbrellaNode()
+    except StartupError as exc:
+        print(f"umbrella_node: error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    node.start()
+    ok = True
+    try:
+        executor.spin_until_future_complete(node.finished)
+        ok = bool(node.finished.done() and node.finished.result())
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.stop()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0 if ok else 3
+
+
+if __name__ == "__main__":
+    sys.exit(main())
