@@ -19,7 +19,7 @@ setup(
     ext_modules=[Extension("umbrella_sim._kernel", ["umbrella_sim/_kernel.c"],
                            extra_compile_args=["-O3", "-std=c99"], libraries=["m"],
                            optional=True)],
-    install_requires=["setuptools", "numpy", "scipy", "PyYAML"],
+    install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "matplotlib"],
     zip_safe=True,
     maintainer="umbrella_sim developers",
     maintainer_email="dev@umbrella-sim.invalid",
@@ -30,6 +30,8 @@ setup(
         "console_scripts": [
             "umbrella-sim = umbrella_sim.cli:main",
             "umbrella_node = umbrella_sim.node:main",
+            "umbrella-replay = umbrella_sim.replay:main",
+            "umbrella-compare = umbrella_sim.compare:main",
         ],
     },
 )

@@ -117,6 +117,12 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument("--csv", metavar="FILE", help="write the time series")
     sp.add_argument("--csv-state", action="store_true", help="add q and qd to the CSV")
     sp.add_argument("--json", action="store_true", help="print one JSON summary")
+    sp.add_argument("--mcap", metavar="BAG_DIR",
+                    help="record the node's topics to a new bag directory (BAG_DIR/"
+                         "BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the summary "
+                         "is then taken at the publication instants")
+    sp.add_argument("--publish-rate", type=float, default=100.0,
+                    help="publication rate of the --mcap recording (Hz, sim time)")
     return ap
 
 
@@ -130,10 +136,22 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--duration {args.duration}: must be > 0")
         if args.csv and os.path.exists(args.csv):
             raise ValueError(f"--csv {args.csv}: file exists, not overwriting")
+        if args.mcap and os.path.exists(args.mcap):
+            raise ValueError(f"--mcap {args.mcap}: already exists, not overwriting")
+        if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
+            raise ValueError(f"--publish-rate {args.publish_rate}: must be in [1, 5000] Hz")
     except ValueError as exc:
         ap.exit(2, f"umbrella-sim: error: {exc}\n")
     progress = Progress(args.duration) if sys.stderr.isatty() and not args.json else None
-    result = simulate(params, args.duration, force_profile=profile, progress=progress)
+    if args.mcap:
+        from .recording import record_offline
+        try:
+            result = record_offline(params, args.mcap, args.duration, profile,
+                                    publish_rate=args.publish_rate, progress=progress)
+        except ValueError as exc:
+            ap.exit(2, f"umbrella-sim: error: {exc}\n")
+    else:
+        result = simulate(params, args.duration, force_profile=profile, progress=progress)
     if progress:
         progress.close()
     if args.csv:

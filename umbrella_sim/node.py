@@ -10,10 +10,13 @@ Threads, chosen deliberately:
     which releases the GIL, so commands are taken while physics runs.  A command is handed
     over under a lock and applied at the next step boundary; every applied value is logged
     with its sim time, which is the exact force history for an offline re-run.
+Everything published and every command received (accepted, refused, applied) is recorded to
+MCAP when ``record_path`` is set (see recording.py).
 """
 from __future__ import annotations
 
 import gc
+import json
 import math
 import sys
 import threading
@@ -24,22 +27,18 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.task import Future
 from rcl_interfaces.msg import SetParametersResult
+from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
 from . import __version__
 from . import ros_io
 from .params import SPECS, UmbrellaParams
-from .solver import SimulationDiverged, UmbrellaSimulator, validate_force
+from .publication import PublicationDriver
+from .solver import SimulationDiverged, validate_force
 
 
 class StartupError(RuntimeError):
     pass
-
-
-def physics_step(time_step: float, publish_rate: float) -> float:
-    """The largest step <= time_step that divides the publication period."""
-    period = 1.0 / publish_rate
-    return period / math.ceil(period / time_step - 1e-9)
 
 
 class UmbrellaNode(Node):
@@ -62,7 +61,6 @@ class UmbrellaNode(Node):
         self.pending_params = self.model_params
         self._sim_lock = threading.RLock()
         self._cmd_lock = threading.Lock()
-        self._commanded_force = self.model_params.sleeve_force
         self.accepted_commands = 0
         self.refused_commands = 0
         self.fault: str | None = None
@@ -70,16 +68,21 @@ class UmbrellaNode(Node):
         self.finished = Future()
         self._stop = threading.Event()
         self._wake = threading.Event()
+        self.recorder = None
+        self.published: dict[str, int] = {}
 
         self.pub = {key: self.create_publisher(t.type, t.name, t.qos)
                     for key, t in ros_io.TOPICS.items()}
-        self.create_subscription(ros_io.COMMAND.type, ros_io.COMMAND.name, self._on_force,
-                                 ros_io.COMMAND.qos)
+        self.command_sub = self.create_subscription(
+            ros_io.COMMAND.type, ros_io.COMMAND.name, self._on_force, ros_io.COMMAND.qos)
+        self.command_topic = self.command_sub.topic_name
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._marker_ns = self.get_namespace().strip("/") or "umbrella"
         self._build_simulator()
+        if self.node_cfg["record_path"]:
+            self._open_recording(self.node_cfg["record_path"])
         self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
 
     # ------------------------------------------------------------------ config
@@ -100,30 +103,69 @@ class UmbrellaNode(Node):
 
     def _build_simulator(self) -> None:
         p = self.model_params
-        h = physics_step(p.time_step, self.node_cfg["publish_rate"])
-        self.sim = UmbrellaSimulator(p.replace(time_step=h))
-        self.publish_every = round((1.0 / self.node_cfg["publish_rate"]) / h)
+        self.driver = PublicationDriver(p, self.node_cfg["publish_rate"])
+        self.sim = self.driver.sim
         with self._cmd_lock:
             self._commanded_force = p.sleeve_force
         self.fault = None
         self._phase = "deploying"
         self.get_logger().info(
             f"umbrella_sim {__version__}: model {p.model}, N = {p.elements_per_segment}, "
-            f"v0 = {p.v0:g} m/s, physics step {h:.9g} s ({self.publish_every} per publication "
-            f"at {self.node_cfg['publish_rate']:g} Hz), kernel "
-            f"{getattr(self.sim.engine, 'integrator', None) and self.sim.engine.integrator.backend or 'rigid'}")
+            f"v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s "
+            f"({self.driver.publish_every} per publication at "
+            f"{self.node_cfg['publish_rate']:g} Hz), kernel {self.driver.backend}")
+
+    def _open_recording(self, path: str) -> None:
+        from .recording import BagRecorder, run_metadata
+        try:
+            self.recorder = BagRecorder(path, run_metadata(
+                self.model_params, self.node_cfg, self.driver.step, self.sim.model,
+                self.driver.backend, source=f"umbrella_node {self.get_fully_qualified_name()}"))
+        except ValueError as exc:
+            raise StartupError(str(exc)) from None
+        for key, pub in self.pub.items():
+            self.recorder.add_channel(pub.topic_name, ros_io.TOPICS[key].type,
+                                      ros_io.TOPICS[key].qos)
+        for suffix in ("", ros_io.COMMAND_REFUSED_SUFFIX, ros_io.COMMAND_APPLIED_SUFFIX):
+            self.recorder.add_channel(self.command_topic + suffix, Float64, ros_io.COMMAND.qos)
+        self.get_logger().info(f"recording to {self.recorder.path}")
+
+    def close_recording(self) -> None:
+        if self.recorder is None:
+            return
+        counts = {"published": json.dumps(self.published),
+                  "commands_accepted": str(self.accepted_commands),
+                  "commands_refused": str(self.refused_commands),
+                  "recorded": json.dumps(self.recorder.counts)}
+        from .recording import events_metadata
+        self.recorder.close({"umbrella_sim.counts": counts, **events_metadata(self.sim)})
+        self.get_logger().info(f"recording finalised: {self.recorder.path} "
+                               f"({sum(self.recorder.counts.values())} messages)")
+
+    def _record(self, topic: str, msg, t: float) -> None:
+        if self.recorder is not None:
+            self.recorder.write(topic, msg, ros_io.stamp_ns(t))
+
+    def _publish(self, key: str, msg, t: float) -> None:
+        pub = self.pub[key]
+        pub.publish(msg)
+        self.published[pub.topic_name] = self.published.get(pub.topic_name, 0) + 1
+        self._record(pub.topic_name, msg, t)
 
     # ---------------------------------------------------------------- callbacks
     def _on_force(self, msg) -> None:
+        t = self.sim.time
         try:
             force = validate_force(msg.data)
         except ValueError as exc:
             self.refused_commands += 1
+            self._record(self.command_topic + ros_io.COMMAND_REFUSED_SUFFIX, msg, t)
             self.get_logger().warn(f"refused sleeve_force command: {exc} "
                                    f"(refused so far: {self.refused_commands})",
                                    throttle_duration_sec=1.0)
             return
         self.accepted_commands += 1
+        self._record(self.command_topic, msg, t)
         with self._cmd_lock:
             self._commanded_force = force
 
@@ -189,34 +231,25 @@ class UmbrellaNode(Node):
 
     def _publish_phase(self, phase: str) -> None:
         self._phase = phase
-        self.pub["deployment_phase"].publish(ros_io.phase_msg(phase))
+        self._publish("deployment_phase", ros_io.phase_msg(phase), self.sim.time)
 
     def _publish_sample(self) -> None:
-        s = self.sim.sample()
-        positions = self.sim.model.node_positions(s.q, self.node_cfg["marker_magnification"])
-        for key, msg in ros_io.sample_messages(s, self.sim.params, positions,
-                                               self._marker_ns).items():
-            self.pub[key].publish(msg)
-
-    def _apply_command(self) -> None:
-        with self._cmd_lock:
-            force = self._commanded_force
-        if force != self.sim.sleeve_force:
-            self.sim.set_sleeve_force(force)
-            note = " (locked: no effect on motion)" if self.sim.stage == "locked" else ""
-            self.get_logger().info(f"sleeve force {force:.17g} N applied from "
-                                   f"t = {self.sim.time:.9f} s{note}")
+        t = self.sim.time
+        for key, msg in self.driver.messages(self._marker_ns,
+                                             self.node_cfg["marker_magnification"]).items():
+            self._publish(key, msg, t)
 
     def _advance_one_publication(self) -> None:
-        for _ in range(self.publish_every):
-            self._apply_command()
-            stage = self.sim.stage
-            self.sim.step(record=False)
-            if stage != self.sim.stage:
-                self.get_logger().info(f"locked at t = {self.sim.lock_event.time:.9f} s "
-                                       f"(energy {self.sim.lock_event.energy_before:.6g} J -> "
-                                       f"{self.sim.lock_event.energy_after:.6g} J, "
-                                       f"{self.sim.lock_event.kind} lock)")
+        with self._cmd_lock:
+            force = self._commanded_force
+        for ev in self.driver.advance(force):
+            if ev.kind == "applied":
+                self.get_logger().info(f"sleeve force {ev.force:.17g} N applied from "
+                                       f"t = {ev.time:.9f} s{ev.detail}")
+                self._record(self.command_topic + ros_io.COMMAND_APPLIED_SUFFIX,
+                             Float64(data=ev.force), ev.time)
+            else:
+                self.get_logger().info(f"locked at t = {ev.time:.9f} s ({ev.detail})")
                 self._publish_phase("locked")
 
     def _physics_loop(self) -> None:
@@ -299,8 +332,8 @@ class UmbrellaNode(Node):
                   "accepted_commands": self.accepted_commands,
                   "refused_commands": self.refused_commands, "steps": self.sim.steps,
                   "physics_step_s": self.sim.h}
-        self.pub["diagnostics"].publish(
-            ros_io.diagnostics_msg(sim_t, f"{self.get_name()}: physics", level, message, values))
+        self._publish("diagnostics", ros_io.diagnostics_msg(
+            sim_t, f"{self.get_name()}: physics", level, message, values), sim_t)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -329,6 +362,7 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         node.stop()
+        node.close_recording()
         node.destroy_node()
         rclpy.try_shutdown()
     return 0 if ok else 3

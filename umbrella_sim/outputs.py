@@ -30,6 +30,8 @@ class Sample:
     peak_stress_leaf_x: float      # where, m from O along the leaf
     peak_stress_link: float
     peak_stress_link_x: float      # m from O'' along the link
+    stress_leaf_joint: float       # top-fibre stress on the leaf at O'' (Pa, Fig. 6.5)
+    stress_link_mid: float         # top-fibre stress at mid-link (Pa, Fig. 6.6)
     multipliers: np.ndarray        # lambda (thesis sign: M q'' = ... + J^T lambda)
     sleeve_reaction: tuple         # force on the sleeve from axle (X) and stop (Y), N
     kinetic_energy: float
@@ -42,7 +44,8 @@ class Sample:
 CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate", "alpha1_accel",
                "sleeve_position", "sleeve_velocity", "sleeve_force", "tip_axial",
                "tip_transverse", "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
-               "peak_stress_link_x", "sleeve_reaction_x", "sleeve_reaction_y",
+               "peak_stress_link_x", "stress_leaf_joint", "stress_link_mid",
+               "sleeve_reaction_x", "sleeve_reaction_y",
                "kinetic_energy", "strain_energy", "work", "lock_energy_loss",
                "constraint_residual"]
 

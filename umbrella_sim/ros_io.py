@@ -47,8 +47,12 @@ TOPICS = {
     "peak_stress": Topic("peak_stress", Float64MultiArray, RELIABLE),
     "markers": Topic("markers", MarkerArray, RELIABLE),
     "deployment_phase": Topic("deployment_phase", String, LATCHED),
+    "energy": Topic("energy", Float64MultiArray, RELIABLE),
     "diagnostics": Topic("diagnostics", DiagnosticArray, RELIABLE),
 }
+#: recorded alongside the command topic: refused commands, and each value as applied
+COMMAND_REFUSED_SUFFIX = "/refused"
+COMMAND_APPLIED_SUFFIX = "/applied"
 COMMAND = Topic("sleeve_force", Float64, RELIABLE)
 
 # --------------------------------------------------------------------- parameters
@@ -141,16 +145,30 @@ def tip_deflection_msg(s: Sample) -> PointStamped:
     return msg
 
 
-PEAK_STRESS_LABELS = ("body: leaf,link", "field: peak_abs_stress_Pa,position_m,stress_ratio")
+PEAK_STRESS_LABELS = ("body: leaf,link",
+                      "field: peak_abs_stress_Pa,position_m,stress_ratio,reference_stress_Pa")
+ENERGY_LABEL = "field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J"
 
 
 def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
+    """Per body: peak |sigma|, where, ratio to yield, and the reference stress (top fibre;
+    leaf at O'', link at mid-span: the thesis's Fig. 6.5 and 6.6)."""
     msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=PEAK_STRESS_LABELS[0], size=2, stride=6),
-                      MultiArrayDimension(label=PEAK_STRESS_LABELS[1], size=3, stride=3)]
+    msg.layout.dim = [MultiArrayDimension(label=PEAK_STRESS_LABELS[0], size=2, stride=8),
+                      MultiArrayDimension(label=PEAK_STRESS_LABELS[1], size=4, stride=4)]
     msg.layout.data_offset = 0
     msg.data = [s.peak_stress_leaf, s.peak_stress_leaf_x, s.peak_stress_leaf / yield_strength,
-                s.peak_stress_link, s.peak_stress_link_x, s.peak_stress_link / yield_strength]
+                s.stress_leaf_joint,
+                s.peak_stress_link, s.peak_stress_link_x, s.peak_stress_link / yield_strength,
+                s.stress_link_mid]
+    return msg
+
+
+def energy_msg(s: Sample, initial_energy: float) -> Float64MultiArray:
+    msg = Float64MultiArray()
+    msg.layout.dim = [MultiArrayDimension(label=ENERGY_LABEL, size=5, stride=5)]
+    balance = (s.kinetic_energy + s.strain_energy - initial_energy - s.work + s.lock_energy_loss)
+    msg.data = [s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss, balance]
     return msg
 
 
@@ -201,9 +219,11 @@ def diagnostics_msg(t: float, name: str, level: int, message: str, values: dict)
     return msg
 
 
-def sample_messages(s: Sample, params: UmbrellaParams, positions, marker_ns: str) -> dict:
+def sample_messages(s: Sample, params: UmbrellaParams, positions, marker_ns: str,
+                    initial_energy: float) -> dict:
     """The per-publication messages of one sample, keyed by topic key."""
     return {
+        "energy": energy_msg(s, initial_energy),
         "clock": clock_msg(s.time),
         "joint_states": joint_state_msg(s),
         "tip_deflection": tip_deflection_msg(s),

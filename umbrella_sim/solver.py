@@ -339,6 +339,7 @@ class UmbrellaSimulator:
         link_abs = np.maximum(np.abs(kt), np.abs(kb))
         il, ik = int(np.argmax(leaf_abs)), int(np.argmax(link_abs))
         tip_u, tip_v = m.tip_displacement(q)
+        joint_stress, mid_link_stress = m.reference_stresses(lt, kt)
         if isinstance(self.engine, RigidEngine):
             reaction = (float(lam[0]), float(lam[1]))
             kinetic = self.engine.mech.kinetic_energy(*s.q, *s.qd)
@@ -357,6 +358,7 @@ class UmbrellaSimulator:
             leaf_stress=np.vstack([lt, lb]), link_stress=np.vstack([kt, kb]),
             peak_stress_leaf=float(leaf_abs[il]), peak_stress_leaf_x=float(m.leaf.stress_x[il]),
             peak_stress_link=float(link_abs[ik]), peak_stress_link_x=float(m.link.stress_x[ik]),
+            stress_leaf_joint=joint_stress, stress_link_mid=mid_link_stress,
             multipliers=lam.copy(), sleeve_reaction=reaction,
             kinetic_energy=float(kinetic), strain_energy=float(m.strain_energy(q)),
             work=float(work), lock_energy_loss=float(lock_loss),

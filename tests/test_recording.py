@@ -1,0 +1,240 @@
+"""MCAP recording, replay and comparison (real node processes, real DDS)."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter, defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, String
+
+from tests.ros_helpers import NodeProcess, Probe, ros_env
+from umbrella_sim.logs import read_log
+from umbrella_sim.ros_io import LATCHED
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def run_cli(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True,
+                          cwd=ROOT, env=ros_env(), timeout=timeout)
+
+
+def mcap_file(bag: Path) -> Path:
+    return bag / (bag.name + "_0.mcap")
+
+
+@pytest.fixture(scope="module")
+def live_bag(tmp_path_factory):
+    """A live recording: V0 = 0, accepted and refused commands, stopped with SIGTERM."""
+    bag = tmp_path_factory.mktemp("live") / "live_run"
+    probe = Probe("recorder_probe")
+    try:
+        probe.subscribe("/deployment_phase", String, LATCHED)
+        with NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}") as node:
+            node.wait_for_log("recording to")
+            pub = probe.publisher("/sleeve_force", Float64)
+            probe.wait_for_subscribers(pub)
+            time.sleep(0.2)
+            for value in (float("nan"), -2.0):
+                pub.publish(Float64(data=value))
+            pub.publish(Float64(data=15.0))
+            time.sleep(0.25)
+            pub.publish(Float64(data=25.0))
+            probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=30)
+            time.sleep(1.2)                       # at least one diagnostics message
+            assert node.stop(signal.SIGTERM) == 0
+            log = node.output()
+    finally:
+        probe.close()
+    assert "recording finalised" in log
+    return bag
+
+
+def test_independent_readers_decode_every_message(live_bag):
+    meta = read_log(str(live_bag)).metadata
+    counts = json.loads(meta["umbrella_sim.counts"]["recorded"])
+    # 1) mcap + mcap-ros2-support, through the summary and indexes
+    per_topic = Counter()
+    times = defaultdict(list)
+    with open(mcap_file(live_bag), "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary.statistics.message_count == sum(counts.values())
+        assert all(ch.message_encoding == "cdr" for ch in summary.channels.values())
+        assert all(summary.schemas[ch.schema_id].encoding == "ros2msg"
+                   for ch in summary.channels.values())
+        assert all("offered_qos_profiles" in ch.metadata for ch in summary.channels.values())
+        assert summary.chunk_indexes and all(ci.compression == "zstd"
+                                             for ci in summary.chunk_indexes)
+        for schema, channel, message, decoded in reader.iter_decoded_messages(
+                log_time_order=False):
+            per_topic[channel.topic] += 1
+            times[channel.topic].append(message.log_time)
+            assert decoded is not None
+    assert dict(per_topic) == {k: v for k, v in counts.items() if v}
+    for topic, ts in times.items():
+        assert all(b >= a for a, b in zip(ts, ts[1:])), f"{topic} log times not monotonic"
+    # 2) rosbags, on the bag directory and on the .mcap alone (it rejects inexact CDR sizes)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    for target in (live_bag, mcap_file(live_bag)):
+        with AnyReader([Path(target)], default_typestore=store) as rd:
+            seen = Counter()
+            for conn, _, raw in rd.messages():
+                rd.deserialize(raw, conn.msgtype)
+                seen[conn.topic] += 1
+        assert dict(seen) == dict(per_topic)
+
+
+def test_nothing_lost_published_and_received_equal_recorded(live_bag):
+    log = read_log(str(live_bag))
+    c = log.metadata["umbrella_sim.counts"]
+    published = json.loads(c["published"])
+    recorded = json.loads(c["recorded"])
+    for topic, n in published.items():
+        assert recorded[topic] == n == log.count(topic), topic
+    assert int(c["commands_accepted"]) == log.count("/sleeve_force") == 2
+    assert int(c["commands_refused"]) == log.count("/sleeve_force/refused") == 2
+    assert log.count("/sleeve_force/applied") == 2
+    assert log.count("/diagnostics") >= 1
+    assert log.metadata["umbrella_sim.events"]["locked"] == "true"
+
+
+def test_log_is_self_describing(live_bag):
+    log = read_log(str(live_bag))
+    params = log.parameters()
+    assert params["v0"] == 0.0 and params["model"] == "flexible"
+    assert params["physics_step"] == pytest.approx(0.002)
+    build = log.metadata["umbrella_sim.build"]
+    assert build["package_version"] and build["git_revision"]
+    mesh = log.metadata["umbrella_sim.mesh"]
+    assert json.loads(mesh["coordinates"])[0] == "alpha1"
+    bag_yaml = (live_bag / "metadata.yaml").read_text()
+    assert "version: 9" in bag_yaml and "storage_identifier: mcap" in bag_yaml
+    assert "serialized_metadata" in log.metadata["rosbag2"]
+
+
+def test_resimulate_live_log_with_force_profile(live_bag):
+    r = run_cli("umbrella_sim.replay", str(live_bag), "--resimulate")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "PASS" in r.stdout and "leaf_hinge" in r.stdout
+
+
+def test_offline_recording_has_the_live_layout(live_bag, tmp_path):
+    bag = tmp_path / "offline_run"
+    r = run_cli("umbrella_sim", "simulate", "--v0", "0", "--force", "10", "--duration", "0.6",
+                "--mcap", str(bag))
+    assert r.returncode == 0, r.stderr
+    live, off = read_log(str(live_bag)), read_log(str(bag))
+    assert {t: ty for t, (ty, _) in live.channels.items()} == \
+        {t: ty for t, (ty, _) in off.channels.items()}
+    assert set(live.metadata) == set(off.metadata)
+    again = run_cli("umbrella_sim", "simulate", "--duration", "0.1", "--mcap", str(bag))
+    assert again.returncode == 2 and "not overwriting" in again.stderr
+
+
+def test_sigkill_leaves_readable_chunks(tmp_path):
+    bag = tmp_path / "killed"
+    with NodeProcess("-p", "v0:=-0.2", "-p", "real_time_factor:=0.0",
+                     "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("recording to")
+        time.sleep(2.0)                                # several chunks at ~15x real time
+        node.stop(signal.SIGKILL)
+    assert not (bag / "metadata.yaml").exists()        # never finalised
+    with open(mcap_file(bag), "rb") as fh:
+        with pytest.raises(Exception):
+            make_reader(fh).get_summary().statistics  # no summary section
+    # read how: scan records from the start, keep complete chunks (umbrella_sim.logs)
+    log = read_log(str(bag))
+    assert log.truncated
+    n = log.count("/joint_states")
+    assert n > 100
+    t = [tm for tm, _ in log.decoded("/joint_states")]
+    assert np.allclose(np.diff(t), 0.01)               # no gap inside what was recovered
+    assert "umbrella_sim.parameters" in log.metadata   # written at start, outside chunks
+    r = run_cli("umbrella_sim.replay", str(bag), "--resimulate")
+    assert r.returncode == 0 and "truncated log" in r.stdout, r.stdout + r.stderr
+
+
+def test_replay_republishes_with_recorded_spacing(tmp_path):
+    """Spacing tolerance: median |interval - 10 ms| < 2 ms at rate 1, < 1 ms at rate 2."""
+    bag = tmp_path / "replay_src"
+    assert run_cli("umbrella_sim", "simulate", "--v0", "-0.5", "--duration", "1.0",
+                   "--mcap", str(bag)).returncode == 0
+    recorded = read_log(str(bag)).count("/clock")
+    probe = Probe("replay_probe")
+    try:
+        probe.subscribe("/clock", Clock)
+        probe.subscribe("/joint_states", JointState)
+        for rate, period in ((1.0, 0.010), (2.0, 0.005)):
+            probe.received["/clock"] = []
+            r = subprocess.run([sys.executable, "-m", "umbrella_sim.replay", str(bag),
+                                "--rate", str(rate)], capture_output=True, text=True,
+                               env=ros_env(), timeout=60)
+            assert r.returncode == 0, r.stderr
+            time.sleep(0.3)
+            arrivals = probe.timed("/clock")
+            assert len(arrivals) == recorded
+            stamps = [m.clock.sec + 1e-9 * m.clock.nanosec for _, m in arrivals]
+            assert stamps == sorted(stamps)
+            gaps = np.diff([w for w, _ in arrivals])
+            assert abs(np.median(gaps) - period) < period / 5
+    finally:
+        probe.close()
+
+
+def test_compare_known_runs(tmp_path):
+    a, b = tmp_path / "v05", tmp_path / "v10"
+    for bag, v0 in ((a, "-0.5"), (b, "-1.0")):
+        assert run_cli("umbrella_sim", "simulate", "--v0", v0, "--duration", "0.2",
+                       "--mcap", str(bag)).returncode == 0
+    out = tmp_path / "cmp"
+    r = run_cli("umbrella_sim.compare", str(a), str(b), "--out", str(out), "--thesis")
+    assert r.returncode == 0, r.stderr
+    result = json.loads((out / "compare.json").read_text())
+    ta, tb = read_log(str(a)).metadata, read_log(str(b)).metadata
+    expected = float(tb["umbrella_sim.events"]["lock_time"]) - \
+        float(ta["umbrella_sim.events"]["lock_time"])
+    assert result["runs"][1]["deploy_time_difference"] == pytest.approx(expected, abs=1e-12)
+    assert expected == pytest.approx(0.045237789 - 0.090435163, abs=1e-8)
+    assert result["runs"][0]["thesis"]["deploy_time_deformable_fea"] == 0.09040
+    assert "0.0904" in r.stdout and "thesis" in r.stdout
+    for name in ("alpha1.png", "tip_deflection.png", "stress.png", "shapes.png"):
+        png = out / name
+        assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_bad_files_give_clear_errors(tmp_path, live_bag):
+    not_mcap = tmp_path / "x.mcap"
+    not_mcap.write_bytes(b"definitely not an mcap file")
+    truncated = tmp_path / "t.mcap"
+    truncated.write_bytes(mcap_file(live_bag).read_bytes()[:200])
+    missing = tmp_path / "nofile.mcap"
+    # a valid MCAP without the topics compare needs
+    from mcap.writer import Writer
+    other = tmp_path / "other.mcap"
+    with open(other, "wb") as fh:
+        w = Writer(fh)
+        w.start()
+        sid = w.register_schema("x", "jsonschema", b"{}")
+        cid = w.register_channel("/something", "json", sid)
+        w.add_message(cid, 0, b"{}", 0)
+        w.finish()
+    cases = [(not_mcap, "not an MCAP file"), (truncated, "no channels"),
+             (missing, "no such file"), (other, "umbrella_sim.parameters")]
+    for path, words in cases:
+        for tool in (["umbrella_sim.compare", str(path), "--out", str(tmp_path / "o")],
+                     ["umbrella_sim.replay", str(path), "--resimulate"]):
+            r = run_cli(*tool)
+            assert r.returncode == 2, (tool, r.stdout, r.stderr)
+            assert words in r.stderr and "Traceback" not in r.stderr, (tool, r.stderr)

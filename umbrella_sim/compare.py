@@ -1,0 +1,305 @@
+"""umbrella-compare A B [...] --out DIR: compare recorded runs (live or offline).
+
+Aligns the runs on the first run's publication times (linear interpolation), prints a table
+and writes compare.json with: deployment time and its difference to the first run, max and
+RMS difference of alpha1, its rate, the tip deflection and the peak stresses, the energy
+drift of each run; writes PNG plots mirroring the thesis's figures (alpha1 and its rate and
+acceleration, tip deflection in stage 1 and across the lock, stress at O'' on the leaf and at
+mid-link, deformed shapes).  --thesis adds the thesis's quoted numbers.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .logs import LogError, read_log
+from .outputs import dominant_period
+
+#: Table 6.1 (deformable FEA, rigid FEA) and the V0 = -0.2 figures quoted in ch. 6
+THESIS_TABLE_6_1 = {-0.5: (0.09040, 0.09033), -1.0: (0.04525, 0.04517), -2.0: (0.02343, 0.02259)}
+THESIS_V02 = {"deploy_time": 0.2259, "tip_deflection_max": 0.665e-3,
+              "tip_deflection_max_time": 0.08, "stage2_tip_amplitude": 0.060,
+              "stage2_tip_period": 0.05}
+
+
+@dataclass
+class Run:
+    label: str
+    path: str
+    params: dict
+    t: np.ndarray
+    alpha1: np.ndarray
+    alpha1_rate: np.ndarray
+    tip_t: np.ndarray
+    tip_v: np.ndarray
+    stress_t: np.ndarray
+    peak_leaf: np.ndarray
+    peak_link: np.ndarray
+    stress_joint: np.ndarray
+    stress_mid: np.ndarray
+    deploy_time: float | None
+    energy_drift: float | None
+    shapes: list = field(default_factory=list)      # [(t, leaf_xy, link_xy)]
+    magnification: float = 1.0
+
+    def figures(self) -> dict:
+        """The thesis's V0 = -0.2 figures, from the recorded tip deflection."""
+        out = {"deploy_time": self.deploy_time}
+        lock = self.deploy_time if self.deploy_time is not None else math.inf
+        s1 = self.tip_t <= lock
+        if s1.any():
+            i = int(np.argmax(np.abs(self.tip_v[s1])))
+            out["tip_deflection_max"] = float(abs(self.tip_v[s1][i]))
+            out["tip_deflection_max_time"] = float(self.tip_t[s1][i])
+        s2 = self.tip_t > lock
+        if s2.sum() > 8:
+            v = self.tip_v[s2]
+            out["stage2_tip_amplitude"] = 0.5 * float(v.max() - v.min())
+            p = dominant_period(self.tip_t[s2], v)
+            out["stage2_tip_period"] = None if math.isnan(p) else p
+        return out
+
+
+def _series(log, suffix, fn):
+    data = log.decoded(log.find_topic(suffix))
+    if not data:
+        raise LogError(f"{log.path}: topic {suffix} has no messages")
+    t = np.array([tm for tm, _ in data])
+    return t, [fn(m) for _, m in data]
+
+
+def load_run(path: str, label: str | None = None) -> Run:
+    log = read_log(path)
+    params = log.parameters()
+    t, js = _series(log, "joint_states", lambda m: (m.position[0], m.velocity[0]))
+    tt, tip = _series(log, "tip_deflection", lambda m: m.point.y)
+    ts, st = _series(log, "peak_stress", lambda m: tuple(m.data[:8]))
+    st = np.array(st)
+    events = log.metadata.get("umbrella_sim.events", {})
+    deploy = None
+    if events.get("locked") == "true":
+        deploy = float(events["lock_time"])
+    else:
+        phase = log.find_topic("deployment_phase", required=False)
+        locked = [tm for tm, m in log.decoded(phase)] if phase else []
+        locked = [tm for tm, m in log.decoded(phase) if m.data == "locked"] if phase else []
+        deploy = locked[0] if locked else None
+    drift = None
+    energy = log.find_topic("energy", required=False)
+    if energy:
+        e = np.array([m.data[:5] for _, m in log.decoded(energy)])
+        if len(e):
+            drift = float(np.abs(e[:, 4]).max() / max(np.abs(e[:, 0] + e[:, 1]).max(),
+                                                      np.abs(e[:, 2]).max(), 1e-300))
+    shapes = []
+    markers = log.find_topic("markers", required=False)
+    if markers:
+        for tm, m in log.decoded(markers):
+            pts = [np.array([[p.x, p.y] for p in mk.points]) for mk in m.markers[:2]]
+            if len(pts) == 2:
+                shapes.append((tm, pts[0], pts[1]))
+    if label is None:
+        label = f"{os.path.basename(os.path.dirname(log.path)) or log.path}"
+    a = np.array(js)
+    return Run(label, log.path, params, t, a[:, 0], a[:, 1], tt, np.array(tip), ts,
+               st[:, 0], st[:, 4], st[:, 3], st[:, 7], deploy, drift, shapes,
+               float(params.get("marker_magnification", 1.0)))
+
+
+def _diff(ref_t, ref_y, t, y):
+    lo, hi = max(ref_t[0], t[0]), min(ref_t[-1], t[-1])
+    keep = (ref_t >= lo) & (ref_t <= hi)
+    if keep.sum() < 2:
+        raise LogError("runs do not overlap in time")
+    d = np.interp(ref_t[keep], t, y) - ref_y[keep]
+    return float(np.abs(d).max()), float(np.sqrt(np.mean(d * d)))
+
+
+SIGNALS = [("alpha1", "rad", lambda r: (r.t, r.alpha1)),
+           ("alpha1_rate", "rad/s", lambda r: (r.t, r.alpha1_rate)),
+           ("tip_deflection", "m", lambda r: (r.tip_t, r.tip_v)),
+           ("peak_stress_leaf", "Pa", lambda r: (r.stress_t, r.peak_leaf)),
+           ("peak_stress_link", "Pa", lambda r: (r.stress_t, r.peak_link))]
+
+
+def compare(runs: list[Run], thesis: bool = False) -> dict:
+    ref = runs[0]
+    out = {"reference": ref.label, "runs": []}
+    for r in runs:
+        entry = {"label": r.label, "path": r.path, "model": r.params.get("model"),
+                 "elements_per_segment": r.params.get("elements_per_segment"),
+                 "v0": r.params.get("v0"), "deploy_time": r.deploy_time,
+                 "deploy_time_difference": (None if r.deploy_time is None or ref.deploy_time
+                                            is None else r.deploy_time - ref.deploy_time),
+                 "energy_drift": r.energy_drift, "differences": {}}
+        for name, unit, get in SIGNALS:
+            rt, ry = get(ref)
+            t, y = get(r)
+            mx, rms = _diff(rt, ry, t, y)
+            entry["differences"][name] = {"max": mx, "rms": rms, "unit": unit}
+        entry["figures"] = r.figures()
+        if thesis:
+            v0 = r.params.get("v0")
+            th = {}
+            if v0 in THESIS_TABLE_6_1:
+                th["deploy_time_deformable_fea"], th["deploy_time_rigid_fea"] = \
+                    THESIS_TABLE_6_1[v0]
+            if v0 == -0.2:
+                th.update(THESIS_V02)
+            entry["thesis"] = th
+        out["runs"].append(entry)
+    return out
+
+
+def print_table(result: dict, stream=sys.stdout) -> None:
+    w = stream.write
+    w(f"reference run: {result['reference']}\n")
+    w(f"{'run':<18} {'model':<9} {'N':>2} {'V0':>6} {'deploy (s)':>11} {'d deploy (s)':>13} "
+      f"{'energy drift':>12}\n")
+    for e in result["runs"]:
+        dt = e["deploy_time"]
+        dd = e["deploy_time_difference"]
+        w(f"{e['label']:<18} {str(e['model']):<9} {str(e['elements_per_segment']):>2} "
+          f"{e['v0']:>6g} {('%.7f' % dt) if dt is not None else '-':>11} "
+          f"{('%+.3e' % dd) if dd is not None else '-':>13} "
+          f"{('%.2e' % e['energy_drift']) if e['energy_drift'] is not None else '-':>12}\n")
+    w(f"\n{'run':<18} " + " ".join(f"{n + ' max/rms':>27}" for n, _, _ in SIGNALS) + "\n")
+    for e in result["runs"]:
+        cells = []
+        for n, unit, _ in SIGNALS:
+            d = e["differences"][n]
+            cells.append(f"{d['max']:>11.3e}/{d['rms']:.3e} {unit:<5}"[:27].rjust(27))
+        w(f"{e['label']:<18} " + " ".join(cells) + "\n")
+    w("\nfigures (stage-1 max tip deflection and time, stage-2 amplitude and period):\n")
+    for e in result["runs"]:
+        f = e["figures"]
+
+        def fmt(key, scale=1.0, spec=".4g"):
+            v = f.get(key)
+            return "-" if v is None else format(v * scale, spec)
+        line = (f"{e['label']:<18} deploy {fmt('deploy_time', 1, '.5f')} s, tip max "
+                f"{fmt('tip_deflection_max', 1e3)} mm at {fmt('tip_deflection_max_time', 1, '.3f')} s, "
+                f"stage 2 {fmt('stage2_tip_amplitude', 1e3)} mm / {fmt('stage2_tip_period', 1, '.4f')} s")
+        w(line + "\n")
+        if e.get("thesis"):
+            th = e["thesis"]
+            w(f"{'':<18} thesis: " + ", ".join(f"{k} {v:g}" for k, v in th.items()) + "\n")
+
+
+def plot(runs: list[Run], out_dir: str) -> list[str]:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    os.makedirs(out_dir, exist_ok=True)
+    files = []
+
+    def save(fig, name):
+        path = os.path.join(out_dir, name)
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        files.append(path)
+
+    fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+    for r in runs:
+        axes[0].plot(r.t, r.alpha1, label=r.label)
+        axes[1].plot(r.t, r.alpha1_rate, label=r.label)
+        axes[2].plot(r.t, np.gradient(r.alpha1_rate, r.t), label=r.label)
+    for ax, lab in zip(axes, ("alpha1 (rad)", "d alpha1/dt (rad/s)", "d2 alpha1/dt2 (rad/s2)")):
+        ax.set_ylabel(lab)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[2].set_xlabel("t (s)")
+    axes[0].set_title("leaf angle, rate and acceleration (thesis Fig. 6.1, 6.12-6.17)")
+    save(fig, "alpha1.png")
+
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6))
+    for r in runs:
+        lock = r.deploy_time if r.deploy_time is not None else r.tip_t[-1]
+        s1 = r.tip_t <= lock
+        axes[0].plot(r.tip_t[s1], r.tip_v[s1] * 1e3, label=r.label)
+        axes[1].plot(r.tip_t, r.tip_v * 1e3, label=r.label)
+        if r.deploy_time is not None:
+            axes[1].axvline(r.deploy_time, ls="--", lw=0.7, color="gray")
+    axes[0].set_title("transverse deflection of G, stage 1 (Fig. 6.2, 6.10)")
+    axes[1].set_title("across the lock (Fig. 6.4)")
+    for ax in axes:
+        ax.set_ylabel("v_G (mm)")
+        ax.grid(alpha=0.3)
+    axes[1].set_xlabel("t (s)")
+    axes[0].legend(fontsize=8)
+    save(fig, "tip_deflection.png")
+
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    for r in runs:
+        axes[0].plot(r.stress_t, r.stress_joint / 1e6, label=r.label)
+        axes[1].plot(r.stress_t, r.stress_mid / 1e6, label=r.label)
+    axes[0].set_title("top-fibre stress on the leaf at O'' (Fig. 6.5, 6.11)")
+    axes[1].set_title("top-fibre stress at mid-link (Fig. 6.6)")
+    for ax in axes:
+        ax.set_ylabel("sigma (MPa)")
+        ax.grid(alpha=0.3)
+    axes[1].set_xlabel("t (s)")
+    axes[0].legend(fontsize=8)
+    save(fig, "stress.png")
+
+    fig, axes = plt.subplots(1, len(runs), figsize=(4 * len(runs), 4), squeeze=False)
+    for ax, r in zip(axes[0], runs):
+        if not r.shapes:
+            continue
+        end = r.shapes[-1][0]
+        lock = r.deploy_time or end
+        wanted = [0.0, 0.25 * lock, 0.5 * lock, 0.75 * lock, lock, min(end, lock + 0.02),
+                  min(end, lock + 0.04)]
+        for k, tw in enumerate(wanted):
+            tm, leaf, link = min(r.shapes, key=lambda s: abs(s[0] - tw))
+            c = "tab:blue" if tm <= lock else "tab:red"
+            ax.plot(leaf[:, 0], leaf[:, 1], "-o", ms=2, color=c, lw=1)
+            ax.plot(link[:, 0], link[:, 1], "-", color=c, lw=0.8, alpha=0.7)
+        ax.axvline(0, color="k", lw=0.6)
+        ax.set_aspect("equal")
+        ax.set_title(f"{r.label} (x{r.magnification:g})", fontsize=9)
+        ax.set_xlabel("X (m)")
+    axes[0][0].set_ylabel("Y (m)")
+    save(fig, "shapes.png")
+    return files
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="umbrella-compare", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("logs", nargs="+", help="bag directories or .mcap files (first = reference)")
+    ap.add_argument("--out", required=True, help="directory for compare.json and the plots")
+    ap.add_argument("--names", nargs="+", help="labels for the runs")
+    ap.add_argument("--thesis", action="store_true", help="add the thesis's numbers")
+    ap.add_argument("--no-plots", action="store_true")
+    args = ap.parse_args(argv)
+    try:
+        if args.names and len(args.names) != len(args.logs):
+            raise LogError(f"--names: {len(args.names)} labels for {len(args.logs)} logs")
+        runs = [load_run(p, args.names[i] if args.names else None)
+                for i, p in enumerate(args.logs)]
+        result = compare(runs, thesis=args.thesis)
+        os.makedirs(args.out, exist_ok=True)
+        print_table(result)
+        if not args.no_plots:
+            result["plots"] = plot(runs, args.out)
+        with open(os.path.join(args.out, "compare.json"), "w", encoding="utf-8") as fh:
+            json.dump(result, fh, indent=2)
+        print(f"\nwrote {os.path.join(args.out, 'compare.json')}"
+              + (f" and {len(result['plots'])} plots" if "plots" in result else ""))
+        return 0
+    except LogError as exc:
+        print(f"umbrella-compare: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
