@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Set up a local virtualenv (.venv) with every dependency, then run the main job or the tests.
 
-    python3 bootstrap.py run      # umbrella_node on config/umbrella.yaml (Ctrl-C stops it)
+    python3 bootstrap.py run      # umbrella_node on config/umbrella.yaml, recording MCAP to
+                                  # runs/run-YYYYmmdd-HHMMSS/ (Ctrl-C stops and finalises it)
     python3 bootstrap.py test     # the test suite
 
 Arguments after run go to the node: python3 bootstrap.py run -p v0:=-0.5
@@ -11,6 +12,7 @@ requirements are unchanged is reused.
 """
 import hashlib
 import os
+import time
 import subprocess
 import sys
 
@@ -48,8 +50,12 @@ def main(argv) -> int:
     env = dict(os.environ, AMENT_PREFIX_PATH=VENV)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if argv[0] == "run":
+        runs = os.path.join(ROOT, "runs")
+        os.makedirs(runs, exist_ok=True)
+        bag = os.path.join(runs, time.strftime("run-%Y%m%d-%H%M%S"))
         cmd = [PY, "-m", "umbrella_sim.node", "--ros-args", "--params-file",
-               os.path.join(ROOT, "config", "umbrella.yaml")] + argv[1:]
+               os.path.join(ROOT, "config", "umbrella.yaml"), "-p", f"record_path:={bag}"] \
+            + argv[1:]
     elif argv[0] == "test":
         cmd = [PY, "-m", "pytest", "-q", os.path.join(ROOT, "tests")] + argv[1:]
     else:

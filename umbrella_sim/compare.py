@@ -47,6 +47,22 @@ class Run:
     energy_drift: float | None
     shapes: list = field(default_factory=list)      # [(t, leaf_xy, link_xy)]
     magnification: float = 1.0
+    alpha2: np.ndarray | None = None
+    leaf_node_x: np.ndarray | None = None
+    link_node_x: np.ndarray | None = None
+
+    def shape(self, t: float, magnification: float):
+        """Deformed shape nearest to t with the elastic part re-scaled from the recorded
+        marker magnification to another one (undeformed frames from the joint angles)."""
+        tm, leaf, link = min(self.shapes, key=lambda s: abs(s[0] - t))
+        if self.leaf_node_x is None or self.magnification <= 0:
+            return tm, leaf, link
+        a1 = np.interp(tm, self.t, self.alpha1)
+        a2 = np.interp(tm, self.t, self.alpha2)
+        leaf_u = np.outer(self.leaf_node_x, [math.cos(a1), math.sin(a1)])
+        link_u = link[0] + np.outer(self.link_node_x, [math.cos(a2), math.sin(a2)])
+        scale = magnification / self.magnification
+        return tm, leaf_u + scale * (leaf - leaf_u), link_u + scale * (link - link_u)
 
     def figures(self) -> dict:
         """The thesis's V0 = -0.2 figures, from the recorded tip deflection."""
@@ -77,7 +93,8 @@ def _series(log, suffix, fn):
 def load_run(path: str, label: str | None = None) -> Run:
     log = read_log(path)
     params = log.parameters()
-    t, js = _series(log, "joint_states", lambda m: (m.position[0], m.velocity[0]))
+    t, js = _series(log, "joint_states",
+                    lambda m: (m.position[0], m.velocity[0], m.position[0] + m.position[1]))
     tt, tip = _series(log, "tip_deflection", lambda m: m.point.y)
     ts, st = _series(log, "peak_stress", lambda m: tuple(m.data[:8]))
     st = np.array(st)
@@ -87,7 +104,6 @@ def load_run(path: str, label: str | None = None) -> Run:
         deploy = float(events["lock_time"])
     else:
         phase = log.find_topic("deployment_phase", required=False)
-        locked = [tm for tm, m in log.decoded(phase)] if phase else []
         locked = [tm for tm, m in log.decoded(phase) if m.data == "locked"] if phase else []
         deploy = locked[0] if locked else None
     drift = None
@@ -107,9 +123,12 @@ def load_run(path: str, label: str | None = None) -> Run:
     if label is None:
         label = f"{os.path.basename(os.path.dirname(log.path)) or log.path}"
     a = np.array(js)
+    mesh = log.metadata.get("umbrella_sim.mesh", {})
+    leaf_x = np.array(json.loads(mesh["leaf_node_x"])) if "leaf_node_x" in mesh else None
+    link_x = np.array(json.loads(mesh["link_node_x"])) if "link_node_x" in mesh else None
     return Run(label, log.path, params, t, a[:, 0], a[:, 1], tt, np.array(tip), ts,
                st[:, 0], st[:, 4], st[:, 3], st[:, 7], deploy, drift, shapes,
-               float(params.get("marker_magnification", 1.0)))
+               float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x)
 
 
 def _diff(ref_t, ref_y, t, y):
@@ -192,7 +211,8 @@ def print_table(result: dict, stream=sys.stdout) -> None:
             w(f"{'':<18} thesis: " + ", ".join(f"{k} {v:g}" for k, v in th.items()) + "\n")
 
 
-def plot(runs: list[Run], out_dir: str) -> list[str]:
+def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]:
+    """PNG plots; magnification = (stage 1, stage 2) for the deformed shapes."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -259,13 +279,15 @@ def plot(runs: list[Run], out_dir: str) -> list[str]:
         wanted = [0.0, 0.25 * lock, 0.5 * lock, 0.75 * lock, lock, min(end, lock + 0.02),
                   min(end, lock + 0.04)]
         for k, tw in enumerate(wanted):
-            tm, leaf, link = min(r.shapes, key=lambda s: abs(s[0] - tw))
-            c = "tab:blue" if tm <= lock else "tab:red"
+            stage1 = tw <= lock
+            tm, leaf, link = r.shape(tw, magnification[0] if stage1 else magnification[1])
+            c = "tab:blue" if stage1 else "tab:red"
             ax.plot(leaf[:, 0], leaf[:, 1], "-o", ms=2, color=c, lw=1)
             ax.plot(link[:, 0], link[:, 1], "-", color=c, lw=0.8, alpha=0.7)
         ax.axvline(0, color="k", lw=0.6)
         ax.set_aspect("equal")
-        ax.set_title(f"{r.label} (x{r.magnification:g})", fontsize=9)
+        ax.set_title(f"{r.label}: stage 1 x{magnification[0]:g} (blue), "
+                     f"stage 2 x{magnification[1]:g} (red)", fontsize=8)
         ax.set_xlabel("X (m)")
     axes[0][0].set_ylabel("Y (m)")
     save(fig, "shapes.png")
@@ -280,6 +302,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--names", nargs="+", help="labels for the runs")
     ap.add_argument("--thesis", action="store_true", help="add the thesis's numbers")
     ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument("--magnification", type=float, nargs=2, default=(200.0, 5.0),
+                    metavar=("STAGE1", "STAGE2"),
+                    help="deformation magnification of the shapes plot (default 200 5)")
     args = ap.parse_args(argv)
     try:
         if args.names and len(args.names) != len(args.logs):
@@ -290,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
         os.makedirs(args.out, exist_ok=True)
         print_table(result)
         if not args.no_plots:
-            result["plots"] = plot(runs, args.out)
+            result["plots"] = plot(runs, args.out, tuple(args.magnification))
         with open(os.path.join(args.out, "compare.json"), "w", encoding="utf-8") as fh:
             json.dump(result, fh, indent=2)
         print(f"\nwrote {os.path.join(args.out, 'compare.json')}"
