@@ -179,8 +179,9 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
         for rate, period in ((1.0, 0.010), (2.0, 0.005)):
             probe.received["/clock"] = []
             r = subprocess.run([sys.executable, "-m", "umbrella_sim.replay", str(bag),
-                                "--rate", str(rate)], capture_output=True, text=True,
-                               env=ros_env(), timeout=60)
+                                "--rate", str(rate), "--topics", "/clock", "/joint_states",
+                                "--wait-for-subscribers", "20"], capture_output=True,
+                               text=True, env=ros_env(), timeout=60)
             assert r.returncode == 0, r.stderr
             time.sleep(0.3)
             arrivals = probe.timed("/clock")

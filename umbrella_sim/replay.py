@@ -89,7 +89,8 @@ def resimulate(log: LogData) -> dict:
 
 # -------------------------------------------------------------------- republish
 def republish(log: LogData, rate: float, start_offset: float, loop: bool,
-              with_commands: bool, topics: list[str] | None, ros_args: list[str]) -> int:
+              with_commands: bool, topics: list[str] | None, ros_args: list[str],
+              wait_for_subscribers: float = 0.0) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
@@ -113,6 +114,15 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     print(f"replaying {len(msgs)} messages on {len(pubs)} topics from {log.path} at "
           f"{rate:g}x{' (truncated log)' if log.truncated else ''}", flush=True)
     time.sleep(0.5)   # let subscribers discover the publishers
+    if wait_for_subscribers > 0:
+        deadline = time.monotonic() + wait_for_subscribers
+        while any(p.get_subscription_count() == 0 for p in pubs.values()):
+            if time.monotonic() > deadline:
+                idle = sorted(t for t, p in pubs.items() if p.get_subscription_count() == 0)
+                print(f"no subscriber after {wait_for_subscribers:g} s on: {', '.join(idle)};"
+                      " replaying anyway", flush=True)
+                break
+            time.sleep(0.05)
     sent = 0
     try:
         while True:
@@ -150,6 +160,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="skip the first S seconds of the log")
     ap.add_argument("--loop", action="store_true", help="replay until interrupted")
     ap.add_argument("--topics", nargs="+", help="only these topics")
+    ap.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="SECONDS",
+                    help="before replaying, wait up to SECONDS until every replayed topic "
+                         "has a subscriber")
     ap.add_argument("--with-commands", action="store_true",
                     help="also republish the recorded sleeve_force commands")
     ap.add_argument("--resimulate", action="store_true",
@@ -176,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"(tolerance {args.tolerance:g})")
             return 0 if ok else 1
         return republish(log, args.rate, args.start_offset, args.loop, args.with_commands,
-                         args.topics, ros_args)
+                         args.topics, ros_args, args.wait_for_subscribers)
     except LogError as exc:
         print(f"umbrella-replay: error: {exc}", file=sys.stderr)
         return 2
