@@ -174,3 +174,15 @@ def test_namespaced_nodes_do_not_cross_talk(probe):
         assert "sleeve force" not in a2.output()
     assert all(abs(m.position[0] - ALPHA0) < 1e-9 for m in probe.messages("/a2/joint_states"))
     assert [m.data for m in probe.messages("/a2/deployment_phase")] == ["deploying"]
+
+
+def test_node_says_when_physics_cannot_keep_up(probe):
+    """Asking for 1000x real time: the node warns and diagnostics report the measured factor."""
+    probe.subscribe("/diagnostics", DiagnosticArray)
+    with NodeProcess("-p", "real_time_factor:=1000.0", "-p", "elements_per_segment:=2") as node:
+        node.wait_for_log("physics cannot keep up", timeout=20)
+        msg = probe.wait_for("/diagnostics", lambda m: m.status[0].level == b"\x01", timeout=20)
+    values = diag_values(msg)
+    assert "behind real time" in msg.status[0].message
+    assert 1.0 < float(values["measured_real_time_factor"]) < 1000.0
+    assert float(values["lag_s"]) > 0.05

@@ -239,3 +239,18 @@ def test_bad_files_give_clear_errors(tmp_path, live_bag):
             r = run_cli(*tool)
             assert r.returncode == 2, (tool, r.stdout, r.stderr)
             assert words in r.stderr and "Traceback" not in r.stderr, (tool, r.stderr)
+
+
+def test_sigint_finalises_the_recording(tmp_path):
+    bag = tmp_path / "interrupted"
+    with NodeProcess("-p", "v0:=-0.5", "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("recording to")
+        node.wait_for_log("locked at t")
+        assert node.stop(signal.SIGINT) == 0
+        assert "recording finalised" in node.output()
+    assert (bag / "metadata.yaml").exists()
+    with open(mcap_file(bag), "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    log = read_log(str(bag))
+    assert not log.truncated
+    assert summary.statistics.message_count == len(log.messages) > 50
