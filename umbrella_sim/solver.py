@@ -345,7 +345,9 @@ class UmbrellaSimulator:
             kinetic = self.engine.mech.kinetic_energy(*s.q, *s.qd)
         else:
             reaction = (float(lam[2]), float(lam[3]) if stage == LOCKED else 0.0)
-            kinetic = m.kinetic_energy(q, qd)
+            # the step leaves M(q) qd in the state: T = 1/2 qd . p without re-assembling M
+            kinetic = (0.5 * qd @ s.momentum if s.momentum is not None
+                       else m.kinetic_energy(q, qd))
         cs = ConstraintSet(locked=stage == LOCKED, rigid=False)
         return Sample(
             time=s.t, stage=stage, q=q.copy(), qd=qd.copy(),
@@ -355,7 +357,7 @@ class UmbrellaSimulator:
             sleeve_position=float(m.sleeve_height(q)),
             sleeve_velocity=float(m.sleeve_height_gradient(q) @ qd),
             sleeve_force=force, tip_axial=tip_u, tip_transverse=tip_v,
-            leaf_stress=np.vstack([lt, lb]), link_stress=np.vstack([kt, kb]),
+            leaf_stress=np.array((lt, lb)), link_stress=np.array((kt, kb)),
             peak_stress_leaf=float(leaf_abs[il]), peak_stress_leaf_x=float(m.leaf.stress_x[il]),
             peak_stress_link=float(link_abs[ik]), peak_stress_link_x=float(m.link.stress_x[ik]),
             stress_leaf_joint=joint_stress, stress_link_mid=mid_link_stress,
