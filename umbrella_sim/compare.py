@@ -227,18 +227,24 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
         plt.close(fig)
         files.append(path)
 
+    def finish(fig, axes, ylabels, titles, name):
+        for ax, ylabel, title in zip(axes, ylabels, titles):
+            ax.set_ylabel(ylabel)
+            ax.grid(alpha=0.3)
+            if title:
+                ax.set_title(title)
+        axes[-1].set_xlabel("t (s)")
+        axes[0].legend(fontsize=8)
+        save(fig, name)
+
     fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
     for r in runs:
         axes[0].plot(r.t, r.alpha1, label=r.label)
         axes[1].plot(r.t, r.alpha1_rate, label=r.label)
         axes[2].plot(r.t, np.gradient(r.alpha1_rate, r.t), label=r.label)
-    for ax, lab in zip(axes, ("alpha1 (rad)", "d alpha1/dt (rad/s)", "d2 alpha1/dt2 (rad/s2)")):
-        ax.set_ylabel(lab)
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    axes[2].set_xlabel("t (s)")
-    axes[0].set_title("leaf angle, rate and acceleration (thesis Fig. 6.1, 6.12-6.17)")
-    save(fig, "alpha1.png")
+    finish(fig, axes, ("alpha1 (rad)", "d alpha1/dt (rad/s)", "d2 alpha1/dt2 (rad/s2)"),
+           ("leaf angle, rate and acceleration (thesis Fig. 6.1, 6.12-6.17)", "", ""),
+           "alpha1.png")
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 6))
     for r in runs:
@@ -248,27 +254,17 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
         axes[1].plot(r.tip_t, r.tip_v * 1e3, label=r.label)
         if r.deploy_time is not None:
             axes[1].axvline(r.deploy_time, ls="--", lw=0.7, color="gray")
-    axes[0].set_title("transverse deflection of G, stage 1 (Fig. 6.2, 6.10)")
-    axes[1].set_title("across the lock (Fig. 6.4)")
-    for ax in axes:
-        ax.set_ylabel("v_G (mm)")
-        ax.grid(alpha=0.3)
-    axes[1].set_xlabel("t (s)")
-    axes[0].legend(fontsize=8)
-    save(fig, "tip_deflection.png")
+    finish(fig, axes, ("v_G (mm)", "v_G (mm)"),
+           ("transverse deflection of G, stage 1 (Fig. 6.2, 6.10)", "across the lock (Fig. 6.4)"),
+           "tip_deflection.png")
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
     for r in runs:
         axes[0].plot(r.stress_t, r.stress_joint / 1e6, label=r.label)
         axes[1].plot(r.stress_t, r.stress_mid / 1e6, label=r.label)
-    axes[0].set_title("top-fibre stress on the leaf at O'' (Fig. 6.5, 6.11)")
-    axes[1].set_title("top-fibre stress at mid-link (Fig. 6.6)")
-    for ax in axes:
-        ax.set_ylabel("sigma (MPa)")
-        ax.grid(alpha=0.3)
-    axes[1].set_xlabel("t (s)")
-    axes[0].legend(fontsize=8)
-    save(fig, "stress.png")
+    finish(fig, axes, ("sigma (MPa)", "sigma (MPa)"),
+           ("top-fibre stress on the leaf at O'' (Fig. 6.5, 6.11)",
+            "top-fibre stress at mid-link (Fig. 6.6)"), "stress.png")
 
     fig, axes = plt.subplots(1, len(runs), figsize=(4 * len(runs), 4), squeeze=False)
     for ax, r in zip(axes[0], runs):
