@@ -97,11 +97,11 @@ class MidpointDAE:
         sol = np.linalg.solve(kkt, rhs)
         return sol[:n], sol[n:]
 
-    def project_velocity(self, q, qd, cs: ConstraintSet, metric=None):
+    def project_velocity(self, q, qd, cs: ConstraintSet):
         """Closest qd (in the mass metric) with J qd = 0 (plastic impact, Eq. 5.22 form)."""
         m = self.model
         jac = m.constraint_jacobian(q, cs)
-        metric = m.mass_matrix(q) if metric is None else metric
+        metric = m.mass_matrix(q)
         n, nc = m.n, jac.shape[0]
         kkt = np.zeros((n + nc, n + nc))
         kkt[:n, :n] = metric
