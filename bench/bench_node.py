@@ -10,7 +10,6 @@ The arrival times include DDS transport, so they bound the node's own publicatio
 """
 import argparse
 import os
-import re
 import sys
 import time
 

@@ -5,8 +5,6 @@ import shutil
 import subprocess
 import sys
 
-import pytest
-
 from tests.ros_helpers import ros_env
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

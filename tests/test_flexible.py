@@ -6,8 +6,6 @@ Tolerances (stated in the closing note of the physics issue):
     0.08 s (the thesis reads it off a plot);
   * stage-2 tip amplitude within 10 % of "about 60 mm", period within 10 % of "about 0.05 s".
 """
-import math
-
 import numpy as np
 import pytest
 

@@ -32,7 +32,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from . import __version__
 from . import ros_io
-from .params import SPECS, UmbrellaParams
+from .params import NODE_PARAMETERS, SPECS, UmbrellaParams
 from .publication import PublicationDriver
 from .solver import SimulationDiverged, validate_force
 
@@ -89,7 +89,7 @@ class UmbrellaNode(Node):
     @staticmethod
     def _node_config(values: dict) -> dict:
         cfg = {}
-        for name, (_, _, rng, _) in ros_io.NODE_PARAMETERS.items():
+        for name, (_, _, rng, _) in NODE_PARAMETERS.items():
             v = values[name]
             if rng is not None:
                 try:
@@ -193,7 +193,7 @@ class UmbrellaNode(Node):
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         core = {p.name: p.value for p in params if p.name in SPECS}
-        node = {p.name: p.value for p in params if p.name in ros_io.NODE_PARAMETERS}
+        node = {p.name: p.value for p in params if p.name in NODE_PARAMETERS}
         try:
             candidate = self.pending_params.replace(**core).validated() if core else \
                 self.pending_params

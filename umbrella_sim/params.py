@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from typing import Any, Mapping
 
 MODELS = ("flexible", "rigid-fe", "rigid")
@@ -133,9 +133,24 @@ SPECS: dict[str, ParamSpec] = {
     "time_step": ParamSpec("fixed physics step of the integrator", "s"),
 }
 
-#: parameters of the ROS node only (issue 3); the offline CLI reads the same file and skips them
-NODE_ONLY_PARAMS = ("publish_rate", "real_time_factor", "duration", "record_path",
-                    "marker_magnification", "use_sim_time")
+#: node-only parameters: name -> (default, description with units, (low, high) or None, read_only)
+NODE_PARAMETERS = {
+    "publish_rate": (100.0, "publication rate of joint_states, tip_deflection, peak_stress, "
+                     "markers and clock (Hz, sim time); the physics step is time_step or "
+                     "shorter so that publications fall on steps", (1.0, 5000.0), False),
+    "real_time_factor": (1.0, "sim seconds per wall second: 1.0 = wall-clock pace, "
+                         "0 = as fast as possible (-)", (0.0, 1000.0), False),
+    "duration": (0.0, "simulated time after which the node exits (s); 0 = run until stopped",
+                 (0.0, 1.0e9), False),
+    "record_path": ("", "bag directory to record to (NAME/NAME_0.mcap + metadata.yaml), "
+                    "must not exist; '' = no recording (fixed for the life of the node)",
+                    None, True),
+    "marker_magnification": (1.0, "deformation magnification of the markers (-)",
+                             (0.0, 1.0e6), False),
+}
+
+#: keys of a params file that belong to the node, not the model: the offline CLI skips them
+NODE_ONLY_PARAMS = tuple(NODE_PARAMETERS) + ("use_sim_time",)
 
 _INT_FIELDS = {"elements_per_segment"}
 _STR_FIELDS = {"model", "lock"}

@@ -22,7 +22,7 @@ import threading
 
 import yaml
 from mcap.writer import CompressionType, IndexType, Writer
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
 
 from . import __version__
@@ -328,13 +328,14 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
 
     from . import ros_io
     from .outputs import RunResult
+    from .params import NODE_PARAMETERS
     from .publication import PublicationDriver
     from .solver import SimulationDiverged, validate_force
 
     profile = sorted(force_profile or [], key=lambda tf: tf[0])
     for _, f in profile:
         validate_force(f)
-    node_cfg = {k: v[0] for k, v in ros_io.NODE_PARAMETERS.items()}
+    node_cfg = {k: v[0] for k, v in NODE_PARAMETERS.items()}
     node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,
                     record_path=bag_dir, marker_magnification=marker_magnification)
     driver = PublicationDriver(params, publish_rate)

@@ -16,8 +16,6 @@ import math
 import sys
 import time
 
-import numpy as np
-
 from .logs import LogError, LogData, qos_from_yaml, read_log
 
 COMMAND_SUFFIXES = ("sleeve_force", "sleeve_force/refused", "sleeve_force/applied")

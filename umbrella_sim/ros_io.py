@@ -20,7 +20,7 @@ from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimens
 from visualization_msgs.msg import Marker, MarkerArray
 
 from .outputs import Sample
-from .params import SPECS, UmbrellaParams
+from .params import NODE_PARAMETERS, SPECS, UmbrellaParams
 
 INERTIAL_FRAME = "umbrella_base"   # X toward the leaf, Y up the axle, origin at the hinge O
 LEAF_FRAME = "leaf"                # origin O, x' through O''
@@ -56,21 +56,6 @@ COMMAND_APPLIED_SUFFIX = "/applied"
 COMMAND = Topic("sleeve_force", Float64, RELIABLE)
 
 # --------------------------------------------------------------------- parameters
-#: node-only parameters: name -> (default, description with units, (low, high) or None, read_only)
-NODE_PARAMETERS = {
-    "publish_rate": (100.0, "publication rate of joint_states, tip_deflection, peak_stress, "
-                     "markers and clock (Hz, sim time); the physics step is time_step or "
-                     "shorter so that publications fall on steps", (1.0, 5000.0), False),
-    "real_time_factor": (1.0, "sim seconds per wall second: 1.0 = wall-clock pace, "
-                         "0 = as fast as possible (-)", (0.0, 1000.0), False),
-    "duration": (0.0, "simulated time after which the node exits (s); 0 = run until stopped",
-                 (0.0, 1.0e9), False),
-    "record_path": ("", "MCAP file or bag directory to record to; '' = no recording "
-                    "(fixed for the life of the node)", None, True),
-    "marker_magnification": (1.0, "deformation magnification of the markers (-)",
-                             (0.0, 1.0e6), False),
-}
-
 _RANGES = {
     "l1": (1e-6, 1e3), "l2": (1e-6, 1e3), "l3": (1e-6, 1e3), "section_height": (0.0, 10.0),
     "area": (0.0, 100.0), "second_moment_of_area": (0.0, 100.0),

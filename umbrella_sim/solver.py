@@ -348,7 +348,6 @@ class UmbrellaSimulator:
             # the step leaves M(q) qd in the state: T = 1/2 qd . p without re-assembling M
             kinetic = (0.5 * qd @ s.momentum if s.momentum is not None
                        else m.kinetic_energy(q, qd))
-        cs = ConstraintSet(locked=stage == LOCKED, rigid=False)
         return Sample(
             time=s.t, stage=stage, q=q.copy(), qd=qd.copy(),
             alpha1=float(q[0]), alpha2=float(q[m.i_alpha2]),
@@ -364,8 +363,7 @@ class UmbrellaSimulator:
             multipliers=lam.copy(), sleeve_reaction=reaction,
             kinetic_energy=float(kinetic), strain_energy=float(m.strain_energy(q)),
             work=float(work), lock_energy_loss=float(lock_loss),
-            constraint_residual=self.engine.residual(s, stage) if stage == DEFORMING or
-            not isinstance(self.engine, RigidEngine) else 0.0,
+            constraint_residual=self.engine.residual(s, stage),
         )
 
 
