@@ -28,8 +28,13 @@ def run(cmd, **kw):
 
 def setup() -> None:
     req = os.path.join(ROOT, "requirements.txt")
-    with open(req, "rb") as fh:
-        digest = hashlib.sha256(fh.read() + open(os.path.join(ROOT, "setup.py"), "rb").read()).hexdigest()
+    # what the install depends on: a change to any of these reinstalls (and rebuilds the kernel)
+    inputs = [req, os.path.join(ROOT, "setup.py"), os.path.join(ROOT, "umbrella_sim", "_kernel.c")]
+    digest = hashlib.sha256()
+    for path in inputs:
+        with open(path, "rb") as fh:
+            digest.update(fh.read())
+    digest = digest.hexdigest()
     stamp = os.path.join(VENV, ".umbrella_sim-installed")
     if os.path.exists(stamp) and open(stamp).read() == digest and os.path.exists(PY):
         return
