@@ -66,7 +66,14 @@ def main(argv) -> int:
     else:
         return 0
     print("+", " ".join(cmd), flush=True)
-    return subprocess.call(cmd, cwd=ROOT, env=env)
+    child = subprocess.Popen(cmd, cwd=ROOT, env=env)
+    while True:
+        try:
+            # Ctrl-C reaches the child too (same process group): it stops and finalises its
+            # recording; this process waits for that instead of dying first
+            return child.wait()
+        except KeyboardInterrupt:
+            continue
 
 
 if __name__ == "__main__":
