@@ -139,8 +139,12 @@ class UmbrellaNode(Node):
                   "recorded": json.dumps(self.recorder.counts)}
         from .recording import events_metadata
         self.recorder.close({"umbrella_sim.counts": counts, **events_metadata(self.sim)})
-        self.get_logger().info(f"recording finalised: {self.recorder.path} "
-                               f"({sum(self.recorder.counts.values())} messages)")
+        text = (f"recording finalised: {self.recorder.path} "
+                f"({sum(self.recorder.counts.values())} messages)")
+        if self.context.ok():
+            self.get_logger().info(text)
+        else:  # after SIGINT/SIGTERM the context is gone: /rosout cannot take it any more
+            print(f"[INFO] [{self.get_name()}]: {text}", file=sys.stderr, flush=True)
 
     def _record(self, topic: str, msg, t: float) -> None:
         if self.recorder is not None:
