@@ -1,6 +1,6 @@
 """MCAP recording with the ROS 2 profile, laid out as rosbag2 writes it.
 
-A recording is a bag directory ``NAME/`` holding ``NAME_0.mcap`` and ``metadata.yaml``.  The
+A recording is a bag directory ``NAME/`` holding ``NAME_0.mcap`` and ``metadata.yaml`` (bag metadata version 8).  The
 .mcap also stands alone: profile ``ros2``, one ``ros2msg`` schema per type (the full .msg text
 with its dependencies), ``cdr`` messages from rclpy.serialization trimmed to the exact CDR
 size, ``offered_qos_profiles`` on every channel, log/publish times in sim time (ns), zstd
@@ -302,7 +302,9 @@ class BagRecorder:
                    "message_count": self.counts[topic]}
                   for topic, (_, tname, qos) in self._channels.items()]
         return {
-            "version": 9, "storage_identifier": "mcap",
+            # version 8: offered_qos_profiles as a YAML string with integer enums, which is
+            # what qos_yaml() writes (version 9 switched to a list with enum names)
+            "version": 8, "storage_identifier": "mcap",
             "duration": {"nanoseconds": duration},
             "starting_time": {"nanoseconds_since_epoch": start},
             "message_count": total, "topics_with_message_count": topics,
