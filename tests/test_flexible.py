@@ -165,3 +165,12 @@ def test_stress_recovery_sign_and_fibres():
     u_joint = e[m.leaf.elastic_index(1, "u")]
     assert mean[0] == pytest.approx(72e9 * u_joint / 0.5, rel=1e-9)
     assert s.peak_stress_leaf == pytest.approx(np.abs(s.leaf_stress).max())
+
+
+def test_sixteen_elements_per_segment():
+    """The issue's largest mesh (48 elements, 148 coordinates) through the lock."""
+    r = simulate(UmbrellaParams(v0=-0.2, elements_per_segment=16), 0.4)
+    s = r.summary()
+    assert r.error is None and len(r.q_labels) == 148
+    assert s["deploy_time"] == pytest.approx(0.22591, rel=1e-4)
+    assert s["constraint_residual_max"] < 1e-10 and s["energy_drift"] < 1e-4
