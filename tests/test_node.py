@@ -93,6 +93,15 @@ def test_invalid_start_parameters_exit_nonzero_naming_the_parameter(args, culpri
     assert culprit in r.stderr and "Traceback" not in r.stderr
 
 
+def test_help_lists_every_parameter():
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--help"],
+                       capture_output=True, text=True, env=ros_env(), timeout=60)
+    assert r.returncode == 0
+    for name in list(UmbrellaParams().as_dict()) + ["publish_rate", "record_path"]:
+        assert f"  {name} " in r.stdout
+    assert "sleeve_force" in r.stdout and "~/reset" in r.stdout
+
+
 def test_invalid_commands_refused_counted_and_never_applied(probe):
     probe.subscribe("/joint_states", JointState)
     probe.subscribe("/diagnostics", DiagnosticArray)

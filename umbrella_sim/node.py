@@ -340,8 +340,30 @@ class UmbrellaNode(Node):
             sim_t, f"{self.get_name()}: physics", level, message, values), sim_t)
 
 
+def usage() -> str:
+    lines = ["usage: umbrella_node [--help] [--ros-args -p name:=value ... --params-file FILE",
+             "                      -r __ns:=/NAMESPACE]", "",
+             "Real-time flexible umbrella-frame deployment simulator (ROS 2 node).", "",
+             "model parameters (structural ones apply on ~/reset when set at runtime):"]
+    defaults = ros_io.parameter_defaults()
+    for name, spec in SPECS.items():
+        lines.append(f"  {name:<24} {defaults[name]!r:<22} {spec.units:<7} {spec.description}")
+    lines.append("node parameters:")
+    for name, (default, text, _, _) in NODE_PARAMETERS.items():
+        lines.append(f"  {name:<24} {default!r:<22} {text}")
+    lines += ["", "topics: " + ", ".join(t.name for t in ros_io.TOPICS.values())
+              + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= 0)",
+              "services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)",
+              "details: msg_docs/ in the package share directory"]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
+    if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
+                                               if "--ros-args" in argv else len(argv)]):
+        print(usage())
+        return 0
     rclpy.init(args=argv)
     leftover = rclpy.utilities.remove_ros_args(argv)[1:]
     if leftover:
