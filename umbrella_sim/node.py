@@ -16,7 +16,6 @@ MCAP when ``record_path`` is set (see recording.py).
 from __future__ import annotations
 
 import gc
-import json
 import math
 import sys
 import threading
@@ -123,22 +122,15 @@ class UmbrellaNode(Node):
                 self.driver.backend, source=f"umbrella_node {self.get_fully_qualified_name()}"))
         except ValueError as exc:
             raise StartupError(str(exc)) from None
-        for key, pub in self.pub.items():
-            self.recorder.add_channel(pub.topic_name, ros_io.TOPICS[key].type,
-                                      ros_io.TOPICS[key].qos)
-        for suffix in ("", ros_io.COMMAND_REFUSED_SUFFIX, ros_io.COMMAND_APPLIED_SUFFIX):
-            self.recorder.add_channel(self.command_topic + suffix, Float64, ros_io.COMMAND.qos)
+        self.recorder.add_umbrella_channels(
+            {key: pub.topic_name for key, pub in self.pub.items()}, self.command_topic)
         self.get_logger().info(f"recording to {self.recorder.path}")
 
     def close_recording(self) -> None:
         if self.recorder is None:
             return
-        counts = {"published": json.dumps(self.published),
-                  "commands_accepted": str(self.accepted_commands),
-                  "commands_refused": str(self.refused_commands),
-                  "recorded": json.dumps(self.recorder.counts)}
-        from .recording import events_metadata
-        self.recorder.close({"umbrella_sim.counts": counts, **events_metadata(self.sim)})
+        self.recorder.close_run(self.sim, self.published, self.accepted_commands,
+                                self.refused_commands)
         text = (f"recording finalised: {self.recorder.path} "
                 f"({sum(self.recorder.counts.values())} messages)")
         if self.context.ok():

@@ -1,7 +1,7 @@
 """MCAP recording with the ROS 2 profile, laid out as rosbag2 writes it.
 
-A recording is a bag directory ``NAME/`` holding ``NAME_0.mcap`` and ``metadata.yaml`` (bag metadata version 8).  The
-.mcap also stands alone: profile ``ros2``, one ``ros2msg`` schema per type (the full .msg text
+A recording is a bag directory ``NAME/`` holding ``NAME_0.mcap`` and ``metadata.yaml`` (bag
+metadata version 8).  The .mcap also stands alone: profile ``ros2``, one ``ros2msg`` schema per type (the full .msg text
 with its dependencies), ``cdr`` messages from rclpy.serialization trimmed to the exact CDR
 size, ``offered_qos_profiles`` on every channel, log/publish times in sim time (ns), zstd
 chunks with message indexes, a Statistics record, and at close a ``rosbag2`` metadata record
@@ -259,6 +259,24 @@ class BagRecorder:
             self._channels[topic] = (cid, tname, qos)
             self.counts[topic] = 0
 
+    def add_umbrella_channels(self, topic_names: dict, command_topic: str) -> None:
+        """The layout of an umbrella_sim run, live or offline: every published topic
+        (topic key -> resolved name) and the command with its refused/applied records."""
+        from std_msgs.msg import Float64
+
+        from . import ros_io
+        for key, name in topic_names.items():
+            self.add_channel(name, ros_io.TOPICS[key].type, ros_io.TOPICS[key].qos)
+        for suffix in ("", ros_io.COMMAND_REFUSED_SUFFIX, ros_io.COMMAND_APPLIED_SUFFIX):
+            self.add_channel(command_topic + suffix, Float64, ros_io.COMMAND.qos)
+
+    def close_run(self, sim, published: dict, accepted: int, refused: int) -> None:
+        """Finalise with the counts (published vs recorded) and the exact lock event."""
+        self.close({"umbrella_sim.counts": {
+            "published": json.dumps(published), "commands_accepted": str(accepted),
+            "commands_refused": str(refused), "recorded": json.dumps(self.counts)},
+            **events_metadata(sim)})
+
     def write(self, topic: str, msg, t_ns: int) -> None:
         data = cdr_bytes(msg)
         with self._lock:
@@ -344,11 +362,8 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     rec = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, driver.sim.model,
                                             driver.backend, source="umbrella-sim simulate"))
     topics = {key: "/" + t.name for key, t in ros_io.TOPICS.items()}
-    for key, name in topics.items():
-        rec.add_channel(name, ros_io.TOPICS[key].type, ros_io.TOPICS[key].qos)
     command = "/" + ros_io.COMMAND.name
-    for suffix in ("", ros_io.COMMAND_REFUSED_SUFFIX, ros_io.COMMAND_APPLIED_SUFFIX):
-        rec.add_channel(command + suffix, Float64, ros_io.COMMAND.qos)
+    rec.add_umbrella_channels(topics, command)
     published: dict[str, int] = {}
 
     def publish(key, msg, t):
@@ -395,10 +410,7 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
         result.error = str(exc)
         publish("deployment_phase", ros_io.phase_msg("fault"), sim.time)
     finally:
-        rec.close({"umbrella_sim.counts": {
-            "published": json.dumps(published), "commands_accepted": str(i_cmd),
-            "commands_refused": "0", "recorded": json.dumps(rec.counts)},
-            **events_metadata(sim)})
+        rec.close_run(sim, published, accepted=i_cmd, refused=0)
     result.wall_time = _time.perf_counter() - wall0
     result.steps = sim.steps
     result.lock = sim.lock_event
