@@ -124,6 +124,20 @@ class Probe:
         raise AssertionError(f"no message on {topic} satisfying the condition within {timeout} s"
                              f" (got {len(self.messages(topic))})")
 
+    def wait_for_count(self, topic: str, count: int, timeout: float = 20.0) -> list:
+        """The first `count` messages on topic, waiting for them.
+
+        Messages on different topics have no mutual order in DDS, and a latched (transient
+        local) sample reaches a late-matched reader only after the reliable handshake, so a
+        test waits for what it asserts on instead of assuming it is already there."""
+        deadline = time.monotonic() + timeout
+        while len(self.messages(topic)) < count:
+            if time.monotonic() > deadline:
+                raise AssertionError(f"fewer than {count} messages on {topic} within {timeout} s"
+                                     f" (got {len(self.messages(topic))})")
+            time.sleep(0.02)
+        return self.messages(topic)[:count]
+
     def publisher(self, topic: str, msg_type, qos=10):
         return self.node.create_publisher(msg_type, topic, qos)
 

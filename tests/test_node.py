@@ -47,8 +47,7 @@ def test_topic_driven_deployment_matches_offline_core(probe):
     with NodeProcess("-p", "v0:=0.0", "-p", "publish_rate:=100.0") as node:
         step = float(node.wait_for_log(r"physics step ([0-9.e-]+) s").group(1))
         probe.wait_for("/deployment_phase", lambda m: m.data == "deploying")
-        while len(probe.messages("/joint_states")) < 30:          # 0.3 s of rest observed
-            time.sleep(0.02)
+        probe.wait_for_count("/joint_states", 30)                  # 0.3 s of rest observed
         pub = probe.publisher("/sleeve_force", Float64)
         probe.wait_for_subscribers(pub)
         for _ in range(3):
@@ -113,6 +112,7 @@ def test_invalid_commands_refused_counted_and_never_applied(probe):
             pub.publish(Float64(data=bad))
         probe.wait_for("/diagnostics", lambda m: diag_values(m)["refused_commands"] == "4",
                        timeout=10)
+        probe.wait_for_count("/joint_states", 1)
         t_seen = stamp_s(probe.messages("/joint_states")[-1])
         probe.wait_for("/joint_states", lambda m: stamp_s(m) > t_seen + 0.3)
         assert "refused sleeve_force command" in node.output()
@@ -127,6 +127,7 @@ def test_pause_and_reset(probe):
     with NodeProcess("-p", "v0:=-0.5") as node:
         node.wait_for_log("physics step")
         probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
+        probe.wait_for_count("/clock", 1)
         assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=True)).success
         time.sleep(0.1)
         frozen = probe.messages("/clock")[-1].clock
@@ -138,8 +139,8 @@ def test_pause_and_reset(probe):
         n_before = len(probe.messages("/deployment_phase"))
         assert probe.call(Trigger, "/umbrella_node/reset", Trigger.Request()).success
         probe.wait_for("/clock", lambda m: m.clock.sec == 0 and m.clock.nanosec < 50_000_000)
-        phases = [m.data for m in probe.messages("/deployment_phase")][n_before:]
-        assert phases and phases[0] == "deploying"
+        phases = [m.data for m in probe.wait_for_count("/deployment_phase", n_before + 1)]
+        assert phases[n_before] == "deploying"
         probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
         node.wait_for_log(r"locked at t = 0.0904", count=2)      # the same run again
 
@@ -180,6 +181,7 @@ def test_namespaced_nodes_do_not_cross_talk(probe):
         probe.wait_for("/a1/deployment_phase", lambda m: m.data == "locked", timeout=20)
         t_lock = float(a1.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
         probe.wait_for("/a2/joint_states", lambda m: stamp_s(m) > t_lock + 0.2)
+        probe.wait_for_count("/a2/deployment_phase", 1)
         assert "sleeve force" not in a2.output()
     assert all(abs(m.position[0] - ALPHA0) < 1e-9 for m in probe.messages("/a2/joint_states"))
     assert [m.data for m in probe.messages("/a2/deployment_phase")] == ["deploying"]

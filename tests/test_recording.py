@@ -189,7 +189,8 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
                                 "--wait-for-subscribers", "20"], capture_output=True,
                                text=True, env=ros_env(), timeout=60)
             assert r.returncode == 0, r.stderr
-            time.sleep(0.3)
+            probe.wait_for_count("/clock", recorded, timeout=5)
+            time.sleep(0.1)                             # nothing beyond what was recorded
             arrivals = probe.timed("/clock")
             assert len(arrivals) == recorded
             stamps = [m.clock.sec + 1e-9 * m.clock.nanosec for _, m in arrivals]

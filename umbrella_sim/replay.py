@@ -90,6 +90,7 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
               with_commands: bool, topics: list[str] | None, ros_args: list[str],
               wait_for_subscribers: float = 0.0) -> int:
     import rclpy
+    from rclpy.duration import Duration
     from rclpy.executors import ExternalShutdownException
 
     chosen = [t for t in log.topics() if (with_commands or not _is_command(t))
@@ -137,7 +138,9 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        time.sleep(0.2)
+        # reliable subscribers get every sample before the publishers go away
+        for pub in pubs.values():
+            pub.wait_for_all_acked(Duration(seconds=2.0))
         node.destroy_node()
         rclpy.try_shutdown()
     print(f"replayed {sent} messages", flush=True)
