@@ -59,6 +59,7 @@ class UmbrellaNode(Node):
             raise StartupError(str(exc)) from None
         self.pending_params = self.model_params
         self._sim_lock = threading.RLock()
+        self._epoch = 0                     # counts resets; samples of an older epoch are dropped
         self._cmd_lock = threading.Lock()
         self.accepted_commands = 0
         self.refused_commands = 0
@@ -169,6 +170,7 @@ class UmbrellaNode(Node):
         with self._sim_lock:
             self.model_params = self.pending_params
             self._build_simulator()
+            self._epoch += 1
             self._anchor()
             self._publish_phase("deploying")
         self._wake.set()
@@ -229,11 +231,18 @@ class UmbrellaNode(Node):
         self._phase = phase
         self._publish("deployment_phase", ros_io.phase_msg(phase), self.sim.time)
 
-    def _publish_sample(self) -> None:
-        t = self.sim.time
-        for key, msg in self.driver.messages(self._marker_ns,
-                                             self.node_cfg["marker_magnification"]).items():
-            self._publish(key, msg, t)
+    def _sample_messages(self) -> tuple[int, float, dict]:
+        """The current state's messages, built under the sim lock, published later."""
+        return self._epoch, self.sim.time, self.driver.messages(
+            self._marker_ns, self.node_cfg["marker_magnification"])
+
+    def _publish_sample(self, sample: tuple[int, float, dict]) -> None:
+        epoch, t, msgs = sample
+        with self._sim_lock:
+            if epoch != self._epoch:          # a reset came in meanwhile: the sample is stale
+                return
+            for key, msg in msgs.items():
+                self._publish(key, msg, t)
 
     def _advance_one_publication(self) -> None:
         with self._cmd_lock:
@@ -258,8 +267,11 @@ class UmbrellaNode(Node):
         lag = 0.0
         self._max_lag = 0.0
         try:
-            self._publish_sample()
+            with self._sim_lock:
+                sample = self._sample_messages()
+            self._publish_sample(sample)
             while not self._stop.is_set():
+                sample = None
                 with self._sim_lock:
                     idle = self.paused or self.fault is not None
                     if not idle:
@@ -269,12 +281,23 @@ class UmbrellaNode(Node):
                             self.fault = str(exc)
                             log.error(f"simulation fault: {exc}; call ~/reset to restart")
                             self._publish_phase("fault")
-                        self._publish_sample()
+                        sample = self._sample_messages()
                     sim_t, rtf = self.sim.time, self.node_cfg["real_time_factor"]
                     target = (self._wall_anchor + (sim_t - self._sim_anchor) / rtf) if rtf > 0 \
                         else None
                     duration = self.node_cfg["duration"]
                 now = time.monotonic()
+                if target is not None and sample is not None:
+                    lag = now - target
+                    self._max_lag = max(self._max_lag, lag)
+                    if lag < 0:               # publish the state of sim time t at wall time t
+                        self._sleep_until(target)
+                    elif lag > max(0.05, 2.0 / self.node_cfg["publish_rate"]):
+                        log.warn(f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
+                                 f"time x real_time_factor (see diagnostics)",
+                                 throttle_duration_sec=5.0)
+                if sample is not None:
+                    self._publish_sample(sample)
                 if now - diag_wall >= 1.0:
                     measured = (sim_t - diag_sim) / (now - diag_wall)
                     self._publish_diagnostics(sim_t, measured, lag)
@@ -286,16 +309,6 @@ class UmbrellaNode(Node):
                 if idle:
                     self._wake.wait(0.05)
                     self._wake.clear()
-                    continue
-                if target is not None:
-                    lag = now - target
-                    self._max_lag = max(self._max_lag, lag)
-                    if lag < 0:
-                        self._sleep_until(target)
-                    elif lag > max(0.05, 2.0 / self.node_cfg["publish_rate"]):
-                        log.warn(f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
-                                 f"time x real_time_factor (see diagnostics)",
-                                 throttle_duration_sec=5.0)
         except Exception as exc:  # keep the process informative, never silent
             log.error(f"physics thread stopped: {exc!r}")
             self.fault = repr(exc)
