@@ -64,7 +64,8 @@ def paced(probe: Probe, n_el: int, rate: float, seconds: float):
     node_lag = max(float({kv.key: kv.value for kv in m.status[0].values}["max_lag_s"])
                    for m in probe.messages("/diagnostics")[1:])
     beyond = int(np.sum(np.abs(drift) > period))
-    return dict(node_max_lag=node_lag, beyond=beyond, p50=np.percentile(jitter, 50), p99=np.percentile(jitter, 99),
+    return dict(node_max_lag=node_lag, beyond=beyond,
+                p50=np.percentile(jitter, 50), p99=np.percentile(jitter, 99),
                 drift_end=drift[-1], drift_max=np.abs(drift).max(), span=wall[-1] - wall[0],
                 received=len(sim), expected=expected, behind=behind)
 

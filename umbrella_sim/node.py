@@ -268,8 +268,7 @@ class UmbrellaNode(Node):
         self._max_lag = 0.0
         try:
             with self._sim_lock:
-                sample = self._sample_messages()
-            self._publish_sample(sample)
+                self._publish_sample(self._sample_messages())
             while not self._stop.is_set():
                 sample = None
                 with self._sim_lock:
