@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import gc
 import math
+import signal
 import sys
 import threading
 import time
@@ -24,6 +25,7 @@ import time
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64
@@ -217,9 +219,13 @@ class UmbrellaNode(Node):
         self._anchor()
         self._thread.start()
 
-    def stop(self) -> None:
+    def request_stop(self) -> None:
+        """Ask the physics thread to finish its publication and end (signal-safe)."""
         self._stop.set()
         self._wake.set()
+
+    def stop(self) -> None:
+        self.request_stop()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
 
@@ -358,6 +364,9 @@ def usage() -> str:
     lines += ["", "topics: " + ", ".join(t.name for t in ros_io.TOPICS.values())
               + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= 0)",
               "services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)",
+              "exit: SIGINT/SIGTERM stop the physics, then finalise the recording; code 0 on "
+              "a clean stop or when duration is reached, 2 for invalid arguments or "
+              "parameters, 3 if the simulation ended in a fault",
               "details: msg_docs/ in the package share directory"]
     return "\n".join(lines)
 
@@ -368,7 +377,9 @@ def main(argv: list[str] | None = None) -> int:
                                                if "--ros-args" in argv else len(argv)]):
         print(usage())
         return 0
-    rclpy.init(args=argv)
+    # rclpy's own handlers would shut the context down at once, under the physics thread's
+    # feet; ours stop the physics first, then the recording is closed, then rclpy
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     leftover = rclpy.utilities.remove_ros_args(argv)[1:]
     if leftover:
         print(f"umbrella_node: error: unexpected arguments {leftover}; parameters go after "
@@ -383,11 +394,19 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     executor = SingleThreadedExecutor()
     executor.add_node(node)
+
+    def on_signal(signum, frame):
+        node.request_stop()
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, on_signal)
     node.start()
     ok = True
     try:
-        executor.spin_until_future_complete(node.finished)
-        ok = bool(node.finished.done() and node.finished.result())
+        # the timeout lets a signal's Python handler run while the executor waits
+        while not node.finished.done():
+            executor.spin_once(timeout_sec=0.1)
+        ok = bool(node.finished.result())
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
