@@ -6,15 +6,17 @@
     python3 bootstrap.py test     # the test suite
 
 Arguments after run go to the node: python3 bootstrap.py run -p v0:=-0.5
+Environment: UMBRELLA_VENV (default ./.venv), UMBRELLA_RUNS_DIR (default ./runs).
 
 Needs only python3 (3.11); everything else comes from PyPI.  Idempotent: a venv whose
 requirements are unchanged is reused.
 """
 import hashlib
 import os
-import time
+import signal
 import subprocess
 import sys
+import time
 
 ROOT = os.path.dirname(os.path.abspath(__file__))
 VENV = os.environ.get("UMBRELLA_VENV", os.path.join(ROOT, ".venv"))
@@ -55,7 +57,7 @@ def main(argv) -> int:
     env = dict(os.environ, AMENT_PREFIX_PATH=VENV)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if argv[0] == "run":
-        runs = os.path.join(ROOT, "runs")
+        runs = os.environ.get("UMBRELLA_RUNS_DIR", os.path.join(ROOT, "runs"))
         os.makedirs(runs, exist_ok=True)
         bag = os.path.join(runs, time.strftime("run-%Y%m%d-%H%M%S"))
         cmd = [PY, "-m", "umbrella_sim.node", "--ros-args", "--params-file",
@@ -66,14 +68,18 @@ def main(argv) -> int:
     else:
         return 0
     print("+", " ".join(cmd), flush=True)
-    child = subprocess.Popen(cmd, cwd=ROOT, env=env)
-    while True:
-        try:
-            # Ctrl-C reaches the child too (same process group): it stops and finalises its
-            # recording; this process waits for that instead of dying first
-            return child.wait()
-        except KeyboardInterrupt:
-            continue
+    # the child has its own session, so a signal reaches it exactly once, from here, whether it
+    # came from the terminal (Ctrl-C) or was sent to this process (kill, timeout, a supervisor);
+    # the child stops and finalises its recording while this process waits for it
+    child = subprocess.Popen(cmd, cwd=ROOT, env=env, start_new_session=True)
+
+    def forward(signum, frame):
+        if child.poll() is None:
+            child.send_signal(signum)
+
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, forward)
+    return child.wait()
 
 
 if __name__ == "__main__":
