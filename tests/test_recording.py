@@ -189,6 +189,7 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
                                 "--wait-for-subscribers", "20"], capture_output=True,
                                text=True, env=ros_env(), timeout=60)
             assert r.returncode == 0, r.stderr
+            assert "not acknowledged" not in r.stdout
             probe.wait_for_count("/clock", recorded, timeout=5)
             time.sleep(0.1)                             # nothing beyond what was recorded
             arrivals = probe.timed("/clock")

@@ -19,6 +19,7 @@ import time
 from .logs import LogError, LogData, qos_from_yaml, read_log
 
 COMMAND_SUFFIXES = ("sleeve_force", "sleeve_force/refused", "sleeve_force/applied")
+ACK_TIMEOUT_S = 3.5      # > Fast DDS's default 3 s heartbeat period, which prompts the acks
 
 
 def _is_command(topic: str) -> bool:
@@ -138,9 +139,14 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        # reliable subscribers get every sample before the publishers go away
-        for pub in pubs.values():
-            pub.wait_for_all_acked(Duration(seconds=2.0))
+        # reliable subscribers get every sample (a lost one is resent on their NACK) before the
+        # publishers go away; Fast DDS asks for acknowledgements with its periodic heartbeat,
+        # every 3 s by default, hence the bound
+        unacked = [t for t, pub in pubs.items()
+                   if not pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))]
+        if unacked:
+            print(f"not acknowledged by every subscriber within {ACK_TIMEOUT_S:g} s: "
+                  f"{', '.join(unacked)}", flush=True)
         node.destroy_node()
         rclpy.try_shutdown()
     print(f"replayed {sent} messages", flush=True)
