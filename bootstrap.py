@@ -21,6 +21,7 @@ import time
 ROOT = os.path.dirname(os.path.abspath(__file__))
 VENV = os.environ.get("UMBRELLA_VENV", os.path.join(ROOT, ".venv"))
 PY = os.path.join(VENV, "bin", "python")
+STAMP_NAME = ".umbrella_sim-installed"    # in the venv: digest of what it was installed from
 
 
 def run(cmd, **kw):
@@ -37,7 +38,7 @@ def setup() -> None:
         with open(path, "rb") as fh:
             digest.update(fh.read())
     digest = digest.hexdigest()
-    stamp = os.path.join(VENV, ".umbrella_sim-installed")
+    stamp = os.path.join(VENV, STAMP_NAME)
     if os.path.exists(stamp) and open(stamp).read() == digest and os.path.exists(PY):
         return
     if not os.path.exists(PY):

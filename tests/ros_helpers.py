@@ -114,15 +114,23 @@ class Probe:
         with self._lock:
             return list(self.received.get(topic, []))
 
-    def wait_for(self, topic: str, predicate=lambda m: True, timeout: float = 20.0):
+    @staticmethod
+    def _poll(condition, timeout: float, failure):
+        """condition()'s first truthy value, polling; AssertionError(failure()) at the timeout."""
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            for m in self.messages(topic):
-                if predicate(m):
-                    return m
+        while True:
+            result = condition()
+            if result:
+                return result
+            if time.monotonic() > deadline:
+                raise AssertionError(failure())
             time.sleep(0.02)
-        raise AssertionError(f"no message on {topic} satisfying the condition within {timeout} s"
-                             f" (got {len(self.messages(topic))})")
+
+    def wait_for(self, topic: str, predicate=lambda m: True, timeout: float = 20.0):
+        found = self._poll(lambda: [m for m in self.messages(topic) if predicate(m)][:1], timeout,
+                           lambda: f"no message on {topic} satisfying the condition within "
+                                   f"{timeout} s (got {len(self.messages(topic))})")
+        return found[0]
 
     def wait_for_count(self, topic: str, count: int, timeout: float = 20.0) -> list:
         """The first `count` messages on topic, waiting for them.
@@ -130,34 +138,24 @@ class Probe:
         Messages on different topics have no mutual order in DDS, and a latched (transient
         local) sample reaches a late-matched reader only after the reliable handshake, so a
         test waits for what it asserts on instead of assuming it is already there."""
-        deadline = time.monotonic() + timeout
-        while len(self.messages(topic)) < count:
-            if time.monotonic() > deadline:
-                raise AssertionError(f"fewer than {count} messages on {topic} within {timeout} s"
-                                     f" (got {len(self.messages(topic))})")
-            time.sleep(0.02)
+        self._poll(lambda: len(self.messages(topic)) >= count, timeout,
+                   lambda: f"fewer than {count} messages on {topic} within {timeout} s"
+                           f" (got {len(self.messages(topic))})")
         return self.messages(topic)[:count]
 
     def publisher(self, topic: str, msg_type, qos=10):
         return self.node.create_publisher(msg_type, topic, qos)
 
     def wait_for_subscribers(self, pub, count: int = 1, timeout: float = 20.0):
-        deadline = time.monotonic() + timeout
-        while pub.get_subscription_count() < count:
-            if time.monotonic() > deadline:
-                raise AssertionError(f"no subscriber on {pub.topic_name}")
-            time.sleep(0.02)
+        self._poll(lambda: pub.get_subscription_count() >= count, timeout,
+                   lambda: f"no subscriber on {pub.topic_name}")
 
     def call(self, srv_type, name: str, request, timeout: float = 20.0):
         client = self.node.create_client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout):
             raise AssertionError(f"service {name} not available")
         future = client.call_async(request)
-        deadline = time.monotonic() + timeout
-        while not future.done():
-            if time.monotonic() > deadline:
-                raise AssertionError(f"service {name} did not answer")
-            time.sleep(0.01)
+        self._poll(future.done, timeout, lambda: f"service {name} did not answer")
         return future.result()
 
     def close(self):

@@ -9,11 +9,11 @@ import time
 
 import pytest
 
+from bootstrap import ROOT, STAMP_NAME
 from tests.ros_helpers import ros_env
 from umbrella_sim.logs import read_log
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-STAMP = os.path.join(sys.prefix, ".umbrella_sim-installed")
+STAMP = os.path.join(sys.prefix, STAMP_NAME)
 
 
 @pytest.mark.skipif(not os.path.exists(STAMP),
