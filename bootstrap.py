@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Set up a local virtualenv (.venv) with every dependency, then run the main job or the tests.
+"""
+Set up a local virtualenv (.venv) with every dependency, then run the main job or the tests.
 
     python3 bootstrap.py run      # umbrella_node on config/umbrella.yaml, recording MCAP to
                                   # runs/run-YYYYmmdd-HHMMSS/ (Ctrl-C stops and finalises it)

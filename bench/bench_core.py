@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Real-time factor of the physics core (simulated seconds per wall second, one process).
+"""
+Real-time factor of the physics core (simulated seconds per wall second, one process).
 
 Flexible model, V0 = -0.2, through the lock to t = 1.0 s, at the default time step (the
 accuracy the tests demand).  Two figures per mesh: stepping only (what the node pays between
@@ -31,7 +32,8 @@ def one_run(params, record):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--time-step", type=float, default=UmbrellaParams().time_step)
@@ -51,7 +53,8 @@ def main():
             best[record] = min(walls)
         its = sim.engine.integrator.iterations / sim.steps
         target = TARGETS.get(n)
-        verdict = "" if target is None else f"{target:>5.0f}x {'ok' if 1.0 / best[False] >= target else 'MISS'}"
+        ok = target is not None and 1.0 / best[False] >= target
+        verdict = "" if target is None else f"{target:>5.0f}x {'ok' if ok else 'MISS'}"
         print(f"{n:>3} {sim.model.n:>5} {sim.steps:>6} {its:>11.2f} {1.0 / best[False]:>8.1f}x "
               f"{1.0 / best[True]:>11.1f}x {verdict}")
 

@@ -1,13 +1,16 @@
 #!/usr/bin/env python3
-"""umbrella_node timing, measured from a separate subscriber process over DDS (N = 2, default
-config).  Prints:
+"""
+Measure umbrella_node timing from a separate subscriber process over DDS.
+
+N = 2, default config.  Prints:
   * the achieved real-time factor with real_time_factor = 0 (as fast as possible);
   * at real_time_factor = 1, publish_rate 200 Hz and 1 kHz: p50 / p99 of |interval - period|
     of /clock arrivals, and the sim-time vs wall-time drift over the run (--seconds, 60).
 The arrival times include DDS transport, so they bound the node's own publication jitter.
 
     python bench/bench_node.py [--seconds 60] [--elements 2] [--rates 200 1000]
-    python bench/bench_node.py --seconds 600 --rates 200 --fast-seconds 0   # the 10-minute drift run
+    # the 10-minute drift run:
+    python bench/bench_node.py --seconds 600 --rates 200 --fast-seconds 0
 """
 import argparse
 import gc
@@ -15,14 +18,14 @@ import os
 import sys
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
+from rosgraph_msgs.msg import Clock
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 
 from tests.ros_helpers import NodeProcess, Probe  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from rosgraph_msgs.msg import Clock  # noqa: E402
 
 
 def wall_stamp(line_match) -> float:
@@ -32,7 +35,8 @@ def wall_stamp(line_match) -> float:
 def as_fast_as_possible(n_el: int, sim_seconds: float) -> float:
     with NodeProcess("-p", f"elements_per_segment:={n_el}", "-p", "real_time_factor:=0.0",
                      "-p", f"duration:={sim_seconds}") as node:
-        start = wall_stamp(node.wait_for_log(r"\[INFO\] \[([0-9.]+)\] \[umbrella_node\]: umbrella_sim"))
+        start = wall_stamp(node.wait_for_log(
+            r"\[INFO\] \[([0-9.]+)\] \[umbrella_node\]: umbrella_sim"))
         end = wall_stamp(node.wait_for_log(r"\[INFO\] \[([0-9.]+)\] \[umbrella_node\]: duration",
                                            timeout=600))
         node.proc.wait(60)
@@ -64,10 +68,10 @@ def paced(probe: Probe, n_el: int, rate: float, seconds: float):
     node_lag = max(float({kv.key: kv.value for kv in m.status[0].values}["max_lag_s"])
                    for m in probe.messages("/diagnostics")[1:])
     beyond = int(np.sum(np.abs(drift) > period))
-    return dict(node_max_lag=node_lag, beyond=beyond,
-                p50=np.percentile(jitter, 50), p99=np.percentile(jitter, 99),
-                drift_end=drift[-1], drift_max=np.abs(drift).max(), span=wall[-1] - wall[0],
-                received=len(sim), expected=expected, behind=behind)
+    return {"node_max_lag": node_lag, "beyond": beyond,
+            "p50": np.percentile(jitter, 50), "p99": np.percentile(jitter, 99),
+            "drift_end": drift[-1], "drift_max": np.abs(drift).max(), "span": wall[-1] - wall[0],
+            "received": len(sim), "expected": expected, "behind": behind}
 
 
 def main():
@@ -93,7 +97,8 @@ def main():
     try:
         for rate in args.rates:
             r = paced(probe, args.elements, rate, args.seconds)
-            print(f"N = {args.elements}, real_time_factor = 1, {rate:g} Hz over {r['span']:.1f} s: "
+            print(f"N = {args.elements}, real_time_factor = 1, {rate:g} Hz over "
+                  f"{r['span']:.1f} s: "
                   f"interval jitter p50 {r['p50'] * 1e6:.0f} us, p99 {r['p99'] * 1e6:.0f} us; "
                   f"sim - wall drift at end {r['drift_end'] * 1e3:+.3f} ms, max |drift| "
                   f"{r['drift_max'] * 1e3:.3f} ms at the subscriber ({r['beyond']} samples "

@@ -1,5 +1,8 @@
 #!/usr/bin/env python3
-"""Bytes per simulated second of an MCAP recording at the default publish rate (100 Hz),
+"""
+Measure the bytes per simulated second of an MCAP recording.
+
+At the default publish rate (100 Hz),
 the default config (N = 1) and N = 2, through the lock, and the time it takes to write.
 
     python bench/bench_recording.py [--seconds 10]

@@ -1,6 +1,10 @@
 #!/usr/bin/env python3
-"""Regenerate docs/deployment.png: deformed shapes through a deployment and the tip
-deflection across the lock (flexible model, thesis data, V0 = -0.2 m/s, N = 2)."""
+"""
+Regenerate docs/deployment.png.
+
+Deformed shapes through a deployment and the tip
+deflection across the lock (flexible model, thesis data, V0 = -0.2 m/s, N = 2).
+"""
 import os
 import sys
 

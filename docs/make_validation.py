@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Regenerate docs/validation.md and docs/validation/*.png (one command):
+"""
+Regenerate docs/validation.md and docs/validation/*.png (one command).
 
     .venv/bin/python docs/make_validation.py
 
@@ -15,7 +16,8 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
-from umbrella_sim.compare import THESIS_TABLE_6_1, THESIS_V02, compare, load_run, plot  # noqa: E402
+from umbrella_sim.compare import (  # noqa: E402
+    compare, load_run, plot, THESIS_TABLE_6_1, THESIS_V02)
 from umbrella_sim.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.recording import git_revision, record_offline  # noqa: E402
 from umbrella_sim.rigid import deployment_time_by_quadrature  # noqa: E402
@@ -43,7 +45,8 @@ def main():
 
     # --- Table 6.1
     lines += ["## Table 6.1: deployment time (s)", "",
-              "| V0 (m/s) | thesis deformable | flexible N = 1 | flexible N = 2 | thesis rigid FEA "
+              "| V0 (m/s) | thesis deformable | flexible N = 1 | flexible N = 2 "
+              "| thesis rigid FEA "
               "| rigid-fe | rigid (closed form) | exact (quadrature) |",
               "|---|---|---|---|---|---|---|---|"]
     for v0 in (-0.2, -0.5, -1.0, -2.0):
@@ -92,7 +95,7 @@ def main():
               "Recorded at 1 kHz (the figures are read from the recorded tip deflection). The "
               "stage-1 maximum is within 0.2 % of the thesis's, 4 ms later than its 0.08 s "
               "(which the thesis reads off Fig. 6.2); the stage-2 amplitude is 2–3 % above "
-              "\"about 60 mm\" and the period 6 % below \"about 0.05 s\". The thesis used an "
+              "'about 60 mm' and the period 6 % below 'about 0.05 s'. The thesis used an "
               "explicit Runge–Kutta scheme of its own step and, as printed, several erroneous "
               "matrices (shared/notes/formulation.md); nothing here was tuned to its numbers. "
               "The rigid runs have no elastic deflection: their tip difference is the flexible "

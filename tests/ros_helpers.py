@@ -1,4 +1,5 @@
-"""Real node processes over real DDS: start/stop umbrella_node, probe its topics.
+"""
+Real node processes over real DDS: start/stop umbrella_node, probe its topics.
 
 Each test session runs in its own ROS_DOMAIN_ID with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST.
 """
@@ -25,7 +26,8 @@ def ros_env() -> dict:
 
 
 os.environ.update({k: v for k, v in ros_env().items()
-                   if k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "RMW_IMPLEMENTATION")})
+                   if k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
+                            "RMW_IMPLEMENTATION")})
 
 
 class NodeProcess:
@@ -33,7 +35,8 @@ class NodeProcess:
 
     def __init__(self, *ros_args: str, executable: list[str] | None = None):
         self.log = tempfile.NamedTemporaryFile("w+", suffix=".log", delete=False)
-        cmd = (executable or [sys.executable, "-m", "umbrella_sim.node"]) + ["--ros-args", *ros_args]
+        cmd = ((executable or [sys.executable, "-m", "umbrella_sim.node"])
+               + ["--ros-args", *ros_args])
         self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=subprocess.STDOUT,
                                      env=ros_env(), start_new_session=True)
 
@@ -42,7 +45,7 @@ class NodeProcess:
             return fh.read()
 
     def wait_for_log(self, pattern: str, timeout: float = 20.0, count: int = 1):
-        """The count-th match of pattern in the node's output, waiting for it."""
+        """Return the count-th match of pattern in the node's output, waiting for it."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             found = list(re.finditer(pattern, self.output()))
@@ -133,11 +136,13 @@ class Probe:
         return found[0]
 
     def wait_for_count(self, topic: str, count: int, timeout: float = 20.0) -> list:
-        """The first `count` messages on topic, waiting for them.
+        """
+        Return the first `count` messages on topic, waiting for them.
 
         Messages on different topics have no mutual order in DDS, and a latched (transient
         local) sample reaches a late-matched reader only after the reliable handshake, so a
-        test waits for what it asserts on instead of assuming it is already there."""
+        test waits for what it asserts on instead of assuming it is already there.
+        """
         self._poll(lambda: len(self.messages(topic)) >= count, timeout,
                    lambda: f"fewer than {count} messages on {topic} within {timeout} s"
                            f" (got {len(self.messages(topic))})")

@@ -1,6 +1,10 @@
-"""The README's main command: `python3 bootstrap.py run` runs the node on the default config,
+"""
+Test the README's main command, `python3 bootstrap.py run`.
+
+It runs the node on the default config,
 records MCAP, and a signal sent to the bootstrap process (not only Ctrl-C in a terminal, which
-reaches the whole process group) stops the node cleanly with a finalised recording."""
+reaches the whole process group) stops the node cleanly with a finalised recording.
+"""
 import os
 import signal
 import subprocess

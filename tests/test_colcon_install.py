@@ -1,5 +1,9 @@
-"""The `ros2 run` contract: colcon builds the package, the ament index resolves it, and
-<prefix>/lib/umbrella_sim/umbrella_node runs (ros2cli itself is not on PyPI)."""
+"""
+Test the `ros2 run` contract.
+
+Colcon builds the package, the ament index resolves it, and
+<prefix>/lib/umbrella_sim/umbrella_node runs (ros2cli itself is not on PyPI).
+"""
 import os
 import shutil
 import subprocess
@@ -27,10 +31,13 @@ def test_colcon_build_and_ros2_run_resolution(tmp_path):
     # what `ros2 run umbrella_sim umbrella_node` does after `source install/setup.bash`
     script = f"""
 source {tmp_path}/install/setup.bash
-prefix=$({sys.executable} -c 'from ament_index_python.packages import get_package_prefix as g; print(g("umbrella_sim"))')
-share=$({sys.executable} -c 'from ament_index_python.packages import get_package_share_directory as g; print(g("umbrella_sim"))')
+index="import ament_index_python.packages as p"
+prefix=$({sys.executable} -c "$index; print(p.get_package_prefix('umbrella_sim'))")
+share=$({sys.executable} -c "$index; print(p.get_package_share_directory('umbrella_sim'))")
 echo "prefix=$prefix"
-exec "$prefix/lib/umbrella_sim/umbrella_node" --ros-args --params-file "$share/config/umbrella.yaml" -p v0:=-0.5 -p duration:=0.2 -p real_time_factor:=0.0
+exec "$prefix/lib/umbrella_sim/umbrella_node" --ros-args \
+    --params-file "$share/config/umbrella.yaml" \
+    -p v0:=-0.5 -p duration:=0.2 -p real_time_factor:=0.0
 """
     run = subprocess.run(["bash", "-c", script], env=env, capture_output=True, text=True,
                          timeout=120)

@@ -4,7 +4,7 @@ import os
 import numpy as np
 import pytest
 
-from umbrella_sim.integrators import MidpointDAE, load_kernel
+from umbrella_sim.integrators import load_kernel, MidpointDAE
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.solver import UmbrellaSimulator
 

@@ -1,4 +1,5 @@
-"""The flexible model: thesis numbers, energy balance, constraints, the lock, mesh convergence.
+"""
+The flexible model: thesis numbers, energy balance, constraints, the lock, mesh convergence.
 
 Tolerances (stated in the closing note of the physics issue):
   * deployment time, N = 1: within 0.5 % of Table 6.1 (0.09040 / 0.04525 / 0.02343 s);
@@ -13,7 +14,7 @@ from umbrella_sim.model import ConstraintSet
 from umbrella_sim.outputs import energy_balance_error
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.rigid import deployment_time_by_quadrature
-from umbrella_sim.solver import UmbrellaSimulator, simulate
+from umbrella_sim.solver import simulate, UmbrellaSimulator
 
 THESIS_DEFORMABLE = {-0.5: 0.09040, -1.0: 0.04525, -2.0: 0.02343}
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from umbrella_sim.model import UmbrellaModel, shape_functions
+from umbrella_sim.model import shape_functions, UmbrellaModel
 from umbrella_sim.params import UmbrellaParams
 
 MESHES = [1, 2, 3, 5]
@@ -16,7 +16,7 @@ def random_state(model, rng, elastic=1e-3):
 
 
 def point_position(model, body, q, x):
-    """r = R + A (p + N B e) (Eq. 3.17) of the point at abscissa x, straight from [N]."""
+    """Return r = R + A (p + N B e) (Eq. 3.17) of the point at abscissa x, from [N]."""
     leaf = body is model.leaf
     e = q[model.s_leaf] if leaf else q[model.s_link]
     alpha = q[0] if leaf else q[model.i_alpha2]

@@ -5,8 +5,8 @@ import subprocess
 import sys
 import time
 
-import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rosgraph_msgs.msg import Clock
@@ -39,9 +39,13 @@ def diag_values(msg: DiagnosticArray) -> dict:
 
 
 def test_topic_driven_deployment_matches_offline_core(probe):
-    """V0 = 0: nothing moves until a sleeve_force command; then deploying -> locked, the leaf
+    """
+    Deploy on command and match the offline core's lock time.
+
+    V0 = 0: nothing moves until a sleeve_force command; then deploying -> locked, the leaf
     reaches pi/12, and the lock time equals the offline core's under the force history
-    read from the node's own log (same grid, same code: tolerance 1e-9 s)."""
+    read from the node's own log (same grid, same code: tolerance 1e-9 s).
+    """
     probe.subscribe("/joint_states", JointState)
     probe.subscribe("/deployment_phase", String, LATCHED)
     with NodeProcess("-p", "v0:=0.0", "-p", "publish_rate:=100.0") as node:

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from umbrella_sim.params import UmbrellaParams, load_params_file
+from umbrella_sim.params import load_params_file, UmbrellaParams
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config", "umbrella.yaml")

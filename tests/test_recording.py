@@ -1,19 +1,19 @@
 """MCAP recording, replay and comparison (real node processes, real DDS)."""
+from collections import Counter, defaultdict
 import json
 import os
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import time
-from collections import Counter, defaultdict
-from pathlib import Path
 
-import numpy as np
-import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+import numpy as np
+import pytest
 from rosbags.highlevel import AnyReader
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import get_typestore, Stores
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
@@ -36,7 +36,7 @@ def mcap_file(bag: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def live_bag(tmp_path_factory):
-    """A live recording: V0 = 0, accepted and refused commands, stopped with SIGTERM."""
+    """Record a live run: V0 = 0, accepted and refused commands, stopped with SIGTERM."""
     bag = tmp_path_factory.mktemp("live") / "live_run"
     probe = Probe("recorder_probe")
     try:
@@ -251,8 +251,12 @@ def test_bad_files_give_clear_errors(tmp_path, live_bag):
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_signal_stops_physics_then_finalises_the_recording(tmp_path, sig):
-    """At 1 kHz the physics thread publishes nearly all the time: the signal must stop it
-    before rclpy shuts down, or a publish hits a dead context (it did, 12 times in 12)."""
+    """
+    Stop cleanly on a signal while publishing at 1 kHz.
+
+    At 1 kHz the physics thread publishes nearly all the time: the signal must stop it
+    before rclpy shuts down, or a publish hits a dead context (it did, 12 times in 12).
+    """
     bag = tmp_path / "interrupted"
     with NodeProcess("-p", "v0:=-0.5", "-p", "publish_rate:=1000.0",
                      "-p", f"record_path:={bag}") as node:

@@ -1,12 +1,16 @@
-"""Three independent rigid answers agree: the closed-form two-angle model (Eq. 4.125,
+"""
+Three independent rigid answers agree.
+
+The closed-form two-angle model (Eq. 4.125,
 corrected), the FE model with elastic coordinates constrained (Case 3), and the work-energy
-quadrature t = int d(alpha1)/|alpha1'|."""
+quadrature t = int d(alpha1)/|alpha1'|.
+"""
 import math
 
 import pytest
 
 from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.rigid import RigidMechanism, deployment_time_by_quadrature
+from umbrella_sim.rigid import deployment_time_by_quadrature, RigidMechanism
 from umbrella_sim.solver import simulate
 
 # shared/notes/formulation.md: computed independently by energy quadrature

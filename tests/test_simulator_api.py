@@ -6,7 +6,7 @@ import pytest
 
 from umbrella_sim.integrators import PHI_TOLERANCE
 from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.solver import SimulationDiverged, UmbrellaSimulator, simulate
+from umbrella_sim.solver import simulate, SimulationDiverged, UmbrellaSimulator
 
 
 def trajectory(samples):

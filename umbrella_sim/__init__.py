@@ -1,4 +1,5 @@
-"""umbrella_sim: real-time flexible multibody simulation of an umbrella-frame antenna.
+"""
+umbrella_sim: real-time flexible multibody simulation of an umbrella-frame antenna.
 
 The physics core (params, model, rigid, solver, outputs) imports no ROS package.
 """

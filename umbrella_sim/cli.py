@@ -9,7 +9,7 @@ import os
 import sys
 
 from . import __version__
-from .params import NODE_ONLY_PARAMS, UmbrellaParams, load_params_file
+from .params import load_params_file, NODE_ONLY_PARAMS, UmbrellaParams
 from .solver import simulate, validate_force
 
 
@@ -42,9 +42,11 @@ def read_force_profile(path: str) -> list[tuple[float, float]]:
             except ValueError:
                 if lineno == 1:
                     continue  # header
-                raise ValueError(f"force profile {path}:{lineno}: not numbers: {row[:2]}") from None
+                raise ValueError(f"force profile {path}:{lineno}: not numbers: "
+                                 f"{row[:2]}") from None
             if not math.isfinite(t) or t < 0.0:
-                raise ValueError(f"force profile {path}:{lineno}: time {t} must be finite and >= 0")
+                raise ValueError(f"force profile {path}:{lineno}: time {t} must be finite "
+                                 "and >= 0")
             if rows and t < rows[-1][0]:
                 raise ValueError(f"force profile {path}:{lineno}: time {t} goes backwards")
             try:
@@ -78,6 +80,7 @@ def build_params(args) -> UmbrellaParams:
 
 
 class Progress:
+
     def __init__(self, duration: float, stream=sys.stderr):
         self.duration = duration
         self.stream = stream

@@ -1,4 +1,5 @@
-"""umbrella-compare A B [...] --out DIR: compare recorded runs (live or offline).
+"""
+umbrella-compare A B [...] --out DIR: compare recorded runs (live or offline).
 
 Aligns the runs on the first run's publication times (linear interpolation), prints a table
 and writes compare.json with: deployment time and its difference to the first run, max and
@@ -10,11 +11,11 @@ mid-link, deformed shapes).  --thesis adds the thesis's quoted numbers.
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass, field
 import json
 import math
 import os
 import sys
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -52,8 +53,12 @@ class Run:
     link_node_x: np.ndarray | None = None
 
     def shape(self, t: float, magnification: float):
-        """Deformed shape nearest to t with the elastic part re-scaled from the recorded
-        marker magnification to another one (undeformed frames from the joint angles)."""
+        """
+        Return the deformed shape nearest to t at another magnification.
+
+        The elastic part is re-scaled from the recorded
+        marker magnification to another one (undeformed frames from the joint angles).
+        """
         tm, leaf, link = min(self.shapes, key=lambda s: abs(s[0] - t))
         if self.leaf_node_x is None or self.magnification <= 0:
             return tm, leaf, link
@@ -65,7 +70,7 @@ class Run:
         return tm, leaf_u + scale * (leaf - leaf_u), link_u + scale * (link - link_u)
 
     def figures(self) -> dict:
-        """The thesis's V0 = -0.2 figures, from the recorded tip deflection."""
+        """Return the thesis's V0 = -0.2 figures, from the recorded tip deflection."""
         out = {"deploy_time": self.deploy_time}
         lock = self.deploy_time if self.deploy_time is not None else math.inf
         s1 = self.tip_t <= lock
@@ -203,8 +208,10 @@ def print_table(result: dict, stream=sys.stdout) -> None:
             v = f.get(key)
             return "-" if v is None else format(v * scale, spec)
         line = (f"{e['label']:<18} deploy {fmt('deploy_time', 1, '.5f')} s, tip max "
-                f"{fmt('tip_deflection_max', 1e3)} mm at {fmt('tip_deflection_max_time', 1, '.3f')} s, "
-                f"stage 2 {fmt('stage2_tip_amplitude', 1e3)} mm / {fmt('stage2_tip_period', 1, '.4f')} s")
+                f"{fmt('tip_deflection_max', 1e3)} mm at "
+                f"{fmt('tip_deflection_max_time', 1, '.3f')} s, "
+                f"stage 2 {fmt('stage2_tip_amplitude', 1e3)} mm / "
+                f"{fmt('stage2_tip_period', 1, '.4f')} s")
         w(line + "\n")
         if e.get("thesis"):
             th = e["thesis"]

@@ -1,4 +1,5 @@
-"""Time integrator for the constrained equations of motion: ``MidpointDAE``.
+"""
+Time integrator for the constrained equations of motion: ``MidpointDAE``.
 
 An implicit midpoint rule with discrete gradients on the index-3 DAE (4.87 / 4.118 / 4.119).
 Why this scheme:
@@ -27,9 +28,9 @@ the tests compare the kernel against.
 from __future__ import annotations
 
 import ctypes
+from dataclasses import dataclass, replace
 import glob
 import os
-from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
@@ -84,7 +85,7 @@ class MidpointDAE:
         return "compiled" if self._compiled is not None else "numpy"
 
     def consistent_acceleration(self, q, qd, force: float, cs: ConstraintSet):
-        """q'' and lambda from the index-1 form [[M, -J^T], [J, 0]] (4.87)."""
+        """Solve for q'' and lambda from the index-1 form [[M, -J^T], [J, 0]] (4.87)."""
         m = self.model
         n, nc = m.n, m.n_constraints(cs)
         mass, jac = m.mass_matrix(q), m.constraint_jacobian(q, cs)
@@ -119,7 +120,10 @@ class MidpointDAE:
             return self._step(s, h, force, cs)
 
     def _step(self, s: DynamicState, h: float, force: float, cs: ConstraintSet) -> DynamicState:
-        """One energy-consistent midpoint step (q1 = q0 + h (v0 + v1)/2, dq = q1 - q0):
+        """
+        Take one energy-consistent midpoint step.
+
+        With q1 = q0 + h (v0 + v1)/2, dq = q1 - q0:
 
             M(q1) v1 - M(q0) v0 = h [ G_T - K q_m - F_H G_y + G_Phi^T lambda ],   Phi(q1) = 0
 
@@ -207,7 +211,7 @@ class MidpointDAE:
         return DynamicState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v)
 
     def with_constraints(self, s: DynamicState, force: float, cs: ConstraintSet) -> DynamicState:
-        """Same q, qd; consistent q'' and lambda for another constraint set."""
+        """Keep q, qd; return consistent q'' and lambda for another constraint set."""
         qdd, lam = self.consistent_acceleration(s.q, s.qd, force, cs)
         return replace(s, qdd=qdd, multipliers=lam, momentum=None)
 
@@ -234,7 +238,7 @@ _kernel_lib = None
 
 
 def load_kernel():
-    """The compiled step, or None when it was not built (then numpy does the work)."""
+    """Return the compiled step, or None when it was not built (then numpy does the work)."""
     global _kernel_lib
     if _kernel_lib is None:
         here = os.path.dirname(os.path.abspath(__file__))
@@ -261,13 +265,14 @@ def _dptr(a: np.ndarray):
 
 
 class _CompiledStep:
+
     def __init__(self, lib, m: UmbrellaModel):
         self.lib = lib
         self.model = m
         body = -np.ones(m.n, dtype=np.intc)
         body[m.s_leaf] = 0
         body[m.s_link] = 1
-        keep = dict(
+        keep = dict(  # noqa: C408 (keyword names are the kernel's arguments)
             c_full=np.ascontiguousarray(m._c_full), g_full=np.ascontiguousarray(m._g_full),
             mff_full=np.ascontiguousarray(m._mff_full), w_full=np.ascontiguousarray(m._w_full),
             sbar=np.ascontiguousarray(m._link_sbar), isbar=np.ascontiguousarray(m._link_isbar),

@@ -1,4 +1,5 @@
-"""Reading recorded runs back: a bag directory or a single .mcap, finalised or not.
+"""
+Reading recorded runs back: a bag directory or a single .mcap, finalised or not.
 
 A finalised file is read through its summary and indexes.  A file whose writer was killed
 (SIGKILL: no summary, no footer) is read record by record from the start: every complete
@@ -6,18 +7,18 @@ chunk is recovered and the torn tail is dropped (``LogData.truncated`` says so).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 import importlib
 import json
 import os
-from dataclasses import dataclass, field
 
-import yaml
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import breakup_chunk, StreamReader
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
+import yaml
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
@@ -102,7 +103,7 @@ def qos_from_yaml(text: str) -> QoSProfile:
 
 
 def resolve_path(path: str) -> str:
-    """The .mcap of a bag directory (from metadata.yaml, else the only .mcap), or the file."""
+    """Return the .mcap of a bag directory (metadata.yaml, else the only .mcap), or the file."""
     if os.path.isdir(path):
         meta = os.path.join(path, "metadata.yaml")
         if os.path.isfile(meta):

@@ -1,4 +1,5 @@
-"""Floating-frame finite-element model of the planar leaf + link umbrella frame.
+"""
+Floating-frame finite-element model of the planar leaf + link umbrella frame.
 
 Model layer: parameters -> geometry, mesh, constant shape-function integrals, and the
 state-dependent matrices of the constrained Lagrangian DAE (thesis ch. 3-4)
@@ -17,8 +18,8 @@ the printed errata of the thesis enters.  Nothing here imports rclpy.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -38,13 +39,14 @@ def _cos_sin(alpha):
 
 
 def rotation(alpha):
-    """[A] of Eq. 3.6 (works for complex alpha, for complex-step tests)."""
+    """Return [A] of Eq. 3.6 (works for complex alpha, for complex-step tests)."""
     c, s = np.cos(alpha), np.sin(alpha)
     return np.array([[c, -s], [s, c]])
 
 
 def shape_functions(eta: np.ndarray, le: float):
-    """[N] (3.4), d[N]/dx and d2[N]/dx2 (corrected Eq. 5.40) at local coordinates eta.
+    """
+    [N] (3.4), d[N]/dx and d2[N]/dx2 (corrected Eq. 5.40) at local coordinates eta.
 
     Returns three arrays of shape (len(eta), 2, 6), element dofs (u_i v_i th_i u_j v_j th_j).
     """
@@ -67,7 +69,8 @@ def shape_functions(eta: np.ndarray, le: float):
 
 
 class BeamBody:
-    """One Euler-Bernoulli body in its floating frame: mesh, invariants, stiffness, stress.
+    """
+    One Euler-Bernoulli body in its floating frame: mesh, invariants, stiffness, stress.
 
     segments: [(length, n_elements), ...] laid end to end from the frame origin;
     fixed: [(node, 'u'|'v'|'theta'), ...] nodal coordinates removed by the frame choice.
@@ -155,7 +158,8 @@ class BeamBody:
     def displacement(self, e: np.ndarray, x: np.ndarray) -> np.ndarray:
         """(u, v) at body abscissae x (Eq. 3.16): shape (len(x), 2)."""
         x = np.atleast_1d(np.asarray(x, dtype=float))
-        j = np.clip(np.searchsorted(self.node_x, x, side="right") - 1, 0, len(self.element_length) - 1)
+        j = np.clip(np.searchsorted(self.node_x, x, side="right") - 1, 0,
+                    len(self.element_length) - 1)
         out = np.empty((len(x), 2))
         for i, (xi, ji) in enumerate(zip(x, j)):
             le = self.element_length[ji]
@@ -166,8 +170,12 @@ class BeamBody:
 
 @dataclass(frozen=True)
 class ConstraintSet:
-    """Which constraints hold: Phi1-3 always (4.60), Phi4 when locked (4.63),
-    Phi5-6 (all elastic coordinates) in the rigid-FE mode (4.71)."""
+    """
+    Which constraints hold.
+
+    Phi1-3 always (4.60), Phi4 when locked (4.63),
+    Phi5-6 (all elastic coordinates) in the rigid-FE mode (4.71).
+    """
 
     locked: bool
     rigid: bool
@@ -182,8 +190,8 @@ class UmbrellaModel:
         n = p.elements_per_segment
         area, inertia = p.cross_section_area, p.cross_section_inertia
         rho_a, e_mod = p.mass_per_length, p.youngs_modulus
-        common = dict(mass_per_length=rho_a, ea=e_mod * area, ei=e_mod * inertia,
-                      youngs_modulus=e_mod, fibre=p.fibre_distance)
+        common = {"mass_per_length": rho_a, "ea": e_mod * area, "ei": e_mod * inertia,
+                  "youngs_modulus": e_mod, "fibre": p.fibre_distance}
         self.leaf = BeamBody("leaf", [(p.l1, n), (p.l2, n)],
                              [(0, "u"), (0, "v"), (n, "v")], **common)
         self.link = BeamBody("link", [(p.l3, n)], [(0, "u"), (0, "v"), (n, "v")], **common)
@@ -250,7 +258,8 @@ class UmbrellaModel:
 
     # ---------------------------------------------------------------- inertia
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
-        """M(q) = int rho C^T C dx (4.7, 4.35), from the invariants:
+        """
+        Return M(q) = int rho C^T C dx (4.7, 4.35), from the invariants.
 
         per body M_aa = J0 + 2 c.e + e.Mff e, M_af = g + e W (rotation-deformation),
         link M_Ra = A I~ (p_bar + S_bar e), M_Rf = A S_bar (translation couplings).
@@ -286,7 +295,8 @@ class UmbrellaModel:
         a2 = rotation(q[self.i_alpha2])
         ubar = lk.p_bar + lk.s_bar @ e2
         sd = lk.s_bar @ ed2
-        out[self.i_r2x:self.i_r2y + 1] = a2 @ (w2 * w2 * ubar - 2.0 * w2 * np.array([-sd[1], sd[0]]))
+        out[self.i_r2x:self.i_r2y + 1] = a2 @ (w2 * w2 * ubar
+                                               - 2.0 * w2 * np.array([-sd[1], sd[0]]))
         out[self.i_alpha2] = -2.0 * w2 * (h2 @ ed2)
         out[self.s_link] = w2 * w2 * h2 + 2.0 * w2 * (lk.w_skew @ ed2)
         return out
@@ -434,7 +444,7 @@ class UmbrellaModel:
 
     # ------------------------------------------------------- initial state
     def rigid_configuration(self, alpha1: float) -> np.ndarray:
-        """q of the undeformed mechanism at leaf angle alpha1 (5.21)."""
+        """Return q of the undeformed mechanism at leaf angle alpha1 (5.21)."""
         p = self.params
         q = np.zeros(self.n)
         q[0] = alpha1
@@ -474,8 +484,12 @@ class UmbrellaModel:
                 (self.link.stress_top @ e2, self.link.stress_bottom @ e2))
 
     def reference_stresses(self, leaf_top, link_top) -> tuple[float, float]:
-        """Top-fibre stress on the leaf at O'' (end of the inner segment) and at mid-link
-        (linear within the element holding l3/2)."""
+        """
+        Return the reference top-fibre stresses.
+
+        On the leaf at O'' (end of the inner segment) and at mid-link
+        (linear within the element holding l3/2).
+        """
         n = self.params.elements_per_segment
         joint = float(leaf_top[2 * n - 1])
         x_mid = 0.5 * self.params.l3
@@ -498,6 +512,7 @@ class UmbrellaModel:
                         disp[node, k] = e[body.elastic_index(node, dof)]
                     except KeyError:
                         pass
-            local = np.column_stack([body.node_x, np.zeros_like(body.node_x)]) + magnification * disp
+            local = (np.column_stack([body.node_x, np.zeros_like(body.node_x)])
+                     + magnification * disp)
             out.append(origin + local @ rotation(alpha).T)
         return out

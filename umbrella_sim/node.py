@@ -1,4 +1,5 @@
-"""umbrella_node: the ROS 2 face of the simulator (a thin adapter around UmbrellaSimulator).
+"""
+umbrella_node: the ROS 2 face of the simulator (a thin adapter around UmbrellaSimulator).
 
 Threads, chosen deliberately:
   * the physics thread steps the DAE and publishes; it is paced against time.monotonic()
@@ -22,12 +23,12 @@ import sys
 import threading
 import time
 
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
-from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
@@ -43,6 +44,7 @@ class StartupError(RuntimeError):
 
 
 class UmbrellaNode(Node):
+
     def __init__(self, **kwargs):
         super().__init__("umbrella_node", **kwargs)
         defaults = ros_io.parameter_defaults()
@@ -238,7 +240,7 @@ class UmbrellaNode(Node):
         self._publish("deployment_phase", ros_io.phase_msg(phase), self.sim.time)
 
     def _sample_messages(self) -> tuple[int, float, dict]:
-        """The current state's messages, built under the sim lock, published later."""
+        """Build the current state's messages under the sim lock, to be published later."""
         return self._epoch, self.sim.time, self.driver.messages(
             self._marker_ns, self.node_cfg["marker_magnification"])
 

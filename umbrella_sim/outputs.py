@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 import csv
-import math
 from dataclasses import dataclass, field
+import math
 
 import numpy as np
 
@@ -87,8 +87,12 @@ class RunResult:
         return np.array([getattr(s, name) for s in self.samples], dtype=float)
 
     def write_csv(self, path: str, with_state: bool = False) -> None:
-        """Time series; with_state adds q, qd and the fibre stresses along both bodies
-        (columns 'sigma_top[leaf@0.25]' = top-fibre stress at 0.25 m from O, Pa)."""
+        """
+        Write the time series as CSV.
+
+        with_state adds q, qd and the fibre stresses along both bodies
+        (columns 'sigma_top[leaf@0.25]' = top-fibre stress at 0.25 m from O, Pa).
+        """
         with open(path, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             header = list(CSV_COLUMNS)
@@ -188,7 +192,7 @@ def energy_balance_error(r: RunResult) -> np.ndarray:
 
 
 def energy_drift(r: RunResult) -> float:
-    """max |energy balance error| relative to the largest mechanical energy of the run."""
+    """Return max |energy balance error| relative to the largest mechanical energy."""
     e = r.column("kinetic_energy") + r.column("strain_energy")
     scale = max(float(np.abs(e).max()), float(np.abs(r.column("work")).max()), 1e-300)
     return float(np.abs(energy_balance_error(r)).max() / scale)

@@ -1,4 +1,5 @@
-"""Simulation parameters: one flat, validated record shared by the CLI and the node.
+"""
+Simulation parameters: one flat, validated record shared by the CLI and the node.
 
 Every field is SI (m, kg, s, N, Pa, rad).  The same names are the ROS parameters of
 ``umbrella_node`` and the keys of ``config/umbrella.yaml`` (a ROS 2 params file).
@@ -6,8 +7,8 @@ Every field is SI (m, kg, s, N, Pa, rad).  The same names are the ROS parameters
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, fields
+import math
 from typing import Any, Mapping
 
 MODELS = ("flexible", "rigid-fe", "rigid")

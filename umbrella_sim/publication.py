@@ -1,4 +1,7 @@
-"""One publication period at a time: the code path shared by the live node and the offline
+"""
+One publication period at a time.
+
+The code path shared by the live node and the offline
 MCAP writer, so that both produce the same messages at the same sim times.
 
 The physics step is the largest step <= time_step dividing 1/publish_rate, so publications
@@ -7,8 +10,8 @@ and the lock are reported as events (the node logs and records them).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 
 from . import ros_io
 from .params import UmbrellaParams
@@ -16,7 +19,7 @@ from .solver import UmbrellaSimulator
 
 
 def physics_step(time_step: float, publish_rate: float) -> float:
-    """The largest step <= time_step that divides the publication period."""
+    """Return the largest step <= time_step that divides the publication period."""
     period = 1.0 / publish_rate
     return period / math.ceil(period / time_step - 1e-9)
 
@@ -30,6 +33,7 @@ class Event:
 
 
 class PublicationDriver:
+
     def __init__(self, params: UmbrellaParams, publish_rate: float):
         self.params = params
         self.step = physics_step(params.time_step, publish_rate)

@@ -1,11 +1,13 @@
-"""MCAP recording with the ROS 2 profile, laid out as rosbag2 writes it.
+"""
+MCAP recording with the ROS 2 profile, laid out as rosbag2 writes it.
 
 A recording is a bag directory ``NAME/`` holding ``NAME_0.mcap`` and ``metadata.yaml`` (bag
-metadata version 8).  The .mcap also stands alone: profile ``ros2``, one ``ros2msg`` schema per type (the full .msg text
-with its dependencies), ``cdr`` messages from rclpy.serialization trimmed to the exact CDR
-size, ``offered_qos_profiles`` on every channel, log/publish times in sim time (ns), zstd
-chunks with message indexes, a Statistics record, and at close a ``rosbag2`` metadata record
-(``serialized_metadata``) like rosbag2's MCAP plugin.
+metadata version 8).  The .mcap also stands alone: profile ``ros2``, one ``ros2msg`` schema
+per type (the full .msg text with its dependencies), ``cdr`` messages from
+rclpy.serialization trimmed to the exact CDR size, ``offered_qos_profiles`` on every
+channel, log/publish times in sim time (ns), zstd chunks with message indexes, a Statistics
+record, and at close a ``rosbag2`` metadata record (``serialized_metadata``) like rosbag2's
+MCAP plugin.
 
 Self-describing: metadata records ``umbrella_sim.parameters`` (every parameter, including the
 physics step actually used), ``umbrella_sim.build`` (version, git revision, kernel),
@@ -20,10 +22,10 @@ import subprocess
 import sys
 import threading
 
-import yaml
 from mcap.writer import CompressionType, IndexType, Writer
 from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
+import yaml
 
 from . import __version__
 
@@ -75,8 +77,12 @@ def _dependencies(pkg: str, text: str) -> list[str]:
 
 
 def message_definition(full_name: str) -> str:
-    """The ros2msg 'complete message definition': the type's .msg text, then every dependency
-    after a line of 80 '=' and 'MSG: pkg/msg/Type' (rosbag2 docs/message_definition_encoding)."""
+    """
+    Return the ros2msg 'complete message definition'.
+
+    The type's .msg text, then every dependency
+    after a line of 80 '=' and 'MSG: pkg/msg/Type' (rosbag2 docs/message_definition_encoding).
+    """
     order: list[str] = []
     texts: dict[str, str] = {}
 
@@ -151,8 +157,12 @@ def _cdr_items(ftype: str, values, pos: int) -> int:
 
 
 def cdr_bytes(msg) -> bytes:
-    """rclpy's CDR, trimmed to the exact size (rclpy may return a few padding bytes more,
-    which rosbags rejects; ros2 bag record writes the exact size)."""
+    """
+    Serialise to CDR, trimmed to the exact size.
+
+    (rclpy may return a few padding bytes more,
+    which rosbags rejects; ros2 bag record writes the exact size).
+    """
     data = serialize_message(msg)
     size = 4 + _cdr_end(msg, 0)                # 4-byte encapsulation header
     if size > len(data):
@@ -197,7 +207,7 @@ def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: st
 
 
 def events_metadata(sim) -> dict[str, dict[str, str]]:
-    """The exact lock instant (the phase message comes at the next publication)."""
+    """Return the exact lock instant (the phase message comes at the next publication)."""
     ev = sim.lock_event
     if ev is None:
         return {"umbrella_sim.events": {"locked": "false"}}
@@ -260,8 +270,12 @@ class BagRecorder:
             self.counts[topic] = 0
 
     def add_umbrella_channels(self, topic_names: dict, command_topic: str) -> None:
-        """The layout of an umbrella_sim run, live or offline: every published topic
-        (topic key -> resolved name) and the command with its refused/applied records."""
+        """
+        Add the channels of an umbrella_sim run, live or offline.
+
+        Every published topic
+        (topic key -> resolved name) and the command with its refused/applied records.
+        """
         from std_msgs.msg import Float64
 
         from . import ros_io
@@ -339,9 +353,13 @@ class BagRecorder:
 def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                    publish_rate: float = 100.0, marker_magnification: float = 1.0,
                    progress=None):
-    """Run the physics offline through the node's publication path and record the same
+    """
+    Run the physics offline and record it as a live umbrella_node would.
+
+    Goes through the node's publication path and records the same
     topics, layout and metadata as a live umbrella_node (root namespace).  Returns the
-    RunResult of the samples at the publication instants (error set if it diverged)."""
+    RunResult of the samples at the publication instants (error set if it diverged).
+    """
     import time as _time
 
     from std_msgs.msg import Float64

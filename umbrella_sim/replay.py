@@ -1,4 +1,5 @@
-"""umbrella-replay LOG: republish a recorded run over ROS 2, or re-simulate and check it.
+"""
+umbrella-replay LOG: republish a recorded run over ROS 2, or re-simulate and check it.
 
     umbrella-replay run1                      # republish with the recorded timing
     umbrella-replay run1 --rate 2 --start-offset 0.1 --loop
@@ -16,7 +17,7 @@ import math
 import sys
 import time
 
-from .logs import LogError, LogData, qos_from_yaml, read_log
+from .logs import LogData, LogError, qos_from_yaml, read_log
 
 COMMAND_SUFFIXES = ("sleeve_force", "sleeve_force/refused", "sleeve_force/applied")
 ACK_TIMEOUT_S = 3.5      # > Fast DDS's default 3 s heartbeat period, which prompts the acks
@@ -28,8 +29,12 @@ def _is_command(topic: str) -> bool:
 
 # ------------------------------------------------------------------- resimulate
 def resimulate(log: LogData) -> dict:
-    """Re-run the physics from the log's parameters and applied forces; returns
-    {signal: largest |recorded - re-simulated|} over the recorded publications."""
+    """
+    Re-run the physics from the log's parameters and applied forces.
+
+    The result maps each signal to its largest |recorded - re-simulated| over the
+    recorded publications.
+    """
     from .params import SPECS, UmbrellaParams
     from .publication import PublicationDriver
 
@@ -43,8 +48,8 @@ def resimulate(log: LogData) -> dict:
     applied_topic = log.find_topic("sleeve_force/applied", required=False)
     applied = [(t, m.data) for t, m in log.decoded(applied_topic)] if applied_topic else []
     joint = log.decoded(log.find_topic("joint_states"))
-    tip = dict((round(t, 9), m) for t, m in log.decoded(log.find_topic("tip_deflection")))
-    peak = dict((round(t, 9), m) for t, m in log.decoded(log.find_topic("peak_stress")))
+    tip = {round(t, 9): m for t, m in log.decoded(log.find_topic("tip_deflection"))}
+    peak = {round(t, 9): m for t, m in log.decoded(log.find_topic("peak_stress"))}
     times = [t for t, _ in joint]
     if any(b < a for a, b in zip(times, times[1:])):
         raise LogError(f"{log.path}: sim time goes backwards (a reset): resimulation covers "

@@ -1,4 +1,7 @@
-"""Closed-form rigid two-angle model (thesis 4.6, Eq. 4.120-4.125, re-derived) and the
+"""
+Closed-form rigid two-angle model and a work-energy quadrature.
+
+The model of thesis 4.6 (Eq. 4.120-4.125, re-derived) and the
 independent work-energy quadrature of its deployment time.
 
 Leaf: uniform bar O-G of length l1 + l2 hinged at O; link: uniform bar O''-H of length l3.
@@ -20,6 +23,7 @@ from .params import UmbrellaParams
 
 
 class RigidMechanism:
+
     def __init__(self, params: UmbrellaParams):
         p = params.validated()
         self.params = p
@@ -34,7 +38,7 @@ class RigidMechanism:
         return math.acos(-p.l1 / p.l3 * math.cos(alpha1))
 
     def alpha2_rate_ratio(self, alpha1: float, alpha2: float) -> float:
-        """d alpha2 / d alpha1 from the velocity constraint J q' = 0 (4.124)."""
+        """Return d alpha2 / d alpha1 from the velocity constraint J q' = 0 (4.124)."""
         p = self.params
         return -p.l1 * math.sin(alpha1) / (p.l3 * math.sin(alpha2))
 
@@ -94,7 +98,8 @@ class RigidMechanism:
 
 def deployment_time_by_quadrature(params: UmbrellaParams, v0: float | None = None,
                                   sleeve_force: float | None = None) -> float:
-    """t = int d(alpha1) / |alpha1'(alpha1)| with alpha1' from work-energy:
+    """
+    Return t = int d(alpha1) / |alpha1'(alpha1)|, alpha1' from work-energy.
 
         1/2 m(alpha1) alpha1'^2 = T0 + F_H (y_H(alpha0) - y_H(alpha1)).
 

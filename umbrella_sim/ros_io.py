@@ -1,4 +1,5 @@
-"""ROS 2 message layer: topics, QoS, parameter declarations, and Sample -> messages.
+"""
+ROS 2 message layer: topics, QoS, parameter declarations, and Sample -> messages.
 
 Shared by the live node and the offline MCAP writer so both produce the same topics and
 layout.  Imports ROS message packages but not rclpy's node machinery; the physics core does
@@ -6,8 +7,8 @@ not import this module.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -36,7 +37,7 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 @dataclass(frozen=True)
 class Topic:
     name: str          # relative: resolves under the node's namespace
-    type: type
+    type: type  # noqa: A003 (the message type, as rclpy calls it)
     qos: QoSProfile
 
 
@@ -136,8 +137,12 @@ ENERGY_LABEL = "field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J"
 
 
 def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
-    """Per body: peak |sigma|, where, ratio to yield, and the reference stress (top fibre;
-    leaf at O'', link at mid-span: the thesis's Fig. 6.5 and 6.6)."""
+    """
+    Build the peak_stress message.
+
+    Per body: peak |sigma|, where, ratio to yield, and the reference stress (top fibre;
+    leaf at O'', link at mid-span: the thesis's Fig. 6.5 and 6.6).
+    """
     msg = Float64MultiArray()
     msg.layout.dim = [MultiArrayDimension(label=PEAK_STRESS_LABELS[0], size=2, stride=8),
                       MultiArrayDimension(label=PEAK_STRESS_LABELS[1], size=4, stride=4)]
@@ -194,7 +199,8 @@ def phase_msg(phase: str) -> String:
     return String(data=phase)
 
 
-def diagnostics_msg(t: float, name: str, level: int, message: str, values: dict) -> DiagnosticArray:
+def diagnostics_msg(t: float, name: str, level: int, message: str,
+                    values: dict) -> DiagnosticArray:
     msg = DiagnosticArray()
     msg.header.stamp = stamp(t)
     st = DiagnosticStatus(level=bytes([level]), name=name, message=message,
@@ -206,7 +212,7 @@ def diagnostics_msg(t: float, name: str, level: int, message: str, values: dict)
 
 def sample_messages(s: Sample, params: UmbrellaParams, positions, marker_ns: str,
                     initial_energy: float) -> dict:
-    """The per-publication messages of one sample, keyed by topic key."""
+    """Return the per-publication messages of one sample, keyed by topic key."""
     return {
         "energy": energy_msg(s, initial_energy),
         "clock": clock_msg(s.time),

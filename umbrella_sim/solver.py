@@ -1,4 +1,5 @@
-"""Solver layer: the stepping simulator (stage 1, lock event, stage 2) and a whole-run helper.
+"""
+Solver layer: the stepping simulator (stage 1, lock event, stage 2) and a whole-run helper.
 
 ``UmbrellaSimulator`` advances on a fixed grid t_k = k h (h = params.time_step).  The sleeve
 force is a zero-order hold: the value set with ``set_sleeve_force`` acts from the start of
@@ -10,15 +11,15 @@ grid is kept.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 import math
 import time as _time
-from dataclasses import replace
 from typing import Callable, Iterable
 
 import numpy as np
 
 from .integrators import ConvergenceError, DynamicState, MidpointDAE
-from .model import DEFORMING, LOCKED, ConstraintSet, UmbrellaModel
+from .model import ConstraintSet, DEFORMING, LOCKED, UmbrellaModel
 from .outputs import LockEvent, RunResult, Sample
 from .params import UmbrellaParams
 from .rigid import RigidMechanism
@@ -94,10 +95,14 @@ class FiniteElementEngine:
         return s, LockEvent(s.t, self.lock_kind, float(before), float(after), free)
 
     def _energy_redistribution(self, q, qd, cs):
-        """Thesis 5.2.2 for any mesh: only the rigid velocities (R2x', R2y', alpha1',
+        """
+        Redistribute the velocities at the lock, keeping the kinetic energy.
+
+        Thesis 5.2.2 for any mesh: only the rigid velocities (R2x', R2y', alpha1',
         alpha2') and the link's axial velocity at H change; they satisfy J2 qd = 0 (5.36-5.39)
         and keep the kinetic energy (5.35).  Of the two energy roots, the one closest to the
-        pre-lock velocities in the mass metric is taken."""
+        pre-lock velocities in the mass metric is taken.
+        """
         m = self.model
         free = [m.i_alpha1, m.i_r2x, m.i_r2y, m.i_alpha2, m.i_u_sleeve]
         fixed = np.setdiff1d(np.arange(m.n), free)
@@ -119,7 +124,8 @@ class FiniteElementEngine:
         if disc < 0.0:
             raise SimulationDiverged("energy lock impossible: the kinetic energy before the lock "
                                      "is below the least energy compatible with the lock "
-                                     f"({c + t_target - b * b / (4 * a):.6g} J > {t_target:.6g} J)")
+                                     f"({c + t_target - b * b / (4 * a):.6g} J > "
+                                     f"{t_target:.6g} J)")
         roots = [(-b + sgn * math.sqrt(disc)) / (2 * a) for sgn in (1.0, -1.0)]
         candidates = [base + r * z for r in roots]
         best = min(candidates, key=lambda v: (v - qd) @ mass @ (v - qd))
@@ -233,8 +239,12 @@ class UmbrellaSimulator:
 
     # -- stepping
     def step(self, record: bool = True) -> list[Sample]:
-        """Advance one grid step; returns the samples produced (two if the lock happened;
-        none with record=False, for callers that sample at their own rate)."""
+        """
+        Advance one grid step and return the samples produced.
+
+        Two if the lock happened;
+        none with record=False, for callers that sample at their own rate).
+        """
         eng, s0, force = self.engine, self._state, self._force
         t_next = (self._k + 1) * self.h
         out: list[Sample] = []
@@ -290,8 +300,12 @@ class UmbrellaSimulator:
         return s
 
     def _find_lock(self, s0: DynamicState, h: float, force: float) -> DynamicState:
-        """Illinois root-finding of y_H(t0 + dt) = y_S over the step length dt: the sleeve
-        reaches the stop on the integrator's own trajectory, to |dt| < 1e-12 s."""
+        """
+        Find the lock instant inside the step.
+
+        Illinois root-finding of y_H(t0 + dt) = y_S over the step length dt: the sleeve
+        reaches the stop on the integrator's own trajectory, to |dt| < 1e-12 s.
+        """
         eng, y_stop = self.engine, self.model.y_stop
 
         def at(dt):
@@ -371,9 +385,13 @@ def simulate(params: UmbrellaParams, duration: float,
              force_profile: Iterable[tuple[float, float]] | None = None,
              stop_after_lock: float | None = None,
              progress: Callable[[float], None] | None = None) -> RunResult:
-    """Whole run on top of the simulator.  force_profile: (t, F) pairs, zero-order hold,
+    """
+    Run a whole simulation on top of the simulator.
+
+    force_profile: (t, F) pairs, zero-order hold,
     each value acting from the first step that starts at or after its time.  On a diverged
-    run the samples computed before the failure are kept and ``result.error`` says why."""
+    run the samples computed before the failure are kept and ``result.error`` says why.
+    """
     sim = UmbrellaSimulator(params)
     result = RunResult(params=params.as_dict(), q_labels=sim.model.coordinate_labels(),
                        leaf_stress_x=list(sim.model.leaf.stress_x),
