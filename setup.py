@@ -28,8 +28,13 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "umbrella-sim = umbrella_sim.cli:main",
+            # `ros2 run umbrella_sim <name>`: one naming style, snake_case as ROS executables
             "umbrella_node = umbrella_sim.node:main",
+            "umbrella_sim = umbrella_sim.cli:main",
+            "umbrella_replay = umbrella_sim.replay:main",
+            "umbrella_compare = umbrella_sim.compare:main",
+            # the earlier names, kept as aliases
+            "umbrella-sim = umbrella_sim.cli:main",
             "umbrella-replay = umbrella_sim.replay:main",
             "umbrella-compare = umbrella_sim.compare:main",
         ],

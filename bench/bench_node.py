@@ -26,6 +26,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 
 from tests.ros_helpers import NodeProcess, Probe  # noqa: E402
+from umbrella_sim.ros_io import CLOCK_READER_QOS  # noqa: E402
 
 
 def wall_stamp(line_match) -> float:
@@ -92,7 +93,7 @@ def main():
     # full passes over them would stall arrivals by tens of ms and show up as fake drift
     gc.disable()
     probe = Probe("bench_probe")
-    probe.subscribe("/clock", Clock)
+    probe.subscribe("/clock", Clock, CLOCK_READER_QOS)  # /clock is best effort
     probe.subscribe("/diagnostics", DiagnosticArray)
     try:
         for rate in args.rates:

@@ -6,7 +6,7 @@ Regenerate docs/validation.md and docs/validation/*.png (one command).
 
 Table 6.1 side by side with ours (flexible N = 1, 2; rigid-fe; rigid; exact quadrature), the
 V0 = -0.2 figures against the thesis, comparison plots from recorded runs (the same
-umbrella-compare code users run), and the mesh-convergence study.
+umbrella_compare code users run), and the mesh-convergence study.
 """
 import os
 import sys

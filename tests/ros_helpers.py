@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -31,14 +32,22 @@ os.environ.update({k: v for k, v in ros_env().items()
 
 
 class NodeProcess:
-    """umbrella_node in a child process; its stderr/stdout go to a file we can read."""
+    """
+    umbrella_node in a child process; its stderr/stdout go to a file we can read.
 
-    def __init__(self, *ros_args: str, executable: list[str] | None = None):
+    The node records by default into its working directory: unless cwd is given it runs in
+    a temporary directory that is removed afterwards, so tests never leave bags behind.
+    """
+
+    def __init__(self, *ros_args: str, executable: list[str] | None = None,
+                 cwd: str | None = None):
         self.log = tempfile.NamedTemporaryFile("w+", suffix=".log", delete=False)
+        self._own_cwd = None if cwd else tempfile.mkdtemp(prefix="umbrella_node_")
+        self.cwd = cwd or self._own_cwd
         cmd = ((executable or [sys.executable, "-m", "umbrella_sim.node"])
                + ["--ros-args", *ros_args])
         self.proc = subprocess.Popen(cmd, stdout=self.log, stderr=subprocess.STDOUT,
-                                     env=ros_env(), start_new_session=True)
+                                     env=ros_env(), start_new_session=True, cwd=self.cwd)
 
     def output(self) -> str:
         with open(self.log.name, encoding="utf-8", errors="replace") as fh:
@@ -72,6 +81,8 @@ class NodeProcess:
     def __exit__(self, *exc):
         self.stop()
         os.unlink(self.log.name)
+        if self._own_cwd:
+            shutil.rmtree(self._own_cwd, ignore_errors=True)
 
 
 class Probe:

@@ -5,7 +5,7 @@ import subprocess
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
@@ -16,7 +16,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from tests.ros_helpers import NodeProcess, Probe, ros_env
 from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.ros_io import LATCHED
+from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.solver import simulate
 
 ALPHA0 = UmbrellaParams().alpha0
@@ -126,7 +126,7 @@ def test_invalid_commands_refused_counted_and_never_applied(probe):
 
 
 def test_pause_and_reset(probe):
-    probe.subscribe("/clock", Clock)
+    probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
     probe.subscribe("/deployment_phase", String, LATCHED)
     with NodeProcess("-p", "v0:=-0.5") as node:
         node.wait_for_log("physics step")
@@ -196,7 +196,8 @@ def test_node_says_when_physics_cannot_keep_up(probe):
     probe.subscribe("/diagnostics", DiagnosticArray)
     with NodeProcess("-p", "real_time_factor:=1000.0", "-p", "elements_per_segment:=2") as node:
         node.wait_for_log("physics cannot keep up", timeout=20)
-        msg = probe.wait_for("/diagnostics", lambda m: m.status[0].level == b"\x01", timeout=20)
+        msg = probe.wait_for("/diagnostics", lambda m: m.status[0].level == DiagnosticStatus.WARN,
+                             timeout=20)
     values = diag_values(msg)
     assert "behind real time" in msg.status[0].message
     assert 1.0 < float(values["measured_real_time_factor"]) < 1000.0

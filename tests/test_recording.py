@@ -20,7 +20,7 @@ from std_msgs.msg import Float64, String
 
 from tests.ros_helpers import NodeProcess, Probe, ros_env
 from umbrella_sim.logs import read_log
-from umbrella_sim.ros_io import LATCHED
+from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -180,7 +180,7 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
     recorded = read_log(str(bag)).count("/clock")
     probe = Probe("replay_probe")
     try:
-        probe.subscribe("/clock", Clock)
+        probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
         probe.subscribe("/joint_states", JointState)
         for rate, period in ((1.0, 0.010), (2.0, 0.005)):
             probe.received["/clock"] = []

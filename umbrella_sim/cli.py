@@ -1,4 +1,4 @@
-"""Offline command line: ``umbrella-sim simulate`` (also ``python -m umbrella_sim``)."""
+"""Offline command line: ``umbrella_sim simulate`` (also ``python -m umbrella_sim``)."""
 from __future__ import annotations
 
 import argparse
@@ -9,7 +9,8 @@ import os
 import sys
 
 from . import __version__
-from .params import load_params_file, NODE_ONLY_PARAMS, UmbrellaParams
+from .params import (load_params_file, NODE_ONLY_PARAMS, parameter_help, SPECS,
+                     UmbrellaParams)
 from .solver import simulate, validate_force
 
 
@@ -96,25 +97,28 @@ class Progress:
 
 
 def make_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="umbrella-sim",
+    ap = argparse.ArgumentParser(prog="umbrella_sim",
                                  description="Flexible umbrella-frame deployment simulator.")
     ap.add_argument("--version", action="version", version=f"umbrella_sim {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     sp = sub.add_parser("simulate", help="run one simulation offline",
                         description="Run the physics core offline and report the result. "
-                                    "Units SI (m, s, N, Pa, rad).")
+                                    "Units SI (m, s, N, Pa, rad).",
+                        formatter_class=argparse.RawDescriptionHelpFormatter,
+                        epilog="parameters (--set NAME=VALUE, or a --params file):\n"
+                               + "\n".join(parameter_help(SPECS.values())))
     sp.add_argument("--params", metavar="FILE",
                     help="ROS 2 params YAML (default: config/umbrella.yaml)")
     sp.add_argument("--set", action="append", metavar="NAME=VALUE",
                     help="override one parameter (repeatable)")
-    sp.add_argument("--model", choices=["flexible", "rigid-fe", "rigid"])
+    sp.add_argument("--model", choices=SPECS["model"].choices)
     sp.add_argument("--elements-per-segment", type=int, dest="elements_per_segment")
     sp.add_argument("--v0", type=float, help="initial sleeve velocity along Y (m/s)")
     force = sp.add_mutually_exclusive_group()
     force.add_argument("--force", type=float, help="constant sleeve force F_H >= 0 (N)")
     force.add_argument("--force-profile", metavar="CSV",
                        help="CSV of t,F rows: F_H held from each t until the next")
-    sp.add_argument("--lock", choices=["energy", "plastic"])
+    sp.add_argument("--lock", choices=SPECS["lock"].choices)
     sp.add_argument("--time-step", type=float, dest="time_step", help="physics step (s)")
     sp.add_argument("--duration", type=float, default=1.0, help="simulated time (s)")
     sp.add_argument("--csv", metavar="FILE", help="write the time series")
@@ -144,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
             raise ValueError(f"--publish-rate {args.publish_rate}: must be in [1, 5000] Hz")
     except ValueError as exc:
-        ap.exit(2, f"umbrella-sim: error: {exc}\n")
+        ap.exit(2, f"umbrella_sim: error: {exc}\n")
     progress = Progress(args.duration) if sys.stderr.isatty() and not args.json else None
     if args.mcap:
         from .recording import record_offline
@@ -152,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
             result = record_offline(params, args.mcap, args.duration, profile,
                                     publish_rate=args.publish_rate, progress=progress)
         except ValueError as exc:
-            ap.exit(2, f"umbrella-sim: error: {exc}\n")
+            ap.exit(2, f"umbrella_sim: error: {exc}\n")
     else:
         result = simulate(params, args.duration, force_profile=profile, progress=progress)
     if progress:
@@ -166,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         for key in sorted(summary):
             print(f"{key:28s} {summary[key]}")
     if result.error:
-        print(f"umbrella-sim: error: {result.error} (kept {len(result.samples)} samples"
+        print(f"umbrella_sim: error: {result.error} (kept {len(result.samples)} samples"
               + (f" in {args.csv}" if args.csv else "") + ")", file=sys.stderr)
         return 3
     return 0

@@ -1,5 +1,5 @@
 """
-umbrella-compare A B [...] --out DIR: compare recorded runs (live or offline).
+umbrella_compare A B [...] --out DIR: compare recorded runs (live or offline).
 
 Aligns the runs on the first run's publication times (linear interpolation), prints a table
 and writes compare.json with: deployment time and its difference to the first run, max and
@@ -298,7 +298,7 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="umbrella-compare", description=__doc__,
+    ap = argparse.ArgumentParser(prog="umbrella_compare", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("logs", nargs="+", help="bag directories or .mcap files (first = reference)")
     ap.add_argument("--out", required=True, help="directory for compare.json and the plots")
@@ -325,7 +325,7 @@ def main(argv: list[str] | None = None) -> int:
               + (f" and {len(result['plots'])} plots" if "plots" in result else ""))
         return 0
     except LogError as exc:
-        print(f"umbrella-compare: error: {exc}", file=sys.stderr)
+        print(f"umbrella_compare: error: {exc}", file=sys.stderr)
         return 2
 
 

@@ -17,14 +17,15 @@ MCAP when ``record_path`` is set (see recording.py).
 from __future__ import annotations
 
 import gc
-import math
 import signal
 import sys
 import threading
 import time
 
+from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -34,7 +35,8 @@ from std_srvs.srv import SetBool, Trigger
 
 from . import __version__
 from . import ros_io
-from .params import NODE_PARAMETERS, SPECS, UmbrellaParams
+from .params import (check_node_parameters, NODE_PARAMETERS, parameter_help, REGISTRY, RESET,
+                     SPECS, UmbrellaParams)
 from .publication import PublicationDriver
 from .solver import SimulationDiverged, validate_force
 
@@ -47,18 +49,27 @@ class UmbrellaNode(Node):
 
     def __init__(self, **kwargs):
         super().__init__("umbrella_node", **kwargs)
-        defaults = ros_io.parameter_defaults()
+        # statically typed parameters (ros_io.descriptor); an integer literal given for a
+        # double (-p v0:=-1) is taken as the double, before rclpy's type check sees it
+        for name, override in list(self._parameter_overrides.items()):
+            self._parameter_overrides[name] = ros_io.coerce_parameter(override)
         values = {}
-        for name, default in defaults.items():
+        for name, default in ros_io.parameter_defaults().items():
             try:
                 values[name] = self.declare_parameter(name, default,
                                                       ros_io.descriptor(name)).value
+            except InvalidParameterTypeException:
+                given = self._parameter_overrides[name]
+                raise StartupError(
+                    f"parameter {name}={given.value!r}: must be of type "
+                    f"{REGISTRY[name].type_name}, got {given.type_.name.lower()}") from None
             except Exception as exc:  # rclpy names the parameter in its exceptions
                 raise StartupError(f"parameter {name}: {exc}") from None
         try:
             self.model_params = UmbrellaParams.from_mapping(
                 {k: v for k, v in values.items() if k in SPECS}).validated()
-            self.node_cfg = self._node_config(values)
+            self.node_cfg = check_node_parameters(
+                {k: v for k, v in values.items() if k in NODE_PARAMETERS})
         except ValueError as exc:
             raise StartupError(str(exc)) from None
         self.pending_params = self.model_params
@@ -82,32 +93,21 @@ class UmbrellaNode(Node):
         self.command_topic = self.command_sub.topic_name
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/pause", self._on_pause)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        # rclpy's three stages: convert exact int/double literals, validate, then apply
+        self.add_pre_set_parameters_callback(self._coerce_parameters)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
         self._marker_ns = self.get_namespace().strip("/") or "umbrella"
         self._build_simulator()
-        if self.node_cfg["record_path"]:
+        if self.node_cfg["record"]:
             self._open_recording(self.node_cfg["record_path"])
         self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
 
     # ------------------------------------------------------------------ config
-    @staticmethod
-    def _node_config(values: dict) -> dict:
-        cfg = {}
-        for name, (_, _, rng, _) in NODE_PARAMETERS.items():
-            v = values[name]
-            if rng is not None:
-                try:
-                    v = float(v)
-                except (TypeError, ValueError):
-                    raise ValueError(f"parameter {name}={v!r}: must be a number") from None
-                if not (math.isfinite(v) and rng[0] <= v <= rng[1]):
-                    raise ValueError(f"parameter {name}={v}: must be in [{rng[0]:g}, {rng[1]:g}]")
-            cfg[name] = v
-        return cfg
-
     def _build_simulator(self) -> None:
         p = self.model_params
-        self.driver = PublicationDriver(p, self.node_cfg["publish_rate"])
+        self.driver_rate = self.node_cfg["publish_rate"]    # a publish_rate set applies here
+        self.driver = PublicationDriver(p, self.driver_rate)
         self.sim = self.driver.sim
         with self._cmd_lock:
             self._commanded_force = p.sleeve_force
@@ -120,11 +120,18 @@ class UmbrellaNode(Node):
             f"{self.node_cfg['publish_rate']:g} Hz), kernel {self.driver.backend}")
 
     def _open_recording(self, path: str) -> None:
-        from .recording import BagRecorder, run_metadata
+        from .recording import BagRecorder, new_bag_recorder, run_metadata
+
+        def metadata(bag_dir):
+            cfg = dict(self.node_cfg, record_path=bag_dir)
+            return run_metadata(self.model_params, cfg, self.driver.step, self.sim.model,
+                                self.driver.backend,
+                                source=f"umbrella_node {self.get_fully_qualified_name()}")
         try:
-            self.recorder = BagRecorder(path, run_metadata(
-                self.model_params, self.node_cfg, self.driver.step, self.sim.model,
-                self.driver.backend, source=f"umbrella_node {self.get_fully_qualified_name()}"))
+            if path:
+                self.recorder = BagRecorder(path, metadata(path))
+            else:   # as ros2 bag record: a new timestamped directory in the working directory
+                self.recorder = new_bag_recorder(self.get_namespace(), metadata)
         except ValueError as exc:
             raise StartupError(str(exc)) from None
         self.recorder.add_umbrella_channels(
@@ -161,9 +168,9 @@ class UmbrellaNode(Node):
         except ValueError as exc:
             self.refused_commands += 1
             self._record(self.command_topic + ros_io.COMMAND_REFUSED_SUFFIX, msg, t)
-            self.get_logger().warn(f"refused sleeve_force command: {exc} "
-                                   f"(refused so far: {self.refused_commands})",
-                                   throttle_duration_sec=1.0)
+            self.get_logger().warning(f"refused sleeve_force command: {exc} "
+                                      f"(refused so far: {self.refused_commands})",
+                                      throttle_duration_sec=1.0)
             return
         self.accepted_commands += 1
         self._record(self.command_topic, msg, t)
@@ -193,27 +200,39 @@ class UmbrellaNode(Node):
         self.get_logger().info(f"{response.message} at t = {self.sim.time:.9f} s")
         return response
 
-    def _on_set_parameters(self, params) -> SetParametersResult:
+    @staticmethod
+    def _coerce_parameters(params: list) -> list:
+        return [ros_io.coerce_parameter(p) for p in params]
+
+    def _parameter_candidate(self, params) -> tuple[dict, dict, UmbrellaParams, dict]:
         core = {p.name: p.value for p in params if p.name in SPECS}
         node = {p.name: p.value for p in params if p.name in NODE_PARAMETERS}
+        candidate = (self.pending_params.replace(**core).validated() if core
+                     else self.pending_params)
+        cfg = dict(self.node_cfg)
+        cfg.update(check_node_parameters(node))
+        return core, node, candidate, cfg
+
+    def _validate_parameters(self, params) -> SetParametersResult:
+        """Accept or refuse a set (on-set callback); changes nothing."""
         try:
-            candidate = self.pending_params.replace(**core).validated() if core else \
-                self.pending_params
-            cfg = dict(self.node_cfg)
-            cfg.update(node)
-            cfg = self._node_config(cfg)
+            self._parameter_candidate(params)
         except ValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params) -> None:
+        """Apply a set that was accepted (post-set callback)."""
+        core, node, candidate, cfg = self._parameter_candidate(params)
         self.pending_params = candidate
         with self._sim_lock:
-            rate_changed = cfg["publish_rate"] != self.node_cfg["publish_rate"]
             self.node_cfg = cfg
             if "real_time_factor" in node:
                 self._anchor()
-        if core or rate_changed:
-            self.get_logger().info(f"parameters {', '.join(sorted({**core, **node}))} set; "
-                                   "model changes apply on ~/reset")
-        return SetParametersResult(successful=True)
+        on_reset = sorted(n for n in {**core, **node} if REGISTRY[n].applies == RESET)
+        if on_reset:
+            self.get_logger().info(f"parameters {', '.join(on_reset)} set; they apply on "
+                                   "~/reset")
 
     # --------------------------------------------------------------- physics
     def start(self) -> None:
@@ -299,10 +318,10 @@ class UmbrellaNode(Node):
                     self._max_lag = max(self._max_lag, lag)
                     if lag < 0:               # publish the state of sim time t at wall time t
                         self._sleep_until(target)
-                    elif lag > max(0.05, 2.0 / self.node_cfg["publish_rate"]):
-                        log.warn(f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
-                                 f"time x real_time_factor (see diagnostics)",
-                                 throttle_duration_sec=5.0)
+                    elif lag > max(0.05, 2.0 / self.driver_rate):
+                        log.warning(f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
+                                    f"time x real_time_factor (see diagnostics)",
+                                    throttle_duration_sec=5.0)
                 if sample is not None:
                     self._publish_sample(sample)
                 if now - diag_wall >= 1.0:
@@ -336,11 +355,12 @@ class UmbrellaNode(Node):
     def _publish_diagnostics(self, sim_t: float, measured: float, lag: float) -> None:
         rtf = self.node_cfg["real_time_factor"]
         if self.fault:
-            level, message = 2, f"fault: {self.fault}"
-        elif rtf > 0 and lag > max(0.05, 2.0 / self.node_cfg["publish_rate"]):
-            level, message = 1, f"behind real time: measured {measured:.3f}x of {rtf:g}x"
+            level, message = DiagnosticStatus.ERROR, f"fault: {self.fault}"
+        elif rtf > 0 and lag > max(0.05, 2.0 / self.driver_rate):
+            level, message = (DiagnosticStatus.WARN,
+                              f"behind real time: measured {measured:.3f}x of {rtf:g}x")
         else:
-            level, message = 0, self._phase
+            level, message = DiagnosticStatus.OK, self._phase
         values = {"sim_time_s": f"{sim_t:.6f}", "measured_real_time_factor": f"{measured:.4f}",
                   "requested_real_time_factor": rtf, "lag_s": f"{max(lag, 0.0):.6f}",
                   "max_lag_s": f"{max(self._max_lag, 0.0):.6f}",
@@ -348,21 +368,20 @@ class UmbrellaNode(Node):
                   "accepted_commands": self.accepted_commands,
                   "refused_commands": self.refused_commands, "steps": self.sim.steps,
                   "physics_step_s": self.sim.h}
+        # the status name carries the namespace: every antenna publishes on /diagnostics
         self._publish("diagnostics", ros_io.diagnostics_msg(
-            sim_t, f"{self.get_name()}: physics", level, message, values), sim_t)
+            sim_t, ros_io.diagnostic_name(self.get_fully_qualified_name()), level, message,
+            values), sim_t)
 
 
 def usage() -> str:
     lines = ["usage: umbrella_node [--help] [--ros-args -p name:=value ... --params-file FILE",
              "                      -r __ns:=/NAMESPACE]", "",
              "Real-time flexible umbrella-frame deployment simulator (ROS 2 node).", "",
-             "model parameters (structural ones apply on ~/reset when set at runtime):"]
-    defaults = ros_io.parameter_defaults()
-    for name, spec in SPECS.items():
-        lines.append(f"  {name:<24} {defaults[name]!r:<22} {spec.units:<7} {spec.description}")
+             "model parameters (a runtime set applies on ~/reset):"]
+    lines += parameter_help(SPECS.values())
     lines.append("node parameters:")
-    for name, (default, text, _, _) in NODE_PARAMETERS.items():
-        lines.append(f"  {name:<24} {default!r:<22} {text}")
+    lines += parameter_help(NODE_PARAMETERS.values())
     lines += ["", "topics: " + ", ".join(t.name for t in ros_io.TOPICS.values())
               + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= 0)",
               "services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)",

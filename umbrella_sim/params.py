@@ -1,7 +1,11 @@
 """
-Simulation parameters: one flat, validated record shared by the CLI and the node.
+Simulation parameters: one registry from which everything else is derived.
 
-Every field is SI (m, kg, s, N, Pa, rad).  The same names are the ROS parameters of
+``REGISTRY`` holds every parameter once: name, type, default, unit, range, when a change
+applies, and what it means.  From it come the ``UmbrellaParams`` dataclass and its checks, the
+node's ROS parameter descriptors (ros_io.descriptor), ``umbrella_node --help``, the CLI's
+``--set``, and the tables of msg_docs/parameters.md and node_parameters.md (param_docs.py).
+Every value is SI (m, kg, s, N, Pa, rad).  The same names are the ROS parameters of
 ``umbrella_node`` and the keys of ``config/umbrella.yaml`` (a ROS 2 params file).
 """
 from __future__ import annotations
@@ -9,45 +13,249 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, fields
 import math
+import re
 from typing import Any, Mapping
 
 MODELS = ("flexible", "rigid-fe", "rigid")
 LOCKS = ("energy", "plastic")
 
+# when a change made at runtime (ros2 param set) takes effect
+RESET = "reset"            # on ~/reset (the model or the initial state changes)
+NOW = "now"                # at the next publication
+START = "start"            # read-only: fixed for the life of the node
+
+# which part of the program a parameter belongs to
+MODEL = "model"            # the physics (UmbrellaParams), also the offline CLI
+INPUT = "input"            # the physics' input, also in UmbrellaParams
+NODE = "node"              # umbrella_node only
+
 
 @dataclass(frozen=True)
-class ParamSpec:
-    """What a parameter means: description with units, and whether a reset is needed."""
+class Param:
+    """One parameter: everything any interface needs to know about it."""
 
-    description: str
-    units: str
-    structural: bool = True  # changes the model or initial state: applies on reset
+    name: str
+    type: type                      # noqa: A003 (float | int | str | bool)
+    default: Any
+    unit: str                       # SI unit; "-" for none
+    doc: str                        # what it is, one or two sentences
+    low: float | None = None        # range; None = unbounded on that side
+    high: float | None = None
+    low_open: bool = False          # True: value > low (else value >= low)
+    high_open: bool = False         # True: value < high (else value <= high)
+    choices: tuple = ()             # allowed values of a str parameter
+    applies: str = RESET            # RESET | NOW | START
+    group: str = MODEL              # MODEL | INPUT | NODE
+    rule: str = ""                  # cross-parameter rule, checked in validate()
+    default_text: str = ""          # how the docs show the default, when repr is unclear
+
+    @property
+    def default_str(self) -> str:
+        if self.default_text:
+            return self.default_text
+        if self.type is float:
+            return _num(self.default)
+        if self.type is bool:
+            return str(self.default).lower()
+        return str(self.default)
+
+    @property
+    def type_name(self) -> str:
+        return {float: "double", int: "integer", str: "string", bool: "bool"}[self.type]
+
+    def range_text(self) -> str:
+        """Return the range as docs and messages write it: '> 0', '1 … 64', '(0, π/2)'."""
+        if self.choices:
+            return " | ".join(self.choices)
+        lo, hi = self.low, self.high
+        if lo is None and hi is None:
+            return "finite" if self.type is float else "any"
+        if hi is None:
+            return f"{'>' if self.low_open else '>='} {_num(lo)}"
+        if lo is None:
+            return f"{'<' if self.high_open else '<='} {_num(hi)}"
+        if not (self.low_open or self.high_open):
+            return f"{_num(lo)} … {_num(hi)}"
+        return (f"{'(' if self.low_open else '['}{_num(lo)}, {_num(hi)}"
+                f"{')' if self.high_open else ']'}")
+
+    def check(self, value: Any) -> None:
+        """Raise ValueError naming the parameter unless value is in this parameter's range."""
+        if self.choices:
+            if value not in self.choices:
+                raise ValueError(f"parameter {self.name}={value!r}: must be one of "
+                                 f"{', '.join(self.choices)}")
+            return
+        if self.type is not float and self.type is not int:
+            return
+        if not math.isfinite(value):
+            raise ValueError(f"parameter {self.name}={value}: must be a finite number")
+        lo, hi = self.low, self.high
+        below = lo is not None and (value <= lo if self.low_open else value < lo)
+        above = hi is not None and (value >= hi if self.high_open else value > hi)
+        if not (below or above):
+            return
+        if self.type is int and lo is not None and hi is not None:
+            raise ValueError(f"parameter {self.name}={value}: must be between {_num(lo)} and "
+                             f"{_num(hi)}")
+        if below:
+            raise ValueError(f"parameter {self.name}={value}: must be "
+                             f"{'>' if self.low_open else '>='} {_num(lo)}")
+        raise ValueError(f"parameter {self.name}={value}: must be "
+                         f"{'<' if self.high_open else '<='} {_num(hi)}")
+
+    def coerce(self, value: Any) -> Any:
+        """Convert a CLI / YAML / ROS value to this type, naming the parameter on failure."""
+        try:
+            if self.type is str:
+                if not isinstance(value, str):
+                    raise ValueError("must be a string")
+                return value
+            if self.type is bool:
+                if isinstance(value, bool):
+                    return value
+                text = str(value).strip().lower()
+                if text in ("true", "1", "yes", "on"):
+                    return True
+                if text in ("false", "0", "no", "off"):
+                    return False
+                raise ValueError("must be true or false")
+            if isinstance(value, bool):
+                raise ValueError("must be a number")
+            if self.type is int:
+                number = float(value) if isinstance(value, str) else value
+                if isinstance(number, float) and not number.is_integer():
+                    raise ValueError("must be a whole number")
+                return int(number)
+            return float(value)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise ValueError(f"parameter {self.name}={value!r}: {exc}") from None
 
 
-@dataclass(frozen=True)
-class UmbrellaParams:
+def _num(x: float) -> str:
+    for v, text in ((math.pi / 2, "π/2"), (math.pi, "π")):
+        if x == v:
+            return text
+    return re.sub(r"e\+?(-?)0*(\d)", r"e\1\2", f"{x:g}")
+
+
+_P = Param
+REGISTRY: dict[str, Param] = {p.name: p for p in (
     # geometry (Fig. 3.4): leaf O-O''-G, link O''-H, sleeve H slides on the axle (Y axis)
-    l1: float = 0.5
-    l2: float = 0.5
-    l3: float = 0.5
+    _P("l1", float, 0.5, "m", "leaf length from the hinge O to the link joint O''",
+       low=0.0, low_open=True, high=1e3),
+    _P("l2", float, 0.5, "m", "leaf length from the link joint O'' to the tip G",
+       low=0.0, low_open=True, high=1e3),
+    _P("l3", float, 0.5, "m", "link length from O'' to the sleeve joint H",
+       low=0.0, low_open=True, high=1e3),
     # cross section: a square of height b gives A = b^2, I = b^4/12; explicit A and I win
-    section_height: float = 0.01
-    area: float = 0.0
-    second_moment_of_area: float = 0.0
+    _P("section_height", float, 0.01, "m",
+       "height b of the square cross-section (A = b², I = b⁴/12); also sets the outer "
+       "fibre at b/2", low=0.0, high=10.0,
+       rule="> 0 unless `area` and `second_moment_of_area` are given"),
+    _P("area", float, 0.0, "m²", "cross-section area A; 0 = derive from `section_height`",
+       low=0.0, high=100.0, rule="give with `second_moment_of_area`"),
+    _P("second_moment_of_area", float, 0.0, "m⁴",
+       "second moment of area I; 0 = derive from `section_height`; without b the outer "
+       "fibre is at √(3I/A)", low=0.0, high=100.0, rule="give with `area`"),
     # material: Al 7075-T6 (thesis ch. 6)
-    youngs_modulus: float = 72.0e9
-    density: float = 2770.0
-    yield_strength: float = 500.0e6
+    _P("youngs_modulus", float, 72.0e9, "Pa", "Young's modulus E of leaf and link",
+       low=0.0, low_open=True, high=1e15),
+    _P("density", float, 2770.0, "kg/m³", "mass density ρ of leaf and link",
+       low=0.0, low_open=True, high=1e6),
+    _P("yield_strength", float, 500.0e6, "Pa",
+       "yield strength, for the stress ratio peak |σ| / yield",
+       low=0.0, low_open=True, high=1e15),
     # configuration
-    alpha0: float = 0.49 * math.pi
-    alpha_deployed: float = math.pi / 12.0
-    v0: float = -0.2
-    sleeve_force: float = 0.0
+    _P("alpha0", float, 0.49 * math.pi, "rad",
+       "initial leaf angle α1 from +X (folded)", low=0.0, low_open=True,
+       high=math.pi / 2, high_open=True, default_text="0.49π = 1.5393804",
+       rule="> `alpha_deployed`; l1·|cos alpha0| < l3"),
+    _P("alpha_deployed", float, math.pi / 12.0, "rad",
+       "leaf angle at full deployment; the stop S is at y = l1 sin α + √(l3² − l1² cos² α)",
+       low=0.0, low_open=True, high=math.pi / 2, high_open=True,
+       default_text="π/12 = 0.2617994", rule="l1·|cos alpha_deployed| < l3"),
+    _P("v0", float, -0.2, "m/s", "initial sleeve velocity along +Y (negative deploys)",
+       low=-1e3, high=1e3),
+    _P("sleeve_force", float, 0.0, "N",
+       "sleeve force F_H at the start, along −Y (pushes toward deployment); at runtime "
+       "command it on the `sleeve_force` topic", low=0.0, high=1e9, group=INPUT),
     # model and numerics
-    model: str = "flexible"
-    elements_per_segment: int = 1
-    lock: str = "energy"
-    time_step: float = 2.0e-3
+    _P("model", str, "flexible", "-",
+       "flexible: Case 1 then Case 2; rigid-fe: Case 3 (elastic coordinates constrained); "
+       "rigid: closed-form two-angle model", choices=MODELS),
+    _P("elements_per_segment", int, 1, "-",
+       "beam elements N on each of O–O'', O''–G and O''–H (1 = the thesis's 3-element "
+       "model, 2 = 6-element)", low=1, high=64),
+    _P("lock", str, "energy", "-",
+       "velocity redistribution at the lock: energy (thesis 5.2.2) or plastic (rigid "
+       "models always stop: plastic)", choices=LOCKS),
+    _P("time_step", float, 2.0e-3, "s", "fixed physics step of the integrator",
+       low=0.0, low_open=True, high=0.01),
+    # the node
+    _P("publish_rate", float, 100.0, "Hz",
+       "publication rate (sim time) of joint_states, tip_deflection, peak_stress, energy, "
+       "markers and clock; the physics step is the largest step ≤ `time_step` that "
+       "divides 1/`publish_rate`, so publications fall on steps", low=1.0, high=5000.0,
+       group=NODE),
+    _P("real_time_factor", float, 1.0, "-",
+       "sim seconds per wall second: 1 = wall-clock pace, 0 = as fast as possible",
+       low=0.0, high=1000.0, applies=NOW, group=NODE),
+    _P("duration", float, 0.0, "s",
+       "sim time at which the node exits (code 0); 0 = run until stopped",
+       low=0.0, high=1e9, applies=NOW, group=NODE),
+    _P("record", bool, True, "-",
+       "record every topic, command and the parameters to an MCAP bag (see recording.md); "
+       "false = no recording", applies=START, group=NODE),
+    _P("record_path", str, "", "-",
+       "bag directory to record to (NAME/NAME_0.mcap + metadata.yaml); must not exist; "
+       "'' = a new directory umbrella_<namespace>_YYYY_MM_DD-HH_MM_SS in the working "
+       "directory, as ros2 bag record does", applies=START, group=NODE,
+       default_text='""'),
+    _P("marker_magnification", float, 1.0, "-",
+       "deformation magnification of the markers", low=0.0, high=1e6, applies=NOW,
+       group=NODE),
+)}
+
+#: the physics' parameters (the fields of UmbrellaParams), in registry order
+SPECS: dict[str, Param] = {n: p for n, p in REGISTRY.items() if p.group in (MODEL, INPUT)}
+#: parameters of umbrella_node only
+NODE_PARAMETERS: dict[str, Param] = {n: p for n, p in REGISTRY.items() if p.group == NODE}
+#: keys of a params file that belong to the node, not the model: the offline CLI skips them
+NODE_ONLY_PARAMS = tuple(NODE_PARAMETERS) + ("use_sim_time",)
+
+
+def defaults(group: str | None = None) -> dict:
+    """Name -> default of every parameter (of one group)."""
+    return {n: p.default for n, p in REGISTRY.items() if group in (None, p.group)}
+
+
+def node_defaults() -> dict:
+    return {n: p.default for n, p in NODE_PARAMETERS.items()}
+
+
+def parameter_help(params, width: int = 99) -> list[str]:
+    """Return --help lines: name, default, unit, range and when it applies, then the doc."""
+    import textwrap
+
+    when = {RESET: "on reset", NOW: "at once", START: "read-only"}
+    out = []
+    for p in params:
+        out.append(f"  {p.name:<22} {p.type_name:<7} default {p.default_str}, {p.unit}, "
+                   f"{p.range_text()}" + (f"; {p.rule.replace('`', '')}" if p.rule else "")
+                   + f"; applies {when[p.applies]}")
+        out += textwrap.wrap(p.doc.replace("`", ""), width, initial_indent=" " * 6,
+                             subsequent_indent=" " * 6)
+    return out
+
+
+def coerce(name: str, value: Any) -> Any:
+    """Convert a CLI / YAML / ROS value to the parameter's type, naming it on failure."""
+    return REGISTRY[name].coerce(value)
+
+
+class _DerivedQuantities:
+    """Methods of UmbrellaParams; its fields come from the registry (SPECS)."""
 
     # ------------------------------------------------------------------ derived
     @property
@@ -83,6 +291,9 @@ class UmbrellaParams:
 
     # ---------------------------------------------------------------- building
     def replace(self, **changes: Any) -> "UmbrellaParams":
+        unknown = sorted(set(changes) - set(SPECS))
+        if unknown:
+            raise ValueError(_unknown_message(unknown))
         return dataclasses.replace(self, **{k: coerce(k, v) for k, v in changes.items()})
 
     def as_dict(self) -> dict:
@@ -92,114 +303,50 @@ class UmbrellaParams:
     def from_mapping(cls, values: Mapping[str, Any], base: "UmbrellaParams | None" = None,
                      ignore_unknown: bool = False) -> "UmbrellaParams":
         base = base or cls()
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(values) - known)
+        unknown = sorted(set(values) - set(SPECS))
         if unknown and not ignore_unknown:
-            raise ValueError(f"unknown parameter(s) {', '.join(unknown)}; "
-                             f"known: {', '.join(sorted(known))}")
-        return base.replace(**{k: v for k, v in values.items() if k in known})
+            raise ValueError(_unknown_message(unknown))
+        return base.replace(**{k: v for k, v in values.items() if k in SPECS})
 
     def validated(self) -> "UmbrellaParams":
         validate(self)
         return self
 
 
+def _unknown_message(unknown: list[str]) -> str:
+    return f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(SPECS))}"
+
+
+#: the physics' parameters as one frozen record; fields and defaults from SPECS
+UmbrellaParams = dataclasses.make_dataclass(
+    "UmbrellaParams", [(p.name, p.type, dataclasses.field(default=p.default))
+                       for p in SPECS.values()],
+    bases=(_DerivedQuantities,), frozen=True)
+UmbrellaParams.__module__ = __name__     # pickles as umbrella_sim.params.UmbrellaParams
+UmbrellaParams.__doc__ = ("The physics' parameters (SI), one field per entry of SPECS; "
+                          "immutable: change with replace(), check with validated().")
+
+
 def _sleeve_height(l1: float, l3: float, alpha: float) -> float:
-    """y_H of the rigid mechanism at leaf angle alpha (H on the axle above O'')."""
+    """Return y_H of the rigid mechanism at leaf angle alpha (H on the axle above O'')."""
     return l1 * math.sin(alpha) + math.sqrt(max(l3 ** 2 - (l1 * math.cos(alpha)) ** 2, 0.0))
-
-
-SPECS: dict[str, ParamSpec] = {
-    "l1": ParamSpec("leaf length from the hinge O to the link joint O''", "m"),
-    "l2": ParamSpec("leaf length from the link joint O'' to the tip G", "m"),
-    "l3": ParamSpec("link length from O'' to the sleeve joint H", "m"),
-    "section_height": ParamSpec("height b of the square cross-section (A = b^2, I = b^4/12); "
-                                "also sets the outer fibre at b/2", "m"),
-    "area": ParamSpec("cross-section area A; 0 = derive from section_height", "m^2"),
-    "second_moment_of_area": ParamSpec("second moment of area I; 0 = derive from section_height",
-                                       "m^4"),
-    "youngs_modulus": ParamSpec("Young's modulus E of leaf and link", "Pa"),
-    "density": ParamSpec("mass density of leaf and link", "kg/m^3"),
-    "yield_strength": ParamSpec("yield strength, for the stress ratio peak |sigma| / yield", "Pa"),
-    "alpha0": ParamSpec("initial leaf angle alpha1 from the X axis (folded)", "rad"),
-    "alpha_deployed": ParamSpec("leaf angle at full deployment; the stop S is derived from it",
-                                "rad"),
-    "v0": ParamSpec("initial sleeve velocity along Y (negative deploys)", "m/s"),
-    "sleeve_force": ParamSpec("sleeve force F_H at start, >= 0, pushes the sleeve along -Y",
-                              "N", structural=False),
-    "model": ParamSpec("flexible | rigid-fe | rigid", "-"),
-    "elements_per_segment": ParamSpec("beam elements on each of O-O'', O''-G and O''-H "
-                                      "(1 = thesis 3-element model, 2 = 6-element)", "-"),
-    "lock": ParamSpec("velocity redistribution at the lock: energy (thesis 5.2.2) | plastic", "-"),
-    "time_step": ParamSpec("fixed physics step of the integrator", "s"),
-}
-
-#: node-only parameters: name -> (default, description with units, (low, high) or None, read_only)
-NODE_PARAMETERS = {
-    "publish_rate": (100.0, "publication rate of joint_states, tip_deflection, peak_stress, "
-                     "markers and clock (Hz, sim time); the physics step is time_step or "
-                     "shorter so that publications fall on steps", (1.0, 5000.0), False),
-    "real_time_factor": (1.0, "sim seconds per wall second: 1.0 = wall-clock pace, "
-                         "0 = as fast as possible (-)", (0.0, 1000.0), False),
-    "duration": (0.0, "simulated time after which the node exits (s); 0 = run until stopped",
-                 (0.0, 1.0e9), False),
-    "record_path": ("", "bag directory to record to (NAME/NAME_0.mcap + metadata.yaml), "
-                    "must not exist; '' = no recording (fixed for the life of the node)",
-                    None, True),
-    "marker_magnification": (1.0, "deformation magnification of the markers (-)",
-                             (0.0, 1.0e6), False),
-}
-
-#: keys of a params file that belong to the node, not the model: the offline CLI skips them
-NODE_ONLY_PARAMS = tuple(NODE_PARAMETERS) + ("use_sim_time",)
-
-_INT_FIELDS = {"elements_per_segment"}
-_STR_FIELDS = {"model", "lock"}
-
-
-def coerce(name: str, value: Any) -> Any:
-    """Convert a CLI / YAML / ROS value to the field's type, naming the parameter on failure."""
-    try:
-        if name in _STR_FIELDS:
-            return str(value)
-        if name in _INT_FIELDS:
-            if isinstance(value, float) and not value.is_integer():
-                raise ValueError("must be a whole number")
-            return int(value)
-        if isinstance(value, bool):
-            raise ValueError("must be a number")
-        return float(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"parameter {name}={value!r}: {exc}") from None
 
 
 def validate(p: UmbrellaParams) -> None:
     """Raise ValueError naming the parameter and the rule it breaks."""
-    for f in fields(p):
-        v = getattr(p, f.name)
-        if isinstance(v, float) and not math.isfinite(v):
-            raise ValueError(f"parameter {f.name}={v}: must be a finite number")
-    for name in ("l1", "l2", "l3", "youngs_modulus", "density", "yield_strength", "time_step"):
-        if getattr(p, name) <= 0.0:
-            raise ValueError(f"parameter {name}={getattr(p, name)}: must be > 0")
-    for name in ("section_height", "area", "second_moment_of_area"):
-        if getattr(p, name) < 0.0:
-            raise ValueError(f"parameter {name}={getattr(p, name)}: must be >= 0")
+    for name, spec in SPECS.items():
+        value = getattr(p, name)
+        if not isinstance(value, spec.type) or (spec.type is not bool
+                                                and isinstance(value, bool)):
+            raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}")
+        spec.check(value)
+    # the rules that tie parameters together (each registry entry's `rule` names its own)
     if (p.area > 0.0) != (p.second_moment_of_area > 0.0):
         raise ValueError("parameters area and second_moment_of_area: give both or neither")
     if p.area == 0.0 and p.section_height <= 0.0:
         raise ValueError(f"parameter section_height={p.section_height}: must be > 0 "
                          "unless area and second_moment_of_area are given")
-    if p.model not in MODELS:
-        raise ValueError(f"parameter model={p.model!r}: must be one of {', '.join(MODELS)}")
-    if p.lock not in LOCKS:
-        raise ValueError(f"parameter lock={p.lock!r}: must be one of {', '.join(LOCKS)}")
-    if not 1 <= p.elements_per_segment <= 64:
-        raise ValueError(f"parameter elements_per_segment={p.elements_per_segment}: "
-                         "must be between 1 and 64")
-    if not 0.0 < p.alpha_deployed < math.pi / 2:
-        raise ValueError(f"parameter alpha_deployed={p.alpha_deployed}: must be in (0, pi/2)")
-    if not p.alpha_deployed < p.alpha0 < math.pi / 2:
+    if not p.alpha_deployed < p.alpha0:
         raise ValueError(f"parameter alpha0={p.alpha0}: must be above alpha_deployed="
                          f"{p.alpha_deployed} and below pi/2")
     for name in ("alpha0", "alpha_deployed"):
@@ -207,11 +354,16 @@ def validate(p: UmbrellaParams) -> None:
         if reach >= p.l3:
             raise ValueError(f"parameter {name}={getattr(p, name)}: geometry cannot close, "
                              f"l1*|cos({name})| = {reach:.6g} m must be < l3 = {p.l3} m")
-    if p.sleeve_force < 0.0:
-        raise ValueError(f"parameter sleeve_force={p.sleeve_force}: must be >= 0 "
-                         "(F_H pushes the sleeve along -Y)")
-    if p.time_step > 0.01:
-        raise ValueError(f"parameter time_step={p.time_step}: must be <= 0.01 s")
+
+
+def check_node_parameters(values: Mapping[str, Any]) -> dict:
+    """Coerce and range-check node parameters (name -> value); return them typed."""
+    out = {}
+    for name, value in values.items():
+        spec = NODE_PARAMETERS[name]
+        out[name] = spec.coerce(value)
+        spec.check(out[name])
+    return out
 
 
 def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:

@@ -218,6 +218,37 @@ def events_metadata(sim) -> dict[str, dict[str, str]]:
 
 
 # ---------------------------------------------------------------------- recorder
+def default_bag_name(namespace: str = "/", when: float | None = None) -> str:
+    """Return umbrella[_ns]_YYYY_MM_DD-HH_MM_SS, as ros2 bag record names its bags."""
+    import time
+
+    ns = namespace.strip("/").replace("/", "_")
+    stamp = time.strftime("%Y_%m_%d-%H_%M_%S", time.localtime(when))
+    return "_".join(["umbrella"] + ([ns] if ns else []) + [stamp])
+
+
+def new_bag_recorder(namespace: str, metadata, parent: str = ".") -> "BagRecorder":
+    """
+    Open a new timestamped bag directory in parent (default: the working directory).
+
+    Never overwrites: when the name is taken (two antennas started in the same second, or
+    a bag left from a run a moment ago) the next free NAME_1, NAME_2, ... is used.
+    metadata(bag_dir) returns the run's metadata records.
+    """
+    base = os.path.join(os.path.abspath(parent), default_bag_name(namespace))
+    for k in range(1000):
+        bag_dir = base if k == 0 else f"{base}_{k}"
+        if os.path.exists(bag_dir):
+            continue
+        try:
+            return BagRecorder(bag_dir, metadata(bag_dir))
+        except ValueError:
+            if os.path.exists(bag_dir):      # taken meanwhile by another process: next name
+                continue
+            raise
+    raise ValueError(f"recording: no free bag directory name {base}_N in {parent}")
+
+
 class BagRecorder:
     """Thread-safe writer of one bag directory; never overwrites."""
 
@@ -362,24 +393,25 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     """
     import time as _time
 
+    from diagnostic_msgs.msg import DiagnosticStatus
     from std_msgs.msg import Float64
 
     from . import ros_io
     from .outputs import RunResult
-    from .params import NODE_PARAMETERS
+    from .params import node_defaults
     from .publication import PublicationDriver
     from .solver import SimulationDiverged, validate_force
 
     profile = sorted(force_profile or [], key=lambda tf: tf[0])
     for _, f in profile:
         validate_force(f)
-    node_cfg = {k: v[0] for k, v in NODE_PARAMETERS.items()}
+    node_cfg = node_defaults()
     node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,
                     record_path=bag_dir, marker_magnification=marker_magnification)
     driver = PublicationDriver(params, publish_rate)
     rec = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, driver.sim.model,
-                                            driver.backend, source="umbrella-sim simulate"))
-    topics = {key: "/" + t.name for key, t in ros_io.TOPICS.items()}
+                                            driver.backend, source="umbrella_sim simulate"))
+    topics = {key: "/" + t.name.lstrip("/") for key, t in ros_io.TOPICS.items()}
     command = "/" + ros_io.COMMAND.name
     rec.add_umbrella_channels(topics, command)
     published: dict[str, int] = {}
@@ -405,7 +437,7 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
             if t >= next_diag - 1e-12:
                 wall = _time.perf_counter() - wall0
                 publish("diagnostics", ros_io.diagnostics_msg(
-                    t, "umbrella_sim offline: physics", 0, "offline",
+                    t, "umbrella_sim offline: physics", DiagnosticStatus.OK, "offline",
                     {"sim_time_s": f"{t:.6f}", "measured_real_time_factor":
                      f"{t / wall:.4f}" if wall > 0 else "inf", "steps": sim.steps,
                      "physics_step_s": sim.h}), t)

@@ -1,9 +1,9 @@
 """
-umbrella-replay LOG: republish a recorded run over ROS 2, or re-simulate and check it.
+umbrella_replay LOG: republish a recorded run over ROS 2, or re-simulate and check it.
 
-    umbrella-replay run1                      # republish with the recorded timing
-    umbrella-replay run1 --rate 2 --start-offset 0.1 --loop
-    umbrella-replay run1 --resimulate         # re-run the physics from the log and compare
+    umbrella_replay run1                      # republish with the recorded timing
+    umbrella_replay run1 --rate 2 --start-offset 0.1 --loop
+    umbrella_replay run1 --resimulate         # re-run the physics from the log and compare
 
 Republishing sends the recorded serialized bytes (exactly what was recorded) on the
 recorded topics with the recorded QoS, including /clock, spaced by the recorded log times
@@ -112,7 +112,7 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     msgs = [m for m in msgs if m.log_time >= t0]
     if not msgs:
         raise LogError(f"{log.path}: --start-offset {start_offset} s is past the end of the log")
-    rclpy.init(args=["umbrella-replay", "--ros-args", *ros_args])
+    rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args])
     node = rclpy.create_node("umbrella_replay")
     pubs = {t: node.create_publisher(log.msg_type(t), t, qos_from_yaml(log.channels[t][1]))
             for t in chosen}
@@ -164,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     if "--ros-args" in argv:
         i = argv.index("--ros-args")
         argv, ros_args = argv[:i], argv[i + 1:]
-    ap = argparse.ArgumentParser(prog="umbrella-replay", description=__doc__,
+    ap = argparse.ArgumentParser(prog="umbrella_replay", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("log", help="bag directory or .mcap file")
     ap.add_argument("--rate", type=float, default=1.0, help="playback rate factor")
@@ -203,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
         return republish(log, args.rate, args.start_offset, args.loop, args.with_commands,
                          args.topics, ros_args, args.wait_for_subscribers)
     except LogError as exc:
-        print(f"umbrella-replay: error: {exc}", file=sys.stderr)
+        print(f"umbrella_replay: error: {exc}", file=sys.stderr)
         return 2
 
 

@@ -13,7 +13,8 @@ import math
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PointStamped
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType)
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -21,7 +22,7 @@ from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimens
 from visualization_msgs.msg import Marker, MarkerArray
 
 from .outputs import Sample
-from .params import NODE_PARAMETERS, SPECS, UmbrellaParams
+from .params import defaults, NOW, REGISTRY, RESET, START, UmbrellaParams
 
 INERTIAL_FRAME = "umbrella_base"   # X toward the leaf, Y up the axle, origin at the hinge O
 LEAF_FRAME = "leaf"                # origin O, x' through O''
@@ -32,24 +33,33 @@ RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                       history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: /clock as rclpy's TimeSource (and rclcpp's ClockQoS) subscribes to it and as rosbag2 and
+#: Gazebo publish it: best effort, keep last 1.  A reliable reader does not match it.
+CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                       history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+#: a /clock reader that keeps every tick until its callback runs (tests, benchmarks)
+CLOCK_READER_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
+                              history=HistoryPolicy.KEEP_LAST,
+                              durability=DurabilityPolicy.VOLATILE)
 
 
 @dataclass(frozen=True)
 class Topic:
-    name: str          # relative: resolves under the node's namespace
+    name: str          # relative names resolve under the node's namespace
     type: type  # noqa: A003 (the message type, as rclpy calls it)
     qos: QoSProfile
 
 
 TOPICS = {
-    "clock": Topic("clock", Clock, RELIABLE),
+    "clock": Topic("clock", Clock, CLOCK_QOS),
     "joint_states": Topic("joint_states", JointState, RELIABLE),
     "tip_deflection": Topic("tip_deflection", PointStamped, RELIABLE),
     "peak_stress": Topic("peak_stress", Float64MultiArray, RELIABLE),
     "markers": Topic("markers", MarkerArray, RELIABLE),
     "deployment_phase": Topic("deployment_phase", String, LATCHED),
     "energy": Topic("energy", Float64MultiArray, RELIABLE),
-    "diagnostics": Topic("diagnostics", DiagnosticArray, RELIABLE),
+    # absolute, as diagnostic_updater publishes: one aggregator sees every antenna
+    "diagnostics": Topic("/diagnostics", DiagnosticArray, RELIABLE),
 }
 #: recorded alongside the command topic: refused commands, and each value as applied
 COMMAND_REFUSED_SUFFIX = "/refused"
@@ -57,45 +67,58 @@ COMMAND_APPLIED_SUFFIX = "/applied"
 COMMAND = Topic("sleeve_force", Float64, RELIABLE)
 
 # --------------------------------------------------------------------- parameters
-_RANGES = {
-    "l1": (1e-6, 1e3), "l2": (1e-6, 1e3), "l3": (1e-6, 1e3), "section_height": (0.0, 10.0),
-    "area": (0.0, 100.0), "second_moment_of_area": (0.0, 100.0),
-    "youngs_modulus": (1e-3, 1e15), "density": (1e-6, 1e6), "yield_strength": (1e-3, 1e15),
-    "alpha0": (0.0, math.pi / 2), "alpha_deployed": (0.0, math.pi / 2), "v0": (-1e3, 1e3),
-    "sleeve_force": (0.0, 1e9), "time_step": (1e-7, 0.01), "elements_per_segment": (1, 64),
-}
+_APPLIES = {RESET: "a runtime set applies on ~/reset", NOW: "a runtime set applies at once",
+            START: "read-only: fixed when the node starts"}
+_ROS_TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
+              str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL}
 
 
 def descriptor(name: str) -> ParameterDescriptor:
-    """Descriptor with description, units, range and read_only flag for any parameter."""
-    if name in NODE_PARAMETERS:
-        _, text, rng, read_only = NODE_PARAMETERS[name]
-        constraints = "applies immediately" if not read_only else "read-only"
-    else:
-        spec = SPECS[name]
-        text = f"{spec.description} ({spec.units})"
-        rng = _RANGES.get(name)
-        read_only = False
-        constraints = ("structural: a runtime set applies on ~/reset" if spec.structural
-                       else "initial value; applies on ~/reset (use the sleeve_force topic)")
-        constraints += "; cross-checked with the other parameters (msg_docs/parameters.md)"
-    d = ParameterDescriptor(name=name, description=text, additional_constraints=constraints,
-                            read_only=read_only)
-    if rng is not None:
-        if isinstance(rng[0], int) and isinstance(rng[1], int):
-            d.integer_range = [IntegerRange(from_value=rng[0], to_value=rng[1], step=1)]
-        else:
-            d.floating_point_range = [FloatingPointRange(from_value=float(rng[0]),
-                                                         to_value=float(rng[1]), step=0.0)]
-    # numbers accept int or double literals (-p v0:=-1); UmbrellaParams coerces and checks
-    d.dynamic_typing = name not in ("model", "lock", "record_path")
+    """Build the statically typed descriptor of a parameter from the registry."""
+    p = REGISTRY[name]
+    constraints = [f"range {p.range_text()}" if p.low is not None or p.high is not None
+                   else ("one of " + p.range_text() if p.choices else "")]
+    if p.rule:
+        constraints.append(p.rule.replace("`", ""))
+    constraints.append(_APPLIES[p.applies])
+    if name == "sleeve_force":
+        constraints.append("command the running force on the sleeve_force topic")
+    d = ParameterDescriptor(
+        name=name, type=_ROS_TYPES[p.type], description=f"{p.doc} ({p.unit})",
+        additional_constraints="; ".join(c for c in constraints if c),
+        read_only=p.applies == START, dynamic_typing=False)
+    if p.low is not None and p.high is not None:
+        if p.type is int:
+            d.integer_range = [IntegerRange(from_value=int(p.low), to_value=int(p.high),
+                                            step=1)]
+        elif p.type is float:
+            d.floating_point_range = [FloatingPointRange(from_value=float(p.low),
+                                                         to_value=float(p.high), step=0.0)]
     return d
 
 
+def coerce_parameter(param):
+    """
+    Return param with the registry's type where the value converts exactly, else unchanged.
+
+    An integer literal for a double parameter (`-p v0:=-1`, `ros2 param set ...
+    marker_magnification 100`) becomes the double; a whole double for an integer parameter
+    the integer.  Anything else is left for rclpy's static type check, which refuses it.
+    """
+    from rclpy.parameter import Parameter
+    spec = REGISTRY.get(param.name)
+    if spec is None:
+        return param
+    if spec.type is float and param.type_ == Parameter.Type.INTEGER:
+        return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
+    if (spec.type is int and param.type_ == Parameter.Type.DOUBLE
+            and math.isfinite(param.value) and float(param.value).is_integer()):
+        return Parameter(param.name, Parameter.Type.INTEGER, int(param.value))
+    return param
+
+
 def parameter_defaults() -> dict:
-    out = UmbrellaParams().as_dict()
-    out.update({k: v[0] for k, v in NODE_PARAMETERS.items()})
-    return out
+    return defaults()
 
 
 # ------------------------------------------------------------------------ messages
@@ -199,11 +222,17 @@ def phase_msg(phase: str) -> String:
     return String(data=phase)
 
 
-def diagnostics_msg(t: float, name: str, level: int, message: str,
+def diagnostic_name(node_fqn: str) -> str:
+    """Return the status name, 'NAMESPACE/umbrella_node: physics' (diagnostic_updater style)."""
+    return f"{node_fqn.lstrip('/')}: physics"
+
+
+def diagnostics_msg(t: float, name: str, level: bytes, message: str,
                     values: dict) -> DiagnosticArray:
+    """Build a one-status array; level is DiagnosticStatus.OK, WARN, ERROR or STALE."""
     msg = DiagnosticArray()
     msg.header.stamp = stamp(t)
-    st = DiagnosticStatus(level=bytes([level]), name=name, message=message,
+    st = DiagnosticStatus(level=level, name=name, message=message,
                           hardware_id="umbrella_sim")
     st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
     msg.status = [st]

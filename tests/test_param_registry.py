@@ -1,0 +1,87 @@
+"""The one parameter registry: every interface derived from it, docs current."""
+import math
+import pickle
+
+import pytest
+
+from umbrella_sim import param_docs
+from umbrella_sim.cli import make_parser
+from umbrella_sim.params import (coerce, defaults, load_params_file, MODEL, NODE_PARAMETERS,
+                                 parameter_help, REGISTRY, SPECS, UmbrellaParams)
+
+
+def test_msg_docs_parameter_tables_are_current():
+    """Regenerate: .venv/bin/python -m umbrella_sim.param_docs."""
+    assert param_docs.main(["--check"]) == 0
+
+
+def test_docs_list_every_parameter_with_its_default():
+    import os
+    pages = "".join(open(os.path.join(param_docs.msg_docs_dir(), p), encoding="utf-8").read()
+                    for p in param_docs.PAGES)
+    for p in REGISTRY.values():
+        assert f"| `{p.name}` | {p.type_name} | {p.unit} | {p.default_str} |" in pages
+
+
+def test_dataclass_fields_and_defaults_are_the_registry():
+    p = UmbrellaParams()
+    assert list(p.as_dict()) == list(SPECS)
+    assert p.as_dict() == {n: s.default for n, s in SPECS.items()}
+    assert defaults(MODEL).items() <= p.as_dict().items()
+    assert pickle.loads(pickle.dumps(p)) == p          # a sweep ships it to other processes
+    with pytest.raises(Exception):
+        p.l1 = 1.0                                      # frozen
+
+
+def test_config_file_holds_every_model_parameter_at_its_default():
+    import os
+    cfg = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                       "config", "umbrella.yaml")
+    values = load_params_file(cfg)
+    assert set(values) == set(SPECS)
+    assert UmbrellaParams.from_mapping(values) == UmbrellaParams()
+
+
+@pytest.mark.parametrize("name", list(REGISTRY))
+def test_every_range_is_enforced_at_its_bounds(name):
+    """Just outside each finite bound is refused, naming the parameter; the default passes."""
+    p = REGISTRY[name]
+    p.check(p.default)
+    for bound, open_, outward in ((p.low, p.low_open, -1.0), (p.high, p.high_open, 1.0)):
+        if bound is None:
+            continue
+        outside = bound if open_ else bound + outward * (1 if p.type is int else
+                                                         max(abs(bound), 1.0) * 1e-9)
+        with pytest.raises(ValueError, match=f"parameter {name}="):
+            p.check(p.type(outside))
+    if p.choices:
+        with pytest.raises(ValueError, match="one of"):
+            p.check("nonsense")
+    if p.type is float:
+        with pytest.raises(ValueError, match="finite"):
+            p.check(math.nan)
+
+
+def test_coercion_names_the_parameter_and_keeps_types():
+    assert coerce("v0", "-1") == -1.0 and isinstance(coerce("v0", 1), float)
+    assert coerce("elements_per_segment", "2") == 2
+    assert coerce("elements_per_segment", 3.0) == 3
+    assert coerce("record", "false") is False
+    for name, value in (("elements_per_segment", 2.5), ("v0", True), ("v0", "fast"),
+                        ("model", 3), ("record", "maybe")):
+        with pytest.raises(ValueError, match=f"parameter {name}="):
+            coerce(name, value)
+
+
+def test_help_texts_come_from_the_registry():
+    node_help = "\n".join(parameter_help(REGISTRY.values()))
+    for p in REGISTRY.values():
+        assert f"  {p.name} " in node_help and p.range_text() in node_help
+    sim = make_parser()._subparsers._group_actions[0].choices["simulate"]
+    text = sim.format_help().split("parameters (--set NAME=VALUE")[1]
+    for name in SPECS:
+        assert f"  {name} " in text
+    for name in NODE_PARAMETERS:
+        assert f"  {name} " not in text
+    model = next(a for a in sim._actions if a.dest == "model")
+    assert tuple(model.choices) == SPECS["model"].choices

@@ -1,0 +1,146 @@
+"""
+What a ROS 2 user relies on.
+
+Static parameter types, descriptors from the one registry, diagnostics on /diagnostics named
+by namespace, /clock QoS, and recording by default.
+"""
+import os
+import subprocess
+import sys
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import pytest
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+
+from tests.ros_helpers import NodeProcess, Probe, ros_env
+from umbrella_sim import ros_io
+from umbrella_sim.logs import read_log
+from umbrella_sim.params import NODE_PARAMETERS, REGISTRY, SPECS, START
+
+
+@pytest.fixture
+def probe():
+    p = Probe("conventions_probe")
+    yield p
+    p.close()
+
+
+def _value(kind: int, v) -> ParameterValue:
+    field = {ParameterType.PARAMETER_INTEGER: "integer_value",
+             ParameterType.PARAMETER_DOUBLE: "double_value",
+             ParameterType.PARAMETER_STRING: "string_value"}[kind]
+    return ParameterValue(type=kind, **{field: v})
+
+
+def test_descriptors_come_from_the_registry():
+    for name, p in REGISTRY.items():
+        d = ros_io.descriptor(name)
+        assert not d.dynamic_typing
+        assert d.type == {float: ParameterType.PARAMETER_DOUBLE,
+                          int: ParameterType.PARAMETER_INTEGER,
+                          str: ParameterType.PARAMETER_STRING,
+                          bool: ParameterType.PARAMETER_BOOL}[p.type]
+        assert d.read_only == (p.applies == START)
+        assert p.unit in d.description
+        if p.type is float and p.low is not None and p.high is not None:
+            assert (d.floating_point_range[0].from_value,
+                    d.floating_point_range[0].to_value) == (p.low, p.high)
+    # the issue that started this: publish_rate changes the physics step, built on reset
+    assert "~/reset" in ros_io.descriptor("publish_rate").additional_constraints
+    assert "at once" in ros_io.descriptor("marker_magnification").additional_constraints
+
+
+def test_live_node_conventions(probe, tmp_path):
+    """
+    One namespaced node, started the plain `ros2 run` way (no record_path).
+
+    Integer literals for doubles are taken as doubles and the type never changes, a string
+    is refused; diagnostics arrive on the absolute /diagnostics named by namespace; /clock
+    reaches a reader with rclpy TimeSource's QoS; the run is recorded into a new
+    timestamped bag directory in the working directory.
+    """
+    probe.subscribe("/diagnostics", DiagnosticArray)
+    time_source_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+    probe.subscribe("/a1/clock", Clock, time_source_qos)
+    with NodeProcess("-r", "__ns:=/a1", "-p", "v0:=0", "-p", "real_time_factor:=2",
+                     cwd=str(tmp_path)) as node:
+        node.wait_for_log("physics step")
+        srv = "/a1/umbrella_node"
+
+        def set_param(name, kind, v):
+            req = SetParameters.Request(parameters=[Parameter(name=name, value=_value(kind, v))])
+            return probe.call(SetParameters, f"{srv}/set_parameters", req).results[0]
+
+        def get(name):
+            req = GetParameters.Request(names=[name])
+            return probe.call(GetParameters, f"{srv}/get_parameters", req).values[0]
+
+        # started with -p v0:=0 and real_time_factor:=2 (integers): declared as doubles
+        assert get("v0").type == ParameterType.PARAMETER_DOUBLE and get("v0").double_value == 0
+        assert get("real_time_factor").type == ParameterType.PARAMETER_DOUBLE
+        r = set_param("marker_magnification", ParameterType.PARAMETER_INTEGER, 100)
+        assert r.successful, r.reason
+        got = get("marker_magnification")
+        assert got.type == ParameterType.PARAMETER_DOUBLE and got.double_value == 100.0
+        r = set_param("marker_magnification", ParameterType.PARAMETER_STRING, "big")
+        assert not r.successful and "type" in r.reason.lower()
+        assert get("marker_magnification").double_value == 100.0
+        r = set_param("elements_per_segment", ParameterType.PARAMETER_DOUBLE, 2.5)
+        assert not r.successful
+        assert get("elements_per_segment").type == ParameterType.PARAMETER_INTEGER
+        r = set_param("record_path", ParameterType.PARAMETER_STRING, "/tmp/elsewhere")
+        assert not r.successful and "read-only" in r.reason
+        desc = probe.call(DescribeParameters, f"{srv}/describe_parameters",
+                          DescribeParameters.Request(names=["publish_rate"])).descriptors[0]
+        assert "~/reset" in desc.additional_constraints and not desc.dynamic_typing
+
+        msg = probe.wait_for("/diagnostics", lambda m: m.status[0].name.startswith("a1/"))
+        assert msg.status[0].name == "a1/umbrella_node: physics"
+        # OK while it keeps pace, WARN when a loaded machine holds it back
+        assert msg.status[0].level in (DiagnosticStatus.OK, DiagnosticStatus.WARN)
+        assert msg.status[0].hardware_id == "umbrella_sim"
+        probe.wait_for_count("/a1/clock", 1)
+        assert node.stop() == 0
+        assert "recording finalised" in node.output()
+    (bag,) = [p for p in tmp_path.iterdir() if p.is_dir()]
+    assert bag.name.startswith("umbrella_a1_") and len(bag.name) == len("umbrella_a1_") + 19
+    log = read_log(str(bag))
+    assert log.count("/a1/joint_states") > 0 and log.count("/diagnostics") > 0
+
+
+def test_recording_can_be_turned_off_and_never_overwrites(tmp_path):
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args",
+                               "-p", "duration:=0.05", "-p", "real_time_factor:=0.0", *args],
+                              capture_output=True, text=True, env=ros_env(), timeout=120,
+                              cwd=str(tmp_path))
+
+    off = run("-p", "record:=false")
+    assert off.returncode == 0, off.stderr
+    assert os.listdir(tmp_path) == []
+    # two runs in the same second get two directories: NAME and NAME_1
+    first, second = run(), run()
+    assert first.returncode == 0 and second.returncode == 0, first.stderr + second.stderr
+    names = sorted(os.listdir(tmp_path))
+    assert len(names) == 2 and all(n.startswith("umbrella_2") for n in names)
+    assert len({read_log(str(tmp_path / n)).count("/joint_states") for n in names}) == 1
+
+
+@pytest.mark.parametrize("args, words", [
+    (["-p", "v0:=fast"], ["v0", "double"]),
+    (["-p", "elements_per_segment:=2.5"], ["elements_per_segment", "integer"]),
+    (["-p", "record:=maybe"], ["record", "bool"]),
+])
+def test_wrong_parameter_type_at_start_is_refused(args, words):
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args", *args],
+                       capture_output=True, text=True, env=ros_env(), timeout=60)
+    assert r.returncode == 2
+    assert all(w in r.stderr for w in words) and "Traceback" not in r.stderr, r.stderr
+
+
+def test_every_registry_entry_is_a_parameter_of_one_kind():
+    assert set(SPECS) | set(NODE_PARAMETERS) == set(REGISTRY)
+    assert not set(SPECS) & set(NODE_PARAMETERS)

@@ -1,0 +1,74 @@
+"""
+Parameter tables of msg_docs/, generated from the registry (params.REGISTRY).
+
+    .venv/bin/python -m umbrella_sim.param_docs          # rewrite the tables in place
+    .venv/bin/python -m umbrella_sim.param_docs --check  # exit 1 if a page is out of date
+
+Each page keeps its prose; only the text between ``<!-- BEGIN GENERATED: GROUP -->`` and
+``<!-- END GENERATED: GROUP -->`` is replaced (GROUP: model, input or node).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+
+from .params import NOW, REGISTRY, RESET, START
+
+PAGES = ("parameters.md", "node_parameters.md")
+_APPLIES = {RESET: "on `~/reset`", NOW: "at once", START: "read-only (at start)"}
+_BLOCK = re.compile(r"(<!-- BEGIN GENERATED: (\w+) -->\n).*?(<!-- END GENERATED: \2 -->)",
+                    re.S)
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def table(group: str) -> str:
+    """Return the markdown table of one parameter group."""
+    rows = ["| name | type | unit | default | range | applies | meaning |",
+            "|---|---|---|---|---|---|---|"]
+    for p in REGISTRY.values():
+        if p.group != group:
+            continue
+        rng = _cell(p.range_text()) + (f"; {_cell(p.rule)}" if p.rule else "")
+        rows.append(f"| `{p.name}` | {p.type_name} | {p.unit} | {_cell(p.default_str)} | "
+                    f"{rng} | {_APPLIES[p.applies]} | {_cell(p.doc)} |")
+    return "\n".join(rows) + "\n"
+
+
+def render(text: str) -> str:
+    """Return the page text with every generated block rebuilt from the registry."""
+    return _BLOCK.sub(lambda m: m.group(1) + table(m.group(2)) + m.group(3), text)
+
+
+def msg_docs_dir() -> str:
+    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                        "msg_docs")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description="Regenerate the parameter tables of msg_docs/.")
+    ap.add_argument("--check", action="store_true", help="only report stale pages")
+    ap.add_argument("--dir", default=msg_docs_dir(), help="the msg_docs directory")
+    args = ap.parse_args(argv)
+    stale = []
+    for page in PAGES:
+        path = os.path.join(args.dir, page)
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+        new = render(text)
+        if new != text:
+            stale.append(path)
+            if not args.check:
+                with open(path, "w", encoding="utf-8") as fh:
+                    fh.write(new)
+    for path in stale:
+        print(("out of date: " if args.check else "rewrote ") + path)
+    return 1 if stale and args.check else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
