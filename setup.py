@@ -13,6 +13,9 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
         ("share/" + package_name + "/msg_docs", glob("msg_docs/*.md")),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+        ("share/" + package_name + "/urdf", glob("urdf/*.urdf")),
+        ("share/" + package_name + "/rviz", glob("rviz/*.rviz")),
     ],
     # the compiled integrator step (plain C, loaded with ctypes); optional: without a C
     # compiler the numpy path runs instead

@@ -39,12 +39,21 @@ exec "$prefix/lib/umbrella_sim/umbrella_node" --ros-args \
     --params-file "$share/config/umbrella.yaml" \
     -p v0:=-0.5 -p duration:=0.2 -p real_time_factor:=0.0
 """
+    workdir = tmp_path / "work"        # `ros2 run` records into the working directory
+    workdir.mkdir()
     run = subprocess.run(["bash", "-c", script], env=env, capture_output=True, text=True,
-                         timeout=120)
+                         timeout=120, cwd=workdir)
     out = run.stdout + run.stderr
     assert run.returncode == 0, out
     assert f"prefix={tmp_path}/install/umbrella_sim" in out
     assert "locked at t = 0.0904" in out and "duration 0.2 s reached" in out
     assert "kernel compiled" in out                   # colcon built the C step too
-    for name in ("package.xml", "config/umbrella.yaml", "msg_docs/parameters.md"):
+    for name in ("package.xml", "config/umbrella.yaml", "msg_docs/parameters.md",
+                 "launch/umbrella.launch.py", "launch/multi_antenna.launch.py",
+                 "urdf/umbrella.urdf", "rviz/umbrella.rviz"):
         assert (tmp_path / "install/umbrella_sim/share/umbrella_sim" / name).exists()
+    for exe in ("umbrella_node", "umbrella_sim", "umbrella_replay", "umbrella_compare",
+                "umbrella-sim", "umbrella-replay", "umbrella-compare"):
+        assert (tmp_path / "install/umbrella_sim/lib/umbrella_sim" / exe).exists(), exe
+    (bag,) = workdir.iterdir()                       # recorded by default, never elsewhere
+    assert bag.name.startswith("umbrella_") and (bag / "metadata.yaml").exists()

@@ -260,8 +260,9 @@ class UmbrellaNode(Node):
 
     def _sample_messages(self) -> tuple[int, float, dict]:
         """Build the current state's messages under the sim lock, to be published later."""
+        cfg = self.node_cfg
         return self._epoch, self.sim.time, self.driver.messages(
-            self._marker_ns, self.node_cfg["marker_magnification"])
+            self._marker_ns, cfg["marker_magnification"], cfg["frame_prefix"])
 
     def _publish_sample(self, sample: tuple[int, float, dict]) -> None:
         epoch, t, msgs = sample

@@ -215,6 +215,10 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     _P("marker_magnification", float, 1.0, "-",
        "deformation magnification of the markers", low=0.0, high=1e6, applies=NOW,
        group=NODE),
+    _P("frame_prefix", str, "", "-",
+       "prefix of the frame ids of joint_states, tip_deflection and markers (umbrella_base, "
+       "leaf); 'a1/' matches robot_state_publisher's frame_prefix when several antennas "
+       "share one TF tree", applies=START, group=NODE, default_text='""'),
 )}
 
 #: the physics' parameters (the fields of UmbrellaParams), in registry order

@@ -65,8 +65,8 @@ class PublicationDriver:
                     f"{ev.kind} lock")))
         return events
 
-    def messages(self, marker_ns: str, magnification: float) -> dict:
+    def messages(self, marker_ns: str, magnification: float, frame_prefix: str = "") -> dict:
         s = self.sim.sample()
         positions = self.sim.model.node_positions(s.q, magnification)
         return ros_io.sample_messages(s, self.sim.params, positions, marker_ns,
-                                      self.initial_energy)
+                                      self.initial_energy, frame_prefix)

@@ -135,10 +135,10 @@ def clock_msg(t: float) -> Clock:
     return Clock(clock=stamp(t))
 
 
-def joint_state_msg(s: Sample) -> JointState:
+def joint_state_msg(s: Sample, frame_prefix: str = "") -> JointState:
     msg = JointState()
     msg.header.stamp = stamp(s.time)
-    msg.header.frame_id = INERTIAL_FRAME
+    msg.header.frame_id = frame_prefix + INERTIAL_FRAME
     msg.name = list(JOINT_NAMES)
     msg.position = [s.alpha1, s.alpha2 - s.alpha1, s.sleeve_position]
     msg.velocity = [s.alpha1_rate, s.alpha2_rate - s.alpha1_rate, s.sleeve_velocity]
@@ -146,10 +146,10 @@ def joint_state_msg(s: Sample) -> JointState:
     return msg
 
 
-def tip_deflection_msg(s: Sample) -> PointStamped:
+def tip_deflection_msg(s: Sample, frame_prefix: str = "") -> PointStamped:
     msg = PointStamped()
     msg.header.stamp = stamp(s.time)
-    msg.header.frame_id = LEAF_FRAME
+    msg.header.frame_id = frame_prefix + LEAF_FRAME
     msg.point = Point(x=s.tip_axial, y=s.tip_transverse, z=0.0)
     return msg
 
@@ -185,14 +185,14 @@ def energy_msg(s: Sample, initial_energy: float) -> Float64MultiArray:
     return msg
 
 
-def markers_msg(s: Sample, positions, ns: str) -> MarkerArray:
+def markers_msg(s: Sample, positions, ns: str, frame_prefix: str = "") -> MarkerArray:
     """LINE_STRIPs of the deformed leaf and link, a sphere at the sleeve."""
     out = MarkerArray()
     colours = (ColorRGBA(r=0.9, g=0.6, b=0.1, a=1.0), ColorRGBA(r=0.2, g=0.5, b=0.9, a=1.0))
     for i, (pts, colour) in enumerate(zip(positions, colours)):
         m = Marker()
         m.header.stamp = stamp(s.time)
-        m.header.frame_id = INERTIAL_FRAME
+        m.header.frame_id = frame_prefix + INERTIAL_FRAME
         m.ns = ns
         m.id = i
         m.type = Marker.LINE_STRIP
@@ -204,7 +204,7 @@ def markers_msg(s: Sample, positions, ns: str) -> MarkerArray:
         out.markers.append(m)
     m = Marker()
     m.header.stamp = stamp(s.time)
-    m.header.frame_id = INERTIAL_FRAME
+    m.header.frame_id = frame_prefix + INERTIAL_FRAME
     m.ns = ns
     m.id = 2
     m.type = Marker.SPHERE
@@ -240,13 +240,13 @@ def diagnostics_msg(t: float, name: str, level: bytes, message: str,
 
 
 def sample_messages(s: Sample, params: UmbrellaParams, positions, marker_ns: str,
-                    initial_energy: float) -> dict:
+                    initial_energy: float, frame_prefix: str = "") -> dict:
     """Return the per-publication messages of one sample, keyed by topic key."""
     return {
         "energy": energy_msg(s, initial_energy),
         "clock": clock_msg(s.time),
-        "joint_states": joint_state_msg(s),
-        "tip_deflection": tip_deflection_msg(s),
+        "joint_states": joint_state_msg(s, frame_prefix),
+        "tip_deflection": tip_deflection_msg(s, frame_prefix),
         "peak_stress": peak_stress_msg(s, params.yield_strength),
-        "markers": markers_msg(s, positions, marker_ns),
+        "markers": markers_msg(s, positions, marker_ns, frame_prefix),
     }

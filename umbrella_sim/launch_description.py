@@ -1,0 +1,181 @@
+"""
+What ``launch/umbrella.launch.py`` starts, as plain data (importable without ``launch``).
+
+The launch files are thin wrappers: they declare ``ARGUMENTS`` and turn ``plan(...)`` into
+``launch_ros.actions.Node`` / ``launch.actions.LogInfo`` actions.  Everything that decides
+something lives here, so it is tested without ROS 2's launch (it is not on PyPI).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import os
+
+from .params import REGISTRY, SPECS, UmbrellaParams
+
+PACKAGE = "umbrella_sim"
+
+
+@dataclass(frozen=True)
+class Argument:
+    name: str
+    default: str
+    description: str
+
+
+@dataclass
+class NodeAction:
+    package: str
+    executable: str
+    name: str
+    namespace: str
+    parameters: list = field(default_factory=list)    # params-file paths and dicts
+    remappings: list = field(default_factory=list)
+    arguments: list = field(default_factory=list)
+
+
+@dataclass
+class LogAction:
+    msg: str
+
+
+def share_dir(package: str = PACKAGE) -> str | None:
+    """Return the package's share directory from the ament index, or None if not installed."""
+    try:
+        from ament_index_python.packages import (get_package_share_directory,
+                                                 PackageNotFoundError)
+    except ImportError:
+        return None
+    try:
+        return get_package_share_directory(package)
+    except (PackageNotFoundError, LookupError, OSError, ValueError):
+        return None
+
+
+def default_params_file() -> str:
+    share = share_dir()
+    if share and os.path.isfile(os.path.join(share, "config", "umbrella.yaml")):
+        return os.path.join(share, "config", "umbrella.yaml")
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    return os.path.join(here, "config", "umbrella.yaml")
+
+
+def arguments() -> list[Argument]:
+    """Return the launch arguments: the node's setup, then one override per model parameter."""
+    out = [
+        Argument("namespace", "", "ROS namespace of the antenna (e.g. a1); '' = root"),
+        Argument("params_file", default_params_file(), "ROS 2 params file for umbrella_node"),
+        Argument("record", "true", "record to an MCAP bag (true | false)"),
+        Argument("record_path", "", "bag directory; '' = umbrella_<ns>_<date>-<time> in the "
+                                    "working directory"),
+        Argument("use_sim_time", "true",
+                 "robot_state_publisher and RViz follow the node's /clock (sim time)"),
+        Argument("robot_state_publisher", "true",
+                 "start robot_state_publisher with the URDF, if it is installed"),
+        Argument("rviz", "false", "start RViz with rviz/umbrella.rviz, if it is installed"),
+    ]
+    for name in list(SPECS) + ["publish_rate", "real_time_factor", "duration",
+                               "marker_magnification"]:
+        p = REGISTRY[name]
+        out.append(Argument(name, "", f"override {name} ({p.unit}, default from params_file): "
+                                      f"{p.doc}"))
+    return out
+
+
+def _truthy(value: str, name: str) -> bool:
+    return REGISTRY["record"].coerce(value) if name == "record" else \
+        str(value).strip().lower() in ("true", "1", "yes", "on")
+
+
+def overrides(values: dict[str, str]) -> dict:
+    """Typed parameter overrides from launch-argument strings ('' = not given)."""
+    out = {}
+    for name, text in values.items():
+        if name in REGISTRY and text not in ("", None):
+            out[name] = REGISTRY[name].coerce(text)
+    # check the model overrides as a whole now, not after the node has started
+    model = {k: v for k, v in out.items() if k in SPECS}
+    if model:
+        UmbrellaParams.from_mapping(model).validated()
+    return out
+
+
+def plan(values: dict[str, str], installed=share_dir) -> list:
+    """
+    Return the actions for one antenna, given the launch arguments' string values.
+
+    installed(package) returns the package's share directory or None (tests pass their own).
+    """
+    ns = values.get("namespace", "").strip("/")
+    rel = f"/{ns}" if ns else ""
+    sim_time = _truthy(values.get("use_sim_time", "true"), "use_sim_time")
+    params = [values.get("params_file") or default_params_file()]
+    node_params = overrides(values)
+    node_params["record"] = _truthy(values.get("record", "true"), "record")
+    if values.get("record_path"):
+        node_params["record_path"] = values["record_path"]
+    # one TF tree for every antenna: frames a1/umbrella_base, a1/leaf, ... (see frames in
+    # msg_docs/README.md); the node's messages name the same frames
+    prefix = f"{ns}/" if ns else ""
+    node_params["frame_prefix"] = prefix
+    params.append(node_params)
+    actions: list = [NodeAction(PACKAGE, "umbrella_node", "umbrella_node", ns, params)]
+    # TF consumers read sim time from this antenna's clock (relative: /<ns>/clock)
+    clock = [("/clock", f"{rel}/clock")] if ns else []
+    if _truthy(values.get("robot_state_publisher", "true"), "robot_state_publisher"):
+        if installed("robot_state_publisher"):
+            from .params import load_params_file
+            from .robot_description import urdf
+            # the geometry the node will run: the params file, then the overrides
+            given = {k: v for k, v in load_params_file(params[0]).items() if k in SPECS}
+            given.update({k: v for k, v in node_params.items() if k in SPECS})
+            model = UmbrellaParams.from_mapping(given)
+            actions.append(NodeAction(
+                "robot_state_publisher", "robot_state_publisher", "robot_state_publisher", ns,
+                [{"robot_description": urdf(model), "use_sim_time": sim_time,
+                  "frame_prefix": prefix}], clock))
+        else:
+            actions.append(LogAction(
+                "robot_state_publisher is not installed: no TF frames and no robot_description "
+                f"for {rel or '/'}; RViz can still show {rel}/markers in frame umbrella_base "
+                "(apt install ros-jazzy-robot-state-publisher)"))
+    if _truthy(values.get("rviz", "false"), "rviz"):
+        share = installed(PACKAGE)
+        if installed("rviz2") and share:
+            actions.append(NodeAction("rviz2", "rviz2", "rviz2", ns,
+                                      [{"use_sim_time": sim_time}], clock,
+                                      ["-d", os.path.join(share, "rviz", "umbrella.rviz")]))
+        else:
+            actions.append(LogAction("rviz2 is not installed: not starting RViz"))
+    return actions
+
+
+def split_namespaces(text: str) -> list[str]:
+    """Return the namespaces of 'a1,a2 a3' (commas or spaces), refusing duplicates."""
+    names = [n.strip().strip("/") for n in text.replace(",", " ").split()]
+    if not names:
+        raise ValueError("namespaces: give at least one, e.g. a1,a2")
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"namespaces: {', '.join(dup)} given twice")
+    return names
+
+
+def to_launch_actions(planned: list) -> list:
+    """Turn planned NodeAction / LogAction records into ROS 2 launch actions."""
+    from launch.actions import LogInfo
+    from launch_ros.actions import Node
+
+    out = []
+    for a in planned:
+        if isinstance(a, LogAction):
+            out.append(LogInfo(msg=a.msg))
+        else:
+            out.append(Node(package=a.package, executable=a.executable, name=a.name,
+                            namespace=a.namespace, parameters=a.parameters,
+                            remappings=a.remappings, arguments=a.arguments, output="screen"))
+    return out
+
+
+def launch_values(context) -> dict[str, str]:
+    """Return every argument's value from a launch context (its default when not given)."""
+    return {a.name: context.launch_configurations.get(a.name, a.default) for a in arguments()}
