@@ -1,0 +1,22 @@
+"""Session-wide checks shared by every test module."""
+import os
+import re
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# a bag the node names itself: umbrella[_ns]_YYYY_MM_DD-HH_MM_SS[_k]
+_BAG = re.compile(r"^umbrella_(\w+_)?\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?$")
+
+
+def _bags() -> set:
+    return {n for n in os.listdir(ROOT) if _BAG.match(n)}
+
+
+@pytest.fixture(scope="session", autouse=True)
+def no_recordings_left_in_the_repository():
+    """Nodes record by default into their working directory: tests must use temporary ones."""
+    before = _bags()
+    yield
+    left = sorted(_bags() - before)
+    assert not left, f"tests left recordings in {ROOT}: {left}"
