@@ -39,6 +39,7 @@ class Sample:
     work: float                    # work done by F_H since t = 0 (J)
     lock_energy_loss: float        # energy removed by the lock so far (J)
     constraint_residual: float     # max(|Phi|, |J q'|)
+    damping_dissipation: float = 0.0   # energy removed by structural damping so far (J)
 
 
 CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate", "alpha1_accel",
@@ -47,7 +48,7 @@ CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate"
                "peak_stress_link_x", "stress_leaf_joint", "stress_link_mid",
                "sleeve_reaction_x", "sleeve_reaction_y",
                "kinetic_energy", "strain_energy", "work", "lock_energy_loss",
-               "constraint_residual"]
+               "constraint_residual", "damping_dissipation"]
 
 
 def sample_row(s: Sample) -> list:
@@ -186,9 +187,10 @@ def summarize(r: RunResult) -> dict:
 
 
 def energy_balance_error(r: RunResult) -> np.ndarray:
-    """(T + V) - (T0 + V0) - W + lock losses, per sample (J)."""
+    """(T + V) - (T0 + V0) - W + lock losses + damping dissipation, per sample (J)."""
     e = r.column("kinetic_energy") + r.column("strain_energy")
-    return e - e[0] - r.column("work") + r.column("lock_energy_loss")
+    return (e - e[0] - r.column("work") + r.column("lock_energy_loss")
+            + r.column("damping_dissipation"))
 
 
 def energy_drift(r: RunResult) -> float:

@@ -16,7 +16,7 @@ import math
 import re
 from typing import Any, Mapping
 
-MODELS = ("flexible", "rigid-fe", "rigid")
+MODELS = ("flexible", "flexible-nonlinear", "rigid-fe", "rigid")
 LOCKS = ("energy", "plastic")
 
 # when a change made at runtime (ros2 param set) takes effect
@@ -182,8 +182,10 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "command it on the `sleeve_force` topic", low=0.0, high=1e9, group=INPUT),
     # model and numerics
     _P("model", str, "flexible", "-",
-       "flexible: Case 1 then Case 2; rigid-fe: Case 3 (elastic coordinates constrained); "
-       "rigid: closed-form two-angle model", choices=MODELS),
+       "flexible: Case 1 then Case 2; flexible-nonlinear: the same with the von Kármán "
+       "membrane strain u' + v'²/2 (geometric stiffening, thesis §7.2; numpy, slower); "
+       "rigid-fe: Case 3 (elastic coordinates constrained); rigid: closed-form two-angle "
+       "model", choices=MODELS),
     _P("elements_per_segment", int, 1, "-",
        "beam elements N on each of O–O'', O''–G and O''–H (1 = the thesis's 3-element "
        "model, 2 = 6-element)", low=1, high=64),
@@ -192,6 +194,12 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "models always stop: plastic)", choices=LOCKS),
     _P("time_step", float, 2.0e-3, "s", "fixed physics step of the integrator",
        low=0.0, low_open=True, high=0.01),
+    _P("damping_ratio", float, 0.0, "-",
+       "structural damping ratio ζ of the first stage-2 mode: strain-rate (Kelvin–Voigt, "
+       "stiffness-proportional Rayleigh) damping β = 2ζ/ω1, ω1 the first mode of the locked "
+       "frame linearised at full deployment, mode i gets ζω_i/ω1; the dissipated energy is "
+       "reported (`energy` topic); 0 = undamped (the thesis); no effect on rigid-fe and "
+       "rigid; with `flexible`, ζ > 0 steps in numpy", low=0.0, high=1.0, high_open=True),
     # the node
     _P("publish_rate", float, 100.0, "Hz",
        "publication rate (sim time) of joint_states, tip_deflection, peak_stress, energy, "

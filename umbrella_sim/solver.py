@@ -29,6 +29,11 @@ DIVERGENCE_RESIDUAL = 1e-6
 EVENT_TIME_TOLERANCE = 1e-12
 
 
+def nonlinear_model_needed(p: UmbrellaParams) -> bool:
+    """The nonlinear model, or the linear one with damping, step in nonlinear.py."""
+    return p.model == "flexible-nonlinear" or (p.model == "flexible" and p.damping_ratio > 0.0)
+
+
 class SimulationDiverged(RuntimeError):
     """The state became non-finite or left the constraint manifold; nothing was advanced."""
 
@@ -202,8 +207,12 @@ class UmbrellaSimulator:
         if params is not None:
             self.params = params.validated()
         p = self.params
-        self.model = UmbrellaModel(p)
-        self.engine = (RigidEngine if p.model == "rigid" else FiniteElementEngine)(p, self.model)
+        if nonlinear_model_needed(p):   # geometrically nonlinear and/or damped beams
+            from . import nonlinear
+            self.model, self.engine = nonlinear.build(p)
+        else:
+            self.model = UmbrellaModel(p)
+            self.engine = (RigidEngine if p.model == "rigid" else FiniteElementEngine)(p, self.model)
         self.h = p.time_step
         self._force = validate_force(p.sleeve_force)
         self._k = 0
@@ -377,6 +386,7 @@ class UmbrellaSimulator:
             multipliers=lam.copy(), sleeve_reaction=reaction,
             kinetic_energy=float(kinetic), strain_energy=float(m.strain_energy(q)),
             work=float(work), lock_energy_loss=float(lock_loss),
+            damping_dissipation=float(getattr(s, "dissipation", 0.0)),
             constraint_residual=self.engine.residual(s, stage),
         )
 
