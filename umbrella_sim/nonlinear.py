@@ -21,24 +21,33 @@ replay see the same q), the strains in this frame stay small (|v'| < 0.2 even at
 V0 = -2 m/s), and U is a polynomial (quartic in q), for which an exact energy-consistent
 discrete gradient exists.
 
-U is evaluated by 5-point Gauss quadrature per element, exact for the degree-8 integrand
-(u' is constant and v' quadratic in an element).  Its discrete gradient over a step is the
-average-vector-field (AVF) gradient int_0^1 grad U(q0 + s dq) ds, exact with 2-point Gauss
-in s because the integrand is cubic in s; dq . AVF = U(q1) - U(q0) exactly, so the midpoint
-scheme of integrators.py keeps its energy balance with the nonlinear U.  Stress recovery:
-axial sigma = E eps (with the v'^2/2 term), bending -/+ E c v'' as in the linear model.
+Membrane locking: with the thesis's shape functions (u linear, v cubic in an element) u' is
+constant in an element while v'^2/2 is quartic, so a pointwise eps cannot vanish when the
+element bends and inextensional bending is charged spurious axial energy (the spin-up tip
+deflection came out 40 % low at 4 elements).  The axial energy therefore uses the element's
+mean membrane strain, 1/2 EA l_e eps_e^2 with eps_e = (1/l_e) int (u' + v'^2/2) dx (5-point
+Gauss, exact for the quartic) -- the standard cure; for small motion eps_e = u' and U is the
+linear model's 1/2 q.K q exactly.  U is a quartic polynomial in q.  Its discrete gradient over
+a step is the average-vector-field (AVF) gradient int_0^1 grad U(q0 + s dq) ds, exact with
+2-point Gauss in s because the integrand is cubic in s; dq . AVF = U(q1) - U(q0) exactly, so
+the midpoint scheme of integrators.py keeps its energy balance with the nonlinear U.  Stress
+recovery: sigma = E (eps_e -/+ c v'') at both ends of every element.
 
 Structural damping (parameter ``damping_ratio`` zeta, models ``flexible`` and
 ``flexible-nonlinear``)
 ------------------------------------------------------------------------------------------
-Stiffness-proportional Rayleigh (Kelvin-Voigt) damping on the elastic coordinates,
-Q_d = -beta K e', beta = 2 zeta / omega_1, with omega_1 the first natural frequency of the
+Stiffness-proportional Rayleigh (Kelvin-Voigt) damping of the strain rates,
+Q_d = -C(q) q', C = beta B(q)^T D B(q) (B = d strain / dq, D = diag(EA, EI); C = beta K for
+the linear strain), beta = 2 zeta / omega_1, with omega_1 the first natural frequency of the
 locked frame linearised about the undeformed deployed configuration (stage 2).  That mode
 then has exactly the ratio zeta; mode i has zeta * omega_i / omega_1 (higher modes decay
-faster); rigid motion (alpha, R) is not damped: K is zero on those coordinates.  In the
-midpoint step the damping force is -C dq/h, so the step dissipates exactly
-dq . C dq / h >= 0; the state carries the dissipated energy, and the energy balance reads
-T + V - (T0 + V0) - W + lock loss + dissipation = 0.
+faster); rigid motion (alpha, R) is not damped.  For the nonlinear strain C must follow B(q):
+beta K would damp the axial rate u' of the foreshortening u' = -v'^2/2 of inextensional
+bending through the huge EA and over-damp the bending (it did: the V0 = -0.2 stage-2
+amplitude fell 4x in one cycle at zeta = 0.02).  In the midpoint step the damping force is
+-C(q_m) dq/h, so the step dissipates exactly dq . C(q_m) dq / h >= 0; the state carries the
+dissipated energy, and the energy balance reads T + V - (T0 + V0) - W + lock loss +
+dissipation = 0.
 
 Both are numpy code (a compiled version can follow the kernel of integrators.py); with
 zeta = 0 the model ``flexible`` keeps the compiled linear path.  Nothing here imports rclpy.
@@ -139,6 +148,16 @@ class StrainEnergy:
         b, nw = self._point_forces(q)
         return self.k_bending @ q + self.du.T @ nw + self.dv.T @ (nw * b)
 
+    def material_tangent(self, q) -> np.ndarray:
+        """B(q)^T D B(q): the tangent without the geometric stiffness; the strain-rate
+        (Kelvin-Voigt) damping is beta times this, so it acts on d eps/dt, never on the
+        foreshortening u' = -v'^2/2 of inextensional bending."""
+        if not self.nonlinear:
+            return self.k_linear
+        b = self.dv @ q
+        g = self.mean @ (self.du + b[:, None] * self.dv)
+        return self.k_bending + g.T @ (self.ea_l[:, None] * g)
+
     def tangent(self, q) -> np.ndarray:
         """d grad U / dq: material part g^T EA l g (g = d eps_mean / dq per element) plus
         the geometric stiffness int N v' v' (N = EA eps_mean)."""
@@ -168,7 +187,7 @@ class StrainEnergy:
 # ------------------------------------------------------------------------- model
 class NonlinearUmbrellaModel(UmbrellaModel):
     """UmbrellaModel with the strain energy of ``StrainEnergy`` (nonlinear or linear) and
-    the matching stress recovery; the damping matrix C = beta K of ``damping_ratio``."""
+    the matching stress recovery; the strain-rate damping of ``damping_ratio``."""
 
     def __init__(self, params: UmbrellaParams):
         super().__init__(params)
@@ -176,13 +195,13 @@ class NonlinearUmbrellaModel(UmbrellaModel):
         self.strain = StrainEnergy(((self.leaf, self.s_leaf), (self.link, self.s_link)), self.n,
                                    p.youngs_modulus * p.cross_section_area,
                                    nonlinear=p.model == NONLINEAR_MODEL)
-        # v' at both ends of every element, for the axial strain u' + v'^2/2
-        ends = np.array([0.0, 1.0])
-        self._dv_ends = (_derivatives(self.leaf, ends).dv, _derivatives(self.link, ends).dv)
         self.first_frequency = locked_first_frequency(self)
-        beta = 2.0 * p.damping_ratio / self.first_frequency
-        self.damping = beta * self.stiffness
-        self.damping_beta = beta
+        self.damping_beta = 2.0 * p.damping_ratio / self.first_frequency
+
+    def damping_matrix(self, q) -> np.ndarray:
+        """C(q) = beta B(q)^T D B(q): Kelvin-Voigt damping of the strain rates (beta K for the
+        linear strain; zero on alpha and R)."""
+        return self.damping_beta * self.strain.material_tangent(q)
 
     def strain_energy(self, q) -> float:
         return self.strain.energy(q)
@@ -191,13 +210,16 @@ class NonlinearUmbrellaModel(UmbrellaModel):
         return self.strain.gradient(q)
 
     def stresses(self, q):
+        """Top/bottom fibre stress E (eps -/+ c v'') with the element's membrane strain
+        eps = (1/l_e) int (u' + v'^2/2) dx (the strain the energy uses) at both its ends."""
         (lt, lb), (kt, kb) = super().stresses(q)
         if not self.strain.nonlinear:
             return (lt, lb), (kt, kb)
-        e_mod = self.params.youngs_modulus
-        extra = [0.5 * e_mod * (dv @ q[s]) ** 2
-                 for dv, s in zip(self._dv_ends, (self.s_leaf, self.s_link))]
-        return (lt + extra[0], lb + extra[0]), (kt + extra[1], kb + extra[1])
+        b = self.strain.dv @ q
+        extra = np.repeat(self.params.youngs_modulus * (self.strain.mean @ (0.5 * b * b)), 2)
+        n_leaf = len(lt)
+        return ((lt + extra[:n_leaf], lb + extra[:n_leaf]),
+                (kt + extra[n_leaf:], kb + extra[n_leaf:]))
 
 
 def locked_first_frequency(model: UmbrellaModel) -> float:
@@ -235,7 +257,7 @@ class ElasticMidpointDAE(MidpointDAE):
         kkt[:n, n:] = -jac.T
         kkt[n:, :n] = jac
         rhs = np.concatenate([m.quadratic_velocity_forces(q, qd) - m.elastic_force(q)
-                              - m.damping @ qd + m.applied_forces(q, force),
+                              - m.damping_matrix(q) @ qd + m.applied_forces(q, force),
                               m.constraint_bias(q, qd, cs)])
         sol = np.linalg.solve(kkt, rhs)
         return sol[:n], sol[n:]
@@ -269,7 +291,6 @@ class ElasticMidpointDAE(MidpointDAE):
         p0 = s.momentum if s.momentum is not None else m.mass_matrix(q0) @ v0
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
-        damping = m.damping
         q = q0 + h * v0
         lam = s.multipliers.copy()
         nc = len(phi0)
@@ -290,6 +311,7 @@ class ElasticMidpointDAE(MidpointDAE):
             jac_m = m.constraint_jacobian(qm, cs)
             if dd > 0.0:
                 jac_m += np.outer((phi - phi0 - jac_m @ dq) / dd, dq)
+            damping = m.damping_matrix(qm)
             resid = (mass1 @ v1 - p0 + damping @ dq
                      - h * (g_t - m.strain.discrete_gradient(q0, q) - force * g_y + jac_m.T @ lam))
             if lu is None or refresh:
@@ -325,7 +347,7 @@ class ElasticMidpointDAE(MidpointDAE):
                                    f"at t = {s.t + h:.9g} s (|dq| = {np.max(np.abs(dx[:n])):.3g})")
         self.iterations += it
         dq = q - q0
-        dissipated = float(dq @ damping @ dq) / h
+        dissipated = float(dq @ m.damping_matrix(q0 + 0.5 * dq) @ dq) / h
         v = 2.0 * dq / h - v0
         jac = m.constraint_jacobian(q, cs)
         jv = jac @ v
