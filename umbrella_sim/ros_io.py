@@ -156,7 +156,7 @@ def tip_deflection_msg(s: Sample, frame_prefix: str = "") -> PointStamped:
 
 PEAK_STRESS_LABELS = ("body: leaf,link",
                       "field: peak_abs_stress_Pa,position_m,stress_ratio,reference_stress_Pa")
-ENERGY_LABEL = "field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J"
+ENERGY_LABEL = "field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J,damping_J"
 
 
 def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
@@ -179,9 +179,11 @@ def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
 
 def energy_msg(s: Sample, initial_energy: float) -> Float64MultiArray:
     msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=ENERGY_LABEL, size=5, stride=5)]
-    balance = (s.kinetic_energy + s.strain_energy - initial_energy - s.work + s.lock_energy_loss)
-    msg.data = [s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss, balance]
+    msg.layout.dim = [MultiArrayDimension(label=ENERGY_LABEL, size=6, stride=6)]
+    balance = (s.kinetic_energy + s.strain_energy - initial_energy - s.work + s.lock_energy_loss
+               + s.damping_dissipation)
+    msg.data = [s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss, balance,
+                s.damping_dissipation]
     return msg
 
 
