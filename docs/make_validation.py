@@ -131,6 +131,11 @@ def main():
               "Deployment time and the first vibration mode are converged from the thesis's "
               "3-element mesh on; the peak stress, a second derivative of the displacement "
               "field, converges more slowly (its location moves with the mesh).", "",
+              "## Geometrically nonlinear model and structural damping", "",
+              "`flexible-nonlinear` beside `flexible` at V0 = −0.2, −1, −2 m/s (mesh series), "
+              "the spin-up benchmark of Kane, Ryan & Banerjee (1987) and damped runs: "
+              "[validation_nonlinear.md](validation_nonlinear.md) (regenerate: "
+              "`python docs/make_validation_nonlinear.py`).", "",
               f"_Generated in {time.time() - t_start:.0f} s._", ""]
     with open(os.path.join(HERE, "validation.md"), "w", encoding="utf-8") as fh:
         fh.write("\n".join(lines))

@@ -1,0 +1,65 @@
+#!/usr/bin/env python3
+"""Real-time factor of the geometrically nonlinear model (flexible-nonlinear) and of the damped
+linear one, beside the linear flexible model (simulated seconds per wall second, one process).
+
+V0 = -0.2, through the lock to t = 1.0 s, at the default (accuracy-chosen) time step,
+stepping only (no output samples), best of --repeat runs.  Target: >= 5x at N = 4 for
+flexible-nonlinear.  The nonlinear and damped paths are numpy (the linear flexible model
+runs in the compiled kernel when it is built); the machine is shared, so figures are noisy.
+
+    python bench/bench_nonlinear.py [--meshes 1 2 4] [--repeat 2] [--duration 1.0]
+"""
+import argparse
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+from umbrella_sim.params import UmbrellaParams  # noqa: E402
+from umbrella_sim.solver import UmbrellaSimulator  # noqa: E402
+
+TARGETS = {("flexible-nonlinear", 4): 5.0}
+CASES = (("flexible", 0.0), ("flexible", 0.02), ("flexible-nonlinear", 0.0),
+         ("flexible-nonlinear", 0.02))
+
+
+def one_run(params, duration):
+    sim = UmbrellaSimulator(params)
+    t0 = time.perf_counter()
+    sim.advance_to(duration, record=False)
+    return time.perf_counter() - t0, sim
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4])
+    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--duration", type=float, default=1.0)
+    ap.add_argument("--time-step", type=float, default=UmbrellaParams().time_step)
+    args = ap.parse_args()
+    print(f"V0 = -0.2, t = 0 -> {args.duration:g} s through the lock, h = {args.time_step:g} s, "
+          f"best of {args.repeat}, stepping only")
+    print(f"{'model':>19} {'zeta':>5} {'N':>3} {'dofs':>5} {'backend':>8} {'newton/step':>11} "
+          f"{'split':>6} {'RTF':>7} {'target':>9}")
+    for n in args.meshes:
+        for model, zeta in CASES:
+            p = UmbrellaParams(v0=-0.2, model=model, damping_ratio=zeta, elements_per_segment=n,
+                               time_step=args.time_step)
+            walls = []
+            for _ in range(args.repeat):
+                wall, sim = one_run(p, args.duration)
+                walls.append(wall)
+            integ = sim.engine.integrator
+            its = integ.iterations / sim.steps
+            split = getattr(integ, "halvings", 0)
+            rtf = args.duration / min(walls)
+            target = TARGETS.get((model, n))
+            verdict = "" if target is None else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}"
+            print(f"{model:>19} {zeta:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} {its:>11.2f} "
+                  f"{split:>6} {rtf:>6.2f}x {verdict:>9}")
+
+
+if __name__ == "__main__":
+    main()
