@@ -4,6 +4,10 @@ import re
 
 import pytest
 
+# Tests import numpy before umbrella_sim: the package's one-BLAS-thread default
+# (umbrella_sim/__init__.py) must be in place before numpy loads.
+import umbrella_sim  # noqa: F401, I100
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # a bag the node names itself: umbrella[_ns]_YYYY_MM_DD-HH_MM_SS[_k]
 _BAG = re.compile(r"^umbrella_(\w+_)?\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?$")

@@ -197,10 +197,16 @@ class NonlinearUmbrellaModel(UmbrellaModel):
                                    nonlinear=p.model == NONLINEAR_MODEL)
         self.first_frequency = locked_first_frequency(self)
         self.damping_beta = 2.0 * p.damping_ratio / self.first_frequency
+        # undamped, or damped with the linear strain: C does not depend on q
+        self._constant_damping = (self.damping_beta * self.stiffness
+                                  if self.damping_beta == 0.0 or not self.strain.nonlinear
+                                  else None)
 
     def damping_matrix(self, q) -> np.ndarray:
         """C(q) = beta B(q)^T D B(q): Kelvin-Voigt damping of the strain rates (beta K for the
         linear strain; zero on alpha and R)."""
+        if self._constant_damping is not None:
+            return self._constant_damping
         return self.damping_beta * self.strain.material_tangent(q)
 
     def strain_energy(self, q) -> float:
@@ -247,6 +253,7 @@ class ElasticMidpointDAE(MidpointDAE):
         self.strain_nonlinear = model.strain.nonlinear
         self.refreshes = 0   # iteration matrices re-factored inside a step, for diagnostics
         self.halvings = 0    # steps split in two because Newton failed
+        self.backtracks = 0  # line-search step reductions
 
     def consistent_acceleration(self, q, qd, force: float, cs: ConstraintSet):
         m = self.model
@@ -284,21 +291,20 @@ class ElasticMidpointDAE(MidpointDAE):
 
     def _step(self, s, h, force, cs):
         """M(q1) v1 - M(q0) v0 = h [G_T - G_U - C dq/h - F_H G_y + G_Phi^T lambda], Phi(q1) = 0;
-        G_U the AVF gradient of U, the rest as in MidpointDAE._step."""
+        G_U the AVF gradient of U, the rest as in MidpointDAE._step.  Newton with a
+        backtracking line search on the residual norm: with large bending the stiff axial
+        directions turn with v' inside a step and a full Newton update can overshoot."""
         m = self.model
         n = m.n
         q0, v0 = s.q, s.qd
         p0 = s.momentum if s.momentum is not None else m.mass_matrix(q0) @ v0
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
-        q = q0 + h * v0
-        lam = s.multipliers.copy()
         nc = len(phi0)
-        rhs = np.empty(n + nc)
-        lu = piv = None
-        refresh = False
-        last_norm = np.inf
-        for it in range(1, self.max_iterations + 1):
+        lam_scale = 0.5 * h * h
+
+        def evaluate(q, lam):
+            """Newton right-hand side -[h/2 R(q, lam); Phi(q)] and the pieces of its matrix."""
             dq = q - q0
             dd = dq @ dq
             qm = q0 + 0.5 * dq
@@ -313,10 +319,19 @@ class ElasticMidpointDAE(MidpointDAE):
                 jac_m += np.outer((phi - phi0 - jac_m @ dq) / dd, dq)
             damping = m.damping_matrix(qm)
             resid = (mass1 @ v1 - p0 + damping @ dq
-                     - h * (g_t - m.strain.discrete_gradient(q0, q) - force * g_y + jac_m.T @ lam))
+                     - h * (g_t - m.strain.discrete_gradient(q0, q) - force * g_y
+                            + jac_m.T @ lam))
+            return np.concatenate([-0.5 * h * resid, -phi]), (mass1, jac_m, damping, qm, dq)
+
+        q = q0 + h * v0
+        lam = s.multipliers.copy()
+        f, parts = evaluate(q, lam)
+        lu = piv = None
+        refresh = False
+        last_norm = np.inf
+        for it in range(1, self.max_iterations + 1):
             if lu is None or refresh:
-                # the stiff axial directions turn with v': with large bending the frozen
-                # matrix of the predictor converges slowly, so it is refreshed when needed
+                mass1, jac_m, damping, qm, dq = parts
                 it_mat = np.zeros((n + nc, n + nc))
                 it_mat[:n, :n] = (mass1 + 0.5 * h * h * m.strain.discrete_gradient_jacobian(q0, q)
                                   + 0.5 * h * (m.gyroscopic_matrix(qm, dq / h) + damping))
@@ -326,32 +341,39 @@ class ElasticMidpointDAE(MidpointDAE):
                 if info != 0:
                     raise ConvergenceError(f"singular iteration matrix at t = {s.t + h:.9g} s")
                 self.refreshes += int(refresh)
-                refresh = False
-            rhs[:n] = -0.5 * h * resid
-            rhs[n:] = -phi
-            dx = dgetrs(lu, piv, rhs)[0]
-            q = q + dx[:n]
-            lam = lam + dx[n:] / (0.5 * h * h)
-            step_norm = np.max(np.abs(dx[:n]))
-            if not np.isfinite(step_norm):
+            dx = dgetrs(lu, piv, f)[0]
+            if not np.all(np.isfinite(dx)):
                 raise ConvergenceError(f"Newton iterate became non-finite at t = {s.t + h:.9g} s")
+            f_norm = np.linalg.norm(f)
+            alpha = 1.0
+            while True:
+                q_try = q + alpha * dx[:n]
+                lam_try = lam + alpha * dx[n:] / lam_scale
+                f_try, parts_try = evaluate(q_try, lam_try)
+                if not self.strain_nonlinear or np.linalg.norm(f_try) < f_norm or alpha < 0.05:
+                    break
+                alpha *= 0.5
+                self.backtracks += 1
+            q, lam, f, parts = q_try, lam_try, f_try, parts_try
+            step_norm = alpha * np.max(np.abs(dx[:n]))
             rate = step_norm / last_norm if it > 1 else 1.0
             if step_norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * step_norm
                                               < self.tolerance):
-                if np.max(np.abs(m.constraint_residual(q, cs))) < PHI_TOLERANCE:
+                if np.max(np.abs(f[n:])) < PHI_TOLERANCE:
                     break
-            refresh = self.strain_nonlinear and it > 1 and rate > 0.2
+            # the stiff axial directions turn with v': a frozen matrix converges slowly
+            refresh = self.strain_nonlinear and it > 1 and (rate > 0.2 or alpha < 1.0)
             last_norm = step_norm
         else:
             raise ConvergenceError(f"Newton did not converge in {self.max_iterations} iterations "
-                                   f"at t = {s.t + h:.9g} s (|dq| = {np.max(np.abs(dx[:n])):.3g})")
+                                   f"at t = {s.t + h:.9g} s (|dq| = {step_norm:.3g})")
         self.iterations += it
         dq = q - q0
         dissipated = float(dq @ m.damping_matrix(q0 + 0.5 * dq) @ dq) / h
         v = 2.0 * dq / h - v0
         jac = m.constraint_jacobian(q, cs)
         jv = jac @ v
-        mass1 = m.mass_matrix(q)
+        mass1 = parts[0]
         if np.max(np.abs(jv)) > 0.0:
             chol, info = dpotrf(mass1, lower=False)
             if info != 0:
