@@ -1,5 +1,8 @@
 #!/usr/bin/env python3
-"""Real-time factor of the geometrically nonlinear model (flexible-nonlinear) and of the damped
+"""
+Real-time factor of the geometrically nonlinear and the damped models.
+
+Real-time factor of the geometrically nonlinear model (flexible-nonlinear) and of the damped
 linear one, beside the linear flexible model (simulated seconds per wall second, one process).
 
 V0 = -0.2, through the lock to t = 1.0 s, at the default (accuracy-chosen) time step,
@@ -56,9 +59,10 @@ def main():
             split = getattr(integ, "halvings", 0)
             rtf = args.duration / min(walls)
             target = TARGETS.get((model, n))
-            verdict = "" if target is None else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}"
-            print(f"{model:>19} {zeta:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} {its:>11.2f} "
-                  f"{split:>6} {rtf:>6.2f}x {verdict:>9}")
+            verdict = ("" if target is None
+                       else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}")
+            print(f"{model:>19} {zeta:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} "
+                  f"{its:>11.2f} {split:>6} {rtf:>6.2f}x {verdict:>9}")
 
 
 if __name__ == "__main__":

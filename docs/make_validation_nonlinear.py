@@ -1,5 +1,8 @@
 #!/usr/bin/env python3
-"""Regenerate docs/validation_nonlinear.md (one command):
+"""
+Regenerate docs/validation_nonlinear.md.
+
+Regenerate docs/validation_nonlinear.md (one command):
 
     .venv/bin/python docs/make_validation_nonlinear.py [--meshes 1 2 4 8]
 
@@ -8,7 +11,6 @@ V0 = -0.2, -1, -2 m/s for a mesh series, the spin-up benchmark of Kane, Ryan & B
 (1987) against the quasi-static stiffened solution, and a damped run.
 """
 import argparse
-import math
 import os
 import sys
 import time
@@ -46,8 +48,8 @@ def frame_rows(meshes):
     return rows
 
 
-KANE = dict(length=10.0, mass_per_length=1.2, ea=2.8e7, ei=1.4e4, youngs_modulus=7e10,
-            fibre=0.01)
+KANE = {"length": 10.0, "mass_per_length": 1.2, "ea": 2.8e7, "ei": 1.4e4,
+        "youngs_modulus": 7e10, "fibre": 0.01}
 
 
 def quasi_static_tip(t):
@@ -100,8 +102,10 @@ def main():
             continue
         lines.append(
             f"| {v0:g} | {n} | {model} | {fmt(s['deploy_time'], 1, '.6f')} | "
-            f"{fmt(s['tip_deflection_max'], 1e3, '.3f')} | {fmt(s['stage2_tip_amplitude'], 1e3, '.1f')} | "
-            f"{fmt(s['stage2_tip_period'], 1e3, '.2f')} | {fmt(s['peak_stress_leaf'], 1e-6, '.1f')} @ "
+            f"{fmt(s['tip_deflection_max'], 1e3, '.3f')} | "
+            f"{fmt(s['stage2_tip_amplitude'], 1e3, '.1f')} | "
+            f"{fmt(s['stage2_tip_period'], 1e3, '.2f')} | "
+            f"{fmt(s['peak_stress_leaf'], 1e-6, '.1f')} @ "
             f"{s['peak_stress_leaf_x']:.3g} | {s['energy_drift']:.1e} | {wall:.1f} |")
     finest = max(args.meshes)
     pick = {(v0, model): s for v0, n, model, s, err, _ in rows if n == finest and not err}
@@ -130,7 +134,7 @@ def main():
               "Reference: the quasi-static tip deflection of the spinning cantilever under its "
               "Euler load ρA θ̈ x with the exact centrifugal tension N = ρAω²(L² − x²)/2, "
               "EI v'''' − (N v')' − ρAω² v = −ρA θ̈ x, solved by scipy's boundary-value solver "
-              "(no finite elements). The published finding: the linear (\"conventional\") "
+              "(no finite elements). The published finding: the linear ('conventional') "
               "model diverges once ω passes the first bending frequency 3.516·√(EI/ρAL⁴) = "
               "3.80 rad/s; a model with geometric stiffening stays bounded.", "",
               "| t (s) | quasi-static reference (m) | nonlinear N = 4, h = 10 ms (m) | "

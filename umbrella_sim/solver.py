@@ -30,7 +30,11 @@ EVENT_TIME_TOLERANCE = 1e-12
 
 
 def nonlinear_model_needed(p: UmbrellaParams) -> bool:
-    """The nonlinear model, or the linear one with damping, step in nonlinear.py."""
+    """
+    Say whether nonlinear.py steps p: the nonlinear model, or the damped linear one.
+
+    The nonlinear model, or the linear one with damping, step in nonlinear.py.
+    """
     return p.model == "flexible-nonlinear" or (p.model == "flexible" and p.damping_ratio > 0.0)
 
 
@@ -212,7 +216,8 @@ class UmbrellaSimulator:
             self.model, self.engine = nonlinear.build(p)
         else:
             self.model = UmbrellaModel(p)
-            self.engine = (RigidEngine if p.model == "rigid" else FiniteElementEngine)(p, self.model)
+            engine = RigidEngine if p.model == "rigid" else FiniteElementEngine
+            self.engine = engine(p, self.model)
         self.h = p.time_step
         self._force = validate_force(p.sleeve_force)
         self._k = 0
