@@ -30,11 +30,7 @@ EVENT_TIME_TOLERANCE = 1e-12
 
 
 def nonlinear_model_needed(p: UmbrellaParams) -> bool:
-    """
-    Say whether nonlinear.py steps p: the nonlinear model, or the damped linear one.
-
-    The nonlinear model, or the linear one with damping, step in nonlinear.py.
-    """
+    """Say whether nonlinear.py steps p (the nonlinear model, or the damped linear one)."""
     return p.model == "flexible-nonlinear" or (p.model == "flexible" and p.damping_ratio > 0.0)
 
 
