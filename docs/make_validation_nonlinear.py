@@ -96,9 +96,9 @@ def main():
              f"{git_revision()[:12]}). Thesis data (Al 7075-T6, 10 mm square section, "
              f"l1 = l2 = l3 = 0.5 m), energy lock, physics step {STEP * 1e3:g} ms (the step "
              f"study below shows why), {STAGE2:g} s of stage 2. The formulation is argued in "
-             "the docstring of `umbrella_sim/nonlinear.py`: the same floating frames and mass matrix as "
-             "`flexible`, with the von Kármán membrane strain ε = u' + v'²/2 (element mean) in "
-             "the strain energy.", ""]
+             "the docstring of `umbrella_sim/nonlinear.py`: the same floating frames and mass "
+             "matrix as `flexible`, with the von Kármán membrane strain ε = u' + v'²/2 (element "
+             "mean) in the strain energy.", ""]
 
     # ---------------------------------------------------------------- the frame
     rows = frame_rows(args.meshes)
