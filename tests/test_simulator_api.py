@@ -71,14 +71,15 @@ def test_bad_force_profile_refused():
 
 
 def test_diverging_run_stops_with_clear_error_and_keeps_samples():
-    # 10 kN on a 0.4 kg frame: the 2 ms step cannot follow; Newton fails after a few steps
-    r = simulate(UmbrellaParams(v0=0.0, sleeve_force=1.0e4), 0.5)
+    # 2.3 kN on a 0.4 kg frame (just below the link's buckling load, so accepted): Newton
+    # fails after a few steps
+    r = simulate(UmbrellaParams(v0=0.0, sleeve_force=2300.0), 0.5)
     assert r.error is not None and "t = " in r.error
     assert len(r.samples) >= 3
     assert all(np.all(np.isfinite(s.q)) for s in r.samples)
     assert r.samples[-1].time < 0.5
     # the simulator object is left at the last good state
-    sim = UmbrellaSimulator(UmbrellaParams(v0=0.0, sleeve_force=1.0e4))
+    sim = UmbrellaSimulator(UmbrellaParams(v0=0.0, sleeve_force=2300.0))
     with pytest.raises(SimulationDiverged):
         for _ in range(300):
             sim.step()
@@ -100,3 +101,20 @@ def test_outputs_are_consistent():
     assert locked and all(abs(s.sleeve_position - p.sleeve_stop_height) < PHI_TOLERANCE
                           for s in locked)
     assert all(s.sleeve_reaction[1] != 0.0 for s in locked)
+
+
+def test_sleeve_force_bounded_by_what_the_link_carries():
+    """The command range ends at the link's Euler buckling load pi^2 E I / l3^2 (a pinned-
+    pinned column; the squash load A sigma_y is far higher for the thesis's section)."""
+    p = UmbrellaParams()
+    euler = math.pi ** 2 * 72.0e9 * (0.01 ** 4 / 12) / 0.5 ** 2
+    assert p.sleeve_force_limit == pytest.approx(euler, rel=1e-12)
+    assert 2.3e3 < euler < 2.4e3
+    stubby = UmbrellaParams(l1=0.05, l2=0.05, l3=0.06).validated()   # squash load governs
+    assert stubby.sleeve_force_limit == pytest.approx(0.01 ** 2 * 500e6, rel=1e-12)
+    sim = UmbrellaSimulator(p)
+    sim.set_sleeve_force(euler)
+    with pytest.raises(ValueError, match="link can carry"):
+        sim.set_sleeve_force(euler * 1.001)
+    with pytest.raises(ValueError, match="sleeve_force"):
+        UmbrellaParams(sleeve_force=1e9).validated()

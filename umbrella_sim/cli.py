@@ -3,14 +3,16 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import math
 import os
 import sys
 
 from . import __version__
-from .params import (load_params_file, NODE_ONLY_PARAMS, parameter_help, SPECS,
-                     UmbrellaParams)
+from .files import check_new_output, read_text_input
+from .params import (check_known_names, load_params_file, NODE_ONLY_PARAMS, parameter_help,
+                     SPECS, UmbrellaParams)
 from .solver import simulate, validate_force
 
 
@@ -25,36 +27,34 @@ def default_params_file() -> str | None:
     return None
 
 
-def read_force_profile(path: str) -> list[tuple[float, float]]:
-    """CSV of (t, F) rows, an optional header line; times non-decreasing, F >= 0."""
+def read_force_profile(path: str, limit: float | None = None) -> list[tuple[float, float]]:
+    """CSV of (t, F) rows, an optional header line; times non-decreasing, 0 <= F <= limit."""
     rows: list[tuple[float, float]] = []
+    text = read_text_input(path, "force profile")
     try:
-        fh = open(path, newline="", encoding="utf-8")
-    except OSError as exc:
-        raise ValueError(f"force profile {path}: {exc.strerror}") from None
-    with fh:
-        for lineno, row in enumerate(csv.reader(fh), start=1):
-            if not row or row[0].strip().startswith("#"):
-                continue
-            if len(row) < 2:
-                raise ValueError(f"force profile {path}:{lineno}: expected two columns t,F")
-            try:
-                t, f = float(row[0]), float(row[1])
-            except ValueError:
-                if lineno == 1:
-                    continue  # header
-                raise ValueError(f"force profile {path}:{lineno}: not numbers: "
-                                 f"{row[:2]}") from None
-            if not math.isfinite(t) or t < 0.0:
-                raise ValueError(f"force profile {path}:{lineno}: time {t} must be finite "
-                                 "and >= 0")
-            if rows and t < rows[-1][0]:
-                raise ValueError(f"force profile {path}:{lineno}: time {t} goes backwards")
-            try:
-                validate_force(f)
-            except ValueError as exc:
-                raise ValueError(f"force profile {path}:{lineno}: {exc}") from None
-            rows.append((t, f))
+        parsed = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
+        raise ValueError(f"force profile {path}: not CSV ({exc})") from None
+    for lineno, row in enumerate(parsed, start=1):
+        if not row or row[0].strip().startswith("#"):
+            continue
+        if len(row) < 2:
+            raise ValueError(f"force profile {path}:{lineno}: expected two columns t,F")
+        try:
+            t, f = float(row[0]), float(row[1])
+        except ValueError:
+            if lineno == 1:
+                continue  # header
+            raise ValueError(f"force profile {path}:{lineno}: not numbers: {row[:2]}") from None
+        if not math.isfinite(t) or t < 0.0:
+            raise ValueError(f"force profile {path}:{lineno}: time {t} must be finite and >= 0")
+        if rows and t < rows[-1][0]:
+            raise ValueError(f"force profile {path}:{lineno}: time {t} goes backwards")
+        try:
+            validate_force(f, limit)
+        except ValueError as exc:
+            raise ValueError(f"force profile {path}:{lineno}: {exc}") from None
+        rows.append((t, f))
     if not rows:
         raise ValueError(f"force profile {path}: no (t, F) rows")
     return rows
@@ -64,11 +64,15 @@ def build_params(args) -> UmbrellaParams:
     values: dict = {}
     params_file = args.params or default_params_file()
     if params_file:
-        values.update(load_params_file(params_file))
+        from_file = load_params_file(params_file)
+        check_known_names(from_file, set(SPECS) | set(NODE_ONLY_PARAMS),
+                          f"params file {params_file}")
+        values.update(from_file)
     for item in args.set or []:
         if "=" not in item:
             raise ValueError(f"--set {item!r}: expected name=value")
         name, value = item.split("=", 1)
+        check_known_names([name.strip()], SPECS, "--set")
         values[name.strip()] = value.strip()
     for name in NODE_ONLY_PARAMS:
         values.pop(name, None)
@@ -138,13 +142,13 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         params = build_params(args)
-        profile = read_force_profile(args.force_profile) if args.force_profile else None
+        profile = read_force_profile(args.force_profile, params.sleeve_force_limit) if args.force_profile else None
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f"--duration {args.duration}: must be > 0")
-        if args.csv and os.path.exists(args.csv):
-            raise ValueError(f"--csv {args.csv}: file exists, not overwriting")
-        if args.mcap and os.path.exists(args.mcap):
-            raise ValueError(f"--mcap {args.mcap}: already exists, not overwriting")
+        if args.csv:
+            check_new_output(args.csv, "--csv")
+        if args.mcap:
+            check_new_output(args.mcap, "--mcap")
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
             raise ValueError(f"--publish-rate {args.publish_rate}: must be in [1, 5000] Hz")
     except ValueError as exc:
@@ -161,19 +165,31 @@ def main(argv: list[str] | None = None) -> int:
         result = simulate(params, args.duration, force_profile=profile, progress=progress)
     if progress:
         progress.close()
-    if args.csv:
-        result.write_csv(args.csv, with_state=args.csv_state)
-    summary = result.summary()
+    summary = result.summary()          # printed before any file is written: never lost
     if args.json:
         print(json.dumps(summary, indent=2, sort_keys=True))
     else:
         for key in sorted(summary):
             print(f"{key:28s} {summary[key]}")
+    output_error = getattr(result, "recording_error", None)
+    if args.csv:
+        try:
+            result.write_csv(args.csv, with_state=args.csv_state)
+        except OSError as exc:
+            try:
+                os.unlink(args.csv)
+            except OSError:
+                pass
+            output_error = f"--csv {args.csv}: {exc.strerror or exc}"
+    if output_error:
+        print(f"umbrella_sim: error: output incomplete: {output_error} (the summary above "
+              "is complete)", file=sys.stderr)
     if result.error:
         print(f"umbrella_sim: error: {result.error} (kept {len(result.samples)} samples"
-              + (f" in {args.csv}" if args.csv else "") + ")", file=sys.stderr)
+              + (f" in {args.csv}" if args.csv and not output_error else "") + ")",
+              file=sys.stderr)
         return 3
-    return 0
+    return 4 if output_error else 0
 
 
 if __name__ == "__main__":

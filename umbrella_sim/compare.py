@@ -87,44 +87,67 @@ class Run:
         return out
 
 
-def _series(log, suffix, fn):
-    data = log.decoded(log.find_topic(suffix))
-    if not data:
-        raise LogError(f"{log.path}: topic {suffix} has no messages")
-    t = np.array([tm for tm, _ in data])
-    return t, [fn(m) for _, m in data]
+def _series(log, topic, fn, segment, width: int, stride: int = 1):
+    """(t, values) of one topic of one segment, streamed: only the extracted numbers are kept
+    (every stride-th message)."""
+    t, rows = [], []
+    for i, (tm, m) in enumerate(log.iter_decoded(topic, segment)):
+        if i % stride:
+            continue
+        try:
+            row = fn(m)
+        except (IndexError, AttributeError, TypeError) as exc:
+            raise LogError(f"{log.path}: topic {topic}: message {i} lacks the fields "
+                           f"umbrella_sim writes ({exc})") from None
+        t.append(tm)
+        rows.append(row)
+    if not t and width:
+        raise LogError(f"{log.path}: topic {topic} has no messages"
+                       + (f" in segment {segment.index}" if segment.index else ""))
+    order = np.argsort(np.array(t), kind="stable")
+    return np.array(t)[order], [rows[i] for i in order]
 
 
-def load_run(path: str, label: str | None = None) -> Run:
+def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     log = read_log(path)
-    params = log.parameters()
-    t, js = _series(log, "joint_states",
-                    lambda m: (m.position[0], m.velocity[0], m.position[0] + m.position[1]))
-    tt, tip = _series(log, "tip_deflection", lambda m: m.point.y)
-    ts, st = _series(log, "peak_stress", lambda m: tuple(m.data[:8]))
+    seg = log.segment(segment)
+    params = seg.params
+    t, js = _series(log, log.find_topic("joint_states"),
+                    lambda m: (m.position[0], m.velocity[0], m.position[0] + m.position[1]),
+                    seg, 3)
+    tt, tip = _series(log, log.find_topic("tip_deflection"), lambda m: m.point.y, seg, 1)
+    ts, st = _series(log, log.find_topic("peak_stress"),
+                     lambda m: tuple(m.data[i] for i in range(8)), seg, 8)
     st = np.array(st)
-    events = log.metadata.get("umbrella_sim.events", {})
+    # umbrella_sim.events.K: segment K ended by a reset; umbrella_sim.events: the last one
+    last = len(log.segments()) - 1
+    events = log.metadata.get("umbrella_sim.events" if segment == last
+                              else f"umbrella_sim.events.{segment}", {})
     deploy = None
     if events.get("locked") == "true":
         deploy = float(events["lock_time"])
     else:
         phase = log.find_topic("deployment_phase", required=False)
-        locked = [tm for tm, m in log.decoded(phase) if m.data == "locked"] if phase else []
-        deploy = locked[0] if locked else None
+        locked = [tm for tm, m in log.iter_decoded(phase, seg) if m.data == "locked"] \
+            if phase else []
+        deploy = min(locked) if locked else None
     drift = None
     energy = log.find_topic("energy", required=False)
     if energy:
-        e = np.array([m.data[:5] for _, m in log.decoded(energy)])
+        _, e = _series(log, energy, lambda m: tuple(m.data[i] for i in range(5)), seg, 0)
+        e = np.array(e)
         if len(e):
             drift = float(np.abs(e[:, 4]).max() / max(np.abs(e[:, 0] + e[:, 1]).max(),
                                                       np.abs(e[:, 2]).max(), 1e-300))
     shapes = []
     markers = log.find_topic("markers", required=False)
-    if markers:
-        for tm, m in log.decoded(markers):
-            pts = [np.array([[p.x, p.y] for p in mk.points]) for mk in m.markers[:2]]
-            if len(pts) == 2:
-                shapes.append((tm, pts[0], pts[1]))
+    if markers:           # at most ~2000 shapes kept, whatever the log's length
+        stride = max(1, log.count(markers) // 2000)
+
+        def shape(m):
+            return [np.array([[p.x, p.y] for p in mk.points]) for mk in m.markers[:2]]
+        tm_all, pts_all = _series(log, markers, shape, seg, 0, stride)
+        shapes = [(tm, pts[0], pts[1]) for tm, pts in zip(tm_all, pts_all) if len(pts) == 2]
     if label is None:
         label = f"{os.path.basename(os.path.dirname(log.path)) or log.path}"
     a = np.array(js)
@@ -301,7 +324,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="umbrella_compare", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("logs", nargs="+", help="bag directories or .mcap files (first = reference)")
-    ap.add_argument("--out", required=True, help="directory for compare.json and the plots")
+    ap.add_argument("--out", required=True,
+                    help="new (or empty) directory for compare.json and the plots")
+    ap.add_argument("--segment", type=int, default=0,
+                    help="which segment of each log (a ~/reset starts a new one; default 0)")
     ap.add_argument("--names", nargs="+", help="labels for the runs")
     ap.add_argument("--thesis", action="store_true", help="add the thesis's numbers")
     ap.add_argument("--no-plots", action="store_true")
@@ -309,24 +335,50 @@ def main(argv: list[str] | None = None) -> int:
                     metavar=("STAGE1", "STAGE2"),
                     help="deformation magnification of the shapes plot (default 200 5)")
     args = ap.parse_args(argv)
+    if not all(math.isfinite(m) and m > 0 for m in args.magnification):
+        ap.error(f"--magnification {args.magnification}: must be finite numbers > 0")
+    if args.segment < 0:
+        ap.error(f"--segment {args.segment}: must be >= 0")
+    if args.names and len(args.names) != len(args.logs):
+        ap.error(f"--names: {len(args.names)} labels for {len(args.logs)} logs")
     try:
-        if args.names and len(args.names) != len(args.logs):
-            raise LogError(f"--names: {len(args.names)} labels for {len(args.logs)} logs")
-        runs = [load_run(p, args.names[i] if args.names else None)
+        out = _check_out_dir(args.out)          # before reading any log
+        runs = [load_run(p, args.names[i] if args.names else None, args.segment)
                 for i, p in enumerate(args.logs)]
         result = compare(runs, thesis=args.thesis)
-        os.makedirs(args.out, exist_ok=True)
-        print_table(result)
-        if not args.no_plots:
-            result["plots"] = plot(runs, args.out, tuple(args.magnification))
-        with open(os.path.join(args.out, "compare.json"), "w", encoding="utf-8") as fh:
-            json.dump(result, fh, indent=2)
-        print(f"\nwrote {os.path.join(args.out, 'compare.json')}"
-              + (f" and {len(result['plots'])} plots" if "plots" in result else ""))
-        return 0
     except LogError as exc:
         print(f"umbrella_compare: error: {exc}", file=sys.stderr)
         return 2
+    print_table(result)
+    try:
+        os.makedirs(out, exist_ok=True)
+        if not args.no_plots:
+            result["plots"] = plot(runs, out, tuple(args.magnification))
+        with open(os.path.join(out, "compare.json"), "x", encoding="utf-8") as fh:
+            json.dump(result, fh, indent=2)
+    except OSError as exc:
+        print(f"umbrella_compare: error: writing to {out}: {exc.strerror or exc} (the table "
+              "above is complete)", file=sys.stderr)
+        return 4
+    print(f"\nwrote {os.path.join(out, 'compare.json')}"
+          + (f" and {len(result['plots'])} plots" if "plots" in result else ""))
+    return 0
+
+
+def _check_out_dir(path: str) -> str:
+    """--out: a new directory, or an existing empty one; never overwrites."""
+    from .files import check_new_output
+
+    if os.path.isdir(path) and not os.path.islink(path):
+        if os.listdir(path):
+            raise LogError(f"--out {path}: directory is not empty, not overwriting")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise LogError(f"--out {path}: directory is not writable")
+        return path
+    try:
+        return check_new_output(path, "--out")
+    except ValueError as exc:
+        raise LogError(str(exc)) from None
 
 
 if __name__ == "__main__":

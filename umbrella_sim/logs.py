@@ -1,9 +1,22 @@
 """
 Reading recorded runs back: a bag directory or a single .mcap, finalised or not.
 
-A finalised file is read through its summary and indexes.  A file whose writer was killed
-(SIGKILL: no summary, no footer) is read record by record from the start: every complete
-chunk is recovered and the torn tail is dropped (``LogData.truncated`` says so).
+Reading streams: opening a log reads its channels, metadata and message counts (from the
+summary of a finalised file, else by one pass over the records); messages are read from the
+file each time they are asked for, one chunk at a time, so memory stays bounded for any
+bag size.  A file whose writer was killed (SIGKILL: no summary, no footer) is read record by
+record from the start: every complete chunk is recovered and the torn tail is dropped
+(``LogData.truncated`` says so).  A recording stopped by a write error says so in its
+``umbrella_sim.recording_error`` record (``LogData.ended_early``).
+
+Segments: a ~/reset restarts sim time at 0; the recorder then offsets log times so they never
+go backwards and writes an ``umbrella_sim.segment.K`` record with the offset and the new
+parameters.  ``LogData.segments()`` lists them; ``decoded(topic, segment=K)`` gives that
+segment's messages in its own sim time.
+
+Everything that makes a file unusable raises LogError naming the file and the reason: not a
+regular file, not MCAP, not an umbrella_sim recording, unknown message types, payloads that
+do not decode.
 """
 from __future__ import annotations
 
@@ -11,6 +24,7 @@ from dataclasses import dataclass, field
 import importlib
 import json
 import os
+import stat
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
@@ -21,6 +35,9 @@ from rclpy.serialization import deserialize_message
 import yaml
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+PARAMETERS_RECORD = "umbrella_sim.parameters"
+SEGMENT_RECORD = "umbrella_sim.segment"            # + ".K", written by the recorder on reset
+ENDED_EARLY_RECORD = "umbrella_sim.recording_error"
 
 
 class LogError(ValueError):
@@ -34,15 +51,26 @@ class RawMessage:
     data: bytes
 
 
+@dataclass(frozen=True)
+class Segment:
+    index: int
+    offset_ns: int          # log time = offset_ns + sim time (ns)
+    end_ns: int | None      # first log time of the next segment, None for the last
+    params: dict
+
+
 @dataclass
 class LogData:
     path: str
     channels: dict = field(default_factory=dict)      # topic -> (type name, qos yaml)
-    messages: list = field(default_factory=list)      # RawMessage, file order
     metadata: dict = field(default_factory=dict)      # record name -> {key: value}
+    counts: dict = field(default_factory=dict)        # topic -> messages in the file
     truncated: bool = False
+    indexed: bool = False
+    time_range: tuple = (None, None)                  # first, last log time (ns)
     _types: dict = field(default_factory=dict)
 
+    # ------------------------------------------------------------------ topics
     def topics(self) -> list[str]:
         return sorted(self.channels)
 
@@ -61,26 +89,114 @@ class LogData:
 
     def msg_type(self, topic: str):
         if topic not in self._types:
-            self._types[topic] = import_type(self.channels[topic][0])
+            try:
+                self._types[topic] = import_type(self.channels[topic][0])
+            except LogError as exc:
+                raise LogError(f"{self.path}: topic {topic}: {exc}") from None
         return self._types[topic]
 
-    def decoded(self, topic: str) -> list[tuple[float, object]]:
-        """[(log time in s, message)] of one topic, in log-time order."""
+    def count(self, topic: str) -> int:
+        return self.counts.get(topic, 0)
+
+    @property
+    def message_count(self) -> int:
+        return sum(self.counts.values())
+
+    # ---------------------------------------------------------------- messages
+    def iter_raw(self, topics=None):
+        """RawMessage of the given topics (all if None), streamed from the file: log-time
+        order for a finalised file, file order for a recovered one (the recorder writes in
+        publication order)."""
+        wanted = None if topics is None else set(topics)
+        if self.indexed:
+            with open(self.path, "rb") as fh:
+                reader = make_reader(fh)
+                try:
+                    for _, channel, message in reader.iter_messages(
+                            topics=None if wanted is None else sorted(wanted),
+                            log_time_order=True):
+                        yield RawMessage(channel.topic, message.log_time, message.data)
+                except (McapError, EOFError, ValueError, AssertionError, KeyError) as exc:
+                    raise LogError(f"{self.path}: unreadable MCAP data ({exc})") from None
+            return
+        for record, topic in _scan(self.path, {}, {}):
+            if isinstance(record, Message) and (wanted is None or topic in wanted):
+                yield RawMessage(topic, record.log_time, record.data)
+
+    @property
+    def messages(self) -> list[RawMessage]:
+        """Every message in memory (small logs and tests only; tools use iter_raw)."""
+        return list(self.iter_raw())
+
+    def iter_decoded(self, topic: str, segment: "Segment | None" = None):
+        """(time in s, message) of one topic: log time, or the segment's sim time."""
         cls = self.msg_type(topic)
-        out = [(m.log_time * 1e-9, deserialize_message(m.data, cls))
-               for m in self.messages if m.topic == topic]
+        for i, m in enumerate(self.iter_raw([topic])):
+            if segment is not None:
+                if m.log_time < segment.offset_ns or (segment.end_ns is not None
+                                                      and m.log_time >= segment.end_ns):
+                    continue
+                t = (m.log_time - segment.offset_ns) * 1e-9
+            else:
+                t = m.log_time * 1e-9
+            yield t, self.decode(topic, m.data, cls, i, m.log_time)
+
+    def decoded(self, topic: str, segment: "Segment | None" = None) -> list[tuple[float, object]]:
+        """[(time in s, message)] of one topic, in time order (see iter_decoded)."""
+        out = list(self.iter_decoded(topic, segment))
         out.sort(key=lambda tm: tm[0])
         return out
 
-    def count(self, topic: str) -> int:
-        return sum(1 for m in self.messages if m.topic == topic)
+    def decode(self, topic: str, data: bytes, cls=None, index: int | None = None,
+               log_time: int | None = None):
+        cls = cls or self.msg_type(topic)
+        try:
+            return deserialize_message(data, cls)
+        except Exception as exc:      # rclpy raises RMWError / RuntimeError on bad CDR
+            where = "" if index is None else f" message {index} (log time {log_time} ns)"
+            reason = " ".join(str(exc).split())
+            raise LogError(f"{self.path}: topic {topic}{where}: payload does not decode as "
+                           f"{self.channels[topic][0]} ({reason})") from None
+
+    # ----------------------------------------------------------------- metadata
+    @property
+    def ended_early(self) -> str | None:
+        """Why the recording stopped early (write error), or None."""
+        rec = self.metadata.get(ENDED_EARLY_RECORD)
+        return rec.get("error", "unknown error") if rec else None
 
     def parameters(self) -> dict:
-        rec = self.metadata.get("umbrella_sim.parameters")
+        rec = self.metadata.get(PARAMETERS_RECORD)
         if rec is None:
-            raise LogError(f"{self.path}: no umbrella_sim.parameters metadata record "
+            raise LogError(f"{self.path}: no {PARAMETERS_RECORD} metadata record "
                            "(not recorded by umbrella_sim?)")
-        return {k: json.loads(v) for k, v in rec.items()}
+        try:
+            return {k: json.loads(v) for k, v in rec.items()}
+        except (TypeError, ValueError):
+            raise LogError(f"{self.path}: {PARAMETERS_RECORD} holds values that are not "
+                           "JSON") from None
+
+    def segments(self) -> list[Segment]:
+        """Segment 0 (start parameters), then one per ~/reset recorded."""
+        starts = [(0, 0, self.parameters())]
+        for name, rec in self.metadata.items():
+            if not name.startswith(SEGMENT_RECORD + "."):
+                continue
+            try:
+                # a JSON object of JSON texts, as in umbrella_sim.parameters
+                params = {k: json.loads(v) for k, v in json.loads(rec["parameters"]).items()}
+                starts.append((int(rec["index"]), int(rec["log_time_offset_ns"]), params))
+            except (KeyError, TypeError, ValueError):
+                raise LogError(f"{self.path}: metadata record {name} is malformed") from None
+        starts.sort()
+        return [Segment(k, off, starts[i + 1][1] if i + 1 < len(starts) else None, params)
+                for i, (k, off, params) in enumerate(starts)]
+
+    def segment(self, index: int) -> Segment:
+        segs = self.segments()
+        if not 0 <= index < len(segs):
+            raise LogError(f"{self.path}: no segment {index} (the log has {len(segs)})")
+        return segs[index]
 
 
 def import_type(type_name: str):
@@ -88,7 +204,7 @@ def import_type(type_name: str):
         pkg, kind, name = type_name.split("/")
         return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
     except (ValueError, ImportError, AttributeError):
-        raise LogError(f"message type {type_name} is not available here") from None
+        raise LogError(f"message type {type_name!r} is not available here") from None
 
 
 def qos_from_yaml(text: str) -> QoSProfile:
@@ -102,28 +218,44 @@ def qos_from_yaml(text: str) -> QoSProfile:
         return QoSProfile(depth=10)
 
 
+def _regular_file(path: str) -> None:
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise LogError(f"{path}: {exc.strerror}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise LogError(f"{path}: not a regular file (a FIFO, device or socket cannot be read "
+                       "as a log)")
+
+
 def resolve_path(path: str) -> str:
-    """Return the .mcap of a bag directory (metadata.yaml, else the only .mcap), or the file."""
+    """The .mcap of a bag directory (from metadata.yaml, else the only .mcap), or the file."""
     if os.path.isdir(path):
         meta = os.path.join(path, "metadata.yaml")
         if os.path.isfile(meta):
             try:
-                info = yaml.safe_load(open(meta, encoding="utf-8"))["rosbag2_bagfile_information"]
+                with open(meta, "rb") as fh:
+                    info = yaml.safe_load(fh.read().decode("utf-8"))["rosbag2_bagfile_information"]
                 return os.path.join(path, os.path.basename(info["relative_file_paths"][0]))
-            except (KeyError, IndexError, TypeError, yaml.YAMLError):
+            except (KeyError, IndexError, TypeError, UnicodeDecodeError, yaml.YAMLError):
                 raise LogError(f"{meta}: not a rosbag2 metadata file") from None
+            except OSError as exc:
+                raise LogError(f"{meta}: {exc.strerror}") from None
         found = [f for f in sorted(os.listdir(path)) if f.endswith(".mcap")]
         if len(found) != 1:
             raise LogError(f"{path}: a bag directory needs metadata.yaml or exactly one .mcap "
                            f"(found {len(found)})")
         return os.path.join(path, found[0])
-    if not os.path.exists(path):
+    if not os.path.lexists(path):
         raise LogError(f"{path}: no such file or directory")
     return path
 
 
-def read_log(path: str) -> LogData:
+def read_log(path: str, umbrella: bool = True) -> LogData:
+    """Open a log (channels, metadata, counts; no messages in memory).  umbrella=True: it
+    must be an umbrella_sim recording (its parameters record)."""
     mcap_path = resolve_path(path)
+    _regular_file(mcap_path)
     try:
         with open(mcap_path, "rb") as fh:
             head = fh.read(len(MCAP_MAGIC))
@@ -133,58 +265,90 @@ def read_log(path: str) -> LogData:
         raise LogError(f"{mcap_path}: not an MCAP file (bad magic bytes)")
     log = LogData(path=mcap_path)
     try:
-        _read_indexed(log)
+        _open_indexed(log)
     except (McapError, EOFError, ValueError, AssertionError, KeyError, OSError):
         log.channels.clear()
-        log.messages.clear()
         log.metadata.clear()
-        _read_recovering(log)
+        log.counts.clear()
+        _open_recovering(log)
     if not log.channels:
         raise LogError(f"{mcap_path}: no channels (empty or unreadable MCAP)")
+    if umbrella:
+        if PARAMETERS_RECORD not in log.metadata:
+            raise LogError(f"{mcap_path}: not an umbrella_sim recording (no "
+                           f"{PARAMETERS_RECORD} metadata record)")
+        log.segments()          # malformed segment records fail here, not half-way
+    for topic, (tname, _) in log.channels.items():
+        if log.counts.get(topic):
+            log.msg_type(topic)     # a type we cannot decode fails now, naming the topic
     return log
 
 
-def _read_indexed(log: LogData) -> None:
+def _open_indexed(log: LogData) -> None:
     with open(log.path, "rb") as fh:
         reader = make_reader(fh)
         summary = reader.get_summary()
-        if summary is None:
+        if summary is None or summary.statistics is None:
             raise McapError("no summary")
         for ch in summary.channels.values():
-            schema = summary.schemas[ch.schema_id]
-            log.channels[ch.topic] = (schema.name, ch.metadata.get("offered_qos_profiles", ""))
+            schema = summary.schemas.get(ch.schema_id)
+            log.channels[ch.topic] = (schema.name if schema else "",
+                                      ch.metadata.get("offered_qos_profiles", ""))
+            log.counts[ch.topic] = log.counts.get(ch.topic, 0) + \
+                summary.statistics.channel_message_counts.get(ch.id, 0)
         for m in reader.iter_metadata():
             log.metadata[m.name] = dict(m.metadata)
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            log.messages.append(RawMessage(channel.topic, message.log_time, message.data))
+        st = summary.statistics
+        if st.message_count:
+            log.time_range = (st.message_start_time, st.message_end_time)
+    log.indexed = True
 
 
-def _read_recovering(log: LogData) -> None:
-    """Scan records from the start, keeping every complete one (a killed writer)."""
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-
-    def take(record) -> None:
+def _scan(path: str, schemas: dict, channels: dict, state: dict | None = None):
+    """(record, topic) for every complete record, chunks opened; stops at a torn tail
+    (state["truncated"] = True).  One chunk in memory at a time."""
+    def take(record):
         if isinstance(record, Schema):
             schemas[record.id] = record
         elif isinstance(record, Channel):
             channels[record.id] = record
+        elif isinstance(record, Chunk):
+            for inner in breakup_chunk(record, validate_crc=True):
+                yield from take(inner)
+            return
+        topic = None
+        if isinstance(record, Message):
+            ch = channels.get(record.channel_id)
+            if ch is None:
+                return
+            topic = ch.topic
+        yield record, topic
+
+    with open(path, "rb") as fh:
+        try:
+            for record in StreamReader(fh, skip_magic=False).records:
+                yield from take(record)
+        except Exception:
+            if state is not None:
+                state["truncated"] = True
+
+
+def _open_recovering(log: LogData) -> None:
+    """One pass over the records of a file without a usable summary (a killed writer)."""
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    state = {"truncated": False}
+    for record, topic in _scan(log.path, schemas, channels, state):
+        if isinstance(record, Channel):
             schema = schemas.get(record.schema_id)
             log.channels[record.topic] = (schema.name if schema else "",
                                           record.metadata.get("offered_qos_profiles", ""))
+            log.counts.setdefault(record.topic, 0)
         elif isinstance(record, Message):
-            ch = channels.get(record.channel_id)
-            if ch is not None:
-                log.messages.append(RawMessage(ch.topic, record.log_time, record.data))
+            log.counts[topic] += 1
+            lo, hi = log.time_range
+            log.time_range = (record.log_time if lo is None else min(lo, record.log_time),
+                              record.log_time if hi is None else max(hi, record.log_time))
         elif isinstance(record, Metadata):
             log.metadata[record.name] = dict(record.metadata)
-        elif isinstance(record, Chunk):
-            for inner in breakup_chunk(record, validate_crc=True):
-                take(inner)
-
-    with open(log.path, "rb") as fh:
-        try:
-            for record in StreamReader(fh, skip_magic=False).records:
-                take(record)
-        except Exception:
-            log.truncated = True
+    log.truncated = state["truncated"]

@@ -6,9 +6,9 @@ Threads, chosen deliberately:
     (not a ROS timer: this node is the /clock source, and a timer on sim time would wait on
     itself).  Sim time is anchored to the wall time of the last (re)start, so it does not
     accumulate drift;
-  * the executor thread (SingleThreadedExecutor) serves the sleeve_force subscription, the
-    ~/reset and ~/pause services and parameter sets.  The compiled step is a ctypes call,
-    which releases the GIL, so commands are taken while physics runs.  A command is handed
+  * a two-thread executor serves the sleeve_force subscription (its own callback group)
+    and, independently, the ~/reset and ~/pause services and parameter sets.  The
+    compiled step is a ctypes call, which releases the GIL, so commands are taken while physics runs.  A command is handed
     over under a lock and applied at the next step boundary; every applied value is logged
     with its sim time, which is the exact force history for an offline re-run.
 Everything published and every command received (accepted, refused, applied) is recorded to
@@ -16,7 +16,9 @@ MCAP when ``record_path`` is set (see recording.py).
 """
 from __future__ import annotations
 
+import contextlib
 import gc
+import math
 import signal
 import sys
 import threading
@@ -25,8 +27,9 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.exceptions import InvalidParameterTypeException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
@@ -35,10 +38,21 @@ from std_srvs.srv import SetBool, Trigger
 
 from . import __version__
 from . import ros_io
-from .params import (check_node_parameters, NODE_PARAMETERS, parameter_help, REGISTRY, RESET,
-                     SPECS, UmbrellaParams)
+from .params import (check_known_names, check_node_parameters, NODE_PARAMETERS,
+                     parameter_help, read_params_file, REGISTRY, RESET, section_matches, SPECS,
+                     UmbrellaParams)
 from .publication import PublicationDriver
 from .solver import SimulationDiverged, validate_force
+
+#: parameters every rclpy node has (besides qos_overrides.*)
+ROS_OWN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
+#: overload policy: the physics may fall this far behind wall time x real_time_factor; past
+#: it the pacing is re-anchored (the backlog is dropped, not caught up) and the slip reported
+MAX_LAG_S = 0.5
+#: refused commands recorded per wall second at most (the rest are counted only)
+REFUSED_RECORD_RATE = 10
+#: exit codes (also in usage())
+EXIT_OK, EXIT_USAGE, EXIT_FAULT, EXIT_RECORDING = 0, 2, 3, 4
 
 
 class StartupError(RuntimeError):
@@ -47,8 +61,9 @@ class StartupError(RuntimeError):
 
 class UmbrellaNode(Node):
 
-    def __init__(self, **kwargs):
+    def __init__(self, params_files: tuple = (), **kwargs):
         super().__init__("umbrella_node", **kwargs)
+        self._check_parameter_sources(params_files, set(ros_io.parameter_defaults()))
         # statically typed parameters (ros_io.descriptor); an integer literal given for a
         # double (-p v0:=-1) is taken as the double, before rclpy's type check sees it
         for name, override in list(self._parameter_overrides.items()):
@@ -70,6 +85,9 @@ class UmbrellaNode(Node):
                 {k: v for k, v in values.items() if k in SPECS}).validated()
             self.node_cfg = check_node_parameters(
                 {k: v for k, v in values.items() if k in NODE_PARAMETERS})
+            if self.node_cfg["record"] and self.node_cfg["record_path"]:   # before any work
+                from .recording import check_record_path
+                check_record_path(self.node_cfg["record_path"])
         except ValueError as exc:
             raise StartupError(str(exc)) from None
         self.pending_params = self.model_params
@@ -84,15 +102,27 @@ class UmbrellaNode(Node):
         self._stop = threading.Event()
         self._wake = threading.Event()
         self.recorder = None
+        self.recording_error: str | None = None
         self.published: dict[str, int] = {}
+        self.refused_not_recorded = 0
+        self._refused_window = (0.0, 0)       # (wall start, recorded in this 1 s window)
+        self.slip = 0.0                       # wall seconds dropped by re-anchoring (overload)
+        self.re_anchors = 0
+        self._service_waiting = threading.Event()
+        self._peers_warned = ""
+        self._warned_at: dict[str, float] = {}
 
         self.pub = {key: self.create_publisher(t.type, t.name, t.qos)
                     for key, t in ros_io.TOPICS.items()}
+        # commands and services in their own callback groups, served by a 2-thread executor:
+        # a slow ~/reset never delays a command and a command flood never delays ~/pause
         self.command_sub = self.create_subscription(
-            ros_io.COMMAND.type, ros_io.COMMAND.name, self._on_force, ros_io.COMMAND.qos)
+            ros_io.COMMAND.type, ros_io.COMMAND.name, self._on_force, ros_io.COMMAND.qos,
+            callback_group=MutuallyExclusiveCallbackGroup())
         self.command_topic = self.command_sub.topic_name
-        self.create_service(Trigger, "~/reset", self._on_reset)
-        self.create_service(SetBool, "~/pause", self._on_pause)
+        services = MutuallyExclusiveCallbackGroup()
+        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
+        self.create_service(SetBool, "~/pause", self._on_pause, callback_group=services)
         # rclpy's three stages: convert exact int/double literals, validate, then apply
         self.add_pre_set_parameters_callback(self._coerce_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -104,6 +134,29 @@ class UmbrellaNode(Node):
         self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
 
     # ------------------------------------------------------------------ config
+    def _check_parameter_sources(self, params_files, known: set) -> None:
+        """Every params file has a section for this node, and every parameter given for it
+        (-p or a file) is one it knows: a typo is an error, never a silent default."""
+        fqn = self.get_fully_qualified_name()
+        known = known | ROS_OWN_PARAMETERS
+        in_files = set()
+        try:
+            for path in params_files:
+                sections = read_params_file(path)
+                if not any(section_matches(key, fqn) for key in sections):
+                    raise ValueError(f"params file {path}: no section for node {fqn} "
+                                     f"(sections: {', '.join(sections)}); use '/**' or the "
+                                     "node's name")
+                names = {n for key, values in sections.items() if section_matches(key, fqn)
+                         for n in values}
+                check_known_names(names, known, f"params file {path} (for {fqn})")
+                in_files |= names
+            names = [n for n in self._parameter_overrides
+                     if not n.startswith("qos_overrides.") and n not in in_files]
+            check_known_names(names, known, f"-p for {fqn}")
+        except ValueError as exc:
+            raise StartupError(str(exc)) from None
+
     def _build_simulator(self) -> None:
         p = self.model_params
         self.driver_rate = self.node_cfg["publish_rate"]    # a publish_rate set applies here
@@ -129,29 +182,44 @@ class UmbrellaNode(Node):
                                 source=f"umbrella_node {self.get_fully_qualified_name()}")
         try:
             if path:
-                self.recorder = BagRecorder(path, metadata(path))
+                self.recorder = BagRecorder(path, metadata(path),
+                                            on_error=self._on_recording_error)
             else:   # as ros2 bag record: a new timestamped directory in the working directory
-                self.recorder = new_bag_recorder(self.get_namespace(), metadata)
+                self.recorder = new_bag_recorder(self.get_namespace(), metadata,
+                                                 on_error=self._on_recording_error)
         except ValueError as exc:
             raise StartupError(str(exc)) from None
         self.recorder.add_umbrella_channels(
             {key: pub.topic_name for key, pub in self.pub.items()}, self.command_topic)
         self.get_logger().info(f"recording to {self.recorder.path}")
 
+    def _on_recording_error(self, reason: str) -> None:
+        """The recorder stopped on a write error (once): say so; physics and topics go on."""
+        self.recording_error = reason
+        self._log("error", f"recording stopped: {reason}; {self.recorder.path} keeps what was "
+                           "written before (readable, marked as ended early); the simulation "
+                           f"and its topics go on; exit code {EXIT_RECORDING} at the end")
+
+    def _log(self, level: str, text: str) -> None:
+        if self.context.ok():
+            getattr(self.get_logger(), level)(text)
+        else:  # after SIGINT/SIGTERM the context is gone: /rosout cannot take it any more
+            print(f"[{level.upper()}] [{self.get_name()}]: {text}", file=sys.stderr, flush=True)
+
     def close_recording(self) -> None:
         if self.recorder is None:
             return
+        had_error = self.recorder.error is not None
         self.recorder.close_run(self.sim, self.published, self.accepted_commands,
-                                self.refused_commands)
-        text = (f"recording finalised: {self.recorder.path} "
-                f"({sum(self.recorder.counts.values())} messages)")
-        if self.context.ok():
-            self.get_logger().info(text)
-        else:  # after SIGINT/SIGTERM the context is gone: /rosout cannot take it any more
-            print(f"[INFO] [{self.get_name()}]: {text}", file=sys.stderr, flush=True)
+                                self.refused_commands, fault=self.fault, extra={
+                                    "refused_not_recorded": str(self.refused_not_recorded),
+                                    "segments": str(self.recorder.segment + 1)})
+        if not had_error and self.recorder.error is None:
+            self._log("info", f"recording finalised: {self.recorder.path} "
+                              f"({sum(self.recorder.counts.values())} messages)")
 
     def _record(self, topic: str, msg, t: float) -> None:
-        if self.recorder is not None:
+        if self.recorder is not None and self.recorder.error is None:
             self.recorder.write(topic, msg, ros_io.stamp_ns(t))
 
     def _publish(self, key: str, msg, t: float) -> None:
@@ -164,25 +232,53 @@ class UmbrellaNode(Node):
     def _on_force(self, msg) -> None:
         t = self.sim.time
         try:
-            force = validate_force(msg.data)
+            force = validate_force(msg.data, self.sim.params.sleeve_force_limit)
         except ValueError as exc:
             self.refused_commands += 1
-            self._record(self.command_topic + ros_io.COMMAND_REFUSED_SUFFIX, msg, t)
-            self.get_logger().warning(f"refused sleeve_force command: {exc} "
-                                      f"(refused so far: {self.refused_commands})",
-                                      throttle_duration_sec=1.0)
+            now = time.monotonic()
+            start, n = self._refused_window
+            if now - start >= 1.0:
+                start, n = now, 0
+            if n < REFUSED_RECORD_RATE:       # a flood of bad commands cannot fill the disk
+                self._record(self.command_topic + ros_io.COMMAND_REFUSED_SUFFIX, msg, t)
+                n += 1
+            else:
+                self.refused_not_recorded += 1
+            self._refused_window = (start, n)
+            self._warn_throttled("refused", 1.0, lambda: f"refused sleeve_force command: {exc} "
+                                 f"(refused so far: {self.refused_commands})")
             return
         self.accepted_commands += 1
         self._record(self.command_topic, msg, t)
         with self._cmd_lock:
             self._commanded_force = force
 
-    def _on_reset(self, request, response):
+    @contextlib.contextmanager
+    def _locked(self):
+        """The sim lock for a service: the physics thread steps aside at its next
+        publication boundary (Python locks are not fair: without this a busy physics loop
+        could re-take the lock for seconds)."""
+        self._service_waiting.set()
         with self._sim_lock:
+            self._service_waiting.clear()
+            yield
+
+    def _on_reset(self, request, response):
+        with self._locked():
+            ended, fault = self.sim, self.fault
             self.model_params = self.pending_params
             self._build_simulator()
             self._epoch += 1
             self._anchor()
+            if self.recorder is not None:
+                from .recording import events_metadata, run_metadata
+                meta = run_metadata(self.model_params, self.node_cfg, self.driver.step,
+                                    self.sim.model, self.driver.backend, source="~/reset")
+                k = self.recorder.start_segment(
+                    meta["umbrella_sim.parameters"], gap_ns=ros_io.stamp_ns(self.driver.step),
+                    ended_events=events_metadata(ended, fault)["umbrella_sim.events"])
+                self.get_logger().info(f"recording segment {k} (reset; log time offset "
+                                       f"{self.recorder.offset_ns * 1e-9:.9f} s)")
             self._publish_phase("deploying")
         self._wake.set()
         response.success = True
@@ -191,7 +287,7 @@ class UmbrellaNode(Node):
         return response
 
     def _on_pause(self, request, response):
-        with self._sim_lock:
+        with self._locked():
             self.paused = bool(request.data)
             self._anchor()
         self._wake.set()
@@ -225,7 +321,7 @@ class UmbrellaNode(Node):
         """Apply a set that was accepted (post-set callback)."""
         core, node, candidate, cfg = self._parameter_candidate(params)
         self.pending_params = candidate
-        with self._sim_lock:
+        with self._locked():
             self.node_cfg = cfg
             if "real_time_factor" in node:
                 self._anchor()
@@ -275,13 +371,17 @@ class UmbrellaNode(Node):
     def _advance_one_publication(self) -> None:
         with self._cmd_lock:
             force = self._commanded_force
+        if force != self.sim.sleeve_force:
+            # logged and recorded BEFORE the solver sees it: a fault it causes is in the log
+            # and --resimulate reproduces it (the driver applies it at the period's first step)
+            t = self.sim.time
+            note = " (locked: no effect on motion)" if self.sim.stage == "locked" else ""
+            self.get_logger().info(f"sleeve force {force:.17g} N applied from t = {t:.9f} s"
+                                   f"{note}")
+            self._record(self.command_topic + ros_io.COMMAND_APPLIED_SUFFIX,
+                         Float64(data=force), t)
         for ev in self.driver.advance(force):
-            if ev.kind == "applied":
-                self.get_logger().info(f"sleeve force {ev.force:.17g} N applied from "
-                                       f"t = {ev.time:.9f} s{ev.detail}")
-                self._record(self.command_topic + ros_io.COMMAND_APPLIED_SUFFIX,
-                             Float64(data=ev.force), ev.time)
-            else:
+            if ev.kind == "locked":
                 self.get_logger().info(f"locked at t = {ev.time:.9f} s ({ev.detail})")
                 self._publish_phase("locked")
 
@@ -298,38 +398,50 @@ class UmbrellaNode(Node):
             with self._sim_lock:
                 self._publish_sample(self._sample_messages())
             while not self._stop.is_set():
+                if self._service_waiting.is_set():
+                    time.sleep(0.0005)        # a service waits for the lock: let it in
                 sample = None
                 with self._sim_lock:
                     idle = self.paused or self.fault is not None
+                    duration = self.node_cfg["duration"]
                     if not idle:
                         try:
                             self._advance_one_publication()
+                            sample = self._sample_messages()
                         except SimulationDiverged as exc:
+                            # the state stays at the last good step (maybe between
+                            # publications): nothing more is published from it
                             self.fault = str(exc)
-                            log.error(f"simulation fault: {exc}; call ~/reset to restart")
+                            log.error(f"simulation fault: {exc}; " + (
+                                f"the run ends (duration {duration:g} s is set; exit code "
+                                f"{EXIT_FAULT})" if duration > 0 else "call ~/reset to restart"))
                             self._publish_phase("fault")
-                        sample = self._sample_messages()
                     sim_t, rtf = self.sim.time, self.node_cfg["real_time_factor"]
                     target = (self._wall_anchor + (sim_t - self._sim_anchor) / rtf) if rtf > 0 \
                         else None
-                    duration = self.node_cfg["duration"]
+                    epoch = self._epoch
                 now = time.monotonic()
                 if target is not None and sample is not None:
                     lag = now - target
                     self._max_lag = max(self._max_lag, lag)
                     if lag < 0:               # publish the state of sim time t at wall time t
                         self._sleep_until(target)
+                    elif lag > MAX_LAG_S:
+                        self._re_anchor(epoch, now, sim_t, lag)
                     elif lag > max(0.05, 2.0 / self.driver_rate):
-                        log.warning(f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
-                                    f"time x real_time_factor (see diagnostics)",
-                                    throttle_duration_sec=5.0)
+                        self._warn_throttled("behind", 5.0, lambda: (
+                            f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
+                            "time x real_time_factor (see diagnostics)"))
                 if sample is not None:
                     self._publish_sample(sample)
                 if now - diag_wall >= 1.0:
                     measured = (sim_t - diag_sim) / (now - diag_wall)
+                    self._check_namespace_peers()
                     self._publish_diagnostics(sim_t, measured, lag)
                     diag_wall, diag_sim = now, sim_t
                     self._max_lag = 0.0
+                if duration > 0 and self.fault is not None:
+                    break
                 if duration > 0 and sim_t >= duration - 1e-12:
                     log.info(f"duration {duration:g} s reached at t = {sim_t:.9f} s")
                     break
@@ -342,6 +454,51 @@ class UmbrellaNode(Node):
         finally:
             if not self.finished.done():
                 self.finished.set_result(self.fault is None)
+
+    def _re_anchor(self, epoch: int, now: float, sim_t: float, lag: float) -> None:
+        """Overload policy: more than MAX_LAG_S behind, the pacing restarts from now (the
+        backlog is dropped, never caught up in a burst); the sim then runs at the speed the
+        machine allows, reported as measured_real_time_factor, and the dropped wall time
+        accumulates in slip_s (diagnostics)."""
+        with self._sim_lock:
+            if epoch != self._epoch:
+                return
+            self._wall_anchor, self._sim_anchor = now, sim_t
+        self.slip += lag
+        self.re_anchors += 1
+        self._warn_throttled("re-anchor", 5.0, lambda: (
+            f"physics cannot keep real time: {lag * 1e3:.0f} ms behind at t = {sim_t:.3f} s; "
+            f"pacing re-anchored (lag bounded by {MAX_LAG_S:g} s; total slip "
+            f"{self.slip:.3f} s in {self.re_anchors} re-anchors, see diagnostics)"))
+
+    def _warn_throttled(self, key: str, period: float, text) -> None:
+        """A WARN at most once per period (s) per key.  rclpy's own throttle_duration_sec
+        inspects the caller's frame on every call (~3.5 ms measured), which throttled the
+        command callback to ~130 commands/s during a flood."""
+        now = time.monotonic()
+        if now - self._warned_at.get(key, -math.inf) >= period:
+            self._warned_at[key] = now
+            self.get_logger().warning(text())
+
+    def _check_namespace_peers(self) -> None:
+        """Two simulators in one namespace mix their /clock, commands and resets: warn."""
+        try:
+            clocks = self.count_publishers(self.pub["clock"].topic_name)
+            same = sum(1 for n, ns in self.get_node_names_and_namespaces()
+                       if (n, ns) == (self.get_name(), self.get_namespace()))
+        except Exception:             # the graph is gone (shutting down)
+            return
+        self.clock_publishers = clocks
+        text = ""
+        if same > 1:
+            text = (f"{same} nodes named {self.get_fully_qualified_name()}: their topics, "
+                    "commands and ~/reset mix; give each its own namespace (-r __ns:=/NAME)")
+        elif clocks > 1:
+            text = (f"{clocks} publishers on {self.pub['clock'].topic_name}: another simulator "
+                    "or a replay in this namespace; sim time will jump")
+        if text and text != self._peers_warned:
+            self.get_logger().warning(text)
+        self._peers_warned = text
 
     def _sleep_until(self, target: float) -> None:
         """Sleep, then spin the last 0.3 ms for a punctual publication."""
@@ -357,6 +514,10 @@ class UmbrellaNode(Node):
         rtf = self.node_cfg["real_time_factor"]
         if self.fault:
             level, message = DiagnosticStatus.ERROR, f"fault: {self.fault}"
+        elif self.recording_error:
+            level, message = DiagnosticStatus.ERROR, f"recording stopped: {self.recording_error}"
+        elif self._peers_warned:
+            level, message = DiagnosticStatus.WARN, self._peers_warned
         elif rtf > 0 and lag > max(0.05, 2.0 / self.driver_rate):
             level, message = (DiagnosticStatus.WARN,
                               f"behind real time: measured {measured:.3f}x of {rtf:g}x")
@@ -368,7 +529,13 @@ class UmbrellaNode(Node):
                   "phase": self._phase, "paused": self.paused,
                   "accepted_commands": self.accepted_commands,
                   "refused_commands": self.refused_commands, "steps": self.sim.steps,
-                  "physics_step_s": self.sim.h}
+                  "physics_step_s": self.sim.h, "slip_s": f"{self.slip:.6f}",
+                  "re_anchors": self.re_anchors,
+                  "refused_not_recorded": self.refused_not_recorded,
+                  "clock_publishers": getattr(self, "clock_publishers", 1),
+                  "recording": ("off" if self.recorder is None else
+                                f"stopped: {self.recording_error}" if self.recording_error
+                                else "ok")}
         # the status name carries the namespace: every antenna publishes on /diagnostics
         self._publish("diagnostics", ros_io.diagnostics_msg(
             sim_t, ros_io.diagnostic_name(self.get_fully_qualified_name()), level, message,
@@ -386,57 +553,91 @@ def usage() -> str:
     lines += ["", "topics: " + ", ".join(t.name for t in ros_io.TOPICS.values())
               + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= 0)",
               "services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)",
-              "exit: SIGINT/SIGTERM stop the physics, then finalise the recording; code 0 on "
-              "a clean stop or when duration is reached, 2 for invalid arguments or "
-              "parameters, 3 if the simulation ended in a fault",
+              "exit: SIGINT/SIGTERM stop the physics, then finalise the recording; code "
+              f"{EXIT_OK} on a clean stop or when duration is reached, {EXIT_USAGE} for "
+              "invalid arguments, parameters or params files, "
+              f"{EXIT_FAULT} if the simulation ended in a fault, {EXIT_RECORDING} if the "
+              "recording stopped on a write error (the run itself went on)",
               "details: msg_docs/ in the package share directory"]
     return "\n".join(lines)
 
 
+def _params_files(argv: list[str]) -> list[str]:
+    """The --params-file arguments among the ROS arguments."""
+    return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--params-file"]
+
+
 def main(argv: list[str] | None = None) -> int:
+    # from here on SIGINT/SIGTERM only ask for a stop (no KeyboardInterrupt traceback during
+    # start-up); rclpy's own handlers would shut the context down at once, under the
+    # physics thread's feet; ours stop the physics first, then the recording is closed,
+    # then rclpy
+    stop_requested = []
+    node = None
+
+    def on_signal(signum, frame):
+        stop_requested.append(signum)
+        if node is not None:
+            node.request_stop()
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, on_signal)
     argv = list(sys.argv if argv is None else argv)
     if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
                                                if "--ros-args" in argv else len(argv)]):
         print(usage())
-        return 0
-    # rclpy's own handlers would shut the context down at once, under the physics thread's
-    # feet; ours stop the physics first, then the recording is closed, then rclpy
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+        return EXIT_OK
+
+    def fail(text: str) -> int:
+        print(f"umbrella_node: error: {text}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return EXIT_USAGE
+
+    files = _params_files(argv)
+    for path in files:          # rcl's parse errors are tracebacks: check the files first
+        try:
+            read_params_file(path)
+        except ValueError as exc:
+            return fail(str(exc))
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong
+        reason = " ".join(str(exc).split())
+        if type(exc).__name__ == "UnknownROSArgsError":
+            reason = f"unknown ROS arguments {reason}"
+        return fail(f"invalid ROS arguments: {reason} (see --help)")
     leftover = rclpy.utilities.remove_ros_args(argv)[1:]
     if leftover:
-        print(f"umbrella_node: error: unexpected arguments {leftover}; parameters go after "
-              "--ros-args as -p name:=value or --params-file FILE", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
+        return fail(f"unexpected arguments {leftover}; parameters go after --ros-args as "
+                    "-p name:=value or --params-file FILE")
     try:
-        node = UmbrellaNode()
+        node = UmbrellaNode(params_files=tuple(files))
     except StartupError as exc:
-        print(f"umbrella_node: error: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    executor = SingleThreadedExecutor()
+        return fail(str(exc))
+    executor = MultiThreadedExecutor(num_threads=2)
     executor.add_node(node)
-
-    def on_signal(signum, frame):
+    if stop_requested:          # a signal during start-up: stop before any physics
         node.request_stop()
-
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, on_signal)
-    node.start()
+    else:
+        node.start()
     ok = True
     try:
         # the timeout lets a signal's Python handler run while the executor waits
-        while not node.finished.done():
+        while not node.finished.done() and not stop_requested:
             executor.spin_once(timeout_sec=0.1)
-        ok = bool(node.finished.result())
+        node.stop()
+        ok = bool(node.finished.result()) if node.finished.done() else node.fault is None
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         node.stop()
         node.close_recording()
+        executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         rclpy.try_shutdown()
-    return 0 if ok else 3
+    if not ok:
+        return EXIT_FAULT
+    return EXIT_RECORDING if node.recording_error else EXIT_OK
 
 
 if __name__ == "__main__":

@@ -80,6 +80,7 @@ class RunResult:
     steps: int = 0
     wall_time: float = 0.0
     error: str | None = None
+    recording_error: str | None = None       # the MCAP recording stopped early (why)
     q_labels: list = field(default_factory=list)
     leaf_stress_x: list = field(default_factory=list)   # m from O, per stress point
     link_stress_x: list = field(default_factory=list)   # m from O''

@@ -16,6 +16,8 @@ import math
 import re
 from typing import Any, Mapping
 
+from .files import read_text_input
+
 MODELS = ("flexible", "flexible-nonlinear", "rigid-fe", "rigid")
 LOCKS = ("energy", "plastic")
 
@@ -179,7 +181,9 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        low=-1e3, high=1e3),
     _P("sleeve_force", float, 0.0, "N",
        "sleeve force F_H at the start, along −Y (pushes toward deployment); at runtime "
-       "command it on the `sleeve_force` topic", low=0.0, high=1e9, group=INPUT),
+       "command it on the `sleeve_force` topic", low=0.0, high=1e9, group=INPUT,
+       rule="≤ the axial load the link can carry, min(π² E I / l3², A σ_yield): 2368.7 N "
+            "for the thesis data (topic_sleeve_force.md)"),
     # model and numerics
     _P("model", str, "flexible", "-",
        "flexible: Case 1 then Case 2; flexible-nonlinear: the same with the von Kármán "
@@ -293,6 +297,16 @@ class _DerivedQuantities:
         return self.density * self.cross_section_area
 
     @property
+    def sleeve_force_limit(self) -> float:
+        """Largest sleeve force F_H a command may ask for (N): the axial load the link O''-H
+        can carry, min(Euler buckling load of a pinned-pinned column pi^2 E I / l3^2, squash
+        load A sigma_y).  In stage 1 the link's compression is F_H / sin(alpha2) >= F_H, so a
+        larger F_H buckles or crushes the link in every configuration, which this
+        (geometrically linear, elastic) model cannot represent."""
+        euler = math.pi ** 2 * self.youngs_modulus * self.cross_section_inertia / self.l3 ** 2
+        return min(euler, self.cross_section_area * self.yield_strength)
+
+    @property
     def sleeve_stop_height(self) -> float:
         """Height of the stop S on the axle: the rigid geometry at alpha_deployed."""
         return _sleeve_height(self.l1, self.l3, self.alpha_deployed)
@@ -326,7 +340,11 @@ class _DerivedQuantities:
 
 
 def _unknown_message(unknown: list[str]) -> str:
-    return f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(SPECS))}"
+    try:
+        check_known_names(unknown, SPECS, "parameters")
+    except ValueError as exc:
+        return str(exc)
+    return ""
 
 
 #: the physics' parameters as one frozen record; fields and defaults from SPECS
@@ -366,6 +384,10 @@ def validate(p: UmbrellaParams) -> None:
         if reach >= p.l3:
             raise ValueError(f"parameter {name}={getattr(p, name)}: geometry cannot close, "
                              f"l1*|cos({name})| = {reach:.6g} m must be < l3 = {p.l3} m")
+    if p.sleeve_force > p.sleeve_force_limit:
+        raise ValueError(f"parameter sleeve_force={p.sleeve_force}: must be <= "
+                         f"{p.sleeve_force_limit:.6g} N, the load the link can carry "
+                         "(Euler buckling / squash load, msg_docs/topic_sleeve_force.md)")
 
 
 def check_node_parameters(values: Mapping[str, Any]) -> dict:
@@ -378,29 +400,84 @@ def check_node_parameters(values: Mapping[str, Any]) -> dict:
     return out
 
 
-def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:
-    """Read the ``ros__parameters`` of a ROS 2 params YAML (``/**`` or the node's name)."""
+def _flatten(values: dict, prefix: str = "") -> dict:
+    """Nested mappings are dotted parameter names in ROS 2 (`a: {b: 1}` is `a.b`)."""
+    out = {}
+    for key, value in values.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(_flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def read_params_file(path: str) -> dict[str, dict]:
+    """{section (node name pattern): ros__parameters with dotted names} of a ROS 2 params
+    YAML, or ValueError naming the file and the reason.  The same checks rcl makes, done
+    first so that a bad file gets a one-line error instead of an rcl traceback."""
     import yaml  # local import: only the file path needs it
 
+    text = read_text_input(path, "params file")
     try:
-        with open(path, "r", encoding="utf-8") as fh:
-            doc = yaml.safe_load(fh)
-    except OSError as exc:
-        raise ValueError(f"params file {path}: {exc.strerror}") from None
+        doc = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise ValueError(f"params file {path}: not valid YAML ({exc})") from None
-    if not isinstance(doc, dict):
-        raise ValueError(f"params file {path}: expected a mapping of node names")
-    merged: dict = {}
-    for key in ("/**", node_name, "/" + node_name):
-        section = doc.get(key)
-        if section is None:
-            continue
+        reason = " ".join(str(exc).split())
+        raise ValueError(f"params file {path}: not valid YAML ({reason})") from None
+    if not isinstance(doc, dict) or not doc:
+        raise ValueError(f"params file {path}: expected a mapping of node names to "
+                         "{ros__parameters: {...}}")
+    sections = {}
+    for key, section in doc.items():
         values = section.get("ros__parameters") if isinstance(section, dict) else None
         if not isinstance(values, dict):
-            raise ValueError(f"params file {path}: section {key!r} has no ros__parameters mapping")
-        merged.update(values)
-    if not merged:
-        raise ValueError(f"params file {path}: no '/**' or '{node_name}' section with "
-                         "ros__parameters")
+            raise ValueError(f"params file {path}: section {key!r} has no ros__parameters "
+                             "mapping")
+        extra = sorted(set(section) - {"ros__parameters"})
+        if extra:
+            raise ValueError(f"params file {path}: section {key!r}: only ros__parameters is "
+                             f"allowed, found {', '.join(map(str, extra))}")
+        sections[str(key)] = _flatten(values)
+    return sections
+
+
+def section_matches(pattern: str, node_fqn: str) -> bool:
+    """Whether a params-file section name applies to the node of fully qualified name
+    node_fqn (ROS 2 rules: '/**' any namespace depth, '*' one token, no leading slash means
+    relative to the root)."""
+    tokens = pattern.strip("/").split("/")
+    regex = "".join("(/[^/]+)*" if t == "**" else "/[^/]+" if t == "*" else "/" + re.escape(t)
+                    for t in tokens)
+    return re.fullmatch(regex, node_fqn) is not None
+
+
+def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:
+    """The ``ros__parameters`` of a ROS 2 params YAML that apply to node_name in the root
+    namespace (sections '/**', '/*', node_name, ...); a file with no such section is an
+    error."""
+    sections = read_params_file(path)
+    merged: dict = {}
+    for key, values in sections.items():
+        if section_matches(key, "/" + node_name):
+            merged.update(values)
+    if not any(section_matches(key, "/" + node_name) for key in sections):
+        raise ValueError(f"params file {path}: no section for node /{node_name} (sections: "
+                         f"{', '.join(sections)}); use '/**' or '{node_name}'")
     return merged
+
+
+def check_known_names(names, known, source: str) -> None:
+    """ValueError naming every name of `names` not in `known`, with a "did you mean"
+    suggestion (difflib) for each; `source` says where the names came from (e.g. "params
+    file config/x.yaml", "-p", "--set")."""
+    import difflib
+
+    known = set(known)
+    problems = []
+    for name in sorted(set(names) - known):
+        close = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.5)
+        problems.append(f"{name!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    if problems:
+        raise ValueError(f"{source}: unknown parameter{'s' if len(problems) > 1 else ''} "
+                         f"{', '.join(problems)}; known parameters are listed by "
+                         "umbrella_node --help and in msg_docs/parameters.md")

@@ -28,6 +28,7 @@ from rclpy.serialization import serialize_message
 import yaml
 
 from . import __version__
+from .files import check_new_output
 
 CHUNK_SIZE = 64 * 1024
 DELIMITER = "=" * 80
@@ -206,15 +207,16 @@ def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: st
     }
 
 
-def events_metadata(sim) -> dict[str, dict[str, str]]:
-    """Return the exact lock instant (the phase message comes at the next publication)."""
+def events_metadata(sim, fault: str | None = None) -> dict[str, dict[str, str]]:
+    """The exact lock instant (the phase message comes at the next publication) and the
+    solver fault that ended the run, if any (at the last good state's time)."""
     ev = sim.lock_event
-    if ev is None:
-        return {"umbrella_sim.events": {"locked": "false"}}
-    return {"umbrella_sim.events": {"locked": "true", "lock_time": repr(ev.time),
-                                    "lock_kind": ev.kind,
-                                    "energy_before": repr(ev.energy_before),
-                                    "energy_after": repr(ev.energy_after)}}
+    out = {"locked": "false"} if ev is None else {
+        "locked": "true", "lock_time": repr(ev.time), "lock_kind": ev.kind,
+        "energy_before": repr(ev.energy_before), "energy_after": repr(ev.energy_after)}
+    if fault is not None:
+        out.update(fault=fault, fault_time=repr(sim.time))
+    return {"umbrella_sim.events": out}
 
 
 # ---------------------------------------------------------------------- recorder
@@ -227,7 +229,8 @@ def default_bag_name(namespace: str = "/", when: float | None = None) -> str:
     return "_".join(["umbrella"] + ([ns] if ns else []) + [stamp])
 
 
-def new_bag_recorder(namespace: str, metadata, parent: str = ".") -> "BagRecorder":
+def new_bag_recorder(namespace: str, metadata, parent: str = ".",
+                     on_error=None) -> "BagRecorder":
     """
     Open a new timestamped bag directory in parent (default: the working directory).
 
@@ -241,7 +244,7 @@ def new_bag_recorder(namespace: str, metadata, parent: str = ".") -> "BagRecorde
         if os.path.exists(bag_dir):
             continue
         try:
-            return BagRecorder(bag_dir, metadata(bag_dir))
+            return BagRecorder(bag_dir, metadata(bag_dir), on_error=on_error)
         except ValueError:
             if os.path.exists(bag_dir):      # taken meanwhile by another process: next name
                 continue
@@ -249,18 +252,107 @@ def new_bag_recorder(namespace: str, metadata, parent: str = ".") -> "BagRecorde
     raise ValueError(f"recording: no free bag directory name {base}_N in {parent}")
 
 
-class BagRecorder:
-    """Thread-safe writer of one bag directory; never overwrites."""
+def _write_all(fd: int, data) -> None:
+    """os.write until everything is written (the one place bytes reach the file)."""
+    view = memoryview(data)
+    while view:
+        n = os.write(fd, view)
+        view = view[n:]
 
-    def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]]):
-        bag_dir = os.path.abspath(bag_dir.rstrip("/"))
-        if os.path.exists(bag_dir):
-            raise ValueError(f"record_path {bag_dir}: already exists, not overwriting")
-        parent = os.path.dirname(bag_dir)
-        if not os.path.isdir(parent):
-            raise ValueError(f"record_path {bag_dir}: parent directory {parent} does not exist")
-        if not os.access(parent, os.W_OK):
-            raise ValueError(f"record_path {bag_dir}: parent directory {parent} is not writable")
+
+class RecordingError(OSError):
+    """The recording stopped on a write error; what was committed before stays readable."""
+
+
+class _CommittedFile:
+    """The MCAP writer's stream: buffers records in memory and writes them to the file only
+    on commit(), which happens between records.  A failed commit (ENOSPC, EIO, EACCES...)
+    truncates the file back to the last committed record boundary, so the file never holds
+    a torn record and the space of the failed write is given back."""
+
+    def __init__(self, path: str):
+        self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        self.committed = 0
+        self._pending = bytearray()
+
+    def write(self, data) -> int:
+        self._pending += data
+        return len(data)
+
+    def tell(self) -> int:
+        return self.committed + len(self._pending)
+
+    def flush(self) -> None:           # the writer's flush(); commits happen explicitly
+        pass
+
+    def commit(self) -> bool:
+        """Write what is pending; True if anything was written."""
+        if not self._pending:
+            return False
+        try:
+            _write_all(self.fd, self._pending)
+        except OSError:
+            self._pending.clear()
+            self.rollback()
+            raise
+        self.committed += len(self._pending)
+        self._pending.clear()
+        return True
+
+    def rollback(self) -> None:
+        try:
+            os.ftruncate(self.fd, self.committed)
+            os.lseek(self.fd, self.committed, os.SEEK_SET)
+        except OSError:
+            pass
+
+    def close(self, sync: bool = True) -> None:
+        if self.fd < 0:
+            return
+        try:
+            if sync:
+                os.fsync(self.fd)
+        finally:
+            os.close(self.fd)
+            self.fd = -1
+
+
+def _ended_early_tail(metadata: dict[str, str]) -> bytes:
+    """A Metadata record, DataEnd and a Footer without summary: appended at the last record
+    boundary, it makes a failed recording a complete MCAP again that says why it ended."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import DataEnd, Footer, Metadata
+
+    builder = RecordBuilder()
+    Metadata(name=ENDED_EARLY_RECORD, metadata=metadata).write(builder)
+    DataEnd(data_section_crc=0).write(builder)
+    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
+    return bytes(builder.end()) + b"\x89MCAP0\r\n"
+
+
+#: metadata record of a recording that stopped on a write error (see msg_docs/recording.md)
+ENDED_EARLY_RECORD = "umbrella_sim.recording_error"
+#: metadata records umbrella_sim.segment.K: a reset started segment K (msg_docs/recording.md)
+SEGMENT_RECORD = "umbrella_sim.segment"
+
+
+def check_record_path(bag_dir: str, what: str = "record_path") -> str:
+    """The absolute bag directory, or ValueError naming why it cannot be created (cheap
+    checks before any simulation work; nothing is created; never overwrites)."""
+    return check_new_output(bag_dir, what)
+
+
+class BagRecorder:
+    """Thread-safe writer of one bag directory; never overwrites.
+
+    A write error (disk full, I/O error, permissions) never propagates to the caller's
+    publishing: the recording stops at the last complete record, an ``umbrella_sim.
+    recording_error`` metadata record and a footer are appended if the disk takes them,
+    ``error`` holds the reason and ``on_error`` (if given) is called once with it.  A failure
+    while starting removes everything the recorder created and raises ValueError."""
+
+    def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]], on_error=None):
+        bag_dir = check_record_path(bag_dir)
         try:
             os.mkdir(bag_dir)
         except OSError as exc:
@@ -268,26 +360,80 @@ class BagRecorder:
         self.bag_dir = bag_dir
         self.file_name = os.path.basename(bag_dir) + "_0.mcap"
         self.path = os.path.join(bag_dir, self.file_name)
-        # flushed after every write: a finished chunk reaches the OS at once, so a SIGKILL
-        # loses only the chunk being filled (messages accumulate in memory until then)
-        self._fh = open(self.path, "xb")
-        self._writer = Writer(self._fh, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD,
-                              index_types=IndexType.ALL, use_chunking=True,
-                              use_statistics=True)
-        self._writer.start(profile="ros2", library=f"umbrella_sim {__version__}")
+        self.error: str | None = None
+        self.on_error = on_error
+        self._fh = None
+        try:
+            # committed after every write: a finished chunk reaches the OS at once, so a
+            # SIGKILL loses only the chunk being filled (messages accumulate in memory)
+            self._fh = _CommittedFile(self.path)
+            self._writer = Writer(self._fh, chunk_size=CHUNK_SIZE,
+                                  compression=CompressionType.ZSTD,
+                                  index_types=IndexType.ALL, use_chunking=True,
+                                  use_statistics=True)
+            self._writer.start(profile="ros2", library=f"umbrella_sim {__version__}")
+            for name, data in metadata.items():
+                self._writer.add_metadata(name, data)
+            self._fh.commit()
+        except OSError as exc:
+            self._remove_partial()
+            raise ValueError(f"record_path {bag_dir}: cannot start the recording: "
+                             f"{exc.strerror or exc}") from None
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}
+        self._schema_written: set[int] = set()
         self._channels: dict[str, tuple[int, str, QoSProfile]] = {}
         self.counts: dict[str, int] = {}
         self._first = self._last = None
+        self._on_disk: tuple[dict, int | None] = ({}, None)   # counts, last time in the file
         self._closed = False
-        for name, data in metadata.items():
-            self._writer.add_metadata(name, data)
-        self._fh.flush()
+        self.segment = 0
+        self.offset_ns = 0
+
+    def _remove_partial(self) -> None:
+        if self._fh is not None:
+            try:
+                self._fh.close(sync=False)
+            except OSError:
+                pass
+        for path in (self.path, self.bag_dir):
+            try:
+                (os.rmdir if path == self.bag_dir else os.unlink)(path)
+            except OSError:
+                pass
+
+    def _fail(self, exc: OSError, what: str, t_ns: int | None) -> None:
+        """Stop recording after a write error (called with the lock held)."""
+        self.error = f"{what}: {exc.strerror or exc} (errno {exc.errno})" if exc.errno else \
+            f"{what}: {exc}"
+        self._closed = True
+        # what the file holds: the messages of the chunks written before the failure (the
+        # chunk being filled was only in memory)
+        counts, last = self._on_disk
+        self.counts = {topic: counts.get(topic, 0) for topic in self.counts}
+        self._last = last
+        meta = {"ended_early": "true", "error": self.error,
+                "last_log_time_ns": "" if last is None else str(last),
+                "failed_at_log_time_ns": "" if t_ns is None else str(t_ns),
+                "recorded": json.dumps(self.counts)}
+        try:
+            _write_all(self._fh.fd, _ended_early_tail(meta))
+        except OSError:
+            self._fh.rollback()     # a clean prefix without footer: readers recover it
+        try:
+            self._fh.close()
+        except OSError:
+            pass
+        try:
+            self._write_bag_info()
+        except OSError:
+            pass
+        if self.on_error is not None:
+            self.on_error(self.error)
 
     def add_channel(self, topic: str, msg_type, qos: QoSProfile) -> None:
         with self._lock:
-            if topic in self._channels:
+            if topic in self._channels or self._closed:
                 return
             tname = type_name(msg_type)
             if tname not in self._schemas:
@@ -299,6 +445,24 @@ class BagRecorder:
                 metadata={"offered_qos_profiles": qos_yaml(qos)})
             self._channels[topic] = (cid, tname, qos)
             self.counts[topic] = 0
+            # the writer puts Schema and Channel records into the chunk being filled; repeat
+            # them outside chunks now, so that a recording cut short by a write error keeps
+            # its channels even if its first chunk never reached the disk (MCAP allows
+            # identical repeats)
+            from mcap.data_stream import RecordBuilder
+            from mcap.records import Channel, Schema
+            builder = RecordBuilder()
+            if self._schemas[tname] not in self._schema_written:
+                Schema(id=self._schemas[tname], name=tname, encoding="ros2msg",
+                       data=message_definition(tname).encode("utf-8")).write(builder)
+                self._schema_written.add(self._schemas[tname])
+            Channel(id=cid, topic=topic, message_encoding="cdr", schema_id=self._schemas[tname],
+                    metadata={"offered_qos_profiles": qos_yaml(qos)}).write(builder)
+            self._fh.write(builder.end())
+            try:
+                self._fh.commit()
+            except OSError as exc:
+                self._fail(exc, f"writing channel {topic}", None)
 
     def add_umbrella_channels(self, topic_names: dict, command_topic: str) -> None:
         """
@@ -315,44 +479,106 @@ class BagRecorder:
         for suffix in ("", ros_io.COMMAND_REFUSED_SUFFIX, ros_io.COMMAND_APPLIED_SUFFIX):
             self.add_channel(command_topic + suffix, Float64, ros_io.COMMAND.qos)
 
-    def close_run(self, sim, published: dict, accepted: int, refused: int) -> None:
-        """Finalise with the counts (published vs recorded) and the exact lock event."""
+    def close_run(self, sim, published: dict, accepted: int, refused: int,
+                  fault: str | None = None, extra: dict | None = None) -> None:
+        """Finalise with the counts (published vs recorded), the exact lock event and the
+        fault, if any; extra: more counts (e.g. refused commands not recorded)."""
         self.close({"umbrella_sim.counts": {
             "published": json.dumps(published), "commands_accepted": str(accepted),
-            "commands_refused": str(refused), "recorded": json.dumps(self.counts)},
-            **events_metadata(sim)})
+            "commands_refused": str(refused), "recorded": json.dumps(self.counts),
+            **(extra or {})},
+            **events_metadata(sim, fault)})
 
-    def write(self, topic: str, msg, t_ns: int) -> None:
-        data = cdr_bytes(msg)
+    def start_segment(self, parameters: dict[str, str], gap_ns: int,
+                      ended_events: dict[str, str] | None = None) -> int:
+        """A new segment (after a reset with maybe new parameters): sim time restarts at 0,
+        so from now on log times are offset to follow the previous segment's last message by
+        gap_ns (log time never goes backwards; header stamps stay sim time).  A metadata
+        record ``umbrella_sim.segment.K`` holds the offset and the segment's parameters.
+        Returns K (the first segment, 0, is described by ``umbrella_sim.parameters``).
+        ended_events: the events of the segment that ends (``umbrella_sim.events.K-1``; the
+        last segment's are ``umbrella_sim.events``, written at close)."""
         with self._lock:
             if self._closed:
-                return
+                return self.segment
+            if ended_events is not None:
+                self._writer.add_metadata(f"umbrella_sim.events.{self.segment}", ended_events)
+            self.segment += 1
+            self.offset_ns = (self._last if self._last is not None else self.offset_ns) + gap_ns
+            self._writer.add_metadata(f"{SEGMENT_RECORD}.{self.segment}", {
+                "index": str(self.segment), "log_time_offset_ns": str(self.offset_ns),
+                "parameters": json.dumps(parameters)})
+            try:
+                self._fh.commit()
+            except OSError as exc:
+                self._fail(exc, f"writing segment {self.segment}", None)
+            return self.segment
+
+    def write(self, topic: str, msg, t_ns: int) -> bool:
+        """Record one message at sim time t_ns (plus the segment's log-time offset); False
+        once the recording has stopped (closed or failed)."""
+        if self._closed:
+            return False
+        data = cdr_bytes(msg)
+        t_ns += self.offset_ns
+        with self._lock:
+            if self._closed:
+                return False
             cid = self._channels[topic][0]
             seq = self.counts[topic]
             self._writer.add_message(channel_id=cid, log_time=t_ns, publish_time=t_ns,
                                      data=data, sequence=seq)
-            self._fh.flush()
+            try:
+                wrote = self._fh.commit()
+            except OSError as exc:
+                self._fail(exc, f"writing {topic}", t_ns)
+                return False
             self.counts[topic] = seq + 1
             self._first = t_ns if self._first is None else min(self._first, t_ns)
             self._last = t_ns if self._last is None else max(self._last, t_ns)
+            if wrote:       # a chunk (holding this message) reached the file
+                self._on_disk = (dict(self.counts), self._last)
+            return True
 
     def close(self, final_metadata: dict[str, dict[str, str]] | None = None) -> None:
         with self._lock:
             if self._closed:
                 return
             self._closed = True
-            for name, data in (final_metadata or {}).items():
-                self._writer.add_metadata(name, data)
-            info = self._bag_info()
-            self._writer.add_metadata("rosbag2", {
-                "serialized_metadata": yaml.safe_dump(info, sort_keys=False),
-                "ROS_DISTRO": "jazzy"})
-            self._writer.finish()
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
-            self._fh.close()
-            with open(os.path.join(self.bag_dir, "metadata.yaml"), "w", encoding="utf-8") as fh:
-                yaml.safe_dump({"rosbag2_bagfile_information": info}, fh, sort_keys=False)
+            try:
+                for name, data in (final_metadata or {}).items():
+                    self._writer.add_metadata(name, data)
+                self._fh.commit()          # the counts and events first: they are small
+                info = self._bag_info()
+                self._writer.add_metadata("rosbag2", {
+                    "serialized_metadata": yaml.safe_dump(info, sort_keys=False),
+                    "ROS_DISTRO": "jazzy"})
+                self._writer.finish()
+                self._fh.commit()
+                self._fh.close()
+            except OSError as exc:
+                self._closed = False
+                self._fail(exc, "finalising", None)
+                return
+            try:
+                self._write_bag_info()
+            except OSError as exc:
+                self.error = f"writing metadata.yaml: {exc.strerror or exc}"
+                if self.on_error is not None:
+                    self.on_error(self.error)
+
+    def _write_bag_info(self) -> None:
+        path = os.path.join(self.bag_dir, "metadata.yaml")
+        text = yaml.safe_dump({"rosbag2_bagfile_information": self._bag_info()},
+                              sort_keys=False)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            _write_all(fd, text.encode("utf-8"))
+        except OSError:
+            os.close(fd)
+            os.unlink(path)       # no half-written metadata.yaml: readers fall back to the .mcap
+            raise
+        os.close(fd)
 
     def _bag_info(self) -> dict:
         start = self._first or 0
@@ -404,7 +630,7 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
 
     profile = sorted(force_profile or [], key=lambda tf: tf[0])
     for _, f in profile:
-        validate_force(f)
+        validate_force(f, params.sleeve_force_limit)
     node_cfg = node_defaults()
     node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,
                     record_path=bag_dir, marker_magnification=marker_magnification)
@@ -448,11 +674,11 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                 force = profile[i_cmd][1]
                 rec.write(command, Float64(data=force), ros_io.stamp_ns(profile[i_cmd][0]))
                 i_cmd += 1
+            if force != sim.sleeve_force:   # recorded before it is applied: a fault it
+                rec.write(command + ros_io.COMMAND_APPLIED_SUFFIX, Float64(data=force),
+                          ros_io.stamp_ns(sim.time))    # causes is reproducible from the log
             for ev in driver.advance(force):
-                if ev.kind == "applied":
-                    rec.write(command + ros_io.COMMAND_APPLIED_SUFFIX, Float64(data=ev.force),
-                              ros_io.stamp_ns(ev.time))
-                else:
+                if ev.kind == "locked":
                     publish("deployment_phase", ros_io.phase_msg("locked"), sim.time)
             if progress is not None and k % 20 == 0:
                 progress(sim.time)
@@ -460,7 +686,8 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
         result.error = str(exc)
         publish("deployment_phase", ros_io.phase_msg("fault"), sim.time)
     finally:
-        rec.close_run(sim, published, accepted=i_cmd, refused=0)
+        rec.close_run(sim, published, accepted=i_cmd, refused=0, fault=result.error)
+    result.recording_error = rec.error
     result.wall_time = _time.perf_counter() - wall0
     result.steps = sim.steps
     result.lock = sim.lock_event

@@ -28,67 +28,134 @@ def _is_command(topic: str) -> bool:
 
 
 # ------------------------------------------------------------------- resimulate
-def resimulate(log: LogData) -> dict:
-    """
-    Re-run the physics from the log's parameters and applied forces.
+SIGNALS = ("leaf_hinge", "link_hinge", "sleeve_slider", "leaf_hinge_rate", "sleeve_velocity",
+           "sleeve_force", "tip_axial", "tip_transverse", "peak_stress_leaf",
+           "peak_stress_link")
 
-    The result maps each signal to its largest |recorded - re-simulated| over the
-    recorded publications.
-    """
+
+def resimulate(log: LogData) -> dict:
+    """Re-run the physics of every segment from its parameters and the applied forces;
+    returns {"compared": publications, "max_abs_diff": {signal: largest |recorded -
+    re-simulated|}, "segments": [...], "problems": [...]}.  A recorded fault must be
+    reproduced at the same sim time, a fault the log does not show is a problem.  Streams:
+    one publication's messages in memory at a time."""
+    diffs = dict.fromkeys(SIGNALS, 0.0)
+    out = {"compared": 0, "max_abs_diff": diffs, "segments": [], "problems": []}
+    for seg in log.segments():
+        res = _resimulate_segment(log, seg, diffs)
+        out["compared"] += res["compared"]
+        out["segments"].append(res)
+        out["problems"] += [f"segment {seg.index}: {p}" for p in res["problems"]]
+    if out["compared"] == 0:
+        raise LogError(f"{log.path}: no joint_states messages to compare")
+    return out
+
+
+def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
     from .params import SPECS, UmbrellaParams
     from .publication import PublicationDriver
+    from .solver import SimulationDiverged
 
-    params_all = log.parameters()
-    params = UmbrellaParams.from_mapping({k: v for k, v in params_all.items() if k in SPECS})
-    rate = float(params_all["publish_rate"])
-    driver = PublicationDriver(params.validated(), rate)
-    if abs(driver.step - float(params_all["physics_step"])) > 1e-15:
-        raise LogError(f"{log.path}: physics step {params_all['physics_step']} cannot be "
-                       f"reproduced from time_step and publish_rate (got {driver.step})")
-    applied_topic = log.find_topic("sleeve_force/applied", required=False)
-    applied = [(t, m.data) for t, m in log.decoded(applied_topic)] if applied_topic else []
-    joint = log.decoded(log.find_topic("joint_states"))
-    tip = {round(t, 9): m for t, m in log.decoded(log.find_topic("tip_deflection"))}
-    peak = {round(t, 9): m for t, m in log.decoded(log.find_topic("peak_stress"))}
-    times = [t for t, _ in joint]
-    if any(b < a for a, b in zip(times, times[1:])):
-        raise LogError(f"{log.path}: sim time goes backwards (a reset): resimulation covers "
-                       "one continuous run")
-    diffs = {"leaf_hinge": 0.0, "link_hinge": 0.0, "sleeve_slider": 0.0,
-             "leaf_hinge_rate": 0.0, "sleeve_velocity": 0.0, "sleeve_force": 0.0,
-             "tip_axial": 0.0, "tip_transverse": 0.0, "peak_stress_leaf": 0.0,
-             "peak_stress_link": 0.0}
+    p_all = seg.params
+    try:
+        params = UmbrellaParams.from_mapping(
+            {k: v for k, v in p_all.items() if k in SPECS}).validated()
+        rate = float(p_all["publish_rate"])
+        step = float(p_all["physics_step"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise LogError(f"{log.path}: segment {seg.index}: parameters cannot be used "
+                       f"({exc})") from None
+    driver = PublicationDriver(params, rate)
+    if abs(driver.step - step) > 1e-15:
+        raise LogError(f"{log.path}: physics step {step} cannot be reproduced from "
+                       f"time_step and publish_rate (got {driver.step})")
+    topics = {"joint": log.find_topic("joint_states"),
+              "tip": log.find_topic("tip_deflection", required=False),
+              "peak": log.find_topic("peak_stress", required=False),
+              "applied": log.find_topic("sleeve_force/applied", required=False),
+              "phase": log.find_topic("deployment_phase", required=False)}
+    by_topic = {t: k for k, t in topics.items() if t}
     sim = driver.sim
-    force, i_app, compared = params.sleeve_force, 0, 0
-    for t_rec, js in joint:
+    res = {"index": seg.index, "compared": 0, "problems": [], "fault": None,
+           "recorded_fault": None}
+    state = {"force": params.sleeve_force, "faulted": None}
+
+    def advance_to(t_rec: float) -> bool:
         while sim.time < t_rec - 1e-9:
-            while i_app < len(applied) and applied[i_app][0] <= sim.time + 1e-12:
-                force = applied[i_app][1]
-                i_app += 1
-            driver.advance(force)
-        if abs(sim.time - t_rec) > 1e-9:
-            raise LogError(f"{log.path}: recorded publication at t = {t_rec} s is not on the "
-                           f"re-simulated grid (t = {sim.time})")
-        s = sim.sample()
-        ref = {"leaf_hinge": s.alpha1, "link_hinge": s.alpha2 - s.alpha1,
-               "sleeve_slider": s.sleeve_position, "leaf_hinge_rate": s.alpha1_rate,
-               "sleeve_velocity": s.sleeve_velocity, "sleeve_force": s.sleeve_force}
-        rec = {"leaf_hinge": js.position[0], "link_hinge": js.position[1],
-               "sleeve_slider": js.position[2], "leaf_hinge_rate": js.velocity[0],
-               "sleeve_velocity": js.velocity[2], "sleeve_force": js.effort[2]}
-        key = round(t_rec, 9)
-        if key in tip:
-            rec.update(tip_axial=tip[key].point.x, tip_transverse=tip[key].point.y)
-            ref.update(tip_axial=s.tip_axial, tip_transverse=s.tip_transverse)
-        if key in peak:
-            rec.update(peak_stress_leaf=peak[key].data[0], peak_stress_link=peak[key].data[4])
-            ref.update(peak_stress_leaf=s.peak_stress_leaf, peak_stress_link=s.peak_stress_link)
-        for name in rec:
-            diffs[name] = max(diffs[name], abs(rec[name] - ref[name]))
-        compared += 1
-    if compared == 0:
-        raise LogError(f"{log.path}: no joint_states messages to compare")
-    return {"compared": compared, "max_abs_diff": diffs}
+            try:
+                driver.advance(state["force"])
+            except SimulationDiverged as exc:
+                state["faulted"] = (sim.time, str(exc))
+                return False
+        return True
+
+    def take(t: float, group: dict) -> None:
+        if "joint" in group and state["faulted"] is None:
+            if not advance_to(t):
+                res["problems"].append(f"the re-simulation faulted at t = "
+                                       f"{state['faulted'][0]:.9f} s ({state['faulted'][1]}) "
+                                       f"where the log goes on to t = {t:.9f} s")
+            elif abs(sim.time - t) > 1e-9:
+                raise LogError(f"{log.path}: recorded publication at t = {t} s is not on the "
+                               f"re-simulated grid (t = {sim.time})")
+            else:
+                _compare_publication(sim.sample(), group, diffs)
+                res["compared"] += 1
+        if "applied" in group:      # recorded at the step it acts from: after the states
+            state["force"] = group["applied"].data
+        if "phase" in group and group["phase"].data == "fault":
+            res["recorded_fault"] = t
+
+    group, t_group = {}, None
+    for m in log.iter_raw(list(by_topic)):
+        if m.log_time < seg.offset_ns or (seg.end_ns is not None and m.log_time >= seg.end_ns):
+            continue
+        t = (m.log_time - seg.offset_ns) * 1e-9
+        if t_group is not None and abs(t - t_group) > 1e-10:
+            take(t_group, group)
+            group = {}
+        t_group = t
+        key = by_topic[m.topic]
+        group[key] = log.decode(m.topic, m.data)
+    if t_group is not None:
+        take(t_group, group)
+    if res["recorded_fault"] is not None:
+        # the log ends this segment in a fault: the re-simulation must fault too, from the
+        # same last good state (one more publication period with the last applied force)
+        if state["faulted"] is None:
+            try:
+                driver.advance(state["force"])
+            except SimulationDiverged as exc:
+                state["faulted"] = (sim.time, str(exc))
+        if state["faulted"] is None:
+            res["problems"].append(f"the log faults at t = {res['recorded_fault']:.9f} s; "
+                                   "the re-simulation does not")
+        elif abs(state["faulted"][0] - res["recorded_fault"]) > 1e-9:
+            res["problems"].append(f"the log faults at t = {res['recorded_fault']:.9f} s, the "
+                                   f"re-simulation at t = {state['faulted'][0]:.9f} s")
+    if state["faulted"] is not None:
+        res["fault"] = {"time": state["faulted"][0], "reason": state["faulted"][1]}
+    return res
+
+
+def _compare_publication(s, group: dict, diffs: dict) -> None:
+    js = group["joint"]
+    ref = {"leaf_hinge": s.alpha1, "link_hinge": s.alpha2 - s.alpha1,
+           "sleeve_slider": s.sleeve_position, "leaf_hinge_rate": s.alpha1_rate,
+           "sleeve_velocity": s.sleeve_velocity, "sleeve_force": s.sleeve_force}
+    rec = {"leaf_hinge": js.position[0], "link_hinge": js.position[1],
+           "sleeve_slider": js.position[2], "leaf_hinge_rate": js.velocity[0],
+           "sleeve_velocity": js.velocity[2], "sleeve_force": js.effort[2]}
+    if "tip" in group:
+        rec.update(tip_axial=group["tip"].point.x, tip_transverse=group["tip"].point.y)
+        ref.update(tip_axial=s.tip_axial, tip_transverse=s.tip_transverse)
+    if "peak" in group:
+        rec.update(peak_stress_leaf=group["peak"].data[0],
+                   peak_stress_link=group["peak"].data[4])
+        ref.update(peak_stress_leaf=s.peak_stress_leaf, peak_stress_link=s.peak_stress_link)
+    for name in rec:
+        d = abs(rec[name] - ref[name])
+        diffs[name] = max(diffs[name], d if d == d else float("inf"))    # NaN counts as inf
 
 
 # -------------------------------------------------------------------- republish
@@ -105,18 +172,18 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
         missing = sorted(set(topics) - set(log.channels))
         if missing:
             raise LogError(f"{log.path}: topics not in the log: {', '.join(missing)}")
-    msgs = sorted((m for m in log.messages if m.topic in chosen), key=lambda m: m.log_time)
-    if not msgs:
+    total = sum(log.count(t) for t in chosen)
+    if total == 0:
         raise LogError(f"{log.path}: nothing to replay")
-    t0 = msgs[0].log_time + int(round(start_offset * 1e9))
-    msgs = [m for m in msgs if m.log_time >= t0]
-    if not msgs:
+    first = next(log.iter_raw(chosen))
+    t0 = first.log_time + int(round(start_offset * 1e9))
+    if log.time_range[1] is not None and t0 > log.time_range[1]:
         raise LogError(f"{log.path}: --start-offset {start_offset} s is past the end of the log")
     rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args])
     node = rclpy.create_node("umbrella_replay")
     pubs = {t: node.create_publisher(log.msg_type(t), t, qos_from_yaml(log.channels[t][1]))
             for t in chosen}
-    print(f"replaying {len(msgs)} messages on {len(pubs)} topics from {log.path} at "
+    print(f"replaying up to {total} messages on {len(pubs)} topics from {log.path} at "
           f"{rate:g}x{' (truncated log)' if log.truncated else ''}", flush=True)
     time.sleep(0.5)   # let subscribers discover the publishers
     if wait_for_subscribers > 0:
@@ -132,7 +199,9 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     try:
         while True:
             wall0 = time.monotonic()
-            for m in msgs:
+            for m in log.iter_raw(chosen):      # streamed: bounded memory for any log
+                if m.log_time < t0:
+                    continue
                 target = wall0 + (m.log_time - t0) * 1e-9 / rate
                 delay = target - time.monotonic()
                 if delay > 0:
@@ -180,25 +249,45 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--resimulate", action="store_true",
                     help="re-run the physics from the log and compare, no ROS traffic")
     ap.add_argument("--tolerance", type=float, default=1e-9,
-                    help="largest accepted difference for --resimulate")
+                    help="largest accepted difference for --resimulate (>= 0)")
     args = ap.parse_args(argv)
+    # argument values: an argparse usage error (exit 2) before any file is read
+    if not (math.isfinite(args.tolerance) and args.tolerance >= 0):
+        ap.error(f"--tolerance {args.tolerance}: must be a finite number >= 0")
+    if not (math.isfinite(args.rate) and args.rate > 0):
+        ap.error(f"--rate {args.rate}: must be a finite number > 0")
+    if not (math.isfinite(args.start_offset) and args.start_offset >= 0):
+        ap.error(f"--start-offset {args.start_offset}: must be a finite number >= 0")
+    if not (math.isfinite(args.wait_for_subscribers) and args.wait_for_subscribers >= 0):
+        ap.error(f"--wait-for-subscribers {args.wait_for_subscribers}: must be >= 0")
     try:
-        if not (math.isfinite(args.rate) and args.rate > 0):
-            raise LogError(f"--rate {args.rate}: must be > 0")
-        if not (math.isfinite(args.start_offset) and args.start_offset >= 0):
-            raise LogError(f"--start-offset {args.start_offset}: must be >= 0")
         log = read_log(args.log)
         if args.resimulate:
             res = resimulate(log)
             worst = max(res["max_abs_diff"].values())
+            notes = [n for n in ("truncated log" if log.truncated else "",
+                                 f"recording ended early: {log.ended_early}"
+                                 if log.ended_early else "",
+                                 f"{len(res['segments'])} segments (resets)"
+                                 if len(res["segments"]) > 1 else "") if n]
             print(f"resimulated {res['compared']} publications of {log.path}"
-                  + (" (truncated log)" if log.truncated else ""))
+                  + (f" ({'; '.join(notes)})" if notes else ""))
+            for seg in res["segments"]:
+                if seg["fault"]:
+                    print(f"segment {seg['index']}: fault reproduced at t = "
+                          f"{seg['fault']['time']:.9f} s: {seg['fault']['reason']}"
+                          if seg["recorded_fault"] is not None else
+                          f"segment {seg['index']}: re-simulation faulted at t = "
+                          f"{seg['fault']['time']:.9f} s: {seg['fault']['reason']}")
             print(f"{'signal':<20} {'max |recorded - resimulated|':>30}")
             for name, d in res["max_abs_diff"].items():
                 print(f"{name:<20} {d:>30.3e}")
-            ok = worst <= args.tolerance
+            for problem in res["problems"]:
+                print(f"problem: {problem}")
+            ok = worst <= args.tolerance and not res["problems"]
             print(f"{'PASS' if ok else 'FAIL'}: largest difference {worst:.3e} "
-                  f"(tolerance {args.tolerance:g})")
+                  f"(tolerance {args.tolerance:g})"
+                  + (f"; {len(res['problems'])} problem(s)" if res["problems"] else ""))
             return 0 if ok else 1
         return republish(log, args.rate, args.start_offset, args.loop, args.with_commands,
                          args.topics, ros_args, args.wait_for_subscribers)

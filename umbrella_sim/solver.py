@@ -38,7 +38,9 @@ class SimulationDiverged(RuntimeError):
     """The state became non-finite or left the constraint manifold; nothing was advanced."""
 
 
-def validate_force(force: float) -> float:
+def validate_force(force: float, limit: float | None = None) -> float:
+    """F_H as a float, or ValueError: finite, >= 0 and, given the model's
+    UmbrellaParams.sleeve_force_limit, at most that (N)."""
     try:
         f = float(force)
     except (TypeError, ValueError):
@@ -48,6 +50,9 @@ def validate_force(force: float) -> float:
     if f < 0.0:
         raise ValueError(f"sleeve force {f} N: must be >= 0 (F_H pushes the sleeve along -Y; "
                          "the sleeve cannot be pulled)")
+    if limit is not None and f > limit:
+        raise ValueError(f"sleeve force {f:g} N: above {limit:.6g} N, the axial load the link "
+                         "can carry (Euler buckling / squash load)")
     return f
 
 
@@ -228,7 +233,7 @@ class UmbrellaSimulator:
     # -- inputs
     def set_sleeve_force(self, force: float) -> None:
         """F_H >= 0 (N, along -Y); acts from the start of the next step (zero-order hold)."""
-        self._force = validate_force(force)
+        self._force = validate_force(force, self.params.sleeve_force_limit)
 
     @property
     def sleeve_force(self) -> float:
@@ -410,7 +415,7 @@ def simulate(params: UmbrellaParams, duration: float,
     result.samples.append(sim.sample())
     profile = sorted(force_profile or [], key=lambda tf: tf[0])
     for t_cmd, f_cmd in profile:
-        validate_force(f_cmd)
+        validate_force(f_cmd, sim.params.sleeve_force_limit)
     i_cmd = 0
     wall0 = _time.perf_counter()
     n_steps = int(round(duration / sim.h))

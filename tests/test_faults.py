@@ -1,0 +1,426 @@
+"""Faults and bad input: write errors while recording, solver faults, unknown parameters,
+bad params files and ROS arguments, foreign and damaged logs, overload, resets."""
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, String
+from std_srvs.srv import Trigger
+
+from tests.ros_helpers import NodeProcess, Probe, ros_env
+from umbrella_sim import recording
+from umbrella_sim.logs import LogError, read_log
+from umbrella_sim.node import MAX_LAG_S, REFUSED_RECORD_RATE
+from umbrella_sim.params import UmbrellaParams
+from umbrella_sim.ros_io import LATCHED
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+#: runs umbrella_node with a disk that holds LIMIT bytes per file: every write that would
+#: make the file larger fails with the given errno, like a full tmpfs
+FAULTY_DISK = """
+import errno, os, sys
+import umbrella_sim.recording as rec
+from umbrella_sim.node import main
+limit, code = int(sys.argv.pop(1)), int(sys.argv.pop(1))
+real = rec._write_all
+def faulty(fd, data):
+    if os.fstat(fd).st_size + len(data) > limit:
+        raise OSError(code, os.strerror(code))
+    real(fd, data)
+rec._write_all = faulty
+sys.exit(main())
+"""
+
+
+def run(*args, timeout=120):
+    return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True,
+                          cwd=ROOT, env=ros_env(), timeout=timeout)
+
+
+def diag_values(msg: DiagnosticArray) -> dict:
+    return {kv.key: kv.value for kv in msg.status[0].values}
+
+
+def stamp_s(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+@pytest.fixture
+def probe():
+    p = Probe("faults_probe")
+    yield p
+    p.close()
+
+
+# ------------------------------------------------------------------ write errors
+def _disk(monkeypatch, limit, code=errno.ENOSPC):
+    real = recording._write_all
+
+    def faulty(fd, data):
+        if os.fstat(fd).st_size + len(data) > limit:
+            raise OSError(code, os.strerror(code))
+        real(fd, data)
+    monkeypatch.setattr(recording, "_write_all", faulty)
+
+
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EIO, errno.EACCES])
+def test_write_error_stops_recording_cleanly_and_keeps_what_was_written(tmp_path, monkeypatch,
+                                                                       code):
+    _disk(monkeypatch, 100_000, code)
+    errors = []
+    rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}},
+                                on_error=errors.append)
+    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    n = 0
+    while rec.write("/x", Float64(data=float(n)), n * 1_000_000):
+        n += 1
+        assert n < 10**6
+    assert not rec.write("/x", Float64(data=-1.0), 0)          # stays stopped, no exception
+    rec.close({"late": {"a": "b"}})                             # no exception either
+    assert len(errors) == 1 and os.strerror(code) in errors[0]
+    log = read_log(str(tmp_path / "bag"))
+    assert log.ended_early and os.strerror(code) in log.ended_early
+    values = [m.data for _, m in log.decoded("/x")]
+    # every complete chunk is there, in order, and the counts say what the file holds
+    assert values == [float(i) for i in range(len(values))] and len(values) > 1000
+    assert log.count("/x") == rec.counts["/x"] == len(values) < n
+    assert os.path.getsize(log.path) <= 100_000
+
+
+def test_disk_full_at_start_leaves_nothing_behind(tmp_path, monkeypatch):
+    _disk(monkeypatch, 20)
+    with pytest.raises(ValueError, match="cannot start the recording: No space left"):
+        recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {"a": "1"}})
+    assert os.listdir(tmp_path) == []
+
+
+def test_write_error_at_close_still_marks_the_recording(tmp_path, monkeypatch):
+    rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}})
+    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    for i in range(3000):
+        assert rec.write("/x", Float64(data=float(i)), i)
+    size = os.path.getsize(rec.path)
+    # room for the trailer, not for the last chunk and the summary
+    _disk(monkeypatch, size + 800, errno.EIO)
+    rec.close()
+    assert rec.error and "finalising" in rec.error
+    log = read_log(str(tmp_path / "bag"))
+    assert log.ended_early
+    assert log.count("/x") == 0 or [m.data for _, m in log.decoded("/x")] == \
+        [float(i) for i in range(log.count("/x"))]
+
+
+def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
+    probe.subscribe("/joint_states", JointState)
+    bag = tmp_path / "full"
+    with NodeProcess("-p", "publish_rate:=1000.0", "-p", "duration:=6.0",
+                     "-p", "real_time_factor:=3.0", "-p", f"record_path:={bag}",
+                     executable=[sys.executable, "-c", FAULTY_DISK, "150000",
+                                 str(errno.ENOSPC)]) as node:
+        node.wait_for_log("recording stopped", timeout=60)
+        n_at_error = len(probe.messages("/joint_states"))
+        assert node.proc.wait(timeout=60) == 4
+        out = node.output()
+    assert out.count("recording stopped") == 1 and "Traceback" not in out
+    assert "duration 6 s reached" in out                      # the simulation went on
+    assert len(probe.messages("/joint_states")) > n_at_error
+    log = read_log(str(bag))
+    assert "No space left" in log.ended_early
+    r = run("umbrella_sim.replay", str(bag), "--resimulate")
+    assert r.returncode == 0 and "recording ended early" in r.stdout, r.stdout + r.stderr
+
+
+def test_output_paths_checked_before_any_work(tmp_path):
+    (tmp_path / "exists.csv").write_text("x")
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "compare.json").write_text("{}")
+    for args, words in [(["--csv", str(tmp_path / "nodir" / "x.csv")], "does not exist"),
+                        (["--csv", str(tmp_path / "exists.csv")], "not overwriting"),
+                        (["--mcap", str(tmp_path / "full")], "not overwriting")]:
+        t0 = time.monotonic()
+        r = run("umbrella_sim", "simulate", "--duration", "100", *args)
+        assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr
+        assert time.monotonic() - t0 < 60        # 100 s of physics was never started
+    r = run("umbrella_sim.compare", "a", "b", "--out", str(tmp_path / "full"))
+    assert r.returncode == 2 and "not empty" in r.stderr
+    assert (tmp_path / "full" / "compare.json").read_text() == "{}"
+    r = run("umbrella_sim.compare", "a", "b", "--out", str(tmp_path / "exists.csv"))
+    assert r.returncode == 2 and "not overwriting" in r.stderr
+
+
+# ------------------------------------------------------------------ solver faults
+def test_offline_fault_recorded_and_reproduced(tmp_path):
+    bag = tmp_path / "fault"
+    r = run("umbrella_sim", "simulate", "--v0", "0", "--force", "2300", "--duration", "0.5",
+            "--mcap", str(bag))
+    assert r.returncode == 3
+    log = read_log(str(bag))
+    assert "Newton" in log.metadata["umbrella_sim.events"]["fault"]
+    r = run("umbrella_sim.replay", str(bag), "--resimulate")
+    assert r.returncode == 0 and "fault reproduced at t = " in r.stdout, r.stdout + r.stderr
+
+
+def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, probe):
+    """The force that faults the solver is in the log before it is applied, --resimulate
+    faults at the same instant, nothing is republished after the fault, the run ends (3)."""
+    probe.subscribe("/joint_states", JointState)
+    probe.subscribe("/deployment_phase", String, LATCHED)
+    bag = tmp_path / "commanded"
+    with NodeProcess("-p", "v0:=0.0", "-p", "duration:=30.0",
+                     "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("recording to")
+        pub = probe.publisher("/sleeve_force", Float64)
+        probe.wait_for_subscribers(pub)
+        pub.publish(Float64(data=2300.0))
+        probe.wait_for("/deployment_phase", lambda m: m.data == "fault", timeout=30)
+        assert node.proc.wait(timeout=30) == 3
+        out = node.output()
+    assert "the run ends" in out
+    stamps = [stamp_s(m) for m in probe.messages("/joint_states")]
+    assert len(stamps) == len(set(stamps))                    # no sample published twice
+    log = read_log(str(bag))
+    applied = [m.data for _, m in log.decoded("/sleeve_force/applied")]
+    assert applied == [2300.0]
+    assert log.metadata["umbrella_sim.events"]["fault"]
+    r = run("umbrella_sim.replay", str(bag), "--resimulate")
+    assert r.returncode == 0 and "fault reproduced" in r.stdout, r.stdout + r.stderr
+
+
+def test_command_above_what_the_link_carries_is_refused(probe):
+    probe.subscribe("/diagnostics", DiagnosticArray)
+    limit = UmbrellaParams().sleeve_force_limit
+    with NodeProcess("-p", "v0:=0.0") as node:
+        node.wait_for_log("physics step")
+        pub = probe.publisher("/sleeve_force", Float64)
+        probe.wait_for_subscribers(pub)
+        pub.publish(Float64(data=limit * 1.01))
+        probe.wait_for("/diagnostics", lambda m: diag_values(m)["refused_commands"] == "1")
+        assert "link can carry" in node.output()
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args", "-p",
+                        "sleeve_force:=1e9"], capture_output=True, text=True, env=ros_env(),
+                       timeout=60)
+    assert r.returncode == 2 and "sleeve_force" in r.stderr and "link can carry" in r.stderr
+
+
+# ------------------------------------------------------------- bad configuration
+def _node(*args, timeout=60):
+    return subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args", *args,
+                           "-p", "duration:=0.1", "-p", "real_time_factor:=0.0"],
+                          capture_output=True, text=True, env=ros_env(), timeout=timeout)
+
+
+@pytest.mark.parametrize("content, args, words", [
+    (None, ["-p", "youngs_modulous:=1.0"], "did you mean 'youngs_modulus'"),
+    (None, ["-p", "foo:=1.0"], "unknown parameter 'foo'"),
+    ("other_node:\n  ros__parameters:\n    l1: -5.0\n", [], "no section for node /umbrella_node"),
+    ("/**:\n  ros__parameters:\n    l4: 1.0\n", [], "'l4' (did you mean 'l"),
+    ("/**:\n  ros__parameters:\n    l1: {a: 1}\n", [], "'l1.a'"),
+    ("/**:\n  ros__parameters: [1, 2\n", [], "not valid YAML"),
+    ("- 1\n- 2\n", [], "expected a mapping"),
+    ("/**:\n  l1: 0.5\n", [], "has no ros__parameters"),
+    (b"\x89PNG\r\n\x1a\n\x00\x00", [], "binary data"),
+    (None, ["--params-file", "/nonexistent/p.yaml"], "No such file"),
+    (None, ["-p", "l1"], "invalid ROS arguments"),
+    (None, ["--bogus-flag"], "unknown ROS arguments"),
+], ids=["typo", "unknown", "other-node", "unknown-key", "nested", "malformed", "list",
+        "no-ros-parameters", "binary", "missing", "no-assign", "bogus-flag"])
+def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):
+    if content is not None:
+        path = tmp_path / "p.yaml"
+        (path.write_bytes if isinstance(content, bytes) else path.write_text)(content)
+        args = ["--params-file", str(path), *args]
+    r = _node(*args)
+    assert r.returncode == 2, r.stderr
+    assert words in r.stderr and "Traceback" not in r.stderr, r.stderr
+    if content is not None:
+        assert "p.yaml" in r.stderr
+
+
+def test_params_file_for_a_namespaced_node(tmp_path):
+    path = tmp_path / "ns.yaml"
+    path.write_text("/a1/umbrella_node:\n  ros__parameters:\n    v0: -0.5\n")
+    assert _node("--params-file", str(path), "-r", "__ns:=/a1").returncode == 0
+    r = _node("--params-file", str(path))
+    assert r.returncode == 2 and "no section for node /umbrella_node" in r.stderr
+
+
+def test_cli_set_and_params_file_typos_suggest(tmp_path):
+    r = run("umbrella_sim", "simulate", "--set", "youngs_modulous=1")
+    assert r.returncode == 2 and "did you mean 'youngs_modulus'" in r.stderr
+    path = tmp_path / "p.yaml"
+    path.write_text("umbrella_node:\n  ros__parameters:\n    elements_per_segmnt: 2\n")
+    r = run("umbrella_sim", "simulate", "--params", str(path))
+    assert r.returncode == 2 and "did you mean 'elements_per_segment'" in r.stderr
+    assert str(path) in r.stderr
+
+
+def test_sigint_during_startup_is_quiet(tmp_path):
+    """SIGINT while the node is still starting (model built, recording not yet open or
+    physics not yet started): a clean stop, no KeyboardInterrupt traceback."""
+    bag = tmp_path / "early"
+    with NodeProcess("-p", f"record_path:={bag}", "-p", "elements_per_segment:=8") as node:
+        node.wait_for_log(r"umbrella_sim \S+: model flexible", timeout=30)
+        assert node.stop(signal.SIGINT) == 0
+        out = node.output()
+    assert "Traceback" not in out and "KeyboardInterrupt" not in out, out
+    if bag.exists():                       # whatever was created is a finalised recording
+        assert not read_log(str(bag)).truncated
+
+
+# -------------------------------------------------------------------- bad logs
+def _foreign(path, payload=None, parameters=None):
+    from mcap.writer import Writer
+    from rclpy.serialization import serialize_message
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        w.start("ros2", "test")
+        sid = w.register_schema("sensor_msgs/msg/JointState", "ros2msg",
+                                recording.message_definition("sensor_msgs/msg/JointState")
+                                .encode())
+        cid = w.register_channel("/joint_states", "cdr", sid)
+        if parameters:
+            w.add_metadata("umbrella_sim.parameters", parameters)
+        for i in range(5):
+            w.add_message(cid, i * 10**7, payload or serialize_message(JointState()), i * 10**7)
+        w.finish()
+
+
+def test_foreign_damaged_and_special_logs_exit_2_naming_file(tmp_path):
+    good = tmp_path / "good"
+    assert run("umbrella_sim", "simulate", "--duration", "0.05", "--mcap",
+               str(good)).returncode == 0
+    foreign, garbage = tmp_path / "foreign.mcap", tmp_path / "garbage.mcap"
+    _foreign(foreign)
+    # an umbrella_sim parameters record, the right schema, payloads that are not CDR of it
+    _foreign(garbage, payload=b"\x00\x01\x00\x00\xff\xff\xff\x7f",
+             parameters=read_log(str(good)).metadata["umbrella_sim.parameters"])
+    fifo = tmp_path / "fifo.mcap"
+    os.mkfifo(fifo)
+    cases = [(foreign, "not an umbrella_sim recording"),
+             (garbage, "payload does not decode as sensor_msgs/msg/JointState"),
+             (fifo, "not a regular file"), (tmp_path, "needs metadata.yaml")]
+    for path, words in cases:
+        for tool in (["umbrella_sim.replay", str(path), "--resimulate"],
+                     ["umbrella_sim.compare", str(good), str(path), "--out",
+                      str(tmp_path / "out"), "--no-plots"]):
+            r = run(*tool, timeout=60)
+            assert r.returncode == 2, (tool, r.stdout, r.stderr)
+            assert words in r.stderr and str(path) in r.stderr, (tool, r.stderr)
+            assert "Traceback" not in r.stderr
+    for bad in ("nan", "-1", "inf"):
+        r = run("umbrella_sim.replay", str(good), "--resimulate", "--tolerance", bad)
+        assert r.returncode == 2 and "--tolerance" in r.stderr
+    r = run("umbrella_sim.replay", str(good), "--rate", "0")
+    assert r.returncode == 2 and "--rate" in r.stderr
+
+
+def test_binary_text_inputs_named(tmp_path):
+    blob = tmp_path / "blob.csv"
+    blob.write_bytes(bytes(range(256)) * 4)
+    r = run("umbrella_sim", "simulate", "--force-profile", str(blob))
+    assert r.returncode == 2 and str(blob) in r.stderr and "binary" in r.stderr
+    r = run("umbrella_sim", "simulate", "--params", str(blob))
+    assert r.returncode == 2 and str(blob) in r.stderr and "Traceback" not in r.stderr
+
+
+def test_log_messages_are_streamed_not_loaded(tmp_path):
+    """Reading every message of a log holds about one chunk at a time, not the log."""
+    import tracemalloc
+    bag = tmp_path / "s"
+    assert run("umbrella_sim", "simulate", "--duration", "2.0", "--publish-rate", "1000",
+               "--mcap", str(bag)).returncode == 0
+    tracemalloc.start()
+    log = read_log(str(bag))
+    total = 0
+    for m in log.iter_raw():
+        total += len(m.data)
+    for _ in log.iter_decoded("/markers"):
+        pass
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert log.message_count == sum(log.count(t) for t in log.topics()) > 10_000
+    assert total > 2_000_000
+    assert peak < total / 4, (peak, total)
+
+
+# ---------------------------------------------------- overload, peers, segments
+def test_overload_lag_bounded_by_re_anchoring(probe):
+    probe.subscribe("/diagnostics", DiagnosticArray)
+    with NodeProcess("-p", "real_time_factor:=1000.0", "-p", "elements_per_segment:=2") as node:
+        node.wait_for_log("pacing re-anchored", timeout=30)
+        msg = probe.wait_for("/diagnostics",
+                             lambda m: int(diag_values(m)["re_anchors"]) > 0, timeout=20)
+    values = diag_values(msg)
+    assert float(values["slip_s"]) > MAX_LAG_S
+    # the lag is measured once per publication and re-anchored past MAX_LAG_S: it exceeds
+    # the bound by at most one publication's work
+    assert float(values["lag_s"]) < MAX_LAG_S + 1.0
+
+
+def test_two_nodes_in_one_namespace_are_warned():
+    with NodeProcess("-p", "v0:=0.0") as a, NodeProcess("-p", "v0:=0.0") as b:
+        a.wait_for_log("nodes named /umbrella_node|publishers on /clock", timeout=30)
+        b.wait_for_log("nodes named /umbrella_node|publishers on /clock", timeout=30)
+
+
+def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
+    """Runtime parameter change + ~/reset while recording: the log holds two segments with
+    their own parameters; --resimulate checks both, compare picks one; a flood of refused
+    commands is counted but recorded at a bounded rate."""
+    probe.subscribe("/deployment_phase", String, LATCHED)
+    probe.subscribe("/diagnostics", DiagnosticArray)
+    bag = tmp_path / "segments"
+    with NodeProcess("-p", "v0:=-0.5", "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("locked at t", timeout=30)
+        # keep-last 1000 on our side too: a reliable writer drops what its history cannot hold
+        pub = probe.publisher("/sleeve_force", Float64, qos=1000)
+        probe.wait_for_subscribers(pub)
+        for _ in range(300):
+            pub.publish(Float64(data=-1.0))
+        # keep-all, reliable: none is lost, however fast they come (they queue)
+        probe.wait_for("/diagnostics", lambda m: diag_values(m)["refused_commands"] == "300",
+                       timeout=60)
+        req = SetParameters.Request(parameters=[Parameter(
+            name="v0", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
+                                            double_value=-1.0))])
+        assert probe.call(SetParameters, "/umbrella_node/set_parameters", req).results[0].successful
+        assert probe.call(Trigger, "/umbrella_node/reset", Trigger.Request()).success
+        node.wait_for_log("locked at t", count=2, timeout=30)
+        time.sleep(0.3)
+        assert node.stop() == 0
+        out = node.output()
+    assert "recording segment 1" in out
+    log = read_log(str(bag))
+    segs = log.segments()
+    assert [s.params["v0"] for s in segs] == [-0.5, -1.0]
+    refused = log.count("/sleeve_force/refused")
+    counts = log.metadata["umbrella_sim.counts"]
+    assert int(counts["commands_refused"]) == 300
+    assert refused + int(counts["refused_not_recorded"]) == 300
+    assert refused <= REFUSED_RECORD_RATE * 10
+    times = [t for t, _ in log.decoded("/joint_states")]
+    assert times == sorted(times)                   # log time never goes backwards
+    r = run("umbrella_sim.replay", str(bag), "--resimulate")
+    assert r.returncode == 0 and "2 segments" in r.stdout, r.stdout + r.stderr
+    deploy = {}
+    for k in (0, 1):
+        out_dir = tmp_path / f"cmp{k}"
+        r = run("umbrella_sim.compare", str(bag), "--out", str(out_dir), "--no-plots",
+                "--segment", str(k))
+        assert r.returncode == 0, r.stderr
+        deploy[k] = json.loads((out_dir / "compare.json").read_text())["runs"][0]["deploy_time"]
+    # the segments are the two runs: V0 = -0.5 and -1.0 deploy in ~0.090 s and ~0.045 s
+    assert deploy[0] == pytest.approx(0.0904, abs=5e-4)
+    assert deploy[1] == pytest.approx(0.0452, abs=5e-4)
+    with pytest.raises(LogError, match="no segment 2"):
+        log.segment(2)

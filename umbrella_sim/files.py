@@ -1,0 +1,47 @@
+"""Checks of input and output paths, made before any expensive work.
+
+Every tool reads its text inputs through ``read_text_input`` and checks every output path with
+``check_new_output`` first, so a wrong path fails at once, names the file and the reason, and
+never overwrites anything.
+"""
+from __future__ import annotations
+
+import os
+import stat
+
+
+def read_text_input(path: str, what: str) -> str:
+    """The UTF-8 text of a regular file, or ValueError naming the file and why not (missing,
+    a directory or FIFO, unreadable, binary)."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise ValueError(f"{what} {path}: {exc.strerror}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{what} {path}: not a regular file")
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        raise ValueError(f"{what} {path}: {exc.strerror}") from None
+    if b"\0" in data:
+        raise ValueError(f"{what} {path}: binary data (NUL bytes), not a text file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{what} {path}: not UTF-8 text (byte {exc.start})") from None
+
+
+def check_new_output(path: str, what: str) -> str:
+    """The absolute path of a file or directory to be created, or ValueError naming why it
+    cannot be (it exists: never overwritten; no parent directory; parent not writable).
+    Nothing is created."""
+    path = os.path.abspath(path.rstrip("/") or "/")
+    if os.path.lexists(path):
+        raise ValueError(f"{what} {path}: already exists, not overwriting")
+    parent = os.path.dirname(path)
+    if not os.path.isdir(parent):
+        raise ValueError(f"{what} {path}: parent directory {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{what} {path}: parent directory {parent} is not writable")
+    return path
