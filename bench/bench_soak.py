@@ -1,4 +1,5 @@
-"""Soak benchmark: umbrella_node at 1 kHz with recording for a long run.
+"""
+Soak benchmark: umbrella_node at 1 kHz with recording for a long run.
 
 Prints the resident memory slope (kB per simulated second, fitted after a warm-up), the lag
 behind wall time (largest, and the slip dropped by the overload policy), CPU seconds per
@@ -133,7 +134,8 @@ def main() -> int:
           f"{sim_span / wall_span:.3f}")
     print(f"CPU: {cpu_per_sim:.3f} CPU-s per simulated s")
     if size:
-        print(f"recording: {size / sim_span / 1024:.1f} KiB per simulated s ({size / 2**20:.1f} MiB)")
+        print(f"recording: {size / sim_span / 1024:.1f} KiB per simulated s "
+              f"({size / 2**20:.1f} MiB)")
     print(f"files: {tmp}")
     return 0
 

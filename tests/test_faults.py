@@ -1,15 +1,20 @@
-"""Faults and bad input: write errors while recording, solver faults, unknown parameters,
-bad params files and ROS arguments, foreign and damaged logs, overload, resets."""
+"""
+Test faults and bad input.
+
+Faults and bad input: write errors while recording, solver faults, unknown parameters,
+bad params files and ROS arguments, foreign and damaged logs, overload, resets.
+"""
 import errno
 import json
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
-import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from sensor_msgs.msg import JointState
@@ -74,8 +79,8 @@ def _disk(monkeypatch, limit, code=errno.ENOSPC):
 
 
 @pytest.mark.parametrize("code", [errno.ENOSPC, errno.EIO, errno.EACCES])
-def test_write_error_stops_recording_cleanly_and_keeps_what_was_written(tmp_path, monkeypatch,
-                                                                       code):
+def test_write_error_stops_recording_cleanly_and_keeps_what_was_written(
+        tmp_path, monkeypatch, code):
     _disk(monkeypatch, 100_000, code)
     errors = []
     rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}},
@@ -171,8 +176,12 @@ def test_offline_fault_recorded_and_reproduced(tmp_path):
 
 
 def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, probe):
-    """The force that faults the solver is in the log before it is applied, --resimulate
-    faults at the same instant, nothing is republished after the fault, the run ends (3)."""
+    """
+    Record, reproduce and end a run on a commanded solver fault.
+
+    The force that faults the solver is in the log before it is applied, --resimulate
+    faults at the same instant, nothing is republished after the fault, the run ends (3).
+    """
     probe.subscribe("/joint_states", JointState)
     probe.subscribe("/deployment_phase", String, LATCHED)
     bag = tmp_path / "commanded"
@@ -206,17 +215,20 @@ def test_command_above_what_the_link_carries_is_refused(probe):
         pub.publish(Float64(data=limit * 1.01))
         probe.wait_for("/diagnostics", lambda m: diag_values(m)["refused_commands"] == "1")
         assert "link can carry" in node.output()
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args", "-p",
-                        "sleeve_force:=1e9"], capture_output=True, text=True, env=ros_env(),
-                       timeout=60)
+    r = _node("-p", "sleeve_force:=1e9")
     assert r.returncode == 2 and "sleeve_force" in r.stderr and "link can carry" in r.stderr
 
 
 # ------------------------------------------------------------- bad configuration
 def _node(*args, timeout=60):
-    return subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args", *args,
-                           "-p", "duration:=0.1", "-p", "real_time_factor:=0.0"],
-                          capture_output=True, text=True, env=ros_env(), timeout=timeout)
+    """Run a short node in a temporary directory (it records there by default)."""
+    with tempfile.TemporaryDirectory() as cwd:
+        r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args", *args,
+                            "-p", "duration:=0.1", "-p", "real_time_factor:=0.0"],
+                           capture_output=True, text=True, env=ros_env(), timeout=timeout,
+                           cwd=cwd)
+        r.left = os.listdir(cwd)
+    return r
 
 
 @pytest.mark.parametrize("content, args, words", [
@@ -241,6 +253,7 @@ def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words
         args = ["--params-file", str(path), *args]
     r = _node(*args)
     assert r.returncode == 2, r.stderr
+    assert r.left == []                             # a failed start leaves nothing behind
     assert words in r.stderr and "Traceback" not in r.stderr, r.stderr
     if content is not None:
         assert "p.yaml" in r.stderr
@@ -265,8 +278,12 @@ def test_cli_set_and_params_file_typos_suggest(tmp_path):
 
 
 def test_sigint_during_startup_is_quiet(tmp_path):
-    """SIGINT while the node is still starting (model built, recording not yet open or
-    physics not yet started): a clean stop, no KeyboardInterrupt traceback."""
+    """
+    Stop quietly on SIGINT during start-up.
+
+    SIGINT while the node is still starting (model built, recording not yet open or
+    physics not yet started): a clean stop, no KeyboardInterrupt traceback.
+    """
     bag = tmp_path / "early"
     with NodeProcess("-p", f"record_path:={bag}", "-p", "elements_per_segment:=8") as node:
         node.wait_for_log(r"umbrella_sim \S+: model flexible", timeout=30)
@@ -374,9 +391,13 @@ def test_two_nodes_in_one_namespace_are_warned():
 
 
 def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
-    """Runtime parameter change + ~/reset while recording: the log holds two segments with
+    """
+    Record a reset with new parameters as a new segment.
+
+    Runtime parameter change + ~/reset while recording: the log holds two segments with
     their own parameters; --resimulate checks both, compare picks one; a flood of refused
-    commands is counted but recorded at a bounded rate."""
+    commands is counted but recorded at a bounded rate.
+    """
     probe.subscribe("/deployment_phase", String, LATCHED)
     probe.subscribe("/diagnostics", DiagnosticArray)
     bag = tmp_path / "segments"
@@ -393,7 +414,8 @@ def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
         req = SetParameters.Request(parameters=[Parameter(
             name="v0", value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
                                             double_value=-1.0))])
-        assert probe.call(SetParameters, "/umbrella_node/set_parameters", req).results[0].successful
+        result = probe.call(SetParameters, "/umbrella_node/set_parameters", req)
+        assert result.results[0].successful
         assert probe.call(Trigger, "/umbrella_node/reset", Trigger.Request()).success
         node.wait_for_log("locked at t", count=2, timeout=30)
         time.sleep(0.3)

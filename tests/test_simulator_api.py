@@ -104,8 +104,12 @@ def test_outputs_are_consistent():
 
 
 def test_sleeve_force_bounded_by_what_the_link_carries():
-    """The command range ends at the link's Euler buckling load pi^2 E I / l3^2 (a pinned-
-    pinned column; the squash load A sigma_y is far higher for the thesis's section)."""
+    """
+    Bound the sleeve force by the load the link can carry.
+
+    The command range ends at the link's Euler buckling load pi^2 E I / l3^2 (a pinned-
+    pinned column; the squash load A sigma_y is far higher for the thesis's section).
+    """
     p = UmbrellaParams()
     euler = math.pi ** 2 * 72.0e9 * (0.01 ** 4 / 12) / 0.5 ** 2
     assert p.sleeve_force_limit == pytest.approx(euler, rel=1e-12)

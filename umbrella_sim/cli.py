@@ -142,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         params = build_params(args)
-        profile = read_force_profile(args.force_profile, params.sleeve_force_limit) if args.force_profile else None
+        profile = (read_force_profile(args.force_profile, params.sleeve_force_limit)
+                   if args.force_profile else None)
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f"--duration {args.duration}: must be > 0")
         if args.csv:

@@ -88,8 +88,12 @@ class Run:
 
 
 def _series(log, topic, fn, segment, width: int, stride: int = 1):
-    """(t, values) of one topic of one segment, streamed: only the extracted numbers are kept
-    (every stride-th message)."""
+    """
+    Return (t, values) of one topic of one segment.
+
+    (t, values) of one topic of one segment, streamed: only the extracted numbers are kept
+    (every stride-th message).
+    """
     t, rows = [], []
     for i, (tm, m) in enumerate(log.iter_decoded(topic, segment)):
         if i % stride:

@@ -1,4 +1,5 @@
-"""Checks of input and output paths, made before any expensive work.
+"""
+Checks of input and output paths, made before any expensive work.
 
 Every tool reads its text inputs through ``read_text_input`` and checks every output path with
 ``check_new_output`` first, so a wrong path fails at once, names the file and the reason, and
@@ -11,8 +12,12 @@ import stat
 
 
 def read_text_input(path: str, what: str) -> str:
-    """The UTF-8 text of a regular file, or ValueError naming the file and why not (missing,
-    a directory or FIFO, unreadable, binary)."""
+    """
+    Return the UTF-8 text of a regular file.
+
+    The UTF-8 text of a regular file, or ValueError naming the file and why not (missing,
+    a directory or FIFO, unreadable, binary).
+    """
     try:
         st = os.stat(path)
     except OSError as exc:
@@ -33,9 +38,13 @@ def read_text_input(path: str, what: str) -> str:
 
 
 def check_new_output(path: str, what: str) -> str:
-    """The absolute path of a file or directory to be created, or ValueError naming why it
+    """
+    Return the absolute path of an output to be created.
+
+    The absolute path of a file or directory to be created, or ValueError naming why it
     cannot be (it exists: never overwritten; no parent directory; parent not writable).
-    Nothing is created."""
+    Nothing is created.
+    """
     path = os.path.abspath(path.rstrip("/") or "/")
     if os.path.lexists(path):
         raise ValueError(f"{what} {path}: already exists, not overwriting")

@@ -104,9 +104,13 @@ class LogData:
 
     # ---------------------------------------------------------------- messages
     def iter_raw(self, topics=None):
-        """RawMessage of the given topics (all if None), streamed from the file: log-time
+        """
+        Stream the RawMessages of the given topics.
+
+        RawMessage of the given topics (all if None), streamed from the file: log-time
         order for a finalised file, file order for a recovered one (the recorder writes in
-        publication order)."""
+        publication order).
+        """
         wanted = None if topics is None else set(topics)
         if self.indexed:
             with open(self.path, "rb") as fh:
@@ -229,7 +233,7 @@ def _regular_file(path: str) -> None:
 
 
 def resolve_path(path: str) -> str:
-    """The .mcap of a bag directory (from metadata.yaml, else the only .mcap), or the file."""
+    """Return the .mcap of a bag directory (metadata.yaml, else the only .mcap), or the file."""
     if os.path.isdir(path):
         meta = os.path.join(path, "metadata.yaml")
         if os.path.isfile(meta):
@@ -252,8 +256,12 @@ def resolve_path(path: str) -> str:
 
 
 def read_log(path: str, umbrella: bool = True) -> LogData:
-    """Open a log (channels, metadata, counts; no messages in memory).  umbrella=True: it
-    must be an umbrella_sim recording (its parameters record)."""
+    """
+    Open a log (channels, metadata, counts; no messages in memory).
+
+    Open a log (channels, metadata, counts; no messages in memory).  umbrella=True: it
+    must be an umbrella_sim recording (its parameters record).
+    """
     mcap_path = resolve_path(path)
     _regular_file(mcap_path)
     try:
@@ -305,8 +313,12 @@ def _open_indexed(log: LogData) -> None:
 
 
 def _scan(path: str, schemas: dict, channels: dict, state: dict | None = None):
-    """(record, topic) for every complete record, chunks opened; stops at a torn tail
-    (state["truncated"] = True).  One chunk in memory at a time."""
+    """
+    Yield (record, topic) for every complete record.
+
+    (record, topic) for every complete record, chunks opened; stops at a torn tail
+    (state["truncated"] = True).  One chunk in memory at a time.
+    """
     def take(record):
         if isinstance(record, Schema):
             schemas[record.id] = record

@@ -8,7 +8,8 @@ Threads, chosen deliberately:
     accumulate drift;
   * a two-thread executor serves the sleeve_force subscription (its own callback group)
     and, independently, the ~/reset and ~/pause services and parameter sets.  The
-    compiled step is a ctypes call, which releases the GIL, so commands are taken while physics runs.  A command is handed
+    compiled step is a ctypes call, which releases the GIL, so commands are taken while
+    physics runs.  A command is handed
     over under a lock and applied at the next step boundary; every applied value is logged
     with its sim time, which is the exact force history for an offline re-run.
 Everything published and every command received (accepted, refused, applied) is recorded to
@@ -135,8 +136,12 @@ class UmbrellaNode(Node):
 
     # ------------------------------------------------------------------ config
     def _check_parameter_sources(self, params_files, known: set) -> None:
-        """Every params file has a section for this node, and every parameter given for it
-        (-p or a file) is one it knows: a typo is an error, never a silent default."""
+        """
+        Check the params files and parameter names given for this node.
+
+        Every params file has a section for this node, and every parameter given for it
+        (-p or a file) is one it knows: a typo is an error, never a silent default.
+        """
         fqn = self.get_fully_qualified_name()
         known = known | ROS_OWN_PARAMETERS
         in_files = set()
@@ -194,7 +199,7 @@ class UmbrellaNode(Node):
         self.get_logger().info(f"recording to {self.recorder.path}")
 
     def _on_recording_error(self, reason: str) -> None:
-        """The recorder stopped on a write error (once): say so; physics and topics go on."""
+        """Report a write error of the recorder (called once)."""
         self.recording_error = reason
         self._log("error", f"recording stopped: {reason}; {self.recorder.path} keeps what was "
                            "written before (readable, marked as ended early); the simulation "
@@ -234,6 +239,7 @@ class UmbrellaNode(Node):
         try:
             force = validate_force(msg.data, self.sim.params.sleeve_force_limit)
         except ValueError as exc:
+            reason = str(exc)
             self.refused_commands += 1
             now = time.monotonic()
             start, n = self._refused_window
@@ -245,7 +251,7 @@ class UmbrellaNode(Node):
             else:
                 self.refused_not_recorded += 1
             self._refused_window = (start, n)
-            self._warn_throttled("refused", 1.0, lambda: f"refused sleeve_force command: {exc} "
+            self._warn_throttled("refused", 1.0, lambda: f"refused sleeve_force command: {reason} "
                                  f"(refused so far: {self.refused_commands})")
             return
         self.accepted_commands += 1
@@ -255,9 +261,13 @@ class UmbrellaNode(Node):
 
     @contextlib.contextmanager
     def _locked(self):
-        """The sim lock for a service: the physics thread steps aside at its next
+        """
+        Take the sim lock for a service.
+
+        The sim lock for a service: the physics thread steps aside at its next
         publication boundary (Python locks are not fair: without this a busy physics loop
-        could re-take the lock for seconds)."""
+        could re-take the lock for seconds).
+        """
         self._service_waiting.set()
         with self._sim_lock:
             self._service_waiting.clear()
@@ -456,10 +466,14 @@ class UmbrellaNode(Node):
                 self.finished.set_result(self.fault is None)
 
     def _re_anchor(self, epoch: int, now: float, sim_t: float, lag: float) -> None:
-        """Overload policy: more than MAX_LAG_S behind, the pacing restarts from now (the
+        """
+        Re-anchor the pacing (the overload policy).
+
+        Overload policy: more than MAX_LAG_S behind, the pacing restarts from now (the
         backlog is dropped, never caught up in a burst); the sim then runs at the speed the
         machine allows, reported as measured_real_time_factor, and the dropped wall time
-        accumulates in slip_s (diagnostics)."""
+        accumulates in slip_s (diagnostics).
+        """
         with self._sim_lock:
             if epoch != self._epoch:
                 return
@@ -472,9 +486,13 @@ class UmbrellaNode(Node):
             f"{self.slip:.3f} s in {self.re_anchors} re-anchors, see diagnostics)"))
 
     def _warn_throttled(self, key: str, period: float, text) -> None:
-        """A WARN at most once per period (s) per key.  rclpy's own throttle_duration_sec
+        """
+        Log a WARN at most once per period (s) per key.
+
+        A WARN at most once per period (s) per key.  rclpy's own throttle_duration_sec
         inspects the caller's frame on every call (~3.5 ms measured), which throttled the
-        command callback to ~130 commands/s during a flood."""
+        command callback to ~130 commands/s during a flood.
+        """
         now = time.monotonic()
         if now - self._warned_at.get(key, -math.inf) >= period:
             self._warned_at[key] = now
@@ -563,7 +581,7 @@ def usage() -> str:
 
 
 def _params_files(argv: list[str]) -> list[str]:
-    """The --params-file arguments among the ROS arguments."""
+    """Return the --params-file arguments among the ROS arguments."""
     return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--params-file"]
 
 

@@ -298,11 +298,15 @@ class _DerivedQuantities:
 
     @property
     def sleeve_force_limit(self) -> float:
-        """Largest sleeve force F_H a command may ask for (N): the axial load the link O''-H
+        """
+        Return the largest sleeve force F_H a command may ask for (N).
+
+        Largest sleeve force F_H a command may ask for (N): the axial load the link O''-H
         can carry, min(Euler buckling load of a pinned-pinned column pi^2 E I / l3^2, squash
         load A sigma_y).  In stage 1 the link's compression is F_H / sin(alpha2) >= F_H, so a
         larger F_H buckles or crushes the link in every configuration, which this
-        (geometrically linear, elastic) model cannot represent."""
+        (geometrically linear, elastic) model cannot represent.
+        """
         euler = math.pi ** 2 * self.youngs_modulus * self.cross_section_inertia / self.l3 ** 2
         return min(euler, self.cross_section_area * self.yield_strength)
 
@@ -413,9 +417,13 @@ def _flatten(values: dict, prefix: str = "") -> dict:
 
 
 def read_params_file(path: str) -> dict[str, dict]:
-    """{section (node name pattern): ros__parameters with dotted names} of a ROS 2 params
+    """
+    Read the sections of a ROS 2 params YAML.
+
+    {section (node name pattern): ros__parameters with dotted names} of a ROS 2 params
     YAML, or ValueError naming the file and the reason.  The same checks rcl makes, done
-    first so that a bad file gets a one-line error instead of an rcl traceback."""
+    first so that a bad file gets a one-line error instead of an rcl traceback.
+    """
     import yaml  # local import: only the file path needs it
 
     text = read_text_input(path, "params file")
@@ -442,9 +450,13 @@ def read_params_file(path: str) -> dict[str, dict]:
 
 
 def section_matches(pattern: str, node_fqn: str) -> bool:
-    """Whether a params-file section name applies to the node of fully qualified name
+    """
+    Tell whether a params-file section applies to a node.
+
+    Whether a params-file section name applies to the node of fully qualified name
     node_fqn (ROS 2 rules: '/**' any namespace depth, '*' one token, no leading slash means
-    relative to the root)."""
+    relative to the root).
+    """
     tokens = pattern.strip("/").split("/")
     regex = "".join("(/[^/]+)*" if t == "**" else "/[^/]+" if t == "*" else "/" + re.escape(t)
                     for t in tokens)
@@ -452,9 +464,13 @@ def section_matches(pattern: str, node_fqn: str) -> bool:
 
 
 def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:
-    """The ``ros__parameters`` of a ROS 2 params YAML that apply to node_name in the root
+    """
+    Return the parameters of a params YAML for node_name.
+
+    The ``ros__parameters`` of a ROS 2 params YAML that apply to node_name in the root
     namespace (sections '/**', '/*', node_name, ...); a file with no such section is an
-    error."""
+    error.
+    """
     sections = read_params_file(path)
     merged: dict = {}
     for key, values in sections.items():
@@ -467,9 +483,13 @@ def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:
 
 
 def check_known_names(names, known, source: str) -> None:
-    """ValueError naming every name of `names` not in `known`, with a "did you mean"
+    """
+    Refuse unknown parameter names, suggesting the closest known one.
+
+    ValueError naming every name of `names` not in `known`, with a "did you mean"
     suggestion (difflib) for each; `source` says where the names came from (e.g. "params
-    file config/x.yaml", "-p", "--set")."""
+    file config/x.yaml", "-p", "--set").
+    """
     import difflib
 
     known = set(known)

@@ -208,8 +208,12 @@ def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: st
 
 
 def events_metadata(sim, fault: str | None = None) -> dict[str, dict[str, str]]:
-    """The exact lock instant (the phase message comes at the next publication) and the
-    solver fault that ended the run, if any (at the last good state's time)."""
+    """
+    Return the events record: the exact lock instant and the fault, if any.
+
+    The exact lock instant (the phase message comes at the next publication) and the
+    solver fault that ended the run, if any (at the last good state's time).
+    """
     ev = sim.lock_event
     out = {"locked": "false"} if ev is None else {
         "locked": "true", "lock_time": repr(ev.time), "lock_kind": ev.kind,
@@ -265,10 +269,14 @@ class RecordingError(OSError):
 
 
 class _CommittedFile:
-    """The MCAP writer's stream: buffers records in memory and writes them to the file only
+    """
+    Write the MCAP writer's records to the file between records only.
+
+    The MCAP writer's stream: buffers records in memory and writes them to the file only
     on commit(), which happens between records.  A failed commit (ENOSPC, EIO, EACCES...)
     truncates the file back to the last committed record boundary, so the file never holds
-    a torn record and the space of the failed write is given back."""
+    a torn record and the space of the failed write is given back.
+    """
 
     def __init__(self, path: str):
         self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
@@ -318,8 +326,12 @@ class _CommittedFile:
 
 
 def _ended_early_tail(metadata: dict[str, str]) -> bytes:
-    """A Metadata record, DataEnd and a Footer without summary: appended at the last record
-    boundary, it makes a failed recording a complete MCAP again that says why it ended."""
+    """
+    Return the trailer of a recording stopped by a write error.
+
+    A Metadata record, DataEnd and a Footer without summary: appended at the last record
+    boundary, it makes a failed recording a complete MCAP again that says why it ended.
+    """
     from mcap.data_stream import RecordBuilder
     from mcap.records import DataEnd, Footer, Metadata
 
@@ -337,19 +349,27 @@ SEGMENT_RECORD = "umbrella_sim.segment"
 
 
 def check_record_path(bag_dir: str, what: str = "record_path") -> str:
-    """The absolute bag directory, or ValueError naming why it cannot be created (cheap
-    checks before any simulation work; nothing is created; never overwrites)."""
+    """
+    Return the absolute bag directory, or raise ValueError why it cannot be created.
+
+    The absolute bag directory, or ValueError naming why it cannot be created (cheap
+    checks before any simulation work; nothing is created; never overwrites).
+    """
     return check_new_output(bag_dir, what)
 
 
 class BagRecorder:
-    """Thread-safe writer of one bag directory; never overwrites.
+    """
+    Write one bag directory, thread-safe; never overwrites.
+
+    Thread-safe writer of one bag directory; never overwrites.
 
     A write error (disk full, I/O error, permissions) never propagates to the caller's
     publishing: the recording stops at the last complete record, an ``umbrella_sim.
     recording_error`` metadata record and a footer are appended if the disk takes them,
     ``error`` holds the reason and ``on_error`` (if given) is called once with it.  A failure
-    while starting removes everything the recorder created and raises ValueError."""
+    while starting removes everything the recorder created and raises ValueError.
+    """
 
     def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]], on_error=None):
         bag_dir = check_record_path(bag_dir)
@@ -481,8 +501,12 @@ class BagRecorder:
 
     def close_run(self, sim, published: dict, accepted: int, refused: int,
                   fault: str | None = None, extra: dict | None = None) -> None:
-        """Finalise with the counts (published vs recorded), the exact lock event and the
-        fault, if any; extra: more counts (e.g. refused commands not recorded)."""
+        """
+        Finalise with the counts, the exact lock event and the fault, if any.
+
+        Finalise with the counts (published vs recorded), the exact lock event and the
+        fault, if any; extra: more counts (e.g. refused commands not recorded).
+        """
         self.close({"umbrella_sim.counts": {
             "published": json.dumps(published), "commands_accepted": str(accepted),
             "commands_refused": str(refused), "recorded": json.dumps(self.counts),
@@ -491,13 +515,17 @@ class BagRecorder:
 
     def start_segment(self, parameters: dict[str, str], gap_ns: int,
                       ended_events: dict[str, str] | None = None) -> int:
-        """A new segment (after a reset with maybe new parameters): sim time restarts at 0,
+        """
+        Start a new segment (after a reset, maybe with new parameters).
+
+        A new segment (after a reset with maybe new parameters): sim time restarts at 0,
         so from now on log times are offset to follow the previous segment's last message by
         gap_ns (log time never goes backwards; header stamps stay sim time).  A metadata
         record ``umbrella_sim.segment.K`` holds the offset and the segment's parameters.
         Returns K (the first segment, 0, is described by ``umbrella_sim.parameters``).
         ended_events: the events of the segment that ends (``umbrella_sim.events.K-1``; the
-        last segment's are ``umbrella_sim.events``, written at close)."""
+        last segment's are ``umbrella_sim.events``, written at close).
+        """
         with self._lock:
             if self._closed:
                 return self.segment
@@ -515,8 +543,12 @@ class BagRecorder:
             return self.segment
 
     def write(self, topic: str, msg, t_ns: int) -> bool:
-        """Record one message at sim time t_ns (plus the segment's log-time offset); False
-        once the recording has stopped (closed or failed)."""
+        """
+        Record one message at sim time t_ns (plus the segment's log-time offset).
+
+        Record one message at sim time t_ns (plus the segment's log-time offset); False
+        once the recording has stopped (closed or failed).
+        """
         if self._closed:
             return False
         data = cdr_bytes(msg)

@@ -34,11 +34,15 @@ SIGNALS = ("leaf_hinge", "link_hinge", "sleeve_slider", "leaf_hinge_rate", "slee
 
 
 def resimulate(log: LogData) -> dict:
-    """Re-run the physics of every segment from its parameters and the applied forces;
+    """
+    Re-run the physics of every segment and compare it with the log.
+
+    Re-run the physics of every segment from its parameters and the applied forces;
     returns {"compared": publications, "max_abs_diff": {signal: largest |recorded -
     re-simulated|}, "segments": [...], "problems": [...]}.  A recorded fault must be
     reproduced at the same sim time, a fault the log does not show is a problem.  Streams:
-    one publication's messages in memory at a time."""
+    one publication's messages in memory at a time.
+    """
     diffs = dict.fromkeys(SIGNALS, 0.0)
     out = {"compared": 0, "max_abs_diff": diffs, "segments": [], "problems": []}
     for seg in log.segments():

@@ -39,8 +39,12 @@ class SimulationDiverged(RuntimeError):
 
 
 def validate_force(force: float, limit: float | None = None) -> float:
-    """F_H as a float, or ValueError: finite, >= 0 and, given the model's
-    UmbrellaParams.sleeve_force_limit, at most that (N)."""
+    """
+    Return F_H as a float, or raise ValueError naming the rule it breaks.
+
+    F_H as a float, or ValueError: finite, >= 0 and, given the model's
+    UmbrellaParams.sleeve_force_limit, at most that (N).
+    """
     try:
         f = float(force)
     except (TypeError, ValueError):
