@@ -117,20 +117,21 @@ def _log_decrement_ratio(r):
     """
     Return the damping ratio from the decay of the stage-2 tip peaks.
 
-    Damping ratio from the decay of the stage-2 tip peaks (parabolic peak interpolation,
-    least-squares slope of ln(peak) per cycle).
+    Both signs of peak (half cycles), parabolic peak interpolation, least-squares slope of
+    ln|peak|; measured from v = 0, the equilibrium of the locked, unloaded frame (no gravity,
+    and F_H no longer acts).
     """
-    t, v = r.column("time"), r.column("tip_transverse")
+    v = r.column("tip_transverse")
     locked = np.array([s.stage == "locked" for s in r.samples])
-    t, v = t[locked][5:], v[locked][5:]
-    v = v - v.mean()
+    v = v[locked][5:]
     peaks = []
     for i in range(1, len(v) - 1):
-        if v[i] > v[i - 1] and v[i] >= v[i + 1] and v[i] > 0.3 * v.max():
-            a, b, c = v[i - 1], v[i], v[i + 1]
-            peaks.append(b - 0.125 * (a - c) ** 2 / (a - 2 * b + c))
-    assert len(peaks) >= 6
-    delta = -np.polyfit(np.arange(len(peaks)), np.log(peaks), 1)[0]
+        for sign in (1.0, -1.0):
+            a, b, c = sign * v[i - 1], sign * v[i], sign * v[i + 1]
+            if b > a and b >= c and b > 0.3 * np.abs(v).max():
+                peaks.append(b - 0.125 * (a - c) ** 2 / (a - 2 * b + c))
+    assert len(peaks) >= 12
+    delta = -2.0 * np.polyfit(np.arange(len(peaks)), np.log(peaks), 1)[0]   # per cycle
     return delta / math.sqrt(4 * math.pi ** 2 + delta ** 2)
 
 
