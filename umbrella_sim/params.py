@@ -81,30 +81,33 @@ class Param:
         return (f"{'(' if self.low_open else '['}{_num(lo)}, {_num(hi)}"
                 f"{')' if self.high_open else ']'}")
 
-    def check(self, value: Any) -> None:
-        """Raise ValueError naming the parameter unless value is in this parameter's range."""
+    def check(self, value: Any, what: str = "") -> None:
+        """
+        Raise ValueError naming the parameter unless value is in this parameter's range.
+
+        what replaces 'parameter NAME' in the message (e.g. 'sleeve force command').
+        """
+        what = what or f"parameter {self.name}"
         if self.choices:
             if value not in self.choices:
-                raise ValueError(f"parameter {self.name}={value!r}: must be one of "
-                                 f"{', '.join(self.choices)}")
+                raise ValueError(f"{what}={value!r}: must be one of {', '.join(self.choices)}")
             return
         if self.type is not float and self.type is not int:
             return
         if not math.isfinite(value):
-            raise ValueError(f"parameter {self.name}={value}: must be a finite number")
+            raise ValueError(f"{what}={value}: must be a finite number")
         lo, hi = self.low, self.high
         below = lo is not None and (value <= lo if self.low_open else value < lo)
         above = hi is not None and (value >= hi if self.high_open else value > hi)
         if not (below or above):
             return
         if self.type is int and lo is not None and hi is not None:
-            raise ValueError(f"parameter {self.name}={value}: must be between {_num(lo)} and "
-                             f"{_num(hi)}")
+            raise ValueError(f"{what}={value}: must be between {_num(lo)} and {_num(hi)}")
         if below:
-            raise ValueError(f"parameter {self.name}={value}: must be "
-                             f"{'>' if self.low_open else '>='} {_num(lo)}")
-        raise ValueError(f"parameter {self.name}={value}: must be "
-                         f"{'<' if self.high_open else '<='} {_num(hi)}")
+            raise ValueError(f"{what}={value}: must be {'>' if self.low_open else '>='} "
+                             f"{_num(lo)}")
+        raise ValueError(f"{what}={value}: must be {'<' if self.high_open else '<='} "
+                         f"{_num(hi)}")
 
     def coerce(self, value: Any) -> Any:
         """Convert a CLI / YAML / ROS value to this type, naming the parameter on failure."""

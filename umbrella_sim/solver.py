@@ -21,7 +21,7 @@ import numpy as np
 from .integrators import ConvergenceError, DynamicState, MidpointDAE
 from .model import ConstraintSet, DEFORMING, LOCKED, UmbrellaModel
 from .outputs import LockEvent, RunResult, Sample
-from .params import UmbrellaParams
+from .params import SPECS, UmbrellaParams
 from .rigid import RigidMechanism
 
 #: residual above which a run is declared diverged (m, m/s)
@@ -49,11 +49,8 @@ def validate_force(force: float, limit: float | None = None) -> float:
         f = float(force)
     except (TypeError, ValueError):
         raise ValueError(f"sleeve force {force!r}: not a number") from None
-    if math.isnan(f) or math.isinf(f):
-        raise ValueError(f"sleeve force {f}: must be finite")
-    if f < 0.0:
-        raise ValueError(f"sleeve force {f} N: must be >= 0 (F_H pushes the sleeve along -Y; "
-                         "the sleeve cannot be pulled)")
+    # the same range as the sleeve_force parameter: one rule (params.REGISTRY)
+    SPECS["sleeve_force"].check(f, what="sleeve force F_H")
     if limit is not None and f > limit:
         raise ValueError(f"sleeve force {f:g} N: above {limit:.6g} N, the axial load the link "
                          "can carry (Euler buckling / squash load)")
