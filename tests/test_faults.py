@@ -8,6 +8,7 @@ import errno
 import json
 import os
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -30,19 +31,32 @@ from umbrella_sim.ros_io import LATCHED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-#: runs umbrella_node with a disk that holds LIMIT bytes per file: every write that would
-#: make the file larger fails with the given errno, like a full tmpfs
-FAULTY_DISK = """
-import errno, os, sys
-import umbrella_sim.recording as rec
+def full_disk_write(limit: int, code: int, real=os.write):
+    """
+    Return an os.write for a disk that holds `limit` bytes per regular file.
+
+    Like a full tmpfs: the write that reaches the limit is partial, the next one fails
+    with `code` (ENOSPC, EIO, ...); pipes and terminals are not affected.
+    """
+    def write(fd, data):
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            return real(fd, data)
+        room = limit - os.lseek(fd, 0, os.SEEK_CUR)
+        if room <= 0:
+            raise OSError(code, os.strerror(code))
+        return real(fd, data[:room])
+    return write
+
+
+#: runs umbrella_node on such a disk: argv[1] bytes per file, argv[2] the errno
+FAULTY_DISK = f"""
+import os, sys
+sys.path.insert(0, {ROOT!r})
+from tests.test_faults import full_disk_write
 from umbrella_sim.node import main
 limit, code = int(sys.argv.pop(1)), int(sys.argv.pop(1))
-real = rec._write_all
-def faulty(fd, data):
-    if os.fstat(fd).st_size + len(data) > limit:
-        raise OSError(code, os.strerror(code))
-    real(fd, data)
-rec._write_all = faulty
+os.write = full_disk_write(limit, code)
 sys.exit(main())
 """
 
@@ -69,13 +83,7 @@ def probe():
 
 # ------------------------------------------------------------------ write errors
 def _disk(monkeypatch, limit, code=errno.ENOSPC):
-    real = recording._write_all
-
-    def faulty(fd, data):
-        if os.fstat(fd).st_size + len(data) > limit:
-            raise OSError(code, os.strerror(code))
-        real(fd, data)
-    monkeypatch.setattr(recording, "_write_all", faulty)
+    monkeypatch.setattr(os, "write", full_disk_write(limit, code))
 
 
 @pytest.mark.parametrize("code", [errno.ENOSPC, errno.EIO, errno.EACCES])

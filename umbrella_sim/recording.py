@@ -264,10 +264,6 @@ def _write_all(fd: int, data) -> None:
         view = view[n:]
 
 
-class RecordingError(OSError):
-    """The recording stopped on a write error; what was committed before stays readable."""
-
-
 class _CommittedFile:
     """
     Write the MCAP writer's records to the file between records only.
@@ -297,14 +293,16 @@ class _CommittedFile:
         """Write what is pending; True if anything was written."""
         if not self._pending:
             return False
+        # an immutable copy: a failed os.write leaves views of its buffer in the traceback,
+        # and a bytearray with live views cannot be cleared (BufferError on a full tmpfs)
+        data = bytes(self._pending)
+        self._pending.clear()
         try:
-            _write_all(self.fd, self._pending)
+            _write_all(self.fd, data)
         except OSError:
-            self._pending.clear()
             self.rollback()
             raise
-        self.committed += len(self._pending)
-        self._pending.clear()
+        self.committed += len(data)
         return True
 
     def rollback(self) -> None:
