@@ -31,6 +31,7 @@ from umbrella_sim.ros_io import LATCHED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
+
 def full_disk_write(limit: int, code: int, real=os.write):
     """
     Return an os.write for a disk that holds `limit` bytes per regular file.
