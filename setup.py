@@ -1,6 +1,29 @@
 from glob import glob
 
 from setuptools import Extension, find_packages, setup
+from setuptools.command.build_ext import build_ext
+
+NO_COMPILER = (
+    "umbrella_sim needs a C compiler: the physics step is compiled code "
+    "(umbrella_sim/_kernel.c, plain C99 + libm). Install one (Debian/Ubuntu: "
+    "`sudo apt-get install gcc`, or build-essential) and run the installation again.")
+
+
+class BuildKernel(build_ext):
+    """Build the compiled step; without a working C compiler, stop with one clear message."""
+
+    def run(self):
+        try:
+            super().run()
+        except Exception as exc:  # distutils raises several types for a missing compiler
+            raise SystemExit(f"error: {NO_COMPILER}\n({type(exc).__name__}: {exc})") from None
+
+    def build_extension(self, ext):
+        try:
+            super().build_extension(ext)
+        except Exception as exc:
+            raise SystemExit(f"error: {NO_COMPILER}\n({type(exc).__name__}: {exc})") from None
+
 
 package_name = "umbrella_sim"
 
@@ -17,11 +40,10 @@ setup(
         ("share/" + package_name + "/urdf", glob("urdf/*.urdf")),
         ("share/" + package_name + "/rviz", glob("rviz/*.rviz")),
     ],
-    # the compiled integrator step (plain C, loaded with ctypes); optional: without a C
-    # compiler the numpy path runs instead
+    # the compiled integrator (plain C, loaded with ctypes): required
     ext_modules=[Extension("umbrella_sim._kernel", ["umbrella_sim/_kernel.c"],
-                           extra_compile_args=["-O3", "-std=c99"], libraries=["m"],
-                           optional=True)],
+                           extra_compile_args=["-O3", "-std=c99"], libraries=["m"])],
+    cmdclass={"build_ext": BuildKernel},
     install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "matplotlib"],
     zip_safe=True,
     maintainer="umbrella_sim developers",

@@ -21,9 +21,11 @@ THESIS_DEFORMABLE = {-0.5: 0.09040, -1.0: 0.04525, -2.0: 0.02343}
 
 @pytest.fixture(scope="module")
 def thesis_run():
-    """V0 = -0.2, N = 1, energy lock, through the lock and 1 s of stage 2."""
-    p = UmbrellaParams(v0=-0.2)
-    r = simulate(p, 1.0 + 0.2259)
+    """V0 = -0.2, N = 1, energy lock, through the lock and 1 s of stage 2.  At 0.25 ms: the
+    thesis tolerances (>= 0.5 %) hold at any step up to that (tests/test_time_step.py and
+    docs/validation.md measure the step error), and simulate() builds a Sample per step."""
+    p = UmbrellaParams(v0=-0.2, time_step=2.5e-4)
+    r = simulate(p, 1.0 + 0.2260)
     assert r.error is None
     return r
 
@@ -66,12 +68,12 @@ def test_peak_stresses_leaf_above_link(thesis_run):
 
 
 def test_energy_conserved_without_force(thesis_run):
-    """F_H = 0: total energy drifts < 1e-4 through stage 1 and 1 s of stage 2 (energy lock)."""
+    """F_H = 0: total energy drifts < 1e-9 through stage 1 and 1 s of stage 2 (energy lock)."""
     assert thesis_run.lock.kind == "energy"
     assert thesis_run.samples[-1].time >= thesis_run.lock.time + 1.0 - 1e-9
-    assert thesis_run.summary()["energy_drift"] < 1e-4
+    assert thesis_run.summary()["energy_drift"] < 1e-9
     e = np.array([s.kinetic_energy + s.strain_energy for s in thesis_run.samples])
-    assert np.abs(e - e[0]).max() / e[0] < 1e-4
+    assert np.abs(e - e[0]).max() / e[0] < 1e-9
 
 
 def test_constraint_residuals_over_one_second(thesis_run):
@@ -144,14 +146,23 @@ def test_mesh_convergence_of_deployment_time_and_period():
     assert abs(period[4] - period[8]) < abs(period[1] - period[8])
 
 
-def test_time_step_convergence():
-    """The default step's error in the thesis figures is small against the tolerances."""
-    fine = simulate(UmbrellaParams(v0=-0.2, time_step=2.5e-4), 0.6).summary()
-    coarse = simulate(UmbrellaParams(v0=-0.2), 0.6).summary()
-    assert coarse["deploy_time"] == pytest.approx(fine["deploy_time"], rel=1e-5)
-    assert coarse["tip_deflection_max"] == pytest.approx(fine["tip_deflection_max"], rel=0.01)
-    assert coarse["stage2_tip_period"] == pytest.approx(fine["stage2_tip_period"], rel=0.01)
-    assert coarse["stage2_tip_amplitude"] == pytest.approx(fine["stage2_tip_amplitude"], rel=0.03)
+def test_scheme_balances_energy_before_the_energy_scaling(monkeypatch):
+    """The velocity projection is scaled to the discrete energy balance (exact by
+    construction); the scaling only corrects the Newton tolerance and the projection's
+    O(h^4) sliver.  Without it the scheme itself must still balance energy closely:
+    numpy reference, scaling disabled, F_H = 2 N, through the lock and 0.1 s of stage 2."""
+    from umbrella_sim import integrators
+    monkeypatch.setattr(integrators, "ENERGY_RESTORE_LIMIT", 1.0 - 1e-300)   # never scale
+    p = UmbrellaParams(v0=-0.5, sleeve_force=2.0, time_step=5e-4)
+    sim = UmbrellaSimulator(p)
+    sim.engine.integrator = integrators.MidpointDAE(sim.model, kernel="numpy")
+    b = sim.advance(380)
+    assert b.lock is not None and b.error is None
+    err = b.kinetic_energy + b.strain_energy - b.work + b.lock_energy_loss
+    e0 = sim.engine.kinetic_energy(sim.engine.initial(2.0))
+    # the scheme alone: ~3e-5 here (Newton tolerance and projection); the scaling makes it
+    # round-off (test_energy_conserved_without_force, test_energy_equals_work_with_force)
+    assert abs(err - err[0]).max() / (e0 + b.work.max()) < 1e-4
 
 
 def test_stress_recovery_sign_and_fibres():

@@ -69,8 +69,10 @@ def test_topic_driven_deployment_matches_offline_core(probe):
     states = probe.messages("/joint_states")
     before = [m for m in states if stamp_s(m) <= t_cmd + 1e-9]
     after = [m for m in states if stamp_s(m) > lock_t]
-    # at rest with no force the state is static to round-off (|dq| ~ 1e-12)
-    assert len(before) > 10 and all(abs(m.position[0] - ALPHA0) < 1e-9 for m in before)
+    # at rest with no force the state is static to round-off: each step corrects the
+    # constraints' ~1e-17 m round-off, a velocity of ~eps/h that no force damps, so the
+    # angle random-walks by ~1e-9 rad over seconds at the 5e-5 s step (0.5 um at the tip)
+    assert len(before) > 10 and all(abs(m.position[0] - ALPHA0) < 1e-7 for m in before)
     assert all(m.effort[2] == 0.0 for m in before)
     assert any(m.position[0] != ALPHA0 for m in states if lock_t > stamp_s(m) > t_cmd)
     assert min(abs(m.position[0] - DEPLOYED) for m in after) < 1e-3

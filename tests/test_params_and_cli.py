@@ -80,7 +80,7 @@ def test_cli_json_summary():
 def test_cli_models_and_csv(tmp_path):
     out = tmp_path / "run.csv"
     r = cli("simulate", "--model", "rigid", "--v0", "-2", "--duration", "0.03",
-            "--csv", str(out), "--csv-state", "--json")
+            "--time-step", "0.002", "--csv", str(out), "--csv-state", "--json")
     assert r.returncode == 0, r.stderr
     lines = out.read_text().splitlines()
     header = lines[0].split(",")
@@ -95,7 +95,7 @@ def test_cli_force_profile(tmp_path):
     prof = tmp_path / "force.csv"
     prof.write_text("t,F\n0.0,0.0\n0.01,20.0\n")
     r = cli("simulate", "--v0", "0", "--force-profile", str(prof), "--duration", "0.6",
-            "--json")
+            "--time-step", "0.002", "--json")
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["deploy_time"] > 0.01
     prof.write_text("t,F\n0.0,1.0\n0.01,-5.0\n")

@@ -1,10 +1,27 @@
 /*
- * Compiled step of the energy-consistent midpoint integrator (see integrators.py).
+ * Compiled stepping of the energy-consistent midpoint integrator (see integrators.py).
  *
- * The same arithmetic as NewmarkDAE._step in numpy (the reference path the tests compare
+ * The same arithmetic as MidpointDAE._step in numpy (the reference path the tests compare
  * against): discrete-gradient residual, Newton iterations on a once-factored iteration
- * matrix, velocity projection in the mass metric.  Plain C on double arrays, loaded with
- * ctypes: no Python or numpy headers.  Matrices are row-major.
+ * matrix, velocity projection in the mass metric with the kinetic energy kept, and the
+ * per-step outputs the node publishes (tip deflection, fibre stress peaks and where,
+ * sleeve position and velocity, energies, work).  Plain C on double arrays, loaded with
+ * ctypes: no Python or numpy headers.
+ *
+ * Structure used so that the cost grows linearly with the mesh:
+ *   - the constant matrices (elastic mass Mff, stiffness K, rotation-deformation coupling W)
+ *     live only on the elastic coordinates, node by node, so they are banded (half
+ *     bandwidth <= 5: an element couples two nodes) and are stored in band form;
+ *   - M(q) and the iteration matrix are that band plus an "arrow": the rows and columns of
+ *     the border coordinates (alpha1, R2x, R2y, alpha2) and of the multipliers.  Linear
+ *     systems are solved by a band LU of the elastic block (its symmetric part is positive
+ *     definite: M + h^2/4 K, plus a skew gyroscopic part, so no pivoting is needed) and a
+ *     pivoted dense LU of the small Schur complement on the border;
+ *   - M(q) is never formed: products M(q) v use the band and a few border vectors.
+ * The rigid-FE mode (every elastic coordinate constrained) goes through the same code with
+ * a border as large as the mesh, so there it costs what a dense solve costs.
+ *
+ * A context (umbrella_new) holds the model and every work buffer, allocated once.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -14,181 +31,135 @@ typedef struct {
     int n;                 /* coordinates */
     int n_link;            /* link elastic coordinates */
     int i_r2x, i_r2y, i_alpha2, s_link;
-    int i_u_joint, i_u_sleeve;
-    int n_elastic;
+    int i_u_joint, i_u_sleeve, i_tip_u, i_tip_v;
+    int n_elastic;         /* leaf + link elastic coordinates, in q order */
+    int bw;                /* half bandwidth of the elastic block, elastic ordering */
+    int n_stress_leaf, n_stress_link, stress_width;
     double l1, l3, y_stop;
-    double j0_leaf, j0_link, pbar0;
-    const double *c_full, *g_full, *mff_full, *w_full;   /* n, n, n*n, n*n */
+    double j0_leaf, j0_link, pbar0, link_mass;
+    const double *c_full, *g_full;                       /* n */
     const int *body;       /* n: -1 not elastic, 0 leaf, 1 link */
+    const int *elastic_idx;                              /* n_elastic: q index of elastic p */
     const double *sbar, *isbar;                          /* 2 x n_link each */
-    const double *mass_template, *stiffness;             /* n*n */
-    const int *elastic_idx;                              /* n_elastic */
+    const double *mff_band, *k_band, *w_band;            /* n_elastic x (2 bw + 1) */
+    const int *stress_idx;                               /* points x width: q indices */
+    const double *stress_top, *stress_bottom;            /* points x width */
+    const double *stress_x;                              /* points */
 } Model;
 
-enum { OK = 0, NO_CONVERGENCE = 1, NON_FINITE = 2, SINGULAR = 3, NOT_PD = 4, NO_MEMORY = 5 };
+enum { OK = 0, NO_CONVERGENCE = 1, NON_FINITE = 2, SINGULAR = 3, NOT_PD = 4, NO_MEMORY = 5,
+       CROSSING = 6, DIVERGED = 7 };
 
-static void mass_matrix(const Model *m, const double *q, double *M) {
-    int n = m->n, ia = m->i_alpha2, ix = m->i_r2x, iy = m->i_r2y, sk = m->s_link;
-    memcpy(M, m->mass_template, sizeof(double) * n * n);
-    double maa[2] = {m->j0_leaf, m->j0_link};
-    for (int i = 0; i < n; i++) {
-        int b = m->body[i];
-        if (b < 0) continue;
-        double h = m->c_full[i], af = m->g_full[i];
-        for (int j = 0; j < n; j++) {
-            h += m->mff_full[i * n + j] * q[j];
-            af += q[j] * m->w_full[j * n + i];
+/* fields of a per-step output row, in this order (outputs.STEP_FIELDS) */
+enum { F_TIME, F_STAGE, F_ALPHA1, F_ALPHA1_RATE, F_SLEEVE_POS, F_SLEEVE_VEL, F_FORCE,
+       F_TIP_AXIAL, F_TIP_TRANSVERSE, F_PEAK_LEAF, F_PEAK_LEAF_X, F_PEAK_LINK, F_PEAK_LINK_X,
+       F_KINETIC, F_STRAIN, F_WORK, F_LOCK_LOSS, N_FIELDS };
+
+#define JW 3   /* nonzeros of a joint/stop constraint row */
+
+typedef struct {
+    int ne, bw, nb;
+    const double *C;          /* 4 x ne */
+    int lo[4], hi[4];
+    const int *cpos;          /* nc x JW elastic positions or -1 */
+    const double *cval;       /* nc x JW */
+} Arrow;
+
+typedef struct {
+    const Model *m;
+    int ne, nbmax, width;
+    /* state-dependent pieces of M(q) */
+    double *hq, *maf;      /* n */
+    double maa[2], mra[2];
+    double *mrf;           /* 2 x n_link */
+    /* vectors */
+    double *q1, *v1, *dq, *qm, *hm, *mffv, *wv0, *gt, *gy, *res, *kq, *mv, *wa, *wb, *vt, *rhs, *xa;
+    double *phi0, *phi, *corr, *jrow_val, *jm_val;   /* constraint rows */
+    int *jrow_idx, *jm_idx, *cpos;   /* cpos: elastic position of jrow entries, or -1 */
+    /* arrow system: band E, border columns B (col-major, ne per column), rows C, Schur S */
+    double *E, *B, *C, *S;
+    int *piv;
+    Arrow arrow;           /* the arrow system factored last */
+    double *Emass;         /* LU of the constant elastic mass band (projection) */
+    double *q_s, *v_s, *p_s, *lam_s;  /* single-step results */
+} Ctx;
+
+#define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
+static int nc_of(const Model *m, int locked, int rigid) {
+    return 3 + (locked ? 1 : 0) + (rigid ? m->n_elastic : 0);
+}
+
+/* ------------------------------------------------------------------ band algebra */
+/* y1 = band1 x and y2 = band2 x (band2/y2 may be NULL) at the elastic coordinates of
+ * q-indexed vectors; other entries of y untouched.  The elastic coordinates are two
+ * contiguous runs of q (leaf, link) and the band does not couple them. */
+static void band_matvec2(const Model *m, const double *band1, double *y1, const double *band2,
+                         double *y2, const double *x) {
+    int ne = m->n_elastic, nl = m->n_link, bw = m->bw, w = 2 * bw + 1;
+    for (int seg = 0; seg < 2; seg++) {
+        int p0 = seg == 0 ? 0 : ne - nl, np = seg == 0 ? ne - nl : nl;
+        int off = seg == 0 ? 1 : m->s_link;
+        const double *xs = x + off;
+        for (int i = 0; i < np; i++) {
+            int lo = i - bw < 0 ? 0 : i - bw, hi = i + bw >= np ? np - 1 : i + bw;
+            const double *r1 = band1 + (size_t)(p0 + i) * w + bw - i;
+            double s1 = 0.0;
+            if (band2) {
+                const double *r2 = band2 + (size_t)(p0 + i) * w + bw - i;
+                double s2 = 0.0;
+                for (int j = lo; j <= hi; j++) { s1 += r1[j] * xs[j]; s2 += r2[j] * xs[j]; }
+                y2[off + i] = s2;
+            } else {
+                for (int j = lo; j <= hi; j++) s1 += r1[j] * xs[j];
+            }
+            y1[off + i] = s1;
         }
-        maa[b] += (m->c_full[i] + h) * q[i];
-        int a = b == 0 ? 0 : ia;
-        M[a * n + i] = af;
-        M[i * n + a] = af;
-    }
-    M[0] = maa[0];
-    M[ia * n + ia] = maa[1];
-    double c = cos(q[ia]), s = sin(q[ia]);
-    double ub0 = m->pbar0, ub1 = 0.0;
-    for (int k = 0; k < m->n_link; k++) {
-        ub0 += m->sbar[k] * q[sk + k];
-        ub1 += m->sbar[m->n_link + k] * q[sk + k];
-    }
-    M[ix * n + ia] = M[ia * n + ix] = -c * ub1 - s * ub0;
-    M[iy * n + ia] = M[ia * n + iy] = -s * ub1 + c * ub0;
-    for (int k = 0; k < m->n_link; k++) {
-        double r0 = c * m->sbar[k] + s * m->isbar[k];
-        double r1 = c * m->sbar[m->n_link + k] + s * m->isbar[m->n_link + k];
-        M[ix * n + sk + k] = M[(sk + k) * n + ix] = r0;
-        M[iy * n + sk + k] = M[(sk + k) * n + iy] = r1;
     }
 }
 
-static void matvec(int n, const double *A, const double *x, double *y) {
-    for (int i = 0; i < n; i++) {
-        double acc = 0.0;
-        for (int j = 0; j < n; j++) acc += A[i * n + j] * x[j];
-        y[i] = acc;
-    }
+static void band_matvec(const Model *m, const double *band, const double *x, double *y, int acc) {
+    (void)acc;
+    band_matvec2(m, band, y, NULL, NULL, x);
 }
 
-/* d/dq [1/2 a^T M(q) b] */
-static void bilinear_gradient(const Model *m, const double *q, const double *a, const double *b,
-                              double *out, double *tmp) {
-    int n = m->n, ia = m->i_alpha2, ix = m->i_r2x, iy = m->i_r2y, sk = m->s_link, nl = m->n_link;
-    double *wa = tmp, *wb = tmp + n;
-    matvec(n, m->w_full, a, wa);
-    matvec(n, m->w_full, b, wb);
-    for (int i = 0; i < n; i++) {
-        int bd = m->body[i];
-        if (bd < 0) { out[i] = 0.0; continue; }
-        double h = m->c_full[i];
-        for (int j = 0; j < n; j++) h += m->mff_full[i * n + j] * q[j];
-        int ang = bd == 0 ? 0 : ia;
-        double oa = a[ang], ob = b[ang];
-        out[i] = oa * ob * h + 0.5 * (oa * wb[i] + ob * wa[i]);
-    }
-    double c = cos(q[ia]), s = sin(q[ia]);
-    double ub0 = m->pbar0, ub1 = 0.0;
-    for (int k = 0; k < nl; k++) {
-        ub0 += m->sbar[k] * q[sk + k];
-        ub1 += m->sbar[nl + k] * q[sk + k];
-    }
-    double aub0 = c * ub0 - s * ub1, aub1 = s * ub0 + c * ub1;
-    double acc = -0.5 * ((a[ix] * aub0 + a[iy] * aub1) * b[ia] + (b[ix] * aub0 + b[iy] * aub1) * a[ia]);
-    for (int k = 0; k < nl; k++) {
-        double ais0 = c * m->isbar[k] - s * m->sbar[k];
-        double ais1 = c * m->isbar[nl + k] - s * m->sbar[nl + k];
-        double ar = a[ix] * ais0 + a[iy] * ais1, br = b[ix] * ais0 + b[iy] * ais1;
-        acc += 0.5 * (ar * b[sk + k] + br * a[sk + k]);
-        out[sk + k] += 0.5 * (b[ia] * ar + a[ia] * br);
-    }
-    out[ia] = acc;
-}
-
-/* -dQv/dqdot */
-static void gyroscopic_matrix(const Model *m, const double *q, const double *v, double *G) {
-    int n = m->n, ia = m->i_alpha2, ix = m->i_r2x, iy = m->i_r2y, sk = m->s_link, nl = m->n_link;
-    memset(G, 0, sizeof(double) * n * n);
-    for (int i = 0; i < n; i++) {
-        int bd = m->body[i];
-        if (bd < 0) continue;
-        int ang = bd == 0 ? 0 : ia;
-        double w = v[ang], h = m->c_full[i], wed = 0.0;
-        for (int j = 0; j < n; j++) {
-            h += m->mff_full[i * n + j] * q[j];
-            wed += m->w_full[i * n + j] * v[j];
-            G[i * n + j] = -2.0 * w * m->w_full[i * n + j];
+/* LU without pivoting of a band matrix (n x (2 bw + 1)) in place */
+static int band_factor(int n, int bw, double *A) {
+    int w = 2 * bw + 1;
+    for (int k = 0; k < n; k++) {
+        double piv = A[(size_t)k * w + bw];
+        if (!(fabs(piv) > 0.0) || !isfinite(piv)) return SINGULAR;
+        int hi = k + bw >= n ? n - 1 : k + bw;
+        for (int i = k + 1; i <= hi; i++) {
+            double *ri = A + (size_t)i * w;
+            double f = ri[k - i + bw] / piv;
+            ri[k - i + bw] = f;
+            if (f == 0.0) continue;
+            const double *rk = A + (size_t)k * w;
+            for (int j = k + 1; j <= hi; j++) ri[j - i + bw] -= f * rk[j - k + bw];
         }
-        G[ang * n + ang] += 2.0 * h * v[i];
-        G[ang * n + i] = 2.0 * w * h;
-        G[i * n + ang] = -2.0 * w * h - 2.0 * wed;
     }
-    double c = cos(q[ia]), s = sin(q[ia]), w2 = v[ia];
-    double ub0 = m->pbar0, ub1 = 0.0, sd0 = 0.0, sd1 = 0.0;
-    for (int k = 0; k < nl; k++) {
-        ub0 += m->sbar[k] * q[sk + k];
-        ub1 += m->sbar[nl + k] * q[sk + k];
-        sd0 += m->sbar[k] * v[sk + k];
-        sd1 += m->sbar[nl + k] * v[sk + k];
+    return OK;
+}
+
+static void band_solve(int n, int bw, const double *A, double *x) {
+    int w = 2 * bw + 1;
+    for (int i = 0; i < n; i++) {
+        int lo = i - bw < 0 ? 0 : i - bw;
+        const double *ri = A + (size_t)i * w;
+        double s = x[i];
+        for (int j = lo; j < i; j++) s -= ri[j - i + bw] * x[j];
+        x[i] = s;
     }
-    double x0 = 2.0 * w2 * ub0 + 2.0 * sd1, x1 = 2.0 * w2 * ub1 - 2.0 * sd0; /* 2w u - 2 I~ sd */
-    G[ix * n + ia] = -(c * x0 - s * x1);
-    G[iy * n + ia] = -(s * x0 + c * x1);
-    for (int k = 0; k < nl; k++) {
-        G[ix * n + sk + k] = 2.0 * w2 * (c * m->isbar[k] - s * m->sbar[k]);
-        G[iy * n + sk + k] = 2.0 * w2 * (c * m->isbar[nl + k] - s * m->sbar[nl + k]);
+    for (int i = n - 1; i >= 0; i--) {
+        int hi = i + bw >= n ? n - 1 : i + bw;
+        const double *ri = A + (size_t)i * w;
+        double s = x[i];
+        for (int j = i + 1; j <= hi; j++) s -= ri[j - i + bw] * x[j];
+        x[i] = s / ri[bw];
     }
 }
 
-static double sleeve_height(const Model *m, const double *q) {
-    return q[m->i_r2y] + (m->l3 + q[m->i_u_sleeve]) * sin(q[m->i_alpha2]);
-}
-
-static void sleeve_gradient(const Model *m, const double *q, double *g) {
-    memset(g, 0, sizeof(double) * m->n);
-    g[m->i_r2y] = 1.0;
-    g[m->i_alpha2] = (m->l3 + q[m->i_u_sleeve]) * cos(q[m->i_alpha2]);
-    g[m->i_u_sleeve] = sin(q[m->i_alpha2]);
-}
-
-static void constraints(const Model *m, const double *q, int locked, int rigid, double *phi) {
-    double a1 = q[0], a2 = q[m->i_alpha2];
-    double r1 = m->l1 + q[m->i_u_joint], r3 = m->l3 + q[m->i_u_sleeve];
-    phi[0] = r1 * cos(a1) - q[m->i_r2x];
-    phi[1] = r1 * sin(a1) - q[m->i_r2y];
-    phi[2] = q[m->i_r2x] + r3 * cos(a2);
-    int row = 3;
-    if (locked) phi[row++] = q[m->i_r2y] + r3 * sin(a2) - m->y_stop;
-    if (rigid)
-        for (int k = 0; k < m->n_elastic; k++) phi[row++] = q[m->elastic_idx[k]];
-}
-
-static void jacobian(const Model *m, const double *q, int locked, int rigid, int nc, double *J) {
-    int n = m->n;
-    memset(J, 0, sizeof(double) * nc * n);
-    double a1 = q[0], a2 = q[m->i_alpha2];
-    double c1 = cos(a1), s1 = sin(a1), c2 = cos(a2), s2 = sin(a2);
-    double r1 = m->l1 + q[m->i_u_joint], r3 = m->l3 + q[m->i_u_sleeve];
-    J[0] = -r1 * s1; J[m->i_u_joint] = c1; J[m->i_r2x] = -1.0;
-    J[n] = r1 * c1; J[n + m->i_u_joint] = s1; J[n + m->i_r2y] = -1.0;
-    J[2 * n + m->i_r2x] = 1.0; J[2 * n + m->i_alpha2] = -r3 * s2; J[2 * n + m->i_u_sleeve] = c2;
-    int row = 3;
-    if (locked) {
-        J[3 * n + m->i_r2y] = 1.0; J[3 * n + m->i_alpha2] = r3 * c2; J[3 * n + m->i_u_sleeve] = s2;
-        row = 4;
-    }
-    if (rigid)
-        for (int k = 0; k < m->n_elastic; k++) J[(row + k) * n + m->elastic_idx[k]] = 1.0;
-}
-
-static void gonzalez(int n, double *grad, double delta_f, const double *dq, double dd) {
-    if (dd == 0.0) return;
-    double gd = 0.0;
-    for (int i = 0; i < n; i++) gd += grad[i] * dq[i];
-    double f = (delta_f - gd) / dd;
-    for (int i = 0; i < n; i++) grad[i] += f * dq[i];
-}
-
-/* LU with partial pivoting in place; returns 0 or SINGULAR */
+/* dense LU with partial pivoting, row-major */
 static int lu_factor(int N, double *A, int *piv) {
     for (int k = 0; k < N; k++) {
         int p = k;
@@ -225,33 +196,438 @@ static void lu_solve(int N, const double *A, const int *piv, double *b) {
     }
 }
 
-static int cholesky(int n, double *A) {   /* lower factor in place */
-    for (int j = 0; j < n; j++) {
-        double d = A[j * n + j];
-        for (int k = 0; k < j; k++) d -= A[j * n + k] * A[j * n + k];
-        if (!(d > 0.0)) return NOT_PD;
-        d = sqrt(d);
-        A[j * n + j] = d;
-        for (int i = j + 1; i < n; i++) {
-            double acc = A[i * n + j];
-            for (int k = 0; k < j; k++) acc -= A[i * n + k] * A[j * n + k];
-            A[i * n + j] = acc / d;
+/* X = A^-1 X for nrhs right-hand sides stored row-major (n x nrhs) */
+static void band_solve_multi(int n, int bw, const double *A, double *X, int nrhs) {
+    int w = 2 * bw + 1;
+    for (int i = 0; i < n; i++) {
+        int lo = i - bw < 0 ? 0 : i - bw;
+        const double *ri = A + (size_t)i * w;
+        double *xi = X + (size_t)i * nrhs;
+        for (int j = lo; j < i; j++) {
+            double f = ri[j - i + bw];
+            if (f == 0.0) continue;
+            const double *xj = X + (size_t)j * nrhs;
+            for (int c = 0; c < nrhs; c++) xi[c] -= f * xj[c];
         }
     }
-    return OK;
+    for (int i = n - 1; i >= 0; i--) {
+        int hi = i + bw >= n ? n - 1 : i + bw;
+        const double *ri = A + (size_t)i * w;
+        double *xi = X + (size_t)i * nrhs;
+        for (int j = i + 1; j <= hi; j++) {
+            double f = ri[j - i + bw];
+            if (f == 0.0) continue;
+            const double *xj = X + (size_t)j * nrhs;
+            for (int c = 0; c < nrhs; c++) xi[c] -= f * xj[c];
+        }
+        double inv = 1.0 / ri[bw];
+        for (int c = 0; c < nrhs; c++) xi[c] *= inv;
+    }
 }
 
-static void cholesky_solve(int n, const double *L, double *b) {
-    for (int i = 0; i < n; i++) {
-        double acc = b[i];
-        for (int k = 0; k < i; k++) acc -= L[i * n + k] * b[k];
-        b[i] = acc / L[i * n + i];
+/* Arrow system [[E, B], [C, D]]: E banded (ne x ne), border nb = 4 + nc.  B (ne x nb,
+ * row-major); C = 4 dense rows (ne each, nonzero only on [lo[r], hi[r])) and nc sparse
+ * rows (JW entries: elastic position or -1, value).  On entry S = D.  On exit E = LU(E)
+ * (unless e_factored), B = Y = E^-1 B, S = LU(D - C Y). */
+
+static int arrow_factor(const Arrow *a, double *E, int e_factored, double *B, double *S, int *piv) {
+    int ne = a->ne, nb = a->nb;
+    if (!e_factored && band_factor(ne, a->bw, E) != OK) return SINGULAR;
+    band_solve_multi(ne, a->bw, E, B, nb);
+    for (int r = 0; r < 4; r++) {
+        const double *cr = a->C + (size_t)r * ne;
+        double *sr = S + r * nb;
+        for (int p = a->lo[r]; p < a->hi[r]; p++) {
+            double f = cr[p];
+            const double *bp = B + (size_t)p * nb;
+            for (int c = 0; c < nb; c++) sr[c] -= f * bp[c];
+        }
     }
-    for (int i = n - 1; i >= 0; i--) {
-        double acc = b[i];
-        for (int k = i + 1; k < n; k++) acc -= L[k * n + i] * b[k];
-        b[i] = acc / L[i * n + i];
+    for (int r = 0; r < nb - 4; r++) {
+        double *sr = S + (4 + r) * nb;
+        for (int k = 0; k < JW; k++) {
+            int p = a->cpos[r * JW + k];
+            if (p < 0) continue;
+            double f = a->cval[r * JW + k];
+            const double *bp = B + (size_t)p * nb;
+            for (int c = 0; c < nb; c++) sr[c] -= f * bp[c];
+        }
     }
+    return lu_factor(nb, S, piv);
+}
+
+/* x = [x_e (ne), x_b (nb)]: rhs in, solution out */
+static void arrow_solve(const Arrow *a, const double *E, const double *Y, const double *S,
+                        const int *piv, double *x) {
+    int ne = a->ne, nb = a->nb;
+    double *xe = x, *xb = x + ne;
+    band_solve(ne, a->bw, E, xe);
+    for (int r = 0; r < 4; r++) {
+        const double *cr = a->C + (size_t)r * ne;
+        double s = 0.0;
+        for (int p = a->lo[r]; p < a->hi[r]; p++) s += cr[p] * xe[p];
+        xb[r] -= s;
+    }
+    for (int r = 0; r < nb - 4; r++)
+        for (int k = 0; k < JW; k++) {
+            int p = a->cpos[r * JW + k];
+            if (p >= 0) xb[4 + r] -= a->cval[r * JW + k] * xe[p];
+        }
+    lu_solve(nb, S, piv, xb);
+    for (int p = 0; p < ne; p++) {
+        const double *yp = Y + (size_t)p * nb;
+        double s = 0.0;
+        for (int c = 0; c < nb; c++) s += yp[c] * xb[c];
+        xe[p] -= s;
+    }
+}
+
+/* --------------------------------------------------------------------- mass matrix */
+/* border coordinate c (0..3) as a q index */
+static int border_q(const Model *m, int c) {
+    return c == 0 ? 0 : c == 1 ? m->i_r2x : c == 2 ? m->i_r2y : m->i_alpha2;
+}
+
+/* the state-dependent entries of M(q) (model.mass_matrix) */
+static void mass_data(Ctx *x, const double *q) {
+    const Model *m = x->m;
+    int n = m->n, nl = m->n_link, ia = m->i_alpha2, sk = m->s_link;
+    double *h = x->hq, *maf = x->maf;
+    (void)n;
+    /* h = c + Mff q; m_af = g + q W = g - W q (W skew) */
+    band_matvec2(m, m->mff_band, h, m->w_band, maf, q);
+    x->maa[0] = m->j0_leaf;
+    x->maa[1] = m->j0_link;
+    for (int p = 0; p < m->n_elastic; p++) {
+        int i = m->elastic_idx[p];
+        h[i] += m->c_full[i];
+        maf[i] = m->g_full[i] - maf[i];
+        x->maa[m->body[i]] += (m->c_full[i] + h[i]) * q[i];
+    }
+    double c = cos(q[ia]), s = sin(q[ia]);
+    double ub0 = m->pbar0, ub1 = 0.0;
+    for (int k = 0; k < nl; k++) {
+        ub0 += m->sbar[k] * q[sk + k];
+        ub1 += m->sbar[nl + k] * q[sk + k];
+    }
+    x->mra[0] = -c * ub1 - s * ub0;
+    x->mra[1] = -s * ub1 + c * ub0;
+    for (int k = 0; k < nl; k++) {
+        x->mrf[k] = c * m->sbar[k] + s * m->isbar[k];
+        x->mrf[nl + k] = c * m->sbar[nl + k] + s * m->isbar[nl + k];
+    }
+}
+
+/* y = M(q) v with the pieces of mass_data, given mffv = Mff v (elastic entries) */
+static void mass_matvec_pre(const Ctx *x, const double *v, const double *mffv, double *y) {
+    const Model *m = x->m;
+    int n = m->n, nl = m->n_link, ia = m->i_alpha2, ix = m->i_r2x, iy = m->i_r2y, sk = m->s_link;
+    for (int i = 0; i < n; i++) y[i] = m->body[i] >= 0 ? mffv[i] : 0.0;
+    y[ix] = m->link_mass * v[ix];
+    y[iy] = m->link_mass * v[iy];
+    for (int p = 0; p < m->n_elastic; p++) {
+        int i = m->elastic_idx[p], a = m->body[i] == 0 ? 0 : ia;
+        y[a] += x->maf[i] * v[i];
+        y[i] += x->maf[i] * v[a];
+    }
+    y[0] += x->maa[0] * v[0];
+    y[ia] += x->maa[1] * v[ia];
+    y[ix] += x->mra[0] * v[ia];
+    y[iy] += x->mra[1] * v[ia];
+    y[ia] += x->mra[0] * v[ix] + x->mra[1] * v[iy];
+    for (int k = 0; k < nl; k++) {
+        y[ix] += x->mrf[k] * v[sk + k];
+        y[iy] += x->mrf[nl + k] * v[sk + k];
+        y[sk + k] += x->mrf[k] * v[ix] + x->mrf[nl + k] * v[iy];
+    }
+}
+
+static void mass_matvec(const Ctx *x, const double *v, double *y) {
+    band_matvec(x->m, x->m->mff_band, v, x->mffv, 0);
+    mass_matvec_pre(x, v, x->mffv, y);
+}
+
+/* M(q)[i, border c] for a q index i (elastic or border) */
+static double mass_border(const Ctx *x, int i, int c) {
+    const Model *m = x->m;
+    int ia = m->i_alpha2, ix = m->i_r2x, iy = m->i_r2y, sk = m->s_link, nl = m->n_link;
+    int b = m->body[i];
+    if (b >= 0) {
+        if ((c == 0 && b == 0) || (c == 3 && b == 1)) return x->maf[i];
+        if (b == 1 && (c == 1 || c == 2)) return x->mrf[(c - 1) * nl + (i - sk)];
+        return 0.0;
+    }
+    int cq = border_q(m, c);
+    if (i == cq) return i == 0 ? x->maa[0] : i == ia ? x->maa[1] : m->link_mass;
+    if (i == ia && cq == ix) return x->mra[0];
+    if (i == ia && cq == iy) return x->mra[1];
+    if (cq == ia && i == ix) return x->mra[0];
+    if (cq == ia && i == iy) return x->mra[1];
+    return 0.0;
+}
+
+/* d/dq [1/2 a^T M(q) b] (model.kinetic_bilinear_gradient), given h = c + Mff q,
+ * wa = W a and wb = W b at the elastic coordinates */
+static void bilinear_gradient(const Model *m, const double *q, const double *a, const double *b,
+                              const double *h, const double *wa, const double *wb, double *out) {
+    int n = m->n, ia = m->i_alpha2, ix = m->i_r2x, iy = m->i_r2y, sk = m->s_link, nl = m->n_link;
+    memset(out, 0, sizeof(double) * n);
+    for (int p = 0; p < m->n_elastic; p++) {
+        int i = m->elastic_idx[p], ang = m->body[i] == 0 ? 0 : ia;
+        double oa = a[ang], ob = b[ang];
+        out[i] = oa * ob * h[i] + 0.5 * (oa * wb[i] + ob * wa[i]);
+    }
+    double c = cos(q[ia]), s = sin(q[ia]);
+    double ub0 = m->pbar0, ub1 = 0.0;
+    for (int k = 0; k < nl; k++) {
+        ub0 += m->sbar[k] * q[sk + k];
+        ub1 += m->sbar[nl + k] * q[sk + k];
+    }
+    double aub0 = c * ub0 - s * ub1, aub1 = s * ub0 + c * ub1;
+    double acc = -0.5 * ((a[ix] * aub0 + a[iy] * aub1) * b[ia] + (b[ix] * aub0 + b[iy] * aub1) * a[ia]);
+    for (int k = 0; k < nl; k++) {
+        double ais0 = c * m->isbar[k] - s * m->sbar[k];
+        double ais1 = c * m->isbar[nl + k] - s * m->sbar[nl + k];
+        double ar = a[ix] * ais0 + a[iy] * ais1, br = b[ix] * ais0 + b[iy] * ais1;
+        acc += 0.5 * (ar * b[sk + k] + br * a[sk + k]);
+        out[sk + k] += 0.5 * (b[ia] * ar + a[ia] * br);
+    }
+    out[ia] = acc;
+}
+
+/* ------------------------------------------------------------------- constraints */
+static double sleeve_height(const Model *m, const double *q) {
+    return q[m->i_r2y] + (m->l3 + q[m->i_u_sleeve]) * sin(q[m->i_alpha2]);
+}
+
+static void sleeve_gradient(const Model *m, const double *q, double *g) {
+    memset(g, 0, sizeof(double) * m->n);
+    g[m->i_r2y] = 1.0;
+    g[m->i_alpha2] = (m->l3 + q[m->i_u_sleeve]) * cos(q[m->i_alpha2]);
+    g[m->i_u_sleeve] = sin(q[m->i_alpha2]);
+}
+
+static void constraints(const Model *m, const double *q, int locked, int rigid, double *phi) {
+    double a1 = q[0], a2 = q[m->i_alpha2];
+    double r1 = m->l1 + q[m->i_u_joint], r3 = m->l3 + q[m->i_u_sleeve];
+    phi[0] = r1 * cos(a1) - q[m->i_r2x];
+    phi[1] = r1 * sin(a1) - q[m->i_r2y];
+    phi[2] = q[m->i_r2x] + r3 * cos(a2);
+    int row = 3;
+    if (locked) phi[row++] = q[m->i_r2y] + r3 * sin(a2) - m->y_stop;
+    if (rigid)
+        for (int k = 0; k < m->n_elastic; k++) phi[row++] = q[m->elastic_idx[k]];
+}
+
+/* sparse rows of J(q): JW (index, value) pairs per row; rigid rows have one entry */
+static void jacobian(const Model *m, const double *q, int locked, int rigid, int *idx, double *val) {
+    double a1 = q[0], a2 = q[m->i_alpha2];
+    double c1 = cos(a1), s1 = sin(a1), c2 = cos(a2), s2 = sin(a2);
+    double r1 = m->l1 + q[m->i_u_joint], r3 = m->l3 + q[m->i_u_sleeve];
+    int *I = idx; double *V = val;
+    I[0] = 0; V[0] = -r1 * s1; I[1] = m->i_u_joint; V[1] = c1; I[2] = m->i_r2x; V[2] = -1.0;
+    I[3] = 0; V[3] = r1 * c1; I[4] = m->i_u_joint; V[4] = s1; I[5] = m->i_r2y; V[5] = -1.0;
+    I[6] = m->i_r2x; V[6] = 1.0; I[7] = m->i_alpha2; V[7] = -r3 * s2; I[8] = m->i_u_sleeve; V[8] = c2;
+    int row = 3;
+    if (locked) {
+        I[9] = m->i_r2y; V[9] = 1.0; I[10] = m->i_alpha2; V[10] = r3 * c2; I[11] = m->i_u_sleeve; V[11] = s2;
+        row = 4;
+    }
+    if (rigid)
+        for (int k = 0; k < m->n_elastic; k++, row++) {
+            I[row * JW] = m->elastic_idx[k]; V[row * JW] = 1.0;
+            I[row * JW + 1] = I[row * JW + 2] = 0; V[row * JW + 1] = V[row * JW + 2] = 0.0;
+        }
+}
+
+static double jrow_dot(const int *I, const double *V, int r, const double *x) {
+    return V[r * JW] * x[I[r * JW]] + V[r * JW + 1] * x[I[r * JW + 1]] + V[r * JW + 2] * x[I[r * JW + 2]];
+}
+
+static void gonzalez(int n, double *grad, double delta_f, const double *dq, double dd) {
+    if (dd == 0.0) return;
+    double gd = 0.0;
+    for (int i = 0; i < n; i++) gd += grad[i] * dq[i];
+    double f = (delta_f - gd) / dd;
+    for (int i = 0; i < n; i++) grad[i] += f * dq[i];
+}
+
+/* ------------------------------------------------------------------ context */
+void umbrella_free(Ctx *x) {
+    if (!x) return;
+    free(x->hq); free(x->piv); free(x->jrow_idx); free(x->E);
+    free(x);
+}
+
+Ctx *umbrella_new(const Model *m) {
+    Ctx *x = calloc(1, sizeof(Ctx));
+    if (!x) return NULL;
+    int n = m->n, ne = m->n_elastic, w = 2 * m->bw + 1;
+    int ncmax = 4 + ne, nbmax = 4 + ncmax;
+    x->m = m;
+    x->ne = ne;
+    x->nbmax = nbmax;
+    x->width = w;
+    size_t nvec = 24;
+    size_t doubles = (size_t)n * nvec + 2 * (size_t)m->n_link + 2 * (size_t)(n + ncmax)
+                     + 6 * (size_t)ncmax * JW + 3 * (size_t)ncmax;
+    x->hq = calloc(doubles, sizeof(double));
+    x->piv = calloc(nbmax, sizeof(int));
+    x->jrow_idx = calloc(3 * (size_t)ncmax * JW, sizeof(int));
+    x->E = calloc((size_t)ne * w * 2 + (size_t)nbmax * ne * 2 + (size_t)nbmax * nbmax, sizeof(double));
+    if (!x->hq || !x->piv || !x->jrow_idx || !x->E) { umbrella_free(x); return NULL; }
+    double *d = x->hq;
+    double **vecs[] = {&x->hq, &x->maf, &x->q1, &x->v1, &x->dq, &x->qm, &x->hm, &x->gt, &x->gy,
+                       &x->res, &x->kq, &x->mv, &x->wa, &x->wb, &x->vt, &x->q_s, &x->v_s, &x->p_s,
+                       &x->mffv, &x->wv0};
+    for (size_t k = 0; k < sizeof(vecs) / sizeof(vecs[0]); k++) { *vecs[k] = d; d += n; }
+    x->mrf = d; d += 2 * m->n_link;
+    x->rhs = d; d += n + ncmax;
+    x->xa = d; d += n + ncmax;
+    x->jrow_val = d; d += (size_t)ncmax * JW;
+    x->jm_val = d; d += (size_t)ncmax * JW;
+    x->phi0 = d; d += ncmax;
+    x->phi = d; d += ncmax;
+    x->corr = d; d += ncmax;
+    x->lam_s = d; d += ncmax;
+    x->jm_idx = x->jrow_idx + (size_t)ncmax * JW;
+    x->cpos = x->jm_idx + (size_t)ncmax * JW;
+    x->Emass = x->E + (size_t)ne * w;
+    x->B = x->Emass + (size_t)ne * w;
+    x->C = x->B + (size_t)nbmax * ne;
+    x->S = x->C + (size_t)nbmax * ne;
+    memcpy(x->Emass, m->mff_band, sizeof(double) * (size_t)ne * w);
+    if (band_factor(ne, m->bw, x->Emass) != OK) { umbrella_free(x); return NULL; }
+    return x;
+}
+
+/* ------------------------------------------------------------------ one step */
+/* elastic position of a q index, or -1 */
+static int epos(const Model *m, int i) {
+    if (m->body[i] < 0) return -1;
+    return i < m->s_link ? i - 1 : (m->n_elastic - m->n_link) + (i - m->s_link);
+}
+
+/* border slot (0..3) of a border q index */
+static int bslot(const Model *m, int i) {
+    return i == 0 ? 0 : i == m->i_r2x ? 1 : i == m->i_r2y ? 2 : 3;
+}
+
+/* the arrow description for the current rows J(q) (jrow_*) */
+static Arrow make_arrow(Ctx *x, int nc) {
+    const Model *m = x->m;
+    int n1 = x->ne - m->n_link;
+    Arrow a = {x->ne, m->bw, 4 + nc, x->C, {0, n1, n1, n1}, {n1, x->ne, x->ne, x->ne},
+               x->cpos, x->jrow_val};
+    for (int k = 0; k < nc * JW; k++) x->cpos[k] = x->jrow_val[k] != 0.0 ? epos(m, x->jrow_idx[k]) : -1;
+    return a;
+}
+
+/* Iteration matrix M(q) + h^2/4 K + h/2 G(qm, dq/h) with the constraint columns -Jm^T and
+ * rows J(q), as an arrow system; the multipliers are scaled by h^2/2 (integrators.py). */
+static int factor_iteration_matrix(Ctx *x, double h, int nc) {
+    const Model *m = x->m;
+    int ne = x->ne, w = x->width, nb = 4 + nc, nl = m->n_link;
+    int ia = m->i_alpha2, sk = m->s_link;
+    const int *ei = m->elastic_idx;
+    double *vt = x->vt, *h_m = x->hm, *wed = x->wb;
+    const double *qm = x->qm;
+    for (int i = 0; i < m->n; i++) vt[i] = x->dq[i] / h;
+    /* h_m = c + Mff qm from this Newton iteration */
+    band_matvec(m, m->w_band, vt, wed, 0);
+    double om[2] = {vt[0], vt[ia]};
+    /* E: Mff + h^2/4 K - h w_body W  (G_ee = -2 w W) */
+    double h2 = 0.25 * h * h;
+    for (int p = 0; p < ne; p++) {
+        double f = -h * om[m->body[ei[p]]];
+        const double *mf = m->mff_band + (size_t)p * w, *kb = m->k_band + (size_t)p * w;
+        const double *wb = m->w_band + (size_t)p * w;
+        double *e = x->E + (size_t)p * w;
+        for (int k = 0; k < w; k++) e[k] = mf[k] + h2 * kb[k] + f * wb[k];
+    }
+    /* gyroscopic border terms (model.gyroscopic_matrix) */
+    double g00 = 0.0, gaa = 0.0;
+    for (int p = 0; p < ne; p++) {
+        int i = ei[p];
+        if (m->body[i] == 0) g00 += 2.0 * h_m[i] * vt[i]; else gaa += 2.0 * h_m[i] * vt[i];
+    }
+    double c = cos(qm[ia]), s = sin(qm[ia]), w2 = vt[ia];
+    double ub0 = m->pbar0, ub1 = 0.0, sd0 = 0.0, sd1 = 0.0;
+    for (int k = 0; k < nl; k++) {
+        ub0 += m->sbar[k] * qm[sk + k];
+        ub1 += m->sbar[nl + k] * qm[sk + k];
+        sd0 += m->sbar[k] * vt[sk + k];
+        sd1 += m->sbar[nl + k] * vt[sk + k];
+    }
+    double x0 = 2.0 * w2 * ub0 + 2.0 * sd1, x1 = 2.0 * w2 * ub1 - 2.0 * sd0;
+    double g_xa = -(c * x0 - s * x1), g_ya = -(s * x0 + c * x1);
+    double hh = 0.5 * h;
+    Arrow a = make_arrow(x, nc);
+    /* B (row-major) and the four dense rows C */
+    double *B = x->B, *C = x->C;
+    for (int p = 0; p < ne; p++) {
+        int i = ei[p], b = m->body[i];
+        double *Bp = B + (size_t)p * nb;
+        for (int cb = 0; cb < 4; cb++) {
+            double mb = mass_border(x, i, cb);
+            double gcol = 0.0, grow = 0.0;     /* G[i, c], G[c, i] */
+            if ((cb == 0 && b == 0) || (cb == 3 && b == 1)) {
+                double wb = om[b];
+                gcol = -2.0 * wb * h_m[i] - 2.0 * wed[i];
+                grow = 2.0 * wb * h_m[i];
+            } else if (b == 1 && (cb == 1 || cb == 2)) {
+                int k = i - sk;
+                grow = cb == 1 ? 2.0 * w2 * (c * m->isbar[k] - s * m->sbar[k])
+                               : 2.0 * w2 * (c * m->isbar[nl + k] - s * m->sbar[nl + k]);
+            }
+            Bp[cb] = mb + hh * gcol;
+            C[(size_t)cb * ne + p] = mb + hh * grow;
+        }
+        /* multiplier columns -Jm^T, Jm = J(qm) + corr dq */
+        double dqi = x->dq[i];
+        for (int r = 0; r < nc; r++) Bp[4 + r] = -x->corr[r] * dqi;
+    }
+    for (int r = 0; r < nc; r++)
+        for (int k = 0; k < JW; k++) {
+            int p = epos(m, x->jm_idx[r * JW + k]);
+            if (p >= 0) B[(size_t)p * nb + 4 + r] -= x->jm_val[r * JW + k];
+        }
+    /* D */
+    double *S = x->S;
+    memset(S, 0, sizeof(double) * nb * nb);
+    for (int r = 0; r < 4; r++) {
+        int iq = border_q(m, r);
+        for (int cb = 0; cb < 4; cb++) S[r * nb + cb] = mass_border(x, iq, cb);
+    }
+    S[0] += hh * g00;
+    S[3 * nb + 3] += hh * gaa;
+    S[1 * nb + 3] += hh * g_xa;
+    S[2 * nb + 3] += hh * g_ya;
+    for (int r = 0; r < nc; r++) {
+        for (int cb = 0; cb < 4; cb++) S[cb * nb + 4 + r] = -x->corr[r] * x->dq[border_q(m, cb)];
+        for (int k = 0; k < JW; k++) {
+            int i = x->jm_idx[r * JW + k];
+            if (m->body[i] < 0) S[bslot(m, i) * nb + 4 + r] -= x->jm_val[r * JW + k];
+            i = x->jrow_idx[r * JW + k];
+            if (m->body[i] < 0) S[(4 + r) * nb + bslot(m, i)] += x->jrow_val[r * JW + k];
+        }
+    }
+    x->arrow = a;
+    return arrow_factor(&a, x->E, 0, B, S, x->piv);
+}
+
+/* solve the factored arrow system for a q-ordered rhs of length n + nc, in place */
+static void arrow_solve_q(Ctx *x, const double *E, int nc, double *r) {
+    const Model *m = x->m;
+    int ne = x->ne, n = m->n;
+    double *a = x->xa;
+    for (int p = 0; p < ne; p++) a[p] = r[m->elastic_idx[p]];
+    for (int c = 0; c < 4; c++) a[ne + c] = r[border_q(m, c)];
+    for (int k = 0; k < nc; k++) a[ne + 4 + k] = r[n + k];
+    arrow_solve(&x->arrow, E, x->B, x->S, x->piv, a);
+    for (int p = 0; p < ne; p++) r[m->elastic_idx[p]] = a[p];
+    for (int c = 0; c < 4; c++) r[border_q(m, c)] = a[ne + c];
+    for (int k = 0; k < nc; k++) r[n + k] = a[ne + 4 + k];
 }
 
 static double max_abs(int n, const double *x) {
@@ -260,35 +636,79 @@ static double max_abs(int n, const double *x) {
     return r;
 }
 
-int umbrella_step(const Model *m, int locked, int rigid,
-                  const double *q0, const double *v0, const double *lam0, const double *p0_in,
-                  double h, double force, double tol, double phi_tol, int max_iter,
-                  double *q, double *v, double *lam, double *p1, int *iterations) {
-    int n = m->n;
-    int nc = 3 + (locked ? 1 : 0) + (rigid ? m->n_elastic : 0);
-    int N = n + nc;
-    size_t doubles = (size_t)n * n * 3 + (size_t)N * N + (size_t)nc * n * 3 + (size_t)n * 16
-                     + (size_t)N * 2 + (size_t)nc * nc + (size_t)nc * 8;
-    double *buf = malloc(sizeof(double) * doubles);
-    int *piv = malloc(sizeof(int) * (N + nc));
-    if (!buf || !piv) { free(buf); free(piv); return NO_MEMORY; }
-    double *M1 = buf, *G = M1 + n * n, *Kqm_tmp = G + n * n;    /* Kqm_tmp: n*n scratch */
-    double *A = Kqm_tmp + n * n, *Jm = A + N * N, *J1 = Jm + nc * n, *X = J1 + nc * n;
-    double *p0 = X + nc * n, *dq = p0 + n, *qm = dq + n, *v1 = qm + n, *gt = v1 + n;
-    double *gy = gt + n, *res = gy + n, *tmp = res + n, *kq = tmp + 2 * n, *mv = kq + n;
-    double *rhs = mv + n, *phi0 = rhs + N, *phi = phi0 + nc, *corr = phi + nc, *S = corr + nc;
-    double *mu = S + nc * nc;
+/* Velocity projection onto J(q1) v = 0 in the mass metric, then scaled to the kinetic energy
+ * t_target of the discrete energy balance (integrators._project_keeping_energy).  Needs
+ * mass_data(q1) and the rows J(q1) in jrow_*.  Leaves M(q1) v in p. */
+static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_target) {
+    const Model *m = x->m;
+    int ne = x->ne, nb = 4 + nc, n = m->n;
+    const int *ei = m->elastic_idx;
+    double jv_max = 0.0;
+    for (int r = 0; r < nc; r++) {
+        double a = fabs(jrow_dot(x->jrow_idx, x->jrow_val, r, v));
+        if (a > jv_max) jv_max = a;
+    }
+    if (!(jv_max > 0.0)) { mass_matvec(x, v, p_out); goto scale; }
+    /* KKT [[M, J^T], [J, 0]] [dv; mu] = [0; -J v], arrow form with E = Mff (factored once) */
+    Arrow a = make_arrow(x, nc);
+    double *B = x->B, *C = x->C;
+    for (int p = 0; p < ne; p++) {
+        double *Bp = B + (size_t)p * nb;
+        for (int cb = 0; cb < 4; cb++) Bp[cb] = C[(size_t)cb * ne + p] = mass_border(x, ei[p], cb);
+        for (int r = 0; r < nc; r++) Bp[4 + r] = 0.0;
+    }
+    double *S = x->S;
+    memset(S, 0, sizeof(double) * nb * nb);
+    for (int r = 0; r < 4; r++)
+        for (int cb = 0; cb < 4; cb++) S[r * nb + cb] = mass_border(x, border_q(m, r), cb);
+    for (int r = 0; r < nc; r++)
+        for (int k = 0; k < JW; k++) {
+            int i = x->jrow_idx[r * JW + k];
+            double val = x->jrow_val[r * JW + k];
+            int p = epos(m, i);
+            if (p >= 0) B[(size_t)p * nb + 4 + r] += val;
+            else {
+                S[bslot(m, i) * nb + 4 + r] += val;
+                S[(4 + r) * nb + bslot(m, i)] += val;
+            }
+        }
+    x->arrow = a;
+    if (arrow_factor(&a, x->Emass, 1, B, S, x->piv) != OK) return SINGULAR;
+    double *r = x->rhs;
+    memset(r, 0, sizeof(double) * n);
+    for (int k = 0; k < nc; k++) r[n + k] = -jrow_dot(x->jrow_idx, x->jrow_val, k, v);
+    arrow_solve_q(x, x->Emass, nc, r);
+    for (int i = 0; i < n; i++) v[i] += r[i];
+    mass_matvec(x, v, p_out);
+scale:;
+    double t_after = 0.0;
+    for (int i = 0; i < n; i++) t_after += v[i] * p_out[i];
+    t_after *= 0.5;
+    if (t_after > 0.0 && t_target >= t_after / ENERGY_RESTORE_LIMIT
+        && t_target <= ENERGY_RESTORE_LIMIT * t_after) {
+        double f = sqrt(t_target / t_after);
+        for (int i = 0; i < n; i++) { v[i] *= f; p_out[i] *= f; }
+    }
+    return OK;
+}
+
+/* One step from (q0, v0, lam0, p0) of length h; results in x->q_s, v_s, lam_s, p_s. */
+static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v0,
+                const double *lam0, const double *p0, double h, double force, double tol,
+                double phi_tol, int max_iter, int *iterations) {
+    const Model *m = x->m;
+    int n = m->n, nc = nc_of(m, locked, rigid);
+    double *q = x->q_s, *v = x->v_s, *lam = x->lam_s, *dq = x->dq, *qm = x->qm, *v1 = x->v1;
+    double *phi0 = x->phi0, *phi = x->phi, *rhs = x->rhs;
     int status = OK, it = 0, factored = 0;
     double half_h2 = 0.5 * h * h;
-
-    if (p0_in) memcpy(p0, p0_in, sizeof(double) * n);
-    else { mass_matrix(m, q0, M1); matvec(n, M1, v0, p0); }
     constraints(m, q0, locked, rigid, phi0);
     double y0 = sleeve_height(m, q0);
     for (int i = 0; i < n; i++) q[i] = q0[i] + h * v0[i];
     memcpy(lam, lam0, sizeof(double) * nc);
-    double last_norm = INFINITY;
+    double last_norm = INFINITY, step_norm = 0.0;
     int converged = 0;
+    band_matvec(m, m->w_band, v0, x->wv0, 0);
     for (it = 1; it <= max_iter; it++) {
         double dd = 0.0;
         for (int i = 0; i < n; i++) {
@@ -297,52 +717,41 @@ int umbrella_step(const Model *m, int locked, int rigid,
             qm[i] = q0[i] + 0.5 * dq[i];
             v1[i] = 2.0 * dq[i] / h - v0[i];
         }
-        mass_matrix(m, q, M1);
+        mass_data(x, q);
         constraints(m, q, locked, rigid, phi);
-        bilinear_gradient(m, qm, v0, v1, gt, tmp);
-        matvec(n, M1, v1, mv);
+        band_matvec2(m, m->mff_band, x->hm, m->k_band, x->kq, qm);   /* Mff qm, K qm */
+        for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; x->hm[i] += m->c_full[i]; }
+        band_matvec2(m, m->mff_band, x->mffv, m->w_band, x->wb, v1); /* Mff v1, W v1 */
+        bilinear_gradient(m, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
+        mass_matvec_pre(x, v1, x->mffv, x->mv);
         /* f = 1/2 v0^T M(q) v1: f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1), M symmetric */
         double df = 0.0;
-        for (int i = 0; i < n; i++) df += 0.5 * (v0[i] * mv[i] - p0[i] * v1[i]);
-        gonzalez(n, gt, df, dq, dd);
-        sleeve_gradient(m, qm, gy);
-        gonzalez(n, gy, sleeve_height(m, q) - y0, dq, dd);
-        jacobian(m, qm, locked, rigid, nc, Jm);
-        if (dd > 0.0) {
-            for (int r = 0; r < nc; r++) {
-                double jd = 0.0;
-                for (int i = 0; i < n; i++) jd += Jm[r * n + i] * dq[i];
-                corr[r] = (phi[r] - phi0[r] - jd) / dd;
-            }
-            for (int r = 0; r < nc; r++)
-                for (int i = 0; i < n; i++) Jm[r * n + i] += corr[r] * dq[i];
+        for (int i = 0; i < n; i++) df += 0.5 * (v0[i] * x->mv[i] - p0[i] * v1[i]);
+        gonzalez(n, x->gt, df, dq, dd);
+        sleeve_gradient(m, qm, x->gy);
+        gonzalez(n, x->gy, sleeve_height(m, q) - y0, dq, dd);
+        jacobian(m, qm, locked, rigid, x->jm_idx, x->jm_val);
+        double cl = 0.0;   /* corr . lam */
+        for (int r = 0; r < nc; r++) {
+            x->corr[r] = dd > 0.0 ? (phi[r] - phi0[r] - jrow_dot(x->jm_idx, x->jm_val, r, dq)) / dd : 0.0;
+            cl += x->corr[r] * lam[r];
         }
-        matvec(n, m->stiffness, qm, kq);
-        for (int i = 0; i < n; i++) {
-            double jl = 0.0;
-            for (int r = 0; r < nc; r++) jl += Jm[r * n + i] * lam[r];
-            res[i] = mv[i] - p0[i] - h * (gt[i] - kq[i] - force * gy[i] + jl);
-        }
+        /* res = M1 v1 - p0 - h (gt - K qm - F gy + Jm^T lam) */
+        double *res = x->res;
+        for (int i = 0; i < n; i++) res[i] = dq[i] * cl;
+        for (int r = 0; r < nc; r++)
+            for (int k = 0; k < JW; k++) res[x->jm_idx[r * JW + k]] += x->jm_val[r * JW + k] * lam[r];
+        for (int i = 0; i < n; i++)
+            res[i] = x->mv[i] - p0[i] - h * (x->gt[i] - x->kq[i] - force * x->gy[i] + res[i]);
         if (!factored) {
-            jacobian(m, q, locked, rigid, nc, J1);
-            for (int i = 0; i < n; i++) tmp[i] = dq[i] / h;
-            gyroscopic_matrix(m, qm, tmp, G);
-            for (int i = 0; i < n; i++) {
-                for (int j = 0; j < n; j++)
-                    A[i * N + j] = M1[i * n + j] + 0.25 * h * h * m->stiffness[i * n + j] + 0.5 * h * G[i * n + j];
-                for (int r = 0; r < nc; r++) A[i * N + n + r] = -Jm[r * n + i];
-            }
-            for (int r = 0; r < nc; r++) {
-                for (int j = 0; j < n; j++) A[(n + r) * N + j] = J1[r * n + j];
-                for (int j = 0; j < nc; j++) A[(n + r) * N + n + j] = 0.0;
-            }
-            if (lu_factor(N, A, piv) != OK) { status = SINGULAR; goto done; }
+            jacobian(m, q, locked, rigid, x->jrow_idx, x->jrow_val);
+            if (factor_iteration_matrix(x, h, nc) != OK) { status = SINGULAR; goto done; }
             factored = 1;
         }
         for (int i = 0; i < n; i++) rhs[i] = -0.5 * h * res[i];
         for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
-        lu_solve(N, A, piv, rhs);
-        double step_norm = 0.0;
+        arrow_solve_q(x, x->E, nc, rhs);
+        step_norm = 0.0;
         for (int i = 0; i < n; i++) {
             q[i] += rhs[i];
             double a = fabs(rhs[i]);
@@ -358,39 +767,153 @@ int umbrella_step(const Model *m, int locked, int rigid,
         last_norm = step_norm;
     }
     if (!converged) { status = NO_CONVERGENCE; goto done; }
-    /* velocity, then projection onto J(q1) v = 0 in the mass metric */
     for (int i = 0; i < n; i++) v[i] = 2.0 * (q[i] - q0[i]) / h - v0[i];
-    jacobian(m, q, locked, rigid, nc, J1);
-    mass_matrix(m, q, M1);
-    double jv_max = 0.0;
-    for (int r = 0; r < nc; r++) {
-        double acc = 0.0;
-        for (int i = 0; i < n; i++) acc += J1[r * n + i] * v[i];
-        mu[r] = acc;
-        if (fabs(acc) > jv_max) jv_max = fabs(acc);
-    }
-    if (jv_max > 0.0) {
-        memcpy(Kqm_tmp, M1, sizeof(double) * n * n);
-        if (cholesky(n, Kqm_tmp) != OK) { status = NOT_PD; goto done; }
-        for (int r = 0; r < nc; r++) {          /* X[:, r] = M^-1 J^T[:, r], stored by rows */
-            for (int i = 0; i < n; i++) X[r * n + i] = J1[r * n + i];
-            cholesky_solve(n, Kqm_tmp, X + r * n);
-        }
-        for (int r = 0; r < nc; r++)
-            for (int c2 = 0; c2 < nc; c2++) {
-                double acc = 0.0;
-                for (int i = 0; i < n; i++) acc += J1[r * n + i] * X[c2 * n + i];
-                S[r * nc + c2] = acc;
-            }
-        if (lu_factor(nc, S, piv + N) != OK) { status = SINGULAR; goto done; }
-        lu_solve(nc, S, piv + N, mu);
-        for (int r = 0; r < nc; r++)
-            for (int i = 0; i < n; i++) v[i] -= X[r * n + i] * mu[r];
-    }
-    matvec(n, M1, v, p1);
+    jacobian(m, q, locked, rigid, x->jrow_idx, x->jrow_val);
+    mass_data(x, q);
+    /* kinetic energy of the discrete balance: T0 + V(q0) - V(q1) + F (y0 - y1) */
+    double t_target = force * (y0 - sleeve_height(m, q));
+    band_matvec(m, m->k_band, q0, x->kq, 0);
+    for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target += 0.5 * q0[i] * x->kq[i]; }
+    band_matvec(m, m->k_band, q, x->kq, 0);
+    for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target -= 0.5 * q[i] * x->kq[i]; }
+    for (int i = 0; i < n; i++) t_target += 0.5 * v0[i] * p0[i];
+    if (project_velocity(x, nc, v, x->p_s, t_target) != OK) { status = SINGULAR; goto done; }
 done:
     *iterations = it > max_iter ? max_iter : it;
-    free(buf);
-    free(piv);
     return status;
+}
+
+/* single step (root finding of the lock, tests): p0 = M(q0) v0 may be NULL */
+int umbrella_step(Ctx *x, int locked, int rigid,
+                  const double *q0, const double *v0, const double *lam0, const double *p0_in,
+                  double h, double force, double tol, double phi_tol, int max_iter,
+                  double *q, double *v, double *lam, double *p1, int *iterations) {
+    const Model *m = x->m;
+    int n = m->n, nc = nc_of(m, locked, rigid);
+    double *p0 = x->q1;         /* step() does not use q1 */
+    if (p0_in) memcpy(p0, p0_in, sizeof(double) * n);
+    else { mass_data(x, q0); mass_matvec(x, v0, p0); }
+    int status = step(x, locked, rigid, q0, v0, lam0, p0, h, force, tol, phi_tol,
+                      max_iter, iterations);
+    if (status == OK) {
+        memcpy(q, x->q_s, sizeof(double) * n);
+        memcpy(v, x->v_s, sizeof(double) * n);
+        memcpy(lam, x->lam_s, sizeof(double) * nc);
+        memcpy(p1, x->p_s, sizeof(double) * n);
+    }
+    return status;
+}
+
+/* p = M(q) v */
+void umbrella_momentum(Ctx *x, const double *q, const double *v, double *p) {
+    mass_data(x, q);
+    mass_matvec(x, v, p);
+}
+
+/* ------------------------------------------------------------------- outputs */
+static void output_row(const Ctx *x, const double *q, const double *v, const double *p,
+                       double t, int stage, double force, double work, double lock_loss,
+                       double *out, int cap, int k) {
+    const Model *m = x->m;
+    int n = m->n, ia = m->i_alpha2, W = m->stress_width;
+    double *o = out + k;
+#define SET(f, val) o[(size_t)(f) * cap] = (val)
+    SET(F_TIME, t);
+    SET(F_STAGE, (double)stage);
+    SET(F_ALPHA1, q[0]);
+    SET(F_ALPHA1_RATE, v[0]);
+    SET(F_SLEEVE_POS, sleeve_height(m, q));
+    SET(F_SLEEVE_VEL, v[m->i_r2y] + (m->l3 + q[m->i_u_sleeve]) * cos(q[ia]) * v[ia]
+                      + sin(q[ia]) * v[m->i_u_sleeve]);
+    SET(F_FORCE, force);
+    SET(F_TIP_AXIAL, q[m->i_tip_u]);
+    SET(F_TIP_TRANSVERSE, q[m->i_tip_v]);
+    int first = 0;
+    for (int body = 0; body < 2; body++) {
+        int np = body == 0 ? m->n_stress_leaf : m->n_stress_link;
+        double best = -1.0;
+        int at = first;
+        for (int k2 = first; k2 < first + np; k2++) {
+            double top = 0.0, bot = 0.0;
+            for (int j = 0; j < W; j++) {
+                double qj = q[m->stress_idx[k2 * W + j]];
+                top += m->stress_top[k2 * W + j] * qj;
+                bot += m->stress_bottom[k2 * W + j] * qj;
+            }
+            double a = fabs(top) > fabs(bot) ? fabs(top) : fabs(bot);
+            if (a > best) { best = a; at = k2; }
+        }
+        SET(body == 0 ? F_PEAK_LEAF : F_PEAK_LINK, best);
+        SET(body == 0 ? F_PEAK_LEAF_X : F_PEAK_LINK_X, m->stress_x[at]);
+        first += np;
+    }
+    double ke = 0.0;
+    for (int i = 0; i < n; i++) ke += v[i] * p[i];
+    SET(F_KINETIC, 0.5 * ke);
+    double *kq = x->kq;
+    memset(kq, 0, sizeof(double) * n);
+    band_matvec(m, m->k_band, q, kq, 0);
+    double se = 0.0;
+    for (int i = 0; i < n; i++) se += q[i] * kq[i];
+    SET(F_STRAIN, 0.5 * se);
+    SET(F_WORK, work);
+    SET(F_LOCK_LOSS, lock_loss);
+#undef SET
+}
+
+/* Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from the state (q, v, lam, p) at t_k0,
+ * updated in place after every committed step, with one output row per step (out: N_FIELDS
+ * x cap, field-major) and accel = (v1 - v0) / h of the last one.  acc = {work, lock_loss}
+ * in/out.  Stops early:
+ *   CROSSING  in stage 1 the sleeve reached the stop during the next step (not committed:
+ *             the caller finds the crossing time and applies the lock);
+ *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, *residual set);
+ *   others    the step failed (not committed).
+ * *n_done = committed steps. */
+int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double *lam,
+                     double *p, long k0, double h, int n_steps, double force, double tol,
+                     double phi_tol, int max_iter, double div_tol, double *acc, double *out,
+                     int cap, int *n_done, int *iterations, double *residual, double *accel) {
+    const Model *m = x->m;
+    int n = m->n, nc = nc_of(m, locked, rigid);
+    int status = OK, its_total = 0;
+    *n_done = 0;
+    for (int k = 0; k < n_steps && k < cap; k++) {
+        double t0 = (double)(k0 + k) * h, t1 = (double)(k0 + k + 1) * h;
+        int its = 0;
+        status = step(x, locked, rigid, q, v, lam, p, t1 - t0, force, tol, phi_tol, max_iter, &its);
+        its_total += its;
+        if (status != OK) break;
+        const double *q1 = x->q_s, *v1 = x->v_s;
+        /* residual of the new state (jacobian rows of q1 are in jrow_*) */
+        constraints(m, q1, locked, rigid, x->phi);
+        double r = max_abs(nc, x->phi);
+        for (int c = 0; c < nc; c++) {
+            double a = fabs(jrow_dot(x->jrow_idx, x->jrow_val, c, v1));
+            if (!(a <= r)) r = a;
+        }
+        int finite = 1;
+        for (int i = 0; i < n; i++) if (!isfinite(q1[i]) || !isfinite(v1[i])) { finite = 0; break; }
+        if (!finite) { status = NON_FINITE; break; }
+        if (!(r <= div_tol)) { *residual = r; status = DIVERGED; break; }
+        double y1 = sleeve_height(m, q1);
+        if (!locked && y1 - m->y_stop <= 0.0) { status = CROSSING; break; }
+        acc[0] += force * (sleeve_height(m, q) - y1);
+        for (int i = 0; i < n; i++) accel[i] = (v1[i] - v[i]) / (t1 - t0);
+        memcpy(q, q1, sizeof(double) * n);
+        memcpy(v, v1, sizeof(double) * n);
+        memcpy(lam, x->lam_s, sizeof(double) * nc);
+        memcpy(p, x->p_s, sizeof(double) * n);
+        output_row(x, q, v, p, t1, locked ? 1 : 0, force, acc[0], acc[1], out, cap, k);
+        *n_done = k + 1;
+    }
+    *iterations = its_total;
+    return status;
+}
+
+/* one output row for an arbitrary state (after the lock step, tests) */
+void umbrella_outputs(Ctx *x, const double *q, const double *v, const double *p, double t,
+                      int stage, double force, double work, double lock_loss, double *out,
+                      int cap, int k) {
+    output_row(x, q, v, p, t, stage, force, work, lock_loss, out, cap, k);
 }

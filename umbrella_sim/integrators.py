@@ -14,14 +14,17 @@ Why this scheme:
     the plain midpoint rule by 0.1 %: the unresolved stiff modes drive alpha' through
     the constraints and the kinetic energy is not quadratic in q;
   * positions satisfy Phi(q) = 0 at every step (index 3), and the velocities are projected
-    onto J q' = 0 in the mass metric (energy changes only to second order in an O(h^2)
-    violation), so both residuals stay at round-off without Baumgarte parameters.
+    onto J q' = 0 in the mass metric and scaled to the kinetic energy of the discrete energy
+    balance (``_project_keeping_energy``), so both residuals stay at round-off without
+    Baumgarte parameters, and energy is balanced to round-off, not to the Newton tolerance.
 Each step solves the nonlinear residual with Newton's method; the iteration matrix
 M + h^2/4 K + h/2 G (G the gyroscopic tangent) is factored once per step.
 
-The step runs in a compiled kernel (``_kernel.c``, loaded with ctypes) when it was built,
-else in numpy; ``UMBRELLA_SIM_KERNEL=numpy`` forces the numpy path, which is the reference
-the tests compare the kernel against.
+The product path is the compiled kernel (``_kernel.c``, loaded with ctypes; installation
+requires a C compiler): ``CompiledKernel.advance`` runs many steps and their outputs per call,
+on banded + arrow linear algebra whose cost grows linearly with the mesh.
+``UMBRELLA_SIM_KERNEL=numpy`` selects the numpy implementation below, the reference the tests
+compare the kernel against step by step.
 
 ``rk4`` for the closed-form rigid model lives in ``rigid.RigidMechanism.rk4_step``.
 """
@@ -30,6 +33,7 @@ from __future__ import annotations
 import ctypes
 from dataclasses import dataclass, replace
 import glob
+import math
 import os
 
 import numpy as np
@@ -62,6 +66,41 @@ def _gonzalez(grad_mid: np.ndarray, delta_f: float, dq: np.ndarray, dd: float) -
     return grad_mid + ((delta_f - grad_mid @ dq) / dd) * dq
 
 
+#: largest kinetic-energy ratio (before / after the projection) that is restored by scaling
+ENERGY_RESTORE_LIMIT = 1.01
+
+
+def _project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
+                            t_target: float):
+    """v projected onto J v = 0 in the mass metric, then scaled to the kinetic energy
+    t_target that the discrete energy balance of the step prescribes,
+
+        T1 = T0 + V(q0) - V(q1) + F_H (y_H(q0) - y_H(q1))      (V = 1/2 q.K q).
+
+    After a converged step J(q1) v1 = O(h^2): the mass-metric projection removes the
+    violation and with it an O(h^4) sliver of kinetic energy, every step; that sliver was the
+    energy drift of the scheme (-2.3e-5 per simulated second at N = 1, 2 ms).  The scheme
+    itself balances energy only to the Newton tolerance, an error per step that grows like
+    1/h (the momentum residual is divided by h): at 5e-5 s it drifted 3e-6 per second.
+    Scaling by sqrt(t_target / T(projected v)) keeps J v = 0 (it is linear) and makes the
+    balance exact to round-off; the change of v is of the order of the projection and the
+    Newton error.  Scaling is skipped when it would change T by more than 1 % (never after a
+    converged step; such a state is left to the divergence checks) or T is zero.
+    None if M is not positive definite."""
+    jv = jac @ v
+    vp = v
+    if np.max(np.abs(jv)) > 0.0:
+        chol, info = dpotrf(mass, lower=False)
+        if info != 0:
+            return None
+        x = dpotrs(chol, jac.T)[0]
+        vp = v - x @ np.linalg.solve(jac @ x, jv)
+    t_after = 0.5 * (vp @ mass @ vp)
+    if t_after > 0.0 and t_after / ENERGY_RESTORE_LIMIT <= t_target <= ENERGY_RESTORE_LIMIT * t_after:
+        vp = vp * math.sqrt(t_target / t_after)
+    return vp
+
+
 class MidpointDAE:
     def __init__(self, model: UmbrellaModel, tolerance: float = 1e-10, max_iterations: int = 25,
                  kernel: str | None = None):
@@ -75,14 +114,25 @@ class MidpointDAE:
         self._compiled = None
         if kernel != "numpy":
             lib = load_kernel()
-            if lib is None and kernel == "compiled":
-                raise RuntimeError("the compiled kernel umbrella_sim/_kernel*.so is not built")
-            if lib is not None:
-                self._compiled = _CompiledStep(lib, model)
+            if lib is None:
+                raise RuntimeError("the compiled kernel umbrella_sim/_kernel*.so is not built: "
+                                   "reinstall (python3 bootstrap.py setup; it needs a C "
+                                   "compiler), or set UMBRELLA_SIM_KERNEL=numpy for the slow "
+                                   "numpy reference path")
+            self._compiled = CompiledKernel(lib, model)
 
     @property
     def backend(self) -> str:
         return "compiled" if self._compiled is not None else "numpy"
+
+    @property
+    def kernel(self) -> "CompiledKernel | None":
+        """The compiled multi-step path, None on the numpy path."""
+        return self._compiled
+
+    @staticmethod
+    def kernel_error(status: int, t: float) -> str:
+        return f"{_KERNEL_ERRORS.get(status, f'kernel status {status}')} at t = {t:.9g} s"
 
     def consistent_acceleration(self, q, qd, force: float, cs: ConstraintSet):
         """Solve for q'' and lambda from the index-1 form [[M, -J^T], [J, 0]] (4.87)."""
@@ -196,18 +246,12 @@ class MidpointDAE:
                                    f"at t = {s.t + h:.9g} s (|dq| = {np.max(np.abs(dx[:n])):.3g})")
         self.iterations += it
         v = 2.0 * (q - q0) / h - v0
-        # velocity projection onto J(q1) v = 0 in the mass metric: the violation is O(h^2)
-        # and the energy it removes second order in it (another metric would change the
-        # energy to first order)
-        jac = m.constraint_jacobian(q, cs)
-        jv = jac @ v
         mass1 = m.mass_matrix(q)
-        if np.max(np.abs(jv)) > 0.0:
-            chol, info = dpotrf(mass1, lower=False)
-            if info != 0:
-                raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
-            x = dpotrs(chol, jac.T)[0]
-            v = v - x @ np.linalg.solve(jac @ x, jv)
+        t_target = (0.5 * (v0 @ p0) + 0.5 * (q0 @ stiff @ q0) - 0.5 * (q @ stiff @ q)
+                    + force * (y0 - m.sleeve_height(q)))
+        v = _project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
+        if v is None:
+            raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
         return DynamicState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v)
 
     def with_constraints(self, s: DynamicState, force: float, cs: ConstraintSet) -> DynamicState:
@@ -217,23 +261,28 @@ class MidpointDAE:
 
 
 # ------------------------------------------------------------------ compiled kernel
+_dp, _ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+
+
 class _ModelStruct(ctypes.Structure):
+    """Mirror of ``Model`` in _kernel.c (same order)."""
     _fields_ = [(name, ctypes.c_int) for name in
                 ("n", "n_link", "i_r2x", "i_r2y", "i_alpha2", "s_link", "i_u_joint",
-                 "i_u_sleeve", "n_elastic")] + \
+                 "i_u_sleeve", "i_tip_u", "i_tip_v", "n_elastic", "bw", "n_stress_leaf",
+                 "n_stress_link", "stress_width")] + \
                [(name, ctypes.c_double) for name in
-                ("l1", "l3", "y_stop", "j0_leaf", "j0_link", "pbar0")] + \
-               [(name, ctypes.POINTER(ctypes.c_double)) for name in
-                ("c_full", "g_full", "mff_full", "w_full")] + \
-               [("body", ctypes.POINTER(ctypes.c_int))] + \
-               [(name, ctypes.POINTER(ctypes.c_double)) for name in
-                ("sbar", "isbar", "mass_template", "stiffness")] + \
-               [("elastic_idx", ctypes.POINTER(ctypes.c_int))]
+                ("l1", "l3", "y_stop", "j0_leaf", "j0_link", "pbar0", "link_mass")] + \
+               [("c_full", _dp), ("g_full", _dp), ("body", _ip), ("elastic_idx", _ip),
+                ("sbar", _dp), ("isbar", _dp), ("mff_band", _dp), ("k_band", _dp),
+                ("w_band", _dp), ("stress_idx", _ip), ("stress_top", _dp),
+                ("stress_bottom", _dp), ("stress_x", _dp)]
 
 
 _KERNEL_ERRORS = {1: "Newton did not converge", 2: "Newton iterate became non-finite",
                   3: "singular iteration matrix", 4: "mass matrix not positive definite",
                   5: "out of memory"}
+#: umbrella_advance status codes that are not failures
+ADVANCE_DONE, ADVANCE_CROSSING, ADVANCE_DIVERGED = 0, 6, 7
 _kernel_lib = None
 
 
@@ -249,60 +298,139 @@ def load_kernel():
                 lib = ctypes.CDLL(path)
             except OSError:
                 continue
-            dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-            lib.umbrella_step.restype = ctypes.c_int
-            lib.umbrella_step.argtypes = [ctypes.POINTER(_ModelStruct), ctypes.c_int, ctypes.c_int,
-                                          dp, dp, dp, dp, ctypes.c_double, ctypes.c_double,
-                                          ctypes.c_double, ctypes.c_double, ctypes.c_int,
-                                          dp, dp, dp, dp, ip]
+            vp, d, i = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
+            lib.umbrella_new.restype = vp
+            lib.umbrella_new.argtypes = [ctypes.POINTER(_ModelStruct)]
+            lib.umbrella_free.restype = None
+            lib.umbrella_free.argtypes = [vp]
+            lib.umbrella_step.restype = i
+            lib.umbrella_step.argtypes = [vp, i, i, _dp, _dp, _dp, _dp, d, d, d, d, i,
+                                          _dp, _dp, _dp, _dp, _ip]
+            lib.umbrella_momentum.restype = None
+            lib.umbrella_momentum.argtypes = [vp, _dp, _dp, _dp]
+            lib.umbrella_advance.restype = i
+            lib.umbrella_advance.argtypes = [vp, i, i, _dp, _dp, _dp, _dp, ctypes.c_long, d, i,
+                                             d, d, d, i, d, _dp, _dp, i, _ip, _ip, _dp, _dp]
             _kernel_lib = lib
             break
     return _kernel_lib or None
 
 
 def _dptr(a: np.ndarray):
-    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+    return a.ctypes.data_as(_dp)
 
 
-class _CompiledStep:
+class CompiledKernel:
+    """
+    Hold the model handed to _kernel.c once, and every buffer the calls use.
 
-    def __init__(self, lib, m: UmbrellaModel):
+    Each buffer is allocated once and its ctypes pointer cached: a call converts only scalars.
+    """
+
+    def __init__(self, lib, m: UmbrellaModel, capacity: int = 64):
         self.lib = lib
         self.model = m
-        body = -np.ones(m.n, dtype=np.intc)
+        n = m.n
+        body = -np.ones(n, dtype=np.intc)
         body[m.s_leaf] = 0
         body[m.s_link] = 1
-        keep = dict(  # noqa: C408 (keyword names are the kernel's arguments)
-            c_full=np.ascontiguousarray(m._c_full), g_full=np.ascontiguousarray(m._g_full),
-            mff_full=np.ascontiguousarray(m._mff_full), w_full=np.ascontiguousarray(m._w_full),
-            sbar=np.ascontiguousarray(m._link_sbar), isbar=np.ascontiguousarray(m._link_isbar),
-            mass_template=np.ascontiguousarray(m._mass_template),
-            stiffness=np.ascontiguousarray(m.stiffness))
-        self._keep = keep  # the struct points into these arrays
-        self._body = body
-        self._elastic = np.ascontiguousarray(m.elastic_indices, dtype=np.intc)
-        ip = ctypes.POINTER(ctypes.c_int)
+        bw, mff_band, k_band, w_band = m.banded_invariants()
+        s_idx, s_top, s_bot, s_x, (n_leaf, n_link) = m.stress_rows()
+        elastic = np.ascontiguousarray(m.elastic_indices, dtype=np.intc)
+        link = m.link
+        keep = {"c_full": np.zeros(n), "g_full": np.zeros(n),
+                "sbar": np.ascontiguousarray(link.s_bar),
+                "isbar": np.ascontiguousarray([-link.s_bar[1], link.s_bar[0]]),
+                "mff_band": np.ascontiguousarray(mff_band),
+                "k_band": np.ascontiguousarray(k_band), "w_band": np.ascontiguousarray(w_band),
+                "stress_top": np.ascontiguousarray(s_top),
+                "stress_bottom": np.ascontiguousarray(s_bot),
+                "stress_x": np.ascontiguousarray(s_x)}
+        keep["c_full"][m.s_leaf], keep["c_full"][m.s_link] = m.leaf.c, link.c
+        keep["g_full"][m.s_leaf], keep["g_full"][m.s_link] = m.leaf.g, link.g
+        ints = {"body": body, "elastic_idx": elastic,
+                "stress_idx": np.ascontiguousarray(s_idx)}
+        self._keep = (keep, ints)  # the struct points into these arrays
         self.struct = _ModelStruct(
-            n=m.n, n_link=m.link.n_elastic, i_r2x=m.i_r2x, i_r2y=m.i_r2y, i_alpha2=m.i_alpha2,
+            n=n, n_link=link.n_elastic, i_r2x=m.i_r2x, i_r2y=m.i_r2y, i_alpha2=m.i_alpha2,
             s_link=m.s_link.start, i_u_joint=m.i_u_joint, i_u_sleeve=m.i_u_sleeve,
-            n_elastic=len(self._elastic), l1=m.params.l1, l3=m.params.l3, y_stop=m.y_stop,
-            j0_leaf=m.leaf.j0, j0_link=m.link.j0, pbar0=m.link.p_bar[0],
-            body=body.ctypes.data_as(ip), elastic_idx=self._elastic.ctypes.data_as(ip),
-            **{k: _dptr(v) for k, v in keep.items()})
-        self._its = ctypes.c_int(0)
+            i_tip_u=m.i_tip_u, i_tip_v=m.i_tip_v, n_elastic=len(elastic), bw=bw,
+            n_stress_leaf=n_leaf, n_stress_link=n_link, stress_width=s_idx.shape[1],
+            l1=m.params.l1, l3=m.params.l3, y_stop=m.y_stop, j0_leaf=m.leaf.j0,
+            j0_link=link.j0, pbar0=link.p_bar[0], link_mass=link.mass,
+            **{k: _dptr(v) for k, v in keep.items()},
+            **{k: v.ctypes.data_as(_ip) for k, v in ints.items()})
+        ctx = lib.umbrella_new(ctypes.byref(self.struct))
+        if not ctx:
+            raise MemoryError("the compiled kernel could not allocate its buffers")
+        self._ctx = ctypes.c_void_p(ctx)
+        self._free = lib.umbrella_free
+        nc_max = 4 + len(elastic)
+        # the state advanced in place, and the last step's acceleration
+        self.q, self.v, self.p, self.accel = (np.zeros(n) for _ in range(4))
+        self.lam = np.zeros(nc_max)
+        self.acc = np.zeros(2)                     # work, lock loss (J)
+        self._ptr = {k: _dptr(getattr(self, k)) for k in ("q", "v", "p", "lam", "acc", "accel")}
+        self._n_done, self._its = ctypes.c_int(0), ctypes.c_int(0)
+        self._residual = ctypes.c_double(0.0)
+        self._refs = tuple(ctypes.byref(o) for o in (self._n_done, self._its, self._residual))
+        self._set_capacity(capacity)
+        # single-step outputs
+        self._q1, self._v1, self._p1 = np.zeros(n), np.zeros(n), np.zeros(n)
+        self._lam1 = np.zeros(nc_max)
+
+    def __del__(self):
+        ctx = getattr(self, "_ctx", None)
+        if ctx is not None and ctx.value:
+            self._free(ctx)
+            self._ctx = None
+
+    def _set_capacity(self, cap: int) -> None:
+        from .outputs import STEP_FIELDS
+        self.out = np.zeros((len(STEP_FIELDS), cap))
+        self._out_ptr = _dptr(self.out)
+        self.capacity = cap
+
+    def load(self, s: DynamicState, work: float, lock_loss: float) -> None:
+        """Take s as the state to advance from."""
+        self.q[:] = s.q
+        self.v[:] = s.qd
+        self.lam[:len(s.multipliers)] = s.multipliers
+        if s.momentum is not None:
+            self.p[:] = s.momentum
+        else:
+            self.lib.umbrella_momentum(self._ctx, self._ptr["q"], self._ptr["v"], self._ptr["p"])
+        self.acc[0], self.acc[1] = work, lock_loss
+
+    def advance(self, cs: ConstraintSet, k0: int, h: float, n_steps: int, force: float,
+                tol: float, max_iter: int, div_tol: float):
+        """n_steps grid steps from the loaded state; returns (status, steps done, Newton
+        iterations, residual of a diverged step).  Rows are in self.out[:, :steps]."""
+        if n_steps > self.capacity:
+            self._set_capacity(max(n_steps, 2 * self.capacity))
+        ptr = self._ptr
+        status = self.lib.umbrella_advance(
+            self._ctx, cs.locked, cs.rigid, ptr["q"], ptr["v"], ptr["lam"], ptr["p"], k0, h,
+            n_steps, force, tol, PHI_TOLERANCE, max_iter, div_tol, ptr["acc"], self._out_ptr,
+            self.capacity, *self._refs, ptr["accel"])
+        return status, self._n_done.value, self._its.value, self._residual.value
+
+    def state(self, t: float, nc: int) -> DynamicState:
+        return DynamicState(t, self.q.copy(), self.v.copy(), self.accel.copy(),
+                            self.lam[:nc].copy(), self.p.copy())
 
     def step(self, s: DynamicState, h, force, cs: ConstraintSet, tol, max_iter):
-        n = self.model.n
         q0 = np.ascontiguousarray(s.q, dtype=float)
         v0 = np.ascontiguousarray(s.qd, dtype=float)
         lam0 = np.ascontiguousarray(s.multipliers, dtype=float)
         p0 = None if s.momentum is None else np.ascontiguousarray(s.momentum, dtype=float)
-        q, v, p1 = np.empty(n), np.empty(n), np.empty(n)
-        lam = np.empty(len(lam0))
         status = self.lib.umbrella_step(
-            ctypes.byref(self.struct), int(cs.locked), int(cs.rigid), _dptr(q0), _dptr(v0),
+            self._ctx, int(cs.locked), int(cs.rigid), _dptr(q0), _dptr(v0),
             _dptr(lam0), None if p0 is None else _dptr(p0), h, force, tol, PHI_TOLERANCE,
-            max_iter, _dptr(q), _dptr(v), _dptr(lam), _dptr(p1), ctypes.byref(self._its))
+            max_iter, _dptr(self._q1), _dptr(self._v1), _dptr(self._lam1), _dptr(self._p1),
+            ctypes.byref(self._its))
         if status != 0:
             raise ConvergenceError(f"{_KERNEL_ERRORS.get(status, status)} at t = {s.t + h:.9g} s")
-        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, p1), self._its.value
+        v = self._v1.copy()
+        return (DynamicState(s.t + h, self._q1.copy(), v, (v - v0) / h,
+                             self._lam1[:len(lam0)].copy(), self._p1.copy()), self._its.value)

@@ -19,13 +19,27 @@ the printed errata of the thesis enters.  Nothing here imports rclpy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import enum
 import math
 
 import numpy as np
 
 from .params import UmbrellaParams
 
-DEFORMING, LOCKED = "deploying", "locked"
+
+
+class Stage(enum.StrEnum):
+    """Stage of the deployment; compares equal to its name string ("deploying", "locked")."""
+    DEPLOYING = "deploying"     # Case 1: the sleeve slides down the axle
+    LOCKED = "locked"           # Case 2: the sleeve held at the stop S
+
+    @property
+    def code(self) -> int:
+        """0 deploying, 1 locked (StepBlock.stage, the compiled kernel)."""
+        return 0 if self is Stage.DEPLOYING else 1
+
+
+DEFORMING, LOCKED = Stage.DEPLOYING, Stage.LOCKED
 _GAUSS_ETA, _GAUSS_W = np.polynomial.legendre.leggauss(5)  # exact to degree 9
 _GAUSS_ETA = 0.5 * (_GAUSS_ETA + 1.0)
 _GAUSS_W = 0.5 * _GAUSS_W
@@ -255,6 +269,48 @@ class UmbrellaModel:
             if body is self.leaf:
                 labels += ["R2x", "R2y", "alpha2"]
         return labels
+
+    # ------------------------------------------------- structure (compiled kernel)
+    def banded_invariants(self):
+        """The constant matrices on the elastic coordinates (leaf then link, node by node),
+        in band form: (half_bandwidth, mass Mff, stiffness K, coupling W), each of shape
+        (n_elastic, 2 bw + 1) with entry [p, k] = A[e_p, e_(p + k - bw)].  An element couples
+        the coordinates of two neighbouring nodes, so bw <= 5 whatever the mesh."""
+        idx = self.elastic_indices
+        mats = [self._mff_full[np.ix_(idx, idx)], self.stiffness[np.ix_(idx, idx)],
+                self._w_full[np.ix_(idx, idx)]]
+        rows, cols = np.nonzero(np.any([a != 0.0 for a in mats], axis=0))
+        bw = int(np.max(np.abs(rows - cols))) if len(rows) else 0
+        ne = len(idx)
+        bands = []
+        for a in mats:
+            band = np.zeros((ne, 2 * bw + 1))
+            for k in range(-bw, bw + 1):
+                d = np.diagonal(a, k)
+                if k >= 0:
+                    band[:ne - k, bw + k] = d
+                else:
+                    band[-k:, bw + k] = d
+            bands.append(band)
+        return bw, bands[0], bands[1], bands[2]
+
+    def stress_rows(self):
+        """Fibre stress at the stress points of both bodies (leaf first, then link) as
+        sparse rows over q: (q indices, top coefficients, bottom coefficients) each of shape
+        (points, width), plus the points' abscissae and the point count per body."""
+        rows = []
+        for body, s_e in ((self.leaf, self.s_leaf), (self.link, self.s_link)):
+            for top, bottom in zip(body.stress_top, body.stress_bottom):
+                nz = np.nonzero((top != 0.0) | (bottom != 0.0))[0]
+                rows.append((nz + s_e.start, top[nz], bottom[nz]))
+        width = max(1, max(len(r[0]) for r in rows))
+        idx = np.zeros((len(rows), width), dtype=np.intc)
+        top = np.zeros((len(rows), width))
+        bottom = np.zeros((len(rows), width))
+        for k, (i, t, b) in enumerate(rows):
+            idx[k, :len(i)], top[k, :len(i)], bottom[k, :len(i)] = i, t, b
+        x = np.concatenate([self.leaf.stress_x, self.link.stress_x])
+        return idx, top, bottom, x, (len(self.leaf.stress_x), len(self.link.stress_x))
 
     # ---------------------------------------------------------------- inertia
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:

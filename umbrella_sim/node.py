@@ -12,6 +12,8 @@ Threads, chosen deliberately:
     physics runs.  A command is handed
     over under a lock and applied at the next step boundary; every applied value is logged
     with its sim time, which is the exact force history for an offline re-run.
+Each message is serialized once: the same bytes go to the publisher and to the recorder.
+Markers go out at their own display rate (marker_rate).
 Everything published and every command received (accepted, refused, applied) is recorded to
 MCAP when ``record_path`` is set (see recording.py).
 """
@@ -32,6 +34,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64
@@ -115,6 +118,7 @@ class UmbrellaNode(Node):
 
         self.pub = {key: self.create_publisher(t.type, t.name, t.qos)
                     for key, t in ros_io.TOPICS.items()}
+        self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
         # commands and services in their own callback groups, served by a 2-thread executor:
         # a slow ~/reset never delays a command and a command flood never delays ~/pause
         self.command_sub = self.create_subscription(
@@ -165,7 +169,7 @@ class UmbrellaNode(Node):
     def _build_simulator(self) -> None:
         p = self.model_params
         self.driver_rate = self.node_cfg["publish_rate"]    # a publish_rate set applies here
-        self.driver = PublicationDriver(p, self.driver_rate)
+        self.driver = PublicationDriver(p, self.driver_rate, self.node_cfg["marker_rate"])
         self.sim = self.driver.sim
         with self._cmd_lock:
             self._commanded_force = p.sleeve_force
@@ -223,15 +227,17 @@ class UmbrellaNode(Node):
             self._log("info", f"recording finalised: {self.recorder.path} "
                               f"({sum(self.recorder.counts.values())} messages)")
 
-    def _record(self, topic: str, msg, t: float) -> None:
+    def _record(self, topic: str, msg, t: float, data: bytes | None = None) -> None:
         if self.recorder is not None and self.recorder.error is None:
-            self.recorder.write(topic, msg, ros_io.stamp_ns(t))
+            self.recorder.write(topic, msg, ros_io.stamp_ns(t), data)
 
     def _publish(self, key: str, msg, t: float) -> None:
         pub = self.pub[key]
-        pub.publish(msg)
-        self.published[pub.topic_name] = self.published.get(pub.topic_name, 0) + 1
-        self._record(pub.topic_name, msg, t)
+        data = serialize_message(msg)   # once: the publisher and the recorder share the bytes
+        pub.publish(data)
+        name = self._topic_name[key]
+        self.published[name] = self.published.get(name, 0) + 1
+        self._record(name, msg, t, data)
 
     # ---------------------------------------------------------------- callbacks
     def _on_force(self, msg) -> None:

@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass, field
+from functools import cached_property
 import math
+from typing import Callable
 
 import numpy as np
 
@@ -63,6 +65,19 @@ def sample_row(s: Sample) -> list:
     return row
 
 
+#: per-physics-step outputs of ``UmbrellaSimulator.advance``, in the order the compiled kernel
+#: writes them (_kernel.c, enum F_*); stage is the int code of model.Stage
+STEP_FIELDS = ("time", "stage", "alpha1", "alpha1_rate", "sleeve_position", "sleeve_velocity",
+               "sleeve_force", "tip_axial", "tip_transverse", "peak_stress_leaf",
+               "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x", "kinetic_energy",
+               "strain_energy", "work", "lock_energy_loss")
+
+
+def step_row(s: Sample) -> list[float]:
+    """The STEP_FIELDS of one sample (the reference the compiled outputs are tested against)."""
+    return [float(s.stage.code) if f == "stage" else float(getattr(s, f)) for f in STEP_FIELDS]
+
+
 @dataclass
 class LockEvent:
     time: float
@@ -70,6 +85,49 @@ class LockEvent:
     energy_before: float
     energy_after: float
     free_velocities: tuple = ()
+
+
+@dataclass(frozen=True)
+class StepBlock:
+    """What ``UmbrellaSimulator.advance(n_steps)`` returns: one entry per physics step taken
+    (1-D arrays, field names STEP_FIELDS), the Sample of the final state (``last``, built on
+    first use: stresses along the bodies, multipliers and residuals cost more than a step),
+    the lock if it happened inside the block, and the fault that stopped the block early (the
+    state is then the last good step, and the entries cover the steps taken before it)."""
+    time: np.ndarray
+    stage: np.ndarray
+    alpha1: np.ndarray
+    alpha1_rate: np.ndarray
+    sleeve_position: np.ndarray
+    sleeve_velocity: np.ndarray
+    sleeve_force: np.ndarray
+    tip_axial: np.ndarray
+    tip_transverse: np.ndarray
+    peak_stress_leaf: np.ndarray
+    peak_stress_leaf_x: np.ndarray
+    peak_stress_link: np.ndarray
+    peak_stress_link_x: np.ndarray
+    kinetic_energy: np.ndarray
+    strain_energy: np.ndarray
+    work: np.ndarray
+    lock_energy_loss: np.ndarray
+    make_last: Callable[[], Sample] = field(repr=False)
+    lock: LockEvent | None = None
+    error: str | None = None
+
+    @cached_property
+    def last(self) -> Sample:
+        return self.make_last()
+
+    @classmethod
+    def from_rows(cls, rows: np.ndarray, make_last: Callable[[], Sample], lock=None,
+                  error=None) -> "StepBlock":
+        """rows: (len(STEP_FIELDS), steps), owned by the block; make_last builds the Sample
+        of the final state (a closure over that immutable state)."""
+        return cls(*rows, make_last=make_last, lock=lock, error=error)
+
+    def __len__(self) -> int:
+        return len(self.time)
 
 
 @dataclass

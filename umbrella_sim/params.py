@@ -200,7 +200,9 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     _P("lock", str, "energy", "-",
        "velocity redistribution at the lock: energy (thesis 5.2.2) or plastic (rigid "
        "models always stop: plastic)", choices=LOCKS),
-    _P("time_step", float, 2.0e-3, "s", "fixed physics step of the integrator",
+    _P("time_step", float, 5.0e-5, "s",
+       "fixed physics step of the integrator; the default is chosen by accuracy against "
+       "fine-step runs (docs/validation.md, step convergence)",
        low=0.0, low_open=True, high=0.01),
     _P("damping_ratio", float, 0.0, "-",
        "structural damping ratio ζ of the first stage-2 mode: strain-rate (Kelvin–Voigt, "
@@ -231,6 +233,11 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     _P("marker_magnification", float, 1.0, "-",
        "deformation magnification of the markers", low=0.0, high=1e6, applies=NOW,
        group=NODE),
+    _P("marker_rate", float, 30.0, "Hz",
+       "publication rate (sim time) of markers: every k-th publication, k = "
+       "round(`publish_rate` / `marker_rate`) ≥ 1, t = 0 included; RViz draws at 30–60 Hz "
+       "and a MarkerArray costs more than all other topics together",
+       low=0.1, high=5000.0, group=NODE),
     _P("frame_prefix", str, "", "-",
        "prefix of the frame ids of joint_states, tip_deflection and markers (umbrella_base, "
        "leaf); 'a1/' matches robot_state_publisher's frame_prefix when several antennas "

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import math
 
 from . import ros_io
-from .params import UmbrellaParams
-from .solver import UmbrellaSimulator
+from .params import NODE_PARAMETERS, UmbrellaParams
+from .solver import SimulationDiverged, UmbrellaSimulator
 
 
 def physics_step(time_step: float, publish_rate: float) -> float:
@@ -34,39 +34,50 @@ class Event:
 
 class PublicationDriver:
 
-    def __init__(self, params: UmbrellaParams, publish_rate: float):
+    def __init__(self, params: UmbrellaParams, publish_rate: float,
+                 marker_rate: float = NODE_PARAMETERS["marker_rate"].default):
         self.params = params
         self.step = physics_step(params.time_step, publish_rate)
         self.publish_every = round((1.0 / publish_rate) / self.step)
+        # markers on every marker_every-th publication (t = 0 included)
+        self.marker_every = max(1, round(publish_rate / marker_rate))
+        self.periods = 0
         self.sim = UmbrellaSimulator(params.replace(time_step=self.step))
+        self.last_block = None
         first = self.sim.sample()
         self.initial_energy = first.kinetic_energy + first.strain_energy
 
     @property
     def backend(self) -> str:
-        integrator = getattr(self.sim.engine, "integrator", None)
-        return integrator.backend if integrator is not None else "closed-form rigid (numpy)"
+        return self.sim.engine.backend
 
     def advance(self, commanded_force: float) -> list[Event]:
-        """Step one publication period; raises SimulationDiverged (state kept)."""
+        """Step one publication period (one ``UmbrellaSimulator.advance`` call, its StepBlock
+        kept as ``last_block``); raises SimulationDiverged after the steps that succeeded
+        (state kept, their outputs in ``last_block``)."""
         sim = self.sim
         events = []
-        for _ in range(self.publish_every):
-            if commanded_force != sim.sleeve_force:
-                sim.set_sleeve_force(commanded_force)
-                note = " (locked: no effect on motion)" if sim.stage == "locked" else ""
-                events.append(Event("applied", sim.time, commanded_force, note))
-            stage = sim.stage
-            sim.step(record=False)
-            if stage != sim.stage:
-                ev = sim.lock_event
-                events.append(Event("locked", ev.time, detail=(
-                    f"energy {ev.energy_before:.6g} J -> {ev.energy_after:.6g} J, "
-                    f"{ev.kind} lock")))
+        if commanded_force != sim.sleeve_force:
+            sim.set_sleeve_force(commanded_force)
+            note = " (locked: no effect on motion)" if sim.stage == "locked" else ""
+            events.append(Event("applied", sim.time, commanded_force, note))
+        block = self.last_block = sim.advance(self.publish_every)
+        self.periods += 1
+        ev = block.lock
+        if ev is not None:
+            events.append(Event("locked", ev.time, detail=(
+                f"energy {ev.energy_before:.6g} J -> {ev.energy_after:.6g} J, "
+                f"{ev.kind} lock")))
+        if block.error is not None:
+            raise SimulationDiverged(block.error)
         return events
 
     def messages(self, marker_ns: str, magnification: float, frame_prefix: str = "") -> dict:
-        s = self.sim.sample()
-        positions = self.sim.model.node_positions(s.q, magnification)
+        """Return the messages of the current state; markers only at their own rate."""
+        block = self.last_block
+        s = block.last if block is not None and block.last.time == self.sim.time else \
+            self.sim.sample()
+        with_markers = self.periods % self.marker_every == 0
+        positions = self.sim.model.node_positions(s.q, magnification) if with_markers else None
         return ros_io.sample_messages(s, self.sim.params, positions, marker_ns,
                                       self.initial_energy, frame_prefix)

@@ -157,14 +157,16 @@ def _cdr_items(ftype: str, values, pos: int) -> int:
     return pos
 
 
-def cdr_bytes(msg) -> bytes:
+def cdr_bytes(msg, data: bytes | None = None) -> bytes:
     """
     Serialise to CDR, trimmed to the exact size.
 
     (rclpy may return a few padding bytes more,
-    which rosbags rejects; ros2 bag record writes the exact size).
+    which rosbags rejects; ros2 bag record writes the exact size).  data: msg already
+    serialized (the bytes the node published), to serialize once.
     """
-    data = serialize_message(msg)
+    if data is None:
+        data = serialize_message(msg)
     size = 4 + _cdr_end(msg, 0)                # 4-byte encapsulation header
     if size > len(data):
         raise RuntimeError(f"CDR size walk overran the payload for {type_name(msg)}")
@@ -540,16 +542,17 @@ class BagRecorder:
                 self._fail(exc, f"writing segment {self.segment}", None)
             return self.segment
 
-    def write(self, topic: str, msg, t_ns: int) -> bool:
+    def write(self, topic: str, msg, t_ns: int, data: bytes | None = None) -> bool:
         """
         Record one message at sim time t_ns (plus the segment's log-time offset).
 
         Record one message at sim time t_ns (plus the segment's log-time offset); False
-        once the recording has stopped (closed or failed).
+        once the recording has stopped (closed or failed).  data: serialize_message(msg)
+        when the caller has it already (the node publishes those bytes).
         """
         if self._closed:
             return False
-        data = cdr_bytes(msg)
+        data = cdr_bytes(msg, data)
         t_ns += self.offset_ns
         with self._lock:
             if self._closed:

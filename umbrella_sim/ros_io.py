@@ -248,12 +248,17 @@ def diagnostics_msg(t: float, name: str, level: bytes, message: str,
 
 def sample_messages(s: Sample, params: UmbrellaParams, positions, marker_ns: str,
                     initial_energy: float, frame_prefix: str = "") -> dict:
-    """Return the per-publication messages of one sample, keyed by topic key."""
-    return {
+    """Return the per-publication messages of one sample, keyed by topic key.
+
+    No markers when positions is None: they go out at their own (display) rate.
+    """
+    out = {
         "energy": energy_msg(s, initial_energy),
         "clock": clock_msg(s.time),
         "joint_states": joint_state_msg(s, frame_prefix),
         "tip_deflection": tip_deflection_msg(s, frame_prefix),
         "peak_stress": peak_stress_msg(s, params.yield_strength),
-        "markers": markers_msg(s, positions, marker_ns, frame_prefix),
     }
+    if positions is not None:
+        out["markers"] = markers_msg(s, positions, marker_ns, frame_prefix)
+    return out

@@ -11,6 +11,7 @@ grid is kept.
 """
 from __future__ import annotations
 
+import abc
 from dataclasses import replace
 import math
 import time as _time
@@ -18,9 +19,10 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from .integrators import ConvergenceError, DynamicState, MidpointDAE
-from .model import ConstraintSet, DEFORMING, LOCKED, UmbrellaModel
-from .outputs import LockEvent, RunResult, Sample
+from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ConvergenceError,
+                          DynamicState, MidpointDAE)
+from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
+from .outputs import LockEvent, RunResult, Sample, STEP_FIELDS, step_row, StepBlock
 from .params import SPECS, UmbrellaParams
 from .rigid import RigidMechanism
 
@@ -58,8 +60,69 @@ def validate_force(force: float, limit: float | None = None) -> float:
 
 
 # --------------------------------------------------------------------- engines
-class FiniteElementEngine:
-    """Flexible (Case 1 -> Case 2) or rigid-FE (Case 3) model on the Newmark integrator."""
+class Engine(abc.ABC):
+    """What the simulator needs of a model's time stepping (flexible / rigid-FE on the
+    midpoint DAE integrator, the closed-form rigid model, or any other model).
+
+    States are DynamicState; the stage selects the constraints.  ``advance`` is the fast
+    path (many steps in one call, compiled); an engine without one returns None from it and
+    the simulator loops over ``step``."""
+
+    lock_kind: str
+
+    @property
+    @abc.abstractmethod
+    def backend(self) -> str:
+        """What does the stepping, for logs and recordings."""
+
+    @abc.abstractmethod
+    def initial(self, force: float) -> DynamicState:
+        """The state at t = 0, stage deploying."""
+
+    @abc.abstractmethod
+    def step(self, s: DynamicState, h: float, force: float, stage: Stage) -> DynamicState:
+        """One step of length h (raises ConvergenceError)."""
+
+    @abc.abstractmethod
+    def fe_state(self, s: DynamicState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, q', q'') in the finite-element coordinates of UmbrellaModel."""
+
+    @abc.abstractmethod
+    def residual(self, s: DynamicState, stage: Stage) -> float:
+        """max(|Phi|, |J q'|)."""
+
+    @abc.abstractmethod
+    def sleeve_height(self, s: DynamicState) -> float:
+        """y_H (m)."""
+
+    @abc.abstractmethod
+    def kinetic_energy(self, s: DynamicState) -> float:
+        """T (J)."""
+
+    @abc.abstractmethod
+    def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
+        """Force on the sleeve from the axle (X) and the stop (Y), N."""
+
+    @abc.abstractmethod
+    def lock(self, s: DynamicState, force: float) -> tuple[DynamicState, LockEvent]:
+        """The state right after the lock at s (same t), and what the lock did."""
+
+    def newton_iterations(self) -> int:
+        """Newton iterations so far (0 for explicit schemes)."""
+        return 0
+
+    def advance(self, s: DynamicState, k0: int, h: float, n_steps: int, force: float,
+                stage: Stage, work: float, lock_loss: float):
+        """Up to n_steps grid steps t_k -> (k + 1) h from s at t = k0 h in one call; stops
+        before a step in which the sleeve reaches the stop (stage deploying), and at a
+        failure.  Returns None if this engine has no such path, else (state, rows, work,
+        stop): rows (len(STEP_FIELDS), steps done), stop None (all steps done), "crossing",
+        or a failure message."""
+        return None
+
+
+class FiniteElementEngine(Engine):
+    """Flexible (Case 1 -> Case 2) or rigid-FE (Case 3) model on the midpoint DAE integrator."""
 
     def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
         self.model = model
@@ -67,23 +130,60 @@ class FiniteElementEngine:
         self.lock_kind = "plastic" if self.rigid else params.lock
         self.integrator = MidpointDAE(model)
         self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
-                    for stage in (DEFORMING, LOCKED)}
+                    for stage in Stage}
+
+    @property
+    def backend(self) -> str:
+        return self.integrator.backend
+
+    def newton_iterations(self) -> int:
+        return self.integrator.iterations
 
     def initial(self, force: float) -> DynamicState:
         q, qd = self.model.initial_state()
         qdd, lam = self.integrator.consistent_acceleration(q, qd, force, self._cs[DEFORMING])
         return DynamicState(0.0, q, qd, qdd, lam)
 
-    def step(self, s: DynamicState, h: float, force: float, stage: str) -> DynamicState:
+    def step(self, s: DynamicState, h: float, force: float, stage: Stage) -> DynamicState:
         return self.integrator.step(s, h, force, self._cs[stage])
+
+    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
+        kernel = self.integrator.kernel
+        if kernel is None:
+            return None
+        integ, cs = self.integrator, self._cs[stage]
+        kernel.load(s, work, lock_loss)
+        status, done, its, residual = kernel.advance(
+            cs, k0, h, n_steps, force, integ.tolerance, integ.max_iterations,
+            DIVERGENCE_RESIDUAL)
+        integ.iterations += its
+        t = (k0 + done) * h
+        if status == ADVANCE_DONE:
+            stop = None
+        elif status == ADVANCE_CROSSING:
+            stop = "crossing"
+        elif status == ADVANCE_DIVERGED:
+            stop = (f"constraint residual {residual:.3g} past tolerance "
+                    f"{DIVERGENCE_RESIDUAL:g} at t = {t + h:.9g} s")
+        else:
+            stop = f"solver failed at t = {t:.9g} s: {integ.kernel_error(status, t + h)}"
+        state = kernel.state(t, self.model.n_constraints(cs)) if done else s
+        return state, kernel.out[:, :done].copy(), float(kernel.acc[0]), stop
 
     def fe_state(self, s: DynamicState):
         return s.q, s.qd, s.qdd
 
-    def multipliers(self, s: DynamicState, force: float, stage: str) -> np.ndarray:
-        return s.multipliers
+    def kinetic_energy(self, s: DynamicState) -> float:
+        # the step leaves M(q) qd in the state: T = 1/2 qd . p without re-assembling M
+        if s.momentum is not None:
+            return float(0.5 * s.qd @ s.momentum)
+        return float(self.model.kinetic_energy(s.q, s.qd))
 
-    def residual(self, s: DynamicState, stage: str) -> float:
+    def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
+        lam = s.multipliers
+        return float(lam[2]), float(lam[3]) if stage == LOCKED else 0.0
+
+    def residual(self, s: DynamicState, stage: Stage) -> float:
         cs = self._cs[stage]
         m = self.model
         return max(float(np.max(np.abs(m.constraint_residual(s.q, cs)))),
@@ -144,10 +244,11 @@ class FiniteElementEngine:
         return best, tuple(labels[i] for i in free)
 
 
-class RigidEngine:
+class RigidEngine(Engine):
     """Closed-form two-angle model (4.120-4.125), RK4 with projection, sub-stepped."""
 
     max_substep = 1e-4
+    backend = "closed-form rigid (numpy)"
 
     def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
         self.model = model
@@ -164,7 +265,7 @@ class RigidEngine:
         acc = self.mech.accelerations(y[0], y[1], y[2], y[3], force)
         return DynamicState(t, y[:2], y[2:], acc[:2], np.array([acc[2], 0.0]))
 
-    def step(self, s: DynamicState, h: float, force: float, stage: str) -> DynamicState:
+    def step(self, s: DynamicState, h: float, force: float, stage: Stage) -> DynamicState:
         if stage == LOCKED:
             return replace(s, t=s.t + h, multipliers=np.array([0.0, force]))
         y = np.concatenate([s.q, s.qd])
@@ -182,10 +283,13 @@ class RigidEngine:
         qdd[m.i_alpha2] = s.qdd[1]
         return q, qd, qdd
 
-    def multipliers(self, s, force, stage):
-        return s.multipliers
+    def kinetic_energy(self, s: DynamicState) -> float:
+        return float(self.mech.kinetic_energy(*s.q, *s.qd))
 
-    def residual(self, s: DynamicState, stage: str) -> float:
+    def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
+        return float(s.multipliers[0]), float(s.multipliers[1])
+
+    def residual(self, s: DynamicState, stage: Stage) -> float:
         p = self.model.params
         a1, a2 = s.q
         w1, w2 = s.qd
@@ -246,7 +350,7 @@ class UmbrellaSimulator:
         return self._state.t
 
     @property
-    def stage(self) -> str:
+    def stage(self) -> Stage:
         return self._stage
 
     @property
@@ -281,19 +385,64 @@ class UmbrellaSimulator:
             remaining = t_next - s_locked.t
             if remaining > EVENT_TIME_TOLERANCE:
                 s1 = self._checked(lambda: eng.step(s_locked, remaining, force, LOCKED), LOCKED)
+                work += force * (eng.sleeve_height(s_locked) - eng.sleeve_height(s1))
             else:
-                s1 = replace(s_locked, t=t_next)
-        # commit only after everything succeeded: a failure leaves the last good state
-        self._state, self._stage, self._k = s1, stage, self._k + 1
+                s1 = s_locked
+        # the grid time exactly, whatever the rounding of t0 + h
+        s1 = replace(s1, t=t_next)
+        self._commit(s1, stage, force, work, lock_loss, lock_event, 1)
+        if record:
+            out.append(self.sample())
+        return out
+
+    def _commit(self, s1, stage, force, work, lock_loss, lock_event, steps) -> None:
+        """Only after everything succeeded: a failure leaves the last good state."""
+        self._state, self._stage, self._k = s1, stage, self._k + steps
         self._work += work
         self._lock_loss += lock_loss
         self._applied_force = force
         if lock_event is not None:
             self.lock_event = lock_event
-        self.steps += 1
-        if record:
-            out.append(self.sample())
-        return out
+        self.steps += steps
+
+    def advance(self, n_steps: int) -> StepBlock:
+        """Take n_steps grid steps (stopping early only at a fault) and return their outputs,
+        one entry per step, with the final Sample and the lock if it happened in the block.
+
+        The engine's compiled path runs the steps in one call each (two around the lock,
+        whose step is taken here); engines without one, or UMBRELLA_SIM_KERNEL=numpy, take
+        them one by one with outputs from ``sample()`` (the reference path)."""
+        rows = np.empty((len(STEP_FIELDS), n_steps))
+        done = 0
+        error = None
+        lock_before = self.lock_event
+        force = self._force
+        while done < n_steps:
+            fast = self.engine.advance(self._state, self._k, self.h, n_steps - done, force,
+                                       self._stage, self._work, self._lock_loss)
+            if fast is not None:
+                state, block, work, stop = fast
+                k = block.shape[1]
+                if k:
+                    rows[:, done:done + k] = block
+                    self._commit(state, self._stage, force, work - self._work, 0.0, None, k)
+                    done += k
+                if stop is None:
+                    break
+                if stop != "crossing":
+                    error = stop
+                    break
+            try:                          # the lock step, or every step without a fast path
+                self.step(record=False)
+            except SimulationDiverged as exc:
+                error = str(exc)
+                break
+            rows[:, done] = step_row(self.sample())
+            done += 1
+        lock = self.lock_event if self.lock_event is not lock_before else None
+        final = (self._state, self._stage, self._applied_force, self._work, self._lock_loss)
+        return StepBlock.from_rows(rows[:, :done].copy() if done < n_steps else rows,
+                                   lambda: self._sample(*final), lock, error)
 
     def advance_to(self, t: float, record: bool = True) -> list[Sample]:
         """Take every grid step that ends at or before t."""
@@ -302,7 +451,7 @@ class UmbrellaSimulator:
             out.extend(self.step(record))
         return out
 
-    def _checked(self, fn: Callable[[], DynamicState], stage: str) -> DynamicState:
+    def _checked(self, fn: Callable[[], DynamicState], stage: Stage) -> DynamicState:
         try:
             s = fn()
         except (ConvergenceError, np.linalg.LinAlgError) as exc:
@@ -359,27 +508,19 @@ class UmbrellaSimulator:
         return self._sample(self._state, self._stage, self._applied_force, self._work,
                             self._lock_loss)
 
-    def _sample(self, s: DynamicState, stage: str, force: float, work: float,
+    def _sample(self, s: DynamicState, stage: Stage, force: float, work: float,
                 lock_loss: float) -> Sample:
-        m = self.model
-        q, qd, qdd = self.engine.fe_state(s)
-        lam = np.asarray(self.engine.multipliers(s, force, stage), dtype=float)
+        m, eng = self.model, self.engine
+        q, qd, qdd = eng.fe_state(s)
+        lam = np.asarray(s.multipliers, dtype=float)
         (lt, lb), (kt, kb) = m.stresses(q)
         leaf_abs = np.maximum(np.abs(lt), np.abs(lb))
         link_abs = np.maximum(np.abs(kt), np.abs(kb))
         il, ik = int(np.argmax(leaf_abs)), int(np.argmax(link_abs))
         tip_u, tip_v = m.tip_displacement(q)
         joint_stress, mid_link_stress = m.reference_stresses(lt, kt)
-        if isinstance(self.engine, RigidEngine):
-            reaction = (float(lam[0]), float(lam[1]))
-            kinetic = self.engine.mech.kinetic_energy(*s.q, *s.qd)
-        else:
-            reaction = (float(lam[2]), float(lam[3]) if stage == LOCKED else 0.0)
-            # the step leaves M(q) qd in the state: T = 1/2 qd . p without re-assembling M
-            kinetic = (0.5 * qd @ s.momentum if s.momentum is not None
-                       else m.kinetic_energy(q, qd))
         return Sample(
-            time=s.t, stage=stage, q=q.copy(), qd=qd.copy(),
+            time=s.t, stage=Stage(stage), q=q.copy(), qd=qd.copy(),
             alpha1=float(q[0]), alpha2=float(q[m.i_alpha2]),
             alpha1_rate=float(qd[0]), alpha2_rate=float(qd[m.i_alpha2]),
             alpha1_accel=float(qdd[0]),
@@ -390,11 +531,11 @@ class UmbrellaSimulator:
             peak_stress_leaf=float(leaf_abs[il]), peak_stress_leaf_x=float(m.leaf.stress_x[il]),
             peak_stress_link=float(link_abs[ik]), peak_stress_link_x=float(m.link.stress_x[ik]),
             stress_leaf_joint=joint_stress, stress_link_mid=mid_link_stress,
-            multipliers=lam.copy(), sleeve_reaction=reaction,
-            kinetic_energy=float(kinetic), strain_energy=float(m.strain_energy(q)),
+            multipliers=lam.copy(), sleeve_reaction=eng.sleeve_reaction(s, stage),
+            kinetic_energy=eng.kinetic_energy(s), strain_energy=float(m.strain_energy(q)),
             work=float(work), lock_energy_loss=float(lock_loss),
             damping_dissipation=float(getattr(s, "dissipation", 0.0)),
-            constraint_residual=self.engine.residual(s, stage),
+            constraint_residual=eng.residual(s, stage),
         )
 
 

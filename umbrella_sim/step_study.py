@@ -1,0 +1,148 @@
+"""Accuracy of a physics step against a fine-step run of the same code (time-step study).
+
+The figures a structural engineer reads off a run, computed from every physics step
+(``UmbrellaSimulator.advance``), so they do not depend on an output rate:
+deploy (lock) time, stage-1 and stage-2 peak fibre stresses on leaf and link, the stage-2
+tip period, and the stage-2 tip series.  ``step_errors`` compares a run with a candidate step
+against a run with a much finer step (the same model, mesh and lock), which is how the
+default ``time_step`` was chosen (docs/validation.md, bench/bench_accuracy.py).
+Nothing here imports rclpy.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .outputs import dominant_period
+from .params import UmbrellaParams
+from .solver import UmbrellaSimulator
+
+#: issue-level accuracy targets for the default step (relative unless stated)
+TARGETS = {"deploy_time": 1e-5, "stage2_period": 5e-4, "stage2_tip_series_m": 2e-3,
+           "peak_stress": 0.03}
+
+
+def fundamental_period(t: np.ndarray, x: np.ndarray) -> float:
+    """Period of the dominant mode of x(t): the frequency maximising the Hann-windowed
+    Fourier amplitude, refined by golden-section search around the mean-crossing estimate.
+    Unlike crossing times, it is not shifted by the higher modes riding on the signal."""
+    guess = dominant_period(t, x)
+    if not math.isfinite(guess):
+        return math.nan
+    x = (x - x.mean()) * np.hanning(len(x))
+
+    def amp(period):
+        return -abs(np.dot(x, np.exp(-2j * math.pi * t / period)))
+
+    lo, hi = 0.8 * guess, 1.25 * guess
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    c, d = hi - g * (hi - lo), lo + g * (hi - lo)
+    fc, fd = amp(c), amp(d)
+    while hi - lo > 1e-9 * guess:
+        if fc < fd:
+            hi, d, fd = d, c, fc
+            c = hi - g * (hi - lo)
+            fc = amp(c)
+        else:
+            lo, c, fc = c, d, fd
+            d = lo + g * (hi - lo)
+            fd = amp(d)
+    return 0.5 * (lo + hi)
+
+
+@dataclass
+class StepRun:
+    h: float
+    deploy_time: float
+    time: np.ndarray          # every step
+    stage: np.ndarray
+    tip_transverse: np.ndarray
+    peak_stress_leaf: np.ndarray
+    peak_stress_link: np.ndarray
+
+    def stage_mask(self, code: int, window: float | None = None) -> np.ndarray:
+        mask = self.stage == code
+        if window is not None and code == 1:
+            mask &= self.time <= self.deploy_time + window + 1e-12
+        return mask
+
+    def figures(self, window: float) -> dict:
+        s1, s2 = self.stage_mask(0), self.stage_mask(1, window)
+        out = {"deploy_time": self.deploy_time}
+        for body in ("leaf", "link"):
+            peak = getattr(self, f"peak_stress_{body}")
+            out[f"stage1_peak_{body}"] = float(peak[s1].max()) if s1.any() else math.nan
+            out[f"stage2_peak_{body}"] = float(peak[s2].max()) if s2.any() else math.nan
+        out["stage2_period"] = fundamental_period(self.time[s2], self.tip_transverse[s2])
+        return out
+
+
+def run_steps(params: UmbrellaParams, window: float, block: int = 2000) -> StepRun:
+    """Deploy, then `window` seconds of stage 2, keeping every step's outputs."""
+    sim = UmbrellaSimulator(params)
+    parts = []
+    lock_time = None
+    while True:
+        b = sim.advance(block)
+        if b.error:
+            raise RuntimeError(f"{params.time_step:g} s step: {b.error}")
+        parts.append(b)
+        if b.lock is not None:
+            lock_time = b.lock.time
+        if lock_time is not None and sim.time >= lock_time + window:
+            break
+        if sim.time > 10.0:
+            raise RuntimeError("no lock within 10 s")
+
+    def cat(name):
+        return np.concatenate([getattr(p, name) for p in parts])
+    return StepRun(sim.h, lock_time, cat("time"), cat("stage"), cat("tip_transverse"),
+                   cat("peak_stress_leaf"), cat("peak_stress_link"))
+
+
+def step_errors(run: StepRun, ref: StepRun, window: float) -> dict:
+    """Errors of `run` against `ref` (relative, except the tip series: max |difference| in m
+    over the window, compared at the run's step times; the reference is interpolated
+    linearly, so its step must be much finer)."""
+    a, b = run.figures(window), ref.figures(window)
+    out = {"deploy_time": abs(a["deploy_time"] - b["deploy_time"]) / b["deploy_time"],
+           "stage2_period": abs(a["stage2_period"] - b["stage2_period"]) / b["stage2_period"]}
+    for key in ("stage1_peak_leaf", "stage1_peak_link", "stage2_peak_leaf", "stage2_peak_link"):
+        out[key] = abs(a[key] - b[key]) / b[key]
+    t_end = min(run.deploy_time, ref.deploy_time) + window
+    mask = run.stage_mask(1) & (run.time <= t_end) & (run.time >= max(run.deploy_time, ref.deploy_time))
+    ref2 = ref.stage_mask(1)
+    tip_ref = np.interp(run.time[mask], ref.time[ref2], ref.tip_transverse[ref2])
+    out["stage2_tip_series_m"] = float(np.max(np.abs(run.tip_transverse[mask] - tip_ref)))
+    out["stage2_tip_amplitude_m"] = 0.5 * float(np.ptp(ref.tip_transverse[ref2 & (ref.time <= t_end)]))
+    return out
+
+
+def within_targets(err: dict) -> bool:
+    return (err["deploy_time"] <= TARGETS["deploy_time"]
+            and err["stage2_period"] <= TARGETS["stage2_period"]
+            and err["stage2_tip_series_m"] <= TARGETS["stage2_tip_series_m"]
+            and max(err[k] for k in err if "_peak_" in k) <= TARGETS["peak_stress"])
+
+
+def observed_order(params: UmbrellaParams, steps: tuple[float, float, float], duration: float,
+                   field: str = "tip_transverse") -> float:
+    """Observed order of convergence p from three runs with steps h, h/r, h/r^2 over
+    `duration`: p = log(e1 / e2) / log r, e1 = max |x_h - x_(h/r)|, e2 = max |x_(h/r) -
+    x_(h/r^2)| over the times of the coarsest grid, x = `field` of every step.  Meaningful in
+    the asymptotic range only: every excited mode resolved (the link's axial modes reach
+    ~3e5 rad/s, so h below ~1e-5 s) and no lock inside the horizon."""
+    r = steps[0] / steps[1]
+    series = []
+    for k, h in enumerate(steps):
+        sim = UmbrellaSimulator(params.replace(time_step=h))
+        b = sim.advance(int(round(duration / h)))
+        if b.error or b.lock is not None:
+            raise RuntimeError(b.error or "the lock is inside the horizon")
+        every = int(round(r ** k))
+        series.append(getattr(b, field)[every - 1::every])
+    e1 = float(np.max(np.abs(series[0] - series[1])))
+    e2 = float(np.max(np.abs(series[1] - series[2])))
+    return math.log(e1 / e2) / math.log(r)
