@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Cost of the physics core: per-step cost vs mesh, and whole-run real-time factors.
+"""
+Cost of the physics core: per-step cost vs mesh, and whole-run real-time factors.
 
 For each mesh N (flexible model, V0 = -0.2 m/s, energy lock, t = 0 -> 1.0 s through the lock,
 at the default time step unless --time-step):
@@ -34,8 +35,12 @@ SAMPLE_PERIOD = 1e-3
 
 
 def block_run(params):
-    """Whole run in blocks of one sample period (each block builds the Sample of its last
-    step); returns (cpu s, wall s, sim)."""
+    """
+    Run the whole run in blocks of one sample period.
+
+    Whole run in blocks of one sample period (each block builds the Sample of its last
+    step); returns (cpu s, wall s, sim).
+    """
     sim = UmbrellaSimulator(params)
     per_block = round(SAMPLE_PERIOD / sim.h)
     n_blocks = round(DURATION / SAMPLE_PERIOD)
@@ -56,16 +61,19 @@ def single_run(params, n_steps):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8, 16])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--time-step", type=float, default=UmbrellaParams().time_step)
     args = ap.parse_args()
     h = physics_step(args.time_step, 1.0 / SAMPLE_PERIOD)
     print(f"flexible, V0 = -0.2, energy lock, t = 0 -> {DURATION:g} s through the lock, "
-          f"h = {h:.6g} s ({round(DURATION / h)} steps), a Sample every {SAMPLE_PERIOD * 1e3:g} ms; "
+          f"h = {h:.6g} s ({round(DURATION / h)} steps), a Sample every "
+          f"{SAMPLE_PERIOD * 1e3:g} ms; "
           f"best of {args.repeat}; loadavg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
-    print(f"{'N':>3} {'coords':>6} {'newton':>6} {'us/step':>8} {'us/step':>8} {'ns/step/coord':>13}"
+    print(f"{'N':>3} {'coords':>6} {'newton':>6} {'us/step':>8} {'us/step':>8} "
+          f"{'ns/step/coord':>13}"
           f" {'RTF':>7} {'targets (us, RTF)':>18}")
     print(f"{'':>3} {'':>6} {'/step':>6} {'block':>8} {'single':>8} {'block':>13} {'wall':>7}")
     for n in args.meshes:

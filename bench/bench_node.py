@@ -3,6 +3,9 @@
 Measure umbrella_node timing from a separate subscriber process over DDS.
 
 N = 2, default config.  Prints:
+  * CPU per simulated second of the node process (all its threads: physics, publication,
+    recording writer, executor) at real_time_factor = 1 and publish_rate 1 kHz (--cpu-rate),
+    without and with recording (--cpu-seconds of steady state, after a 2 s warm-up);
   * the achieved real-time factor with real_time_factor = 0 (as fast as possible);
   * at real_time_factor = 1, publish_rate 200 Hz and 1 kHz: p50 / p99 of |interval - period|
     of /clock arrivals, and the sim-time vs wall-time drift over the run (--seconds, 60).
@@ -16,6 +19,7 @@ import argparse
 import gc
 import os
 import sys
+import tempfile
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -42,6 +46,34 @@ def as_fast_as_possible(n_el: int, sim_seconds: float) -> float:
                                            timeout=600))
         node.proc.wait(60)
     return sim_seconds / (end - start)
+
+
+def process_cpu(pid: int) -> float:
+    """Return the CPU seconds (user + system, all threads) of a running process."""
+    with open(f"/proc/{pid}/stat") as fh:
+        fields = fh.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def cpu_per_sim_second(probe: Probe, n_el: int, rate: float, record: bool, seconds: float):
+    """Return (node CPU s per simulated s, simulated s per wall s) in steady state."""
+    probe.received["/clock"] = []
+    with tempfile.TemporaryDirectory(prefix="bench_node_") as tmp:
+        rec = ["-p", f"record_path:={tmp}/bag"] if record else ["-p", "record:=false"]
+        with NodeProcess("-p", f"elements_per_segment:={n_el}", "-p", f"publish_rate:={rate}",
+                         "-p", "real_time_factor:=1.0", *rec, cwd=tmp) as node:
+            node.wait_for_log("physics step")
+            probe.wait_for("/clock", timeout=30)
+            time.sleep(2.0)                                  # discovery, warm-up
+            marks = []
+            for _ in range(2):
+                last = probe.messages("/clock")[-1].clock
+                marks.append((process_cpu(node.proc.pid), last.sec + 1e-9 * last.nanosec,
+                              time.monotonic()))
+                if not marks[1:]:
+                    time.sleep(seconds)
+    (c0, s0, w0), (c1, s1, w1) = marks
+    return (c1 - c0) / (s1 - s0), (s1 - s0) / (w1 - w0)
 
 
 def paced(probe: Probe, n_el: int, rate: float, seconds: float):
@@ -84,7 +116,28 @@ def main():
                     help="sim seconds of the as-fast-as-possible run (0 skips it)")
     ap.add_argument("--rates", type=float, nargs="+", default=[200.0, 1000.0],
                     help="publish rates (Hz) of the paced runs")
+    ap.add_argument("--cpu-rate", type=float, default=1000.0,
+                    help="publish rate (Hz) of the CPU measurement (0 skips it)")
+    ap.add_argument("--cpu-seconds", type=float, default=10.0,
+                    help="wall seconds of steady state the CPU is measured over")
+    ap.add_argument("--cpu-only", action="store_true", help="only the CPU measurement")
     args = ap.parse_args()
+    if args.cpu_rate > 0:
+        probe = Probe("bench_cpu_probe")
+        probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
+        try:
+            for record in (False, True):
+                cpu, pace = cpu_per_sim_second(probe, args.elements, args.cpu_rate, record,
+                                               args.cpu_seconds)
+                print(f"N = {args.elements}, {args.cpu_rate:g} Hz publication, "
+                      f"{'with' if record else 'without'} recording: {cpu:.3f} CPU s per "
+                      f"simulated s (node process, all threads; achieved {pace:.3f}x real "
+                      f"time; loadavg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs)",
+                      flush=True)
+        finally:
+            probe.close()
+        if args.cpu_only:
+            return
     if args.fast_seconds > 0:
         rtf = as_fast_as_possible(args.elements, args.fast_seconds)
         print(f"N = {args.elements}, real_time_factor = 0 (publish 100 Hz): achieved {rtf:.1f}x "

@@ -79,9 +79,13 @@ def test_compiled_single_step_matches_to_roundoff(n_el, t0):
     ("flexible", 1, "energy", 0.0), ("flexible", 2, "plastic", 1.5),
     ("flexible", 4, "energy", 0.0), ("rigid-fe", 2, "energy", 0.5)])
 def test_compiled_advance_outputs_match_reference_per_step(model, n_el, lock, force):
-    """Every per-step output of the compiled block loop (through the lock) against the
+    """
+    Compare every per-step output of the compiled block loop with the reference.
+
+    Every per-step output of the compiled block loop (through the lock) against the
     reference: numpy steps and outputs from sample().  The trajectories agree to round-off
-    amplified over ~150 steps, so 1e-10 of each field's scale."""
+    amplified over ~150 steps, so 1e-10 of each field's scale.
+    """
     p = UmbrellaParams(v0=-0.5, model=model, elements_per_segment=n_el, lock=lock,
                        sleeve_force=force, time_step=1e-3)
     sizes = [7, 30, 1, 45, 50, 17]           # uneven blocks, one of them holding the lock

@@ -21,9 +21,13 @@ THESIS_DEFORMABLE = {-0.5: 0.09040, -1.0: 0.04525, -2.0: 0.02343}
 
 @pytest.fixture(scope="module")
 def thesis_run():
-    """V0 = -0.2, N = 1, energy lock, through the lock and 1 s of stage 2.  At 0.25 ms: the
+    """
+    V0 = -0.2, N = 1, energy lock, through the lock and 1 s of stage 2.
+
+    At 0.25 ms: the
     thesis tolerances (>= 0.5 %) hold at any step up to that (tests/test_time_step.py and
-    docs/validation.md measure the step error), and simulate() builds a Sample per step."""
+    docs/validation.md measure the step error), and simulate() builds a Sample per step.
+    """
     p = UmbrellaParams(v0=-0.2, time_step=2.5e-4)
     r = simulate(p, 1.0 + 0.2260)
     assert r.error is None
@@ -147,10 +151,14 @@ def test_mesh_convergence_of_deployment_time_and_period():
 
 
 def test_scheme_balances_energy_before_the_energy_scaling(monkeypatch):
-    """The velocity projection is scaled to the discrete energy balance (exact by
+    """
+    Check the scheme's own energy balance, before the energy scaling.
+
+    The velocity projection is scaled to the discrete energy balance (exact by
     construction); the scaling only corrects the Newton tolerance and the projection's
     O(h^4) sliver.  Without it the scheme itself must still balance energy closely:
-    numpy reference, scaling disabled, F_H = 2 N, through the lock and 0.1 s of stage 2."""
+    numpy reference, scaling disabled, F_H = 2 N, through the lock and 0.1 s of stage 2.
+    """
     from umbrella_sim import integrators
     monkeypatch.setattr(integrators, "ENERGY_RESTORE_LIMIT", 1.0 - 1e-300)   # never scale
     p = UmbrellaParams(v0=-0.5, sleeve_force=2.0, time_step=5e-4)

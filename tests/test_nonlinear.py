@@ -34,6 +34,13 @@ from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.solver import simulate
 
 NL = "flexible-nonlinear"
+# these tests' figures were made at a 2 ms step, and the nonlinear model steps in numpy: at the
+# default step (5e-5 s, chosen for the compiled linear model) they would take 40x longer
+STEP = 2e-3
+
+
+def P(**kw):  # noqa: N802 (reads like the UmbrellaParams it builds)
+    return UmbrellaParams(**{"time_step": STEP, **kw})
 
 
 def test_strain_energy_gradient_tangent_and_discrete_gradient():
@@ -64,7 +71,7 @@ def test_strain_energy_gradient_tangent_and_discrete_gradient():
 @pytest.fixture(scope="module")
 def runs_v02():
     """V0 = -0.2, N = 1, both models through the lock and 0.35 s of stage 2."""
-    return {model: simulate(UmbrellaParams(v0=-0.2, model=model), 0.6)
+    return {model: simulate(P(v0=-0.2, model=model), 0.6)
             for model in ("flexible", NL)}
 
 
@@ -74,7 +81,7 @@ def test_reduces_to_linear_model_for_small_motion(runs_v02):
     assert nl["deploy_time"] == pytest.approx(lin["deploy_time"], rel=1e-5)
     diff_02 = nl["tip_deflection_max"] / lin["tip_deflection_max"] - 1.0
     assert -0.01 < diff_02 < 0.0                 # stiffening: less deflection, under 1 %
-    slow = [simulate(UmbrellaParams(v0=-0.1, model=model), 0.6, stop_after_lock=0.0).summary()
+    slow = [simulate(P(v0=-0.1, model=model), 0.6, stop_after_lock=0.0).summary()
             for model in ("flexible", NL)]
     diff_01 = slow[1]["tip_deflection_max"] / slow[0]["tip_deflection_max"] - 1.0
     assert 3.0 < diff_02 / diff_01 < 5.0          # O(alpha1'^2): the centrifugal stiffening
@@ -90,12 +97,12 @@ def test_energy_conserved_without_force(runs_v02):
     s = r.summary()
     assert s["energy_drift"] < 1e-6
     assert s["constraint_residual_max"] < 1e-10
-    fast = simulate(UmbrellaParams(v0=-1.0, model=NL), 0.12).summary()   # large motion
+    fast = simulate(P(v0=-1.0, model=NL), 0.12).summary()   # large motion
     assert fast["energy_drift"] < 1e-6 and fast["constraint_residual_max"] < 1e-10
 
 
 def test_energy_equals_work_with_force():
-    r = simulate(UmbrellaParams(v0=-0.2, sleeve_force=3.0, model=NL), 0.3)
+    r = simulate(P(v0=-0.2, sleeve_force=3.0, model=NL), 0.3)
     assert r.error is None and r.lock is not None
     work = r.column("work")
     assert work.max() > 0.1
@@ -145,7 +152,7 @@ def test_damping_log_decrement_matches_ratio(model):
     hardening raises the frequency, and a stiffness-proportional damping ratio with it).
     """
     zeta = 0.02
-    p = UmbrellaParams(v0=-0.2, model=model, damping_ratio=zeta)
+    p = P(v0=-0.2, model=model, damping_ratio=zeta)
     r = simulate(p, 2.0, stop_after_lock=0.4)
     assert r.error is None
     assert _log_decrement_ratio(r) == pytest.approx(zeta, rel=0.05)
@@ -156,7 +163,7 @@ def test_damping_log_decrement_matches_ratio(model):
 
 
 def test_damping_zero_is_the_undamped_model():
-    p = UmbrellaParams(v0=-0.5)
+    p = P(v0=-0.5)
     a = simulate(p, 0.12).samples[-1]
     b = simulate(p.replace(damping_ratio=1e-300), 0.12).samples[-1]   # numpy damped path
     assert np.abs(a.q - b.q).max() < 1e-9 and b.damping_dissipation < 1e-290
@@ -169,7 +176,7 @@ def test_bad_damping_ratio_is_refused_by_name():
 
 
 def test_sixteen_elements_per_segment_nonlinear():
-    r = simulate(UmbrellaParams(v0=-0.5, model=NL, elements_per_segment=16), 0.1,
+    r = simulate(P(v0=-0.5, model=NL, elements_per_segment=16), 0.1,
                  stop_after_lock=0.0)
     assert r.error is None and r.lock is not None
     assert r.summary()["energy_drift"] < 1e-4
@@ -258,7 +265,7 @@ def test_failed_nonlinear_solve_is_a_fault_that_keeps_the_log(monkeypatch):
     that the solver itself meets the force.
     """
     monkeypatch.setattr(UmbrellaParams, "sleeve_force_limit", property(lambda p: math.inf))
-    r = simulate(UmbrellaParams(v0=-0.2, model=NL), 0.1, force_profile=[(0.02, 1e6)])
+    r = simulate(P(v0=-0.2, model=NL), 0.1, force_profile=[(0.02, 1e6)])
     assert r.error is not None and "t = 0.02" in r.error
     assert len(r.samples) == 11 and r.samples[-1].time == pytest.approx(0.02)
     assert all(np.all(np.isfinite(s.q)) for s in r.samples)
@@ -280,14 +287,14 @@ def test_node_runs_the_nonlinear_damped_model():
         probe.subscribe("/deployment_phase", String, LATCHED)
         probe.subscribe("/energy", Float64MultiArray)
         with NodeProcess("-p", f"model:={NL}", "-p", "damping_ratio:=0.05",
-                         "-p", "v0:=-1.0") as node:
+                         "-p", "v0:=-1.0", "-p", f"time_step:={STEP}") as node:
             probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=60)
             lock_t = float(node.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
             msg = probe.wait_for("/energy", lambda m: m.data[5] > 0.01, timeout=60)
             assert node.stop() == 0
     finally:
         probe.close()
-    offline = simulate(UmbrellaParams(v0=-1.0, model=NL, damping_ratio=0.05), 0.1,
+    offline = simulate(P(v0=-1.0, model=NL, damping_ratio=0.05), 0.1,
                        stop_after_lock=0.0)
     assert lock_t == pytest.approx(offline.lock.time, abs=1e-5)
     kinetic, strain, work, lock_loss, balance, damping = msg.data

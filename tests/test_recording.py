@@ -20,8 +20,8 @@ from std_msgs.msg import Float64, String
 
 from tests.ros_helpers import NodeProcess, Probe, ros_env
 from umbrella_sim.logs import read_log
-from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.params import UmbrellaParams
+from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

@@ -1,24 +1,36 @@
-"""The time step: observed order of convergence, and the default step's accuracy against a
-fine-step run of the same code (the claims docs/validation.md tabulates in full)."""
+"""
+Test the time step: observed order, and the default step's accuracy.
+
+The time step: observed order of convergence, and the default step's accuracy against a
+fine-step run of the same code (the claims docs/validation.md tabulates in full).
+"""
 import pytest
 
 from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.step_study import TARGETS, observed_order, run_steps, step_errors
+from umbrella_sim.step_study import observed_order, run_steps, step_errors, TARGETS
 
 
 @pytest.mark.parametrize("n_el", [1, 2])
 @pytest.mark.parametrize("field", ["tip_transverse", "alpha1"])
 def test_observed_order_is_two_in_the_asymptotic_range(n_el, field):
-    """Implicit midpoint: second order once every excited mode is resolved (the link's axial
-    modes, ~3e5 rad/s, need h below ~1e-5 s): 4 ms of stage 1 at h = 8, 4, 2 us."""
+    """
+    Check the observed order of convergence is two in the asymptotic range.
+
+    Implicit midpoint: second order once every excited mode is resolved (the link's axial
+    modes, ~3e5 rad/s, need h below ~1e-5 s): 4 ms of stage 1 at h = 8, 4, 2 us.
+    """
     p = UmbrellaParams(v0=-0.5, elements_per_segment=n_el)
     assert observed_order(p, (8e-6, 4e-6, 2e-6), 0.004, field) == pytest.approx(2.0, abs=0.15)
 
 
 @pytest.mark.parametrize("n_el, lock", [(1, "energy"), (2, "plastic")])
 def test_default_step_against_a_fine_step_run(n_el, lock):
-    """V0 = -0.2 through the lock and 0.15 s of stage 2, default step vs 5 us: deploy time
-    within 1e-5, stage-2 period within 0.05 %, stage-1 peak stresses within 3 %."""
+    """
+    Check the default step against a fine-step run of the same code.
+
+    V0 = -0.2 through the lock and 0.15 s of stage 2, default step vs 5 us: deploy time
+    within 1e-5, stage-2 period within 0.05 %, stage-1 peak stresses within 3 %.
+    """
     p = UmbrellaParams(v0=-0.2, elements_per_segment=n_el, lock=lock)
     window = 0.15
     fine = run_steps(p.replace(time_step=5e-6), window)

@@ -72,10 +72,13 @@ ENERGY_RESTORE_LIMIT = 1.01
 
 def _project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
                             t_target: float):
-    """v projected onto J v = 0 in the mass metric, then scaled to the kinetic energy
+    """
+    Project v onto J v = 0 (mass metric) and scale it to the balance's energy.
+
+    v projected onto J v = 0 in the mass metric, then scaled to the kinetic energy
     t_target that the discrete energy balance of the step prescribes,
 
-        T1 = T0 + V(q0) - V(q1) + F_H (y_H(q0) - y_H(q1))      (V = 1/2 q.K q).
+    T1 = T0 + V(q0) - V(q1) + F_H (y_H(q0) - y_H(q1))      (V = 1/2 q.K q).
 
     After a converged step J(q1) v1 = O(h^2): the mass-metric projection removes the
     violation and with it an O(h^4) sliver of kinetic energy, every step; that sliver was the
@@ -86,7 +89,8 @@ def _project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
     balance exact to round-off; the change of v is of the order of the projection and the
     Newton error.  Scaling is skipped when it would change T by more than 1 % (never after a
     converged step; such a state is left to the divergence checks) or T is zero.
-    None if M is not positive definite."""
+    None if M is not positive definite.
+    """
     jv = jac @ v
     vp = v
     if np.max(np.abs(jv)) > 0.0:
@@ -96,7 +100,8 @@ def _project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
         x = dpotrs(chol, jac.T)[0]
         vp = v - x @ np.linalg.solve(jac @ x, jv)
     t_after = 0.5 * (vp @ mass @ vp)
-    if t_after > 0.0 and t_after / ENERGY_RESTORE_LIMIT <= t_target <= ENERGY_RESTORE_LIMIT * t_after:
+    limit = ENERGY_RESTORE_LIMIT
+    if t_after > 0.0 and t_after / limit <= t_target <= limit * t_after:
         vp = vp * math.sqrt(t_target / t_after)
     return vp
 
@@ -127,7 +132,7 @@ class MidpointDAE:
 
     @property
     def kernel(self) -> "CompiledKernel | None":
-        """The compiled multi-step path, None on the numpy path."""
+        """Return the compiled multi-step path, None on the numpy path."""
         return self._compiled
 
     @staticmethod
@@ -266,6 +271,7 @@ _dp, _ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
 
 class _ModelStruct(ctypes.Structure):
     """Mirror of ``Model`` in _kernel.c (same order)."""
+
     _fields_ = [(name, ctypes.c_int) for name in
                 ("n", "n_link", "i_r2x", "i_r2y", "i_alpha2", "s_link", "i_u_joint",
                  "i_u_sleeve", "i_tip_u", "i_tip_v", "n_elastic", "bw", "n_stress_leaf",
@@ -404,8 +410,12 @@ class CompiledKernel:
 
     def advance(self, cs: ConstraintSet, k0: int, h: float, n_steps: int, force: float,
                 tol: float, max_iter: int, div_tol: float):
-        """n_steps grid steps from the loaded state; returns (status, steps done, Newton
-        iterations, residual of a diverged step).  Rows are in self.out[:, :steps]."""
+        """
+        Take n_steps grid steps from the loaded state.
+
+        n_steps grid steps from the loaded state; returns (status, steps done, Newton
+        iterations, residual of a diverged step).  Rows are in self.out[:, :steps].
+        """
         if n_steps > self.capacity:
             self._set_capacity(max(n_steps, 2 * self.capacity))
         ptr = self._ptr

@@ -27,9 +27,9 @@ import numpy as np
 from .params import UmbrellaParams
 
 
-
 class Stage(enum.StrEnum):
     """Stage of the deployment; compares equal to its name string ("deploying", "locked")."""
+
     DEPLOYING = "deploying"     # Case 1: the sleeve slides down the axle
     LOCKED = "locked"           # Case 2: the sleeve held at the stop S
 
@@ -272,10 +272,14 @@ class UmbrellaModel:
 
     # ------------------------------------------------- structure (compiled kernel)
     def banded_invariants(self):
-        """The constant matrices on the elastic coordinates (leaf then link, node by node),
+        """
+        Return the constant elastic matrices in band form.
+
+        The constant matrices on the elastic coordinates (leaf then link, node by node),
         in band form: (half_bandwidth, mass Mff, stiffness K, coupling W), each of shape
         (n_elastic, 2 bw + 1) with entry [p, k] = A[e_p, e_(p + k - bw)].  An element couples
-        the coordinates of two neighbouring nodes, so bw <= 5 whatever the mesh."""
+        the coordinates of two neighbouring nodes, so bw <= 5 whatever the mesh.
+        """
         idx = self.elastic_indices
         mats = [self._mff_full[np.ix_(idx, idx)], self.stiffness[np.ix_(idx, idx)],
                 self._w_full[np.ix_(idx, idx)]]
@@ -295,9 +299,13 @@ class UmbrellaModel:
         return bw, bands[0], bands[1], bands[2]
 
     def stress_rows(self):
-        """Fibre stress at the stress points of both bodies (leaf first, then link) as
+        """
+        Return the fibre-stress recovery as sparse rows over q.
+
+        Fibre stress at the stress points of both bodies (leaf first, then link) as
         sparse rows over q: (q indices, top coefficients, bottom coefficients) each of shape
-        (points, width), plus the points' abscissae and the point count per body."""
+        (points, width), plus the points' abscissae and the point count per body.
+        """
         rows = []
         for body, s_e in ((self.leaf, self.s_leaf), (self.link, self.s_link)):
             for top, bottom in zip(body.stress_top, body.stress_bottom):

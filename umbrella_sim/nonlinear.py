@@ -77,7 +77,8 @@ import numpy as np
 from scipy.linalg import eigh, null_space
 from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
 
-from .integrators import _gonzalez, ConvergenceError, DynamicState, MidpointDAE, PHI_TOLERANCE
+from .integrators import (_gonzalez, _project_keeping_energy, ConvergenceError, DynamicState,
+                          MidpointDAE, PHI_TOLERANCE)
 from .model import _GAUSS_ETA, _GAUSS_W, BeamBody, ConstraintSet, shape_functions, UmbrellaModel
 from .params import UmbrellaParams
 from .solver import FiniteElementEngine   # the solver imports this module only inside reset()
@@ -437,7 +438,15 @@ class ElasticMidpointDAE(MidpointDAE):
         jac = m.constraint_jacobian(q, cs)
         jv = jac @ v
         mass1 = parts[0]
-        if np.max(np.abs(jv)) > 0.0:
+        if not self.strain_nonlinear:
+            # the linear strain keeps MidpointDAE's projection (same results as `flexible`):
+            # scaled to the kinetic energy of the discrete balance, here net of the damping
+            t_target = (0.5 * (v0 @ p0) + m.strain_energy(q0) - m.strain_energy(q)
+                        + force * (y0 - m.sleeve_height(q)) - dissipated)
+            v = _project_keeping_energy(mass1, jac, v, t_target)
+            if v is None:
+                raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
+        elif np.max(np.abs(jv)) > 0.0:
             chol, info = dpotrf(mass1, lower=False)
             if info != 0:
                 raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")

@@ -74,7 +74,7 @@ STEP_FIELDS = ("time", "stage", "alpha1", "alpha1_rate", "sleeve_position", "sle
 
 
 def step_row(s: Sample) -> list[float]:
-    """The STEP_FIELDS of one sample (the reference the compiled outputs are tested against)."""
+    """Return the STEP_FIELDS of one sample (the reference the compiled outputs are tested on)."""
     return [float(s.stage.code) if f == "stage" else float(getattr(s, f)) for f in STEP_FIELDS]
 
 
@@ -89,11 +89,16 @@ class LockEvent:
 
 @dataclass(frozen=True)
 class StepBlock:
-    """What ``UmbrellaSimulator.advance(n_steps)`` returns: one entry per physics step taken
+    """
+    Hold the outputs of every physics step of one advance call.
+
+    What ``UmbrellaSimulator.advance(n_steps)`` returns: one entry per physics step taken
     (1-D arrays, field names STEP_FIELDS), the Sample of the final state (``last``, built on
     first use: stresses along the bodies, multipliers and residuals cost more than a step),
     the lock if it happened inside the block, and the fault that stopped the block early (the
-    state is then the last good step, and the entries cover the steps taken before it)."""
+    state is then the last good step, and the entries cover the steps taken before it).
+    """
+
     time: np.ndarray
     stage: np.ndarray
     alpha1: np.ndarray
@@ -122,8 +127,12 @@ class StepBlock:
     @classmethod
     def from_rows(cls, rows: np.ndarray, make_last: Callable[[], Sample], lock=None,
                   error=None) -> "StepBlock":
-        """rows: (len(STEP_FIELDS), steps), owned by the block; make_last builds the Sample
-        of the final state (a closure over that immutable state)."""
+        """
+        Build a block from its rows (len(STEP_FIELDS), steps).
+
+        rows: (len(STEP_FIELDS), steps), owned by the block; make_last builds the Sample
+        of the final state (a closure over that immutable state).
+        """
         return cls(*rows, make_last=make_last, lock=lock, error=error)
 
     def __len__(self) -> int:

@@ -52,9 +52,13 @@ class PublicationDriver:
         return self.sim.engine.backend
 
     def advance(self, commanded_force: float) -> list[Event]:
-        """Step one publication period (one ``UmbrellaSimulator.advance`` call, its StepBlock
+        """
+        Step one publication period.
+
+        Step one publication period (one ``UmbrellaSimulator.advance`` call, its StepBlock
         kept as ``last_block``); raises SimulationDiverged after the steps that succeeded
-        (state kept, their outputs in ``last_block``)."""
+        (state kept, their outputs in ``last_block``).
+        """
         sim = self.sim
         events = []
         if commanded_force != sim.sleeve_force:

@@ -248,7 +248,8 @@ def diagnostics_msg(t: float, name: str, level: bytes, message: str,
 
 def sample_messages(s: Sample, params: UmbrellaParams, positions, marker_ns: str,
                     initial_energy: float, frame_prefix: str = "") -> dict:
-    """Return the per-publication messages of one sample, keyed by topic key.
+    """
+    Return the per-publication messages of one sample, keyed by topic key.
 
     No markers when positions is None: they go out at their own (display) rate.
     """

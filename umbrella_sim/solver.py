@@ -61,23 +61,27 @@ def validate_force(force: float, limit: float | None = None) -> float:
 
 # --------------------------------------------------------------------- engines
 class Engine(abc.ABC):
-    """What the simulator needs of a model's time stepping (flexible / rigid-FE on the
+    """
+    Define what the simulator needs of a model's time stepping.
+
+    What the simulator needs of a model's time stepping (flexible / rigid-FE on the
     midpoint DAE integrator, the closed-form rigid model, or any other model).
 
     States are DynamicState; the stage selects the constraints.  ``advance`` is the fast
     path (many steps in one call, compiled); an engine without one returns None from it and
-    the simulator loops over ``step``."""
+    the simulator loops over ``step``.
+    """
 
     lock_kind: str
 
     @property
     @abc.abstractmethod
     def backend(self) -> str:
-        """What does the stepping, for logs and recordings."""
+        """Name what does the stepping, for logs and recordings."""
 
     @abc.abstractmethod
     def initial(self, force: float) -> DynamicState:
-        """The state at t = 0, stage deploying."""
+        """Return the state at t = 0, stage deploying."""
 
     @abc.abstractmethod
     def step(self, s: DynamicState, h: float, force: float, stage: Stage) -> DynamicState:
@@ -105,7 +109,7 @@ class Engine(abc.ABC):
 
     @abc.abstractmethod
     def lock(self, s: DynamicState, force: float) -> tuple[DynamicState, LockEvent]:
-        """The state right after the lock at s (same t), and what the lock did."""
+        """Return the state right after the lock at s (same t), and what the lock did."""
 
     def newton_iterations(self) -> int:
         """Newton iterations so far (0 for explicit schemes)."""
@@ -113,11 +117,15 @@ class Engine(abc.ABC):
 
     def advance(self, s: DynamicState, k0: int, h: float, n_steps: int, force: float,
                 stage: Stage, work: float, lock_loss: float):
-        """Up to n_steps grid steps t_k -> (k + 1) h from s at t = k0 h in one call; stops
+        """
+        Take up to n_steps grid steps in one call (the fast path).
+
+        Up to n_steps grid steps t_k -> (k + 1) h from s at t = k0 h in one call; stops
         before a step in which the sleeve reaches the stop (stage deploying), and at a
         failure.  Returns None if this engine has no such path, else (state, rows, work,
         stop): rows (len(STEP_FIELDS), steps done), stop None (all steps done), "crossing",
-        or a failure message."""
+        or a failure message.
+        """
         return None
 
 
@@ -406,12 +414,16 @@ class UmbrellaSimulator:
         self.steps += steps
 
     def advance(self, n_steps: int) -> StepBlock:
-        """Take n_steps grid steps (stopping early only at a fault) and return their outputs,
+        """
+        Take n_steps grid steps and return their outputs as a StepBlock.
+
+        Take n_steps grid steps (stopping early only at a fault) and return their outputs,
         one entry per step, with the final Sample and the lock if it happened in the block.
 
         The engine's compiled path runs the steps in one call each (two around the lock,
         whose step is taken here); engines without one, or UMBRELLA_SIM_KERNEL=numpy, take
-        them one by one with outputs from ``sample()`` (the reference path)."""
+        them one by one with outputs from ``sample()`` (the reference path).
+        """
         rows = np.empty((len(STEP_FIELDS), n_steps))
         done = 0
         error = None

@@ -1,4 +1,5 @@
-"""Accuracy of a physics step against a fine-step run of the same code (time-step study).
+"""
+Accuracy of a physics step against a fine-step run of the same code (time-step study).
 
 The figures a structural engineer reads off a run, computed from every physics step
 (``UmbrellaSimulator.advance``), so they do not depend on an output rate:
@@ -10,8 +11,8 @@ Nothing here imports rclpy.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -25,9 +26,13 @@ TARGETS = {"deploy_time": 1e-5, "stage2_period": 5e-4, "stage2_tip_series_m": 2e
 
 
 def fundamental_period(t: np.ndarray, x: np.ndarray) -> float:
-    """Period of the dominant mode of x(t): the frequency maximising the Hann-windowed
+    """
+    Return the period of the dominant mode of x(t).
+
+    Period of the dominant mode of x(t): the frequency maximising the Hann-windowed
     Fourier amplitude, refined by golden-section search around the mean-crossing estimate.
-    Unlike crossing times, it is not shifted by the higher modes riding on the signal."""
+    Unlike crossing times, it is not shifted by the higher modes riding on the signal.
+    """
     guess = dominant_period(t, x)
     if not math.isfinite(guess):
         return math.nan
@@ -103,20 +108,26 @@ def run_steps(params: UmbrellaParams, window: float, block: int = 2000) -> StepR
 
 
 def step_errors(run: StepRun, ref: StepRun, window: float) -> dict:
-    """Errors of `run` against `ref` (relative, except the tip series: max |difference| in m
+    """
+    Return the errors of `run` against `ref`.
+
+    Errors of `run` against `ref` (relative, except the tip series: max |difference| in m
     over the window, compared at the run's step times; the reference is interpolated
-    linearly, so its step must be much finer)."""
+    linearly, so its step must be much finer).
+    """
     a, b = run.figures(window), ref.figures(window)
     out = {"deploy_time": abs(a["deploy_time"] - b["deploy_time"]) / b["deploy_time"],
            "stage2_period": abs(a["stage2_period"] - b["stage2_period"]) / b["stage2_period"]}
     for key in ("stage1_peak_leaf", "stage1_peak_link", "stage2_peak_leaf", "stage2_peak_link"):
         out[key] = abs(a[key] - b[key]) / b[key]
     t_end = min(run.deploy_time, ref.deploy_time) + window
-    mask = run.stage_mask(1) & (run.time <= t_end) & (run.time >= max(run.deploy_time, ref.deploy_time))
+    mask = (run.stage_mask(1) & (run.time <= t_end)
+            & (run.time >= max(run.deploy_time, ref.deploy_time)))
     ref2 = ref.stage_mask(1)
     tip_ref = np.interp(run.time[mask], ref.time[ref2], ref.tip_transverse[ref2])
     out["stage2_tip_series_m"] = float(np.max(np.abs(run.tip_transverse[mask] - tip_ref)))
-    out["stage2_tip_amplitude_m"] = 0.5 * float(np.ptp(ref.tip_transverse[ref2 & (ref.time <= t_end)]))
+    window_ref = ref2 & (ref.time <= t_end)
+    out["stage2_tip_amplitude_m"] = 0.5 * float(np.ptp(ref.tip_transverse[window_ref]))
     return out
 
 
@@ -129,11 +140,15 @@ def within_targets(err: dict) -> bool:
 
 def observed_order(params: UmbrellaParams, steps: tuple[float, float, float], duration: float,
                    field: str = "tip_transverse") -> float:
-    """Observed order of convergence p from three runs with steps h, h/r, h/r^2 over
+    """
+    Return the observed order of convergence in the step.
+
+    Observed order of convergence p from three runs with steps h, h/r, h/r^2 over
     `duration`: p = log(e1 / e2) / log r, e1 = max |x_h - x_(h/r)|, e2 = max |x_(h/r) -
     x_(h/r^2)| over the times of the coarsest grid, x = `field` of every step.  Meaningful in
     the asymptotic range only: every excited mode resolved (the link's axial modes reach
-    ~3e5 rad/s, so h below ~1e-5 s) and no lock inside the horizon."""
+    ~3e5 rad/s, so h below ~1e-5 s) and no lock inside the horizon.
+    """
     r = steps[0] / steps[1]
     series = []
     for k, h in enumerate(steps):
