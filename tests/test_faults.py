@@ -175,8 +175,9 @@ def test_output_paths_checked_before_any_work(tmp_path):
 # ------------------------------------------------------------------ solver faults
 def test_offline_fault_recorded_and_reproduced(tmp_path):
     bag = tmp_path / "fault"
+    # at a 2 ms step Newton cannot follow 2.3 kN (at the default 50 us it can)
     r = run("umbrella_sim", "simulate", "--v0", "0", "--force", "2300", "--duration", "0.5",
-            "--mcap", str(bag))
+            "--time-step", "0.002", "--mcap", str(bag))
     assert r.returncode == 3
     log = read_log(str(bag))
     assert "Newton" in log.metadata["umbrella_sim.events"]["fault"]
@@ -194,7 +195,7 @@ def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, p
     probe.subscribe("/joint_states", JointState)
     probe.subscribe("/deployment_phase", String, LATCHED)
     bag = tmp_path / "commanded"
-    with NodeProcess("-p", "v0:=0.0", "-p", "duration:=30.0",
+    with NodeProcess("-p", "v0:=0.0", "-p", "duration:=30.0", "-p", "time_step:=0.002",
                      "-p", f"record_path:={bag}") as node:
         node.wait_for_log("recording to")
         pub = probe.publisher("/sleeve_force", Float64)
@@ -363,7 +364,8 @@ def test_log_messages_are_streamed_not_loaded(tmp_path):
     """Reading every message of a log holds about one chunk at a time, not the log."""
     import tracemalloc
     bag = tmp_path / "s"
-    assert run("umbrella_sim", "simulate", "--duration", "2.0", "--publish-rate", "1000",
+    # 4 s: markers go out at 30 Hz, so a second of log is ~0.6 MB
+    assert run("umbrella_sim", "simulate", "--duration", "4.0", "--publish-rate", "1000",
                "--mcap", str(bag)).returncode == 0
     tracemalloc.start()
     log = read_log(str(bag))

@@ -77,13 +77,13 @@ def test_bad_force_profile_refused():
 def test_diverging_run_stops_with_clear_error_and_keeps_samples():
     # 2.3 kN on a 0.4 kg frame (just below the link's buckling load, so accepted): Newton
     # fails after a few steps
-    r = simulate(UmbrellaParams(v0=0.0, sleeve_force=2300.0), 0.5)
+    r = simulate(UmbrellaParams(v0=0.0, sleeve_force=2300.0, time_step=API_STEP), 0.5)
     assert r.error is not None and "t = " in r.error
     assert len(r.samples) >= 3
     assert all(np.all(np.isfinite(s.q)) for s in r.samples)
     assert r.samples[-1].time < 0.5
     # the simulator object is left at the last good state
-    sim = UmbrellaSimulator(UmbrellaParams(v0=0.0, sleeve_force=2300.0))
+    sim = UmbrellaSimulator(UmbrellaParams(v0=0.0, sleeve_force=2300.0, time_step=API_STEP))
     with pytest.raises(SimulationDiverged):
         for _ in range(300):
             sim.step()
