@@ -83,10 +83,12 @@ def step_convergence_section() -> list[str]:
               "modes of kHz and more) and the stage-2 tip series (the 251 Hz second mode, 2.5 mm "
               "at N = 1 and V0 = −0.2, whose phase error accumulates over the 0.5 s) — do not "
               "fall like h² and need h ≤ 2.5·10⁻⁵ s (tip series at V0 = −0.2) or ~10⁻⁵ s "
-              "(V0 = −0.5, stage-2 peaks); the deploy time to 1e-5 is limited at V0 = −0.5 by "
-              "the axial vibration of the link at the lock (~10⁻⁶ m), which no real-time step "
-              "resolves. The default step meets deploy time, period and stage-1 peaks "
-              "everywhere in the table; see the README for what it costs.", ""]
+              "(V0 = −0.5, stage-2 peaks). The deploy time is limited at V0 ≤ −0.5 by the "
+              "axial vibration of the link at the lock (~10⁻⁶ m), which only h ≈ 2.5 µs "
+              "resolves: its error does not fall like h² (at V0 = −2, ~4·10⁻⁵ to 2·10⁻⁴ for "
+              "every step above). The default step meets the period and stage-1 peak targets "
+              "everywhere in the table, the deploy time everywhere but N = 1 at V0 = −0.5 "
+              "(1.3·10⁻⁵); see the README for what it costs.", ""]
     lines += energy_drift_lines()
     return lines
 
@@ -182,7 +184,7 @@ def main():
                      f"{fmt(f2.get(key) * scale if f2.get(key) is not None else None, spec)} |")
     lines += ["",
               "Recorded at 1 kHz (the figures are read from the recorded tip deflection). The "
-              "stage-1 maximum is within 0.2 % of the thesis's, 4 ms later than its 0.08 s "
+              "stage-1 maximum is within 0.2 % of the thesis's, 2–3 ms later than its 0.08 s "
               "(which the thesis reads off Fig. 6.2); the stage-2 amplitude is 2–3 % above "
               "'about 60 mm' and the period 6 % below 'about 0.05 s'. The thesis used an "
               "explicit Runge–Kutta scheme of its own step and, as printed, several erroneous "
