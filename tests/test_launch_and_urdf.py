@@ -16,7 +16,7 @@ import pytest
 
 from umbrella_sim import launch_description as ld
 from umbrella_sim import robot_description as rd
-from umbrella_sim.params import SPECS, UmbrellaParams
+from umbrella_sim.params import NODE_PARAMETERS, SPECS, UmbrellaParams
 from umbrella_sim.ros_io import JOINT_NAMES, joint_state_msg
 from umbrella_sim.solver import UmbrellaSimulator
 
@@ -153,8 +153,8 @@ def test_umbrella_launch_declares_the_arguments_and_starts_the_node(launch_stubs
                              {"namespace": "a1", "v0": "-0.5", "elements_per_segment": "2",
                               "record": "false", "use_sim_time": "true"})
     for name in ("namespace", "params_file", "record_path", "use_sim_time", "record", "rviz",
-                 *SPECS):
-        assert name in declared
+                 *SPECS, *NODE_PARAMETERS):
+        assert name in declared or name == "frame_prefix"
     assert os.path.isfile(declared["params_file"])
     nodes = [a for a in actions if type(a).__name__ == "Node"]
     umbrella = next(n for n in nodes if n.kwargs["executable"] == "umbrella_node")

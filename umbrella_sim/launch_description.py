@@ -73,9 +73,10 @@ def arguments() -> list[Argument]:
                  "start robot_state_publisher with the URDF, if it is installed"),
         Argument("rviz", "false", "start RViz with rviz/umbrella.rviz, if it is installed"),
     ]
-    for name in list(SPECS) + ["publish_rate", "real_time_factor", "duration",
-                               "marker_magnification"]:
-        p = REGISTRY[name]
+    own = {a.name for a in out} | {"frame_prefix"}      # set from namespace
+    for name, p in REGISTRY.items():
+        if name in own:
+            continue
         out.append(Argument(name, "", f"override {name} ({p.unit}, default from params_file): "
                                       f"{p.doc}"))
     return out
