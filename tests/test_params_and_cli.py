@@ -126,3 +126,34 @@ def test_cli_diverging_run_keeps_csv(tmp_path):
     assert r.returncode == 3
     assert "error" in r.stderr and "kept" in r.stderr
     assert len(out.read_text().splitlines()) > 3
+
+
+def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
+    """
+    Check every command against sleeve_force_min, the one bound.
+
+    sleeve_force_min < 0 is a drive that can hold the sleeve back; the default keeps the
+    thesis's push-only sleeve.
+    """
+    from umbrella_sim.solver import UmbrellaSimulator, simulate
+
+    with pytest.raises(ValueError, match="sleeve_force_min.*<= 0"):
+        UmbrellaParams(sleeve_force_min=1.0).validated()
+    with pytest.raises(ValueError, match="sleeve_force=-3.*-2"):
+        UmbrellaParams(sleeve_force_min=-2.0, sleeve_force=-3.0).validated()
+    push_only = UmbrellaSimulator(UmbrellaParams(v0=-0.5))
+    with pytest.raises(ValueError, match=">= 0"):
+        push_only.set_sleeve_force(-1.0)
+    braking = UmbrellaSimulator(UmbrellaParams(v0=-0.5, sleeve_force_min=-5.0))
+    braking.set_sleeve_force(-5.0)
+    with pytest.raises(ValueError, match="-5"):
+        braking.set_sleeve_force(-5.5)
+    with pytest.raises(ValueError, match="-1"):
+        simulate(UmbrellaParams(v0=-0.5), 0.1, force_profile=[(0.0, -1.0)])
+    # holding back slows the deployment: the lock comes later than coasting at v0
+    coast = simulate(UmbrellaParams(v0=-0.5), 1.0, stop_after_lock=0.0)
+    held = simulate(UmbrellaParams(v0=-0.5, sleeve_force_min=-5.0), 1.0,
+                    force_profile=[(0.0, -0.5)], stop_after_lock=0.0)
+    assert held.lock.time > coast.lock.time
+    assert held.samples[-1].work < 0.0                  # the drive took energy out
+    assert held.summary()["energy_drift"] < 1e-5        # and the balance still closes

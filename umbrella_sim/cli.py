@@ -13,7 +13,7 @@ from . import __version__
 from .files import check_new_output, read_text_input
 from .params import (check_known_names, load_params_file, NODE_ONLY_PARAMS, parameter_help,
                      SPECS, UmbrellaParams)
-from .solver import simulate, validate_force
+from .solver import command_force, simulate
 
 
 def default_params_file() -> str | None:
@@ -27,8 +27,13 @@ def default_params_file() -> str | None:
     return None
 
 
-def read_force_profile(path: str, limit: float | None = None) -> list[tuple[float, float]]:
-    """CSV of (t, F) rows, an optional header line; times non-decreasing, 0 <= F <= limit."""
+def read_force_profile(path: str, params: UmbrellaParams | None = None
+                       ) -> list[tuple[float, float]]:
+    """
+    Read a CSV of (t, F) rows, an optional header line.
+
+    Times are non-decreasing; each F is a command the model (params) accepts.
+    """
     rows: list[tuple[float, float]] = []
     text = read_text_input(path, "force profile")
     try:
@@ -51,7 +56,7 @@ def read_force_profile(path: str, limit: float | None = None) -> list[tuple[floa
         if rows and t < rows[-1][0]:
             raise ValueError(f"force profile {path}:{lineno}: time {t} goes backwards")
         try:
-            validate_force(f, limit)
+            command_force(f, params or UmbrellaParams())
         except ValueError as exc:
             raise ValueError(f"force profile {path}:{lineno}: {exc}") from None
         rows.append((t, f))
@@ -142,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         params = build_params(args)
-        profile = (read_force_profile(args.force_profile, params.sleeve_force_limit)
+        profile = (read_force_profile(args.force_profile, params)
                    if args.force_profile else None)
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f"--duration {args.duration}: must be > 0")

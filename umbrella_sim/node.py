@@ -46,7 +46,7 @@ from .params import (check_known_names, check_node_parameters, NODE_PARAMETERS,
                      parameter_help, read_params_file, REGISTRY, RESET, section_matches, SPECS,
                      UmbrellaParams)
 from .publication import PublicationDriver
-from .solver import SimulationDiverged, validate_force
+from .solver import command_force, SimulationDiverged
 
 #: parameters every rclpy node has (besides qos_overrides.*)
 ROS_OWN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
@@ -243,7 +243,7 @@ class UmbrellaNode(Node):
     def _on_force(self, msg) -> None:
         t = self.sim.time
         try:
-            force = validate_force(msg.data, self.sim.params.sleeve_force_limit)
+            force = command_force(msg.data, self.sim.params)
         except ValueError as exc:
             reason = str(exc)
             self.refused_commands += 1
@@ -575,7 +575,8 @@ def usage() -> str:
     lines.append("node parameters:")
     lines += parameter_help(NODE_PARAMETERS.values())
     lines += ["", "topics: " + ", ".join(t.name for t in ros_io.TOPICS.values())
-              + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= 0)",
+              + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= "
+              "sleeve_force_min, 0 by default)",
               "services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)",
               "exit: SIGINT/SIGTERM stop the physics, then finalise the recording; code "
               f"{EXIT_OK} on a clean stop or when duration is reached, {EXIT_USAGE} for "

@@ -184,9 +184,14 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        low=-1e3, high=1e3),
     _P("sleeve_force", float, 0.0, "N",
        "sleeve force F_H at the start, along −Y (pushes toward deployment); at runtime "
-       "command it on the `sleeve_force` topic", low=0.0, high=1e9, group=INPUT,
-       rule="≤ the axial load the link can carry, min(π² E I / l3², A σ_yield): 2368.7 N "
-            "for the thesis data (topic_sleeve_force.md)"),
+       "command it on the `sleeve_force` topic", low=-1e9, high=1e9, group=INPUT,
+       rule="≥ `sleeve_force_min`; ≤ the axial load the link can carry, min(π² E I / l3², "
+            "A σ_yield): 2368.7 N for the thesis data (topic_sleeve_force.md)"),
+    _P("sleeve_force_min", float, 0.0, "N",
+       "smallest sleeve force accepted (topic, force profile, `sleeve_force`): 0 = push-only, "
+       "the thesis's sleeve; < 0 = a drive that can also hold the sleeve back (brake), "
+       "which a soft closed-loop latch needs: pushing alone never takes kinetic energy out "
+       "before the lock", low=-1e9, high=0.0),
     # model and numerics
     _P("model", str, "flexible", "-",
        "flexible: Case 1 then Case 2; flexible-nonlinear: the same with the von Kármán "
@@ -399,6 +404,10 @@ def validate(p: UmbrellaParams) -> None:
         if reach >= p.l3:
             raise ValueError(f"parameter {name}={getattr(p, name)}: geometry cannot close, "
                              f"l1*|cos({name})| = {reach:.6g} m must be < l3 = {p.l3} m")
+    if p.sleeve_force < p.sleeve_force_min:
+        raise ValueError(f"parameter sleeve_force={p.sleeve_force}: must be >= "
+                         f"{p.sleeve_force_min:g} = sleeve_force_min (F_H pushes the sleeve "
+                         "along -Y)")
     if p.sleeve_force > p.sleeve_force_limit:
         raise ValueError(f"parameter sleeve_force={p.sleeve_force}: must be <= "
                          f"{p.sleeve_force_limit:.6g} N, the load the link can carry "

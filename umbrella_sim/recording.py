@@ -659,11 +659,11 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     from .outputs import RunResult
     from .params import node_defaults
     from .publication import PublicationDriver
-    from .solver import SimulationDiverged, validate_force
+    from .solver import command_force, SimulationDiverged
 
     profile = sorted(force_profile or [], key=lambda tf: tf[0])
     for _, f in profile:
-        validate_force(f, params.sleeve_force_limit)
+        command_force(f, params)
     node_cfg = node_defaults()
     node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,
                     record_path=bag_dir, marker_magnification=marker_magnification)

@@ -40,12 +40,14 @@ class SimulationDiverged(RuntimeError):
     """The state became non-finite or left the constraint manifold; nothing was advanced."""
 
 
-def validate_force(force: float, limit: float | None = None) -> float:
+def validate_force(force: float, limit: float | None = None, minimum: float = 0.0) -> float:
     """
     Return F_H as a float, or raise ValueError naming the rule it breaks.
 
-    F_H as a float, or ValueError: finite, >= 0 and, given the model's
-    UmbrellaParams.sleeve_force_limit, at most that (N).
+    F_H must be finite, >= minimum (the model's ``sleeve_force_min``: 0 for the thesis's
+    push-only sleeve, < 0 for a drive that can hold the sleeve back) and, given the model's
+    UmbrellaParams.sleeve_force_limit, at most that (N).  Every command is checked with
+    ``command_force`` below, which takes both bounds from the model.
     """
     try:
         f = float(force)
@@ -53,10 +55,18 @@ def validate_force(force: float, limit: float | None = None) -> float:
         raise ValueError(f"sleeve force {force!r}: not a number") from None
     # the same range as the sleeve_force parameter: one rule (params.REGISTRY)
     SPECS["sleeve_force"].check(f, what="sleeve force F_H")
+    if f < minimum:
+        raise ValueError(f"sleeve force F_H={f}: must be >= {minimum:g} (sleeve_force_min; "
+                         "below 0 only for a drive that can hold the sleeve back)")
     if limit is not None and f > limit:
         raise ValueError(f"sleeve force {f:g} N: above {limit:.6g} N, the axial load the link "
                          "can carry (Euler buckling / squash load)")
     return f
+
+
+def command_force(force: float, params: UmbrellaParams) -> float:
+    """Return a force command as a float if the model accepts it, else raise ValueError."""
+    return validate_force(force, params.sleeve_force_limit, params.sleeve_force_min)
 
 
 # --------------------------------------------------------------------- engines
@@ -333,7 +343,7 @@ class UmbrellaSimulator:
             engine = RigidEngine if p.model == "rigid" else FiniteElementEngine
             self.engine = engine(p, self.model)
         self.h = p.time_step
-        self._force = validate_force(p.sleeve_force)
+        self._force = command_force(p.sleeve_force, p)
         self._k = 0
         self._stage = DEFORMING
         self._state = self.engine.initial(self._force)
@@ -346,7 +356,7 @@ class UmbrellaSimulator:
     # -- inputs
     def set_sleeve_force(self, force: float) -> None:
         """F_H >= 0 (N, along -Y); acts from the start of the next step (zero-order hold)."""
-        self._force = validate_force(force, self.params.sleeve_force_limit)
+        self._force = command_force(force, self.params)
 
     @property
     def sleeve_force(self) -> float:
@@ -569,7 +579,7 @@ def simulate(params: UmbrellaParams, duration: float,
     result.samples.append(sim.sample())
     profile = sorted(force_profile or [], key=lambda tf: tf[0])
     for t_cmd, f_cmd in profile:
-        validate_force(f_cmd, sim.params.sleeve_force_limit)
+        command_force(f_cmd, sim.params)
     i_cmd = 0
     wall0 = _time.perf_counter()
     n_steps = int(round(duration / sim.h))
