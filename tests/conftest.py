@@ -24,3 +24,7 @@ def no_recordings_left_in_the_repository():
     yield
     left = sorted(_bags() - before)
     assert not left, f"tests left recordings in {ROOT}: {left}"
+
+
+# the public test API's fixtures (ros_domain_id, probe, antenna_factory) for our own tests
+from umbrella_sim.testing import antenna_factory, probe, ros_domain_id  # noqa: E402, F401, I100

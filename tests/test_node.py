@@ -14,20 +14,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, Trigger
 
-from tests.ros_helpers import NodeProcess, Probe, ros_env
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.solver import simulate
+from umbrella_sim.testing import NodeProcess, ros_env
 
 ALPHA0 = UmbrellaParams().alpha0
 DEPLOYED = math.pi / 12
-
-
-@pytest.fixture
-def probe():
-    p = Probe()
-    yield p
-    p.close()
 
 
 def stamp_s(msg) -> float:

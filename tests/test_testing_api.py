@@ -1,0 +1,119 @@
+"""The public test API (umbrella_sim.testing): waits, failure messages, cleanup, summaries."""
+import math
+import os
+import signal
+
+import pytest
+
+from umbrella_sim.testing import (_shm_segments, default_domain_id, DOMAIN_ID_ENV, NodeProcess,
+                                  summarize_run)
+
+
+def own_segments(pid: int) -> set:
+    """Return the node's own Fast DDS participant segments (not the port mailboxes)."""
+    return {p for p in _shm_segments(pid) if "fastrtps_port" not in p}
+
+
+def process_gone(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    return False
+
+
+def test_domain_id_from_the_environment(monkeypatch):
+    monkeypatch.setenv(DOMAIN_ID_ENV, "42")
+    assert default_domain_id() == 42
+    monkeypatch.setenv(DOMAIN_ID_ENV, "many")
+    with pytest.raises(ValueError, match=DOMAIN_ID_ENV):
+        default_domain_id()
+    monkeypatch.delenv(DOMAIN_ID_ENV)
+    assert 10 <= default_domain_id() <= 99
+
+
+def test_summary_figures_are_taken_on_either_side_of_the_lock():
+    tip = [(0.0, 0.0), (0.5, 0.001), (1.0, 0.002), (1.1, 0.05), (1.2, -0.03)]
+    stress = [(0.5, 9.0), (1.0, 10.0), (1.1, 3.0), (1.2, 4.0)]
+    s = summarize_run([(0.2, 0.0), (0.25, 5.0), (0.6, 1.0)], 1.05, False, tip, stress)
+    assert s.first_push_time == 0.25 and s.deploy_time == pytest.approx(0.8)
+    assert s.stage2_peak_stress == 4.0
+    assert s.stage2_tip_amplitude == pytest.approx(0.04)
+    assert s.stage2_samples == 2 and s.stage2_span == pytest.approx(0.15)
+    moving = summarize_run([], 1.05, True, tip, stress)
+    assert moving.deploy_time == 1.05
+    never = summarize_run([], None, False, tip, stress)
+    assert never.deploy_time is None and math.isnan(never.stage2_peak_stress)
+
+
+def test_waits_fail_saying_what_was_awaited_and_what_was_seen(antenna_factory):
+    antenna = antenna_factory({"v0": 0.0})          # at rest: it never locks
+    antenna.wait_for_phase("deploying")
+    with pytest.raises(AssertionError) as exc:
+        antenna.wait_for_phase("locked", timeout=1.0)
+    text = str(exc.value)
+    assert "'locked'" in text and "deploying" in text and "1.0 s" in text
+    with pytest.raises(AssertionError) as exc:
+        antenna.wait_for("joint_states", lambda m: m.position[0] < 1.0, timeout=0.5,
+                         what="alpha1 < 1 rad")
+    text = str(exc.value)
+    assert "alpha1 < 1 rad" in text and "/joint_states" in text and "last: " in text
+    with pytest.raises(ValueError, match="phase 'done'"):
+        antenna.wait_for_phase("done")
+    with pytest.raises(AssertionError, match="never reached 1000"):
+        antenna.wait_for_sim_time(1000.0, timeout=0.5)
+
+
+def test_startup_failure_reports_the_node_output():
+    node = NodeProcess(parameters={"l1": -1.0})
+    with pytest.raises(AssertionError) as exc:
+        node.wait_for_log("physics step", timeout=30)
+    assert "exited (code 2)" in str(exc.value) and "l1" in str(exc.value)
+    node.close()
+    assert not os.path.exists(node.log_path)
+
+
+def test_close_leaves_no_process_log_or_shared_memory(antenna_factory):
+    antenna = antenna_factory({"v0": -0.5})
+    antenna.wait_for_phase("locked", timeout=30)
+    pid, log = antenna.node.pid, antenna.node.log_path
+    segments = own_segments(pid)
+    antenna.close()
+    assert process_gone(pid) and not os.path.exists(log)
+    assert antenna.node.proc.returncode == 0              # SIGTERM: a clean stop
+    assert not [p for p in segments if os.path.exists(p)]
+
+
+def test_a_killed_node_leaves_no_shared_memory_either(ros_domain_id):
+    with NodeProcess(parameters={"v0": 0.0}, domain_id=ros_domain_id) as node:
+        node.wait_for_log("physics step")
+        segments = own_segments(node.pid)
+        assert node.stop(sig=signal.SIGKILL) == -signal.SIGKILL
+        assert process_gone(node.pid)
+        # a SIGKILLed participant cannot unlink its segments: stop() did
+        assert not [p for p in segments if os.path.exists(p)]
+
+
+def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_factory):
+    """
+    Compare the summary read off the topics and log with the physics core.
+
+    The core re-runs the force history the node applied: same deploy time (same grid, same
+    code).
+    """
+    from umbrella_sim.params import UmbrellaParams
+    from umbrella_sim.solver import simulate
+
+    antenna = antenna_factory({"v0": 0.0, "publish_rate": 200.0})
+    antenna.wait_for_phase("deploying")
+    antenna.play_force_profile([(0.0, 30.0)])
+    summary = antenna.summary(after_lock=0.2)
+    offline = simulate(UmbrellaParams(v0=0.0, time_step=antenna.physics_step),
+                       summary.lock_time + 0.01, force_profile=antenna.applied_forces(),
+                       stop_after_lock=0.0)
+    # the log gives the 1/600 s step to 9 digits: the two grids drift apart by ~1e-12 s a step
+    assert summary.lock_time == pytest.approx(offline.lock.time, abs=1e-7)
+    assert summary.deploy_time == pytest.approx(offline.lock.time - summary.first_push_time)
+    assert summary.stage2_samples >= 0.2 * 200 - 2 and summary.stage2_span >= 0.2
+    # the energy lock turns the stage-1 kinetic energy into a large stage-2 vibration
+    assert summary.stage2_tip_amplitude > 0.05

@@ -1,0 +1,653 @@
+"""
+Topic-driven actuation tests against a real ``umbrella_node``: the public test API.
+
+Start the simulated antenna in a child process on a private ROS domain, command the sleeve
+over ``sleeve_force``, wait for what comes back, and assert on the run's summary::
+
+    from umbrella_sim.testing import SimulatedAntenna
+
+    def test_twenty_newtons_deploy_the_frame(tmp_path):
+        with SimulatedAntenna({"v0": 0.0}) as antenna:
+            antenna.wait_for_phase("deploying")
+            antenna.publish_force(20.0)
+            antenna.wait_for_phase("locked", timeout=30)
+            summary = antenna.summary(after_lock=0.3)
+        assert summary.deploy_time < 0.5
+
+Everything here talks over real DDS, so:
+
+* **Isolation.**  Each process runs with ``ROS_DOMAIN_ID`` = :func:`default_domain_id` (the
+  ``UMBRELLA_TEST_DOMAIN_ID`` environment variable, else one derived from the pid) and
+  ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; pass ``domain_id=`` to choose another.
+  :class:`Probe` (the test's own rclpy node) sets the same two variables in this process.
+* **Waiting.**  Every wait polls what has been received, up to a timeout, and fails with an
+  ``AssertionError`` that says what was awaited and what was seen: no fixed sleeps.
+  Messages on different topics have no mutual order in DDS, and a transient-local sample
+  reaches a late reader only after the handshake: wait for what you assert on.
+* **Cleanup.**  ``stop()`` (also on leaving a ``with`` block) sends SIGTERM, waits, then
+  SIGKILLs the process group; Fast DDS shared-memory segments (``/dev/shm/fastrtps_*``) that
+  the process had open and no live process still uses are removed, so even a killed node
+  leaves nothing behind.  Its log file is deleted.
+* **Summaries.**  :meth:`SimulatedAntenna.summary` computes the deploy time, the stage-2 peak
+  stress and tip amplitude from the node's topics and log; :func:`summary_from_recording`
+  computes the same figures, exactly on sim time, from an MCAP recording (``record_path``).
+
+Pytest fixtures (import them into your ``conftest.py``): ``ros_domain_id``, ``probe`` and
+``antenna_factory`` (starts :class:`SimulatedAntenna` objects and stops them at teardown).
+rclpy is imported only when a probe or an antenna is created.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from typing import Any, Callable, Iterable
+
+#: environment variable that sets the default ROS domain of tests
+DOMAIN_ID_ENV = "UMBRELLA_TEST_DOMAIN_ID"
+PHASES = ("deploying", "locked", "fault")
+
+
+def default_domain_id() -> int:
+    """``$UMBRELLA_TEST_DOMAIN_ID`` if set, else 10..99 from the pid (one per test session)."""
+    value = os.environ.get(DOMAIN_ID_ENV)
+    if value is None:
+        return os.getpid() % 90 + 10
+    try:
+        domain = int(value)
+    except ValueError:
+        raise ValueError(f"{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232") from None
+    if not 0 <= domain <= 232:
+        raise ValueError(f"{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232")
+    return domain
+
+
+DOMAIN_ID = default_domain_id()
+
+
+def ros_env(domain_id: int | None = None) -> dict:
+    """Return the environment for a child ROS process: private domain, localhost discovery."""
+    env = dict(os.environ)
+    env.update(ROS_DOMAIN_ID=str(DOMAIN_ID if domain_id is None else domain_id),
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               RMW_IMPLEMENTATION="rmw_fastrtps_cpp", PYTHONUNBUFFERED="1",
+               RCUTILS_LOGGING_BUFFERED_STREAM="0")
+    return env
+
+
+def poll(condition: Callable[[], Any], timeout: float, failure: Callable[[], str],
+         interval: float = 0.02):
+    """condition()'s first truthy value, polling; AssertionError(failure()) at the timeout."""
+    deadline = time.monotonic() + timeout
+    while True:
+        result = condition()
+        if result:
+            return result
+        if time.monotonic() > deadline:
+            raise AssertionError(failure())
+        time.sleep(interval)
+
+
+def _brief(msg, limit: int = 160) -> str:
+    text = repr(msg)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+# ------------------------------------------------------------- shared memory
+_SHM = "/dev/shm/"
+
+
+def _shm_segments(pid: int) -> set[str]:
+    """Fast DDS segments a live process has mapped or open."""
+    found = set()
+    try:
+        with open(f"/proc/{pid}/maps", encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                path = line.rstrip("\n").split(" ")[-1]
+                if path.startswith(_SHM + "fastrtps_"):
+                    found.add(path)
+        for fd in os.listdir(f"/proc/{pid}/fd"):
+            try:
+                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+            except OSError:
+                continue
+            if target.startswith(_SHM + "fastrtps_") or target.startswith(_SHM + "sem.fastrtps_"):
+                found.add(target)
+    except OSError:
+        pass
+    return found
+
+
+def _segment_family(path: str) -> set[str]:
+    """Return a segment, its lock file (_el) and its named semaphore (sem.<name>_mutex)."""
+    name = os.path.basename(path)
+    name = name[len("sem."):] if name.startswith("sem.") else name
+    name = name[:-len("_mutex")] if name.endswith("_mutex") else name
+    name = name[:-len("_el")] if name.endswith("_el") else name
+    return {_SHM + name, _SHM + name + "_el", _SHM + "sem." + name + "_mutex"}
+
+
+def remove_stale_shm(paths: Iterable[str]) -> list[str]:
+    """
+    Remove the given Fast DDS participant segments that no live process uses; return them.
+
+    A segment goes with its lock file when no live process maps or holds either open.  The
+    per-domain port segments (``fastrtps_port*``) are left to Fast DDS, which reclaims them
+    on the next start in that domain: a process that used one keeps a handle to it after its
+    participant is gone, and a port file unlinked under it would cut it off from the domain.
+    """
+    families = [_segment_family(p) for p in set(paths)
+                if not os.path.basename(p).removeprefix("sem.").startswith("fastrtps_port")]
+    if not families:
+        return []
+    in_use: set[str] = set()
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            in_use |= _shm_segments(int(entry))
+    removed = []
+    for family in families:
+        if family & in_use:
+            continue
+        for path in sorted(family):
+            try:
+                os.unlink(path)
+                removed.append(path)
+            except FileNotFoundError:
+                pass
+            except OSError:
+                pass
+    return removed
+
+
+# -------------------------------------------------------------- child process
+class NodeProcess:
+    """
+    A ROS node in a child process (its own session); output goes to a log file.
+
+    ``NodeProcess("-p", "v0:=0.0")`` starts ``umbrella_node`` with raw ROS arguments;
+    ``parameters={"v0": 0.0}`` and ``namespace="a1"`` build them for you; ``module=`` runs
+    another node of the package (``"umbrella_sim.deploy_controller"``).
+    """
+
+    def __init__(self, *ros_args: str, executable: list[str] | None = None,
+                 module: str = "umbrella_sim.node", parameters: dict | None = None,
+                 namespace: str | None = None, domain_id: int | None = None,
+                 cwd: str | None = None):
+        self.domain_id = DOMAIN_ID if domain_id is None else domain_id
+        args = list(ros_args)
+        if namespace:
+            args += ["-r", f"__ns:=/{namespace.strip('/')}"]
+        for name, value in (parameters or {}).items():
+            args += ["-p", f"{name}:={_ros_literal(value)}"]
+        fd, self.log_path = tempfile.mkstemp(prefix="umbrella_node-", suffix=".log")
+        self.log = os.fdopen(fd, "w+")
+        self.command = (executable or [sys.executable, "-m", module]) + ["--ros-args", *args]
+        # the node records by default into its working directory: unless cwd is given it
+        # runs in a temporary one, removed by close(), so tests never leave bags behind
+        self._own_cwd = None if cwd else tempfile.mkdtemp(prefix="umbrella_node_")
+        self.cwd = cwd or self._own_cwd
+        self.proc = subprocess.Popen(self.command, stdout=self.log, stderr=subprocess.STDOUT,
+                                     env=ros_env(self.domain_id), start_new_session=True,
+                                     cwd=self.cwd)
+        self.shm: set[str] = set()
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    @property
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def output(self) -> str:
+        with open(self.log_path, encoding="utf-8", errors="replace") as fh:
+            return fh.read()
+
+    def wait_for_log(self, pattern: str, timeout: float = 20.0, count: int = 1):
+        """Return the count-th match of a regular expression in the output, waiting for it."""
+        def found():
+            matches = list(re.finditer(pattern, self.output()))
+            if len(matches) >= count:
+                return matches[count - 1]
+            if not self.running:
+                raise AssertionError(
+                    f"process exited (code {self.proc.returncode}) before {count} log "
+                    f"line(s) matching {pattern!r}; output:\n{self.output()}")
+            return None
+        self.shm |= _shm_segments(self.pid)
+        return poll(found, timeout, lambda: f"no {count} log line(s) matching {pattern!r} "
+                                            f"within {timeout} s; output:\n{self.output()}")
+
+    def stop(self, sig=signal.SIGTERM, timeout: float = 10.0) -> int:
+        """
+        Signal, wait (SIGKILL to the group after timeout), remove leftover shared memory.
+
+        Returns the exit code (negative: killed by that signal).
+        """
+        if self.running:
+            self.shm |= _shm_segments(self.pid)
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                pass
+        try:                                   # anything left in its session
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        self.proc.wait()
+        remove_stale_shm(self.shm)
+        return self.proc.returncode
+
+    def close(self) -> None:
+        self.stop()
+        self.log.close()
+        try:
+            os.unlink(self.log_path)
+        except FileNotFoundError:
+            pass
+        if self._own_cwd:
+            shutil.rmtree(self._own_cwd, ignore_errors=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _ros_literal(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+# ------------------------------------------------------------------- probe
+class Probe:
+    """The test's own rclpy node (its own context) spinning in a background thread."""
+
+    def __init__(self, name: str = "probe", domain_id: int | None = None):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.domain_id = DOMAIN_ID if domain_id is None else domain_id
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=self.domain_id)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.received: dict[str, list] = {}
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        while self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:
+                if not self.context.ok():
+                    return
+                raise
+
+    def subscribe(self, topic: str, msg_type, qos=10):
+        """Keep every message on topic with its arrival time (time.monotonic())."""
+        if topic in self.received:
+            return
+        self.received[topic] = []
+
+        def cb(msg, topic=topic):
+            with self._lock:
+                self.received[topic].append((time.monotonic(), msg))
+        self.node.create_subscription(msg_type, topic, cb, qos)
+
+    def messages(self, topic: str) -> list:
+        with self._lock:
+            return [m for _, m in self.received.get(topic, [])]
+
+    def timed(self, topic: str) -> list:
+        """Return [(arrival time.monotonic(), message)] of topic."""
+        with self._lock:
+            return list(self.received.get(topic, []))
+
+    _poll = staticmethod(poll)
+
+    def wait_for(self, topic: str, predicate=lambda m: True, timeout: float = 20.0,
+                 what: str = "the condition"):
+        """Return the first message on topic satisfying predicate, waiting for it."""
+        def failure():
+            msgs = self.messages(topic)
+            last = f"; last: {_brief(msgs[-1])}" if msgs else ""
+            return (f"no message on {topic} satisfying {what} within {timeout} s "
+                    f"(got {len(msgs)}{last})")
+        found = poll(lambda: [m for m in self.messages(topic) if predicate(m)][:1], timeout,
+                     failure)
+        return found[0]
+
+    def wait_for_count(self, topic: str, count: int, timeout: float = 20.0) -> list:
+        """Return the first ``count`` messages on topic, waiting for them."""
+        poll(lambda: len(self.messages(topic)) >= count, timeout,
+             lambda: f"fewer than {count} messages on {topic} within {timeout} s"
+                     f" (got {len(self.messages(topic))})")
+        return self.messages(topic)[:count]
+
+    def publisher(self, topic: str, msg_type, qos=10):
+        return self.node.create_publisher(msg_type, topic, qos)
+
+    def wait_for_subscribers(self, pub, count: int = 1, timeout: float = 20.0):
+        poll(lambda: pub.get_subscription_count() >= count, timeout,
+             lambda: f"no {count} subscriber(s) on {pub.topic_name} within {timeout} s "
+                     f"(got {pub.get_subscription_count()})")
+
+    def call(self, srv_type, name: str, request, timeout: float = 20.0):
+        client = self.node.create_client(srv_type, name)
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise AssertionError(f"service {name} not available within {timeout} s")
+        future = client.call_async(request)
+        poll(future.done, timeout, lambda: f"service {name} did not answer within {timeout} s")
+        return future.result()
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=2.0)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+# ------------------------------------------------------------------ summary
+@dataclass(frozen=True)
+class RunSummary:
+    """What an actuation test asserts on (SI units, sim time)."""
+
+    first_push_time: float | None   # sim time the first non-zero force acted from
+    lock_time: float | None         # sim time the sleeve reached the stop
+    deploy_time: float | None       # lock_time - first_push_time (from 0 if it moved at start)
+    stage2_peak_stress: float       # max over leaf and link of peak |sigma| after the lock (Pa)
+    stage2_tip_amplitude: float     # half peak-to-peak transverse tip deflection after it (m)
+    stage2_samples: int             # samples the stage-2 figures come from
+    stage2_span: float              # sim time those samples cover (s)
+
+
+def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
+                  started_moving: bool, tip: list[tuple[float, float]],
+                  stress: list[tuple[float, float]]) -> RunSummary:
+    """
+    Return the run summary: the one place these figures are defined.
+
+    From the applied force history [(t, F)], the lock time, whether the frame moved from
+    t = 0 (v0 != 0 or an initial force), tip [(t, transverse deflection)] and stress
+    [(t, max(peak leaf, peak link))].
+    """
+    first_push = 0.0 if started_moving else next((t for t, f in applied if f != 0.0), None)
+    deploy = (lock_time - first_push if lock_time is not None and first_push is not None
+              else None)
+    after = (lambda t: lock_time is not None and t > lock_time)
+    tip2 = [y for t, y in tip if after(t)]
+    stress2 = [s for t, s in stress if after(t)]
+    times2 = [t for t, _ in tip if after(t)]
+    return RunSummary(
+        first_push_time=first_push, lock_time=lock_time, deploy_time=deploy,
+        stage2_peak_stress=max(stress2) if stress2 else math.nan,
+        stage2_tip_amplitude=0.5 * (max(tip2) - min(tip2)) if tip2 else math.nan,
+        stage2_samples=len(tip2),
+        stage2_span=(times2[-1] - lock_time) if times2 else 0.0)
+
+
+def summary_from_recording(path: str) -> RunSummary:
+    """
+    Return the run summary of a finalised (or torn) MCAP recording of umbrella_node.
+
+    Every figure is on sim time (the log time of each message).
+    """
+    from .logs import read_log
+
+    log = read_log(path)
+    params = log.parameters()
+    events = log.metadata.get("umbrella_sim.events", {})
+    lock_time = float(events["lock_time"]) if events.get("lock_time") else None
+    applied_topic = log.find_topic("sleeve_force/applied", required=False)
+    applied = ([(t, m.data) for t, m in log.decoded(applied_topic)] if applied_topic else [])
+    tip = [(t, m.point.y) for t, m in log.decoded(log.find_topic("tip_deflection"))]
+    stress = [(t, max(m.data[0], m.data[4]))
+              for t, m in log.decoded(log.find_topic("peak_stress"))]
+    if lock_time is None:          # a torn recording: the first 'locked' phase message
+        locked = [t for t, m in log.decoded(log.find_topic("deployment_phase"))
+                  if m.data == "locked"]
+        lock_time = locked[0] if locked else None
+    moving = float(params.get("v0", 0.0)) != 0.0 or float(params.get("sleeve_force", 0.0)) != 0
+    return summarize_run(applied, lock_time, moving, tip, stress)
+
+
+# ------------------------------------------------------------------ antenna
+APPLIED_RE = r"sleeve force ([0-9.eE+-]+|nan|inf|-inf) N applied from t = ([0-9.]+) s"
+LOCKED_RE = r"locked at t = ([0-9.]+) s"
+
+
+class SimulatedAntenna:
+    """
+    An ``umbrella_node`` under test plus a probe subscribed to its topics.
+
+    ``parameters``: node parameters by name (``{"v0": 0.0, "publish_rate": 200.0}``);
+    ``namespace``: run the node under ``/namespace``; ``record_path``: record to that bag
+    directory (see :func:`summary_from_recording`), else the node does not record;
+    ``probe``: share one :class:`Probe` between several antennas (default: one of its own,
+    closed with the antenna).  The constructor returns once the node has started and its
+    first joint state arrived.
+    """
+
+    _count = 0          # probe node names stay unique within a process
+
+    def __init__(self, parameters: dict | None = None, namespace: str = "",
+                 record_path: str | None = None, domain_id: int | None = None,
+                 probe: Probe | None = None, startup_timeout: float = 30.0):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PointStamped
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64, Float64MultiArray, String
+
+        from . import ros_io
+
+        self.parameters = dict(parameters or {})
+        if record_path is not None:
+            self.parameters["record_path"] = str(record_path)
+        else:                                  # recording is optional: off unless asked for
+            self.parameters.setdefault("record", False)
+        self.record_path = record_path
+        self.namespace = namespace.strip("/")
+        prefix = f"/{self.namespace}/" if self.namespace else "/"
+        # relative names resolve under the namespace; absolute ones (/diagnostics) do not
+        self.topics = {key: t.name if t.name.startswith("/") else prefix + t.name
+                       for key, t in ros_io.TOPICS.items()}
+        self.topics["sleeve_force"] = prefix + ros_io.COMMAND.name
+        self._own_probe = probe is None
+        SimulatedAntenna._count += 1
+        self.probe = probe or Probe(f"antenna_probe_{SimulatedAntenna._count}",
+                                    domain_id=domain_id)
+        self.domain_id = self.probe.domain_id
+        for key, msg_type in (("joint_states", JointState), ("tip_deflection", PointStamped),
+                              ("peak_stress", Float64MultiArray),
+                              ("diagnostics", DiagnosticArray)):
+            self.probe.subscribe(self.topics[key], msg_type, ros_io.TOPICS[key].qos)
+        self.probe.subscribe(self.topics["deployment_phase"], String, ros_io.LATCHED)
+        self._float64 = Float64
+        self._command_pub = None
+        self.node = NodeProcess(parameters=self.parameters, namespace=self.namespace or None,
+                                domain_id=self.domain_id)
+        try:
+            self.physics_step = float(self.node.wait_for_log(
+                r"physics step ([0-9.eE+-]+) s", timeout=startup_timeout).group(1))
+            poll(lambda: self.probe.messages(self.topics["joint_states"]), startup_timeout,
+                 lambda: f"no message on {self.topics['joint_states']} within "
+                         f"{startup_timeout} s of the node's start (node "
+                         f"{'running' if self.node.running else 'exited'}); node output:\n"
+                         f"{self.node.output()[-2000:]}")
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------ commands
+    def publish_force(self, force: float, timeout: float = 20.0) -> None:
+        """Publish one sleeve_force command (after the node's subscription has matched)."""
+        if self._command_pub is None:
+            from . import ros_io
+            self._command_pub = self.probe.publisher(self.topics["sleeve_force"], self._float64,
+                                                     ros_io.COMMAND.qos)
+            self.probe.wait_for_subscribers(self._command_pub, timeout=timeout)
+        self._command_pub.publish(self._float64(data=float(force)))
+
+    def play_force_profile(self, profile: Iterable[tuple[float, float]],
+                           timeout: float = 30.0) -> None:
+        """
+        Publish each (t, F) of a profile when the node's sim time reaches start + t.
+
+        The start is sim_time() at the call (joint_states stamps); returns after the last
+        command.  Commands act from the next publication after they arrive: for
+        sim-time-exact profiles give the node a ``sleeve_force`` parameter or use
+        ``umbrella_sim simulate --force-profile``.
+        """
+        rows = sorted(profile, key=lambda tf: tf[0])
+        t0 = self.sim_time()
+        for t_rel, force in rows:
+            self.wait_for_sim_time(t0 + t_rel, timeout=timeout)
+            self.publish_force(force)
+
+    # --------------------------------------------------------------- waits
+    def sim_time(self) -> float:
+        """Stamp of the latest joint state received (s)."""
+        states = self.probe.messages(self.topics["joint_states"])
+        return _stamp(states[-1]) if states else 0.0
+
+    def phases(self) -> list[str]:
+        return [m.data for m in self.probe.messages(self.topics["deployment_phase"])]
+
+    def wait_for_phase(self, phase: str, timeout: float = 20.0) -> None:
+        if phase not in PHASES:
+            raise ValueError(f"phase {phase!r}: must be one of {', '.join(PHASES)}")
+        poll(lambda: phase in self.phases(), timeout,
+             lambda: f"deployment_phase never became {phase!r} within {timeout} s on "
+                     f"{self.topics['deployment_phase']} (saw {self.phases() or 'nothing'}; "
+                     f"sim time {self.sim_time():.3f} s; node "
+                     f"{'running' if self.node.running else 'exited'})")
+
+    def wait_for_sim_time(self, t: float, timeout: float = 20.0) -> None:
+        poll(lambda: self.sim_time() >= t, timeout,
+             lambda: f"sim time never reached {t:.6f} s within {timeout} s on "
+                     f"{self.topics['joint_states']} (latest stamp {self.sim_time():.6f} s)")
+
+    def wait_for(self, key: str, predicate, timeout: float = 20.0, what: str = "the condition"):
+        """Return the first message on a node topic (``"joint_states"``, ...) satisfying it."""
+        return self.probe.wait_for(self.topics[key], predicate, timeout, what)
+
+    def messages(self, key: str) -> list:
+        return self.probe.messages(self.topics[key])
+
+    # --------------------------------------------------------- what happened
+    def applied_forces(self) -> list[tuple[float, float]]:
+        """[(sim time, F)] every value the node applied, from its log (exact)."""
+        return [(float(t), float(f)) for f, t in re.findall(APPLIED_RE, self.node.output())]
+
+    def lock_time(self) -> float | None:
+        m = re.search(LOCKED_RE, self.node.output())
+        return float(m.group(1)) if m else None
+
+    def diagnostics(self) -> dict:
+        """Return the key/values of the latest diagnostics message ({} before the first)."""
+        msgs = self.messages("diagnostics")
+        return {kv.key: kv.value for kv in msgs[-1].status[0].values} if msgs else {}
+
+    def summary(self, after_lock: float = 0.3, timeout: float = 30.0) -> RunSummary:
+        """
+        Return the run summary from the topics, once ``after_lock`` s of stage 2 were seen.
+
+        Stage-2 stress samples are those received after the 'locked' phase message (the
+        stress message has no stamp), so the first publication or two after the lock may
+        be left out; a recording gives the exact figures (:func:`summary_from_recording`).
+        """
+        self.wait_for_phase("locked", timeout)
+        lock = poll(self.lock_time, timeout, lambda: "no 'locked at' line in the node's log")
+        self.wait_for_sim_time(lock + after_lock, timeout)
+        phase_arrival = next(t for t, m in self.probe.timed(self.topics["deployment_phase"])
+                             if m.data == "locked")
+        tip = [(_stamp(m), m.point.y) for m in self.messages("tip_deflection")]
+        # no stamp: a stress message is stage 2 if it arrived after the phase message
+        stress = [(math.inf if arrival > phase_arrival else -math.inf,
+                   max(m.data[0], m.data[4]))
+                  for arrival, m in self.probe.timed(self.topics["peak_stress"])]
+        moving = (float(self.parameters.get("v0", -0.2)) != 0.0
+                  or float(self.parameters.get("sleeve_force", 0.0)) != 0.0)
+        return summarize_run(self.applied_forces(), lock, moving, tip, stress)
+
+    # ------------------------------------------------------------- lifetime
+    def stop(self, timeout: float = 10.0) -> int:
+        """SIGTERM the node (it finalises its recording), wait; the exit code."""
+        return self.node.stop(timeout=timeout)
+
+    def close(self) -> None:
+        try:
+            self.node.close()
+        finally:
+            if self._own_probe:
+                self.probe.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _stamp(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+# ------------------------------------------------------------------ fixtures
+try:
+    import pytest
+except ImportError:                                    # pragma: no cover
+    pytest = None
+
+if pytest is not None:
+    @pytest.fixture(scope="session")
+    def ros_domain_id() -> int:
+        """Return the ROS domain of this session (UMBRELLA_TEST_DOMAIN_ID, else from the pid)."""
+        return DOMAIN_ID
+
+    @pytest.fixture
+    def probe(ros_domain_id):
+        """Yield a Probe on the session's domain, closed after the test."""
+        p = Probe(domain_id=ros_domain_id)
+        yield p
+        p.close()
+
+    @pytest.fixture
+    def antenna_factory(ros_domain_id):
+        """Start SimulatedAntenna(**kwargs) objects; all are closed after the test."""
+        started: list[SimulatedAntenna] = []
+
+        def start(parameters: dict | None = None, **kwargs) -> SimulatedAntenna:
+            kwargs.setdefault("domain_id", ros_domain_id)
+            antenna = SimulatedAntenna(parameters, **kwargs)
+            started.append(antenna)
+            return antenna
+        yield start
+        for antenna in reversed(started):
+            antenna.close()
