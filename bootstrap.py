@@ -4,7 +4,7 @@ Set up a local virtualenv (.venv) with every dependency, then run the main job o
 
     python3 bootstrap.py run      # umbrella_node on config/umbrella.yaml, recording MCAP to
                                   # runs/run-YYYYmmdd-HHMMSS/ (Ctrl-C stops and finalises it)
-    python3 bootstrap.py test     # the test suite
+    python3 bootstrap.py test     # the test suite and examples/
 
 Arguments after run go to the node: python3 bootstrap.py run -p v0:=-0.5
 Environment: UMBRELLA_VENV (default ./.venv), UMBRELLA_RUNS_DIR (default ./runs).
@@ -66,7 +66,9 @@ def main(argv) -> int:
                os.path.join(ROOT, "config", "umbrella.yaml"), "-p", f"record_path:={bag}"] \
             + argv[1:]
     elif argv[0] == "test":
-        cmd = [PY, "-m", "pytest", "-q", os.path.join(ROOT, "tests")] + argv[1:]
+        # the test suite and the user-facing actuation examples (they must keep working)
+        cmd = [PY, "-m", "pytest", "-q", os.path.join(ROOT, "tests"),
+               os.path.join(ROOT, "examples")] + argv[1:]
     else:
         return 0
     print("+", " ".join(cmd), flush=True)

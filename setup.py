@@ -62,6 +62,7 @@ setup(
             "umbrella-sim = umbrella_sim.cli:main",
             "umbrella-replay = umbrella_sim.replay:main",
             "umbrella-compare = umbrella_sim.compare:main",
+            "deploy_controller = umbrella_sim.deploy_controller:main",
         ],
     },
 )

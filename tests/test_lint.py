@@ -14,7 +14,8 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # every Python file of the repository (ament's walk would also enter .venv and colcon's build/)
-PATHS = ["umbrella_sim", "tests", "bench", "docs", "launch", "bootstrap.py", "setup.py"]
+PATHS = ["umbrella_sim", "tests", "examples", "bench", "docs", "launch", "bootstrap.py",
+         "setup.py"]
 
 
 def _paths():

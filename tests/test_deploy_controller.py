@@ -1,0 +1,135 @@
+"""
+deploy_controller: the law against the physics core offline, then over DDS in real time.
+
+Every figure is compared with the constant sleeve force that deploys in the same time on the
+same model, found or run in the same test (no stored numbers).
+"""
+import subprocess
+import sys
+
+import pytest
+
+from umbrella_sim.deploy_controller import (constant_force_for, ControllerConfig, DeployLaw,
+                                            simulate_closed_loop)
+from umbrella_sim.params import UmbrellaParams
+from umbrella_sim.publication import physics_step
+from umbrella_sim.solver import simulate
+from umbrella_sim.testing import NodeProcess, ros_env, summarize_run, summary_from_recording
+
+TARGET = 1.0            # s, deploy time asked of the controller
+LIMIT = 8.0             # N, the controller's force limits: [-LIMIT, LIMIT]
+RATE = 200.0            # Hz, joint_states rate = the control rate
+AFTER = 0.5             # s of stage 2 observed (~10 periods of the leaf's vibration)
+MODEL = UmbrellaParams(v0=0.0, sleeve_force_min=-LIMIT)
+
+
+def run_summary(result, first_push: float):
+    """Return the run summary of an offline RunResult (the same figures as over DDS)."""
+    return summarize_run([(first_push, 1.0)], result.lock.time, False,
+                         [(s.time, s.tip_transverse) for s in result.samples],
+                         [(s.time, max(s.peak_stress_leaf, s.peak_stress_link))
+                          for s in result.samples])
+
+
+@pytest.fixture(scope="module")
+def constant():
+    """Return the constant force deploying in TARGET on the node's grid, and its summary."""
+    params = MODEL.replace(time_step=physics_step(MODEL.time_step, RATE))
+    force = constant_force_for(params, TARGET)
+    run = simulate(params.replace(sleeve_force=force), 3 * TARGET, stop_after_lock=AFTER)
+    return force, run_summary(run, 0.0)
+
+
+@pytest.mark.parametrize("delay", [1, 3])
+def test_law_on_the_physics_core_locks_five_times_softer_in_the_target_time(constant, delay):
+    """Commands act `delay` publications after the state they answer (the DDS round trip)."""
+    _, ref = constant
+    cfg = ControllerConfig(target_time=TARGET, max_force=LIMIT, min_force=-LIMIT)
+    run, first = simulate_closed_loop(MODEL, cfg, RATE, delay, after_lock=AFTER)
+    s = run_summary(run, first)
+    assert ref.deploy_time == pytest.approx(TARGET, rel=1e-4)
+    assert abs(s.deploy_time - ref.deploy_time) <= 0.05 * ref.deploy_time
+    assert s.stage2_peak_stress * 5 <= ref.stage2_peak_stress
+    assert s.stage2_tip_amplitude * 5 <= ref.stage2_tip_amplitude
+    forces = run.column("sleeve_force")
+    assert forces.min() >= -LIMIT and forces.max() <= LIMIT
+    assert forces.min() < 0.0                                  # it did hold the sleeve back
+
+
+def test_push_only_cannot_lock_five_times_softer(constant):
+    """
+    Push-only: softer than the constant force, but not 5x.
+
+    With F_H >= 0 the kinetic energy never drops before the lock, so the softest lock in a
+    given time is a coast (rigid estimate ~3x below the constant force).
+    """
+    _, ref = constant
+    cfg = ControllerConfig(target_time=TARGET, max_force=LIMIT, min_force=0.0)
+    run, first = simulate_closed_loop(MODEL, cfg, RATE, 1, after_lock=AFTER)
+    s = run_summary(run, first)
+    assert run.column("sleeve_force").min() >= 0.0
+    assert abs(s.deploy_time - ref.deploy_time) <= 0.05 * ref.deploy_time
+    ratio = ref.stage2_tip_amplitude / s.stage2_tip_amplitude
+    assert 1.5 < ratio < 5.0
+
+
+def test_infeasible_target_is_refused_naming_the_parameter():
+    with pytest.raises(ValueError, match="target_time=0.1: too short for max_force=8"):
+        DeployLaw(MODEL, ControllerConfig(target_time=0.1, max_force=LIMIT))
+    with pytest.raises(ValueError, match="min_force=1"):
+        DeployLaw(MODEL, ControllerConfig(min_force=1.0))
+
+
+@pytest.mark.parametrize("args, culprit", [
+    (["-p", "target_time:=-1.0"], "target_time"),
+    (["-p", "target_time:=0.05"], "too short"),
+    (["-p", "max_force:=fast"], "max_force"),
+    (["-p", "l1:=-1.0"], "l1"),
+])
+def test_controller_refuses_bad_parameters_with_exit_2(args, culprit):
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.deploy_controller", "--ros-args",
+                        *args], capture_output=True, text=True, env=ros_env(), timeout=60)
+    assert r.returncode == 2, r.stderr
+    assert culprit in r.stderr and "Traceback" not in r.stderr
+
+
+def test_controller_over_dds_locks_five_times_softer_than_constant_force(
+        constant, antenna_factory, ros_domain_id, tmp_path):
+    """
+    Real time, real DDS: the constant force and the controller, each on a fresh node.
+
+    Both nodes record; the figures come from the recordings (sim time, every publication).
+    """
+    force, _ = constant
+    node_params = {"v0": 0.0, "sleeve_force_min": -LIMIT, "publish_rate": RATE}
+
+    cf = antenna_factory(node_params, record_path=str(tmp_path / "constant"))
+    cf.wait_for_phase("deploying")
+    cf.publish_force(force)
+    cf.wait_for_phase("locked", timeout=60)
+    cf.wait_for_sim_time(cf.lock_time() + AFTER, timeout=30)
+    assert cf.stop() == 0
+    ref = summary_from_recording(str(tmp_path / "constant"))
+
+    ctl = antenna_factory(node_params, record_path=str(tmp_path / "controlled"))
+    ctl.wait_for_phase("deploying")
+    with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
+                     parameters={"target_time": TARGET, "max_force": LIMIT,
+                                 "min_force": -LIMIT}) as controller:
+        ctl.wait_for_phase("locked", timeout=60)
+        ctl.wait_for_sim_time(ctl.lock_time() + AFTER, timeout=30)
+        controller.wait_for_log("deployment over")
+        log = controller.output()
+        assert controller.stop() == 0
+    assert ctl.stop() == 0
+    s = summary_from_recording(str(tmp_path / "controlled"))
+    print(f"\nconstant {force:.4f} N: deploy {ref.deploy_time:.4f} s, stage-2 peak stress "
+          f"{ref.stage2_peak_stress / 1e6:.2f} MPa, tip amplitude "
+          f"{ref.stage2_tip_amplitude * 1e3:.2f} mm\ncontroller: deploy {s.deploy_time:.4f} s, "
+          f"stage-2 peak stress {s.stage2_peak_stress / 1e6:.2f} MPa, tip amplitude "
+          f"{s.stage2_tip_amplitude * 1e3:.2f} mm\n{log}")
+    assert ref.deploy_time == pytest.approx(TARGET, rel=1e-3)
+    assert s.stage2_span >= AFTER and ref.stage2_span >= AFTER
+    assert abs(s.deploy_time - ref.deploy_time) <= 0.05 * ref.deploy_time
+    assert s.stage2_peak_stress * 5 <= ref.stage2_peak_stress
+    assert s.stage2_tip_amplitude * 5 <= ref.stage2_tip_amplitude
