@@ -18,7 +18,7 @@ from umbrella_sim.testing import NodeProcess, ros_env, summarize_run, summary_fr
 
 TARGET = 1.0            # s, deploy time asked of the controller
 LIMIT = 8.0             # N, the controller's force limits: [-LIMIT, LIMIT]
-RATE = 200.0            # Hz, joint_states rate = the control rate
+RATE = 100.0            # Hz, joint_states rate = the control rate (the node default)
 AFTER = 0.5             # s of stage 2 observed (~10 periods of the leaf's vibration)
 MODEL = UmbrellaParams(v0=0.0, sleeve_force_min=-LIMIT)
 
