@@ -16,7 +16,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
-from umbrella_sim.solver import simulate
+from umbrella_sim.solver import simulate, UmbrellaSimulator
 from umbrella_sim.testing import NodeProcess, ros_env
 
 ALPHA0 = UmbrellaParams().alpha0
@@ -104,7 +104,7 @@ def test_invalid_commands_refused_counted_and_never_applied(probe):
     probe.subscribe("/joint_states", JointState)
     probe.subscribe("/diagnostics", DiagnosticArray)
     with NodeProcess("-p", "v0:=0.0") as node:
-        node.wait_for_log("physics step")
+        step = float(node.wait_for_log(r"physics step ([0-9.e-]+) s").group(1))
         pub = probe.publisher("/sleeve_force", Float64)
         probe.wait_for_subscribers(pub)
         for bad in (float("nan"), -1.0, float("inf"), -float("inf")):
@@ -116,7 +116,17 @@ def test_invalid_commands_refused_counted_and_never_applied(probe):
         probe.wait_for("/joint_states", lambda m: stamp_s(m) > t_seen + 0.3)
         assert "refused sleeve_force command" in node.output()
     states = probe.messages("/joint_states")
-    assert all(m.effort[2] == 0.0 and abs(m.position[0] - ALPHA0) < 1e-9 for m in states)
+    assert all(m.effort[2] == 0.0 for m in states)
+    # the states are the unforced run's: the offline core on the same grid (at rest the
+    # discrete state creeps by round-off, ~1.5e-9 rad in 3 s at the 50 us step, so the
+    # reference is the unforced run itself, not alpha0)
+    sim = UmbrellaSimulator(UmbrellaParams(v0=0.0, time_step=step))
+    n_per = round(0.01 / step)
+    for m in sorted(states, key=stamp_s):
+        k = round(stamp_s(m) / 0.01)
+        sim.advance(k * n_per - sim.steps)
+        assert abs(m.position[0] - sim.sample().alpha1) < 1e-12
+    assert abs(states[-1].position[0] - ALPHA0) < 1e-6
     assert diag_values(probe.messages("/diagnostics")[-1])["accepted_commands"] == "0"
 
 
