@@ -20,7 +20,24 @@ TARGET = 1.0            # s, deploy time asked of the controller
 LIMIT = 8.0             # N, the controller's force limits: [-LIMIT, LIMIT]
 RATE = 100.0            # Hz, joint_states rate = the control rate (the node default)
 AFTER = 0.5             # s of stage 2 observed (~10 periods of the leaf's vibration)
-MODEL = UmbrellaParams(v0=0.0, sleeve_force_min=-LIMIT)
+# a 2 ms physics step (the thesis's; deploy time within 1e-5 of finer steps): at the 50 us
+# default the node's 200 compiled steps a publication, sharing the GIL with its executor on a
+# loaded 2-core machine, delayed the commands by up to the whole deployment
+STEP = 0.002
+MODEL = UmbrellaParams(v0=0.0, sleeve_force_min=-LIMIT, time_step=STEP)
+
+
+MAX_GAP = 0.1          # s of sim time: the longest the loop may go without a command
+
+
+def command_gap(bag: str, start: float, end: float) -> float:
+    """Return the longest sim-time gap between commands the node received in [start, end]."""
+    from umbrella_sim.logs import read_log
+
+    log = read_log(bag)
+    times = [start] + [t for t, _ in log.decoded(log.find_topic("sleeve_force"))
+                       if start < t < end] + [end]
+    return max(b - a for a, b in zip(times, times[1:]))
 
 
 def run_summary(result, first_push: float):
@@ -101,7 +118,8 @@ def test_controller_over_dds_locks_five_times_softer_than_constant_force(
     Both nodes record; the figures come from the recordings (sim time, every publication).
     """
     force, _ = constant
-    node_params = {"v0": 0.0, "sleeve_force_min": -LIMIT, "publish_rate": RATE}
+    node_params = {"v0": 0.0, "sleeve_force_min": -LIMIT, "publish_rate": RATE,
+                   "time_step": STEP}
 
     cf = antenna_factory(node_params, record_path=str(tmp_path / "constant"))
     cf.wait_for_phase("deploying")
@@ -111,18 +129,31 @@ def test_controller_over_dds_locks_five_times_softer_than_constant_force(
     assert cf.stop() == 0
     ref = summary_from_recording(str(tmp_path / "constant"))
 
-    ctl = antenna_factory(node_params, record_path=str(tmp_path / "controlled"))
-    ctl.wait_for_phase("deploying")
-    with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
-                     parameters={"target_time": TARGET, "max_force": LIMIT,
-                                 "min_force": -LIMIT}) as controller:
-        ctl.wait_for_phase("locked", timeout=60)
-        ctl.wait_for_sim_time(ctl.lock_time() + AFTER, timeout=30)
-        controller.wait_for_log("deployment over")
-        log = controller.output()
-        assert controller.stop() == 0
-    assert ctl.stop() == 0
-    s = summary_from_recording(str(tmp_path / "controlled"))
+    # a closed-loop run counts if the loop ran: commands reached the node at least every
+    # MAX_GAP of sim time from the first push to the lock (from the node's recording).  On a
+    # loaded 2-core machine a process can get no CPU for 0.4 s; such a run is repeated once.
+    gaps = []
+    for attempt in range(2):
+        bag = str(tmp_path / f"controlled{attempt}")
+        ctl = antenna_factory(node_params, record_path=bag)
+        ctl.wait_for_phase("deploying")
+        with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
+                         parameters={"target_time": TARGET, "max_force": LIMIT,
+                                     "min_force": -LIMIT}) as controller:
+            ctl.wait_for_phase("locked", timeout=60)
+            ctl.wait_for_sim_time(ctl.lock_time() + AFTER, timeout=30)
+            controller.wait_for_log("deployment over")
+            log = controller.output()
+            assert controller.stop() == 0
+        assert ctl.stop() == 0
+        s = summary_from_recording(bag)
+        gaps.append(command_gap(bag, s.first_push_time, s.lock_time))
+        if gaps[-1] <= MAX_GAP:
+            break
+    else:
+        pytest.fail(f"the closed loop did not run: commands reached the node only every "
+                    f"{', '.join(f'{g * 1e3:.0f}' for g in gaps)} ms (sim) at worst "
+                    f"(> {MAX_GAP * 1e3:.0f} ms) in both attempts")
     print(f"\nconstant {force:.4f} N: deploy {ref.deploy_time:.4f} s, stage-2 peak stress "
           f"{ref.stage2_peak_stress / 1e6:.2f} MPa, tip amplitude "
           f"{ref.stage2_tip_amplitude * 1e3:.2f} mm\ncontroller: deploy {s.deploy_time:.4f} s, "
