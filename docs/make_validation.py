@@ -188,7 +188,7 @@ def main():
               "(which the thesis reads off Fig. 6.2); the stage-2 amplitude is 2–3 % above "
               "'about 60 mm' and the period 6 % below 'about 0.05 s'. The thesis used an "
               "explicit Runge–Kutta scheme of its own step and, as printed, several erroneous "
-              "matrices (shared/notes/formulation.md); nothing here was tuned to its numbers. "
+              "matrices (printed errata, corrected here); nothing here was tuned to its numbers. "
               "The rigid runs have no elastic deflection: their tip difference is the flexible "
               "run's deflection itself.", "",
               "| run | energy drift | max abs. difference of alpha1 to N = 1 (rad) "

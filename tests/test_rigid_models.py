@@ -13,7 +13,8 @@ from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.rigid import deployment_time_by_quadrature, RigidMechanism
 from umbrella_sim.solver import simulate
 
-# shared/notes/formulation.md: computed independently by energy quadrature
+# rigid-model deployment times computed independently by energy quadrature of the closed-form
+# rigid mechanism (Hu 2006, Eq. 4.120-4.125)
 REFERENCE = {-0.2: 0.2258847, -0.5: 0.0903539, -1.0: 0.0451769, -2.0: 0.0225885}
 
 
