@@ -46,4 +46,8 @@ def test_main_command_records_and_forwards_signals(tmp_path, sig):
     (run,) = (tmp_path / "runs").iterdir()
     log = read_log(str(run))
     assert not log.truncated
-    assert log.count("/joint_states") > 50
+    # every joint_states publication of the run is in the file: the default 100 Hz over the
+    # simulated time recorded (the node may run behind real time on a busy machine)
+    stamps = [t for t, _ in log.decoded("/joint_states")]
+    assert stamps[-1] > 0.15                      # past the lock (t ~ 0.19 s)
+    assert len(stamps) >= int(100 * (stamps[-1] - stamps[0])) - 1
