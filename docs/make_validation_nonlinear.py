@@ -16,13 +16,12 @@ import sys
 import time
 
 import numpy as np
-from scipy.integrate import solve_bvp
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
-from umbrella_sim.nonlinear import (NonlinearUmbrellaModel, PrescribedRotationBeam,  # noqa: E402
-                                    spin_up_angle)
+from umbrella_sim.nonlinear import (NonlinearUmbrellaModel, spin_up,  # noqa: E402
+                                    spin_up_quasi_static_tip)
 from umbrella_sim.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.recording import git_revision  # noqa: E402
 from umbrella_sim.solver import simulate  # noqa: E402
@@ -60,30 +59,6 @@ def frame_rows(meshes):
     return [(v0, n, model, *run(v0, n, model, STEP))
             for v0 in (-0.2, -1.0, -2.0) for n in meshes
             for model in ("flexible", "flexible-nonlinear")]
-
-
-KANE = {"length": 10.0, "mass_per_length": 1.2, "ea": 2.8e7, "ei": 1.4e4,
-        "youngs_modulus": 7e10, "fibre": 0.01}
-
-
-def quasi_static_tip(t):
-    length, rho_a, ei = KANE["length"], KANE["mass_per_length"], KANE["ei"]
-    _, w, wd = spin_up_angle(t)
-
-    def rhs(x, y):
-        tension = 0.5 * rho_a * w * w * (length ** 2 - x * x)
-        return np.vstack([y[1], y[2], y[3], (-rho_a * w * w * x * y[1] + tension * y[2]
-                                             + rho_a * w * w * y[0] - rho_a * wd * x) / ei])
-
-    x = np.linspace(0.0, length, 60)
-    sol = solve_bvp(rhs, lambda a, b: np.array([a[0], a[1], b[2], b[3]]), x, np.zeros((4, 60)),
-                    tol=1e-8)
-    return float(sol.sol(length)[0])
-
-
-def spin_up(n, nonlinear, h):
-    beam = PrescribedRotationBeam(n_elements=n, nonlinear=nonlinear, **KANE)
-    return beam.simulate(lambda t: spin_up_angle(t)[1], lambda t: spin_up_angle(t)[2], 20.0, h)
 
 
 def main():
@@ -141,6 +116,29 @@ def main():
                          else f"{100 * (b[key] / a[key] - 1):+.2f} %")
         lines.append(f"| {v0:g} | " + " | ".join(cells) + " |")
 
+    # ---------------------------------------------------------------- small motion
+    lines += ["", "## Small motion: why the stage-1 tip deflection differs at V0 = −0.2", "",
+              "The two models share the mass matrix, joints, integrator and every term of U "
+              "that is quadratic in q; the nonlinear one adds the cubic and quartic von Kármán "
+              "terms (the leaf's axial force N times v'²/2, and the foreshortening). Their "
+              "effect on the stage-1 tip deflection must therefore vanish with the motion, "
+              "be mesh- and step-independent, and the deploy time agree: it does. The "
+              "difference is physics of the stiffened model (the leaf carries a few newtons "
+              "of axial force from the mechanism and the rotation while it bends), not a "
+              "discretisation mismatch; the issue's 0.5 % holds at V0 = −0.1 and the test "
+              "bounds V0 = −0.2 at 1 %.", "",
+              "| N | h (ms) | V0 (m/s) | tip linear (mm) | tip nonlinear (mm) | difference | "
+              "deploy time difference |", "|---|---|---|---|---|---|---|"]
+    for n, h in ((2, STEP), (4, STEP), (4, STEP / 5)):
+        for v0 in (-0.05, -0.1, -0.2, -0.4):
+            a, b = (simulate(UmbrellaParams(v0=v0, model=model, elements_per_segment=n,
+                                            time_step=h), 3.0, stop_after_lock=0.0).summary()
+                    for model in ("flexible", "flexible-nonlinear"))
+            lines.append(f"| {n} | {h * 1e3:g} | {v0:g} | {a['tip_deflection_max'] * 1e3:.5f} | "
+                         f"{b['tip_deflection_max'] * 1e3:.5f} | "
+                         f"{100 * (b['tip_deflection_max'] / a['tip_deflection_max'] - 1):+.3f} % "
+                         f"| {b['deploy_time'] / a['deploy_time'] - 1:+.1e} |")
+
     # ---------------------------------------------------------------- time step
     lines += ["", "## Time-step study, N = 4", "",
               "Stage 1 and the deploy time are converged at the default 2 ms for both models. "
@@ -179,8 +177,8 @@ def main():
               "3.80 rad/s; a model with geometric stiffening stays bounded.", "",
               "| t (s) | quasi-static reference (m) | nonlinear N = 4, h = 10 ms (m) | "
               "nonlinear N = 8, h = 5 ms (m) | linear N = 4 (m) |", "|---|---|---|---|---|"]
-    runs = {"n4": spin_up(4, True, 0.01), "n8": spin_up(8, True, 0.005),
-            "lin": spin_up(4, False, 0.01)}
+    runs = {"n4": spin_up(4, True, 20.0, 0.01), "n8": spin_up(8, True, 20.0, 0.005),
+            "lin": spin_up(4, False, 20.0, 0.01)}
 
     def at(run, tt):
         t, _, v = runs[run]
@@ -188,7 +186,8 @@ def main():
         return f"{v[i]:.4f}" if i < len(t) else "diverged"
 
     for tt in (2.0, 4.0, 6.0, 7.0, 8.0, 9.0, 10.0, 12.0, 15.0, 18.0):
-        lines.append(f"| {tt:g} | {quasi_static_tip(tt):.4f} | {at('n4', tt)} | {at('n8', tt)} "
+        lines.append(f"| {tt:g} | {spin_up_quasi_static_tip(tt):.4f} | {at('n4', tt)} | "
+                     f"{at('n8', tt)} "
                      f"| {at('lin', tt)} |")
     t, u, v = runs["n8"]
     after = t > 15.0

@@ -66,6 +66,45 @@ def _gonzalez(grad_mid: np.ndarray, delta_f: float, dq: np.ndarray, dd: float) -
     return grad_mid + ((delta_f - grad_mid @ dq) / dd) * dq
 
 
+@dataclass(frozen=True)
+class MidpointIterate:
+    """The discrete-gradient pieces of the midpoint residual at a Newton iterate q."""
+
+    dq: np.ndarray       # q - q0
+    qm: np.ndarray       # midpoint q0 + dq / 2
+    v1: np.ndarray       # 2 dq / h - v0
+    mass1: np.ndarray    # M(q)
+    phi: np.ndarray      # Phi(q)
+    g_t: np.ndarray      # Gonzalez gradient of 1/2 v0^T M(q) v1
+    g_y: np.ndarray      # Gonzalez gradient of the sleeve height y_H
+    jac_m: np.ndarray    # Gonzalez constraint Jacobian between q0 and q
+
+
+def midpoint_iterate(m: UmbrellaModel, cs: ConstraintSet, q0, v0, p0, phi0, y0, q,
+                     h: float) -> MidpointIterate:
+    """
+    Return the pieces of the midpoint residual at the iterate q.
+
+    The residual of the step is M(q) v1 - M(q0) v0 - h [G_T - G_U - F_H G_y + G_Phi^T lam]
+    (+ damping); G_T, G_y, G_Phi are Gonzalez discrete gradients of f(q) = 1/2 v0^T M(q) v1,
+    y_H(q) and Phi(q) between q0 and q (dq . G_f = f(q) - f(q0) exactly).  p0 = M(q0) v0
+    also gives f(q0) = 1/2 p0 . v1.  One place for MidpointDAE and the elastic integrator.
+    """
+    dq = q - q0
+    dd = dq @ dq
+    qm = q0 + 0.5 * dq
+    v1 = 2.0 * dq / h - v0
+    mass1 = m.mass_matrix(q)
+    phi = m.constraint_residual(q, cs)
+    g_t = _gonzalez(m.kinetic_bilinear_gradient(qm, v0, v1), 0.5 * (v0 @ mass1 - p0) @ v1,
+                    dq, dd)
+    g_y = _gonzalez(m.sleeve_height_gradient(qm), m.sleeve_height(q) - y0, dq, dd)
+    jac_m = m.constraint_jacobian(qm, cs)
+    if dd > 0.0:
+        jac_m += np.outer((phi - phi0 - jac_m @ dq) / dd, dq)
+    return MidpointIterate(dq, qm, v1, mass1, phi, g_t, g_y, jac_m)
+
+
 #: largest kinetic-energy ratio (before / after the projection) that is restored by scaling
 ENERGY_RESTORE_LIMIT = 1.01
 
@@ -206,26 +245,16 @@ class MidpointDAE:
         rhs = np.empty(n + nc)
         last_norm = np.inf
         for it in range(1, self.max_iterations + 1):
-            dq = q - q0
-            dd = dq @ dq
-            qm = q0 + 0.5 * dq
-            v1 = 2.0 * dq / h - v0
-            mass1 = m.mass_matrix(q)
-            phi = m.constraint_residual(q, cs)
-            g_t = _gonzalez(m.kinetic_bilinear_gradient(qm, v0, v1),
-                            0.5 * (v0 @ mass1 - p0) @ v1, dq, dd)
-            g_y = _gonzalez(m.sleeve_height_gradient(qm), m.sleeve_height(q) - y0, dq, dd)
-            jac_m = m.constraint_jacobian(qm, cs)
-            if dd > 0.0:
-                jac_m += np.outer((phi - phi0 - jac_m @ dq) / dd, dq)
-            resid = (mass1 @ v1 - p0
-                     - h * (g_t - stiff @ qm - force * g_y + jac_m.T @ lam))
+            x = midpoint_iterate(m, cs, q0, v0, p0, phi0, y0, q, h)
+            resid = (x.mass1 @ x.v1 - p0
+                     - h * (x.g_t - stiff @ x.qm - force * x.g_y + x.jac_m.T @ lam))
+            phi = x.phi
             if lu is None:
                 jac = m.constraint_jacobian(q, cs)
                 it_mat = np.zeros((n + nc, n + nc))
-                it_mat[:n, :n] = (mass1 + 0.25 * h * h * stiff
-                                  + 0.5 * h * m.gyroscopic_matrix(qm, dq / h))
-                it_mat[:n, n:] = -jac_m.T
+                it_mat[:n, :n] = (x.mass1 + 0.25 * h * h * stiff
+                                  + 0.5 * h * m.gyroscopic_matrix(x.qm, x.dq / h))
+                it_mat[:n, n:] = -x.jac_m.T
                 it_mat[n:, :n] = jac
                 lu, piv, info = dgetrf(it_mat, overwrite_a=True)
                 if info != 0:

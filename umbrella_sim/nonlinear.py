@@ -41,11 +41,12 @@ vibration at V0 <= -1 m/s (tip amplitudes of 0.2-0.3 m on the 0.5 m segment O''-
 it, and there a co-rotational or geometrically exact element is the next step;
 docs/validation_nonlinear.md reports max |v'| beside the figures.
 
-Time integration: the midpoint step of MidpointDAE with the AVF gradient, a Newton line
+Time integration: the midpoint step of MidpointDAE (the same residual pieces,
+integrators.midpoint_iterate) with the AVF gradient; full Newton with a backtracking line
 search (a full update can overshoot when the stiff axial directions turn with v' inside a
-step), steps split in halves where Newton still fails, and the velocity projection's
-O(h^2) kinetic-energy loss given back by a uniform rescale, so the nonlinear model balances
-energy to the Newton tolerance.  Its stage 2 needs a finer step than the linear model's
+step), steps split in halves where Newton still fails, and MidpointDAE's velocity
+projection scaled to the kinetic energy of the step's discrete balance, so the nonlinear
+model balances energy to round-off.  Its stage 2 needs a finer step than the linear model's
 (energy flows between modes, the unresolved ones included): see the step study in
 docs/validation_nonlinear.md.
 
@@ -75,10 +76,10 @@ import math
 
 import numpy as np
 from scipy.linalg import eigh, null_space
-from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
+from scipy.linalg.lapack import dgetrf, dgetrs
 
-from .integrators import (_gonzalez, _project_keeping_energy, ConvergenceError, DynamicState,
-                          MidpointDAE, PHI_TOLERANCE)
+from .integrators import (_project_keeping_energy, ConvergenceError, DynamicState,
+                          midpoint_iterate, MidpointDAE, PHI_TOLERANCE)
 from .model import _GAUSS_ETA, _GAUSS_W, BeamBody, ConstraintSet, shape_functions, UmbrellaModel
 from .params import UmbrellaParams
 from .solver import FiniteElementEngine   # the solver imports this module only inside reset()
@@ -303,7 +304,6 @@ class ElasticMidpointDAE(MidpointDAE):
         self.refreshes = 0   # iteration matrices re-factored inside a step, for diagnostics
         self.halvings = 0    # steps split in two because Newton failed
         self.backtracks = 0  # line-search step reductions
-        self.projection_loss = 0.0   # kinetic energy the projections removed and were given back
 
     def consistent_acceleration(self, q, qd, force: float, cs: ConstraintSet):
         m = self.model
@@ -348,9 +348,12 @@ class ElasticMidpointDAE(MidpointDAE):
         Take one energy-consistent midpoint step.
 
         M(q1) v1 - M(q0) v0 = h [G_T - G_U - C dq/h - F_H G_y + G_Phi^T lambda], Phi(q1) = 0;
-        G_U the AVF gradient of U, the rest as in MidpointDAE._step.  Newton with a
-        backtracking line search on the residual norm: with large bending the stiff axial
-        directions turn with v' inside a step and a full Newton update can overshoot.
+        G_U the AVF gradient of U, the rest as in MidpointDAE._step (integrators.
+        midpoint_iterate).  Nonlinear strain: full Newton (the matrix re-factored every
+        iteration: the stiff axial directions turn with v', and a frozen matrix converges
+        slowly) with a backtracking line search on the residual norm (a full update can
+        overshoot); a step already below the tolerance is taken whole.  _kernel_nonlinear.c
+        does the same arithmetic in the same order.
         """
         m = self.model
         n = m.n
@@ -360,73 +363,56 @@ class ElasticMidpointDAE(MidpointDAE):
         y0 = m.sleeve_height(q0)
         nc = len(phi0)
         lam_scale = 0.5 * h * h
+        line_search = full_newton = self.strain_nonlinear
 
         def evaluate(q, lam):
-            """
-            Return the Newton right-hand side and the pieces of its matrix.
-
-            Newton right-hand side -[h/2 R(q, lam); Phi(q)] and the pieces of its matrix.
-            """
-            dq = q - q0
-            dd = dq @ dq
-            qm = q0 + 0.5 * dq
-            v1 = 2.0 * dq / h - v0
-            mass1 = m.mass_matrix(q)
-            phi = m.constraint_residual(q, cs)
-            g_t = _gonzalez(m.kinetic_bilinear_gradient(qm, v0, v1),
-                            0.5 * (v0 @ mass1 - p0) @ v1, dq, dd)
-            g_y = _gonzalez(m.sleeve_height_gradient(qm), m.sleeve_height(q) - y0, dq, dd)
-            jac_m = m.constraint_jacobian(qm, cs)
-            if dd > 0.0:
-                jac_m += np.outer((phi - phi0 - jac_m @ dq) / dd, dq)
-            damping = m.damping_matrix(qm)
-            resid = (mass1 @ v1 - p0 + damping @ dq
-                     - h * (g_t - m.strain.discrete_gradient(q0, q) - force * g_y
-                            + jac_m.T @ lam))
-            return np.concatenate([-0.5 * h * resid, -phi]), (mass1, jac_m, damping, qm, dq)
+            """Newton right-hand side -[h/2 R(q, lam); Phi(q)] and the residual's pieces."""
+            x = midpoint_iterate(m, cs, q0, v0, p0, phi0, y0, q, h)
+            damping = m.damping_matrix(x.qm)
+            resid = (x.mass1 @ x.v1 - p0 + damping @ x.dq
+                     - h * (x.g_t - m.strain.discrete_gradient(q0, q) - force * x.g_y
+                            + x.jac_m.T @ lam))
+            return np.concatenate([-0.5 * h * resid, -x.phi]), x, damping
 
         q = q0 + h * v0
         lam = s.multipliers.copy()
-        f, parts = evaluate(q, lam)
         lu = piv = None
-        refresh = False
-        last_norm = np.inf
-        for it in range(1, self.max_iterations + 1):
-            if lu is None or refresh:
-                mass1, jac_m, damping, qm, dq = parts
+        last_norm = f_base = np.inf
+        alpha, base, dx = 1.0, None, None
+        it = 0
+        while it < self.max_iterations:
+            f, x, damping = evaluate(q, lam)
+            f_norm = np.linalg.norm(f)
+            if line_search and base is not None and not f_norm < f_base and alpha >= 0.05:
+                alpha *= 0.5                      # backtrack along the last Newton step
+                self.backtracks += 1
+                q = base[0] + alpha * dx[:n]
+                lam = base[1] + alpha * dx[n:] / lam_scale
+                continue
+            it += 1
+            if lu is None or full_newton:
                 it_mat = np.zeros((n + nc, n + nc))
-                it_mat[:n, :n] = (mass1 + 0.5 * h * h * m.strain.discrete_gradient_jacobian(q0, q)
-                                  + 0.5 * h * (m.gyroscopic_matrix(qm, dq / h) + damping))
-                it_mat[:n, n:] = -jac_m.T
+                avf_jacobian = m.strain.discrete_gradient_jacobian(q0, q)
+                it_mat[:n, :n] = (x.mass1 + 0.5 * h * h * avf_jacobian
+                                  + 0.5 * h * (m.gyroscopic_matrix(x.qm, x.dq / h) + damping))
+                it_mat[:n, n:] = -x.jac_m.T
                 it_mat[n:, :n] = m.constraint_jacobian(q, cs)
                 lu, piv, info = dgetrf(it_mat, overwrite_a=True)
                 if info != 0:
                     raise ConvergenceError(f"singular iteration matrix at t = {s.t + h:.9g} s")
-                self.refreshes += int(refresh)
+                self.refreshes += int(it > 1)
             dx = dgetrs(lu, piv, f)[0]
-            if not np.all(np.isfinite(dx)):
+            step_norm = np.max(np.abs(dx[:n]))
+            if not np.isfinite(step_norm):
                 raise ConvergenceError(f"Newton iterate became non-finite at t = {s.t + h:.9g} s")
-            f_norm = np.linalg.norm(f)
-            alpha = 1.0
-            while True:
-                q_try = q + alpha * dx[:n]
-                lam_try = lam + alpha * dx[n:] / lam_scale
-                f_try, parts_try = evaluate(q_try, lam_try)
-                if not self.strain_nonlinear or np.linalg.norm(f_try) < f_norm or alpha < 0.05:
-                    break
-                alpha *= 0.5
-                self.backtracks += 1
-            q, lam, f, parts = q_try, lam_try, f_try, parts_try
-            step_norm = alpha * np.max(np.abs(dx[:n]))
+            base, f_base, alpha = (q, lam), f_norm, 1.0
+            q = q + dx[:n]
+            lam = lam + dx[n:] / lam_scale
             rate = step_norm / last_norm if it > 1 else 1.0
             if step_norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * step_norm
                                               < self.tolerance):
-                if np.max(np.abs(f[n:])) < PHI_TOLERANCE:
+                if np.max(np.abs(m.constraint_residual(q, cs))) < PHI_TOLERANCE:
                     break
-            # the stiff axial directions turn with v': a frozen matrix converges slowly, and
-            # a full Newton iteration (re-factored every time) takes fewer iterations and
-            # step splits than refreshing only on slow convergence (4.8 vs 5.4 per step, N = 2)
-            refresh = self.strain_nonlinear
             last_norm = step_norm
         else:
             raise ConvergenceError(f"Newton did not converge in {self.max_iterations} iterations "
@@ -435,32 +421,14 @@ class ElasticMidpointDAE(MidpointDAE):
         dq = q - q0
         dissipated = float(dq @ m.damping_matrix(q0 + 0.5 * dq) @ dq) / h
         v = 2.0 * dq / h - v0
-        jac = m.constraint_jacobian(q, cs)
-        jv = jac @ v
-        mass1 = parts[0]
-        if not self.strain_nonlinear:
-            # the linear strain keeps MidpointDAE's projection (same results as `flexible`):
-            # scaled to the kinetic energy of the discrete balance, here net of the damping
-            t_target = (0.5 * (v0 @ p0) + m.strain_energy(q0) - m.strain_energy(q)
-                        + force * (y0 - m.sleeve_height(q)) - dissipated)
-            v = _project_keeping_energy(mass1, jac, v, t_target)
-            if v is None:
-                raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
-        elif np.max(np.abs(jv)) > 0.0:
-            chol, info = dpotrf(mass1, lower=False)
-            if info != 0:
-                raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
-            x = dpotrs(chol, jac.T)[0]
-            t_before = 0.5 * v @ mass1 @ v
-            v = v - x @ np.linalg.solve(jac @ x, jv)
-            t_after = 0.5 * v @ mass1 @ v
-            # the mass-metric projection removes O(h^2 |J v|^2) kinetic energy (it was the
-            # whole energy error of the nonlinear model: 0.8 % over 0.3 s at V0 = -2); a
-            # uniform rescale (J v = 0 is kept) gives it back, so the step balances exactly.
-            # The linear strain keeps MidpointDAE's projection (same results as `flexible`).
-            self.projection_loss += t_before - t_after
-            if self.strain_nonlinear and t_after > 0.0 and t_before > t_after:
-                v = v * np.sqrt(t_before / t_after)
+        mass1 = m.mass_matrix(q)
+        # the projection onto J v = 0, scaled to the kinetic energy of the step's discrete
+        # balance (net of the damping): energy is balanced to round-off, as in MidpointDAE
+        t_target = (0.5 * (v0 @ p0) + m.strain_energy(q0) - m.strain_energy(q)
+                    + force * (y0 - m.sleeve_height(q)) - dissipated)
+        v = _project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
+        if v is None:
+            raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
         return DampedState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v,
                            getattr(s, "dissipation", 0.0) + dissipated)
 
@@ -566,3 +534,42 @@ def spin_up_angle(t: float, omega: float = 6.0, ramp: float = 15.0):
                 (omega / ramp) * (t - math.sin(a * t) / a),
                 (omega / ramp) * (1.0 - math.cos(a * t)))
     return omega * (t - 0.5 * ramp), omega, 0.0
+
+
+#: the spin-up beam of Kane, Ryan & Banerjee (1987): L = 10 m, A = 4e-4 m^2, I = 2e-7 m^4,
+#: E = 7e10 Pa, rho = 3000 kg/m^3 (EA, EI, rho A as in the AeroBeams.jl spinupRobotArm example)
+KANE_BEAM = {"length": 10.0, "mass_per_length": 1.2, "ea": 2.8e7, "ei": 1.4e4,
+             "youngs_modulus": 7e10, "fibre": 0.01}
+
+
+def spin_up(n_elements: int, nonlinear: bool, duration: float, h: float):
+    """Return times, tip u, tip v of the Kane spin-up beam on our beam element (hub frame)."""
+    beam = PrescribedRotationBeam(n_elements=n_elements, nonlinear=nonlinear, **KANE_BEAM)
+    return beam.simulate(lambda t: spin_up_angle(t)[1], lambda t: spin_up_angle(t)[2],
+                         duration, h)
+
+
+def spin_up_quasi_static_tip(t: float) -> float:
+    """
+    Return the quasi-static tip deflection of the spinning Kane beam at time t (m).
+
+    The cantilever under its Euler load rho A theta'' x with the exact centrifugal tension
+    N = rho A w^2 (L^2 - x^2) / 2, EI v'''' - (N v')' - rho A w^2 v = -rho A theta'' x,
+    solved by scipy's boundary-value solver (no finite elements): the independent reference
+    of the spin-up benchmark.
+    """
+    from scipy.integrate import solve_bvp
+    length, rho_a, ei = KANE_BEAM["length"], KANE_BEAM["mass_per_length"], KANE_BEAM["ei"]
+    _, w, wd = spin_up_angle(t)
+
+    def rhs(x, y):
+        tension = 0.5 * rho_a * w * w * (length ** 2 - x * x)
+        return np.vstack([y[1], y[2], y[3], (-rho_a * w * w * x * y[1] + tension * y[2]
+                                             + rho_a * w * w * y[0] - rho_a * wd * x) / ei])
+
+    x = np.linspace(0.0, length, 60)
+    sol = solve_bvp(rhs, lambda a, b: np.array([a[0], a[1], b[2], b[3]]), x, np.zeros((4, 60)),
+                    tol=1e-8)
+    if sol.status != 0:
+        raise RuntimeError(f"quasi-static spin-up reference at t = {t:g} s: {sol.message}")
+    return float(sol.sol(length)[0])
