@@ -9,7 +9,7 @@ import math
 import os
 import sys
 
-from . import __version__
+from . import __version__, sweep
 from .files import check_new_output, read_text_input
 from .params import (check_known_names, load_params_file, NODE_ONLY_PARAMS, parameter_help,
                      SPECS, UmbrellaParams)
@@ -65,28 +65,36 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
     return rows
 
 
-def build_params(args) -> UmbrellaParams:
+def resolve_params(overrides: dict, params_file: str | None = None) -> UmbrellaParams:
+    """The offline run's parameters: the params file (default config/umbrella.yaml, its node-only
+    keys skipped), then the overrides; validated (ValueError names the parameter)."""
     values: dict = {}
-    params_file = args.params or default_params_file()
+    params_file = params_file or default_params_file()
     if params_file:
         from_file = load_params_file(params_file)
         check_known_names(from_file, set(SPECS) | set(NODE_ONLY_PARAMS),
                           f"params file {params_file}")
         values.update(from_file)
+    for name in NODE_ONLY_PARAMS:
+        values.pop(name, None)
+    values.update(overrides)
+    return UmbrellaParams.from_mapping(values).validated()
+
+
+def build_params(args) -> UmbrellaParams:
+    values: dict = {}
     for item in args.set or []:
         if "=" not in item:
             raise ValueError(f"--set {item!r}: expected name=value")
         name, value = item.split("=", 1)
         check_known_names([name.strip()], SPECS, "--set")
         values[name.strip()] = value.strip()
-    for name in NODE_ONLY_PARAMS:
-        values.pop(name, None)
     for flag, name in (("model", "model"), ("elements_per_segment", "elements_per_segment"),
                        ("v0", "v0"), ("force", "sleeve_force"), ("lock", "lock"),
                        ("time_step", "time_step")):
         if getattr(args, flag) is not None:
             values[name] = getattr(args, flag)
-    return UmbrellaParams.from_mapping(values).validated()
+    return resolve_params(values, args.params)
 
 
 class Progress:
@@ -139,12 +147,15 @@ def make_parser() -> argparse.ArgumentParser:
                          "is then taken at the publication instants")
     sp.add_argument("--publish-rate", type=float, default=100.0,
                     help="publication rate of the --mcap recording (Hz, sim time)")
+    sweep.add_parser(sub)
     return ap
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = make_parser()
     args = ap.parse_args(argv)
+    if args.command == "sweep":
+        return sweep.main(args, ap)
     try:
         params = build_params(args)
         profile = (read_force_profile(args.force_profile, params)
