@@ -374,11 +374,6 @@ def write_parquet(path: str, columns: list[str], rows: list[dict]) -> None:
     os.replace(tmp, path)
 
 
-def read_csv(path: str) -> list[dict]:
-    with open(path, newline="", encoding="utf-8") as fh:
-        return list(csv.DictReader(fh))
-
-
 # ------------------------------------------------------------------ plots
 def _series(sweep: Sweep, rows: list[dict]):
     """x = the first grid axis; one series per combination of the other swept parameters."""
@@ -448,7 +443,8 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
             if not numeric:
                 ax.set_xticks(range(len(xs_all)), [str(x) for x in xs_all])
             ax.grid(True, alpha=0.3)
-            ax.legend(fontsize=8)
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize=8)
         axes[-1].set_xlabel(xlabel)
         axes[0].set_title(title)
         fig.tight_layout()
@@ -458,8 +454,12 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
         written.append(path)
 
     # deployment time, and its difference to the rigid model (Table 6.1 "time prolonged")
-    fig, (ax, ax_d) = plt.subplots(2, 1, figsize=(7, 6.5), sharex=True,
-                                   gridspec_kw={"height_ratios": [3, 2]})
+    if len(series) > 1 or reference:
+        fig, (ax, ax_d) = plt.subplots(2, 1, figsize=(7, 6.5), sharex=True,
+                                       gridspec_kw={"height_ratios": [3, 2]})
+    else:
+        fig, ax = plt.subplots(figsize=(7, 4.5))
+        ax_d = None
     ref_label, ref_rows = _reference_series(series)
     ref = {r.get(x_name): r["deploy_time"] for r in ref_rows
            if isinstance(r.get("deploy_time"), (int, float))}
@@ -469,7 +469,7 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
             ax.plot(*zip(*pts), "o-", color=colours[label], label=label)
         diff = [(pos[r.get(x_name)], (r["deploy_time"] - ref[r.get(x_name)]) * 1e3) for r in g
                 if isinstance(r.get("deploy_time"), (int, float)) and r.get(x_name) in ref]
-        if diff and label != ref_label:
+        if diff and label != ref_label and ax_d is not None:
             ax_d.plot(*zip(*diff), "o-", color=colours[label], label=label)
     for i, (label, values) in enumerate((reference or {}).items()):
         pts = sorted((pos[x], t) for x, t in values.items() if x in pos and t is not None)
@@ -477,12 +477,13 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
             ax.plot(*zip(*pts), "kx^+d"[i % 5], ms=9, ls="none", label=label)
             diff = [(pos[x], (t - ref[x]) * 1e3) for x, t in values.items()
                     if x in ref and x in pos and t is not None]
-            if diff:
+            if diff and ax_d is not None:
                 ax_d.plot(*zip(*sorted(diff)), "kx^+d"[i % 5], ms=9, ls="none", label=label)
     ax.set_ylabel("deployment time (s)")
-    ax_d.set_ylabel(f"minus {ref_label} (ms)")
-    ax_d.axhline(0.0, color="k", lw=0.8)
-    finish(fig, [ax, ax_d], "deploy_time.png", f"deployment time vs {x_name} (thesis Table 6.1)")
+    if ax_d is not None:
+        ax_d.set_ylabel(f"minus {ref_label} (ms)")
+        ax_d.axhline(0.0, color="k", lw=0.8)
+    finish(fig, [a for a in (ax, ax_d) if a is not None], "deploy_time.png", f"deployment time vs {x_name} (thesis Table 6.1)")
 
     # peak stresses with the yield line; rigid models carry no elastic stress: left out
     fig, ax = plt.subplots(figsize=(7, 4.5))
@@ -551,7 +552,7 @@ class SweepReport:
     total: int
     skipped: int
     ran: int = 0
-    failed: int = 0
+    failed: int = 0             # rows of the table whose status is not ok
     interrupted: bool = False
     csv: str = ""
     parquet: str = ""
@@ -561,7 +562,11 @@ class SweepReport:
 def _client(workers: int | None, scheduler: str | None, log: Callable[[str], None]):
     import logging
 
-    from distributed import Client, LocalCluster
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError as exc:
+        raise SpecError(f"umbrella-sim sweep needs dask and distributed ({exc}); "
+                        "install requirements.txt") from None
 
     if scheduler:
         try:
@@ -570,12 +575,19 @@ def _client(workers: int | None, scheduler: str | None, log: Callable[[str], Non
             raise SpecError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
         return client, None
     n = workers or os.cpu_count() or 1
+    # loopback only, every port (scheduler, its HTTP server, workers) picked free by the OS
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           host="127.0.0.1", scheduler_port=0, dashboard_address=None,
+                           host="127.0.0.1", scheduler_port=0, dashboard_address="127.0.0.1:0",
                            silence_logs=logging.ERROR)
     log(f"local Dask cluster: {n} worker process{'es' if n > 1 else ''} at "
         f"{cluster.scheduler_address}")
     return Client(cluster), cluster
+
+
+def _ignore_sigint() -> None:
+    """On a local cluster's workers: Ctrl-C reaches the whole process group; the sweep
+    process handles it and closes the workers, which would otherwise each print a traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _check_workers(client, scheduler: str | None, log) -> None:
@@ -594,6 +606,8 @@ def _check_workers(client, scheduler: str | None, log) -> None:
         raise SpecError(f"workers run other umbrella_sim versions than {__version__}: {wrong}")
     if scheduler:
         log(f"Dask cluster {scheduler}: {len(versions)} worker(s)")
+    else:
+        client.run(_ignore_sigint)
 
 
 def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
@@ -646,7 +660,6 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
                     store.save(make_record(case, result))
                     report.ran += 1
                     failed = result["status"] != STATUS_OK
-                    report.failed += failed
                     progress.update(failed, f"case {case.index}: {case.label(sweep.swept)}"
                                     + (f": {result['status']}" if failed else ""))
                     fut.release()
@@ -681,9 +694,10 @@ def _write_outputs(sweep, store, out_dir, report, log) -> None:
         report.parquet = ""
         log("results.parquet not written: pyarrow is not installed")
     report.plots = plot(sweep, rows, out_dir)
-    done = sum(r["status"] in FINISHED for r in rows)
-    log(f"{len(rows)} of {len(sweep.cases)} cases in {report.csv} ({done} finished, "
-        f"{len(rows) - done} failed)")
+    ok = sum(r["status"] == STATUS_OK for r in rows)
+    report.failed = len(rows) - ok
+    log(f"{len(rows)} of {len(sweep.cases)} cases in {report.csv}: {ok} ok"
+        + (f", {report.failed} failed (see the error column)" if report.failed else ""))
 
 
 # ------------------------------------------------------------------ command line

@@ -1,0 +1,376 @@
+"""umbrella-sim sweep: SPEC checks, a local Dask sweep, a real distributed run (dask scheduler +
+two dask worker processes on 127.0.0.1), a worker killed mid-sweep, Ctrl-C and re-runs.
+
+Every process a test starts runs in its own session and is killed (whole process group) in
+teardown; every port is picked free by the OS.
+"""
+import csv
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from umbrella_sim import cli, sweep
+from umbrella_sim.compare import THESIS_TABLE_6_1
+from umbrella_sim.params import UmbrellaParams
+from umbrella_sim.rigid import deployment_time_by_quadrature
+from umbrella_sim.solver import simulate
+
+BIN = os.path.dirname(sys.executable)
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+#: columns that depend on the machine and the moment, not on the physics
+WALL_CLOCK = {"wall_time", "real_time_factor", "worker", "mcap"}
+
+SMALL_SPEC = """
+grid:
+  v0: [-1.0, -2.0]
+  model: [flexible, rigid]
+cases:
+  - {v0: -2.0, model: rigid-fe}
+  - {v0: -1000.0, time_step: 0.01}   # 1 km/s with a 10 ms step: the solver gives up
+duration: 0.1
+stop_after_lock: 0.01
+"""
+
+
+def write(path, text):
+    path.write_text(text)
+    return str(path)
+
+
+def sweep_cmd(*args):
+    return [sys.executable, "-m", "umbrella_sim", "sweep", *args]
+
+
+class Processes:
+    """Processes started by a test, each in its own session; all killed at teardown."""
+
+    def __init__(self, log_dir):
+        self.log_dir = log_dir
+        self.procs = []
+
+    def start(self, name, cmd):
+        log = open(os.path.join(self.log_dir, name + ".log"), "w")
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
+                                start_new_session=True, cwd=self.log_dir)
+        proc.log_path = log.name
+        log.close()
+        self.procs.append(proc)
+        return proc
+
+    @staticmethod
+    def kill(proc, sig=signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            pass
+
+    def stop_all(self):
+        for proc in self.procs:
+            self.kill(proc)
+        for proc in self.procs:
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                pass
+
+
+def output(proc):
+    with open(proc.log_path, encoding="utf-8", errors="replace") as fh:
+        return fh.read()
+
+
+def run_sweep(procs, name, *args, timeout=240):
+    proc = procs.start(name, sweep_cmd(*args))
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"sweep {name} did not finish in {timeout} s:\n{output(proc)}")
+    return proc.returncode, output(proc)
+
+
+def read_rows(out_dir):
+    with open(os.path.join(out_dir, "results.csv"), newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def physics(rows):
+    return [{k: v for k, v in row.items() if k not in WALL_CLOCK} for row in rows]
+
+
+def wait_for(predicate, timeout, what):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.1)
+    pytest.fail(f"timed out after {timeout} s waiting for {what}")
+
+
+def finished_cases(out_dir):
+    cases = os.path.join(out_dir, "cases")
+    return [f for f in os.listdir(cases) if f.endswith(".json")] if os.path.isdir(cases) else []
+
+
+@pytest.fixture
+def procs(tmp_path):
+    p = Processes(str(tmp_path))
+    yield p
+    p.stop_all()
+
+
+@pytest.fixture(scope="module")
+def local_run(tmp_path_factory):
+    """The small SPEC on a local cluster of two worker processes (module-wide)."""
+    tmp = tmp_path_factory.mktemp("local")
+    spec = write(tmp / "small.yaml", SMALL_SPEC)
+    out = str(tmp / "out")
+    procs = Processes(str(tmp))
+    try:
+        rc, log = run_sweep(procs, "local", spec, "--out", out, "--workers", "2")
+    finally:
+        procs.stop_all()
+    return {"spec": spec, "out": out, "rc": rc, "log": log, "rows": read_rows(out)}
+
+
+@pytest.fixture
+def dask_cluster(procs, tmp_path):
+    """`dask scheduler` and two `dask worker` processes on 127.0.0.1 (free ports)."""
+    scheduler_file = str(tmp_path / "scheduler.json")
+    procs.start("scheduler", [os.path.join(BIN, "dask"), "scheduler", "--host", "127.0.0.1",
+                              "--port", "0", "--dashboard-address", "127.0.0.1:0",
+                              "--scheduler-file", scheduler_file])
+    wait_for(lambda: os.path.exists(scheduler_file), 60, "the scheduler file")
+    time.sleep(0.2)     # the file is written in one go, but give it a moment to be closed
+    with open(scheduler_file) as fh:
+        address = json.load(fh)["address"]
+    workers = [procs.start(f"worker{i}", [
+        os.path.join(BIN, "dask"), "worker", address, "--host", "127.0.0.1", "--nworkers", "1",
+        "--nthreads", "1", "--dashboard-address", "127.0.0.1:0",
+        "--local-directory", str(tmp_path / f"worker{i}")]) for i in range(2)]
+    from distributed import Client
+
+    with Client(address, timeout="30s") as client:
+        client.wait_for_workers(2, timeout=60)
+    return address, workers
+
+
+# ------------------------------------------------------------------ SPEC checks
+@pytest.mark.parametrize("spec, culprits", [
+    ("grid:\n  v0: [-1.0, -2.0]\n  speed: [1, 2]\n", ["case 1", "speed", "unknown parameter"]),
+    ("grid:\n  v0: [-1.0, fast]\n", ["case 2", "v0", "fast"]),
+    ("grid:\n  v0: [-1.0]\ncases:\n  - {model: flexible}\n  - {model: elastic}\n",
+     ["case 3", "model", "elastic", "one of"]),
+    ("base: {l3: 0.01}\ngrid:\n  v0: [-1.0]\n", ["case 1", "cannot close"]),
+    ("grid:\n  elements_per_segment: [1, 2.5]\n", ["case 2", "elements_per_segment"]),
+    ("grid:\n  v0: []\n", ["grid", "v0", "non-empty list"]),
+    ("grid:\n  v0: [-1.0]\nduration: -1\n", ["duration", "-1"]),
+    ("grid:\n  v0: [-1.0]\nstop_after_lock: .nan\n", ["stop_after_lock"]),
+    ("grid:\n  v0: [-1.0]\nforce: -2\n", ["force", ">= 0"]),
+    ("grid:\n  v0: [-1.0]\nforce_profile: missing.csv\n", ["force_profile", "missing.csv"]),
+    ("grid:\n  v0: [-1.0]\nrepeat: 3\n", ["unknown key", "repeat"]),
+    ("base: {v0: -1.0}\n", ["no cases"]),
+    ("grid: [v0, -1.0]\n", ["grid", "mapping"]),
+    ("grid:\n  v0: [-1.0\n", ["not valid YAML"]),
+])
+def test_bad_spec_refused_before_any_work(tmp_path, capsys, spec, culprits):
+    path = write(tmp_path / "bad.yaml", spec)
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["sweep", path, "--out", str(out)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    for culprit in culprits:
+        assert culprit in err, err
+    assert not out.exists(), "a refused SPEC must not touch the results directory"
+
+
+def test_missing_spec_and_bad_options_refused(tmp_path, capsys):
+    spec = write(tmp_path / "ok.yaml", "grid:\n  v0: [-1.0]\n")
+    for args, culprit in ((["nope.yaml"], "nope.yaml"),
+                          ([spec, "--workers", "0"], "--workers"),
+                          ([spec, "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+                           "--scheduler")):
+        with pytest.raises(SystemExit) as exc:
+            cli.main(["sweep", *args, "--out", str(tmp_path / "out")])
+        assert exc.value.code == 2
+        assert culprit in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_spec_cases_ids_and_force_profile(tmp_path):
+    """Grid product (first axis outermost), explicit cases after it, duplicates run once,
+    a force profile read relative to the SPEC; the case's run matches simulate()."""
+    write(tmp_path / "push.csv", "t,F\n0.0,0.0\n0.01,4.0\n")
+    spec = sweep.load_spec(write(tmp_path / "s.yaml", (
+        "base: {elements_per_segment: 1}\n"
+        "grid:\n  v0: [-0.5, -1.0]\n  model: [flexible, rigid]\n"
+        "cases:\n  - {v0: -1.0, model: rigid}\n  - {v0: -1.0, lock: plastic}\n"
+        "force_profile: push.csv\nduration: 0.12\nstop_after_lock: 0.0\n")))
+    assert [(c.params["v0"], c.params["model"]) for c in spec.cases[:4]] == [
+        (-0.5, "flexible"), (-0.5, "rigid"), (-1.0, "flexible"), (-1.0, "rigid")]
+    assert spec.duplicates == [(5, 4)]
+    assert spec.cases[-1].index == 6 and spec.cases[-1].params["lock"] == "plastic"
+    assert spec.axes == ["v0", "model"] and spec.swept == ["v0", "model", "lock"]
+    assert len({c.case_id for c in spec.cases}) == 5
+    case = spec.cases[0]
+    assert case.force_profile == [[0.0, 0.0], [0.01, 4.0]]
+    got = sweep.run_case(case.task(None))
+    assert got["status"] == "ok", got["error"]
+    ref = simulate(UmbrellaParams(v0=-0.5), 0.12, force_profile=[(0.0, 0.0), (0.01, 4.0)],
+                   stop_after_lock=0.0).summary()
+    assert got["summary"]["deploy_time"] == ref["deploy_time"]
+    free = simulate(UmbrellaParams(v0=-0.5), 0.12, stop_after_lock=0.0).summary()
+    assert got["summary"]["deploy_time"] < free["deploy_time"], "F_H pushes toward deployment"
+    # the key follows every parameter and the run options
+    other = sweep.load_spec(write(tmp_path / "t.yaml", (
+        "base: {elements_per_segment: 1}\ngrid:\n  v0: [-0.5]\n  model: [flexible]\n"
+        "force_profile: push.csv\nduration: 0.12\n")))
+    assert other.cases[0].case_id != case.case_id
+
+
+# ------------------------------------------------------------------ local cluster
+def test_local_sweep_table_physics_and_plots(local_run):
+    assert local_run["rc"] == 3, local_run["log"]          # one case fails, the rest go on
+    rows = local_run["rows"]
+    assert [int(r["case"]) for r in rows] == [1, 2, 3, 4, 5, 6]
+    by = {(float(r["v0"]), r["model"]): r for r in rows}
+    failed = rows[5]
+    assert failed["status"] == "diverged" and failed["error"], failed
+    assert all(r["status"] == "ok" and not r["error"] for r in rows[:5])
+    for v0 in (-1.0, -2.0):
+        t_flex = float(by[(v0, "flexible")]["deploy_time"])
+        t_rigid = float(by[(v0, "rigid")]["deploy_time"])
+        exact = deployment_time_by_quadrature(UmbrellaParams(), v0)
+        assert t_rigid == pytest.approx(exact, rel=1e-4)
+        # deformation delays the deployment (Table 6.1); the flexible time is the thesis's
+        assert t_flex > t_rigid
+        assert t_flex == pytest.approx(THESIS_TABLE_6_1[v0][0], rel=5e-3)
+    assert float(by[(-2.0, "rigid-fe")]["deploy_time"]) == pytest.approx(
+        deployment_time_by_quadrature(UmbrellaParams(), -2.0), rel=1e-3)
+    # each row is the summary `umbrella-sim simulate` gives for the same case
+    ref = simulate(UmbrellaParams(v0=-2.0), 0.1, stop_after_lock=0.01).summary()
+    row = by[(-2.0, "flexible")]
+    for key, value in ref.items():
+        if key in WALL_CLOCK or key == "error":
+            continue
+        assert key in row, f"summary key {key} missing from results.csv"
+        if isinstance(value, float):
+            assert float(row[key]) == value, key
+    assert float(row["duration"]) == 0.1 and float(row["stop_after_lock"]) == 0.01
+    assert float(row["final_time"]) == pytest.approx(ref["final_time"])
+    # parquet holds the same table
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(os.path.join(local_run["out"], "results.parquet")).to_pylist()
+    assert [r["case_id"] for r in table] == [r["case_id"] for r in rows]
+    assert table[0]["deploy_time"] == float(rows[0]["deploy_time"])
+    for name in sweep.PLOTS:
+        with open(os.path.join(local_run["out"], name), "rb") as fh:
+            assert fh.read(8) == b"\x89PNG\r\n\x1a\n", name
+    assert "6/6 cases" in local_run["log"] and "ETA" in local_run["log"]
+
+
+def test_rerun_skips_finished_cases(local_run, procs):
+    store = os.path.join(local_run["out"], "cases")
+    before = {f: os.stat(os.path.join(store, f)).st_mtime_ns for f in os.listdir(store)}
+    rc, log = run_sweep(procs, "again", local_run["spec"], "--out", local_run["out"])
+    assert rc == 3, log                 # still one failed case in the table
+    assert "6 of 6 cases already" in log and "Dask cluster" not in log, log
+    assert {f: os.stat(os.path.join(store, f)).st_mtime_ns for f in os.listdir(store)} == before
+    assert physics(read_rows(local_run["out"])) == physics(local_run["rows"])
+
+
+def test_ctrl_c_keeps_finished_cases_and_rerun_completes(tmp_path, procs):
+    spec = write(tmp_path / "slow.yaml", (
+        "base: {elements_per_segment: 4, v0: -1.0}\n"
+        "grid:\n  section_height: [0.008, 0.009, 0.010, 0.011, 0.012, 0.013, 0.014, 0.015]\n"
+        "duration: 2.0\n"))
+    out = str(tmp_path / "out")
+    proc = procs.start("interrupted", sweep_cmd(spec, "--out", out, "--workers", "1"))
+    wait_for(lambda: finished_cases(out) or proc.poll() is not None, 120, "a finished case")
+    os.killpg(proc.pid, signal.SIGINT)          # as Ctrl-C in a terminal: the whole group
+    proc.wait(timeout=60)
+    log = output(proc)
+    assert proc.returncode == 130, log
+    assert "interrupted" in log and "Traceback" not in log, log
+    kept = finished_cases(out)
+    rows = read_rows(out)
+    assert 1 <= len(rows) == len(kept) < 8, log
+    assert {r["case_id"] + ".json" for r in rows} == set(kept)
+    rc, log2 = run_sweep(procs, "finish", spec, "--out", out, "--workers", "1")
+    assert rc == 0, log2
+    assert f"{len(kept)} of 8 cases already" in log2
+    rows2 = read_rows(out)
+    assert len(rows2) == 8 and all(r["status"] == "ok" for r in rows2)
+    final = {r["case_id"]: r for r in physics(rows2)}
+    for row in physics(rows):
+        assert final[row["case_id"]] == row, "a kept case changed"
+    # a thicker section is stiffer: less stage-1 tip deflection (rows in SPEC order)
+    tips = [float(r["tip_deflection_max"]) for r in rows2]
+    assert all(a > b for a, b in zip(tips, tips[1:])), tips
+
+
+# ------------------------------------------------------------------ a real Dask cluster
+def test_distributed_run_equals_local_run(local_run, dask_cluster, procs, tmp_path):
+    address, _ = dask_cluster
+    out = str(tmp_path / "dist")
+    rc, log = run_sweep(procs, "dist", local_run["spec"], "--out", out, "--scheduler", address)
+    assert rc == 3, log
+    assert f"Dask cluster {address}: 2 worker(s)" in log
+    rows = read_rows(out)
+    assert physics(rows) == physics(local_run["rows"])
+    assert len({r["worker"] for r in rows}) == 2, "both workers took cases"
+
+
+def test_worker_killed_mid_sweep_gives_complete_table(dask_cluster, procs, tmp_path):
+    address, workers = dask_cluster
+    spec = write(tmp_path / "ten.yaml", (
+        "base: {elements_per_segment: 4}\n"
+        "grid:\n  v0: [-0.3, -0.4, -0.5, -0.6, -0.7, -0.8, -0.9, -1.0, -1.1, -1.2]\n"
+        "duration: 2.0\n"))
+    out = str(tmp_path / "out")
+    proc = procs.start("killed", sweep_cmd(spec, "--out", out, "--scheduler", address))
+    wait_for(lambda: finished_cases(out) or proc.poll() is not None, 120, "a finished case")
+    Processes.kill(workers[0])          # nanny and worker process, mid-sweep
+    workers[0].wait(timeout=10)
+    proc.wait(timeout=240)
+    log = output(proc)
+    assert proc.returncode == 0, log
+    rows = read_rows(out)
+    assert len(rows) == 10 and all(r["status"] == "ok" for r in rows), log
+    # stage-1 tip deflection grows with the deployment speed, whichever worker ran the case
+    tips = [float(r["tip_deflection_max"]) for r in rows]
+    assert all(a < b for a, b in zip(tips, tips[1:])), tips
+    assert math.isclose(float(rows[0]["deploy_time"]),
+                        simulate(UmbrellaParams(v0=-0.3, elements_per_segment=4), 2.0)
+                        .summary()["deploy_time"], rel_tol=0, abs_tol=0)
+
+
+def test_mcap_keeps_a_recording_per_case(tmp_path, procs):
+    from umbrella_sim.compare import load_run
+
+    spec = write(tmp_path / "rec.yaml", ("grid:\n  model: [flexible, rigid]\nbase: {v0: -2.0}\n"
+                                         "duration: 0.05\nstop_after_lock: 0.005\n"))
+    out = str(tmp_path / "out")
+    rc, log = run_sweep(procs, "plain", spec, "--out", out, "--workers", "1")
+    assert rc == 0, log
+    # a finished case without its recording runs again under --mcap, then is skipped
+    rc, log = run_sweep(procs, "rec", spec, "--out", out, "--workers", "1", "--mcap")
+    assert rc == 0 and "already" not in log, log
+    rows = read_rows(out)
+    for row in rows:
+        bag = row["mcap"]
+        assert bag == os.path.join(out, "mcap", row["case_id"])
+        assert os.path.isfile(os.path.join(bag, row["case_id"] + "_0.mcap"))
+        run = load_run(bag)
+        # recorded at 100 Hz publications: the lock shows within one publication period
+        assert run.deploy_time == pytest.approx(float(row["deploy_time"]), abs=0.0101)
+        assert run.params["model"] == row["model"]
+    rc, log = run_sweep(procs, "rec2", spec, "--out", out, "--workers", "1", "--mcap")
+    assert rc == 0 and "2 of 2 cases already" in log, log
