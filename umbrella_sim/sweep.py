@@ -207,7 +207,10 @@ def load_spec(path: str) -> Sweep:
 
 # ------------------------------------------------------------------ one case (on a worker)
 def worker_version() -> str:
-    """The umbrella_sim version a worker runs (checked before any case is sent)."""
+    """The umbrella_sim version a worker runs, after importing the physics core (checked, and
+    the import paid, before any case is sent)."""
+    from . import solver  # noqa: F401
+
     return __version__
 
 
@@ -557,6 +560,9 @@ class SweepReport:
     csv: str = ""
     parquet: str = ""
     plots: list = field(default_factory=list)
+    setup_s: float = 0.0        # wall time to start or reach the cluster and check its workers
+    run_s: float = 0.0          # wall time from the first submission to the last result
+    compute_s: float = 0.0      # sum of the cases' own wall times on the workers
 
 
 def _client(workers: int | None, scheduler: str | None, log: Callable[[str], None]):
@@ -637,10 +643,13 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
     futures = []
     try:
         if todo:
+            t0 = time.perf_counter()
             client, cluster = _client(workers, scheduler, log)
             _check_workers(client, scheduler, log)
             from distributed import as_completed
 
+            t1 = time.perf_counter()
+            report.setup_s = t1 - t0
             by_key = {}
             for case in todo:
                 fut = client.submit(run_case, case.task(mcap_dir), pure=False,
@@ -659,12 +668,18 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
                                   "worker": None, "mcap": None}
                     store.save(make_record(case, result))
                     report.ran += 1
+                    report.run_s = time.perf_counter() - t1
+                    report.compute_s += result.get("case_wall_time") or 0.0
                     failed = result["status"] != STATUS_OK
                     progress.update(failed, f"case {case.index}: {case.label(sweep.swept)}"
                                     + (f": {result['status']}" if failed else ""))
                     fut.release()
             finally:
                 progress.close()
+            log(f"{report.ran} case(s) in {report.run_s:.1f} s "
+                f"({report.ran / max(report.run_s, 1e-9):.2f} cases/s, "
+                f"{report.compute_s:.1f} s of computing; cluster ready in "
+                f"{report.setup_s:.1f} s)")
     except KeyboardInterrupt:
         report.interrupted = True
         log(f"interrupted: {report.ran} case(s) of {len(todo)} finished in this run are kept "

@@ -1,0 +1,77 @@
+#!/usr/bin/env python3
+"""Throughput of `umbrella-sim sweep`: cases per second with 1 and 2 local Dask workers, and the
+scheduling overhead per case.
+
+The sweep: --cases flexible cases (N = 1, V0 spread over -0.3 .. -1.5 m/s), each run for
+--duration simulated seconds.  For each worker count, a fresh local cluster runs the whole
+sweep into a fresh directory (the same code path as the command line) and we print:
+- cluster start: starting the worker processes and checking their umbrella_sim;
+- cases/s: cases finished per wall second, first submission to last result (store writes
+  included, cluster start excluded);
+- overhead/case: (wall time x workers - sum of the cases' own wall times on the workers) /
+  cases, i.e. what Dask, the pickling of the task and result and the store cost each case;
+- no-op round trip: submit -> result of an empty task on the same cluster, one at a time.
+The machine is shared: wall-clock figures are noisy.
+
+    python bench/bench_sweep.py [--cases 24] [--duration 0.3] [--workers 1 2]
+"""
+import argparse
+import io
+import os
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+from umbrella_sim import sweep  # noqa: E402
+
+
+def noop(x):
+    return x
+
+
+def round_trip(n_workers: int, n: int = 50) -> float:
+    client, cluster = sweep._client(n_workers, None, lambda msg: None)
+    try:
+        client.submit(noop, -1, pure=False).result()        # warm up
+        t0 = time.perf_counter()
+        for i in range(n):
+            client.submit(noop, i, pure=False).result()
+        return (time.perf_counter() - t0) / n
+    finally:
+        client.close()
+        cluster.close()
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cases", type=int, default=24)
+    ap.add_argument("--duration", type=float, default=0.3, help="simulated s per case")
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    args = ap.parse_args()
+    v0s = [round(-0.3 - 1.2 * i / max(args.cases - 1, 1), 6) for i in range(args.cases)]
+    print(f"{args.cases} cases: flexible N = 1, V0 = {v0s[0]} .. {v0s[-1]} m/s, "
+          f"{args.duration} s simulated each; {os.cpu_count()} cores (shared machine)")
+    print(f"{'workers':>7} {'cluster start':>13} {'wall':>7} {'cases/s':>8} "
+          f"{'compute/case':>12} {'overhead/case':>13} {'no-op round trip':>16}")
+    with tempfile.TemporaryDirectory(prefix="bench_sweep_") as tmp:
+        spec = os.path.join(tmp, "spec.yaml")
+        with open(spec, "w") as fh:
+            fh.write(f"grid:\n  v0: {v0s}\nduration: {args.duration}\n")
+        loaded = sweep.load_spec(spec)
+        for n in args.workers:
+            log = io.StringIO()
+            report = sweep.run_sweep(loaded, os.path.join(tmp, f"out{n}"), workers=n,
+                                     stream=log)
+            assert report.ran == args.cases and report.failed == 0, log.getvalue()
+            overhead = (report.run_s * n - report.compute_s) / report.ran
+            rt = round_trip(n)
+            print(f"{n:>7} {report.setup_s:>11.2f} s {report.run_s:>5.2f} s "
+                  f"{report.ran / report.run_s:>8.2f} {report.compute_s / report.ran * 1e3:>9.1f} ms"
+                  f" {overhead * 1e3:>10.1f} ms {rt * 1e3:>13.2f} ms")
+
+
+if __name__ == "__main__":
+    main()
