@@ -390,11 +390,13 @@ def _series(sweep: Sweep, rows: list[dict]):
 
     def label(key):
         parts = []
+        closed_form = dict(zip(others, key)).get("model") == "rigid"
         for name, value in zip(others, key):
             if name == "model":
                 parts.insert(0, str(value))
             elif name == "elements_per_segment":
-                parts.append(f"N = {value}")
+                if not closed_form:             # the closed-form rigid model has no mesh
+                    parts.append(f"N = {value}")
             else:
                 parts.append(f"{name} = {value}")
         return ", ".join(parts) or "all cases"
@@ -476,25 +478,34 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
             ax_d.plot(*zip(*diff), "o-", color=colours[label], label=label)
     for i, (label, values) in enumerate((reference or {}).items()):
         pts = sorted((pos[x], t) for x, t in values.items() if x in pos and t is not None)
+        style = dict(marker="Dx+^v"[i % 5], ms=9, ls="none", color="k", mfc="none", label=label)
         if pts:
-            ax.plot(*zip(*pts), "kx^+d"[i % 5], ms=9, ls="none", label=label)
+            ax.plot(*zip(*pts), **style)
             diff = [(pos[x], (t - ref[x]) * 1e3) for x, t in values.items()
                     if x in ref and x in pos and t is not None]
             if diff and ax_d is not None:
-                ax_d.plot(*zip(*sorted(diff)), "kx^+d"[i % 5], ms=9, ls="none", label=label)
+                ax_d.plot(*zip(*sorted(diff)), **style)
     ax.set_ylabel("deployment time (s)")
     if ax_d is not None:
         ax_d.set_ylabel(f"minus {ref_label} (ms)")
         ax_d.axhline(0.0, color="k", lw=0.8)
     finish(fig, [a for a in (ax, ax_d) if a is not None], "deploy_time.png", f"deployment time vs {x_name} (thesis Table 6.1)")
 
-    # peak stresses with the yield line; rigid models carry no elastic stress: left out
+    def elastic(keys):
+        """Series with elastic deformation: rigid models (zero up to round-off) left out."""
+        top = max([abs(r[k]) for _, g in series for r in g for k in keys
+                   if isinstance(r.get(k), (int, float))] or [0.0])
+        return [(label, g) for label, g in series
+                if any(abs(r[k]) > 1e-6 * top for r in g for k in keys
+                       if isinstance(r.get(k), (int, float)))]
+
+    # peak stresses with the yield line
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, g in series:
+    for label, g in elastic(["peak_stress_leaf", "peak_stress_link"]):
         for key, style, body in (("peak_stress_leaf", "o-", "leaf"),
                                  ("peak_stress_link", "s--", "link")):
             pts = points(g, key, 1e-6)
-            if any(y > 0.0 for _, y in pts):
+            if pts:
                 ax.plot(*zip(*pts), style, color=colours[label], label=f"{label}: {body}")
     for y in sorted({r["yield_strength"] for _, g in series for r in g
                      if isinstance(r.get("yield_strength"), (int, float))}):
@@ -503,9 +514,9 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     finish(fig, [ax], "peak_stress.png", f"peak stress vs {x_name}")
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, g in series:
+    for label, g in elastic(["tip_deflection_max"]):
         pts = points(g, "tip_deflection_max", 1e3)
-        if any(y > 0.0 for _, y in pts):
+        if pts:
             ax.plot(*zip(*pts), "o-", color=colours[label], label=label)
     ax.set_ylabel("stage-1 max transverse deflection of G (mm)")
     finish(fig, [ax], "tip_deflection.png", f"stage-1 max tip deflection vs {x_name}")
