@@ -111,7 +111,8 @@ def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> st
 def load_spec(path: str) -> Sweep:
     """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
     from .cli import read_force_profile, resolve_params
-    from .solver import validate_force
+    from .params import UmbrellaParams
+    from .solver import command_force
 
     try:
         with open(path, encoding="utf-8") as fh:
@@ -160,10 +161,9 @@ def load_spec(path: str) -> Sweep:
             raise SpecError(f"sweep spec {path}: give force or force_profile, not both")
         if "sleeve_force" in base:
             raise SpecError(f"sweep spec {path}: force and base.sleeve_force both set")
-        try:
-            base["sleeve_force"] = validate_force(doc["force"])
-        except (TypeError, ValueError) as exc:
-            raise SpecError(f"sweep spec {path}: force: {exc}") from None
+        if isinstance(doc["force"], bool) or not isinstance(doc["force"], (int, float)):
+            raise SpecError(f"sweep spec {path}: force: {doc['force']!r} is not a number")
+        base["sleeve_force"] = doc["force"]     # its range is checked with each case's model
     profile = profile_path = None
     if doc.get("force_profile") is not None:
         if not isinstance(doc["force_profile"], str):
@@ -193,6 +193,12 @@ def load_spec(path: str) -> Sweep:
             shown = ", ".join(f"{k}={v!r}" for k, v in overrides.items() if k not in base
                               or source == "cases")
             raise SpecError(f"sweep spec {path}: case {index} ({source}: {shown}): {exc}") from None
+        for t, f in profile or []:
+            try:
+                command_force(f, UmbrellaParams(**params))
+            except ValueError as exc:
+                raise SpecError(f"sweep spec {path}: case {index}: force_profile at t = {t:g} s: "
+                                f"{exc}") from None
         case = Case(index=index, overrides=overrides, params=params, duration=duration,
                     stop_after_lock=stop_after_lock, force_profile=profile,
                     force_profile_path=profile_path)
@@ -755,7 +761,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
             raise SpecError(f"--out {args.out}: exists and is not a directory")
         sweep = load_spec(args.spec)
     except SpecError as exc:
-        ap.exit(2, f"umbrella-sim: error: {exc}\n")
+        ap.exit(2, f"{ap.prog}: error: {exc}\n")
 
     def stop(signum, frame):
         raise KeyboardInterrupt
@@ -765,7 +771,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         report = run_sweep(sweep, args.out, workers=args.workers, scheduler=args.scheduler,
                            mcap=args.mcap)
     except SpecError as exc:
-        ap.exit(2, f"umbrella-sim: error: {exc}\n")
+        ap.exit(2, f"{ap.prog}: error: {exc}\n")
     finally:
         signal.signal(signal.SIGTERM, previous)
     if report.interrupted:
