@@ -288,7 +288,7 @@ def test_rerun_skips_finished_cases(local_run, procs):
 
 def test_ctrl_c_keeps_finished_cases_and_rerun_completes(tmp_path, procs):
     spec = write(tmp_path / "slow.yaml", (
-        "base: {elements_per_segment: 4, v0: -1.0}\n"
+        "base: {elements_per_segment: 4, v0: -1.0, time_step: 0.002}\n"
         "grid:\n  section_height: [0.008, 0.009, 0.010, 0.011, 0.012, 0.013, 0.014, 0.015]\n"
         "duration: 2.0\n"))
     out = str(tmp_path / "out")
@@ -331,7 +331,7 @@ def test_distributed_run_equals_local_run(local_run, dask_cluster, procs, tmp_pa
 def test_worker_killed_mid_sweep_gives_complete_table(dask_cluster, procs, tmp_path):
     address, workers = dask_cluster
     spec = write(tmp_path / "ten.yaml", (
-        "base: {elements_per_segment: 4}\n"
+        "base: {elements_per_segment: 4, time_step: 0.002}\n"
         "grid:\n  v0: [-0.3, -0.4, -0.5, -0.6, -0.7, -0.8, -0.9, -1.0, -1.1, -1.2]\n"
         "duration: 2.0\n"))
     out = str(tmp_path / "out")
@@ -348,7 +348,8 @@ def test_worker_killed_mid_sweep_gives_complete_table(dask_cluster, procs, tmp_p
     tips = [float(r["tip_deflection_max"]) for r in rows]
     assert all(a < b for a, b in zip(tips, tips[1:])), tips
     assert math.isclose(float(rows[0]["deploy_time"]),
-                        simulate(UmbrellaParams(v0=-0.3, elements_per_segment=4), 2.0)
+                        simulate(UmbrellaParams(v0=-0.3, elements_per_segment=4,
+                                                time_step=0.002), 2.0)
                         .summary()["deploy_time"], rel_tol=0, abs_tol=0)
 
 
