@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Throughput of `umbrella-sim sweep`: cases per second with 1 and 2 local Dask workers, and the
-scheduling overhead per case.
+"""
+Throughput of `umbrella-sim sweep`: cases/s with 1 and 2 local Dask workers, overhead per case.
 
 The sweep: --cases flexible cases (N = 1, V0 spread over -0.3 .. -1.5 m/s), each run for
 --duration simulated seconds.  For each worker count, a fresh local cluster runs the whole
@@ -68,8 +68,9 @@ def main():
             assert report.ran == args.cases and report.failed == 0, log.getvalue()
             overhead = (report.run_s * n - report.compute_s) / report.ran
             rt = round_trip(n)
+            compute_ms = report.compute_s / report.ran * 1e3
             print(f"{n:>7} {report.setup_s:>11.2f} s {report.run_s:>5.2f} s "
-                  f"{report.ran / report.run_s:>8.2f} {report.compute_s / report.ran * 1e3:>9.1f} ms"
+                  f"{report.ran / report.run_s:>8.2f} {compute_ms:>9.1f} ms"
                   f" {overhead * 1e3:>10.1f} ms {rt * 1e3:>13.2f} ms")
 
 

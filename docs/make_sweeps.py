@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Regenerate the Table 6.1 section of docs/sweeps.md and docs/sweeps/*.png (one command):
+"""
+Regenerate the Table 6.1 section of docs/sweeps.md and docs/sweeps/*.png in one command.
 
     .venv/bin/python docs/make_sweeps.py [--workers N]
 

@@ -1,5 +1,8 @@
-"""umbrella-sim sweep: SPEC checks, a local Dask sweep, a real distributed run (dask scheduler +
-two dask worker processes on 127.0.0.1), a worker killed mid-sweep, Ctrl-C and re-runs.
+"""
+umbrella-sim sweep: SPEC checks, local and distributed Dask runs, failures and re-runs.
+
+The distributed run is real: `dask scheduler` and two `dask worker` processes on 127.0.0.1; a
+worker is killed mid-sweep, a sweep is interrupted as by Ctrl-C and re-run.
 
 Every process a test starts runs in its own session and is killed (whole process group) in
 teardown; every port is picked free by the OS.
@@ -126,7 +129,7 @@ def procs(tmp_path):
 
 @pytest.fixture(scope="module")
 def local_run(tmp_path_factory):
-    """The small SPEC on a local cluster of two worker processes (module-wide)."""
+    """Run the small SPEC on a local cluster of two worker processes (module-wide)."""
     tmp = tmp_path_factory.mktemp("local")
     spec = write(tmp / "small.yaml", SMALL_SPEC)
     out = str(tmp / "out")
@@ -204,8 +207,12 @@ def test_missing_spec_and_bad_options_refused(tmp_path, capsys):
 
 
 def test_spec_cases_ids_and_force_profile(tmp_path):
-    """Grid product (first axis outermost), explicit cases after it, duplicates run once,
-    a force profile read relative to the SPEC; the case's run matches simulate()."""
+    """
+    Check the grid product (first axis outermost) and the explicit cases after it.
+
+    Duplicates run once, a force profile is read relative to the SPEC, and the case's run
+    matches simulate().
+    """
     write(tmp_path / "push.csv", "t,F\n0.0,0.0\n0.01,4.0\n")
     spec = sweep.load_spec(write(tmp_path / "s.yaml", (
         "base: {elements_per_segment: 1}\n"

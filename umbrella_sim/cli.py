@@ -66,8 +66,12 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
 
 
 def resolve_params(overrides: dict, params_file: str | None = None) -> UmbrellaParams:
-    """The offline run's parameters: the params file (default config/umbrella.yaml, its node-only
-    keys skipped), then the overrides; validated (ValueError names the parameter)."""
+    """
+    Return an offline run's parameters, validated (a ValueError names the parameter).
+
+    The params file (default config/umbrella.yaml, its node-only keys skipped), then the
+    overrides.
+    """
     values: dict = {}
     params_file = params_file or default_params_file()
     if params_file:

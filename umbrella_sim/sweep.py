@@ -1,4 +1,5 @@
-"""``umbrella-sim sweep SPEC.yaml --out DIR``: parameter sweeps on a Dask cluster.
+"""
+``umbrella-sim sweep SPEC.yaml --out DIR``: parameter sweeps on a Dask cluster.
 
 A SPEC (YAML) names the cases; each case is one offline run (the same path and the same JSON
 summary as ``umbrella-sim simulate --json``), executed as a Dask task: on a local cluster with
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+from dataclasses import dataclass, field
 import hashlib
 import itertools
 import json
@@ -41,7 +43,6 @@ import socket
 import sys
 import time
 import traceback
-from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import yaml
@@ -76,7 +77,7 @@ class Case:
         return ", ".join(f"{n}={self.overrides[n]}" for n in names if n in self.overrides)
 
     def task(self, mcap_dir: str | None) -> dict:
-        """What a worker needs (plain data, pickles anywhere)."""
+        """Return what a worker needs (plain data, pickles anywhere)."""
         return {"case_id": self.case_id, "params": self.params, "duration": self.duration,
                 "stop_after_lock": self.stop_after_lock, "force_profile": self.force_profile,
                 "mcap_dir": mcap_dir}
@@ -144,7 +145,8 @@ def load_spec(path: str) -> Sweep:
         raise SpecError(f"sweep spec {path}: grid: expected a mapping name -> list of values")
     for name, values in grid.items():
         if not isinstance(values, list) or not values:
-            raise SpecError(f"sweep spec {path}: grid: {name}: expected a non-empty list of values")
+            raise SpecError(f"sweep spec {path}: grid: {name}: "
+                            "expected a non-empty list of values")
     if not isinstance(explicit, list) or not all(isinstance(c, dict) for c in explicit):
         raise SpecError(f"sweep spec {path}: cases: expected a list of mappings of overrides")
     if not grid and not explicit:
@@ -192,7 +194,8 @@ def load_spec(path: str) -> Sweep:
         except ValueError as exc:
             shown = ", ".join(f"{k}={v!r}" for k, v in overrides.items() if k not in base
                               or source == "cases")
-            raise SpecError(f"sweep spec {path}: case {index} ({source}: {shown}): {exc}") from None
+            raise SpecError(f"sweep spec {path}: case {index} ({source}: {shown}): "
+                            f"{exc}") from None
         for t, f in profile or []:
             try:
                 command_force(f, UmbrellaParams(**params))
@@ -213,16 +216,22 @@ def load_spec(path: str) -> Sweep:
 
 # ------------------------------------------------------------------ one case (on a worker)
 def worker_version() -> str:
-    """The umbrella_sim version a worker runs, after importing the physics core (checked, and
-    the import paid, before any case is sent)."""
+    """
+    Return the umbrella_sim version a worker runs, after importing the physics core.
+
+    Checked, and the import paid, before any case is sent.
+    """
     from . import solver  # noqa: F401
 
     return __version__
 
 
 def run_case(task: dict) -> dict:
-    """Run one case offline, as ``umbrella-sim simulate`` does; never raises: an exception
-    becomes the case's error so the other cases go on."""
+    """
+    Run one case offline, as ``umbrella-sim simulate`` does.
+
+    Never raises: an exception becomes the case's error so the other cases go on.
+    """
     from .params import UmbrellaParams
 
     out = {"case_id": task["case_id"], "worker": f"{socket.gethostname()}:{os.getpid()}",
@@ -257,8 +266,11 @@ def run_case(task: dict) -> dict:
 
 
 def _mcap_duration(task: dict) -> float:
-    """Recording length: the duration, or up to stop_after_lock past the lock (found first by
-    the plain run, which costs a fraction of the recording)."""
+    """
+    Return the recording length: the duration, or up to stop_after_lock past the lock.
+
+    The lock is found first by the plain run, which costs a fraction of the recording.
+    """
     if task["stop_after_lock"] is None:
         return task["duration"]
     from .params import UmbrellaParams
@@ -385,7 +397,7 @@ def write_parquet(path: str, columns: list[str], rows: list[dict]) -> None:
 
 # ------------------------------------------------------------------ plots
 def _series(sweep: Sweep, rows: list[dict]):
-    """x = the first grid axis; one series per combination of the other swept parameters."""
+    """Group the rows: x = the first grid axis, a series per combination of the others."""
     x_name = sweep.axes[0] if sweep.axes else "case"
     others = [n for n in sweep.swept if n != x_name]
     groups: dict[tuple, list[dict]] = {}
@@ -416,8 +428,11 @@ def _sort_key(v):
 
 
 def _reference_series(series):
-    """The series the deployment-time difference is taken to: the rigid model's if swept
-    (Table 6.1's "time prolonged"), else the first."""
+    """
+    Return the series the deployment-time difference is taken to.
+
+    The rigid model's if swept (Table 6.1's "time prolonged"), else the first.
+    """
     for label, g in series:
         if g and all(r.get("model") == "rigid" for r in g):
             return label, g
@@ -426,9 +441,12 @@ def _reference_series(series):
 
 def plot(sweep: Sweep, rows: list[dict], out_dir: str,
          reference: dict | None = None) -> list[str]:
-    """deploy_time.png, peak_stress.png, tip_deflection.png against the first grid axis, one
-    curve per combination of the other swept parameters.  reference: {label: {x: deploy
-    time}} drawn as open markers (e.g. the thesis's Table 6.1)."""
+    """
+    Plot deploy_time.png, peak_stress.png, tip_deflection.png against the first grid axis.
+
+    One curve per combination of the other swept parameters.  reference: {label: {x: deploy
+    time}} drawn as open markers (e.g. the thesis's Table 6.1).
+    """
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -484,7 +502,8 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
             ax_d.plot(*zip(*diff), "o-", color=colours[label], label=label)
     for i, (label, values) in enumerate((reference or {}).items()):
         pts = sorted((pos[x], t) for x, t in values.items() if x in pos and t is not None)
-        style = dict(marker="Dx+^v"[i % 5], ms=9, ls="none", color="k", mfc="none", label=label)
+        style = {"marker": "Dx+^v"[i % 5], "ms": 9, "ls": "none", "color": "k", "mfc": "none",
+                 "label": label}
         if pts:
             ax.plot(*zip(*pts), **style)
             diff = [(pos[x], (t - ref[x]) * 1e3) for x, t in values.items()
@@ -495,7 +514,8 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     if ax_d is not None:
         ax_d.set_ylabel(f"minus {ref_label} (ms)")
         ax_d.axhline(0.0, color="k", lw=0.8)
-    finish(fig, [a for a in (ax, ax_d) if a is not None], "deploy_time.png", f"deployment time vs {x_name} (thesis Table 6.1)")
+    finish(fig, [a for a in (ax, ax_d) if a is not None], "deploy_time.png",
+           f"deployment time vs {x_name} (thesis Table 6.1)")
 
     def elastic(keys):
         """Series with elastic deformation: rigid models (zero up to round-off) left out."""
@@ -531,8 +551,11 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
 
 # ------------------------------------------------------------------ progress
 class SweepProgress:
-    """One line: bar, done/total, failures, elapsed and ETA (rewritten on a terminal, one
-    line per finished case otherwise)."""
+    """
+    Progress of a sweep in one line: bar, done/total, failures, elapsed and ETA.
+
+    The line is rewritten on a terminal; otherwise one line per finished case.
+    """
 
     def __init__(self, total: int, stream=sys.stderr):
         self.total, self.done, self.failed = total, 0, 0
@@ -608,8 +631,12 @@ def _client(workers: int | None, scheduler: str | None, log: Callable[[str], Non
 
 
 def _ignore_sigint() -> None:
-    """On a local cluster's workers: Ctrl-C reaches the whole process group; the sweep
-    process handles it and closes the workers, which would otherwise each print a traceback."""
+    """
+    Ignore SIGINT on a local cluster's workers.
+
+    Ctrl-C reaches the whole process group; the sweep process handles it and closes the
+    workers, which would otherwise each print a traceback.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
@@ -636,8 +663,11 @@ def _check_workers(client, scheduler: str | None, log) -> None:
 def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
               scheduler: str | None = None, mcap: bool = False,
               stream=sys.stderr) -> SweepReport:
-    """Run the cases not yet in DIR's store; write each result as it arrives; then the
-    table and the plots (also after Ctrl-C, from the finished cases)."""
+    """
+    Run the cases not yet in DIR's store, writing each result as it arrives.
+
+    Then write the table and the plots (also after Ctrl-C, from the finished cases).
+    """
     def log(msg):
         stream.write(msg + "\n")
         stream.flush()
