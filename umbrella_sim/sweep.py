@@ -451,15 +451,16 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .params import REGISTRY
+
     x_name, series = _series(sweep, rows)
     if not series:
         return []
     xs_all = sorted({r.get(x_name) for _, g in series for r in g}, key=_sort_key)
     numeric = all(isinstance(x, (int, float)) for x in xs_all)
     pos = {x: (x if numeric else i) for i, x in enumerate(xs_all)}
-    units = {"v0": "m/s", "sleeve_force": "N", "section_height": "m", "l1": "m", "l2": "m",
-             "l3": "m", "time_step": "s", "youngs_modulus": "Pa", "density": "kg/m^3"}
-    xlabel = f"{x_name} ({units[x_name]})" if x_name in units else x_name
+    unit = REGISTRY[x_name].unit if x_name in REGISTRY else "-"
+    xlabel = x_name if unit == "-" else f"{x_name} ({unit})"
     colours = {label: f"C{i % 10}" for i, (label, _) in enumerate(series)}
     written = []
 
