@@ -241,6 +241,67 @@ def test_spec_cases_ids_and_force_profile(tmp_path):
     assert other.cases[0].case_id != case.case_id
 
 
+def test_table_takes_every_summary_key(tmp_path):
+    """
+    Check that the table follows the summary: a key the sweep has never heard of is a column.
+
+    Lists (e.g. validity warnings) are JSON text in both files; a case without a result is no
+    row; a summary key that repeats a parameter is not a second column.
+    """
+    import pyarrow.parquet as pq
+
+    spec = sweep.load_spec(write(tmp_path / "s.yaml", "grid:\n  v0: [-0.5, -1.0, -2.0]\n"))
+    store = sweep.CaseStore(str(tmp_path / "out"))
+    summaries = [{"deploy_time": 0.09, "warnings": [], "a_new_figure": 1.5, "lock": "energy"},
+                 {"deploy_time": 0.045, "warnings": ["step too coarse for the lock", "x"],
+                  "a_new_figure": 2, "lock": "energy"}]
+    for case, summary in zip(spec.cases, summaries):
+        store.save(sweep.make_record(case, {"case_id": case.case_id, "status": "ok",
+                                            "error": None, "summary": summary,
+                                            "worker": "w", "mcap": None}))
+    columns, rows = sweep.table_rows(spec, store)
+    assert len(rows) == 2 and columns.count("lock") == 1
+    assert columns.index("v0") < columns.index("deploy_time") < columns.index("a_new_figure")
+    sweep.write_csv(str(tmp_path / "r.csv"), columns, rows)
+    sweep.write_parquet(str(tmp_path / "r.parquet"), columns, rows)
+    with open(tmp_path / "r.csv", newline="") as fh:
+        got = list(csv.DictReader(fh))
+    parquet = pq.read_table(str(tmp_path / "r.parquet")).to_pylist()
+    for table in (got, parquet):
+        assert [json.loads(r["warnings"]) for r in table] == [s["warnings"] for s in summaries]
+        assert [float(r["a_new_figure"]) for r in table] == [1.5, 2.0]
+    assert isinstance(parquet[1]["a_new_figure"], float), "int and float cells: one float column"
+
+
+def test_progress_line_counts_failures_and_eta(monkeypatch):
+    import io
+
+    clock = [100.0]
+    monkeypatch.setattr(sweep.time, "monotonic", lambda: clock[0])
+    log = io.StringIO()
+    progress = sweep.SweepProgress(4, log)
+    clock[0] = 110.0
+    progress.update(False, "case 1: v0=-1.0")
+    clock[0] = 130.0
+    progress.update(True, "case 2: v0=-2.0: diverged")
+    lines = log.getvalue().splitlines()
+    assert lines[0].endswith("1/4 cases  elapsed 0:00:10  ETA 0:00:30  (case 1: v0=-1.0)")
+    assert "2/4 cases, 1 failed  elapsed 0:00:30  ETA 0:00:30" in lines[1]
+
+    class Terminal(io.StringIO):
+
+        def isatty(self):
+            return True
+
+    term = Terminal()
+    progress = sweep.SweepProgress(2, term)
+    clock[0] += 3725.0
+    progress.update(False, "case 1")
+    progress.close()
+    assert term.getvalue() == ("\r[############             ] 1/2 cases  elapsed 1:02:05  "
+                               "ETA 1:02:05\n")
+
+
 # ------------------------------------------------------------------ local cluster
 def test_local_sweep_table_physics_and_plots(local_run):
     assert local_run["rc"] == 3, local_run["log"]          # one case fails, the rest go on

@@ -306,7 +306,7 @@ class CaseStore:
     def save(self, record: dict) -> None:
         tmp = self.path(record["case_id"]) + f".{os.getpid()}.tmp"
         with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(record, fh, indent=1, sort_keys=True, default=_jsonable)
+            json.dump(record, fh, indent=1, default=_jsonable)     # summary keys in order
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, self.path(record["case_id"]))
