@@ -141,9 +141,8 @@ def local_run(tmp_path_factory):
     return {"spec": spec, "out": out, "rc": rc, "log": log, "rows": read_rows(out)}
 
 
-@pytest.fixture
-def dask_cluster(procs, tmp_path):
-    """`dask scheduler` and two `dask worker` processes on 127.0.0.1 (free ports)."""
+def start_dask_cluster(procs, tmp_path):
+    """Start `dask scheduler` and two `dask worker` processes on 127.0.0.1 (free ports)."""
     scheduler_file = str(tmp_path / "scheduler.json")
     procs.start("scheduler", [os.path.join(BIN, "dask"), "scheduler", "--host", "127.0.0.1",
                               "--port", "0", "--dashboard-address", "127.0.0.1:0",
@@ -161,6 +160,23 @@ def dask_cluster(procs, tmp_path):
     with Client(address, timeout="30s") as client:
         client.wait_for_workers(2, timeout=60)
     return address, workers
+
+
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
+    """Start a cluster shared by the tests that leave it as they found it (module-wide)."""
+    tmp = tmp_path_factory.mktemp("cluster")
+    procs = Processes(str(tmp))
+    try:
+        yield start_dask_cluster(procs, tmp)
+    finally:
+        procs.stop_all()
+
+
+@pytest.fixture
+def own_dask_cluster(procs, tmp_path):
+    """Start a cluster for one test, which may break it (kill a worker)."""
+    return start_dask_cluster(procs, tmp_path)
 
 
 # ------------------------------------------------------------------ SPEC checks
@@ -396,8 +412,8 @@ def test_distributed_run_equals_local_run(local_run, dask_cluster, procs, tmp_pa
     assert len({r["worker"] for r in rows}) == 2, "both workers took cases"
 
 
-def test_worker_killed_mid_sweep_gives_complete_table(dask_cluster, procs, tmp_path):
-    address, workers = dask_cluster
+def test_worker_killed_mid_sweep_gives_complete_table(own_dask_cluster, procs, tmp_path):
+    address, workers = own_dask_cluster
     spec = write(tmp_path / "ten.yaml", (
         "base: {elements_per_segment: 4, time_step: 0.002}\n"
         "grid:\n  v0: [-0.3, -0.4, -0.5, -0.6, -0.7, -0.8, -0.9, -1.0, -1.1, -1.2]\n"
@@ -421,16 +437,19 @@ def test_worker_killed_mid_sweep_gives_complete_table(dask_cluster, procs, tmp_p
                         .summary()["deploy_time"], rel_tol=0, abs_tol=0)
 
 
-def test_mcap_keeps_a_recording_per_case(tmp_path, procs):
+def test_mcap_keeps_a_recording_per_case(dask_cluster, tmp_path, procs):
     from umbrella_sim.compare import load_run
 
+    address, _ = dask_cluster
     spec = write(tmp_path / "rec.yaml", ("grid:\n  model: [flexible, rigid]\nbase: {v0: -2.0}\n"
                                          "duration: 0.05\nstop_after_lock: 0.005\n"))
     out = str(tmp_path / "out")
-    rc, log = run_sweep(procs, "plain", spec, "--out", out, "--workers", "1")
-    assert rc == 0, log
-    # a finished case without its recording runs again under --mcap, then is skipped
-    rc, log = run_sweep(procs, "rec", spec, "--out", out, "--workers", "1", "--mcap")
+    # the flexible case finished by a run without --mcap (what such a run stores)
+    loaded = sweep.load_spec(spec)
+    plain = loaded.cases[0]
+    sweep.CaseStore(out).save(sweep.make_record(plain, sweep.run_case(plain.task(None))))
+    # ... runs again under --mcap, to make its recording
+    rc, log = run_sweep(procs, "rec", spec, "--out", out, "--scheduler", address, "--mcap")
     assert rc == 0 and "already" not in log, log
     rows = read_rows(out)
     for row in rows:
@@ -441,5 +460,5 @@ def test_mcap_keeps_a_recording_per_case(tmp_path, procs):
         # recorded at 100 Hz publications: the lock shows within one publication period
         assert run.deploy_time == pytest.approx(float(row["deploy_time"]), abs=0.0101)
         assert run.params["model"] == row["model"]
-    rc, log = run_sweep(procs, "rec2", spec, "--out", out, "--workers", "1", "--mcap")
+    rc, log = run_sweep(procs, "rec2", spec, "--out", out, "--scheduler", address, "--mcap")
     assert rc == 0 and "2 of 2 cases already" in log, log
