@@ -53,7 +53,8 @@ def main():
     args = ap.parse_args()
     v0s = [round(-0.3 - 1.2 * i / max(args.cases - 1, 1), 6) for i in range(args.cases)]
     print(f"{args.cases} cases: flexible N = 1, V0 = {v0s[0]} .. {v0s[-1]} m/s, "
-          f"{args.duration} s simulated each; {os.cpu_count()} cores (shared machine)")
+          f"{args.duration} s simulated each; {os.cpu_count()} cores (shared machine), "
+          f"load average {os.getloadavg()[0]:.1f}")
     print(f"{'workers':>7} {'cluster start':>13} {'wall':>7} {'cases/s':>8} "
           f"{'compute/case':>12} {'overhead/case':>13} {'no-op round trip':>16}")
     with tempfile.TemporaryDirectory(prefix="bench_sweep_") as tmp:
@@ -71,7 +72,8 @@ def main():
             compute_ms = report.compute_s / report.ran * 1e3
             print(f"{n:>7} {report.setup_s:>11.2f} s {report.run_s:>5.2f} s "
                   f"{report.ran / report.run_s:>8.2f} {compute_ms:>9.1f} ms"
-                  f" {overhead * 1e3:>10.1f} ms {rt * 1e3:>13.2f} ms")
+                  f" {overhead * 1e3:>10.1f} ms {rt * 1e3:>13.2f} ms"
+                  f"   (load average {os.getloadavg()[0]:.1f})")
 
 
 if __name__ == "__main__":
