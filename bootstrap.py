@@ -12,6 +12,7 @@ Environment: UMBRELLA_VENV (default ./.venv), UMBRELLA_RUNS_DIR (default ./runs)
 Needs only python3 (3.11); everything else comes from PyPI.  Idempotent: a venv whose
 requirements are unchanged is reused.
 """
+import glob
 import hashlib
 import os
 import signal
@@ -33,7 +34,8 @@ def run(cmd, **kw):
 def setup() -> None:
     req = os.path.join(ROOT, "requirements.txt")
     # what the install depends on: a change to any of these reinstalls (and rebuilds the kernel)
-    inputs = [req, os.path.join(ROOT, "setup.py"), os.path.join(ROOT, "umbrella_sim", "_kernel.c")]
+    inputs = [req, os.path.join(ROOT, "setup.py"),
+              *sorted(glob.glob(os.path.join(ROOT, "umbrella_sim", "_kernel*.[ch]")))]
     digest = hashlib.sha256()
     for path in inputs:
         with open(path, "rb") as fh:

@@ -42,7 +42,9 @@ setup(
         ("share/" + package_name + "/rviz", glob("rviz/*.rviz")),
     ],
     # the compiled integrator (plain C, loaded with ctypes): required
-    ext_modules=[Extension("umbrella_sim._kernel", ["umbrella_sim/_kernel.c"],
+    ext_modules=[Extension("umbrella_sim._kernel",
+                           ["umbrella_sim/_kernel.c", "umbrella_sim/_kernel_nonlinear.c"],
+                           depends=["umbrella_sim/_kernel_elastic.h"],
                            extra_compile_args=["-O3", "-std=c99"], libraries=["m"])],
     cmdclass={"build_ext": BuildKernel},
     install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "matplotlib"],

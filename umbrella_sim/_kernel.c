@@ -27,6 +27,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "_kernel_elastic.h"   /* the nonlinear / damped elastic law (_kernel_nonlinear.c) */
+
 typedef struct {
     int n;                 /* coordinates */
     int n_link;            /* link elastic coordinates */
@@ -82,6 +84,8 @@ typedef struct {
     Arrow arrow;           /* the arrow system factored last */
     double *Emass;         /* LU of the constant elastic mass band (projection) */
     double *q_s, *v_s, *p_s, *lam_s;  /* single-step results */
+    ElasticLaw *law;       /* NULL: U = 1/2 q.K q, undamped; else U, C of the law */
+    double dissipated;     /* damping dissipation of the last step (J) */
 } Ctx;
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
@@ -538,9 +542,11 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
     double om[2] = {vt[0], vt[ia]};
     /* E: Mff + h^2/4 K - h w_body W  (G_ee = -2 w W) */
     double h2 = 0.25 * h * h;
+    const double *k_band = m->k_band;   /* with a law: its h^2/2 dG_U/dq1 + h/2 C, scale 1 */
+    if (x->law) { k_band = x->law->band; h2 = 1.0; }
     for (int p = 0; p < ne; p++) {
         double f = -h * om[m->body[ei[p]]];
-        const double *mf = m->mff_band + (size_t)p * w, *kb = m->k_band + (size_t)p * w;
+        const double *mf = m->mff_band + (size_t)p * w, *kb = k_band + (size_t)p * w;
         const double *wb = m->w_band + (size_t)p * w;
         double *e = x->E + (size_t)p * w;
         for (int k = 0; k < w; k++) e[k] = mf[k] + h2 * kb[k] + f * wb[k];
@@ -701,6 +707,11 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     double *q = x->q_s, *v = x->v_s, *lam = x->lam_s, *dq = x->dq, *qm = x->qm, *v1 = x->v1;
     double *phi0 = x->phi0, *phi = x->phi, *rhs = x->rhs;
     int status = OK, it = 0, factored = 0;
+    /* nonlinear law: backtracking line search, the matrix re-factored after a slow
+     * iteration (ElasticMidpointDAE._step_numpy) */
+    ElasticLaw *law = x->law;
+    int full_newton = law && law->d.nonlinear, have_base = 0, refresh = 0;
+    double alpha = 1.0, f_base = INFINITY;
     double half_h2 = 0.5 * h * h;
     constraints(m, q0, locked, rigid, phi0);
     double y0 = sleeve_height(m, q0);
@@ -720,6 +731,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         mass_data(x, q);
         constraints(m, q, locked, rigid, phi);
         band_matvec2(m, m->mff_band, x->hm, m->k_band, x->kq, qm);   /* Mff qm, K qm */
+        if (law) elastic_force(law, q0, q, h, x->kq);    /* AVF gradient of U + C dq / h */
         for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; x->hm[i] += m->c_full[i]; }
         band_matvec2(m, m->mff_band, x->mffv, m->w_band, x->wb, v1); /* Mff v1, W v1 */
         bilinear_gradient(m, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
@@ -743,14 +755,36 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             for (int k = 0; k < JW; k++) res[x->jm_idx[r * JW + k]] += x->jm_val[r * JW + k] * lam[r];
         for (int i = 0; i < n; i++)
             res[i] = x->mv[i] - p0[i] - h * (x->gt[i] - x->kq[i] - force * x->gy[i] + res[i]);
-        if (!factored) {
+        if (full_newton) {
+            double fn = 0.0;
+            for (int i = 0; i < n; i++) fn += 0.25 * h * h * res[i] * res[i];
+            for (int r = 0; r < nc; r++) fn += phi[r] * phi[r];
+            fn = sqrt(fn);
+            if (have_base && !(fn < f_base) && alpha >= 0.05) {   /* backtrack */
+                alpha *= 0.5;
+                for (int i = 0; i < n; i++) q[i] = law->q_base[i] + alpha * law->dx[i];
+                for (int r = 0; r < nc; r++) lam[r] = law->lam_base[r] + alpha * law->dx[n + r] / half_h2;
+                it--;
+                continue;
+            }
+            f_base = fn;
+        }
+        if (!factored || refresh) {
             jacobian(m, q, locked, rigid, x->jrow_idx, x->jrow_val);
+            if (law) elastic_iteration_band(law, q0, q, h);
             if (factor_iteration_matrix(x, h, nc) != OK) { status = SINGULAR; goto done; }
             factored = 1;
         }
         for (int i = 0; i < n; i++) rhs[i] = -0.5 * h * res[i];
         for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
         arrow_solve_q(x, x->E, nc, rhs);
+        if (full_newton) {
+            memcpy(law->q_base, q, sizeof(double) * n);
+            memcpy(law->lam_base, lam, sizeof(double) * nc);
+            memcpy(law->dx, rhs, sizeof(double) * (n + nc));
+            have_base = 1;
+            alpha = 1.0;
+        }
         step_norm = 0.0;
         for (int i = 0; i < n; i++) {
             q[i] += rhs[i];
@@ -760,6 +794,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         for (int r = 0; r < nc; r++) lam[r] += rhs[n + r] / half_h2;
         if (!isfinite(step_norm)) { status = NON_FINITE; goto done; }
         double rate = it > 1 ? step_norm / last_norm : 1.0;
+        refresh = full_newton && it > 1 && rate > ELASTIC_REFRESH_RATE;
         if (step_norm < tol || (rate < 0.5 && rate / (1.0 - rate) * step_norm < tol)) {
             constraints(m, q, locked, rigid, phi);
             if (max_abs(nc, phi) < phi_tol) { converged = 1; break; }
@@ -770,12 +805,18 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     for (int i = 0; i < n; i++) v[i] = 2.0 * (q[i] - q0[i]) / h - v0[i];
     jacobian(m, q, locked, rigid, x->jrow_idx, x->jrow_val);
     mass_data(x, q);
-    /* kinetic energy of the discrete balance: T0 + V(q0) - V(q1) + F (y0 - y1) */
+    /* kinetic energy of the discrete balance: T0 + V(q0) - V(q1) + F (y0 - y1) (- damping) */
     double t_target = force * (y0 - sleeve_height(m, q));
+    x->dissipated = 0.0;
+    if (law) {
+        x->dissipated = elastic_dissipation(law, q0, q, h);
+        t_target += elastic_energy(law, q0) - elastic_energy(law, q) - x->dissipated;
+    } else {
     band_matvec(m, m->k_band, q0, x->kq, 0);
     for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target += 0.5 * q0[i] * x->kq[i]; }
     band_matvec(m, m->k_band, q, x->kq, 0);
     for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target -= 0.5 * q[i] * x->kq[i]; }
+    }
     for (int i = 0; i < n; i++) t_target += 0.5 * v0[i] * p0[i];
     if (project_velocity(x, nc, v, x->p_s, t_target) != OK) { status = SINGULAR; goto done; }
 done:
@@ -804,6 +845,11 @@ int umbrella_step(Ctx *x, int locked, int rigid,
     return status;
 }
 
+/* attach the elastic law of _kernel_nonlinear.c (NULL: the constant K, undamped) */
+void umbrella_set_law(Ctx *x, ElasticLaw *law) {
+    x->law = law;
+}
+
 /* p = M(q) v */
 void umbrella_momentum(Ctx *x, const double *q, const double *v, double *p) {
     mass_data(x, q);
@@ -829,6 +875,11 @@ static void output_row(const Ctx *x, const double *q, const double *v, const dou
     SET(F_TIP_AXIAL, q[m->i_tip_u]);
     SET(F_TIP_TRANSVERSE, q[m->i_tip_v]);
     int first = 0;
+    const double *membrane = NULL;   /* per element, 2 stress points each (leaf, then link) */
+    if (x->law && x->law->d.nonlinear) {
+        elastic_membrane_stress(x->law, q);
+        membrane = x->law->el_stress;
+    }
     for (int body = 0; body < 2; body++) {
         int np = body == 0 ? m->n_stress_leaf : m->n_stress_link;
         double best = -1.0;
@@ -840,6 +891,7 @@ static void output_row(const Ctx *x, const double *q, const double *v, const dou
                 top += m->stress_top[k2 * W + j] * qj;
                 bot += m->stress_bottom[k2 * W + j] * qj;
             }
+            if (membrane) { top += membrane[k2 / 2]; bot += membrane[k2 / 2]; }
             double a = fabs(top) > fabs(bot) ? fabs(top) : fabs(bot);
             if (a > best) { best = a; at = k2; }
         }
@@ -855,7 +907,7 @@ static void output_row(const Ctx *x, const double *q, const double *v, const dou
     band_matvec(m, m->k_band, q, kq, 0);
     double se = 0.0;
     for (int i = 0; i < n; i++) se += q[i] * kq[i];
-    SET(F_STRAIN, 0.5 * se);
+    SET(F_STRAIN, x->law ? elastic_energy(x->law, q) : 0.5 * se);
     SET(F_WORK, work);
     SET(F_LOCK_LOSS, lock_loss);
 #undef SET
@@ -899,6 +951,7 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         double y1 = sleeve_height(m, q1);
         if (!locked && y1 - m->y_stop <= 0.0) { status = CROSSING; break; }
         acc[0] += force * (sleeve_height(m, q) - y1);
+        if (x->law) acc[2] += x->dissipated;   /* acc has 3 entries when a law is attached */
         for (int i = 0; i < n; i++) accel[i] = (v1[i] - v[i]) / (t1 - t0);
         memcpy(q, q1, sizeof(double) * n);
         memcpy(v, v1, sizeof(double) * n);

@@ -404,7 +404,7 @@ class CompiledKernel:
         # the state advanced in place, and the last step's acceleration
         self.q, self.v, self.p, self.accel = (np.zeros(n) for _ in range(4))
         self.lam = np.zeros(nc_max)
-        self.acc = np.zeros(2)                     # work, lock loss (J)
+        self.acc = np.zeros(3)                     # work, lock loss, damping dissipation (J)
         self._ptr = {k: _dptr(getattr(self, k)) for k in ("q", "v", "p", "lam", "acc", "accel")}
         self._n_done, self._its = ctypes.c_int(0), ctypes.c_int(0)
         self._residual = ctypes.c_double(0.0)
@@ -436,6 +436,7 @@ class CompiledKernel:
         else:
             self.lib.umbrella_momentum(self._ctx, self._ptr["q"], self._ptr["v"], self._ptr["p"])
         self.acc[0], self.acc[1] = work, lock_loss
+        self.acc[2] = getattr(s, "dissipation", 0.0)   # with an elastic law (nonlinear.py)
 
     def advance(self, cs: ConstraintSet, k0: int, h: float, n_steps: int, force: float,
                 tol: float, max_iter: int, div_tol: float):

@@ -58,6 +58,19 @@ def rotation(alpha):
     return np.array([[c, -s], [s, c]])
 
 
+def band_form(a: np.ndarray, bw: int) -> np.ndarray:
+    """Return the square matrix a (zero beyond half bandwidth bw) as band[p, k] = a[p, p+k-bw]."""
+    ne = len(a)
+    band = np.zeros((ne, 2 * bw + 1))
+    for k in range(-bw, bw + 1):
+        d = np.diagonal(a, k)
+        if k >= 0:
+            band[:ne - k, bw + k] = d
+        else:
+            band[-k:, bw + k] = d
+    return band
+
+
 def shape_functions(eta: np.ndarray, le: float):
     """
     [N] (3.4), d[N]/dx and d2[N]/dx2 (corrected Eq. 5.40) at local coordinates eta.
@@ -285,17 +298,7 @@ class UmbrellaModel:
                 self._w_full[np.ix_(idx, idx)]]
         rows, cols = np.nonzero(np.any([a != 0.0 for a in mats], axis=0))
         bw = int(np.max(np.abs(rows - cols))) if len(rows) else 0
-        ne = len(idx)
-        bands = []
-        for a in mats:
-            band = np.zeros((ne, 2 * bw + 1))
-            for k in range(-bw, bw + 1):
-                d = np.diagonal(a, k)
-                if k >= 0:
-                    band[:ne - k, bw + k] = d
-                else:
-                    band[-k:, bw + k] = d
-            bands.append(band)
+        bands = [band_form(a, bw) for a in mats]
         return bw, bands[0], bands[1], bands[2]
 
     def stress_rows(self):

@@ -66,11 +66,15 @@ amplitude fell 4x in one cycle at zeta = 0.02).  In the midpoint step the dampin
 dissipated energy, and the energy balance reads T + V - (T0 + V0) - W + lock loss +
 dissipation = 0.
 
-Both are numpy code (a compiled version can follow the kernel of integrators.py); with
-zeta = 0 the model ``flexible`` keeps the compiled linear path.  Nothing here imports rclpy.
+Compiled path: the kernel of integrators.py (_kernel.c) with this module's elastic law
+attached (_kernel_nonlinear.c, ``CompiledElasticLaw``): the same arithmetic as the numpy
+step here, which stays as the reference the tests compare it with step by step
+(UMBRELLA_SIM_KERNEL=numpy selects it).  With zeta = 0 the model ``flexible`` keeps the
+plain linear kernel.  Nothing here imports rclpy.
 """
 from __future__ import annotations
 
+import ctypes
 from dataclasses import dataclass
 import math
 
@@ -80,11 +84,15 @@ from scipy.linalg.lapack import dgetrf, dgetrs
 
 from .integrators import (_project_keeping_energy, ConvergenceError, DynamicState,
                           midpoint_iterate, MidpointDAE, PHI_TOLERANCE)
-from .model import _GAUSS_ETA, _GAUSS_W, BeamBody, ConstraintSet, shape_functions, UmbrellaModel
+from .model import (_GAUSS_ETA, _GAUSS_W, band_form, BeamBody, ConstraintSet, shape_functions,
+                    UmbrellaModel)
 from .params import UmbrellaParams
 from .solver import FiniteElementEngine   # the solver imports this module only inside reset()
 
 NONLINEAR_MODEL = "flexible-nonlinear"
+#: Newton contraction rate above which the nonlinear step re-factors its iteration matrix
+#: (_kernel_elastic.h ELASTIC_REFRESH_RATE)
+REFRESH_RATE = 0.1
 #: 2-point Gauss-Legendre on [0, 1]: exact AVF integral of the cubic s -> grad U(q0 + s dq)
 _AVF_S = 0.5 + np.array([-0.5, 0.5]) / math.sqrt(3.0)
 
@@ -283,6 +291,98 @@ def locked_first_frequency(model: UmbrellaModel) -> float:
     return float(math.sqrt(w2[0]))
 
 
+# ------------------------------------------------------------ compiled elastic law
+_dp, _ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+
+
+class _ElasticData(ctypes.Structure):
+    """Mirror of ElasticData in _kernel_elastic.h (same order)."""
+
+    _fields_ = ([(name, ctypes.c_int) for name in
+                 ("n", "ne", "bw", "n_el", "n_gauss", "nonlinear")]
+                + [("beta", ctypes.c_double), ("youngs_modulus", ctypes.c_double),
+                   ("elastic_idx", _ip), ("kb_band", _dp), ("el_q", _ip), ("el_pos", _ip),
+                   ("du", _dp), ("dv", _dp), ("mean_w", _dp), ("ea_l", _dp)])
+
+
+def _declare_law_functions(lib) -> None:
+    vp = ctypes.c_void_p
+    lib.elastic_new.restype = vp
+    lib.elastic_new.argtypes = [ctypes.POINTER(_ElasticData)]
+    lib.elastic_free.restype = None
+    lib.elastic_free.argtypes = [vp]
+    lib.elastic_last_dissipation.restype = ctypes.c_double
+    lib.elastic_last_dissipation.argtypes = [vp]
+    lib.umbrella_set_law.restype = None
+    lib.umbrella_set_law.argtypes = [vp, vp]
+
+
+class CompiledElasticLaw:
+    """
+    The strain energy and damping of a NonlinearUmbrellaModel, handed to _kernel_nonlinear.c.
+
+    Element by element: the q indices of an element's (up to) six coordinates, u' and v' at
+    its Gauss points (rows of StrainEnergy.du / dv), the element-mean weights, EA l_e, and
+    the bending stiffness in the band form of the kernel.  Attached to a CompiledKernel, it
+    replaces the kernel's constant K (umbrella_set_law).
+    """
+
+    def __init__(self, lib, model: "NonlinearUmbrellaModel"):
+        _declare_law_functions(lib)
+        st, p = model.strain, model.params
+        idx = np.asarray(model.elastic_indices)
+        bw = model.banded_invariants()[0]
+        n_el, n_gauss = len(st.element_length), len(_GAUSS_ETA)
+        n_leaf_points = model.stress_rows()[4][0]
+        if n_leaf_points != 2 * len(model.leaf.element_length):
+            raise ValueError("compiled elastic law: the leaf's stress points are not the two "
+                             "ends of each element")
+        el_q = -np.ones((n_el, 6), dtype=np.intc)
+        du = np.zeros((n_el, n_gauss, 6))
+        dv = np.zeros((n_el, n_gauss, 6))
+        for e in range(n_el):
+            rows = slice(e * n_gauss, (e + 1) * n_gauss)
+            cols = np.nonzero(np.any(st.du[rows] != 0.0, axis=0)
+                              | np.any(st.dv[rows] != 0.0, axis=0))[0]
+            el_q[e, :len(cols)] = cols
+            du[e, :, :len(cols)] = st.du[rows][:, cols]
+            dv[e, :, :len(cols)] = st.dv[rows][:, cols]
+        el_pos = np.where(el_q >= 0, np.searchsorted(idx, np.maximum(el_q, 0)), -1)
+        mean_w = np.array([st.mean[e, e * n_gauss:(e + 1) * n_gauss] for e in range(n_el)])
+        arrays = {"elastic_idx": np.ascontiguousarray(idx, dtype=np.intc),
+                  "kb_band": band_form(st.k_bending[np.ix_(idx, idx)], bw),
+                  "el_q": el_q, "el_pos": np.ascontiguousarray(el_pos, dtype=np.intc),
+                  "du": du, "dv": dv, "mean_w": mean_w,
+                  "ea_l": np.ascontiguousarray(st.ea_l, dtype=float)}
+        arrays = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
+        self._arrays = arrays   # the struct points into these
+        self.struct = _ElasticData(
+            n=model.n, ne=len(idx), bw=bw, n_el=n_el, n_gauss=n_gauss,
+            nonlinear=int(st.nonlinear), beta=model.damping_beta,
+            youngs_modulus=p.youngs_modulus,
+            **{k: v.ctypes.data_as(_ip if v.dtype == np.intc else _dp)
+               for k, v in arrays.items()})
+        self.lib = lib
+        ptr = lib.elastic_new(ctypes.byref(self.struct))
+        if not ptr:
+            raise MemoryError("the compiled elastic law could not allocate its buffers")
+        self.ptr = ctypes.c_void_p(ptr)
+
+    def attach(self, kernel) -> None:
+        """Make kernel (a CompiledKernel of the same model) step with this law."""
+        self.lib.umbrella_set_law(kernel._ctx, self.ptr)
+        kernel.elastic_law = self      # the context points at the law: keep it alive
+
+    def last_dissipation(self) -> float:
+        return float(self.lib.elastic_last_dissipation(self.ptr))
+
+    def __del__(self):
+        ptr = getattr(self, "ptr", None)
+        if ptr is not None and ptr.value:
+            self.lib.elastic_free(ptr)
+            self.ptr = None
+
+
 # -------------------------------------------------------------------- integrator
 @dataclass(frozen=True)
 class DampedState(DynamicState):
@@ -298,8 +398,12 @@ class ElasticMidpointDAE(MidpointDAE):
     """
 
     def __init__(self, model: NonlinearUmbrellaModel, tolerance: float = 1e-10,
-                 max_iterations: int = 25):
-        super().__init__(model, tolerance, max_iterations, kernel="numpy")
+                 max_iterations: int = 25, kernel: str | None = None):
+        super().__init__(model, tolerance, max_iterations, kernel)
+        self.law = None
+        if self._compiled is not None:   # the compiled step with this model's elastic law
+            self.law = CompiledElasticLaw(self._compiled.lib, model)
+            self.law.attach(self._compiled)
         self.strain_nonlinear = model.strain.nonlinear
         self.refreshes = 0   # iteration matrices re-factored inside a step, for diagnostics
         self.halvings = 0    # steps split in two because Newton failed
@@ -344,16 +448,27 @@ class ElasticMidpointDAE(MidpointDAE):
         return self._substeps(mid, 0.5 * h, force, cs, depth + 1)
 
     def _step(self, s, h, force, cs):
+        """Take one step: compiled (_kernel_nonlinear.c hooks) or the numpy reference."""
+        if self._compiled is None:
+            return self._step_numpy(s, h, force, cs)
+        out, its = self._compiled.step(s, h, force, cs, self.tolerance, self.max_iterations)
+        self.iterations += its
+        return DampedState(out.t, out.q, out.qd, out.qdd, out.multipliers, out.momentum,
+                           getattr(s, "dissipation", 0.0) + self.law.last_dissipation())
+
+    def _step_numpy(self, s, h, force, cs):
         """
         Take one energy-consistent midpoint step.
 
         M(q1) v1 - M(q0) v0 = h [G_T - G_U - C dq/h - F_H G_y + G_Phi^T lambda], Phi(q1) = 0;
         G_U the AVF gradient of U, the rest as in MidpointDAE._step (integrators.
-        midpoint_iterate).  Nonlinear strain: full Newton (the matrix re-factored every
-        iteration: the stiff axial directions turn with v', and a frozen matrix converges
-        slowly) with a backtracking line search on the residual norm (a full update can
-        overshoot); a step already below the tolerance is taken whole.  _kernel_nonlinear.c
-        does the same arithmetic in the same order.
+        midpoint_iterate).  Nonlinear strain: the iteration matrix is re-factored after an
+        iteration that contracted by less than REFRESH_RATE (the stiff axial directions turn
+        with v' inside a large step, and a frozen matrix then converges slowly; at small
+        steps one factorisation serves the whole step), and a backtracking line search on
+        the residual norm guards against overshooting updates; a step already below the
+        tolerance is taken whole.  _kernel.c with _kernel_nonlinear.c does the same
+        arithmetic in the same order.
         """
         m = self.model
         n = m.n
@@ -363,7 +478,8 @@ class ElasticMidpointDAE(MidpointDAE):
         y0 = m.sleeve_height(q0)
         nc = len(phi0)
         lam_scale = 0.5 * h * h
-        line_search = full_newton = self.strain_nonlinear
+        line_search = self.strain_nonlinear
+        refresh = False
 
         def evaluate(q, lam):
             """Newton right-hand side -[h/2 R(q, lam); Phi(q)] and the residual's pieces."""
@@ -390,7 +506,7 @@ class ElasticMidpointDAE(MidpointDAE):
                 lam = base[1] + alpha * dx[n:] / lam_scale
                 continue
             it += 1
-            if lu is None or full_newton:
+            if lu is None or refresh:
                 it_mat = np.zeros((n + nc, n + nc))
                 avf_jacobian = m.strain.discrete_gradient_jacobian(q0, q)
                 it_mat[:n, :n] = (x.mass1 + 0.5 * h * h * avf_jacobian
@@ -409,6 +525,7 @@ class ElasticMidpointDAE(MidpointDAE):
             q = q + dx[:n]
             lam = lam + dx[n:] / lam_scale
             rate = step_norm / last_norm if it > 1 else 1.0
+            refresh = self.strain_nonlinear and it > 1 and rate > REFRESH_RATE
             if step_norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * step_norm
                                               < self.tolerance):
                 if np.max(np.abs(m.constraint_residual(q, cs))) < PHI_TOLERANCE:
@@ -444,6 +561,23 @@ class ElasticEngine(FiniteElementEngine):
     def initial(self, force: float) -> DynamicState:
         s = super().initial(force)
         return DampedState(s.t, s.q, s.qd, s.qdd, s.multipliers)
+
+    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
+        """
+        Take up to n_steps steps on the compiled path (FiniteElementEngine.advance).
+
+        The state carries the dissipated energy; a step the compiled loop could not take is
+        handed back as "crossing", i.e. to the simulator's single-step path, which retakes
+        it split in halves (``ElasticMidpointDAE._substeps``) or reports the fault.
+        """
+        out = super().advance(s, k0, h, n_steps, force, stage, work, lock_loss)
+        if out is None:
+            return None
+        state, rows, work, stop = out
+        if rows.shape[1]:
+            state = DampedState(state.t, state.q, state.qd, state.qdd, state.multipliers,
+                                state.momentum, float(self.integrator.kernel.acc[2]))
+        return state, rows, work, None if stop is None else "crossing"
 
 
 def build(params: UmbrellaParams):

@@ -195,8 +195,9 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     # model and numerics
     _P("model", str, "flexible", "-",
        "flexible: Case 1 then Case 2; flexible-nonlinear: the same with the von Kármán "
-       "membrane strain u' + v'²/2 (geometric stiffening, thesis §7.2; numpy, slower; its "
-       "stage 2 at V0 ≤ −1 m/s wants time_step ≤ 0.5 ms, docs/validation_nonlinear.md); "
+       "membrane strain u' + v'²/2 (geometric stiffening, thesis §7.2; compiled, ~1.5× the "
+       "cost of a flexible step; its stage 2 at V0 ≤ −1 m/s wants time_step ≤ 0.5 ms, "
+       "docs/validation_nonlinear.md); "
        "rigid-fe: Case 3 (elastic coordinates constrained); rigid: closed-form two-angle "
        "model", choices=MODELS),
     _P("elements_per_segment", int, 1, "-",
@@ -214,7 +215,7 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "stiffness-proportional Rayleigh) damping β = 2ζ/ω1, ω1 the first mode of the locked "
        "frame linearised at full deployment, mode i gets ζω_i/ω1; the dissipated energy is "
        "reported (`energy` topic); 0 = undamped (the thesis); no effect on rigid-fe and "
-       "rigid; with `flexible`, ζ > 0 steps in numpy", low=0.0, high=1.0, high_open=True),
+       "rigid", low=0.0, high=1.0, high_open=True),
     # the node
     _P("publish_rate", float, 100.0, "Hz",
        "publication rate (sim time) of joint_states, tip_deflection, peak_stress, energy, "

@@ -1,0 +1,60 @@
+/*
+ * Elastic law of the compiled step for the models that nonlinear.py builds: the von Karman
+ * (element-mean membrane strain) or linear strain energy U(q), its average-vector-field (AVF)
+ * discrete gradient and tangent, and the Kelvin-Voigt damping C(q) = beta B(q)^T D B(q).
+ * Implemented in _kernel_nonlinear.c; _kernel.c calls it through the hooks of step() and
+ * output_row() when a law is attached (umbrella_set_law), else it uses its constant K.
+ * The arithmetic is that of nonlinear.StrainEnergy / ElasticMidpointDAE (the numpy reference
+ * the tests compare against step by step).
+ */
+#ifndef UMBRELLA_KERNEL_ELASTIC_H
+#define UMBRELLA_KERNEL_ELASTIC_H
+
+/* Newton contraction rate above which the iteration matrix is re-factored (nonlinear strain;
+ * nonlinear.REFRESH_RATE) */
+#define ELASTIC_REFRESH_RATE 0.1
+
+/* Mirror of nonlinear._ElasticData (same order). */
+typedef struct {
+    int n;                   /* coordinates */
+    int ne;                  /* elastic coordinates (Model.n_elastic) */
+    int bw;                  /* half bandwidth of the elastic band (Model.bw) */
+    int n_el;                /* elements, leaf then link */
+    int n_gauss;             /* Gauss points per element */
+    int nonlinear;           /* 1: eps = mean(u' + v'^2/2); 0: eps = u' */
+    double beta;             /* damping: C = beta B^T D B (s); 0: undamped */
+    double youngs_modulus;   /* E (Pa), for the membrane part of the fibre stress */
+    const int *elastic_idx;  /* ne: q index of elastic position p */
+    const double *kb_band;   /* ne x (2 bw + 1): bending stiffness (K without its axial part) */
+    const int *el_q;         /* n_el x 6: q index of the element's coordinates, -1 if none */
+    const int *el_pos;       /* n_el x 6: their elastic positions, -1 if none */
+    const double *du, *dv;   /* n_el x n_gauss x 6: u', v' at the Gauss points */
+    const double *mean_w;    /* n_el x n_gauss: Gauss weight / l_e (element mean) */
+    const double *ea_l;      /* n_el: EA l_e */
+} ElasticData;
+
+typedef struct {
+    ElasticData d;
+    double *band;            /* ne x (2 bw + 1): the law's part of the iteration matrix */
+    double *qa, *qb, *g;     /* n, n, n_el x 6: work */
+    double *el_stress;       /* n_el: membrane stress of the last elastic_membrane_stress */
+    double *q_base, *lam_base, *dx;   /* line search: n, ne + 4, n + ne + 4 */
+    double last_dissipation; /* dq . C(q_m) dq / h of the last elastic_dissipation (J) */
+    double band_h;           /* step of the band (the linear strain's band is constant) */
+    double *energy_q, energy; /* the last elastic_energy: q (n) and U(q) */
+    int energy_valid;
+} ElasticLaw;
+
+ElasticLaw *elastic_new(const ElasticData *d);
+void elastic_free(ElasticLaw *law);
+/* out[i] at the elastic q indices i: AVF gradient of U between q0 and q1 + C(q_m) (q1 - q0) / h */
+void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h, double *out);
+/* law->band = h^2/2 d AVF / d q1 + h/2 C(q_m) */
+void elastic_iteration_band(ElasticLaw *law, const double *q0, const double *q1, double h);
+double elastic_energy(ElasticLaw *law, const double *q);
+/* dq . C(q_m) dq / h, also kept in law->last_dissipation */
+double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, double h);
+/* law->el_stress[e] = E (1/l_e) int v'^2/2 dx (0 with the linear strain) */
+void elastic_membrane_stress(ElasticLaw *law, const double *q);
+
+#endif

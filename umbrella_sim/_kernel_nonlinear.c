@@ -1,0 +1,262 @@
+/*
+ * Elastic law of the compiled step (see _kernel_elastic.h): the strain energy of
+ * nonlinear.StrainEnergy and the damping of NonlinearUmbrellaModel.damping_matrix, element
+ * by element on the elastic band of _kernel.c.
+ *
+ *   U = 1/2 q.Kb q + 1/2 sum_e EA l_e eps_e^2,   eps_e = sum_g (w_g / l_e)(u'_g + v'_g^2 / 2)
+ *
+ * (Kb: the bending stiffness; v'^2 dropped with the linear strain, then U = 1/2 q.K q).
+ * Gradient Kb q + sum_g EA w_g eps_e (du_g + v'_g dv_g); tangent Kb + EA l_e g g^T
+ * + sum_g EA w_g eps_e dv_g dv_g^T with g = d eps_e / dq; the material tangent (no
+ * geometric part) times beta is the Kelvin-Voigt damping C(q).  AVF gradient over a step:
+ * 2-point Gauss in s on [0, 1] (exact: the integrand is cubic in s).
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "_kernel_elastic.h"
+
+#define EDOF 6      /* coordinates of an element: two nodes x (u, v, theta) */
+#define GMAX 8      /* Gauss points per element, at most */
+
+ElasticLaw *elastic_new(const ElasticData *d) {
+    if (d->n_gauss > GMAX || d->n_gauss < 1) return NULL;
+    ElasticLaw *law = calloc(1, sizeof(ElasticLaw));
+    if (!law) return NULL;
+    law->d = *d;
+    int w = 2 * d->bw + 1, nc = d->ne + 4;
+    size_t doubles = (size_t)d->ne * w + 4 * (size_t)d->n + (size_t)d->n_el * EDOF + d->n_el
+                     + nc + (size_t)(d->n + nc);
+    law->band = calloc(doubles, sizeof(double));
+    if (!law->band) { free(law); return NULL; }
+    double *p = law->band + (size_t)d->ne * w;
+    law->qa = p; p += d->n;
+    law->qb = p; p += d->n;
+    law->q_base = p; p += d->n;
+    law->energy_q = p; p += d->n;
+    law->band_h = -1.0;
+    law->g = p; p += (size_t)d->n_el * EDOF;
+    law->el_stress = p; p += d->n_el;
+    law->lam_base = p; p += nc;
+    law->dx = p;
+    return law;
+}
+
+void elastic_free(ElasticLaw *law) {
+    if (!law) return;
+    free(law->band);
+    free(law);
+}
+
+/* eps_e, and v' at the element's Gauss points (b) for the coordinates q */
+static double element_strain(const ElasticData *d, int e, const double *q, double *b) {
+    const int *iq = d->el_q + (size_t)e * EDOF;
+    double x[EDOF];
+    for (int k = 0; k < EDOF; k++) x[k] = iq[k] >= 0 ? q[iq[k]] : 0.0;
+    double eps = 0.0;
+    for (int gp = 0; gp < d->n_gauss; gp++) {
+        size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
+        double a = 0.0, v = 0.0;
+        for (int k = 0; k < EDOF; k++) {
+            a += d->du[row + k] * x[k];
+            v += d->dv[row + k] * x[k];
+        }
+        b[gp] = d->nonlinear ? v : 0.0;
+        eps += d->mean_w[(size_t)e * d->n_gauss + gp] * (a + 0.5 * b[gp] * b[gp]);
+    }
+    return eps;
+}
+
+/* g = d eps_e / dq on the element's coordinates */
+static void element_strain_gradient(const ElasticData *d, int e, const double *b, double *g) {
+    for (int k = 0; k < EDOF; k++) g[k] = 0.0;
+    for (int gp = 0; gp < d->n_gauss; gp++) {
+        size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
+        double mw = d->mean_w[(size_t)e * d->n_gauss + gp];
+        for (int k = 0; k < EDOF; k++) g[k] += mw * (d->du[row + k] + b[gp] * d->dv[row + k]);
+    }
+}
+
+/* y[eidx[p]] (+)= scale * (Kb x)[p] */
+static void bending_matvec(const ElasticData *d, const double *x, double scale, double *y, int acc) {
+    int ne = d->ne, bw = d->bw, w = 2 * bw + 1;
+    for (int p = 0; p < ne; p++) {
+        int lo = p - bw < 0 ? 0 : p - bw, hi = p + bw >= ne ? ne - 1 : p + bw;
+        const double *r = d->kb_band + (size_t)p * w + bw - p;
+        double s = 0.0;
+        for (int j = lo; j <= hi; j++) s += r[j] * x[d->elastic_idx[j]];
+        if (acc) y[d->elastic_idx[p]] += scale * s;
+        else y[d->elastic_idx[p]] = scale * s;
+    }
+}
+
+/* x . Kb x */
+static double bending_quadratic(const ElasticData *d, const double *x) {
+    int ne = d->ne, bw = d->bw, w = 2 * bw + 1;
+    double quad = 0.0;
+    for (int p = 0; p < ne; p++) {
+        int lo = p - bw < 0 ? 0 : p - bw, hi = p + bw >= ne ? ne - 1 : p + bw;
+        const double *r = d->kb_band + (size_t)p * w + bw - p;
+        double s = 0.0;
+        for (int j = lo; j <= hi; j++) s += r[j] * x[d->elastic_idx[j]];
+        quad += x[d->elastic_idx[p]] * s;
+    }
+    return quad;
+}
+
+/* y (+)= scale * grad U(q) at the elastic q indices */
+static void gradient(const ElasticData *d, const double *q, double scale, double *y, int acc) {
+    bending_matvec(d, q, scale, y, acc);
+    double b[GMAX];
+    for (int e = 0; e < d->n_el; e++) {
+        double eps = element_strain(d, e, q, b);
+        const int *iq = d->el_q + (size_t)e * EDOF;
+        for (int gp = 0; gp < d->n_gauss; gp++) {
+            size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
+            double nw = scale * d->ea_l[e] * d->mean_w[(size_t)e * d->n_gauss + gp] * eps;
+            for (int k = 0; k < EDOF; k++)
+                if (iq[k] >= 0) y[iq[k]] += nw * (d->du[row + k] + b[gp] * d->dv[row + k]);
+        }
+    }
+}
+
+/* band += scale * (tangent of U at q), or its material part (geometric = 0); without the
+ * bending stiffness Kb, which the caller adds once */
+static void tangent_band(const ElasticData *d, const double *q, double scale, int geometric,
+                         double *band) {
+    int bw = d->bw, w = 2 * bw + 1;
+    double b[GMAX], g[EDOF];
+    for (int e = 0; e < d->n_el; e++) {
+        double eps = element_strain(d, e, q, b);
+        element_strain_gradient(d, e, b, g);
+        const int *pos = d->el_pos + (size_t)e * EDOF;
+        double geo[EDOF][EDOF];
+        memset(geo, 0, sizeof(geo));
+        if (geometric && d->nonlinear)
+            for (int gp = 0; gp < d->n_gauss; gp++) {
+                size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
+                double nw = d->ea_l[e] * d->mean_w[(size_t)e * d->n_gauss + gp] * eps;
+                for (int k = 0; k < EDOF; k++)
+                    for (int l = 0; l < EDOF; l++)
+                        geo[k][l] += nw * d->dv[row + k] * d->dv[row + l];
+            }
+        for (int k = 0; k < EDOF; k++) {
+            if (pos[k] < 0) continue;
+            double *r = band + (size_t)pos[k] * w + bw - pos[k];
+            for (int l = 0; l < EDOF; l++)
+                if (pos[l] >= 0) r[pos[l]] += scale * (d->ea_l[e] * g[k] * g[l] + geo[k][l]);
+        }
+    }
+}
+
+/* x . M x with M the material tangent at q (Kb + sum EA l_e g g^T); y (+)= scale M x */
+static double material_apply(const ElasticData *d, const double *q, const double *x, double scale,
+                             double *y) {
+    double b[GMAX], g[EDOF], quad = 0.0;
+    if (y) bending_matvec(d, x, scale, y, 1);
+    quad += bending_quadratic(d, x);
+    for (int e = 0; e < d->n_el; e++) {
+        element_strain(d, e, q, b);
+        element_strain_gradient(d, e, b, g);
+        const int *iq = d->el_q + (size_t)e * EDOF;
+        double gx = 0.0;
+        for (int k = 0; k < EDOF; k++) if (iq[k] >= 0) gx += g[k] * x[iq[k]];
+        quad += d->ea_l[e] * gx * gx;
+        if (y)
+            for (int k = 0; k < EDOF; k++) if (iq[k] >= 0) y[iq[k]] += scale * d->ea_l[e] * gx * g[k];
+    }
+    return quad;
+}
+
+static const double AVF_S[2] = {0.21132486540518713, 0.78867513459481287};  /* 1/2 -+ 1/(2 sqrt 3) */
+
+void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h, double *out) {
+    const ElasticData *d = &law->d;
+    int n = d->n;
+    if (!d->nonlinear) {   /* U quadratic, C = beta K constant: K (q_m + beta dq / h) */
+        for (int i = 0; i < n; i++)
+            law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]) + d->beta / h * (q1[i] - q0[i]);
+        gradient(d, law->qa, 1.0, out, 0);
+        return;
+    }
+    for (int i = 0; i < n; i++) {
+        double dq = q1[i] - q0[i];
+        law->qa[i] = q0[i] + AVF_S[0] * dq;
+        law->qb[i] = q0[i] + AVF_S[1] * dq;
+    }
+    gradient(d, law->qa, 0.5, out, 0);
+    gradient(d, law->qb, 0.5, out, 1);
+    if (d->beta > 0.0) {
+        for (int i = 0; i < n; i++) {
+            law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
+            law->qb[i] = q1[i] - q0[i];
+        }
+        material_apply(d, law->qa, law->qb, d->beta / h, out);
+    }
+}
+
+void elastic_iteration_band(ElasticLaw *law, const double *q0, const double *q1, double h) {
+    const ElasticData *d = &law->d;
+    int n = d->n;
+    size_t nb = (size_t)d->ne * (2 * d->bw + 1);
+    double kb_scale = 0.25 * h * h + 0.5 * h * d->beta;   /* sum of the scales below */
+    if (!d->nonlinear && law->band_h == h) return;       /* constant for the linear strain */
+    for (size_t k = 0; k < nb; k++) law->band[k] = kb_scale * d->kb_band[k];
+    law->band_h = h;
+    for (int s = 0; s < 2; s++) {
+        for (int i = 0; i < n; i++) law->qa[i] = q0[i] + AVF_S[s] * (q1[i] - q0[i]);
+        tangent_band(d, law->qa, 0.25 * h * h * AVF_S[s], 1, law->band);
+    }
+    if (d->beta > 0.0) {
+        for (int i = 0; i < n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
+        tangent_band(d, law->qa, 0.5 * h * d->beta, 0, law->band);
+    }
+}
+
+double elastic_energy(ElasticLaw *law, const double *q) {
+    const ElasticData *d = &law->d;
+    /* asked for the end of a step, then its output row, then the start of the next */
+    if (law->energy_valid && memcmp(q, law->energy_q, sizeof(double) * d->n) == 0)
+        return law->energy;
+    double b[GMAX], u = 0.0;
+    u += bending_quadratic(d, q);
+    for (int e = 0; e < d->n_el; e++) {
+        double eps = element_strain(d, e, q, b);
+        u += d->ea_l[e] * eps * eps;
+    }
+    memcpy(law->energy_q, q, sizeof(double) * d->n);
+    law->energy = 0.5 * u;
+    law->energy_valid = 1;
+    return law->energy;
+}
+
+double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, double h) {
+    const ElasticData *d = &law->d;
+    double diss = 0.0;
+    if (d->beta > 0.0) {
+        for (int i = 0; i < d->n; i++) {
+            law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
+            law->qb[i] = q1[i] - q0[i];
+        }
+        diss = d->beta * material_apply(d, law->qa, law->qb, 0.0, NULL) / h;
+    }
+    law->last_dissipation = diss;
+    return diss;
+}
+
+void elastic_membrane_stress(ElasticLaw *law, const double *q) {
+    const ElasticData *d = &law->d;
+    double b[GMAX];
+    for (int e = 0; e < d->n_el; e++) {
+        element_strain(d, e, q, b);
+        double s = 0.0;
+        for (int gp = 0; gp < d->n_gauss; gp++)
+            s += d->mean_w[(size_t)e * d->n_gauss + gp] * 0.5 * b[gp] * b[gp];
+        law->el_stress[e] = d->youngs_modulus * s;
+    }
+}
+
+double elastic_last_dissipation(const ElasticLaw *law) {
+    return law->last_dissipation;
+}
