@@ -211,15 +211,38 @@ def test_bad_spec_refused_before_any_work(tmp_path, capsys, spec, culprits):
 
 def test_missing_spec_and_bad_options_refused(tmp_path, capsys):
     spec = write(tmp_path / "ok.yaml", "grid:\n  v0: [-1.0]\n")
-    for args, culprit in ((["nope.yaml"], "nope.yaml"),
-                          ([spec, "--workers", "0"], "--workers"),
-                          ([spec, "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
-                           "--scheduler")):
+    a_file = write(tmp_path / "a_file", "")
+    out = str(tmp_path / "out")
+    for args, culprits in (
+            (["nope.yaml", "--out", out], ["sweep spec", "nope.yaml"]),
+            ([str(tmp_path), "--out", out], ["sweep spec", "not a regular file"]),
+            ([spec, "--out", out, "--workers", "0"], ["--workers"]),
+            ([spec, "--out", out, "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+             ["--scheduler"]),
+            ([spec, "--out", a_file], ["--out", "not a directory"]),
+            ([spec, "--out", str(tmp_path / "no" / "out")], ["--out", "parent directory"])):
         with pytest.raises(SystemExit) as exc:
-            cli.main(["sweep", *args, "--out", str(tmp_path / "out")])
+            cli.main(["sweep", *args])
         assert exc.value.code == 2
-        assert culprit in capsys.readouterr().err
-    assert not (tmp_path / "out").exists()
+        err = capsys.readouterr().err
+        assert all(c in err for c in culprits), err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "no").exists()
+
+
+def test_unreachable_scheduler_refused_before_dir_is_touched(tmp_path, capsys, monkeypatch):
+    import socket
+
+    with socket.socket() as sock:       # a port nobody listens on
+        sock.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{sock.getsockname()[1]}"
+    monkeypatch.setattr(sweep, "CONNECT_TIMEOUT", 1.0)
+    spec = write(tmp_path / "ok.yaml", "grid:\n  v0: [-1.0]\n")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["sweep", spec, "--out", str(tmp_path / "out"), "--scheduler", address])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"--scheduler {address}: cannot connect" in err, err
+    assert not (tmp_path / "out").exists(), "no cluster, no results directory"
 
 
 def test_spec_cases_ids_and_force_profile(tmp_path):

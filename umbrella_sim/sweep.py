@@ -48,6 +48,7 @@ from typing import Any, Callable
 import yaml
 
 from . import __version__
+from .files import check_new_output, read_text_input
 
 SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
              "force_profile")
@@ -56,6 +57,8 @@ STATUS_OK, STATUS_DIVERGED, STATUS_ERROR = "ok", "diverged", "error"
 #: statuses of a case that is done: re-running the sweep skips it
 FINISHED = (STATUS_OK, STATUS_DIVERGED)
 PLOTS = ("deploy_time.png", "peak_stress.png", "tip_deflection.png")
+CONNECT_TIMEOUT = 10.0      # s to reach a --scheduler
+WORKER_TIMEOUT = 30.0       # s for a first worker to join it
 
 
 class SpecError(ValueError):
@@ -90,6 +93,7 @@ class Sweep:
     axes: list                  # grid parameter names, in SPEC order
     swept: list                 # every parameter name the grid or the cases set
     duplicates: list = field(default_factory=list)   # (index, index of the same case)
+    text: str = ""              # the SPEC as read (copied to DIR/spec.yaml)
 
 
 # ------------------------------------------------------------------ the SPEC
@@ -116,10 +120,10 @@ def load_spec(path: str) -> Sweep:
     from .solver import command_force
 
     try:
-        with open(path, encoding="utf-8") as fh:
-            doc = yaml.safe_load(fh)
-    except OSError as exc:
-        raise SpecError(f"sweep spec {path}: {exc.strerror}") from None
+        text = read_text_input(path, "sweep spec")
+        doc = yaml.safe_load(text)
+    except ValueError as exc:       # missing, not a regular file, unreadable, not text
+        raise SpecError(str(exc)) from None
     except yaml.YAMLError as exc:
         raise SpecError(f"sweep spec {path}: not valid YAML ({exc})") from None
     if not isinstance(doc, dict):
@@ -185,7 +189,7 @@ def load_spec(path: str) -> Sweep:
     swept = list(axes)
     for c in explicit:
         swept += [n for n in c if n not in swept]
-    sweep = Sweep(path=os.path.abspath(path), cases=[], axes=axes, swept=swept)
+    sweep = Sweep(path=os.path.abspath(path), cases=[], axes=axes, swept=swept, text=text)
     seen: dict[str, int] = {}
     for index, overrides in enumerate(overrides_list, start=1):
         source = "grid" if index <= len(overrides_list) - len(explicit) else "cases"
@@ -288,8 +292,7 @@ class CaseStore:
     """DIR/cases/<case_id>.json: one file per case result, each written atomically."""
 
     def __init__(self, out_dir: str):
-        self.dir = os.path.join(out_dir, "cases")
-        os.makedirs(self.dir, exist_ok=True)
+        self.dir = os.path.join(out_dir, "cases")     # made by the first save
 
     def path(self, cid: str) -> str:
         return os.path.join(self.dir, cid + ".json")
@@ -304,6 +307,7 @@ class CaseStore:
             return None             # unreadable: the case runs again
 
     def save(self, record: dict) -> None:
+        os.makedirs(self.dir, exist_ok=True)
         tmp = self.path(record["case_id"]) + f".{os.getpid()}.tmp"
         with open(tmp, "w", encoding="utf-8") as fh:
             json.dump(record, fh, indent=1, default=_jsonable)     # summary keys in order
@@ -617,7 +621,7 @@ def _client(workers: int | None, scheduler: str | None, log: Callable[[str], Non
 
     if scheduler:
         try:
-            client = Client(scheduler, timeout="10s")
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT)
         except OSError as exc:
             raise SpecError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
         return client, None
@@ -645,9 +649,10 @@ def _check_workers(client, scheduler: str | None, log) -> None:
     """Every worker imports this umbrella_sim version, or nothing is sent."""
     if scheduler:
         try:
-            client.wait_for_workers(1, timeout=30)
+            client.wait_for_workers(1, timeout=WORKER_TIMEOUT)
         except Exception:  # noqa: BLE001 - distributed raises its own TimeoutError
-            raise SpecError(f"--scheduler {scheduler}: no worker joined within 30 s") from None
+            raise SpecError(f"--scheduler {scheduler}: no worker joined within "
+                            f"{WORKER_TIMEOUT:g} s") from None
     try:
         versions = client.run(worker_version)
     except Exception as exc:  # noqa: BLE001 - e.g. ModuleNotFoundError on a worker
@@ -673,14 +678,8 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
         stream.write(msg + "\n")
         stream.flush()
 
-    os.makedirs(out_dir, exist_ok=True)
     store = CaseStore(out_dir)
     mcap_dir = os.path.join(os.path.abspath(out_dir), "mcap") if mcap else None
-    if mcap_dir:
-        os.makedirs(mcap_dir, exist_ok=True)
-    with open(os.path.join(out_dir, "spec.yaml"), "w", encoding="utf-8") as fh, \
-            open(sweep.path, encoding="utf-8") as src:
-        fh.write(src.read())
     todo = [c for c in sweep.cases if not is_finished(store.load(c.case_id), mcap)]
     report = SweepReport(total=len(sweep.cases), skipped=len(sweep.cases) - len(todo))
     for index, same in sweep.duplicates:
@@ -689,11 +688,19 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
         log(f"{report.skipped} of {report.total} cases already in {out_dir}: skipped")
     client = cluster = None
     futures = []
+    made_dir = False
     try:
-        if todo:
+        if todo:    # the cluster first: if it cannot be had, DIR is left as it was
             t0 = time.perf_counter()
             client, cluster = _client(workers, scheduler, log)
             _check_workers(client, scheduler, log)
+        os.makedirs(store.dir, exist_ok=True)
+        if mcap_dir:
+            os.makedirs(mcap_dir, exist_ok=True)
+        with open(os.path.join(out_dir, "spec.yaml"), "w", encoding="utf-8") as fh:
+            fh.write(sweep.text)
+        made_dir = True
+        if todo:
             from distributed import as_completed
 
             t1 = time.perf_counter()
@@ -742,7 +749,8 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
                     cluster.close(timeout=10)
             except Exception:  # noqa: BLE001 - closing after an interrupt: best effort
                 pass
-        _write_outputs(sweep, store, out_dir, report, log)
+        if made_dir:
+            _write_outputs(sweep, store, out_dir, report, log)
     return report
 
 
@@ -764,6 +772,23 @@ def _write_outputs(sweep, store, out_dir, report, log) -> None:
 
 
 # ------------------------------------------------------------------ command line
+def check_out_dir(path: str) -> None:
+    """Refuse a results directory that cannot be used (a new one, or one to resume into)."""
+    if not os.path.lexists(path):
+        try:
+            check_new_output(path, "--out")
+        except ValueError as exc:
+            raise SpecError(str(exc)) from None
+        return
+    if not os.path.isdir(path):
+        raise SpecError(f"--out {path}: exists and is not a directory")
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise SpecError(f"--out {path}: directory is not writable")
+    cases = os.path.join(path, "cases")
+    if os.path.lexists(cases) and not os.path.isdir(cases):
+        raise SpecError(f"--out {path}: {cases} exists and is not a directory")
+
+
 def add_parser(sub) -> argparse.ArgumentParser:
     sp = sub.add_parser("sweep", help="run a parameter sweep on Dask",
                         description="Run every case of SPEC.yaml (base / grid / cases, see "
@@ -788,8 +813,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         if args.workers is not None and args.scheduler:
             raise SpecError("--workers and --scheduler: the cluster's workers are its own; "
                             "give one of them")
-        if os.path.exists(args.out) and not os.path.isdir(args.out):
-            raise SpecError(f"--out {args.out}: exists and is not a directory")
+        check_out_dir(args.out)
         sweep = load_spec(args.spec)
     except SpecError as exc:
         ap.exit(2, f"{ap.prog}: error: {exc}\n")
