@@ -8,8 +8,12 @@ sweep into a fresh directory (the same code path as the command line) and we pri
 - cluster start: starting the worker processes and checking their umbrella_sim;
 - cases/s: cases finished per wall second, first submission to last result (store writes
   included, cluster start excluded);
-- overhead/case: (wall time x workers - sum of the cases' own wall times on the workers) /
-  cases, i.e. what Dask, the pickling of the task and result and the store cost each case;
+- idle/case: time a worker spends between the end of one of its cases and the start of its
+  next (Dask handing over the next task: the scheduling overhead per case as the workers see
+  it; the next task is usually queued on the worker already);
+- wall overhead/case: (wall time x workers - sum of the cases' own wall times on the workers)
+  / cases: the idle time above plus the start (first task reaching each worker) and the tail
+  (workers idle while the last cases finish), i.e. everything that is not computing;
 - no-op round trip: submit -> result of an empty task on the same cluster, one at a time.
 The machine is shared: wall-clock figures are noisy.
 
@@ -17,6 +21,7 @@ The machine is shared: wall-clock figures are noisy.
 """
 import argparse
 import io
+import json
 import os
 import sys
 import tempfile
@@ -29,6 +34,22 @@ from umbrella_sim import sweep  # noqa: E402
 
 def noop(x):
     return x
+
+
+def idle_between_cases(out_dir: str) -> tuple[float, int]:
+    """Return the summed gaps between consecutive cases on each worker, and their number."""
+    by_worker: dict[str, list] = {}
+    store = os.path.join(out_dir, "cases")
+    for name in os.listdir(store):
+        with open(os.path.join(store, name)) as fh:
+            rec = json.load(fh)
+        by_worker.setdefault(rec["worker"], []).append((rec["started_at"], rec["finished_at"]))
+    total, gaps = 0.0, 0
+    for spans in by_worker.values():
+        spans.sort()
+        total += sum(start - end for (_, end), (start, _) in zip(spans, spans[1:]))
+        gaps += len(spans) - 1
+    return total, gaps
 
 
 def round_trip(n_workers: int, n: int = 50) -> float:
@@ -56,7 +77,8 @@ def main():
           f"{args.duration} s simulated each; {os.cpu_count()} cores (shared machine), "
           f"load average {os.getloadavg()[0]:.1f}")
     print(f"{'workers':>7} {'cluster start':>13} {'wall':>7} {'cases/s':>8} "
-          f"{'compute/case':>12} {'overhead/case':>13} {'no-op round trip':>16}")
+          f"{'compute/case':>12} {'idle/case':>10} {'wall overhead/case':>18} "
+          f"{'no-op round trip':>16}")
     with tempfile.TemporaryDirectory(prefix="bench_sweep_") as tmp:
         spec = os.path.join(tmp, "spec.yaml")
         with open(spec, "w") as fh:
@@ -64,15 +86,17 @@ def main():
         loaded = sweep.load_spec(spec)
         for n in args.workers:
             log = io.StringIO()
-            report = sweep.run_sweep(loaded, os.path.join(tmp, f"out{n}"), workers=n,
-                                     stream=log)
+            out = os.path.join(tmp, f"out{n}")
+            report = sweep.run_sweep(loaded, out, workers=n, stream=log)
             assert report.ran == args.cases and report.failed == 0, log.getvalue()
             overhead = (report.run_s * n - report.compute_s) / report.ran
             rt = round_trip(n)
+            idle, gaps = idle_between_cases(out)
             compute_ms = report.compute_s / report.ran * 1e3
             print(f"{n:>7} {report.setup_s:>11.2f} s {report.run_s:>5.2f} s "
                   f"{report.ran / report.run_s:>8.2f} {compute_ms:>9.1f} ms"
-                  f" {overhead * 1e3:>10.1f} ms {rt * 1e3:>13.2f} ms"
+                  f" {idle / max(gaps, 1) * 1e3:>7.1f} ms {overhead * 1e3:>15.1f} ms"
+                  f" {rt * 1e3:>13.2f} ms"
                   f"   (load average {os.getloadavg()[0]:.1f})")
 
 

@@ -239,7 +239,8 @@ def run_case(task: dict) -> dict:
     from .params import UmbrellaParams
 
     out = {"case_id": task["case_id"], "worker": f"{socket.gethostname()}:{os.getpid()}",
-           "umbrella_sim": __version__, "summary": {}, "error": None, "mcap": None}
+           "umbrella_sim": __version__, "summary": {}, "error": None, "mcap": None,
+           "started_at": time.time()}      # the worker's clock (gaps between its cases)
     t0 = time.perf_counter()
     try:
         params = UmbrellaParams.from_mapping(task["params"]).validated()
@@ -266,6 +267,7 @@ def run_case(task: dict) -> dict:
         out["error"] = f"{type(exc).__name__}: {exc} [{' | '.join(tb[-3:-1])}]"
         out["status"] = STATUS_ERROR
     out["case_wall_time"] = time.perf_counter() - t0
+    out["finished_at"] = time.time()
     return out
 
 
