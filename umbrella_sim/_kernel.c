@@ -730,7 +730,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         }
         mass_data(x, q);
         constraints(m, q, locked, rigid, phi);
-        band_matvec2(m, m->mff_band, x->hm, m->k_band, x->kq, qm);   /* Mff qm, K qm */
+        band_matvec2(m, m->mff_band, x->hm, law ? NULL : m->k_band, x->kq, qm); /* Mff qm, K qm */
         if (law) elastic_force(law, q0, q, h, x->kq);    /* AVF gradient of U + C dq / h */
         for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; x->hm[i] += m->c_full[i]; }
         band_matvec2(m, m->mff_band, x->mffv, m->w_band, x->wb, v1); /* Mff v1, W v1 */

@@ -105,9 +105,8 @@ static double bending_quadratic(const ElasticData *d, const double *x) {
     return quad;
 }
 
-/* y (+)= scale * grad U(q) at the elastic q indices */
-static void gradient(const ElasticData *d, const double *q, double scale, double *y, int acc) {
-    bending_matvec(d, q, scale, y, acc);
+/* y += scale * (grad U(q) - Kb q), the membrane part, at the elastic q indices */
+static void membrane_gradient(const ElasticData *d, const double *q, double scale, double *y) {
     double b[GMAX];
     for (int e = 0; e < d->n_el; e++) {
         double eps = element_strain(d, e, q, b);
@@ -177,16 +176,20 @@ void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h
     if (!d->nonlinear) {   /* U quadratic, C = beta K constant: K (q_m + beta dq / h) */
         for (int i = 0; i < n; i++)
             law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]) + d->beta / h * (q1[i] - q0[i]);
-        gradient(d, law->qa, 1.0, out, 0);
+        bending_matvec(d, law->qa, 1.0, out, 0);
+        membrane_gradient(d, law->qa, 1.0, out);
         return;
     }
+    /* AVF: Kb q_m (Kb q is linear) + the mean of the membrane gradient at the Gauss points */
+    for (int i = 0; i < n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
+    bending_matvec(d, law->qa, 1.0, out, 0);
     for (int i = 0; i < n; i++) {
         double dq = q1[i] - q0[i];
         law->qa[i] = q0[i] + AVF_S[0] * dq;
         law->qb[i] = q0[i] + AVF_S[1] * dq;
     }
-    gradient(d, law->qa, 0.5, out, 0);
-    gradient(d, law->qb, 0.5, out, 1);
+    membrane_gradient(d, law->qa, 0.5, out);
+    membrane_gradient(d, law->qb, 0.5, out);
     if (d->beta > 0.0) {
         for (int i = 0; i < n; i++) {
             law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
