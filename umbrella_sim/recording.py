@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import subprocess
 import sys
 import threading
@@ -124,37 +125,58 @@ def _align(pos: int, n: int) -> int:
     return (pos + n - 1) // n * n
 
 
+#: message class -> its fields' size functions (built once per type: the walk runs for every
+#: recorded message, so the type strings are parsed once, not per message)
+_PLANS: dict = {}
+
+
 def _cdr_end(msg, pos: int) -> int:
-    for field, ftype in msg.get_fields_and_field_types().items():
-        value = getattr(msg, field)
-        pos = _cdr_field(ftype, value, pos)
+    plan = _PLANS.get(type(msg))
+    if plan is None:
+        plan = _PLANS[type(msg)] = [(field, _field_size(ftype)) for field, ftype
+                                    in msg.get_fields_and_field_types().items()]
+    for field, size in plan:
+        pos = size(getattr(msg, field), pos)
     return pos
 
 
-def _cdr_field(ftype: str, value, pos: int) -> int:
+def _field_size(ftype: str):
+    """Return size(value, pos) -> end position of one field of IDL type ftype."""
     if ftype.startswith("sequence<"):
-        inner = ftype[len("sequence<"):-1].rsplit(",", 1)[0].strip()
-        pos = _align(pos, 4) + 4
-        return _cdr_items(inner, value, pos)
+        items = _items_size(ftype[len("sequence<"):-1].rsplit(",", 1)[0].strip())
+        return lambda value, pos: items(value, (pos + 3) // 4 * 4 + 4)
     if ftype.endswith("]"):
-        inner = ftype[:ftype.index("[")]
-        return _cdr_items(inner, value, pos)
-    return _cdr_items(ftype, [value], pos)
+        return _items_size(ftype[:ftype.index("[")])
+    items = _items_size(ftype)
+    return lambda value, pos: items((value,), pos)
 
 
-def _cdr_items(ftype: str, values, pos: int) -> int:
-    if ftype.startswith("string") or ftype.startswith("wstring"):
+def _items_size(ftype: str):
+    """Return size(values, pos) -> end position of consecutive items of IDL type ftype."""
+    if ftype.startswith("wstring"):
+        def size(values, pos):
+            for v in values:
+                pos = (pos + 3) // 4 * 4 + 4 + 4 * (len(v) + 1)
+            return pos
+        return size
+    if ftype.startswith("string"):
+        def size(values, pos):
+            for v in values:
+                pos = (pos + 3) // 4 * 4 + 4 + len(v.encode("utf-8")) + 1
+            return pos
+        return size
+    n = _SIZES.get(ftype)
+    if n is not None:
+        def size(values, pos):
+            k = len(values)
+            return (pos + n - 1) // n * n + n * k if k else pos
+        return size
+
+    def size(values, pos):                    # nested messages
         for v in values:
-            pos = _align(pos, 4) + 4
-            pos += (len(v.encode("utf-8")) + 1) if ftype.startswith("string") else 4 * (len(v) + 1)
+            pos = _cdr_end(v, pos)
         return pos
-    size = _SIZES.get(ftype)
-    if size is not None:
-        n = len(values)
-        return (_align(pos, size) + size * n) if n else pos
-    for v in values:                           # nested message
-        pos = _cdr_end(v, pos)
-    return pos
+    return size
 
 
 def cdr_bytes(msg, data: bytes | None = None) -> bytes:
@@ -236,7 +258,7 @@ def default_bag_name(namespace: str = "/", when: float | None = None) -> str:
 
 
 def new_bag_recorder(namespace: str, metadata, parent: str = ".",
-                     on_error=None) -> "BagRecorder":
+                     on_error=None, background: bool = False) -> "BagRecorder":
     """
     Open a new timestamped bag directory in parent (default: the working directory).
 
@@ -250,7 +272,8 @@ def new_bag_recorder(namespace: str, metadata, parent: str = ".",
         if os.path.exists(bag_dir):
             continue
         try:
-            return BagRecorder(bag_dir, metadata(bag_dir), on_error=on_error)
+            return BagRecorder(bag_dir, metadata(bag_dir), on_error=on_error,
+                               background=background)
         except ValueError:
             if os.path.exists(bag_dir):      # taken meanwhile by another process: next name
                 continue
@@ -369,9 +392,20 @@ class BagRecorder:
     recording_error`` metadata record and a footer are appended if the disk takes them,
     ``error`` holds the reason and ``on_error`` (if given) is called once with it.  A failure
     while starting removes everything the recorder created and raises ValueError.
+
+    background=True (the live node): ``write`` only queues the message (bounded, QUEUE_LIMIT;
+    a full queue makes the caller wait, nothing is dropped) and a writer thread does the CDR
+    trim, the chunking, the zstd compression and the file writes, so none of it runs on the
+    publishing thread.  A write error there stops the recording as above (``on_error`` is then
+    called from the writer thread); the other methods first wait for the queue to drain, so
+    segments, counts and the footer see every message queued before them.
     """
 
-    def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]], on_error=None):
+    #: messages queued at most for the background writer (~1 s of a 1 kHz publication)
+    QUEUE_LIMIT = 8192
+
+    def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]], on_error=None,
+                 background: bool = False):
         bag_dir = check_record_path(bag_dir)
         try:
             os.mkdir(bag_dir)
@@ -409,6 +443,32 @@ class BagRecorder:
         self._closed = False
         self.segment = 0
         self.offset_ns = 0
+        self._queue = None
+        if background:
+            self._queue = queue.Queue(self.QUEUE_LIMIT)
+            self._writer_thread = threading.Thread(target=self._write_queued,
+                                                   name="recorder", daemon=True)
+            self._writer_thread.start()
+
+    def _write_queued(self) -> None:
+        """Write what write() queued, until the None that close() queues (writer thread)."""
+        while True:
+            item = self._queue.get()
+            try:
+                if item is None:
+                    return
+                self._write_now(*item)
+            except Exception as exc:     # never lose the thread silently: stop the recording
+                with self._lock:
+                    if not self._closed:
+                        self._fail(OSError(f"{type(exc).__name__}: {exc}"), "recording", None)
+            finally:
+                self._queue.task_done()
+
+    def _drain(self) -> None:
+        """Wait until the writer thread has written everything queued so far."""
+        if self._queue is not None and self._writer_thread.is_alive():
+            self._queue.join()
 
     def _remove_partial(self) -> None:
         if self._fh is not None:
@@ -452,6 +512,7 @@ class BagRecorder:
             self.on_error(self.error)
 
     def add_channel(self, topic: str, msg_type, qos: QoSProfile) -> None:
+        self._drain()
         with self._lock:
             if topic in self._channels or self._closed:
                 return
@@ -526,6 +587,7 @@ class BagRecorder:
         ended_events: the events of the segment that ends (``umbrella_sim.events.K-1``; the
         last segment's are ``umbrella_sim.events``, written at close).
         """
+        self._drain()
         with self._lock:
             if self._closed:
                 return self.segment
@@ -548,12 +610,22 @@ class BagRecorder:
 
         Record one message at sim time t_ns (plus the segment's log-time offset); False
         once the recording has stopped (closed or failed).  data: serialize_message(msg)
-        when the caller has it already (the node publishes those bytes).
+        when the caller has it already (the node publishes those bytes).  With a background
+        writer the message is queued (msg must not be changed afterwards) and True means
+        queued; a later write error shows in ``error``, ``on_error`` and the next call.
         """
         if self._closed:
             return False
-        data = cdr_bytes(msg, data)
         t_ns += self.offset_ns
+        if self._queue is not None:
+            self._queue.put((topic, msg, t_ns, data))
+            return True
+        return self._write_now(topic, msg, t_ns, data)
+
+    def _write_now(self, topic: str, msg, t_ns: int, data: bytes | None) -> bool:
+        if self._closed:
+            return False
+        data = cdr_bytes(msg, data)
         with self._lock:
             if self._closed:
                 return False
@@ -574,6 +646,9 @@ class BagRecorder:
             return True
 
     def close(self, final_metadata: dict[str, dict[str, str]] | None = None) -> None:
+        if self._queue is not None and self._writer_thread.is_alive():
+            self._queue.put(None)
+            self._writer_thread.join()
         with self._lock:
             if self._closed:
                 return

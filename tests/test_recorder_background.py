@@ -1,0 +1,59 @@
+"""The live node's recorder: compression and file writes on a writer thread of their own."""
+import errno
+import os
+import threading
+
+from std_msgs.msg import Float64
+
+from tests.test_faults import full_disk_write
+from umbrella_sim import recording
+from umbrella_sim.logs import read_log
+
+
+def _values(path, topic="/x"):
+    return [m.data for _, m in read_log(path).decoded(topic)]
+
+
+def test_background_writer_records_what_the_synchronous_one_does(tmp_path):
+    logs = []
+    for background in (False, True):
+        rec = recording.BagRecorder(str(tmp_path / f"bag{background}"),
+                                    {"umbrella_sim.parameters": {}}, background=background)
+        rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+        for i in range(5000):
+            assert rec.write("/x", Float64(data=float(i)), i * 1000)
+        k = rec.start_segment({"a": "1"}, gap_ns=1000)     # waits for the queue
+        assert k == 1 and rec.offset_ns == 4999 * 1000 + 1000
+        for i in range(10):
+            assert rec.write("/x", Float64(data=-float(i)), i * 1000)
+        rec.close()
+        assert rec.error is None and rec.counts["/x"] == 5010
+        logs.append(_values(rec.path))
+    assert logs[0] == logs[1] == [float(i) for i in range(5000)] + [-float(i) for i in range(10)]
+
+
+def test_background_write_error_stops_the_recording_cleanly(tmp_path, monkeypatch):
+    monkeypatch.setattr(os, "write", full_disk_write(100_000, errno.ENOSPC))
+    errors, threads = [], []
+
+    def on_error(reason):
+        errors.append(reason)
+        threads.append(threading.current_thread().name)
+
+    rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}},
+                                on_error=on_error, background=True)
+    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    n = 0
+    while rec.write("/x", Float64(data=float(n)), n * 1_000_000):   # queued until it fails
+        n += 1
+        assert n < 10**6
+    assert not rec.write("/x", Float64(data=-1.0), 0)          # stays stopped, no exception
+    rec.close({"late": {"a": "b"}})                             # no exception either
+    assert len(errors) == 1 and os.strerror(errno.ENOSPC) in errors[0]
+    assert threads == ["recorder"]                              # not the publishing thread
+    log = read_log(str(tmp_path / "bag"))
+    assert log.ended_early and os.strerror(errno.ENOSPC) in log.ended_early
+    values = _values(log.path)
+    assert values == [float(i) for i in range(len(values))] and len(values) > 1000
+    assert log.count("/x") == rec.counts["/x"] == len(values) < n
+    assert os.path.getsize(log.path) <= 100_000
