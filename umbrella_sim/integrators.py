@@ -410,6 +410,7 @@ class CompiledKernel:
         self._residual = ctypes.c_double(0.0)
         self._refs = tuple(ctypes.byref(o) for o in (self._n_done, self._its, self._residual))
         self._set_capacity(capacity)
+        self._made = None        # the DynamicState the buffers hold (see load)
         # single-step outputs
         self._q1, self._v1, self._p1 = np.zeros(n), np.zeros(n), np.zeros(n)
         self._lam1 = np.zeros(nc_max)
@@ -427,7 +428,11 @@ class CompiledKernel:
         self.capacity = cap
 
     def load(self, s: DynamicState, work: float, lock_loss: float) -> None:
-        """Take s as the state to advance from."""
+        """Take s as the state to advance from (nothing to copy if it is the last one made)."""
+        self.acc[0], self.acc[1] = work, lock_loss
+        if s is self._made:
+            return
+        self._made = None
         self.q[:] = s.q
         self.v[:] = s.qd
         self.lam[:len(s.multipliers)] = s.multipliers
@@ -456,8 +461,10 @@ class CompiledKernel:
         return status, self._n_done.value, self._its.value, self._residual.value
 
     def state(self, t: float, nc: int) -> DynamicState:
-        return DynamicState(t, self.q.copy(), self.v.copy(), self.accel.copy(),
-                            self.lam[:nc].copy(), self.p.copy())
+        """Return the advanced state; advancing from it next time needs no load."""
+        self._made = DynamicState(t, self.q.copy(), self.v.copy(), self.accel.copy(),
+                                  self.lam[:nc].copy(), self.p.copy())
+        return self._made
 
     def step(self, s: DynamicState, h, force, cs: ConstraintSet, tol, max_iter):
         q0 = np.ascontiguousarray(s.q, dtype=float)

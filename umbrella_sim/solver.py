@@ -133,8 +133,8 @@ class Engine(abc.ABC):
         Up to n_steps grid steps t_k -> (k + 1) h from s at t = k0 h in one call; stops
         before a step in which the sleeve reaches the stop (stage deploying), and at a
         failure.  Returns None if this engine has no such path, else (state, rows, work,
-        stop): rows (len(STEP_FIELDS), steps done), stop None (all steps done), "crossing",
-        or a failure message.
+        stop): rows (len(STEP_FIELDS), steps done; may be the engine's buffer, valid until
+        its next call), stop None (all steps done), "crossing", or a failure message.
         """
         return None
 
@@ -170,7 +170,7 @@ class FiniteElementEngine(Engine):
         if kernel is None:
             return None
         integ, cs = self.integrator, self._cs[stage]
-        kernel.load(s, work, lock_loss)
+        kernel.load(s, work, lock_loss)     # a no-op when s is the state it returned last
         status, done, its, residual = kernel.advance(
             cs, k0, h, n_steps, force, integ.tolerance, integ.max_iterations,
             DIVERGENCE_RESIDUAL)
@@ -186,7 +186,7 @@ class FiniteElementEngine(Engine):
         else:
             stop = f"solver failed at t = {t:.9g} s: {integ.kernel_error(status, t + h)}"
         state = kernel.state(t, self.model.n_constraints(cs)) if done else s
-        return state, kernel.out[:, :done].copy(), float(kernel.acc[0]), stop
+        return state, kernel.out[:, :done], float(kernel.acc[0]), stop
 
     def fe_state(self, s: DynamicState):
         return s.q, s.qd, s.qdd
@@ -434,7 +434,7 @@ class UmbrellaSimulator:
         whose step is taken here); engines without one, or UMBRELLA_SIM_KERNEL=numpy, take
         them one by one with outputs from ``sample()`` (the reference path).
         """
-        rows = np.empty((len(STEP_FIELDS), n_steps))
+        rows = None
         done = 0
         error = None
         lock_before = self.lock_event
@@ -445,8 +445,13 @@ class UmbrellaSimulator:
             if fast is not None:
                 state, block, work, stop = fast
                 k = block.shape[1]
-                if k:
+                if k == n_steps:              # the whole block in one call (the usual case)
+                    rows = block.copy()
+                elif k:
+                    if rows is None:
+                        rows = np.empty((len(STEP_FIELDS), n_steps))
                     rows[:, done:done + k] = block
+                if k:
                     self._commit(state, self._stage, force, work - self._work, 0.0, None, k)
                     done += k
                 if stop is None:
@@ -459,11 +464,15 @@ class UmbrellaSimulator:
             except SimulationDiverged as exc:
                 error = str(exc)
                 break
+            if rows is None:
+                rows = np.empty((len(STEP_FIELDS), n_steps))
             rows[:, done] = step_row(self.sample())
             done += 1
         lock = self.lock_event if self.lock_event is not lock_before else None
         final = (self._state, self._stage, self._applied_force, self._work, self._lock_loss)
-        return StepBlock.from_rows(rows[:, :done].copy() if done < n_steps else rows,
+        if rows is None:
+            rows = np.empty((len(STEP_FIELDS), 0))
+        return StepBlock.from_rows(rows[:, :done].copy() if done < rows.shape[1] else rows,
                                    lambda: self._sample(*final), lock, error)
 
     def advance_to(self, t: float, record: bool = True) -> list[Sample]:
