@@ -970,3 +970,71 @@ void umbrella_outputs(Ctx *x, const double *q, const double *v, const double *p,
                       int cap, int k) {
     output_row(x, q, v, p, t, stage, force, work, lock_loss, out, cap, k);
 }
+
+/* Lock instant inside a step (solver.UmbrellaSimulator._find_lock, the same Illinois
+ * iteration): y_H(t0 + dt) = y_stop on the integrator's own trajectory, stage deploying, from
+ * (q0, v0, lam0, p0) with the step length dt in (0, h], until the bracket is below event_tol
+ * or y_H hits the stop exactly.  Every trial step is checked like a committed one (finite,
+ * max(|Phi|, |J v|) <= div_tol).  On OK: the best trial (least |y_H - y_stop|) in q, v, lam,
+ * p (nc rows of lam) and its step length in *dt_out.  On DIVERGED or a step failure: *dt_out
+ * is the failing trial's step length and *residual its residual (DIVERGED).  The caller
+ * knows that a step of length h crosses (umbrella_advance returned CROSSING). */
+int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0,
+                           const double *lam0, const double *p0, double h, double force,
+                           double tol, double phi_tol, int max_iter, double div_tol,
+                           double event_tol, double *q, double *v, double *lam, double *p,
+                           double *dt_out, double *residual, int *iterations) {
+    const Model *m = x->m;
+    int n = m->n, nc = nc_of(m, 0, rigid), its_total = 0;
+    double a = 0.0, fa = sleeve_height(m, q0) - m->y_stop, b = h, fb = 0.0;
+    double best_dt = h, f_best = INFINITY;
+    int have_best = 0, side = 0;
+    *residual = 0.0;
+    for (int trial = 0; trial < 201; trial++) {
+        double dt;
+        if (trial == 0) dt = b;
+        else {
+            if (b - a < event_tol || f_best == 0.0) break;
+            dt = b - fb * (b - a) / (fb - fa);
+            if (!(a < dt && dt < b)) dt = 0.5 * (a + b);
+        }
+        int its = 0;
+        int status = step(x, 0, rigid, q0, v0, lam0, p0, dt, force, tol, phi_tol, max_iter, &its);
+        its_total += its;
+        *dt_out = dt;
+        if (status != OK) { *iterations = its_total; return status; }
+        const double *q1 = x->q_s, *v1 = x->v_s;
+        for (int i = 0; i < n; i++)
+            if (!isfinite(q1[i]) || !isfinite(v1[i])) { *iterations = its_total; return NON_FINITE; }
+        constraints(m, q1, 0, rigid, x->phi);
+        double r = max_abs(nc, x->phi);
+        for (int c = 0; c < nc; c++) {
+            double aj = fabs(jrow_dot(x->jrow_idx, x->jrow_val, c, v1));
+            if (!(aj <= r)) r = aj;
+        }
+        if (!(r <= div_tol)) { *residual = r; *iterations = its_total; return DIVERGED; }
+        double f = sleeve_height(m, q1) - m->y_stop;
+        if (!have_best || fabs(f) < fabs(f_best)) {
+            have_best = 1;
+            f_best = f;
+            best_dt = dt;
+            memcpy(q, q1, sizeof(double) * n);
+            memcpy(v, v1, sizeof(double) * n);
+            memcpy(lam, x->lam_s, sizeof(double) * nc);
+            memcpy(p, x->p_s, sizeof(double) * n);
+        }
+        if (trial == 0) { fb = f; continue; }
+        if (f > 0.0) {
+            a = dt; fa = f;
+            if (side == -1) fb *= 0.5;
+            side = -1;
+        } else {
+            b = dt; fb = f;
+            if (side == 1) fa *= 0.5;
+            side = 1;
+        }
+    }
+    *dt_out = best_dt;
+    *iterations = its_total;
+    return OK;
+}

@@ -346,6 +346,9 @@ def load_kernel():
             lib.umbrella_advance.restype = i
             lib.umbrella_advance.argtypes = [vp, i, i, _dp, _dp, _dp, _dp, ctypes.c_long, d, i,
                                              d, d, d, i, d, _dp, _dp, i, _ip, _ip, _dp, _dp]
+            lib.umbrella_find_crossing.restype = i
+            lib.umbrella_find_crossing.argtypes = [vp, i, _dp, _dp, _dp, _dp, d, d, d, d, i, d,
+                                                   d, _dp, _dp, _dp, _dp, _dp, _dp, _ip]
             _kernel_lib = lib
             break
     return _kernel_lib or None
@@ -465,6 +468,37 @@ class CompiledKernel:
         self._made = DynamicState(t, self.q.copy(), self.v.copy(), self.accel.copy(),
                                   self.lam[:nc].copy(), self.p.copy())
         return self._made
+
+    def find_crossing(self, s: DynamicState, h: float, force: float, cs: ConstraintSet,
+                      tol: float, max_iter: int, div_tol: float, event_tol: float):
+        """
+        Return (status, state, step length, Newton iterations, residual) of the lock instant.
+
+        The Illinois root find of y_H = y_stop over the step length in (0, h] from s (stage
+        deploying), in compiled code (_kernel.c umbrella_find_crossing).  state is the best
+        trial (status 0), else None and the step length / residual of the failing trial.
+        """
+        q0 = np.ascontiguousarray(s.q, dtype=float)
+        v0 = np.ascontiguousarray(s.qd, dtype=float)
+        lam0 = np.zeros(len(self.lam))
+        lam0[:len(s.multipliers)] = s.multipliers
+        p0 = np.empty(len(q0))
+        if s.momentum is not None:
+            p0[:] = s.momentum
+        else:
+            self.lib.umbrella_momentum(self._ctx, _dptr(q0), _dptr(v0), _dptr(p0))
+        dt, res = ctypes.c_double(0.0), ctypes.c_double(0.0)
+        status = self.lib.umbrella_find_crossing(
+            self._ctx, int(cs.rigid), _dptr(q0), _dptr(v0), _dptr(lam0), _dptr(p0), h, force,
+            tol, PHI_TOLERANCE, max_iter, div_tol, event_tol, _dptr(self._q1), _dptr(self._v1),
+            _dptr(self._lam1), _dptr(self._p1), ctypes.byref(dt), ctypes.byref(res),
+            ctypes.byref(self._its))
+        if status != 0:
+            return status, None, dt.value, self._its.value, res.value
+        v = self._v1.copy()
+        state = DynamicState(s.t + dt.value, self._q1.copy(), v, (v - v0) / dt.value,
+                             self._lam1[:len(s.multipliers)].copy(), self._p1.copy())
+        return status, state, dt.value, self._its.value, res.value
 
     def step(self, s: DynamicState, h, force, cs: ConstraintSet, tol, max_iter):
         q0 = np.ascontiguousarray(s.q, dtype=float)

@@ -125,6 +125,15 @@ class Engine(abc.ABC):
         """Newton iterations so far (0 for explicit schemes)."""
         return 0
 
+    def find_crossing(self, s: DynamicState, h: float, force: float):
+        """
+        Return the state at the lock instant inside a step of length h from s, or None.
+
+        The fast path of ``UmbrellaSimulator._find_lock`` (compiled, the same root find);
+        None if this engine has none.  Raises SimulationDiverged like a failed step.
+        """
+        return None
+
     def advance(self, s: DynamicState, k0: int, h: float, n_steps: int, force: float,
                 stage: Stage, work: float, lock_loss: float):
         """
@@ -164,6 +173,23 @@ class FiniteElementEngine(Engine):
 
     def step(self, s: DynamicState, h: float, force: float, stage: Stage) -> DynamicState:
         return self.integrator.step(s, h, force, self._cs[stage])
+
+    def find_crossing(self, s, h, force):
+        kernel = self.integrator.kernel
+        if kernel is None:
+            return None
+        integ = self.integrator
+        status, state, dt, its, residual = kernel.find_crossing(
+            s, h, force, self._cs[DEFORMING], integ.tolerance, integ.max_iterations,
+            DIVERGENCE_RESIDUAL, EVENT_TIME_TOLERANCE)
+        integ.iterations += its
+        if status == ADVANCE_DIVERGED:
+            raise SimulationDiverged(f"constraint residual {residual:.3g} past tolerance "
+                                     f"{DIVERGENCE_RESIDUAL:g} at t = {s.t + dt:.9g} s")
+        if status != ADVANCE_DONE:
+            raise SimulationDiverged(f"solver failed at t = {s.t:.9g} s: "
+                                     f"{integ.kernel_error(status, s.t + dt)}")
+        return state
 
     def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
         kernel = self.integrator.kernel
@@ -503,6 +529,9 @@ class UmbrellaSimulator:
         reaches the stop on the integrator's own trajectory, to |dt| < 1e-12 s.
         """
         eng, y_stop = self.engine, self.model.y_stop
+        fast = eng.find_crossing(s0, h, force)
+        if fast is not None:
+            return fast
 
         def at(dt):
             s = self._checked(lambda: eng.step(s0, dt, force, DEFORMING), DEFORMING)
