@@ -24,7 +24,7 @@ from umbrella_sim.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.recording import git_revision, record_offline  # noqa: E402
 from umbrella_sim.rigid import deployment_time_by_quadrature  # noqa: E402
 from umbrella_sim.solver import simulate, UmbrellaSimulator  # noqa: E402
-from umbrella_sim.step_study import run_steps, step_errors  # noqa: E402
+from umbrella_sim.step_study import run_steps, step_errors, TARGETS  # noqa: E402
 
 OUT_DIR = os.path.join(HERE, "validation")
 
@@ -37,9 +37,28 @@ def fmt(v, spec=".5f"):
     return "–" if v is None else format(v, spec)
 
 
-STUDY_STEPS = (2e-3, 2e-4, 1e-4, 5e-5, 2.5e-5)
-STUDY_REFERENCE = 2.5e-6
+STUDY_STEPS = (2e-4, 1e-4, 5e-5, 2.5e-5, 1e-5, 5e-6)
+STUDY_REFERENCE = 1.25e-6
 STUDY_WINDOW = 0.5
+#: V0 = -2: deploy time only (stage 1 lasts 23 ms), so a much finer reference is cheap
+FAST_STEPS = STUDY_STEPS + (2.5e-6,)
+FAST_REFERENCE = 3.125e-7
+
+_TARGET_NAMES = {"deploy_time": "deploy time 1e-5", "stage2_period": "stage-2 period 5e-4",
+                 "stage1_peak": "stage-1 peak stresses 3 %",
+                 "stage2_peak": "stage-2 peak stresses 3 %",
+                 "stage2_tip_series_m": "stage-2 tip series 2 mm"}
+
+
+def _met(e: dict) -> dict:
+    """Say which target each error meets (step_study.TARGETS)."""
+    return {"deploy_time": e["deploy_time"] <= TARGETS["deploy_time"],
+            "stage2_period": e["stage2_period"] <= TARGETS["stage2_period"],
+            "stage1_peak": max(e["stage1_peak_leaf"], e["stage1_peak_link"])
+            <= TARGETS["peak_stress"],
+            "stage2_peak": max(e["stage2_peak_leaf"], e["stage2_peak_link"])
+            <= TARGETS["peak_stress"],
+            "stage2_tip_series_m": e["stage2_tip_series_m"] <= TARGETS["stage2_tip_series_m"]}
 
 
 def step_convergence_section() -> list[str]:
@@ -57,6 +76,8 @@ def step_convergence_section() -> list[str]:
              "| N | V0 | lock | step (s) | deploy time | stage-2 period | stage-1 peak "
              "(leaf, link) | stage-2 peak (leaf, link) | tip series (mm) / amplitude (mm) |",
              "|---|---|---|---|---|---|---|---|---|"]
+    met = {h: {k: [] for k in _TARGET_NAMES} for h in STUDY_STEPS}
+    worst = {h: {} for h in STUDY_STEPS}
     for n in (1, 2, 4):
         for v0 in (-0.2, -0.5):
             for lock in ("energy", "plastic"):
@@ -65,6 +86,10 @@ def step_convergence_section() -> list[str]:
                 for h in STUDY_STEPS:
                     e = step_errors(run_steps(p.replace(time_step=h), STUDY_WINDOW), ref,
                                     STUDY_WINDOW)
+                    for k, ok in _met(e).items():
+                        met[h][k].append(ok)
+                    for k, v in e.items():
+                        worst[h][k] = max(worst[h].get(k, 0.0), v)
                     mark = "**" if h == default else ""
                     lines.append(
                         f"| {n} | {v0:g} | {lock} | {mark}{h:g}{mark} | "
@@ -73,31 +98,55 @@ def step_convergence_section() -> list[str]:
                         f"{e['stage2_peak_leaf']:.1%}, {e['stage2_peak_link']:.1%} | "
                         f"{e['stage2_tip_series_m'] * 1e3:.2f} / "
                         f"{e['stage2_tip_amplitude_m'] * 1e3:.0f} |")
+    cases = len(met[STUDY_STEPS[0]]["deploy_time"])
+    lines += ["", f"Cases of the table (of {cases}) in which each step meets each target, "
+              "and the worst error:", "",
+              "| step (s) | " + " | ".join(_TARGET_NAMES.values()) + " |",
+              "|---|" + "---|" * len(_TARGET_NAMES)]
+    for h in STUDY_STEPS:
+        w = worst[h]
+        worst_of = {"deploy_time": f"{w['deploy_time']:.1e}",
+                    "stage2_period": f"{w['stage2_period']:.1e}",
+                    "stage1_peak": f"{max(w['stage1_peak_leaf'], w['stage1_peak_link']):.1%}",
+                    "stage2_peak": f"{max(w['stage2_peak_leaf'], w['stage2_peak_link']):.1%}",
+                    "stage2_tip_series_m": f"{w['stage2_tip_series_m'] * 1e3:.2f} mm"}
+        mark = "**" if h == default else ""
+        lines.append(f"| {mark}{h:g}{mark} | " + " | ".join(
+            f"{sum(met[h][k])} ({worst_of[k]})" for k in _TARGET_NAMES) + " |")
     # what V0 = -2 needs for the deploy time
-    lines += ["", "V0 = −2 m/s, N = 2, energy lock (0.1 s of stage 2): deploy-time error by step "
-              "— " + ", ".join(
-                  f"{h:g} s: {e:.1e}" for h, e in _fast_deploy_errors()) + ".", ""]
-    lines += ["Observed order of convergence 2 (the implicit midpoint rule) once every excited "
-              "mode is resolved, h ≤ 8 µs (tests/test_time_step.py). Above that, the errors "
-              "that stay — the stage-2 peak stresses (a transient of the lock that excites "
-              "modes of kHz and more) and the stage-2 tip series (the 251 Hz second mode, 2.5 mm "
-              "at N = 1 and V0 = −0.2, whose phase error accumulates over the 0.5 s) — do not "
-              "fall like h² and need h ≤ 2.5·10⁻⁵ s (tip series at V0 = −0.2) or ~10⁻⁵ s "
-              "(V0 = −0.5, stage-2 peaks). The deploy time is limited at V0 ≤ −0.5 by the "
-              "axial vibration of the link at the lock (~10⁻⁶ m), which only h ≈ 2.5 µs "
-              "resolves: its error does not fall like h² (at V0 = −2, ~4·10⁻⁵ to 2·10⁻⁴ for "
-              "every step above). The default step meets the period and stage-1 peak targets "
-              "everywhere in the table, the deploy time everywhere but N = 1 at V0 = −0.5 "
-              "(1.3·10⁻⁵); see the README for what it costs.", ""]
+    lines += ["", f"V0 = −2 m/s, deploy-time error by step against a {FAST_REFERENCE:g} s "
+              "run:", "",
+              "| N | " + " | ".join(f"{h:g} s" for h in FAST_STEPS) + " |",
+              "|---|" + "---|" * len(FAST_STEPS)]
+    for n in (1, 2):
+        lines.append(f"| {n} | " + " | ".join(f"{e:.1e}" for e in _fast_deploy_errors(n)) + " |")
+    lines += ["",
+              "Observed order of convergence 2 (the implicit midpoint rule) once every excited "
+              "mode is resolved, h ≤ 8 µs (tests/test_time_step.py). Above that the deploy time"
+              " at V0 ≤ −0.5, the stage-2 tip series and the stage-2 peak stresses do not fall "
+              "like h²: they are set by the link's axial modes (~3·10⁵ rad/s, a period of 21 "
+              "µs), which the midpoint rule keeps at their energy but at a wrong (aliased) "
+              "frequency while h is above ~5 µs. The deploy time moves with the phase of the "
+              "axial vibration of the link at the lock (the sleeve height includes it). In "
+              "stage 2 the lock's impact excites those modes, and through the frame's kinematic"
+              " coupling they shift the 21 Hz mode's period (N = 1, V0 = −0.5: by ~4·10⁻⁴ at "
+              "every step from 100 to 12.5 µs, 1·10⁻⁴ at 5 µs), whose phase error accumulates "
+              "over the 0.5 s into the tip series. Two checks of that reading (N = 1, V0 = "
+              "−0.5, energy lock): a Newton tolerance of 10⁻¹³ instead of 10⁻¹⁰ leaves the 50 "
+              "µs errors unchanged, and 1.25 µs steps from 20 ms before to 20 ms after the lock"
+              " (100 µs elsewhere) leave the tip-series error at 13 mm. Which step meets which "
+              "target in every case is in the summary table above; the tests assert the default"
+              " step's claims and the steps the stage-2 and V0 = −2 targets need against "
+              "fine-step runs (tests/test_time_step.py).", ""]
     lines += energy_drift_lines()
     return lines
 
 
-def _fast_deploy_errors():
-    p = UmbrellaParams(v0=-2.0, elements_per_segment=2)
-    ref = run_steps(p.replace(time_step=STUDY_REFERENCE), 0.1)
-    for h in STUDY_STEPS:
-        yield h, step_errors(run_steps(p.replace(time_step=h), 0.1), ref, 0.1)["deploy_time"]
+def _fast_deploy_errors(n: int):
+    p = UmbrellaParams(v0=-2.0, elements_per_segment=n)
+    ref = run_steps(p.replace(time_step=FAST_REFERENCE), 0.0).deploy_time
+    for h in FAST_STEPS:
+        yield abs(run_steps(p.replace(time_step=h), 0.0).deploy_time - ref) / ref
 
 
 def energy_drift_lines() -> list[str]:

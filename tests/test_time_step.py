@@ -44,3 +44,39 @@ def test_default_step_against_a_fine_step_run(n_el, lock):
     # and the step matters: at 40x the default step the period is off by more than that
     coarse = step_errors(run_steps(p.replace(time_step=2e-3), window), fine, window)
     assert coarse["stage2_period"] > TARGETS["stage2_period"]
+
+
+@pytest.mark.parametrize("v0, needed", [(-0.5, 1e-5), (-2.0, 5e-6)])
+def test_step_the_deploy_time_of_a_fast_deployment_needs(v0, needed):
+    """
+    Check the step a fast deployment's deploy time needs, against a fine-step run.
+
+    N = 1: the deploy time moves with the phase of the link's axial vibration at the lock,
+    which a step resolves from ~10 us down (docs/validation.md): within 1e-5 at the step
+    the README names, against a 0.625 us run.
+    """
+    p = UmbrellaParams(v0=v0, elements_per_segment=1)
+    ref = run_steps(p.replace(time_step=6.25e-7), 0.0).deploy_time
+    err = abs(run_steps(p.replace(time_step=needed), 0.0).deploy_time - ref) / ref
+    assert err < TARGETS["deploy_time"]
+    if v0 == -2.0:   # the default step does not do it (README): 4.7e-5 when last measured
+        default = run_steps(p, 0.0).deploy_time
+        assert abs(default - ref) / ref > TARGETS["deploy_time"]
+
+
+def test_step_the_stage2_targets_need():
+    """
+    Check the step the stage-2 tip series and peak stresses need.
+
+    N = 1, V0 = -0.2, energy lock, 0.5 s of stage 2: with the link's axial modes resolved
+    (5 us) the tip series is within 2 mm and the stage-2 peak stresses within 3 % of a
+    2.5 us run, and the period within 0.05 %.
+    """
+    p = UmbrellaParams(v0=-0.2, elements_per_segment=1)
+    window = 0.5
+    fine = run_steps(p.replace(time_step=2.5e-6), window)
+    err = step_errors(run_steps(p.replace(time_step=5e-6), window), fine, window)
+    assert err["stage2_tip_series_m"] < TARGETS["stage2_tip_series_m"]
+    assert err["stage2_peak_leaf"] < TARGETS["peak_stress"]
+    assert err["stage2_peak_link"] < TARGETS["peak_stress"]
+    assert err["stage2_period"] < TARGETS["stage2_period"]
