@@ -15,7 +15,8 @@ Threads, chosen deliberately:
 Each message is serialized once: the same bytes go to the publisher and to the recorder.
 Markers go out at their own display rate (marker_rate).
 Everything published and every command received (accepted, refused, applied) is recorded to
-MCAP when ``record_path`` is set (see recording.py).
+MCAP when ``record_path`` is set (see recording.py), by a writer thread of the recorder's own:
+the publishing thread only queues the bytes it published.
 """
 from __future__ import annotations
 
