@@ -433,6 +433,7 @@ class CompiledKernel:
     def load(self, s: DynamicState, work: float, lock_loss: float) -> None:
         """Take s as the state to advance from (nothing to copy if it is the last one made)."""
         self.acc[0], self.acc[1] = work, lock_loss
+        self.acc[2] = getattr(s, "dissipation", 0.0)   # with an elastic law (nonlinear.py)
         if s is self._made:
             return
         self._made = None
@@ -443,8 +444,6 @@ class CompiledKernel:
             self.p[:] = s.momentum
         else:
             self.lib.umbrella_momentum(self._ctx, self._ptr["q"], self._ptr["v"], self._ptr["p"])
-        self.acc[0], self.acc[1] = work, lock_loss
-        self.acc[2] = getattr(s, "dissipation", 0.0)   # with an elastic law (nonlinear.py)
 
     def advance(self, cs: ConstraintSet, k0: int, h: float, n_steps: int, force: float,
                 tol: float, max_iter: int, div_tol: float):

@@ -176,7 +176,9 @@ class FiniteElementEngine(Engine):
 
     def find_crossing(self, s, h, force):
         kernel = self.integrator.kernel
-        if kernel is None:
+        # an elastic law (nonlinear.py) carries its dissipation and halves failed steps:
+        # its crossing goes through its own step
+        if kernel is None or getattr(kernel, "elastic_law", None) is not None:
             return None
         integ = self.integrator
         status, state, dt, its, residual = kernel.find_crossing(
