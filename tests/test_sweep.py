@@ -460,6 +460,43 @@ def test_worker_killed_mid_sweep_gives_complete_table(own_dask_cluster, procs, t
                         .summary()["deploy_time"], rel_tol=0, abs_tol=0)
 
 
+def store_one_case(spec, index, out):
+    """Run case `index` of the SPEC in-process and store it, as a sweep run does."""
+    case = sweep.load_spec(spec).cases[index]
+    sweep.CaseStore(out).save(sweep.make_record(case, sweep.run_case(case.task(None))))
+    return case
+
+
+def test_unwritable_table_exits_4_and_keeps_the_store(tmp_path, capsys):
+    spec = write(tmp_path / "s.yaml", "grid:\n  v0: [-2.0]\nbase: {model: rigid}\n"
+                                      "duration: 0.05\n")
+    out = tmp_path / "out"
+    case = store_one_case(spec, 0, str(out))
+    (out / "results.csv").mkdir()       # the table cannot be written (even by root)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["sweep", spec, "--out", str(out)])
+    assert exc.value.code == 4
+    err = capsys.readouterr().err
+    assert "cannot write the results" in err and str(out / "results.csv") in err, err
+    assert finished_cases(str(out)) == [case.case_id + ".json"]
+
+
+def test_store_write_error_stops_the_sweep_keeping_finished_cases(dask_cluster, tmp_path,
+                                                                  procs):
+    address, _ = dask_cluster
+    spec = write(tmp_path / "s.yaml", "grid:\n  v0: [-1.0, -2.0]\nbase: {model: rigid}\n"
+                                      "duration: 0.05\n")
+    out = tmp_path / "out"
+    first = store_one_case(spec, 0, str(out))
+    second = sweep.load_spec(spec).cases[1]
+    (out / "cases" / (second.case_id + ".json")).mkdir()   # its result cannot be stored
+    rc, log = run_sweep(procs, "store", spec, "--out", str(out), "--scheduler", address)
+    assert rc == 4, log
+    assert "cannot write the results" in log and second.case_id in log, log
+    assert "Traceback" not in log, log
+    assert [r["case_id"] for r in read_rows(str(out))] == [first.case_id]
+
+
 def test_mcap_keeps_a_recording_per_case(dask_cluster, tmp_path, procs):
     from umbrella_sim.compare import load_run
 
@@ -467,10 +504,7 @@ def test_mcap_keeps_a_recording_per_case(dask_cluster, tmp_path, procs):
     spec = write(tmp_path / "rec.yaml", ("grid:\n  model: [flexible, rigid]\nbase: {v0: -2.0}\n"
                                          "duration: 0.05\nstop_after_lock: 0.005\n"))
     out = str(tmp_path / "out")
-    # the flexible case finished by a run without --mcap (what such a run stores)
-    loaded = sweep.load_spec(spec)
-    plain = loaded.cases[0]
-    sweep.CaseStore(out).save(sweep.make_record(plain, sweep.run_case(plain.task(None))))
+    store_one_case(spec, 0, out)    # the flexible case, finished by a run without --mcap
     # ... runs again under --mcap, to make its recording
     rc, log = run_sweep(procs, "rec", spec, "--out", out, "--scheduler", address, "--mcap")
     assert rc == 0 and "already" not in log, log

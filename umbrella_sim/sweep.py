@@ -65,6 +65,10 @@ class SpecError(ValueError):
     """The SPEC cannot be run; the message names the key, case and parameter."""
 
 
+class OutputError(OSError):
+    """DIR cannot be written; the message names the file (finished cases stay in the store)."""
+
+
 @dataclass
 class Case:
     index: int                  # 1-based position in the SPEC (grid first, then cases)
@@ -309,13 +313,21 @@ class CaseStore:
             return None             # unreadable: the case runs again
 
     def save(self, record: dict) -> None:
-        os.makedirs(self.dir, exist_ok=True)
         tmp = self.path(record["case_id"]) + f".{os.getpid()}.tmp"
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(record, fh, indent=1, default=_jsonable)     # summary keys in order
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, self.path(record["case_id"]))
+        try:
+            os.makedirs(self.dir, exist_ok=True)
+            with open(tmp, "w", encoding="utf-8") as fh:
+                json.dump(record, fh, indent=1, default=_jsonable)     # summary keys in order
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, self.path(record["case_id"]))
+        except OSError as exc:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+            raise OutputError(exc.errno, f"{self.path(record['case_id'])}: "
+                                         f"{exc.strerror}") from None
 
 
 def _jsonable(value):
@@ -691,16 +703,13 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
     client = cluster = None
     futures = []
     made_dir = False
+    write_error = None
     try:
         if todo:    # the cluster first: if it cannot be had, DIR is left as it was
             t0 = time.perf_counter()
             client, cluster = _client(workers, scheduler, log)
             _check_workers(client, scheduler, log)
-        os.makedirs(store.dir, exist_ok=True)
-        if mcap_dir:
-            os.makedirs(mcap_dir, exist_ok=True)
-        with open(os.path.join(out_dir, "spec.yaml"), "w", encoding="utf-8") as fh:
-            fh.write(sweep.text)
+        _prepare_dir(sweep, store, out_dir, mcap_dir)
         made_dir = True
         if todo:
             from distributed import as_completed
@@ -739,8 +748,14 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
                 f"{report.setup_s:.1f} s)")
     except KeyboardInterrupt:
         report.interrupted = True
-        log(f"interrupted: {report.ran} case(s) of {len(todo)} finished in this run are kept "
-            f"in {out_dir}; run the same command again to finish the rest")
+        if made_dir:
+            log(f"interrupted: {report.ran} case(s) of {len(todo)} finished in this run are "
+                f"kept in {out_dir}; run the same command again to finish the rest")
+        else:
+            log(f"interrupted before any case ran; {out_dir} left as it was")
+    except OutputError as exc:      # DIR cannot take results: stop, keep what the store has
+        write_error = exc
+        log(f"cannot write the results: {exc.strerror}; stopping the sweep")
     finally:
         if client is not None:
             try:
@@ -752,21 +767,43 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
             except Exception:  # noqa: BLE001 - closing after an interrupt: best effort
                 pass
         if made_dir:
-            _write_outputs(sweep, store, out_dir, report, log)
+            try:
+                _write_outputs(sweep, store, out_dir, report, log)
+            except OutputError as exc:
+                write_error = write_error or exc
+    if write_error is not None:
+        raise write_error
     return report
+
+
+def _prepare_dir(sweep, store, out_dir, mcap_dir) -> None:
+    try:
+        os.makedirs(store.dir, exist_ok=True)
+        if mcap_dir:
+            os.makedirs(mcap_dir, exist_ok=True)
+        with open(os.path.join(out_dir, "spec.yaml"), "w", encoding="utf-8") as fh:
+            fh.write(sweep.text)
+    except OSError as exc:
+        raise OutputError(exc.errno, f"{exc.filename}: {exc.strerror}") from None
 
 
 def _write_outputs(sweep, store, out_dir, report, log) -> None:
     columns, rows = table_rows(sweep, store)
     report.csv = os.path.join(out_dir, "results.csv")
-    write_csv(report.csv, columns, rows)
+    report.parquet = os.path.join(out_dir, "results.parquet")
+    path = report.csv
     try:
-        report.parquet = os.path.join(out_dir, "results.parquet")
-        write_parquet(report.parquet, columns, rows)
-    except ImportError:
-        report.parquet = ""
-        log("results.parquet not written: pyarrow is not installed")
-    report.plots = plot(sweep, rows, out_dir)
+        write_csv(report.csv, columns, rows)
+        path = report.parquet
+        try:
+            write_parquet(report.parquet, columns, rows)
+        except ImportError:
+            report.parquet = ""
+            log("results.parquet not written: pyarrow is not installed")
+        path = out_dir
+        report.plots = plot(sweep, rows, out_dir)
+    except OSError as exc:
+        raise OutputError(exc.errno, f"{path}: {exc.strerror}") from None
     ok = sum(r["status"] == STATUS_OK for r in rows)
     report.failed = len(rows) - ok
     log(f"{len(rows)} of {len(sweep.cases)} cases in {report.csv}: {ok} ok"
@@ -829,6 +866,9 @@ def main(args, ap: argparse.ArgumentParser) -> int:
                            mcap=args.mcap)
     except SpecError as exc:
         ap.exit(2, f"{ap.prog}: error: {exc}\n")
+    except OutputError as exc:
+        ap.exit(4, f"{ap.prog}: error: cannot write the results: {exc.strerror}; every case "
+                   f"finished before it is kept in {os.path.join(args.out, 'cases')}\n")
     finally:
         signal.signal(signal.SIGTERM, previous)
     if report.interrupted:
