@@ -710,7 +710,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     /* nonlinear law: backtracking line search, the matrix re-factored after a slow
      * iteration (ElasticMidpointDAE._step_numpy) */
     ElasticLaw *law = x->law;
-    int full_newton = law && law->d.nonlinear, have_base = 0, refresh = 0;
+    int nonlinear_law = law && law->d.nonlinear, have_base = 0, refresh = 0;
     double alpha = 1.0, f_base = INFINITY;
     double half_h2 = 0.5 * h * h;
     constraints(m, q0, locked, rigid, phi0);
@@ -755,7 +755,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             for (int k = 0; k < JW; k++) res[x->jm_idx[r * JW + k]] += x->jm_val[r * JW + k] * lam[r];
         for (int i = 0; i < n; i++)
             res[i] = x->mv[i] - p0[i] - h * (x->gt[i] - x->kq[i] - force * x->gy[i] + res[i]);
-        if (full_newton) {
+        if (nonlinear_law) {
             double fn = 0.0;
             for (int i = 0; i < n; i++) fn += 0.25 * h * h * res[i] * res[i];
             for (int r = 0; r < nc; r++) fn += phi[r] * phi[r];
@@ -778,7 +778,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         for (int i = 0; i < n; i++) rhs[i] = -0.5 * h * res[i];
         for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
         arrow_solve_q(x, x->E, nc, rhs);
-        if (full_newton) {
+        if (nonlinear_law) {
             memcpy(law->q_base, q, sizeof(double) * n);
             memcpy(law->lam_base, lam, sizeof(double) * nc);
             memcpy(law->dx, rhs, sizeof(double) * (n + nc));
@@ -794,7 +794,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         for (int r = 0; r < nc; r++) lam[r] += rhs[n + r] / half_h2;
         if (!isfinite(step_norm)) { status = NON_FINITE; goto done; }
         double rate = it > 1 ? step_norm / last_norm : 1.0;
-        refresh = full_newton && it > 1 && rate > ELASTIC_REFRESH_RATE;
+        refresh = nonlinear_law && it > 1 && rate > ELASTIC_REFRESH_RATE;
         if (step_norm < tol || (rate < 0.5 && rate / (1.0 - rate) * step_norm < tol)) {
             constraints(m, q, locked, rigid, phi);
             if (max_abs(nc, phi) < phi_tol) { converged = 1; break; }
@@ -812,10 +812,10 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         x->dissipated = elastic_dissipation(law, q0, q, h);
         t_target += elastic_energy(law, q0) - elastic_energy(law, q) - x->dissipated;
     } else {
-    band_matvec(m, m->k_band, q0, x->kq, 0);
-    for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target += 0.5 * q0[i] * x->kq[i]; }
-    band_matvec(m, m->k_band, q, x->kq, 0);
-    for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target -= 0.5 * q[i] * x->kq[i]; }
+        band_matvec(m, m->k_band, q0, x->kq, 0);
+        for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target += 0.5 * q0[i] * x->kq[i]; }
+        band_matvec(m, m->k_band, q, x->kq, 0);
+        for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target -= 0.5 * q[i] * x->kq[i]; }
     }
     for (int i = 0; i < n; i++) t_target += 0.5 * v0[i] * p0[i];
     if (project_velocity(x, nc, v, x->p_s, t_target) != OK) { status = SINGULAR; goto done; }

@@ -394,7 +394,8 @@ class ElasticMidpointDAE(MidpointDAE):
     Energy-consistent midpoint step with a general strain energy and damping.
 
     The energy-consistent midpoint step of MidpointDAE with a general strain energy
-    (AVF discrete gradient) and the damping force -C dq/h.  numpy only.
+    (AVF discrete gradient) and the damping force -C dq/h: on the compiled kernel with
+    ``CompiledElasticLaw`` attached, or in numpy (kernel="numpy", the reference).
     """
 
     def __init__(self, model: NonlinearUmbrellaModel, tolerance: float = 1e-10,
