@@ -195,7 +195,7 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     # model and numerics
     _P("model", str, "flexible", "-",
        "flexible: Case 1 then Case 2; flexible-nonlinear: the same with the von Kármán "
-       "membrane strain u' + v'²/2 (geometric stiffening, thesis §7.2; compiled, ~1.5× the "
+       "membrane strain u' + v'²/2 (geometric stiffening, thesis §7.2; compiled, 1.5–2× the "
        "cost of a flexible step; its stage 2 at V0 ≤ −1 m/s wants time_step ≤ 0.5 ms, "
        "docs/validation_nonlinear.md); "
        "rigid-fe: Case 3 (elastic coordinates constrained); rigid: closed-form two-angle "
