@@ -138,6 +138,27 @@ class StepBlock:
     def __len__(self) -> int:
         return len(self.time)
 
+    @classmethod
+    def concatenate(cls, blocks: list["StepBlock"]) -> "StepBlock":
+        """Return one block of consecutive blocks' steps (the last block's final state)."""
+        if len(blocks) == 1:
+            return blocks[0]
+        rows = np.array([np.concatenate([getattr(b, f) for b in blocks]) for f in STEP_FIELDS])
+        lock = next((b.lock for b in blocks if b.lock is not None), None)
+        error = next((b.error for b in blocks if b.error is not None), None)
+        return cls.from_rows(rows, blocks[-1].make_last, lock, error)
+
+    def peaks(self) -> dict[str, tuple[float, float]]:
+        """Return {body: (largest peak |sigma| over the block's steps, where)} ({} if empty)."""
+        out = {}
+        if not len(self):
+            return out
+        for body in ("leaf", "link"):
+            peaks = getattr(self, f"peak_stress_{body}")
+            i = int(np.argmax(peaks))
+            out[body] = (float(peaks[i]), float(getattr(self, f"peak_stress_{body}_x")[i]))
+        return out
+
 
 @dataclass
 class RunResult:

@@ -5,8 +5,11 @@ The code path shared by the live node and the offline
 MCAP writer, so that both produce the same messages at the same sim times.
 
 The physics step is the largest step <= time_step dividing 1/publish_rate, so publications
-fall on steps; a commanded force is applied at the next step boundary; every applied value
-and the lock are reported as events (the node logs and records them).
+fall on steps.  The sleeve force follows the driver's ForceSchedule (forcing.py, the one
+zero-order-hold rule): the node adds a command at the start of the next publication period,
+the offline driver (solver.simulate) gives the whole profile, each value acting from its
+own step.  Every applied value and the lock are reported as events (the node logs and
+records them).
 """
 from __future__ import annotations
 
@@ -14,8 +17,10 @@ from dataclasses import dataclass
 import math
 
 from . import ros_io
+from .forcing import ForceSchedule
+from .outputs import StepBlock
 from .params import NODE_PARAMETERS, UmbrellaParams
-from .solver import SimulationDiverged, UmbrellaSimulator
+from .solver import command_force, SimulationDiverged, UmbrellaSimulator
 
 
 def physics_step(time_step: float, publish_rate: float) -> float:
@@ -33,6 +38,13 @@ class Event:
 
 
 class PublicationDriver:
+    """
+    The simulator and its force schedule, one publication period at a time.
+
+    ``advance`` (the live node) and ``take`` (the offline driver, which steps through
+    solver.simulate) report the applied forces and the lock as events and keep the block
+    of steps of the last period.
+    """
 
     def __init__(self, params: UmbrellaParams, publish_rate: float,
                  marker_rate: float = NODE_PARAMETERS["marker_rate"].default):
@@ -43,7 +55,9 @@ class PublicationDriver:
         self.marker_every = max(1, round(publish_rate / marker_rate))
         self.periods = 0
         self.sim = UmbrellaSimulator(params.replace(time_step=self.step))
-        self.last_block = None
+        self.schedule = ForceSchedule(self.step, self.sim.sleeve_force,
+                                      check=lambda f: command_force(f, self.sim.params))
+        self.last_block: StepBlock | None = None
         first = self.sim.sample()
         self.initial_energy = first.kinetic_energy + first.strain_energy
 
@@ -51,36 +65,52 @@ class PublicationDriver:
     def backend(self) -> str:
         return self.sim.engine.backend
 
-    def advance(self, commanded_force: float) -> list[Event]:
+    def command(self, force: float) -> None:
+        """Schedule a live command: F_H = force from the current step on (raises ValueError)."""
+        if force != self.schedule.force_at(self.sim.step_index):
+            self.schedule.add(self.sim.time, force)
+
+    def advance(self, commanded_force: float | None = None) -> list[Event]:
         """
         Step one publication period.
 
-        Step one publication period (one ``UmbrellaSimulator.advance`` call, its StepBlock
-        kept as ``last_block``); raises SimulationDiverged after the steps that succeeded
-        (state kept, their outputs in ``last_block``).
+        With the commanded force (if given) scheduled from its first step, one
+        ``UmbrellaSimulator.advance_schedule`` call (its StepBlock kept as ``last_block``);
+        raises SimulationDiverged after the steps that succeeded (state kept, their
+        outputs in ``last_block``).
         """
-        sim = self.sim
-        events = []
-        if commanded_force != sim.sleeve_force:
-            sim.set_sleeve_force(commanded_force)
-            note = " (locked: no effect on motion)" if sim.stage == "locked" else ""
-            events.append(Event("applied", sim.time, commanded_force, note))
-        block = self.last_block = sim.advance(self.publish_every)
+        if commanded_force is not None:
+            self.command(commanded_force)
+        block, applied = self.sim.advance_schedule(self.schedule, self.publish_every)
+        events = self.take(block, applied)
+        if block.error is not None:
+            raise SimulationDiverged(block.error)
+        return events
+
+    def take(self, block: StepBlock, applied: list[tuple[float, float]]) -> list[Event]:
+        """Note one period's block of steps; return its events (applied forces, the lock)."""
+        self.last_block = block
         self.periods += 1
+        lock = self.sim.lock_event
+        events = [Event("applied", t, f, " (locked: no effect on motion)"
+                        if lock is not None and t >= lock.time else "") for t, f in applied]
         ev = block.lock
         if ev is not None:
             events.append(Event("locked", ev.time, detail=(
                 f"energy {ev.energy_before:.6g} J -> {ev.energy_after:.6g} J, "
                 f"{ev.kind} lock")))
-        if block.error is not None:
-            raise SimulationDiverged(block.error)
+        events.sort(key=lambda e: e.time)
         return events
+
+    def publication_sample(self):
+        """Return the Sample a publication now carries (the current state)."""
+        block = self.last_block
+        return block.last if block is not None and len(block) and \
+            block.last.time == self.sim.time else self.sim.sample()
 
     def messages(self, marker_ns: str, magnification: float, frame_prefix: str = "") -> dict:
         """Return the messages of the current state; markers only at their own rate."""
-        block = self.last_block
-        s = block.last if block is not None and block.last.time == self.sim.time else \
-            self.sim.sample()
+        s = self.publication_sample()
         with_markers = self.periods % self.marker_every == 0
         positions = self.sim.model.node_positions(s.q, magnification) if with_markers else None
         return ros_io.sample_messages(s, self.sim.params, positions, marker_ns,

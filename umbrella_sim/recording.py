@@ -721,9 +721,11 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     """
     Run the physics offline and record it as a live umbrella_node would.
 
-    Goes through the node's publication path and records the same
-    topics, layout and metadata as a live umbrella_node (root namespace).  Returns the
-    RunResult of the samples at the publication instants (error set if it diverged).
+    Steps through solver.simulate (the one offline driver: same states as ``umbrella_sim
+    simulate`` without a recording) and publishes through the node's publication path,
+    recording the same topics, layout and metadata as a live umbrella_node (root
+    namespace).  Returns the RunResult with the samples at the publication instants
+    (error set if it diverged).
     """
     import time as _time
 
@@ -731,72 +733,76 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     from std_msgs.msg import Float64
 
     from . import ros_io
-    from .outputs import RunResult
+    from .forcing import ForceSchedule
     from .params import node_defaults
     from .publication import PublicationDriver
-    from .solver import command_force, SimulationDiverged
+    from .solver import command_force, simulate
 
-    profile = sorted(force_profile or [], key=lambda tf: tf[0])
-    for _, f in profile:
-        command_force(f, params)
     node_cfg = node_defaults()
     node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,
                     record_path=bag_dir, marker_magnification=marker_magnification)
     driver = PublicationDriver(params, publish_rate)
-    rec = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, driver.sim.model,
+    sim = driver.sim
+    profile = sorted(force_profile or [], key=lambda tf: tf[0])
+    # checked before the bag is created
+    schedule = ForceSchedule(sim.h, sim.sleeve_force, profile,
+                             check=lambda f: command_force(f, sim.params))
+    rec = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, sim.model,
                                             driver.backend, source="umbrella_sim simulate"))
     topics = {key: "/" + t.name.lstrip("/") for key, t in ros_io.TOPICS.items()}
     command = "/" + ros_io.COMMAND.name
     rec.add_umbrella_channels(topics, command)
     published: dict[str, int] = {}
+    state = {"next_diag": 1.0, "i_cmd": 0}
+    wall0 = _time.perf_counter()
 
     def publish(key, msg, t):
         published[topics[key]] = published.get(topics[key], 0) + 1
         rec.write(topics[key], msg, ros_io.stamp_ns(t))
 
-    sim = driver.sim
-    result = RunResult(params=params.as_dict(), q_labels=sim.model.coordinate_labels(),
-                       leaf_stress_x=list(sim.model.leaf.stress_x),
-                       link_stress_x=list(sim.model.link.stress_x))
-    wall0 = _time.perf_counter()
-    publish("deployment_phase", ros_io.phase_msg("deploying"), 0.0)
-    force, i_cmd, next_diag = params.sleeve_force, 0, 1.0
-    n_periods = int(round(duration * publish_rate))
+    def commands_until(t):
+        # each command at its own time, as the node records one at receipt
+        while state["i_cmd"] < len(profile) and profile[state["i_cmd"]][0] <= t + 1e-12:
+            t_cmd, f_cmd = profile[state["i_cmd"]]
+            rec.write(command, Float64(data=float(f_cmd)), ros_io.stamp_ns(t_cmd))
+            state["i_cmd"] += 1
+
+    def publication():
+        t = sim.time
+        for key, msg in driver.messages("umbrella", marker_magnification).items():
+            publish(key, msg, t)
+        if t >= state["next_diag"] - 1e-12:
+            wall = _time.perf_counter() - wall0
+            publish("diagnostics", ros_io.diagnostics_msg(
+                t, "umbrella_sim offline: physics", DiagnosticStatus.OK, "offline",
+                {"sim_time_s": f"{t:.6f}", "measured_real_time_factor":
+                 f"{t / wall:.4f}" if wall > 0 else "inf", "steps": sim.steps,
+                 "physics_step_s": sim.h}), t)
+            state["next_diag"] += 1.0
+
+    def on_output(block, applied):
+        commands_until(sim.time)
+        for ev in driver.take(block, applied):
+            if ev.kind == "applied":    # at the step it acts from, as the node records it
+                rec.write(command + ros_io.COMMAND_APPLIED_SUFFIX, Float64(data=ev.force),
+                          ros_io.stamp_ns(ev.time))
+            else:
+                publish("deployment_phase", ros_io.phase_msg("locked"), sim.time)
+        if block.error is not None:
+            publish("deployment_phase", ros_io.phase_msg("fault"), sim.time)
+        elif sim.step_index % driver.publish_every == 0:
+            publication()
+
+    result = None
     try:
-        for k in range(n_periods + 1):
-            t = sim.time
-            result.samples.append(sim.sample())
-            for key, msg in driver.messages("umbrella", marker_magnification).items():
-                publish(key, msg, t)
-            if t >= next_diag - 1e-12:
-                wall = _time.perf_counter() - wall0
-                publish("diagnostics", ros_io.diagnostics_msg(
-                    t, "umbrella_sim offline: physics", DiagnosticStatus.OK, "offline",
-                    {"sim_time_s": f"{t:.6f}", "measured_real_time_factor":
-                     f"{t / wall:.4f}" if wall > 0 else "inf", "steps": sim.steps,
-                     "physics_step_s": sim.h}), t)
-                next_diag += 1.0
-            if k == n_periods:
-                break
-            while i_cmd < len(profile) and profile[i_cmd][0] <= t + 1e-12:
-                force = profile[i_cmd][1]
-                rec.write(command, Float64(data=force), ros_io.stamp_ns(profile[i_cmd][0]))
-                i_cmd += 1
-            if force != sim.sleeve_force:   # recorded before it is applied: a fault it
-                rec.write(command + ros_io.COMMAND_APPLIED_SUFFIX, Float64(data=force),
-                          ros_io.stamp_ns(sim.time))    # causes is reproducible from the log
-            for ev in driver.advance(force):
-                if ev.kind == "locked":
-                    publish("deployment_phase", ros_io.phase_msg("locked"), sim.time)
-            if progress is not None and k % 20 == 0:
-                progress(sim.time)
-    except SimulationDiverged as exc:
-        result.error = str(exc)
-        publish("deployment_phase", ros_io.phase_msg("fault"), sim.time)
+        publish("deployment_phase", ros_io.phase_msg("deploying"), 0.0)
+        commands_until(0.0)
+        publication()
+        result = simulate(params, duration, schedule, progress=progress, simulator=sim,
+                          output_every=driver.publish_every, on_output=on_output)
     finally:
-        rec.close_run(sim, published, accepted=i_cmd, refused=0, fault=result.error)
+        rec.close_run(sim, published, accepted=state["i_cmd"], refused=0,
+                      fault=result.error if result is not None else None)
     result.recording_error = rec.error
     result.wall_time = _time.perf_counter() - wall0
-    result.steps = sim.steps
-    result.lock = sim.lock_event
     return result

@@ -56,9 +56,17 @@ def resimulate(log: LogData) -> dict:
 
 
 def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
+    """
+    Re-run one segment through the offline driver (solver.simulate).
+
+    The applied forces (``sleeve_force/applied``, each at the step it acts from) become the
+    ForceSchedule every path uses; the recorded publications are streamed and compared as
+    the re-simulation reaches each one.
+    """
+    from .forcing import ForceSchedule
     from .params import SPECS, UmbrellaParams
     from .publication import PublicationDriver
-    from .solver import SimulationDiverged
+    from .solver import command_force, simulate
 
     p_all = seg.params
     try:
@@ -75,70 +83,95 @@ def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
                        f"time_step and publish_rate (got {driver.step})")
     topics = {"joint": log.find_topic("joint_states"),
               "tip": log.find_topic("tip_deflection", required=False),
-              "peak": log.find_topic("peak_stress", required=False),
-              "applied": log.find_topic("sleeve_force/applied", required=False),
-              "phase": log.find_topic("deployment_phase", required=False)}
+              "peak": log.find_topic("peak_stress", required=False)}
     by_topic = {t: k for k, t in topics.items() if t}
     sim = driver.sim
     res = {"index": seg.index, "compared": 0, "problems": [], "fault": None,
            "recorded_fault": None}
-    state = {"force": params.sleeve_force, "faulted": None}
 
-    def advance_to(t_rec: float) -> bool:
-        while sim.time < t_rec - 1e-9:
-            try:
-                driver.advance(state["force"])
-            except SimulationDiverged as exc:
-                state["faulted"] = (sim.time, str(exc))
-                return False
-        return True
+    def in_segment(m) -> bool:
+        return m.log_time >= seg.offset_ns and (seg.end_ns is None or m.log_time < seg.end_ns)
 
-    def take(t: float, group: dict) -> None:
-        if "joint" in group and state["faulted"] is None:
-            if not advance_to(t):
-                res["problems"].append(f"the re-simulation faulted at t = "
-                                       f"{state['faulted'][0]:.9f} s ({state['faulted'][1]}) "
-                                       f"where the log goes on to t = {t:.9f} s")
-            elif abs(sim.time - t) > 1e-9:
-                raise LogError(f"{log.path}: recorded publication at t = {t} s is not on the "
-                               f"re-simulated grid (t = {sim.time})")
+    # first pass: the force history, the recorded fault and the last publication (only the
+    # few command and phase records are decoded)
+    applied, t_last = [], 0.0
+    for key in ("sleeve_force/applied", "deployment_phase", "joint_states"):
+        topic = log.find_topic(key, required=False)
+        for m in (log.iter_raw([topic]) if topic else ()):
+            if not in_segment(m):
+                continue
+            t = (m.log_time - seg.offset_ns) * 1e-9
+            if key == "joint_states":
+                t_last = max(t_last, t)
+                continue
+            msg = log.decode(m.topic, m.data)
+            if key == "deployment_phase":
+                if msg.data == "fault" and res["recorded_fault"] is None:
+                    res["recorded_fault"] = t
             else:
-                _compare_publication(sim.sample(), group, diffs)
-                res["compared"] += 1
-        if "applied" in group:      # recorded at the step it acts from: after the states
-            state["force"] = group["applied"].data
-        if "phase" in group and group["phase"].data == "fault":
-            res["recorded_fault"] = t
+                applied.append((t, msg.data))
+    try:
+        schedule = ForceSchedule(driver.step, params.sleeve_force, applied,
+                                 check=lambda f: command_force(f, params))
+    except ValueError as exc:
+        raise LogError(f"{log.path}: segment {seg.index}: sleeve_force/applied: {exc}") from None
 
-    group, t_group = {}, None
-    for m in log.iter_raw(list(by_topic)):
-        if m.log_time < seg.offset_ns or (seg.end_ns is not None and m.log_time >= seg.end_ns):
-            continue
-        t = (m.log_time - seg.offset_ns) * 1e-9
-        if t_group is not None and abs(t - t_group) > 1e-10:
-            take(t_group, group)
-            group = {}
-        t_group = t
-        key = by_topic[m.topic]
-        group[key] = log.decode(m.topic, m.data)
-    if t_group is not None:
-        take(t_group, group)
+    def groups():
+        group, t_group = {}, None
+        for m in log.iter_raw(list(by_topic)):
+            if not in_segment(m):
+                continue
+            t = (m.log_time - seg.offset_ns) * 1e-9
+            if t_group is not None and abs(t - t_group) > 1e-10:
+                yield t_group, group
+                group = {}
+            t_group = t
+            group[by_topic[m.topic]] = log.decode(m.topic, m.data)
+        if t_group is not None:
+            yield t_group, group
+
+    stream = groups()
+    pending = [next(stream, None)]
+
+    def compare_until(t_now: float) -> None:
+        """Compare the recorded publication at t_now; none may be left behind before it."""
+        while pending[0] is not None and pending[0][0] < t_now + 1e-9:
+            t, group = pending[0]
+            if "joint" in group:
+                if abs(t - t_now) > 1e-9:
+                    raise LogError(f"{log.path}: recorded publication at t = {t} s is not on "
+                                   f"the re-simulated grid (t = {t_now})")
+                _compare_publication(driver.publication_sample(), group, diffs)
+                res["compared"] += 1
+            pending[0] = next(stream, None)
+
+    def on_output(block, applied_now) -> None:
+        driver.take(block, applied_now)
+        if block.error is None and sim.step_index % driver.publish_every == 0:
+            compare_until(sim.time)
+
+    compare_until(0.0)
+    # to the log's last publication, or one period past a recorded fault (the
+    # re-simulation must fault there too, from the same last good state)
+    t_end = t_last
     if res["recorded_fault"] is not None:
-        # the log ends this segment in a fault: the re-simulation must fault too, from the
-        # same last good state (one more publication period with the last applied force)
-        if state["faulted"] is None:
-            try:
-                driver.advance(state["force"])
-            except SimulationDiverged as exc:
-                state["faulted"] = (sim.time, str(exc))
-        if state["faulted"] is None:
+        t_end = max(t_end, res["recorded_fault"] + 1.0 / rate)
+    result = simulate(params, t_end, schedule, simulator=sim,
+                      output_every=driver.publish_every, on_output=on_output,
+                      keep_samples=False)
+    if result.error is not None:
+        res["fault"] = {"time": sim.time, "reason": result.error}
+        if pending[0] is not None:
+            res["problems"].append(f"the re-simulation faulted at t = {sim.time:.9f} s "
+                                   f"({result.error}) where the log goes on to t = "
+                                   f"{pending[0][0]:.9f} s")
+    if res["recorded_fault"] is not None:
+        if result.error is None:
             res["problems"].append(f"the log faults at t = {res['recorded_fault']:.9f} s; "
                                    "the re-simulation does not")
-        elif abs(state["faulted"][0] - res["recorded_fault"]) > 1e-9:
+        elif abs(sim.time - res["recorded_fault"]) > 1e-9:
             res["problems"].append(f"the log faults at t = {res['recorded_fault']:.9f} s, the "
-                                   f"re-simulation at t = {state['faulted'][0]:.9f} s")
-    if state["faulted"] is not None:
-        res["fault"] = {"time": state["faulted"][0], "reason": state["faulted"][1]}
+                                   f"re-simulation at t = {sim.time:.9f} s")
     return res
 
 

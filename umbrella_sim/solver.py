@@ -14,11 +14,13 @@ from __future__ import annotations
 import abc
 from dataclasses import replace
 import math
+import re
 import time as _time
 from typing import Callable, Iterable
 
 import numpy as np
 
+from .forcing import ForceSchedule
 from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ConvergenceError,
                           DynamicState, MidpointDAE)
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
@@ -38,6 +40,17 @@ def nonlinear_model_needed(p: UmbrellaParams) -> bool:
 
 class SimulationDiverged(RuntimeError):
     """The state became non-finite or left the constraint manifold; nothing was advanced."""
+
+
+def fault_message(t_good: float, reason: str) -> str:
+    """
+    Return the text of a solver fault with one time in it: the last good state's.
+
+    reason: what failed (an integrator's own 'at t = ...' is dropped: the failed step is
+    the one after t_good, and the recording's fault_time is t_good).
+    """
+    reason = re.sub(r" at t = \S+ s", "", reason)
+    return f"solver failed in the step after t = {t_good:.9g} s: {reason}"
 
 
 def validate_force(force: float, limit: float | None = None, minimum: float = 0.0) -> float:
@@ -209,10 +222,10 @@ class FiniteElementEngine(Engine):
         elif status == ADVANCE_CROSSING:
             stop = "crossing"
         elif status == ADVANCE_DIVERGED:
-            stop = (f"constraint residual {residual:.3g} past tolerance "
-                    f"{DIVERGENCE_RESIDUAL:g} at t = {t + h:.9g} s")
+            stop = fault_message(t, f"constraint residual {residual:.3g} past tolerance "
+                                    f"{DIVERGENCE_RESIDUAL:g}")
         else:
-            stop = f"solver failed at t = {t:.9g} s: {integ.kernel_error(status, t + h)}"
+            stop = fault_message(t, integ.kernel_error(status, t + h))
         state = kernel.state(t, self.model.n_constraints(cs)) if done else s
         return state, kernel.out[:, :done], float(kernel.acc[0]), stop
 
@@ -379,6 +392,7 @@ class UmbrellaSimulator:
         self._work = 0.0
         self._lock_loss = 0.0
         self.lock_event: LockEvent | None = None
+        self._locked_at = None
         self.steps = 0
 
     # -- inputs
@@ -425,9 +439,9 @@ class UmbrellaSimulator:
             s_locked, lock_event = eng.lock(s_hit, force)
             lock_loss = lock_event.energy_before - lock_event.energy_after
             stage = LOCKED
+            locked_at = (s_locked, stage, force, self._work + work, self._lock_loss + lock_loss)
             if record:
-                out.append(self._sample(s_locked, stage, force, self._work + work,
-                                        self._lock_loss + lock_loss))
+                out.append(self._sample(*locked_at))
             remaining = t_next - s_locked.t
             if remaining > EVENT_TIME_TOLERANCE:
                 s1 = self._checked(lambda: eng.step(s_locked, remaining, force, LOCKED), LOCKED)
@@ -437,6 +451,8 @@ class UmbrellaSimulator:
         # the grid time exactly, whatever the rounding of t0 + h
         s1 = replace(s1, t=t_next)
         self._commit(s1, stage, force, work, lock_loss, lock_event, 1)
+        if lock_event is not None:
+            self._locked_at = locked_at
         if record:
             out.append(self.sample())
         return out
@@ -503,6 +519,38 @@ class UmbrellaSimulator:
         return StepBlock.from_rows(rows[:, :done].copy() if done < rows.shape[1] else rows,
                                    lambda: self._sample(*final), lock, error)
 
+    def advance_schedule(self, schedule: ForceSchedule, n_steps: int
+                         ) -> tuple[StepBlock, list[tuple[float, float]]]:
+        """
+        Take n_steps steps with F_H from the schedule (forcing.py's one rule).
+
+        Returns the block of those steps (stopped early only at a fault, as ``advance``)
+        and the values that took effect in it, [(t, F)], each at the step it acts from.
+        """
+        applied: list[tuple[float, float]] = []
+        blocks: list[StepBlock] = []
+        k_end = self._k + int(n_steps)
+        while True:
+            f = schedule.force_at(self._k)
+            if f != self._force:
+                self.set_sleeve_force(f)
+                applied.append((self.time, f))
+            change = schedule.next_change(self._k)
+            n = (k_end if change is None else min(change, k_end)) - self._k
+            blocks.append(self.advance(n))
+            if blocks[-1].error is not None or self._k >= k_end:
+                break
+        return StepBlock.concatenate(blocks), applied
+
+    @property
+    def step_index(self) -> int:
+        """Return the steps taken since t = 0 (the simulator is at t = step_index * h)."""
+        return self._k
+
+    def lock_sample(self) -> Sample | None:
+        """Return the Sample of the state right after the lock (None before the lock)."""
+        return None if self._locked_at is None else self._sample(*self._locked_at)
+
     def advance_to(self, t: float, record: bool = True) -> list[Sample]:
         """Take every grid step that ends at or before t."""
         out: list[Sample] = []
@@ -514,13 +562,14 @@ class UmbrellaSimulator:
         try:
             s = fn()
         except (ConvergenceError, np.linalg.LinAlgError) as exc:
-            raise SimulationDiverged(f"solver failed at t = {self.time:.9g} s: {exc}") from None
+            raise SimulationDiverged(fault_message(self.time, str(exc))) from None
         if not (np.all(np.isfinite(s.q)) and np.all(np.isfinite(s.qd))):
-            raise SimulationDiverged(f"state became non-finite at t = {s.t:.9g} s")
+            raise SimulationDiverged(fault_message(self.time, "the state became non-finite"))
         res = self.engine.residual(s, stage)
         if not res <= DIVERGENCE_RESIDUAL:
-            raise SimulationDiverged(f"constraint residual {res:.3g} past tolerance "
-                                     f"{DIVERGENCE_RESIDUAL:g} at t = {s.t:.9g} s")
+            raise SimulationDiverged(fault_message(
+                self.time, f"constraint residual {res:.3g} past tolerance "
+                           f"{DIVERGENCE_RESIDUAL:g}"))
         return s
 
     def _find_lock(self, s0: DynamicState, h: float, force: float) -> DynamicState:
@@ -602,40 +651,61 @@ class UmbrellaSimulator:
 
 
 def simulate(params: UmbrellaParams, duration: float,
-             force_profile: Iterable[tuple[float, float]] | None = None,
+             force_profile: Iterable[tuple[float, float]] | ForceSchedule | None = None,
              stop_after_lock: float | None = None,
-             progress: Callable[[float], None] | None = None) -> RunResult:
+             progress: Callable[[float], None] | None = None, *,
+             simulator: UmbrellaSimulator | None = None, output_every: int = 1,
+             on_output: Callable[[StepBlock, list], None] | None = None,
+             keep_samples: bool = True) -> RunResult:
     """
-    Run a whole simulation on top of the simulator.
+    Run a whole simulation: the one offline driver.
 
-    force_profile: (t, F) pairs, zero-order hold,
-    each value acting from the first step that starts at or after its time.  On a diverged
-    run the samples computed before the failure are kept and ``result.error`` says why.
+    ``umbrella_sim simulate``, ``--mcap`` (recording.record_offline) and ``umbrella_replay
+    --resimulate`` all run through here, on ``UmbrellaSimulator.advance_schedule``, as the
+    node does one publication period at a time; so they give identical states.
+
+    force_profile: (t, F) pairs or a ForceSchedule: F_H as forcing.py's zero-order hold
+    (each value acts from the first step that starts at or after its time).  Every
+    output_every steps (and at the end) ``on_output(block, applied)`` gets the StepBlock of
+    those steps and the force values that took effect in them; keep_samples keeps the
+    Sample at each of those instants (and right after the lock) in ``result.samples``.
+    simulator: step this one (fresh, at t = 0) instead of a new one.  On a diverged run what
+    was computed before the failure is kept and ``result.error`` says why.
     """
-    sim = UmbrellaSimulator(params)
-    result = RunResult(params=params.as_dict(), q_labels=sim.model.coordinate_labels(),
+    sim = simulator if simulator is not None else UmbrellaSimulator(params)
+    if isinstance(force_profile, ForceSchedule):
+        schedule = force_profile
+    else:
+        schedule = ForceSchedule(sim.h, sim.sleeve_force,
+                                 sorted(force_profile or [], key=lambda tf: tf[0]),
+                                 check=lambda f: command_force(f, sim.params))
+    result = RunResult(params=sim.params.as_dict(), q_labels=sim.model.coordinate_labels(),
                        leaf_stress_x=list(sim.model.leaf.stress_x),
                        link_stress_x=list(sim.model.link.stress_x))
-    result.samples.append(sim.sample())
-    profile = sorted(force_profile or [], key=lambda tf: tf[0])
-    for t_cmd, f_cmd in profile:
-        command_force(f_cmd, sim.params)
-    i_cmd = 0
+    if keep_samples:
+        result.samples.append(sim.sample())
+    every = max(1, int(output_every))
     wall0 = _time.perf_counter()
-    n_steps = int(round(duration / sim.h))
-    try:
-        for k in range(n_steps):
-            while i_cmd < len(profile) and profile[i_cmd][0] <= sim.time + 1e-12:
-                sim.set_sleeve_force(profile[i_cmd][1])
-                i_cmd += 1
-            result.samples.extend(sim.step())
-            if progress is not None and k % 50 == 0:
-                progress(sim.time)
-            if (stop_after_lock is not None and sim.lock_event is not None
-                    and sim.time >= sim.lock_event.time + stop_after_lock):
-                break
-    except SimulationDiverged as exc:
-        result.error = str(exc)
+    k_end = int(round(duration / sim.h))
+    next_progress = 0
+    while sim.step_index < k_end:
+        block, applied = sim.advance_schedule(schedule, min(every, k_end - sim.step_index))
+        if keep_samples:
+            if block.lock is not None:
+                result.samples.append(sim.lock_sample())
+            if len(block):
+                result.samples.append(block.last)
+        if on_output is not None:
+            on_output(block, applied)
+        if block.error is not None:
+            result.error = block.error
+            break
+        if progress is not None and sim.step_index >= next_progress:
+            progress(sim.time)
+            next_progress = sim.step_index + max(50, every)
+        if (stop_after_lock is not None and sim.lock_event is not None
+                and sim.time >= sim.lock_event.time + stop_after_lock):
+            break
     result.wall_time = _time.perf_counter() - wall0
     result.steps = sim.steps
     result.lock = sim.lock_event

@@ -1,0 +1,83 @@
+"""
+The sleeve force as a function of time: one zero-order-hold rule for every path.
+
+``ForceSchedule`` holds F_H on the physics grid t_k = k h.  The rule, used by the offline
+simulator (``umbrella_sim simulate``, with or without ``--mcap``), the live node and
+``umbrella_replay --resimulate``:
+
+    a value given for time t acts from step k = ceil((t - 1 ns) / h), i.e. from the first
+    physics step that starts at or after t (a time within 1 ns of a grid point, the
+    resolution of a recording's time stamps, counts as on it); when several values fall
+    on the same step, the last one given wins.
+
+The live node takes a command received between two publications at the start of the next
+publication period (its sim time then, on the grid) and records that instant
+(``sleeve_force/applied``), so the recorded history, through the same rule, reproduces the
+run exactly.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from typing import Callable, Iterable
+
+#: a time within this of a grid point counts as on it (s): the ns resolution of recordings
+TIME_RESOLUTION = 1e-9
+
+
+class ForceSchedule:
+    """F_H per physics step (see the module docstring for the rule)."""
+
+    def __init__(self, step: float, initial: float = 0.0,
+                 changes: Iterable[tuple[float, float]] = (),
+                 check: Callable[[float], float] | None = None):
+        """
+        Build the schedule of F_H on the grid of ``step`` seconds.
+
+        initial: F_H from t = 0 until the first change; changes: (t, F) pairs in
+        non-decreasing time; check: validates one force value and returns it as a float
+        (``solver.command_force`` with the model's bounds), raising ValueError.
+        """
+        if not (math.isfinite(step) and step > 0.0):
+            raise ValueError(f"physics step {step}: must be a finite number > 0")
+        self.step = float(step)
+        self._check = check or float
+        self.initial = self._check(initial)
+        self._k: list[int] = []           # step index from which ...
+        self._f: list[float] = []         # ... this force acts
+        for t, f in changes or ():
+            self.add(t, f)
+
+    def step_index(self, t: float) -> int:
+        """Return the first step that starts at or after t (within 1 ns)."""
+        if not (math.isfinite(t) and t >= 0.0):
+            raise ValueError(f"force schedule time {t}: must be finite and >= 0")
+        return max(0, math.ceil((t - TIME_RESOLUTION) / self.step))
+
+    def add(self, t: float, force: float) -> int:
+        """Schedule F_H = force from time t on (times non-decreasing); return its step."""
+        f = self._check(force)
+        k = self.step_index(t)
+        if self._k and k < self._k[-1]:
+            raise ValueError(f"force schedule time {t} s goes backwards (the previous value "
+                             f"acts from t = {self._k[-1] * self.step:.9g} s)")
+        if self._k and k == self._k[-1]:
+            self._f[-1] = f
+        else:
+            self._k.append(k)
+            self._f.append(f)
+        return k
+
+    def force_at(self, k: int) -> float:
+        """F_H during step k (from t_k to t_k+1)."""
+        i = bisect.bisect_right(self._k, k) - 1
+        return self.initial if i < 0 else self._f[i]
+
+    def next_change(self, k: int) -> int | None:
+        """Return the first step after k at which a scheduled value starts acting (or None)."""
+        i = bisect.bisect_right(self._k, k)
+        return self._k[i] if i < len(self._k) else None
+
+    def changes(self) -> list[tuple[float, float]]:
+        """Return [(time the value acts from, value)], on the grid."""
+        return [(k * self.step, f) for k, f in zip(self._k, self._f)]
