@@ -20,7 +20,7 @@ CONFIG = os.path.join(ROOT, "config", "umbrella.yaml")
     ({"density": 0.0}, "density", "> 0"),
     ({"section_height": 0.0}, "section_height", "> 0"),
     ({"area": 1e-4}, "area", "both or neither"),
-    ({"l3": 0.01}, "alpha", "cannot close"),
+    ({"l3": 0.01}, "parameter l3=0.01", "cannot close"),
     ({"alpha0": 0.2}, "alpha0", "above alpha_deployed"),
     ({"elements_per_segment": 0}, "elements_per_segment", "between"),
     ({"v0": math.nan}, "v0", "finite"),

@@ -11,8 +11,8 @@ import sys
 
 from . import __version__, sweep
 from .files import check_new_output, read_text_input
-from .params import (check_known_names, load_params_file, NODE_ONLY_PARAMS, parameter_help,
-                     SPECS, UmbrellaParams)
+from .params import (check_known_names, load_params_file, NODE_ONLY_PARAMS,
+                     NODE_PARAMETERS, parameter_help, SPECS, UmbrellaParams)
 from .solver import command_force, simulate
 
 
@@ -65,6 +65,12 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
     return rows
 
 
+#: node parameters that ``--set`` may give offline: they shape the --mcap recording
+RECORDING_PARAMS = ("publish_rate", "marker_magnification")
+#: models whose lock is always plastic (a rigid mechanism stopped at a point)
+RIGID_MODELS = ("rigid", "rigid-fe")
+
+
 def resolve_params(overrides: dict, params_file: str | None = None) -> UmbrellaParams:
     """
     Return an offline run's parameters, validated (a ValueError names the parameter).
@@ -79,7 +85,7 @@ def resolve_params(overrides: dict, params_file: str | None = None) -> UmbrellaP
         check_known_names(from_file, set(SPECS) | set(NODE_ONLY_PARAMS),
                           f"params file {params_file}")
         values.update(from_file)
-    for name in NODE_ONLY_PARAMS:
+    for name in NODE_ONLY_PARAMS:     # a params file shared with the node: its node part
         values.pop(name, None)
     values.update(overrides)
     return UmbrellaParams.from_mapping(values).validated()
@@ -87,18 +93,41 @@ def resolve_params(overrides: dict, params_file: str | None = None) -> UmbrellaP
 
 def build_params(args) -> UmbrellaParams:
     values: dict = {}
+    lock_given = None
     for item in args.set or []:
         if "=" not in item:
             raise ValueError(f"--set {item!r}: expected name=value")
-        name, value = item.split("=", 1)
-        check_known_names([name.strip()], SPECS, "--set")
-        values[name.strip()] = value.strip()
+        name, value = (x.strip() for x in item.split("=", 1))
+        if name in RECORDING_PARAMS:
+            if not args.mcap:
+                raise ValueError(f"--set {name}={value}: a parameter of umbrella_node's "
+                                 "publication; offline it only shapes a --mcap recording "
+                                 "(the summary comes from every physics step whatever the "
+                                 "rate): add --mcap BAG_DIR")
+            setattr(args, name, NODE_PARAMETERS[name].coerce(value))
+            NODE_PARAMETERS[name].check(getattr(args, name))
+            continue
+        if name in NODE_PARAMETERS:
+            raise ValueError(f"--set {name}: a parameter of the live umbrella_node only, with "
+                             "no meaning offline (see --duration, --mcap, --publish-rate)")
+        check_known_names([name], SPECS, "--set")
+        values[name] = value
+        if name == "lock":
+            lock_given = f"--set lock={value}"
     for flag, name in (("model", "model"), ("elements_per_segment", "elements_per_segment"),
                        ("v0", "v0"), ("force", "sleeve_force"), ("lock", "lock"),
                        ("time_step", "time_step")):
         if getattr(args, flag) is not None:
             values[name] = getattr(args, flag)
-    return resolve_params(values, args.params)
+    if args.lock is not None:
+        lock_given = f"--lock {args.lock}"
+    params = resolve_params(values, args.params)
+    if lock_given and params.model in RIGID_MODELS and params.lock != "plastic":
+        raise ValueError(f"{lock_given}: does not apply to --model {params.model}, whose lock "
+                         "is always plastic (a rigid mechanism stopped at a point keeps no "
+                         "kinetic energy to redistribute); use --lock plastic or a flexible "
+                         "model")
+    return params
 
 
 class Progress:
@@ -149,10 +178,82 @@ def make_parser() -> argparse.ArgumentParser:
                     help="record the node's topics to a new bag directory (BAG_DIR/"
                          "BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the summary "
                          "is then taken at the publication instants")
-    sp.add_argument("--publish-rate", type=float, default=100.0,
-                    help="publication rate of the --mcap recording (Hz, sim time)")
+    sp.add_argument("--publish-rate", type=float, default=100.0, dest="publish_rate",
+                    help="publication rate of the --mcap recording (Hz, sim time; also "
+                         "--set publish_rate=...); the summary is the same at any rate")
+    sp.set_defaults(marker_magnification=1.0)
     sweep.add_parser(sub)
     return ap
+
+
+#: text summary: key -> (unit, scale, format); keys in this order, then any others
+TEXT_FIELDS = {
+    "deploy_time": ("s", 1.0, ".6f"),
+    "tip_deflection_max": ("mm", 1e3, ".4g"),
+    "tip_deflection_max_time": ("s", 1.0, ".4f"),
+    "stage2_tip_amplitude": ("mm", 1e3, ".4g"),
+    "stage2_tip_period": ("s", 1.0, ".5f"),
+    "stage2_window": ("s", 1.0, ".4f"),
+    "peak_stress_leaf": ("MPa", 1e-6, ".4g"),
+    "peak_stress_leaf_x": ("m", 1.0, ".4g"),
+    "peak_stress_leaf_time": ("s", 1.0, ".4f"),
+    "peak_stress_link": ("MPa", 1e-6, ".4g"),
+    "peak_stress_link_x": ("m", 1.0, ".4g"),
+    "peak_stress_link_time": ("s", 1.0, ".4f"),
+    "yield_strength": ("MPa", 1e-6, ".4g"),
+    "stress_ratio_max": ("-", 1.0, ".3g"),
+    "tip_deflection_ratio_max": ("% of l1+l2", 100.0, ".3g"),
+    "lock": ("", None, ""),
+    "lock_energy_before": ("J", 1.0, ".6g"),
+    "lock_energy_after": ("J", 1.0, ".6g"),
+    "lock_free_velocities": ("", None, ""),
+    "energy_drift": ("-", 1.0, ".2e"),
+    "constraint_residual_max": ("m, m/s", 1.0, ".1e"),
+    "final_time": ("s", 1.0, ".4f"),
+    "steps": ("", None, ""),
+    "wall_time": ("s", 1.0, ".2f"),
+    "real_time_factor": ("-", 1.0, ".3g"),
+    "figures_from": ("", None, ""),
+}
+
+
+def format_summary(summary: dict) -> str:
+    """
+    Return the summary as text: one figure a line, with its unit, rounded to what it means.
+
+    The warnings and the error are printed to stderr (main).
+    """
+    lines = []
+    keys = [k for k in TEXT_FIELDS if k in summary]
+    keys += sorted(k for k in summary if k not in TEXT_FIELDS and k not in ("warnings", "error"))
+    for key in keys:
+        value = summary[key]
+        unit, scale, spec = TEXT_FIELDS.get(key, ("", None, ""))
+        if value is None:
+            text = "-"
+        elif isinstance(value, list) and scale is None:
+            text = ", ".join(str(v) for v in value) or "-"
+        elif isinstance(value, list):
+            text = " to ".join(format(v * scale, spec) for v in value) + f" {unit}"
+        elif scale is None or isinstance(value, str):
+            text = str(value)
+        else:
+            text = f"{format(value * scale, spec)} {unit}".rstrip()
+        lines.append(f"{key:28s} {text}")
+    return "\n".join(lines)
+
+
+def write_stdout(text: str) -> bool:
+    """Print text; False if the reader went away (``umbrella_sim simulate | head``)."""
+    try:
+        sys.stdout.write(text + "\n")
+        sys.stdout.flush()
+        return True
+    except BrokenPipeError:
+        # no traceback, and no second error when the interpreter flushes stdout at exit
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return False
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -179,7 +280,9 @@ def main(argv: list[str] | None = None) -> int:
         from .recording import record_offline
         try:
             result = record_offline(params, args.mcap, args.duration, profile,
-                                    publish_rate=args.publish_rate, progress=progress)
+                                    publish_rate=args.publish_rate,
+                                    marker_magnification=args.marker_magnification,
+                                    progress=progress)
         except ValueError as exc:
             ap.exit(2, f"umbrella_sim: error: {exc}\n")
     else:
@@ -187,11 +290,10 @@ def main(argv: list[str] | None = None) -> int:
     if progress:
         progress.close()
     summary = result.summary()          # printed before any file is written: never lost
-    if args.json:
-        print(json.dumps(summary, indent=2, sort_keys=True))
-    else:
-        for key in sorted(summary):
-            print(f"{key:28s} {summary[key]}")
+    for text in summary.get("warnings", []):
+        print(f"umbrella_sim: warning: {text}", file=sys.stderr)
+    reader_there = write_stdout(json.dumps(summary, indent=2, sort_keys=True) if args.json
+                                else format_summary(summary))
     output_error = getattr(result, "recording_error", None)
     if args.csv:
         try:
@@ -210,7 +312,9 @@ def main(argv: list[str] | None = None) -> int:
               + (f" in {args.csv}" if args.csv and not output_error else "") + ")",
               file=sys.stderr)
         return 3
-    return 4 if output_error else 0
+    if output_error:
+        return 4
+    return 0 if reader_there else 141       # 128 + SIGPIPE, as a shell reports it
 
 
 if __name__ == "__main__":

@@ -402,9 +402,10 @@ def validate(p: UmbrellaParams) -> None:
                          f"{p.alpha_deployed} and below pi/2")
     for name in ("alpha0", "alpha_deployed"):
         reach = p.l1 * abs(math.cos(getattr(p, name)))
-        if reach >= p.l3:
-            raise ValueError(f"parameter {name}={getattr(p, name)}: geometry cannot close, "
-                             f"l1*|cos({name})| = {reach:.6g} m must be < l3 = {p.l3} m")
+        if reach >= p.l3:     # the link is what the user usually shortened: named first
+            raise ValueError(f"parameter l3={p.l3}: the link is too short, geometry cannot "
+                             f"close: l1*|cos({name})| = {reach:.6g} m must be < l3 "
+                             f"(l1={p.l1}, {name}={getattr(p, name):.6g})")
     if p.sleeve_force < p.sleeve_force_min:
         raise ValueError(f"parameter sleeve_force={p.sleeve_force}: must be >= "
                          f"{p.sleeve_force_min:g} = sleeve_force_min (F_H pushes the sleeve "
