@@ -20,7 +20,18 @@ import sys
 import numpy as np
 
 from .logs import LogError, read_log
-from .outputs import dominant_period
+from .outputs import stage2_figures, validity_warnings
+
+#: the figures compared between runs (outputs.SummaryAccumulator names)
+FIGURE_KEYS = ("deploy_time", "tip_deflection_max", "tip_deflection_max_time",
+               "stage2_tip_amplitude", "stage2_tip_period", "stage2_window",
+               "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_leaf_time",
+               "peak_stress_link", "peak_stress_link_x", "peak_stress_link_time",
+               "stress_ratio_max", "tip_deflection_ratio_max")
+RIGID_MODELS = ("rigid", "rigid-fe")
+#: the shapes plot draws the largest elastic displacement of a stage at most this fraction
+#: of the leaf length l1 + l2: --magnification is reduced to it (the legend says by how much)
+SHAPE_DISPLACEMENT_LIMIT = 0.2
 
 #: Table 6.1 (deformable FEA, rigid FEA) and the V0 = -0.2 figures quoted in ch. 6
 THESIS_TABLE_6_1 = {-0.5: (0.09040, 0.09033), -1.0: (0.04525, 0.04517), -2.0: (0.02343, 0.02259)}
@@ -51,6 +62,14 @@ class Run:
     alpha2: np.ndarray | None = None
     leaf_node_x: np.ndarray | None = None
     link_node_x: np.ndarray | None = None
+    summary: dict | None = None       # umbrella_sim.summary metadata: every physics step
+    warnings: list | None = None
+    lock_kind: str | None = None
+
+    @property
+    def rigid(self) -> bool:
+        """Say whether the model has no elastic field (its zero stress is not a result)."""
+        return self.params.get("model") in RIGID_MODELS
 
     def shape(self, t: float, magnification: float):
         """
@@ -70,7 +89,16 @@ class Run:
         return tm, leaf_u + scale * (leaf - leaf_u), link_u + scale * (link - link_u)
 
     def figures(self) -> dict:
-        """Return the thesis's V0 = -0.2 figures, from the recorded tip deflection."""
+        """
+        Return the summary figures, saying where they come from (figures_from).
+
+        From the recording's metadata (every physics step) when the log has it, else from
+        the recorded samples (older or killed recordings), which depend on the rate.
+        """
+        if self.summary is not None:
+            out = {k: self.summary.get(k) for k in FIGURE_KEYS}
+            out["figures_from"] = "every physics step (recording metadata)"
+            return out
         out = {"deploy_time": self.deploy_time}
         lock = self.deploy_time if self.deploy_time is not None else math.inf
         s1 = self.tip_t <= lock
@@ -78,13 +106,27 @@ class Run:
             i = int(np.argmax(np.abs(self.tip_v[s1])))
             out["tip_deflection_max"] = float(abs(self.tip_v[s1][i]))
             out["tip_deflection_max_time"] = float(self.tip_t[s1][i])
-        s2 = self.tip_t > lock
-        if s2.sum() > 8:
-            v = self.tip_v[s2]
-            out["stage2_tip_amplitude"] = 0.5 * float(v.max() - v.min())
-            p = dominant_period(self.tip_t[s2], v)
-            out["stage2_tip_period"] = None if math.isnan(p) else p
+        out.update(stage2_figures(self.tip_t, self.tip_v, self.deploy_time))
+        for body, peaks in (("leaf", self.peak_leaf), ("link", self.peak_link)):
+            i = int(np.argmax(peaks))
+            out[f"peak_stress_{body}"] = float(peaks[i])
+            out[f"peak_stress_{body}_time"] = float(self.stress_t[i])
+        rate = self.params.get("publish_rate")
+        out["figures_from"] = (f"recorded samples at {rate} Hz: the log has no summary record "
+                               "(an older recording, or its writer was killed), so these "
+                               "figures depend on the recording rate")
         return out
+
+    def validity(self) -> list:
+        """Return the recorded validity warnings, or the same rule applied to the samples."""
+        if self.warnings is not None:
+            return list(self.warnings)
+        tip = float(np.abs(self.tip_v).max()) if len(self.tip_v) else 0.0
+        peak = float(max(self.peak_leaf.max(), self.peak_link.max()))
+        try:
+            return validity_warnings(self.params, self.lock_kind, peak, tip)
+        except (KeyError, TypeError):
+            return []
 
 
 def _series(log, topic, fn, segment, width: int, stride: int = 1):
@@ -158,9 +200,19 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     mesh = log.metadata.get("umbrella_sim.mesh", {})
     leaf_x = np.array(json.loads(mesh["leaf_node_x"])) if "leaf_node_x" in mesh else None
     link_x = np.array(json.loads(mesh["link_node_x"])) if "link_node_x" in mesh else None
+    summary = warnings = None
+    record = log.metadata.get("umbrella_sim.summary") if segment == last else None
+    if record and "figures" in record:
+        try:
+            summary = json.loads(record["figures"])
+            warnings = json.loads(record.get("warnings", "[]"))
+        except ValueError:
+            raise LogError(f"{log.path}: metadata umbrella_sim.summary is not valid JSON") \
+                from None
     return Run(label, log.path, params, t, a[:, 0], a[:, 1], tt, np.array(tip), ts,
                st[:, 0], st[:, 4], st[:, 3], st[:, 7], deploy, drift, shapes,
-               float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x)
+               float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,
+               summary, warnings, events.get("lock_kind"))
 
 
 def _diff(ref_t, ref_y, t, y):
@@ -195,6 +247,7 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
             mx, rms = _diff(rt, ry, t, y)
             entry["differences"][name] = {"max": mx, "rms": rms, "unit": unit}
         entry["figures"] = r.figures()
+        entry["warnings"] = r.validity()
         if thesis:
             v0 = r.params.get("v0")
             th = {}
@@ -240,6 +293,11 @@ def print_table(result: dict, stream=sys.stdout) -> None:
                 f"stage 2 {fmt('stage2_tip_amplitude', 1e3)} mm / "
                 f"{fmt('stage2_tip_period', 1, '.4f')} s")
         w(line + "\n")
+        w(f"{'':<18} peak |sigma| leaf {fmt('peak_stress_leaf', 1e-6)} MPa at "
+          f"{fmt('peak_stress_leaf_time', 1, '.3f')} s, link {fmt('peak_stress_link', 1e-6)} "
+          f"MPa at {fmt('peak_stress_link_time', 1, '.3f')} s; from {f.get('figures_from')}\n")
+        for text in e.get("warnings", []):
+            w(f"{'':<18} warning: {text}\n")
         if e.get("thesis"):
             th = e["thesis"]
             w(f"{'':<18} thesis: " + ", ".join(f"{k} {v:g}" for k, v in th.items()) + "\n")
@@ -292,36 +350,102 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
            ("transverse deflection of G, stage 1 (Fig. 6.2, 6.10)", "across the lock (Fig. 6.4)"),
            "tip_deflection.png")
 
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig, axes = plt.subplots(3, 1, figsize=(8, 9), sharex=True)
+    yields = sorted({float(r.params["yield_strength"]) for r in runs
+                     if r.params.get("yield_strength")})
     for r in runs:
+        if r.rigid:
+            # a rigid model has no elastic field: its zero stress is not a result, so it is
+            # named in the legend and not drawn
+            for ax in axes:
+                ax.plot([], [], ls="none", label=f"{r.label}: rigid model, no stress")
+            continue
         axes[0].plot(r.stress_t, r.stress_joint / 1e6, label=r.label)
         axes[1].plot(r.stress_t, r.stress_mid / 1e6, label=r.label)
-    finish(fig, axes, ("sigma (MPa)", "sigma (MPa)"),
+        axes[2].plot(r.stress_t, r.peak_leaf / 1e6, label=f"{r.label} leaf")
+        axes[2].plot(r.stress_t, r.peak_link / 1e6, ls="--", label=f"{r.label} link")
+    for ys in yields:
+        for ax, signs in zip(axes, ((1, -1), (1, -1), (1,))):
+            for k, sign in enumerate(signs):
+                ax.axhline(sign * ys / 1e6, color="tab:red", lw=0.8, ls=":",
+                           label=f"yield {ys / 1e6:g} MPa" if k == 0 else None)
+    for ax in axes[1:]:
+        ax.legend(fontsize=7)
+    finish(fig, axes, ("sigma (MPa)", "sigma (MPa)", "max |sigma| (MPa)"),
            ("top-fibre stress on the leaf at O'' (Fig. 6.5, 6.11)",
-            "top-fibre stress at mid-link (Fig. 6.6)"), "stress.png")
+            "top-fibre stress at mid-link (Fig. 6.6)",
+            "peak |sigma| on each body (each publication: the peak since the previous one)"),
+           "stress.png")
 
-    fig, axes = plt.subplots(1, len(runs), figsize=(4 * len(runs), 4), squeeze=False)
+    fig, axes = plt.subplots(1, len(runs), figsize=(4.5 * len(runs), 4.5), squeeze=False)
     for ax, r in zip(axes[0], runs):
-        if not r.shapes:
-            continue
-        end = r.shapes[-1][0]
-        lock = r.deploy_time or end
-        wanted = [0.0, 0.25 * lock, 0.5 * lock, 0.75 * lock, lock, min(end, lock + 0.02),
-                  min(end, lock + 0.04)]
-        for k, tw in enumerate(wanted):
-            stage1 = tw <= lock
-            tm, leaf, link = r.shape(tw, magnification[0] if stage1 else magnification[1])
-            c = "tab:blue" if stage1 else "tab:red"
-            ax.plot(leaf[:, 0], leaf[:, 1], "-o", ms=2, color=c, lw=1)
+        snaps = shape_snapshots(r, magnification)
+        blues = plt.cm.Blues(np.linspace(0.45, 1.0, 5))
+        reds = plt.cm.Reds(np.linspace(0.45, 1.0, 4))
+        n1 = n2 = 0
+        for stage, tm, mag, leaf, link in snaps:
+            if stage == "deploying":
+                c, n1 = blues[min(n1, 4)], n1 + 1
+            else:
+                c, n2 = reds[min(n2, 3)], n2 + 1
+            ax.plot(leaf[:, 0], leaf[:, 1], "-o", ms=2, color=c, lw=1,
+                    label=f"t = {tm:.4f} s (x{mag:.3g})")
             ax.plot(link[:, 0], link[:, 1], "-", color=c, lw=0.8, alpha=0.7)
         ax.axvline(0, color="k", lw=0.6)
         ax.set_aspect("equal")
-        ax.set_title(f"{r.label}: stage 1 x{magnification[0]:g} (blue), "
-                     f"stage 2 x{magnification[1]:g} (red)", fontsize=8)
+        if snaps:
+            ax.legend(fontsize=6, loc="best")
+        lock_text = f"lock at {r.deploy_time:.4f} s" if r.deploy_time is not None else "no lock"
+        ax.set_title(f"{r.label}: stage 1 (blue), stage 2 (red); {lock_text}", fontsize=8)
         ax.set_xlabel("X (m)")
     axes[0][0].set_ylabel("Y (m)")
     save(fig, "shapes.png")
     return files
+
+
+def shape_snapshots(r: Run, magnification=(200.0, 5.0)) -> list:
+    """
+    Return the deformed shapes to draw: [(stage, t, magnification, leaf_xy, link_xy)].
+
+    Five recorded shapes in stage 1 (strictly before the lock) and four after it; the
+    magnification follows the stage of the shape actually drawn, and is reduced so that the
+    stage's largest elastic displacement drawn is at most SHAPE_DISPLACEMENT_LIMIT of the
+    leaf length (a V0 = -1 m/s run at x200 would draw its leaf metres away).
+    """
+    if not r.shapes:
+        return []
+    end = r.shapes[-1][0]
+    lock = r.deploy_time if r.deploy_time is not None else math.inf
+    times = np.array([s[0] for s in r.shapes])
+    s1, s2 = times[times < lock], times[times > lock]
+    wanted = []
+    if len(s1):
+        wanted += [("deploying", s1[np.argmin(np.abs(s1 - f * s1[-1]))])
+                   for f in (0.0, 0.25, 0.5, 0.75, 1.0)]
+    if len(s2):
+        wanted += [("locked", s2[np.argmin(np.abs(s2 - tw))])
+                   for tw in (lock + 0.01, lock + 0.02, lock + 0.04, min(end, lock + 0.06))]
+    seen, picked = set(), []
+    for stage, tw in wanted:
+        if tw not in seen:
+            seen.add(tw)
+            picked.append((stage, float(tw)))
+    length = float(r.params.get("l1", 0.5)) + float(r.params.get("l2", 0.5))
+    scale = {}
+    for k, stage in enumerate(("deploying", "locked")):
+        biggest = 0.0
+        for st, tw in picked:
+            if st == stage:
+                _, leaf1, _ = r.shape(tw, 1.0)
+                _, leaf0, _ = r.shape(tw, 0.0)
+                biggest = max(biggest, float(np.abs(leaf1 - leaf0).max()))
+        limit = SHAPE_DISPLACEMENT_LIMIT * length / biggest if biggest > 0 else math.inf
+        scale[stage] = min(magnification[k], limit)
+    out = []
+    for stage, tw in picked:
+        tm, leaf, link = r.shape(tw, scale[stage])
+        out.append((stage, tm, scale[stage], leaf, link))
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -221,11 +221,13 @@ class UmbrellaNode(Node):
     def close_recording(self) -> None:
         if self.recorder is None:
             return
+        from .recording import summary_metadata
         had_error = self.recorder.error is not None
         self.recorder.close_run(self.sim, self.published, self.accepted_commands,
                                 self.refused_commands, fault=self.fault, extra={
                                     "refused_not_recorded": str(self.refused_not_recorded),
-                                    "segments": str(self.recorder.segment + 1)})
+                                    "segments": str(self.recorder.segment + 1)},
+                                summary=summary_metadata(self.driver.summary.figures()))
         if not had_error and self.recorder.error is None:
             self._log("info", f"recording finalised: {self.recorder.path} "
                               f"({sum(self.recorder.counts.values())} messages)")
@@ -399,7 +401,12 @@ class UmbrellaNode(Node):
                                    f"{note}")
             self._record(self.command_topic + ros_io.COMMAND_APPLIED_SUFFIX,
                          Float64(data=force), t)
-        for ev in self.driver.advance(force):
+        try:
+            events = self.driver.advance(force)
+        finally:
+            for text in self.driver.summary.new_warnings():   # each logged once
+                self.get_logger().warning(f"t = {self.sim.time:.6f} s: {text}")
+        for ev in events:
             if ev.kind == "locked":
                 self.get_logger().info(f"locked at t = {ev.time:.9f} s ({ev.detail})")
                 self._publish_phase("locked")
@@ -552,6 +559,9 @@ class UmbrellaNode(Node):
         elif rtf > 0 and lag > max(0.05, 2.0 / self.driver_rate):
             level, message = (DiagnosticStatus.WARN,
                               f"behind real time: measured {measured:.3f}x of {rtf:g}x")
+        elif self.driver.summary.warnings():
+            level, message = DiagnosticStatus.WARN, "outside the model's validity: " + "; ".join(
+                w.split(":")[0] for w in self.driver.summary.warnings())
         else:
             level, message = DiagnosticStatus.OK, self._phase
         values = {"sim_time_s": f"{sim_t:.6f}", "measured_real_time_factor": f"{measured:.4f}",
@@ -567,6 +577,8 @@ class UmbrellaNode(Node):
                   "recording": ("off" if self.recorder is None else
                                 f"stopped: {self.recording_error}" if self.recording_error
                                 else "ok")}
+        for i, text in enumerate(self.driver.summary.warnings()):
+            values[f"warning_{i}"] = text
         # the status name carries the namespace: every antenna publishes on /diagnostics
         self._publish("diagnostics", ros_io.diagnostics_msg(
             sim_t, ros_io.diagnostic_name(self.get_fully_qualified_name()), level, message,

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 import math
 from typing import Callable
@@ -172,6 +172,7 @@ class RunResult:
     q_labels: list = field(default_factory=list)
     leaf_stress_x: list = field(default_factory=list)   # m from O, per stress point
     link_stress_x: list = field(default_factory=list)   # m from O''
+    figures: dict | None = None     # SummaryAccumulator.figures() of every physics step
 
     def column(self, name: str) -> np.ndarray:
         return np.array([getattr(s, name) for s in self.samples], dtype=float)
@@ -204,72 +205,275 @@ class RunResult:
         return summarize(self)
 
 
-def _half_peak_to_peak(x: np.ndarray) -> float:
-    return 0.5 * float(x.max() - x.min()) if len(x) else math.nan
+# ------------------------------------------------------------------ summary figures
+#: the stage-2 amplitude and period are measured over this window after the lock (s): six
+#: periods of the thesis frame's first locked mode (~0.05 s), the same for a 1 s offline run
+#: and a 10 min live one, so that runs of different lengths compare
+STAGE2_WINDOW = 0.3
+#: validity of the small-deformation (linear elastic field) model: the tip deflection |v_G|
+#: may reach this fraction of the leaf length l1 + l2.  Beyond it the slope of the bent
+#: leaf passes ~0.15 rad, where the neglected terms of the curvature and the membrane strain
+#: (~v'^2, model flexible-nonlinear) reach a few percent (linear beam theory's L/10 rule)
+TIP_DEFLECTION_LIMIT = 0.10
 
 
-def dominant_period(t: np.ndarray, x: np.ndarray) -> float:
-    """Mean spacing of upward mean crossings, with hysteresis against ripple."""
-    if len(x) < 8:
+def oscillation_period(t: np.ndarray, x: np.ndarray) -> float:
+    """
+    Return the period of the dominant oscillation of x(t), robust to ripple and drift.
+
+    x is detrended (least-squares straight line removed).  A first estimate comes from its
+    upward zero crossings (linear interpolation between samples; a crossing counts only
+    after x went below -30 % of its largest |x| since the previous one: hysteresis against
+    the ripple of the higher modes): (last - first crossing) / (crossings - 1).  It is then
+    refined to the period maximising the Hann-windowed Fourier amplitude (golden-section
+    search in [0.8, 1.25] x the estimate), which the higher modes riding on the signal do
+    not shift as they shift crossing times.  nan with fewer than two full periods.
+    """
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if len(x) < 8 or t[-1] <= t[0]:
         return math.nan
-    x = x - x.mean()
-    amp = np.abs(x).max()
+    x = x - np.polyval(np.polyfit(t - t[0], x, 1), t - t[0])
+    amp = float(np.abs(x).max())
     if amp == 0.0:
         return math.nan
-    low, crossings, armed = -0.3 * amp, [], False
-    for i in range(1, len(x)):
-        if x[i] < low:
-            armed = True
-        if armed and x[i - 1] < 0.0 <= x[i]:
-            frac = -x[i - 1] / (x[i] - x[i - 1])
-            crossings.append(t[i - 1] + frac * (t[i] - t[i - 1]))
-            armed = False
-    if len(crossings) < 2:
+    up = np.flatnonzero((x[:-1] < 0.0) & (x[1:] >= 0.0))
+    low = np.flatnonzero(x < -0.3 * amp)
+    crossings, last = [], -1
+    for i in up:
+        j = np.searchsorted(low, last + 1)     # armed: below -0.3 amp since the last one
+        if j < len(low) and low[j] <= i:
+            frac = -x[i] / (x[i + 1] - x[i])
+            crossings.append(t[i] + frac * (t[i + 1] - t[i]))
+            last = i
+    if len(crossings) < 3:
         return math.nan
-    return float(np.mean(np.diff(crossings)))
+    guess = float((crossings[-1] - crossings[0]) / (len(crossings) - 1))
+    xw = x * np.hanning(len(x))
+
+    def minus_amplitude(period):
+        return -abs(np.dot(xw, np.exp(-2j * math.pi * t / period)))
+
+    lo, hi = 0.8 * guess, 1.25 * guess
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    c, d = hi - g * (hi - lo), lo + g * (hi - lo)
+    fc, fd = minus_amplitude(c), minus_amplitude(d)
+    while hi - lo > 1e-9 * guess:
+        if fc < fd:
+            hi, d, fd = d, c, fc
+            c = hi - g * (hi - lo)
+            fc = minus_amplitude(c)
+        else:
+            lo, c, fc = c, d, fd
+            d = lo + g * (hi - lo)
+            fd = minus_amplitude(d)
+    return 0.5 * (lo + hi)
+
+
+def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dict:
+    """
+    Return the stage-2 amplitude and period of the tip deflection v(t).
+
+    Over the window (lock, lock + STAGE2_WINDOW], or the part of it the run covers
+    (reported as stage2_window): half the peak-to-peak of v and oscillation_period(t, v).
+    """
+    out = {"stage2_window": None, "stage2_tip_amplitude": None, "stage2_tip_period": None}
+    if lock_time is None:
+        return out
+    keep = (t > lock_time) & (t <= lock_time + STAGE2_WINDOW + 1e-12)
+    t, v = t[keep], v[keep]
+    if len(v) <= 8:
+        return out
+    out["stage2_window"] = [float(lock_time), float(t[-1])]
+    out["stage2_tip_amplitude"] = 0.5 * float(v.max() - v.min())
+    period = oscillation_period(t, v)
+    out["stage2_tip_period"] = None if math.isnan(period) else period
+    return out
+
+
+def lock_warning(params: dict, lock_kind: str | None) -> str | None:
+    """Return a warning if the lock asked for does not apply to the model (else None)."""
+    asked = params.get("lock")
+    if lock_kind is not None and asked is not None and asked != lock_kind:
+        return (f"lock not applicable: lock={asked} does not apply to model="
+                f"{params.get('model')} (a rigid mechanism stopped at a point keeps no "
+                f"kinetic energy to redistribute); the {lock_kind} lock is used; set "
+                f"lock={lock_kind} to silence this")
+    return None
+
+
+def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
+                      tip_deflection: float) -> list[str]:
+    """
+    Return where a run left the model's validity: one rule, used everywhere.
+
+    Each text starts with a fixed key ('yield exceeded', 'large deflection', 'lock not
+    applicable') before a colon.
+    """
+    out = []
+    lw = lock_warning(params, lock_kind)
+    if lw:
+        out.append(lw)
+    ys = params["yield_strength"]
+    if peak_stress > ys:
+        out.append(f"yield exceeded: peak |sigma| {peak_stress / 1e6:.4g} MPa is "
+                   f"{peak_stress / ys:.3g} x yield_strength {ys / 1e6:.4g} MPa; the linear "
+                   "elastic material law no longer holds")
+    length = params["l1"] + params["l2"]
+    if tip_deflection > TIP_DEFLECTION_LIMIT * length:
+        out.append(f"large deflection: |v_G| reached {tip_deflection * 1e3:.4g} mm = "
+                   f"{100 * tip_deflection / length:.3g} % of the leaf length {length:g} m "
+                   f"(limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no "
+                   "longer holds (compare model flexible-nonlinear)")
+    return out
+
+
+class SummaryAccumulator:
+    """
+    Summary figures of a run from every physics step (StepBlocks).
+
+    Independent of the publication or recording rate.  Written once; used by the CLI, the
+    node (diagnostics, recording metadata) and, through the recording's metadata,
+    umbrella_compare.  The energy balance and the constraint residual are taken at the end
+    of each block (every step for ``simulate``, every publication for the node).
+    """
+
+    def __init__(self, params: dict, initial: Sample, lock_kind: str | None = None):
+        self.params = dict(params)
+        self.lock_kind = lock_kind
+        self.lock: LockEvent | None = None
+        self.steps = 0
+        self.final_time = float(initial.time)
+        self.error: str | None = None
+        self._e0 = initial.kinetic_energy + initial.strain_energy
+        self._scale = max(abs(self._e0), 1e-300)
+        self._balance = 0.0
+        self._residual = float(initial.constraint_residual)
+        self._tip1 = ((abs(initial.tip_transverse), float(initial.time))
+                      if initial.stage == "deploying" else (None, None))
+        self._tip_all = abs(initial.tip_transverse)
+        self._peaks = {b: (getattr(initial, f"peak_stress_{b}"),
+                           getattr(initial, f"peak_stress_{b}_x"), float(initial.time))
+                       for b in ("leaf", "link")}
+        self._s2_t: list = []
+        self._s2_v: list = []
+        self._warned: set = set()
+
+    def add(self, block: StepBlock) -> None:
+        """Take the steps of one block."""
+        if block.lock is not None and self.lock is None:
+            self.lock = block.lock
+        if block.error is not None:
+            self.error = block.error
+        n = len(block)
+        if n == 0:
+            return
+        t, v = block.time, block.tip_transverse
+        self.steps += n
+        self.final_time = float(t[-1])
+        av = np.abs(v)
+        self._tip_all = max(self._tip_all, float(av.max()))
+        s1 = block.stage == 0
+        if s1.any():
+            i = int(np.argmax(np.where(s1, av, -1.0)))
+            if self._tip1[0] is None or av[i] > self._tip1[0]:
+                self._tip1 = (float(av[i]), float(t[i]))
+        if self.lock is not None:
+            keep = (~s1) & (t <= self.lock.time + STAGE2_WINDOW + 1e-12)
+            if keep.any():
+                self._s2_t.append(t[keep])
+                self._s2_v.append(v[keep])
+        for body in ("leaf", "link"):
+            peaks = getattr(block, f"peak_stress_{body}")
+            i = int(np.argmax(peaks))
+            if peaks[i] > self._peaks[body][0]:
+                self._peaks[body] = (float(peaks[i]),
+                                     float(getattr(block, f"peak_stress_{body}_x")[i]),
+                                     float(t[i]))
+        last = block.last
+        self._residual = max(self._residual, float(last.constraint_residual))
+        e = last.kinetic_energy + last.strain_energy
+        self._scale = max(self._scale, abs(e), abs(last.work))
+        self._balance = max(self._balance, abs(e - self._e0 - last.work + last.lock_energy_loss
+                                               + last.damping_dissipation))
+
+    def figures(self) -> dict:
+        """Return the physics figures of the run so far (no wall-clock ones), JSON-ready."""
+        p = self.params
+        out: dict = {"deploy_time": self.lock.time if self.lock else None,
+                     "tip_deflection_max": self._tip1[0],
+                     "tip_deflection_max_time": self._tip1[1]}
+        if self._s2_t:
+            out.update(stage2_figures(np.concatenate(self._s2_t), np.concatenate(self._s2_v),
+                                      self.lock.time))
+        else:
+            out.update(stage2_figures(np.zeros(0), np.zeros(0), None))
+        for body in ("leaf", "link"):
+            peak, x, t = self._peaks[body]
+            out[f"peak_stress_{body}"] = peak
+            out[f"peak_stress_{body}_x"] = x
+            out[f"peak_stress_{body}_time"] = t
+        out["yield_strength"] = p.get("yield_strength")
+        out["stress_ratio_max"] = max(out["peak_stress_leaf"], out["peak_stress_link"]) / \
+            p["yield_strength"]
+        out["tip_deflection_ratio_max"] = self._tip_all / (p["l1"] + p["l2"])
+        out["energy_drift"] = self._balance / self._scale
+        if self.lock:
+            out["lock"] = self.lock.kind
+            out["lock_energy_before"] = self.lock.energy_before
+            out["lock_energy_after"] = self.lock.energy_after
+            out["lock_free_velocities"] = list(self.lock.free_velocities)
+        out["constraint_residual_max"] = self._residual
+        out["final_time"] = self.final_time
+        out["steps"] = self.steps
+        out["warnings"] = self.warnings()
+        if self.error:
+            out["error"] = self.error
+        return out
+
+    def warnings(self) -> list[str]:
+        """Return the validity warnings so far (validity_warnings)."""
+        return validity_warnings(self.params, self.lock_kind,
+                                 max(self._peaks["leaf"][0], self._peaks["link"][0]),
+                                 self._tip_all)
+
+    def new_warnings(self) -> list[str]:
+        """Return the warnings not returned by an earlier call (a log line each, once)."""
+        fresh = [w for w in self.warnings() if w.split(":")[0] not in self._warned]
+        self._warned.update(w.split(":")[0] for w in fresh)
+        return fresh
+
+
+def blocks_from_samples(samples: list) -> StepBlock:
+    """Return a StepBlock of samples (each taken as one step's end)."""
+    rows = np.array([step_row(s) for s in samples], dtype=float).reshape(-1, len(STEP_FIELDS))
+    last = samples[-1]
+    return StepBlock.from_rows(rows.T.copy(), lambda: last)
 
 
 def summarize(r: RunResult) -> dict:
-    if not r.samples:
+    """
+    Return the summary of a run.
+
+    The figures of every physics step (``r.figures``, from solver.simulate's
+    SummaryAccumulator) if the run has them, else from its samples ('figures_from':
+    'samples'), plus the wall-clock figures.
+    """
+    if r.figures is not None:
+        out = dict(r.figures)
+    elif not r.samples:
         return {"error": r.error, "steps": r.steps}
-    t = r.column("time")
-    v = r.column("tip_transverse")
-    stage1 = np.array([s.stage == "deploying" for s in r.samples])
-    stage2 = ~stage1
-    out: dict = {}
-    out["deploy_time"] = r.lock.time if r.lock else None
-    if stage1.any():
-        i = int(np.argmax(np.abs(v[stage1])))
-        out["tip_deflection_max"] = float(abs(v[stage1][i]))
-        out["tip_deflection_max_time"] = float(t[stage1][i])
     else:
-        out["tip_deflection_max"] = out["tip_deflection_max_time"] = None
-    if stage2.sum() > 8:
-        out["stage2_tip_amplitude"] = _half_peak_to_peak(v[stage2])
-        period = dominant_period(t[stage2], v[stage2])
-        out["stage2_tip_period"] = None if math.isnan(period) else period
-    else:
-        out["stage2_tip_amplitude"] = out["stage2_tip_period"] = None
-    for body in ("leaf", "link"):
-        peaks = r.column(f"peak_stress_{body}")
-        i = int(np.argmax(peaks))
-        out[f"peak_stress_{body}"] = float(peaks[i])
-        out[f"peak_stress_{body}_x"] = float(getattr(r.samples[i], f"peak_stress_{body}_x"))
-        out[f"peak_stress_{body}_time"] = float(t[i])
-    out["yield_strength"] = r.params.get("yield_strength")
-    out["stress_ratio_max"] = max(out["peak_stress_leaf"], out["peak_stress_link"]) / \
-        r.params["yield_strength"]
-    out["energy_drift"] = energy_drift(r)
-    if r.lock:
-        out["lock"] = r.lock.kind
-        out["lock_energy_before"] = r.lock.energy_before
-        out["lock_energy_after"] = r.lock.energy_after
-        out["lock_free_velocities"] = list(r.lock.free_velocities)
-    out["constraint_residual_max"] = float(r.column("constraint_residual").max())
-    out["final_time"] = float(t[-1])
+        acc = SummaryAccumulator(r.params, r.samples[0], r.lock.kind if r.lock else None)
+        if len(r.samples) > 1:
+            block = blocks_from_samples(r.samples[1:])
+            acc.add(replace(block, lock=r.lock, error=r.error))
+        out = acc.figures()
+        out["figures_from"] = "samples"
     out["steps"] = r.steps
     out["wall_time"] = r.wall_time
-    out["real_time_factor"] = float(t[-1] / r.wall_time) if r.wall_time > 0 else None
+    ft = out.get("final_time")
+    out["real_time_factor"] = float(ft / r.wall_time) if r.wall_time > 0 and ft else None
     if r.error:
         out["error"] = r.error
     return out

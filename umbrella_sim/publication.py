@@ -13,12 +13,12 @@ records them).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 from . import ros_io
 from .forcing import ForceSchedule
-from .outputs import StepBlock
+from .outputs import StepBlock, SummaryAccumulator
 from .params import NODE_PARAMETERS, UmbrellaParams
 from .solver import command_force, SimulationDiverged, UmbrellaSimulator
 
@@ -60,6 +60,10 @@ class PublicationDriver:
         self.last_block: StepBlock | None = None
         first = self.sim.sample()
         self.initial_energy = first.kinetic_energy + first.strain_energy
+        # the live node's summary of every step (the offline driver keeps its own)
+        self.summary = SummaryAccumulator(self.sim.params.as_dict(), first,
+                                          self.sim.engine.lock_kind)
+        self._peaks: dict = {}       # peak stresses over the steps since the last publication
 
     @property
     def backend(self) -> str:
@@ -82,6 +86,7 @@ class PublicationDriver:
         if commanded_force is not None:
             self.command(commanded_force)
         block, applied = self.sim.advance_schedule(self.schedule, self.publish_every)
+        self.summary.add(block)
         events = self.take(block, applied)
         if block.error is not None:
             raise SimulationDiverged(block.error)
@@ -91,6 +96,9 @@ class PublicationDriver:
         """Note one period's block of steps; return its events (applied forces, the lock)."""
         self.last_block = block
         self.periods += 1
+        for body, (peak, x) in block.peaks().items():
+            if peak > self._peaks.get(body, (-1.0, 0.0))[0]:
+                self._peaks[body] = (peak, x)
         lock = self.sim.lock_event
         events = [Event("applied", t, f, " (locked: no effect on motion)"
                         if lock is not None and t >= lock.time else "") for t, f in applied]
@@ -103,10 +111,21 @@ class PublicationDriver:
         return events
 
     def publication_sample(self):
-        """Return the Sample a publication now carries (the current state)."""
+        """
+        Return the Sample a publication now carries.
+
+        The current state, with the peak stresses (and where) replaced by the largest over
+        every step since the previous publication (the first publication: the initial
+        state's), so that no peak between publications is lost.
+        """
         block = self.last_block
-        return block.last if block is not None and len(block) and \
+        s = block.last if block is not None and len(block) and \
             block.last.time == self.sim.time else self.sim.sample()
+        peaks, self._peaks = self._peaks, {}
+        if peaks:
+            s = replace(s, peak_stress_leaf=peaks["leaf"][0], peak_stress_leaf_x=peaks["leaf"][1],
+                        peak_stress_link=peaks["link"][0], peak_stress_link_x=peaks["link"][1])
+        return s
 
     def messages(self, marker_ns: str, magnification: float, frame_prefix: str = "") -> dict:
         """Return the messages of the current state; markers only at their own rate."""

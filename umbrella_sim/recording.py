@@ -561,18 +561,20 @@ class BagRecorder:
             self.add_channel(command_topic + suffix, Float64, ros_io.COMMAND.qos)
 
     def close_run(self, sim, published: dict, accepted: int, refused: int,
-                  fault: str | None = None, extra: dict | None = None) -> None:
+                  fault: str | None = None, extra: dict | None = None,
+                  summary: dict | None = None) -> None:
         """
         Finalise with the counts, the exact lock event and the fault, if any.
 
         Finalise with the counts (published vs recorded), the exact lock event and the
-        fault, if any; extra: more counts (e.g. refused commands not recorded).
+        fault, if any; extra: more counts (e.g. refused commands not recorded); summary:
+        the summary record (summary_metadata).
         """
         self.close({"umbrella_sim.counts": {
             "published": json.dumps(published), "commands_accepted": str(accepted),
             "commands_refused": str(refused), "recorded": json.dumps(self.counts),
             **(extra or {})},
-            **events_metadata(sim, fault)})
+            **events_metadata(sim, fault), **(summary or {})})
 
     def start_segment(self, parameters: dict[str, str], gap_ns: int,
                       ended_events: dict[str, str] | None = None) -> int:
@@ -715,6 +717,23 @@ class BagRecorder:
 
 
 # ------------------------------------------------------------------ offline runs
+#: metadata record of the run's summary figures from every physics step (recording.md)
+SUMMARY_RECORD = "umbrella_sim.summary"
+
+
+def summary_metadata(figures: dict) -> dict[str, dict[str, str]]:
+    """
+    Return the summary metadata record: figures of every physics step and the warnings.
+
+    From outputs.SummaryAccumulator.figures(), so that umbrella_compare reports the
+    physics, not the recorded samples.
+    """
+    return {SUMMARY_RECORD: {
+        "figures": json.dumps({k: v for k, v in figures.items() if k != "warnings"}),
+        "warnings": json.dumps(figures.get("warnings", [])),
+        "source": "every physics step"}}
+
+
 def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                    publish_rate: float = 100.0, marker_magnification: float = 1.0,
                    progress=None):
@@ -802,7 +821,8 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                           output_every=driver.publish_every, on_output=on_output)
     finally:
         rec.close_run(sim, published, accepted=state["i_cmd"], refused=0,
-                      fault=result.error if result is not None else None)
+                      fault=result.error if result is not None else None,
+                      summary=summary_metadata(result.figures) if result is not None else None)
     result.recording_error = rec.error
     result.wall_time = _time.perf_counter() - wall0
     return result

@@ -24,7 +24,8 @@ from .forcing import ForceSchedule
 from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ConvergenceError,
                           DynamicState, MidpointDAE)
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
-from .outputs import LockEvent, RunResult, Sample, STEP_FIELDS, step_row, StepBlock
+from .outputs import (LockEvent, RunResult, Sample, STEP_FIELDS, step_row, StepBlock,
+                      SummaryAccumulator)
 from .params import SPECS, UmbrellaParams
 from .rigid import RigidMechanism
 
@@ -667,7 +668,8 @@ def simulate(params: UmbrellaParams, duration: float,
     force_profile: (t, F) pairs or a ForceSchedule: F_H as forcing.py's zero-order hold
     (each value acts from the first step that starts at or after its time).  Every
     output_every steps (and at the end) ``on_output(block, applied)`` gets the StepBlock of
-    those steps and the force values that took effect in them; keep_samples keeps the
+    those steps and the force values that took effect in them; ``result.figures`` are the
+    summary figures of every step (outputs.SummaryAccumulator); keep_samples keeps the
     Sample at each of those instants (and right after the lock) in ``result.samples``.
     simulator: step this one (fresh, at t = 0) instead of a new one.  On a diverged run what
     was computed before the failure is kept and ``result.error`` says why.
@@ -682,14 +684,17 @@ def simulate(params: UmbrellaParams, duration: float,
     result = RunResult(params=sim.params.as_dict(), q_labels=sim.model.coordinate_labels(),
                        leaf_stress_x=list(sim.model.leaf.stress_x),
                        link_stress_x=list(sim.model.link.stress_x))
+    first = sim.sample()
     if keep_samples:
-        result.samples.append(sim.sample())
+        result.samples.append(first)
+    summary = SummaryAccumulator(result.params, first, sim.engine.lock_kind)
     every = max(1, int(output_every))
     wall0 = _time.perf_counter()
     k_end = int(round(duration / sim.h))
     next_progress = 0
     while sim.step_index < k_end:
         block, applied = sim.advance_schedule(schedule, min(every, k_end - sim.step_index))
+        summary.add(block)
         if keep_samples:
             if block.lock is not None:
                 result.samples.append(sim.lock_sample())
@@ -709,4 +714,5 @@ def simulate(params: UmbrellaParams, duration: float,
     result.wall_time = _time.perf_counter() - wall0
     result.steps = sim.steps
     result.lock = sim.lock_event
+    result.figures = summary.figures()
     return result

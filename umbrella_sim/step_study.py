@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from .outputs import dominant_period
+from .outputs import oscillation_period
 from .params import UmbrellaParams
 from .solver import UmbrellaSimulator
 
@@ -25,36 +25,8 @@ TARGETS = {"deploy_time": 1e-5, "stage2_period": 5e-4, "stage2_tip_series_m": 2e
            "peak_stress": 0.03}
 
 
-def fundamental_period(t: np.ndarray, x: np.ndarray) -> float:
-    """
-    Return the period of the dominant mode of x(t).
-
-    Period of the dominant mode of x(t): the frequency maximising the Hann-windowed
-    Fourier amplitude, refined by golden-section search around the mean-crossing estimate.
-    Unlike crossing times, it is not shifted by the higher modes riding on the signal.
-    """
-    guess = dominant_period(t, x)
-    if not math.isfinite(guess):
-        return math.nan
-    x = (x - x.mean()) * np.hanning(len(x))
-
-    def amp(period):
-        return -abs(np.dot(x, np.exp(-2j * math.pi * t / period)))
-
-    lo, hi = 0.8 * guess, 1.25 * guess
-    g = (math.sqrt(5.0) - 1.0) / 2.0
-    c, d = hi - g * (hi - lo), lo + g * (hi - lo)
-    fc, fd = amp(c), amp(d)
-    while hi - lo > 1e-9 * guess:
-        if fc < fd:
-            hi, d, fd = d, c, fc
-            c = hi - g * (hi - lo)
-            fc = amp(c)
-        else:
-            lo, c, fc = c, d, fd
-            d = lo + g * (hi - lo)
-            fd = amp(d)
-    return 0.5 * (lo + hi)
+#: the period of the dominant mode of x(t): the summary's estimator (outputs.py)
+fundamental_period = oscillation_period
 
 
 @dataclass

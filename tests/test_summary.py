@@ -1,0 +1,312 @@
+"""
+Summary figures from every physics step, validity warnings, compare's plots, CLI output.
+
+The figures (deploy time, stage-1 maxima, stage-2 amplitude and period, peak stresses) must
+not depend on the publication or recording rate, must equal a brute-force pass over every
+step of the reference stepping path, and must reach umbrella_compare through the recording's
+metadata.
+"""
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from umbrella_sim import compare
+from umbrella_sim.logs import read_log
+from umbrella_sim.nonlinear import locked_first_frequency
+from umbrella_sim.outputs import oscillation_period, STAGE2_WINDOW, TIP_DEFLECTION_LIMIT
+from umbrella_sim.params import UmbrellaParams
+from umbrella_sim.recording import record_offline
+from umbrella_sim.solver import simulate, UmbrellaSimulator
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# 0.25 ms divides both publication periods below; the figures' arithmetic is step-independent
+STEP = 2.5e-4
+PARAMS = UmbrellaParams(v0=-0.5, time_step=STEP)
+DURATION = 0.45                     # the lock (~0.09 s) and the whole stage-2 window
+FIGURES = ("deploy_time", "tip_deflection_max", "tip_deflection_max_time",
+           "stage2_tip_amplitude", "stage2_tip_period", "peak_stress_leaf",
+           "peak_stress_leaf_x", "peak_stress_leaf_time", "peak_stress_link",
+           "peak_stress_link_x", "peak_stress_link_time")
+
+
+def run_cli(*args, timeout=300, **kw):
+    return subprocess.run([sys.executable, "-m", "umbrella_sim", "simulate", *args],
+                          capture_output=True, text=True, cwd=ROOT, timeout=timeout, **kw)
+
+
+@pytest.fixture(scope="module")
+def offline():
+    return simulate(PARAMS, DURATION)
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory):
+    """Record the same run at 100 Hz and at 1 kHz."""
+    out = {}
+    for rate in (100.0, 1000.0):
+        bag = tmp_path_factory.mktemp("rate") / f"run_{rate:g}"
+        record_offline(PARAMS, str(bag), DURATION, publish_rate=rate)
+        out[rate] = bag
+    return out
+
+
+def recorded_summary(bag):
+    meta = read_log(str(bag)).metadata["umbrella_sim.summary"]
+    return json.loads(meta["figures"]), json.loads(meta["warnings"])
+
+
+def test_brute_force_over_every_step_of_the_reference_path(offline):
+    """Every step of UmbrellaSimulator.step (numpy reference, one Sample each)."""
+    sim = UmbrellaSimulator(PARAMS)
+    samples = [sim.sample()]
+    while sim.time < DURATION - 1e-12:
+        samples += sim.step()
+    lock = sim.lock_event.time
+    s1 = [s for s in samples if s.stage == "deploying"]
+    tip1 = max(s1, key=lambda s: abs(s.tip_transverse))
+    s2 = [s for s in samples if s.time > lock and s.time <= lock + STAGE2_WINDOW + 1e-12]
+    v2 = [s.tip_transverse for s in s2]
+    f = offline.summary()
+    assert f["deploy_time"] == lock
+    assert f["tip_deflection_max"] == abs(tip1.tip_transverse)
+    assert f["tip_deflection_max_time"] == tip1.time
+    assert f["stage2_tip_amplitude"] == 0.5 * (max(v2) - min(v2))
+    assert f["stage2_window"] == [lock, s2[-1].time]
+    for body in ("leaf", "link"):
+        peak = max(samples, key=lambda s: getattr(s, f"peak_stress_{body}"))
+        # the compiled stress recovery rounds differently from numpy's (1 ulp)
+        assert f[f"peak_stress_{body}"] == pytest.approx(getattr(peak, f"peak_stress_{body}"),
+                                                         rel=1e-14)
+        assert f[f"peak_stress_{body}_x"] == getattr(peak, f"peak_stress_{body}_x")
+        assert f[f"peak_stress_{body}_time"] == peak.time
+    assert f["stress_ratio_max"] == max(f["peak_stress_leaf"], f["peak_stress_link"]) / 500e6
+
+
+def test_figures_do_not_depend_on_the_recording_rate(offline, bags):
+    f_sim = offline.summary()
+    for rate, bag in bags.items():
+        recorded, warnings = recorded_summary(bag)
+        for key in FIGURES:
+            assert recorded[key] == pytest.approx(f_sim[key], rel=1e-12, abs=0), (rate, key)
+        assert warnings == f_sim["warnings"]
+    # umbrella_compare reports those figures, not the samples'
+    runs = [compare.load_run(str(b)) for b in bags.values()]
+    figs = [r.figures() for r in runs]
+    assert all(f["figures_from"].startswith("every physics step") for f in figs)
+    for key in FIGURES:
+        assert figs[0][key] == figs[1][key] == pytest.approx(f_sim[key], rel=1e-12)
+
+
+def test_figures_from_samples_depend_on_the_rate_and_say_so(bags):
+    """Without the summary record (an older log) compare falls back to the samples."""
+    runs = []
+    for bag in bags.values():
+        r = compare.load_run(str(bag))
+        r.summary = None
+        runs.append(r.figures())
+    assert all("depend on the recording rate" in f["figures_from"] for f in runs)
+    # the 100 Hz samples miss the stage-1 peak the 1 kHz ones come closer to
+    assert runs[0]["tip_deflection_max"] < runs[1]["tip_deflection_max"]
+
+
+def test_published_peak_stress_is_the_peak_since_the_previous_publication(offline, bags):
+    """At 100 Hz each peak_stress message carries the largest |sigma| of its 40 steps."""
+    log = read_log(str(bags[100.0]))
+    steps = list(offline.samples)
+    t = np.array([s.time for s in steps])
+    leaf = np.array([s.peak_stress_leaf for s in steps])
+    msgs = log.decoded(log.find_topic("peak_stress"))
+    prev = None
+    for tm, m in msgs:
+        window = (t <= tm + 1e-12) & ((t > prev + 1e-12) if prev is not None else (t <= 1e-12))
+        # (samples recover stresses in numpy, the steps in C: 1 ulp apart)
+        assert m.data[0] == pytest.approx(leaf[window].max(), rel=1e-14), tm
+        prev = tm
+    # so the recorded stage-1 peaks hold the true maximum, which 100 Hz samples of the
+    # instantaneous value would miss
+    assert max(m.data[0] for _, m in msgs) == offline.summary()["peak_stress_leaf"]
+    instantaneous = [s.peak_stress_leaf for s in steps if round(s.time * 100, 6).is_integer()]
+    assert max(instantaneous) < offline.summary()["peak_stress_leaf"]
+
+
+def test_period_estimator_on_a_known_signal():
+    """Two modes (47 ms and 4 ms, 20 %), a drift and an offset: the 47 ms period."""
+    t = np.arange(0.0, 0.3, 5e-5)
+    x = (np.sin(2 * math.pi * t / 0.047 + 0.4) + 0.2 * np.sin(2 * math.pi * t / 0.004)
+         + 0.5 * t + 3.0)
+    assert oscillation_period(t, x) == pytest.approx(0.047, rel=1e-3)
+    assert math.isnan(oscillation_period(t[:1000], x[:1000]))     # one period only: nan
+
+
+@pytest.mark.parametrize("lock", ["energy", "plastic"])
+def test_stage2_period_is_the_locked_frames_first_mode(lock):
+    """The stage-2 tip period = 2 pi / omega_1 of the locked frame (linearised) to 0.5 %."""
+    p = UmbrellaParams(v0=-0.5, lock=lock, time_step=STEP)
+    f = simulate(p, DURATION, keep_samples=False).figures
+    period = 2 * math.pi / locked_first_frequency(UmbrellaSimulator(p).model)
+    assert f["stage2_tip_period"] == pytest.approx(period, rel=5e-3)
+    assert f["stage2_window"][1] == pytest.approx(f["deploy_time"] + STAGE2_WINDOW, abs=STEP)
+
+
+# ------------------------------------------------------------------ warnings
+FAST = UmbrellaParams(v0=-2.0, time_step=STEP)
+
+
+@pytest.fixture(scope="module")
+def fast_run():
+    return simulate(FAST, 0.1)
+
+
+def test_validity_warnings_at_v0_minus_2(fast_run):
+    f = fast_run.summary()
+    keys = [w.split(":")[0] for w in f["warnings"]]
+    assert keys == ["yield exceeded", "large deflection"]
+    assert f["stress_ratio_max"] > 1.0
+    assert f["tip_deflection_ratio_max"] > TIP_DEFLECTION_LIMIT
+    quiet = simulate(UmbrellaParams(v0=-0.2, time_step=STEP), 0.1).summary()
+    assert quiet["warnings"] == []
+
+
+def test_lock_that_does_not_apply_is_named():
+    f = simulate(UmbrellaParams(model="rigid", lock="energy"), 0.05).summary()
+    assert [w.split(":")[0] for w in f["warnings"]] == ["lock not applicable"]
+    assert simulate(UmbrellaParams(model="rigid", lock="plastic"), 0.05).summary()[
+        "warnings"] == []
+
+
+def test_warnings_in_cli_text_json_and_recording(tmp_path):
+    args = ["--v0", "-2", "--time-step", str(STEP), "--duration", "0.1"]
+    text = run_cli(*args)
+    assert text.returncode == 0, text.stderr
+    assert "umbrella_sim: warning: yield exceeded" in text.stderr
+    assert "umbrella_sim: warning: large deflection" in text.stderr
+    js = run_cli(*args, "--json")
+    assert [w.split(":")[0] for w in json.loads(js.stdout)["warnings"]] == [
+        "yield exceeded", "large deflection"]
+    bag = tmp_path / "fast"
+    rec = run_cli(*args, "--mcap", str(bag))
+    assert rec.returncode == 0, rec.stderr
+    _, warnings = recorded_summary(bag)
+    assert [w.split(":")[0] for w in warnings] == ["yield exceeded", "large deflection"]
+    assert [w.split(":")[0] for w in compare.load_run(str(bag)).validity()] == [
+        "yield exceeded", "large deflection"]
+
+
+def test_node_warns_once_and_diagnostics_say_warn(antenna_factory, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    bag = tmp_path / "node_fast"
+    antenna = antenna_factory({"v0": -2.0, "time_step": STEP, "real_time_factor": 0.1,
+                               "duration": 0.4}, record_path=str(bag))
+    msg = antenna.wait_for(
+        "diagnostics", lambda m: m.status[0].level == DiagnosticStatus.WARN, timeout=60,
+        what="a WARN diagnostic")
+    values = {kv.key: kv.value for kv in msg.status[0].values}
+    assert "outside the model's validity" in msg.status[0].message
+    assert values["warning_0"].startswith("yield exceeded")
+    assert antenna.node.proc.wait(timeout=120) == 0
+    log = antenna.node.output()
+    assert log.count("yield exceeded") == 1 and log.count("large deflection") == 1
+    _, warnings = recorded_summary(bag)
+    assert [w.split(":")[0] for w in warnings] == ["yield exceeded", "large deflection"]
+
+
+# ------------------------------------------------------------------ CLI small items
+def test_text_summary_has_units_and_rounding():
+    out = run_cli("--v0", "-0.5", "--time-step", str(STEP), "--duration", "0.2")
+    lines = dict(line.split(None, 1) for line in out.stdout.splitlines())
+    assert lines["deploy_time"].endswith(" s") and len(lines["deploy_time"]) == len("0.090000 s")
+    assert lines["tip_deflection_max"].endswith(" mm")
+    assert lines["peak_stress_leaf"].endswith(" MPa")
+    assert lines["energy_drift"].endswith(" -")
+
+
+def test_closed_stdout_ends_quietly():
+    """Umbrella_sim simulate | head: the reader went away; no traceback, exit 141."""
+    p = subprocess.Popen([sys.executable, "-m", "umbrella_sim", "simulate", "--duration",
+                          "0.05", "--time-step", "1e-3"], cwd=ROOT, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141
+    assert "Traceback" not in err and "BrokenPipe" not in err
+
+
+def test_node_parameters_on_simulate_are_not_ignored(tmp_path):
+    out = run_cli("--duration", "0.01", "--set", "publish_rate=10")
+    assert out.returncode == 2 and "publish_rate" in out.stderr and "--mcap" in out.stderr
+    out = run_cli("--duration", "0.01", "--set", "real_time_factor=2")
+    assert out.returncode == 2 and "real_time_factor" in out.stderr
+    bag = tmp_path / "rate10"
+    out = run_cli("--duration", "0.5", "--time-step", "1e-3", "--set", "publish_rate=10",
+                  "--mcap", str(bag))
+    assert out.returncode == 0, out.stderr
+    log = read_log(str(bag))
+    assert len(log.decoded(log.find_topic("joint_states"))) == 6     # 0, 0.1, ... 0.5 s
+
+
+def test_rigid_model_with_energy_lock_refused():
+    out = run_cli("--duration", "0.01", "--model", "rigid", "--lock", "energy")
+    assert out.returncode == 2 and "--lock energy" in out.stderr and "rigid" in out.stderr
+    out = run_cli("--duration", "0.01", "--model", "rigid-fe", "--set", "lock=energy")
+    assert out.returncode == 2 and "lock=energy" in out.stderr
+
+
+def test_failure_message_names_one_time():
+    r = simulate(UmbrellaParams(v0=0.0, sleeve_force=2300.0, time_step=2e-3), 0.5)
+    assert r.error is not None and r.error.count("t = ") == 1
+    assert f"t = {r.samples[-1].time:.9g} s" in r.error
+
+
+# ------------------------------------------------------------------ plots
+@pytest.fixture
+def captured_figures(monkeypatch):
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+    figures = {}
+
+    def savefig(self, path, *a, **kw):
+        figures[os.path.basename(path)] = self
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    return figures
+
+
+def test_shapes_stay_on_screen_with_stage_magnification_and_times(tmp_path,
+                                                                  captured_figures):
+    """V0 = -1 m/s, --thesis: every leaf drawn within 2 m of the hinge; legend has times."""
+    bag = tmp_path / "v1"
+    record_offline(UmbrellaParams(v0=-1.0, time_step=STEP), str(bag), 0.15)
+    run = compare.load_run(str(bag))
+    snaps = compare.shape_snapshots(run, (200.0, 5.0))
+    assert {s[0] for s in snaps} == {"deploying", "locked"}
+    for stage, tm, mag, leaf, link in snaps:
+        assert (tm < run.deploy_time) == (stage == "deploying")
+        assert mag <= (200.0 if stage == "deploying" else 5.0)
+        assert np.abs(leaf).max() < 2.0 and np.abs(link).max() < 2.0
+    assert compare.main([str(bag), "--thesis", "--out", str(tmp_path / "out")]) == 0
+    ax = captured_figures["shapes.png"].axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert len(labels) == len(snaps) and all(lb.startswith("t = ") for lb in labels)
+    for line in ax.get_lines():
+        assert np.abs(line.get_xydata()).max() < 2.0
+
+
+def test_stress_plot_has_yield_line_and_no_zero_rigid_stress(tmp_path, captured_figures):
+    flex, rigid = tmp_path / "flex", tmp_path / "rigid"
+    record_offline(UmbrellaParams(v0=-0.5, time_step=STEP), str(flex), 0.15)
+    record_offline(UmbrellaParams(v0=-0.5, model="rigid", lock="plastic"), str(rigid), 0.15)
+    assert compare.main([str(flex), str(rigid), "--names", "flex", "rigid", "--out",
+                         str(tmp_path / "out")]) == 0
+    fig = captured_figures["stress.png"]
+    for ax in fig.axes:
+        labels = [ln.get_label() for ln in ax.get_lines()]
+        assert any(lb.startswith("yield 500 MPa") for lb in labels)
+        drawn = [ln for ln in ax.get_lines() if ln.get_label().startswith("rigid")]
+        assert drawn and all(len(ln.get_xdata()) == 0 for ln in drawn)
+        assert any("rigid model, no stress" in lb for lb in labels)
