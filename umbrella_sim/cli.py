@@ -176,8 +176,8 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument("--json", action="store_true", help="print one JSON summary")
     sp.add_argument("--mcap", metavar="BAG_DIR",
                     help="record the node's topics to a new bag directory (BAG_DIR/"
-                         "BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the summary "
-                         "is then taken at the publication instants")
+                         "BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the same "
+                         "states and summary as without it")
     sp.add_argument("--publish-rate", type=float, default=100.0, dest="publish_rate",
                     help="publication rate of the --mcap recording (Hz, sim time; also "
                          "--set publish_rate=...); the summary is the same at any rate")
