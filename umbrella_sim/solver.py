@@ -200,11 +200,10 @@ class FiniteElementEngine(Engine):
             DIVERGENCE_RESIDUAL, EVENT_TIME_TOLERANCE)
         integ.iterations += its
         if status == ADVANCE_DIVERGED:
-            raise SimulationDiverged(f"constraint residual {residual:.3g} past tolerance "
-                                     f"{DIVERGENCE_RESIDUAL:g} at t = {s.t + dt:.9g} s")
+            raise SimulationDiverged(fault_message(s.t, f"constraint residual {residual:.3g} "
+                                                        f"past tolerance {DIVERGENCE_RESIDUAL:g}"))
         if status != ADVANCE_DONE:
-            raise SimulationDiverged(f"solver failed at t = {s.t:.9g} s: "
-                                     f"{integ.kernel_error(status, s.t + dt)}")
+            raise SimulationDiverged(fault_message(s.t, integ.kernel_error(status, s.t + dt)))
         return state
 
     def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
