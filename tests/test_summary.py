@@ -201,13 +201,15 @@ def test_node_warns_once_and_diagnostics_say_warn(antenna_factory, tmp_path):
     from diagnostic_msgs.msg import DiagnosticStatus
 
     bag = tmp_path / "node_fast"
-    antenna = antenna_factory({"v0": -2.0, "time_step": STEP, "real_time_factor": 0.1,
+    # 8 s of wall time: several 1 Hz diagnostics (a 'behind real time' WARN, which takes
+    # precedence on a loaded machine, cannot hide them all)
+    antenna = antenna_factory({"v0": -2.0, "time_step": STEP, "real_time_factor": 0.05,
                                "duration": 0.4}, record_path=str(bag))
     msg = antenna.wait_for(
-        "diagnostics", lambda m: m.status[0].level == DiagnosticStatus.WARN, timeout=60,
-        what="a WARN diagnostic")
+        "diagnostics", lambda m: m.status[0].level == DiagnosticStatus.WARN
+        and "outside the model's validity" in m.status[0].message, timeout=60,
+        what="a WARN diagnostic on the model's validity")
     values = {kv.key: kv.value for kv in msg.status[0].values}
-    assert "outside the model's validity" in msg.status[0].message
     assert values["warning_0"].startswith("yield exceeded")
     assert antenna.node.proc.wait(timeout=120) == 0
     log = antenna.node.output()
