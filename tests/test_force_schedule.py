@@ -161,6 +161,9 @@ def live_run(antenna_factory, bag):
     antenna = antenna_factory({"v0": -0.5, "time_step": STEP, "publish_rate": 1000.0,
                                "real_time_factor": 0.001, "duration": DURATION},
                               record_path=str(bag))
+    # the command publisher matched now (a command equal to the force in effect changes
+    # nothing), so that the 4 N command later goes out at once
+    antenna.publish_force(0.0)
     antenna.wait_for_sim_time(0.010 - 1e-9, timeout=60)
     antenna.publish_force(4.0)
     applied = antenna.node.wait_for_log(r"applied from t = ([0-9.]+) s", timeout=60)
