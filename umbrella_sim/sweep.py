@@ -833,7 +833,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
                         description="Run every case of SPEC.yaml (base / grid / cases, see "
                                     "docs/sweeps.md) offline, in parallel on Dask; write "
                                     "DIR/results.csv, DIR/results.parquet and plots.")
-    sp.add_argument("spec", metavar="SPEC.yaml")
+    sp.add_argument("spec", metavar="SPEC.yaml", help="the sweep: base, grid, cases, run options")
     sp.add_argument("--out", required=True, metavar="DIR",
                     help="results directory; re-running into it skips finished cases")
     sp.add_argument("--workers", type=int, metavar="N",
