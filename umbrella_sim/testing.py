@@ -585,6 +585,16 @@ class SimulatedAntenna:
         self.wait_for_phase("locked", timeout)
         lock = poll(self.lock_time, timeout, lambda: "no 'locked at' line in the node's log")
         self.wait_for_sim_time(lock + after_lock, timeout)
+        # joint_states sets the sim time; the tip and stress streams (one message each per
+        # publication) may still be in flight behind it on a busy machine: wait for them too
+        tips = poll(lambda: [m for m in self.messages("tip_deflection")
+                             if _stamp(m) >= lock + after_lock][:1] and
+                    self.messages("tip_deflection"), timeout,
+                    lambda: f"tip_deflection never reached sim time {lock + after_lock:.6f} s "
+                            f"within {timeout} s")
+        poll(lambda: len(self.messages("peak_stress")) >= len(tips), timeout,
+             lambda: f"peak_stress lags tip_deflection ({len(self.messages('peak_stress'))} "
+                     f"vs {len(tips)} messages) after {timeout} s")
         phase_arrival = next(t for t, m in self.probe.timed(self.topics["deployment_phase"])
                              if m.data == "locked")
         tip = [(_stamp(m), m.point.y) for m in self.messages("tip_deflection")]
