@@ -306,6 +306,48 @@ def test_sigint_during_startup_is_quiet(tmp_path):
         assert not read_log(str(bag)).truncated
 
 
+def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monkeypatch):
+    """
+    Keep the writer's chunk index out of memory while recording.
+
+    The MCAP writer's chunk index (one entry per chunk, the recorder's only
+    per-message-count growth) is kept on disk while recording: what stays in memory is
+    bounded by the spill size whatever the length of the run, and the finished file's
+    summary still indexes every chunk, so readers seek by time.
+    """
+    from mcap.reader import make_reader
+    monkeypatch.setattr(recording._SpilledChunkIndex, "SPILL_BYTES", 2048)
+    rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}})
+    rec.add_channel("/s", String, recording.QoSProfile(depth=10))
+    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    index = rec._chunk_index
+    assert rec._writer._Writer__chunk_indices is index     # the writer uses it
+    in_memory = []
+    n = 3000
+    for i in range(n):
+        # 2 kB of text that zstd cannot shrink to nothing: ~30 messages per 64 KiB chunk
+        rec.write("/s", String(data=f"{i:08d}" * 250), i * 1_000_000)
+        rec.write("/x", Float64(data=float(i)), i * 1_000_000)
+        in_memory.append(index.in_memory_bytes())
+    assert index.count > 50
+    assert max(in_memory) < 2048 + 400          # one spill's worth, not one entry per chunk
+    rec.close()
+    chunks = index.count                        # the last chunk is written at close
+    with open(rec.path, "rb") as fh:
+        reader = make_reader(fh)
+        summary = reader.get_summary()
+        assert len(summary.chunk_indexes) == summary.statistics.chunk_count == chunks
+        assert summary.statistics.message_count == 2 * n
+        # a seek by time reads from the right chunk on
+        t = (n // 2) * 1_000_000
+        first = next(reader.iter_messages(topics=["/x"], start_time=t))
+        assert first[2].log_time == t
+    log = read_log(str(tmp_path / "bag"))
+    assert not log.truncated and log.count("/x") == n
+    assert [m.data for _, m in log.decoded("/x")] == [float(i) for i in range(n)]
+    assert sorted(os.listdir(tmp_path / "bag")) == ["bag_0.mcap", "metadata.yaml"]
+
+
 # -------------------------------------------------------------------- bad logs
 def _foreign(path, payload=None, parameters=None):
     from mcap.writer import Writer

@@ -365,6 +365,80 @@ def _ended_early_tail(metadata: dict[str, str]) -> bytes:
     return bytes(builder.end()) + b"\x89MCAP0\r\n"
 
 
+class _SpilledChunkIndex:
+    """
+    The MCAP writer's chunk index, kept on disk while recording (bounded memory).
+
+    The writer keeps one ChunkIndex object per chunk until finish() writes the summary
+    section (measured: ~1.2 kB of Python objects per 64 KiB chunk, 8 to 15 kB per simulated
+    second at 1 kHz, growing without bound).  This list stand-in serialises each index to
+    its MCAP record at once (~190 bytes) and moves the records to an anonymous temporary
+    file next to the recording (unlinked from the start: nothing is left behind) every
+    64 KiB; finish() reads them back in order into the summary, which therefore still holds
+    every chunk index (readers seek by time as before).  If the temporary file cannot be
+    written (disk full) the records stay in memory: the recording itself fails soon after.
+    """
+
+    SPILL_BYTES = 64 * 1024
+
+    def __init__(self, directory: str):
+        import tempfile
+
+        self._records = bytearray()
+        self.count = 0
+        try:
+            self._file = tempfile.TemporaryFile(dir=directory)
+        except OSError:
+            self._file = None
+
+    def append(self, index) -> None:
+        from mcap.data_stream import RecordBuilder
+
+        builder = RecordBuilder()
+        index.write(builder)
+        self._records += builder.end()
+        self.count += 1
+        if self._file is not None and len(self._records) >= self.SPILL_BYTES:
+            try:
+                self._file.write(self._records)
+                self._records.clear()
+            except OSError:
+                pass
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __iter__(self):
+        """Yield the records in order, in pieces the writer copies into its summary."""
+        if self._file is not None:
+            self._file.flush()
+            self._file.seek(0)
+            while True:
+                piece = self._file.read(1 << 20)
+                if not piece:
+                    break
+                yield _RawRecords(piece)
+        yield _RawRecords(bytes(self._records))
+
+    def in_memory_bytes(self) -> int:
+        return len(self._records)
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+
+class _RawRecords:
+    """Already serialised MCAP records, written as they are."""
+
+    def __init__(self, data: bytes):
+        self.data = data
+
+    def write(self, builder) -> None:
+        builder.write(self.data)
+
+
 #: metadata record of a recording that stopped on a write error (see msg_docs/recording.md)
 ENDED_EARLY_RECORD = "umbrella_sim.recording_error"
 #: metadata records umbrella_sim.segment.K: a reset started segment K (msg_docs/recording.md)
@@ -417,6 +491,7 @@ class BagRecorder:
         self.error: str | None = None
         self.on_error = on_error
         self._fh = None
+        self._chunk_index = None
         try:
             # committed after every write: a finished chunk reaches the OS at once, so a
             # SIGKILL loses only the chunk being filled (messages accumulate in memory)
@@ -425,6 +500,11 @@ class BagRecorder:
                                   compression=CompressionType.ZSTD,
                                   index_types=IndexType.ALL, use_chunking=True,
                                   use_statistics=True)
+            # the writer's growing chunk index goes to disk (mcap's private list, replaced
+            # where this mcap version has it; otherwise it stays in memory as before)
+            self._chunk_index = _SpilledChunkIndex(bag_dir)
+            if isinstance(getattr(self._writer, "_Writer__chunk_indices", None), list):
+                self._writer._Writer__chunk_indices = self._chunk_index
             self._writer.start(profile="ros2", library=f"umbrella_sim {__version__}")
             for name, data in metadata.items():
                 self._writer.add_metadata(name, data)
@@ -471,6 +551,7 @@ class BagRecorder:
             self._queue.join()
 
     def _remove_partial(self) -> None:
+        self._release_index()
         if self._fh is not None:
             try:
                 self._fh.close(sync=False)
@@ -481,6 +562,10 @@ class BagRecorder:
                 (os.rmdir if path == self.bag_dir else os.unlink)(path)
             except OSError:
                 pass
+
+    def _release_index(self) -> None:
+        if self._chunk_index is not None:
+            self._chunk_index.close()
 
     def _fail(self, exc: OSError, what: str, t_ns: int | None) -> None:
         """Stop recording after a write error (called with the lock held)."""
@@ -500,6 +585,7 @@ class BagRecorder:
             _write_all(self._fh.fd, _ended_early_tail(meta))
         except OSError:
             self._fh.rollback()     # a clean prefix without footer: readers recover it
+        self._release_index()
         try:
             self._fh.close()
         except OSError:
@@ -664,6 +750,7 @@ class BagRecorder:
                     "serialized_metadata": yaml.safe_dump(info, sort_keys=False),
                     "ROS_DISTRO": "jazzy"})
                 self._writer.finish()
+                self._release_index()
                 self._fh.commit()
                 self._fh.close()
             except OSError as exc:
