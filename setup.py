@@ -57,7 +57,7 @@ setup(
     entry_points={
         "console_scripts": [
             # `ros2 run umbrella_sim <name>`: one naming style, snake_case as ROS executables
-            "umbrella_node = umbrella_sim.node:main",
+            "umbrella_node = umbrella_sim.stop_signals:node_main",
             "umbrella_sim = umbrella_sim.cli:main",
             "umbrella_replay = umbrella_sim.replay:main",
             "umbrella_compare = umbrella_sim.compare:main",

@@ -306,6 +306,62 @@ def test_sigint_during_startup_is_quiet(tmp_path):
         assert not read_log(str(bag)).truncated
 
 
+def _catches_sigterm(pid: int) -> bool:
+    """Tell whether the process has its own SIGTERM handler (umbrella_sim's first line ran)."""
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            caught = next(line for line in fh if line.startswith("SigCgt:")).split()[1]
+    except (OSError, StopIteration):
+        return False
+    return bool(int(caught, 16) & (1 << (signal.SIGTERM - 1)))
+
+
+@pytest.mark.parametrize("signum,delay,entry", [
+    (signal.SIGINT, 0.0, "module"), (signal.SIGINT, 0.15, "module"),
+    (signal.SIGINT, 0.4, "module"), (signal.SIGINT, 0.8, "script"),
+    (signal.SIGINT, 1.5, "module"), (signal.SIGTERM, 0.3, "module"),
+    (signal.SIGTERM, 0.6, "script")])
+def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum, delay, entry):
+    """
+    Stop cleanly on a signal at any instant of start-up.
+
+    A stop signal at any instant of start-up (imports, rclpy.init, model, recording,
+    first publication): exit 0, no traceback, nothing half-written left behind.  The
+    instants count from when the entry point's handlers are in place (the interpreter's own
+    start before that is Python's); on a loaded machine the later ones may reach a running
+    node, which must stop just as cleanly.
+    """
+    bag = tmp_path / "bag"
+    args = ["--ros-args", "-p", f"record_path:={bag}", "-p", "elements_per_segment:=4"]
+    script = os.path.join(os.path.dirname(sys.executable), "umbrella_node")
+    if entry == "script" and not os.path.exists(script):
+        entry = "module"               # an install without console scripts next to python
+    cmd = [script, *args] if entry == "script" else \
+        [sys.executable, "-m", "umbrella_sim.node", *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=str(tmp_path), env=ros_env())
+    try:
+        deadline = time.monotonic() + 60
+        while not _catches_sigterm(proc.pid) and proc.poll() is None:
+            assert time.monotonic() < deadline, "no SIGTERM handler after 60 s"
+            time.sleep(0.002)
+        time.sleep(delay)
+        proc.send_signal(signum)
+        out, err = proc.communicate(timeout=90)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err + out and "KeyboardInterrupt" not in err + out, err
+    name = signal.Signals(signum).name
+    if f"stopped by {name} during start-up; nothing was started" in err:
+        assert not bag.exists()
+    elif bag.exists():                       # it was running: a finalised recording
+        log = read_log(str(bag))
+        assert not log.truncated and not log.ended_early
+
+
 def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monkeypatch):
     """
     Keep the writer's chunk index out of memory while recording.

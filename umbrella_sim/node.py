@@ -20,10 +20,16 @@ the publishing thread only queues the bytes it published.
 """
 from __future__ import annotations
 
+if __name__ == "__main__":
+    # python -m umbrella_sim.node: take SIGINT/SIGTERM as stop requests before the heavy
+    # imports below (see stop_signals.py), then run this module's main as an ordinary import
+    from umbrella_sim.stop_signals import node_main
+
+    raise SystemExit(node_main())
+
 import contextlib
 import gc
 import math
-import signal
 import sys
 import threading
 import time
@@ -43,6 +49,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from . import __version__
 from . import ros_io
+from . import stop_signals
 from .params import (check_known_names, check_node_parameters, NODE_PARAMETERS,
                      parameter_help, read_params_file, REGISTRY, RESET, section_matches, SPECS,
                      UmbrellaParams)
@@ -597,8 +604,9 @@ def usage() -> str:
               + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= "
               "sleeve_force_min, 0 by default)",
               "services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)",
-              "exit: SIGINT/SIGTERM stop the physics, then finalise the recording; code "
-              f"{EXIT_OK} on a clean stop or when duration is reached, {EXIT_USAGE} for "
+              "exit: SIGINT/SIGTERM stop the physics, then finalise the recording (during "
+              f"start-up: nothing is started); code {EXIT_OK} on a clean stop or when duration "
+              f"is reached, {EXIT_USAGE} for "
               "invalid arguments, parameters or params files, "
               f"{EXIT_FAULT} if the simulation ended in a fault, {EXIT_RECORDING} if the "
               "recording stopped on a write error (the run itself went on)",
@@ -612,21 +620,37 @@ def _params_files(argv: list[str]) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    # from here on SIGINT/SIGTERM only ask for a stop (no KeyboardInterrupt traceback during
-    # start-up); rclpy's own handlers would shut the context down at once, under the
-    # physics thread's feet; ours stop the physics first, then the recording is closed,
-    # then rclpy
-    stop_requested = []
-    node = None
+    # SIGINT/SIGTERM only ask for a stop (stop_signals.py: the entry points install the
+    # handlers before the heavy imports, so a signal during them is noted too, never a
+    # KeyboardInterrupt traceback); rclpy's own handlers would shut the context down at once,
+    # under the physics thread's feet; ours stop the physics first, then the recording is
+    # closed, then rclpy.  A stop during start-up: exit 0, nothing started or left behind.
+    stop_signals.install()
+    running: list[UmbrellaNode] = []        # the node, once built: a signal asks it to stop
 
-    def on_signal(signum, frame):
-        stop_requested.append(signum)
-        if node is not None:
+    def on_signal(signum):
+        for node in running:
             node.request_stop()
 
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, on_signal)
-    argv = list(sys.argv if argv is None else argv)
+    stop_signals.add_listener(on_signal)
+    try:
+        return _run(list(sys.argv if argv is None else argv), running)
+    finally:
+        stop_signals.remove_listener(on_signal)
+
+
+def _stopped_during_start_up() -> int:
+    """Exit quietly after a stop signal that came before the node was running."""
+    print(f"umbrella_node: stopped by {stop_signals.name(stop_signals.received[0])} during "
+          "start-up; nothing was started", file=sys.stderr)
+    rclpy.try_shutdown()
+    return EXIT_OK
+
+
+def _run(argv: list[str], running: list) -> int:
+    stop_requested = stop_signals.received      # every stop signal since the process began
+    if stop_requested:          # during the imports: before any ROS or simulation work
+        return _stopped_during_start_up()
     if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
                                                if "--ros-args" in argv else len(argv)]):
         print(usage())
@@ -650,6 +674,8 @@ def main(argv: list[str] | None = None) -> int:
         if type(exc).__name__ == "UnknownROSArgsError":
             reason = f"unknown ROS arguments {reason}"
         return fail(f"invalid ROS arguments: {reason} (see --help)")
+    if stop_requested:
+        return _stopped_during_start_up()
     leftover = rclpy.utilities.remove_ros_args(argv)[1:]
     if leftover:
         return fail(f"unexpected arguments {leftover}; parameters go after --ros-args as "
@@ -658,6 +684,7 @@ def main(argv: list[str] | None = None) -> int:
         node = UmbrellaNode(params_files=tuple(files))
     except StartupError as exc:
         return fail(str(exc))
+    running.append(node)
     executor = MultiThreadedExecutor(num_threads=2)
     executor.add_node(node)
     if stop_requested:          # a signal during start-up: stop before any physics

@@ -1,0 +1,56 @@
+"""
+SIGINT and SIGTERM as a stop request, from the first instant of a process.
+
+The node's imports (rclpy, numpy, scipy, the model) and ``rclpy.init`` take about a second
+(more on a loaded machine).  Python's default SIGINT handler raises KeyboardInterrupt wherever
+the interpreter happens to be, so a Ctrl-C during that second used to end in a traceback from
+some import.  The node's entry points (the ``umbrella_node`` console script and ``python -m
+umbrella_sim.node``) therefore install these handlers *before* importing anything heavy: a
+signal is only noted here, and ``node.main`` looks at it between its start-up phases and stops
+cleanly (exit code 0, nothing started or left behind), or asks a running node to stop.
+
+This module imports nothing but the standard library, so that installing the handlers is the
+first thing a process does (a signal in the ~50 ms the interpreter itself needs to start is
+Python's default behaviour).
+"""
+import signal
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+#: the stop signals received so far, in order
+received: list[int] = []
+_listeners: list = []
+
+
+def _on_signal(signum, frame) -> None:
+    received.append(signum)
+    for listener in list(_listeners):
+        listener(signum)
+
+
+def install() -> None:
+    """Take SIGINT and SIGTERM as stop requests from now on (idempotent)."""
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, _on_signal)
+
+
+def add_listener(listener) -> None:
+    """Call listener(signum) on every later stop signal (from the main thread)."""
+    _listeners.append(listener)
+
+
+def remove_listener(listener) -> None:
+    if listener in _listeners:
+        _listeners.remove(listener)
+
+
+def name(signum: int) -> str:
+    return signal.Signals(signum).name
+
+
+def node_main() -> int:
+    """Run umbrella_node (the console script): the handlers first, then the heavy imports."""
+    install()
+    from .node import main
+
+    return main()
