@@ -433,9 +433,14 @@ def test_foreign_damaged_and_special_logs_exit_2_naming_file(tmp_path):
              parameters=read_log(str(good)).metadata["umbrella_sim.parameters"])
     fifo = tmp_path / "fifo.mcap"
     os.mkfifo(fifo)
+    # cut inside its only chunk: the parameters (outside chunks) survive, no message does
+    data = (good / "good_0.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:len(data) // 2])
     cases = [(foreign, "not an umbrella_sim recording"),
              (garbage, "payload does not decode as sensor_msgs/msg/JointState"),
-             (fifo, "not a regular file"), (tmp_path, "needs metadata.yaml")]
+             (fifo, "not a regular file"), (tmp_path, "needs metadata.yaml"),
+             (cut, "the file is truncated: only its complete chunks could be read")]
     for path, words in cases:
         for tool in (["umbrella_sim.replay", str(path), "--resimulate"],
                      ["umbrella_sim.compare", str(good), str(path), "--out",

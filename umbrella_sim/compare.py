@@ -149,7 +149,8 @@ def _series(log, topic, fn, segment, width: int, stride: int = 1):
         rows.append(row)
     if not t and width:
         raise LogError(f"{log.path}: topic {topic} has no messages"
-                       + (f" in segment {segment.index}" if segment.index else ""))
+                       + (f" in segment {segment.index}" if segment.index else "")
+                       + log.truncation_note())
     order = np.argsort(np.array(t), kind="stable")
     return np.array(t)[order], [rows[i] for i in order]
 

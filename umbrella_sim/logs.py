@@ -95,6 +95,11 @@ class LogData:
                 raise LogError(f"{self.path}: topic {topic}: {exc}") from None
         return self._types[topic]
 
+    def truncation_note(self) -> str:
+        """Return ' (...)' saying the file is truncated, for errors about missing messages."""
+        return (" (the file is truncated: only its complete chunks could be read; a killed "
+                "recorder loses the chunk it was filling)") if self.truncated else ""
+
     def count(self, topic: str) -> int:
         return self.counts.get(topic, 0)
 

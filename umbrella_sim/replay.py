@@ -51,7 +51,8 @@ def resimulate(log: LogData) -> dict:
         out["segments"].append(res)
         out["problems"] += [f"segment {seg.index}: {p}" for p in res["problems"]]
     if out["compared"] == 0:
-        raise LogError(f"{log.path}: no joint_states messages to compare")
+        raise LogError(f"{log.path}: no joint_states messages to compare"
+                       + log.truncation_note())
     return out
 
 
