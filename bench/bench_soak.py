@@ -54,6 +54,7 @@ class Diagnostics:
         self.values: dict = {}
         self.max_lag = 0.0
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 10)
+        self.stopping = False
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
@@ -65,13 +66,17 @@ class Diagnostics:
         self.values = values
 
     def _spin(self):
-        while self.context.ok():
+        while self.context.ok() and not self.stopping:
             try:
                 self.executor.spin_once(timeout_sec=0.1)
             except Exception:
                 return
 
     def close(self):
+        # the spinning thread ends before the executor and context go away (else the C++
+        # executor can be torn down under it: 'terminate called without an active exception')
+        self.stopping = True
+        self.thread.join(timeout=5.0)
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         self.rclpy.try_shutdown(context=self.context)
@@ -129,6 +134,9 @@ def main() -> int:
           f"(exit code {proc.returncode})")
     print(f"RSS: {a[0, 2] / 1024:.1f} MB -> {a[-1, 2] / 1024:.1f} MB; slope after warm-up "
           f"{slope:.2f} kB per simulated s ({slope * 60 / 1024:.2f} MB per simulated min)")
+    quarters = [a[min(len(a) - 1, round(q * (len(a) - 1)))] for q in (0.25, 0.5, 0.75, 1.0)]
+    print("RSS at 1/4, 1/2, 3/4, end of the run: " + ", ".join(
+        f"{r[2] / 1024:.1f} MB (t = {r[1]:.0f} s)" for r in quarters))
     print(f"lag: largest max_lag_s {diag.max_lag:.3f} s; slip {final.get('slip_s', '?')} s "
           f"in {final.get('re_anchors', '?')} re-anchors; achieved real-time factor "
           f"{sim_span / wall_span:.3f}")

@@ -362,6 +362,33 @@ def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum
         assert not log.truncated and not log.ended_early
 
 
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_interrupted_offline_run_exits_130_with_its_recording_finalised(tmp_path, signum):
+    """A run of the offline tool stopped by a signal: one line, exit 130, the bag finalised."""
+    bag = tmp_path / "long"
+    proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim", "simulate", "--set",
+                             "time_step=0.002", "--duration", "1e6", "--mcap", str(bag)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=ROOT, env=ros_env())
+    try:
+        deadline = time.monotonic() + 120
+        mcap = bag / "long_0.mcap"
+        # under way: the first chunks of messages are on disk
+        while not (mcap.exists() and mcap.stat().st_size > 100_000) and proc.poll() is None:
+            assert time.monotonic() < deadline, "the run did not start recording"
+            time.sleep(0.05)
+        proc.send_signal(signum)
+        out, err = proc.communicate(timeout=90)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and f"interrupted by {signal.Signals(signum).name}" in err
+    log = read_log(str(bag))
+    assert not log.truncated and log.count("/joint_states") > 100
+
+
 def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monkeypatch):
     """
     Keep the writer's chunk index out of memory while recording.

@@ -14,6 +14,7 @@ from .files import check_new_output, read_text_input
 from .params import (check_known_names, load_params_file, NODE_ONLY_PARAMS,
                      NODE_PARAMETERS, parameter_help, SPECS, UmbrellaParams)
 from .solver import command_force, simulate
+from .stop_signals import interruptible
 
 
 def default_params_file() -> str | None:
@@ -256,6 +257,8 @@ def write_stdout(text: str) -> bool:
         return False
 
 
+@interruptible("umbrella_sim", "what was written is complete (a --mcap recording is "
+               "finalised up to the interruption; --csv is only written after a finished run)")
 def main(argv: list[str] | None = None) -> int:
     ap = make_parser()
     args = ap.parse_args(argv)

@@ -21,6 +21,7 @@ import numpy as np
 
 from .logs import LogError, read_log
 from .outputs import stage2_figures, validity_warnings
+from .stop_signals import interruptible
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
 FIGURE_KEYS = ("deploy_time", "tip_deflection_max", "tip_deflection_max_time",
@@ -449,6 +450,7 @@ def shape_snapshots(r: Run, magnification=(200.0, 5.0)) -> list:
     return out
 
 
+@interruptible("umbrella_compare", "--out may hold part of the outputs")
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="umbrella_compare", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -18,6 +18,7 @@ import sys
 import time
 
 from .logs import LogData, LogError, qos_from_yaml, read_log
+from .stop_signals import interruptible
 
 COMMAND_SUFFIXES = ("sleeve_force", "sleeve_force/refused", "sleeve_force/applied")
 ACK_TIMEOUT_S = 3.5      # > Fast DDS's default 3 s heartbeat period, which prompts the acks
@@ -265,6 +266,7 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     return 0
 
 
+@interruptible("umbrella_replay", "nothing was written")
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     ros_args = []

@@ -13,7 +13,10 @@ This module imports nothing but the standard library, so that installing the han
 first thing a process does (a signal in the ~50 ms the interpreter itself needs to start is
 Python's default behaviour).
 """
+import functools
 import signal
+import sys
+import threading
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -54,3 +57,36 @@ def node_main() -> int:
     from .node import main
 
     return main()
+
+
+#: exit status of a command-line tool stopped by SIGINT or SIGTERM (the shell's 128 + SIGINT)
+EXIT_INTERRUPTED = 130
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt(name(signum))
+
+
+def interruptible(tool: str, kept: str):
+    """
+    Make a tool's main end on SIGINT/SIGTERM with one line and exit 130, not a traceback.
+
+    SIGTERM raises KeyboardInterrupt like SIGINT, so the same ``finally`` blocks run (an
+    offline recording is finalised); kept says what the user still has.
+    """
+    def wrap(main):
+        @functools.wraps(main)
+        def run(argv=None):
+            in_main = threading.current_thread() is threading.main_thread()
+            previous = signal.signal(signal.SIGTERM, _interrupt) if in_main else None
+            try:
+                return main(argv)
+            except KeyboardInterrupt as exc:
+                how = str(exc) or "SIGINT"
+                print(f"{tool}: interrupted by {how}; {kept}", file=sys.stderr)
+                return EXIT_INTERRUPTED
+            finally:
+                if in_main:
+                    signal.signal(signal.SIGTERM, previous)
+        return run
+    return wrap
