@@ -656,6 +656,7 @@ class BagRecorder:
         fault, if any; extra: more counts (e.g. refused commands not recorded); summary:
         the summary record (summary_metadata).
         """
+        self._drain()       # the background writer's queue first: "recorded" counts all of it
         self.close({"umbrella_sim.counts": {
             "published": json.dumps(published), "commands_accepted": str(accepted),
             "commands_refused": str(refused), "recorded": json.dumps(self.counts),
