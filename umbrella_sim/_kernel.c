@@ -1038,3 +1038,39 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
     *iterations = its_total;
     return OK;
 }
+
+/* What a Sample holds beyond the state (solver.UmbrellaSimulator._sample), for an arbitrary
+ * state (q, v, p = M(q) v): one output row (row[N_FIELDS]; time, stage, force, work and lock
+ * loss left 0), the fibre stress at every stress point (stress: top fibre of every point,
+ * then bottom, leaf points first) and max(|Phi|, |J v|) in *residual. */
+void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const double *v,
+                     const double *p, double *row, double *stress, double *residual) {
+    const Model *m = x->m;
+    int W = m->stress_width, npts = m->n_stress_leaf + m->n_stress_link;
+    int nc = nc_of(m, locked, rigid);
+    output_row(x, q, v, p, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, row, 1, 0);
+    const double *membrane = NULL;
+    if (x->law && x->law->d.nonlinear) {
+        elastic_membrane_stress(x->law, q);
+        membrane = x->law->el_stress;
+    }
+    for (int k = 0; k < npts; k++) {
+        double top = 0.0, bot = 0.0;
+        for (int j = 0; j < W; j++) {
+            double qj = q[m->stress_idx[k * W + j]];
+            top += m->stress_top[k * W + j] * qj;
+            bot += m->stress_bottom[k * W + j] * qj;
+        }
+        if (membrane) { top += membrane[k / 2]; bot += membrane[k / 2]; }
+        stress[k] = top;
+        stress[npts + k] = bot;
+    }
+    constraints(m, q, locked, rigid, x->phi);
+    jacobian(m, q, locked, rigid, x->jm_idx, x->jm_val);
+    double r = max_abs(nc, x->phi);
+    for (int c = 0; c < nc; c++) {
+        double a = fabs(jrow_dot(x->jm_idx, x->jm_val, c, v));
+        if (!(a <= r)) r = a;
+    }
+    *residual = r;
+}

@@ -346,6 +346,8 @@ def load_kernel():
             lib.umbrella_advance.restype = i
             lib.umbrella_advance.argtypes = [vp, i, i, _dp, _dp, _dp, _dp, ctypes.c_long, d, i,
                                              d, d, d, i, d, _dp, _dp, i, _ip, _ip, _dp, _dp]
+            lib.umbrella_sample.restype = None
+            lib.umbrella_sample.argtypes = [vp, i, i, _dp, _dp, _dp, _dp, _dp, _dp]
             lib.umbrella_find_crossing.restype = i
             lib.umbrella_find_crossing.argtypes = [vp, i, _dp, _dp, _dp, _dp, d, d, d, d, i, d,
                                                    d, _dp, _dp, _dp, _dp, _dp, _dp, _ip]
@@ -414,6 +416,7 @@ class CompiledKernel:
         self._refs = tuple(ctypes.byref(o) for o in (self._n_done, self._its, self._residual))
         self._set_capacity(capacity)
         self._made = None        # the DynamicState the buffers hold (see load)
+        self._sample_buf = None
         # single-step outputs
         self._q1, self._v1, self._p1 = np.zeros(n), np.zeros(n), np.zeros(n)
         self._lam1 = np.zeros(nc_max)
@@ -467,6 +470,30 @@ class CompiledKernel:
         self._made = DynamicState(t, self.q.copy(), self.v.copy(), self.accel.copy(),
                                   self.lam[:nc].copy(), self.p.copy())
         return self._made
+
+    def sample(self, s: DynamicState, cs: ConstraintSet):
+        """
+        Return (row, stress, residual) of a state with its momentum (_kernel.c umbrella_sample).
+
+        row: the STEP_FIELDS of s (time, stage, force, work, lock loss left 0); stress:
+        (2, points) top and bottom fibre stress at every stress point, leaf first; residual:
+        max(|Phi|, |J q'|).
+        """
+        if self._sample_buf is None:
+            from .outputs import STEP_FIELDS
+            points = len(self.model.leaf.stress_x) + len(self.model.link.stress_x)
+            row, stress, res = (np.zeros(len(STEP_FIELDS)), np.zeros((2, points)),
+                                ctypes.c_double(0.0))
+            self._sample_buf = (row, stress, res, _dptr(row), _dptr(stress), ctypes.byref(res))
+        row, stress, res, row_p, stress_p, res_p = self._sample_buf
+        if s is self._made:              # the buffers hold it: no conversion
+            q, v, p = self._ptr["q"], self._ptr["v"], self._ptr["p"]
+        else:
+            arrays = [np.ascontiguousarray(a, dtype=float) for a in (s.q, s.qd, s.momentum)]
+            q, v, p = (_dptr(a) for a in arrays)
+        self.lib.umbrella_sample(self._ctx, int(cs.locked), int(cs.rigid), q, v, p, row_p,
+                                 stress_p, res_p)
+        return row.copy(), stress.copy(), res.value
 
     def find_crossing(self, s: DynamicState, h: float, force: float, cs: ConstraintSet,
                       tol: float, max_iter: int, div_tol: float, event_tol: float):

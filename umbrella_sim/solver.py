@@ -139,6 +139,16 @@ class Engine(abc.ABC):
         """Newton iterations so far (0 for explicit schemes)."""
         return 0
 
+    def sample_outputs(self, s: DynamicState, stage: Stage):
+        """
+        Return (row, stress, residual) of s in compiled code, or None (no fast path).
+
+        row: STEP_FIELDS values (state-dependent ones); stress: (2, points) top/bottom fibre
+        stress, leaf points first; residual: max(|Phi|, |J q'|).  What ``_sample`` otherwise
+        computes with numpy, in one call.
+        """
+        return None
+
     def find_crossing(self, s: DynamicState, h: float, force: float):
         """
         Return the state at the lock instant inside a step of length h from s, or None.
@@ -187,6 +197,13 @@ class FiniteElementEngine(Engine):
 
     def step(self, s: DynamicState, h: float, force: float, stage: Stage) -> DynamicState:
         return self.integrator.step(s, h, force, self._cs[stage])
+
+    def sample_outputs(self, s, stage):
+        kernel = self.integrator.kernel
+        if (kernel is None or s.momentum is None
+                or getattr(kernel, "elastic_law", None) is not None):
+            return None
+        return kernel.sample(s, self._cs[stage])
 
     def find_crossing(self, s, h, force):
         kernel = self.integrator.kernel
@@ -624,29 +641,46 @@ class UmbrellaSimulator:
         m, eng = self.model, self.engine
         q, qd, qdd = eng.fe_state(s)
         lam = np.asarray(s.multipliers, dtype=float)
-        (lt, lb), (kt, kb) = m.stresses(q)
-        leaf_abs = np.maximum(np.abs(lt), np.abs(lb))
-        link_abs = np.maximum(np.abs(kt), np.abs(kb))
-        il, ik = int(np.argmax(leaf_abs)), int(np.argmax(link_abs))
-        tip_u, tip_v = m.tip_displacement(q)
+        fast = eng.sample_outputs(s, stage)
+        if fast is not None:          # compiled: the figures below in one call
+            row, stress, residual = fast
+            f = dict(zip(STEP_FIELDS, row.tolist()))
+            n_leaf = len(m.leaf.stress_x)
+            lt, kt = stress[0, :n_leaf], stress[0, n_leaf:]
+            lb, kb = stress[1, :n_leaf], stress[1, n_leaf:]
+        else:
+            (lt, lb), (kt, kb) = m.stresses(q)
+            leaf_abs = np.maximum(np.abs(lt), np.abs(lb))
+            link_abs = np.maximum(np.abs(kt), np.abs(kb))
+            il, ik = int(np.argmax(leaf_abs)), int(np.argmax(link_abs))
+            tip_u, tip_v = m.tip_displacement(q)
+            f = {"sleeve_position": float(m.sleeve_height(q)),
+                 "sleeve_velocity": float(m.sleeve_height_gradient(q) @ qd),
+                 "tip_axial": tip_u, "tip_transverse": tip_v,
+                 "peak_stress_leaf": float(leaf_abs[il]),
+                 "peak_stress_leaf_x": float(m.leaf.stress_x[il]),
+                 "peak_stress_link": float(link_abs[ik]),
+                 "peak_stress_link_x": float(m.link.stress_x[ik]),
+                 "kinetic_energy": eng.kinetic_energy(s),
+                 "strain_energy": float(m.strain_energy(q))}
+            residual = eng.residual(s, stage)
         joint_stress, mid_link_stress = m.reference_stresses(lt, kt)
         return Sample(
             time=s.t, stage=Stage(stage), q=q.copy(), qd=qd.copy(),
             alpha1=float(q[0]), alpha2=float(q[m.i_alpha2]),
             alpha1_rate=float(qd[0]), alpha2_rate=float(qd[m.i_alpha2]),
             alpha1_accel=float(qdd[0]),
-            sleeve_position=float(m.sleeve_height(q)),
-            sleeve_velocity=float(m.sleeve_height_gradient(q) @ qd),
-            sleeve_force=force, tip_axial=tip_u, tip_transverse=tip_v,
+            sleeve_position=f["sleeve_position"], sleeve_velocity=f["sleeve_velocity"],
+            sleeve_force=force, tip_axial=f["tip_axial"], tip_transverse=f["tip_transverse"],
             leaf_stress=np.array((lt, lb)), link_stress=np.array((kt, kb)),
-            peak_stress_leaf=float(leaf_abs[il]), peak_stress_leaf_x=float(m.leaf.stress_x[il]),
-            peak_stress_link=float(link_abs[ik]), peak_stress_link_x=float(m.link.stress_x[ik]),
+            peak_stress_leaf=f["peak_stress_leaf"], peak_stress_leaf_x=f["peak_stress_leaf_x"],
+            peak_stress_link=f["peak_stress_link"], peak_stress_link_x=f["peak_stress_link_x"],
             stress_leaf_joint=joint_stress, stress_link_mid=mid_link_stress,
             multipliers=lam.copy(), sleeve_reaction=eng.sleeve_reaction(s, stage),
-            kinetic_energy=eng.kinetic_energy(s), strain_energy=float(m.strain_energy(q)),
+            kinetic_energy=f["kinetic_energy"], strain_energy=f["strain_energy"],
             work=float(work), lock_energy_loss=float(lock_loss),
             damping_dissipation=float(getattr(s, "dissipation", 0.0)),
-            constraint_residual=eng.residual(s, stage),
+            constraint_residual=residual,
         )
 
 
