@@ -16,9 +16,9 @@ received per topic).  They are written outside chunks at once, so they survive a
 """
 from __future__ import annotations
 
+import collections
 import json
 import os
-import queue
 import subprocess
 import sys
 import threading
@@ -470,13 +470,17 @@ class BagRecorder:
     background=True (the live node): ``write`` only queues the message (bounded, QUEUE_LIMIT;
     a full queue makes the caller wait, nothing is dropped) and a writer thread does the CDR
     trim, the chunking, the zstd compression and the file writes, so none of it runs on the
-    publishing thread.  A write error there stops the recording as above (``on_error`` is then
+    publishing thread.  The writer wakes every WRITE_PERIOD and writes what accumulated (a
+    wake-up per message cost more CPU than the writing: a thread switch and a GIL handover
+    each).  A write error there stops the recording as above (``on_error`` is then
     called from the writer thread); the other methods first wait for the queue to drain, so
     segments, counts and the footer see every message queued before them.
     """
 
     #: messages queued at most for the background writer (~1 s of a 1 kHz publication)
     QUEUE_LIMIT = 8192
+    #: the background writer's period (s)
+    WRITE_PERIOD = 0.02
 
     def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]], on_error=None,
                  background: bool = False):
@@ -525,30 +529,45 @@ class BagRecorder:
         self.offset_ns = 0
         self._queue = None
         if background:
-            self._queue = queue.Queue(self.QUEUE_LIMIT)
+            self._queue = collections.deque()        # append/popleft are thread-safe
+            self._cv = threading.Condition()
+            self._writing = False
+            self._stop_writer = False
             self._writer_thread = threading.Thread(target=self._write_queued,
                                                    name="recorder", daemon=True)
             self._writer_thread.start()
 
     def _write_queued(self) -> None:
-        """Write what write() queued, until the None that close() queues (writer thread)."""
+        """Write what write() queued, every WRITE_PERIOD, until close() (writer thread)."""
+        items = self._queue
         while True:
-            item = self._queue.get()
-            try:
-                if item is None:
-                    return
-                self._write_now(*item)
-            except Exception as exc:     # never lose the thread silently: stop the recording
-                with self._lock:
-                    if not self._closed:
-                        self._fail(OSError(f"{type(exc).__name__}: {exc}"), "recording", None)
-            finally:
-                self._queue.task_done()
+            with self._cv:
+                if not items:
+                    if self._stop_writer:
+                        return
+                    self._cv.wait(self.WRITE_PERIOD)
+                self._writing = True
+            while items:
+                item = items.popleft()
+                try:
+                    self._write_now(*item)
+                except Exception as exc:  # never lose the thread silently: stop the recording
+                    with self._lock:
+                        if not self._closed:
+                            self._fail(OSError(f"{type(exc).__name__}: {exc}"), "recording",
+                                       None)
+            with self._cv:
+                self._writing = False
+                self._cv.notify_all()
 
     def _drain(self) -> None:
         """Wait until the writer thread has written everything queued so far."""
-        if self._queue is not None and self._writer_thread.is_alive():
-            self._queue.join()
+        if self._queue is None:
+            return
+        with self._cv:
+            self._cv.notify_all()
+            while (self._queue or self._writing) and self._writer_thread.is_alive():
+                self._cv.wait(0.1)
 
     def _remove_partial(self) -> None:
         self._release_index()
@@ -707,7 +726,13 @@ class BagRecorder:
             return False
         t_ns += self.offset_ns
         if self._queue is not None:
-            self._queue.put((topic, msg, t_ns, data))
+            self._queue.append((topic, msg, t_ns, data))
+            if len(self._queue) >= self.QUEUE_LIMIT:      # full: wait for the writer
+                with self._cv:
+                    self._cv.notify_all()
+                    while (len(self._queue) >= self.QUEUE_LIMIT
+                           and self._writer_thread.is_alive()):
+                        self._cv.wait(0.1)
             return True
         return self._write_now(topic, msg, t_ns, data)
 
@@ -736,7 +761,9 @@ class BagRecorder:
 
     def close(self, final_metadata: dict[str, dict[str, str]] | None = None) -> None:
         if self._queue is not None and self._writer_thread.is_alive():
-            self._queue.put(None)
+            with self._cv:
+                self._stop_writer = True
+                self._cv.notify_all()
             self._writer_thread.join()
         with self._lock:
             if self._closed:
