@@ -57,3 +57,19 @@ def test_background_write_error_stops_the_recording_cleanly(tmp_path, monkeypatc
     assert values == [float(i) for i in range(len(values))] and len(values) > 1000
     assert log.count("/x") == rec.counts["/x"] == len(values) < n
     assert os.path.getsize(log.path) <= 100_000
+
+
+def test_background_close_run_counts_every_queued_message(tmp_path):
+    rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}},
+                                background=True)
+    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    for i in range(300):
+        rec.write("/x", Float64(data=float(i)), i)
+
+    class Sim:
+        lock_event = None
+        time = 0.0
+    rec.close_run(Sim(), {"/x": 300}, 0, 0)
+    log = read_log(rec.path)
+    assert log.count("/x") == 300
+    assert '"/x": 300' in log.metadata["umbrella_sim.counts"]["recorded"]
