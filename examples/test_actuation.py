@@ -39,10 +39,11 @@ def test_the_deploy_controller_latches_softly(antenna_factory, ros_domain_id):
     A drive that can brake (sleeve_force_min < 0) keeps the stage-2 vibration small.
     """
     # joint_states at the node's default 100 Hz: the controller answers each of them; a 2 ms
-    # physics step leaves the node's command callback CPU to spare on a busy machine, and half
-    # real time halves the loop's DDS round trip in sim time (a late brake deploys early)
+    # physics step leaves the node's command callback CPU to spare on a busy machine, and a
+    # quarter of real time shrinks the loop's stalls in sim time: a controller process that
+    # gets no CPU for 100 ms holds its last command (a held full push deploys early)
     antenna = antenna_factory({"v0": 0.0, "sleeve_force_min": -8.0, "time_step": 0.002,
-                               "real_time_factor": 0.5})
+                               "real_time_factor": 0.25})
     antenna.wait_for_phase("deploying")
     with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
                      parameters={"target_time": 1.0, "max_force": 8.0, "min_force": -8.0}):
