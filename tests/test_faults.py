@@ -346,12 +346,8 @@ def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum
             assert time.monotonic() < deadline, "no SIGTERM handler after 60 s"
             time.sleep(0.002)
         time.sleep(delay)
-        proc.send_signal(signum)
-        out, err = proc.communicate(timeout=90)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        out, err = _signal_and_collect(proc, signum)
     assert proc.returncode == 0, err
     assert "Traceback" not in err + out and "KeyboardInterrupt" not in err + out, err
     name = signal.Signals(signum).name
@@ -360,6 +356,17 @@ def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum
     elif bag.exists():                       # it was running: a finalised recording
         log = read_log(str(bag))
         assert not log.truncated and not log.ended_early
+
+
+def _signal_and_collect(proc, signum):
+    """Send signum to proc, return its (stdout, stderr); killed if it outlives 90 s."""
+    try:
+        proc.send_signal(signum)
+        return proc.communicate(timeout=90)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
@@ -377,12 +384,8 @@ def test_interrupted_offline_run_exits_130_with_its_recording_finalised(tmp_path
         while not (mcap.exists() and mcap.stat().st_size > 100_000) and proc.poll() is None:
             assert time.monotonic() < deadline, "the run did not start recording"
             time.sleep(0.05)
-        proc.send_signal(signum)
-        out, err = proc.communicate(timeout=90)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        out, err = _signal_and_collect(proc, signum)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and f"interrupted by {signal.Signals(signum).name}" in err
     log = read_log(str(bag))
