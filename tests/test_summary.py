@@ -312,3 +312,33 @@ def test_stress_plot_has_yield_line_and_no_zero_rigid_stress(tmp_path, captured_
         drawn = [ln for ln in ax.get_lines() if ln.get_label().startswith("rigid")]
         assert drawn and all(len(ln.get_xdata()) == 0 for ln in drawn)
         assert any("rigid model, no stress" in lb for lb in labels)
+
+
+def test_physics_rate_plots_draw_every_step_of_the_recorded_run(
+        offline, bags, tmp_path, captured_figures):
+    """
+    Draw the 100 Hz recording re-run at every physics step (compare --physics-rate).
+
+    The re-run passes through every recorded sample, and its extremes are the summary's
+    figures of every step (which the 100 Hz samples miss).
+    """
+    bag = bags[100.0]
+    run = compare.load_run(str(bag))
+    series = compare.physics_run(str(bag))
+    t = series["time"]
+    assert np.allclose(np.diff(t), STEP, rtol=1e-6, atol=0)
+    assert len(t) >= round(DURATION / STEP) - 1
+    at = np.searchsorted(t, run.t[1:] - 1e-9)                 # the publication instants
+    assert np.allclose(t[at], run.t[1:], rtol=0, atol=1e-9)
+    assert np.array_equal(series["alpha1"][at], run.alpha1[1:])
+    f = offline.summary()
+    lock = f["deploy_time"]
+    stage1 = np.abs(series["tip_transverse"][t <= lock])
+    assert stage1.max() == pytest.approx(f["tip_deflection_max"], rel=1e-12)
+    assert np.abs(run.tip_v[run.tip_t <= lock]).max() < 0.99 * stage1.max()
+    assert series["peak_stress_leaf"].max() == pytest.approx(f["peak_stress_leaf"], rel=1e-12)
+    assert compare.main([str(bag), "--physics-rate", "--out", str(tmp_path / "out")]) == 0
+    drawn = captured_figures["alpha1.png"].axes[0].get_lines()[0].get_xdata()
+    assert len(drawn) == len(t)
+    drawn = captured_figures["tip_deflection.png"].axes[1].get_lines()[0].get_xdata()
+    assert len(drawn) == len(t)

@@ -66,6 +66,8 @@ class Run:
     summary: dict | None = None       # umbrella_sim.summary metadata: every physics step
     warnings: list | None = None
     lock_kind: str | None = None
+    # every physics step of a re-run of the log (--physics-rate): replay.physics_series
+    physics: dict | None = None
 
     @property
     def rigid(self) -> bool:
@@ -217,6 +219,14 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
                summary, warnings, events.get("lock_kind"))
 
 
+def physics_run(path: str, segment: int = 0) -> dict:
+    """Return the signals of one log's segment at every physics step (a re-run of it)."""
+    from .replay import physics_series
+
+    log = read_log(path)
+    return physics_series(log, log.segment(segment))
+
+
 def _diff(ref_t, ref_y, t, y):
     lo, hi = max(ref_t[0], t[0]), min(ref_t[-1], t[-1])
     keep = (ref_t >= lo) & (ref_t <= hi)
@@ -333,19 +343,23 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
 
     fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
     for r in runs:
-        axes[0].plot(r.t, r.alpha1, label=r.label)
-        axes[1].plot(r.t, r.alpha1_rate, label=r.label)
-        axes[2].plot(r.t, np.gradient(r.alpha1_rate, r.t), label=r.label)
+        t, a1, rate = ((r.physics["time"], r.physics["alpha1"], r.physics["alpha1_rate"])
+                       if r.physics else (r.t, r.alpha1, r.alpha1_rate))
+        axes[0].plot(t, a1, label=r.label)
+        axes[1].plot(t, rate, label=r.label)
+        axes[2].plot(t, np.gradient(rate, t), label=r.label)
     finish(fig, axes, ("alpha1 (rad)", "d alpha1/dt (rad/s)", "d2 alpha1/dt2 (rad/s2)"),
            ("leaf angle, rate and acceleration (thesis Fig. 6.1, 6.12-6.17)", "", ""),
            "alpha1.png")
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 6))
     for r in runs:
-        lock = r.deploy_time if r.deploy_time is not None else r.tip_t[-1]
-        s1 = r.tip_t <= lock
-        axes[0].plot(r.tip_t[s1], r.tip_v[s1] * 1e3, label=r.label)
-        axes[1].plot(r.tip_t, r.tip_v * 1e3, label=r.label)
+        tip_t, tip_v = ((r.physics["time"], r.physics["tip_transverse"]) if r.physics
+                        else (r.tip_t, r.tip_v))
+        lock = r.deploy_time if r.deploy_time is not None else tip_t[-1]
+        s1 = tip_t <= lock
+        axes[0].plot(tip_t[s1], tip_v[s1] * 1e3, label=r.label)
+        axes[1].plot(tip_t, tip_v * 1e3, label=r.label)
         if r.deploy_time is not None:
             axes[1].axvline(r.deploy_time, ls="--", lw=0.7, color="gray")
     finish(fig, axes, ("v_G (mm)", "v_G (mm)"),
@@ -364,8 +378,11 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
             continue
         axes[0].plot(r.stress_t, r.stress_joint / 1e6, label=r.label)
         axes[1].plot(r.stress_t, r.stress_mid / 1e6, label=r.label)
-        axes[2].plot(r.stress_t, r.peak_leaf / 1e6, label=f"{r.label} leaf")
-        axes[2].plot(r.stress_t, r.peak_link / 1e6, ls="--", label=f"{r.label} link")
+        peak_t, leaf, link = ((r.physics["time"], r.physics["peak_stress_leaf"],
+                               r.physics["peak_stress_link"]) if r.physics
+                              else (r.stress_t, r.peak_leaf, r.peak_link))
+        axes[2].plot(peak_t, leaf / 1e6, label=f"{r.label} leaf")
+        axes[2].plot(peak_t, link / 1e6, ls="--", label=f"{r.label} link")
     for ys in yields:
         for ax, signs in zip(axes, ((1, -1), (1, -1), (1,))):
             for k, sign in enumerate(signs):
@@ -376,7 +393,8 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
     finish(fig, axes, ("sigma (MPa)", "sigma (MPa)", "max |sigma| (MPa)"),
            ("top-fibre stress on the leaf at O'' (Fig. 6.5, 6.11)",
             "top-fibre stress at mid-link (Fig. 6.6)",
-            "peak |sigma| on each body (each publication: the peak since the previous one)"),
+            "peak |sigma| on each body (every physics step with --physics-rate, else each "
+            "publication: the peak since the previous one)"),
            "stress.png")
 
     fig, axes = plt.subplots(1, len(runs), figsize=(4.5 * len(runs), 4.5), squeeze=False)
@@ -462,6 +480,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--names", nargs="+", help="labels for the runs")
     ap.add_argument("--thesis", action="store_true", help="add the thesis's numbers")
     ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument("--physics-rate", action="store_true",
+                    help="re-run each log's recorded commands (as umbrella_replay "
+                         "--resimulate does) and draw the leaf angle, rate, acceleration, tip "
+                         "deflection and peak stresses from every physics step instead of the "
+                         "recorded samples")
     ap.add_argument("--magnification", type=float, nargs=2, default=(200.0, 5.0),
                     metavar=("STAGE1", "STAGE2"),
                     help="deformation magnification of the shapes plot (default 200 5)")
@@ -477,6 +500,9 @@ def main(argv: list[str] | None = None) -> int:
         runs = [load_run(p, args.names[i] if args.names else None, args.segment)
                 for i, p in enumerate(args.logs)]
         result = compare(runs, thesis=args.thesis)
+        if args.physics_rate and not args.no_plots:
+            for r in runs:
+                r.physics = physics_run(r.path, args.segment)
     except LogError as exc:
         print(f"umbrella_compare: error: {exc}", file=sys.stderr)
         return 2

@@ -17,6 +17,8 @@ import math
 import sys
 import time
 
+import numpy as np
+
 from .logs import LogData, LogError, qos_from_yaml, read_log
 from .stop_signals import interruptible
 
@@ -57,18 +59,18 @@ def resimulate(log: LogData) -> dict:
     return out
 
 
-def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
+def _segment_inputs(log: LogData, seg):
     """
-    Re-run one segment through the offline driver (solver.simulate).
+    Return what re-running one segment needs: (params, driver, schedule, t_last, t_fault).
 
     The applied forces (``sleeve_force/applied``, each at the step it acts from) become the
-    ForceSchedule every path uses; the recorded publications are streamed and compared as
-    the re-simulation reaches each one.
+    ForceSchedule every path uses; t_last is the segment's last publication, t_fault the
+    recorded fault (None without one).
     """
     from .forcing import ForceSchedule
     from .params import SPECS, UmbrellaParams
     from .publication import PublicationDriver
-    from .solver import command_force, simulate
+    from .solver import command_force
 
     p_all = seg.params
     try:
@@ -83,24 +85,13 @@ def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
     if abs(driver.step - step) > 1e-15:
         raise LogError(f"{log.path}: physics step {step} cannot be reproduced from "
                        f"time_step and publish_rate (got {driver.step})")
-    topics = {"joint": log.find_topic("joint_states"),
-              "tip": log.find_topic("tip_deflection", required=False),
-              "peak": log.find_topic("peak_stress", required=False)}
-    by_topic = {t: k for k, t in topics.items() if t}
-    sim = driver.sim
-    res = {"index": seg.index, "compared": 0, "problems": [], "fault": None,
-           "recorded_fault": None}
-
-    def in_segment(m) -> bool:
-        return m.log_time >= seg.offset_ns and (seg.end_ns is None or m.log_time < seg.end_ns)
-
-    # first pass: the force history, the recorded fault and the last publication (only the
-    # few command and phase records are decoded)
-    applied, t_last = [], 0.0
+    # the force history, the recorded fault and the last publication (only the few command
+    # and phase records are decoded)
+    applied, t_last, t_fault = [], 0.0, None
     for key in ("sleeve_force/applied", "deployment_phase", "joint_states"):
         topic = log.find_topic(key, required=False)
         for m in (log.iter_raw([topic]) if topic else ()):
-            if not in_segment(m):
+            if not _in_segment(seg, m):
                 continue
             t = (m.log_time - seg.offset_ns) * 1e-9
             if key == "joint_states":
@@ -108,8 +99,8 @@ def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
                 continue
             msg = log.decode(m.topic, m.data)
             if key == "deployment_phase":
-                if msg.data == "fault" and res["recorded_fault"] is None:
-                    res["recorded_fault"] = t
+                if msg.data == "fault" and t_fault is None:
+                    t_fault = t
             else:
                 applied.append((t, msg.data))
     try:
@@ -117,11 +108,60 @@ def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
                                  check=lambda f: command_force(f, params))
     except ValueError as exc:
         raise LogError(f"{log.path}: segment {seg.index}: sleeve_force/applied: {exc}") from None
+    return params, driver, schedule, t_last, t_fault
+
+
+def _in_segment(seg, m) -> bool:
+    return m.log_time >= seg.offset_ns and (seg.end_ns is None or m.log_time < seg.end_ns)
+
+
+def physics_series(log: LogData, seg) -> dict:
+    """
+    Re-run one segment and return its signals at every physics step (arrays by name).
+
+    Names: time, alpha1, alpha1_rate, tip_transverse, peak_stress_leaf, peak_stress_link
+    (the StepBlock fields); the run stops at the segment's last publication or its fault.
+    """
+    from .solver import simulate
+
+    params, driver, schedule, t_last, t_fault = _segment_inputs(log, seg)
+    names = ("time", "alpha1", "alpha1_rate", "tip_transverse", "peak_stress_leaf",
+             "peak_stress_link")
+    parts = {n: [] for n in names}
+
+    def on_output(block, applied_now) -> None:
+        for n in names:
+            parts[n].append(getattr(block, n))
+
+    t_end = t_last if t_fault is None else max(t_last, t_fault)
+    simulate(params, t_end, schedule, simulator=driver.sim,
+             output_every=driver.publish_every, on_output=on_output, keep_samples=False)
+    return {n: np.concatenate(v) if v else np.zeros(0) for n, v in parts.items()}
+
+
+def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
+    """
+    Re-run one segment through the offline driver (solver.simulate).
+
+    The recorded publications are streamed and compared as the re-simulation reaches each
+    one.
+    """
+    from .solver import simulate
+
+    params, driver, schedule, t_last, t_fault = _segment_inputs(log, seg)
+    rate = float(seg.params["publish_rate"])          # checked by _segment_inputs
+    topics = {"joint": log.find_topic("joint_states"),
+              "tip": log.find_topic("tip_deflection", required=False),
+              "peak": log.find_topic("peak_stress", required=False)}
+    by_topic = {t: k for k, t in topics.items() if t}
+    sim = driver.sim
+    res = {"index": seg.index, "compared": 0, "problems": [], "fault": None,
+           "recorded_fault": t_fault}
 
     def groups():
         group, t_group = {}, None
         for m in log.iter_raw(list(by_topic)):
-            if not in_segment(m):
+            if not _in_segment(seg, m):
                 continue
             t = (m.log_time - seg.offset_ns) * 1e-9
             if t_group is not None and abs(t - t_group) > 1e-10:
