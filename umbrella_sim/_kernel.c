@@ -857,11 +857,35 @@ void umbrella_momentum(Ctx *x, const double *q, const double *v, double *p) {
 }
 
 /* ------------------------------------------------------------------- outputs */
+/* Membrane stress of the nonlinear law at q (per element, 2 stress points each: leaf, then
+ * link), or NULL for the linear model, whose fibre stress is bending only. */
+static const double *membrane_stress(const Ctx *x, const double *q) {
+    if (!(x->law && x->law->d.nonlinear)) return NULL;
+    elastic_membrane_stress(x->law, q);
+    return x->law->el_stress;
+}
+
+/* Top and bottom fibre stress at stress point k (the section's bending stress,
+ * plus the membrane stress of the nonlinear law when there is one). */
+static void fibre_stress(const Model *m, const double *q, const double *membrane, int k,
+                         double *top, double *bot) {
+    int W = m->stress_width;
+    double t = 0.0, b = 0.0;
+    for (int j = 0; j < W; j++) {
+        double qj = q[m->stress_idx[k * W + j]];
+        t += m->stress_top[k * W + j] * qj;
+        b += m->stress_bottom[k * W + j] * qj;
+    }
+    if (membrane) { t += membrane[k / 2]; b += membrane[k / 2]; }
+    *top = t;
+    *bot = b;
+}
+
 static void output_row(const Ctx *x, const double *q, const double *v, const double *p,
                        double t, int stage, double force, double work, double lock_loss,
                        double *out, int cap, int k) {
     const Model *m = x->m;
-    int n = m->n, ia = m->i_alpha2, W = m->stress_width;
+    int n = m->n, ia = m->i_alpha2;
     double *o = out + k;
 #define SET(f, val) o[(size_t)(f) * cap] = (val)
     SET(F_TIME, t);
@@ -875,23 +899,14 @@ static void output_row(const Ctx *x, const double *q, const double *v, const dou
     SET(F_TIP_AXIAL, q[m->i_tip_u]);
     SET(F_TIP_TRANSVERSE, q[m->i_tip_v]);
     int first = 0;
-    const double *membrane = NULL;   /* per element, 2 stress points each (leaf, then link) */
-    if (x->law && x->law->d.nonlinear) {
-        elastic_membrane_stress(x->law, q);
-        membrane = x->law->el_stress;
-    }
+    const double *membrane = membrane_stress(x, q);
     for (int body = 0; body < 2; body++) {
         int np = body == 0 ? m->n_stress_leaf : m->n_stress_link;
         double best = -1.0;
         int at = first;
         for (int k2 = first; k2 < first + np; k2++) {
-            double top = 0.0, bot = 0.0;
-            for (int j = 0; j < W; j++) {
-                double qj = q[m->stress_idx[k2 * W + j]];
-                top += m->stress_top[k2 * W + j] * qj;
-                bot += m->stress_bottom[k2 * W + j] * qj;
-            }
-            if (membrane) { top += membrane[k2 / 2]; bot += membrane[k2 / 2]; }
+            double top, bot;
+            fibre_stress(m, q, membrane, k2, &top, &bot);
             double a = fabs(top) > fabs(bot) ? fabs(top) : fabs(bot);
             if (a > best) { best = a; at = k2; }
         }
@@ -1046,25 +1061,12 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
 void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const double *v,
                      const double *p, double *row, double *stress, double *residual) {
     const Model *m = x->m;
-    int W = m->stress_width, npts = m->n_stress_leaf + m->n_stress_link;
+    int npts = m->n_stress_leaf + m->n_stress_link;
     int nc = nc_of(m, locked, rigid);
     output_row(x, q, v, p, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, row, 1, 0);
-    const double *membrane = NULL;
-    if (x->law && x->law->d.nonlinear) {
-        elastic_membrane_stress(x->law, q);
-        membrane = x->law->el_stress;
-    }
-    for (int k = 0; k < npts; k++) {
-        double top = 0.0, bot = 0.0;
-        for (int j = 0; j < W; j++) {
-            double qj = q[m->stress_idx[k * W + j]];
-            top += m->stress_top[k * W + j] * qj;
-            bot += m->stress_bottom[k * W + j] * qj;
-        }
-        if (membrane) { top += membrane[k / 2]; bot += membrane[k / 2]; }
-        stress[k] = top;
-        stress[npts + k] = bot;
-    }
+    const double *membrane = membrane_stress(x, q);
+    for (int k = 0; k < npts; k++)
+        fibre_stress(m, q, membrane, k, &stress[k], &stress[npts + k]);
     constraints(m, q, locked, rigid, x->phi);
     jacobian(m, q, locked, rigid, x->jm_idx, x->jm_val);
     double r = max_abs(nc, x->phi);
