@@ -8,7 +8,6 @@ import errno
 import json
 import os
 import signal
-import stat
 import subprocess
 import sys
 import tempfile
@@ -22,6 +21,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
+from tests.disk_faults import full_disk_write
 from tests.ros_helpers import NodeProcess, Probe, ros_env
 from umbrella_sim import recording
 from umbrella_sim.logs import LogError, read_log
@@ -30,36 +30,6 @@ from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.ros_io import LATCHED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def full_disk_write(limit: int, code: int, real=os.write):
-    """
-    Return an os.write for a disk that holds `limit` bytes per regular file.
-
-    Like a full tmpfs: the write that reaches the limit is partial, the next one fails
-    with `code` (ENOSPC, EIO, ...); pipes and terminals are not affected.
-    """
-    def write(fd, data):
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            return real(fd, data)
-        room = limit - os.lseek(fd, 0, os.SEEK_CUR)
-        if room <= 0:
-            raise OSError(code, os.strerror(code))
-        return real(fd, data[:room])
-    return write
-
-
-#: runs umbrella_node on such a disk: argv[1] bytes per file, argv[2] the errno
-FAULTY_DISK = f"""
-import os, sys
-sys.path.insert(0, {ROOT!r})
-from tests.test_faults import full_disk_write
-from umbrella_sim.node import main
-limit, code = int(sys.argv.pop(1)), int(sys.argv.pop(1))
-os.write = full_disk_write(limit, code)
-sys.exit(main())
-"""
 
 
 def run(*args, timeout=120):
@@ -141,8 +111,8 @@ def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
     # discovered the node and counts messages published after the error even on a busy machine
     with NodeProcess("-p", "publish_rate:=1000.0", "-p", "duration:=15.0",
                      "-p", "real_time_factor:=3.0", "-p", f"record_path:={bag}",
-                     executable=[sys.executable, "-c", FAULTY_DISK, "150000",
-                                 str(errno.ENOSPC)]) as node:
+                     executable=[sys.executable, "-m", "tests.disk_faults", "150000",
+                                 str(errno.ENOSPC)], cwd=ROOT) as node:
         node.wait_for_log("recording stopped", timeout=60)
         n_at_error = len(probe.messages("/joint_states"))
         assert node.proc.wait(timeout=60) == 4

@@ -5,7 +5,7 @@ import threading
 
 from std_msgs.msg import Float64
 
-from tests.test_faults import full_disk_write
+from tests.disk_faults import full_disk_write
 from umbrella_sim import recording
 from umbrella_sim.logs import read_log
 

@@ -2,11 +2,13 @@
 import math
 import os
 import signal
+import subprocess
+import sys
 
 import pytest
 
 from umbrella_sim.testing import (_shm_segments, default_domain_id, DOMAIN_ID_ENV, NodeProcess,
-                                  summarize_run)
+                                  ros_env, summarize_run)
 
 
 def own_segments(pid: int) -> set:
@@ -117,3 +119,13 @@ def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_f
     assert summary.stage2_samples >= 0.2 * 200 - 2 and summary.stage2_span >= 0.2
     # the energy lock turns the stage-1 kinetic energy into a large stage-2 vibration
     assert summary.stage2_tip_amplitude > 0.05
+
+
+def test_a_child_process_has_the_domain_it_was_given(monkeypatch):
+    """Without the variable set, a child importing the API must not pick a domain from its pid."""
+    monkeypatch.delenv(DOMAIN_ID_ENV, raising=False)
+    code = "import os, umbrella_sim.testing as t; print(t.DOMAIN_ID, os.environ['ROS_DOMAIN_ID'])"
+    for domain in (17, 93):
+        out = subprocess.run([sys.executable, "-c", code], env=ros_env(domain),
+                             capture_output=True, text=True, check=True).stdout.split()
+        assert out == [str(domain), str(domain)]

@@ -75,8 +75,11 @@ DOMAIN_ID = default_domain_id()
 
 def ros_env(domain_id: int | None = None) -> dict:
     """Return the environment for a child ROS process: private domain, localhost discovery."""
+    domain = str(DOMAIN_ID if domain_id is None else domain_id)
     env = dict(os.environ)
-    env.update(ROS_DOMAIN_ID=str(DOMAIN_ID if domain_id is None else domain_id),
+    # the domain goes in DOMAIN_ID_ENV too: a child that imports this module (a test helper,
+    # a user's wrapper around the node) then has the same DOMAIN_ID instead of one from its pid
+    env.update({DOMAIN_ID_ENV: domain}, ROS_DOMAIN_ID=domain,
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                RMW_IMPLEMENTATION="rmw_fastrtps_cpp", PYTHONUNBUFFERED="1",
                RCUTILS_LOGGING_BUFFERED_STREAM="0")

@@ -1,0 +1,33 @@
+"""
+A disk that fills up, for recording tests (no ROS imports, no side effects).
+
+``python -m tests.disk_faults LIMIT ERRNO --ros-args ...`` runs umbrella_node on such a disk.
+"""
+import os
+import stat
+import sys
+
+
+def full_disk_write(limit: int, code: int, real=os.write):
+    """
+    Return an os.write for a disk that holds `limit` bytes per regular file.
+
+    Like a full tmpfs: the write that reaches the limit is partial, the next one fails
+    with `code` (ENOSPC, EIO, ...); pipes and terminals are not affected.
+    """
+    def write(fd, data):
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            return real(fd, data)
+        room = limit - os.lseek(fd, 0, os.SEEK_CUR)
+        if room <= 0:
+            raise OSError(code, os.strerror(code))
+        return real(fd, data[:room])
+    return write
+
+
+if __name__ == "__main__":
+    from umbrella_sim.node import main
+    limit, code = int(sys.argv.pop(1)), int(sys.argv.pop(1))
+    os.write = full_disk_write(limit, code)
+    sys.exit(main())
