@@ -131,7 +131,9 @@ def test_compiled_sample_matches_numpy_outputs(model, n_el, monkeypatch):
     from dataclasses import fields
 
     from umbrella_sim.solver import FiniteElementEngine
-    sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5, model=model, elements_per_segment=n_el))
+    # a 50 us step: the first two blocks end in stage 1 (deploy at ~0.09 s), the others in 2
+    sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5, model=model, elements_per_segment=n_el,
+                                           time_step=5e-5))
     stages = set()
     for block in (1000, 1000, 300, 2000):
         sim.advance(block)

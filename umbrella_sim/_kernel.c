@@ -76,6 +76,11 @@ typedef struct {
     double *mrf;           /* 2 x n_link */
     /* vectors */
     double *q1, *v1, *dq, *qm, *hm, *mffv, *wv0, *gt, *gy, *res, *kq, *mv, *wa, *wb, *vt, *rhs, *xa;
+    /* band products (elastic entries of q-indexed vectors): of q0 and v0 at the start of a
+     * step, of dq in each Newton iteration, of the converged q1; Mff, W, K are constant, so
+     * a step needs one product of each per iteration (the rest by linearity) */
+    double *mq0, *wq0, *kq0, *mv0, *mdq, *wdq, *kdq, *mq1, *wq1, *kq1;
+    int q0_products;       /* mq0, wq0, kq0 hold the products of the q0 of the next step */
     double *phi0, *phi, *corr, *jrow_val, *jm_val;   /* constraint rows */
     int *jrow_idx, *jm_idx, *cpos;   /* cpos: elastic position of jrow entries, or -1 */
     /* arrow system: band E, border columns B (col-major, ne per column), rows C, Schur S */
@@ -117,6 +122,32 @@ static void band_matvec2(const Model *m, const double *band1, double *y1, const 
                 for (int j = lo; j <= hi; j++) s1 += r1[j] * xs[j];
             }
             y1[off + i] = s1;
+        }
+    }
+}
+
+/* y1 = band1 x, y2 = band2 x, y3 = band3 x in one pass (band3/y3 may be NULL) */
+static void band_matvec3(const Model *m, const double *band1, double *y1, const double *band2,
+                         double *y2, const double *band3, double *y3, const double *x) {
+    if (!band3) { band_matvec2(m, band1, y1, band2, y2, x); return; }
+    int ne = m->n_elastic, nl = m->n_link, bw = m->bw, w = 2 * bw + 1;
+    for (int seg = 0; seg < 2; seg++) {
+        int p0 = seg == 0 ? 0 : ne - nl, np = seg == 0 ? ne - nl : nl;
+        int off = seg == 0 ? 1 : m->s_link;
+        const double *xs = x + off;
+        for (int i = 0; i < np; i++) {
+            int lo = i - bw < 0 ? 0 : i - bw, hi = i + bw >= np ? np - 1 : i + bw;
+            size_t r = (size_t)(p0 + i) * w + bw - i;
+            const double *r1 = band1 + r, *r2 = band2 + r, *r3 = band3 + r;
+            double s1 = 0.0, s2 = 0.0, s3 = 0.0;
+            for (int j = lo; j <= hi; j++) {
+                s1 += r1[j] * xs[j];
+                s2 += r2[j] * xs[j];
+                s3 += r3[j] * xs[j];
+            }
+            y1[off + i] = s1;
+            y2[off + i] = s2;
+            y3[off + i] = s3;
         }
     }
 }
@@ -292,14 +323,13 @@ static int border_q(const Model *m, int c) {
     return c == 0 ? 0 : c == 1 ? m->i_r2x : c == 2 ? m->i_r2y : m->i_alpha2;
 }
 
-/* the state-dependent entries of M(q) (model.mass_matrix) */
-static void mass_data(Ctx *x, const double *q) {
+/* the state-dependent entries of M(q) (model.mass_matrix), given hq = Mff q and maf = W q
+ * at the elastic entries (mass_data computes them; the step has them from its products) */
+static void mass_data_from_products(Ctx *x, const double *q) {
     const Model *m = x->m;
-    int n = m->n, nl = m->n_link, ia = m->i_alpha2, sk = m->s_link;
+    int nl = m->n_link, ia = m->i_alpha2, sk = m->s_link;
     double *h = x->hq, *maf = x->maf;
-    (void)n;
     /* h = c + Mff q; m_af = g + q W = g - W q (W skew) */
-    band_matvec2(m, m->mff_band, h, m->w_band, maf, q);
     x->maa[0] = m->j0_leaf;
     x->maa[1] = m->j0_link;
     for (int p = 0; p < m->n_elastic; p++) {
@@ -320,6 +350,11 @@ static void mass_data(Ctx *x, const double *q) {
         x->mrf[k] = c * m->sbar[k] + s * m->isbar[k];
         x->mrf[nl + k] = c * m->sbar[nl + k] + s * m->isbar[nl + k];
     }
+}
+
+static void mass_data(Ctx *x, const double *q) {
+    band_matvec2(x->m, x->m->mff_band, x->hq, x->m->w_band, x->maf, q);
+    mass_data_from_products(x, q);
 }
 
 /* y = M(q) v with the pieces of mass_data, given mffv = Mff v (elastic entries) */
@@ -472,7 +507,7 @@ Ctx *umbrella_new(const Model *m) {
     x->ne = ne;
     x->nbmax = nbmax;
     x->width = w;
-    size_t nvec = 24;
+    size_t nvec = 34;
     size_t doubles = (size_t)n * nvec + 2 * (size_t)m->n_link + 2 * (size_t)(n + ncmax)
                      + 6 * (size_t)ncmax * JW + 3 * (size_t)ncmax;
     x->hq = calloc(doubles, sizeof(double));
@@ -483,7 +518,8 @@ Ctx *umbrella_new(const Model *m) {
     double *d = x->hq;
     double **vecs[] = {&x->hq, &x->maf, &x->q1, &x->v1, &x->dq, &x->qm, &x->hm, &x->gt, &x->gy,
                        &x->res, &x->kq, &x->mv, &x->wa, &x->wb, &x->vt, &x->q_s, &x->v_s, &x->p_s,
-                       &x->mffv, &x->wv0};
+                       &x->mffv, &x->wv0, &x->mq0, &x->wq0, &x->kq0, &x->mv0, &x->mdq, &x->wdq,
+                       &x->kdq, &x->mq1, &x->wq1, &x->kq1};
     for (size_t k = 0; k < sizeof(vecs) / sizeof(vecs[0]); k++) { *vecs[k] = d; d += n; }
     x->mrf = d; d += 2 * m->n_link;
     x->rhs = d; d += n + ncmax;
@@ -537,8 +573,8 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
     double *vt = x->vt, *h_m = x->hm, *wed = x->wb;
     const double *qm = x->qm;
     for (int i = 0; i < m->n; i++) vt[i] = x->dq[i] / h;
-    /* h_m = c + Mff qm from this Newton iteration */
-    band_matvec(m, m->w_band, vt, wed, 0);
+    /* h_m = c + Mff qm and W dq from this Newton iteration */
+    for (int p = 0; p < ne; p++) wed[ei[p]] = x->wdq[ei[p]] / h;
     double om[2] = {vt[0], vt[ia]};
     /* E: Mff + h^2/4 K - h w_body W  (G_ee = -2 w W) */
     double h2 = 0.25 * h * h;
@@ -719,7 +755,14 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     memcpy(lam, lam0, sizeof(double) * nc);
     double last_norm = INFINITY, step_norm = 0.0;
     int converged = 0;
-    band_matvec(m, m->w_band, v0, x->wv0, 0);
+    const double *k_band = law ? NULL : m->k_band;
+    const int *ei = m->elastic_idx;
+    int ne = m->n_elastic;
+    if (!x->q0_products) {
+        band_matvec3(m, m->mff_band, x->mq0, m->w_band, x->wq0, k_band, x->kq0, q0);
+        x->q0_products = 1;
+    }
+    band_matvec2(m, m->mff_band, x->mv0, m->w_band, x->wv0, v0);
     for (it = 1; it <= max_iter; it++) {
         double dd = 0.0;
         for (int i = 0; i < n; i++) {
@@ -728,12 +771,21 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             qm[i] = q0[i] + 0.5 * dq[i];
             v1[i] = 2.0 * dq[i] / h - v0[i];
         }
-        mass_data(x, q);
+        /* Mff, W, K of q = q0 + dq, qm = q0 + dq / 2 and v1 = 2 dq / h - v0 */
+        band_matvec3(m, m->mff_band, x->mdq, m->w_band, x->wdq, k_band, x->kdq, dq);
+        for (int p = 0; p < ne; p++) {
+            int i = ei[p];
+            double md = x->mdq[i], wd = x->wdq[i];
+            x->hq[i] = x->mq0[i] + md;
+            x->maf[i] = x->wq0[i] + wd;
+            x->hm[i] = m->c_full[i] + (x->mq0[i] + 0.5 * md);
+            if (!law) x->kq[i] = x->kq0[i] + 0.5 * x->kdq[i];
+            x->mffv[i] = 2.0 * md / h - x->mv0[i];
+            x->wb[i] = 2.0 * wd / h - x->wv0[i];
+        }
+        mass_data_from_products(x, q);
         constraints(m, q, locked, rigid, phi);
-        band_matvec2(m, m->mff_band, x->hm, law ? NULL : m->k_band, x->kq, qm); /* Mff qm, K qm */
         if (law) elastic_force(law, q0, q, h, x->kq);    /* AVF gradient of U + C dq / h */
-        for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; x->hm[i] += m->c_full[i]; }
-        band_matvec2(m, m->mff_band, x->mffv, m->w_band, x->wb, v1); /* Mff v1, W v1 */
         bilinear_gradient(m, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
         mass_matvec_pre(x, v1, x->mffv, x->mv);
         /* f = 1/2 v0^T M(q) v1: f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1), M symmetric */
@@ -804,7 +856,10 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     if (!converged) { status = NO_CONVERGENCE; goto done; }
     for (int i = 0; i < n; i++) v[i] = 2.0 * (q[i] - q0[i]) / h - v0[i];
     jacobian(m, q, locked, rigid, x->jrow_idx, x->jrow_val);
-    mass_data(x, q);
+    /* the products of q1, direct: the next step's q0 products (bitwise what it would compute) */
+    band_matvec3(m, m->mff_band, x->mq1, m->w_band, x->wq1, k_band, x->kq1, q);
+    for (int p = 0; p < ne; p++) { int i = ei[p]; x->hq[i] = x->mq1[i]; x->maf[i] = x->wq1[i]; }
+    mass_data_from_products(x, q);
     /* kinetic energy of the discrete balance: T0 + V(q0) - V(q1) + F (y0 - y1) (- damping) */
     double t_target = force * (y0 - sleeve_height(m, q));
     x->dissipated = 0.0;
@@ -812,10 +867,8 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         x->dissipated = elastic_dissipation(law, q0, q, h);
         t_target += elastic_energy(law, q0) - elastic_energy(law, q) - x->dissipated;
     } else {
-        band_matvec(m, m->k_band, q0, x->kq, 0);
-        for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target += 0.5 * q0[i] * x->kq[i]; }
-        band_matvec(m, m->k_band, q, x->kq, 0);
-        for (int p = 0; p < m->n_elastic; p++) { int i = m->elastic_idx[p]; t_target -= 0.5 * q[i] * x->kq[i]; }
+        for (int p = 0; p < ne; p++) { int i = ei[p]; t_target += 0.5 * q0[i] * x->kq0[i]; }
+        for (int p = 0; p < ne; p++) { int i = ei[p]; t_target -= 0.5 * q[i] * x->kq1[i]; }
     }
     for (int i = 0; i < n; i++) t_target += 0.5 * v0[i] * p0[i];
     if (project_velocity(x, nc, v, x->p_s, t_target) != OK) { status = SINGULAR; goto done; }
@@ -832,6 +885,7 @@ int umbrella_step(Ctx *x, int locked, int rigid,
     const Model *m = x->m;
     int n = m->n, nc = nc_of(m, locked, rigid);
     double *p0 = x->q1;         /* step() does not use q1 */
+    x->q0_products = 0;
     if (p0_in) memcpy(p0, p0_in, sizeof(double) * n);
     else { mass_data(x, q0); mass_matvec(x, v0, p0); }
     int status = step(x, locked, rigid, q0, v0, lam0, p0, h, force, tol, phi_tol,
@@ -882,8 +936,8 @@ static void fibre_stress(const Model *m, const double *q, const double *membrane
 }
 
 static void output_row(const Ctx *x, const double *q, const double *v, const double *p,
-                       double t, int stage, double force, double work, double lock_loss,
-                       double *out, int cap, int k) {
+                       const double *kq_known, double t, int stage, double force, double work,
+                       double lock_loss, double *out, int cap, int k) {
     const Model *m = x->m;
     int n = m->n, ia = m->i_alpha2;
     double *o = out + k;
@@ -917,12 +971,21 @@ static void output_row(const Ctx *x, const double *q, const double *v, const dou
     double ke = 0.0;
     for (int i = 0; i < n; i++) ke += v[i] * p[i];
     SET(F_KINETIC, 0.5 * ke);
-    double *kq = x->kq;
-    memset(kq, 0, sizeof(double) * n);
-    band_matvec(m, m->k_band, q, kq, 0);
     double se = 0.0;
-    for (int i = 0; i < n; i++) se += q[i] * kq[i];
-    SET(F_STRAIN, x->law ? elastic_energy(x->law, q) : 0.5 * se);
+    if (x->law) se = elastic_energy(x->law, q);
+    else {
+        const double *kq = kq_known;       /* K q, or computed here */
+        if (!kq) {
+            band_matvec(m, m->k_band, q, x->kq, 0);
+            kq = x->kq;
+        }
+        for (int p2 = 0; p2 < m->n_elastic; p2++) {
+            int i = m->elastic_idx[p2];
+            se += q[i] * kq[i];
+        }
+        se *= 0.5;
+    }
+    SET(F_STRAIN, se);
     SET(F_WORK, work);
     SET(F_LOCK_LOSS, lock_loss);
 #undef SET
@@ -945,6 +1008,7 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
     int n = m->n, nc = nc_of(m, locked, rigid);
     int status = OK, its_total = 0;
     *n_done = 0;
+    x->q0_products = 0;
     for (int k = 0; k < n_steps && k < cap; k++) {
         double t0 = (double)(k0 + k) * h, t1 = (double)(k0 + k + 1) * h;
         int its = 0;
@@ -972,7 +1036,12 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         memcpy(v, v1, sizeof(double) * n);
         memcpy(lam, x->lam_s, sizeof(double) * nc);
         memcpy(p, x->p_s, sizeof(double) * n);
-        output_row(x, q, v, p, t1, locked ? 1 : 0, force, acc[0], acc[1], out, cap, k);
+        /* q1's products are the next step's q0 products */
+        memcpy(x->mq0, x->mq1, sizeof(double) * n);
+        memcpy(x->wq0, x->wq1, sizeof(double) * n);
+        memcpy(x->kq0, x->kq1, sizeof(double) * n);
+        output_row(x, q, v, p, x->law ? NULL : x->kq0, t1, locked ? 1 : 0, force, acc[0], acc[1],
+                   out, cap, k);
         *n_done = k + 1;
     }
     *iterations = its_total;
@@ -983,7 +1052,7 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
 void umbrella_outputs(Ctx *x, const double *q, const double *v, const double *p, double t,
                       int stage, double force, double work, double lock_loss, double *out,
                       int cap, int k) {
-    output_row(x, q, v, p, t, stage, force, work, lock_loss, out, cap, k);
+    output_row(x, q, v, p, NULL, t, stage, force, work, lock_loss, out, cap, k);
 }
 
 /* Lock instant inside a step (solver.UmbrellaSimulator._find_lock, the same Illinois
@@ -1004,6 +1073,7 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
     double a = 0.0, fa = sleeve_height(m, q0) - m->y_stop, b = h, fb = 0.0;
     double best_dt = h, f_best = INFINITY;
     int have_best = 0, side = 0;
+    x->q0_products = 0;        /* then every trial step starts from these q0 products */
     *residual = 0.0;
     for (int trial = 0; trial < 201; trial++) {
         double dt;
@@ -1063,7 +1133,7 @@ void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const doubl
     const Model *m = x->m;
     int npts = m->n_stress_leaf + m->n_stress_link;
     int nc = nc_of(m, locked, rigid);
-    output_row(x, q, v, p, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, row, 1, 0);
+    output_row(x, q, v, p, NULL, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, row, 1, 0);
     const double *membrane = membrane_stress(x, q);
     for (int k = 0; k < npts; k++)
         fibre_stress(m, q, membrane, k, &stress[k], &stress[npts + k]);
