@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import enum
+from functools import cached_property
 import math
 
 import numpy as np
@@ -550,6 +551,15 @@ class UmbrellaModel:
         return ((self.leaf.stress_top @ e1, self.leaf.stress_bottom @ e1),
                 (self.link.stress_top @ e2, self.link.stress_bottom @ e2))
 
+    @cached_property
+    def _reference_stress_points(self) -> tuple[int, int, float]:
+        """(leaf stress point at O'', link element holding l3/2, where in it)."""
+        n = self.params.elements_per_segment
+        x_mid = 0.5 * self.params.l3
+        j = min(int(np.searchsorted(self.link.node_x, x_mid, side="right")) - 1, n - 1)
+        frac = float((x_mid - self.link.node_x[j]) / self.link.element_length[j])
+        return 2 * n - 1, j, frac
+
     def reference_stresses(self, leaf_top, link_top) -> tuple[float, float]:
         """
         Return the reference top-fibre stresses.
@@ -557,13 +567,9 @@ class UmbrellaModel:
         On the leaf at O'' (end of the inner segment) and at mid-link
         (linear within the element holding l3/2).
         """
-        n = self.params.elements_per_segment
-        joint = float(leaf_top[2 * n - 1])
-        x_mid = 0.5 * self.params.l3
-        j = min(int(np.searchsorted(self.link.node_x, x_mid, side="right")) - 1, n - 1)
-        frac = (x_mid - self.link.node_x[j]) / self.link.element_length[j]
+        joint, j, frac = self._reference_stress_points
         mid = float((1 - frac) * link_top[2 * j] + frac * link_top[2 * j + 1])
-        return joint, mid
+        return float(leaf_top[joint]), mid
 
     def node_positions(self, q, magnification: float = 1.0):
         """Inertial (X, Y) of the leaf and link nodes, deformation magnified."""

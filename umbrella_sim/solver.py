@@ -24,8 +24,8 @@ from .forcing import ForceSchedule
 from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ConvergenceError,
                           DynamicState, MidpointDAE)
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
-from .outputs import (LockEvent, RunResult, Sample, STEP_FIELDS, step_row, StepBlock,
-                      SummaryAccumulator)
+from .outputs import (build_frozen, LockEvent, RunResult, Sample, STEP_FIELDS, step_row,
+                      StepBlock, SummaryAccumulator)
 from .params import SPECS, UmbrellaParams
 from .rigid import RigidMechanism
 
@@ -646,8 +646,8 @@ class UmbrellaSimulator:
             row, stress, residual = fast
             f = dict(zip(STEP_FIELDS, row.tolist()))
             n_leaf = len(m.leaf.stress_x)
-            lt, kt = stress[0, :n_leaf], stress[0, n_leaf:]
-            lb, kb = stress[1, :n_leaf], stress[1, n_leaf:]
+            leaf_stress, link_stress = stress[:, :n_leaf], stress[:, n_leaf:]
+            lt, kt = leaf_stress[0], link_stress[0]
         else:
             (lt, lb), (kt, kb) = m.stresses(q)
             leaf_abs = np.maximum(np.abs(lt), np.abs(lb))
@@ -664,24 +664,29 @@ class UmbrellaSimulator:
                  "kinetic_energy": eng.kinetic_energy(s),
                  "strain_energy": float(m.strain_energy(q))}
             residual = eng.residual(s, stage)
+            leaf_stress, link_stress = np.array((lt, lb)), np.array((kt, kb))
         joint_stress, mid_link_stress = m.reference_stresses(lt, kt)
-        return Sample(
-            time=s.t, stage=Stage(stage), q=q.copy(), qd=qd.copy(),
-            alpha1=float(q[0]), alpha2=float(q[m.i_alpha2]),
-            alpha1_rate=float(qd[0]), alpha2_rate=float(qd[m.i_alpha2]),
-            alpha1_accel=float(qdd[0]),
-            sleeve_position=f["sleeve_position"], sleeve_velocity=f["sleeve_velocity"],
-            sleeve_force=force, tip_axial=f["tip_axial"], tip_transverse=f["tip_transverse"],
-            leaf_stress=np.array((lt, lb)), link_stress=np.array((kt, kb)),
-            peak_stress_leaf=f["peak_stress_leaf"], peak_stress_leaf_x=f["peak_stress_leaf_x"],
-            peak_stress_link=f["peak_stress_link"], peak_stress_link_x=f["peak_stress_link_x"],
-            stress_leaf_joint=joint_stress, stress_link_mid=mid_link_stress,
-            multipliers=lam.copy(), sleeve_reaction=eng.sleeve_reaction(s, stage),
-            kinetic_energy=f["kinetic_energy"], strain_energy=f["strain_energy"],
-            work=float(work), lock_energy_loss=float(lock_loss),
-            damping_dissipation=float(getattr(s, "dissipation", 0.0)),
-            constraint_residual=residual,
-        )
+        # every field of Sample (build_frozen: once per publication, without a frozen
+        # dataclass's per-field setattr)
+        values = {name: f[name] for name in _SAMPLE_FIELDS_FROM_ROW}
+        values.update({
+            "time": s.t, "stage": Stage(stage), "q": q.copy(), "qd": qd.copy(),
+            "alpha1": float(q[0]), "alpha2": float(q[m.i_alpha2]),
+            "alpha1_rate": float(qd[0]), "alpha2_rate": float(qd[m.i_alpha2]),
+            "alpha1_accel": float(qdd[0]), "sleeve_force": force,
+            "leaf_stress": leaf_stress, "link_stress": link_stress,
+            "stress_leaf_joint": joint_stress, "stress_link_mid": mid_link_stress,
+            "multipliers": lam.copy(), "sleeve_reaction": eng.sleeve_reaction(s, stage),
+            "work": float(work), "lock_energy_loss": float(lock_loss),
+            "constraint_residual": residual,
+            "damping_dissipation": float(getattr(s, "dissipation", 0.0))})
+        return build_frozen(Sample, values)
+
+
+#: the Sample fields that are per-step outputs too (STEP_FIELDS): taken from the step row
+_SAMPLE_FIELDS_FROM_ROW = ("sleeve_position", "sleeve_velocity", "tip_axial", "tip_transverse",
+                           "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
+                           "peak_stress_link_x", "kinetic_energy", "strain_energy")
 
 
 def simulate(params: UmbrellaParams, duration: float,
