@@ -292,8 +292,8 @@ def main():
         return [100.0 * (f[key] / THESIS_V02[key] - 1.0) for f in (f1, f2)]
 
     def span(values, spec=".1f"):
-        lo, hi = min(values), max(values)
-        return f"{lo:{spec}}" if f"{lo:{spec}}" == f"{hi:{spec}}" else f"{lo:{spec}}–{hi:{spec}}"
+        lo, hi = (f"{v:{spec}}" for v in (min(values), max(values)))
+        return lo if lo == hi else f"{lo} to {hi}"
 
     late = [1e3 * (f["tip_deflection_max_time"] - THESIS_V02["tip_deflection_max_time"])
             for f in (f1, f2)]

@@ -66,7 +66,7 @@ def test_a_nan_command_is_refused_and_nothing_moves(antenna_factory):
     assert antenna.phases() == ["deploying"]
     states = antenna.messages("joint_states")
     assert all(m.effort[2] == 0.0 for m in states)          # no force ever acted
-    # at rest: alpha1 only creeps by round-off (~1e-9 rad a second at the 50 us step)
+    # at rest: alpha1 only creeps by round-off (~1e-9 rad a second at a 50 us step)
     assert all(abs(m.position[0] - states[0].position[0]) < 1e-6 for m in states)
 
 

@@ -147,7 +147,7 @@ def test_output_paths_checked_before_any_work(tmp_path):
 # ------------------------------------------------------------------ solver faults
 def test_offline_fault_recorded_and_reproduced(tmp_path):
     bag = tmp_path / "fault"
-    # at a 2 ms step Newton cannot follow 2.3 kN (at the default 50 us it can)
+    # at a 2 ms step Newton cannot follow 2.3 kN (at a 50 us step it can)
     r = run("umbrella_sim", "simulate", "--v0", "0", "--force", "2300", "--duration", "0.5",
             "--time-step", "0.002", "--mcap", str(bag))
     assert r.returncode == 3

@@ -32,7 +32,7 @@ def assert_unforced(states, step: float, period: float = 0.01) -> None:
     Assert that published states are the unforced run's (v0 = 0, no force).
 
     The reference is the offline core on the same grid: at rest the discrete state creeps by
-    round-off (~1.5e-9 rad in 3 s at the 50 us step), so alpha0 itself is only met to 1e-6.
+    round-off (~1.5e-9 rad in 3 s at a 50 us step), so alpha0 itself is only met to 1e-6.
     """
     sim = UmbrellaSimulator(UmbrellaParams(v0=0.0, time_step=step))
     n_per = round(period / step)
@@ -79,7 +79,7 @@ def test_topic_driven_deployment_matches_offline_core(probe):
     after = [m for m in states if stamp_s(m) > lock_t]
     # at rest with no force the state is static to round-off: each step corrects the
     # constraints' ~1e-17 m round-off, a velocity of ~eps/h that no force damps, so the
-    # angle random-walks by ~1e-9 rad over seconds at the 5e-5 s step (0.5 um at the tip)
+    # angle random-walks by ~1e-9 rad over seconds at a 5e-5 s step (0.5 um at the tip)
     assert len(before) > 10 and all(abs(m.position[0] - ALPHA0) < 1e-7 for m in before)
     assert all(m.effort[2] == 0.0 for m in before)
     assert any(m.position[0] != ALPHA0 for m in states if lock_t > stamp_s(m) > t_cmd)

@@ -120,7 +120,7 @@ def test_cli_rejects_bad_input(args, words):
 def test_cli_diverging_run_keeps_csv(tmp_path):
     out = tmp_path / "div.csv"
     # 2300 N: below the link's buckling load (accepted) but the Newton iteration fails
-    # (at a 2 ms step; at the default 50 us Newton follows 2.3 kN)
+    # (at a 2 ms step; at a 50 us step Newton follows 2.3 kN)
     r = cli("simulate", "--v0", "0", "--force", "2300", "--duration", "0.5", "--time-step",
             "0.002", "--csv", str(out))
     assert r.returncode == 3
