@@ -99,37 +99,11 @@ static int nc_of(const Model *m, int locked, int rigid) {
 }
 
 /* ------------------------------------------------------------------ band algebra */
-/* y1 = band1 x and y2 = band2 x (band2/y2 may be NULL) at the elastic coordinates of
- * q-indexed vectors; other entries of y untouched.  The elastic coordinates are two
- * contiguous runs of q (leaf, link) and the band does not couple them. */
-static void band_matvec2(const Model *m, const double *band1, double *y1, const double *band2,
-                         double *y2, const double *x) {
-    int ne = m->n_elastic, nl = m->n_link, bw = m->bw, w = 2 * bw + 1;
-    for (int seg = 0; seg < 2; seg++) {
-        int p0 = seg == 0 ? 0 : ne - nl, np = seg == 0 ? ne - nl : nl;
-        int off = seg == 0 ? 1 : m->s_link;
-        const double *xs = x + off;
-        for (int i = 0; i < np; i++) {
-            int lo = i - bw < 0 ? 0 : i - bw, hi = i + bw >= np ? np - 1 : i + bw;
-            const double *r1 = band1 + (size_t)(p0 + i) * w + bw - i;
-            double s1 = 0.0;
-            if (band2) {
-                const double *r2 = band2 + (size_t)(p0 + i) * w + bw - i;
-                double s2 = 0.0;
-                for (int j = lo; j <= hi; j++) { s1 += r1[j] * xs[j]; s2 += r2[j] * xs[j]; }
-                y2[off + i] = s2;
-            } else {
-                for (int j = lo; j <= hi; j++) s1 += r1[j] * xs[j];
-            }
-            y1[off + i] = s1;
-        }
-    }
-}
-
-/* y1 = band1 x, y2 = band2 x, y3 = band3 x in one pass (band3/y3 may be NULL) */
+/* y1 = band1 x, y2 = band2 x, y3 = band3 x in one pass (band3/y3 may be NULL, and then
+ * band2/y2 too) at the elastic coordinates of q-indexed vectors; other entries of y untouched.
+ * The elastic coordinates are two contiguous runs of q (leaf, link), not coupled by the band. */
 static void band_matvec3(const Model *m, const double *band1, double *y1, const double *band2,
                          double *y2, const double *band3, double *y3, const double *x) {
-    if (!band3) { band_matvec2(m, band1, y1, band2, y2, x); return; }
     int ne = m->n_elastic, nl = m->n_link, bw = m->bw, w = 2 * bw + 1;
     for (int seg = 0; seg < 2; seg++) {
         int p0 = seg == 0 ? 0 : ne - nl, np = seg == 0 ? ne - nl : nl;
@@ -138,18 +112,31 @@ static void band_matvec3(const Model *m, const double *band1, double *y1, const 
         for (int i = 0; i < np; i++) {
             int lo = i - bw < 0 ? 0 : i - bw, hi = i + bw >= np ? np - 1 : i + bw;
             size_t r = (size_t)(p0 + i) * w + bw - i;
-            const double *r1 = band1 + r, *r2 = band2 + r, *r3 = band3 + r;
+            const double *r1 = band1 + r;
             double s1 = 0.0, s2 = 0.0, s3 = 0.0;
-            for (int j = lo; j <= hi; j++) {
-                s1 += r1[j] * xs[j];
-                s2 += r2[j] * xs[j];
-                s3 += r3[j] * xs[j];
+            if (band3) {
+                const double *r2 = band2 + r, *r3 = band3 + r;
+                for (int j = lo; j <= hi; j++) {
+                    s1 += r1[j] * xs[j];
+                    s2 += r2[j] * xs[j];
+                    s3 += r3[j] * xs[j];
+                }
+                y3[off + i] = s3;
+            } else if (band2) {
+                const double *r2 = band2 + r;
+                for (int j = lo; j <= hi; j++) { s1 += r1[j] * xs[j]; s2 += r2[j] * xs[j]; }
+            } else {
+                for (int j = lo; j <= hi; j++) s1 += r1[j] * xs[j];
             }
+            if (band2) y2[off + i] = s2;
             y1[off + i] = s1;
-            y2[off + i] = s2;
-            y3[off + i] = s3;
         }
     }
+}
+
+static void band_matvec2(const Model *m, const double *band1, double *y1, const double *band2,
+                         double *y2, const double *x) {
+    band_matvec3(m, band1, y1, band2, y2, NULL, NULL, x);
 }
 
 static void band_matvec(const Model *m, const double *band, const double *x, double *y, int acc) {
