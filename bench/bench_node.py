@@ -2,16 +2,19 @@
 """
 Measure umbrella_node timing from a separate subscriber process over DDS.
 
-N = 2, default config.  Prints:
-  * CPU per simulated second of the node process (all its threads: physics, publication,
-    recording writer, executor) at real_time_factor = 1 and publish_rate 1 kHz (--cpu-rate),
-    without and with recording (--cpu-seconds of steady state, after a 2 s warm-up);
+Default config.  Prints:
+  * a table of CPU seconds per simulated second of the node process (all its threads:
+    physics, publication, recording writer, executor) at real_time_factor = 1, for
+    N = 2 and 8 (--cpu-elements) x publish_rate 100 Hz and 1 kHz (--cpu-rates), without and
+    with recording (--cpu-seconds of steady state, after a 2 s warm-up), with the load
+    average (the machine may be shared: the figures include what other load costs the node);
   * the achieved real-time factor with real_time_factor = 0 (as fast as possible);
   * at real_time_factor = 1, publish_rate 200 Hz and 1 kHz: p50 / p99 of |interval - period|
     of /clock arrivals, and the sim-time vs wall-time drift over the run (--seconds, 60).
 The arrival times include DDS transport, so they bound the node's own publication jitter.
 
     python bench/bench_node.py [--seconds 60] [--elements 2] [--rates 200 1000]
+    python bench/bench_node.py --cpu-only            # the CPU table only
     # the 10-minute drift run:
     python bench/bench_node.py --seconds 600 --rates 200 --fast-seconds 0
 """
@@ -76,6 +79,47 @@ def cpu_per_sim_second(probe: Probe, n_el: int, rate: float, record: bool, secon
     return (c1 - c0) / (s1 - s0), (s1 - s0) / (w1 - w0)
 
 
+def physics_alone(n_el: int, rate: float, sim_seconds: float = 1.0) -> float:
+    """
+    Return the CPU s per simulated s of the physics alone (this process, no ROS).
+
+    PublicationDriver.advance, one publication period at a time (steps, StepBlock, summary),
+    without messages: the node's figure minus this one is the publication path's cost.
+    """
+    from umbrella_sim.params import UmbrellaParams
+    from umbrella_sim.publication import PublicationDriver
+    driver = PublicationDriver(UmbrellaParams(elements_per_segment=n_el), rate)
+    periods = int(round(sim_seconds * rate))
+    for _ in range(periods // 10):           # warm-up
+        driver.advance()
+    c0 = time.thread_time()
+    for _ in range(periods):
+        driver.advance()
+    return (time.thread_time() - c0) / (periods / rate)
+
+
+def cpu_table(args) -> None:
+    """Print CPU s per simulated s, without and with recording, for each N and rate."""
+    probe = Probe("bench_cpu_probe")
+    probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
+    print("CPU seconds per simulated second of umbrella_node (all threads), real_time_factor 1;"
+          "\nphysics alone: the same periods stepped in this process without ROS (the "
+          "difference is\nthe publication path: messages, publishing, recording, pacing)")
+    print(f"{'N':>3} {'rate Hz':>8} {'no recording':>13} {'recording':>10} "
+          f"{'physics alone':>14} {'achieved x':>11} {'loadavg':>8}")
+    try:
+        for n_el in args.cpu_elements:
+            for rate in args.cpu_rates:
+                row = [cpu_per_sim_second(probe, n_el, rate, record, args.cpu_seconds)
+                       for record in (False, True)]
+                alone = physics_alone(n_el, rate)
+                print(f"{n_el:>3} {rate:>8g} {row[0][0]:>13.3f} {row[1][0]:>10.3f} "
+                      f"{alone:>14.3f} {min(r[1] for r in row):>11.3f} "
+                      f"{os.getloadavg()[0]:>8.2f} (on {os.cpu_count()} CPUs)", flush=True)
+    finally:
+        probe.close()
+
+
 def paced(probe: Probe, n_el: int, rate: float, seconds: float):
     topic = "/clock"
     probe.received[topic] = []
@@ -116,26 +160,16 @@ def main():
                     help="sim seconds of the as-fast-as-possible run (0 skips it)")
     ap.add_argument("--rates", type=float, nargs="+", default=[200.0, 1000.0],
                     help="publish rates (Hz) of the paced runs")
-    ap.add_argument("--cpu-rate", type=float, default=1000.0,
-                    help="publish rate (Hz) of the CPU measurement (0 skips it)")
+    ap.add_argument("--cpu-rates", type=float, nargs="*", default=[100.0, 1000.0],
+                    help="publish rates (Hz) of the CPU table (none skips it)")
+    ap.add_argument("--cpu-elements", type=int, nargs="+", default=[2, 8],
+                    help="elements per segment of the CPU table")
     ap.add_argument("--cpu-seconds", type=float, default=10.0,
                     help="wall seconds of steady state the CPU is measured over")
     ap.add_argument("--cpu-only", action="store_true", help="only the CPU measurement")
     args = ap.parse_args()
-    if args.cpu_rate > 0:
-        probe = Probe("bench_cpu_probe")
-        probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
-        try:
-            for record in (False, True):
-                cpu, pace = cpu_per_sim_second(probe, args.elements, args.cpu_rate, record,
-                                               args.cpu_seconds)
-                print(f"N = {args.elements}, {args.cpu_rate:g} Hz publication, "
-                      f"{'with' if record else 'without'} recording: {cpu:.3f} CPU s per "
-                      f"simulated s (node process, all threads; achieved {pace:.3f}x real "
-                      f"time; loadavg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs)",
-                      flush=True)
-        finally:
-            probe.close()
+    if args.cpu_rates:
+        cpu_table(args)
         if args.cpu_only:
             return
     if args.fast_seconds > 0:

@@ -244,9 +244,12 @@ class UmbrellaNode(Node):
             self.recorder.write(topic, msg, ros_io.stamp_ns(t), data)
 
     def _publish(self, key: str, msg, t: float) -> None:
-        pub = self.pub[key]
-        data = serialize_message(msg)   # once: the publisher and the recorder share the bytes
-        pub.publish(data)
+        """Publish a message, or the exact CDR bytes of one, and record the same bytes."""
+        if isinstance(msg, bytes):      # ros_io.SampleEncoder's: exact size already
+            data, msg = msg, None
+        else:
+            data = serialize_message(msg)   # once: the publisher and the recorder share it
+        self.pub[key].publish(data)
         name = self._topic_name[key]
         self.published[name] = self.published.get(name, 0) + 1
         self._record(name, msg, t, data)

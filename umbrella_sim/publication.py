@@ -64,6 +64,8 @@ class PublicationDriver:
         self.summary = SummaryAccumulator(self.sim.params.as_dict(), first,
                                           self.sim.engine.lock_kind)
         self._peaks: dict = {}       # peak stresses over the steps since the last publication
+        self._first = first
+        self._encoders: dict[str, ros_io.SampleEncoder] = {}    # by frame_prefix
 
     @property
     def backend(self) -> str:
@@ -128,9 +130,21 @@ class PublicationDriver:
         return s
 
     def messages(self, marker_ns: str, magnification: float, frame_prefix: str = "") -> dict:
-        """Return the messages of the current state; markers only at their own rate."""
-        s = self.publication_sample()
-        with_markers = self.periods % self.marker_every == 0
-        positions = self.sim.model.node_positions(s.q, magnification) if with_markers else None
-        return ros_io.sample_messages(s, self.sim.params, positions, marker_ns,
-                                      self.initial_energy, frame_prefix)
+        """
+        Return what the current state publishes, keyed as ros_io.TOPICS.
+
+        The per-publication topics as their CDR bytes (ros_io.SampleEncoder: built once,
+        published and recorded as they are); the markers, at their own rate only, as a
+        MarkerArray (serialized once by whoever publishes it).  The Sample they carry is
+        kept as ``published_sample``.
+        """
+        s = self.published_sample = self.publication_sample()
+        encoder = self._encoders.get(frame_prefix)
+        if encoder is None:
+            encoder = self._encoders[frame_prefix] = ros_io.SampleEncoder(
+                self._first, self.sim.params, self.initial_energy, frame_prefix)
+        out: dict = encoder.encode(s)
+        if self.periods % self.marker_every == 0:
+            out["markers"] = ros_io.markers_msg(
+                s, self.sim.model.node_positions(s.q, magnification), marker_ns, frame_prefix)
+        return out

@@ -718,7 +718,8 @@ class BagRecorder:
 
         Record one message at sim time t_ns (plus the segment's log-time offset); False
         once the recording has stopped (closed or failed).  data: serialize_message(msg)
-        when the caller has it already (the node publishes those bytes).  With a background
+        when the caller has it already (the node publishes those bytes); msg None: data is
+        the message's exact CDR (ros_io.SampleEncoder), written as it is.  With a background
         writer the message is queued (msg must not be changed afterwards) and True means
         queued; a later write error shows in ``error``, ``on_error`` and the next call.
         """
@@ -739,7 +740,8 @@ class BagRecorder:
     def _write_now(self, topic: str, msg, t_ns: int, data: bytes | None) -> bool:
         if self._closed:
             return False
-        data = cdr_bytes(msg, data)
+        if msg is not None:         # else data is the exact CDR already (ros_io.SampleEncoder)
+            data = cdr_bytes(msg, data)
         with self._lock:
             if self._closed:
                 return False
@@ -892,7 +894,10 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
 
     def publish(key, msg, t):
         published[topics[key]] = published.get(topics[key], 0) + 1
-        rec.write(topics[key], msg, ros_io.stamp_ns(t))
+        if isinstance(msg, bytes):      # exact CDR from ros_io.SampleEncoder, as the node's
+            rec.write(topics[key], None, ros_io.stamp_ns(t), msg)
+        else:
+            rec.write(topics[key], msg, ros_io.stamp_ns(t))
 
     def commands_until(t):
         # each command at its own time, as the node records one at receipt

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import struct
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -140,22 +141,34 @@ def clock_msg(t: float) -> Clock:
     return Clock(clock=stamp(t))
 
 
+def joint_state_values(s: Sample) -> tuple:
+    """Return position, velocity, effort of JOINT_NAMES (relative link angle, sleeve along Y)."""
+    return ((s.alpha1, s.alpha2 - s.alpha1, s.sleeve_position),
+            (s.alpha1_rate, s.alpha2_rate - s.alpha1_rate, s.sleeve_velocity),
+            (0.0, 0.0, s.sleeve_force))
+
+
 def joint_state_msg(s: Sample, frame_prefix: str = "") -> JointState:
     msg = JointState()
     msg.header.stamp = stamp(s.time)
     msg.header.frame_id = frame_prefix + INERTIAL_FRAME
     msg.name = list(JOINT_NAMES)
-    msg.position = [s.alpha1, s.alpha2 - s.alpha1, s.sleeve_position]
-    msg.velocity = [s.alpha1_rate, s.alpha2_rate - s.alpha1_rate, s.sleeve_velocity]
-    msg.effort = [0.0, 0.0, s.sleeve_force]
+    position, velocity, effort = joint_state_values(s)
+    msg.position, msg.velocity, msg.effort = list(position), list(velocity), list(effort)
     return msg
+
+
+def tip_deflection_values(s: Sample) -> tuple:
+    """Return the tip G in the leaf frame: axial u, transverse v, 0 (m)."""
+    return (s.tip_axial, s.tip_transverse, 0.0)
 
 
 def tip_deflection_msg(s: Sample, frame_prefix: str = "") -> PointStamped:
     msg = PointStamped()
     msg.header.stamp = stamp(s.time)
     msg.header.frame_id = frame_prefix + LEAF_FRAME
-    msg.point = Point(x=s.tip_axial, y=s.tip_transverse, z=0.0)
+    x, y, z = tip_deflection_values(s)
+    msg.point = Point(x=x, y=y, z=z)
     return msg
 
 
@@ -164,31 +177,41 @@ PEAK_STRESS_LABELS = ("body: leaf,link",
 ENERGY_LABEL = "field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J,damping_J"
 
 
-def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
+def peak_stress_values(s: Sample, yield_strength: float) -> tuple:
     """
-    Build the peak_stress message.
+    Return the peak_stress data.
 
     Per body: peak |sigma|, where, ratio to yield, and the reference stress (top fibre;
     leaf at O'', link at mid-span: the thesis's Fig. 6.5 and 6.6).
     """
+    return (s.peak_stress_leaf, s.peak_stress_leaf_x, s.peak_stress_leaf / yield_strength,
+            s.stress_leaf_joint,
+            s.peak_stress_link, s.peak_stress_link_x, s.peak_stress_link / yield_strength,
+            s.stress_link_mid)
+
+
+def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
+    """Build the peak_stress message (peak_stress_values, labelled layout)."""
     msg = Float64MultiArray()
     msg.layout.dim = [MultiArrayDimension(label=PEAK_STRESS_LABELS[0], size=2, stride=8),
                       MultiArrayDimension(label=PEAK_STRESS_LABELS[1], size=4, stride=4)]
     msg.layout.data_offset = 0
-    msg.data = [s.peak_stress_leaf, s.peak_stress_leaf_x, s.peak_stress_leaf / yield_strength,
-                s.stress_leaf_joint,
-                s.peak_stress_link, s.peak_stress_link_x, s.peak_stress_link / yield_strength,
-                s.stress_link_mid]
+    msg.data = list(peak_stress_values(s, yield_strength))
     return msg
+
+
+def energy_values(s: Sample, initial_energy: float) -> tuple:
+    """Return kinetic, strain, work, lock loss, balance error, damping (J; ENERGY_LABEL)."""
+    balance = (s.kinetic_energy + s.strain_energy - initial_energy - s.work + s.lock_energy_loss
+               + s.damping_dissipation)
+    return (s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss, balance,
+            s.damping_dissipation)
 
 
 def energy_msg(s: Sample, initial_energy: float) -> Float64MultiArray:
     msg = Float64MultiArray()
     msg.layout.dim = [MultiArrayDimension(label=ENERGY_LABEL, size=6, stride=6)]
-    balance = (s.kinetic_energy + s.strain_energy - initial_energy - s.work + s.lock_energy_loss
-               + s.damping_dissipation)
-    msg.data = [s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss, balance,
-                s.damping_dissipation]
+    msg.data = list(energy_values(s, initial_energy))
     return msg
 
 
@@ -244,6 +267,74 @@ def diagnostics_msg(t: float, name: str, level: bytes, message: str,
     st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
     msg.status = [st]
     return msg
+
+
+class SampleEncoder:
+    """
+    The per-publication topics of a Sample straight to CDR bytes (the publication hot path).
+
+    Each topic's bytes are those of rclpy's serializer for the message the builders above
+    make (``sample_messages``), trimmed to the exact size as ``ros2 bag record`` writes
+    them: a template serialized once from the builders' message holds the constant part
+    (layout, labels, joint names, frame ids), and each publication packs only the stamp and
+    the doubles into a copy of it.  No message objects per publication: the node publishes
+    these bytes (Publisher.publish takes serialized bytes) and the recorder writes them.
+    """
+
+    #: topic key -> doubles at the end of the message, as groups (a sequence or a struct)
+    GROUPS = {"energy": (6,), "clock": (), "joint_states": (3, 3, 3), "tip_deflection": (3,),
+              "peak_stress": (8,)}
+    #: topics with a stamp (header.stamp, Clock.clock) right after the 4-byte CDR header
+    STAMPED = ("clock", "joint_states", "tip_deflection")
+
+    def __init__(self, first: Sample, params: UmbrellaParams, initial_energy: float,
+                 frame_prefix: str = ""):
+        from .recording import cdr_bytes       # the exact-size rule, one place
+        self.yield_strength = params.yield_strength
+        self.initial_energy = initial_energy
+        msgs = sample_messages(first, params, None, "", initial_energy, frame_prefix)
+        self._templates = {k: cdr_bytes(msgs[k]) for k in self.GROUPS}
+        self._doubles = {k: self._offsets(len(self._templates[k]), g)
+                         for k, g in self.GROUPS.items()}
+        self._stamp = struct.Struct("<iI")
+
+    @staticmethod
+    def _offsets(size: int, groups: tuple) -> list:
+        """
+        Return [(offset, Struct)] of the trailing groups of doubles of a message.
+
+        CDR (XCDR1, 8-aligned doubles): the last group ends the message; before each later
+        sequence of doubles sit its 4-byte count and 4 pad bytes, since every group of
+        doubles ends 8-aligned.
+        """
+        out, end = [], size
+        for k in reversed(groups):
+            start = end - 8 * k
+            out.append((start, struct.Struct(f"<{k}d")))
+            end = start - 8
+        return out[::-1]
+
+    def _fill(self, key: str, sec: int, nsec: int, groups) -> bytes:
+        buf = bytearray(self._templates[key])
+        if key in self.STAMPED:
+            self._stamp.pack_into(buf, 4, sec, nsec)
+        for (offset, layout), values in zip(self._doubles[key], groups):
+            layout.pack_into(buf, offset, *values)
+        return bytes(buf)
+
+    def encode(self, s: Sample) -> dict[str, bytes]:
+        """Return the CDR bytes of every per-publication topic of s, keyed as TOPICS."""
+        ns = stamp_ns(s.time)
+        sec, nsec = ns // 1_000_000_000, ns % 1_000_000_000
+        return {
+            "energy": self._fill("energy", sec, nsec, (energy_values(s, self.initial_energy),)),
+            "clock": self._fill("clock", sec, nsec, ()),
+            "joint_states": self._fill("joint_states", sec, nsec, joint_state_values(s)),
+            "tip_deflection": self._fill("tip_deflection", sec, nsec,
+                                         (tip_deflection_values(s),)),
+            "peak_stress": self._fill("peak_stress", sec, nsec,
+                                      (peak_stress_values(s, self.yield_strength),)),
+        }
 
 
 def sample_messages(s: Sample, params: UmbrellaParams, positions, marker_ns: str,
