@@ -1035,6 +1035,31 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
     return status;
 }
 
+/* umbrella_advance's arguments in one struct the caller keeps and updates (integrators.py
+ * _AdvanceCall, same order): from Python, converting 22 ctypes arguments cost as much as
+ * half a physics step, setting the few that change costs a tenth of that */
+typedef struct {
+    int locked, rigid;
+    long k0;
+    double h;
+    int n_steps;
+    double force, tol, phi_tol;
+    int max_iter;
+    double div_tol;
+    double *q, *v, *lam, *p, *acc, *out;
+    int cap;
+    int n_done, iterations;
+    double residual;
+    double *accel;
+} AdvanceCall;
+
+int umbrella_advance_call(Ctx *x, AdvanceCall *a) {
+    return umbrella_advance(x, a->locked, a->rigid, a->q, a->v, a->lam, a->p, a->k0, a->h,
+                            a->n_steps, a->force, a->tol, a->phi_tol, a->max_iter, a->div_tol,
+                            a->acc, a->out, a->cap, &a->n_done, &a->iterations, &a->residual,
+                            a->accel);
+}
+
 /* one output row for an arbitrary state (after the lock step, tests) */
 void umbrella_outputs(Ctx *x, const double *q, const double *v, const double *p, double t,
                       int stage, double force, double work, double lock_loss, double *out,
@@ -1132,4 +1157,16 @@ void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const doubl
         if (!(a <= r)) r = a;
     }
     *residual = r;
+}
+
+/* umbrella_sample's arguments in one struct (integrators.py _SampleCall), as AdvanceCall */
+typedef struct {
+    int locked, rigid;
+    const double *q, *v, *p;
+    double *row, *stress;
+    double residual;
+} SampleCall;
+
+void umbrella_sample_call(Ctx *x, SampleCall *a) {
+    umbrella_sample(x, a->locked, a->rigid, a->q, a->v, a->p, a->row, a->stress, &a->residual);
 }

@@ -313,6 +313,25 @@ class _ModelStruct(ctypes.Structure):
                 ("stress_bottom", _dp), ("stress_x", _dp)]
 
 
+class _AdvanceCall(ctypes.Structure):
+    """Mirror of ``AdvanceCall`` in _kernel.c: umbrella_advance's arguments, kept and updated."""
+
+    _fields_ = [("locked", ctypes.c_int), ("rigid", ctypes.c_int), ("k0", ctypes.c_long),
+                ("h", ctypes.c_double), ("n_steps", ctypes.c_int), ("force", ctypes.c_double),
+                ("tol", ctypes.c_double), ("phi_tol", ctypes.c_double),
+                ("max_iter", ctypes.c_int), ("div_tol", ctypes.c_double),
+                ("q", _dp), ("v", _dp), ("lam", _dp), ("p", _dp), ("acc", _dp), ("out", _dp),
+                ("cap", ctypes.c_int), ("n_done", ctypes.c_int), ("iterations", ctypes.c_int),
+                ("residual", ctypes.c_double), ("accel", _dp)]
+
+
+class _SampleCall(ctypes.Structure):
+    """Mirror of ``SampleCall`` in _kernel.c: umbrella_sample's arguments."""
+
+    _fields_ = [("locked", ctypes.c_int), ("rigid", ctypes.c_int), ("q", _dp), ("v", _dp),
+                ("p", _dp), ("row", _dp), ("stress", _dp), ("residual", ctypes.c_double)]
+
+
 _KERNEL_ERRORS = {1: "Newton did not converge", 2: "Newton iterate became non-finite",
                   3: "singular iteration matrix", 4: "mass matrix not positive definite",
                   5: "out of memory"}
@@ -343,11 +362,10 @@ def load_kernel():
                                           _dp, _dp, _dp, _dp, _ip]
             lib.umbrella_momentum.restype = None
             lib.umbrella_momentum.argtypes = [vp, _dp, _dp, _dp]
-            lib.umbrella_advance.restype = i
-            lib.umbrella_advance.argtypes = [vp, i, i, _dp, _dp, _dp, _dp, ctypes.c_long, d, i,
-                                             d, d, d, i, d, _dp, _dp, i, _ip, _ip, _dp, _dp]
-            lib.umbrella_sample.restype = None
-            lib.umbrella_sample.argtypes = [vp, i, i, _dp, _dp, _dp, _dp, _dp, _dp]
+            lib.umbrella_advance_call.restype = i
+            lib.umbrella_advance_call.argtypes = [vp, ctypes.POINTER(_AdvanceCall)]
+            lib.umbrella_sample_call.restype = None
+            lib.umbrella_sample_call.argtypes = [vp, ctypes.POINTER(_SampleCall)]
             lib.umbrella_find_crossing.restype = i
             lib.umbrella_find_crossing.argtypes = [vp, i, _dp, _dp, _dp, _dp, d, d, d, d, i, d,
                                                    d, _dp, _dp, _dp, _dp, _dp, _dp, _ip]
@@ -411,9 +429,11 @@ class CompiledKernel:
         self.lam = np.zeros(nc_max)
         self.acc = np.zeros(3)                     # work, lock loss, damping dissipation (J)
         self._ptr = {k: _dptr(getattr(self, k)) for k in ("q", "v", "p", "lam", "acc", "accel")}
-        self._n_done, self._its = ctypes.c_int(0), ctypes.c_int(0)
-        self._residual = ctypes.c_double(0.0)
-        self._refs = tuple(ctypes.byref(o) for o in (self._n_done, self._its, self._residual))
+        self._its = ctypes.c_int(0)
+        ptr = self._ptr
+        self._call = _AdvanceCall(phi_tol=PHI_TOLERANCE, q=ptr["q"], v=ptr["v"], lam=ptr["lam"],
+                                  p=ptr["p"], acc=ptr["acc"], accel=ptr["accel"])
+        self._call_ref = ctypes.byref(self._call)
         self._set_capacity(capacity)
         self._made = None        # the DynamicState the buffers hold (see load)
         self._sample_buf = None
@@ -432,6 +452,7 @@ class CompiledKernel:
         self.out = np.zeros((len(STEP_FIELDS), cap))
         self._out_ptr = _dptr(self.out)
         self.capacity = cap
+        self._call.out, self._call.cap = self._out_ptr, cap
 
     def load(self, s: DynamicState, work: float, lock_loss: float) -> None:
         """Take s as the state to advance from (nothing to copy if it is the last one made)."""
@@ -458,12 +479,12 @@ class CompiledKernel:
         """
         if n_steps > self.capacity:
             self._set_capacity(max(n_steps, 2 * self.capacity))
-        ptr = self._ptr
-        status = self.lib.umbrella_advance(
-            self._ctx, cs.locked, cs.rigid, ptr["q"], ptr["v"], ptr["lam"], ptr["p"], k0, h,
-            n_steps, force, tol, PHI_TOLERANCE, max_iter, div_tol, ptr["acc"], self._out_ptr,
-            self.capacity, *self._refs, ptr["accel"])
-        return status, self._n_done.value, self._its.value, self._residual.value
+        call = self._call
+        call.locked, call.rigid, call.k0, call.h = cs.locked, cs.rigid, k0, h
+        call.n_steps, call.force, call.tol = n_steps, force, tol
+        call.max_iter, call.div_tol = max_iter, div_tol
+        status = self.lib.umbrella_advance_call(self._ctx, self._call_ref)
+        return status, call.n_done, call.iterations, call.residual
 
     def state(self, t: float, nc: int) -> DynamicState:
         """Return the advanced state; advancing from it next time needs no load."""
@@ -482,18 +503,21 @@ class CompiledKernel:
         if self._sample_buf is None:
             from .outputs import STEP_FIELDS
             points = len(self.model.leaf.stress_x) + len(self.model.link.stress_x)
-            row, stress, res = (np.zeros(len(STEP_FIELDS)), np.zeros((2, points)),
-                                ctypes.c_double(0.0))
-            self._sample_buf = (row, stress, res, _dptr(row), _dptr(stress), ctypes.byref(res))
-        row, stress, res, row_p, stress_p, res_p = self._sample_buf
-        if s is self._made:              # the buffers hold it: no conversion
-            q, v, p = self._ptr["q"], self._ptr["v"], self._ptr["p"]
-        else:
+            row, stress = np.zeros(len(STEP_FIELDS)), np.zeros((2, points))
+            ptr = self._ptr
+            # one call struct on the buffers (the state last made), one for any other state
+            calls = [_SampleCall(row=_dptr(row), stress=_dptr(stress)) for _ in range(2)]
+            calls[0].q, calls[0].v, calls[0].p = ptr["q"], ptr["v"], ptr["p"]
+            self._sample_buf = (row, stress, calls, [ctypes.byref(c) for c in calls])
+        row, stress, calls, refs = self._sample_buf
+        which = 0 if s is self._made else 1          # the buffers hold it: no conversion
+        call = calls[which]
+        if which:
             arrays = [np.ascontiguousarray(a, dtype=float) for a in (s.q, s.qd, s.momentum)]
-            q, v, p = (_dptr(a) for a in arrays)
-        self.lib.umbrella_sample(self._ctx, int(cs.locked), int(cs.rigid), q, v, p, row_p,
-                                 stress_p, res_p)
-        return row.copy(), stress.copy(), res.value
+            call.q, call.v, call.p = (_dptr(a) for a in arrays)
+        call.locked, call.rigid = cs.locked, cs.rigid
+        self.lib.umbrella_sample_call(self._ctx, refs[which])
+        return row.copy(), stress.copy(), call.residual
 
     def find_crossing(self, s: DynamicState, h: float, force: float, cs: ConstraintSet,
                       tol: float, max_iter: int, div_tol: float, event_tol: float):

@@ -14,6 +14,7 @@ from __future__ import annotations
 import abc
 from dataclasses import replace
 import math
+import operator
 import re
 import time as _time
 from typing import Callable, Iterable
@@ -640,11 +641,10 @@ class UmbrellaSimulator:
                 lock_loss: float) -> Sample:
         m, eng = self.model, self.engine
         q, qd, qdd = eng.fe_state(s)
-        lam = np.asarray(s.multipliers, dtype=float)
         fast = eng.sample_outputs(s, stage)
         if fast is not None:          # compiled: the figures below in one call
             row, stress, residual = fast
-            f = dict(zip(STEP_FIELDS, row.tolist()))
+            values = dict(zip(_SAMPLE_FIELDS_FROM_ROW, _pick_from_row(row.tolist())))
             n_leaf = len(m.leaf.stress_x)
             leaf_stress, link_stress = stress[:, :n_leaf], stress[:, n_leaf:]
             lt, kt = leaf_stress[0], link_stress[0]
@@ -654,29 +654,29 @@ class UmbrellaSimulator:
             link_abs = np.maximum(np.abs(kt), np.abs(kb))
             il, ik = int(np.argmax(leaf_abs)), int(np.argmax(link_abs))
             tip_u, tip_v = m.tip_displacement(q)
-            f = {"sleeve_position": float(m.sleeve_height(q)),
-                 "sleeve_velocity": float(m.sleeve_height_gradient(q) @ qd),
-                 "tip_axial": tip_u, "tip_transverse": tip_v,
-                 "peak_stress_leaf": float(leaf_abs[il]),
-                 "peak_stress_leaf_x": float(m.leaf.stress_x[il]),
-                 "peak_stress_link": float(link_abs[ik]),
-                 "peak_stress_link_x": float(m.link.stress_x[ik]),
-                 "kinetic_energy": eng.kinetic_energy(s),
-                 "strain_energy": float(m.strain_energy(q))}
+            values = {"sleeve_position": float(m.sleeve_height(q)),
+                      "sleeve_velocity": float(m.sleeve_height_gradient(q) @ qd),
+                      "tip_axial": tip_u, "tip_transverse": tip_v,
+                      "peak_stress_leaf": float(leaf_abs[il]),
+                      "peak_stress_leaf_x": float(m.leaf.stress_x[il]),
+                      "peak_stress_link": float(link_abs[ik]),
+                      "peak_stress_link_x": float(m.link.stress_x[ik]),
+                      "kinetic_energy": eng.kinetic_energy(s),
+                      "strain_energy": float(m.strain_energy(q))}
             residual = eng.residual(s, stage)
             leaf_stress, link_stress = np.array((lt, lb)), np.array((kt, kb))
         joint_stress, mid_link_stress = m.reference_stresses(lt, kt)
+        ia = m.i_alpha2
         # every field of Sample (build_frozen: once per publication, without a frozen
         # dataclass's per-field setattr)
-        values = {name: f[name] for name in _SAMPLE_FIELDS_FROM_ROW}
         values.update({
             "time": s.t, "stage": Stage(stage), "q": q.copy(), "qd": qd.copy(),
-            "alpha1": float(q[0]), "alpha2": float(q[m.i_alpha2]),
-            "alpha1_rate": float(qd[0]), "alpha2_rate": float(qd[m.i_alpha2]),
-            "alpha1_accel": float(qdd[0]), "sleeve_force": force,
+            "alpha1": q.item(0), "alpha2": q.item(ia), "alpha1_rate": qd.item(0),
+            "alpha2_rate": qd.item(ia), "alpha1_accel": qdd.item(0), "sleeve_force": force,
             "leaf_stress": leaf_stress, "link_stress": link_stress,
             "stress_leaf_joint": joint_stress, "stress_link_mid": mid_link_stress,
-            "multipliers": lam.copy(), "sleeve_reaction": eng.sleeve_reaction(s, stage),
+            "multipliers": np.array(s.multipliers, dtype=float),
+            "sleeve_reaction": eng.sleeve_reaction(s, stage),
             "work": float(work), "lock_energy_loss": float(lock_loss),
             "constraint_residual": residual,
             "damping_dissipation": float(getattr(s, "dissipation", 0.0))})
@@ -687,6 +687,7 @@ class UmbrellaSimulator:
 _SAMPLE_FIELDS_FROM_ROW = ("sleeve_position", "sleeve_velocity", "tip_axial", "tip_transverse",
                            "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
                            "peak_stress_link_x", "kinetic_energy", "strain_energy")
+_pick_from_row = operator.itemgetter(*(STEP_FIELDS.index(f) for f in _SAMPLE_FIELDS_FROM_ROW))
 
 
 def simulate(params: UmbrellaParams, duration: float,
