@@ -22,6 +22,7 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
+from umbrella_sim.model import Stage  # noqa: E402
 from umbrella_sim.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.solver import UmbrellaSimulator  # noqa: E402
 
@@ -31,15 +32,30 @@ CASES = (("flexible", 0.0), ("flexible", 0.02), ("flexible-nonlinear", 0.0),
 
 
 def one_run(params, duration):
-    """Whole run in 1 ms blocks of simulated time (what the node pays): wall, CPU seconds."""
+    """
+    Whole run in 1 ms blocks of simulated time (what the node pays).
+
+    Returns wall and CPU seconds, the simulator, and the Newton iterations per step in stage 1
+    and in stage 2 (counted at the first block boundary after the lock).
+    """
     sim = UmbrellaSimulator(params)
+    integ = sim.engine.integrator
     per_block = max(1, round(1e-3 / sim.h))
+    at_lock = None
     t0, c0 = time.perf_counter(), time.process_time()
     while sim.time < duration - 1e-12:
         block = sim.advance(per_block)
         if block.error:
             raise SystemExit(f"{params.model}: {block.error}")
-    return time.perf_counter() - t0, time.process_time() - c0, sim
+        if at_lock is None and sim.stage == Stage.LOCKED:
+            at_lock = (integ.iterations, sim.steps)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    its1 = its2 = float("nan")
+    if at_lock is not None:
+        its1 = at_lock[0] / at_lock[1]
+        if sim.steps > at_lock[1]:
+            its2 = (integ.iterations - at_lock[0]) / (sim.steps - at_lock[1])
+    return wall, cpu, sim, its1, its2
 
 
 def main():
@@ -53,9 +69,10 @@ def main():
     print(f"V0 = -0.2, t = 0 -> {args.duration:g} s through the lock, h = {args.time_step:g} s, "
           f"best of {args.repeat}, 1 ms blocks; loadavg {os.getloadavg()[0]:.2f} on "
           f"{os.cpu_count()} CPUs")
+    print("newton/step 1|2: Newton iterations per step in stage 1 (deploying) | stage 2 (locked)")
     print("RTF = simulated s per second (CPU: process time, what the step costs; wall: what a "
           "loaded machine gave)")
-    print(f"{'model':>19} {'zeta':>5} {'N':>3} {'dofs':>5} {'backend':>8} {'newton/step':>11} "
+    print(f"{'model':>19} {'zeta':>5} {'N':>3} {'dofs':>5} {'backend':>8} {'newton/step 1|2':>15} "
           f"{'us/step':>8} {'RTF cpu':>8} {'RTF wall':>9} {'target':>9}")
     for n in args.meshes:
         for model, zeta in CASES:
@@ -63,11 +80,10 @@ def main():
                                time_step=args.time_step)
             walls, cpus = [], []
             for _ in range(args.repeat):
-                wall, cpu, sim = one_run(p, args.duration)
+                wall, cpu, sim, its1, its2 = one_run(p, args.duration)
                 walls.append(wall)
                 cpus.append(cpu)
             integ = sim.engine.integrator
-            its = integ.iterations / sim.steps
             us_step = 1e6 * min(cpus) / sim.steps
             rtf = args.duration / min(cpus)
             rtf_wall = args.duration / min(walls)
@@ -75,7 +91,8 @@ def main():
             verdict = ("" if target is None
                        else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}")
             print(f"{model:>19} {zeta:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} "
-                  f"{its:>11.2f} {us_step:>8.1f} {rtf:>7.2f}x {rtf_wall:>8.2f}x {verdict:>9}")
+                  f"{its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x {rtf_wall:>8.2f}x "
+                  f"{verdict:>9}")
 
 
 if __name__ == "__main__":
