@@ -42,6 +42,9 @@ typedef struct {
     double last_dissipation; /* dq . C(q_m) dq / h of the last elastic_dissipation (J) */
     double band_h;           /* step of the band (the linear strain's band is constant) */
     double *energy_q, energy; /* the last elastic_energy: q (n) and U(q) */
+    double *du_mean;         /* n_el x 6: sum_g w_g / l_e u'_g (d eps_e / dq of the linear strain) */
+    double *g_mat;           /* n_el x 6 x 6: sum_g w_g / l_e v'_g v'_g^T (0: linear strain), so
+                              * eps_e = du_mean . x + x . G x / 2 on the element's coordinates x */
     int energy_valid;
 } ElasticLaw;
 

@@ -10,6 +10,12 @@
  * + sum_g EA w_g eps_e dv_g dv_g^T with g = d eps_e / dq; the material tangent (no
  * geometric part) times beta is the Kelvin-Voigt damping C(q).  AVF gradient over a step:
  * 2-point Gauss in s on [0, 1] (exact: the integrand is cubic in s).
+ *
+ * The element mean over the Gauss points does not depend on the state: elastic_new sums it
+ * once into du_mean = sum_g (w_g / l_e) u'_g and G = sum_g (w_g / l_e) v'_g v'_g^T, so that
+ * eps_e = du_mean . x + x . G x / 2, g = du_mean + G x, the geometric tangent EA l_e eps_e G
+ * and the membrane stress E x . G x / 2 (x: the element's coordinates) cost one 6 x 6
+ * product per element instead of a pass over the Gauss points.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -18,16 +24,15 @@
 #include "_kernel_elastic.h"
 
 #define EDOF 6      /* coordinates of an element: two nodes x (u, v, theta) */
-#define GMAX 8      /* Gauss points per element, at most */
 
 ElasticLaw *elastic_new(const ElasticData *d) {
-    if (d->n_gauss > GMAX || d->n_gauss < 1) return NULL;
+    if (d->n_gauss < 1) return NULL;
     ElasticLaw *law = calloc(1, sizeof(ElasticLaw));
     if (!law) return NULL;
     law->d = *d;
     int w = 2 * d->bw + 1, nc = d->ne + 4;
     size_t doubles = (size_t)d->ne * w + 4 * (size_t)d->n + (size_t)d->n_el * EDOF + d->n_el
-                     + nc + (size_t)(d->n + nc);
+                     + nc + (size_t)(d->n + nc) + (size_t)d->n_el * (EDOF + EDOF * EDOF);
     law->band = calloc(doubles, sizeof(double));
     if (!law->band) { free(law); return NULL; }
     double *p = law->band + (size_t)d->ne * w;
@@ -39,7 +44,20 @@ ElasticLaw *elastic_new(const ElasticData *d) {
     law->g = p; p += (size_t)d->n_el * EDOF;
     law->el_stress = p; p += d->n_el;
     law->lam_base = p; p += nc;
-    law->dx = p;
+    law->dx = p; p += d->n + nc;
+    law->du_mean = p; p += (size_t)d->n_el * EDOF;
+    law->g_mat = p;
+    for (int e = 0; e < d->n_el; e++)
+        for (int gp = 0; gp < d->n_gauss; gp++) {
+            size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
+            double mw = d->mean_w[(size_t)e * d->n_gauss + gp];
+            double *dm = law->du_mean + (size_t)e * EDOF, *gm = law->g_mat + (size_t)e * EDOF * EDOF;
+            for (int k = 0; k < EDOF; k++) {
+                dm[k] += mw * d->du[row + k];
+                if (d->nonlinear)
+                    for (int l = 0; l < EDOF; l++) gm[k * EDOF + l] += mw * d->dv[row + k] * d->dv[row + l];
+            }
+        }
     return law;
 }
 
@@ -49,33 +67,28 @@ void elastic_free(ElasticLaw *law) {
     free(law);
 }
 
-/* eps_e, and v' at the element's Gauss points (b) for the coordinates q */
-static double element_strain(const ElasticData *d, int e, const double *q, double *b) {
+/* eps_e for the coordinates q; x: the element's coordinates, gx = G x (0 for the linear
+ * strain) */
+static double element_strain(const ElasticLaw *law, int e, const double *q, double *x, double *gx) {
+    const ElasticData *d = &law->d;
     const int *iq = d->el_q + (size_t)e * EDOF;
-    double x[EDOF];
+    const double *dm = law->du_mean + (size_t)e * EDOF, *gm = law->g_mat + (size_t)e * EDOF * EDOF;
     for (int k = 0; k < EDOF; k++) x[k] = iq[k] >= 0 ? q[iq[k]] : 0.0;
-    double eps = 0.0;
-    for (int gp = 0; gp < d->n_gauss; gp++) {
-        size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
-        double a = 0.0, v = 0.0;
-        for (int k = 0; k < EDOF; k++) {
-            a += d->du[row + k] * x[k];
-            v += d->dv[row + k] * x[k];
-        }
-        b[gp] = d->nonlinear ? v : 0.0;
-        eps += d->mean_w[(size_t)e * d->n_gauss + gp] * (a + 0.5 * b[gp] * b[gp]);
+    double a = 0.0, xgx = 0.0;
+    for (int k = 0; k < EDOF; k++) {
+        double s = 0.0;
+        for (int l = 0; l < EDOF; l++) s += gm[k * EDOF + l] * x[l];
+        gx[k] = s;
+        a += dm[k] * x[k];
+        xgx += x[k] * s;
     }
-    return eps;
+    return a + 0.5 * xgx;
 }
 
-/* g = d eps_e / dq on the element's coordinates */
-static void element_strain_gradient(const ElasticData *d, int e, const double *b, double *g) {
-    for (int k = 0; k < EDOF; k++) g[k] = 0.0;
-    for (int gp = 0; gp < d->n_gauss; gp++) {
-        size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
-        double mw = d->mean_w[(size_t)e * d->n_gauss + gp];
-        for (int k = 0; k < EDOF; k++) g[k] += mw * (d->du[row + k] + b[gp] * d->dv[row + k]);
-    }
+/* g = d eps_e / dq = du_mean + G x on the element's coordinates */
+static void element_strain_gradient(const ElasticLaw *law, int e, const double *gx, double *g) {
+    const double *dm = law->du_mean + (size_t)e * EDOF;
+    for (int k = 0; k < EDOF; k++) g[k] = dm[k] + gx[k];
 }
 
 /* y[eidx[p]] (+)= scale * (Kb x)[p] */
@@ -106,58 +119,51 @@ static double bending_quadratic(const ElasticData *d, const double *x) {
 }
 
 /* y += scale * (grad U(q) - Kb q), the membrane part, at the elastic q indices */
-static void membrane_gradient(const ElasticData *d, const double *q, double scale, double *y) {
-    double b[GMAX];
+static void membrane_gradient(const ElasticLaw *law, const double *q, double scale, double *y) {
+    const ElasticData *d = &law->d;
+    double x[EDOF], gx[EDOF], g[EDOF];
     for (int e = 0; e < d->n_el; e++) {
-        double eps = element_strain(d, e, q, b);
+        double eps = element_strain(law, e, q, x, gx);
+        element_strain_gradient(law, e, gx, g);
         const int *iq = d->el_q + (size_t)e * EDOF;
-        for (int gp = 0; gp < d->n_gauss; gp++) {
-            size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
-            double nw = scale * d->ea_l[e] * d->mean_w[(size_t)e * d->n_gauss + gp] * eps;
-            for (int k = 0; k < EDOF; k++)
-                if (iq[k] >= 0) y[iq[k]] += nw * (d->du[row + k] + b[gp] * d->dv[row + k]);
-        }
+        double nw = scale * d->ea_l[e] * eps;
+        for (int k = 0; k < EDOF; k++)
+            if (iq[k] >= 0) y[iq[k]] += nw * g[k];
     }
 }
 
 /* band += scale * (tangent of U at q), or its material part (geometric = 0); without the
  * bending stiffness Kb, which the caller adds once */
-static void tangent_band(const ElasticData *d, const double *q, double scale, int geometric,
+static void tangent_band(const ElasticLaw *law, const double *q, double scale, int geometric,
                          double *band) {
+    const ElasticData *d = &law->d;
     int bw = d->bw, w = 2 * bw + 1;
-    double b[GMAX], g[EDOF];
+    double x[EDOF], gx[EDOF], g[EDOF];
     for (int e = 0; e < d->n_el; e++) {
-        double eps = element_strain(d, e, q, b);
-        element_strain_gradient(d, e, b, g);
+        double eps = element_strain(law, e, q, x, gx);
+        element_strain_gradient(law, e, gx, g);
         const int *pos = d->el_pos + (size_t)e * EDOF;
-        double geo[EDOF][EDOF];
-        memset(geo, 0, sizeof(geo));
-        if (geometric && d->nonlinear)
-            for (int gp = 0; gp < d->n_gauss; gp++) {
-                size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
-                double nw = d->ea_l[e] * d->mean_w[(size_t)e * d->n_gauss + gp] * eps;
-                for (int k = 0; k < EDOF; k++)
-                    for (int l = 0; l < EDOF; l++)
-                        geo[k][l] += nw * d->dv[row + k] * d->dv[row + l];
-            }
+        const double *gm = law->g_mat + (size_t)e * EDOF * EDOF;
+        double geo = geometric && d->nonlinear ? d->ea_l[e] * eps : 0.0;   /* times G */
         for (int k = 0; k < EDOF; k++) {
             if (pos[k] < 0) continue;
             double *r = band + (size_t)pos[k] * w + bw - pos[k];
             for (int l = 0; l < EDOF; l++)
-                if (pos[l] >= 0) r[pos[l]] += scale * (d->ea_l[e] * g[k] * g[l] + geo[k][l]);
+                if (pos[l] >= 0) r[pos[l]] += scale * (d->ea_l[e] * g[k] * g[l] + geo * gm[k * EDOF + l]);
         }
     }
 }
 
 /* x . M x with M the material tangent at q (Kb + sum EA l_e g g^T); y (+)= scale M x */
-static double material_apply(const ElasticData *d, const double *q, const double *x, double scale,
-                             double *y) {
-    double b[GMAX], g[EDOF], quad = 0.0;
+static double material_apply(const ElasticLaw *law, const double *q, const double *x,
+                             double scale, double *y) {
+    const ElasticData *d = &law->d;
+    double xe[EDOF], gx[EDOF], g[EDOF], quad = 0.0;
     if (y) bending_matvec(d, x, scale, y, 1);
     quad += bending_quadratic(d, x);
     for (int e = 0; e < d->n_el; e++) {
-        element_strain(d, e, q, b);
-        element_strain_gradient(d, e, b, g);
+        element_strain(law, e, q, xe, gx);
+        element_strain_gradient(law, e, gx, g);
         const int *iq = d->el_q + (size_t)e * EDOF;
         double gx = 0.0;
         for (int k = 0; k < EDOF; k++) if (iq[k] >= 0) gx += g[k] * x[iq[k]];
@@ -177,7 +183,7 @@ void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h
         for (int i = 0; i < n; i++)
             law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]) + d->beta / h * (q1[i] - q0[i]);
         bending_matvec(d, law->qa, 1.0, out, 0);
-        membrane_gradient(d, law->qa, 1.0, out);
+        membrane_gradient(law, law->qa, 1.0, out);
         return;
     }
     /* AVF: Kb q_m (Kb q is linear) + the mean of the membrane gradient at the Gauss points */
@@ -188,14 +194,14 @@ void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h
         law->qa[i] = q0[i] + AVF_S[0] * dq;
         law->qb[i] = q0[i] + AVF_S[1] * dq;
     }
-    membrane_gradient(d, law->qa, 0.5, out);
-    membrane_gradient(d, law->qb, 0.5, out);
+    membrane_gradient(law, law->qa, 0.5, out);
+    membrane_gradient(law, law->qb, 0.5, out);
     if (d->beta > 0.0) {
         for (int i = 0; i < n; i++) {
             law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
             law->qb[i] = q1[i] - q0[i];
         }
-        material_apply(d, law->qa, law->qb, d->beta / h, out);
+        material_apply(law, law->qa, law->qb, d->beta / h, out);
     }
 }
 
@@ -209,11 +215,11 @@ void elastic_iteration_band(ElasticLaw *law, const double *q0, const double *q1,
     law->band_h = h;
     for (int s = 0; s < 2; s++) {
         for (int i = 0; i < n; i++) law->qa[i] = q0[i] + AVF_S[s] * (q1[i] - q0[i]);
-        tangent_band(d, law->qa, 0.25 * h * h * AVF_S[s], 1, law->band);
+        tangent_band(law, law->qa, 0.25 * h * h * AVF_S[s], 1, law->band);
     }
     if (d->beta > 0.0) {
         for (int i = 0; i < n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
-        tangent_band(d, law->qa, 0.5 * h * d->beta, 0, law->band);
+        tangent_band(law, law->qa, 0.5 * h * d->beta, 0, law->band);
     }
 }
 
@@ -222,10 +228,10 @@ double elastic_energy(ElasticLaw *law, const double *q) {
     /* asked for the end of a step, then its output row, then the start of the next */
     if (law->energy_valid && memcmp(q, law->energy_q, sizeof(double) * d->n) == 0)
         return law->energy;
-    double b[GMAX], u = 0.0;
+    double x[EDOF], gx[EDOF], u = 0.0;
     u += bending_quadratic(d, q);
     for (int e = 0; e < d->n_el; e++) {
-        double eps = element_strain(d, e, q, b);
+        double eps = element_strain(law, e, q, x, gx);
         u += d->ea_l[e] * eps * eps;
     }
     memcpy(law->energy_q, q, sizeof(double) * d->n);
@@ -242,7 +248,7 @@ double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, 
             law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
             law->qb[i] = q1[i] - q0[i];
         }
-        diss = d->beta * material_apply(d, law->qa, law->qb, 0.0, NULL) / h;
+        diss = d->beta * material_apply(law, law->qa, law->qb, 0.0, NULL) / h;
     }
     law->last_dissipation = diss;
     return diss;
@@ -250,13 +256,12 @@ double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, 
 
 void elastic_membrane_stress(ElasticLaw *law, const double *q) {
     const ElasticData *d = &law->d;
-    double b[GMAX];
+    double x[EDOF], gx[EDOF];
     for (int e = 0; e < d->n_el; e++) {
-        element_strain(d, e, q, b);
-        double s = 0.0;
-        for (int gp = 0; gp < d->n_gauss; gp++)
-            s += d->mean_w[(size_t)e * d->n_gauss + gp] * 0.5 * b[gp] * b[gp];
-        law->el_stress[e] = d->youngs_modulus * s;
+        element_strain(law, e, q, x, gx);
+        double xgx = 0.0;
+        for (int k = 0; k < EDOF; k++) xgx += x[k] * gx[k];
+        law->el_stress[e] = d->youngs_modulus * 0.5 * xgx;
     }
 }
 
