@@ -81,7 +81,7 @@ def test_reduces_to_linear_model_for_small_motion(runs_v02):
     """
     The nonlinear model tends to the linear one as the motion gets small.
 
-    Deploy time within 1e-5 (the issue's tolerance).  Stage-1 tip deflection: the difference
+    Deploy time within 1e-5 (the tolerance asked).  Stage-1 tip deflection: the difference
     is the cubic and quartic terms of U (the von Karman coupling of the leaf's axial force,
     ~4 N at V0 = -0.2, with its bending), so it grows like the motion, ~V0^2: -0.54 % at
     V0 = -0.2 and -0.14 % at -0.1 at the default step (N = 8), -0.73 % / -0.24 % at this
@@ -98,7 +98,7 @@ def test_reduces_to_linear_model_for_small_motion(runs_v02):
             for model in ("flexible", NL)]
     assert slow[1]["deploy_time"] == pytest.approx(slow[0]["deploy_time"], rel=1e-5)
     diff_01 = slow[1]["tip_deflection_max"] / slow[0]["tip_deflection_max"] - 1.0
-    assert abs(diff_01) < 0.005                   # the issue's 0.5 %
+    assert abs(diff_01) < 0.005                   # the 0.5 % asked
     assert 2.5 < diff_02 / diff_01 < 5.0          # ~V0^2: it vanishes with the motion
     # stage 2 at this amplitude is close to linear too
     assert nl["stage2_tip_period"] == pytest.approx(lin["stage2_tip_period"], rel=0.03)
