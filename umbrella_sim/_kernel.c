@@ -67,6 +67,18 @@ typedef struct {
     const double *cval;       /* nc x JW */
 } Arrow;
 
+/* A constant elastic band F factored once (the elastic mass Mff, or Mff + h^2/4 K of the
+ * step h), with F^-1 of every constant piece of the arrow's border columns, so that the
+ * border solve Y = F^-1 B of a step is two band solves and sums instead of one band solve
+ * per border column (arrow_border_from_solved). */
+typedef struct {
+    double h;              /* the step F is factored for; 0 for Mff, -1 not prepared */
+    double *lu;            /* ne x (2 bw + 1) band LU of F */
+    double *sb[2], *isb[2];  /* F^-1 of the link's sbar rows and their perpendiculars */
+    double *ej, *es;       /* F^-1 e_p at the joint's and the sleeve's axial coordinate */
+    int pj, ps;            /* their elastic positions */
+} SolvedBand;
+
 typedef struct {
     const Model *m;
     int ne, nbmax, width;
@@ -88,6 +100,11 @@ typedef struct {
     int *piv;
     Arrow arrow;           /* the arrow system factored last */
     double *Emass;         /* LU of the constant elastic mass band (projection) */
+    SolvedBand fmass, fiter;   /* Mff; Mff + h^2/4 K of the last step length (linear law) */
+    const double *e_iter;  /* the band LU the iteration matrix's arrow solves use */
+    double *sv, *sdq;      /* work: a body-wise border column, F^-1 dq (ne each) */
+    double cos2, sin2;     /* cos, sin of alpha2 of the last mass_data_from_products */
+    double *solved_buf;    /* storage of fiter, fmass's solves, sv, sdq */
     double *q_s, *v_s, *p_s, *lam_s;  /* single-step results */
     ElasticLaw *law;       /* NULL: U = 1/2 q.K q, undamped; else U, C of the law */
     double dissipated;     /* damping dissipation of the last step (J) */
@@ -163,22 +180,35 @@ static int band_factor(int n, int bw, double *A) {
     return OK;
 }
 
-static void band_solve(int n, int bw, const double *A, double *x) {
+/* x = A^-1 x with A = band_factor's LU; rows away from the ends in full-width loops, so
+ * that with bw a constant (band_solve) the compiler unrolls them */
+static inline __attribute__((always_inline)) void band_solve_bw(int n, const int bw,
+                                                                const double *A, double *x) {
     int w = 2 * bw + 1;
     for (int i = 0; i < n; i++) {
-        int lo = i - bw < 0 ? 0 : i - bw;
         const double *ri = A + (size_t)i * w;
         double s = x[i];
-        for (int j = lo; j < i; j++) s -= ri[j - i + bw] * x[j];
+        if (i >= bw)
+            for (int k = 0; k < bw; k++) s -= ri[k] * x[i - bw + k];
+        else
+            for (int j = 0; j < i; j++) s -= ri[j - i + bw] * x[j];
         x[i] = s;
     }
     for (int i = n - 1; i >= 0; i--) {
-        int hi = i + bw >= n ? n - 1 : i + bw;
         const double *ri = A + (size_t)i * w;
         double s = x[i];
-        for (int j = i + 1; j <= hi; j++) s -= ri[j - i + bw] * x[j];
+        if (i + bw < n)
+            for (int k = 1; k <= bw; k++) s -= ri[bw + k] * x[i + k];
+        else
+            for (int j = i + 1; j < n; j++) s -= ri[j - i + bw] * x[j];
         x[i] = s / ri[bw];
     }
+}
+
+static void band_solve(int n, int bw, const double *A, double *x) {
+    if (bw == 5) band_solve_bw(n, 5, A, x);        /* N >= 2 elements a segment */
+    else if (bw == 4) band_solve_bw(n, 4, A, x);   /* N = 1 */
+    else band_solve_bw(n, bw, A, x);
 }
 
 /* dense LU with partial pivoting, row-major */
@@ -252,10 +282,17 @@ static void band_solve_multi(int n, int bw, const double *A, double *X, int nrhs
  * rows (JW entries: elastic position or -1, value).  On entry S = D.  On exit E = LU(E)
  * (unless e_factored), B = Y = E^-1 B, S = LU(D - C Y). */
 
+static int arrow_schur(const Arrow *a, const double *B, double *S, int *piv);
+
 static int arrow_factor(const Arrow *a, double *E, int e_factored, double *B, double *S, int *piv) {
+    if (!e_factored && band_factor(a->ne, a->bw, E) != OK) return SINGULAR;
+    band_solve_multi(a->ne, a->bw, E, B, a->nb);
+    return arrow_schur(a, B, S, piv);
+}
+
+/* S = LU(D - C Y), given Y = E^-1 B in B */
+static int arrow_schur(const Arrow *a, const double *B, double *S, int *piv) {
     int ne = a->ne, nb = a->nb;
-    if (!e_factored && band_factor(ne, a->bw, E) != OK) return SINGULAR;
-    band_solve_multi(ne, a->bw, E, B, nb);
     for (int r = 0; r < 4; r++) {
         const double *cr = a->C + (size_t)r * ne;
         double *sr = S + r * nb;
@@ -278,23 +315,25 @@ static int arrow_factor(const Arrow *a, double *E, int e_factored, double *B, do
     return lu_factor(nb, S, piv);
 }
 
-/* x = [x_e (ne), x_b (nb)]: rhs in, solution out */
+/* x = [x_e (ne), x_b (nb)]: rhs in, solution out; top_zero: x_e is zero on entry */
 static void arrow_solve(const Arrow *a, const double *E, const double *Y, const double *S,
-                        const int *piv, double *x) {
+                        const int *piv, double *x, int top_zero) {
     int ne = a->ne, nb = a->nb;
     double *xe = x, *xb = x + ne;
-    band_solve(ne, a->bw, E, xe);
-    for (int r = 0; r < 4; r++) {
-        const double *cr = a->C + (size_t)r * ne;
-        double s = 0.0;
-        for (int p = a->lo[r]; p < a->hi[r]; p++) s += cr[p] * xe[p];
-        xb[r] -= s;
-    }
-    for (int r = 0; r < nb - 4; r++)
-        for (int k = 0; k < JW; k++) {
-            int p = a->cpos[r * JW + k];
-            if (p >= 0) xb[4 + r] -= a->cval[r * JW + k] * xe[p];
+    if (!top_zero) {
+        band_solve(ne, a->bw, E, xe);
+        for (int r = 0; r < 4; r++) {
+            const double *cr = a->C + (size_t)r * ne;
+            double s = 0.0;
+            for (int p = a->lo[r]; p < a->hi[r]; p++) s += cr[p] * xe[p];
+            xb[r] -= s;
         }
+        for (int r = 0; r < nb - 4; r++)
+            for (int k = 0; k < JW; k++) {
+                int p = a->cpos[r * JW + k];
+                if (p >= 0) xb[4 + r] -= a->cval[r * JW + k] * xe[p];
+            }
+    }
     lu_solve(nb, S, piv, xb);
     for (int p = 0; p < ne; p++) {
         const double *yp = Y + (size_t)p * nb;
@@ -326,6 +365,8 @@ static void mass_data_from_products(Ctx *x, const double *q) {
         x->maa[m->body[i]] += (m->c_full[i] + h[i]) * q[i];
     }
     double c = cos(q[ia]), s = sin(q[ia]);
+    x->cos2 = c;
+    x->sin2 = s;
     double ub0 = m->pbar0, ub1 = 0.0;
     for (int k = 0; k < nl; k++) {
         ub0 += m->sbar[k] * q[sk + k];
@@ -390,6 +431,22 @@ static double mass_border(const Ctx *x, int i, int c) {
     if (cq == ia && i == ix) return x->mra[0];
     if (cq == ia && i == iy) return x->mra[1];
     return 0.0;
+}
+
+/* M(q)[i, border 0..3] of an elastic q index i: its body angle's column, and for the link
+ * the R2 columns (mass_border for an elastic row, in one pass) */
+static inline void mass_border_row(const Ctx *x, int i, double mb[4]) {
+    const Model *m = x->m;
+    if (m->body[i] == 0) {
+        mb[0] = x->maf[i];
+        mb[1] = mb[2] = mb[3] = 0.0;
+    } else {
+        int k = i - m->s_link;
+        mb[0] = 0.0;
+        mb[1] = x->mrf[k];
+        mb[2] = x->mrf[m->n_link + k];
+        mb[3] = x->maf[i];
+    }
 }
 
 /* d/dq [1/2 a^T M(q) b] (model.kinetic_bilinear_gradient), given h = c + Mff q,
@@ -481,9 +538,11 @@ static void gonzalez(int n, double *grad, double delta_f, const double *dq, doub
 /* ------------------------------------------------------------------ context */
 void umbrella_free(Ctx *x) {
     if (!x) return;
-    free(x->hq); free(x->piv); free(x->jrow_idx); free(x->E);
+    free(x->hq); free(x->piv); free(x->jrow_idx); free(x->E); free(x->solved_buf);
     free(x);
 }
+
+static int solved_band_prepare(Ctx *x, SolvedBand *f, double h, double h2);
 
 Ctx *umbrella_new(const Model *m) {
     Ctx *x = calloc(1, sizeof(Ctx));
@@ -523,8 +582,22 @@ Ctx *umbrella_new(const Model *m) {
     x->B = x->Emass + (size_t)ne * w;
     x->C = x->B + (size_t)nbmax * ne;
     x->S = x->C + (size_t)nbmax * ne;
-    memcpy(x->Emass, m->mff_band, sizeof(double) * (size_t)ne * w);
-    if (band_factor(ne, m->bw, x->Emass) != OK) { umbrella_free(x); return NULL; }
+    /* the solved bands: fmass on Mff, fiter (Mff + h^2/4 K) prepared at the first step */
+    x->solved_buf = calloc((size_t)ne * (w + 2 * 6 + 2), sizeof(double));
+    if (!x->solved_buf) { umbrella_free(x); return NULL; }
+    d = x->solved_buf;
+    x->fiter.lu = d; d += (size_t)ne * w;
+    SolvedBand *fb[2] = {&x->fmass, &x->fiter};
+    for (int b = 0; b < 2; b++) {
+        double **cols[6] = {&fb[b]->sb[0], &fb[b]->sb[1], &fb[b]->isb[0], &fb[b]->isb[1],
+                            &fb[b]->ej, &fb[b]->es};
+        for (int c = 0; c < 6; c++) { *cols[c] = d; d += ne; }
+    }
+    x->sv = d; d += ne;
+    x->sdq = d;
+    x->fiter.h = -1.0;
+    x->fmass.lu = x->Emass;      /* the LU of Mff (projection) */
+    if (solved_band_prepare(x, &x->fmass, 0.0, 0.0) != OK) { umbrella_free(x); return NULL; }
     return x;
 }
 
@@ -550,6 +623,74 @@ static Arrow make_arrow(Ctx *x, int nc) {
     return a;
 }
 
+/* Factor F = Mff + h2 K (h2 = 0: the mass) into f->lu and solve for its constant border
+ * pieces.  f->h = h on success. */
+static int solved_band_prepare(Ctx *x, SolvedBand *f, double h, double h2) {
+    const Model *m = x->m;
+    int ne = x->ne, w = x->width, nl = m->n_link, n1 = ne - nl, bw = m->bw;
+    for (size_t k = 0; k < (size_t)ne * w; k++) f->lu[k] = m->mff_band[k] + h2 * m->k_band[k];
+    f->h = -1.0;
+    if (band_factor(ne, bw, f->lu) != OK) return SINGULAR;
+    double *cols[6] = {f->sb[0], f->sb[1], f->isb[0], f->isb[1], f->ej, f->es};
+    for (int c = 0; c < 6; c++) memset(cols[c], 0, sizeof(double) * ne);
+    for (int k = 0; k < nl; k++) {
+        f->sb[0][n1 + k] = m->sbar[k];
+        f->sb[1][n1 + k] = m->sbar[nl + k];
+        f->isb[0][n1 + k] = m->isbar[k];
+        f->isb[1][n1 + k] = m->isbar[nl + k];
+    }
+    f->pj = epos(m, m->i_u_joint);
+    f->ps = epos(m, m->i_u_sleeve);
+    f->ej[f->pj] = 1.0;
+    f->es[f->ps] = 1.0;
+    for (int c = 0; c < 6; c++) band_solve(ne, bw, f->lu, cols[c]);
+    f->h = h;
+    return OK;
+}
+
+/* Y = F^-1 B of the arrow's border columns, into x->B (row-major, nb = 4 + nc), for the
+ * flexible model (constraint rows touch the elastic coordinates only at the joint's and the
+ * sleeve's axial coordinates), where
+ *   columns alpha1 / alpha2: sv (elastic order; leaf entries are alpha1's, link alpha2's),
+ *     solved here in place;
+ *   columns R2x, R2y: M's link coupling cos(alpha2) sbar + sin(alpha2) isbar (cos2, sin2);
+ *   constraint column r: dcoef[r] dq (dcoef may be NULL) + sign * the elastic entries of the
+ *     sparse rows (idx, val): nc <= 4, the flexible model, whose rows (jacobian()) touch the
+ *     elastic coordinates only at the joint's and the sleeve's axial coordinate. */
+static void arrow_border_from_solved(Ctx *x, const SolvedBand *f, int nc, double *sv,
+                                     const double *dcoef, const int *idx, const double *val,
+                                     double sign) {
+    const Model *m = x->m;
+    int ne = x->ne, nb = 4 + nc, n1 = ne - m->n_link;
+    band_solve(ne, m->bw, f->lu, sv);
+    const double *sdq = NULL;
+    if (dcoef) {
+        const int *ei = m->elastic_idx;
+        for (int p = 0; p < ne; p++) x->sdq[p] = x->dq[ei[p]];
+        band_solve(ne, m->bw, f->lu, x->sdq);
+        sdq = x->sdq;
+    }
+    double c = x->cos2, s = x->sin2;
+    double *B = x->B;
+    for (int p = 0; p < ne; p++) {
+        double *Bp = B + (size_t)p * nb;
+        Bp[0] = p < n1 ? sv[p] : 0.0;
+        Bp[1] = c * f->sb[0][p] + s * f->isb[0][p];
+        Bp[2] = c * f->sb[1][p] + s * f->isb[1][p];
+        Bp[3] = p < n1 ? 0.0 : sv[p];
+        for (int r = 0; r < nc; r++) Bp[4 + r] = sdq ? dcoef[r] * sdq[p] : 0.0;
+    }
+    for (int r = 0; r < nc; r++)
+        for (int k = 0; k < JW; k++) {
+            double v = val[r * JW + k];
+            int p = v != 0.0 ? epos(m, idx[r * JW + k]) : -1;
+            if (p < 0) continue;
+            const double *col = p == f->pj ? f->ej : f->es;
+            v *= sign;
+            for (int q = 0; q < ne; q++) B[(size_t)q * nb + 4 + r] += v * col[q];
+        }
+}
+
 /* Iteration matrix M(q) + h^2/4 K + h/2 G(qm, dq/h) with the constraint columns -Jm^T and
  * rows J(q), as an arrow system; the multipliers are scaled by h^2/2 (integrators.py). */
 static int factor_iteration_matrix(Ctx *x, double h, int nc) {
@@ -563,16 +704,29 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
     /* h_m = c + Mff qm and W dq from this Newton iteration */
     for (int p = 0; p < ne; p++) wed[ei[p]] = x->wdq[ei[p]] / h;
     double om[2] = {vt[0], vt[ia]};
-    /* E: Mff + h^2/4 K - h w_body W  (G_ee = -2 w W) */
-    double h2 = 0.25 * h * h;
-    const double *k_band = m->k_band;   /* with a law: its h^2/2 dG_U/dq1 + h/2 C, scale 1 */
-    if (x->law) { k_band = x->law->band; h2 = 1.0; }
-    for (int p = 0; p < ne; p++) {
-        double f = -h * om[m->body[ei[p]]];
-        const double *mf = m->mff_band + (size_t)p * w, *kb = k_band + (size_t)p * w;
-        const double *wb = m->w_band + (size_t)p * w;
-        double *e = x->E + (size_t)p * w;
-        for (int k = 0; k < w; k++) e[k] = mf[k] + h2 * kb[k] + f * wb[k];
+    /* The iteration matrix of integrators.iteration_blocks: for the flexible model (nc <= 4)
+     * the gyroscopic elastic block G_ee = -2 w W and the Gonzalez correction of the
+     * constraint columns are left out, which only changes how Newton converges, not to what.
+     * Then the linear law's elastic block E is the constant Mff + h^2/4 K, factored once per
+     * step length with the solves of its constant border pieces (SolvedBand: "solved").
+     * Otherwise E = Mff + (the law's band, or h^2/4 K) (- h w_body W, rigid-FE), here. */
+    int exact = nc > 4, solved = !x->law && !exact;
+    /* the grid step t1 - t0 varies in its last bits: the band of a step within 1e-9 of it
+     * serves (the iteration matrix only steers Newton) */
+    if (solved && !(fabs(x->fiter.h - h) <= 1e-9 * h)
+        && solved_band_prepare(x, &x->fiter, h, 0.25 * h * h) != OK)
+        return SINGULAR;
+    if (!solved) {
+        double h2 = 0.25 * h * h;
+        const double *k_band = m->k_band;   /* with a law: its h^2/2 dG_U/dq1 + h/2 C, scale 1 */
+        if (x->law) { k_band = x->law->band; h2 = 1.0; }
+        for (int p = 0; p < ne; p++) {
+            double f = exact ? -h * om[m->body[ei[p]]] : 0.0;
+            const double *mf = m->mff_band + (size_t)p * w, *kb = k_band + (size_t)p * w;
+            const double *wb = m->w_band + (size_t)p * w;
+            double *e = x->E + (size_t)p * w;
+            for (int k = 0; k < w; k++) e[k] = mf[k] + h2 * kb[k] + f * wb[k];
+        }
     }
     /* gyroscopic border terms (model.gyroscopic_matrix) */
     double g00 = 0.0, gaa = 0.0;
@@ -596,9 +750,10 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
     double *B = x->B, *C = x->C;
     for (int p = 0; p < ne; p++) {
         int i = ei[p], b = m->body[i];
-        double *Bp = B + (size_t)p * nb;
+        double *Bp = B + (size_t)p * nb, mbr[4];
+        mass_border_row(x, i, mbr);
         for (int cb = 0; cb < 4; cb++) {
-            double mb = mass_border(x, i, cb);
+            double mb = mbr[cb];
             double gcol = 0.0, grow = 0.0;     /* G[i, c], G[c, i] */
             if ((cb == 0 && b == 0) || (cb == 3 && b == 1)) {
                 double wb = om[b];
@@ -609,18 +764,27 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
                 grow = cb == 1 ? 2.0 * w2 * (c * m->isbar[k] - s * m->sbar[k])
                                : 2.0 * w2 * (c * m->isbar[nl + k] - s * m->sbar[nl + k]);
             }
-            Bp[cb] = mb + hh * gcol;
+            if (solved) {
+                if (cb == (b == 0 ? 0 : 3)) x->sv[p] = mb + hh * gcol;
+            } else {
+                Bp[cb] = mb + hh * gcol;
+            }
             C[(size_t)cb * ne + p] = mb + hh * grow;
         }
-        /* multiplier columns -Jm^T, Jm = J(qm) + corr dq */
-        double dqi = x->dq[i];
-        for (int r = 0; r < nc; r++) Bp[4 + r] = -x->corr[r] * dqi;
+        /* multiplier columns -Jc^T: Jc = J(qm) (+ corr dq, exact) */
+        double dqi = exact ? x->dq[i] : 0.0;
+        if (!solved)
+            for (int r = 0; r < nc; r++) Bp[4 + r] = -x->corr[r] * dqi;
     }
-    for (int r = 0; r < nc; r++)
-        for (int k = 0; k < JW; k++) {
-            int p = epos(m, x->jm_idx[r * JW + k]);
-            if (p >= 0) B[(size_t)p * nb + 4 + r] -= x->jm_val[r * JW + k];
-        }
+    if (solved) {
+        arrow_border_from_solved(x, &x->fiter, nc, x->sv, NULL, x->jm_idx, x->jm_val, -1.0);
+    } else {
+        for (int r = 0; r < nc; r++)
+            for (int k = 0; k < JW; k++) {
+                int p = epos(m, x->jm_idx[r * JW + k]);
+                if (p >= 0) B[(size_t)p * nb + 4 + r] -= x->jm_val[r * JW + k];
+            }
+    }
     /* D */
     double *S = x->S;
     memset(S, 0, sizeof(double) * nb * nb);
@@ -633,7 +797,8 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
     S[1 * nb + 3] += hh * g_xa;
     S[2 * nb + 3] += hh * g_ya;
     for (int r = 0; r < nc; r++) {
-        for (int cb = 0; cb < 4; cb++) S[cb * nb + 4 + r] = -x->corr[r] * x->dq[border_q(m, cb)];
+        for (int cb = 0; cb < 4; cb++)
+            S[cb * nb + 4 + r] = exact ? -x->corr[r] * x->dq[border_q(m, cb)] : 0.0;
         for (int k = 0; k < JW; k++) {
             int i = x->jm_idx[r * JW + k];
             if (m->body[i] < 0) S[bslot(m, i) * nb + 4 + r] -= x->jm_val[r * JW + k];
@@ -642,18 +807,23 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
         }
     }
     x->arrow = a;
+    if (solved) {
+        x->e_iter = x->fiter.lu;
+        return arrow_schur(&a, B, S, x->piv);
+    }
+    x->e_iter = x->E;
     return arrow_factor(&a, x->E, 0, B, S, x->piv);
 }
 
 /* solve the factored arrow system for a q-ordered rhs of length n + nc, in place */
-static void arrow_solve_q(Ctx *x, const double *E, int nc, double *r) {
+static void arrow_solve_q(Ctx *x, const double *E, int nc, double *r, int top_zero) {
     const Model *m = x->m;
     int ne = x->ne, n = m->n;
     double *a = x->xa;
     for (int p = 0; p < ne; p++) a[p] = r[m->elastic_idx[p]];
     for (int c = 0; c < 4; c++) a[ne + c] = r[border_q(m, c)];
     for (int k = 0; k < nc; k++) a[ne + 4 + k] = r[n + k];
-    arrow_solve(&x->arrow, E, x->B, x->S, x->piv, a);
+    arrow_solve(&x->arrow, E, x->B, x->S, x->piv, a, top_zero);
     for (int p = 0; p < ne; p++) r[m->elastic_idx[p]] = a[p];
     for (int c = 0; c < 4; c++) r[border_q(m, c)] = a[ne + c];
     for (int k = 0; k < nc; k++) r[n + k] = a[ne + 4 + k];
@@ -678,13 +848,25 @@ static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_t
         if (a > jv_max) jv_max = a;
     }
     if (!(jv_max > 0.0)) { mass_matvec(x, v, p_out); goto scale; }
-    /* KKT [[M, J^T], [J, 0]] [dv; mu] = [0; -J v], arrow form with E = Mff (factored once) */
+    /* KKT [[M, J^T], [J, 0]] [dv; mu] = [0; -J v], arrow form with E = Mff (factored once,
+     * with the solves of its constant border pieces: the flexible model) */
     Arrow a = make_arrow(x, nc);
     double *B = x->B, *C = x->C;
+    int solved = nc <= 4;
     for (int p = 0; p < ne; p++) {
-        double *Bp = B + (size_t)p * nb;
-        for (int cb = 0; cb < 4; cb++) Bp[cb] = C[(size_t)cb * ne + p] = mass_border(x, ei[p], cb);
-        for (int r = 0; r < nc; r++) Bp[4 + r] = 0.0;
+        double *Bp = B + (size_t)p * nb, mbr[4];
+        mass_border_row(x, ei[p], mbr);
+        for (int cb = 0; cb < 4; cb++) {
+            double mb = mbr[cb];
+            C[(size_t)cb * ne + p] = mb;
+            if (solved) {
+                if (cb == (m->body[ei[p]] == 0 ? 0 : 3)) x->sv[p] = mb;
+            } else {
+                Bp[cb] = mb;
+            }
+        }
+        if (!solved)
+            for (int r = 0; r < nc; r++) Bp[4 + r] = 0.0;
     }
     double *S = x->S;
     memset(S, 0, sizeof(double) * nb * nb);
@@ -695,18 +877,23 @@ static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_t
             int i = x->jrow_idx[r * JW + k];
             double val = x->jrow_val[r * JW + k];
             int p = epos(m, i);
-            if (p >= 0) B[(size_t)p * nb + 4 + r] += val;
-            else {
+            if (p >= 0) {
+                if (!solved) B[(size_t)p * nb + 4 + r] += val;
+            } else {
                 S[bslot(m, i) * nb + 4 + r] += val;
                 S[(4 + r) * nb + bslot(m, i)] += val;
             }
         }
     x->arrow = a;
-    if (arrow_factor(&a, x->Emass, 1, B, S, x->piv) != OK) return SINGULAR;
+    if (solved) {
+        arrow_border_from_solved(x, &x->fmass, nc, x->sv, NULL, x->jrow_idx, x->jrow_val, 1.0);
+        if (arrow_schur(&a, B, S, x->piv) != OK) return SINGULAR;
+    } else if (arrow_factor(&a, x->Emass, 1, B, S, x->piv) != OK) return SINGULAR;
     double *r = x->rhs;
     memset(r, 0, sizeof(double) * n);
     for (int k = 0; k < nc; k++) r[n + k] = -jrow_dot(x->jrow_idx, x->jrow_val, k, v);
-    arrow_solve_q(x, x->Emass, nc, r);
+    /* the elastic rows of the rhs are zero (the border rows too, but they are not skipped) */
+    arrow_solve_q(x, x->Emass, nc, r, 1);
     for (int i = 0; i < n; i++) v[i] += r[i];
     mass_matvec(x, v, p_out);
 scale:;
@@ -816,7 +1003,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         }
         for (int i = 0; i < n; i++) rhs[i] = -0.5 * h * res[i];
         for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
-        arrow_solve_q(x, x->E, nc, rhs);
+        arrow_solve_q(x, x->e_iter, nc, rhs, 0);
         if (nonlinear_law) {
             memcpy(law->q_base, q, sizeof(double) * n);
             memcpy(law->lam_base, lam, sizeof(double) * nc);

@@ -105,6 +105,29 @@ def midpoint_iterate(m: UmbrellaModel, cs: ConstraintSet, q0, v0, p0, phi0, y0, 
     return MidpointIterate(dq, qm, v1, mass1, phi, g_t, g_y, jac_m)
 
 
+def iteration_blocks(m: UmbrellaModel, cs: ConstraintSet, x: MidpointIterate, h: float,
+                     elastic_tangent: np.ndarray):
+    """
+    Return (A, Jc) of the Newton iteration matrix [[A, -Jc^T], [J(q), 0]] at the iterate x.
+
+    elastic_tangent: the elastic forces' part, h^2/4 K for the linear law (the elastic
+    integrator of nonlinear.py passes its own).  The exact tangent is A = M(q) +
+    elastic_tangent + h/2 G(qm, dq/h), Jc = the Gonzalez Jacobian (J(qm) + corr dq^T).  For the flexible model two small terms are left out: the
+    gyroscopic elastic-elastic blocks G_ee = -2 w W (w = alpha' of the body; |h w| ~ 1e-3
+    against the unit scale of M + h^2/4 K) and the Gonzalez correction corr dq^T (|dq| ~ h q').
+    That changes how Newton converges, not to what, and leaves the elastic block of the
+    iteration matrix constant and its constraint columns sparse, so the compiled kernel
+    factors it once per step length (SolvedBand in _kernel.c; the same matrix).  The
+    rigid-FE mode keeps the exact tangent.
+    """
+    g = m.gyroscopic_matrix(x.qm, x.dq / h)
+    if cs.rigid:
+        return x.mass1 + elastic_tangent + 0.5 * h * g, x.jac_m
+    for s_e in (m.s_leaf, m.s_link):
+        g[s_e, s_e] = 0.0
+    return x.mass1 + elastic_tangent + 0.5 * h * g, m.constraint_jacobian(x.qm, cs)
+
+
 #: largest kinetic-energy ratio (before / after the projection) that is restored by scaling
 ENERGY_RESTORE_LIMIT = 1.01
 
@@ -252,9 +275,8 @@ class MidpointDAE:
             if lu is None:
                 jac = m.constraint_jacobian(q, cs)
                 it_mat = np.zeros((n + nc, n + nc))
-                it_mat[:n, :n] = (x.mass1 + 0.25 * h * h * stiff
-                                  + 0.5 * h * m.gyroscopic_matrix(x.qm, x.dq / h))
-                it_mat[:n, n:] = -x.jac_m.T
+                it_mat[:n, :n], jac_c = iteration_blocks(m, cs, x, h, 0.25 * h * h * stiff)
+                it_mat[:n, n:] = -jac_c.T
                 it_mat[n:, :n] = jac
                 lu, piv, info = dgetrf(it_mat, overwrite_a=True)
                 if info != 0:

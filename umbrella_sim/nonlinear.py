@@ -83,7 +83,7 @@ from scipy.linalg import eigh, null_space
 from scipy.linalg.lapack import dgetrf, dgetrs
 
 from .integrators import (_project_keeping_energy, ConvergenceError, DynamicState,
-                          midpoint_iterate, MidpointDAE, PHI_TOLERANCE)
+                          iteration_blocks, midpoint_iterate, MidpointDAE, PHI_TOLERANCE)
 from .model import (_GAUSS_ETA, _GAUSS_W, band_form, BeamBody, ConstraintSet, shape_functions,
                     UmbrellaModel)
 from .params import UmbrellaParams
@@ -510,9 +510,9 @@ class ElasticMidpointDAE(MidpointDAE):
             if lu is None or refresh:
                 it_mat = np.zeros((n + nc, n + nc))
                 avf_jacobian = m.strain.discrete_gradient_jacobian(q0, q)
-                it_mat[:n, :n] = (x.mass1 + 0.5 * h * h * avf_jacobian
-                                  + 0.5 * h * (m.gyroscopic_matrix(x.qm, x.dq / h) + damping))
-                it_mat[:n, n:] = -x.jac_m.T
+                it_mat[:n, :n], jac_c = iteration_blocks(
+                    m, cs, x, h, 0.5 * h * h * avf_jacobian + 0.5 * h * damping)
+                it_mat[:n, n:] = -jac_c.T
                 it_mat[n:, :n] = m.constraint_jacobian(q, cs)
                 lu, piv, info = dgetrf(it_mat, overwrite_a=True)
                 if info != 0:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass, field, fields, replace
-from functools import cache, cached_property
+from functools import cache
 import math
 from typing import Callable
 
@@ -106,42 +106,40 @@ class LockEvent:
     free_velocities: tuple = ()
 
 
-@dataclass(frozen=True)
 class StepBlock:
     """
     Hold the outputs of every physics step of one advance call.
 
     What ``UmbrellaSimulator.advance(n_steps)`` returns: one entry per physics step taken
-    (1-D arrays, field names STEP_FIELDS), the Sample of the final state (``last``, built on
-    first use: stresses along the bodies, multipliers and residuals cost more than a step),
-    the lock if it happened inside the block, and the fault that stopped the block early (the
-    state is then the last good step, and the entries cover the steps taken before it).
+    (1-D arrays, one attribute per name of STEP_FIELDS: ``block.time``, ``block.tip_transverse``,
+    ...), the Sample of the final state (``last``, built on first use: stresses along the
+    bodies, multipliers and residuals cost more than a step), the lock if it happened inside
+    the block, and the fault that stopped the block early (the state is then the last good
+    step, and the entries cover the steps taken before it).
+
+    The entries are rows of one (len(STEP_FIELDS), steps) array, ``rows``, as the compiled
+    loop writes them; a field is a view of its row, made when it is read (a block is made once
+    per publication period, and most readers look at a few fields).  Read-only.
     """
 
-    time: np.ndarray
-    stage: np.ndarray
-    alpha1: np.ndarray
-    alpha1_rate: np.ndarray
-    sleeve_position: np.ndarray
-    sleeve_velocity: np.ndarray
-    sleeve_force: np.ndarray
-    tip_axial: np.ndarray
-    tip_transverse: np.ndarray
-    peak_stress_leaf: np.ndarray
-    peak_stress_leaf_x: np.ndarray
-    peak_stress_link: np.ndarray
-    peak_stress_link_x: np.ndarray
-    kinetic_energy: np.ndarray
-    strain_energy: np.ndarray
-    work: np.ndarray
-    lock_energy_loss: np.ndarray
-    make_last: Callable[[], Sample] = field(repr=False)
-    lock: LockEvent | None = None
-    error: str | None = None
+    __slots__ = ("rows", "make_last", "lock", "error", "_last")
 
-    @cached_property
+    def __init__(self, rows: np.ndarray, make_last: Callable[[], Sample],
+                 lock: LockEvent | None = None, error: str | None = None):
+        if len(rows) != len(STEP_FIELDS):
+            raise ValueError(f"a block has {len(STEP_FIELDS)} rows, not {len(rows)}")
+        for name, value in (("rows", rows), ("make_last", make_last), ("lock", lock),
+                            ("error", error), ("_last", None)):
+            object.__setattr__(self, name, value)
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"StepBlock is read-only (cannot set {name!r})")
+
+    @property
     def last(self) -> Sample:
-        return self.make_last()
+        if self._last is None:
+            object.__setattr__(self, "_last", self.make_last())
+        return self._last
 
     @classmethod
     def from_rows(cls, rows: np.ndarray, make_last: Callable[[], Sample], lock=None,
@@ -152,14 +150,10 @@ class StepBlock:
         rows: (len(STEP_FIELDS), steps), owned by the block; make_last builds the Sample
         of the final state (a closure over that immutable state).
         """
-        if len(rows) != len(STEP_FIELDS):
-            raise ValueError(f"a block has {len(STEP_FIELDS)} rows, not {len(rows)}")
-        values = dict(zip(STEP_FIELDS, rows))
-        values.update(make_last=make_last, lock=lock, error=error)
-        return build_frozen(cls, values)
+        return cls(rows, make_last, lock, error)
 
     def __len__(self) -> int:
-        return len(self.time)
+        return self.rows.shape[1]
 
     @classmethod
     def concatenate(cls, blocks: list["StepBlock"]) -> "StepBlock":
@@ -182,6 +176,15 @@ class StepBlock:
             out[body] = (float(peaks[i]), float(getattr(self, f"peak_stress_{body}_x")[i]))
         return out
 
+
+
+def _step_field(row: int, name: str) -> property:
+    return property(lambda block: block.rows[row], doc=f"{name} at every step of the block")
+
+
+for _row, _name in enumerate(STEP_FIELDS):
+    setattr(StepBlock, _name, _step_field(_row, _name))
+del _row, _name
 
 @dataclass
 class RunResult:
