@@ -112,10 +112,11 @@ def iteration_blocks(m: UmbrellaModel, cs: ConstraintSet, x: MidpointIterate, h:
 
     elastic_tangent: the elastic forces' part, h^2/4 K for the linear law (the elastic
     integrator of nonlinear.py passes its own).  The exact tangent is A = M(q) +
-    elastic_tangent + h/2 G(qm, dq/h), Jc = the Gonzalez Jacobian (J(qm) + corr dq^T).  For the flexible model two small terms are left out: the
-    gyroscopic elastic-elastic blocks G_ee = -2 w W (w = alpha' of the body; |h w| ~ 1e-3
-    against the unit scale of M + h^2/4 K) and the Gonzalez correction corr dq^T (|dq| ~ h q').
-    That changes how Newton converges, not to what, and leaves the elastic block of the
+    elastic_tangent + h/2 G(qm, dq/h), Jc = the Gonzalez Jacobian (J(qm) + corr dq^T).
+    For the flexible model two small terms are left out: the gyroscopic elastic-elastic
+    blocks G_ee = -2 w W (w = alpha' of the body; |h w| ~ 1e-3 against the unit scale of
+    M + h^2/4 K) and the Gonzalez correction corr dq^T (|dq| ~ h q').  That changes how
+    Newton converges, not to what, and leaves the elastic block of the linear law's
     iteration matrix constant and its constraint columns sparse, so the compiled kernel
     factors it once per step length (SolvedBand in _kernel.c; the same matrix).  The
     rigid-FE mode keeps the exact tangent.

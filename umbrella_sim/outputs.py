@@ -177,7 +177,6 @@ class StepBlock:
         return out
 
 
-
 def _step_field(row: int, name: str) -> property:
     return property(lambda block: block.rows[row], doc=f"{name} at every step of the block")
 
@@ -185,6 +184,7 @@ def _step_field(row: int, name: str) -> property:
 for _row, _name in enumerate(STEP_FIELDS):
     setattr(StepBlock, _name, _step_field(_row, _name))
 del _row, _name
+
 
 @dataclass
 class RunResult:
