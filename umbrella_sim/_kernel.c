@@ -118,37 +118,56 @@ static int nc_of(const Model *m, int locked, int rigid) {
 /* ------------------------------------------------------------------ band algebra */
 /* y1 = band1 x, y2 = band2 x, y3 = band3 x in one pass (band3/y3 may be NULL, and then
  * band2/y2 too) at the elastic coordinates of q-indexed vectors; other entries of y untouched.
- * The elastic coordinates are two contiguous runs of q (leaf, link), not coupled by the band. */
-static void band_matvec3(const Model *m, const double *band1, double *y1, const double *band2,
-                         double *y2, const double *band3, double *y3, const double *x) {
-    int ne = m->n_elastic, nl = m->n_link, bw = m->bw, w = 2 * bw + 1;
+ * The elastic coordinates are two contiguous runs of q (leaf, link), not coupled by the band.
+ * Rows away from a run's ends in full-width loops, unrolled for a constant bw (band_matvec3). */
+static inline __attribute__((always_inline)) void band_matvec3_bw(
+        const Model *m, const int bw, const double *band1, double *y1, const double *band2,
+        double *y2, const double *band3, double *y3, const double *x) {
+    int ne = m->n_elastic, nl = m->n_link, w = 2 * bw + 1;
     for (int seg = 0; seg < 2; seg++) {
         int p0 = seg == 0 ? 0 : ne - nl, np = seg == 0 ? ne - nl : nl;
         int off = seg == 0 ? 1 : m->s_link;
         const double *xs = x + off;
         for (int i = 0; i < np; i++) {
-            int lo = i - bw < 0 ? 0 : i - bw, hi = i + bw >= np ? np - 1 : i + bw;
-            size_t r = (size_t)(p0 + i) * w + bw - i;
-            const double *r1 = band1 + r;
+            size_t r = (size_t)(p0 + i) * w;
             double s1 = 0.0, s2 = 0.0, s3 = 0.0;
-            if (band3) {
-                const double *r2 = band2 + r, *r3 = band3 + r;
+            if (i >= bw && i + bw < np) {
+                const double *xi = xs + i - bw, *r1 = band1 + r;
+                if (band3) {
+                    const double *r2 = band2 + r, *r3 = band3 + r;
+                    for (int k = 0; k < w; k++) {
+                        s1 += r1[k] * xi[k];
+                        s2 += r2[k] * xi[k];
+                        s3 += r3[k] * xi[k];
+                    }
+                } else if (band2) {
+                    const double *r2 = band2 + r;
+                    for (int k = 0; k < w; k++) { s1 += r1[k] * xi[k]; s2 += r2[k] * xi[k]; }
+                } else {
+                    for (int k = 0; k < w; k++) s1 += r1[k] * xi[k];
+                }
+            } else {
+                int lo = i - bw < 0 ? 0 : i - bw, hi = i + bw >= np ? np - 1 : i + bw;
+                const double *r1 = band1 + r + bw - i;
+                const double *r2 = band2 ? band2 + r + bw - i : NULL;
+                const double *r3 = band3 ? band3 + r + bw - i : NULL;
                 for (int j = lo; j <= hi; j++) {
                     s1 += r1[j] * xs[j];
-                    s2 += r2[j] * xs[j];
-                    s3 += r3[j] * xs[j];
+                    if (r2) s2 += r2[j] * xs[j];
+                    if (r3) s3 += r3[j] * xs[j];
                 }
-                y3[off + i] = s3;
-            } else if (band2) {
-                const double *r2 = band2 + r;
-                for (int j = lo; j <= hi; j++) { s1 += r1[j] * xs[j]; s2 += r2[j] * xs[j]; }
-            } else {
-                for (int j = lo; j <= hi; j++) s1 += r1[j] * xs[j];
             }
+            if (band3) y3[off + i] = s3;
             if (band2) y2[off + i] = s2;
             y1[off + i] = s1;
         }
     }
+}
+
+static void band_matvec3(const Model *m, const double *band1, double *y1, const double *band2,
+                         double *y2, const double *band3, double *y3, const double *x) {
+    if (m->bw == 5) band_matvec3_bw(m, 5, band1, y1, band2, y2, band3, y3, x);  /* N >= 2 */
+    else band_matvec3_bw(m, m->bw, band1, y1, band2, y2, band3, y3, x);
 }
 
 static void band_matvec2(const Model *m, const double *band1, double *y1, const double *band2,
