@@ -45,7 +45,10 @@ typedef struct {
     double *du_mean;         /* n_el x 6: sum_g w_g / l_e u'_g (d eps_e / dq of the linear strain) */
     double *g_mat;           /* n_el x 6 x 6: sum_g w_g / l_e v'_g v'_g^T (0: linear strain), so
                               * eps_e = du_mean . x + x . G x / 2 on the element's coordinates x */
-    int energy_valid;
+    double *start_q;         /* n: the q0 of the start terms below */
+    double *start_gx;        /* n_el x 6: G x0 at the start of the step (x0: q0's element coords) */
+    double *start_eps;       /* n_el x 2: du_mean . x0, x0 . G x0 */
+    int energy_valid, start_valid;
 } ElasticLaw;
 
 ElasticLaw *elastic_new(const ElasticData *d);

@@ -32,7 +32,8 @@ ElasticLaw *elastic_new(const ElasticData *d) {
     law->d = *d;
     int w = 2 * d->bw + 1, nc = d->ne + 4;
     size_t doubles = (size_t)d->ne * w + 4 * (size_t)d->n + (size_t)d->n_el * EDOF + d->n_el
-                     + nc + (size_t)(d->n + nc) + (size_t)d->n_el * (EDOF + EDOF * EDOF);
+                     + nc + (size_t)(d->n + nc) + (size_t)d->n_el * (EDOF + EDOF * EDOF)
+                     + d->n + (size_t)d->n_el * (EDOF + 2);
     law->band = calloc(doubles, sizeof(double));
     if (!law->band) { free(law); return NULL; }
     double *p = law->band + (size_t)d->ne * w;
@@ -46,7 +47,10 @@ ElasticLaw *elastic_new(const ElasticData *d) {
     law->lam_base = p; p += nc;
     law->dx = p; p += d->n + nc;
     law->du_mean = p; p += (size_t)d->n_el * EDOF;
-    law->g_mat = p;
+    law->g_mat = p; p += (size_t)d->n_el * EDOF * EDOF;
+    law->start_q = p; p += d->n;
+    law->start_gx = p; p += (size_t)d->n_el * EDOF;
+    law->start_eps = p;
     for (int e = 0; e < d->n_el; e++)
         for (int gp = 0; gp < d->n_gauss; gp++) {
             size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
@@ -75,6 +79,10 @@ static double element_strain(const ElasticLaw *law, int e, const double *q, doub
     const double *dm = law->du_mean + (size_t)e * EDOF, *gm = law->g_mat + (size_t)e * EDOF * EDOF;
     for (int k = 0; k < EDOF; k++) x[k] = iq[k] >= 0 ? q[iq[k]] : 0.0;
     double a = 0.0, xgx = 0.0;
+    if (!d->nonlinear) {   /* G = 0 */
+        for (int k = 0; k < EDOF; k++) { gx[k] = 0.0; a += dm[k] * x[k]; }
+        return a;
+    }
     for (int k = 0; k < EDOF; k++) {
         double s = 0.0;
         for (int l = 0; l < EDOF; l++) s += gm[k * EDOF + l] * x[l];
@@ -83,6 +91,53 @@ static double element_strain(const ElasticLaw *law, int e, const double *q, doub
         xgx += x[k] * s;
     }
     return a + 0.5 * xgx;
+}
+
+/* The step's start terms G x0, du_mean . x0 and x0 . G x0 of every element (nonlinear
+ * strain), kept while q0 stays the same: the Newton iterations of a step share them. */
+static void step_start(ElasticLaw *law, const double *q0) {
+    const ElasticData *d = &law->d;
+    if (law->start_valid && memcmp(q0, law->start_q, sizeof(double) * d->n) == 0) return;
+    double x[EDOF];
+    for (int e = 0; e < d->n_el; e++) {
+        double *gx = law->start_gx + (size_t)e * EDOF, *ce = law->start_eps + 2 * (size_t)e;
+        ce[0] = element_strain(law, e, q0, x, gx);
+        double xgx = 0.0;
+        for (int k = 0; k < EDOF; k++) xgx += x[k] * gx[k];
+        ce[1] = xgx;
+        ce[0] -= 0.5 * xgx;
+    }
+    memcpy(law->start_q, q0, sizeof(double) * d->n);
+    law->start_valid = 1;
+}
+
+/* Strain of element e along the step q0 + s (q1 - q0) at the two AVF points s = AVF_S[j]:
+ * eps[j] and g_j = d eps / dq there (g: 2 x 6), from the start terms and one G dx
+ * (eps(s) = du.x0 + s du.dx + (x0.G x0 + 2 s dx.G x0 + s^2 dx.G dx) / 2, g(s) = du + G x0
+ * + s G dx: the same polynomial the Gauss points evaluate, without a G product per point) */
+static const double AVF_S[2] = {0.21132486540518713, 0.78867513459481287};  /* 1/2 -+ 1/(2 sqrt 3) */
+
+static void element_step_strain(const ElasticLaw *law, int e, const double *q0, const double *q1,
+                                double *eps, double *g) {
+    const ElasticData *d = &law->d;
+    const int *iq = d->el_q + (size_t)e * EDOF;
+    const double *dm = law->du_mean + (size_t)e * EDOF, *gm = law->g_mat + (size_t)e * EDOF * EDOF;
+    const double *gx0 = law->start_gx + (size_t)e * EDOF, *ce = law->start_eps + 2 * (size_t)e;
+    double dx[EDOF], gdx[EDOF], lin1 = 0.0, c1 = 0.0, c2 = 0.0;
+    for (int k = 0; k < EDOF; k++) dx[k] = iq[k] >= 0 ? q1[iq[k]] - q0[iq[k]] : 0.0;
+    for (int k = 0; k < EDOF; k++) {
+        double s = 0.0;
+        for (int l = 0; l < EDOF; l++) s += gm[k * EDOF + l] * dx[l];
+        gdx[k] = s;
+        lin1 += dm[k] * dx[k];
+        c1 += dx[k] * gx0[k];
+        c2 += dx[k] * s;
+    }
+    for (int j = 0; j < 2; j++) {
+        double t = AVF_S[j];
+        eps[j] = ce[0] + t * lin1 + 0.5 * (ce[1] + t * (2.0 * c1 + t * c2));
+        for (int k = 0; k < EDOF; k++) g[j * EDOF + k] = dm[k] + gx0[k] + t * gdx[k];
+    }
 }
 
 /* g = d eps_e / dq = du_mean + G x on the element's coordinates */
@@ -174,8 +229,6 @@ static double material_apply(const ElasticLaw *law, const double *q, const doubl
     return quad;
 }
 
-static const double AVF_S[2] = {0.21132486540518713, 0.78867513459481287};  /* 1/2 -+ 1/(2 sqrt 3) */
-
 void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h, double *out) {
     const ElasticData *d = &law->d;
     int n = d->n;
@@ -189,13 +242,15 @@ void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h
     /* AVF: Kb q_m (Kb q is linear) + the mean of the membrane gradient at the Gauss points */
     for (int i = 0; i < n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
     bending_matvec(d, law->qa, 1.0, out, 0);
-    for (int i = 0; i < n; i++) {
-        double dq = q1[i] - q0[i];
-        law->qa[i] = q0[i] + AVF_S[0] * dq;
-        law->qb[i] = q0[i] + AVF_S[1] * dq;
+    step_start(law, q0);
+    for (int e = 0; e < d->n_el; e++) {
+        double eps[2], g[2 * EDOF];
+        element_step_strain(law, e, q0, q1, eps, g);
+        const int *iq = d->el_q + (size_t)e * EDOF;
+        double w0 = 0.5 * d->ea_l[e] * eps[0], w1 = 0.5 * d->ea_l[e] * eps[1];
+        for (int k = 0; k < EDOF; k++)
+            if (iq[k] >= 0) out[iq[k]] += w0 * g[k] + w1 * g[EDOF + k];
     }
-    membrane_gradient(law, law->qa, 0.5, out);
-    membrane_gradient(law, law->qb, 0.5, out);
     if (d->beta > 0.0) {
         for (int i = 0; i < n; i++) {
             law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
@@ -213,9 +268,29 @@ void elastic_iteration_band(ElasticLaw *law, const double *q0, const double *q1,
     if (!d->nonlinear && law->band_h == h) return;       /* constant for the linear strain */
     for (size_t k = 0; k < nb; k++) law->band[k] = kb_scale * d->kb_band[k];
     law->band_h = h;
-    for (int s = 0; s < 2; s++) {
-        for (int i = 0; i < n; i++) law->qa[i] = q0[i] + AVF_S[s] * (q1[i] - q0[i]);
-        tangent_band(law, law->qa, 0.25 * h * h * AVF_S[s], 1, law->band);
+    if (d->nonlinear) {   /* sum_j h^2/4 s_j (tangent at the AVF point j), one pass */
+        int bw = d->bw, w = 2 * bw + 1;
+        step_start(law, q0);
+        for (int e = 0; e < d->n_el; e++) {
+            double eps[2], g[2 * EDOF];
+            element_step_strain(law, e, q0, q1, eps, g);
+            const int *pos = d->el_pos + (size_t)e * EDOF;
+            const double *gm = law->g_mat + (size_t)e * EDOF * EDOF;
+            double c0 = 0.25 * h * h * AVF_S[0] * d->ea_l[e], c1 = 0.25 * h * h * AVF_S[1] * d->ea_l[e];
+            double geo = c0 * eps[0] + c1 * eps[1];   /* times G */
+            for (int k = 0; k < EDOF; k++) {
+                if (pos[k] < 0) continue;
+                double *r = law->band + (size_t)pos[k] * w + bw - pos[k];
+                double a0 = c0 * g[k], a1 = c1 * g[EDOF + k];
+                for (int l = 0; l < EDOF; l++)
+                    if (pos[l] >= 0) r[pos[l]] += a0 * g[l] + a1 * g[EDOF + l] + geo * gm[k * EDOF + l];
+            }
+        }
+    } else {
+        for (int s = 0; s < 2; s++) {
+            for (int i = 0; i < n; i++) law->qa[i] = q0[i] + AVF_S[s] * (q1[i] - q0[i]);
+            tangent_band(law, law->qa, 0.25 * h * h * AVF_S[s], 1, law->band);
+        }
     }
     if (d->beta > 0.0) {
         for (int i = 0; i < n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
