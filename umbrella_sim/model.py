@@ -568,8 +568,9 @@ class UmbrellaModel:
         (linear within the element holding l3/2).
         """
         joint, j, frac = self._reference_stress_points
-        mid = float((1 - frac) * link_top[2 * j] + frac * link_top[2 * j + 1])
-        return float(leaf_top[joint]), mid
+        # plain floats (.item): once per publication
+        return (float(leaf_top.item(joint)),
+                (1.0 - frac) * link_top.item(2 * j) + frac * link_top.item(2 * j + 1))
 
     def node_positions(self, q, magnification: float = 1.0):
         """Inertial (X, Y) of the leaf and link nodes, deformation magnified."""

@@ -647,7 +647,7 @@ class UmbrellaSimulator:
             values = dict(zip(_SAMPLE_FIELDS_FROM_ROW, _pick_from_row(row.tolist())))
             n_leaf = len(m.leaf.stress_x)
             leaf_stress, link_stress = stress[:, :n_leaf], stress[:, n_leaf:]
-            lt, kt = leaf_stress[0], link_stress[0]
+            lt, kt = stress[0, :n_leaf], stress[0, n_leaf:]
         else:
             (lt, lb), (kt, kb) = m.stresses(q)
             leaf_abs = np.maximum(np.abs(lt), np.abs(lb))
@@ -670,7 +670,8 @@ class UmbrellaSimulator:
         # every field of Sample (build_frozen: once per publication, without a frozen
         # dataclass's per-field setattr)
         values.update({
-            "time": s.t, "stage": Stage(stage), "q": q.copy(), "qd": qd.copy(),
+            "time": s.t, "stage": stage if type(stage) is Stage else Stage(stage),
+            "q": q.copy(), "qd": qd.copy(),
             "alpha1": q.item(0), "alpha2": q.item(ia), "alpha1_rate": qd.item(0),
             "alpha2_rate": qd.item(ia), "alpha1_accel": qdd.item(0), "sleeve_force": force,
             "leaf_stress": leaf_stress, "link_stress": link_stress,
