@@ -457,6 +457,7 @@ class CompiledKernel:
         self._call = _AdvanceCall(phi_tol=PHI_TOLERANCE, q=ptr["q"], v=ptr["v"], lam=ptr["lam"],
                                   p=ptr["p"], acc=ptr["acc"], accel=ptr["accel"])
         self._call_ref = ctypes.byref(self._call)
+        self._setting = None     # what _call holds besides the state and k0, n_steps
         self._set_capacity(capacity)
         self._made = None        # the DynamicState the buffers hold (see load)
         self._sample_buf = None
@@ -503,9 +504,12 @@ class CompiledKernel:
         if n_steps > self.capacity:
             self._set_capacity(max(n_steps, 2 * self.capacity))
         call = self._call
-        call.locked, call.rigid, call.k0, call.h = cs.locked, cs.rigid, k0, h
-        call.n_steps, call.force, call.tol = n_steps, force, tol
-        call.max_iter, call.div_tol = max_iter, div_tol
+        call.k0, call.n_steps = k0, n_steps
+        setting = (cs.locked, cs.rigid, h, force, tol, max_iter, div_tol)
+        if setting != self._setting:    # usually the same as last time: no ctypes setattr
+            self._setting = setting
+            (call.locked, call.rigid, call.h, call.force, call.tol, call.max_iter,
+             call.div_tol) = setting
         status = self.lib.umbrella_advance_call(self._ctx, self._call_ref)
         return status, call.n_done, call.iterations, call.residual
 
