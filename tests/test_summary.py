@@ -18,7 +18,8 @@ import pytest
 from umbrella_sim import compare
 from umbrella_sim.logs import read_log
 from umbrella_sim.nonlinear import locked_first_frequency
-from umbrella_sim.outputs import oscillation_period, STAGE2_WINDOW, TIP_DEFLECTION_LIMIT
+from umbrella_sim.outputs import (oscillation_period, STAGE2_WINDOW, STEP_FIELDS,
+                                  TIP_DEFLECTION_LIMIT)
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.recording import record_offline
 from umbrella_sim.solver import simulate, UmbrellaSimulator
@@ -85,6 +86,41 @@ def test_brute_force_over_every_step_of_the_reference_path(offline):
         assert f[f"peak_stress_{body}_x"] == getattr(peak, f"peak_stress_{body}_x")
         assert f[f"peak_stress_{body}_time"] == peak.time
     assert f["stress_ratio_max"] == max(f["peak_stress_leaf"], f["peak_stress_link"]) / 500e6
+
+
+def test_figures_do_not_depend_on_how_the_steps_are_blocked():
+    """The accumulator on every step one by one, ten at a time (the node) or as one block."""
+    from umbrella_sim.outputs import StepBlock, SummaryAccumulator
+    sim = UmbrellaSimulator(PARAMS)
+    first = sim.sample()
+    blocks = [sim.advance(10) for _ in range(round(DURATION / STEP / 10))]
+    lock = next(b.lock for b in blocks if b.lock is not None)
+    steps = StepBlock.concatenate(blocks)
+
+    def figures(parts):
+        acc = SummaryAccumulator(sim.params.as_dict(), first, sim.engine.lock_kind)
+        for b in parts:
+            acc.add(b)
+        # the energy balance and the constraint residual are taken at each block's end
+        return {k: v for k, v in acc.figures().items()
+                if k not in ("energy_drift", "constraint_residual_max")}
+
+    locked_at = int(np.argmax(steps.stage != 0))       # the lock is in that step
+    singles = [StepBlock.from_rows(np.array([[getattr(steps, f)[i]] for f in STEP_FIELDS]),
+                                   lambda: blocks[-1].last, lock if i == locked_at else None)
+               for i in range(len(steps))]
+    whole = figures([steps])
+    assert whole["stage2_window"] is not None and whole["deploy_time"] == lock.time
+    assert figures(blocks) == whole
+    assert figures(singles) == whole
+    for body in ("leaf", "link"):           # the peak over a block: where np.argmax finds it
+        p = getattr(steps, f"peak_stress_{body}")
+        i = int(np.argmax(p))
+        assert steps.peaks[body] == (p[i], getattr(steps, f"peak_stress_{body}_x")[i],
+                                     steps.time[i])
+    tied = StepBlock.from_rows(np.vstack([np.arange(3.0)] * len(STEP_FIELDS)), lambda: None)
+    tied.peak_stress_leaf[:] = 7.0
+    assert tied.peaks["leaf"] == (7.0, 0.0, 0.0)        # the first of equal peaks
 
 
 def test_figures_do_not_depend_on_the_recording_rate(offline, bags):

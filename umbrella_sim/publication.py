@@ -98,7 +98,7 @@ class PublicationDriver:
         """Note one period's block of steps; return its events (applied forces, the lock)."""
         self.last_block = block
         self.periods += 1
-        for body, (peak, x) in block.peaks().items():
+        for body, (peak, x, _) in block.peaks.items():
             if peak > self._peaks.get(body, (-1.0, 0.0))[0]:
                 self._peaks[body] = (peak, x)
         lock = self.sim.lock_event
