@@ -38,14 +38,12 @@ def test_the_deploy_controller_latches_softly(antenna_factory, ros_domain_id):
 
     A drive that can brake (sleeve_force_min < 0) keeps the stage-2 vibration small.
     """
-    # joint_states at the node's default 100 Hz: the controller answers each of them; a 2 ms
-    # physics step leaves the node's command callback CPU to spare on a busy machine, and a
-    # twentieth of real time shrinks the loop's stalls in sim time: a controller process that
-    # gets no CPU for 200 ms holds its last command for 10 ms of sim time instead of 200 (a
-    # held full push deploys early, a held brake late; on a loaded 2-core CI machine a
-    # quarter of real time was not enough: 1.051 s, nor once a tenth: 0.928 s)
+    # joint_states at the node's default 100 Hz: the controller answers each of them, and in
+    # lockstep the node waits for that answer before it computes the next period, so a
+    # controller process that gets no CPU for a while on a busy machine only slows the run
+    # down, never changes it; a 2 ms physics step is the thesis's
     antenna = antenna_factory({"v0": 0.0, "sleeve_force_min": -8.0, "time_step": 0.002,
-                               "real_time_factor": 0.05})
+                               "lockstep": True})
     antenna.wait_for_phase("deploying")
     with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
                      parameters={"target_time": 1.0, "max_force": 8.0, "min_force": -8.0}):

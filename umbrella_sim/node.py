@@ -14,6 +14,9 @@ Threads, chosen deliberately:
     with its sim time, which is the exact force history for an offline re-run.
 Each message is serialized once: the same bytes go to the publisher and to the recorder.
 Markers go out at their own display rate (marker_rate).
+With ``lockstep`` the physics thread waits, while deploying, for a command answering each
+joint_states before it steps on (the co-simulation handshake of SITL simulators), so a
+closed loop does not depend on how the operating system schedules the controller.
 Everything published and every command received (accepted, refused, applied) is recorded to
 MCAP when ``record_path`` is set (see recording.py), by a writer thread of the recorder's own:
 the publishing thread only queues the bytes it published.
@@ -106,6 +109,13 @@ class UmbrellaNode(Node):
         self._sim_lock = threading.RLock()
         self._epoch = 0                     # counts resets; samples of an older epoch are dropped
         self._cmd_lock = threading.Lock()
+        # lockstep: armed when the first command (after start or ~/reset) starts acting; then
+        # a command since the last joint_states lets the next period start (set by _on_force,
+        # cleared when joint_states is published)
+        self._lockstep_armed = False
+        self._answered = threading.Event()
+        self.lockstep_waits = 0               # periods that waited for their command
+        self._lockstep_waiting_since = 0.0    # monotonic start of the current wait, 0 = none
         self.accepted_commands = 0
         self.refused_commands = 0
         self.fault: str | None = None
@@ -274,11 +284,12 @@ class UmbrellaNode(Node):
             self._refused_window = (start, n)
             self._warn_throttled("refused", 1.0, lambda: f"refused sleeve_force command: {reason} "
                                  f"(refused so far: {self.refused_commands})")
-            return
-        self.accepted_commands += 1
-        self._record(self.command_topic, msg, t)
-        with self._cmd_lock:
-            self._commanded_force = force
+        else:
+            self.accepted_commands += 1
+            self._record(self.command_topic, msg, t)
+            with self._cmd_lock:
+                self._commanded_force = force
+        self._answered.set()              # any command answers the last state (lockstep)
 
     @contextlib.contextmanager
     def _locked(self):
@@ -301,6 +312,8 @@ class UmbrellaNode(Node):
             self._build_simulator()
             self._epoch += 1
             self._anchor()
+            self._lockstep_armed = False      # the next command starts the handshake again
+            self._answered.clear()
             if self.recorder is not None:
                 from .recording import events_metadata, run_metadata
                 meta = run_metadata(self.model_params, self.node_cfg, self.driver.step,
@@ -371,6 +384,7 @@ class UmbrellaNode(Node):
         """Ask the physics thread to finish its publication and end (signal-safe)."""
         self._stop.set()
         self._wake.set()
+        self._answered.set()
 
     def stop(self) -> None:
         self.request_stop()
@@ -396,8 +410,15 @@ class UmbrellaNode(Node):
         with self._sim_lock:
             if epoch != self._epoch:          # a reset came in meanwhile: the sample is stale
                 return
+            if "joint_states" in msgs and self._lockstep_armed:
+                self._answered.clear()        # a command from now on answers this state
             for key, msg in msgs.items():
                 self._publish(key, msg, t)
+
+    def _waiting_for_command(self) -> bool:
+        """Lockstep: no command has answered the last joint_states yet (sim lock held)."""
+        return (self.node_cfg["lockstep"] and self._lockstep_armed
+                and self.sim.stage == "deploying" and not self._answered.is_set())
 
     def _advance_one_publication(self) -> None:
         with self._cmd_lock:
@@ -438,9 +459,17 @@ class UmbrellaNode(Node):
                     time.sleep(0.0005)        # a service waits for the lock: let it in
                 sample = None
                 with self._sim_lock:
-                    idle = self.paused or self.fault is not None
+                    waiting = not self.paused and self._waiting_for_command()
+                    idle = self.paused or self.fault is not None or waiting
                     duration = self.node_cfg["duration"]
-                    if not idle:
+                    if waiting:
+                        self._lockstep_wait()
+                    elif not idle:
+                        if self._lockstep_waiting_since:   # the command came: pace from now
+                            self._lockstep_waiting_since = 0.0
+                            self._anchor()
+                        if self.node_cfg["lockstep"] and self._answered.is_set():
+                            self._lockstep_armed = True   # the handshake starts (or goes on)
                         try:
                             self._advance_one_publication()
                             sample = self._sample_messages()
@@ -481,7 +510,9 @@ class UmbrellaNode(Node):
                 if duration > 0 and sim_t >= duration - 1e-12:
                     log.info(f"duration {duration:g} s reached at t = {sim_t:.9f} s")
                     break
-                if idle:
+                if waiting:
+                    self._answered.wait(0.05)
+                elif idle:
                     self._wake.wait(0.05)
                     self._wake.clear()
         except Exception as exc:  # keep the process informative, never silent
@@ -490,6 +521,22 @@ class UmbrellaNode(Node):
         finally:
             if not self.finished.done():
                 self.finished.set_result(self.fault is None)
+
+    def _lockstep_wait(self) -> None:
+        """
+        Take one idle turn of a lockstep wait (sim lock held).
+
+        The pace restarts from the moment the command comes (the anchor follows the wait),
+        so waiting for a controller is neither lag nor slip.
+        """
+        if not self._lockstep_waiting_since:
+            self._lockstep_waiting_since = time.monotonic()
+            self.lockstep_waits += 1
+        waited = time.monotonic() - self._lockstep_waiting_since
+        if waited >= 5.0:
+            self._warn_throttled("lockstep", 5.0, lambda: (
+                f"lockstep: no sleeve_force command for {waited:.0f} s (wall) since the "
+                f"joint_states of t = {self.sim.time:.6f} s; the simulation waits for it"))
 
     def _re_anchor(self, epoch: int, now: float, sim_t: float, lag: float) -> None:
         """
@@ -580,6 +627,9 @@ class UmbrellaNode(Node):
                   "phase": self._phase, "paused": self.paused,
                   "accepted_commands": self.accepted_commands,
                   "refused_commands": self.refused_commands, "steps": self.sim.steps,
+                  "lockstep": self.node_cfg["lockstep"],
+                  "waiting_for_command": bool(self._lockstep_waiting_since),
+                  "lockstep_waits": self.lockstep_waits,
                   "physics_step_s": self.sim.h, "slip_s": f"{self.slip:.6f}",
                   "re_anchors": self.re_anchors,
                   "refused_not_recorded": self.refused_not_recorded,

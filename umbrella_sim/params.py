@@ -227,6 +227,15 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     _P("real_time_factor", float, 1.0, "-",
        "sim seconds per wall second: 1 = wall-clock pace, 0 = as fast as possible",
        low=0.0, high=1000.0, applies=NOW, group=NODE),
+    _P("lockstep", bool, False, "-",
+       "true = the simulation waits for its controller: from the first `sleeve_force` "
+       "command on, while deploying, each publication period starts only once a command "
+       "(accepted or refused) has arrived since the previous joint_states, and acts from "
+       "that period's first step; a closed loop's result then does not depend on process "
+       "scheduling, and `real_time_factor` is the fastest pace. Locked or faulted (the "
+       "sleeve force no longer moves the frame) and after ~/reset until a command, the "
+       "node runs on its own. false = real time, a command acts from the next period "
+       "boundary after it arrives", applies=NOW, group=NODE),
     _P("duration", float, 0.0, "s",
        "sim time at which the node exits (code 0); 0 = run until stopped",
        low=0.0, high=1e9, applies=NOW, group=NODE),

@@ -1,0 +1,57 @@
+"""
+Lockstep: with ``lockstep:=true`` the node waits for a command answering each joint_states.
+
+Over real DDS: the node stalls while no command answers its last state, and each answer
+(accepted or refused) lets exactly one publication period run, driven by that answer.
+"""
+import time
+
+import pytest
+
+PERIOD = 0.01           # s, publish_rate 100 Hz
+STEP = 0.002            # s
+
+
+def stamp(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+
+def wait_quiet(antenna, seconds: float = 0.4, timeout: float = 10.0) -> int:
+    """Return the count of joint_states after `seconds` of wall time without a new one."""
+    n = len(antenna.messages("joint_states"))
+    for _ in range(round(timeout / seconds)):
+        time.sleep(seconds)
+        m = len(antenna.messages("joint_states"))
+        if m == n:
+            return n
+        n = m
+    pytest.fail(f"the node never stalled: {n} joint_states and counting after {timeout} s")
+
+
+def test_lockstep_runs_one_period_per_command(antenna_factory):
+    antenna = antenna_factory({"v0": 0.0, "lockstep": True, "publish_rate": 1 / PERIOD,
+                               "time_step": STEP})
+    antenna.wait_for_phase("deploying")
+    antenna.wait_for_sim_time(0.05)           # before the first command it runs on its own
+    antenna.publish_force(5.0)
+    antenna.wait_for("diagnostics", lambda m: any(
+        kv.key == "waiting_for_command" and kv.value == "True" for kv in m.status[0].values),
+        timeout=10, what="waiting_for_command == True")
+    n = wait_quiet(antenna)                   # stalled: nothing answers its last state
+    t = stamp(antenna.messages("joint_states")[-1])
+    for force in (6.0, float("nan"), 7.0):    # a refused command answers too (force held)
+        antenna.publish_force(force)
+        antenna.wait_for("joint_states", lambda m: stamp(m) > t + 1e-9, timeout=10,
+                         what=f"the state after t = {t:.6f} s")
+        assert wait_quiet(antenna) == n + 1, "one answer ran more than one period"
+        state = antenna.messages("joint_states")[-1]
+        assert stamp(state) == pytest.approx(t + PERIOD, abs=1e-9)
+        assert state.effort[2] == (6.0 if force != 7.0 else 7.0)  # the force of that period
+        n, t = n + 1, stamp(state)
+    applied = antenna.applied_forces()
+    assert [f for _, f in applied] == [5.0, 6.0, 7.0]
+    # the first command acts for one period, then each answer from the state it answered
+    assert applied[2][0] == pytest.approx(t - PERIOD, abs=1e-9)
+    assert applied[1][0] == pytest.approx(t - 3 * PERIOD, abs=1e-9)
+    assert applied[0][0] == pytest.approx(t - 4 * PERIOD, abs=1e-9)
+    assert antenna.diagnostics()["lockstep"] == "True"
