@@ -17,7 +17,11 @@
  *     systems are solved by a band LU of the elastic block (its symmetric part is positive
  *     definite: M + h^2/4 K, plus a skew gyroscopic part, so no pivoting is needed) and a
  *     pivoted dense LU of the small Schur complement on the border;
- *   - M(q) is never formed: products M(q) v use the band and a few border vectors.
+ *   - M(q) is never formed: products M(q) v use the band and a few border vectors;
+ *   - stage 2's phase correction (integrators.ModalPhaseCorrection) is a rank-r term
+ *     U diag(c) U^T (r <= ~8 modes) in the residual and the energy, left out of the
+ *     iteration matrix (at most 3e-3 of its elastic block: ~0.2 more Newton iterations
+ *     a step, integrators.PHASE_CORRECTION_LIMIT).
  * The rigid-FE mode (every elastic coordinate constrained) goes through the same code with
  * a border as large as the mesh, so there it costs what a dense solve costs.
  *
@@ -108,6 +112,12 @@ typedef struct {
     double *q_s, *v_s, *p_s, *lam_s;  /* single-step results */
     ElasticLaw *law;       /* NULL: U = 1/2 q.K q, undamped; else U, C of the law */
     double dissipated;     /* damping dissipation of the last step (J) */
+    /* stage 2's modal phase correction (integrators.ModalPhaseCorrection):
+     * pc_r modes, rows u_i of pc_u (pc_r x n), stiffening c_i, measured from q_lock (the
+     * caller's arrays); pc_r = 0: none.  With an elastic law too. */
+    int pc_r;
+    const double *pc_u, *pc_c, *pc_ref;
+    double *pc_f;          /* n: its force at the last Newton iterate's qm */
 } Ctx;
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
@@ -584,7 +594,7 @@ Ctx *umbrella_new(const Model *m) {
     double **vecs[] = {&x->hq, &x->maf, &x->q1, &x->v1, &x->dq, &x->qm, &x->hm, &x->gt, &x->gy,
                        &x->res, &x->kq, &x->mv, &x->wa, &x->wb, &x->vt, &x->q_s, &x->v_s, &x->p_s,
                        &x->mffv, &x->wv0, &x->mq0, &x->wq0, &x->kq0, &x->mv0, &x->mdq, &x->wdq,
-                       &x->kdq, &x->mq1, &x->wq1, &x->kq1};
+                       &x->kdq, &x->mq1, &x->wq1, &x->kq1, &x->pc_f};
     for (size_t k = 0; k < sizeof(vecs) / sizeof(vecs[0]); k++) { *vecs[k] = d; d += n; }
     x->mrf = d; d += 2 * m->n_link;
     x->rhs = d; d += n + ncmax;
@@ -927,6 +937,32 @@ scale:;
     return OK;
 }
 
+/* The stage-2 phase correction at q: its energy 1/2 sum_i c_i (u_i . (q - q_lock))^2, and
+ * its force U diag(c) U^T (q - q_lock) into f (n) unless f is NULL. */
+static double phase_correction(const Ctx *x, const double *q, double *f) {
+    int n = x->m->n;
+    double e = 0.0;
+    if (f) memset(f, 0, sizeof(double) * n);
+    for (int j = 0; j < x->pc_r; j++) {
+        const double *u = x->pc_u + (size_t)j * n;
+        double eta = 0.0;
+        for (int i = 0; i < n; i++) eta += u[i] * (q[i] - x->pc_ref[i]);
+        double s = x->pc_c[j] * eta;
+        e += 0.5 * s * eta;
+        if (f) for (int i = 0; i < n; i++) f[i] += s * u[i];
+    }
+    return e;
+}
+
+/* Stage 2's phase correction from now on (r = 0: none); the arrays stay the caller's. */
+void umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *c,
+                                   const double *q_lock) {
+    x->pc_r = r;
+    x->pc_u = u;
+    x->pc_c = c;
+    x->pc_ref = q_lock;
+}
+
 /* One step from (q0, v0, lam0, p0) of length h; results in x->q_s, v_s, lam_s, p_s. */
 static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v0,
                 const double *lam0, const double *p0, double h, double force, double tol,
@@ -940,6 +976,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
      * iteration (ElasticMidpointDAE._step_numpy) */
     ElasticLaw *law = x->law;
     int nonlinear_law = law && law->d.nonlinear, have_base = 0, refresh = 0;
+    int pc = locked && !rigid && x->pc_r > 0;    /* stage 2's phase correction */
     double alpha = 1.0, f_base = INFINITY;
     double half_h2 = 0.5 * h * h;
     constraints(m, q0, locked, rigid, phi0);
@@ -1000,6 +1037,10 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             for (int k = 0; k < JW; k++) res[x->jm_idx[r * JW + k]] += x->jm_val[r * JW + k] * lam[r];
         for (int i = 0; i < n; i++)
             res[i] = x->mv[i] - p0[i] - h * (x->gt[i] - x->kq[i] - force * x->gy[i] + res[i]);
+        if (pc) {                         /* its elastic force at qm joins K qm */
+            phase_correction(x, qm, x->pc_f);
+            for (int i = 0; i < n; i++) res[i] += h * x->pc_f[i];
+        }
         if (nonlinear_law) {
             double fn = 0.0;
             for (int i = 0; i < n; i++) fn += 0.25 * h * h * res[i] * res[i];
@@ -1063,6 +1104,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target += 0.5 * q0[i] * x->kq0[i]; }
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target -= 0.5 * q[i] * x->kq1[i]; }
     }
+    if (pc) t_target += phase_correction(x, q0, NULL) - phase_correction(x, q, NULL);
     for (int i = 0; i < n; i++) t_target += 0.5 * v0[i] * p0[i];
     if (project_velocity(x, nc, v, x->p_s, t_target) != OK) { status = SINGULAR; goto done; }
 done:
@@ -1178,6 +1220,7 @@ static void output_row(const Ctx *x, const double *q, const double *v, const dou
         }
         se *= 0.5;
     }
+    if (stage == 1 && x->pc_r > 0) se += phase_correction(x, q, NULL);   /* stage 2 */
     SET(F_STRAIN, se);
     SET(F_WORK, work);
     SET(F_LOCK_LOSS, lock_loss);

@@ -521,6 +521,23 @@ class UmbrellaModel:
         q[self.i_alpha2] = math.acos(-p.l1 / p.l3 * math.cos(alpha1))
         return q
 
+    @cached_property
+    def locked_modes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """
+        Return (omega, phi, mass) of the locked frame linearised at full deployment.
+
+        K x = omega^2 M x on the null space of the locked constraint Jacobian, about the
+        undeformed deployed configuration: omega ascending (rad/s), phi (n, modes) mass-
+        normalised (phi^T M phi = I), mass = M there.
+        """
+        from scipy.linalg import eigh, null_space
+
+        q = self.rigid_configuration(self.params.alpha_deployed)
+        z = null_space(self.constraint_jacobian(q, ConstraintSet(locked=True, rigid=False)))
+        mass = self.mass_matrix(q)
+        w2, psi = eigh(z.T @ self.stiffness @ z, z.T @ mass @ z)
+        return np.sqrt(np.maximum(w2, 0.0)), z @ psi, mass
+
     def rigid_velocity(self, q: np.ndarray, alpha1_rate: float) -> np.ndarray:
         p = self.params
         a1, a2 = q[0], q[self.i_alpha2]

@@ -68,14 +68,15 @@ def _segment_inputs(log: LogData, seg):
     recorded fault (None without one).
     """
     from .forcing import ForceSchedule
-    from .params import SPECS, UmbrellaParams
+    from .params import RECORDED_BEFORE_ADDED, SPECS, UmbrellaParams
     from .publication import PublicationDriver
     from .solver import command_force
 
     p_all = seg.params
     try:
         params = UmbrellaParams.from_mapping(
-            {k: v for k, v in p_all.items() if k in SPECS}).validated()
+            {**RECORDED_BEFORE_ADDED, **{k: v for k, v in p_all.items() if k in SPECS}}
+        ).validated()
         rate = float(p_all["publish_rate"])
         step = float(p_all["physics_step"])
     except (KeyError, TypeError, ValueError) as exc:

@@ -128,6 +128,10 @@ class Engine(abc.ABC):
     def kinetic_energy(self, s: DynamicState) -> float:
         """T (J)."""
 
+    def strain_energy(self, s: DynamicState, stage: Stage) -> float:
+        """V (J), the potential of the engine's energy balance."""
+        return float(self.model.strain_energy(self.fe_state(s)[0]))
+
     @abc.abstractmethod
     def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
         """Force on the sleeve from the axle (X) and the stop (Y), N."""
@@ -180,9 +184,20 @@ class FiniteElementEngine(Engine):
         self.model = model
         self.rigid = params.model == "rigid-fe"
         self.lock_kind = "plastic" if self.rigid else params.lock
-        self.integrator = MidpointDAE(model)
+        self.integrator = self._integrator(model)
+        if params.phase_correction and self.phase_correctable:   # ModalPhaseCorrection
+            self.integrator.correct_stage2_phase(params.time_step)
         self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
                     for stage in Stage}
+
+    @staticmethod
+    def _integrator(model: UmbrellaModel) -> MidpointDAE:
+        return MidpointDAE(model)
+
+    @property
+    def phase_correctable(self) -> bool:
+        """Stage 2 takes ModalPhaseCorrection: its elastic coordinates vibrate (not rigid-FE)."""
+        return not self.rigid
 
     @property
     def backend(self) -> str:
@@ -256,6 +271,9 @@ class FiniteElementEngine(Engine):
             return float(0.5 * s.qd @ s.momentum)
         return float(self.model.kinetic_energy(s.q, s.qd))
 
+    def strain_energy(self, s: DynamicState, stage: Stage) -> float:
+        return self.integrator.strain_energy(s.q, self._cs[stage])
+
     def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
         lam = s.multipliers
         return float(lam[2]), float(lam[3]) if stage == LOCKED else 0.0
@@ -280,6 +298,7 @@ class FiniteElementEngine(Engine):
             qd = self.integrator.project_velocity(s.q, s.qd, cs)
         s = self.integrator.with_constraints(replace(s, qd=qd), force, cs)
         after = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
+        self.integrator.lock_at(s.q)
         return s, LockEvent(s.t, self.lock_kind, float(before), float(after), free)
 
     def _energy_redistribution(self, q, qd, cs):
@@ -662,7 +681,7 @@ class UmbrellaSimulator:
                       "peak_stress_link": float(link_abs[ik]),
                       "peak_stress_link_x": float(m.link.stress_x[ik]),
                       "kinetic_energy": eng.kinetic_energy(s),
-                      "strain_energy": float(m.strain_energy(q))}
+                      "strain_energy": eng.strain_energy(s, stage)}
             residual = eng.residual(s, stage)
             leaf_stress, link_stress = np.array((lt, lb)), np.array((kt, kb))
         joint_stress, mid_link_stress = m.reference_stresses(lt, kt)
