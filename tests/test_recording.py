@@ -280,3 +280,20 @@ def test_signal_stops_physics_then_finalises_the_recording(tmp_path, sig):
     log = read_log(str(bag))
     assert not log.truncated
     assert summary.statistics.message_count == len(log.messages) > 50
+
+
+def test_a_recording_from_before_the_phase_correction_re_runs_without_it():
+    """A recording whose parameters lack phase_correction was made by the plain midpoint rule."""
+    from types import SimpleNamespace
+
+    from umbrella_sim.publication import physics_step
+    from umbrella_sim.replay import _segment_inputs
+
+    old = {k: v for k, v in UmbrellaParams().as_dict().items() if k != "phase_correction"}
+    seg = SimpleNamespace(index=0, offset_ns=0, end_ns=None,
+                          params={**old, "publish_rate": 100.0,
+                                  "physics_step": physics_step(old["time_step"], 100.0)})
+    log = SimpleNamespace(path="old.mcap", find_topic=lambda key, required=False: None)
+    assert _segment_inputs(log, seg)[0].phase_correction is False
+    seg.params["phase_correction"] = True              # what a recording of today holds
+    assert _segment_inputs(log, seg)[0].phase_correction is True
