@@ -19,9 +19,8 @@
  *     pivoted dense LU of the small Schur complement on the border;
  *   - M(q) is never formed: products M(q) v use the band and a few border vectors;
  *   - stage 2's phase correction (integrators.ModalPhaseCorrection) is a rank-r term
- *     U diag(c) U^T (r <= ~8 modes) in the residual and the energy, left out of the
- *     iteration matrix (at most 3e-3 of its elastic block: ~0.2 more Newton iterations
- *     a step, integrators.PHASE_CORRECTION_LIMIT).
+ *     U diag(c) U^T (r <= ~8 modes) in the residual and the energy; left out of the
+ *     constant iteration matrix, it is put back into each Newton update mode by mode.
  * The rigid-FE mode (every elastic coordinate constrained) goes through the same code with
  * a border as large as the mesh, so there it costs what a dense solve costs.
  *
@@ -116,7 +115,7 @@ typedef struct {
      * pc_r modes, rows u_i of pc_u (pc_r x n), stiffening c_i, measured from q_lock (the
      * caller's arrays); pc_r = 0: none.  With an elastic law too. */
     int pc_r;
-    const double *pc_u, *pc_c, *pc_ref;
+    const double *pc_u, *pc_phi, *pc_w2, *pc_c, *pc_ref;   /* pc_phi: phi_i^T rows, w2: omega^2 */
     double *pc_f;          /* n: its force at the last Newton iterate's qm */
 } Ctx;
 
@@ -955,12 +954,32 @@ static double phase_correction(const Ctx *x, const double *q, double *f) {
 }
 
 /* Stage 2's phase correction from now on (r = 0: none); the arrays stay the caller's. */
-void umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *c,
-                                   const double *q_lock) {
+void umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *phi,
+                                   const double *w2, const double *c, const double *q_lock) {
     x->pc_r = r;
     x->pc_u = u;
+    x->pc_phi = phi;
+    x->pc_w2 = w2;
     x->pc_c = c;
     x->pc_ref = q_lock;
+}
+
+/* The Newton update dq (n) with the correction's share of the tangent put back, mode by mode
+ * (integrators.ModalPhaseCorrection.newton_update); the modal components first, in pc_f
+ * (free between the residual and the next iteration). */
+static void phase_correction_update(Ctx *x, double h, double *dq) {
+    int n = x->m->n, r = x->pc_r;
+    double quarter = 0.25 * h * h, *s = x->pc_f;
+    for (int j = 0; j < r; j++) {
+        const double *u = x->pc_u + (size_t)j * n;
+        double c = x->pc_c[j], eta = 0.0;
+        for (int i = 0; i < n; i++) eta += u[i] * dq[i];
+        s[j] = quarter * c / (1.0 + quarter * (x->pc_w2[j] + c)) * eta;
+    }
+    for (int j = 0; j < r; j++) {
+        const double *phi = x->pc_phi + (size_t)j * n;
+        for (int i = 0; i < n; i++) dq[i] -= s[j] * phi[i];
+    }
 }
 
 /* One step from (q0, v0, lam0, p0) of length h; results in x->q_s, v_s, lam_s, p_s. */
@@ -1064,6 +1083,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         for (int i = 0; i < n; i++) rhs[i] = -0.5 * h * res[i];
         for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
         arrow_solve_q(x, x->e_iter, nc, rhs, 0);
+        if (pc) phase_correction_update(x, h, rhs);
         if (nonlinear_law) {
             memcpy(law->q_base, q, sizeof(double) * n);
             memcpy(law->lam_base, lam, sizeof(double) * nc);

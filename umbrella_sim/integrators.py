@@ -51,8 +51,8 @@ from .model import ConstraintSet, UmbrellaModel
 PHI_TOLERANCE = 1e-11
 
 
-#: modes whose period the stage-2 correction makes exact: omega h at most this (their added
-#: stiffness, h^2/4 (omega'^2 - omega^2) <= 3e-3 of the iteration matrix's, is left out of it)
+#: modes whose period the stage-2 correction makes exact: omega h at most this (beyond it the
+#: pre-warped stiffness grows fast and the linearised modes stop describing the step)
 PHASE_CORRECTION_LIMIT = 0.5
 
 
@@ -83,8 +83,9 @@ class ModalPhaseCorrection:
         keep = omega * h <= PHASE_CORRECTION_LIMIT
         self.omega = omega[keep]
         self.h = h
-        # rows u_i = (M0 phi_i)^T, C-contiguous for the kernel
+        # rows u_i = (M0 phi_i)^T and phi_i^T, C-contiguous for the kernel
         self.modes = np.ascontiguousarray((mass @ phi[:, keep]).T)
+        self.shapes = np.ascontiguousarray(phi[:, keep].T)
         self.stiffening = (2.0 / h * np.tan(0.5 * h * self.omega)) ** 2 - self.omega ** 2
         self.reference: np.ndarray | None = None   # q at the lock; None: inactive
 
@@ -97,6 +98,19 @@ class ModalPhaseCorrection:
     def energy(self, q: np.ndarray) -> float:
         eta = self.modes @ (q - self.reference)
         return float(0.5 * (self.stiffening * eta) @ eta)
+
+    def newton_update(self, dq: np.ndarray, h: float) -> np.ndarray:
+        """
+        Return the Newton update dq with the correction's share of the tangent put back.
+
+        The iteration matrix leaves h^2/4 U diag(c) U^T out; in the modes' coordinates its
+        block is 1 + h^2 omega^2 / 4 where the tangent's is 1 + h^2 (omega^2 + c) / 4, so each
+        modal component of dq is scaled by their ratio (Woodbury for M0-orthonormal modes).
+        Only how Newton converges changes, not to what.
+        """
+        quarter = 0.25 * h * h
+        shrink = quarter * self.stiffening / (1.0 + quarter * (self.omega ** 2 + self.stiffening))
+        return dq - self.shapes.T @ (shrink * (self.modes @ dq))
 
 
 class ConvergenceError(RuntimeError):
@@ -365,6 +379,8 @@ class MidpointDAE:
             rhs[:n] = -0.5 * h * resid
             rhs[n:] = -phi
             dx = dgetrs(lu, piv, rhs)[0]
+            if pc is not None:
+                dx[:n] = pc.newton_update(dx[:n], h)
             q = q + dx[:n]
             lam = lam + dx[n:] / half_h2
             step_norm = np.max(np.abs(dx[:n]))
@@ -466,7 +482,7 @@ def load_kernel():
             lib.umbrella_momentum.restype = None
             lib.umbrella_momentum.argtypes = [vp, _dp, _dp, _dp]
             lib.umbrella_set_phase_correction.restype = None
-            lib.umbrella_set_phase_correction.argtypes = [vp, i, _dp, _dp, _dp]
+            lib.umbrella_set_phase_correction.argtypes = [vp, i, _dp, _dp, _dp, _dp, _dp]
             lib.umbrella_advance_call.restype = i
             lib.umbrella_advance_call.argtypes = [vp, ctypes.POINTER(_AdvanceCall)]
             lib.umbrella_sample_call.restype = None
@@ -556,7 +572,8 @@ class CompiledKernel:
     def set_phase_correction(self, pc: ModalPhaseCorrection) -> None:
         """Hand stage 2's phase correction to the kernel (it keeps pointers to these arrays)."""
         self._phase_correction = arrays = tuple(
-            np.ascontiguousarray(a, dtype=float) for a in (pc.modes, pc.stiffening, pc.reference))
+            np.ascontiguousarray(a, dtype=float)
+            for a in (pc.modes, pc.shapes, pc.omega ** 2, pc.stiffening, pc.reference))
         self.lib.umbrella_set_phase_correction(self._ctx, len(pc.stiffening),
                                                *(_dptr(a) for a in arrays))
 
