@@ -117,6 +117,8 @@ typedef struct {
     int pc_r;
     const double *pc_u, *pc_phi, *pc_w2, *pc_c, *pc_ref;   /* pc_phi: phi_i^T rows, w2: omega^2 */
     double *pc_f;          /* n: its force at the last Newton iterate's qm */
+    double *pc_eq, pc_e;   /* the last phase_correction_energy: q (n) and its value */
+    int pc_e_valid;        /* (a step asks for q0, then q1 twice: q0 was the last q1) */
 } Ctx;
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
@@ -593,7 +595,7 @@ Ctx *umbrella_new(const Model *m) {
     double **vecs[] = {&x->hq, &x->maf, &x->q1, &x->v1, &x->dq, &x->qm, &x->hm, &x->gt, &x->gy,
                        &x->res, &x->kq, &x->mv, &x->wa, &x->wb, &x->vt, &x->q_s, &x->v_s, &x->p_s,
                        &x->mffv, &x->wv0, &x->mq0, &x->wq0, &x->kq0, &x->mv0, &x->mdq, &x->wdq,
-                       &x->kdq, &x->mq1, &x->wq1, &x->kq1, &x->pc_f};
+                       &x->kdq, &x->mq1, &x->wq1, &x->kq1, &x->pc_f, &x->pc_eq};
     for (size_t k = 0; k < sizeof(vecs) / sizeof(vecs[0]); k++) { *vecs[k] = d; d += n; }
     x->mrf = d; d += 2 * m->n_link;
     x->rhs = d; d += n + ncmax;
@@ -962,6 +964,18 @@ void umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double 
     x->pc_w2 = w2;
     x->pc_c = c;
     x->pc_ref = q_lock;
+    x->pc_e_valid = 0;
+}
+
+/* phase_correction's energy at q, kept for the next call (as elastic_energy) */
+static double phase_correction_energy(Ctx *x, const double *q) {
+    size_t bytes = sizeof(double) * x->m->n;
+    if (!(x->pc_e_valid && memcmp(q, x->pc_eq, bytes) == 0)) {
+        x->pc_e = phase_correction(x, q, NULL);
+        memcpy(x->pc_eq, q, bytes);
+        x->pc_e_valid = 1;
+    }
+    return x->pc_e;
 }
 
 /* The Newton update dq (n) with the correction's share of the tangent put back, mode by mode
@@ -1124,7 +1138,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target += 0.5 * q0[i] * x->kq0[i]; }
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target -= 0.5 * q[i] * x->kq1[i]; }
     }
-    if (pc) t_target += phase_correction(x, q0, NULL) - phase_correction(x, q, NULL);
+    if (pc) t_target += phase_correction_energy(x, q0) - phase_correction_energy(x, q);
     for (int i = 0; i < n; i++) t_target += 0.5 * v0[i] * p0[i];
     if (project_velocity(x, nc, v, x->p_s, t_target) != OK) { status = SINGULAR; goto done; }
 done:
@@ -1190,7 +1204,7 @@ static void fibre_stress(const Model *m, const double *q, const double *membrane
     *bot = b;
 }
 
-static void output_row(const Ctx *x, const double *q, const double *v, const double *p,
+static void output_row(Ctx *x, const double *q, const double *v, const double *p,
                        const double *kq_known, double t, int stage, double force, double work,
                        double lock_loss, double *out, int cap, int k) {
     const Model *m = x->m;
@@ -1240,7 +1254,7 @@ static void output_row(const Ctx *x, const double *q, const double *v, const dou
         }
         se *= 0.5;
     }
-    if (stage == 1 && x->pc_r > 0) se += phase_correction(x, q, NULL);   /* stage 2 */
+    if (stage == 1 && x->pc_r > 0) se += phase_correction_energy(x, q);   /* stage 2 */
     SET(F_STRAIN, se);
     SET(F_WORK, work);
     SET(F_LOCK_LOSS, lock_loss);

@@ -82,7 +82,6 @@ class ModalPhaseCorrection:
         omega, phi, mass = model.locked_modes
         keep = omega * h <= PHASE_CORRECTION_LIMIT
         self.omega = omega[keep]
-        self.h = h
         # rows u_i = (M0 phi_i)^T and phi_i^T, C-contiguous for the kernel
         self.modes = np.ascontiguousarray((mass @ phi[:, keep]).T)
         self.shapes = np.ascontiguousarray(phi[:, keep].T)
