@@ -117,6 +117,7 @@ typedef struct {
     int pc_r;
     const double *pc_u, *pc_phi, *pc_w2, *pc_c, *pc_ref;   /* pc_phi: phi_i^T rows, w2: omega^2 */
     double *pc_f;          /* n: its force at the last Newton iterate's qm */
+    double *pc_d, *pc_s;   /* n each: q - q_lock; the modal sums (r <= n) */
     double *pc_eq, pc_e;   /* the last phase_correction_energy: q (n) and its value */
     int pc_e_valid;        /* (a step asks for q0, then q1 twice: q0 was the last q1) */
 } Ctx;
@@ -191,27 +192,32 @@ static void band_matvec(const Model *m, const double *band, const double *x, dou
     band_matvec2(m, band, y, NULL, NULL, x);
 }
 
-/* LU without pivoting of a band matrix (n x (2 bw + 1)) in place */
+/* LU without pivoting of a band matrix (n x (2 bw + 1)) in place; the diagonal keeps the
+ * reciprocals of the pivots (the solves multiply) */
 static int band_factor(int n, int bw, double *A) {
     int w = 2 * bw + 1;
     for (int k = 0; k < n; k++) {
         double piv = A[(size_t)k * w + bw];
         if (!(fabs(piv) > 0.0) || !isfinite(piv)) return SINGULAR;
+        double inv = 1.0 / piv;
         int hi = k + bw >= n ? n - 1 : k + bw;
         for (int i = k + 1; i <= hi; i++) {
             double *ri = A + (size_t)i * w;
-            double f = ri[k - i + bw] / piv;
+            double f = ri[k - i + bw] * inv;
             ri[k - i + bw] = f;
             if (f == 0.0) continue;
             const double *rk = A + (size_t)k * w;
             for (int j = k + 1; j <= hi; j++) ri[j - i + bw] -= f * rk[j - k + bw];
         }
+        A[(size_t)k * w + bw] = inv;
     }
     return OK;
 }
 
 /* x = A^-1 x with A = band_factor's LU; rows away from the ends in full-width loops, so
- * that with bw a constant (band_solve) the compiler unrolls them */
+ * that with bw a constant (band_solve) the compiler unrolls them.  Each row sums the
+ * farthest unknowns first: the one just computed enters last, so only one multiply-add
+ * per row waits for it (a substitution is a chain of rows; its latency is the cost). */
 static inline __attribute__((always_inline)) void band_solve_bw(int n, const int bw,
                                                                 const double *A, double *x) {
     int w = 2 * bw + 1;
@@ -228,10 +234,10 @@ static inline __attribute__((always_inline)) void band_solve_bw(int n, const int
         const double *ri = A + (size_t)i * w;
         double s = x[i];
         if (i + bw < n)
-            for (int k = 1; k <= bw; k++) s -= ri[bw + k] * x[i + k];
+            for (int k = bw; k >= 1; k--) s -= ri[bw + k] * x[i + k];
         else
-            for (int j = i + 1; j < n; j++) s -= ri[j - i + bw] * x[j];
-        x[i] = s / ri[bw];
+            for (int j = n - 1; j > i; j--) s -= ri[j - i + bw] * x[j];
+        x[i] = s * ri[bw];
     }
 }
 
@@ -241,7 +247,8 @@ static void band_solve(int n, int bw, const double *A, double *x) {
     else band_solve_bw(n, bw, A, x);
 }
 
-/* dense LU with partial pivoting, row-major */
+/* dense LU with partial pivoting, row-major; the diagonal keeps the reciprocals of the
+ * pivots */
 static int lu_factor(int N, double *A, int *piv) {
     for (int k = 0; k < N; k++) {
         int p = k;
@@ -259,10 +266,12 @@ static int lu_factor(int N, double *A, int *piv) {
             if (f != 0.0)
                 for (int j = k + 1; j < N; j++) A[i * N + j] -= f * A[k * N + j];
         }
+        A[k * N + k] = inv;
     }
     return OK;
 }
 
+/* b = A^-1 b with lu_factor's A and piv (each row's latest unknown last, as band_solve) */
 static void lu_solve(int N, const double *A, const int *piv, double *b) {
     for (int k = 0; k < N; k++)
         if (piv[k] != k) { double t = b[k]; b[k] = b[piv[k]]; b[piv[k]] = t; }
@@ -273,8 +282,8 @@ static void lu_solve(int N, const double *A, const int *piv, double *b) {
     }
     for (int i = N - 1; i >= 0; i--) {
         double acc = b[i];
-        for (int j = i + 1; j < N; j++) acc -= A[i * N + j] * b[j];
-        b[i] = acc / A[i * N + i];
+        for (int j = N - 1; j > i; j--) acc -= A[i * N + j] * b[j];
+        b[i] = acc * A[i * N + i];
     }
 }
 
@@ -302,7 +311,7 @@ static void band_solve_multi(int n, int bw, const double *A, double *X, int nrhs
             const double *xj = X + (size_t)j * nrhs;
             for (int c = 0; c < nrhs; c++) xi[c] -= f * xj[c];
         }
-        double inv = 1.0 / ri[bw];
+        double inv = ri[bw];     /* band_factor keeps the reciprocal */
         for (int c = 0; c < nrhs; c++) xi[c] *= inv;
     }
 }
@@ -595,7 +604,8 @@ Ctx *umbrella_new(const Model *m) {
     double **vecs[] = {&x->hq, &x->maf, &x->q1, &x->v1, &x->dq, &x->qm, &x->hm, &x->gt, &x->gy,
                        &x->res, &x->kq, &x->mv, &x->wa, &x->wb, &x->vt, &x->q_s, &x->v_s, &x->p_s,
                        &x->mffv, &x->wv0, &x->mq0, &x->wq0, &x->kq0, &x->mv0, &x->mdq, &x->wdq,
-                       &x->kdq, &x->mq1, &x->wq1, &x->kq1, &x->pc_f, &x->pc_eq};
+                       &x->kdq, &x->mq1, &x->wq1, &x->kq1, &x->pc_f, &x->pc_eq, &x->pc_d,
+                       &x->pc_s};
     for (size_t k = 0; k < sizeof(vecs) / sizeof(vecs[0]); k++) { *vecs[k] = d; d += n; }
     x->mrf = d; d += 2 * m->n_link;
     x->rhs = d; d += n + ncmax;
@@ -938,19 +948,50 @@ scale:;
     return OK;
 }
 
+/* eta_j = u_j . d (j < r; u_j the rows of u, r x n), each summed in i order as a plain loop
+ * would, four modes at a time: independent sums instead of one latency-bound chain */
+static void modal_dots(int r, int n, const double *u, const double *d, double *eta) {
+    int j = 0;
+    for (; j + 4 <= r; j += 4) {
+        const double *u0 = u + (size_t)j * n, *u1 = u0 + n, *u2 = u1 + n, *u3 = u2 + n;
+        double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+        for (int i = 0; i < n; i++) {
+            a0 += u0[i] * d[i];
+            a1 += u1[i] * d[i];
+            a2 += u2[i] * d[i];
+            a3 += u3[i] * d[i];
+        }
+        eta[j] = a0;
+        eta[j + 1] = a1;
+        eta[j + 2] = a2;
+        eta[j + 3] = a3;
+    }
+    for (; j < r; j++) {
+        const double *uj = u + (size_t)j * n;
+        double a = 0.0;
+        for (int i = 0; i < n; i++) a += uj[i] * d[i];
+        eta[j] = a;
+    }
+}
+
 /* The stage-2 phase correction at q: its energy 1/2 sum_i c_i (u_i . (q - q_lock))^2, and
  * its force U diag(c) U^T (q - q_lock) into f (n) unless f is NULL. */
 static double phase_correction(const Ctx *x, const double *q, double *f) {
-    int n = x->m->n;
-    double e = 0.0;
-    if (f) memset(f, 0, sizeof(double) * n);
-    for (int j = 0; j < x->pc_r; j++) {
-        const double *u = x->pc_u + (size_t)j * n;
-        double eta = 0.0;
-        for (int i = 0; i < n; i++) eta += u[i] * (q[i] - x->pc_ref[i]);
-        double s = x->pc_c[j] * eta;
-        e += 0.5 * s * eta;
-        if (f) for (int i = 0; i < n; i++) f[i] += s * u[i];
+    int n = x->m->n, r = x->pc_r;
+    double e = 0.0, *d = x->pc_d, *s = x->pc_s;
+    for (int i = 0; i < n; i++) d[i] = q[i] - x->pc_ref[i];
+    modal_dots(r, n, x->pc_u, d, s);
+    for (int j = 0; j < r; j++) {
+        double eta = s[j];
+        s[j] = x->pc_c[j] * eta;
+        e += 0.5 * s[j] * eta;
+    }
+    if (f) {
+        memset(f, 0, sizeof(double) * n);
+        for (int j = 0; j < r; j++) {
+            const double *u = x->pc_u + (size_t)j * n;
+            for (int i = 0; i < n; i++) f[i] += s[j] * u[i];
+        }
     }
     return e;
 }
@@ -979,16 +1020,14 @@ static double phase_correction_energy(Ctx *x, const double *q) {
 }
 
 /* The Newton update dq (n) with the correction's share of the tangent put back, mode by mode
- * (integrators.ModalPhaseCorrection.newton_update); the modal components first, in pc_f
- * (free between the residual and the next iteration). */
+ * (integrators.ModalPhaseCorrection.newton_update); the modal components first, in pc_s. */
 static void phase_correction_update(Ctx *x, double h, double *dq) {
     int n = x->m->n, r = x->pc_r;
-    double quarter = 0.25 * h * h, *s = x->pc_f;
+    double quarter = 0.25 * h * h, *s = x->pc_s;
+    modal_dots(r, n, x->pc_u, dq, s);
     for (int j = 0; j < r; j++) {
-        const double *u = x->pc_u + (size_t)j * n;
-        double c = x->pc_c[j], eta = 0.0;
-        for (int i = 0; i < n; i++) eta += u[i] * dq[i];
-        s[j] = quarter * c / (1.0 + quarter * (x->pc_w2[j] + c)) * eta;
+        double c = x->pc_c[j];
+        s[j] = quarter * c / (1.0 + quarter * (x->pc_w2[j] + c)) * s[j];
     }
     for (int j = 0; j < r; j++) {
         const double *phi = x->pc_phi + (size_t)j * n;
