@@ -82,6 +82,8 @@ typedef struct {
     int pj, ps;            /* their elastic positions */
 } SolvedBand;
 
+#define TRIG_CACHE 4
+
 typedef struct {
     const Model *m;
     int ne, nbmax, width;
@@ -120,9 +122,30 @@ typedef struct {
     double *pc_d, *pc_s;   /* n each: q - q_lock; the modal sums (r <= n) */
     double *pc_eq, pc_e;   /* the last phase_correction_energy: q (n) and its value */
     int pc_e_valid;        /* (a step asks for q0, then q1 twice: q0 was the last q1) */
+    /* cos and sin of the last few angles (cos_sin): a Newton iteration needs alpha1 and
+     * alpha2 of q1 and of the midpoint in several functions */
+    double trig_a[TRIG_CACHE], trig_c[TRIG_CACHE], trig_s[TRIG_CACHE];
+    int trig_n, trig_next;
 } Ctx;
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
+
+/* cos(a) and sin(a), bitwise, from the context's cache of the last TRIG_CACHE angles */
+static inline void cos_sin(Ctx *x, double a, double *c, double *s) {
+    for (int k = 0; k < x->trig_n; k++)
+        if (memcmp(&x->trig_a[k], &a, sizeof a) == 0) {
+            *c = x->trig_c[k];
+            *s = x->trig_s[k];
+            return;
+        }
+    int k = x->trig_next;
+    x->trig_next = (k + 1) % TRIG_CACHE;
+    if (x->trig_n < TRIG_CACHE) x->trig_n++;
+    x->trig_a[k] = a;
+    *c = x->trig_c[k] = cos(a);
+    *s = x->trig_s[k] = sin(a);
+}
+
 static int nc_of(const Model *m, int locked, int rigid) {
     return 3 + (locked ? 1 : 0) + (rigid ? m->n_elastic : 0);
 }
@@ -403,7 +426,8 @@ static void mass_data_from_products(Ctx *x, const double *q) {
         maf[i] = m->g_full[i] - maf[i];
         x->maa[m->body[i]] += (m->c_full[i] + h[i]) * q[i];
     }
-    double c = cos(q[ia]), s = sin(q[ia]);
+    double c, s;
+    cos_sin(x, q[ia], &c, &s);
     x->cos2 = c;
     x->sin2 = s;
     double ub0 = m->pbar0, ub1 = 0.0;
@@ -490,8 +514,9 @@ static inline void mass_border_row(const Ctx *x, int i, double mb[4]) {
 
 /* d/dq [1/2 a^T M(q) b] (model.kinetic_bilinear_gradient), given h = c + Mff q,
  * wa = W a and wb = W b at the elastic coordinates */
-static void bilinear_gradient(const Model *m, const double *q, const double *a, const double *b,
+static void bilinear_gradient(Ctx *x, const double *q, const double *a, const double *b,
                               const double *h, const double *wa, const double *wb, double *out) {
+    const Model *m = x->m;
     int n = m->n, ia = m->i_alpha2, ix = m->i_r2x, iy = m->i_r2y, sk = m->s_link, nl = m->n_link;
     memset(out, 0, sizeof(double) * n);
     for (int p = 0; p < m->n_elastic; p++) {
@@ -499,7 +524,8 @@ static void bilinear_gradient(const Model *m, const double *q, const double *a, 
         double oa = a[ang], ob = b[ang];
         out[i] = oa * ob * h[i] + 0.5 * (oa * wb[i] + ob * wa[i]);
     }
-    double c = cos(q[ia]), s = sin(q[ia]);
+    double c, s;
+    cos_sin(x, q[ia], &c, &s);
     double ub0 = m->pbar0, ub1 = 0.0;
     for (int k = 0; k < nl; k++) {
         ub0 += m->sbar[k] * q[sk + k];
@@ -518,33 +544,46 @@ static void bilinear_gradient(const Model *m, const double *q, const double *a, 
 }
 
 /* ------------------------------------------------------------------- constraints */
-static double sleeve_height(const Model *m, const double *q) {
-    return q[m->i_r2y] + (m->l3 + q[m->i_u_sleeve]) * sin(q[m->i_alpha2]);
+static double sleeve_height(Ctx *x, const double *q) {
+    const Model *m = x->m;
+    double c, s;
+    cos_sin(x, q[m->i_alpha2], &c, &s);
+    return q[m->i_r2y] + (m->l3 + q[m->i_u_sleeve]) * s;
 }
 
-static void sleeve_gradient(const Model *m, const double *q, double *g) {
+static void sleeve_gradient(Ctx *x, const double *q, double *g) {
+    const Model *m = x->m;
     memset(g, 0, sizeof(double) * m->n);
     g[m->i_r2y] = 1.0;
-    g[m->i_alpha2] = (m->l3 + q[m->i_u_sleeve]) * cos(q[m->i_alpha2]);
-    g[m->i_u_sleeve] = sin(q[m->i_alpha2]);
+    double c, s;
+    cos_sin(x, q[m->i_alpha2], &c, &s);
+    g[m->i_alpha2] = (m->l3 + q[m->i_u_sleeve]) * c;
+    g[m->i_u_sleeve] = s;
 }
 
-static void constraints(const Model *m, const double *q, int locked, int rigid, double *phi) {
+static void constraints(Ctx *x, const double *q, int locked, int rigid, double *phi) {
+    const Model *m = x->m;
     double a1 = q[0], a2 = q[m->i_alpha2];
     double r1 = m->l1 + q[m->i_u_joint], r3 = m->l3 + q[m->i_u_sleeve];
-    phi[0] = r1 * cos(a1) - q[m->i_r2x];
-    phi[1] = r1 * sin(a1) - q[m->i_r2y];
-    phi[2] = q[m->i_r2x] + r3 * cos(a2);
+    double c1, s1, c2, s2;
+    cos_sin(x, a1, &c1, &s1);
+    cos_sin(x, a2, &c2, &s2);
+    phi[0] = r1 * c1 - q[m->i_r2x];
+    phi[1] = r1 * s1 - q[m->i_r2y];
+    phi[2] = q[m->i_r2x] + r3 * c2;
     int row = 3;
-    if (locked) phi[row++] = q[m->i_r2y] + r3 * sin(a2) - m->y_stop;
+    if (locked) phi[row++] = q[m->i_r2y] + r3 * s2 - m->y_stop;
     if (rigid)
         for (int k = 0; k < m->n_elastic; k++) phi[row++] = q[m->elastic_idx[k]];
 }
 
 /* sparse rows of J(q): JW (index, value) pairs per row; rigid rows have one entry */
-static void jacobian(const Model *m, const double *q, int locked, int rigid, int *idx, double *val) {
+static void jacobian(Ctx *x, const double *q, int locked, int rigid, int *idx, double *val) {
+    const Model *m = x->m;
     double a1 = q[0], a2 = q[m->i_alpha2];
-    double c1 = cos(a1), s1 = sin(a1), c2 = cos(a2), s2 = sin(a2);
+    double c1, s1, c2, s2;
+    cos_sin(x, a1, &c1, &s1);
+    cos_sin(x, a2, &c2, &s2);
     double r1 = m->l1 + q[m->i_u_joint], r3 = m->l3 + q[m->i_u_sleeve];
     int *I = idx; double *V = val;
     I[0] = 0; V[0] = -r1 * s1; I[1] = m->i_u_joint; V[1] = c1; I[2] = m->i_r2x; V[2] = -1.0;
@@ -774,7 +813,8 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
         int i = ei[p];
         if (m->body[i] == 0) g00 += 2.0 * h_m[i] * vt[i]; else gaa += 2.0 * h_m[i] * vt[i];
     }
-    double c = cos(qm[ia]), s = sin(qm[ia]), w2 = vt[ia];
+    double c, s, w2 = vt[ia];
+    cos_sin(x, qm[ia], &c, &s);
     double ub0 = m->pbar0, ub1 = 0.0, sd0 = 0.0, sd1 = 0.0;
     for (int k = 0; k < nl; k++) {
         ub0 += m->sbar[k] * qm[sk + k];
@@ -1051,8 +1091,8 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     int pc = locked && !rigid && x->pc_r > 0;    /* stage 2's phase correction */
     double alpha = 1.0, f_base = INFINITY;
     double half_h2 = 0.5 * h * h;
-    constraints(m, q0, locked, rigid, phi0);
-    double y0 = sleeve_height(m, q0);
+    constraints(x, q0, locked, rigid, phi0);
+    double y0 = sleeve_height(x, q0);
     for (int i = 0; i < n; i++) q[i] = q0[i] + h * v0[i];
     memcpy(lam, lam0, sizeof(double) * nc);
     double last_norm = INFINITY, step_norm = 0.0;
@@ -1086,17 +1126,17 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             x->wb[i] = 2.0 * wd / h - x->wv0[i];
         }
         mass_data_from_products(x, q);
-        constraints(m, q, locked, rigid, phi);
+        constraints(x, q, locked, rigid, phi);
         if (law) elastic_force(law, q0, q, h, x->kq);    /* AVF gradient of U + C dq / h */
-        bilinear_gradient(m, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
+        bilinear_gradient(x, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
         mass_matvec_pre(x, v1, x->mffv, x->mv);
         /* f = 1/2 v0^T M(q) v1: f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1), M symmetric */
         double df = 0.0;
         for (int i = 0; i < n; i++) df += 0.5 * (v0[i] * x->mv[i] - p0[i] * v1[i]);
         gonzalez(n, x->gt, df, dq, dd);
-        sleeve_gradient(m, qm, x->gy);
-        gonzalez(n, x->gy, sleeve_height(m, q) - y0, dq, dd);
-        jacobian(m, qm, locked, rigid, x->jm_idx, x->jm_val);
+        sleeve_gradient(x, qm, x->gy);
+        gonzalez(n, x->gy, sleeve_height(x, q) - y0, dq, dd);
+        jacobian(x, qm, locked, rigid, x->jm_idx, x->jm_val);
         double cl = 0.0;   /* corr . lam */
         for (int r = 0; r < nc; r++) {
             x->corr[r] = dd > 0.0 ? (phi[r] - phi0[r] - jrow_dot(x->jm_idx, x->jm_val, r, dq)) / dd : 0.0;
@@ -1128,7 +1168,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             f_base = fn;
         }
         if (!factored || refresh) {
-            jacobian(m, q, locked, rigid, x->jrow_idx, x->jrow_val);
+            jacobian(x, q, locked, rigid, x->jrow_idx, x->jrow_val);
             if (law) elastic_iteration_band(law, q0, q, h);
             if (factor_iteration_matrix(x, h, nc) != OK) { status = SINGULAR; goto done; }
             factored = 1;
@@ -1155,20 +1195,20 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         double rate = it > 1 ? step_norm / last_norm : 1.0;
         refresh = nonlinear_law && it > 1 && rate > ELASTIC_REFRESH_RATE;
         if (step_norm < tol || (rate < 0.5 && rate / (1.0 - rate) * step_norm < tol)) {
-            constraints(m, q, locked, rigid, phi);
+            constraints(x, q, locked, rigid, phi);
             if (max_abs(nc, phi) < phi_tol) { converged = 1; break; }
         }
         last_norm = step_norm;
     }
     if (!converged) { status = NO_CONVERGENCE; goto done; }
     for (int i = 0; i < n; i++) v[i] = 2.0 * (q[i] - q0[i]) / h - v0[i];
-    jacobian(m, q, locked, rigid, x->jrow_idx, x->jrow_val);
+    jacobian(x, q, locked, rigid, x->jrow_idx, x->jrow_val);
     /* the products of q1, direct: the next step's q0 products (bitwise what it would compute) */
     band_matvec3(m, m->mff_band, x->mq1, m->w_band, x->wq1, k_band, x->kq1, q);
     for (int p = 0; p < ne; p++) { int i = ei[p]; x->hq[i] = x->mq1[i]; x->maf[i] = x->wq1[i]; }
     mass_data_from_products(x, q);
     /* kinetic energy of the discrete balance: T0 + V(q0) - V(q1) + F (y0 - y1) (- damping) */
-    double t_target = force * (y0 - sleeve_height(m, q));
+    double t_target = force * (y0 - sleeve_height(x, q));
     x->dissipated = 0.0;
     if (law) {
         x->dissipated = elastic_dissipation(law, q0, q, h);
@@ -1248,15 +1288,16 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
                        double lock_loss, double *out, int cap, int k) {
     const Model *m = x->m;
     int n = m->n, ia = m->i_alpha2;
-    double *o = out + k;
+    double *o = out + k, c2, s2;
+    cos_sin(x, q[ia], &c2, &s2);
 #define SET(f, val) o[(size_t)(f) * cap] = (val)
     SET(F_TIME, t);
     SET(F_STAGE, (double)stage);
     SET(F_ALPHA1, q[0]);
     SET(F_ALPHA1_RATE, v[0]);
-    SET(F_SLEEVE_POS, sleeve_height(m, q));
-    SET(F_SLEEVE_VEL, v[m->i_r2y] + (m->l3 + q[m->i_u_sleeve]) * cos(q[ia]) * v[ia]
-                      + sin(q[ia]) * v[m->i_u_sleeve]);
+    SET(F_SLEEVE_POS, sleeve_height(x, q));
+    SET(F_SLEEVE_VEL, v[m->i_r2y] + (m->l3 + q[m->i_u_sleeve]) * c2 * v[ia]
+                      + s2 * v[m->i_u_sleeve]);
     SET(F_FORCE, force);
     SET(F_TIP_AXIAL, q[m->i_tip_u]);
     SET(F_TIP_TRANSVERSE, q[m->i_tip_v]);
@@ -1326,7 +1367,7 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         if (status != OK) break;
         const double *q1 = x->q_s, *v1 = x->v_s;
         /* residual of the new state (jacobian rows of q1 are in jrow_*) */
-        constraints(m, q1, locked, rigid, x->phi);
+        constraints(x, q1, locked, rigid, x->phi);
         double r = max_abs(nc, x->phi);
         for (int c = 0; c < nc; c++) {
             double a = fabs(jrow_dot(x->jrow_idx, x->jrow_val, c, v1));
@@ -1336,9 +1377,9 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         for (int i = 0; i < n; i++) if (!isfinite(q1[i]) || !isfinite(v1[i])) { finite = 0; break; }
         if (!finite) { status = NON_FINITE; break; }
         if (!(r <= div_tol)) { *residual = r; status = DIVERGED; break; }
-        double y1 = sleeve_height(m, q1);
+        double y1 = sleeve_height(x, q1);
         if (!locked && y1 - m->y_stop <= 0.0) { status = CROSSING; break; }
-        acc[0] += force * (sleeve_height(m, q) - y1);
+        acc[0] += force * (sleeve_height(x, q) - y1);
         if (x->law) acc[2] += x->dissipated;   /* acc has 3 entries when a law is attached */
         for (int i = 0; i < n; i++) accel[i] = (v1[i] - v[i]) / (t1 - t0);
         memcpy(q, q1, sizeof(double) * n);
@@ -1404,7 +1445,7 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
                            double *dt_out, double *residual, int *iterations) {
     const Model *m = x->m;
     int n = m->n, nc = nc_of(m, 0, rigid), its_total = 0;
-    double a = 0.0, fa = sleeve_height(m, q0) - m->y_stop, b = h, fb = 0.0;
+    double a = 0.0, fa = sleeve_height(x, q0) - m->y_stop, b = h, fb = 0.0;
     double best_dt = h, f_best = INFINITY;
     int have_best = 0, side = 0;
     x->q0_products = 0;        /* then every trial step starts from these q0 products */
@@ -1425,14 +1466,14 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
         const double *q1 = x->q_s, *v1 = x->v_s;
         for (int i = 0; i < n; i++)
             if (!isfinite(q1[i]) || !isfinite(v1[i])) { *iterations = its_total; return NON_FINITE; }
-        constraints(m, q1, 0, rigid, x->phi);
+        constraints(x, q1, 0, rigid, x->phi);
         double r = max_abs(nc, x->phi);
         for (int c = 0; c < nc; c++) {
             double aj = fabs(jrow_dot(x->jrow_idx, x->jrow_val, c, v1));
             if (!(aj <= r)) r = aj;
         }
         if (!(r <= div_tol)) { *residual = r; *iterations = its_total; return DIVERGED; }
-        double f = sleeve_height(m, q1) - m->y_stop;
+        double f = sleeve_height(x, q1) - m->y_stop;
         if (!have_best || fabs(f) < fabs(f_best)) {
             have_best = 1;
             f_best = f;
@@ -1471,8 +1512,8 @@ void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const doubl
     const double *membrane = membrane_stress(x, q);
     for (int k = 0; k < npts; k++)
         fibre_stress(m, q, membrane, k, &stress[k], &stress[npts + k]);
-    constraints(m, q, locked, rigid, x->phi);
-    jacobian(m, q, locked, rigid, x->jm_idx, x->jm_val);
+    constraints(x, q, locked, rigid, x->phi);
+    jacobian(x, q, locked, rigid, x->jm_idx, x->jm_val);
     double r = max_abs(nc, x->phi);
     for (int c = 0; c < nc; c++) {
         double a = fabs(jrow_dot(x->jm_idx, x->jm_val, c, v));
