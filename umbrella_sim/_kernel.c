@@ -605,10 +605,23 @@ static double jrow_dot(const int *I, const double *V, int r, const double *x) {
     return V[r * JW] * x[I[r * JW]] + V[r * JW + 1] * x[I[r * JW + 1]] + V[r * JW + 2] * x[I[r * JW + 2]];
 }
 
+/* a . b in four partial sums (one chain of n dependent adds is the cost otherwise) */
+static double dot(int n, const double *a, const double *b) {
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        s0 += a[i] * b[i];
+        s1 += a[i + 1] * b[i + 1];
+        s2 += a[i + 2] * b[i + 2];
+        s3 += a[i + 3] * b[i + 3];
+    }
+    for (; i < n; i++) s0 += a[i] * b[i];
+    return (s0 + s1) + (s2 + s3);
+}
+
 static void gonzalez(int n, double *grad, double delta_f, const double *dq, double dd) {
     if (dd == 0.0) return;
-    double gd = 0.0;
-    for (int i = 0; i < n; i++) gd += grad[i] * dq[i];
+    double gd = dot(n, grad, dq);
     double f = (delta_f - gd) / dd;
     for (int i = 0; i < n; i++) grad[i] += f * dq[i];
 }
@@ -779,9 +792,10 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
     const int *ei = m->elastic_idx;
     double *vt = x->vt, *h_m = x->hm, *wed = x->wb;
     const double *qm = x->qm;
-    for (int i = 0; i < m->n; i++) vt[i] = x->dq[i] / h;
+    double inv_h = 1.0 / h;
+    for (int i = 0; i < m->n; i++) vt[i] = x->dq[i] * inv_h;
     /* h_m = c + Mff qm and W dq from this Newton iteration */
-    for (int p = 0; p < ne; p++) wed[ei[p]] = x->wdq[ei[p]] / h;
+    for (int p = 0; p < ne; p++) wed[ei[p]] = x->wdq[ei[p]] * inv_h;
     double om[2] = {vt[0], vt[ia]};
     /* The iteration matrix of integrators.iteration_blocks: for the flexible model (nc <= 4)
      * the gyroscopic elastic block G_ee = -2 w W and the Gonzalez correction of the
@@ -1090,7 +1104,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     int nonlinear_law = law && law->d.nonlinear, have_base = 0, refresh = 0;
     int pc = locked && !rigid && x->pc_r > 0;    /* stage 2's phase correction */
     double alpha = 1.0, f_base = INFINITY;
-    double half_h2 = 0.5 * h * h;
+    double half_h2 = 0.5 * h * h, two_h = 2.0 / h;   /* v1 = 2 dq / h - v0 */
     constraints(x, q0, locked, rigid, phi0);
     double y0 = sleeve_height(x, q0);
     for (int i = 0; i < n; i++) q[i] = q0[i] + h * v0[i];
@@ -1106,13 +1120,12 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     }
     band_matvec2(m, m->mff_band, x->mv0, m->w_band, x->wv0, v0);
     for (it = 1; it <= max_iter; it++) {
-        double dd = 0.0;
         for (int i = 0; i < n; i++) {
             dq[i] = q[i] - q0[i];
-            dd += dq[i] * dq[i];
             qm[i] = q0[i] + 0.5 * dq[i];
-            v1[i] = 2.0 * dq[i] / h - v0[i];
+            v1[i] = dq[i] * two_h - v0[i];
         }
+        double dd = dot(n, dq, dq);
         /* Mff, W, K of q = q0 + dq, qm = q0 + dq / 2 and v1 = 2 dq / h - v0 */
         band_matvec3(m, m->mff_band, x->mdq, m->w_band, x->wdq, k_band, x->kdq, dq);
         for (int p = 0; p < ne; p++) {
@@ -1122,8 +1135,8 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             x->maf[i] = x->wq0[i] + wd;
             x->hm[i] = m->c_full[i] + (x->mq0[i] + 0.5 * md);
             if (!law) x->kq[i] = x->kq0[i] + 0.5 * x->kdq[i];
-            x->mffv[i] = 2.0 * md / h - x->mv0[i];
-            x->wb[i] = 2.0 * wd / h - x->wv0[i];
+            x->mffv[i] = md * two_h - x->mv0[i];
+            x->wb[i] = wd * two_h - x->wv0[i];
         }
         mass_data_from_products(x, q);
         constraints(x, q, locked, rigid, phi);
@@ -1131,8 +1144,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         bilinear_gradient(x, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
         mass_matvec_pre(x, v1, x->mffv, x->mv);
         /* f = 1/2 v0^T M(q) v1: f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1), M symmetric */
-        double df = 0.0;
-        for (int i = 0; i < n; i++) df += 0.5 * (v0[i] * x->mv[i] - p0[i] * v1[i]);
+        double df = 0.5 * (dot(n, v0, x->mv) - dot(n, p0, v1));
         gonzalez(n, x->gt, df, dq, dd);
         sleeve_gradient(x, qm, x->gy);
         gonzalez(n, x->gy, sleeve_height(x, q) - y0, dq, dd);
@@ -1155,7 +1167,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         }
         if (nonlinear_law) {
             double fn = 0.0;
-            for (int i = 0; i < n; i++) fn += 0.25 * h * h * res[i] * res[i];
+            fn += 0.25 * h * h * dot(n, res, res);
             for (int r = 0; r < nc; r++) fn += phi[r] * phi[r];
             fn = sqrt(fn);
             if (have_base && !(fn < f_base) && alpha >= 0.05) {   /* backtrack */
@@ -1201,7 +1213,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         last_norm = step_norm;
     }
     if (!converged) { status = NO_CONVERGENCE; goto done; }
-    for (int i = 0; i < n; i++) v[i] = 2.0 * (q[i] - q0[i]) / h - v0[i];
+    for (int i = 0; i < n; i++) v[i] = (q[i] - q0[i]) * two_h - v0[i];
     jacobian(x, q, locked, rigid, x->jrow_idx, x->jrow_val);
     /* the products of q1, direct: the next step's q0 products (bitwise what it would compute) */
     band_matvec3(m, m->mff_band, x->mq1, m->w_band, x->wq1, k_band, x->kq1, q);
@@ -1381,7 +1393,8 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         if (!locked && y1 - m->y_stop <= 0.0) { status = CROSSING; break; }
         acc[0] += force * (sleeve_height(x, q) - y1);
         if (x->law) acc[2] += x->dissipated;   /* acc has 3 entries when a law is attached */
-        for (int i = 0; i < n; i++) accel[i] = (v1[i] - v[i]) / (t1 - t0);
+        double inv_dt = 1.0 / (t1 - t0);
+        for (int i = 0; i < n; i++) accel[i] = (v1[i] - v[i]) * inv_dt;
         memcpy(q, q1, sizeof(double) * n);
         memcpy(v, v1, sizeof(double) * n);
         memcpy(lam, x->lam_s, sizeof(double) * nc);
