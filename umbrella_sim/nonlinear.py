@@ -82,7 +82,8 @@ import numpy as np
 from scipy.linalg.lapack import dgetrf, dgetrs
 
 from .integrators import (_project_keeping_energy, ConvergenceError, DynamicState,
-                          iteration_blocks, midpoint_iterate, MidpointDAE, PHI_TOLERANCE)
+                          iteration_blocks, midpoint_iterate, MidpointDAE, NEWTON_TOLERANCE,
+                          PHI_TOLERANCE)
 from .model import (_GAUSS_ETA, _GAUSS_W, band_form, BeamBody, ConstraintSet, shape_functions,
                     UmbrellaModel)
 from .params import UmbrellaParams
@@ -389,7 +390,7 @@ class ElasticMidpointDAE(MidpointDAE):
     ``CompiledElasticLaw`` attached, or in numpy (kernel="numpy", the reference).
     """
 
-    def __init__(self, model: NonlinearUmbrellaModel, tolerance: float = 1e-10,
+    def __init__(self, model: NonlinearUmbrellaModel, tolerance: float = NEWTON_TOLERANCE,
                  max_iterations: int = 25, kernel: str | None = None):
         super().__init__(model, tolerance, max_iterations, kernel)
         self.law = None

@@ -177,12 +177,13 @@ class StepBlock:
         if self._peaks is None:
             out: dict = {}
             if len(self):
-                t = self.time
-                for body in ("leaf", "link"):
-                    peaks = getattr(self, f"peak_stress_{body}").tolist()
+                # one fancy index and one tolist for the five rows (a publication's ~10
+                # steps: Python floats beat numpy calls)
+                t, *rows = self.rows[_PEAK_ROWS].tolist()
+                for body, peaks, where in (("leaf", rows[0], rows[1]),
+                                           ("link", rows[2], rows[3])):
                     i = peaks.index(max(peaks))
-                    out[body] = (peaks[i], float(getattr(self, f"peak_stress_{body}_x")[i]),
-                                 float(t[i]))
+                    out[body] = (peaks[i], where[i], t[i])
             object.__setattr__(self, "_peaks", out)
         return self._peaks
 
@@ -194,6 +195,10 @@ def _step_field(row: int, name: str) -> property:
 for _row, _name in enumerate(STEP_FIELDS):
     setattr(StepBlock, _name, _step_field(_row, _name))
 del _row, _name
+#: rows StepBlock.peaks and SummaryAccumulator.add read together
+_PEAK_ROWS = [STEP_FIELDS.index(f) for f in (
+    "time", "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x")]
+_SUMMARY_ROWS = [STEP_FIELDS.index(f) for f in ("time", "tip_transverse", "stage")]
 
 
 @dataclass
@@ -406,7 +411,7 @@ class SummaryAccumulator:
             return
         # Python floats: a live node adds a block of ~10 steps per publication, where every
         # numpy call costs more than the loop (~90 -> ~20 us per 1 kHz period, measured)
-        t, v, stage = block.time.tolist(), block.tip_transverse.tolist(), block.stage.tolist()
+        t, v, stage = block.rows[_SUMMARY_ROWS].tolist()
         self.steps += n
         self.final_time = t[-1]
         av = [abs(x) for x in v]

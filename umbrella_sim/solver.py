@@ -23,7 +23,7 @@ import numpy as np
 
 from .forcing import ForceSchedule
 from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ConvergenceError,
-                          DynamicState, MidpointDAE)
+                          DynamicState, MidpointDAE, newton_tolerance)
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import (build_frozen, LockEvent, RunResult, Sample, STEP_FIELDS, step_row,
                       StepBlock, SummaryAccumulator)
@@ -185,6 +185,7 @@ class FiniteElementEngine(Engine):
         self.rigid = params.model == "rigid-fe"
         self.lock_kind = "plastic" if self.rigid else params.lock
         self.integrator = self._integrator(model)
+        self.integrator.tolerance = newton_tolerance(params.time_step)
         if params.phase_correction and self.phase_correctable:   # ModalPhaseCorrection
             self.integrator.correct_stage2_phase(params.time_step)
         self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
