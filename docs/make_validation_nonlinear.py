@@ -260,9 +260,9 @@ def main():
             except RuntimeError:
                 cells.append("diverged")
         soft = ROTATING_CANTILEVER_FLAPWISE[0] ** 2 - gamma ** 2
+        theory = f"{math.sqrt(soft):.4f}" if soft > 0 else "unstable"
         lines.append(f"| {gamma} | {ROTATING_CANTILEVER_FLAPWISE[gamma]:.4f} | "
-                     f"{published:.4f} | {' | '.join(cells)} | "
-                     f"{math.sqrt(soft) if soft > 0 else 'unstable'!s:.6} |")
+                     f"{published:.4f} | {' | '.join(cells)} | {theory} |")
     lines.append("")
 
     # ---------------------------------------------------------------- damping
