@@ -24,8 +24,8 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 
 from umbrella_sim.nonlinear import (NonlinearUmbrellaModel,  # noqa: E402
                                     rotating_cantilever_chordwise,
-                                    rotating_cantilever_frequency,
-                                    ROTATING_CANTILEVER_FLAPWISE, spin_up,
+                                    ROTATING_CANTILEVER_FLAPWISE,
+                                    rotating_cantilever_frequency, spin_up,
                                     spin_up_quasi_static_tip)
 from umbrella_sim.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.recording import git_revision  # noqa: E402
