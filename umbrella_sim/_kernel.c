@@ -477,27 +477,19 @@ static void mass_matvec(const Ctx *x, const double *v, double *y) {
     mass_matvec_pre(x, v, x->mffv, y);
 }
 
-/* M(q)[i, border c] for a q index i (elastic or border) */
-static double mass_border(const Ctx *x, int i, int c) {
-    const Model *m = x->m;
-    int ia = m->i_alpha2, ix = m->i_r2x, iy = m->i_r2y, sk = m->s_link, nl = m->n_link;
-    int b = m->body[i];
-    if (b >= 0) {
-        if ((c == 0 && b == 0) || (c == 3 && b == 1)) return x->maf[i];
-        if (b == 1 && (c == 1 || c == 2)) return x->mrf[(c - 1) * nl + (i - sk)];
-        return 0.0;
-    }
-    int cq = border_q(m, c);
-    if (i == cq) return i == 0 ? x->maa[0] : i == ia ? x->maa[1] : m->link_mass;
-    if (i == ia && cq == ix) return x->mra[0];
-    if (i == ia && cq == iy) return x->mra[1];
-    if (cq == ia && i == ix) return x->mra[0];
-    if (cq == ia && i == iy) return x->mra[1];
-    return 0.0;
+/* the border block of M(q) (rows and columns alpha1, R2x, R2y, alpha2: model.mass_matrix) into the first four rows and columns of S (row length nb) */
+static void mass_border_block(const Ctx *x, double *S, int nb) {
+    double lm = x->m->link_mass, r0 = x->mra[0], r1 = x->mra[1];
+    const double block[16] = {x->maa[0], 0.0, 0.0, 0.0,
+                              0.0, lm, 0.0, r0,
+                              0.0, 0.0, lm, r1,
+                              0.0, r0, r1, x->maa[1]};
+    for (int r = 0; r < 4; r++)
+        for (int c = 0; c < 4; c++) S[r * nb + c] = block[r * 4 + c];
 }
 
 /* M(q)[i, border 0..3] of an elastic q index i: its body angle's column, and for the link
- * the R2 columns (mass_border for an elastic row, in one pass) */
+ * the R2 columns, in one pass */
 static inline void mass_border_row(const Ctx *x, int i, double mb[4]) {
     const Model *m = x->m;
     if (m->body[i] == 0) {
@@ -882,10 +874,7 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
     /* D */
     double *S = x->S;
     memset(S, 0, sizeof(double) * nb * nb);
-    for (int r = 0; r < 4; r++) {
-        int iq = border_q(m, r);
-        for (int cb = 0; cb < 4; cb++) S[r * nb + cb] = mass_border(x, iq, cb);
-    }
+    mass_border_block(x, S, nb);
     S[0] += hh * g00;
     S[3 * nb + 3] += hh * gaa;
     S[1 * nb + 3] += hh * g_xa;
@@ -964,8 +953,7 @@ static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_t
     }
     double *S = x->S;
     memset(S, 0, sizeof(double) * nb * nb);
-    for (int r = 0; r < 4; r++)
-        for (int cb = 0; cb < 4; cb++) S[r * nb + cb] = mass_border(x, border_q(m, r), cb);
+    mass_border_block(x, S, nb);
     for (int r = 0; r < nc; r++)
         for (int k = 0; k < JW; k++) {
             int i = x->jrow_idx[r * JW + k];
