@@ -1016,6 +1016,33 @@ static void modal_dots(int r, int n, const double *u, const double *d, double *e
     }
 }
 
+/* y[i] += sign s_j rows_j[i] for j = 0 .. r-1 in that order (rows: r x n), each y[i]
+ * held in a register over the modes, four at a time (one pass over y instead of r) */
+static void modal_combine(int r, int n, const double *rows, const double *s, double sign,
+                          double *y) {
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        double a0 = y[i], a1 = y[i + 1], a2 = y[i + 2], a3 = y[i + 3];
+        for (int j = 0; j < r; j++) {
+            const double *rj = rows + (size_t)j * n + i;
+            double sj = sign * s[j];
+            a0 += sj * rj[0];
+            a1 += sj * rj[1];
+            a2 += sj * rj[2];
+            a3 += sj * rj[3];
+        }
+        y[i] = a0;
+        y[i + 1] = a1;
+        y[i + 2] = a2;
+        y[i + 3] = a3;
+    }
+    for (; i < n; i++) {
+        double a = y[i];
+        for (int j = 0; j < r; j++) a += sign * s[j] * rows[(size_t)j * n + i];
+        y[i] = a;
+    }
+}
+
 /* The stage-2 phase correction at q: its energy 1/2 sum_i c_i (u_i . (q - q_lock))^2, and
  * its force U diag(c) U^T (q - q_lock) into f (n) unless f is NULL. */
 static double phase_correction(const Ctx *x, const double *q, double *f) {
@@ -1030,10 +1057,7 @@ static double phase_correction(const Ctx *x, const double *q, double *f) {
     }
     if (f) {
         memset(f, 0, sizeof(double) * n);
-        for (int j = 0; j < r; j++) {
-            const double *u = x->pc_u + (size_t)j * n;
-            for (int i = 0; i < n; i++) f[i] += s[j] * u[i];
-        }
+        modal_combine(r, n, x->pc_u, s, 1.0, f);
     }
     return e;
 }
@@ -1071,10 +1095,7 @@ static void phase_correction_update(Ctx *x, double h, double *dq) {
         double c = x->pc_c[j];
         s[j] = quarter * c / (1.0 + quarter * (x->pc_w2[j] + c)) * s[j];
     }
-    for (int j = 0; j < r; j++) {
-        const double *phi = x->pc_phi + (size_t)j * n;
-        for (int i = 0; i < n; i++) dq[i] -= s[j] * phi[i];
-    }
+    modal_combine(r, n, x->pc_phi, s, -1.0, dq);
 }
 
 /* One step from (q0, v0, lam0, p0) of length h; results in x->q_s, v_s, lam_s, p_s. */
