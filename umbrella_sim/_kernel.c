@@ -477,7 +477,8 @@ static void mass_matvec(const Ctx *x, const double *v, double *y) {
     mass_matvec_pre(x, v, x->mffv, y);
 }
 
-/* the border block of M(q) (rows and columns alpha1, R2x, R2y, alpha2: model.mass_matrix) into the first four rows and columns of S (row length nb) */
+/* the border block of M(q) (rows and columns alpha1, R2x, R2y, alpha2: model.mass_matrix)
+ * into the first four rows and columns of S (row length nb) */
 static void mass_border_block(const Ctx *x, double *S, int nb) {
     double lm = x->m->link_mass, r0 = x->mra[0], r1 = x->mra[1];
     const double block[16] = {x->maa[0], 0.0, 0.0, 0.0,
@@ -1175,8 +1176,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             for (int i = 0; i < n; i++) res[i] += h * x->pc_f[i];
         }
         if (nonlinear_law) {
-            double fn = 0.0;
-            fn += 0.25 * h * h * dot(n, res, res);
+            double fn = 0.25 * h * h * dot(n, res, res);
             for (int r = 0; r < nc; r++) fn += phi[r] * phi[r];
             fn = sqrt(fn);
             if (have_base && !(fn < f_base) && alpha >= 0.05) {   /* backtrack */
