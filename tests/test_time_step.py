@@ -175,7 +175,7 @@ def test_newton_error_is_far_below_the_step_error():
     """
     Check the Newton tolerance leaves an error far below the time step's own.
 
-    N = 2, V0 = -0.5 through the lock and 0.1 s of stage 2: the tip series with the engine's
+    N = 2, V0 = -0.5, 0.35 s through the lock into stage 2: the tip series with the engine's
     Newton tolerance (integrators.newton_tolerance of the step) against a 1e-13 one differs
     by less than 1 % of what halving the step changes; every run keeps energy to round-off.
     """
