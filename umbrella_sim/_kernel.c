@@ -1121,7 +1121,8 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     memcpy(lam, lam0, sizeof(double) * nc);
     double last_norm = INFINITY, step_norm = 0.0;
     int converged = 0;
-    const double *k_band = law ? NULL : m->k_band;
+    /* K, or with a law its bending part Kb (linear in q; the law adds the rest) */
+    const double *k_band = law ? law->d.kb_band : m->k_band;
     const int *ei = m->elastic_idx;
     int ne = m->n_elastic;
     if (!x->q0_products) {
@@ -1144,13 +1145,13 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             x->hq[i] = x->mq0[i] + md;
             x->maf[i] = x->wq0[i] + wd;
             x->hm[i] = m->c_full[i] + (x->mq0[i] + 0.5 * md);
-            if (!law) x->kq[i] = x->kq0[i] + 0.5 * x->kdq[i];
+            x->kq[i] = x->kq0[i] + 0.5 * x->kdq[i];
             x->mffv[i] = md * two_h - x->mv0[i];
             x->wb[i] = wd * two_h - x->wv0[i];
         }
         mass_data_from_products(x, q);
         constraints(x, q, locked, rigid, phi);
-        if (law) elastic_force(law, q0, q, h, x->kq);    /* AVF gradient of U + C dq / h */
+        if (law) elastic_force(law, q0, q, h, x->kdq, x->kq);   /* + the rest of G_U, C dq / h */
         bilinear_gradient(x, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
         mass_matvec_pre(x, v1, x->mffv, x->mv);
         /* f = 1/2 v0^T M(q) v1: f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1), M symmetric */
@@ -1233,7 +1234,9 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     x->dissipated = 0.0;
     if (law) {
         x->dissipated = elastic_dissipation(law, q0, q, h);
-        t_target += elastic_energy(law, q0) - elastic_energy(law, q) - x->dissipated;
+        /* U(q0) first: kept from the step before; U(q1) then keeps q1's strains */
+        double u0 = elastic_energy(law, q0, x->kq0);
+        t_target += u0 - elastic_energy(law, q, x->kq1) - x->dissipated;
     } else {
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target += 0.5 * q0[i] * x->kq0[i]; }
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target -= 0.5 * q[i] * x->kq1[i]; }
@@ -1271,6 +1274,7 @@ int umbrella_step(Ctx *x, int locked, int rigid,
 /* attach the elastic law of _kernel_nonlinear.c (NULL: the constant K, undamped) */
 void umbrella_set_law(Ctx *x, ElasticLaw *law) {
     x->law = law;
+    x->q0_products = 0;   /* kq0: K q0, or Kb q0 with a law */
 }
 
 /* p = M(q) v */
@@ -1304,6 +1308,8 @@ static void fibre_stress(const Model *m, const double *q, const double *membrane
     *bot = b;
 }
 
+/* The outputs of the state (q, v, p = M v) into column k of out; kq_known: K q at q (Kb q
+ * with a law) if the caller has it, else NULL */
 static void output_row(Ctx *x, const double *q, const double *v, const double *p,
                        const double *kq_known, double t, int stage, double force, double work,
                        double lock_loss, double *out, int cap, int k) {
@@ -1342,7 +1348,7 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
     for (int i = 0; i < n; i++) ke += v[i] * p[i];
     SET(F_KINETIC, 0.5 * ke);
     double se = 0.0;
-    if (x->law) se = elastic_energy(x->law, q);
+    if (x->law) se = elastic_energy(x->law, q, kq_known);
     else {
         const double *kq = kq_known;       /* K q, or computed here */
         if (!kq) {
@@ -1412,7 +1418,7 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         memcpy(x->mq0, x->mq1, sizeof(double) * n);
         memcpy(x->wq0, x->wq1, sizeof(double) * n);
         memcpy(x->kq0, x->kq1, sizeof(double) * n);
-        output_row(x, q, v, p, x->law ? NULL : x->kq0, t1, locked ? 1 : 0, force, acc[0], acc[1],
+        output_row(x, q, v, p, x->kq0, t1, locked ? 1 : 0, force, acc[0], acc[1],
                    out, cap, k);
         *n_done = k + 1;
     }

@@ -53,11 +53,15 @@ typedef struct {
 
 ElasticLaw *elastic_new(const ElasticData *d);
 void elastic_free(ElasticLaw *law);
-/* out[i] at the elastic q indices i: AVF gradient of U between q0 and q1 + C(q_m) (q1 - q0) / h */
-void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h, double *out);
+/* out[i] at the elastic q indices += the AVF gradient of U between q0 and q1 without its
+ * bending part + C(q_m) (q1 - q0) / h.  The bending part Kb q_m is the caller's: out holds it
+ * on entry (Kb is linear: the band products of the step), and kb_dq = Kb (q1 - q0). */
+void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h,
+                   const double *kb_dq, double *out);
 /* law->band = h^2/2 d AVF / d q1 + h/2 C(q_m) */
 void elastic_iteration_band(ElasticLaw *law, const double *q0, const double *q1, double h);
-double elastic_energy(ElasticLaw *law, const double *q);
+/* U(q); kbq = Kb q at the elastic q indices if the caller has it, else NULL */
+double elastic_energy(ElasticLaw *law, const double *q, const double *kbq);
 /* dq . C(q_m) dq / h, also kept in law->last_dissipation */
 double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, double h);
 /* law->el_stress[e] = E (1/l_e) int v'^2/2 dx (0 with the linear strain) */

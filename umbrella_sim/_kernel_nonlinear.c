@@ -71,9 +71,10 @@ void elastic_free(ElasticLaw *law) {
     free(law);
 }
 
-/* eps_e for the coordinates q; x: the element's coordinates, gx = G x (0 for the linear
- * strain) */
-static double element_strain(const ElasticLaw *law, int e, const double *q, double *x, double *gx) {
+/* eps_e = a + xgx / 2 for the coordinates q, with a = du_mean . x and xgx = x . G x (0 for
+ * the linear strain); x: the element's coordinates, gx = G x (0 for the linear strain) */
+static double element_strain(const ElasticLaw *law, int e, const double *q, double *x, double *gx,
+                             double *a_out, double *xgx_out) {
     const ElasticData *d = &law->d;
     const int *iq = d->el_q + (size_t)e * EDOF;
     const double *dm = law->du_mean + (size_t)e * EDOF, *gm = law->g_mat + (size_t)e * EDOF * EDOF;
@@ -81,31 +82,29 @@ static double element_strain(const ElasticLaw *law, int e, const double *q, doub
     double a = 0.0, xgx = 0.0;
     if (!d->nonlinear) {   /* G = 0 */
         for (int k = 0; k < EDOF; k++) { gx[k] = 0.0; a += dm[k] * x[k]; }
-        return a;
+    } else {
+        for (int k = 0; k < EDOF; k++) {
+            double s = 0.0;
+            for (int l = 0; l < EDOF; l++) s += gm[k * EDOF + l] * x[l];
+            gx[k] = s;
+            a += dm[k] * x[k];
+            xgx += x[k] * s;
+        }
     }
-    for (int k = 0; k < EDOF; k++) {
-        double s = 0.0;
-        for (int l = 0; l < EDOF; l++) s += gm[k * EDOF + l] * x[l];
-        gx[k] = s;
-        a += dm[k] * x[k];
-        xgx += x[k] * s;
-    }
+    if (a_out) { *a_out = a; *xgx_out = xgx; }
     return a + 0.5 * xgx;
 }
 
-/* The step's start terms G x0, du_mean . x0 and x0 . G x0 of every element (nonlinear
- * strain), kept while q0 stays the same: the Newton iterations of a step share them. */
+/* The start terms G x0, du_mean . x0 and x0 . G x0 of every element at q0, kept while q0
+ * stays the same: the Newton iterations of a step share them, and the end of a step computes
+ * them at q1 for its energy and membrane stress, which the next step then starts from. */
 static void step_start(ElasticLaw *law, const double *q0) {
     const ElasticData *d = &law->d;
     if (law->start_valid && memcmp(q0, law->start_q, sizeof(double) * d->n) == 0) return;
     double x[EDOF];
     for (int e = 0; e < d->n_el; e++) {
-        double *gx = law->start_gx + (size_t)e * EDOF, *ce = law->start_eps + 2 * (size_t)e;
-        ce[0] = element_strain(law, e, q0, x, gx);
-        double xgx = 0.0;
-        for (int k = 0; k < EDOF; k++) xgx += x[k] * gx[k];
-        ce[1] = xgx;
-        ce[0] -= 0.5 * xgx;
+        double *ce = law->start_eps + 2 * (size_t)e;
+        element_strain(law, e, q0, x, law->start_gx + (size_t)e * EDOF, &ce[0], &ce[1]);
     }
     memcpy(law->start_q, q0, sizeof(double) * d->n);
     law->start_valid = 1;
@@ -178,7 +177,7 @@ static void membrane_gradient(const ElasticLaw *law, const double *q, double sca
     const ElasticData *d = &law->d;
     double x[EDOF], gx[EDOF], g[EDOF];
     for (int e = 0; e < d->n_el; e++) {
-        double eps = element_strain(law, e, q, x, gx);
+        double eps = element_strain(law, e, q, x, gx, NULL, NULL);
         element_strain_gradient(law, e, gx, g);
         const int *iq = d->el_q + (size_t)e * EDOF;
         double nw = scale * d->ea_l[e] * eps;
@@ -195,7 +194,7 @@ static void tangent_band(const ElasticLaw *law, const double *q, double scale, i
     int bw = d->bw, w = 2 * bw + 1;
     double x[EDOF], gx[EDOF], g[EDOF];
     for (int e = 0; e < d->n_el; e++) {
-        double eps = element_strain(law, e, q, x, gx);
+        double eps = element_strain(law, e, q, x, gx, NULL, NULL);
         element_strain_gradient(law, e, gx, g);
         const int *pos = d->el_pos + (size_t)e * EDOF;
         const double *gm = law->g_mat + (size_t)e * EDOF * EDOF;
@@ -209,15 +208,24 @@ static void tangent_band(const ElasticLaw *law, const double *q, double scale, i
     }
 }
 
-/* x . M x with M the material tangent at q (Kb + sum EA l_e g g^T); y (+)= scale M x */
+/* x . M x with M the material tangent at q (Kb + sum EA l_e g g^T); y (+)= scale M x.
+ * kbx: Kb x at the elastic q indices if the caller has it, else NULL (computed here). */
 static double material_apply(const ElasticLaw *law, const double *q, const double *x,
-                             double scale, double *y) {
+                             const double *kbx, double scale, double *y) {
     const ElasticData *d = &law->d;
     double xe[EDOF], gx[EDOF], g[EDOF], quad = 0.0;
-    if (y) bending_matvec(d, x, scale, y, 1);
-    quad += bending_quadratic(d, x);
+    if (kbx) {
+        for (int p = 0; p < d->ne; p++) {
+            int i = d->elastic_idx[p];
+            quad += x[i] * kbx[i];
+            if (y) y[i] += scale * kbx[i];
+        }
+    } else {
+        if (y) bending_matvec(d, x, scale, y, 1);
+        quad += bending_quadratic(d, x);
+    }
     for (int e = 0; e < d->n_el; e++) {
-        element_strain(law, e, q, xe, gx);
+        element_strain(law, e, q, xe, gx, NULL, NULL);
         element_strain_gradient(law, e, gx, g);
         const int *iq = d->el_q + (size_t)e * EDOF;
         double gx = 0.0;
@@ -229,19 +237,20 @@ static double material_apply(const ElasticLaw *law, const double *q, const doubl
     return quad;
 }
 
-void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h, double *out) {
+void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h,
+                   const double *kb_dq, double *out) {
     const ElasticData *d = &law->d;
     int n = d->n;
     if (!d->nonlinear) {   /* U quadratic, C = beta K constant: K (q_m + beta dq / h) */
-        for (int i = 0; i < n; i++)
-            law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]) + d->beta / h * (q1[i] - q0[i]);
-        bending_matvec(d, law->qa, 1.0, out, 0);
+        double c = d->beta / h;
+        for (int i = 0; i < n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]) + c * (q1[i] - q0[i]);
+        if (c > 0.0)
+            for (int p = 0; p < d->ne; p++) { int i = d->elastic_idx[p]; out[i] += c * kb_dq[i]; }
         membrane_gradient(law, law->qa, 1.0, out);
         return;
     }
-    /* AVF: Kb q_m (Kb q is linear) + the mean of the membrane gradient at the Gauss points */
-    for (int i = 0; i < n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
-    bending_matvec(d, law->qa, 1.0, out, 0);
+    /* AVF: Kb q_m (on entry: Kb q is linear) + the mean of the membrane gradient at the
+     * Gauss points */
     step_start(law, q0);
     for (int e = 0; e < d->n_el; e++) {
         double eps[2], g[2 * EDOF];
@@ -256,7 +265,7 @@ void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h
             law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
             law->qb[i] = q1[i] - q0[i];
         }
-        material_apply(law, law->qa, law->qb, d->beta / h, out);
+        material_apply(law, law->qa, law->qb, kb_dq, d->beta / h, out);
     }
 }
 
@@ -298,15 +307,20 @@ void elastic_iteration_band(ElasticLaw *law, const double *q0, const double *q1,
     }
 }
 
-double elastic_energy(ElasticLaw *law, const double *q) {
+double elastic_energy(ElasticLaw *law, const double *q, const double *kbq) {
     const ElasticData *d = &law->d;
     /* asked for the end of a step, then its output row, then the start of the next */
     if (law->energy_valid && memcmp(q, law->energy_q, sizeof(double) * d->n) == 0)
         return law->energy;
-    double x[EDOF], gx[EDOF], u = 0.0;
-    u += bending_quadratic(d, q);
+    double u = 0.0;
+    if (kbq)
+        for (int p = 0; p < d->ne; p++) { int i = d->elastic_idx[p]; u += q[i] * kbq[i]; }
+    else
+        u += bending_quadratic(d, q);
+    step_start(law, q);   /* the element strains at q: the next step starts from them */
     for (int e = 0; e < d->n_el; e++) {
-        double eps = element_strain(law, e, q, x, gx);
+        const double *ce = law->start_eps + 2 * (size_t)e;
+        double eps = ce[0] + 0.5 * ce[1];
         u += d->ea_l[e] * eps * eps;
     }
     memcpy(law->energy_q, q, sizeof(double) * d->n);
@@ -323,7 +337,7 @@ double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, 
             law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
             law->qb[i] = q1[i] - q0[i];
         }
-        diss = d->beta * material_apply(law, law->qa, law->qb, 0.0, NULL) / h;
+        diss = d->beta * material_apply(law, law->qa, law->qb, NULL, 0.0, NULL) / h;
     }
     law->last_dissipation = diss;
     return diss;
@@ -331,13 +345,9 @@ double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, 
 
 void elastic_membrane_stress(ElasticLaw *law, const double *q) {
     const ElasticData *d = &law->d;
-    double x[EDOF], gx[EDOF];
-    for (int e = 0; e < d->n_el; e++) {
-        element_strain(law, e, q, x, gx);
-        double xgx = 0.0;
-        for (int k = 0; k < EDOF; k++) xgx += x[k] * gx[k];
-        law->el_stress[e] = d->youngs_modulus * 0.5 * xgx;
-    }
+    step_start(law, q);   /* usually kept from the energy of the step that ended at q */
+    for (int e = 0; e < d->n_el; e++)
+        law->el_stress[e] = d->youngs_modulus * 0.5 * law->start_eps[2 * (size_t)e + 1];
 }
 
 double elastic_last_dissipation(const ElasticLaw *law) {
