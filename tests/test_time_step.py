@@ -7,7 +7,8 @@ fine-step run of the same code (the claims docs/validation.md tabulates in full)
 import pytest
 
 from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.step_study import observed_order, run_steps, step_errors, TARGETS
+from umbrella_sim.step_study import (observed_order, run_steps, sampled_peak_shortfall,
+                                     step_errors, TARGETS)
 
 
 @pytest.mark.parametrize("n_el", [1, 2])
@@ -72,13 +73,15 @@ def test_step_the_deploy_time_of_a_fast_deployment_needs(v0, needed):
 
 def test_step_the_stage2_targets_need():
     """
-    Check the step the stage-2 tip series and peak stresses need.
+    Check the step the stage-2 tip series and peak stresses need, and why.
 
     Energy lock, 0.5 s of stage 2 against a 2.5 us run: at 25 us (a quarter of the default
     step) the tip series is within 2 mm and the period within 0.05 % at N = 1, V0 = -0.5, the
-    default step's worst tip-series case at N = 1 (docs/validation.md); the stage-2 peak
-    stresses, a maximum over modes up to the link's axial ones, are within 3 % at 10 us at
-    N = 2, V0 = -0.5, where the default step is several per cent off.
+    default step's worst tip-series case at N = 1 (docs/validation.md).  The stage-2 peak
+    stresses, a maximum over modes up to the link's axial ones, at N = 2, V0 = -0.2: the
+    default step is off by more than 3 %, and so is the reference itself seen only on the
+    default step's grid (its peaks are crests narrower than the step: no scheme at that step
+    can promise them); at 10 us they are within 3 %, with the tip series within 2 mm.
     """
     window = 0.5
     p = UmbrellaParams(v0=-0.5, elements_per_segment=1)
@@ -86,11 +89,14 @@ def test_step_the_stage2_targets_need():
     err = step_errors(run_steps(p.replace(time_step=2.5e-5), window), fine, window)
     assert err["stage2_tip_series_m"] < TARGETS["stage2_tip_series_m"]
     assert err["stage2_period"] < TARGETS["stage2_period"]
-    p = UmbrellaParams(v0=-0.5, elements_per_segment=2)
+    p = UmbrellaParams(v0=-0.2, elements_per_segment=2)
     fine = run_steps(p.replace(time_step=2.5e-6), window)
     default = step_errors(run_steps(p, window), fine, window)
-    err = step_errors(run_steps(p.replace(time_step=1e-5), window), fine, window)
     assert max(default["stage2_peak_leaf"], default["stage2_peak_link"]) > TARGETS["peak_stress"]
+    seen = sampled_peak_shortfall(fine, p.time_step, window)
+    assert max(seen.values()) > TARGETS["peak_stress"]
+    assert max(sampled_peak_shortfall(fine, 1e-5, window).values()) < TARGETS["peak_stress"]
+    err = step_errors(run_steps(p.replace(time_step=1e-5), window), fine, window)
     assert err["stage2_peak_leaf"] < TARGETS["peak_stress"]
     assert err["stage2_peak_link"] < TARGETS["peak_stress"]
     assert err["stage2_tip_series_m"] < TARGETS["stage2_tip_series_m"]
@@ -199,3 +205,19 @@ def test_newton_error_is_far_below_the_step_error():
     newton_error = max(abs(default - tip_series(h, 1e-13)))
     step_error = max(abs(default - tip_series(h / 2)[1::2]))
     assert newton_error < 1e-2 * step_error, (newton_error, step_error)
+
+
+def test_sampled_peak_shortfall_of_a_narrow_crest():
+    """A triangular crest 8 ms wide, seen every 4 ms: the worst grid phase misses half of it."""
+    import numpy as np
+
+    from umbrella_sim.step_study import StepRun
+
+    t = np.arange(0.0, 1.0, 1e-3)
+    crest = 1.0 + np.maximum(0.0, 1.0 - np.abs(t - 0.5) / 4e-3)
+    ref = StepRun(1e-3, 0.0, t, np.ones_like(t), np.zeros_like(t), crest, 2.0 * crest)
+    assert sampled_peak_shortfall(ref, 4e-3, 1.0) == pytest.approx(
+        {"leaf": 0.25, "link": 0.25})
+    assert sampled_peak_shortfall(ref, 1e-3, 1.0) == {"leaf": 0.0, "link": 0.0}
+    with pytest.raises(ValueError, match="not a multiple"):
+        sampled_peak_shortfall(ref, 2.5e-3, 1.0)
