@@ -242,7 +242,7 @@ def energy_drift_lines() -> list[str]:
         lines.append(f"| {n} | {v0:g} | {cells[0]} | {cells[1]} |")
     lines += ["", "Relative to the initial energy, fitted slope. The velocity projection is "
               "scaled to the kinetic energy of each step's discrete energy balance, so what is "
-              "left is round-off (integrators._project_keeping_energy).", ""]
+              "left is round-off (integrators.project_keeping_energy).", ""]
     return lines
 
 

@@ -139,9 +139,9 @@ def test_element_stiffness_has_corrected_sign():
     # G's transverse stiffness of a clamped-guided element: 12 EI / l^3
     assert k[iv, iv] == pytest.approx(12 * ei / le**3, rel=1e-12)
     # full element: the v_i-v_j coupling is negative
-    from umbrella_sim.model import _GAUSS_ETA, _GAUSS_W
-    _, _, d2n = shape_functions(_GAUSS_ETA, le)
-    ke = ei * np.einsum("q,qi,qj->ij", le * _GAUSS_W, d2n[:, 1], d2n[:, 1])
+    from umbrella_sim.model import GAUSS_POINTS, GAUSS_WEIGHTS
+    _, _, d2n = shape_functions(GAUSS_POINTS, le)
+    ke = ei * np.einsum("q,qi,qj->ij", le * GAUSS_WEIGHTS, d2n[:, 1], d2n[:, 1])
     assert ke[1, 4] == pytest.approx(-12 * ei / le**3, rel=1e-12)
 
 

@@ -15,7 +15,7 @@ Why this scheme:
     the constraints and the kinetic energy is not quadratic in q;
   * positions satisfy Phi(q) = 0 at every step (index 3), and the velocities are projected
     onto J q' = 0 in the mass metric and scaled to the kinetic energy of the discrete energy
-    balance (``_project_keeping_energy``), so both residuals stay at round-off without
+    balance (``project_keeping_energy``), so both residuals stay at round-off without
     Baumgarte parameters, and energy is balanced to round-off, not to the Newton tolerance.
 Each step solves the nonlinear residual with Newton's method; the iteration matrix
 M + h^2/4 K + h/2 G (G the gyroscopic tangent) is factored once per step.
@@ -223,8 +223,8 @@ def iteration_blocks(m: UmbrellaModel, cs: ConstraintSet, x: MidpointIterate, h:
 ENERGY_RESTORE_LIMIT = 1.01
 
 
-def _project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
-                            t_target: float):
+def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
+                           t_target: float):
     """
     Project v onto J v = 0 (mass metric) and scale it to the balance's energy.
 
@@ -425,7 +425,7 @@ class MidpointDAE:
         mass1 = m.mass_matrix(q)
         t_target = (0.5 * (v0 @ p0) + self.strain_energy(q0, cs) - self.strain_energy(q, cs)
                     + force * (y0 - m.sleeve_height(q)))
-        v = _project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
+        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
         if v is None:
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
         return DynamicState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v)
@@ -506,6 +506,8 @@ def load_kernel():
             lib.umbrella_momentum.argtypes = [vp, _dp, _dp, _dp]
             lib.umbrella_set_phase_correction.restype = None
             lib.umbrella_set_phase_correction.argtypes = [vp, i, _dp, _dp, _dp, _dp, _dp]
+            lib.umbrella_set_law.restype = None
+            lib.umbrella_set_law.argtypes = [vp, vp]
             lib.umbrella_advance_call.restype = i
             lib.umbrella_advance_call.argtypes = [vp, ctypes.POINTER(_AdvanceCall)]
             lib.umbrella_sample_call.restype = None
@@ -602,6 +604,15 @@ class CompiledKernel:
             for a in (pc.modes, pc.shapes, pc.omega ** 2, pc.stiffening, pc.reference))
         self.lib.umbrella_set_phase_correction(self._ctx, len(pc.stiffening),
                                                *(_dptr(a) for a in arrays))
+
+    def set_elastic_law(self, law, law_ptr) -> None:
+        """
+        Step with the elastic law of _kernel_nonlinear.c at law_ptr (nonlinear.CompiledLaw).
+
+        The context points at it: the law object is kept alive as ``elastic_law``.
+        """
+        self.lib.umbrella_set_law(self._ctx, law_ptr)
+        self.elastic_law = law
 
     def _set_capacity(self, cap: int) -> None:
         from .outputs import STEP_FIELDS

@@ -41,9 +41,10 @@ class Stage(enum.StrEnum):
 
 
 DEFORMING, LOCKED = Stage.DEPLOYING, Stage.LOCKED
-_GAUSS_ETA, _GAUSS_W = np.polynomial.legendre.leggauss(5)  # exact to degree 9
-_GAUSS_ETA = 0.5 * (_GAUSS_ETA + 1.0)
-_GAUSS_W = 0.5 * _GAUSS_W
+#: 5-point Gauss-Legendre on [0, 1] (exact to degree 9): the element integrals
+GAUSS_POINTS, GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(5)
+GAUSS_POINTS = 0.5 * (GAUSS_POINTS + 1.0)
+GAUSS_WEIGHTS = 0.5 * GAUSS_WEIGHTS
 _DOF = {"u": 0, "v": 1, "theta": 2}
 
 
@@ -131,10 +132,10 @@ class BeamBody:
         # --- quadrature points of the whole body: S(x) maps e to (u, v) at x
         xs, ws, shapes = [], [], []
         for j, le in enumerate(lengths):
-            n, _, _ = shape_functions(_GAUSS_ETA, le)
+            n, _, _ = shape_functions(GAUSS_POINTS, le)
             shapes.append(n @ self.element_dof_maps[j])
-            xs.append(self.node_x[j] + le * _GAUSS_ETA)
-            ws.append(le * _GAUSS_W)
+            xs.append(self.node_x[j] + le * GAUSS_POINTS)
+            ws.append(le * GAUSS_WEIGHTS)
         self.quad_x = np.concatenate(xs)
         self.quad_w = np.concatenate(ws) * mass_per_length      # rho A dx
         self.quad_shape = np.concatenate(shapes)                 # (nq, 2, ne)
@@ -156,10 +157,10 @@ class BeamBody:
         # --- stiffness (4.37, 4.42): EI v''^2 + EA u'^2, exact quadrature
         k = np.zeros((ne, ne))
         for j, le in enumerate(lengths):
-            _, dn, d2n = shape_functions(_GAUSS_ETA, le)
+            _, dn, d2n = shape_functions(GAUSS_POINTS, le)
             b = self.element_dof_maps[j]
-            ke = (ei * np.einsum("q,qi,qj->ij", le * _GAUSS_W, d2n[:, 1], d2n[:, 1])
-                  + ea * np.einsum("q,qi,qj->ij", le * _GAUSS_W, dn[:, 0], dn[:, 0]))
+            ke = (ei * np.einsum("q,qi,qj->ij", le * GAUSS_WEIGHTS, d2n[:, 1], d2n[:, 1])
+                  + ea * np.einsum("q,qi,qj->ij", le * GAUSS_WEIGHTS, dn[:, 0], dn[:, 0]))
             k += b.T @ ke @ b
         self.stiffness = k
 

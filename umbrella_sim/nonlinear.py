@@ -81,11 +81,10 @@ import math
 import numpy as np
 from scipy.linalg.lapack import dgetrf, dgetrs
 
-from .integrators import (_project_keeping_energy, ConvergenceError, DynamicState,
-                          iteration_blocks, midpoint_iterate, MidpointDAE, NEWTON_TOLERANCE,
-                          PHI_TOLERANCE)
-from .model import (_GAUSS_ETA, _GAUSS_W, band_form, BeamBody, ConstraintSet, shape_functions,
-                    UmbrellaModel)
+from .integrators import (ConvergenceError, DynamicState, iteration_blocks, midpoint_iterate,
+                          MidpointDAE, NEWTON_TOLERANCE, PHI_TOLERANCE, project_keeping_energy)
+from .model import (band_form, BeamBody, ConstraintSet, GAUSS_POINTS, GAUSS_WEIGHTS,
+                    shape_functions, UmbrellaModel)
 from .outputs import oscillation_period
 from .params import UmbrellaParams
 from .solver import FiniteElementEngine   # the solver imports this module only inside reset()
@@ -130,19 +129,19 @@ class StrainEnergy:
         du, dv, w, lengths = [], [], [], []
         self.k_linear = np.zeros((n, n))
         for body, s_e in bodies:
-            d = _derivatives(body, _GAUSS_ETA)
+            d = _derivatives(body, GAUSS_POINTS)
             for src, dst in ((d.du, du), (d.dv, dv)):
                 full = np.zeros((len(src), n))
                 full[:, s_e] = src
                 dst.append(full)
-            w.append(np.outer(body.element_length, _GAUSS_W).ravel())
+            w.append(np.outer(body.element_length, GAUSS_WEIGHTS).ravel())
             lengths.append(body.element_length)
             self.k_linear[s_e, s_e] = body.stiffness
         self.du = np.vstack(du)
         self.dv = np.vstack(dv)
         w = np.concatenate(w)
         self.element_length = np.concatenate(lengths)
-        n_el, n_gauss = len(self.element_length), len(_GAUSS_ETA)
+        n_el, n_gauss = len(self.element_length), len(GAUSS_POINTS)
         # element mean over its Gauss points: (n_el, nq), rows w_q / l_e
         self.mean = np.zeros((n_el, n_el * n_gauss))
         for j in range(n_el):
@@ -306,8 +305,6 @@ def _declare_law_functions(lib) -> None:
     lib.elastic_free.argtypes = [vp]
     lib.elastic_last_dissipation.restype = ctypes.c_double
     lib.elastic_last_dissipation.argtypes = [vp]
-    lib.umbrella_set_law.restype = None
-    lib.umbrella_set_law.argtypes = [vp, vp]
 
 
 class CompiledElasticLaw:
@@ -325,7 +322,7 @@ class CompiledElasticLaw:
         st, p = model.strain, model.params
         idx = np.asarray(model.elastic_indices)
         bw = model.banded_invariants()[0]
-        n_el, n_gauss = len(st.element_length), len(_GAUSS_ETA)
+        n_el, n_gauss = len(st.element_length), len(GAUSS_POINTS)
         n_leaf_points = model.stress_rows()[4][0]
         if n_leaf_points != 2 * len(model.leaf.element_length):
             raise ValueError("compiled elastic law: the leaf's stress points are not the two "
@@ -363,8 +360,7 @@ class CompiledElasticLaw:
 
     def attach(self, kernel) -> None:
         """Make kernel (a CompiledKernel of the same model) step with this law."""
-        self.lib.umbrella_set_law(kernel._ctx, self.ptr)
-        kernel.elastic_law = self      # the context points at the law: keep it alive
+        kernel.set_elastic_law(self, self.ptr)
 
     def last_dissipation(self) -> float:
         return float(self.lib.elastic_last_dissipation(self.ptr))
@@ -540,7 +536,7 @@ class ElasticMidpointDAE(MidpointDAE):
         # balance (net of the damping): energy is balanced to round-off, as in MidpointDAE
         t_target = (0.5 * (v0 @ p0) + self.strain_energy(q0, cs) - self.strain_energy(q, cs)
                     + force * (y0 - m.sleeve_height(q)) - dissipated)
-        v = _project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
+        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
         if v is None:
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
         return DampedState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v,
