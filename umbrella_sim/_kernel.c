@@ -113,15 +113,14 @@ typedef struct {
     double *q_s, *v_s, *p_s, *lam_s;  /* single-step results */
     ElasticLaw *law;       /* NULL: U = 1/2 q.K q, undamped; else U, C of the law */
     double dissipated;     /* damping dissipation of the last step (J) */
-    /* stage 2's modal phase correction (integrators.ModalPhaseCorrection):
-     * pc_r modes, rows u_i of pc_u (pc_r x n), stiffening c_i, measured from q_lock (the
-     * caller's arrays); pc_r = 0: none.  With an elastic law too. */
+    /* stage 2's modal phase correction (integrators.ModalPhaseCorrection): the momentum
+     * gains D v = sum_i d_i u_i (u_i . v), pc_r modes, rows u_i of pc_u (pc_r x n), modal
+     * mass changes d_i in pc_d (the caller's arrays); pc_e_lock: 1/2 v.D v just after the
+     * lock; pc_r = 0: none.  With an elastic law too. */
     int pc_r;
-    const double *pc_u, *pc_phi, *pc_w2, *pc_c, *pc_ref;   /* pc_phi: phi_i^T rows, w2: omega^2 */
-    double *pc_f;          /* n: its force at the last Newton iterate's qm */
-    double *pc_d, *pc_s;   /* n each: q - q_lock; the modal sums (r <= n) */
-    double *pc_eq, pc_e;   /* the last phase_correction_energy: q (n) and its value */
-    int pc_e_valid;        /* (a step asks for q0, then q1 twice: q0 was the last q1) */
+    const double *pc_u, *pc_phi, *pc_w2, *pc_d;   /* pc_phi: phi_i^T rows, w2: omega^2 */
+    double pc_e_lock;
+    double *pc_f, *pc_s;   /* n: D v of the last Newton iterate; the modal sums (r <= n) */
     /* cos and sin of the last few angles (cos_sin): a Newton iteration needs alpha1 and
      * alpha2 of q1 and of the midpoint in several functions */
     double trig_a[TRIG_CACHE], trig_c[TRIG_CACHE], trig_s[TRIG_CACHE];
@@ -637,7 +636,7 @@ Ctx *umbrella_new(const Model *m) {
     x->ne = ne;
     x->nbmax = nbmax;
     x->width = w;
-    size_t nvec = 34;
+    size_t nvec = 32;
     size_t doubles = (size_t)n * nvec + 2 * (size_t)m->n_link + 2 * (size_t)(n + ncmax)
                      + 6 * (size_t)ncmax * JW + 3 * (size_t)ncmax;
     x->hq = calloc(doubles, sizeof(double));
@@ -649,8 +648,7 @@ Ctx *umbrella_new(const Model *m) {
     double **vecs[] = {&x->hq, &x->maf, &x->q1, &x->v1, &x->dq, &x->qm, &x->hm, &x->gt, &x->gy,
                        &x->res, &x->kq, &x->mv, &x->wa, &x->wb, &x->vt, &x->q_s, &x->v_s, &x->p_s,
                        &x->mffv, &x->wv0, &x->mq0, &x->wq0, &x->kq0, &x->mv0, &x->mdq, &x->wdq,
-                       &x->kdq, &x->mq1, &x->wq1, &x->kq1, &x->pc_f, &x->pc_eq, &x->pc_d,
-                       &x->pc_s};
+                       &x->kdq, &x->mq1, &x->wq1, &x->kq1, &x->pc_f, &x->pc_s};
     for (size_t k = 0; k < sizeof(vecs) / sizeof(vecs[0]); k++) { *vecs[k] = d; d += n; }
     x->mrf = d; d += 2 * m->n_link;
     x->rhs = d; d += n + ncmax;
@@ -919,10 +917,13 @@ static double max_abs(int n, const double *x) {
     return r;
 }
 
+static double phase_correction(const Ctx *x, const double *v, double *y);
+
 /* Velocity projection onto J(q1) v = 0 in the mass metric, then scaled to the kinetic energy
- * t_target of the discrete energy balance (integrators._project_keeping_energy).  Needs
- * mass_data(q1) and the rows J(q1) in jrow_*.  Leaves M(q1) v in p. */
-static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_target) {
+ * t_target of the discrete energy balance (integrators.project_keeping_energy).  Needs
+ * mass_data(q1) and the rows J(q1) in jrow_*.  Leaves the momentum M(q1) v in p, plus D v
+ * with stage 2's phase correction (pc), whose 1/2 v.D v the balance's T includes. */
+static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_target, int pc) {
     const Model *m = x->m;
     int ne = x->ne, nb = 4 + nc, n = m->n;
     const int *ei = m->elastic_idx;
@@ -980,6 +981,7 @@ static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_t
     for (int i = 0; i < n; i++) v[i] += r[i];
     mass_matvec(x, v, p_out);
 scale:;
+    if (pc) phase_correction(x, v, p_out);   /* the momentum (M + D) v, in T of the balance */
     double t_after = 0.0;
     for (int i = 0; i < n; i++) t_after += v[i] * p_out[i];
     t_after *= 0.5;
@@ -1044,46 +1046,30 @@ static void modal_combine(int r, int n, const double *rows, const double *s, dou
     }
 }
 
-/* The stage-2 phase correction at q: its energy 1/2 sum_i c_i (u_i . (q - q_lock))^2, and
- * its force U diag(c) U^T (q - q_lock) into f (n) unless f is NULL. */
-static double phase_correction(const Ctx *x, const double *q, double *f) {
+/* The stage-2 phase correction's momentum: y += D v (y may be NULL); returns 1/2 v . D v.
+ * The modal components d_i (u_i . v) are left in pc_s. */
+static double phase_correction(const Ctx *x, const double *v, double *y) {
     int n = x->m->n, r = x->pc_r;
-    double e = 0.0, *d = x->pc_d, *s = x->pc_s;
-    for (int i = 0; i < n; i++) d[i] = q[i] - x->pc_ref[i];
-    modal_dots(r, n, x->pc_u, d, s);
+    double e = 0.0, *s = x->pc_s;
+    modal_dots(r, n, x->pc_u, v, s);
     for (int j = 0; j < r; j++) {
         double eta = s[j];
-        s[j] = x->pc_c[j] * eta;
+        s[j] = x->pc_d[j] * eta;
         e += 0.5 * s[j] * eta;
     }
-    if (f) {
-        memset(f, 0, sizeof(double) * n);
-        modal_combine(r, n, x->pc_u, s, 1.0, f);
-    }
+    if (y) modal_combine(r, n, x->pc_u, s, 1.0, y);
     return e;
 }
 
 /* Stage 2's phase correction from now on (r = 0: none); the arrays stay the caller's. */
 void umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *phi,
-                                   const double *w2, const double *c, const double *q_lock) {
+                                   const double *w2, const double *d, double e_lock) {
     x->pc_r = r;
     x->pc_u = u;
     x->pc_phi = phi;
     x->pc_w2 = w2;
-    x->pc_c = c;
-    x->pc_ref = q_lock;
-    x->pc_e_valid = 0;
-}
-
-/* phase_correction's energy at q, kept for the next call (as elastic_energy) */
-static double phase_correction_energy(Ctx *x, const double *q) {
-    size_t bytes = sizeof(double) * x->m->n;
-    if (!(x->pc_e_valid && memcmp(q, x->pc_eq, bytes) == 0)) {
-        x->pc_e = phase_correction(x, q, NULL);
-        memcpy(x->pc_eq, q, bytes);
-        x->pc_e_valid = 1;
-    }
-    return x->pc_e;
+    x->pc_d = d;
+    x->pc_e_lock = e_lock;
 }
 
 /* The Newton update dq (n) with the correction's share of the tangent put back, mode by mode
@@ -1093,8 +1079,8 @@ static void phase_correction_update(Ctx *x, double h, double *dq) {
     double quarter = 0.25 * h * h, *s = x->pc_s;
     modal_dots(r, n, x->pc_u, dq, s);
     for (int j = 0; j < r; j++) {
-        double c = x->pc_c[j];
-        s[j] = quarter * c / (1.0 + quarter * (x->pc_w2[j] + c)) * s[j];
+        double d = x->pc_d[j];
+        s[j] = d / (1.0 + quarter * x->pc_w2[j] + d) * s[j];
     }
     modal_combine(r, n, x->pc_phi, s, -1.0, dq);
 }
@@ -1154,7 +1140,9 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         if (law) elastic_force(law, q0, q, h, x->kdq, x->kq);   /* + the rest of G_U, C dq / h */
         bilinear_gradient(x, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
         mass_matvec_pre(x, v1, x->mffv, x->mv);
-        /* f = 1/2 v0^T M(q) v1: f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1), M symmetric */
+        if (pc) phase_correction(x, v1, x->mv);   /* the momentum (M(q1) + D) v1 */
+        /* f = 1/2 v0^T M(q) v1: f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1), M symmetric (with
+         * the phase correction p0 and mv both hold D: its share, 1/2 (v0.D v1 - D v0.v1), is 0) */
         double df = 0.5 * (dot(n, v0, x->mv) - dot(n, p0, v1));
         gonzalez(n, x->gt, df, dq, dd);
         sleeve_gradient(x, qm, x->gy);
@@ -1172,10 +1160,6 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             for (int k = 0; k < JW; k++) res[x->jm_idx[r * JW + k]] += x->jm_val[r * JW + k] * lam[r];
         for (int i = 0; i < n; i++)
             res[i] = x->mv[i] - p0[i] - h * (x->gt[i] - x->kq[i] - force * x->gy[i] + res[i]);
-        if (pc) {                         /* its elastic force at qm joins K qm */
-            phase_correction(x, qm, x->pc_f);
-            for (int i = 0; i < n; i++) res[i] += h * x->pc_f[i];
-        }
         if (nonlinear_law) {
             double fn = 0.25 * h * h * dot(n, res, res);
             for (int r = 0; r < nc; r++) fn += phi[r] * phi[r];
@@ -1241,9 +1225,8 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target += 0.5 * q0[i] * x->kq0[i]; }
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target -= 0.5 * q[i] * x->kq1[i]; }
     }
-    if (pc) t_target += phase_correction_energy(x, q0) - phase_correction_energy(x, q);
     for (int i = 0; i < n; i++) t_target += 0.5 * v0[i] * p0[i];
-    if (project_velocity(x, nc, v, x->p_s, t_target) != OK) { status = SINGULAR; goto done; }
+    if (project_velocity(x, nc, v, x->p_s, t_target, pc) != OK) { status = SINGULAR; goto done; }
 done:
     *iterations = it > max_iter ? max_iter : it;
     return status;
@@ -1259,7 +1242,11 @@ int umbrella_step(Ctx *x, int locked, int rigid,
     double *p0 = x->q1;         /* step() does not use q1 */
     x->q0_products = 0;
     if (p0_in) memcpy(p0, p0_in, sizeof(double) * n);
-    else { mass_data(x, q0); mass_matvec(x, v0, p0); }
+    else {
+        mass_data(x, q0);
+        mass_matvec(x, v0, p0);
+        if (locked && !rigid && x->pc_r > 0) phase_correction(x, v0, p0);
+    }
     int status = step(x, locked, rigid, q0, v0, lam0, p0, h, force, tol, phi_tol,
                       max_iter, iterations);
     if (status == OK) {
@@ -1278,9 +1265,12 @@ void umbrella_set_law(Ctx *x, ElasticLaw *law) {
 }
 
 /* p = M(q) v */
+/* the momentum of a state: M(q) v, plus D v once stage 2's phase correction is on (it is
+ * set at the lock) */
 void umbrella_momentum(Ctx *x, const double *q, const double *v, double *p) {
     mass_data(x, q);
     mass_matvec(x, v, p);
+    if (x->pc_r > 0) phase_correction(x, v, p);
 }
 
 /* ------------------------------------------------------------------- outputs */
@@ -1344,9 +1334,13 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         SET(body == 0 ? F_PEAK_LEAF_X : F_PEAK_LINK_X, m->stress_x[at]);
         first += np;
     }
-    double ke = 0.0;
+    double ke = 0.0, pc_e = 0.0;
     for (int i = 0; i < n; i++) ke += v[i] * p[i];
-    SET(F_KINETIC, 0.5 * ke);
+    ke *= 0.5;
+    /* stage 2's phase correction: p = (M + D) v; T reported without 1/2 v.D v, which goes to
+     * the strain energy less its value just after the lock (continuous there) */
+    if (stage == 1 && x->pc_r > 0) pc_e = phase_correction(x, v, NULL);
+    SET(F_KINETIC, ke - pc_e);
     double se = 0.0;
     if (x->law) se = elastic_energy(x->law, q, kq_known);
     else {
@@ -1361,7 +1355,7 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         }
         se *= 0.5;
     }
-    if (stage == 1 && x->pc_r > 0) se += phase_correction_energy(x, q);   /* stage 2 */
+    if (stage == 1 && x->pc_r > 0) se += pc_e - x->pc_e_lock;
     SET(F_STRAIN, se);
     SET(F_WORK, work);
     SET(F_LOCK_LOSS, lock_loss);

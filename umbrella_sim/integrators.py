@@ -69,14 +69,10 @@ def newton_tolerance(h: float) -> float:
     return min(1e-9, max(NEWTON_TOLERANCE, 1e-9 * (h / 1e-4) ** 3))
 
 
-#: modes whose period the stage-2 correction makes exact: omega h at most this.  The pre-warped
-#: stiffness omega'^2 is right for a mode's free vibration but stiffens its quasi-static
-#: response (what the frame's large, nonlinear motion drives at low frequency) by
-#: (tan(omega h / 2) / (omega h / 2))^2 - 1: 4 % at omega h = 0.5, 10 % at 0.75, 19 % at 1, 54 %
-#: at 1.5.  0.75 keeps that under 10 %; over the 12 cases of docs/validation.md it took the
-#: stage-2 tip-series error at 0.1 ms from 0.2-4.0 mm (limit 0.5) to 0.2-2.3 mm, none worse,
-#: while a limit of 1.1 (a 24 % stiffening at N = 1) put one case at 3.9 mm
-PHASE_CORRECTION_LIMIT = 0.75
+#: modes whose period the stage-2 correction makes exact: omega h at most this, i.e. modes the
+#: step samples at least ~4 times a period (pi / 2 = 1.57).  Beyond, the modal mass that makes
+#: the period exact falls fast (to 0 at omega h = pi): 65 % of the mode's at 1.5, 17 % at 2.5.
+PHASE_CORRECTION_LIMIT = 1.5
 
 
 class ModalPhaseCorrection:
@@ -85,20 +81,27 @@ class ModalPhaseCorrection:
 
     The midpoint rule turns a mode x'' = -omega^2 x by Omega h per step, with
     tan(Omega h / 2) = omega h / 2: the period grows by ~(omega h)^2 / 12 (2e-3 at 1.6e3 rad/s
-    and 0.1 ms, a radian of phase over 0.5 s).  Giving the mode the stiffness
-    omega'^2 = (2 / h tan(omega h / 2))^2 instead (the frequency pre-warping of the bilinear
-    transform, Tustin) makes Omega = omega.  The modes are those of the locked frame
-    linearised at full deployment (``UmbrellaModel.locked_modes``, mass-normalised phi), for
-    omega h <= PHASE_CORRECTION_LIMIT; the elastic force and energy gain
+    and 0.1 ms, a radian of phase over 0.5 s).  Giving the mode the modal mass
+    (omega / omega')^2, omega' = 2 / h tan(omega h / 2), instead of 1 (mass-normalised) makes
+    Omega = omega: the frequency pre-warping of the bilinear transform (Tustin), put into the
+    mass rather than the stiffness, so that a mode's quasi-static response (what the frame's
+    large, nonlinear motion drives at low frequency) keeps its stiffness; pre-warping the
+    stiffness instead stiffens it by (omega' / omega)^2 - 1, which at 0.1 ms put the tip series
+    of V0 = -0.5 off by up to 2.3 mm where the mass version keeps 1.2 mm (docs/validation.md).
+    The modes are those of the locked frame linearised at full deployment
+    (``UmbrellaModel.locked_modes``, mass-normalised phi), for omega h <=
+    PHASE_CORRECTION_LIMIT; the kinetic energy gains
 
-        U diag(c) U^T (q - q_lock),   1/2 sum_i c_i (u_i . (q - q_lock))^2,
-        U = M0 phi,  c_i = omega'_i^2 - omega_i^2 = O(omega_i^4 h^2 / 12),
+        1/2 v^T D v,   D = U diag(d) U^T,   U = M0 phi,   d_i = (omega_i / omega'_i)^2 - 1,
 
-    measured from the state at the lock (the energy is continuous there), so the scheme keeps
-    its exact energy balance; the correction vanishes as h -> 0 (consistent, still second
-    order).  The grid step h is the simulator's: the lock's part step uses it too.  For the
-    linear strain only (engines' ``phase_correctable``): with the von Karman strain the axial
-    coordinates follow the foreshortening of the bending, far from the linearisation.
+    d_i in (-1, 0], O(omega_i^2 h^2 / 12): the momentum is (M(q) + D) v, and the scheme keeps
+    its exact balance of T + 1/2 v^T D v + V (the correction vanishes as h -> 0: consistent,
+    still second order).  Reported: the kinetic energy T, and the correction's 1/2 v^T D v
+    less its value just after the lock in the strain energy, so that the energy figures are
+    continuous through the lock.  The grid step h is the simulator's: the lock's part step
+    uses it too.  For the linear strain only (engines' ``phase_correctable``): with the von
+    Karman strain the axial coordinates follow the foreshortening of the bending, far from the
+    linearisation.
     """
 
     def __init__(self, model: UmbrellaModel, h: float):
@@ -108,30 +111,33 @@ class ModalPhaseCorrection:
         # rows u_i = (M0 phi_i)^T and phi_i^T, C-contiguous for the kernel
         self.modes = np.ascontiguousarray((mass @ phi[:, keep]).T)
         self.shapes = np.ascontiguousarray(phi[:, keep].T)
-        self.stiffening = (2.0 / h * np.tan(0.5 * h * self.omega)) ** 2 - self.omega ** 2
-        self.reference: np.ndarray | None = None   # q at the lock; None: inactive
+        self.mass_change = (self.omega / (2.0 / h * np.tan(0.5 * h * self.omega))) ** 2 - 1.0
+        self.lock_energy: float | None = None   # 1/2 v^T D v just after the lock; None: inactive
 
-    def start(self, q_lock: np.ndarray) -> None:
-        self.reference = np.array(q_lock, dtype=float)
+    def start(self, v_lock: np.ndarray) -> None:
+        self.lock_energy = self.energy(v_lock)
 
-    def force(self, q: np.ndarray) -> np.ndarray:
-        return self.modes.T @ (self.stiffening * (self.modes @ (q - self.reference)))
+    def momentum(self, v: np.ndarray) -> np.ndarray:
+        """Return D v, the correction's share of the momentum."""
+        return self.modes.T @ (self.mass_change * (self.modes @ v))
 
-    def energy(self, q: np.ndarray) -> float:
-        eta = self.modes @ (q - self.reference)
-        return float(0.5 * (self.stiffening * eta) @ eta)
+    def energy(self, v: np.ndarray) -> float:
+        """Return 1/2 v^T D v (<= 0)."""
+        eta = self.modes @ v
+        return float(0.5 * (self.mass_change * eta) @ eta)
 
     def newton_update(self, dq: np.ndarray, h: float) -> np.ndarray:
         """
         Return the Newton update dq with the correction's share of the tangent put back.
 
-        The iteration matrix leaves h^2/4 U diag(c) U^T out; in the modes' coordinates its
-        block is 1 + h^2 omega^2 / 4 where the tangent's is 1 + h^2 (omega^2 + c) / 4, so each
-        modal component of dq is scaled by their ratio (Woodbury for M0-orthonormal modes).
-        Only how Newton converges changes, not to what.
+        The iteration matrix leaves D out; in the modes' coordinates its block is
+        1 + h^2 omega^2 / 4 where the tangent's is 1 + d + h^2 omega^2 / 4, so each modal
+        component of dq is scaled by their ratio (Woodbury for M0-orthonormal modes).  Only
+        how Newton converges changes, not to what.
         """
         quarter = 0.25 * h * h
-        shrink = quarter * self.stiffening / (1.0 + quarter * (self.omega ** 2 + self.stiffening))
+        d = self.mass_change
+        shrink = d / (1.0 + quarter * self.omega ** 2 + d)
         return dq - self.shapes.T @ (shrink * (self.modes @ dq))
 
 
@@ -224,7 +230,7 @@ ENERGY_RESTORE_LIMIT = 1.01
 
 
 def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
-                           t_target: float):
+                           t_target: float, extra_momentum=None):
     """
     Project v onto J v = 0 (mass metric) and scale it to the balance's energy.
 
@@ -242,6 +248,8 @@ def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
     balance exact to round-off; the change of v is of the order of the projection and the
     Newton error.  Scaling is skipped when it would change T by more than 1 % (never after a
     converged step; such a state is left to the divergence checks) or T is zero.
+    extra_momentum(v): a constant-mass share of the momentum (the stage-2 phase correction's
+    D v) that the kinetic energy of the balance includes; the projection's metric stays M.
     None if M is not positive definite.
     """
     jv = jac @ v
@@ -252,7 +260,8 @@ def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
             return None
         x = dpotrs(chol, jac.T)[0]
         vp = v - x @ np.linalg.solve(jac @ x, jv)
-    t_after = 0.5 * (vp @ mass @ vp)
+    p = mass @ vp if extra_momentum is None else mass @ vp + extra_momentum(vp)
+    t_after = 0.5 * (vp @ p)
     limit = ENERGY_RESTORE_LIMIT
     if t_after > 0.0 and t_after / limit <= t_target <= limit * t_after:
         vp = vp * math.sqrt(t_target / t_after)
@@ -289,24 +298,30 @@ class MidpointDAE:
         """Use ``ModalPhaseCorrection`` for grid step h in stage 2 (from ``lock_at`` on)."""
         self.phase_correction = ModalPhaseCorrection(self.model, h)
 
-    def lock_at(self, q: np.ndarray) -> None:
-        """Start stage 2's phase correction (if any) from the configuration at the lock."""
+    def lock_at(self, v: np.ndarray) -> None:
+        """Start stage 2's phase correction (if any) from the velocity just after the lock."""
         pc = self.phase_correction
         if pc is not None:
-            pc.start(q)
+            pc.start(v)
             if self._compiled is not None:
                 self._compiled.set_phase_correction(pc)
 
-    def _stage2_correction(self, cs: ConstraintSet) -> "ModalPhaseCorrection | None":
+    def stage2_correction(self, cs: ConstraintSet) -> "ModalPhaseCorrection | None":
+        """Return the phase correction acting under cs (stage 2, from the lock), else None."""
         pc = self.phase_correction
-        if pc is None or pc.reference is None or not cs.locked or cs.rigid:
+        if pc is None or pc.lock_energy is None or not cs.locked or cs.rigid:
             return None
         return pc
 
+    def momentum(self, q: np.ndarray, qd: np.ndarray, cs: ConstraintSet) -> np.ndarray:
+        """Return the step's momentum: M(q) qd, plus D qd of the stage-2 phase correction."""
+        p = self.model.mass_matrix(q) @ qd
+        pc = self.stage2_correction(cs)
+        return p if pc is None else p + pc.momentum(qd)
+
     def strain_energy(self, q: np.ndarray, cs: ConstraintSet) -> float:
-        """1/2 q.K q, plus the stage-2 phase correction's energy (the balance's V)."""
-        pc = self._stage2_correction(cs)
-        return float(self.model.strain_energy(q)) + (pc.energy(q) if pc is not None else 0.0)
+        """1/2 q.K q (the balance's V)."""
+        return float(self.model.strain_energy(q))
 
     @property
     def kernel(self) -> "CompiledKernel | None":
@@ -371,24 +386,25 @@ class MidpointDAE:
         n = m.n
         q0, v0 = s.q, s.qd
         half_h2 = 0.5 * h * h
-        p0 = s.momentum if s.momentum is not None else m.mass_matrix(q0) @ v0
-        # p0 = M(q0) v0 also gives f(q0) = 1/2 p0 . v1
+        pc = self.stage2_correction(cs)
+        p0 = s.momentum if s.momentum is not None else self.momentum(q0, v0, cs)
+        # p0 = M(q0) v0 (+ D v0) also gives f(q0) = 1/2 p0 . v1 (D is constant: its share of
+        # f(q1) - f(q0), 1/2 v0 . D v1 - 1/2 D v0 . v1, is zero)
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
         # predictor: the previous step's velocity held
         q = q0 + h * v0
         lam = s.multipliers.copy()
         stiff = m.stiffness
-        pc = self._stage2_correction(cs)
         lu = piv = None
         nc = len(phi0)
         rhs = np.empty(n + nc)
         last_norm = np.inf
         for it in range(1, self.max_iterations + 1):
             x = midpoint_iterate(m, cs, q0, v0, p0, phi0, y0, q, h)
-            elastic = stiff @ x.qm if pc is None else stiff @ x.qm + pc.force(x.qm)
-            resid = (x.mass1 @ x.v1 - p0
-                     - h * (x.g_t - elastic - force * x.g_y + x.jac_m.T @ lam))
+            momentum1 = x.mass1 @ x.v1 if pc is None else x.mass1 @ x.v1 + pc.momentum(x.v1)
+            resid = (momentum1 - p0
+                     - h * (x.g_t - stiff @ x.qm - force * x.g_y + x.jac_m.T @ lam))
             phi = x.phi
             if lu is None:
                 jac = m.constraint_jacobian(q, cs)
@@ -425,10 +441,12 @@ class MidpointDAE:
         mass1 = m.mass_matrix(q)
         t_target = (0.5 * (v0 @ p0) + self.strain_energy(q0, cs) - self.strain_energy(q, cs)
                     + force * (y0 - m.sleeve_height(q)))
-        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
+        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target,
+                                   None if pc is None else pc.momentum)
         if v is None:
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
-        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v)
+        p1 = mass1 @ v if pc is None else mass1 @ v + pc.momentum(v)
+        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, p1)
 
     def with_constraints(self, s: DynamicState, force: float, cs: ConstraintSet) -> DynamicState:
         """Keep q, qd; return consistent q'' and lambda for another constraint set."""
@@ -505,7 +523,7 @@ def load_kernel():
             lib.umbrella_momentum.restype = None
             lib.umbrella_momentum.argtypes = [vp, _dp, _dp, _dp]
             lib.umbrella_set_phase_correction.restype = None
-            lib.umbrella_set_phase_correction.argtypes = [vp, i, _dp, _dp, _dp, _dp, _dp]
+            lib.umbrella_set_phase_correction.argtypes = [vp, i, _dp, _dp, _dp, _dp, d]
             lib.umbrella_set_law.restype = None
             lib.umbrella_set_law.argtypes = [vp, vp]
             lib.umbrella_advance_call.restype = i
@@ -601,9 +619,9 @@ class CompiledKernel:
         """Hand stage 2's phase correction to the kernel (it keeps pointers to these arrays)."""
         self._phase_correction = arrays = tuple(
             np.ascontiguousarray(a, dtype=float)
-            for a in (pc.modes, pc.shapes, pc.omega ** 2, pc.stiffening, pc.reference))
-        self.lib.umbrella_set_phase_correction(self._ctx, len(pc.stiffening),
-                                               *(_dptr(a) for a in arrays))
+            for a in (pc.modes, pc.shapes, pc.omega ** 2, pc.mass_change))
+        self.lib.umbrella_set_phase_correction(self._ctx, len(pc.mass_change),
+                                               *(_dptr(a) for a in arrays), pc.lock_energy)
 
     def set_elastic_law(self, law, law_ptr) -> None:
         """

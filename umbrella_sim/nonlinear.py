@@ -463,12 +463,12 @@ class ElasticMidpointDAE(MidpointDAE):
         m = self.model
         n = m.n
         q0, v0 = s.q, s.qd
-        p0 = s.momentum if s.momentum is not None else m.mass_matrix(q0) @ v0
+        pc = self.stage2_correction(cs)
+        p0 = s.momentum if s.momentum is not None else self.momentum(q0, v0, cs)
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
         nc = len(phi0)
         lam_scale = 0.5 * h * h
-        pc = self._stage2_correction(cs)
         line_search = self.strain_nonlinear
         refresh = False
 
@@ -477,9 +477,8 @@ class ElasticMidpointDAE(MidpointDAE):
             x = midpoint_iterate(m, cs, q0, v0, p0, phi0, y0, q, h)
             damping = m.damping_matrix(x.qm)
             elastic = m.strain.discrete_gradient(q0, q)
-            if pc is not None:
-                elastic = elastic + pc.force(x.qm)
-            resid = (x.mass1 @ x.v1 - p0 + damping @ x.dq
+            momentum1 = x.mass1 @ x.v1 if pc is None else x.mass1 @ x.v1 + pc.momentum(x.v1)
+            resid = (momentum1 - p0 + damping @ x.dq
                      - h * (x.g_t - elastic - force * x.g_y + x.jac_m.T @ lam))
             return np.concatenate([-0.5 * h * resid, -x.phi]), x, damping
 
@@ -536,10 +535,12 @@ class ElasticMidpointDAE(MidpointDAE):
         # balance (net of the damping): energy is balanced to round-off, as in MidpointDAE
         t_target = (0.5 * (v0 @ p0) + self.strain_energy(q0, cs) - self.strain_energy(q, cs)
                     + force * (y0 - m.sleeve_height(q)) - dissipated)
-        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
+        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target,
+                                   None if pc is None else pc.momentum)
         if v is None:
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
-        return DampedState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v,
+        p1 = mass1 @ v if pc is None else mass1 @ v + pc.momentum(v)
+        return DampedState(s.t + h, q, v, (v - v0) / h, lam, p1,
                            getattr(s, "dissipation", 0.0) + dissipated)
 
 

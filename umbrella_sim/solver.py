@@ -125,11 +125,11 @@ class Engine(abc.ABC):
         """y_H (m)."""
 
     @abc.abstractmethod
-    def kinetic_energy(self, s: DynamicState) -> float:
+    def kinetic_energy(self, s: DynamicState, stage: Stage) -> float:
         """T (J)."""
 
     def strain_energy(self, s: DynamicState, stage: Stage) -> float:
-        """V (J), the potential of the engine's energy balance."""
+        """V (J), the potential of the engine's energy balance (with its corrections)."""
         return float(self.model.strain_energy(self.fe_state(s)[0]))
 
     @abc.abstractmethod
@@ -266,14 +266,20 @@ class FiniteElementEngine(Engine):
     def fe_state(self, s: DynamicState):
         return s.q, s.qd, s.qdd
 
-    def kinetic_energy(self, s: DynamicState) -> float:
-        # the step leaves M(q) qd in the state: T = 1/2 qd . p without re-assembling M
+    def kinetic_energy(self, s: DynamicState, stage: Stage) -> float:
+        # the step leaves its momentum in the state: T = 1/2 qd . p without re-assembling M
+        # (p = (M + D) qd with the stage-2 phase correction, whose 1/2 qd . D qd goes to V)
         if s.momentum is not None:
-            return float(0.5 * s.qd @ s.momentum)
+            pc = self.integrator.stage2_correction(self._cs[stage])
+            t = float(0.5 * s.qd @ s.momentum)
+            return t if pc is None else t - pc.energy(s.qd)
         return float(self.model.kinetic_energy(s.q, s.qd))
 
     def strain_energy(self, s: DynamicState, stage: Stage) -> float:
-        return self.integrator.strain_energy(s.q, self._cs[stage])
+        cs = self._cs[stage]
+        v = self.integrator.strain_energy(s.q, cs)
+        pc = self.integrator.stage2_correction(cs)
+        return v if pc is None else v + pc.energy(s.qd) - pc.lock_energy
 
     def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
         lam = s.multipliers
@@ -299,7 +305,7 @@ class FiniteElementEngine(Engine):
             qd = self.integrator.project_velocity(s.q, s.qd, cs)
         s = self.integrator.with_constraints(replace(s, qd=qd), force, cs)
         after = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
-        self.integrator.lock_at(s.q)
+        self.integrator.lock_at(s.qd)
         return s, LockEvent(s.t, self.lock_kind, float(before), float(after), free)
 
     def _energy_redistribution(self, q, qd, cs):
@@ -380,7 +386,7 @@ class RigidEngine(Engine):
         qdd[m.i_alpha2] = s.qdd[1]
         return q, qd, qdd
 
-    def kinetic_energy(self, s: DynamicState) -> float:
+    def kinetic_energy(self, s: DynamicState, stage: Stage) -> float:
         return float(self.mech.kinetic_energy(*s.q, *s.qd))
 
     def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
@@ -681,7 +687,7 @@ class UmbrellaSimulator:
                       "peak_stress_leaf_x": float(m.leaf.stress_x[il]),
                       "peak_stress_link": float(link_abs[ik]),
                       "peak_stress_link_x": float(m.link.stress_x[ik]),
-                      "kinetic_energy": eng.kinetic_energy(s),
+                      "kinetic_energy": eng.kinetic_energy(s, stage),
                       "strain_energy": eng.strain_energy(s, stage)}
             residual = eng.residual(s, stage)
             leaf_stress, link_stress = np.array((lt, lb)), np.array((kt, kb))
