@@ -388,8 +388,9 @@ class MidpointDAE:
         half_h2 = 0.5 * h * h
         pc = self.stage2_correction(cs)
         p0 = s.momentum if s.momentum is not None else self.momentum(q0, v0, cs)
-        # p0 = M(q0) v0 (+ D v0) also gives f(q0) = 1/2 p0 . v1 (D is constant: its share of
-        # f(q1) - f(q0), 1/2 v0 . D v1 - 1/2 D v0 . v1, is zero)
+        # M(q0) v0 gives f(q0) = 1/2 (M(q0) v0) . v1 of the Gonzalez gradient (the momentum
+        # less the phase correction's constant D v0)
+        mass_p0 = p0 if pc is None else p0 - pc.momentum(v0)
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
         # predictor: the previous step's velocity held
@@ -401,7 +402,7 @@ class MidpointDAE:
         rhs = np.empty(n + nc)
         last_norm = np.inf
         for it in range(1, self.max_iterations + 1):
-            x = midpoint_iterate(m, cs, q0, v0, p0, phi0, y0, q, h)
+            x = midpoint_iterate(m, cs, q0, v0, mass_p0, phi0, y0, q, h)
             momentum1 = x.mass1 @ x.v1 if pc is None else x.mass1 @ x.v1 + pc.momentum(x.v1)
             resid = (momentum1 - p0
                      - h * (x.g_t - stiff @ x.qm - force * x.g_y + x.jac_m.T @ lam))

@@ -465,6 +465,7 @@ class ElasticMidpointDAE(MidpointDAE):
         q0, v0 = s.q, s.qd
         pc = self.stage2_correction(cs)
         p0 = s.momentum if s.momentum is not None else self.momentum(q0, v0, cs)
+        mass_p0 = p0 if pc is None else p0 - pc.momentum(v0)   # M(q0) v0: f(q0) of G_T
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
         nc = len(phi0)
@@ -474,7 +475,7 @@ class ElasticMidpointDAE(MidpointDAE):
 
         def evaluate(q, lam):
             """Newton right-hand side -[h/2 R(q, lam); Phi(q)] and the residual's pieces."""
-            x = midpoint_iterate(m, cs, q0, v0, p0, phi0, y0, q, h)
+            x = midpoint_iterate(m, cs, q0, v0, mass_p0, phi0, y0, q, h)
             damping = m.damping_matrix(x.qm)
             elastic = m.strain.discrete_gradient(q0, q)
             momentum1 = x.mass1 @ x.v1 if pc is None else x.mass1 @ x.v1 + pc.momentum(x.v1)
