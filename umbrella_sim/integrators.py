@@ -94,7 +94,7 @@ class ModalPhaseCorrection:
 
         1/2 v^T D v,   D = U diag(d) U^T,   U = M0 phi,   d_i = (omega_i / omega'_i)^2 - 1,
 
-    d_i in (-1, 0], O(omega_i^2 h^2 / 12): the momentum is (M(q) + D) v, and the scheme keeps
+    d_i in (-1, 0], ~ -(omega_i h)^2 / 6: the momentum is (M(q) + D) v, and the scheme keeps
     its exact balance of T + 1/2 v^T D v + V (the correction vanishes as h -> 0: consistent,
     still second order).  Reported: the kinetic energy T, and the correction's 1/2 v^T D v
     less its value just after the lock in the strain energy, so that the energy figures are

@@ -210,16 +210,16 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "fixed physics step of the integrator; the default is chosen by accuracy against "
        "fine-step runs (docs/validation.md, step convergence): the largest step meeting "
        "the deploy-time, stage-2 period and stage-1 peak-stress targets in every studied "
-       "case (with `phase_correction` the stage-2 tip series is within 2 mm in 8 of the 12 "
-       "at 0.1 ms and in all at 25 µs; the stage-2 peak stresses within 3 % need 10 µs: "
-       "they are crests narrower than 0.1 ms)",
+       "case, the stage-2 tip series within 2 mm too (with `phase_correction`); the stage-2 "
+       "peak stresses within 3 % need 25 µs: they are crests narrower than 0.1 ms",
        low=0.0, low_open=True, high=0.01),
     _P("phase_correction", bool, True, "-",
        "stage 2 of flexible (also damped; not flexible-nonlinear, whose axial coordinates "
        "follow the bending's foreshortening): the locked frame's modes with "
-       "ω·time_step ≤ 0.75 turn at their exact period (frequency pre-warping of the "
-       "midpoint rule, whose period error (ωh)²/12 otherwise puts the 1–5·10³ rad/s modes "
-       "out of phase within 0.5 s: tip series off by 3–13 mm at 0.1 ms, 0.2–2.3 mm with it); "
+       "ω·time_step ≤ 1.5 turn at their exact period (frequency pre-warping of the "
+       "midpoint rule by modal mass, whose period error (ωh)²/12 otherwise puts the "
+       "1–10·10³ rad/s modes out of phase within 0.5 s: tip series off by 3–13 mm at 0.1 ms, "
+       "0.04–1.2 mm with it; stage-2 steps cost ~40 % more); "
        "energy still balanced exactly; false = the plain energy-consistent midpoint rule "
        "(docs/validation.md)"),
     _P("damping_ratio", float, 0.0, "-",
