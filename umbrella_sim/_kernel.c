@@ -120,7 +120,12 @@ typedef struct {
     int pc_r;
     const double *pc_u, *pc_phi, *pc_w2, *pc_d;   /* pc_phi: phi_i^T rows, w2: omega^2 */
     double pc_e_lock;
-    double *pc_f, *pc_s;   /* n: D v of the last Newton iterate; the modal sums (r <= n) */
+    double *pc_s;          /* the modal sums (r <= n) */
+    /* its share of the Newton matrix, put back into each update by Woodbury on the factored
+     * matrix K of a recent step: W = K^-1 [U; 0] (r rows of n + nc), C = (diag(1/d) +
+     * U^T W_q)^-1 (r x r), refreshed every PC_REFRESH_STEPS steps (pc_w_age) */
+    double *pc_w, *pc_cap, *pc_work;
+    int *pc_piv, pc_w_nc, pc_w_age;
     /* cos and sin of the last few angles (cos_sin): a Newton iteration needs alpha1 and
      * alpha2 of q1 and of the midpoint in several functions */
     double trig_a[TRIG_CACHE], trig_c[TRIG_CACHE], trig_s[TRIG_CACHE];
@@ -622,6 +627,7 @@ static void gonzalez(int n, double *grad, double delta_f, const double *dq, doub
 void umbrella_free(Ctx *x) {
     if (!x) return;
     free(x->hq); free(x->piv); free(x->jrow_idx); free(x->E); free(x->solved_buf);
+    free(x->pc_w); free(x->pc_piv);
     free(x);
 }
 
@@ -636,7 +642,7 @@ Ctx *umbrella_new(const Model *m) {
     x->ne = ne;
     x->nbmax = nbmax;
     x->width = w;
-    size_t nvec = 32;
+    size_t nvec = 31;
     size_t doubles = (size_t)n * nvec + 2 * (size_t)m->n_link + 2 * (size_t)(n + ncmax)
                      + 6 * (size_t)ncmax * JW + 3 * (size_t)ncmax;
     x->hq = calloc(doubles, sizeof(double));
@@ -648,7 +654,7 @@ Ctx *umbrella_new(const Model *m) {
     double **vecs[] = {&x->hq, &x->maf, &x->q1, &x->v1, &x->dq, &x->qm, &x->hm, &x->gt, &x->gy,
                        &x->res, &x->kq, &x->mv, &x->wa, &x->wb, &x->vt, &x->q_s, &x->v_s, &x->p_s,
                        &x->mffv, &x->wv0, &x->mq0, &x->wq0, &x->kq0, &x->mv0, &x->mdq, &x->wdq,
-                       &x->kdq, &x->mq1, &x->wq1, &x->kq1, &x->pc_f, &x->pc_s};
+                       &x->kdq, &x->mq1, &x->wq1, &x->kq1, &x->pc_s};
     for (size_t k = 0; k < sizeof(vecs) / sizeof(vecs[0]); k++) { *vecs[k] = d; d += n; }
     x->mrf = d; d += 2 * m->n_link;
     x->rhs = d; d += n + ncmax;
@@ -1061,28 +1067,79 @@ static double phase_correction(const Ctx *x, const double *v, double *y) {
     return e;
 }
 
-/* Stage 2's phase correction from now on (r = 0: none); the arrays stay the caller's. */
-void umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *phi,
-                                   const double *w2, const double *d, double e_lock) {
+/* Stage 2's phase correction from now on (r = 0: none); the arrays stay the caller's.
+ * Returns 0, or SINGULAR if its Newton buffers cannot be allocated. */
+int umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *phi,
+                                  const double *w2, const double *d, double e_lock) {
+    int len = x->m->n + x->nbmax - 4;     /* n + nc at most */
+    free(x->pc_w);
+    free(x->pc_piv);
+    x->pc_w = NULL;
+    x->pc_piv = NULL;
+    x->pc_r = 0;
+    if (r > 0) {
+        x->pc_w = malloc(sizeof(double) * ((size_t)r * len + 2 * (size_t)r * r + len));
+        x->pc_piv = malloc(sizeof(int) * (size_t)r);
+        if (!x->pc_w || !x->pc_piv) return SINGULAR;
+        x->pc_cap = x->pc_w + (size_t)r * len;      /* LU of C^-1, then C */
+        x->pc_work = x->pc_cap + 2 * (size_t)r * r;
+    }
     x->pc_r = r;
     x->pc_u = u;
     x->pc_phi = phi;
     x->pc_w2 = w2;
     x->pc_d = d;
     x->pc_e_lock = e_lock;
+    x->pc_w_nc = -1;        /* W and C are made at the next factored Newton matrix */
+    return OK;
 }
 
-/* The Newton update dq (n) with the correction's share of the tangent put back, mode by mode
- * (integrators.ModalPhaseCorrection.newton_update); the modal components first, in pc_s. */
-static void phase_correction_update(Ctx *x, double h, double *dq) {
-    int n = x->m->n, r = x->pc_r;
-    double quarter = 0.25 * h * h, *s = x->pc_s;
-    modal_dots(r, n, x->pc_u, dq, s);
+/* The Newton matrix K leaves D out; Woodbury puts it back: (K + [U; 0] diag(d) [U; 0]^T)^-1
+ * b = x - W C U^T x_q with x = K^-1 b.  W and C come from the factored K of the step that
+ * made them and serve the next PC_REFRESH_STEPS steps (K moves slowly in stage 2: with a
+ * K a few steps old Newton converges as with the exact one; the modes of the linearised
+ * frame alone, K taken as M0 + h^2/4 K0, cost 0.6 iterations a step more at omega h ~ 1.5). */
+#define PC_REFRESH_STEPS 25
+
+static int phase_correction_prepare(Ctx *x, int nc) {
+    const Model *m = x->m;
+    int n = m->n, r = x->pc_r, len = n + nc;
+    if (x->pc_w_nc == nc && x->pc_w_age < PC_REFRESH_STEPS) return OK;
     for (int j = 0; j < r; j++) {
-        double d = x->pc_d[j];
-        s[j] = d / (1.0 + quarter * x->pc_w2[j] + d) * s[j];
+        double *w = x->pc_w + (size_t)j * len;
+        memcpy(w, x->pc_u + (size_t)j * n, sizeof(double) * n);
+        memset(w + n, 0, sizeof(double) * nc);
+        arrow_solve_q(x, x->e_iter, nc, w, 0);
     }
-    modal_combine(r, n, x->pc_phi, s, -1.0, dq);
+    double *cap = x->pc_cap, *inv = x->pc_work;
+    for (int j = 0; j < r; j++)             /* C^-1 = diag(1/d) + U^T W_q */
+        for (int k = 0; k < r; k++)
+            cap[j * r + k] = dot(n, x->pc_u + (size_t)j * n, x->pc_w + (size_t)k * len)
+                             + (j == k ? 1.0 / x->pc_d[j] : 0.0);
+    if (lu_factor(r, cap, x->pc_piv) != OK) return SINGULAR;
+    double *c = cap + (size_t)r * r;          /* C, column by column, after the LU */
+    for (int k = 0; k < r; k++) {
+        for (int j = 0; j < r; j++) inv[j] = j == k ? 1.0 : 0.0;
+        lu_solve(r, cap, x->pc_piv, inv);
+        for (int j = 0; j < r; j++) c[j * r + k] = inv[j];
+    }
+    x->pc_w_nc = nc;
+    x->pc_w_age = 0;
+    return OK;
+}
+
+/* The Newton update x (n + nc, q-ordered then multipliers) with D put back (above) */
+static void phase_correction_update(Ctx *x, int nc, double *upd) {
+    int n = x->m->n, r = x->pc_r, len = n + nc;
+    double *s = x->pc_s, *t = x->pc_work;
+    const double *c = x->pc_cap + (size_t)r * r;
+    modal_dots(r, n, x->pc_u, upd, s);
+    for (int j = 0; j < r; j++) {
+        double a = 0.0;
+        for (int k = 0; k < r; k++) a += c[j * r + k] * s[k];
+        t[j] = a;
+    }
+    modal_combine(r, len, x->pc_w, t, -1.0, upd);
 }
 
 /* One step from (q0, v0, lam0, p0) of length h; results in x->q_s, v_s, lam_s, p_s. */
@@ -1099,6 +1156,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     ElasticLaw *law = x->law;
     int nonlinear_law = law && law->d.nonlinear, have_base = 0, refresh = 0;
     int pc = locked && !rigid && x->pc_r > 0;    /* stage 2's phase correction */
+    if (pc) x->pc_w_age++;
     double alpha = 1.0, f_base = INFINITY;
     double half_h2 = 0.5 * h * h, two_h = 2.0 / h;   /* v1 = 2 dq / h - v0 */
     constraints(x, q0, locked, rigid, phi0);
@@ -1178,11 +1236,12 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             if (law) elastic_iteration_band(law, q0, q, h);
             if (factor_iteration_matrix(x, h, nc) != OK) { status = SINGULAR; goto done; }
             factored = 1;
+            if (pc && phase_correction_prepare(x, nc) != OK) { status = SINGULAR; goto done; }
         }
         for (int i = 0; i < n; i++) rhs[i] = -0.5 * h * res[i];
         for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
         arrow_solve_q(x, x->e_iter, nc, rhs, 0);
-        if (pc) phase_correction_update(x, h, rhs);
+        if (pc) phase_correction_update(x, nc, rhs);
         if (nonlinear_law) {
             memcpy(law->q_base, q, sizeof(double) * n);
             memcpy(law->lam_base, lam, sizeof(double) * nc);
