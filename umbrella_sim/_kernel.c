@@ -126,6 +126,11 @@ typedef struct {
      * U^T W_q)^-1 (r x r), refreshed every PC_REFRESH_STEPS steps (pc_w_age) */
     double *pc_w, *pc_cap, *pc_work;
     int *pc_piv, pc_w_nc, pc_w_age;
+    /* the modal velocities u_i . v of the last projected v (pc_v), and its 1/2 v.D v: the next
+     * step starts from them and the output row reports them; pc_eta_v0, pc_eta_dq: u_i . v0
+     * and u_i . (q - q0) within a step, kept up to date through the Newton updates */
+    double *pc_eta_v, *pc_v, pc_e_v, *pc_eta_v0, *pc_eta_dq;
+    int pc_v_valid;
     /* cos and sin of the last few angles (cos_sin): a Newton iteration needs alpha1 and
      * alpha2 of q1 and of the midpoint in several functions */
     double trig_a[TRIG_CACHE], trig_c[TRIG_CACHE], trig_s[TRIG_CACHE];
@@ -987,14 +992,24 @@ static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_t
     for (int i = 0; i < n; i++) v[i] += r[i];
     mass_matvec(x, v, p_out);
 scale:;
-    if (pc) phase_correction(x, v, p_out);   /* the momentum (M + D) v, in T of the balance */
+    double f = 1.0, pc_e = 0.0;
+    if (pc) {                          /* the momentum (M + D) v, in T of the balance */
+        pc_e = phase_correction(x, v, p_out);
+        for (int j = 0; j < x->pc_r; j++) x->pc_eta_v[j] = x->pc_s[j] / x->pc_d[j];
+    }
     double t_after = 0.0;
     for (int i = 0; i < n; i++) t_after += v[i] * p_out[i];
     t_after *= 0.5;
     if (t_after > 0.0 && t_target >= t_after / ENERGY_RESTORE_LIMIT
         && t_target <= ENERGY_RESTORE_LIMIT * t_after) {
-        double f = sqrt(t_target / t_after);
+        f = sqrt(t_target / t_after);
         for (int i = 0; i < n; i++) { v[i] *= f; p_out[i] *= f; }
+    }
+    if (pc) {
+        for (int j = 0; j < x->pc_r; j++) x->pc_eta_v[j] *= f;
+        x->pc_e_v = pc_e * f * f;
+        memcpy(x->pc_v, v, sizeof(double) * n);
+        x->pc_v_valid = 1;
     }
     return OK;
 }
@@ -1078,12 +1093,18 @@ int umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *
     x->pc_piv = NULL;
     x->pc_r = 0;
     if (r > 0) {
-        x->pc_w = malloc(sizeof(double) * ((size_t)r * len + 2 * (size_t)r * r + len));
+        x->pc_w = malloc(sizeof(double) * ((size_t)r * len + 2 * (size_t)r * r + len
+                                           + 3 * (size_t)r + x->m->n));
         x->pc_piv = malloc(sizeof(int) * (size_t)r);
         if (!x->pc_w || !x->pc_piv) return SINGULAR;
         x->pc_cap = x->pc_w + (size_t)r * len;      /* LU of C^-1, then C */
         x->pc_work = x->pc_cap + 2 * (size_t)r * r;
+        x->pc_eta_v = x->pc_work + len;
+        x->pc_eta_v0 = x->pc_eta_v + r;
+        x->pc_eta_dq = x->pc_eta_v0 + r;
+        x->pc_v = x->pc_eta_dq + r;
     }
+    x->pc_v_valid = 0;
     x->pc_r = r;
     x->pc_u = u;
     x->pc_phi = phi;
@@ -1138,8 +1159,30 @@ static void phase_correction_update(Ctx *x, int nc, double *upd) {
         double a = 0.0;
         for (int k = 0; k < r; k++) a += c[j * r + k] * s[k];
         t[j] = a;
+        /* U^T of the corrected update: s - U^T W_q C s = diag(1/d) C s (C^-1 = diag(1/d) +
+         * U^T W_q), what q gains along the modes */
+        x->pc_eta_dq[j] += a / x->pc_d[j];
     }
     modal_combine(r, len, x->pc_w, t, -1.0, upd);
+}
+
+/* u_i . v0 at the start of a step: from the projection that made v0, else computed */
+static void phase_correction_start(Ctx *x, const double *v0, double h) {
+    int n = x->m->n, r = x->pc_r;
+    if (x->pc_v_valid && memcmp(v0, x->pc_v, sizeof(double) * n) == 0)
+        memcpy(x->pc_eta_v0, x->pc_eta_v, sizeof(double) * r);
+    else
+        modal_dots(r, n, x->pc_u, v0, x->pc_eta_v0);
+    for (int j = 0; j < r; j++) x->pc_eta_dq[j] = h * x->pc_eta_v0[j];   /* dq = h v0 */
+}
+
+/* D v1 into y (the momentum of the Newton iterate), v1 = 2 dq / h - v0, from the tracked
+ * modal components */
+static void phase_correction_iterate(Ctx *x, double two_h, double *y) {
+    int n = x->m->n, r = x->pc_r;
+    double *s = x->pc_s;
+    for (int j = 0; j < r; j++) s[j] = x->pc_d[j] * (two_h * x->pc_eta_dq[j] - x->pc_eta_v0[j]);
+    modal_combine(r, n, x->pc_u, s, 1.0, y);
 }
 
 /* One step from (q0, v0, lam0, p0) of length h; results in x->q_s, v_s, lam_s, p_s. */
@@ -1155,8 +1198,12 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
      * iteration (ElasticMidpointDAE._step_numpy) */
     ElasticLaw *law = x->law;
     int nonlinear_law = law && law->d.nonlinear, have_base = 0, refresh = 0;
-    int pc = locked && !rigid && x->pc_r > 0;    /* stage 2's phase correction */
-    if (pc) x->pc_w_age++;
+    /* stage 2's phase correction (never with the nonlinear strain: phase_correctable) */
+    int pc = locked && !rigid && x->pc_r > 0 && !nonlinear_law;
+    if (pc) {
+        x->pc_w_age++;
+        phase_correction_start(x, v0, h);
+    }
     double alpha = 1.0, f_base = INFINITY;
     double half_h2 = 0.5 * h * h, two_h = 2.0 / h;   /* v1 = 2 dq / h - v0 */
     constraints(x, q0, locked, rigid, phi0);
@@ -1198,7 +1245,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         if (law) elastic_force(law, q0, q, h, x->kdq, x->kq);   /* + the rest of G_U, C dq / h */
         bilinear_gradient(x, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
         mass_matvec_pre(x, v1, x->mffv, x->mv);
-        if (pc) phase_correction(x, v1, x->mv);   /* the momentum (M(q1) + D) v1 */
+        if (pc) phase_correction_iterate(x, two_h, x->mv);   /* the momentum (M(q1) + D) v1 */
         /* f = 1/2 v0^T M(q) v1: f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1), M symmetric (with
          * the phase correction p0 and mv both hold D: its share, 1/2 (v0.D v1 - D v0.v1), is 0) */
         double df = 0.5 * (dot(n, v0, x->mv) - dot(n, p0, v1));
@@ -1398,7 +1445,9 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
     ke *= 0.5;
     /* stage 2's phase correction: p = (M + D) v; T reported without 1/2 v.D v, which goes to
      * the strain energy less its value just after the lock (continuous there) */
-    if (stage == 1 && x->pc_r > 0) pc_e = phase_correction(x, v, NULL);
+    if (stage == 1 && x->pc_r > 0)
+        pc_e = x->pc_v_valid && memcmp(v, x->pc_v, sizeof(double) * n) == 0
+               ? x->pc_e_v : phase_correction(x, v, NULL);
     SET(F_KINETIC, ke - pc_e);
     double se = 0.0;
     if (x->law) se = elastic_energy(x->law, q, kq_known);
