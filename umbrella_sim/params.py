@@ -219,7 +219,7 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "ω·time_step ≤ 1.5 turn at their exact period (frequency pre-warping of the "
        "midpoint rule by modal mass, whose period error (ωh)²/12 otherwise puts the "
        "1–10·10³ rad/s modes out of phase within 0.5 s: tip series off by 3–13 mm at 0.1 ms, "
-       "0.04–1.2 mm with it; stage-2 steps cost ~35 % more); "
+       "0.04–1.2 mm with it; stage-2 steps cost ~30 % more); "
        "energy still balanced exactly; false = the plain energy-consistent midpoint rule "
        "(docs/validation.md)"),
     _P("damping_ratio", float, 0.0, "-",
