@@ -1,6 +1,7 @@
 """Session-wide checks shared by every test module."""
 import os
 import re
+import signal
 
 import pytest
 
@@ -9,6 +10,13 @@ import pytest
 import umbrella_sim  # noqa: F401, I100
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+# The tests that stop a tool with SIGINT model Ctrl-C in a terminal.  A runner started with
+# SIGINT ignored (a background job of a non-interactive shell) passes that on to every child,
+# and Python keeps an inherited SIG_IGN, so the tool would never see the signal: give the
+# children the terminal's default disposition.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 # a bag the node names itself: umbrella[_ns]_YYYY_MM_DD-HH_MM_SS[_k]
 _BAG = re.compile(r"^umbrella_(\w+_)?\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?$")
 
