@@ -559,9 +559,11 @@ class ElasticEngine(FiniteElementEngine):
         Not with the nonlinear strain.
 
         Its axial coordinates follow the bending's foreshortening (u' = -v'^2/2), far from the
-        lock's configuration and from the linearised modes: a correction measured from
-        there acts as extra axial stiffness (it moved the stage-2 period at V0 = -0.2 by 1 %
-        where its own size is 1e-5).  The linear strain (damped flexible) takes it.
+        lock's configuration and from the linearised modes the correction is built on (in
+        its earlier, stiffness form, measured from the lock, it moved the stage-2 period at
+        V0 = -0.2 by 1 % where its own size is 1e-5; the modal-mass form is not tried with
+        this strain, and the kernel leaves it out).  The linear strain (damped flexible)
+        takes it.
         """
         return not self.rigid and not self.model.strain.nonlinear
 
