@@ -116,9 +116,9 @@ typedef struct {
     /* stage 2's modal phase correction (integrators.ModalPhaseCorrection): the momentum
      * gains D v = sum_i d_i u_i (u_i . v), pc_r modes, rows u_i of pc_u (pc_r x n), modal
      * mass changes d_i in pc_d (the caller's arrays); pc_e_lock: 1/2 v.D v just after the
-     * lock; pc_r = 0: none.  With an elastic law too. */
+     * lock; pc_r = 0: none.  With the linear elastic law too (pc_acts). */
     int pc_r;
-    const double *pc_u, *pc_phi, *pc_w2, *pc_d;   /* pc_phi: phi_i^T rows, w2: omega^2 */
+    const double *pc_u, *pc_d;
     double pc_e_lock;
     double *pc_s;          /* the modal sums (r <= n) */
     /* its share of the Newton matrix, put back into each update by Woodbury on the factored
@@ -138,6 +138,12 @@ typedef struct {
 } Ctx;
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
+
+/* Whether stage 2's phase correction acts on a step or state: it is set at the lock, and
+ * never with the rigid-FE constraints or the nonlinear strain (engines' phase_correctable) */
+static int pc_acts(const Ctx *x, int locked, int rigid) {
+    return locked && !rigid && x->pc_r > 0 && !(x->law && x->law->d.nonlinear);
+}
 
 /* cos(a) and sin(a), bitwise, from the context's cache of the last TRIG_CACHE angles */
 static inline void cos_sin(Ctx *x, double a, double *c, double *s) {
@@ -1084,8 +1090,8 @@ static double phase_correction(const Ctx *x, const double *v, double *y) {
 
 /* Stage 2's phase correction from now on (r = 0: none); the arrays stay the caller's.
  * Returns 0, or SINGULAR if its Newton buffers cannot be allocated. */
-int umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *phi,
-                                  const double *w2, const double *d, double e_lock) {
+int umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *d,
+                                  double e_lock) {
     int len = x->m->n + x->nbmax - 4;     /* n + nc at most */
     free(x->pc_w);
     free(x->pc_piv);
@@ -1107,8 +1113,6 @@ int umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *
     x->pc_v_valid = 0;
     x->pc_r = r;
     x->pc_u = u;
-    x->pc_phi = phi;
-    x->pc_w2 = w2;
     x->pc_d = d;
     x->pc_e_lock = e_lock;
     x->pc_w_nc = -1;        /* W and C are made at the next factored Newton matrix */
@@ -1198,8 +1202,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
      * iteration (ElasticMidpointDAE._step_numpy) */
     ElasticLaw *law = x->law;
     int nonlinear_law = law && law->d.nonlinear, have_base = 0, refresh = 0;
-    /* stage 2's phase correction (never with the nonlinear strain: phase_correctable) */
-    int pc = locked && !rigid && x->pc_r > 0 && !nonlinear_law;
+    int pc = pc_acts(x, locked, rigid);    /* stage 2's phase correction */
     if (pc) {
         x->pc_w_age++;
         phase_correction_start(x, v0, h);
@@ -1351,7 +1354,7 @@ int umbrella_step(Ctx *x, int locked, int rigid,
     else {
         mass_data(x, q0);
         mass_matvec(x, v0, p0);
-        if (locked && !rigid && x->pc_r > 0) phase_correction(x, v0, p0);
+        if (pc_acts(x, locked, rigid)) phase_correction(x, v0, p0);
     }
     int status = step(x, locked, rigid, q0, v0, lam0, p0, h, force, tol, phi_tol,
                       max_iter, iterations);
@@ -1370,13 +1373,12 @@ void umbrella_set_law(Ctx *x, ElasticLaw *law) {
     x->q0_products = 0;   /* kq0: K q0, or Kb q0 with a law */
 }
 
-/* p = M(q) v */
 /* the momentum of a state: M(q) v, plus D v once stage 2's phase correction is on (it is
  * set at the lock) */
 void umbrella_momentum(Ctx *x, const double *q, const double *v, double *p) {
     mass_data(x, q);
     mass_matvec(x, v, p);
-    if (x->pc_r > 0) phase_correction(x, v, p);
+    if (pc_acts(x, 1, 0)) phase_correction(x, v, p);   /* set at the lock: stage 2 */
 }
 
 /* ------------------------------------------------------------------- outputs */
@@ -1445,7 +1447,7 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
     ke *= 0.5;
     /* stage 2's phase correction: p = (M + D) v; T reported without 1/2 v.D v, which goes to
      * the strain energy less its value just after the lock (continuous there) */
-    if (stage == 1 && x->pc_r > 0)
+    if (pc_acts(x, stage == 1, 0))      /* (rigid-FE never has one) */
         pc_e = x->pc_v_valid && memcmp(v, x->pc_v, sizeof(double) * n) == 0
                ? x->pc_e_v : phase_correction(x, v, NULL);
     SET(F_KINETIC, ke - pc_e);
@@ -1463,7 +1465,7 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         }
         se *= 0.5;
     }
-    if (stage == 1 && x->pc_r > 0) se += pc_e - x->pc_e_lock;
+    if (pc_acts(x, stage == 1, 0)) se += pc_e - x->pc_e_lock;
     SET(F_STRAIN, se);
     SET(F_WORK, work);
     SET(F_LOCK_LOSS, lock_loss);

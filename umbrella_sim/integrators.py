@@ -232,8 +232,15 @@ def iteration_blocks(m: UmbrellaModel, cs: ConstraintSet, x: MidpointIterate, h:
 ENERGY_RESTORE_LIMIT = 1.01
 
 
+def corrected_momentum(mass: np.ndarray, v: np.ndarray,
+                       pc: "ModalPhaseCorrection | None") -> np.ndarray:
+    """Return the step's momentum M v, plus the stage-2 phase correction's D v if pc."""
+    p = mass @ v
+    return p if pc is None else p + pc.momentum(v)
+
+
 def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
-                           t_target: float, extra_momentum=None):
+                           t_target: float, pc: "ModalPhaseCorrection | None" = None):
     """
     Project v onto J v = 0 (mass metric) and scale it to the balance's energy.
 
@@ -251,8 +258,8 @@ def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
     balance exact to round-off; the change of v is of the order of the projection and the
     Newton error.  Scaling is skipped when it would change T by more than 1 % (never after a
     converged step; such a state is left to the divergence checks) or T is zero.
-    extra_momentum(v): a constant-mass share of the momentum (the stage-2 phase correction's
-    D v) that the kinetic energy of the balance includes; the projection's metric stays M.
+    pc: the stage-2 phase correction acting, whose constant D the kinetic energy of the
+    balance includes (corrected_momentum); the projection's metric stays M.
     None if M is not positive definite.
     """
     jv = jac @ v
@@ -263,8 +270,7 @@ def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
             return None
         x = dpotrs(chol, jac.T)[0]
         vp = v - x @ np.linalg.solve(jac @ x, jv)
-    p = mass @ vp if extra_momentum is None else mass @ vp + extra_momentum(vp)
-    t_after = 0.5 * (vp @ p)
+    t_after = 0.5 * (vp @ corrected_momentum(mass, vp, pc))
     limit = ENERGY_RESTORE_LIMIT
     if t_after > 0.0 and t_after / limit <= t_target <= limit * t_after:
         vp = vp * math.sqrt(t_target / t_after)
@@ -318,9 +324,19 @@ class MidpointDAE:
 
     def momentum(self, q: np.ndarray, qd: np.ndarray, cs: ConstraintSet) -> np.ndarray:
         """Return the step's momentum: M(q) qd, plus D qd of the stage-2 phase correction."""
-        p = self.model.mass_matrix(q) @ qd
+        return corrected_momentum(self.model.mass_matrix(q), qd, self.stage2_correction(cs))
+
+    def _start_momenta(self, s: DynamicState, cs: ConstraintSet):
+        """
+        Return (pc, p0, M(q0) v0) at the start of a step from s.
+
+        The phase correction acting, the step's momentum p0 (the state's, or computed), and
+        p0 less the correction's constant D v0: M(q0) v0 gives f(q0) = 1/2 (M(q0) v0) . v1 of
+        the Gonzalez gradient G_T.
+        """
         pc = self.stage2_correction(cs)
-        return p if pc is None else p + pc.momentum(qd)
+        p0 = s.momentum if s.momentum is not None else self.momentum(s.q, s.qd, cs)
+        return pc, p0, p0 if pc is None else p0 - pc.momentum(s.qd)
 
     def strain_energy(self, q: np.ndarray, cs: ConstraintSet) -> float:
         """1/2 q.K q (the balance's V)."""
@@ -389,11 +405,7 @@ class MidpointDAE:
         n = m.n
         q0, v0 = s.q, s.qd
         half_h2 = 0.5 * h * h
-        pc = self.stage2_correction(cs)
-        p0 = s.momentum if s.momentum is not None else self.momentum(q0, v0, cs)
-        # M(q0) v0 gives f(q0) = 1/2 (M(q0) v0) . v1 of the Gonzalez gradient (the momentum
-        # less the phase correction's constant D v0)
-        mass_p0 = p0 if pc is None else p0 - pc.momentum(v0)
+        pc, p0, mass_p0 = self._start_momenta(s, cs)
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
         # predictor: the previous step's velocity held
@@ -406,8 +418,7 @@ class MidpointDAE:
         last_norm = np.inf
         for it in range(1, self.max_iterations + 1):
             x = midpoint_iterate(m, cs, q0, v0, mass_p0, phi0, y0, q, h)
-            momentum1 = x.mass1 @ x.v1 if pc is None else x.mass1 @ x.v1 + pc.momentum(x.v1)
-            resid = (momentum1 - p0
+            resid = (corrected_momentum(x.mass1, x.v1, pc) - p0
                      - h * (x.g_t - stiff @ x.qm - force * x.g_y + x.jac_m.T @ lam))
             phi = x.phi
             if lu is None:
@@ -445,12 +456,10 @@ class MidpointDAE:
         mass1 = m.mass_matrix(q)
         t_target = (0.5 * (v0 @ p0) + self.strain_energy(q0, cs) - self.strain_energy(q, cs)
                     + force * (y0 - m.sleeve_height(q)))
-        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target,
-                                   None if pc is None else pc.momentum)
+        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target, pc)
         if v is None:
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
-        p1 = mass1 @ v if pc is None else mass1 @ v + pc.momentum(v)
-        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, p1)
+        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, corrected_momentum(mass1, v, pc))
 
     def with_constraints(self, s: DynamicState, force: float, cs: ConstraintSet) -> DynamicState:
         """Keep q, qd; return consistent q'' and lambda for another constraint set."""
@@ -527,7 +536,7 @@ def load_kernel():
             lib.umbrella_momentum.restype = None
             lib.umbrella_momentum.argtypes = [vp, _dp, _dp, _dp]
             lib.umbrella_set_phase_correction.restype = i
-            lib.umbrella_set_phase_correction.argtypes = [vp, i, _dp, _dp, _dp, _dp, d]
+            lib.umbrella_set_phase_correction.argtypes = [vp, i, _dp, _dp, d]
             lib.umbrella_set_law.restype = None
             lib.umbrella_set_law.argtypes = [vp, vp]
             lib.umbrella_advance_call.restype = i
@@ -623,7 +632,7 @@ class CompiledKernel:
         """Hand stage 2's phase correction to the kernel (it keeps pointers to these arrays)."""
         self._phase_correction = arrays = tuple(
             np.ascontiguousarray(a, dtype=float)
-            for a in (pc.modes, pc.shapes, pc.omega ** 2, pc.mass_change))
+            for a in (pc.modes, pc.mass_change))
         if self.lib.umbrella_set_phase_correction(self._ctx, len(pc.mass_change),
                                                   *(_dptr(a) for a in arrays), pc.lock_energy):
             raise MemoryError("the compiled kernel could not allocate the phase correction's "

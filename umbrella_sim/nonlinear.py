@@ -81,8 +81,9 @@ import math
 import numpy as np
 from scipy.linalg.lapack import dgetrf, dgetrs
 
-from .integrators import (ConvergenceError, DynamicState, iteration_blocks, midpoint_iterate,
-                          MidpointDAE, NEWTON_TOLERANCE, PHI_TOLERANCE, project_keeping_energy)
+from .integrators import (ConvergenceError, corrected_momentum, DynamicState, iteration_blocks,
+                          midpoint_iterate, MidpointDAE, NEWTON_TOLERANCE, PHI_TOLERANCE,
+                          project_keeping_energy)
 from .model import (band_form, BeamBody, ConstraintSet, GAUSS_POINTS, GAUSS_WEIGHTS,
                     shape_functions, UmbrellaModel)
 from .outputs import oscillation_period
@@ -463,9 +464,7 @@ class ElasticMidpointDAE(MidpointDAE):
         m = self.model
         n = m.n
         q0, v0 = s.q, s.qd
-        pc = self.stage2_correction(cs)
-        p0 = s.momentum if s.momentum is not None else self.momentum(q0, v0, cs)
-        mass_p0 = p0 if pc is None else p0 - pc.momentum(v0)   # M(q0) v0: f(q0) of G_T
+        pc, p0, mass_p0 = self._start_momenta(s, cs)
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
         nc = len(phi0)
@@ -478,8 +477,7 @@ class ElasticMidpointDAE(MidpointDAE):
             x = midpoint_iterate(m, cs, q0, v0, mass_p0, phi0, y0, q, h)
             damping = m.damping_matrix(x.qm)
             elastic = m.strain.discrete_gradient(q0, q)
-            momentum1 = x.mass1 @ x.v1 if pc is None else x.mass1 @ x.v1 + pc.momentum(x.v1)
-            resid = (momentum1 - p0 + damping @ x.dq
+            resid = (corrected_momentum(x.mass1, x.v1, pc) - p0 + damping @ x.dq
                      - h * (x.g_t - elastic - force * x.g_y + x.jac_m.T @ lam))
             return np.concatenate([-0.5 * h * resid, -x.phi]), x, damping
 
@@ -536,12 +534,10 @@ class ElasticMidpointDAE(MidpointDAE):
         # balance (net of the damping): energy is balanced to round-off, as in MidpointDAE
         t_target = (0.5 * (v0 @ p0) + self.strain_energy(q0, cs) - self.strain_energy(q, cs)
                     + force * (y0 - m.sleeve_height(q)) - dissipated)
-        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target,
-                                   None if pc is None else pc.momentum)
+        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target, pc)
         if v is None:
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
-        p1 = mass1 @ v if pc is None else mass1 @ v + pc.momentum(v)
-        return DampedState(s.t + h, q, v, (v - v0) / h, lam, p1,
+        return DampedState(s.t + h, q, v, (v - v0) / h, lam, corrected_momentum(mass1, v, pc),
                            getattr(s, "dissipation", 0.0) + dissipated)
 
 
