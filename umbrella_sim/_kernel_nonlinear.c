@@ -145,19 +145,6 @@ static void element_strain_gradient(const ElasticLaw *law, int e, const double *
     for (int k = 0; k < EDOF; k++) g[k] = dm[k] + gx[k];
 }
 
-/* y[eidx[p]] (+)= scale * (Kb x)[p] */
-static void bending_matvec(const ElasticData *d, const double *x, double scale, double *y, int acc) {
-    int ne = d->ne, bw = d->bw, w = 2 * bw + 1;
-    for (int p = 0; p < ne; p++) {
-        int lo = p - bw < 0 ? 0 : p - bw, hi = p + bw >= ne ? ne - 1 : p + bw;
-        const double *r = d->kb_band + (size_t)p * w + bw - p;
-        double s = 0.0;
-        for (int j = lo; j <= hi; j++) s += r[j] * x[d->elastic_idx[j]];
-        if (acc) y[d->elastic_idx[p]] += scale * s;
-        else y[d->elastic_idx[p]] = scale * s;
-    }
-}
-
 /* x . Kb x */
 static double bending_quadratic(const ElasticData *d, const double *x) {
     int ne = d->ne, bw = d->bw, w = 2 * bw + 1;
@@ -209,7 +196,8 @@ static void tangent_band(const ElasticLaw *law, const double *q, double scale, i
 }
 
 /* x . M x with M the material tangent at q (Kb + sum EA l_e g g^T); y (+)= scale M x.
- * kbx: Kb x at the elastic q indices if the caller has it, else NULL (computed here). */
+ * kbx: Kb x at the elastic q indices (the step's band products), else NULL: x . Kb x is
+ * computed here, and y must be NULL. */
 static double material_apply(const ElasticLaw *law, const double *q, const double *x,
                              const double *kbx, double scale, double *y) {
     const ElasticData *d = &law->d;
@@ -221,7 +209,6 @@ static double material_apply(const ElasticLaw *law, const double *q, const doubl
             if (y) y[i] += scale * kbx[i];
         }
     } else {
-        if (y) bending_matvec(d, x, scale, y, 1);
         quad += bending_quadratic(d, x);
     }
     for (int e = 0; e < d->n_el; e++) {
