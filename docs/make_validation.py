@@ -165,7 +165,7 @@ def step_convergence_section() -> list[str]:
               f"with ωh ≤ {PHASE_CORRECTION_LIMIT:g} given the modal mass that makes their "
               "discrete period exact, leaving their stiffness, and with it their quasi-static "
               "response, as it is; `integrators.ModalPhaseCorrection`) removes that error, and "
-              f"with it the tip-series error and most of the period error; (2) the modes above "
+              "with it the tip-series error and most of the period error; (2) the modes above "
               f"ωh ≈ {PHASE_CORRECTION_LIMIT:g}, up to the "
               "link's axial modes (~3·10⁵ rad/s, a period of 21 µs), which the midpoint rule "
               "keeps at their energy but at a wrong (aliased) frequency while h is above ~5 µs:"
