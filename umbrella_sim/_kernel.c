@@ -82,6 +82,22 @@ typedef struct {
     int pj, ps;            /* their elastic positions */
 } SolvedBand;
 
+/* A factored arrow system with its own storage: the iteration matrix of the Newton steps
+ * (two slots) and the mass matrix of the velocity projection each keep one, so that neither
+ * the projection nor a step that is not kept overwrites the matrix a step carries over to
+ * the next (Ctx: slot, it, it_kept, it_slot). */
+typedef struct {
+    Arrow a;
+    const double *E;       /* the band LU of its elastic block */
+    double *E_store;       /* storage for it when it is not constant (ne x (2 bw + 1)) */
+    double *B, *C, *S;     /* Y = E^-1 B (ne x nbmax), 4 dense rows C, LU of the Schur complement */
+    double *cval;          /* its constraint rows' values (a copy: jrow_val moves on) */
+    int *piv, *cpos;
+    /* the step that factored it last: its end state (q, v), constraint count and length */
+    double *q_end, *v_end, h;
+    int nc;
+} ArrowLU;
+
 #define TRIG_CACHE 4
 
 typedef struct {
@@ -99,14 +115,17 @@ typedef struct {
     double *mq0, *wq0, *kq0, *mv0, *mdq, *wdq, *kdq, *mq1, *wq1, *kq1;
     int q0_products;       /* mq0, wq0, kq0 hold the products of the q0 of the next step */
     double *phi0, *phi, *corr, *jrow_val, *jm_val;   /* constraint rows */
-    int *jrow_idx, *jm_idx, *cpos;   /* cpos: elastic position of jrow entries, or -1 */
-    /* arrow system: band E, border columns B (col-major, ne per column), rows C, Schur S */
-    double *E, *B, *C, *S;
-    int *piv;
-    Arrow arrow;           /* the arrow system factored last */
+    int *jrow_idx, *jm_idx;
+    double *E;             /* storage of the slots' bands and of Emass */
     double *Emass;         /* LU of the constant elastic mass band (projection) */
+    ArrowLU slot[2], pm;   /* the iteration matrix's slots; the projection's mass matrix */
+    ArrowLU *it;           /* the slot the step solves with */
+    /* slot[it_slot] (if it_kept) as the last step left it, for the first Newton iteration of
+     * a step that starts where that one ended, with the same constraint count and step
+     * length (the nonlinear law, see step()); a step factors into the other slot */
+    int it_kept, it_slot;
+    int *piv;              /* storage of it.piv, pm.piv */
     SolvedBand fmass, fiter;   /* Mff; Mff + h^2/4 K of the last step length (linear law) */
-    const double *e_iter;  /* the band LU the iteration matrix's arrow solves use */
     double *sv, *sdq;      /* work: a body-wise border column, F^-1 dq (ne each) */
     double cos2, sin2;     /* cos, sin of alpha2 of the last mass_data_from_products */
     double *solved_buf;    /* storage of fiter, fmass's solves, sv, sdq */
@@ -657,9 +676,10 @@ Ctx *umbrella_new(const Model *m) {
     size_t doubles = (size_t)n * nvec + 2 * (size_t)m->n_link + 2 * (size_t)(n + ncmax)
                      + 6 * (size_t)ncmax * JW + 3 * (size_t)ncmax;
     x->hq = calloc(doubles, sizeof(double));
-    x->piv = calloc(nbmax, sizeof(int));
-    x->jrow_idx = calloc(3 * (size_t)ncmax * JW, sizeof(int));
-    x->E = calloc((size_t)ne * w * 2 + (size_t)nbmax * ne * 2 + (size_t)nbmax * nbmax, sizeof(double));
+    x->piv = calloc(3 * (size_t)nbmax, sizeof(int));
+    x->jrow_idx = calloc(5 * (size_t)ncmax * JW, sizeof(int));
+    x->E = calloc((size_t)ne * w * 3 + 3 * ((size_t)nbmax * ne * 2 + (size_t)nbmax * nbmax
+                                           + (size_t)ncmax * JW + 2 * (size_t)n), sizeof(double));
     if (!x->hq || !x->piv || !x->jrow_idx || !x->E) { umbrella_free(x); return NULL; }
     double *d = x->hq;
     double **vecs[] = {&x->hq, &x->maf, &x->q1, &x->v1, &x->dq, &x->qm, &x->hm, &x->gt, &x->gy,
@@ -677,11 +697,23 @@ Ctx *umbrella_new(const Model *m) {
     x->corr = d; d += ncmax;
     x->lam_s = d; d += ncmax;
     x->jm_idx = x->jrow_idx + (size_t)ncmax * JW;
-    x->cpos = x->jm_idx + (size_t)ncmax * JW;
     x->Emass = x->E + (size_t)ne * w;
-    x->B = x->Emass + (size_t)ne * w;
-    x->C = x->B + (size_t)nbmax * ne;
-    x->S = x->C + (size_t)nbmax * ne;
+    d = x->Emass + (size_t)ne * w;
+    ArrowLU *fs[3] = {&x->slot[0], &x->slot[1], &x->pm};
+    for (int k = 0; k < 3; k++) {
+        fs[k]->E_store = k == 0 ? x->E : d;
+        if (k == 1) d += (size_t)ne * w;
+        fs[k]->q_end = d; d += n;
+        fs[k]->v_end = d; d += n;
+        fs[k]->B = d; d += (size_t)nbmax * ne;
+        fs[k]->C = d; d += (size_t)nbmax * ne;
+        fs[k]->S = d; d += (size_t)nbmax * nbmax;
+        fs[k]->cval = d; d += (size_t)ncmax * JW;
+        fs[k]->piv = x->piv + (size_t)k * nbmax;
+        fs[k]->cpos = x->jm_idx + (size_t)(1 + k) * ncmax * JW;
+    }
+    x->pm.E = x->Emass;
+    x->it = &x->slot[0];
     /* the solved bands: fmass on Mff, fiter (Mff + h^2/4 K) prepared at the first step */
     x->solved_buf = calloc((size_t)ne * (w + 2 * 6 + 2), sizeof(double));
     if (!x->solved_buf) { umbrella_free(x); return NULL; }
@@ -713,14 +745,15 @@ static int bslot(const Model *m, int i) {
     return i == 0 ? 0 : i == m->i_r2x ? 1 : i == m->i_r2y ? 2 : 3;
 }
 
-/* the arrow description for the current rows J(q) (jrow_*) */
-static Arrow make_arrow(Ctx *x, int nc) {
+/* f's arrow description for the current rows J(q) (jrow_*, copied) */
+static void make_arrow(Ctx *x, ArrowLU *f, int nc) {
     const Model *m = x->m;
     int n1 = x->ne - m->n_link;
-    Arrow a = {x->ne, m->bw, 4 + nc, x->C, {0, n1, n1, n1}, {n1, x->ne, x->ne, x->ne},
-               x->cpos, x->jrow_val};
-    for (int k = 0; k < nc * JW; k++) x->cpos[k] = x->jrow_val[k] != 0.0 ? epos(m, x->jrow_idx[k]) : -1;
-    return a;
+    Arrow a = {x->ne, m->bw, 4 + nc, f->C, {0, n1, n1, n1}, {n1, x->ne, x->ne, x->ne},
+               f->cpos, f->cval};
+    memcpy(f->cval, x->jrow_val, sizeof(double) * nc * JW);
+    for (int k = 0; k < nc * JW; k++) f->cpos[k] = f->cval[k] != 0.0 ? epos(m, x->jrow_idx[k]) : -1;
+    f->a = a;
 }
 
 /* Factor F = Mff + h2 K (h2 = 0: the mass) into f->lu and solve for its constant border
@@ -748,7 +781,7 @@ static int solved_band_prepare(Ctx *x, SolvedBand *f, double h, double h2) {
     return OK;
 }
 
-/* Y = F^-1 B of the arrow's border columns, into x->B (row-major, nb = 4 + nc), for the
+/* Y = F^-1 B of the arrow's border columns, into B (row-major, nb = 4 + nc), for the
  * flexible model (constraint rows touch the elastic coordinates only at the joint's and the
  * sleeve's axial coordinates), where
  *   columns alpha1 / alpha2: sv (elastic order; leaf entries are alpha1's, link alpha2's),
@@ -759,7 +792,7 @@ static int solved_band_prepare(Ctx *x, SolvedBand *f, double h, double h2) {
  *     elastic coordinates only at the joint's and the sleeve's axial coordinate. */
 static void arrow_border_from_solved(Ctx *x, const SolvedBand *f, int nc, double *sv,
                                      const double *dcoef, const int *idx, const double *val,
-                                     double sign) {
+                                     double sign, double *B) {
     const Model *m = x->m;
     int ne = x->ne, nb = 4 + nc, n1 = ne - m->n_link;
     band_solve(ne, m->bw, f->lu, sv);
@@ -771,7 +804,6 @@ static void arrow_border_from_solved(Ctx *x, const SolvedBand *f, int nc, double
         sdq = x->sdq;
     }
     double c = x->cos2, s = x->sin2;
-    double *B = x->B;
     for (int p = 0; p < ne; p++) {
         double *Bp = B + (size_t)p * nb;
         Bp[0] = p < n1 ? sv[p] : 0.0;
@@ -825,7 +857,7 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
             double f = exact ? -h * om[m->body[ei[p]]] : 0.0;
             const double *mf = m->mff_band + (size_t)p * w, *kb = k_band + (size_t)p * w;
             const double *wb = m->w_band + (size_t)p * w;
-            double *e = x->E + (size_t)p * w;
+            double *e = x->it->E_store + (size_t)p * w;
             for (int k = 0; k < w; k++) e[k] = mf[k] + h2 * kb[k] + f * wb[k];
         }
     }
@@ -847,9 +879,10 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
     double x0 = 2.0 * w2 * ub0 + 2.0 * sd1, x1 = 2.0 * w2 * ub1 - 2.0 * sd0;
     double g_xa = -(c * x0 - s * x1), g_ya = -(s * x0 + c * x1);
     double hh = 0.5 * h;
-    Arrow a = make_arrow(x, nc);
+    ArrowLU *f = x->it;
+    make_arrow(x, f, nc);
     /* B (row-major) and the four dense rows C */
-    double *B = x->B, *C = x->C;
+    double *B = f->B, *C = f->C;
     for (int p = 0; p < ne; p++) {
         int i = ei[p], b = m->body[i];
         double *Bp = B + (size_t)p * nb, mbr[4];
@@ -879,7 +912,7 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
             for (int r = 0; r < nc; r++) Bp[4 + r] = -x->corr[r] * dqi;
     }
     if (solved) {
-        arrow_border_from_solved(x, &x->fiter, nc, x->sv, NULL, x->jm_idx, x->jm_val, -1.0);
+        arrow_border_from_solved(x, &x->fiter, nc, x->sv, NULL, x->jm_idx, x->jm_val, -1.0, B);
     } else {
         for (int r = 0; r < nc; r++)
             for (int k = 0; k < JW; k++) {
@@ -888,7 +921,7 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
             }
     }
     /* D */
-    double *S = x->S;
+    double *S = f->S;
     memset(S, 0, sizeof(double) * nb * nb);
     mass_border_block(x, S, nb);
     S[0] += hh * g00;
@@ -905,24 +938,23 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
             if (m->body[i] < 0) S[(4 + r) * nb + bslot(m, i)] += x->jrow_val[r * JW + k];
         }
     }
-    x->arrow = a;
     if (solved) {
-        x->e_iter = x->fiter.lu;
-        return arrow_schur(&a, B, S, x->piv);
+        f->E = x->fiter.lu;
+        return arrow_schur(&f->a, B, S, f->piv);
     }
-    x->e_iter = x->E;
-    return arrow_factor(&a, x->E, 0, B, S, x->piv);
+    f->E = f->E_store;
+    return arrow_factor(&f->a, f->E_store, 0, B, S, f->piv);
 }
 
 /* solve the factored arrow system for a q-ordered rhs of length n + nc, in place */
-static void arrow_solve_q(Ctx *x, const double *E, int nc, double *r, int top_zero) {
+static void arrow_solve_q(Ctx *x, const ArrowLU *f, int nc, double *r, int top_zero) {
     const Model *m = x->m;
     int ne = x->ne, n = m->n;
     double *a = x->xa;
     for (int p = 0; p < ne; p++) a[p] = r[m->elastic_idx[p]];
     for (int c = 0; c < 4; c++) a[ne + c] = r[border_q(m, c)];
     for (int k = 0; k < nc; k++) a[ne + 4 + k] = r[n + k];
-    arrow_solve(&x->arrow, E, x->B, x->S, x->piv, a, top_zero);
+    arrow_solve(&f->a, f->E, f->B, f->S, f->piv, a, top_zero);
     for (int p = 0; p < ne; p++) r[m->elastic_idx[p]] = a[p];
     for (int c = 0; c < 4; c++) r[border_q(m, c)] = a[ne + c];
     for (int k = 0; k < nc; k++) r[n + k] = a[ne + 4 + k];
@@ -952,8 +984,9 @@ static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_t
     if (!(jv_max > 0.0)) { mass_matvec(x, v, p_out); goto scale; }
     /* KKT [[M, J^T], [J, 0]] [dv; mu] = [0; -J v], arrow form with E = Mff (factored once,
      * with the solves of its constant border pieces: the flexible model) */
-    Arrow a = make_arrow(x, nc);
-    double *B = x->B, *C = x->C;
+    ArrowLU *fm = &x->pm;
+    make_arrow(x, fm, nc);
+    double *B = fm->B, *C = fm->C;
     int solved = nc <= 4;
     for (int p = 0; p < ne; p++) {
         double *Bp = B + (size_t)p * nb, mbr[4];
@@ -970,7 +1003,7 @@ static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_t
         if (!solved)
             for (int r = 0; r < nc; r++) Bp[4 + r] = 0.0;
     }
-    double *S = x->S;
+    double *S = fm->S;
     memset(S, 0, sizeof(double) * nb * nb);
     mass_border_block(x, S, nb);
     for (int r = 0; r < nc; r++)
@@ -985,16 +1018,15 @@ static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_t
                 S[(4 + r) * nb + bslot(m, i)] += val;
             }
         }
-    x->arrow = a;
     if (solved) {
-        arrow_border_from_solved(x, &x->fmass, nc, x->sv, NULL, x->jrow_idx, x->jrow_val, 1.0);
-        if (arrow_schur(&a, B, S, x->piv) != OK) return SINGULAR;
-    } else if (arrow_factor(&a, x->Emass, 1, B, S, x->piv) != OK) return SINGULAR;
+        arrow_border_from_solved(x, &x->fmass, nc, x->sv, NULL, x->jrow_idx, x->jrow_val, 1.0, B);
+        if (arrow_schur(&fm->a, B, S, fm->piv) != OK) return SINGULAR;
+    } else if (arrow_factor(&fm->a, x->Emass, 1, B, S, fm->piv) != OK) return SINGULAR;
     double *r = x->rhs;
     memset(r, 0, sizeof(double) * n);
     for (int k = 0; k < nc; k++) r[n + k] = -jrow_dot(x->jrow_idx, x->jrow_val, k, v);
     /* the elastic rows of the rhs are zero (the border rows too, but they are not skipped) */
-    arrow_solve_q(x, x->Emass, nc, r, 1);
+    arrow_solve_q(x, fm, nc, r, 1);
     for (int i = 0; i < n; i++) v[i] += r[i];
     mass_matvec(x, v, p_out);
 scale:;
@@ -1134,7 +1166,7 @@ static int phase_correction_prepare(Ctx *x, int nc) {
         double *w = x->pc_w + (size_t)j * len;
         memcpy(w, x->pc_u + (size_t)j * n, sizeof(double) * n);
         memset(w + n, 0, sizeof(double) * nc);
-        arrow_solve_q(x, x->e_iter, nc, w, 0);
+        arrow_solve_q(x, x->it, nc, w, 0);
     }
     double *cap = x->pc_cap, *inv = x->pc_work;
     for (int j = 0; j < r; j++)             /* C^-1 = diag(1/d) + U^T W_q */
@@ -1192,7 +1224,7 @@ static void phase_correction_iterate(Ctx *x, double two_h, double *y) {
 /* One step from (q0, v0, lam0, p0) of length h; results in x->q_s, v_s, lam_s, p_s. */
 static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v0,
                 const double *lam0, const double *p0, double h, double force, double tol,
-                double phi_tol, int max_iter, int *iterations) {
+                double phi_tol, int max_iter, int carry, int *iterations) {
     const Model *m = x->m;
     int n = m->n, nc = nc_of(m, locked, rigid);
     double *q = x->q_s, *v = x->v_s, *lam = x->lam_s, *dq = x->dq, *qm = x->qm, *v1 = x->v1;
@@ -1202,6 +1234,27 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
      * iteration (ElasticMidpointDAE._step_numpy) */
     ElasticLaw *law = x->law;
     int nonlinear_law = law && law->d.nonlinear, have_base = 0, refresh = 0;
+    /* The nonlinear law's tangent turns with the slopes: taken at the predictor q0 + h v0
+     * (~1e-3 off in stage 2 at V0 = -0.2) it gives Newton a linear rate of ~1e-2, and a step
+     * 3 to 4 iterations.  So when a step starts where a step of 3 or more iterations ended
+     * (and carry: not a trial step of the lock's root find), its first iteration uses the
+     * matrix that step factored last (a rule of the trajectory alone: umbrella_step and
+     * umbrella_advance give the same bits), and
+     * the matrix is factored anew at the first iterate, which is close: still one
+     * factorisation a step, and 0.6 iterations fewer in stage 2 (N = 4).  After a step of
+     * 2 iterations (small or damped motion) the predictor's tangent serves: the carried
+     * matrix would cost 0.2 iterations more there. */
+    ArrowLU *kept = x->it_kept ? &x->slot[x->it_slot] : NULL;
+    int lagged = carry && nonlinear_law && kept && kept->nc == nc
+                 && fabs(kept->h - h) <= 1e-9 * h
+                 && memcmp(q0, kept->q_end, sizeof(double) * n) == 0
+                 && memcmp(v0, kept->v_end, sizeof(double) * n) == 0;
+    /* this step's factorisations go to the other slot: the kept one stays intact if the
+     * step is not taken (umbrella_advance restores it_kept, it_slot) */
+    ArrowLU *fresh = kept ? &x->slot[1 - x->it_slot] : &x->slot[0];
+    x->it = lagged ? kept : fresh;
+    x->it_kept = 0;
+    factored = lagged;
     int pc = pc_acts(x, locked, rigid);    /* stage 2's phase correction */
     if (pc) {
         x->pc_w_age++;
@@ -1284,13 +1337,14 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         if (!factored || refresh) {
             jacobian(x, q, locked, rigid, x->jrow_idx, x->jrow_val);
             if (law) elastic_iteration_band(law, q0, q, h);
+            x->it = fresh;
             if (factor_iteration_matrix(x, h, nc) != OK) { status = SINGULAR; goto done; }
             factored = 1;
             if (pc && phase_correction_prepare(x, nc) != OK) { status = SINGULAR; goto done; }
         }
         for (int i = 0; i < n; i++) rhs[i] = -0.5 * h * res[i];
         for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
-        arrow_solve_q(x, x->e_iter, nc, rhs, 0);
+        arrow_solve_q(x, x->it, nc, rhs, 0);
         if (pc) phase_correction_update(x, nc, rhs);
         if (nonlinear_law) {
             memcpy(law->q_base, q, sizeof(double) * n);
@@ -1308,7 +1362,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         for (int r = 0; r < nc; r++) lam[r] += rhs[n + r] / half_h2;
         if (!isfinite(step_norm)) { status = NON_FINITE; goto done; }
         double rate = it > 1 ? step_norm / last_norm : 1.0;
-        refresh = nonlinear_law && it > 1 && rate > ELASTIC_REFRESH_RATE;
+        refresh = nonlinear_law && ((it == 1 && lagged) || (it > 1 && rate > ELASTIC_REFRESH_RATE));
         if (step_norm < tol || (rate < 0.5 && rate / (1.0 - rate) * step_norm < tol)) {
             constraints(x, q, locked, rigid, phi);
             if (max_abs(nc, phi) < phi_tol) { converged = 1; break; }
@@ -1336,6 +1390,15 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     }
     for (int i = 0; i < n; i++) t_target += 0.5 * v0[i] * p0[i];
     if (project_velocity(x, nc, v, x->p_s, t_target, pc) != OK) { status = SINGULAR; goto done; }
+    if (carry && nonlinear_law && it >= ELASTIC_CARRY_ITERATIONS) {
+        ArrowLU *f = x->it;
+        memcpy(f->q_end, q, sizeof(double) * n);
+        memcpy(f->v_end, v, sizeof(double) * n);
+        f->nc = nc;
+        f->h = h;
+        x->it_kept = 1;
+        x->it_slot = (int)(f - x->slot);
+    }
 done:
     *iterations = it > max_iter ? max_iter : it;
     return status;
@@ -1357,7 +1420,7 @@ int umbrella_step(Ctx *x, int locked, int rigid,
         if (pc_acts(x, locked, rigid)) phase_correction(x, v0, p0);
     }
     int status = step(x, locked, rigid, q0, v0, lam0, p0, h, force, tol, phi_tol,
-                      max_iter, iterations);
+                      max_iter, 1, iterations);
     if (status == OK) {
         memcpy(q, x->q_s, sizeof(double) * n);
         memcpy(v, x->v_s, sizeof(double) * n);
@@ -1481,6 +1544,26 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
  *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, *residual set);
  *   others    the step failed (not committed).
  * *n_done = committed steps. */
+/* Whether umbrella_advance takes the step just made (x->q_s, v_s): OK, or why not (the
+ * state became non-finite, the constraint residual diverged (its value in *residual), the
+ * sleeve reached the stop: CROSSING, the caller's lock step) */
+static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
+                      double *residual) {
+    const Model *m = x->m;
+    const double *q1 = x->q_s, *v1 = x->v_s;
+    /* residual of the new state (jacobian rows of q1 are in jrow_*) */
+    constraints(x, q1, locked, rigid, x->phi);
+    double r = max_abs(nc, x->phi);
+    for (int c = 0; c < nc; c++) {
+        double a = fabs(jrow_dot(x->jrow_idx, x->jrow_val, c, v1));
+        if (!(a <= r)) r = a;
+    }
+    for (int i = 0; i < m->n; i++) if (!isfinite(q1[i]) || !isfinite(v1[i])) return NON_FINITE;
+    if (!(r <= div_tol)) { *residual = r; return DIVERGED; }
+    if (!locked && sleeve_height(x, q1) - m->y_stop <= 0.0) return CROSSING;
+    return OK;
+}
+
 int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double *lam,
                      double *p, long k0, double h, int n_steps, double force, double tol,
                      double phi_tol, int max_iter, double div_tol, double *acc, double *out,
@@ -1492,25 +1575,18 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
     x->q0_products = 0;
     for (int k = 0; k < n_steps && k < cap; k++) {
         double t0 = (double)(k0 + k) * h, t1 = (double)(k0 + k + 1) * h;
-        int its = 0;
-        status = step(x, locked, rigid, q, v, lam, p, t1 - t0, force, tol, phi_tol, max_iter, &its);
+        int its = 0, kept = x->it_kept, kept_slot = x->it_slot;
+        status = step(x, locked, rigid, q, v, lam, p, t1 - t0, force, tol, phi_tol, max_iter, 1,
+                      &its);
         its_total += its;
-        if (status != OK) break;
-        const double *q1 = x->q_s, *v1 = x->v_s;
-        /* residual of the new state (jacobian rows of q1 are in jrow_*) */
-        constraints(x, q1, locked, rigid, x->phi);
-        double r = max_abs(nc, x->phi);
-        for (int c = 0; c < nc; c++) {
-            double a = fabs(jrow_dot(x->jrow_idx, x->jrow_val, c, v1));
-            if (!(a <= r)) r = a;
+        if (status == OK) status = step_taken(x, locked, rigid, nc, div_tol, residual);
+        if (status != OK) {   /* not taken: the caller retakes it (umbrella_step) as it was */
+            x->it_kept = kept;
+            x->it_slot = kept_slot;
+            break;
         }
-        int finite = 1;
-        for (int i = 0; i < n; i++) if (!isfinite(q1[i]) || !isfinite(v1[i])) { finite = 0; break; }
-        if (!finite) { status = NON_FINITE; break; }
-        if (!(r <= div_tol)) { *residual = r; status = DIVERGED; break; }
-        double y1 = sleeve_height(x, q1);
-        if (!locked && y1 - m->y_stop <= 0.0) { status = CROSSING; break; }
-        acc[0] += force * (sleeve_height(x, q) - y1);
+        const double *q1 = x->q_s, *v1 = x->v_s;
+        acc[0] += force * (sleeve_height(x, q) - sleeve_height(x, q1));
         if (x->law) acc[2] += x->dissipated;   /* acc has 3 entries when a law is attached */
         double inv_dt = 1.0 / (t1 - t0);
         for (int i = 0; i < n; i++) accel[i] = (v1[i] - v[i]) * inv_dt;
@@ -1591,7 +1667,8 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
             if (!(a < dt && dt < b)) dt = 0.5 * (a + b);
         }
         int its = 0;
-        int status = step(x, 0, rigid, q0, v0, lam0, p0, dt, force, tol, phi_tol, max_iter, &its);
+        int status = step(x, 0, rigid, q0, v0, lam0, p0, dt, force, tol, phi_tol, max_iter, 0,
+                          &its);
         its_total += its;
         *dt_out = dt;
         if (status != OK) { *iterations = its_total; return status; }

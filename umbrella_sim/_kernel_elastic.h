@@ -13,6 +13,9 @@
 /* Newton contraction rate above which the iteration matrix is re-factored (nonlinear strain;
  * nonlinear.REFRESH_RATE) */
 #define ELASTIC_REFRESH_RATE 0.1
+/* a step of this many Newton iterations or more hands its last matrix to the next step
+ * (nonlinear.CARRY_ITERATIONS) */
+#define ELASTIC_CARRY_ITERATIONS 3
 
 /* Mirror of nonlinear._ElasticData (same order). */
 typedef struct {
