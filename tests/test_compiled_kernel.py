@@ -125,15 +125,22 @@ def test_block_size_does_not_change_the_result():
 
 
 @needs_kernel
-@pytest.mark.parametrize("model, n_el", [("flexible", 1), ("flexible", 4), ("rigid-fe", 2)])
-def test_compiled_sample_matches_numpy_outputs(model, n_el, monkeypatch):
-    """The Sample built from one compiled call (stresses, peaks, energies, residual) vs numpy."""
+@pytest.mark.parametrize("model, n_el, zeta", [
+    ("flexible", 1, 0.0), ("flexible", 4, 0.0), ("rigid-fe", 2, 0.0), ("flexible", 2, 0.02),
+    ("flexible-nonlinear", 2, 0.0), ("flexible-nonlinear", 4, 0.02)])
+def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
+    """
+    The Sample built from one compiled call (stresses, peaks, energies, residual) vs numpy.
+
+    Also with an elastic law (_kernel_nonlinear.c): the membrane stress in the fibre
+    stresses, the nonlinear strain energy, the damped model's energies.
+    """
     from dataclasses import fields
 
     from umbrella_sim.solver import FiniteElementEngine
     # a 50 us step: the first two blocks end in stage 1 (deploy at ~0.09 s), the others in 2
     sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5, model=model, elements_per_segment=n_el,
-                                           time_step=5e-5))
+                                           damping_ratio=zeta, time_step=5e-5))
     stages = set()
     for block in (1000, 1000, 300, 2000):
         sim.advance(block)

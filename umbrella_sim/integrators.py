@@ -156,6 +156,7 @@ class DynamicState:
     qdd: np.ndarray
     multipliers: np.ndarray
     momentum: np.ndarray | None = None   # M(q) qd, carried to the next step when known
+    dissipation: float = 0.0    # energy removed by structural damping since t = 0 (J)
 
 
 def _gonzalez(grad_mid: np.ndarray, delta_f: float, dq: np.ndarray, dd: float) -> np.ndarray:
@@ -657,7 +658,7 @@ class CompiledKernel:
     def load(self, s: DynamicState, work: float, lock_loss: float) -> None:
         """Take s as the state to advance from (nothing to copy if it is the last one made)."""
         self.acc[0], self.acc[1] = work, lock_loss
-        self.acc[2] = getattr(s, "dissipation", 0.0)   # with an elastic law (nonlinear.py)
+        self.acc[2] = s.dissipation   # accumulated with a damped elastic law (nonlinear.py)
         if s is self._made:
             return
         self._made = None
@@ -693,7 +694,7 @@ class CompiledKernel:
         """Return the advanced state; advancing from it next time needs no load."""
         b, n = self._state_buf.copy(), len(self.q)
         self._made = DynamicState(t, b[:n], b[n:2 * n], b[3 * n:4 * n], b[4 * n:4 * n + nc],
-                                  b[2 * n:3 * n])
+                                  b[2 * n:3 * n], float(self.acc[2]))
         return self._made
 
     def sample(self, s: DynamicState, cs: ConstraintSet):

@@ -377,11 +377,6 @@ class CompiledElasticLaw:
 
 
 # -------------------------------------------------------------------- integrator
-@dataclass(frozen=True)
-class DampedState(DynamicState):
-    dissipation: float = 0.0    # energy removed by the structural damping since t = 0 (J)
-
-
 class ElasticMidpointDAE(MidpointDAE):
     """
     Energy-consistent midpoint step with a general strain energy and damping.
@@ -450,8 +445,8 @@ class ElasticMidpointDAE(MidpointDAE):
             return self._step_numpy(s, h, force, cs)
         out, its = self._compiled.step(s, h, force, cs, self.tolerance, self.max_iterations)
         self.iterations += its
-        return DampedState(out.t, out.q, out.qd, out.qdd, out.multipliers, out.momentum,
-                           getattr(s, "dissipation", 0.0) + self.law.last_dissipation())
+        return DynamicState(out.t, out.q, out.qd, out.qdd, out.multipliers, out.momentum,
+                            s.dissipation + self.law.last_dissipation())
 
     def _step_numpy(self, s, h, force, cs):
         """
@@ -553,8 +548,8 @@ class ElasticMidpointDAE(MidpointDAE):
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
         if self.strain_nonlinear and it >= CARRY_ITERATIONS:
             self._carried = (q, v, nc, h, lu, piv)
-        return DampedState(s.t + h, q, v, (v - v0) / h, lam, corrected_momentum(mass1, v, pc),
-                           getattr(s, "dissipation", 0.0) + dissipated)
+        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, corrected_momentum(mass1, v, pc),
+                            s.dissipation + dissipated)
 
 
 # ------------------------------------------------------------------------ engine
@@ -579,25 +574,19 @@ class ElasticEngine(FiniteElementEngine):
         """
         return not self.rigid and not self.model.strain.nonlinear
 
-    def initial(self, force: float) -> DynamicState:
-        s = super().initial(force)
-        return DampedState(s.t, s.q, s.qd, s.qdd, s.multipliers)
-
     def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
         """
         Take up to n_steps steps on the compiled path (FiniteElementEngine.advance).
 
-        The state carries the dissipated energy; a step the compiled loop could not take is
-        handed back as "crossing", i.e. to the simulator's single-step path, which retakes
-        it split in halves (``ElasticMidpointDAE._substeps``) or reports the fault.
+        The state carries the dissipated energy (the kernel's accumulator); a step the
+        compiled loop could not take is handed back as "crossing", i.e. to the simulator's
+        single-step path, which retakes it split in halves (``ElasticMidpointDAE._substeps``)
+        or reports the fault.
         """
         out = super().advance(s, k0, h, n_steps, force, stage, work, lock_loss)
         if out is None:
             return None
         state, rows, work, stop = out
-        if rows.shape[1]:
-            state = DampedState(state.t, state.q, state.qd, state.qdd, state.multipliers,
-                                state.momentum, float(self.integrator.kernel.acc[2]))
         return state, rows, work, None if stop is None else "crossing"
 
 

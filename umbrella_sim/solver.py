@@ -217,8 +217,7 @@ class FiniteElementEngine(Engine):
 
     def sample_outputs(self, s, stage):
         kernel = self.integrator.kernel
-        if (kernel is None or s.momentum is None
-                or getattr(kernel, "elastic_law", None) is not None):
+        if kernel is None or s.momentum is None:
             return None
         return kernel.sample(s, self._cs[stage])
 
@@ -706,7 +705,7 @@ class UmbrellaSimulator:
             "sleeve_reaction": eng.sleeve_reaction(s, stage),
             "work": float(work), "lock_energy_loss": float(lock_loss),
             "constraint_residual": residual,
-            "damping_dissipation": float(getattr(s, "dissipation", 0.0))})
+            "damping_dissipation": float(s.dissipation)})
         return build_frozen(Sample, values)
 
 
