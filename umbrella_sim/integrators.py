@@ -46,6 +46,7 @@ import numpy as np
 from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
 
 from .model import ConstraintSet, UmbrellaModel
+from .outputs import build_frozen
 
 #: constraint residual the Newton iteration must reach before it stops (m)
 PHI_TOLERANCE = 1e-11
@@ -693,8 +694,11 @@ class CompiledKernel:
     def state(self, t: float, nc: int) -> DynamicState:
         """Return the advanced state; advancing from it next time needs no load."""
         b, n = self._state_buf.copy(), len(self.q)
-        self._made = DynamicState(t, b[:n], b[n:2 * n], b[3 * n:4 * n], b[4 * n:4 * n + nc],
-                                  b[2 * n:3 * n], float(self.acc[2]))
+        # once per publication: the frozen dataclass's per-field __init__ costs 3 us
+        self._made = build_frozen(DynamicState, {
+            "t": t, "q": b[:n], "qd": b[n:2 * n], "qdd": b[3 * n:4 * n],
+            "multipliers": b[4 * n:4 * n + nc], "momentum": b[2 * n:3 * n],
+            "dissipation": self.acc.item(2)})
         return self._made
 
     def sample(self, s: DynamicState, cs: ConstraintSet):

@@ -128,9 +128,13 @@ class StepBlock:
                  lock: LockEvent | None = None, error: str | None = None):
         if len(rows) != len(STEP_FIELDS):
             raise ValueError(f"a block has {len(STEP_FIELDS)} rows, not {len(rows)}")
-        for name, value in (("rows", rows), ("make_last", make_last), ("lock", lock),
-                            ("error", error), ("_last", None), ("_peaks", None)):
-            object.__setattr__(self, name, value)
+        _set = object.__setattr__        # (read-only: __setattr__ refuses)
+        _set(self, "rows", rows)
+        _set(self, "make_last", make_last)
+        _set(self, "lock", lock)
+        _set(self, "error", error)
+        _set(self, "_last", None)
+        _set(self, "_peaks", None)
 
     def __setattr__(self, name, value):
         raise AttributeError(f"StepBlock is read-only (cannot set {name!r})")
@@ -179,7 +183,7 @@ class StepBlock:
             if len(self):
                 # one fancy index and one tolist for the five rows (a publication's ~10
                 # steps: Python floats beat numpy calls)
-                t, *rows = self.rows[_PEAK_ROWS].tolist()
+                t, *rows = self.rows.take(_PEAK_ROWS, axis=0).tolist()
                 for body, peaks, where in (("leaf", rows[0], rows[1]),
                                            ("link", rows[2], rows[3])):
                     i = peaks.index(max(peaks))
@@ -196,9 +200,9 @@ for _row, _name in enumerate(STEP_FIELDS):
     setattr(StepBlock, _name, _step_field(_row, _name))
 del _row, _name
 #: rows StepBlock.peaks and SummaryAccumulator.add read together
-_PEAK_ROWS = [STEP_FIELDS.index(f) for f in (
-    "time", "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x")]
-_SUMMARY_ROWS = [STEP_FIELDS.index(f) for f in ("time", "tip_transverse", "stage")]
+_PEAK_ROWS = np.array([STEP_FIELDS.index(f) for f in (
+    "time", "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x")])
+_SUMMARY_ROWS = np.array([STEP_FIELDS.index(f) for f in ("time", "tip_transverse", "stage")])
 
 
 @dataclass
@@ -411,22 +415,23 @@ class SummaryAccumulator:
             return
         # Python floats: a live node adds a block of ~10 steps per publication, where every
         # numpy call costs more than the loop (~90 -> ~20 us per 1 kHz period, measured)
-        t, v, stage = block.rows[_SUMMARY_ROWS].tolist()
+        t, v, stage = block.rows.take(_SUMMARY_ROWS, axis=0).tolist()
         self.steps += n
         self.final_time = t[-1]
-        av = [abs(x) for x in v]
-        self._tip_all = max(self._tip_all, max(av))
-        tip1, when = self._tip1
-        for a, s, ti in zip(av, stage, t):
-            if s == 0 and (tip1 is None or a > tip1):     # stage 1: deploying
-                tip1, when = a, ti
-        self._tip1 = (tip1, when)
-        if self.lock is not None and min(t) <= self.lock.time + STAGE2_WINDOW + 1e-12 \
-                and max(stage) != 0:
-            keep = (block.stage != 0) & (block.time <= self.lock.time + STAGE2_WINDOW + 1e-12)
-            if keep.any():
-                self._s2_t.append(block.time[keep])
-                self._s2_v.append(block.tip_transverse[keep])
+        self._tip_all = max(self._tip_all, max(v), -min(v))
+        if stage[0] == 0:                                  # stage 1 (deploying) in the block
+            tip1, when = self._tip1
+            for x, s, ti in zip(v, stage, t):
+                if s == 0 and (tip1 is None or abs(x) > tip1):
+                    tip1, when = abs(x), ti
+            self._tip1 = (tip1, when)
+        if self.lock is not None and stage[-1] != 0 \
+                and t[0] <= self.lock.time + STAGE2_WINDOW + 1e-12:
+            end = self.lock.time + STAGE2_WINDOW + 1e-12
+            for ti, x, s in zip(t, v, stage):
+                if s != 0 and ti <= end:
+                    self._s2_t.append(ti)
+                    self._s2_v.append(x)
         for body, (peak, x, ti) in block.peaks.items():
             if peak > self._peaks[body][0]:
                 self._peaks[body] = (peak, x, ti)
@@ -444,7 +449,7 @@ class SummaryAccumulator:
                      "tip_deflection_max": self._tip1[0],
                      "tip_deflection_max_time": self._tip1[1]}
         if self._s2_t:
-            out.update(stage2_figures(np.concatenate(self._s2_t), np.concatenate(self._s2_v),
+            out.update(stage2_figures(np.array(self._s2_t), np.array(self._s2_v),
                                       self.lock.time))
         else:
             out.update(stage2_figures(np.zeros(0), np.zeros(0), None))
