@@ -8,7 +8,8 @@ linear one, beside the linear flexible model (simulated seconds per wall second,
 V0 = -0.2, through the lock to t = 1.0 s, at the default (accuracy-chosen) time step, in
 blocks of 1 ms of simulated time through UmbrellaSimulator.advance (the compiled loop with
 every step's outputs, what the node pays), best of --repeat runs; us/step and the CPU
-real-time factor from process time, beside the wall-clock one.  Target: >= 5x at N = 4 for
+real-time factor from process time, beside the wall-clock one; each block builds the
+Sample of its last step, as a publication does.  Target: >= 5x at N = 4 for
 flexible-nonlinear.  All four cases run on the compiled kernel (the nonlinear and
 damped ones with the elastic law of _kernel_nonlinear.c attached); UMBRELLA_SIM_KERNEL=numpy
 gives the numpy reference.  The machine is shared, so figures are noisy.
@@ -45,6 +46,7 @@ def one_run(params, duration):
     t0, c0 = time.perf_counter(), time.process_time()
     while sim.time < duration - 1e-12:
         block = sim.advance(per_block)
+        block.last                            # the Sample a publication carries
         if block.error:
             raise SystemExit(f"{params.model}: {block.error}")
         if at_lock is None and sim.stage == Stage.LOCKED:

@@ -125,7 +125,7 @@ typedef struct {
      * length (the nonlinear law, see step()); a step factors into the other slot */
     int it_kept, it_slot;
     int *piv;              /* storage of it.piv, pm.piv */
-    SolvedBand fmass, fiter;   /* Mff; Mff + h^2/4 K of the last step length (linear law) */
+    SolvedBand fmass, fiter;   /* Mff; Mff + h^2/4 K (or the damped linear law's band) */
     double *sv, *sdq;      /* work: a body-wise border column, F^-1 dq (ne each) */
     double cos2, sin2;     /* cos, sin of alpha2 of the last mass_data_from_products */
     double *solved_buf;    /* storage of fiter, fmass's solves, sv, sdq */
@@ -661,7 +661,8 @@ void umbrella_free(Ctx *x) {
     free(x);
 }
 
-static int solved_band_prepare(Ctx *x, SolvedBand *f, double h, double h2);
+static int solved_band_prepare(Ctx *x, SolvedBand *f, double h, const double *band,
+                               double scale);
 
 Ctx *umbrella_new(const Model *m) {
     Ctx *x = calloc(1, sizeof(Ctx));
@@ -729,7 +730,7 @@ Ctx *umbrella_new(const Model *m) {
     x->sdq = d;
     x->fiter.h = -1.0;
     x->fmass.lu = x->Emass;      /* the LU of Mff (projection) */
-    if (solved_band_prepare(x, &x->fmass, 0.0, 0.0) != OK) { umbrella_free(x); return NULL; }
+    if (solved_band_prepare(x, &x->fmass, 0.0, m->k_band, 0.0) != OK) { umbrella_free(x); return NULL; }
     return x;
 }
 
@@ -758,10 +759,11 @@ static void make_arrow(Ctx *x, ArrowLU *f, int nc) {
 
 /* Factor F = Mff + h2 K (h2 = 0: the mass) into f->lu and solve for its constant border
  * pieces.  f->h = h on success. */
-static int solved_band_prepare(Ctx *x, SolvedBand *f, double h, double h2) {
+static int solved_band_prepare(Ctx *x, SolvedBand *f, double h, const double *band,
+                               double scale) {
     const Model *m = x->m;
     int ne = x->ne, w = x->width, nl = m->n_link, n1 = ne - nl, bw = m->bw;
-    for (size_t k = 0; k < (size_t)ne * w; k++) f->lu[k] = m->mff_band[k] + h2 * m->k_band[k];
+    for (size_t k = 0; k < (size_t)ne * w; k++) f->lu[k] = m->mff_band[k] + scale * band[k];
     f->h = -1.0;
     if (band_factor(ne, bw, f->lu) != OK) return SINGULAR;
     double *cols[6] = {f->sb[0], f->sb[1], f->isb[0], f->isb[1], f->ej, f->es};
@@ -840,14 +842,17 @@ static int factor_iteration_matrix(Ctx *x, double h, int nc) {
     /* The iteration matrix of integrators.iteration_blocks: for the flexible model (nc <= 4)
      * the gyroscopic elastic block G_ee = -2 w W and the Gonzalez correction of the
      * constraint columns are left out, which only changes how Newton converges, not to what.
-     * Then the linear law's elastic block E is the constant Mff + h^2/4 K, factored once per
-     * step length with the solves of its constant border pieces (SolvedBand: "solved").
-     * Otherwise E = Mff + (the law's band, or h^2/4 K) (- h w_body W, rigid-FE), here. */
-    int exact = nc > 4, solved = !x->law && !exact;
+     * Then the elastic block E of the linear strain is constant: Mff + h^2/4 K, or with the
+     * damped law (linear strain) Mff + its band (h^2/4 K + h/2 C), factored once per step
+     * length with the solves of its constant border pieces (SolvedBand: "solved").
+     * Otherwise E = Mff + (the nonlinear law's band, or h^2/4 K) (- h w_body W, rigid-FE),
+     * here. */
+    int exact = nc > 4, solved = !(x->law && x->law->d.nonlinear) && !exact;
     /* the grid step t1 - t0 varies in its last bits: the band of a step within 1e-9 of it
      * serves (the iteration matrix only steers Newton) */
     if (solved && !(fabs(x->fiter.h - h) <= 1e-9 * h)
-        && solved_band_prepare(x, &x->fiter, h, 0.25 * h * h) != OK)
+        && solved_band_prepare(x, &x->fiter, h, x->law ? x->law->band : m->k_band,
+                               x->law ? 1.0 : 0.25 * h * h) != OK)
         return SINGULAR;
     if (!solved) {
         double h2 = 0.25 * h * h;
@@ -1434,6 +1439,7 @@ int umbrella_step(Ctx *x, int locked, int rigid,
 void umbrella_set_law(Ctx *x, ElasticLaw *law) {
     x->law = law;
     x->q0_products = 0;   /* kq0: K q0, or Kb q0 with a law */
+    x->fiter.h = -1.0;    /* its band is the law's from now on */
 }
 
 /* the momentum of a state: M(q) v, plus D v once stage 2's phase correction is on (it is
