@@ -29,7 +29,7 @@ from umbrella_sim.nonlinear import (NonlinearUmbrellaModel,  # noqa: E402
                                     spin_up_quasi_static_tip)
 from umbrella_sim.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.recording import git_revision  # noqa: E402
-from umbrella_sim.solver import simulate  # noqa: E402
+from umbrella_sim.solver import simulate, UmbrellaSimulator  # noqa: E402
 
 STAGE2 = 0.3   # s of stage 2 simulated after the lock
 STEP = 5e-5   # s: the step of these tables (half the default; the step study below shows it)
@@ -58,6 +58,59 @@ def run(v0, n, model, h=None):
     wall = time.perf_counter() - t0
     print(f"V0 = {v0:g} N = {n} {model} h = {p.time_step:g}: {wall:.1f} s", file=sys.stderr)
     return r.summary(), r.error, wall, max_slopes(r, p)
+
+
+def perturbation_growth(v0, model, h, tolerance=1e-11, duration=0.5):
+    """
+    Return how a tiny perturbation of the stage-2 trajectory grows.
+
+    (lock time, [time after the lock at which |tip difference| first exceeds 1 um, 1 mm,
+    10 mm, or None], max difference) between a run at the default Newton tolerance and one at
+    `tolerance` (a perturbation of ~1e-9 m per step), N = 4.
+    """
+    runs = []
+    for tol in (None, tolerance):
+        sim = UmbrellaSimulator(UmbrellaParams(v0=v0, model=model, elements_per_segment=4,
+                                               time_step=h))
+        if tol is not None:
+            sim.engine.integrator.tolerance = tol
+        block = sim.advance(round(duration / h))
+        runs.append((block.time, block.tip_transverse, sim.lock_event.time))
+    t, lock = runs[0][0], runs[0][2]
+    d = np.abs(runs[0][1] - runs[1][1])
+    after = [float(t[np.argmax(d > a)] - lock) if d.max() > a else None
+             for a in (1e-6, 1e-3, 1e-2)]
+    return lock, after, float(d.max())
+
+
+def sensitivity_section():
+    """How far the stage-2 tip series can be predicted: perturbation growth, measured."""
+    lines = ["", "## Sensitivity of the stage-2 motion", "",
+             "Two runs that differ only in the Newton tolerance (default against 1e-11: a "
+             "perturbation of ~1e-9 m a step), N = 4, 0.5 s: the time after the lock at "
+             "which their tip deflections first differ by more than 1 µm, 1 mm and 10 mm "
+             "(negative: before the lock), "
+             "and the largest difference.", "",
+             "| V0 (m/s) | model | h (µs) | lock (s) | > 1 µm (s) | > 1 mm (s) | > 10 mm (s) "
+             "| max difference (mm) |", "|---|---|---|---|---|---|---|---|"]
+    cases = [(v0, model, 1e-4) for v0 in (-0.2, -1.0, -2.0)
+             for model in ("flexible", "flexible-nonlinear")]
+    cases += [(-2.0, "flexible-nonlinear", h) for h in (5e-5, 2.5e-5)]
+    for v0, model, h in cases:
+        lock, after, dmax = perturbation_growth(v0, model, h)
+        lines.append(f"| {v0:g} | {model} | {h * 1e6:g} | {lock:.6f} | "
+                     + " | ".join("–" if a is None else f"{a:.3f}" for a in after)
+                     + f" | {dmax * 1e3:.3g} |")
+    lines += ["", "The linear model keeps such a perturbation at the micrometre level: its "
+              "stage-2 motion is a superposition of modes. The nonlinear model at V0 = −1 "
+              "and −2 amplifies it to millimetres within a fraction of a second of stage 2, "
+              "at every step size (the rows at 50 and 25 µs): at these amplitudes the "
+              "coupled bending and stretching of the von Kármán frame is sensitive to its "
+              "initial state, so its tip series after that time is reproducible only bit for "
+              "bit (same build, step and tolerance), not predictable; the envelope figures "
+              "(amplitude, period, peak stress) are what the tables above compare, and they "
+              "move by a few per cent with the step for the same reason."]
+    return lines
 
 
 def frame_rows(meshes):
@@ -187,6 +240,8 @@ def main():
               "rad relative to their body frames, far outside the ~0.3 rad of the von Kármán "
               "strain, and a co-rotational or geometrically exact element is the next step "
               "(nonlinear.py, Validity)."]
+
+    lines += sensitivity_section()
 
     # ---------------------------------------------------------------- spin-up benchmark
     lines += ["", "## Spin-up benchmark (Kane, Ryan & Banerjee 1987)", "",
