@@ -12,11 +12,14 @@ at the default time step unless --time-step):
   * RTF: simulated seconds per wall second of that 1 ms-block run, best of --repeat;
   * the cost per step divided by the number of coordinates, to show the growth is linear.
 The machine is shared: CPU time is what the step costs; wall RTF is what a user saw.
-Targets: <= 10 us/step at N = 2, <= 40 us/step at N = 8; RTF >= 10 at N = 2, >= 2 at N = 8.
+Targets: <= 10 us/step at N = 2, <= 40 us/step at N = 8; RTF >= 10 at N = 2, >= 2 at N = 8
+(flexible); RTF >= 5 at N = 4 (--model flexible-nonlinear).
 
     python bench/bench_core.py [--meshes 1 2 4 8 16] [--repeat 3] [--time-step H]
+                               [--model flexible-nonlinear] [--damping-ratio Z]
 """
 import argparse
+import math
 import os
 import sys
 import time
@@ -27,8 +30,9 @@ from umbrella_sim.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.publication import physics_step  # noqa: E402
 from umbrella_sim.solver import UmbrellaSimulator  # noqa: E402
 
-COST_TARGETS = {2: 10.0, 8: 40.0}
-RTF_TARGETS = {2: 10.0, 8: 2.0}
+#: model -> {N: target}
+COST_TARGETS = {"flexible": {2: 10.0, 8: 40.0}}
+RTF_TARGETS = {"flexible": {2: 10.0, 8: 2.0}, "flexible-nonlinear": {4: 5.0}}
 DURATION = 1.0
 SAMPLE_PERIOD = 1e-3
 
@@ -66,9 +70,15 @@ def main():
     ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8, 16])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--time-step", type=float, default=UmbrellaParams().time_step)
+    ap.add_argument("--model", default="flexible",
+                    choices=("flexible", "flexible-nonlinear", "rigid-fe"))
+    ap.add_argument("--damping-ratio", type=float, default=0.0)
     args = ap.parse_args()
     h = physics_step(args.time_step, 1.0 / SAMPLE_PERIOD)
-    print(f"flexible, V0 = -0.2, energy lock, t = 0 -> {DURATION:g} s through the lock, "
+    cost_targets = COST_TARGETS.get(args.model, {})
+    rtf_targets = RTF_TARGETS.get(args.model, {})
+    print(f"{args.model} (damping_ratio {args.damping_ratio:g}), V0 = -0.2, energy lock, "
+          f"t = 0 -> {DURATION:g} s through the lock, "
           f"h = {h:.6g} s ({round(DURATION / h)} steps), a Sample every "
           f"{SAMPLE_PERIOD * 1e3:g} ms; "
           f"best of {args.repeat}; loadavg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
@@ -77,7 +87,8 @@ def main():
           f" {'RTF':>7} {'targets (us, RTF)':>18}")
     print(f"{'':>3} {'':>6} {'/step':>6} {'kernel':>8} {'1 ms':>8} {'kernel':>13} {'wall':>7}")
     for n in args.meshes:
-        p = UmbrellaParams(v0=-0.2, elements_per_segment=n, time_step=h)
+        p = UmbrellaParams(v0=-0.2, elements_per_segment=n, time_step=h, model=args.model,
+                           damping_ratio=args.damping_ratio)
         cpus, walls = [], []
         for _ in range(args.repeat):
             cpu, wall, sim = block_run(p)
@@ -88,9 +99,10 @@ def main():
         newton = sim.engine.newton_iterations() / sim.steps
         rtf = DURATION / min(walls)
         tgt = ""
-        if n in COST_TARGETS:
-            ok = kernel <= COST_TARGETS[n] and rtf >= RTF_TARGETS[n]
-            tgt = f"{COST_TARGETS[n]:>4.0f}, {RTF_TARGETS[n]:>3.0f}x {'ok' if ok else 'MISS'}"
+        if n in rtf_targets:
+            ok = kernel <= cost_targets.get(n, math.inf) and rtf >= rtf_targets[n]
+            cost = f"{cost_targets[n]:>4.0f}" if n in cost_targets else f"{'-':>4}"
+            tgt = f"{cost}, {rtf_targets[n]:>3.0f}x {'ok' if ok else 'MISS'}"
         print(f"{n:>3} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} {us:>8.2f} "
               f"{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18}", flush=True)
 
