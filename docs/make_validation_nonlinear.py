@@ -235,11 +235,13 @@ def main():
     lines += ["", f"Change of each figure from h = {STEP * 1e6:g} µs (used in the "
               f"tables above) to {STEP / 2 * 1e6:g} µs: " + "; ".join(changes) + ". Stage 1 "
               "and the deploy time are step-converged; the stage-2 figures of the nonlinear "
-              "model at V0 = −2 are not better than a few per cent (its period and peak "
-              "stress move by the percentages above): there the fibres turn by up to 1.6 "
-              "rad relative to their body frames, far outside the ~0.3 rad of the von Kármán "
-              "strain, and a co-rotational or geometrically exact element is the next step "
-              "(nonlinear.py, Validity)."]
+              "model at V0 = −1 and −2 are not better than a few per cent (its period and "
+              "peak stress move by the percentages above): its stage-2 motion amplifies any "
+              "perturbation, a step's error as much as round-off (next section), so these "
+              "figures are envelopes of a motion that no step size pins down; and at V0 = −2 "
+              "the fibres turn by up to 1.6 rad relative to their body frames, far outside "
+              "the ~0.3 rad of the von Kármán strain, where a co-rotational or geometrically "
+              "exact element is the next step (nonlinear.py, Validity)."]
 
     lines += sensitivity_section()
 
