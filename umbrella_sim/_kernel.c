@@ -1243,12 +1243,11 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
      * (~1e-3 off in stage 2 at V0 = -0.2) it gives Newton a linear rate of ~1e-2, and a step
      * 3 to 4 iterations.  So when a step starts where a step of 3 or more iterations ended
      * (and carry: not a trial step of the lock's root find), its first iteration uses the
-     * matrix that step factored last (a rule of the trajectory alone: umbrella_step and
-     * umbrella_advance give the same bits), and
-     * the matrix is factored anew at the first iterate, which is close: still one
-     * factorisation a step, and 0.6 iterations fewer in stage 2 (N = 4).  After a step of
-     * 2 iterations (small or damped motion) the predictor's tangent serves: the carried
-     * matrix would cost 0.2 iterations more there. */
+     * matrix that step factored last, and the matrix is factored anew at the first iterate,
+     * which is close: still one factorisation a step, and 0.6 iterations fewer in stage 2
+     * (N = 4).  A rule of the trajectory alone, so umbrella_step and umbrella_advance give
+     * the same bits.  After a step of 2 iterations (small or damped motion) the predictor's
+     * tangent serves: the carried matrix would cost 0.2 iterations more there. */
     ArrowLU *kept = x->it_kept ? &x->slot[x->it_slot] : NULL;
     int lagged = carry && nonlinear_law && kept && kept->nc == nc
                  && fabs(kept->h - h) <= 1e-9 * h
