@@ -173,6 +173,7 @@ class BeamBody:
             curvature.append(d2n[:, 1] @ b)
             px.append(self.node_x[j] + np.array([0.0, le]))
         self.stress_x = np.concatenate(px)
+        self.n_stress_points = len(self.stress_x)
         # sigma_top/bottom = E (u' -/+ c v'') (Eq. 5.43-5.44, y = +c is the top fibre)
         ax, cu = np.concatenate(axial), np.concatenate(curvature)
         self.stress_top = youngs_modulus * (ax - fibre * cu)

@@ -14,7 +14,6 @@ from __future__ import annotations
 import abc
 from dataclasses import replace
 import math
-import operator
 import re
 import time as _time
 from typing import Callable, Iterable
@@ -669,51 +668,57 @@ class UmbrellaSimulator:
         fast = eng.sample_outputs(s, stage)
         if fast is not None:          # compiled: the figures below in one call
             row, stress, residual = fast
-            values = dict(zip(_SAMPLE_FIELDS_FROM_ROW, _pick_from_row(row.tolist())))
-            n_leaf = len(m.leaf.stress_x)
+            (sleeve_position, sleeve_velocity, tip_axial, tip_transverse, peak_leaf,
+             peak_leaf_x, peak_link, peak_link_x, kinetic, strain) = _pick_from_row(row)
+            n_leaf = m.leaf.n_stress_points
             leaf_stress, link_stress = stress[:, :n_leaf], stress[:, n_leaf:]
-            lt, kt = stress[0, :n_leaf], stress[0, n_leaf:]
+            lt, kt = leaf_stress[0], link_stress[0]
         else:
             (lt, lb), (kt, kb) = m.stresses(q)
             leaf_abs = np.maximum(np.abs(lt), np.abs(lb))
             link_abs = np.maximum(np.abs(kt), np.abs(kb))
             il, ik = int(np.argmax(leaf_abs)), int(np.argmax(link_abs))
-            tip_u, tip_v = m.tip_displacement(q)
-            values = {"sleeve_position": float(m.sleeve_height(q)),
-                      "sleeve_velocity": float(m.sleeve_height_gradient(q) @ qd),
-                      "tip_axial": tip_u, "tip_transverse": tip_v,
-                      "peak_stress_leaf": float(leaf_abs[il]),
-                      "peak_stress_leaf_x": float(m.leaf.stress_x[il]),
-                      "peak_stress_link": float(link_abs[ik]),
-                      "peak_stress_link_x": float(m.link.stress_x[ik]),
-                      "kinetic_energy": eng.kinetic_energy(s, stage),
-                      "strain_energy": eng.strain_energy(s, stage)}
+            tip_axial, tip_transverse = m.tip_displacement(q)
+            sleeve_position = float(m.sleeve_height(q))
+            sleeve_velocity = float(m.sleeve_height_gradient(q) @ qd)
+            peak_leaf, peak_leaf_x = float(leaf_abs[il]), float(m.leaf.stress_x[il])
+            peak_link, peak_link_x = float(link_abs[ik]), float(m.link.stress_x[ik])
+            kinetic, strain = eng.kinetic_energy(s, stage), eng.strain_energy(s, stage)
             residual = eng.residual(s, stage)
             leaf_stress, link_stress = np.array((lt, lb)), np.array((kt, kb))
         joint_stress, mid_link_stress = m.reference_stresses(lt, kt)
         ia = m.i_alpha2
-        # every field of Sample (build_frozen: once per publication, without a frozen
-        # dataclass's per-field setattr)
-        values.update({
+        # every field of Sample in one dict (build_frozen: once per publication, without a
+        # frozen dataclass's per-field setattr)
+        return build_frozen(Sample, {
             "time": s.t, "stage": stage if type(stage) is Stage else Stage(stage),
             "q": q.copy(), "qd": qd.copy(),
             "alpha1": q.item(0), "alpha2": q.item(ia), "alpha1_rate": qd.item(0),
-            "alpha2_rate": qd.item(ia), "alpha1_accel": qdd.item(0), "sleeve_force": force,
+            "alpha2_rate": qd.item(ia), "alpha1_accel": qdd.item(0),
+            "sleeve_position": sleeve_position, "sleeve_velocity": sleeve_velocity,
+            "sleeve_force": force, "tip_axial": tip_axial, "tip_transverse": tip_transverse,
             "leaf_stress": leaf_stress, "link_stress": link_stress,
+            "peak_stress_leaf": peak_leaf, "peak_stress_leaf_x": peak_leaf_x,
+            "peak_stress_link": peak_link, "peak_stress_link_x": peak_link_x,
             "stress_leaf_joint": joint_stress, "stress_link_mid": mid_link_stress,
             "multipliers": np.array(s.multipliers, dtype=float),
             "sleeve_reaction": eng.sleeve_reaction(s, stage),
+            "kinetic_energy": kinetic, "strain_energy": strain,
             "work": float(work), "lock_energy_loss": float(lock_loss),
             "constraint_residual": residual,
             "damping_dissipation": float(s.dissipation)})
-        return build_frozen(Sample, values)
 
 
 #: the Sample fields that are per-step outputs too (STEP_FIELDS): taken from the step row
 _SAMPLE_FIELDS_FROM_ROW = ("sleeve_position", "sleeve_velocity", "tip_axial", "tip_transverse",
                            "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
                            "peak_stress_link_x", "kinetic_energy", "strain_energy")
-_pick_from_row = operator.itemgetter(*(STEP_FIELDS.index(f) for f in _SAMPLE_FIELDS_FROM_ROW))
+_ROW_INDEX = np.array([STEP_FIELDS.index(f) for f in _SAMPLE_FIELDS_FROM_ROW])
+
+
+def _pick_from_row(row: np.ndarray) -> list[float]:
+    """Return the _SAMPLE_FIELDS_FROM_ROW of a step row, as Python floats."""
+    return row.take(_ROW_INDEX).tolist()
 
 
 def simulate(params: UmbrellaParams, duration: float,
