@@ -89,11 +89,13 @@ typedef struct {
 typedef struct {
     Arrow a;
     const double *E;       /* the band LU of its elastic block */
-    double *E_store;       /* storage for it when it is not constant (ne x (2 bw + 1)) */
+    double *E_store;       /* storage for it when it is not constant (ne x (2 bw + 1));
+                            * NULL for the projection's, whose E is the constant Emass */
     double *B, *C, *S;     /* Y = E^-1 B (ne x nbmax), 4 dense rows C, LU of the Schur complement */
     double *cval;          /* its constraint rows' values (a copy: jrow_val moves on) */
     int *piv, *cpos;
-    /* the step that factored it last: its end state (q, v), constraint count and length */
+    /* the step that factored it last: its end state (q, v), constraint count and length
+     * (the iteration slots only) */
     double *q_end, *v_end, h;
     int nc;
 } ArrowLU;
@@ -680,7 +682,7 @@ Ctx *umbrella_new(const Model *m) {
     x->piv = calloc(3 * (size_t)nbmax, sizeof(int));
     x->jrow_idx = calloc(5 * (size_t)ncmax * JW, sizeof(int));
     x->E = calloc((size_t)ne * w * 3 + 3 * ((size_t)nbmax * ne * 2 + (size_t)nbmax * nbmax
-                                           + (size_t)ncmax * JW + 2 * (size_t)n), sizeof(double));
+                                           + (size_t)ncmax * JW) + 4 * (size_t)n, sizeof(double));
     if (!x->hq || !x->piv || !x->jrow_idx || !x->E) { umbrella_free(x); return NULL; }
     double *d = x->hq;
     double **vecs[] = {&x->hq, &x->maf, &x->q1, &x->v1, &x->dq, &x->qm, &x->hm, &x->gt, &x->gy,
@@ -700,12 +702,14 @@ Ctx *umbrella_new(const Model *m) {
     x->jm_idx = x->jrow_idx + (size_t)ncmax * JW;
     x->Emass = x->E + (size_t)ne * w;
     d = x->Emass + (size_t)ne * w;
+    x->slot[0].E_store = x->E;
+    x->slot[1].E_store = d; d += (size_t)ne * w;
+    for (int k = 0; k < 2; k++) {
+        x->slot[k].q_end = d; d += n;
+        x->slot[k].v_end = d; d += n;
+    }
     ArrowLU *fs[3] = {&x->slot[0], &x->slot[1], &x->pm};
     for (int k = 0; k < 3; k++) {
-        fs[k]->E_store = k == 0 ? x->E : d;
-        if (k == 1) d += (size_t)ne * w;
-        fs[k]->q_end = d; d += n;
-        fs[k]->v_end = d; d += n;
         fs[k]->B = d; d += (size_t)nbmax * ne;
         fs[k]->C = d; d += (size_t)nbmax * ne;
         fs[k]->S = d; d += (size_t)nbmax * nbmax;
@@ -757,8 +761,8 @@ static void make_arrow(Ctx *x, ArrowLU *f, int nc) {
     f->a = a;
 }
 
-/* Factor F = Mff + h2 K (h2 = 0: the mass) into f->lu and solve for its constant border
- * pieces.  f->h = h on success. */
+/* Factor F = Mff + scale * band (h^2/4 K, the damped linear law's band, or scale 0: the
+ * mass) into f->lu and solve for its constant border pieces.  f->h = h on success. */
 static int solved_band_prepare(Ctx *x, SolvedBand *f, double h, const double *band,
                                double scale) {
     const Model *m = x->m;
