@@ -162,3 +162,41 @@ def test_constraint_jacobian_and_bias_match_complex_step():
     g = model.sleeve_height_gradient(q)
     g_cs = np.array([model.sleeve_height(q + 1j * h * e).imag / h for e in np.eye(model.n)])
     assert np.abs(g - g_cs).max() < 1e-14
+
+
+@pytest.mark.parametrize("model_name", ["flexible", "flexible-nonlinear"])
+def test_stress_rates_are_the_time_derivative_of_the_stresses(model_name):
+    """d/dt of the fibre stresses along q + t qd, by complex step (membrane: quadratic in q)."""
+    from umbrella_sim.solver import UmbrellaSimulator
+    model = UmbrellaSimulator(UmbrellaParams(elements_per_segment=3, model=model_name)).model
+    q, qd = random_state(model, np.random.default_rng(4), elastic=1e-2)
+    rates = model.stress_rates(q, qd)
+    stepped = model.stresses(q + 1e-30j * qd)
+    for body in (0, 1):
+        for fibre in (0, 1):
+            expected = np.imag(stepped[body][fibre]) / 1e-30
+            assert np.allclose(rates[body][fibre], expected, rtol=1e-12,
+                               atol=1e-12 * np.abs(expected).max())
+    if model_name == "flexible-nonlinear":      # the membrane part is there and moves
+        linear = UmbrellaModel.stress_rates(model, q, qd)
+        assert np.abs(rates[0][0] - linear[0][0]).max() > 1e-3 * np.abs(rates[0][0]).max()
+
+
+def test_hermite_peak_is_the_cubic_s_largest_value_on_the_step():
+    """Against the cubic sampled densely: crests inside, at the ends, a parabola, a line."""
+    from umbrella_sim.outputs import hermite_peak
+    rng = np.random.default_rng(7)
+    s0, s1 = rng.normal(size=(2, 4000))
+    d0, d1 = rng.normal(size=(2, 4000)) * rng.choice([0.0, 0.1, 1.0, 10.0], size=(2, 4000))
+    d1[:500] = 2.0 * (s1[:500] - s0[:500]) - d0[:500]    # a parabola (no cubic term)
+    d0[500:600] = d1[500:600] = (s1 - s0)[500:600]     # a straight line
+    t = np.linspace(0.0, 1.0, 20001)[:, None]
+    a, b = 3.0 * (s1 - s0) - 2.0 * d0 - d1, 2.0 * (s0 - s1) + d0 + d1
+    dense = np.abs(s0 + t * (d0 + t * (a + t * b))).max(axis=0)
+    peak = hermite_peak(s0, d0, s1, d1)
+    # never below the dense samples, above them only by what the sampling misses
+    assert np.all(peak >= dense - 1e-12)
+    assert np.allclose(peak, dense, rtol=1e-6, atol=1e-9)
+    inside = peak > np.maximum(np.abs(s0), np.abs(s1)) + 1e-9
+    assert 0.2 < inside.mean() < 0.9          # crests between the ends are common
+    assert np.array_equal(peak[500:600], np.maximum(np.abs(s0), np.abs(s1))[500:600])

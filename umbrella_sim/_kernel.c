@@ -156,6 +156,10 @@ typedef struct {
      * alpha2 of q1 and of the midpoint in several functions */
     double trig_a[TRIG_CACHE], trig_c[TRIG_CACHE], trig_s[TRIG_CACHE];
     int trig_n, trig_next;
+    /* fibre stress (top of every stress point, then bottom) and its rate at the start of the
+     * step umbrella_advance takes next (pk_sig, pk_rate) and at its end (pk_sig1, pk_rate1):
+     * the step's peak is that of their cubic Hermite interpolant (output_row) */
+    double *pk_sig, *pk_rate, *pk_sig1, *pk_rate1;
 } Ctx;
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
@@ -720,7 +724,8 @@ Ctx *umbrella_new(const Model *m) {
     x->pm.E = x->Emass;
     x->it = &x->slot[0];
     /* the solved bands: fmass on Mff, fiter (Mff + h^2/4 K) prepared at the first step */
-    x->solved_buf = calloc((size_t)ne * (w + 2 * 6 + 2), sizeof(double));
+    int npts = m->n_stress_leaf + m->n_stress_link;
+    x->solved_buf = calloc((size_t)ne * (w + 2 * 6 + 2) + 8 * (size_t)npts, sizeof(double));
     if (!x->solved_buf) { umbrella_free(x); return NULL; }
     d = x->solved_buf;
     x->fiter.lu = d; d += (size_t)ne * w;
@@ -731,7 +736,9 @@ Ctx *umbrella_new(const Model *m) {
         for (int c = 0; c < 6; c++) { *cols[c] = d; d += ne; }
     }
     x->sv = d; d += ne;
-    x->sdq = d;
+    x->sdq = d; d += ne;
+    double **pk[4] = {&x->pk_sig, &x->pk_rate, &x->pk_sig1, &x->pk_rate1};
+    for (int k = 0; k < 4; k++) { *pk[k] = d; d += 2 * (size_t)npts; }
     x->fiter.h = -1.0;
     x->fmass.lu = x->Emass;      /* the LU of Mff (projection) */
     if (solved_band_prepare(x, &x->fmass, 0.0, m->k_band, 0.0) != OK) { umbrella_free(x); return NULL; }
@@ -1478,11 +1485,55 @@ static void fibre_stress(const Model *m, const double *q, const double *membrane
     *bot = b;
 }
 
+/* Fibre stress at every stress point of (q, v) (top of each point, then bottom: sig[k],
+ * sig[npts + k]) and its rate (rate, same order; the fibre stress is linear in q, plus the
+ * nonlinear law's membrane stress, quadratic) */
+static void fibre_stress_and_rate(Ctx *x, const double *q, const double *v, double *sig,
+                                  double *rate) {
+    const Model *m = x->m;
+    int npts = m->n_stress_leaf + m->n_stress_link;
+    const double *membrane = membrane_stress(x, q), *membrane_rate = NULL;
+    if (membrane) {
+        elastic_membrane_stress_rate(x->law, q, v);
+        membrane_rate = x->law->el_stress_rate;
+    }
+    for (int k = 0; k < npts; k++) {
+        fibre_stress(m, q, membrane, k, &sig[k], &sig[npts + k]);
+        fibre_stress(m, v, membrane_rate, k, &rate[k], &rate[npts + k]);
+    }
+}
+
+/* The largest |p| on [0, 1] of the cubic p with p(0) = s0, p(1) = s1, p'(0) = d0, p'(1) = d1
+ * (a fibre's stress over a step: values and rates times the step at its ends;
+ * outputs.hermite_peak, the same arithmetic) */
+static double hermite_peak(double s0, double d0, double s1, double d1) {
+    double best = fabs(s0) > fabs(s1) ? fabs(s0) : fabs(s1);
+    double a = 3.0 * (s1 - s0) - 2.0 * d0 - d1, b = 2.0 * (s0 - s1) + d0 + d1;
+    /* p(t) = s0 + t (d0 + t (a + t b)); p'(t) = 3 b t^2 + 2 a t + d0 = 0 */
+    double qa = 3.0 * b, qb = 2.0 * a, disc = qb * qb - 4.0 * qa * d0;
+    if (!(disc >= 0.0)) return best;
+    double r = -0.5 * (qb + copysign(sqrt(disc), qb)), roots[2];
+    int nr = 0;
+    if (r != 0.0) roots[nr++] = d0 / r;
+    if (qa != 0.0) roots[nr++] = r / qa;
+    for (int i = 0; i < nr; i++) {
+        double t = roots[i];
+        if (t > 0.0 && t < 1.0) {
+            double val = fabs(s0 + t * (d0 + t * (a + t * b)));
+            if (val > best) best = val;
+        }
+    }
+    return best;
+}
+
 /* The outputs of the state (q, v, p = M v) into column k of out; kq_known: K q at q (Kb q
- * with a law) if the caller has it, else NULL */
+ * with a law) if the caller has it, else NULL.  The peak stress: with h_step > 0, the largest
+ * over the step of length h_step that ended at this state, whose start left its fibre stress
+ * and rate in pk_sig, pk_rate (this state's then replace them); with h_step = 0, the state's
+ * own. */
 static void output_row(Ctx *x, const double *q, const double *v, const double *p,
                        const double *kq_known, double t, int stage, double force, double work,
-                       double lock_loss, double *out, int cap, int k) {
+                       double lock_loss, double h_step, double *out, int cap, int k) {
     const Model *m = x->m;
     int n = m->n, ia = m->i_alpha2;
     double *o = out + k, c2, s2;
@@ -1498,21 +1549,37 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
     SET(F_FORCE, force);
     SET(F_TIP_AXIAL, q[m->i_tip_u]);
     SET(F_TIP_TRANSVERSE, q[m->i_tip_v]);
-    int first = 0;
-    const double *membrane = membrane_stress(x, q);
+    int first = 0, npts = m->n_stress_leaf + m->n_stress_link;
+    double *sig = x->pk_sig1, *rate = x->pk_rate1;
+    const double *sig0 = x->pk_sig, *rate0 = x->pk_rate;
+    if (h_step > 0.0) fibre_stress_and_rate(x, q, v, sig, rate);
+    else {
+        const double *membrane = membrane_stress(x, q);
+        for (int k2 = 0; k2 < npts; k2++) fibre_stress(m, q, membrane, k2, &sig[k2], &sig[npts + k2]);
+    }
     for (int body = 0; body < 2; body++) {
         int np = body == 0 ? m->n_stress_leaf : m->n_stress_link;
         double best = -1.0;
         int at = first;
         for (int k2 = first; k2 < first + np; k2++) {
-            double top, bot;
-            fibre_stress(m, q, membrane, k2, &top, &bot);
-            double a = fabs(top) > fabs(bot) ? fabs(top) : fabs(bot);
+            double a, top = sig[k2], bot = sig[npts + k2];
+            if (h_step > 0.0) {
+                int kb = npts + k2;
+                double pt = hermite_peak(sig0[k2], h_step * rate0[k2], top, h_step * rate[k2]);
+                double pb = hermite_peak(sig0[kb], h_step * rate0[kb], bot, h_step * rate[kb]);
+                a = pt > pb ? pt : pb;
+            } else {
+                a = fabs(top) > fabs(bot) ? fabs(top) : fabs(bot);
+            }
             if (a > best) { best = a; at = k2; }
         }
         SET(body == 0 ? F_PEAK_LEAF : F_PEAK_LINK, best);
         SET(body == 0 ? F_PEAK_LEAF_X : F_PEAK_LINK_X, m->stress_x[at]);
         first += np;
+    }
+    if (h_step > 0.0) {   /* this state starts the next step */
+        x->pk_sig1 = x->pk_sig; x->pk_sig = sig;
+        x->pk_rate1 = x->pk_rate; x->pk_rate = rate;
     }
     double ke = 0.0, pc_e = 0.0;
     for (int i = 0; i < n; i++) ke += v[i] * p[i];
@@ -1582,6 +1649,7 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
     int status = OK, its_total = 0;
     *n_done = 0;
     x->q0_products = 0;
+    fibre_stress_and_rate(x, q, v, x->pk_sig, x->pk_rate);   /* the first step's start */
     for (int k = 0; k < n_steps && k < cap; k++) {
         double t0 = (double)(k0 + k) * h, t1 = (double)(k0 + k + 1) * h;
         int its = 0, kept = x->it_kept, kept_slot = x->it_slot;
@@ -1607,7 +1675,7 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         memcpy(x->mq0, x->mq1, sizeof(double) * n);
         memcpy(x->wq0, x->wq1, sizeof(double) * n);
         memcpy(x->kq0, x->kq1, sizeof(double) * n);
-        output_row(x, q, v, p, x->kq0, t1, locked ? 1 : 0, force, acc[0], acc[1],
+        output_row(x, q, v, p, x->kq0, t1, locked ? 1 : 0, force, acc[0], acc[1], t1 - t0,
                    out, cap, k);
         *n_done = k + 1;
     }
@@ -1644,7 +1712,7 @@ int umbrella_advance_call(Ctx *x, AdvanceCall *a) {
 void umbrella_outputs(Ctx *x, const double *q, const double *v, const double *p, double t,
                       int stage, double force, double work, double lock_loss, double *out,
                       int cap, int k) {
-    output_row(x, q, v, p, NULL, t, stage, force, work, lock_loss, out, cap, k);
+    output_row(x, q, v, p, NULL, t, stage, force, work, lock_loss, 0.0, out, cap, k);
 }
 
 /* Lock instant inside a step (solver.UmbrellaSimulator._find_lock, the same Illinois
@@ -1726,7 +1794,7 @@ void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const doubl
     const Model *m = x->m;
     int npts = m->n_stress_leaf + m->n_stress_link;
     int nc = nc_of(m, locked, rigid);
-    output_row(x, q, v, p, NULL, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, row, 1, 0);
+    output_row(x, q, v, p, NULL, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, 0.0, row, 1, 0);
     const double *membrane = membrane_stress(x, q);
     for (int k = 0; k < npts; k++)
         fibre_stress(m, q, membrane, k, &stress[k], &stress[npts + k]);

@@ -41,6 +41,7 @@ typedef struct {
     double *band;            /* ne x (2 bw + 1): the law's part of the iteration matrix */
     double *qa, *qb, *g;     /* n, n, n_el x 6: work */
     double *el_stress;       /* n_el: membrane stress of the last elastic_membrane_stress */
+    double *el_stress_rate;  /* n_el: its rate, of the last elastic_membrane_stress_rate */
     double *q_base, *lam_base, *dx;   /* line search: n, ne + 4, n + ne + 4 */
     double last_dissipation; /* dq . C(q_m) dq / h of the last elastic_dissipation (J) */
     double band_h;           /* step of the band (the linear strain's band is constant) */
@@ -69,5 +70,7 @@ double elastic_energy(ElasticLaw *law, const double *q, const double *kbq);
 double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, double h);
 /* law->el_stress[e] = E (1/l_e) int v'^2/2 dx (0 with the linear strain) */
 void elastic_membrane_stress(ElasticLaw *law, const double *q);
+/* law->el_stress_rate[e] = E (1/l_e) int v' v'_t dx, the rate of that stress at (q, v) */
+void elastic_membrane_stress_rate(ElasticLaw *law, const double *q, const double *v);
 
 #endif

@@ -33,7 +33,7 @@ ElasticLaw *elastic_new(const ElasticData *d) {
     int w = 2 * d->bw + 1, nc = d->ne + 4;
     size_t doubles = (size_t)d->ne * w + 4 * (size_t)d->n + (size_t)d->n_el * EDOF + d->n_el
                      + nc + (size_t)(d->n + nc) + (size_t)d->n_el * (EDOF + EDOF * EDOF)
-                     + d->n + (size_t)d->n_el * (EDOF + 2);
+                     + d->n + (size_t)d->n_el * (EDOF + 2) + d->n_el;
     law->band = calloc(doubles, sizeof(double));
     if (!law->band) { free(law); return NULL; }
     double *p = law->band + (size_t)d->ne * w;
@@ -44,6 +44,7 @@ ElasticLaw *elastic_new(const ElasticData *d) {
     law->band_h = -1.0;
     law->g = p; p += (size_t)d->n_el * EDOF;
     law->el_stress = p; p += d->n_el;
+    law->el_stress_rate = p; p += d->n_el;
     law->lam_base = p; p += nc;
     law->dx = p; p += d->n + nc;
     law->du_mean = p; p += (size_t)d->n_el * EDOF;
@@ -335,6 +336,18 @@ void elastic_membrane_stress(ElasticLaw *law, const double *q) {
     step_start(law, q);   /* usually kept from the energy of the step that ended at q */
     for (int e = 0; e < d->n_el; e++)
         law->el_stress[e] = d->youngs_modulus * 0.5 * law->start_eps[2 * (size_t)e + 1];
+}
+
+void elastic_membrane_stress_rate(ElasticLaw *law, const double *q, const double *v) {
+    const ElasticData *d = &law->d;
+    step_start(law, q);   /* G x of q's element coordinates x */
+    for (int e = 0; e < d->n_el; e++) {
+        const int *iq = d->el_q + (size_t)e * EDOF;
+        const double *gx = law->start_gx + (size_t)e * EDOF;
+        double r = 0.0;   /* d/dt (x . G x / 2) = (G x) . x_t */
+        for (int k = 0; k < EDOF; k++) if (iq[k] >= 0) r += gx[k] * v[iq[k]];
+        law->el_stress_rate[e] = d->youngs_modulus * r;
+    }
 }
 
 double elastic_last_dissipation(const ElasticLaw *law) {

@@ -570,6 +570,10 @@ class UmbrellaModel:
         return ((self.leaf.stress_top @ e1, self.leaf.stress_bottom @ e1),
                 (self.link.stress_top @ e2, self.link.stress_bottom @ e2))
 
+    def stress_rates(self, q, qd):
+        """d/dt of ``stresses`` at (q, qd) (Pa/s): linear in q, so ``stresses`` of qd."""
+        return UmbrellaModel.stresses(self, qd)
+
     @cached_property
     def _reference_stress_points(self) -> tuple[int, int, float]:
         """(leaf stress point at O'', link element holding l3/2, where in it)."""

@@ -281,6 +281,17 @@ class NonlinearUmbrellaModel(UmbrellaModel):
         return ((lt + extra[:n_leaf], lb + extra[:n_leaf]),
                 (kt + extra[n_leaf:], kb + extra[n_leaf:]))
 
+    def stress_rates(self, q, qd):
+        """d/dt of ``stresses``: the linear part of qd, plus E (1/l_e) int v' v'_t dx."""
+        (lt, lb), (kt, kb) = super().stress_rates(q, qd)
+        if not self.strain.nonlinear:
+            return (lt, lb), (kt, kb)
+        rate = self.strain.mean @ ((self.strain.dv @ q) * (self.strain.dv @ qd))
+        extra = np.repeat(self.params.youngs_modulus * rate, 2)
+        n_leaf = len(lt)
+        return ((lt + extra[:n_leaf], lb + extra[:n_leaf]),
+                (kt + extra[n_leaf:], kb + extra[n_leaf:]))
+
 
 def locked_first_frequency(model: UmbrellaModel) -> float:
     """Return omega_1 (rad/s) of the locked frame linearised at full deployment."""

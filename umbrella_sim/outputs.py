@@ -85,16 +85,69 @@ def sample_row(s: Sample) -> list:
 
 
 #: per-physics-step outputs of ``UmbrellaSimulator.advance``, in the order the compiled kernel
-#: writes them (_kernel.c, enum F_*); stage is the int code of model.Stage
+#: writes them (_kernel.c, enum F_*); stage is the int code of model.Stage.  The state's
+#: figures at the step's end, except the peak stresses (and where): the largest over the
+#: whole step (``step_peaks``), so that a crest between two steps is not lost
 STEP_FIELDS = ("time", "stage", "alpha1", "alpha1_rate", "sleeve_position", "sleeve_velocity",
                "sleeve_force", "tip_axial", "tip_transverse", "peak_stress_leaf",
                "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x", "kinetic_energy",
                "strain_energy", "work", "lock_energy_loss")
 
 
-def step_row(s: Sample) -> list[float]:
-    """Return the STEP_FIELDS of one sample (the reference the compiled outputs are tested on)."""
-    return [float(s.stage.code) if f == "stage" else float(getattr(s, f)) for f in STEP_FIELDS]
+def step_row(s: Sample, peaks: tuple | None = None) -> list[float]:
+    """
+    Return the STEP_FIELDS of one sample (the reference the compiled outputs are tested on).
+
+    peaks: the step's (peak_stress_leaf, its x, peak_stress_link, its x) (``step_peaks``)
+    in place of the sample's own, which are those of its instant.
+    """
+    row = [float(s.stage.code) if f == "stage" else float(getattr(s, f)) for f in STEP_FIELDS]
+    if peaks is not None:
+        row[_STEP_PEAKS] = [float(v) for v in peaks]
+    return row
+
+
+def hermite_peak(s0, d0, s1, d1) -> np.ndarray:
+    """
+    Return the largest |p| on [0, 1] of the cubic p(0) = s0, p(1) = s1, p'(0) = d0, p'(1) = d1.
+
+    Elementwise.  A fibre's stress over a physics step, from its values and its rates times
+    the step at the two ends: the cubic Hermite interpolant, whose crest may lie between the
+    steps (for the midpoint rule it is the constant-acceleration path between them, nearly
+    a parabola).  _kernel.c hermite_peak is the same arithmetic.
+    """
+    s0, d0, s1, d1 = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (s0, d0, s1, d1)))
+    best = np.maximum(np.abs(s0), np.abs(s1))
+    a = 3.0 * (s1 - s0) - 2.0 * d0 - d1
+    b = 2.0 * (s0 - s1) + d0 + d1
+    qa, qb = 3.0 * b, 2.0 * a               # p'(t) = qa t^2 + qb t + d0
+    disc = qb * qb - 4.0 * qa * d0
+    real = disc >= 0.0
+    r = -0.5 * (qb + np.copysign(np.sqrt(np.where(real, disc, 0.0)), qb))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for t in (np.where(r != 0.0, d0 / r, np.nan), np.where(qa != 0.0, r / qa, np.nan)):
+            val = np.abs(s0 + t * (d0 + t * (a + t * b)))
+            best = np.where(real & (t > 0.0) & (t < 1.0) & (val > best), val, best)
+    return best
+
+
+def step_peaks(start, end, h: float, stress_x: tuple) -> tuple[float, float, float, float]:
+    """
+    Return the largest fibre stress over a step and where: (leaf, x, link, x).
+
+    start, end: (stresses, rates) at the step's two ends, each as ``UmbrellaModel.stresses``
+    gives them ((leaf top, leaf bottom), (link top, link bottom)); h: the step (s);
+    stress_x: the leaf's and the link's stress point abscissae.  Per point the larger of its
+    two fibres' ``hermite_peak``; the first point holding the largest value.
+    """
+    out: list[float] = []
+    for body, xs in enumerate(stress_x):
+        peak = np.max([hermite_peak(start[0][body][f], h * start[1][body][f],
+                                    end[0][body][f], h * end[1][body][f]) for f in (0, 1)],
+                      axis=0)
+        i = int(np.argmax(peak))
+        out += [float(peak[i]), float(xs[i])]
+    return tuple(out)
 
 
 @dataclass
@@ -199,6 +252,9 @@ def _step_field(row: int, name: str) -> property:
 for _row, _name in enumerate(STEP_FIELDS):
     setattr(StepBlock, _name, _step_field(_row, _name))
 del _row, _name
+#: the rows of a step's peak stresses and where (step_peaks)
+_STEP_PEAKS = slice(STEP_FIELDS.index("peak_stress_leaf"),
+                    STEP_FIELDS.index("peak_stress_link_x") + 1)
 #: rows StepBlock.peaks and SummaryAccumulator.add read together
 _PEAK_ROWS = np.array([STEP_FIELDS.index(f) for f in (
     "time", "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x")])

@@ -24,8 +24,8 @@ from .forcing import ForceSchedule
 from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ConvergenceError,
                           DynamicState, MidpointDAE, newton_tolerance)
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
-from .outputs import (build_frozen, LockEvent, RunResult, Sample, STEP_FIELDS, step_row,
-                      StepBlock, SummaryAccumulator)
+from .outputs import (build_frozen, LockEvent, RunResult, Sample, STEP_FIELDS, step_peaks,
+                      step_row, StepBlock, SummaryAccumulator)
 from .params import SPECS, UmbrellaParams
 from .rigid import RigidMechanism
 
@@ -545,6 +545,7 @@ class UmbrellaSimulator:
                 if stop != "crossing":
                     error = stop
                     break
+            start, t_start = self._fibre_stress(), self.time
             try:                          # the lock step, or every step without a fast path
                 self.step(record=False)
             except SimulationDiverged as exc:
@@ -552,7 +553,10 @@ class UmbrellaSimulator:
                 break
             if rows is None:
                 rows = np.empty((len(STEP_FIELDS), n_steps))
-            rows[:, done] = step_row(self.sample())
+            m = self.model
+            rows[:, done] = step_row(self.sample(), step_peaks(
+                start, self._fibre_stress(), self.time - t_start,
+                (m.leaf.stress_x, m.link.stress_x)))
             done += 1
         lock = self.lock_event if self.lock_event is not lock_before else None
         final = (self._state, self._stage, self._applied_force, self._work, self._lock_loss)
@@ -657,6 +661,11 @@ class UmbrellaSimulator:
         return best
 
     # -- outputs
+    def _fibre_stress(self) -> tuple:
+        """Return the fibre stresses and their rates of the current state (step_peaks)."""
+        q, qd, _ = self.engine.fe_state(self._state)
+        return self.model.stresses(q), self.model.stress_rates(q, qd)
+
     def sample(self) -> Sample:
         return self._sample(self._state, self._stage, self._applied_force, self._work,
                             self._lock_loss)
