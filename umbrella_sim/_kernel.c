@@ -1503,9 +1503,12 @@ static void fibre_stress_and_rate(Ctx *x, const double *q, const double *v, doub
     }
 }
 
+#define RESOLVED_CREST 1.0   /* outputs.RESOLVED_CREST */
+
 /* The largest |p| on [0, 1] of the cubic p with p(0) = s0, p(1) = s1, p'(0) = d0, p'(1) = d1
- * (a fibre's stress over a step: values and rates times the step at its ends;
- * outputs.hermite_peak, the same arithmetic) */
+ * (a fibre's stress over a step: values and rates times the step at its ends), a crest
+ * inside counted where |p''| <= RESOLVED_CREST |p| (outputs.hermite_peak, the same
+ * arithmetic) */
 static double hermite_peak(double s0, double d0, double s1, double d1) {
     double best = fabs(s0) > fabs(s1) ? fabs(s0) : fabs(s1);
     double a = 3.0 * (s1 - s0) - 2.0 * d0 - d1, b = 2.0 * (s0 - s1) + d0 + d1;
@@ -1520,7 +1523,7 @@ static double hermite_peak(double s0, double d0, double s1, double d1) {
         double t = roots[i];
         if (t > 0.0 && t < 1.0) {
             double val = fabs(s0 + t * (d0 + t * (a + t * b)));
-            if (val > best) best = val;
+            if (fabs(2.0 * a + 6.0 * b * t) <= RESOLVED_CREST * val && val > best) best = val;
         }
     }
     return best;
