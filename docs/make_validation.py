@@ -143,9 +143,9 @@ def step_convergence_section() -> list[str]:
               f"reference's own stage-2 peaks seen only every {default:g} s fall short of its "
               f"peaks at every {STUDY_REFERENCE:g} s step by that much (the worst phase of the "
               "grid; `step_study.sampled_peak_shortfall`). Where the run is still more than "
-              "3 % off, the crests come from modes the step does not resolve, whose frequency "
-              "the midpoint rule aliases: only a smaller step helps (the summary table "
-              "above).", "",
+              "3 % off, the error is the step's own: modes it does not resolve, whose "
+              "frequency the midpoint rule aliases, shape those crests, and only a smaller "
+              "step helps (the summary table above).", "",
               "| N | V0 | lock | run's error (leaf, link) | reference seen on the step's grid: "
               "shortfall (leaf, link) |", "|---|---|---|---|---|"]
     for n, v0, lock, e, short in seen:
