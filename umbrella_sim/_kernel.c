@@ -1548,7 +1548,7 @@ static double hermite_peak(double s0, double d0, double s1, double d1) {
  * with a law) if the caller has it, else NULL.  The peak stress: with h_step > 0, the largest
  * over the step of length h_step that ended at this state, whose start left its fibre stress
  * and rate in pk_sig, pk_rate (this state's then replace them); with h_step = 0, the state's
- * own. */
+ * own, its fibre stresses left in pk_sig1 (top of every point, then bottom). */
 static void output_row(Ctx *x, const double *q, const double *v, const double *p,
                        const double *kq_known, double t, int stage, double force, double work,
                        double lock_loss, double h_step, double *out, int cap, int k) {
@@ -1831,9 +1831,7 @@ void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const doubl
     int npts = m->n_stress_leaf + m->n_stress_link;
     int nc = nc_of(m, locked, rigid);
     output_row(x, q, v, p, NULL, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, 0.0, row, 1, 0);
-    const double *membrane = membrane_stress(x, q);
-    for (int k = 0; k < npts; k++)
-        fibre_stress(m, q, membrane, k, &stress[k], &stress[npts + k]);
+    memcpy(stress, x->pk_sig1, sizeof(double) * 2 * npts);   /* output_row's, same order */
     constraints(x, q, locked, rigid, x->phi);
     jacobian(x, q, locked, rigid, x->jm_idx, x->jm_val);
     double r = max_abs(nc, x->phi);
