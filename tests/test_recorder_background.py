@@ -73,3 +73,30 @@ def test_background_close_run_counts_every_queued_message(tmp_path):
     log = read_log(rec.path)
     assert log.count("/x") == 300
     assert '"/x": 300' in log.metadata["umbrella_sim.counts"]["recorded"]
+
+
+def test_fast_message_records_are_byte_for_byte_those_of_mcap_add_message(tmp_path):
+    """The recorder's own Message records and message indexes (_MessageAppender) write the
+    same file as mcap's Writer.add_message: several channels, many chunks, a segment."""
+    files = []
+    for fast in (True, False):
+        (tmp_path / str(fast)).mkdir()           # the same bag name: it is in the metadata
+        rec = recording.BagRecorder(str(tmp_path / str(fast) / "bag"),
+                                    {"umbrella_sim.parameters": {}})
+        assert rec._appender is not None        # this mcap version has what it needs
+        if not fast:
+            rec._appender = None
+        for topic in ("/x", "/y", "/z"):
+            rec.add_channel(topic, Float64, recording.QoSProfile(depth=10))
+        for i in range(20000):                  # ~30 chunks of 64 KiB
+            for k, topic in enumerate(("/x", "/y", "/z")[:1 + i % 3]):
+                assert rec.write(topic, Float64(data=float(i * 3 + k)), i * 1000 + k)
+        rec.start_segment({"a": "1"}, gap_ns=1000)
+        for i in range(10):
+            assert rec.write("/y", Float64(data=-float(i)), i * 1000)
+        rec.close()
+        assert rec.error is None
+        with open(rec.path, "rb") as fh:
+            files.append(fh.read())
+    assert len(files[0]) > 20 * recording.CHUNK_SIZE // 4
+    assert files[0] == files[1]
