@@ -76,8 +76,12 @@ def test_background_close_run_counts_every_queued_message(tmp_path):
 
 
 def test_fast_message_records_are_byte_for_byte_those_of_mcap_add_message(tmp_path):
-    """The recorder's own Message records and message indexes (_MessageAppender) write the
-    same file as mcap's Writer.add_message: several channels, many chunks, a segment."""
+    """
+    Write with the recorder's own Message records, and with mcap's Writer.add_message.
+
+    _MessageAppender and its packed message indexes give the same file, byte for byte:
+    several channels, many chunks, a segment.
+    """
     files = []
     for fast in (True, False):
         (tmp_path / str(fast)).mkdir()           # the same bag name: it is in the metadata

@@ -473,9 +473,9 @@ class _MessageAppender:
     What ``Writer.add_message`` does for a chunked writer (the statistics, the chunk's time
     range and message index, the record, closing a full chunk) without building a Message
     object and writing its five fields one by one, and with each chunk's message indexes
-    packed at once (_PackedMessageIndex).  ``create`` returns None where this mcap version lacks the
-    members it uses; ``add_message`` serves then.  The files are byte for byte those of
-    ``add_message`` (tests/test_recording.py).
+    packed at once (_PackedMessageIndex).  ``create`` returns None where this mcap version
+    lacks the members it uses; ``add_message`` serves then.  The files are byte for byte
+    those of ``add_message`` (tests/test_recorder_background.py).
     """
 
     def __init__(self, stats, chunk, finish_full_chunk):
