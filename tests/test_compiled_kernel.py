@@ -132,6 +132,9 @@ def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
     """
     The Sample built from one compiled call (stresses, peaks, energies, residual) vs numpy.
 
+    The advance's own outputs of the state it reached and a separate umbrella_sample call
+    give the same bits.
+
     Also with an elastic law (_kernel_nonlinear.c): the membrane stress in the fibre
     stresses, the nonlinear strain energy, the damped model's energies.
     """
@@ -145,6 +148,12 @@ def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
     for block in (1000, 1000, 300, 2000):
         sim.advance(block)
         fast = sim.sample()
+        kernel = sim.engine.integrator.kernel
+        assert kernel._final_of is sim.state          # from what the advance computed
+        kernel._final_of = None                        # from umbrella_sample: the same bits
+        again = sim.sample()
+        for f in fields(fast):
+            assert np.array_equal(getattr(fast, f.name), getattr(again, f.name)), f.name
         with monkeypatch.context() as mp:
             mp.setattr(FiniteElementEngine, "sample_outputs", lambda self, s, stage: None)
             ref = sim.sample()

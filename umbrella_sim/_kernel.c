@@ -160,6 +160,7 @@ typedef struct {
      * step umbrella_advance takes next (pk_sig, pk_rate) and at its end (pk_sig1, pk_rate1):
      * the step's peak is that of their cubic Hermite interpolant (output_row) */
     double *pk_sig, *pk_rate, *pk_sig1, *pk_rate1;
+    double last_residual;  /* max(|Phi|, |J v|) of the last state step_taken checked */
 } Ctx;
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
@@ -1544,6 +1545,24 @@ static double hermite_peak(double s0, double d0, double s1, double d1) {
     return best;
 }
 
+/* A state's own peak stress of each body (leaf, its x, link, its x into peaks): the largest
+ * max(|top|, |bottom|) over its stress points, the first point holding it (np.argmax);
+ * sig: the fibre stresses, top of every point then bottom */
+static void state_peaks(const Model *m, const double *sig, double *peaks) {
+    int first = 0, npts = m->n_stress_leaf + m->n_stress_link;
+    for (int body = 0; body < 2; body++) {
+        int np = body == 0 ? m->n_stress_leaf : m->n_stress_link, at = first;
+        double best = -1.0;
+        for (int k = first; k < first + np; k++) {
+            double top = fabs(sig[k]), bot = fabs(sig[npts + k]), a = top > bot ? top : bot;
+            if (a > best) { best = a; at = k; }
+        }
+        peaks[2 * body] = best;
+        peaks[2 * body + 1] = m->stress_x[at];
+        first += np;
+    }
+}
+
 /* The outputs of the state (q, v, p = M v) into column k of out; kq_known: K q at q (Kb q
  * with a law) if the caller has it, else NULL.  The peak stress: with h_step > 0, the largest
  * over the step of length h_step that ended at this state, whose start left its fibre stress
@@ -1574,39 +1593,40 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
     else {
         const double *membrane = membrane_stress(x, q);
         for (int k2 = 0; k2 < npts; k2++) fibre_stress(m, q, membrane, k2, &sig[k2], &sig[npts + k2]);
+        double peaks[4];
+        state_peaks(m, sig, peaks);
+        SET(F_PEAK_LEAF, peaks[0]);
+        SET(F_PEAK_LEAF_X, peaks[1]);
+        SET(F_PEAK_LINK, peaks[2]);
+        SET(F_PEAK_LINK_X, peaks[3]);
     }
-    for (int body = 0; body < 2; body++) {
+    for (int body = 0; h_step > 0.0 && body < 2; body++) {   /* the step's peak */
         int np = body == 0 ? m->n_stress_leaf : m->n_stress_link;
         double best = -1.0, floor = -1.0;
         int at = first;
-        /* Over a step: the largest |sigma| at the step's ends, floor, is at most the peak; a
-         * point whose cubics stay below it cannot hold the peak, and the Hermite bound
+        /* The largest |sigma| at the step's ends, floor, is at most the peak; a point whose
+         * cubics stay below it cannot hold the peak, and the Hermite bound
          * |p| <= max(|s0|, |s1|) + 4/27 (|d0| + |d1|) (p's basis: h00 + h01 = 1, both >= 0,
          * |h10|, |h11| <= 4/27) leaves most points out before their root solves: the same
          * result as taking every point (the margin covers the round-off of the bound) */
-        if (h_step > 0.0)
-            for (int k2 = first; k2 < first + np; k2++) {
-                int kb = npts + k2;
-                double e[4] = {fabs(sig0[k2]), fabs(sig[k2]), fabs(sig0[kb]), fabs(sig[kb])};
-                for (int j = 0; j < 4; j++) if (e[j] > floor) floor = e[j];
-            }
         for (int k2 = first; k2 < first + np; k2++) {
-            double a, top = sig[k2], bot = sig[npts + k2];
-            if (h_step > 0.0) {
-                int kb = npts + k2;
-                double d0t = h_step * rate0[k2], d1t = h_step * rate[k2];
-                double d0b = h_step * rate0[kb], d1b = h_step * rate[kb];
-                double et = fabs(sig0[k2]) > fabs(top) ? fabs(sig0[k2]) : fabs(top);
-                double eb = fabs(sig0[kb]) > fabs(bot) ? fabs(sig0[kb]) : fabs(bot);
-                double ut = et + (4.0 / 27.0) * (fabs(d0t) + fabs(d1t));
-                double ub = eb + (4.0 / 27.0) * (fabs(d0b) + fabs(d1b));
-                if ((ut > ub ? ut : ub) * (1.0 + 1e-12) < floor) continue;
-                double pt = ut * (1.0 + 1e-12) < floor ? et : hermite_peak(sig0[k2], d0t, top, d1t);
-                double pb = ub * (1.0 + 1e-12) < floor ? eb : hermite_peak(sig0[kb], d0b, bot, d1b);
-                a = pt > pb ? pt : pb;
-            } else {
-                a = fabs(top) > fabs(bot) ? fabs(top) : fabs(bot);
-            }
+            int kb = npts + k2;
+            double e[4] = {fabs(sig0[k2]), fabs(sig[k2]), fabs(sig0[kb]), fabs(sig[kb])};
+            for (int j = 0; j < 4; j++) if (e[j] > floor) floor = e[j];
+        }
+        for (int k2 = first; k2 < first + np; k2++) {
+            int kb = npts + k2;
+            double top = sig[k2], bot = sig[kb];
+            double d0t = h_step * rate0[k2], d1t = h_step * rate[k2];
+            double d0b = h_step * rate0[kb], d1b = h_step * rate[kb];
+            double et = fabs(sig0[k2]) > fabs(top) ? fabs(sig0[k2]) : fabs(top);
+            double eb = fabs(sig0[kb]) > fabs(bot) ? fabs(sig0[kb]) : fabs(bot);
+            double ut = et + (4.0 / 27.0) * (fabs(d0t) + fabs(d1t));
+            double ub = eb + (4.0 / 27.0) * (fabs(d0b) + fabs(d1b));
+            if ((ut > ub ? ut : ub) * (1.0 + 1e-12) < floor) continue;
+            double pt = ut * (1.0 + 1e-12) < floor ? et : hermite_peak(sig0[k2], d0t, top, d1t);
+            double pb = ub * (1.0 + 1e-12) < floor ? eb : hermite_peak(sig0[kb], d0b, bot, d1b);
+            double a = pt > pb ? pt : pb;
             if (a > best) { best = a; at = k2; }
         }
         SET(body == 0 ? F_PEAK_LEAF : F_PEAK_LINK, best);
@@ -1670,6 +1690,7 @@ static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
         double a = fabs(jrow_dot(x->jrow_idx, x->jrow_val, c, v1));
         if (!(a <= r)) r = a;
     }
+    x->last_residual = r;
     for (int i = 0; i < m->n; i++) if (!isfinite(q1[i]) || !isfinite(v1[i])) return NON_FINITE;
     if (!(r <= div_tol)) { *residual = r; return DIVERGED; }
     if (!locked && sleeve_height(x, q1) - m->y_stop <= 0.0) return CROSSING;
@@ -1679,10 +1700,12 @@ static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
 int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double *lam,
                      double *p, long k0, double h, int n_steps, double force, double tol,
                      double phi_tol, int max_iter, double div_tol, double *acc, double *out,
-                     int cap, int *n_done, int *iterations, double *residual, double *accel) {
+                     int cap, int *n_done, int *iterations, double *residual, double *accel,
+                     double *final) {
     const Model *m = x->m;
     int n = m->n, nc = nc_of(m, locked, rigid);
     int status = OK, its_total = 0;
+    double final_residual = 0.0;
     *n_done = 0;
     x->q0_products = 0;
     fibre_stress_and_rate(x, q, v, x->pk_sig, x->pk_rate);   /* the first step's start */
@@ -1713,9 +1736,20 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         memcpy(x->kq0, x->kq1, sizeof(double) * n);
         output_row(x, q, v, p, x->kq0, t1, locked ? 1 : 0, force, acc[0], acc[1], t1 - t0,
                    out, cap, k);
+        final_residual = x->last_residual;
         *n_done = k + 1;
     }
     *iterations = its_total;
+    if (final && *n_done > 0) {
+        /* what umbrella_sample gives for the state reached, from what the last step computed:
+         * its row with the state's own peaks, its residual, its fibre stresses (output_row
+         * left them in pk_sig) */
+        int npts = m->n_stress_leaf + m->n_stress_link;
+        for (int f = 0; f < N_FIELDS; f++) final[f] = out[(size_t)f * cap + *n_done - 1];
+        state_peaks(m, x->pk_sig, final + F_PEAK_LEAF);   /* leaf, its x, link, its x */
+        final[N_FIELDS] = final_residual;
+        memcpy(final + N_FIELDS + 1, x->pk_sig, sizeof(double) * 2 * npts);
+    }
     return status;
 }
 
@@ -1735,13 +1769,14 @@ typedef struct {
     int n_done, iterations;
     double residual;
     double *accel;
+    double *final;   /* NULL, or N_FIELDS + 1 + 2 points: umbrella_sample of the state reached */
 } AdvanceCall;
 
 int umbrella_advance_call(Ctx *x, AdvanceCall *a) {
     return umbrella_advance(x, a->locked, a->rigid, a->q, a->v, a->lam, a->p, a->k0, a->h,
                             a->n_steps, a->force, a->tol, a->phi_tol, a->max_iter, a->div_tol,
                             a->acc, a->out, a->cap, &a->n_done, &a->iterations, &a->residual,
-                            a->accel);
+                            a->accel, a->final);
 }
 
 /* one output row for an arbitrary state (after the lock step, tests) */

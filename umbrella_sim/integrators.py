@@ -497,7 +497,7 @@ class _AdvanceCall(ctypes.Structure):
                 ("max_iter", ctypes.c_int), ("div_tol", ctypes.c_double),
                 ("q", _dp), ("v", _dp), ("lam", _dp), ("p", _dp), ("acc", _dp), ("out", _dp),
                 ("cap", ctypes.c_int), ("n_done", ctypes.c_int), ("iterations", ctypes.c_int),
-                ("residual", ctypes.c_double), ("accel", _dp)]
+                ("residual", ctypes.c_double), ("accel", _dp), ("final", _dp)]
 
 
 class _SampleCall(ctypes.Structure):
@@ -613,8 +613,15 @@ class CompiledKernel:
         self._ptr = {k: _dptr(getattr(self, k)) for k in ("q", "v", "p", "lam", "acc", "accel")}
         self._its = ctypes.c_int(0)
         ptr = self._ptr
+        # umbrella_sample of the state each advance reaches, made by that call (sample())
+        from .outputs import STEP_FIELDS
+        self._points = len(m.leaf.stress_x) + len(m.link.stress_x)
+        self._final_fields = len(STEP_FIELDS)
+        self._final = np.zeros(len(STEP_FIELDS) + 1 + 2 * self._points)
+        self._final_cs = self._final_of = None
         self._call = _AdvanceCall(phi_tol=PHI_TOLERANCE, q=ptr["q"], v=ptr["v"], lam=ptr["lam"],
-                                  p=ptr["p"], acc=ptr["acc"], accel=ptr["accel"])
+                                  p=ptr["p"], acc=ptr["acc"], accel=ptr["accel"],
+                                  final=_dptr(self._final))
         self._call_ref = ctypes.byref(self._call)
         self._setting = None     # what _call holds besides the state and k0, n_steps
         self._set_capacity(capacity)
@@ -689,7 +696,10 @@ class CompiledKernel:
             (call.locked, call.rigid, call.h, call.force, call.tol, call.max_iter,
              call.div_tol) = setting
         status = self.lib.umbrella_advance_call(self._ctx, self._call_ref)
-        return status, call.n_done, call.iterations, call.residual
+        done = call.n_done
+        if done:      # _final holds the Sample outputs of the state state() makes next
+            self._final_cs, self._final_of = cs, None
+        return status, done, call.iterations, call.residual
 
     def state(self, t: float, nc: int) -> DynamicState:
         """Return the advanced state; advancing from it next time needs no load."""
@@ -699,6 +709,8 @@ class CompiledKernel:
             "t": t, "q": b[:n], "qd": b[n:2 * n], "qdd": b[3 * n:4 * n],
             "multipliers": b[4 * n:4 * n + nc], "momentum": b[2 * n:3 * n],
             "dissipation": self.acc.item(2)})
+        if self._final_cs is not None and self._final_of is None:
+            self._final_of = self._made
         return self._made
 
     def sample(self, s: DynamicState, cs: ConstraintSet):
@@ -709,6 +721,9 @@ class CompiledKernel:
         valid until the next call; stress: (2, points) top and bottom fibre stress at every
         stress point, leaf first; residual: max(|Phi|, |J q'|).
         """
+        if s is self._final_of and cs is self._final_cs:   # the advance that made s left them
+            f, k = self._final, self._final_fields
+            return f[:k], f[k + 1:].reshape(2, self._points).copy(), f.item(k)
         if self._sample_buf is None:
             from .outputs import STEP_FIELDS
             points = len(self.model.leaf.stress_x) + len(self.model.link.stress_x)
