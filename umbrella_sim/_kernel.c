@@ -1191,11 +1191,11 @@ static int phase_correction_prepare(Ctx *x, int nc) {
             cap[j * r + k] = dot(n, x->pc_u + (size_t)j * n, x->pc_w + (size_t)k * len)
                              + (j == k ? 1.0 / x->pc_d[j] : 0.0);
     if (lu_factor(r, cap, x->pc_piv) != OK) return SINGULAR;
-    double *c = cap + (size_t)r * r;          /* C, column by column, after the LU */
+    double *c = cap + (size_t)r * r;          /* C column-major (c[k r + j] = C_jk), after the LU */
     for (int k = 0; k < r; k++) {
         for (int j = 0; j < r; j++) inv[j] = j == k ? 1.0 : 0.0;
         lu_solve(r, cap, x->pc_piv, inv);
-        for (int j = 0; j < r; j++) c[j * r + k] = inv[j];
+        memcpy(c + (size_t)k * r, inv, sizeof(double) * r);
     }
     x->pc_w_nc = nc;
     x->pc_w_age = 0;
@@ -1208,14 +1208,17 @@ static void phase_correction_update(Ctx *x, int nc, double *upd) {
     double *s = x->pc_s, *t = x->pc_work;
     const double *c = x->pc_cap + (size_t)r * r;
     modal_dots(r, n, x->pc_u, upd, s);
-    for (int j = 0; j < r; j++) {
-        double a = 0.0;
-        for (int k = 0; k < r; k++) a += c[j * r + k] * s[k];
-        t[j] = a;
-        /* U^T of the corrected update: s - U^T W_q C s = diag(1/d) C s (C^-1 = diag(1/d) +
-         * U^T W_q), what q gains along the modes */
-        x->pc_eta_dq[j] += a / x->pc_d[j];
+    /* t = C s, column by column: each t_j summed over k in order, the r sums side by side
+     * (a row-by-row product is one latency-bound chain per row) */
+    for (int j = 0; j < r; j++) t[j] = 0.0;
+    for (int k = 0; k < r; k++) {
+        const double *ck = c + (size_t)k * r;
+        double sk = s[k];
+        for (int j = 0; j < r; j++) t[j] += ck[j] * sk;
     }
+    /* U^T of the corrected update: s - U^T W_q C s = diag(1/d) C s (C^-1 = diag(1/d) +
+     * U^T W_q), what q gains along the modes */
+    for (int j = 0; j < r; j++) x->pc_eta_dq[j] += t[j] / x->pc_d[j];
     modal_combine(r, len, x->pc_w, t, -1.0, upd);
 }
 
