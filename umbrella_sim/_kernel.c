@@ -5,7 +5,8 @@
  * against): discrete-gradient residual, Newton iterations on a once-factored iteration
  * matrix, velocity projection in the mass metric with the kinetic energy kept, and the
  * per-step outputs the node publishes (tip deflection, fibre stress peaks and where,
- * sleeve position and velocity, energies, work).  Plain C on double arrays, loaded with
+ * sleeve position and velocity, energies, work), and a Sample's figures of the state a call
+ * reaches (sample_vector: reference stresses, sleeve reaction, residual, every fibre stress).  Plain C on double arrays, loaded with
  * ctypes: no Python or numpy headers.
  *
  * Structure used so that the cost grows linearly with the mesh:
@@ -19,8 +20,9 @@
  *     pivoted dense LU of the small Schur complement on the border;
  *   - M(q) is never formed: products M(q) v use the band and a few border vectors;
  *   - stage 2's phase correction (integrators.ModalPhaseCorrection) is a rank-r term
- *     U diag(c) U^T (r <= ~8 modes) in the residual and the energy; left out of the
- *     constant iteration matrix, it is put back into each Newton update mode by mode.
+ *     U diag(d) U^T (r = 8 modes at N = 1, 14-16 above) in the residual and the energy;
+ *     left out of the constant iteration matrix, it is put back into each Newton update by
+ *     Woodbury on the factored matrix of a recent step (phase_correction_prepare).
  * The rigid-FE mode (every elastic coordinate constrained) goes through the same code with
  * a border as large as the mesh, so there it costs what a dense solve costs.
  *
@@ -50,6 +52,10 @@ typedef struct {
     const int *stress_idx;                               /* points x width: q indices */
     const double *stress_top, *stress_bottom;            /* points x width */
     const double *stress_x;                              /* points */
+    /* the reference stresses (model.reference_stresses): the leaf's stress point at O'';
+     * the link element holding l3/2 and where in it (0..1) */
+    int ref_leaf_point, ref_link_element;
+    double ref_link_frac;
 } Model;
 
 enum { OK = 0, NO_CONVERGENCE = 1, NON_FINITE = 2, SINGULAR = 3, NOT_PD = 4, NO_MEMORY = 5,
@@ -59,6 +65,14 @@ enum { OK = 0, NO_CONVERGENCE = 1, NON_FINITE = 2, SINGULAR = 3, NOT_PD = 4, NO_
 enum { F_TIME, F_STAGE, F_ALPHA1, F_ALPHA1_RATE, F_SLEEVE_POS, F_SLEEVE_VEL, F_FORCE,
        F_TIP_AXIAL, F_TIP_TRANSVERSE, F_PEAK_LEAF, F_PEAK_LEAF_X, F_PEAK_LINK, F_PEAK_LINK_X,
        F_KINETIC, F_STRAIN, F_WORK, F_LOCK_LOSS, N_FIELDS };
+
+/* what a Sample holds of a state beyond q, qd, q'' and the multipliers, in this order
+ * (integrators.SAMPLE_VECTOR), then the fibre stress at every stress point (top of every
+ * point, then bottom; leaf points first) */
+enum { S_ALPHA1, S_ALPHA2, S_ALPHA1_RATE, S_ALPHA2_RATE, S_SLEEVE_POS, S_SLEEVE_VEL,
+       S_TIP_AXIAL, S_TIP_TRANSVERSE, S_PEAK_LEAF, S_PEAK_LEAF_X, S_PEAK_LINK, S_PEAK_LINK_X,
+       S_STRESS_LEAF_JOINT, S_STRESS_LINK_MID, S_REACTION_X, S_REACTION_Y, S_KINETIC, S_STRAIN,
+       S_RESIDUAL, N_SAMPLE };
 
 #define JW 3   /* nonzeros of a joint/stop constraint row */
 
@@ -1670,6 +1684,38 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
 #undef SET
 }
 
+/* The Sample vector (S_*, then the fibre stresses) of a state (q, v, lam) from its output
+ * row (row[f * stride], an output_row of the state), its fibre stresses sig (pk_sig1's
+ * layout) and its residual max(|Phi|, |J v|): the state's own peaks (state_peaks), the
+ * reference stresses (model.reference_stresses: the leaf's top fibre at O'', the link's
+ * interpolated at l3/2) and the sleeve's reaction (solver's sleeve_reaction: axle lam[2],
+ * stop lam[3] once locked) */
+static void sample_vector(const Model *m, int locked, const double *q, const double *v,
+                          const double *lam, const double *row, size_t stride,
+                          const double *sig, double residual, double *out) {
+    int npts = m->n_stress_leaf + m->n_stress_link, ia = m->i_alpha2;
+    out[S_ALPHA1] = q[0];
+    out[S_ALPHA2] = q[ia];
+    out[S_ALPHA1_RATE] = v[0];
+    out[S_ALPHA2_RATE] = v[ia];
+    out[S_SLEEVE_POS] = row[F_SLEEVE_POS * stride];
+    out[S_SLEEVE_VEL] = row[F_SLEEVE_VEL * stride];
+    out[S_TIP_AXIAL] = row[F_TIP_AXIAL * stride];
+    out[S_TIP_TRANSVERSE] = row[F_TIP_TRANSVERSE * stride];
+    state_peaks(m, sig, out + S_PEAK_LEAF);    /* leaf, its x, link, its x */
+    const double *link_top = sig + m->n_stress_leaf;
+    int j = m->ref_link_element;
+    out[S_STRESS_LEAF_JOINT] = sig[m->ref_leaf_point];
+    out[S_STRESS_LINK_MID] = (1.0 - m->ref_link_frac) * link_top[2 * j]
+                             + m->ref_link_frac * link_top[2 * j + 1];
+    out[S_REACTION_X] = lam[2];
+    out[S_REACTION_Y] = locked ? lam[3] : 0.0;
+    out[S_KINETIC] = row[F_KINETIC * stride];
+    out[S_STRAIN] = row[F_STRAIN * stride];
+    out[S_RESIDUAL] = residual;
+    memcpy(out + N_SAMPLE, sig, sizeof(double) * 2 * npts);
+}
+
 /* Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from the state (q, v, lam, p) at t_k0,
  * updated in place after every committed step, with one output row per step (out: N_FIELDS
  * x cap, field-major) and accel = (v1 - v0) / h of the last one.  acc = {work, lock_loss}
@@ -1743,16 +1789,10 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         *n_done = k + 1;
     }
     *iterations = its_total;
-    if (final && *n_done > 0) {
-        /* what umbrella_sample gives for the state reached, from what the last step computed:
-         * its row with the state's own peaks, its residual, its fibre stresses (output_row
-         * left them in pk_sig) */
-        int npts = m->n_stress_leaf + m->n_stress_link;
-        for (int f = 0; f < N_FIELDS; f++) final[f] = out[(size_t)f * cap + *n_done - 1];
-        state_peaks(m, x->pk_sig, final + F_PEAK_LEAF);   /* leaf, its x, link, its x */
-        final[N_FIELDS] = final_residual;
-        memcpy(final + N_FIELDS + 1, x->pk_sig, sizeof(double) * 2 * npts);
-    }
+    if (final && *n_done > 0)   /* umbrella_sample of the state reached, from its last step's
+                                  * row, residual and fibre stresses (left in pk_sig) */
+        sample_vector(m, locked, q, v, lam, out + *n_done - 1, (size_t)cap, x->pk_sig,
+                      final_residual, final);
     return status;
 }
 
@@ -1772,7 +1812,7 @@ typedef struct {
     int n_done, iterations;
     double residual;
     double *accel;
-    double *final;   /* NULL, or N_FIELDS + 1 + 2 points: umbrella_sample of the state reached */
+    double *final;   /* NULL, or N_SAMPLE + 2 points: umbrella_sample of the state reached */
 } AdvanceCall;
 
 int umbrella_advance_call(Ctx *x, AdvanceCall *a) {
@@ -1859,17 +1899,14 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
     return OK;
 }
 
-/* What a Sample holds beyond the state (solver.UmbrellaSimulator._sample), for an arbitrary
- * state (q, v, p = M(q) v): one output row (row[N_FIELDS]; time, stage, force, work and lock
- * loss left 0), the fibre stress at every stress point (stress: top fibre of every point,
- * then bottom, leaf points first) and max(|Phi|, |J v|) in *residual. */
+/* The Sample vector (sample_vector: S_* then the fibre stresses) of an arbitrary state
+ * (q, v, p = M(q) v, lam) into out[N_SAMPLE + 2 points] */
 void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const double *v,
-                     const double *p, double *row, double *stress, double *residual) {
+                     const double *p, const double *lam, double *out) {
     const Model *m = x->m;
-    int npts = m->n_stress_leaf + m->n_stress_link;
     int nc = nc_of(m, locked, rigid);
+    double row[N_FIELDS];
     output_row(x, q, v, p, NULL, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, 0.0, row, 1, 0);
-    memcpy(stress, x->pk_sig1, sizeof(double) * 2 * npts);   /* output_row's, same order */
     constraints(x, q, locked, rigid, x->phi);
     jacobian(x, q, locked, rigid, x->jm_idx, x->jm_val);
     double r = max_abs(nc, x->phi);
@@ -1877,17 +1914,16 @@ void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const doubl
         double a = fabs(jrow_dot(x->jm_idx, x->jm_val, c, v));
         if (!(a <= r)) r = a;
     }
-    *residual = r;
+    sample_vector(m, locked, q, v, lam, row, 1, x->pk_sig1, r, out);   /* output_row's */
 }
 
 /* umbrella_sample's arguments in one struct (integrators.py _SampleCall), as AdvanceCall */
 typedef struct {
     int locked, rigid;
-    const double *q, *v, *p;
-    double *row, *stress;
-    double residual;
+    const double *q, *v, *p, *lam;
+    double *out;
 } SampleCall;
 
 void umbrella_sample_call(Ctx *x, SampleCall *a) {
-    umbrella_sample(x, a->locked, a->rigid, a->q, a->v, a->p, a->row, a->stress, &a->residual);
+    umbrella_sample(x, a->locked, a->rigid, a->q, a->v, a->p, a->lam, a->out);
 }

@@ -488,7 +488,20 @@ class _ModelStruct(ctypes.Structure):
                [("c_full", _dp), ("g_full", _dp), ("body", _ip), ("elastic_idx", _ip),
                 ("sbar", _dp), ("isbar", _dp), ("mff_band", _dp), ("k_band", _dp),
                 ("w_band", _dp), ("stress_idx", _ip), ("stress_top", _dp),
-                ("stress_bottom", _dp), ("stress_x", _dp)]
+                ("stress_bottom", _dp), ("stress_x", _dp)] + \
+               [("ref_leaf_point", ctypes.c_int), ("ref_link_element", ctypes.c_int),
+                ("ref_link_frac", ctypes.c_double)]
+
+
+#: what a compiled Sample vector holds (_kernel.c sample_vector, S_* in this order), then the
+#: fibre stress at every stress point (top of every point, then bottom; leaf points first);
+#: the names are the Sample's, but the sleeve reaction's two components
+SAMPLE_VECTOR = ("alpha1", "alpha2", "alpha1_rate", "alpha2_rate", "sleeve_position",
+                 "sleeve_velocity", "tip_axial", "tip_transverse", "peak_stress_leaf",
+                 "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x",
+                 "stress_leaf_joint", "stress_link_mid", "sleeve_reaction_x",
+                 "sleeve_reaction_y", "kinetic_energy", "strain_energy",
+                 "constraint_residual")
 
 
 class _AdvanceCall(ctypes.Structure):
@@ -507,7 +520,7 @@ class _SampleCall(ctypes.Structure):
     """Mirror of ``SampleCall`` in _kernel.c: umbrella_sample's arguments."""
 
     _fields_ = [("locked", ctypes.c_int), ("rigid", ctypes.c_int), ("q", _dp), ("v", _dp),
-                ("p", _dp), ("row", _dp), ("stress", _dp), ("residual", ctypes.c_double)]
+                ("p", _dp), ("lam", _dp), ("out", _dp)]
 
 
 _KERNEL_ERRORS = {1: "Newton did not converge", 2: "Newton iterate became non-finite",
@@ -598,6 +611,8 @@ class CompiledKernel:
             n_stress_leaf=n_leaf, n_stress_link=n_link, stress_width=s_idx.shape[1],
             l1=m.params.l1, l3=m.params.l3, y_stop=m.y_stop, j0_leaf=m.leaf.j0,
             j0_link=link.j0, pbar0=link.p_bar[0], link_mass=link.mass,
+            **dict(zip(("ref_leaf_point", "ref_link_element", "ref_link_frac"),
+                       m.reference_stress_points)),
             **{k: _dptr(v) for k, v in keep.items()},
             **{k: v.ctypes.data_as(_ip) for k, v in ints.items()})
         ctx = lib.umbrella_new(ctypes.byref(self.struct))
@@ -617,10 +632,8 @@ class CompiledKernel:
         self._its = ctypes.c_int(0)
         ptr = self._ptr
         # umbrella_sample of the state each advance reaches, made by that call (sample())
-        from .outputs import STEP_FIELDS
         self._points = len(m.leaf.stress_x) + len(m.link.stress_x)
-        self._final_fields = len(STEP_FIELDS)
-        self._final = np.zeros(len(STEP_FIELDS) + 1 + 2 * self._points)
+        self._final = np.zeros(len(SAMPLE_VECTOR) + 2 * self._points)
         self._final_cs = self._final_of = None
         self._call = _AdvanceCall(phi_tol=PHI_TOLERANCE, q=ptr["q"], v=ptr["v"], lam=ptr["lam"],
                                   p=ptr["p"], acc=ptr["acc"], accel=ptr["accel"],
@@ -707,6 +720,7 @@ class CompiledKernel:
     def state(self, t: float, nc: int) -> DynamicState:
         """Return the advanced state; advancing from it next time needs no load."""
         b, n = self._state_buf.copy(), len(self.q)
+        b.flags.writeable = False     # immutable: a Sample of it shares its arrays
         # once per publication: the frozen dataclass's per-field __init__ costs 3 us
         self._made = build_frozen(DynamicState, {
             "t": t, "q": b[:n], "qd": b[n:2 * n], "qdd": b[3 * n:4 * n],
@@ -716,38 +730,37 @@ class CompiledKernel:
             self._final_of = self._made
         return self._made
 
-    def sample(self, s: DynamicState, cs: ConstraintSet):
+    def sample(self, s: DynamicState, cs: ConstraintSet) -> np.ndarray:
         """
-        Return (row, stress, residual) of a state with its momentum (_kernel.c umbrella_sample).
+        Return the Sample vector of a state with its momentum (_kernel.c umbrella_sample).
 
-        row: the STEP_FIELDS of s (time, stage, force, work, lock loss left 0), a buffer
-        valid until the next call; stress: (2, points) top and bottom fibre stress at every
-        stress point, leaf first; residual: max(|Phi|, |J q'|).
+        A new array: SAMPLE_VECTOR, then the top and bottom fibre stress at every stress
+        point (leaf first).  The state an advance reached has it from that call.
         """
-        if s is self._final_of and cs is self._final_cs:   # the advance that made s left them
-            f, k = self._final, self._final_fields
-            return f[:k], f[k + 1:].reshape(2, self._points).copy(), f.item(k)
+        if s is self._final_of and cs is self._final_cs:   # the advance that made s left it
+            return self._final.copy()
         if self._sample_buf is None:
-            from .outputs import STEP_FIELDS
-            points = len(self.model.leaf.stress_x) + len(self.model.link.stress_x)
-            row, stress = np.zeros(len(STEP_FIELDS)), np.zeros((2, points))
+            out = np.zeros(len(self._final))
             ptr = self._ptr
             # one call struct on the buffers (the state last made), one for any other state
-            calls = [_SampleCall(row=_dptr(row), stress=_dptr(stress)) for _ in range(2)]
-            calls[0].q, calls[0].v, calls[0].p = ptr["q"], ptr["v"], ptr["p"]
-            self._sample_buf = (row, stress, calls, [ctypes.byref(c) for c in calls],
-                                [None, None])
-        row, stress, calls, refs, flags = self._sample_buf
+            calls = [_SampleCall(out=_dptr(out)) for _ in range(2)]
+            calls[0].q, calls[0].v, calls[0].p, calls[0].lam = (ptr["q"], ptr["v"], ptr["p"],
+                                                                ptr["lam"])
+            self._sample_buf = (out, calls, [ctypes.byref(c) for c in calls], [None, None])
+        out, calls, refs, flags = self._sample_buf
         which = 0 if s is self._made else 1          # the buffers hold it: no conversion
         call = calls[which]
         if which:
+            lam = np.zeros(len(self.lam))
+            lam[:len(s.multipliers)] = s.multipliers
             arrays = [np.ascontiguousarray(a, dtype=float) for a in (s.q, s.qd, s.momentum)]
-            call.q, call.v, call.p = (_dptr(a) for a in arrays)
+            arrays.append(lam)
+            call.q, call.v, call.p, call.lam = (_dptr(a) for a in arrays)
         if flags[which] is not cs:                   # (a ctypes setattr costs ~0.2 us)
             call.locked, call.rigid = cs.locked, cs.rigid
             flags[which] = cs
         self.lib.umbrella_sample_call(self._ctx, refs[which])
-        return row, stress.copy(), call.residual
+        return out.copy()
 
     def find_crossing(self, s: DynamicState, h: float, force: float, cs: ConstraintSet,
                       tol: float, max_iter: int, div_tol: float, event_tol: float):

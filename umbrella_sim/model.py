@@ -575,7 +575,7 @@ class UmbrellaModel:
         return UmbrellaModel.stresses(self, qd)
 
     @cached_property
-    def _reference_stress_points(self) -> tuple[int, int, float]:
+    def reference_stress_points(self) -> tuple[int, int, float]:
         """(leaf stress point at O'', link element holding l3/2, where in it)."""
         n = self.params.elements_per_segment
         x_mid = 0.5 * self.params.l3
@@ -588,9 +588,10 @@ class UmbrellaModel:
         Return the reference top-fibre stresses.
 
         On the leaf at O'' (end of the inner segment) and at mid-link
-        (linear within the element holding l3/2).
+        (linear within the element holding l3/2).  The compiled twin: _kernel.c
+        sample_vector, on reference_stress_points.
         """
-        joint, j, frac = self._reference_stress_points
+        joint, j, frac = self.reference_stress_points
         # plain floats (.item): once per publication
         return (float(leaf_top.item(joint)),
                 (1.0 - frac) * link_top.item(2 * j) + frac * link_top.item(2 * j + 1))

@@ -15,12 +15,13 @@ def build_frozen(cls, values: dict):
     Return an instance of the frozen dataclass cls holding values (every field, trusted).
 
     The per-publication hot path: a frozen dataclass's __init__ sets each field through
-    object.__setattr__ (~0.1 us a field); this fills the instance's __dict__ at once.
+    object.__setattr__ (~0.1 us a field); values, a dict the caller made for it, becomes the
+    instance's __dict__ as it is.
     """
     if len(values) != _field_count(cls):
         raise TypeError(f"{cls.__name__} has {_field_count(cls)} fields, {len(values)} given")
     obj = object.__new__(cls)
-    obj.__dict__.update(values)
+    object.__setattr__(obj, "__dict__", values)
     return obj
 
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from .forcing import ForceSchedule
 from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ConvergenceError,
-                          DynamicState, MidpointDAE, newton_tolerance)
+                          DynamicState, MidpointDAE, newton_tolerance, SAMPLE_VECTOR)
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import (build_frozen, LockEvent, RunResult, Sample, STEP_FIELDS, step_peaks,
                       step_row, StepBlock, SummaryAccumulator)
@@ -145,11 +145,11 @@ class Engine(abc.ABC):
 
     def sample_outputs(self, s: DynamicState, stage: Stage):
         """
-        Return (row, stress, residual) of s in compiled code, or None (no fast path).
+        Return the Sample vector of s from compiled code, or None (no fast path).
 
-        row: STEP_FIELDS values (state-dependent ones); stress: (2, points) top/bottom fibre
-        stress, leaf points first; residual: max(|Phi|, |J q'|).  What ``_sample`` otherwise
-        computes with numpy, in one call.
+        A new array: integrators.SAMPLE_VECTOR (figures and residual max(|Phi|, |J q'|)),
+        then the top and bottom fibre stress at every stress point, leaf points first.  What
+        ``_sample`` otherwise computes with numpy, in one call.
         """
         return None
 
@@ -674,60 +674,61 @@ class UmbrellaSimulator:
                 lock_loss: float) -> Sample:
         m, eng = self.model, self.engine
         q, qd, qdd = eng.fe_state(s)
-        fast = eng.sample_outputs(s, stage)
-        if fast is not None:          # compiled: the figures below in one call
-            row, stress, residual = fast
-            (sleeve_position, sleeve_velocity, tip_axial, tip_transverse, peak_leaf,
-             peak_leaf_x, peak_link, peak_link_x, kinetic, strain) = _pick_from_row(row)
+        stage = stage if type(stage) is Stage else Stage(stage)
+        common = {"time": s.t, "stage": stage, "q": _frozen(q), "qd": _frozen(qd),
+                  "alpha1_accel": qdd.item(0), "sleeve_force": force,
+                  "multipliers": _frozen(s.multipliers), "work": float(work),
+                  "lock_energy_loss": float(lock_loss),
+                  "damping_dissipation": float(s.dissipation)}
+        vector = eng.sample_outputs(s, stage)
+        if vector is not None:
+            # compiled (integrators.SAMPLE_VECTOR): the rest in one list and the stresses as
+            # views of the vector (a new array), without a numpy call per figure
+            n = len(SAMPLE_VECTOR)
+            values = dict(zip(SAMPLE_VECTOR, vector[:n].tolist()))
+            values["sleeve_reaction"] = (values.pop("sleeve_reaction_x"),
+                                         values.pop("sleeve_reaction_y"))
+            stress = vector[n:].reshape(2, -1)
+            stress.flags.writeable = False
             n_leaf = m.leaf.n_stress_points
-            leaf_stress, link_stress = stress[:, :n_leaf], stress[:, n_leaf:]
-            lt, kt = leaf_stress[0], link_stress[0]
-        else:
-            (lt, lb), (kt, kb) = m.stresses(q)
-            leaf_abs = np.maximum(np.abs(lt), np.abs(lb))
-            link_abs = np.maximum(np.abs(kt), np.abs(kb))
-            il, ik = int(np.argmax(leaf_abs)), int(np.argmax(link_abs))
-            tip_axial, tip_transverse = m.tip_displacement(q)
-            sleeve_position = float(m.sleeve_height(q))
-            sleeve_velocity = float(m.sleeve_height_gradient(q) @ qd)
-            peak_leaf, peak_leaf_x = float(leaf_abs[il]), float(m.leaf.stress_x[il])
-            peak_link, peak_link_x = float(link_abs[ik]), float(m.link.stress_x[ik])
-            kinetic, strain = eng.kinetic_energy(s, stage), eng.strain_energy(s, stage)
-            residual = eng.residual(s, stage)
-            leaf_stress, link_stress = np.array((lt, lb)), np.array((kt, kb))
+            values["leaf_stress"], values["link_stress"] = stress[:, :n_leaf], stress[:, n_leaf:]
+            values.update(common)
+            return build_frozen(Sample, values)
+        (lt, lb), (kt, kb) = m.stresses(q)
+        leaf_abs = np.maximum(np.abs(lt), np.abs(lb))
+        link_abs = np.maximum(np.abs(kt), np.abs(kb))
+        il, ik = int(np.argmax(leaf_abs)), int(np.argmax(link_abs))
+        tip_axial, tip_transverse = m.tip_displacement(q)
         joint_stress, mid_link_stress = m.reference_stresses(lt, kt)
         ia = m.i_alpha2
-        # every field of Sample in one dict (build_frozen: once per publication, without a
-        # frozen dataclass's per-field setattr)
+        # every field of Sample in one dict (build_frozen, without a frozen dataclass's
+        # per-field setattr)
         return build_frozen(Sample, {
-            "time": s.t, "stage": stage if type(stage) is Stage else Stage(stage),
-            "q": q.copy(), "qd": qd.copy(),
+            **common,
             "alpha1": q.item(0), "alpha2": q.item(ia), "alpha1_rate": qd.item(0),
-            "alpha2_rate": qd.item(ia), "alpha1_accel": qdd.item(0),
-            "sleeve_position": sleeve_position, "sleeve_velocity": sleeve_velocity,
-            "sleeve_force": force, "tip_axial": tip_axial, "tip_transverse": tip_transverse,
-            "leaf_stress": leaf_stress, "link_stress": link_stress,
-            "peak_stress_leaf": peak_leaf, "peak_stress_leaf_x": peak_leaf_x,
-            "peak_stress_link": peak_link, "peak_stress_link_x": peak_link_x,
+            "alpha2_rate": qd.item(ia),
+            "sleeve_position": float(m.sleeve_height(q)),
+            "sleeve_velocity": float(m.sleeve_height_gradient(q) @ qd),
+            "tip_axial": tip_axial, "tip_transverse": tip_transverse,
+            "leaf_stress": _frozen((lt, lb)), "link_stress": _frozen((kt, kb)),
+            "peak_stress_leaf": float(leaf_abs[il]),
+            "peak_stress_leaf_x": float(m.leaf.stress_x[il]),
+            "peak_stress_link": float(link_abs[ik]),
+            "peak_stress_link_x": float(m.link.stress_x[ik]),
             "stress_leaf_joint": joint_stress, "stress_link_mid": mid_link_stress,
-            "multipliers": np.array(s.multipliers, dtype=float),
             "sleeve_reaction": eng.sleeve_reaction(s, stage),
-            "kinetic_energy": kinetic, "strain_energy": strain,
-            "work": float(work), "lock_energy_loss": float(lock_loss),
-            "constraint_residual": residual,
-            "damping_dissipation": float(s.dissipation)})
+            "kinetic_energy": eng.kinetic_energy(s, stage),
+            "strain_energy": eng.strain_energy(s, stage),
+            "constraint_residual": eng.residual(s, stage)})
 
 
-#: the Sample fields that are per-step outputs too (STEP_FIELDS): taken from the step row
-_SAMPLE_FIELDS_FROM_ROW = ("sleeve_position", "sleeve_velocity", "tip_axial", "tip_transverse",
-                           "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
-                           "peak_stress_link_x", "kinetic_energy", "strain_energy")
-_ROW_INDEX = np.array([STEP_FIELDS.index(f) for f in _SAMPLE_FIELDS_FROM_ROW])
-
-
-def _pick_from_row(row: np.ndarray) -> list[float]:
-    """Return the _SAMPLE_FIELDS_FROM_ROW of a step row, as Python floats."""
-    return row.take(_ROW_INDEX).tolist()
+def _frozen(a) -> np.ndarray:
+    """Return a read-only float array of a: a itself if it is one (the compiled states')."""
+    if type(a) is np.ndarray and not a.flags.writeable and a.dtype == np.float64:
+        return a
+    a = np.array(a, dtype=float)
+    a.flags.writeable = False
+    return a
 
 
 def simulate(params: UmbrellaParams, duration: float,
