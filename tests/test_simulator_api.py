@@ -126,3 +126,21 @@ def test_sleeve_force_bounded_by_what_the_link_carries():
         sim.set_sleeve_force(euler * 1.001)
     with pytest.raises(ValueError, match="sleeve_force"):
         UmbrellaParams(sleeve_force=1e9).validated()
+
+
+@pytest.mark.parametrize("kernel", ["compiled", "numpy"])
+def test_samples_and_states_cannot_be_changed(kernel, monkeypatch):
+    """A Sample's arrays are read-only; the compiled path's share its states', read-only."""
+    monkeypatch.setenv("UMBRELLA_SIM_KERNEL", kernel)
+    sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5, elements_per_segment=2))
+    s = sim.advance(50).last
+    before = s.q.copy()
+    for name in ("q", "qd", "multipliers", "leaf_stress", "link_stress"):
+        with pytest.raises(ValueError):
+            getattr(s, name).flat[0] = 1.0
+    if kernel == "compiled":
+        assert s.q is sim.state.q
+        with pytest.raises(ValueError):
+            sim.state.q[0] = 1.0
+    sim.advance(50)
+    assert np.array_equal(s.q, before) and not np.array_equal(sim.state.q, before)
