@@ -66,7 +66,7 @@ def perturbation_growth(v0, model, h, tolerance=1e-11, duration=0.5):
 
     (lock time, [time after the lock at which |tip difference| first exceeds 1 um, 1 mm,
     10 mm, or None], max difference) between a run at the default Newton tolerance and one at
-    `tolerance` (a perturbation of ~1e-9 m per step), N = 4.
+    `tolerance` (a perturbation of up to the default's, newton_tolerance(h), per step), N = 4.
     """
     runs = []
     for tol in (None, tolerance):
@@ -86,8 +86,9 @@ def perturbation_growth(v0, model, h, tolerance=1e-11, duration=0.5):
 def sensitivity_section():
     """How far the stage-2 tip series can be predicted: perturbation growth, measured."""
     lines = ["", "## Sensitivity of the stage-2 motion", "",
-             "Two runs that differ only in the Newton tolerance (default against 1e-11: a "
-             "perturbation of ~1e-9 m a step), N = 4, 0.5 s (0.25 s at 2.5 µs): the time "
+             "Two runs that differ only in the Newton tolerance (default, "
+             "`integrators.newton_tolerance` of the step, against 1e-11: a perturbation of "
+             "up to 1e-8 m a step), N = 4, 0.5 s (0.25 s at 2.5 µs): the time "
              "after the lock at "
              "which their tip deflections first differ by more than 1 µm, 1 mm and 10 mm "
              "(negative: before the lock), "
