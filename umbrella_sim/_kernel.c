@@ -6,8 +6,8 @@
  * matrix, velocity projection in the mass metric with the kinetic energy kept, and the
  * per-step outputs the node publishes (tip deflection, fibre stress peaks and where,
  * sleeve position and velocity, energies, work), and a Sample's figures of the state a call
- * reaches (sample_vector: reference stresses, sleeve reaction, residual, every fibre stress).  Plain C on double arrays, loaded with
- * ctypes: no Python or numpy headers.
+ * reaches (sample_vector: reference stresses, sleeve reaction, residual, every fibre stress).
+ * Plain C on double arrays, loaded with ctypes: no Python or numpy headers.
  *
  * Structure used so that the cost grows linearly with the mesh:
  *   - the constant matrices (elastic mass Mff, stiffness K, rotation-deformation coupling W)
@@ -174,7 +174,6 @@ typedef struct {
      * step umbrella_advance takes next (pk_sig, pk_rate) and at its end (pk_sig1, pk_rate1):
      * the step's peak is that of their cubic Hermite interpolant (output_row) */
     double *pk_sig, *pk_rate, *pk_sig1, *pk_rate1;
-    double last_residual;  /* max(|Phi|, |J v|) of the last state step_taken checked */
 } Ctx;
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
@@ -997,6 +996,19 @@ static double max_abs(int n, const double *x) {
     return r;
 }
 
+/* A state's constraint residual max(|Phi(q)|, |J v|), J's rows at q in (I, V); leaves Phi(q)
+ * in x->phi */
+static double state_residual(Ctx *x, const double *q, const double *v, int locked, int rigid,
+                             int nc, const int *I, const double *V) {
+    constraints(x, q, locked, rigid, x->phi);
+    double r = max_abs(nc, x->phi);
+    for (int c = 0; c < nc; c++) {
+        double a = fabs(jrow_dot(I, V, c, v));
+        if (!(a <= r)) r = a;
+    }
+    return r;
+}
+
 static double phase_correction(const Ctx *x, const double *v, double *y);
 
 /* Velocity projection onto J(q1) v = 0 in the mass metric, then scaled to the kinetic energy
@@ -1722,26 +1734,22 @@ static void sample_vector(const Model *m, int locked, const double *q, const dou
  * in/out.  Stops early:
  *   CROSSING  in stage 1 the sleeve reached the stop during the next step (not committed:
  *             the caller finds the crossing time and applies the lock);
- *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, *residual set);
+ *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, *residual: its
+ *             value; otherwise that of the last state checked);
  *   others    the step failed (not committed).
  * *n_done = committed steps. */
 /* Whether umbrella_advance takes the step just made (x->q_s, v_s): OK, or why not (the
- * state became non-finite, the constraint residual diverged (its value in *residual), the
- * sleeve reached the stop: CROSSING, the caller's lock step) */
+ * state became non-finite, the constraint residual diverged, the sleeve reached the stop:
+ * CROSSING, the caller's lock step).  *residual: the new state's constraint residual. */
 static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
                       double *residual) {
     const Model *m = x->m;
     const double *q1 = x->q_s, *v1 = x->v_s;
-    /* residual of the new state (jacobian rows of q1 are in jrow_*) */
-    constraints(x, q1, locked, rigid, x->phi);
-    double r = max_abs(nc, x->phi);
-    for (int c = 0; c < nc; c++) {
-        double a = fabs(jrow_dot(x->jrow_idx, x->jrow_val, c, v1));
-        if (!(a <= r)) r = a;
-    }
-    x->last_residual = r;
+    /* (the jacobian rows of q1 are in jrow_*) */
+    double r = *residual = state_residual(x, q1, v1, locked, rigid, nc, x->jrow_idx,
+                                          x->jrow_val);
     for (int i = 0; i < m->n; i++) if (!isfinite(q1[i]) || !isfinite(v1[i])) return NON_FINITE;
-    if (!(r <= div_tol)) { *residual = r; return DIVERGED; }
+    if (!(r <= div_tol)) return DIVERGED;
     if (!locked && sleeve_height(x, q1) - m->y_stop <= 0.0) return CROSSING;
     return OK;
 }
@@ -1785,7 +1793,7 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         memcpy(x->kq0, x->kq1, sizeof(double) * n);
         output_row(x, q, v, p, x->kq0, t1, locked ? 1 : 0, force, acc[0], acc[1], t1 - t0,
                    out, cap, k);
-        final_residual = x->last_residual;
+        final_residual = *residual;   /* step_taken's, of this state */
         *n_done = k + 1;
     }
     *iterations = its_total;
@@ -1866,12 +1874,7 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
         const double *q1 = x->q_s, *v1 = x->v_s;
         for (int i = 0; i < n; i++)
             if (!isfinite(q1[i]) || !isfinite(v1[i])) { *iterations = its_total; return NON_FINITE; }
-        constraints(x, q1, 0, rigid, x->phi);
-        double r = max_abs(nc, x->phi);
-        for (int c = 0; c < nc; c++) {
-            double aj = fabs(jrow_dot(x->jrow_idx, x->jrow_val, c, v1));
-            if (!(aj <= r)) r = aj;
-        }
+        double r = state_residual(x, q1, v1, 0, rigid, nc, x->jrow_idx, x->jrow_val);
         if (!(r <= div_tol)) { *residual = r; *iterations = its_total; return DIVERGED; }
         double f = sleeve_height(x, q1) - m->y_stop;
         if (!have_best || fabs(f) < fabs(f_best)) {
@@ -1907,13 +1910,8 @@ void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const doubl
     int nc = nc_of(m, locked, rigid);
     double row[N_FIELDS];
     output_row(x, q, v, p, NULL, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, 0.0, row, 1, 0);
-    constraints(x, q, locked, rigid, x->phi);
     jacobian(x, q, locked, rigid, x->jm_idx, x->jm_val);
-    double r = max_abs(nc, x->phi);
-    for (int c = 0; c < nc; c++) {
-        double a = fabs(jrow_dot(x->jm_idx, x->jm_val, c, v));
-        if (!(a <= r)) r = a;
-    }
+    double r = state_residual(x, q, v, locked, rigid, nc, x->jm_idx, x->jm_val);
     sample_vector(m, locked, q, v, lam, row, 1, x->pk_sig1, r, out);   /* output_row's */
 }
 
