@@ -65,7 +65,7 @@ setup(
             "umbrella-sim = umbrella_sim.cli:main",
             "umbrella-replay = umbrella_sim.replay:main",
             "umbrella-compare = umbrella_sim.compare:main",
-            "deploy_controller = umbrella_sim.deploy_controller:main",
+            "deploy_controller = umbrella_sim.stop_signals:controller_main",
         ],
     },
 )

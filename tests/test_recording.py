@@ -3,6 +3,7 @@ from collections import Counter, defaultdict
 import json
 import os
 from pathlib import Path
+import re
 import signal
 import subprocess
 import sys
@@ -204,6 +205,42 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
             assert stamps == sorted(stamps)
             gaps = np.diff([w for w, _ in arrivals])
             assert abs(np.median(gaps) - period) < period / 5
+    finally:
+        probe.close()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, signum):
+    """
+    A looping replay stopped by SIGTERM or SIGINT: exit 0, no traceback, its count printed.
+
+    It still waits for its reliable subscriber to acknowledge what was sent, so the ROS
+    context must outlive the signal (rclpy's own handlers shut it down at once, and the wait
+    then raised RCLError).
+    """
+    bag = tmp_path / "loop_src"
+    assert run_cli("umbrella_sim", "simulate", "--v0", "-0.5", "--duration", "0.3",
+                   "--mcap", str(bag)).returncode == 0
+    probe = Probe("replay_stop_probe")
+    try:
+        probe.subscribe("/joint_states", JointState)
+        proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim.replay", str(bag),
+                                 "--loop", "--topics", "/joint_states",
+                                 "--wait-for-subscribers", "20"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env=ros_env())
+        try:
+            probe.wait_for_count("/joint_states", 20, timeout=30)
+            proc.send_signal(signum)
+            out, err = proc.communicate(timeout=30)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+        assert proc.returncode == 0, err
+        assert "Traceback" not in out + err, err
+        sent = int(re.search(r"replayed (\d+) messages", out).group(1))
+        probe.wait_for_count("/joint_states", sent, timeout=5)  # acknowledged = delivered
     finally:
         probe.close()
 

@@ -35,6 +35,13 @@ imported only by the node part.
 """
 from __future__ import annotations
 
+if __name__ == "__main__":
+    # python -m umbrella_sim.deploy_controller: take SIGINT/SIGTERM as stop requests before the
+    # heavy imports below (see stop_signals.py), then run this module's main as an import
+    from umbrella_sim.stop_signals import controller_main
+
+    raise SystemExit(controller_main())
+
 import collections
 from dataclasses import dataclass
 import math
@@ -44,6 +51,7 @@ import time
 
 import numpy as np
 
+from . import stop_signals
 from .params import UmbrellaParams
 from .rigid import RigidMechanism
 
@@ -432,26 +440,37 @@ def _number(name: str, value):
 
 
 def main(argv: list[str] | None = None) -> int:
+    # SIGINT/SIGTERM only ask for a stop (stop_signals.py), as in umbrella_node.  With rclpy's
+    # own handlers a signal shut the context down from the signal handler while the executor
+    # could be building its next wait set: rclpy.spin then raised RCLError ("failed to
+    # initialize wait set: the given context is not valid") and the process exited 1.
+    stop_signals.install()
     argv = list(sys.argv if argv is None else argv)
     if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
                                                if "--ros-args" in argv else len(argv)]):
         print(usage())
         return 0
+    if stop_signals.received:           # during the imports: nothing started yet
+        return 0
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
-    rclpy.init(args=argv)
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = _make_node_class()()
     except StartupError as exc:
         print(f"deploy_controller: error: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
     try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        # the timeout lets a signal's Python handler run while the executor waits
+        while not stop_signals.received:
+            executor.spin_once(timeout_sec=0.1)
     finally:
+        executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
@@ -467,7 +486,3 @@ def usage() -> str:
     lines.append("model parameters: the same names and values as umbrella_node's "
                  "(l1, alpha0, ...)")
     return "\n".join(lines)
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -245,6 +245,7 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     import rclpy
     from rclpy.duration import Duration
     from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
     chosen = [t for t in log.topics() if (with_commands or not _is_command(t))
               and (not topics or t in topics)]
@@ -259,7 +260,11 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     t0 = first.log_time + int(round(start_offset * 1e9))
     if log.time_range[1] is not None and t0 > log.time_range[1]:
         raise LogError(f"{log.path}: --start-offset {start_offset} s is past the end of the log")
-    rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args])
+    # SIGINT/SIGTERM raise KeyboardInterrupt here (stop_signals.interruptible), with the context
+    # still valid for the acknowledgements below; rclpy's own handlers would shut it down
+    # first, and waiting for them then raised RCLError
+    rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args],
+               signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("umbrella_replay")
     pubs = {t: node.create_publisher(log.msg_type(t), t, qos_from_yaml(log.channels[t][1]))
             for t in chosen}

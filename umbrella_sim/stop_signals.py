@@ -8,6 +8,7 @@ some import.  The node's entry points (the ``umbrella_node`` console script and 
 umbrella_sim.node``) therefore install these handlers *before* importing anything heavy: a
 signal is only noted here, and ``node.main`` looks at it between its start-up phases and stops
 cleanly (exit code 0, nothing started or left behind), or asks a running node to stop.
+``deploy_controller`` does the same (``controller_main``): it spins until a stop is noted.
 
 This module imports nothing but the standard library, so that installing the handlers is the
 first thing a process does (a signal in the ~50 ms the interpreter itself needs to start is
@@ -55,6 +56,14 @@ def node_main() -> int:
     """Run umbrella_node (the console script): the handlers first, then the heavy imports."""
     install()
     from .node import main
+
+    return main()
+
+
+def controller_main() -> int:
+    """Run deploy_controller (the console script): the handlers first, then the heavy imports."""
+    install()
+    from .deploy_controller import main
 
     return main()
 
