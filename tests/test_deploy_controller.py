@@ -144,7 +144,7 @@ def test_controller_over_dds_locks_five_times_softer_than_constant_force(
         ctl.wait_for_sim_time(ctl.lock_time() + AFTER, timeout=30)
         controller.wait_for_log("deployment over")
         log = controller.output()
-        assert controller.stop() == 0
+        assert controller.stop() == 0, controller.output()
     assert ctl.stop() == 0
     s = summary_from_recording(bag)
     # the loop ran: a command every period from the first push to the lock
