@@ -185,6 +185,10 @@ class BeamBody:
             raise KeyError(f"{self.name} node {node} {dof} is fixed by the frame")
         return idx
 
+    def node_displacement_index(self) -> np.ndarray:
+        """Return the elastic index of every node's (u, v), shape (nodes, 2); -1: fixed."""
+        return np.asarray(self._full_to_e).reshape(-1, 3)[:, :2].copy()
+
     def displacement(self, e: np.ndarray, x: np.ndarray) -> np.ndarray:
         """(u, v) at body abscissae x (Eq. 3.16): shape (len(x), 2)."""
         x = np.atleast_1d(np.asarray(x, dtype=float))
@@ -596,21 +600,26 @@ class UmbrellaModel:
         return (float(leaf_top.item(joint)),
                 (1.0 - frac) * link_top.item(2 * j) + frac * link_top.item(2 * j + 1))
 
+    @cached_property
+    def _node_displacement_maps(self) -> tuple:
+        """Per body: (undeformed nodes (n, 2), index into q of each node's (u, v), mask)."""
+        out = []
+        for body, s_e in ((self.leaf, self.s_leaf), (self.link, self.s_link)):
+            full = body.node_displacement_index()
+            fixed = full < 0                        # held by the frame: no displacement
+            index = np.where(fixed, 0, full + s_e.start)
+            rest = np.column_stack([body.node_x, np.zeros_like(body.node_x)])
+            out.append((rest, index, fixed))
+        return tuple(out)
+
     def node_positions(self, q, magnification: float = 1.0):
         """Inertial (X, Y) of the leaf and link nodes, deformation magnified."""
+        q = np.asarray(q)
+        origins = ((np.zeros(2), q[0]),
+                   (q[[self.i_r2x, self.i_r2y]], q[self.i_alpha2]))
         out = []
-        for body, s_e, origin, alpha in ((self.leaf, self.s_leaf, np.zeros(2), q[0]),
-                                         (self.link, self.s_link,
-                                          q[[self.i_r2x, self.i_r2y]], q[self.i_alpha2])):
-            e = np.asarray(q[s_e])
-            disp = np.zeros((len(body.node_x), 2))
-            for node in range(len(body.node_x)):
-                for k, dof in enumerate(("u", "v")):
-                    try:
-                        disp[node, k] = e[body.elastic_index(node, dof)]
-                    except KeyError:
-                        pass
-            local = (np.column_stack([body.node_x, np.zeros_like(body.node_x)])
-                     + magnification * disp)
-            out.append(origin + local @ rotation(alpha).T)
+        for (rest, index, fixed), (origin, alpha) in zip(self._node_displacement_maps, origins):
+            disp = q[index]
+            disp[fixed] = 0.0
+            out.append(origin + (rest + magnification * disp) @ rotation(alpha).T)
         return out
