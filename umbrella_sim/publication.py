@@ -66,6 +66,7 @@ class PublicationDriver:
         self._peaks: dict = {}       # peak stresses over the steps since the last publication
         self._first = first
         self._encoders: dict[str, ros_io.SampleEncoder] = {}    # by frame_prefix
+        self._marker_encoders: dict = {}            # by (marker namespace, frame_prefix)
 
     @property
     def backend(self) -> str:
@@ -136,9 +137,8 @@ class PublicationDriver:
         Return what the current state publishes, keyed as ros_io.TOPICS.
 
         The per-publication topics as their CDR bytes (ros_io.SampleEncoder: built once,
-        published and recorded as they are); the markers, at their own rate only, as a
-        MarkerArray (serialized once by whoever publishes it).  The Sample they carry is
-        kept as ``published_sample``.
+        published and recorded as they are); the markers, at their own rate only, likewise
+        (ros_io.MarkerEncoder).  The Sample they carry is kept as ``published_sample``.
         """
         s = self.published_sample = self.publication_sample()
         encoder = self._encoders.get(frame_prefix)
@@ -147,6 +147,10 @@ class PublicationDriver:
                 self._first, self.sim.params, self.initial_energy, frame_prefix)
         out: dict = encoder.encode(s)
         if self.periods % self.marker_every == 0:
-            out["markers"] = ros_io.markers_msg(
-                s, self.sim.model.node_positions(s.q, magnification), marker_ns, frame_prefix)
+            positions = self.sim.model.node_positions(s.q, magnification)
+            markers = self._marker_encoders.get((marker_ns, frame_prefix))
+            if markers is None:
+                markers = self._marker_encoders[marker_ns, frame_prefix] = \
+                    ros_io.MarkerEncoder(positions, marker_ns, frame_prefix)
+            out["markers"] = markers.encode(s.time, s.sleeve_position, positions)
         return out
