@@ -352,7 +352,7 @@ class MarkerEncoder:
     def __init__(self, positions, ns: str, frame_prefix: str = ""):
         from .recording import cdr_bytes       # the exact-size rule, one place
         self._counts = tuple(len(p) for p in positions)
-        sentinels = iter(_sentinel_doubles(3 * sum(self._counts) + 1))
+        sentinels = iter(_sentinel_doubles(2 * sum(self._counts) + 1))   # x, y; sleeve
         probe = [np.array([[next(sentinels), next(sentinels)] for _ in range(n)])
                  for n in self._counts]
         sleeve = next(sentinels)
