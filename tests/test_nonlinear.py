@@ -289,10 +289,11 @@ def test_compiled_blocks_and_single_steps_agree_bit_for_bit():
     """
     The compiled loop and the single-step path give the same bits through the lock.
 
-    The carried iteration matrix is a rule of the trajectory (a step starting where a step
-    of 3+ iterations ended): the loop hands a step it cannot take (the crossing, a failed
-    Newton solve, here at 2 ms with large motion) back with the carried matrix as it was, and
-    the single-step path, which retakes it split in halves, sees what the loop saw.
+    The carried iteration matrix is a rule of the trajectory (a step starting where the
+    last step ended, and how many steps that matrix served): the loop hands a step it cannot
+    take (the crossing, a failed Newton solve, here at 2 ms with large motion) back with the
+    carried matrix as it was, and the single-step path, which retakes it split in halves,
+    sees what the loop saw.
     """
     p = P(v0=-1.0, model=NL, elements_per_segment=2)
     by_blocks = UmbrellaSimulator(p)

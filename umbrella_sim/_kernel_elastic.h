@@ -13,9 +13,10 @@
 /* Newton contraction rate above which the iteration matrix is re-factored (nonlinear strain;
  * nonlinear.REFRESH_RATE) */
 #define ELASTIC_REFRESH_RATE 0.1
-/* a step of this many Newton iterations or more hands its last matrix to the next step
- * (nonlinear.CARRY_ITERATIONS) */
-#define ELASTIC_CARRY_ITERATIONS 3
+/* a step's last iteration matrix goes on to the next step; one factored this many steps
+ * ago or less serves that step whole, an older one only its first iteration
+ * (nonlinear.CARRY_STEPS) */
+#define ELASTIC_CARRY_STEPS 2
 
 /* Mirror of nonlinear._ElasticData (same order). */
 typedef struct {
