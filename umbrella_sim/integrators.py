@@ -626,20 +626,23 @@ class CompiledKernel:
         self._ctx = ctypes.c_void_p(ctx)
         self._free = lib.umbrella_free
         nc_max = 4 + len(elastic)
-        # the state advanced in place, and the last step's acceleration: views of one
-        # buffer, so that a DynamicState of it is one copy (state())
-        self._state_buf = np.zeros(4 * n + nc_max)
+        # the state advanced in place, the last step's acceleration, then umbrella_sample of
+        # the state each advance reaches (made by that call): views of one buffer, so that a
+        # DynamicState of it and its Sample vector are one copy (state(), sample())
+        self._points = len(m.leaf.stress_x) + len(m.link.stress_x)
+        self._n, self._state_len = n, 4 * n + nc_max
+        self._state_buf = np.zeros(self._state_len + len(SAMPLE_VECTOR) + 2 * self._points)
         self.q, self.v, self.p, self.accel = (self._state_buf[k * n:(k + 1) * n]
                                               for k in range(4))
-        self.lam = self._state_buf[4 * n:]
+        self.lam = self._state_buf[4 * n:self._state_len]
+        self._final = self._state_buf[self._state_len:]
         self.acc = np.zeros(3)                     # work, lock loss, damping dissipation (J)
         self._ptr = {k: _dptr(getattr(self, k)) for k in ("q", "v", "p", "lam", "acc", "accel")}
         self._its = ctypes.c_int(0)
         ptr = self._ptr
-        # umbrella_sample of the state each advance reaches, made by that call (sample())
-        self._points = len(m.leaf.stress_x) + len(m.link.stress_x)
-        self._final = np.zeros(len(SAMPLE_VECTOR) + 2 * self._points)
-        self._final_cs = self._final_of = None
+        # the state whose copy holds its Sample vector (the last advance's), that copy's
+        # vector, and the constraint set it was made with
+        self._final_cs = self._final_of = self._final_copy = None
         self._call = _AdvanceCall(phi_tol=PHI_TOLERANCE, q=ptr["q"], v=ptr["v"], lam=ptr["lam"],
                                   p=ptr["p"], acc=ptr["acc"], accel=ptr["accel"],
                                   final=_dptr(self._final))
@@ -719,12 +722,12 @@ class CompiledKernel:
         status = self.lib.umbrella_advance_call(self._ctx, self._call_ref)
         done = call.n_done
         if done:      # _final holds the Sample outputs of the state state() makes next
-            self._final_cs, self._final_of = cs, None
+            self._final_cs, self._final_of, self._final_copy = cs, None, None
         return status, done, call.iterations, call.residual
 
     def state(self, t: float, nc: int) -> DynamicState:
         """Return the advanced state; advancing from it next time needs no load."""
-        b, n = self._state_buf.copy(), len(self.q)
+        b, n = self._state_buf.copy(), self._n
         b.flags.writeable = False     # immutable: a Sample of it shares its arrays
         # once per publication: the frozen dataclass's per-field __init__ costs 3 us
         self._made = build_frozen(DynamicState, {
@@ -732,18 +735,19 @@ class CompiledKernel:
             "multipliers": b[4 * n:4 * n + nc], "momentum": b[2 * n:3 * n],
             "dissipation": self.acc.item(2)})
         if self._final_cs is not None and self._final_of is None:
-            self._final_of = self._made
+            self._final_of, self._final_copy = self._made, b[self._state_len:]
         return self._made
 
     def sample(self, s: DynamicState, cs: ConstraintSet) -> np.ndarray:
         """
         Return the Sample vector of a state with its momentum (_kernel.c umbrella_sample).
 
-        A new array: SAMPLE_VECTOR, then the top and bottom fibre stress at every stress
-        point (leaf first).  The state an advance reached has it from that call.
+        A read-only array of its own: SAMPLE_VECTOR, then the top and bottom fibre stress at
+        every stress point (leaf first).  The state an advance reached has it from that call
+        (in the copy that holds the state's arrays).
         """
         if s is self._final_of and cs is self._final_cs:   # the advance that made s left it
-            return self._final.copy()
+            return self._final_copy
         if self._sample_buf is None:
             out = np.zeros(len(self._final))
             ptr = self._ptr
@@ -765,7 +769,9 @@ class CompiledKernel:
             call.locked, call.rigid = cs.locked, cs.rigid
             flags[which] = cs
         self.lib.umbrella_sample_call(self._ctx, refs[which])
-        return out.copy()
+        out = out.copy()
+        out.flags.writeable = False
+        return out
 
     def find_crossing(self, s: DynamicState, h: float, force: float, cs: ConstraintSet,
                       tol: float, max_iter: int, div_tol: float, event_tol: float):

@@ -683,13 +683,12 @@ class UmbrellaSimulator:
         vector = eng.sample_outputs(s, stage)
         if vector is not None:
             # compiled (integrators.SAMPLE_VECTOR): the rest in one list and the stresses as
-            # views of the vector (a new array), without a numpy call per figure
+            # views of the vector (read-only, of its own), without a numpy call per figure
             n = len(SAMPLE_VECTOR)
             values = dict(zip(SAMPLE_VECTOR, vector[:n].tolist()))
             values["sleeve_reaction"] = (values.pop("sleeve_reaction_x"),
                                          values.pop("sleeve_reaction_y"))
             stress = vector[n:].reshape(2, -1)
-            stress.flags.writeable = False
             n_leaf = m.leaf.n_stress_points
             values["leaf_stress"], values["link_stress"] = stress[:, :n_leaf], stress[:, n_leaf:]
             values.update(common)
