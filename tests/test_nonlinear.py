@@ -27,7 +27,7 @@ import math
 import numpy as np
 import pytest
 
-from umbrella_sim.integrators import load_kernel
+from umbrella_sim.integrators import load_kernel, newton_tolerance
 from umbrella_sim.model import ConstraintSet, Stage
 from umbrella_sim.nonlinear import (ElasticMidpointDAE, KANE_BEAM, NonlinearUmbrellaModel,
                                     rotating_cantilever_chordwise, ROTATING_CANTILEVER_FLAPWISE,
@@ -282,6 +282,44 @@ def test_compiled_elastic_blocks_match_numpy_run(zeta):
     assert fast_last.damping_dissipation == pytest.approx(ref_last.damping_dissipation,
                                                           rel=1e-7, abs=1e-12)
     assert (fast_last.damping_dissipation > 1.0) == (zeta > 0)
+
+
+@needs_kernel
+def test_compiled_and_numpy_carry_the_same_iteration_matrices():
+    """
+    The carried-matrix rule is the same in the kernel and the numpy reference.
+
+    Stage 2 at V0 = -1 and the default step and tolerance, where a step begins with a matrix
+    up to CARRY_STEPS steps old and re-factors after a slow iteration: both paths take the
+    same Newton iterations block by block, and the same steps to ~round-off.  (A rule that
+    differed, e.g. by a step in the matrix's age, changes the counts.)  The states agree to
+    the Newton tolerance (1e-8 m a step): the paths part at the lock at that level already
+    (the compiled path's lock step is the single-step one), and stage 2 at V0 = -1 amplifies
+    it.
+    """
+    p = P(v0=-1.0, model=NL, elements_per_segment=2, time_step=1e-4)
+    runs = {}
+    for kernel in ("numpy", "compiled"):
+        sim = _simulator(kernel, p)
+        integ = sim.engine.integrator
+        integ.tolerance = newton_tolerance(p.time_step)
+        sim.advance(500)                                   # through the lock (~0.045 s)
+        assert sim.stage == Stage.LOCKED
+        counts, rows = [], []
+        for _ in range(4):
+            before = integ.iterations
+            block = sim.advance(60)
+            rows.append(np.array([getattr(block, f) for f in STEP_FIELDS]))
+            counts.append(integ.iterations - before)
+        runs[kernel] = (counts, np.hstack(rows))
+    (ref_counts, ref), (fast_counts, fast) = runs["numpy"], runs["compiled"]
+    assert ref_counts == fast_counts
+    assert sum(ref_counts) > 3 * 4 * 60    # ~4.6 iterations a step: the matrices age here
+    for f in ("alpha1", "tip_axial", "tip_transverse"):          # rad, m
+        i = STEP_FIELDS.index(f)
+        assert np.max(np.abs(ref[i] - fast[i])) < 1e-7, f
+    scale = np.maximum(1.0, np.abs(ref).max(axis=1))[:, None]
+    assert np.max(np.abs(ref - fast) / scale) < 1e-5
 
 
 @needs_kernel
