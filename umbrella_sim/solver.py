@@ -147,8 +147,9 @@ class Engine(abc.ABC):
         """
         Return the Sample vector of s from compiled code, or None (no fast path).
 
-        A new array: integrators.SAMPLE_VECTOR (figures and residual max(|Phi|, |J q'|)),
-        then the top and bottom fibre stress at every stress point, leaf points first.  What
+        A read-only array of s's own (for a state an advance made, it shares that state's
+        copy): integrators.SAMPLE_VECTOR (figures and residual max(|Phi|, |J q'|)), then the
+        top and bottom fibre stress at every stress point, leaf points first.  What
         ``_sample`` otherwise computes with numpy, in one call.
         """
         return None
