@@ -10,7 +10,11 @@ at the default time step unless --time-step):
   * us/step (1 ms): UmbrellaSimulator.advance in blocks of one publication period (1 ms) and
     the full Sample of each block's last step (what a 1 kHz publication pays), CPU time;
   * RTF: simulated seconds per wall second of that 1 ms-block run, best of --repeat;
-  * the cost per step divided by the number of coordinates, to show the growth is linear.
+  * the cost per step divided by the number of coordinates, to show the growth is linear;
+  * of that 1 ms-block run (one more run, CPU time): the compiled calls per block
+    (CompiledKernel.advance, timed around each call) and the rest (Python: the block, the
+    state, the Sample, the lock), and the real-time factor the compiled calls alone would
+    allow (1 ms over their CPU time per block): the ceiling no Python trimming can pass.
 The machine is shared: CPU time is what the step costs; wall RTF is what a user saw.
 Targets: <= 10 us/step at N = 2, <= 40 us/step at N = 8; RTF >= 10 at N = 2, >= 2 at N = 8
 (flexible); RTF >= 5 at N = 4 (--model flexible-nonlinear).
@@ -55,6 +59,34 @@ def block_run(params):
     return cpu, wall, sim
 
 
+def split_run(params):
+    """
+    Return (CPU s of the compiled calls, CPU s of the whole run) of one 1 ms-block run.
+
+    The compiled multi-step calls are timed around each call (CompiledKernel.advance, ~1 us
+    of timing in ~100); None without a compiled kernel.
+    """
+    sim = UmbrellaSimulator(params)
+    kernel = sim.engine.integrator.kernel
+    if kernel is None:
+        return None
+    inside = [0.0]
+    advance = kernel.advance
+
+    def timed(*args):
+        c = time.thread_time()
+        out = advance(*args)
+        inside[0] += time.thread_time() - c
+        return out
+
+    kernel.advance = timed       # this instance only: the other runs are not instrumented
+    per_block = round(SAMPLE_PERIOD / sim.h)
+    c0 = time.thread_time()
+    for _ in range(round(DURATION / SAMPLE_PERIOD)):
+        sim.advance(per_block).last
+    return inside[0], time.thread_time() - c0
+
+
 def kernel_run(params):
     """Return the CPU s per step of the whole run in one advance call."""
     sim = UmbrellaSimulator(params)
@@ -84,8 +116,9 @@ def main():
           f"best of {args.repeat}; loadavg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
     print(f"{'N':>3} {'coords':>6} {'newton':>6} {'us/step':>8} {'us/step':>8} "
           f"{'ns/step/coord':>13}"
-          f" {'RTF':>7} {'targets (us, RTF)':>18}")
-    print(f"{'':>3} {'':>6} {'/step':>6} {'kernel':>8} {'1 ms':>8} {'kernel':>13} {'wall':>7}")
+          f" {'RTF':>7} {'targets (us, RTF)':>18} {'us/1 ms block':>15} {'RTF':>7}")
+    print(f"{'':>3} {'':>6} {'/step':>6} {'kernel':>8} {'1 ms':>8} {'kernel':>13} {'wall':>7}"
+          f" {'':>18} {'kernel':>7} {'rest':>7} {'kernel':>7}")
     for n in args.meshes:
         p = UmbrellaParams(v0=-0.2, elements_per_segment=n, time_step=h, model=args.model,
                            damping_ratio=args.damping_ratio)
@@ -103,8 +136,15 @@ def main():
             ok = kernel <= cost_targets.get(n, math.inf) and rtf >= rtf_targets[n]
             cost = f"{cost_targets[n]:>4.0f}" if n in cost_targets else f"{'-':>4}"
             tgt = f"{cost}, {rtf_targets[n]:>3.0f}x {'ok' if ok else 'MISS'}"
+        split = split_run(p)
+        n_blocks = round(DURATION / SAMPLE_PERIOD)
+        if split is None:
+            tail = f"{'-':>7} {'-':>7} {'-':>7}"
+        else:
+            compiled, total = (1e6 * v / n_blocks for v in split)
+            tail = f"{compiled:>7.1f} {total - compiled:>7.1f} {1e3 / compiled:>6.1f}x"
         print(f"{n:>3} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} {us:>8.2f} "
-              f"{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18}", flush=True)
+              f"{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18} {tail}", flush=True)
 
 
 if __name__ == "__main__":
