@@ -41,50 +41,38 @@ DURATION = 1.0
 SAMPLE_PERIOD = 1e-3
 
 
-def block_run(params):
+def block_run(params, time_compiled=False):
     """
     Run the whole run in blocks of one sample period.
 
     Whole run in blocks of one sample period (each block builds the Sample of its last
-    step); returns (cpu s, wall s, sim).
+    step); returns (cpu s, wall s, sim, compiled cpu s).  With time_compiled, the compiled
+    multi-step calls are timed around each call (CompiledKernel.advance, ~1 us of timing in
+    ~100; this run's other figures are not used), else (and without a compiled kernel) the
+    last is None.
     """
     sim = UmbrellaSimulator(params)
     per_block = round(SAMPLE_PERIOD / sim.h)
     n_blocks = round(DURATION / SAMPLE_PERIOD)
+    kernel = sim.engine.integrator.kernel
+    compiled = None
+    if time_compiled and kernel is not None:
+        compiled = [0.0]
+        advance = kernel.advance
+
+        def timed(*args):
+            c = time.thread_time()
+            out = advance(*args)
+            compiled[0] += time.thread_time() - c
+            return out
+
+        kernel.advance = timed       # this instance only
     c0, w0 = time.thread_time(), time.perf_counter()
     for _ in range(n_blocks):
         sim.advance(per_block).last
     cpu, wall = time.thread_time() - c0, time.perf_counter() - w0
     assert sim.lock_event is not None, "the run did not reach the lock"
-    return cpu, wall, sim
-
-
-def split_run(params):
-    """
-    Return (CPU s of the compiled calls, CPU s of the whole run) of one 1 ms-block run.
-
-    The compiled multi-step calls are timed around each call (CompiledKernel.advance, ~1 us
-    of timing in ~100); None without a compiled kernel.
-    """
-    sim = UmbrellaSimulator(params)
-    kernel = sim.engine.integrator.kernel
-    if kernel is None:
-        return None
-    inside = [0.0]
-    advance = kernel.advance
-
-    def timed(*args):
-        c = time.thread_time()
-        out = advance(*args)
-        inside[0] += time.thread_time() - c
-        return out
-
-    kernel.advance = timed       # this instance only: the other runs are not instrumented
-    per_block = round(SAMPLE_PERIOD / sim.h)
-    c0 = time.thread_time()
-    for _ in range(round(DURATION / SAMPLE_PERIOD)):
-        sim.advance(per_block).last
-    return inside[0], time.thread_time() - c0
+    return cpu, wall, sim, None if compiled is None else compiled[0]
 
 
 def kernel_run(params):
@@ -124,7 +112,7 @@ def main():
                            damping_ratio=args.damping_ratio)
         cpus, walls = [], []
         for _ in range(args.repeat):
-            cpu, wall, sim = block_run(p)
+            cpu, wall, sim, _ = block_run(p)
             cpus.append(cpu)
             walls.append(wall)
         us = 1e6 * min(cpus) / sim.steps
@@ -136,12 +124,12 @@ def main():
             ok = kernel <= cost_targets.get(n, math.inf) and rtf >= rtf_targets[n]
             cost = f"{cost_targets[n]:>4.0f}" if n in cost_targets else f"{'-':>4}"
             tgt = f"{cost}, {rtf_targets[n]:>3.0f}x {'ok' if ok else 'MISS'}"
-        split = split_run(p)
-        n_blocks = round(DURATION / SAMPLE_PERIOD)
-        if split is None:
+        total, _, _, compiled = block_run(p, time_compiled=True)
+        if compiled is None:
             tail = f"{'-':>7} {'-':>7} {'-':>7}"
         else:
-            compiled, total = (1e6 * v / n_blocks for v in split)
+            n_blocks = round(DURATION / SAMPLE_PERIOD)
+            compiled, total = 1e6 * compiled / n_blocks, 1e6 * total / n_blocks
             tail = f"{compiled:>7.1f} {total - compiled:>7.1f} {1e3 / compiled:>6.1f}x"
         print(f"{n:>3} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} {us:>8.2f} "
               f"{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18} {tail}", flush=True)
