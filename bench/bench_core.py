@@ -39,6 +39,7 @@ COST_TARGETS = {"flexible": {2: 10.0, 8: 40.0}}
 RTF_TARGETS = {"flexible": {2: 10.0, 8: 2.0}, "flexible-nonlinear": {4: 5.0}}
 DURATION = 1.0
 SAMPLE_PERIOD = 1e-3
+BLOCKS = round(DURATION / SAMPLE_PERIOD)   # sample periods in the run
 
 
 def block_run(params, time_compiled=False):
@@ -53,7 +54,6 @@ def block_run(params, time_compiled=False):
     """
     sim = UmbrellaSimulator(params)
     per_block = round(SAMPLE_PERIOD / sim.h)
-    n_blocks = round(DURATION / SAMPLE_PERIOD)
     kernel = sim.engine.integrator.kernel
     compiled = None
     if time_compiled and kernel is not None:
@@ -68,7 +68,7 @@ def block_run(params, time_compiled=False):
 
         kernel.advance = timed       # this instance only
     c0, w0 = time.thread_time(), time.perf_counter()
-    for _ in range(n_blocks):
+    for _ in range(BLOCKS):
         sim.advance(per_block).last
     cpu, wall = time.thread_time() - c0, time.perf_counter() - w0
     assert sim.lock_event is not None, "the run did not reach the lock"
@@ -128,8 +128,7 @@ def main():
         if compiled is None:
             tail = f"{'-':>7} {'-':>7} {'-':>7}"
         else:
-            n_blocks = round(DURATION / SAMPLE_PERIOD)
-            compiled, total = 1e6 * compiled / n_blocks, 1e6 * total / n_blocks
+            compiled, total = 1e6 * compiled / BLOCKS, 1e6 * total / BLOCKS
             tail = f"{compiled:>7.1f} {total - compiled:>7.1f} {1e3 / compiled:>6.1f}x"
         print(f"{n:>3} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} {us:>8.2f} "
               f"{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18} {tail}", flush=True)
