@@ -7,8 +7,9 @@ fine-step run of the same code (the claims docs/validation.md tabulates in full)
 import pytest
 
 from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.step_study import (observed_order, run_steps, sampled_peak_shortfall,
-                                     step_errors, TARGETS)
+from umbrella_sim.step_study import (mesh_step, observed_order, run_steps,
+                                     sampled_peak_shortfall, step_errors, TARGETS,
+                                     within_targets)
 
 
 @pytest.mark.parametrize("n_el", [1, 2])
@@ -99,6 +100,26 @@ def test_step_the_stage2_peak_stresses_need():
     assert err["stage2_peak_leaf"] < TARGETS["peak_stress"]
     assert err["stage2_peak_link"] < TARGETS["peak_stress"]
     assert err["stage2_tip_series_m"] < TARGETS["stage2_tip_series_m"]
+
+
+@pytest.mark.parametrize("n_el, v0, lock", [(2, -0.5, "plastic"), (4, -0.2, "plastic")])
+def test_the_mesh_step_meets_every_target_where_the_default_step_misses_one(n_el, v0, lock):
+    """
+    Check step_study.mesh_step (0.1 ms / N) where the fixed default step misses a target.
+
+    0.5 s of stage 2 against the validation's 1.25 us reference: the default step's stage-2
+    peak stresses are more than 3 % off in these cases (docs/validation.md); 0.1 ms / N
+    meets the deploy time, the stage-2 period, both stages' peak stresses and the tip series.
+    """
+    p = UmbrellaParams(v0=v0, elements_per_segment=n_el, lock=lock)
+    window = 0.5
+    fine = run_steps(p.replace(time_step=1.25e-6), window)
+    default = step_errors(run_steps(p, window), fine, window)
+    assert max(default["stage2_peak_leaf"], default["stage2_peak_link"]) > TARGETS["peak_stress"]
+    step = mesh_step(p)
+    assert step == pytest.approx(UmbrellaParams().time_step / n_el)
+    err = step_errors(run_steps(p.replace(time_step=step), window), fine, window)
+    assert within_targets(err), err
 
 
 @pytest.mark.parametrize("n_el, v0, lock", [(1, -0.2, "energy"), (1, -0.5, "energy"),

@@ -25,6 +25,21 @@ TARGETS = {"deploy_time": 1e-5, "stage2_period": 5e-4, "stage2_tip_series_m": 2e
            "peak_stress": 0.03}
 
 
+def mesh_step(params: UmbrellaParams) -> float:
+    """
+    Return the step that meets every accuracy target on this mesh: the default step / N.
+
+    The default time_step (0.1 ms) divided by the elements per segment.  With the thesis's
+    lengths (every segment 0.5 m) this is about the time an axial wave, c = sqrt(E / rho)
+    ~ 5.1 km/s, takes to cross one element (a Courant number c h / l_e of 1.02 with the
+    thesis's data): the waves the lock launches shape the stage-2 stress crests, and halving
+    the element halves their shortest period.  Measured, not derived: docs/validation.md
+    (step convergence) counts the cases it meets, and tests/test_time_step.py checks it where
+    the fixed default step misses a target.
+    """
+    return UmbrellaParams().time_step / params.elements_per_segment
+
+
 #: the period of the dominant mode of x(t): the summary's estimator (outputs.py)
 fundamental_period = oscillation_period
 
