@@ -19,7 +19,7 @@ The machine is shared: CPU time is what the step costs; wall RTF is what a user 
 Targets: <= 10 us/step at N = 2, <= 40 us/step at N = 8; RTF >= 10 at N = 2, >= 2 at N = 8
 (flexible); RTF >= 5 at N = 4 (--model flexible-nonlinear).
 
-    python bench/bench_core.py [--meshes 1 2 4 8 16] [--repeat 3] [--time-step H]
+    python bench/bench_core.py [--meshes 1 2 4 8 16] [--repeat 3] [--time-step H | --mesh-step]
                                [--model flexible-nonlinear] [--damping-ratio Z]
 """
 import argparse
@@ -33,6 +33,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from umbrella_sim.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.publication import physics_step  # noqa: E402
 from umbrella_sim.solver import UmbrellaSimulator  # noqa: E402
+from umbrella_sim.step_study import mesh_step  # noqa: E402
 
 #: model -> {N: target}
 COST_TARGETS = {"flexible": {2: 10.0, 8: 40.0}}
@@ -90,26 +91,34 @@ def main():
     ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8, 16])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--time-step", type=float, default=UmbrellaParams().time_step)
+    ap.add_argument("--mesh-step", action="store_true",
+                    help="each mesh at step_study.mesh_step (0.1 ms / N): the step that meets "
+                         "every accuracy target (docs/validation.md), instead of --time-step")
     ap.add_argument("--model", default="flexible",
                     choices=("flexible", "flexible-nonlinear", "rigid-fe"))
     ap.add_argument("--damping-ratio", type=float, default=0.0)
     args = ap.parse_args()
     h = physics_step(args.time_step, 1.0 / SAMPLE_PERIOD)
+    steps = ("h = step_study.mesh_step (0.1 ms / N)" if args.mesh_step else
+             f"h = {h:.6g} s ({round(DURATION / h)} steps)")
     cost_targets = COST_TARGETS.get(args.model, {})
     rtf_targets = RTF_TARGETS.get(args.model, {})
     print(f"{args.model} (damping_ratio {args.damping_ratio:g}), V0 = -0.2, energy lock, "
           f"t = 0 -> {DURATION:g} s through the lock, "
-          f"h = {h:.6g} s ({round(DURATION / h)} steps), a Sample every "
+          f"{steps}, a Sample every "
           f"{SAMPLE_PERIOD * 1e3:g} ms; "
           f"best of {args.repeat}; loadavg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
-    print(f"{'N':>3} {'coords':>6} {'newton':>6} {'us/step':>8} {'us/step':>8} "
+    print(f"{'N':>3} {'h':>5} {'coords':>6} {'newton':>6} {'us/step':>8} {'us/step':>8} "
           f"{'ns/step/coord':>13}"
           f" {'RTF':>7} {'targets (us, RTF)':>18} {'us/1 ms block':>15} {'RTF':>7}")
-    print(f"{'':>3} {'':>6} {'/step':>6} {'kernel':>8} {'1 ms':>8} {'kernel':>13} {'wall':>7}"
+    print(f"{'':>3} {'us':>5} {'':>6} {'/step':>6} {'kernel':>8} {'1 ms':>8} {'kernel':>13} "
+          f"{'wall':>7}"
           f" {'':>18} {'kernel':>7} {'rest':>7} {'kernel':>7}")
     for n in args.meshes:
         p = UmbrellaParams(v0=-0.2, elements_per_segment=n, time_step=h, model=args.model,
                            damping_ratio=args.damping_ratio)
+        if args.mesh_step:
+            p = p.replace(time_step=physics_step(mesh_step(p), 1.0 / SAMPLE_PERIOD))
         cpus, walls = [], []
         for _ in range(args.repeat):
             cpu, wall, sim, _ = block_run(p)
@@ -130,7 +139,8 @@ def main():
         else:
             compiled, total = 1e6 * compiled / BLOCKS, 1e6 * total / BLOCKS
             tail = f"{compiled:>7.1f} {total - compiled:>7.1f} {1e3 / compiled:>6.1f}x"
-        print(f"{n:>3} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} {us:>8.2f} "
+        print(f"{n:>3} {1e6 * sim.h:>5.1f} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} "
+              f"{us:>8.2f} "
               f"{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18} {tail}", flush=True)
 
 
