@@ -92,14 +92,14 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--time-step", type=float, default=UmbrellaParams().time_step)
     ap.add_argument("--mesh-step", action="store_true",
-                    help="each mesh at step_study.mesh_step (0.1 ms / N): the step that meets "
-                         "every accuracy target (docs/validation.md), instead of --time-step")
+                    help="each mesh at step_study.mesh_step (the default step / N): the step that "
+                         "meets every accuracy target (docs/validation.md), not --time-step")
     ap.add_argument("--model", default="flexible",
                     choices=("flexible", "flexible-nonlinear", "rigid-fe"))
     ap.add_argument("--damping-ratio", type=float, default=0.0)
     args = ap.parse_args()
     h = physics_step(args.time_step, 1.0 / SAMPLE_PERIOD)
-    steps = ("h = step_study.mesh_step (0.1 ms / N)" if args.mesh_step else
+    steps = ("h = step_study.mesh_step (the default step / N)" if args.mesh_step else
              f"h = {h:.6g} s ({round(DURATION / h)} steps)")
     cost_targets = COST_TARGETS.get(args.model, {})
     rtf_targets = RTF_TARGETS.get(args.model, {})
