@@ -118,7 +118,10 @@ def test_the_mesh_step_meets_every_target_where_the_default_step_misses_one(n_el
     assert max(default["stage2_peak_leaf"], default["stage2_peak_link"]) > TARGETS["peak_stress"]
     step = mesh_step(p)
     assert step == pytest.approx(UmbrellaParams().time_step / n_el)
-    err = step_errors(run_steps(p.replace(time_step=step), window), fine, window)
+    # through the parameter a user sets (step_follows_mesh), not the study's own call
+    run = run_steps(p.replace(step_follows_mesh=True), window)
+    assert run.h == step
+    err = step_errors(run, fine, window)
     assert within_targets(err), err
 
 
@@ -244,3 +247,38 @@ def test_sampled_peak_shortfall_of_a_narrow_crest():
     assert sampled_peak_shortfall(ref, 1e-3, 1.0) == {"leaf": 0.0, "link": 0.0}
     with pytest.raises(ValueError, match="not a multiple"):
         sampled_peak_shortfall(ref, 2.5e-3, 1.0)
+
+
+def test_step_follows_mesh_sets_the_step_of_every_run(tmp_path):
+    """
+    Check that step_follows_mesh makes the step time_step / N wherever a run is made.
+
+    The simulator, the node's publication driver (the largest step <= it dividing the
+    publication period), an offline recording, and the re-simulation of that recording.
+    """
+    from umbrella_sim.logs import read_log
+    from umbrella_sim.publication import PublicationDriver
+    from umbrella_sim.recording import record_offline
+    from umbrella_sim.replay import resimulate
+    from umbrella_sim.solver import UmbrellaSimulator
+
+    p = UmbrellaParams(v0=-0.5, elements_per_segment=3, step_follows_mesh=True)
+    assert UmbrellaSimulator(p).h == p.time_step / 3
+    assert UmbrellaSimulator(p.replace(step_follows_mesh=False)).h == p.time_step
+    assert UmbrellaSimulator(p.replace(time_step=2e-4, elements_per_segment=4)).h == 5e-5
+    # the rule the accuracy study names is this one at the default time_step
+    assert mesh_step(p.replace(time_step=2e-4)) == UmbrellaParams().time_step / 3
+    driver = PublicationDriver(p, 1000.0)
+    assert driver.publish_every == 30 and driver.sim.h == driver.step
+    assert driver.step == pytest.approx(p.time_step / 3, rel=1e-12)
+    assert PublicationDriver(p, 1000.0 / 7).step <= p.time_step / 3   # divides 7 ms
+
+    bag = tmp_path / "mesh"
+    q = p.replace(elements_per_segment=2)
+    record_offline(q, str(bag), 0.05, publish_rate=1000.0)
+    log = read_log(str(bag))
+    assert log.parameters()["step_follows_mesh"] is True
+    assert float(log.parameters()["physics_step"]) == pytest.approx(5e-5, rel=1e-12)
+    res = resimulate(log)
+    assert res["compared"] > 40
+    assert max(res["max_abs_diff"].values()) < 1e-12

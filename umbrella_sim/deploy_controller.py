@@ -284,7 +284,8 @@ def simulate_closed_loop(params: UmbrellaParams, cfg: ControllerConfig,
     from .publication import physics_step
     from .solver import UmbrellaSimulator
 
-    p = params.replace(v0=0.0, time_step=physics_step(params.time_step, publish_rate))
+    p = params.replace(v0=0.0).with_physics_step(
+        physics_step(params.physics_time_step, publish_rate))
     sim = UmbrellaSimulator(p)
     law = DeployLaw(params, cfg)
     period = 1.0 / publish_rate
@@ -326,7 +327,8 @@ def _make_node_class():
             # the frame the law's rigid model describes: umbrella_node's own parameter names
             model = {}
             for name, default in UmbrellaParams().as_dict().items():
-                if name in ("model", "lock", "time_step", "elements_per_segment"):
+                if name in ("model", "lock", "time_step", "step_follows_mesh",
+                            "elements_per_segment"):
                     continue                      # the numerics do not enter the law
                 model[name] = self.declare_parameter(name, default, ParameterDescriptor(
                     name=name, read_only=True, dynamic_typing=True,

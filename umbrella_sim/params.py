@@ -212,10 +212,17 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "the deploy-time, stage-2 period and stage-1 peak-stress targets in every studied "
        "case, the stage-2 tip series within 2 mm too (with `phase_correction`); the stage-2 "
        "peak stresses (each step's largest over the step) are within 3 % in 9 of its 12 "
-       "cases: the rest are crests of modes 0.1 ms does not resolve. 0.1 ms / "
-       "elements_per_segment (step_study.mesh_step, about an element's axial-wave transit "
-       "time) meets every target in every studied case, at N times the cost",
+       "cases: the rest are crests of modes 0.1 ms does not resolve. `step_follows_mesh` "
+       "divides it by elements_per_segment: 0.1 ms / N meets every target in every studied "
+       "case, at N times the cost",
        low=0.0, low_open=True, high=0.01),
+    _P("step_follows_mesh", bool, False, "-",
+       "true = the physics step is `time_step` / `elements_per_segment` (at the default "
+       "`time_step`: step_study.mesh_step, about an element's axial-wave transit time), the "
+       "step that meets every accuracy target of docs/validation.md in every studied case "
+       "(the stage-2 peak stresses too), at N times the cost of a fixed step; the node still "
+       "takes the largest step ≤ it that divides 1/`publish_rate`. false = `time_step` "
+       "for every mesh"),
     _P("phase_correction", bool, True, "-",
        "stage 2 of flexible (also damped; not flexible-nonlinear, whose axial coordinates "
        "follow the bending's foreshortening): the locked frame's modes with "
@@ -276,7 +283,7 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
 
 #: parameters added after recordings were made, with the value an older recording (which
 #: does not list them) was made with: replay re-runs it so
-RECORDED_BEFORE_ADDED = {"phase_correction": False}
+RECORDED_BEFORE_ADDED = {"phase_correction": False, "step_follows_mesh": False}
 
 #: the physics' parameters (the fields of UmbrellaParams), in registry order
 SPECS: dict[str, Param] = {n: p for n, p in REGISTRY.items() if p.group in (MODEL, INPUT)}
@@ -363,6 +370,17 @@ class _DerivedQuantities:
     @property
     def sleeve_start_height(self) -> float:
         return _sleeve_height(self.l1, self.l3, self.alpha0)
+
+    @property
+    def physics_time_step(self) -> float:
+        """Return the integrator's step (s): time_step, or time_step / N (step_follows_mesh)."""
+        if self.step_follows_mesh:
+            return self.time_step / self.elements_per_segment
+        return self.time_step
+
+    def with_physics_step(self, step: float) -> "UmbrellaParams":
+        """Return these parameters with the integrator's step set to step exactly."""
+        return self.replace(time_step=step, step_follows_mesh=False)
 
     # ---------------------------------------------------------------- building
     def replace(self, **changes: Any) -> "UmbrellaParams":

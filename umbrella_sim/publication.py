@@ -49,12 +49,12 @@ class PublicationDriver:
     def __init__(self, params: UmbrellaParams, publish_rate: float,
                  marker_rate: float = NODE_PARAMETERS["marker_rate"].default):
         self.params = params
-        self.step = physics_step(params.time_step, publish_rate)
+        self.step = physics_step(params.physics_time_step, publish_rate)
         self.publish_every = round((1.0 / publish_rate) / self.step)
         # markers on every marker_every-th publication (t = 0 included)
         self.marker_every = max(1, round(publish_rate / marker_rate))
         self.periods = 0
-        self.sim = UmbrellaSimulator(params.replace(time_step=self.step))
+        self.sim = UmbrellaSimulator(params.with_physics_step(self.step))
         self.schedule = ForceSchedule(self.step, self.sim.sleeve_force,
                                       check=lambda f: command_force(f, self.sim.params))
         self.last_block: StepBlock | None = None

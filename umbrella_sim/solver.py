@@ -1,13 +1,13 @@
 """
 Solver layer: the stepping simulator (stage 1, lock event, stage 2) and a whole-run helper.
 
-``UmbrellaSimulator`` advances on a fixed grid t_k = k h (h = params.time_step).  The sleeve
-force is a zero-order hold: the value set with ``set_sleeve_force`` acts from the start of
-the next step.  ``step()`` and ``advance_to(t)`` therefore give identical results however the
-calls are split.  When the sleeve reaches the stop S inside a step, the crossing time is
-root-found by re-taking the step from its start with a shorter length (Illinois method,
-|dt| < 1e-12 s), the lock is applied there, and the step is completed under Case 2, so the
-grid is kept.
+``UmbrellaSimulator`` advances on a fixed grid t_k = k h (h = params.physics_time_step).
+The sleeve force is a zero-order hold: the value set with ``set_sleeve_force`` acts from the
+start of the next step.  ``step()`` and ``advance_to(t)`` therefore give identical results
+however the calls are split.  When the sleeve reaches the stop S inside a step, the crossing
+time is root-found by re-taking the step from its start with a shorter length (Illinois
+method, |dt| < 1e-12 s), the lock is applied there, and the step is completed under Case 2,
+so the grid is kept.
 """
 from __future__ import annotations
 
@@ -185,9 +185,9 @@ class FiniteElementEngine(Engine):
         self.rigid = params.model == "rigid-fe"
         self.lock_kind = "plastic" if self.rigid else params.lock
         self.integrator = self._integrator(model)
-        self.integrator.tolerance = newton_tolerance(params.time_step)
+        self.integrator.tolerance = newton_tolerance(params.physics_time_step)
         if params.phase_correction and self.phase_correctable:   # ModalPhaseCorrection
-            self.integrator.correct_stage2_phase(params.time_step)
+            self.integrator.correct_stage2_phase(params.physics_time_step)
         self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
                     for stage in Stage}
 
@@ -426,7 +426,7 @@ class UmbrellaSimulator:
             self.model = UmbrellaModel(p)
             engine = RigidEngine if p.model == "rigid" else FiniteElementEngine
             self.engine = engine(p, self.model)
-        self.h = p.time_step
+        self.h = p.physics_time_step
         self._force = command_force(p.sleeve_force, p)
         self._k = 0
         self._stage = DEFORMING

@@ -6,7 +6,7 @@ The figures a structural engineer reads off a run, computed from every physics s
 deploy (lock) time, stage-1 and stage-2 peak fibre stresses on leaf and link, the stage-2
 tip period, and the stage-2 tip series.  ``step_errors`` compares a run with a candidate step
 against a run with a much finer step (the same model, mesh and lock), which is how the
-default ``time_step`` was chosen (docs/validation.md, bench/bench_accuracy.py).
+default ``time_step`` was chosen (docs/validation.md, docs/make_validation.py).
 Nothing here imports rclpy.
 """
 from __future__ import annotations
@@ -37,7 +37,8 @@ def mesh_step(params: UmbrellaParams) -> float:
     (step convergence) counts the cases it meets, and tests/test_time_step.py checks it where
     the fixed default step misses a target.
     """
-    return UmbrellaParams().time_step / params.elements_per_segment
+    return params.replace(time_step=UmbrellaParams().time_step,
+                          step_follows_mesh=True).physics_time_step
 
 
 #: the period of the dominant mode of x(t): the summary's estimator (outputs.py)
@@ -79,7 +80,7 @@ def run_steps(params: UmbrellaParams, window: float, block: int = 2000) -> StepR
     while True:
         b = sim.advance(block)
         if b.error:
-            raise RuntimeError(f"{params.time_step:g} s step: {b.error}")
+            raise RuntimeError(f"{sim.h:g} s step: {b.error}")
         parts.append(b)
         if b.lock is not None:
             lock_time = b.lock.time
@@ -161,7 +162,7 @@ def observed_order(params: UmbrellaParams, steps: tuple[float, float, float], du
     r = steps[0] / steps[1]
     series = []
     for k, h in enumerate(steps):
-        sim = UmbrellaSimulator(params.replace(time_step=h))
+        sim = UmbrellaSimulator(params.with_physics_step(h))
         b = sim.advance(int(round(duration / h)))
         if b.error or b.lock is not None:
             raise RuntimeError(b.error or "the lock is inside the horizon")
