@@ -1,5 +1,7 @@
 """The publication path without DDS: encoded bytes, marker rate, recorded bytes."""
 from pathlib import Path
+import subprocess
+import sys
 
 from mcap.reader import make_reader
 import pytest
@@ -18,7 +20,7 @@ def built(driver, s, frame_prefix):
 
 @pytest.mark.parametrize("frame_prefix", ["", "a/", "ab/", "abc/", "antenna_12/"])
 def test_encoded_bytes_are_the_built_messages(frame_prefix):
-    """Every per-publication topic: exact CDR size, decodes to the builder's message."""
+    """Every per-publication topic: the serializer's bytes of the builder's message, exactly."""
     driver = PublicationDriver(UmbrellaParams(v0=-0.5), 1000.0)
     seen = set()
     for period in range(400):      # deploying, the lock and after it, a force change
@@ -32,7 +34,7 @@ def test_encoded_bytes_are_the_built_messages(frame_prefix):
         for key, ref in reference.items():
             data = msgs[key]
             assert isinstance(data, bytes), key
-            assert len(data) == len(cdr_bytes(ref)), key
+            assert data == cdr_bytes(ref), key       # exact size, zero padding, every value
             assert deserialize_message(data, type(ref)) == ref, key
     assert seen == {"deploying", "locked"}
 
@@ -42,9 +44,10 @@ def test_encoded_bytes_are_the_built_messages(frame_prefix):
     (2, "flexible-nonlinear", "abc", "antenna_12/", 10.0), (4, "rigid-fe", "x", "ab/", 1.0)])
 def test_marker_bytes_are_the_built_markers(mesh, model, ns, frame_prefix, magnification):
     """
-    Markers: the encoder's bytes decode to markers_msg's message, at its exact CDR size.
+    Markers: the encoder's bytes are those of markers_msg's message, byte for byte.
 
-    (Not byte for byte: rclpy's serializer leaves CDR alignment padding uninitialised.)
+    (cdr_bytes sets the CDR alignment padding, which rclpy's serializer leaves as its buffer
+    held it, to zero: the encoder's template too.)
     """
     driver = PublicationDriver(UmbrellaParams(v0=-0.5, elements_per_segment=mesh, model=model),
                                1000.0, marker_rate=1000.0)
@@ -56,7 +59,7 @@ def test_marker_bytes_are_the_built_markers(mesh, model, ns, frame_prefix, magni
         ref = ros_io.markers_msg(s, driver.sim.model.node_positions(s.q, magnification), ns,
                                  frame_prefix)
         data, expected = msgs["markers"], cdr_bytes(ref)     # (colours: float32 on the wire)
-        assert len(data) == len(expected)
+        assert data == expected
         assert deserialize_message(data, ros_io.MarkerArray) == \
             deserialize_message(expected, ros_io.MarkerArray)
         driver.advance()
@@ -105,3 +108,29 @@ def test_recorded_bytes_are_the_published_bytes(tmp_path):
             assert deserialize_message(message.data, type(ref)) == ref
             checked += 1
     assert checked == 3 * len(samples)
+
+
+def test_a_recording_does_not_depend_on_the_process_that_made_it(tmp_path):
+    """
+    Check that two processes recording the same run write the same bytes for every message.
+
+    rclpy's serializer leaves the CDR alignment padding as its buffer held it, which differs
+    from one process to the next; the encoders' templates have it zeroed (cdr_bytes).
+    """
+    code = ("import sys\n"
+            "from umbrella_sim.params import UmbrellaParams\n"
+            "from umbrella_sim.recording import record_offline\n"
+            "record_offline(UmbrellaParams(v0=-0.5, elements_per_segment=2), sys.argv[1], 0.3,"
+            " force_profile=[(0.1, 5.0)], publish_rate=200.0)\n")
+    runs = []
+    for name in ("a", "b"):
+        subprocess.run([sys.executable, "-c", code, str(tmp_path / name)], check=True,
+                       timeout=300)
+        with open(tmp_path / name / f"{name}_0.mcap", "rb") as fh:
+            runs.append([(channel.topic, message.log_time, message.data)
+                         for _, channel, message in make_reader(fh).iter_messages()])
+    topics = {topic for topic, _, _ in runs[0]}
+    assert {"/joint_states", "/energy", "/peak_stress", "/tip_deflection", "/clock",
+            "/markers"} <= topics
+    assert len(runs[0]) > 300
+    assert runs[0] == runs[1]

@@ -44,7 +44,6 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
-from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64
@@ -257,14 +256,13 @@ class UmbrellaNode(Node):
 
     def _publish(self, key: str, msg, t: float) -> None:
         """Publish a message, or the exact CDR bytes of one, and record the same bytes."""
-        if isinstance(msg, bytes):      # ros_io.SampleEncoder's: exact size already
-            data, msg = msg, None
-        else:
-            data = serialize_message(msg)   # once: the publisher and the recorder share it
-        self.pub[key].publish(data)
+        if not isinstance(msg, bytes):  # (the encoders' bytes are exact and zero-padded)
+            from .recording import cdr_bytes   # once: the publisher and the recorder share it
+            msg = cdr_bytes(msg)
+        self.pub[key].publish(msg)
         name = self._topic_name[key]
         self.published[name] = self.published.get(name, 0) + 1
-        self._record(name, msg, t, data)
+        self._record(name, None, t, msg)
 
     # ---------------------------------------------------------------- callbacks
     def _on_force(self, msg) -> None:

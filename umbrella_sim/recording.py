@@ -134,69 +134,86 @@ def _align(pos: int, n: int) -> int:
 _PLANS: dict = {}
 
 
-def _cdr_end(msg, pos: int) -> int:
+def _cdr_end(msg, pos: int, pads: list | None = None) -> int:
+    """Return where msg's CDR ends from pos; pads: collects its alignment gaps (start, end)."""
     plan = _PLANS.get(type(msg))
     if plan is None:
         plan = _PLANS[type(msg)] = [(field, _field_size(ftype)) for field, ftype
                                     in msg.get_fields_and_field_types().items()]
     for field, size in plan:
-        pos = size(getattr(msg, field), pos)
+        pos = size(getattr(msg, field), pos, pads)
     return pos
 
 
+def _aligned(pos: int, n: int, pads: list | None) -> int:
+    """Return pos aligned to n, noting the gap in pads (CDR padding) if any."""
+    end = (pos + n - 1) // n * n
+    if pads is not None and end > pos:
+        pads.append((pos, end))
+    return end
+
+
 def _field_size(ftype: str):
-    """Return size(value, pos) -> end position of one field of IDL type ftype."""
+    """Return size(value, pos, pads) -> end position of one field of IDL type ftype."""
     if ftype.startswith("sequence<"):
         items = _items_size(ftype[len("sequence<"):-1].rsplit(",", 1)[0].strip())
-        return lambda value, pos: items(value, (pos + 3) // 4 * 4 + 4)
+        return lambda value, pos, pads: items(value, _aligned(pos, 4, pads) + 4, pads)
     if ftype.endswith("]"):
         return _items_size(ftype[:ftype.index("[")])
     items = _items_size(ftype)
-    return lambda value, pos: items((value,), pos)
+    return lambda value, pos, pads: items((value,), pos, pads)
 
 
 def _items_size(ftype: str):
-    """Return size(values, pos) -> end position of consecutive items of IDL type ftype."""
+    """Return size(values, pos, pads) -> end position of consecutive items of IDL type ftype."""
     if ftype.startswith("wstring"):
-        def size(values, pos):
+        def size(values, pos, pads):
             for v in values:
-                pos = (pos + 3) // 4 * 4 + 4 + 4 * (len(v) + 1)
+                pos = _aligned(pos, 4, pads) + 4 + 4 * (len(v) + 1)
             return pos
         return size
     if ftype.startswith("string"):
-        def size(values, pos):
+        def size(values, pos, pads):
             for v in values:
-                pos = (pos + 3) // 4 * 4 + 4 + len(v.encode("utf-8")) + 1
+                pos = _aligned(pos, 4, pads) + 4 + len(v.encode("utf-8")) + 1
             return pos
         return size
     n = _SIZES.get(ftype)
     if n is not None:
-        def size(values, pos):
+        def size(values, pos, pads):
             k = len(values)
-            return (pos + n - 1) // n * n + n * k if k else pos
+            return _aligned(pos, n, pads) + n * k if k else pos
         return size
 
-    def size(values, pos):                    # nested messages
+    def size(values, pos, pads):                    # nested messages
         for v in values:
-            pos = _cdr_end(v, pos)
+            pos = _cdr_end(v, pos, pads)
         return pos
     return size
 
 
 def cdr_bytes(msg, data: bytes | None = None) -> bytes:
     """
-    Serialise to CDR, trimmed to the exact size.
+    Serialise to CDR, trimmed to the exact size, with zero padding.
 
-    (rclpy may return a few padding bytes more,
-    which rosbags rejects; ros2 bag record writes the exact size).  data: msg already
-    serialized (the bytes the node published), to serialize once.
+    rclpy may return a few padding bytes more, which rosbags rejects; ros2 bag record writes
+    the exact size.  The alignment gaps are set to 0: the serializer leaves whatever its
+    buffer held there, so the same message would serialize to different bytes from one
+    process to the next, and a recording would depend on the process that made it.  data:
+    msg already serialized, to serialize once.
     """
     if data is None:
         data = serialize_message(msg)
-    size = 4 + _cdr_end(msg, 0)                # 4-byte encapsulation header
+    pads: list = []
+    size = 4 + _cdr_end(msg, 0, pads)           # 4-byte encapsulation header
     if size > len(data):
         raise RuntimeError(f"CDR size walk overran the payload for {type_name(msg)}")
-    return data[:size]
+    if not pads:
+        return data[:size]
+    out = bytearray(data[:size])
+    for start, end in pads:                     # positions after the 4-byte header
+        out[4 + start:4 + end] = bytes(end - start)
+    return bytes(out)
 
 
 # ------------------------------------------------------------------- provenance
@@ -794,10 +811,11 @@ class BagRecorder:
 
         Record one message at sim time t_ns (plus the segment's log-time offset); False
         once the recording has stopped (closed or failed).  data: serialize_message(msg)
-        when the caller has it already (the node publishes those bytes); msg None: data is
-        the message's exact CDR (ros_io.SampleEncoder), written as it is.  With a background
-        writer the message is queued (msg must not be changed afterwards) and True means
-        queued; a later write error shows in ``error``, ``on_error`` and the next call.
+        when the caller has it already; msg None: data is the message's exact CDR
+        (cdr_bytes, or ros_io's encoders: what the node publishes), written as it is.
+        With a background writer the message is queued (msg must not be changed afterwards)
+        and True means queued; a later write error shows in ``error``, ``on_error`` and the
+        next call.
         """
         if self._closed:
             return False
