@@ -727,8 +727,9 @@ class CompiledKernel:
 
     def state(self, t: float, nc: int) -> DynamicState:
         """Return the advanced state; advancing from it next time needs no load."""
-        b, n = self._state_buf.copy(), self._n
-        b.flags.writeable = False     # immutable: a Sample of it shares its arrays
+        # a read-only copy (immutable: a Sample of it shares its arrays); via bytes: setting
+        # a copy's writeable flag costs as much again as the copy
+        b, n = np.frombuffer(self._state_buf.tobytes()), self._n
         # once per publication: the frozen dataclass's per-field __init__ costs 3 us
         self._made = build_frozen(DynamicState, {
             "t": t, "q": b[:n], "qd": b[n:2 * n], "qdd": b[3 * n:4 * n],

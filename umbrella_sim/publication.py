@@ -102,6 +102,8 @@ class PublicationDriver:
         for body, (peak, x, _) in block.peaks.items():
             if peak > self._peaks.get(body, (-1.0, 0.0))[0]:
                 self._peaks[body] = (peak, x)
+        if not applied and block.lock is None:      # most periods: nothing to report
+            return []
         lock = self.sim.lock_event
         events = [Event("applied", t, f, " (locked: no effect on motion)"
                         if lock is not None and t >= lock.time else "") for t, f in applied]

@@ -287,8 +287,9 @@ class SampleEncoder:
     make (``sample_messages``), trimmed to the exact size as ``ros2 bag record`` writes
     them: a template serialized once from the builders' message holds the constant part
     (layout, labels, joint names, frame ids), and each publication packs only the stamp and
-    the doubles into a copy of it.  No message objects per publication: the node publishes
-    these bytes (Publisher.publish takes serialized bytes) and the recorder writes them.
+    the doubles between those constant bytes, one ``struct`` call a topic.  No message
+    objects per publication: the node publishes these bytes (Publisher.publish takes
+    serialized bytes) and the recorder writes them.
     """
 
     #: topic key -> doubles at the end of the message, as groups (a sequence or a struct)
@@ -303,45 +304,60 @@ class SampleEncoder:
         self.yield_strength = params.yield_strength
         self.initial_energy = initial_energy
         msgs = sample_messages(first, params, None, "", initial_energy, frame_prefix)
-        self._templates = {k: cdr_bytes(msgs[k]) for k in self.GROUPS}
-        self._doubles = {k: self._offsets(len(self._templates[k]), g)
+        self._layouts = {k: self._layout(cdr_bytes(msgs[k]), g,
+                                         k in self.STAMPED)
                          for k, g in self.GROUPS.items()}
 
     @staticmethod
-    def _offsets(size: int, groups: tuple) -> list:
+    def _layout(template: bytes, groups: tuple, stamped: bool) -> tuple:
         """
-        Return [(offset, Struct)] of the trailing groups of doubles of a message.
+        Return (Struct of the whole message, its constant byte runs) for a template.
 
-        CDR (XCDR1, 8-aligned doubles): the last group ends the message; before each later
-        sequence of doubles sit its 4-byte count and 4 pad bytes, since every group of
-        doubles ends 8-aligned.
+        CDR (XCDR1, 8-aligned doubles): the last group of doubles ends the message; before
+        each later sequence of doubles sit its 4-byte count and 4 pad bytes, since every
+        group of doubles ends 8-aligned.  The Struct packs, in order: the constant bytes
+        before the stamp (the CDR header), the stamp if any, then before each group the
+        constant bytes up to it (``Ns`` fields: the template's own bytes) and its doubles.
         """
-        out, end = [], size
+        starts, end = [], len(template)
         for k in reversed(groups):
-            start = end - 8 * k
-            out.append((start, struct.Struct(f"<{k}d")))
-            end = start - 8
-        return out[::-1]
-
-    def _fill(self, key: str, sec: int, nsec: int, groups) -> bytes:
-        buf = bytearray(self._templates[key])
-        if key in self.STAMPED:
-            _STAMP.pack_into(buf, 4, sec, nsec)
-        for (offset, layout), values in zip(self._doubles[key], groups):
-            layout.pack_into(buf, offset, *values)
-        return bytes(buf)
+            starts.append(end - 8 * k)
+            end = starts[-1] - 8
+        fields, consts, pos = ["<"], [], 0
+        if stamped:
+            fields += ["4s", "iI"]
+            consts.append(template[:4])
+            pos = 4 + _STAMP.size
+        for start, k in zip(reversed(starts), groups):
+            fields += [f"{start - pos}s", f"{k}d"]
+            consts.append(template[pos:start])
+            pos = start + 8 * k
+        if pos != len(template):
+            fields.append(f"{len(template) - pos}s")
+            consts.append(template[pos:])
+        layout = struct.Struct("".join(fields))
+        if layout.size != len(template):
+            raise ValueError(f"a {len(template)}-byte template, a {layout.size}-byte layout")
+        return layout, tuple(consts)
 
     def encode(self, s: Sample) -> dict[str, bytes]:
         """Return the CDR bytes of every per-publication topic of s, keyed as TOPICS."""
         sec, nsec = stamp_parts(s.time)
+        layouts = self._layouts
+        energy, energy_c = layouts["energy"]
+        clock, clock_c = layouts["clock"]
+        joints, joints_c = layouts["joint_states"]
+        tip, tip_c = layouts["tip_deflection"]
+        peak, peak_c = layouts["peak_stress"]
+        position, velocity, effort = joint_state_values(s)
         return {
-            "energy": self._fill("energy", sec, nsec, (energy_values(s, self.initial_energy),)),
-            "clock": self._fill("clock", sec, nsec, ()),
-            "joint_states": self._fill("joint_states", sec, nsec, joint_state_values(s)),
-            "tip_deflection": self._fill("tip_deflection", sec, nsec,
-                                         (tip_deflection_values(s),)),
-            "peak_stress": self._fill("peak_stress", sec, nsec,
-                                      (peak_stress_values(s, self.yield_strength),)),
+            "energy": energy.pack(energy_c[0], *energy_values(s, self.initial_energy)),
+            "clock": clock.pack(clock_c[0], sec, nsec),
+            "joint_states": joints.pack(joints_c[0], sec, nsec, joints_c[1], *position,
+                                        joints_c[2], *velocity, joints_c[3], *effort),
+            "tip_deflection": tip.pack(tip_c[0], sec, nsec, tip_c[1],
+                                       *tip_deflection_values(s)),
+            "peak_stress": peak.pack(peak_c[0], *peak_stress_values(s, self.yield_strength)),
         }
 
 
