@@ -227,6 +227,26 @@ def test_validity_warnings_at_v0_minus_2(fast_run):
     assert quiet["warnings"] == []
 
 
+def test_new_warnings_names_each_warning_in_the_block_it_first_holds():
+    """A live node's check after every block: each warning once, in its block, none missed."""
+    from umbrella_sim.outputs import SummaryAccumulator
+
+    sim = UmbrellaSimulator(FAST)
+    acc = SummaryAccumulator(FAST.as_dict(), sim.sample(), sim.engine.lock_kind)
+    first, before = {}, set()
+    for k in range(40):                        # 0.1 s in blocks of 10 steps
+        acc.add(sim.advance(10))
+        now = {w.split(":")[0] for w in acc.warnings()}
+        for w in acc.new_warnings():
+            key = w.split(":")[0]
+            assert key not in first and key in now - before
+            first[key] = k
+        assert set(first) == now               # nothing that holds is left unsaid
+        before = now
+    assert set(first) == {"yield exceeded", "large deflection"}
+    assert first["yield exceeded"] != first["large deflection"]   # the second came later
+
+
 def test_lock_that_does_not_apply_is_named():
     f = simulate(UmbrellaParams(model="rigid", lock="energy"), 0.05).summary()
     assert [w.split(":")[0] for w in f["warnings"]] == ["lock not applicable"]
