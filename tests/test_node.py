@@ -215,3 +215,25 @@ def test_node_says_when_physics_cannot_keep_up(probe):
     # what the factor is depends on the machine's load; that it is reported and falls short
     assert 0.0 < float(values["measured_real_time_factor"]) < 1000.0
     assert float(values["lag_s"]) > 0.05
+
+
+def test_step_follows_mesh_as_a_node_parameter():
+    """
+    Check the node's step with step_follows_mesh: time_step / N, and the offline core's lock.
+
+    N = 2 at 1 kHz: 50 us (0.1 ms / 2 divides the period); the lock instant equals the
+    offline simulator's with the same parameters (same grid, same code: 1e-9 s).
+    """
+    with NodeProcess("-p", "elements_per_segment:=2", "-p", "step_follows_mesh:=true",
+                     "-p", "publish_rate:=1000.0", "-p", "record:=false",
+                     "-p", "real_time_factor:=0.0", "-p", "duration:=0.3") as node:
+        step = float(node.wait_for_log(r"physics step ([0-9.e-]+) s").group(1))
+        lock_t = float(node.wait_for_log(r"locked at t = ([0-9.]+) s", timeout=120).group(1))
+        assert node.proc.wait(timeout=120) == 0
+    p = UmbrellaParams(elements_per_segment=2, step_follows_mesh=True)
+    assert step == pytest.approx(p.time_step / 2, rel=1e-9)
+    sim = UmbrellaSimulator(p)
+    while sim.lock_event is None:
+        sim.advance(100)
+    assert sim.h == step
+    assert lock_t == pytest.approx(sim.lock_event.time, abs=1e-9)
