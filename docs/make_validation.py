@@ -144,7 +144,8 @@ def step_convergence_section() -> list[str]:
               "; about the time an axial wave takes to cross an element): it meets every "
               f"target in {sum(all(ok) for ok in zip(*met[rule].values()))} of the "
               f"{len(met[rule]['deploy_time'])} cases, at N times the default step's cost per "
-              "simulated second.", ""]
+              "simulated second. A run takes it with the parameter `step_follows_mesh` "
+              "(`-p step_follows_mesh:=true`, `--set step_follows_mesh=true`).", ""]
     lines += ["", f"Stage-2 peak stresses at the default step ({default:g} s). Those peaks are "
               "narrow crests of modes up to the mesh's highest, often narrower than the step. "
               "A step's peak is therefore the largest fibre stress over the whole step, not at "
