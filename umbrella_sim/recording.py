@@ -125,8 +125,12 @@ _SIZES = {"boolean": 1, "octet": 1, "char": 1, "uint8": 1, "int8": 1, "int16": 2
           "long double": 16, "wchar": 2}
 
 
-def _align(pos: int, n: int) -> int:
-    return (pos + n - 1) // n * n
+def _align(pos: int, n: int, pads: list | None = None) -> int:
+    """Return pos aligned to n, noting the gap in pads (CDR padding) if any."""
+    end = (pos + n - 1) // n * n
+    if pads is not None and end > pos:
+        pads.append((pos, end))
+    return end
 
 
 #: message class -> its fields' size functions (built once per type: the walk runs for every
@@ -145,19 +149,11 @@ def _cdr_end(msg, pos: int, pads: list | None = None) -> int:
     return pos
 
 
-def _aligned(pos: int, n: int, pads: list | None) -> int:
-    """Return pos aligned to n, noting the gap in pads (CDR padding) if any."""
-    end = (pos + n - 1) // n * n
-    if pads is not None and end > pos:
-        pads.append((pos, end))
-    return end
-
-
 def _field_size(ftype: str):
     """Return size(value, pos, pads) -> end position of one field of IDL type ftype."""
     if ftype.startswith("sequence<"):
         items = _items_size(ftype[len("sequence<"):-1].rsplit(",", 1)[0].strip())
-        return lambda value, pos, pads: items(value, _aligned(pos, 4, pads) + 4, pads)
+        return lambda value, pos, pads: items(value, _align(pos, 4, pads) + 4, pads)
     if ftype.endswith("]"):
         return _items_size(ftype[:ftype.index("[")])
     items = _items_size(ftype)
@@ -169,20 +165,20 @@ def _items_size(ftype: str):
     if ftype.startswith("wstring"):
         def size(values, pos, pads):
             for v in values:
-                pos = _aligned(pos, 4, pads) + 4 + 4 * (len(v) + 1)
+                pos = _align(pos, 4, pads) + 4 + 4 * (len(v) + 1)
             return pos
         return size
     if ftype.startswith("string"):
         def size(values, pos, pads):
             for v in values:
-                pos = _aligned(pos, 4, pads) + 4 + len(v.encode("utf-8")) + 1
+                pos = _align(pos, 4, pads) + 4 + len(v.encode("utf-8")) + 1
             return pos
         return size
     n = _SIZES.get(ftype)
     if n is not None:
         def size(values, pos, pads):
             k = len(values)
-            return _aligned(pos, n, pads) + n * k if k else pos
+            return _align(pos, n, pads) + n * k if k else pos
         return size
 
     def size(values, pos, pads):                    # nested messages

@@ -325,7 +325,7 @@ class SampleEncoder:
             end = starts[-1] - 8
         fields, consts, pos = ["<"], [], 0
         if stamped:
-            fields += ["4s", "iI"]
+            fields += ["4s", _STAMP.format.lstrip("<")]
             consts.append(template[:4])
             pos = 4 + _STAMP.size
         for start, k in zip(reversed(starts), groups):
@@ -350,6 +350,8 @@ class SampleEncoder:
         tip, tip_c = layouts["tip_deflection"]
         peak, peak_c = layouts["peak_stress"]
         position, velocity, effort = joint_state_values(s)
+        # each pack's arguments in _layout's order: the header (and stamp) if STAMPED, then
+        # for each of GROUPS[key] its constant bytes and its doubles
         return {
             "energy": energy.pack(energy_c[0], *energy_values(s, self.initial_energy)),
             "clock": clock.pack(clock_c[0], sec, nsec),
