@@ -520,3 +520,22 @@ def test_mcap_keeps_a_recording_per_case(dask_cluster, tmp_path, procs):
         assert run.params["model"] == row["model"]
     rc, log = run_sweep(procs, "rec2", spec, "--out", out, "--scheduler", address, "--mcap")
     assert rc == 0 and "2 of 2 cases already" in log, log
+
+
+def test_mcap_case_that_diverges_is_reported_as_without_mcap(tmp_path):
+    """A case that fails fails under --mcap too: its row, its error, its recording's fault."""
+    from umbrella_sim.replay import read_log
+
+    spec = write(tmp_path / "f.yaml", "cases:\n  - {v0: -1000.0, time_step: 0.01}\n"
+                                      "duration: 0.1\nstop_after_lock: 0.01\n")
+    case = sweep.load_spec(spec).cases[0]
+    plain = sweep.run_case(case.task(None))
+    mcap_dir = tmp_path / "mcap"
+    mcap_dir.mkdir()
+    recorded = sweep.run_case(case.task(str(mcap_dir)))
+    assert plain["status"] == "diverged" and plain["error"], plain
+    assert recorded["status"] == plain["status"], recorded
+    assert recorded["error"] == plain["error"]
+    assert recorded["summary"]["steps"] == plain["summary"]["steps"]
+    events = read_log(recorded["mcap"]).metadata["umbrella_sim.events"]
+    assert events.get("fault") == plain["error"], events

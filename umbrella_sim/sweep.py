@@ -279,7 +279,9 @@ def _mcap_duration(task: dict) -> float:
     """
     Return the recording length: the duration, or up to stop_after_lock past the lock.
 
-    The lock is found first by the plain run, which costs a fraction of the recording.
+    The lock is found first by the plain run, which costs a fraction of the recording.  A
+    plain run that failed stopped at its fault, not at the end: the recording then takes
+    the whole duration, so that it meets the same fault and the case reports it.
     """
     if task["stop_after_lock"] is None:
         return task["duration"]
@@ -290,7 +292,9 @@ def _mcap_duration(task: dict) -> float:
     profile = [tuple(row) for row in task["force_profile"]] if task["force_profile"] else None
     probe = simulate(params, task["duration"], force_profile=profile,
                      stop_after_lock=task["stop_after_lock"])
-    return min(task["duration"], probe.samples[-1].time) if probe.samples else task["duration"]
+    if probe.error is not None or not probe.samples:
+        return task["duration"]
+    return min(task["duration"], probe.samples[-1].time)
 
 
 # ------------------------------------------------------------------ the store
