@@ -157,3 +157,31 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     assert held.lock.time > coast.lock.time
     assert held.samples[-1].work < 0.0                  # the drive took energy out
     assert held.summary()["energy_drift"] < 1e-5        # and the balance still closes
+
+
+@pytest.mark.parametrize("text, rows", [
+    ("t,F\n0,5\n0.3,0\n", [(0.0, 5.0), (0.3, 0.0)]),
+    ("# my drive\n\nt [s], F [N]\n0,5\n", [(0.0, 5.0)]),     # a header after a comment
+    ("0,5\n0.3,0,\n", [(0.0, 5.0), (0.3, 0.0)]),             # a trailing comma
+])
+def test_force_profile_rows_and_header(tmp_path, text, rows):
+    from umbrella_sim.cli import read_force_profile
+    prof = tmp_path / "f.csv"
+    prof.write_text(text)
+    assert read_force_profile(str(prof)) == rows
+
+
+@pytest.mark.parametrize("text, where, words", [
+    ("0,5 N\n0.3,0\n", "f.csv:1", "not numbers"),     # a bad first row is not a header
+    ("t,F\n0,5 N\n", "f.csv:2", "not numbers"),
+    ("t,5\n0,5\n", "f.csv:1", "not numbers"),         # half a number: not a header either
+    ("0,1,2\n", "f.csv:1", "two columns"),            # a third column is not dropped
+    ("t,F\nF\n", "f.csv:2", "two columns"),
+])
+def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
+    from umbrella_sim.cli import read_force_profile
+    prof = tmp_path / "f.csv"
+    prof.write_text(text)
+    with pytest.raises(ValueError) as exc:
+        read_force_profile(str(prof))
+    assert where in str(exc.value) and words in str(exc.value), exc.value

@@ -28,12 +28,22 @@ def default_params_file() -> str | None:
     return None
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def read_force_profile(path: str, params: UmbrellaParams | None = None
                        ) -> list[tuple[float, float]]:
     """
     Read a CSV of (t, F) rows, an optional header line.
 
-    Times are non-decreasing; each F is a command the model (params) accepts.
+    Blank lines and lines starting with # are skipped; the first other line may be a header
+    (neither of its two fields a number).  Times are non-decreasing; each F is a command the
+    model (params) accepts.
     """
     rows: list[tuple[float, float]] = []
     text = read_text_input(path, "force profile")
@@ -41,16 +51,19 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
         parsed = list(csv.reader(io.StringIO(text, newline="")))
     except csv.Error as exc:
         raise ValueError(f"force profile {path}: not CSV ({exc})") from None
+    first = True
     for lineno, row in enumerate(parsed, start=1):
         if not row or row[0].strip().startswith("#"):
             continue
-        if len(row) < 2:
-            raise ValueError(f"force profile {path}:{lineno}: expected two columns t,F")
+        if len(row) < 2 or any(field.strip() for field in row[2:]):
+            raise ValueError(f"force profile {path}:{lineno}: expected two columns t,F, "
+                             f"got {row}")
+        header, first = first and not any(map(_is_number, row[:2])), False
+        if header:
+            continue
         try:
             t, f = float(row[0]), float(row[1])
         except ValueError:
-            if lineno == 1:
-                continue  # header
             raise ValueError(f"force profile {path}:{lineno}: not numbers: {row[:2]}") from None
         if not math.isfinite(t) or t < 0.0:
             raise ValueError(f"force profile {path}:{lineno}: time {t} must be finite and >= 0")
