@@ -168,6 +168,34 @@ def test_figures_from_samples_depend_on_the_rate_and_say_so(bags):
     assert runs[0]["tip_deflection_max"] < runs[1]["tip_deflection_max"]
 
 
+def test_figures_from_samples_of_a_truncated_log_keep_the_stages_apart(bags, tmp_path):
+    """
+    A log cut short has no events record: its lock comes from the "locked" phase message.
+
+    That message is published with the first locked state, so its samples are of stage 2:
+    the stage-1 figures are those of the samples before it, as the exact lock gives.
+    """
+    bag = tmp_path / "long"           # 1.5 s: several chunks, the first ends in stage 2
+    record_offline(PARAMS, str(bag), 1.5, publish_rate=100.0)
+    whole = compare.load_run(str(bag))
+    whole.summary = None
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    data = (bag / "long_0.mcap").read_bytes()
+    (cut / "cut_0.mcap").write_bytes(data[:int(0.45 * len(data))])     # as by a SIGKILL
+    log = read_log(str(cut))
+    assert log.truncated and "umbrella_sim.events" not in log.metadata
+    assert log.decoded(log.find_topic("joint_states"))[-1][0] > whole.deploy_time + 0.1
+    run = compare.load_run(str(cut))
+    assert not run.deploy_time_exact and whole.deploy_time_exact
+    # the phase message: the first publication at or after the exact lock
+    assert whole.deploy_time <= run.deploy_time < whole.deploy_time + 0.01
+    f_cut, f_whole = run.figures(), whole.figures()
+    assert f_cut["tip_deflection_max"] == f_whole["tip_deflection_max"]
+    assert f_cut["tip_deflection_max_time"] == f_whole["tip_deflection_max_time"] < \
+        whole.deploy_time
+
+
 def test_published_peak_stress_is_the_peak_since_the_previous_publication(offline, bags):
     """At 100 Hz each peak_stress message carries the largest |sigma| of its 40 steps."""
     log = read_log(str(bags[100.0]))

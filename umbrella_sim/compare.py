@@ -68,6 +68,10 @@ class Run:
     lock_kind: str | None = None
     # every physics step of a re-run of the log (--physics-rate): replay.physics_series
     physics: dict | None = None
+    # deploy_time is the exact lock instant (the events record); False: the time of the
+    # first publication after it (the "locked" phase message of a log without that record),
+    # whose samples are already of stage 2
+    deploy_time_exact: bool = True
 
     @property
     def rigid(self) -> bool:
@@ -104,7 +108,7 @@ class Run:
             return out
         out = {"deploy_time": self.deploy_time}
         lock = self.deploy_time if self.deploy_time is not None else math.inf
-        s1 = self.tip_t <= lock
+        s1 = self.tip_t <= lock if self.deploy_time_exact else self.tip_t < lock
         if s1.any():
             i = int(np.argmax(np.abs(self.tip_v[s1])))
             out["tip_deflection_max"] = float(abs(self.tip_v[s1][i]))
@@ -173,14 +177,14 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     last = len(log.segments()) - 1
     events = log.metadata.get("umbrella_sim.events" if segment == last
                               else f"umbrella_sim.events.{segment}", {})
-    deploy = None
+    deploy, exact = None, True
     if events.get("locked") == "true":
         deploy = float(events["lock_time"])
     else:
         phase = log.find_topic("deployment_phase", required=False)
         locked = [tm for tm, m in log.iter_decoded(phase, seg) if m.data == "locked"] \
             if phase else []
-        deploy = min(locked) if locked else None
+        deploy, exact = (min(locked), False) if locked else (None, True)
     drift = None
     energy = log.find_topic("energy", required=False)
     if energy:
@@ -216,7 +220,7 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     return Run(label, log.path, params, t, a[:, 0], a[:, 1], tt, np.array(tip), ts,
                st[:, 0], st[:, 4], st[:, 3], st[:, 7], deploy, drift, shapes,
                float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,
-               summary, warnings, events.get("lock_kind"))
+               summary, warnings, events.get("lock_kind"), deploy_time_exact=exact)
 
 
 def physics_run(path: str, segment: int = 0) -> dict:
