@@ -362,6 +362,31 @@ def test_interrupted_offline_run_exits_130_with_its_recording_finalised(tmp_path
     assert not log.truncated and log.count("/joint_states") > 100
 
 
+def test_output_read_by_a_closed_pipe_is_no_traceback_and_keeps_the_files(tmp_path):
+    """`umbrella_compare ... | head -1`: exit 141 (SIGPIPE), no traceback, compare.json kept."""
+    bags = []
+    for name in ("a", "b"):
+        bags.append(str(tmp_path / name))
+        r = run("umbrella_sim", "simulate", "--set", "time_step=0.001", "--duration", "0.3",
+                "--mcap", bags[-1])
+        assert r.returncode == 0, r.stderr
+    out = tmp_path / "cmp"
+    for args in (["umbrella_sim", "simulate", "--duration", "0.01"],
+                 ["umbrella_sim.compare", *bags, "--out", str(out), "--no-plots"],
+                 ["umbrella_sim.replay", bags[0], "--resimulate"]):
+        read_end, write_end = os.pipe()
+        os.close(read_end)              # the reader is gone before the first line
+        try:
+            proc = subprocess.run([sys.executable, "-m", *args], stdout=write_end,
+                                  stderr=subprocess.PIPE, text=True, cwd=ROOT, env=ros_env(),
+                                  timeout=120)
+        finally:
+            os.close(write_end)
+        assert proc.returncode == 141, (args, proc.stderr)
+        assert "Traceback" not in proc.stderr and "Error" not in proc.stderr, proc.stderr
+    assert json.loads((out / "compare.json").read_text())["runs"]
+
+
 def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monkeypatch):
     """
     Keep the writer's chunk index out of memory while recording.

@@ -14,7 +14,7 @@ from .files import check_new_output, read_text_input
 from .params import (check_known_names, load_params_file, NODE_ONLY_PARAMS,
                      NODE_PARAMETERS, parameter_help, SPECS, UmbrellaParams)
 from .solver import command_force, simulate
-from .stop_signals import interruptible
+from .stop_signals import EXIT_READER_GONE, interruptible, stdout_reader_gone
 
 
 def default_params_file() -> str | None:
@@ -264,9 +264,7 @@ def write_stdout(text: str) -> bool:
         sys.stdout.flush()
         return True
     except BrokenPipeError:
-        # no traceback, and no second error when the interpreter flushes stdout at exit
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
+        stdout_reader_gone()
         return False
 
 
@@ -330,7 +328,7 @@ def main(argv: list[str] | None = None) -> int:
         return 3
     if output_error:
         return 4
-    return 0 if reader_there else 141       # 128 + SIGPIPE, as a shell reports it
+    return 0 if reader_there else EXIT_READER_GONE
 
 
 if __name__ == "__main__":

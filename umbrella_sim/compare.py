@@ -21,7 +21,7 @@ import numpy as np
 
 from .logs import LogError, read_log
 from .outputs import stage2_figures, validity_warnings
-from .stop_signals import interruptible
+from .stop_signals import EXIT_READER_GONE, interruptible, stdout_reader_gone
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
 FIGURE_KEYS = ("deploy_time", "tip_deflection_max", "tip_deflection_max_time",
@@ -510,7 +510,13 @@ def main(argv: list[str] | None = None) -> int:
     except LogError as exc:
         print(f"umbrella_compare: error: {exc}", file=sys.stderr)
         return 2
-    print_table(result)
+    reader_there = True
+    try:
+        print_table(result)
+        sys.stdout.flush()
+    except BrokenPipeError:         # (umbrella_compare ... | head): the outputs still follow
+        stdout_reader_gone()
+        reader_there = False
     try:
         os.makedirs(out, exist_ok=True)
         if not args.no_plots:
@@ -523,7 +529,7 @@ def main(argv: list[str] | None = None) -> int:
         return 4
     print(f"\nwrote {os.path.join(out, 'compare.json')}"
           + (f" and {len(result['plots'])} plots" if "plots" in result else ""))
-    return 0
+    return 0 if reader_there else EXIT_READER_GONE
 
 
 def _check_out_dir(path: str) -> str:

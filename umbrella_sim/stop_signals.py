@@ -15,6 +15,7 @@ first thing a process does (a signal in the ~50 ms the interpreter itself needs 
 Python's default behaviour).
 """
 import functools
+import os
 import signal
 import sys
 import threading
@@ -70,6 +71,21 @@ def controller_main() -> int:
 
 #: exit status of a command-line tool stopped by SIGINT or SIGTERM (the shell's 128 + SIGINT)
 EXIT_INTERRUPTED = 130
+#: exit status of a tool whose standard output was closed by its reader (``... | head``):
+#: 128 + SIGPIPE, as a shell reports a program the signal ended
+EXIT_READER_GONE = 141
+
+
+def stdout_reader_gone() -> None:
+    """
+    Send the rest of standard output nowhere: its reader closed the pipe.
+
+    Called on BrokenPipeError, so that nothing more (nor the interpreter's flush at exit)
+    fails on it; the tool goes on with what is not printing (files it writes).
+    """
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 def _interrupt(signum, frame):
@@ -81,7 +97,8 @@ def interruptible(tool: str, kept: str):
     Make a tool's main end on SIGINT/SIGTERM with one line and exit 130, not a traceback.
 
     SIGTERM raises KeyboardInterrupt like SIGINT, so the same ``finally`` blocks run (an
-    offline recording is finalised); kept says what the user still has.
+    offline recording is finalised); kept says what the user still has.  A standard output
+    closed by its reader ends it with EXIT_READER_GONE, not a traceback.
     """
     def wrap(main):
         @functools.wraps(main)
@@ -94,6 +111,9 @@ def interruptible(tool: str, kept: str):
                 how = str(exc) or "SIGINT"
                 print(f"{tool}: interrupted by {how}; {kept}", file=sys.stderr)
                 return EXIT_INTERRUPTED
+            except BrokenPipeError:
+                stdout_reader_gone()
+                return EXIT_READER_GONE
             finally:
                 if in_main:
                     signal.signal(signal.SIGTERM, previous)
