@@ -219,6 +219,11 @@ def test_missing_spec_and_bad_options_refused(tmp_path, capsys):
             ([spec, "--out", out, "--workers", "0"], ["--workers"]),
             ([spec, "--out", out, "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
              ["--scheduler"]),
+            ([spec, "--out", out, "--scheduler", "notaurl"], ["--scheduler 'notaurl'"]),
+            ([spec, "--out", out, "--scheduler", "tcp://127.0.0.1"], ["not a scheduler"]),
+            ([spec, "--out", out, "--scheduler", "http://127.0.0.1:8786"], ["tcp://HOST"]),
+            ([spec, "--out", out, "--scheduler", "tcp://127.0.0.1:99999"], ["--scheduler"]),
+            ([spec, "--out", out, "--scheduler", "tcp://:8786"], ["--scheduler"]),
             ([spec, "--out", a_file], ["--out", "not a directory"]),
             ([spec, "--out", str(tmp_path / "no" / "out")], ["--out", "parent directory"])):
         with pytest.raises(SystemExit) as exc:

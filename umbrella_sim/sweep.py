@@ -628,6 +628,22 @@ class SweepReport:
     compute_s: float = 0.0      # sum of the cases' own wall times on the workers
 
 
+def check_scheduler_address(address: str) -> str:
+    """
+    Return a --scheduler address if it has the form of one, else raise SpecError.
+
+    [tcp:// | tls://]HOST:PORT, the addresses ``dask scheduler`` prints; checked before any
+    work, where distributed would raise a ValueError from deep inside its client.
+    """
+    scheme, sep, rest = address.rpartition("://")
+    host, colon, port = rest.rpartition(":")
+    if (sep and scheme not in ("tcp", "tls")) or not colon or not host.strip("[]") \
+            or not port.isdigit() or not 0 < int(port) < 65536:
+        raise SpecError(f"--scheduler {address!r}: not a scheduler address: expected "
+                        "tcp://HOST:PORT (as `dask scheduler` prints it)")
+    return address
+
+
 def _client(workers: int | None, scheduler: str | None, log: Callable[[str], None]):
     import logging
 
@@ -640,7 +656,7 @@ def _client(workers: int | None, scheduler: str | None, log: Callable[[str], Non
     if scheduler:
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT)
-        except OSError as exc:
+        except (OSError, ValueError) as exc:
             raise SpecError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
         return client, None
     n = workers or os.cpu_count() or 1
@@ -856,6 +872,8 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         if args.workers is not None and args.scheduler:
             raise SpecError("--workers and --scheduler: the cluster's workers are its own; "
                             "give one of them")
+        if args.scheduler is not None:
+            check_scheduler_address(args.scheduler)
         check_out_dir(args.out)
         sweep = load_spec(args.spec)
     except SpecError as exc:
