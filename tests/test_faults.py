@@ -132,7 +132,9 @@ def test_output_paths_checked_before_any_work(tmp_path):
     (tmp_path / "full" / "compare.json").write_text("{}")
     for args, words in [(["--csv", str(tmp_path / "nodir" / "x.csv")], "does not exist"),
                         (["--csv", str(tmp_path / "exists.csv")], "not overwriting"),
-                        (["--mcap", str(tmp_path / "full")], "not overwriting")]:
+                        (["--mcap", str(tmp_path / "full")], "not overwriting"),
+                        (["--csv", ""], "--csv '': empty path"),
+                        (["--mcap", ""], "--mcap '': empty path")]:
         t0 = time.monotonic()
         r = run("umbrella_sim", "simulate", "--duration", "100", *args)
         assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr
@@ -142,6 +144,8 @@ def test_output_paths_checked_before_any_work(tmp_path):
     assert (tmp_path / "full" / "compare.json").read_text() == "{}"
     r = run("umbrella_sim.compare", "a", "b", "--out", str(tmp_path / "exists.csv"))
     assert r.returncode == 2 and "not overwriting" in r.stderr
+    r = run("umbrella_sim.compare", "a", "b", "--out", "")
+    assert r.returncode == 2 and "--out '': empty path" in r.stderr
 
 
 # ------------------------------------------------------------------ solver faults

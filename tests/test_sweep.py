@@ -225,6 +225,7 @@ def test_missing_spec_and_bad_options_refused(tmp_path, capsys):
             ([spec, "--out", out, "--scheduler", "tcp://127.0.0.1:99999"], ["--scheduler"]),
             ([spec, "--out", out, "--scheduler", "tcp://:8786"], ["--scheduler"]),
             ([spec, "--out", a_file], ["--out", "not a directory"]),
+            ([spec, "--out", ""], ["--out ''", "empty path"]),
             ([spec, "--out", str(tmp_path / "no" / "out")], ["--out", "parent directory"])):
         with pytest.raises(SystemExit) as exc:
             cli.main(["sweep", *args])

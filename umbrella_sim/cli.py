@@ -281,9 +281,9 @@ def main(argv: list[str] | None = None) -> int:
                    if args.force_profile else None)
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f"--duration {args.duration}: must be > 0")
-        if args.csv:
+        if args.csv is not None:
             check_new_output(args.csv, "--csv")
-        if args.mcap:
+        if args.mcap is not None:
             check_new_output(args.mcap, "--mcap")
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
             raise ValueError(f"--publish-rate {args.publish_rate}: must be in [1, 5000] Hz")

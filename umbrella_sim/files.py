@@ -45,6 +45,8 @@ def check_new_output(path: str, what: str) -> str:
     cannot be (it exists: never overwritten; no parent directory; parent not writable).
     Nothing is created.
     """
+    if not path.strip():
+        raise ValueError(f"{what} {path!r}: empty path")
     path = os.path.abspath(path.rstrip("/") or "/")
     if os.path.lexists(path):
         raise ValueError(f"{what} {path}: already exists, not overwriting")
