@@ -391,6 +391,32 @@ def test_output_read_by_a_closed_pipe_is_no_traceback_and_keeps_the_files(tmp_pa
     assert json.loads((out / "compare.json").read_text())["runs"]
 
 
+def test_compare_gives_every_run_a_label_of_its_own(tmp_path):
+    """Runs given as .mcap files are named by their files; same names fall back to paths."""
+    bag = tmp_path / "run"
+    r = run("umbrella_sim", "simulate", "--set", "time_step=0.001", "--duration", "0.05",
+            "--mcap", str(bag))
+    assert r.returncode == 0, r.stderr
+    data = (bag / "run_0.mcap").read_bytes()
+    for rel in ("m/x.mcap", "m/y.mcap", "d1/z.mcap", "d2/z.mcap"):
+        (tmp_path / rel).parent.mkdir(exist_ok=True)
+        (tmp_path / rel).write_bytes(data)
+    for logs, labels in ((["m/x.mcap", "m/y.mcap"], ["x", "y"]),
+                         (["d1/z.mcap", "d2/z.mcap"], ["d1/z.mcap", "d2/z.mcap"]),
+                         ([str(bag), "m/x.mcap"], ["run", "x"])):
+        out = tmp_path / f"cmp_{labels[0].replace('/', '_')}"
+        r = subprocess.run([sys.executable, "-m", "umbrella_sim.compare", *logs, "--out",
+                            str(out), "--no-plots"], capture_output=True, text=True,
+                           cwd=tmp_path, env=ros_env(), timeout=120)
+        assert r.returncode == 0, r.stderr
+        assert [e["label"] for e in json.loads((out / "compare.json").read_text())["runs"]] \
+            == labels
+    r = run("umbrella_sim.compare", str(bag), str(bag), "--names", "a", "a", "--out",
+            str(tmp_path / "cmp_names"))
+    assert r.returncode == 2 and "--names a a" in r.stderr, r.stderr
+    assert not (tmp_path / "cmp_names").exists()
+
+
 def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monkeypatch):
     """
     Keep the writer's chunk index out of memory while recording.

@@ -162,6 +162,12 @@ def _series(log, topic, fn, segment, width: int, stride: int = 1):
     return np.array(t)[order], [rows[i] for i in order]
 
 
+def default_label(path: str) -> str:
+    """Return a run's label: its bag directory's name, or its .mcap file's without .mcap."""
+    name = os.path.basename(os.path.normpath(path)) or path
+    return name[:-len(".mcap")] if name.endswith(".mcap") and len(name) > 5 else name
+
+
 def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     log = read_log(path)
     seg = log.segment(segment)
@@ -203,7 +209,7 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
         tm_all, pts_all = _series(log, markers, shape, seg, 0, stride)
         shapes = [(tm, pts[0], pts[1]) for tm, pts in zip(tm_all, pts_all) if len(pts) == 2]
     if label is None:
-        label = f"{os.path.basename(os.path.dirname(log.path)) or log.path}"
+        label = default_label(path)
     a = np.array(js)
     mesh = log.metadata.get("umbrella_sim.mesh", {})
     leaf_x = np.array(json.loads(mesh["leaf_node_x"])) if "leaf_node_x" in mesh else None
@@ -499,10 +505,14 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--segment {args.segment}: must be >= 0")
     if args.names and len(args.names) != len(args.logs):
         ap.error(f"--names: {len(args.names)} labels for {len(args.logs)} logs")
+    if args.names and len(set(args.names)) != len(args.names):
+        ap.error(f"--names {' '.join(args.names)}: each run needs a label of its own")
+    names = args.names or [default_label(p) for p in args.logs]
+    if len(set(names)) != len(names):      # same-named bags or files: their paths as given
+        names = [p if names.count(n) > 1 else n for p, n in zip(args.logs, names)]
     try:
         out = _check_out_dir(args.out)          # before reading any log
-        runs = [load_run(p, args.names[i] if args.names else None, args.segment)
-                for i, p in enumerate(args.logs)]
+        runs = [load_run(p, name, args.segment) for p, name in zip(args.logs, names)]
         result = compare(runs, thesis=args.thesis)
         if args.physics_rate and not args.no_plots:
             for r in runs:
