@@ -160,15 +160,20 @@ def test_pause_and_reset(probe):
         node.wait_for_log(r"locked at t = 0.0904", count=2)      # the same run again
 
 
+def set_double(probe, name, value):
+    """Set one double parameter of /umbrella_node (SetParameters, as `ros2 param set`)."""
+    v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+    req = SetParameters.Request(parameters=[Parameter(name=name, value=v)])
+    return probe.call(SetParameters, "/umbrella_node/set_parameters", req).results[0]
+
+
 def test_runtime_parameter_sets(probe):
     probe.subscribe("/deployment_phase", String, LATCHED)
     with NodeProcess("-p", "v0:=0.0") as node:
         node.wait_for_log("physics step")
 
         def set_param(name, value):
-            v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
-            req = SetParameters.Request(parameters=[Parameter(name=name, value=v)])
-            return probe.call(SetParameters, "/umbrella_node/set_parameters", req).results[0]
+            return set_double(probe, name, value)
 
         bad = set_param("l1", -1.0)
         assert not bad.successful and "l1" in bad.reason           # rclpy range or ours
@@ -180,6 +185,37 @@ def test_runtime_parameter_sets(probe):
         probe.call(Trigger, "/umbrella_node/reset", Trigger.Request())
         probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
         node.wait_for_log(r"locked at t = 0.0452")
+
+
+def test_reset_refused_when_the_pending_parameters_make_no_model(probe):
+    """
+    Parameters are set one at a time and apply at ~/reset, which checks them whole.
+
+    A pair (area, second_moment_of_area) is set one per request; a reset between them, or
+    with a section whose model cannot be built, is refused with the reason, and the run goes
+    on; good values then reset.
+    """
+    probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
+    with NodeProcess("-p", "v0:=0.0") as node:
+        node.wait_for_log("physics step")
+
+        def reset():
+            return probe.call(Trigger, "/umbrella_node/reset", Trigger.Request())
+
+        assert set_double(probe, "area", 1e-4).successful
+        refused = reset()
+        assert not refused.success and "area and second_moment_of_area" in refused.message
+        assert set_double(probe, "second_moment_of_area", 1e-8 / 12).successful
+        assert set_double(probe, "density", 1e-300).successful
+        refused = reset()
+        assert not refused.success and "density=1e-300" in refused.message, refused.message
+        assert "reset refused" in node.wait_for_log(r"\[ERROR\].*reset refused.*").group(0)
+        t = probe.wait_for_count("/clock", 1)[-1].clock.sec
+        probe.wait_for("/clock", lambda m: m.clock.sec >= t + 1)     # the run went on
+        assert set_double(probe, "density", 2770.0).successful
+        assert reset().success
+        node.wait_for_log("reset: simulation restarted")
+        assert "Traceback" not in node.output()
 
 
 def test_namespaced_nodes_do_not_cross_talk(probe):

@@ -13,7 +13,7 @@ from . import __version__, sweep
 from .files import check_new_output, read_text_input
 from .params import (check_known_names, load_params_file, NODE_ONLY_PARAMS,
                      NODE_PARAMETERS, parameter_help, SPECS, UmbrellaParams)
-from .solver import command_force, simulate
+from .solver import command_force, simulate, UmbrellaSimulator
 from .stop_signals import EXIT_READER_GONE, interruptible, stdout_reader_gone
 
 
@@ -287,6 +287,8 @@ def main(argv: list[str] | None = None) -> int:
             check_new_output(args.mcap, "--mcap")
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
             raise ValueError(f"--publish-rate {args.publish_rate}: must be in [1, 5000] Hz")
+        # the model, before the run (a ModelError names the parameters; --mcap builds its own)
+        simulator = None if args.mcap else UmbrellaSimulator(params)
     except ValueError as exc:
         ap.exit(2, f"umbrella_sim: error: {exc}\n")
     progress = Progress(args.duration) if sys.stderr.isatty() and not args.json else None
@@ -300,7 +302,8 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             ap.exit(2, f"umbrella_sim: error: {exc}\n")
     else:
-        result = simulate(params, args.duration, force_profile=profile, progress=progress)
+        result = simulate(params, args.duration, force_profile=profile, progress=progress,
+                          simulator=simulator)
     if progress:
         progress.close()
     summary = result.summary()          # printed before any file is written: never lost

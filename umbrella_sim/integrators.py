@@ -622,7 +622,9 @@ class CompiledKernel:
             **{k: v.ctypes.data_as(_ip) for k, v in ints.items()})
         ctx = lib.umbrella_new(ctypes.byref(self.struct))
         if not ctx:
-            raise MemoryError("the compiled kernel could not allocate its buffers")
+            # (umbrella_new: its buffers, or the LU of the constant elastic mass band)
+            raise MemoryError("the compiled kernel could not be set up: out of memory, or a "
+                              "singular elastic mass matrix")
         self._ctx = ctypes.c_void_p(ctx)
         self._free = lib.umbrella_free
         nc_max = 4 + len(elastic)

@@ -152,7 +152,10 @@ class UmbrellaNode(Node):
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._marker_ns = self.get_namespace().strip("/") or "umbrella"
-        self._build_simulator()
+        try:
+            self._install_driver(self._make_driver(self.model_params))
+        except ValueError as exc:     # a ModelError names the parameters
+            raise StartupError(str(exc)) from None
         if self.node_cfg["record"]:
             self._open_recording(self.node_cfg["record_path"])
         self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
@@ -185,10 +188,15 @@ class UmbrellaNode(Node):
         except ValueError as exc:
             raise StartupError(str(exc)) from None
 
-    def _build_simulator(self) -> None:
-        p = self.model_params
-        self.driver_rate = self.node_cfg["publish_rate"]    # a publish_rate set applies here
-        self.driver = PublicationDriver(p, self.driver_rate, self.node_cfg["marker_rate"])
+    def _make_driver(self, p: UmbrellaParams) -> PublicationDriver:
+        """Build the model and its driver (ValueError if it cannot be); changes nothing."""
+        cfg = self.node_cfg                 # a publish_rate set applies here
+        return PublicationDriver(p, cfg["publish_rate"], cfg["marker_rate"])
+
+    def _install_driver(self, driver: PublicationDriver) -> None:
+        p = self.model_params = driver.params
+        self.driver_rate = driver.publish_rate
+        self.driver = driver
         self.sim = self.driver.sim
         with self._cmd_lock:
             self._commanded_force = p.sleeve_force
@@ -198,7 +206,7 @@ class UmbrellaNode(Node):
             f"umbrella_sim {__version__}: model {p.model}, N = {p.elements_per_segment}, "
             f"v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s "
             f"({self.driver.publish_every} per publication at "
-            f"{self.node_cfg['publish_rate']:g} Hz), kernel {self.driver.backend}")
+            f"{self.driver_rate:g} Hz), kernel {self.driver.backend}")
 
     def _open_recording(self, path: str) -> None:
         from .recording import BagRecorder, new_bag_recorder, run_metadata
@@ -306,10 +314,19 @@ class UmbrellaNode(Node):
             yield
 
     def _on_reset(self, request, response):
+        # the new model first, outside the lock: parameters that cannot make one (the pair
+        # rule, a singular mass matrix) refuse the reset, and the run goes on as it was
+        try:
+            driver = self._make_driver(self.pending_params.validated())
+        except ValueError as exc:
+            response.success = False
+            response.message = (f"reset refused: {exc}; the run goes on (set other values "
+                                "and call ~/reset again)")
+            self.get_logger().error(response.message)
+            return response
         with self._locked():
             ended, fault = self.sim, self.fault
-            self.model_params = self.pending_params
-            self._build_simulator()
+            self._install_driver(driver)
             self._epoch += 1
             self._anchor()
             self._lockstep_armed = False      # the next command starts the handshake again
@@ -347,7 +364,8 @@ class UmbrellaNode(Node):
     def _parameter_candidate(self, params) -> tuple[dict, dict, UmbrellaParams, dict]:
         core = {p.name: p.value for p in params if p.name in SPECS}
         node = {p.name: p.value for p in params if p.name in NODE_PARAMETERS}
-        candidate = (self.pending_params.replace(**core).validated() if core
+        # one parameter at a time (a SetParameters request): the pair rule waits for ~/reset
+        candidate = (self.pending_params.replace(**core).validated(pairs=False) if core
                      else self.pending_params)
         cfg = dict(self.node_cfg)
         cfg.update(check_node_parameters(node))

@@ -19,6 +19,9 @@ from typing import Any, Mapping
 from .files import read_text_input
 
 MODELS = ("flexible", "flexible-nonlinear", "rigid-fe", "rigid")
+#: smallest physics step (s): the finest step of the convergence studies is 3.125e-7 s; at
+#: 1e-9 s a 1 kHz publication period took 10^6 steps and their outputs' memory
+MIN_PHYSICS_STEP = 1e-7
 LOCKS = ("energy", "plastic")
 
 # when a change made at runtime (ros2 param set) takes effect
@@ -215,7 +218,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "cases: the rest are crests of modes 0.1 ms does not resolve. `step_follows_mesh` "
        "divides it by elements_per_segment: 0.1 ms / N meets every target in every studied "
        "case, at N times the cost",
-       low=0.0, low_open=True, high=0.01),
+       low=MIN_PHYSICS_STEP, high=0.01,
+       rule=f"with `step_follows_mesh`, time_step / N ≥ {MIN_PHYSICS_STEP:g} s too"),
     _P("step_follows_mesh", bool, False, "-",
        "true = the physics step is `time_step` / `elements_per_segment` (at the default "
        "`time_step`: step_study.mesh_step, about an element's axial-wave transit time), the "
@@ -401,8 +405,9 @@ class _DerivedQuantities:
             raise ValueError(_unknown_message(unknown))
         return base.replace(**{k: v for k, v in values.items() if k in SPECS})
 
-    def validated(self) -> "UmbrellaParams":
-        validate(self)
+    def validated(self, pairs: bool = True) -> "UmbrellaParams":
+        """Return self if valid, else raise ValueError (validate; pairs: its pair rule)."""
+        validate(self, pairs)
         return self
 
 
@@ -429,8 +434,14 @@ def _sleeve_height(l1: float, l3: float, alpha: float) -> float:
     return l1 * math.sin(alpha) + math.sqrt(max(l3 ** 2 - (l1 * math.cos(alpha)) ** 2, 0.0))
 
 
-def validate(p: UmbrellaParams) -> None:
-    """Raise ValueError naming the parameter and the rule it breaks."""
+def validate(p: UmbrellaParams, pairs: bool = True) -> None:
+    """
+    Raise ValueError naming the parameter and the rule it breaks.
+
+    pairs=False leaves out the rule of parameters given together (area and
+    second_moment_of_area): the live node takes parameter sets one parameter at a time and
+    checks the pair when they apply, at ~/reset.
+    """
     for name, spec in SPECS.items():
         value = getattr(p, name)
         if not isinstance(value, spec.type) or (spec.type is not bool
@@ -438,9 +449,9 @@ def validate(p: UmbrellaParams) -> None:
             raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}")
         spec.check(value)
     # the rules that tie parameters together (each registry entry's `rule` names its own)
-    if (p.area > 0.0) != (p.second_moment_of_area > 0.0):
+    if pairs and (p.area > 0.0) != (p.second_moment_of_area > 0.0):
         raise ValueError("parameters area and second_moment_of_area: give both or neither")
-    if p.area == 0.0 and p.section_height <= 0.0:
+    if (p.area == 0.0 or p.second_moment_of_area == 0.0) and p.section_height <= 0.0:
         raise ValueError(f"parameter section_height={p.section_height}: must be > 0 "
                          "unless area and second_moment_of_area are given")
     if not p.alpha_deployed < p.alpha0:
@@ -452,6 +463,10 @@ def validate(p: UmbrellaParams) -> None:
             raise ValueError(f"parameter l3={p.l3}: the link is too short, geometry cannot "
                              f"close: l1*|cos({name})| = {reach:.6g} m must be < l3 "
                              f"(l1={p.l1}, {name}={getattr(p, name):.6g})")
+    if p.physics_time_step < MIN_PHYSICS_STEP:
+        raise ValueError(f"parameter time_step={p.time_step}: with step_follows_mesh the "
+                         f"physics step time_step / elements_per_segment = "
+                         f"{p.physics_time_step:.3g} s must be >= {MIN_PHYSICS_STEP:g} s")
     if p.sleeve_force < p.sleeve_force_min:
         raise ValueError(f"parameter sleeve_force={p.sleeve_force}: must be >= "
                          f"{p.sleeve_force_min:g} = sleeve_force_min (F_H pushes the sleeve "

@@ -49,6 +49,7 @@ class PublicationDriver:
     def __init__(self, params: UmbrellaParams, publish_rate: float,
                  marker_rate: float = NODE_PARAMETERS["marker_rate"].default):
         self.params = params
+        self.publish_rate = publish_rate
         self.step = physics_step(params.physics_time_step, publish_rate)
         self.publish_every = round((1.0 / publish_rate) / self.step)
         # markers on every marker_every-th publication (t = 0 included)

@@ -43,6 +43,18 @@ class SimulationDiverged(RuntimeError):
     """The state became non-finite or left the constraint manifold; nothing was advanced."""
 
 
+class ModelError(ValueError):
+    """Valid parameters whose model cannot be built (e.g. a singular mass matrix)."""
+
+    def __init__(self, params: UmbrellaParams, reason: BaseException):
+        changed = [f"{name}={getattr(params, name)!r}" for name, spec in SPECS.items()
+                   if getattr(params, name) != spec.default]
+        super().__init__(
+            f"the parameters do not give a model that can be simulated "
+            f"({type(reason).__name__}: {reason}); set away from the defaults: "
+            + (", ".join(changed) if changed else "none"))
+
+
 def fault_message(t_good: float, reason: str) -> str:
     """
     Return the text of a solver fault with one time in it: the last good state's.
@@ -416,21 +428,31 @@ class UmbrellaSimulator:
 
     # -- lifecycle
     def reset(self, params: UmbrellaParams | None = None) -> None:
-        if params is not None:
-            self.params = params.validated()
-        p = self.params
-        if nonlinear_model_needed(p):   # geometrically nonlinear and/or damped beams
-            from . import nonlinear
-            self.model, self.engine = nonlinear.build(p)
-        else:
-            self.model = UmbrellaModel(p)
-            engine = RigidEngine if p.model == "rigid" else FiniteElementEngine
-            self.engine = engine(p, self.model)
+        """
+        Start again at t = 0 (with params, if given).
+
+        Raises ValueError naming the culprit (ModelError: valid parameters whose model
+        cannot be built, e.g. a section so thin that the mass matrix is singular); the
+        simulator is then as it was.
+        """
+        p = params.validated() if params is not None else self.params
+        force = command_force(p.sleeve_force, p)
+        try:
+            if nonlinear_model_needed(p):   # geometrically nonlinear and/or damped beams
+                from . import nonlinear
+                model, engine = nonlinear.build(p)
+            else:
+                model = UmbrellaModel(p)
+                engine = (RigidEngine if p.model == "rigid" else FiniteElementEngine)(p, model)
+            state = engine.initial(force)
+        except (ArithmeticError, MemoryError, ValueError) as exc:   # (LinAlgError too)
+            raise ModelError(p, exc) from None
+        self.params, self.model, self.engine = p, model, engine
         self.h = p.physics_time_step
-        self._force = command_force(p.sleeve_force, p)
+        self._force = force
         self._k = 0
         self._stage = DEFORMING
-        self._state = self.engine.initial(self._force)
+        self._state = state
         self._applied_force = self._force
         self._work = 0.0
         self._lock_loss = 0.0
