@@ -218,6 +218,29 @@ def test_reset_refused_when_the_pending_parameters_make_no_model(probe):
         assert "Traceback" not in node.output()
 
 
+def test_use_sim_time_is_not_taken_by_the_clock_source(probe):
+    """
+    Keep use_sim_time false on the node that drives /clock, and say so.
+
+    A params file for every node may set it: following its own /clock cost a callback per
+    publication. The node does not subscribe to /clock; a runtime set is refused.
+    """
+    from rcl_interfaces.srv import GetParameters
+
+    with NodeProcess("-p", "use_sim_time:=true", "-p", "v0:=-0.5") as node:
+        node.wait_for_log("use_sim_time:=true not taken")
+        node.wait_for_log(r"locked at t = 0.0904")                  # the run as without it
+        names = [i.node_name for i in probe.node.get_subscriptions_info_by_topic("/clock")]
+        assert "umbrella_node" not in names, names
+        got = probe.call(GetParameters, "/umbrella_node/get_parameters",
+                         GetParameters.Request(names=["use_sim_time"]))
+        assert got.values[0].bool_value is False
+        v = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=True)
+        req = SetParameters.Request(parameters=[Parameter(name="use_sim_time", value=v)])
+        result = probe.call(SetParameters, "/umbrella_node/set_parameters", req).results[0]
+        assert not result.successful and "drives" in result.reason, result.reason
+
+
 def test_namespaced_nodes_do_not_cross_talk(probe):
     for ns in ("a1", "a2"):
         probe.subscribe(f"/{ns}/joint_states", JointState)

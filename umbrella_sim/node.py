@@ -44,6 +44,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64
@@ -59,7 +60,11 @@ from .publication import PublicationDriver
 from .solver import command_force, SimulationDiverged
 
 #: parameters every rclpy node has (besides qos_overrides.*)
-ROS_OWN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
+USE_SIM_TIME = "use_sim_time"
+ROS_OWN_PARAMETERS = {USE_SIM_TIME, "start_type_description_service"}
+SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
+                   "paces it by the system clock; a node does not follow the clock it drives "
+                   "(use_sim_time stays false here; set it for the other nodes)")
 #: overload policy: the physics may fall this far behind wall time x real_time_factor; past
 #: it the pacing is re-anchored (the backlog is dropped, not caught up) and the slip reported
 MAX_LAG_S = 0.5
@@ -80,6 +85,12 @@ class UmbrellaNode(Node):
     def __init__(self, params_files: tuple = (), **kwargs):
         super().__init__("umbrella_node", **kwargs)
         self._check_parameter_sources(params_files, set(ros_io.parameter_defaults()))
+        if self.get_parameter(USE_SIM_TIME).value:
+            # a params file for every node ('/**') may set it: this node drives /clock and
+            # paces it by the system clock; following its own /clock would only cost a
+            # callback a publication (rclpy's time source), which slowed it several fold
+            self.set_parameters([Parameter(USE_SIM_TIME, Parameter.Type.BOOL, False)])
+            self.get_logger().info(f"{USE_SIM_TIME}:=true not taken: {SIM_TIME_REASON}")
         # statically typed parameters (ros_io.descriptor); an integer literal given for a
         # double (-p v0:=-1) is taken as the double, before rclpy's type check sees it
         for name, override in list(self._parameter_overrides.items()):
@@ -373,6 +384,8 @@ class UmbrellaNode(Node):
 
     def _validate_parameters(self, params) -> SetParametersResult:
         """Accept or refuse a set (on-set callback); changes nothing."""
+        if any(p.name == USE_SIM_TIME and p.value is True for p in params):
+            return SetParametersResult(successful=False, reason=SIM_TIME_REASON)
         try:
             self._parameter_candidate(params)
         except ValueError as exc:
