@@ -335,6 +335,33 @@ def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum
         assert not log.truncated and not log.ended_early
 
 
+def test_stop_inside_a_long_period_ends_it_and_records_one_state(tmp_path):
+    """
+    A stop signal in a long publication period (1 Hz, 10^6 steps of 1 us) ends it early.
+
+    The period goes in short calls (PublicationDriver.advance with should_stop); the node
+    publishes nothing for the partial period, and its recording's events and summary are of
+    the same state: every step taken, none in flight.
+    """
+    bag = tmp_path / "long_period"
+    with NodeProcess("-p", "publish_rate:=1.0", "-p", "time_step:=1e-6",
+                     "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("recording to")
+        time.sleep(1.5)                         # inside the first period (~10 s of steps)
+        assert node.stop(signal.SIGTERM, timeout=60) == 0, node.output()
+        out = node.output()
+    assert "recording finalised" in out and "Traceback" not in out, out
+    log = read_log(str(bag))
+    assert not log.truncated and log.count("/joint_states") == 1     # t = 0 only
+    summary = json.loads(log.metadata["umbrella_sim.summary"]["figures"])
+    steps = summary["steps"]
+    assert 0 < steps < 10 ** 6 and summary["final_time"] == pytest.approx(steps * 1e-6)
+    events = log.metadata["umbrella_sim.events"]      # (the lock comes at ~226 000 steps)
+    assert (events["locked"] == "true") == (summary["deploy_time"] is not None)
+    if summary["deploy_time"] is not None:
+        assert float(events["lock_time"]) == summary["deploy_time"]
+
+
 def _signal_and_collect(proc, signum):
     """Send signum to proc, return its (stdout, stderr); killed if it outlives 90 s."""
     try:

@@ -167,8 +167,6 @@ class UmbrellaNode(Node):
             self._install_driver(self._make_driver(self.model_params))
         except ValueError as exc:     # a ModelError names the parameters
             raise StartupError(str(exc)) from None
-        if self.node_cfg["record"]:
-            self._open_recording(self.node_cfg["record_path"])
         self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
 
     # ------------------------------------------------------------------ config
@@ -260,11 +258,18 @@ class UmbrellaNode(Node):
             return
         from .recording import summary_metadata
         had_error = self.recorder.error is not None
-        self.recorder.close_run(self.sim, self.published, self.accepted_commands,
-                                self.refused_commands, fault=self.fault, extra={
-                                    "refused_not_recorded": str(self.refused_not_recorded),
-                                    "segments": str(self.recorder.segment + 1)},
-                                summary=summary_metadata(self.driver.summary.figures()))
+        # the events and the summary of one state: not while the physics thread is in a
+        # period (it ends a period early on a stop: PublicationDriver.advance)
+        held = self._sim_lock.acquire(timeout=60.0)
+        try:
+            self.recorder.close_run(self.sim, self.published, self.accepted_commands,
+                                    self.refused_commands, fault=self.fault, extra={
+                                        "refused_not_recorded": str(self.refused_not_recorded),
+                                        "segments": str(self.recorder.segment + 1)},
+                                    summary=summary_metadata(self.driver.summary.figures()))
+        finally:
+            if held:
+                self._sim_lock.release()
         if not had_error and self.recorder.error is None:
             self._log("info", f"recording finalised: {self.recorder.path} "
                               f"({sum(self.recorder.counts.values())} messages)")
@@ -407,6 +412,9 @@ class UmbrellaNode(Node):
 
     # --------------------------------------------------------------- physics
     def start(self) -> None:
+        """Open the recording (StartupError if it cannot be) and start the physics thread."""
+        if self.node_cfg["record"]:     # not before: a stop during start-up creates nothing
+            self._open_recording(self.node_cfg["record_path"])
         self._publish_phase("deploying")
         self._anchor()
         self._thread.start()
@@ -464,7 +472,7 @@ class UmbrellaNode(Node):
             self._record(self.command_topic + ros_io.COMMAND_APPLIED_SUFFIX,
                          Float64(data=force), t)
         try:
-            events = self.driver.advance(force)
+            events = self.driver.advance(force, should_stop=self._stop.is_set)
         finally:
             for text in self.driver.summary.new_warnings():   # each logged once
                 self.get_logger().warning(f"t = {self.sim.time:.6f} s: {text}")
@@ -503,7 +511,9 @@ class UmbrellaNode(Node):
                             self._lockstep_armed = True   # the handshake starts (or goes on)
                         try:
                             self._advance_one_publication()
-                            sample = self._sample_messages()
+                            # (a stop may end a long period early: no publication then)
+                            sample = (self._sample_messages() if self.driver.at_publication
+                                      else None)
                         except SimulationDiverged as exc:
                             # the state stays at the last good step (maybe between
                             # publications): nothing more is published from it
@@ -774,12 +784,16 @@ def _run(argv: list[str], running: list) -> int:
     except StartupError as exc:
         return fail(str(exc))
     running.append(node)
+    if stop_requested:          # a signal while the model was built: before any output
+        node.destroy_node()
+        return _stopped_during_start_up()
+    try:
+        node.start()
+    except StartupError as exc:
+        node.destroy_node()
+        return fail(str(exc))
     executor = MultiThreadedExecutor(num_threads=2)
     executor.add_node(node)
-    if stop_requested:          # a signal during start-up: stop before any physics
-        node.request_stop()
-    else:
-        node.start()
     ok = True
     try:
         # the timeout lets a signal's Python handler run while the executor waits

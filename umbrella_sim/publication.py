@@ -15,12 +15,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import Callable
 
 from . import ros_io
 from .forcing import ForceSchedule
 from .outputs import build_frozen, Sample, StepBlock, SummaryAccumulator
 from .params import NODE_PARAMETERS, UmbrellaParams
 from .solver import command_force, SimulationDiverged, UmbrellaSimulator
+
+
+#: steps per advance_schedule call of a period when a stop may come (PublicationDriver.advance):
+#: at most ~0.3 s of the slowest model (N = 64, flexible-nonlinear), a few ms of most
+STOP_CHECK_STEPS = 256
 
 
 def physics_step(time_step: float, publish_rate: float) -> float:
@@ -78,23 +84,43 @@ class PublicationDriver:
         if force != self.schedule.force_at(self.sim.step_index):
             self.schedule.add(self.sim.time, force)
 
-    def advance(self, commanded_force: float | None = None) -> list[Event]:
+    def advance(self, commanded_force: float | None = None,
+                should_stop: Callable[[], bool] | None = None) -> list[Event]:
         """
         Step one publication period.
 
-        With the commanded force (if given) scheduled from its first step, one
-        ``UmbrellaSimulator.advance_schedule`` call (its StepBlock kept as ``last_block``);
-        raises SimulationDiverged after the steps that succeeded (state kept, their
-        outputs in ``last_block``).
+        With the commanded force (if given) scheduled from its first step,
+        ``UmbrellaSimulator.advance_schedule`` calls (their StepBlock kept as
+        ``last_block``); raises SimulationDiverged after the steps that succeeded (state
+        kept, their outputs in ``last_block``).  With should_stop, a long period goes in
+        calls of STOP_CHECK_STEPS steps and ends early once it returns True (``at_publication``
+        then says False): a stop does not wait for a period of many slow steps.  The summary
+        takes the period's steps as one block either way.
         """
         if commanded_force is not None:
             self.command(commanded_force)
-        block, applied = self.sim.advance_schedule(self.schedule, self.publish_every)
+        chunk = self.publish_every if should_stop is None else STOP_CHECK_STEPS
+        blocks, applied = [], []
+        k_end = self.sim.step_index + self.publish_every - \
+            self.sim.step_index % self.publish_every
+        while self.sim.step_index < k_end:
+            block, values = self.sim.advance_schedule(
+                self.schedule, min(chunk, k_end - self.sim.step_index))
+            blocks.append(block)
+            applied += values
+            if block.error is not None or (should_stop is not None and should_stop()):
+                break
+        block = StepBlock.concatenate(blocks)
         self.summary.add(block)
         events = self.take(block, applied)
         if block.error is not None:
             raise SimulationDiverged(block.error)
         return events
+
+    @property
+    def at_publication(self) -> bool:
+        """Say whether the simulator is at a publication instant (not stopped mid-period)."""
+        return self.sim.step_index % self.publish_every == 0
 
     def take(self, block: StepBlock, applied: list[tuple[float, float]]) -> list[Event]:
         """Note one period's block of steps; return its events (applied forces, the lock)."""
