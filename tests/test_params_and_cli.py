@@ -58,6 +58,23 @@ def test_bad_params_file(tmp_path):
     empty.write_text("other_node:\n  ros__parameters: {a: 1}\n")
     with pytest.raises(ValueError, match="no section for node /umbrella_node"):
         load_params_file(str(empty))
+    for text, words in (("/**:\n  ros__parameters:\n    v0:\n", "no value for v0"),
+                        ("/**:\n  ros__parameters:\n    v0: -0.5\n    v0: -1.0\n",
+                         "key 'v0' given twice")):
+        bad.write_text(text)        # YAML would give None, or the last value, silently
+        with pytest.raises(ValueError, match=words):
+            load_params_file(str(bad))
+
+
+def test_a_bad_value_in_a_params_file_names_the_file(tmp_path):
+    bad = tmp_path / "fast.yaml"
+    bad.write_text('/**:\n  ros__parameters:\n    v0: "fast"\n')
+    r = cli("simulate", "--params", str(bad), "--duration", "0.01")
+    assert r.returncode == 2 and "fast.yaml" in r.stderr and "v0" in r.stderr, r.stderr
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    r = cli("simulate", "--duration", "0.01", "--csv", str(a_file / "x.csv"))
+    assert r.returncode == 2 and f"{a_file} is not a directory" in r.stderr, r.stderr
 
 
 def cli(*args, cwd=None):

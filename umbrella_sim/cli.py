@@ -11,7 +11,7 @@ import sys
 
 from . import __version__, sweep
 from .files import check_new_output, read_text_input
-from .params import (check_known_names, load_params_file, NODE_ONLY_PARAMS,
+from .params import (check_known_names, check_values, load_params_file, NODE_ONLY_PARAMS,
                      NODE_PARAMETERS, parameter_help, SPECS, UmbrellaParams)
 from .solver import command_force, simulate, UmbrellaSimulator
 from .stop_signals import EXIT_READER_GONE, interruptible, stdout_reader_gone
@@ -98,6 +98,11 @@ def resolve_params(overrides: dict, params_file: str | None = None) -> UmbrellaP
         from_file = load_params_file(params_file)
         check_known_names(from_file, set(SPECS) | set(NODE_ONLY_PARAMS),
                           f"params file {params_file}")
+        try:        # its own values first: an error names the file
+            check_values({k: v for k, v in from_file.items()
+                          if k in SPECS and k not in overrides})
+        except ValueError as exc:
+            raise ValueError(f"params file {params_file}: {exc}") from None
         values.update(from_file)
     for name in NODE_ONLY_PARAMS:     # a params file shared with the node: its node part
         values.pop(name, None)

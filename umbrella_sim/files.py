@@ -52,7 +52,8 @@ def check_new_output(path: str, what: str) -> str:
         raise ValueError(f"{what} {path}: already exists, not overwriting")
     parent = os.path.dirname(path)
     if not os.path.isdir(parent):
-        raise ValueError(f"{what} {path}: parent directory {parent} does not exist")
+        why = "is not a directory" if os.path.exists(parent) else "does not exist"
+        raise ValueError(f"{what} {path}: parent directory {parent} {why}")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"{what} {path}: parent directory {parent} is not writable")
     return path

@@ -434,6 +434,26 @@ def _sleeve_height(l1: float, l3: float, alpha: float) -> float:
     return l1 * math.sin(alpha) + math.sqrt(max(l3 ** 2 - (l1 * math.cos(alpha)) ** 2, 0.0))
 
 
+def _check_each(p: UmbrellaParams, names) -> None:
+    """Raise ValueError for the first of names whose value has the wrong type or range."""
+    for name in names:
+        spec, value = SPECS[name], getattr(p, name)
+        if not isinstance(value, spec.type) or (spec.type is not bool
+                                                and isinstance(value, bool)):
+            raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}")
+        spec.check(value)
+
+
+def check_values(values: Mapping[str, Any]) -> None:
+    """
+    Check each value on its own: its type and range, not the rules tying several together.
+
+    For values from one source (a params file), so that the error can name the source
+    before they are merged with others.
+    """
+    _check_each(UmbrellaParams.from_mapping(values), values)
+
+
 def validate(p: UmbrellaParams, pairs: bool = True) -> None:
     """
     Raise ValueError naming the parameter and the rule it breaks.
@@ -442,12 +462,7 @@ def validate(p: UmbrellaParams, pairs: bool = True) -> None:
     second_moment_of_area): the live node takes parameter sets one parameter at a time and
     checks the pair when they apply, at ~/reset.
     """
-    for name, spec in SPECS.items():
-        value = getattr(p, name)
-        if not isinstance(value, spec.type) or (spec.type is not bool
-                                                and isinstance(value, bool)):
-            raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}")
-        spec.check(value)
+    _check_each(p, SPECS)
     # the rules that tie parameters together (each registry entry's `rule` names its own)
     if pairs and (p.area > 0.0) != (p.second_moment_of_area > 0.0):
         raise ValueError("parameters area and second_moment_of_area: give both or neither")
@@ -510,8 +525,22 @@ def read_params_file(path: str) -> dict[str, dict]:
     import yaml  # local import: only the file path needs it
 
     text = read_text_input(path, "params file")
+
+    class UniqueKeys(yaml.SafeLoader):
+        """A mapping with a key twice is an error (YAML takes the last one silently)."""
+
+        def construct_mapping(self, node, deep=False):
+            seen = set()
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=deep)
+                if key in seen:
+                    raise yaml.MarkedYAMLError(
+                        problem=f"key {key!r} given twice", problem_mark=key_node.start_mark)
+                seen.add(key)
+            return super().construct_mapping(node, deep)
+
     try:
-        doc = yaml.safe_load(text)
+        doc = yaml.load(text, Loader=UniqueKeys)   # noqa: S506 - a SafeLoader
     except yaml.YAMLError as exc:
         reason = " ".join(str(exc).split())
         raise ValueError(f"params file {path}: not valid YAML ({reason})") from None
@@ -529,6 +558,10 @@ def read_params_file(path: str) -> dict[str, dict]:
             raise ValueError(f"params file {path}: section {key!r}: only ros__parameters is "
                              f"allowed, found {', '.join(map(str, extra))}")
         sections[str(key)] = _flatten(values)
+        empty = sorted(name for name, value in sections[str(key)].items() if value is None)
+        if empty:
+            raise ValueError(f"params file {path}: section {key!r}: no value for "
+                             f"{', '.join(empty)}")
     return sections
 
 
