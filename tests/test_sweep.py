@@ -186,6 +186,8 @@ def own_dask_cluster(procs, tmp_path):
     ("grid:\n  v0: [-1.0]\ncases:\n  - {model: flexible}\n  - {model: elastic}\n",
      ["case 3", "model", "elastic", "one of"]),
     ("base: {l3: 0.01}\ngrid:\n  v0: [-1.0]\n", ["case 1", "cannot close"]),
+    ("grid:\n  model: [flexible, rigid]\nbase: {lock: energy}\n",       # as simulate's
+     ["case 2", "lock=energy", "always plastic"]),
     ("grid:\n  elements_per_segment: [1, 2.5]\n", ["case 2", "elements_per_segment"]),
     ("grid:\n  v0: []\n", ["grid", "v0", "non-empty list"]),
     ("grid:\n  v0: [-1.0]\nduration: -1\n", ["duration", "-1"]),

@@ -141,12 +141,22 @@ def build_params(args) -> UmbrellaParams:
     if args.lock is not None:
         lock_given = f"--lock {args.lock}"
     params = resolve_params(values, args.params)
-    if lock_given and params.model in RIGID_MODELS and params.lock != "plastic":
-        raise ValueError(f"{lock_given}: does not apply to --model {params.model}, whose lock "
-                         "is always plastic (a rigid mechanism stopped at a point keeps no "
-                         "kinetic energy to redistribute); use --lock plastic or a flexible "
-                         "model")
+    check_lock_given(params, lock_given)
     return params
+
+
+def check_lock_given(params: UmbrellaParams, given: str | None) -> None:
+    """
+    Refuse a lock asked for explicitly (given: how) that the model cannot take.
+
+    A rigid model always stops plastically; a lock from a params file shared with flexible
+    runs only gets the validity warning (outputs.lock_warning).
+    """
+    if given and params.model in RIGID_MODELS and params.lock != "plastic":
+        raise ValueError(f"{given}: does not apply to model {params.model}, whose lock "
+                         "is always plastic (a rigid mechanism stopped at a point keeps no "
+                         "kinetic energy to redistribute); use lock plastic or a flexible "
+                         "model")
 
 
 class Progress:

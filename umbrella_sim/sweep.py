@@ -119,7 +119,7 @@ def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> st
 
 def load_spec(path: str) -> Sweep:
     """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
-    from .cli import read_force_profile, resolve_params
+    from .cli import check_lock_given, read_force_profile, resolve_params
     from .params import UmbrellaParams
     from .solver import command_force
 
@@ -198,7 +198,10 @@ def load_spec(path: str) -> Sweep:
     for index, overrides in enumerate(overrides_list, start=1):
         source = "grid" if index <= len(overrides_list) - len(explicit) else "cases"
         try:
-            params = resolve_params(overrides, params_file).as_dict()
+            resolved = resolve_params(overrides, params_file)
+            check_lock_given(resolved, f"lock={overrides['lock']}" if "lock" in overrides
+                             else None)
+            params = resolved.as_dict()
         except ValueError as exc:
             shown = ", ".join(f"{k}={v!r}" for k, v in overrides.items() if k not in base
                               or source == "cases")
