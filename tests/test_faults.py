@@ -449,6 +449,19 @@ def test_compare_gives_every_run_a_label_of_its_own(tmp_path):
     assert not (tmp_path / "cmp_names").exists()
 
 
+def test_compare_with_a_run_that_faulted_at_once_names_both_logs(tmp_path):
+    """A log with one sample (a fault in the first step) has no time to compare over."""
+    for name, args in (("fault", ["--set", "v0=-1000", "--set", "time_step=0.01"]),
+                       ("good", ["--set", "time_step=0.001"])):
+        r = run("umbrella_sim", "simulate", "--duration", "0.05", *args,
+                "--mcap", str(tmp_path / name))
+        assert r.returncode == (3 if name == "fault" else 0), r.stderr
+    r = run("umbrella_sim.compare", str(tmp_path / "good"), str(tmp_path / "fault"),
+            "--out", str(tmp_path / "cmp"), "--no-plots")
+    assert r.returncode == 2 and "do not overlap in time" in r.stderr, r.stderr
+    assert "fault_0.mcap (1 samples" in r.stderr and "good_0.mcap" in r.stderr, r.stderr
+
+
 def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monkeypatch):
     """
     Keep the writer's chunk index out of memory while recording.
@@ -531,7 +544,8 @@ def test_foreign_damaged_and_special_logs_exit_2_naming_file(tmp_path):
     for path, words in cases:
         for tool in (["umbrella_sim.replay", str(path), "--resimulate"],
                      ["umbrella_sim.compare", str(good), str(path), "--out",
-                      str(tmp_path / "out"), "--no-plots"]):
+                      str(tmp_path / "out"), "--no-plots"]) + (
+                (["umbrella_sim.replay", str(path)],) if path == cut else ()):
             r = run(*tool, timeout=60)
             assert r.returncode == 2, (tool, r.stdout, r.stderr)
             assert words in r.stderr and str(path) in r.stderr, (tool, r.stderr)
@@ -541,6 +555,9 @@ def test_foreign_damaged_and_special_logs_exit_2_naming_file(tmp_path):
         assert r.returncode == 2 and "--tolerance" in r.stderr
     r = run("umbrella_sim.replay", str(good), "--rate", "0")
     assert r.returncode == 2 and "--rate" in r.stderr
+    # republishing's options with --resimulate: refused, not ignored
+    r = run("umbrella_sim.replay", str(good), "--resimulate", "--rate", "2", "--topics", "/x")
+    assert r.returncode == 2 and "--rate, --topics: options of republishing" in r.stderr
 
 
 def test_binary_text_inputs_named(tmp_path):

@@ -266,7 +266,12 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
         for name, unit, get in SIGNALS:
             rt, ry = get(ref)
             t, y = get(r)
-            mx, rms = _diff(rt, ry, t, y)
+            try:
+                mx, rms = _diff(rt, ry, t, y)
+            except LogError as exc:     # which runs, and what each holds
+                raise LogError(f"{exc}: {ref.path} ({len(rt)} samples, t = {rt[0]:g} .. "
+                               f"{rt[-1]:g} s) and {r.path} ({len(t)} samples, t = "
+                               f"{t[0]:g} .. {t[-1]:g} s)") from None
             entry["differences"][name] = {"max": mx, "rms": rms, "unit": unit}
         entry["figures"] = r.figures()
         entry["warnings"] = r.validity()

@@ -255,7 +255,7 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
             raise LogError(f"{log.path}: topics not in the log: {', '.join(missing)}")
     total = sum(log.count(t) for t in chosen)
     if total == 0:
-        raise LogError(f"{log.path}: nothing to replay")
+        raise LogError(f"{log.path}: nothing to replay{log.truncation_note()}")
     first = next(log.iter_raw(chosen))
     t0 = first.log_time + int(round(start_offset * 1e9))
     if log.time_range[1] is not None and t0 > log.time_range[1]:
@@ -322,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="umbrella_replay", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("log", help="bag directory or .mcap file")
-    ap.add_argument("--rate", type=float, default=1.0, help="playback rate factor")
+    ap.add_argument("--rate", type=float, default=None, help="playback rate factor (1)")
     ap.add_argument("--start-offset", type=float, default=0.0,
                     help="skip the first S seconds of the log")
     ap.add_argument("--loop", action="store_true", help="replay until interrupted")
@@ -338,6 +338,16 @@ def main(argv: list[str] | None = None) -> int:
                     help="largest accepted difference for --resimulate (>= 0)")
     args = ap.parse_args(argv)
     # argument values: an argparse usage error (exit 2) before any file is read
+    if args.resimulate:     # what only republishing takes: refused, not ignored
+        given = [flag for flag, value in (
+            ("--rate", args.rate is not None), ("--start-offset", args.start_offset != 0.0),
+            ("--loop", args.loop), ("--topics", args.topics),
+            ("--wait-for-subscribers", args.wait_for_subscribers != 0.0),
+            ("--with-commands", args.with_commands), ("--ros-args", ros_args)) if value]
+        if given:
+            ap.error(f"{', '.join(given)}: options of republishing; --resimulate re-runs the "
+                     "whole log without ROS traffic")
+    args.rate = 1.0 if args.rate is None else args.rate
     if not (math.isfinite(args.tolerance) and args.tolerance >= 0):
         ap.error(f"--tolerance {args.tolerance}: must be a finite number >= 0")
     if not (math.isfinite(args.rate) and args.rate > 0):
