@@ -115,8 +115,12 @@ def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
                                  str(errno.ENOSPC)], cwd=ROOT) as node:
         node.wait_for_log("recording stopped", timeout=60)
         n_at_error = len(probe.messages("/joint_states"))
+        # a reset after it: the run restarts; no recording segment is claimed
+        assert probe.call(Trigger, "/umbrella_node/reset", Trigger.Request()).success
+        node.wait_for_log("reset: simulation restarted")
         assert node.proc.wait(timeout=60) == 4
         out = node.output()
+    assert "recording segment" not in out
     assert out.count("recording stopped") == 1 and "Traceback" not in out
     assert "duration 15 s reached" in out                      # the simulation went on
     assert len(probe.messages("/joint_states")) > n_at_error

@@ -347,7 +347,7 @@ class UmbrellaNode(Node):
             self._anchor()
             self._lockstep_armed = False      # the next command starts the handshake again
             self._answered.clear()
-            if self.recorder is not None:
+            if self.recorder is not None and self.recorder.error is None:
                 from .recording import events_metadata, run_metadata
                 meta = run_metadata(self.model_params, self.node_cfg, self.driver.step,
                                     self.sim.model, self.driver.backend, source="~/reset")
