@@ -202,3 +202,19 @@ def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
     with pytest.raises(ValueError) as exc:
         read_force_profile(str(prof))
     assert where in str(exc.value) and words in str(exc.value), exc.value
+
+
+def test_params_file_publish_rate_shapes_the_mcap_recording(tmp_path):
+    """A params file shared with the node: its publish_rate is the recording's, unless given."""
+    from umbrella_sim.logs import read_log
+    params = tmp_path / "rate.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    publish_rate: 1000.0\n")
+    counts = []
+    for name, extra in (("file", []), ("flag", ["--publish-rate", "50"]),
+                        ("set", ["--set", "publish_rate=200"])):
+        bag = tmp_path / name
+        r = cli("simulate", "--params", str(params), "--duration", "0.1", "--mcap", str(bag),
+                *extra)
+        assert r.returncode == 0, r.stderr
+        counts.append(read_log(str(bag)).count("/joint_states"))
+    assert counts == [101, 6, 21]       # t = 0 and every period of 0.1 s

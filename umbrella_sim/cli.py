@@ -142,6 +142,20 @@ def build_params(args) -> UmbrellaParams:
         lock_given = f"--lock {args.lock}"
     params = resolve_params(values, args.params)
     check_lock_given(params, lock_given)
+    # what shapes a --mcap recording: --publish-rate / --set, else the params file's (a file
+    # shared with the node), else the node's default
+    params_file = args.params or default_params_file()
+    from_file = load_params_file(params_file) if params_file else {}
+    for name in RECORDING_PARAMS:
+        spec = NODE_PARAMETERS[name]
+        if getattr(args, name) is None and name in from_file:
+            try:
+                setattr(args, name, spec.coerce(from_file[name]))
+                spec.check(getattr(args, name))
+            except ValueError as exc:
+                raise ValueError(f"params file {params_file}: {exc}") from None
+        elif getattr(args, name) is None:
+            setattr(args, name, spec.default)
     return params
 
 
@@ -207,10 +221,11 @@ def make_parser() -> argparse.ArgumentParser:
                     help="record the node's topics to a new bag directory (BAG_DIR/"
                          "BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the same "
                          "states and summary as without it")
-    sp.add_argument("--publish-rate", type=float, default=100.0, dest="publish_rate",
+    sp.add_argument("--publish-rate", type=float, default=None, dest="publish_rate",
                     help="publication rate of the --mcap recording (Hz, sim time; also "
-                         "--set publish_rate=...); the summary is the same at any rate")
-    sp.set_defaults(marker_magnification=1.0)
+                         "--set publish_rate=... or the params file's; default 100); the "
+                         "summary is the same at any rate")
+    sp.set_defaults(marker_magnification=None)
     sweep.add_parser(sub)
     return ap
 
