@@ -236,11 +236,15 @@ def _node(*args, timeout=60):
     (None, ["--bogus-flag"], "unknown ROS arguments"),
     (None, ["-p", "section_height:=1e-300"], "section_height=1e-300"),
     ("/**:\n  ros__parameters:\n    v0:\n", [], "no value for v0"),
+    (None, ["-p", "qos_overrides./clok.publisher.depth:=5"],
+     "did you mean 'qos_overrides./clock.publisher.depth'"),
+    ("/**:\n  ros__parameters:\n    qos_overrides:\n      /clock:\n        publisher:\n"
+     "          depth: deep\n", [], "qos_overrides./clock.publisher.depth"),
     ("/**:\n  ros__parameters:\n    v0: -0.5\n    v0: -1.0\n", [], "given twice"),
     (None, ["-p", "time_step:=1e-9"], "time_step"),
 ], ids=["typo", "unknown", "other-node", "unknown-key", "nested", "malformed", "list",
         "no-ros-parameters", "binary", "missing", "no-assign", "bogus-flag", "no-model",
-        "empty-value", "twice", "tiny-step"])
+        "empty-value", "qos-typo", "qos-type", "twice", "tiny-step"])
 def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):
     if content is not None:
         path = tmp_path / "p.yaml"

@@ -15,7 +15,7 @@ from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from tests.ros_helpers import NodeProcess, Probe, ros_env
+from tests.ros_helpers import NodeProcess, poll, Probe, ros_env
 from umbrella_sim import ros_io
 from umbrella_sim.logs import read_log
 from umbrella_sim.params import NODE_PARAMETERS, REGISTRY, SPECS, START
@@ -109,6 +109,34 @@ def test_live_node_conventions(probe, tmp_path):
     assert bag.name.startswith("umbrella_a1_") and len(bag.name) == len("umbrella_a1_") + 19
     log = read_log(str(bag))
     assert log.count("/a1/joint_states") > 0 and log.count("/diagnostics") > 0
+
+
+def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
+    """
+    The ROS 2 convention: qos_overrides.<topic>.publisher.<policy> set the QoS.
+
+    Here /clock made reliable (ClockQoS is best effort) and joint_states' depth 7: the
+    publisher offers them, and the recording's offered_qos_profiles say so.
+    """
+    from umbrella_sim.logs import qos_from_yaml
+    bag = tmp_path / "bag"
+    with NodeProcess("-p", "qos_overrides./clock.publisher.reliability:=reliable",
+                     "-p", "qos_overrides./joint_states.publisher.depth:=7",
+                     "-p", "v0:=-0.5", "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("recording to")
+
+        def clock_publisher():
+            return [e for e in probe.node.get_publishers_info_by_topic("/clock")
+                    if e.node_name == "umbrella_node"]
+        poll(clock_publisher, 20, lambda: "the node's /clock publisher was not discovered")
+        assert clock_publisher()[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
+        node.wait_for_log("locked at")
+        assert node.stop() == 0
+    log = read_log(str(bag))
+    assert qos_from_yaml(log.channels["/clock"][1]).reliability == ReliabilityPolicy.RELIABLE
+    assert qos_from_yaml(log.channels["/joint_states"][1]).depth == 7
+    assert qos_from_yaml(log.channels["/tip_deflection"][1]).depth == \
+        ros_io.TOPICS["tip_deflection"].qos.depth
 
 
 def test_recording_can_be_turned_off_and_never_overwrites(tmp_path):

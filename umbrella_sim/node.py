@@ -45,6 +45,7 @@ from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64
@@ -61,6 +62,7 @@ from .solver import command_force, SimulationDiverged
 
 #: parameters every rclpy node has (besides qos_overrides.*)
 USE_SIM_TIME = "use_sim_time"
+QOS_OVERRIDES = "qos_overrides."
 ROS_OWN_PARAMETERS = {USE_SIM_TIME, "start_type_description_service"}
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
                    "paces it by the system clock; a node does not follow the clock it drives "
@@ -146,14 +148,27 @@ class UmbrellaNode(Node):
         self._peers_warned = ""
         self._warned_at: dict[str, float] = {}
 
-        self.pub = {key: self.create_publisher(t.type, t.name, t.qos)
-                    for key, t in ros_io.TOPICS.items()}
+        # QoS as documented, or as qos_overrides.<topic>.publisher.<policy> parameters set
+        # (history, depth, reliability, durability: the ROS 2 convention; read-only)
+        try:
+            # (own copies: topics share ros_io's profiles)
+            self.pub = {key: self.create_publisher(
+                t.type, t.name, ros_io.own_qos(t.qos),
+                qos_overriding_options=QoSOverridingOptions.with_default_policies())
+                for key, t in ros_io.TOPICS.items()}
+            # commands and services in their own callback groups, served by a 2-thread
+            # executor: a slow ~/reset never delays a command and a command flood never
+            # delays ~/pause
+            self.command_sub = self.create_subscription(
+                ros_io.COMMAND.type, ros_io.COMMAND.name, self._on_force,
+                ros_io.own_qos(ros_io.COMMAND.qos),
+                callback_group=MutuallyExclusiveCallbackGroup(),
+                qos_overriding_options=QoSOverridingOptions.with_default_policies())
+        except Exception as exc:  # rclpy's errors name the parameter
+            files = f" (params files: {', '.join(params_files)})" if params_files else ""
+            raise StartupError(f"qos_overrides: {' '.join(str(exc).split())}{files}") from None
+        self._check_qos_overrides(params_files)
         self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
-        # commands and services in their own callback groups, served by a 2-thread executor:
-        # a slow ~/reset never delays a command and a command flood never delays ~/pause
-        self.command_sub = self.create_subscription(
-            ros_io.COMMAND.type, ros_io.COMMAND.name, self._on_force, ros_io.COMMAND.qos,
-            callback_group=MutuallyExclusiveCallbackGroup())
         self.command_topic = self.command_sub.topic_name
         services = MutuallyExclusiveCallbackGroup()
         self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
@@ -188,12 +203,27 @@ class UmbrellaNode(Node):
                                      f"(sections: {', '.join(sections)}); use '/**' or the "
                                      "node's name")
                 names = {n for key, values in sections.items() if section_matches(key, fqn)
-                         for n in values}
+                         for n in values if not n.startswith(QOS_OVERRIDES)}
                 check_known_names(names, known, f"params file {path} (for {fqn})")
                 in_files |= names
-            names = [n for n in self._parameter_overrides
-                     if not n.startswith("qos_overrides.") and n not in in_files]
+            names = [n for n in self._parameter_overrides   # (qos_overrides: once declared)
+                     if not n.startswith(QOS_OVERRIDES) and n not in in_files]
             check_known_names(names, known, f"-p for {fqn}")
+        except ValueError as exc:
+            raise StartupError(str(exc)) from None
+
+    def _check_qos_overrides(self, params_files) -> None:
+        """Refuse a qos_overrides.* name given for this node that none of its topics has."""
+        fqn = self.get_fully_qualified_name()
+        given = {n for n in self._parameter_overrides if n.startswith(QOS_OVERRIDES)}
+        for path in params_files:
+            given |= {n for key, values in read_params_file(path).items()
+                      if section_matches(key, fqn) for n in values
+                      if n.startswith(QOS_OVERRIDES)}
+        declared = {QOS_OVERRIDES + n
+                    for n in self.get_parameters_by_prefix(QOS_OVERRIDES.rstrip("."))}
+        try:
+            check_known_names(given, declared, f"qos_overrides for {fqn}")
         except ValueError as exc:
             raise StartupError(str(exc)) from None
 
@@ -237,7 +267,8 @@ class UmbrellaNode(Node):
         except ValueError as exc:
             raise StartupError(str(exc)) from None
         self.recorder.add_umbrella_channels(
-            {key: pub.topic_name for key, pub in self.pub.items()}, self.command_topic)
+            {key: pub.topic_name for key, pub in self.pub.items()}, self.command_topic,
+            {key: pub.qos_profile for key, pub in self.pub.items()})
         self.get_logger().info(f"recording to {self.recorder.path}")
 
     def _on_recording_error(self, reason: str) -> None:

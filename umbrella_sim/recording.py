@@ -739,18 +739,21 @@ class BagRecorder:
             except OSError as exc:
                 self._fail(exc, f"writing channel {topic}", None)
 
-    def add_umbrella_channels(self, topic_names: dict, command_topic: str) -> None:
+    def add_umbrella_channels(self, topic_names: dict, command_topic: str,
+                              qos: dict | None = None) -> None:
         """
         Add the channels of an umbrella_sim run, live or offline.
 
-        Every published topic
-        (topic key -> resolved name) and the command with its refused/applied records.
+        Every published topic (topic key -> resolved name) with the QoS it is published with
+        (qos: topic key -> profile, the node's after qos_overrides; else ros_io.TOPICS's) and
+        the command with its refused/applied records.
         """
         from std_msgs.msg import Float64
 
         from . import ros_io
         for key, name in topic_names.items():
-            self.add_channel(name, ros_io.TOPICS[key].type, ros_io.TOPICS[key].qos)
+            self.add_channel(name, ros_io.TOPICS[key].type,
+                             (qos or {}).get(key, ros_io.TOPICS[key].qos))
         for suffix in ("", ros_io.COMMAND_REFUSED_SUFFIX, ros_io.COMMAND_APPLIED_SUFFIX):
             self.add_channel(command_topic + suffix, Float64, ros_io.COMMAND.qos)
 

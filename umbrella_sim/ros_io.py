@@ -80,6 +80,15 @@ _ROS_TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETE
               str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL}
 
 
+def own_qos(qos: QoSProfile) -> QoSProfile:
+    """Return a copy of a profile (rclpy applies qos_overrides to the profile it is given)."""
+    return QoSProfile(history=qos.history, depth=qos.depth, reliability=qos.reliability,
+                      durability=qos.durability, lifespan=qos.lifespan, deadline=qos.deadline,
+                      liveliness=qos.liveliness,
+                      liveliness_lease_duration=qos.liveliness_lease_duration,
+                      avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions)
+
+
 def descriptor(name: str) -> ParameterDescriptor:
     """Build the statically typed descriptor of a parameter from the registry."""
     p = REGISTRY[name]
