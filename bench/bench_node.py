@@ -6,8 +6,12 @@ Default config.  Prints:
   * a table of CPU seconds per simulated second of the node process (all its threads:
     physics, publication, recording writer, executor) at real_time_factor = 1, for
     N = 2 and 8 (--cpu-elements) x publish_rate 100 Hz and 1 kHz (--cpu-rates), without and
-    with recording (--cpu-seconds of steady state, after a 2 s warm-up), with the load
-    average (the machine may be shared: the figures include what other load costs the node);
+    with recording, and with recording while this process subscribes to /clock
+    (--cpu-seconds of steady state, after a 2 s warm-up), with the load average (the machine
+    may be shared: the figures include what other load costs the node).  The sim time of
+    each mark comes from /diagnostics (1 Hz), so the first two columns have no subscriber to
+    a per-period topic: what delivering each publication to a subscriber costs the node's
+    Fast DDS is the third column less the second;
   * the achieved real-time factor with real_time_factor = 0 (as fast as possible);
   * at real_time_factor = 1, publish_rate 200 Hz and 1 kHz: p50 / p99 of |interval - period|
     of /clock arrivals, and the sim-time vs wall-time drift over the run (--seconds, 60).
@@ -58,23 +62,40 @@ def process_cpu(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def cpu_per_sim_second(probe: Probe, n_el: int, rate: float, record: bool, seconds: float):
-    """Return (node CPU s per simulated s, simulated s per wall s) in steady state."""
-    probe.received["/clock"] = []
+def cpu_per_sim_second(probe: Probe, n_el: int, rate: float, record: bool, seconds: float,
+                       clock_subscriber: bool = False):
+    """
+    Return (node CPU s per simulated s, simulated s per wall s) in steady state.
+
+    The marks are taken as /diagnostics messages arrive (probe subscribes to it: 1 Hz,
+    carrying the node's sim time); with clock_subscriber, a second probe subscribes to
+    /clock (one publication a period) meanwhile.
+    """
+    probe.received["/diagnostics"] = []
+    clock_probe = None
     with tempfile.TemporaryDirectory(prefix="bench_node_") as tmp:
         rec = ["-p", f"record_path:={tmp}/bag"] if record else ["-p", "record:=false"]
         with NodeProcess("-p", f"elements_per_segment:={n_el}", "-p", f"publish_rate:={rate}",
                          "-p", "real_time_factor:=1.0", *rec, cwd=tmp) as node:
-            node.wait_for_log("physics step")
-            probe.wait_for("/clock", timeout=30)
-            time.sleep(2.0)                                  # discovery, warm-up
-            marks = []
-            for _ in range(2):
-                last = probe.messages("/clock")[-1].clock
-                marks.append((process_cpu(node.proc.pid), last.sec + 1e-9 * last.nanosec,
-                              time.monotonic()))
-                if not marks[1:]:
-                    time.sleep(seconds)
+            try:
+                node.wait_for_log("physics step")
+                if clock_subscriber:
+                    clock_probe = Probe("bench_cpu_clock_probe")
+                    clock_probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
+                    clock_probe.wait_for("/clock", timeout=30)
+                probe.wait_for("/diagnostics", timeout=30)
+                time.sleep(2.0)                              # discovery, warm-up
+                marks = []
+                for wait in (0.0, seconds):
+                    time.sleep(wait)
+                    count = len(probe.messages("/diagnostics"))
+                    msg = probe.wait_for_count("/diagnostics", count + 1, timeout=30)[-1]
+                    cpu = process_cpu(node.proc.pid)     # as the message arrives
+                    values = {kv.key: kv.value for kv in msg.status[0].values}
+                    marks.append((cpu, float(values["sim_time_s"]), time.monotonic()))
+            finally:
+                if clock_probe is not None:
+                    clock_probe.close()
     (c0, s0, w0), (c1, s1, w1) = marks
     return (c1 - c0) / (s1 - s0), (s1 - s0) / (w1 - w0)
 
@@ -101,20 +122,21 @@ def physics_alone(n_el: int, rate: float, sim_seconds: float = 1.0) -> float:
 def cpu_table(args) -> None:
     """Print CPU s per simulated s, without and with recording, for each N and rate."""
     probe = Probe("bench_cpu_probe")
-    probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
+    probe.subscribe("/diagnostics", DiagnosticArray)
     print("CPU seconds per simulated second of umbrella_node (all threads), real_time_factor 1;"
+          "\nno subscriber to a per-period topic, then recording with one /clock subscriber;"
           "\nphysics alone: the same periods stepped in this process without ROS (the "
           "difference is\nthe publication path: messages, publishing, recording, pacing)")
     print(f"{'N':>3} {'rate Hz':>8} {'no recording':>13} {'recording':>10} "
-          f"{'physics alone':>14} {'achieved x':>11} {'loadavg':>8}")
+          f"{'+ /clock sub':>13} {'physics alone':>14} {'achieved x':>11} {'loadavg':>8}")
     try:
         for n_el in args.cpu_elements:
             for rate in args.cpu_rates:
-                row = [cpu_per_sim_second(probe, n_el, rate, record, args.cpu_seconds)
-                       for record in (False, True)]
+                row = [cpu_per_sim_second(probe, n_el, rate, record, args.cpu_seconds, sub)
+                       for record, sub in ((False, False), (True, False), (True, True))]
                 alone = physics_alone(n_el, rate)
                 print(f"{n_el:>3} {rate:>8g} {row[0][0]:>13.3f} {row[1][0]:>10.3f} "
-                      f"{alone:>14.3f} {min(r[1] for r in row):>11.3f} "
+                      f"{row[2][0]:>13.3f} {alone:>14.3f} {min(r[1] for r in row):>11.3f} "
                       f"{os.getloadavg()[0]:>8.2f} (on {os.cpu_count()} CPUs)", flush=True)
     finally:
         probe.close()
