@@ -10,6 +10,7 @@ picks it), talks to it over real DDS, and stops it afterwards.
 """
 import math
 
+import pytest
 from std_msgs.msg import Float64
 
 from umbrella_sim.testing import NodeProcess
@@ -56,7 +57,12 @@ def test_the_deploy_controller_latches_softly(antenna_factory, ros_domain_id):
 
 def test_a_nan_command_is_refused_and_nothing_moves(antenna_factory):
     antenna = antenna_factory({"v0": 0.0})
-    antenna.publish_force(float("nan"))
+    with pytest.raises(ValueError, match="sleeve force"):
+        antenna.publish_force(float("nan"))     # the helper refuses what the node would
+    # sent on the topic anyway, the node refuses it, counts it and nothing moves
+    pub = antenna.probe.publisher(antenna.topics["sleeve_force"], Float64)
+    antenna.probe.wait_for_subscribers(pub)
+    pub.publish(Float64(data=float("nan")))
     antenna.wait_for("diagnostics", lambda m: any(
         kv.key == "refused_commands" and kv.value == "1" for kv in m.status[0].values),
         timeout=10, what="refused_commands == 1")

@@ -64,6 +64,17 @@ def test_waits_fail_saying_what_was_awaited_and_what_was_seen(antenna_factory):
         antenna.wait_for_phase("done")
     with pytest.raises(AssertionError, match="never reached 1000"):
         antenna.wait_for_sim_time(1000.0, timeout=0.5)
+    # mistakes named at once, not as a timeout later
+    with pytest.raises(ValueError, match="link can carry"):
+        antenna.publish_force(5000.0)               # the node would refuse it
+    with pytest.raises(ValueError, match="sleeve force"):
+        antenna.publish_force(math.nan)
+    with pytest.raises(ValueError, match="'energy'.*does not subscribe.*joint_states"):
+        antenna.messages("energy")
+    with pytest.raises(ValueError, match="'joint_state'.*receives.*joint_states"):
+        antenna.wait_for("joint_state", lambda m: True)
+    with pytest.raises(ValueError, match="already runs in namespace '/'"):
+        antenna_factory({"v0": 0.0})                # one topic set for two nodes
 
 
 def test_startup_failure_reports_the_node_output():
@@ -129,3 +140,61 @@ def test_a_child_process_has_the_domain_it_was_given(monkeypatch):
         out = subprocess.run([sys.executable, "-c", code], env=ros_env(domain),
                              capture_output=True, text=True, check=True).stdout.split()
         assert out == [str(domain), str(domain)]
+
+
+FORGETFUL_TEST = """
+import signal, sys, threading, time
+from umbrella_sim.testing import SimulatedAntenna
+antenna = SimulatedAntenna({"v0": 0.0})          # never closed
+print("pid", antenna.node.pid, flush=True)
+if sys.argv[1] == "interrupt":                  # Ctrl-C while a wait is under way
+    threading.Timer(1.0, lambda: signal.raise_signal(signal.SIGINT)).start()
+    try:
+        antenna.wait_for_phase("locked", timeout=60)
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+"""
+
+
+@pytest.mark.parametrize("how", ["exit", "interrupt"])
+def test_a_forgotten_close_or_a_ctrl_c_still_stops_the_node(tmp_path, how):
+    """An antenna never closed goes at exit; Ctrl-C interrupts a wait (rclpy takes no signal)."""
+    script = tmp_path / "forgetful.py"
+    script.write_text(FORGETFUL_TEST)
+    r = subprocess.run([sys.executable, str(script), how], capture_output=True, text=True,
+                       env=ros_env(), timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "terminate called" not in r.stderr and "Traceback" not in r.stderr, r.stderr
+    pid = int(r.stdout.split()[1])
+    assert process_gone(pid)
+    assert ("interrupted" in r.stdout) == (how == "interrupt")
+
+
+def test_start_paused_pause_resume_and_reset(antenna_factory):
+    """
+    start_paused holds t = 0 until resume(); after reset() every figure is the new run's.
+
+    V0 = -0.5 m/s locks at 0.0904 s, sooner than a node starts: paused, the test sees the
+    whole run. After a reset (paused, so the new run also waits) phases, lock time and
+    applied forces start again, and the same run locks at the same instant.
+    """
+    antenna = antenna_factory({"v0": -0.5, "start_paused": True})
+    assert antenna.phases() == ["deploying"] or antenna.wait_for_phase("deploying") is None
+    with pytest.raises(AssertionError, match="never reached"):
+        antenna.wait_for_sim_time(1e-3, timeout=1.0)       # held at t = 0
+    antenna.wait_for("diagnostics", lambda m: True, timeout=5.0)
+    assert antenna.sim_time() == 0.0 and antenna.diagnostics()["paused"] == "True"
+    antenna.resume()
+    antenna.wait_for_phase("locked", timeout=30)
+    first = antenna.lock_time()
+    assert first == pytest.approx(0.0904, abs=1e-3)
+    antenna.pause()
+    antenna.reset()
+    assert antenna.phases() == ["deploying"] and antenna.lock_time() is None
+    assert antenna.sim_time() == 0.0 and antenna.applied_forces() == []
+    assert antenna.messages("joint_states") == [] == antenna.messages("peak_stress")
+    antenna.resume()
+    antenna.wait_for_phase("locked", timeout=30)
+    assert antenna.lock_time() == first
+    summary = antenna.summary(after_lock=0.05)
+    assert summary.lock_time == first and summary.deploy_time == first

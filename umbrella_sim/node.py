@@ -133,7 +133,7 @@ class UmbrellaNode(Node):
         self.accepted_commands = 0
         self.refused_commands = 0
         self.fault: str | None = None
-        self.paused = False
+        self.paused = bool(self.node_cfg["start_paused"])     # ~/pause false starts it
         self.finished = Future()
         self._stop = threading.Event()
         self._wake = threading.Event()

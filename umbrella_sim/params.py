@@ -251,6 +251,10 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     _P("real_time_factor", float, 1.0, "-",
        "sim seconds per wall second: 1 = wall-clock pace, 0 = as fast as possible",
        low=0.0, high=1000.0, applies=NOW, group=NODE),
+    _P("start_paused", bool, False, "-",
+       "true = start paused at t = 0 (the first state published, the physics held) until "
+       "`~/pause` false, as a simulator's paused start: a test or a controller can connect "
+       "and then start the run", applies=START, group=NODE),
     _P("lockstep", bool, False, "-",
        "true = the simulation waits for its controller: from the first `sleeve_force` "
        "command on, while deploying, each publication period starts only once a command "

@@ -50,6 +50,7 @@ import tempfile
 import threading
 import time
 from typing import Any, Callable, Iterable
+import weakref
 
 #: environment variable that sets the default ROS domain of tests
 DOMAIN_ID_ENV = "UMBRELLA_TEST_DOMAIN_ID"
@@ -282,13 +283,17 @@ class Probe:
     def __init__(self, name: str = "probe", domain_id: int | None = None):
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
 
         self.domain_id = DOMAIN_ID if domain_id is None else domain_id
         os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
         os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
         self.rclpy = rclpy
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=self.domain_id)
+        # no rclpy signal handlers: Ctrl-C stays a KeyboardInterrupt of the test runner (which
+        # tears the fixtures down) instead of shutting the context under a waiting test
+        rclpy.init(context=self.context, domain_id=self.domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -442,6 +447,7 @@ def summary_from_recording(path: str) -> RunSummary:
 
 # ------------------------------------------------------------------ antenna
 APPLIED_RE = r"sleeve force ([0-9.eE+-]+|nan|inf|-inf) N applied from t = ([0-9.]+) s"
+RESET_LINE = "reset: simulation restarted"
 LOCKED_RE = r"locked at t = ([0-9.]+) s"
 
 
@@ -458,6 +464,7 @@ class SimulatedAntenna:
     """
 
     _count = 0          # probe node names stay unique within a process
+    _live: set = set()  # (domain, namespace) of the antennas not closed yet
 
     def __init__(self, parameters: dict | None = None, namespace: str = "",
                  record_path: str | None = None, domain_id: int | None = None,
@@ -476,6 +483,13 @@ class SimulatedAntenna:
             self.parameters.setdefault("record", False)
         self.record_path = record_path
         self.namespace = namespace.strip("/")
+        domain = (probe.domain_id if probe is not None
+                  else DOMAIN_ID if domain_id is None else domain_id)
+        self._key = (domain, self.namespace)
+        if self._key in SimulatedAntenna._live:
+            raise ValueError(f"an antenna already runs in namespace '/{self.namespace}' on ROS "
+                             f"domain {domain}: their topics would be one; give each antenna "
+                             "its own namespace (namespace=...)")
         prefix = f"/{self.namespace}/" if self.namespace else "/"
         # relative names resolve under the namespace; absolute ones (/diagnostics) do not
         self.topics = {key: t.name if t.name.startswith("/") else prefix + t.name
@@ -493,8 +507,13 @@ class SimulatedAntenna:
         self.probe.subscribe(self.topics["deployment_phase"], String, ros_io.LATCHED)
         self._float64 = Float64
         self._command_pub = None
+        self._runs = 0          # resets so far: waits and figures are of the current run
+        SimulatedAntenna._live.add(self._key)
         self.node = NodeProcess(parameters=self.parameters, namespace=self.namespace or None,
                                 domain_id=self.domain_id)
+        # a forgotten close(): the node and the probe still go, at the latest at exit
+        self._finalizer = weakref.finalize(self, _close_antenna, self.node,
+                                           self.probe if self._own_probe else None, self._key)
         try:
             self.physics_step = float(self.node.wait_for_log(
                 r"physics step ([0-9.eE+-]+) s", timeout=startup_timeout).group(1))
@@ -509,7 +528,16 @@ class SimulatedAntenna:
 
     # ------------------------------------------------------------ commands
     def publish_force(self, force: float, timeout: float = 20.0) -> None:
-        """Publish one sleeve_force command (after the node's subscription has matched)."""
+        """
+        Publish one sleeve_force command (after the node's subscription has matched).
+
+        A force the node would refuse (solver.command_force: NaN, below sleeve_force_min,
+        above what the link carries) raises ValueError here, with the node's reason.
+        """
+        from .params import SPECS, UmbrellaParams
+        from .solver import command_force
+        command_force(force, UmbrellaParams.from_mapping(
+            {k: v for k, v in self.parameters.items() if k in SPECS}))
         if self._command_pub is None:
             from . import ros_io
             self._command_pub = self.probe.publisher(self.topics["sleeve_force"], self._float64,
@@ -533,14 +561,55 @@ class SimulatedAntenna:
             self.wait_for_sim_time(t0 + t_rel, timeout=timeout)
             self.publish_force(force)
 
+    def pause(self, paused: bool = True) -> None:
+        """Pause (or resume) the simulation: ``~/pause``; sim time holds while paused."""
+        from std_srvs.srv import SetBool
+        r = self.probe.call(SetBool, self._service("pause"), SetBool.Request(data=paused))
+        if not r.success:
+            raise AssertionError(f"~/pause {paused}: refused: {r.message}")
+
+    def resume(self) -> None:
+        """Resume a paused run (also the start of one made with ``start_paused``)."""
+        self.pause(False)
+
+    def reset(self, timeout: float = 20.0) -> None:
+        """
+        Restart the run at t = 0 (``~/reset``, with the parameters set since the start).
+
+        Returns once the node has restarted (its log and the new run's "deploying" phase);
+        from then on every wait, message list and figure (phases, sim_time, messages,
+        applied_forces, lock_time, summary) is of the new run only: the node publishes its
+        first state one period after t = 0 (none while paused).  AssertionError with the
+        node's reason if it refuses.
+        """
+        from std_srvs.srv import Trigger
+        resets = self._output().count(RESET_LINE)
+        topic = self.topics["deployment_phase"]
+
+        def runs_begun():
+            return [m.data for m in self.probe.messages(topic)].count("deploying")
+        begun = runs_begun()
+        r = self.probe.call(Trigger, self._service("reset"), Trigger.Request(), timeout)
+        if not r.success:
+            raise AssertionError(f"~/reset refused: {r.message}")
+        self._runs += 1
+        poll(lambda: self._output().count(RESET_LINE) > resets, timeout,
+             lambda: f"no '{RESET_LINE}' in the node's log within {timeout} s")
+        poll(lambda: runs_begun() > begun, timeout,
+             lambda: f"no new 'deploying' on {topic} within {timeout} s of ~/reset")
+
+    def _service(self, name: str) -> str:
+        return (f"/{self.namespace}" if self.namespace else "") + f"/umbrella_node/{name}"
+
     # --------------------------------------------------------------- waits
     def sim_time(self) -> float:
-        """Stamp of the latest joint state received (s)."""
-        states = self.probe.messages(self.topics["joint_states"])
+        """Stamp of the latest joint state of this run received (s)."""
+        states = self.messages("joint_states")
         return _stamp(states[-1]) if states else 0.0
 
     def phases(self) -> list[str]:
-        return [m.data for m in self.probe.messages(self.topics["deployment_phase"])]
+        """Return the deployment phases of this run, in order ("deploying" first)."""
+        return [m.data for _, m in self._timed_run("deployment_phase")]
 
     def wait_for_phase(self, phase: str, timeout: float = 20.0) -> None:
         if phase not in PHASES:
@@ -557,19 +626,77 @@ class SimulatedAntenna:
                      f"{self.topics['joint_states']} (latest stamp {self.sim_time():.6f} s)")
 
     def wait_for(self, key: str, predicate, timeout: float = 20.0, what: str = "the condition"):
-        """Return the first message on a node topic (``"joint_states"``, ...) satisfying it."""
-        return self.probe.wait_for(self.topics[key], predicate, timeout, what)
+        """Return this run's first message on a node topic (``"joint_states"``...) that fits."""
+        topic = self._received_topic(key)
+
+        def failure():
+            msgs = self.messages(key)
+            last = f"; last: {_brief(msgs[-1])}" if msgs else ""
+            return (f"no message on {topic} satisfying {what} within {timeout} s "
+                    f"(got {len(msgs)}{last})")
+        return poll(lambda: [m for m in self.messages(key) if predicate(m)][:1], timeout,
+                    failure)[0]
 
     def messages(self, key: str) -> list:
-        return self.probe.messages(self.topics[key])
+        """Return this run's messages on a node topic (after ``reset()``, the new run's)."""
+        return [m for _, m in self._timed_run(key)]
+
+    def _timed_run(self, key: str) -> list:
+        """Return [(arrival, message)] of this run on a topic the antenna receives."""
+        timed = self.probe.timed(self._received_topic(key))
+        if key == "deployment_phase":       # each run's phases start with "deploying"
+            starts = [i for i, (_, m) in enumerate(timed) if m.data == "deploying"]
+            return timed[starts[-1]:] if starts and self._runs else timed
+        if not self._runs:
+            return timed
+        if hasattr(timed[-1][1] if timed else None, "header"):
+            # stamped: a run restarts sim time, so it begins where a stamp does not increase
+            i = len(timed) - 1
+            while i > 0 and _stamp(timed[i][1]) > _stamp(timed[i - 1][1]):
+                i -= 1
+            return timed[i:] if self._run_start() is not None else []
+        start = self._run_start()          # unstamped: what arrived since the run's first state
+        return [] if start is None else [(a, m) for a, m in timed if a >= start]
+
+    def _run_start(self):
+        """Return the arrival time of this run's first joint state (None: not yet)."""
+        timed = self.probe.timed(self.topics["joint_states"])
+        for i in range(len(timed) - 1, 0, -1):
+            if _stamp(timed[i][1]) <= _stamp(timed[i - 1][1]):
+                return timed[i][0]
+        return timed[0][0] if timed and not self._runs else None
+
+    def _received_topic(self, key: str) -> str:
+        """Return the topic of a key the antenna receives (else ValueError: which it does)."""
+        received = [k for k, name in self.topics.items() if name in self.probe.received]
+        if key not in received:
+            what = ("receives" if key not in self.topics
+                    else "does not subscribe to it; it receives")
+            raise ValueError(f"topic key {key!r}: the antenna {what} {', '.join(received)} "
+                             f"(subscribe to others with antenna.probe.subscribe"
+                             f"(antenna.topics[key], type, qos))")
+        return self.topics[key]
 
     # --------------------------------------------------------- what happened
+    def _output(self) -> str:
+        return self.node.output()
+
+    def _run_output(self) -> str:
+        """Return the node's log since this run began (after the last reset line, if any)."""
+        out = self._output()
+        return out[out.rfind(RESET_LINE):] if self._runs else out
+
     def applied_forces(self) -> list[tuple[float, float]]:
-        """[(sim time, F)] every value the node applied, from its log (exact)."""
-        return [(float(t), float(f)) for f, t in re.findall(APPLIED_RE, self.node.output())]
+        """
+        [(sim time, F)] every commanded value the node applied in this run, from its log.
+
+        Exact; the ``sleeve_force`` parameter's value, which acts from t = 0, is not a
+        command and is not listed.
+        """
+        return [(float(t), float(f)) for f, t in re.findall(APPLIED_RE, self._run_output())]
 
     def lock_time(self) -> float | None:
-        m = re.search(LOCKED_RE, self.node.output())
+        m = re.search(LOCKED_RE, self._run_output())
         return float(m.group(1)) if m else None
 
     def diagnostics(self) -> dict:
@@ -598,13 +725,13 @@ class SimulatedAntenna:
         poll(lambda: len(self.messages("peak_stress")) >= len(tips), timeout,
              lambda: f"peak_stress lags tip_deflection ({len(self.messages('peak_stress'))} "
                      f"vs {len(tips)} messages) after {timeout} s")
-        phase_arrival = next(t for t, m in self.probe.timed(self.topics["deployment_phase"])
+        phase_arrival = next(t for t, m in self._timed_run("deployment_phase")
                              if m.data == "locked")
         tip = [(_stamp(m), m.point.y) for m in self.messages("tip_deflection")]
         # no stamp: a stress message is stage 2 if it arrived after the phase message
         stress = [(math.inf if arrival > phase_arrival else -math.inf,
                    max(m.data[0], m.data[4]))
-                  for arrival, m in self.probe.timed(self.topics["peak_stress"])]
+                  for arrival, m in self._timed_run("peak_stress")]
         moving = (float(self.parameters.get("v0", -0.2)) != 0.0
                   or float(self.parameters.get("sleeve_force", 0.0)) != 0.0)
         return summarize_run(self.applied_forces(), lock, moving, tip, stress)
@@ -615,17 +742,22 @@ class SimulatedAntenna:
         return self.node.stop(timeout=timeout)
 
     def close(self) -> None:
-        try:
-            self.node.close()
-        finally:
-            if self._own_probe:
-                self.probe.close()
+        self._finalizer()
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
         self.close()
+
+
+def _close_antenna(node: NodeProcess, probe: Probe | None, key: tuple) -> None:
+    try:
+        node.close()
+    finally:
+        SimulatedAntenna._live.discard(key)
+        if probe is not None:
+            probe.close()
 
 
 def _stamp(msg) -> float:
