@@ -4,7 +4,7 @@ Launch several antennas in one ROS graph, each in its own namespace.
     ros2 launch umbrella_sim multi_antenna.launch.py namespaces:=a1,a2,a3 v0:=0.0
 
 Every antenna gets umbrella_node (topics /<ns>/..., its own /<ns>/clock, a bag
-umbrella_<ns>_<date>-<time> in the working directory) and a robot_state_publisher with
+umbrella_<ns>_<date>-<time> in the working directory, or <record_path>_<ns>) and a robot_state_publisher with
 frame_prefix '<ns>/', so one TF tree holds a1/umbrella_base, a2/umbrella_base, ...
 Diagnostics of all of them arrive on /diagnostics, named '<ns>/umbrella_node: physics'.
 The other arguments are those of umbrella.launch.py and apply to every antenna.
@@ -20,7 +20,8 @@ def _setup(context, *args, **kwargs):
     actions = []
     for ns in umbrella.split_namespaces(context.launch_configurations.get("namespaces",
                                                                           "a1,a2")):
-        actions += umbrella.to_launch_actions(umbrella.plan(dict(values, namespace=ns)))
+        actions += umbrella.to_launch_actions(umbrella.plan(umbrella.antenna_values(values,
+                                                                                    ns)))
     return actions
 
 

@@ -561,8 +561,9 @@ def test_foreign_damaged_and_special_logs_exit_2_naming_file(tmp_path):
     for bad in ("nan", "-1", "inf"):
         r = run("umbrella_sim.replay", str(good), "--resimulate", "--tolerance", bad)
         assert r.returncode == 2 and "--tolerance" in r.stderr
-    r = run("umbrella_sim.replay", str(good), "--rate", "0")
-    assert r.returncode == 2 and "--rate" in r.stderr
+    for option, value in (("--rate", "0"), ("--rate", "1e-12"), ("--start-offset", "1e300")):
+        r = run("umbrella_sim.replay", str(good), option, value)     # (overflowed: tracebacks)
+        assert r.returncode == 2 and option in r.stderr and "Traceback" not in r.stderr
     # republishing's options with --resimulate: refused, not ignored
     r = run("umbrella_sim.replay", str(good), "--resimulate", "--rate", "2", "--topics", "/x")
     assert r.returncode == 2 and "--rate, --topics: options of republishing" in r.stderr

@@ -192,6 +192,21 @@ def test_plan_refuses_bad_overrides_before_starting_anything():
         ld.plan(dict(values, v0="fast"), installed=lambda pkg: None)
     with pytest.raises(ValueError, match="alpha0"):
         ld.plan(dict(values, alpha0="0.1"), installed=lambda pkg: None)
+    for flag in ("rviz", "use_sim_time", "robot_state_publisher"):     # a typo is no "false"
+        with pytest.raises(ValueError, match=f"{flag}:='ture'"):
+            ld.plan(dict(values, **{flag: "ture"}), installed=lambda pkg: None)
+
+
+def test_plan_checks_overrides_on_top_of_the_params_file(tmp_path):
+    """l1 = 0.6 with a params file's l3 = 0.9 closes; on the defaults (l3 = 0.5) it would not."""
+    long_link = tmp_path / "long.yaml"
+    long_link.write_text("/**:\n  ros__parameters:\n    l1: 0.9\n    l3: 0.9\n")
+    values = {a.name: a.default for a in ld.arguments()}
+    (node, *_) = ld.plan(dict(values, params_file=str(long_link), l1="0.6"),
+                         installed=lambda pkg: None)
+    assert node.parameters[0] == str(long_link) and node.parameters[1]["l1"] == 0.6
+    with pytest.raises(ValueError, match="l3"):
+        ld.plan(dict(values, l1="0.6"), installed=lambda pkg: None)
 
 
 def test_multi_antenna_launch_starts_one_namespaced_antenna_each(launch_stubs):
@@ -203,6 +218,12 @@ def test_multi_antenna_launch_starts_one_namespaced_antenna_each(launch_stubs):
              and a.kwargs["executable"] == "umbrella_node"]
     assert [n.kwargs["namespace"] for n in nodes] == ["a1", "a2", "a3"]
     assert [n.kwargs["parameters"][1]["frame_prefix"] for n in nodes] == ["a1/", "a2/", "a3/"]
+    # one record_path for all: a bag directory each (one directory takes one recording)
+    _, actions = _run(module.generate_launch_description(),
+                      {"namespaces": "a1,a2", "record_path": "/tmp/bags/run/"})
+    assert [a.kwargs["parameters"][1]["record_path"] for a in actions
+            if type(a).__name__ == "Node" and a.kwargs["executable"] == "umbrella_node"] == \
+        ["/tmp/bags/run_a1", "/tmp/bags/run_a2"]
     with pytest.raises(ValueError, match="a1 given twice"):
         ld.split_namespaces("a1,a1")
 

@@ -83,20 +83,43 @@ def arguments() -> list[Argument]:
 
 
 def _truthy(value: str, name: str) -> bool:
-    return REGISTRY["record"].coerce(value) if name == "record" else \
-        str(value).strip().lower() in ("true", "1", "yes", "on")
+    """A true/false launch argument, by the registry's rule for booleans (a typo is an error)."""
+    try:
+        return REGISTRY["record"].coerce(value)
+    except ValueError:
+        raise ValueError(f"launch argument {name}:={value!r}: must be true or false") from None
 
 
-def overrides(values: dict[str, str]) -> dict:
-    """Typed parameter overrides from launch-argument strings ('' = not given)."""
+def overrides(values: dict[str, str], params_file: str | None = None) -> dict:
+    """
+    Typed parameter overrides from launch-argument strings ('' = not given).
+
+    The model overrides are checked as a whole now, not after the node has started, on top
+    of the params file's model values (as the node will take them).
+    """
     out = {}
     for name, text in values.items():
         if name in REGISTRY and text not in ("", None):
             out[name] = REGISTRY[name].coerce(text)
-    # check the model overrides as a whole now, not after the node has started
     model = {k: v for k, v in out.items() if k in SPECS}
     if model:
-        UmbrellaParams.from_mapping(model).validated()
+        from .params import load_params_file
+        base = ({k: v for k, v in load_params_file(params_file).items() if k in SPECS}
+                if params_file else {})
+        UmbrellaParams.from_mapping({**base, **model}).validated()
+    return out
+
+
+def antenna_values(values: dict[str, str], ns: str) -> dict[str, str]:
+    """
+    Return one antenna's launch values among several (multi_antenna.launch.py).
+
+    A record_path given for all of them becomes record_path_<ns> each: one bag directory
+    cannot take two recordings.
+    """
+    out = dict(values, namespace=ns)
+    if values.get("record_path"):
+        out["record_path"] = f"{values['record_path'].rstrip('/')}_{ns}"
     return out
 
 
@@ -110,7 +133,7 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
     rel = f"/{ns}" if ns else ""
     sim_time = _truthy(values.get("use_sim_time", "true"), "use_sim_time")
     params = [values.get("params_file") or default_params_file()]
-    node_params = overrides(values)
+    node_params = overrides(values, params[0])
     node_params["record"] = _truthy(values.get("record", "true"), "record")
     if values.get("record_path"):
         node_params["record_path"] = values["record_path"]
@@ -137,7 +160,7 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
         else:
             actions.append(LogAction(
                 "robot_state_publisher is not installed: no TF frames and no robot_description "
-                f"for {rel or '/'}; RViz can still show {rel}/markers in frame umbrella_base "
+                f"for {rel or '/'}; RViz can still show {rel}/markers in frame {prefix}umbrella_base "
                 "(apt install ros-jazzy-robot-state-publisher)"))
     if _truthy(values.get("rviz", "false"), "rviz"):
         share = installed(PACKAGE)

@@ -350,10 +350,10 @@ def main(argv: list[str] | None = None) -> int:
     args.rate = 1.0 if args.rate is None else args.rate
     if not (math.isfinite(args.tolerance) and args.tolerance >= 0):
         ap.error(f"--tolerance {args.tolerance}: must be a finite number >= 0")
-    if not (math.isfinite(args.rate) and args.rate > 0):
-        ap.error(f"--rate {args.rate}: must be a finite number > 0")
-    if not (math.isfinite(args.start_offset) and args.start_offset >= 0):
-        ap.error(f"--start-offset {args.start_offset}: must be a finite number >= 0")
+    if not (math.isfinite(args.rate) and 1e-6 <= args.rate <= 1e6):
+        ap.error(f"--rate {args.rate}: must be a number in [1e-6, 1e6]")
+    if not (math.isfinite(args.start_offset) and 0 <= args.start_offset <= 1e9):
+        ap.error(f"--start-offset {args.start_offset}: must be a number in [0, 1e9] s")
     if not (math.isfinite(args.wait_for_subscribers) and args.wait_for_subscribers >= 0):
         ap.error(f"--wait-for-subscribers {args.wait_for_subscribers}: must be >= 0")
     try:
