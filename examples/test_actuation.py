@@ -59,10 +59,8 @@ def test_a_nan_command_is_refused_and_nothing_moves(antenna_factory):
     antenna = antenna_factory({"v0": 0.0})
     with pytest.raises(ValueError, match="sleeve force"):
         antenna.publish_force(float("nan"))     # the helper refuses what the node would
-    # sent on the topic anyway, the node refuses it, counts it and nothing moves
-    pub = antenna.probe.publisher(antenna.topics["sleeve_force"], Float64)
-    antenna.probe.wait_for_subscribers(pub)
-    pub.publish(Float64(data=float("nan")))
+    # sent anyway (check=False), the node refuses it, counts it and nothing moves
+    antenna.publish_force(float("nan"), check=False)
     antenna.wait_for("diagnostics", lambda m: any(
         kv.key == "refused_commands" and kv.value == "1" for kv in m.status[0].values),
         timeout=10, what="refused_commands == 1")

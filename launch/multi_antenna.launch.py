@@ -4,8 +4,9 @@ Launch several antennas in one ROS graph, each in its own namespace.
     ros2 launch umbrella_sim multi_antenna.launch.py namespaces:=a1,a2,a3 v0:=0.0
 
 Every antenna gets umbrella_node (topics /<ns>/..., its own /<ns>/clock, a bag
-umbrella_<ns>_<date>-<time> in the working directory, or <record_path>_<ns>) and a robot_state_publisher with
-frame_prefix '<ns>/', so one TF tree holds a1/umbrella_base, a2/umbrella_base, ...
+umbrella_<ns>_<date>-<time> in the working directory, or <record_path>_<ns>) and a
+robot_state_publisher with frame_prefix '<ns>/', so one TF tree holds a1/umbrella_base,
+a2/umbrella_base, ...
 Diagnostics of all of them arrive on /diagnostics, named '<ns>/umbrella_node: physics'.
 The other arguments are those of umbrella.launch.py and apply to every antenna.
 """

@@ -83,7 +83,7 @@ def arguments() -> list[Argument]:
 
 
 def _truthy(value: str, name: str) -> bool:
-    """A true/false launch argument, by the registry's rule for booleans (a typo is an error)."""
+    """Return a true/false launch argument by the registry's rule (a typo is an error)."""
     try:
         return REGISTRY["record"].coerce(value)
     except ValueError:
@@ -160,8 +160,8 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
         else:
             actions.append(LogAction(
                 "robot_state_publisher is not installed: no TF frames and no robot_description "
-                f"for {rel or '/'}; RViz can still show {rel}/markers in frame {prefix}umbrella_base "
-                "(apt install ros-jazzy-robot-state-publisher)"))
+                f"for {rel or '/'}; RViz can still show {rel}/markers in frame "
+                f"{prefix}umbrella_base (apt install ros-jazzy-robot-state-publisher)"))
     if _truthy(values.get("rviz", "false"), "rviz"):
         share = installed(PACKAGE)
         if installed("rviz2") and share:

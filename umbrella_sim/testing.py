@@ -464,7 +464,7 @@ class SimulatedAntenna:
     """
 
     _count = 0          # probe node names stay unique within a process
-    _live: set = set()  # (domain, namespace) of the antennas not closed yet
+    _live: dict = {}    # (domain, namespace) -> the NodeProcess of the last antenna there
 
     def __init__(self, parameters: dict | None = None, namespace: str = "",
                  record_path: str | None = None, domain_id: int | None = None,
@@ -486,7 +486,8 @@ class SimulatedAntenna:
         domain = (probe.domain_id if probe is not None
                   else DOMAIN_ID if domain_id is None else domain_id)
         self._key = (domain, self.namespace)
-        if self._key in SimulatedAntenna._live:
+        other = SimulatedAntenna._live.get(self._key)
+        if other is not None and other.running:
             raise ValueError(f"an antenna already runs in namespace '/{self.namespace}' on ROS "
                              f"domain {domain}: their topics would be one; give each antenna "
                              "its own namespace (namespace=...)")
@@ -508,9 +509,9 @@ class SimulatedAntenna:
         self._float64 = Float64
         self._command_pub = None
         self._runs = 0          # resets so far: waits and figures are of the current run
-        SimulatedAntenna._live.add(self._key)
         self.node = NodeProcess(parameters=self.parameters, namespace=self.namespace or None,
                                 domain_id=self.domain_id)
+        SimulatedAntenna._live[self._key] = self.node
         # a forgotten close(): the node and the probe still go, at the latest at exit
         self._finalizer = weakref.finalize(self, _close_antenna, self.node,
                                            self.probe if self._own_probe else None, self._key)
@@ -527,17 +528,19 @@ class SimulatedAntenna:
             raise
 
     # ------------------------------------------------------------ commands
-    def publish_force(self, force: float, timeout: float = 20.0) -> None:
+    def publish_force(self, force: float, timeout: float = 20.0, check: bool = True) -> None:
         """
         Publish one sleeve_force command (after the node's subscription has matched).
 
         A force the node would refuse (solver.command_force: NaN, below sleeve_force_min,
-        above what the link carries) raises ValueError here, with the node's reason.
+        above what the link carries) raises ValueError here, with the node's reason;
+        check=False sends it anyway (a test of the node's refusal).
         """
-        from .params import SPECS, UmbrellaParams
-        from .solver import command_force
-        command_force(force, UmbrellaParams.from_mapping(
-            {k: v for k, v in self.parameters.items() if k in SPECS}))
+        if check:
+            from .params import SPECS, UmbrellaParams
+            from .solver import command_force
+            command_force(force, UmbrellaParams.from_mapping(
+                {k: v for k, v in self.parameters.items() if k in SPECS}))
         if self._command_pub is None:
             from . import ros_io
             self._command_pub = self.probe.publisher(self.topics["sleeve_force"], self._float64,
@@ -755,7 +758,8 @@ def _close_antenna(node: NodeProcess, probe: Probe | None, key: tuple) -> None:
     try:
         node.close()
     finally:
-        SimulatedAntenna._live.discard(key)
+        if SimulatedAntenna._live.get(key) is node:
+            del SimulatedAntenna._live[key]
         if probe is not None:
             probe.close()
 
