@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from umbrella_sim.testing import (_shm_segments, default_domain_id, DOMAIN_ID_ENV, NodeProcess,
-                                  ros_env, summarize_run)
+                                  ros_env, summarize_run, summary_from_recording)
 
 
 def own_segments(pid: int) -> set:
@@ -170,7 +170,7 @@ def test_a_forgotten_close_or_a_ctrl_c_still_stops_the_node(tmp_path, how):
     assert ("interrupted" in r.stdout) == (how == "interrupt")
 
 
-def test_start_paused_pause_resume_and_reset(antenna_factory):
+def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path):
     """
     start_paused holds t = 0 until resume(); after reset() every figure is the new run's.
 
@@ -178,7 +178,8 @@ def test_start_paused_pause_resume_and_reset(antenna_factory):
     whole run. After a reset (paused, so the new run also waits) phases, lock time and
     applied forces start again, and the same run locks at the same instant.
     """
-    antenna = antenna_factory({"v0": -0.5, "start_paused": True})
+    bag = tmp_path / "two_runs"
+    antenna = antenna_factory({"v0": -0.5, "start_paused": True}, record_path=str(bag))
     assert antenna.phases() == ["deploying"] or antenna.wait_for_phase("deploying") is None
     with pytest.raises(AssertionError, match="never reached"):
         antenna.wait_for_sim_time(1e-3, timeout=1.0)       # held at t = 0
@@ -198,3 +199,10 @@ def test_start_paused_pause_resume_and_reset(antenna_factory):
     assert antenna.lock_time() == first
     summary = antenna.summary(after_lock=0.05)
     assert summary.lock_time == first and summary.deploy_time == first
+    antenna.wait_for_sim_time(first + 0.3)
+    assert antenna.stop() == 0
+    # the recording's summary is of its last run (segment) too: its stage 2 alone (both runs'
+    # log times together made a span of ~1.4 s)
+    recorded = summary_from_recording(str(bag))
+    assert recorded.lock_time == pytest.approx(first, abs=1e-9) == recorded.deploy_time
+    assert 0.3 <= recorded.stage2_span < 1.0 and recorded.stage2_samples < 100

@@ -424,21 +424,24 @@ def summary_from_recording(path: str) -> RunSummary:
     """
     Return the run summary of a finalised (or torn) MCAP recording of umbrella_node.
 
-    Every figure is on sim time (the log time of each message).
+    Of its last run (a ~/reset starts a new segment); every figure is on that run's sim
+    time.
     """
     from .logs import read_log
 
     log = read_log(path)
-    params = log.parameters()
-    events = log.metadata.get("umbrella_sim.events", {})
+    seg = log.segments()[-1]
+    params = seg.params
+    events = log.metadata.get("umbrella_sim.events", {})      # the last segment's
     lock_time = float(events["lock_time"]) if events.get("lock_time") else None
     applied_topic = log.find_topic("sleeve_force/applied", required=False)
-    applied = ([(t, m.data) for t, m in log.decoded(applied_topic)] if applied_topic else [])
-    tip = [(t, m.point.y) for t, m in log.decoded(log.find_topic("tip_deflection"))]
+    applied = ([(t, m.data) for t, m in log.decoded(applied_topic, seg)]
+               if applied_topic else [])
+    tip = [(t, m.point.y) for t, m in log.decoded(log.find_topic("tip_deflection"), seg)]
     stress = [(t, max(m.data[0], m.data[4]))
-              for t, m in log.decoded(log.find_topic("peak_stress"))]
+              for t, m in log.decoded(log.find_topic("peak_stress"), seg)]
     if lock_time is None:          # a torn recording: the first 'locked' phase message
-        locked = [t for t, m in log.decoded(log.find_topic("deployment_phase"))
+        locked = [t for t, m in log.decoded(log.find_topic("deployment_phase"), seg)
                   if m.data == "locked"]
         lock_time = locked[0] if locked else None
     moving = float(params.get("v0", 0.0)) != 0.0 or float(params.get("sleeve_force", 0.0)) != 0
@@ -460,7 +463,8 @@ class SimulatedAntenna:
     directory (see :func:`summary_from_recording`), else the node does not record;
     ``probe``: share one :class:`Probe` between several antennas (default: one of its own,
     closed with the antenna).  The constructor returns once the node has started and its
-    first joint state arrived.
+    first joint state arrived (its phase, with ``start_paused``: the node then holds t = 0
+    until :meth:`resume`).
     """
 
     _count = 0          # probe node names stay unique within a process
@@ -518,8 +522,11 @@ class SimulatedAntenna:
         try:
             self.physics_step = float(self.node.wait_for_log(
                 r"physics step ([0-9.eE+-]+) s", timeout=startup_timeout).group(1))
-            poll(lambda: self.probe.messages(self.topics["joint_states"]), startup_timeout,
-                 lambda: f"no message on {self.topics['joint_states']} within "
+            # (a node started paused published its t = 0 state before this probe matched:
+            # the latched phase arrives late, a joint state would not)
+            first = "deployment_phase" if self.parameters.get("start_paused") else "joint_states"
+            poll(lambda: self.probe.messages(self.topics[first]), startup_timeout,
+                 lambda: f"no message on {self.topics[first]} within "
                          f"{startup_timeout} s of the node's start (node "
                          f"{'running' if self.node.running else 'exited'}); node output:\n"
                          f"{self.node.output()[-2000:]}")
