@@ -225,3 +225,29 @@ def test_stop_signal_while_commands_flow_is_a_clean_exit(probe, ros_domain_id):
             assert "Traceback" not in out, out
     finally:
         ended.set()
+
+
+def test_controller_deploys_each_new_run_after_a_reset(antenna_factory, ros_domain_id):
+    """
+    A ~/reset after the lock starts a new run: the controller deploys it afresh.
+
+    It notices by the phase (locked -> deploying) and by sim time going back, as it would
+    a restarted node; the second deployment takes the same time as the first.
+    """
+    ctl = antenna_factory({"v0": 0.0, "sleeve_force_min": -LIMIT, "publish_rate": RATE,
+                           "time_step": STEP, "lockstep": True})
+    ctl.wait_for_phase("deploying")
+    with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
+                     parameters={"target_time": TARGET, "max_force": LIMIT,
+                                 "min_force": -LIMIT}) as controller:
+        deploy = []
+        for run in range(2):
+            ctl.wait_for_phase("locked", timeout=60)
+            deploy.append(ctl.lock_time() - ctl.applied_forces()[0][0])
+            if run == 0:
+                controller.wait_for_log("deployment over")
+                ctl.reset()
+        controller.wait_for_log("a new run; deploying it from its start")
+        assert controller.stop() == 0, controller.output()
+    assert deploy[0] == pytest.approx(TARGET, rel=0.05)
+    assert deploy[1] == pytest.approx(deploy[0], rel=0.01), deploy

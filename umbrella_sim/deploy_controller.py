@@ -361,7 +361,20 @@ def _make_node_class():
                 f"{cfg.max_force:g}] N, lock rate {self.law.lock_rate:.4g} rad/s, "
                 f"deceleration {self.law.deceleration:.4g} rad/s^2; waiting for joint_states")
 
+        def _restart(self, why: str) -> None:
+            """Deploy a new run of the simulation (~/reset, a restarted node) afresh."""
+            if self.commanding or self.done:
+                self.get_logger().info(f"{why}: a new run; deploying it from its start")
+            self.law.t_start = None
+            self.commanding = self.done = False
+            self._last_stamp = None
+            self._last_wall = None
+            self._last_effort = 0.0
+            self._sent.clear()
+
         def _on_phase(self, msg) -> None:
+            if msg.data == "deploying" and self.phase in ("locked", "fault"):
+                self._restart(f"phase {self.phase} -> deploying")
             self.phase = msg.data
             if msg.data != "deploying" and self.commanding and not self.done:
                 self.done = True
@@ -374,9 +387,15 @@ def _make_node_class():
                                        f"commanding 0 N; command delay {spread} (last 15)")
 
         def _on_state(self, msg) -> None:
-            if self.done or self.phase != "deploying":
-                return
             t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+            if self._last_stamp is not None and t < self._last_stamp - 1e-9:
+                # sim time went back: the simulation restarted (its plan and its time base
+                # are no longer this run's; a stale plan latched hard at 100x the energy)
+                self._restart(f"sim time went back from {self._last_stamp:.6f} s to "
+                              f"{t:.6f} s")
+            if self.done or self.phase != "deploying":
+                self._last_stamp = t if self.done else self._last_stamp
+                return
             now = time.monotonic()
             if self._last_wall is not None and self.commanding and now - self._last_wall > 0.05:
                 self.get_logger().warn(
