@@ -14,7 +14,7 @@ from .files import check_new_output, read_text_input
 from .params import (check_known_names, check_values, load_params_file, NODE_ONLY_PARAMS,
                      NODE_PARAMETERS, parameter_help, SPECS, UmbrellaParams)
 from .solver import command_force, simulate, UmbrellaSimulator
-from .stop_signals import EXIT_READER_GONE, interruptible, stdout_reader_gone
+from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
 
 
 def default_params_file() -> str | None:
@@ -85,17 +85,19 @@ RECORDING_PARAMS = ("publish_rate", "marker_magnification")
 RIGID_MODELS = ("rigid", "rigid-fe")
 
 
-def resolve_params(overrides: dict, params_file: str | None = None) -> UmbrellaParams:
+def resolve_params(overrides: dict, params_file: str | None = None,
+                   from_file: dict | None = None) -> UmbrellaParams:
     """
     Return an offline run's parameters, validated (a ValueError names the parameter).
 
     The params file (default config/umbrella.yaml, its node-only keys skipped), then the
-    overrides.
+    overrides; from_file: that file's parameters, if the caller has read them.
     """
     values: dict = {}
     params_file = params_file or default_params_file()
     if params_file:
-        from_file = load_params_file(params_file)
+        if from_file is None:
+            from_file = load_params_file(params_file)
         check_known_names(from_file, set(SPECS) | set(NODE_ONLY_PARAMS),
                           f"params file {params_file}")
         try:        # its own values first: an error names the file
@@ -140,12 +142,12 @@ def build_params(args) -> UmbrellaParams:
             values[name] = getattr(args, flag)
     if args.lock is not None:
         lock_given = f"--lock {args.lock}"
-    params = resolve_params(values, args.params)
+    params_file = args.params or default_params_file()
+    from_file = load_params_file(params_file) if params_file else {}
+    params = resolve_params(values, params_file, from_file)
     check_lock_given(params, lock_given)
     # what shapes a --mcap recording: --publish-rate / --set, else the params file's (a file
     # shared with the node), else the node's default
-    params_file = args.params or default_params_file()
-    from_file = load_params_file(params_file) if params_file else {}
     for name in RECORDING_PARAMS:
         spec = NODE_PARAMETERS[name]
         if getattr(args, name) is None and name in from_file:
@@ -289,13 +291,7 @@ def format_summary(summary: dict) -> str:
 
 def write_stdout(text: str) -> bool:
     """Print text; False if the reader went away (``umbrella_sim simulate | head``)."""
-    try:
-        sys.stdout.write(text + "\n")
-        sys.stdout.flush()
-        return True
-    except BrokenPipeError:
-        stdout_reader_gone()
-        return False
+    return print_for_reader(lambda: sys.stdout.write(text + "\n"))
 
 
 @interruptible("umbrella_sim", "what was written is complete (a --mcap recording is "

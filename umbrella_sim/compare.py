@@ -21,7 +21,7 @@ import numpy as np
 
 from .logs import LogError, read_log
 from .outputs import stage2_figures, validity_warnings
-from .stop_signals import EXIT_READER_GONE, interruptible, stdout_reader_gone
+from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
 FIGURE_KEYS = ("deploy_time", "tip_deflection_max", "tip_deflection_max_time",
@@ -525,13 +525,8 @@ def main(argv: list[str] | None = None) -> int:
     except LogError as exc:
         print(f"umbrella_compare: error: {exc}", file=sys.stderr)
         return 2
-    reader_there = True
-    try:
-        print_table(result)
-        sys.stdout.flush()
-    except BrokenPipeError:         # (umbrella_compare ... | head): the outputs still follow
-        stdout_reader_gone()
-        reader_there = False
+    # (umbrella_compare ... | head): the outputs are still written
+    reader_there = print_for_reader(lambda: print_table(result))
     try:
         os.makedirs(out, exist_ok=True)
         if not args.no_plots:

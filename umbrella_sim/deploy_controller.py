@@ -394,7 +394,8 @@ def _make_node_class():
                 self._restart(f"sim time went back from {self._last_stamp:.6f} s to "
                               f"{t:.6f} s")
             if self.done or self.phase != "deploying":
-                self._last_stamp = t if self.done else self._last_stamp
+                if self.done:               # (sim time going back then means a new run)
+                    self._last_stamp = t
                 return
             now = time.monotonic()
             if self._last_wall is not None and self.commanding and now - self._last_wall > 0.05:

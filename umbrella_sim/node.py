@@ -86,7 +86,8 @@ class UmbrellaNode(Node):
 
     def __init__(self, params_files: tuple = (), **kwargs):
         super().__init__("umbrella_node", **kwargs)
-        self._check_parameter_sources(params_files, set(ros_io.parameter_defaults()))
+        qos_given = self._check_parameter_sources(params_files,
+                                                  set(ros_io.parameter_defaults()))
         if self.get_parameter(USE_SIM_TIME).value:
             # a params file for every node ('/**') may set it: this node drives /clock and
             # paces it by the system clock; following its own /clock would only cost a
@@ -167,7 +168,7 @@ class UmbrellaNode(Node):
         except Exception as exc:  # rclpy's errors name the parameter
             files = f" (params files: {', '.join(params_files)})" if params_files else ""
             raise StartupError(f"qos_overrides: {' '.join(str(exc).split())}{files}") from None
-        self._check_qos_overrides(params_files)
+        self._check_qos_overrides(qos_given)
         self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
         self.command_topic = self.command_sub.topic_name
         services = MutuallyExclusiveCallbackGroup()
@@ -185,12 +186,14 @@ class UmbrellaNode(Node):
         self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
 
     # ------------------------------------------------------------------ config
-    def _check_parameter_sources(self, params_files, known: set) -> None:
+    def _check_parameter_sources(self, params_files, known: set) -> set:
         """
         Check the params files and parameter names given for this node.
 
         Every params file has a section for this node, and every parameter given for it
-        (-p or a file) is one it knows: a typo is an error, never a silent default.
+        (-p or a file) is one it knows: a typo is an error, never a silent default.  Returns
+        the qos_overrides.* names given, checked once the topics have declared theirs
+        (_check_qos_overrides).
         """
         fqn = self.get_fully_qualified_name()
         known = known | ROS_OWN_PARAMETERS
@@ -203,23 +206,21 @@ class UmbrellaNode(Node):
                                      f"(sections: {', '.join(sections)}); use '/**' or the "
                                      "node's name")
                 names = {n for key, values in sections.items() if section_matches(key, fqn)
-                         for n in values if not n.startswith(QOS_OVERRIDES)}
-                check_known_names(names, known, f"params file {path} (for {fqn})")
+                         for n in values}
+                check_known_names({n for n in names if not n.startswith(QOS_OVERRIDES)},
+                                  known, f"params file {path} (for {fqn})")
                 in_files |= names
-            names = [n for n in self._parameter_overrides   # (qos_overrides: once declared)
+            names = [n for n in self._parameter_overrides
                      if not n.startswith(QOS_OVERRIDES) and n not in in_files]
             check_known_names(names, known, f"-p for {fqn}")
         except ValueError as exc:
             raise StartupError(str(exc)) from None
+        return {n for n in (*in_files, *self._parameter_overrides)
+                if n.startswith(QOS_OVERRIDES)}
 
-    def _check_qos_overrides(self, params_files) -> None:
+    def _check_qos_overrides(self, given: set) -> None:
         """Refuse a qos_overrides.* name given for this node that none of its topics has."""
         fqn = self.get_fully_qualified_name()
-        given = {n for n in self._parameter_overrides if n.startswith(QOS_OVERRIDES)}
-        for path in params_files:
-            given |= {n for key, values in read_params_file(path).items()
-                      if section_matches(key, fqn) for n in values
-                      if n.startswith(QOS_OVERRIDES)}
         declared = {QOS_OVERRIDES + n
                     for n in self.get_parameters_by_prefix(QOS_OVERRIDES.rstrip("."))}
         try:

@@ -88,6 +88,22 @@ def stdout_reader_gone() -> None:
     os.close(devnull)
 
 
+def print_for_reader(write) -> bool:
+    """
+    Run write() (it prints to standard output) and flush; False if the reader went away.
+
+    Then standard output goes nowhere (stdout_reader_gone) and the tool goes on with what
+    is not printing: ``umbrella_sim simulate | head`` still writes its files.
+    """
+    try:
+        write()
+        sys.stdout.flush()
+        return True
+    except BrokenPipeError:
+        stdout_reader_gone()
+        return False
+
+
 def _interrupt(signum, frame):
     raise KeyboardInterrupt(name(signum))
 

@@ -593,7 +593,7 @@ class SimulatedAntenna:
         node's reason if it refuses.
         """
         from std_srvs.srv import Trigger
-        resets = self._output().count(RESET_LINE)
+        resets = self.node.output().count(RESET_LINE)
         topic = self.topics["deployment_phase"]
 
         def runs_begun():
@@ -603,7 +603,7 @@ class SimulatedAntenna:
         if not r.success:
             raise AssertionError(f"~/reset refused: {r.message}")
         self._runs += 1
-        poll(lambda: self._output().count(RESET_LINE) > resets, timeout,
+        poll(lambda: self.node.output().count(RESET_LINE) > resets, timeout,
              lambda: f"no '{RESET_LINE}' in the node's log within {timeout} s")
         poll(lambda: runs_begun() > begun, timeout,
              lambda: f"no new 'deploying' on {topic} within {timeout} s of ~/reset")
@@ -660,21 +660,24 @@ class SimulatedAntenna:
         if not self._runs:
             return timed
         if hasattr(timed[-1][1] if timed else None, "header"):
-            # stamped: a run restarts sim time, so it begins where a stamp does not increase
-            i = len(timed) - 1
-            while i > 0 and _stamp(timed[i][1]) > _stamp(timed[i - 1][1]):
-                i -= 1
-            return timed[i:] if self._run_start() is not None else []
-        start = self._run_start()          # unstamped: what arrived since the run's first state
-        return [] if start is None else [(a, m) for a, m in timed if a >= start]
+            i = self._run_index(timed)
+            return [] if i is None else timed[i:]
+        # unstamped: what arrived since the run's first joint state
+        states = self.probe.timed(self.topics["joint_states"])
+        i = self._run_index(states)
+        return [] if i is None else [(a, m) for a, m in timed if a >= states[i][0]]
 
-    def _run_start(self):
-        """Return the arrival time of this run's first joint state (None: not yet)."""
-        timed = self.probe.timed(self.topics["joint_states"])
+    def _run_index(self, timed: list) -> int | None:
+        """
+        Return where this run begins in [(arrival, stamped message)] (None: not yet).
+
+        A run restarts sim time, so after a reset it begins at the last stamp that does not
+        increase; before any, at the first message.
+        """
         for i in range(len(timed) - 1, 0, -1):
             if _stamp(timed[i][1]) <= _stamp(timed[i - 1][1]):
-                return timed[i][0]
-        return timed[0][0] if timed and not self._runs else None
+                return i
+        return 0 if timed and not self._runs else None
 
     def _received_topic(self, key: str) -> str:
         """Return the topic of a key the antenna receives (else ValueError: which it does)."""
@@ -688,12 +691,9 @@ class SimulatedAntenna:
         return self.topics[key]
 
     # --------------------------------------------------------- what happened
-    def _output(self) -> str:
-        return self.node.output()
-
     def _run_output(self) -> str:
         """Return the node's log since this run began (after the last reset line, if any)."""
-        out = self._output()
+        out = self.node.output()
         return out[out.rfind(RESET_LINE):] if self._runs else out
 
     def applied_forces(self) -> list[tuple[float, float]]:
