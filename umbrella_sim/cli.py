@@ -10,6 +10,7 @@ import os
 import sys
 
 from . import __version__, sweep
+from .arguments import ArgumentParser
 from .files import check_new_output, read_text_input
 from .params import (check_known_names, check_values, load_params_file, NODE_ONLY_PARAMS,
                      NODE_PARAMETERS, parameter_help, SPECS, UmbrellaParams)
@@ -192,8 +193,8 @@ class Progress:
 
 
 def make_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="umbrella_sim",
-                                 description="Flexible umbrella-frame deployment simulator.")
+    ap = ArgumentParser(prog="umbrella_sim",
+                        description="Flexible umbrella-frame deployment simulator.")
     ap.add_argument("--version", action="version", version=f"umbrella_sim {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     sp = sub.add_parser("simulate", help="run one simulation offline",

@@ -19,6 +19,7 @@ import sys
 
 import numpy as np
 
+from .arguments import ArgumentParser
 from .logs import LogError, read_log
 from .outputs import stage2_figures, validity_warnings
 from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
@@ -485,8 +486,8 @@ def shape_snapshots(r: Run, magnification=(200.0, 5.0)) -> list:
 
 @interruptible("umbrella_compare", "--out may hold part of the outputs")
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="umbrella_compare", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = ArgumentParser(prog="umbrella_compare", description=__doc__,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("logs", nargs="+", help="bag directories or .mcap files (first = reference)")
     ap.add_argument("--out", required=True,
                     help="new (or empty) directory for compare.json and the plots")

@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from .arguments import ArgumentParser
 from .logs import LogData, LogError, qos_from_yaml, read_log
 from .stop_signals import interruptible
 
@@ -319,8 +320,8 @@ def main(argv: list[str] | None = None) -> int:
     if "--ros-args" in argv:
         i = argv.index("--ros-args")
         argv, ros_args = argv[:i], argv[i + 1:]
-    ap = argparse.ArgumentParser(prog="umbrella_replay", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = ArgumentParser(prog="umbrella_replay", description=__doc__,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("log", help="bag directory or .mcap file")
     ap.add_argument("--rate", type=float, default=None, help="playback rate factor (1)")
     ap.add_argument("--start-offset", type=float, default=0.0,
