@@ -157,6 +157,21 @@ def test_recording_can_be_turned_off_and_never_overwrites(tmp_path):
     assert len({read_log(str(tmp_path / n)).count("/joint_states") for n in names}) == 1
 
 
+def test_record_path_with_a_tilde_records_under_home(tmp_path):
+    """``-p record_path:=~/bags/run``: no shell expands that ``~``; the node does."""
+    home, cwd = tmp_path / "home", tmp_path / "cwd"
+    (home / "bags").mkdir(parents=True)
+    cwd.mkdir()
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args",
+                        "-p", "duration:=0.05", "-p", "real_time_factor:=0.0",
+                        "-p", "record_path:=~/bags/run"], capture_output=True, text=True,
+                       env=dict(ros_env(), HOME=str(home)), timeout=120, cwd=str(cwd))
+    assert r.returncode == 0, r.stderr
+    assert os.listdir(cwd) == []                    # no directory named '~'
+    assert read_log(str(home / "bags" / "run")).count("/joint_states") > 0
+    assert str(home / "bags" / "run") in r.stderr    # the log names where it went
+
+
 @pytest.mark.parametrize("args, words", [
     (["-p", "v0:=fast"], ["v0", "double"]),
     (["-p", "elements_per_segment:=2.5"], ["elements_per_segment", "integer"]),

@@ -18,6 +18,7 @@ def read_text_input(path: str, what: str) -> str:
     The UTF-8 text of a regular file, or ValueError naming the file and why not (missing,
     a directory or FIFO, unreadable, binary).
     """
+    path = os.path.expanduser(path)          # as in a shell (see check_new_output)
     try:
         st = os.stat(path)
     except OSError as exc:
@@ -43,11 +44,12 @@ def check_new_output(path: str, what: str) -> str:
 
     The absolute path of a file or directory to be created, or ValueError naming why it
     cannot be (it exists: never overwritten; no parent directory; parent not writable).
-    Nothing is created.
+    Nothing is created.  A leading ``~`` is the home directory, as in a shell (which does
+    not expand it in ``-p record_path:=~/bags/run``).
     """
     if not path.strip():
         raise ValueError(f"{what} {path!r}: empty path")
-    path = os.path.abspath(path.rstrip("/") or "/")
+    path = os.path.abspath(os.path.expanduser(path).rstrip("/") or "/")
     if os.path.lexists(path):
         raise ValueError(f"{what} {path}: already exists, not overwriting")
     parent = os.path.dirname(path)

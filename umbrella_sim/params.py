@@ -271,7 +271,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "record every topic, command and the parameters to an MCAP bag (see recording.md); "
        "false = no recording", applies=START, group=NODE),
     _P("record_path", str, "", "-",
-       "bag directory to record to (NAME/NAME_0.mcap + metadata.yaml); must not exist; "
+       "bag directory to record to (NAME/NAME_0.mcap + metadata.yaml; a leading ~ is the "
+       "home directory); must not exist; "
        "'' = a new directory umbrella_<namespace>_YYYY_MM_DD-HH_MM_SS in the working "
        "directory, as ros2 bag record does", applies=START, group=NODE,
        default_text='""'),
