@@ -566,6 +566,9 @@ def test_foreign_damaged_and_special_logs_exit_2_naming_file(tmp_path):
     # republishing's options with --resimulate: refused, not ignored
     r = run("umbrella_sim.replay", str(good), "--resimulate", "--rate", "2", "--topics", "/x")
     assert r.returncode == 2 and "--rate, --topics: options of republishing" in r.stderr
+    # and --resimulate's option without it: refused, not ignored
+    r = run("umbrella_sim.replay", str(good), "--tolerance", "1e-6")
+    assert r.returncode == 2 and "--tolerance: an option of --resimulate" in r.stderr
 
 
 def test_binary_text_inputs_named(tmp_path):

@@ -245,6 +245,28 @@ def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, 
         probe.close()
 
 
+def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
+    """SIGTERM before the first message (no subscriber yet): as a stop while replaying."""
+    bag = tmp_path / "wait_src"
+    assert run_cli("umbrella_sim", "simulate", "--v0", "-0.5", "--duration", "0.05",
+                   "--mcap", str(bag)).returncode == 0
+    proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim.replay", str(bag),
+                             "--topics", "/joint_states", "--wait-for-subscribers", "120"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=ros_env())
+    try:
+        assert proc.stdout.readline().startswith("replaying up to")
+        time.sleep(1.0)             # past the discovery pause: in the wait itself
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+    assert "replayed 0 messages" in out and "Traceback" not in err, (out, err)
+
+
 def test_compare_known_runs(tmp_path):
     a, b = tmp_path / "v05", tmp_path / "v10"
     for bag, v0 in ((a, "-0.5"), (b, "-1.0")):

@@ -271,18 +271,18 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
             for t in chosen}
     print(f"replaying up to {total} messages on {len(pubs)} topics from {log.path} at "
           f"{rate:g}x{' (truncated log)' if log.truncated else ''}", flush=True)
-    time.sleep(0.5)   # let subscribers discover the publishers
-    if wait_for_subscribers > 0:
-        deadline = time.monotonic() + wait_for_subscribers
-        while any(p.get_subscription_count() == 0 for p in pubs.values()):
-            if time.monotonic() > deadline:
-                idle = sorted(t for t, p in pubs.items() if p.get_subscription_count() == 0)
-                print(f"no subscriber after {wait_for_subscribers:g} s on: {', '.join(idle)};"
-                      " replaying anyway", flush=True)
-                break
-            time.sleep(0.05)
     sent = 0
-    try:
+    try:        # a stop while waiting for subscribers ends like one while replaying
+        time.sleep(0.5)   # let subscribers discover the publishers
+        if wait_for_subscribers > 0:
+            deadline = time.monotonic() + wait_for_subscribers
+            while any(p.get_subscription_count() == 0 for p in pubs.values()):
+                if time.monotonic() > deadline:
+                    idle = sorted(t for t, p in pubs.items() if p.get_subscription_count() == 0)
+                    print(f"no subscriber after {wait_for_subscribers:g} s on: "
+                          f"{', '.join(idle)}; replaying anyway", flush=True)
+                    break
+                time.sleep(0.05)
         while True:
             wall0 = time.monotonic()
             for m in log.iter_raw(chosen):      # streamed: bounded memory for any log
@@ -335,8 +335,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="also republish the recorded sleeve_force commands")
     ap.add_argument("--resimulate", action="store_true",
                     help="re-run the physics from the log and compare, no ROS traffic")
-    ap.add_argument("--tolerance", type=float, default=1e-9,
-                    help="largest accepted difference for --resimulate (>= 0)")
+    ap.add_argument("--tolerance", type=float, default=None,
+                    help="largest accepted difference for --resimulate (>= 0; 1e-9)")
     args = ap.parse_args(argv)
     # argument values: an argparse usage error (exit 2) before any file is read
     if args.resimulate:     # what only republishing takes: refused, not ignored
@@ -348,7 +348,10 @@ def main(argv: list[str] | None = None) -> int:
         if given:
             ap.error(f"{', '.join(given)}: options of republishing; --resimulate re-runs the "
                      "whole log without ROS traffic")
+    elif args.tolerance is not None:
+        ap.error("--tolerance: an option of --resimulate (republishing compares nothing)")
     args.rate = 1.0 if args.rate is None else args.rate
+    args.tolerance = 1e-9 if args.tolerance is None else args.tolerance
     if not (math.isfinite(args.tolerance) and args.tolerance >= 0):
         ap.error(f"--tolerance {args.tolerance}: must be a finite number >= 0")
     if not (math.isfinite(args.rate) and 1e-6 <= args.rate <= 1e6):
