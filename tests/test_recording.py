@@ -267,6 +267,32 @@ def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
     assert "replayed 0 messages" in out and "Traceback" not in err, (out, err)
 
 
+def test_replay_under_a_namespace_moves_the_node_topics(tmp_path, live_bag):
+    """``--ros-args -r __ns:=/replay`` moves the recorded node's topics, as it moves a node."""
+    from umbrella_sim.replay import moved_topics
+
+    log = read_log(str(live_bag))
+    names, note = moved_topics(log, log.topics(), "/replay")
+    assert names["/joint_states"] == "/replay/joint_states"
+    assert names["/sleeve_force/applied"] == "/replay/sleeve_force/applied"
+    assert names["/diagnostics"] == "/diagnostics"         # absolute, as the node's own
+    assert moved_topics(log, log.topics(), "/")[0] == {t: t for t in log.topics()}
+    assert "moved to /replay" in note
+    # over DDS: the subscriber under /replay gets every recorded state
+    probe = Probe("replay_ns_probe")
+    try:
+        probe.subscribe("/replay/joint_states", JointState)
+        r = subprocess.run([sys.executable, "-m", "umbrella_sim.replay", str(live_bag),
+                            "--topics", "/joint_states",
+                            "--wait-for-subscribers", "20", "--ros-args", "-r",
+                            "__ns:=/replay"], capture_output=True, text=True, env=ros_env(),
+                           timeout=120)
+        assert r.returncode == 0 and "no subscriber" not in r.stdout, r.stdout + r.stderr
+        probe.wait_for_count("/replay/joint_states", log.count("/joint_states"), timeout=10)
+    finally:
+        probe.close()
+
+
 def test_compare_known_runs(tmp_path):
     a, b = tmp_path / "v05", tmp_path / "v10"
     for bag, v0 in ((a, "-0.5"), (b, "-1.0")):

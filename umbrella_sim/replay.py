@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import posixpath
 import sys
 import time
 
@@ -240,6 +241,28 @@ def _compare_publication(s, group: dict, diffs: dict) -> None:
 
 
 # -------------------------------------------------------------------- republish
+def moved_topics(log: LogData, topics: list[str], namespace: str) -> tuple[dict, str]:
+    """
+    Return where each recorded topic is republished, and a note saying what moved.
+
+    The node's topics are relative to its namespace (``/a1/joint_states``), and a log
+    holds them resolved.  ``--ros-args -r __ns:=/replay`` moves those under the recorded
+    node's namespace (that of its ``joint_states``) to ``/replay``, as it would move the node
+    itself; the node's absolute topics (``/diagnostics``) stay.  Without it nothing moves.
+    """
+    names = {t: t for t in topics}
+    if namespace == "/":
+        return names, ""
+    from .ros_io import ABSOLUTE_TOPIC_NAMES
+
+    recorded = posixpath.dirname(log.find_topic("joint_states"))
+    under = recorded.rstrip("/") + "/"
+    for t in topics:
+        if t.startswith(under) and t not in ABSOLUTE_TOPIC_NAMES:
+            names[t] = namespace.rstrip("/") + "/" + t[len(under):]
+    return names, f" (topics under {recorded} moved to {namespace})"
+
+
 def republish(log: LogData, rate: float, start_offset: float, loop: bool,
               with_commands: bool, topics: list[str] | None, ros_args: list[str],
               wait_for_subscribers: float = 0.0) -> int:
@@ -267,10 +290,11 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args],
                signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node("umbrella_replay")
-    pubs = {t: node.create_publisher(log.msg_type(t), t, qos_from_yaml(log.channels[t][1]))
-            for t in chosen}
+    names, moved = moved_topics(log, chosen, node.get_namespace())
+    pubs = {t: node.create_publisher(log.msg_type(t), names[t],
+                                     qos_from_yaml(log.channels[t][1])) for t in chosen}
     print(f"replaying up to {total} messages on {len(pubs)} topics from {log.path} at "
-          f"{rate:g}x{' (truncated log)' if log.truncated else ''}", flush=True)
+          f"{rate:g}x{' (truncated log)' if log.truncated else ''}{moved}", flush=True)
     sent = 0
     try:        # a stop while waiting for subscribers ends like one while replaying
         time.sleep(0.5)   # let subscribers discover the publishers

@@ -63,6 +63,8 @@ TOPICS = {
     # absolute, as diagnostic_updater publishes: one aggregator sees every antenna
     "diagnostics": Topic("/diagnostics", DiagnosticArray, RELIABLE),
 }
+#: the node's topics that its namespace does not move
+ABSOLUTE_TOPIC_NAMES = frozenset(t.name for t in TOPICS.values() if t.name.startswith("/"))
 #: recorded alongside the command topic: refused commands, and each value as applied
 COMMAND_REFUSED_SUFFIX = "/refused"
 COMMAND_APPLIED_SUFFIX = "/applied"
