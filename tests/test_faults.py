@@ -26,8 +26,9 @@ from tests.ros_helpers import NodeProcess, Probe, ros_env
 from umbrella_sim import recording
 from umbrella_sim.logs import LogError, read_log
 from umbrella_sim.node import MAX_LAG_S, REFUSED_RECORD_RATE
-from umbrella_sim.params import UmbrellaParams
+from umbrella_sim.params import SPECS, UmbrellaParams
 from umbrella_sim.ros_io import LATCHED
+from umbrella_sim.solver import simulate
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -672,8 +673,10 @@ def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
                 "--segment", str(k))
         assert r.returncode == 0, r.stderr
         deploy[k] = json.loads((out_dir / "compare.json").read_text())["runs"][0]["deploy_time"]
-    # the segments are the two runs: V0 = -0.5 and -1.0 deploy in ~0.090 s and ~0.045 s
-    assert deploy[0] == pytest.approx(0.0904, abs=5e-4)
-    assert deploy[1] == pytest.approx(0.0452, abs=5e-4)
+    # the segments are the two runs, each as the offline simulator runs its parameters
+    for k, seg in enumerate(segs):
+        model = UmbrellaParams.from_mapping({n: v for n, v in seg.params.items() if n in SPECS})
+        offline = simulate(model, 0.2, stop_after_lock=0.0)
+        assert deploy[k] == pytest.approx(offline.lock.time, abs=1e-9), k
     with pytest.raises(LogError, match="no segment 2"):
         log.segment(2)

@@ -5,6 +5,7 @@ import subprocess
 import sys
 import time
 
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
@@ -17,7 +18,7 @@ from std_srvs.srv import SetBool, Trigger
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.solver import simulate, UmbrellaSimulator
-from umbrella_sim.testing import NodeProcess, ros_env
+from umbrella_sim.testing import NodeProcess, poll, ros_env
 
 ALPHA0 = UmbrellaParams().alpha0
 DEPLOYED = math.pi / 12
@@ -152,12 +153,21 @@ def test_pause_and_reset(probe):
         t_frozen = frozen.sec + 1e-9 * frozen.nanosec
         probe.wait_for("/clock", lambda m: m.clock.sec + 1e-9 * m.clock.nanosec > t_frozen + 0.1)
         n_before = len(probe.messages("/deployment_phase"))
+        clocks_before = len(probe.messages("/clock"))
         assert probe.call(Trigger, "/umbrella_node/reset", Trigger.Request()).success
-        probe.wait_for("/clock", lambda m: m.clock.sec == 0 and m.clock.nanosec < 50_000_000)
+        def new_run_first_clock():
+            """Return the first clock that went back since the reset call (the new run's)."""
+            seen = [m.clock for m in probe.messages("/clock")[clocks_before - 1:]]
+            return next((b for a, b in zip(seen, seen[1:])
+                         if (b.sec, b.nanosec) < (a.sec, a.nanosec)), None)
+        assert poll(new_run_first_clock, 10, lambda: "sim time never went back") == Time()
         phases = [m.data for m in probe.wait_for_count("/deployment_phase", n_before + 1)]
         assert phases[n_before] == "deploying"
         probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
-        node.wait_for_log(r"locked at t = 0.0904", count=2)      # the same run again
+        node.wait_for_log("locked at t", count=2)
+        locks = [float(t) for t in re.findall(r"locked at t = ([0-9.]+) s", node.output())]
+    offline = simulate(UmbrellaParams(v0=-0.5), 0.2, stop_after_lock=0.0).lock.time
+    assert locks[:2] == pytest.approx([offline, offline], abs=1e-9)   # the same run again
 
 
 def set_double(probe, name, value):
@@ -184,7 +194,9 @@ def test_runtime_parameter_sets(probe):
         assert "locked" not in [m.data for m in probe.messages("/deployment_phase")]
         probe.call(Trigger, "/umbrella_node/reset", Trigger.Request())
         probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
-        node.wait_for_log(r"locked at t = 0.0452")
+        locked = float(node.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
+    assert locked == pytest.approx(
+        simulate(UmbrellaParams(v0=-1.0), 0.2, stop_after_lock=0.0).lock.time, abs=1e-9)
 
 
 def test_reset_refused_when_the_pending_parameters_make_no_model(probe):

@@ -389,6 +389,9 @@ class UmbrellaNode(Node):
                 self.get_logger().info(f"recording segment {k} (reset; log time offset "
                                        f"{self.recorder.offset_ns * 1e-9:.9f} s)")
             self._publish_phase("deploying")
+            # the new run's t = 0 state, as at start (paused or not): every run, and every
+            # recording segment, begins with its initial state
+            self._publish_sample(self._sample_messages())
         self._wake.set()
         response.success = True
         response.message = "reset to t = 0"

@@ -586,10 +586,11 @@ class SimulatedAntenna:
         """
         Restart the run at t = 0 (``~/reset``, with the parameters set since the start).
 
-        Returns once the node has restarted (its log and the new run's "deploying" phase);
+        Returns once the node has restarted (its log, the new run's "deploying" phase and
+        its t = 0 joint state);
         from then on every wait, message list and figure (phases, sim_time, messages,
-        applied_forces, lock_time, summary) is of the new run only: the node publishes its
-        first state one period after t = 0 (none while paused).  AssertionError with the
+        applied_forces, lock_time, summary) is of the new run only, which begins with its
+        t = 0 state (published at the reset, paused or not).  AssertionError with the
         node's reason if it refuses.
         """
         from std_srvs.srv import Trigger
@@ -607,6 +608,9 @@ class SimulatedAntenna:
              lambda: f"no '{RESET_LINE}' in the node's log within {timeout} s")
         poll(lambda: runs_begun() > begun, timeout,
              lambda: f"no new 'deploying' on {topic} within {timeout} s of ~/reset")
+        poll(lambda: self.messages("joint_states"), timeout,
+             lambda: f"no t = 0 state on {self.topics['joint_states']} within {timeout} s of "
+                     "~/reset")
 
     def _service(self, name: str) -> str:
         return (f"/{self.namespace}" if self.namespace else "") + f"/umbrella_node/{name}"
