@@ -104,12 +104,33 @@ def test_infeasible_target_is_refused_naming_the_parameter():
     (["-p", "target_time:=0.05"], "too short"),
     (["-p", "max_force:=fast"], "max_force"),
     (["-p", "l1:=-1.0"], "l1"),
+    (["-p", "targt_time:=1.0"], "unknown parameter 'targt_time' (did you mean 'target_time'?)"),
+    (["-p", "qos_overrides./sleeve_force.publisher.depth:=5"], "its topics take none"),
 ])
 def test_controller_refuses_bad_parameters_with_exit_2(args, culprit):
     r = subprocess.run([sys.executable, "-m", "umbrella_sim.deploy_controller", "--ros-args",
                         *args], capture_output=True, text=True, env=ros_env(), timeout=60)
     assert r.returncode == 2, r.stderr
     assert culprit in r.stderr and "Traceback" not in r.stderr
+
+
+def test_controller_shares_the_node_params_file_and_names_a_typo_in_it(tmp_path):
+    """One '/**' params file serves both nodes; a misspelt name in it is exit 2, not ignored."""
+    shared = tmp_path / "shared.yaml"
+    shared.write_text("/**:\n  ros__parameters:\n    v0: 0.0\n    publish_rate: 100.0\n"
+                      "    record: false\n    target_time: 1.5\n    max_force: 8.0\n")
+    with NodeProcess("--params-file", str(shared),
+                     module="umbrella_sim.deploy_controller") as controller:
+        controller.wait_for_log("waiting for joint_states", timeout=60)
+        assert "target 1.5 s" in controller.output()
+        assert controller.stop() == 0
+    typo = tmp_path / "typo.yaml"
+    typo.write_text(shared.read_text().replace("max_force", "max_forse"))
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.deploy_controller", "--ros-args",
+                        "--params-file", str(typo)], capture_output=True, text=True,
+                       env=ros_env(), timeout=60)
+    assert r.returncode == 2 and str(typo) in r.stderr, r.stderr
+    assert "'max_forse' (did you mean 'max_force'?)" in r.stderr
 
 
 def test_controller_over_dds_locks_five_times_softer_than_constant_force(

@@ -52,7 +52,8 @@ import time
 import numpy as np
 
 from . import stop_signals
-from .params import UmbrellaParams
+from .params import (check_known_names, check_parameter_sources, params_files_in,
+                     UmbrellaParams)
 from .rigid import RigidMechanism
 
 #: controller parameters: name -> (default, description with units)
@@ -75,6 +76,9 @@ CONTROLLER_PARAMETERS = {
     "position_gain": (36.0, "feedback gain on the leaf angle error (1/s^2); it keeps the "
                       "deploy time"),
 }
+
+CONTROLLER_PARAMETERS_LISTED = ("deploy_controller --help and in msg_docs/deploy_controller.md "
+                                "(and umbrella_node's, for the model)")
 
 
 def _check(name: str, value: float, ok: bool, rule: str) -> float:
@@ -318,8 +322,19 @@ def _make_node_class():
     class DeployControllerNode(Node):
         """joint_states + deployment_phase -> sleeve_force, one command per joint state."""
 
-        def __init__(self):
+        def __init__(self, params_files: tuple = ()):
             super().__init__("deploy_controller")
+            # a misspelt name is an error, never a silent default; the node's own names are
+            # taken (and not used: the numerics), so one params file can serve both nodes
+            known = set(CONTROLLER_PARAMETERS) | set(ros_io.parameter_defaults())
+            fqn = self.get_fully_qualified_name()
+            try:
+                qos = check_parameter_sources(fqn, params_files, list(
+                    self._parameter_overrides), known, CONTROLLER_PARAMETERS_LISTED)
+                check_known_names(qos, (), f"qos_overrides for {fqn} (its topics take none)",
+                                  CONTROLLER_PARAMETERS_LISTED)
+            except ValueError as exc:
+                raise StartupError(str(exc)) from None
             values = {}
             for name, (default, text) in CONTROLLER_PARAMETERS.items():
                 values[name] = self.declare_parameter(name, default, ParameterDescriptor(
@@ -478,9 +493,14 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
+    try:                        # rcl's parse errors are tracebacks: check the files first
+        files = params_files_in(argv)
+    except ValueError as exc:
+        print(f"deploy_controller: error: {exc}", file=sys.stderr)
+        return 2
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        node = _make_node_class()()
+        node = _make_node_class()(tuple(files))
     except StartupError as exc:
         print(f"deploy_controller: error: {exc}", file=sys.stderr)
         rclpy.try_shutdown()

@@ -54,16 +54,12 @@ from std_srvs.srv import SetBool, Trigger
 from . import __version__
 from . import ros_io
 from . import stop_signals
-from .params import (check_known_names, check_node_parameters, NODE_PARAMETERS,
-                     parameter_help, read_params_file, REGISTRY, RESET, section_matches, SPECS,
-                     UmbrellaParams)
+from .params import (check_known_names, check_node_parameters, check_parameter_sources,
+                     NODE_PARAMETERS, parameter_help, params_files_in, QOS_OVERRIDES, REGISTRY,
+                     RESET, SPECS, UmbrellaParams, USE_SIM_TIME)
 from .publication import PublicationDriver
 from .solver import command_force, SimulationDiverged
 
-#: parameters every rclpy node has (besides qos_overrides.*)
-USE_SIM_TIME = "use_sim_time"
-QOS_OVERRIDES = "qos_overrides."
-ROS_OWN_PARAMETERS = {USE_SIM_TIME, "start_type_description_service"}
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
                    "paces it by the system clock; a node does not follow the clock it drives "
                    "(use_sim_time stays false here; set it for the other nodes)")
@@ -187,36 +183,12 @@ class UmbrellaNode(Node):
 
     # ------------------------------------------------------------------ config
     def _check_parameter_sources(self, params_files, known: set) -> set:
-        """
-        Check the params files and parameter names given for this node.
-
-        Every params file has a section for this node, and every parameter given for it
-        (-p or a file) is one it knows: a typo is an error, never a silent default.  Returns
-        the qos_overrides.* names given, checked once the topics have declared theirs
-        (_check_qos_overrides).
-        """
-        fqn = self.get_fully_qualified_name()
-        known = known | ROS_OWN_PARAMETERS
-        in_files = set()
+        """Check the params files and names given for this node (StartupError: which)."""
         try:
-            for path in params_files:
-                sections = read_params_file(path)
-                if not any(section_matches(key, fqn) for key in sections):
-                    raise ValueError(f"params file {path}: no section for node {fqn} "
-                                     f"(sections: {', '.join(sections)}); use '/**' or the "
-                                     "node's name")
-                names = {n for key, values in sections.items() if section_matches(key, fqn)
-                         for n in values}
-                check_known_names({n for n in names if not n.startswith(QOS_OVERRIDES)},
-                                  known, f"params file {path} (for {fqn})")
-                in_files |= names
-            names = [n for n in self._parameter_overrides
-                     if not n.startswith(QOS_OVERRIDES) and n not in in_files]
-            check_known_names(names, known, f"-p for {fqn}")
+            return check_parameter_sources(self.get_fully_qualified_name(), params_files,
+                                           list(self._parameter_overrides), known)
         except ValueError as exc:
             raise StartupError(str(exc)) from None
-        return {n for n in (*in_files, *self._parameter_overrides)
-                if n.startswith(QOS_OVERRIDES)}
 
     def _check_qos_overrides(self, given: set) -> None:
         """Refuse a qos_overrides.* name given for this node that none of its topics has."""
@@ -748,11 +720,6 @@ def usage() -> str:
     return "\n".join(lines)
 
 
-def _params_files(argv: list[str]) -> list[str]:
-    """Return the --params-file arguments among the ROS arguments."""
-    return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--params-file"]
-
-
 def main(argv: list[str] | None = None) -> int:
     # SIGINT/SIGTERM only ask for a stop (stop_signals.py: the entry points install the
     # handlers before the heavy imports, so a signal during them is noted too, never a
@@ -795,12 +762,10 @@ def _run(argv: list[str], running: list) -> int:
         rclpy.try_shutdown()
         return EXIT_USAGE
 
-    files = _params_files(argv)
-    for path in files:          # rcl's parse errors are tracebacks: check the files first
-        try:
-            read_params_file(path)
-        except ValueError as exc:
-            return fail(str(exc))
+    try:                        # rcl's parse errors are tracebacks: check the files first
+        files = params_files_in(argv)
+    except ValueError as exc:
+        return fail(str(exc))
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong

@@ -603,13 +603,17 @@ def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:
     return merged
 
 
-def check_known_names(names, known, source: str) -> None:
+NODE_PARAMETERS_LISTED = "umbrella_node --help and in msg_docs/parameters.md"
+
+
+def check_known_names(names, known, source: str,
+                      listed: str = NODE_PARAMETERS_LISTED) -> None:
     """
     Refuse unknown parameter names, suggesting the closest known one.
 
     ValueError naming every name of `names` not in `known`, with a "did you mean"
     suggestion (difflib) for each; `source` says where the names came from (e.g. "params
-    file config/x.yaml", "-p", "--set").
+    file config/x.yaml", "-p", "--set"); `listed` where the known ones are listed.
     """
     import difflib
 
@@ -620,5 +624,50 @@ def check_known_names(names, known, source: str) -> None:
         problems.append(f"{name!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
     if problems:
         raise ValueError(f"{source}: unknown parameter{'s' if len(problems) > 1 else ''} "
-                         f"{', '.join(problems)}; known parameters are listed by "
-                         "umbrella_node --help and in msg_docs/parameters.md")
+                         f"{', '.join(problems)}; known parameters are listed by {listed}")
+
+
+#: the prefix of rclpy's QoS override parameters, and the parameters every rclpy node has
+QOS_OVERRIDES = "qos_overrides."
+USE_SIM_TIME = "use_sim_time"
+ROS_OWN_PARAMETERS = frozenset({USE_SIM_TIME, "start_type_description_service"})
+
+
+def params_files_in(ros_args: list[str]) -> list[str]:
+    """
+    Return the ``--params-file`` arguments of a command line, each read and checked.
+
+    ValueError naming the file and the problem (rcl's own parse errors are tracebacks).
+    """
+    files = [ros_args[i + 1] for i, a in enumerate(ros_args[:-1]) if a == "--params-file"]
+    for path in files:
+        read_params_file(path)
+    return files
+
+
+def check_parameter_sources(node_fqn: str, params_files, given, known,
+                            listed: str = NODE_PARAMETERS_LISTED) -> set:
+    """
+    Check the params files and parameter names a ROS node was started with.
+
+    Every params file has a section for the node, and every parameter given for it (``-p``,
+    ``given``, or a file) is one it knows (``known``, besides ROS_OWN_PARAMETERS): a typo
+    is a ValueError naming it, never a silent default.  Returns the ``qos_overrides.*``
+    names given, for the node to check against the QoS its topics declare.
+    """
+    known = set(known) | ROS_OWN_PARAMETERS
+    in_files = set()
+    for path in params_files:
+        sections = read_params_file(path)
+        if not any(section_matches(key, node_fqn) for key in sections):
+            raise ValueError(f"params file {path}: no section for node {node_fqn} "
+                             f"(sections: {', '.join(sections)}); use '/**' or the "
+                             "node's name")
+        names = {n for key, values in sections.items() if section_matches(key, node_fqn)
+                 for n in values}
+        check_known_names({n for n in names if not n.startswith(QOS_OVERRIDES)}, known,
+                          f"params file {path} (for {node_fqn})", listed)
+        in_files |= names
+    names = [n for n in given if not n.startswith(QOS_OVERRIDES) and n not in in_files]
+    check_known_names(names, known, f"-p for {node_fqn}", listed)
+    return {n for n in (*in_files, *given) if n.startswith(QOS_OVERRIDES)}
