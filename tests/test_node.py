@@ -155,6 +155,7 @@ def test_pause_and_reset(probe):
         n_before = len(probe.messages("/deployment_phase"))
         clocks_before = len(probe.messages("/clock"))
         assert probe.call(Trigger, "/umbrella_node/reset", Trigger.Request()).success
+
         def new_run_first_clock():
             """Return the first clock that went back since the reset call (the new run's)."""
             seen = [m.clock for m in probe.messages("/clock")[clocks_before - 1:]]
