@@ -42,6 +42,21 @@ def command_gap(bag: str, start: float, end: float) -> float:
     return max(b - a for a, b in zip(times, times[1:]))
 
 
+def wait_for_controller(antenna, controller, publishers: int = 1,
+                        timeout: float = 60.0) -> None:
+    """
+    Wait until the controller is up and in the antenna's graph.
+
+    Its subscriptions to the antenna's topics, and ``publishers`` on sleeve_force in all.
+    """
+    controller.wait_for_log("waiting for joint_states", timeout=timeout)
+    graph = antenna.probe.node
+    topics = [antenna.topics[name] for name in ("joint_states", "deployment_phase")]
+    poll(lambda: all(graph.count_subscribers(t) >= 2 for t in topics)
+         and graph.count_publishers(antenna.topics["sleeve_force"]) >= publishers, timeout,
+         lambda: f"the controller never appeared on {topics} and sleeve_force")
+
+
 def run_summary(result, first_push: float):
     """Return the run summary of an offline RunResult (the same figures as over DDS)."""
     return summarize_run([(first_push, 1.0)], result.lock.time, False,
@@ -179,6 +194,7 @@ def test_controller_over_dds_locks_five_times_softer_than_constant_force(
           f"{s.stage2_peak_stress / 1e6:.3f} MPa (offline {offline.stage2_peak_stress / 1e6:.3f}),"
           f" tip amplitude {s.stage2_tip_amplitude * 1e3:.3f} mm (offline "
           f"{offline.stage2_tip_amplitude * 1e3:.3f})\n{log}")
+    assert "it refuses them" not in log and "publishers on" not in log   # no false alarm
     assert ref.deploy_time == pytest.approx(TARGET, rel=1e-3)
     assert s.stage2_span >= AFTER and ref.stage2_span >= AFTER
     assert abs(s.deploy_time - ref.deploy_time) <= 0.05 * ref.deploy_time
@@ -217,13 +233,14 @@ def test_stop_signal_while_commands_flow_is_a_clean_exit(probe, ros_domain_id):
     probe.subscribe(ros_io.COMMAND.name, Float64)
     phase.publish(String(data="deploying"))
     ended = threading.Event()
+    folded = UmbrellaParams().alpha0
 
     def pump():
         k = 0
         while not ended.is_set():
             k += 1
-            msg = JointState(position=[1.0, 0.5, 0.0], velocity=[0.0, 0.0, 0.0],
-                             effort=[0.0, 0.0, 0.0])
+            msg = JointState(position=[folded, 0.5, 0.0], velocity=[0.0, 0.0, 0.0],
+                             effort=[0.0, 0.0, 0.0])     # folded at rest: the plan's start
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(k * 10**6, 10**9)
             states.publish(msg)
             time.sleep(STATE_INTERVAL)
@@ -269,6 +286,59 @@ def test_controller_deploys_each_new_run_after_a_reset(antenna_factory, ros_doma
                 controller.wait_for_log("deployment over")
                 ctl.reset()
         controller.wait_for_log("a new run; deploying it from its start")
-        assert controller.stop() == 0, controller.output()
+        out = controller.output()
+        assert controller.stop() == 0, out
+    assert "it refuses them" not in out and "not folded at rest" not in out   # no false alarm
     assert deploy[0] == pytest.approx(TARGET, rel=0.05)
     assert deploy[1] == pytest.approx(deploy[0], rel=0.01), deploy
+
+
+def test_controller_leaves_a_frame_that_is_not_at_rest_alone(antenna_factory, ros_domain_id):
+    """
+    The plan deploys from rest: a node started with v0 != 0 gets no command, and an error.
+
+    Pushing a frame that already deploys faster than the plan only makes its lock harder
+    (the controller once pushed the node's default V0 = -0.2 m/s run at full force).
+    """
+    # at 1/20 of real time: the 0.23 s deployment lasts longer than DDS takes to deliver
+    # the first states to a controller the graph already shows (up to ~1 s here)
+    antenna = antenna_factory({"v0": -0.2, "publish_rate": RATE, "time_step": STEP,
+                               "start_paused": True, "real_time_factor": 0.05})
+    with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
+                     parameters={"target_time": TARGET, "max_force": LIMIT}) as controller:
+        wait_for_controller(antenna, controller)
+        antenna.resume()
+        controller.wait_for_log("the frame is not folded at rest", timeout=30)
+        antenna.wait_for_phase("locked", timeout=30)
+        out = controller.output()
+        assert controller.stop() == 0, out
+    assert "give umbrella_node v0:=0.0" in out and "deployment over" not in out
+    assert antenna.applied_forces() == []
+    offline = simulate(UmbrellaParams(v0=-0.2, time_step=STEP), 1.0, stop_after_lock=0.0)
+    assert antenna.lock_time() == pytest.approx(offline.lock.time, abs=1e-9)   # on its own
+
+
+def test_controller_warns_when_its_commands_are_refused_or_others_command(
+        antenna_factory, ros_domain_id):
+    """
+    The node's echoed effort shows what it applies: braking commands it refuses are named.
+
+    The node takes no force below its sleeve_force_min (0 by default) while the controller
+    brakes down to -LIMIT; a second publisher on sleeve_force (the test's own) is named too.
+    """
+    antenna = antenna_factory({"v0": 0.0, "publish_rate": RATE, "time_step": STEP,
+                               "start_paused": True})
+    antenna.publish_force(0.0)              # a second publisher on the topic, holding 0 N
+    with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
+                     parameters={"target_time": TARGET, "max_force": LIMIT,
+                                 "min_force": -LIMIT}) as controller:
+        wait_for_controller(antenna, controller, publishers=2)
+        antenna.resume()
+        antenna.wait_for_phase("locked", timeout=60)
+        controller.wait_for_log("deployment over", timeout=30)
+        out = controller.output()
+        assert controller.stop() == 0, out
+    assert "2 publishers on /sleeve_force" in out, out
+    assert "it refuses them (its sleeve_force_min" in out, out
+    assert "below" in antenna.node.output() or "sleeve_force_min" in antenna.node.output()
+    assert min(f for _, f in antenna.applied_forces()) >= 0.0

@@ -77,6 +77,9 @@ CONTROLLER_PARAMETERS = {
                       "deploy time"),
 }
 
+#: at rest for the plan: rate and angle from the start within this fraction of the plan's
+#: cruise rate and of its span
+REST_FRACTION = 0.05
 CONTROLLER_PARAMETERS_LISTED = ("deploy_controller --help and in msg_docs/deploy_controller.md "
                                 "(and umbrella_node's, for the model)")
 
@@ -343,8 +346,8 @@ def _make_node_class():
             model = {}
             for name, default in UmbrellaParams().as_dict().items():
                 if name in ("model", "lock", "time_step", "step_follows_mesh",
-                            "elements_per_segment"):
-                    continue                      # the numerics do not enter the law
+                            "elements_per_segment", "v0"):
+                    continue    # the numerics do not enter the law; it plans from rest
                 model[name] = self.declare_parameter(name, default, ParameterDescriptor(
                     name=name, read_only=True, dynamic_typing=True,
                     description="model parameter: give the value umbrella_node has")).value
@@ -371,6 +374,8 @@ def _make_node_class():
             self._last_wall: float | None = None
             self._sent: collections.deque = collections.deque(maxlen=400)  # (stamp, F)
             self._delays: collections.deque = collections.deque(maxlen=15)
+            self._not_ours = 0        # consecutive states applying none of our commands
+            self._publishers_checked = -math.inf     # wall time of the last check
             self.get_logger().info(
                 f"target {cfg.target_time:g} s, force in [{cfg.min_force:g}, "
                 f"{cfg.max_force:g}] N, lock rate {self.law.lock_rate:.4g} rad/s, "
@@ -386,6 +391,7 @@ def _make_node_class():
             self._last_wall = None
             self._last_effort = 0.0
             self._sent.clear()
+            self._not_ours = 0
 
         def _on_phase(self, msg) -> None:
             if msg.data == "deploying" and self.phase in ("locked", "fault"):
@@ -432,11 +438,67 @@ def _make_node_class():
                     self.law.start(t - self._period)
                     self.get_logger().info(f"first push acting from t = "
                                            f"{self.law.t_start:.6f} s")
+                elif not self.commanding and not self._at_rest(t, msg):
+                    self.done = True        # idle until a new run
+                    return
                 else:
                     self.commanding = True
                     self._send(t, self.law.cfg.max_force)
                     return
+            self._check_commands_applied(t, effort)
             self._send(t, self.law.force(t, msg.position[0], msg.velocity[0], self.lead()))
+
+        def _at_rest(self, t: float, msg) -> bool:
+            """
+            Tell whether the frame is folded and at rest, where the plan starts.
+
+            Else log why not (the node's v0, or another command moved it) and stay idle
+            for this run: pushing a frame already deploying faster than the plan only makes
+            its lock harder.
+            """
+            p, law = self.law.params, self.law
+            rate, angle = msg.velocity[0], msg.position[0]
+            if abs(rate) <= REST_FRACTION * law.cruise and \
+                    abs(angle - p.alpha0) <= REST_FRACTION * law.span:
+                return True
+            self.get_logger().error(
+                f"the frame is not folded at rest at t = {t:.6f} s (alpha1 = {angle:.6g} rad, "
+                f"alpha1' = {rate:.6g} rad/s; the plan starts at alpha0 = {p.alpha0:.6g} rad "
+                f"at rest and cruises at {law.cruise:.4g} rad/s): give umbrella_node v0:=0.0 "
+                "(and no other sleeve_force command); not commanding this run (a ~/reset "
+                "starts a new one)")
+            return False
+
+        def _check_commands_applied(self, t: float, effort: float) -> None:
+            """
+            Warn when the node applies none of our recent commands, or others command it.
+
+            The node echoes the force it applies in ``effort[2]``: a value none of our
+            commands of the last round trip had (the measured delay plus three periods),
+            three states running, means it refuses them (its sleeve_force_min /
+            sleeve_force_limit) or another publisher commands it.  After a stall the first
+            state may show an older command, once.  Publishers on the topic are counted
+            once a second.
+            """
+            now = time.monotonic()
+            if now - self._publishers_checked >= 1.0:
+                self._publishers_checked = now
+                n = self.count_publishers(self.pub.topic_name)
+                if n > 1:
+                    self.get_logger().warn(
+                        f"{n} publishers on {self.pub.topic_name}: the node applies "
+                        "whichever command came last, so another node commanding the sleeve "
+                        "fights this one; stop it", throttle_duration_sec=5.0)
+            period = self._period or 0.0
+            window = (statistics.median(self._delays) if self._delays else period) + 3 * period
+            ours = {f for ts, f in self._sent if ts >= t - window - 1e-9}
+            self._not_ours = 0 if effort in ours else self._not_ours + 1
+            if self._not_ours >= 3:
+                self.get_logger().warn(
+                    f"the node applies {effort:.6g} N at t = {t:.6f} s, none of our commands "
+                    f"of the last {window:g} s (latest {self._sent[-1][1]:.6g} N): it refuses "
+                    "them (its sleeve_force_min / sleeve_force_limit; see its log) or another "
+                    "node commands it", throttle_duration_sec=2.0)
 
         def _send(self, t: float, force: float) -> None:
             self._sent.append((t, float(force)))

@@ -752,7 +752,15 @@ class SimulatedAntenna:
 
     # ------------------------------------------------------------- lifetime
     def stop(self, timeout: float = 10.0) -> int:
-        """SIGTERM the node (it finalises its recording), wait; the exit code."""
+        """
+        SIGTERM the node (it finalises its recording), wait; the exit code.
+
+        The antenna's command publisher goes too: a controller started next to another
+        antenna in the same namespace would otherwise count it as a second commander.
+        """
+        if self._command_pub is not None:
+            self.probe.node.destroy_publisher(self._command_pub)
+            self._command_pub = None
         return self.node.stop(timeout=timeout)
 
     def close(self) -> None:
