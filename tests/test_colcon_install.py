@@ -46,7 +46,14 @@ exec "$prefix/lib/umbrella_sim/umbrella_node" --ros-args \
     out = run.stdout + run.stderr
     assert run.returncode == 0, out
     assert f"prefix={tmp_path}/install/umbrella_sim" in out
-    assert "locked at t = 0.0904" in out and "duration 0.2 s reached" in out
+    # the installed node runs the default config as the source tree's simulator does
+    from umbrella_sim.params import load_params_file, SPECS, UmbrellaParams
+    from umbrella_sim.solver import simulate
+
+    config = load_params_file(os.path.join(ROOT, "config", "umbrella.yaml"))
+    params = UmbrellaParams.from_mapping({k: v for k, v in config.items() if k in SPECS})
+    offline = simulate(params.replace(v0=-0.5), 0.2, stop_after_lock=0.0).lock.time
+    assert f"locked at t = {offline:.9f} s" in out and "duration 0.2 s reached" in out
     assert "kernel compiled" in out                   # colcon built the C step too
     for name in ("package.xml", "config/umbrella.yaml", "msg_docs/parameters.md",
                  "launch/umbrella.launch.py", "launch/multi_antenna.launch.py",
