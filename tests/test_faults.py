@@ -22,7 +22,7 @@ from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
 from tests.disk_faults import full_disk_write
-from tests.ros_helpers import NodeProcess, Probe, ros_env
+from tests.ros_helpers import NodeProcess, Probe, ros_env, signal_and_collect
 from umbrella_sim import recording
 from umbrella_sim.logs import LogError, read_log
 from umbrella_sim.node import MAX_LAG_S, REFUSED_RECORD_RATE
@@ -334,7 +334,7 @@ def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum
             time.sleep(0.002)
         time.sleep(delay)
     finally:
-        out, err = _signal_and_collect(proc, signum)
+        out, err = signal_and_collect(proc, signum)
     assert proc.returncode == 0, err
     assert "Traceback" not in err + out and "KeyboardInterrupt" not in err + out, err
     name = signal.Signals(signum).name
@@ -372,17 +372,6 @@ def test_stop_inside_a_long_period_ends_it_and_records_one_state(tmp_path):
         assert float(events["lock_time"]) == summary["deploy_time"]
 
 
-def _signal_and_collect(proc, signum):
-    """Send signum to proc, return its (stdout, stderr); killed if it outlives 90 s."""
-    try:
-        proc.send_signal(signum)
-        return proc.communicate(timeout=90)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-
-
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_interrupted_offline_run_exits_130_with_its_recording_finalised(tmp_path, signum):
     """A run of the offline tool stopped by a signal: one line, exit 130, the bag finalised."""
@@ -399,7 +388,7 @@ def test_interrupted_offline_run_exits_130_with_its_recording_finalised(tmp_path
             assert time.monotonic() < deadline, "the run did not start recording"
             time.sleep(0.05)
     finally:
-        out, err = _signal_and_collect(proc, signum)
+        out, err = signal_and_collect(proc, signum)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and f"interrupted by {signal.Signals(signum).name}" in err
     log = read_log(str(bag))

@@ -19,7 +19,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
-from tests.ros_helpers import NodeProcess, Probe, ros_env
+from tests.ros_helpers import NodeProcess, Probe, ros_env, signal_and_collect
 from umbrella_sim.logs import read_log
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
@@ -229,14 +229,8 @@ def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, 
                                  "--wait-for-subscribers", "20"],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 env=ros_env())
-        try:
-            probe.wait_for_count("/joint_states", 20, timeout=30)
-            proc.send_signal(signum)
-            out, err = proc.communicate(timeout=30)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
+        out, err = signal_and_collect(
+            proc, signum, lambda: probe.wait_for_count("/joint_states", 20, timeout=30))
         assert proc.returncode == 0, err
         assert "Traceback" not in out + err, err
         sent = int(re.search(r"replayed (\d+) messages", out).group(1))
@@ -254,15 +248,12 @@ def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
                              "--topics", "/joint_states", "--wait-for-subscribers", "120"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=ros_env())
-    try:
+
+    def in_the_wait():
         assert proc.stdout.readline().startswith("replaying up to")
         time.sleep(1.0)             # past the discovery pause: in the wait itself
-        proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+
+    out, err = signal_and_collect(proc, signal.SIGTERM, in_the_wait)
     assert proc.returncode == 0, err
     assert "replayed 0 messages" in out and "Traceback" not in err, (out, err)
 
