@@ -395,20 +395,27 @@ class RunSummary:
     stage2_span: float              # sim time those samples cover (s)
 
 
+#: the stage-2 window of a run summary (s of sim time after the lock), live or recorded
+SUMMARY_AFTER_LOCK = 0.3
+
+
 def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
                   started_moving: bool, tip: list[tuple[float, float]],
-                  stress: list[tuple[float, float]]) -> RunSummary:
+                  stress: list[tuple[float, float]],
+                  after_lock: float | None = None) -> RunSummary:
     """
     Return the run summary: the one place these figures are defined.
 
     From the applied force history [(t, F)], the lock time, whether the frame moved from
     t = 0 (v0 != 0 or an initial force), tip [(t, transverse deflection)] and stress
-    [(t, max(peak leaf, peak link))].
+    [(t, max(peak leaf, peak link))].  Stage 2 is lock < t <= lock + after_lock (None:
+    every sample after the lock).
     """
     first_push = 0.0 if started_moving else next((t for t, f in applied if f != 0.0), None)
     deploy = (lock_time - first_push if lock_time is not None and first_push is not None
               else None)
-    after = (lambda t: lock_time is not None and t > lock_time)
+    end = math.inf if after_lock is None or lock_time is None else lock_time + after_lock
+    after = (lambda t: lock_time is not None and lock_time < t <= end + 1e-9)
     tip2 = [y for t, y in tip if after(t)]
     stress2 = [s for t, s in stress if after(t)]
     times2 = [t for t, _ in tip if after(t)]
@@ -420,12 +427,14 @@ def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
         stage2_span=(times2[-1] - lock_time) if times2 else 0.0)
 
 
-def summary_from_recording(path: str) -> RunSummary:
+def summary_from_recording(path: str,
+                           after_lock: float | None = SUMMARY_AFTER_LOCK) -> RunSummary:
     """
     Return the run summary of a finalised (or torn) MCAP recording of umbrella_node.
 
     Of its last run (a ~/reset starts a new segment); every figure is on that run's sim
-    time.
+    time, stage 2 over ``after_lock`` s after the lock as :meth:`SimulatedAntenna.summary`
+    (None: to the end of the recording), so neither depends on when the node was stopped.
     """
     from .logs import read_log
 
@@ -445,7 +454,7 @@ def summary_from_recording(path: str) -> RunSummary:
                   if m.data == "locked"]
         lock_time = locked[0] if locked else None
     moving = float(params.get("v0", 0.0)) != 0.0 or float(params.get("sleeve_force", 0.0)) != 0
-    return summarize_run(applied, lock_time, moving, tip, stress)
+    return summarize_run(applied, lock_time, moving, tip, stress, after_lock)
 
 
 # ------------------------------------------------------------------ antenna
@@ -500,6 +509,7 @@ class SimulatedAntenna:
         self.topics = {key: t.name if t.name.startswith("/") else prefix + t.name
                        for key, t in ros_io.TOPICS.items()}
         self.topics["sleeve_force"] = prefix + ros_io.COMMAND.name
+        self._diag = ros_io.diagnostic_name(prefix + "umbrella_node")   # its status name
         self._own_probe = probe is None
         SimulatedAntenna._count += 1
         self.probe = probe or Probe(f"antenna_probe_{SimulatedAntenna._count}",
@@ -513,6 +523,8 @@ class SimulatedAntenna:
         self._float64 = Float64
         self._command_pub = None
         self._runs = 0          # resets so far: waits and figures are of the current run
+        self._marks: dict[str, int] = {}    # messages per key received before the last reset
+        self._pending: dict = {}            # parameters set that apply on the next reset
         self.node = NodeProcess(parameters=self.parameters, namespace=self.namespace or None,
                                 domain_id=self.domain_id)
         SimulatedAntenna._live[self._key] = self.node
@@ -525,11 +537,16 @@ class SimulatedAntenna:
             # (a node started paused published its t = 0 state before this probe matched:
             # the latched phase arrives late, a joint state would not)
             first = "deployment_phase" if self.parameters.get("start_paused") else "joint_states"
-            poll(lambda: self.probe.messages(self.topics[first]), startup_timeout,
+            poll(lambda: self.probe.messages(self.topics[first]) or not self.node.running,
+                 startup_timeout,
                  lambda: f"no message on {self.topics[first]} within "
                          f"{startup_timeout} s of the node's start (node "
                          f"{'running' if self.node.running else 'exited'}); node output:\n"
                          f"{self.node.output()[-2000:]}")
+            if not self.probe.messages(self.topics[first]):
+                raise AssertionError(f"the node exited (code {self.node.proc.returncode}) "
+                                     f"before its first message on {self.topics[first]}; "
+                                     f"node output:\n{self.node.output()[-2000:]}")
         except BaseException:
             self.close()
             raise
@@ -561,15 +578,44 @@ class SimulatedAntenna:
         Publish each (t, F) of a profile when the node's sim time reaches start + t.
 
         The start is sim_time() at the call (joint_states stamps); returns after the last
-        command.  Commands act from the next publication after they arrive: for
-        sim-time-exact profiles give the node a ``sleeve_force`` parameter or use
-        ``umbrella_sim simulate --force-profile``.
+        command.  Commands act from the next publication after they arrive, so each lands
+        on the publication grid a little after its t; a profile exact in sim time is
+        ``umbrella_sim simulate --force-profile`` (offline, the same physics).
         """
         rows = sorted(profile, key=lambda tf: tf[0])
         t0 = self.sim_time()
         for t_rel, force in rows:
             self.wait_for_sim_time(t0 + t_rel, timeout=timeout)
             self.publish_force(force)
+
+    def set_parameters(self, timeout: float = 20.0, **values) -> None:
+        """
+        Set node parameters at run time (SetParameters, as ``ros2 param set`` does).
+
+        ``antenna.set_parameters(v0=-0.5, sleeve_force_min=-5.0)``: one request, each value
+        checked and set on its own (AssertionError naming those refused, with the node's
+        reasons; the others are set).  Model
+        parameters apply on the next :meth:`reset`, as on the node, and from then on this
+        antenna's figures and force checks (:meth:`publish_force`) use them; the node's own
+        (``real_time_factor``, ``marker_magnification``...) apply at once.
+        """
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+
+        from .params import REGISTRY, RESET
+
+        request = SetParameters.Request(parameters=[
+            Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])
+        results = self.probe.call(SetParameters, self._service("set_parameters"), request,
+                                  timeout).results
+        for (name, value), r in zip(values.items(), results):
+            if r.successful:
+                spec = REGISTRY.get(name)
+                (self._pending if spec is not None and spec.applies == RESET
+                 else self.parameters)[name] = value
+        refused = [f"{name}: {r.reason}" for name, r in zip(values, results) if not r.successful]
+        if refused:
+            raise AssertionError(f"parameters refused: {'; '.join(refused)}")
 
     def pause(self, paused: bool = True) -> None:
         """Pause (or resume) the simulation: ``~/pause``; sim time holds while paused."""
@@ -600,10 +646,15 @@ class SimulatedAntenna:
         def runs_begun():
             return [m.data for m in self.probe.messages(topic)].count("deploying")
         begun = runs_begun()
+        marks = {key: len(self._received(key)) for key, topic in self.topics.items()
+                 if topic in self.probe.received}
         r = self.probe.call(Trigger, self._service("reset"), Trigger.Request(), timeout)
         if not r.success:
             raise AssertionError(f"~/reset refused: {r.message}")
         self._runs += 1
+        self._marks = marks
+        self.parameters.update(self._pending)     # the model parameters set apply now
+        self._pending = {}
         poll(lambda: self.node.output().count(RESET_LINE) > resets, timeout,
              lambda: f"no '{RESET_LINE}' in the node's log within {timeout} s")
         poll(lambda: runs_begun() > begun, timeout,
@@ -655,33 +706,45 @@ class SimulatedAntenna:
         """Return this run's messages on a node topic (after ``reset()``, the new run's)."""
         return [m for _, m in self._timed_run(key)]
 
+    def _received(self, key: str) -> list:
+        """Return [(arrival, message)] received on a key's topic, this node's only."""
+        timed = self.probe.timed(self._received_topic(key))
+        if key == "diagnostics":            # /diagnostics is every node's: this node's only
+            timed = [(a, m) for a, m in timed if m.status and m.status[0].name == self._diag]
+        return timed
+
     def _timed_run(self, key: str) -> list:
         """Return [(arrival, message)] of this run on a topic the antenna receives."""
-        timed = self.probe.timed(self._received_topic(key))
+        timed = self._received(key)
         if key == "deployment_phase":       # each run's phases start with "deploying"
             starts = [i for i, (_, m) in enumerate(timed) if m.data == "deploying"]
             return timed[starts[-1]:] if starts and self._runs else timed
         if not self._runs:
             return timed
         if hasattr(timed[-1][1] if timed else None, "header"):
-            i = self._run_index(timed)
+            i = self._run_index(timed, self._marks.get(key, 0))
             return [] if i is None else timed[i:]
         # unstamped: what arrived since the run's first joint state
-        states = self.probe.timed(self.topics["joint_states"])
-        i = self._run_index(states)
+        states = self._received("joint_states")
+        i = self._run_index(states, self._marks.get("joint_states", 0))
         return [] if i is None else [(a, m) for a, m in timed if a >= states[i][0]]
 
-    def _run_index(self, timed: list) -> int | None:
+    def _run_index(self, timed: list, mark: int) -> int | None:
         """
         Return where this run begins in [(arrival, stamped message)] (None: not yet).
 
-        A run restarts sim time, so after a reset it begins at the last stamp that does not
-        increase; before any, at the first message.
+        Before any reset, at the first message.  After one, at the first message since the
+        reset call (``mark`` messages came before it) that restarts sim time: its t = 0
+        state, or a stamp below the one before it (a message the previous run still had in
+        flight comes first, and its stamps only grow).
         """
-        for i in range(len(timed) - 1, 0, -1):
-            if _stamp(timed[i][1]) <= _stamp(timed[i - 1][1]):
+        if not self._runs:
+            return 0 if timed else None
+        for i in range(mark, len(timed)):
+            t = _stamp(timed[i][1])
+            if t == 0.0 or (i > 0 and t < _stamp(timed[i - 1][1])):
                 return i
-        return 0 if timed and not self._runs else None
+        return None
 
     def _received_topic(self, key: str) -> str:
         """Return the topic of a key the antenna receives (else ValueError: which it does)."""
@@ -718,21 +781,24 @@ class SimulatedAntenna:
         msgs = self.messages("diagnostics")
         return {kv.key: kv.value for kv in msgs[-1].status[0].values} if msgs else {}
 
-    def summary(self, after_lock: float = 0.3, timeout: float = 30.0) -> RunSummary:
+    def summary(self, after_lock: float = SUMMARY_AFTER_LOCK,
+                timeout: float = 30.0) -> RunSummary:
         """
-        Return the run summary from the topics, once ``after_lock`` s of stage 2 were seen.
+        Return the run summary from the topics, stage 2 over ``after_lock`` s after the lock.
 
-        Stage-2 stress samples are those received after the 'locked' phase message (the
-        stress message has no stamp), so the first publication or two after the lock may
-        be left out; a recording gives the exact figures (:func:`summary_from_recording`).
+        The tip figures are exact (stamped).  The stress message has no stamp: stage-2
+        stress samples are those received after the 'locked' phase message and before the
+        first tip message past the window, so a publication at either end may be left out
+        or taken in; a recording gives the exact figures (:func:`summary_from_recording`).
         """
         self.wait_for_phase("locked", timeout)
         lock = poll(self.lock_time, timeout, lambda: "no 'locked at' line in the node's log")
-        self.wait_for_sim_time(lock + after_lock, timeout)
+        end = lock + after_lock
+        self.wait_for_sim_time(end, timeout)
         # joint_states sets the sim time; the tip and stress streams (one message each per
         # publication) may still be in flight behind it on a busy machine: wait for them too
         tips = poll(lambda: [m for m in self.messages("tip_deflection")
-                             if _stamp(m) >= lock + after_lock][:1] and
+                             if _stamp(m) > end + 1e-9][:1] and
                     self.messages("tip_deflection"), timeout,
                     lambda: f"tip_deflection never reached sim time {lock + after_lock:.6f} s "
                             f"within {timeout} s")
@@ -742,13 +808,15 @@ class SimulatedAntenna:
         phase_arrival = next(t for t, m in self._timed_run("deployment_phase")
                              if m.data == "locked")
         tip = [(_stamp(m), m.point.y) for m in self.messages("tip_deflection")]
-        # no stamp: a stress message is stage 2 if it arrived after the phase message
-        stress = [(math.inf if arrival > phase_arrival else -math.inf,
-                   max(m.data[0], m.data[4]))
+        cut = next(a for a, m in self._timed_run("tip_deflection") if _stamp(m) > end + 1e-9)
+
+        def when(arrival):  # no stamp: before, in or after the window by when it arrived
+            return -math.inf if arrival <= phase_arrival else end if arrival < cut else math.inf
+        stress = [(when(arrival), max(m.data[0], m.data[4]))
                   for arrival, m in self._timed_run("peak_stress")]
         moving = (float(self.parameters.get("v0", -0.2)) != 0.0
                   or float(self.parameters.get("sleeve_force", 0.0)) != 0.0)
-        return summarize_run(self.applied_forces(), lock, moving, tip, stress)
+        return summarize_run(self.applied_forces(), lock, moving, tip, stress, after_lock)
 
     # ------------------------------------------------------------- lifetime
     def stop(self, timeout: float = 10.0) -> int:
