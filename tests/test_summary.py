@@ -18,8 +18,8 @@ import pytest
 from umbrella_sim import compare
 from umbrella_sim.logs import read_log
 from umbrella_sim.nonlinear import locked_first_frequency
-from umbrella_sim.outputs import (oscillation_period, STAGE2_WINDOW, STEP_FIELDS, step_peaks,
-                                  TIP_DEFLECTION_LIMIT)
+from umbrella_sim.outputs import (energy_drift, oscillation_period, STAGE2_WINDOW, STEP_FIELDS,
+                                  step_peaks, TIP_DEFLECTION_LIMIT)
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.recording import record_offline
 from umbrella_sim.solver import simulate, UmbrellaSimulator
@@ -215,6 +215,15 @@ def test_published_peak_stress_is_the_peak_since_the_previous_publication(offlin
     assert max(m.data[0] for _, m in msgs) == offline.summary()["peak_stress_leaf"]
     instantaneous = [s.peak_stress_leaf for s in steps if round(s.time * 100, 6).is_integer()]
     assert max(instantaneous) < offline.summary()["peak_stress_leaf"]
+
+
+def test_energy_drift_of_a_frame_that_never_moves_is_round_off():
+    """V0 = 0, no force: nothing moves, and the balance's round-off is no 100 % drift."""
+    r = simulate(UmbrellaParams(v0=0.0), 0.02)
+    energies = r.column("kinetic_energy") + r.column("strain_energy")
+    assert np.abs(energies).max() < 1e-15            # it did not move
+    assert r.summary()["energy_drift"] < 1e-9
+    assert energy_drift(r) < 1e-9                    # the sample path, the same rule
 
 
 def test_period_estimator_on_a_known_signal():

@@ -10,6 +10,11 @@ from typing import Callable
 import numpy as np
 
 
+
+#: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
+#: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
+ENERGY_SCALE_FLOOR = 1e-9
+
 def build_frozen(cls, values: dict):
     """
     Return an instance of the frozen dataclass cls holding values (every field, trusted).
@@ -459,7 +464,7 @@ class SummaryAccumulator:
         self.final_time = float(initial.time)
         self.error: str | None = None
         self._e0 = initial.kinetic_energy + initial.strain_energy
-        self._scale = max(abs(self._e0), 1e-300)
+        self._scale = max(abs(self._e0), ENERGY_SCALE_FLOOR)
         self._balance = 0.0
         self._residual = float(initial.constraint_residual)
         self._tip1 = ((abs(initial.tip_transverse), float(initial.time))
@@ -609,5 +614,6 @@ def energy_balance_error(r: RunResult) -> np.ndarray:
 def energy_drift(r: RunResult) -> float:
     """Return max |energy balance error| relative to the largest mechanical energy."""
     e = r.column("kinetic_energy") + r.column("strain_energy")
-    scale = max(float(np.abs(e).max()), float(np.abs(r.column("work")).max()), 1e-300)
+    scale = max(float(np.abs(e).max()), float(np.abs(r.column("work")).max()),
+                ENERGY_SCALE_FLOOR)
     return float(np.abs(energy_balance_error(r)).max() / scale)
