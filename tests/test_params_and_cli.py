@@ -23,6 +23,9 @@ CONFIG = os.path.join(ROOT, "config", "umbrella.yaml")
     ({"area": 1e-4}, "area", "both or neither"),
     ({"l3": 0.01}, "parameter l3=0.01", "cannot close"),
     ({"alpha0": 0.2}, "alpha0", "above alpha_deployed"),
+    ({"alpha0": 1.5707963}, "alpha0", "<= 1.5698"),       # the toggle: no lever, v0 -> inf
+    ({"area": 1e-4, "second_moment_of_area": 1e-8}, "second_moment_of_area",
+     "no section of height section_height=0.01"),           # I > A (b/2)^2 = 2.5e-9
     ({"elements_per_segment": 0}, "elements_per_segment", "between"),
     ({"v0": math.nan}, "v0", "finite"),
     ({"l1": math.inf}, "l1", "finite"),

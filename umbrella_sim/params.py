@@ -160,7 +160,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     _P("section_height", float, 0.01, "m",
        "height b of the square cross-section (A = b², I = b⁴/12); also sets the outer "
        "fibre at b/2", low=0.0, high=10.0,
-       rule="> 0 unless `area` and `second_moment_of_area` are given"),
+       rule="> 0 unless `area` and `second_moment_of_area` are given; with them, "
+            "`second_moment_of_area` ≤ `area`·(b/2)²"),
     _P("area", float, 0.0, "m²", "cross-section area A; 0 = derive from `section_height`",
        low=0.0, high=100.0, rule="give with `second_moment_of_area`"),
     _P("second_moment_of_area", float, 0.0, "m⁴",
@@ -175,10 +176,13 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "yield strength, for the stress ratio peak |σ| / yield",
        low=0.0, low_open=True, high=1e15),
     # configuration
+    # at α1 = π/2 the sleeve has no lever on the leaf (dy_H/dα1 = 0, the toggle): a v0 there
+    # is an unbounded leaf rate (infinite energies within 1e-7 rad of it) and a force no torque
     _P("alpha0", float, 0.49 * math.pi, "rad",
        "initial leaf angle α1 from +X (folded)", low=0.0, low_open=True,
-       high=math.pi / 2, high_open=True, default_text="0.49π = 1.5393804",
-       rule="> `alpha_deployed`; l1·|cos alpha0| < l3"),
+       high=math.pi / 2 - 1e-3, default_text="0.49π = 1.5393804",
+       rule="> `alpha_deployed`; l1·|cos alpha0| < l3; ≤ π/2 − 0.001, where the sleeve "
+            "still has a lever on the leaf"),
     _P("alpha_deployed", float, math.pi / 12.0, "rad",
        "leaf angle at full deployment; the stop S is at y = l1 sin α + √(l3² − l1² cos² α)",
        low=0.0, low_open=True, high=math.pi / 2, high_open=True,
@@ -474,6 +478,15 @@ def validate(p: UmbrellaParams, pairs: bool = True) -> None:
     if (p.area == 0.0 or p.second_moment_of_area == 0.0) and p.section_height <= 0.0:
         raise ValueError(f"parameter section_height={p.section_height}: must be > 0 "
                          "unless area and second_moment_of_area are given")
+    if p.area > 0.0 and p.second_moment_of_area > 0.0 and p.section_height > 0.0:
+        most = p.area * (0.5 * p.section_height) ** 2   # every fibre at the outer ones
+        if p.second_moment_of_area > most * (1.0 + 1e-12):
+            raise ValueError(
+                f"parameter second_moment_of_area={p.second_moment_of_area}: more than "
+                f"area * (section_height / 2)^2 = {most:.6g} m^4, which no section of "
+                f"height section_height={p.section_height} m has (its outer fibre, where "
+                "the stress is recovered, is at section_height / 2): give the section's "
+                "height, or section_height 0 for the rectangle of that area and I")
     if not p.alpha_deployed < p.alpha0:
         raise ValueError(f"parameter alpha0={p.alpha0}: must be above alpha_deployed="
                          f"{p.alpha_deployed} and below pi/2")
