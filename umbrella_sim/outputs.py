@@ -9,11 +9,10 @@ from typing import Callable
 
 import numpy as np
 
-
-
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
 ENERGY_SCALE_FLOOR = 1e-9
+
 
 def build_frozen(cls, values: dict):
     """
