@@ -1,4 +1,5 @@
 from glob import glob
+import shutil
 
 from setuptools import Extension, find_packages, setup
 from setuptools.command.build_ext import build_ext
@@ -22,6 +23,11 @@ class BuildKernel(build_ext):
         try:
             super().build_extension(ext)
         except Exception as exc:
+            cc = getattr(self.compiler, "compiler", None) or [""]
+            if shutil.which(cc[0]):       # a compiler that ran and failed: not a missing one
+                raise SystemExit(f"error: the compiled step {ext.sources} did not build with "
+                                 f"{cc[0]}: see its messages above ({type(exc).__name__}: "
+                                 f"{exc})") from None
             raise SystemExit(f"error: {NO_COMPILER}\n({type(exc).__name__}: {exc})") from None
 
 

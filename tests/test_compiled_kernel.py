@@ -169,3 +169,28 @@ def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
             else:
                 assert a == b, f.name
     assert stages == {Stage.DEPLOYING, Stage.LOCKED}
+
+
+def test_install_names_a_missing_compiler_apart_from_a_failed_build(tmp_path):
+    """No C compiler: one message saying to install one; a compiler that fails: not that."""
+    import shutil
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    shutil.copytree(root, tmp_path / "src", ignore=shutil.ignore_patterns(
+        ".git", ".venv", "build", "*.egg-info", "*.so", "__pycache__", ".pytest_cache",
+        "tests", "docs", "bench"))
+
+    def build(**env):
+        return subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--inplace"],
+                              cwd=tmp_path / "src", capture_output=True, text=True,
+                              env=dict(os.environ, **env), timeout=300)
+
+    missing = build(CC=str(tmp_path / "no-such-cc"))
+    assert missing.returncode != 0 and "needs a C compiler" in missing.stderr, missing.stderr
+    kernel = tmp_path / "src" / "umbrella_sim" / "_kernel.c"
+    kernel.write_text(kernel.read_text() + "\nthis is not C;\n")
+    failed = build()
+    assert failed.returncode != 0 and "did not build with" in failed.stderr, failed.stderr
+    assert "needs a C compiler" not in failed.stderr

@@ -669,3 +669,34 @@ def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
         assert deploy[k] == pytest.approx(offline.lock.time, abs=1e-9), k
     with pytest.raises(LogError, match="no segment 2"):
         log.segment(2)
+
+
+@pytest.mark.parametrize("model", ["flexible", "rigid-fe", "rigid", "flexible-nonlinear"])
+def test_a_frame_folding_back_to_the_axle_is_a_fault(model):
+    """
+    v0 > 0 folds the frame back; at alpha1 = pi/2 the leaf lies along the axle: a fault.
+
+    It used to swing through and 'deploy' at the mirror image of the deployed shape
+    (alpha1 = pi - alpha_deployed), reported as a lock. Every model stops at the same step,
+    the last good state before it; the compiled and the numpy paths agree.
+    """
+    import math
+
+    from umbrella_sim.params import UmbrellaParams
+    from umbrella_sim.solver import simulate
+
+    params = UmbrellaParams(v0=0.5, model=model, lock="plastic")
+    r = simulate(params, 0.05)
+    assert r.lock is None and r.error is not None and "reached the axle" in r.error
+    last = r.samples[-1]                     # the last good state: one step short of it
+    assert last.alpha1 < math.pi / 2 <= last.alpha1 + 1.5 * last.alpha1_rate * params.time_step
+    reference = simulate(UmbrellaParams(v0=0.5), 0.05)     # rigid closed form's instant
+    assert r.samples[-1].time == reference.samples[-1].time
+
+
+def test_a_braking_force_folding_the_frame_back_is_a_fault():
+    from umbrella_sim.params import UmbrellaParams
+    from umbrella_sim.solver import simulate
+
+    r = simulate(UmbrellaParams(v0=0.0, sleeve_force_min=-10.0, sleeve_force=-5.0), 1.0)
+    assert r.lock is None and "reached the axle" in r.error

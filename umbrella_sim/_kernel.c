@@ -59,7 +59,7 @@ typedef struct {
 } Model;
 
 enum { OK = 0, NO_CONVERGENCE = 1, NON_FINITE = 2, SINGULAR = 3, NOT_PD = 4, NO_MEMORY = 5,
-       CROSSING = 6, DIVERGED = 7 };
+       CROSSING = 6, DIVERGED = 7, AXLE = 8 };
 
 /* fields of a per-step output row, in this order (outputs.STEP_FIELDS) */
 enum { F_TIME, F_STAGE, F_ALPHA1, F_ALPHA1_RATE, F_SLEEVE_POS, F_SLEEVE_VEL, F_FORCE,
@@ -1772,6 +1772,8 @@ static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
                                           x->jrow_val);
     for (int i = 0; i < m->n; i++) if (!isfinite(q1[i]) || !isfinite(v1[i])) return NON_FINITE;
     if (!(r <= div_tol)) return DIVERGED;
+    /* the leaf at the axle, folding back past its start (integrators.ALPHA1_AXLE) */
+    if (!locked && q1[0] >= 1.57079632679489661923) return AXLE;
     if (!locked && sleeve_height(x, q1) - m->y_stop <= 0.0) return CROSSING;
     return OK;
 }

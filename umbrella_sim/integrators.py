@@ -528,9 +528,15 @@ class _SampleCall(ctypes.Structure):
                 ("p", _dp), ("lam", _dp), ("out", _dp)]
 
 
+#: the leaf angle at which the leaf lies along the axle: a stage-1 state there is a fault
+#: (_kernel.c step_taken, UmbrellaSimulator._checked, RigidEngine._check)
+ALPHA1_AXLE = math.pi / 2
+AXLE_REASON = ("the leaf reached the axle (alpha1 = pi/2): the frame folded back past its "
+               "start (v0 > 0 or a sleeve force below 0 drove it there), where the model has "
+               "no stop")
 _KERNEL_ERRORS = {1: "Newton did not converge", 2: "Newton iterate became non-finite",
                   3: "singular iteration matrix", 4: "mass matrix not positive definite",
-                  5: "out of memory"}
+                  5: "out of memory", 8: AXLE_REASON}
 #: umbrella_advance status codes that are not failures
 ADVANCE_DONE, ADVANCE_CROSSING, ADVANCE_DIVERGED = 0, 6, 7
 _kernel_lib = None

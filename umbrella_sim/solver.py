@@ -21,8 +21,9 @@ from typing import Callable, Iterable
 import numpy as np
 
 from .forcing import ForceSchedule
-from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ConvergenceError,
-                          DynamicState, MidpointDAE, newton_tolerance, SAMPLE_VECTOR)
+from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ALPHA1_AXLE,
+                          AXLE_REASON, ConvergenceError, DynamicState, MidpointDAE,
+                          newton_tolerance, SAMPLE_VECTOR)
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import (build_frozen, LockEvent, RunResult, Sample, STEP_FIELDS, step_peaks,
                       step_row, StepBlock, SummaryAccumulator)
@@ -450,6 +451,8 @@ class RigidEngine(Engine):
         res = self._residual(*y)
         if not res <= DIVERGENCE_RESIDUAL:
             return f"constraint residual {res:.3g} past tolerance {DIVERGENCE_RESIDUAL:g}"
+        if y[0] >= ALPHA1_AXLE:
+            return AXLE_REASON
         return None
 
     def _residual(self, a1, a2, w1, w2) -> float:
@@ -704,6 +707,8 @@ class UmbrellaSimulator:
             raise SimulationDiverged(fault_message(
                 self.time, f"constraint residual {res:.3g} past tolerance "
                            f"{DIVERGENCE_RESIDUAL:g}"))
+        if stage == DEFORMING and s.q[0] >= ALPHA1_AXLE:
+            raise SimulationDiverged(fault_message(self.time, AXLE_REASON))
         return s
 
     def _find_lock(self, s0: DynamicState, h: float, force: float) -> DynamicState:
