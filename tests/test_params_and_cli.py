@@ -24,6 +24,7 @@ CONFIG = os.path.join(ROOT, "config", "umbrella.yaml")
     ({"l3": 0.01}, "parameter l3=0.01", "cannot close"),
     ({"alpha0": 0.2}, "alpha0", "above alpha_deployed"),
     ({"alpha0": 1.5707963}, "alpha0", "<= 1.5698"),       # the toggle: no lever, v0 -> inf
+    ({"sleeve_force_min": -1e6}, "sleeve_force_min", "link in tension"),   # squash: 50 kN
     ({"area": 1e-4, "second_moment_of_area": 1e-8}, "second_moment_of_area",
      "no section of height section_height=0.01"),           # I > A (b/2)^2 = 2.5e-9
     ({"elements_per_segment": 0}, "elements_per_segment", "between"),
@@ -212,6 +213,7 @@ def test_force_profile_rows_and_header(tmp_path, text, rows):
     ("t,5\n0,5\n", "f.csv:1", "not numbers"),         # half a number: not a header either
     ("0,1,2\n", "f.csv:1", "two columns"),            # a third column is not dropped
     ("t,F\nF\n", "f.csv:2", "two columns"),
+    ("0,1\n0.5,2\n0.5,3\n", "f.csv:3", "time 0.5 given twice"),   # (the last one won)
 ])
 def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
     from umbrella_sim.cli import read_force_profile

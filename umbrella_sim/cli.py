@@ -70,6 +70,9 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
             raise ValueError(f"force profile {path}:{lineno}: time {t} must be finite and >= 0")
         if rows and t < rows[-1][0]:
             raise ValueError(f"force profile {path}:{lineno}: time {t} goes backwards")
+        if rows and t == rows[-1][0]:     # which one acts? one force per instant
+            raise ValueError(f"force profile {path}:{lineno}: time {t} given twice (the row "
+                             "before has it too): one force per instant")
         try:
             command_force(f, params or UmbrellaParams())
         except ValueError as exc:

@@ -438,10 +438,13 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                    "elastic material law no longer holds")
     length = params["l1"] + params["l2"]
     if tip_deflection > TIP_DEFLECTION_LIMIT * length:
+        beyond = ("the von Karman strain of flexible-nonlinear holds to fibre rotations of "
+                  "~0.3 rad: check them (docs/validation_nonlinear.md)"
+                  if params.get("model") == "flexible-nonlinear" else
+                  "small-deformation theory no longer holds (compare model flexible-nonlinear)")
         out.append(f"large deflection: |v_G| reached {tip_deflection * 1e3:.4g} mm = "
                    f"{100 * tip_deflection / length:.3g} % of the leaf length {length:g} m "
-                   f"(limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no "
-                   "longer holds (compare model flexible-nonlinear)")
+                   f"(limit {100 * TIP_DEFLECTION_LIMIT:g} %): {beyond}")
     return out
 
 

@@ -198,7 +198,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "smallest sleeve force accepted (topic, force profile, `sleeve_force`): 0 = push-only, "
        "the thesis's sleeve; < 0 = a drive that can also hold the sleeve back (brake), "
        "which a soft closed-loop latch needs: pushing alone never takes kinetic energy out "
-       "before the lock", low=-1e9, high=0.0),
+       "before the lock", low=-1e9, high=0.0,
+       rule="≥ −`area`·`yield_strength`, the link's load in tension"),
     # model and numerics
     _P("model", str, "flexible", "-",
        "flexible: Case 1 then Case 2; flexible-nonlinear: the same with the von Kármán "
@@ -373,7 +374,12 @@ class _DerivedQuantities:
         (geometrically linear, elastic) model cannot represent.
         """
         euler = math.pi ** 2 * self.youngs_modulus * self.cross_section_inertia / self.l3 ** 2
-        return min(euler, self.cross_section_area * self.yield_strength)
+        return min(euler, self.sleeve_force_tension_limit)     # (the same squash load)
+
+    @property
+    def sleeve_force_tension_limit(self) -> float:
+        """Return the largest force holding the sleeve back (N): the link's squash load."""
+        return self.cross_section_area * self.yield_strength
 
     @property
     def sleeve_stop_height(self) -> float:
@@ -500,6 +506,11 @@ def validate(p: UmbrellaParams, pairs: bool = True) -> None:
         raise ValueError(f"parameter time_step={p.time_step}: with step_follows_mesh the "
                          f"physics step time_step / elements_per_segment = "
                          f"{p.physics_time_step:.3g} s must be >= {MIN_PHYSICS_STEP:g} s")
+    if p.sleeve_force_min < -p.sleeve_force_tension_limit:
+        raise ValueError(f"parameter sleeve_force_min={p.sleeve_force_min}: must be >= "
+                         f"{-p.sleeve_force_tension_limit:.6g} N: a force holding the sleeve "
+                         "back puts the link in tension, which it carries up to its squash "
+                         "load area * yield_strength")
     if p.sleeve_force < p.sleeve_force_min:
         raise ValueError(f"parameter sleeve_force={p.sleeve_force}: must be >= "
                          f"{p.sleeve_force_min:g} = sleeve_force_min (F_H pushes the sleeve "
