@@ -255,7 +255,8 @@ def energy_drift_lines() -> list[str]:
         while sim.lock_event is None or sim.time < sim.lock_event.time + 1.0:
             blocks.append(sim.advance(2000))
         get = lambda f: np.concatenate([getattr(b, f) for b in blocks])  # noqa: E731
-        e = get("kinetic_energy") + get("strain_energy") - get("work") + get("lock_energy_loss")
+        e = (get("kinetic_energy") + get("strain_energy") + get("phase_correction_energy")
+             - get("work") + get("lock_energy_loss"))
         t, st = get("time"), get("stage")
         cells = []
         for code in (0, 1):

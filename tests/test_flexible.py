@@ -12,7 +12,7 @@ import pytest
 
 from umbrella_sim.integrators import PHI_TOLERANCE
 from umbrella_sim.model import ConstraintSet, Stage
-from umbrella_sim.outputs import energy_balance_error
+from umbrella_sim.outputs import energy_balance_error, mechanical_energy
 from umbrella_sim.params import UmbrellaParams
 from umbrella_sim.rigid import deployment_time_by_quadrature
 from umbrella_sim.solver import simulate, UmbrellaSimulator
@@ -77,7 +77,8 @@ def test_energy_conserved_without_force(thesis_run):
     assert thesis_run.lock.kind == "energy"
     assert thesis_run.samples[-1].time >= thesis_run.lock.time + 1.0 - 1e-9
     assert thesis_run.summary()["energy_drift"] < 1e-9
-    e = np.array([s.kinetic_energy + s.strain_energy for s in thesis_run.samples])
+    # (with stage 2's phase correction the integrator keeps T + V + its term)
+    e = np.array([mechanical_energy(s) for s in thesis_run.samples])
     assert np.abs(e - e[0]).max() / e[0] < 1e-9
 
 
@@ -177,7 +178,8 @@ def test_scheme_balances_energy_before_the_energy_scaling(monkeypatch):
     sim.engine.integrator = integrators.MidpointDAE(sim.model, kernel="numpy")
     b = sim.advance(380)
     assert b.lock is not None and b.error is None
-    err = b.kinetic_energy + b.strain_energy - b.work + b.lock_energy_loss
+    err = (b.kinetic_energy + b.strain_energy + b.phase_correction_energy - b.work
+           + b.lock_energy_loss)
     e0 = sim.engine.kinetic_energy(sim.engine.initial(2.0), Stage.DEPLOYING)
     # the scheme alone: ~3e-5 here (Newton tolerance and projection); the scaling makes it
     # round-off (test_energy_conserved_without_force, test_energy_equals_work_with_force)
@@ -209,3 +211,30 @@ def test_sixteen_elements_per_segment():
     assert s["deploy_time"] == pytest.approx(
         deployment_time_by_quadrature(UmbrellaParams(v0=-0.2)), rel=1e-3)
     assert s["constraint_residual_max"] < 1e-10 and s["energy_drift"] < 1e-4
+
+
+def test_a_damped_frame_at_rest_has_no_strain_energy_and_the_correction_its_own_term():
+    """
+    Damping brings the locked frame to rest: T and V go to zero, whatever the correction.
+
+    Stage 2's phase correction changes the modal masses of the modes it corrects; the
+    integrator keeps T + V + its term ½q'Dq' (less that just after the lock). That term
+    used to be reported inside the strain energy: 0.59 J of 'strain' in a frame at rest.
+    """
+    runs = {pc: simulate(UmbrellaParams(v0=-1.0, damping_ratio=0.3, lock="plastic",
+                                        phase_correction=pc), 1.0) for pc in (True, False)}
+    for pc, r in runs.items():
+        end = r.samples[-1]
+        assert end.strain_energy < 1e-12 and end.kinetic_energy < 1e-12      # at rest
+        assert r.summary()["energy_drift"] < 1e-10                           # balance closes
+        correction = r.column("phase_correction_energy")
+        if pc:
+            lock = r.column("time") >= r.lock.time
+            assert np.all(correction[~lock] == 0.0) and correction[lock][0] < 1e-12
+            assert correction[-1] > 0.1                  # the corrected modes' share, kept
+        else:
+            assert np.all(correction == 0.0)
+    # what the correction keeps is what the damping did not take, against the run without it
+    with_pc, without = runs[True].samples[-1], runs[False].samples[-1]
+    assert with_pc.damping_dissipation + with_pc.phase_correction_energy == pytest.approx(
+        without.damping_dissipation, rel=0.01)

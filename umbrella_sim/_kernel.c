@@ -64,7 +64,7 @@ enum { OK = 0, NO_CONVERGENCE = 1, NON_FINITE = 2, SINGULAR = 3, NOT_PD = 4, NO_
 /* fields of a per-step output row, in this order (outputs.STEP_FIELDS) */
 enum { F_TIME, F_STAGE, F_ALPHA1, F_ALPHA1_RATE, F_SLEEVE_POS, F_SLEEVE_VEL, F_FORCE,
        F_TIP_AXIAL, F_TIP_TRANSVERSE, F_PEAK_LEAF, F_PEAK_LEAF_X, F_PEAK_LINK, F_PEAK_LINK_X,
-       F_KINETIC, F_STRAIN, F_WORK, F_LOCK_LOSS, N_FIELDS };
+       F_KINETIC, F_STRAIN, F_WORK, F_LOCK_LOSS, F_PC_ENERGY, N_FIELDS };
 
 /* what a Sample holds of a state beyond q, qd, q'' and the multipliers, in this order
  * (integrators.SAMPLE_VECTOR), then the fibre stress at every stress point (top of every
@@ -72,7 +72,7 @@ enum { F_TIME, F_STAGE, F_ALPHA1, F_ALPHA1_RATE, F_SLEEVE_POS, F_SLEEVE_VEL, F_F
 enum { S_ALPHA1, S_ALPHA2, S_ALPHA1_RATE, S_ALPHA2_RATE, S_SLEEVE_POS, S_SLEEVE_VEL,
        S_TIP_AXIAL, S_TIP_TRANSVERSE, S_PEAK_LEAF, S_PEAK_LEAF_X, S_PEAK_LINK, S_PEAK_LINK_X,
        S_STRESS_LEAF_JOINT, S_STRESS_LINK_MID, S_REACTION_X, S_REACTION_Y, S_KINETIC, S_STRAIN,
-       S_RESIDUAL, N_SAMPLE };
+       S_RESIDUAL, S_PC_ENERGY, N_SAMPLE };
 
 #define JW 3   /* nonzeros of a joint/stop constraint row */
 
@@ -1691,8 +1691,8 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
     double ke = 0.0, pc_e = 0.0;
     for (int i = 0; i < n; i++) ke += v[i] * p[i];
     ke *= 0.5;
-    /* stage 2's phase correction: p = (M + D) v; T reported without 1/2 v.D v, which goes to
-     * the strain energy less its value just after the lock (continuous there) */
+    /* stage 2's phase correction: p = (M + D) v; T reported without 1/2 v.D v, which is the
+     * correction's own energy less its value just after the lock (F_PC_ENERGY: 0 there) */
     if (pc_acts(x, stage == 1, 0))      /* (rigid-FE never has one) */
         pc_e = x->pc_v_valid && memcmp(v, x->pc_v, sizeof(double) * n) == 0
                ? x->pc_e_v : phase_correction(x, v, NULL);
@@ -1711,10 +1711,10 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         }
         se *= 0.5;
     }
-    if (pc_acts(x, stage == 1, 0)) se += pc_e - x->pc_e_lock;
     SET(F_STRAIN, se);
     SET(F_WORK, work);
     SET(F_LOCK_LOSS, lock_loss);
+    SET(F_PC_ENERGY, pc_acts(x, stage == 1, 0) ? pc_e - x->pc_e_lock : 0.0);
 #undef SET
 }
 
@@ -1747,6 +1747,7 @@ static void sample_vector(const Model *m, int locked, const double *q, const dou
     out[S_KINETIC] = row[F_KINETIC * stride];
     out[S_STRAIN] = row[F_STRAIN * stride];
     out[S_RESIDUAL] = residual;
+    out[S_PC_ENERGY] = row[F_PC_ENERGY * stride];
     memcpy(out + N_SAMPLE, sig, sizeof(double) * 2 * npts);
 }
 

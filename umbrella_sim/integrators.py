@@ -506,7 +506,7 @@ SAMPLE_VECTOR = ("alpha1", "alpha2", "alpha1_rate", "alpha2_rate", "sleeve_posit
                  "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x",
                  "stress_leaf_joint", "stress_link_mid", "sleeve_reaction_x",
                  "sleeve_reaction_y", "kinetic_energy", "strain_energy",
-                 "constraint_residual")
+                 "constraint_residual", "phase_correction_energy")
 
 
 class _AdvanceCall(ctypes.Structure):

@@ -60,12 +60,20 @@ class Sample:
     stress_link_mid: float         # top-fibre stress at mid-link (Pa, Fig. 6.6)
     multipliers: np.ndarray        # lambda (thesis sign: M q'' = ... + J^T lambda)
     sleeve_reaction: tuple         # force on the sleeve from axle (X) and stop (Y), N
-    kinetic_energy: float
-    strain_energy: float
+    kinetic_energy: float          # T = 1/2 q'.M q' (J)
+    strain_energy: float           # V (J): 1/2 q.K q, or the nonlinear law's
     work: float                    # work done by F_H since t = 0 (J)
     lock_energy_loss: float        # energy removed by the lock so far (J)
     constraint_residual: float     # max(|Phi|, |J q'|)
     damping_dissipation: float = 0.0   # energy removed by structural damping so far (J)
+    # stage 2's phase correction: its 1/2 q'.D q' less that just after the lock (J; 0
+    # without it), in the energy the integrator keeps (mechanical_energy)
+    phase_correction_energy: float = 0.0
+
+
+def mechanical_energy(s) -> float:
+    """Return T + V + the phase correction's term (J): the energy of the balance, one rule."""
+    return s.kinetic_energy + s.strain_energy + s.phase_correction_energy
 
 
 CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate", "alpha1_accel",
@@ -74,7 +82,7 @@ CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate"
                "peak_stress_link_x", "stress_leaf_joint", "stress_link_mid",
                "sleeve_reaction_x", "sleeve_reaction_y",
                "kinetic_energy", "strain_energy", "work", "lock_energy_loss",
-               "constraint_residual", "damping_dissipation"]
+               "constraint_residual", "damping_dissipation", "phase_correction_energy"]
 
 
 def sample_row(s: Sample) -> list:
@@ -96,7 +104,7 @@ def sample_row(s: Sample) -> list:
 STEP_FIELDS = ("time", "stage", "alpha1", "alpha1_rate", "sleeve_position", "sleeve_velocity",
                "sleeve_force", "tip_axial", "tip_transverse", "peak_stress_leaf",
                "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x", "kinetic_energy",
-               "strain_energy", "work", "lock_energy_loss")
+               "strain_energy", "work", "lock_energy_loss", "phase_correction_energy")
 
 
 def step_row(s: Sample, peaks: tuple | None = None) -> list[float]:
@@ -465,7 +473,7 @@ class SummaryAccumulator:
         self.steps = 0
         self.final_time = float(initial.time)
         self.error: str | None = None
-        self._e0 = initial.kinetic_energy + initial.strain_energy
+        self._e0 = mechanical_energy(initial)
         self._scale = max(abs(self._e0), ENERGY_SCALE_FLOOR)
         self._balance = 0.0
         self._residual = float(initial.constraint_residual)
@@ -513,7 +521,7 @@ class SummaryAccumulator:
                 self._peaks[body] = (peak, x, ti)
         last = block.last
         self._residual = max(self._residual, float(last.constraint_residual))
-        e = last.kinetic_energy + last.strain_energy
+        e = mechanical_energy(last)
         self._scale = max(self._scale, abs(e), abs(last.work))
         self._balance = max(self._balance, abs(e - self._e0 - last.work + last.lock_energy_loss
                                                + last.damping_dissipation))
@@ -608,14 +616,16 @@ def summarize(r: RunResult) -> dict:
 
 def energy_balance_error(r: RunResult) -> np.ndarray:
     """(T + V) - (T0 + V0) - W + lock losses + damping dissipation, per sample (J)."""
-    e = r.column("kinetic_energy") + r.column("strain_energy")
+    e = (r.column("kinetic_energy") + r.column("strain_energy")
+         + r.column("phase_correction_energy"))
     return (e - e[0] - r.column("work") + r.column("lock_energy_loss")
             + r.column("damping_dissipation"))
 
 
 def energy_drift(r: RunResult) -> float:
     """Return max |energy balance error| relative to the largest mechanical energy."""
-    e = r.column("kinetic_energy") + r.column("strain_energy")
+    e = (r.column("kinetic_energy") + r.column("strain_energy")
+         + r.column("phase_correction_energy"))
     scale = max(float(np.abs(e).max()), float(np.abs(r.column("work")).max()),
                 ENERGY_SCALE_FLOOR)
     return float(np.abs(energy_balance_error(r)).max() / scale)

@@ -19,7 +19,7 @@ from typing import Callable
 
 from . import ros_io
 from .forcing import ForceSchedule
-from .outputs import build_frozen, Sample, StepBlock, SummaryAccumulator
+from .outputs import build_frozen, mechanical_energy, Sample, StepBlock, SummaryAccumulator
 from .params import NODE_PARAMETERS, UmbrellaParams
 from .solver import command_force, SimulationDiverged, UmbrellaSimulator
 
@@ -66,7 +66,7 @@ class PublicationDriver:
                                       check=lambda f: command_force(f, self.sim.params))
         self.last_block: StepBlock | None = None
         first = self.sim.sample()
-        self.initial_energy = first.kinetic_energy + first.strain_energy
+        self.initial_energy = mechanical_energy(first)
         # the live node's summary of every step (the offline driver keeps its own)
         self.summary = SummaryAccumulator(self.sim.params.as_dict(), first,
                                           self.sim.engine.lock_kind)

@@ -23,7 +23,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimension, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from .outputs import Sample
+from .outputs import mechanical_energy, Sample
 from .params import defaults, NOW, REGISTRY, RESET, START, UmbrellaParams
 
 INERTIAL_FRAME = "umbrella_base"   # X toward the leaf, Y up the axle, origin at the hinge O
@@ -195,7 +195,8 @@ def tip_deflection_msg(s: Sample, frame_prefix: str = "") -> PointStamped:
 
 PEAK_STRESS_LABELS = ("body: leaf,link",
                       "field: peak_abs_stress_Pa,position_m,stress_ratio,reference_stress_Pa")
-ENERGY_LABEL = "field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J,damping_J"
+ENERGY_LABEL = ("field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J,damping_J,"
+                "phase_correction_J")
 
 
 def peak_stress_values(s: Sample, yield_strength: float) -> tuple:
@@ -222,16 +223,16 @@ def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
 
 
 def energy_values(s: Sample, initial_energy: float) -> tuple:
-    """Return kinetic, strain, work, lock loss, balance error, damping (J; ENERGY_LABEL)."""
-    balance = (s.kinetic_energy + s.strain_energy - initial_energy - s.work + s.lock_energy_loss
+    """Return kinetic, strain, work, lock loss, balance, damping, correction (J; ENERGY_LABEL)."""
+    balance = (mechanical_energy(s) - initial_energy - s.work + s.lock_energy_loss
                + s.damping_dissipation)
     return (s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss, balance,
-            s.damping_dissipation)
+            s.damping_dissipation, s.phase_correction_energy)
 
 
 def energy_msg(s: Sample, initial_energy: float) -> Float64MultiArray:
     msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=ENERGY_LABEL, size=6, stride=6)]
+    msg.layout.dim = [MultiArrayDimension(label=ENERGY_LABEL, size=7, stride=7)]
     msg.data = list(energy_values(s, initial_energy))
     return msg
 
@@ -304,7 +305,7 @@ class SampleEncoder:
     """
 
     #: topic key -> doubles at the end of the message, as groups (a sequence or a struct)
-    GROUPS = {"energy": (6,), "clock": (), "joint_states": (3, 3, 3), "tip_deflection": (3,),
+    GROUPS = {"energy": (7,), "clock": (), "joint_states": (3, 3, 3), "tip_deflection": (3,),
               "peak_stress": (8,)}
     #: topics with a stamp (header.stamp, Clock.clock) right after the 4-byte CDR header
     STAMPED = ("clock", "joint_states", "tip_deflection")

@@ -141,8 +141,12 @@ class Engine(abc.ABC):
         """T (J)."""
 
     def strain_energy(self, s: DynamicState, stage: Stage) -> float:
-        """V (J), the potential of the engine's energy balance (with its corrections)."""
+        """V (J)."""
         return float(self.model.strain_energy(self.fe_state(s)[0]))
+
+    def phase_correction_energy(self, s: DynamicState, stage: Stage) -> float:
+        """Return the integrator's correction term of the balance (J; outputs.Sample), 0 here."""
+        return 0.0
 
     @abc.abstractmethod
     def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
@@ -280,7 +284,8 @@ class FiniteElementEngine(Engine):
 
     def kinetic_energy(self, s: DynamicState, stage: Stage) -> float:
         # the step leaves its momentum in the state: T = 1/2 qd . p without re-assembling M
-        # (p = (M + D) qd with the stage-2 phase correction, whose 1/2 qd . D qd goes to V)
+        # (p = (M + D) qd with the stage-2 phase correction, whose 1/2 qd . D qd is its own
+        # term: phase_correction_energy)
         if s.momentum is not None:
             pc = self.integrator.stage2_correction(self._cs[stage])
             t = float(0.5 * s.qd @ s.momentum)
@@ -288,10 +293,13 @@ class FiniteElementEngine(Engine):
         return float(self.model.kinetic_energy(s.q, s.qd))
 
     def strain_energy(self, s: DynamicState, stage: Stage) -> float:
-        cs = self._cs[stage]
-        v = self.integrator.strain_energy(s.q, cs)
-        pc = self.integrator.stage2_correction(cs)
-        return v if pc is None else v + pc.energy(s.qd) - pc.lock_energy
+        return self.integrator.strain_energy(s.q, self._cs[stage])
+
+    def phase_correction_energy(self, s: DynamicState, stage: Stage) -> float:
+        # the modified modal masses' 1/2 qd . D qd less its value just after the lock: in the
+        # energy the integrator keeps, not in T or V (a damped frame at rest keeps it)
+        pc = self.integrator.stage2_correction(self._cs[stage])
+        return 0.0 if pc is None else pc.energy(s.qd) - pc.lock_energy
 
     def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
         lam = s.multipliers
@@ -427,7 +435,7 @@ class RigidEngine(Engine):
             velocity = p.l1 * math.cos(a1) * w1 + p.l3 * math.cos(a2) * w2
             rows[:, i] = ((k0 + i + 1) * h, code, a1, w1, height, velocity, force, 0.0, 0.0,
                           *zero_peaks, mech.kinetic_energy(a1, a2, w1, w2), 0.0, work,
-                          lock_loss)
+                          lock_loss, 0.0)
             done += 1
         if not done:
             return s, rows[:, :0], work, stop
@@ -811,6 +819,7 @@ class UmbrellaSimulator:
             "sleeve_reaction": eng.sleeve_reaction(s, stage),
             "kinetic_energy": eng.kinetic_energy(s, stage),
             "strain_energy": eng.strain_energy(s, stage),
+            "phase_correction_energy": eng.phase_correction_energy(s, stage),
             "constraint_residual": eng.residual(s, stage)})
 
 
