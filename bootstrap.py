@@ -21,7 +21,8 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.abspath(__file__))
-VENV = os.environ.get("UMBRELLA_VENV", os.path.join(ROOT, ".venv"))
+# (relative to the working directory the command was given in, as a user means them)
+VENV = os.path.abspath(os.environ.get("UMBRELLA_VENV", os.path.join(ROOT, ".venv")))
 PY = os.path.join(VENV, "bin", "python")
 STAMP_NAME = ".umbrella_sim-installed"    # in the venv: digest of what it was installed from
 
@@ -61,7 +62,7 @@ def main(argv) -> int:
     env = dict(os.environ, AMENT_PREFIX_PATH=VENV)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if argv[0] == "run":
-        runs = os.environ.get("UMBRELLA_RUNS_DIR", os.path.join(ROOT, "runs"))
+        runs = os.path.abspath(os.environ.get("UMBRELLA_RUNS_DIR", os.path.join(ROOT, "runs")))
         os.makedirs(runs, exist_ok=True)
         bag = os.path.join(runs, time.strftime("run-%Y%m%d-%H%M%S"))
         cmd = [PY, "-m", "umbrella_sim.node", "--ros-args", "--params-file",

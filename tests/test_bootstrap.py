@@ -24,12 +24,14 @@ STAMP = os.path.join(sys.prefix, STAMP_NAME)
                     reason="not running in a venv made by bootstrap.py (CI always is)")
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_main_command_records_and_forwards_signals(tmp_path, sig):
-    env = dict(ros_env(), UMBRELLA_VENV=sys.prefix, UMBRELLA_RUNS_DIR=str(tmp_path / "runs"))
+    # a relative runs directory is the caller's working directory's, as the user means it
+    # (the node runs in the repository: it failed there, "parent directory ... does not exist")
+    env = dict(ros_env(), UMBRELLA_VENV=sys.prefix, UMBRELLA_RUNS_DIR="runs")
     out = tmp_path / "bootstrap.log"
     with open(out, "w") as fh:
         proc = subprocess.Popen([sys.executable, os.path.join(ROOT, "bootstrap.py"), "run"],
                                 stdout=fh, stderr=subprocess.STDOUT, env=env,
-                                start_new_session=True)
+                                start_new_session=True, cwd=tmp_path)
     try:
         deadline = time.monotonic() + 60
         while "locked at t" not in out.read_text() and proc.poll() is None:

@@ -372,14 +372,24 @@ def test_stop_inside_a_long_period_ends_it_and_records_one_state(tmp_path):
         assert float(events["lock_time"]) == summary["deploy_time"]
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
-def test_interrupted_offline_run_exits_130_with_its_recording_finalised(tmp_path, signum):
-    """A run of the offline tool stopped by a signal: one line, exit 130, the bag finalised."""
+@pytest.mark.parametrize("signum, background", [
+    (signal.SIGINT, False), (signal.SIGTERM, False), (signal.SIGINT, True)],
+    ids=["SIGINT", "SIGTERM", "SIGINT-background"])
+def test_interrupted_offline_run_exits_130_with_its_recording_finalised(
+        tmp_path, signum, background):
+    """
+    A run of the offline tool stopped by a signal: one line, exit 130, the bag finalised.
+
+    Also when started as a background job of a script, which starts it with SIGINT ignored
+    (`kill -INT` then did nothing, as the nodes do not).
+    """
     bag = tmp_path / "long"
     proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim", "simulate", "--set",
                              "time_step=0.002", "--duration", "1e6", "--mcap", str(bag)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=ROOT, env=ros_env())
+                            cwd=ROOT, env=ros_env(), preexec_fn=(
+                                (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+                                if background else None))
     try:
         deadline = time.monotonic() + 120
         mcap = bag / "long_0.mcap"
@@ -700,3 +710,34 @@ def test_a_braking_force_folding_the_frame_back_is_a_fault():
 
     r = simulate(UmbrellaParams(v0=0.0, sleeve_force_min=-10.0, sleeve_force=-5.0), 1.0)
     assert r.lock is None and "reached the axle" in r.error
+
+
+def test_a_stop_signal_inside_message_decoding_is_an_interrupt_not_a_bad_log(
+        tmp_path, monkeypatch):
+    """
+    Ctrl-C while rclpy converts a message: an interrupt, not 'payload does not decode'.
+
+    The signal's KeyboardInterrupt raised inside rclpy's C conversion came back as its own
+    error ("Unable to convert function return value..."), which read as a corrupt log.
+    """
+    from umbrella_sim import logs, stop_signals
+
+    bag = tmp_path / "short"
+    assert run("umbrella_sim", "simulate", "--duration", "0.02", "--mcap",
+               str(bag)).returncode == 0
+    log = read_log(str(bag))
+    topic = log.find_topic("joint_states")
+    data = next(log.iter_raw([topic])).data
+
+    def interrupted(data, cls):
+        stop_signals.received.append(signal.SIGINT)      # the handler ran in the conversion
+        raise TypeError("Unable to convert function return value to a Python type!")
+    monkeypatch.setattr(logs, "deserialize_message", interrupted)
+    with pytest.raises(KeyboardInterrupt, match="SIGINT"):
+        log.decode(topic, data)
+
+    def corrupt(data, cls):
+        raise TypeError("Unable to convert function return value to a Python type!")
+    monkeypatch.setattr(logs, "deserialize_message", corrupt)
+    with pytest.raises(LogError, match="payload does not decode"):   # no signal: the log
+        log.decode(topic, data)

@@ -272,3 +272,16 @@ def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factor
     antenna.publish_force(-2.0)                  # accepted now, by the antenna and the node
     poll(lambda: [f for _, f in antenna.applied_forces()] == [-2.0], 10.0,
          lambda: f"applied: {antenna.applied_forces()}")
+
+
+def test_a_relative_record_path_is_the_tests_working_directory(
+        antenna_factory, tmp_path, monkeypatch):
+    """The node runs in a temporary directory: record_path="bag" still lands in the test's."""
+    monkeypatch.chdir(tmp_path)
+    antenna = antenna_factory({"v0": -0.5}, record_path="bag")
+    antenna.wait_for_phase("locked", timeout=30)
+    lock = antenna.lock_time()
+    antenna.wait_for_sim_time(lock + 0.35)
+    assert antenna.stop() == 0
+    antenna.close()                          # (it used to take the bag with its directory)
+    assert summary_from_recording("bag").lock_time == pytest.approx(lock, abs=1e-9)

@@ -34,6 +34,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 import yaml
 
+from . import stop_signals
+
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 PARAMETERS_RECORD = "umbrella_sim.parameters"
 SEGMENT_RECORD = "umbrella_sim.segment"            # + ".K", written by the recorder on reset
@@ -159,9 +161,12 @@ class LogData:
     def decode(self, topic: str, data: bytes, cls=None, index: int | None = None,
                log_time: int | None = None):
         cls = cls or self.msg_type(topic)
+        signals = len(stop_signals.received)
         try:
             return deserialize_message(data, cls)
         except Exception as exc:      # rclpy raises RMWError / RuntimeError on bad CDR
+            if len(stop_signals.received) > signals:   # a stop signal inside the conversion
+                raise KeyboardInterrupt(stop_signals.name(stop_signals.received[-1])) from None
             where = "" if index is None else f" message {index} (log time {log_time} ns)"
             reason = " ".join(str(exc).split())
             raise LogError(f"{self.path}: topic {topic}{where}: payload does not decode as "

@@ -105,6 +105,7 @@ def print_for_reader(write) -> bool:
 
 
 def _interrupt(signum, frame):
+    received.append(signum)     # (a C extension may turn the exception into its own error)
     raise KeyboardInterrupt(name(signum))
 
 
@@ -113,14 +114,17 @@ def interruptible(tool: str, kept: str):
     Make a tool's main end on SIGINT/SIGTERM with one line and exit 130, not a traceback.
 
     SIGTERM raises KeyboardInterrupt like SIGINT, so the same ``finally`` blocks run (an
-    offline recording is finalised); kept says what the user still has.  A standard output
-    closed by its reader ends it with EXIT_READER_GONE, not a traceback.
+    offline recording is finalised); kept says what the user still has.  SIGINT is taken
+    even when the tool was started with it ignored (a background job of a script), as the
+    nodes take it.  A standard output closed by its reader ends it with EXIT_READER_GONE,
+    not a traceback.
     """
     def wrap(main):
         @functools.wraps(main)
         def run(argv=None):
             in_main = threading.current_thread() is threading.main_thread()
-            previous = signal.signal(signal.SIGTERM, _interrupt) if in_main else None
+            previous = ({s: signal.signal(s, _interrupt) for s in STOP_SIGNALS} if in_main
+                        else {})
             try:
                 return main(argv)
             except KeyboardInterrupt as exc:
@@ -131,7 +135,7 @@ def interruptible(tool: str, kept: str):
                 stdout_reader_gone()
                 return EXIT_READER_GONE
             finally:
-                if in_main:
-                    signal.signal(signal.SIGTERM, previous)
+                for signum, handler in previous.items():
+                    signal.signal(signum, handler)
         return run
     return wrap

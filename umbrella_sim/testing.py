@@ -491,7 +491,10 @@ class SimulatedAntenna:
 
         self.parameters = dict(parameters or {})
         if record_path is not None:
-            self.parameters["record_path"] = str(record_path)
+            # the node runs in a temporary directory of its own (NodeProcess): a relative
+            # path means the test's working directory, where the test will look for it
+            record_path = os.path.abspath(os.path.expanduser(str(record_path)))
+            self.parameters["record_path"] = record_path
         else:                                  # recording is optional: off unless asked for
             self.parameters.setdefault("record", False)
         self.record_path = record_path
