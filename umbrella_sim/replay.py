@@ -302,7 +302,8 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
             deadline = time.monotonic() + wait_for_subscribers
             while any(p.get_subscription_count() == 0 for p in pubs.values()):
                 if time.monotonic() > deadline:
-                    idle = sorted(t for t, p in pubs.items() if p.get_subscription_count() == 0)
+                    idle = sorted(names[t] for t, p in pubs.items()
+                                  if p.get_subscription_count() == 0)
                     print(f"no subscriber after {wait_for_subscribers:g} s on: "
                           f"{', '.join(idle)}; replaying anyway", flush=True)
                     break
