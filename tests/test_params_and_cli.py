@@ -40,6 +40,17 @@ def test_bad_parameters_name_culprit_and_rule(changes, culprit, rule):
     assert culprit in str(exc.value) and rule in str(exc.value)
 
 
+def test_integers_for_doubles_are_the_doubles():
+    """UmbrellaParams(v0=-1) as -p v0:=-1 and --set v0=-1: the double, and validated."""
+    p = UmbrellaParams(v0=-1, sleeve_force_min=-8).validated()
+    assert p == UmbrellaParams(v0=-1.0, sleeve_force_min=-8.0)
+    assert type(p.v0) is float and type(p.sleeve_force_min) is float
+    with pytest.raises(ValueError, match="elements_per_segment=1.5"):
+        UmbrellaParams(elements_per_segment=1.5).validated()      # not the other way round
+    with pytest.raises(ValueError, match="v0=True"):
+        UmbrellaParams(v0=True).validated()                      # nor a boolean
+
+
 def test_non_numeric_value_names_parameter():
     with pytest.raises(ValueError, match="parameter l1='abc'"):
         UmbrellaParams().replace(l1="abc")

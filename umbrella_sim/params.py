@@ -339,6 +339,14 @@ def coerce(name: str, value: Any) -> Any:
 class _DerivedQuantities:
     """Methods of UmbrellaParams; its fields come from the registry (SPECS)."""
 
+    def __post_init__(self):
+        # an exact int where a float is meant (UmbrellaParams(v0=-1)) is that float, as in
+        # every other interface; anything else is left for validated() to name
+        for name, spec in SPECS.items():
+            value = getattr(self, name)
+            if spec.type is float and type(value) is int and float(value) == value:
+                object.__setattr__(self, name, float(value))
+
     # ------------------------------------------------------------------ derived
     @property
     def cross_section_area(self) -> float:
