@@ -132,7 +132,8 @@ class Run:
         tip = float(np.abs(self.tip_v).max()) if len(self.tip_v) else 0.0
         peak = float(max(self.peak_leaf.max(), self.peak_link.max()))
         try:
-            return validity_warnings(self.params, self.lock_kind, peak, tip)
+            return validity_warnings(self.params, self.lock_kind, peak, tip,
+                                     locked=self.deploy_time is not None)
         except (KeyError, TypeError):
             return []
 

@@ -427,18 +427,70 @@ def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     return None
 
 
+#: the largest omega h at which the locked frame's first mode is resolved: the midpoint rule
+#: lengthens a period by ~(omega h)^2 / 12 (1 % at 0.35); stage 2's phase correction makes the
+#: period exact up to omega h = 1.5, past which it leaves a mode as it is (aliased)
+RESOLVED_OMEGA_H = {False: math.sqrt(12 * 0.01), True: 1.5}
+
+
+@cache
+def _locked_first_omega(items: tuple) -> float | None:
+    """Return omega_1 (rad/s) of the locked frame of these parameters, None without one."""
+    from .model import UmbrellaModel
+    from .params import UmbrellaParams
+
+    p = UmbrellaParams.from_mapping(dict(items))
+    if p.model not in ("flexible", "flexible-nonlinear"):
+        return None
+    return float(UmbrellaModel(p).locked_modes[0][0])
+
+
+def coarse_step_warning(params: dict) -> str | None:
+    """
+    Return a warning when the step does not resolve the locked frame's first mode.
+
+    Its period then comes out wrong (past omega h = 1.5, aliased: several times too long on
+    a small or light frame at the default step) and the stage-2 stresses with it.
+    """
+    from .params import SPECS, UmbrellaParams
+
+    try:
+        p = UmbrellaParams.from_mapping({k: v for k, v in params.items() if k in SPECS})
+        omega = _locked_first_omega(tuple(sorted(p.as_dict().items())))
+    except (ValueError, TypeError):
+        return None
+    if omega is None:
+        return None
+    h = p.physics_time_step
+    corrected = bool(p.phase_correction) and p.model == "flexible"
+    limit = RESOLVED_OMEGA_H[corrected]
+    if omega * h <= limit:
+        return None
+    enough = limit / omega * (p.time_step / h)      # (time_step / physics step: the mesh's)
+    scale = 10.0 ** (math.floor(math.log10(enough)) - 2)
+    enough = math.floor(enough / scale) * scale        # three digits, rounded down
+    return (f"coarse step: the locked frame's first mode (period {2e3 * math.pi / omega:.4g} "
+            f"ms) gets {2 * math.pi / (omega * h):.3g} steps a period at the physics step "
+            f"{h:g} s, fewer than the {2 * math.pi / limit:.3g} that resolve it"
+            f"{' with phase_correction' if corrected else ''}: the stage-2 period and "
+            f"stresses are not those of the model; set time_step <= {enough:.3g} s")
+
+
 def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
-                      tip_deflection: float) -> list[str]:
+                      tip_deflection: float, locked: bool = False) -> list[str]:
     """
     Return where a run left the model's validity: one rule, used everywhere.
 
-    Each text starts with a fixed key ('yield exceeded', 'large deflection', 'lock not
-    applicable') before a colon.
+    Each text starts with a fixed key ('lock not applicable', 'coarse step' once locked,
+    'yield exceeded', 'large deflection') before a colon.
     """
     out = []
     lw = lock_warning(params, lock_kind)
     if lw:
         out.append(lw)
+    cw = coarse_step_warning(params) if locked else None
+    if cw:
+        out.append(cw)
     ys = params["yield_strength"]
     if peak_stress > ys:
         out.append(f"yield exceeded: peak |sigma| {peak_stress / 1e6:.4g} MPa is "
@@ -564,13 +616,14 @@ class SummaryAccumulator:
         """Return the validity warnings so far (validity_warnings)."""
         return validity_warnings(self.params, self.lock_kind,
                                  max(self._peaks["leaf"][0], self._peaks["link"][0]),
-                                 self._tip_all)
+                                 self._tip_all, locked=self.lock is not None)
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
         # the warnings depend on the run only through the largest peak stress and tip
         # deflection so far: unchanged (most publications), nothing can be new
-        seen = (self._peaks["leaf"][0], self._peaks["link"][0], self._tip_all)
+        seen = (self._peaks["leaf"][0], self._peaks["link"][0], self._tip_all,
+                self.lock is not None)
         if seen == self._warned_at:
             return []
         self._warned_at = seen
