@@ -479,3 +479,19 @@ def test_a_step_too_coarse_for_the_locked_frame_is_named():
     # before the lock there is no stage 2 to resolve: nothing said
     assert not [w for w in simulate(UmbrellaParams(v0=-0.1), 0.05).summary()["warnings"]
                 if w.startswith("coarse step")]
+
+
+def test_a_run_that_does_not_conserve_energy_says_so():
+    """
+    flexible-nonlinear at V0 = -5 m/s on a 2 ms step loses ~1 % of its energy in a few steps.
+
+    Each of those steps would need its energy restored by more than 1 %, which the scheme
+    skips; the summary's energy_drift showed it, no warning did.
+    """
+    fast = simulate(UmbrellaParams(v0=-5.0, time_step=2e-3, model="flexible-nonlinear"), 0.3)
+    summary = fast.summary()
+    assert summary["energy_drift"] > 1e-3
+    assert [w for w in summary["warnings"] if w.startswith("energy not conserved")]
+    quiet = simulate(UmbrellaParams(v0=-0.5, model="flexible-nonlinear"), 0.15).summary()
+    assert quiet["energy_drift"] < 1e-6
+    assert not [w for w in quiet["warnings"] if w.startswith("energy not conserved")]

@@ -133,7 +133,8 @@ class Run:
         peak = float(max(self.peak_leaf.max(), self.peak_link.max()))
         try:
             return validity_warnings(self.params, self.lock_kind, peak, tip,
-                                     locked=self.deploy_time is not None)
+                                     locked=self.deploy_time is not None,
+                                     energy_drift=self.energy_drift)
         except (KeyError, TypeError):
             return []
 
