@@ -231,9 +231,9 @@ def test_antennas_in_two_namespaces_keep_their_own_diagnostics(antenna_factory):
     running = antenna_factory({"v0": 0.0}, namespace="a2")
     for antenna in (paused, running):        # each node's own (1 Hz), both on one topic
         antenna.wait_for("diagnostics", lambda m: True, timeout=10.0)
-    both = paused.probe.messages("/diagnostics")
-    assert {m.status[0].name for m in both} == {"a1/umbrella_node: physics",
-                                                "a2/umbrella_node: physics"}
+    both = {"a1/umbrella_node: physics", "a2/umbrella_node: physics"}
+    poll(lambda: {m.status[0].name for m in paused.probe.messages("/diagnostics")} == both,
+         10.0, lambda: "a probe never got both nodes' statuses on /diagnostics")
     for antenna, ns, state in ((paused, "a1", "True"), (running, "a2", "False")):
         names = {m.status[0].name for m in antenna.messages("diagnostics")}
         assert names == {f"{ns}/umbrella_node: physics"}, names
