@@ -157,6 +157,7 @@ def test_cli_force_profile(tmp_path):
     (["--force", "nan"], "sleeve_force"),
     (["--elements-per-segment", "0"], "elements_per_segment"),
     (["--params", "/nonexistent.yaml"], "/nonexistent.yaml"),
+    (["--duration", "5e-5"], "shorter than one physics step (0.0001 s)"),   # ran 0 steps
 ])
 def test_cli_rejects_bad_input(args, words):
     r = cli("simulate", *args)

@@ -311,6 +311,10 @@ def main(argv: list[str] | None = None) -> int:
                    if args.force_profile else None)
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f"--duration {args.duration}: must be > 0")
+        if args.duration < params.physics_time_step * (1.0 - 1e-9):   # (it ran no step)
+            raise ValueError(f"--duration {args.duration}: shorter than one physics step "
+                             f"({params.physics_time_step:g} s); the run takes every step "
+                             "that ends by then")
         if args.csv is not None:
             check_new_output(args.csv, "--csv")
         if args.mcap is not None:
