@@ -21,7 +21,7 @@ import numpy as np
 
 from .arguments import ArgumentParser
 from .logs import LogError, read_log
-from .outputs import stage2_figures, validity_warnings
+from .outputs import relative_drift, stage2_figures, validity_warnings
 from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
@@ -197,11 +197,14 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     drift = None
     energy = log.find_topic("energy", required=False)
     if energy:
-        _, e = _series(log, energy, lambda m: tuple(m.data[i] for i in range(5)), seg, 0)
+        # kinetic, strain, work, lock loss, balance (ENERGY_LABEL), then its 7th value, the
+        # phase correction's term, where the recording has it
+        _, e = _series(log, energy, lambda m: (*(m.data[i] for i in range(5)),
+                                               *m.data[6:7]), seg, 0)
         e = np.array(e)
         if len(e):
-            drift = float(np.abs(e[:, 4]).max() / max(np.abs(e[:, 0] + e[:, 1]).max(),
-                                                      np.abs(e[:, 2]).max(), 1e-300))
+            mechanical = e[:, 0] + e[:, 1] + (e[:, 5] if e.shape[1] > 5 else 0.0)
+            drift = relative_drift(e[:, 4], mechanical, e[:, 2])
     shapes = []
     markers = log.find_topic("markers", required=False)
     if markers:           # at most ~2000 shapes kept, whatever the log's length

@@ -71,8 +71,15 @@ class Sample:
     phase_correction_energy: float = 0.0
 
 
-def mechanical_energy(s) -> float:
-    """Return T + V + the phase correction's term (J): the energy of the balance, one rule."""
+def mechanical_energy(s):
+    """
+    Return T + V + the phase correction's term (J): the energy of the balance, one rule.
+
+    Of a Sample, or per step of a StepBlock or per sample of a RunResult (arrays).
+    """
+    if isinstance(s, RunResult):                    # its sample columns
+        return (s.column("kinetic_energy") + s.column("strain_energy")
+                + s.column("phase_correction_energy"))
     return s.kinetic_energy + s.strain_energy + s.phase_correction_energy
 
 
@@ -433,34 +440,35 @@ def lock_warning(params: dict, lock_kind: str | None) -> str | None:
 RESOLVED_OMEGA_H = {False: math.sqrt(12 * 0.01), True: 1.5}
 
 
-@cache
-def _locked_first_omega(items: tuple) -> float | None:
-    """Return omega_1 (rad/s) of the locked frame of these parameters, None without one."""
-    from .model import UmbrellaModel
-    from .params import UmbrellaParams
-
-    p = UmbrellaParams.from_mapping(dict(items))
-    if p.model not in ("flexible", "flexible-nonlinear"):
-        return None
-    return float(UmbrellaModel(p).locked_modes[0][0])
-
-
 def coarse_step_warning(params: dict) -> str | None:
     """
     Return a warning when the step does not resolve the locked frame's first mode.
 
     Its period then comes out wrong (past omega h = 1.5, aliased: several times too long on
-    a small or light frame at the default step) and the stage-2 stresses with it.
+    a small or light frame at the default step) and the stage-2 stresses with it.  It
+    depends on the model parameters alone: worked out once per set of them.
     """
-    from .params import SPECS, UmbrellaParams
+    from .params import SPECS
 
     try:
-        p = UmbrellaParams.from_mapping({k: v for k, v in params.items() if k in SPECS})
-        omega = _locked_first_omega(tuple(sorted(p.as_dict().items())))
-    except (ValueError, TypeError):
+        return _coarse_step_warning(tuple(sorted((k, v) for k, v in params.items()
+                                                 if k in SPECS)))
+    except TypeError:           # (a value that cannot be a parameter: no model to judge)
         return None
-    if omega is None:
+
+
+@cache
+def _coarse_step_warning(items: tuple) -> str | None:
+    from .model import UmbrellaModel
+    from .params import UmbrellaParams
+
+    try:
+        p = UmbrellaParams.from_mapping(dict(items))
+    except ValueError:
         return None
+    if p.model not in ("flexible", "flexible-nonlinear"):
+        return None
+    omega = float(UmbrellaModel(p).locked_modes[0][0])
     h = p.physics_time_step
     corrected = bool(p.phase_correction) and p.model == "flexible"
     limit = RESOLVED_OMEGA_H[corrected]
@@ -681,16 +689,21 @@ def summarize(r: RunResult) -> dict:
 
 def energy_balance_error(r: RunResult) -> np.ndarray:
     """(T + V) - (T0 + V0) - W + lock losses + damping dissipation, per sample (J)."""
-    e = (r.column("kinetic_energy") + r.column("strain_energy")
-         + r.column("phase_correction_energy"))
+    e = mechanical_energy(r)
     return (e - e[0] - r.column("work") + r.column("lock_energy_loss")
             + r.column("damping_dissipation"))
 
 
+def relative_drift(balance_error, energy, work) -> float:
+    """
+    Return max |balance error| over the largest |energy| or |work| (series): energy_drift.
+
+    One rule for a run's samples (energy_drift) and a recording's energy topic (compare).
+    """
+    scale = max(float(np.abs(energy).max()), float(np.abs(work).max()), ENERGY_SCALE_FLOOR)
+    return float(np.abs(balance_error).max() / scale)
+
+
 def energy_drift(r: RunResult) -> float:
     """Return max |energy balance error| relative to the largest mechanical energy."""
-    e = (r.column("kinetic_energy") + r.column("strain_energy")
-         + r.column("phase_correction_energy"))
-    scale = max(float(np.abs(e).max()), float(np.abs(r.column("work")).max()),
-                ENERGY_SCALE_FLOOR)
-    return float(np.abs(energy_balance_error(r)).max() / scale)
+    return relative_drift(energy_balance_error(r), mechanical_energy(r), r.column("work"))

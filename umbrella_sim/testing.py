@@ -736,13 +736,11 @@ class SimulatedAntenna:
         """
         Return where this run begins in [(arrival, stamped message)] (None: not yet).
 
-        Before any reset, at the first message.  After one, at the first message since the
-        reset call (``mark`` messages came before it) that restarts sim time: its t = 0
-        state, or a stamp below the one before it (a message the previous run still had in
-        flight comes first, and its stamps only grow).
+        After a reset: the first message since the reset call (``mark`` messages came
+        before it) that restarts sim time: its t = 0 state, or a stamp below the one before
+        it (a message the previous run still had in flight comes first, and its stamps only
+        grow).  (Before any reset a run is every message: _timed_run.)
         """
-        if not self._runs:
-            return 0 if timed else None
         for i in range(mark, len(timed)):
             t = _stamp(timed[i][1])
             if t == 0.0 or (i > 0 and t < _stamp(timed[i - 1][1])):
