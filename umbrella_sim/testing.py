@@ -736,12 +736,13 @@ class SimulatedAntenna:
         """
         Return where this run begins in [(arrival, stamped message)] (None: not yet).
 
-        After a reset: the first message since the reset call (``mark`` messages came
+        After a reset: the last message since the reset call (``mark`` messages came
         before it) that restarts sim time: its t = 0 state, or a stamp below the one before
-        it (a message the previous run still had in flight comes first, and its stamps only
-        grow).  (Before any reset a run is every message: _timed_run.)
+        it.  The last: what the previous run still had in flight comes first, and may
+        restart sim time itself (a paused start's t = 0 state that arrives late).  (Before
+        any reset a run is every message: _timed_run.)
         """
-        for i in range(mark, len(timed)):
+        for i in range(len(timed) - 1, mark - 1, -1):
             t = _stamp(timed[i][1])
             if t == 0.0 or (i > 0 and t < _stamp(timed[i - 1][1])):
                 return i
