@@ -158,6 +158,12 @@ def test_cli_force_profile(tmp_path):
     (["--elements-per-segment", "0"], "elements_per_segment"),
     (["--params", "/nonexistent.yaml"], "/nonexistent.yaml"),
     (["--duration", "5e-5"], "shorter than one physics step (0.0001 s)"),   # ran 0 steps
+    # one parameter given twice: the dedicated option used to win over --set silently
+    (["--force", "5", "--set", "sleeve_force=10"], "--force 5.0"),
+    (["--model", "rigid", "--set", "model=flexible"], "already given by --model rigid"),
+    (["--set", "v0=-1", "--set", "v0=-2"], "already given by --set v0=-1"),
+    (["--mcap", "/nonexistent/bag", "--publish-rate", "50", "--set", "publish_rate=200"],
+     "already given by --publish-rate 50.0"),
 ])
 def test_cli_rejects_bad_input(args, words):
     r = cli("simulate", *args)

@@ -116,13 +116,34 @@ def resolve_params(overrides: dict, params_file: str | None = None,
     return UmbrellaParams.from_mapping(values).validated()
 
 
+#: simulate's options that give a parameter: (argparse dest, parameter)
+CLI_FLAGS = (("model", "model"), ("elements_per_segment", "elements_per_segment"),
+             ("v0", "v0"), ("force", "sleeve_force"), ("lock", "lock"),
+             ("time_step", "time_step"), ("publish_rate", "publish_rate"))
+
+
+def _given_once(given: dict, name: str, how: str) -> None:
+    """Record that the command line gives parameter name (how); refuse a second time."""
+    if name in given:
+        raise ValueError(f"{how}: {name} is already given by {given[name]} (give each "
+                         "parameter once)")
+    given[name] = how
+
+
 def build_params(args) -> UmbrellaParams:
     values: dict = {}
+    given: dict = {}            # parameter -> the option that gave it, to refuse a second
     lock_given = None
+    flags = {name: getattr(args, flag) for flag, name in CLI_FLAGS
+             if getattr(args, flag) is not None}
+    for flag, name in CLI_FLAGS:
+        if name in flags:
+            _given_once(given, name, f"--{flag.replace('_', '-')} {flags[name]}")
     for item in args.set or []:
         if "=" not in item:
             raise ValueError(f"--set {item!r}: expected name=value")
         name, value = (x.strip() for x in item.split("=", 1))
+        _given_once(given, name, f"--set {name}={value}")
         if name in RECORDING_PARAMS:
             if not args.mcap:
                 raise ValueError(f"--set {name}={value}: a parameter of umbrella_node's "
@@ -139,11 +160,7 @@ def build_params(args) -> UmbrellaParams:
         values[name] = value
         if name == "lock":
             lock_given = f"--set lock={value}"
-    for flag, name in (("model", "model"), ("elements_per_segment", "elements_per_segment"),
-                       ("v0", "v0"), ("force", "sleeve_force"), ("lock", "lock"),
-                       ("time_step", "time_step")):
-        if getattr(args, flag) is not None:
-            values[name] = getattr(args, flag)
+    values.update({name: value for name, value in flags.items() if name in SPECS})
     if args.lock is not None:
         lock_given = f"--lock {args.lock}"
     params_file = args.params or default_params_file()
@@ -209,7 +226,8 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument("--params", metavar="FILE",
                     help="ROS 2 params YAML (default: config/umbrella.yaml)")
     sp.add_argument("--set", action="append", metavar="NAME=VALUE",
-                    help="override one parameter (repeatable)")
+                    help="override one parameter (repeatable; each parameter once, here or "
+                         "by its own option)")
     sp.add_argument("--model", choices=SPECS["model"].choices)
     sp.add_argument("--elements-per-segment", type=int, dest="elements_per_segment")
     sp.add_argument("--v0", type=float, help="initial sleeve velocity along Y (m/s)")
