@@ -489,6 +489,28 @@ def test_unwritable_table_exits_4_and_keeps_the_store(tmp_path, capsys):
     assert finished_cases(str(out)) == [case.case_id + ".json"]
 
 
+def test_ctrl_c_while_the_table_is_written_keeps_a_whole_table(tmp_path, capfd, monkeypatch):
+    """A stop signal in the middle of writing results.csv: the table is finished, then 130."""
+    spec = write(tmp_path / "s.yaml", "grid:\n  v0: [-2.0, -1.0]\nbase: {model: rigid}\n"
+                                      "duration: 0.05\n")
+    out = tmp_path / "out"
+    cases = [store_one_case(spec, i, str(out)) for i in (0, 1)]
+    write_csv = sweep.write_csv
+
+    def interrupted_write(path, columns, rows):
+        with open(path, "w") as fh:
+            fh.write(",".join(columns) + "\n")
+        os.kill(os.getpid(), signal.SIGINT)     # Ctrl-C after the header line
+        write_csv(path, columns, rows)
+
+    monkeypatch.setattr(sweep, "write_csv", interrupted_write)
+    assert cli.main(["sweep", spec, "--out", str(out)]) == 130
+    err = capfd.readouterr().err
+    assert "2 of 2 cases in" in err and "interrupted; every finished case is kept" in err, err
+    assert {r["case_id"] for r in read_rows(str(out))} == {c.case_id for c in cases}
+    assert os.path.exists(out / "results.parquet")
+
+
 def test_store_write_error_stops_the_sweep_keeping_finished_cases(dask_cluster, tmp_path,
                                                                   capsys):
     address, _ = dask_cluster

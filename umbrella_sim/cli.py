@@ -198,9 +198,9 @@ def check_lock_given(params: UmbrellaParams, given: str | None) -> None:
 
 class Progress:
 
-    def __init__(self, duration: float, stream=sys.stderr):
+    def __init__(self, duration: float, stream=None):
         self.duration = duration
-        self.stream = stream
+        self.stream = stream or sys.stderr     # (at call time: a redirected stderr)
 
     def __call__(self, t: float) -> None:
         frac = min(1.0, t / self.duration) if self.duration > 0 else 1.0

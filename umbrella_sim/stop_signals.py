@@ -14,6 +14,7 @@ This module imports nothing but the standard library, so that installing the han
 first thing a process does (a signal in the ~50 ms the interpreter itself needs to start is
 Python's default behaviour).
 """
+import contextlib
 import functools
 import os
 import signal
@@ -102,6 +103,35 @@ def print_for_reader(write) -> bool:
     except BrokenPipeError:
         stdout_reader_gone()
         return False
+
+
+@contextlib.contextmanager
+def deferred():
+    """
+    Hold SIGINT and SIGTERM until the block has finished, then act on them as before.
+
+    For a short write that must be whole (a table of results already computed): a stop
+    signal during it is noted, the block completes, and the handler in place before it then
+    runs (raising KeyboardInterrupt, say).  Outside the main thread, where handlers cannot be
+    set, the block just runs.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: held.append(signum))
+                for s in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        if held:
+            handler = previous[held[0]]
+            if callable(handler):
+                handler(held[0], None)
+            elif handler == signal.SIG_DFL:
+                os.kill(os.getpid(), held[0])
 
 
 def _interrupt(signum, frame):

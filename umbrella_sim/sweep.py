@@ -49,6 +49,7 @@ import yaml
 
 from . import __version__
 from .files import check_new_output, read_text_input
+from .stop_signals import deferred
 
 SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
              "force_profile")
@@ -583,9 +584,9 @@ class SweepProgress:
     The line is rewritten on a terminal; otherwise one line per finished case.
     """
 
-    def __init__(self, total: int, stream=sys.stderr):
+    def __init__(self, total: int, stream=None):
         self.total, self.done, self.failed = total, 0, 0
-        self.stream = stream
+        self.stream = stream or sys.stderr     # (at call time: a redirected stderr)
         self.tty = hasattr(stream, "isatty") and stream.isatty()
         self.t0 = time.monotonic()
 
@@ -705,12 +706,14 @@ def _check_workers(client, scheduler: str | None, log) -> None:
 
 def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
               scheduler: str | None = None, mcap: bool = False,
-              stream=sys.stderr) -> SweepReport:
+              stream=None) -> SweepReport:
     """
     Run the cases not yet in DIR's store, writing each result as it arrives.
 
     Then write the table and the plots (also after Ctrl-C, from the finished cases).
     """
+    stream = stream or sys.stderr
+
     def log(msg):
         stream.write(msg + "\n")
         stream.flush()
@@ -816,21 +819,23 @@ def _write_outputs(sweep, store, out_dir, report, log) -> None:
     report.parquet = os.path.join(out_dir, "results.parquet")
     path = report.csv
     try:
-        write_csv(report.csv, columns, rows)
-        path = report.parquet
-        try:
-            write_parquet(report.parquet, columns, rows)
-        except ImportError:
-            report.parquet = ""
-            log("results.parquet not written: pyarrow is not installed")
+        with deferred():        # a stop signal while the table is written: after it
+            write_csv(report.csv, columns, rows)
+            path = report.parquet
+            try:
+                write_parquet(report.parquet, columns, rows)
+            except ImportError:
+                report.parquet = ""
+                log("results.parquet not written: pyarrow is not installed")
+            ok = sum(r["status"] == STATUS_OK for r in rows)
+            report.failed = len(rows) - ok
+            log(f"{len(rows)} of {len(sweep.cases)} cases in {report.csv}: {ok} ok"
+                + (f", {report.failed} failed (see the error column)" if report.failed
+                   else ""))
         path = out_dir
         report.plots = plot(sweep, rows, out_dir)
     except OSError as exc:
         raise OutputError(exc.errno, f"{path}: {exc.strerror}") from None
-    ok = sum(r["status"] == STATUS_OK for r in rows)
-    report.failed = len(rows) - ok
-    log(f"{len(rows)} of {len(sweep.cases)} cases in {report.csv}: {ok} ok"
-        + (f", {report.failed} failed (see the error column)" if report.failed else ""))
 
 
 # ------------------------------------------------------------------ command line
@@ -894,6 +899,12 @@ def main(args, ap: argparse.ArgumentParser) -> int:
     except OutputError as exc:
         ap.exit(4, f"{ap.prog}: error: cannot write the results: {exc.strerror}; every case "
                    f"finished before it is kept in {os.path.join(args.out, 'cases')}\n")
+    except KeyboardInterrupt:       # a second stop, while the table or the plots were made
+        print(f"{ap.prog}: interrupted; every finished case is kept in "
+              f"{os.path.join(args.out, 'cases')} (and in results.csv if it was written: "
+              "it is written whole); run the same command again to finish",
+              file=sys.stderr)
+        return 130
     finally:
         signal.signal(signal.SIGTERM, previous)
     if report.interrupted:
