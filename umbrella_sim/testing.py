@@ -390,7 +390,10 @@ class RunSummary:
     lock_time: float | None         # sim time the sleeve reached the stop
     deploy_time: float | None       # lock_time - first_push_time (from 0 if it moved at start)
     stage2_peak_stress: float       # max over leaf and link of peak |sigma| after the lock (Pa)
-    stage2_tip_amplitude: float     # half peak-to-peak transverse tip deflection after it (m)
+    stage2_tip_amplitude: float     # half peak-to-peak transverse tip deflection after it (m),
+    #                                 of the samples at publish_rate: a crest between two is
+    #                                 missed (100 Hz: 0.6-6.4 % low at V0 = -0.2; 1 kHz: < 0.9 %;
+    #                                 the offline summary takes every physics step)
     stage2_samples: int             # samples the stage-2 figures come from
     stage2_span: float              # sim time those samples cover (s)
 
@@ -788,7 +791,9 @@ class SimulatedAntenna:
         """
         Return the run summary from the topics, stage 2 over ``after_lock`` s after the lock.
 
-        The tip figures are exact (stamped).  The stress message has no stamp: stage-2
+        The tip figures are of the tip messages, each exact at its stamp: the amplitude
+        is of those samples, so it reads a few per cent low at 100 Hz (RunSummary).  The
+        stress figure is a peak-hold over each period.  The stress message has no stamp: stage-2
         stress samples are those received after the 'locked' phase message and before the
         first tip message past the window, so a publication at either end may be left out
         or taken in; a recording gives the exact figures (:func:`summary_from_recording`).
