@@ -199,7 +199,7 @@ def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path):
     antenna.pause()
     antenna.reset()
     assert antenna.phases() == ["deploying"] and antenna.lock_time() is None
-    assert antenna.sim_time() == 0.0 and antenna.applied_forces() == []
+    assert antenna.sim_time() == 0.0 and antenna.applied_forces() == []   # its t = 0 state
     # the new run begins with its t = 0 state, as the first did (and its recording segment)
     assert [m.header.stamp for m in antenna.messages("joint_states")] == [Time()]
     assert len(antenna.messages("peak_stress")) == 1
@@ -285,3 +285,15 @@ def test_a_relative_record_path_is_the_tests_working_directory(
     assert antenna.stop() == 0
     antenna.close()                          # (it used to take the bag with its directory)
     assert summary_from_recording("bag").lock_time == pytest.approx(lock, abs=1e-9)
+
+
+def test_sim_time_is_none_before_the_first_state():
+    """No joint state received yet: no sim time (it read 0.0, as if the run stood at t = 0)."""
+    from umbrella_sim.testing import SimulatedAntenna
+
+    antenna = object.__new__(SimulatedAntenna)     # its topics only: no node
+    antenna.messages = lambda key: []
+    antenna.topics = {"joint_states": "/joint_states"}
+    assert antenna.sim_time() is None
+    with pytest.raises(AssertionError, match=r"never reached 0\.000000 s .*no joint state yet"):
+        antenna.wait_for_sim_time(0.0, timeout=0.05)

@@ -583,12 +583,13 @@ class SimulatedAntenna:
         """
         Publish each (t, F) of a profile when the node's sim time reaches start + t.
 
-        The start is sim_time() at the call (joint_states stamps); returns after the last
-        command.  Commands act from the next publication after they arrive, so each lands
+        The start is sim_time() at the call (joint_states stamps; the run's first state is
+        waited for); returns after the last command.  Commands act from the next publication after they arrive, so each lands
         on the publication grid a little after its t; a profile exact in sim time is
         ``umbrella_sim simulate --force-profile`` (offline, the same physics).
         """
         rows = sorted(profile, key=lambda tf: tf[0])
+        self.wait_for("joint_states", lambda m: True, timeout, "a first joint state")
         t0 = self.sim_time()
         for t_rel, force in rows:
             self.wait_for_sim_time(t0 + t_rel, timeout=timeout)
@@ -673,10 +674,14 @@ class SimulatedAntenna:
         return (f"/{self.namespace}" if self.namespace else "") + f"/umbrella_node/{name}"
 
     # --------------------------------------------------------------- waits
-    def sim_time(self) -> float:
-        """Stamp of the latest joint state of this run received (s)."""
+    def sim_time(self) -> float | None:
+        """Stamp of the latest joint state of this run received (s); None before the first."""
         states = self.messages("joint_states")
-        return _stamp(states[-1]) if states else 0.0
+        return _stamp(states[-1]) if states else None
+
+    def _sim_time_text(self) -> str:
+        t = self.sim_time()
+        return "no joint state yet" if t is None else f"latest stamp {t:.6f} s"
 
     def phases(self) -> list[str]:
         """Return the deployment phases of this run, in order ("deploying" first)."""
@@ -688,13 +693,17 @@ class SimulatedAntenna:
         poll(lambda: phase in self.phases(), timeout,
              lambda: f"deployment_phase never became {phase!r} within {timeout} s on "
                      f"{self.topics['deployment_phase']} (saw {self.phases() or 'nothing'}; "
-                     f"sim time {self.sim_time():.3f} s; node "
+                     f"{self._sim_time_text()}; node "
                      f"{'running' if self.node.running else 'exited'})")
 
     def wait_for_sim_time(self, t: float, timeout: float = 20.0) -> None:
-        poll(lambda: self.sim_time() >= t, timeout,
+        def reached():
+            now = self.sim_time()
+            return now is not None and now >= t
+
+        poll(reached, timeout,
              lambda: f"sim time never reached {t:.6f} s within {timeout} s on "
-                     f"{self.topics['joint_states']} (latest stamp {self.sim_time():.6f} s)")
+                     f"{self.topics['joint_states']} ({self._sim_time_text()})")
 
     def wait_for(self, key: str, predicate, timeout: float = 20.0, what: str = "the condition"):
         """Return this run's first message on a node topic (``"joint_states"``...) that fits."""
