@@ -243,20 +243,55 @@ def physics_run(path: str, segment: int = 0) -> dict:
     return physics_series(log, log.segment(segment))
 
 
-def _diff(ref_t, ref_y, t, y):
+def _spacing(t) -> float:
+    return float(np.median(np.diff(t))) if len(t) > 1 else math.inf
+
+
+def _on_grid(t, y, grid, peak_hold: bool):
+    """
+    Return series (t, y) on the instants grid, a coarser one.
+
+    A value (linear interpolation), or for a peak-hold the largest of y over each grid
+    period (grid[k-1], grid[k]], as the coarser run's own peak-hold holds.
+    """
+    if not peak_hold:
+        return np.interp(grid, t, y)
+    tol = 1e-9                      # stamps are exact to the recording's 1 ns
+    hi = np.searchsorted(t, grid + tol, side="right")
+    lo = np.searchsorted(t, np.concatenate(([-np.inf], grid[:-1])) + tol, side="right")
+    out = np.interp(grid, t, y)     # (a period with no sample of the finer run)
+    for k in np.nonzero(hi > lo)[0]:
+        out[k] = y[lo[k]:hi[k]].max()
+    return out
+
+
+def _diff(ref_t, ref_y, t, y, peak_hold: bool = False):
+    """
+    Return (max, rms) of y - ref_y over the span both runs cover.
+
+    On the instants of the coarser run (its publications), the other one brought to them,
+    so that runs recorded at two rates compare as they would at the coarser one, whichever
+    is the reference: a value interpolated at them (the finer run's samples include them
+    when one rate is a multiple of the other), a peak-hold re-held over their periods.
+    """
     lo, hi = max(ref_t[0], t[0]), min(ref_t[-1], t[-1])
-    keep = (ref_t >= lo) & (ref_t <= hi)
+    if _spacing(t) > _spacing(ref_t) * (1 + 1e-6):      # the other run is the coarser
+        ref_t, ref_y, t, y, sign = t, y, ref_t, ref_y, -1.0
+    else:
+        sign = 1.0
+    keep = (ref_t >= lo - 1e-9) & (ref_t <= hi + 1e-9)
     if keep.sum() < 2:
         raise LogError("runs do not overlap in time")
-    d = np.interp(ref_t[keep], t, y) - ref_y[keep]
+    d = sign * (_on_grid(t, y, ref_t[keep], peak_hold) - ref_y[keep])
     return float(np.abs(d).max()), float(np.sqrt(np.mean(d * d)))
 
 
-SIGNALS = [("alpha1", "rad", lambda r: (r.t, r.alpha1)),
-           ("alpha1_rate", "rad/s", lambda r: (r.t, r.alpha1_rate)),
-           ("tip_deflection", "m", lambda r: (r.tip_t, r.tip_v)),
-           ("peak_stress_leaf", "Pa", lambda r: (r.stress_t, r.peak_leaf)),
-           ("peak_stress_link", "Pa", lambda r: (r.stress_t, r.peak_link))]
+#: (name, unit, (t, y) of a run, y is a peak-hold over each publication period)
+SIGNALS = [("alpha1", "rad", lambda r: (r.t, r.alpha1), False),
+           ("alpha1_rate", "rad/s", lambda r: (r.t, r.alpha1_rate), False),
+           ("tip_deflection", "m", lambda r: (r.tip_t, r.tip_v), False),
+           ("peak_stress_leaf", "Pa", lambda r: (r.stress_t, r.peak_leaf), True),
+           ("peak_stress_link", "Pa", lambda r: (r.stress_t, r.peak_link), True)]
 
 
 def compare(runs: list[Run], thesis: bool = False) -> dict:
@@ -269,11 +304,11 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
                  "deploy_time_difference": (None if r.deploy_time is None or ref.deploy_time
                                             is None else r.deploy_time - ref.deploy_time),
                  "energy_drift": r.energy_drift, "differences": {}}
-        for name, unit, get in SIGNALS:
+        for name, unit, get, peak_hold in SIGNALS:
             rt, ry = get(ref)
             t, y = get(r)
             try:
-                mx, rms = _diff(rt, ry, t, y)
+                mx, rms = _diff(rt, ry, t, y, peak_hold)
             except LogError as exc:     # which runs, and what each holds
                 raise LogError(f"{exc}: {ref.path} ({len(rt)} samples, t = {rt[0]:g} .. "
                                f"{rt[-1]:g} s) and {r.path} ({len(t)} samples, t = "
@@ -306,10 +341,10 @@ def print_table(result: dict, stream=sys.stdout) -> None:
           f"{e['v0']:>6g} {('%.7f' % dt) if dt is not None else '-':>11} "
           f"{('%+.3e' % dd) if dd is not None else '-':>13} "
           f"{('%.2e' % e['energy_drift']) if e['energy_drift'] is not None else '-':>12}\n")
-    w(f"\n{'run':<18} " + " ".join(f"{n + ' max/rms':>27}" for n, _, _ in SIGNALS) + "\n")
+    w(f"\n{'run':<18} " + " ".join(f"{n + ' max/rms':>27}" for n, *_ in SIGNALS) + "\n")
     for e in result["runs"]:
         cells = []
-        for n, unit, _ in SIGNALS:
+        for n, unit, *_ in SIGNALS:
             d = e["differences"][n]
             cells.append(f"{d['max']:>11.3e}/{d['rms']:.3e} {unit:<5}"[:27].rjust(27))
         w(f"{e['label']:<18} " + " ".join(cells) + "\n")
