@@ -30,8 +30,7 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from umbrella_sim.params import UmbrellaParams  # noqa: E402
-from umbrella_sim.publication import physics_step  # noqa: E402
+from umbrella_sim.params import physics_step, UmbrellaParams  # noqa: E402
 from umbrella_sim.solver import UmbrellaSimulator  # noqa: E402
 from umbrella_sim.step_study import mesh_step  # noqa: E402
 

@@ -14,8 +14,7 @@ import pytest
 
 from umbrella_sim.deploy_controller import (constant_force_for, ControllerConfig, DeployLaw,
                                             simulate_closed_loop)
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.publication import physics_step
+from umbrella_sim.params import physics_step, UmbrellaParams
 from umbrella_sim.solver import simulate
 from umbrella_sim.testing import (NodeProcess, poll, ros_env, summarize_run,
                                   summary_from_recording)

@@ -242,6 +242,21 @@ def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
     assert where in str(exc.value) and words in str(exc.value), exc.value
 
 
+def test_mcap_recording_says_when_its_publications_shorten_the_step(tmp_path):
+    """--mcap at a time_step that does not divide the period: the node's step, said so."""
+    from umbrella_sim.logs import read_log
+
+    r = cli("simulate", "--time-step", "3e-4", "--duration", "0.05", "--mcap",
+            str(tmp_path / "short"), "--json")
+    assert r.returncode == 0, r.stderr
+    assert "physics step 0.000294117647 s, not 0.0003 s" in r.stderr, r.stderr
+    step = read_log(str(tmp_path / "short")).metadata["umbrella_sim.parameters"]["physics_step"]
+    assert float(step) == pytest.approx(0.01 / 34, rel=1e-12)
+    r = cli("simulate", "--time-step", "2e-4", "--duration", "0.05", "--mcap",
+            str(tmp_path / "same"))
+    assert r.returncode == 0 and "note" not in r.stderr, r.stderr
+
+
 def test_params_file_publish_rate_shapes_the_mcap_recording(tmp_path):
     """A params file shared with the node: its publish_rate is the recording's, unless given."""
     from umbrella_sim.logs import read_log

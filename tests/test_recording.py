@@ -385,7 +385,7 @@ def test_a_recording_from_before_the_phase_correction_re_runs_without_it():
     """A recording whose parameters lack phase_correction was made by the plain midpoint rule."""
     from types import SimpleNamespace
 
-    from umbrella_sim.publication import physics_step
+    from umbrella_sim.params import physics_step
     from umbrella_sim.replay import _segment_inputs
 
     old = {k: v for k, v in UmbrellaParams().as_dict().items() if k != "phase_correction"}

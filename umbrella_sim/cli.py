@@ -13,7 +13,8 @@ from . import __version__, sweep
 from .arguments import ArgumentParser
 from .files import check_new_output, read_text_input
 from .params import (check_known_names, check_values, load_params_file, NODE_ONLY_PARAMS,
-                     NODE_PARAMETERS, parameter_help, SPECS, UmbrellaParams)
+                     NODE_PARAMETERS, parameter_help, shortened_step_note, SPECS,
+                     UmbrellaParams)
 from .solver import command_force, simulate, UmbrellaSimulator
 from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
 
@@ -244,11 +245,13 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument("--mcap", metavar="BAG_DIR",
                     help="record the node's topics to a new bag directory (BAG_DIR/"
                          "BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the same "
-                         "states and summary as without it")
+                         "states and summary as without it when the physics step divides the "
+                         "publication period (the default's does; else the recording takes "
+                         "the largest step that does, as the node, and says so)")
     sp.add_argument("--publish-rate", type=float, default=None, dest="publish_rate",
                     help="publication rate of the --mcap recording (Hz, sim time; also "
                          "--set publish_rate=... or the params file's; default 100); the "
-                         "summary is the same at any rate")
+                         "summary is the same at any rate whose period the step divides")
     sp.set_defaults(marker_magnification=None)
     sweep.add_parser(sub)
     return ap
@@ -345,6 +348,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.exit(2, f"umbrella_sim: error: {exc}\n")
     progress = Progress(args.duration) if sys.stderr.isatty() and not args.json else None
     if args.mcap:
+        note = shortened_step_note(params.physics_time_step, args.publish_rate)
+        if note:
+            print(f"umbrella_sim: note: the --mcap recording takes a {note}", file=sys.stderr)
         from .recording import record_offline
         try:
             result = record_offline(params, args.mcap, args.duration, profile,

@@ -288,7 +288,7 @@ def simulate_closed_loop(params: UmbrellaParams, cfg: ControllerConfig,
     DDS round trip).  Returns (RunResult of every step, first push time).
     """
     from .outputs import RunResult
-    from .publication import physics_step
+    from .params import physics_step
     from .solver import UmbrellaSimulator
 
     p = params.replace(v0=0.0).with_physics_step(

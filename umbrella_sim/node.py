@@ -56,7 +56,7 @@ from . import ros_io
 from . import stop_signals
 from .params import (check_known_names, check_node_parameters, check_parameter_sources,
                      NODE_PARAMETERS, parameter_help, params_files_in, QOS_OVERRIDES, REGISTRY,
-                     RESET, SPECS, UmbrellaParams, USE_SIM_TIME)
+                     RESET, shortened_step_note, SPECS, UmbrellaParams, USE_SIM_TIME)
 from .publication import PublicationDriver
 from .solver import command_force, SimulationDiverged
 
@@ -219,6 +219,9 @@ class UmbrellaNode(Node):
             f"v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s "
             f"({self.driver.publish_every} per publication at "
             f"{self.driver_rate:g} Hz), kernel {self.driver.backend}")
+        note = shortened_step_note(p.physics_time_step, self.driver_rate)
+        if note:
+            self.get_logger().info(note)
 
     def _open_recording(self, path: str) -> None:
         from .recording import BagRecorder, new_bag_recorder, run_metadata

@@ -703,3 +703,25 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
     names = [n for n in given if not n.startswith(QOS_OVERRIDES) and n not in in_files]
     check_known_names(names, known, f"-p for {node_fqn}", listed)
     return {n for n in (*in_files, *given) if n.startswith(QOS_OVERRIDES)}
+
+
+def physics_step(time_step: float, publish_rate: float) -> float:
+    """Return the largest step <= time_step that divides the publication period."""
+    period = 1.0 / publish_rate
+    return period / math.ceil(period / time_step - 1e-9)
+
+
+def shortened_step_note(time_step: float, publish_rate: float) -> str | None:
+    """
+    Say how the publications shorten the step, if they do (None if time_step divides them).
+
+    A recording (live, or offline with --mcap) then steps at physics_step(), so its states
+    differ from a run at time_step by that step's error.
+    """
+    step = physics_step(time_step, publish_rate)
+    if abs(step - time_step) <= 1e-12 * time_step:
+        return None
+    return (f"physics step {step:.9g} s, not {time_step:g} s: the largest step <= it that "
+            f"divides the {1e3 / publish_rate:g} ms publication period (publish_rate "
+            f"{publish_rate:g} Hz), so the states differ from a run at {time_step:g} s by the "
+            "step's error; a time_step dividing the period keeps them the same")

@@ -14,25 +14,18 @@ records them).
 from __future__ import annotations
 
 from dataclasses import dataclass
-import math
 from typing import Callable
 
 from . import ros_io
 from .forcing import ForceSchedule
 from .outputs import build_frozen, mechanical_energy, Sample, StepBlock, SummaryAccumulator
-from .params import NODE_PARAMETERS, UmbrellaParams
+from .params import NODE_PARAMETERS, physics_step, UmbrellaParams
 from .solver import command_force, SimulationDiverged, UmbrellaSimulator
 
 
 #: steps per advance_schedule call of a period when a stop may come (PublicationDriver.advance):
 #: at most ~0.3 s of the slowest model (N = 64, flexible-nonlinear), a few ms of most
 STOP_CHECK_STEPS = 256
-
-
-def physics_step(time_step: float, publish_rate: float) -> float:
-    """Return the largest step <= time_step that divides the publication period."""
-    period = 1.0 / publish_rate
-    return period / math.ceil(period / time_step - 1e-9)
 
 
 @dataclass(frozen=True)

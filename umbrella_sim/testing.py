@@ -584,8 +584,9 @@ class SimulatedAntenna:
         Publish each (t, F) of a profile when the node's sim time reaches start + t.
 
         The start is sim_time() at the call (joint_states stamps; the run's first state is
-        waited for); returns after the last command.  Commands act from the next publication after they arrive, so each lands
-        on the publication grid a little after its t; a profile exact in sim time is
+        waited for); returns after the last command.  Commands act from the next
+        publication after they arrive, so each lands on the publication grid a little after
+        its t; a profile exact in sim time is
         ``umbrella_sim simulate --force-profile`` (offline, the same physics).
         """
         rows = sorted(profile, key=lambda tf: tf[0])
