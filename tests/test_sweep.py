@@ -293,7 +293,8 @@ def test_table_takes_every_summary_key(tmp_path):
     Check that the table follows the summary: a key the sweep has never heard of is a column.
 
     Lists (e.g. validity warnings) are JSON text in both files; a case without a result is no
-    row; a summary key that repeats a parameter is not a second column.
+    row; a summary key that repeats a parameter is not a second column, unless the run took
+    another value (a rigid model's lock: the table said energy where the run stopped plastically).
     """
     import pyarrow.parquet as pq
 
@@ -307,7 +308,15 @@ def test_table_takes_every_summary_key(tmp_path):
                                             "error": None, "summary": summary,
                                             "worker": "w", "mcap": None}))
     columns, rows = sweep.table_rows(spec, store)
-    assert len(rows) == 2 and columns.count("lock") == 1
+    assert len(rows) == 2 and columns.count("lock") == 1 and "lock_used" not in columns
+    summaries[1]["lock"] = "plastic"        # (as a rigid model's summary says)
+    store.save(sweep.make_record(spec.cases[1], {"case_id": spec.cases[1].case_id,
+                                                 "status": "ok", "error": None,
+                                                 "summary": summaries[1], "worker": "w",
+                                                 "mcap": None}))
+    columns, rows = sweep.table_rows(spec, store)
+    assert [(r["lock"], r["lock_used"]) for r in rows] == [("energy", "energy"),
+                                                           ("energy", "plastic")]
     assert columns.index("v0") < columns.index("deploy_time") < columns.index("a_new_figure")
     sweep.write_csv(str(tmp_path / "r.csv"), columns, rows)
     sweep.write_parquet(str(tmp_path / "r.parquet"), columns, rows)

@@ -373,13 +373,20 @@ def table_rows(sweep: Sweep, store: CaseStore) -> tuple[list[str], list[dict]]:
         row.update(duration=case.duration, stop_after_lock=case.stop_after_lock,
                    force_profile=case.force_profile_path)
         for key, value in (rec.get("summary") or {}).items():
-            if key == "error" or key in case.params:   # same value as the parameter's column
+            if key == "error":
                 continue
+            if key in case.params:      # the parameter's column, unless the run took another
+                if value == case.params[key]:     # (a rigid model's lock is plastic)
+                    continue
+                key = f"{key}_used"
             if key not in summary_keys:
                 summary_keys.append(key)
             row[key] = value
         row.update(worker=rec.get("worker"), mcap=rec.get("mcap"))
         rows.append(row)
+    for key in [k for k in summary_keys if k.endswith("_used")]:   # in every row, then
+        for row in rows:
+            row.setdefault(key, row.get(key[:-len("_used")]))
     columns = ["case", "case_id", "status"] + list(sweep.swept)
     columns += [n for n in (rows[0] if rows else {}) if n not in columns and n not in
                 ("error", "worker", "mcap") and n not in summary_keys]
