@@ -82,6 +82,31 @@ def test_bad_params_file(tmp_path):
             load_params_file(str(bad))
 
 
+@pytest.mark.parametrize("line, words", [
+    ('v0: "-0.5"', "v0='-0.5': must be of type double, got string"),
+    ("step_follows_mesh: 'yes'", "step_follows_mesh='yes': must be of type bool"),
+    ("elements_per_segment: 2.0", "elements_per_segment=2.0: must be of type integer, got double"),
+    ("lock: 1", "lock=1: must be of type string, got integer"),
+])
+def test_a_params_file_value_of_another_type_is_refused_as_the_node_does(tmp_path, line, words):
+    """A quoted number in a params file is a string: the node refuses it, and so does simulate."""
+    path = tmp_path / "typed.yaml"
+    path.write_text(f"/**:\n  ros__parameters:\n    {line}\n")
+    r = cli("simulate", "--params", str(path), "--duration", "0.01")
+    assert r.returncode == 2 and words in r.stderr and str(path) in r.stderr, r.stderr
+
+
+def test_params_file_numbers_are_typed_as_rcl_types_them(tmp_path):
+    """72.0e9 is a double to rcl (strtod), a string to YAML 1.1; quoted numbers are strings."""
+    from umbrella_sim.params import load_params_file
+
+    path = tmp_path / "typed.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    youngs_modulus: 72.0e9\n    v0: -5e-1\n"
+                    "    l1: .5\n    elements_per_segment: 2\n    lock: '1'\n")
+    assert load_params_file(str(path)) == {"youngs_modulus": 72e9, "v0": -0.5, "l1": 0.5,
+                                           "elements_per_segment": 2, "lock": "1"}
+
+
 def test_a_bad_value_in_a_params_file_names_the_file(tmp_path):
     bad = tmp_path / "fast.yaml"
     bad.write_text('/**:\n  ros__parameters:\n    v0: "fast"\n')

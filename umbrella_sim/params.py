@@ -467,13 +467,40 @@ def _check_each(p: UmbrellaParams, names) -> None:
         spec.check(value)
 
 
+def check_types(values: Mapping[str, Any]) -> None:
+    """
+    Refuse a typed value (YAML: a params file, a sweep SPEC) of another type than the node's.
+
+    As rclpy does with a params file: a double takes a number (an int is that double), an
+    integer a whole number, a bool true/false, a string a string; "-0.5" in quotes is a
+    string.  (Text from a command line, -p or --set, is parsed instead: Param.coerce.)
+    """
+    for name, value in values.items():
+        spec = SPECS.get(name)
+        if spec is None:
+            continue
+        ok = (isinstance(value, bool) if spec.type is bool
+              else isinstance(value, str) if spec.type is str
+              else not isinstance(value, bool) and (
+                  isinstance(value, int) or (spec.type is float and isinstance(value, float))))
+        if not ok:
+            raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}, "
+                             f"got {_yaml_type(value)}")
+
+
+def _yaml_type(value: Any) -> str:
+    return {bool: "bool", int: "integer", float: "double", str: "string"}.get(
+        type(value), type(value).__name__)
+
+
 def check_values(values: Mapping[str, Any]) -> None:
     """
     Check each value on its own: its type and range, not the rules tying several together.
 
-    For values from one source (a params file), so that the error can name the source
-    before they are merged with others.
+    For values from one typed source (a params file), so that the error can name the
+    source before they are merged with others.
     """
+    check_types(values)
     _check_each(UmbrellaParams.from_mapping(values), values)
 
 
@@ -551,20 +578,23 @@ def _flatten(values: dict, prefix: str = "") -> dict:
     return out
 
 
-def read_params_file(path: str) -> dict[str, dict]:
+#: a plain (unquoted) scalar rcl's params parser reads as a double: strtod's forms, which
+#: include 72.0e9 (YAML 1.1, and so PyYAML, wants a sign in the exponent: a string to it)
+_ROS_DOUBLE = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|[-+]?\.(inf|Inf|INF)"
+                         r"|\.(nan|NaN|NAN)")
+
+
+def load_yaml_as_ros(text: str):
     """
-    Read the sections of a ROS 2 params YAML.
+    Load YAML typed as rcl types a params file; a mapping with a key twice is an error.
 
-    {section (node name pattern): ros__parameters with dotted names} of a ROS 2 params
-    YAML, or ValueError naming the file and the reason.  The same checks rcl makes, done
-    first so that a bad file gets a one-line error instead of an rcl traceback.
+    A plain scalar in one of strtod's forms is a double (72.0e9 too), a quoted one a string
+    ("-0.5"), as rclpy gives them to a node; YAML takes a repeated key's last value
+    silently, rcl refuses the file.  yaml.YAMLError if it cannot be read.
     """
-    import yaml  # local import: only the file path needs it
+    import yaml
 
-    text = read_text_input(path, "params file")
-
-    class UniqueKeys(yaml.SafeLoader):
-        """A mapping with a key twice is an error (YAML takes the last one silently)."""
+    class RosTyped(yaml.SafeLoader):
 
         def construct_mapping(self, node, deep=False):
             seen = set()
@@ -576,8 +606,24 @@ def read_params_file(path: str) -> dict[str, dict]:
                 seen.add(key)
             return super().construct_mapping(node, deep)
 
+    RosTyped.add_implicit_resolver("tag:yaml.org,2002:float", _ROS_DOUBLE,
+                                   list("-+0123456789."))
+    return yaml.load(text, Loader=RosTyped)   # noqa: S506 - a SafeLoader
+
+
+def read_params_file(path: str) -> dict[str, dict]:
+    """
+    Read the sections of a ROS 2 params YAML.
+
+    {section (node name pattern): ros__parameters with dotted names} of a ROS 2 params
+    YAML, or ValueError naming the file and the reason.  The same checks rcl makes, done
+    first so that a bad file gets a one-line error instead of an rcl traceback.
+    """
+    import yaml  # local import: only the file path needs it
+
+    text = read_text_input(path, "params file")
     try:
-        doc = yaml.load(text, Loader=UniqueKeys)   # noqa: S506 - a SafeLoader
+        doc = load_yaml_as_ros(text)
     except yaml.YAMLError as exc:
         reason = " ".join(str(exc).split())
         raise ValueError(f"params file {path}: not valid YAML ({reason})") from None

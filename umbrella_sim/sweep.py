@@ -121,12 +121,12 @@ def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> st
 def load_spec(path: str) -> Sweep:
     """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
     from .cli import check_lock_given, read_force_profile, resolve_params
-    from .params import UmbrellaParams
+    from .params import check_types, load_yaml_as_ros, UmbrellaParams
     from .solver import command_force
 
     try:
         text = read_text_input(path, "sweep spec")
-        doc = yaml.safe_load(text)
+        doc = load_yaml_as_ros(text)        # typed as a params file is
     except ValueError as exc:       # missing, not a regular file, unreadable, not text
         raise SpecError(str(exc)) from None
     except yaml.YAMLError as exc:
@@ -187,6 +187,13 @@ def load_spec(path: str) -> Sweep:
     if params_file is not None:
         params_file = rel(params_file)
 
+    if doc.get("force") is not None:    # force is every case's: a case may not set its own
+        for c in [grid] + explicit:
+            if "sleeve_force" in c:
+                raise SpecError(f"sweep spec {path}: force and "
+                                f"{'grid' if c is grid else 'cases'}: sleeve_force both set "
+                                "(force is every case's sleeve_force; sweep sleeve_force "
+                                "without it)")
     axes = list(grid)
     overrides_list = [dict(base, **dict(zip(axes, combo)))
                       for combo in itertools.product(*grid.values())] if grid else []
@@ -199,6 +206,7 @@ def load_spec(path: str) -> Sweep:
     for index, overrides in enumerate(overrides_list, start=1):
         source = "grid" if index <= len(overrides_list) - len(explicit) else "cases"
         try:
+            check_types(overrides)          # typed YAML, as a params file (the node's rule)
             resolved = resolve_params(overrides, params_file)
             check_lock_given(resolved, f"lock={overrides['lock']}" if "lock" in overrides
                              else None)
