@@ -242,6 +242,7 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     ("t,F\n0,5\n0.3,0\n", [(0.0, 5.0), (0.3, 0.0)]),
     ("# my drive\n\nt [s], F [N]\n0,5\n", [(0.0, 5.0)]),     # a header after a comment
     ("0,5\n0.3,0,\n", [(0.0, 5.0), (0.3, 0.0)]),             # a trailing comma
+    ("Time (s),Force (N)\n0,5\n", [(0.0, 5.0)]),
 ])
 def test_force_profile_rows_and_header(tmp_path, text, rows):
     from umbrella_sim.cli import read_force_profile
@@ -257,6 +258,9 @@ def test_force_profile_rows_and_header(tmp_path, text, rows):
     ("0,1,2\n", "f.csv:1", "two columns"),            # a third column is not dropped
     ("t,F\nF\n", "f.csv:2", "two columns"),
     ("0,1\n0.5,2\n0.5,3\n", "f.csv:3", "time 0.5 given twice"),   # (the last one won)
+    ("F,t\n0,0\n5,0.1\n", "f.csv:1", "time then force"),   # (was read as t,F)
+    ("force,time\n0,0\n", "f.csv:1", "['force', 'time']"),
+    ("t,F\n0,1_0\n", "f.csv:2", "not numbers"),             # (was 10 N)
 ])
 def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
     from umbrella_sim.cli import read_force_profile

@@ -30,9 +30,16 @@ def default_params_file() -> str | None:
     return None
 
 
+def _number(text: str) -> float:
+    """Return a CSV field as a number: Python's float forms but for digit separators (1_0)."""
+    if "_" in text:
+        raise ValueError(text)
+    return float(text)
+
+
 def _is_number(text: str) -> bool:
     try:
-        float(text)
+        _number(text)
     except ValueError:
         return False
     return True
@@ -62,9 +69,13 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
                              f"got {row}")
         header, first = first and not any(map(_is_number, row[:2])), False
         if header:
+            names = [field.strip().lower() for field in row[:2]]
+            if not (names[0].startswith("t") and names[1].startswith("f")):
+                raise ValueError(f"force profile {path}:{lineno}: header {row[:2]}: the "
+                                 "columns are time then force (t,F)")
             continue
         try:
-            t, f = float(row[0]), float(row[1])
+            t, f = _number(row[0]), _number(row[1])
         except ValueError:
             raise ValueError(f"force profile {path}:{lineno}: not numbers: {row[:2]}") from None
         if not math.isfinite(t) or t < 0.0:
