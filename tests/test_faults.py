@@ -403,6 +403,11 @@ def test_interrupted_offline_run_exits_130_with_its_recording_finalised(
     assert "Traceback" not in err and f"interrupted by {signal.Signals(signum).name}" in err
     log = read_log(str(bag))
     assert not log.truncated and log.count("/joint_states") > 100
+    # its summary of every step computed (umbrella_compare's figures; it had none)
+    figures = json.loads(log.metadata["umbrella_sim.summary"]["figures"])
+    last_state = max(t for t, _ in log.decoded(log.find_topic("joint_states")))
+    assert last_state - 0.01 <= figures["final_time"] <= last_state + 0.01 + 1e-9
+    assert figures["energy_drift"] < 1e-6
 
 
 def test_output_read_by_a_closed_pipe_is_no_traceback_and_keeps_the_files(tmp_path):

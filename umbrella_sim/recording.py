@@ -1041,11 +1041,12 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
         commands_until(0.0)
         publication()
         result = simulate(params, duration, schedule, progress=progress, simulator=sim,
-                          output_every=driver.publish_every, on_output=on_output)
-    finally:
+                          output_every=driver.publish_every, on_output=on_output,
+                          summary=driver.summary)
+    finally:    # interrupted: the summary of every step computed, as the node's at a stop
         rec.close_run(sim, published, accepted=state["i_cmd"], refused=0,
                       fault=result.error if result is not None else None,
-                      summary=summary_metadata(result.figures) if result is not None else None)
+                      summary=summary_metadata(driver.summary.figures()))
     result.recording_error = rec.error
     result.wall_time = _time.perf_counter() - wall0
     return result

@@ -838,7 +838,8 @@ def simulate(params: UmbrellaParams, duration: float,
              progress: Callable[[float], None] | None = None, *,
              simulator: UmbrellaSimulator | None = None, output_every: int = 1,
              on_output: Callable[[StepBlock, list], None] | None = None,
-             keep_samples: bool = True) -> RunResult:
+             keep_samples: bool = True,
+             summary: SummaryAccumulator | None = None) -> RunResult:
     """
     Run a whole simulation: the one offline driver.
 
@@ -852,8 +853,9 @@ def simulate(params: UmbrellaParams, duration: float,
     those steps and the force values that took effect in them; ``result.figures`` are the
     summary figures of every step (outputs.SummaryAccumulator); keep_samples keeps the
     Sample at each of those instants (and right after the lock) in ``result.samples``.
-    simulator: step this one (fresh, at t = 0) instead of a new one.  On a diverged run what
-    was computed before the failure is kept and ``result.error`` says why.
+    simulator: step this one (fresh, at t = 0) instead of a new one; summary: accumulate into
+    this one (of its first state), which the caller keeps if the run is interrupted.  On a
+    diverged run what was computed before the failure is kept and ``result.error`` says why.
     """
     sim = simulator if simulator is not None else UmbrellaSimulator(params)
     if isinstance(force_profile, ForceSchedule):
@@ -868,7 +870,8 @@ def simulate(params: UmbrellaParams, duration: float,
     first = sim.sample()
     if keep_samples:
         result.samples.append(first)
-    summary = SummaryAccumulator(result.params, first, sim.engine.lock_kind)
+    if summary is None:
+        summary = SummaryAccumulator(result.params, first, sim.engine.lock_kind)
     every = max(1, int(output_every))
     wall0 = _time.perf_counter()
     k_end = int(round(duration / sim.h))
