@@ -23,7 +23,8 @@ CONFIG = os.path.join(ROOT, "config", "umbrella.yaml")
     ({"area": 1e-4}, "area", "both or neither"),
     ({"l3": 0.01}, "parameter l3=0.01", "cannot close"),
     ({"alpha0": 0.2}, "alpha0", "above alpha_deployed"),
-    ({"alpha0": 1.5707963}, "alpha0", "<= 1.5698"),       # the toggle: no lever, v0 -> inf
+    ({"alpha0": 1.5707963}, "alpha0", "<= 1.5697963"),    # the toggle: no lever, v0 -> inf
+    ({"alpha0": 1.5698}, "alpha0", "<= 1.5697963"),       # (the bound read 1.5698)
     ({"sleeve_force_min": -1e6}, "sleeve_force_min", "link in tension"),   # squash: 50 kN
     ({"area": 1e-4, "second_moment_of_area": 1e-8}, "second_moment_of_area",
      "no section of height section_height=0.01"),           # I > A (b/2)^2 = 2.5e-9

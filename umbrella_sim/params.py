@@ -144,7 +144,8 @@ def _num(x: float) -> str:
     for v, text in ((math.pi / 2, "π/2"), (math.pi, "π")):
         if x == v:
             return text
-    return re.sub(r"e\+?(-?)0*(\d)", r"e\1\2", f"{x:g}")
+    text = f"{x:g}" if float(f"{x:g}") == x else f"{x:.8g}"   # a bound shown is the bound
+    return re.sub(r"e\+?(-?)0*(\d)", r"e\1\2", text)
 
 
 _P = Param
