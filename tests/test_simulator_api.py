@@ -144,3 +144,16 @@ def test_samples_and_states_cannot_be_changed(kernel, monkeypatch):
             sim.state.q[0] = 1.0
     sim.advance(50)
     assert np.array_equal(s.q, before) and not np.array_equal(sim.state.q, before)
+
+
+def test_a_negative_block_or_a_time_already_past_is_refused_and_changes_nothing():
+    """advance(-5) and advance_to(an earlier t) were silent no-ops."""
+    sim = UmbrellaSimulator(UmbrellaParams())
+    sim.advance(10)
+    t = sim.time
+    for call in (lambda: sim.advance(-5), lambda: sim.advance(2.5),
+                 lambda: sim.advance_schedule(None, -1), lambda: sim.advance_to(t / 2),
+                 lambda: sim.advance_to(math.nan)):
+        with pytest.raises(ValueError, match="n_steps=|before the simulator's time"):
+            call()
+    assert sim.time == t and len(sim.advance(0)) == 0 and sim.advance_to(t) == []

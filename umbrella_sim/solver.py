@@ -617,8 +617,10 @@ class UmbrellaSimulator:
 
         The engine's compiled path runs the steps in one call each (two around the lock,
         whose step is taken here); engines without one, or UMBRELLA_SIM_KERNEL=numpy, take
-        them one by one with outputs from ``sample()`` (the reference path).
+        them one by one with outputs from ``sample()`` (the reference path).  n_steps is a
+        whole number >= 0 (ValueError otherwise).
         """
+        _check_steps(n_steps)
         rows = None
         done = 0
         error = None
@@ -672,6 +674,7 @@ class UmbrellaSimulator:
         Returns the block of those steps (stopped early only at a fault, as ``advance``)
         and the values that took effect in it, [(t, F)], each at the step it acts from.
         """
+        _check_steps(n_steps)
         applied: list[tuple[float, float]] = []
         blocks: list[StepBlock] = []
         k_end = self._k + int(n_steps)
@@ -697,7 +700,10 @@ class UmbrellaSimulator:
         return None if self._locked_at is None else self._sample(*self._locked_at)
 
     def advance_to(self, t: float, record: bool = True) -> list[Sample]:
-        """Take every grid step that ends at or before t."""
+        """Take every grid step that ends at or before t (ValueError for a t already past)."""
+        if not t >= self.time - 1e-12 * max(1.0, abs(t)):     # (NaN too)
+            raise ValueError(f"advance_to({t!r}): before the simulator's time "
+                             f"{self.time:.9g} s (it only goes forward; reset() starts again)")
         out: list[Sample] = []
         while (self._k + 1) * self.h <= t + 1e-12 * max(1.0, abs(t)):
             out.extend(self.step(record))
@@ -830,6 +836,11 @@ def _frozen(a) -> np.ndarray:
     a = np.array(a, dtype=float)
     a.flags.writeable = False
     return a
+
+
+def _check_steps(n_steps) -> None:
+    if isinstance(n_steps, bool) or not float(n_steps).is_integer() or n_steps < 0:
+        raise ValueError(f"n_steps={n_steps!r}: must be a whole number >= 0")
 
 
 def simulate(params: UmbrellaParams, duration: float,
