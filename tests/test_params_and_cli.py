@@ -158,7 +158,8 @@ def test_cli_models_and_csv(tmp_path):
     lines = out.read_text().splitlines()
     header = lines[0].split(",")
     assert header[0] == "time" and "q[alpha1]" in header and "qd[link.u1]" in header
-    assert "sigma_top[leaf@0.5]" in header and "sigma_bottom[link@0.5]" in header
+    assert "sigma_top[leaf@0.5-]" in header and "sigma_bottom[link@0.5]" in header
+    assert len(set(header)) == len(header), "a column name twice (leaf@0.5: two elements')"
     assert len(lines) == 1 + 1 + 15 + 1    # header, t = 0, 15 steps, the lock instant
     again = cli("simulate", "--duration", "0.01", "--csv", str(out))
     assert again.returncode == 2 and "exists" in again.stderr

@@ -314,7 +314,9 @@ class RunResult:
         Write the time series as CSV.
 
         with_state adds q, qd and the fibre stresses along both bodies
-        (columns 'sigma_top[leaf@0.25]' = top-fibre stress at 0.25 m from O, Pa).
+        (columns 'sigma_top[leaf@0.25]' = top-fibre stress at 0.25 m from O, Pa; at a node
+        between two elements, each element's own: 'leaf@0.5-' of the element ending there,
+        'leaf@0.5+' of the one starting there).
         """
         with open(path, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
@@ -324,7 +326,8 @@ class RunResult:
                 header += [f"qd[{lab}]" for lab in self.q_labels]
                 for body, xs in (("leaf", self.leaf_stress_x), ("link", self.link_stress_x)):
                     for fibre in ("top", "bottom"):
-                        header += [f"sigma_{fibre}[{body}@{x:.6g}]" for x in xs]
+                        header += [f"sigma_{fibre}[{body}@{x}]"
+                                   for x in stress_point_labels(xs)]
             w.writerow(header)
             for s in self.samples:
                 row = sample_row(s)
@@ -400,6 +403,21 @@ def oscillation_period(t: np.ndarray, x: np.ndarray) -> float:
             d = lo + g * (hi - lo)
             fd = minus_amplitude(d)
     return 0.5 * (lo + hi)
+
+
+def stress_point_labels(xs) -> list[str]:
+    """
+    Name stress points by position (m, 6 digits); a node two elements share gets - and +.
+
+    Stresses are recovered at both ends of every element, so an inner node has two: the
+    element ending there (x-) and the one starting there (x+).
+    """
+    texts = [f"{x:.6g}" for x in xs]
+    out = list(texts)
+    for i in range(len(texts) - 1):
+        if texts[i] == texts[i + 1]:
+            out[i], out[i + 1] = texts[i] + "-", texts[i + 1] + "+"
+    return out
 
 
 def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dict:
