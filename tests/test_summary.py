@@ -495,3 +495,12 @@ def test_a_run_that_does_not_conserve_energy_says_so():
     quiet = simulate(UmbrellaParams(v0=-0.5, model="flexible-nonlinear"), 0.15).summary()
     assert quiet["energy_drift"] < 1e-6
     assert not [w for w in quiet["warnings"] if w.startswith("energy not conserved")]
+
+
+def test_a_soft_section_strained_past_the_small_strain_limit_is_warned_about():
+    """E = 1 kPa: 116 % strain, far below yield, and no warning said so."""
+    f = simulate(UmbrellaParams(youngs_modulus=1e3, time_step=STEP), 0.3).summary()
+    strain = max(f["peak_stress_leaf"], f["peak_stress_link"]) / 1e3
+    assert strain > 0.01
+    text = next(w for w in f["warnings"] if w.startswith("large strain:"))
+    assert f"{100 * strain:.3g} %" in text and "yield exceeded" not in " ".join(f["warnings"])
