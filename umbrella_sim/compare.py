@@ -449,8 +449,8 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
     finish(fig, axes, ("sigma (MPa)", "sigma (MPa)", "max |sigma| (MPa)"),
            ("top-fibre stress on the leaf at O'' (Fig. 6.5, 6.11)",
             "top-fibre stress at mid-link (Fig. 6.6)",
-            "peak |sigma| on each body (every physics step with --physics-rate, else each "
-            "publication: the peak since the previous one)"),
+            "peak |sigma| on each body (every physics step with --physics-rate,\n"
+            "else each publication: the peak since the previous one)"),
            "stress.png")
 
     fig, axes = plt.subplots(1, len(runs), figsize=(4.5 * len(runs), 4.5), squeeze=False)
