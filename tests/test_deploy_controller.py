@@ -166,6 +166,17 @@ def test_controller_shares_the_node_params_file_and_names_a_typo_in_it(tmp_path)
         controller.wait_for_log("waiting for joint_states", timeout=60)
         assert "target 1.5 s" in controller.output()
         assert controller.stop() == 0
+    # and the node, which skips the controller's names there (it refused them: exit 2)
+    with NodeProcess("--params-file", str(shared)) as node:
+        node.wait_for_log("physics step", timeout=60)
+        assert node.stop() == 0, node.output()
+    # a section naming the node alone is the node's: a controller name there is a mistake
+    own = tmp_path / "own.yaml"
+    own.write_text("umbrella_node:\n  ros__parameters:\n    target_time: 1.5\n")
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args",
+                        "--params-file", str(own)], capture_output=True, text=True,
+                       env=ros_env(), timeout=60)
+    assert r.returncode == 2 and "unknown parameter 'target_time'" in r.stderr, r.stderr
     typo = tmp_path / "typo.yaml"
     typo.write_text(shared.read_text().replace("max_force", "max_forse"))
     r = subprocess.run([sys.executable, "-m", "umbrella_sim.deploy_controller", "--ros-args",

@@ -184,9 +184,12 @@ class UmbrellaNode(Node):
     # ------------------------------------------------------------------ config
     def _check_parameter_sources(self, params_files, known: set) -> set:
         """Check the params files and names given for this node (StartupError: which)."""
+        from .deploy_controller import CONTROLLER_PARAMETERS   # a '/**' file may serve both
+
         try:
-            return check_parameter_sources(self.get_fully_qualified_name(), params_files,
-                                           list(self._parameter_overrides), known)
+            return check_parameter_sources(
+                self.get_fully_qualified_name(), params_files,
+                list(self._parameter_overrides), known, shared=CONTROLLER_PARAMETERS)
         except ValueError as exc:
             raise StartupError(str(exc)) from None
 

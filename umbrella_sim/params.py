@@ -725,14 +725,17 @@ def params_files_in(ros_args: list[str]) -> list[str]:
 
 
 def check_parameter_sources(node_fqn: str, params_files, given, known,
-                            listed: str = NODE_PARAMETERS_LISTED) -> set:
+                            listed: str = NODE_PARAMETERS_LISTED, shared=()) -> set:
     """
     Check the params files and parameter names a ROS node was started with.
 
     Every params file has a section for the node, and every parameter given for it (``-p``,
     ``given``, or a file) is one it knows (``known``, besides ROS_OWN_PARAMETERS): a typo
-    is a ValueError naming it, never a silent default.  Returns the ``qos_overrides.*``
-    names given, for the node to check against the QoS its topics declare.
+    is a ValueError naming it, never a silent default.  A wildcard section ('/**', '/*',
+    ...) may also give the sibling umbrella_sim node's parameters (``shared``), so that one
+    file serves both; those are skipped there (in a section naming this node, or -p, they
+    are unknown).  Returns the ``qos_overrides.*`` names given, for the node to check
+    against the QoS its topics declare.
     """
     known = set(known) | ROS_OWN_PARAMETERS
     in_files = set()
@@ -742,11 +745,12 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
             raise ValueError(f"params file {path}: no section for node {node_fqn} "
                              f"(sections: {', '.join(sections)}); use '/**' or the "
                              "node's name")
-        names = {n for key, values in sections.items() if section_matches(key, node_fqn)
-                 for n in values}
-        check_known_names({n for n in names if not n.startswith(QOS_OVERRIDES)}, known,
-                          f"params file {path} (for {node_fqn})", listed)
-        in_files |= names
+        for key, values in sections.items():
+            if section_matches(key, node_fqn):
+                names = {n for n in values if not n.startswith(QOS_OVERRIDES)}
+                check_known_names(names - set(shared) if "*" in key else names, known,
+                                  f"params file {path} (for {node_fqn})", listed)
+                in_files |= set(values)
     names = [n for n in given if not n.startswith(QOS_OVERRIDES) and n not in in_files]
     check_known_names(names, known, f"-p for {node_fqn}", listed)
     return {n for n in (*in_files, *given) if n.startswith(QOS_OVERRIDES)}
