@@ -134,6 +134,46 @@ def test_resimulate_live_log_with_force_profile(live_bag):
     assert "PASS" in r.stdout and "leaf_hinge" in r.stdout
 
 
+def test_a_remapped_node_s_recording_serves_every_tool(tmp_path):
+    """
+    -r joint_states:=js -r sleeve_force:=/cmd in a namespace: the tools find the topics.
+
+    Replay, compare and the test API's summary looked for topics ending in joint_states
+    and sleeve_force/applied; the recording names its topics' remappings now.
+    """
+    from umbrella_sim.testing import summary_from_recording
+
+    bag = tmp_path / "remapped"
+    probe = Probe("remap_probe")
+    try:
+        probe.subscribe("/r1/deployment_phase", String, LATCHED)
+        with NodeProcess("-r", "__ns:=/r1", "-r", "joint_states:=js", "-r",
+                         "sleeve_force:=/cmd", "-p", "v0:=0.0",
+                         "-p", f"record_path:={bag}") as node:
+            node.wait_for_log("recording to")
+            pub = probe.publisher("/cmd", Float64)
+            probe.wait_for_subscribers(pub)
+            time.sleep(0.2)
+            pub.publish(Float64(data=20.0))
+            probe.wait_for("/r1/deployment_phase", lambda m: m.data == "locked", timeout=30)
+            time.sleep(0.4)
+            assert node.stop(signal.SIGTERM) == 0
+    finally:
+        probe.close()
+    log = read_log(str(bag))
+    assert {"/r1/js", "/cmd/applied"} <= set(log.topics())
+    summary = summary_from_recording(str(bag), after_lock=0.1)
+    assert summary.first_push_time is not None and summary.first_push_time > 0
+    assert summary.deploy_time == pytest.approx(summary.lock_time - summary.first_push_time)
+    r = run_cli("umbrella_sim.replay", str(bag), "--resimulate")
+    assert r.returncode == 0 and "PASS" in r.stdout, r.stdout + r.stderr
+    r = run_cli("umbrella_sim.compare", str(bag), str(bag), "--out", str(tmp_path / "cmp"),
+                "--no-plots")
+    assert r.returncode == 0, r.stderr
+    diffs = json.loads((tmp_path / "cmp" / "compare.json").read_text())["runs"][1]
+    assert diffs["differences"]["alpha1"]["max"] == 0.0
+
+
 def test_offline_recording_has_the_live_layout(live_bag, tmp_path):
     bag = tmp_path / "offline_run"
     r = run_cli("umbrella_sim", "simulate", "--v0", "0", "--force", "10", "--duration", "0.6",

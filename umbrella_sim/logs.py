@@ -39,6 +39,9 @@ from . import stop_signals
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 PARAMETERS_RECORD = "umbrella_sim.parameters"
 SEGMENT_RECORD = "umbrella_sim.segment"            # + ".K", written by the recorder on reset
+#: the node's own topic name (joint_states, sleeve_force/applied...) -> the name recorded,
+#: which a remapping (-r joint_states:=js, a namespace) may have changed
+TOPICS_RECORD = "umbrella_sim.topics"
 ENDED_EARLY_RECORD = "umbrella_sim.recording_error"
 
 
@@ -77,6 +80,15 @@ class LogData:
         return sorted(self.channels)
 
     def find_topic(self, suffix: str, required: bool = True) -> str | None:
+        """
+        Return the recorded topic the node's topic `suffix` went to (None / LogError).
+
+        Through the recording's topic record (a remapped or namespaced node's names), else
+        (older recordings) the one topic whose name ends in it.
+        """
+        recorded = self.metadata.get(TOPICS_RECORD, {}).get(suffix.lstrip("/"))
+        if recorded in self.channels:
+            return recorded
         matches = [t for t in self.channels if t == suffix or t.endswith("/" + suffix.lstrip("/"))]
         matches = [t for t in matches if not t.endswith(("/refused", "/applied"))
                    or suffix.endswith(("/refused", "/applied"))]

@@ -34,6 +34,7 @@ import yaml
 
 from . import __version__
 from .files import check_new_output
+from .logs import SEGMENT_RECORD, TOPICS_RECORD
 
 CHUNK_SIZE = 64 * 1024
 DELIMITER = "=" * 80
@@ -459,7 +460,6 @@ class _RawRecords:
 #: metadata record of a recording that stopped on a write error (see msg_docs/recording.md)
 ENDED_EARLY_RECORD = "umbrella_sim.recording_error"
 #: metadata records umbrella_sim.segment.K: a reset started segment K (msg_docs/recording.md)
-SEGMENT_RECORD = "umbrella_sim.segment"
 
 
 #: a Message record up to its data: opcode, record length, channel id, sequence, log time,
@@ -600,6 +600,7 @@ class BagRecorder:
             self._writer.start(profile="ros2", library=f"umbrella_sim {__version__}")
             for name, data in metadata.items():
                 self._writer.add_metadata(name, data)
+            self._written_records = set(metadata)
             self._fh.commit()
         except OSError as exc:
             self._remove_partial()
@@ -751,11 +752,18 @@ class BagRecorder:
         from std_msgs.msg import Float64
 
         from . import ros_io
+        resolved = {}       # the node's own topic name -> the name recorded (remapped)
         for key, name in topic_names.items():
             self.add_channel(name, ros_io.TOPICS[key].type,
                              (qos or {}).get(key, ros_io.TOPICS[key].qos))
+            resolved[ros_io.TOPICS[key].name.lstrip("/")] = name
         for suffix in ("", ros_io.COMMAND_REFUSED_SUFFIX, ros_io.COMMAND_APPLIED_SUFFIX):
             self.add_channel(command_topic + suffix, Float64, ros_io.COMMAND.qos)
+            resolved[ros_io.COMMAND.name.lstrip("/") + suffix] = command_topic + suffix
+        with self._lock:    # so that the tools find each topic however it was remapped
+            if not self._closed and TOPICS_RECORD not in self._written_records:
+                self._writer.add_metadata(TOPICS_RECORD, resolved)
+                self._written_records.add(TOPICS_RECORD)
 
     def close_run(self, sim, published: dict, accepted: int, refused: int,
                   fault: str | None = None, extra: dict | None = None,
