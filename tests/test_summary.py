@@ -185,15 +185,15 @@ def test_figures_from_samples_of_a_truncated_log_keep_the_stages_apart(bags, tmp
     (cut / "cut_0.mcap").write_bytes(data[:int(0.45 * len(data))])     # as by a SIGKILL
     log = read_log(str(cut))
     assert log.truncated and "umbrella_sim.events" not in log.metadata
-    assert log.decoded(log.find_topic("joint_states"))[-1][0] > whole.deploy_time + 0.1
+    assert log.decoded(log.find_topic("joint_states"))[-1][0] > whole.lock_time + 0.1
     run = compare.load_run(str(cut))
-    assert not run.deploy_time_exact and whole.deploy_time_exact
+    assert not run.lock_time_exact and whole.lock_time_exact
     # the phase message: the first publication at or after the exact lock
-    assert whole.deploy_time <= run.deploy_time < whole.deploy_time + 0.01
+    assert whole.lock_time <= run.lock_time < whole.lock_time + 0.01
     f_cut, f_whole = run.figures(), whole.figures()
     assert f_cut["tip_deflection_max"] == f_whole["tip_deflection_max"]
     assert f_cut["tip_deflection_max_time"] == f_whole["tip_deflection_max_time"] < \
-        whole.deploy_time
+        whole.lock_time
 
 
 def test_published_peak_stress_is_the_peak_since_the_previous_publication(offline, bags):
@@ -405,7 +405,7 @@ def test_shapes_stay_on_screen_with_stage_magnification_and_times(tmp_path,
     snaps = compare.shape_snapshots(run, (200.0, 5.0))
     assert {s[0] for s in snaps} == {"deploying", "locked"}
     for stage, tm, mag, leaf, link in snaps:
-        assert (tm < run.deploy_time) == (stage == "deploying")
+        assert (tm < run.lock_time) == (stage == "deploying")
         assert mag <= (200.0 if stage == "deploying" else 5.0)
         assert np.abs(leaf).max() < 2.0 and np.abs(link).max() < 2.0
     assert compare.main([str(bag), "--thesis", "--out", str(tmp_path / "out")]) == 0
@@ -504,3 +504,29 @@ def test_a_soft_section_strained_past_the_small_strain_limit_is_warned_about():
     assert strain > 0.01
     text = next(w for w in f["warnings"] if w.startswith("large strain:"))
     assert f"{100 * strain:.3g} %" in text and "yield exceeded" not in " ".join(f["warnings"])
+
+
+def test_deploy_time_runs_from_the_first_push_on_every_path(tmp_path):
+    """
+    A frame at rest pushed at 0.1 s deploys in the time one pushed at 0 does (one rule).
+
+    The summary (simulate, sweeps, the node's metadata), compare and the test API all take
+    the lock less the start of the deployment (outputs.deploy_start); compare took the lock
+    instant, 4.1 s for a controller run that waited 3.9 s for its first push.
+    """
+    from umbrella_sim.testing import summary_from_recording
+
+    rest = UmbrellaParams(v0=0.0, time_step=STEP)
+    now = simulate(rest.replace(sleeve_force=5.0), 1.0, stop_after_lock=0.0).summary()
+    bag = tmp_path / "late"
+    late_run = record_offline(rest, str(bag), 1.2, [(0.0, 0.0), (0.1, 5.0)])
+    late = late_run.summary()
+    assert now["deploy_start"] == 0.0 and late["deploy_start"] == pytest.approx(0.1, abs=1e-12)
+    assert late["lock_time"] == pytest.approx(late["deploy_time"] + 0.1, abs=1e-12)
+    # the same motion shifted by 0.1 s: the same deploy time (the lock's root find on a
+    # shifted step grid)
+    assert late["deploy_time"] == pytest.approx(now["deploy_time"], rel=1e-9)
+    assert compare.load_run(str(bag)).deploy_time == pytest.approx(late["deploy_time"],
+                                                                   abs=1e-12)
+    assert summary_from_recording(str(bag)).deploy_time == pytest.approx(late["deploy_time"],
+                                                                         abs=1e-12)

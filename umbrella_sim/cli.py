@@ -271,6 +271,8 @@ def make_parser() -> argparse.ArgumentParser:
 #: text summary: key -> (unit, scale, format); keys in this order, then any others
 TEXT_FIELDS = {
     "deploy_time": ("s", 1.0, ".6f"),
+    "deploy_start": ("s", 1.0, ".6f"),
+    "lock_time": ("s", 1.0, ".6f"),
     "tip_deflection_max": ("mm", 1e3, ".4g"),
     "tip_deflection_max_time": ("s", 1.0, ".4f"),
     "stage2_tip_amplitude": ("mm", 1e3, ".4g"),

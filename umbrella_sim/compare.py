@@ -21,12 +21,13 @@ import numpy as np
 
 from .arguments import ArgumentParser
 from .logs import LogError, read_log
-from .outputs import relative_drift, stage2_figures, validity_warnings
+from .outputs import deploy_start, relative_drift, stage2_figures, validity_warnings
 from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
-FIGURE_KEYS = ("deploy_time", "tip_deflection_max", "tip_deflection_max_time",
-               "stage2_tip_amplitude", "stage2_tip_period", "stage2_window",
+FIGURE_KEYS = ("deploy_time", "deploy_start", "lock_time", "tip_deflection_max",
+               "tip_deflection_max_time", "stage2_tip_amplitude", "stage2_tip_period",
+               "stage2_window",
                "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_leaf_time",
                "peak_stress_link", "peak_stress_link_x", "peak_stress_link_time",
                "stress_ratio_max", "tip_deflection_ratio_max")
@@ -57,7 +58,7 @@ class Run:
     peak_link: np.ndarray
     stress_joint: np.ndarray
     stress_mid: np.ndarray
-    deploy_time: float | None
+    lock_time: float | None        # the lock instant (sim time)
     energy_drift: float | None
     shapes: list = field(default_factory=list)      # [(t, leaf_xy, link_xy)]
     magnification: float = 1.0
@@ -69,10 +70,18 @@ class Run:
     lock_kind: str | None = None
     # every physics step of a re-run of the log (--physics-rate): replay.physics_series
     physics: dict | None = None
-    # deploy_time is the exact lock instant (the events record); False: the time of the
+    # lock_time is the exact lock instant (the events record); False: the time of the
     # first publication after it (the "locked" phase message of a log without that record),
     # whose samples are already of stage 2
-    deploy_time_exact: bool = True
+    lock_time_exact: bool = True
+    deploy_start: float | None = 0.0     # outputs.deploy_start of the recorded run
+
+    @property
+    def deploy_time(self) -> float | None:
+        """Return the deploy time: the lock less the start of the deployment (one rule)."""
+        if self.lock_time is None:
+            return None
+        return self.lock_time - (self.deploy_start or 0.0)
 
     @property
     def rigid(self) -> bool:
@@ -107,14 +116,15 @@ class Run:
             out = {k: self.summary.get(k) for k in FIGURE_KEYS}
             out["figures_from"] = "every physics step (recording metadata)"
             return out
-        out = {"deploy_time": self.deploy_time}
-        lock = self.deploy_time if self.deploy_time is not None else math.inf
-        s1 = self.tip_t <= lock if self.deploy_time_exact else self.tip_t < lock
+        out = {"deploy_time": self.deploy_time, "deploy_start": self.deploy_start,
+               "lock_time": self.lock_time}
+        lock = self.lock_time if self.lock_time is not None else math.inf
+        s1 = self.tip_t <= lock if self.lock_time_exact else self.tip_t < lock
         if s1.any():
             i = int(np.argmax(np.abs(self.tip_v[s1])))
             out["tip_deflection_max"] = float(abs(self.tip_v[s1][i]))
             out["tip_deflection_max_time"] = float(self.tip_t[s1][i])
-        out.update(stage2_figures(self.tip_t, self.tip_v, self.deploy_time))
+        out.update(stage2_figures(self.tip_t, self.tip_v, self.lock_time))
         for body, peaks in (("leaf", self.peak_leaf), ("link", self.peak_link)):
             i = int(np.argmax(peaks))
             out[f"peak_stress_{body}"] = float(peaks[i])
@@ -133,7 +143,7 @@ class Run:
         peak = float(max(self.peak_leaf.max(), self.peak_link.max()))
         try:
             return validity_warnings(self.params, self.lock_kind, peak, tip,
-                                     locked=self.deploy_time is not None,
+                                     locked=self.lock_time is not None,
                                      energy_drift=self.energy_drift)
         except (KeyError, TypeError):
             return []
@@ -229,10 +239,16 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
         except ValueError:
             raise LogError(f"{log.path}: metadata umbrella_sim.summary is not valid JSON") \
                 from None
+    applied_topic = log.find_topic("sleeve_force/applied", required=False)
+    applied = ([(tm, m.data) for tm, m in log.iter_decoded(applied_topic, seg)]
+               if applied_topic else [])
+    start = deploy_start(float(params.get("v0", 0.0)) != 0.0
+                         or float(params.get("sleeve_force", 0.0)) != 0.0, applied)
     return Run(label, log.path, params, t, a[:, 0], a[:, 1], tt, np.array(tip), ts,
                st[:, 0], st[:, 4], st[:, 3], st[:, 7], deploy, drift, shapes,
                float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,
-               summary, warnings, events.get("lock_kind"), deploy_time_exact=exact)
+               summary, warnings, events.get("lock_kind"), lock_time_exact=exact,
+               deploy_start=start)
 
 
 def physics_run(path: str, segment: int = 0) -> dict:
@@ -301,6 +317,7 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
         entry = {"label": r.label, "path": r.path, "model": r.params.get("model"),
                  "elements_per_segment": r.params.get("elements_per_segment"),
                  "v0": r.params.get("v0"), "deploy_time": r.deploy_time,
+                 "deploy_start": r.deploy_start, "lock_time": r.lock_time,
                  "deploy_time_difference": (None if r.deploy_time is None or ref.deploy_time
                                             is None else r.deploy_time - ref.deploy_time),
                  "energy_drift": r.energy_drift, "differences": {}}
@@ -412,12 +429,12 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
     for r in runs:
         tip_t, tip_v = ((r.physics["time"], r.physics["tip_transverse"]) if r.physics
                         else (r.tip_t, r.tip_v))
-        lock = r.deploy_time if r.deploy_time is not None else tip_t[-1]
+        lock = r.lock_time if r.lock_time is not None else tip_t[-1]
         s1 = tip_t <= lock
         axes[0].plot(tip_t[s1], tip_v[s1] * 1e3, label=r.label)
         axes[1].plot(tip_t, tip_v * 1e3, label=r.label)
-        if r.deploy_time is not None:
-            axes[1].axvline(r.deploy_time, ls="--", lw=0.7, color="gray")
+        if r.lock_time is not None:
+            axes[1].axvline(r.lock_time, ls="--", lw=0.7, color="gray")
     finish(fig, axes, ("v_G (mm)", "v_G (mm)"),
            ("transverse deflection of G, stage 1 (Fig. 6.2, 6.10)", "across the lock (Fig. 6.4)"),
            "tip_deflection.png")
@@ -471,7 +488,7 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
         ax.set_aspect("equal")
         if snaps:
             ax.legend(fontsize=6, loc="best")
-        lock_text = f"lock at {r.deploy_time:.4f} s" if r.deploy_time is not None else "no lock"
+        lock_text = f"lock at {r.lock_time:.4f} s" if r.lock_time is not None else "no lock"
         ax.set_title(f"{r.label}: stage 1 (blue), stage 2 (red); {lock_text}", fontsize=8)
         ax.set_xlabel("X (m)")
     axes[0][0].set_ylabel("Y (m)")
@@ -491,7 +508,7 @@ def shape_snapshots(r: Run, magnification=(200.0, 5.0)) -> list:
     if not r.shapes:
         return []
     end = r.shapes[-1][0]
-    lock = r.deploy_time if r.deploy_time is not None else math.inf
+    lock = r.lock_time if r.lock_time is not None else math.inf
     times = np.array([s[0] for s in r.shapes])
     s1, s2 = times[times < lock], times[times > lock]
     wanted = []

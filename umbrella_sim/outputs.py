@@ -290,6 +290,7 @@ _STEP_PEAKS = slice(STEP_FIELDS.index("peak_stress_leaf"),
 _PEAK_ROWS = np.array([STEP_FIELDS.index(f) for f in (
     "time", "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x")])
 _SUMMARY_ROWS = np.array([STEP_FIELDS.index(f) for f in ("time", "tip_transverse", "stage")])
+_FORCE_ROW = STEP_FIELDS.index("sleeve_force")
 
 
 @dataclass
@@ -422,6 +423,20 @@ def stress_point_labels(xs) -> list[str]:
         if texts[i] == texts[i + 1]:
             out[i], out[i + 1] = texts[i] + "-", texts[i + 1] + "+"
     return out
+
+
+def deploy_start(moving_at_start: bool, applied) -> float | None:
+    """
+    Return when the deployment started: the origin of a run's deploy time (one rule).
+
+    t = 0 if the frame moved from the start (v0 != 0, or a force acting from t = 0), else
+    the instant the first non-zero sleeve force acted ([(t, F)] in time order); None if
+    neither happened.  A frame at rest that waits for its first command does not deploy
+    while it waits: the thesis's deploy time runs from the initial velocity V0.
+    """
+    if moving_at_start:
+        return 0.0
+    return next((float(t) for t, f in applied if f != 0.0), None)
 
 
 def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dict:
@@ -584,6 +599,9 @@ class SummaryAccumulator:
                        for b in ("leaf", "link")}
         self._s2_t: list = []
         self._s2_v: list = []
+        # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
+        self._start = deploy_start(initial.sleeve_velocity != 0.0 or initial.alpha1_rate != 0.0
+                                   or initial.sleeve_force != 0.0, ())
         self._warned: set = set()
         self._warned_at: tuple | None = None   # (peak, tip) the last new_warnings saw
 
@@ -599,6 +617,11 @@ class SummaryAccumulator:
         # Python floats: a live node adds a block of ~10 steps per publication, where every
         # numpy call costs more than the loop (~90 -> ~20 us per 1 kHz period, measured)
         t, v, stage = block.rows.take(_SUMMARY_ROWS, axis=0).tolist()
+        if self._start is None:     # (until the first push: then never again)
+            pushed = np.flatnonzero(block.rows[_FORCE_ROW])
+            if len(pushed):         # from the start of the step it acted in
+                i = int(pushed[0])
+                self._start = self.final_time if i == 0 else t[i - 1]
         self.steps += n
         self.final_time = t[-1]
         self._tip_all = max(self._tip_all, max(v), -min(v))
@@ -628,7 +651,9 @@ class SummaryAccumulator:
     def figures(self) -> dict:
         """Return the physics figures of the run so far (no wall-clock ones), JSON-ready."""
         p = self.params
-        out: dict = {"deploy_time": self.lock.time if self.lock else None,
+        start = self._start if self._start is not None else 0.0
+        out: dict = {"deploy_time": self.lock.time - start if self.lock else None,
+                     "deploy_start": start, "lock_time": self.lock.time if self.lock else None,
                      "tip_deflection_max": self._tip1[0],
                      "tip_deflection_max_time": self._tip1[1]}
         if self._s2_t:

@@ -414,7 +414,9 @@ def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
     [(t, max(peak leaf, peak link))].  Stage 2 is lock < t <= lock + after_lock (None:
     every sample after the lock).
     """
-    first_push = 0.0 if started_moving else next((t for t, f in applied if f != 0.0), None)
+    from .outputs import deploy_start   # (the one rule: the summary, compare, this)
+
+    first_push = deploy_start(started_moving, applied)
     deploy = (lock_time - first_push if lock_time is not None and first_push is not None
               else None)
     end = math.inf if after_lock is None or lock_time is None else lock_time + after_lock
