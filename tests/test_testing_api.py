@@ -298,3 +298,24 @@ def test_sim_time_is_none_before_the_first_state():
     assert antenna.sim_time() is None
     with pytest.raises(AssertionError, match=r"never reached 0\.000000 s .*no joint state yet"):
         antenna.wait_for_sim_time(0.0, timeout=0.05)
+
+
+def test_two_sessions_on_one_machine_get_two_domains():
+    """A domain another process holds is skipped: two CI jobs drove each other's antennas."""
+    import subprocess
+    import sys
+
+    from umbrella_sim.testing import FREE_DOMAINS, reserve_domain
+
+    start = FREE_DOMAINS[-1]        # the last, so that the next one wraps around
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from umbrella_sim.testing import reserve_domain; "
+         f"print(reserve_domain({start}), flush=True); sys.stdin.read()"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        held = int(holder.stdout.readline())
+        mine = reserve_domain(held)
+        assert mine != held and mine in FREE_DOMAINS
+    finally:
+        holder.stdin.close()
+        holder.wait(timeout=30)

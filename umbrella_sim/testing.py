@@ -17,7 +17,8 @@ over ``sleeve_force``, wait for what comes back, and assert on the run's summary
 Everything here talks over real DDS, so:
 
 * **Isolation.**  Each process runs with ``ROS_DOMAIN_ID`` = :func:`default_domain_id` (the
-  ``UMBRELLA_TEST_DOMAIN_ID`` environment variable, else one derived from the pid) and
+  ``UMBRELLA_TEST_DOMAIN_ID`` environment variable, else a domain of 10..99 that no other
+  test session on the machine holds) and
   ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; pass ``domain_id=`` to choose another.
   :class:`Probe` (the test's own rclpy node) sets the same two variables in this process.
 * **Waiting.**  Every wait polls what has been received, up to a timeout, and fails with an
@@ -57,11 +58,54 @@ DOMAIN_ID_ENV = "UMBRELLA_TEST_DOMAIN_ID"
 PHASES = ("deploying", "locked", "fault")
 
 
+#: the domains handed out by default, and where a process holding one says so (a lock file)
+FREE_DOMAINS = range(10, 100)
+_DOMAIN_LOCKS = os.path.join(tempfile.gettempdir(), "umbrella_sim_ros_domains")
+_held_domain_locks: list = []      # open lock files: a domain is held while its process lives
+
+
+def reserve_domain(first: int) -> int:
+    """
+    Return a domain of FREE_DOMAINS that no other process of this machine holds, from first.
+
+    Held until this process exits (an exclusive flock on a file per domain), so that two test
+    sessions on one machine (two CI jobs, a user's tests beside ours) never share a domain:
+    they drove each other's antennas when both took the pid's domain.  If every domain is
+    held (or locks are not possible here), first.
+    """
+    try:
+        import fcntl
+
+        os.makedirs(_DOMAIN_LOCKS, exist_ok=True)
+    except (ImportError, OSError):
+        return first
+    span = len(FREE_DOMAINS)
+    for k in range(span):
+        domain = FREE_DOMAINS[(first - FREE_DOMAINS[0] + k) % span]
+        try:
+            fh = open(os.path.join(_DOMAIN_LOCKS, f"{domain}.lock"), "a")
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.close()
+            continue
+        _held_domain_locks.append(fh)
+        return domain
+    return first
+
+
 def default_domain_id() -> int:
-    """``$UMBRELLA_TEST_DOMAIN_ID`` if set, else 10..99 from the pid (one per test session)."""
+    """
+    ``$UMBRELLA_TEST_DOMAIN_ID`` if set, else a free domain of 10..99 (one per test session).
+
+    The free domain is reserved for this process (:func:`reserve_domain`), from one derived
+    from the pid; its child processes get it through the environment (:func:`ros_env`).
+    """
     value = os.environ.get(DOMAIN_ID_ENV)
     if value is None:
-        return os.getpid() % 90 + 10
+        return reserve_domain(os.getpid() % len(FREE_DOMAINS) + FREE_DOMAINS[0])
     try:
         domain = int(value)
     except ValueError:
@@ -883,7 +927,7 @@ except ImportError:                                    # pragma: no cover
 if pytest is not None:
     @pytest.fixture(scope="session")
     def ros_domain_id() -> int:
-        """Return the ROS domain of this session (UMBRELLA_TEST_DOMAIN_ID, else from the pid)."""
+        """Return the ROS domain of this session (UMBRELLA_TEST_DOMAIN_ID, else a free one)."""
         return DOMAIN_ID
 
     @pytest.fixture
