@@ -75,6 +75,7 @@ class Run:
     # whose samples are already of stage 2
     lock_time_exact: bool = True
     deploy_start: float | None = 0.0     # outputs.deploy_start of the recorded run
+    segment: int | None = None           # a segment before the log's last (its own record)
 
     @property
     def deploy_time(self) -> float | None:
@@ -130,9 +131,11 @@ class Run:
             out[f"peak_stress_{body}"] = float(peaks[i])
             out[f"peak_stress_{body}_time"] = float(self.stress_t[i])
         rate = self.params.get("publish_rate")
-        out["figures_from"] = (f"recorded samples at {rate} Hz: the log has no summary record "
-                               "(an older recording, or its writer was killed), so these "
-                               "figures depend on the recording rate")
+        why = (f"the summary record is of the log's last run, not of segment {self.segment}"
+               if self.segment is not None else
+               "the log has no summary record (an older recording, or its writer was killed)")
+        out["figures_from"] = (f"recorded samples at {rate} Hz: {why}, so these figures "
+                               "depend on the recording rate")
         return out
 
     def validity(self) -> list:
@@ -248,7 +251,7 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
                st[:, 0], st[:, 4], st[:, 3], st[:, 7], deploy, drift, shapes,
                float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,
                summary, warnings, events.get("lock_kind"), lock_time_exact=exact,
-               deploy_start=start)
+               deploy_start=start, segment=segment if segment != last else None)
 
 
 def physics_run(path: str, segment: int = 0) -> dict:
