@@ -187,3 +187,23 @@ def test_wrong_parameter_type_at_start_is_refused(args, words):
 def test_every_registry_entry_is_a_parameter_of_one_kind():
     assert set(SPECS) | set(NODE_PARAMETERS) == set(REGISTRY)
     assert not set(SPECS) & set(NODE_PARAMETERS)
+
+
+def test_the_interface_table_gives_each_topic_the_qos_it_has():
+    """msg_docs/README.md's QoS column against ros_io (it said depth 10 for a keep-all)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy
+
+    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+    with open(os.path.join(root, "msg_docs", "README.md"), encoding="utf-8") as fh:
+        rows = {cells[1].strip().strip("`"): cells[5] for cells in
+                (line.split("|") for line in fh if line.startswith("| `"))}
+    topics = {t.name.lstrip("/"): t for t in (*ros_io.TOPICS.values(), ros_io.COMMAND)}
+    for name, topic in topics.items():
+        q = topic.qos
+        text = rows[name if name != "diagnostics" else "/diagnostics"].replace("*", "").strip()
+        want = ", ".join((
+            "reliable" if q.reliability == ReliabilityPolicy.RELIABLE else "best effort",
+            "transient local" if q.durability == DurabilityPolicy.TRANSIENT_LOCAL
+            else "volatile",
+            "keep all" if q.history == HistoryPolicy.KEEP_ALL else f"depth {q.depth}"))
+        assert text == want, name
