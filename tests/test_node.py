@@ -1,5 +1,6 @@
 """umbrella_node over real DDS: topic-driven actuation, validation, services, namespaces."""
 import math
+import os
 import re
 import subprocess
 import sys
@@ -114,6 +115,10 @@ def test_help_lists_every_parameter():
     for name in list(UmbrellaParams().as_dict()) + ["publish_rate", "record_path"]:
         assert f"  {name} " in r.stdout
     assert "sleeve_force" in r.stdout and "~/reset" in r.stdout
+    # where the interface docs are, on this install (the package share directory named by
+    # the help did not exist in the bootstrap's editable install)
+    docs = re.search(r"details: (\S+)", r.stdout).group(1)
+    assert os.path.isfile(os.path.join(docs, "topic_sleeve_force.md")), docs
 
 
 def test_invalid_commands_refused_counted_and_never_applied(probe):

@@ -33,6 +33,7 @@ if __name__ == "__main__":
 import contextlib
 import gc
 import math
+import os
 import sys
 import threading
 import time
@@ -722,8 +723,18 @@ def usage() -> str:
               "invalid arguments, parameters or params files, "
               f"{EXIT_FAULT} if the simulation ended in a fault, {EXIT_RECORDING} if the "
               "recording stopped on a write error (the run itself went on)",
-              "details: msg_docs/ in the package share directory"]
+              f"details: {msg_docs_location()}"]
     return "\n".join(lines)
+
+
+def msg_docs_location() -> str:
+    """Return where the interface docs are here: the source tree's, or the installed ones."""
+    for path in (os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "msg_docs"),
+                 os.path.join(sys.prefix, "share", "umbrella_sim", "msg_docs")):
+        if os.path.isfile(os.path.join(path, "README.md")):
+            return os.path.normpath(path) + os.sep
+    return "msg_docs/ of the umbrella_sim sources (the package share directory of a colcon " \
+           "install)"
 
 
 def main(argv: list[str] | None = None) -> int:
