@@ -62,5 +62,12 @@ exec "$prefix/lib/umbrella_sim/umbrella_node" --ros-args \
     for exe in ("umbrella_node", "umbrella_sim", "umbrella_replay", "umbrella_compare",
                 "umbrella-sim", "umbrella-replay", "umbrella-compare"):
         assert (tmp_path / "install/umbrella_sim/lib/umbrella_sim" / exe).exists(), exe
+    # its --help points at the installed interface docs
+    node = tmp_path / "install/umbrella_sim/lib/umbrella_sim/umbrella_node"
+    help_run = subprocess.run(["bash", "-c", f"source {tmp_path}/install/setup.bash; "
+                               f"exec {node} --help"], env=env, capture_output=True,
+                              text=True, timeout=120)
+    assert (f"details: {tmp_path}/install/umbrella_sim/share/umbrella_sim/msg_docs/"
+            in help_run.stdout), help_run.stdout[-300:] + help_run.stderr
     (bag,) = workdir.iterdir()                       # recorded by default, never elsewhere
     assert bag.name.startswith("umbrella_") and (bag / "metadata.yaml").exists()

@@ -729,7 +729,11 @@ def usage() -> str:
 
 def msg_docs_location() -> str:
     """Return where the interface docs are here: the source tree's, or the installed ones."""
-    for path in (os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "msg_docs"),
+    here = os.path.dirname(os.path.abspath(__file__))
+    # the sources (an editable install), a colcon install's prefix (PREFIX/lib/pythonX.Y/
+    # site-packages/umbrella_sim), a pip install's
+    for path in (os.path.join(here, "..", "msg_docs"),
+                 os.path.join(here, *[".."] * 4, "share", "umbrella_sim", "msg_docs"),
                  os.path.join(sys.prefix, "share", "umbrella_sim", "msg_docs")):
         if os.path.isfile(os.path.join(path, "README.md")):
             return os.path.normpath(path) + os.sep
