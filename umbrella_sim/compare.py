@@ -425,7 +425,9 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
         axes[1].plot(t, rate, label=r.label)
         axes[2].plot(t, np.gradient(rate, t), label=r.label)
     finish(fig, axes, ("alpha1 (rad)", "d alpha1/dt (rad/s)", "d2 alpha1/dt2 (rad/s2)"),
-           ("leaf angle, rate and acceleration (thesis Fig. 6.1, 6.12-6.17)", "", ""),
+           ("leaf angle, rate and acceleration (thesis Fig. 6.1, 6.12-6.17)", "",
+            "acceleration: the rate differenced at the recorded rate (--physics-rate: at "
+            "every step)"),
            "alpha1.png")
 
     fig, axes = plt.subplots(2, 1, figsize=(8, 6))
