@@ -228,6 +228,30 @@ def git_revision() -> str:
     return "unknown"
 
 
+def build_environment() -> dict[str, str]:
+    """
+    Return what sets a run's floating-point round-off besides the code.
+
+    numpy, its BLAS kernel (OpenBLAS picks one per CPU unless OPENBLAS_CORETYPE names it)
+    and the CPU.  The model's matrices go through BLAS; another kernel rounds them
+    differently in the last bit, so a re-simulation elsewhere agrees to round-off, not bit
+    for bit.
+    """
+    import platform
+
+    import numpy
+
+    cpu = platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
+            cpu = next((line.split(":", 1)[1].strip() for line in fh
+                        if line.startswith("model name")), cpu)
+    except OSError:
+        pass
+    return {"numpy": numpy.__version__,
+            "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE", "auto"), "cpu": cpu}
+
+
 def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: str,
                  source: str) -> dict[str, dict[str, str]]:
     """Metadata records that make a log reproducible from the file alone."""
@@ -238,7 +262,7 @@ def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: st
         "umbrella_sim.parameters": {k: json.dumps(v) for k, v in all_params.items()},
         "umbrella_sim.build": {"package_version": __version__, "git_revision": git_revision(),
                                "kernel": backend, "source": source,
-                               "python": sys.version.split()[0]},
+                               "python": sys.version.split()[0], **build_environment()},
         "umbrella_sim.mesh": {
             "model": params.model, "lock": params.lock,
             "elements_per_segment": str(params.elements_per_segment),

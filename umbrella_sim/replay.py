@@ -49,16 +49,46 @@ def resimulate(log: LogData) -> dict:
     one publication's messages in memory at a time.
     """
     diffs = dict.fromkeys(SIGNALS, 0.0)
-    out = {"compared": 0, "max_abs_diff": diffs, "segments": [], "problems": []}
+    scales = dict.fromkeys(SIGNALS, 0.0)
+    out = {"compared": 0, "max_abs_diff": diffs, "scale": scales, "segments": [],
+           "problems": []}
     for seg in log.segments():
-        res = _resimulate_segment(log, seg, diffs)
+        res = _resimulate_segment(log, seg, diffs, scales)
         out["compared"] += res["compared"]
         out["segments"].append(res)
         out["problems"] += [f"segment {seg.index}: {p}" for p in res["problems"]]
     if out["compared"] == 0:
         raise LogError(f"{log.path}: no joint_states messages to compare"
                        + log.truncation_note())
+    out["relative_diff"] = {name: relative_difference(diffs[name], scales[name])
+                            for name in SIGNALS}
     return out
+
+
+#: --resimulate's default tolerance, relative: the same build on the same machine gives 0;
+#: another BLAS kernel (OPENBLAS_CORETYPE) or CPU rounds the model's matrices differently in
+#: the last bit, 1e-12 at the first publication, grown to 3.5e-9 of a peak stress over 80 s
+#: of stage 2 (measured); any change to the physics or the force history shows far above it
+DEFAULT_TOLERANCE = 1e-6
+
+
+def build_difference(log: LogData) -> str:
+    """Say how the recording's build and floating-point environment differ from this one."""
+    from .recording import build_environment
+
+    recorded = log.metadata.get("umbrella_sim.build", {})
+    here = build_environment()
+    differ = [f"{k} {recorded.get(k, 'unrecorded')!r} there, {v!r} here"
+              for k, v in here.items() if recorded.get(k) != v]
+    return ("recorded with another floating-point environment (" + "; ".join(differ)
+            + "): round-off differs from the first step on") if differ else ""
+
+
+def relative_difference(diff: float, scale: float) -> float:
+    """Return diff over the signal's largest recorded magnitude (0 / inf for a zero one)."""
+    if diff == 0.0:
+        return 0.0
+    return diff / scale if scale > 0.0 else math.inf
 
 
 def _segment_inputs(log: LogData, seg):
@@ -142,7 +172,7 @@ def physics_series(log: LogData, seg) -> dict:
     return {n: np.concatenate(v) if v else np.zeros(0) for n, v in parts.items()}
 
 
-def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
+def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
     """
     Re-run one segment through the offline driver (solver.simulate).
 
@@ -186,7 +216,7 @@ def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
                 if abs(t - t_now) > 1e-9:
                     raise LogError(f"{log.path}: recorded publication at t = {t} s is not on "
                                    f"the re-simulated grid (t = {t_now})")
-                _compare_publication(driver.publication_sample(), group, diffs)
+                _compare_publication(driver.publication_sample(), group, diffs, scales)
                 res["compared"] += 1
             pending[0] = next(stream, None)
 
@@ -220,7 +250,7 @@ def _resimulate_segment(log: LogData, seg, diffs: dict) -> dict:
     return res
 
 
-def _compare_publication(s, group: dict, diffs: dict) -> None:
+def _compare_publication(s, group: dict, diffs: dict, scales: dict) -> None:
     js = group["joint"]
     ref = {"leaf_hinge": s.alpha1, "link_hinge": s.alpha2 - s.alpha1,
            "sleeve_slider": s.sleeve_position, "leaf_hinge_rate": s.alpha1_rate,
@@ -238,6 +268,7 @@ def _compare_publication(s, group: dict, diffs: dict) -> None:
     for name in rec:
         d = abs(rec[name] - ref[name])
         diffs[name] = max(diffs[name], d if d == d else float("inf"))    # NaN counts as inf
+        scales[name] = max(scales[name], abs(rec[name]))
 
 
 # -------------------------------------------------------------------- republish
@@ -361,7 +392,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--resimulate", action="store_true",
                     help="re-run the physics from the log and compare, no ROS traffic")
     ap.add_argument("--tolerance", type=float, default=None,
-                    help="largest accepted difference for --resimulate (>= 0; 1e-9)")
+                    help="largest accepted difference for --resimulate, relative to each "
+                         f"signal's largest recorded magnitude (>= 0; {DEFAULT_TOLERANCE:g})")
     args = ap.parse_args(argv)
     # argument values: an argparse usage error (exit 2) before any file is read
     if args.resimulate:     # what only republishing takes: refused, not ignored
@@ -376,7 +408,7 @@ def main(argv: list[str] | None = None) -> int:
     elif args.tolerance is not None:
         ap.error("--tolerance: an option of --resimulate (republishing compares nothing)")
     args.rate = 1.0 if args.rate is None else args.rate
-    args.tolerance = 1e-9 if args.tolerance is None else args.tolerance
+    args.tolerance = DEFAULT_TOLERANCE if args.tolerance is None else args.tolerance
     if not (math.isfinite(args.tolerance) and args.tolerance >= 0):
         ap.error(f"--tolerance {args.tolerance}: must be a finite number >= 0")
     if not (math.isfinite(args.rate) and 1e-6 <= args.rate <= 1e6):
@@ -389,7 +421,7 @@ def main(argv: list[str] | None = None) -> int:
         log = read_log(args.log)
         if args.resimulate:
             res = resimulate(log)
-            worst = max(res["max_abs_diff"].values())
+            worst = max(res["relative_diff"].values())
             notes = [n for n in ("truncated log" if log.truncated else "",
                                  f"recording ended early: {log.ended_early}"
                                  if log.ended_early else "",
@@ -404,15 +436,19 @@ def main(argv: list[str] | None = None) -> int:
                           if seg["recorded_fault"] is not None else
                           f"segment {seg['index']}: re-simulation faulted at t = "
                           f"{seg['fault']['time']:.9f} s: {seg['fault']['reason']}")
-            print(f"{'signal':<20} {'max |recorded - resimulated|':>30}")
+            print(f"{'signal':<20} {'max |recorded - resimulated|':>30} "
+                  f"{'relative to max |recorded|':>28}")
             for name, d in res["max_abs_diff"].items():
-                print(f"{name:<20} {d:>30.3e}")
+                print(f"{name:<20} {d:>30.3e} {res['relative_diff'][name]:>28.3e}")
             for problem in res["problems"]:
                 print(f"problem: {problem}")
             ok = worst <= args.tolerance and not res["problems"]
-            print(f"{'PASS' if ok else 'FAIL'}: largest difference {worst:.3e} "
+            note = build_difference(log)
+            print(f"{'PASS' if ok else 'FAIL'}: largest relative difference {worst:.3e} "
                   f"(tolerance {args.tolerance:g})"
                   + (f"; {len(res['problems'])} problem(s)" if res["problems"] else ""))
+            if note and worst > 0.0:
+                print(f"note: {note}")
             return 0 if ok else 1
         return republish(log, args.rate, args.start_offset, args.loop, args.with_commands,
                          args.topics, ros_args, args.wait_for_subscribers)
