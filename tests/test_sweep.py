@@ -584,3 +584,38 @@ def test_mcap_case_that_diverges_is_reported_as_without_mcap(tmp_path):
     assert recorded["summary"]["steps"] == plain["summary"]["steps"]
     events = read_log(recorded["mcap"]).metadata["umbrella_sim.events"]
     assert events.get("fault") == plain["error"], events
+
+
+def test_a_case_whose_recording_failed_is_not_finished(tmp_path, monkeypatch):
+    """--mcap: a case whose recording hit a write error is an error, run again on resume."""
+    from umbrella_sim import recording
+
+    spec = sweep.load_spec(write(tmp_path / "s.yaml",
+                                 "grid:\n  v0: [-2.0]\nbase: {model: rigid}\nduration: 0.05\n"))
+    record = recording.record_offline
+
+    def full_disk(*args, **kwargs):     # what a full disk leaves: the run, a torn recording
+        result = record(*args, **kwargs)
+        result.recording_error = "No space left on device"
+        return result
+
+    monkeypatch.setattr(recording, "record_offline", full_disk)
+    case = spec.cases[0]
+    (tmp_path / "mcap").mkdir()
+    result = sweep.run_case(case.task(str(tmp_path / "mcap")))
+    assert result["status"] == "error" and "No space left on device" in result["error"]
+    assert result["summary"]["deploy_time"] > 0          # what the run computed is kept
+    store = sweep.CaseStore(str(tmp_path / "out"))
+    store.save(sweep.make_record(case, result))
+    assert not sweep.is_finished(store.load(case.case_id), mcap=True)   # (it was 'ok')
+
+
+def test_an_mcap_case_whose_recording_shortens_the_step_is_a_case_of_its_own(tmp_path):
+    """3 ms does not divide the 10 ms publication period: the recorded run steps at 2.5 ms."""
+    spec = sweep.load_spec(write(tmp_path / "s.yaml",
+                                 "grid:\n  time_step: [3.0e-3, 2.0e-3]\nduration: 0.1\n"))
+    plain = [c.case_id for c in spec.cases]
+    notes: list = []
+    sweep._mcap_step_cases(spec, notes.append)
+    assert spec.cases[0].case_id != plain[0] and spec.cases[1].case_id == plain[1]
+    assert notes == [notes[0]] and "case 1" in notes[0] and "0.0025 s, not 0.003 s" in notes[0]

@@ -270,6 +270,11 @@ def run_case(task: dict) -> dict:
                 shutil.rmtree(bag)
             result = record_offline(params, bag, _mcap_duration(task), profile)
             out["mcap"] = bag
+            if result.recording_error:      # not finished: a resumed sweep runs it again
+                out["summary"] = result.summary()
+                out["error"] = f"recording {bag}: {result.recording_error}"
+                out["status"] = STATUS_ERROR
+                return _finished(out, t0)
         else:
             from .solver import simulate
 
@@ -282,6 +287,10 @@ def run_case(task: dict) -> dict:
         tb = traceback.format_exc(limit=-3).strip().splitlines()
         out["error"] = f"{type(exc).__name__}: {exc} [{' | '.join(tb[-3:-1])}]"
         out["status"] = STATUS_ERROR
+    return _finished(out, t0)
+
+
+def _finished(out: dict, t0: float) -> dict:
     out["case_wall_time"] = time.perf_counter() - t0
     out["finished_at"] = time.time()
     return out
@@ -410,12 +419,19 @@ def _cell(value):
 
 def write_csv(path: str, columns: list[str], rows: list[dict]) -> None:
     tmp = path + ".tmp"
-    with open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow(columns)
-        for row in rows:
-            w.writerow(["" if row.get(c) is None else _cell(row.get(c)) for c in columns])
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(columns)
+            for row in rows:
+                w.writerow(["" if row.get(c) is None else _cell(row.get(c)) for c in columns])
+        os.replace(tmp, path)
+    except BaseException:       # a full disk, an interrupt: no half table left beside it
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
 
 
 def write_parquet(path: str, columns: list[str], rows: list[dict]) -> None:
@@ -719,6 +735,26 @@ def _check_workers(client, scheduler: str | None, log) -> None:
         client.run(_ignore_sigint)
 
 
+def _mcap_step_cases(sweep: Sweep, log) -> None:
+    """
+    Give --mcap cases whose recording shortens the step a case id of their own, and say so.
+
+    A recording's physics step divides its publication period (as the node's), so at a
+    time_step that does not divide it the recorded run is another computation than the
+    plain one: it must not take (or replace) the plain case's result.
+    """
+    from .params import NODE_PARAMETERS, shortened_step_note, UmbrellaParams
+
+    rate = NODE_PARAMETERS["publish_rate"].default
+    for case in sweep.cases:
+        step = UmbrellaParams.from_mapping(case.params).physics_time_step
+        note = shortened_step_note(step, rate)
+        if note:
+            case.case_id = case_id(dict(case.params, mcap_publish_rate=rate), case.duration,
+                                   case.stop_after_lock, case.force_profile)
+            log(f"case {case.index}: the --mcap recording takes a {note}")
+
+
 def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
               scheduler: str | None = None, mcap: bool = False,
               stream=None) -> SweepReport:
@@ -735,6 +771,8 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
 
     store = CaseStore(out_dir)
     mcap_dir = os.path.join(os.path.abspath(out_dir), "mcap") if mcap else None
+    if mcap:
+        _mcap_step_cases(sweep, log)
     todo = [c for c in sweep.cases if not is_finished(store.load(c.case_id), mcap)]
     report = SweepReport(total=len(sweep.cases), skipped=len(sweep.cases) - len(todo))
     for index, same in sweep.duplicates:
