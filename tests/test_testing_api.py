@@ -319,3 +319,26 @@ def test_two_sessions_on_one_machine_get_two_domains():
     finally:
         holder.stdin.close()
         holder.wait(timeout=30)
+
+
+def test_compare_draws_a_segment_of_another_mesh(antenna_factory, tmp_path):
+    """A reset to N = 2 after a run at N = 1: compare --segment 1 drew it with N = 1's nodes."""
+    import subprocess
+    import sys
+
+    from umbrella_sim.testing import ros_env
+
+    bag = tmp_path / "two_meshes"
+    antenna = antenna_factory({"v0": -1.0}, record_path=str(bag))
+    antenna.wait_for_phase("locked", timeout=30)
+    antenna.set_parameters(elements_per_segment=2)
+    antenna.reset()
+    antenna.wait_for_phase("locked", timeout=30)
+    antenna.wait_for_sim_time(antenna.lock_time() + 0.05)
+    assert antenna.stop() == 0
+    out = tmp_path / "cmp"
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.compare", str(bag), "--segment",
+                        "1", "--out", str(out)], capture_output=True, text=True,
+                       env=ros_env(), timeout=300)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    assert (out / "shapes.png").stat().st_size > 10_000

@@ -230,9 +230,11 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     if label is None:
         label = default_label(path)
     a = np.array(js)
-    mesh = log.metadata.get("umbrella_sim.mesh", {})
+    mesh = log.metadata.get("umbrella_sim.mesh", {})       # the first segment's
     leaf_x = np.array(json.loads(mesh["leaf_node_x"])) if "leaf_node_x" in mesh else None
     link_x = np.array(json.loads(mesh["link_node_x"])) if "link_node_x" in mesh else None
+    if segment and leaf_x is not None:      # a later segment: its own mesh (a reset may change N)
+        leaf_x, link_x = _segment_mesh(log, params)
     summary = warnings = None
     record = log.metadata.get("umbrella_sim.summary") if segment == last else None
     if record and "figures" in record:
@@ -252,6 +254,19 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
                float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,
                summary, warnings, events.get("lock_kind"), lock_time_exact=exact,
                deploy_start=start, segment=segment if segment != last else None)
+
+
+def _segment_mesh(log, params: dict):
+    """Return the leaf's and the link's node positions of a segment's own parameters."""
+    from .model import UmbrellaModel
+    from .params import RECORDED_BEFORE_ADDED, SPECS, UmbrellaParams
+
+    try:
+        model = UmbrellaModel(UmbrellaParams.from_mapping(
+            {**RECORDED_BEFORE_ADDED, **{k: v for k, v in params.items() if k in SPECS}}))
+    except ValueError as exc:
+        raise LogError(f"{log.path}: a segment's parameters cannot be used ({exc})") from None
+    return np.array(model.leaf.node_x), np.array(model.link.node_x)
 
 
 def physics_run(path: str, segment: int = 0) -> dict:
