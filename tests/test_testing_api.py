@@ -342,3 +342,32 @@ def test_compare_draws_a_segment_of_another_mesh(antenna_factory, tmp_path):
                        env=ros_env(), timeout=300)
     assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
     assert (out / "shapes.png").stat().st_size > 10_000
+
+
+def test_a_summary_of_a_window_the_probe_never_saw_is_an_error_not_nan():
+    """A probe that matched 1.9 s into the run: summary(after_lock=0.2) returned NaN figures."""
+    from geometry_msgs.msg import PointStamped
+    from std_msgs.msg import Float64MultiArray, String
+
+    from umbrella_sim.testing import SimulatedAntenna
+
+    def tip(t):
+        m = PointStamped()
+        m.header.stamp.sec, m.header.stamp.nanosec = int(t), round(t % 1 * 1e9)
+        return m
+
+    late = [tip(1.88 + 0.01 * k) for k in range(5)]           # all past the window
+    stress = [Float64MultiArray(data=[1e8] * 8) for _ in late]
+    antenna = object.__new__(SimulatedAntenna)               # its figures only: no node
+    antenna.parameters = {"v0": -0.5}
+    antenna.wait_for_phase = antenna.wait_for_sim_time = lambda *args: None
+    antenna.lock_time = lambda: 0.0904
+    antenna.applied_forces = lambda: []
+    antenna.messages = lambda key: {"tip_deflection": late, "peak_stress": stress}[key]
+    antenna._timed_run = lambda key: {
+        "deployment_phase": [(0.5, String(data="locked"))],
+        "tip_deflection": [(2.0 + k, m) for k, m in enumerate(late)],
+        "peak_stress": [(2.0 + k, m) for k, m in enumerate(stress)]}[key]
+    with pytest.raises(AssertionError, match=r"no stage-2 samples received in \(0\.090400, "
+                                             r"0\.290400\] s .*from 1\.880000 s"):
+        antenna.summary(after_lock=0.2)

@@ -849,7 +849,9 @@ class SimulatedAntenna:
 
         The tip figures are of the tip messages, each exact at its stamp: the amplitude
         is of those samples, so it reads a few per cent low at 100 Hz (RunSummary).  The
-        stress figure is a peak-hold over each period.  The stress message has no stamp: stage-2
+        stress figure is a peak-hold over each period.  AssertionError if none of the window's
+        messages were received (a probe that subscribed after it).  The stress message has no
+        stamp: stage-2
         stress samples are those received after the 'locked' phase message and before the
         first tip message past the window, so a publication at either end may be left out
         or taken in; a recording gives the exact figures (:func:`summary_from_recording`).
@@ -879,7 +881,15 @@ class SimulatedAntenna:
                   for arrival, m in self._timed_run("peak_stress")]
         moving = (float(self.parameters.get("v0", -0.2)) != 0.0
                   or float(self.parameters.get("sleeve_force", 0.0)) != 0.0)
-        return summarize_run(self.applied_forces(), lock, moving, tip, stress, after_lock)
+        out = summarize_run(self.applied_forces(), lock, moving, tip, stress, after_lock)
+        if out.stage2_samples == 0 or not any(w == end for w, _ in stress):
+            first = min((t for t, _ in tip), default=None)
+            raise AssertionError(
+                f"no stage-2 samples received in ({lock:.6f}, {end:.6f}] s of sim time "
+                f"(tip messages from {first if first is None else f'{first:.6f} s'}: this "
+                "antenna's probe subscribed after the window); take a summary of a window "
+                "it saw, or summary_from_recording of its recording")
+        return out
 
     # ------------------------------------------------------------- lifetime
     def stop(self, timeout: float = 10.0) -> int:
