@@ -371,3 +371,17 @@ def test_a_summary_of_a_window_the_probe_never_saw_is_an_error_not_nan():
     with pytest.raises(AssertionError, match=r"no stage-2 samples received in \(0\.090400, "
                                              r"0\.290400\] s .*from 1\.880000 s"):
         antenna.summary(after_lock=0.2)
+
+
+def test_the_real_time_factor_after_a_reset_is_measured_from_the_reset(antenna_factory):
+    """Sim time goes back at a reset: the first status after it read -6.2x and -3.0x."""
+    from umbrella_sim.testing import poll
+
+    antenna = antenna_factory({"v0": -0.2})
+    antenna.wait_for_sim_time(1.5, timeout=30)      # well past a diagnostics period
+    antenna.reset()
+    poll(lambda: len(antenna.messages("diagnostics")) >= 2, 20,
+         lambda: "fewer than two diagnostics after the reset")
+    measured = [float({kv.key: kv.value for kv in m.status[0].values}
+                      ["measured_real_time_factor"]) for m in antenna.messages("diagnostics")]
+    assert all(0.5 < x < 1.5 for x in measured), measured      # real_time_factor 1

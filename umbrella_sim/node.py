@@ -501,7 +501,7 @@ class UmbrellaNode(Node):
         # ~20 ms now and then (measured with bench/bench_node.py)
         gc.freeze()
         log = self.get_logger()
-        diag_wall, diag_sim = time.monotonic(), self.sim.time
+        diag_wall, diag_sim, diag_epoch = time.monotonic(), self.sim.time, self._epoch
         lag = 0.0
         self._max_lag = 0.0
         try:
@@ -554,6 +554,8 @@ class UmbrellaNode(Node):
                             "time x real_time_factor (see diagnostics)"))
                 if sample is not None:
                     self._publish_sample(sample)
+                if epoch != diag_epoch:     # a reset: sim time restarted, measure from here
+                    diag_wall, diag_sim, diag_epoch = now, sim_t, epoch
                 if now - diag_wall >= 1.0:
                     measured = (sim_t - diag_sim) / (now - diag_wall)
                     self._check_namespace_peers()

@@ -783,10 +783,11 @@ class SimulatedAntenna:
             return timed[starts[-1]:] if starts and self._runs else timed
         if not self._runs:
             return timed
-        if hasattr(timed[-1][1] if timed else None, "header"):
+        if key != "diagnostics" and hasattr(timed[-1][1] if timed else None, "header"):
             i = self._run_index(timed, self._marks.get(key, 0))
             return [] if i is None else timed[i:]
-        # unstamped: what arrived since the run's first joint state
+        # unstamped, or diagnostics (1 Hz: its first stamp of a new run need not fall below
+        # the last of the old one): what arrived since the run's first joint state
         states = self._received("joint_states")
         i = self._run_index(states, self._marks.get("joint_states", 0))
         return [] if i is None else [(a, m) for a, m in timed if a >= states[i][0]]
