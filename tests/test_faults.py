@@ -129,6 +129,9 @@ def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
     assert "No space left" in log.ended_early
     r = run("umbrella_sim.replay", str(bag), "--resimulate")
     assert r.returncode == 0 and "recording ended early" in r.stdout, r.stdout + r.stderr
+    from umbrella_sim.compare import load_run      # and compare says why it has no summary
+    why = load_run(str(bag)).figures()["figures_from"]
+    assert "recording ended early (" in why and "No space left" in why, why
 
 
 def test_output_paths_checked_before_any_work(tmp_path):

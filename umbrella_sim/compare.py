@@ -76,6 +76,7 @@ class Run:
     lock_time_exact: bool = True
     deploy_start: float | None = 0.0     # outputs.deploy_start of the recorded run
     segment: int | None = None           # a segment before the log's last (its own record)
+    ended_early: str | None = None       # the recording's write error, if it stopped on one
 
     @property
     def deploy_time(self) -> float | None:
@@ -133,6 +134,8 @@ class Run:
         rate = self.params.get("publish_rate")
         why = (f"the summary record is of the log's last run, not of segment {self.segment}"
                if self.segment is not None else
+               f"the recording ended early ({self.ended_early}) before its summary record"
+               if self.ended_early else
                "the log has no summary record (an older recording, or its writer was killed)")
         out["figures_from"] = (f"recorded samples at {rate} Hz: {why}, so these figures "
                                "depend on the recording rate")
@@ -253,7 +256,8 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
                st[:, 0], st[:, 4], st[:, 3], st[:, 7], deploy, drift, shapes,
                float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,
                summary, warnings, events.get("lock_kind"), lock_time_exact=exact,
-               deploy_start=start, segment=segment if segment != last else None)
+               deploy_start=start, segment=segment if segment != last else None,
+               ended_early=log.ended_early or None)
 
 
 def _segment_mesh(log, params: dict):
