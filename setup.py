@@ -54,12 +54,12 @@ setup(
                            extra_compile_args=["-O3", "-std=c99"], libraries=["m"])],
     cmdclass={"build_ext": BuildKernel},
     install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "matplotlib"],
+    extras_require={"test": ["pytest"]},     # (tests_require: gone from setuptools)
     zip_safe=True,
     maintainer="umbrella_sim developers",
     maintainer_email="dev@umbrella-sim.invalid",
     description="Real-time flexible umbrella-frame deployment simulator (ROS 2 Jazzy)",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             # `ros2 run umbrella_sim <name>`: one naming style, snake_case as ROS executables
