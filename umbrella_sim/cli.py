@@ -250,7 +250,9 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument("--lock", choices=SPECS["lock"].choices)
     sp.add_argument("--time-step", type=float, dest="time_step", help="physics step (s)")
     sp.add_argument("--duration", type=float, default=1.0, help="simulated time (s)")
-    sp.add_argument("--csv", metavar="FILE", help="write the time series")
+    sp.add_argument("--csv", metavar="FILE",
+                    help="write the time series (every physics step; with --mcap, each "
+                         "publication)")
     sp.add_argument("--csv-state", action="store_true", help="add q and qd to the CSV")
     sp.add_argument("--json", action="store_true", help="print one JSON summary")
     sp.add_argument("--mcap", metavar="BAG_DIR",
@@ -258,7 +260,10 @@ def make_parser() -> argparse.ArgumentParser:
                          "BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the same "
                          "states and summary as without it when the physics step divides the "
                          "publication period (the default's does; else the recording takes "
-                         "the largest step that does, as the node, and says so)")
+                         "the largest step that does, as the node, and says so), but for "
+                         "energy_drift and constraint_residual_max, checked at each "
+                         "publication instead of each step (they differ in the last digits), "
+                         "and --csv, whose rows are then the publications")
     sp.add_argument("--publish-rate", type=float, default=None, dest="publish_rate",
                     help="publication rate of the --mcap recording (Hz, sim time; also "
                          "--set publish_rate=... or the params file's; default 100); the "
