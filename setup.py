@@ -64,13 +64,14 @@ setup(
         "console_scripts": [
             # `ros2 run umbrella_sim <name>`: one naming style, snake_case as ROS executables
             "umbrella_node = umbrella_sim.stop_signals:node_main",
-            "umbrella_sim = umbrella_sim.cli:main",
-            "umbrella_replay = umbrella_sim.replay:main",
-            "umbrella_compare = umbrella_sim.compare:main",
+            # (each takes SIGINT/SIGTERM before its heavy imports: stop_signals.py)
+            "umbrella_sim = umbrella_sim.stop_signals:cli_main",
+            "umbrella_replay = umbrella_sim.stop_signals:replay_main",
+            "umbrella_compare = umbrella_sim.stop_signals:compare_main",
             # the earlier names, kept as aliases
-            "umbrella-sim = umbrella_sim.cli:main",
-            "umbrella-replay = umbrella_sim.replay:main",
-            "umbrella-compare = umbrella_sim.compare:main",
+            "umbrella-sim = umbrella_sim.stop_signals:cli_main",
+            "umbrella-replay = umbrella_sim.stop_signals:replay_main",
+            "umbrella-compare = umbrella_sim.stop_signals:compare_main",
             "deploy_controller = umbrella_sim.stop_signals:controller_main",
         ],
     },

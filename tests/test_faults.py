@@ -413,6 +413,29 @@ def test_interrupted_offline_run_exits_130_with_its_recording_finalised(
     assert figures["energy_drift"] < 1e-6
 
 
+def test_a_stop_signal_while_a_tool_starts_is_taken(tmp_path):
+    """
+    SIGINT during the console script's imports, started as a background job (SIGINT ignored).
+
+    The imports take ~0.5 s before main installs its handlers: the signal was lost and the
+    run went to its end.  Now the entry point takes it first: exit 130 at once, one line.
+    """
+    tool = "umbrella_sim"
+    script = os.path.join(os.path.dirname(sys.executable), tool)
+    proc = subprocess.Popen([script, "simulate", "--time-step", "1e-5", "--duration", "1.0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=tmp_path, env=ros_env(),
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    for _ in range(50):     # every 0.05 s until it ends: the first ones may come before
+        time.sleep(0.05)    # the interpreter has run a line (ignored then, as by any program)
+        if proc.poll() is not None:
+            break
+        proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    assert f"{tool}: interrupted by SIGINT while starting; nothing was done" in err, err
+
+
 def test_output_read_by_a_closed_pipe_is_no_traceback_and_keeps_the_files(tmp_path):
     """`umbrella_compare ... | head -1`: exit 141 (SIGPIPE), no traceback, compare.json kept."""
     bags = []
