@@ -195,6 +195,13 @@ def test_plan_refuses_bad_overrides_before_starting_anything():
     for flag in ("rviz", "use_sim_time", "robot_state_publisher"):     # a typo is no "false"
         with pytest.raises(ValueError, match=f"{flag}:='ture'"):
             ld.plan(dict(values, **{flag: "ture"}), installed=lambda pkg: None)
+    # node parameters and the namespace too, before the node is started (they failed there)
+    for name, text, words in (("publish_rate", "0", "publish_rate=0.0"),
+                              ("duration", "-1", "duration=-1.0"),
+                              ("namespace", "1a", "'1a' is not a ROS name token")):
+        with pytest.raises(ValueError, match=words):
+            ld.plan(dict(values, **{name: text}), installed=lambda pkg: None)
+    assert ld.plan(dict(values, namespace="a1/b_2"), installed=lambda pkg: None)
 
 
 def test_plan_checks_overrides_on_top_of_the_params_file(tmp_path):

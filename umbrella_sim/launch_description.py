@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import os
+import re
 
 from .params import REGISTRY, SPECS, UmbrellaParams
 
@@ -101,6 +102,8 @@ def overrides(values: dict[str, str], params_file: str | None = None) -> dict:
     for name, text in values.items():
         if name in REGISTRY and text not in ("", None):
             out[name] = REGISTRY[name].coerce(text)
+            if name not in SPECS:           # a node parameter: its range, as the node's
+                REGISTRY[name].check(out[name])
     model = {k: v for k, v in out.items() if k in SPECS}
     if model:
         from .params import load_params_file
@@ -130,6 +133,10 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
     installed(package) returns the package's share directory or None (tests pass their own).
     """
     ns = values.get("namespace", "").strip("/")
+    bad = [t for t in ns.split("/") if ns and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", t)]
+    if bad:         # (ROS names: a token starts with a letter or _, then letters, digits, _)
+        raise ValueError(f"launch argument namespace:={ns!r}: {bad[0]!r} is not a ROS name "
+                         "token (a letter or _ first, then letters, digits or _)")
     rel = f"/{ns}" if ns else ""
     sim_time = _truthy(values.get("use_sim_time", "true"), "use_sim_time")
     params = [values.get("params_file") or default_params_file()]
