@@ -696,12 +696,40 @@ def _client(workers: int | None, scheduler: str | None, log: Callable[[str], Non
         return client, None
     n = workers or os.cpu_count() or 1
     # loopback only, every port (scheduler, its HTTP server, workers) picked free by the OS
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           host="127.0.0.1", scheduler_port=0, dashboard_address="127.0.0.1:0",
-                           silence_logs=logging.ERROR)
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", scheduler_port=0,
+                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+    except KeyboardInterrupt:
+        _drop_unstarted_clusters()
+        raise
     log(f"local Dask cluster: {n} worker process{'es' if n > 1 else ''} at "
         f"{cluster.scheduler_address}")
     return Client(cluster), cluster
+
+
+def _drop_unstarted_clusters() -> None:
+    """
+    Close what a cluster interrupted while starting had started, and forget it.
+
+    distributed closes every cluster at exit, and asserted on one a Ctrl-C had left
+    half-made ('Exception ignored in atexit callback ... Status.init' after the exit line).
+    """
+    from distributed.deploy.spec import SpecCluster
+
+    for cluster in list(SpecCluster._instances):
+        try:
+            cluster.close(timeout=5)
+        except BaseException:  # noqa: BLE001 - half-made: close what can be closed
+            pass
+        _forget_cluster(cluster)
+
+
+def _forget_cluster(cluster) -> None:
+    """Keep distributed from closing a cluster again at exit (we closed it, or tried)."""
+    from distributed.deploy.spec import SpecCluster
+
+    SpecCluster._instances.discard(cluster)
 
 
 def _ignore_sigint() -> None:
@@ -845,6 +873,8 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
                     cluster.close(timeout=10)
             except Exception:  # noqa: BLE001 - closing after an interrupt: best effort
                 pass
+            if cluster is not None:
+                _forget_cluster(cluster)
         if made_dir:
             try:
                 _write_outputs(sweep, store, out_dir, report, log)
