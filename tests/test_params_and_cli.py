@@ -88,6 +88,7 @@ def test_bad_params_file(tmp_path):
     ("step_follows_mesh: 'yes'", "step_follows_mesh='yes': must be of type bool"),
     ("elements_per_segment: 2.0", "elements_per_segment=2.0: must be of type integer, got double"),
     ("lock: 1", "lock=1: must be of type string, got integer"),
+    ('publish_rate: "50"', "publish_rate='50': must be of type double, got string"),
 ])
 def test_a_params_file_value_of_another_type_is_refused_as_the_node_does(tmp_path, line, words):
     """A quoted number in a params file is a string: the node refuses it, and so does simulate."""
@@ -103,9 +104,12 @@ def test_params_file_numbers_are_typed_as_rcl_types_them(tmp_path):
 
     path = tmp_path / "typed.yaml"
     path.write_text("/**:\n  ros__parameters:\n    youngs_modulus: 72.0e9\n    v0: -5e-1\n"
-                    "    l1: .5\n    elements_per_segment: 2\n    lock: '1'\n")
+                    "    l1: .5\n    elements_per_segment: 2\n    lock: '1'\n"
+                    "    host: 10.0.0.1\n    name: 3d\n    dir: 2024_runs\n")
     assert load_params_file(str(path)) == {"youngs_modulus": 72e9, "v0": -0.5, "l1": 0.5,
-                                           "elements_per_segment": 2, "lock": "1"}
+                                           "elements_per_segment": 2, "lock": "1",
+                                           "host": "10.0.0.1", "name": "3d",   # (text that
+                                           "dir": "2024_runs"}   # starts with a number)
 
 
 def test_a_bad_value_in_a_params_file_names_the_file(tmp_path):
@@ -245,6 +249,7 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     ("# my drive\n\nt [s], F [N]\n0,5\n", [(0.0, 5.0)]),     # a header after a comment
     ("0,5\n0.3,0,\n", [(0.0, 5.0), (0.3, 0.0)]),             # a trailing comma
     ("Time (s),Force (N)\n0,5\n", [(0.0, 5.0)]),
+    ("t,sleeve_force\n0,5\n", [(0.0, 5.0)]),       # the topic's name
 ])
 def test_force_profile_rows_and_header(tmp_path, text, rows):
     from umbrella_sim.cli import read_force_profile

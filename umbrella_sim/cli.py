@@ -12,9 +12,9 @@ import sys
 from . import __version__, sweep
 from .arguments import ArgumentParser
 from .files import check_new_output, read_text_input
-from .params import (check_known_names, check_values, load_params_file, NODE_ONLY_PARAMS,
-                     NODE_PARAMETERS, parameter_help, shortened_step_note, SPECS,
-                     UmbrellaParams)
+from .params import (check_known_names, check_types, check_values, load_params_file,
+                     NODE_ONLY_PARAMS, NODE_PARAMETERS, parameter_help, shortened_step_note,
+                     SPECS, UmbrellaParams)
 from .solver import command_force, simulate, UmbrellaSimulator
 from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
 
@@ -51,7 +51,8 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
     Read a CSV of (t, F) rows, an optional header line.
 
     Blank lines and lines starting with # are skipped; the first other line may be a header
-    (neither of its two fields a number).  Times are non-decreasing; each F is a command the
+    (neither of its two fields a number; one naming force then time, F,t, is refused).
+    Times are non-decreasing; each F is a command the
     model (params) accepts.
     """
     rows: list[tuple[float, float]] = []
@@ -70,9 +71,9 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
         header, first = first and not any(map(_is_number, row[:2])), False
         if header:
             names = [field.strip().lower() for field in row[:2]]
-            if not (names[0].startswith("t") and names[1].startswith("f")):
+            if names[0].startswith("f") and names[1].startswith("t"):   # (any other names)
                 raise ValueError(f"force profile {path}:{lineno}: header {row[:2]}: the "
-                                 "columns are time then force (t,F)")
+                                 "columns are time then force (t,F), not force then time")
             continue
         try:
             t, f = _number(row[0]), _number(row[1])
@@ -185,6 +186,7 @@ def build_params(args) -> UmbrellaParams:
         spec = NODE_PARAMETERS[name]
         if getattr(args, name) is None and name in from_file:
             try:
+                check_types({name: from_file[name]})    # typed as the node reads the file
                 setattr(args, name, spec.coerce(from_file[name]))
                 spec.check(getattr(args, name))
             except ValueError as exc:

@@ -477,7 +477,7 @@ def check_types(values: Mapping[str, Any]) -> None:
     string.  (Text from a command line, -p or --set, is parsed instead: Param.coerce.)
     """
     for name, value in values.items():
-        spec = SPECS.get(name)
+        spec = REGISTRY.get(name)           # model and node parameters alike
         if spec is None:
             continue
         ok = (isinstance(value, bool) if spec.type is bool
@@ -581,8 +581,8 @@ def _flatten(values: dict, prefix: str = "") -> dict:
 
 #: a plain (unquoted) scalar rcl's params parser reads as a double: strtod's forms, which
 #: include 72.0e9 (YAML 1.1, and so PyYAML, wants a sign in the exponent: a string to it)
-_ROS_DOUBLE = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|[-+]?\.(inf|Inf|INF)"
-                         r"|\.(nan|NaN|NAN)")
+_ROS_DOUBLE = re.compile(r"(?:[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|[-+]?\.(inf|Inf|INF)"
+                         r"|\.(nan|NaN|NAN))$")      # the whole value (PyYAML: match only)
 
 
 def load_yaml_as_ros(text: str):
