@@ -530,3 +530,5 @@ def test_deploy_time_runs_from_the_first_push_on_every_path(tmp_path):
                                                                    abs=1e-12)
     assert summary_from_recording(str(bag)).deploy_time == pytest.approx(late["deploy_time"],
                                                                          abs=1e-12)
+    # never pushed: no start (compare said None, the summary 0.0)
+    assert simulate(rest, 0.05).summary()["deploy_start"] is None

@@ -425,6 +425,18 @@ def stress_point_labels(xs) -> list[str]:
     return out
 
 
+def moves_from_start(params) -> bool:
+    """
+    Tell whether a run's frame moves from t = 0: v0 != 0 or a sleeve force acting from it.
+
+    params: the run's parameters (a mapping; the registry's default for one not given).
+    """
+    from .params import defaults
+
+    given = {**defaults(), **dict(params)}
+    return float(given["v0"]) != 0.0 or float(given["sleeve_force"]) != 0.0
+
+
 def deploy_start(moving_at_start: bool, applied) -> float | None:
     """
     Return when the deployment started: the origin of a run's deploy time (one rule).
@@ -600,8 +612,7 @@ class SummaryAccumulator:
         self._s2_t: list = []
         self._s2_v: list = []
         # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
-        self._start = deploy_start(initial.sleeve_velocity != 0.0 or initial.alpha1_rate != 0.0
-                                   or initial.sleeve_force != 0.0, ())
+        self._start = deploy_start(moves_from_start(self.params), ())
         self._warned: set = set()
         self._warned_at: tuple | None = None   # (peak, tip) the last new_warnings saw
 
@@ -651,9 +662,10 @@ class SummaryAccumulator:
     def figures(self) -> dict:
         """Return the physics figures of the run so far (no wall-clock ones), JSON-ready."""
         p = self.params
-        start = self._start if self._start is not None else 0.0
+        start = self._start if self._start is not None else 0.0    # (None: never pushed)
         out: dict = {"deploy_time": self.lock.time - start if self.lock else None,
-                     "deploy_start": start, "lock_time": self.lock.time if self.lock else None,
+                     "deploy_start": self._start,
+                     "lock_time": self.lock.time if self.lock else None,
                      "tip_deflection_max": self._tip1[0],
                      "tip_deflection_max_time": self._tip1[1]}
         if self._s2_t:

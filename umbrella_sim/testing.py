@@ -502,8 +502,10 @@ def summary_from_recording(path: str,
         locked = [t for t, m in log.decoded(log.find_topic("deployment_phase"), seg)
                   if m.data == "locked"]
         lock_time = locked[0] if locked else None
-    moving = float(params.get("v0", 0.0)) != 0.0 or float(params.get("sleeve_force", 0.0)) != 0
-    return summarize_run(applied, lock_time, moving, tip, stress, after_lock)
+    from .outputs import moves_from_start
+
+    return summarize_run(applied, lock_time, moves_from_start(params), tip, stress,
+                         after_lock)
 
 
 # ------------------------------------------------------------------ antenna
@@ -880,9 +882,10 @@ class SimulatedAntenna:
             return -math.inf if arrival <= phase_arrival else end if arrival < cut else math.inf
         stress = [(when(arrival), max(m.data[0], m.data[4]))
                   for arrival, m in self._timed_run("peak_stress")]
-        moving = (float(self.parameters.get("v0", -0.2)) != 0.0
-                  or float(self.parameters.get("sleeve_force", 0.0)) != 0.0)
-        out = summarize_run(self.applied_forces(), lock, moving, tip, stress, after_lock)
+        from .outputs import moves_from_start
+
+        out = summarize_run(self.applied_forces(), lock, moves_from_start(self.parameters),
+                            tip, stress, after_lock)
         if out.stage2_samples == 0 or not any(w == end for w, _ in stress):
             first = min((t for t, _ in tip), default=None)
             raise AssertionError(
