@@ -368,9 +368,16 @@ def test_a_summary_of_a_window_the_probe_never_saw_is_an_error_not_nan():
         "deployment_phase": [(0.5, String(data="locked"))],
         "tip_deflection": [(2.0 + k, m) for k, m in enumerate(late)],
         "peak_stress": [(2.0 + k, m) for k, m in enumerate(stress)]}[key]
-    with pytest.raises(AssertionError, match=r"no stage-2 samples received in \(0\.090400, "
-                                             r"0\.290400\] s .*from 1\.880000 s"):
+    with pytest.raises(AssertionError, match=r"no stage-2 tip samples in \(0\.090400, "
+                                             r"0\.290400\] s .*at 1\.880000 s: this "
+                                             r"antenna's probe subscribed after the window"):
         antenna.summary(after_lock=0.2)
+    # a window shorter than a publication period holds none: said so, not blamed on the probe
+    on_time = [tip(0.01 * k) for k in range(40)]
+    stress[:] = [Float64MultiArray(data=[1e8] * 8) for _ in on_time]
+    late[:] = on_time
+    with pytest.raises(AssertionError, match="after_lock is shorter than a publication period"):
+        antenna.summary(after_lock=0.004)
 
 
 def test_the_real_time_factor_after_a_reset_is_measured_from_the_reset(antenna_factory):

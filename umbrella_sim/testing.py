@@ -886,13 +886,21 @@ class SimulatedAntenna:
 
         out = summarize_run(self.applied_forces(), lock, moves_from_start(self.parameters),
                             tip, stress, after_lock)
-        if out.stage2_samples == 0 or not any(w == end for w, _ in stress):
-            first = min((t for t, _ in tip), default=None)
+        window = f"({lock:.6f}, {end:.6f}] s of sim time"
+        if out.stage2_samples == 0:
+            first = min((t for t, _ in tip), default=math.inf)
+            why = (f"its first tip message is at {first:.6f} s: this antenna's probe "
+                   "subscribed after the window" if first > end else
+                   "no publication falls in it: after_lock is shorter than a publication "
+                   "period")
+            raise AssertionError(f"no stage-2 tip samples in {window}: {why}; take a summary "
+                                 "of a window it saw, or summary_from_recording")
+        if not any(w == end for w, _ in stress):
             raise AssertionError(
-                f"no stage-2 samples received in ({lock:.6f}, {end:.6f}] s of sim time "
-                f"(tip messages from {first if first is None else f'{first:.6f} s'}: this "
-                "antenna's probe subscribed after the window); take a summary of a window "
-                "it saw, or summary_from_recording of its recording")
+                f"no peak_stress message of {window} received between the 'locked' phase "
+                "message and the first tip message past the window (messages on different "
+                "topics have no mutual order): take a longer after_lock, or "
+                "summary_from_recording")
         return out
 
     # ------------------------------------------------------------- lifetime
