@@ -392,6 +392,19 @@ def test_compare_of_one_run_recorded_at_two_rates_finds_no_difference(tmp_path):
             assert d["max"] <= 1e-9 * scale[name], (order[0].name, name, d)
 
 
+def test_peak_holds_compare_on_the_coarser_grid_when_the_runs_start_apart():
+    """A coarse run from 0.5 s, a fine one from 0: its first period took every earlier peak."""
+    from umbrella_sim.compare import _diff
+
+    fine_t = np.arange(0.0, 2.0 + 1e-9, 0.001)
+    fine = np.sin(40 * fine_t) ** 2 + 5.0 * (fine_t < 0.3)     # a crest long before 0.5 s
+    coarse_t = np.arange(0.5, 2.0 + 1e-9, 0.01)
+    coarse = np.array([fine[(fine_t > t - 0.01 + 1e-9) & (fine_t <= t + 1e-9)].max()
+                       for t in coarse_t])      # the coarse run's own peak-hold of the same
+    assert _diff(coarse_t, coarse, fine_t, fine, True) == (0.0, 0.0)
+    assert _diff(fine_t, fine, coarse_t, coarse, True) == (0.0, 0.0)
+
+
 def test_bad_files_give_clear_errors(tmp_path, live_bag):
     not_mcap = tmp_path / "x.mcap"
     not_mcap.write_bytes(b"definitely not an mcap file")

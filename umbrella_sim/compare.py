@@ -295,8 +295,10 @@ def _on_grid(t, y, grid, peak_hold: bool):
     if not peak_hold:
         return np.interp(grid, t, y)
     tol = 1e-9                      # stamps are exact to the recording's 1 ns
+    period = grid[1] - grid[0] if len(grid) > 1 else 0.0     # (the first: one period too)
     hi = np.searchsorted(t, grid + tol, side="right")
-    lo = np.searchsorted(t, np.concatenate(([-np.inf], grid[:-1])) + tol, side="right")
+    lo = np.searchsorted(t, np.concatenate(([grid[0] - period], grid[:-1])) + tol,
+                         side="right")
     out = np.interp(grid, t, y)     # (a period with no sample of the finer run)
     for k in np.nonzero(hi > lo)[0]:
         out[k] = y[lo[k]:hi[k]].max()

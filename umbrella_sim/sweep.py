@@ -49,12 +49,15 @@ import yaml
 
 from . import __version__
 from .files import check_new_output, read_text_input
+from .params import NODE_PARAMETERS
 from .stop_signals import deferred
 
 SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
              "force_profile")
 DEFAULT_DURATION = 1.0      # s, as `umbrella-sim simulate`
 STATUS_OK, STATUS_DIVERGED, STATUS_ERROR = "ok", "diverged", "error"
+#: the publication rate of a case's --mcap recording: the node's default, as simulate --mcap
+MCAP_PUBLISH_RATE = NODE_PARAMETERS["publish_rate"].default
 #: statuses of a case that is done: re-running the sweep skips it
 FINISHED = (STATUS_OK, STATUS_DIVERGED)
 PLOTS = ("deploy_time.png", "peak_stress.png", "tip_deflection.png")
@@ -268,7 +271,8 @@ def run_case(task: dict) -> dict:
             if os.path.exists(bag):     # left by an unfinished earlier attempt of this case
                 import shutil
                 shutil.rmtree(bag)
-            result = record_offline(params, bag, _mcap_duration(task), profile)
+            result = record_offline(params, bag, _mcap_duration(task), profile,
+                                    publish_rate=MCAP_PUBLISH_RATE)
             out["mcap"] = bag
             if result.recording_error:      # not finished: a resumed sweep runs it again
                 out["summary"] = result.summary()
@@ -618,7 +622,7 @@ class SweepProgress:
     def __init__(self, total: int, stream=None):
         self.total, self.done, self.failed = total, 0, 0
         self.stream = stream or sys.stderr     # (at call time: a redirected stderr)
-        self.tty = hasattr(stream, "isatty") and stream.isatty()
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.t0 = time.monotonic()
 
     @staticmethod
@@ -696,28 +700,30 @@ def _client(workers: int | None, scheduler: str | None, log: Callable[[str], Non
         return client, None
     n = workers or os.cpu_count() or 1
     # loopback only, every port (scheduler, its HTTP server, workers) picked free by the OS
+    from distributed.deploy.spec import SpecCluster
+
+    before = set(SpecCluster._instances)
     try:
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                host="127.0.0.1", scheduler_port=0,
                                dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
     except KeyboardInterrupt:
-        _drop_unstarted_clusters()
+        _drop_unstarted_clusters(set(SpecCluster._instances) - before)
         raise
     log(f"local Dask cluster: {n} worker process{'es' if n > 1 else ''} at "
         f"{cluster.scheduler_address}")
     return Client(cluster), cluster
 
 
-def _drop_unstarted_clusters() -> None:
+def _drop_unstarted_clusters(clusters) -> None:
     """
     Close what a cluster interrupted while starting had started, and forget it.
 
     distributed closes every cluster at exit, and asserted on one a Ctrl-C had left
     half-made ('Exception ignored in atexit callback ... Status.init' after the exit line).
+    clusters: the ones that start made (a caller's own are left alone).
     """
-    from distributed.deploy.spec import SpecCluster
-
-    for cluster in list(SpecCluster._instances):
+    for cluster in clusters:
         try:
             cluster.close(timeout=5)
         except BaseException:  # noqa: BLE001 - half-made: close what can be closed
@@ -771,9 +777,9 @@ def _mcap_step_cases(sweep: Sweep, log) -> None:
     time_step that does not divide it the recorded run is another computation than the
     plain one: it must not take (or replace) the plain case's result.
     """
-    from .params import NODE_PARAMETERS, shortened_step_note, UmbrellaParams
+    from .params import shortened_step_note, UmbrellaParams
 
-    rate = NODE_PARAMETERS["publish_rate"].default
+    rate = MCAP_PUBLISH_RATE
     for case in sweep.cases:
         step = UmbrellaParams.from_mapping(case.params).physics_time_step
         note = shortened_step_note(step, rate)
