@@ -185,6 +185,10 @@ def test_a_remapped_node_s_recording_serves_every_tool(tmp_path):
         probe.close()
     log = read_log(str(bag))
     assert {"/r1/js", "/cmd/applied"} <= set(log.topics())
+    # the remapped command is still a command: not republished unless --with-commands
+    from umbrella_sim.replay import _is_command
+    assert sorted(t for t in log.topics() if _is_command(t, log)) == [
+        "/cmd", "/cmd/applied", "/cmd/refused"]
     summary = summary_from_recording(str(bag), after_lock=0.1)
     assert summary.first_push_time is not None and summary.first_push_time > 0
     assert summary.deploy_time == pytest.approx(summary.lock_time - summary.first_push_time)

@@ -21,14 +21,18 @@ import time
 import numpy as np
 
 from .arguments import ArgumentParser
-from .logs import LogData, LogError, qos_from_yaml, read_log
+from .logs import LogData, LogError, qos_from_yaml, read_log, TOPICS_RECORD
 from .stop_signals import interruptible
 
 COMMAND_SUFFIXES = ("sleeve_force", "sleeve_force/refused", "sleeve_force/applied")
 ACK_TIMEOUT_S = 3.5      # > Fast DDS's default 3 s heartbeat period, which prompts the acks
 
 
-def _is_command(topic: str) -> bool:
+def _is_command(topic: str, log: LogData | None = None) -> bool:
+    """Tell whether a recorded topic is the node's command or its records (remapped too)."""
+    recorded = (log.metadata.get(TOPICS_RECORD, {}) if log is not None else {})
+    if any(recorded.get(s) == topic for s in COMMAND_SUFFIXES):
+        return True
     return any(topic.endswith("/" + s) or topic == s for s in COMMAND_SUFFIXES)
 
 
@@ -302,7 +306,7 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
-    chosen = [t for t in log.topics() if (with_commands or not _is_command(t))
+    chosen = [t for t in log.topics() if (with_commands or not _is_command(t, log))
               and (not topics or t in topics)]
     if topics:
         missing = sorted(set(topics) - set(log.channels))
