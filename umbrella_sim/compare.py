@@ -21,8 +21,7 @@ import numpy as np
 
 from .arguments import ArgumentParser
 from .logs import LogError, read_log
-from .outputs import (deploy_start, moves_from_start, relative_drift, stage2_figures,
-                      validity_warnings)
+from .outputs import deploy_start_of, relative_drift, stage2_figures, validity_warnings
 from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
@@ -251,7 +250,7 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     applied_topic = log.find_topic("sleeve_force/applied", required=False)
     applied = ([(tm, m.data) for tm, m in log.iter_decoded(applied_topic, seg)]
                if applied_topic else [])
-    start = deploy_start(moves_from_start(params), applied)
+    start = deploy_start_of(params, applied)
     return Run(label, log.path, params, t, a[:, 0], a[:, 1], tt, np.array(tip), ts,
                st[:, 0], st[:, 4], st[:, 3], st[:, 7], deploy, drift, shapes,
                float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,

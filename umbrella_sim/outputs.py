@@ -425,30 +425,34 @@ def stress_point_labels(xs) -> list[str]:
     return out
 
 
-def moves_from_start(params) -> bool:
-    """
-    Tell whether a run's frame moves from t = 0: v0 != 0 or a sleeve force acting from it.
-
-    params: the run's parameters (a mapping; the registry's default for one not given).
-    """
-    from .params import defaults
-
-    given = {**defaults(), **dict(params)}
-    return float(given["v0"]) != 0.0 or float(given["sleeve_force"]) != 0.0
-
-
-def deploy_start(moving_at_start: bool, applied) -> float | None:
+def deploy_start(v0: float, forces) -> float | None:
     """
     Return when the deployment started: the origin of a run's deploy time (one rule).
 
-    t = 0 if the frame moved from the start (v0 != 0, or a force acting from t = 0), else
-    the instant the first non-zero sleeve force acted ([(t, F)] in time order); None if
-    neither happened.  A frame at rest that waits for its first command does not deploy
-    while it waits: the thesis's deploy time runs from the initial velocity V0.
+    t = 0 if the frame moves from the start (v0 != 0), else the first instant a non-zero
+    sleeve force acts; None if neither happened.  forces: (t, F) in time order, each F
+    acting from t, a later value at the same t replacing an earlier one (the parameter's
+    value at t = 0, then a command or profile row at t = 0 that replaces it).  A frame at
+    rest that waits for its first command does not deploy while it waits: the thesis's
+    deploy time runs from the initial velocity V0.
     """
-    if moving_at_start:
+    if v0 != 0.0:
         return 0.0
-    return next((float(t) for t, f in applied if f != 0.0), None)
+    pending = None          # (t, F) not yet known to be the last value at its t
+    for t, f in forces:
+        if pending is not None and t > pending[0] + 1e-12 and pending[1] != 0.0:
+            return float(pending[0])
+        pending = (t, f)
+    return float(pending[0]) if pending is not None and pending[1] != 0.0 else None
+
+
+def deploy_start_of(params, applied) -> float | None:
+    """deploy_start of a recorded run: its parameters (registry defaults) and applied forces."""
+    from .params import defaults
+
+    given = {**defaults(), **dict(params)}
+    return deploy_start(float(given["v0"]),
+                        [(0.0, float(given["sleeve_force"])), *applied])
 
 
 def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dict:
@@ -612,7 +616,7 @@ class SummaryAccumulator:
         self._s2_t: list = []
         self._s2_v: list = []
         # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
-        self._start = deploy_start(moves_from_start(self.params), ())
+        self._start = deploy_start(float(self.params.get("v0", 0.0)), ())
         self._warned: set = set()
         self._warned_at: tuple | None = None   # (peak, tip) the last new_warnings saw
 
@@ -632,7 +636,8 @@ class SummaryAccumulator:
             pushed = np.flatnonzero(block.rows[_FORCE_ROW])
             if len(pushed):         # from the start of the step it acted in
                 i = int(pushed[0])
-                self._start = self.final_time if i == 0 else t[i - 1]
+                step_start = self.final_time if i == 0 else t[i - 1]
+                self._start = deploy_start(0.0, [(step_start, block.rows[_FORCE_ROW, i])])
         self.steps += n
         self.final_time = t[-1]
         self._tip_all = max(self._tip_all, max(v), -min(v))

@@ -460,7 +460,7 @@ def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
     """
     from .outputs import deploy_start   # (the one rule: the summary, compare, this)
 
-    first_push = deploy_start(started_moving, applied)
+    first_push = 0.0 if started_moving else deploy_start(0.0, applied)
     deploy = (lock_time - first_push if lock_time is not None and first_push is not None
               else None)
     end = math.inf if after_lock is None or lock_time is None else lock_time + after_lock
@@ -502,10 +502,10 @@ def summary_from_recording(path: str,
         locked = [t for t, m in log.decoded(log.find_topic("deployment_phase"), seg)
                   if m.data == "locked"]
         lock_time = locked[0] if locked else None
-    from .outputs import moves_from_start
+    from .outputs import deploy_start_of
 
-    return summarize_run(applied, lock_time, moves_from_start(params), tip, stress,
-                         after_lock)
+    return summarize_run(applied, lock_time, deploy_start_of(params, applied) == 0.0, tip,
+                         stress, after_lock)
 
 
 # ------------------------------------------------------------------ antenna
@@ -882,9 +882,10 @@ class SimulatedAntenna:
             return -math.inf if arrival <= phase_arrival else end if arrival < cut else math.inf
         stress = [(when(arrival), max(m.data[0], m.data[4]))
                   for arrival, m in self._timed_run("peak_stress")]
-        from .outputs import moves_from_start
+        from .outputs import deploy_start_of
 
-        out = summarize_run(self.applied_forces(), lock, moves_from_start(self.parameters),
+        applied = self.applied_forces()
+        out = summarize_run(applied, lock, deploy_start_of(self.parameters, applied) == 0.0,
                             tip, stress, after_lock)
         window = f"({lock:.6f}, {end:.6f}] s of sim time"
         if out.stage2_samples == 0:
