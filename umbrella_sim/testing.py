@@ -619,26 +619,31 @@ class SimulatedAntenna:
             from .solver import command_force
             command_force(force, UmbrellaParams.from_mapping(
                 {k: v for k, v in self.parameters.items() if k in SPECS}))
+        self._command_publisher(timeout).publish(self._float64(data=float(force)))
+
+    def _command_publisher(self, timeout: float):
+        """Return the sleeve_force publisher, made and matched with the node's subscription."""
         if self._command_pub is None:
             from . import ros_io
             self._command_pub = self.probe.publisher(self.topics["sleeve_force"], self._float64,
                                                      ros_io.COMMAND.qos)
             self.probe.wait_for_subscribers(self._command_pub, timeout=timeout)
-        self._command_pub.publish(self._float64(data=float(force)))
+        return self._command_pub
 
     def play_force_profile(self, profile: Iterable[tuple[float, float]],
                            timeout: float = 30.0) -> None:
         """
         Publish each (t, F) of a profile when the node's sim time reaches start + t.
 
-        The start is sim_time() at the call (joint_states stamps; the run's first state is
-        waited for); returns after the last command.  Commands act from the next
-        publication after they arrive, so each lands on the publication grid a little after
-        its t; a profile exact in sim time is
+        The start is sim_time() once the command publisher has matched the node (joint_states
+        stamps; the run's first state is waited for); returns after the last command.
+        Commands act from the next publication after they arrive, so each lands on the
+        publication grid a little after its t; a profile exact in sim time is
         ``umbrella_sim simulate --force-profile`` (offline, the same physics).
         """
         rows = sorted(profile, key=lambda tf: tf[0])
         self.wait_for("joint_states", lambda m: True, timeout, "a first joint state")
+        self._command_publisher(timeout)    # matched first: its ~0.4 s not inside the profile
         t0 = self.sim_time()
         for t_rel, force in rows:
             self.wait_for_sim_time(t0 + t_rel, timeout=timeout)
