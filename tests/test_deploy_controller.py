@@ -170,6 +170,11 @@ def test_controller_shares_the_node_params_file_and_names_a_typo_in_it(tmp_path)
     with NodeProcess("--params-file", str(shared)) as node:
         node.wait_for_log("physics step", timeout=60)
         assert node.stop() == 0, node.output()
+    # and the offline tools, which read the node's file (they refused the controller's names)
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim", "simulate", "--params",
+                        str(shared), "--duration", "0.01"], capture_output=True, text=True,
+                       env=ros_env(), timeout=60)
+    assert r.returncode == 0, r.stderr
     # a section naming the node alone is the node's: a controller name there is a mistake
     own = tmp_path / "own.yaml"
     own.write_text("umbrella_node:\n  ros__parameters:\n    target_time: 1.5\n")

@@ -11,6 +11,7 @@ import sys
 
 from . import __version__, sweep
 from .arguments import ArgumentParser
+from .deploy_controller import CONTROLLER_PARAMETERS
 from .files import check_new_output, read_text_input
 from .params import (check_known_names, check_types, check_values, load_params_file,
                      NODE_ONLY_PARAMS, NODE_PARAMETERS, parameter_help, shortened_step_note,
@@ -115,7 +116,7 @@ def resolve_params(overrides: dict, params_file: str | None = None,
     if params_file:
         if from_file is None:
             from_file = load_params_file(params_file)
-        check_known_names(from_file, set(SPECS) | set(NODE_ONLY_PARAMS),
+        check_known_names(from_file, set(SPECS) | set(NODE_ONLY_PARAMS) | set(SHARED_NAMES),
                           f"params file {params_file}")
         try:        # its own values first: an error names the file
             check_values({k: v for k, v in from_file.items()
@@ -123,11 +124,14 @@ def resolve_params(overrides: dict, params_file: str | None = None,
         except ValueError as exc:
             raise ValueError(f"params file {params_file}: {exc}") from None
         values.update(from_file)
-    for name in NODE_ONLY_PARAMS:     # a params file shared with the node: its node part
+    for name in (*NODE_ONLY_PARAMS, *SHARED_NAMES):   # a file shared with the nodes: theirs
         values.pop(name, None)
     values.update(overrides)
     return UmbrellaParams.from_mapping(values).validated()
 
+
+#: deploy_controller's parameters, which a '/**' params file shared with it may hold
+SHARED_NAMES = tuple(CONTROLLER_PARAMETERS)
 
 #: simulate's options that give a parameter: (argparse dest, parameter)
 CLI_FLAGS = (("model", "model"), ("elements_per_segment", "elements_per_segment"),
