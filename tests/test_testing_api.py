@@ -378,6 +378,8 @@ def test_a_summary_of_a_window_the_probe_never_saw_is_an_error_not_nan():
     late[:] = on_time
     with pytest.raises(AssertionError, match="after_lock is shorter than a publication period"):
         antenna.summary(after_lock=0.004)
+    with pytest.raises(ValueError, match="after_lock=None: seconds"):      # (a TypeError)
+        antenna.summary(after_lock=None)
 
 
 def test_the_real_time_factor_after_a_reset_is_measured_from_the_reset(antenna_factory):

@@ -864,6 +864,10 @@ class SimulatedAntenna:
         first tip message past the window, so a publication at either end may be left out
         or taken in; a recording gives the exact figures (:func:`summary_from_recording`).
         """
+        if after_lock is None or not after_lock > 0:
+            raise ValueError(f"after_lock={after_lock!r}: seconds of sim time after the lock "
+                             "(> 0); a live run has no end to summarise to (None, the whole "
+                             "run, is for summary_from_recording)")
         self.wait_for_phase("locked", timeout)
         lock = poll(self.lock_time, timeout, lambda: "no 'locked at' line in the node's log")
         end = lock + after_lock
