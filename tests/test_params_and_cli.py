@@ -86,7 +86,7 @@ def test_bad_params_file(tmp_path):
 @pytest.mark.parametrize("line, words", [
     ('v0: "-0.5"', "v0='-0.5': must be of type double, got string"),
     ("step_follows_mesh: 'yes'", "step_follows_mesh='yes': must be of type bool"),
-    ("elements_per_segment: 2.0", "elements_per_segment=2.0: must be of type integer, got double"),
+    ("elements_per_segment: 2.5", "elements_per_segment=2.5: must be of type integer, got double"),
     ("lock: 1", "lock=1: must be of type string, got integer"),
     ('publish_rate: "50"', "publish_rate='50': must be of type double, got string"),
 ])

@@ -472,18 +472,19 @@ def check_types(values: Mapping[str, Any]) -> None:
     """
     Refuse a typed value (YAML: a params file, a sweep SPEC) of another type than the node's.
 
-    As rclpy does with a params file: a double takes a number (an int is that double), an
-    integer a whole number, a bool true/false, a string a string; "-0.5" in quotes is a
-    string.  (Text from a command line, -p or --set, is parsed instead: Param.coerce.)
+    As the node takes a params file: a double takes a number (an int is that double), an
+    integer a whole number (2.0 is 2, as the node takes it), a bool true/false, a string a
+    string; "-0.5" in quotes is a string.  (Text from a command line, -p or --set, is
+    parsed instead: Param.coerce.)
     """
     for name, value in values.items():
         spec = REGISTRY.get(name)           # model and node parameters alike
         if spec is None:
             continue
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
         ok = (isinstance(value, bool) if spec.type is bool
               else isinstance(value, str) if spec.type is str
-              else not isinstance(value, bool) and (
-                  isinstance(value, int) or (spec.type is float and isinstance(value, float))))
+              else number and (spec.type is float or float(value).is_integer()))
         if not ok:
             raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}, "
                              f"got {_yaml_type(value)}")
