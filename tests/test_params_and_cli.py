@@ -250,6 +250,7 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     ("0,5\n0.3,0,\n", [(0.0, 5.0), (0.3, 0.0)]),             # a trailing comma
     ("Time (s),Force (N)\n0,5\n", [(0.0, 5.0)]),
     ("t,sleeve_force\n0,5\n", [(0.0, 5.0)]),       # the topic's name
+    ("\ufefft,F\n0,5\n", [(0.0, 5.0)]),             # a spreadsheet's UTF-8 byte-order mark
 ])
 def test_force_profile_rows_and_header(tmp_path, text, rows):
     from umbrella_sim.cli import read_force_profile

@@ -57,7 +57,7 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
     model (params) accepts.
     """
     rows: list[tuple[float, float]] = []
-    text = read_text_input(path, "force profile")
+    text = read_text_input(path, "force profile").removeprefix("\ufeff")   # (Excel's BOM)
     try:
         parsed = list(csv.reader(io.StringIO(text, newline="")))
     except csv.Error as exc:
