@@ -193,6 +193,7 @@ def test_cli_force_profile(tmp_path):
     (["--force", "5", "--set", "sleeve_force=10"], "--force 5.0"),
     (["--model", "rigid", "--set", "model=flexible"], "already given by --model rigid"),
     (["--set", "v0=-1", "--set", "v0=-2"], "already given by --set v0=-1"),
+    (["--v0", "0", "--v0", "-0.5"], "--v0 given twice"),
     (["--mcap", "/nonexistent/bag", "--publish-rate", "50", "--set", "publish_rate=200"],
      "already given by --publish-rate 50.0"),
 ])

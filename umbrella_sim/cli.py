@@ -230,6 +230,15 @@ class Progress:
         self.stream.write("\n")
 
 
+class _Once(argparse.Action):
+    """An option that gives a parameter: given twice is an error, not the last one winning."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if getattr(namespace, self.dest) is not None:
+            parser.error(f"{option_string} given twice (give each parameter once)")
+        setattr(namespace, self.dest, values)
+
+
 def make_parser() -> argparse.ArgumentParser:
     ap = ArgumentParser(prog="umbrella_sim",
                         description="Flexible umbrella-frame deployment simulator.")
@@ -246,15 +255,19 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument("--set", action="append", metavar="NAME=VALUE",
                     help="override one parameter (repeatable; each parameter once, here or "
                          "by its own option)")
-    sp.add_argument("--model", choices=SPECS["model"].choices)
-    sp.add_argument("--elements-per-segment", type=int, dest="elements_per_segment")
-    sp.add_argument("--v0", type=float, help="initial sleeve velocity along Y (m/s)")
+    sp.add_argument("--model", choices=SPECS["model"].choices, action=_Once)
+    sp.add_argument("--elements-per-segment", type=int, dest="elements_per_segment",
+                    action=_Once)
+    sp.add_argument("--v0", type=float, action=_Once,
+                    help="initial sleeve velocity along Y (m/s)")
     force = sp.add_mutually_exclusive_group()
-    force.add_argument("--force", type=float, help="constant sleeve force F_H >= 0 (N)")
+    force.add_argument("--force", type=float, action=_Once,
+                       help="constant sleeve force F_H >= 0 (N)")
     force.add_argument("--force-profile", metavar="CSV",
                        help="CSV of t,F rows: F_H held from each t until the next")
-    sp.add_argument("--lock", choices=SPECS["lock"].choices)
-    sp.add_argument("--time-step", type=float, dest="time_step", help="physics step (s)")
+    sp.add_argument("--lock", choices=SPECS["lock"].choices, action=_Once)
+    sp.add_argument("--time-step", type=float, dest="time_step", action=_Once,
+                    help="physics step (s)")
     sp.add_argument("--duration", type=float, default=1.0, help="simulated time (s)")
     sp.add_argument("--csv", metavar="FILE",
                     help="write the time series (every physics step; with --mcap, each "
@@ -271,6 +284,7 @@ def make_parser() -> argparse.ArgumentParser:
                          "publication instead of each step (they differ in the last digits), "
                          "and --csv, whose rows are then the publications")
     sp.add_argument("--publish-rate", type=float, default=None, dest="publish_rate",
+                    action=_Once,
                     help="publication rate of the --mcap recording (Hz, sim time; also "
                          "--set publish_rate=... or the params file's; default 100); the "
                          "summary is the same at any rate whose period the step divides")
