@@ -35,6 +35,7 @@ import yaml
 from . import __version__
 from .files import check_new_output
 from .logs import SEGMENT_RECORD, TOPICS_RECORD
+from .stop_signals import deferred
 
 CHUNK_SIZE = 64 * 1024
 DELIMITER = "=" * 80
@@ -1055,6 +1056,10 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
             state["next_diag"] += 1.0
 
     def on_output(block, applied):
+        with deferred():    # a stop signal lands between periods, never inside a write
+            record_period(block, applied)
+
+    def record_period(block, applied):
         commands_until(sim.time)
         for ev in driver.take(block, applied):
             if ev.kind == "applied":    # at the step it acts from, as the node records it
