@@ -333,6 +333,14 @@ def test_table_takes_every_summary_key(tmp_path):
         assert [json.loads(r["warnings"]) for r in table] == [s["warnings"] for s in summaries]
         assert [float(r["a_new_figure"]) for r in table] == [1.5, 2.0]
     assert isinstance(parquet[1]["a_new_figure"], float), "int and float cells: one float column"
+    # a case that failed before its summary: no lock was used (it showed the one asked for)
+    store.save(sweep.make_record(spec.cases[2], {"case_id": spec.cases[2].case_id,
+                                                 "status": "error", "error": "boom",
+                                                 "summary": {}, "worker": "w",
+                                                 "mcap": None}))
+    columns, rows = sweep.table_rows(spec, store)
+    assert rows[2]["lock"] == "energy" and rows[2]["lock_used"] is None
+    assert "_same" not in columns
 
 
 def test_progress_line_counts_failures_and_eta(monkeypatch):

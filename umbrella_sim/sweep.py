@@ -393,11 +393,13 @@ def table_rows(sweep: Sweep, store: CaseStore) -> tuple[list[str], list[dict]]:
         row.update(case.params)
         row.update(duration=case.duration, stop_after_lock=case.stop_after_lock,
                    force_profile=case.force_profile_path)
+        used = row["_same"] = set()     # summary keys that repeat their parameter's value
         for key, value in (rec.get("summary") or {}).items():
             if key == "error":
                 continue
             if key in case.params:      # the parameter's column, unless the run took another
                 if value == case.params[key]:     # (a rigid model's lock is plastic)
+                    used.add(key)
                     continue
                 key = f"{key}_used"
             if key not in summary_keys:
@@ -405,9 +407,12 @@ def table_rows(sweep: Sweep, store: CaseStore) -> tuple[list[str], list[dict]]:
             row[key] = value
         row.update(worker=rec.get("worker"), mcap=rec.get("mcap"))
         rows.append(row)
-    for key in [k for k in summary_keys if k.endswith("_used")]:   # in every row, then
-        for row in rows:
-            row.setdefault(key, row.get(key[:-len("_used")]))
+    for key in [k for k in summary_keys if k.endswith("_used")]:   # in every row, then:
+        for row in rows:        # the value the run took (none for a run that has no summary)
+            name = key[:-len("_used")]
+            row.setdefault(key, row.get(name) if name in row["_same"] else None)
+    for row in rows:
+        del row["_same"]
     columns = ["case", "case_id", "status"] + list(sweep.swept)
     columns += [n for n in (rows[0] if rows else {}) if n not in columns and n not in
                 ("error", "worker", "mcap") and n not in summary_keys]
