@@ -474,9 +474,10 @@ def _make_node_class():
             Warn when the node applies none of our recent commands, or others command it.
 
             The node echoes the force it applies in ``effort[2]``: a value none of our
-            commands of the last round trip had (the longest of the recent measured delays
-            plus three periods: a free-running node under load took commands 0.2 s late
-            where the median was one period), three states running, means it refuses them
+            commands of the last round trip had (the latest measured delay plus three
+            periods: a free-running node under load took commands 0.2 s late where the
+            median was one period; an older spike no longer widens it, or a refused braking
+            command went unnoticed), three states running, means it refuses them
             (its sleeve_force_min / sleeve_force_limit) or another publisher commands it.
             After a stall the first state may show an older command, once.  Publishers on
             the topic are counted once a second.
@@ -491,7 +492,7 @@ def _make_node_class():
                         "whichever command came last, so another node commanding the sleeve "
                         "fights this one; stop it", throttle_duration_sec=5.0)
             period = self._period or 0.0
-            window = (max(self._delays) if self._delays else period) + 3 * period
+            window = (self._delays[-1] if self._delays else period) + 3 * period
             ours = {f for ts, f in self._sent if ts >= t - window - 1e-9}
             self._not_ours = 0 if effort in ours else self._not_ours + 1
             if self._not_ours >= 3:
