@@ -262,11 +262,10 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
 def _segment_mesh(log, params: dict):
     """Return the leaf's and the link's node positions of a segment's own parameters."""
     from .model import UmbrellaModel
-    from .params import RECORDED_BEFORE_ADDED, SPECS, UmbrellaParams
+    from .params import recorded_params
 
     try:
-        model = UmbrellaModel(UmbrellaParams.from_mapping(
-            {**RECORDED_BEFORE_ADDED, **{k: v for k, v in params.items() if k in SPECS}}))
+        model = UmbrellaModel(recorded_params(params))
     except ValueError as exc:
         raise LogError(f"{log.path}: a segment's parameters cannot be used ({exc})") from None
     return np.array(model.leaf.node_x), np.array(model.link.node_x)

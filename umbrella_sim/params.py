@@ -300,6 +300,19 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
 #: does not list them) was made with: replay re-runs it so
 RECORDED_BEFORE_ADDED = {"phase_correction": False, "step_follows_mesh": False}
 
+
+def recorded_params(values: Mapping[str, Any]) -> "UmbrellaParams":
+    """
+    Return the model a recording's parameters describe, validated (ValueError if none).
+
+    Its recorded model parameters (node ones are skipped) and, for those added since, the
+    value it was made with (RECORDED_BEFORE_ADDED).
+    """
+    return UmbrellaParams.from_mapping(
+        {**RECORDED_BEFORE_ADDED, **{k: v for k, v in values.items() if k in SPECS}}
+    ).validated()
+
+
 #: the physics' parameters (the fields of UmbrellaParams), in registry order
 SPECS: dict[str, Param] = {n: p for n, p in REGISTRY.items() if p.group in (MODEL, INPUT)}
 #: parameters of umbrella_node only

@@ -114,15 +114,13 @@ def _segment_inputs(log: LogData, seg):
     recorded fault (None without one).
     """
     from .forcing import ForceSchedule
-    from .params import RECORDED_BEFORE_ADDED, SPECS, UmbrellaParams
+    from .params import recorded_params
     from .publication import PublicationDriver
     from .solver import command_force
 
     p_all = seg.params
     try:
-        params = UmbrellaParams.from_mapping(
-            {**RECORDED_BEFORE_ADDED, **{k: v for k, v in p_all.items() if k in SPECS}}
-        ).validated()
+        params = recorded_params(p_all)
         rate = float(p_all["publish_rate"])
         step = float(p_all["physics_step"])
     except (KeyError, TypeError, ValueError) as exc:
