@@ -173,8 +173,12 @@ def load_spec(path: str) -> Sweep:
     if doc.get("force") is not None:
         if doc.get("force_profile") is not None:
             raise SpecError(f"sweep spec {path}: give force or force_profile, not both")
-        if "sleeve_force" in base:
-            raise SpecError(f"sweep spec {path}: force and base.sleeve_force both set")
+        # force is every case's sleeve_force: no part of the SPEC may set its own
+        for where, c in (("base", base), ("grid", grid), *(("cases", c) for c in explicit)):
+            if "sleeve_force" in c:
+                raise SpecError(f"sweep spec {path}: force and {where}: sleeve_force both set "
+                                "(force is every case's sleeve_force; sweep sleeve_force "
+                                "without it)")
         if isinstance(doc["force"], bool) or not isinstance(doc["force"], (int, float)):
             raise SpecError(f"sweep spec {path}: force: {doc['force']!r} is not a number")
         base["sleeve_force"] = doc["force"]     # its range is checked with each case's model
@@ -190,13 +194,6 @@ def load_spec(path: str) -> Sweep:
     if params_file is not None:
         params_file = rel(params_file)
 
-    if doc.get("force") is not None:    # force is every case's: a case may not set its own
-        for c in [grid] + explicit:
-            if "sleeve_force" in c:
-                raise SpecError(f"sweep spec {path}: force and "
-                                f"{'grid' if c is grid else 'cases'}: sleeve_force both set "
-                                "(force is every case's sleeve_force; sweep sleeve_force "
-                                "without it)")
     axes = list(grid)
     overrides_list = [dict(base, **dict(zip(axes, combo)))
                       for combo in itertools.product(*grid.values())] if grid else []
