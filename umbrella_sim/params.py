@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, fields
+import functools
 import math
 import re
 from typing import Any, Mapping
@@ -609,6 +610,14 @@ def load_yaml_as_ros(text: str):
     """
     import yaml
 
+    return yaml.load(text, Loader=_ros_typed_loader())   # noqa: S506 - a SafeLoader
+
+
+@functools.cache
+def _ros_typed_loader():
+    """Return the loader class of load_yaml_as_ros (made once: yaml imported on first use)."""
+    import yaml
+
     class RosTyped(yaml.SafeLoader):
 
         def construct_mapping(self, node, deep=False):
@@ -623,7 +632,7 @@ def load_yaml_as_ros(text: str):
 
     RosTyped.add_implicit_resolver("tag:yaml.org,2002:float", _ROS_DOUBLE,
                                    list("-+0123456789."))
-    return yaml.load(text, Loader=RosTyped)   # noqa: S506 - a SafeLoader
+    return RosTyped
 
 
 def read_params_file(path: str) -> dict[str, dict]:
