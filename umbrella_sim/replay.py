@@ -28,9 +28,9 @@ COMMAND_SUFFIXES = ("sleeve_force", "sleeve_force/refused", "sleeve_force/applie
 ACK_TIMEOUT_S = 3.5      # > Fast DDS's default 3 s heartbeat period, which prompts the acks
 
 
-def _is_command(topic: str, log: LogData | None = None) -> bool:
+def _is_command(topic: str, log: LogData) -> bool:
     """Tell whether a recorded topic is the node's command or its records (remapped too)."""
-    recorded = (log.metadata.get(TOPICS_RECORD, {}) if log is not None else {})
+    recorded = log.metadata.get(TOPICS_RECORD, {})
     if any(recorded.get(s) == topic for s in COMMAND_SUFFIXES):
         return True
     return any(topic.endswith("/" + s) or topic == s for s in COMMAND_SUFFIXES)
