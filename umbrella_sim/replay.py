@@ -99,7 +99,7 @@ def build_difference(log: LogData) -> str:
 
 
 def relative_difference(diff: float, scale: float) -> float:
-    """Return diff over the signal's largest recorded magnitude (0 / inf for a zero one)."""
+    """Return diff over its quantity's largest recorded magnitude (0 / inf for a zero one)."""
     if diff == 0.0:
         return 0.0
     return diff / scale if scale > 0.0 else math.inf
@@ -404,8 +404,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--resimulate", action="store_true",
                     help="re-run the physics from the log and compare, no ROS traffic")
     ap.add_argument("--tolerance", type=float, default=None,
-                    help="largest accepted difference for --resimulate, relative to each "
-                         f"signal's largest recorded magnitude (>= 0; {DEFAULT_TOLERANCE:g})")
+                    help="largest accepted difference for --resimulate, relative to the "
+                         "largest recorded magnitude of the signal's quantity (>= 0; "
+                         f"{DEFAULT_TOLERANCE:g})")
     args = ap.parse_args(argv)
     # argument values: an argparse usage error (exit 2) before any file is read
     if args.resimulate:     # what only republishing takes: refused, not ignored
