@@ -36,7 +36,7 @@ def setup() -> None:
     req = os.path.join(ROOT, "requirements.txt")
     # what the install depends on: a change to any of these reinstalls (and rebuilds the kernel)
     inputs = [req, os.path.join(ROOT, "setup.py"),
-              *sorted(glob.glob(os.path.join(ROOT, "umbrella_sim", "_kernel*.[ch]")))]
+              *sorted(glob.glob(os.path.join(ROOT, "umbrella_sim", "core", "_kernel*.[ch]")))]
     digest = hashlib.sha256()
     for path in inputs:
         with open(path, "rb") as fh:

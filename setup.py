@@ -48,9 +48,10 @@ setup(
         ("share/" + package_name + "/rviz", glob("rviz/*.rviz")),
     ],
     # the compiled integrator (plain C, loaded with ctypes): required
-    ext_modules=[Extension("umbrella_sim._kernel",
-                           ["umbrella_sim/_kernel.c", "umbrella_sim/_kernel_nonlinear.c"],
-                           depends=["umbrella_sim/_kernel_elastic.h"],
+    ext_modules=[Extension("umbrella_sim.core._kernel",
+                           ["umbrella_sim/core/_kernel.c",
+                            "umbrella_sim/core/_kernel_nonlinear.c"],
+                           depends=["umbrella_sim/core/_kernel_elastic.h"],
                            extra_compile_args=["-O3", "-std=c99"], libraries=["m"])],
     cmdclass={"build_ext": BuildKernel},
     install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "matplotlib"],
@@ -63,16 +64,16 @@ setup(
     entry_points={
         "console_scripts": [
             # `ros2 run umbrella_sim <name>`: one naming style, snake_case as ROS executables
-            "umbrella_node = umbrella_sim.stop_signals:node_main",
+            "umbrella_node = umbrella_sim.tools.entry:node_main",
             # (each takes SIGINT/SIGTERM before its heavy imports: stop_signals.py)
-            "umbrella_sim = umbrella_sim.stop_signals:cli_main",
-            "umbrella_replay = umbrella_sim.stop_signals:replay_main",
-            "umbrella_compare = umbrella_sim.stop_signals:compare_main",
+            "umbrella_sim = umbrella_sim.tools.entry:cli_main",
+            "umbrella_replay = umbrella_sim.tools.entry:replay_main",
+            "umbrella_compare = umbrella_sim.tools.entry:compare_main",
             # the earlier names, kept as aliases
-            "umbrella-sim = umbrella_sim.stop_signals:cli_main",
-            "umbrella-replay = umbrella_sim.stop_signals:replay_main",
-            "umbrella-compare = umbrella_sim.stop_signals:compare_main",
-            "deploy_controller = umbrella_sim.stop_signals:controller_main",
+            "umbrella-sim = umbrella_sim.tools.entry:cli_main",
+            "umbrella-replay = umbrella_sim.tools.entry:replay_main",
+            "umbrella-compare = umbrella_sim.tools.entry:compare_main",
+            "deploy_controller = umbrella_sim.tools.entry:controller_main",
         ],
     },
 )

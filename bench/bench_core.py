@@ -30,9 +30,9 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from umbrella_sim.params import physics_step, UmbrellaParams  # noqa: E402
-from umbrella_sim.solver import UmbrellaSimulator  # noqa: E402
-from umbrella_sim.step_study import mesh_step  # noqa: E402
+from umbrella_sim.core.params import physics_step, UmbrellaParams  # noqa: E402
+from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
+from umbrella_sim.core.step_study import mesh_step  # noqa: E402
 
 #: model -> {N: target}
 COST_TARGETS = {"flexible": {2: 10.0, 8: 40.0}}

@@ -37,7 +37,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 
 from tests.ros_helpers import NodeProcess, Probe  # noqa: E402
-from umbrella_sim.ros_io import CLOCK_READER_QOS  # noqa: E402
+from umbrella_sim.ros.messages import CLOCK_READER_QOS  # noqa: E402
 
 
 def wall_stamp(line_match) -> float:
@@ -107,8 +107,8 @@ def physics_alone(n_el: int, rate: float, sim_seconds: float = 1.0) -> float:
     PublicationDriver.advance, one publication period at a time (steps, StepBlock, summary),
     without messages: the node's figure minus this one is the publication path's cost.
     """
-    from umbrella_sim.params import UmbrellaParams
-    from umbrella_sim.publication import PublicationDriver
+    from umbrella_sim.core.params import UmbrellaParams
+    from umbrella_sim.ros.publication import PublicationDriver
     driver = PublicationDriver(UmbrellaParams(elements_per_segment=n_el), rate)
     periods = int(round(sim_seconds * rate))
     for _ in range(periods // 10):           # warm-up

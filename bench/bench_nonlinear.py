@@ -23,9 +23,9 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from umbrella_sim.model import Stage  # noqa: E402
-from umbrella_sim.params import UmbrellaParams  # noqa: E402
-from umbrella_sim.solver import UmbrellaSimulator  # noqa: E402
+from umbrella_sim.core.model import Stage  # noqa: E402
+from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
+from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
 
 TARGETS = {("flexible-nonlinear", 4): 5.0}
 CASES = (("flexible", 0.0), ("flexible", 0.02), ("flexible-nonlinear", 0.0),

@@ -29,7 +29,7 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from umbrella_sim import sweep  # noqa: E402
+from umbrella_sim.tools import sweep  # noqa: E402
 
 
 def noop(x):

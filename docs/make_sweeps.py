@@ -19,11 +19,11 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..")
 sys.path.insert(0, ROOT)
 
-from umbrella_sim import sweep  # noqa: E402
-from umbrella_sim.compare import THESIS_TABLE_6_1, THESIS_V02  # noqa: E402
-from umbrella_sim.params import UmbrellaParams  # noqa: E402
-from umbrella_sim.recording import git_revision  # noqa: E402
-from umbrella_sim.rigid import deployment_time_by_quadrature  # noqa: E402
+from umbrella_sim.bag.recording import git_revision  # noqa: E402
+from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
+from umbrella_sim.core.rigid import deployment_time_by_quadrature  # noqa: E402
+from umbrella_sim.tools import sweep  # noqa: E402
+from umbrella_sim.tools.compare import THESIS_TABLE_6_1, THESIS_V02  # noqa: E402
 
 SPEC = os.path.join(ROOT, "config", "sweeps", "table_6_1.yaml")
 DOC = os.path.join(HERE, "sweeps.md")

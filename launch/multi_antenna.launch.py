@@ -13,7 +13,7 @@ The other arguments are those of umbrella.launch.py and apply to every antenna.
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 
-from umbrella_sim import launch_description as umbrella
+from umbrella_sim.ros import launch_description as umbrella
 
 
 def _setup(context, *args, **kwargs):

@@ -15,7 +15,7 @@ import pytest
 
 from bootstrap import ROOT, STAMP_NAME
 from tests.ros_helpers import ros_env
-from umbrella_sim.logs import read_log
+from umbrella_sim.bag.reader import read_log
 
 STAMP = os.path.join(sys.prefix, STAMP_NAME)
 

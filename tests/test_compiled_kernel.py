@@ -4,11 +4,11 @@ import os
 import numpy as np
 import pytest
 
-from umbrella_sim.integrators import load_kernel, MidpointDAE
-from umbrella_sim.model import ConstraintSet, Stage
-from umbrella_sim.outputs import STEP_FIELDS
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.solver import UmbrellaSimulator
+from umbrella_sim.core.integrators import load_kernel, MidpointDAE
+from umbrella_sim.core.model import ConstraintSet, Stage
+from umbrella_sim.core.outputs import STEP_FIELDS
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.solver import UmbrellaSimulator
 
 needs_kernel = pytest.mark.skipif(load_kernel() is None, reason="compiled kernel not built")
 
@@ -140,7 +140,7 @@ def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
     """
     from dataclasses import fields
 
-    from umbrella_sim.solver import FiniteElementEngine
+    from umbrella_sim.core.solver import FiniteElementEngine
     # a 50 us step: the first two blocks end in stage 1 (deploy at ~0.09 s), the others in 2
     sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5, model=model, elements_per_segment=n_el,
                                            damping_ratio=zeta, time_step=5e-5))

@@ -12,12 +12,11 @@ import time
 
 import pytest
 
-from umbrella_sim.deploy_controller import (constant_force_for, ControllerConfig, DeployLaw,
-                                            simulate_closed_loop)
-from umbrella_sim.params import physics_step, UmbrellaParams
-from umbrella_sim.solver import simulate
-from umbrella_sim.testing import (NodeProcess, poll, ros_env, summarize_run,
-                                  summary_from_recording)
+from umbrella_sim.core.params import physics_step, UmbrellaParams
+from umbrella_sim.core.solver import simulate
+from umbrella_sim.ros.deploy_controller import (constant_force_for, ControllerConfig, DeployLaw,
+                                                simulate_closed_loop)
+from umbrella_sim.testing import NodeProcess, poll, ros_env, summarize_run, summary_from_recording
 
 TARGET = 1.0            # s, deploy time asked of the controller
 LIMIT = 8.0             # N, the controller's force limits: [-LIMIT, LIMIT]
@@ -33,7 +32,7 @@ MODEL = UmbrellaParams(v0=0.0, sleeve_force_min=-LIMIT, time_step=STEP)
 
 def command_gap(bag: str, start: float, end: float) -> float:
     """Return the longest sim-time gap between commands the node received in [start, end]."""
-    from umbrella_sim.logs import read_log
+    from umbrella_sim.bag.reader import read_log
 
     log = read_log(bag)
     times = [start] + [t for t, _ in log.decoded(log.find_topic("sleeve_force"))
@@ -268,7 +267,7 @@ def test_stop_signal_while_commands_flow_is_a_clean_exit(probe, ros_domain_id):
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64, String
 
-    from umbrella_sim import ros_io
+    from umbrella_sim.ros import messages as ros_io
 
     phase = probe.node.create_publisher(String, ros_io.TOPICS["deployment_phase"].name,
                                         ros_io.TOPICS["deployment_phase"].qos)
@@ -407,7 +406,7 @@ def test_a_command_taken_late_is_not_reported_as_refused(capfd):
     import rclpy
     from sensor_msgs.msg import JointState
 
-    from umbrella_sim.deploy_controller import _make_node_class
+    from umbrella_sim.ros.deploy_controller import _make_node_class
     from umbrella_sim.testing import DOMAIN_ID
 
     rclpy.init(domain_id=DOMAIN_ID)    # (its publisher and subscriptions: no traffic)

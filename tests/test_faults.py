@@ -23,12 +23,12 @@ from std_srvs.srv import Trigger
 
 from tests.disk_faults import full_disk_write
 from tests.ros_helpers import NodeProcess, Probe, ros_env, signal_and_collect
-from umbrella_sim import recording
-from umbrella_sim.logs import LogError, read_log
-from umbrella_sim.node import MAX_LAG_S, REFUSED_RECORD_RATE
-from umbrella_sim.params import SPECS, UmbrellaParams
-from umbrella_sim.ros_io import LATCHED
-from umbrella_sim.solver import simulate
+from umbrella_sim.bag import recording
+from umbrella_sim.bag.reader import LogError, read_log
+from umbrella_sim.core.params import SPECS, UmbrellaParams
+from umbrella_sim.core.solver import simulate
+from umbrella_sim.ros.messages import LATCHED
+from umbrella_sim.ros.node import MAX_LAG_S, REFUSED_RECORD_RATE
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -127,9 +127,9 @@ def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
     assert len(probe.messages("/joint_states")) > n_at_error
     log = read_log(str(bag))
     assert "No space left" in log.ended_early
-    r = run("umbrella_sim.replay", str(bag), "--resimulate")
+    r = run("umbrella_sim.tools.replay", str(bag), "--resimulate")
     assert r.returncode == 0 and "recording ended early" in r.stdout, r.stdout + r.stderr
-    from umbrella_sim.compare import load_run      # and compare says why it has no summary
+    from umbrella_sim.tools.compare import load_run      # and compare says why it has no summary
     why = load_run(str(bag)).figures()["figures_from"]
     assert "recording ended early (" in why and "No space left" in why, why
 
@@ -146,12 +146,12 @@ def test_output_paths_checked_before_any_work(tmp_path):
         # 10^6 s of physics could not end within run()'s timeout: a refusal came first
         r = run("umbrella_sim", "simulate", "--duration", "1e6", *args)
         assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr
-    r = run("umbrella_sim.compare", "a", "b", "--out", str(tmp_path / "full"))
+    r = run("umbrella_sim.tools.compare", "a", "b", "--out", str(tmp_path / "full"))
     assert r.returncode == 2 and "not empty" in r.stderr
     assert (tmp_path / "full" / "compare.json").read_text() == "{}"
-    r = run("umbrella_sim.compare", "a", "b", "--out", str(tmp_path / "exists.csv"))
+    r = run("umbrella_sim.tools.compare", "a", "b", "--out", str(tmp_path / "exists.csv"))
     assert r.returncode == 2 and "not overwriting" in r.stderr
-    r = run("umbrella_sim.compare", "a", "b", "--out", "")
+    r = run("umbrella_sim.tools.compare", "a", "b", "--out", "")
     assert r.returncode == 2 and "--out '': empty path" in r.stderr
 
 
@@ -164,7 +164,7 @@ def test_offline_fault_recorded_and_reproduced(tmp_path):
     assert r.returncode == 3
     log = read_log(str(bag))
     assert "Newton" in log.metadata["umbrella_sim.events"]["fault"]
-    r = run("umbrella_sim.replay", str(bag), "--resimulate")
+    r = run("umbrella_sim.tools.replay", str(bag), "--resimulate")
     assert r.returncode == 0 and "fault reproduced at t = " in r.stdout, r.stdout + r.stderr
 
 
@@ -194,7 +194,7 @@ def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, p
     applied = [m.data for _, m in log.decoded("/sleeve_force/applied")]
     assert applied == [2300.0]
     assert log.metadata["umbrella_sim.events"]["fault"]
-    r = run("umbrella_sim.replay", str(bag), "--resimulate")
+    r = run("umbrella_sim.tools.replay", str(bag), "--resimulate")
     assert r.returncode == 0 and "fault reproduced" in r.stdout, r.stdout + r.stderr
 
 
@@ -446,8 +446,8 @@ def test_output_read_by_a_closed_pipe_is_no_traceback_and_keeps_the_files(tmp_pa
         assert r.returncode == 0, r.stderr
     out = tmp_path / "cmp"
     for args in (["umbrella_sim", "simulate", "--duration", "0.01"],
-                 ["umbrella_sim.compare", *bags, "--out", str(out), "--no-plots"],
-                 ["umbrella_sim.replay", bags[0], "--resimulate"]):
+                 ["umbrella_sim.tools.compare", *bags, "--out", str(out), "--no-plots"],
+                 ["umbrella_sim.tools.replay", bags[0], "--resimulate"]):
         read_end, write_end = os.pipe()
         os.close(read_end)              # the reader is gone before the first line
         try:
@@ -475,13 +475,13 @@ def test_compare_gives_every_run_a_label_of_its_own(tmp_path):
                          (["d1/z.mcap", "d2/z.mcap"], ["d1/z.mcap", "d2/z.mcap"]),
                          ([str(bag), "m/x.mcap"], ["run", "x"])):
         out = tmp_path / f"cmp_{labels[0].replace('/', '_')}"
-        r = subprocess.run([sys.executable, "-m", "umbrella_sim.compare", *logs, "--out",
+        r = subprocess.run([sys.executable, "-m", "umbrella_sim.tools.compare", *logs, "--out",
                             str(out), "--no-plots"], capture_output=True, text=True,
                            cwd=tmp_path, env=ros_env(), timeout=120)
         assert r.returncode == 0, r.stderr
         assert [e["label"] for e in json.loads((out / "compare.json").read_text())["runs"]] \
             == labels
-    r = run("umbrella_sim.compare", str(bag), str(bag), "--names", "a", "a", "--out",
+    r = run("umbrella_sim.tools.compare", str(bag), str(bag), "--names", "a", "a", "--out",
             str(tmp_path / "cmp_names"))
     assert r.returncode == 2 and "--names a a" in r.stderr, r.stderr
     assert not (tmp_path / "cmp_names").exists()
@@ -494,7 +494,7 @@ def test_compare_with_a_run_that_faulted_at_once_names_both_logs(tmp_path):
         r = run("umbrella_sim", "simulate", "--duration", "0.05", *args,
                 "--mcap", str(tmp_path / name))
         assert r.returncode == (3 if name == "fault" else 0), r.stderr
-    r = run("umbrella_sim.compare", str(tmp_path / "good"), str(tmp_path / "fault"),
+    r = run("umbrella_sim.tools.compare", str(tmp_path / "good"), str(tmp_path / "fault"),
             "--out", str(tmp_path / "cmp"), "--no-plots")
     assert r.returncode == 2 and "do not overlap in time" in r.stderr, r.stderr
     assert "fault_0.mcap (1 samples" in r.stderr and "good_0.mcap" in r.stderr, r.stderr
@@ -580,25 +580,27 @@ def test_foreign_damaged_and_special_logs_exit_2_naming_file(tmp_path):
              (fifo, "not a regular file"), (tmp_path, "needs metadata.yaml"),
              (cut, "the file is truncated: only its complete chunks could be read")]
     for path, words in cases:
-        for tool in (["umbrella_sim.replay", str(path), "--resimulate"],
-                     ["umbrella_sim.compare", str(good), str(path), "--out",
+        for tool in (["umbrella_sim.tools.replay", str(path), "--resimulate"],
+                     ["umbrella_sim.tools.compare", str(good), str(path), "--out",
                       str(tmp_path / "out"), "--no-plots"]) + (
-                (["umbrella_sim.replay", str(path)],) if path == cut else ()):
+                (["umbrella_sim.tools.replay", str(path)],) if path == cut else ()):
             r = run(*tool, timeout=60)
             assert r.returncode == 2, (tool, r.stdout, r.stderr)
             assert words in r.stderr and str(path) in r.stderr, (tool, r.stderr)
             assert "Traceback" not in r.stderr
     for bad in ("nan", "-1", "inf"):
-        r = run("umbrella_sim.replay", str(good), "--resimulate", "--tolerance", bad)
+        r = run("umbrella_sim.tools.replay", str(good), "--resimulate", "--tolerance", bad)
         assert r.returncode == 2 and "--tolerance" in r.stderr
     for option, value in (("--rate", "0"), ("--rate", "1e-12"), ("--start-offset", "1e300")):
-        r = run("umbrella_sim.replay", str(good), option, value)     # (overflowed: tracebacks)
+        # (these overflowed: tracebacks)
+        r = run("umbrella_sim.tools.replay", str(good), option, value)
         assert r.returncode == 2 and option in r.stderr and "Traceback" not in r.stderr
     # republishing's options with --resimulate: refused, not ignored
-    r = run("umbrella_sim.replay", str(good), "--resimulate", "--rate", "2", "--topics", "/x")
+    r = run("umbrella_sim.tools.replay", str(good), "--resimulate", "--rate", "2", "--topics",
+            "/x")
     assert r.returncode == 2 and "--rate, --topics: options of republishing" in r.stderr
     # and --resimulate's option without it: refused, not ignored
-    r = run("umbrella_sim.replay", str(good), "--tolerance", "1e-6")
+    r = run("umbrella_sim.tools.replay", str(good), "--tolerance", "1e-6")
     assert r.returncode == 2 and "--tolerance: an option of --resimulate" in r.stderr
 
 
@@ -694,12 +696,12 @@ def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
     assert refused <= REFUSED_RECORD_RATE * 10
     times = [t for t, _ in log.decoded("/joint_states")]
     assert times == sorted(times)                   # log time never goes backwards
-    r = run("umbrella_sim.replay", str(bag), "--resimulate")
+    r = run("umbrella_sim.tools.replay", str(bag), "--resimulate")
     assert r.returncode == 0 and "2 segments" in r.stdout, r.stdout + r.stderr
     deploy = {}
     for k in (0, 1):
         out_dir = tmp_path / f"cmp{k}"
-        r = run("umbrella_sim.compare", str(bag), "--out", str(out_dir), "--no-plots",
+        r = run("umbrella_sim.tools.compare", str(bag), "--out", str(out_dir), "--no-plots",
                 "--segment", str(k))
         assert r.returncode == 0, r.stderr
         run0 = json.loads((out_dir / "compare.json").read_text())["runs"][0]
@@ -728,8 +730,8 @@ def test_a_frame_folding_back_to_the_axle_is_a_fault(model):
     """
     import math
 
-    from umbrella_sim.params import UmbrellaParams
-    from umbrella_sim.solver import simulate
+    from umbrella_sim.core.params import UmbrellaParams
+    from umbrella_sim.core.solver import simulate
 
     params = UmbrellaParams(v0=0.5, model=model, lock="plastic")
     r = simulate(params, 0.05)
@@ -741,8 +743,8 @@ def test_a_frame_folding_back_to_the_axle_is_a_fault(model):
 
 
 def test_a_braking_force_folding_the_frame_back_is_a_fault():
-    from umbrella_sim.params import UmbrellaParams
-    from umbrella_sim.solver import simulate
+    from umbrella_sim.core.params import UmbrellaParams
+    from umbrella_sim.core.solver import simulate
 
     r = simulate(UmbrellaParams(v0=0.0, sleeve_force_min=-10.0, sleeve_force=-5.0), 1.0)
     assert r.lock is None and "reached the axle" in r.error
@@ -756,7 +758,8 @@ def test_a_stop_signal_inside_message_decoding_is_an_interrupt_not_a_bad_log(
     The signal's KeyboardInterrupt raised inside rclpy's C conversion came back as its own
     error ("Unable to convert function return value..."), which read as a corrupt log.
     """
-    from umbrella_sim import logs, stop_signals
+    from umbrella_sim.bag import reader as logs
+    from umbrella_sim.ros import signals as stop_signals
 
     bag = tmp_path / "short"
     assert run("umbrella_sim", "simulate", "--duration", "0.02", "--mcap",

@@ -10,12 +10,12 @@ Tolerances (stated in the closing note of the physics issue):
 import numpy as np
 import pytest
 
-from umbrella_sim.integrators import PHI_TOLERANCE
-from umbrella_sim.model import ConstraintSet, Stage
-from umbrella_sim.outputs import energy_balance_error, mechanical_energy
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.rigid import deployment_time_by_quadrature
-from umbrella_sim.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.integrators import PHI_TOLERANCE
+from umbrella_sim.core.model import ConstraintSet, Stage
+from umbrella_sim.core.outputs import energy_balance_error, mechanical_energy
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.rigid import deployment_time_by_quadrature
+from umbrella_sim.core.solver import simulate, UmbrellaSimulator
 
 THESIS_DEFORMABLE = {-0.5: 0.09040, -1.0: 0.04525, -2.0: 0.02343}
 
@@ -171,7 +171,7 @@ def test_scheme_balances_energy_before_the_energy_scaling(monkeypatch):
     O(h^4) sliver.  Without it the scheme itself must still balance energy closely:
     numpy reference, scaling disabled, F_H = 2 N, through the lock and 0.1 s of stage 2.
     """
-    from umbrella_sim import integrators
+    from umbrella_sim.core import integrators
     monkeypatch.setattr(integrators, "ENERGY_RESTORE_LIMIT", 1.0 - 1e-300)   # never scale
     p = UmbrellaParams(v0=-0.5, sleeve_force=2.0, time_step=5e-4)
     sim = UmbrellaSimulator(p)

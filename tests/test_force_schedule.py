@@ -14,11 +14,11 @@ import sys
 import numpy as np
 import pytest
 
-from umbrella_sim.forcing import ForceSchedule
-from umbrella_sim.logs import read_log
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.recording import record_offline
-from umbrella_sim.solver import command_force, simulate, UmbrellaSimulator
+from umbrella_sim.bag.reader import read_log
+from umbrella_sim.bag.recording import record_offline
+from umbrella_sim.core.forcing import ForceSchedule
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.solver import command_force, simulate, UmbrellaSimulator
 
 # a 1 ms step keeps these fast; the schedule's grid arithmetic is the same at any step
 STEP = 1e-3
@@ -127,7 +127,7 @@ def test_mcap_recording_has_the_states_of_simulate(tmp_path, offline, rate):
 
 
 def resimulate_cli(bag):
-    return subprocess.run([sys.executable, "-m", "umbrella_sim.replay", str(bag),
+    return subprocess.run([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
                            "--resimulate", "--tolerance", "0"],
                           capture_output=True, text=True, timeout=300)
 

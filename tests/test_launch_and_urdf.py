@@ -14,11 +14,12 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from umbrella_sim import launch_description as ld
-from umbrella_sim import robot_description as rd
-from umbrella_sim.params import NODE_PARAMETERS, SPECS, UmbrellaParams
-from umbrella_sim.ros_io import JOINT_NAMES, joint_state_msg
-from umbrella_sim.solver import UmbrellaSimulator
+from umbrella_sim.core.params import NODE_PARAMETERS, SPECS, UmbrellaParams
+from umbrella_sim.core.solver import UmbrellaSimulator
+from umbrella_sim.ros import launch_description as ld
+from umbrella_sim.ros import robot_description as rd
+from umbrella_sim.ros.messages import JOINT_NAMES, joint_state_msg
+from umbrella_sim.ros.share import share_dir
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 URDF = os.path.join(ROOT, "urdf", "umbrella.urdf")
@@ -26,7 +27,7 @@ URDF = os.path.join(ROOT, "urdf", "umbrella.urdf")
 
 # ------------------------------------------------------------------------------- URDF
 def test_urdf_file_is_the_generated_one():
-    """Regenerate: .venv/bin/python -m umbrella_sim.robot_description > urdf/umbrella.urdf."""
+    """Regenerate: .venv/bin/python -m umbrella_sim.ros.robot_description > urdf/umbrella.urdf."""
     with open(URDF, encoding="utf-8") as fh:
         assert fh.read() == rd.urdf()
 
@@ -165,7 +166,7 @@ def test_umbrella_launch_declares_the_arguments_and_starts_the_node(launch_stubs
                          "frame_prefix": "a1/"}
     assert isinstance(overrides["v0"], float)
     assert isinstance(overrides["elements_per_segment"], int)
-    if ld.share_dir("robot_state_publisher") is None:     # always so with PyPI's ROS
+    if share_dir("robot_state_publisher") is None:     # always so with PyPI's ROS
         logs = [a.kwargs.get("msg", a.args[0] if a.args else "") for a in actions
                 if type(a).__name__ == "LogInfo"]
         assert any("robot_state_publisher is not installed" in m for m in logs)

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from umbrella_sim.model import shape_functions, UmbrellaModel
-from umbrella_sim.params import UmbrellaParams
+from umbrella_sim.core.model import shape_functions, UmbrellaModel
+from umbrella_sim.core.params import UmbrellaParams
 
 MESHES = [1, 2, 3, 5]
 
@@ -139,14 +139,14 @@ def test_element_stiffness_has_corrected_sign():
     # G's transverse stiffness of a clamped-guided element: 12 EI / l^3
     assert k[iv, iv] == pytest.approx(12 * ei / le**3, rel=1e-12)
     # full element: the v_i-v_j coupling is negative
-    from umbrella_sim.model import GAUSS_POINTS, GAUSS_WEIGHTS
+    from umbrella_sim.core.model import GAUSS_POINTS, GAUSS_WEIGHTS
     _, _, d2n = shape_functions(GAUSS_POINTS, le)
     ke = ei * np.einsum("q,qi,qj->ij", le * GAUSS_WEIGHTS, d2n[:, 1], d2n[:, 1])
     assert ke[1, 4] == pytest.approx(-12 * ei / le**3, rel=1e-12)
 
 
 def test_constraint_jacobian_and_bias_match_complex_step():
-    from umbrella_sim.model import ConstraintSet
+    from umbrella_sim.core.model import ConstraintSet
     model = UmbrellaModel(UmbrellaParams(elements_per_segment=2))
     q, qd = random_state(model, np.random.default_rng(7), elastic=1e-2)
     h = 1e-30
@@ -167,7 +167,7 @@ def test_constraint_jacobian_and_bias_match_complex_step():
 @pytest.mark.parametrize("model_name", ["flexible", "flexible-nonlinear"])
 def test_stress_rates_are_the_time_derivative_of_the_stresses(model_name):
     """d/dt of the fibre stresses along q + t qd, by complex step (membrane: quadratic in q)."""
-    from umbrella_sim.solver import UmbrellaSimulator
+    from umbrella_sim.core.solver import UmbrellaSimulator
     model = UmbrellaSimulator(UmbrellaParams(elements_per_segment=3, model=model_name)).model
     q, qd = random_state(model, np.random.default_rng(4), elastic=1e-2)
     rates = model.stress_rates(q, qd)
@@ -189,7 +189,7 @@ def test_hermite_peak_finds_resolved_crests_between_the_ends():
     Also exact on a parabola and a straight line; a crest the step does not resolve
     (w h = 2.5 to 3, the crest mid-step) is not counted: the larger end stands.
     """
-    from umbrella_sim.outputs import hermite_peak
+    from umbrella_sim.core.outputs import hermite_peak
     rng = np.random.default_rng(7)
     tau = np.linspace(0.0, 1.0, 20001)[:, None]
 

@@ -16,9 +16,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, Trigger
 
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
-from umbrella_sim.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.testing import NodeProcess, poll, ros_env
 
 ALPHA0 = UmbrellaParams().alpha0

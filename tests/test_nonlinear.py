@@ -27,15 +27,16 @@ import math
 import numpy as np
 import pytest
 
-from umbrella_sim.integrators import load_kernel, newton_tolerance
-from umbrella_sim.model import ConstraintSet, Stage
-from umbrella_sim.nonlinear import (ElasticMidpointDAE, KANE_BEAM, NonlinearUmbrellaModel,
-                                    rotating_cantilever_chordwise, ROTATING_CANTILEVER_FLAPWISE,
-                                    rotating_cantilever_frequency, spin_up,
-                                    spin_up_angle, spin_up_quasi_static_tip)
-from umbrella_sim.outputs import energy_balance_error, STEP_FIELDS
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.integrators import load_kernel, newton_tolerance
+from umbrella_sim.core.model import ConstraintSet, Stage
+from umbrella_sim.core.nonlinear import (ElasticMidpointDAE, KANE_BEAM, NonlinearUmbrellaModel,
+                                         rotating_cantilever_chordwise,
+                                         ROTATING_CANTILEVER_FLAPWISE,
+                                         rotating_cantilever_frequency, spin_up, spin_up_angle,
+                                         spin_up_quasi_static_tip)
+from umbrella_sim.core.outputs import energy_balance_error, STEP_FIELDS
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.solver import simulate, UmbrellaSimulator
 
 NL = "flexible-nonlinear"
 # these tests' figures were made at a 2 ms step: it keeps the suite short (the default 5e-5 s
@@ -465,7 +466,7 @@ def test_node_runs_the_nonlinear_damped_model():
     from std_msgs.msg import Float64MultiArray, String
 
     from tests.ros_helpers import NodeProcess, Probe
-    from umbrella_sim.ros_io import LATCHED
+    from umbrella_sim.ros.messages import LATCHED
     probe = Probe()
     try:
         probe.subscribe("/deployment_phase", String, LATCHED)
@@ -487,9 +488,9 @@ def test_node_runs_the_nonlinear_damped_model():
 
 def test_recording_and_resimulation_of_the_nonlinear_damped_model(tmp_path):
     """Record offline as the node would, then re-run the physics from the log: identical."""
-    from umbrella_sim.logs import read_log
-    from umbrella_sim.recording import record_offline
-    from umbrella_sim.replay import resimulate
+    from umbrella_sim.bag.reader import read_log
+    from umbrella_sim.bag.recording import record_offline
+    from umbrella_sim.tools.replay import resimulate
 
     bag = tmp_path / "nl"
     p = UmbrellaParams(v0=-1.0, model=NL, damping_ratio=0.02)

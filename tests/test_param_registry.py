@@ -4,14 +4,14 @@ import pickle
 
 import pytest
 
-from umbrella_sim import param_docs
-from umbrella_sim.cli import make_parser
-from umbrella_sim.params import (coerce, defaults, load_params_file, MODEL, NODE_PARAMETERS,
-                                 parameter_help, REGISTRY, SPECS, UmbrellaParams)
+from umbrella_sim.core.params import (coerce, defaults, load_params_file, MODEL, NODE_PARAMETERS,
+                                      parameter_help, REGISTRY, SPECS, UmbrellaParams)
+from umbrella_sim.tools import param_docs
+from umbrella_sim.tools.cli import make_parser
 
 
 def test_msg_docs_parameter_tables_are_current():
-    """Regenerate: .venv/bin/python -m umbrella_sim.param_docs."""
+    """Regenerate: .venv/bin/python -m umbrella_sim.tools.param_docs."""
     assert param_docs.main(["--check"]) == 0
 
 

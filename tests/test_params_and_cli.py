@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
-from umbrella_sim.params import load_params_file, UmbrellaParams
-from umbrella_sim.rigid import deployment_time_by_quadrature
+from umbrella_sim.core.params import load_params_file, UmbrellaParams
+from umbrella_sim.core.rigid import deployment_time_by_quadrature
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config", "umbrella.yaml")
@@ -100,7 +100,7 @@ def test_a_params_file_value_of_another_type_is_refused_as_the_node_does(tmp_pat
 
 def test_params_file_numbers_are_typed_as_rcl_types_them(tmp_path):
     """72.0e9 is a double to rcl (strtod), a string to YAML 1.1; quoted numbers are strings."""
-    from umbrella_sim.params import load_params_file
+    from umbrella_sim.core.params import load_params_file
 
     path = tmp_path / "typed.yaml"
     path.write_text("/**:\n  ros__parameters:\n    youngs_modulus: 72.0e9\n    v0: -5e-1\n"
@@ -221,7 +221,7 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     sleeve_force_min < 0 is a drive that can hold the sleeve back; the default keeps the
     thesis's push-only sleeve.
     """
-    from umbrella_sim.solver import UmbrellaSimulator, simulate
+    from umbrella_sim.core.solver import simulate, UmbrellaSimulator
 
     with pytest.raises(ValueError, match="sleeve_force_min.*<= 0"):
         UmbrellaParams(sleeve_force_min=1.0).validated()
@@ -254,7 +254,7 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     ("\ufefft,F\n0,5\n", [(0.0, 5.0)]),             # a spreadsheet's UTF-8 byte-order mark
 ])
 def test_force_profile_rows_and_header(tmp_path, text, rows):
-    from umbrella_sim.cli import read_force_profile
+    from umbrella_sim.tools.cli import read_force_profile
     prof = tmp_path / "f.csv"
     prof.write_text(text)
     assert read_force_profile(str(prof)) == rows
@@ -272,7 +272,7 @@ def test_force_profile_rows_and_header(tmp_path, text, rows):
     ("t,F\n0,1_0\n", "f.csv:2", "not numbers"),             # (was 10 N)
 ])
 def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
-    from umbrella_sim.cli import read_force_profile
+    from umbrella_sim.tools.cli import read_force_profile
     prof = tmp_path / "f.csv"
     prof.write_text(text)
     with pytest.raises(ValueError) as exc:
@@ -282,7 +282,7 @@ def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
 
 def test_mcap_recording_says_when_its_publications_shorten_the_step(tmp_path):
     """--mcap at a time_step that does not divide the period: the node's step, said so."""
-    from umbrella_sim.logs import read_log
+    from umbrella_sim.bag.reader import read_log
 
     r = cli("simulate", "--time-step", "3e-4", "--duration", "0.05", "--mcap",
             str(tmp_path / "short"), "--json")
@@ -297,7 +297,7 @@ def test_mcap_recording_says_when_its_publications_shorten_the_step(tmp_path):
 
 def test_params_file_publish_rate_shapes_the_mcap_recording(tmp_path):
     """A params file shared with the node: its publish_rate is the recording's, unless given."""
-    from umbrella_sim.logs import read_log
+    from umbrella_sim.bag.reader import read_log
     params = tmp_path / "rate.yaml"
     params.write_text("/**:\n  ros__parameters:\n    publish_rate: 1000.0\n")
     counts = []

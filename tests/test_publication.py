@@ -7,10 +7,10 @@ from mcap.reader import make_reader
 import pytest
 from rclpy.serialization import deserialize_message
 
-from umbrella_sim import ros_io
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.publication import PublicationDriver
-from umbrella_sim.recording import cdr_bytes, record_offline
+from umbrella_sim.bag.recording import cdr_bytes, record_offline
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.ros import messages as ros_io
+from umbrella_sim.ros.publication import PublicationDriver
 
 
 def built(driver, s, frame_prefix):
@@ -118,8 +118,8 @@ def test_a_recording_does_not_depend_on_the_process_that_made_it(tmp_path):
     from one process to the next; the encoders' templates have it zeroed (cdr_bytes).
     """
     code = ("import sys\n"
-            "from umbrella_sim.params import UmbrellaParams\n"
-            "from umbrella_sim.recording import record_offline\n"
+            "from umbrella_sim.core.params import UmbrellaParams\n"
+            "from umbrella_sim.bag.recording import record_offline\n"
             "record_offline(UmbrellaParams(v0=-0.5, elements_per_segment=2), sys.argv[1], 0.3,"
             " force_profile=[(0.1, 5.0)], publish_rate=200.0)\n")
     runs = []

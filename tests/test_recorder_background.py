@@ -6,8 +6,8 @@ import threading
 from std_msgs.msg import Float64
 
 from tests.disk_faults import full_disk_write
-from umbrella_sim import recording
-from umbrella_sim.logs import read_log
+from umbrella_sim.bag import recording
+from umbrella_sim.bag.reader import read_log
 
 
 def _values(path, topic="/x"):

@@ -20,9 +20,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
 from tests.ros_helpers import NodeProcess, Probe, ros_env, signal_and_collect
-from umbrella_sim.logs import read_log
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.ros_io import CLOCK_READER_QOS, LATCHED
+from umbrella_sim.bag.reader import read_log
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -129,7 +129,7 @@ def test_log_is_self_describing(live_bag):
 
 
 def test_resimulate_live_log_with_force_profile(live_bag):
-    r = run_cli("umbrella_sim.replay", str(live_bag), "--resimulate")
+    r = run_cli("umbrella_sim.tools.replay", str(live_bag), "--resimulate")
     assert r.returncode == 0, r.stdout + r.stderr
     assert "PASS" in r.stdout and "leaf_hinge" in r.stdout
 
@@ -148,8 +148,8 @@ def test_resimulation_under_another_blas_kernel_passes_and_says_why_it_differs(t
                           timeout=300).returncode == 0
     assert read_log(str(bag)).metadata["umbrella_sim.build"]["openblas_coretype"] == "Haswell"
     env.pop("OPENBLAS_CORETYPE")
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim.replay", str(bag), "--resimulate"],
-                       env=env, capture_output=True, text=True, timeout=300)
+    r = subprocess.run([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
+                        "--resimulate"], env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and "PASS" in r.stdout, r.stdout + r.stderr
     worst = float(re.search(r"largest relative difference (\S+)", r.stdout).group(1))
     assert worst < 1e-9
@@ -186,15 +186,15 @@ def test_a_remapped_node_s_recording_serves_every_tool(tmp_path):
     log = read_log(str(bag))
     assert {"/r1/js", "/cmd/applied"} <= set(log.topics())
     # the remapped command is still a command: not republished unless --with-commands
-    from umbrella_sim.replay import _is_command
+    from umbrella_sim.tools.replay import _is_command
     assert sorted(t for t in log.topics() if _is_command(t, log)) == [
         "/cmd", "/cmd/applied", "/cmd/refused"]
     summary = summary_from_recording(str(bag), after_lock=0.1)
     assert summary.first_push_time is not None and summary.first_push_time > 0
     assert summary.deploy_time == pytest.approx(summary.lock_time - summary.first_push_time)
-    r = run_cli("umbrella_sim.replay", str(bag), "--resimulate")
+    r = run_cli("umbrella_sim.tools.replay", str(bag), "--resimulate")
     assert r.returncode == 0 and "PASS" in r.stdout, r.stdout + r.stderr
-    r = run_cli("umbrella_sim.compare", str(bag), str(bag), "--out", str(tmp_path / "cmp"),
+    r = run_cli("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(tmp_path / "cmp"),
                 "--no-plots")
     assert r.returncode == 0, r.stderr
     diffs = json.loads((tmp_path / "cmp" / "compare.json").read_text())["runs"][1]
@@ -225,7 +225,7 @@ def test_sigkill_leaves_readable_chunks(tmp_path):
     with open(mcap_file(bag), "rb") as fh:
         with pytest.raises(Exception):
             make_reader(fh).get_summary().statistics  # no summary section
-    # read how: scan records from the start, keep complete chunks (umbrella_sim.logs)
+    # read how: scan records from the start, keep complete chunks (umbrella_sim.bag.reader)
     log = read_log(str(bag))
     assert log.truncated
     n = log.count("/joint_states")
@@ -233,7 +233,7 @@ def test_sigkill_leaves_readable_chunks(tmp_path):
     t = [tm for tm, _ in log.decoded("/joint_states")]
     assert np.allclose(np.diff(t), 0.01)               # no gap inside what was recovered
     assert "umbrella_sim.parameters" in log.metadata   # written at start, outside chunks
-    r = run_cli("umbrella_sim.replay", str(bag), "--resimulate")
+    r = run_cli("umbrella_sim.tools.replay", str(bag), "--resimulate")
     assert r.returncode == 0 and "truncated log" in r.stdout, r.stdout + r.stderr
     # a killed Fast DDS participant leaves its shared-memory segments behind
     fastdds = os.path.join(os.path.dirname(sys.executable), "fastdds")
@@ -258,7 +258,7 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
         probe.subscribe("/joint_states", JointState)
         for rate, period in ((0.5, 0.020), (1.0, 0.010)):
             probe.received["/clock"] = []
-            r = subprocess.run([sys.executable, "-m", "umbrella_sim.replay", str(bag),
+            r = subprocess.run([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
                                 "--rate", str(rate), "--topics", "/clock", "/joint_states",
                                 "--wait-for-subscribers", "20"], capture_output=True,
                                text=True, env=ros_env(), timeout=60)
@@ -291,7 +291,7 @@ def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, 
     probe = Probe("replay_stop_probe")
     try:
         probe.subscribe("/joint_states", JointState)
-        proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim.replay", str(bag),
+        proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
                                  "--loop", "--topics", "/joint_states",
                                  "--wait-for-subscribers", "20"],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
@@ -311,7 +311,7 @@ def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
     bag = tmp_path / "wait_src"
     assert run_cli("umbrella_sim", "simulate", "--v0", "-0.5", "--duration", "0.05",
                    "--mcap", str(bag)).returncode == 0
-    proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim.replay", str(bag),
+    proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
                              "--topics", "/joint_states", "--wait-for-subscribers", "120"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=ros_env())
@@ -327,7 +327,7 @@ def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
 
 def test_replay_under_a_namespace_moves_the_node_topics(tmp_path, live_bag):
     """``--ros-args -r __ns:=/replay`` moves the recorded node's topics, as it moves a node."""
-    from umbrella_sim.replay import moved_topics
+    from umbrella_sim.tools.replay import moved_topics
 
     log = read_log(str(live_bag))
     names, note = moved_topics(log, log.topics(), "/replay")
@@ -340,7 +340,7 @@ def test_replay_under_a_namespace_moves_the_node_topics(tmp_path, live_bag):
     probe = Probe("replay_ns_probe")
     try:
         probe.subscribe("/replay/joint_states", JointState)
-        r = subprocess.run([sys.executable, "-m", "umbrella_sim.replay", str(live_bag),
+        r = subprocess.run([sys.executable, "-m", "umbrella_sim.tools.replay", str(live_bag),
                             "--topics", "/joint_states",
                             "--wait-for-subscribers", "20", "--ros-args", "-r",
                             "__ns:=/replay"], capture_output=True, text=True, env=ros_env(),
@@ -357,7 +357,7 @@ def test_compare_known_runs(tmp_path):
         assert run_cli("umbrella_sim", "simulate", "--v0", v0, "--duration", "0.2",
                        "--mcap", str(bag)).returncode == 0
     out = tmp_path / "cmp"
-    r = run_cli("umbrella_sim.compare", str(a), str(b), "--out", str(out), "--thesis")
+    r = run_cli("umbrella_sim.tools.compare", str(a), str(b), "--out", str(out), "--thesis")
     assert r.returncode == 0, r.stderr
     result = json.loads((out / "compare.json").read_text())
     ta, tb = read_log(str(a)).metadata, read_log(str(b)).metadata
@@ -387,7 +387,8 @@ def test_compare_of_one_run_recorded_at_two_rates_finds_no_difference(tmp_path):
                        "--publish-rate", rate).returncode == 0
     for order in (bags, bags[::-1]):
         out = tmp_path / f"cmp_{order[0].name}"
-        r = run_cli("umbrella_sim.compare", *map(str, order), "--out", str(out), "--no-plots")
+        r = run_cli("umbrella_sim.tools.compare", *map(str, order), "--out", str(out),
+                    "--no-plots")
         assert r.returncode == 0, r.stderr
         diffs = json.loads((out / "compare.json").read_text())["runs"][1]["differences"]
         scale = {"alpha1": 1.0, "alpha1_rate": 1.0, "tip_deflection": 0.06,
@@ -398,7 +399,7 @@ def test_compare_of_one_run_recorded_at_two_rates_finds_no_difference(tmp_path):
 
 def test_peak_holds_compare_on_the_coarser_grid_when_the_runs_start_apart():
     """A coarse run from 0.5 s, a fine one from 0: its first period took every earlier peak."""
-    from umbrella_sim.compare import _diff
+    from umbrella_sim.tools.compare import _diff
 
     fine_t = np.arange(0.0, 2.0 + 1e-9, 0.001)
     fine = np.sin(40 * fine_t) ** 2 + 5.0 * (fine_t < 0.3)     # a crest long before 0.5 s
@@ -428,8 +429,8 @@ def test_bad_files_give_clear_errors(tmp_path, live_bag):
     cases = [(not_mcap, "not an MCAP file"), (truncated, "no channels"),
              (missing, "no such file"), (other, "umbrella_sim.parameters")]
     for path, words in cases:
-        for tool in (["umbrella_sim.compare", str(path), "--out", str(tmp_path / "o")],
-                     ["umbrella_sim.replay", str(path), "--resimulate"]):
+        for tool in (["umbrella_sim.tools.compare", str(path), "--out", str(tmp_path / "o")],
+                     ["umbrella_sim.tools.replay", str(path), "--resimulate"]):
             r = run_cli(*tool)
             assert r.returncode == 2, (tool, r.stdout, r.stderr)
             assert words in r.stderr and "Traceback" not in r.stderr, (tool, r.stderr)
@@ -465,8 +466,8 @@ def test_a_recording_from_before_the_phase_correction_re_runs_without_it():
     """A recording whose parameters lack phase_correction was made by the plain midpoint rule."""
     from types import SimpleNamespace
 
-    from umbrella_sim.params import physics_step
-    from umbrella_sim.replay import _segment_inputs
+    from umbrella_sim.core.params import physics_step
+    from umbrella_sim.tools.replay import _segment_inputs
 
     old = {k: v for k, v in UmbrellaParams().as_dict().items() if k != "phase_correction"}
     seg = SimpleNamespace(index=0, offset_ns=0, end_ns=None,

@@ -9,9 +9,9 @@ import math
 
 import pytest
 
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.rigid import deployment_time_by_quadrature, RigidMechanism
-from umbrella_sim.solver import simulate
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.rigid import deployment_time_by_quadrature, RigidMechanism
+from umbrella_sim.core.solver import simulate
 
 # rigid-model deployment times computed independently by energy quadrature of the closed-form
 # rigid mechanism (Hu 2006, Eq. 4.120-4.125)
@@ -74,8 +74,8 @@ def test_closed_form_fast_path_steps_as_the_generic_path(monkeypatch, v0, force)
     rows, lock and final state; the sleeve velocity comes from the angles' rates in the
     block and from the FE configuration in a Sample, so it agrees to round-off.
     """
-    from umbrella_sim.outputs import STEP_FIELDS, step_row
-    from umbrella_sim.solver import RigidEngine, UmbrellaSimulator
+    from umbrella_sim.core.outputs import STEP_FIELDS, step_row
+    from umbrella_sim.core.solver import RigidEngine, UmbrellaSimulator
 
     p = UmbrellaParams(model="rigid", v0=v0, sleeve_force=force)
     fast = UmbrellaSimulator(p)

@@ -16,9 +16,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from tests.ros_helpers import NodeProcess, poll, Probe, ros_env
-from umbrella_sim import ros_io
-from umbrella_sim.logs import read_log
-from umbrella_sim.params import NODE_PARAMETERS, REGISTRY, SPECS, START
+from umbrella_sim.bag.reader import read_log
+from umbrella_sim.core.params import NODE_PARAMETERS, REGISTRY, SPECS, START
+from umbrella_sim.ros import messages as ros_io
 
 
 @pytest.fixture
@@ -118,7 +118,7 @@ def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
     Here /clock made reliable (ClockQoS is best effort) and joint_states' depth 7: the
     publisher offers them, and the recording's offered_qos_profiles say so.
     """
-    from umbrella_sim.logs import qos_from_yaml
+    from umbrella_sim.bag.reader import qos_from_yaml
     bag = tmp_path / "bag"
     with NodeProcess("-p", "qos_overrides./clock.publisher.reliability:=reliable",
                      "-p", "qos_overrides./joint_states.publisher.depth:=7",

@@ -18,11 +18,12 @@ import time
 
 import pytest
 
-from umbrella_sim import cli, sweep
-from umbrella_sim.compare import THESIS_TABLE_6_1
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.rigid import deployment_time_by_quadrature
-from umbrella_sim.solver import simulate
+
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.rigid import deployment_time_by_quadrature
+from umbrella_sim.core.solver import simulate
+from umbrella_sim.tools import cli, sweep
+from umbrella_sim.tools.compare import THESIS_TABLE_6_1
 
 BIN = os.path.dirname(sys.executable)
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -552,7 +553,7 @@ def test_store_write_error_stops_the_sweep_keeping_finished_cases(dask_cluster, 
 
 
 def test_mcap_keeps_a_recording_per_case(dask_cluster, tmp_path, procs):
-    from umbrella_sim.compare import load_run
+    from umbrella_sim.tools.compare import load_run
 
     address, _ = dask_cluster
     spec = write(tmp_path / "rec.yaml", ("grid:\n  model: [flexible, rigid]\nbase: {v0: -2.0}\n"
@@ -577,7 +578,7 @@ def test_mcap_keeps_a_recording_per_case(dask_cluster, tmp_path, procs):
 
 def test_mcap_case_that_diverges_is_reported_as_without_mcap(tmp_path):
     """A case that fails fails under --mcap too: its row, its error, its recording's fault."""
-    from umbrella_sim.replay import read_log
+    from umbrella_sim.tools.replay import read_log
 
     spec = write(tmp_path / "f.yaml", "cases:\n  - {v0: -1000.0, time_step: 0.01}\n"
                                       "duration: 0.1\nstop_after_lock: 0.01\n")
@@ -596,7 +597,7 @@ def test_mcap_case_that_diverges_is_reported_as_without_mcap(tmp_path):
 
 def test_a_case_whose_recording_failed_is_not_finished(tmp_path, monkeypatch):
     """--mcap: a case whose recording hit a write error is an error, run again on resume."""
-    from umbrella_sim import recording
+    from umbrella_sim.bag import recording
 
     spec = sweep.load_spec(write(tmp_path / "s.yaml",
                                  "grid:\n  v0: [-2.0]\nbase: {model: rigid}\nduration: 0.05\n"))

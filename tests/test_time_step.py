@@ -6,11 +6,11 @@ fine-step run of the same code (the claims docs/validation.md tabulates in full)
 """
 import pytest
 
-from umbrella_sim.outputs import mechanical_energy
-from umbrella_sim.params import UmbrellaParams
-from umbrella_sim.step_study import (mesh_step, observed_order, run_steps,
-                                     sampled_peak_shortfall, step_errors, TARGETS,
-                                     within_targets)
+from umbrella_sim.core.outputs import mechanical_energy
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.step_study import (mesh_step, observed_order, run_steps,
+                                          sampled_peak_shortfall, step_errors, TARGETS,
+                                          within_targets)
 
 
 @pytest.mark.parametrize("n_el", [1, 2])
@@ -163,9 +163,9 @@ def _locked_mode_period_error(phase_correction: bool, k: int, h: float = 1e-4):
 
     import numpy as np
 
-    from umbrella_sim.integrators import DynamicState
-    from umbrella_sim.model import ConstraintSet, Stage
-    from umbrella_sim.solver import UmbrellaSimulator
+    from umbrella_sim.core.integrators import DynamicState
+    from umbrella_sim.core.model import ConstraintSet, Stage
+    from umbrella_sim.core.solver import UmbrellaSimulator
 
     sim = UmbrellaSimulator(UmbrellaParams(phase_correction=phase_correction, time_step=h))
     engine, m = sim.engine, sim.model
@@ -212,8 +212,8 @@ def test_newton_error_is_far_below_the_step_error():
     Newton tolerance (integrators.newton_tolerance of the step) against a 1e-13 one differs
     by less than 1 % of what halving the step changes; every run keeps energy to round-off.
     """
-    from umbrella_sim.integrators import newton_tolerance
-    from umbrella_sim.solver import UmbrellaSimulator
+    from umbrella_sim.core.integrators import newton_tolerance
+    from umbrella_sim.core.solver import UmbrellaSimulator
 
     def tip_series(h, tolerance=None, duration=0.35):
         sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5, elements_per_segment=2, time_step=h))
@@ -238,7 +238,7 @@ def test_sampled_peak_shortfall_of_a_narrow_crest():
     """A triangular crest 8 ms wide, seen every 4 ms: the worst grid phase misses half of it."""
     import numpy as np
 
-    from umbrella_sim.step_study import StepRun
+    from umbrella_sim.core.step_study import StepRun
 
     t = np.arange(0.0, 1.0, 1e-3)
     crest = 1.0 + np.maximum(0.0, 1.0 - np.abs(t - 0.5) / 4e-3)
@@ -257,11 +257,11 @@ def test_step_follows_mesh_sets_the_step_of_every_run(tmp_path):
     The simulator, the node's publication driver (the largest step <= it dividing the
     publication period), an offline recording, and the re-simulation of that recording.
     """
-    from umbrella_sim.logs import read_log
-    from umbrella_sim.publication import PublicationDriver
-    from umbrella_sim.recording import record_offline
-    from umbrella_sim.replay import resimulate
-    from umbrella_sim.solver import UmbrellaSimulator
+    from umbrella_sim.bag.reader import read_log
+    from umbrella_sim.bag.recording import record_offline
+    from umbrella_sim.core.solver import UmbrellaSimulator
+    from umbrella_sim.ros.publication import PublicationDriver
+    from umbrella_sim.tools.replay import resimulate
 
     p = UmbrellaParams(v0=-0.5, elements_per_segment=3, step_follows_mesh=True)
     assert UmbrellaSimulator(p).h == p.time_step / 3

@@ -1,5 +1,6 @@
+"""``python -m umbrella_sim``: the offline command line (simulate, sweep)."""
 import sys
 
-from .cli import main
+from .tools.entry import cli_main
 
-sys.exit(main())
+sys.exit(cli_main())

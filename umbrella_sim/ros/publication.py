@@ -16,11 +16,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from . import ros_io
-from .forcing import ForceSchedule
-from .outputs import build_frozen, mechanical_energy, Sample, StepBlock, SummaryAccumulator
-from .params import NODE_PARAMETERS, physics_step, UmbrellaParams
-from .solver import command_force, SimulationDiverged, UmbrellaSimulator
+from . import messages as ros_io
+from ..core.forcing import ForceSchedule
+from ..core.outputs import build_frozen, mechanical_energy, Sample, StepBlock, SummaryAccumulator
+from ..core.params import NODE_PARAMETERS, physics_step, UmbrellaParams
+from ..core.solver import command_force, SimulationDiverged, UmbrellaSimulator
 
 
 #: steps per advance_schedule call of a period when a stop may come (PublicationDriver.advance):

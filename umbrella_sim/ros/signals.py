@@ -54,22 +54,6 @@ def name(signum: int) -> str:
     return signal.Signals(signum).name
 
 
-def node_main() -> int:
-    """Run umbrella_node (the console script): the handlers first, then the heavy imports."""
-    install()
-    from .node import main
-
-    return main()
-
-
-def controller_main() -> int:
-    """Run deploy_controller (the console script): the handlers first, then the heavy imports."""
-    install()
-    from .deploy_controller import main
-
-    return main()
-
-
 #: exit status of a command-line tool stopped by SIGINT or SIGTERM (the shell's 128 + SIGINT)
 EXIT_INTERRUPTED = 130
 #: exit status of a tool whose standard output was closed by its reader (``... | head``):
@@ -134,41 +118,10 @@ def deferred():
                 os.kill(os.getpid(), held[0])
 
 
-def _offline_tool(module: str, tool: str) -> int:
-    """
-    Run an offline tool (its console script): SIGINT/SIGTERM taken before the heavy imports.
-
-    Its imports (numpy, scipy, rclpy's messages, the model) take about half a second, during
-    which a tool started with SIGINT ignored (a script's background job) lost a Ctrl-C or a
-    ``kill -INT`` and ran to the end; one started normally printed an import's traceback.
-    """
-    import importlib
-
-    if threading.current_thread() is threading.main_thread():
-        for signum in STOP_SIGNALS:
-            signal.signal(signum, _interrupt)
-    try:
-        main = importlib.import_module(f"umbrella_sim.{module}").main
-    except KeyboardInterrupt as exc:
-        print(f"{tool}: interrupted by {str(exc) or 'SIGINT'} while starting; nothing was "
-              "done", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    return main()
-
-
-def cli_main() -> int:
-    """Run ``umbrella_sim`` (simulate, sweep): the handlers first, then the heavy imports."""
-    return _offline_tool("cli", "umbrella_sim")
-
-
-def replay_main() -> int:
-    """Run ``umbrella_replay``: the handlers first, then the heavy imports."""
-    return _offline_tool("replay", "umbrella_replay")
-
-
-def compare_main() -> int:
-    """Run ``umbrella_compare``: the handlers first, then the heavy imports."""
-    return _offline_tool("compare", "umbrella_compare")
+def interrupt_on_stop_signals() -> None:
+    """Make SIGINT and SIGTERM raise KeyboardInterrupt (an offline tool's, from its start)."""
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, _interrupt)
 
 
 def _interrupt(signum, frame):

@@ -14,7 +14,8 @@ import os
 import re
 import sys
 
-from .params import NOW, REGISTRY, RESET, START
+from ..core.params import NOW, REGISTRY, RESET, START
+from ..ros.share import package_path
 
 PAGES = ("parameters.md", "node_parameters.md")
 _APPLIES = {RESET: "on `~/reset`", NOW: "at once", START: "read-only (at start)"}
@@ -45,8 +46,8 @@ def render(text: str) -> str:
 
 
 def msg_docs_dir() -> str:
-    return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                        "msg_docs")
+    """Return the msg_docs/ directory the tables are written in (the source checkout's)."""
+    return package_path("msg_docs") or "msg_docs"
 
 
 def main(argv: list[str] | None = None) -> int:

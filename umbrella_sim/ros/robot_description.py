@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from xml.sax.saxutils import quoteattr
 
-from .params import UmbrellaParams
+from ..core.params import UmbrellaParams
 
 BASE, LEAF, LINK, SLEEVE, TIP = "umbrella_base", "leaf", "link", "sleeve", "tip"
 JOINTS = {"leaf_hinge": ("revolute", BASE, LEAF),

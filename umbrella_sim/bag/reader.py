@@ -34,7 +34,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 import yaml
 
-from . import stop_signals
+from ..ros import signals as stop_signals
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 PARAMETERS_RECORD = "umbrella_sim.parameters"

@@ -20,9 +20,9 @@ import sys
 import numpy as np
 
 from .arguments import ArgumentParser
-from .logs import LogError, read_log
-from .outputs import deploy_start_of, relative_drift, stage2_figures, validity_warnings
-from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
+from ..bag.reader import LogError, read_log
+from ..core.outputs import deploy_start_of, relative_drift, stage2_figures, validity_warnings
+from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
 FIGURE_KEYS = ("deploy_time", "deploy_start", "lock_time", "tip_deflection_max",
@@ -261,8 +261,8 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
 
 def _segment_mesh(log, params: dict):
     """Return the leaf's and the link's node positions of a segment's own parameters."""
-    from .model import UmbrellaModel
-    from .params import recorded_params
+    from ..core.model import UmbrellaModel
+    from ..core.params import recorded_params
 
     try:
         model = UmbrellaModel(recorded_params(params))
@@ -626,7 +626,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _check_out_dir(path: str) -> str:
     """--out: a new directory, or an existing empty one; never overwrites."""
-    from .files import check_new_output
+    from ..bag.paths import check_new_output
 
     if os.path.isdir(path) and not os.path.islink(path):
         if os.listdir(path):

@@ -458,7 +458,7 @@ def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
     [(t, max(peak leaf, peak link))].  Stage 2 is lock < t <= lock + after_lock (None:
     every sample after the lock).
     """
-    from .outputs import deploy_start   # (the one rule: the summary, compare, this)
+    from ..core.outputs import deploy_start   # (the one rule: the summary, compare, this)
 
     first_push = 0.0 if started_moving else deploy_start(0.0, applied)
     deploy = (lock_time - first_push if lock_time is not None and first_push is not None
@@ -485,7 +485,7 @@ def summary_from_recording(path: str,
     time, stage 2 over ``after_lock`` s after the lock as :meth:`SimulatedAntenna.summary`
     (None: to the end of the recording), so neither depends on when the node was stopped.
     """
-    from .logs import read_log
+    from ..bag.reader import read_log
 
     log = read_log(path)
     seg = log.segments()[-1]
@@ -502,7 +502,7 @@ def summary_from_recording(path: str,
         locked = [t for t, m in log.decoded(log.find_topic("deployment_phase"), seg)
                   if m.data == "locked"]
         lock_time = locked[0] if locked else None
-    from .outputs import deploy_start_of
+    from ..core.outputs import deploy_start_of
 
     return summarize_run(applied, lock_time, deploy_start_of(params, applied) == 0.0, tip,
                          stress, after_lock)
@@ -538,7 +538,7 @@ class SimulatedAntenna:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64, Float64MultiArray, String
 
-        from . import ros_io
+        from ..ros import messages as ros_io
 
         self.parameters = dict(parameters or {})
         if record_path is not None:
@@ -615,8 +615,8 @@ class SimulatedAntenna:
         check=False sends it anyway (a test of the node's refusal).
         """
         if check:
-            from .params import SPECS, UmbrellaParams
-            from .solver import command_force
+            from ..core.params import SPECS, UmbrellaParams
+            from ..core.solver import command_force
             command_force(force, UmbrellaParams.from_mapping(
                 {k: v for k, v in self.parameters.items() if k in SPECS}))
         self._command_publisher(timeout).publish(self._float64(data=float(force)))
@@ -624,7 +624,7 @@ class SimulatedAntenna:
     def _command_publisher(self, timeout: float):
         """Return the sleeve_force publisher, made and matched with the node's subscription."""
         if self._command_pub is None:
-            from . import ros_io
+            from ..ros import messages as ros_io
             self._command_pub = self.probe.publisher(self.topics["sleeve_force"], self._float64,
                                                      ros_io.COMMAND.qos)
             self.probe.wait_for_subscribers(self._command_pub, timeout=timeout)
@@ -663,7 +663,7 @@ class SimulatedAntenna:
         from rcl_interfaces.srv import SetParameters
         from rclpy.parameter import Parameter
 
-        from .params import REGISTRY, RESET
+        from ..core.params import REGISTRY, RESET
 
         request = SetParameters.Request(parameters=[
             Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])
@@ -891,7 +891,7 @@ class SimulatedAntenna:
             return -math.inf if arrival <= phase_arrival else end if arrival < cut else math.inf
         stress = [(when(arrival), max(m.data[0], m.data[4]))
                   for arrival, m in self._timed_run("peak_stress")]
-        from .outputs import deploy_start_of
+        from ..core.outputs import deploy_start_of
 
         applied = self.applied_forces()
         out = summarize_run(applied, lock, deploy_start_of(self.parameters, applied) == 0.0,

@@ -21,8 +21,8 @@ import time
 import numpy as np
 
 from .arguments import ArgumentParser
-from .logs import LogData, LogError, qos_from_yaml, read_log, TOPICS_RECORD
-from .stop_signals import interruptible
+from ..bag.reader import LogData, LogError, qos_from_yaml, read_log, TOPICS_RECORD
+from ..ros.signals import interruptible
 
 COMMAND_SUFFIXES = ("sleeve_force", "sleeve_force/refused", "sleeve_force/applied")
 ACK_TIMEOUT_S = 3.5      # > Fast DDS's default 3 s heartbeat period, which prompts the acks
@@ -88,7 +88,7 @@ DEFAULT_TOLERANCE = 1e-6
 
 def build_difference(log: LogData) -> str:
     """Say how the recording's build and floating-point environment differ from this one."""
-    from .recording import build_environment
+    from ..bag.recording import build_environment
 
     recorded = log.metadata.get("umbrella_sim.build", {})
     here = build_environment()
@@ -113,10 +113,10 @@ def _segment_inputs(log: LogData, seg):
     ForceSchedule every path uses; t_last is the segment's last publication, t_fault the
     recorded fault (None without one).
     """
-    from .forcing import ForceSchedule
-    from .params import recorded_params
-    from .publication import PublicationDriver
-    from .solver import command_force
+    from ..core.forcing import ForceSchedule
+    from ..core.params import recorded_params
+    from ..core.solver import command_force
+    from ..ros.publication import PublicationDriver
 
     p_all = seg.params
     try:
@@ -167,7 +167,7 @@ def physics_series(log: LogData, seg) -> dict:
     Names: time, alpha1, alpha1_rate, tip_transverse, peak_stress_leaf, peak_stress_link
     (the StepBlock fields); the run stops at the segment's last publication or its fault.
     """
-    from .solver import simulate
+    from ..core.solver import simulate
 
     params, driver, schedule, t_last, t_fault = _segment_inputs(log, seg)
     names = ("time", "alpha1", "alpha1_rate", "tip_transverse", "peak_stress_leaf",
@@ -191,7 +191,7 @@ def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
     The recorded publications are streamed and compared as the re-simulation reaches each
     one.
     """
-    from .solver import simulate
+    from ..core.solver import simulate
 
     params, driver, schedule, t_last, t_fault = _segment_inputs(log, seg)
     rate = float(seg.params["publish_rate"])          # checked by _segment_inputs
@@ -296,7 +296,7 @@ def moved_topics(log: LogData, topics: list[str], namespace: str) -> tuple[dict,
     names = {t: t for t in topics}
     if namespace == "/":
         return names, ""
-    from .ros_io import ABSOLUTE_TOPIC_NAMES
+    from ..ros.messages import ABSOLUTE_TOPIC_NAMES
 
     recorded = posixpath.dirname(log.find_topic("joint_states"))
     under = recorded.rstrip("/") + "/"

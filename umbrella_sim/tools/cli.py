@@ -9,26 +9,22 @@ import math
 import os
 import sys
 
-from . import __version__, sweep
+from . import sweep
 from .arguments import ArgumentParser
-from .deploy_controller import CONTROLLER_PARAMETERS
-from .files import check_new_output, read_text_input
-from .params import (check_known_names, check_types, check_values, load_params_file,
-                     NODE_ONLY_PARAMS, NODE_PARAMETERS, parameter_help, shortened_step_note,
-                     SPECS, UmbrellaParams)
-from .solver import command_force, simulate, UmbrellaSimulator
-from .stop_signals import EXIT_READER_GONE, interruptible, print_for_reader
+from .. import __version__
+from ..bag.paths import check_new_output, read_text_input
+from ..core.params import (check_known_names, check_types, check_values, load_params_file,
+                           NODE_ONLY_PARAMS, NODE_PARAMETERS, parameter_help, shortened_step_note,
+                           SPECS, UmbrellaParams)
+from ..core.solver import command_force, simulate, UmbrellaSimulator
+from ..ros.deploy_controller import CONTROLLER_PARAMETERS
+from ..ros.share import package_path
+from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader
 
 
 def default_params_file() -> str | None:
-    """config/umbrella.yaml of a source checkout, or of the installed share/ directory."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    candidates = [os.path.join(here, "..", "config", "umbrella.yaml"),
-                  os.path.join(sys.prefix, "share", "umbrella_sim", "config", "umbrella.yaml")]
-    for path in candidates:
-        if os.path.isfile(path):
-            return os.path.normpath(path)
-    return None
+    """Return the package's config/umbrella.yaml (the source checkout's, or installed)."""
+    return package_path("config", "umbrella.yaml")
 
 
 def _number(text: str) -> float:
@@ -389,7 +385,7 @@ def main(argv: list[str] | None = None) -> int:
         note = shortened_step_note(params.physics_time_step, args.publish_rate)
         if note:
             print(f"umbrella_sim: note: the --mcap recording takes a {note}", file=sys.stderr)
-        from .recording import record_offline
+        from ..bag.recording import record_offline
         try:
             result = record_offline(params, args.mcap, args.duration, profile,
                                     publish_rate=args.publish_rate,

@@ -17,7 +17,7 @@ import math
 import re
 from typing import Any, Mapping
 
-from .files import read_text_input
+from ..bag.paths import read_text_input
 
 MODELS = ("flexible", "flexible-nonlinear", "rigid-fe", "rigid")
 #: smallest physics step (s): the finest step of the convergence studies is 3.125e-7 s; at

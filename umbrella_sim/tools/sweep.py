@@ -47,10 +47,10 @@ from typing import Any, Callable
 
 import yaml
 
-from . import __version__
-from .files import check_new_output, read_text_input
-from .params import NODE_PARAMETERS
-from .stop_signals import deferred
+from .. import __version__
+from ..bag.paths import check_new_output, read_text_input
+from ..core.params import NODE_PARAMETERS
+from ..ros.signals import deferred
 
 SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
              "force_profile")
@@ -124,8 +124,8 @@ def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> st
 def load_spec(path: str) -> Sweep:
     """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
     from .cli import check_lock_given, read_force_profile, resolve_params
-    from .params import check_types, load_yaml_as_ros, UmbrellaParams
-    from .solver import command_force
+    from ..core.params import check_types, load_yaml_as_ros, UmbrellaParams
+    from ..core.solver import command_force
 
     try:
         text = read_text_input(path, "sweep spec")
@@ -241,7 +241,7 @@ def worker_version() -> str:
 
     Checked, and the import paid, before any case is sent.
     """
-    from . import solver  # noqa: F401
+    from ..core import solver  # noqa: F401
 
     return __version__
 
@@ -252,7 +252,7 @@ def run_case(task: dict) -> dict:
 
     Never raises: an exception becomes the case's error so the other cases go on.
     """
-    from .params import UmbrellaParams
+    from ..core.params import UmbrellaParams
 
     out = {"case_id": task["case_id"], "worker": f"{socket.gethostname()}:{os.getpid()}",
            "umbrella_sim": __version__, "summary": {}, "error": None, "mcap": None,
@@ -262,7 +262,7 @@ def run_case(task: dict) -> dict:
         params = UmbrellaParams.from_mapping(task["params"]).validated()
         profile = [tuple(row) for row in task["force_profile"]] if task["force_profile"] else None
         if task["mcap_dir"]:
-            from .recording import record_offline
+            from ..bag.recording import record_offline
 
             bag = os.path.join(task["mcap_dir"], task["case_id"])
             if os.path.exists(bag):     # left by an unfinished earlier attempt of this case
@@ -277,7 +277,7 @@ def run_case(task: dict) -> dict:
                 out["status"] = STATUS_ERROR
                 return _finished(out, t0)
         else:
-            from .solver import simulate
+            from ..core.solver import simulate
 
             result = simulate(params, task["duration"], force_profile=profile,
                               stop_after_lock=task["stop_after_lock"])
@@ -307,8 +307,8 @@ def _mcap_duration(task: dict) -> float:
     """
     if task["stop_after_lock"] is None:
         return task["duration"]
-    from .params import UmbrellaParams
-    from .solver import simulate
+    from ..core.params import UmbrellaParams
+    from ..core.solver import simulate
 
     params = UmbrellaParams.from_mapping(task["params"]).validated()
     profile = [tuple(row) for row in task["force_profile"]] if task["force_profile"] else None
@@ -514,7 +514,7 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .params import REGISTRY
+    from ..core.params import REGISTRY
 
     x_name, series = _series(sweep, rows)
     if not series:
@@ -779,7 +779,7 @@ def _mcap_step_cases(sweep: Sweep, log) -> None:
     time_step that does not divide it the recorded run is another computation than the
     plain one: it must not take (or replace) the plain case's result.
     """
-    from .params import shortened_step_note, UmbrellaParams
+    from ..core.params import shortened_step_note, UmbrellaParams
 
     rate = MCAP_PUBLISH_RATE
     for case in sweep.cases:

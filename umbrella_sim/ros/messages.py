@@ -23,8 +23,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimension, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from .outputs import mechanical_energy, Sample
-from .params import defaults, NOW, REGISTRY, RESET, START, UmbrellaParams
+from ..core.outputs import mechanical_energy, Sample
+from ..core.params import defaults, NOW, REGISTRY, RESET, START, UmbrellaParams
 
 INERTIAL_FRAME = "umbrella_base"   # X toward the leaf, Y up the axle, origin at the hinge O
 LEAF_FRAME = "leaf"                # origin O, x' through O''
@@ -312,7 +312,7 @@ class SampleEncoder:
 
     def __init__(self, first: Sample, params: UmbrellaParams, initial_energy: float,
                  frame_prefix: str = ""):
-        from .recording import cdr_bytes       # the exact-size rule, one place
+        from ..bag.recording import cdr_bytes       # the exact-size rule, one place
         self.yield_strength = params.yield_strength
         self.initial_energy = initial_energy
         msgs = sample_messages(first, params, None, "", initial_energy, frame_prefix)
@@ -387,7 +387,7 @@ class MarkerEncoder:
     """
 
     def __init__(self, positions, ns: str, frame_prefix: str = ""):
-        from .recording import cdr_bytes       # the exact-size rule, one place
+        from ..bag.recording import cdr_bytes       # the exact-size rule, one place
         self._counts = tuple(len(p) for p in positions)
         sentinels = iter(_sentinel_doubles(2 * sum(self._counts) + 1))   # x, y; sleeve
         probe = [np.array([[next(sentinels), next(sentinels)] for _ in range(n)])

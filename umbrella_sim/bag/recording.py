@@ -32,10 +32,10 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
 import yaml
 
-from . import __version__
-from .files import check_new_output
-from .logs import SEGMENT_RECORD, TOPICS_RECORD
-from .stop_signals import deferred
+from .paths import check_new_output
+from .reader import SEGMENT_RECORD, TOPICS_RECORD
+from .. import __version__
+from ..ros.signals import deferred
 
 CHUNK_SIZE = 64 * 1024
 DELIMITER = "=" * 80
@@ -776,7 +776,7 @@ class BagRecorder:
         """
         from std_msgs.msg import Float64
 
-        from . import ros_io
+        from ..ros import messages as ros_io
         resolved = {}       # the node's own topic name -> the name recorded (remapped)
         for key, name in topic_names.items():
             self.add_channel(name, ros_io.TOPICS[key].type,
@@ -1004,11 +1004,11 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     from diagnostic_msgs.msg import DiagnosticStatus
     from std_msgs.msg import Float64
 
-    from . import ros_io
-    from .forcing import ForceSchedule
-    from .params import node_defaults
-    from .publication import PublicationDriver
-    from .solver import command_force, simulate
+    from ..core.forcing import ForceSchedule
+    from ..core.params import node_defaults
+    from ..core.solver import command_force, simulate
+    from ..ros import messages as ros_io
+    from ..ros.publication import PublicationDriver
 
     node_cfg = node_defaults()
     node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,

@@ -11,9 +11,8 @@ from dataclasses import dataclass, field
 import os
 import re
 
-from .params import REGISTRY, SPECS, UmbrellaParams
-
-PACKAGE = "umbrella_sim"
+from .share import PACKAGE, package_path, share_dir
+from ..core.params import REGISTRY, SPECS, UmbrellaParams
 
 
 @dataclass(frozen=True)
@@ -39,25 +38,9 @@ class LogAction:
     msg: str
 
 
-def share_dir(package: str = PACKAGE) -> str | None:
-    """Return the package's share directory from the ament index, or None if not installed."""
-    try:
-        from ament_index_python.packages import (get_package_share_directory,
-                                                 PackageNotFoundError)
-    except ImportError:
-        return None
-    try:
-        return get_package_share_directory(package)
-    except (PackageNotFoundError, LookupError, OSError, ValueError):
-        return None
-
-
 def default_params_file() -> str:
-    share = share_dir()
-    if share and os.path.isfile(os.path.join(share, "config", "umbrella.yaml")):
-        return os.path.join(share, "config", "umbrella.yaml")
-    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    return os.path.join(here, "config", "umbrella.yaml")
+    """Return the package's config/umbrella.yaml (installed, or of the source checkout)."""
+    return package_path("config", "umbrella.yaml") or os.path.join("config", "umbrella.yaml")
 
 
 def arguments() -> list[Argument]:
@@ -106,7 +89,7 @@ def overrides(values: dict[str, str], params_file: str | None = None) -> dict:
                 REGISTRY[name].check(out[name])
     model = {k: v for k, v in out.items() if k in SPECS}
     if model:
-        from .params import load_params_file
+        from ..core.params import load_params_file
         base = ({k: v for k, v in load_params_file(params_file).items() if k in SPECS}
                 if params_file else {})
         UmbrellaParams.from_mapping({**base, **model}).validated()
@@ -154,8 +137,8 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
     clock = [("/clock", f"{rel}/clock")] if ns else []
     if _truthy(values.get("robot_state_publisher", "true"), "robot_state_publisher"):
         if installed("robot_state_publisher"):
-            from .params import load_params_file
             from .robot_description import urdf
+            from ..core.params import load_params_file
             # the geometry the node will run: the params file, then the overrides
             given = {k: v for k, v in load_params_file(params[0]).items() if k in SPECS}
             given.update({k: v for k, v in node_params.items() if k in SPECS})

@@ -1,0 +1,60 @@
+"""
+The console scripts: each takes SIGINT/SIGTERM before its heavy imports, then runs its tool.
+
+The imports of a tool (numpy, scipy, rclpy and its messages, the model) take about a second
+on a loaded machine.  Python's default SIGINT handler raises KeyboardInterrupt wherever the
+interpreter happens to be, so a Ctrl-C then ended in a traceback from some import, and a tool
+started with SIGINT ignored (a script's background job) lost it.  Every entry point therefore
+installs the handlers of ``ros.signals`` first (that module imports only the standard
+library): the nodes note a signal and stop cleanly at their next start-up phase; the offline
+tools end with one line and exit 130.
+"""
+import importlib
+import sys
+import threading
+
+from ..ros import signals
+
+
+def node_main() -> int:
+    """Run umbrella_node: the handlers first, then the heavy imports."""
+    signals.install()
+    from ..ros.node import main
+
+    return main()
+
+
+def controller_main() -> int:
+    """Run deploy_controller: the handlers first, then the heavy imports."""
+    signals.install()
+    from ..ros.deploy_controller import main
+
+    return main()
+
+
+def _offline_tool(module: str, tool: str) -> int:
+    """Run an offline tool: SIGINT/SIGTERM end it with one line (exit 130) from the start."""
+    if threading.current_thread() is threading.main_thread():
+        signals.interrupt_on_stop_signals()
+    try:
+        main = importlib.import_module(f"umbrella_sim.tools.{module}").main
+    except KeyboardInterrupt as exc:
+        print(f"{tool}: interrupted by {str(exc) or 'SIGINT'} while starting; nothing was "
+              "done", file=sys.stderr)
+        return signals.EXIT_INTERRUPTED
+    return main()
+
+
+def cli_main() -> int:
+    """Run ``umbrella_sim`` (simulate, sweep)."""
+    return _offline_tool("cli", "umbrella_sim")
+
+
+def replay_main() -> int:
+    """Run ``umbrella_replay``."""
+    return _offline_tool("replay", "umbrella_replay")
+
+
+def compare_main() -> int:
+    """Run ``umbrella_compare``."""
+    return _offline_tool("compare", "umbrella_compare")
