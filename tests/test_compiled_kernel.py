@@ -140,7 +140,7 @@ def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
     """
     from dataclasses import fields
 
-    from umbrella_sim.core.solver import FiniteElementEngine
+    from umbrella_sim.core.engines import FiniteElementEngine
     # a 50 us step: the first two blocks end in stage 1 (deploy at ~0.09 s), the others in 2
     sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5, model=model, elements_per_segment=n_el,
                                            damping_ratio=zeta, time_step=5e-5))
@@ -189,7 +189,7 @@ def test_install_names_a_missing_compiler_apart_from_a_failed_build(tmp_path):
 
     missing = build(CC=str(tmp_path / "no-such-cc"))
     assert missing.returncode != 0 and "needs a C compiler" in missing.stderr, missing.stderr
-    kernel = tmp_path / "src" / "umbrella_sim" / "_kernel.c"
+    kernel = tmp_path / "src" / "umbrella_sim" / "core" / "_kernel.c"
     kernel.write_text(kernel.read_text() + "\nthis is not C;\n")
     failed = build()
     assert failed.returncode != 0 and "did not build with" in failed.stderr, failed.stderr

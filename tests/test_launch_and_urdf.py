@@ -16,8 +16,7 @@ import pytest
 
 from umbrella_sim.core.params import NODE_PARAMETERS, SPECS, UmbrellaParams
 from umbrella_sim.core.solver import UmbrellaSimulator
-from umbrella_sim.ros import launch_description as ld
-from umbrella_sim.ros import robot_description as rd
+from umbrella_sim.ros import launch_description as ld, robot_description as rd
 from umbrella_sim.ros.messages import JOINT_NAMES, joint_state_msg
 from umbrella_sim.ros.share import share_dir
 

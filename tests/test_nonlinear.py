@@ -34,9 +34,10 @@ from umbrella_sim.core.nonlinear import (ElasticMidpointDAE, KANE_BEAM, Nonlinea
                                          ROTATING_CANTILEVER_FLAPWISE,
                                          rotating_cantilever_frequency, spin_up, spin_up_angle,
                                          spin_up_quasi_static_tip)
-from umbrella_sim.core.outputs import energy_balance_error, STEP_FIELDS
+from umbrella_sim.core.outputs import STEP_FIELDS
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.summary import energy_balance_error
 
 NL = "flexible-nonlinear"
 # these tests' figures were made at a 2 ms step: it keeps the suite short (the default 5e-5 s

@@ -74,8 +74,9 @@ def test_closed_form_fast_path_steps_as_the_generic_path(monkeypatch, v0, force)
     rows, lock and final state; the sleeve velocity comes from the angles' rates in the
     block and from the FE configuration in a Sample, so it agrees to round-off.
     """
+    from umbrella_sim.core.engines import RigidEngine
     from umbrella_sim.core.outputs import STEP_FIELDS, step_row
-    from umbrella_sim.core.solver import RigidEngine, UmbrellaSimulator
+    from umbrella_sim.core.solver import UmbrellaSimulator
 
     p = UmbrellaParams(model="rigid", v0=v0, sleeve_force=force)
     fast = UmbrellaSimulator(p)

@@ -4,9 +4,10 @@ import math
 import numpy as np
 import pytest
 
+from umbrella_sim.core.engines import SimulationDiverged
 from umbrella_sim.core.integrators import PHI_TOLERANCE
 from umbrella_sim.core.params import UmbrellaParams
-from umbrella_sim.core.solver import simulate, SimulationDiverged, UmbrellaSimulator
+from umbrella_sim.core.solver import simulate, UmbrellaSimulator
 
 
 def trajectory(samples):

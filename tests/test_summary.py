@@ -18,10 +18,11 @@ import pytest
 from umbrella_sim.bag.reader import read_log
 from umbrella_sim.bag.recording import record_offline
 from umbrella_sim.core.nonlinear import locked_first_frequency
-from umbrella_sim.core.outputs import (energy_drift, oscillation_period, STAGE2_WINDOW,
-                                       STEP_FIELDS, step_peaks, TIP_DEFLECTION_LIMIT)
+from umbrella_sim.core.outputs import STEP_FIELDS, step_peaks
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.summary import (energy_drift, oscillation_period, STAGE2_WINDOW,
+                                       TIP_DEFLECTION_LIMIT)
 from umbrella_sim.tools import compare
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -108,7 +109,8 @@ def test_brute_force_over_every_step_of_the_reference_path(offline):
 
 def test_figures_do_not_depend_on_how_the_steps_are_blocked():
     """The accumulator on every step one by one, ten at a time (the node) or as one block."""
-    from umbrella_sim.core.outputs import StepBlock, SummaryAccumulator
+    from umbrella_sim.core.outputs import StepBlock
+    from umbrella_sim.core.summary import SummaryAccumulator
     sim = UmbrellaSimulator(PARAMS)
     first = sim.sample()
     blocks = [sim.advance(10) for _ in range(round(DURATION / STEP / 10))]
@@ -271,7 +273,7 @@ def test_validity_warnings_at_v0_minus_2(fast_run):
 
 def test_new_warnings_names_each_warning_in_the_block_it_first_holds():
     """A live node's check after every block: each warning once, in its block, none missed."""
-    from umbrella_sim.core.outputs import SummaryAccumulator
+    from umbrella_sim.core.summary import SummaryAccumulator
 
     sim = UmbrellaSimulator(FAST)
     acc = SummaryAccumulator(FAST.as_dict(), sim.sample(), sim.engine.lock_kind)

@@ -1004,9 +1004,9 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     from diagnostic_msgs.msg import DiagnosticStatus
     from std_msgs.msg import Float64
 
-    from ..core.forcing import ForceSchedule
+    from ..core.forcing import command_force, ForceSchedule
     from ..core.params import node_defaults
-    from ..core.solver import command_force, simulate
+    from ..core.solver import simulate
     from ..ros import messages as ros_io
     from ..ros.publication import PublicationDriver
 

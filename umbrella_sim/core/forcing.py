@@ -21,6 +21,8 @@ import bisect
 import math
 from typing import Callable, Iterable
 
+from .params import SPECS, UmbrellaParams
+
 #: a time within this of a grid point counts as on it (s): the ns resolution of recordings
 TIME_RESOLUTION = 1e-9
 
@@ -81,3 +83,32 @@ class ForceSchedule:
     def changes(self) -> list[tuple[float, float]]:
         """Return [(time the value acts from, value)], on the grid."""
         return [(k * self.step, f) for k, f in zip(self._k, self._f)]
+
+
+def validate_force(force: float, limit: float | None = None, minimum: float = 0.0) -> float:
+    """
+    Return F_H as a float, or raise ValueError naming the rule it breaks.
+
+    F_H must be finite, >= minimum (the model's ``sleeve_force_min``: 0 for the thesis's
+    push-only sleeve, < 0 for a drive that can hold the sleeve back) and, given the model's
+    UmbrellaParams.sleeve_force_limit, at most that (N).  Every command is checked with
+    ``command_force`` below, which takes both bounds from the model.
+    """
+    try:
+        f = float(force)
+    except (TypeError, ValueError):
+        raise ValueError(f"sleeve force {force!r}: not a number") from None
+    # the same range as the sleeve_force parameter: one rule (params.REGISTRY)
+    SPECS["sleeve_force"].check(f, what="sleeve force F_H")
+    if f < minimum:
+        raise ValueError(f"sleeve force F_H={f}: must be >= {minimum:g} (sleeve_force_min; "
+                         "below 0 only for a drive that can hold the sleeve back)")
+    if limit is not None and f > limit:
+        raise ValueError(f"sleeve force {f:g} N: above {limit:.6g} N, the axial load the link "
+                         "can carry (Euler buckling / squash load)")
+    return f
+
+
+def command_force(force: float, params: UmbrellaParams) -> float:
+    """Return a force command as a float if the model accepts it, else raise ValueError."""
+    return validate_force(force, params.sleeve_force_limit, params.sleeve_force_min)

@@ -81,14 +81,14 @@ import math
 import numpy as np
 from scipy.linalg.lapack import dgetrf, dgetrs
 
+from .engines import FiniteElementEngine
 from .integrators import (ConvergenceError, corrected_momentum, DynamicState, iteration_blocks,
                           midpoint_iterate, MidpointDAE, NEWTON_TOLERANCE, PHI_TOLERANCE,
                           project_keeping_energy)
 from .model import (band_form, BeamBody, ConstraintSet, GAUSS_POINTS, GAUSS_WEIGHTS,
                     shape_functions, UmbrellaModel)
-from .outputs import oscillation_period
 from .params import UmbrellaParams
-from .solver import FiniteElementEngine   # the solver imports this module only inside reset()
+from .summary import oscillation_period
 
 NONLINEAR_MODEL = "flexible-nonlinear"
 #: Newton contraction rate above which the nonlinear step re-factors its iteration matrix

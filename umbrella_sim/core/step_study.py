@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
-from .outputs import oscillation_period
 from .params import UmbrellaParams
 from .solver import UmbrellaSimulator
+from .summary import oscillation_period
 
 #: issue-level accuracy targets for the default step (relative unless stated)
 TARGETS = {"deploy_time": 1e-5, "stage2_period": 5e-4, "stage2_tip_series_m": 2e-3,

@@ -280,9 +280,9 @@ def simulate_closed_loop(params: UmbrellaParams, cfg: ControllerConfig,
     States are sampled at publish_rate, each command acts ``delay`` publications later (the
     DDS round trip).  Returns (RunResult of every step, first push time).
     """
-    from ..core.outputs import RunResult
     from ..core.params import physics_step
     from ..core.solver import UmbrellaSimulator
+    from ..core.summary import RunResult
 
     p = params.replace(v0=0.0).with_physics_step(
         physics_step(params.physics_time_step, publish_rate))

@@ -45,16 +45,16 @@ from rclpy.task import Future
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
-from . import messages as ros_io
-from . import signals as stop_signals
+from . import messages as ros_io, signals as stop_signals
 from .publication import PublicationDriver
 from .share import package_path
 from .. import __version__
+from ..core.engines import SimulationDiverged
+from ..core.forcing import command_force
 from ..core.params import (check_known_names, check_node_parameters, check_parameter_sources,
                            NODE_PARAMETERS, parameter_help, params_files_in, QOS_OVERRIDES,
                            REGISTRY, RESET, shortened_step_note, SPECS, UmbrellaParams,
                            USE_SIM_TIME)
-from ..core.solver import command_force, SimulationDiverged
 
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
                    "paces it by the system clock; a node does not follow the clock it drives "

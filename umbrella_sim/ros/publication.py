@@ -17,10 +17,12 @@ from dataclasses import dataclass
 from typing import Callable
 
 from . import messages as ros_io
-from ..core.forcing import ForceSchedule
-from ..core.outputs import build_frozen, mechanical_energy, Sample, StepBlock, SummaryAccumulator
+from ..core.engines import SimulationDiverged
+from ..core.forcing import command_force, ForceSchedule
+from ..core.outputs import build_frozen, mechanical_energy, Sample, StepBlock
 from ..core.params import NODE_PARAMETERS, physics_step, UmbrellaParams
-from ..core.solver import command_force, SimulationDiverged, UmbrellaSimulator
+from ..core.solver import UmbrellaSimulator
+from ..core.summary import SummaryAccumulator
 
 
 #: steps per advance_schedule call of a period when a stop may come (PublicationDriver.advance):

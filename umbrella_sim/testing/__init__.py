@@ -458,7 +458,7 @@ def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
     [(t, max(peak leaf, peak link))].  Stage 2 is lock < t <= lock + after_lock (None:
     every sample after the lock).
     """
-    from ..core.outputs import deploy_start   # (the one rule: the summary, compare, this)
+    from ..core.summary import deploy_start  # (the one rule: the summary, compare, this)
 
     first_push = 0.0 if started_moving else deploy_start(0.0, applied)
     deploy = (lock_time - first_push if lock_time is not None and first_push is not None
@@ -502,7 +502,7 @@ def summary_from_recording(path: str,
         locked = [t for t, m in log.decoded(log.find_topic("deployment_phase"), seg)
                   if m.data == "locked"]
         lock_time = locked[0] if locked else None
-    from ..core.outputs import deploy_start_of
+    from ..core.summary import deploy_start_of
 
     return summarize_run(applied, lock_time, deploy_start_of(params, applied) == 0.0, tip,
                          stress, after_lock)
@@ -615,8 +615,8 @@ class SimulatedAntenna:
         check=False sends it anyway (a test of the node's refusal).
         """
         if check:
+            from ..core.forcing import command_force
             from ..core.params import SPECS, UmbrellaParams
-            from ..core.solver import command_force
             command_force(force, UmbrellaParams.from_mapping(
                 {k: v for k, v in self.parameters.items() if k in SPECS}))
         self._command_publisher(timeout).publish(self._float64(data=float(force)))
@@ -891,7 +891,7 @@ class SimulatedAntenna:
             return -math.inf if arrival <= phase_arrival else end if arrival < cut else math.inf
         stress = [(when(arrival), max(m.data[0], m.data[4]))
                   for arrival, m in self._timed_run("peak_stress")]
-        from ..core.outputs import deploy_start_of
+        from ..core.summary import deploy_start_of
 
         applied = self.applied_forces()
         out = summarize_run(applied, lock, deploy_start_of(self.parameters, applied) == 0.0,

@@ -13,10 +13,11 @@ from . import sweep
 from .arguments import ArgumentParser
 from .. import __version__
 from ..bag.paths import check_new_output, read_text_input
+from ..core.forcing import command_force
 from ..core.params import (check_known_names, check_types, check_values, load_params_file,
                            NODE_ONLY_PARAMS, NODE_PARAMETERS, parameter_help, shortened_step_note,
                            SPECS, UmbrellaParams)
-from ..core.solver import command_force, simulate, UmbrellaSimulator
+from ..core.solver import simulate, UmbrellaSimulator
 from ..ros.deploy_controller import CONTROLLER_PARAMETERS
 from ..ros.share import package_path
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader

@@ -21,7 +21,7 @@ import numpy as np
 
 from .arguments import ArgumentParser
 from ..bag.reader import LogError, read_log
-from ..core.outputs import deploy_start_of, relative_drift, stage2_figures, validity_warnings
+from ..core.summary import deploy_start_of, relative_drift, stage2_figures, validity_warnings
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)

@@ -113,9 +113,8 @@ def _segment_inputs(log: LogData, seg):
     ForceSchedule every path uses; t_last is the segment's last publication, t_fault the
     recorded fault (None without one).
     """
-    from ..core.forcing import ForceSchedule
+    from ..core.forcing import command_force, ForceSchedule
     from ..core.params import recorded_params
-    from ..core.solver import command_force
     from ..ros.publication import PublicationDriver
 
     p_all = seg.params

@@ -124,8 +124,8 @@ def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> st
 def load_spec(path: str) -> Sweep:
     """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
     from .cli import check_lock_given, read_force_profile, resolve_params
+    from ..core.forcing import command_force
     from ..core.params import check_types, load_yaml_as_ros, UmbrellaParams
-    from ..core.solver import command_force
 
     try:
         text = read_text_input(path, "sweep spec")

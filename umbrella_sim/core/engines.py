@@ -1,0 +1,440 @@
+"""
+Engines: how one model steps in time (the ``Engine`` interface and its implementations).
+
+``FiniteElementEngine`` steps the flexible (Case 1 -> Case 2) and rigid-FE (Case 3) models
+on the midpoint DAE integrator (compiled, or numpy as the reference); ``RigidEngine`` the
+closed-form two-angle model; nonlinear.py adds the geometrically nonlinear / damped one.
+``UmbrellaSimulator`` (solver.py) drives any of them on the time grid and applies the lock.
+"""
+from __future__ import annotations
+
+import abc
+from dataclasses import replace
+import math
+import re
+
+import numpy as np
+
+from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ALPHA1_AXLE,
+                          AXLE_REASON, DynamicState, MidpointDAE, newton_tolerance)
+from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
+from .outputs import LockEvent, STEP_FIELDS, step_peaks
+from .params import UmbrellaParams
+from .rigid import RigidMechanism
+
+#: residual above which a run is declared diverged (m, m/s)
+DIVERGENCE_RESIDUAL = 1e-6
+EVENT_TIME_TOLERANCE = 1e-12
+
+
+class SimulationDiverged(RuntimeError):
+    """The state became non-finite or left the constraint manifold; nothing was advanced."""
+
+
+def fault_message(t_good: float, reason: str) -> str:
+    """
+    Return the text of a solver fault with one time in it: the last good state's.
+
+    reason: what failed (an integrator's own 'at t = ...' is dropped: the failed step is
+    the one after t_good, and the recording's fault_time is t_good).
+    """
+    reason = re.sub(r" at t = \S+ s", "", reason)
+    return f"solver failed in the step after t = {t_good:.9g} s: {reason}"
+
+
+class Engine(abc.ABC):
+    """
+    Define what the simulator needs of a model's time stepping.
+
+    What the simulator needs of a model's time stepping (flexible / rigid-FE on the
+    midpoint DAE integrator, the closed-form rigid model, or any other model).
+
+    States are DynamicState; the stage selects the constraints.  ``advance`` is the fast
+    path (many steps in one call, compiled); an engine without one returns None from it and
+    the simulator loops over ``step``.
+    """
+
+    lock_kind: str
+
+    @property
+    @abc.abstractmethod
+    def backend(self) -> str:
+        """Name what does the stepping, for logs and recordings."""
+
+    @abc.abstractmethod
+    def initial(self, force: float) -> DynamicState:
+        """Return the state at t = 0, stage deploying."""
+
+    @abc.abstractmethod
+    def step(self, s: DynamicState, h: float, force: float, stage: Stage) -> DynamicState:
+        """One step of length h (raises ConvergenceError)."""
+
+    @abc.abstractmethod
+    def fe_state(self, s: DynamicState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, q', q'') in the finite-element coordinates of UmbrellaModel."""
+
+    @abc.abstractmethod
+    def residual(self, s: DynamicState, stage: Stage) -> float:
+        """max(|Phi|, |J q'|)."""
+
+    @abc.abstractmethod
+    def sleeve_height(self, s: DynamicState) -> float:
+        """y_H (m)."""
+
+    @abc.abstractmethod
+    def kinetic_energy(self, s: DynamicState, stage: Stage) -> float:
+        """T (J)."""
+
+    def strain_energy(self, s: DynamicState, stage: Stage) -> float:
+        """V (J)."""
+        return float(self.model.strain_energy(self.fe_state(s)[0]))
+
+    def phase_correction_energy(self, s: DynamicState, stage: Stage) -> float:
+        """Return the integrator's correction term of the balance (J; outputs.Sample), 0 here."""
+        return 0.0
+
+    @abc.abstractmethod
+    def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
+        """Force on the sleeve from the axle (X) and the stop (Y), N."""
+
+    @abc.abstractmethod
+    def lock(self, s: DynamicState, force: float) -> tuple[DynamicState, LockEvent]:
+        """Return the state right after the lock at s (same t), and what the lock did."""
+
+    def newton_iterations(self) -> int:
+        """Newton iterations so far (0 for explicit schemes)."""
+        return 0
+
+    def sample_outputs(self, s: DynamicState, stage: Stage):
+        """
+        Return the Sample vector of s from compiled code, or None (no fast path).
+
+        A read-only array of s's own (for a state an advance made, it shares that state's
+        copy): integrators.SAMPLE_VECTOR (figures and residual max(|Phi|, |J q'|)), then the
+        top and bottom fibre stress at every stress point, leaf points first.  What
+        ``_sample`` otherwise computes with numpy, in one call.
+        """
+        return None
+
+    def find_crossing(self, s: DynamicState, h: float, force: float):
+        """
+        Return the state at the lock instant inside a step of length h from s, or None.
+
+        The fast path of ``UmbrellaSimulator._find_lock`` (compiled, the same root find);
+        None if this engine has none.  Raises SimulationDiverged like a failed step.
+        """
+        return None
+
+    def advance(self, s: DynamicState, k0: int, h: float, n_steps: int, force: float,
+                stage: Stage, work: float, lock_loss: float):
+        """
+        Take up to n_steps grid steps in one call (the fast path).
+
+        Up to n_steps grid steps t_k -> (k + 1) h from s at t = k0 h in one call; stops
+        before a step in which the sleeve reaches the stop (stage deploying), and at a
+        failure.  Returns None if this engine has no such path, else (state, rows, work,
+        stop): rows (len(STEP_FIELDS), steps done; may be the engine's buffer, valid until
+        its next call), stop None (all steps done), "crossing", or a failure message.
+        """
+        return None
+
+
+class FiniteElementEngine(Engine):
+    """Flexible (Case 1 -> Case 2) or rigid-FE (Case 3) model on the midpoint DAE integrator."""
+
+    def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
+        self.model = model
+        self.rigid = params.model == "rigid-fe"
+        self.lock_kind = "plastic" if self.rigid else params.lock
+        self.integrator = self._integrator(model)
+        self.integrator.tolerance = newton_tolerance(params.physics_time_step)
+        if params.phase_correction and self.phase_correctable:   # ModalPhaseCorrection
+            self.integrator.correct_stage2_phase(params.physics_time_step)
+        self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
+                    for stage in Stage}
+
+    @staticmethod
+    def _integrator(model: UmbrellaModel) -> MidpointDAE:
+        return MidpointDAE(model)
+
+    @property
+    def phase_correctable(self) -> bool:
+        """Stage 2 takes ModalPhaseCorrection: its elastic coordinates vibrate (not rigid-FE)."""
+        return not self.rigid
+
+    @property
+    def backend(self) -> str:
+        return self.integrator.backend
+
+    def newton_iterations(self) -> int:
+        return self.integrator.iterations
+
+    def initial(self, force: float) -> DynamicState:
+        q, qd = self.model.initial_state()
+        qdd, lam = self.integrator.consistent_acceleration(q, qd, force, self._cs[DEFORMING])
+        return DynamicState(0.0, q, qd, qdd, lam)
+
+    def step(self, s: DynamicState, h: float, force: float, stage: Stage) -> DynamicState:
+        return self.integrator.step(s, h, force, self._cs[stage])
+
+    def sample_outputs(self, s, stage):
+        kernel = self.integrator.kernel
+        if kernel is None or s.momentum is None:
+            return None
+        return kernel.sample(s, self._cs[stage])
+
+    def find_crossing(self, s, h, force):
+        kernel = self.integrator.kernel
+        # an elastic law (nonlinear.py) carries its dissipation and halves failed steps:
+        # its crossing goes through its own step
+        if kernel is None or getattr(kernel, "elastic_law", None) is not None:
+            return None
+        integ = self.integrator
+        status, state, dt, its, residual = kernel.find_crossing(
+            s, h, force, self._cs[DEFORMING], integ.tolerance, integ.max_iterations,
+            DIVERGENCE_RESIDUAL, EVENT_TIME_TOLERANCE)
+        integ.iterations += its
+        if status == ADVANCE_DIVERGED:
+            raise SimulationDiverged(fault_message(s.t, f"constraint residual {residual:.3g} "
+                                                        f"past tolerance {DIVERGENCE_RESIDUAL:g}"))
+        if status != ADVANCE_DONE:
+            raise SimulationDiverged(fault_message(s.t, integ.kernel_error(status, s.t + dt)))
+        return state
+
+    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
+        kernel = self.integrator.kernel
+        if kernel is None:
+            return None
+        integ, cs = self.integrator, self._cs[stage]
+        kernel.load(s, work, lock_loss)     # a no-op when s is the state it returned last
+        status, done, its, residual = kernel.advance(
+            cs, k0, h, n_steps, force, integ.tolerance, integ.max_iterations,
+            DIVERGENCE_RESIDUAL)
+        integ.iterations += its
+        t = (k0 + done) * h
+        if status == ADVANCE_DONE:
+            stop = None
+        elif status == ADVANCE_CROSSING:
+            stop = "crossing"
+        elif status == ADVANCE_DIVERGED:
+            stop = fault_message(t, f"constraint residual {residual:.3g} past tolerance "
+                                    f"{DIVERGENCE_RESIDUAL:g}")
+        else:
+            stop = fault_message(t, integ.kernel_error(status, t + h))
+        state = kernel.state(t, self.model.n_constraints(cs)) if done else s
+        return state, kernel.out[:, :done], float(kernel.acc[0]), stop
+
+    def fe_state(self, s: DynamicState):
+        return s.q, s.qd, s.qdd
+
+    def kinetic_energy(self, s: DynamicState, stage: Stage) -> float:
+        # the step leaves its momentum in the state: T = 1/2 qd . p without re-assembling M
+        # (p = (M + D) qd with the stage-2 phase correction, whose 1/2 qd . D qd is its own
+        # term: phase_correction_energy)
+        if s.momentum is not None:
+            pc = self.integrator.stage2_correction(self._cs[stage])
+            t = float(0.5 * s.qd @ s.momentum)
+            return t if pc is None else t - pc.energy(s.qd)
+        return float(self.model.kinetic_energy(s.q, s.qd))
+
+    def strain_energy(self, s: DynamicState, stage: Stage) -> float:
+        return self.integrator.strain_energy(s.q, self._cs[stage])
+
+    def phase_correction_energy(self, s: DynamicState, stage: Stage) -> float:
+        # the modified modal masses' 1/2 qd . D qd less its value just after the lock: in the
+        # energy the integrator keeps, not in T or V (a damped frame at rest keeps it)
+        pc = self.integrator.stage2_correction(self._cs[stage])
+        return 0.0 if pc is None else pc.energy(s.qd) - pc.lock_energy
+
+    def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
+        lam = s.multipliers
+        return float(lam[2]), float(lam[3]) if stage == LOCKED else 0.0
+
+    def residual(self, s: DynamicState, stage: Stage) -> float:
+        cs = self._cs[stage]
+        m = self.model
+        return max(float(np.max(np.abs(m.constraint_residual(s.q, cs)))),
+                   float(np.max(np.abs(m.constraint_jacobian(s.q, cs) @ s.qd))))
+
+    def sleeve_height(self, s: DynamicState) -> float:
+        return float(self.model.sleeve_height(s.q))
+
+    def lock(self, s: DynamicState, force: float) -> tuple[DynamicState, LockEvent]:
+        m = self.model
+        cs = self._cs[LOCKED]
+        before = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
+        free: tuple = ()
+        if self.lock_kind == "energy":
+            qd, free = self._energy_redistribution(s.q, s.qd, cs)
+        else:
+            qd = self.integrator.project_velocity(s.q, s.qd, cs)
+        s = self.integrator.with_constraints(replace(s, qd=qd), force, cs)
+        after = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
+        self.integrator.lock_at(s.qd)
+        return s, LockEvent(s.t, self.lock_kind, float(before), float(after), free)
+
+    def _energy_redistribution(self, q, qd, cs):
+        """
+        Redistribute the velocities at the lock, keeping the kinetic energy.
+
+        Thesis 5.2.2 for any mesh: only the rigid velocities (R2x', R2y', alpha1',
+        alpha2') and the link's axial velocity at H change; they satisfy J2 qd = 0 (5.36-5.39)
+        and keep the kinetic energy (5.35).  Of the two energy roots, the one closest to the
+        pre-lock velocities in the mass metric is taken.
+        """
+        m = self.model
+        free = [m.i_alpha1, m.i_r2x, m.i_r2y, m.i_alpha2, m.i_u_sleeve]
+        fixed = np.setdiff1d(np.arange(m.n), free)
+        jac = m.constraint_jacobian(q, cs)
+        a_free = jac[:, free]
+        rhs = -jac[:, fixed] @ qd[fixed]
+        particular = np.linalg.lstsq(a_free, rhs, rcond=None)[0]
+        null = np.linalg.svd(a_free)[2][-1]
+        base = qd.copy()
+        base[free] = particular
+        z = np.zeros(m.n)
+        z[free] = null
+        mass = m.mass_matrix(q)
+        t_target = 0.5 * qd @ mass @ qd
+        a = 0.5 * z @ mass @ z
+        b = z @ mass @ base
+        c = 0.5 * base @ mass @ base - t_target
+        disc = b * b - 4 * a * c
+        if disc < 0.0:
+            raise SimulationDiverged("energy lock impossible: the kinetic energy before the lock "
+                                     "is below the least energy compatible with the lock "
+                                     f"({c + t_target - b * b / (4 * a):.6g} J > "
+                                     f"{t_target:.6g} J)")
+        roots = [(-b + sgn * math.sqrt(disc)) / (2 * a) for sgn in (1.0, -1.0)]
+        candidates = [base + r * z for r in roots]
+        best = min(candidates, key=lambda v: (v - qd) @ mass @ (v - qd))
+        labels = m.coordinate_labels()
+        return best, tuple(labels[i] for i in free)
+
+
+class RigidEngine(Engine):
+    """Closed-form two-angle model (4.120-4.125), RK4 with projection, sub-stepped."""
+
+    max_substep = 1e-4
+    backend = "closed-form rigid (Python)"
+
+    def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
+        self.model = model
+        self.mech = RigidMechanism(params)
+        self.lock_kind = "plastic"
+
+    def initial(self, force: float) -> DynamicState:
+        y = self.mech.initial_state(self.model.params.v0)
+        return self._state(0.0, y, force, DEFORMING)
+
+    def _state(self, t, y, force, stage) -> DynamicState:
+        if stage == LOCKED:
+            return DynamicState(t, np.array(y[:2]), np.zeros(2), np.zeros(2),
+                                np.array([0.0, force]))
+        acc = self.mech.accelerations(y[0], y[1], y[2], y[3], force)
+        return DynamicState(t, np.array(y[:2]), np.array(y[2:4]), np.array(acc[:2]),
+                            np.array([acc[2], 0.0]))
+
+    def _rk4(self, y, h: float, force: float):
+        """(alpha1, alpha2, rates) after a step of length h: RK4 sub-steps <= max_substep."""
+        n_sub = max(1, math.ceil(h / self.max_substep - 1e-9))
+        for _ in range(n_sub):
+            y = self.mech.rk4_step(y, h / n_sub, force)
+        return y
+
+    def step(self, s: DynamicState, h: float, force: float, stage: Stage) -> DynamicState:
+        if stage == LOCKED:
+            return replace(s, t=s.t + h, multipliers=np.array([0.0, force]))
+        return self._state(s.t + h, self._rk4((*s.q, *s.qd), h, force), force, stage)
+
+    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
+        """
+        Take n_steps steps of ``step`` in one loop (the fast path), rows from the angles.
+
+        Each row holds what a Sample of the rigid state holds (no elastic field: tip
+        deflection, strain energy and stresses zero), so the per-step Samples and stress
+        peaks of the generic path (~0.7 ms a step) are not made; stops before the step in
+        which the sleeve reaches the stop, as the compiled engines do.
+        """
+        mech, p = self.mech, self.model.params
+        rows = np.empty((len(STEP_FIELDS), n_steps))
+        zero_peaks = self._zero_peaks()
+        y = (*(float(v) for v in s.q), *(float(v) for v in s.qd))
+        height = mech.sleeve_height(y[0], y[1])
+        code = float(stage.code)
+        stop, done = None, 0
+        for i in range(n_steps):
+            if stage == DEFORMING:     # (a grid step's length, as UmbrellaSimulator.step's)
+                y1 = self._rk4(y, (k0 + i + 1) * h - (k0 + i) * h, force)
+                reason = self._check(y1)
+                if reason is not None:
+                    stop = fault_message((k0 + i) * h, reason)
+                    break
+                h1 = mech.sleeve_height(y1[0], y1[1])
+                if h1 - self.model.y_stop <= 0.0:
+                    stop = "crossing"
+                    break
+                work += force * (height - h1)
+                y, height = y1, h1
+            a1, a2, w1, w2 = y
+            velocity = p.l1 * math.cos(a1) * w1 + p.l3 * math.cos(a2) * w2
+            rows[:, i] = ((k0 + i + 1) * h, code, a1, w1, height, velocity, force, 0.0, 0.0,
+                          *zero_peaks, mech.kinetic_energy(a1, a2, w1, w2), 0.0, work,
+                          lock_loss, 0.0)
+            done += 1
+        if not done:
+            return s, rows[:, :0], work, stop
+        state = (replace(s, t=(k0 + done) * h, multipliers=np.array([0.0, force]))
+                 if stage == LOCKED else self._state((k0 + done) * h, y, force, stage))
+        return state, rows[:, :done], work, stop
+
+    def _zero_peaks(self) -> tuple:
+        """Return a step's stress peaks (outputs.step_peaks) with no elastic field: zeros."""
+        if not hasattr(self, "_peaks0"):
+            m = self.model
+            zero = tuple(np.zeros((2, len(b.stress_x))) for b in (m.leaf, m.link))
+            self._peaks0 = tuple(float(v) for v in step_peaks(
+                (zero, zero), (zero, zero), 1.0, (m.leaf.stress_x, m.link.stress_x)))
+        return self._peaks0
+
+    def _check(self, y) -> str | None:
+        """Why the state y cannot be taken (UmbrellaSimulator._checked's rule), or None."""
+        if not all(math.isfinite(v) for v in y):
+            return "the state became non-finite"
+        res = self._residual(*y)
+        if not res <= DIVERGENCE_RESIDUAL:
+            return f"constraint residual {res:.3g} past tolerance {DIVERGENCE_RESIDUAL:g}"
+        if y[0] >= ALPHA1_AXLE:
+            return AXLE_REASON
+        return None
+
+    def _residual(self, a1, a2, w1, w2) -> float:
+        p = self.model.params
+        return max(abs(p.l1 * math.cos(a1) + p.l3 * math.cos(a2)),
+                   abs(p.l1 * math.sin(a1) * w1 + p.l3 * math.sin(a2) * w2))
+
+    def fe_state(self, s: DynamicState):
+        m = self.model
+        q = m.rigid_configuration(float(s.q[0]))
+        qd = m.rigid_velocity(q, float(s.qd[0]))
+        qdd = np.zeros(m.n)
+        qdd[0] = s.qdd[0]
+        qdd[m.i_alpha2] = s.qdd[1]
+        return q, qd, qdd
+
+    def kinetic_energy(self, s: DynamicState, stage: Stage) -> float:
+        return float(self.mech.kinetic_energy(*s.q, *s.qd))
+
+    def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
+        return float(s.multipliers[0]), float(s.multipliers[1])
+
+    def residual(self, s: DynamicState, stage: Stage) -> float:
+        return self._residual(*s.q, *s.qd)
+
+    def sleeve_height(self, s: DynamicState) -> float:
+        return self.mech.sleeve_height(float(s.q[0]), float(s.q[1]))
+
+    def lock(self, s: DynamicState, force: float):
+        before = self.mech.kinetic_energy(*s.q, *s.qd)
+        s = DynamicState(s.t, s.q, np.zeros(2), np.zeros(2), np.array([0.0, force]))
+        return s, LockEvent(s.t, "plastic", float(before), 0.0, ())

@@ -1,0 +1,509 @@
+"""
+Summary figures of a run, from every physics step: one rule for each figure, used everywhere.
+
+``SummaryAccumulator`` takes the StepBlocks of a run as they come (the CLI, the node, the
+offline recorder and the sweep all feed it) and gives the figures: deploy time, stage-1 tip
+deflection, stage-2 amplitude and period over a fixed window after the lock, peak stresses
+and where, the energy balance, and where the run left the model's validity (the warnings).
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field, replace
+from functools import cache
+import math
+
+import numpy as np
+
+from .outputs import (CSV_COLUMNS, LockEvent, mechanical_energy, Sample, sample_row, STEP_FIELDS,
+                      step_row, StepBlock)
+
+#: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
+#: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
+ENERGY_SCALE_FLOOR = 1e-9
+#: rows of a block the summary reads together
+_SUMMARY_ROWS = np.array([STEP_FIELDS.index(f) for f in ("time", "tip_transverse", "stage")])
+_FORCE_ROW = STEP_FIELDS.index("sleeve_force")
+
+
+@dataclass
+class RunResult:
+    params: dict
+    samples: list = field(default_factory=list)
+    lock: LockEvent | None = None
+    steps: int = 0
+    wall_time: float = 0.0
+    error: str | None = None
+    recording_error: str | None = None       # the MCAP recording stopped early (why)
+    q_labels: list = field(default_factory=list)
+    leaf_stress_x: list = field(default_factory=list)   # m from O, per stress point
+    link_stress_x: list = field(default_factory=list)   # m from O''
+    figures: dict | None = None     # SummaryAccumulator.figures() of every physics step
+
+    def column(self, name: str) -> np.ndarray:
+        return np.array([getattr(s, name) for s in self.samples], dtype=float)
+
+    def write_csv(self, path: str, with_state: bool = False) -> None:
+        """
+        Write the time series as CSV.
+
+        with_state adds q, qd and the fibre stresses along both bodies
+        (columns 'sigma_top[leaf@0.25]' = top-fibre stress at 0.25 m from O, Pa; at a node
+        between two elements, each element's own: 'leaf@0.5-' of the element ending there,
+        'leaf@0.5+' of the one starting there).
+        """
+        with open(path, "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            header = list(CSV_COLUMNS)
+            if with_state and self.samples:
+                header += [f"q[{lab}]" for lab in self.q_labels]
+                header += [f"qd[{lab}]" for lab in self.q_labels]
+                for body, xs in (("leaf", self.leaf_stress_x), ("link", self.link_stress_x)):
+                    for fibre in ("top", "bottom"):
+                        header += [f"sigma_{fibre}[{body}@{x}]"
+                                   for x in stress_point_labels(xs)]
+            w.writerow(header)
+            for s in self.samples:
+                row = sample_row(s)
+                if with_state:
+                    row += list(s.q) + list(s.qd)
+                    row += list(s.leaf_stress.ravel()) + list(s.link_stress.ravel())
+                w.writerow(row)
+
+    def summary(self) -> dict:
+        return summarize(self)
+
+
+#: the stage-2 amplitude and period are measured over this window after the lock (s): six
+#: periods of the thesis frame's first locked mode (~0.05 s), the same for a 1 s offline run
+#: and a 10 min live one, so that runs of different lengths compare
+STAGE2_WINDOW = 0.3
+#: validity of the small-deformation (linear elastic field) model: the tip deflection |v_G|
+#: may reach this fraction of the leaf length l1 + l2.  Beyond it the slope of the bent
+#: leaf passes ~0.15 rad, where the neglected terms of the curvature and the membrane strain
+#: (~v'^2, model flexible-nonlinear) reach a few percent (linear beam theory's L/10 rule)
+TIP_DEFLECTION_LIMIT = 0.10
+#: validity of the small-strain measures (u', v'' linear in the displacements, Hooke's law):
+#: the peak fibre strain |sigma| / E may reach this (a metal yields first: 0.7 % for the
+#: thesis's Al 7075-T6; a soft section does not)
+STRAIN_LIMIT = 0.01
+
+
+def oscillation_period(t: np.ndarray, x: np.ndarray) -> float:
+    """
+    Return the period of the dominant oscillation of x(t), robust to ripple and drift.
+
+    x is detrended (least-squares straight line removed).  A first estimate comes from its
+    upward zero crossings (linear interpolation between samples; a crossing counts only
+    after x went below -30 % of its largest |x| since the previous one: hysteresis against
+    the ripple of the higher modes): (last - first crossing) / (crossings - 1).  It is then
+    refined to the period maximising the Hann-windowed Fourier amplitude (golden-section
+    search in [0.8, 1.25] x the estimate), which the higher modes riding on the signal do
+    not shift as they shift crossing times.  nan with fewer than two full periods.
+    """
+    t = np.asarray(t, dtype=float)
+    x = np.asarray(x, dtype=float)
+    if len(x) < 8 or t[-1] <= t[0]:
+        return math.nan
+    x = x - np.polyval(np.polyfit(t - t[0], x, 1), t - t[0])
+    amp = float(np.abs(x).max())
+    if amp == 0.0:
+        return math.nan
+    up = np.flatnonzero((x[:-1] < 0.0) & (x[1:] >= 0.0))
+    low = np.flatnonzero(x < -0.3 * amp)
+    crossings, last = [], -1
+    for i in up:
+        j = np.searchsorted(low, last + 1)     # armed: below -0.3 amp since the last one
+        if j < len(low) and low[j] <= i:
+            frac = -x[i] / (x[i + 1] - x[i])
+            crossings.append(t[i] + frac * (t[i + 1] - t[i]))
+            last = i
+    if len(crossings) < 3:
+        return math.nan
+    guess = float((crossings[-1] - crossings[0]) / (len(crossings) - 1))
+    xw = x * np.hanning(len(x))
+
+    def minus_amplitude(period):
+        return -abs(np.dot(xw, np.exp(-2j * math.pi * t / period)))
+
+    lo, hi = 0.8 * guess, 1.25 * guess
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    c, d = hi - g * (hi - lo), lo + g * (hi - lo)
+    fc, fd = minus_amplitude(c), minus_amplitude(d)
+    while hi - lo > 1e-9 * guess:
+        if fc < fd:
+            hi, d, fd = d, c, fc
+            c = hi - g * (hi - lo)
+            fc = minus_amplitude(c)
+        else:
+            lo, c, fc = c, d, fd
+            d = lo + g * (hi - lo)
+            fd = minus_amplitude(d)
+    return 0.5 * (lo + hi)
+
+
+def stress_point_labels(xs) -> list[str]:
+    """
+    Name stress points by position (m, 6 digits); a node two elements share gets - and +.
+
+    Stresses are recovered at both ends of every element, so an inner node has two: the
+    element ending there (x-) and the one starting there (x+).
+    """
+    texts = [f"{x:.6g}" for x in xs]
+    out = list(texts)
+    for i in range(len(texts) - 1):
+        if texts[i] == texts[i + 1]:
+            out[i], out[i + 1] = texts[i] + "-", texts[i + 1] + "+"
+    return out
+
+
+def deploy_start(v0: float, forces) -> float | None:
+    """
+    Return when the deployment started: the origin of a run's deploy time (one rule).
+
+    t = 0 if the frame moves from the start (v0 != 0), else the first instant a non-zero
+    sleeve force acts; None if neither happened.  forces: (t, F) in time order, each F
+    acting from t, a later value at the same t replacing an earlier one (the parameter's
+    value at t = 0, then a command or profile row at t = 0 that replaces it).  A frame at
+    rest that waits for its first command does not deploy while it waits: the thesis's
+    deploy time runs from the initial velocity V0.
+    """
+    if v0 != 0.0:
+        return 0.0
+    pending = None          # (t, F) not yet known to be the last value at its t
+    for t, f in forces:
+        if pending is not None and t > pending[0] + 1e-12 and pending[1] != 0.0:
+            return float(pending[0])
+        pending = (t, f)
+    return float(pending[0]) if pending is not None and pending[1] != 0.0 else None
+
+
+def deploy_start_of(params, applied) -> float | None:
+    """deploy_start of a recorded run: its parameters (registry defaults) and applied forces."""
+    from .params import defaults
+
+    given = {**defaults(), **dict(params)}
+    return deploy_start(float(given["v0"]),
+                        [(0.0, float(given["sleeve_force"])), *applied])
+
+
+def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dict:
+    """
+    Return the stage-2 amplitude and period of the tip deflection v(t).
+
+    Over the window (lock, lock + STAGE2_WINDOW], or the part of it the run covers
+    (reported as stage2_window): half the peak-to-peak of v and oscillation_period(t, v).
+    """
+    out = {"stage2_window": None, "stage2_tip_amplitude": None, "stage2_tip_period": None}
+    if lock_time is None:
+        return out
+    keep = (t > lock_time) & (t <= lock_time + STAGE2_WINDOW + 1e-12)
+    t, v = t[keep], v[keep]
+    if len(v) <= 8:
+        return out
+    out["stage2_window"] = [float(lock_time), float(t[-1])]
+    out["stage2_tip_amplitude"] = 0.5 * float(v.max() - v.min())
+    period = oscillation_period(t, v)
+    out["stage2_tip_period"] = None if math.isnan(period) else period
+    return out
+
+
+def lock_warning(params: dict, lock_kind: str | None) -> str | None:
+    """Return a warning if the lock asked for does not apply to the model (else None)."""
+    asked = params.get("lock")
+    if lock_kind is not None and asked is not None and asked != lock_kind:
+        return (f"lock not applicable: lock={asked} does not apply to model="
+                f"{params.get('model')} (a rigid mechanism stopped at a point keeps no "
+                f"kinetic energy to redistribute); the {lock_kind} lock is used; set "
+                f"lock={lock_kind} to silence this")
+    return None
+
+
+#: the largest omega h at which the locked frame's first mode is resolved: the midpoint rule
+#: lengthens a period by ~(omega h)^2 / 12 (1 % at 0.35); stage 2's phase correction makes the
+#: period exact up to omega h = 1.5, past which it leaves a mode as it is (aliased)
+RESOLVED_OMEGA_H = {False: math.sqrt(12 * 0.01), True: 1.5}
+
+
+def coarse_step_warning(params: dict) -> str | None:
+    """
+    Return a warning when the step does not resolve the locked frame's first mode.
+
+    Its period then comes out wrong (past omega h = 1.5, aliased: several times too long on
+    a small or light frame at the default step) and the stage-2 stresses with it.  It
+    depends on the model parameters alone: worked out once per set of them.
+    """
+    from .params import SPECS
+
+    try:
+        return _coarse_step_warning(tuple(sorted((k, v) for k, v in params.items()
+                                                 if k in SPECS)))
+    except TypeError:           # (a value that cannot be a parameter: no model to judge)
+        return None
+
+
+@cache
+def _coarse_step_warning(items: tuple) -> str | None:
+    from .model import UmbrellaModel
+    from .params import UmbrellaParams
+
+    try:
+        p = UmbrellaParams.from_mapping(dict(items))
+    except ValueError:
+        return None
+    if p.model not in ("flexible", "flexible-nonlinear"):
+        return None
+    omega = float(UmbrellaModel(p).locked_modes[0][0])
+    h = p.physics_time_step
+    corrected = bool(p.phase_correction) and p.model == "flexible"
+    limit = RESOLVED_OMEGA_H[corrected]
+    if omega * h <= limit:
+        return None
+    enough = limit / omega * (p.time_step / h)      # (time_step / physics step: the mesh's)
+    scale = 10.0 ** (math.floor(math.log10(enough)) - 2)
+    enough = math.floor(enough / scale) * scale        # three digits, rounded down
+    return (f"coarse step: the locked frame's first mode (period {2e3 * math.pi / omega:.4g} "
+            f"ms) gets {2 * math.pi / (omega * h):.3g} steps a period at the physics step "
+            f"{h:g} s, fewer than the {2 * math.pi / limit:.3g} that resolve it"
+            f"{' with phase_correction' if corrected else ''}: the stage-2 period and "
+            f"stresses are not those of the model; set time_step <= {enough:.3g} s")
+
+
+#: an energy balance error (energy_drift) past which a run is named: well above round-off
+#: (~1e-13) and the Newton tolerance's share (< 1e-4 in every documented run)
+ENERGY_DRIFT_LIMIT = 1e-3
+
+
+def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
+                      tip_deflection: float, locked: bool = False,
+                      energy_drift: float | None = None) -> list[str]:
+    """
+    Return where a run left the model's validity: one rule, used everywhere.
+
+    Each text starts with a fixed key ('lock not applicable', 'coarse step' once locked,
+    'energy not conserved', 'yield exceeded', 'large strain' (below yield), 'large
+    deflection') before a colon.
+    """
+    out = []
+    lw = lock_warning(params, lock_kind)
+    if lw:
+        out.append(lw)
+    cw = coarse_step_warning(params) if locked else None
+    if cw:
+        out.append(cw)
+    if energy_drift is not None and energy_drift > ENERGY_DRIFT_LIMIT:
+        out.append(f"energy not conserved: the energy balance is off by {100 * energy_drift:.3g}"
+                   f" % of the run's energy (limit {100 * ENERGY_DRIFT_LIMIT:g} %): a step "
+                   "too coarse for this motion, whose energy restoration was skipped (more "
+                   "than 1 % a step); use a smaller time_step")
+    ys = params["yield_strength"]
+    if peak_stress > ys:
+        out.append(f"yield exceeded: peak |sigma| {peak_stress / 1e6:.4g} MPa is "
+                   f"{peak_stress / ys:.3g} x yield_strength {ys / 1e6:.4g} MPa; the linear "
+                   "elastic material law no longer holds")
+    strain = peak_stress / params["youngs_modulus"]
+    if strain > STRAIN_LIMIT and peak_stress <= ys:      # (past yield: the warning above)
+        out.append(f"large strain: peak |sigma| / youngs_modulus = {100 * strain:.3g} % "
+                   f"(limit {100 * STRAIN_LIMIT:g} %): the small-strain measures and "
+                   "Hooke's law of the beam elements no longer hold")
+    length = params["l1"] + params["l2"]
+    if tip_deflection > TIP_DEFLECTION_LIMIT * length:
+        beyond = ("the von Karman strain of flexible-nonlinear holds to fibre rotations of "
+                  "~0.3 rad: check them (docs/validation_nonlinear.md)"
+                  if params.get("model") == "flexible-nonlinear" else
+                  "small-deformation theory no longer holds (compare model flexible-nonlinear)")
+        out.append(f"large deflection: |v_G| reached {tip_deflection * 1e3:.4g} mm = "
+                   f"{100 * tip_deflection / length:.3g} % of the leaf length {length:g} m "
+                   f"(limit {100 * TIP_DEFLECTION_LIMIT:g} %): {beyond}")
+    return out
+
+
+class SummaryAccumulator:
+    """
+    Summary figures of a run from every physics step (StepBlocks).
+
+    Independent of the publication or recording rate.  Written once; used by the CLI, the
+    node (diagnostics, recording metadata) and, through the recording's metadata,
+    umbrella_compare.  The energy balance and the constraint residual are taken at the end
+    of each block (every step for ``simulate``, every publication for the node).
+    """
+
+    def __init__(self, params: dict, initial: Sample, lock_kind: str | None = None):
+        self.params = dict(params)
+        self.lock_kind = lock_kind
+        self.lock: LockEvent | None = None
+        self.steps = 0
+        self.final_time = float(initial.time)
+        self.error: str | None = None
+        self._e0 = mechanical_energy(initial)
+        self._scale = max(abs(self._e0), ENERGY_SCALE_FLOOR)
+        self._balance = 0.0
+        self._residual = float(initial.constraint_residual)
+        self._tip1 = ((abs(initial.tip_transverse), float(initial.time))
+                      if initial.stage == "deploying" else (None, None))
+        self._tip_all = abs(initial.tip_transverse)
+        self._peaks = {b: (getattr(initial, f"peak_stress_{b}"),
+                           getattr(initial, f"peak_stress_{b}_x"), float(initial.time))
+                       for b in ("leaf", "link")}
+        self._s2_t: list = []
+        self._s2_v: list = []
+        # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
+        self._start = deploy_start(float(self.params.get("v0", 0.0)), ())
+        self._warned: set = set()
+        self._warned_at: tuple | None = None   # (peak, tip) the last new_warnings saw
+
+    def add(self, block: StepBlock) -> None:
+        """Take the steps of one block."""
+        if block.lock is not None and self.lock is None:
+            self.lock = block.lock
+        if block.error is not None:
+            self.error = block.error
+        n = len(block)
+        if n == 0:
+            return
+        # Python floats: a live node adds a block of ~10 steps per publication, where every
+        # numpy call costs more than the loop (~90 -> ~20 us per 1 kHz period, measured)
+        t, v, stage = block.rows.take(_SUMMARY_ROWS, axis=0).tolist()
+        if self._start is None:     # (until the first push: then never again)
+            # each step's force acts from the step's start: the previous step's end
+            self._start = deploy_start(0.0, zip([self.final_time, *t[:-1]],
+                                                block.rows[_FORCE_ROW].tolist()))
+        self.steps += n
+        self.final_time = t[-1]
+        self._tip_all = max(self._tip_all, max(v), -min(v))
+        if stage[0] == 0:                                  # stage 1 (deploying) in the block
+            tip1, when = self._tip1
+            for x, s, ti in zip(v, stage, t):
+                if s == 0 and (tip1 is None or abs(x) > tip1):
+                    tip1, when = abs(x), ti
+            self._tip1 = (tip1, when)
+        if self.lock is not None and stage[-1] != 0 \
+                and t[0] <= self.lock.time + STAGE2_WINDOW + 1e-12:
+            end = self.lock.time + STAGE2_WINDOW + 1e-12
+            for ti, x, s in zip(t, v, stage):
+                if s != 0 and ti <= end:
+                    self._s2_t.append(ti)
+                    self._s2_v.append(x)
+        for body, (peak, x, ti) in block.peaks.items():
+            if peak > self._peaks[body][0]:
+                self._peaks[body] = (peak, x, ti)
+        last = block.last
+        self._residual = max(self._residual, float(last.constraint_residual))
+        e = mechanical_energy(last)
+        self._scale = max(self._scale, abs(e), abs(last.work))
+        self._balance = max(self._balance, abs(e - self._e0 - last.work + last.lock_energy_loss
+                                               + last.damping_dissipation))
+
+    def figures(self) -> dict:
+        """Return the physics figures of the run so far (no wall-clock ones), JSON-ready."""
+        p = self.params
+        start = self._start if self._start is not None else 0.0    # (None: never pushed)
+        out: dict = {"deploy_time": self.lock.time - start if self.lock else None,
+                     "deploy_start": self._start,
+                     "lock_time": self.lock.time if self.lock else None,
+                     "tip_deflection_max": self._tip1[0],
+                     "tip_deflection_max_time": self._tip1[1]}
+        if self._s2_t:
+            out.update(stage2_figures(np.array(self._s2_t), np.array(self._s2_v),
+                                      self.lock.time))
+        else:
+            out.update(stage2_figures(np.zeros(0), np.zeros(0), None))
+        for body in ("leaf", "link"):
+            peak, x, t = self._peaks[body]
+            out[f"peak_stress_{body}"] = peak
+            out[f"peak_stress_{body}_x"] = x
+            out[f"peak_stress_{body}_time"] = t
+        out["yield_strength"] = p.get("yield_strength")
+        out["stress_ratio_max"] = max(out["peak_stress_leaf"], out["peak_stress_link"]) / \
+            p["yield_strength"]
+        out["tip_deflection_ratio_max"] = self._tip_all / (p["l1"] + p["l2"])
+        out["energy_drift"] = self._balance / self._scale
+        if self.lock:
+            out["lock"] = self.lock.kind
+            out["lock_energy_before"] = self.lock.energy_before
+            out["lock_energy_after"] = self.lock.energy_after
+            out["lock_free_velocities"] = list(self.lock.free_velocities)
+        out["constraint_residual_max"] = self._residual
+        out["final_time"] = self.final_time
+        out["steps"] = self.steps
+        out["warnings"] = self.warnings()
+        if self.error:
+            out["error"] = self.error
+        return out
+
+    def warnings(self) -> list[str]:
+        """Return the validity warnings so far (validity_warnings)."""
+        return validity_warnings(self.params, self.lock_kind,
+                                 max(self._peaks["leaf"][0], self._peaks["link"][0]),
+                                 self._tip_all, locked=self.lock is not None,
+                                 energy_drift=self._balance / self._scale)
+
+    def new_warnings(self) -> list[str]:
+        """Return the warnings not returned by an earlier call (a log line each, once)."""
+        # the warnings depend on the run only through the largest peak stress and tip
+        # deflection so far: unchanged (most publications), nothing can be new
+        seen = (self._peaks["leaf"][0], self._peaks["link"][0], self._tip_all,
+                self.lock is not None, self._balance / self._scale > ENERGY_DRIFT_LIMIT)
+        if seen == self._warned_at:
+            return []
+        self._warned_at = seen
+        fresh = [w for w in self.warnings() if w.split(":")[0] not in self._warned]
+        self._warned.update(w.split(":")[0] for w in fresh)
+        return fresh
+
+
+def blocks_from_samples(samples: list) -> StepBlock:
+    """Return a StepBlock of samples (each taken as one step's end)."""
+    rows = np.array([step_row(s) for s in samples], dtype=float).reshape(-1, len(STEP_FIELDS))
+    last = samples[-1]
+    return StepBlock.from_rows(rows.T.copy(), lambda: last)
+
+
+def summarize(r: RunResult) -> dict:
+    """
+    Return the summary of a run.
+
+    The figures of every physics step (``r.figures``, from solver.simulate's
+    SummaryAccumulator) if the run has them, else from its samples ('figures_from':
+    'samples'), plus the wall-clock figures.
+    """
+    if r.figures is not None:
+        out = dict(r.figures)
+    elif not r.samples:
+        return {"error": r.error, "steps": r.steps}
+    else:
+        acc = SummaryAccumulator(r.params, r.samples[0], r.lock.kind if r.lock else None)
+        if len(r.samples) > 1:
+            block = blocks_from_samples(r.samples[1:])
+            acc.add(replace(block, lock=r.lock, error=r.error))
+        out = acc.figures()
+        out["figures_from"] = "samples"
+    out["steps"] = r.steps
+    out["wall_time"] = r.wall_time
+    ft = out.get("final_time")
+    out["real_time_factor"] = float(ft / r.wall_time) if r.wall_time > 0 and ft else None
+    if r.error:
+        out["error"] = r.error
+    return out
+
+
+def energy_balance_error(r: RunResult) -> np.ndarray:
+    """(T + V) - (T0 + V0) - W + lock losses + damping dissipation, per sample (J)."""
+    e = mechanical_energy(r)
+    return (e - e[0] - r.column("work") + r.column("lock_energy_loss")
+            + r.column("damping_dissipation"))
+
+
+def relative_drift(balance_error, energy, work) -> float:
+    """
+    Return max |balance error| over the largest |energy| or |work| (series): energy_drift.
+
+    One rule for a run's samples (energy_drift) and a recording's energy topic (compare).
+    """
+    scale = max(float(np.abs(energy).max()), float(np.abs(work).max()), ENERGY_SCALE_FLOOR)
+    return float(np.abs(balance_error).max() / scale)
+
+
+def energy_drift(r: RunResult) -> float:
+    """Return max |energy balance error| relative to the largest mechanical energy."""
+    return relative_drift(energy_balance_error(r), mechanical_energy(r), r.column("work"))
