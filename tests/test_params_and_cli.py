@@ -7,8 +7,9 @@ import sys
 
 import pytest
 
-from umbrella_sim.core.params import load_params_file, UmbrellaParams
+from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.rigid import deployment_time_by_quadrature
+from umbrella_sim.ros.params_file import load_params_file
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG = os.path.join(ROOT, "config", "umbrella.yaml")
@@ -100,7 +101,7 @@ def test_a_params_file_value_of_another_type_is_refused_as_the_node_does(tmp_pat
 
 def test_params_file_numbers_are_typed_as_rcl_types_them(tmp_path):
     """72.0e9 is a double to rcl (strtod), a string to YAML 1.1; quoted numbers are strings."""
-    from umbrella_sim.core.params import load_params_file
+    from umbrella_sim.ros.params_file import load_params_file
 
     path = tmp_path / "typed.yaml"
     path.write_text("/**:\n  ros__parameters:\n    youngs_modulus: 72.0e9\n    v0: -5e-1\n"

@@ -17,8 +17,10 @@ from rosgraph_msgs.msg import Clock
 
 from tests.ros_helpers import NodeProcess, poll, Probe, ros_env
 from umbrella_sim.bag.reader import read_log
-from umbrella_sim.core.params import NODE_PARAMETERS, REGISTRY, SPECS, START
+from umbrella_sim.core.params import (CONTROLLER_PARAMETERS, NODE_PARAMETERS, REGISTRY, SPECS,
+                                      START)
 from umbrella_sim.ros import messages as ros_io
+from umbrella_sim.ros.parameters import descriptor
 
 
 @pytest.fixture
@@ -37,7 +39,7 @@ def _value(kind: int, v) -> ParameterValue:
 
 def test_descriptors_come_from_the_registry():
     for name, p in REGISTRY.items():
-        d = ros_io.descriptor(name)
+        d = descriptor(name)
         assert not d.dynamic_typing
         assert d.type == {float: ParameterType.PARAMETER_DOUBLE,
                           int: ParameterType.PARAMETER_INTEGER,
@@ -49,8 +51,8 @@ def test_descriptors_come_from_the_registry():
             assert (d.floating_point_range[0].from_value,
                     d.floating_point_range[0].to_value) == (p.low, p.high)
     # the issue that started this: publish_rate changes the physics step, built on reset
-    assert "~/reset" in ros_io.descriptor("publish_rate").additional_constraints
-    assert "at once" in ros_io.descriptor("marker_magnification").additional_constraints
+    assert "~/reset" in descriptor("publish_rate").additional_constraints
+    assert "at once" in descriptor("marker_magnification").additional_constraints
 
 
 def test_live_node_conventions(probe, tmp_path):
@@ -185,8 +187,9 @@ def test_wrong_parameter_type_at_start_is_refused(args, words):
 
 
 def test_every_registry_entry_is_a_parameter_of_one_kind():
-    assert set(SPECS) | set(NODE_PARAMETERS) == set(REGISTRY)
-    assert not set(SPECS) & set(NODE_PARAMETERS)
+    kinds = (set(SPECS), set(NODE_PARAMETERS), set(CONTROLLER_PARAMETERS))
+    assert set.union(*kinds) == set(REGISTRY)
+    assert sum(map(len, kinds)) == len(REGISTRY)       # no name of two kinds
 
 
 def test_the_interface_table_gives_each_topic_the_qos_it_has():

@@ -12,12 +12,10 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, fields
-import functools
 import math
 import re
 from typing import Any, Mapping
 
-from ..bag.paths import read_text_input
 
 MODELS = ("flexible", "flexible-nonlinear", "rigid-fe", "rigid")
 #: smallest physics step (s): the finest step of the convergence studies is 3.125e-7 s; at
@@ -34,6 +32,7 @@ START = "start"            # read-only: fixed for the life of the node
 MODEL = "model"            # the physics (UmbrellaParams), also the offline CLI
 INPUT = "input"            # the physics' input, also in UmbrellaParams
 NODE = "node"              # umbrella_node only
+CONTROLLER = "controller"  # deploy_controller only (it also takes the model's geometry)
 
 
 @dataclass(frozen=True)
@@ -51,7 +50,7 @@ class Param:
     high_open: bool = False         # True: value < high (else value <= high)
     choices: tuple = ()             # allowed values of a str parameter
     applies: str = RESET            # RESET | NOW | START
-    group: str = MODEL              # MODEL | INPUT | NODE
+    group: str = MODEL              # MODEL | INPUT | NODE | CONTROLLER
     rule: str = ""                  # cross-parameter rule, checked in validate()
     default_text: str = ""          # how the docs show the default, when repr is unclear
 
@@ -295,6 +294,34 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "prefix of the frame ids of joint_states, tip_deflection and markers (umbrella_base, "
        "leaf); 'a1/' matches robot_state_publisher's frame_prefix when several antennas "
        "share one TF tree", applies=START, group=NODE, default_text='""'),
+    # deploy_controller (msg_docs/deploy_controller.md): read once, at start
+    _P("target_time", float, 1.0, "s",
+       "deploy time to reach, from the first push to the lock (sim time)",
+       low=0.0, low_open=True, high=1e4, applies=START, group=CONTROLLER),
+    _P("max_force", float, 20.0, "N",
+       "largest sleeve force commanded (pushes along -Y); the plan starts with it",
+       low=0.0, low_open=True, high=1e9, applies=START, group=CONTROLLER),
+    _P("min_force", float, 0.0, "N",
+       "smallest sleeve force commanded; < 0 lets the controller hold the sleeve back (the "
+       "node must accept it: its `sleeve_force_min` <= `min_force`); 0 = push-only",
+       low=-1e9, high=0.0, applies=START, group=CONTROLLER),
+    _P("lock_rate", float, 0.0, "rad/s",
+       "leaf angular speed |alpha1'| at the stop; 0 = a quarter of the mean rate "
+       "(alpha0 - alpha_deployed) / `target_time`", low=0.0, applies=START, group=CONTROLLER),
+    _P("creep_angle", float, 0.0, "rad",
+       "last stretch of alpha1 before the stop planned at `lock_rate` (< alpha0 - "
+       "alpha_deployed); 0 = brake right up to the stop, which keeps the needed force steady "
+       "there: a command held through a stall of the loop then stays right",
+       low=0.0, applies=START, group=CONTROLLER),
+    _P("deceleration", float, 0.0, "rad/s²",
+       "planned leaf deceleration before the creep; 0 = 4 (alpha0 - alpha_deployed) / "
+       "`target_time`², capped at half of what `min_force` can do near the stop (the rest is "
+       "kept for feedback)", low=0.0, applies=START, group=CONTROLLER),
+    _P("velocity_gain", float, 8.0, "1/s", "feedback gain on the leaf rate error",
+       low=0.0, applies=START, group=CONTROLLER),
+    _P("position_gain", float, 36.0, "1/s²",
+       "feedback gain on the leaf angle error; it keeps the deploy time",
+       low=0.0, applies=START, group=CONTROLLER),
 )}
 
 #: parameters added after recordings were made, with the value an older recording (which
@@ -318,13 +345,18 @@ def recorded_params(values: Mapping[str, Any]) -> "UmbrellaParams":
 SPECS: dict[str, Param] = {n: p for n, p in REGISTRY.items() if p.group in (MODEL, INPUT)}
 #: parameters of umbrella_node only
 NODE_PARAMETERS: dict[str, Param] = {n: p for n, p in REGISTRY.items() if p.group == NODE}
+#: parameters of deploy_controller only (it also takes the model's geometry: SPECS)
+CONTROLLER_PARAMETERS: dict[str, Param] = {n: p for n, p in REGISTRY.items()
+                                           if p.group == CONTROLLER}
 #: keys of a params file that belong to the node, not the model: the offline CLI skips them
 NODE_ONLY_PARAMS = tuple(NODE_PARAMETERS) + ("use_sim_time",)
 
 
 def defaults(group: str | None = None) -> dict:
-    """Name -> default of every parameter (of one group)."""
-    return {n: p.default for n, p in REGISTRY.items() if group in (None, p.group)}
+    """Name -> default of every parameter of umbrella_node (or of one group)."""
+    if group is None:
+        return {n: p.default for n, p in REGISTRY.items() if p.group != CONTROLLER}
+    return {n: p.default for n, p in REGISTRY.items() if p.group == group}
 
 
 def node_defaults() -> dict:
@@ -474,12 +506,7 @@ def _sleeve_height(l1: float, l3: float, alpha: float) -> float:
 
 def _check_each(p: UmbrellaParams, names) -> None:
     """Raise ValueError for the first of names whose value has the wrong type or range."""
-    for name in names:
-        spec, value = SPECS[name], getattr(p, name)
-        if not isinstance(value, spec.type) or (spec.type is not bool
-                                                and isinstance(value, bool)):
-            raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}")
-        spec.check(value)
+    _check_fields(p, {name: SPECS[name] for name in names})
 
 
 def check_types(values: Mapping[str, Any]) -> None:
@@ -582,129 +609,6 @@ def check_node_parameters(values: Mapping[str, Any]) -> dict:
     return out
 
 
-def _flatten(values: dict, prefix: str = "") -> dict:
-    """Nested mappings are dotted parameter names in ROS 2 (`a: {b: 1}` is `a.b`)."""
-    out = {}
-    for key, value in values.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            out.update(_flatten(value, name + "."))
-        else:
-            out[name] = value
-    return out
-
-
-#: a plain (unquoted) scalar rcl's params parser reads as a double: strtod's forms, which
-#: include 72.0e9 (YAML 1.1, and so PyYAML, wants a sign in the exponent: a string to it)
-_ROS_DOUBLE = re.compile(r"(?:[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|[-+]?\.(inf|Inf|INF)"
-                         r"|\.(nan|NaN|NAN))$")      # the whole value (PyYAML: match only)
-
-
-def load_yaml_as_ros(text: str):
-    """
-    Load YAML typed as rcl types a params file; a mapping with a key twice is an error.
-
-    A plain scalar in one of strtod's forms is a double (72.0e9 too), a quoted one a string
-    ("-0.5"), as rclpy gives them to a node; YAML takes a repeated key's last value
-    silently, rcl refuses the file.  yaml.YAMLError if it cannot be read.
-    """
-    import yaml
-
-    return yaml.load(text, Loader=_ros_typed_loader())   # noqa: S506 - a SafeLoader
-
-
-@functools.cache
-def _ros_typed_loader():
-    """Return the loader class of load_yaml_as_ros (made once: yaml imported on first use)."""
-    import yaml
-
-    class RosTyped(yaml.SafeLoader):
-
-        def construct_mapping(self, node, deep=False):
-            seen = set()
-            for key_node, _ in node.value:
-                key = self.construct_object(key_node, deep=deep)
-                if key in seen:
-                    raise yaml.MarkedYAMLError(
-                        problem=f"key {key!r} given twice", problem_mark=key_node.start_mark)
-                seen.add(key)
-            return super().construct_mapping(node, deep)
-
-    RosTyped.add_implicit_resolver("tag:yaml.org,2002:float", _ROS_DOUBLE,
-                                   list("-+0123456789."))
-    return RosTyped
-
-
-def read_params_file(path: str) -> dict[str, dict]:
-    """
-    Read the sections of a ROS 2 params YAML.
-
-    {section (node name pattern): ros__parameters with dotted names} of a ROS 2 params
-    YAML, or ValueError naming the file and the reason.  The same checks rcl makes, done
-    first so that a bad file gets a one-line error instead of an rcl traceback.
-    """
-    import yaml  # local import: only the file path needs it
-
-    text = read_text_input(path, "params file")
-    try:
-        doc = load_yaml_as_ros(text)
-    except yaml.YAMLError as exc:
-        reason = " ".join(str(exc).split())
-        raise ValueError(f"params file {path}: not valid YAML ({reason})") from None
-    if not isinstance(doc, dict) or not doc:
-        raise ValueError(f"params file {path}: expected a mapping of node names to "
-                         "{ros__parameters: {...}}")
-    sections = {}
-    for key, section in doc.items():
-        values = section.get("ros__parameters") if isinstance(section, dict) else None
-        if not isinstance(values, dict):
-            raise ValueError(f"params file {path}: section {key!r} has no ros__parameters "
-                             "mapping")
-        extra = sorted(set(section) - {"ros__parameters"})
-        if extra:
-            raise ValueError(f"params file {path}: section {key!r}: only ros__parameters is "
-                             f"allowed, found {', '.join(map(str, extra))}")
-        sections[str(key)] = _flatten(values)
-        empty = sorted(name for name, value in sections[str(key)].items() if value is None)
-        if empty:
-            raise ValueError(f"params file {path}: section {key!r}: no value for "
-                             f"{', '.join(empty)}")
-    return sections
-
-
-def section_matches(pattern: str, node_fqn: str) -> bool:
-    """
-    Tell whether a params-file section applies to a node.
-
-    Whether a params-file section name applies to the node of fully qualified name
-    node_fqn (ROS 2 rules: '/**' any namespace depth, '*' one token, no leading slash means
-    relative to the root).
-    """
-    tokens = pattern.strip("/").split("/")
-    regex = "".join("(/[^/]+)*" if t == "**" else "/[^/]+" if t == "*" else "/" + re.escape(t)
-                    for t in tokens)
-    return re.fullmatch(regex, node_fqn) is not None
-
-
-def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:
-    """
-    Return the parameters of a params YAML for node_name.
-
-    The ``ros__parameters`` of a ROS 2 params YAML that apply to node_name in the root
-    namespace (sections '/**', '/*', node_name, ...); a file with no such section is an
-    error.
-    """
-    sections = read_params_file(path)
-    merged: dict = {}
-    for key, values in sections.items():
-        if section_matches(key, "/" + node_name):
-            merged.update(values)
-    if not any(section_matches(key, "/" + node_name) for key in sections):
-        raise ValueError(f"params file {path}: no section for node /{node_name} (sections: "
-                         f"{', '.join(sections)}); use '/**' or '{node_name}'")
-    return merged
-
-
 NODE_PARAMETERS_LISTED = "umbrella_node --help and in msg_docs/parameters.md"
 
 
@@ -729,56 +633,6 @@ def check_known_names(names, known, source: str,
                          f"{', '.join(problems)}; known parameters are listed by {listed}")
 
 
-#: the prefix of rclpy's QoS override parameters, and the parameters every rclpy node has
-QOS_OVERRIDES = "qos_overrides."
-USE_SIM_TIME = "use_sim_time"
-ROS_OWN_PARAMETERS = frozenset({USE_SIM_TIME, "start_type_description_service"})
-
-
-def params_files_in(ros_args: list[str]) -> list[str]:
-    """
-    Return the ``--params-file`` arguments of a command line, each read and checked.
-
-    ValueError naming the file and the problem (rcl's own parse errors are tracebacks).
-    """
-    files = [ros_args[i + 1] for i, a in enumerate(ros_args[:-1]) if a == "--params-file"]
-    for path in files:
-        read_params_file(path)
-    return files
-
-
-def check_parameter_sources(node_fqn: str, params_files, given, known,
-                            listed: str = NODE_PARAMETERS_LISTED, shared=()) -> set:
-    """
-    Check the params files and parameter names a ROS node was started with.
-
-    Every params file has a section for the node, and every parameter given for it (``-p``,
-    ``given``, or a file) is one it knows (``known``, besides ROS_OWN_PARAMETERS): a typo
-    is a ValueError naming it, never a silent default.  A wildcard section ('/**', '/*',
-    ...) may also give the sibling umbrella_sim node's parameters (``shared``), so that one
-    file serves both; those are skipped there (in a section naming this node, or -p, they
-    are unknown).  Returns the ``qos_overrides.*`` names given, for the node to check
-    against the QoS its topics declare.
-    """
-    known = set(known) | ROS_OWN_PARAMETERS
-    in_files = set()
-    for path in params_files:
-        sections = read_params_file(path)
-        if not any(section_matches(key, node_fqn) for key in sections):
-            raise ValueError(f"params file {path}: no section for node {node_fqn} "
-                             f"(sections: {', '.join(sections)}); use '/**' or the "
-                             "node's name")
-        for key, values in sections.items():
-            if section_matches(key, node_fqn):
-                names = {n for n in values if not n.startswith(QOS_OVERRIDES)}
-                check_known_names(names - set(shared) if "*" in key else names, known,
-                                  f"params file {path} (for {node_fqn})", listed)
-                in_files |= set(values)
-    names = [n for n in given if not n.startswith(QOS_OVERRIDES) and n not in in_files]
-    check_known_names(names, known, f"-p for {node_fqn}", listed)
-    return {n for n in (*in_files, *given) if n.startswith(QOS_OVERRIDES)}
-
-
 def physics_step(time_step: float, publish_rate: float) -> float:
     """Return the largest step <= time_step that divides the publication period."""
     period = 1.0 / publish_rate
@@ -799,3 +653,37 @@ def shortened_step_note(time_step: float, publish_rate: float) -> str | None:
             f"divides the {1e3 / publish_rate:g} ms publication period (publish_rate "
             f"{publish_rate:g} Hz), so the states differ from a run at {time_step:g} s by the "
             "step's error; a time_step dividing the period keeps them the same")
+
+
+def _check_fields(record, specs: Mapping[str, Param]) -> None:
+    """Raise ValueError for the first field of record whose type or range is wrong."""
+    for name, spec in specs.items():
+        value = getattr(record, name)
+        if not isinstance(value, spec.type) or (spec.type is not bool
+                                                and isinstance(value, bool)):
+            raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}")
+        spec.check(value)
+
+
+class _ControllerChecks:
+    """Methods of ControllerConfig; its fields come from the registry (CONTROLLER_PARAMETERS)."""
+
+    def __post_init__(self):
+        for name in CONTROLLER_PARAMETERS:      # an exact int is that double, as in UmbrellaParams
+            value = getattr(self, name)
+            if type(value) is int:
+                object.__setattr__(self, name, float(value))
+
+    def validated(self) -> "ControllerConfig":
+        """Return self if every value is in its range, else raise ValueError naming it."""
+        _check_fields(self, CONTROLLER_PARAMETERS)
+        return self
+
+
+#: deploy_controller's parameters as one frozen record; fields and defaults from the registry
+ControllerConfig = dataclasses.make_dataclass(
+    "ControllerConfig", [(p.name, p.type, dataclasses.field(default=p.default))
+                         for p in CONTROLLER_PARAMETERS.values()],
+    bases=(_ControllerChecks,), frozen=True)
+ControllerConfig.__module__ = __name__
+ControllerConfig.__doc__ = "deploy_controller's parameters (SI); check with validated()."

@@ -2,307 +2,34 @@
 deploy_controller: closed-loop deployment of the umbrella frame over ROS topics.
 
 Subscribes ``joint_states`` and ``deployment_phase`` of an ``umbrella_node`` and publishes
-``sleeve_force``.  Starting from rest it deploys the frame in ``target_time`` (sim seconds from
-the first push to the lock) and brings the leaf to the stop slowly, at ``lock_rate``, within
-the force limits [``min_force``, ``max_force``].
-
-Why braking.  The speed at the lock sets the stage-2 vibration: the lock keeps the kinetic
-energy (thesis 5.2.2) and turns it into vibration, so the tip amplitude and the stage-2
-stress grow like |alpha1'| at the lock.  A push-only drive (F_H >= 0, the thesis's sleeve)
-never takes kinetic energy out in stage 1, so for a given deploy time the softest push-only
-lock is a coast at constant kinetic energy; with the thesis frame that lowers the stage-2
-amplitude only ~3x below the constant force deploying in the same time.  A real deployment
-drive (a lead screw, a motor) can also hold the sleeve back: ``min_force`` < 0 allows it, and
-the node must then accept such commands (its ``sleeve_force_min`` parameter).  With
-``min_force = 0`` the plan has no braking and ends in a coast.
-
-The law, in the leaf angle alpha1 (the natural coordinate: the sleeve's lever dy_H/dalpha1
-vanishes near the folded state, so a sleeve-position loop would be badly scaled):
-
-* at the first push a reference alpha1_ref(t) is planned on the rigid two-angle model
-  (rigid.py: same geometry and masses): full push from rest, cruise, a constant
-  deceleration down to ``lock_rate`` at the stop (optionally a last ``creep_angle`` at
-  ``lock_rate``); the cruise rate is solved so that the whole plan takes ``target_time``;
-* the force is the plan's inverse dynamics, m(a) a'' + 1/2 m'(a) a'^2 = -F_H y_H'(a), at the
-  commanded acceleration a''_ref + kv (a'_ref - a') + kp (a_ref - a), clipped to the limits.
-  The feed-forward carries the motion, so the gains stay low: the frame's bending modes
-  (20-35 Hz, undamped in the model) sit inside the loop with a DDS round trip of 5-100 ms,
-  and a stiff loop would pump them.  The position term keeps the deploy time.
-
-The law itself (``DeployLaw``) is plain Python on the physics core's rigid model, tested
-offline against the simulator (``simulate_closed_loop``) as well as over DDS; rclpy is
-imported only by the node part.
+``sleeve_force``, one command per joint state, from the law of ``core.control.DeployLaw``
+(planned on the rigid two-angle model of the same frame; see that module for the law and
+msg_docs/deploy_controller.md for the node).  Its parameters are the registry's
+(``core.params.CONTROLLER_PARAMETERS``: typed, ranged, read-only) and the model's geometry,
+which a params file shared with umbrella_node gives.
 """
 from __future__ import annotations
 
 import collections
-from dataclasses import dataclass
 import math
 import statistics
 import sys
 import time
 
-import numpy as np
 
 from . import signals as stop_signals
-from ..core.params import (check_known_names, check_parameter_sources, params_files_in,
-                           UmbrellaParams)
-from ..core.rigid import RigidMechanism
+from .parameters import declare_from_registry
+from .params_file import check_parameter_sources, params_files_in
+from ..core.control import DeployLaw
+from ..core.params import (check_known_names, CONTROLLER_PARAMETERS, ControllerConfig, defaults,
+                           parameter_help, UmbrellaParams)
 
-#: controller parameters: name -> (default, description with units)
-CONTROLLER_PARAMETERS = {
-    "target_time": (1.0, "deploy time to reach, from the first push to the lock (s, sim time)"),
-    "max_force": (20.0, "largest sleeve force commanded (N, > 0, pushes along -Y); the plan "
-                  "starts with it"),
-    "min_force": (0.0, "smallest sleeve force commanded (N, <= 0); < 0 lets the controller "
-                  "hold the sleeve back (the node must accept it: sleeve_force_min <= "
-                  "min_force); 0 = push-only"),
-    "lock_rate": (0.0, "leaf angular speed |alpha1'| at the stop (rad/s); 0 = a quarter of "
-                  "the mean rate (alpha0 - alpha_deployed) / target_time"),
-    "creep_angle": (0.0, "last stretch of alpha1 before the stop planned at lock_rate (rad); "
-                    "0 = brake right up to the stop, which keeps the needed force steady "
-                    "there: a command held through a stall of the loop then stays right"),
-    "deceleration": (0.0, "planned leaf deceleration before the creep (rad/s^2); 0 = "
-                     "4 (alpha0 - alpha_deployed) / target_time^2, capped at half of what "
-                     "min_force can do near the stop (the rest is kept for feedback)"),
-    "velocity_gain": (8.0, "feedback gain on the leaf rate error (1/s)"),
-    "position_gain": (36.0, "feedback gain on the leaf angle error (1/s^2); it keeps the "
-                      "deploy time"),
-}
 
 #: at rest for the plan: rate and angle from the start within this fraction of the plan's
 #: cruise rate and of its span
 REST_FRACTION = 0.05
 CONTROLLER_PARAMETERS_LISTED = ("deploy_controller --help and in msg_docs/deploy_controller.md "
                                 "(and umbrella_node's, for the model)")
-
-
-def _check(name: str, value: float, ok: bool, rule: str) -> float:
-    if not (isinstance(value, (int, float)) and not isinstance(value, bool)
-            and math.isfinite(value) and ok):
-        raise ValueError(f"parameter {name}={value!r}: {rule}")
-    return float(value)
-
-
-@dataclass(frozen=True)
-class ControllerConfig:
-    target_time: float = CONTROLLER_PARAMETERS["target_time"][0]
-    max_force: float = CONTROLLER_PARAMETERS["max_force"][0]
-    min_force: float = CONTROLLER_PARAMETERS["min_force"][0]
-    lock_rate: float = CONTROLLER_PARAMETERS["lock_rate"][0]
-    creep_angle: float = CONTROLLER_PARAMETERS["creep_angle"][0]
-    deceleration: float = CONTROLLER_PARAMETERS["deceleration"][0]
-    velocity_gain: float = CONTROLLER_PARAMETERS["velocity_gain"][0]
-    position_gain: float = CONTROLLER_PARAMETERS["position_gain"][0]
-
-    def validated(self) -> "ControllerConfig":
-        v = self
-        _check("target_time", v.target_time, 0 < v.target_time <= 1e4, "must be in (0, 1e4] s")
-        _check("max_force", v.max_force, 0 < v.max_force <= 1e9, "must be in (0, 1e9] N")
-        _check("min_force", v.min_force, -1e9 <= v.min_force <= 0, "must be in [-1e9, 0] N")
-        _check("lock_rate", v.lock_rate, v.lock_rate >= 0, "must be >= 0 rad/s (0 = auto)")
-        _check("creep_angle", v.creep_angle, v.creep_angle >= 0, "must be >= 0 rad")
-        _check("deceleration", v.deceleration, v.deceleration >= 0,
-               "must be >= 0 rad/s^2 (0 = auto)")
-        _check("velocity_gain", v.velocity_gain, v.velocity_gain >= 0, "must be >= 0 1/s")
-        _check("position_gain", v.position_gain, v.position_gain >= 0, "must be >= 0 1/s^2")
-        return self
-
-
-class DeployLaw:
-    """
-    Sleeve force from (sim time, alpha1, alpha1'); see the module docstring.
-
-    ``start(t)`` marks the sim time the first push acts from (the plan's t = 0);
-    ``force(t, alpha1, rate)`` is the command for the state sampled at t.
-    """
-
-    GRID = 4000        # plan resolution in alpha1
-
-    def __init__(self, params: UmbrellaParams, cfg: ControllerConfig):
-        self.params = params.validated()
-        self.cfg = cfg.validated()
-        self.mech = RigidMechanism(self.params)
-        p, c = self.params, self.cfg
-        self.span = p.alpha0 - p.alpha_deployed
-        if c.creep_angle >= self.span:
-            raise ValueError(f"parameter creep_angle={c.creep_angle}: must be below "
-                             f"alpha0 - alpha_deployed = {self.span:.6g} rad")
-        self.lock_rate = c.lock_rate if c.lock_rate > 0 else 0.25 * self.span / c.target_time
-        near_stop = p.alpha_deployed + self.span * np.linspace(0.0, 0.5, 21)
-        self.braking_authority = min(-c.min_force * self.lever(a) / self.inertia(a)
-                                     for a in near_stop)
-        if c.min_force < 0:
-            wanted = c.deceleration or 4.0 * self.span / c.target_time ** 2
-            self.deceleration = min(wanted, 0.5 * self.braking_authority)
-        else:
-            self.deceleration = 0.0       # push-only: no braking, the plan ends in a coast
-        self._plan()
-        self.t_start: float | None = None
-
-    # ------------------------------------------------------------ rigid model
-    def inertia(self, a1: float) -> float:
-        """Generalised mass m(alpha1): T = 1/2 m alpha1'^2 on the constraint (4.120)."""
-        a2 = self.mech.alpha2(a1)
-        return 2.0 * self.mech.kinetic_energy(a1, a2, 1.0, self.mech.alpha2_rate_ratio(a1, a2))
-
-    def lever(self, a1: float) -> float:
-        """dy_H / d alpha1 (m/rad): F_H's generalised force on alpha1 is -F_H times this."""
-        p = self.params
-        a2 = self.mech.alpha2(a1)
-        return p.l1 * math.cos(a1) + p.l3 * math.cos(a2) * self.mech.alpha2_rate_ratio(a1, a2)
-
-    def _inverse_dynamics(self, a1: float, rate: float, accel: float) -> float:
-        h = 1e-6
-        dm = (self.inertia(a1 + h) - self.inertia(a1 - h)) / (2 * h)
-        return -(self.inertia(a1) * accel + 0.5 * dm * rate * rate) / self.lever(a1)
-
-    # ------------------------------------------------------------------- plan
-    def _plan(self) -> None:
-        """
-        Tabulate alpha1_ref(t) and the feed-forward force.
-
-        s(d) = min(full push from rest, cruise, braking curve, creep) over the remaining
-        angle d, the cruise rate bisected to take target_time.
-        """
-        p, c = self.params, self.cfg
-        d = np.linspace(self.span, 0.0, self.GRID + 1)          # remaining angle, decreasing
-        alpha = p.alpha_deployed + d
-        y = np.array([self.mech.sleeve_height(a, self.mech.alpha2(a)) for a in alpha])
-        m = np.array([self.inertia(a) for a in alpha])
-        push = np.sqrt(np.maximum(2.0 * c.max_force * (y[0] - y) / m, 0.0))  # 1/2 m s^2 = W
-        s_e, d_c, dec = self.lock_rate, c.creep_angle, self.deceleration
-        if dec > 0:
-            brake = np.where(d > d_c, np.sqrt(s_e ** 2 + 2 * dec * np.maximum(d - d_c, 0.0)),
-                             s_e)
-        else:
-            brake = np.full_like(d, np.inf)
-
-        def profile(cruise):
-            return np.minimum(np.minimum(push, brake), cruise)
-
-        def duration(cruise):
-            s = profile(cruise)
-            mid = 0.5 * (s[1:] + s[:-1])
-            return float(np.sum(np.diff(-d) / np.maximum(mid, 1e-300)))
-
-        fastest = duration(np.inf)
-        if fastest > c.target_time:
-            raise ValueError(f"parameter target_time={c.target_time:g}: too short for "
-                             f"max_force={c.max_force:g} N (and the braking at min_force="
-                             f"{c.min_force:g} N): the fastest plan takes {fastest:.4g} s")
-        lo, hi = 1e-6, float(np.max(np.minimum(push, brake)))
-        if dec <= 0:
-            lo = max(lo, s_e) if c.lock_rate > 0 else lo
-        for _ in range(100):
-            mid = 0.5 * (lo + hi)
-            if duration(mid) > c.target_time:
-                lo = mid
-            else:
-                hi = mid
-        self.cruise = hi
-        s = profile(hi)
-        mid = 0.5 * (s[1:] + s[:-1])
-        t = np.concatenate([[0.0], np.cumsum(np.diff(-d) / np.maximum(mid, 1e-300))])
-        rate = -s                                              # alpha1' < 0 deploys
-        accel = np.gradient(rate, t, edge_order=1)
-        self.plan_t, self.plan_alpha, self.plan_rate, self.plan_accel = t, alpha, rate, accel
-        self.plan_force = np.array([self._inverse_dynamics(a, r, acc)
-                                    for a, r, acc in zip(alpha, rate, accel)])
-
-    def reference(self, t: float) -> tuple[float, float, float]:
-        """
-        Return (alpha1_ref, alpha1'_ref, alpha1''_ref) at sim time t.
-
-        Past the plan's end the reference keeps creeping at lock_rate (a late frame is still
-        brought in slowly).
-        """
-        tau = t - self.t_start
-        end = self.plan_t[-1]
-        if tau >= end:
-            return self.params.alpha_deployed + self.plan_rate[-1] * (tau - end), \
-                self.plan_rate[-1], 0.0
-        tau = max(tau, 0.0)
-        return (float(np.interp(tau, self.plan_t, self.plan_alpha)),
-                float(np.interp(tau, self.plan_t, self.plan_rate)),
-                float(np.interp(tau, self.plan_t, self.plan_accel)))
-
-    # -------------------------------------------------------------------- law
-    def start(self, t: float) -> None:
-        self.t_start = t
-
-    def force(self, t: float, a1: float, rate: float, lead: float = 0.0) -> float:
-        """
-        Return the command for the state (alpha1, alpha1') sampled at t.
-
-        It acts about ``lead`` seconds later (the measured command delay): the state is
-        predicted to then along the plan's acceleration, so the delay does not eat the
-        loop's phase.
-        """
-        if self.t_start is None:
-            self.start(t)
-        a_ref, rate_ref, accel_ref = self.reference(t + lead)
-        a1 = a1 + rate * lead + 0.5 * accel_ref * lead * lead
-        rate = rate + accel_ref * lead
-        accel = (accel_ref + self.cfg.velocity_gain * (rate_ref - rate)
-                 + self.cfg.position_gain * (a_ref - a1))
-        f = self._inverse_dynamics(a1, rate, accel)
-        return min(max(f, self.cfg.min_force), self.cfg.max_force)
-
-
-# ================================================================== offline loop
-def constant_force_for(params: UmbrellaParams, target_time: float, rtol: float = 1e-4) -> float:
-    """
-    Return the constant sleeve force that deploys from rest in target_time on this model.
-
-    The physics core decides; secant steps on t ~ F^-1/2 from the rigid quadrature's guess.
-    """
-    from ..core.rigid import deployment_time_by_quadrature
-    from ..core.solver import simulate
-
-    p = params.replace(v0=0.0)
-    force = deployment_time_by_quadrature(p, sleeve_force=1.0) ** 2 / target_time ** 2
-    for _ in range(20):
-        run = simulate(p.replace(sleeve_force=force), 20.0 * target_time, stop_after_lock=0.0)
-        if run.lock is None:
-            raise ValueError(f"no lock within {20 * target_time:g} s at F = {force:g} N")
-        if abs(run.lock.time - target_time) <= rtol * target_time:
-            return force
-        force *= (run.lock.time / target_time) ** 2
-    raise ValueError(f"no constant force found deploying in {target_time:g} s")
-
-
-def simulate_closed_loop(params: UmbrellaParams, cfg: ControllerConfig,
-                         publish_rate: float = 200.0, delay: int = 1, after_lock: float = 0.5):
-    """
-    Run the law against the physics core as the node runs it.
-
-    States are sampled at publish_rate, each command acts ``delay`` publications later (the
-    DDS round trip).  Returns (RunResult of every step, first push time).
-    """
-    from ..core.params import physics_step
-    from ..core.solver import UmbrellaSimulator
-    from ..core.summary import RunResult
-
-    p = params.replace(v0=0.0).with_physics_step(
-        physics_step(params.physics_time_step, publish_rate))
-    sim = UmbrellaSimulator(p)
-    law = DeployLaw(params, cfg)
-    period = 1.0 / publish_rate
-    result = RunResult(params=p.as_dict())
-    result.samples.append(sim.sample())
-    pending = [0.0] * delay
-    law.start(delay * period)
-    while sim.lock_event is None or sim.time < sim.lock_event.time + after_lock - 1e-12:
-        s = sim.sample()
-        pending.append(0.0 if sim.lock_event else
-                       law.force(s.time, s.alpha1, s.alpha1_rate, (delay + 0.5) * period))
-        sim.set_sleeve_force(pending.pop(0))
-        result.samples.extend(sim.advance_to(sim.time + period))
-        if sim.time > 20.0 * cfg.target_time:
-            break
-    result.lock, result.steps = sim.lock_event, sim.steps
-    return result, delay * period
 
 
 # ======================================================================= ROS node
@@ -322,7 +49,7 @@ def _make_node_class():
             super().__init__("deploy_controller")
             # a misspelt name is an error, never a silent default; the node's own names are
             # taken (and not used: the numerics), so one params file can serve both nodes
-            known = set(CONTROLLER_PARAMETERS) | set(ros_io.parameter_defaults())
+            known = set(CONTROLLER_PARAMETERS) | set(defaults())
             fqn = self.get_fully_qualified_name()
             try:
                 qos = check_parameter_sources(fqn, params_files, list(
@@ -331,10 +58,10 @@ def _make_node_class():
                                   CONTROLLER_PARAMETERS_LISTED)
             except ValueError as exc:
                 raise StartupError(str(exc)) from None
-            values = {}
-            for name, (default, text) in CONTROLLER_PARAMETERS.items():
-                values[name] = self.declare_parameter(name, default, ParameterDescriptor(
-                    name=name, description=text, read_only=True, dynamic_typing=True)).value
+            try:
+                values = declare_from_registry(self, CONTROLLER_PARAMETERS)
+            except ValueError as exc:
+                raise StartupError(str(exc)) from None
             # the frame the law's rigid model describes: umbrella_node's own parameter names
             model = {}
             for name, default in UmbrellaParams().as_dict().items():
@@ -345,7 +72,7 @@ def _make_node_class():
                     name=name, read_only=True, dynamic_typing=True,
                     description="model parameter: give the value umbrella_node has")).value
             try:
-                cfg = ControllerConfig(**{k: _number(k, v) for k, v in values.items()})
+                cfg = ControllerConfig(**values).validated()
                 self.law = DeployLaw(UmbrellaParams.from_mapping(model), cfg)
             except ValueError as exc:
                 raise StartupError(str(exc)) from None
@@ -527,12 +254,6 @@ class StartupError(RuntimeError):
     pass
 
 
-def _number(name: str, value):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"parameter {name}={value!r}: must be a number")
-    return float(value)
-
-
 def main(argv: list[str] | None = None) -> int:
     # SIGINT/SIGTERM only ask for a stop (stop_signals.py), as in umbrella_node.  With rclpy's
     # own handlers a signal shut the context down from the signal handler while the executor
@@ -579,9 +300,8 @@ def usage() -> str:
     lines = ["usage: deploy_controller [--help] [--ros-args -p name:=value ... "
              "-r __ns:=/NAMESPACE]", "",
              "Closed-loop deployment: joint_states -> sleeve_force (see msg_docs/"
-             "deploy_controller.md).", "", "controller parameters:"]
-    for name, (default, text) in CONTROLLER_PARAMETERS.items():
-        lines.append(f"  {name:<16} {default!r:<8} {text}")
+             "deploy_controller.md).", "", "controller parameters (read-only):"]
+    lines += parameter_help(CONTROLLER_PARAMETERS.values())
     lines.append("model parameters: the same names and values as umbrella_node's "
                  "(l1, alpha0, ...)")
     return "\n".join(lines)

@@ -89,7 +89,7 @@ def overrides(values: dict[str, str], params_file: str | None = None) -> dict:
                 REGISTRY[name].check(out[name])
     model = {k: v for k, v in out.items() if k in SPECS}
     if model:
-        from ..core.params import load_params_file
+        from .params_file import load_params_file
         base = ({k: v for k, v in load_params_file(params_file).items() if k in SPECS}
                 if params_file else {})
         UmbrellaParams.from_mapping({**base, **model}).validated()
@@ -137,8 +137,8 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
     clock = [("/clock", f"{rel}/clock")] if ns else []
     if _truthy(values.get("robot_state_publisher", "true"), "robot_state_publisher"):
         if installed("robot_state_publisher"):
+            from .params_file import load_params_file
             from .robot_description import urdf
-            from ..core.params import load_params_file
             # the geometry the node will run: the params file, then the overrides
             given = {k: v for k, v in load_params_file(params[0]).items() if k in SPECS}
             given.update({k: v for k, v in node_params.items() if k in SPECS})

@@ -1,5 +1,5 @@
 """
-ROS 2 message layer: topics, QoS, parameter declarations, and Sample -> messages.
+ROS 2 message layer: topics, QoS, and Sample -> messages.
 
 Shared by the live node and the offline MCAP writer so both produce the same topics and
 layout.  Imports ROS message packages but not rclpy's node machinery; the physics core does
@@ -8,15 +8,12 @@ not import this module.
 from __future__ import annotations
 
 from dataclasses import dataclass
-import math
 import struct
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PointStamped
 import numpy as np
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                ParameterType)
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -24,7 +21,7 @@ from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimens
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ..core.outputs import mechanical_energy, Sample
-from ..core.params import defaults, NOW, REGISTRY, RESET, START, UmbrellaParams
+from ..core.params import UmbrellaParams
 
 INERTIAL_FRAME = "umbrella_base"   # X toward the leaf, Y up the axle, origin at the hinge O
 LEAF_FRAME = "leaf"                # origin O, x' through O''
@@ -75,12 +72,6 @@ COMMAND = Topic("sleeve_force", Float64, QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL,
     durability=DurabilityPolicy.VOLATILE))
 
-# --------------------------------------------------------------------- parameters
-_APPLIES = {RESET: "a runtime set applies on ~/reset", NOW: "a runtime set applies at once",
-            START: "read-only: fixed when the node starts"}
-_ROS_TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
-              str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL}
-
 
 def own_qos(qos: QoSProfile) -> QoSProfile:
     """Return a copy of a profile (rclpy applies qos_overrides to the profile it is given)."""
@@ -89,54 +80,6 @@ def own_qos(qos: QoSProfile) -> QoSProfile:
                       liveliness=qos.liveliness,
                       liveliness_lease_duration=qos.liveliness_lease_duration,
                       avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions)
-
-
-def descriptor(name: str) -> ParameterDescriptor:
-    """Build the statically typed descriptor of a parameter from the registry."""
-    p = REGISTRY[name]
-    constraints = [f"range {p.range_text()}" if p.low is not None or p.high is not None
-                   else ("one of " + p.range_text() if p.choices else "")]
-    if p.rule:
-        constraints.append(p.rule.replace("`", ""))
-    constraints.append(_APPLIES[p.applies])
-    if name == "sleeve_force":
-        constraints.append("command the running force on the sleeve_force topic")
-    d = ParameterDescriptor(
-        name=name, type=_ROS_TYPES[p.type], description=f"{p.doc} ({p.unit})",
-        additional_constraints="; ".join(c for c in constraints if c),
-        read_only=p.applies == START, dynamic_typing=False)
-    if p.low is not None and p.high is not None:
-        if p.type is int:
-            d.integer_range = [IntegerRange(from_value=int(p.low), to_value=int(p.high),
-                                            step=1)]
-        elif p.type is float:
-            d.floating_point_range = [FloatingPointRange(from_value=float(p.low),
-                                                         to_value=float(p.high), step=0.0)]
-    return d
-
-
-def coerce_parameter(param):
-    """
-    Return param with the registry's type where the value converts exactly, else unchanged.
-
-    An integer literal for a double parameter (`-p v0:=-1`, `ros2 param set ...
-    marker_magnification 100`) becomes the double; a whole double for an integer parameter
-    the integer.  Anything else is left for rclpy's static type check, which refuses it.
-    """
-    from rclpy.parameter import Parameter
-    spec = REGISTRY.get(param.name)
-    if spec is None:
-        return param
-    if spec.type is float and param.type_ == Parameter.Type.INTEGER:
-        return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
-    if (spec.type is int and param.type_ == Parameter.Type.DOUBLE
-            and math.isfinite(param.value) and float(param.value).is_integer()):
-        return Parameter(param.name, Parameter.Type.INTEGER, int(param.value))
-    return param
-
-
-def parameter_defaults() -> dict:
-    return defaults()
 
 
 # ------------------------------------------------------------------------ messages

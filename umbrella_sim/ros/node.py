@@ -35,7 +35,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -46,15 +45,16 @@ from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
 from . import messages as ros_io, signals as stop_signals
+from .parameters import coerce_parameter, declare_from_registry, parameter_defaults
+from .params_file import check_parameter_sources, params_files_in, QOS_OVERRIDES, USE_SIM_TIME
 from .publication import PublicationDriver
 from .share import package_path
 from .. import __version__
 from ..core.engines import SimulationDiverged
 from ..core.forcing import command_force
-from ..core.params import (check_known_names, check_node_parameters, check_parameter_sources,
-                           NODE_PARAMETERS, parameter_help, params_files_in, QOS_OVERRIDES,
-                           REGISTRY, RESET, shortened_step_note, SPECS, UmbrellaParams,
-                           USE_SIM_TIME)
+from ..core.params import (check_known_names, check_node_parameters, CONTROLLER_PARAMETERS,
+                           NODE_PARAMETERS, parameter_help, REGISTRY, RESET, shortened_step_note,
+                           SPECS, UmbrellaParams)
 
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
                    "paces it by the system clock; a node does not follow the clock it drives "
@@ -79,29 +79,17 @@ class UmbrellaNode(Node):
     def __init__(self, params_files: tuple = (), **kwargs):
         super().__init__("umbrella_node", **kwargs)
         qos_given = self._check_parameter_sources(params_files,
-                                                  set(ros_io.parameter_defaults()))
+                                                  set(parameter_defaults()))
         if self.get_parameter(USE_SIM_TIME).value:
             # a params file for every node ('/**') may set it: this node drives /clock and
             # paces it by the system clock; following its own /clock would only cost a
             # callback a publication (rclpy's time source), which slowed it several fold
             self.set_parameters([Parameter(USE_SIM_TIME, Parameter.Type.BOOL, False)])
             self.get_logger().info(f"{USE_SIM_TIME}:=true not taken: {SIM_TIME_REASON}")
-        # statically typed parameters (ros_io.descriptor); an integer literal given for a
-        # double (-p v0:=-1) is taken as the double, before rclpy's type check sees it
-        for name, override in list(self._parameter_overrides.items()):
-            self._parameter_overrides[name] = ros_io.coerce_parameter(override)
-        values = {}
-        for name, default in ros_io.parameter_defaults().items():
-            try:
-                values[name] = self.declare_parameter(name, default,
-                                                      ros_io.descriptor(name)).value
-            except InvalidParameterTypeException:
-                given = self._parameter_overrides[name]
-                raise StartupError(
-                    f"parameter {name}={given.value!r}: must be of type "
-                    f"{REGISTRY[name].type_name}, got {given.type_.name.lower()}") from None
-            except Exception as exc:  # rclpy names the parameter in its exceptions
-                raise StartupError(f"parameter {name}: {exc}") from None
+        try:
+            values = declare_from_registry(self, parameter_defaults())
+        except ValueError as exc:
+            raise StartupError(str(exc)) from None
         try:
             self.model_params = UmbrellaParams.from_mapping(
                 {k: v for k, v in values.items() if k in SPECS}).validated()
@@ -180,12 +168,11 @@ class UmbrellaNode(Node):
     # ------------------------------------------------------------------ config
     def _check_parameter_sources(self, params_files, known: set) -> set:
         """Check the params files and names given for this node (StartupError: which)."""
-        from .deploy_controller import CONTROLLER_PARAMETERS   # a '/**' file may serve both
-
         try:
             return check_parameter_sources(
                 self.get_fully_qualified_name(), params_files,
-                list(self._parameter_overrides), known, shared=CONTROLLER_PARAMETERS)
+                list(self._parameter_overrides), known,
+                shared=CONTROLLER_PARAMETERS)   # a '/**' file may serve both nodes
         except ValueError as exc:
             raise StartupError(str(exc)) from None
 
@@ -384,7 +371,7 @@ class UmbrellaNode(Node):
 
     @staticmethod
     def _coerce_parameters(params: list) -> list:
-        return [ros_io.coerce_parameter(p) for p in params]
+        return [coerce_parameter(p) for p in params]
 
     def _parameter_candidate(self, params) -> tuple[dict, dict, UmbrellaParams, dict]:
         core = {p.name: p.value for p in params if p.name in SPECS}

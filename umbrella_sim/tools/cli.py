@@ -14,11 +14,11 @@ from .arguments import ArgumentParser
 from .. import __version__
 from ..bag.paths import check_new_output, read_text_input
 from ..core.forcing import command_force
-from ..core.params import (check_known_names, check_types, check_values, load_params_file,
+from ..core.params import (check_known_names, check_types, check_values, CONTROLLER_PARAMETERS,
                            NODE_ONLY_PARAMS, NODE_PARAMETERS, parameter_help, shortened_step_note,
                            SPECS, UmbrellaParams)
 from ..core.solver import simulate, UmbrellaSimulator
-from ..ros.deploy_controller import CONTROLLER_PARAMETERS
+from ..ros.params_file import load_params_file
 from ..ros.share import package_path
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader
 

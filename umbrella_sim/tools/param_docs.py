@@ -1,11 +1,11 @@
 """
-Parameter tables of msg_docs/, generated from the registry (params.REGISTRY).
+Parameter tables of msg_docs/, generated from the registry (core.params.REGISTRY).
 
-    .venv/bin/python -m umbrella_sim.param_docs          # rewrite the tables in place
-    .venv/bin/python -m umbrella_sim.param_docs --check  # exit 1 if a page is out of date
+    .venv/bin/python -m umbrella_sim.tools.param_docs          # rewrite the tables in place
+    .venv/bin/python -m umbrella_sim.tools.param_docs --check  # exit 1 if a page is stale
 
 Each page keeps its prose; only the text between ``<!-- BEGIN GENERATED: GROUP -->`` and
-``<!-- END GENERATED: GROUP -->`` is replaced (GROUP: model, input or node).
+``<!-- END GENERATED: GROUP -->`` is replaced (GROUP: model, input, node or controller).
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import sys
 from ..core.params import NOW, REGISTRY, RESET, START
 from ..ros.share import package_path
 
-PAGES = ("parameters.md", "node_parameters.md")
+PAGES = ("parameters.md", "node_parameters.md", "deploy_controller.md")
 _APPLIES = {RESET: "on `~/reset`", NOW: "at once", START: "read-only (at start)"}
 _BLOCK = re.compile(r"(<!-- BEGIN GENERATED: (\w+) -->\n).*?(<!-- END GENERATED: \2 -->)",
                     re.S)

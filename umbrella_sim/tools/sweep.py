@@ -125,7 +125,8 @@ def load_spec(path: str) -> Sweep:
     """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
     from .cli import check_lock_given, read_force_profile, resolve_params
     from ..core.forcing import command_force
-    from ..core.params import check_types, load_yaml_as_ros, UmbrellaParams
+    from ..core.params import check_types, UmbrellaParams
+    from ..ros.params_file import load_yaml_as_ros
 
     try:
         text = read_text_input(path, "sweep spec")

@@ -1,0 +1,106 @@
+"""
+ROS parameters from the registry: typed, ranged descriptors and the coercions rclpy lacks.
+
+Every parameter of umbrella_node and deploy_controller is declared statically typed
+(``dynamic_typing=False``) with its range and its rule in the descriptor, read-only when it is
+fixed at start (core.params.REGISTRY).  ``coerce_parameter`` takes an integer literal for a
+double (``-p v0:=-1``) and a whole double for an integer, as the other interfaces do.
+"""
+from __future__ import annotations
+
+import math
+
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType)
+
+from ..core.params import defaults, NOW, REGISTRY, RESET, START
+
+
+# --------------------------------------------------------------------- parameters
+_APPLIES = {RESET: "a runtime set applies on ~/reset", NOW: "a runtime set applies at once",
+            START: "read-only: fixed when the node starts"}
+
+
+_ROS_TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
+              str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL}
+
+
+def descriptor(name: str) -> ParameterDescriptor:
+    """Build the statically typed descriptor of a parameter from the registry."""
+    p = REGISTRY[name]
+    constraints = [f"range {p.range_text()}" if p.low is not None or p.high is not None
+                   else ("one of " + p.range_text() if p.choices else "")]
+    if p.rule:
+        constraints.append(p.rule.replace("`", ""))
+    constraints.append(_APPLIES[p.applies])
+    if name == "sleeve_force":
+        constraints.append("command the running force on the sleeve_force topic")
+    d = ParameterDescriptor(
+        name=name, type=_ROS_TYPES[p.type], description=f"{p.doc} ({p.unit})",
+        additional_constraints="; ".join(c for c in constraints if c),
+        read_only=p.applies == START, dynamic_typing=False)
+    if p.low is not None and p.high is not None:
+        if p.type is int:
+            d.integer_range = [IntegerRange(from_value=int(p.low), to_value=int(p.high),
+                                            step=1)]
+        elif p.type is float:
+            d.floating_point_range = [FloatingPointRange(from_value=float(p.low),
+                                                         to_value=float(p.high), step=0.0)]
+    return d
+
+
+def coerce_parameter(param):
+    """
+    Return param with the registry's type where the value converts exactly, else unchanged.
+
+    An integer literal for a double parameter (`-p v0:=-1`, `ros2 param set ...
+    marker_magnification 100`) becomes the double; a whole double for an integer parameter
+    the integer.  Anything else is left for rclpy's static type check, which refuses it.
+    """
+    from rclpy.parameter import Parameter
+    spec = REGISTRY.get(param.name)
+    if spec is None:
+        return param
+    if spec.type is float and param.type_ == Parameter.Type.INTEGER:
+        return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
+    if (spec.type is int and param.type_ == Parameter.Type.DOUBLE
+            and math.isfinite(param.value) and float(param.value).is_integer()):
+        return Parameter(param.name, Parameter.Type.INTEGER, int(param.value))
+    return param
+
+
+def parameter_defaults() -> dict:
+    """Return name -> default of every parameter umbrella_node declares."""
+    return defaults()
+
+
+def declare_from_registry(node, names) -> dict:
+    """
+    Declare the registry's parameters names on node; return name -> value given or default.
+
+    Statically typed (``descriptor``); an integer literal given for a double (``-p v0:=-1``)
+    is taken as the double before rclpy's type check sees it.  ValueError naming the
+    parameter, the value given and the rule it breaks.
+    """
+    from rclpy.exceptions import InvalidParameterTypeException
+
+    overrides = node._parameter_overrides     # (rclpy keeps what -p and files gave here)
+    for name, override in list(overrides.items()):
+        overrides[name] = coerce_parameter(override)
+    values = {}
+    for name in names:
+        spec = REGISTRY[name]
+        try:
+            values[name] = node.declare_parameter(name, spec.default, descriptor(name)).value
+        except InvalidParameterTypeException:
+            given = overrides[name]
+            raise ValueError(f"parameter {name}={given.value!r}: must be of type "
+                             f"{spec.type_name}, got {given.type_.name.lower()}") from None
+        except Exception:  # noqa: BLE001 - rclpy's range refusal: say the registry's rule
+            value = overrides[name].value
+            try:
+                spec.check(value)
+            except ValueError as exc:
+                raise ValueError(str(exc)) from None
+            raise
+    return values

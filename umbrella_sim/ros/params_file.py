@@ -1,0 +1,193 @@
+"""
+ROS 2 parameter sources: params YAML files, ``-p`` overrides, and what a node may be given.
+
+A ROS 2 params file maps node-name patterns ('/**', '/*', 'umbrella_node', '/a1/umbrella_node')
+to ``ros__parameters``.  rcl parses it with its own typing (a plain 72.0e9 is a double, a
+quoted "-0.5" a string) and refuses a key given twice; these readers apply the same rules
+first, so that a bad file gets a one-line error naming the file instead of an rcl traceback,
+and the offline tools read the same files the nodes take.
+"""
+from __future__ import annotations
+
+import functools
+import re
+
+from ..bag.paths import read_text_input
+from ..core.params import check_known_names, NODE_PARAMETERS_LISTED
+
+
+def _flatten(values: dict, prefix: str = "") -> dict:
+    """Nested mappings are dotted parameter names in ROS 2 (`a: {b: 1}` is `a.b`)."""
+    out = {}
+    for key, value in values.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(_flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+#: a plain (unquoted) scalar rcl's params parser reads as a double: strtod's forms, which
+#: include 72.0e9 (YAML 1.1, and so PyYAML, wants a sign in the exponent: a string to it)
+_ROS_DOUBLE = re.compile(r"(?:[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|[-+]?\.(inf|Inf|INF)"
+                         r"|\.(nan|NaN|NAN))$")      # the whole value (PyYAML: match only)
+
+
+def load_yaml_as_ros(text: str):
+    """
+    Load YAML typed as rcl types a params file; a mapping with a key twice is an error.
+
+    A plain scalar in one of strtod's forms is a double (72.0e9 too), a quoted one a string
+    ("-0.5"), as rclpy gives them to a node; YAML takes a repeated key's last value
+    silently, rcl refuses the file.  yaml.YAMLError if it cannot be read.
+    """
+    import yaml
+
+    return yaml.load(text, Loader=_ros_typed_loader())   # noqa: S506 - a SafeLoader
+
+
+@functools.cache
+def _ros_typed_loader():
+    """Return the loader class of load_yaml_as_ros (made once: yaml imported on first use)."""
+    import yaml
+
+    class RosTyped(yaml.SafeLoader):
+
+        def construct_mapping(self, node, deep=False):
+            seen = set()
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=deep)
+                if key in seen:
+                    raise yaml.MarkedYAMLError(
+                        problem=f"key {key!r} given twice", problem_mark=key_node.start_mark)
+                seen.add(key)
+            return super().construct_mapping(node, deep)
+
+    RosTyped.add_implicit_resolver("tag:yaml.org,2002:float", _ROS_DOUBLE,
+                                   list("-+0123456789."))
+    return RosTyped
+
+
+def read_params_file(path: str) -> dict[str, dict]:
+    """
+    Read the sections of a ROS 2 params YAML.
+
+    {section (node name pattern): ros__parameters with dotted names} of a ROS 2 params
+    YAML, or ValueError naming the file and the reason.  The same checks rcl makes, done
+    first so that a bad file gets a one-line error instead of an rcl traceback.
+    """
+    import yaml  # local import: only the file path needs it
+
+    text = read_text_input(path, "params file")
+    try:
+        doc = load_yaml_as_ros(text)
+    except yaml.YAMLError as exc:
+        reason = " ".join(str(exc).split())
+        raise ValueError(f"params file {path}: not valid YAML ({reason})") from None
+    if not isinstance(doc, dict) or not doc:
+        raise ValueError(f"params file {path}: expected a mapping of node names to "
+                         "{ros__parameters: {...}}")
+    sections = {}
+    for key, section in doc.items():
+        values = section.get("ros__parameters") if isinstance(section, dict) else None
+        if not isinstance(values, dict):
+            raise ValueError(f"params file {path}: section {key!r} has no ros__parameters "
+                             "mapping")
+        extra = sorted(set(section) - {"ros__parameters"})
+        if extra:
+            raise ValueError(f"params file {path}: section {key!r}: only ros__parameters is "
+                             f"allowed, found {', '.join(map(str, extra))}")
+        sections[str(key)] = _flatten(values)
+        empty = sorted(name for name, value in sections[str(key)].items() if value is None)
+        if empty:
+            raise ValueError(f"params file {path}: section {key!r}: no value for "
+                             f"{', '.join(empty)}")
+    return sections
+
+
+def section_matches(pattern: str, node_fqn: str) -> bool:
+    """
+    Tell whether a params-file section applies to a node.
+
+    Whether a params-file section name applies to the node of fully qualified name
+    node_fqn (ROS 2 rules: '/**' any namespace depth, '*' one token, no leading slash means
+    relative to the root).
+    """
+    tokens = pattern.strip("/").split("/")
+    regex = "".join("(/[^/]+)*" if t == "**" else "/[^/]+" if t == "*" else "/" + re.escape(t)
+                    for t in tokens)
+    return re.fullmatch(regex, node_fqn) is not None
+
+
+def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:
+    """
+    Return the parameters of a params YAML for node_name.
+
+    The ``ros__parameters`` of a ROS 2 params YAML that apply to node_name in the root
+    namespace (sections '/**', '/*', node_name, ...); a file with no such section is an
+    error.
+    """
+    sections = read_params_file(path)
+    merged: dict = {}
+    for key, values in sections.items():
+        if section_matches(key, "/" + node_name):
+            merged.update(values)
+    if not any(section_matches(key, "/" + node_name) for key in sections):
+        raise ValueError(f"params file {path}: no section for node /{node_name} (sections: "
+                         f"{', '.join(sections)}); use '/**' or '{node_name}'")
+    return merged
+
+
+#: the prefix of rclpy's QoS override parameters, and the parameters every rclpy node has
+QOS_OVERRIDES = "qos_overrides."
+
+
+USE_SIM_TIME = "use_sim_time"
+
+
+ROS_OWN_PARAMETERS = frozenset({USE_SIM_TIME, "start_type_description_service"})
+
+
+def params_files_in(ros_args: list[str]) -> list[str]:
+    """
+    Return the ``--params-file`` arguments of a command line, each read and checked.
+
+    ValueError naming the file and the problem (rcl's own parse errors are tracebacks).
+    """
+    files = [ros_args[i + 1] for i, a in enumerate(ros_args[:-1]) if a == "--params-file"]
+    for path in files:
+        read_params_file(path)
+    return files
+
+
+def check_parameter_sources(node_fqn: str, params_files, given, known,
+                            listed: str = NODE_PARAMETERS_LISTED, shared=()) -> set:
+    """
+    Check the params files and parameter names a ROS node was started with.
+
+    Every params file has a section for the node, and every parameter given for it (``-p``,
+    ``given``, or a file) is one it knows (``known``, besides ROS_OWN_PARAMETERS): a typo
+    is a ValueError naming it, never a silent default.  A wildcard section ('/**', '/*',
+    ...) may also give the sibling umbrella_sim node's parameters (``shared``), so that one
+    file serves both; those are skipped there (in a section naming this node, or -p, they
+    are unknown).  Returns the ``qos_overrides.*`` names given, for the node to check
+    against the QoS its topics declare.
+    """
+    known = set(known) | ROS_OWN_PARAMETERS
+    in_files = set()
+    for path in params_files:
+        sections = read_params_file(path)
+        if not any(section_matches(key, node_fqn) for key in sections):
+            raise ValueError(f"params file {path}: no section for node {node_fqn} "
+                             f"(sections: {', '.join(sections)}); use '/**' or the "
+                             "node's name")
+        for key, values in sections.items():
+            if section_matches(key, node_fqn):
+                names = {n for n in values if not n.startswith(QOS_OVERRIDES)}
+                check_known_names(names - set(shared) if "*" in key else names, known,
+                                  f"params file {path} (for {node_fqn})", listed)
+                in_files |= set(values)
+    names = [n for n in given if not n.startswith(QOS_OVERRIDES) and n not in in_files]
+    check_known_names(names, known, f"-p for {node_fqn}", listed)
+    return {n for n in (*in_files, *given) if n.startswith(QOS_OVERRIDES)}
