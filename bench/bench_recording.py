@@ -16,8 +16,8 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 from umbrella_sim.bag.reader import read_log  # noqa: E402
-from umbrella_sim.bag.recording import record_offline  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
+from umbrella_sim.ros.recording import record_offline  # noqa: E402
 
 
 def main():

@@ -13,9 +13,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+from umbrella_sim.core.driver import simulate  # noqa: E402
 from umbrella_sim.core.model import UmbrellaModel  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
-from umbrella_sim.core.solver import simulate  # noqa: E402
 
 p = UmbrellaParams(v0=-0.2, elements_per_segment=2, time_step=5e-4)
 r = simulate(p, 0.45)

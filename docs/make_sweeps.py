@@ -19,7 +19,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..")
 sys.path.insert(0, ROOT)
 
-from umbrella_sim.bag.recording import git_revision  # noqa: E402
+from umbrella_sim.bag.provenance import git_revision  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.core.rigid import deployment_time_by_quadrature  # noqa: E402
 from umbrella_sim.tools import sweep  # noqa: E402

@@ -20,13 +20,15 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
-from umbrella_sim.bag.recording import git_revision, record_offline  # noqa: E402
+from umbrella_sim.bag.provenance import git_revision  # noqa: E402
+from umbrella_sim.core.driver import simulate  # noqa: E402
 from umbrella_sim.core.integrators import PHASE_CORRECTION_LIMIT  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.core.rigid import deployment_time_by_quadrature  # noqa: E402
-from umbrella_sim.core.solver import simulate, UmbrellaSimulator  # noqa: E402
+from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
 from umbrella_sim.core.step_study import (  # noqa: E402
     mesh_step, run_steps, sampled_peak_shortfall, step_errors, TARGETS)
+from umbrella_sim.ros.recording import record_offline  # noqa: E402
 from umbrella_sim.tools.compare import (  # noqa: E402
     compare, load_run, plot, THESIS_TABLE_6_1, THESIS_V02)
 

@@ -13,8 +13,8 @@ import time
 import pytest
 
 from umbrella_sim.core.control import constant_force_for, DeployLaw, simulate_closed_loop
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import ControllerConfig, physics_step, UmbrellaParams
-from umbrella_sim.core.solver import simulate
 from umbrella_sim.testing import NodeProcess, poll, ros_env, summarize_run, summary_from_recording
 
 TARGET = 1.0            # s, deploy time asked of the controller

@@ -17,16 +17,17 @@ from diagnostic_msgs.msg import DiagnosticArray
 import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
 from tests.disk_faults import full_disk_write
 from tests.ros_helpers import NodeProcess, Probe, ros_env, signal_and_collect
-from umbrella_sim.bag import recording
+from umbrella_sim.bag import cdr, writer as recording
 from umbrella_sim.bag.reader import LogError, read_log
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import SPECS, UmbrellaParams
-from umbrella_sim.core.solver import simulate
 from umbrella_sim.ros.messages import LATCHED
 from umbrella_sim.ros.node import MAX_LAG_S, REFUSED_RECORD_RATE
 
@@ -65,7 +66,7 @@ def test_write_error_stops_recording_cleanly_and_keeps_what_was_written(
     errors = []
     rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}},
                                 on_error=errors.append)
-    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    rec.add_channel("/x", Float64, QoSProfile(depth=10))
     n = 0
     while rec.write("/x", Float64(data=float(n)), n * 1_000_000):
         n += 1
@@ -91,7 +92,7 @@ def test_disk_full_at_start_leaves_nothing_behind(tmp_path, monkeypatch):
 
 def test_write_error_at_close_still_marks_the_recording(tmp_path, monkeypatch):
     rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}})
-    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    rec.add_channel("/x", Float64, QoSProfile(depth=10))
     for i in range(3000):
         assert rec.write("/x", Float64(data=float(i)), i)
     size = os.path.getsize(rec.path)
@@ -512,8 +513,8 @@ def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monke
     from mcap.reader import make_reader
     monkeypatch.setattr(recording._SpilledChunkIndex, "SPILL_BYTES", 2048)
     rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}})
-    rec.add_channel("/s", String, recording.QoSProfile(depth=10))
-    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    rec.add_channel("/s", String, QoSProfile(depth=10))
+    rec.add_channel("/x", Float64, QoSProfile(depth=10))
     index = rec._chunk_index
     assert rec._writer._Writer__chunk_indices is index     # the writer uses it
     in_memory = []
@@ -550,7 +551,7 @@ def _foreign(path, payload=None, parameters=None):
         w = Writer(fh)
         w.start("ros2", "test")
         sid = w.register_schema("sensor_msgs/msg/JointState", "ros2msg",
-                                recording.message_definition("sensor_msgs/msg/JointState")
+                                cdr.message_definition("sensor_msgs/msg/JointState")
                                 .encode())
         cid = w.register_channel("/joint_states", "cdr", sid)
         if parameters:
@@ -730,8 +731,8 @@ def test_a_frame_folding_back_to_the_axle_is_a_fault(model):
     """
     import math
 
+    from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.params import UmbrellaParams
-    from umbrella_sim.core.solver import simulate
 
     params = UmbrellaParams(v0=0.5, model=model, lock="plastic")
     r = simulate(params, 0.05)
@@ -743,40 +744,46 @@ def test_a_frame_folding_back_to_the_axle_is_a_fault(model):
 
 
 def test_a_braking_force_folding_the_frame_back_is_a_fault():
+    from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.params import UmbrellaParams
-    from umbrella_sim.core.solver import simulate
 
     r = simulate(UmbrellaParams(v0=0.0, sleeve_force_min=-10.0, sleeve_force=-5.0), 1.0)
     assert r.lock is None and "reached the axle" in r.error
 
 
 def test_a_stop_signal_inside_message_decoding_is_an_interrupt_not_a_bad_log(
-        tmp_path, monkeypatch):
+        tmp_path, monkeypatch, capsys):
     """
-    Ctrl-C while rclpy converts a message: an interrupt, not 'payload does not decode'.
+    Ctrl-C while rclpy converts a message: an interrupt (130), not 'payload does not decode'.
 
     The signal's KeyboardInterrupt raised inside rclpy's C conversion came back as its own
-    error ("Unable to convert function return value..."), which read as a corrupt log.
+    error ("Unable to convert function return value..."), which read as a corrupt log.  The
+    reader says the payload does not decode; the tools, which know the signals, make it the
+    interrupt it was.
     """
     from umbrella_sim.bag import reader as logs
     from umbrella_sim.ros import signals as stop_signals
+    from umbrella_sim.tools import compare, replay
 
     bag = tmp_path / "short"
     assert run("umbrella_sim", "simulate", "--duration", "0.02", "--mcap",
                str(bag)).returncode == 0
-    log = read_log(str(bag))
-    topic = log.find_topic("joint_states")
-    data = next(log.iter_raw([topic])).data
 
     def interrupted(data, cls):
         stop_signals.received.append(signal.SIGINT)      # the handler ran in the conversion
         raise TypeError("Unable to convert function return value to a Python type!")
     monkeypatch.setattr(logs, "deserialize_message", interrupted)
-    with pytest.raises(KeyboardInterrupt, match="SIGINT"):
-        log.decode(topic, data)
+    for main, args in ((replay.main, [str(bag), "--resimulate"]),
+                       (compare.main, [str(bag), "--out", str(tmp_path / "cmp"), "--no-plots"])):
+        assert main(args) == 130
+        err = capsys.readouterr().err
+        assert "interrupted by SIGINT" in err and "does not decode" not in err, err
 
     def corrupt(data, cls):
         raise TypeError("Unable to convert function return value to a Python type!")
     monkeypatch.setattr(logs, "deserialize_message", corrupt)
+    log = read_log(str(bag))
     with pytest.raises(LogError, match="payload does not decode"):   # no signal: the log
-        log.decode(topic, data)
+        log.decode(log.find_topic("joint_states"), next(log.iter_raw()).data)
+    assert replay.main([str(bag), "--resimulate"]) == 2
+    assert "payload does not decode" in capsys.readouterr().err

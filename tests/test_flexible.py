@@ -10,12 +10,13 @@ Tolerances (stated in the closing note of the physics issue):
 import numpy as np
 import pytest
 
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.integrators import PHI_TOLERANCE
 from umbrella_sim.core.model import ConstraintSet, Stage
 from umbrella_sim.core.outputs import mechanical_energy
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.rigid import deployment_time_by_quadrature
-from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.solver import UmbrellaSimulator
 from umbrella_sim.core.summary import energy_balance_error
 
 THESIS_DEFORMABLE = {-0.5: 0.09040, -1.0: 0.04525, -2.0: 0.02343}

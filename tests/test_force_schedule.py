@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 
 from umbrella_sim.bag.reader import read_log
-from umbrella_sim.bag.recording import record_offline
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.forcing import command_force, ForceSchedule
 from umbrella_sim.core.params import UmbrellaParams
-from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.solver import UmbrellaSimulator
+from umbrella_sim.ros.recording import record_offline
 
 # a 1 ms step keeps these fast; the schedule's grid arithmetic is the same at any step
 STEP = 1e-3

@@ -16,8 +16,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import SetBool, Trigger
 
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import UmbrellaParams
-from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.solver import UmbrellaSimulator
 from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.testing import NodeProcess, poll, ros_env
 

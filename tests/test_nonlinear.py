@@ -27,6 +27,7 @@ import math
 import numpy as np
 import pytest
 
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.integrators import load_kernel, newton_tolerance
 from umbrella_sim.core.model import ConstraintSet, Stage
 from umbrella_sim.core.nonlinear import (ElasticMidpointDAE, KANE_BEAM, NonlinearUmbrellaModel,
@@ -36,7 +37,7 @@ from umbrella_sim.core.nonlinear import (ElasticMidpointDAE, KANE_BEAM, Nonlinea
                                          spin_up_quasi_static_tip)
 from umbrella_sim.core.outputs import STEP_FIELDS
 from umbrella_sim.core.params import UmbrellaParams
-from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.solver import UmbrellaSimulator
 from umbrella_sim.core.summary import energy_balance_error
 
 NL = "flexible-nonlinear"
@@ -490,7 +491,7 @@ def test_node_runs_the_nonlinear_damped_model():
 def test_recording_and_resimulation_of_the_nonlinear_damped_model(tmp_path):
     """Record offline as the node would, then re-run the physics from the log: identical."""
     from umbrella_sim.bag.reader import read_log
-    from umbrella_sim.bag.recording import record_offline
+    from umbrella_sim.ros.recording import record_offline
     from umbrella_sim.tools.replay import resimulate
 
     bag = tmp_path / "nl"

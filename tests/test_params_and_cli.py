@@ -222,7 +222,8 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     sleeve_force_min < 0 is a drive that can hold the sleeve back; the default keeps the
     thesis's push-only sleeve.
     """
-    from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+    from umbrella_sim.core.driver import simulate
+    from umbrella_sim.core.solver import UmbrellaSimulator
 
     with pytest.raises(ValueError, match="sleeve_force_min.*<= 0"):
         UmbrellaParams(sleeve_force_min=1.0).validated()
@@ -255,7 +256,7 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     ("\ufefft,F\n0,5\n", [(0.0, 5.0)]),             # a spreadsheet's UTF-8 byte-order mark
 ])
 def test_force_profile_rows_and_header(tmp_path, text, rows):
-    from umbrella_sim.tools.cli import read_force_profile
+    from umbrella_sim.tools.inputs import read_force_profile
     prof = tmp_path / "f.csv"
     prof.write_text(text)
     assert read_force_profile(str(prof)) == rows
@@ -273,7 +274,7 @@ def test_force_profile_rows_and_header(tmp_path, text, rows):
     ("t,F\n0,1_0\n", "f.csv:2", "not numbers"),             # (was 10 N)
 ])
 def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
-    from umbrella_sim.tools.cli import read_force_profile
+    from umbrella_sim.tools.inputs import read_force_profile
     prof = tmp_path / "f.csv"
     prof.write_text(text)
     with pytest.raises(ValueError) as exc:

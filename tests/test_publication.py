@@ -7,30 +7,40 @@ from mcap.reader import make_reader
 import pytest
 from rclpy.serialization import deserialize_message
 
-from umbrella_sim.bag.recording import cdr_bytes, record_offline
+from umbrella_sim.bag.cdr import cdr_bytes
+from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.ros import messages as ros_io
-from umbrella_sim.ros.publication import PublicationDriver
+from umbrella_sim.ros.publication import PublicationEncoder
+from umbrella_sim.ros.recording import record_offline
 
 
-def built(driver, s, frame_prefix):
-    return ros_io.sample_messages(s, driver.sim.params, None, "", driver.initial_energy,
+def built(encoder, s, frame_prefix):
+    return ros_io.sample_messages(s, encoder.driver.params, None, "", encoder.initial_energy,
                                   frame_prefix)
+
+
+def next_period(driver, force=None):
+    """Step one publication period (with the command, if given) as the node does."""
+    if force is not None:
+        driver.command(force)
+    assert driver.advance_period()[-1].error is None
 
 
 @pytest.mark.parametrize("frame_prefix", ["", "a/", "ab/", "abc/", "antenna_12/"])
 def test_encoded_bytes_are_the_built_messages(frame_prefix):
     """Every per-publication topic: the serializer's bytes of the builder's message, exactly."""
-    driver = PublicationDriver(UmbrellaParams(v0=-0.5), 1000.0)
+    driver = RunDriver(UmbrellaParams(v0=-0.5), 1000.0)
+    encoder = PublicationEncoder(driver)
     seen = set()
     for period in range(400):      # deploying, the lock and after it, a force change
-        driver.advance(25.0 if period >= 100 else None)
+        next_period(driver, 25.0 if period >= 100 else None)
+        s = driver.publication()
         if period % 37:
             continue
-        msgs = driver.messages("ns", 1.0, frame_prefix)
-        s = driver.published_sample
+        msgs = encoder.messages(s, "ns", 1.0, frame_prefix)
         seen.add(s.stage)
-        reference = built(driver, s, frame_prefix)
+        reference = built(encoder, s, frame_prefix)
         for key, ref in reference.items():
             data = msgs[key]
             assert isinstance(data, bytes), key
@@ -49,12 +59,12 @@ def test_marker_bytes_are_the_built_markers(mesh, model, ns, frame_prefix, magni
     (cdr_bytes sets the CDR alignment padding, which rclpy's serializer leaves as its buffer
     held it, to zero: the encoder's template too.)
     """
-    driver = PublicationDriver(UmbrellaParams(v0=-0.5, elements_per_segment=mesh, model=model),
-                               1000.0, marker_rate=1000.0)
+    driver = RunDriver(UmbrellaParams(v0=-0.5, elements_per_segment=mesh, model=model), 1000.0)
+    encoder = PublicationEncoder(driver, marker_rate=1000.0)
     seen = set()
     for period in range(320):      # deploying, the lock and after it
-        msgs = driver.messages(ns, magnification, frame_prefix)
-        s = driver.published_sample
+        s = driver.publication()
+        msgs = encoder.messages(s, ns, magnification, frame_prefix)
         seen.add(s.stage)
         ref = ros_io.markers_msg(s, driver.sim.model.node_positions(s.q, magnification), ns,
                                  frame_prefix)
@@ -62,7 +72,7 @@ def test_marker_bytes_are_the_built_markers(mesh, model, ns, frame_prefix, magni
         assert data == expected
         assert deserialize_message(data, ros_io.MarkerArray) == \
             deserialize_message(expected, ros_io.MarkerArray)
-        driver.advance()
+        next_period(driver)
     assert seen == {"deploying", "locked"}
 
 
@@ -70,16 +80,17 @@ def test_marker_bytes_are_the_built_markers(mesh, model, ns, frame_prefix, magni
                                                        (200.0, 60.0), (50.0, 100.0)])
 def test_markers_at_their_documented_rate(publish_rate, marker_rate):
     """markers: every k-th publication, k = round(publish_rate / marker_rate) >= 1, t = 0 in."""
-    driver = PublicationDriver(UmbrellaParams(), publish_rate, marker_rate)
+    driver = RunDriver(UmbrellaParams(), publish_rate)
+    encoder = PublicationEncoder(driver, marker_rate)
     k = max(1, round(publish_rate / marker_rate))
     with_markers = []
     for _ in range(int(0.4 * publish_rate)):
-        msgs = driver.messages("ns", 1.0)
+        msgs = encoder.messages(driver.publication(), "ns", 1.0)
         if "markers" in msgs:
             with_markers.append(driver.sim.time)
             assert isinstance(deserialize_message(msgs["markers"], ros_io.MarkerArray),
                               ros_io.MarkerArray)
-        driver.advance()
+        next_period(driver)
     assert with_markers[0] == 0.0
     sim_span = driver.sim.time
     # the rate from counts over sim time: within one marker of publish_rate / k
@@ -92,10 +103,10 @@ def test_recorded_bytes_are_the_published_bytes(tmp_path):
     """The offline recorder writes the encoder's bytes: they decode to the built messages."""
     params = UmbrellaParams(v0=-0.5)
     bag = tmp_path / "run"
-    result = record_offline(params, str(bag), 0.05, publish_rate=1000.0)
+    result = record_offline(params, str(bag), 0.05, publish_rate=1000.0, keep_samples=True)
     assert result.error is None
     samples = {ros_io.stamp_ns(s.time): s for s in result.samples}
-    reference = PublicationDriver(params, 1000.0)
+    reference = PublicationEncoder(RunDriver(params, 1000.0))
     topics = {"/" + ros_io.TOPICS[k].name: k for k in ros_io.SampleEncoder.GROUPS}
     checked = 0
     with open(Path(bag) / "run_0.mcap", "rb") as fh:
@@ -119,7 +130,7 @@ def test_a_recording_does_not_depend_on_the_process_that_made_it(tmp_path):
     """
     code = ("import sys\n"
             "from umbrella_sim.core.params import UmbrellaParams\n"
-            "from umbrella_sim.bag.recording import record_offline\n"
+            "from umbrella_sim.ros.recording import record_offline\n"
             "record_offline(UmbrellaParams(v0=-0.5, elements_per_segment=2), sys.argv[1], 0.3,"
             " force_profile=[(0.1, 5.0)], publish_rate=200.0)\n")
     runs = []

@@ -1,12 +1,15 @@
 """The live node's recorder: compression and file writes on a writer thread of their own."""
 import errno
+import json
 import os
 import threading
 
+from rclpy.qos import QoSProfile
 from std_msgs.msg import Float64
 
 from tests.disk_faults import full_disk_write
-from umbrella_sim.bag import recording
+from umbrella_sim.bag import writer as recording
+from umbrella_sim.bag.format import CHUNK_SIZE
 from umbrella_sim.bag.reader import read_log
 
 
@@ -19,7 +22,7 @@ def test_background_writer_records_what_the_synchronous_one_does(tmp_path):
     for background in (False, True):
         rec = recording.BagRecorder(str(tmp_path / f"bag{background}"),
                                     {"umbrella_sim.parameters": {}}, background=background)
-        rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+        rec.add_channel("/x", Float64, QoSProfile(depth=10))
         for i in range(5000):
             assert rec.write("/x", Float64(data=float(i)), i * 1000)
         k = rec.start_segment({"a": "1"}, gap_ns=1000)     # waits for the queue
@@ -42,7 +45,7 @@ def test_background_write_error_stops_the_recording_cleanly(tmp_path, monkeypatc
 
     rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}},
                                 on_error=on_error, background=True)
-    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    rec.add_channel("/x", Float64, QoSProfile(depth=10))
     n = 0
     while rec.write("/x", Float64(data=float(n)), n * 1_000_000):   # queued until it fails
         n += 1
@@ -62,14 +65,11 @@ def test_background_write_error_stops_the_recording_cleanly(tmp_path, monkeypatc
 def test_background_close_run_counts_every_queued_message(tmp_path):
     rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}},
                                 background=True)
-    rec.add_channel("/x", Float64, recording.QoSProfile(depth=10))
+    rec.add_channel("/x", Float64, QoSProfile(depth=10))
     for i in range(300):
         rec.write("/x", Float64(data=float(i)), i)
-
-    class Sim:
-        lock_event = None
-        time = 0.0
-    rec.close_run(Sim(), {"/x": 300}, 0, 0)
+    recorded = rec.drained_counts()         # what RunRecording.close writes as its counts
+    rec.close({"umbrella_sim.counts": {"recorded": json.dumps(recorded)}})
     log = read_log(rec.path)
     assert log.count("/x") == 300
     assert '"/x": 300' in log.metadata["umbrella_sim.counts"]["recorded"]
@@ -91,7 +91,7 @@ def test_fast_message_records_are_byte_for_byte_those_of_mcap_add_message(tmp_pa
         if not fast:
             rec._appender = None
         for topic in ("/x", "/y", "/z"):
-            rec.add_channel(topic, Float64, recording.QoSProfile(depth=10))
+            rec.add_channel(topic, Float64, QoSProfile(depth=10))
         for i in range(20000):                  # ~30 chunks of 64 KiB
             for k, topic in enumerate(("/x", "/y", "/z")[:1 + i % 3]):
                 assert rec.write(topic, Float64(data=float(i * 3 + k)), i * 1000 + k)
@@ -102,5 +102,5 @@ def test_fast_message_records_are_byte_for_byte_those_of_mcap_add_message(tmp_pa
         assert rec.error is None
         with open(rec.path, "rb") as fh:
             files.append(fh.read())
-    assert len(files[0]) > 20 * recording.CHUNK_SIZE // 4
+    assert len(files[0]) > 20 * CHUNK_SIZE // 4
     assert files[0] == files[1]

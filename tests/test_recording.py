@@ -474,6 +474,6 @@ def test_a_recording_from_before_the_phase_correction_re_runs_without_it():
                           params={**old, "publish_rate": 100.0,
                                   "physics_step": physics_step(old["time_step"], 100.0)})
     log = SimpleNamespace(path="old.mcap", find_topic=lambda key, required=False: None)
-    assert _segment_inputs(log, seg)[0].phase_correction is False
+    assert _segment_inputs(log, seg)[0].params.phase_correction is False
     seg.params["phase_correction"] = True              # what a recording of today holds
     assert _segment_inputs(log, seg)[0].phase_correction is True

@@ -9,9 +9,9 @@ import math
 
 import pytest
 
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.rigid import deployment_time_by_quadrature, RigidMechanism
-from umbrella_sim.core.solver import simulate
 
 # rigid-model deployment times computed independently by energy quadrature of the closed-form
 # rigid mechanism (Hu 2006, Eq. 4.120-4.125)

@@ -4,10 +4,11 @@ import math
 import numpy as np
 import pytest
 
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.engines import SimulationDiverged
 from umbrella_sim.core.integrators import PHI_TOLERANCE
 from umbrella_sim.core.params import UmbrellaParams
-from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.solver import UmbrellaSimulator
 
 
 def trajectory(samples):

@@ -16,13 +16,14 @@ import numpy as np
 import pytest
 
 from umbrella_sim.bag.reader import read_log
-from umbrella_sim.bag.recording import record_offline
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.nonlinear import locked_first_frequency
 from umbrella_sim.core.outputs import STEP_FIELDS, step_peaks
 from umbrella_sim.core.params import UmbrellaParams
-from umbrella_sim.core.solver import simulate, UmbrellaSimulator
+from umbrella_sim.core.solver import UmbrellaSimulator
 from umbrella_sim.core.summary import (energy_drift, oscillation_period, STAGE2_WINDOW,
                                        TIP_DEFLECTION_LIMIT)
+from umbrella_sim.ros.recording import record_offline
 from umbrella_sim.tools import compare
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -19,9 +19,9 @@ import time
 import pytest
 
 
+from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.rigid import deployment_time_by_quadrature
-from umbrella_sim.core.solver import simulate
 from umbrella_sim.tools import cli, sweep
 from umbrella_sim.tools.compare import THESIS_TABLE_6_1
 
@@ -597,7 +597,7 @@ def test_mcap_case_that_diverges_is_reported_as_without_mcap(tmp_path):
 
 def test_a_case_whose_recording_failed_is_not_finished(tmp_path, monkeypatch):
     """--mcap: a case whose recording hit a write error is an error, run again on resume."""
-    from umbrella_sim.bag import recording
+    from umbrella_sim.ros import recording
 
     spec = sweep.load_spec(write(tmp_path / "s.yaml",
                                  "grid:\n  v0: [-2.0]\nbase: {model: rigid}\nduration: 0.05\n"))

@@ -114,8 +114,8 @@ def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_f
     The core re-runs the force history the node applied: same deploy time (same grid, same
     code).
     """
+    from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.params import UmbrellaParams
-    from umbrella_sim.core.solver import simulate
 
     antenna = antenna_factory({"v0": 0.0, "publish_rate": 200.0})
     antenna.wait_for_phase("deploying")
@@ -181,8 +181,8 @@ def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path):
     """
     from builtin_interfaces.msg import Time
 
+    from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.params import UmbrellaParams
-    from umbrella_sim.core.solver import simulate
 
     bag = tmp_path / "two_runs"
     antenna = antenna_factory({"v0": -0.5, "start_paused": True}, record_path=str(bag))
@@ -256,8 +256,8 @@ def test_reset_before_a_paused_start_was_resumed_begins_the_new_run(antenna_fact
 
 def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factory):
     """set_parameters + reset: the node's new model, and the antenna's figures and checks."""
+    from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.params import UmbrellaParams
-    from umbrella_sim.core.solver import simulate
 
     antenna = antenna_factory({"v0": 0.0, "start_paused": True})
     with pytest.raises(AssertionError, match="l1"):

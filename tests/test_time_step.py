@@ -258,9 +258,9 @@ def test_step_follows_mesh_sets_the_step_of_every_run(tmp_path):
     publication period), an offline recording, and the re-simulation of that recording.
     """
     from umbrella_sim.bag.reader import read_log
-    from umbrella_sim.bag.recording import record_offline
+    from umbrella_sim.core.driver import RunDriver
     from umbrella_sim.core.solver import UmbrellaSimulator
-    from umbrella_sim.ros.publication import PublicationDriver
+    from umbrella_sim.ros.recording import record_offline
     from umbrella_sim.tools.replay import resimulate
 
     p = UmbrellaParams(v0=-0.5, elements_per_segment=3, step_follows_mesh=True)
@@ -269,10 +269,10 @@ def test_step_follows_mesh_sets_the_step_of_every_run(tmp_path):
     assert UmbrellaSimulator(p.replace(time_step=2e-4, elements_per_segment=4)).h == 5e-5
     # the rule the accuracy study names is this one at the default time_step
     assert mesh_step(p.replace(time_step=2e-4)) == UmbrellaParams().time_step / 3
-    driver = PublicationDriver(p, 1000.0)
-    assert driver.publish_every == 30 and driver.sim.h == driver.step
+    driver = RunDriver(p, 1000.0)
+    assert driver.period_steps == 30 and driver.sim.h == driver.step
     assert driver.step == pytest.approx(p.time_step / 3, rel=1e-12)
-    assert PublicationDriver(p, 1000.0 / 7).step <= p.time_step / 3   # divides 7 ms
+    assert RunDriver(p, 1000.0 / 7).step <= p.time_step / 3   # divides 7 ms
 
     bag = tmp_path / "mesh"
     q = p.replace(elements_per_segment=2)

@@ -34,15 +34,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 import yaml
 
-from ..ros import signals as stop_signals
-
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-PARAMETERS_RECORD = "umbrella_sim.parameters"
-SEGMENT_RECORD = "umbrella_sim.segment"            # + ".K", written by the recorder on reset
-#: the node's own topic name (joint_states, sleeve_force/applied...) -> the name recorded,
-#: which a remapping (-r joint_states:=js, a namespace) may have changed
-TOPICS_RECORD = "umbrella_sim.topics"
-ENDED_EARLY_RECORD = "umbrella_sim.recording_error"
+from .format import (ENDED_EARLY_RECORD, MCAP_MAGIC, PARAMETERS_RECORD, SEGMENT_RECORD,
+                     TOPICS_RECORD)
 
 
 class LogError(ValueError):
@@ -173,12 +166,9 @@ class LogData:
     def decode(self, topic: str, data: bytes, cls=None, index: int | None = None,
                log_time: int | None = None):
         cls = cls or self.msg_type(topic)
-        signals = len(stop_signals.received)
         try:
             return deserialize_message(data, cls)
         except Exception as exc:      # rclpy raises RMWError / RuntimeError on bad CDR
-            if len(stop_signals.received) > signals:   # a stop signal inside the conversion
-                raise KeyboardInterrupt(stop_signals.name(stop_signals.received[-1])) from None
             where = "" if index is None else f" message {index} (log time {log_time} ns)"
             reason = " ".join(str(exc).split())
             raise LogError(f"{self.path}: topic {topic}{where}: payload does not decode as "

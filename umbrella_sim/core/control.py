@@ -38,8 +38,10 @@ import math
 
 import numpy as np
 
+from .driver import RunDriver, simulate
 from .params import ControllerConfig, UmbrellaParams
-from .rigid import RigidMechanism
+from .rigid import deployment_time_by_quadrature, RigidMechanism
+from .summary import RunResult
 
 
 class DeployLaw:
@@ -190,13 +192,11 @@ def constant_force_for(params: UmbrellaParams, target_time: float, rtol: float =
 
     The physics core decides; secant steps on t ~ F^-1/2 from the rigid quadrature's guess.
     """
-    from ..core.rigid import deployment_time_by_quadrature
-    from ..core.solver import simulate
-
     p = params.replace(v0=0.0)
     force = deployment_time_by_quadrature(p, sleeve_force=1.0) ** 2 / target_time ** 2
     for _ in range(20):
-        run = simulate(p.replace(sleeve_force=force), 20.0 * target_time, stop_after_lock=0.0)
+        run = simulate(p.replace(sleeve_force=force), 20.0 * target_time, stop_after_lock=0.0,
+                       keep_samples=False)
         if run.lock is None:
             raise ValueError(f"no lock within {20 * target_time:g} s at F = {force:g} N")
         if abs(run.lock.time - target_time) <= rtol * target_time:
@@ -210,29 +210,30 @@ def simulate_closed_loop(params: UmbrellaParams, cfg: ControllerConfig,
     """
     Run the law against the physics core as the node runs it.
 
-    States are sampled at publish_rate, each command acts ``delay`` publications later (the
-    DDS round trip).  Returns (RunResult of every step, first push time).
+    States are published at publish_rate (the node's publication Samples: peak stresses held
+    over each period), each command acts ``delay`` publications later (the DDS round trip).
+    Returns (RunResult of the publications, first push time).
     """
-    from ..core.params import physics_step
-    from ..core.solver import UmbrellaSimulator
-    from ..core.summary import RunResult
-
-    p = params.replace(v0=0.0).with_physics_step(
-        physics_step(params.physics_time_step, publish_rate))
-    sim = UmbrellaSimulator(p)
+    driver = RunDriver(params.replace(v0=0.0), publish_rate)
+    sim = driver.sim
     law = DeployLaw(params, cfg)
     period = 1.0 / publish_rate
-    result = RunResult(params=p.as_dict())
-    result.samples.append(sim.sample())
+    result = RunResult(params=driver.params.as_dict())
+    s = driver.publication()
+    result.samples.append(s)
     pending = [0.0] * delay
     law.start(delay * period)
     while sim.lock_event is None or sim.time < sim.lock_event.time + after_lock - 1e-12:
-        s = sim.sample()
         pending.append(0.0 if sim.lock_event else
                        law.force(s.time, s.alpha1, s.alpha1_rate, (delay + 0.5) * period))
-        sim.set_sleeve_force(pending.pop(0))
-        result.samples.extend(sim.advance_to(sim.time + period))
+        driver.command(pending.pop(0))
+        result.error = driver.advance_period()[-1].error
+        if result.error is not None:
+            break
+        s = driver.publication()
+        result.samples.append(s)
         if sim.time > 20.0 * cfg.target_time:
             break
     result.lock, result.steps = sim.lock_event, sim.steps
+    result.figures = driver.summary.figures()
     return result, delay * period

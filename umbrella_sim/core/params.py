@@ -494,7 +494,7 @@ UmbrellaParams = dataclasses.make_dataclass(
     "UmbrellaParams", [(p.name, p.type, dataclasses.field(default=p.default))
                        for p in SPECS.values()],
     bases=(_DerivedQuantities,), frozen=True)
-UmbrellaParams.__module__ = __name__     # pickles as umbrella_sim.params.UmbrellaParams
+UmbrellaParams.__module__ = __name__     # pickles as umbrella_sim.core.params.UmbrellaParams
 UmbrellaParams.__doc__ = ("The physics' parameters (SI), one field per entry of SPECS; "
                           "immutable: change with replace(), check with validated().")
 

@@ -12,8 +12,7 @@ so the grid is kept.
 from __future__ import annotations
 
 from dataclasses import replace
-import time as _time
-from typing import Callable, Iterable
+from typing import Callable
 
 import numpy as np
 
@@ -25,7 +24,6 @@ from .integrators import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicStat
 from .model import DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import build_frozen, LockEvent, Sample, STEP_FIELDS, step_peaks, step_row, StepBlock
 from .params import SPECS, UmbrellaParams
-from .summary import RunResult, SummaryAccumulator
 
 
 def nonlinear_model_needed(p: UmbrellaParams) -> bool:
@@ -390,73 +388,3 @@ def _frozen(a) -> np.ndarray:
 def _check_steps(n_steps) -> None:
     if isinstance(n_steps, bool) or not float(n_steps).is_integer() or n_steps < 0:
         raise ValueError(f"n_steps={n_steps!r}: must be a whole number >= 0")
-
-
-def simulate(params: UmbrellaParams, duration: float,
-             force_profile: Iterable[tuple[float, float]] | ForceSchedule | None = None,
-             stop_after_lock: float | None = None,
-             progress: Callable[[float], None] | None = None, *,
-             simulator: UmbrellaSimulator | None = None, output_every: int = 1,
-             on_output: Callable[[StepBlock, list], None] | None = None,
-             keep_samples: bool = True,
-             summary: SummaryAccumulator | None = None) -> RunResult:
-    """
-    Run a whole simulation: the one offline driver.
-
-    ``umbrella_sim simulate``, ``--mcap`` (recording.record_offline) and ``umbrella_replay
-    --resimulate`` all run through here, on ``UmbrellaSimulator.advance_schedule``, as the
-    node does one publication period at a time; so they give identical states.
-
-    force_profile: (t, F) pairs or a ForceSchedule: F_H as forcing.py's zero-order hold
-    (each value acts from the first step that starts at or after its time).  Every
-    output_every steps (and at the end) ``on_output(block, applied)`` gets the StepBlock of
-    those steps and the force values that took effect in them; ``result.figures`` are the
-    summary figures of every step (outputs.SummaryAccumulator); keep_samples keeps the
-    Sample at each of those instants (and right after the lock) in ``result.samples``.
-    simulator: step this one (fresh, at t = 0) instead of a new one; summary: accumulate into
-    this one (of its first state), which the caller keeps if the run is interrupted.  On a
-    diverged run what was computed before the failure is kept and ``result.error`` says why.
-    """
-    sim = simulator if simulator is not None else UmbrellaSimulator(params)
-    if isinstance(force_profile, ForceSchedule):
-        schedule = force_profile
-    else:
-        schedule = ForceSchedule(sim.h, sim.sleeve_force,
-                                 sorted(force_profile or [], key=lambda tf: tf[0]),
-                                 check=lambda f: command_force(f, sim.params))
-    result = RunResult(params=sim.params.as_dict(), q_labels=sim.model.coordinate_labels(),
-                       leaf_stress_x=list(sim.model.leaf.stress_x),
-                       link_stress_x=list(sim.model.link.stress_x))
-    first = sim.sample()
-    if keep_samples:
-        result.samples.append(first)
-    if summary is None:
-        summary = SummaryAccumulator(result.params, first, sim.engine.lock_kind)
-    every = max(1, int(output_every))
-    wall0 = _time.perf_counter()
-    k_end = int(round(duration / sim.h))
-    next_progress = 0
-    while sim.step_index < k_end:
-        block, applied = sim.advance_schedule(schedule, min(every, k_end - sim.step_index))
-        summary.add(block)
-        if keep_samples:
-            if block.lock is not None:
-                result.samples.append(sim.lock_sample())
-            if len(block):
-                result.samples.append(block.last)
-        if on_output is not None:
-            on_output(block, applied)
-        if block.error is not None:
-            result.error = block.error
-            break
-        if progress is not None and sim.step_index >= next_progress:
-            progress(sim.time)
-            next_progress = sim.step_index + max(50, every)
-        if (stop_after_lock is not None and sim.lock_event is not None
-                and sim.time >= sim.lock_event.time + stop_after_lock):
-            break
-    result.wall_time = _time.perf_counter() - wall0
-    result.steps = sim.steps
-    result.lock = sim.lock_event
-    result.figures = summary.figures()
-    return result

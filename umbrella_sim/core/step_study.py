@@ -2,7 +2,8 @@
 Accuracy of a physics step against a fine-step run of the same code (time-step study).
 
 The figures a structural engineer reads off a run, computed from every physics step
-(``UmbrellaSimulator.advance``), so they do not depend on an output rate:
+(``RunDriver``'s chunks of ``UmbrellaSimulator.advance``), so they do not depend on an output
+rate:
 deploy (lock) time, stage-1 and stage-2 peak fibre stresses on leaf and link, the stage-2
 tip period, and the stage-2 tip series.  ``step_errors`` compares a run with a candidate step
 against a run with a much finer step (the same model, mesh and lock), which is how the
@@ -16,8 +17,8 @@ import math
 
 import numpy as np
 
+from .driver import RunDriver
 from .params import UmbrellaParams
-from .solver import UmbrellaSimulator
 from .summary import oscillation_period
 
 #: issue-level accuracy targets for the default step (relative unless stated)
@@ -72,27 +73,21 @@ class StepRun:
         return out
 
 
-def run_steps(params: UmbrellaParams, window: float, block: int = 2000) -> StepRun:
+def run_steps(params: UmbrellaParams, window: float) -> StepRun:
     """Deploy, then `window` seconds of stage 2, keeping every step's outputs."""
-    sim = UmbrellaSimulator(params)
+    driver = RunDriver(params)
     parts = []
-    lock_time = None
-    while True:
-        b = sim.advance(block)
-        if b.error:
-            raise RuntimeError(f"{sim.h:g} s step: {b.error}")
-        parts.append(b)
-        if b.lock is not None:
-            lock_time = b.lock.time
-        if lock_time is not None and sim.time >= lock_time + window:
-            break
-        if sim.time > 10.0:
-            raise RuntimeError("no lock within 10 s")
+    error = driver.run(10.0, stop_after_lock=window,
+                       on_chunk=lambda chunk: parts.append(chunk.block))
+    if error:
+        raise RuntimeError(f"{driver.step:g} s step: {error}")
+    if driver.sim.lock_event is None:
+        raise RuntimeError("no lock within 10 s")
 
     def cat(name):
         return np.concatenate([getattr(p, name) for p in parts])
-    return StepRun(sim.h, lock_time, cat("time"), cat("stage"), cat("tip_transverse"),
-                   cat("peak_stress_leaf"), cat("peak_stress_link"))
+    return StepRun(driver.step, driver.sim.lock_event.time, cat("time"), cat("stage"),
+                   cat("tip_transverse"), cat("peak_stress_leaf"), cat("peak_stress_link"))
 
 
 def step_errors(run: StepRun, ref: StepRun, window: float) -> dict:
@@ -162,12 +157,14 @@ def observed_order(params: UmbrellaParams, steps: tuple[float, float, float], du
     r = steps[0] / steps[1]
     series = []
     for k, h in enumerate(steps):
-        sim = UmbrellaSimulator(params.with_physics_step(h))
-        b = sim.advance(int(round(duration / h)))
-        if b.error or b.lock is not None:
-            raise RuntimeError(b.error or "the lock is inside the horizon")
+        driver = RunDriver(params.with_physics_step(h))
+        parts = []
+        error = driver.run(duration, on_chunk=lambda chunk: parts.append(getattr(chunk.block,
+                                                                                 field)))
+        if error or driver.sim.lock_event is not None:
+            raise RuntimeError(error or "the lock is inside the horizon")
         every = int(round(r ** k))
-        series.append(getattr(b, field)[every - 1::every])
+        series.append(np.concatenate(parts)[every - 1::every])
     e1 = float(np.max(np.abs(series[0] - series[1])))
     e2 = float(np.max(np.abs(series[1] - series[2])))
     return math.log(e1 / e2) / math.log(r)

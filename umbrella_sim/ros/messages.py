@@ -62,9 +62,6 @@ TOPICS = {
 }
 #: the node's topics that its namespace does not move
 ABSOLUTE_TOPIC_NAMES = frozenset(t.name for t in TOPICS.values() if t.name.startswith("/"))
-#: recorded alongside the command topic: refused commands, and each value as applied
-COMMAND_REFUSED_SUFFIX = "/refused"
-COMMAND_APPLIED_SUFFIX = "/applied"
 #: keep all: with a reliable publisher, a burst of commands faster than the node takes them
 #: is held back by DDS flow control instead of being overwritten in the reader's history
 #: (keep-last 10 lost ~4 % of a 5 kHz stream); every received value is counted and recorded
@@ -255,7 +252,7 @@ class SampleEncoder:
 
     def __init__(self, first: Sample, params: UmbrellaParams, initial_energy: float,
                  frame_prefix: str = ""):
-        from ..bag.recording import cdr_bytes       # the exact-size rule, one place
+        from ..bag.cdr import cdr_bytes  # the exact-size rule, one place
         self.yield_strength = params.yield_strength
         self.initial_energy = initial_energy
         msgs = sample_messages(first, params, None, "", initial_energy, frame_prefix)
@@ -330,7 +327,7 @@ class MarkerEncoder:
     """
 
     def __init__(self, positions, ns: str, frame_prefix: str = ""):
-        from ..bag.recording import cdr_bytes       # the exact-size rule, one place
+        from ..bag.cdr import cdr_bytes  # the exact-size rule, one place
         self._counts = tuple(len(p) for p in positions)
         sentinels = iter(_sentinel_doubles(2 * sum(self._counts) + 1))   # x, y; sleeve
         probe = [np.array([[next(sentinels), next(sentinels)] for _ in range(n)])

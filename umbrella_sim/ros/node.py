@@ -41,15 +41,19 @@ from rclpy.parameter import Parameter
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
-from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
 from . import messages as ros_io, signals as stop_signals
 from .parameters import coerce_parameter, declare_from_registry, parameter_defaults
 from .params_file import check_parameter_sources, params_files_in, QOS_OVERRIDES, USE_SIM_TIME
-from .publication import PublicationDriver
+from .publication import PublicationEncoder
+from .recording import RunRecording
 from .share import package_path
 from .. import __version__
+from ..bag.cdr import cdr_bytes
+from ..bag.provenance import run_metadata
+from ..bag.writer import BagRecorder, check_record_path, new_bag_recorder
+from ..core.driver import RunDriver
 from ..core.engines import SimulationDiverged
 from ..core.forcing import command_force
 from ..core.params import (check_known_names, check_node_parameters, CONTROLLER_PARAMETERS,
@@ -96,7 +100,6 @@ class UmbrellaNode(Node):
             self.node_cfg = check_node_parameters(
                 {k: v for k, v in values.items() if k in NODE_PARAMETERS})
             if self.node_cfg["record"] and self.node_cfg["record_path"]:   # before any work
-                from ..bag.recording import check_record_path
                 check_record_path(self.node_cfg["record_path"])
         except ValueError as exc:
             raise StartupError(str(exc)) from None
@@ -118,9 +121,8 @@ class UmbrellaNode(Node):
         self.finished = Future()
         self._stop = threading.Event()
         self._wake = threading.Event()
-        self.recorder = None
+        self.recording: RunRecording | None = None
         self.recording_error: str | None = None
-        self.published: dict[str, int] = {}
         self.refused_not_recorded = 0
         self._refused_window = (0.0, 0)       # (wall start, recorded in this 1 s window)
         self.slip = 0.0                       # wall seconds dropped by re-anchoring (overload)
@@ -186,12 +188,14 @@ class UmbrellaNode(Node):
         except ValueError as exc:
             raise StartupError(str(exc)) from None
 
-    def _make_driver(self, p: UmbrellaParams) -> PublicationDriver:
-        """Build the model and its driver (ValueError if it cannot be); changes nothing."""
+    def _make_driver(self, p: UmbrellaParams) -> tuple[RunDriver, PublicationEncoder]:
+        """Build the model, its run driver and encoder (ValueError if it cannot be)."""
         cfg = self.node_cfg                 # a publish_rate set applies here
-        return PublicationDriver(p, cfg["publish_rate"], cfg["marker_rate"])
+        driver = RunDriver(p, cfg["publish_rate"])
+        return driver, PublicationEncoder(driver, cfg["marker_rate"])
 
-    def _install_driver(self, driver: PublicationDriver) -> None:
+    def _install_driver(self, made: tuple[RunDriver, PublicationEncoder]) -> None:
+        driver, self.encoder = made
         p = self.model_params = driver.params
         self.driver_rate = driver.publish_rate
         self.driver = driver
@@ -203,15 +207,13 @@ class UmbrellaNode(Node):
         self.get_logger().info(
             f"umbrella_sim {__version__}: model {p.model}, N = {p.elements_per_segment}, "
             f"v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s "
-            f"({self.driver.publish_every} per publication at "
+            f"({self.driver.period_steps} per publication at "
             f"{self.driver_rate:g} Hz), kernel {self.driver.backend}")
         note = shortened_step_note(p.physics_time_step, self.driver_rate)
         if note:
             self.get_logger().info(note)
 
     def _open_recording(self, path: str) -> None:
-        from ..bag.recording import BagRecorder, new_bag_recorder, run_metadata
-
         def metadata(bag_dir):
             cfg = dict(self.node_cfg, record_path=bag_dir)
             return run_metadata(self.model_params, cfg, self.driver.step, self.sim.model,
@@ -220,23 +222,22 @@ class UmbrellaNode(Node):
         try:
             # compression and file writes on the recorder's own thread, not the publishing one
             if path:
-                self.recorder = BagRecorder(path, metadata(path),
-                                            on_error=self._on_recording_error, background=True)
+                recorder = BagRecorder(path, metadata(path), on_error=self._on_recording_error,
+                                       background=True)
             else:   # as ros2 bag record: a new timestamped directory in the working directory
-                self.recorder = new_bag_recorder(self.get_namespace(), metadata,
-                                                 on_error=self._on_recording_error,
-                                                 background=True)
+                recorder = new_bag_recorder(self.get_namespace(), metadata,
+                                            on_error=self._on_recording_error, background=True)
         except ValueError as exc:
             raise StartupError(str(exc)) from None
-        self.recorder.add_umbrella_channels(
-            {key: pub.topic_name for key, pub in self.pub.items()}, self.command_topic,
-            {key: pub.qos_profile for key, pub in self.pub.items()})
-        self.get_logger().info(f"recording to {self.recorder.path}")
+        self.recording = RunRecording(
+            recorder, {key: pub.topic_name for key, pub in self.pub.items()},
+            self.command_topic, {key: pub.qos_profile for key, pub in self.pub.items()})
+        self.get_logger().info(f"recording to {self.recording.path}")
 
     def _on_recording_error(self, reason: str) -> None:
         """Report a write error of the recorder (called once)."""
         self.recording_error = reason
-        self._log("error", f"recording stopped: {reason}; {self.recorder.path} keeps what was "
+        self._log("error", f"recording stopped: {reason}; {self.recording.path} keeps what was "
                            "written before (readable, marked as ended early); the simulation "
                            f"and its topics go on; exit code {EXIT_RECORDING} at the end")
 
@@ -247,39 +248,38 @@ class UmbrellaNode(Node):
             print(f"[{level.upper()}] [{self.get_name()}]: {text}", file=sys.stderr, flush=True)
 
     def close_recording(self) -> None:
-        if self.recorder is None:
+        rec = self.recording
+        if rec is None:
             return
-        from ..bag.recording import summary_metadata
-        had_error = self.recorder.error is not None
+        had_error = rec.error is not None
         # the events and the summary of one state: not while the physics thread is in a
-        # period (it ends a period early on a stop: PublicationDriver.advance)
+        # chunk of steps
         held = self._sim_lock.acquire(timeout=60.0)
         try:
-            self.recorder.close_run(self.sim, self.published, self.accepted_commands,
-                                    self.refused_commands, fault=self.fault, extra={
-                                        "refused_not_recorded": str(self.refused_not_recorded),
-                                        "segments": str(self.recorder.segment + 1)},
-                                    summary=summary_metadata(self.driver.summary.figures()))
+            rec.close(self.sim, self.accepted_commands, self.refused_commands,
+                      self.driver.summary.figures(), fault=self.fault, extra={
+                          "refused_not_recorded": str(self.refused_not_recorded),
+                          "segments": str(rec.recorder.segment + 1)})
         finally:
             if held:
                 self._sim_lock.release()
-        if not had_error and self.recorder.error is None:
-            self._log("info", f"recording finalised: {self.recorder.path} "
-                              f"({sum(self.recorder.counts.values())} messages)")
+        if not had_error and rec.error is None:
+            self._log("info", f"recording finalised: {rec.path} "
+                              f"({sum(rec.recorder.counts.values())} messages)")
 
-    def _record(self, topic: str, msg, t: float, data: bytes | None = None) -> None:
-        if self.recorder is not None and self.recorder.error is None:
-            self.recorder.write(topic, msg, ros_io.stamp_ns(t), data)
+    def _recording_on(self) -> RunRecording | None:
+        """Return the recording if it is being written (not off, not stopped by an error)."""
+        rec = self.recording
+        return rec if rec is not None and rec.error is None else None
 
     def _publish(self, key: str, msg, t: float) -> None:
         """Publish a message, or the exact CDR bytes of one, and record the same bytes."""
         if not isinstance(msg, bytes):  # (the encoders' bytes are exact and zero-padded)
-            from ..bag.recording import cdr_bytes   # once: the publisher and the recorder share it
-            msg = cdr_bytes(msg)
+            msg = cdr_bytes(msg)        # once: the publisher and the recorder share it
         self.pub[key].publish(msg)
-        name = self._topic_name[key]
-        self.published[name] = self.published.get(name, 0) + 1
-        self._record(name, None, t, msg)
+        rec = self._recording_on()
+        if rec is not None:
+            rec.publish(key, msg, t)
 
     # ---------------------------------------------------------------- callbacks
     def _on_force(self, msg) -> None:
@@ -293,8 +293,10 @@ class UmbrellaNode(Node):
             start, n = self._refused_window
             if now - start >= 1.0:
                 start, n = now, 0
+            rec = self._recording_on()
             if n < REFUSED_RECORD_RATE:       # a flood of bad commands cannot fill the disk
-                self._record(self.command_topic + ros_io.COMMAND_REFUSED_SUFFIX, msg, t)
+                if rec is not None:
+                    rec.refused(msg, t)
                 n += 1
             else:
                 self.refused_not_recorded += 1
@@ -303,7 +305,9 @@ class UmbrellaNode(Node):
                                  f"(refused so far: {self.refused_commands})")
         else:
             self.accepted_commands += 1
-            self._record(self.command_topic, msg, t)
+            rec = self._recording_on()
+            if rec is not None:
+                rec.command(msg, t)
             with self._cmd_lock:
                 self._commanded_force = force
         self._answered.set()              # any command answers the last state (lockstep)
@@ -340,15 +344,13 @@ class UmbrellaNode(Node):
             self._anchor()
             self._lockstep_armed = False      # the next command starts the handshake again
             self._answered.clear()
-            if self.recorder is not None and self.recorder.error is None:
-                from ..bag.recording import events_metadata, run_metadata
+            rec = self._recording_on()
+            if rec is not None:
                 meta = run_metadata(self.model_params, self.node_cfg, self.driver.step,
                                     self.sim.model, self.driver.backend, source="~/reset")
-                k = self.recorder.start_segment(
-                    meta["umbrella_sim.parameters"], gap_ns=ros_io.stamp_ns(self.driver.step),
-                    ended_events=events_metadata(ended, fault)["umbrella_sim.events"])
+                k = rec.start_segment(meta, self.driver, ended, fault)
                 self.get_logger().info(f"recording segment {k} (reset; log time offset "
-                                       f"{self.recorder.offset_ns * 1e-9:.9f} s)")
+                                       f"{rec.recorder.offset_ns * 1e-9:.9f} s)")
             self._publish_phase("deploying")
             # the new run's t = 0 state, as at start (paused or not): every run, and every
             # recording segment, begins with its initial state
@@ -435,10 +437,11 @@ class UmbrellaNode(Node):
         self._publish("deployment_phase", ros_io.phase_msg(phase), self.sim.time)
 
     def _sample_messages(self) -> tuple[int, float, dict]:
-        """Build the current state's messages under the sim lock, to be published later."""
+        """Build the publication's messages under the sim lock, to be published later."""
         cfg = self.node_cfg
-        return self._epoch, self.sim.time, self.driver.messages(
-            self._marker_ns, cfg["marker_magnification"], cfg["frame_prefix"])
+        return self._epoch, self.sim.time, self.encoder.messages(
+            self.driver.publication(), self._marker_ns, cfg["marker_magnification"],
+            cfg["frame_prefix"])
 
     def _publish_sample(self, sample: tuple[int, float, dict]) -> None:
         epoch, t, msgs = sample
@@ -453,29 +456,42 @@ class UmbrellaNode(Node):
     def _waiting_for_command(self) -> bool:
         """Lockstep: no command has answered the last joint_states yet (sim lock held)."""
         return (self.node_cfg["lockstep"] and self._lockstep_armed
-                and self.sim.stage == "deploying" and not self._answered.is_set())
+                and self.driver.at_publication and self.sim.stage == "deploying"
+                and not self._answered.is_set())
 
-    def _advance_one_publication(self) -> None:
+    def _take_command(self) -> None:
+        """At a publication instant: the latest command acts from this step on (sim lock held)."""
         with self._cmd_lock:
             force = self._commanded_force
-        if force != self.sim.sleeve_force:
-            # logged and recorded BEFORE the solver sees it: a fault it causes is in the log
-            # and --resimulate reproduces it (the driver applies it at the period's first step)
-            t = self.sim.time
-            note = " (locked: no effect on motion)" if self.sim.stage == "locked" else ""
-            self.get_logger().info(f"sleeve force {force:.17g} N applied from t = {t:.9f} s"
-                                   f"{note}")
-            self._record(self.command_topic + ros_io.COMMAND_APPLIED_SUFFIX,
-                         Float64(data=force), t)
+        t = self.driver.command(force)
+        if t is None:
+            return
+        # logged and recorded BEFORE the solver sees it: a fault it causes is in the log and
+        # --resimulate reproduces it
+        note = " (locked: no effect on motion)" if self.sim.stage == "locked" else ""
+        self.get_logger().info(f"sleeve force {force:.17g} N applied from t = {t:.9f} s{note}")
+        rec = self._recording_on()
+        if rec is not None:
+            rec.applied(force, t)
+
+    def _advance_chunk(self) -> bool:
+        """Step the next chunk (sim lock held); True if the run is at a publication after it."""
+        if self.driver.at_publication:
+            self._take_command()
         try:
-            events = self.driver.advance(force, should_stop=self._stop.is_set)
+            chunk = self.driver.advance()
         finally:
             for text in self.driver.summary.new_warnings():   # each logged once
                 self.get_logger().warning(f"t = {self.sim.time:.6f} s: {text}")
-        for ev in events:
-            if ev.kind == "locked":
-                self.get_logger().info(f"locked at t = {ev.time:.9f} s ({ev.detail})")
-                self._publish_phase("locked")
+        ev = chunk.lock
+        if ev is not None:
+            self.get_logger().info(
+                f"locked at t = {ev.time:.9f} s (energy {ev.energy_before:.6g} J -> "
+                f"{ev.energy_after:.6g} J, {ev.kind} lock)")
+            self._publish_phase("locked")
+        if chunk.error is not None:
+            raise SimulationDiverged(chunk.error)
+        return chunk.at_publication
 
     def _physics_loop(self) -> None:
         # everything allocated so far (modules, model, publishers) lives for the whole run:
@@ -506,10 +522,10 @@ class UmbrellaNode(Node):
                         if self.node_cfg["lockstep"] and self._answered.is_set():
                             self._lockstep_armed = True   # the handshake starts (or goes on)
                         try:
-                            self._advance_one_publication()
-                            # (a stop may end a long period early: no publication then)
-                            sample = (self._sample_messages() if self.driver.at_publication
-                                      else None)
+                            # a chunk of steps, at most to the next publication: the lock
+                            # is given up between chunks, for a service or a stop
+                            if self._advance_chunk():
+                                sample = self._sample_messages()
                         except SimulationDiverged as exc:
                             # the state stays at the last good step (maybe between
                             # publications): nothing more is published from it
@@ -546,7 +562,7 @@ class UmbrellaNode(Node):
                     self._max_lag = 0.0
                 if duration > 0 and self.fault is not None:
                     break
-                if duration > 0 and sim_t >= duration - 1e-12:
+                if duration > 0 and sample is not None and sim_t >= duration - 1e-12:
                     log.info(f"duration {duration:g} s reached at t = {sim_t:.9f} s")
                     break
                 if waiting:
@@ -678,7 +694,7 @@ class UmbrellaNode(Node):
                   "re_anchors": self.re_anchors,
                   "refused_not_recorded": self.refused_not_recorded,
                   "clock_publishers": getattr(self, "clock_publishers", 1),
-                  "recording": ("off" if self.recorder is None else
+                  "recording": ("off" if self.recording is None else
                                 f"stopped: {self.recording_error}" if self.recording_error
                                 else "ok")}
         for i, text in enumerate(self.driver.summary.warnings()):

@@ -129,6 +129,22 @@ def _interrupt(signum, frame):
     raise KeyboardInterrupt(name(signum))
 
 
+#: len(received) when the running tool's main began (interruptible)
+_received_at_start = [0]
+
+
+def raise_if_stopped() -> None:
+    """
+    Raise KeyboardInterrupt if a stop signal came since the tool's main began.
+
+    For an error that a stop signal may have caused: the signal's KeyboardInterrupt,
+    raised inside a C extension (rclpy's message conversion), comes back as that
+    extension's own error, which would read as a bad input.
+    """
+    if len(received) > _received_at_start[0]:
+        raise KeyboardInterrupt(name(received[-1]))
+
+
 def interruptible(tool: str, kept: str):
     """
     Make a tool's main end on SIGINT/SIGTERM with one line and exit 130, not a traceback.
@@ -145,6 +161,7 @@ def interruptible(tool: str, kept: str):
             in_main = threading.current_thread() is threading.main_thread()
             previous = ({s: signal.signal(s, _interrupt) for s in STOP_SIGNALS} if in_main
                         else {})
+            _received_at_start[0] = len(received)
             try:
                 return main(argv)
             except KeyboardInterrupt as exc:

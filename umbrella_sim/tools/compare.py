@@ -22,7 +22,7 @@ import numpy as np
 from .arguments import ArgumentParser
 from ..bag.reader import LogError, read_log
 from ..core.summary import deploy_start_of, relative_drift, stage2_figures, validity_warnings
-from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader
+from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader, raise_if_stopped
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
 FIGURE_KEYS = ("deploy_time", "deploy_start", "lock_time", "tip_deflection_max",
@@ -605,6 +605,7 @@ def main(argv: list[str] | None = None) -> int:
             for r in runs:
                 r.physics = physics_run(r.path, args.segment)
     except LogError as exc:
+        raise_if_stopped()           # (a stop signal inside a decoding: an interrupt)
         print(f"umbrella_compare: error: {exc}", file=sys.stderr)
         return 2
     # (umbrella_compare ... | head): the outputs are still written

@@ -21,10 +21,17 @@ import time
 import numpy as np
 
 from .arguments import ArgumentParser
-from ..bag.reader import LogData, LogError, qos_from_yaml, read_log, TOPICS_RECORD
-from ..ros.signals import interruptible
+from ..bag.format import APPLIED_SUFFIX, REFUSED_SUFFIX, TOPICS_RECORD
+from ..bag.provenance import build_environment
+from ..bag.reader import LogData, LogError, qos_from_yaml, read_log
+from ..core.driver import RunDriver
+from ..core.forcing import command_force, ForceSchedule
+from ..core.params import physics_step, recorded_params
+from ..ros.messages import ABSOLUTE_TOPIC_NAMES, COMMAND
+from ..ros.signals import interruptible, raise_if_stopped
 
-COMMAND_SUFFIXES = ("sleeve_force", "sleeve_force/refused", "sleeve_force/applied")
+#: the node's command topic and its records (each as the node names it, before remapping)
+COMMAND_SUFFIXES = tuple(COMMAND.name + s for s in ("", REFUSED_SUFFIX, APPLIED_SUFFIX))
 ACK_TIMEOUT_S = 3.5      # > Fast DDS's default 3 s heartbeat period, which prompts the acks
 
 
@@ -88,8 +95,6 @@ DEFAULT_TOLERANCE = 1e-6
 
 def build_difference(log: LogData) -> str:
     """Say how the recording's build and floating-point environment differ from this one."""
-    from ..bag.recording import build_environment
-
     recorded = log.metadata.get("umbrella_sim.build", {})
     here = build_environment()
     differ = [f"{k} {recorded.get(k, 'unrecorded')!r} there, {v!r} here"
@@ -107,16 +112,12 @@ def relative_difference(diff: float, scale: float) -> float:
 
 def _segment_inputs(log: LogData, seg):
     """
-    Return what re-running one segment needs: (params, driver, schedule, t_last, t_fault).
+    Return what re-running one segment needs: (run driver, t_last, t_fault).
 
     The applied forces (``sleeve_force/applied``, each at the step it acts from) become the
-    ForceSchedule every path uses; t_last is the segment's last publication, t_fault the
-    recorded fault (None without one).
+    driver's force schedule; t_last is the segment's last publication, t_fault the recorded
+    fault (None without one).
     """
-    from ..core.forcing import command_force, ForceSchedule
-    from ..core.params import recorded_params
-    from ..ros.publication import PublicationDriver
-
     p_all = seg.params
     try:
         params = recorded_params(p_all)
@@ -125,10 +126,10 @@ def _segment_inputs(log: LogData, seg):
     except (KeyError, TypeError, ValueError) as exc:
         raise LogError(f"{log.path}: segment {seg.index}: parameters cannot be used "
                        f"({exc})") from None
-    driver = PublicationDriver(params, rate)
-    if abs(driver.step - step) > 1e-15:
+    if abs(physics_step(params.physics_time_step, rate) - step) > 1e-15:
         raise LogError(f"{log.path}: physics step {step} cannot be reproduced from "
-                       f"time_step and publish_rate (got {driver.step})")
+                       f"time_step and publish_rate (got "
+                       f"{physics_step(params.physics_time_step, rate)})")
     # the force history, the recorded fault and the last publication (only the few command
     # and phase records are decoded)
     applied, t_last, t_fault = [], 0.0, None
@@ -148,11 +149,11 @@ def _segment_inputs(log: LogData, seg):
             else:
                 applied.append((t, msg.data))
     try:
-        schedule = ForceSchedule(driver.step, params.sleeve_force, applied,
+        schedule = ForceSchedule(step, params.sleeve_force, applied,
                                  check=lambda f: command_force(f, params))
     except ValueError as exc:
         raise LogError(f"{log.path}: segment {seg.index}: sleeve_force/applied: {exc}") from None
-    return params, driver, schedule, t_last, t_fault
+    return RunDriver(params, rate, force_profile=schedule), t_last, t_fault
 
 
 def _in_segment(seg, m) -> bool:
@@ -166,34 +167,28 @@ def physics_series(log: LogData, seg) -> dict:
     Names: time, alpha1, alpha1_rate, tip_transverse, peak_stress_leaf, peak_stress_link
     (the StepBlock fields); the run stops at the segment's last publication or its fault.
     """
-    from ..core.solver import simulate
-
-    params, driver, schedule, t_last, t_fault = _segment_inputs(log, seg)
+    driver, t_last, t_fault = _segment_inputs(log, seg)
     names = ("time", "alpha1", "alpha1_rate", "tip_transverse", "peak_stress_leaf",
              "peak_stress_link")
     parts = {n: [] for n in names}
 
-    def on_output(block, applied_now) -> None:
+    def on_chunk(chunk) -> None:
         for n in names:
-            parts[n].append(getattr(block, n))
+            parts[n].append(getattr(chunk.block, n))
 
     t_end = t_last if t_fault is None else max(t_last, t_fault)
-    simulate(params, t_end, schedule, simulator=driver.sim,
-             output_every=driver.publish_every, on_output=on_output, keep_samples=False)
+    driver.run(t_end, on_chunk=on_chunk)
     return {n: np.concatenate(v) if v else np.zeros(0) for n, v in parts.items()}
 
 
 def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
     """
-    Re-run one segment through the offline driver (solver.simulate).
+    Re-run one segment on a run driver and compare each publication with the recorded one.
 
     The recorded publications are streamed and compared as the re-simulation reaches each
     one.
     """
-    from ..core.solver import simulate
-
-    params, driver, schedule, t_last, t_fault = _segment_inputs(log, seg)
-    rate = float(seg.params["publish_rate"])          # checked by _segment_inputs
+    driver, t_last, t_fault = _segment_inputs(log, seg)
     topics = {"joint": log.find_topic("joint_states"),
               "tip": log.find_topic("tip_deflection", required=False),
               "peak": log.find_topic("peak_stress", required=False)}
@@ -219,44 +214,38 @@ def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
     stream = groups()
     pending = [next(stream, None)]
 
-    def compare_until(t_now: float) -> None:
-        """Compare the recorded publication at t_now; none may be left behind before it."""
+    def compare_until(s) -> None:
+        """Compare the recorded publication at s.time; none may be left behind before it."""
+        t_now = s.time
         while pending[0] is not None and pending[0][0] < t_now + 1e-9:
             t, group = pending[0]
             if "joint" in group:
                 if abs(t - t_now) > 1e-9:
                     raise LogError(f"{log.path}: recorded publication at t = {t} s is not on "
                                    f"the re-simulated grid (t = {t_now})")
-                _compare_publication(driver.publication_sample(), group, diffs, scales)
+                _compare_publication(s, group, diffs, scales)
                 res["compared"] += 1
             pending[0] = next(stream, None)
 
-    def on_output(block, applied_now) -> None:
-        driver.take(block, applied_now)
-        if block.error is None and sim.step_index % driver.publish_every == 0:
-            compare_until(sim.time)
-
-    compare_until(0.0)
+    compare_until(driver.publication())
     # to the log's last publication, or one period past a recorded fault (the
     # re-simulation must fault there too, from the same last good state)
     t_end = t_last
-    if res["recorded_fault"] is not None:
-        t_end = max(t_end, res["recorded_fault"] + 1.0 / rate)
-    result = simulate(params, t_end, schedule, simulator=sim,
-                      output_every=driver.publish_every, on_output=on_output,
-                      keep_samples=False)
-    if result.error is not None:
-        res["fault"] = {"time": sim.time, "reason": result.error}
+    if t_fault is not None:
+        t_end = max(t_end, t_fault + 1.0 / driver.publish_rate)
+    error = driver.run(t_end, on_publication=compare_until)
+    if error is not None:
+        res["fault"] = {"time": sim.time, "reason": error}
         if pending[0] is not None:
             res["problems"].append(f"the re-simulation faulted at t = {sim.time:.9f} s "
-                                   f"({result.error}) where the log goes on to t = "
+                                   f"({error}) where the log goes on to t = "
                                    f"{pending[0][0]:.9f} s")
-    if res["recorded_fault"] is not None:
-        if result.error is None:
-            res["problems"].append(f"the log faults at t = {res['recorded_fault']:.9f} s; "
+    if t_fault is not None:
+        if error is None:
+            res["problems"].append(f"the log faults at t = {t_fault:.9f} s; "
                                    "the re-simulation does not")
-        elif abs(sim.time - res["recorded_fault"]) > 1e-9:
-            res["problems"].append(f"the log faults at t = {res['recorded_fault']:.9f} s, the "
+        elif abs(sim.time - t_fault) > 1e-9:
+            res["problems"].append(f"the log faults at t = {t_fault:.9f} s, the "
                                    f"re-simulation at t = {sim.time:.9f} s")
     return res
 
@@ -295,7 +284,6 @@ def moved_topics(log: LogData, topics: list[str], namespace: str) -> tuple[dict,
     names = {t: t for t in topics}
     if namespace == "/":
         return names, ""
-    from ..ros.messages import ABSOLUTE_TOPIC_NAMES
 
     recorded = posixpath.dirname(log.find_topic("joint_states"))
     under = recorded.rstrip("/") + "/"
@@ -465,6 +453,7 @@ def main(argv: list[str] | None = None) -> int:
         return republish(log, args.rate, args.start_offset, args.loop, args.with_commands,
                          args.topics, ros_args, args.wait_for_subscribers)
     except LogError as exc:
+        raise_if_stopped()           # (a stop signal inside a decoding: an interrupt)
         print(f"umbrella_replay: error: {exc}", file=sys.stderr)
         return 2
 

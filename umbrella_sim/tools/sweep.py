@@ -123,7 +123,7 @@ def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> st
 
 def load_spec(path: str) -> Sweep:
     """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
-    from .cli import check_lock_given, read_force_profile, resolve_params
+    from .inputs import check_lock_given, read_force_profile, resolve_params
     from ..core.forcing import command_force
     from ..core.params import check_types, UmbrellaParams
     from ..ros.params_file import load_yaml_as_ros
@@ -263,7 +263,7 @@ def run_case(task: dict) -> dict:
         params = UmbrellaParams.from_mapping(task["params"]).validated()
         profile = [tuple(row) for row in task["force_profile"]] if task["force_profile"] else None
         if task["mcap_dir"]:
-            from ..bag.recording import record_offline
+            from ..ros.recording import record_offline
 
             bag = os.path.join(task["mcap_dir"], task["case_id"])
             if os.path.exists(bag):     # left by an unfinished earlier attempt of this case
@@ -278,10 +278,10 @@ def run_case(task: dict) -> dict:
                 out["status"] = STATUS_ERROR
                 return _finished(out, t0)
         else:
-            from ..core.solver import simulate
+            from ..core.driver import simulate
 
             result = simulate(params, task["duration"], force_profile=profile,
-                              stop_after_lock=task["stop_after_lock"])
+                              stop_after_lock=task["stop_after_lock"], keep_samples=False)
         out["summary"] = result.summary()
         out["error"] = result.error
         out["status"] = STATUS_DIVERGED if result.error else STATUS_OK
@@ -308,16 +308,16 @@ def _mcap_duration(task: dict) -> float:
     """
     if task["stop_after_lock"] is None:
         return task["duration"]
+    from ..core.driver import simulate
     from ..core.params import UmbrellaParams
-    from ..core.solver import simulate
 
     params = UmbrellaParams.from_mapping(task["params"]).validated()
     profile = [tuple(row) for row in task["force_profile"]] if task["force_profile"] else None
     probe = simulate(params, task["duration"], force_profile=profile,
-                     stop_after_lock=task["stop_after_lock"])
-    if probe.error is not None or not probe.samples:
+                     stop_after_lock=task["stop_after_lock"], keep_samples=False)
+    if probe.error is not None:
         return task["duration"]
-    return min(task["duration"], probe.samples[-1].time)
+    return min(task["duration"], probe.figures["final_time"])
 
 
 # ------------------------------------------------------------------ the store

@@ -1,18 +1,12 @@
 """
-MCAP recording with the ROS 2 profile, laid out as rosbag2 writes it.
+Writing a recording: one rosbag2 bag directory, crash-safe, never overwriting.
 
-A recording is a bag directory ``NAME/`` holding ``NAME_0.mcap`` and ``metadata.yaml`` (bag
-metadata version 8).  The .mcap also stands alone: profile ``ros2``, one ``ros2msg`` schema
-per type (the full .msg text with its dependencies), ``cdr`` messages from
-rclpy.serialization trimmed to the exact CDR size, ``offered_qos_profiles`` on every
-channel, log/publish times in sim time (ns), zstd chunks with message indexes, a Statistics
-record, and at close a ``rosbag2`` metadata record (``serialized_metadata``) like rosbag2's
-MCAP plugin.
-
-Self-describing: metadata records ``umbrella_sim.parameters`` (every parameter, including the
-physics step actually used), ``umbrella_sim.build`` (version, git revision, kernel),
-``umbrella_sim.mesh`` and, at close, ``umbrella_sim.counts`` (messages published / commands
-received per topic).  They are written outside chunks at once, so they survive a crash.
+``BagRecorder`` writes ``NAME/NAME_0.mcap`` (profile ``ros2``, one ``ros2msg`` schema per type,
+``cdr`` messages, ``offered_qos_profiles`` on every channel, log/publish times in sim time
+(ns), zstd chunks with message indexes, a Statistics record and, at close, a ``rosbag2``
+metadata record like rosbag2's MCAP plugin) and ``metadata.yaml``.  Metadata records are
+written outside chunks at once, so they survive a crash; a write error stops only the
+recording, which ends as a readable file saying why.
 """
 from __future__ import annotations
 
@@ -21,273 +15,18 @@ import itertools
 import json
 import os
 import struct
-import subprocess
-import sys
 import threading
 
 from mcap.opcode import Opcode
 from mcap.records import MessageIndex
 from mcap.writer import CompressionType, IndexType, Writer
 from rclpy.qos import QoSProfile
-from rclpy.serialization import serialize_message
 import yaml
 
+from .cdr import cdr_bytes, message_definition, qos_yaml, type_name
+from .format import CHUNK_SIZE, ENDED_EARLY_RECORD, EVENTS_RECORD, SEGMENT_RECORD
 from .paths import check_new_output
-from .reader import SEGMENT_RECORD, TOPICS_RECORD
 from .. import __version__
-from ..ros.signals import deferred
-
-CHUNK_SIZE = 64 * 1024
-DELIMITER = "=" * 80
-_PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
-               "int32", "uint32", "int64", "uint64", "string", "wstring"}
-_INFINITE = {"sec": 9223372036, "nsec": 854775807}
-
-
-# ------------------------------------------------------------------ type metadata
-def type_name(msg_or_type) -> str:
-    """'sensor_msgs/msg/JointState' for a message class or instance."""
-    cls = msg_or_type if isinstance(msg_or_type, type) else type(msg_or_type)
-    pkg = cls.__module__.split(".")[0]
-    return f"{pkg}/msg/{cls.__name__}"
-
-
-def _share_dirs() -> list[str]:
-    dirs = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-    dirs.append(sys.prefix)
-    return [os.path.join(d, "share") for d in dirs]
-
-
-def _msg_text(full_name: str) -> str:
-    pkg, _, name = full_name.split("/")
-    for share in _share_dirs():
-        path = os.path.join(share, pkg, "msg", name + ".msg")
-        if os.path.isfile(path):
-            with open(path, encoding="utf-8") as fh:
-                return fh.read()
-    raise FileNotFoundError(f"message definition {full_name}.msg not found under "
-                            "AMENT_PREFIX_PATH or the interpreter's share/")
-
-
-def _dependencies(pkg: str, text: str) -> list[str]:
-    """Message types used by the fields of a .msg text (constants are always primitive)."""
-    deps = []
-    for line in text.splitlines():
-        line = line.split("#", 1)[0].strip()
-        if not line:
-            continue
-        base = line.split()[0].split("[", 1)[0].split("<=", 1)[0]
-        if base in _PRIMITIVES:
-            continue
-        p, n = (base.split("/")[0], base.split("/")[-1]) if "/" in base else (pkg, base)
-        deps.append(f"{p}/msg/{n}")
-    return deps
-
-
-def message_definition(full_name: str) -> str:
-    """
-    Return the ros2msg 'complete message definition'.
-
-    The type's .msg text, then every dependency
-    after a line of 80 '=' and 'MSG: pkg/msg/Type' (rosbag2 docs/message_definition_encoding).
-    """
-    order: list[str] = []
-    texts: dict[str, str] = {}
-
-    def visit(name: str) -> None:
-        if name in texts:
-            return
-        texts[name] = _msg_text(name)
-        order.append(name)
-        for dep in _dependencies(name.split("/")[0], texts[name]):
-            visit(dep)
-
-    visit(full_name)
-    parts = [texts[order[0]].rstrip("\n")]
-    for name in order[1:]:
-        parts.append(f"{DELIMITER}\nMSG: {name}\n{texts[name].rstrip(chr(10))}")
-    return "\n".join(parts) + "\n"
-
-
-def qos_yaml(qos: QoSProfile) -> str:
-    """offered_qos_profiles as rosbag2 writes it (enum values as integers)."""
-    profile = {
-        "history": int(qos.history), "depth": int(qos.depth),
-        "reliability": int(qos.reliability), "durability": int(qos.durability),
-        "deadline": dict(_INFINITE), "lifespan": dict(_INFINITE),
-        "liveliness": int(qos.liveliness), "liveliness_lease_duration": dict(_INFINITE),
-        "avoid_ros_namespace_conventions": False,
-    }
-    return yaml.safe_dump([profile], sort_keys=False).rstrip("\n")
-
-
-# --------------------------------------------------------------- exact CDR size
-_SIZES = {"boolean": 1, "octet": 1, "char": 1, "uint8": 1, "int8": 1, "int16": 2, "uint16": 2,
-          "int32": 4, "uint32": 4, "float": 4, "int64": 8, "uint64": 8, "double": 8,
-          "long double": 16, "wchar": 2}
-
-
-def _align(pos: int, n: int, pads: list | None = None) -> int:
-    """Return pos aligned to n, noting the gap in pads (CDR padding) if any."""
-    end = (pos + n - 1) // n * n
-    if pads is not None and end > pos:
-        pads.append((pos, end))
-    return end
-
-
-#: message class -> its fields' size functions (built once per type: the walk runs for every
-#: recorded message, so the type strings are parsed once, not per message)
-_PLANS: dict = {}
-
-
-def _cdr_end(msg, pos: int, pads: list | None = None) -> int:
-    """Return where msg's CDR ends from pos; pads: collects its alignment gaps (start, end)."""
-    plan = _PLANS.get(type(msg))
-    if plan is None:
-        plan = _PLANS[type(msg)] = [(field, _field_size(ftype)) for field, ftype
-                                    in msg.get_fields_and_field_types().items()]
-    for field, size in plan:
-        pos = size(getattr(msg, field), pos, pads)
-    return pos
-
-
-def _field_size(ftype: str):
-    """Return size(value, pos, pads) -> end position of one field of IDL type ftype."""
-    if ftype.startswith("sequence<"):
-        items = _items_size(ftype[len("sequence<"):-1].rsplit(",", 1)[0].strip())
-        return lambda value, pos, pads: items(value, _align(pos, 4, pads) + 4, pads)
-    if ftype.endswith("]"):
-        return _items_size(ftype[:ftype.index("[")])
-    items = _items_size(ftype)
-    return lambda value, pos, pads: items((value,), pos, pads)
-
-
-def _items_size(ftype: str):
-    """Return size(values, pos, pads) -> end position of consecutive items of IDL type ftype."""
-    if ftype.startswith("wstring"):
-        def size(values, pos, pads):
-            for v in values:
-                pos = _align(pos, 4, pads) + 4 + 4 * (len(v) + 1)
-            return pos
-        return size
-    if ftype.startswith("string"):
-        def size(values, pos, pads):
-            for v in values:
-                pos = _align(pos, 4, pads) + 4 + len(v.encode("utf-8")) + 1
-            return pos
-        return size
-    n = _SIZES.get(ftype)
-    if n is not None:
-        def size(values, pos, pads):
-            k = len(values)
-            return _align(pos, n, pads) + n * k if k else pos
-        return size
-
-    def size(values, pos, pads):                    # nested messages
-        for v in values:
-            pos = _cdr_end(v, pos, pads)
-        return pos
-    return size
-
-
-def cdr_bytes(msg, data: bytes | None = None) -> bytes:
-    """
-    Serialise to CDR, trimmed to the exact size, with zero padding.
-
-    rclpy may return a few padding bytes more, which rosbags rejects; ros2 bag record writes
-    the exact size.  The alignment gaps are set to 0: the serializer leaves whatever its
-    buffer held there, so the same message would serialize to different bytes from one
-    process to the next, and a recording would depend on the process that made it.  data:
-    msg already serialized, to serialize once.
-    """
-    if data is None:
-        data = serialize_message(msg)
-    pads: list = []
-    size = 4 + _cdr_end(msg, 0, pads)           # 4-byte encapsulation header
-    if size > len(data):
-        raise RuntimeError(f"CDR size walk overran the payload for {type_name(msg)}")
-    if not pads:
-        return data[:size]
-    out = bytearray(data[:size])
-    for start, end in pads:                     # positions after the 4-byte header
-        out[4 + start:4 + end] = bytes(end - start)
-    return bytes(out)
-
-
-# ------------------------------------------------------------------- provenance
-def git_revision() -> str:
-    here = os.path.dirname(os.path.abspath(__file__))
-    try:
-        out = subprocess.run(["git", "-C", here, "rev-parse", "HEAD"], capture_output=True,
-                             text=True, timeout=5)
-        if out.returncode == 0:
-            dirty = subprocess.run(["git", "-C", here, "status", "--porcelain", "--", "."],
-                                   capture_output=True, text=True, timeout=5).stdout.strip()
-            return out.stdout.strip() + ("+dirty" if dirty else "")
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return "unknown"
-
-
-def build_environment() -> dict[str, str]:
-    """
-    Return what sets a run's floating-point round-off besides the code.
-
-    numpy, its BLAS kernel (OpenBLAS picks one per CPU unless OPENBLAS_CORETYPE names it)
-    and the CPU.  The model's matrices go through BLAS; another kernel rounds them
-    differently in the last bit, so a re-simulation elsewhere agrees to round-off, not bit
-    for bit.
-    """
-    import platform
-
-    import numpy
-
-    cpu = platform.machine()
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
-            cpu = next((line.split(":", 1)[1].strip() for line in fh
-                        if line.startswith("model name")), cpu)
-    except OSError:
-        pass
-    return {"numpy": numpy.__version__,
-            "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE", "auto"), "cpu": cpu}
-
-
-def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: str,
-                 source: str) -> dict[str, dict[str, str]]:
-    """Metadata records that make a log reproducible from the file alone."""
-    all_params = dict(params.as_dict())
-    all_params.update(node_cfg)
-    all_params["physics_step"] = physics_step
-    return {
-        "umbrella_sim.parameters": {k: json.dumps(v) for k, v in all_params.items()},
-        "umbrella_sim.build": {"package_version": __version__, "git_revision": git_revision(),
-                               "kernel": backend, "source": source,
-                               "python": sys.version.split()[0], **build_environment()},
-        "umbrella_sim.mesh": {
-            "model": params.model, "lock": params.lock,
-            "elements_per_segment": str(params.elements_per_segment),
-            "coordinates": json.dumps(model.coordinate_labels()),
-            "leaf_node_x": json.dumps(list(model.leaf.node_x)),
-            "link_node_x": json.dumps(list(model.link.node_x)),
-        },
-    }
-
-
-def events_metadata(sim, fault: str | None = None) -> dict[str, dict[str, str]]:
-    """
-    Return the events record: the exact lock instant and the fault, if any.
-
-    The exact lock instant (the phase message comes at the next publication) and the
-    solver fault that ended the run, if any (at the last good state's time).
-    """
-    ev = sim.lock_event
-    out = {"locked": "false"} if ev is None else {
-        "locked": "true", "lock_time": repr(ev.time), "lock_kind": ev.kind,
-        "energy_before": repr(ev.energy_before), "energy_after": repr(ev.energy_after)}
-    if fault is not None:
-        out.update(fault=fault, fault_time=repr(sim.time))
-    return {"umbrella_sim.events": out}
 
 
 # ---------------------------------------------------------------------- recorder
@@ -480,11 +219,6 @@ class _RawRecords:
 
     def write(self, builder) -> None:
         builder.write(self.data)
-
-
-#: metadata record of a recording that stopped on a write error (see msg_docs/recording.md)
-ENDED_EARLY_RECORD = "umbrella_sim.recording_error"
-#: metadata records umbrella_sim.segment.K: a reset started segment K (msg_docs/recording.md)
 
 
 #: a Message record up to its data: opcode, record length, channel id, sequence, log time,
@@ -765,47 +499,23 @@ class BagRecorder:
             except OSError as exc:
                 self._fail(exc, f"writing channel {topic}", None)
 
-    def add_umbrella_channels(self, topic_names: dict, command_topic: str,
-                              qos: dict | None = None) -> None:
-        """
-        Add the channels of an umbrella_sim run, live or offline.
+    def add_metadata(self, name: str, values: dict[str, str]) -> None:
+        """Write a metadata record now (outside the chunks: it survives a crash); once a name."""
+        self._drain()
+        with self._lock:
+            if self._closed or name in self._written_records:
+                return
+            self._writer.add_metadata(name, values)
+            self._written_records.add(name)
+            try:
+                self._fh.commit()
+            except OSError as exc:
+                self._fail(exc, f"writing {name}", None)
 
-        Every published topic (topic key -> resolved name) with the QoS it is published with
-        (qos: topic key -> profile, the node's after qos_overrides; else ros_io.TOPICS's) and
-        the command with its refused/applied records.
-        """
-        from std_msgs.msg import Float64
-
-        from ..ros import messages as ros_io
-        resolved = {}       # the node's own topic name -> the name recorded (remapped)
-        for key, name in topic_names.items():
-            self.add_channel(name, ros_io.TOPICS[key].type,
-                             (qos or {}).get(key, ros_io.TOPICS[key].qos))
-            resolved[ros_io.TOPICS[key].name.lstrip("/")] = name
-        for suffix in ("", ros_io.COMMAND_REFUSED_SUFFIX, ros_io.COMMAND_APPLIED_SUFFIX):
-            self.add_channel(command_topic + suffix, Float64, ros_io.COMMAND.qos)
-            resolved[ros_io.COMMAND.name.lstrip("/") + suffix] = command_topic + suffix
-        with self._lock:    # so that the tools find each topic however it was remapped
-            if not self._closed and TOPICS_RECORD not in self._written_records:
-                self._writer.add_metadata(TOPICS_RECORD, resolved)
-                self._written_records.add(TOPICS_RECORD)
-
-    def close_run(self, sim, published: dict, accepted: int, refused: int,
-                  fault: str | None = None, extra: dict | None = None,
-                  summary: dict | None = None) -> None:
-        """
-        Finalise with the counts, the exact lock event and the fault, if any.
-
-        Finalise with the counts (published vs recorded), the exact lock event and the
-        fault, if any; extra: more counts (e.g. refused commands not recorded); summary:
-        the summary record (summary_metadata).
-        """
-        self._drain()       # the background writer's queue first: "recorded" counts all of it
-        self.close({"umbrella_sim.counts": {
-            "published": json.dumps(published), "commands_accepted": str(accepted),
-            "commands_refused": str(refused), "recorded": json.dumps(self.counts),
-            **(extra or {})},
-            **events_metadata(sim, fault), **(summary or {})})
+    def drained_counts(self) -> dict[str, int]:
+        """Return the messages recorded per topic, once every queued message is written."""
+        self._drain()
+        return dict(self.counts)
 
     def start_segment(self, parameters: dict[str, str], gap_ns: int,
                       ended_events: dict[str, str] | None = None) -> int:
@@ -825,7 +535,7 @@ class BagRecorder:
             if self._closed:
                 return self.segment
             if ended_events is not None:
-                self._writer.add_metadata(f"umbrella_sim.events.{self.segment}", ended_events)
+                self._writer.add_metadata(f"{EVENTS_RECORD}.{self.segment}", ended_events)
             self.segment += 1
             self.offset_ns = (self._last if self._last is not None else self.offset_ns) + gap_ns
             self._writer.add_metadata(f"{SEGMENT_RECORD}.{self.segment}", {
@@ -967,123 +677,3 @@ class BagRecorder:
                        "duration": {"nanoseconds": duration}, "message_count": total}],
             "custom_data": {}, "ros_distro": "jazzy",
         }
-
-
-# ------------------------------------------------------------------ offline runs
-#: metadata record of the run's summary figures from every physics step (recording.md)
-SUMMARY_RECORD = "umbrella_sim.summary"
-
-
-def summary_metadata(figures: dict) -> dict[str, dict[str, str]]:
-    """
-    Return the summary metadata record: figures of every physics step and the warnings.
-
-    From outputs.SummaryAccumulator.figures(), so that umbrella_compare reports the
-    physics, not the recorded samples.
-    """
-    return {SUMMARY_RECORD: {
-        "figures": json.dumps({k: v for k, v in figures.items() if k != "warnings"}),
-        "warnings": json.dumps(figures.get("warnings", [])),
-        "source": "every physics step"}}
-
-
-def record_offline(params, bag_dir: str, duration: float, force_profile=None,
-                   publish_rate: float = 100.0, marker_magnification: float = 1.0,
-                   progress=None):
-    """
-    Run the physics offline and record it as a live umbrella_node would.
-
-    Steps through solver.simulate (the one offline driver: same states as ``umbrella_sim
-    simulate`` without a recording) and publishes through the node's publication path,
-    recording the same topics, layout and metadata as a live umbrella_node (root
-    namespace).  Returns the RunResult with the samples at the publication instants
-    (error set if it diverged).
-    """
-    import time as _time
-
-    from diagnostic_msgs.msg import DiagnosticStatus
-    from std_msgs.msg import Float64
-
-    from ..core.forcing import command_force, ForceSchedule
-    from ..core.params import node_defaults
-    from ..core.solver import simulate
-    from ..ros import messages as ros_io
-    from ..ros.publication import PublicationDriver
-
-    node_cfg = node_defaults()
-    node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,
-                    record_path=bag_dir, marker_magnification=marker_magnification)
-    driver = PublicationDriver(params, publish_rate)
-    sim = driver.sim
-    profile = sorted(force_profile or [], key=lambda tf: tf[0])
-    # checked before the bag is created
-    schedule = ForceSchedule(sim.h, sim.sleeve_force, profile,
-                             check=lambda f: command_force(f, sim.params))
-    rec = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, sim.model,
-                                            driver.backend, source="umbrella_sim simulate"))
-    topics = {key: "/" + t.name.lstrip("/") for key, t in ros_io.TOPICS.items()}
-    command = "/" + ros_io.COMMAND.name
-    rec.add_umbrella_channels(topics, command)
-    published: dict[str, int] = {}
-    state = {"next_diag": 1.0, "i_cmd": 0}
-    wall0 = _time.perf_counter()
-
-    def publish(key, msg, t):
-        published[topics[key]] = published.get(topics[key], 0) + 1
-        if isinstance(msg, bytes):      # exact CDR from ros_io.SampleEncoder, as the node's
-            rec.write(topics[key], None, ros_io.stamp_ns(t), msg)
-        else:
-            rec.write(topics[key], msg, ros_io.stamp_ns(t))
-
-    def commands_until(t):
-        # each command at its own time, as the node records one at receipt
-        while state["i_cmd"] < len(profile) and profile[state["i_cmd"]][0] <= t + 1e-12:
-            t_cmd, f_cmd = profile[state["i_cmd"]]
-            rec.write(command, Float64(data=float(f_cmd)), ros_io.stamp_ns(t_cmd))
-            state["i_cmd"] += 1
-
-    def publication():
-        t = sim.time
-        for key, msg in driver.messages("umbrella", marker_magnification).items():
-            publish(key, msg, t)
-        if t >= state["next_diag"] - 1e-12:
-            wall = _time.perf_counter() - wall0
-            publish("diagnostics", ros_io.diagnostics_msg(
-                t, "umbrella_sim offline: physics", DiagnosticStatus.OK, "offline",
-                {"sim_time_s": f"{t:.6f}", "measured_real_time_factor":
-                 f"{t / wall:.4f}" if wall > 0 else "inf", "steps": sim.steps,
-                 "physics_step_s": sim.h}), t)
-            state["next_diag"] += 1.0
-
-    def on_output(block, applied):
-        with deferred():    # a stop signal lands between periods, never inside a write
-            record_period(block, applied)
-
-    def record_period(block, applied):
-        commands_until(sim.time)
-        for ev in driver.take(block, applied):
-            if ev.kind == "applied":    # at the step it acts from, as the node records it
-                rec.write(command + ros_io.COMMAND_APPLIED_SUFFIX, Float64(data=ev.force),
-                          ros_io.stamp_ns(ev.time))
-            else:
-                publish("deployment_phase", ros_io.phase_msg("locked"), sim.time)
-        if block.error is not None:
-            publish("deployment_phase", ros_io.phase_msg("fault"), sim.time)
-        elif sim.step_index % driver.publish_every == 0:
-            publication()
-
-    result = None
-    try:
-        publish("deployment_phase", ros_io.phase_msg("deploying"), 0.0)
-        commands_until(0.0)
-        publication()
-        result = simulate(params, duration, schedule, progress=progress, simulator=sim,
-                          output_every=driver.publish_every, on_output=on_output,
-                          summary=driver.summary)
-    finally:    # interrupted: the summary of every step computed, as the node's at a stop
-        rec.close_run(sim, published, accepted=state["i_cmd"], refused=0,
-                      fault=result.error if result is not None else None,
-                      summary=summary_metadata(driver.summary.figures()))
-    result.recording_error = rec.error
-    result.wall_time = _time.perf_counter() - wall0
-    return result

@@ -1,0 +1,211 @@
+"""
+What an offline run is given: its parameters (params file, options, --set) and force profile.
+
+``umbrella_sim simulate`` and ``umbrella_sim sweep`` take the same ROS 2 params files as the
+nodes (a ``/**`` file shared with umbrella_node and deploy_controller included), resolve them
+with the same types and rules, and read a force profile as a CSV of (t, F) rows.  Every
+refusal names the file, the line or the option, and why.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import math
+
+from ..bag.paths import read_text_input
+from ..core.forcing import command_force
+from ..core.params import (check_known_names, check_types, check_values, CONTROLLER_PARAMETERS,
+                           NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS, UmbrellaParams)
+from ..ros.params_file import load_params_file
+from ..ros.share import package_path
+
+
+def default_params_file() -> str | None:
+    """Return the package's config/umbrella.yaml (the source checkout's, or installed)."""
+    return package_path("config", "umbrella.yaml")
+
+
+def _number(text: str) -> float:
+    """Return a CSV field as a number: Python's float forms but for digit separators (1_0)."""
+    if "_" in text:
+        raise ValueError(text)
+    return float(text)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        _number(text)
+    except ValueError:
+        return False
+    return True
+
+
+def read_force_profile(path: str, params: UmbrellaParams | None = None
+                       ) -> list[tuple[float, float]]:
+    """
+    Read a CSV of (t, F) rows, an optional header line.
+
+    Blank lines and lines starting with # are skipped; the first other line may be a header
+    (neither of its two fields a number; one naming force then time, F,t, is refused).
+    Times are non-decreasing; each F is a command the
+    model (params) accepts.
+    """
+    rows: list[tuple[float, float]] = []
+    text = read_text_input(path, "force profile").removeprefix("\ufeff")   # (Excel's BOM)
+    try:
+        parsed = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
+        raise ValueError(f"force profile {path}: not CSV ({exc})") from None
+    first = True
+    for lineno, row in enumerate(parsed, start=1):
+        if not row or row[0].strip().startswith("#"):
+            continue
+        if len(row) < 2 or any(field.strip() for field in row[2:]):
+            raise ValueError(f"force profile {path}:{lineno}: expected two columns t,F, "
+                             f"got {row}")
+        header, first = first and not any(map(_is_number, row[:2])), False
+        if header:
+            names = [field.strip().lower() for field in row[:2]]
+            if names[0].startswith("f") and names[1].startswith("t"):   # (any other names)
+                raise ValueError(f"force profile {path}:{lineno}: header {row[:2]}: the "
+                                 "columns are time then force (t,F), not force then time")
+            continue
+        try:
+            t, f = _number(row[0]), _number(row[1])
+        except ValueError:
+            raise ValueError(f"force profile {path}:{lineno}: not numbers: {row[:2]}") from None
+        if not math.isfinite(t) or t < 0.0:
+            raise ValueError(f"force profile {path}:{lineno}: time {t} must be finite and >= 0")
+        if rows and t < rows[-1][0]:
+            raise ValueError(f"force profile {path}:{lineno}: time {t} goes backwards")
+        if rows and t == rows[-1][0]:     # which one acts? one force per instant
+            raise ValueError(f"force profile {path}:{lineno}: time {t} given twice (the row "
+                             "before has it too): one force per instant")
+        try:
+            command_force(f, params or UmbrellaParams())
+        except ValueError as exc:
+            raise ValueError(f"force profile {path}:{lineno}: {exc}") from None
+        rows.append((t, f))
+    if not rows:
+        raise ValueError(f"force profile {path}: no (t, F) rows")
+    return rows
+
+
+#: node parameters that ``--set`` may give offline: they shape the --mcap recording
+RECORDING_PARAMS = ("publish_rate", "marker_magnification")
+
+
+#: models whose lock is always plastic (a rigid mechanism stopped at a point)
+RIGID_MODELS = ("rigid", "rigid-fe")
+
+
+def resolve_params(overrides: dict, params_file: str | None = None,
+                   from_file: dict | None = None) -> UmbrellaParams:
+    """
+    Return an offline run's parameters, validated (a ValueError names the parameter).
+
+    The params file (default config/umbrella.yaml, its node-only keys skipped), then the
+    overrides; from_file: that file's parameters, if the caller has read them.
+    """
+    values: dict = {}
+    params_file = params_file or default_params_file()
+    if params_file:
+        if from_file is None:
+            from_file = load_params_file(params_file)
+        check_known_names(from_file, set(SPECS) | set(NODE_ONLY_PARAMS) | set(SHARED_NAMES),
+                          f"params file {params_file}")
+        try:        # its own values first: an error names the file
+            check_values({k: v for k, v in from_file.items()
+                          if k in SPECS and k not in overrides})
+        except ValueError as exc:
+            raise ValueError(f"params file {params_file}: {exc}") from None
+        values.update(from_file)
+    for name in (*NODE_ONLY_PARAMS, *SHARED_NAMES):   # a file shared with the nodes: theirs
+        values.pop(name, None)
+    values.update(overrides)
+    return UmbrellaParams.from_mapping(values).validated()
+
+
+#: deploy_controller's parameters, which a '/**' params file shared with it may hold
+SHARED_NAMES = tuple(CONTROLLER_PARAMETERS)
+
+
+#: simulate's options that give a parameter: (argparse dest, parameter)
+CLI_FLAGS = (("model", "model"), ("elements_per_segment", "elements_per_segment"),
+             ("v0", "v0"), ("force", "sleeve_force"), ("lock", "lock"),
+             ("time_step", "time_step"), ("publish_rate", "publish_rate"))
+
+
+def _given_once(given: dict, name: str, how: str) -> None:
+    """Record that the command line gives parameter name (how); refuse a second time."""
+    if name in given:
+        raise ValueError(f"{how}: {name} is already given by {given[name]} (give each "
+                         "parameter once)")
+    given[name] = how
+
+
+def build_params(args) -> UmbrellaParams:
+    values: dict = {}
+    given: dict = {}            # parameter -> the option that gave it, to refuse a second
+    lock_given = None
+    flags = {name: getattr(args, flag) for flag, name in CLI_FLAGS
+             if getattr(args, flag) is not None}
+    for flag, name in CLI_FLAGS:
+        if name in flags:
+            _given_once(given, name, f"--{flag.replace('_', '-')} {flags[name]}")
+    for item in args.set or []:
+        if "=" not in item:
+            raise ValueError(f"--set {item!r}: expected name=value")
+        name, value = (x.strip() for x in item.split("=", 1))
+        _given_once(given, name, f"--set {name}={value}")
+        if name in RECORDING_PARAMS:
+            if not args.mcap:
+                raise ValueError(f"--set {name}={value}: a parameter of umbrella_node's "
+                                 "publication; offline it only shapes a --mcap recording "
+                                 "(the summary comes from every physics step whatever the "
+                                 "rate): add --mcap BAG_DIR")
+            setattr(args, name, NODE_PARAMETERS[name].coerce(value))
+            NODE_PARAMETERS[name].check(getattr(args, name))
+            continue
+        if name in NODE_PARAMETERS:
+            raise ValueError(f"--set {name}: a parameter of the live umbrella_node only, with "
+                             "no meaning offline (see --duration, --mcap, --publish-rate)")
+        check_known_names([name], SPECS, "--set")
+        values[name] = value
+        if name == "lock":
+            lock_given = f"--set lock={value}"
+    values.update({name: value for name, value in flags.items() if name in SPECS})
+    if args.lock is not None:
+        lock_given = f"--lock {args.lock}"
+    params_file = args.params or default_params_file()
+    from_file = load_params_file(params_file) if params_file else {}
+    params = resolve_params(values, params_file, from_file)
+    check_lock_given(params, lock_given)
+    # what shapes a --mcap recording: --publish-rate / --set, else the params file's (a file
+    # shared with the node), else the node's default
+    for name in RECORDING_PARAMS:
+        spec = NODE_PARAMETERS[name]
+        if getattr(args, name) is None and name in from_file:
+            try:
+                check_types({name: from_file[name]})    # typed as the node reads the file
+                setattr(args, name, spec.coerce(from_file[name]))
+                spec.check(getattr(args, name))
+            except ValueError as exc:
+                raise ValueError(f"params file {params_file}: {exc}") from None
+        elif getattr(args, name) is None:
+            setattr(args, name, spec.default)
+    return params
+
+
+def check_lock_given(params: UmbrellaParams, given: str | None) -> None:
+    """
+    Refuse a lock asked for explicitly (given: how) that the model cannot take.
+
+    A rigid model always stops plastically; a lock from a params file shared with flexible
+    runs only gets the validity warning (outputs.lock_warning).
+    """
+    if given and params.model in RIGID_MODELS and params.lock != "plastic":
+        raise ValueError(f"{given}: does not apply to model {params.model}, whose lock "
+                         "is always plastic (a rigid mechanism stopped at a point keeps no "
+                         "kinetic energy to redistribute); use lock plastic or a flexible "
+                         "model")
