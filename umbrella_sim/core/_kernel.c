@@ -32,47 +32,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "_kernel.h"          /* the interface: structs, codes, fields, API */
 #include "_kernel_elastic.h"   /* the nonlinear / damped elastic law (_kernel_nonlinear.c) */
-
-typedef struct {
-    int n;                 /* coordinates */
-    int n_link;            /* link elastic coordinates */
-    int i_r2x, i_r2y, i_alpha2, s_link;
-    int i_u_joint, i_u_sleeve, i_tip_u, i_tip_v;
-    int n_elastic;         /* leaf + link elastic coordinates, in q order */
-    int bw;                /* half bandwidth of the elastic block, elastic ordering */
-    int n_stress_leaf, n_stress_link, stress_width;
-    double l1, l3, y_stop;
-    double j0_leaf, j0_link, pbar0, link_mass;
-    const double *c_full, *g_full;                       /* n */
-    const int *body;       /* n: -1 not elastic, 0 leaf, 1 link */
-    const int *elastic_idx;                              /* n_elastic: q index of elastic p */
-    const double *sbar, *isbar;                          /* 2 x n_link each */
-    const double *mff_band, *k_band, *w_band;            /* n_elastic x (2 bw + 1) */
-    const int *stress_idx;                               /* points x width: q indices */
-    const double *stress_top, *stress_bottom;            /* points x width */
-    const double *stress_x;                              /* points */
-    /* the reference stresses (model.reference_stresses): the leaf's stress point at O'';
-     * the link element holding l3/2 and where in it (0..1) */
-    int ref_leaf_point, ref_link_element;
-    double ref_link_frac;
-} Model;
-
-enum { OK = 0, NO_CONVERGENCE = 1, NON_FINITE = 2, SINGULAR = 3, NOT_PD = 4, NO_MEMORY = 5,
-       CROSSING = 6, DIVERGED = 7, AXLE = 8 };
-
-/* fields of a per-step output row, in this order (outputs.STEP_FIELDS) */
-enum { F_TIME, F_STAGE, F_ALPHA1, F_ALPHA1_RATE, F_SLEEVE_POS, F_SLEEVE_VEL, F_FORCE,
-       F_TIP_AXIAL, F_TIP_TRANSVERSE, F_PEAK_LEAF, F_PEAK_LEAF_X, F_PEAK_LINK, F_PEAK_LINK_X,
-       F_KINETIC, F_STRAIN, F_WORK, F_LOCK_LOSS, F_PC_ENERGY, N_FIELDS };
-
-/* what a Sample holds of a state beyond q, qd, q'' and the multipliers, in this order
- * (integrators.SAMPLE_VECTOR), then the fibre stress at every stress point (top of every
- * point, then bottom; leaf points first) */
-enum { S_ALPHA1, S_ALPHA2, S_ALPHA1_RATE, S_ALPHA2_RATE, S_SLEEVE_POS, S_SLEEVE_VEL,
-       S_TIP_AXIAL, S_TIP_TRANSVERSE, S_PEAK_LEAF, S_PEAK_LEAF_X, S_PEAK_LINK, S_PEAK_LINK_X,
-       S_STRESS_LEAF_JOINT, S_STRESS_LINK_MID, S_REACTION_X, S_REACTION_Y, S_KINETIC, S_STRAIN,
-       S_RESIDUAL, S_PC_ENERGY, N_SAMPLE };
 
 #define JW 3   /* nonzeros of a joint/stop constraint row */
 
@@ -117,7 +78,7 @@ typedef struct {
 
 #define TRIG_CACHE 4
 
-typedef struct {
+struct Ctx {
     const Model *m;
     int ne, nbmax, width;
     /* state-dependent pieces of M(q) */
@@ -175,10 +136,10 @@ typedef struct {
     double trig_a[TRIG_CACHE], trig_c[TRIG_CACHE], trig_s[TRIG_CACHE];
     int trig_n, trig_next;
     /* fibre stress (top of every stress point, then bottom) and its rate at the start of the
-     * step umbrella_advance takes next (pk_sig, pk_rate) and at its end (pk_sig1, pk_rate1):
+     * step advance() takes next (pk_sig, pk_rate) and at its end (pk_sig1, pk_rate1):
      * the step's peak is that of their cubic Hermite interpolant (output_row) */
     double *pk_sig, *pk_rate, *pk_sig1, *pk_rate1;
-} Ctx;
+};
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
 
@@ -1294,7 +1255,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
      * and the matrix is factored anew at the first iterate, which is close.  A factorisation
      * costs about a Newton iteration: this takes 0.4 iterations more a step than factoring
      * every step, and 12 % less time (N = 2 and 4, V0 = -0.2 and -1).  A rule of the
-     * trajectory alone, so umbrella_step and umbrella_advance give the same bits (a step is
+     * trajectory alone, so umbrella_step and umbrella_advance_call give the same bits (a step is
      * handed on only once taken: carry_commit). */
     ArrowLU *kept = x->it_kept ? &x->slot[x->it_slot] : NULL;
     int lagged = carry && nonlinear_law && kept && kept->nc == nc
@@ -1304,7 +1265,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     int lag_whole = lagged && kept->age < ELASTIC_CARRY_STEPS;
     x->carry_slot = -1;
     /* this step's factorisations go to the other slot: the kept one stays intact if the
-     * step is not taken (umbrella_advance restores it_kept, it_slot) */
+     * step is not taken (advance() restores it_kept, it_slot) */
     ArrowLU *fresh = kept ? &x->slot[1 - x->it_slot] : &x->slot[0];
     x->it = lagged ? kept : fresh;
     x->it_kept = 0;
@@ -1751,17 +1712,7 @@ static void sample_vector(const Model *m, int locked, const double *q, const dou
     memcpy(out + N_SAMPLE, sig, sizeof(double) * 2 * npts);
 }
 
-/* Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from the state (q, v, lam, p) at t_k0,
- * updated in place after every committed step, with one output row per step (out: N_FIELDS
- * x cap, field-major) and accel = (v1 - v0) / h of the last one.  acc = {work, lock_loss}
- * in/out.  Stops early:
- *   CROSSING  in stage 1 the sleeve reached the stop during the next step (not committed:
- *             the caller finds the crossing time and applies the lock);
- *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, *residual: its
- *             value; otherwise that of the last state checked);
- *   others    the step failed (not committed).
- * *n_done = committed steps. */
-/* Whether umbrella_advance takes the step just made (x->q_s, v_s): OK, or why not (the
+/* Whether advance() takes the step just made (x->q_s, v_s): OK, or why not (the
  * state became non-finite, the constraint residual diverged, the sleeve reached the stop:
  * CROSSING, the caller's lock step).  *residual: the new state's constraint residual. */
 static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
@@ -1779,11 +1730,21 @@ static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
     return OK;
 }
 
-int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double *lam,
-                     double *p, long k0, double h, int n_steps, double force, double tol,
-                     double phi_tol, int max_iter, double div_tol, double *acc, double *out,
-                     int cap, int *n_done, int *iterations, double *residual, double *accel,
-                     double *final) {
+/* Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from the state (q, v, lam, p) at t_k0,
+ * updated in place after every committed step, with one output row per step (out: N_FIELDS
+ * x cap, field-major) and accel = (v1 - v0) / h of the last one.  acc = {work, lock_loss,
+ * damping dissipation} in/out.  Stops early:
+ *   CROSSING  in stage 1 the sleeve reached the stop during the next step (not committed:
+ *             the caller finds the crossing time and applies the lock);
+ *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, *residual: its
+ *             value; otherwise that of the last state checked);
+ *   others    the step failed (not committed).
+ * *n_done = committed steps. */
+static int advance(Ctx *x, int locked, int rigid, double *q, double *v, double *lam,
+                   double *p, long k0, double h, int n_steps, double force, double tol,
+                   double phi_tol, int max_iter, double div_tol, double *acc, double *out,
+                   int cap, int *n_done, int *iterations, double *residual, double *accel,
+                   double *final) {
     const Model *m = x->m;
     int n = m->n, nc = nc_of(m, locked, rigid);
     int status = OK, its_total = 0;
@@ -1823,44 +1784,18 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         *n_done = k + 1;
     }
     *iterations = its_total;
-    if (final && *n_done > 0)   /* umbrella_sample of the state reached, from its last step's
+    if (final && *n_done > 0)   /* sample() of the state reached, from its last step's
                                   * row, residual and fibre stresses (left in pk_sig) */
         sample_vector(m, locked, q, v, lam, out + *n_done - 1, (size_t)cap, x->pk_sig,
                       final_residual, final);
     return status;
 }
 
-/* umbrella_advance's arguments in one struct the caller keeps and updates (integrators.py
- * _AdvanceCall, same order): from Python, converting 22 ctypes arguments cost as much as
- * half a physics step, setting the few that change costs a tenth of that */
-typedef struct {
-    int locked, rigid;
-    long k0;
-    double h;
-    int n_steps;
-    double force, tol, phi_tol;
-    int max_iter;
-    double div_tol;
-    double *q, *v, *lam, *p, *acc, *out;
-    int cap;
-    int n_done, iterations;
-    double residual;
-    double *accel;
-    double *final;   /* NULL, or N_SAMPLE + 2 points: umbrella_sample of the state reached */
-} AdvanceCall;
-
+/* (AdvanceCall, _kernel.h) */
 int umbrella_advance_call(Ctx *x, AdvanceCall *a) {
-    return umbrella_advance(x, a->locked, a->rigid, a->q, a->v, a->lam, a->p, a->k0, a->h,
-                            a->n_steps, a->force, a->tol, a->phi_tol, a->max_iter, a->div_tol,
-                            a->acc, a->out, a->cap, &a->n_done, &a->iterations, &a->residual,
-                            a->accel, a->final);
-}
-
-/* one output row for an arbitrary state (after the lock step, tests) */
-void umbrella_outputs(Ctx *x, const double *q, const double *v, const double *p, double t,
-                      int stage, double force, double work, double lock_loss, double *out,
-                      int cap, int k) {
-    output_row(x, q, v, p, NULL, t, stage, force, work, lock_loss, 0.0, out, cap, k);
+    return advance(x, a->locked, a->rigid, a->q, a->v, a->lam, a->p, a->k0, a->h, a->n_steps,
+                   a->force, a->tol, a->phi_tol, a->max_iter, a->div_tol, a->acc, a->out,
+                   a->cap, &a->n_done, &a->iterations, &a->residual, a->accel, a->final);
 }
 
 /* Lock instant inside a step (solver.UmbrellaSimulator._find_lock, the same Illinois
@@ -1870,7 +1805,7 @@ void umbrella_outputs(Ctx *x, const double *q, const double *v, const double *p,
  * max(|Phi|, |J v|) <= div_tol).  On OK: the best trial (least |y_H - y_stop|) in q, v, lam,
  * p (nc rows of lam) and its step length in *dt_out.  On DIVERGED or a step failure: *dt_out
  * is the failing trial's step length and *residual its residual (DIVERGED).  The caller
- * knows that a step of length h crosses (umbrella_advance returned CROSSING). */
+ * knows that a step of length h crosses (advance() returned CROSSING). */
 int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0,
                            const double *lam0, const double *p0, double h, double force,
                            double tol, double phi_tol, int max_iter, double div_tol,
@@ -1930,8 +1865,8 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
 
 /* The Sample vector (sample_vector: S_* then the fibre stresses) of an arbitrary state
  * (q, v, p = M(q) v, lam) into out[N_SAMPLE + 2 points] */
-void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const double *v,
-                     const double *p, const double *lam, double *out) {
+static void sample(Ctx *x, int locked, int rigid, const double *q, const double *v,
+                   const double *p, const double *lam, double *out) {
     const Model *m = x->m;
     int nc = nc_of(m, locked, rigid);
     double row[N_FIELDS];
@@ -1941,13 +1876,17 @@ void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const doubl
     sample_vector(m, locked, q, v, lam, row, 1, x->pk_sig1, r, out);   /* output_row's */
 }
 
-/* umbrella_sample's arguments in one struct (integrators.py _SampleCall), as AdvanceCall */
-typedef struct {
-    int locked, rigid;
-    const double *q, *v, *p, *lam;
-    double *out;
-} SampleCall;
-
+/* (SampleCall, _kernel.h) */
 void umbrella_sample_call(Ctx *x, SampleCall *a) {
-    umbrella_sample(x, a->locked, a->rigid, a->q, a->v, a->p, a->lam, a->out);
+    sample(x, a->locked, a->rigid, a->q, a->v, a->p, a->lam, a->out);
+}
+
+/* ------------------------------------------------------------------ interface */
+#define UMBRELLA_SIZEOF(name, py) (int)sizeof(name),
+#define UMBRELLA_COUNT(name, py) name,
+
+int umbrella_abi(int *figures, int n) {
+    const int all[] = {UMBRELLA_ABI_STRUCTS(UMBRELLA_SIZEOF) UMBRELLA_ABI_COUNTS(UMBRELLA_COUNT)};
+    for (int k = 0; k < n && k < (int)(sizeof(all) / sizeof(all[0])); k++) figures[k] = all[k];
+    return UMBRELLA_ABI_VERSION;
 }
