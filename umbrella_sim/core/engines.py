@@ -15,8 +15,9 @@ import re
 
 import numpy as np
 
-from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ALPHA1_AXLE,
-                          AXLE_REASON, DynamicState, MidpointDAE, newton_tolerance)
+from .integrators import MidpointDAE, newton_tolerance
+from .kernel import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ALPHA1_AXLE, AXLE_REASON,
+                     DynamicState)
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import LockEvent, STEP_FIELDS, step_peaks
 from .params import UmbrellaParams
@@ -110,7 +111,7 @@ class Engine(abc.ABC):
         Return the Sample vector of s from compiled code, or None (no fast path).
 
         A read-only array of s's own (for a state an advance made, it shares that state's
-        copy): integrators.SAMPLE_VECTOR (figures and residual max(|Phi|, |J q'|)), then the
+        copy): kernel.SAMPLE_VECTOR (figures and residual max(|Phi|, |J q'|)), then the
         top and bottom fibre stress at every stress point, leaf points first.  What
         ``_sample`` otherwise computes with numpy, in one call.
         """

@@ -7,6 +7,8 @@ from typing import Callable
 
 import numpy as np
 
+from .kernel import STEP_FIELDS
+
 
 def build_frozen(cls, values: dict):
     """
@@ -98,14 +100,11 @@ def sample_row(s: Sample) -> list:
     return row
 
 
-#: per-physics-step outputs of ``UmbrellaSimulator.advance``, in the order the compiled kernel
-#: writes them (_kernel.c, enum F_*); stage is the int code of model.Stage.  The state's
-#: figures at the step's end, except the peak stresses (and where): the largest over the
-#: whole step (``step_peaks``), so that a crest between two steps is not lost
-STEP_FIELDS = ("time", "stage", "alpha1", "alpha1_rate", "sleeve_position", "sleeve_velocity",
-               "sleeve_force", "tip_axial", "tip_transverse", "peak_stress_leaf",
-               "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x", "kinetic_energy",
-               "strain_energy", "work", "lock_energy_loss", "phase_correction_energy")
+# STEP_FIELDS (kernel.py, from _kernel.h's UMBRELLA_STEP_FIELDS): the per-physics-step outputs
+# of ``UmbrellaSimulator.advance``, in the order the compiled loop writes them; stage is the
+# int code of model.Stage.  The state's figures at the step's end, except the peak stresses
+# (and where): the largest over the whole step (``step_peaks``), so that a crest between two
+# steps is not lost.
 
 
 def step_row(s: Sample, peaks: tuple | None = None) -> list[float]:

@@ -21,7 +21,7 @@ from . import nonlinear
 from .engines import (DIVERGENCE_RESIDUAL, EVENT_TIME_TOLERANCE, fault_message,
                       FiniteElementEngine, RigidEngine, SimulationDiverged)
 from .forcing import command_force, ForceSchedule
-from .integrators import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicState, SAMPLE_VECTOR
+from .kernel import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicState, SAMPLE_VECTOR
 from .model import DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import build_frozen, LockEvent, Sample, STEP_FIELDS, step_peaks, step_row, StepBlock
 from .params import SPECS, UmbrellaParams
