@@ -1575,14 +1575,20 @@ static void state_peaks(const Model *m, const double *sig, double *peaks) {
     }
 }
 
-/* The outputs of the state (q, v, p = M v) into column k of out; kq_known: K q at q (Kb q
- * with a law) if the caller has it, else NULL.  The peak stress: with h_step > 0, the largest
- * over the step of length h_step that ended at this state, whose start left its fibre stress
- * and rate in pk_sig, pk_rate (this state's then replace them); with h_step = 0, the state's
- * own, its fibre stresses left in pk_sig1 (top of every point, then bottom). */
+/* The output row of the state (q, v, p = M v, lam) into column k of out; kq_known: K q at q
+ * (Kb q with a law) if the caller has it, else NULL; acc = {work, lock loss, damping
+ * dissipation}; accel: alpha1'' = (v1 - v0) / h of the step that ended here (0 for a state
+ * alone); residual: the state's max(|Phi|, |J v|).  The peak stress: with h_step > 0, the
+ * largest over the step of length h_step that ended at this state, whose start left its fibre
+ * stress and rate in pk_sig, pk_rate (this state's then replace them); with h_step = 0, the
+ * state's own, its fibre stresses left in pk_sig1 (top of every point, then bottom).  The
+ * reference stresses (model.reference_stresses): the leaf's top fibre at O'', the link's
+ * interpolated at l3/2; the sleeve's reaction (solver's sleeve_reaction): axle lam[2], stop
+ * lam[3] once locked. */
 static void output_row(Ctx *x, const double *q, const double *v, const double *p,
-                       const double *kq_known, double t, int stage, double force, double work,
-                       double lock_loss, double h_step, double *out, int cap, int k) {
+                       const double *lam, const double *kq_known, double t, int stage,
+                       double force, const double *acc, double accel, double residual,
+                       double h_step, double *out, int cap, int k) {
     const Model *m = x->m;
     int n = m->n, ia = m->i_alpha2;
     double *o = out + k, c2, s2;
@@ -1598,6 +1604,13 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
     SET(F_FORCE, force);
     SET(F_TIP_AXIAL, q[m->i_tip_u]);
     SET(F_TIP_TRANSVERSE, q[m->i_tip_v]);
+    SET(F_ALPHA2, q[ia]);
+    SET(F_ALPHA2_RATE, v[ia]);
+    SET(F_ALPHA1_ACCEL, accel);
+    SET(F_REACTION_X, lam[2]);
+    SET(F_REACTION_Y, stage == 1 ? lam[3] : 0.0);
+    SET(F_RESIDUAL, residual);
+    SET(F_DISSIPATION, acc[2]);
     int first = 0, npts = m->n_stress_leaf + m->n_stress_link;
     double *sig = x->pk_sig1, *rate = x->pk_rate1;
     const double *sig0 = x->pk_sig, *rate0 = x->pk_rate;
@@ -1612,6 +1625,11 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         SET(F_PEAK_LINK, peaks[2]);
         SET(F_PEAK_LINK_X, peaks[3]);
     }
+    const double *link_top = sig + m->n_stress_leaf;    /* (this state's fibre stresses) */
+    int j = m->ref_link_element;
+    SET(F_STRESS_LEAF_JOINT, sig[m->ref_leaf_point]);
+    SET(F_STRESS_LINK_MID, (1.0 - m->ref_link_frac) * link_top[2 * j]
+                           + m->ref_link_frac * link_top[2 * j + 1]);
     for (int body = 0; h_step > 0.0 && body < 2; body++) {   /* the step's peak */
         int np = body == 0 ? m->n_stress_leaf : m->n_stress_link;
         double best = -1.0, floor = -1.0;
@@ -1673,42 +1691,37 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         se *= 0.5;
     }
     SET(F_STRAIN, se);
-    SET(F_WORK, work);
-    SET(F_LOCK_LOSS, lock_loss);
+    SET(F_WORK, acc[0]);
+    SET(F_LOCK_LOSS, acc[1]);
     SET(F_PC_ENERGY, pc_acts(x, stage == 1, 0) ? pc_e - x->pc_e_lock : 0.0);
 #undef SET
 }
 
-/* The Sample vector (S_*, then the fibre stresses) of a state (q, v, lam) from its output
- * row (row[f * stride], an output_row of the state), its fibre stresses sig (pk_sig1's
- * layout) and its residual max(|Phi|, |J v|): the state's own peaks (state_peaks), the
- * reference stresses (model.reference_stresses: the leaf's top fibre at O'', the link's
- * interpolated at l3/2) and the sleeve's reaction (solver's sleeve_reaction: axle lam[2],
- * stop lam[3] once locked) */
-static void sample_vector(const Model *m, int locked, const double *q, const double *v,
-                          const double *lam, const double *row, size_t stride,
-                          const double *sig, double residual, double *out) {
-    int npts = m->n_stress_leaf + m->n_stress_link, ia = m->i_alpha2;
-    out[S_ALPHA1] = q[0];
-    out[S_ALPHA2] = q[ia];
-    out[S_ALPHA1_RATE] = v[0];
-    out[S_ALPHA2_RATE] = v[ia];
-    out[S_SLEEVE_POS] = row[F_SLEEVE_POS * stride];
-    out[S_SLEEVE_VEL] = row[F_SLEEVE_VEL * stride];
-    out[S_TIP_AXIAL] = row[F_TIP_AXIAL * stride];
-    out[S_TIP_TRANSVERSE] = row[F_TIP_TRANSVERSE * stride];
+/* The Sample vector (S_*, then the fibre stresses) of a state from its output row
+ * (row[f * stride], an output_row of the state) and its fibre stresses sig (pk_sig1's
+ * layout): the row's figures, but the state's own peaks (state_peaks) */
+static void sample_vector(const Model *m, const double *row, size_t stride, const double *sig,
+                          double *out) {
+    int npts = m->n_stress_leaf + m->n_stress_link;
+#define ROW(f) row[(size_t)(f) * stride]
+    out[S_ALPHA1] = ROW(F_ALPHA1);
+    out[S_ALPHA2] = ROW(F_ALPHA2);
+    out[S_ALPHA1_RATE] = ROW(F_ALPHA1_RATE);
+    out[S_ALPHA2_RATE] = ROW(F_ALPHA2_RATE);
+    out[S_SLEEVE_POS] = ROW(F_SLEEVE_POS);
+    out[S_SLEEVE_VEL] = ROW(F_SLEEVE_VEL);
+    out[S_TIP_AXIAL] = ROW(F_TIP_AXIAL);
+    out[S_TIP_TRANSVERSE] = ROW(F_TIP_TRANSVERSE);
     state_peaks(m, sig, out + S_PEAK_LEAF);    /* leaf, its x, link, its x */
-    const double *link_top = sig + m->n_stress_leaf;
-    int j = m->ref_link_element;
-    out[S_STRESS_LEAF_JOINT] = sig[m->ref_leaf_point];
-    out[S_STRESS_LINK_MID] = (1.0 - m->ref_link_frac) * link_top[2 * j]
-                             + m->ref_link_frac * link_top[2 * j + 1];
-    out[S_REACTION_X] = lam[2];
-    out[S_REACTION_Y] = locked ? lam[3] : 0.0;
-    out[S_KINETIC] = row[F_KINETIC * stride];
-    out[S_STRAIN] = row[F_STRAIN * stride];
-    out[S_RESIDUAL] = residual;
-    out[S_PC_ENERGY] = row[F_PC_ENERGY * stride];
+    out[S_STRESS_LEAF_JOINT] = ROW(F_STRESS_LEAF_JOINT);
+    out[S_STRESS_LINK_MID] = ROW(F_STRESS_LINK_MID);
+    out[S_REACTION_X] = ROW(F_REACTION_X);
+    out[S_REACTION_Y] = ROW(F_REACTION_Y);
+    out[S_KINETIC] = ROW(F_KINETIC);
+    out[S_STRAIN] = ROW(F_STRAIN);
+    out[S_RESIDUAL] = ROW(F_RESIDUAL);
+    out[S_PC_ENERGY] = ROW(F_PC_ENERGY);
+#undef ROW
     memcpy(out + N_SAMPLE, sig, sizeof(double) * 2 * npts);
 }
 
@@ -1730,35 +1743,49 @@ static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
     return OK;
 }
 
-/* Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from the state (q, v, lam, p) at t_k0,
- * updated in place after every committed step, with one output row per step (out: N_FIELDS
- * x cap, field-major) and accel = (v1 - v0) / h of the last one.  acc = {work, lock_loss,
- * damping dissipation} in/out.  Stops early:
+/* The state's row of AdvanceCall.states (column k, field-major): q, v, then its fibre
+ * stresses (top of every stress point, then bottom; leaf points first) */
+static void state_row(const Ctx *x, const double *q, const double *v, double *states, int cap,
+                      int k) {
+    const Model *m = x->m;
+    int n = m->n, nsig = 2 * (m->n_stress_leaf + m->n_stress_link);
+    double *col = states + k;
+    for (int i = 0; i < n; i++) col[(size_t)i * cap] = q[i];
+    col += (size_t)n * cap;
+    for (int i = 0; i < n; i++) col[(size_t)i * cap] = v[i];
+    col += (size_t)n * cap;
+    for (int i = 0; i < nsig; i++) col[(size_t)i * cap] = x->pk_sig[i];
+}
+
+/* Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from the state (q, v, lam, p) at t_k0
+ * (AdvanceCall, _kernel.h), updated in place after every committed step, with one output row
+ * per step (out: N_FIELDS x cap, field-major), its state row if states, and accel =
+ * (v1 - v0) / h of the last one.  Stops early:
  *   CROSSING  in stage 1 the sleeve reached the stop during the next step (not committed:
  *             the caller finds the crossing time and applies the lock);
- *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, *residual: its
+ *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, residual: its
  *             value; otherwise that of the last state checked);
  *   others    the step failed (not committed).
- * *n_done = committed steps. */
-static int advance(Ctx *x, int locked, int rigid, double *q, double *v, double *lam,
-                   double *p, long k0, double h, int n_steps, double force, double tol,
-                   double phi_tol, int max_iter, double div_tol, double *acc, double *out,
-                   int cap, int *n_done, int *iterations, double *residual, double *accel,
-                   double *final) {
+ * n_done = committed steps; final: the Sample vector of the state reached, from its last
+ * step's row and fibre stresses (left in pk_sig). */
+int umbrella_advance_call(Ctx *x, AdvanceCall *a) {
     const Model *m = x->m;
+    int locked = a->locked, rigid = a->rigid, cap = a->cap;
     int n = m->n, nc = nc_of(m, locked, rigid);
     int status = OK, its_total = 0;
-    double final_residual = 0.0;
-    *n_done = 0;
+    double *q = a->q, *v = a->v, *lam = a->lam, *p = a->p, *acc = a->acc, *accel = a->accel;
+    double h = a->h, force = a->force;
+    long k0 = a->k0;
+    a->n_done = 0;
     x->q0_products = 0;
     fibre_stress_and_rate(x, q, v, x->pk_sig, x->pk_rate);   /* the first step's start */
-    for (int k = 0; k < n_steps && k < cap; k++) {
+    for (int k = 0; k < a->n_steps && k < cap; k++) {
         double t0 = (double)(k0 + k) * h, t1 = (double)(k0 + k + 1) * h;
         int its = 0, kept = x->it_kept, kept_slot = x->it_slot;
-        status = step(x, locked, rigid, q, v, lam, p, t1 - t0, force, tol, phi_tol, max_iter, 1,
-                      &its);
+        status = step(x, locked, rigid, q, v, lam, p, t1 - t0, force, a->tol, a->phi_tol,
+                      a->max_iter, 1, &its);
         its_total += its;
-        if (status == OK) status = step_taken(x, locked, rigid, nc, div_tol, residual);
+        if (status == OK) status = step_taken(x, locked, rigid, nc, a->div_tol, &a->residual);
         if (status != OK) {   /* not taken: the caller retakes it (umbrella_step) as it was */
             x->it_kept = kept;
             x->it_slot = kept_slot;
@@ -1767,7 +1794,7 @@ static int advance(Ctx *x, int locked, int rigid, double *q, double *v, double *
         carry_commit(x, nc, t1 - t0);
         const double *q1 = x->q_s, *v1 = x->v_s;
         acc[0] += force * (sleeve_height(x, q) - sleeve_height(x, q1));
-        if (x->law) acc[2] += x->dissipated;   /* acc has 3 entries when a law is attached */
+        if (x->law) acc[2] += x->dissipated;
         double inv_dt = 1.0 / (t1 - t0);
         for (int i = 0; i < n; i++) accel[i] = (v1[i] - v[i]) * inv_dt;
         memcpy(q, q1, sizeof(double) * n);
@@ -1778,24 +1805,15 @@ static int advance(Ctx *x, int locked, int rigid, double *q, double *v, double *
         memcpy(x->mq0, x->mq1, sizeof(double) * n);
         memcpy(x->wq0, x->wq1, sizeof(double) * n);
         memcpy(x->kq0, x->kq1, sizeof(double) * n);
-        output_row(x, q, v, p, x->kq0, t1, locked ? 1 : 0, force, acc[0], acc[1], t1 - t0,
-                   out, cap, k);
-        final_residual = *residual;   /* step_taken's, of this state */
-        *n_done = k + 1;
+        output_row(x, q, v, p, lam, x->kq0, t1, locked ? 1 : 0, force, acc, accel[0],
+                   a->residual, t1 - t0, a->out, cap, k);   /* (step_taken's residual) */
+        if (a->states) state_row(x, q, v, a->states, cap, k);
+        a->n_done = k + 1;
     }
-    *iterations = its_total;
-    if (final && *n_done > 0)   /* sample() of the state reached, from its last step's
-                                  * row, residual and fibre stresses (left in pk_sig) */
-        sample_vector(m, locked, q, v, lam, out + *n_done - 1, (size_t)cap, x->pk_sig,
-                      final_residual, final);
+    a->iterations = its_total;
+    if (a->final && a->n_done > 0)
+        sample_vector(m, a->out + a->n_done - 1, (size_t)cap, x->pk_sig, a->final);
     return status;
-}
-
-/* (AdvanceCall, _kernel.h) */
-int umbrella_advance_call(Ctx *x, AdvanceCall *a) {
-    return advance(x, a->locked, a->rigid, a->q, a->v, a->lam, a->p, a->k0, a->h, a->n_steps,
-                   a->force, a->tol, a->phi_tol, a->max_iter, a->div_tol, a->acc, a->out,
-                   a->cap, &a->n_done, &a->iterations, &a->residual, a->accel, a->final);
 }
 
 /* Lock instant inside a step (solver.UmbrellaSimulator._find_lock, the same Illinois
@@ -1869,11 +1887,11 @@ static void sample(Ctx *x, int locked, int rigid, const double *q, const double 
                    const double *p, const double *lam, double *out) {
     const Model *m = x->m;
     int nc = nc_of(m, locked, rigid);
-    double row[N_FIELDS];
-    output_row(x, q, v, p, NULL, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, 0.0, row, 1, 0);
+    double row[N_FIELDS], acc[3] = {0.0, 0.0, 0.0};
     jacobian(x, q, locked, rigid, x->jm_idx, x->jm_val);
     double r = state_residual(x, q, v, locked, rigid, nc, x->jm_idx, x->jm_val);
-    sample_vector(m, locked, q, v, lam, row, 1, x->pk_sig1, r, out);   /* output_row's */
+    output_row(x, q, v, p, lam, NULL, 0.0, locked ? 1 : 0, 0.0, acc, 0.0, r, 0.0, row, 1, 0);
+    sample_vector(m, row, 1, x->pk_sig1, out);   /* output_row's fibre stresses */
 }
 
 /* (SampleCall, _kernel.h) */

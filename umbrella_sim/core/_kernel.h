@@ -48,7 +48,10 @@ enum { UMBRELLA_STATUS_CODES(UMBRELLA_STATUS_ENTRY) N_STATUS };
 /* The fields of one step's output row, in this order (outputs.STEP_FIELDS; C: F_<name>);
  * an advance writes them field-major, out[field * cap + step].  The state's figures at the
  * step's end (stage: the int code of model.Stage), except the peak stresses and where they
- * are: the largest over the whole step (the cubic Hermite interpolant of the fibre stress). */
+ * are: the largest over the whole step (the cubic Hermite interpolant of the fibre stress).
+ * Every figure a CSV row of the run needs: alpha1_accel = (v1 - v0) / h of the step; the
+ * reference stresses as the Sample vector's; the sleeve reaction lam[2], and lam[3] once
+ * locked, else 0; the end state's max(|Phi|, |J v|); the damping dissipation so far. */
 #define UMBRELLA_STEP_FIELDS(X) \
     X(TIME, time) \
     X(STAGE, stage) \
@@ -67,7 +70,16 @@ enum { UMBRELLA_STATUS_CODES(UMBRELLA_STATUS_ENTRY) N_STATUS };
     X(STRAIN, strain_energy) \
     X(WORK, work) \
     X(LOCK_LOSS, lock_energy_loss) \
-    X(PC_ENERGY, phase_correction_energy)
+    X(PC_ENERGY, phase_correction_energy) \
+    X(ALPHA2, alpha2) \
+    X(ALPHA2_RATE, alpha2_rate) \
+    X(ALPHA1_ACCEL, alpha1_accel) \
+    X(STRESS_LEAF_JOINT, stress_leaf_joint) \
+    X(STRESS_LINK_MID, stress_link_mid) \
+    X(REACTION_X, sleeve_reaction_x) \
+    X(REACTION_Y, sleeve_reaction_y) \
+    X(RESIDUAL, constraint_residual) \
+    X(DISSIPATION, damping_dissipation)
 #define UMBRELLA_STEP_ENTRY(name, py) F_##name,
 enum { UMBRELLA_STEP_FIELDS(UMBRELLA_STEP_ENTRY) N_FIELDS };
 
@@ -131,7 +143,11 @@ typedef struct {
  * change costs a tenth of that).  Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from
  * the state (q, v, lam, p = M v) at t_k0, updated in place after every committed step, with
  * one output row per step in out (N_FIELDS x cap, field-major) and accel = (v1 - v0) / h of
- * the last one.  acc = {work, lock loss, damping dissipation} in/out (J). */
+ * the last one.  acc = {work, lock loss, damping dissipation} in/out (J).
+ * states: NULL, or the state rows of every step, field-major like out (row r of step k at
+ * states[r * cap + k]), 2 n + 2 points rows: q (n), q' (n), then the fibre stress at every
+ * stress point, top of every point, then bottom, leaf points first (Model.n_stress_leaf +
+ * n_stress_link points). */
 typedef struct {
     int locked, rigid;
     long k0;
@@ -146,6 +162,7 @@ typedef struct {
     double residual;          /* out: the last checked state's max(|Phi|, |J v|) */
     double *accel;
     double *final;   /* NULL, or N_SAMPLE + 2 points: the Sample vector of the state reached */
+    double *states;  /* NULL, or (2 n + 2 points) x cap: the state rows */
 } AdvanceCall;
 
 /* umbrella_sample_call's arguments: the Sample vector (N_SAMPLE, then the fibre stresses)

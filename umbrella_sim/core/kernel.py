@@ -30,6 +30,10 @@ header.
 
 ``CompiledKernel`` holds one model handed to the library and every buffer the calls use;
 ``DynamicState`` is the state it advances (integrators.py steps the same states in numpy).
+
+Why one module: the parser, the loader and ``CompiledKernel`` are the three sides of one
+file, the header: what it declares, the library built from it, and the buffers laid out as it
+says; apart, each would import the others' reading of it.
 """
 from __future__ import annotations
 
@@ -107,7 +111,10 @@ def _statements(text: str, path: str):
     while i < len(lines):
         line = lines[i]
         i += 1
-        if not buf.strip() and line.strip().startswith("#"):
+        if line.strip().startswith("#"):
+            if buf.strip():
+                raise HeaderError(f"{path}:{start}: a declaration without its ';': "
+                                  f"{' '.join(buf.split())[:60]!r}")
             first = i
             while line.rstrip().endswith("\\"):          # a continued directive
                 if i == len(lines):
@@ -494,6 +501,18 @@ class CompiledKernel:
         self._out_ptr = _dptr(self.out)
         self.capacity = cap
         self._call.out, self._call.cap = self._out_ptr, cap
+        # the state rows (AdvanceCall.states: q, q', the fibre stresses), made when asked for
+        self.states_out = None
+        self._call.states, self._states_on = None, False
+
+    def _want_states(self, states: bool) -> None:
+        """Have the advance write its state rows into states_out, or not (NULL)."""
+        if states and self.states_out is None:
+            self.states_out = np.zeros((2 * self._n + 2 * self._points, self.capacity))
+            self._states_ptr = _dptr(self.states_out)
+        if states != self._states_on:
+            self._call.states = self._states_ptr if states else None
+            self._states_on = states
 
     def load(self, s: DynamicState, work: float, lock_loss: float) -> None:
         """Take s as the state to advance from (nothing to copy if it is the last one made)."""
@@ -511,15 +530,18 @@ class CompiledKernel:
             self.lib.umbrella_momentum(self._ctx, self._ptr["q"], self._ptr["v"], self._ptr["p"])
 
     def advance(self, cs: ConstraintSet, k0: int, h: float, n_steps: int, force: float,
-                tol: float, max_iter: int, div_tol: float):
+                tol: float, max_iter: int, div_tol: float, states: bool = False):
         """
         Take n_steps grid steps from the loaded state.
 
         n_steps grid steps from the loaded state; returns (status, steps done, Newton
-        iterations, residual of a diverged step).  Rows are in self.out[:, :steps].
+        iterations, residual of a diverged step).  Rows are in self.out[:, :steps], and with
+        states the state rows in self.states_out[:, :steps] (AdvanceCall.states).
         """
         if n_steps > self.capacity:
             self._set_capacity(max(n_steps, 2 * self.capacity))
+        if states or self._states_on:
+            self._want_states(states)
         call = self._call
         call.k0, call.n_steps = k0, n_steps
         setting = (cs.locked, cs.rigid, h, force, tol, max_iter, div_tol)

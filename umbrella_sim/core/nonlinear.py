@@ -569,7 +569,7 @@ class ElasticEngine(FiniteElementEngine):
         """
         return not self.rigid and not self.model.strain.nonlinear
 
-    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
+    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss, states=False):
         """
         Take up to n_steps steps on the compiled path (FiniteElementEngine.advance).
 
@@ -578,11 +578,11 @@ class ElasticEngine(FiniteElementEngine):
         single-step path, which retakes it split in halves (``ElasticMidpointDAE._substeps``)
         or reports the fault.
         """
-        out = super().advance(s, k0, h, n_steps, force, stage, work, lock_loss)
+        out = super().advance(s, k0, h, n_steps, force, stage, work, lock_loss, states)
         if out is None:
             return None
-        state, rows, work, stop = out
-        return state, rows, work, None if stop is None else "crossing"
+        state, rows, work, stop, state_rows = out
+        return state, rows, work, None if stop is None else "crossing", state_rows
 
 
 def build(params: UmbrellaParams):
