@@ -18,7 +18,7 @@ from umbrella_sim.core import kernel
 from umbrella_sim.core.integrators import MidpointDAE
 from umbrella_sim.core.kernel import HeaderError, parse_header
 from umbrella_sim.core.model import UmbrellaModel
-from umbrella_sim.core.outputs import STEP_FIELDS
+from umbrella_sim.core.outputs import CSV_COLUMNS, STEP_FIELDS
 from umbrella_sim.core.params import UmbrellaParams
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -40,6 +40,7 @@ STEP_ROW = ("time", "stage", "alpha1", "alpha1_rate", "sleeve_position", "sleeve
 
 def test_the_step_row_is_the_headers_list():
     assert STEP_FIELDS == kernel.STEP_FIELDS == STEP_ROW
+    assert set(CSV_COLUMNS) == set(STEP_FIELDS)       # a CSV row needs no Sample
     assert kernel.SAMPLE_VECTOR[:4] == ("alpha1", "alpha2", "alpha1_rate", "alpha2_rate")
     assert kernel.STATUS["ok"] == 0 and kernel.ADVANCE_DONE == 0
     # the structs the header declares, with the members Python sets
