@@ -147,7 +147,7 @@ def test_each_step_row_holds_its_states_sample(kernel, model, monkeypatch):
 
     Step by step through the lock (its step taken in Python) into stage 2: every field of
     the row but the step's peak stresses (over the step, not the instant) equals the Sample
-    of the state the step reached, made on its own (the compiled path: umbrella_sample, not
+    of the state the step reached, made on its own (compiled: umbrella_sample_call, not
     the advance's row; the rigid model's closed form: fe_state's coordinates, but the sleeve
     velocity, from the angles' rates in the row and from the finite-element coordinates in a
     Sample, to round-off, as tests/test_rigid_models.py has it).
@@ -165,7 +165,7 @@ def test_each_step_row_holds_its_states_sample(kernel, model, monkeypatch):
         block = sim.advance(1)
         compiled = getattr(kernel_of, "kernel", None)
         if compiled is not None:
-            compiled._final_of = None      # the Sample from umbrella_sample, not from the row
+            compiled._final_of = None      # the Sample from umbrella_sample_call, not from the row
         last = block.last
         stages.add(last.stage)
         for i, name in enumerate(STEP_FIELDS):
@@ -231,7 +231,7 @@ def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
     """
     The Sample built from one compiled call (stresses, peaks, energies, residual) vs numpy.
 
-    The advance's own outputs of the state it reached and a separate umbrella_sample call
+    The advance's own outputs of the state it reached and a separate umbrella_sample_call
     give the same bits.
 
     Also with an elastic law (_kernel_nonlinear.c): the membrane stress in the fibre
@@ -249,7 +249,7 @@ def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
         fast = sim.sample()
         kernel = sim.engine.integrator.kernel
         assert kernel._final_of is sim.state          # from what the advance computed
-        kernel._final_of = None                        # from umbrella_sample: the same bits
+        kernel._final_of = None                        # from umbrella_sample_call: the same bits
         again = sim.sample()
         for f in fields(fast):
             assert np.array_equal(getattr(fast, f.name), getattr(again, f.name)), f.name

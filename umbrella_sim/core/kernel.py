@@ -441,7 +441,7 @@ class CompiledKernel:
         self._ctx = ctypes.c_void_p(ctx)
         self._free = lib.umbrella_free
         nc_max = 4 + len(elastic)
-        # the state advanced in place, the last step's acceleration, then umbrella_sample of
+        # the state advanced in place, the last step's acceleration, then umbrella_sample_call of
         # the state each advance reaches (made by that call): views of one buffer, so that a
         # DynamicState of it and its Sample vector are one copy (state(), sample())
         self._points = len(m.leaf.stress_x) + len(m.link.stress_x)
@@ -573,7 +573,7 @@ class CompiledKernel:
 
     def sample(self, s: DynamicState, cs: ConstraintSet) -> np.ndarray:
         """
-        Return the Sample vector of a state with its momentum (_kernel.c umbrella_sample).
+        Return the Sample vector of a state with its momentum (_kernel.c umbrella_sample_call).
 
         A read-only array of its own: SAMPLE_VECTOR, then the top and bottom fibre stress at
         every stress point (leaf first).  The state an advance reached has it from that call
