@@ -1,4 +1,5 @@
 from glob import glob
+import os
 import shutil
 
 from setuptools import Extension, find_packages, setup
@@ -6,12 +7,30 @@ from setuptools.command.build_ext import build_ext
 
 NO_COMPILER = (
     "umbrella_sim needs a C compiler: the physics step is compiled code "
-    "(umbrella_sim/_kernel.c, plain C99 + libm). Install one (Debian/Ubuntu: "
+    "(umbrella_sim/core/_kernel.c, plain C99 + libm). Install one (Debian/Ubuntu: "
     "`sudo apt-get install gcc`, or build-essential) and run the installation again.")
+
+
+#: the compiled step: a plain shared library (no Python module init), loaded with ctypes by
+#: umbrella_sim/core/kernel.py from exactly this file, with its interface in _kernel.h
+KERNEL = "umbrella_sim.core.libumbrella_kernel"
 
 
 class BuildKernel(build_ext):
     """Build the compiled step; without a working C compiler, stop with one clear message."""
+
+    def get_ext_filename(self, fullname):
+        # libumbrella_kernel.so, not a CPython-tagged extension module's name (asked for by
+        # the full name, and by its last part alone: build_ext.get_ext_fullpath)
+        if fullname in (KERNEL, KERNEL.rpartition(".")[2]):
+            return os.path.join(*fullname.split(".")) + ".so"
+        return super().get_ext_filename(fullname)
+
+    def get_export_symbols(self, ext):
+        # no PyInit_*: the library exports the API its header marks (-fvisibility=hidden)
+        if ext.name == KERNEL:
+            return []
+        return super().get_export_symbols(ext)
 
     def run(self):
         try:
@@ -47,16 +66,20 @@ setup(
         ("share/" + package_name + "/urdf", glob("urdf/*.urdf")),
         ("share/" + package_name + "/rviz", glob("rviz/*.rviz")),
     ],
+    # the interface of the compiled step: kernel.py reads it at import
+    package_data={"umbrella_sim.core": ["_kernel.h"]},
     # the compiled integrator (plain C, loaded with ctypes): required
-    ext_modules=[Extension("umbrella_sim.core._kernel",
+    ext_modules=[Extension(KERNEL,
                            ["umbrella_sim/core/_kernel.c",
                             "umbrella_sim/core/_kernel_nonlinear.c"],
-                           depends=["umbrella_sim/core/_kernel_elastic.h"],
-                           extra_compile_args=["-O3", "-std=c99"], libraries=["m"])],
+                           depends=["umbrella_sim/core/_kernel.h",
+                                    "umbrella_sim/core/_kernel_elastic.h"],
+                           extra_compile_args=["-O3", "-std=c99", "-fvisibility=hidden"],
+                           libraries=["m"])],
     cmdclass={"build_ext": BuildKernel},
     install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "matplotlib"],
     extras_require={"test": ["pytest"]},     # (tests_require: gone from setuptools)
-    zip_safe=True,
+    zip_safe=False,      # a shared library, loaded from its file
     maintainer="umbrella_sim developers",
     maintainer_email="dev@umbrella-sim.invalid",
     description="Real-time flexible umbrella-frame deployment simulator (ROS 2 Jazzy)",

@@ -32,47 +32,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "_kernel.h"          /* the interface: structs, codes, fields, API */
 #include "_kernel_elastic.h"   /* the nonlinear / damped elastic law (_kernel_nonlinear.c) */
-
-typedef struct {
-    int n;                 /* coordinates */
-    int n_link;            /* link elastic coordinates */
-    int i_r2x, i_r2y, i_alpha2, s_link;
-    int i_u_joint, i_u_sleeve, i_tip_u, i_tip_v;
-    int n_elastic;         /* leaf + link elastic coordinates, in q order */
-    int bw;                /* half bandwidth of the elastic block, elastic ordering */
-    int n_stress_leaf, n_stress_link, stress_width;
-    double l1, l3, y_stop;
-    double j0_leaf, j0_link, pbar0, link_mass;
-    const double *c_full, *g_full;                       /* n */
-    const int *body;       /* n: -1 not elastic, 0 leaf, 1 link */
-    const int *elastic_idx;                              /* n_elastic: q index of elastic p */
-    const double *sbar, *isbar;                          /* 2 x n_link each */
-    const double *mff_band, *k_band, *w_band;            /* n_elastic x (2 bw + 1) */
-    const int *stress_idx;                               /* points x width: q indices */
-    const double *stress_top, *stress_bottom;            /* points x width */
-    const double *stress_x;                              /* points */
-    /* the reference stresses (model.reference_stresses): the leaf's stress point at O'';
-     * the link element holding l3/2 and where in it (0..1) */
-    int ref_leaf_point, ref_link_element;
-    double ref_link_frac;
-} Model;
-
-enum { OK = 0, NO_CONVERGENCE = 1, NON_FINITE = 2, SINGULAR = 3, NOT_PD = 4, NO_MEMORY = 5,
-       CROSSING = 6, DIVERGED = 7, AXLE = 8 };
-
-/* fields of a per-step output row, in this order (outputs.STEP_FIELDS) */
-enum { F_TIME, F_STAGE, F_ALPHA1, F_ALPHA1_RATE, F_SLEEVE_POS, F_SLEEVE_VEL, F_FORCE,
-       F_TIP_AXIAL, F_TIP_TRANSVERSE, F_PEAK_LEAF, F_PEAK_LEAF_X, F_PEAK_LINK, F_PEAK_LINK_X,
-       F_KINETIC, F_STRAIN, F_WORK, F_LOCK_LOSS, F_PC_ENERGY, N_FIELDS };
-
-/* what a Sample holds of a state beyond q, qd, q'' and the multipliers, in this order
- * (integrators.SAMPLE_VECTOR), then the fibre stress at every stress point (top of every
- * point, then bottom; leaf points first) */
-enum { S_ALPHA1, S_ALPHA2, S_ALPHA1_RATE, S_ALPHA2_RATE, S_SLEEVE_POS, S_SLEEVE_VEL,
-       S_TIP_AXIAL, S_TIP_TRANSVERSE, S_PEAK_LEAF, S_PEAK_LEAF_X, S_PEAK_LINK, S_PEAK_LINK_X,
-       S_STRESS_LEAF_JOINT, S_STRESS_LINK_MID, S_REACTION_X, S_REACTION_Y, S_KINETIC, S_STRAIN,
-       S_RESIDUAL, S_PC_ENERGY, N_SAMPLE };
 
 #define JW 3   /* nonzeros of a joint/stop constraint row */
 
@@ -117,7 +78,7 @@ typedef struct {
 
 #define TRIG_CACHE 4
 
-typedef struct {
+struct Ctx {
     const Model *m;
     int ne, nbmax, width;
     /* state-dependent pieces of M(q) */
@@ -175,10 +136,10 @@ typedef struct {
     double trig_a[TRIG_CACHE], trig_c[TRIG_CACHE], trig_s[TRIG_CACHE];
     int trig_n, trig_next;
     /* fibre stress (top of every stress point, then bottom) and its rate at the start of the
-     * step umbrella_advance takes next (pk_sig, pk_rate) and at its end (pk_sig1, pk_rate1):
+     * step advance() takes next (pk_sig, pk_rate) and at its end (pk_sig1, pk_rate1):
      * the step's peak is that of their cubic Hermite interpolant (output_row) */
     double *pk_sig, *pk_rate, *pk_sig1, *pk_rate1;
-} Ctx;
+};
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
 
@@ -1294,7 +1255,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
      * and the matrix is factored anew at the first iterate, which is close.  A factorisation
      * costs about a Newton iteration: this takes 0.4 iterations more a step than factoring
      * every step, and 12 % less time (N = 2 and 4, V0 = -0.2 and -1).  A rule of the
-     * trajectory alone, so umbrella_step and umbrella_advance give the same bits (a step is
+     * trajectory alone, so umbrella_step and umbrella_advance_call give the same bits (a step is
      * handed on only once taken: carry_commit). */
     ArrowLU *kept = x->it_kept ? &x->slot[x->it_slot] : NULL;
     int lagged = carry && nonlinear_law && kept && kept->nc == nc
@@ -1304,7 +1265,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     int lag_whole = lagged && kept->age < ELASTIC_CARRY_STEPS;
     x->carry_slot = -1;
     /* this step's factorisations go to the other slot: the kept one stays intact if the
-     * step is not taken (umbrella_advance restores it_kept, it_slot) */
+     * step is not taken (advance() restores it_kept, it_slot) */
     ArrowLU *fresh = kept ? &x->slot[1 - x->it_slot] : &x->slot[0];
     x->it = lagged ? kept : fresh;
     x->it_kept = 0;
@@ -1614,14 +1575,20 @@ static void state_peaks(const Model *m, const double *sig, double *peaks) {
     }
 }
 
-/* The outputs of the state (q, v, p = M v) into column k of out; kq_known: K q at q (Kb q
- * with a law) if the caller has it, else NULL.  The peak stress: with h_step > 0, the largest
- * over the step of length h_step that ended at this state, whose start left its fibre stress
- * and rate in pk_sig, pk_rate (this state's then replace them); with h_step = 0, the state's
- * own, its fibre stresses left in pk_sig1 (top of every point, then bottom). */
+/* The output row of the state (q, v, p = M v, lam) into column k of out; kq_known: K q at q
+ * (Kb q with a law) if the caller has it, else NULL; acc = {work, lock loss, damping
+ * dissipation}; accel: alpha1'' = (v1 - v0) / h of the step that ended here (0 for a state
+ * alone); residual: the state's max(|Phi|, |J v|).  The peak stress: with h_step > 0, the
+ * largest over the step of length h_step that ended at this state, whose start left its fibre
+ * stress and rate in pk_sig, pk_rate (this state's then replace them); with h_step = 0, the
+ * state's own, its fibre stresses left in pk_sig1 (top of every point, then bottom).  The
+ * reference stresses (model.reference_stresses): the leaf's top fibre at O'', the link's
+ * interpolated at l3/2; the sleeve's reaction (solver's sleeve_reaction): axle lam[2], stop
+ * lam[3] once locked. */
 static void output_row(Ctx *x, const double *q, const double *v, const double *p,
-                       const double *kq_known, double t, int stage, double force, double work,
-                       double lock_loss, double h_step, double *out, int cap, int k) {
+                       const double *lam, const double *kq_known, double t, int stage,
+                       double force, const double *acc, double accel, double residual,
+                       double h_step, double *out, int cap, int k) {
     const Model *m = x->m;
     int n = m->n, ia = m->i_alpha2;
     double *o = out + k, c2, s2;
@@ -1637,6 +1604,13 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
     SET(F_FORCE, force);
     SET(F_TIP_AXIAL, q[m->i_tip_u]);
     SET(F_TIP_TRANSVERSE, q[m->i_tip_v]);
+    SET(F_ALPHA2, q[ia]);
+    SET(F_ALPHA2_RATE, v[ia]);
+    SET(F_ALPHA1_ACCEL, accel);
+    SET(F_REACTION_X, lam[2]);
+    SET(F_REACTION_Y, stage == 1 ? lam[3] : 0.0);
+    SET(F_RESIDUAL, residual);
+    SET(F_DISSIPATION, acc[2]);
     int first = 0, npts = m->n_stress_leaf + m->n_stress_link;
     double *sig = x->pk_sig1, *rate = x->pk_rate1;
     const double *sig0 = x->pk_sig, *rate0 = x->pk_rate;
@@ -1651,6 +1625,11 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         SET(F_PEAK_LINK, peaks[2]);
         SET(F_PEAK_LINK_X, peaks[3]);
     }
+    const double *link_top = sig + m->n_stress_leaf;    /* (this state's fibre stresses) */
+    int j = m->ref_link_element;
+    SET(F_STRESS_LEAF_JOINT, sig[m->ref_leaf_point]);
+    SET(F_STRESS_LINK_MID, (1.0 - m->ref_link_frac) * link_top[2 * j]
+                           + m->ref_link_frac * link_top[2 * j + 1]);
     for (int body = 0; h_step > 0.0 && body < 2; body++) {   /* the step's peak */
         int np = body == 0 ? m->n_stress_leaf : m->n_stress_link;
         double best = -1.0, floor = -1.0;
@@ -1712,56 +1691,41 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         se *= 0.5;
     }
     SET(F_STRAIN, se);
-    SET(F_WORK, work);
-    SET(F_LOCK_LOSS, lock_loss);
+    SET(F_WORK, acc[0]);
+    SET(F_LOCK_LOSS, acc[1]);
     SET(F_PC_ENERGY, pc_acts(x, stage == 1, 0) ? pc_e - x->pc_e_lock : 0.0);
 #undef SET
 }
 
-/* The Sample vector (S_*, then the fibre stresses) of a state (q, v, lam) from its output
- * row (row[f * stride], an output_row of the state), its fibre stresses sig (pk_sig1's
- * layout) and its residual max(|Phi|, |J v|): the state's own peaks (state_peaks), the
- * reference stresses (model.reference_stresses: the leaf's top fibre at O'', the link's
- * interpolated at l3/2) and the sleeve's reaction (solver's sleeve_reaction: axle lam[2],
- * stop lam[3] once locked) */
-static void sample_vector(const Model *m, int locked, const double *q, const double *v,
-                          const double *lam, const double *row, size_t stride,
-                          const double *sig, double residual, double *out) {
-    int npts = m->n_stress_leaf + m->n_stress_link, ia = m->i_alpha2;
-    out[S_ALPHA1] = q[0];
-    out[S_ALPHA2] = q[ia];
-    out[S_ALPHA1_RATE] = v[0];
-    out[S_ALPHA2_RATE] = v[ia];
-    out[S_SLEEVE_POS] = row[F_SLEEVE_POS * stride];
-    out[S_SLEEVE_VEL] = row[F_SLEEVE_VEL * stride];
-    out[S_TIP_AXIAL] = row[F_TIP_AXIAL * stride];
-    out[S_TIP_TRANSVERSE] = row[F_TIP_TRANSVERSE * stride];
+/* The Sample vector (S_*, then the fibre stresses) of a state from its output row
+ * (row[f * stride], an output_row of the state) and its fibre stresses sig (pk_sig1's
+ * layout): the row's figures, but the state's own peaks (state_peaks) */
+static void sample_vector(const Model *m, const double *row, size_t stride, const double *sig,
+                          double *out) {
+    int npts = m->n_stress_leaf + m->n_stress_link;
+#define ROW(f) row[(size_t)(f) * stride]
+    out[S_ALPHA1] = ROW(F_ALPHA1);
+    out[S_ALPHA2] = ROW(F_ALPHA2);
+    out[S_ALPHA1_RATE] = ROW(F_ALPHA1_RATE);
+    out[S_ALPHA2_RATE] = ROW(F_ALPHA2_RATE);
+    out[S_SLEEVE_POS] = ROW(F_SLEEVE_POS);
+    out[S_SLEEVE_VEL] = ROW(F_SLEEVE_VEL);
+    out[S_TIP_AXIAL] = ROW(F_TIP_AXIAL);
+    out[S_TIP_TRANSVERSE] = ROW(F_TIP_TRANSVERSE);
     state_peaks(m, sig, out + S_PEAK_LEAF);    /* leaf, its x, link, its x */
-    const double *link_top = sig + m->n_stress_leaf;
-    int j = m->ref_link_element;
-    out[S_STRESS_LEAF_JOINT] = sig[m->ref_leaf_point];
-    out[S_STRESS_LINK_MID] = (1.0 - m->ref_link_frac) * link_top[2 * j]
-                             + m->ref_link_frac * link_top[2 * j + 1];
-    out[S_REACTION_X] = lam[2];
-    out[S_REACTION_Y] = locked ? lam[3] : 0.0;
-    out[S_KINETIC] = row[F_KINETIC * stride];
-    out[S_STRAIN] = row[F_STRAIN * stride];
-    out[S_RESIDUAL] = residual;
-    out[S_PC_ENERGY] = row[F_PC_ENERGY * stride];
+    out[S_STRESS_LEAF_JOINT] = ROW(F_STRESS_LEAF_JOINT);
+    out[S_STRESS_LINK_MID] = ROW(F_STRESS_LINK_MID);
+    out[S_REACTION_X] = ROW(F_REACTION_X);
+    out[S_REACTION_Y] = ROW(F_REACTION_Y);
+    out[S_KINETIC] = ROW(F_KINETIC);
+    out[S_STRAIN] = ROW(F_STRAIN);
+    out[S_RESIDUAL] = ROW(F_RESIDUAL);
+    out[S_PC_ENERGY] = ROW(F_PC_ENERGY);
+#undef ROW
     memcpy(out + N_SAMPLE, sig, sizeof(double) * 2 * npts);
 }
 
-/* Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from the state (q, v, lam, p) at t_k0,
- * updated in place after every committed step, with one output row per step (out: N_FIELDS
- * x cap, field-major) and accel = (v1 - v0) / h of the last one.  acc = {work, lock_loss}
- * in/out.  Stops early:
- *   CROSSING  in stage 1 the sleeve reached the stop during the next step (not committed:
- *             the caller finds the crossing time and applies the lock);
- *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, *residual: its
- *             value; otherwise that of the last state checked);
- *   others    the step failed (not committed).
- * *n_done = committed steps. */
-/* Whether umbrella_advance takes the step just made (x->q_s, v_s): OK, or why not (the
+/* Whether advance() takes the step just made (x->q_s, v_s): OK, or why not (the
  * state became non-finite, the constraint residual diverged, the sleeve reached the stop:
  * CROSSING, the caller's lock step).  *residual: the new state's constraint residual. */
 static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
@@ -1779,25 +1743,49 @@ static int step_taken(Ctx *x, int locked, int rigid, int nc, double div_tol,
     return OK;
 }
 
-int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double *lam,
-                     double *p, long k0, double h, int n_steps, double force, double tol,
-                     double phi_tol, int max_iter, double div_tol, double *acc, double *out,
-                     int cap, int *n_done, int *iterations, double *residual, double *accel,
-                     double *final) {
+/* The state's row of AdvanceCall.states (column k, field-major): q, v, then its fibre
+ * stresses (top of every stress point, then bottom; leaf points first) */
+static void state_row(const Ctx *x, const double *q, const double *v, double *states, int cap,
+                      int k) {
     const Model *m = x->m;
+    int n = m->n, nsig = 2 * (m->n_stress_leaf + m->n_stress_link);
+    double *col = states + k;
+    for (int i = 0; i < n; i++) col[(size_t)i * cap] = q[i];
+    col += (size_t)n * cap;
+    for (int i = 0; i < n; i++) col[(size_t)i * cap] = v[i];
+    col += (size_t)n * cap;
+    for (int i = 0; i < nsig; i++) col[(size_t)i * cap] = x->pk_sig[i];
+}
+
+/* Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from the state (q, v, lam, p) at t_k0
+ * (AdvanceCall, _kernel.h), updated in place after every committed step, with one output row
+ * per step (out: N_FIELDS x cap, field-major), its state row if states, and accel =
+ * (v1 - v0) / h of the last one.  Stops early:
+ *   CROSSING  in stage 1 the sleeve reached the stop during the next step (not committed:
+ *             the caller finds the crossing time and applies the lock);
+ *   DIVERGED  max(|Phi|, |J v|) above div_tol after a step (not committed, residual: its
+ *             value; otherwise that of the last state checked);
+ *   others    the step failed (not committed).
+ * n_done = committed steps; final: the Sample vector of the state reached, from its last
+ * step's row and fibre stresses (left in pk_sig). */
+int umbrella_advance_call(Ctx *x, AdvanceCall *a) {
+    const Model *m = x->m;
+    int locked = a->locked, rigid = a->rigid, cap = a->cap;
     int n = m->n, nc = nc_of(m, locked, rigid);
     int status = OK, its_total = 0;
-    double final_residual = 0.0;
-    *n_done = 0;
+    double *q = a->q, *v = a->v, *lam = a->lam, *p = a->p, *acc = a->acc, *accel = a->accel;
+    double h = a->h, force = a->force;
+    long k0 = a->k0;
+    a->n_done = 0;
     x->q0_products = 0;
     fibre_stress_and_rate(x, q, v, x->pk_sig, x->pk_rate);   /* the first step's start */
-    for (int k = 0; k < n_steps && k < cap; k++) {
+    for (int k = 0; k < a->n_steps && k < cap; k++) {
         double t0 = (double)(k0 + k) * h, t1 = (double)(k0 + k + 1) * h;
         int its = 0, kept = x->it_kept, kept_slot = x->it_slot;
-        status = step(x, locked, rigid, q, v, lam, p, t1 - t0, force, tol, phi_tol, max_iter, 1,
-                      &its);
+        status = step(x, locked, rigid, q, v, lam, p, t1 - t0, force, a->tol, a->phi_tol,
+                      a->max_iter, 1, &its);
         its_total += its;
-        if (status == OK) status = step_taken(x, locked, rigid, nc, div_tol, residual);
+        if (status == OK) status = step_taken(x, locked, rigid, nc, a->div_tol, &a->residual);
         if (status != OK) {   /* not taken: the caller retakes it (umbrella_step) as it was */
             x->it_kept = kept;
             x->it_slot = kept_slot;
@@ -1806,7 +1794,7 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         carry_commit(x, nc, t1 - t0);
         const double *q1 = x->q_s, *v1 = x->v_s;
         acc[0] += force * (sleeve_height(x, q) - sleeve_height(x, q1));
-        if (x->law) acc[2] += x->dissipated;   /* acc has 3 entries when a law is attached */
+        if (x->law) acc[2] += x->dissipated;
         double inv_dt = 1.0 / (t1 - t0);
         for (int i = 0; i < n; i++) accel[i] = (v1[i] - v[i]) * inv_dt;
         memcpy(q, q1, sizeof(double) * n);
@@ -1817,50 +1805,15 @@ int umbrella_advance(Ctx *x, int locked, int rigid, double *q, double *v, double
         memcpy(x->mq0, x->mq1, sizeof(double) * n);
         memcpy(x->wq0, x->wq1, sizeof(double) * n);
         memcpy(x->kq0, x->kq1, sizeof(double) * n);
-        output_row(x, q, v, p, x->kq0, t1, locked ? 1 : 0, force, acc[0], acc[1], t1 - t0,
-                   out, cap, k);
-        final_residual = *residual;   /* step_taken's, of this state */
-        *n_done = k + 1;
+        output_row(x, q, v, p, lam, x->kq0, t1, locked ? 1 : 0, force, acc, accel[0],
+                   a->residual, t1 - t0, a->out, cap, k);   /* (step_taken's residual) */
+        if (a->states) state_row(x, q, v, a->states, cap, k);
+        a->n_done = k + 1;
     }
-    *iterations = its_total;
-    if (final && *n_done > 0)   /* umbrella_sample of the state reached, from its last step's
-                                  * row, residual and fibre stresses (left in pk_sig) */
-        sample_vector(m, locked, q, v, lam, out + *n_done - 1, (size_t)cap, x->pk_sig,
-                      final_residual, final);
+    a->iterations = its_total;
+    if (a->final && a->n_done > 0)
+        sample_vector(m, a->out + a->n_done - 1, (size_t)cap, x->pk_sig, a->final);
     return status;
-}
-
-/* umbrella_advance's arguments in one struct the caller keeps and updates (integrators.py
- * _AdvanceCall, same order): from Python, converting 22 ctypes arguments cost as much as
- * half a physics step, setting the few that change costs a tenth of that */
-typedef struct {
-    int locked, rigid;
-    long k0;
-    double h;
-    int n_steps;
-    double force, tol, phi_tol;
-    int max_iter;
-    double div_tol;
-    double *q, *v, *lam, *p, *acc, *out;
-    int cap;
-    int n_done, iterations;
-    double residual;
-    double *accel;
-    double *final;   /* NULL, or N_SAMPLE + 2 points: umbrella_sample of the state reached */
-} AdvanceCall;
-
-int umbrella_advance_call(Ctx *x, AdvanceCall *a) {
-    return umbrella_advance(x, a->locked, a->rigid, a->q, a->v, a->lam, a->p, a->k0, a->h,
-                            a->n_steps, a->force, a->tol, a->phi_tol, a->max_iter, a->div_tol,
-                            a->acc, a->out, a->cap, &a->n_done, &a->iterations, &a->residual,
-                            a->accel, a->final);
-}
-
-/* one output row for an arbitrary state (after the lock step, tests) */
-void umbrella_outputs(Ctx *x, const double *q, const double *v, const double *p, double t,
-                      int stage, double force, double work, double lock_loss, double *out,
-                      int cap, int k) {
-    output_row(x, q, v, p, NULL, t, stage, force, work, lock_loss, 0.0, out, cap, k);
 }
 
 /* Lock instant inside a step (solver.UmbrellaSimulator._find_lock, the same Illinois
@@ -1870,7 +1823,7 @@ void umbrella_outputs(Ctx *x, const double *q, const double *v, const double *p,
  * max(|Phi|, |J v|) <= div_tol).  On OK: the best trial (least |y_H - y_stop|) in q, v, lam,
  * p (nc rows of lam) and its step length in *dt_out.  On DIVERGED or a step failure: *dt_out
  * is the failing trial's step length and *residual its residual (DIVERGED).  The caller
- * knows that a step of length h crosses (umbrella_advance returned CROSSING). */
+ * knows that a step of length h crosses (advance() returned CROSSING). */
 int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0,
                            const double *lam0, const double *p0, double h, double force,
                            double tol, double phi_tol, int max_iter, double div_tol,
@@ -1930,24 +1883,28 @@ int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0
 
 /* The Sample vector (sample_vector: S_* then the fibre stresses) of an arbitrary state
  * (q, v, p = M(q) v, lam) into out[N_SAMPLE + 2 points] */
-void umbrella_sample(Ctx *x, int locked, int rigid, const double *q, const double *v,
-                     const double *p, const double *lam, double *out) {
+static void sample(Ctx *x, int locked, int rigid, const double *q, const double *v,
+                   const double *p, const double *lam, double *out) {
     const Model *m = x->m;
     int nc = nc_of(m, locked, rigid);
-    double row[N_FIELDS];
-    output_row(x, q, v, p, NULL, 0.0, locked ? 1 : 0, 0.0, 0.0, 0.0, 0.0, row, 1, 0);
+    double row[N_FIELDS], acc[3] = {0.0, 0.0, 0.0};
     jacobian(x, q, locked, rigid, x->jm_idx, x->jm_val);
     double r = state_residual(x, q, v, locked, rigid, nc, x->jm_idx, x->jm_val);
-    sample_vector(m, locked, q, v, lam, row, 1, x->pk_sig1, r, out);   /* output_row's */
+    output_row(x, q, v, p, lam, NULL, 0.0, locked ? 1 : 0, 0.0, acc, 0.0, r, 0.0, row, 1, 0);
+    sample_vector(m, row, 1, x->pk_sig1, out);   /* output_row's fibre stresses */
 }
 
-/* umbrella_sample's arguments in one struct (integrators.py _SampleCall), as AdvanceCall */
-typedef struct {
-    int locked, rigid;
-    const double *q, *v, *p, *lam;
-    double *out;
-} SampleCall;
-
+/* (SampleCall, _kernel.h) */
 void umbrella_sample_call(Ctx *x, SampleCall *a) {
-    umbrella_sample(x, a->locked, a->rigid, a->q, a->v, a->p, a->lam, a->out);
+    sample(x, a->locked, a->rigid, a->q, a->v, a->p, a->lam, a->out);
+}
+
+/* ------------------------------------------------------------------ interface */
+#define UMBRELLA_SIZEOF(name, py) (int)sizeof(name),
+#define UMBRELLA_COUNT(name, py) name,
+
+int umbrella_abi(int *figures, int n) {
+    const int all[] = {UMBRELLA_ABI_STRUCTS(UMBRELLA_SIZEOF) UMBRELLA_ABI_COUNTS(UMBRELLA_COUNT)};
+    for (int k = 0; k < n && k < (int)(sizeof(all) / sizeof(all[0])); k++) figures[k] = all[k];
+    return UMBRELLA_ABI_VERSION;
 }

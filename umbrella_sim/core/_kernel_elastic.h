@@ -2,6 +2,7 @@
  * Elastic law of the compiled step for the models that nonlinear.py builds: the von Karman
  * (element-mean membrane strain) or linear strain energy U(q), its average-vector-field (AVF)
  * discrete gradient and tangent, and the Kelvin-Voigt damping C(q) = beta B(q)^T D B(q).
+ * Internal to the library (its interface with Python: _kernel.h).
  * Implemented in _kernel_nonlinear.c; _kernel.c calls it through the hooks of step() and
  * output_row() when a law is attached (umbrella_set_law), else it uses its constant K.
  * The arithmetic is that of nonlinear.StrainEnergy / ElasticMidpointDAE (the numpy reference
@@ -9,6 +10,8 @@
  */
 #ifndef UMBRELLA_KERNEL_ELASTIC_H
 #define UMBRELLA_KERNEL_ELASTIC_H
+
+#include "_kernel.h"
 
 /* Newton contraction rate above which the iteration matrix is re-factored (nonlinear strain;
  * nonlinear.REFRESH_RATE) */
@@ -18,26 +21,8 @@
  * (nonlinear.CARRY_STEPS) */
 #define ELASTIC_CARRY_STEPS 2
 
-/* Mirror of nonlinear._ElasticData (same order). */
-typedef struct {
-    int n;                   /* coordinates */
-    int ne;                  /* elastic coordinates (Model.n_elastic) */
-    int bw;                  /* half bandwidth of the elastic band (Model.bw) */
-    int n_el;                /* elements, leaf then link */
-    int n_gauss;             /* Gauss points per element */
-    int nonlinear;           /* 1: eps = mean(u' + v'^2/2); 0: eps = u' */
-    double beta;             /* damping: C = beta B^T D B (s); 0: undamped */
-    double youngs_modulus;   /* E (Pa), for the membrane part of the fibre stress */
-    const int *elastic_idx;  /* ne: q index of elastic position p */
-    const double *kb_band;   /* ne x (2 bw + 1): bending stiffness (K without its axial part) */
-    const int *el_q;         /* n_el x 6: q index of the element's coordinates, -1 if none */
-    const int *el_pos;       /* n_el x 6: their elastic positions, -1 if none */
-    const double *du, *dv;   /* n_el x n_gauss x 6: u', v' at the Gauss points */
-    const double *mean_w;    /* n_el x n_gauss: Gauss weight / l_e (element mean) */
-    const double *ea_l;      /* n_el: EA l_e */
-} ElasticData;
-
-typedef struct {
+/* (ElasticData, the law's API functions: _kernel.h) */
+struct ElasticLaw {
     ElasticData d;
     double *band;            /* ne x (2 bw + 1): the law's part of the iteration matrix */
     double *qa, *qb, *g;     /* n, n, n_el x 6: work */
@@ -54,10 +39,8 @@ typedef struct {
     double *start_gx;        /* n_el x 6: G x0 at the start of the step (x0: q0's element coords) */
     double *start_eps;       /* n_el x 2: du_mean . x0, x0 . G x0 */
     int energy_valid, start_valid;
-} ElasticLaw;
+};
 
-ElasticLaw *elastic_new(const ElasticData *d);
-void elastic_free(ElasticLaw *law);
 /* out[i] at the elastic q indices += the AVF gradient of U between q0 and q1 without its
  * bending part + C(q_m) (q1 - q0) / h.  The bending part Kb q_m is the caller's: out holds it
  * on entry (Kb is linear: the band products of the step), and kb_dq = Kb (q1 - q0). */

@@ -15,13 +15,16 @@ import re
 
 import numpy as np
 
-from .integrators import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ALPHA1_AXLE,
-                          AXLE_REASON, DynamicState, MidpointDAE, newton_tolerance)
+from .integrators import MidpointDAE, newton_tolerance
+from .kernel import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ALPHA1_AXLE, AXLE_REASON,
+                     DynamicState)
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import LockEvent, STEP_FIELDS, step_peaks
 from .params import UmbrellaParams
 from .rigid import RigidMechanism
 
+#: the row of each STEP_FIELDS name
+_STEP_ROW = {name: row for row, name in enumerate(STEP_FIELDS)}
 #: residual above which a run is declared diverged (m, m/s)
 DIVERGENCE_RESIDUAL = 1e-6
 EVENT_TIME_TOLERANCE = 1e-12
@@ -110,7 +113,7 @@ class Engine(abc.ABC):
         Return the Sample vector of s from compiled code, or None (no fast path).
 
         A read-only array of s's own (for a state an advance made, it shares that state's
-        copy): integrators.SAMPLE_VECTOR (figures and residual max(|Phi|, |J q'|)), then the
+        copy): kernel.SAMPLE_VECTOR (figures and residual max(|Phi|, |J q'|)), then the
         top and bottom fibre stress at every stress point, leaf points first.  What
         ``_sample`` otherwise computes with numpy, in one call.
         """
@@ -126,15 +129,17 @@ class Engine(abc.ABC):
         return None
 
     def advance(self, s: DynamicState, k0: int, h: float, n_steps: int, force: float,
-                stage: Stage, work: float, lock_loss: float):
+                stage: Stage, work: float, lock_loss: float, states: bool = False):
         """
         Take up to n_steps grid steps in one call (the fast path).
 
         Up to n_steps grid steps t_k -> (k + 1) h from s at t = k0 h in one call; stops
         before a step in which the sleeve reaches the stop (stage deploying), and at a
         failure.  Returns None if this engine has no such path, else (state, rows, work,
-        stop): rows (len(STEP_FIELDS), steps done; may be the engine's buffer, valid until
-        its next call), stop None (all steps done), "crossing", or a failure message.
+        stop, state_rows): rows (len(STEP_FIELDS), steps done; may be the engine's buffer,
+        valid until its next call), stop None (all steps done), "crossing", or a failure
+        message; state_rows, if states, the steps' state rows (outputs.StepBlock.states;
+        may be the engine's buffer too), else None.
         """
         return None
 
@@ -201,7 +206,7 @@ class FiniteElementEngine(Engine):
             raise SimulationDiverged(fault_message(s.t, integ.kernel_error(status, s.t + dt)))
         return state
 
-    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
+    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss, states=False):
         kernel = self.integrator.kernel
         if kernel is None:
             return None
@@ -209,7 +214,7 @@ class FiniteElementEngine(Engine):
         kernel.load(s, work, lock_loss)     # a no-op when s is the state it returned last
         status, done, its, residual = kernel.advance(
             cs, k0, h, n_steps, force, integ.tolerance, integ.max_iterations,
-            DIVERGENCE_RESIDUAL)
+            DIVERGENCE_RESIDUAL, states)
         integ.iterations += its
         t = (k0 + done) * h
         if status == ADVANCE_DONE:
@@ -222,7 +227,8 @@ class FiniteElementEngine(Engine):
         else:
             stop = fault_message(t, integ.kernel_error(status, t + h))
         state = kernel.state(t, self.model.n_constraints(cs)) if done else s
-        return state, kernel.out[:, :done], float(kernel.acc[0]), stop
+        return (state, kernel.out[:, :done], float(kernel.acc[0]), stop,
+                kernel.states_out[:, :done] if states else None)
 
     def fe_state(self, s: DynamicState):
         return s.q, s.qd, s.qdd
@@ -347,26 +353,28 @@ class RigidEngine(Engine):
             return replace(s, t=s.t + h, multipliers=np.array([0.0, force]))
         return self._state(s.t + h, self._rk4((*s.q, *s.qd), h, force), force, stage)
 
-    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
+    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss, states=False):
         """
         Take n_steps steps of ``step`` in one loop (the fast path), rows from the angles.
 
         Each row holds what a Sample of the rigid state holds (no elastic field: tip
-        deflection, strain energy and stresses zero), so the per-step Samples and stress
-        peaks of the generic path (~0.7 ms a step) are not made; stops before the step in
-        which the sleeve reaches the stop, as the compiled engines do.
+        deflection, strain energy and stresses zero; the acceleration and the sleeve's
+        reaction of the closed-form equations at the state), so the per-step Samples and
+        stress peaks of the generic path (~0.7 ms a step) are not made; stops before the
+        step in which the sleeve reaches the stop, as the compiled engines do.  states: the
+        state rows too, in the finite-element coordinates of the mechanism (``fe_state``).
         """
         mech, p = self.mech, self.model.params
-        rows = np.empty((len(STEP_FIELDS), n_steps))
-        zero_peaks = self._zero_peaks()
         y = (*(float(v) for v in s.q), *(float(v) for v in s.qd))
         height = mech.sleeve_height(y[0], y[1])
-        code = float(stage.code)
-        stop, done = None, 0
+        # at rest once locked (qd, qdd zero), the stop holding the sleeve force
+        figures = (0.0, 0.0, force, self._residual(*y))
+        stop, steps, kept = None, [], []
         for i in range(n_steps):
             if stage == DEFORMING:     # (a grid step's length, as UmbrellaSimulator.step's)
                 y1 = self._rk4(y, (k0 + i + 1) * h - (k0 + i) * h, force)
-                reason = self._check(y1)
+                residual = self._residual(*y1)
+                reason = self._check(y1, residual)
                 if reason is not None:
                     stop = fault_message((k0 + i) * h, reason)
                     break
@@ -376,32 +384,72 @@ class RigidEngine(Engine):
                     break
                 work += force * (height - h1)
                 y, height = y1, h1
+                accel, _, reaction = mech.accelerations(*y, force)
+                figures = (accel, reaction, 0.0, residual)
             a1, a2, w1, w2 = y
-            velocity = p.l1 * math.cos(a1) * w1 + p.l3 * math.cos(a2) * w2
-            rows[:, i] = ((k0 + i + 1) * h, code, a1, w1, height, velocity, force, 0.0, 0.0,
-                          *zero_peaks, mech.kinetic_energy(a1, a2, w1, w2), 0.0, work,
-                          lock_loss, 0.0)
-            done += 1
+            steps.append((a1, a2, w1, height, p.l1 * math.cos(a1) * w1 + p.l3 * math.cos(a2) * w2,
+                          # alpha2's rate as fe_state's, to the bit (model.rigid_velocity)
+                          -p.l1 * math.sin(a1) * w1 / (p.l3 * math.sin(a2)),
+                          mech.kinetic_energy(a1, a2, w1, w2), work, *figures))
+            if states:
+                kept.append(self._state_row(a1, w1))
+        done = len(steps)
+        rows = np.empty((len(STEP_FIELDS), done))
+        if done:
+            (a1, a2, w1, height_, velocity, w2, kinetic, work_, accel, reaction_x, reaction_y,
+             residual) = np.array(steps).T
+            columns = dict(
+                time=(k0 + np.arange(1, done + 1)) * h, stage=float(stage.code), alpha1=a1,
+                alpha1_rate=w1, sleeve_position=height_, sleeve_velocity=velocity,
+                sleeve_force=force, kinetic_energy=kinetic, work=work_,
+                lock_energy_loss=lock_loss, alpha2=a2, alpha2_rate=w2, alpha1_accel=accel,
+                sleeve_reaction_x=reaction_x, sleeve_reaction_y=reaction_y,
+                constraint_residual=residual,
+                **self._zero_figures())
+            for name, values in columns.items():
+                rows[_STEP_ROW[name]] = values
+            if len(columns) != len(STEP_FIELDS):
+                raise RuntimeError("RigidEngine.advance fills " + ", ".join(
+                    sorted(columns)) + f", not every one of {STEP_FIELDS}")
+        state_rows = None
+        if states:
+            state_rows = np.array(kept).T if done else np.zeros((self._state_rows(), 0))
         if not done:
-            return s, rows[:, :0], work, stop
+            return s, rows, work, stop, state_rows
         state = (replace(s, t=(k0 + done) * h, multipliers=np.array([0.0, force]))
                  if stage == LOCKED else self._state((k0 + done) * h, y, force, stage))
-        return state, rows[:, :done], work, stop
+        return state, rows, work, stop, state_rows
 
-    def _zero_peaks(self) -> tuple:
-        """Return a step's stress peaks (outputs.step_peaks) with no elastic field: zeros."""
-        if not hasattr(self, "_peaks0"):
+    def _state_rows(self) -> int:
+        m = self.model
+        return 2 * m.n + 2 * (m.leaf.n_stress_points + m.link.n_stress_points)
+
+    def _state_row(self, alpha1: float, alpha1_rate: float) -> np.ndarray:
+        """Return the state row (outputs.StepBlock.states) of the mechanism (fe_state's)."""
+        m = self.model
+        q = m.rigid_configuration(alpha1)
+        (lt, lb), (kt, kb) = m.stresses(q)
+        return np.concatenate([q, m.rigid_velocity(q, alpha1_rate), lt, kt, lb, kb])
+
+    def _zero_figures(self) -> dict:
+        """Return the step figures of the elastic field, which has none here: zeros."""
+        if not hasattr(self, "_zeros"):
             m = self.model
             zero = tuple(np.zeros((2, len(b.stress_x))) for b in (m.leaf, m.link))
-            self._peaks0 = tuple(float(v) for v in step_peaks(
-                (zero, zero), (zero, zero), 1.0, (m.leaf.stress_x, m.link.stress_x)))
-        return self._peaks0
+            peaks = step_peaks((zero, zero), (zero, zero), 1.0,
+                               (m.leaf.stress_x, m.link.stress_x))
+            names = ("peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
+                     "peak_stress_link_x", "stress_leaf_joint", "stress_link_mid")
+            values = (*peaks, *m.reference_stresses(zero[0][0], zero[1][0]))
+            self._zeros = dict(zip(names, (float(v) for v in values)),
+                               tip_axial=0.0, tip_transverse=0.0, strain_energy=0.0,
+                               phase_correction_energy=0.0, damping_dissipation=0.0)
+        return self._zeros
 
-    def _check(self, y) -> str | None:
-        """Why the state y cannot be taken (UmbrellaSimulator._checked's rule), or None."""
+    def _check(self, y, res: float) -> str | None:
+        """Why the state y, residual res, cannot be taken (UmbrellaSimulator._checked's rule)."""
         if not all(math.isfinite(v) for v in y):
             return "the state became non-finite"
-        res = self._residual(*y)
         if not res <= DIVERGENCE_RESIDUAL:
             return f"constraint residual {res:.3g} past tolerance {DIVERGENCE_RESIDUAL:g}"
         if y[0] >= ALPHA1_AXLE:

@@ -26,27 +26,27 @@ In stage 2 the midpoint rule's one systematic error, the period of every mode le
 stage 2 the modes at 1-5e3 rad/s (a few mm at the tip) otherwise drift out of phase at any
 real-time step.
 
-The product path is the compiled kernel (``_kernel.c``, loaded with ctypes; installation
+The product path is the compiled kernel (``_kernel.c``, bound by kernel.py; installation
 requires a C compiler): ``CompiledKernel.advance`` runs many steps and their outputs per call,
 on banded + arrow linear algebra whose cost grows linearly with the mesh.
 ``UMBRELLA_SIM_KERNEL=numpy`` selects the numpy implementation below, the reference the tests
-compare the kernel against step by step.
+compare the kernel against step by step; so does a library that does not match its header
+(kernel.load_kernel refuses it, with a warning).
 
 ``rk4`` for the closed-form rigid model lives in ``rigid.RigidMechanism.rk4_step``.
 """
 from __future__ import annotations
 
-import ctypes
 from dataclasses import dataclass, replace
-import glob
 import math
 import os
 
 import numpy as np
 from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
 
+from .kernel import (CompiledKernel, ConvergenceError, DynamicState, kernel_error,
+                     kernel_refusal, LIBRARY, load_kernel)
 from .model import ConstraintSet, UmbrellaModel
-from .outputs import build_frozen
 
 #: constraint residual the Newton iteration must reach before it stops (m)
 PHI_TOLERANCE = 1e-11
@@ -151,21 +151,6 @@ class ModalPhaseCorrection:
         d = self.mass_change
         shrink = d / (1.0 + quarter * self.omega ** 2 + d)
         return dq - self.shapes.T @ (shrink * (self.modes @ dq))
-
-
-class ConvergenceError(RuntimeError):
-    pass
-
-
-@dataclass(frozen=True)
-class DynamicState:
-    t: float
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    multipliers: np.ndarray
-    momentum: np.ndarray | None = None   # M(q) qd, carried to the next step when known
-    dissipation: float = 0.0    # energy removed by structural damping since t = 0 (J)
 
 
 def _gonzalez(grad_mid: np.ndarray, delta_f: float, dq: np.ndarray, dd: float) -> np.ndarray:
@@ -302,12 +287,16 @@ class MidpointDAE:
         self._compiled = None
         if kernel != "numpy":
             lib = load_kernel()
-            if lib is None:
-                raise RuntimeError("the compiled kernel umbrella_sim/_kernel*.so is not built: "
-                                   "reinstall (python3 bootstrap.py setup; it needs a C "
-                                   "compiler), or set UMBRELLA_SIM_KERNEL=numpy for the slow "
-                                   "numpy reference path")
-            self._compiled = CompiledKernel(lib, model)
+            refused = kernel_refusal()
+            if lib is not None:
+                self._compiled = CompiledKernel(lib, model, PHI_TOLERANCE)
+            elif refused is None:
+                raise RuntimeError(f"the compiled kernel {LIBRARY} is not built: reinstall "
+                                   "(python3 bootstrap.py setup; it needs a C compiler), or set "
+                                   "UMBRELLA_SIM_KERNEL=numpy for the slow numpy reference path")
+            elif kernel == "compiled":
+                raise RuntimeError(refused)
+            # else a library of another interface: the numpy path (load_kernel warned)
 
     @property
     def backend(self) -> str:
@@ -359,7 +348,7 @@ class MidpointDAE:
 
     @staticmethod
     def kernel_error(status: int, t: float) -> str:
-        return f"{_KERNEL_ERRORS.get(status, f'kernel status {status}')} at t = {t:.9g} s"
+        return kernel_error(status, t)
 
     def consistent_acceleration(self, q, qd, force: float, cs: ConstraintSet):
         """Solve for q'' and lambda from the index-1 form [[M, -J^T], [J, 0]] (4.87)."""
@@ -475,356 +464,3 @@ class MidpointDAE:
         """Keep q, qd; return consistent q'' and lambda for another constraint set."""
         qdd, lam = self.consistent_acceleration(s.q, s.qd, force, cs)
         return replace(s, qdd=qdd, multipliers=lam, momentum=None)
-
-
-# ------------------------------------------------------------------ compiled kernel
-_dp, _ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-
-
-class _ModelStruct(ctypes.Structure):
-    """Mirror of ``Model`` in _kernel.c (same order)."""
-
-    _fields_ = [(name, ctypes.c_int) for name in
-                ("n", "n_link", "i_r2x", "i_r2y", "i_alpha2", "s_link", "i_u_joint",
-                 "i_u_sleeve", "i_tip_u", "i_tip_v", "n_elastic", "bw", "n_stress_leaf",
-                 "n_stress_link", "stress_width")] + \
-               [(name, ctypes.c_double) for name in
-                ("l1", "l3", "y_stop", "j0_leaf", "j0_link", "pbar0", "link_mass")] + \
-               [("c_full", _dp), ("g_full", _dp), ("body", _ip), ("elastic_idx", _ip),
-                ("sbar", _dp), ("isbar", _dp), ("mff_band", _dp), ("k_band", _dp),
-                ("w_band", _dp), ("stress_idx", _ip), ("stress_top", _dp),
-                ("stress_bottom", _dp), ("stress_x", _dp)] + \
-               [("ref_leaf_point", ctypes.c_int), ("ref_link_element", ctypes.c_int),
-                ("ref_link_frac", ctypes.c_double)]
-
-
-#: what a compiled Sample vector holds (_kernel.c sample_vector, S_* in this order), then the
-#: fibre stress at every stress point (top of every point, then bottom; leaf points first);
-#: the names are the Sample's, but the sleeve reaction's two components
-SAMPLE_VECTOR = ("alpha1", "alpha2", "alpha1_rate", "alpha2_rate", "sleeve_position",
-                 "sleeve_velocity", "tip_axial", "tip_transverse", "peak_stress_leaf",
-                 "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x",
-                 "stress_leaf_joint", "stress_link_mid", "sleeve_reaction_x",
-                 "sleeve_reaction_y", "kinetic_energy", "strain_energy",
-                 "constraint_residual", "phase_correction_energy")
-
-
-class _AdvanceCall(ctypes.Structure):
-    """Mirror of ``AdvanceCall`` in _kernel.c: umbrella_advance's arguments, kept and updated."""
-
-    _fields_ = [("locked", ctypes.c_int), ("rigid", ctypes.c_int), ("k0", ctypes.c_long),
-                ("h", ctypes.c_double), ("n_steps", ctypes.c_int), ("force", ctypes.c_double),
-                ("tol", ctypes.c_double), ("phi_tol", ctypes.c_double),
-                ("max_iter", ctypes.c_int), ("div_tol", ctypes.c_double),
-                ("q", _dp), ("v", _dp), ("lam", _dp), ("p", _dp), ("acc", _dp), ("out", _dp),
-                ("cap", ctypes.c_int), ("n_done", ctypes.c_int), ("iterations", ctypes.c_int),
-                ("residual", ctypes.c_double), ("accel", _dp), ("final", _dp)]
-
-
-class _SampleCall(ctypes.Structure):
-    """Mirror of ``SampleCall`` in _kernel.c: umbrella_sample's arguments."""
-
-    _fields_ = [("locked", ctypes.c_int), ("rigid", ctypes.c_int), ("q", _dp), ("v", _dp),
-                ("p", _dp), ("lam", _dp), ("out", _dp)]
-
-
-#: the leaf angle at which the leaf lies along the axle: a stage-1 state there is a fault
-#: (_kernel.c step_taken, UmbrellaSimulator._checked, RigidEngine._check)
-ALPHA1_AXLE = math.pi / 2
-AXLE_REASON = ("the leaf reached the axle (alpha1 = pi/2): the frame folded back past its "
-               "start (v0 > 0 or a sleeve force below 0 drove it there), where the model has "
-               "no stop")
-_KERNEL_ERRORS = {1: "Newton did not converge", 2: "Newton iterate became non-finite",
-                  3: "singular iteration matrix", 4: "mass matrix not positive definite",
-                  5: "out of memory", 8: AXLE_REASON}
-#: umbrella_advance status codes that are not failures
-ADVANCE_DONE, ADVANCE_CROSSING, ADVANCE_DIVERGED = 0, 6, 7
-_kernel_lib = None
-
-
-def load_kernel():
-    """Return the compiled step, or None when it was not built (then numpy does the work)."""
-    global _kernel_lib
-    if _kernel_lib is None:
-        here = os.path.dirname(os.path.abspath(__file__))
-        found = sorted(glob.glob(os.path.join(here, "_kernel*.so")))
-        _kernel_lib = False
-        for path in found:
-            try:
-                lib = ctypes.CDLL(path)
-            except OSError:
-                continue
-            vp, d, i = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
-            lib.umbrella_new.restype = vp
-            lib.umbrella_new.argtypes = [ctypes.POINTER(_ModelStruct)]
-            lib.umbrella_free.restype = None
-            lib.umbrella_free.argtypes = [vp]
-            lib.umbrella_step.restype = i
-            lib.umbrella_step.argtypes = [vp, i, i, _dp, _dp, _dp, _dp, d, d, d, d, i,
-                                          _dp, _dp, _dp, _dp, _ip]
-            lib.umbrella_momentum.restype = None
-            lib.umbrella_momentum.argtypes = [vp, _dp, _dp, _dp]
-            lib.umbrella_set_phase_correction.restype = i
-            lib.umbrella_set_phase_correction.argtypes = [vp, i, _dp, _dp, d]
-            lib.umbrella_set_law.restype = None
-            lib.umbrella_set_law.argtypes = [vp, vp]
-            lib.umbrella_advance_call.restype = i
-            lib.umbrella_advance_call.argtypes = [vp, ctypes.POINTER(_AdvanceCall)]
-            lib.umbrella_sample_call.restype = None
-            lib.umbrella_sample_call.argtypes = [vp, ctypes.POINTER(_SampleCall)]
-            lib.umbrella_find_crossing.restype = i
-            lib.umbrella_find_crossing.argtypes = [vp, i, _dp, _dp, _dp, _dp, d, d, d, d, i, d,
-                                                   d, _dp, _dp, _dp, _dp, _dp, _dp, _ip]
-            _kernel_lib = lib
-            break
-    return _kernel_lib or None
-
-
-def _dptr(a: np.ndarray):
-    return a.ctypes.data_as(_dp)
-
-
-class CompiledKernel:
-    """
-    Hold the model handed to _kernel.c once, and every buffer the calls use.
-
-    Each buffer is allocated once and its ctypes pointer cached: a call converts only scalars.
-    """
-
-    def __init__(self, lib, m: UmbrellaModel, capacity: int = 64):
-        self.lib = lib
-        self.model = m
-        n = m.n
-        body = -np.ones(n, dtype=np.intc)
-        body[m.s_leaf] = 0
-        body[m.s_link] = 1
-        bw, mff_band, k_band, w_band = m.banded_invariants()
-        s_idx, s_top, s_bot, s_x, (n_leaf, n_link) = m.stress_rows()
-        elastic = np.ascontiguousarray(m.elastic_indices, dtype=np.intc)
-        link = m.link
-        keep = {"c_full": np.zeros(n), "g_full": np.zeros(n),
-                "sbar": np.ascontiguousarray(link.s_bar),
-                "isbar": np.ascontiguousarray([-link.s_bar[1], link.s_bar[0]]),
-                "mff_band": np.ascontiguousarray(mff_band),
-                "k_band": np.ascontiguousarray(k_band), "w_band": np.ascontiguousarray(w_band),
-                "stress_top": np.ascontiguousarray(s_top),
-                "stress_bottom": np.ascontiguousarray(s_bot),
-                "stress_x": np.ascontiguousarray(s_x)}
-        keep["c_full"][m.s_leaf], keep["c_full"][m.s_link] = m.leaf.c, link.c
-        keep["g_full"][m.s_leaf], keep["g_full"][m.s_link] = m.leaf.g, link.g
-        ints = {"body": body, "elastic_idx": elastic,
-                "stress_idx": np.ascontiguousarray(s_idx)}
-        self._keep = (keep, ints)  # the struct points into these arrays
-        self.struct = _ModelStruct(
-            n=n, n_link=link.n_elastic, i_r2x=m.i_r2x, i_r2y=m.i_r2y, i_alpha2=m.i_alpha2,
-            s_link=m.s_link.start, i_u_joint=m.i_u_joint, i_u_sleeve=m.i_u_sleeve,
-            i_tip_u=m.i_tip_u, i_tip_v=m.i_tip_v, n_elastic=len(elastic), bw=bw,
-            n_stress_leaf=n_leaf, n_stress_link=n_link, stress_width=s_idx.shape[1],
-            l1=m.params.l1, l3=m.params.l3, y_stop=m.y_stop, j0_leaf=m.leaf.j0,
-            j0_link=link.j0, pbar0=link.p_bar[0], link_mass=link.mass,
-            **dict(zip(("ref_leaf_point", "ref_link_element", "ref_link_frac"),
-                       m.reference_stress_points)),
-            **{k: _dptr(v) for k, v in keep.items()},
-            **{k: v.ctypes.data_as(_ip) for k, v in ints.items()})
-        ctx = lib.umbrella_new(ctypes.byref(self.struct))
-        if not ctx:
-            # (umbrella_new: its buffers, or the LU of the constant elastic mass band)
-            raise MemoryError("the compiled kernel could not be set up: out of memory, or a "
-                              "singular elastic mass matrix")
-        self._ctx = ctypes.c_void_p(ctx)
-        self._free = lib.umbrella_free
-        nc_max = 4 + len(elastic)
-        # the state advanced in place, the last step's acceleration, then umbrella_sample of
-        # the state each advance reaches (made by that call): views of one buffer, so that a
-        # DynamicState of it and its Sample vector are one copy (state(), sample())
-        self._points = len(m.leaf.stress_x) + len(m.link.stress_x)
-        self._n, self._state_len = n, 4 * n + nc_max
-        self._state_buf = np.zeros(self._state_len + len(SAMPLE_VECTOR) + 2 * self._points)
-        self.q, self.v, self.p, self.accel = (self._state_buf[k * n:(k + 1) * n]
-                                              for k in range(4))
-        self.lam = self._state_buf[4 * n:self._state_len]
-        self._final = self._state_buf[self._state_len:]
-        self.acc = np.zeros(3)                     # work, lock loss, damping dissipation (J)
-        self._ptr = {k: _dptr(getattr(self, k)) for k in ("q", "v", "p", "lam", "acc", "accel")}
-        self._its = ctypes.c_int(0)
-        ptr = self._ptr
-        # the state whose copy holds its Sample vector (the last advance's), that copy's
-        # vector, and the constraint set it was made with
-        self._final_cs = self._final_of = self._final_copy = None
-        self._call = _AdvanceCall(phi_tol=PHI_TOLERANCE, q=ptr["q"], v=ptr["v"], lam=ptr["lam"],
-                                  p=ptr["p"], acc=ptr["acc"], accel=ptr["accel"],
-                                  final=_dptr(self._final))
-        self._call_ref = ctypes.byref(self._call)
-        self._setting = None     # what _call holds besides the state and k0, n_steps
-        self._set_capacity(capacity)
-        self._made = None        # the DynamicState the buffers hold (see load)
-        self._sample_buf = None
-        # single-step outputs
-        self._q1, self._v1, self._p1 = np.zeros(n), np.zeros(n), np.zeros(n)
-        self._lam1 = np.zeros(nc_max)
-
-    def __del__(self):
-        ctx = getattr(self, "_ctx", None)
-        if ctx is not None and ctx.value:
-            self._free(ctx)
-            self._ctx = None
-
-    def set_phase_correction(self, pc: ModalPhaseCorrection) -> None:
-        """Hand stage 2's phase correction to the kernel (it keeps pointers to these arrays)."""
-        self._phase_correction = arrays = tuple(
-            np.ascontiguousarray(a, dtype=float)
-            for a in (pc.modes, pc.mass_change))
-        if self.lib.umbrella_set_phase_correction(self._ctx, len(pc.mass_change),
-                                                  *(_dptr(a) for a in arrays), pc.lock_energy):
-            raise MemoryError("the compiled kernel could not allocate the phase correction's "
-                              "Newton buffers")
-
-    def set_elastic_law(self, law, law_ptr) -> None:
-        """
-        Step with the elastic law of _kernel_nonlinear.c at law_ptr (nonlinear.CompiledLaw).
-
-        The context points at it: the law object is kept alive as ``elastic_law``.
-        """
-        self.lib.umbrella_set_law(self._ctx, law_ptr)
-        self.elastic_law = law
-
-    def _set_capacity(self, cap: int) -> None:
-        from .outputs import STEP_FIELDS
-        self.out = np.zeros((len(STEP_FIELDS), cap))
-        self._out_ptr = _dptr(self.out)
-        self.capacity = cap
-        self._call.out, self._call.cap = self._out_ptr, cap
-
-    def load(self, s: DynamicState, work: float, lock_loss: float) -> None:
-        """Take s as the state to advance from (nothing to copy if it is the last one made)."""
-        self.acc[0], self.acc[1] = work, lock_loss
-        self.acc[2] = s.dissipation   # accumulated with a damped elastic law (nonlinear.py)
-        if s is self._made:
-            return
-        self._made = None
-        self.q[:] = s.q
-        self.v[:] = s.qd
-        self.lam[:len(s.multipliers)] = s.multipliers
-        if s.momentum is not None:
-            self.p[:] = s.momentum
-        else:
-            self.lib.umbrella_momentum(self._ctx, self._ptr["q"], self._ptr["v"], self._ptr["p"])
-
-    def advance(self, cs: ConstraintSet, k0: int, h: float, n_steps: int, force: float,
-                tol: float, max_iter: int, div_tol: float):
-        """
-        Take n_steps grid steps from the loaded state.
-
-        n_steps grid steps from the loaded state; returns (status, steps done, Newton
-        iterations, residual of a diverged step).  Rows are in self.out[:, :steps].
-        """
-        if n_steps > self.capacity:
-            self._set_capacity(max(n_steps, 2 * self.capacity))
-        call = self._call
-        call.k0, call.n_steps = k0, n_steps
-        setting = (cs.locked, cs.rigid, h, force, tol, max_iter, div_tol)
-        if setting != self._setting:    # usually the same as last time: no ctypes setattr
-            self._setting = setting
-            (call.locked, call.rigid, call.h, call.force, call.tol, call.max_iter,
-             call.div_tol) = setting
-        status = self.lib.umbrella_advance_call(self._ctx, self._call_ref)
-        done = call.n_done
-        if done:      # _final holds the Sample outputs of the state state() makes next
-            self._final_cs, self._final_of, self._final_copy = cs, None, None
-        return status, done, call.iterations, call.residual
-
-    def state(self, t: float, nc: int) -> DynamicState:
-        """Return the advanced state; advancing from it next time needs no load."""
-        # a read-only copy (immutable: a Sample of it shares its arrays); via bytes: setting
-        # a copy's writeable flag costs as much again as the copy
-        b, n = np.frombuffer(self._state_buf.tobytes()), self._n
-        # once per publication: the frozen dataclass's per-field __init__ costs 3 us
-        self._made = build_frozen(DynamicState, {
-            "t": t, "q": b[:n], "qd": b[n:2 * n], "qdd": b[3 * n:4 * n],
-            "multipliers": b[4 * n:4 * n + nc], "momentum": b[2 * n:3 * n],
-            "dissipation": self.acc.item(2)})
-        if self._final_cs is not None and self._final_of is None:
-            self._final_of, self._final_copy = self._made, b[self._state_len:]
-        return self._made
-
-    def sample(self, s: DynamicState, cs: ConstraintSet) -> np.ndarray:
-        """
-        Return the Sample vector of a state with its momentum (_kernel.c umbrella_sample).
-
-        A read-only array of its own: SAMPLE_VECTOR, then the top and bottom fibre stress at
-        every stress point (leaf first).  The state an advance reached has it from that call
-        (in the copy that holds the state's arrays).
-        """
-        if s is self._final_of and cs is self._final_cs:   # the advance that made s left it
-            return self._final_copy
-        if self._sample_buf is None:
-            out = np.zeros(len(self._final))
-            ptr = self._ptr
-            # one call struct on the buffers (the state last made), one for any other state
-            calls = [_SampleCall(out=_dptr(out)) for _ in range(2)]
-            calls[0].q, calls[0].v, calls[0].p, calls[0].lam = (ptr["q"], ptr["v"], ptr["p"],
-                                                                ptr["lam"])
-            self._sample_buf = (out, calls, [ctypes.byref(c) for c in calls], [None, None])
-        out, calls, refs, flags = self._sample_buf
-        which = 0 if s is self._made else 1          # the buffers hold it: no conversion
-        call = calls[which]
-        if which:
-            lam = np.zeros(len(self.lam))
-            lam[:len(s.multipliers)] = s.multipliers
-            arrays = [np.ascontiguousarray(a, dtype=float) for a in (s.q, s.qd, s.momentum)]
-            arrays.append(lam)
-            call.q, call.v, call.p, call.lam = (_dptr(a) for a in arrays)
-        if flags[which] is not cs:                   # (a ctypes setattr costs ~0.2 us)
-            call.locked, call.rigid = cs.locked, cs.rigid
-            flags[which] = cs
-        self.lib.umbrella_sample_call(self._ctx, refs[which])
-        out = out.copy()
-        out.flags.writeable = False
-        return out
-
-    def find_crossing(self, s: DynamicState, h: float, force: float, cs: ConstraintSet,
-                      tol: float, max_iter: int, div_tol: float, event_tol: float):
-        """
-        Return (status, state, step length, Newton iterations, residual) of the lock instant.
-
-        The Illinois root find of y_H = y_stop over the step length in (0, h] from s (stage
-        deploying), in compiled code (_kernel.c umbrella_find_crossing).  state is the best
-        trial (status 0), else None and the step length / residual of the failing trial.
-        """
-        q0 = np.ascontiguousarray(s.q, dtype=float)
-        v0 = np.ascontiguousarray(s.qd, dtype=float)
-        lam0 = np.zeros(len(self.lam))
-        lam0[:len(s.multipliers)] = s.multipliers
-        p0 = np.empty(len(q0))
-        if s.momentum is not None:
-            p0[:] = s.momentum
-        else:
-            self.lib.umbrella_momentum(self._ctx, _dptr(q0), _dptr(v0), _dptr(p0))
-        dt, res = ctypes.c_double(0.0), ctypes.c_double(0.0)
-        status = self.lib.umbrella_find_crossing(
-            self._ctx, int(cs.rigid), _dptr(q0), _dptr(v0), _dptr(lam0), _dptr(p0), h, force,
-            tol, PHI_TOLERANCE, max_iter, div_tol, event_tol, _dptr(self._q1), _dptr(self._v1),
-            _dptr(self._lam1), _dptr(self._p1), ctypes.byref(dt), ctypes.byref(res),
-            ctypes.byref(self._its))
-        if status != 0:
-            return status, None, dt.value, self._its.value, res.value
-        v = self._v1.copy()
-        state = DynamicState(s.t + dt.value, self._q1.copy(), v, (v - v0) / dt.value,
-                             self._lam1[:len(s.multipliers)].copy(), self._p1.copy())
-        return status, state, dt.value, self._its.value, res.value
-
-    def step(self, s: DynamicState, h, force, cs: ConstraintSet, tol, max_iter):
-        q0 = np.ascontiguousarray(s.q, dtype=float)
-        v0 = np.ascontiguousarray(s.qd, dtype=float)
-        lam0 = np.ascontiguousarray(s.multipliers, dtype=float)
-        p0 = None if s.momentum is None else np.ascontiguousarray(s.momentum, dtype=float)
-        status = self.lib.umbrella_step(
-            self._ctx, int(cs.locked), int(cs.rigid), _dptr(q0), _dptr(v0),
-            _dptr(lam0), None if p0 is None else _dptr(p0), h, force, tol, PHI_TOLERANCE,
-            max_iter, _dptr(self._q1), _dptr(self._v1), _dptr(self._lam1), _dptr(self._p1),
-            ctypes.byref(self._its))
-        if status != 0:
-            raise ConvergenceError(f"{_KERNEL_ERRORS.get(status, status)} at t = {s.t + h:.9g} s")
-        v = self._v1.copy()
-        return (DynamicState(s.t + h, self._q1.copy(), v, (v - v0) / h,
-                             self._lam1[:len(lam0)].copy(), self._p1.copy()), self._its.value)

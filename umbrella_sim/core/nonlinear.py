@@ -66,11 +66,11 @@ amplitude fell 4x in one cycle at zeta = 0.02).  In the midpoint step the dampin
 dissipated energy, and the energy balance reads T + V - (T0 + V0) - W + lock loss +
 dissipation = 0.
 
-Compiled path: the kernel of integrators.py (_kernel.c) with this module's elastic law
-attached (_kernel_nonlinear.c, ``CompiledElasticLaw``): the same arithmetic as the numpy
-step here, which stays as the reference the tests compare it with step by step
-(UMBRELLA_SIM_KERNEL=numpy selects it).  With zeta = 0 the model ``flexible`` keeps the
-plain linear kernel.  Nothing here imports rclpy.
+Compiled path: the kernel of integrators.py (_kernel.c, bound by kernel.py) with this
+module's elastic law attached (_kernel_nonlinear.c, ``CompiledElasticLaw``): the same
+arithmetic as the numpy step here, which stays as the reference the tests compare it with
+step by step (UMBRELLA_SIM_KERNEL=numpy selects it).  With zeta = 0 the model ``flexible``
+keeps the plain linear kernel.  Nothing here imports rclpy.
 """
 from __future__ import annotations
 
@@ -82,9 +82,9 @@ import numpy as np
 from scipy.linalg.lapack import dgetrf, dgetrs
 
 from .engines import FiniteElementEngine
-from .integrators import (ConvergenceError, corrected_momentum, DynamicState, iteration_blocks,
-                          midpoint_iterate, MidpointDAE, NEWTON_TOLERANCE, PHI_TOLERANCE,
-                          project_keeping_energy)
+from .integrators import (corrected_momentum, iteration_blocks, midpoint_iterate, MidpointDAE,
+                          NEWTON_TOLERANCE, PHI_TOLERANCE, project_keeping_energy)
+from .kernel import ConvergenceError, DynamicState, ElasticData
 from .model import (band_form, BeamBody, ConstraintSet, GAUSS_POINTS, GAUSS_WEIGHTS,
                     shape_functions, UmbrellaModel)
 from .params import UmbrellaParams
@@ -300,29 +300,6 @@ def locked_first_frequency(model: UmbrellaModel) -> float:
 
 
 # ------------------------------------------------------------ compiled elastic law
-_dp, _ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-
-
-class _ElasticData(ctypes.Structure):
-    """Mirror of ElasticData in _kernel_elastic.h (same order)."""
-
-    _fields_ = ([(name, ctypes.c_int) for name in
-                 ("n", "ne", "bw", "n_el", "n_gauss", "nonlinear")]
-                + [("beta", ctypes.c_double), ("youngs_modulus", ctypes.c_double),
-                   ("elastic_idx", _ip), ("kb_band", _dp), ("el_q", _ip), ("el_pos", _ip),
-                   ("du", _dp), ("dv", _dp), ("mean_w", _dp), ("ea_l", _dp)])
-
-
-def _declare_law_functions(lib) -> None:
-    vp = ctypes.c_void_p
-    lib.elastic_new.restype = vp
-    lib.elastic_new.argtypes = [ctypes.POINTER(_ElasticData)]
-    lib.elastic_free.restype = None
-    lib.elastic_free.argtypes = [vp]
-    lib.elastic_last_dissipation.restype = ctypes.c_double
-    lib.elastic_last_dissipation.argtypes = [vp]
-
-
 class CompiledElasticLaw:
     """
     The strain energy and damping of a NonlinearUmbrellaModel, handed to _kernel_nonlinear.c.
@@ -334,7 +311,6 @@ class CompiledElasticLaw:
     """
 
     def __init__(self, lib, model: "NonlinearUmbrellaModel"):
-        _declare_law_functions(lib)
         st, p = model.strain, model.params
         idx = np.asarray(model.elastic_indices)
         bw = model.banded_invariants()[0]
@@ -362,11 +338,12 @@ class CompiledElasticLaw:
                   "ea_l": np.ascontiguousarray(st.ea_l, dtype=float)}
         arrays = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
         self._arrays = arrays   # the struct points into these
-        self.struct = _ElasticData(
+        self.struct = ElasticData(
             n=model.n, ne=len(idx), bw=bw, n_el=n_el, n_gauss=n_gauss,
             nonlinear=int(st.nonlinear), beta=model.damping_beta,
             youngs_modulus=p.youngs_modulus,
-            **{k: v.ctypes.data_as(_ip if v.dtype == np.intc else _dp)
+            **{k: v.ctypes.data_as(ctypes.POINTER(
+                ctypes.c_int if v.dtype == np.intc else ctypes.c_double))
                for k, v in arrays.items()})
         self.lib = lib
         ptr = lib.elastic_new(ctypes.byref(self.struct))
@@ -592,7 +569,7 @@ class ElasticEngine(FiniteElementEngine):
         """
         return not self.rigid and not self.model.strain.nonlinear
 
-    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss):
+    def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss, states=False):
         """
         Take up to n_steps steps on the compiled path (FiniteElementEngine.advance).
 
@@ -601,11 +578,11 @@ class ElasticEngine(FiniteElementEngine):
         single-step path, which retakes it split in halves (``ElasticMidpointDAE._substeps``)
         or reports the fault.
         """
-        out = super().advance(s, k0, h, n_steps, force, stage, work, lock_loss)
+        out = super().advance(s, k0, h, n_steps, force, stage, work, lock_loss, states)
         if out is None:
             return None
-        state, rows, work, stop = out
-        return state, rows, work, None if stop is None else "crossing"
+        state, rows, work, stop, state_rows = out
+        return state, rows, work, None if stop is None else "crossing", state_rows
 
 
 def build(params: UmbrellaParams):

@@ -7,6 +7,8 @@ from typing import Callable
 
 import numpy as np
 
+from .kernel import STEP_FIELDS
+
 
 def build_frozen(cls, values: dict):
     """
@@ -64,6 +66,16 @@ class Sample:
     # without it), in the energy the integrator keeps (mechanical_energy)
     phase_correction_energy: float = 0.0
 
+    @property
+    def sleeve_reaction_x(self) -> float:
+        """Return the axle's force on the sleeve, X (N): sleeve_reaction[0]."""
+        return self.sleeve_reaction[0]
+
+    @property
+    def sleeve_reaction_y(self) -> float:
+        """Return the stop's force on the sleeve, Y (N; 0 before the lock): sleeve_reaction[1]."""
+        return self.sleeve_reaction[1]
+
 
 def mechanical_energy(s):
     """
@@ -87,25 +99,14 @@ CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate"
 
 
 def sample_row(s: Sample) -> list:
-    row = []
-    for c in CSV_COLUMNS:
-        if c == "sleeve_reaction_x":
-            row.append(s.sleeve_reaction[0])
-        elif c == "sleeve_reaction_y":
-            row.append(s.sleeve_reaction[1])
-        else:
-            row.append(getattr(s, c))
-    return row
+    return [getattr(s, c) for c in CSV_COLUMNS]
 
 
-#: per-physics-step outputs of ``UmbrellaSimulator.advance``, in the order the compiled kernel
-#: writes them (_kernel.c, enum F_*); stage is the int code of model.Stage.  The state's
-#: figures at the step's end, except the peak stresses (and where): the largest over the
-#: whole step (``step_peaks``), so that a crest between two steps is not lost
-STEP_FIELDS = ("time", "stage", "alpha1", "alpha1_rate", "sleeve_position", "sleeve_velocity",
-               "sleeve_force", "tip_axial", "tip_transverse", "peak_stress_leaf",
-               "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x", "kinetic_energy",
-               "strain_energy", "work", "lock_energy_loss", "phase_correction_energy")
+# STEP_FIELDS (kernel.py, from _kernel.h's UMBRELLA_STEP_FIELDS): the per-physics-step outputs
+# of ``UmbrellaSimulator.advance``, in the order the compiled loop writes them; stage is the
+# int code of model.Stage.  The state's figures at the step's end, except the peak stresses
+# (and where): the largest over the whole step (``step_peaks``), so that a crest between two
+# steps is not lost.
 
 
 def step_row(s: Sample, peaks: tuple | None = None) -> list[float]:
@@ -119,6 +120,16 @@ def step_row(s: Sample, peaks: tuple | None = None) -> list[float]:
     if peaks is not None:
         row[_STEP_PEAKS] = [float(v) for v in peaks]
     return row
+
+
+def state_row(s: Sample) -> np.ndarray:
+    """
+    Return the state row of one sample (a column of StepBlock.states).
+
+    q, qd, then the fibre stresses: top of every stress point, then bottom, leaf points first.
+    """
+    return np.concatenate([s.q, s.qd, s.leaf_stress[0], s.link_stress[0], s.leaf_stress[1],
+                           s.link_stress[1]])
 
 
 #: a crest of hermite_peak inside the step counts if |p''| <= this * |p| there: the local
@@ -198,19 +209,35 @@ class StepBlock:
     The entries are rows of one (len(STEP_FIELDS), steps) array, ``rows``, as the compiled
     loop writes them; a field is a view of its row, made when it is read (a block is made once
     per publication period, and most readers look at a few fields).  Read-only.
+
+    ``states``: None, or with ``advance(n_steps, states=True)`` the state at the end of every
+    step, one column a step, field-major as the compiled loop writes them (_kernel.h
+    AdvanceCall.states): (2 n + 2 P, steps) for n coordinates and P stress points, the rows
+
+        q (n: the Sample's q), q' (n: its qd), then the fibre stress at every stress point,
+        top of every point, then bottom, leaf points first (P top rows: the leaf's
+        leaf_stress[0], the link's link_stress[0]; then P bottom rows: leaf_stress[1],
+        link_stress[1]),
+
+    i.e. ``state_row`` of each step's Sample.
     """
 
-    __slots__ = ("rows", "make_last", "lock", "error", "_last", "_peaks")
+    __slots__ = ("rows", "make_last", "lock", "error", "states", "_last", "_peaks")
 
     def __init__(self, rows: np.ndarray, make_last: Callable[[], Sample],
-                 lock: LockEvent | None = None, error: str | None = None):
+                 lock: LockEvent | None = None, error: str | None = None,
+                 states: np.ndarray | None = None):
         if len(rows) != len(STEP_FIELDS):
             raise ValueError(f"a block has {len(STEP_FIELDS)} rows, not {len(rows)}")
+        if states is not None and states.shape[1] != rows.shape[1]:
+            raise ValueError(f"a block of {rows.shape[1]} steps with state rows of "
+                             f"{states.shape[1]}")
         _set = object.__setattr__        # (read-only: __setattr__ refuses)
         _set(self, "rows", rows)
         _set(self, "make_last", make_last)
         _set(self, "lock", lock)
         _set(self, "error", error)
+        _set(self, "states", states)
         _set(self, "_last", None)
         _set(self, "_peaks", None)
 
@@ -225,27 +252,34 @@ class StepBlock:
 
     @classmethod
     def from_rows(cls, rows: np.ndarray, make_last: Callable[[], Sample], lock=None,
-                  error=None) -> "StepBlock":
+                  error=None, states: np.ndarray | None = None) -> "StepBlock":
         """
         Build a block from its rows (len(STEP_FIELDS), steps).
 
         rows: (len(STEP_FIELDS), steps), owned by the block; make_last builds the Sample
-        of the final state (a closure over that immutable state).
+        of the final state (a closure over that immutable state); states: the state rows
+        (owned by the block too), or None.
         """
-        return cls(rows, make_last, lock, error)
+        return cls(rows, make_last, lock, error, states)
 
     def __len__(self) -> int:
         return self.rows.shape[1]
 
     @classmethod
     def concatenate(cls, blocks: list["StepBlock"]) -> "StepBlock":
-        """Return one block of consecutive blocks' steps (the last block's final state)."""
+        """
+        Return one block of consecutive blocks' steps (the last block's final state).
+
+        Its state rows: every block's, if every block has them, else None.
+        """
         if len(blocks) == 1:
             return blocks[0]
         rows = np.array([np.concatenate([getattr(b, f) for b in blocks]) for f in STEP_FIELDS])
         lock = next((b.lock for b in blocks if b.lock is not None), None)
         error = next((b.error for b in blocks if b.error is not None), None)
-        return cls.from_rows(rows, blocks[-1].make_last, lock, error)
+        states = (np.concatenate([b.states for b in blocks], axis=1)
+                  if all(b.states is not None for b in blocks) else None)
+        return cls.from_rows(rows, blocks[-1].make_last, lock, error, states)
 
     @property
     def peaks(self) -> dict[str, tuple[float, float, float]]:

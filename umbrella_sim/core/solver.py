@@ -20,9 +20,10 @@ from . import nonlinear
 from .engines import (DIVERGENCE_RESIDUAL, EVENT_TIME_TOLERANCE, fault_message,
                       FiniteElementEngine, RigidEngine, SimulationDiverged)
 from .forcing import command_force, ForceSchedule
-from .integrators import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicState, SAMPLE_VECTOR
+from .kernel import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicState, SAMPLE_VECTOR
 from .model import DEFORMING, LOCKED, Stage, UmbrellaModel
-from .outputs import build_frozen, LockEvent, Sample, STEP_FIELDS, step_peaks, step_row, StepBlock
+from .outputs import (build_frozen, LockEvent, Sample, state_row, STEP_FIELDS, step_peaks,
+                      step_row, StepBlock)
 from .params import SPECS, UmbrellaParams
 
 
@@ -155,12 +156,14 @@ class UmbrellaSimulator:
             self.lock_event = lock_event
         self.steps += steps
 
-    def advance(self, n_steps: int) -> StepBlock:
+    def advance(self, n_steps: int, states: bool = False) -> StepBlock:
         """
         Take n_steps grid steps and return their outputs as a StepBlock.
 
         Take n_steps grid steps (stopping early only at a fault) and return their outputs,
-        one entry per step, with the final Sample and the lock if it happened in the block.
+        one entry per step, with the final Sample and the lock if it happened in the block;
+        with states, also the state at the end of every step (``StepBlock.states``: q, q' and
+        the fibre stresses).
 
         The engine's compiled path runs the steps in one call each (two around the lock,
         whose step is taken here); engines without one, or UMBRELLA_SIM_KERNEL=numpy, take
@@ -168,24 +171,19 @@ class UmbrellaSimulator:
         whole number >= 0 (ValueError otherwise).
         """
         _check_steps(n_steps)
-        rows = None
+        parts = []            # (rows, state rows or None) of the steps taken, in order
         done = 0
         error = None
         lock_before = self.lock_event
         force = self._force
         while done < n_steps:
             fast = self.engine.advance(self._state, self._k, self.h, n_steps - done, force,
-                                       self._stage, self._work, self._lock_loss)
+                                       self._stage, self._work, self._lock_loss, states)
             if fast is not None:
-                state, block, work, stop = fast
+                state, block, work, stop, block_states = fast
                 k = block.shape[1]
-                if k == n_steps:              # the whole block in one call (the usual case)
-                    rows = block.copy()
-                elif k:
-                    if rows is None:
-                        rows = np.empty((len(STEP_FIELDS), n_steps))
-                    rows[:, done:done + k] = block
-                if k:
+                if k:      # (the engine's buffers: copied before its next call)
+                    parts.append((block.copy(), block_states.copy() if states else None))
                     self._commit(state, self._stage, force, work - self._work, 0.0, None, k)
                     done += k
                 if stop is None:
@@ -199,19 +197,24 @@ class UmbrellaSimulator:
             except SimulationDiverged as exc:
                 error = str(exc)
                 break
-            if rows is None:
-                rows = np.empty((len(STEP_FIELDS), n_steps))
-            m = self.model
-            rows[:, done] = step_row(self.sample(), step_peaks(
-                start, self._fibre_stress(), self.time - t_start,
-                (m.leaf.stress_x, m.link.stress_x)))
+            m, sample = self.model, self.sample()
+            row = step_row(sample, step_peaks(start, self._fibre_stress(), self.time - t_start,
+                                              (m.leaf.stress_x, m.link.stress_x)))
+            parts.append((np.array(row)[:, None], state_row(sample)[:, None] if states else None))
             done += 1
         lock = self.lock_event if self.lock_event is not lock_before else None
         final = (self._state, self._stage, self._applied_force, self._work, self._lock_loss)
-        if rows is None:
+        if len(parts) == 1:               # (the usual block: one compiled call)
+            rows, kept = parts[0]
+        elif parts:
+            rows = np.hstack([r for r, _ in parts])
+            kept = np.hstack([k for _, k in parts]) if states else None
+        else:
+            m = self.model
             rows = np.empty((len(STEP_FIELDS), 0))
-        return StepBlock.from_rows(rows[:, :done].copy() if done < rows.shape[1] else rows,
-                                   lambda: self._sample(*final), lock, error)
+            kept = np.empty((2 * m.n + 2 * (m.leaf.n_stress_points + m.link.n_stress_points),
+                             0)) if states else None
+        return StepBlock.from_rows(rows, lambda: self._sample(*final), lock, error, kept)
 
     def advance_schedule(self, schedule: ForceSchedule, n_steps: int
                          ) -> tuple[StepBlock, list[tuple[float, float]]]:

@@ -1,0 +1,264 @@
+/*
+ * The interface of the compiled step (libumbrella_kernel.so): every struct, status code,
+ * list of output fields and function that crosses between the library and Python, declared
+ * once.  _kernel.c and _kernel_nonlinear.c include it; kernel.py reads it (it is installed
+ * with the package) to build its ctypes structures, function signatures and field names,
+ * so nothing here is mirrored by hand.  kernel.py's parser reads a fixed subset of C and
+ * refuses anything else: keep to the statement forms below (comments are free):
+ *   - #define UMBRELLA_ABI_VERSION <integer>, #define UMBRELLA_API <attribute>;
+ *   - X-macro lists, #define UMBRELLA_<LIST>(X) X(C name, Python name) ..., one entry a line;
+ *   - enum entry macros, #define <NAME>(name, py) [PREFIX##]name, and the enums they make,
+ *     enum { UMBRELLA_<LIST>(<NAME>) <COUNT> };
+ *   - typedef struct { <members> } <Name>; with members of int, long, double, pointers to
+ *     those (const or not) and pointers to this header's structs; typedef struct <Name>
+ *     <Name>; for a type Python only holds a pointer to;
+ *   - UMBRELLA_API <type> <function>(<parameters>); of the same types.
+ * The library reports its ABI version, the size of each struct and the length of each list
+ * (umbrella_abi); kernel.load_kernel refuses a library whose figures differ from the
+ * header's, e.g. one left from an older build.
+ */
+#ifndef UMBRELLA_KERNEL_H
+#define UMBRELLA_KERNEL_H
+
+/* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
+ * reordered, a function's arguments changed). */
+#define UMBRELLA_ABI_VERSION 1
+
+/* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
+ * exported. */
+#define UMBRELLA_API __attribute__((visibility("default")))
+
+/* ------------------------------------------------------------------- status codes */
+/* What the stepping functions return, 0, 1, ... in this order; CROSSING and DIVERGED stop
+ * umbrella_advance_call without being failures. */
+#define UMBRELLA_STATUS_CODES(X) \
+    X(OK, ok) \
+    X(NO_CONVERGENCE, no_convergence) \
+    X(NON_FINITE, non_finite) \
+    X(SINGULAR, singular) \
+    X(NOT_PD, not_positive_definite) \
+    X(NO_MEMORY, no_memory) \
+    X(CROSSING, crossing) \
+    X(DIVERGED, diverged) \
+    X(AXLE, axle)
+#define UMBRELLA_STATUS_ENTRY(name, py) name,
+enum { UMBRELLA_STATUS_CODES(UMBRELLA_STATUS_ENTRY) N_STATUS };
+
+/* ------------------------------------------------------------- per-step output row */
+/* The fields of one step's output row, in this order (outputs.STEP_FIELDS; C: F_<name>);
+ * an advance writes them field-major, out[field * cap + step].  The state's figures at the
+ * step's end (stage: the int code of model.Stage), except the peak stresses and where they
+ * are: the largest over the whole step (the cubic Hermite interpolant of the fibre stress).
+ * Every figure a CSV row of the run needs: alpha1_accel = (v1 - v0) / h of the step; the
+ * reference stresses as the Sample vector's; the sleeve reaction lam[2], and lam[3] once
+ * locked, else 0; the end state's max(|Phi|, |J v|); the damping dissipation so far. */
+#define UMBRELLA_STEP_FIELDS(X) \
+    X(TIME, time) \
+    X(STAGE, stage) \
+    X(ALPHA1, alpha1) \
+    X(ALPHA1_RATE, alpha1_rate) \
+    X(SLEEVE_POS, sleeve_position) \
+    X(SLEEVE_VEL, sleeve_velocity) \
+    X(FORCE, sleeve_force) \
+    X(TIP_AXIAL, tip_axial) \
+    X(TIP_TRANSVERSE, tip_transverse) \
+    X(PEAK_LEAF, peak_stress_leaf) \
+    X(PEAK_LEAF_X, peak_stress_leaf_x) \
+    X(PEAK_LINK, peak_stress_link) \
+    X(PEAK_LINK_X, peak_stress_link_x) \
+    X(KINETIC, kinetic_energy) \
+    X(STRAIN, strain_energy) \
+    X(WORK, work) \
+    X(LOCK_LOSS, lock_energy_loss) \
+    X(PC_ENERGY, phase_correction_energy) \
+    X(ALPHA2, alpha2) \
+    X(ALPHA2_RATE, alpha2_rate) \
+    X(ALPHA1_ACCEL, alpha1_accel) \
+    X(STRESS_LEAF_JOINT, stress_leaf_joint) \
+    X(STRESS_LINK_MID, stress_link_mid) \
+    X(REACTION_X, sleeve_reaction_x) \
+    X(REACTION_Y, sleeve_reaction_y) \
+    X(RESIDUAL, constraint_residual) \
+    X(DISSIPATION, damping_dissipation)
+#define UMBRELLA_STEP_ENTRY(name, py) F_##name,
+enum { UMBRELLA_STEP_FIELDS(UMBRELLA_STEP_ENTRY) N_FIELDS };
+
+/* ------------------------------------------------------------------- Sample vector */
+/* What a Sample holds of a state beyond q, q', q'' and the multipliers, in this order
+ * (kernel.SAMPLE_VECTOR; C: S_<name>), then the fibre stress at every stress point: top of
+ * every point, then bottom; leaf points first. */
+#define UMBRELLA_SAMPLE_FIELDS(X) \
+    X(ALPHA1, alpha1) \
+    X(ALPHA2, alpha2) \
+    X(ALPHA1_RATE, alpha1_rate) \
+    X(ALPHA2_RATE, alpha2_rate) \
+    X(SLEEVE_POS, sleeve_position) \
+    X(SLEEVE_VEL, sleeve_velocity) \
+    X(TIP_AXIAL, tip_axial) \
+    X(TIP_TRANSVERSE, tip_transverse) \
+    X(PEAK_LEAF, peak_stress_leaf) \
+    X(PEAK_LEAF_X, peak_stress_leaf_x) \
+    X(PEAK_LINK, peak_stress_link) \
+    X(PEAK_LINK_X, peak_stress_link_x) \
+    X(STRESS_LEAF_JOINT, stress_leaf_joint) \
+    X(STRESS_LINK_MID, stress_link_mid) \
+    X(REACTION_X, sleeve_reaction_x) \
+    X(REACTION_Y, sleeve_reaction_y) \
+    X(KINETIC, kinetic_energy) \
+    X(STRAIN, strain_energy) \
+    X(RESIDUAL, constraint_residual) \
+    X(PC_ENERGY, phase_correction_energy)
+#define UMBRELLA_SAMPLE_ENTRY(name, py) S_##name,
+enum { UMBRELLA_SAMPLE_FIELDS(UMBRELLA_SAMPLE_ENTRY) N_SAMPLE };
+
+/* ---------------------------------------------------------------------- structs */
+/* The model (kernel.CompiledKernel builds it): sizes, indices of q, constants, and the
+ * constant arrays it points into (the caller keeps them alive). */
+typedef struct {
+    int n;                 /* coordinates */
+    int n_link;            /* link elastic coordinates */
+    int i_r2x, i_r2y, i_alpha2, s_link;
+    int i_u_joint, i_u_sleeve, i_tip_u, i_tip_v;
+    int n_elastic;         /* leaf + link elastic coordinates, in q order */
+    int bw;                /* half bandwidth of the elastic block, elastic ordering */
+    int n_stress_leaf, n_stress_link, stress_width;
+    double l1, l3, y_stop;
+    double j0_leaf, j0_link, pbar0, link_mass;
+    const double *c_full, *g_full;                       /* n */
+    const int *body;       /* n: -1 not elastic, 0 leaf, 1 link */
+    const int *elastic_idx;                              /* n_elastic: q index of elastic p */
+    const double *sbar, *isbar;                          /* 2 x n_link each */
+    const double *mff_band, *k_band, *w_band;            /* n_elastic x (2 bw + 1) */
+    const int *stress_idx;                               /* points x width: q indices */
+    const double *stress_top, *stress_bottom;            /* points x width */
+    const double *stress_x;                              /* points */
+    /* the reference stresses (model.reference_stresses): the leaf's stress point at O'';
+     * the link element holding l3/2 and where in it (0..1) */
+    int ref_leaf_point, ref_link_element;
+    double ref_link_frac;
+} Model;
+
+/* umbrella_advance_call's arguments, kept by the caller and updated in place (from Python,
+ * converting 22 ctypes arguments cost as much as half a physics step, setting the few that
+ * change costs a tenth of that).  Up to n_steps grid steps t_k -> t_{k+1} = (k + 1) h from
+ * the state (q, v, lam, p = M v) at t_k0, updated in place after every committed step, with
+ * one output row per step in out (N_FIELDS x cap, field-major) and accel = (v1 - v0) / h of
+ * the last one.  acc = {work, lock loss, damping dissipation} in/out (J).
+ * states: NULL, or the state rows of every step, field-major like out (row r of step k at
+ * states[r * cap + k]), 2 n + 2 points rows: q (n), q' (n), then the fibre stress at every
+ * stress point, top of every point, then bottom, leaf points first (Model.n_stress_leaf +
+ * n_stress_link points). */
+typedef struct {
+    int locked, rigid;
+    long k0;
+    double h;
+    int n_steps;
+    double force, tol, phi_tol;
+    int max_iter;
+    double div_tol;
+    double *q, *v, *lam, *p, *acc, *out;
+    int cap;
+    int n_done, iterations;   /* out: committed steps, Newton iterations */
+    double residual;          /* out: the last checked state's max(|Phi|, |J v|) */
+    double *accel;
+    double *final;   /* NULL, or N_SAMPLE + 2 points: the Sample vector of the state reached */
+    double *states;  /* NULL, or (2 n + 2 points) x cap: the state rows */
+} AdvanceCall;
+
+/* umbrella_sample_call's arguments: the Sample vector (N_SAMPLE, then the fibre stresses)
+ * of the state (q, v, p = M(q) v, lam) into out. */
+typedef struct {
+    int locked, rigid;
+    const double *q, *v, *p, *lam;
+    double *out;
+} SampleCall;
+
+/* The elastic law of _kernel_nonlinear.c (nonlinear.CompiledElasticLaw builds it). */
+typedef struct {
+    int n;                   /* coordinates */
+    int ne;                  /* elastic coordinates (Model.n_elastic) */
+    int bw;                  /* half bandwidth of the elastic band (Model.bw) */
+    int n_el;                /* elements, leaf then link */
+    int n_gauss;             /* Gauss points per element */
+    int nonlinear;           /* 1: eps = mean(u' + v'^2/2); 0: eps = u' */
+    double beta;             /* damping: C = beta B^T D B (s); 0: undamped */
+    double youngs_modulus;   /* E (Pa), for the membrane part of the fibre stress */
+    const int *elastic_idx;  /* ne: q index of elastic position p */
+    const double *kb_band;   /* ne x (2 bw + 1): bending stiffness (K without its axial part) */
+    const int *el_q;         /* n_el x 6: q index of the element's coordinates, -1 if none */
+    const int *el_pos;       /* n_el x 6: their elastic positions, -1 if none */
+    const double *du, *dv;   /* n_el x n_gauss x 6: u', v' at the Gauss points */
+    const double *mean_w;    /* n_el x n_gauss: Gauss weight / l_e (element mean) */
+    const double *ea_l;      /* n_el: EA l_e */
+} ElasticData;
+
+/* Held by Python only as pointers: the stepping context (every work buffer, allocated once)
+ * and an elastic law. */
+typedef struct Ctx Ctx;
+typedef struct ElasticLaw ElasticLaw;
+
+/* What umbrella_abi reports after the version, in this order: the size of each of these
+ * structs, then each of these counts. */
+#define UMBRELLA_ABI_STRUCTS(X) \
+    X(Model, model) \
+    X(AdvanceCall, advance_call) \
+    X(SampleCall, sample_call) \
+    X(ElasticData, elastic_data)
+#define UMBRELLA_ABI_COUNTS(X) \
+    X(N_STATUS, status_codes) \
+    X(N_FIELDS, step_fields) \
+    X(N_SAMPLE, sample_fields)
+
+/* -------------------------------------------------------------------- functions */
+/* UMBRELLA_ABI_VERSION; the first n of the figures UMBRELLA_ABI_STRUCTS and
+ * UMBRELLA_ABI_COUNTS list, into figures. */
+UMBRELLA_API int umbrella_abi(int *figures, int n);
+
+/* A context for the model (which must outlive it), or NULL: out of memory, or a singular
+ * elastic mass matrix. */
+UMBRELLA_API Ctx *umbrella_new(const Model *m);
+UMBRELLA_API void umbrella_free(Ctx *x);
+
+/* Stage 2's modal phase correction (integrators.ModalPhaseCorrection) from now on: r modes,
+ * rows u (r x n), modal mass changes d, 1/2 v.D v just after the lock (the arrays stay the
+ * caller's); r = 0: none.  OK, or SINGULAR if its buffers cannot be allocated. */
+UMBRELLA_API int umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *d,
+                                               double e_lock);
+
+/* Step with this elastic law (NULL: the constant K, undamped). */
+UMBRELLA_API void umbrella_set_law(Ctx *x, ElasticLaw *law);
+
+/* p = M(q) v, plus D v once stage 2's phase correction is set. */
+UMBRELLA_API void umbrella_momentum(Ctx *x, const double *q, const double *v, double *p);
+
+/* One step of length h from (q0, v0, lam0, p0 = M(q0) v0 or NULL) into (q, v, lam, p1). */
+UMBRELLA_API int umbrella_step(Ctx *x, int locked, int rigid, const double *q0,
+                               const double *v0, const double *lam0, const double *p0_in,
+                               double h, double force, double tol, double phi_tol,
+                               int max_iter, double *q, double *v, double *lam, double *p1,
+                               int *iterations);
+
+/* Up to a->n_steps grid steps (AdvanceCall).  Stops early: CROSSING, in stage 1 the sleeve
+ * reached the stop during the next step; DIVERGED, max(|Phi|, |J v|) above div_tol after a
+ * step; any other status, the step failed.  The step that stopped it is not committed. */
+UMBRELLA_API int umbrella_advance_call(Ctx *x, AdvanceCall *a);
+
+/* The Sample vector of a state (SampleCall). */
+UMBRELLA_API void umbrella_sample_call(Ctx *x, SampleCall *a);
+
+/* The lock instant inside a step of length h from (q0, v0, lam0, p0), stage deploying: the
+ * Illinois root find of y_H = y_stop over the step length (solver's _find_lock). */
+UMBRELLA_API int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, const double *v0,
+                                        const double *lam0, const double *p0, double h,
+                                        double force, double tol, double phi_tol,
+                                        int max_iter, double div_tol, double event_tol,
+                                        double *q, double *v, double *lam, double *p,
+                                        double *dt_out, double *residual, int *iterations);
+
+/* The elastic law of d (which must outlive it), or NULL (out of memory); its free; the
+ * damping dissipation dq . C(q_m) dq / h of its last step (J). */
+UMBRELLA_API ElasticLaw *elastic_new(const ElasticData *d);
+UMBRELLA_API void elastic_free(ElasticLaw *law);
+UMBRELLA_API double elastic_last_dissipation(const ElasticLaw *law);
+
+#endif
