@@ -57,6 +57,7 @@ class Chunk:
     lock: LockEvent | None                  # the lock, if it happened in these steps
     error: str | None                       # the fault that ended them early, if any
     at_publication: bool                    # the run stands at a publication instant
+    lock_sample: Sample | None = None       # the state right after the lock, at its instant
 
     @property
     def end_time(self) -> float:
@@ -103,6 +104,7 @@ class RunDriver:
                 self.step, sim.sleeve_force, sorted(force_profile or [], key=lambda tf: tf[0]),
                 check=lambda f: command_force(f, sim.params))
         self.chunk_steps = chunk_steps or chunk_steps_for(self.params, sim.model.n)
+        self.states = False            # chunks with the state rows of their steps
         first = sim.sample()
         self.initial = first
         self.summary = SummaryAccumulator(self.params.as_dict(), first, sim.engine.lock_kind)
@@ -149,8 +151,10 @@ class RunDriver:
         Take the next chunk of steps: at most chunk_steps and max_steps, not past a publication.
 
         The steps go through the compiled loop (UmbrellaSimulator.advance_schedule) with
-        F_H from the schedule; the summary and the publication's peak-hold take them.  A
-        fault ends the chunk early: the state stays at the last good step (``error``).
+        F_H from the schedule; the summary and the publication's peak-hold take them.  The
+        lock ends a chunk (an event its consumers act on); a fault too, the state staying
+        at the last good step (``error``).  With ``states`` set, each chunk's block carries
+        the state rows of its steps (StepBlock.states).
         """
         n = self.chunk_steps
         to_publication = self.steps_to_publication()
@@ -158,7 +162,8 @@ class RunDriver:
             n = min(n, to_publication)
         if max_steps is not None:
             n = min(n, int(max_steps))
-        block, applied = self.sim.advance_schedule(self.schedule, max(n, 0))
+        block, applied = self.sim.advance_schedule(self.schedule, max(n, 0), self.states,
+                                                   until_lock=True)
         self.summary.add(block)
         for body, (peak, x, _) in block.peaks.items():
             if peak > self._hold.get(body, (-1.0, 0.0))[0]:
@@ -166,7 +171,8 @@ class RunDriver:
         if len(block):
             self._last_block = block
         return Chunk(block, tuple(applied), block.lock, block.error,
-                     block.error is None and self.at_publication)
+                     block.error is None and self.at_publication,
+                     self.sim.lock_sample() if block.lock is not None else None)
 
     def advance_period(self) -> list[Chunk]:
         """Take the chunks of steps to the next publication instant (or to a fault)."""
@@ -176,6 +182,14 @@ class RunDriver:
             chunks.append(chunk)
             if chunk.error is not None or chunk.at_publication or self.period_steps is None:
                 return chunks
+
+    def _steps_left(self, k_end: int, stop_after_lock: float | None) -> int:
+        """Return the steps left to k_end, or to the first step ending stop_after_lock past it."""
+        k = self.sim.step_index
+        lock = self.sim.lock_event
+        if stop_after_lock is not None and lock is not None:
+            k_end = min(k_end, math.ceil((lock.time + stop_after_lock) / self.step - 1e-9))
+        return k_end - k
 
     # ------------------------------------------------------------------- outputs
     def state_sample(self) -> Sample:
@@ -219,15 +233,14 @@ class RunDriver:
         k_end = int(round(duration / self.step))
         sim = self.sim
         while sim.step_index < k_end:
-            chunk = self.advance(k_end - sim.step_index)
+            chunk = self.advance(self._steps_left(k_end, stop_after_lock))
             if on_chunk is not None:
                 on_chunk(chunk)
             if chunk.error is not None:
                 return chunk.error
             if chunk.at_publication and on_publication is not None:
                 on_publication(self.publication())
-            if (stop_after_lock is not None and sim.lock_event is not None
-                    and sim.time >= sim.lock_event.time + stop_after_lock):
+            if self._steps_left(k_end, stop_after_lock) <= 0:
                 break
             if should_stop is not None and should_stop():
                 break
@@ -239,18 +252,20 @@ def simulate(params: UmbrellaParams, duration: float,
              stop_after_lock: float | None = None, *, output_every: int = 1,
              keep_samples: bool = True,
              on_chunk: Callable[[Chunk], None] | None = None,
-             should_stop: Callable[[], bool] | None = None) -> RunResult:
+             should_stop: Callable[[], bool] | None = None, states: bool = False) -> RunResult:
     """
     Run a whole simulation offline on a RunDriver and return its RunResult.
 
     ``result.figures`` are the summary figures of every physics step; keep_samples keeps
     the state's Sample every output_every steps (and right after the lock) in
     ``result.samples`` (a Python object a step at output_every = 1: for tests and studies;
-    the command line keeps none and streams what it writes).  On a diverged run what was
+    the command line keeps none and streams what it writes); on_chunk(chunk) gets every
+    chunk of steps (with states, their state rows too).  On a diverged run what was
     computed before the failure is kept and ``result.error`` says why.
     """
     driver = RunDriver(params, period_steps=output_every if keep_samples else None,
                        force_profile=force_profile)
+    driver.states = states
     sim = driver.sim
     result = RunResult(params=sim.params.as_dict(), q_labels=sim.model.coordinate_labels(),
                        leaf_stress_x=list(sim.model.leaf.stress_x),
@@ -260,7 +275,7 @@ def simulate(params: UmbrellaParams, duration: float,
 
     def chunk_done(chunk: Chunk) -> None:
         if keep_samples and chunk.lock is not None:
-            result.samples.append(sim.lock_sample())
+            result.samples.append(chunk.lock_sample)
         if on_chunk is not None:
             on_chunk(chunk)
 

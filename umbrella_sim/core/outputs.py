@@ -89,17 +89,15 @@ def mechanical_energy(s):
     return s.kinetic_energy + s.strain_energy + s.phase_correction_energy
 
 
-CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate", "alpha1_accel",
-               "sleeve_position", "sleeve_velocity", "sleeve_force", "tip_axial",
-               "tip_transverse", "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
-               "peak_stress_link_x", "stress_leaf_joint", "stress_link_mid",
-               "sleeve_reaction_x", "sleeve_reaction_y",
-               "kinetic_energy", "strain_energy", "work", "lock_energy_loss",
-               "constraint_residual", "damping_dissipation", "phase_correction_energy"]
+def energy_balance(s, initial_energy: float):
+    """
+    Return the energy balance error (J), one rule: 0 for a run that keeps its energy.
 
-
-def sample_row(s: Sample) -> list:
-    return [getattr(s, c) for c in CSV_COLUMNS]
+    mechanical_energy - initial_energy - work of F_H + energy the lock removed + energy the
+    damping dissipated, of a Sample or per step of a StepBlock (arrays).
+    """
+    return (mechanical_energy(s) - initial_energy - s.work + s.lock_energy_loss
+            + s.damping_dissipation)
 
 
 # STEP_FIELDS (kernel.py, from _kernel.h's UMBRELLA_STEP_FIELDS): the per-physics-step outputs

@@ -156,14 +156,16 @@ class UmbrellaSimulator:
             self.lock_event = lock_event
         self.steps += steps
 
-    def advance(self, n_steps: int, states: bool = False) -> StepBlock:
+    def advance(self, n_steps: int, states: bool = False, until_lock: bool = False
+                ) -> StepBlock:
         """
         Take n_steps grid steps and return their outputs as a StepBlock.
 
         Take n_steps grid steps (stopping early only at a fault) and return their outputs,
         one entry per step, with the final Sample and the lock if it happened in the block;
         with states, also the state at the end of every step (``StepBlock.states``: q, q' and
-        the fibre stresses).
+        the fibre stresses); with until_lock, the block ends with the step the lock happens
+        in (the lock is an event its consumers act on: a run that stops a time after it).
 
         The engine's compiled path runs the steps in one call each (two around the lock,
         whose step is taken here); engines without one, or UMBRELLA_SIM_KERNEL=numpy, take
@@ -202,6 +204,8 @@ class UmbrellaSimulator:
                                               (m.leaf.stress_x, m.link.stress_x)))
             parts.append((np.array(row)[:, None], state_row(sample)[:, None] if states else None))
             done += 1
+            if until_lock and self.lock_event is not lock_before:
+                break
         lock = self.lock_event if self.lock_event is not lock_before else None
         final = (self._state, self._stage, self._applied_force, self._work, self._lock_loss)
         if len(parts) == 1:               # (the usual block: one compiled call)
@@ -216,13 +220,15 @@ class UmbrellaSimulator:
                              0)) if states else None
         return StepBlock.from_rows(rows, lambda: self._sample(*final), lock, error, kept)
 
-    def advance_schedule(self, schedule: ForceSchedule, n_steps: int
+    def advance_schedule(self, schedule: ForceSchedule, n_steps: int, states: bool = False,
+                         until_lock: bool = False
                          ) -> tuple[StepBlock, list[tuple[float, float]]]:
         """
         Take n_steps steps with F_H from the schedule (forcing.py's one rule).
 
-        Returns the block of those steps (stopped early only at a fault, as ``advance``)
-        and the values that took effect in it, [(t, F)], each at the step it acts from.
+        Returns the block of those steps (stopped early at a fault, and with until_lock at
+        the lock, as ``advance``) and the values that took effect in it, [(t, F)], each at
+        the step it acts from.
         """
         _check_steps(n_steps)
         applied: list[tuple[float, float]] = []
@@ -235,8 +241,9 @@ class UmbrellaSimulator:
                 applied.append((self.time, f))
             change = schedule.next_change(self._k)
             n = (k_end if change is None else min(change, k_end)) - self._k
-            blocks.append(self.advance(n))
-            if blocks[-1].error is not None or self._k >= k_end:
+            blocks.append(self.advance(n, states, until_lock))
+            if (blocks[-1].error is not None or self._k >= k_end
+                    or until_lock and blocks[-1].lock is not None):
                 break
         return StepBlock.concatenate(blocks), applied
 

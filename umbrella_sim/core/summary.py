@@ -8,14 +8,13 @@ and where, the energy balance, and where the run left the model's validity (the 
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass, field, replace
 from functools import cache
 import math
 
 import numpy as np
 
-from .outputs import (CSV_COLUMNS, LockEvent, mechanical_energy, Sample, sample_row, STEP_FIELDS,
+from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS,
                       step_row, StepBlock)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
@@ -42,33 +41,6 @@ class RunResult:
 
     def column(self, name: str) -> np.ndarray:
         return np.array([getattr(s, name) for s in self.samples], dtype=float)
-
-    def write_csv(self, path: str, with_state: bool = False) -> None:
-        """
-        Write the time series as CSV.
-
-        with_state adds q, qd and the fibre stresses along both bodies
-        (columns 'sigma_top[leaf@0.25]' = top-fibre stress at 0.25 m from O, Pa; at a node
-        between two elements, each element's own: 'leaf@0.5-' of the element ending there,
-        'leaf@0.5+' of the one starting there).
-        """
-        with open(path, "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            header = list(CSV_COLUMNS)
-            if with_state and self.samples:
-                header += [f"q[{lab}]" for lab in self.q_labels]
-                header += [f"qd[{lab}]" for lab in self.q_labels]
-                for body, xs in (("leaf", self.leaf_stress_x), ("link", self.link_stress_x)):
-                    for fibre in ("top", "bottom"):
-                        header += [f"sigma_{fibre}[{body}@{x}]"
-                                   for x in stress_point_labels(xs)]
-            w.writerow(header)
-            for s in self.samples:
-                row = sample_row(s)
-                if with_state:
-                    row += list(s.q) + list(s.qd)
-                    row += list(s.leaf_stress.ravel()) + list(s.link_stress.ravel())
-                w.writerow(row)
 
     def summary(self) -> dict:
         return summarize(self)
@@ -140,21 +112,6 @@ def oscillation_period(t: np.ndarray, x: np.ndarray) -> float:
             d = lo + g * (hi - lo)
             fd = minus_amplitude(d)
     return 0.5 * (lo + hi)
-
-
-def stress_point_labels(xs) -> list[str]:
-    """
-    Name stress points by position (m, 6 digits); a node two elements share gets - and +.
-
-    Stresses are recovered at both ends of every element, so an inner node has two: the
-    element ending there (x-) and the one starting there (x+).
-    """
-    texts = [f"{x:.6g}" for x in xs]
-    out = list(texts)
-    for i in range(len(texts) - 1):
-        if texts[i] == texts[i + 1]:
-            out[i], out[i + 1] = texts[i] + "-", texts[i + 1] + "+"
-    return out
 
 
 def deploy_start(v0: float, forces) -> float | None:
@@ -322,10 +279,10 @@ class SummaryAccumulator:
     """
     Summary figures of a run from every physics step (StepBlocks).
 
-    Independent of the publication or recording rate.  Written once; used by the CLI, the
-    node (diagnostics, recording metadata) and, through the recording's metadata,
-    umbrella_compare.  The energy balance and the constraint residual are taken at the end
-    of each block (every step for ``simulate``, every publication for the node).
+    Independent of the publication or recording rate, and of how the steps are split into
+    blocks: every figure, the energy balance and the constraint residual included, comes
+    from each step's row.  Written once; used by the CLI, the node (diagnostics, recording
+    metadata) and, through the recording's metadata, umbrella_compare.
     """
 
     def __init__(self, params: dict, initial: Sample, lock_kind: str | None = None):
@@ -361,38 +318,33 @@ class SummaryAccumulator:
         n = len(block)
         if n == 0:
             return
-        # Python floats: a live node adds a block of ~10 steps per publication, where every
-        # numpy call costs more than the loop (~90 -> ~20 us per 1 kHz period, measured)
-        t, v, stage = block.rows.take(_SUMMARY_ROWS, axis=0).tolist()
+        rows = block.rows
+        t, v, stage = rows[_SUMMARY_ROWS]
         if self._start is None:     # (until the first push: then never again)
             # each step's force acts from the step's start: the previous step's end
-            self._start = deploy_start(0.0, zip([self.final_time, *t[:-1]],
-                                                block.rows[_FORCE_ROW].tolist()))
+            self._start = deploy_start(0.0, zip([self.final_time, *t[:-1].tolist()],
+                                                rows[_FORCE_ROW].tolist()))
         self.steps += n
-        self.final_time = t[-1]
-        self._tip_all = max(self._tip_all, max(v), -min(v))
+        self.final_time = float(t[-1])
+        self._tip_all = max(self._tip_all, float(np.abs(v).max()))
         if stage[0] == 0:                                  # stage 1 (deploying) in the block
-            tip1, when = self._tip1
-            for x, s, ti in zip(v, stage, t):
-                if s == 0 and (tip1 is None or abs(x) > tip1):
-                    tip1, when = abs(x), ti
-            self._tip1 = (tip1, when)
+            deploying = np.abs(np.where(stage == 0, v, 0.0))
+            i = int(deploying.argmax())
+            if self._tip1[0] is None or deploying[i] > self._tip1[0]:
+                self._tip1 = (float(deploying[i]), float(t[i]))
         if self.lock is not None and stage[-1] != 0 \
                 and t[0] <= self.lock.time + STAGE2_WINDOW + 1e-12:
-            end = self.lock.time + STAGE2_WINDOW + 1e-12
-            for ti, x, s in zip(t, v, stage):
-                if s != 0 and ti <= end:
-                    self._s2_t.append(ti)
-                    self._s2_v.append(x)
+            keep = (stage != 0) & (t <= self.lock.time + STAGE2_WINDOW + 1e-12)
+            self._s2_t.append(t[keep])
+            self._s2_v.append(v[keep])
         for body, (peak, x, ti) in block.peaks.items():
             if peak > self._peaks[body][0]:
                 self._peaks[body] = (peak, x, ti)
-        last = block.last
-        self._residual = max(self._residual, float(last.constraint_residual))
-        e = mechanical_energy(last)
-        self._scale = max(self._scale, abs(e), abs(last.work))
-        self._balance = max(self._balance, abs(e - self._e0 - last.work + last.lock_energy_loss
-                                               + last.damping_dissipation))
+        self._residual = max(self._residual, float(block.constraint_residual.max()))
+        self._scale = max(self._scale, float(np.abs(mechanical_energy(block)).max()),
+                          float(np.abs(block.work).max()))
+        self._balance = max(self._balance,
+                            float(np.abs(energy_balance(block, self._e0)).max()))
 
     def figures(self) -> dict:
         """Return the physics figures of the run so far (no wall-clock ones), JSON-ready."""
@@ -404,7 +356,7 @@ class SummaryAccumulator:
                      "tip_deflection_max": self._tip1[0],
                      "tip_deflection_max_time": self._tip1[1]}
         if self._s2_t:
-            out.update(stage2_figures(np.array(self._s2_t), np.array(self._s2_v),
+            out.update(stage2_figures(np.concatenate(self._s2_t), np.concatenate(self._s2_v),
                                       self.lock.time))
         else:
             out.update(stage2_figures(np.zeros(0), np.zeros(0), None))
@@ -488,10 +440,8 @@ def summarize(r: RunResult) -> dict:
 
 
 def energy_balance_error(r: RunResult) -> np.ndarray:
-    """(T + V) - (T0 + V0) - W + lock losses + damping dissipation, per sample (J)."""
-    e = mechanical_energy(r)
-    return (e - e[0] - r.column("work") + r.column("lock_energy_loss")
-            + r.column("damping_dissipation"))
+    """outputs.energy_balance of every sample of a run (J)."""
+    return np.array([energy_balance(s, mechanical_energy(r.samples[0])) for s in r.samples])
 
 
 def relative_drift(balance_error, energy, work) -> float:

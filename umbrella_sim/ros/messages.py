@@ -20,7 +20,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimension, String
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ..core.outputs import mechanical_energy, Sample
+from ..core.outputs import energy_balance, Sample
 from ..core.params import UmbrellaParams
 
 INERTIAL_FRAME = "umbrella_base"   # X toward the leaf, Y up the axle, origin at the hinge O
@@ -164,9 +164,8 @@ def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
 
 def energy_values(s: Sample, initial_energy: float) -> tuple:
     """Return kinetic, strain, work, lock loss, balance, damping, correction (J; ENERGY_LABEL)."""
-    balance = (mechanical_energy(s) - initial_energy - s.work + s.lock_energy_loss
-               + s.damping_dissipation)
-    return (s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss, balance,
+    return (s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss,
+            energy_balance(s, initial_energy),
             s.damping_dissipation, s.phase_correction_energy)
 
 

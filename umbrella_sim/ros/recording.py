@@ -110,7 +110,8 @@ class RunRecording:
 
 def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                    publish_rate: float = 100.0, marker_magnification: float = 1.0,
-                   on_chunk=None, keep_samples: bool = False) -> RunResult:
+                   on_chunk=None, keep_samples: bool = False,
+                   states: bool = False) -> RunResult:
     """
     Run the physics offline and record it as a live umbrella_node (root namespace) would.
 
@@ -118,7 +119,7 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     publication grid), PublicationEncoder encodes each publication, RunRecording writes the
     same topics, layout and metadata as the node.  Each profile row is recorded as a command
     at its own time, each value as applied from the step it acts from.  on_chunk(chunk):
-    after each chunk (progress).  Returns the RunResult (figures of every step; with
+    after each chunk (progress, a CSV; with states, their state rows too).  Returns the RunResult (figures of every step; with
     keep_samples, the Sample of every publication); ``error`` set if it diverged,
     ``recording_error`` if the recording stopped.
     """
@@ -127,6 +128,7 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                     record_path=bag_dir, marker_magnification=marker_magnification)
     profile = sorted(force_profile or [], key=lambda tf: tf[0])
     driver = RunDriver(params, publish_rate, force_profile=profile)   # (checked before the bag)
+    driver.states = states
     sim = driver.sim
     encoder = PublicationEncoder(driver)
     recorder = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, sim.model,

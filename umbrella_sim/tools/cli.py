@@ -9,13 +9,14 @@ import sys
 
 from . import sweep
 from .arguments import ArgumentParser
+from .csv_output import StepCsv
 from .inputs import build_params, read_force_profile
 from .. import __version__
 from ..bag.paths import check_new_output
 from ..core.driver import simulate
 from ..core.params import parameter_help, shortened_step_note, SPECS
 from ..core.solver import UmbrellaSimulator
-from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader
+from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
 
 
 class Progress:
@@ -76,9 +77,11 @@ def make_parser() -> argparse.ArgumentParser:
                     help="physics step (s)")
     sp.add_argument("--duration", type=float, default=1.0, help="simulated time (s)")
     sp.add_argument("--csv", metavar="FILE",
-                    help="write the time series (every physics step; with --mcap, each "
-                         "publication)")
-    sp.add_argument("--csv-state", action="store_true", help="add q and qd to the CSV")
+                    help="write the time series of every physics step (its state at the "
+                         "step's end; peak stresses: the largest over the step), streamed "
+                         "as the run goes")
+    sp.add_argument("--csv-state", action="store_true",
+                    help="add q, q' and the fibre stress at every stress point to the CSV")
     sp.add_argument("--json", action="store_true", help="print one JSON summary")
     sp.add_argument("--mcap", metavar="BAG_DIR",
                     help="record the node's topics to a new bag directory (BAG_DIR/"
@@ -158,13 +161,49 @@ def format_summary(summary: dict) -> str:
     return "\n".join(lines)
 
 
+class CsvStream:
+    """--csv FILE while the run goes: a write error stops the file (removed), not the run."""
+
+    def __init__(self, path: str, initial, state_model=None):
+        self.path, self.initial, self.state_model = path, initial, state_model
+        self.error: str | None = None
+        self.rows = 0
+        self._out = None
+
+    def write(self, chunk) -> None:
+        if self.error is not None:
+            return
+        try:
+            with deferred():    # a stop signal lands between chunks, never inside a row
+                if self._out is None:
+                    self._out = StepCsv(self.path, self.state_model)
+                    self._out.write_sample(self.initial)
+                self._out.write(chunk.block, chunk.lock_sample)
+                self.rows = self._out.rows
+        except OSError as exc:
+            self.error = f"--csv {self.path}: {exc.strerror or exc}"
+            self.close()
+            try:
+                os.unlink(self.path)
+            except OSError:
+                pass
+
+    def close(self) -> None:
+        if self._out is not None:
+            try:
+                self._out.close()
+            except OSError as exc:
+                self.error = self.error or f"--csv {self.path}: {exc.strerror or exc}"
+            self._out = None
+
+
 def write_stdout(text: str) -> bool:
     """Print text; False if the reader went away (``umbrella_sim simulate | head``)."""
     return print_for_reader(lambda: sys.stdout.write(text + "\n"))
 
 
 @interruptible("umbrella_sim", "what was written is complete (a --mcap recording is "
-               "finalised up to the interruption; --csv is only written after a finished run)")
+               "finalised up to the interruption, --csv holds every step before it)")
 def main(argv: list[str] | None = None) -> int:
     ap = make_parser()
     args = ap.parse_args(argv)
@@ -180,58 +219,67 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--duration {args.duration}: shorter than one physics step "
                              f"({params.physics_time_step:g} s); the run takes every step "
                              "that ends by then")
-        if args.csv is not None:
-            check_new_output(args.csv, "--csv")
-        if args.mcap is not None:
-            check_new_output(args.mcap, "--mcap")
+        outputs = {}
+        for option, path in (("--csv", args.csv), ("--mcap", args.mcap)):
+            if path is not None:
+                outputs[option] = check_new_output(path, option)
+        if len(set(outputs.values())) < len(outputs):
+            raise ValueError(f"--csv and --mcap name the same path {args.csv}: give each "
+                             "output its own")
+        if args.csv_state and not args.csv:
+            raise ValueError("--csv-state adds columns to --csv FILE: give --csv too")
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
             raise ValueError(f"--publish-rate {args.publish_rate}: must be in [1, 5000] Hz")
-        # the model, before the run (a ModelError names the parameters; --mcap builds its own)
-        if not args.mcap:
-            UmbrellaSimulator(params)
+        # the model, before the run (a ModelError names the parameters)
+        first = UmbrellaSimulator(params)
+        model = first.model
     except ValueError as exc:
         ap.exit(2, f"umbrella_sim: error: {exc}\n")
     progress = Progress(args.duration) if sys.stderr.isatty() and not args.json else None
-    on_chunk = (lambda chunk: progress(chunk.end_time)) if progress else None
-    if args.mcap:
-        note = shortened_step_note(params.physics_time_step, args.publish_rate)
-        if note:
-            print(f"umbrella_sim: note: the --mcap recording takes a {note}", file=sys.stderr)
-        from ..ros.recording import record_offline
-        try:
-            result = record_offline(params, args.mcap, args.duration, profile,
-                                    publish_rate=args.publish_rate,
-                                    marker_magnification=args.marker_magnification,
-                                    on_chunk=on_chunk)
-        except ValueError as exc:
-            ap.exit(2, f"umbrella_sim: error: {exc}\n")
-    else:
-        result = simulate(params, args.duration, force_profile=profile,
-                          keep_samples=bool(args.csv), on_chunk=on_chunk)
+    csv = (CsvStream(args.csv, first.sample(), model if args.csv_state else None)
+           if args.csv else None)
+
+    def on_chunk(chunk) -> None:
+        if csv is not None:
+            csv.write(chunk)
+        if progress is not None:
+            progress(chunk.end_time)
+
+    try:
+        if args.mcap:
+            note = shortened_step_note(params.physics_time_step, args.publish_rate)
+            if note:
+                print(f"umbrella_sim: note: the --mcap recording takes a {note}",
+                      file=sys.stderr)
+            from ..ros.recording import record_offline
+            try:
+                result = record_offline(params, args.mcap, args.duration, profile,
+                                        publish_rate=args.publish_rate,
+                                        marker_magnification=args.marker_magnification,
+                                        on_chunk=on_chunk, states=args.csv_state)
+            except ValueError as exc:
+                ap.exit(2, f"umbrella_sim: error: {exc}\n")
+        else:
+            result = simulate(params, args.duration, force_profile=profile,
+                              keep_samples=False, on_chunk=on_chunk, states=args.csv_state)
+    finally:
+        if csv is not None:
+            csv.close()
     if progress:
         progress.close()
-    summary = result.summary()          # printed before any file is written: never lost
+    summary = result.summary()
     for text in summary.get("warnings", []):
         print(f"umbrella_sim: warning: {text}", file=sys.stderr)
     reader_there = write_stdout(json.dumps(summary, indent=2, sort_keys=True) if args.json
                                 else format_summary(summary))
-    output_error = getattr(result, "recording_error", None)
-    if args.csv:
-        try:
-            result.write_csv(args.csv, with_state=args.csv_state)
-        except OSError as exc:
-            try:
-                os.unlink(args.csv)
-            except OSError:
-                pass
-            output_error = f"--csv {args.csv}: {exc.strerror or exc}"
+    output_error = getattr(result, "recording_error", None) or (csv.error if csv else None)
     if output_error:
         print(f"umbrella_sim: error: output incomplete: {output_error} (the summary above "
               "is complete)", file=sys.stderr)
     if result.error:
-        print(f"umbrella_sim: error: {result.error} (kept {len(result.samples)} samples"
-              + (f" in {args.csv}" if args.csv and not output_error else "") + ")",
-              file=sys.stderr)
+        kept = (f" (kept the {csv.rows} rows before it in {args.csv})"
+                if csv is not None and not csv.error else "")
+        print(f"umbrella_sim: error: {result.error}{kept}", file=sys.stderr)
         return 3
     if output_error:
         return 4
