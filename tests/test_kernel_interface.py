@@ -19,8 +19,8 @@ from umbrella_sim.core.integrators import MidpointDAE
 from umbrella_sim.core.kernel import HeaderError, parse_header
 from umbrella_sim.core.model import UmbrellaModel
 from umbrella_sim.core.outputs import STEP_FIELDS
-from umbrella_sim.tools.csv_output import CSV_COLUMNS
 from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.tools.csv_output import CSV_COLUMNS
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HEADER_TEXT = open(kernel.HEADER, encoding="utf-8").read()

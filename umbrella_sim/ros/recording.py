@@ -119,9 +119,9 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     publication grid), PublicationEncoder encodes each publication, RunRecording writes the
     same topics, layout and metadata as the node.  Each profile row is recorded as a command
     at its own time, each value as applied from the step it acts from.  on_chunk(chunk):
-    after each chunk (progress, a CSV; with states, their state rows too).  Returns the RunResult (figures of every step; with
-    keep_samples, the Sample of every publication); ``error`` set if it diverged,
-    ``recording_error`` if the recording stopped.
+    after each chunk (progress, a CSV; with states, their state rows too).  Returns the
+    RunResult (figures of every step; with keep_samples, the Sample of every publication);
+    ``error`` set if it diverged, ``recording_error`` if the recording stopped.
     """
     node_cfg = node_defaults()
     node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,
