@@ -24,10 +24,11 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 
 from umbrella_sim.bag.provenance import git_revision  # noqa: E402
 from umbrella_sim.core.driver import simulate  # noqa: E402
-from umbrella_sim.core.nonlinear import (  # noqa: E402
-    NonlinearUmbrellaModel, rotating_cantilever_chordwise, ROTATING_CANTILEVER_FLAPWISE,
-    rotating_cantilever_frequency, spin_up, spin_up_quasi_static_tip)
+from umbrella_sim.core.nonlinear import NonlinearUmbrellaModel  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
+from umbrella_sim.core.rotating_beam import (  # noqa: E402
+    rotating_cantilever_chordwise, ROTATING_CANTILEVER_FLAPWISE, rotating_cantilever_frequency,
+    spin_up, spin_up_quasi_static_tip)
 from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
 
 STAGE2 = 0.3   # s of stage 2 simulated after the lock

@@ -48,7 +48,8 @@ exec "$prefix/lib/umbrella_sim/umbrella_node" --ros-args \
     assert f"prefix={tmp_path}/install/umbrella_sim" in out
     # the installed node runs the default config as the source tree's simulator does
     from umbrella_sim.core.driver import simulate
-    from umbrella_sim.core.params import SPECS, UmbrellaParams
+    from umbrella_sim.core.params import UmbrellaParams
+    from umbrella_sim.core.registry import SPECS
     from umbrella_sim.ros.params_file import load_params_file
 
     config = load_params_file(os.path.join(ROOT, "config", "umbrella.yaml"))

@@ -24,10 +24,11 @@ from std_srvs.srv import Trigger
 
 from tests.disk_faults import full_disk_write
 from tests.ros_helpers import NodeProcess, Probe, ros_env, signal_and_collect
-from umbrella_sim.bag import cdr, writer as recording
+from umbrella_sim.bag import cdr, mcap_stream, writer as recording
 from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.driver import simulate
-from umbrella_sim.core.params import SPECS, UmbrellaParams
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.registry import SPECS
 from umbrella_sim.ros.messages import LATCHED
 from umbrella_sim.ros.node import MAX_LAG_S, REFUSED_RECORD_RATE
 
@@ -511,7 +512,7 @@ def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monke
     summary still indexes every chunk, so readers seek by time.
     """
     from mcap.reader import make_reader
-    monkeypatch.setattr(recording._SpilledChunkIndex, "SPILL_BYTES", 2048)
+    monkeypatch.setattr(mcap_stream.SpilledChunkIndex, "SPILL_BYTES", 2048)
     rec = recording.BagRecorder(str(tmp_path / "bag"), {"umbrella_sim.parameters": {}})
     rec.add_channel("/s", String, QoSProfile(depth=10))
     rec.add_channel("/x", Float64, QoSProfile(depth=10))

@@ -14,7 +14,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from umbrella_sim.core.params import NODE_PARAMETERS, SPECS, UmbrellaParams
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.registry import NODE_PARAMETERS, SPECS
 from umbrella_sim.core.solver import UmbrellaSimulator
 from umbrella_sim.ros import launch_description as ld, robot_description as rd
 from umbrella_sim.ros.messages import JOINT_NAMES, joint_state_msg

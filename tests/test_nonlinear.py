@@ -30,13 +30,13 @@ import pytest
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.integrators import load_kernel, newton_tolerance
 from umbrella_sim.core.model import ConstraintSet, Stage
-from umbrella_sim.core.nonlinear import (ElasticMidpointDAE, KANE_BEAM, NonlinearUmbrellaModel,
-                                         rotating_cantilever_chordwise,
-                                         ROTATING_CANTILEVER_FLAPWISE,
-                                         rotating_cantilever_frequency, spin_up, spin_up_angle,
-                                         spin_up_quasi_static_tip)
+from umbrella_sim.core.nonlinear import ElasticMidpointDAE, NonlinearUmbrellaModel
 from umbrella_sim.core.outputs import STEP_FIELDS
 from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.rotating_beam import (KANE_BEAM, rotating_cantilever_chordwise,
+                                             ROTATING_CANTILEVER_FLAPWISE,
+                                             rotating_cantilever_frequency, spin_up, spin_up_angle,
+                                             spin_up_quasi_static_tip)
 from umbrella_sim.core.solver import UmbrellaSimulator
 from umbrella_sim.core.summary import energy_balance_error
 

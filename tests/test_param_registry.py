@@ -4,8 +4,9 @@ import pickle
 
 import pytest
 
-from umbrella_sim.core.params import (coerce, defaults, MODEL, NODE_PARAMETERS, parameter_help,
-                                      REGISTRY, SPECS, UmbrellaParams)
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.registry import (coerce, defaults, MODEL, NODE_PARAMETERS, parameter_help,
+                                        REGISTRY, SPECS)
 from umbrella_sim.ros.params_file import load_params_file
 from umbrella_sim.tools import param_docs
 from umbrella_sim.tools.cli import make_parser

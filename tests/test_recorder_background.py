@@ -79,7 +79,7 @@ def test_fast_message_records_are_byte_for_byte_those_of_mcap_add_message(tmp_pa
     """
     Write with the recorder's own Message records, and with mcap's Writer.add_message.
 
-    _MessageAppender and its packed message indexes give the same file, byte for byte:
+    MessageAppender and its packed message indexes give the same file, byte for byte:
     several channels, many chunks, a segment.
     """
     files = []

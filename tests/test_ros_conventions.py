@@ -17,7 +17,8 @@ from rosgraph_msgs.msg import Clock
 
 from tests.ros_helpers import NodeProcess, poll, Probe, ros_env
 from umbrella_sim.bag.reader import read_log
-from umbrella_sim.core.params import CONTROLLER_PARAMETERS, NODE_PARAMETERS, REGISTRY, SPECS, START
+from umbrella_sim.core.registry import (CONTROLLER_PARAMETERS, NODE_PARAMETERS, REGISTRY, SPECS,
+                                        START)
 from umbrella_sim.ros import messages as ros_io
 from umbrella_sim.ros.parameters import descriptor
 

@@ -12,8 +12,7 @@ import os
 import subprocess
 import sys
 
-from .format import (BUILD_RECORD, EVENTS_RECORD, MESH_RECORD, PARAMETERS_RECORD,
-                     SUMMARY_RECORD)
+from .format import BUILD_RECORD, EVENTS_RECORD, MESH_RECORD, PARAMETERS_RECORD, SUMMARY_RECORD
 from .. import __version__
 
 

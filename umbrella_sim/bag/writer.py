@@ -11,20 +11,18 @@ recording, which ends as a readable file saying why.
 from __future__ import annotations
 
 import collections
-import itertools
 import json
 import os
-import struct
 import threading
 
-from mcap.opcode import Opcode
-from mcap.records import MessageIndex
 from mcap.writer import CompressionType, IndexType, Writer
 from rclpy.qos import QoSProfile
 import yaml
 
 from .cdr import cdr_bytes, message_definition, qos_yaml, type_name
-from .format import CHUNK_SIZE, ENDED_EARLY_RECORD, EVENTS_RECORD, SEGMENT_RECORD
+from .format import CHUNK_SIZE, EVENTS_RECORD, SEGMENT_RECORD
+from .mcap_stream import (CommittedFile, ended_early_tail, MessageAppender, SpilledChunkIndex,
+                          write_all)
 from .paths import check_new_output
 from .. import __version__
 
@@ -61,234 +59,6 @@ def new_bag_recorder(namespace: str, metadata, parent: str = ".",
                 continue
             raise
     raise ValueError(f"recording: no free bag directory name {base}_N in {parent}")
-
-
-def _write_all(fd: int, data) -> None:
-    """os.write until everything is written (the one place bytes reach the file)."""
-    view = memoryview(data)
-    while view:
-        n = os.write(fd, view)
-        view = view[n:]
-
-
-class _CommittedFile:
-    """
-    Write the MCAP writer's records to the file between records only.
-
-    The MCAP writer's stream: buffers records in memory and writes them to the file only
-    on commit(), which happens between records.  A failed commit (ENOSPC, EIO, EACCES...)
-    truncates the file back to the last committed record boundary, so the file never holds
-    a torn record and the space of the failed write is given back.
-    """
-
-    def __init__(self, path: str):
-        self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-        self.committed = 0
-        self._pending = bytearray()
-
-    def write(self, data) -> int:
-        self._pending += data
-        return len(data)
-
-    def tell(self) -> int:
-        return self.committed + len(self._pending)
-
-    def flush(self) -> None:           # the writer's flush(); commits happen explicitly
-        pass
-
-    def commit(self) -> bool:
-        """Write what is pending; True if anything was written."""
-        if not self._pending:
-            return False
-        # an immutable copy: a failed os.write leaves views of its buffer in the traceback,
-        # and a bytearray with live views cannot be cleared (BufferError on a full tmpfs)
-        data = bytes(self._pending)
-        self._pending.clear()
-        try:
-            _write_all(self.fd, data)
-        except OSError:
-            self.rollback()
-            raise
-        self.committed += len(data)
-        return True
-
-    def rollback(self) -> None:
-        try:
-            os.ftruncate(self.fd, self.committed)
-            os.lseek(self.fd, self.committed, os.SEEK_SET)
-        except OSError:
-            pass
-
-    def close(self, sync: bool = True) -> None:
-        if self.fd < 0:
-            return
-        try:
-            if sync:
-                os.fsync(self.fd)
-        finally:
-            os.close(self.fd)
-            self.fd = -1
-
-
-def _ended_early_tail(metadata: dict[str, str]) -> bytes:
-    """
-    Return the trailer of a recording stopped by a write error.
-
-    A Metadata record, DataEnd and a Footer without summary: appended at the last record
-    boundary, it makes a failed recording a complete MCAP again that says why it ended.
-    """
-    from mcap.data_stream import RecordBuilder
-    from mcap.records import DataEnd, Footer, Metadata
-
-    builder = RecordBuilder()
-    Metadata(name=ENDED_EARLY_RECORD, metadata=metadata).write(builder)
-    DataEnd(data_section_crc=0).write(builder)
-    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
-    return bytes(builder.end()) + b"\x89MCAP0\r\n"
-
-
-class _SpilledChunkIndex:
-    """
-    The MCAP writer's chunk index, kept on disk while recording (bounded memory).
-
-    The writer keeps one ChunkIndex object per chunk until finish() writes the summary
-    section (measured: ~1.2 kB of Python objects per 64 KiB chunk, 8 to 15 kB per simulated
-    second at 1 kHz, growing without bound).  This list stand-in serialises each index to
-    its MCAP record at once (~190 bytes) and moves the records to an anonymous temporary
-    file next to the recording (unlinked from the start: nothing is left behind) every
-    64 KiB; finish() reads them back in order into the summary, which therefore still holds
-    every chunk index (readers seek by time as before).  If the temporary file cannot be
-    written (disk full) the records stay in memory: the recording itself fails soon after.
-    """
-
-    SPILL_BYTES = 64 * 1024
-
-    def __init__(self, directory: str):
-        import tempfile
-
-        self._records = bytearray()
-        self.count = 0
-        try:
-            self._file = tempfile.TemporaryFile(dir=directory)
-        except OSError:
-            self._file = None
-
-    def append(self, index) -> None:
-        from mcap.data_stream import RecordBuilder
-
-        builder = RecordBuilder()
-        index.write(builder)
-        self._records += builder.end()
-        self.count += 1
-        if self._file is not None and len(self._records) >= self.SPILL_BYTES:
-            try:
-                self._file.write(self._records)
-                self._records.clear()
-            except OSError:
-                pass
-
-    def __len__(self) -> int:
-        return self.count
-
-    def __iter__(self):
-        """Yield the records in order, in pieces the writer copies into its summary."""
-        if self._file is not None:
-            self._file.flush()
-            self._file.seek(0)
-            while True:
-                piece = self._file.read(1 << 20)
-                if not piece:
-                    break
-                yield _RawRecords(piece)
-        yield _RawRecords(bytes(self._records))
-
-    def in_memory_bytes(self) -> int:
-        return len(self._records)
-
-    def close(self) -> None:
-        if self._file is not None:
-            self._file.close()
-            self._file = None
-
-
-class _RawRecords:
-    """Already serialised MCAP records, written as they are."""
-
-    def __init__(self, data: bytes):
-        self.data = data
-
-    def write(self, builder) -> None:
-        builder.write(self.data)
-
-
-#: a Message record up to its data: opcode, record length, channel id, sequence, log time,
-#: publish time (the MCAP specification's Message record)
-_MESSAGE_HEAD = struct.Struct("<BQHIQQ")
-
-
-class _PackedMessageIndex(MessageIndex):
-    """A chunk's MessageIndex record written in one struct.pack (the same bytes)."""
-
-    def write(self, stream) -> None:
-        stream.start_record(Opcode.MESSAGE_INDEX)
-        stream.write2(self.channel_id)
-        stream.write4(len(self.records) * 16)
-        stream.write(struct.pack(f"<{2 * len(self.records)}Q",
-                                 *itertools.chain.from_iterable(self.records)))
-        stream.finish_record()
-
-
-class _MessageAppender:
-    """
-    Append Message records to the open chunk of an mcap Writer, one struct.pack each.
-
-    What ``Writer.add_message`` does for a chunked writer (the statistics, the chunk's time
-    range and message index, the record, closing a full chunk) without building a Message
-    object and writing its five fields one by one, and with each chunk's message indexes
-    packed at once (_PackedMessageIndex).  ``create`` returns None where this mcap version
-    lacks the members it uses; ``add_message`` serves then.  The files are byte for byte
-    those of ``add_message`` (tests/test_recorder_background.py).
-    """
-
-    def __init__(self, stats, chunk, finish_full_chunk):
-        self.stats = stats
-        self.chunk = chunk
-        self.finish_full_chunk = finish_full_chunk
-
-    @classmethod
-    def create(cls, writer: Writer) -> "_MessageAppender | None":
-        stats = getattr(writer, "_Writer__statistics", None)
-        chunk = getattr(writer, "_Writer__chunk_builder", None)
-        finish = getattr(writer, "_Writer__maybe_finalize_chunk", None)
-        needed = (hasattr(stats, "channel_message_counts") and hasattr(chunk, "message_indices")
-                  and hasattr(getattr(chunk, "record_writer", None), "_buffer")
-                  and callable(finish))
-        return cls(stats, chunk, finish) if needed else None
-
-    def add(self, channel_id: int, sequence: int, t_ns: int, data: bytes) -> None:
-        st = self.stats
-        if st.message_count == 0 or t_ns < st.message_start_time:
-            st.message_start_time = t_ns
-        if t_ns > st.message_end_time:
-            st.message_end_time = t_ns
-        st.channel_message_counts[channel_id] += 1
-        st.message_count += 1
-        chunk = self.chunk
-        if chunk.num_messages == 0 or t_ns < chunk.message_start_time:
-            chunk.message_start_time = t_ns
-        if t_ns > chunk.message_end_time:
-            chunk.message_end_time = t_ns
-        stream = chunk.record_writer._buffer      # a new one after every finished chunk
-        index = chunk.message_indices.get(channel_id)
-        if index is None:
-            index = chunk.message_indices[channel_id] = _PackedMessageIndex(
-                channel_id=channel_id, records=[])
-        index.records.append((t_ns, stream.tell()))
-        chunk.num_messages += 1
-        stream.write(_MESSAGE_HEAD.pack(Opcode.MESSAGE, 22 + len(data), channel_id, sequence,
-                                        t_ns, t_ns))
-        stream.write(data)
-        self.finish_full_chunk()
 
 
 def check_record_path(bag_dir: str, what: str = "record_path") -> str:
@@ -345,17 +115,17 @@ class BagRecorder:
         try:
             # committed after every write: a finished chunk reaches the OS at once, so a
             # SIGKILL loses only the chunk being filled (messages accumulate in memory)
-            self._fh = _CommittedFile(self.path)
+            self._fh = CommittedFile(self.path)
             self._writer = Writer(self._fh, chunk_size=CHUNK_SIZE,
                                   compression=CompressionType.ZSTD,
                                   index_types=IndexType.ALL, use_chunking=True,
                                   use_statistics=True)
             # the writer's growing chunk index goes to disk (mcap's private list, replaced
             # where this mcap version has it; otherwise it stays in memory as before)
-            self._chunk_index = _SpilledChunkIndex(bag_dir)
+            self._chunk_index = SpilledChunkIndex(bag_dir)
             if isinstance(getattr(self._writer, "_Writer__chunk_indices", None), list):
                 self._writer._Writer__chunk_indices = self._chunk_index
-            self._appender = _MessageAppender.create(self._writer)
+            self._appender = MessageAppender.create(self._writer)
             self._writer.start(profile="ros2", library=f"umbrella_sim {__version__}")
             for name, data in metadata.items():
                 self._writer.add_metadata(name, data)
@@ -450,7 +220,7 @@ class BagRecorder:
                 "failed_at_log_time_ns": "" if t_ns is None else str(t_ns),
                 "recorded": json.dumps(self.counts)}
         try:
-            _write_all(self._fh.fd, _ended_early_tail(meta))
+            write_all(self._fh.fd, ended_early_tail(meta))
         except OSError:
             self._fh.rollback()     # a clean prefix without footer: readers recover it
         self._release_index()
@@ -646,7 +416,7 @@ class BagRecorder:
                               sort_keys=False)
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         try:
-            _write_all(fd, text.encode("utf-8"))
+            write_all(fd, text.encode("utf-8"))
         except OSError:
             os.close(fd)
             os.unlink(path)       # no half-written metadata.yaml: readers fall back to the .mcap

@@ -21,7 +21,8 @@ import bisect
 import math
 from typing import Callable, Iterable
 
-from .params import SPECS, UmbrellaParams
+from .params import UmbrellaParams
+from .registry import SPECS
 
 #: a time within this of a grid point counts as on it (s): the ns resolution of recordings
 TIME_RESOLUTION = 1e-9
@@ -98,7 +99,7 @@ def validate_force(force: float, limit: float | None = None, minimum: float = 0.
         f = float(force)
     except (TypeError, ValueError):
         raise ValueError(f"sleeve force {force!r}: not a number") from None
-    # the same range as the sleeve_force parameter: one rule (params.REGISTRY)
+    # the same range as the sleeve_force parameter: one rule (registry.REGISTRY)
     SPECS["sleeve_force"].check(f, what="sleeve force F_H")
     if f < minimum:
         raise ValueError(f"sleeve force F_H={f}: must be >= {minimum:g} (sleeve_force_min; "

@@ -44,8 +44,8 @@ import os
 import numpy as np
 from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
 
-from .kernel import (CompiledKernel, ConvergenceError, DynamicState, kernel_error,
-                     kernel_refusal, LIBRARY, load_kernel)
+from .kernel import (CompiledKernel, ConvergenceError, DynamicState, kernel_error, kernel_refusal,
+                     LIBRARY, load_kernel)
 from .model import ConstraintSet, UmbrellaModel
 
 #: constraint residual the Newton iteration must reach before it stops (m)

@@ -24,7 +24,8 @@ from .kernel import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicState, SA
 from .model import DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import (build_frozen, LockEvent, Sample, state_row, STEP_FIELDS, step_peaks,
                       step_row, StepBlock)
-from .params import SPECS, UmbrellaParams
+from .params import UmbrellaParams
+from .registry import SPECS
 
 
 def nonlinear_model_needed(p: UmbrellaParams) -> bool:

@@ -14,8 +14,8 @@ import math
 
 import numpy as np
 
-from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS,
-                      step_row, StepBlock)
+from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS, step_row,
+                      StepBlock)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
@@ -137,7 +137,7 @@ def deploy_start(v0: float, forces) -> float | None:
 
 def deploy_start_of(params, applied) -> float | None:
     """deploy_start of a recorded run: its parameters (registry defaults) and applied forces."""
-    from .params import defaults
+    from .registry import defaults
 
     given = {**defaults(), **dict(params)}
     return deploy_start(float(given["v0"]),
@@ -190,7 +190,7 @@ def coarse_step_warning(params: dict) -> str | None:
     a small or light frame at the default step) and the stage-2 stresses with it.  It
     depends on the model parameters alone: worked out once per set of them.
     """
-    from .params import SPECS
+    from .registry import SPECS
 
     try:
         return _coarse_step_warning(tuple(sorted((k, v) for k, v in params.items()

@@ -21,8 +21,8 @@ from . import signals as stop_signals
 from .parameters import declare_from_registry
 from .params_file import check_parameter_sources, params_files_in
 from ..core.control import DeployLaw
-from ..core.params import (check_known_names, CONTROLLER_PARAMETERS, ControllerConfig, defaults,
-                           parameter_help, UmbrellaParams)
+from ..core.params import ControllerConfig, UmbrellaParams
+from ..core.registry import check_known_names, CONTROLLER_PARAMETERS, defaults, parameter_help
 
 
 #: at rest for the plan: rate and angle from the start within this fraction of the plan's

@@ -12,7 +12,8 @@ import os
 import re
 
 from .share import PACKAGE, package_path, share_dir
-from ..core.params import REGISTRY, SPECS, UmbrellaParams
+from ..core.params import UmbrellaParams
+from ..core.registry import REGISTRY, SPECS
 
 
 @dataclass(frozen=True)

@@ -56,9 +56,9 @@ from ..bag.writer import BagRecorder, check_record_path, new_bag_recorder
 from ..core.driver import RunDriver
 from ..core.engines import SimulationDiverged
 from ..core.forcing import command_force
-from ..core.params import (check_known_names, check_node_parameters, CONTROLLER_PARAMETERS,
-                           NODE_PARAMETERS, parameter_help, REGISTRY, RESET, shortened_step_note,
-                           SPECS, UmbrellaParams)
+from ..core.params import shortened_step_note, UmbrellaParams
+from ..core.registry import (check_known_names, check_node_parameters, CONTROLLER_PARAMETERS,
+                             NODE_PARAMETERS, parameter_help, REGISTRY, RESET, SPECS)
 
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
                    "paces it by the system clock; a node does not follow the clock it drives "

@@ -3,7 +3,7 @@ ROS parameters from the registry: typed, ranged descriptors and the coercions rc
 
 Every parameter of umbrella_node and deploy_controller is declared statically typed
 (``dynamic_typing=False``) with its range and its rule in the descriptor, read-only when it is
-fixed at start (core.params.REGISTRY).  ``coerce_parameter`` takes an integer literal for a
+fixed at start (core.registry.REGISTRY).  ``coerce_parameter`` takes an integer literal for a
 double (``-p v0:=-1``) and a whole double for an integer, as the other interfaces do.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import math
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
 
-from ..core.params import defaults, NOW, REGISTRY, RESET, START
+from ..core.registry import defaults, NOW, REGISTRY, RESET, START
 
 
 # --------------------------------------------------------------------- parameters

@@ -13,7 +13,7 @@ import functools
 import re
 
 from ..bag.paths import read_text_input
-from ..core.params import check_known_names, NODE_PARAMETERS_LISTED
+from ..core.registry import check_known_names, NODE_PARAMETERS_LISTED
 
 
 def _flatten(values: dict, prefix: str = "") -> dict:

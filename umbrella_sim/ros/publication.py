@@ -13,7 +13,7 @@ from __future__ import annotations
 from . import messages
 from ..core.driver import RunDriver
 from ..core.outputs import mechanical_energy, Sample
-from ..core.params import NODE_PARAMETERS
+from ..core.registry import NODE_PARAMETERS
 
 
 class PublicationEncoder:

@@ -24,7 +24,7 @@ from ..bag.format import (APPLIED_SUFFIX, COUNTS_RECORD, PARAMETERS_RECORD, REFU
 from ..bag.provenance import events_metadata, run_metadata, summary_metadata
 from ..bag.writer import BagRecorder
 from ..core.driver import Chunk, RunDriver
-from ..core.params import node_defaults
+from ..core.registry import node_defaults
 from ..core.summary import RunResult
 
 

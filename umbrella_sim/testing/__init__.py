@@ -616,7 +616,8 @@ class SimulatedAntenna:
         """
         if check:
             from ..core.forcing import command_force
-            from ..core.params import SPECS, UmbrellaParams
+            from ..core.params import UmbrellaParams
+            from ..core.registry import SPECS
             command_force(force, UmbrellaParams.from_mapping(
                 {k: v for k, v in self.parameters.items() if k in SPECS}))
         self._command_publisher(timeout).publish(self._float64(data=float(force)))
@@ -663,7 +664,7 @@ class SimulatedAntenna:
         from rcl_interfaces.srv import SetParameters
         from rclpy.parameter import Parameter
 
-        from ..core.params import REGISTRY, RESET
+        from ..core.registry import REGISTRY, RESET
 
         request = SetParameters.Request(parameters=[
             Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])

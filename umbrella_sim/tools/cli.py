@@ -14,7 +14,8 @@ from .inputs import build_params, read_force_profile
 from .. import __version__
 from ..bag.paths import check_new_output
 from ..core.driver import simulate
-from ..core.params import parameter_help, shortened_step_note, SPECS
+from ..core.params import shortened_step_note
+from ..core.registry import parameter_help, SPECS
 from ..core.solver import UmbrellaSimulator
 from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
 

@@ -14,8 +14,9 @@ import math
 
 from ..bag.paths import read_text_input
 from ..core.forcing import command_force
-from ..core.params import (check_known_names, check_types, check_values, CONTROLLER_PARAMETERS,
-                           NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS, UmbrellaParams)
+from ..core.params import check_values, UmbrellaParams
+from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
+                             NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
 from ..ros.params_file import load_params_file
 from ..ros.share import package_path
 

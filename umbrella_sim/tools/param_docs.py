@@ -1,5 +1,5 @@
 """
-Parameter tables of msg_docs/, generated from the registry (core.params.REGISTRY).
+Parameter tables of msg_docs/, generated from the registry (core.registry.REGISTRY).
 
     .venv/bin/python -m umbrella_sim.tools.param_docs          # rewrite the tables in place
     .venv/bin/python -m umbrella_sim.tools.param_docs --check  # exit 1 if a page is stale
@@ -14,7 +14,7 @@ import os
 import re
 import sys
 
-from ..core.params import NOW, REGISTRY, RESET, START
+from ..core.registry import NOW, REGISTRY, RESET, START
 from ..ros.share import package_path
 
 PAGES = ("parameters.md", "node_parameters.md", "deploy_controller.md")

@@ -49,7 +49,7 @@ import yaml
 
 from .. import __version__
 from ..bag.paths import check_new_output, read_text_input
-from ..core.params import NODE_PARAMETERS
+from ..core.registry import NODE_PARAMETERS
 from ..ros.signals import deferred
 
 SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
@@ -125,7 +125,8 @@ def load_spec(path: str) -> Sweep:
     """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
     from .inputs import check_lock_given, read_force_profile, resolve_params
     from ..core.forcing import command_force
-    from ..core.params import check_types, UmbrellaParams
+    from ..core.params import UmbrellaParams
+    from ..core.registry import check_types
     from ..ros.params_file import load_yaml_as_ros
 
     try:
@@ -515,7 +516,7 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..core.params import REGISTRY
+    from ..core.registry import REGISTRY
 
     x_name, series = _series(sweep, rows)
     if not series:
