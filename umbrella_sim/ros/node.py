@@ -1,54 +1,47 @@
 """
-umbrella_node: the ROS 2 face of the simulator (a thin adapter around UmbrellaSimulator).
+umbrella_node: the ROS 2 face of the simulator, a thin adapter around the run driver.
 
 Threads, chosen deliberately:
-  * the physics thread steps the DAE and publishes; it is paced against time.monotonic()
-    (not a ROS timer: this node is the /clock source, and a timer on sim time would wait on
-    itself).  Sim time is anchored to the wall time of the last (re)start, so it does not
-    accumulate drift;
+  * the physics thread steps the run driver (core/driver.py) a chunk at a time, giving up
+    the sim lock between chunks, and publishes at each publication instant, paced against
+    the wall clock (pacing.py: this node is the /clock source);
   * a two-thread executor serves the sleeve_force subscription (its own callback group)
-    and, independently, the ~/reset and ~/pause services and parameter sets.  The
-    compiled step is a ctypes call, which releases the GIL, so commands are taken while
-    physics runs.  A command is handed
-    over under a lock and applied at the next step boundary; every applied value is logged
-    with its sim time, which is the exact force history for an offline re-run.
-Each message is serialized once: the same bytes go to the publisher and to the recorder.
-Markers go out at their own display rate (marker_rate).
-With ``lockstep`` the physics thread waits, while deploying, for a command answering each
-joint_states before it steps on (the co-simulation handshake of SITL simulators), so a
-closed loop does not depend on how the operating system schedules the controller.
-Everything published and every command received (accepted, refused, applied) is recorded to
-MCAP when ``record_path`` is set (see recording.py), by a writer thread of the recorder's own:
-the publishing thread only queues the bytes it published.
+    and, independently, the ~/reset and ~/pause services and parameter sets.  The compiled
+    step is a ctypes call, which releases the GIL, so commands are taken while physics
+    runs.  A command is handed over under a lock and acts from the next publication
+    instant; every applied value is logged and recorded with its sim time, which is the
+    exact force history for an offline re-run.
+Each message is serialized once (publication.py): the same bytes go to the publisher and to
+the recorder.  With ``lockstep`` the physics thread waits for a command answering each
+joint_states (lockstep.py).  Everything published and every command received (accepted,
+refused, applied) is recorded to MCAP (recording.py), by a writer thread of the recorder's
+own: the publishing thread only queues the bytes it published.
 """
 from __future__ import annotations
 
 import contextlib
 import gc
 import math
-import os
 import sys
 import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
-from . import messages as ros_io, signals as stop_signals
+from . import messages as ros_io
+from .lockstep import Lockstep
+from .pacing import MAX_LAG_S, Pacer
 from .parameters import coerce_parameter, declare_from_registry, parameter_defaults
-from .params_file import check_parameter_sources, params_files_in, QOS_OVERRIDES, USE_SIM_TIME
+from .params_file import check_parameter_sources, QOS_OVERRIDES, USE_SIM_TIME
 from .publication import PublicationEncoder
 from .recording import RunRecording
-from .share import package_path
 from .. import __version__
 from ..bag.cdr import cdr_bytes
 from ..bag.provenance import run_metadata
@@ -58,18 +51,13 @@ from ..core.engines import SimulationDiverged
 from ..core.forcing import command_force
 from ..core.params import shortened_step_note, UmbrellaParams
 from ..core.registry import (check_known_names, check_node_parameters, CONTROLLER_PARAMETERS,
-                             NODE_PARAMETERS, parameter_help, REGISTRY, RESET, SPECS)
+                             NODE_PARAMETERS, REGISTRY, RESET, SPECS)
 
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
                    "paces it by the system clock; a node does not follow the clock it drives "
                    "(use_sim_time stays false here; set it for the other nodes)")
-#: overload policy: the physics may fall this far behind wall time x real_time_factor; past
-#: it the pacing is re-anchored (the backlog is dropped, not caught up) and the slip reported
-MAX_LAG_S = 0.5
 #: refused commands recorded per wall second at most (the rest are counted only)
 REFUSED_RECORD_RATE = 10
-#: pacing waits up to this long are a plain sleep (_sleep_until)
-PLAIN_SLEEP_S = 0.005
 #: exit codes (also in usage())
 EXIT_OK, EXIT_USAGE, EXIT_FAULT, EXIT_RECORDING = 0, 2, 3, 4
 
@@ -107,13 +95,7 @@ class UmbrellaNode(Node):
         self._sim_lock = threading.RLock()
         self._epoch = 0                     # counts resets; samples of an older epoch are dropped
         self._cmd_lock = threading.Lock()
-        # lockstep: armed when the first command (after start or ~/reset) starts acting; then
-        # a command since the last joint_states lets the next period start (set by _on_force,
-        # cleared when joint_states is published)
-        self._lockstep_armed = False
-        self._answered = threading.Event()
-        self.lockstep_waits = 0               # periods that waited for their command
-        self._lockstep_waiting_since = 0.0    # monotonic start of the current wait, 0 = none
+        self.lockstep = Lockstep()            # the handshake of lockstep:=true
         self.accepted_commands = 0
         self.refused_commands = 0
         self.fault: str | None = None
@@ -121,12 +103,11 @@ class UmbrellaNode(Node):
         self.finished = Future()
         self._stop = threading.Event()
         self._wake = threading.Event()
+        self.pacer = Pacer(self._stop, self._wake)
         self.recording: RunRecording | None = None
         self.recording_error: str | None = None
         self.refused_not_recorded = 0
         self._refused_window = (0.0, 0)       # (wall start, recorded in this 1 s window)
-        self.slip = 0.0                       # wall seconds dropped by re-anchoring (overload)
-        self.re_anchors = 0
         self._service_waiting = threading.Event()
         self._peers_warned = ""
         self._warned_at: dict[str, float] = {}
@@ -310,7 +291,7 @@ class UmbrellaNode(Node):
                 rec.command(msg, t)
             with self._cmd_lock:
                 self._commanded_force = force
-        self._answered.set()              # any command answers the last state (lockstep)
+        self.lockstep.command_came()
 
     @contextlib.contextmanager
     def _locked(self):
@@ -342,8 +323,7 @@ class UmbrellaNode(Node):
             self._install_driver(driver)
             self._epoch += 1
             self._anchor()
-            self._lockstep_armed = False      # the next command starts the handshake again
-            self._answered.clear()
+            self.lockstep.restart()
             rec = self._recording_on()
             if rec is not None:
                 meta = run_metadata(self.model_params, self.node_cfg, self.driver.step,
@@ -421,7 +401,7 @@ class UmbrellaNode(Node):
         """Ask the physics thread to finish its publication and end (signal-safe)."""
         self._stop.set()
         self._wake.set()
-        self._answered.set()
+        self.lockstep.answered.set()       # (a lockstep wait ends too)
 
     def stop(self) -> None:
         self.request_stop()
@@ -429,8 +409,7 @@ class UmbrellaNode(Node):
             self._thread.join(timeout=5.0)
 
     def _anchor(self) -> None:
-        self._wall_anchor = time.monotonic()
-        self._sim_anchor = self.sim.time
+        self.pacer.anchor(self.sim.time)
 
     def _publish_phase(self, phase: str) -> None:
         self._phase = phase
@@ -448,16 +427,15 @@ class UmbrellaNode(Node):
         with self._sim_lock:
             if epoch != self._epoch:          # a reset came in meanwhile: the sample is stale
                 return
-            if "joint_states" in msgs and self._lockstep_armed:
-                self._answered.clear()        # a command from now on answers this state
+            if "joint_states" in msgs:
+                self.lockstep.published()
             for key, msg in msgs.items():
                 self._publish(key, msg, t)
 
     def _waiting_for_command(self) -> bool:
         """Lockstep: no command has answered the last joint_states yet (sim lock held)."""
-        return (self.node_cfg["lockstep"] and self._lockstep_armed
-                and self.driver.at_publication and self.sim.stage == "deploying"
-                and not self._answered.is_set())
+        return self.lockstep.waiting(self.node_cfg["lockstep"], self.driver.at_publication,
+                                     self.sim.stage == "deploying")
 
     def _take_command(self) -> None:
         """At a publication instant: the latest command acts from this step on (sim lock held)."""
@@ -501,7 +479,6 @@ class UmbrellaNode(Node):
         log = self.get_logger()
         diag_wall, diag_sim, diag_epoch = time.monotonic(), self.sim.time, self._epoch
         lag = 0.0
-        self._max_lag = 0.0
         try:
             with self._sim_lock:
                 self._publish_sample(self._sample_messages())
@@ -516,11 +493,8 @@ class UmbrellaNode(Node):
                     if waiting:
                         self._lockstep_wait()
                     elif not idle:
-                        if self._lockstep_waiting_since:   # the command came: pace from now
-                            self._lockstep_waiting_since = 0.0
-                            self._anchor()
-                        if self.node_cfg["lockstep"] and self._answered.is_set():
-                            self._lockstep_armed = True   # the handshake starts (or goes on)
+                        if self.lockstep.go(self.node_cfg["lockstep"]):
+                            self._anchor()          # the command came: pace from now
                         try:
                             # a chunk of steps, at most to the next publication: the lock
                             # is given up between chunks, for a service or a stop
@@ -534,16 +508,14 @@ class UmbrellaNode(Node):
                                 f"the run ends (duration {duration:g} s is set; exit code "
                                 f"{EXIT_FAULT})" if duration > 0 else "call ~/reset to restart"))
                             self._publish_phase("fault")
-                    sim_t, rtf = self.sim.time, self.node_cfg["real_time_factor"]
-                    target = (self._wall_anchor + (sim_t - self._sim_anchor) / rtf) if rtf > 0 \
-                        else None
+                    sim_t = self.sim.time
+                    target = self.pacer.target(sim_t, self.node_cfg["real_time_factor"])
                     epoch = self._epoch
                 now = time.monotonic()
                 if target is not None and sample is not None:
-                    lag = now - target
-                    self._max_lag = max(self._max_lag, lag)
+                    lag = self.pacer.lag(target, now)
                     if lag < 0:               # publish the state of sim time t at wall time t
-                        self._sleep_until(target)
+                        self.pacer.sleep_until(target)
                     elif lag > MAX_LAG_S:
                         self._re_anchor(epoch, now, sim_t, lag)
                     elif lag > max(0.05, 2.0 / self.driver_rate):
@@ -559,14 +531,14 @@ class UmbrellaNode(Node):
                     self._check_namespace_peers()
                     self._publish_diagnostics(sim_t, measured, lag)
                     diag_wall, diag_sim = now, sim_t
-                    self._max_lag = 0.0
+                    self.pacer.max_lag = 0.0
                 if duration > 0 and self.fault is not None:
                     break
                 if duration > 0 and sample is not None and sim_t >= duration - 1e-12:
                     log.info(f"duration {duration:g} s reached at t = {sim_t:.9f} s")
                     break
                 if waiting:
-                    self._answered.wait(0.05)
+                    self.lockstep.answered.wait(0.05)
                 elif idle:
                     self._wake.wait(0.05)
                     self._wake.clear()
@@ -584,34 +556,22 @@ class UmbrellaNode(Node):
         The pace restarts from the moment the command comes (the anchor follows the wait),
         so waiting for a controller is neither lag nor slip.
         """
-        if not self._lockstep_waiting_since:
-            self._lockstep_waiting_since = time.monotonic()
-            self.lockstep_waits += 1
-        waited = time.monotonic() - self._lockstep_waiting_since
+        waited = self.lockstep.wait_turn()
         if waited >= 5.0:
             self._warn_throttled("lockstep", 5.0, lambda: (
                 f"lockstep: no sleeve_force command for {waited:.0f} s (wall) since the "
                 f"joint_states of t = {self.sim.time:.6f} s; the simulation waits for it"))
 
     def _re_anchor(self, epoch: int, now: float, sim_t: float, lag: float) -> None:
-        """
-        Re-anchor the pacing (the overload policy).
-
-        Overload policy: more than MAX_LAG_S behind, the pacing restarts from now (the
-        backlog is dropped, never caught up in a burst); the sim then runs at the speed the
-        machine allows, reported as measured_real_time_factor, and the dropped wall time
-        accumulates in slip_s (diagnostics).
-        """
+        """Re-anchor the pacing (pacing.py's overload policy), unless a reset came meanwhile."""
         with self._sim_lock:
             if epoch != self._epoch:
                 return
-            self._wall_anchor, self._sim_anchor = now, sim_t
-        self.slip += lag
-        self.re_anchors += 1
+            self.pacer.re_anchor(now, sim_t, lag)
         self._warn_throttled("re-anchor", 5.0, lambda: (
             f"physics cannot keep real time: {lag * 1e3:.0f} ms behind at t = {sim_t:.3f} s; "
             f"pacing re-anchored (lag bounded by {MAX_LAG_S:g} s; total slip "
-            f"{self.slip:.3f} s in {self.re_anchors} re-anchors, see diagnostics)"))
+            f"{self.pacer.slip:.3f} s in {self.pacer.re_anchors} re-anchors, see diagnostics)"))
 
     def _warn_throttled(self, key: str, period: float, text) -> None:
         """
@@ -646,25 +606,6 @@ class UmbrellaNode(Node):
             self.get_logger().warning(text)
         self._peers_warned = text
 
-    def _sleep_until(self, target: float) -> None:
-        """
-        Sleep until the wall time target (or a stop).
-
-        No spinning: a spin of the last 0.3 ms cost up to 0.3 core at 1 kHz; the kernel's
-        wake-up latency (~0.1 ms) is well inside a publication period.  A wait of up to
-        PLAIN_SLEEP_S is a plain sleep: an Event wait costs ~15 us of CPU against ~5 us
-        (its lock and condition), and a stop or reset then waits at most that long.
-        """
-        while not self._stop.is_set():
-            remaining = target - time.monotonic()
-            if remaining <= 0:
-                return
-            if remaining <= PLAIN_SLEEP_S:
-                time.sleep(remaining)
-                return
-            self._wake.wait(remaining - PLAIN_SLEEP_S)
-            self._wake.clear()
-
     def _publish_diagnostics(self, sim_t: float, measured: float, lag: float) -> None:
         rtf = self.node_cfg["real_time_factor"]
         if self.fault:
@@ -683,15 +624,15 @@ class UmbrellaNode(Node):
             level, message = DiagnosticStatus.OK, self._phase
         values = {"sim_time_s": f"{sim_t:.6f}", "measured_real_time_factor": f"{measured:.4f}",
                   "requested_real_time_factor": rtf, "lag_s": f"{max(lag, 0.0):.6f}",
-                  "max_lag_s": f"{max(self._max_lag, 0.0):.6f}",
+                  "max_lag_s": f"{max(self.pacer.max_lag, 0.0):.6f}",
                   "phase": self._phase, "paused": self.paused,
                   "accepted_commands": self.accepted_commands,
                   "refused_commands": self.refused_commands, "steps": self.sim.steps,
                   "lockstep": self.node_cfg["lockstep"],
-                  "waiting_for_command": bool(self._lockstep_waiting_since),
-                  "lockstep_waits": self.lockstep_waits,
-                  "physics_step_s": self.sim.h, "slip_s": f"{self.slip:.6f}",
-                  "re_anchors": self.re_anchors,
+                  "waiting_for_command": bool(self.lockstep.waiting_since),
+                  "lockstep_waits": self.lockstep.waits,
+                  "physics_step_s": self.sim.h, "slip_s": f"{self.pacer.slip:.6f}",
+                  "re_anchors": self.pacer.re_anchors,
                   "refused_not_recorded": self.refused_not_recorded,
                   "clock_publishers": getattr(self, "clock_publishers", 1),
                   "recording": ("off" if self.recording is None else
@@ -703,128 +644,3 @@ class UmbrellaNode(Node):
         self._publish("diagnostics", ros_io.diagnostics_msg(
             sim_t, ros_io.diagnostic_name(self.get_fully_qualified_name()), level, message,
             values), sim_t)
-
-
-def usage() -> str:
-    lines = ["usage: umbrella_node [--help] [--ros-args -p name:=value ... --params-file FILE",
-             "                      -r __ns:=/NAMESPACE]", "",
-             "Real-time flexible umbrella-frame deployment simulator (ROS 2 node).", "",
-             "model parameters (a runtime set applies on ~/reset):"]
-    lines += parameter_help(SPECS.values())
-    lines.append("node parameters:")
-    lines += parameter_help(NODE_PARAMETERS.values())
-    lines += ["", "topics: " + ", ".join(t.name for t in ros_io.TOPICS.values())
-              + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= "
-              "sleeve_force_min, 0 by default)",
-              "services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)",
-              "exit: SIGINT/SIGTERM stop the physics, then finalise the recording (during "
-              f"start-up: nothing is started); code {EXIT_OK} on a clean stop or when duration "
-              f"is reached, {EXIT_USAGE} for "
-              "invalid arguments, parameters or params files, "
-              f"{EXIT_FAULT} if the simulation ended in a fault, {EXIT_RECORDING} if the "
-              "recording stopped on a write error (the run itself went on)",
-              f"details: {msg_docs_location()}"]
-    return "\n".join(lines)
-
-
-def msg_docs_location() -> str:
-    """Return where the interface docs are here: the source tree's, or the installed ones."""
-    found = package_path("msg_docs", "README.md")
-    if found:
-        return os.path.dirname(found) + os.sep
-    return "msg_docs/ of the umbrella_sim sources (the package share directory of a colcon " \
-           "install)"
-
-
-def main(argv: list[str] | None = None) -> int:
-    # SIGINT/SIGTERM only ask for a stop (stop_signals.py: the entry points install the
-    # handlers before the heavy imports, so a signal during them is noted too, never a
-    # KeyboardInterrupt traceback); rclpy's own handlers would shut the context down at once,
-    # under the physics thread's feet; ours stop the physics first, then the recording is
-    # closed, then rclpy.  A stop during start-up: exit 0, nothing started or left behind.
-    stop_signals.install()
-    running: list[UmbrellaNode] = []        # the node, once built: a signal asks it to stop
-
-    def on_signal(signum):
-        for node in running:
-            node.request_stop()
-
-    stop_signals.add_listener(on_signal)
-    try:
-        return _run(list(sys.argv if argv is None else argv), running)
-    finally:
-        stop_signals.remove_listener(on_signal)
-
-
-def _stopped_during_start_up() -> int:
-    """Exit quietly after a stop signal that came before the node was running."""
-    print(f"umbrella_node: stopped by {stop_signals.name(stop_signals.received[0])} during "
-          "start-up; nothing was started", file=sys.stderr)
-    rclpy.try_shutdown()
-    return EXIT_OK
-
-
-def _run(argv: list[str], running: list) -> int:
-    stop_requested = stop_signals.received      # every stop signal since the process began
-    if stop_requested:          # during the imports: before any ROS or simulation work
-        return _stopped_during_start_up()
-    if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
-                                               if "--ros-args" in argv else len(argv)]):
-        print(usage())
-        return EXIT_OK
-
-    def fail(text: str) -> int:
-        print(f"umbrella_node: error: {text}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return EXIT_USAGE
-
-    try:                        # rcl's parse errors are tracebacks: check the files first
-        files = params_files_in(argv)
-    except ValueError as exc:
-        return fail(str(exc))
-    try:
-        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong
-        reason = " ".join(str(exc).split())
-        if type(exc).__name__ == "UnknownROSArgsError":
-            reason = f"unknown ROS arguments {reason}"
-        return fail(f"invalid ROS arguments: {reason} (see --help)")
-    if stop_requested:
-        return _stopped_during_start_up()
-    leftover = rclpy.utilities.remove_ros_args(argv)[1:]
-    if leftover:
-        return fail(f"unexpected arguments {leftover}; parameters go after --ros-args as "
-                    "-p name:=value or --params-file FILE")
-    try:
-        node = UmbrellaNode(params_files=tuple(files))
-    except StartupError as exc:
-        return fail(str(exc))
-    running.append(node)
-    if stop_requested:          # a signal while the model was built: before any output
-        node.destroy_node()
-        return _stopped_during_start_up()
-    try:
-        node.start()
-    except StartupError as exc:
-        node.destroy_node()
-        return fail(str(exc))
-    executor = MultiThreadedExecutor(num_threads=2)
-    executor.add_node(node)
-    ok = True
-    try:
-        # the timeout lets a signal's Python handler run while the executor waits
-        while not node.finished.done() and not stop_requested:
-            executor.spin_once(timeout_sec=0.1)
-        node.stop()
-        ok = bool(node.finished.result()) if node.finished.done() else node.fault is None
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.stop()
-        node.close_recording()
-        executor.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        rclpy.try_shutdown()
-    if not ok:
-        return EXIT_FAULT
-    return EXIT_RECORDING if node.recording_error else EXIT_OK

@@ -19,7 +19,7 @@ from ..ros import signals
 def node_main() -> int:
     """Run umbrella_node: the handlers first, then the heavy imports."""
     signals.install()
-    from ..ros.node import main
+    from ..ros.node_main import main
 
     return main()
 

@@ -1,0 +1,148 @@
+"""
+umbrella_node's process: arguments, start-up, the executor, the exit code.
+
+SIGINT/SIGTERM only ask for a stop (ros/signals.py: the entry point installs the handlers
+before the heavy imports, so a signal during them is noted too, never a KeyboardInterrupt
+traceback); rclpy's own handlers would shut the context down at once, under the physics
+thread's feet.  Ours stop the physics first, then the recording is closed, then rclpy.  A
+stop during start-up: exit 0, nothing started or left behind.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from . import messages as ros_io, signals as stop_signals
+from .node import EXIT_FAULT, EXIT_OK, EXIT_RECORDING, EXIT_USAGE, StartupError, UmbrellaNode
+from .params_file import params_files_in
+from .share import package_path
+from ..core.registry import NODE_PARAMETERS, parameter_help, SPECS
+
+
+def usage() -> str:
+    lines = ["usage: umbrella_node [--help] [--ros-args -p name:=value ... --params-file FILE",
+             "                      -r __ns:=/NAMESPACE]", "",
+             "Real-time flexible umbrella-frame deployment simulator (ROS 2 node).", "",
+             "model parameters (a runtime set applies on ~/reset):"]
+    lines += parameter_help(SPECS.values())
+    lines.append("node parameters:")
+    lines += parameter_help(NODE_PARAMETERS.values())
+    lines += ["", "topics: " + ", ".join(t.name for t in ros_io.TOPICS.values())
+              + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= "
+              "sleeve_force_min, 0 by default)",
+              "services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)",
+              "exit: SIGINT/SIGTERM stop the physics, then finalise the recording (during "
+              f"start-up: nothing is started); code {EXIT_OK} on a clean stop or when duration "
+              f"is reached, {EXIT_USAGE} for "
+              "invalid arguments, parameters or params files, "
+              f"{EXIT_FAULT} if the simulation ended in a fault, {EXIT_RECORDING} if the "
+              "recording stopped on a write error (the run itself went on)",
+              f"details: {msg_docs_location()}"]
+    return "\n".join(lines)
+
+
+def msg_docs_location() -> str:
+    """Return where the interface docs are here: the source tree's, or the installed ones."""
+    found = package_path("msg_docs", "README.md")
+    if found:
+        return os.path.dirname(found) + os.sep
+    return "msg_docs/ of the umbrella_sim sources (the package share directory of a colcon " \
+           "install)"
+
+
+def main(argv: list[str] | None = None) -> int:
+    # SIGINT/SIGTERM only ask for a stop (stop_signals.py: the entry points install the
+    # handlers before the heavy imports, so a signal during them is noted too, never a
+    # KeyboardInterrupt traceback); rclpy's own handlers would shut the context down at once,
+    # under the physics thread's feet; ours stop the physics first, then the recording is
+    # closed, then rclpy.  A stop during start-up: exit 0, nothing started or left behind.
+    stop_signals.install()
+    running: list[UmbrellaNode] = []        # the node, once built: a signal asks it to stop
+
+    def on_signal(signum):
+        for node in running:
+            node.request_stop()
+
+    stop_signals.add_listener(on_signal)
+    try:
+        return _run(list(sys.argv if argv is None else argv), running)
+    finally:
+        stop_signals.remove_listener(on_signal)
+
+
+def _stopped_during_start_up() -> int:
+    """Exit quietly after a stop signal that came before the node was running."""
+    print(f"umbrella_node: stopped by {stop_signals.name(stop_signals.received[0])} during "
+          "start-up; nothing was started", file=sys.stderr)
+    rclpy.try_shutdown()
+    return EXIT_OK
+
+
+def _run(argv: list[str], running: list) -> int:
+    stop_requested = stop_signals.received      # every stop signal since the process began
+    if stop_requested:          # during the imports: before any ROS or simulation work
+        return _stopped_during_start_up()
+    if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
+                                               if "--ros-args" in argv else len(argv)]):
+        print(usage())
+        return EXIT_OK
+
+    def fail(text: str) -> int:
+        print(f"umbrella_node: error: {text}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return EXIT_USAGE
+
+    try:                        # rcl's parse errors are tracebacks: check the files first
+        files = params_files_in(argv)
+    except ValueError as exc:
+        return fail(str(exc))
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong
+        reason = " ".join(str(exc).split())
+        if type(exc).__name__ == "UnknownROSArgsError":
+            reason = f"unknown ROS arguments {reason}"
+        return fail(f"invalid ROS arguments: {reason} (see --help)")
+    if stop_requested:
+        return _stopped_during_start_up()
+    leftover = rclpy.utilities.remove_ros_args(argv)[1:]
+    if leftover:
+        return fail(f"unexpected arguments {leftover}; parameters go after --ros-args as "
+                    "-p name:=value or --params-file FILE")
+    try:
+        node = UmbrellaNode(params_files=tuple(files))
+    except StartupError as exc:
+        return fail(str(exc))
+    running.append(node)
+    if stop_requested:          # a signal while the model was built: before any output
+        node.destroy_node()
+        return _stopped_during_start_up()
+    try:
+        node.start()
+    except StartupError as exc:
+        node.destroy_node()
+        return fail(str(exc))
+    executor = MultiThreadedExecutor(num_threads=2)
+    executor.add_node(node)
+    ok = True
+    try:
+        # the timeout lets a signal's Python handler run while the executor waits
+        while not node.finished.done() and not stop_requested:
+            executor.spin_once(timeout_sec=0.1)
+        node.stop()
+        ok = bool(node.finished.result()) if node.finished.done() else node.fault is None
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.stop()
+        node.close_recording()
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if not ok:
+        return EXIT_FAULT
+    return EXIT_RECORDING if node.recording_error else EXIT_OK
