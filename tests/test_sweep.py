@@ -22,7 +22,7 @@ import pytest
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.rigid import deployment_time_by_quadrature
-from umbrella_sim.tools import cli, sweep
+from umbrella_sim.tools import cli, sweep, sweep_results
 from umbrella_sim.tools.compare import THESIS_TABLE_6_1
 
 BIN = os.path.dirname(sys.executable)
@@ -347,14 +347,16 @@ def test_table_takes_every_summary_key(tmp_path):
 def test_progress_line_counts_failures_and_eta(monkeypatch):
     import io
 
+    from umbrella_sim.tools import progress as progress_module
+
     clock = [100.0]
-    monkeypatch.setattr(sweep.time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(progress_module.time, "monotonic", lambda: clock[0])
     log = io.StringIO()
-    progress = sweep.SweepProgress(4, log)
+    progress = sweep.case_progress(4, log)
     clock[0] = 110.0
-    progress.update(False, "case 1: v0=-1.0")
+    progress.update(1, False, "case 1: v0=-1.0")
     clock[0] = 130.0
-    progress.update(True, "case 2: v0=-2.0: diverged")
+    progress.update(2, True, "case 2: v0=-2.0: diverged")
     lines = log.getvalue().splitlines()
     assert lines[0].endswith("1/4 cases  elapsed 0:00:10  ETA 0:00:30  (case 1: v0=-1.0)")
     assert "2/4 cases, 1 failed  elapsed 0:00:30  ETA 0:00:30" in lines[1]
@@ -365,9 +367,9 @@ def test_progress_line_counts_failures_and_eta(monkeypatch):
             return True
 
     term = Terminal()
-    progress = sweep.SweepProgress(2, term)
+    progress = sweep.case_progress(2, term)
     clock[0] += 3725.0
-    progress.update(False, "case 1")
+    progress.update(1, False, "case 1")
     progress.close()
     assert term.getvalue() == ("\r[############             ] 1/2 cases  elapsed 1:02:05  "
                                "ETA 1:02:05\n")
@@ -409,7 +411,7 @@ def test_local_sweep_table_physics_and_plots(local_run):
     table = pq.read_table(os.path.join(local_run["out"], "results.parquet")).to_pylist()
     assert [r["case_id"] for r in table] == [r["case_id"] for r in rows]
     assert table[0]["deploy_time"] == float(rows[0]["deploy_time"])
-    for name in sweep.PLOTS:
+    for name in sweep_results.PLOTS:
         with open(os.path.join(local_run["out"], name), "rb") as fh:
             assert fh.read(8) == b"\x89PNG\r\n\x1a\n", name
     assert "6/6 cases" in local_run["log"] and "ETA" in local_run["log"]

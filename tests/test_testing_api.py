@@ -7,8 +7,9 @@ import sys
 
 import pytest
 
-from umbrella_sim.testing import (_shm_segments, default_domain_id, DOMAIN_ID_ENV, NodeProcess,
-                                  poll, ros_env, summarize_run, summary_from_recording)
+from umbrella_sim.testing import (default_domain_id, DOMAIN_ID_ENV, NodeProcess, poll, ros_env,
+                                  summarize_run, summary_from_recording)
+from umbrella_sim.testing.processes import _shm_segments
 
 
 def own_segments(pid: int) -> set:
@@ -305,7 +306,8 @@ def test_two_sessions_on_one_machine_get_two_domains():
     import subprocess
     import sys
 
-    from umbrella_sim.testing import FREE_DOMAINS, reserve_domain
+    from umbrella_sim.testing import reserve_domain
+    from umbrella_sim.testing.processes import FREE_DOMAINS
 
     start = FREE_DOMAINS[-1]        # the last, so that the next one wraps around
     holder = subprocess.Popen(

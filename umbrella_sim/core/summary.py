@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from .forcing import TIME_RESOLUTION
 from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS, step_row,
                       StepBlock)
 
@@ -144,22 +145,37 @@ def deploy_start_of(params, applied) -> float | None:
                         [(0.0, float(given["sleeve_force"])), *applied])
 
 
+def in_stage2_window(t, lock_time: float, window: float = STAGE2_WINDOW):
+    """
+    Say which instants t (an array, or one) are in stage 2's window: (lock, lock + window].
+
+    The one rule of every stage-2 figure, offline and live; a time within TIME_RESOLUTION
+    (the 1 ns of a recording's stamps) of the window's end is in it.
+    """
+    return (t > lock_time) & (t <= lock_time + window + TIME_RESOLUTION)
+
+
+def amplitude(v) -> float:
+    """Return the amplitude of a vibration v: half its peak-to-peak."""
+    return 0.5 * float(np.max(v) - np.min(v))
+
+
 def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dict:
     """
     Return the stage-2 amplitude and period of the tip deflection v(t).
 
     Over the window (lock, lock + STAGE2_WINDOW], or the part of it the run covers
-    (reported as stage2_window): half the peak-to-peak of v and oscillation_period(t, v).
+    (reported as stage2_window): the amplitude of v and oscillation_period(t, v).
     """
     out = {"stage2_window": None, "stage2_tip_amplitude": None, "stage2_tip_period": None}
     if lock_time is None:
         return out
-    keep = (t > lock_time) & (t <= lock_time + STAGE2_WINDOW + 1e-12)
+    keep = in_stage2_window(t, lock_time)
     t, v = t[keep], v[keep]
     if len(v) <= 8:
         return out
     out["stage2_window"] = [float(lock_time), float(t[-1])]
-    out["stage2_tip_amplitude"] = 0.5 * float(v.max() - v.min())
+    out["stage2_tip_amplitude"] = amplitude(v)
     period = oscillation_period(t, v)
     out["stage2_tip_period"] = None if math.isnan(period) else period
     return out
@@ -332,11 +348,11 @@ class SummaryAccumulator:
             i = int(deploying.argmax())
             if self._tip1[0] is None or deploying[i] > self._tip1[0]:
                 self._tip1 = (float(deploying[i]), float(t[i]))
-        if self.lock is not None and stage[-1] != 0 \
-                and t[0] <= self.lock.time + STAGE2_WINDOW + 1e-12:
-            keep = (stage != 0) & (t <= self.lock.time + STAGE2_WINDOW + 1e-12)
-            self._s2_t.append(t[keep])
-            self._s2_v.append(v[keep])
+        if self.lock is not None and stage[-1] != 0:
+            keep = in_stage2_window(t, self.lock.time)
+            if keep.any():
+                self._s2_t.append(t[keep])
+                self._s2_v.append(v[keep])
         for body, (peak, x, ti) in block.peaks.items():
             if peak > self._peaks[body][0]:
                 self._peaks[body] = (peak, x, ti)

@@ -11,6 +11,7 @@ from . import sweep
 from .arguments import ArgumentParser
 from .csv_output import StepCsv
 from .inputs import build_params, read_force_profile
+from .progress import Progress
 from .. import __version__
 from ..bag.paths import check_new_output
 from ..core.driver import simulate
@@ -18,24 +19,6 @@ from ..core.params import shortened_step_note
 from ..core.registry import parameter_help, SPECS
 from ..core.solver import UmbrellaSimulator
 from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
-
-
-class Progress:
-
-    def __init__(self, duration: float, stream=None):
-        self.duration = duration
-        self.stream = stream or sys.stderr     # (at call time: a redirected stderr)
-
-    def __call__(self, t: float) -> None:
-        if not math.isfinite(t):        # (a chunk that took no step)
-            return
-        frac = min(1.0, t / self.duration) if self.duration > 0 else 1.0
-        bar = "#" * int(30 * frac)
-        self.stream.write(f"\r[{bar:<30}] {100 * frac:5.1f}%  t = {t:.3f} s")
-        self.stream.flush()
-
-    def close(self) -> None:
-        self.stream.write("\n")
 
 
 class _Once(argparse.Action):
@@ -236,7 +219,8 @@ def main(argv: list[str] | None = None) -> int:
         model = first.model
     except ValueError as exc:
         ap.exit(2, f"umbrella_sim: error: {exc}\n")
-    progress = Progress(args.duration) if sys.stderr.isatty() and not args.json else None
+    progress = (Progress(args.duration, lambda t: f"t = {t:.3f} of {args.duration:g} s")
+                if sys.stderr.isatty() and not args.json else None)
     csv = (CsvStream(args.csv, first.sample(), model if args.csv_state else None)
            if args.csv else None)
 
@@ -244,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
         if csv is not None:
             csv.write(chunk)
         if progress is not None:
-            progress(chunk.end_time)
+            progress.update(chunk.end_time)
 
     try:
         if args.mcap:

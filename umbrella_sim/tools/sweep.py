@@ -6,19 +6,7 @@ summary as ``umbrella-sim simulate --json``), executed as a Dask task: on a loca
 one worker process per core, or on an existing cluster (``--scheduler tcp://HOST:PORT``)
 started the usual way with ``dask scheduler`` and ``dask worker``.
 
-SPEC keys (every parameter name is the one of ``config/umbrella.yaml`` / the node)::
-
-    params: other.yaml         # optional ROS 2 params file, default config/umbrella.yaml
-    base: {name: value}        # overrides applied to every case
-    grid: {name: [v1, v2]}     # cartesian product, first axis outermost (and the plots' x axis)
-    cases: [{name: value}]     # explicit cases, added after the grid's
-    duration: 1.0              # simulated time per case (s), the cap when stop_after_lock is set
-    stop_after_lock: 0.2       # end a case this long after its lock (s)
-    force: 5.0                 # constant sleeve force F_H (N), = base sleeve_force
-    force_profile: f.csv       # or a CSV of t,F rows (path relative to the SPEC)
-
-The whole SPEC is checked before any case runs (names, values, every case's parameters through
-the same validation as the CLI); errors name the case and the parameter.
+The SPEC and its checks: sweep_spec.py; the store, the table and the plots: sweep_results.py.
 
 DIR keeps an append-only store, ``DIR/cases/<case_id>.json``, one file per finished case,
 written atomically the moment its result arrives; ``case_id`` hashes the case's full parameter
@@ -31,209 +19,29 @@ keeps every finished case and writes the table of those.
 from __future__ import annotations
 
 import argparse
-import csv
 from dataclasses import dataclass, field
-import hashlib
-import itertools
-import json
-import math
 import os
 import signal
 import socket
 import sys
 import time
 import traceback
-from typing import Any, Callable
+from typing import Callable
 
-import yaml
-
+from .progress import Progress
+from .sweep_results import (CaseStore, is_finished, make_record, OutputError, plot,
+                            STATUS_DIVERGED, STATUS_ERROR, STATUS_OK, table_rows, write_csv,
+                            write_parquet)
+from .sweep_spec import case_id, load_spec, SpecError, Sweep
 from .. import __version__
-from ..bag.paths import check_new_output, read_text_input
+from ..bag.paths import check_new_output
 from ..core.registry import NODE_PARAMETERS
 from ..ros.signals import deferred
 
-SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
-             "force_profile")
-DEFAULT_DURATION = 1.0      # s, as `umbrella-sim simulate`
-STATUS_OK, STATUS_DIVERGED, STATUS_ERROR = "ok", "diverged", "error"
 #: the publication rate of a case's --mcap recording: the node's default, as simulate --mcap
 MCAP_PUBLISH_RATE = NODE_PARAMETERS["publish_rate"].default
-#: statuses of a case that is done: re-running the sweep skips it
-FINISHED = (STATUS_OK, STATUS_DIVERGED)
-PLOTS = ("deploy_time.png", "peak_stress.png", "tip_deflection.png")
 CONNECT_TIMEOUT = 10.0      # s to reach a --scheduler
 WORKER_TIMEOUT = 30.0       # s for a first worker to join it
-
-
-class SpecError(ValueError):
-    """The SPEC cannot be run; the message names the key, case and parameter."""
-
-
-class OutputError(OSError):
-    """DIR cannot be written; the message names the file (finished cases stay in the store)."""
-
-
-@dataclass
-class Case:
-    index: int                  # 1-based position in the SPEC (grid first, then cases)
-    overrides: dict             # what the SPEC sets for this case (base + grid/case values)
-    params: dict                # every parameter, validated (UmbrellaParams.as_dict())
-    duration: float
-    stop_after_lock: float | None
-    force_profile: list | None  # [(t, F)] read from the CSV, or None
-    force_profile_path: str | None
-    case_id: str = ""
-
-    def label(self, names) -> str:
-        return ", ".join(f"{n}={self.overrides[n]}" for n in names if n in self.overrides)
-
-    def task(self, mcap_dir: str | None) -> dict:
-        """Return what a worker needs (plain data, pickles anywhere)."""
-        return {"case_id": self.case_id, "params": self.params, "duration": self.duration,
-                "stop_after_lock": self.stop_after_lock, "force_profile": self.force_profile,
-                "mcap_dir": mcap_dir}
-
-
-@dataclass
-class Sweep:
-    path: str
-    cases: list
-    axes: list                  # grid parameter names, in SPEC order
-    swept: list                 # every parameter name the grid or the cases set
-    duplicates: list = field(default_factory=list)   # (index, index of the same case)
-    text: str = ""              # the SPEC as read (copied to DIR/spec.yaml)
-
-
-# ------------------------------------------------------------------ the SPEC
-def _number(where: str, value: Any, low: float, low_open: bool) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or (value <= low if low_open else value < low):
-        raise SpecError(f"{where}: {value!r} must be a finite number "
-                        f"{'>' if low_open else '>='} {low:g}")
-    return float(value)
-
-
-def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> str:
-    """Key of a case in the store: its full parameters, run options and package version."""
-    doc = {"umbrella_sim": __version__, "params": params, "duration": duration,
-           "stop_after_lock": stop_after_lock, "force_profile": force_profile}
-    blob = json.dumps(doc, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:16]
-
-
-def load_spec(path: str) -> Sweep:
-    """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
-    from .inputs import check_lock_given, read_force_profile, resolve_params
-    from ..core.forcing import command_force
-    from ..core.params import UmbrellaParams
-    from ..core.registry import check_types
-    from ..ros.params_file import load_yaml_as_ros
-
-    try:
-        text = read_text_input(path, "sweep spec")
-        doc = load_yaml_as_ros(text)        # typed as a params file is
-    except ValueError as exc:       # missing, not a regular file, unreadable, not text
-        raise SpecError(str(exc)) from None
-    except yaml.YAMLError as exc:
-        raise SpecError(f"sweep spec {path}: not valid YAML ({exc})") from None
-    if not isinstance(doc, dict):
-        raise SpecError(f"sweep spec {path}: expected a mapping with base/grid/cases")
-    unknown = sorted(set(doc) - set(SPEC_KEYS))
-    if unknown:
-        raise SpecError(f"sweep spec {path}: unknown key(s) {', '.join(map(str, unknown))}; "
-                        f"known: {', '.join(SPEC_KEYS)}")
-    here = os.path.dirname(os.path.abspath(path))
-
-    def rel(p):
-        return p if os.path.isabs(p) else os.path.join(here, p)
-
-    params_file = doc.get("params")
-    if params_file is not None and not isinstance(params_file, str):
-        raise SpecError(f"sweep spec {path}: params: expected a file name")
-    base = doc.get("base") or {}
-    grid = doc.get("grid") or {}
-    explicit = doc.get("cases") or []
-    if not isinstance(base, dict):
-        raise SpecError(f"sweep spec {path}: base: expected a mapping of parameter overrides")
-    if not isinstance(grid, dict):
-        raise SpecError(f"sweep spec {path}: grid: expected a mapping name -> list of values")
-    for name, values in grid.items():
-        if not isinstance(values, list) or not values:
-            raise SpecError(f"sweep spec {path}: grid: {name}: "
-                            "expected a non-empty list of values")
-    if not isinstance(explicit, list) or not all(isinstance(c, dict) for c in explicit):
-        raise SpecError(f"sweep spec {path}: cases: expected a list of mappings of overrides")
-    if not grid and not explicit:
-        raise SpecError(f"sweep spec {path}: no cases: give grid and/or cases")
-    duration = _number(f"sweep spec {path}: duration", doc.get("duration", DEFAULT_DURATION),
-                       0.0, True)
-    stop_after_lock = doc.get("stop_after_lock")
-    if stop_after_lock is not None:
-        stop_after_lock = _number(f"sweep spec {path}: stop_after_lock", stop_after_lock, 0.0,
-                                  False)
-    base = dict(base)
-    if doc.get("force") is not None:
-        if doc.get("force_profile") is not None:
-            raise SpecError(f"sweep spec {path}: give force or force_profile, not both")
-        # force is every case's sleeve_force: no part of the SPEC may set its own
-        for where, c in (("base", base), ("grid", grid), *(("cases", c) for c in explicit)):
-            if "sleeve_force" in c:
-                raise SpecError(f"sweep spec {path}: force and {where}: sleeve_force both set "
-                                "(force is every case's sleeve_force; sweep sleeve_force "
-                                "without it)")
-        if isinstance(doc["force"], bool) or not isinstance(doc["force"], (int, float)):
-            raise SpecError(f"sweep spec {path}: force: {doc['force']!r} is not a number")
-        base["sleeve_force"] = doc["force"]     # its range is checked with each case's model
-    profile = profile_path = None
-    if doc.get("force_profile") is not None:
-        if not isinstance(doc["force_profile"], str):
-            raise SpecError(f"sweep spec {path}: force_profile: expected a CSV file name")
-        profile_path = rel(doc["force_profile"])
-        try:
-            profile = [list(row) for row in read_force_profile(profile_path)]
-        except ValueError as exc:
-            raise SpecError(f"sweep spec {path}: force_profile: {exc}") from None
-    if params_file is not None:
-        params_file = rel(params_file)
-
-    axes = list(grid)
-    overrides_list = [dict(base, **dict(zip(axes, combo)))
-                      for combo in itertools.product(*grid.values())] if grid else []
-    overrides_list += [dict(base, **c) for c in explicit]
-    swept = list(axes)
-    for c in explicit:
-        swept += [n for n in c if n not in swept]
-    sweep = Sweep(path=os.path.abspath(path), cases=[], axes=axes, swept=swept, text=text)
-    seen: dict[str, int] = {}
-    for index, overrides in enumerate(overrides_list, start=1):
-        source = "grid" if index <= len(overrides_list) - len(explicit) else "cases"
-        try:
-            check_types(overrides)          # typed YAML, as a params file (the node's rule)
-            resolved = resolve_params(overrides, params_file)
-            check_lock_given(resolved, f"lock={overrides['lock']}" if "lock" in overrides
-                             else None)
-            params = resolved.as_dict()
-        except ValueError as exc:
-            shown = ", ".join(f"{k}={v!r}" for k, v in overrides.items() if k not in base
-                              or source == "cases")
-            raise SpecError(f"sweep spec {path}: case {index} ({source}: {shown}): "
-                            f"{exc}") from None
-        for t, f in profile or []:
-            try:
-                command_force(f, UmbrellaParams(**params))
-            except ValueError as exc:
-                raise SpecError(f"sweep spec {path}: case {index}: force_profile at t = {t:g} s: "
-                                f"{exc}") from None
-        case = Case(index=index, overrides=overrides, params=params, duration=duration,
-                    stop_after_lock=stop_after_lock, force_profile=profile,
-                    force_profile_path=profile_path)
-        case.case_id = case_id(params, duration, stop_after_lock, profile)
-        if case.case_id in seen:
-            sweep.duplicates.append((index, seen[case.case_id]))
-            continue
-        seen[case.case_id] = index
-        sweep.cases.append(case)
-    return sweep
 
 
 # ------------------------------------------------------------------ one case (on a worker)
@@ -321,338 +129,10 @@ def _mcap_duration(task: dict) -> float:
     return min(task["duration"], probe.figures["final_time"])
 
 
-# ------------------------------------------------------------------ the store
-class CaseStore:
-    """DIR/cases/<case_id>.json: one file per case result, each written atomically."""
-
-    def __init__(self, out_dir: str):
-        self.dir = os.path.join(out_dir, "cases")     # made by the first save
-
-    def path(self, cid: str) -> str:
-        return os.path.join(self.dir, cid + ".json")
-
-    def load(self, cid: str) -> dict | None:
-        try:
-            with open(self.path(cid), encoding="utf-8") as fh:
-                return json.load(fh)
-        except FileNotFoundError:
-            return None
-        except (OSError, ValueError):
-            return None             # unreadable: the case runs again
-
-    def save(self, record: dict) -> None:
-        tmp = self.path(record["case_id"]) + f".{os.getpid()}.tmp"
-        try:
-            os.makedirs(self.dir, exist_ok=True)
-            with open(tmp, "w", encoding="utf-8") as fh:
-                json.dump(record, fh, indent=1, default=_jsonable)     # summary keys in order
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, self.path(record["case_id"]))
-        except OSError as exc:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise OutputError(exc.errno, f"{self.path(record['case_id'])}: "
-                                         f"{exc.strerror}") from None
-
-
-def _jsonable(value):
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return list(value)
-    return str(value)
-
-
-def is_finished(record: dict | None, mcap: bool) -> bool:
-    if record is None or record.get("status") not in FINISHED:
-        return False
-    return not mcap or bool(record.get("mcap")) and os.path.isdir(record["mcap"])
-
-
-def make_record(case: Case, result: dict) -> dict:
-    return dict(result, case=case.index, overrides=case.overrides, params=case.params,
-                duration=case.duration, stop_after_lock=case.stop_after_lock,
-                force_profile=case.force_profile_path)
-
-
-# ------------------------------------------------------------------ results table
-def table_rows(sweep: Sweep, store: CaseStore) -> tuple[list[str], list[dict]]:
-    """One row per case of the SPEC that has a result: case, status, parameters, summary."""
-    rows, summary_keys = [], []
-    for case in sweep.cases:
-        rec = store.load(case.case_id)
-        if rec is None:
-            continue
-        row = {"case": case.index, "case_id": case.case_id, "status": rec.get("status"),
-               "error": rec.get("error")}
-        row.update({name: case.params.get(name, case.overrides.get(name)) for name in sweep.swept})
-        row.update(case.params)
-        row.update(duration=case.duration, stop_after_lock=case.stop_after_lock,
-                   force_profile=case.force_profile_path)
-        used = row["_same"] = set()     # summary keys that repeat their parameter's value
-        for key, value in (rec.get("summary") or {}).items():
-            if key == "error":
-                continue
-            if key in case.params:      # the parameter's column, unless the run took another
-                if value == case.params[key]:     # (a rigid model's lock is plastic)
-                    used.add(key)
-                    continue
-                key = f"{key}_used"
-            if key not in summary_keys:
-                summary_keys.append(key)
-            row[key] = value
-        row.update(worker=rec.get("worker"), mcap=rec.get("mcap"))
-        rows.append(row)
-    for key in [k for k in summary_keys if k.endswith("_used")]:   # in every row, then:
-        for row in rows:        # the value the run took (none for a run that has no summary)
-            name = key[:-len("_used")]
-            row.setdefault(key, row.get(name) if name in row["_same"] else None)
-    for row in rows:
-        del row["_same"]
-    columns = ["case", "case_id", "status"] + list(sweep.swept)
-    columns += [n for n in (rows[0] if rows else {}) if n not in columns and n not in
-                ("error", "worker", "mcap") and n not in summary_keys]
-    columns += summary_keys + ["error", "worker", "mcap"]
-    return columns, rows
-
-
-def _cell(value):
-    if isinstance(value, (list, dict, tuple)):
-        return json.dumps(value)
-    return value
-
-
-def write_csv(path: str, columns: list[str], rows: list[dict]) -> None:
-    tmp = path + ".tmp"
-    try:
-        with open(tmp, "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            w.writerow(columns)
-            for row in rows:
-                w.writerow(["" if row.get(c) is None else _cell(row.get(c)) for c in columns])
-        os.replace(tmp, path)
-    except BaseException:       # a full disk, an interrupt: no half table left beside it
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-def write_parquet(path: str, columns: list[str], rows: list[dict]) -> None:
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    arrays = {}
-    for c in columns:
-        values = [_cell(row.get(c)) for row in rows]
-        kinds = {type(v) for v in values if v is not None}
-        if kinds <= {int, float} and float in kinds:
-            values = [None if v is None else float(v) for v in values]
-        elif len(kinds) > 1:
-            values = [None if v is None else str(v) for v in values]
-        arrays[c] = pa.array(values) if kinds else pa.nulls(len(values), pa.string())
-    tmp = path + ".tmp"
-    pq.write_table(pa.table(arrays), tmp)
-    os.replace(tmp, path)
-
-
-# ------------------------------------------------------------------ plots
-def _series(sweep: Sweep, rows: list[dict]):
-    """Group the rows: x = the first grid axis, a series per combination of the others."""
-    x_name = sweep.axes[0] if sweep.axes else "case"
-    others = [n for n in sweep.swept if n != x_name]
-    groups: dict[tuple, list[dict]] = {}
-    for row in rows:
-        if row.get("status") not in FINISHED:
-            continue
-        groups.setdefault(tuple(row.get(n) for n in others), []).append(row)
-
-    def label(key):
-        parts = []
-        closed_form = dict(zip(others, key)).get("model") == "rigid"
-        for name, value in zip(others, key):
-            if name == "model":
-                parts.insert(0, str(value))
-            elif name == "elements_per_segment":
-                if not closed_form:             # the closed-form rigid model has no mesh
-                    parts.append(f"N = {value}")
-            else:
-                parts.append(f"{name} = {value}")
-        return ", ".join(parts) or "all cases"
-
-    return x_name, [(label(k), sorted(g, key=lambda r: _sort_key(r.get(x_name))))
-                    for k, g in groups.items()]
-
-
-def _sort_key(v):
-    return (0, v, "") if isinstance(v, (int, float)) else (1, 0, str(v))
-
-
-def _reference_series(series):
-    """
-    Return the series the deployment-time difference is taken to.
-
-    The rigid model's if swept (Table 6.1's "time prolonged"), else the first.
-    """
-    for label, g in series:
-        if g and all(r.get("model") == "rigid" for r in g):
-            return label, g
-    return series[0]
-
-
-def plot(sweep: Sweep, rows: list[dict], out_dir: str,
-         reference: dict | None = None) -> list[str]:
-    """
-    Plot deploy_time.png, peak_stress.png, tip_deflection.png against the first grid axis.
-
-    One curve per combination of the other swept parameters.  reference: {label: {x: deploy
-    time}} drawn as open markers (e.g. the thesis's Table 6.1).
-    """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..core.registry import REGISTRY
-
-    x_name, series = _series(sweep, rows)
-    if not series:
-        return []
-    xs_all = sorted({r.get(x_name) for _, g in series for r in g}, key=_sort_key)
-    numeric = all(isinstance(x, (int, float)) for x in xs_all)
-    pos = {x: (x if numeric else i) for i, x in enumerate(xs_all)}
-    unit = REGISTRY[x_name].unit if x_name in REGISTRY else "-"
-    xlabel = x_name if unit == "-" else f"{x_name} ({unit})"
-    colours = {label: f"C{i % 10}" for i, (label, _) in enumerate(series)}
-    written = []
-
-    def points(g, key, scale):
-        return [(pos[r.get(x_name)], r[key] * scale) for r in g
-                if isinstance(r.get(key), (int, float))]
-
-    def finish(fig, axes, name, title):
-        for ax in axes:
-            if not numeric:
-                ax.set_xticks(range(len(xs_all)), [str(x) for x in xs_all])
-            ax.grid(True, alpha=0.3)
-            if ax.get_legend_handles_labels()[0]:
-                ax.legend(fontsize=8)
-        axes[-1].set_xlabel(xlabel)
-        axes[0].set_title(title)
-        fig.tight_layout()
-        path = os.path.join(out_dir, name)
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
-
-    # deployment time, and its difference to the rigid model (Table 6.1 "time prolonged")
-    if len(series) > 1 or reference:
-        fig, (ax, ax_d) = plt.subplots(2, 1, figsize=(7, 6.5), sharex=True,
-                                       gridspec_kw={"height_ratios": [3, 2]})
-    else:
-        fig, ax = plt.subplots(figsize=(7, 4.5))
-        ax_d = None
-    ref_label, ref_rows = _reference_series(series)
-    ref = {r.get(x_name): r["deploy_time"] for r in ref_rows
-           if isinstance(r.get("deploy_time"), (int, float))}
-    for label, g in series:
-        pts = points(g, "deploy_time", 1.0)
-        if pts:
-            ax.plot(*zip(*pts), "o-", color=colours[label], label=label)
-        diff = [(pos[r.get(x_name)], (r["deploy_time"] - ref[r.get(x_name)]) * 1e3) for r in g
-                if isinstance(r.get("deploy_time"), (int, float)) and r.get(x_name) in ref]
-        if diff and label != ref_label and ax_d is not None:
-            ax_d.plot(*zip(*diff), "o-", color=colours[label], label=label)
-    for i, (label, values) in enumerate((reference or {}).items()):
-        pts = sorted((pos[x], t) for x, t in values.items() if x in pos and t is not None)
-        style = {"marker": "Dx+^v"[i % 5], "ms": 9, "ls": "none", "color": "k", "mfc": "none",
-                 "label": label}
-        if pts:
-            ax.plot(*zip(*pts), **style)
-            diff = [(pos[x], (t - ref[x]) * 1e3) for x, t in values.items()
-                    if x in ref and x in pos and t is not None]
-            if diff and ax_d is not None:
-                ax_d.plot(*zip(*sorted(diff)), **style)
-    ax.set_ylabel("deployment time (s)")
-    if ax_d is not None:
-        ax_d.set_ylabel(f"minus {ref_label} (ms)")
-        ax_d.axhline(0.0, color="k", lw=0.8)
-    finish(fig, [a for a in (ax, ax_d) if a is not None], "deploy_time.png",
-           f"deployment time vs {x_name} (thesis Table 6.1)")
-
-    def elastic(keys):
-        """Series with elastic deformation: rigid models (zero up to round-off) left out."""
-        top = max([abs(r[k]) for _, g in series for r in g for k in keys
-                   if isinstance(r.get(k), (int, float))] or [0.0])
-        return [(label, g) for label, g in series
-                if any(abs(r[k]) > 1e-6 * top for r in g for k in keys
-                       if isinstance(r.get(k), (int, float)))]
-
-    # peak stresses with the yield line
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, g in elastic(["peak_stress_leaf", "peak_stress_link"]):
-        for key, style, body in (("peak_stress_leaf", "o-", "leaf"),
-                                 ("peak_stress_link", "s--", "link")):
-            pts = points(g, key, 1e-6)
-            if pts:
-                ax.plot(*zip(*pts), style, color=colours[label], label=f"{label}: {body}")
-    for y in sorted({r["yield_strength"] for _, g in series for r in g
-                     if isinstance(r.get("yield_strength"), (int, float))}):
-        ax.axhline(y * 1e-6, color="r", lw=1.2, ls="-.", label=f"yield strength {y * 1e-6:g} MPa")
-    ax.set_ylabel("peak |stress| (MPa)")
-    finish(fig, [ax], "peak_stress.png", f"peak stress vs {x_name}")
-
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, g in elastic(["tip_deflection_max"]):
-        pts = points(g, "tip_deflection_max", 1e3)
-        if pts:
-            ax.plot(*zip(*pts), "o-", color=colours[label], label=label)
-    ax.set_ylabel("stage-1 max transverse deflection of G (mm)")
-    finish(fig, [ax], "tip_deflection.png", f"stage-1 max tip deflection vs {x_name}")
-    return written
-
-
 # ------------------------------------------------------------------ progress
-class SweepProgress:
-    """
-    Progress of a sweep in one line: bar, done/total, failures, elapsed and ETA.
-
-    The line is rewritten on a terminal; otherwise one line per finished case.
-    """
-
-    def __init__(self, total: int, stream=None):
-        self.total, self.done, self.failed = total, 0, 0
-        self.stream = stream or sys.stderr     # (at call time: a redirected stderr)
-        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.t0 = time.monotonic()
-
-    @staticmethod
-    def _hms(s: float) -> str:
-        s = int(round(s))
-        return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
-
-    def update(self, failed: bool, what: str = "") -> None:
-        self.done += 1
-        self.failed += bool(failed)
-        elapsed = time.monotonic() - self.t0
-        eta = elapsed / self.done * (self.total - self.done)
-        frac = self.done / self.total
-        line = (f"[{'#' * int(25 * frac):<25}] {self.done}/{self.total} cases"
-                f"{f', {self.failed} failed' if self.failed else ''}  elapsed "
-                f"{self._hms(elapsed)}  ETA {self._hms(eta)}")
-        if self.tty:
-            self.stream.write("\r" + line)
-        else:
-            self.stream.write(line + (f"  ({what})" if what else "") + "\n")
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self.tty and self.done:
-            self.stream.write("\n")
-            self.stream.flush()
+def case_progress(total: int, stream=None) -> Progress:
+    """Return the sweep's progress line: bar, cases done of total, failures, elapsed, ETA."""
+    return Progress(total, lambda done: f"{done:.0f}/{total} cases", stream)
 
 
 # ------------------------------------------------------------------ running
@@ -839,7 +319,7 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
                                     key=f"umbrella-case-{case.case_id}-{os.getpid()}")
                 by_key[fut.key] = case
                 futures.append(fut)
-            progress = SweepProgress(len(todo), stream)
+            progress = case_progress(len(todo), stream)
             try:
                 for fut in as_completed(futures):
                     case = by_key[fut.key]
@@ -854,7 +334,8 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
                     report.run_s = time.perf_counter() - t1
                     report.compute_s += result.get("case_wall_time") or 0.0
                     failed = result["status"] != STATUS_OK
-                    progress.update(failed, f"case {case.index}: {case.label(sweep.swept)}"
+                    progress.update(progress.done + 1, failed,
+                                    f"case {case.index}: {case.label(sweep.swept)}"
                                     + (f": {result['status']}" if failed else ""))
                     fut.release()
             finally:

@@ -1,0 +1,395 @@
+"""
+ROS processes under test: private domains, node processes, a probe node, waits that poll.
+
+Each process runs with ``ROS_DOMAIN_ID`` = :func:`default_domain_id` (``UMBRELLA_TEST_DOMAIN_ID``,
+else a domain of 10..99 that no other test session on the machine holds) and
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``.  :class:`NodeProcess` starts any node and stops it
+leaving no process or Fast DDS shared-memory segment behind; :class:`Probe` is the test's own
+rclpy node; :func:`poll` waits for a condition and fails saying what it awaited and saw.
+"""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from typing import Any, Callable, Iterable
+
+#: environment variable that sets the default ROS domain of tests
+DOMAIN_ID_ENV = "UMBRELLA_TEST_DOMAIN_ID"
+
+
+#: the domains handed out by default, and where a process holding one says so (a lock file)
+FREE_DOMAINS = range(10, 100)
+
+
+_DOMAIN_LOCKS = os.path.join(tempfile.gettempdir(), "umbrella_sim_ros_domains")
+
+
+_held_domain_locks: list = []      # open lock files: a domain is held while its process lives
+
+
+def reserve_domain(first: int) -> int:
+    """
+    Return a domain of FREE_DOMAINS that no other process of this machine holds, from first.
+
+    Held until this process exits (an exclusive flock on a file per domain), so that two test
+    sessions on one machine (two CI jobs, a user's tests beside ours) never share a domain:
+    they drove each other's antennas when both took the pid's domain.  If every domain is
+    held (or locks are not possible here), first.
+    """
+    try:
+        import fcntl
+
+        os.makedirs(_DOMAIN_LOCKS, exist_ok=True)
+    except (ImportError, OSError):
+        return first
+    span = len(FREE_DOMAINS)
+    for k in range(span):
+        domain = FREE_DOMAINS[(first - FREE_DOMAINS[0] + k) % span]
+        try:
+            fh = open(os.path.join(_DOMAIN_LOCKS, f"{domain}.lock"), "a")
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            fh.close()
+            continue
+        _held_domain_locks.append(fh)
+        return domain
+    return first
+
+
+def default_domain_id() -> int:
+    """
+    ``$UMBRELLA_TEST_DOMAIN_ID`` if set, else a free domain of 10..99 (one per test session).
+
+    The free domain is reserved for this process (:func:`reserve_domain`), from one derived
+    from the pid; its child processes get it through the environment (:func:`ros_env`).
+    """
+    value = os.environ.get(DOMAIN_ID_ENV)
+    if value is None:
+        return reserve_domain(os.getpid() % len(FREE_DOMAINS) + FREE_DOMAINS[0])
+    try:
+        domain = int(value)
+    except ValueError:
+        raise ValueError(f"{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232") from None
+    if not 0 <= domain <= 232:
+        raise ValueError(f"{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232")
+    return domain
+
+
+DOMAIN_ID = default_domain_id()
+
+
+def ros_env(domain_id: int | None = None) -> dict:
+    """Return the environment for a child ROS process: private domain, localhost discovery."""
+    domain = str(DOMAIN_ID if domain_id is None else domain_id)
+    env = dict(os.environ)
+    # the domain goes in DOMAIN_ID_ENV too: a child that imports this module (a test helper,
+    # a user's wrapper around the node) then has the same DOMAIN_ID instead of one from its pid
+    env.update({DOMAIN_ID_ENV: domain}, ROS_DOMAIN_ID=domain,
+               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               RMW_IMPLEMENTATION="rmw_fastrtps_cpp", PYTHONUNBUFFERED="1",
+               RCUTILS_LOGGING_BUFFERED_STREAM="0")
+    return env
+
+
+def poll(condition: Callable[[], Any], timeout: float, failure: Callable[[], str],
+         interval: float = 0.02):
+    """condition()'s first truthy value, polling; AssertionError(failure()) at the timeout."""
+    deadline = time.monotonic() + timeout
+    while True:
+        result = condition()
+        if result:
+            return result
+        if time.monotonic() > deadline:
+            raise AssertionError(failure())
+        time.sleep(interval)
+
+
+def _brief(msg, limit: int = 160) -> str:
+    text = repr(msg)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+# ------------------------------------------------------------- shared memory
+_SHM = "/dev/shm/"
+
+
+def _shm_segments(pid: int) -> set[str]:
+    """Fast DDS segments a live process has mapped or open."""
+    found = set()
+    try:
+        with open(f"/proc/{pid}/maps", encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                path = line.rstrip("\n").split(" ")[-1]
+                if path.startswith(_SHM + "fastrtps_"):
+                    found.add(path)
+        for fd in os.listdir(f"/proc/{pid}/fd"):
+            try:
+                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+            except OSError:
+                continue
+            if target.startswith(_SHM + "fastrtps_") or target.startswith(_SHM + "sem.fastrtps_"):
+                found.add(target)
+    except OSError:
+        pass
+    return found
+
+
+def _segment_family(path: str) -> set[str]:
+    """Return a segment, its lock file (_el) and its named semaphore (sem.<name>_mutex)."""
+    name = os.path.basename(path)
+    name = name[len("sem."):] if name.startswith("sem.") else name
+    name = name[:-len("_mutex")] if name.endswith("_mutex") else name
+    name = name[:-len("_el")] if name.endswith("_el") else name
+    return {_SHM + name, _SHM + name + "_el", _SHM + "sem." + name + "_mutex"}
+
+
+def remove_stale_shm(paths: Iterable[str]) -> list[str]:
+    """
+    Remove the given Fast DDS participant segments that no live process uses; return them.
+
+    A segment goes with its lock file when no live process maps or holds either open.  The
+    per-domain port segments (``fastrtps_port*``) are left to Fast DDS, which reclaims them
+    on the next start in that domain: a process that used one keeps a handle to it after its
+    participant is gone, and a port file unlinked under it would cut it off from the domain.
+    """
+    families = [_segment_family(p) for p in set(paths)
+                if not os.path.basename(p).removeprefix("sem.").startswith("fastrtps_port")]
+    if not families:
+        return []
+    in_use: set[str] = set()
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            in_use |= _shm_segments(int(entry))
+    removed = []
+    for family in families:
+        if family & in_use:
+            continue
+        for path in sorted(family):
+            try:
+                os.unlink(path)
+                removed.append(path)
+            except FileNotFoundError:
+                pass
+            except OSError:
+                pass
+    return removed
+
+
+# -------------------------------------------------------------- child process
+class NodeProcess:
+    """
+    A ROS node in a child process (its own session); output goes to a log file.
+
+    ``NodeProcess("-p", "v0:=0.0")`` starts ``umbrella_node`` with raw ROS arguments;
+    ``parameters={"v0": 0.0}`` and ``namespace="a1"`` build them for you; ``module=`` runs
+    another node of the package (``"umbrella_sim.deploy_controller"``).
+    """
+
+    def __init__(self, *ros_args: str, executable: list[str] | None = None,
+                 module: str = "umbrella_sim.node", parameters: dict | None = None,
+                 namespace: str | None = None, domain_id: int | None = None,
+                 cwd: str | None = None):
+        self.domain_id = DOMAIN_ID if domain_id is None else domain_id
+        args = list(ros_args)
+        if namespace:
+            args += ["-r", f"__ns:=/{namespace.strip('/')}"]
+        for name, value in (parameters or {}).items():
+            args += ["-p", f"{name}:={_ros_literal(value)}"]
+        fd, self.log_path = tempfile.mkstemp(prefix="umbrella_node-", suffix=".log")
+        self.log = os.fdopen(fd, "w+")
+        self.command = (executable or [sys.executable, "-m", module]) + ["--ros-args", *args]
+        # the node records by default into its working directory: unless cwd is given it
+        # runs in a temporary one, removed by close(), so tests never leave bags behind
+        self._own_cwd = None if cwd else tempfile.mkdtemp(prefix="umbrella_node_")
+        self.cwd = cwd or self._own_cwd
+        self.proc = subprocess.Popen(self.command, stdout=self.log, stderr=subprocess.STDOUT,
+                                     env=ros_env(self.domain_id), start_new_session=True,
+                                     cwd=self.cwd)
+        self.shm: set[str] = set()
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    @property
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def output(self) -> str:
+        with open(self.log_path, encoding="utf-8", errors="replace") as fh:
+            return fh.read()
+
+    def wait_for_log(self, pattern: str, timeout: float = 20.0, count: int = 1):
+        """Return the count-th match of a regular expression in the output, waiting for it."""
+        def found():
+            matches = list(re.finditer(pattern, self.output()))
+            if len(matches) >= count:
+                return matches[count - 1]
+            if not self.running:
+                raise AssertionError(
+                    f"process exited (code {self.proc.returncode}) before {count} log "
+                    f"line(s) matching {pattern!r}; output:\n{self.output()}")
+            return None
+        self.shm |= _shm_segments(self.pid)
+        return poll(found, timeout, lambda: f"no {count} log line(s) matching {pattern!r} "
+                                            f"within {timeout} s; output:\n{self.output()}")
+
+    def stop(self, sig=signal.SIGTERM, timeout: float = 10.0) -> int:
+        """
+        Signal, wait (SIGKILL to the group after timeout), remove leftover shared memory.
+
+        Returns the exit code (negative: killed by that signal).
+        """
+        if self.running:
+            self.shm |= _shm_segments(self.pid)
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                pass
+        try:                                   # anything left in its session
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        self.proc.wait()
+        remove_stale_shm(self.shm)
+        return self.proc.returncode
+
+    def close(self) -> None:
+        self.stop()
+        self.log.close()
+        try:
+            os.unlink(self.log_path)
+        except FileNotFoundError:
+            pass
+        if self._own_cwd:
+            shutil.rmtree(self._own_cwd, ignore_errors=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _ros_literal(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+# ------------------------------------------------------------------- probe
+class Probe:
+    """The test's own rclpy node (its own context) spinning in a background thread."""
+
+    def __init__(self, name: str = "probe", domain_id: int | None = None):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        self.domain_id = DOMAIN_ID if domain_id is None else domain_id
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        # no rclpy signal handlers: Ctrl-C stays a KeyboardInterrupt of the test runner (which
+        # tears the fixtures down) instead of shutting the context under a waiting test
+        rclpy.init(context=self.context, domain_id=self.domain_id,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.received: dict[str, list] = {}
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        while self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:
+                if not self.context.ok():
+                    return
+                raise
+
+    def subscribe(self, topic: str, msg_type, qos=10):
+        """Keep every message on topic with its arrival time (time.monotonic())."""
+        if topic in self.received:
+            return
+        self.received[topic] = []
+
+        def cb(msg, topic=topic):
+            with self._lock:
+                self.received[topic].append((time.monotonic(), msg))
+        self.node.create_subscription(msg_type, topic, cb, qos)
+
+    def messages(self, topic: str) -> list:
+        with self._lock:
+            return [m for _, m in self.received.get(topic, [])]
+
+    def timed(self, topic: str) -> list:
+        """Return [(arrival time.monotonic(), message)] of topic."""
+        with self._lock:
+            return list(self.received.get(topic, []))
+
+    _poll = staticmethod(poll)
+
+    def wait_for(self, topic: str, predicate=lambda m: True, timeout: float = 20.0,
+                 what: str = "the condition"):
+        """Return the first message on topic satisfying predicate, waiting for it."""
+        def failure():
+            msgs = self.messages(topic)
+            last = f"; last: {_brief(msgs[-1])}" if msgs else ""
+            return (f"no message on {topic} satisfying {what} within {timeout} s "
+                    f"(got {len(msgs)}{last})")
+        found = poll(lambda: [m for m in self.messages(topic) if predicate(m)][:1], timeout,
+                     failure)
+        return found[0]
+
+    def wait_for_count(self, topic: str, count: int, timeout: float = 20.0) -> list:
+        """Return the first ``count`` messages on topic, waiting for them."""
+        poll(lambda: len(self.messages(topic)) >= count, timeout,
+             lambda: f"fewer than {count} messages on {topic} within {timeout} s"
+                     f" (got {len(self.messages(topic))})")
+        return self.messages(topic)[:count]
+
+    def publisher(self, topic: str, msg_type, qos=10):
+        return self.node.create_publisher(msg_type, topic, qos)
+
+    def wait_for_subscribers(self, pub, count: int = 1, timeout: float = 20.0):
+        poll(lambda: pub.get_subscription_count() >= count, timeout,
+             lambda: f"no {count} subscriber(s) on {pub.topic_name} within {timeout} s "
+                     f"(got {pub.get_subscription_count()})")
+
+    def call(self, srv_type, name: str, request, timeout: float = 20.0):
+        client = self.node.create_client(srv_type, name)
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise AssertionError(f"service {name} not available within {timeout} s")
+        future = client.call_async(request)
+        poll(future.done, timeout, lambda: f"service {name} did not answer within {timeout} s")
+        return future.result()
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=2.0)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

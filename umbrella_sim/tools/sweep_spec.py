@@ -1,0 +1,206 @@
+"""
+A sweep's SPEC (YAML): the cases it names, each checked before any runs.
+
+SPEC keys (every parameter name is the one of ``config/umbrella.yaml`` / the node)::
+
+    params: other.yaml         # optional ROS 2 params file, default config/umbrella.yaml
+    base: {name: value}        # overrides applied to every case
+    grid: {name: [v1, v2]}     # cartesian product, first axis outermost (and the plots' x axis)
+    cases: [{name: value}]     # explicit cases, added after the grid's
+    duration: 1.0              # simulated time per case (s), the cap when stop_after_lock is set
+    stop_after_lock: 0.2       # end a case this long after its lock (s)
+    force: 5.0                 # constant sleeve force F_H (N), = base sleeve_force
+    force_profile: f.csv       # or a CSV of t,F rows (path relative to the SPEC)
+
+The whole SPEC is checked before any case runs (names, values, every case's parameters through
+the same validation as the CLI); errors name the case and the parameter.  ``case_id`` hashes
+a case's full parameter set, run options and the package version.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import hashlib
+import itertools
+import json
+import math
+import os
+from typing import Any
+
+import yaml
+
+from .inputs import check_lock_given, read_force_profile, resolve_params
+from .. import __version__
+from ..bag.paths import read_text_input
+
+
+SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
+             "force_profile")
+
+
+DEFAULT_DURATION = 1.0      # s, as `umbrella-sim simulate`
+
+
+class SpecError(ValueError):
+    """The SPEC cannot be run; the message names the key, case and parameter."""
+
+
+@dataclass
+class Case:
+    index: int                  # 1-based position in the SPEC (grid first, then cases)
+    overrides: dict             # what the SPEC sets for this case (base + grid/case values)
+    params: dict                # every parameter, validated (UmbrellaParams.as_dict())
+    duration: float
+    stop_after_lock: float | None
+    force_profile: list | None  # [(t, F)] read from the CSV, or None
+    force_profile_path: str | None
+    case_id: str = ""
+
+    def label(self, names) -> str:
+        return ", ".join(f"{n}={self.overrides[n]}" for n in names if n in self.overrides)
+
+    def task(self, mcap_dir: str | None) -> dict:
+        """Return what a worker needs (plain data, pickles anywhere)."""
+        return {"case_id": self.case_id, "params": self.params, "duration": self.duration,
+                "stop_after_lock": self.stop_after_lock, "force_profile": self.force_profile,
+                "mcap_dir": mcap_dir}
+
+
+@dataclass
+class Sweep:
+    path: str
+    cases: list
+    axes: list                  # grid parameter names, in SPEC order
+    swept: list                 # every parameter name the grid or the cases set
+    duplicates: list = field(default_factory=list)   # (index, index of the same case)
+    text: str = ""              # the SPEC as read (copied to DIR/spec.yaml)
+
+
+# ------------------------------------------------------------------ the SPEC
+def _number(where: str, value: Any, low: float, low_open: bool) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or (value <= low if low_open else value < low):
+        raise SpecError(f"{where}: {value!r} must be a finite number "
+                        f"{'>' if low_open else '>='} {low:g}")
+    return float(value)
+
+
+def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> str:
+    """Key of a case in the store: its full parameters, run options and package version."""
+    doc = {"umbrella_sim": __version__, "params": params, "duration": duration,
+           "stop_after_lock": stop_after_lock, "force_profile": force_profile}
+    blob = json.dumps(doc, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:16]
+
+
+def load_spec(path: str) -> Sweep:
+    """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
+    from ..core.forcing import command_force
+    from ..core.params import UmbrellaParams
+    from ..core.registry import check_types
+    from ..ros.params_file import load_yaml_as_ros
+
+    try:
+        text = read_text_input(path, "sweep spec")
+        doc = load_yaml_as_ros(text)        # typed as a params file is
+    except ValueError as exc:       # missing, not a regular file, unreadable, not text
+        raise SpecError(str(exc)) from None
+    except yaml.YAMLError as exc:
+        raise SpecError(f"sweep spec {path}: not valid YAML ({exc})") from None
+    if not isinstance(doc, dict):
+        raise SpecError(f"sweep spec {path}: expected a mapping with base/grid/cases")
+    unknown = sorted(set(doc) - set(SPEC_KEYS))
+    if unknown:
+        raise SpecError(f"sweep spec {path}: unknown key(s) {', '.join(map(str, unknown))}; "
+                        f"known: {', '.join(SPEC_KEYS)}")
+    here = os.path.dirname(os.path.abspath(path))
+
+    def rel(p):
+        return p if os.path.isabs(p) else os.path.join(here, p)
+
+    params_file = doc.get("params")
+    if params_file is not None and not isinstance(params_file, str):
+        raise SpecError(f"sweep spec {path}: params: expected a file name")
+    base = doc.get("base") or {}
+    grid = doc.get("grid") or {}
+    explicit = doc.get("cases") or []
+    if not isinstance(base, dict):
+        raise SpecError(f"sweep spec {path}: base: expected a mapping of parameter overrides")
+    if not isinstance(grid, dict):
+        raise SpecError(f"sweep spec {path}: grid: expected a mapping name -> list of values")
+    for name, values in grid.items():
+        if not isinstance(values, list) or not values:
+            raise SpecError(f"sweep spec {path}: grid: {name}: "
+                            "expected a non-empty list of values")
+    if not isinstance(explicit, list) or not all(isinstance(c, dict) for c in explicit):
+        raise SpecError(f"sweep spec {path}: cases: expected a list of mappings of overrides")
+    if not grid and not explicit:
+        raise SpecError(f"sweep spec {path}: no cases: give grid and/or cases")
+    duration = _number(f"sweep spec {path}: duration", doc.get("duration", DEFAULT_DURATION),
+                       0.0, True)
+    stop_after_lock = doc.get("stop_after_lock")
+    if stop_after_lock is not None:
+        stop_after_lock = _number(f"sweep spec {path}: stop_after_lock", stop_after_lock, 0.0,
+                                  False)
+    base = dict(base)
+    if doc.get("force") is not None:
+        if doc.get("force_profile") is not None:
+            raise SpecError(f"sweep spec {path}: give force or force_profile, not both")
+        # force is every case's sleeve_force: no part of the SPEC may set its own
+        for where, c in (("base", base), ("grid", grid), *(("cases", c) for c in explicit)):
+            if "sleeve_force" in c:
+                raise SpecError(f"sweep spec {path}: force and {where}: sleeve_force both set "
+                                "(force is every case's sleeve_force; sweep sleeve_force "
+                                "without it)")
+        if isinstance(doc["force"], bool) or not isinstance(doc["force"], (int, float)):
+            raise SpecError(f"sweep spec {path}: force: {doc['force']!r} is not a number")
+        base["sleeve_force"] = doc["force"]     # its range is checked with each case's model
+    profile = profile_path = None
+    if doc.get("force_profile") is not None:
+        if not isinstance(doc["force_profile"], str):
+            raise SpecError(f"sweep spec {path}: force_profile: expected a CSV file name")
+        profile_path = rel(doc["force_profile"])
+        try:
+            profile = [list(row) for row in read_force_profile(profile_path)]
+        except ValueError as exc:
+            raise SpecError(f"sweep spec {path}: force_profile: {exc}") from None
+    if params_file is not None:
+        params_file = rel(params_file)
+
+    axes = list(grid)
+    overrides_list = [dict(base, **dict(zip(axes, combo)))
+                      for combo in itertools.product(*grid.values())] if grid else []
+    overrides_list += [dict(base, **c) for c in explicit]
+    swept = list(axes)
+    for c in explicit:
+        swept += [n for n in c if n not in swept]
+    sweep = Sweep(path=os.path.abspath(path), cases=[], axes=axes, swept=swept, text=text)
+    seen: dict[str, int] = {}
+    for index, overrides in enumerate(overrides_list, start=1):
+        source = "grid" if index <= len(overrides_list) - len(explicit) else "cases"
+        try:
+            check_types(overrides)          # typed YAML, as a params file (the node's rule)
+            resolved = resolve_params(overrides, params_file)
+            check_lock_given(resolved, f"lock={overrides['lock']}" if "lock" in overrides
+                             else None)
+            params = resolved.as_dict()
+        except ValueError as exc:
+            shown = ", ".join(f"{k}={v!r}" for k, v in overrides.items() if k not in base
+                              or source == "cases")
+            raise SpecError(f"sweep spec {path}: case {index} ({source}: {shown}): "
+                            f"{exc}") from None
+        for t, f in profile or []:
+            try:
+                command_force(f, UmbrellaParams(**params))
+            except ValueError as exc:
+                raise SpecError(f"sweep spec {path}: case {index}: force_profile at t = {t:g} s: "
+                                f"{exc}") from None
+        case = Case(index=index, overrides=overrides, params=params, duration=duration,
+                    stop_after_lock=stop_after_lock, force_profile=profile,
+                    force_profile_path=profile_path)
+        case.case_id = case_id(params, duration, stop_after_lock, profile)
+        if case.case_id in seen:
+            sweep.duplicates.append((index, seen[case.case_id]))
+            continue
+        seen[case.case_id] = index
+        sweep.cases.append(case)
+    return sweep
