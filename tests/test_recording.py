@@ -476,4 +476,4 @@ def test_a_recording_from_before_the_phase_correction_re_runs_without_it():
     log = SimpleNamespace(path="old.mcap", find_topic=lambda key, required=False: None)
     assert _segment_inputs(log, seg)[0].params.phase_correction is False
     seg.params["phase_correction"] = True              # what a recording of today holds
-    assert _segment_inputs(log, seg)[0].phase_correction is True
+    assert _segment_inputs(log, seg)[0].params.phase_correction is True

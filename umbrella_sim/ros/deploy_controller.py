@@ -148,7 +148,8 @@ def _make_node_class():
                 # the publication period: the smallest spacing seen (states may be skipped)
                 self._period = min(self._period or math.inf, t - self._last_stamp)
             self._last_stamp = t
-            effort = msg.effort[2]
+            state = ros_io.joint_state_figures(msg)
+            effort = state["sleeve_force"]
             if effort != self._last_effort and self._period:
                 self._measure_delay(t, effort)
             self._last_effort = effort
@@ -158,7 +159,7 @@ def _make_node_class():
                     self.law.start(t - self._period)
                     self.get_logger().info(f"first push acting from t = "
                                            f"{self.law.t_start:.6f} s")
-                elif not self.commanding and not self._at_rest(t, msg):
+                elif not self.commanding and not self._at_rest(t, state):
                     self.done = True        # idle until a new run
                     return
                 else:
@@ -166,9 +167,9 @@ def _make_node_class():
                     self._send(t, self.law.cfg.max_force)
                     return
             self._check_commands_applied(t, effort)
-            self._send(t, self.law.force(t, msg.position[0], msg.velocity[0], self.lead()))
+            self._send(t, self.law.force(t, state["alpha1"], state["alpha1_rate"], self.lead()))
 
-        def _at_rest(self, t: float, msg) -> bool:
+        def _at_rest(self, t: float, state: dict) -> bool:
             """
             Tell whether the frame is folded and at rest, where the plan starts.
 
@@ -177,7 +178,7 @@ def _make_node_class():
             its lock harder.
             """
             p, law = self.law.params, self.law
-            rate, angle = msg.velocity[0], msg.position[0]
+            rate, angle = state["alpha1_rate"], state["alpha1"]
             if abs(rate) <= REST_FRACTION * law.cruise and \
                     abs(angle - p.alpha0) <= REST_FRACTION * law.span:
                 return True
@@ -193,11 +194,12 @@ def _make_node_class():
             """
             Warn when the node applies none of our recent commands, or others command it.
 
-            The node echoes the force it applies in ``effort[2]``: a value none of our
-            commands of the last round trip had (the latest measured delay plus three
-            periods: a free-running node under load took commands 0.2 s late where the
-            median was one period; an older spike no longer widens it, or a refused braking
-            command went unnoticed), three states running, means it refuses them
+            The node echoes the force it applies in its joint state (the sleeve's effort): a
+            value none of our commands of the last round trip had (the latest measured delay
+            plus three periods: a free-running node under load took commands 0.2 s late
+            where the median was one period; an older spike no longer widens it, or a
+            refused braking command went unnoticed), three states running, means it refuses
+            them
             (its sleeve_force_min / sleeve_force_limit) or another publisher commands it.
             After a stall the first state may show an older command, once.  Publishers on
             the topic are counted once a second.

@@ -139,13 +139,18 @@ ENERGY_LABEL = ("field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J,da
                 "phase_correction_J")
 
 
-def peak_stress_values(s: Sample, yield_strength: float) -> tuple:
-    """
-    Return the peak_stress data.
+#: the peak_stress data, in order: per body, peak |sigma|, where, ratio to yield, and the
+#: reference stress (top fibre; leaf at O'', link at mid-span: the thesis's Fig. 6.5, 6.6)
+PEAK_STRESS_FIELDS = ("peak_stress_leaf", "peak_stress_leaf_x", "stress_ratio_leaf",
+                      "stress_leaf_joint", "peak_stress_link", "peak_stress_link_x",
+                      "stress_ratio_link", "stress_link_mid")
+#: the energy data, in order (ENERGY_LABEL)
+ENERGY_FIELDS = ("kinetic_energy", "strain_energy", "work", "lock_energy_loss",
+                 "energy_balance", "damping_dissipation", "phase_correction_energy")
 
-    Per body: peak |sigma|, where, ratio to yield, and the reference stress (top fibre;
-    leaf at O'', link at mid-span: the thesis's Fig. 6.5 and 6.6).
-    """
+
+def peak_stress_values(s: Sample, yield_strength: float) -> tuple:
+    """Return the peak_stress data (PEAK_STRESS_FIELDS)."""
     return (s.peak_stress_leaf, s.peak_stress_leaf_x, s.peak_stress_leaf / yield_strength,
             s.stress_leaf_joint,
             s.peak_stress_link, s.peak_stress_link_x, s.peak_stress_link / yield_strength,
@@ -163,7 +168,7 @@ def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
 
 
 def energy_values(s: Sample, initial_energy: float) -> tuple:
-    """Return kinetic, strain, work, lock loss, balance, damping, correction (J; ENERGY_LABEL)."""
+    """Return the energy data (ENERGY_FIELDS, J)."""
     return (s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss,
             energy_balance(s, initial_energy),
             s.damping_dissipation, s.phase_correction_energy)
@@ -174,6 +179,39 @@ def energy_msg(s: Sample, initial_energy: float) -> Float64MultiArray:
     msg.layout.dim = [MultiArrayDimension(label=ENERGY_LABEL, size=7, stride=7)]
     msg.data = list(energy_values(s, initial_energy))
     return msg
+
+
+# --------------------------------------------------------- reading them back
+# The figures a publication's messages carry, by the Sample's names: the inverse of the
+# *_values builders above, for every reader of a recording or a live topic (replay,
+# compare, the test API, the deploy controller)
+def joint_state_figures(msg) -> dict:
+    """
+    Return the figures of a joint state, by the Sample's names.
+
+    alpha1, the link's joint angle alpha2 - alpha1 (link_angle), their rates, alpha2, and
+    the sleeve's position, velocity and force.
+    """
+    position, velocity, effort = msg.position, msg.velocity, msg.effort
+    return {"alpha1": position[0], "link_angle": position[1],
+            "alpha2": position[0] + position[1], "sleeve_position": position[2],
+            "alpha1_rate": velocity[0], "link_angle_rate": velocity[1],
+            "sleeve_velocity": velocity[2], "sleeve_force": effort[2]}
+
+
+def tip_deflection_figures(msg) -> dict:
+    """Return tip_axial and tip_transverse (m, leaf frame)."""
+    return {"tip_axial": msg.point.x, "tip_transverse": msg.point.y}
+
+
+def peak_stress_figures(msg) -> dict:
+    """Return PEAK_STRESS_FIELDS by name."""
+    return dict(zip(PEAK_STRESS_FIELDS, msg.data))
+
+
+def energy_figures(msg) -> dict:
+    """Return ENERGY_FIELDS by name (J)."""
+    return dict(zip(ENERGY_FIELDS, msg.data))
 
 
 def markers_msg(s: Sample, positions, ns: str, frame_prefix: str = "") -> MarkerArray:

@@ -13,8 +13,8 @@ from typing import Iterable
 import weakref
 
 from .processes import _brief, DOMAIN_ID, NodeProcess, poll, Probe
-from .summary import RunSummary, summarize_run, SUMMARY_AFTER_LOCK
-from ..ros.messages import PHASES
+from .summary import peak_stress, RunSummary, summarize_run, SUMMARY_AFTER_LOCK
+from ..ros.messages import PHASES, tip_deflection_figures
 
 
 # ------------------------------------------------------------------ antenna
@@ -398,13 +398,13 @@ class SimulatedAntenna:
                      f"vs {len(tips)} messages) after {timeout} s")
         phase_arrival = next(t for t, m in self._timed_run("deployment_phase")
                              if m.data == "locked")
-        tip = [(_stamp(m), m.point.y) for m in self.messages("tip_deflection")]
+        tip = [(_stamp(m), tip_deflection_figures(m)["tip_transverse"])
+               for m in self.messages("tip_deflection")]
         cut = next(a for a, m in self._timed_run("tip_deflection") if _stamp(m) > end + 1e-9)
 
         def when(arrival):  # no stamp: before, in or after the window by when it arrived
             return -math.inf if arrival <= phase_arrival else end if arrival < cut else math.inf
-        stress = [(when(arrival), max(m.data[0], m.data[4]))
-                  for arrival, m in self._timed_run("peak_stress")]
+        stress = [(when(arrival), peak_stress(m)) for arrival, m in self._timed_run("peak_stress")]
         from ..core.summary import deploy_start_of
 
         applied = self.applied_forces()

@@ -17,6 +17,7 @@ from ..bag.format import EVENTS_RECORD
 from ..bag.reader import read_log
 from ..core.summary import (amplitude, deploy_start, deploy_start_of, in_stage2_window,
                             STAGE2_WINDOW)
+from ..ros.messages import peak_stress_figures, tip_deflection_figures
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,12 @@ class RunSummary:
 #: the stage-2 window of a run summary (s of sim time after the lock), live or recorded:
 #: the offline summary's
 SUMMARY_AFTER_LOCK = STAGE2_WINDOW
+
+
+def peak_stress(msg) -> float:
+    """Return the larger of the leaf's and the link's peak |sigma| of a peak_stress message."""
+    figures = peak_stress_figures(msg)
+    return max(figures["peak_stress_leaf"], figures["peak_stress_link"])
 
 
 def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
@@ -92,9 +99,9 @@ def summary_from_recording(path: str,
     applied_topic = log.find_topic("sleeve_force/applied", required=False)
     applied = ([(t, m.data) for t, m in log.decoded(applied_topic, seg)]
                if applied_topic else [])
-    tip = [(t, m.point.y) for t, m in log.decoded(log.find_topic("tip_deflection"), seg)]
-    stress = [(t, max(m.data[0], m.data[4]))
-              for t, m in log.decoded(log.find_topic("peak_stress"), seg)]
+    tip = [(t, tip_deflection_figures(m)["tip_transverse"])
+           for t, m in log.decoded(log.find_topic("tip_deflection"), seg)]
+    stress = [(t, peak_stress(m)) for t, m in log.decoded(log.find_topic("peak_stress"), seg)]
     if lock_time is None:          # a torn recording: the first 'locked' phase message
         locked = [t for t, m in log.decoded(log.find_topic("deployment_phase"), seg)
                   if m.data == "locked"]

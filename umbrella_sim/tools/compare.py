@@ -22,6 +22,8 @@ import numpy as np
 from .arguments import ArgumentParser
 from ..bag.reader import LogError, read_log
 from ..core.summary import deploy_start_of, relative_drift, stage2_figures, validity_warnings
+from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_figures,
+                            tip_deflection_figures)
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader, raise_if_stopped
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
@@ -168,7 +170,7 @@ def _series(log, topic, fn, segment, width: int, stride: int = 1):
             continue
         try:
             row = fn(m)
-        except (IndexError, AttributeError, TypeError) as exc:
+        except (IndexError, KeyError, AttributeError, TypeError) as exc:
             raise LogError(f"{log.path}: topic {topic}: message {i} lacks the fields "
                            f"umbrella_sim writes ({exc})") from None
         t.append(tm)
@@ -187,16 +189,29 @@ def default_label(path: str) -> str:
     return name[:-len(".mcap")] if name.endswith(".mcap") and len(name) > 5 else name
 
 
+#: the stress figures of a Run, in the order of its fields
+STRESS_FIGURES = ("peak_stress_leaf", "peak_stress_link", "stress_leaf_joint", "stress_link_mid")
+#: the energy figures compare reads
+ENERGY_FIGURES = ("kinetic_energy", "strain_energy", "work", "energy_balance",
+                  "phase_correction_energy")
+
+
+def _figures(figures: dict, *names: str) -> tuple:
+    return tuple(figures[n] for n in names)
+
+
 def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     log = read_log(path)
     seg = log.segment(segment)
     params = seg.params
     t, js = _series(log, log.find_topic("joint_states"),
-                    lambda m: (m.position[0], m.velocity[0], m.position[0] + m.position[1]),
-                    seg, 3)
-    tt, tip = _series(log, log.find_topic("tip_deflection"), lambda m: m.point.y, seg, 1)
+                    lambda m: _figures(joint_state_figures(m), "alpha1", "alpha1_rate",
+                                       "alpha2"), seg, 3)
+    tt, tip = _series(log, log.find_topic("tip_deflection"),
+                      lambda m: tip_deflection_figures(m)["tip_transverse"], seg, 1)
     ts, st = _series(log, log.find_topic("peak_stress"),
-                     lambda m: tuple(m.data[i] for i in range(8)), seg, 8)
+                     lambda m: _figures(peak_stress_figures(m), *STRESS_FIGURES), seg,
+                     len(STRESS_FIGURES))
     st = np.array(st)
     # umbrella_sim.events.K: segment K ended by a reset; umbrella_sim.events: the last one
     last = len(log.segments()) - 1
@@ -213,14 +228,14 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     drift = None
     energy = log.find_topic("energy", required=False)
     if energy:
-        # kinetic, strain, work, lock loss, balance (ENERGY_LABEL), then its 7th value, the
-        # phase correction's term, where the recording has it
-        _, e = _series(log, energy, lambda m: (*(m.data[i] for i in range(5)),
-                                               *m.data[6:7]), seg, 0)
-        e = np.array(e)
-        if len(e):
-            mechanical = e[:, 0] + e[:, 1] + (e[:, 5] if e.shape[1] > 5 else 0.0)
-            drift = relative_drift(e[:, 4], mechanical, e[:, 2])
+        # (the phase correction's term is 0 where the recording does not have it)
+        _, e = _series(log, energy, lambda m: _figures(
+            {"phase_correction_energy": 0.0, **energy_figures(m)}, *ENERGY_FIGURES), seg, 0)
+        e = dict(zip(ENERGY_FIGURES, np.array(e).reshape(-1, len(ENERGY_FIGURES)).T))
+        if len(e["work"]):
+            mechanical = (e["kinetic_energy"] + e["strain_energy"]
+                          + e["phase_correction_energy"])
+            drift = relative_drift(e["energy_balance"], mechanical, e["work"])
     shapes = []
     markers = log.find_topic("markers", required=False)
     if markers:           # at most ~2000 shapes kept, whatever the log's length
@@ -252,7 +267,7 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
                if applied_topic else [])
     start = deploy_start_of(params, applied)
     return Run(label, log.path, params, t, a[:, 0], a[:, 1], tt, np.array(tip), ts,
-               st[:, 0], st[:, 4], st[:, 3], st[:, 7], deploy, drift, shapes,
+               *st.T, deploy, drift, shapes,
                float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,
                summary, warnings, events.get("lock_kind"), lock_time_exact=exact,
                deploy_start=start, segment=segment if segment != last else None,

@@ -27,7 +27,8 @@ from ..bag.reader import LogData, LogError, qos_from_yaml, read_log
 from ..core.driver import RunDriver
 from ..core.forcing import command_force, ForceSchedule
 from ..core.params import physics_step, recorded_params
-from ..ros.messages import ABSOLUTE_TOPIC_NAMES, COMMAND
+from ..ros.messages import (ABSOLUTE_TOPIC_NAMES, COMMAND, joint_state_figures,
+                            peak_stress_figures, tip_deflection_figures)
 from ..ros.signals import interruptible, raise_if_stopped
 
 #: the node's command topic and its records (each as the node names it, before remapping)
@@ -44,9 +45,18 @@ def _is_command(topic: str, log: LogData) -> bool:
 
 
 # ------------------------------------------------------------------- resimulate
-SIGNALS = ("leaf_hinge", "link_hinge", "sleeve_slider", "leaf_hinge_rate", "sleeve_velocity",
-           "sleeve_force", "tip_axial", "tip_transverse", "peak_stress_leaf",
-           "peak_stress_link")
+#: the signals compared, by the node's names (joint names for joint_states), and the Sample's
+#: figure each is (the link's joint: alpha2 - alpha1)
+SIGNALS = {"leaf_hinge": "alpha1", "link_hinge": "link_angle", "sleeve_slider": "sleeve_position",
+           "leaf_hinge_rate": "alpha1_rate", "sleeve_velocity": "sleeve_velocity",
+           "sleeve_force": "sleeve_force", "tip_axial": "tip_axial",
+           "tip_transverse": "tip_transverse", "peak_stress_leaf": "peak_stress_leaf",
+           "peak_stress_link": "peak_stress_link"}
+
+
+def _reference(s, name: str) -> float:
+    """Return a Sample's figure of that name (link_angle: the link's joint, alpha2 - alpha1)."""
+    return s.alpha2 - s.alpha1 if name == "link_angle" else getattr(s, name)
 
 
 def resimulate(log: LogData) -> dict:
@@ -251,20 +261,13 @@ def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
 
 
 def _compare_publication(s, group: dict, diffs: dict, scales: dict) -> None:
-    js = group["joint"]
-    ref = {"leaf_hinge": s.alpha1, "link_hinge": s.alpha2 - s.alpha1,
-           "sleeve_slider": s.sleeve_position, "leaf_hinge_rate": s.alpha1_rate,
-           "sleeve_velocity": s.sleeve_velocity, "sleeve_force": s.sleeve_force}
-    rec = {"leaf_hinge": js.position[0], "link_hinge": js.position[1],
-           "sleeve_slider": js.position[2], "leaf_hinge_rate": js.velocity[0],
-           "sleeve_velocity": js.velocity[2], "sleeve_force": js.effort[2]}
+    rec = joint_state_figures(group["joint"])
     if "tip" in group:
-        rec.update(tip_axial=group["tip"].point.x, tip_transverse=group["tip"].point.y)
-        ref.update(tip_axial=s.tip_axial, tip_transverse=s.tip_transverse)
+        rec.update(tip_deflection_figures(group["tip"]))
     if "peak" in group:
-        rec.update(peak_stress_leaf=group["peak"].data[0],
-                   peak_stress_link=group["peak"].data[4])
-        ref.update(peak_stress_leaf=s.peak_stress_leaf, peak_stress_link=s.peak_stress_link)
+        rec.update(peak_stress_figures(group["peak"]))
+    rec = {signal: rec[name] for signal, name in SIGNALS.items() if name in rec}
+    ref = {signal: _reference(s, name) for signal, name in SIGNALS.items() if signal in rec}
     for name in rec:
         d = abs(rec[name] - ref[name])
         diffs[name] = max(diffs[name], d if d == d else float("inf"))    # NaN counts as inf
