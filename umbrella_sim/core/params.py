@@ -35,16 +35,20 @@ def recorded_params(values: Mapping[str, Any]) -> "UmbrellaParams":
     ).validated()
 
 
+def _exact_fields(record, specs: Mapping[str, Param]) -> None:
+    """Give a record's numbers their parameter's type where they convert exactly (Param.exact)."""
+    for name, spec in specs.items():
+        value = getattr(record, name)
+        exact = spec.exact(value)
+        if exact is not value:
+            object.__setattr__(record, name, exact)
+
+
 class _DerivedQuantities:
     """Methods of UmbrellaParams; its fields come from the registry (SPECS)."""
 
     def __post_init__(self):
-        # an exact int where a float is meant (UmbrellaParams(v0=-1)) is that float, as in
-        # every other interface; anything else is left for validated() to name
-        for name, spec in SPECS.items():
-            value = getattr(self, name)
-            if spec.type is float and type(value) is int and float(value) == value:
-                object.__setattr__(self, name, float(value))
+        _exact_fields(self, SPECS)
 
     # ------------------------------------------------------------------ derived
     @property
@@ -260,10 +264,7 @@ class _ControllerChecks:
     """Methods of ControllerConfig; its fields come from the registry (CONTROLLER_PARAMETERS)."""
 
     def __post_init__(self):
-        for name in CONTROLLER_PARAMETERS:      # an exact int is that double, as in UmbrellaParams
-            value = getattr(self, name)
-            if type(value) is int:
-                object.__setattr__(self, name, float(value))
+        _exact_fields(self, CONTROLLER_PARAMETERS)
 
     def validated(self) -> "ControllerConfig":
         """Return self if every value is in its range, else raise ValueError naming it."""

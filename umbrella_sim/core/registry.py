@@ -112,6 +112,24 @@ class Param:
         raise ValueError(f"{what}={value}: must be {'<' if self.high_open else '<='} "
                          f"{_num(hi)}")
 
+    def exact(self, value: Any) -> Any:
+        """
+        Return a number as this parameter's numeric type where it converts exactly, else value.
+
+        The one rule every interface follows: an int for a double is that double (``-p
+        v0:=-1``, ``UmbrellaParams(v0=-1)``, ``v0: -1`` in a params file), a whole finite
+        double for an integer that integer (``elements_per_segment: 2.0``).  Anything else is
+        left as it is, for the type check to name.
+        """
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return value
+        if self.type is float and isinstance(value, int):
+            return float(value)
+        if (self.type is int and isinstance(value, float) and math.isfinite(value)
+                and value.is_integer()):
+            return int(value)
+        return value
+
     def coerce(self, value: Any) -> Any:
         """Convert a CLI / YAML / ROS value to this type, naming the parameter on failure."""
         try:
@@ -380,11 +398,7 @@ def check_types(values: Mapping[str, Any]) -> None:
         spec = REGISTRY.get(name)           # model and node parameters alike
         if spec is None:
             continue
-        number = isinstance(value, (int, float)) and not isinstance(value, bool)
-        ok = (isinstance(value, bool) if spec.type is bool
-              else isinstance(value, str) if spec.type is str
-              else number and (spec.type is float or float(value).is_integer()))
-        if not ok:
+        if type(spec.exact(value)) is not spec.type:
             raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}, "
                              f"got {_yaml_type(value)}")
 

@@ -8,7 +8,6 @@ double (``-p v0:=-1``) and a whole double for an integer, as the other interface
 """
 from __future__ import annotations
 
-import math
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
@@ -53,20 +52,19 @@ def coerce_parameter(param):
     """
     Return param with the registry's type where the value converts exactly, else unchanged.
 
-    An integer literal for a double parameter (`-p v0:=-1`, `ros2 param set ...
-    marker_magnification 100`) becomes the double; a whole double for an integer parameter
-    the integer.  Anything else is left for rclpy's static type check, which refuses it.
+    Param.exact's rule: an integer literal for a double parameter (`-p v0:=-1`, `ros2 param
+    set ... marker_magnification 100`) becomes the double; a whole double for an integer
+    parameter the integer.  Anything else is left for rclpy's static type check, which
+    refuses it.
     """
     from rclpy.parameter import Parameter
     spec = REGISTRY.get(param.name)
-    if spec is None:
+    if spec is None or param.type_ not in (Parameter.Type.INTEGER, Parameter.Type.DOUBLE):
         return param
-    if spec.type is float and param.type_ == Parameter.Type.INTEGER:
-        return Parameter(param.name, Parameter.Type.DOUBLE, float(param.value))
-    if (spec.type is int and param.type_ == Parameter.Type.DOUBLE
-            and math.isfinite(param.value) and float(param.value).is_integer()):
-        return Parameter(param.name, Parameter.Type.INTEGER, int(param.value))
-    return param
+    value = spec.exact(param.value)
+    if type(value) is type(param.value):
+        return param
+    return Parameter(param.name, Parameter.Type.from_parameter_value(value), value)
 
 
 def parameter_defaults() -> dict:
