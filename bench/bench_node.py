@@ -104,18 +104,18 @@ def physics_alone(n_el: int, rate: float, sim_seconds: float = 1.0) -> float:
     """
     Return the CPU s per simulated s of the physics alone (this process, no ROS).
 
-    PublicationDriver.advance, one publication period at a time (steps, StepBlock, summary),
+    RunDriver.advance_period, one publication period at a time (steps, StepBlock, summary),
     without messages: the node's figure minus this one is the publication path's cost.
     """
+    from umbrella_sim.core.driver import RunDriver
     from umbrella_sim.core.params import UmbrellaParams
-    from umbrella_sim.ros.publication import PublicationDriver
-    driver = PublicationDriver(UmbrellaParams(elements_per_segment=n_el), rate)
+    driver = RunDriver(UmbrellaParams(elements_per_segment=n_el), rate)
     periods = int(round(sim_seconds * rate))
     for _ in range(periods // 10):           # warm-up
-        driver.advance()
+        driver.advance_period()
     c0 = time.thread_time()
     for _ in range(periods):
-        driver.advance()
+        driver.advance_period()
     return (time.thread_time() - c0) / (periods / rate)
 
 

@@ -252,7 +252,8 @@ def simulate(params: UmbrellaParams, duration: float,
              stop_after_lock: float | None = None, *, output_every: int = 1,
              keep_samples: bool = True,
              on_chunk: Callable[[Chunk], None] | None = None,
-             should_stop: Callable[[], bool] | None = None, states: bool = False) -> RunResult:
+             should_stop: Callable[[], bool] | None = None, states: bool = False,
+             driver: RunDriver | None = None) -> RunResult:
     """
     Run a whole simulation offline on a RunDriver and return its RunResult.
 
@@ -261,10 +262,12 @@ def simulate(params: UmbrellaParams, duration: float,
     ``result.samples`` (a Python object a step at output_every = 1: for tests and studies;
     the command line keeps none and streams what it writes); on_chunk(chunk) gets every
     chunk of steps (with states, their state rows too).  On a diverged run what was
-    computed before the failure is kept and ``result.error`` says why.
+    computed before the failure is kept and ``result.error`` says why.  driver: run this
+    one (built by the caller, at t = 0, for the same parameters and profile) instead.
     """
-    driver = RunDriver(params, period_steps=output_every if keep_samples else None,
-                       force_profile=force_profile)
+    if driver is None:
+        driver = RunDriver(params, period_steps=output_every if keep_samples else None,
+                           force_profile=force_profile)
     driver.states = states
     sim = driver.sim
     result = RunResult(params=sim.params.as_dict(), q_labels=sim.model.coordinate_labels(),

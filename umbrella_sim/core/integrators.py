@@ -42,7 +42,6 @@ import math
 import os
 
 import numpy as np
-from scipy.linalg.lapack import dgetrf, dgetrs, dpotrf, dpotrs
 
 from .kernel import (CompiledKernel, ConvergenceError, DynamicState, kernel_error, kernel_refusal,
                      LIBRARY, load_kernel)
@@ -257,6 +256,8 @@ def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
     balance includes (corrected_momentum); the projection's metric stays M.
     None if M is not positive definite.
     """
+    from scipy.linalg.lapack import dpotrf, dpotrs     # (the numpy path's: see _step)
+
     jv = jac @ v
     vp = v
     if np.max(np.abs(jv)) > 0.0:
@@ -400,6 +401,10 @@ class MidpointDAE:
         size, also when the stiff axial modes are not resolved.  v1 is then projected
         onto J(q1) v1 = 0.
         """
+        # (imported here: scipy.linalg costs a sixth of a second to import, which every run
+        # on the compiled kernel would pay for a path it does not take)
+        from scipy.linalg.lapack import dgetrf, dgetrs
+
         m = self.model
         n = m.n
         q0, v0 = s.q, s.qd

@@ -79,7 +79,6 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from scipy.linalg.lapack import dgetrf, dgetrs
 
 from .engines import FiniteElementEngine
 from .integrators import (corrected_momentum, iteration_blocks, midpoint_iterate, MidpointDAE,
@@ -457,6 +456,8 @@ class ElasticMidpointDAE(MidpointDAE):
         every step, 12 % less time (N = 2 and 4).  _kernel.c with _kernel_nonlinear.c does
         the same arithmetic in the same order.
         """
+        from scipy.linalg.lapack import dgetrf, dgetrs     # (as MidpointDAE._step)
+
         m = self.model
         n = m.n
         q0, v0 = s.q, s.qd

@@ -17,7 +17,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import integrate
 
 from .params import UmbrellaParams
 
@@ -122,6 +121,10 @@ def deployment_time_by_quadrature(params: UmbrellaParams, v0: float | None = Non
     p = params.validated()
     v0 = p.v0 if v0 is None else v0
     force = p.sleeve_force if sleeve_force is None else sleeve_force
+    # (here, not at the module's top: scipy.integrate costs a fifth of a second to import,
+    # which every command line would pay; only the quadrature needs it)
+    from scipy import integrate
+
     mech = RigidMechanism(p)
     a0, ad = p.alpha0, p.alpha_deployed
     y0 = mech.initial_state(v0)

@@ -14,10 +14,9 @@ from .inputs import build_params, read_force_profile
 from .progress import Progress
 from .. import __version__
 from ..bag.paths import check_new_output
-from ..core.driver import simulate
+from ..core.driver import RunDriver, simulate
 from ..core.params import shortened_step_note
 from ..core.registry import parameter_help, SPECS
-from ..core.solver import UmbrellaSimulator
 from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
 
 
@@ -214,14 +213,14 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("--csv-state adds columns to --csv FILE: give --csv too")
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
             raise ValueError(f"--publish-rate {args.publish_rate}: must be in [1, 5000] Hz")
-        # the model, before the run (a ModelError names the parameters)
-        first = UmbrellaSimulator(params)
-        model = first.model
+        # the model, before the run (a ModelError names the parameters); --mcap's recording
+        # builds its own on the publication grid
+        driver = RunDriver(params, force_profile=profile)
     except ValueError as exc:
         ap.exit(2, f"umbrella_sim: error: {exc}\n")
     progress = (Progress(args.duration, lambda t: f"t = {t:.3f} of {args.duration:g} s")
                 if sys.stderr.isatty() and not args.json else None)
-    csv = (CsvStream(args.csv, first.sample(), model if args.csv_state else None)
+    csv = (CsvStream(args.csv, driver.initial, driver.sim.model if args.csv_state else None)
            if args.csv else None)
 
     def on_chunk(chunk) -> None:
@@ -245,8 +244,8 @@ def main(argv: list[str] | None = None) -> int:
             except ValueError as exc:
                 ap.exit(2, f"umbrella_sim: error: {exc}\n")
         else:
-            result = simulate(params, args.duration, force_profile=profile,
-                              keep_samples=False, on_chunk=on_chunk, states=args.csv_state)
+            result = simulate(params, args.duration, keep_samples=False, on_chunk=on_chunk,
+                              states=args.csv_state, driver=driver)
     finally:
         if csv is not None:
             csv.close()
