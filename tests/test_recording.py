@@ -7,8 +7,8 @@ import re
 import signal
 import subprocess
 import sys
-import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
@@ -19,8 +19,9 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
-from tests.ros_helpers import NodeProcess, Probe, ros_env, signal_and_collect
-from umbrella_sim.bag.reader import read_log
+from tests.ros_helpers import (main_thread_sleeps, NodeProcess, poll, Probe, ros_env,
+                               signal_and_collect, stamp)
+from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
 
@@ -43,18 +44,20 @@ def live_bag(tmp_path_factory):
     probe = Probe("recorder_probe")
     try:
         probe.subscribe("/deployment_phase", String, LATCHED)
+        probe.subscribe("/diagnostics", DiagnosticArray)
         with NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}") as node:
             node.wait_for_log("recording to")
             pub = probe.publisher("/sleeve_force", Float64)
             probe.wait_for_subscribers(pub)
-            time.sleep(0.2)
             for value in (float("nan"), -2.0):
                 pub.publish(Float64(data=value))
             pub.publish(Float64(data=15.0))
-            time.sleep(0.25)
-            pub.publish(Float64(data=25.0))
+            # (one writer, reliable: the node took the two refused ones before it)
+            node.wait_for_log(r"sleeve force 15 N applied from t = ")
+            pub.publish(Float64(data=25.0))             # applied in a later period
             probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=30)
-            time.sleep(1.2)                       # at least one diagnostics message
+            node.wait_for_log(r"sleeve force 25 N applied from t = ")
+            probe.wait_for_count("/diagnostics", 1)     # published, so recorded
             assert node.stop(signal.SIGTERM) == 0
             log = node.output()
     finally:
@@ -170,16 +173,19 @@ def test_a_remapped_node_s_recording_serves_every_tool(tmp_path):
     probe = Probe("remap_probe")
     try:
         probe.subscribe("/r1/deployment_phase", String, LATCHED)
+        probe.subscribe("/r1/js", JointState)
         with NodeProcess("-r", "__ns:=/r1", "-r", "joint_states:=js", "-r",
                          "sleeve_force:=/cmd", "-p", "v0:=0.0",
                          "-p", f"record_path:={bag}") as node:
             node.wait_for_log("recording to")
             pub = probe.publisher("/cmd", Float64)
             probe.wait_for_subscribers(pub)
-            time.sleep(0.2)
             pub.publish(Float64(data=20.0))
             probe.wait_for("/r1/deployment_phase", lambda m: m.data == "locked", timeout=30)
-            time.sleep(0.4)
+            lock = float(node.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
+            # published past the summary's window below (0.1 s after the lock): recorded
+            probe.wait_for("/r1/js", lambda m: stamp(m) > lock + 0.1,
+                           what=f"a state past {lock + 0.1:.6f} s")
             assert node.stop(signal.SIGTERM) == 0
     finally:
         probe.close()
@@ -214,12 +220,23 @@ def test_offline_recording_has_the_live_layout(live_bag, tmp_path):
     assert again.returncode == 2 and "not overwriting" in again.stderr
 
 
+def recovered_states(bag: Path) -> int:
+    """Return the joint states in the complete chunks of a recording so far (0: none yet)."""
+    try:
+        return read_log(str(bag)).count("/joint_states")
+    except LogError:
+        return 0
+
+
 def test_sigkill_leaves_readable_chunks(tmp_path):
     bag = tmp_path / "killed"
     with NodeProcess("-p", "v0:=-0.2", "-p", "real_time_factor:=0.0",
                      "-p", f"record_path:={bag}") as node:
         node.wait_for_log("recording to")
-        time.sleep(2.0)                                # several chunks at ~15x real time
+        # several complete chunks on disk: what the writer had written is what a kill leaves
+        poll(lambda: recovered_states(bag) > 100, 60,
+             lambda: f"the recording holds {recovered_states(bag)} joint states in complete "
+                     f"chunks after 60 s (awaited > 100)")
         node.stop(signal.SIGKILL)
     assert not (bag / "metadata.yaml").exists()        # never finalised
     with open(mcap_file(bag), "rb") as fh:
@@ -264,8 +281,10 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
                                text=True, env=ros_env(), timeout=60)
             assert r.returncode == 0, r.stderr
             assert "not acknowledged" not in r.stdout
+            # nothing beyond what was recorded was sent (the replay has ended)
+            sent = int(re.search(r"replayed (\d+) messages", r.stdout).group(1))
+            assert sent == recorded + read_log(str(bag)).count("/joint_states"), r.stdout
             probe.wait_for_count("/clock", recorded, timeout=5)
-            time.sleep(0.1)                             # nothing beyond what was recorded
             arrivals = probe.timed("/clock")
             assert len(arrivals) == recorded
             stamps = [m.clock.sec + 1e-9 * m.clock.nanosec for _, m in arrivals]
@@ -318,7 +337,12 @@ def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
 
     def in_the_wait():
         assert proc.stdout.readline().startswith("replaying up to")
-        time.sleep(1.0)             # past the discovery pause: in the wait itself
+        # past its discovery pause (one sleep of its main thread), in the wait itself, which
+        # sleeps 50 ms a turn: three sleeps of the main thread since the line
+        before = main_thread_sleeps(proc.pid)
+        poll(lambda: main_thread_sleeps(proc.pid) >= before + 3, 60,
+             lambda: f"the replay's main thread slept {main_thread_sleeps(proc.pid) - before} "
+                     "time(s) in 60 s since 'replaying up to' (awaited 3: in the wait)")
 
     out, err = signal_and_collect(proc, signal.SIGTERM, in_the_wait)
     assert proc.returncode == 0, err
@@ -445,13 +469,20 @@ def test_signal_stops_physics_then_finalises_the_recording(tmp_path, sig):
     before rclpy shuts down, or a publish hits a dead context (it did, 12 times in 12).
     """
     bag = tmp_path / "interrupted"
-    with NodeProcess("-p", "v0:=-0.5", "-p", "publish_rate:=1000.0",
-                     "-p", f"record_path:={bag}") as node:
-        node.wait_for_log("recording to")
-        node.wait_for_log("locked at t")
-        time.sleep(0.3)
-        assert node.stop(sig) == 0
-        out = node.output()
+    probe = Probe("interrupt_probe")
+    try:
+        probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
+        with NodeProcess("-p", "v0:=-0.5", "-p", "publish_rate:=1000.0",
+                         "-p", f"record_path:={bag}") as node:
+            node.wait_for_log("recording to")
+            lock = float(node.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
+            # publishing for 0.3 s of sim time past the lock
+            probe.wait_for("/clock", lambda m: m.clock.sec + 1e-9 * m.clock.nanosec > lock + 0.3,
+                           what=f"a tick past {lock + 0.3:.6f} s")
+            assert node.stop(sig) == 0
+            out = node.output()
+    finally:
+        probe.close()
     assert "recording finalised" in out
     assert "[ERROR]" not in out and "Failed to publish" not in out, out
     assert (bag / "metadata.yaml").exists()
