@@ -116,6 +116,15 @@ def wait_for(predicate, timeout, what):
     pytest.fail(f"timed out after {timeout} s waiting for {what}")
 
 
+def scheduler_address(path):
+    """Return the address in a scheduler file (None: not there, or not written whole yet)."""
+    try:
+        with open(path) as fh:
+            return json.load(fh)["address"]
+    except (OSError, ValueError, KeyError):
+        return None
+
+
 def finished_cases(out_dir):
     cases = os.path.join(out_dir, "cases")
     return [f for f in os.listdir(cases) if f.endswith(".json")] if os.path.isdir(cases) else []
@@ -148,10 +157,9 @@ def start_dask_cluster(procs, tmp_path):
     procs.start("scheduler", [os.path.join(BIN, "dask"), "scheduler", "--host", "127.0.0.1",
                               "--port", "0", "--dashboard-address", "127.0.0.1:0",
                               "--scheduler-file", scheduler_file])
-    wait_for(lambda: os.path.exists(scheduler_file), 60, "the scheduler file")
-    time.sleep(0.2)     # the file is written in one go, but give it a moment to be closed
-    with open(scheduler_file) as fh:
-        address = json.load(fh)["address"]
+    wait_for(lambda: scheduler_address(scheduler_file), 60,
+             "the scheduler's address in its file")
+    address = scheduler_address(scheduler_file)
     workers = [procs.start(f"worker{i}", [
         os.path.join(BIN, "dask"), "worker", address, "--host", "127.0.0.1", "--nworkers", "1",
         "--nthreads", "1", "--dashboard-address", "127.0.0.1:0",
