@@ -285,7 +285,7 @@ def test_stop_signal_while_commands_flow_is_a_clean_exit(probe, ros_domain_id):
                              effort=[0.0, 0.0, 0.0])     # folded at rest: the plan's start
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(k * 10**6, 10**9)
             states.publish(msg)
-            time.sleep(STATE_INTERVAL)
+            time.sleep(STATE_INTERVAL)      # the stream's pace, not a wait for a condition
 
     pumper = threading.Thread(target=pump, daemon=True)
     pumper.start()
@@ -295,9 +295,11 @@ def test_stop_signal_while_commands_flow_is_a_clean_exit(probe, ros_domain_id):
                              parameters={"max_force": LIMIT, "min_force": -LIMIT}) as c:
                 c.wait_for_log("waiting for joint_states", timeout=60)
                 sent = len(probe.messages(ros_io.COMMAND.name))
-                poll(lambda: len(probe.messages(ros_io.COMMAND.name)) > sent + 20, 30,
-                     lambda: f"controller {i} sent no commands")
-                time.sleep(0.03 * i)
+                # each stop at its own instant of the stream: after 20 + 10 i answers
+                poll(lambda: len(probe.messages(ros_io.COMMAND.name)) > sent + 20 + 10 * i, 30,
+                     lambda: f"controller {i} sent "
+                             f"{len(probe.messages(ros_io.COMMAND.name)) - sent} commands "
+                             f"in 30 s (awaited {21 + 10 * i})")
                 sig = signal.SIGTERM if i % 2 == 0 else signal.SIGINT
                 rc = c.stop(sig)
                 out = c.output()
@@ -350,13 +352,20 @@ def test_controller_leaves_a_frame_that_is_not_at_rest_alone(antenna_factory, ro
     Pushing a frame that already deploys faster than the plan only makes its lock harder
     (the controller once pushed the node's default V0 = -0.2 m/s run at full force).
     """
-    # at 1/20 of real time: the 0.23 s deployment lasts longer than DDS takes to deliver
-    # the first states to a controller the graph already shows (up to ~1 s here)
     antenna = antenna_factory({"v0": -0.2, "publish_rate": RATE, "time_step": STEP,
-                               "start_paused": True, "real_time_factor": 0.05})
+                               "start_paused": True})
     with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
                      parameters={"target_time": TARGET, "max_force": LIMIT}) as controller:
         wait_for_controller(antenna, controller)
+        # reset the paused antenna until the controller has a state of it (the graph shows the
+        # controller ~1 s before DDS delivers it data): its t = 0 state, already at v0
+        for _ in range(20):
+            antenna.reset()
+            try:
+                controller.wait_for_log("the frame is not folded at rest", timeout=3.0)
+                break
+            except AssertionError:
+                continue
         antenna.resume()
         controller.wait_for_log("the frame is not folded at rest", timeout=30)
         antenna.wait_for_phase("locked", timeout=30)
@@ -376,14 +385,21 @@ def test_controller_warns_when_its_commands_are_refused_or_others_command(
     The node takes no force below its sleeve_force_min (0 by default) while the controller
     brakes down to -LIMIT; a second publisher on sleeve_force (the test's own) is named too.
     """
+    from std_msgs.msg import Float64
+
+    # in lockstep from a reset the controller answered (start_answered), as the tests above:
+    # free-running, a loaded machine delayed its commands, its window of our own commands
+    # grew with the delay it measured, and the refused braking went unnoticed
     antenna = antenna_factory({"v0": 0.0, "publish_rate": RATE, "time_step": STEP,
-                               "start_paused": True})
+                               "start_paused": True, "lockstep": True})
     antenna.publish_force(0.0)              # a second publisher on the topic, holding 0 N
+    commands = antenna.topics["sleeve_force"]
+    antenna.probe.subscribe(commands, Float64)
     with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
                      parameters={"target_time": TARGET, "max_force": LIMIT,
                                  "min_force": -LIMIT}) as controller:
         wait_for_controller(antenna, controller, publishers=2)
-        antenna.resume()
+        start_answered(antenna, commands)
         antenna.wait_for_phase("locked", timeout=60)
         controller.wait_for_log("deployment over", timeout=30)
         out = controller.output()
