@@ -7,6 +7,7 @@ import sys
 
 import pytest
 
+from tests.ros_helpers import keep_every_message
 from umbrella_sim.testing import (_shm_segments, default_domain_id, DOMAIN_ID_ENV, NodeProcess,
                                   poll, ros_env, summarize_run, summary_from_recording)
 
@@ -107,7 +108,7 @@ def test_a_killed_node_leaves_no_shared_memory_either(ros_domain_id):
         assert not [p for p in segments if os.path.exists(p)]
 
 
-def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_factory):
+def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_factory, probe):
     """
     Compare the summary read off the topics and log with the physics core.
 
@@ -117,7 +118,9 @@ def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_f
     from umbrella_sim.core.params import UmbrellaParams
     from umbrella_sim.core.solver import simulate
 
-    antenna = antenna_factory({"v0": 0.0, "publish_rate": 200.0})
+    # every publication of the window must reach the probe, also on a loaded machine
+    antenna = antenna_factory({"v0": 0.0, "publish_rate": 200.0},
+                              probe=keep_every_message(probe))
     antenna.wait_for_phase("deploying")
     antenna.play_force_profile([(0.0, 30.0)])
     summary = antenna.summary(after_lock=0.2)
@@ -171,7 +174,7 @@ def test_a_forgotten_close_or_a_ctrl_c_still_stops_the_node(tmp_path, how):
     assert ("interrupted" in r.stdout) == (how == "interrupt")
 
 
-def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path):
+def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path, probe):
     """
     start_paused holds t = 0 until resume(); after reset() every figure is the new run's.
 
@@ -185,7 +188,9 @@ def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path):
     from umbrella_sim.core.solver import simulate
 
     bag = tmp_path / "two_runs"
-    antenna = antenna_factory({"v0": -0.5, "start_paused": True}, record_path=str(bag))
+    # the live figures are compared with the recording's: the probe must keep every message
+    antenna = antenna_factory({"v0": -0.5, "start_paused": True}, record_path=str(bag),
+                              probe=keep_every_message(probe))
     assert antenna.phases() == ["deploying"] or antenna.wait_for_phase("deploying") is None
     with pytest.raises(AssertionError, match="never reached"):
         antenna.wait_for_sim_time(1e-3, timeout=1.0)       # held at t = 0
@@ -391,9 +396,15 @@ def test_the_real_time_factor_after_a_reset_is_measured_from_the_reset(antenna_f
     antenna.reset()
     poll(lambda: len(antenna.messages("diagnostics")) >= 2, 20,
          lambda: "fewer than two diagnostics after the reset")
-    measured = [float({kv.key: kv.value for kv in m.status[0].values}
-                      ["measured_real_time_factor"]) for m in antenna.messages("diagnostics")]
-    assert all(0.5 < x < 1.5 for x in measured), measured      # real_time_factor 1
+    statuses = [{kv.key: kv.value for kv in m.status[0].values}
+                for m in antenna.messages("diagnostics")]
+    measured = [(float(v["measured_real_time_factor"]), float(v["sim_time_s"]))
+                for v in statuses]
+    # sim time over the wall time (at least 1 s) since the previous status or the reset:
+    # positive and at most the sim time itself (across the reset it went negative), below
+    # 1.5 (real_time_factor 1: a catch-up of at most MAX_LAG_S = 0.5 s in a second).  How
+    # close to 1 it comes is the machine's speed, not asserted here
+    assert all(0.0 < x <= t + 1e-4 and x < 1.5 for x, t in measured), measured
 
 
 def test_a_force_profile_is_played_row_by_row(antenna_factory):
@@ -403,8 +414,10 @@ def test_a_force_profile_is_played_row_by_row(antenna_factory):
     The start was taken before the command publisher matched the node (~0.4 s): the later
     rows then went out back to back within one period, and the pulse never acted.
     """
-    antenna = antenna_factory({"v0": 0.0})
-    antenna.play_force_profile([(0.1, 5.0), (0.3, 0.0), (0.35, 5.0)])
+    # at a tenth of real time: a command's way over DDS (the probe sees a state, publishes,
+    # the node takes it at its next period), ~0.1 s on a loaded machine, is 10 ms of sim time
+    antenna = antenna_factory({"v0": 0.0, "real_time_factor": 0.1})
+    antenna.play_force_profile([(0.1, 5.0), (0.3, 0.0), (0.35, 5.0)], timeout=60)
     poll(lambda: len(antenna.applied_forces()) >= 3, 10,
          lambda: f"applied only {antenna.applied_forces()}")
     (t1, f1), (t2, f2), (t3, f3) = antenna.applied_forces()[:3]
