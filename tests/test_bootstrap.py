@@ -20,6 +20,7 @@ from tests.ros_helpers import Probe, ros_env, stamp
 from umbrella_sim.bag.reader import read_log
 
 STAMP = os.path.join(sys.prefix, STAMP_NAME)
+pytestmark = pytest.mark.ros
 
 
 @pytest.mark.skipif(not os.path.exists(STAMP),

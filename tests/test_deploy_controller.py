@@ -148,6 +148,7 @@ def test_infeasible_target_is_refused_naming_the_parameter():
     (["-p", "targt_time:=1.0"], "unknown parameter 'targt_time' (did you mean 'target_time'?)"),
     (["-p", "qos_overrides./sleeve_force.publisher.depth:=5"], "its topics take none"),
 ])
+@pytest.mark.ros
 def test_controller_refuses_bad_parameters_with_exit_2(args, culprit):
     r = subprocess.run([sys.executable, "-m", "umbrella_sim.deploy_controller", "--ros-args",
                         *args], capture_output=True, text=True, env=ros_env(), timeout=60)
@@ -155,6 +156,8 @@ def test_controller_refuses_bad_parameters_with_exit_2(args, culprit):
     assert culprit in r.stderr and "Traceback" not in r.stderr
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_controller_shares_the_node_params_file_and_names_a_typo_in_it(tmp_path):
     """One '/**' params file serves both nodes; a misspelt name in it is exit 2, not ignored."""
     shared = tmp_path / "shared.yaml"
@@ -190,6 +193,8 @@ def test_controller_shares_the_node_params_file_and_names_a_typo_in_it(tmp_path)
     assert "'max_forse' (did you mean 'max_force'?)" in r.stderr
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_controller_over_dds_locks_five_times_softer_than_constant_force(
         constant, antenna_factory, ros_domain_id, tmp_path):
     """
@@ -255,6 +260,8 @@ def test_controller_over_dds_locks_five_times_softer_than_constant_force(
         assert getattr(s, name) == pytest.approx(getattr(offline, name), rel=1e-6), name
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_stop_signal_while_commands_flow_is_a_clean_exit(probe, ros_domain_id):
     """
     SIGTERM or SIGINT while the controller answers joint_states: exit 0, no traceback.
@@ -309,6 +316,8 @@ def test_stop_signal_while_commands_flow_is_a_clean_exit(probe, ros_domain_id):
         ended.set()
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_controller_deploys_each_new_run_after_a_reset(antenna_factory, ros_domain_id):
     """
     A ~/reset after the lock starts a new run: the controller deploys it afresh.
@@ -345,6 +354,8 @@ def test_controller_deploys_each_new_run_after_a_reset(antenna_factory, ros_doma
     assert deploy[1] == pytest.approx(deploy[0], rel=1e-6), deploy      # the same run again
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_controller_leaves_a_frame_that_is_not_at_rest_alone(antenna_factory, ros_domain_id):
     """
     The plan deploys from rest: a node started with v0 != 0 gets no command, and an error.
@@ -377,6 +388,8 @@ def test_controller_leaves_a_frame_that_is_not_at_rest_alone(antenna_factory, ro
     assert antenna.lock_time() == pytest.approx(offline.lock.time, abs=1e-9)   # on its own
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_controller_warns_when_its_commands_are_refused_or_others_command(
         antenna_factory, ros_domain_id):
     """
@@ -410,6 +423,7 @@ def test_controller_warns_when_its_commands_are_refused_or_others_command(
     assert min(f for _, f in antenna.applied_forces()) >= 0.0
 
 
+@pytest.mark.ros
 def test_a_command_taken_late_is_not_reported_as_refused(capfd):
     """
     A free-running node under load takes a command 0.2 s late: ours, not someone else's.

@@ -106,6 +106,8 @@ def test_write_error_at_close_still_marks_the_recording(tmp_path, monkeypatch):
         [float(i) for i in range(log.count("/x"))]
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
     probe.subscribe("/joint_states", JointState)
     bag = tmp_path / "full"
@@ -143,6 +145,7 @@ def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
     assert "recording ended early (" in why and "No space left" in why, why
 
 
+@pytest.mark.slow
 def test_output_paths_checked_before_any_work(tmp_path):
     (tmp_path / "exists.csv").write_text("x")
     (tmp_path / "full").mkdir()
@@ -177,6 +180,8 @@ def test_offline_fault_recorded_and_reproduced(tmp_path):
     assert r.returncode == 0 and "fault reproduced at t = " in r.stdout, r.stdout + r.stderr
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, probe):
     """
     Record, reproduce and end a run on a commanded solver fault.
@@ -207,6 +212,8 @@ def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, p
     assert r.returncode == 0 and "fault reproduced" in r.stdout, r.stdout + r.stderr
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_command_above_what_the_link_carries_is_refused(probe):
     probe.subscribe("/diagnostics", DiagnosticArray)
     limit = UmbrellaParams().sleeve_force_limit
@@ -257,6 +264,7 @@ def _node(*args, timeout=60):
 ], ids=["typo", "unknown", "other-node", "unknown-key", "nested", "malformed", "list",
         "no-ros-parameters", "binary", "missing", "no-assign", "bogus-flag", "no-model",
         "empty-value", "qos-typo", "qos-type", "twice", "tiny-step"])
+@pytest.mark.ros
 def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):
     if content is not None:
         path = tmp_path / "p.yaml"
@@ -270,6 +278,7 @@ def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words
         assert "p.yaml" in r.stderr
 
 
+@pytest.mark.ros
 def test_params_file_for_a_namespaced_node(tmp_path):
     path = tmp_path / "ns.yaml"
     path.write_text("/a1/umbrella_node:\n  ros__parameters:\n    v0: -0.5\n")
@@ -288,6 +297,7 @@ def test_cli_set_and_params_file_typos_suggest(tmp_path):
     assert str(path) in r.stderr
 
 
+@pytest.mark.ros
 def test_sigint_during_startup_is_quiet(tmp_path):
     """
     Stop quietly on SIGINT during start-up.
@@ -325,6 +335,7 @@ def _catches_sigterm(pid: int) -> bool:
     (signal.SIGINT, 0.4, "module"), (signal.SIGINT, 0.8, "script"),
     (signal.SIGINT, 1.5, "module"), (signal.SIGTERM, 0.3, "module"),
     (signal.SIGTERM, 0.6, "script")])
+@pytest.mark.ros
 def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum, delay, entry):
     """
     Stop cleanly on a signal at any instant of start-up.
@@ -365,6 +376,7 @@ def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum
         assert not log.truncated and not log.ended_early
 
 
+@pytest.mark.ros
 def test_stop_inside_a_long_period_ends_it_and_records_one_state(tmp_path):
     """
     A stop signal in a long publication period (1 Hz, 10^6 steps of 1 us) ends it early.
@@ -463,6 +475,7 @@ def test_a_stop_signal_while_a_tool_starts_is_taken(tmp_path):
     assert f"{tool}: interrupted by SIGINT while starting; nothing was done" in err, err
 
 
+@pytest.mark.slow
 def test_output_read_by_a_closed_pipe_is_no_traceback_and_keeps_the_files(tmp_path):
     """`umbrella_compare ... | head -1`: exit 141 (SIGPIPE), no traceback, compare.json kept."""
     bags = []
@@ -587,6 +600,7 @@ def _foreign(path, payload=None, parameters=None):
         w.finish()
 
 
+@pytest.mark.slow
 def test_foreign_damaged_and_special_logs_exit_2_naming_file(tmp_path):
     good = tmp_path / "good"
     assert run("umbrella_sim", "simulate", "--duration", "0.05", "--mcap",
@@ -662,6 +676,8 @@ def test_log_messages_are_streamed_not_loaded(tmp_path):
 
 
 # ---------------------------------------------------- overload, peers, segments
+@pytest.mark.ros
+@pytest.mark.slow
 def test_overload_lag_bounded_by_re_anchoring(probe):
     probe.subscribe("/diagnostics", DiagnosticArray)
     with NodeProcess("-p", "real_time_factor:=1000.0", "-p", "elements_per_segment:=2") as node:
@@ -675,12 +691,15 @@ def test_overload_lag_bounded_by_re_anchoring(probe):
     assert float(values["lag_s"]) < MAX_LAG_S + 1.0
 
 
+@pytest.mark.ros
 def test_two_nodes_in_one_namespace_are_warned():
     with NodeProcess("-p", "v0:=0.0") as a, NodeProcess("-p", "v0:=0.0") as b:
         a.wait_for_log("nodes named /umbrella_node|publishers on /clock", timeout=30)
         b.wait_for_log("nodes named /umbrella_node|publishers on /clock", timeout=30)
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
     """
     Record a reset with new parameters as a new segment.

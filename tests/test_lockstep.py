@@ -6,6 +6,8 @@ Over real DDS: the node stalls while no command answers its last state, and each
 """
 import pytest
 
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
 PERIOD = 0.01           # s, publish_rate 100 Hz
 STEP = 0.002            # s
 

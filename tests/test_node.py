@@ -20,6 +20,8 @@ from umbrella_sim.core.solver import simulate, UmbrellaSimulator
 from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.testing import NodeProcess, poll, ros_env
 
+pytestmark = pytest.mark.ros      # every test starts umbrella_node
+
 ALPHA0 = UmbrellaParams().alpha0
 DEPLOYED = math.pi / 12
 
@@ -51,6 +53,7 @@ def clock_s(msg: Clock) -> float:
     return msg.clock.sec + 1e-9 * msg.clock.nanosec
 
 
+@pytest.mark.slow
 def test_topic_driven_deployment_matches_offline_core(probe):
     """
     Deploy on command and match the offline core's lock time.
@@ -123,6 +126,7 @@ def test_help_lists_every_parameter():
     assert os.path.isfile(os.path.join(docs, "topic_sleeve_force.md")), docs
 
 
+@pytest.mark.slow
 def test_invalid_commands_refused_counted_and_never_applied(probe):
     probe.subscribe("/joint_states", JointState)
     probe.subscribe("/diagnostics", DiagnosticArray)
@@ -279,6 +283,7 @@ def test_use_sim_time_is_not_taken_by_the_clock_source(probe):
         assert not result.successful and "drives" in result.reason, result.reason
 
 
+@pytest.mark.slow
 def test_namespaced_nodes_do_not_cross_talk(probe):
     for ns in ("a1", "a2"):
         probe.subscribe(f"/{ns}/joint_states", JointState)

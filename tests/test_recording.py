@@ -66,6 +66,8 @@ def live_bag(tmp_path_factory):
     return bag
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_independent_readers_decode_every_message(live_bag):
     meta = read_log(str(live_bag)).metadata
     counts = json.loads(meta["umbrella_sim.counts"]["recorded"])
@@ -101,6 +103,7 @@ def test_independent_readers_decode_every_message(live_bag):
         assert dict(seen) == dict(per_topic)
 
 
+@pytest.mark.ros
 def test_nothing_lost_published_and_received_equal_recorded(live_bag):
     log = read_log(str(live_bag))
     c = log.metadata["umbrella_sim.counts"]
@@ -115,6 +118,7 @@ def test_nothing_lost_published_and_received_equal_recorded(live_bag):
     assert log.metadata["umbrella_sim.events"]["locked"] == "true"
 
 
+@pytest.mark.ros
 def test_log_is_self_describing(live_bag):
     log = read_log(str(live_bag))
     params = log.parameters()
@@ -131,6 +135,7 @@ def test_log_is_self_describing(live_bag):
     assert "serialized_metadata" in log.metadata["rosbag2"]
 
 
+@pytest.mark.ros
 def test_resimulate_live_log_with_force_profile(live_bag):
     r = run_cli("umbrella_sim.tools.replay", str(live_bag), "--resimulate")
     assert r.returncode == 0, r.stdout + r.stderr
@@ -160,6 +165,7 @@ def test_resimulation_under_another_blas_kernel_passes_and_says_why_it_differs(t
         assert "openblas_coretype 'Haswell' there, 'auto' here" in r.stdout, r.stdout
 
 
+@pytest.mark.ros
 def test_a_remapped_node_s_recording_serves_every_tool(tmp_path):
     """
     -r joint_states:=js -r sleeve_force:=/cmd in a namespace: the tools find the topics.
@@ -207,6 +213,7 @@ def test_a_remapped_node_s_recording_serves_every_tool(tmp_path):
     assert diffs["differences"]["alpha1"]["max"] == 0.0
 
 
+@pytest.mark.ros
 def test_offline_recording_has_the_live_layout(live_bag, tmp_path):
     bag = tmp_path / "offline_run"
     r = run_cli("umbrella_sim", "simulate", "--v0", "0", "--force", "10", "--duration", "0.6",
@@ -228,6 +235,7 @@ def recovered_states(bag: Path) -> int:
         return 0
 
 
+@pytest.mark.ros
 def test_sigkill_leaves_readable_chunks(tmp_path):
     bag = tmp_path / "killed"
     with NodeProcess("-p", "v0:=-0.2", "-p", "real_time_factor:=0.0",
@@ -258,6 +266,8 @@ def test_sigkill_leaves_readable_chunks(tmp_path):
         subprocess.run([fastdds, "shm", "clean"], capture_output=True, timeout=60)
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_replay_republishes_with_recorded_spacing(tmp_path):
     """
     Spacing tolerance: median |interval - 20 ms| < 4 ms at rate 0.5, < 2 ms at rate 1.
@@ -296,6 +306,8 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
 
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.ros
+@pytest.mark.slow
 def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, signum):
     """
     A looping replay stopped by SIGTERM or SIGINT: exit 0, no traceback, its count printed.
@@ -325,6 +337,7 @@ def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, 
         probe.close()
 
 
+@pytest.mark.ros
 def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
     """SIGTERM before the first message (no subscriber yet): as a stop while replaying."""
     bag = tmp_path / "wait_src"
@@ -349,6 +362,8 @@ def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
     assert "replayed 0 messages" in out and "Traceback" not in err, (out, err)
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_replay_under_a_namespace_moves_the_node_topics(tmp_path, live_bag):
     """``--ros-args -r __ns:=/replay`` moves the recorded node's topics, as it moves a node."""
     from umbrella_sim.tools.replay import moved_topics
@@ -375,6 +390,7 @@ def test_replay_under_a_namespace_moves_the_node_topics(tmp_path, live_bag):
         probe.close()
 
 
+@pytest.mark.slow
 def test_compare_known_runs(tmp_path):
     a, b = tmp_path / "v05", tmp_path / "v10"
     for bag, v0 in ((a, "-0.5"), (b, "-1.0")):
@@ -434,6 +450,7 @@ def test_peak_holds_compare_on_the_coarser_grid_when_the_runs_start_apart():
     assert _diff(fine_t, fine, coarse_t, coarse, True) == (0.0, 0.0)
 
 
+@pytest.mark.ros
 def test_bad_files_give_clear_errors(tmp_path, live_bag):
     not_mcap = tmp_path / "x.mcap"
     not_mcap.write_bytes(b"definitely not an mcap file")
@@ -461,6 +478,7 @@ def test_bad_files_give_clear_errors(tmp_path, live_bag):
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.ros
 def test_signal_stops_physics_then_finalises_the_recording(tmp_path, sig):
     """
     Stop cleanly on a signal while publishing at 1 kHz.

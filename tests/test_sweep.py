@@ -382,6 +382,7 @@ def test_progress_line_counts_failures_and_eta(monkeypatch):
 
 
 # ------------------------------------------------------------------ local cluster
+@pytest.mark.slow
 def test_local_sweep_table_physics_and_plots(local_run):
     assert local_run["rc"] == 3, local_run["log"]          # one case fails, the rest go on
     rows = local_run["rows"]
@@ -423,6 +424,7 @@ def test_local_sweep_table_physics_and_plots(local_run):
     assert "6/6 cases" in local_run["log"] and "ETA" in local_run["log"]
 
 
+@pytest.mark.slow
 def test_rerun_skips_finished_cases(local_run, procs):
     store = os.path.join(local_run["out"], "cases")
     before = {f: os.stat(os.path.join(store, f)).st_mtime_ns for f in os.listdir(store)}
@@ -433,6 +435,7 @@ def test_rerun_skips_finished_cases(local_run, procs):
     assert physics(read_rows(local_run["out"])) == physics(local_run["rows"])
 
 
+@pytest.mark.slow
 def test_ctrl_c_keeps_finished_cases_and_rerun_completes(tmp_path, procs):
     spec = write(tmp_path / "slow.yaml", (
         "base: {elements_per_segment: 4, v0: -1.0, time_step: 0.002}\n"
@@ -464,6 +467,7 @@ def test_ctrl_c_keeps_finished_cases_and_rerun_completes(tmp_path, procs):
 
 
 # ------------------------------------------------------------------ a real Dask cluster
+@pytest.mark.slow
 def test_distributed_run_equals_local_run(local_run, dask_cluster, procs, tmp_path):
     address, _ = dask_cluster
     out = str(tmp_path / "dist")
@@ -475,6 +479,7 @@ def test_distributed_run_equals_local_run(local_run, dask_cluster, procs, tmp_pa
     assert len({r["worker"] for r in rows}) == 2, "both workers took cases"
 
 
+@pytest.mark.slow
 def test_worker_killed_mid_sweep_gives_complete_table(own_dask_cluster, procs, tmp_path):
     address, workers = own_dask_cluster
     spec = write(tmp_path / "ten.yaml", (
@@ -543,6 +548,7 @@ def test_ctrl_c_while_the_table_is_written_keeps_a_whole_table(tmp_path, capfd, 
     assert os.path.exists(out / "results.parquet")
 
 
+@pytest.mark.slow
 def test_store_write_error_stops_the_sweep_keeping_finished_cases(dask_cluster, tmp_path,
                                                                   capsys):
     address, _ = dask_cluster
@@ -560,6 +566,7 @@ def test_store_write_error_stops_the_sweep_keeping_finished_cases(dask_cluster, 
     assert [r["case_id"] for r in read_rows(str(out))] == [first.case_id]
 
 
+@pytest.mark.slow
 def test_mcap_keeps_a_recording_per_case(dask_cluster, tmp_path, procs):
     from umbrella_sim.tools.compare import load_run
 

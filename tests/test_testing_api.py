@@ -49,6 +49,8 @@ def test_summary_figures_are_taken_on_either_side_of_the_lock():
     assert never.deploy_time is None and math.isnan(never.stage2_peak_stress)
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_waits_fail_saying_what_was_awaited_and_what_was_seen(antenna_factory):
     antenna = antenna_factory({"v0": 0.0})          # at rest: it never locks
     antenna.wait_for_phase("deploying")
@@ -78,6 +80,7 @@ def test_waits_fail_saying_what_was_awaited_and_what_was_seen(antenna_factory):
         antenna_factory({"v0": 0.0})                # one topic set for two nodes
 
 
+@pytest.mark.ros
 def test_startup_failure_reports_the_node_output():
     node = NodeProcess(parameters={"l1": -1.0})
     with pytest.raises(AssertionError) as exc:
@@ -87,6 +90,8 @@ def test_startup_failure_reports_the_node_output():
     assert not os.path.exists(node.log_path)
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_close_leaves_no_process_log_or_shared_memory(antenna_factory):
     antenna = antenna_factory({"v0": -0.5})
     antenna.wait_for_phase("locked", timeout=30)
@@ -98,6 +103,7 @@ def test_close_leaves_no_process_log_or_shared_memory(antenna_factory):
     assert not [p for p in segments if os.path.exists(p)]
 
 
+@pytest.mark.ros
 def test_a_killed_node_leaves_no_shared_memory_either(ros_domain_id):
     with NodeProcess(parameters={"v0": 0.0}, domain_id=ros_domain_id) as node:
         node.wait_for_log("physics step")
@@ -108,6 +114,8 @@ def test_a_killed_node_leaves_no_shared_memory_either(ros_domain_id):
         assert not [p for p in segments if os.path.exists(p)]
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_factory, probe):
     """
     Compare the summary read off the topics and log with the physics core.
@@ -161,6 +169,8 @@ if sys.argv[1] == "interrupt":                  # Ctrl-C while a wait is under w
 
 
 @pytest.mark.parametrize("how", ["exit", "interrupt"])
+@pytest.mark.ros
+@pytest.mark.slow
 def test_a_forgotten_close_or_a_ctrl_c_still_stops_the_node(tmp_path, how):
     """An antenna never closed goes at exit; Ctrl-C interrupts a wait (rclpy takes no signal)."""
     script = tmp_path / "forgetful.py"
@@ -174,6 +184,8 @@ def test_a_forgotten_close_or_a_ctrl_c_still_stops_the_node(tmp_path, how):
     assert ("interrupted" in r.stdout) == (how == "interrupt")
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path, probe):
     """
     start_paused holds t = 0 until resume(); after reset() every figure is the new run's.
@@ -231,6 +243,8 @@ def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path, probe):
     assert everything.stage2_span > 0.5 and everything.stage2_samples > recorded.stage2_samples
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_antennas_in_two_namespaces_keep_their_own_diagnostics(antenna_factory):
     """/diagnostics is every node's: each antenna reads its own node's status only."""
     paused = antenna_factory({"v0": 0.0, "start_paused": True}, namespace="a1")
@@ -246,6 +260,7 @@ def test_antennas_in_two_namespaces_keep_their_own_diagnostics(antenna_factory):
         assert antenna.diagnostics()["paused"] == state
 
 
+@pytest.mark.ros
 def test_reset_before_a_paused_start_was_resumed_begins_the_new_run(antenna_factory):
     """A start_paused antenna reset before any resume: its new run is seen from t = 0."""
     from builtin_interfaces.msg import Time
@@ -259,6 +274,8 @@ def test_reset_before_a_paused_start_was_resumed_begins_the_new_run(antenna_fact
     assert antenna.messages("joint_states")[0].header.stamp == Time()
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factory):
     """set_parameters + reset: the node's new model, and the antenna's figures and checks."""
     from umbrella_sim.core.params import UmbrellaParams
@@ -280,6 +297,7 @@ def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factor
          lambda: f"applied: {antenna.applied_forces()}")
 
 
+@pytest.mark.ros
 def test_a_relative_record_path_is_the_tests_working_directory(
         antenna_factory, tmp_path, monkeypatch):
     """The node runs in a temporary directory: record_path="bag" still lands in the test's."""
@@ -326,6 +344,7 @@ def test_two_sessions_on_one_machine_get_two_domains():
         holder.wait(timeout=30)
 
 
+@pytest.mark.ros
 def test_compare_draws_a_segment_of_another_mesh(antenna_factory, tmp_path):
     """A reset to N = 2 after a run at N = 1: compare --segment 1 drew it with N = 1's nodes."""
     import subprocess
@@ -387,6 +406,8 @@ def test_a_summary_of_a_window_the_probe_never_saw_is_an_error_not_nan():
         antenna.summary(after_lock=None)
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_the_real_time_factor_after_a_reset_is_measured_from_the_reset(antenna_factory):
     """Sim time goes back at a reset: the first status after it read -6.2x and -3.0x."""
     from umbrella_sim.testing import poll
@@ -407,6 +428,8 @@ def test_the_real_time_factor_after_a_reset_is_measured_from_the_reset(antenna_f
     assert all(0.0 < x <= t + 1e-4 and x < 1.5 for x, t in measured), measured
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_a_force_profile_is_played_row_by_row(antenna_factory):
     """
     A pulse of 0 N for 50 ms between two pushes reaches the node as three commands.
