@@ -206,7 +206,7 @@ def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path, probe):
     assert antenna.phases() == ["deploying"] or antenna.wait_for_phase("deploying") is None
     with pytest.raises(AssertionError, match="never reached"):
         antenna.wait_for_sim_time(1e-3, timeout=1.0)       # held at t = 0
-    antenna.wait_for("diagnostics", lambda m: True, timeout=5.0)
+    antenna.wait_for("diagnostics", lambda m: True, timeout=20.0)
     # held at t = 0 (its t = 0 state, volatile, may have gone before the probe matched)
     assert antenna.sim_time() in (None, 0.0) and antenna.diagnostics()["paused"] == "True"
     antenna.resume()
