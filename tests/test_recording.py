@@ -19,8 +19,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
-from tests.ros_helpers import (main_thread_sleeps, NodeProcess, poll, Probe, ros_env,
-                               signal_and_collect, stamp)
+from tests.ros_helpers import (keep_every_message, main_thread_sleeps, NodeProcess, poll,
+                               Probe, ros_env, signal_and_collect, stamp)
 from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
@@ -324,7 +324,7 @@ def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, 
                    "--mcap", str(bag)).returncode == 0
     probe = Probe("replay_stop_probe")
     try:
-        probe.subscribe("/joint_states", JointState)
+        keep_every_message(probe, keys=("joint_states",))     # each one is counted
         proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
                                  "--loop", "--topics", "/joint_states",
                                  "--wait-for-subscribers", "20"],
@@ -381,7 +381,7 @@ def test_replay_under_a_namespace_moves_the_node_topics(tmp_path, live_bag):
     # over DDS: the subscriber under /replay gets every recorded state
     probe = Probe("replay_ns_probe")
     try:
-        probe.subscribe("/replay/joint_states", JointState)
+        keep_every_message(probe, "replay", ("joint_states",))  # each one is counted
         r = subprocess.run([sys.executable, "-m", "umbrella_sim.tools.replay", str(live_bag),
                             "--topics", "/joint_states",
                             "--wait-for-subscribers", "20", "--ros-args", "-r",
