@@ -276,12 +276,13 @@ def test_reset_before_a_paused_start_was_resumed_begins_the_new_run(antenna_fact
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factory):
+def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factory, probe):
     """set_parameters + reset: the node's new model, and the antenna's figures and checks."""
     from umbrella_sim.core.params import UmbrellaParams
     from umbrella_sim.core.solver import simulate
 
-    antenna = antenna_factory({"v0": 0.0, "start_paused": True})
+    antenna = antenna_factory({"v0": 0.0, "start_paused": True},
+                              probe=keep_every_message(probe))     # (a summary: see above)
     with pytest.raises(AssertionError, match="l1"):
         antenna.set_parameters(l1=-1.0)
     antenna.set_parameters(v0=-0.5, sleeve_force_min=-5.0)
