@@ -8,10 +8,9 @@ from umbrella_sim.testing import antenna_factory, probe, ros_domain_id  # noqa: 
 
 HERE = Path(__file__).resolve().parent
 # The suite's markers (setup.cfg): every example here talks to a real umbrella_node over DDS
-# (ros); these take more than ~3 s on a quiet machine (slow).  `pytest -m "not ros"` leaves
+# (ros); this one takes more than ~3 s on a quiet machine (slow).  `pytest -m "not ros"` leaves
 # them out.
-SLOW = {"test_the_deploy_controller_latches_softly",
-        "test_a_nan_command_is_refused_and_nothing_moves"}
+SLOW = {"test_the_deploy_controller_latches_softly"}
 
 
 def pytest_collection_modifyitems(config, items):

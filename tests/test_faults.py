@@ -677,7 +677,6 @@ def test_log_messages_are_streamed_not_loaded(tmp_path):
 
 # ---------------------------------------------------- overload, peers, segments
 @pytest.mark.ros
-@pytest.mark.slow
 def test_overload_lag_bounded_by_re_anchoring(probe):
     probe.subscribe("/diagnostics", DiagnosticArray)
     with NodeProcess("-p", "real_time_factor:=1000.0", "-p", "elements_per_segment:=2") as node:

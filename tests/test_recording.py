@@ -310,7 +310,6 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 @pytest.mark.ros
-@pytest.mark.slow
 def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, signum):
     """
     A looping replay stopped by SIGTERM or SIGINT: exit 0, no traceback, its count printed.

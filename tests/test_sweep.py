@@ -424,7 +424,7 @@ def test_local_sweep_table_physics_and_plots(local_run):
     assert "6/6 cases" in local_run["log"] and "ETA" in local_run["log"]
 
 
-@pytest.mark.slow
+@pytest.mark.slow           # (its module-wide sweep or cluster: seconds to start)
 def test_rerun_skips_finished_cases(local_run, procs):
     store = os.path.join(local_run["out"], "cases")
     before = {f: os.stat(os.path.join(store, f)).st_mtime_ns for f in os.listdir(store)}
@@ -548,7 +548,7 @@ def test_ctrl_c_while_the_table_is_written_keeps_a_whole_table(tmp_path, capfd, 
     assert os.path.exists(out / "results.parquet")
 
 
-@pytest.mark.slow
+@pytest.mark.slow           # (its module-wide sweep or cluster: seconds to start)
 def test_store_write_error_stops_the_sweep_keeping_finished_cases(dask_cluster, tmp_path,
                                                                   capsys):
     address, _ = dask_cluster

@@ -91,7 +91,6 @@ def test_startup_failure_reports_the_node_output():
 
 
 @pytest.mark.ros
-@pytest.mark.slow
 def test_close_leaves_no_process_log_or_shared_memory(antenna_factory):
     antenna = antenna_factory({"v0": -0.5})
     antenna.wait_for_phase("locked", timeout=30)
@@ -115,7 +114,6 @@ def test_a_killed_node_leaves_no_shared_memory_either(ros_domain_id):
 
 
 @pytest.mark.ros
-@pytest.mark.slow
 def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_factory, probe):
     """
     Compare the summary read off the topics and log with the physics core.
