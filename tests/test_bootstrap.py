@@ -6,18 +6,21 @@ records MCAP, and a signal sent to the bootstrap process (not only Ctrl-C in a t
 reaches the whole process group) stops the node cleanly with a finalised recording.
 """
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
 
 import pytest
+from sensor_msgs.msg import JointState
 
 from bootstrap import ROOT, STAMP_NAME
-from tests.ros_helpers import ros_env
+from tests.ros_helpers import Probe, ros_env, stamp
 from umbrella_sim.bag.reader import read_log
 
 STAMP = os.path.join(sys.prefix, STAMP_NAME)
+pytestmark = pytest.mark.ros
 
 
 @pytest.mark.skipif(not os.path.exists(STAMP),
@@ -28,6 +31,8 @@ def test_main_command_records_and_forwards_signals(tmp_path, sig):
     # (the node runs in the repository: it failed there, "parent directory ... does not exist")
     env = dict(ros_env(), UMBRELLA_VENV=sys.prefix, UMBRELLA_RUNS_DIR="runs")
     out = tmp_path / "bootstrap.log"
+    probe = Probe("bootstrap_probe")
+    probe.subscribe("/joint_states", JointState)
     with open(out, "w") as fh:
         proc = subprocess.Popen([sys.executable, os.path.join(ROOT, "bootstrap.py"), "run"],
                                 stdout=fh, stderr=subprocess.STDOUT, env=env,
@@ -37,10 +42,14 @@ def test_main_command_records_and_forwards_signals(tmp_path, sig):
         while "locked at t" not in out.read_text() and proc.poll() is None:
             assert time.monotonic() < deadline, out.read_text()
             time.sleep(0.1)
-        time.sleep(0.5)
+        lock = float(re.search(r"locked at t = ([0-9.]+) s", out.read_text()).group(1))
+        # the node runs on, recording, for 0.5 s of sim time past the lock
+        probe.wait_for("/joint_states", lambda m: stamp(m) > lock + 0.5, timeout=60,
+                       what=f"a state past {lock + 0.5:.6f} s")
         proc.send_signal(sig)                 # to bootstrap.py alone
         assert proc.wait(30) == 0, out.read_text()
     finally:
+        probe.close()
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
     text = out.read_text()

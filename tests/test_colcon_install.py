@@ -9,10 +9,13 @@ import shutil
 import subprocess
 import sys
 
+import pytest
+
 from tests.ros_helpers import ros_env
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 COLCON = os.path.join(os.path.dirname(sys.executable), "colcon")
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def test_colcon_build_and_ros2_run_resolution(tmp_path):

@@ -23,7 +23,8 @@ from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
 from tests.disk_faults import full_disk_write
-from tests.ros_helpers import NodeProcess, Probe, ros_env, signal_and_collect
+from tests.ros_helpers import (cpu_seconds, NodeProcess, poll, Probe, ros_env,
+                               signal_and_collect, wait_for_stamp_in_last_run)
 from umbrella_sim.bag import cdr, mcap_stream, writer as recording
 from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.driver import simulate
@@ -108,6 +109,8 @@ def test_write_error_at_close_still_marks_the_recording(tmp_path, monkeypatch):
         [float(i) for i in range(log.count("/x"))]
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
     probe.subscribe("/joint_states", JointState)
     bag = tmp_path / "full"
@@ -119,9 +122,17 @@ def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
                                  str(errno.ENOSPC)], cwd=ROOT) as node:
         node.wait_for_log("recording stopped", timeout=60)
         n_at_error = len(probe.messages("/joint_states"))
+        probe.wait_for_count("/joint_states", 1, timeout=30)     # (the probe has the node)
+        n_before = len(probe.messages("/joint_states"))
+        last = stamp_s(probe.messages("/joint_states")[n_before - 1])
         # a reset after it: the run restarts; no recording segment is claimed
         assert probe.call(Trigger, "/umbrella_node/reset", Trigger.Request()).success
         node.wait_for_log("reset: simulation restarted")
+        # the topics go on after the error: states of the new run (sim time went back; one
+        # writer, in order) reach the probe
+        poll(lambda: any(stamp_s(m) < last for m in probe.messages("/joint_states")[n_before:]),
+             30, lambda: f"no state of the run after the reset within 30 s (the last before it "
+                         f"at {last:.6f} s; {len(probe.messages('/joint_states'))} in all)")
         assert node.proc.wait(timeout=60) == 4
         out = node.output()
     assert "recording segment" not in out
@@ -137,6 +148,7 @@ def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
     assert "recording ended early (" in why and "No space left" in why, why
 
 
+@pytest.mark.slow
 def test_output_paths_checked_before_any_work(tmp_path):
     (tmp_path / "exists.csv").write_text("x")
     (tmp_path / "full").mkdir()
@@ -171,6 +183,8 @@ def test_offline_fault_recorded_and_reproduced(tmp_path):
     assert r.returncode == 0 and "fault reproduced at t = " in r.stdout, r.stdout + r.stderr
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, probe):
     """
     Record, reproduce and end a run on a commanded solver fault.
@@ -201,6 +215,8 @@ def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, p
     assert r.returncode == 0 and "fault reproduced" in r.stdout, r.stdout + r.stderr
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_command_above_what_the_link_carries_is_refused(probe):
     probe.subscribe("/diagnostics", DiagnosticArray)
     limit = UmbrellaParams().sleeve_force_limit
@@ -251,6 +267,7 @@ def _node(*args, timeout=60):
 ], ids=["typo", "unknown", "other-node", "unknown-key", "nested", "malformed", "list",
         "no-ros-parameters", "binary", "missing", "no-assign", "bogus-flag", "no-model",
         "empty-value", "qos-typo", "qos-type", "twice", "tiny-step"])
+@pytest.mark.ros
 def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):
     if content is not None:
         path = tmp_path / "p.yaml"
@@ -264,6 +281,7 @@ def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words
         assert "p.yaml" in r.stderr
 
 
+@pytest.mark.ros
 def test_params_file_for_a_namespaced_node(tmp_path):
     path = tmp_path / "ns.yaml"
     path.write_text("/a1/umbrella_node:\n  ros__parameters:\n    v0: -0.5\n")
@@ -282,6 +300,7 @@ def test_cli_set_and_params_file_typos_suggest(tmp_path):
     assert str(path) in r.stderr
 
 
+@pytest.mark.ros
 def test_sigint_during_startup_is_quiet(tmp_path):
     """
     Stop quietly on SIGINT during start-up.
@@ -299,14 +318,19 @@ def test_sigint_during_startup_is_quiet(tmp_path):
         assert not read_log(str(bag)).truncated
 
 
-def _catches_sigterm(pid: int) -> bool:
-    """Tell whether the process has its own SIGTERM handler (umbrella_sim's first line ran)."""
+def _catches(pid: int, signum: int) -> bool:
+    """Tell whether the process has its own handler of signum (umbrella_sim's first line ran)."""
     try:
         with open(f"/proc/{pid}/status") as fh:
             caught = next(line for line in fh if line.startswith("SigCgt:")).split()[1]
     except (OSError, StopIteration):
         return False
-    return bool(int(caught, 16) & (1 << (signal.SIGTERM - 1)))
+    return bool(int(caught, 16) & (1 << (signum - 1)))
+
+
+def _catches_sigterm(pid: int) -> bool:
+    """Tell whether the process has its own SIGTERM handler (umbrella_sim's first line ran)."""
+    return _catches(pid, signal.SIGTERM)
 
 
 @pytest.mark.parametrize("signum,delay,entry", [
@@ -314,6 +338,7 @@ def _catches_sigterm(pid: int) -> bool:
     (signal.SIGINT, 0.4, "module"), (signal.SIGINT, 0.8, "script"),
     (signal.SIGINT, 1.5, "module"), (signal.SIGTERM, 0.3, "module"),
     (signal.SIGTERM, 0.6, "script")])
+@pytest.mark.ros
 def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum, delay, entry):
     """
     Stop cleanly on a signal at any instant of start-up.
@@ -338,6 +363,9 @@ def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum
         while not _catches_sigterm(proc.pid) and proc.poll() is None:
             assert time.monotonic() < deadline, "no SIGTERM handler after 60 s"
             time.sleep(0.002)
+        # the instant under test, counted from the handlers observed in place: not a wait for
+        # a condition (start-up has no marks of its own to aim at; whichever phase the signal
+        # lands in, on a slow or a fast machine, the same clean exit is asserted)
         time.sleep(delay)
     finally:
         out, err = signal_and_collect(proc, signum)
@@ -351,6 +379,7 @@ def test_stop_signal_at_any_instant_of_start_up_is_a_clean_exit(tmp_path, signum
         assert not log.truncated and not log.ended_early
 
 
+@pytest.mark.ros
 def test_stop_inside_a_long_period_ends_it_and_records_one_state(tmp_path):
     """
     A stop signal in a long publication period (1 Hz, 10^6 steps of 1 us) ends it early.
@@ -363,7 +392,12 @@ def test_stop_inside_a_long_period_ends_it_and_records_one_state(tmp_path):
     with NodeProcess("-p", "publish_rate:=1.0", "-p", "time_step:=1e-6",
                      "-p", f"record_path:={bag}") as node:
         node.wait_for_log("recording to")
-        time.sleep(1.5)                         # inside the first period (~10 s of steps)
+        # inside the first period (~10 s of steps): the node has computed for half a second
+        # since it opened its recording (nothing but the physics thread computes then)
+        cpu = cpu_seconds(node.pid)
+        poll(lambda: cpu_seconds(node.pid) >= cpu + 0.5, 60,
+             lambda: f"the node used {cpu_seconds(node.pid) - cpu:.2f} s of CPU in 60 s after "
+                     "'recording to' (awaited 0.5 s: stepping inside the first period)")
         assert node.stop(signal.SIGTERM, timeout=60) == 0, node.output()
         out = node.output()
     assert "recording finalised" in out and "Traceback" not in out, out
@@ -429,16 +463,22 @@ def test_a_stop_signal_while_a_tool_starts_is_taken(tmp_path):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=tmp_path, env=ros_env(),
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
-    for _ in range(50):     # every 0.05 s until it ends: the first ones may come before
-        time.sleep(0.05)    # the interpreter has run a line (ignored then, as by any program)
-        if proc.poll() is not None:
-            break
+    try:
+        # the entry point's SIGINT handler in place, its first line (SIGINT is ignored before
+        # it, as by any program started so), the imports under way: one Ctrl-C
+        poll(lambda: _catches(proc.pid, signal.SIGINT) or proc.poll() is not None, 60,
+             lambda: "no SIGINT handler in the tool within 60 s of its start", interval=0.002)
         proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 130 and "Traceback" not in err, err
     assert f"{tool}: interrupted by SIGINT while starting; nothing was done" in err, err
 
 
+@pytest.mark.slow
 def test_output_read_by_a_closed_pipe_is_no_traceback_and_keeps_the_files(tmp_path):
     """`umbrella_compare ... | head -1`: exit 141 (SIGPIPE), no traceback, compare.json kept."""
     bags = []
@@ -563,6 +603,7 @@ def _foreign(path, payload=None, parameters=None):
         w.finish()
 
 
+@pytest.mark.slow
 def test_foreign_damaged_and_special_logs_exit_2_naming_file(tmp_path):
     good = tmp_path / "good"
     assert run("umbrella_sim", "simulate", "--duration", "0.05", "--mcap",
@@ -638,6 +679,7 @@ def test_log_messages_are_streamed_not_loaded(tmp_path):
 
 
 # ---------------------------------------------------- overload, peers, segments
+@pytest.mark.ros
 def test_overload_lag_bounded_by_re_anchoring(probe):
     probe.subscribe("/diagnostics", DiagnosticArray)
     with NodeProcess("-p", "real_time_factor:=1000.0", "-p", "elements_per_segment:=2") as node:
@@ -651,12 +693,15 @@ def test_overload_lag_bounded_by_re_anchoring(probe):
     assert float(values["lag_s"]) < MAX_LAG_S + 1.0
 
 
+@pytest.mark.ros
 def test_two_nodes_in_one_namespace_are_warned():
     with NodeProcess("-p", "v0:=0.0") as a, NodeProcess("-p", "v0:=0.0") as b:
         a.wait_for_log("nodes named /umbrella_node|publishers on /clock", timeout=30)
         b.wait_for_log("nodes named /umbrella_node|publishers on /clock", timeout=30)
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
     """
     Record a reset with new parameters as a new segment.
@@ -667,6 +712,7 @@ def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
     """
     probe.subscribe("/deployment_phase", String, LATCHED)
     probe.subscribe("/diagnostics", DiagnosticArray)
+    probe.subscribe("/joint_states", JointState)
     bag = tmp_path / "segments"
     with NodeProcess("-p", "v0:=-0.5", "-p", f"record_path:={bag}") as node:
         node.wait_for_log("locked at t", timeout=30)
@@ -684,8 +730,10 @@ def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
         result = probe.call(SetParameters, "/umbrella_node/set_parameters", req)
         assert result.results[0].successful
         assert probe.call(Trigger, "/umbrella_node/reset", Trigger.Request()).success
-        node.wait_for_log("locked at t", count=2, timeout=30)
-        time.sleep(0.3)
+        lock = float(node.wait_for_log(r"locked at t = ([0-9.]+) s", count=2,
+                                       timeout=30).group(1))
+        # the new segment runs 0.3 s of sim time past its lock (compare's stage-2 window)
+        wait_for_stamp_in_last_run(probe, "/joint_states", lock + 0.3)
         assert node.stop() == 0
         out = node.output()
     assert "recording segment 1" in out

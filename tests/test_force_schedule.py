@@ -173,6 +173,8 @@ def live_run(antenna_factory, bag):
     return float(applied.group(1))
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_live_node_fed_the_same_command_has_the_same_states(antenna_factory, tmp_path,
                                                             offline):
     t_applied = None

@@ -24,6 +24,7 @@ def _paths():
 
 @pytest.mark.flake8
 @pytest.mark.linter
+@pytest.mark.slow
 def test_flake8(monkeypatch, tmp_path):
     monkeypatch.chdir(tmp_path)   # ament_flake8 walks the working directory for AMENT_IGNORE
     rc, errors = flake8_main(argv=["--config", os.path.join(ROOT, "setup.cfg"), *_paths()])

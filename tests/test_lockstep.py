@@ -4,9 +4,9 @@ Lockstep: with ``lockstep:=true`` the node waits for a command answering each jo
 Over real DDS: the node stalls while no command answers its last state, and each answer
 (accepted or refused) lets exactly one publication period run, driven by that answer.
 """
-import time
-
 import pytest
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 PERIOD = 0.01           # s, publish_rate 100 Hz
 STEP = 0.002            # s
@@ -16,16 +16,29 @@ def stamp(msg) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
-def wait_quiet(antenna, seconds: float = 0.4, timeout: float = 10.0) -> int:
-    """Return the count of joint_states after `seconds` of wall time without a new one."""
-    n = len(antenna.messages("joint_states"))
-    for _ in range(round(timeout / seconds)):
-        time.sleep(seconds)
-        m = len(antenna.messages("joint_states"))
-        if m == n:
-            return n
-        n = m
-    pytest.fail(f"the node never stalled: {n} joint_states and counting after {timeout} s")
+def status(msg) -> dict:
+    return {kv.key: kv.value for kv in msg.status[0].values}
+
+
+def wait_stalled(antenna, at: float | None = None, timeout: float = 20.0) -> tuple[int, float]:
+    """
+    Wait until the node waits for a command at its state of sim time `at` (None: any).
+
+    Its own status (1 Hz, also while it waits) says so: waiting_for_command at a sim time.
+    Return the count of joint_states once that state is received (no state follows it
+    without a command) and its stamp.
+    """
+    def stalled(m):
+        v = status(m)
+        return v["waiting_for_command"] == "True" and (
+            at is None or abs(float(v["sim_time_s"]) - at) < 1e-6)
+    where = "" if at is None else f" at t = {at:.6f} s"
+    msg = antenna.wait_for("diagnostics", stalled, timeout=timeout,
+                           what=f"waiting_for_command{where} (one command, one period)")
+    t = float(status(msg)["sim_time_s"])
+    state = antenna.wait_for("joint_states", lambda m: abs(stamp(m) - t) < 1e-6,
+                             timeout=timeout, what=f"the state of t = {t:.6f} s")
+    return len(antenna.messages("joint_states")), stamp(state)
 
 
 def test_lockstep_runs_one_period_per_command(antenna_factory):
@@ -37,13 +50,14 @@ def test_lockstep_runs_one_period_per_command(antenna_factory):
     antenna.wait_for("diagnostics", lambda m: any(
         kv.key == "waiting_for_command" and kv.value == "True" for kv in m.status[0].values),
         timeout=10, what="waiting_for_command == True")
-    n = wait_quiet(antenna)                   # stalled: nothing answers its last state
-    t = stamp(antenna.messages("joint_states")[-1])
+    n, t = wait_stalled(antenna)              # stalled: nothing answers its last state
+    assert stamp(antenna.messages("joint_states")[-1]) == t
     for force in (6.0, float("nan"), 7.0):    # a refused command answers too (force held)
         antenna.publish_force(force, check=False)
         antenna.wait_for("joint_states", lambda m: stamp(m) > t + 1e-9, timeout=10,
                          what=f"the state after t = {t:.6f} s")
-        assert wait_quiet(antenna) == n + 1, "one answer ran more than one period"
+        assert wait_stalled(antenna, t + PERIOD)[0] == n + 1, \
+            "one answer ran more than one period"
         state = antenna.messages("joint_states")[-1]
         assert stamp(state) == pytest.approx(t + PERIOD, abs=1e-9)
         assert state.effort[2] == (6.0 if force != 7.0 else 7.0)  # the force of that period

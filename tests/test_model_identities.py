@@ -182,6 +182,7 @@ def test_stress_rates_are_the_time_derivative_of_the_stresses(model_name):
         assert np.abs(rates[0][0] - linear[0][0]).max() > 1e-3 * np.abs(rates[0][0]).max()
 
 
+@pytest.mark.slow
 def test_hermite_peak_finds_resolved_crests_between_the_ends():
     """
     A fibre stress A cos(w t + phi) over a step of w h <= 0.8: its crest within 0.2 %.

@@ -4,7 +4,6 @@ import os
 import re
 import subprocess
 import sys
-import time
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -21,6 +20,8 @@ from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.solver import UmbrellaSimulator
 from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.testing import NodeProcess, poll, ros_env
+
+pytestmark = pytest.mark.ros      # every test starts umbrella_node
 
 ALPHA0 = UmbrellaParams().alpha0
 DEPLOYED = math.pi / 12
@@ -49,6 +50,11 @@ def diag_values(msg: DiagnosticArray) -> dict:
     return {kv.key: kv.value for kv in msg.status[0].values}
 
 
+def clock_s(msg: Clock) -> float:
+    return msg.clock.sec + 1e-9 * msg.clock.nanosec
+
+
+@pytest.mark.slow
 def test_topic_driven_deployment_matches_offline_core(probe):
     """
     Deploy on command and match the offline core's lock time.
@@ -65,9 +71,8 @@ def test_topic_driven_deployment_matches_offline_core(probe):
         probe.wait_for_count("/joint_states", 30)                  # 0.3 s of rest observed
         pub = probe.publisher("/sleeve_force", Float64)
         probe.wait_for_subscribers(pub)
-        for _ in range(3):
-            pub.publish(Float64(data=20.0))
-            time.sleep(0.05)
+        pub.publish(Float64(data=20.0))
+        node.wait_for_log(r"sleeve force 20 N applied from t = ")       # the command is in
         probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=30)
         lock_t = float(node.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
         probe.wait_for("/joint_states", lambda m: stamp_s(m) > lock_t + 0.1)
@@ -122,6 +127,7 @@ def test_help_lists_every_parameter():
     assert os.path.isfile(os.path.join(docs, "topic_sleeve_force.md")), docs
 
 
+@pytest.mark.slow
 def test_invalid_commands_refused_counted_and_never_applied(probe):
     probe.subscribe("/joint_states", JointState)
     probe.subscribe("/diagnostics", DiagnosticArray)
@@ -146,17 +152,26 @@ def test_invalid_commands_refused_counted_and_never_applied(probe):
 def test_pause_and_reset(probe):
     probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
     probe.subscribe("/deployment_phase", String, LATCHED)
+    probe.subscribe("/diagnostics", DiagnosticArray)
     with NodeProcess("-p", "v0:=-0.5") as node:
         node.wait_for_log("physics step")
         probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
         probe.wait_for_count("/clock", 1)
         assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=True)).success
-        time.sleep(0.1)
-        frozen = probe.messages("/clock")[-1].clock
-        time.sleep(0.4)
-        assert probe.messages("/clock")[-1].clock == frozen          # sim time stopped
+        t_frozen = float(node.wait_for_log(r"paused at t = ([0-9.]+) s").group(1))
+
+        def paused_statuses():
+            return [m for m in probe.messages("/diagnostics")
+                    if diag_values(m)["paused"] == "True"]
+        # the node goes on with its 1 Hz status while paused: two of them, a second of the
+        # node's own time in the pause, during which no tick may go past the paused instant
+        poll(lambda: len(paused_statuses()) >= 2, 20,
+             lambda: f"fewer than two diagnostics saying paused within 20 s of the pause "
+                     f"(got {len(paused_statuses())})")
+        ticks = [clock_s(m) for m in probe.messages("/clock")]
+        assert max(ticks) <= t_frozen + 1e-9                         # sim time stopped
+        assert {diag_values(m)["sim_time_s"] for m in paused_statuses()} == {f"{t_frozen:.6f}"}
         assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=False)).success
-        t_frozen = frozen.sec + 1e-9 * frozen.nanosec
         probe.wait_for("/clock", lambda m: m.clock.sec + 1e-9 * m.clock.nanosec > t_frozen + 0.1)
         n_before = len(probe.messages("/deployment_phase"))
         clocks_before = len(probe.messages("/clock"))
@@ -186,6 +201,7 @@ def set_double(probe, name, value):
 
 def test_runtime_parameter_sets(probe):
     probe.subscribe("/deployment_phase", String, LATCHED)
+    probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
     with NodeProcess("-p", "v0:=0.0") as node:
         node.wait_for_log("physics step")
 
@@ -197,7 +213,13 @@ def test_runtime_parameter_sets(probe):
         bad = set_param("alpha0", 0.1)
         assert not bad.successful and "alpha0" in bad.reason
         assert set_param("v0", -1.0).successful                     # structural: on reset
-        time.sleep(0.3)
+        # the run goes on as it was for 0.3 s of sim time (v0 = -1 locks in 0.05 s); the
+        # node logs a lock before it publishes that period's tick
+        probe.wait_for_count("/clock", 1)
+        t_set = clock_s(probe.messages("/clock")[-1])
+        probe.wait_for("/clock", lambda m: clock_s(m) > t_set + 0.3,
+                       what=f"a tick past {t_set + 0.3:.6f} s")
+        assert "locked at" not in node.output()
         assert "locked" not in [m.data for m in probe.messages("/deployment_phase")]
         probe.call(Trigger, "/umbrella_node/reset", Trigger.Request())
         probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=20)
@@ -262,6 +284,7 @@ def test_use_sim_time_is_not_taken_by_the_clock_source(probe):
         assert not result.successful and "drives" in result.reason, result.reason
 
 
+@pytest.mark.slow
 def test_namespaced_nodes_do_not_cross_talk(probe):
     for ns in ("a1", "a2"):
         probe.subscribe(f"/{ns}/joint_states", JointState)

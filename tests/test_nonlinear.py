@@ -458,6 +458,7 @@ def test_failed_nonlinear_solve_is_a_fault_that_keeps_the_log(monkeypatch):
     assert all(np.all(np.isfinite(s.q)) for s in r.samples)
 
 
+@pytest.mark.ros
 def test_node_runs_the_nonlinear_damped_model():
     """
     Node runs the nonlinear damped model over real DDS.

@@ -55,6 +55,7 @@ def test_descriptors_come_from_the_registry():
     assert "at once" in descriptor("marker_magnification").additional_constraints
 
 
+@pytest.mark.ros
 def test_live_node_conventions(probe, tmp_path):
     """
     One namespaced node, started the plain `ros2 run` way (no record_path).
@@ -113,6 +114,7 @@ def test_live_node_conventions(probe, tmp_path):
     assert log.count("/a1/joint_states") > 0 and log.count("/diagnostics") > 0
 
 
+@pytest.mark.ros
 def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
     """
     The ROS 2 convention: qos_overrides.<topic>.publisher.<policy> set the QoS.
@@ -141,6 +143,7 @@ def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
         ros_io.TOPICS["tip_deflection"].qos.depth
 
 
+@pytest.mark.ros
 def test_recording_can_be_turned_off_and_never_overwrites(tmp_path):
     def run(*args):
         return subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args",
@@ -159,6 +162,7 @@ def test_recording_can_be_turned_off_and_never_overwrites(tmp_path):
     assert len({read_log(str(tmp_path / n)).count("/joint_states") for n in names}) == 1
 
 
+@pytest.mark.ros
 def test_record_path_with_a_tilde_records_under_home(tmp_path):
     """``-p record_path:=~/bags/run``: no shell expands that ``~``; the node does."""
     home, cwd = tmp_path / "home", tmp_path / "cwd"
@@ -179,6 +183,7 @@ def test_record_path_with_a_tilde_records_under_home(tmp_path):
     (["-p", "elements_per_segment:=2.5"], ["elements_per_segment", "integer"]),
     (["-p", "record:=maybe"], ["record", "bool"]),
 ])
+@pytest.mark.ros
 def test_wrong_parameter_type_at_start_is_refused(args, words):
     r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args", *args],
                        capture_output=True, text=True, env=ros_env(), timeout=60)

@@ -317,6 +317,8 @@ def test_warnings_in_cli_text_json_and_recording(tmp_path):
         "yield exceeded", "large deflection"]
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_node_warns_once_and_diagnostics_say_warn(antenna_factory, tmp_path):
     from diagnostic_msgs.msg import DiagnosticStatus
 

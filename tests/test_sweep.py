@@ -116,6 +116,15 @@ def wait_for(predicate, timeout, what):
     pytest.fail(f"timed out after {timeout} s waiting for {what}")
 
 
+def scheduler_address(path):
+    """Return the address in a scheduler file (None: not there, or not written whole yet)."""
+    try:
+        with open(path) as fh:
+            return json.load(fh)["address"]
+    except (OSError, ValueError, KeyError):
+        return None
+
+
 def finished_cases(out_dir):
     cases = os.path.join(out_dir, "cases")
     return [f for f in os.listdir(cases) if f.endswith(".json")] if os.path.isdir(cases) else []
@@ -148,10 +157,9 @@ def start_dask_cluster(procs, tmp_path):
     procs.start("scheduler", [os.path.join(BIN, "dask"), "scheduler", "--host", "127.0.0.1",
                               "--port", "0", "--dashboard-address", "127.0.0.1:0",
                               "--scheduler-file", scheduler_file])
-    wait_for(lambda: os.path.exists(scheduler_file), 60, "the scheduler file")
-    time.sleep(0.2)     # the file is written in one go, but give it a moment to be closed
-    with open(scheduler_file) as fh:
-        address = json.load(fh)["address"]
+    wait_for(lambda: scheduler_address(scheduler_file), 60,
+             "the scheduler's address in its file")
+    address = scheduler_address(scheduler_file)
     workers = [procs.start(f"worker{i}", [
         os.path.join(BIN, "dask"), "worker", address, "--host", "127.0.0.1", "--nworkers", "1",
         "--nthreads", "1", "--dashboard-address", "127.0.0.1:0",
@@ -376,6 +384,7 @@ def test_progress_line_counts_failures_and_eta(monkeypatch):
 
 
 # ------------------------------------------------------------------ local cluster
+@pytest.mark.slow
 def test_local_sweep_table_physics_and_plots(local_run):
     assert local_run["rc"] == 3, local_run["log"]          # one case fails, the rest go on
     rows = local_run["rows"]
@@ -417,6 +426,7 @@ def test_local_sweep_table_physics_and_plots(local_run):
     assert "6/6 cases" in local_run["log"] and "ETA" in local_run["log"]
 
 
+@pytest.mark.slow           # (its module-wide sweep or cluster: seconds to start)
 def test_rerun_skips_finished_cases(local_run, procs):
     store = os.path.join(local_run["out"], "cases")
     before = {f: os.stat(os.path.join(store, f)).st_mtime_ns for f in os.listdir(store)}
@@ -427,6 +437,7 @@ def test_rerun_skips_finished_cases(local_run, procs):
     assert physics(read_rows(local_run["out"])) == physics(local_run["rows"])
 
 
+@pytest.mark.slow
 def test_ctrl_c_keeps_finished_cases_and_rerun_completes(tmp_path, procs):
     spec = write(tmp_path / "slow.yaml", (
         "base: {elements_per_segment: 4, v0: -1.0, time_step: 0.002}\n"
@@ -458,6 +469,7 @@ def test_ctrl_c_keeps_finished_cases_and_rerun_completes(tmp_path, procs):
 
 
 # ------------------------------------------------------------------ a real Dask cluster
+@pytest.mark.slow
 def test_distributed_run_equals_local_run(local_run, dask_cluster, procs, tmp_path):
     address, _ = dask_cluster
     out = str(tmp_path / "dist")
@@ -469,6 +481,7 @@ def test_distributed_run_equals_local_run(local_run, dask_cluster, procs, tmp_pa
     assert len({r["worker"] for r in rows}) == 2, "both workers took cases"
 
 
+@pytest.mark.slow
 def test_worker_killed_mid_sweep_gives_complete_table(own_dask_cluster, procs, tmp_path):
     address, workers = own_dask_cluster
     spec = write(tmp_path / "ten.yaml", (
@@ -537,6 +550,7 @@ def test_ctrl_c_while_the_table_is_written_keeps_a_whole_table(tmp_path, capfd, 
     assert os.path.exists(out / "results.parquet")
 
 
+@pytest.mark.slow           # (its module-wide sweep or cluster: seconds to start)
 def test_store_write_error_stops_the_sweep_keeping_finished_cases(dask_cluster, tmp_path,
                                                                   capsys):
     address, _ = dask_cluster
@@ -554,6 +568,7 @@ def test_store_write_error_stops_the_sweep_keeping_finished_cases(dask_cluster, 
     assert [r["case_id"] for r in read_rows(str(out))] == [first.case_id]
 
 
+@pytest.mark.slow
 def test_mcap_keeps_a_recording_per_case(dask_cluster, tmp_path, procs):
     from umbrella_sim.tools.compare import load_run
 

@@ -7,6 +7,7 @@ import sys
 
 import pytest
 
+from tests.ros_helpers import keep_every_message
 from umbrella_sim.testing import (default_domain_id, DOMAIN_ID_ENV, NodeProcess, poll, ros_env,
                                   summarize_run, summary_from_recording)
 from umbrella_sim.testing.processes import _shm_segments
@@ -49,6 +50,8 @@ def test_summary_figures_are_taken_on_either_side_of_the_lock():
     assert never.deploy_time is None and math.isnan(never.stage2_peak_stress)
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_waits_fail_saying_what_was_awaited_and_what_was_seen(antenna_factory):
     antenna = antenna_factory({"v0": 0.0})          # at rest: it never locks
     antenna.wait_for_phase("deploying")
@@ -78,6 +81,7 @@ def test_waits_fail_saying_what_was_awaited_and_what_was_seen(antenna_factory):
         antenna_factory({"v0": 0.0})                # one topic set for two nodes
 
 
+@pytest.mark.ros
 def test_startup_failure_reports_the_node_output():
     node = NodeProcess(parameters={"l1": -1.0})
     with pytest.raises(AssertionError) as exc:
@@ -87,6 +91,7 @@ def test_startup_failure_reports_the_node_output():
     assert not os.path.exists(node.log_path)
 
 
+@pytest.mark.ros
 def test_close_leaves_no_process_log_or_shared_memory(antenna_factory):
     antenna = antenna_factory({"v0": -0.5})
     antenna.wait_for_phase("locked", timeout=30)
@@ -98,6 +103,7 @@ def test_close_leaves_no_process_log_or_shared_memory(antenna_factory):
     assert not [p for p in segments if os.path.exists(p)]
 
 
+@pytest.mark.ros
 def test_a_killed_node_leaves_no_shared_memory_either(ros_domain_id):
     with NodeProcess(parameters={"v0": 0.0}, domain_id=ros_domain_id) as node:
         node.wait_for_log("physics step")
@@ -108,7 +114,8 @@ def test_a_killed_node_leaves_no_shared_memory_either(ros_domain_id):
         assert not [p for p in segments if os.path.exists(p)]
 
 
-def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_factory):
+@pytest.mark.ros
+def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_factory, probe):
     """
     Compare the summary read off the topics and log with the physics core.
 
@@ -118,7 +125,9 @@ def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_f
     from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.params import UmbrellaParams
 
-    antenna = antenna_factory({"v0": 0.0, "publish_rate": 200.0})
+    # every publication of the window must reach the probe, also on a loaded machine
+    antenna = antenna_factory({"v0": 0.0, "publish_rate": 200.0},
+                              probe=keep_every_message(probe))
     antenna.wait_for_phase("deploying")
     antenna.play_force_profile([(0.0, 30.0)])
     summary = antenna.summary(after_lock=0.2)
@@ -159,6 +168,8 @@ if sys.argv[1] == "interrupt":                  # Ctrl-C while a wait is under w
 
 
 @pytest.mark.parametrize("how", ["exit", "interrupt"])
+@pytest.mark.ros
+@pytest.mark.slow
 def test_a_forgotten_close_or_a_ctrl_c_still_stops_the_node(tmp_path, how):
     """An antenna never closed goes at exit; Ctrl-C interrupts a wait (rclpy takes no signal)."""
     script = tmp_path / "forgetful.py"
@@ -172,7 +183,9 @@ def test_a_forgotten_close_or_a_ctrl_c_still_stops_the_node(tmp_path, how):
     assert ("interrupted" in r.stdout) == (how == "interrupt")
 
 
-def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path):
+@pytest.mark.ros
+@pytest.mark.slow
+def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path, probe):
     """
     start_paused holds t = 0 until resume(); after reset() every figure is the new run's.
 
@@ -186,11 +199,13 @@ def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path):
     from umbrella_sim.core.params import UmbrellaParams
 
     bag = tmp_path / "two_runs"
-    antenna = antenna_factory({"v0": -0.5, "start_paused": True}, record_path=str(bag))
+    # the live figures are compared with the recording's: the probe must keep every message
+    antenna = antenna_factory({"v0": -0.5, "start_paused": True}, record_path=str(bag),
+                              probe=keep_every_message(probe))
     assert antenna.phases() == ["deploying"] or antenna.wait_for_phase("deploying") is None
     with pytest.raises(AssertionError, match="never reached"):
         antenna.wait_for_sim_time(1e-3, timeout=1.0)       # held at t = 0
-    antenna.wait_for("diagnostics", lambda m: True, timeout=5.0)
+    antenna.wait_for("diagnostics", lambda m: True, timeout=20.0)
     # held at t = 0 (its t = 0 state, volatile, may have gone before the probe matched)
     assert antenna.sim_time() in (None, 0.0) and antenna.diagnostics()["paused"] == "True"
     antenna.resume()
@@ -227,6 +242,8 @@ def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path):
     assert everything.stage2_span > 0.5 and everything.stage2_samples > recorded.stage2_samples
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_antennas_in_two_namespaces_keep_their_own_diagnostics(antenna_factory):
     """/diagnostics is every node's: each antenna reads its own node's status only."""
     paused = antenna_factory({"v0": 0.0, "start_paused": True}, namespace="a1")
@@ -242,6 +259,7 @@ def test_antennas_in_two_namespaces_keep_their_own_diagnostics(antenna_factory):
         assert antenna.diagnostics()["paused"] == state
 
 
+@pytest.mark.ros
 def test_reset_before_a_paused_start_was_resumed_begins_the_new_run(antenna_factory):
     """A start_paused antenna reset before any resume: its new run is seen from t = 0."""
     from builtin_interfaces.msg import Time
@@ -255,12 +273,15 @@ def test_reset_before_a_paused_start_was_resumed_begins_the_new_run(antenna_fact
     assert antenna.messages("joint_states")[0].header.stamp == Time()
 
 
-def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factory):
+@pytest.mark.ros
+@pytest.mark.slow
+def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factory, probe):
     """set_parameters + reset: the node's new model, and the antenna's figures and checks."""
     from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.params import UmbrellaParams
 
-    antenna = antenna_factory({"v0": 0.0, "start_paused": True})
+    antenna = antenna_factory({"v0": 0.0, "start_paused": True},
+                              probe=keep_every_message(probe))     # (a summary: see above)
     with pytest.raises(AssertionError, match="l1"):
         antenna.set_parameters(l1=-1.0)
     antenna.set_parameters(v0=-0.5, sleeve_force_min=-5.0)
@@ -276,6 +297,7 @@ def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factor
          lambda: f"applied: {antenna.applied_forces()}")
 
 
+@pytest.mark.ros
 def test_a_relative_record_path_is_the_tests_working_directory(
         antenna_factory, tmp_path, monkeypatch):
     """The node runs in a temporary directory: record_path="bag" still lands in the test's."""
@@ -323,6 +345,7 @@ def test_two_sessions_on_one_machine_get_two_domains():
         holder.wait(timeout=30)
 
 
+@pytest.mark.ros
 def test_compare_draws_a_segment_of_another_mesh(antenna_factory, tmp_path):
     """A reset to N = 2 after a run at N = 1: compare --segment 1 drew it with N = 1's nodes."""
     import subprocess
@@ -384,6 +407,8 @@ def test_a_summary_of_a_window_the_probe_never_saw_is_an_error_not_nan():
         antenna.summary(after_lock=None)
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_the_real_time_factor_after_a_reset_is_measured_from_the_reset(antenna_factory):
     """Sim time goes back at a reset: the first status after it read -6.2x and -3.0x."""
     from umbrella_sim.testing import poll
@@ -393,11 +418,19 @@ def test_the_real_time_factor_after_a_reset_is_measured_from_the_reset(antenna_f
     antenna.reset()
     poll(lambda: len(antenna.messages("diagnostics")) >= 2, 20,
          lambda: "fewer than two diagnostics after the reset")
-    measured = [float({kv.key: kv.value for kv in m.status[0].values}
-                      ["measured_real_time_factor"]) for m in antenna.messages("diagnostics")]
-    assert all(0.5 < x < 1.5 for x in measured), measured      # real_time_factor 1
+    statuses = [{kv.key: kv.value for kv in m.status[0].values}
+                for m in antenna.messages("diagnostics")]
+    measured = [(float(v["measured_real_time_factor"]), float(v["sim_time_s"]))
+                for v in statuses]
+    # sim time over the wall time (at least 1 s) since the previous status or the reset:
+    # positive and at most the sim time itself (across the reset it went negative), below
+    # 1.5 (real_time_factor 1: a catch-up of at most MAX_LAG_S = 0.5 s in a second).  How
+    # close to 1 it comes is the machine's speed, not asserted here
+    assert all(0.0 < x <= t + 1e-4 and x < 1.5 for x, t in measured), measured
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_a_force_profile_is_played_row_by_row(antenna_factory):
     """
     A pulse of 0 N for 50 ms between two pushes reaches the node as three commands.
@@ -405,8 +438,10 @@ def test_a_force_profile_is_played_row_by_row(antenna_factory):
     The start was taken before the command publisher matched the node (~0.4 s): the later
     rows then went out back to back within one period, and the pulse never acted.
     """
-    antenna = antenna_factory({"v0": 0.0})
-    antenna.play_force_profile([(0.1, 5.0), (0.3, 0.0), (0.35, 5.0)])
+    # at a tenth of real time: a command's way over DDS (the probe sees a state, publishes,
+    # the node takes it at its next period), ~0.1 s on a loaded machine, is 10 ms of sim time
+    antenna = antenna_factory({"v0": 0.0, "real_time_factor": 0.1})
+    antenna.play_force_profile([(0.1, 5.0), (0.3, 0.0), (0.35, 5.0)], timeout=60)
     poll(lambda: len(antenna.applied_forces()) >= 3, 10,
          lambda: f"applied only {antenna.applied_forces()}")
     (t1, f1), (t2, f2), (t3, f3) = antenna.applied_forces()[:3]

@@ -73,6 +73,7 @@ def test_step_the_deploy_time_of_a_fast_deployment_needs(v0, needed):
         assert abs(default - ref) / ref > TARGETS["deploy_time"]
 
 
+@pytest.mark.slow
 def test_step_the_stage2_peak_stresses_need():
     """
     Check the stage-2 peak stresses at the default step, and the step they need.
@@ -104,6 +105,7 @@ def test_step_the_stage2_peak_stresses_need():
 
 
 @pytest.mark.parametrize("n_el, v0, lock", [(2, -0.5, "plastic"), (4, -0.2, "plastic")])
+@pytest.mark.slow
 def test_the_mesh_step_meets_every_target_where_the_default_step_misses_one(n_el, v0, lock):
     """
     Check step_study.mesh_step (0.1 ms / N) where the fixed default step misses a target.
