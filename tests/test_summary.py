@@ -24,7 +24,7 @@ from umbrella_sim.core.solver import UmbrellaSimulator
 from umbrella_sim.core.summary import (energy_drift, oscillation_period, STAGE2_WINDOW,
                                        TIP_DEFLECTION_LIMIT)
 from umbrella_sim.ros.recording import record_offline
-from umbrella_sim.tools import compare
+from umbrella_sim.tools import compare, compare_plots
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # 0.25 ms divides both publication periods below; the figures' arithmetic is step-independent
@@ -407,7 +407,7 @@ def test_shapes_stay_on_screen_with_stage_magnification_and_times(tmp_path,
     bag = tmp_path / "v1"
     record_offline(UmbrellaParams(v0=-1.0, time_step=STEP), str(bag), 0.15)
     run = compare.load_run(str(bag))
-    snaps = compare.shape_snapshots(run, (200.0, 5.0))
+    snaps = compare_plots.shape_snapshots(run, (200.0, 5.0))
     assert {s[0] for s in snaps} == {"deploying", "locked"}
     for stage, tm, mag, leaf, link in snaps:
         assert (tm < run.lock_time) == (stage == "deploying")

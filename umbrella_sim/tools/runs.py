@@ -1,0 +1,288 @@
+"""
+A recorded run as umbrella_compare reads it: its signals, figures, shapes and warnings.
+
+``load_run`` reads one segment of a recording (live or offline) into a ``Run``: the joint
+angles and rate, the tip deflection, the stresses, the energy balance, the deformed shapes
+of its markers, the exact lock instant and the summary figures the recording holds;
+``physics_run`` re-runs the segment for its signals at every physics step.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import json
+import math
+import os
+
+import numpy as np
+
+from ..bag.reader import LogError, read_log
+from ..core.summary import deploy_start_of, relative_drift, stage2_figures, validity_warnings
+from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_figures,
+                            tip_deflection_figures)
+
+#: the figures compared between runs (outputs.SummaryAccumulator names)
+FIGURE_KEYS = ("deploy_time", "deploy_start", "lock_time", "tip_deflection_max",
+               "tip_deflection_max_time", "stage2_tip_amplitude", "stage2_tip_period",
+               "stage2_window",
+               "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_leaf_time",
+               "peak_stress_link", "peak_stress_link_x", "peak_stress_link_time",
+               "stress_ratio_max", "tip_deflection_ratio_max")
+
+
+RIGID_MODELS = ("rigid", "rigid-fe")
+
+
+#: the shapes plot draws the largest elastic displacement of a stage at most this fraction
+#: of the leaf length l1 + l2: --magnification is reduced to it (the legend says by how much)
+SHAPE_DISPLACEMENT_LIMIT = 0.2
+
+
+@dataclass
+class Run:
+    label: str
+    path: str
+    params: dict
+    t: np.ndarray
+    alpha1: np.ndarray
+    alpha1_rate: np.ndarray
+    tip_t: np.ndarray
+    tip_v: np.ndarray
+    stress_t: np.ndarray
+    peak_leaf: np.ndarray
+    peak_link: np.ndarray
+    stress_joint: np.ndarray
+    stress_mid: np.ndarray
+    lock_time: float | None        # the lock instant (sim time)
+    energy_drift: float | None
+    shapes: list = field(default_factory=list)      # [(t, leaf_xy, link_xy)]
+    magnification: float = 1.0
+    alpha2: np.ndarray | None = None
+    leaf_node_x: np.ndarray | None = None
+    link_node_x: np.ndarray | None = None
+    summary: dict | None = None       # umbrella_sim.summary metadata: every physics step
+    warnings: list | None = None
+    lock_kind: str | None = None
+    # every physics step of a re-run of the log (--physics-rate): replay.physics_series
+    physics: dict | None = None
+    # lock_time is the exact lock instant (the events record); False: the time of the
+    # first publication after it (the "locked" phase message of a log without that record),
+    # whose samples are already of stage 2
+    lock_time_exact: bool = True
+    deploy_start: float | None = 0.0     # outputs.deploy_start of the recorded run
+    segment: int | None = None           # a segment before the log's last (its own record)
+    ended_early: str | None = None       # the recording's write error, if it stopped on one
+
+    @property
+    def deploy_time(self) -> float | None:
+        """Return the deploy time: the lock less the start of the deployment (one rule)."""
+        if self.lock_time is None:
+            return None
+        return self.lock_time - (self.deploy_start or 0.0)
+
+    @property
+    def rigid(self) -> bool:
+        """Say whether the model has no elastic field (its zero stress is not a result)."""
+        return self.params.get("model") in RIGID_MODELS
+
+    def shape(self, t: float, magnification: float):
+        """
+        Return the deformed shape nearest to t at another magnification.
+
+        The elastic part is re-scaled from the recorded
+        marker magnification to another one (undeformed frames from the joint angles).
+        """
+        tm, leaf, link = min(self.shapes, key=lambda s: abs(s[0] - t))
+        if self.leaf_node_x is None or self.magnification <= 0:
+            return tm, leaf, link
+        a1 = np.interp(tm, self.t, self.alpha1)
+        a2 = np.interp(tm, self.t, self.alpha2)
+        leaf_u = np.outer(self.leaf_node_x, [math.cos(a1), math.sin(a1)])
+        link_u = link[0] + np.outer(self.link_node_x, [math.cos(a2), math.sin(a2)])
+        scale = magnification / self.magnification
+        return tm, leaf_u + scale * (leaf - leaf_u), link_u + scale * (link - link_u)
+
+    def figures(self) -> dict:
+        """
+        Return the summary figures, saying where they come from (figures_from).
+
+        From the recording's metadata (every physics step) when the log has it, else from
+        the recorded samples (older or killed recordings), which depend on the rate.
+        """
+        if self.summary is not None:
+            out = {k: self.summary.get(k) for k in FIGURE_KEYS}
+            out["figures_from"] = "every physics step (recording metadata)"
+            return out
+        out = {"deploy_time": self.deploy_time, "deploy_start": self.deploy_start,
+               "lock_time": self.lock_time}
+        lock = self.lock_time if self.lock_time is not None else math.inf
+        s1 = self.tip_t <= lock if self.lock_time_exact else self.tip_t < lock
+        if s1.any():
+            i = int(np.argmax(np.abs(self.tip_v[s1])))
+            out["tip_deflection_max"] = float(abs(self.tip_v[s1][i]))
+            out["tip_deflection_max_time"] = float(self.tip_t[s1][i])
+        out.update(stage2_figures(self.tip_t, self.tip_v, self.lock_time))
+        for body, peaks in (("leaf", self.peak_leaf), ("link", self.peak_link)):
+            i = int(np.argmax(peaks))
+            out[f"peak_stress_{body}"] = float(peaks[i])
+            out[f"peak_stress_{body}_time"] = float(self.stress_t[i])
+        rate = self.params.get("publish_rate")
+        why = (f"the summary record is of the log's last run, not of segment {self.segment}"
+               if self.segment is not None else
+               f"the recording ended early ({self.ended_early}) before its summary record"
+               if self.ended_early else
+               "the log has no summary record (an older recording, or its writer was killed)")
+        out["figures_from"] = (f"recorded samples at {rate} Hz: {why}, so these figures "
+                               "depend on the recording rate")
+        return out
+
+    def validity(self) -> list:
+        """Return the recorded validity warnings, or the same rule applied to the samples."""
+        if self.warnings is not None:
+            return list(self.warnings)
+        tip = float(np.abs(self.tip_v).max()) if len(self.tip_v) else 0.0
+        peak = float(max(self.peak_leaf.max(), self.peak_link.max()))
+        try:
+            return validity_warnings(self.params, self.lock_kind, peak, tip,
+                                     locked=self.lock_time is not None,
+                                     energy_drift=self.energy_drift)
+        except (KeyError, TypeError):
+            return []
+
+
+def _series(log, topic, fn, segment, width: int, stride: int = 1):
+    """
+    Return (t, values) of one topic of one segment.
+
+    (t, values) of one topic of one segment, streamed: only the extracted numbers are kept
+    (every stride-th message).
+    """
+    t, rows = [], []
+    for i, (tm, m) in enumerate(log.iter_decoded(topic, segment)):
+        if i % stride:
+            continue
+        try:
+            row = fn(m)
+        except (IndexError, KeyError, AttributeError, TypeError) as exc:
+            raise LogError(f"{log.path}: topic {topic}: message {i} lacks the fields "
+                           f"umbrella_sim writes ({exc})") from None
+        t.append(tm)
+        rows.append(row)
+    if not t and width:
+        raise LogError(f"{log.path}: topic {topic} has no messages"
+                       + (f" in segment {segment.index}" if segment.index else "")
+                       + log.truncation_note())
+    order = np.argsort(np.array(t), kind="stable")
+    return np.array(t)[order], [rows[i] for i in order]
+
+
+def default_label(path: str) -> str:
+    """Return a run's label: its bag directory's name, or its .mcap file's without .mcap."""
+    name = os.path.basename(os.path.normpath(path)) or path
+    return name[:-len(".mcap")] if name.endswith(".mcap") and len(name) > 5 else name
+
+
+#: the stress figures of a Run, in the order of its fields
+STRESS_FIGURES = ("peak_stress_leaf", "peak_stress_link", "stress_leaf_joint", "stress_link_mid")
+
+
+#: the energy figures compare reads
+ENERGY_FIGURES = ("kinetic_energy", "strain_energy", "work", "energy_balance",
+                  "phase_correction_energy")
+
+
+def _figures(figures: dict, *names: str) -> tuple:
+    return tuple(figures[n] for n in names)
+
+
+def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
+    log = read_log(path)
+    seg = log.segment(segment)
+    params = seg.params
+    t, js = _series(log, log.find_topic("joint_states"),
+                    lambda m: _figures(joint_state_figures(m), "alpha1", "alpha1_rate",
+                                       "alpha2"), seg, 3)
+    tt, tip = _series(log, log.find_topic("tip_deflection"),
+                      lambda m: tip_deflection_figures(m)["tip_transverse"], seg, 1)
+    ts, st = _series(log, log.find_topic("peak_stress"),
+                     lambda m: _figures(peak_stress_figures(m), *STRESS_FIGURES), seg,
+                     len(STRESS_FIGURES))
+    st = np.array(st)
+    # umbrella_sim.events.K: segment K ended by a reset; umbrella_sim.events: the last one
+    last = len(log.segments()) - 1
+    events = log.metadata.get("umbrella_sim.events" if segment == last
+                              else f"umbrella_sim.events.{segment}", {})
+    deploy, exact = None, True
+    if events.get("locked") == "true":
+        deploy = float(events["lock_time"])
+    else:
+        phase = log.find_topic("deployment_phase", required=False)
+        locked = [tm for tm, m in log.iter_decoded(phase, seg) if m.data == "locked"] \
+            if phase else []
+        deploy, exact = (min(locked), False) if locked else (None, True)
+    drift = None
+    energy = log.find_topic("energy", required=False)
+    if energy:
+        # (the phase correction's term is 0 where the recording does not have it)
+        _, e = _series(log, energy, lambda m: _figures(
+            {"phase_correction_energy": 0.0, **energy_figures(m)}, *ENERGY_FIGURES), seg, 0)
+        e = dict(zip(ENERGY_FIGURES, np.array(e).reshape(-1, len(ENERGY_FIGURES)).T))
+        if len(e["work"]):
+            mechanical = (e["kinetic_energy"] + e["strain_energy"]
+                          + e["phase_correction_energy"])
+            drift = relative_drift(e["energy_balance"], mechanical, e["work"])
+    shapes = []
+    markers = log.find_topic("markers", required=False)
+    if markers:           # at most ~2000 shapes kept, whatever the log's length
+        stride = max(1, log.count(markers) // 2000)
+
+        def shape(m):
+            return [np.array([[p.x, p.y] for p in mk.points]) for mk in m.markers[:2]]
+        tm_all, pts_all = _series(log, markers, shape, seg, 0, stride)
+        shapes = [(tm, pts[0], pts[1]) for tm, pts in zip(tm_all, pts_all) if len(pts) == 2]
+    if label is None:
+        label = default_label(path)
+    a = np.array(js)
+    mesh = log.metadata.get("umbrella_sim.mesh", {})       # the first segment's
+    leaf_x = np.array(json.loads(mesh["leaf_node_x"])) if "leaf_node_x" in mesh else None
+    link_x = np.array(json.loads(mesh["link_node_x"])) if "link_node_x" in mesh else None
+    if segment and leaf_x is not None:      # a later segment: its own mesh (a reset may change N)
+        leaf_x, link_x = _segment_mesh(log, params)
+    summary = warnings = None
+    record = log.metadata.get("umbrella_sim.summary") if segment == last else None
+    if record and "figures" in record:
+        try:
+            summary = json.loads(record["figures"])
+            warnings = json.loads(record.get("warnings", "[]"))
+        except ValueError:
+            raise LogError(f"{log.path}: metadata umbrella_sim.summary is not valid JSON") \
+                from None
+    applied_topic = log.find_topic("sleeve_force/applied", required=False)
+    applied = ([(tm, m.data) for tm, m in log.iter_decoded(applied_topic, seg)]
+               if applied_topic else [])
+    start = deploy_start_of(params, applied)
+    return Run(label, log.path, params, t, a[:, 0], a[:, 1], tt, np.array(tip), ts,
+               *st.T, deploy, drift, shapes,
+               float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,
+               summary, warnings, events.get("lock_kind"), lock_time_exact=exact,
+               deploy_start=start, segment=segment if segment != last else None,
+               ended_early=log.ended_early or None)
+
+
+def _segment_mesh(log, params: dict):
+    """Return the leaf's and the link's node positions of a segment's own parameters."""
+    from ..core.model import UmbrellaModel
+    from ..core.params import recorded_params
+
+    try:
+        model = UmbrellaModel(recorded_params(params))
+    except ValueError as exc:
+        raise LogError(f"{log.path}: a segment's parameters cannot be used ({exc})") from None
+    return np.array(model.leaf.node_x), np.array(model.link.node_x)
+
+
+def physics_run(path: str, segment: int = 0) -> dict:
+    """Return the signals of one log's segment at every physics step (a re-run of it)."""
+    from .replay import physics_series
+
+    log = read_log(path)
+    return physics_series(log, log.segment(segment))
