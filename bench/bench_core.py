@@ -15,9 +15,17 @@ at the default time step unless --time-step):
     (CompiledKernel.advance, timed around each call) and the rest (Python: the block, the
     state, the Sample, the lock), and the real-time factor the compiled calls alone would
     allow (1 ms over their CPU time per block): the ceiling no Python trimming can pass.
+Then, side by side, CPU seconds per simulated second of the same run on three paths:
+  * node: what umbrella_node computes, a RunDriver at 1 kHz, each period's steps and its
+    publication Sample (no ROS: bench_node.py measures the node itself);
+  * simulate: ``umbrella_sim simulate --json``'s run (the run driver's chunks, the summary of
+    every step), and with --csv every step's row written (tools/csv_output.py);
+and the CPU of starting the offline command line (``umbrella_sim simulate --duration 1e-4
+--json``, a child process: start-up and imports).
 The machine is shared: CPU time is what the step costs; wall RTF is what a user saw.
 Targets: <= 10 us/step at N = 2, <= 40 us/step at N = 8; RTF >= 10 at N = 2, >= 2 at N = 8
-(flexible); RTF >= 5 at N = 4 (--model flexible-nonlinear).
+(flexible); RTF >= 5 at N = 4 (--model flexible-nonlinear); simulate <= 1.3x the node path
+and simulate --csv <= 2x at N = 2; the command line's start-up < 0.5 s of CPU.
 
     python bench/bench_core.py [--meshes 1 2 4 8 16] [--repeat 3] [--time-step H | --mesh-step]
                                [--model flexible-nonlinear] [--damping-ratio Z]
@@ -25,18 +33,27 @@ Targets: <= 10 us/step at N = 2, <= 40 us/step at N = 8; RTF >= 10 at N = 2, >= 
 import argparse
 import math
 import os
+import resource
+import subprocess
 import sys
+import tempfile
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
+from umbrella_sim.core.driver import RunDriver, simulate  # noqa: E402
 from umbrella_sim.core.params import physics_step, UmbrellaParams  # noqa: E402
 from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
 from umbrella_sim.core.step_study import mesh_step  # noqa: E402
+from umbrella_sim.tools.csv_output import StepCsv  # noqa: E402
 
 #: model -> {N: target}
 COST_TARGETS = {"flexible": {2: 10.0, 8: 40.0}}
 RTF_TARGETS = {"flexible": {2: 10.0, 8: 2.0}, "flexible-nonlinear": {4: 5.0}}
+#: at N = 2: simulate's CPU over the node path's, without and with --csv; start-up CPU (s)
+OFFLINE_TARGETS = {"json": 1.3, "csv": 2.0}
+START_TARGET = 0.5
+PUBLISH_RATE = 1000.0
 DURATION = 1.0
 SAMPLE_PERIOD = 1e-3
 BLOCKS = round(DURATION / SAMPLE_PERIOD)   # sample periods in the run
@@ -73,6 +90,38 @@ def block_run(params, time_compiled=False):
     cpu, wall = time.thread_time() - c0, time.perf_counter() - w0
     assert sim.lock_event is not None, "the run did not reach the lock"
     return cpu, wall, sim, None if compiled is None else compiled[0]
+
+
+def node_path_cpu(params) -> float:
+    """CPU s per simulated s of the node's stepping: a 1 kHz RunDriver, its publication Sample."""
+    driver = RunDriver(params, PUBLISH_RATE)
+    c0 = time.thread_time()
+    while driver.time < DURATION - 1e-9:
+        driver.advance_period()
+        driver.publication()
+    return (time.thread_time() - c0) / driver.time
+
+
+def offline_cpu(params, csv: bool) -> float:
+    """CPU s per simulated s of umbrella_sim simulate's run (--json; with csv, --csv too)."""
+    with tempfile.TemporaryDirectory(prefix="bench_core_") as tmp:
+        out = StepCsv(os.path.join(tmp, "run.csv")) if csv else None
+        c0 = time.thread_time()
+        result = simulate(params, DURATION, keep_samples=False,
+                          on_chunk=(lambda chunk: out.write(chunk.block)) if out else None)
+        cpu = time.thread_time() - c0
+        if out is not None:
+            out.close()
+    return cpu / result.figures["final_time"]
+
+
+def cli_start_cpu() -> float:
+    """CPU s (user + system) of `umbrella_sim simulate --duration 1e-4 --json`: start-up."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run([os.path.join(os.path.dirname(sys.executable), "umbrella_sim"), "simulate",
+                    "--duration", "1e-4", "--json"], check=True, stdout=subprocess.DEVNULL)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def kernel_run(params):
@@ -141,6 +190,28 @@ def main():
         print(f"{n:>3} {1e6 * sim.h:>5.1f} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} "
               f"{us:>8.2f} "
               f"{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18} {tail}", flush=True)
+    print(f"\nCPU s per simulated s, best of {args.repeat}: the node's path (1 kHz) and "
+          "umbrella_sim simulate's")
+    print(f"{'N':>3} {'node':>7} {'simulate':>9} {'ratio':>6} {'--csv':>7} {'ratio':>6} "
+          f"{'targets (x)':>12}")
+    for n in args.meshes:
+        p = UmbrellaParams(v0=-0.2, elements_per_segment=n, time_step=h, model=args.model,
+                           damping_ratio=args.damping_ratio)
+        node = min(node_path_cpu(p) for _ in range(args.repeat))
+        plain = min(offline_cpu(p, csv=False) for _ in range(args.repeat))
+        csv = min(offline_cpu(p, csv=True) for _ in range(args.repeat))
+        tgt = ""
+        if n == 2 and args.model == "flexible":
+            ok = (plain / node <= OFFLINE_TARGETS["json"]
+                  and csv / node <= OFFLINE_TARGETS["csv"])
+            tgt = (f"{OFFLINE_TARGETS['json']:g}, {OFFLINE_TARGETS['csv']:g} "
+                   f"{'ok' if ok else 'MISS'}")
+        print(f"{n:>3} {node:>7.3f} {plain:>9.3f} {plain / node:>5.2f}x {csv:>7.3f} "
+              f"{csv / node:>5.2f}x {tgt:>12}", flush=True)
+    start = min(cli_start_cpu() for _ in range(args.repeat))
+    print(f"\nstarting umbrella_sim simulate (--duration 1e-4 --json, a child process): "
+          f"{start:.2f} s of CPU (target < {START_TARGET:g} s: "
+          f"{'ok' if start < START_TARGET else 'MISS'})")
 
 
 if __name__ == "__main__":
