@@ -72,6 +72,10 @@ def main(argv) -> int:
         # the test suite and the user-facing actuation examples (they must keep working)
         cmd = [PY, "-m", "pytest", "-q", os.path.join(ROOT, "tests"),
                os.path.join(ROOT, "examples")] + argv[1:]
+        if not argv[1:]:
+            print("the whole suite: ~7 min on a quiet 2-core machine; the fast subset (no ROS "
+                  "node, nothing slow): python3 bootstrap.py test -m \"not ros and not slow\"",
+                  flush=True)
     else:
         return 0
     print("+", " ".join(cmd), flush=True)

@@ -1,7 +1,14 @@
 """
 umbrella_sim: real-time flexible multibody simulation of an umbrella-frame antenna.
 
-The physics core (params, model, rigid, solver, outputs) imports no ROS package.
+Layers, each importing only those below it (tests/test_architecture.py):
+
+    tools    the command lines                                   umbrella_sim.tools
+    ros      the node, messages, controller, launch              umbrella_sim.ros
+    bag      the MCAP / rosbag2 recording format                 umbrella_sim.bag
+    core     the physics, usable from a plain Python script      umbrella_sim.core
+
+and on top the actuation-test API, umbrella_sim.testing.
 """
 import os as _os
 
