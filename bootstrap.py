@@ -74,7 +74,7 @@ def main(argv) -> int:
                os.path.join(ROOT, "examples")] + argv[1:]
         if not argv[1:]:
             print("the whole suite: ~7 min on a quiet 2-core machine; the fast subset (no ROS "
-                  "node, nothing slow): python3 bootstrap.py test -m \"not ros and not slow\"",
+                  'node, nothing slow): python3 bootstrap.py test -m "not ros and not slow"',
                   flush=True)
     else:
         return 0
