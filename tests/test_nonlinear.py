@@ -50,7 +50,7 @@ from umbrella_sim.core.rotating_beam import (KANE_BEAM, rotating_cantilever_chor
                                              rotating_cantilever_frequency, spin_up, spin_up_angle,
                                              spin_up_quasi_static_tip)
 from umbrella_sim.core.solver import UmbrellaSimulator
-from umbrella_sim.core.summary import energy_balance_error
+from umbrella_sim.core.summary import energy_balance_error, SECTION_SLOPE_LIMIT, STRAIN_LIMIT
 
 NL = "flexible-nonlinear"
 # these tests' figures were made at a 2 ms step: it keeps the suite short (the default 5e-5 s
@@ -563,6 +563,31 @@ def test_stage2_figures_converge_with_the_mesh():
         assert a == pytest.approx(b, rel=tol), key
         for value in (a, b):
             assert value == pytest.approx(ref, rel=0.05 if "period" in key else 0.10), key
+
+
+def test_fibres_turned_ninety_degrees_end_the_run_with_the_reason():
+    """
+    The slope coordinates end at a section turned 90 deg from its body frame.
+
+    V0 = -3, N = 4, plastic lock: the tip of the leaf turns through 90 deg in stage 2 and the
+    run stops with a fault that says so; V0 = -2 with the energy lock (85 deg) completes and
+    warns ('fibre rotation'), with the plastic lock (~75 deg) it does not; past yield both
+    say 'large strain' (the co-rotational beam's small-strain limit), and neither the
+    'large deflection' of the small-deformation models.
+    """
+    r = simulate(UmbrellaParams(v0=-3.0, model=NL, elements_per_segment=4, lock="plastic"),
+                 0.2)
+    assert r.error is not None and "slope coordinates end at 90 deg" in r.error
+    for lock, warned in (("energy", True), ("plastic", False)):
+        s = simulate(UmbrellaParams(v0=-2.0, model=NL, elements_per_segment=4, lock=lock),
+                     0.35, stop_after_lock=0.3).summary()
+        assert "error" not in s
+        keys = [w.split(":")[0] for w in s["warnings"]]
+        assert ("fibre rotation" in keys) == warned, (lock, s["warnings"])
+        assert "large strain" in keys and "large deflection" not in keys
+        strain = max(s["peak_stress_leaf"], s["peak_stress_link"]) / 72e9
+        assert strain > STRAIN_LIMIT
+    assert SECTION_SLOPE_LIMIT == pytest.approx(math.sin(math.radians(80.0)))
 
 
 # ---------------------------------------------------------------- spin-up benchmark
