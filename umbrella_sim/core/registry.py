@@ -221,10 +221,11 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        rule="≥ −`area`·`yield_strength`, the link's load in tension"),
     # model and numerics
     _P("model", str, "flexible", "-",
-       "flexible: Case 1 then Case 2; flexible-nonlinear: the same with the von Kármán "
-       "membrane strain u' + v'²/2 (geometric stiffening, thesis §7.2; compiled, 1.5–2× the "
-       "cost of a flexible step; its stage 2 at V0 ≤ −1 m/s wants time_step ≤ 0.5 ms, "
-       "docs/validation_nonlinear.md); "
+       "flexible: Case 1 then Case 2; flexible-nonlinear: the same with geometrically exact "
+       "beams (co-rotational Euler–Bernoulli elements in the floating frames: large "
+       "rotations, small strains, thesis §7.2; a fibre may turn up to 90° from its body "
+       "frame, the run stops there and warns past 80°; compiled, 1.3–2× the cost of a "
+       "flexible step; docs/validation_nonlinear.md); "
        "rigid-fe: Case 3 (elastic coordinates constrained); rigid: closed-form two-angle "
        "model", choices=MODELS),
     _P("elements_per_segment", int, 1, "-",
