@@ -363,9 +363,12 @@ class ElasticMidpointDAE(MidpointDAE):
         is ~1e-3 off in stage 2, where Newton contracts by only ~1e-2 with it.  A matrix
         factored CARRY_STEPS steps ago or less serves the step whole; an older one its first
         iteration, and the step factors its own at the first iterate, which is close.  A
-        factorisation costs about an iteration: 0.4 iterations more a step than factoring in
-        every step, 12 % less time (N = 2 and 4).  _kernel.c with _kernel_nonlinear.c does
-        the same arithmetic in the same order.
+        factorisation costs about an iteration: re-checked with (an earlier variant of) the
+        co-rotational law, N = 4, V0 = -0.2 and -1 on a shared machine, re-factoring at a
+        contraction rate of 0.03 or 0.01, or in every step, was no faster overall (-1 % to
+        +24 % time) than these rules.  A predictor outside the slope coordinates
+        (|theta| >= 1, on a coarse step) starts from q0.  _kernel.c with _kernel_nonlinear.c
+        does the same arithmetic in the same order.
         """
         from scipy.linalg.lapack import dgetrf, dgetrs     # (as MidpointDAE._step)
 
@@ -476,12 +479,12 @@ class ElasticEngine(FiniteElementEngine):
         """
         Not with the nonlinear strain.
 
-        Its axial coordinates follow the bending's foreshortening (u' = -v'^2/2), far from the
-        lock's configuration and from the linearised modes the correction is built on (in
-        its earlier, stiffness form, measured from the lock, it moved the stage-2 period at
-        V0 = -0.2 by 1 % where its own size is 1e-5; the modal-mass form is not tried with
-        this strain, and the kernel leaves it out).  The linear strain (damped flexible)
-        takes it.
+        Its axial coordinates follow the bending's foreshortening (inextensible bending
+        shortens the chords), far from the lock's configuration and from the linearised
+        modes the correction is built on (in its earlier, stiffness form, measured from the
+        lock, it moved the von Karman model's stage-2 period at V0 = -0.2 by 1 % where its
+        own size is 1e-5; the modal-mass form is not tried with a nonlinear strain, and the
+        kernel leaves it out).  The linear strain (damped flexible) takes it.
         """
         return not self.rigid and not self.model.strain.nonlinear
 
