@@ -17,6 +17,8 @@ import numpy as np
 from .forcing import TIME_RESOLUTION
 from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS, step_row,
                       StepBlock)
+from .step_rule import (lock_amplitudes, MAX_STEP_DIVISOR, resolved_omega_h, resolving_divisor,
+                        STRESS_SHARE_LIMIT, unresolved_stress_share)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
@@ -211,31 +213,58 @@ def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     return None
 
 
-#: the largest omega h at which the locked frame's first mode is resolved: the midpoint rule
-#: lengthens a period by ~(omega h)^2 / 12 (1 % at 0.35); stage 2's phase correction makes the
-#: period exact up to omega h = 1.5, past which it leaves a mode as it is (aliased)
-RESOLVED_OMEGA_H = {False: math.sqrt(12 * 0.01), True: 1.5}
-
-
-def coarse_step_warning(params: dict) -> str | None:
+def coarse_step_warning(resolution: dict | None, step_chosen: bool = False) -> str | None:
     """
-    Return a warning when the step does not resolve the locked frame's first mode.
+    Return a warning when the step leaves the modes carrying the stage-2 stresses unresolved.
 
-    Its period then comes out wrong (past omega h = 1.5, aliased: several times too long on
-    a small or light frame at the default step) and the stage-2 stresses with it.  It
-    depends on the model parameters alone: worked out once per set of them.
+    resolution: the lock's (LockEvent.stage2_resolution, step_rule.stage2_resolution), None
+    before the lock or for a rigid model.  Past step_rule.STRESS_SHARE_LIMIT the stage-2
+    peak stresses, and the period if the first mode is among those modes, are not those of
+    the model (docs/validation.md): the text names the shares and the step that resolves
+    them.  step_chosen: the run's step is the one chosen for the mesh (time_step 0).
+    """
+    if not resolution:
+        return None
+    shares = {body: resolution[body] for body in ("leaf", "link")}
+    if max(shares.values()) <= STRESS_SHARE_LIMIT:
+        return None
+    h, enough = resolution["step"], resolution["resolving_step"]
+    if enough is None:
+        fix = (f"no step down to {h / MAX_STEP_DIVISOR:.3g} s (1/{MAX_STEP_DIVISOR} of this "
+               "one) resolves them: give a smaller time_step")
+    else:
+        fix = f"time_step <= {_rounded_down(enough):.3g} s resolves them" + (
+            "" if step_chosen else " (time_step 0 takes the step chosen for the mesh)")
+    return (f"coarse step: modes the physics step {h:g} s does not resolve carry "
+            f"{100 * shares['leaf']:.3g} % of the leaf's and {100 * shares['link']:.3g} % of the "
+            f"link's stage-2 stress crest at the lock (limit {100 * STRESS_SHARE_LIMIT:g} %): "
+            f"the stage-2 peak stresses are not those of the model; {fix}")
+
+
+def _rounded_down(x: float) -> float:
+    """Return x rounded down to three significant digits."""
+    scale = 10.0 ** (math.floor(math.log10(x)) - 2)
+    return math.floor(x / scale * (1 + 1e-12)) * scale
+
+
+def mesh_resolution(params: dict, step: float) -> dict | None:
+    """
+    Return stage2_resolution of a run known by its parameters and step alone (no lock state).
+
+    For a recording without the lock's own figures: the mesh's lock (step_rule.lock_amplitudes)
+    stands for the run's.  None for a rigid model or parameters that do not make one.
     """
     from .registry import SPECS
 
     try:
-        return _coarse_step_warning(tuple(sorted((k, v) for k, v in params.items()
-                                                 if k in SPECS)))
-    except TypeError:           # (a value that cannot be a parameter: no model to judge)
+        return _mesh_resolution(tuple(sorted((k, v) for k, v in params.items() if k in SPECS)),
+                                float(step))
+    except (TypeError, ValueError):   # (a value that cannot be a parameter: no model to judge)
         return None
 
 
 @cache
-def _coarse_step_warning(items: tuple) -> str | None:
+def _mesh_resolution(items: tuple, step: float) -> dict | None:
     from .model import UmbrellaModel
     from .params import UmbrellaParams
 
@@ -245,20 +274,12 @@ def _coarse_step_warning(items: tuple) -> str | None:
         return None
     if p.model not in ("flexible", "flexible-nonlinear"):
         return None
-    omega = float(UmbrellaModel(p).locked_modes[0][0])
-    h = p.physics_time_step
-    corrected = bool(p.phase_correction) and p.model == "flexible"
-    limit = RESOLVED_OMEGA_H[corrected]
-    if omega * h <= limit:
-        return None
-    enough = limit / omega * (p.time_step / h)      # (time_step / physics step: the mesh's)
-    scale = 10.0 ** (math.floor(math.log10(enough)) - 2)
-    enough = math.floor(enough / scale) * scale        # three digits, rounded down
-    return (f"coarse step: the locked frame's first mode (period {2e3 * math.pi / omega:.4g} "
-            f"ms) gets {2 * math.pi / (omega * h):.3g} steps a period at the physics step "
-            f"{h:g} s, fewer than the {2 * math.pi / limit:.3g} that resolve it"
-            f"{' with phase_correction' if corrected else ''}: the stage-2 period and "
-            f"stresses are not those of the model; set time_step <= {enough:.3g} s")
+    model = UmbrellaModel(p)
+    amplitudes = lock_amplitudes(model)
+    limit = resolved_omega_h(p)
+    k = resolving_divisor(model, step, limit, amplitudes)
+    return {"step": step, **unresolved_stress_share(model, amplitudes, step, limit),
+            "resolving_step": None if k is None else step / k}
 
 
 #: an energy balance error (energy_drift) past which a run is named: well above round-off
@@ -268,19 +289,22 @@ ENERGY_DRIFT_LIMIT = 1e-3
 
 def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                       tip_deflection: float, locked: bool = False,
-                      energy_drift: float | None = None) -> list[str]:
+                      energy_drift: float | None = None,
+                      stage2_resolution: dict | None = None) -> list[str]:
     """
     Return where a run left the model's validity: one rule, used everywhere.
 
     Each text starts with a fixed key ('lock not applicable', 'coarse step' once locked,
     'energy not conserved', 'yield exceeded', 'large strain' (below yield), 'large
-    deflection') before a colon.
+    deflection') before a colon.  stage2_resolution: the lock's (LockEvent), for
+    'coarse step'.
     """
     out = []
     lw = lock_warning(params, lock_kind)
     if lw:
         out.append(lw)
-    cw = coarse_step_warning(params) if locked else None
+    cw = (coarse_step_warning(stage2_resolution, params.get("time_step") == 0.0)
+          if locked else None)
     if cw:
         out.append(cw)
     if energy_drift is not None and energy_drift > ENERGY_DRIFT_LIMIT:
@@ -416,6 +440,8 @@ class SummaryAccumulator:
             out["lock_energy_before"] = self.lock.energy_before
             out["lock_energy_after"] = self.lock.energy_after
             out["lock_free_velocities"] = list(self.lock.free_velocities)
+            if self.lock.stage2_resolution:
+                out["stage2_resolution"] = dict(self.lock.stage2_resolution)
         out["constraint_residual_max"] = self._residual
         out["final_time"] = self.final_time
         out["steps"] = self.steps
@@ -429,7 +455,9 @@ class SummaryAccumulator:
         return validity_warnings(self.params, self.lock_kind,
                                  max(self._peaks["leaf"][0], self._peaks["link"][0]),
                                  self._tip_all, locked=self.lock is not None,
-                                 energy_drift=self._balance / self._scale)
+                                 energy_drift=self._balance / self._scale,
+                                 stage2_resolution=self.lock.stage2_resolution
+                                 if self.lock else None)
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""

@@ -52,6 +52,7 @@ from ..core.forcing import command_force
 from ..core.params import shortened_step_note, UmbrellaParams
 from ..core.registry import (check_known_names, check_node_parameters, CONTROLLER_PARAMETERS,
                              NODE_PARAMETERS, REGISTRY, RESET, SPECS)
+from ..core.step_rule import physics_step_of
 
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
                    "paces it by the system clock; a node does not follow the clock it drives "
@@ -190,7 +191,7 @@ class UmbrellaNode(Node):
             f"v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s "
             f"({self.driver.period_steps} per publication at "
             f"{self.driver_rate:g} Hz), kernel {self.driver.backend}")
-        note = shortened_step_note(p.physics_time_step, self.driver_rate)
+        note = shortened_step_note(physics_step_of(p), self.driver_rate)
         if note:
             self.get_logger().info(note)
 

@@ -26,6 +26,7 @@ from ..bag.provenance import build_environment
 from ..bag.reader import LogData, LogError, qos_from_yaml, read_log
 from ..core.driver import RunDriver
 from ..core.forcing import command_force, ForceSchedule
+from ..core.integrators import INTEGRATOR_REVISION
 from ..core.params import physics_step, recorded_params
 from ..ros.messages import (ABSOLUTE_TOPIC_NAMES, COMMAND, joint_state_figures,
                             peak_stress_figures, tip_deflection_figures)
@@ -104,13 +105,20 @@ DEFAULT_TOLERANCE = 1e-6
 
 
 def build_difference(log: LogData) -> str:
-    """Say how the recording's build and floating-point environment differ from this one."""
+    """Say how the recording's integrator, build and floating-point environment differ."""
     recorded = log.metadata.get("umbrella_sim.build", {})
+    notes = []
+    integrator = recorded.get("integrator", "an earlier one (unrecorded)")
+    if integrator != INTEGRATOR_REVISION:
+        notes.append(f"recorded by another integrator ({integrator} there, "
+                     f"{INTEGRATOR_REVISION} here): the physics differs, in stage 2 at least")
     here = build_environment()
     differ = [f"{k} {recorded.get(k, 'unrecorded')!r} there, {v!r} here"
               for k, v in here.items() if recorded.get(k) != v]
-    return ("recorded with another floating-point environment (" + "; ".join(differ)
-            + "): round-off differs from the first step on") if differ else ""
+    if differ:
+        notes.append("recorded with another floating-point environment (" + "; ".join(differ)
+                     + "): round-off differs from the first step on")
+    return "; ".join(notes)
 
 
 def relative_difference(diff: float, scale: float) -> float:
@@ -136,10 +144,13 @@ def _segment_inputs(log: LogData, seg):
     except (KeyError, TypeError, ValueError) as exc:
         raise LogError(f"{log.path}: segment {seg.index}: parameters cannot be used "
                        f"({exc})") from None
-    if abs(physics_step(params.physics_time_step, rate) - step) > 1e-15:
-        raise LogError(f"{log.path}: physics step {step} cannot be reproduced from "
-                       f"time_step and publish_rate (got "
-                       f"{physics_step(params.physics_time_step, rate)})")
+    # the recorded step itself (a recording made under an earlier step rule replays at its
+    # own step), if it is one a run can take: it divides the publication period
+    if not (step > 0.0 and abs(physics_step(step, rate) - step) <= 1e-15):
+        raise LogError(f"{log.path}: physics step {step} cannot be reproduced: it does not "
+                       f"divide the publication period 1/{rate:g} s (a run would take "
+                       f"{physics_step(step, rate) if step > 0.0 else 'none'})")
+    params = params.with_physics_step(step)
     # the force history, the recorded fault and the last publication (only the few command
     # and phase records are decoded)
     applied, t_last, t_fault = [], 0.0, None
