@@ -26,7 +26,9 @@ import pytest
 
 from tests.ros_helpers import ros_env
 from umbrella_sim.bag.reader import LogError, read_log
+from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.summary import stage2_figures, STAGE2_SAMPLES, STAGE2_WINDOW
 from umbrella_sim.ros.recording import record_offline
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -34,6 +36,55 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def diag_values(msg: DiagnosticArray) -> dict:
     return {kv.key: kv.value for kv in msg.status[0].values}
+
+
+# --------------------------------------------------------------- the run's summary
+def run_through_stage2(params: UmbrellaParams, chunk_steps: int | None = None):
+    """Run to the end of the stage-2 window; return the driver and every step's (t, tip)."""
+    driver = RunDriver(params, chunk_steps=chunk_steps)
+    t, v = [], []
+    k_end = None                    # the first step past the window's end
+    while k_end is None or driver.sim.step_index < k_end:
+        chunk = driver.advance(None if k_end is None else k_end - driver.sim.step_index)
+        assert chunk.error is None, chunk.error
+        if chunk.lock is not None:
+            k_end = int((chunk.lock.time + STAGE2_WINDOW) / driver.step) + 2
+        t.append(chunk.block.time.copy())
+        v.append(chunk.block.tip_transverse.copy())
+    return driver, np.concatenate(t), np.concatenate(v)
+
+
+@pytest.mark.slow
+def test_the_stage2_series_a_summary_keeps_is_bounded():
+    """
+    A fine step's stage-2 window: a bounded series for its period, every step for the rest.
+
+    At 2 us the 0.3 s window has 150 000 steps; the summary keeps at most STAGE2_SAMPLES of
+    them (at 0.1 us all 3e6 took 48 MB and ~4 s to analyse at a node's stop), whatever the
+    chunks; the amplitude and the window's end are those of every step and the period is
+    that of every step to 1e-6.  At the default step every step is kept.
+    """
+    fine = UmbrellaParams(v0=-2.0, time_step=2e-6)
+    driver, t, v = run_through_stage2(fine)
+    summary = driver.summary
+    kept = sum(len(a) for a in summary._s2_t)
+    assert kept <= STAGE2_SAMPLES + 1
+    exact = stage2_figures(t, v, driver.sim.lock_event.time)
+    figures = summary.figures()
+    assert figures["stage2_tip_amplitude"] == exact["stage2_tip_amplitude"]
+    assert figures["stage2_window"] == exact["stage2_window"]
+    assert figures["stage2_tip_period"] == pytest.approx(exact["stage2_tip_period"], rel=1e-6)
+    other, _, _ = run_through_stage2(fine, chunk_steps=997)
+    assert other.summary.figures() == figures                   # whatever the chunks
+
+    default = UmbrellaParams(v0=-2.0)
+    driver, t, v = run_through_stage2(default)
+    in_window = (t > driver.sim.lock_event.time) & \
+        (t <= driver.sim.lock_event.time + STAGE2_WINDOW + 1e-9)
+    assert sum(len(a) for a in driver.summary._s2_t) == int(in_window.sum())
+    exact = stage2_figures(t, v, driver.sim.lock_event.time)
+    figures = driver.summary.figures()
+    assert {k: figures[k] for k in exact} == exact              # to the bit
 
 
 # ------------------------------------------------------------------ damaged recordings
