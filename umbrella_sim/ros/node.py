@@ -38,7 +38,8 @@ from std_srvs.srv import SetBool, Trigger
 from . import messages as ros_io
 from .lockstep import Lockstep
 from .pacing import MAX_LAG_S, Pacer
-from .parameters import coerce_parameter, declare_from_registry, parameter_defaults
+from .parameters import (coerce_parameter, declare_from_registry, parameter_defaults,
+                         set_refusal)
 from .params_file import check_parameter_sources, QOS_OVERRIDES, USE_SIM_TIME
 from .publication import PublicationEncoder
 from .recording import RunRecording
@@ -351,6 +352,25 @@ class UmbrellaNode(Node):
         self.get_logger().info(f"{response.message} at t = {self.sim.time:.9f} s")
         return response
 
+    def set_parameters_atomically(self, parameter_list) -> SetParametersResult:
+        """
+        Set parameters (rclpy's SetParameters services call this), refusing with our reasons.
+
+        Every refusal names the parameter and says why (ros.parameters.set_refusal): rclpy's
+        descriptor checks, which run before the on-set callback, would answer first with
+        reasons that do not; an unknown name raises ParameterNotDeclaredException (as rclpy
+        does) whose text names it and suggests the closest declared one.
+        """
+        for param in parameter_list:
+            reason = set_refusal(self, param)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        return super().set_parameters_atomically(parameter_list)
+
+    def set_parameters(self, parameter_list) -> list[SetParametersResult]:
+        """Set parameters one at a time (rclpy's semantics), each as set_parameters_atomically."""
+        return [self.set_parameters_atomically([param]) for param in parameter_list]
+
     @staticmethod
     def _coerce_parameters(params: list) -> list:
         return [coerce_parameter(p) for p in params]
@@ -368,7 +388,8 @@ class UmbrellaNode(Node):
     def _validate_parameters(self, params) -> SetParametersResult:
         """Accept or refuse a set (on-set callback); changes nothing."""
         if any(p.name == USE_SIM_TIME and p.value is True for p in params):
-            return SetParametersResult(successful=False, reason=SIM_TIME_REASON)
+            return SetParametersResult(successful=False,
+                                       reason=f"parameter {USE_SIM_TIME}=true: {SIM_TIME_REASON}")
         try:
             self._parameter_candidate(params)
         except ValueError as exc:
