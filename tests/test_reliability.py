@@ -15,7 +15,9 @@ The reliability suite: the node and the tools under long runs, bad input and sto
 What it asserts is behaviour; how fast is for bench/bench_long_period.py and
 bench/bench_commands.py (timeouts here only bound a failure).
 """
+import json
 import os
+import signal
 import subprocess
 import sys
 
@@ -25,8 +27,11 @@ import numpy as np
 import pytest
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from std_srvs.srv import SetBool
 
-from tests.ros_helpers import NodeProcess, ros_env
+from tests.ros_helpers import NodeProcess, poll, ros_env, stamp
 from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.params import UmbrellaParams
@@ -166,6 +171,77 @@ def test_every_parameter_refusal_names_the_parameter_and_why(probe):
         assert set_param("marker_magnification", I, 100).successful
         assert get("marker_magnification").double_value == 100.0
         assert "Traceback" not in node.output()
+
+
+# ----------------------------------------------------------- long publication periods
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_long_publication_period_keeps_the_node_responsive(probe, tmp_path):
+    """
+    A period of 10^7 steps (1 Hz, 0.1 us; minutes of CPU) inside which the node serves.
+
+    /diagnostics go on at 1 Hz with sim time advancing and say the run is behind before
+    the period ends; ``~/pause`` holds sim time and resumes it; a command is taken at once
+    (counted, recorded) and applied at the next publication instant, the documented rule;
+    SIGINT ends the run inside the period, and the recording's summary holds every step
+    taken (none of them published).
+    """
+    probe.subscribe("/diagnostics", DiagnosticArray)
+    probe.subscribe("/joint_states", JointState)
+    bag = tmp_path / "long"
+    # N = 4: ~10 us a step, so the first period takes minutes on any machine
+    with NodeProcess("-p", "publish_rate:=1.0", "-p", "time_step:=1e-7",
+                     "-p", "elements_per_segment:=4", "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("recording to", timeout=60)
+        probe.wait_for_count("/joint_states", 1, timeout=30)            # t = 0
+
+        def statuses():
+            return [diag_values(m) for m in probe.messages("/diagnostics")]
+
+        def advancing(n):
+            """Wait for n more statuses, each with sim time past the last's."""
+            start = len(statuses())
+
+            def done():
+                new = statuses()[start:]
+                return len(new) >= n and all(float(b["sim_time_s"]) > float(a["sim_time_s"])
+                                             for a, b in zip(new, new[1:]))
+            poll(done, 30, lambda: f"no {n} statuses with sim time advancing: {statuses()}")
+            return statuses()[-1]
+
+        status = advancing(3)
+        assert 0.0 < float(status["sim_time_s"]) < 1.0                  # inside the period
+        assert status["paused"] == "False" and float(status["lag_s"]) > 0.5
+        # a command inside the period: counted and recorded at once, applied at t = 1 s
+        pub = probe.publisher("/sleeve_force", Float64)
+        probe.wait_for_subscribers(pub)
+        pub.publish(Float64(data=20.0))
+        poll(lambda: statuses()[-1]["accepted_commands"] == "1", 30,
+             lambda: f"the command was not counted: {statuses()[-1]}")
+        # ~/pause inside the period: answered, and sim time holds
+        assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=True),
+                          timeout=60).success
+        start = len(statuses())
+        poll(lambda: len(statuses()) >= start + 3, 30, lambda: "no statuses while paused")
+        held = statuses()[start:]
+        assert all(s["paused"] == "True" for s in held)
+        assert len({s["sim_time_s"] for s in held}) == 1
+        assert float(held[-1]["sim_time_s"]) < 1.0
+        assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=False),
+                          timeout=60).success
+        status = advancing(2)
+        assert float(status["sim_time_s"]) < 1.0                        # still the period
+        assert [stamp(m) for m in probe.messages("/joint_states")] == [0.0]
+        assert "applied from" not in node.output()                       # not before t = 1 s
+        steps = int(status["steps"])
+        assert node.stop(signal.SIGINT, timeout=60) == 0
+        out = node.output()
+    assert "recording finalised" in out
+    log = read_log(str(bag))
+    figures = json.loads(log.metadata["umbrella_sim.summary"]["figures"])
+    assert figures["steps"] >= steps and figures["final_time"] < 1.0
+    assert log.count("/joint_states") == 1
+    assert log.count("/sleeve_force") == 1 and log.count("/sleeve_force/applied") == 0
 
 
 # ------------------------------------------------------------------ damaged recordings

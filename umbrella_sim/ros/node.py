@@ -543,6 +543,12 @@ class UmbrellaNode(Node):
                         self._warn_throttled("behind", 5.0, lambda: (
                             f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
                             "time x real_time_factor (see diagnostics)"))
+                elif target is not None and not idle:
+                    # between publications (a long period: many chunks), how far behind the
+                    # physics is now, so that diagnostics say so before the period ends
+                    lag = max(lag, self.pacer.lag(target, now))
+                if idle:
+                    lag = 0.0                 # paused or waiting: not behind (anchored anew)
                 if sample is not None:
                     self._publish_sample(sample)
                 if epoch != diag_epoch:     # a reset: sim time restarted, measure from here
