@@ -78,7 +78,8 @@ def main() -> int:
         def during():
             while not stop.is_set():
                 rss.append(rss_mb(node.pid))
-                start = time.monotonic()
+                start = time.monotonic()     # (a resume of a running node: answered as a
+                # pause is, after the same wait for the sim lock; it re-anchors the pacing)
                 probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=False))
                 pauses.append(time.monotonic() - start)
                 time.sleep(0.2)
