@@ -15,7 +15,12 @@ The reliability suite: the node and the tools under long runs, bad input and sto
   (or a recovered log), never a traceback.
 
 What it asserts is behaviour; how fast is for bench/bench_long_period.py and
-bench/bench_commands.py (timeouts here only bound a failure).
+bench/bench_commands.py (timeouts here only bound a failure).  The rest of what a user relies
+on is held where it was built: several antennas (test_node.py's
+test_namespaced_nodes_do_not_cross_talk, test_faults.py's
+test_two_nodes_in_one_namespace_are_warned), a full disk (test_faults.py's
+test_node_recording_disk_full_goes_on_and_exits_4) and SIGKILL (test_recording.py's
+test_sigkill_leaves_readable_chunks).
 """
 import json
 import os
