@@ -30,8 +30,8 @@ from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.registry import SPECS
+from umbrella_sim.ros.commands import REFUSED_RECORD_RATE
 from umbrella_sim.ros.messages import LATCHED
-from umbrella_sim.ros.node import REFUSED_RECORD_RATE
 from umbrella_sim.ros.pacing import MAX_LAG_S
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
