@@ -201,7 +201,9 @@ def test_a_long_publication_period_keeps_the_node_responsive(probe, tmp_path):
     with NodeProcess("-p", "publish_rate:=1.0", "-p", "time_step:=1e-7",
                      "-p", "elements_per_segment:=4", "-p", f"record_path:={bag}") as node:
         node.wait_for_log("recording to", timeout=60)
-        probe.wait_for_count("/joint_states", 1, timeout=30)            # t = 0
+        # (the t = 0 state may go out before the probe's reader matches: volatile)
+        poll(lambda: probe.node.count_publishers("/joint_states") >= 1, 30,
+             lambda: "the node's joint_states publisher was not discovered")
 
         def statuses():
             return [diag_values(m) for m in probe.messages("/diagnostics")]
@@ -239,7 +241,7 @@ def test_a_long_publication_period_keeps_the_node_responsive(probe, tmp_path):
                           timeout=60).success
         status = advancing(2)
         assert float(status["sim_time_s"]) < 1.0                        # still the period
-        assert [stamp(m) for m in probe.messages("/joint_states")] == [0.0]
+        assert all(stamp(m) == 0.0 for m in probe.messages("/joint_states"))
         assert "applied from" not in node.output()                       # not before t = 1 s
         steps = int(status["steps"])
         assert node.stop(signal.SIGINT, timeout=60) == 0
