@@ -30,6 +30,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -41,7 +42,7 @@ from .commands import CommandIntake
 from .lockstep import Lockstep
 from .pacing import MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, parameter_defaults,
-                         set_refusal)
+                         set_refusal, wrong_type_text)
 from .params_file import check_parameter_sources, QOS_OVERRIDES, USE_SIM_TIME
 from .publication import PublicationEncoder
 from .recording import RunRecording
@@ -69,7 +70,10 @@ class StartupError(RuntimeError):
 class UmbrellaNode(Node):
 
     def __init__(self, params_files: tuple = (), **kwargs):
-        super().__init__("umbrella_node", **kwargs)
+        try:
+            super().__init__("umbrella_node", **kwargs)
+        except InvalidParameterTypeException as exc:    # -p use_sim_time:=abc: ROS's own
+            raise StartupError(wrong_type_text(self, exc)) from None
         qos_given = self._check_parameter_sources(params_files,
                                                   set(parameter_defaults()))
         if self.get_parameter(USE_SIM_TIME).value:
@@ -127,7 +131,9 @@ class UmbrellaNode(Node):
                 qos_overriding_options=QoSOverridingOptions.with_default_policies())
         except Exception as exc:  # rclpy's errors name the parameter
             files = f" (params files: {', '.join(params_files)})" if params_files else ""
-            raise StartupError(f"qos_overrides: {' '.join(str(exc).split())}{files}") from None
+            text = (wrong_type_text(self, exc) if isinstance(exc, InvalidParameterTypeException)
+                    else f"qos_overrides: {' '.join(str(exc).split())}")
+            raise StartupError(text + files) from None
         self._check_qos_overrides(qos_given)
         self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
         self.command_topic = self.command_sub.topic_name

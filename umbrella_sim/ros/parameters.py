@@ -14,6 +14,7 @@ raises ParameterNotDeclaredException with an empty list; a pre-set callback cann
 """
 from __future__ import annotations
 
+import re
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
@@ -114,6 +115,23 @@ def type_refusal(name: str, given, expected: str) -> str:
     """Return the refusal of a value of the wrong type: the parameter, the value, both types."""
     return (f"parameter {name}={given.value!r}: must be of type {expected}, got "
             f"{given.type_.name.lower()}")
+
+
+def wrong_type_text(node, exc) -> str:
+    """
+    Return rclpy's InvalidParameterTypeException for a -p value as type_refusal says it.
+
+    For the parameters rclpy declares itself from the overrides (use_sim_time,
+    qos_overrides.*), whose exception ends a traceback otherwise; its text as it is if it
+    cannot be read.
+    """
+    text = " ".join(str(exc).split())
+    name = text.rsplit(": ", 1)[-1]
+    expected = re.search(r"expecting type '(?:Type\.)?(\w+)'", text)
+    given = getattr(node, "_parameter_overrides", {}).get(name)
+    if given is None or expected is None:
+        return text
+    return type_refusal(name, given, expected.group(1).lower())
 
 
 #: why a read-only parameter is: the registry's are read at start; ROS's own (qos_overrides.*,
