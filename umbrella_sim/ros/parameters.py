@@ -122,16 +122,22 @@ def wrong_type_text(node, exc) -> str:
     Return rclpy's InvalidParameterTypeException for a -p value as type_refusal says it.
 
     For the parameters rclpy declares itself from the overrides (use_sim_time,
-    qos_overrides.*), whose exception ends a traceback otherwise; its text as it is if it
-    cannot be read.
+    qos_overrides.*), whose exception ends a traceback otherwise; node: the node it was
+    declared on (the value given, from its overrides), or None (the value as rclpy's text
+    has it); the text as it is if it cannot be read.
     """
     text = " ".join(str(exc).split())
-    name = text.rsplit(": ", 1)[-1]
-    expected = re.search(r"expecting type '(?:Type\.)?(\w+)'", text)
-    given = getattr(node, "_parameter_overrides", {}).get(name)
-    if given is None or expected is None:
+    found = re.fullmatch(r"Trying to set parameter '(.+?)' to '(.*)' of type '(\w+)', "
+                         r"expecting type '(?:Type\.)?(\w+)': .*", text)
+    if found is None:
         return text
-    return type_refusal(name, given, expected.group(1).lower())
+    name, value, got, expected = found.groups()
+    given = getattr(node, "_parameter_overrides", {}).get(name)
+    if given is not None:
+        return type_refusal(name, given, expected.lower())
+    shown = repr(value) if got == "STRING" else value
+    return (f"parameter {name}={shown}: must be of type {expected.lower()}, got "
+            f"{got.lower()}")
 
 
 #: why a read-only parameter is: the registry's are read at start; ROS's own (qos_overrides.*,
