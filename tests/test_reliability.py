@@ -408,3 +408,17 @@ def test_damaged_bytes_anywhere_give_a_log_error_or_a_recovered_log(small_bag, t
         else:
             outcomes["read"] += 1
     assert outcomes["error"] and outcomes["read"], outcomes
+
+
+@pytest.mark.parametrize("ros_args, culprit", [
+    (["--bogus-flag"], "invalid ROS arguments: unknown ROS arguments ['--bogus-flag']"),
+    (["-p", "use_sim_time:=abc"], "parameter use_sim_time='abc': must be of type bool"),
+])
+@pytest.mark.ros
+def test_replay_refuses_bad_ros_arguments_in_one_line(small_bag, ros_args, culprit):
+    """umbrella_replay's --ros-args that rclpy refuses: exit 2 naming them (a traceback)."""
+    r = tool("replay", str(small_bag), "--ros-args", *ros_args)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"umbrella_replay: error: {culprit}"), \
+        r.stderr
