@@ -69,7 +69,6 @@ def run_through_stage2(params: UmbrellaParams, chunk_steps: int | None = None):
     return driver, np.concatenate(t), np.concatenate(v)
 
 
-@pytest.mark.slow
 def test_the_stage2_series_a_summary_keeps_is_bounded():
     """
     A fine step's stage-2 window: a bounded series for its period, every step for the rest.
