@@ -305,7 +305,7 @@ def test_lock_that_does_not_apply_is_named():
 
 def test_the_default_lock_is_the_one_that_applies_and_rigid_fe_reports_its_zeros():
     """
-    lock auto (the default): energy for the flexible models, plastic for the rigid ones.
+    The default lock, auto: energy for the flexible models, plastic for the rigid ones.
 
     A user who chose no lock gets no 'lock not applicable' warning from a rigid model; rigid-fe
     reports the zero tip deflection and stresses its constraints hold (their round-off,
