@@ -44,6 +44,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from umbrella_sim.core.driver import RunDriver, simulate  # noqa: E402
 from umbrella_sim.core.params import physics_step, UmbrellaParams  # noqa: E402
 from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
+from umbrella_sim.core.step_rule import AUTO_STEP_CEILING  # noqa: E402
 from umbrella_sim.core.step_study import mesh_step  # noqa: E402
 from umbrella_sim.tools.csv_output import StepCsv  # noqa: E402
 
@@ -138,16 +139,18 @@ def main():
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8, 16])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--time-step", type=float, default=UmbrellaParams().time_step)
+    ap.add_argument("--time-step", type=float, default=AUTO_STEP_CEILING,
+                    help="a fixed step for every mesh (default: the one-element mesh's chosen "
+                         "step, 0.1 ms)")
     ap.add_argument("--mesh-step", action="store_true",
-                    help="each mesh at step_study.mesh_step (the default step / N): the step that "
-                         "meets every accuracy target (docs/validation.md), not --time-step")
+                    help="each mesh at the step chosen for it (time_step 0, step_study.mesh_step: "
+                         "docs/validation.md), not --time-step")
     ap.add_argument("--model", default="flexible",
                     choices=("flexible", "flexible-nonlinear", "rigid-fe"))
     ap.add_argument("--damping-ratio", type=float, default=0.0)
     args = ap.parse_args()
     h = physics_step(args.time_step, 1.0 / SAMPLE_PERIOD)
-    steps = ("h = step_study.mesh_step (the default step / N)" if args.mesh_step else
+    steps = ("h = the step chosen for the mesh (time_step 0)" if args.mesh_step else
              f"h = {h:.6g} s ({round(DURATION / h)} steps)")
     cost_targets = COST_TARGETS.get(args.model, {})
     rtf_targets = RTF_TARGETS.get(args.model, {})

@@ -70,19 +70,21 @@ def main():
     ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8])
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--duration", type=float, default=1.0)
-    ap.add_argument("--time-step", type=float, default=UmbrellaParams().time_step)
+    ap.add_argument("--time-step", type=float, default=0.0,
+                    help="s; 0 (default): the step chosen for each model and mesh "
+                         "(step_rule.physics_step_of)")
     ap.add_argument("--v0", type=float, nargs="+", default=[-0.2],
                     help="initial sleeve velocities (m/s); the target is V0 = -0.2's")
     args = ap.parse_args()
     print(f"V0 = {', '.join(f'{v:g}' for v in args.v0)}, t = 0 -> {args.duration:g} s through "
-          f"the lock, h = {args.time_step:g} s, "
+          f"the lock, h = {f'{args.time_step:g} s' if args.time_step else 'chosen per mesh'}, "
           f"best of {args.repeat}, 1 ms blocks; loadavg {os.getloadavg()[0]:.2f} on "
           f"{os.cpu_count()} CPUs")
     print("newton/step 1|2: Newton iterations per step in stage 1 (deploying) | stage 2 (locked)")
     print("RTF = simulated s per second (CPU: process time, what the step costs; wall: what a "
           "loaded machine gave)")
     print(f"{'model':>19} {'zeta':>5} {'V0':>5} {'N':>3} {'dofs':>5} {'backend':>8} "
-          f"{'newton/step 1|2':>15} {'us/step':>8} {'RTF cpu':>8} {'RTF wall':>9} {'target':>9}")
+          f"{'h (us)':>6} {'newton/step 1|2':>15} {'us/step':>8} {'RTF cpu':>8} {'RTF wall':>9} {'target':>9}")
     for v0 in args.v0:
         for n in args.meshes:
             for model, zeta in CASES:
@@ -106,7 +108,7 @@ def bench_case(args, v0, n, model, zeta):
     verdict = ("" if target is None
                else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}")
     print(f"{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} "
-          f"{its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x {rtf_wall:>8.2f}x "
+          f"{sim.h * 1e6:>6.3g} {its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x {rtf_wall:>8.2f}x "
           f"{verdict:>9}")
 
 

@@ -15,6 +15,7 @@ import pytest
 from umbrella_sim.core.control import constant_force_for, DeployLaw, simulate_closed_loop
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import ControllerConfig, physics_step, UmbrellaParams
+from umbrella_sim.core.step_rule import physics_step_of
 from umbrella_sim.testing import NodeProcess, poll, ros_env, summarize_run, summary_from_recording
 
 TARGET = 1.0            # s, deploy time asked of the controller
@@ -93,7 +94,7 @@ def run_summary(result, first_push: float):
 @pytest.fixture(scope="module")
 def constant():
     """Return the constant force deploying in TARGET on the node's grid, and its summary."""
-    params = MODEL.replace(time_step=physics_step(MODEL.time_step, RATE))
+    params = MODEL.replace(time_step=physics_step(physics_step_of(MODEL), RATE))
     force = constant_force_for(params, TARGET)
     run = simulate(params.replace(sleeve_force=force), 3 * TARGET, stop_after_lock=AFTER)
     return force, run_summary(run, 0.0)
@@ -146,6 +147,9 @@ def test_infeasible_target_is_refused_naming_the_parameter():
     (["-p", "l1:=-1.0"], "l1"),
     (["-p", "targt_time:=1.0"], "unknown parameter 'targt_time' (did you mean 'target_time'?)"),
     (["-p", "qos_overrides./sleeve_force.publisher.depth:=5"], "its topics take none"),
+    # the process's own checks (they were tracebacks, exit 1)
+    (["--bogus-flag"], "unknown ROS arguments ['--bogus-flag']"),
+    (["-p", "use_sim_time:=abc"], "parameter use_sim_time='abc': must be of type bool"),
 ])
 @pytest.mark.ros
 def test_controller_refuses_bad_parameters_with_exit_2(args, culprit):

@@ -18,6 +18,7 @@ from std_srvs.srv import SetBool, Trigger
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.solver import UmbrellaSimulator
+from umbrella_sim.core.step_rule import physics_step_of
 from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.testing import NodeProcess, poll, ros_env
 
@@ -320,23 +321,24 @@ def test_node_says_when_physics_cannot_keep_up(probe):
     assert float(values["lag_s"]) > 0.05
 
 
-def test_step_follows_mesh_as_a_node_parameter():
+def test_the_step_chosen_for_the_mesh_on_the_node():
     """
-    Check the node's step with step_follows_mesh: time_step / N, and the offline core's lock.
+    Check the node's step at N = 2: the one chosen for the mesh, and the offline core's lock.
 
-    N = 2 at 1 kHz: 50 us (0.1 ms / 2 divides the period); the lock instant equals the
-    offline simulator's with the same parameters (same grid, same code: 1e-9 s).
+    N = 2 at 1 kHz: 33.3 us (time_step 0: 0.1 ms / 3 leaves 1 % of the stage-2 stress crest
+    to unresolved modes, and divides the period); the lock instant equals the offline
+    simulator's with the same parameters (same grid, same code: 1e-9 s).
     """
-    with NodeProcess("-p", "elements_per_segment:=2", "-p", "step_follows_mesh:=true",
+    with NodeProcess("-p", "elements_per_segment:=2",
                      "-p", "publish_rate:=1000.0", "-p", "record:=false",
                      "-p", "real_time_factor:=0.0", "-p", "duration:=0.3") as node:
         step = float(node.wait_for_log(r"physics step ([0-9.e-]+) s").group(1))
         lock_t = float(node.wait_for_log(r"locked at t = ([0-9.]+) s", timeout=120).group(1))
         assert node.proc.wait(timeout=120) == 0
-    p = UmbrellaParams(elements_per_segment=2, step_follows_mesh=True)
-    assert step == pytest.approx(p.time_step / 2, rel=1e-9)
+    p = UmbrellaParams(elements_per_segment=2)
+    assert step == pytest.approx(physics_step_of(p), rel=1e-8) and step < 1e-4
     sim = UmbrellaSimulator(p)
     while sim.lock_event is None:
         sim.advance(100)
-    assert sim.h == step
+    assert sim.h == pytest.approx(step, rel=1e-8)
     assert lock_t == pytest.approx(sim.lock_event.time, abs=1e-9)

@@ -23,6 +23,7 @@ from tests.ros_helpers import (keep_every_message, main_thread_sleeps, NodeProce
                                Probe, ros_env, signal_and_collect, stamp)
 from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.step_rule import physics_step_of
 from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -123,7 +124,7 @@ def test_log_is_self_describing(live_bag):
     log = read_log(str(live_bag))
     params = log.parameters()
     assert params["v0"] == 0.0 and params["model"] == "flexible"
-    assert params["physics_step"] == pytest.approx(UmbrellaParams().time_step)
+    assert params["physics_step"] == pytest.approx(physics_step_of(UmbrellaParams()))
     build = log.metadata["umbrella_sim.build"]
     assert build["package_version"] and build["git_revision"]
     mesh = log.metadata["umbrella_sim.mesh"]
@@ -520,7 +521,8 @@ def test_a_recording_from_before_the_phase_correction_re_runs_without_it():
     from umbrella_sim.core.params import physics_step
     from umbrella_sim.tools.replay import _segment_inputs
 
-    old = {k: v for k, v in UmbrellaParams().as_dict().items() if k != "phase_correction"}
+    old = {k: v for k, v in UmbrellaParams(time_step=1e-4).as_dict().items()
+           if k != "phase_correction"}
     seg = SimpleNamespace(index=0, offset_ns=0, end_ns=None,
                           params={**old, "publish_rate": 100.0,
                                   "physics_step": physics_step(old["time_step"], 100.0)})

@@ -14,6 +14,7 @@ import sys
 
 from .format import BUILD_RECORD, EVENTS_RECORD, MESH_RECORD, PARAMETERS_RECORD, SUMMARY_RECORD
 from .. import __version__
+from ..core.integrators import INTEGRATOR_REVISION
 
 
 # ------------------------------------------------------------------- provenance
@@ -64,7 +65,7 @@ def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: st
     return {
         PARAMETERS_RECORD: {k: json.dumps(v) for k, v in all_params.items()},
         BUILD_RECORD: {"package_version": __version__, "git_revision": git_revision(),
-                       "kernel": backend, "source": source,
+                       "kernel": backend, "integrator": INTEGRATOR_REVISION, "source": source,
                        "python": sys.version.split()[0], **build_environment()},
         MESH_RECORD: {
             "model": params.model, "lock": params.lock,

@@ -19,10 +19,11 @@
  *     definite: M + h^2/4 K, plus a skew gyroscopic part, so no pivoting is needed) and a
  *     pivoted dense LU of the small Schur complement on the border;
  *   - M(q) is never formed: products M(q) v use the band and a few border vectors;
- *   - stage 2's phase correction (integrators.ModalPhaseCorrection) is a rank-r term
- *     U diag(d) U^T (r = 8 modes at N = 1, 14-16 above) in the residual and the energy;
- *     left out of the constant iteration matrix, it is put back into each Newton update by
- *     Woodbury on the factored matrix of a recent step (phase_correction_prepare).
+ *   - stage 2's mode fit (integrators.LockedModeFit: the phase_correction parameter) maps
+ *     the scheme's velocity w to the physical v = S w, S = I + Phi diag(s - 1) U^T, a rank-r
+ *     change (r = 8 modes at N = 1, 14-16 above) applied by modal sums; its share of the
+ *     tangent, left out of the constant iteration matrix, is put back into each Newton
+ *     update mode by mode (mode_fit_update: LockedModeFit.newton_update).
  * The rigid-FE mode (every elastic coordinate constrained) goes through the same code with
  * a border as large as the mesh, so there it costs what a dense solve costs.
  *
@@ -113,24 +114,21 @@ struct Ctx {
     double *q_s, *v_s, *p_s, *lam_s;  /* single-step results */
     ElasticLaw *law;       /* NULL: U = 1/2 q.K q, undamped; else U, C of the law */
     double dissipated;     /* damping dissipation of the last step (J) */
-    /* stage 2's modal phase correction (integrators.ModalPhaseCorrection): the momentum
-     * gains D v = sum_i d_i u_i (u_i . v), pc_r modes, rows u_i of pc_u (pc_r x n), modal
-     * mass changes d_i in pc_d (the caller's arrays); pc_e_lock: 1/2 v.D v just after the
-     * lock; pc_r = 0: none.  With the linear elastic law too (pc_acts). */
+    /* stage 2's mode fit (integrators.LockedModeFit, the phase_correction parameter): the
+     * step runs in w, v = S w = w + sum_i (s_i - 1) phi_i (u_i . w), with momentum
+     * S^T M(q) S w; pc_r modes, rows u_i = M0 phi_i of pc_u and phi_i of pc_phi (pc_r x n),
+     * scales s_i in pc_sc, the scheme's modal damping less the law's in pc_dc (NULL:
+     * undamped), and each mode's Newton shrink d_i / (block_i + d_i) in pc_shrink (the
+     * caller's arrays: LockedModeFit.newton_shrink);
+     * pc_r = 0: none.  With the linear elastic law too (pc_acts). */
     int pc_r;
-    const double *pc_u, *pc_d;
-    double pc_e_lock;
+    const double *pc_u, *pc_phi, *pc_sc, *pc_dc, *pc_shrink;
     double *pc_s;          /* the modal sums (r <= n) */
-    /* its share of the Newton matrix, put back into each update by Woodbury on the factored
-     * matrix K of a recent step: W = K^-1 [U; 0] (r rows of n + nc), C = (diag(1/d) +
-     * U^T W_q)^-1 (r x r), refreshed every PC_REFRESH_STEPS steps (pc_w_age) */
-    double *pc_w, *pc_cap, *pc_work;
-    int *pc_piv, pc_w_nc, pc_w_age;
-    /* the modal velocities u_i . v of the last projected v (pc_v), and its 1/2 v.D v: the next
-     * step starts from them and the output row reports them; pc_eta_v0, pc_eta_dq: u_i . v0
-     * and u_i . (q - q0) within a step, kept up to date through the Newton updates */
-    double *pc_eta_v, *pc_v, pc_e_v, *pc_eta_v0, *pc_eta_dq;
-    int pc_v_valid;
+    /* rows Mff phi_i and W phi_i (r x n: the band products of S's columns) */
+    double *pc_mphi, *pc_wphi;
+    /* within a step: u_i . w0 and u_i . (q - q0) (kept up to date through the Newton
+     * updates); w0 = S^-1 v0, S^T p0, Mff w0, W w0 */
+    double *pc_eta_w0, *pc_eta_dq, *pc_w0, *pc_sp0, *pc_mw0, *pc_ww0;
     /* cos and sin of the last few angles (cos_sin): a Newton iteration needs alpha1 and
      * alpha2 of q1 and of the midpoint in several functions */
     double trig_a[TRIG_CACHE], trig_c[TRIG_CACHE], trig_s[TRIG_CACHE];
@@ -143,8 +141,8 @@ struct Ctx {
 
 #define ENERGY_RESTORE_LIMIT 1.01   /* integrators.ENERGY_RESTORE_LIMIT */
 
-/* Whether stage 2's phase correction acts on a step or state: it is set at the lock, and
- * never with the rigid-FE constraints or the nonlinear strain (engines' phase_correctable) */
+/* Whether stage 2's mode fit acts on a step: it is set at the lock, and never with the
+ * rigid-FE constraints or the nonlinear strain (engines' phase_correctable) */
 static int pc_acts(const Ctx *x, int locked, int rigid) {
     return locked && !rigid && x->pc_r > 0 && !(x->law && x->law->d.nonlinear);
 }
@@ -642,7 +640,7 @@ static void gonzalez(int n, double *grad, double delta_f, const double *dq, doub
 void umbrella_free(Ctx *x) {
     if (!x) return;
     free(x->hq); free(x->piv); free(x->jrow_idx); free(x->E); free(x->solved_buf);
-    free(x->pc_w); free(x->pc_piv);
+    free(x->pc_eta_w0);
     free(x);
 }
 
@@ -975,13 +973,10 @@ static double state_residual(Ctx *x, const double *q, const double *v, int locke
     return r;
 }
 
-static double phase_correction(const Ctx *x, const double *v, double *y);
-
 /* Velocity projection onto J(q1) v = 0 in the mass metric, then scaled to the kinetic energy
  * t_target of the discrete energy balance (integrators.project_keeping_energy).  Needs
- * mass_data(q1) and the rows J(q1) in jrow_*.  Leaves the momentum M(q1) v in p, plus D v
- * with stage 2's phase correction (pc), whose 1/2 v.D v the balance's T includes. */
-static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_target, int pc) {
+ * mass_data(q1) and the rows J(q1) in jrow_*.  Leaves the momentum M(q1) v in p. */
+static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_target) {
     const Model *m = x->m;
     int ne = x->ne, nb = 4 + nc, n = m->n;
     const int *ei = m->elastic_idx;
@@ -1039,24 +1034,13 @@ static int project_velocity(Ctx *x, int nc, double *v, double *p_out, double t_t
     for (int i = 0; i < n; i++) v[i] += r[i];
     mass_matvec(x, v, p_out);
 scale:;
-    double f = 1.0, pc_e = 0.0;
-    if (pc) {                          /* the momentum (M + D) v, in T of the balance */
-        pc_e = phase_correction(x, v, p_out);
-        for (int j = 0; j < x->pc_r; j++) x->pc_eta_v[j] = x->pc_s[j] / x->pc_d[j];
-    }
     double t_after = 0.0;
     for (int i = 0; i < n; i++) t_after += v[i] * p_out[i];
     t_after *= 0.5;
     if (t_after > 0.0 && t_target >= t_after / ENERGY_RESTORE_LIMIT
         && t_target <= ENERGY_RESTORE_LIMIT * t_after) {
-        f = sqrt(t_target / t_after);
+        double f = sqrt(t_target / t_after);
         for (int i = 0; i < n; i++) { v[i] *= f; p_out[i] *= f; }
-    }
-    if (pc) {
-        for (int j = 0; j < x->pc_r; j++) x->pc_eta_v[j] *= f;
-        x->pc_e_v = pc_e * f * f;
-        memcpy(x->pc_v, v, sizeof(double) * n);
-        x->pc_v_valid = 1;
     }
     return OK;
 }
@@ -1114,123 +1098,87 @@ static void modal_combine(int r, int n, const double *rows, const double *s, dou
     }
 }
 
-/* The stage-2 phase correction's momentum: y += D v (y may be NULL); returns 1/2 v . D v.
- * The modal components d_i (u_i . v) are left in pc_s. */
-static double phase_correction(const Ctx *x, const double *v, double *y) {
-    int n = x->m->n, r = x->pc_r;
-    double e = 0.0, *s = x->pc_s;
-    modal_dots(r, n, x->pc_u, v, s);
-    for (int j = 0; j < r; j++) {
-        double eta = s[j];
-        s[j] = x->pc_d[j] * eta;
-        e += 0.5 * s[j] * eta;
-    }
-    if (y) modal_combine(r, n, x->pc_u, s, 1.0, y);
-    return e;
-}
-
-/* Stage 2's phase correction from now on (r = 0: none); the arrays stay the caller's.
- * Returns 0, or SINGULAR if its Newton buffers cannot be allocated. */
-int umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *d,
-                                  double e_lock) {
-    int len = x->m->n + x->nbmax - 4;     /* n + nc at most */
-    free(x->pc_w);
-    free(x->pc_piv);
-    x->pc_w = NULL;
-    x->pc_piv = NULL;
+/* Stage 2's mode fit from now on (r = 0: none); the arrays stay the caller's (dc may be
+ * NULL: undamped).  Returns 0, or SINGULAR if its buffers cannot be allocated. */
+int umbrella_set_mode_fit(Ctx *x, int r, const double *u, const double *phi, const double *sc,
+                          const double *shrink, const double *dc) {
+    const Model *m = x->m;
+    int n = m->n;
+    free(x->pc_eta_w0);
+    x->pc_eta_w0 = NULL;
     x->pc_r = 0;
     if (r > 0) {
-        x->pc_w = malloc(sizeof(double) * ((size_t)r * len + 2 * (size_t)r * r + len
-                                           + 3 * (size_t)r + x->m->n));
-        x->pc_piv = malloc(sizeof(int) * (size_t)r);
-        if (!x->pc_w || !x->pc_piv) return SINGULAR;
-        x->pc_cap = x->pc_w + (size_t)r * len;      /* LU of C^-1, then C */
-        x->pc_work = x->pc_cap + 2 * (size_t)r * r;
-        x->pc_eta_v = x->pc_work + len;
-        x->pc_eta_v0 = x->pc_eta_v + r;
-        x->pc_eta_dq = x->pc_eta_v0 + r;
-        x->pc_v = x->pc_eta_dq + r;
+        size_t rn = (size_t)r * n;
+        x->pc_eta_w0 = calloc(2 * (size_t)r + 4 * (size_t)n + 2 * rn, sizeof(double));
+        if (!x->pc_eta_w0) return SINGULAR;
+        x->pc_eta_dq = x->pc_eta_w0 + r;
+        x->pc_w0 = x->pc_eta_dq + r;
+        x->pc_sp0 = x->pc_w0 + n;
+        x->pc_mw0 = x->pc_sp0 + n;
+        x->pc_ww0 = x->pc_mw0 + n;
+        x->pc_mphi = x->pc_ww0 + n;               /* zeroed: the band products fill the */
+        x->pc_wphi = x->pc_mphi + rn;             /* elastic entries only */
+        for (int j = 0; j < r; j++)
+            band_matvec2(m, m->mff_band, x->pc_mphi + (size_t)j * n, m->w_band,
+                         x->pc_wphi + (size_t)j * n, phi + (size_t)j * n);
     }
-    x->pc_v_valid = 0;
     x->pc_r = r;
     x->pc_u = u;
-    x->pc_d = d;
-    x->pc_e_lock = e_lock;
-    x->pc_w_nc = -1;        /* W and C are made at the next factored Newton matrix */
+    x->pc_phi = phi;
+    x->pc_sc = sc;
+    x->pc_shrink = shrink;
+    x->pc_dc = dc;
     return OK;
 }
 
-/* The Newton matrix K leaves D out; Woodbury puts it back: (K + [U; 0] diag(d) [U; 0]^T)^-1
- * b = x - W C U^T x_q with x = K^-1 b.  W and C come from the factored K of the step that
- * made them and serve the next PC_REFRESH_STEPS steps (K moves slowly in stage 2: with a
- * K a few steps old Newton converges as with the exact one; the modes of the linearised
- * frame alone, K taken as M0 + h^2/4 K0, cost 0.6 iterations a step more at omega h ~ 1.5). */
-#define PC_REFRESH_STEPS 25
-
-static int phase_correction_prepare(Ctx *x, int nc) {
-    const Model *m = x->m;
-    int n = m->n, r = x->pc_r, len = n + nc;
-    if (x->pc_w_nc == nc && x->pc_w_age < PC_REFRESH_STEPS) return OK;
+/* The Newton update x (n + nc, q-ordered then multipliers) with the fit's share of the
+ * tangent put back mode by mode (LockedModeFit.newton_update): each modal component
+ * g_j = u_j . x_q is shrunk by shrink_j = d_j / (block_j + d_j), d_j the fit's share of the
+ * mode's tangent, block_j the iteration matrix's (1 + (omega_j h)^2 / 4 + h c_j / 2).  The
+ * exact Woodbury correction on the factored matrix took 2.6 Newton iterations a stage-2 step
+ * where this takes 2.06 (N = 1, 2, 4; 2.0 without the fit): the tangent S^T M(q) S is nearer
+ * the modes' own blocks than the factored matrix plus U diag(d) U^T. */
+static void mode_fit_update(Ctx *x, double *upd) {
+    int n = x->m->n, r = x->pc_r;
+    double *g = x->pc_s;
+    modal_dots(r, n, x->pc_u, upd, g);
     for (int j = 0; j < r; j++) {
-        double *w = x->pc_w + (size_t)j * len;
-        memcpy(w, x->pc_u + (size_t)j * n, sizeof(double) * n);
-        memset(w + n, 0, sizeof(double) * nc);
-        arrow_solve_q(x, x->it, nc, w, 0);
+        double shrunk = x->pc_shrink[j] * g[j];
+        x->pc_eta_dq[j] += g[j] - shrunk;          /* u_j . dq gains what is left of g_j */
+        g[j] = shrunk;
     }
-    double *cap = x->pc_cap, *inv = x->pc_work;
-    for (int j = 0; j < r; j++)             /* C^-1 = diag(1/d) + U^T W_q */
-        for (int k = 0; k < r; k++)
-            cap[j * r + k] = dot(n, x->pc_u + (size_t)j * n, x->pc_w + (size_t)k * len)
-                             + (j == k ? 1.0 / x->pc_d[j] : 0.0);
-    if (lu_factor(r, cap, x->pc_piv) != OK) return SINGULAR;
-    double *c = cap + (size_t)r * r;          /* C column-major (c[k r + j] = C_jk), after the LU */
-    for (int k = 0; k < r; k++) {
-        for (int j = 0; j < r; j++) inv[j] = j == k ? 1.0 : 0.0;
-        lu_solve(r, cap, x->pc_piv, inv);
-        memcpy(c + (size_t)k * r, inv, sizeof(double) * r);
-    }
-    x->pc_w_nc = nc;
-    x->pc_w_age = 0;
-    return OK;
+    modal_combine(r, n, x->pc_phi, g, -1.0, upd);
 }
 
-/* The Newton update x (n + nc, q-ordered then multipliers) with D put back (above) */
-static void phase_correction_update(Ctx *x, int nc, double *upd) {
-    int n = x->m->n, r = x->pc_r, len = n + nc;
-    double *s = x->pc_s, *t = x->pc_work;
-    const double *c = x->pc_cap + (size_t)r * r;
-    modal_dots(r, n, x->pc_u, upd, s);
-    /* t = C s, column by column: each t_j summed over k in order, the r sums side by side
-     * (a row-by-row product is one latency-bound chain per row) */
-    for (int j = 0; j < r; j++) t[j] = 0.0;
-    for (int k = 0; k < r; k++) {
-        const double *ck = c + (size_t)k * r;
-        double sk = s[k];
-        for (int j = 0; j < r; j++) t[j] += ck[j] * sk;
-    }
-    /* U^T of the corrected update: s - U^T W_q C s = diag(1/d) C s (C^-1 = diag(1/d) +
-     * U^T W_q), what q gains along the modes */
-    for (int j = 0; j < r; j++) x->pc_eta_dq[j] += t[j] / x->pc_d[j];
-    modal_combine(r, len, x->pc_w, t, -1.0, upd);
-}
-
-/* u_i . v0 at the start of a step: from the projection that made v0, else computed */
-static void phase_correction_start(Ctx *x, const double *v0, double h) {
+/* At the start of a step from (v0, p0 = M(q0) v0), after Mff v0 and W v0 (x->mv0, wv0):
+ * w0 = S^-1 v0 (u_i . S^-1 v = u_i . v / s_i) with Mff w0 and W w0, S^T p0, and u_i . dq of
+ * the predictor dq = h w0 */
+static void mode_fit_start(Ctx *x, const double *v0, const double *p0, double h) {
     int n = x->m->n, r = x->pc_r;
-    if (x->pc_v_valid && memcmp(v0, x->pc_v, sizeof(double) * n) == 0)
-        memcpy(x->pc_eta_v0, x->pc_eta_v, sizeof(double) * r);
-    else
-        modal_dots(r, n, x->pc_u, v0, x->pc_eta_v0);
-    for (int j = 0; j < r; j++) x->pc_eta_dq[j] = h * x->pc_eta_v0[j];   /* dq = h v0 */
+    double *c = x->pc_s;
+    modal_dots(r, n, x->pc_u, v0, x->pc_eta_w0);
+    for (int j = 0; j < r; j++) {
+        double eta_v = x->pc_eta_w0[j];
+        c[j] = (1.0 / x->pc_sc[j] - 1.0) * eta_v;
+        x->pc_eta_w0[j] = eta_v / x->pc_sc[j];
+        x->pc_eta_dq[j] = h * x->pc_eta_w0[j];
+    }
+    memcpy(x->pc_w0, v0, sizeof(double) * n);
+    memcpy(x->pc_mw0, x->mv0, sizeof(double) * n);
+    memcpy(x->pc_ww0, x->wv0, sizeof(double) * n);
+    modal_combine(r, n, x->pc_phi, c, 1.0, x->pc_w0);
+    modal_combine(r, n, x->pc_mphi, c, 1.0, x->pc_mw0);
+    modal_combine(r, n, x->pc_wphi, c, 1.0, x->pc_ww0);
+    modal_dots(r, n, x->pc_phi, p0, c);               /* S^T p0 = p0 + U diag(s-1) Phi^T p0 */
+    for (int j = 0; j < r; j++) c[j] *= x->pc_sc[j] - 1.0;
+    memcpy(x->pc_sp0, p0, sizeof(double) * n);
+    modal_combine(r, n, x->pc_u, c, 1.0, x->pc_sp0);
 }
 
-/* D v1 into y (the momentum of the Newton iterate), v1 = 2 dq / h - v0, from the tracked
- * modal components */
-static void phase_correction_iterate(Ctx *x, double two_h, double *y) {
-    int n = x->m->n, r = x->pc_r;
-    double *s = x->pc_s;
-    for (int j = 0; j < r; j++) s[j] = x->pc_d[j] * (two_h * x->pc_eta_dq[j] - x->pc_eta_v0[j]);
-    modal_combine(r, n, x->pc_u, s, 1.0, y);
+/* The modal sums c_j = (s_j - 1) u_j . w1 of the iterate, w1 = 2 dq / h - w0 */
+static void mode_fit_sums(Ctx *x, double two_h) {
+    for (int j = 0; j < x->pc_r; j++)
+        x->pc_s[j] = (x->pc_sc[j] - 1.0) * (two_h * x->pc_eta_dq[j] - x->pc_eta_w0[j]);
 }
 
 /* One step from (q0, v0, lam0, p0) of length h; results in x->q_s, v_s, lam_s, p_s. */
@@ -1270,18 +1218,11 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     x->it = lagged ? kept : fresh;
     x->it_kept = 0;
     factored = lagged;
-    int pc = pc_acts(x, locked, rigid);    /* stage 2's phase correction */
-    if (pc) {
-        x->pc_w_age++;
-        phase_correction_start(x, v0, h);
-    }
+    int pc = pc_acts(x, locked, rigid);    /* stage 2's mode fit */
     double alpha = 1.0, f_base = INFINITY;
     double half_h2 = 0.5 * h * h, two_h = 2.0 / h;   /* v1 = 2 dq / h - v0 */
     constraints(x, q0, locked, rigid, phi0);
     double y0 = sleeve_height(x, q0);
-    for (int i = 0; i < n; i++) q[i] = q0[i] + h * v0[i];
-    /* a predictor outside the law's coordinates (a slope |theta| >= 1) starts from q0 */
-    if (nonlinear_law && !elastic_admissible(law, q)) memcpy(q, q0, sizeof(double) * n);
     memcpy(lam, lam0, sizeof(double) * nc);
     double last_norm = INFINITY, step_norm = 0.0;
     int converged = 0;
@@ -1295,11 +1236,24 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         x->q0_products = 1;
     }
     band_matvec2(m, m->mff_band, x->mv0, m->w_band, x->wv0, v0);
+    /* the iterate's velocity v1 = 2 dq / h - w0 (w0 = v0 without the fit), with its Mff and W
+     * products; with the fit then v1 = S w1, p0s = S^T p0 */
+    const double *w0 = v0, *mw0 = x->mv0, *ww0 = x->wv0, *p0s = p0;
+    if (pc) {
+        mode_fit_start(x, v0, p0, h);
+        w0 = x->pc_w0;
+        mw0 = x->pc_mw0;
+        ww0 = x->pc_ww0;
+        p0s = x->pc_sp0;
+    }
+    for (int i = 0; i < n; i++) q[i] = q0[i] + h * w0[i];   /* predictor: w0 held */
+    /* a predictor outside the law's coordinates (a slope |theta| >= 1) starts from q0 */
+    if (nonlinear_law && !elastic_admissible(law, q)) memcpy(q, q0, sizeof(double) * n);
     for (it = 1; it <= max_iter; it++) {
         for (int i = 0; i < n; i++) {
             dq[i] = q[i] - q0[i];
             qm[i] = q0[i] + 0.5 * dq[i];
-            v1[i] = dq[i] * two_h - v0[i];
+            v1[i] = dq[i] * two_h - w0[i];
         }
         double dd = dot(n, dq, dq);
         /* Mff, W, K of q = q0 + dq, qm = q0 + dq / 2 and v1 = 2 dq / h - v0 */
@@ -1311,18 +1265,30 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             x->maf[i] = x->wq0[i] + wd;
             x->hm[i] = m->c_full[i] + (x->mq0[i] + 0.5 * md);
             x->kq[i] = x->kq0[i] + 0.5 * x->kdq[i];
-            x->mffv[i] = md * two_h - x->mv0[i];
-            x->wb[i] = wd * two_h - x->wv0[i];
+            x->mffv[i] = md * two_h - mw0[i];
+            x->wb[i] = wd * two_h - ww0[i];
+        }
+        if (pc) {                  /* v1 = S w1: the physical velocity, and its products */
+            mode_fit_sums(x, two_h);
+            modal_combine(x->pc_r, n, x->pc_phi, x->pc_s, 1.0, v1);
+            modal_combine(x->pc_r, n, x->pc_mphi, x->pc_s, 1.0, x->mffv);
+            modal_combine(x->pc_r, n, x->pc_wphi, x->pc_s, 1.0, x->wb);
         }
         mass_data_from_products(x, q);
         constraints(x, q, locked, rigid, phi);
         if (law) elastic_force(law, q0, q, h, x->kdq, x->kq);   /* + the rest of G_U, C dq / h */
         bilinear_gradient(x, qm, v0, v1, x->hm, x->wv0, x->wb, x->gt);
         mass_matvec_pre(x, v1, x->mffv, x->mv);
-        if (pc) phase_correction_iterate(x, two_h, x->mv);   /* the momentum (M(q1) + D) v1 */
-        /* f = 1/2 v0^T M(q) v1: f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1), M symmetric (with
-         * the phase correction p0 and mv both hold D: its share, 1/2 (v0.D v1 - D v0.v1), is 0) */
+        /* f = 1/2 v0^T M(q) v1 (physical velocities): f(q1) - f(q0) = 1/2 (v0^T M1 v1 - p0 . v1),
+         * M symmetric */
         double df = 0.5 * (dot(n, v0, x->mv) - dot(n, p0, v1));
+        if (pc) {                  /* the scheme's momentum S^T M(q1) v1 */
+            modal_dots(x->pc_r, n, x->pc_phi, x->mv, x->pc_s);
+            for (int j = 0; j < x->pc_r; j++) x->pc_s[j] *= x->pc_sc[j] - 1.0;
+            if (x->pc_dc)          /* + h times the fit's damping change U diag(c_w - c) U^T dq / h */
+                for (int j = 0; j < x->pc_r; j++) x->pc_s[j] += x->pc_dc[j] * x->pc_eta_dq[j];
+            modal_combine(x->pc_r, n, x->pc_u, x->pc_s, 1.0, x->mv);
+        }
         gonzalez(n, x->gt, df, dq, dd);
         sleeve_gradient(x, qm, x->gy);
         gonzalez(n, x->gy, sleeve_height(x, q) - y0, dq, dd);
@@ -1338,7 +1304,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         for (int r = 0; r < nc; r++)
             for (int k = 0; k < JW; k++) res[x->jm_idx[r * JW + k]] += x->jm_val[r * JW + k] * lam[r];
         for (int i = 0; i < n; i++)
-            res[i] = x->mv[i] - p0[i] - h * (x->gt[i] - x->kq[i] - force * x->gy[i] + res[i]);
+            res[i] = x->mv[i] - p0s[i] - h * (x->gt[i] - x->kq[i] - force * x->gy[i] + res[i]);
         if (nonlinear_law) {
             double fn = 0.25 * h * h * dot(n, res, res);
             for (int r = 0; r < nc; r++) fn += phi[r] * phi[r];
@@ -1358,12 +1324,11 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             x->it = fresh;
             if (factor_iteration_matrix(x, h, nc) != OK) { status = SINGULAR; goto done; }
             factored = refactored = 1;
-            if (pc && phase_correction_prepare(x, nc) != OK) { status = SINGULAR; goto done; }
         }
         for (int i = 0; i < n; i++) rhs[i] = -0.5 * h * res[i];
         for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
         arrow_solve_q(x, x->it, nc, rhs, 0);
-        if (pc) phase_correction_update(x, nc, rhs);
+        if (pc) mode_fit_update(x, rhs);
         if (nonlinear_law) {
             memcpy(law->q_base, q, sizeof(double) * n);
             memcpy(law->lam_base, lam, sizeof(double) * nc);
@@ -1389,7 +1354,15 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         last_norm = step_norm;
     }
     if (!converged) { status = NO_CONVERGENCE; goto done; }
-    for (int i = 0; i < n; i++) v[i] = (q[i] - q0[i]) * two_h - v0[i];
+    for (int i = 0; i < n; i++) {
+        dq[i] = q[i] - q0[i];
+        v[i] = dq[i] * two_h - w0[i];
+    }
+    if (pc) {                      /* v = S w1, from u . dq of the step taken */
+        modal_dots(x->pc_r, n, x->pc_u, dq, x->pc_eta_dq);
+        mode_fit_sums(x, two_h);
+        modal_combine(x->pc_r, n, x->pc_phi, x->pc_s, 1.0, v);
+    }
     jacobian(x, q, locked, rigid, x->jrow_idx, x->jrow_val);
     /* the products of q1, direct: the next step's q0 products (bitwise what it would compute) */
     band_matvec3(m, m->mff_band, x->mq1, m->w_band, x->wq1, k_band, x->kq1, q);
@@ -1402,13 +1375,16 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         x->dissipated = elastic_dissipation(law, q0, q, h);
         /* U(q0) first: kept from the step before; U(q1) then keeps q1's strains */
         double u0 = elastic_energy(law, q0, x->kq0);
+        if (pc && x->pc_dc)        /* the fit's damping change: dq.U diag(c_w - c) U^T dq / h */
+            for (int j = 0; j < x->pc_r; j++)
+                x->dissipated += x->pc_dc[j] * x->pc_eta_dq[j] * x->pc_eta_dq[j] / h;
         t_target += u0 - elastic_energy(law, q, x->kq1) - x->dissipated;
     } else {
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target += 0.5 * q0[i] * x->kq0[i]; }
         for (int p = 0; p < ne; p++) { int i = ei[p]; t_target -= 0.5 * q[i] * x->kq1[i]; }
     }
     for (int i = 0; i < n; i++) t_target += 0.5 * v0[i] * p0[i];
-    if (project_velocity(x, nc, v, x->p_s, t_target, pc) != OK) { status = SINGULAR; goto done; }
+    if (project_velocity(x, nc, v, x->p_s, t_target) != OK) { status = SINGULAR; goto done; }
     if (carry && nonlinear_law) {
         x->carry_slot = (int)(x->it - x->slot);
         x->carry_age = refactored ? 0 : x->it->age + 1;
@@ -1447,7 +1423,6 @@ int umbrella_step(Ctx *x, int locked, int rigid,
     else {
         mass_data(x, q0);
         mass_matvec(x, v0, p0);
-        if (pc_acts(x, locked, rigid)) phase_correction(x, v0, p0);
     }
     int status = step(x, locked, rigid, q0, v0, lam0, p0, h, force, tol, phi_tol,
                       max_iter, 1, iterations);
@@ -1468,12 +1443,14 @@ void umbrella_set_law(Ctx *x, ElasticLaw *law) {
     x->fiter.h = -1.0;    /* its band is the law's from now on */
 }
 
-/* the momentum of a state: M(q) v, plus D v once stage 2's phase correction is on (it is
- * set at the lock) */
+double umbrella_dissipated(const Ctx *x) {
+    return x->dissipated;
+}
+
+/* the momentum of a state: M(q) v */
 void umbrella_momentum(Ctx *x, const double *q, const double *v, double *p) {
     mass_data(x, q);
     mass_matvec(x, v, p);
-    if (pc_acts(x, 1, 0)) phase_correction(x, v, p);   /* set at the lock: stage 2 */
 }
 
 /* ------------------------------------------------------------------- outputs */
@@ -1673,15 +1650,9 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         x->pk_sig1 = x->pk_sig; x->pk_sig = sig;
         x->pk_rate1 = x->pk_rate; x->pk_rate = rate;
     }
-    double ke = 0.0, pc_e = 0.0;
+    double ke = 0.0;
     for (int i = 0; i < n; i++) ke += v[i] * p[i];
-    ke *= 0.5;
-    /* stage 2's phase correction: p = (M + D) v; T reported without 1/2 v.D v, which is the
-     * correction's own energy less its value just after the lock (F_PC_ENERGY: 0 there) */
-    if (pc_acts(x, stage == 1, 0))      /* (rigid-FE never has one) */
-        pc_e = x->pc_v_valid && memcmp(v, x->pc_v, sizeof(double) * n) == 0
-               ? x->pc_e_v : phase_correction(x, v, NULL);
-    SET(F_KINETIC, ke - pc_e);
+    SET(F_KINETIC, 0.5 * ke);
     double se = 0.0;
     if (x->law) se = elastic_energy(x->law, q, kq_known);
     else {
@@ -1699,7 +1670,6 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
     SET(F_STRAIN, se);
     SET(F_WORK, acc[0]);
     SET(F_LOCK_LOSS, acc[1]);
-    SET(F_PC_ENERGY, pc_acts(x, stage == 1, 0) ? pc_e - x->pc_e_lock : 0.0);
 #undef SET
 }
 
@@ -1726,7 +1696,6 @@ static void sample_vector(const Model *m, const double *row, size_t stride, cons
     out[S_KINETIC] = ROW(F_KINETIC);
     out[S_STRAIN] = ROW(F_STRAIN);
     out[S_RESIDUAL] = ROW(F_RESIDUAL);
-    out[S_PC_ENERGY] = ROW(F_PC_ENERGY);
 #undef ROW
     memcpy(out + N_SAMPLE, sig, sizeof(double) * 2 * npts);
 }

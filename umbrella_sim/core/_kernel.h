@@ -22,7 +22,7 @@
 
 /* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
  * reordered, a function's arguments changed). */
-#define UMBRELLA_ABI_VERSION 1
+#define UMBRELLA_ABI_VERSION 3
 
 /* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
  * exported. */
@@ -70,7 +70,6 @@ enum { UMBRELLA_STATUS_CODES(UMBRELLA_STATUS_ENTRY) N_STATUS };
     X(STRAIN, strain_energy) \
     X(WORK, work) \
     X(LOCK_LOSS, lock_energy_loss) \
-    X(PC_ENERGY, phase_correction_energy) \
     X(ALPHA2, alpha2) \
     X(ALPHA2_RATE, alpha2_rate) \
     X(ALPHA1_ACCEL, alpha1_accel) \
@@ -106,8 +105,7 @@ enum { UMBRELLA_STEP_FIELDS(UMBRELLA_STEP_ENTRY) N_FIELDS };
     X(REACTION_Y, sleeve_reaction_y) \
     X(KINETIC, kinetic_energy) \
     X(STRAIN, strain_energy) \
-    X(RESIDUAL, constraint_residual) \
-    X(PC_ENERGY, phase_correction_energy)
+    X(RESIDUAL, constraint_residual)
 #define UMBRELLA_SAMPLE_ENTRY(name, py) S_##name,
 enum { UMBRELLA_SAMPLE_FIELDS(UMBRELLA_SAMPLE_ENTRY) N_SAMPLE };
 
@@ -224,16 +222,21 @@ UMBRELLA_API int umbrella_abi(int *figures, int n);
 UMBRELLA_API Ctx *umbrella_new(const Model *m);
 UMBRELLA_API void umbrella_free(Ctx *x);
 
-/* Stage 2's modal phase correction (integrators.ModalPhaseCorrection) from now on: r modes,
- * rows u (r x n), modal mass changes d, 1/2 v.D v just after the lock (the arrays stay the
- * caller's); r = 0: none.  OK, or SINGULAR if its buffers cannot be allocated. */
-UMBRELLA_API int umbrella_set_phase_correction(Ctx *x, int r, const double *u, const double *d,
-                                               double e_lock);
+/* Stage 2's mode fit (integrators.LockedModeFit) from now on: r modes, rows u = M0 phi and
+ * phi (r x n), velocity scales s, each mode's Newton shrink, the modal damping change dc
+ * (NULL: undamped); the arrays stay the caller's; r = 0: none.  OK, or SINGULAR if its
+ * buffers cannot be allocated. */
+UMBRELLA_API int umbrella_set_mode_fit(Ctx *x, int r, const double *u, const double *phi,
+                                       const double *s, const double *shrink, const double *dc);
 
 /* Step with this elastic law (NULL: the constant K, undamped). */
 UMBRELLA_API void umbrella_set_law(Ctx *x, ElasticLaw *law);
 
-/* p = M(q) v, plus D v once stage 2's phase correction is set. */
+/* The damping dissipation of the last step taken (J): the elastic law's, and stage 2's mode
+ * fit's share. */
+UMBRELLA_API double umbrella_dissipated(const Ctx *x);
+
+/* p = M(q) v. */
 UMBRELLA_API void umbrella_momentum(Ctx *x, const double *q, const double *v, double *p);
 
 /* One step of length h from (q0, v0, lam0, p0 = M(q0) v0 or NULL) into (q, v, lam, p1). */

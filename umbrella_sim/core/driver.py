@@ -35,6 +35,7 @@ from .forcing import command_force, ForceSchedule
 from .outputs import build_frozen, LockEvent, Sample, StepBlock
 from .params import physics_step, UmbrellaParams
 from .solver import UmbrellaSimulator
+from .step_rule import physics_step_of
 from .summary import RunResult, SummaryAccumulator
 
 #: the work of one chunk, in coordinate-steps of the linear model (a nonlinear step counts
@@ -86,7 +87,7 @@ class RunDriver:
                  force_profile: Iterable[tuple[float, float]] | ForceSchedule | None = None,
                  chunk_steps: int | None = None):
         if publish_rate is not None:
-            step = physics_step(params.physics_time_step, publish_rate)
+            step = physics_step(physics_step_of(params), publish_rate)
             period_steps = round((1.0 / publish_rate) / step)
             params = params.with_physics_step(step)
         elif period_steps is not None and not (isinstance(period_steps, int)

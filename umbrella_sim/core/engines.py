@@ -18,10 +18,12 @@ import numpy as np
 from .integrators import MidpointDAE, newton_tolerance
 from .kernel import (ADVANCE_CROSSING, ADVANCE_DIVERGED, ADVANCE_DONE, ALPHA1_AXLE, AXLE_REASON,
                      DynamicState)
+from .lock import energy_velocity, LockImpossible
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import LockEvent, STEP_FIELDS, step_peaks
 from .params import UmbrellaParams
 from .rigid import RigidMechanism
+from .step_rule import physics_step_of, stage2_resolution
 
 #: the row of each STEP_FIELDS name
 _STEP_ROW = {name: row for row, name in enumerate(STEP_FIELDS)}
@@ -92,10 +94,6 @@ class Engine(abc.ABC):
         """V (J)."""
         return float(self.model.strain_energy(self.fe_state(s)[0]))
 
-    def phase_correction_energy(self, s: DynamicState, stage: Stage) -> float:
-        """Return the integrator's correction term of the balance (J; outputs.Sample), 0 here."""
-        return 0.0
-
     @abc.abstractmethod
     def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
         """Force on the sleeve from the axle (X) and the stop (Y), N."""
@@ -150,11 +148,12 @@ class FiniteElementEngine(Engine):
     def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
         self.model = model
         self.rigid = params.model == "rigid-fe"
-        self.lock_kind = "plastic" if self.rigid else params.lock
+        self.lock_kind = params.lock_rule
         self.integrator = self._integrator(model)
-        self.integrator.tolerance = newton_tolerance(params.physics_time_step)
-        if params.phase_correction and self.phase_correctable:   # ModalPhaseCorrection
-            self.integrator.correct_stage2_phase(params.physics_time_step)
+        self.h = physics_step_of(params)
+        self.integrator.tolerance = newton_tolerance(self.h)
+        if params.phase_correction and self.phase_correctable:   # LockedModeFit
+            self.integrator.fit_stage2_modes(self.h)
         self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
                     for stage in Stage}
 
@@ -164,7 +163,7 @@ class FiniteElementEngine(Engine):
 
     @property
     def phase_correctable(self) -> bool:
-        """Stage 2 takes ModalPhaseCorrection: its elastic coordinates vibrate (not rigid-FE)."""
+        """Stage 2 takes LockedModeFit: its elastic coordinates vibrate (not rigid-FE)."""
         return not self.rigid
 
     @property
@@ -234,23 +233,14 @@ class FiniteElementEngine(Engine):
         return s.q, s.qd, s.qdd
 
     def kinetic_energy(self, s: DynamicState, stage: Stage) -> float:
-        # the step leaves its momentum in the state: T = 1/2 qd . p without re-assembling M
-        # (p = (M + D) qd with the stage-2 phase correction, whose 1/2 qd . D qd is its own
-        # term: phase_correction_energy)
+        # the step leaves its momentum M(q) qd in the state: T = 1/2 qd . p without
+        # re-assembling M
         if s.momentum is not None:
-            pc = self.integrator.stage2_correction(self._cs[stage])
-            t = float(0.5 * s.qd @ s.momentum)
-            return t if pc is None else t - pc.energy(s.qd)
+            return float(0.5 * s.qd @ s.momentum)
         return float(self.model.kinetic_energy(s.q, s.qd))
 
     def strain_energy(self, s: DynamicState, stage: Stage) -> float:
         return self.integrator.strain_energy(s.q, self._cs[stage])
-
-    def phase_correction_energy(self, s: DynamicState, stage: Stage) -> float:
-        # the modified modal masses' 1/2 qd . D qd less its value just after the lock: in the
-        # energy the integrator keeps, not in T or V (a damped frame at rest keeps it)
-        pc = self.integrator.stage2_correction(self._cs[stage])
-        return 0.0 if pc is None else pc.energy(s.qd) - pc.lock_energy
 
     def sleeve_reaction(self, s: DynamicState, stage: Stage) -> tuple[float, float]:
         lam = s.multipliers
@@ -271,51 +261,17 @@ class FiniteElementEngine(Engine):
         before = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
         free: tuple = ()
         if self.lock_kind == "energy":
-            qd, free = self._energy_redistribution(s.q, s.qd, cs)
+            try:
+                qd, free = energy_velocity(m, s.q, s.qd, cs)
+            except LockImpossible as exc:
+                raise SimulationDiverged(str(exc)) from None
         else:
             qd = self.integrator.project_velocity(s.q, s.qd, cs)
         s = self.integrator.with_constraints(replace(s, qd=qd), force, cs)
         after = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
-        self.integrator.lock_at(s.qd)
-        return s, LockEvent(s.t, self.lock_kind, float(before), float(after), free)
-
-    def _energy_redistribution(self, q, qd, cs):
-        """
-        Redistribute the velocities at the lock, keeping the kinetic energy.
-
-        Thesis 5.2.2 for any mesh: only the rigid velocities (R2x', R2y', alpha1',
-        alpha2') and the link's axial velocity at H change; they satisfy J2 qd = 0 (5.36-5.39)
-        and keep the kinetic energy (5.35).  Of the two energy roots, the one closest to the
-        pre-lock velocities in the mass metric is taken.
-        """
-        m = self.model
-        free = [m.i_alpha1, m.i_r2x, m.i_r2y, m.i_alpha2, m.i_u_sleeve]
-        fixed = np.setdiff1d(np.arange(m.n), free)
-        jac = m.constraint_jacobian(q, cs)
-        a_free = jac[:, free]
-        rhs = -jac[:, fixed] @ qd[fixed]
-        particular = np.linalg.lstsq(a_free, rhs, rcond=None)[0]
-        null = np.linalg.svd(a_free)[2][-1]
-        base = qd.copy()
-        base[free] = particular
-        z = np.zeros(m.n)
-        z[free] = null
-        mass = m.mass_matrix(q)
-        t_target = 0.5 * qd @ mass @ qd
-        a = 0.5 * z @ mass @ z
-        b = z @ mass @ base
-        c = 0.5 * base @ mass @ base - t_target
-        disc = b * b - 4 * a * c
-        if disc < 0.0:
-            raise SimulationDiverged("energy lock impossible: the kinetic energy before the lock "
-                                     "is below the least energy compatible with the lock "
-                                     f"({c + t_target - b * b / (4 * a):.6g} J > "
-                                     f"{t_target:.6g} J)")
-        roots = [(-b + sgn * math.sqrt(disc)) / (2 * a) for sgn in (1.0, -1.0)]
-        candidates = [base + r * z for r in roots]
-        best = min(candidates, key=lambda v: (v - qd) @ mass @ (v - qd))
-        labels = m.coordinate_labels()
-        return best, tuple(labels[i] for i in free)
+        self.integrator.lock_at()
+        resolution = None if self.rigid else stage2_resolution(m, s.q, s.qd, self.h)
+        return s, LockEvent(s.t, self.lock_kind, float(before), float(after), free, resolution)
 
 
 class RigidEngine(Engine):
@@ -443,7 +399,7 @@ class RigidEngine(Engine):
             values = (*peaks, *m.reference_stresses(zero[0][0], zero[1][0]))
             self._zeros = dict(zip(names, (float(v) for v in values)),
                                tip_axial=0.0, tip_transverse=0.0, strain_energy=0.0,
-                               phase_correction_energy=0.0, damping_dissipation=0.0)
+                               damping_dissipation=0.0)
         return self._zeros
 
     def _check(self, y, res: float) -> str | None:

@@ -21,10 +21,10 @@ Each step solves the nonlinear residual with Newton's method; the iteration matr
 M + h^2/4 K + h/2 G (G the gyroscopic tangent) is factored once per step.
 
 In stage 2 the midpoint rule's one systematic error, the period of every mode lengthened by
-~(omega h)^2 / 12, is removed from the locked frame's resolved modes
-(``ModalPhaseCorrection``: the frequency pre-warping of the bilinear transform): over 0.5 s of
-stage 2 the modes at 1-5e3 rad/s (a few mm at the tip) otherwise drift out of phase at any
-real-time step.
+~(omega h)^2 / 12 (and its damping ratio scaled by sinc(omega h / 2)^2), is removed from the
+locked frame's resolved modes (``LockedModeFit``: each mode exact in phase, amplitude and
+damping, the physical energy still conserved): over 0.5 s of stage 2 the modes at
+1-5e3 rad/s (a few mm at the tip) otherwise drift out of phase at any real-time step.
 
 The product path is the compiled kernel (``_kernel.c``, bound by kernel.py; installation
 requires a C compiler): ``CompiledKernel.advance`` runs many steps and their outputs per call,
@@ -45,6 +45,7 @@ import numpy as np
 
 from .kernel import (CompiledKernel, ConvergenceError, DynamicState, kernel_error, kernel_refusal,
                      LIBRARY, load_kernel)
+from .lock import plastic_velocity
 from .model import ConstraintSet, UmbrellaModel
 
 #: constraint residual the Newton iteration must reach before it stops (m)
@@ -72,84 +73,119 @@ def newton_tolerance(h: float) -> float:
     return min(1e-8, max(NEWTON_TOLERANCE, 1e-8 * (h / 1e-4) ** 3))
 
 
-#: modes whose period the stage-2 correction makes exact: omega h at most this, i.e. modes the
-#: step samples at least ~4 times a period (pi / 2 = 1.57).  Beyond, the modal mass that makes
-#: the period exact falls fast (to 0 at omega h = pi): 65 % of the mode's at 1.5, 17 % at 2.5.
-#: A sampling rule, not a fit: over the 12 cases of the step study (docs/validation.md) at
-#: 0.1 ms, limits 0.5, 0.7, 1.0 put the tip series at up to 2-4 mm, and the number of cases
-#: whose stage-2 peaks are within 3 % moves non-monotonically with the limit (0.5 .. 3.0:
-#: 5, 6, 6, 9 at 1.5, then 7, 7, 11, 8, 8), as a crest of modes the step does not resolve
-#: happens to line up or not.
+#: what integrates a run, for its recording: a re-simulation by an integrator of another
+#: revision differs in the physics (here: stage 2, whose modified modal masses of earlier
+#: revisions became the mode fit), not in round-off
+INTEGRATOR_REVISION = "midpoint-dae, stage-2 locked-mode fit"
+
+#: modes the stage-2 fit makes exact: omega h at most this, i.e. modes the step samples at
+#: least ~4 times a period (pi / 2 = 1.57).  Beyond, the scheme's modal mass s^2 that makes
+#: the period exact falls fast (to 0 at omega h = pi, the Nyquist limit): s^2 = 0.65 at 1.5,
+#: 0.17 at 2.5.  A mode past it is not resolved by the step, whatever the scheme: the
+#: stage-2 stress check (summary.stage2_resolution) says how much of the stage-2 stress such
+#: modes carry.
 PHASE_CORRECTION_LIMIT = 1.5
 
 
-class ModalPhaseCorrection:
+class LockedModeFit:
     """
-    The stage-2 midpoint rule with the locked frame's resolved modes at their exact period.
+    Stage 2 with the locked frame's resolved modes exact in phase, amplitude and damping.
 
-    The midpoint rule turns a mode x'' = -omega^2 x by Omega h per step, with
-    tan(Omega h / 2) = omega h / 2: the period grows by ~(omega h)^2 / 12 (2e-3 at 1.6e3 rad/s
-    and 0.1 ms, a radian of phase over 0.5 s).  Giving the mode the modal mass
-    (omega / omega')^2, omega' = 2 / h tan(omega h / 2), instead of 1 (mass-normalised) makes
-    Omega = omega: the frequency pre-warping of the bilinear transform (Tustin), put into the
-    mass rather than the stiffness, so that a mode's quasi-static response (what the frame's
-    large, nonlinear motion drives at low frequency) keeps its stiffness; pre-warping the
-    stiffness instead stiffens it by (omega' / omega)^2 - 1, which at 0.1 ms put the tip series
-    of V0 = -0.5 off by up to 2.3 mm where the mass version keeps 1.2 mm (docs/validation.md).
+    The midpoint rule turns an undamped mode x'' = -omega^2 x by Omega h per step, with
+    tan(Omega h / 2) = omega h / 2: the period grows by ~(omega h)^2 / 12 (2e-3 at
+    1.6e3 rad/s and 0.1 ms, a radian of phase over 0.5 s).  The fit integrates with a
+    velocity w whose map to the physical velocity is, mode by mode, v = s w:
+
+        S = I + Phi diag(s - 1) U^T,   U = M0 Phi,   v = S w,
+
+    and takes the energy-consistent midpoint step (Gonzalez discrete gradients) of the
+    Lagrangian 1/2 w^T S^T M(q) S w - V(q) with q' = w.  Its discrete energy is
+    1/2 (S w)^T M(q) (S w) + V = T + V, the physical energy, conserved to round-off with
+    F_H = 0 (and balanced against the work otherwise), for the full nonlinear frame.  On a
+    mode of the locked frame the step is the midpoint rule of a modal mass s^2, stiffness
+    omega^2 and damping c_w, whose eigenvalues are those of the exact flow over h when
+
+        s^2 = (omega h)^2 / (mu+ mu-),   c_w = -s^2 (mu+ + mu-) / h,   mu = 2 tanh(lambda h / 2)
+
+    (the midpoint rule is the Cayley map z = (1 + mu/2) / (1 - mu/2) of mu = h lambda;
+    lambda+- the roots of lambda^2 + 2 zeta omega lambda + omega^2, zeta the mode's damping
+    ratio c / (2 omega), c = phi^T C phi of the elastic law's damping).  Undamped:
+    s = omega / omega', omega' = 2 / h tan(omega h / 2): the frequency pre-warping of the
+    bilinear transform (Tustin), here put into the modal mass, with the velocity mapped back
+    so that the mode's energy, hence its amplitude, is the physical one.  Damped: the decay
+    per step is exactly exp(-zeta omega h) too (the plain midpoint rule scales a damping
+    ratio by sinc(omega h / 2)^2, -8 % at omega h = 1).  The state the step hands on is
+    physical (q, v = S w, M(q) v): the lock, the outputs and every consumer see physical
+    velocities; w lives inside a step.
+
     The modes are those of the locked frame linearised at full deployment
-    (``UmbrellaModel.locked_modes``, mass-normalised phi), for omega h <=
-    PHASE_CORRECTION_LIMIT; the kinetic energy gains
-
-        1/2 v^T D v,   D = U diag(d) U^T,   U = M0 phi,   d_i = (omega_i / omega'_i)^2 - 1,
-
-    d_i in (-1, 0], ~ -(omega_i h)^2 / 6: the momentum is (M(q) + D) v, and the scheme keeps
-    its exact balance of T + 1/2 v^T D v + V (the correction vanishes as h -> 0: consistent,
-    still second order).  Reported: the kinetic energy T, and the correction's 1/2 v^T D v
-    less its value just after the lock in the strain energy, so that the energy figures are
-    continuous through the lock.  The grid step h is the simulator's: the lock's part step
-    uses it too.  For the linear strain only (engines' ``phase_correctable``): with the von
-    Karman strain the axial coordinates follow the foreshortening of the bending, far from the
-    linearisation.
+    (``UmbrellaModel.locked_modes``, mass-normalised phi) with omega h <=
+    PHASE_CORRECTION_LIMIT; elsewhere S = I.  Far from the linearisation the fit is still an
+    energy-consistent scheme of the same order (S is constant); the closer the frame stays to
+    it, the closer each mode is to exact.  The grid step h is the simulator's: the lock's
+    part step uses it too.  For the linear strain only (engines' ``phase_correctable``): with
+    the von Karman strain the axial coordinates follow the foreshortening of the bending,
+    far from the linearisation.
     """
 
-    def __init__(self, model: UmbrellaModel, h: float):
+    def __init__(self, model: UmbrellaModel, h: float, damping: np.ndarray | None = None):
         omega, phi, mass = model.locked_modes
         keep = omega * h <= PHASE_CORRECTION_LIMIT
+        self.step = h
         self.omega = omega[keep]
+        phi = phi[:, keep]
         # rows u_i = (M0 phi_i)^T and phi_i^T, C-contiguous for the kernel
-        self.modes = np.ascontiguousarray((mass @ phi[:, keep]).T)
-        self.shapes = np.ascontiguousarray(phi[:, keep].T)
-        self.mass_change = (self.omega / (2.0 / h * np.tan(0.5 * h * self.omega))) ** 2 - 1.0
-        self.lock_energy: float | None = None   # 1/2 v^T D v just after the lock; None: inactive
+        self.modes = np.ascontiguousarray((mass @ phi).T)
+        self.shapes = np.ascontiguousarray(phi.T)
+        # each mode's damping coefficient (mass-normalised: 2 zeta omega)
+        c = np.zeros_like(self.omega) if damping is None else np.einsum(
+            "ji,jk,ki->i", phi, damping, phi)
+        self.damping_ratio = c / (2.0 * self.omega)
+        zeta = self.damping_ratio.astype(complex)
+        root = np.sqrt(zeta ** 2 - 1.0)
+        mu = [2.0 * np.tanh(0.5 * h * self.omega * (-zeta + sign * root)) for sign in (1, -1)]
+        self.scale = np.sqrt((self.omega * h) ** 2 / (mu[0] * mu[1]).real)     # s
+        #: the scheme's modal damping less the law's: c_w - c (0 undamped)
+        self.damping_change = -self.scale ** 2 * (mu[0] + mu[1]).real / h - c
+        self.mass_change = self.scale ** 2 - 1.0            # s^2 - 1, in (-1, 0]
+        self.active = False                                 # from the lock on
 
-    def start(self, v_lock: np.ndarray) -> None:
-        self.lock_energy = self.energy(v_lock)
+    def to_scheme(self, v: np.ndarray) -> np.ndarray:
+        """Return w = S^-1 v."""
+        return v + self.shapes.T @ ((1.0 / self.scale - 1.0) * (self.modes @ v))
 
-    def momentum(self, v: np.ndarray) -> np.ndarray:
-        """Return D v, the correction's share of the momentum."""
-        return self.modes.T @ (self.mass_change * (self.modes @ v))
+    def to_physical(self, w: np.ndarray) -> np.ndarray:
+        """Return v = S w."""
+        return w + self.shapes.T @ ((self.scale - 1.0) * (self.modes @ w))
 
-    def energy(self, v: np.ndarray) -> float:
-        """Return 1/2 v^T D v (<= 0)."""
-        eta = self.modes @ v
-        return float(0.5 * (self.mass_change * eta) @ eta)
+    def transpose(self, p: np.ndarray) -> np.ndarray:
+        """Return S^T p (a physical momentum as the scheme's)."""
+        return p + self.modes.T @ ((self.scale - 1.0) * (self.shapes @ p))
+
+    def damping_force(self, dq: np.ndarray, h: float) -> np.ndarray:
+        """Return the fit's share of the damping force at w_m = dq / h: U diag(c_w - c) U^T w_m."""
+        return self.modes.T @ (self.damping_change * (self.modes @ dq)) / h
 
     def newton_update(self, dq: np.ndarray, h: float) -> np.ndarray:
         """
-        Return the Newton update dq with the correction's share of the tangent put back.
+        Return the Newton update dq with the fit's share of the tangent put back, mode by mode.
 
-        The iteration matrix leaves D out; in the modes' coordinates its block is
-        1 + h^2 omega^2 / 4 where the tangent's is 1 + d + h^2 omega^2 / 4, so each modal
-        component of dq is scaled by their ratio (Woodbury for M0-orthonormal modes).  Only
-        how Newton converges changes, not to what.  The compiled kernel does the Woodbury on
-        its factored matrix of a recent step instead (_kernel.c phase_correction_prepare):
-        where the frame has moved from the linearisation the modes alone cost ~0.6 Newton
-        iterations a stage-2 step more at omega h ~ 1.5.
+        The iteration matrix leaves S^T M S - M and the damping change out; in the modes'
+        coordinates its block is 1 + h^2 omega^2 / 4 (+ h c / 2 damped) where the tangent's
+        adds d = s^2 - 1 + h (c_w - c) / 2, so each modal component of dq is scaled by their
+        ratio (newton_shrink).  Only how Newton converges changes, not to what.  The exact
+        Woodbury correction of the factored matrix by U diag(d) U^T, which the modal-mass
+        correction this replaced used, converges more slowly here: 2.6 Newton iterations a
+        stage-2 step against 2.06 (N = 1; 2.0 without the fit).  _kernel.c mode_fit_update
+        does the same.
         """
-        quarter = 0.25 * h * h
-        d = self.mass_change
-        shrink = d / (1.0 + quarter * self.omega ** 2 + d)
-        return dq - self.shapes.T @ (shrink * (self.modes @ dq))
+        return dq - self.shapes.T @ (self.newton_shrink(h) * (self.modes @ dq))
+
+    def newton_shrink(self, h: float) -> np.ndarray:
+        """Return each mode's Newton shrink d / (block + d) (newton_update)."""
+        d = self.mass_change + 0.5 * h * self.damping_change
+        block = 1.0 + 0.25 * (h * self.omega) ** 2 + h * self.damping_ratio * self.omega
+        return d / (block + d)
 
 
 def _gonzalez(grad_mid: np.ndarray, delta_f: float, dq: np.ndarray, dd: float) -> np.ndarray:
@@ -165,7 +201,8 @@ class MidpointIterate:
 
     dq: np.ndarray       # q - q0
     qm: np.ndarray       # midpoint q0 + dq / 2
-    v1: np.ndarray       # 2 dq / h - v0
+    v1: np.ndarray       # the physical velocity at q: S w1, w1 = 2 dq / h - w0
+    momentum1: np.ndarray   # the scheme's momentum S^T M(q) v1 (M(q) v1 without a fit)
     mass1: np.ndarray    # M(q)
     phi: np.ndarray      # Phi(q)
     g_t: np.ndarray      # Gonzalez gradient of 1/2 v0^T M(q) v1
@@ -173,29 +210,65 @@ class MidpointIterate:
     jac_m: np.ndarray    # Gonzalez constraint Jacobian between q0 and q
 
 
-def midpoint_iterate(m: UmbrellaModel, cs: ConstraintSet, q0, v0, p0, phi0, y0, q,
+@dataclass(frozen=True)
+class StepStart:
+    """What a step needs of its start state: v0, M(q0) v0, and the scheme's w0, S^T M v0."""
+
+    v0: np.ndarray
+    p0: np.ndarray
+    w0: np.ndarray
+    scheme_p0: np.ndarray
+    fit: LockedModeFit | None
+
+    def end_velocity(self, dq: np.ndarray, h: float) -> np.ndarray:
+        """Return the physical velocity v1 = S w1 at the end of a step dq: w1 = 2 dq / h - w0."""
+        w1 = 2.0 * dq / h - self.w0
+        return w1 if self.fit is None else self.fit.to_physical(w1)
+
+    def damping_force(self, dq: np.ndarray, h: float) -> np.ndarray | float:
+        """Return the fit's share of the damping force over the step dq (0 without)."""
+        return 0.0 if self.fit is None else self.fit.damping_force(dq, h)
+
+    def newton_update(self, dq: np.ndarray, h: float) -> np.ndarray:
+        """Return the Newton update with the fit's share of the tangent (LockedModeFit)."""
+        return dq if self.fit is None else self.fit.newton_update(dq, h)
+
+
+def step_start(v0: np.ndarray, p0: np.ndarray, fit: LockedModeFit | None) -> StepStart:
+    """Return the start of a step from the physical v0 and p0 = M(q0) v0, with the fit if any."""
+    if fit is None:
+        return StepStart(v0, p0, v0, p0, None)
+    return StepStart(v0, p0, fit.to_scheme(v0), fit.transpose(p0), fit)
+
+
+def midpoint_iterate(m: UmbrellaModel, cs: ConstraintSet, q0, start: StepStart, phi0, y0, q,
                      h: float) -> MidpointIterate:
     """
     Return the pieces of the midpoint residual at the iterate q.
 
-    The residual of the step is M(q) v1 - M(q0) v0 - h [G_T - G_U - F_H G_y + G_Phi^T lam]
-    (+ damping); G_T, G_y, G_Phi are Gonzalez discrete gradients of f(q) = 1/2 v0^T M(q) v1,
-    y_H(q) and Phi(q) between q0 and q (dq . G_f = f(q) - f(q0) exactly).  p0 = M(q0) v0
-    also gives f(q0) = 1/2 p0 . v1.  One place for MidpointDAE and the elastic integrator.
+    The residual of the step is S^T M(q) v1 - S^T M(q0) v0 - h [G_T - G_U - F_H G_y +
+    G_Phi^T lam] (+ damping), v = S w, q1 - q0 = h (w0 + w1) / 2 (S = I without
+    ``LockedModeFit``); G_T, G_y, G_Phi are Gonzalez discrete gradients of
+    f(q) = 1/2 v0^T M(q) v1, y_H(q) and Phi(q) between q0 and q (dq . G_f = f(q) - f(q0)
+    exactly).  p0 = M(q0) v0 also gives f(q0) = 1/2 p0 . v1.  One place for MidpointDAE and
+    the elastic integrator.
     """
     dq = q - q0
     dd = dq @ dq
     qm = q0 + 0.5 * dq
-    v1 = 2.0 * dq / h - v0
+    fit = start.fit
+    v1 = start.end_velocity(dq, h)
     mass1 = m.mass_matrix(q)
+    mv1 = mass1 @ v1
     phi = m.constraint_residual(q, cs)
-    g_t = _gonzalez(m.kinetic_bilinear_gradient(qm, v0, v1), 0.5 * (v0 @ mass1 - p0) @ v1,
-                    dq, dd)
+    g_t = _gonzalez(m.kinetic_bilinear_gradient(qm, start.v0, v1),
+                    0.5 * (start.v0 @ mass1 - start.p0) @ v1, dq, dd)
     g_y = _gonzalez(m.sleeve_height_gradient(qm), m.sleeve_height(q) - y0, dq, dd)
     jac_m = m.constraint_jacobian(qm, cs)
     if dd > 0.0:
         jac_m += np.outer((phi - phi0 - jac_m @ dq) / dd, dq)
-    return MidpointIterate(dq, qm, v1, mass1, phi, g_t, g_y, jac_m)
+    return MidpointIterate(dq, qm, v1, mv1 if fit is None else fit.transpose(mv1), mass1, phi,
+                           g_t, g_y, jac_m)
 
 
 def iteration_blocks(m: UmbrellaModel, cs: ConstraintSet, x: MidpointIterate, h: float,
@@ -226,15 +299,8 @@ def iteration_blocks(m: UmbrellaModel, cs: ConstraintSet, x: MidpointIterate, h:
 ENERGY_RESTORE_LIMIT = 1.01
 
 
-def corrected_momentum(mass: np.ndarray, v: np.ndarray,
-                       pc: "ModalPhaseCorrection | None") -> np.ndarray:
-    """Return the step's momentum M v, plus the stage-2 phase correction's D v if pc."""
-    p = mass @ v
-    return p if pc is None else p + pc.momentum(v)
-
-
 def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
-                           t_target: float, pc: "ModalPhaseCorrection | None" = None):
+                           t_target: float):
     """
     Project v onto J v = 0 (mass metric) and scale it to the balance's energy.
 
@@ -252,9 +318,8 @@ def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
     balance exact to round-off; the change of v is of the order of the projection and the
     Newton error.  Scaling is skipped when it would change T by more than 1 % (never after a
     converged step; such a state is left to the divergence checks) or T is zero.
-    pc: the stage-2 phase correction acting, whose constant D the kinetic energy of the
-    balance includes (corrected_momentum); the projection's metric stays M.
-    None if M is not positive definite.
+    v and T are physical (with ``LockedModeFit``: v = S w).  None if M is not positive
+    definite.
     """
     from scipy.linalg.lapack import dpotrf, dpotrs     # (the numpy path's: see _step)
 
@@ -266,7 +331,7 @@ def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
             return None
         x = dpotrs(chol, jac.T)[0]
         vp = v - x @ np.linalg.solve(jac @ x, jv)
-    t_after = 0.5 * (vp @ corrected_momentum(mass, vp, pc))
+    t_after = 0.5 * (vp @ (mass @ vp))
     limit = ENERGY_RESTORE_LIMIT
     if t_after > 0.0 and t_after / limit <= t_target <= limit * t_after:
         vp = vp * math.sqrt(t_target / t_after)
@@ -281,7 +346,7 @@ class MidpointDAE:
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self.iterations = 0  # Newton iterations done, for diagnostics
-        self.phase_correction: ModalPhaseCorrection | None = None   # stage 2, once locked
+        self.mode_fit: LockedModeFit | None = None   # stage 2, once locked
         kernel = kernel or os.environ.get("UMBRELLA_SIM_KERNEL", "auto")
         if kernel not in ("auto", "compiled", "numpy"):
             raise ValueError(f"UMBRELLA_SIM_KERNEL={kernel!r}: must be auto, compiled or numpy")
@@ -303,40 +368,33 @@ class MidpointDAE:
     def backend(self) -> str:
         return "compiled" if self._compiled is not None else "numpy"
 
-    def correct_stage2_phase(self, h: float) -> None:
-        """Use ``ModalPhaseCorrection`` for grid step h in stage 2 (from ``lock_at`` on)."""
-        self.phase_correction = ModalPhaseCorrection(self.model, h)
+    def fit_stage2_modes(self, h: float) -> None:
+        """Use ``LockedModeFit`` for grid step h in stage 2 (from ``lock_at`` on)."""
+        self.mode_fit = LockedModeFit(self.model, h, self.locked_damping())
 
-    def lock_at(self, v: np.ndarray) -> None:
-        """Start stage 2's phase correction (if any) from the velocity just after the lock."""
-        pc = self.phase_correction
-        if pc is not None:
-            pc.start(v)
+    def locked_damping(self) -> np.ndarray | None:
+        """Return the damping matrix at full deployment (None: undamped), for the fit."""
+        return None
+
+    def lock_at(self) -> None:
+        """Start stage 2's mode fit (if any): the lock has happened."""
+        fit = self.mode_fit
+        if fit is not None:
+            fit.active = True
             if self._compiled is not None:
-                self._compiled.set_phase_correction(pc)
+                self._compiled.set_mode_fit(fit)
 
-    def stage2_correction(self, cs: ConstraintSet) -> "ModalPhaseCorrection | None":
-        """Return the phase correction acting under cs (stage 2, from the lock), else None."""
-        pc = self.phase_correction
-        if pc is None or pc.lock_energy is None or not cs.locked or cs.rigid:
+    def stage2_fit(self, cs: ConstraintSet) -> LockedModeFit | None:
+        """Return the mode fit acting under cs (stage 2, from the lock), else None."""
+        fit = self.mode_fit
+        if fit is None or not fit.active or not cs.locked or cs.rigid:
             return None
-        return pc
+        return fit
 
-    def momentum(self, q: np.ndarray, qd: np.ndarray, cs: ConstraintSet) -> np.ndarray:
-        """Return the step's momentum: M(q) qd, plus D qd of the stage-2 phase correction."""
-        return corrected_momentum(self.model.mass_matrix(q), qd, self.stage2_correction(cs))
-
-    def _start_momenta(self, s: DynamicState, cs: ConstraintSet):
-        """
-        Return (pc, p0, M(q0) v0) at the start of a step from s.
-
-        The phase correction acting, the step's momentum p0 (the state's, or computed), and
-        p0 less the correction's constant D v0: M(q0) v0 gives f(q0) = 1/2 (M(q0) v0) . v1 of
-        the Gonzalez gradient G_T.
-        """
-        pc = self.stage2_correction(cs)
-        p0 = s.momentum if s.momentum is not None else self.momentum(s.q, s.qd, cs)
-        return pc, p0, p0 if pc is None else p0 - pc.momentum(s.qd)
+    def _step_start(self, s: DynamicState, cs: ConstraintSet) -> StepStart:
+        """Return the start of a step from s: the state's momentum M(q0) v0, or computed."""
+        p0 = s.momentum if s.momentum is not None else self.model.mass_matrix(s.q) @ s.qd
+        return step_start(s.qd, p0, self.stage2_fit(cs))
 
     def strain_energy(self, q: np.ndarray, cs: ConstraintSet) -> float:
         """1/2 q.K q (the balance's V)."""
@@ -367,16 +425,7 @@ class MidpointDAE:
 
     def project_velocity(self, q, qd, cs: ConstraintSet):
         """Closest qd (in the mass metric) with J qd = 0 (plastic impact, Eq. 5.22 form)."""
-        m = self.model
-        jac = m.constraint_jacobian(q, cs)
-        metric = m.mass_matrix(q)
-        n, nc = m.n, jac.shape[0]
-        kkt = np.zeros((n + nc, n + nc))
-        kkt[:n, :n] = metric
-        kkt[:n, n:] = jac.T
-        kkt[n:, :n] = jac
-        sol = np.linalg.solve(kkt, np.concatenate([metric @ qd, np.zeros(nc)]))
-        return sol[:n]
+        return plastic_velocity(self.model, q, qd, cs)
 
     def step(self, s: DynamicState, h: float, force: float, cs: ConstraintSet) -> DynamicState:
         if self._compiled is not None:
@@ -394,6 +443,8 @@ class MidpointDAE:
 
             M(q1) v1 - M(q0) v0 = h [ G_T - K q_m - F_H G_y + G_Phi^T lambda ],   Phi(q1) = 0
 
+        (in stage 2 with ``LockedModeFit``: in the scheme's velocity w, v = S w, and momentum
+        S^T M v; midpoint_iterate)
         G_T, G_y, G_Phi are Gonzalez discrete gradients of f(q) = 1/2 v0^T M(q) v1, y_H(q)
         and Phi(q) between q0 and q1 (dq . G_f = f(q1) - f(q0) exactly), so over a step
         T1 + V1 - T0 - V0 = F_H (y_H(q0) - y_H(q1)) to the Newton tolerance: the scheme
@@ -409,11 +460,11 @@ class MidpointDAE:
         n = m.n
         q0, v0 = s.q, s.qd
         half_h2 = 0.5 * h * h
-        pc, p0, mass_p0 = self._start_momenta(s, cs)
+        start = self._step_start(s, cs)
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
-        # predictor: the previous step's velocity held
-        q = q0 + h * v0
+        # predictor: the previous step's velocity held (the scheme's: w0)
+        q = q0 + h * start.w0
         lam = s.multipliers.copy()
         stiff = m.stiffness
         lu = piv = None
@@ -421,8 +472,8 @@ class MidpointDAE:
         rhs = np.empty(n + nc)
         last_norm = np.inf
         for it in range(1, self.max_iterations + 1):
-            x = midpoint_iterate(m, cs, q0, v0, mass_p0, phi0, y0, q, h)
-            resid = (corrected_momentum(x.mass1, x.v1, pc) - p0
+            x = midpoint_iterate(m, cs, q0, start, phi0, y0, q, h)
+            resid = (x.momentum1 - start.scheme_p0
                      - h * (x.g_t - stiff @ x.qm - force * x.g_y + x.jac_m.T @ lam))
             phi = x.phi
             if lu is None:
@@ -437,8 +488,7 @@ class MidpointDAE:
             rhs[:n] = -0.5 * h * resid
             rhs[n:] = -phi
             dx = dgetrs(lu, piv, rhs)[0]
-            if pc is not None:
-                dx[:n] = pc.newton_update(dx[:n], h)
+            dx[:n] = start.newton_update(dx[:n], h)
             q = q + dx[:n]
             lam = lam + dx[n:] / half_h2
             step_norm = np.max(np.abs(dx[:n]))
@@ -456,14 +506,14 @@ class MidpointDAE:
             raise ConvergenceError(f"Newton did not converge in {self.max_iterations} iterations "
                                    f"at t = {s.t + h:.9g} s (|dq| = {np.max(np.abs(dx[:n])):.3g})")
         self.iterations += it
-        v = 2.0 * (q - q0) / h - v0
+        v = start.end_velocity(q - q0, h)
         mass1 = m.mass_matrix(q)
-        t_target = (0.5 * (v0 @ p0) + self.strain_energy(q0, cs) - self.strain_energy(q, cs)
-                    + force * (y0 - m.sleeve_height(q)))
-        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target, pc)
+        t_target = (0.5 * (v0 @ start.p0) + self.strain_energy(q0, cs)
+                    - self.strain_energy(q, cs) + force * (y0 - m.sleeve_height(q)))
+        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
         if v is None:
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
-        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, corrected_momentum(mass1, v, pc))
+        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v)
 
     def with_constraints(self, s: DynamicState, force: float, cs: ConstraintSet) -> DynamicState:
         """Keep q, qd; return consistent q'' and lambda for another constraint set."""

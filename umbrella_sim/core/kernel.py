@@ -476,16 +476,24 @@ class CompiledKernel:
             self._free(ctx)
             self._ctx = None
 
-    def set_phase_correction(self, pc) -> None:
-        """Hand stage 2's phase correction (integrators.ModalPhaseCorrection) to the kernel."""
+    def set_mode_fit(self, fit) -> None:
+        """Hand stage 2's mode fit (integrators.LockedModeFit) to the kernel."""
         # (the kernel keeps pointers to these arrays)
-        self._phase_correction = arrays = tuple(
-            np.ascontiguousarray(a, dtype=float)
-            for a in (pc.modes, pc.mass_change))
-        if self.lib.umbrella_set_phase_correction(self._ctx, len(pc.mass_change),
-                                                  *(_dptr(a) for a in arrays), pc.lock_energy):
-            raise MemoryError("the compiled kernel could not allocate the phase correction's "
-                              "Newton buffers")
+        damped = bool(np.any(fit.damping_change))
+        arrays = [np.ascontiguousarray(a, dtype=float) for a in
+                  (fit.modes, fit.shapes, fit.scale, fit.newton_shrink(fit.step),
+                   fit.damping_change)]
+        self._mode_fit = arrays
+        ptrs = [_dptr(a) for a in arrays]
+        if not damped:
+            ptrs[4] = None
+        if self.lib.umbrella_set_mode_fit(self._ctx, len(fit.scale), *ptrs):
+            raise MemoryError("the compiled kernel could not allocate the stage-2 mode fit's "
+                              "buffers")
+
+    def last_dissipation(self) -> float:
+        """Return the damping dissipation of the last step taken (J; with the mode fit's)."""
+        return float(self.lib.umbrella_dissipated(self._ctx))
 
     def set_elastic_law(self, law, law_ptr) -> None:
         """

@@ -88,7 +88,7 @@ import numpy as np
 
 from .beam_strain import CorotationalStrainEnergy, LinearStrainEnergy
 from .engines import FiniteElementEngine
-from .integrators import (corrected_momentum, iteration_blocks, midpoint_iterate, MidpointDAE,
+from .integrators import (iteration_blocks, midpoint_iterate, MidpointDAE,
                           NEWTON_TOLERANCE, PHI_TOLERANCE, project_keeping_energy)
 from .kernel import ConvergenceError, DynamicState, ElasticData
 from .model import band_form, ConstraintSet, UmbrellaModel
@@ -270,6 +270,13 @@ class ElasticMidpointDAE(MidpointDAE):
         # starts there (_step_numpy)
         self._carried = None
 
+    def locked_damping(self):
+        """Return C at full deployment for stage 2's mode fit (None: undamped)."""
+        m = self.model
+        if m.damping_beta == 0.0:
+            return None
+        return m.damping_matrix(m.rigid_configuration(m.params.alpha_deployed))
+
     def consistent_acceleration(self, q, qd, force: float, cs: ConstraintSet):
         m = self.model
         n, nc = m.n, m.n_constraints(cs)
@@ -345,7 +352,7 @@ class ElasticMidpointDAE(MidpointDAE):
         out, its = self._compiled.step(s, h, force, cs, self.tolerance, self.max_iterations)
         self.iterations += its
         return DynamicState(out.t, out.q, out.qd, out.qdd, out.multipliers, out.momentum,
-                            s.dissipation + self.law.last_dissipation())
+                            s.dissipation + self._compiled.last_dissipation())
 
     def _step_numpy(self, s, h, force, cs):
         """
@@ -375,7 +382,7 @@ class ElasticMidpointDAE(MidpointDAE):
         m = self.model
         n = m.n
         q0, v0 = s.q, s.qd
-        pc, p0, mass_p0 = self._start_momenta(s, cs)
+        start = self._step_start(s, cs)
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
         nc = len(phi0)
@@ -388,14 +395,15 @@ class ElasticMidpointDAE(MidpointDAE):
 
         def evaluate(q, lam):
             """Newton right-hand side -[h/2 R(q, lam); Phi(q)] and the residual's pieces."""
-            x = midpoint_iterate(m, cs, q0, v0, mass_p0, phi0, y0, q, h)
+            x = midpoint_iterate(m, cs, q0, start, phi0, y0, q, h)
             damping = m.damping_matrix(x.qm)
             elastic = m.strain.discrete_gradient(q0, q)
-            resid = (corrected_momentum(x.mass1, x.v1, pc) - p0 + damping @ x.dq
+            resid = (x.momentum1 - start.scheme_p0 + damping @ x.dq
+                     + h * start.damping_force(x.dq, h)
                      - h * (x.g_t - elastic - force * x.g_y + x.jac_m.T @ lam))
             return np.concatenate([-0.5 * h * resid, -x.phi]), x, damping
 
-        q = q0 + h * v0
+        q = q0 + h * start.w0
         if self.strain_nonlinear and not m.strain.admissible(q):
             q = q0.copy()           # a predictor outside the slope coordinates starts from q0
         lam = s.multipliers.copy()
@@ -428,6 +436,7 @@ class ElasticMidpointDAE(MidpointDAE):
                 self.refreshes += int(it > 1)
                 refactored = True
             dx = dgetrs(lu, piv, f)[0]
+            dx[:n] = start.newton_update(dx[:n], h)
             step_norm = np.max(np.abs(dx[:n]))
             if not np.isfinite(step_norm):
                 raise ConvergenceError(f"Newton iterate became non-finite at t = {s.t + h:.9g} s")
@@ -447,14 +456,15 @@ class ElasticMidpointDAE(MidpointDAE):
                                    f"at t = {s.t + h:.9g} s (|dq| = {step_norm:.3g})")
         self.iterations += it
         dq = q - q0
-        dissipated = float(dq @ m.damping_matrix(q0 + 0.5 * dq) @ dq) / h
-        v = 2.0 * dq / h - v0
+        dissipated = float(dq @ (m.damping_matrix(q0 + 0.5 * dq) @ dq / h
+                                 + start.damping_force(dq, h)))
+        v = start.end_velocity(dq, h)
         mass1 = m.mass_matrix(q)
         # the projection onto J v = 0, scaled to the kinetic energy of the step's discrete
         # balance (net of the damping): energy is balanced to round-off, as in MidpointDAE
-        t_target = (0.5 * (v0 @ p0) + self.strain_energy(q0, cs) - self.strain_energy(q, cs)
+        t_target = (0.5 * (v0 @ start.p0) + self.strain_energy(q0, cs) - self.strain_energy(q, cs)
                     + force * (y0 - m.sleeve_height(q)) - dissipated)
-        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target, pc)
+        v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
         if v is None:
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
         if self.strain_nonlinear:
@@ -462,7 +472,7 @@ class ElasticMidpointDAE(MidpointDAE):
             self._max_slope = max(self._max_slope,
                                   float(np.abs(m.strain.section_slopes(q0)).max()),
                                   float(np.abs(m.strain.section_slopes(q)).max()))
-        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, corrected_momentum(mass1, v, pc),
+        return DynamicState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v,
                             s.dissipation + dissipated)
 
 

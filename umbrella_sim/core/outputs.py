@@ -62,9 +62,6 @@ class Sample:
     lock_energy_loss: float        # energy removed by the lock so far (J)
     constraint_residual: float     # max(|Phi|, |J q'|)
     damping_dissipation: float = 0.0   # energy removed by structural damping so far (J)
-    # stage 2's phase correction: its 1/2 q'.D q' less that just after the lock (J; 0
-    # without it), in the energy the integrator keeps (mechanical_energy)
-    phase_correction_energy: float = 0.0
 
     @property
     def sleeve_reaction_x(self) -> float:
@@ -79,14 +76,13 @@ class Sample:
 
 def mechanical_energy(s):
     """
-    Return T + V + the phase correction's term (J): the energy of the balance, one rule.
+    Return T + V (J): the energy of the balance, one rule.
 
     Of a Sample, or per step of a StepBlock or per sample of a RunResult (arrays).
     """
     if hasattr(s, "column"):                        # a RunResult: its sample columns
-        return (s.column("kinetic_energy") + s.column("strain_energy")
-                + s.column("phase_correction_energy"))
-    return s.kinetic_energy + s.strain_energy + s.phase_correction_energy
+        return s.column("kinetic_energy") + s.column("strain_energy")
+    return s.kinetic_energy + s.strain_energy
 
 
 def energy_balance(s, initial_energy: float):
@@ -191,6 +187,9 @@ class LockEvent:
     energy_before: float
     energy_after: float
     free_velocities: tuple = ()
+    #: how well the physics step resolves the stage-2 stresses this lock starts
+    #: (step_rule.stage2_resolution; None for the rigid models)
+    stage2_resolution: dict | None = None
 
 
 class StepBlock:

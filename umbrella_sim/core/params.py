@@ -102,11 +102,11 @@ class _DerivedQuantities:
         return _sleeve_height(self.l1, self.l3, self.alpha0)
 
     @property
-    def physics_time_step(self) -> float:
-        """Return the integrator's step (s): time_step, or time_step / N (step_follows_mesh)."""
-        if self.step_follows_mesh:
-            return self.time_step / self.elements_per_segment
-        return self.time_step
+    def lock_rule(self) -> str:
+        """Return the lock the run takes: energy or plastic (``lock`` auto resolved)."""
+        if self.model in ("rigid", "rigid-fe"):
+            return "plastic"
+        return "energy" if self.lock == "auto" else self.lock
 
     def with_physics_step(self, step: float) -> "UmbrellaParams":
         """Return these parameters with the integrator's step set to step exactly."""
@@ -209,10 +209,9 @@ def validate(p: UmbrellaParams, pairs: bool = True) -> None:
             raise ValueError(f"parameter l3={p.l3}: the link is too short, geometry cannot "
                              f"close: l1*|cos({name})| = {reach:.6g} m must be < l3 "
                              f"(l1={p.l1}, {name}={getattr(p, name):.6g})")
-    if p.physics_time_step < MIN_PHYSICS_STEP:
-        raise ValueError(f"parameter time_step={p.time_step}: with step_follows_mesh the "
-                         f"physics step time_step / elements_per_segment = "
-                         f"{p.physics_time_step:.3g} s must be >= {MIN_PHYSICS_STEP:g} s")
+    if 0.0 < p.time_step < MIN_PHYSICS_STEP:
+        raise ValueError(f"parameter time_step={p.time_step}: must be 0 (the step chosen for "
+                         f"the mesh) or >= {MIN_PHYSICS_STEP:g} s")
     if p.sleeve_force_min < -p.sleeve_force_tension_limit:
         raise ValueError(f"parameter sleeve_force_min={p.sleeve_force_min}: must be >= "
                          f"{-p.sleeve_force_tension_limit:.6g} N: a force holding the sleeve "

@@ -21,7 +21,7 @@ MODELS = ("flexible", "flexible-nonlinear", "rigid-fe", "rigid")
 #: smallest physics step (s): the finest step of the convergence studies is 3.125e-7 s; at
 #: 1e-9 s a 1 kHz publication period took 10^6 steps and their outputs' memory
 MIN_PHYSICS_STEP = 1e-7
-LOCKS = ("energy", "plastic")
+LOCKS = ("auto", "energy", "plastic")
 
 # when a change made at runtime (ros2 param set) takes effect
 RESET = "reset"            # on ~/reset (the model or the initial state changes)
@@ -231,36 +231,37 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     _P("elements_per_segment", int, 1, "-",
        "beam elements N on each of O–O'', O''–G and O''–H (1 = the thesis's 3-element "
        "model, 2 = 6-element)", low=1, high=64),
-    _P("lock", str, "energy", "-",
-       "velocity redistribution at the lock: energy (thesis 5.2.2) or plastic (rigid "
-       "models always stop: plastic)", choices=LOCKS),
-    _P("time_step", float, 1.0e-4, "s",
-       "fixed physics step of the integrator; the default is chosen by accuracy against "
-       "fine-step runs (docs/validation.md, step convergence): the largest step meeting "
-       "the deploy-time, stage-2 period and stage-1 peak-stress targets in every studied "
-       "case, the stage-2 tip series within 2 mm too (with `phase_correction`); the stage-2 "
-       "peak stresses (each step's largest over the step) are within 3 % in 9 of its 12 "
-       "cases: the rest are crests of modes 0.1 ms does not resolve. `step_follows_mesh` "
-       "divides it by elements_per_segment: 0.1 ms / N meets every target in every studied "
-       "case, at N times the cost",
-       low=MIN_PHYSICS_STEP, high=0.01,
-       rule=f"with `step_follows_mesh`, time_step / N ≥ {MIN_PHYSICS_STEP:g} s too"),
+    _P("lock", str, "auto", "-",
+       "velocity redistribution at the lock: energy (thesis 5.2.2: keeps the kinetic "
+       "energy), plastic (a perfectly inelastic stop), or auto = the one that applies to "
+       "the model: energy for flexible and flexible-nonlinear, plastic for the rigid models "
+       "(a rigid mechanism stopped at a point keeps no energy to redistribute)",
+       choices=LOCKS),
+    _P("time_step", float, 0.0, "s",
+       "physics step of the integrator; 0 = chosen for the mesh: the largest 0.1 ms / k "
+       "(k = 1 .. 64) at which the locked frame's modes that carry all but 1 % of the "
+       "stage-2 stress crest of the mesh's lock are resolved (ωh ≤ 1.5 with "
+       "`phase_correction`, 0.35 without): 0.1 ms at N = 1, 25 µs at N = 2, 16.7 µs at "
+       "N = 4, 7.7 µs at N = 8 with the thesis's frame. Measured against converged runs "
+       "(docs/validation.md, step convergence): the deploy time, stage-1 and stage-2 peak "
+       "stresses, stage-2 period and amplitude of every studied case, and the stage-2 tip "
+       "series within 1 mm up to V0 = -0.2 m/s (at -0.5 m/s, a 0.12-0.16 m amplitude past "
+       "the small-deflection limit, the floating frames' nonlinearity leaves 1-4 mm)",
+       low=0.0, high=0.01, rule=f"0, or >= {MIN_PHYSICS_STEP:g} s"),
     _P("step_follows_mesh", bool, False, "-",
-       "true = the physics step is `time_step` / `elements_per_segment` (at the default "
-       "`time_step`: step_study.mesh_step, about an element's axial-wave transit time), the "
-       "step that meets every accuracy target of docs/validation.md in every studied case "
-       "(the stage-2 peak stresses too), at N times the cost of a fixed step; the node still "
-       "takes the largest step ≤ it that divides 1/`publish_rate`. false = `time_step` "
-       "for every mesh"),
+       "with a `time_step` > 0: true = the physics step is the largest `time_step` / k "
+       "the mesh's stage-2 stresses need (the rule of `time_step` 0, below this ceiling); "
+       "false = `time_step` as it is (a run whose step leaves more than 1 % of its "
+       "stage-2 stress crest to unresolved modes says so: 'coarse step'). The node still "
+       "takes the largest step ≤ it that divides 1/`publish_rate`"),
     _P("phase_correction", bool, True, "-",
-       "stage 2 of flexible (also damped; not flexible-nonlinear, whose axial coordinates "
-       "follow the bending's foreshortening): the locked frame's modes with "
-       "ω·time_step ≤ 1.5 turn at their exact period (frequency pre-warping of the "
-       "midpoint rule by modal mass, whose period error (ωh)²/12 otherwise puts the "
-       "1–10·10³ rad/s modes out of phase within 0.5 s: tip series off by 3–13 mm at 0.1 ms, "
-       "0.04–1.2 mm with it; stage-2 steps cost ~30 % more); "
-       "energy still balanced exactly; false = the plain energy-consistent midpoint rule "
-       "(docs/validation.md)"),
+       "stage 2 of flexible (also damped; not flexible-nonlinear): the locked frame's "
+       "modes with ω·h ≤ 1.5 are integrated exactly in period, amplitude and damping ratio "
+       "(a velocity map per mode, S = I + Φ diag(s − 1) Uᵀ, inside the energy-consistent "
+       "midpoint step; the physical energy T + V is conserved to round-off); the plain "
+       "midpoint rule lengthens a mode's period by (ωh)²/12, which puts the 1–10·10³ rad/s "
+       "modes out of phase within 0.5 s (tip series off by 4–13 mm at 0.1 ms); false = "
+       "the plain energy-consistent midpoint rule (docs/validation.md)"),
     _P("damping_ratio", float, 0.0, "-",
        "structural damping ratio ζ of the first stage-2 mode: strain-rate (Kelvin–Voigt, "
        "stiffness-proportional Rayleigh) damping β = 2ζ/ω1, ω1 the first mode of the locked "

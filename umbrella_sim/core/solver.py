@@ -1,7 +1,7 @@
 """
 Solver layer: the stepping simulator (stage 1, lock event, stage 2) and a whole-run helper.
 
-``UmbrellaSimulator`` advances on a fixed grid t_k = k h (h = params.physics_time_step).
+``UmbrellaSimulator`` advances on a fixed grid t_k = k h (h = step_rule.physics_step_of(params)).
 The sleeve force is a zero-order hold: the value set with ``set_sleeve_force`` acts from the
 start of the next step.  ``step()`` and ``advance_to(t)`` therefore give identical results
 however the calls are split.  When the sleeve reaches the stop S inside a step, the crossing
@@ -26,6 +26,7 @@ from .outputs import (build_frozen, LockEvent, Sample, state_row, STEP_FIELDS, s
                       step_row, StepBlock)
 from .params import UmbrellaParams
 from .registry import SPECS
+from .step_rule import physics_step_of
 
 
 def nonlinear_model_needed(p: UmbrellaParams) -> bool:
@@ -73,7 +74,7 @@ class UmbrellaSimulator:
         except (ArithmeticError, MemoryError, ValueError) as exc:   # (LinAlgError too)
             raise ModelError(p, exc) from None
         self.params, self.model, self.engine = p, model, engine
-        self.h = p.physics_time_step
+        self.h = physics_step_of(p)
         self._force = force
         self._k = 0
         self._stage = DEFORMING
@@ -383,7 +384,6 @@ class UmbrellaSimulator:
             "sleeve_reaction": eng.sleeve_reaction(s, stage),
             "kinetic_energy": eng.kinetic_energy(s, stage),
             "strain_energy": eng.strain_energy(s, stage),
-            "phase_correction_energy": eng.phase_correction_energy(s, stage),
             "constraint_residual": eng.residual(s, stage)})
 
 

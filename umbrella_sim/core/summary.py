@@ -18,6 +18,8 @@ import numpy as np
 from .forcing import TIME_RESOLUTION
 from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS, step_row,
                       StepBlock)
+from .step_rule import (lock_amplitudes, MAX_STEP_DIVISOR, resolved_omega_h, resolving_divisor,
+                        STRESS_SHARE_LIMIT, unresolved_stress_share)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
@@ -71,6 +73,12 @@ class RunResult:
 #: periods of the thesis frame's first locked mode (~0.05 s), the same for a 1 s offline run
 #: and a 10 min live one, so that runs of different lengths compare
 STAGE2_WINDOW = 0.3
+#: the stage-2 tip series kept for its period: the first step in each STAGE2_WINDOW /
+#: STAGE2_SAMPLES (4.6 us) of the window, i.e. every step at any step above that (the
+#: default 0.1 ms included); a 0.1 us step keeps 65 536 of its 3e6 (1 MB and ~0.1 s to
+#: analyse, where all of them held 48 MB and took ~4 s at a node's stop); the amplitude and
+#: the window's end stay those of every step
+STAGE2_SAMPLES = 1 << 16
 #: validity of the small-deformation (linear elastic field) model: the tip deflection |v_G|
 #: may reach this fraction of the leaf length l1 + l2.  Beyond it the slope of the bent
 #: leaf passes ~0.15 rad, where the neglected terms of the curvature and the membrane strain
@@ -204,7 +212,7 @@ def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dic
 def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     """Return a warning if the lock asked for does not apply to the model (else None)."""
     asked = params.get("lock")
-    if lock_kind is not None and asked is not None and asked != lock_kind:
+    if lock_kind is not None and asked not in (None, "auto") and asked != lock_kind:
         return (f"lock not applicable: lock={asked} does not apply to model="
                 f"{params.get('model')} (a rigid mechanism stopped at a point keeps no "
                 f"kinetic energy to redistribute); the {lock_kind} lock is used; set "
@@ -212,31 +220,58 @@ def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     return None
 
 
-#: the largest omega h at which the locked frame's first mode is resolved: the midpoint rule
-#: lengthens a period by ~(omega h)^2 / 12 (1 % at 0.35); stage 2's phase correction makes the
-#: period exact up to omega h = 1.5, past which it leaves a mode as it is (aliased)
-RESOLVED_OMEGA_H = {False: math.sqrt(12 * 0.01), True: 1.5}
-
-
-def coarse_step_warning(params: dict) -> str | None:
+def coarse_step_warning(resolution: dict | None, step_chosen: bool = False) -> str | None:
     """
-    Return a warning when the step does not resolve the locked frame's first mode.
+    Return a warning when the step leaves the modes carrying the stage-2 stresses unresolved.
 
-    Its period then comes out wrong (past omega h = 1.5, aliased: several times too long on
-    a small or light frame at the default step) and the stage-2 stresses with it.  It
-    depends on the model parameters alone: worked out once per set of them.
+    resolution: the lock's (LockEvent.stage2_resolution, step_rule.stage2_resolution), None
+    before the lock or for a rigid model.  Past step_rule.STRESS_SHARE_LIMIT the stage-2
+    peak stresses, and the period if the first mode is among those modes, are not those of
+    the model (docs/validation.md): the text names the shares and the step that resolves
+    them.  step_chosen: the run's step is the one chosen for the mesh (time_step 0).
+    """
+    if not resolution:
+        return None
+    shares = {body: resolution[body] for body in ("leaf", "link")}
+    if max(shares.values()) <= STRESS_SHARE_LIMIT:
+        return None
+    h, enough = resolution["step"], resolution["resolving_step"]
+    if enough is None:
+        fix = (f"no step down to {h / MAX_STEP_DIVISOR:.3g} s (1/{MAX_STEP_DIVISOR} of this "
+               "one) resolves them: give a smaller time_step")
+    else:
+        fix = f"time_step <= {_rounded_down(enough):.3g} s resolves them" + (
+            "" if step_chosen else " (time_step 0 takes the step chosen for the mesh)")
+    return (f"coarse step: modes the physics step {h:g} s does not resolve carry "
+            f"{100 * shares['leaf']:.3g} % of the leaf's and {100 * shares['link']:.3g} % of the "
+            f"link's stage-2 stress crest at the lock (limit {100 * STRESS_SHARE_LIMIT:g} %): "
+            f"the stage-2 peak stresses are not those of the model; {fix}")
+
+
+def _rounded_down(x: float) -> float:
+    """Return x rounded down to three significant digits."""
+    scale = 10.0 ** (math.floor(math.log10(x)) - 2)
+    return math.floor(x / scale * (1 + 1e-12)) * scale
+
+
+def mesh_resolution(params: dict, step: float) -> dict | None:
+    """
+    Return stage2_resolution of a run known by its parameters and step alone (no lock state).
+
+    For a recording without the lock's own figures: the mesh's lock (step_rule.lock_amplitudes)
+    stands for the run's.  None for a rigid model or parameters that do not make one.
     """
     from .registry import SPECS
 
     try:
-        return _coarse_step_warning(tuple(sorted((k, v) for k, v in params.items()
-                                                 if k in SPECS)))
-    except TypeError:           # (a value that cannot be a parameter: no model to judge)
+        return _mesh_resolution(tuple(sorted((k, v) for k, v in params.items() if k in SPECS)),
+                                float(step))
+    except (TypeError, ValueError):   # (a value that cannot be a parameter: no model to judge)
         return None
 
 
 @cache
-def _coarse_step_warning(items: tuple) -> str | None:
+def _mesh_resolution(items: tuple, step: float) -> dict | None:
     from .model import UmbrellaModel
     from .params import UmbrellaParams
 
@@ -246,20 +281,18 @@ def _coarse_step_warning(items: tuple) -> str | None:
         return None
     if p.model not in ("flexible", "flexible-nonlinear"):
         return None
-    omega = float(UmbrellaModel(p).locked_modes[0][0])
-    h = p.physics_time_step
-    corrected = bool(p.phase_correction) and p.model == "flexible"
-    limit = RESOLVED_OMEGA_H[corrected]
-    if omega * h <= limit:
-        return None
-    enough = limit / omega * (p.time_step / h)      # (time_step / physics step: the mesh's)
-    scale = 10.0 ** (math.floor(math.log10(enough)) - 2)
-    enough = math.floor(enough / scale) * scale        # three digits, rounded down
-    return (f"coarse step: the locked frame's first mode (period {2e3 * math.pi / omega:.4g} "
-            f"ms) gets {2 * math.pi / (omega * h):.3g} steps a period at the physics step "
-            f"{h:g} s, fewer than the {2 * math.pi / limit:.3g} that resolve it"
-            f"{' with phase_correction' if corrected else ''}: the stage-2 period and "
-            f"stresses are not those of the model; set time_step <= {enough:.3g} s")
+    model = UmbrellaModel(p)
+    amplitudes = lock_amplitudes(model)
+    limit = resolved_omega_h(p)
+    k = resolving_divisor(model, step, limit, amplitudes)
+    return {"step": step, **unresolved_stress_share(model, amplitudes, step, limit),
+            "resolving_step": None if k is None else step / k}
+
+
+#: rigid-fe's figures of the elastic field, which its constraints hold at zero: their
+#: round-off (1e-26 m, 1e-14 Pa) is reported as the zero the model means
+RIGID_FE_ZEROS = ("tip_deflection_max", "stage2_tip_amplitude", "peak_stress_leaf",
+                  "peak_stress_link", "stress_ratio_max", "tip_deflection_ratio_max")
 
 
 #: the geometrically exact beam (flexible-nonlinear) takes a fibre's slope |v'| in its body
@@ -308,6 +341,7 @@ ENERGY_DRIFT_LIMIT = 1e-3
 def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                       tip_deflection: float, locked: bool = False,
                       energy_drift: float | None = None,
+                      stage2_resolution: dict | None = None,
                       section_slope: float | None = None) -> list[str]:
     """
     Return where a run left the model's validity: one rule, used everywhere.
@@ -315,13 +349,16 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     Each text starts with a fixed key ('lock not applicable', 'coarse step' once locked,
     'energy not conserved', 'yield exceeded', 'large strain' (below yield; above it too for
     flexible-nonlinear), 'large deflection' (small-deformation models), 'fibre rotation'
-    (flexible-nonlinear: geometric_validity_warnings)) before a colon.
+    (flexible-nonlinear: geometric_validity_warnings)) before a colon.  stage2_resolution:
+    the lock's (LockEvent), for 'coarse step'; section_slope: the largest |v'| of
+    flexible-nonlinear's fibres (geometric_validity_warnings).
     """
     out = []
     lw = lock_warning(params, lock_kind)
     if lw:
         out.append(lw)
-    cw = coarse_step_warning(params) if locked else None
+    cw = (coarse_step_warning(stage2_resolution, params.get("time_step") == 0.0)
+          if locked else None)
     if cw:
         out.append(cw)
     if energy_drift is not None and energy_drift > ENERGY_DRIFT_LIMIT:
@@ -382,6 +419,7 @@ class SummaryAccumulator:
                        for b in ("leaf", "link")}
         self._s2_t: list = []
         self._s2_v: list = []
+        self._s2_bin, self._s2_all = -1.0, (math.inf, -math.inf, 0.0)   # (min, max, end)
         # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
         self._start = deploy_start(float(self.params.get("v0", 0.0)), ())
         self._warned: set = set()
@@ -420,8 +458,15 @@ class SummaryAccumulator:
                 self._tip1 = (float(deploying[i]), float(t[i]))
         if self.lock is not None and stage[-1] != 0 and t[0] <= self._stage2_end:
             keep = in_stage2_window(t, self.lock.time)
-            self._s2_t.append(t[keep])
-            self._s2_v.append(v[keep])
+            t2, v2 = t[keep], v[keep]
+            if len(t2):
+                lo, hi, _ = self._s2_all
+                self._s2_all = (min(lo, float(v2.min())), max(hi, float(v2.max())), float(t2[-1]))
+                bins = np.floor((t2 - self.lock.time) * (STAGE2_SAMPLES / STAGE2_WINDOW))
+                first = np.diff(bins, prepend=self._s2_bin) != 0      # (STAGE2_SAMPLES)
+                self._s2_bin = float(bins[-1])
+                self._s2_t.append(t2[first])
+                self._s2_v.append(v2[first])
         for body, (peak, x, ti) in block.peaks.items():
             if peak > self._peaks[body][0]:
                 self._peaks[body] = (peak, x, ti)
@@ -442,6 +487,9 @@ class SummaryAccumulator:
         if self._s2_t:
             out.update(stage2_figures(np.concatenate(self._s2_t), np.concatenate(self._s2_v),
                                       self.lock.time))
+            if out["stage2_tip_amplitude"] is not None:     # of every step, not those kept
+                lo, hi, end = self._s2_all
+                out["stage2_tip_amplitude"], out["stage2_window"][1] = 0.5 * (hi - lo), end
         else:
             out.update(stage2_figures(np.zeros(0), np.zeros(0), None))
         for body in ("leaf", "link"):
@@ -459,6 +507,11 @@ class SummaryAccumulator:
             out["lock_energy_before"] = self.lock.energy_before
             out["lock_energy_after"] = self.lock.energy_after
             out["lock_free_velocities"] = list(self.lock.free_velocities)
+            if self.lock.stage2_resolution:
+                out["stage2_resolution"] = dict(self.lock.stage2_resolution)
+        if p.get("model") == "rigid-fe":    # (what the rigid model has by construction)
+            out.update(dict.fromkeys(RIGID_FE_ZEROS, 0.0), tip_deflection_max_time=0.0,
+                       peak_stress_leaf_time=0.0, peak_stress_link_time=0.0)
         out["constraint_residual_max"] = self._residual
         out["final_time"] = self.final_time
         out["steps"] = self.steps
@@ -473,6 +526,8 @@ class SummaryAccumulator:
                                  max(self._peaks["leaf"][0], self._peaks["link"][0]),
                                  self._tip_all, locked=self.lock is not None,
                                  energy_drift=self._balance / self._scale,
+                                 stage2_resolution=self.lock.stage2_resolution
+                                 if self.lock else None,
                                  section_slope=self._slope())
 
     def _slope(self) -> float | None:

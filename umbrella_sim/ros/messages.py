@@ -135,8 +135,7 @@ def tip_deflection_msg(s: Sample, frame_prefix: str = "") -> PointStamped:
 
 PEAK_STRESS_LABELS = ("body: leaf,link",
                       "field: peak_abs_stress_Pa,position_m,stress_ratio,reference_stress_Pa")
-ENERGY_LABEL = ("field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J,damping_J,"
-                "phase_correction_J")
+ENERGY_LABEL = "field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J,damping_J"
 
 
 #: the peak_stress data, in order: per body, peak |sigma|, where, ratio to yield, and the
@@ -146,7 +145,10 @@ PEAK_STRESS_FIELDS = ("peak_stress_leaf", "peak_stress_leaf_x", "stress_ratio_le
                       "stress_ratio_link", "stress_link_mid")
 #: the energy data, in order (ENERGY_LABEL)
 ENERGY_FIELDS = ("kinetic_energy", "strain_energy", "work", "lock_energy_loss",
-                 "energy_balance", "damping_dissipation", "phase_correction_energy")
+                 "energy_balance", "damping_dissipation")
+#: what recordings made before the stage-2 mode fit carry after ENERGY_FIELDS: the earlier
+#: phase correction's term, in the energy that integrator kept (T + V + it)
+LEGACY_ENERGY_FIELDS = ("phase_correction_energy",)
 
 
 def peak_stress_values(s: Sample, yield_strength: float) -> tuple:
@@ -170,13 +172,13 @@ def peak_stress_msg(s: Sample, yield_strength: float) -> Float64MultiArray:
 def energy_values(s: Sample, initial_energy: float) -> tuple:
     """Return the energy data (ENERGY_FIELDS, J)."""
     return (s.kinetic_energy, s.strain_energy, s.work, s.lock_energy_loss,
-            energy_balance(s, initial_energy),
-            s.damping_dissipation, s.phase_correction_energy)
+            energy_balance(s, initial_energy), s.damping_dissipation)
 
 
 def energy_msg(s: Sample, initial_energy: float) -> Float64MultiArray:
     msg = Float64MultiArray()
-    msg.layout.dim = [MultiArrayDimension(label=ENERGY_LABEL, size=7, stride=7)]
+    msg.layout.dim = [MultiArrayDimension(label=ENERGY_LABEL, size=len(ENERGY_FIELDS),
+                                          stride=len(ENERGY_FIELDS))]
     msg.data = list(energy_values(s, initial_energy))
     return msg
 
@@ -210,8 +212,8 @@ def peak_stress_figures(msg) -> dict:
 
 
 def energy_figures(msg) -> dict:
-    """Return ENERGY_FIELDS by name (J)."""
-    return dict(zip(ENERGY_FIELDS, msg.data))
+    """Return ENERGY_FIELDS by name (J), and LEGACY_ENERGY_FIELDS where a recording has them."""
+    return dict(zip(ENERGY_FIELDS + LEGACY_ENERGY_FIELDS, msg.data))
 
 
 def markers_msg(s: Sample, positions, ns: str, frame_prefix: str = "") -> MarkerArray:
@@ -282,8 +284,8 @@ class SampleEncoder:
     """
 
     #: topic key -> doubles at the end of the message, as groups (a sequence or a struct)
-    GROUPS = {"energy": (7,), "clock": (), "joint_states": (3, 3, 3), "tip_deflection": (3,),
-              "peak_stress": (8,)}
+    GROUPS = {"energy": (len(ENERGY_FIELDS),), "clock": (), "joint_states": (3, 3, 3),
+              "tip_deflection": (3,), "peak_stress": (len(PEAK_STRESS_FIELDS),)}
     #: topics with a stamp (header.stamp, Clock.clock) right after the 4-byte CDR header
     STAMPED = ("clock", "joint_states", "tip_deflection")
 

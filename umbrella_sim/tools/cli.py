@@ -17,6 +17,7 @@ from ..bag.paths import check_new_output
 from ..core.driver import RunDriver, simulate
 from ..core.params import shortened_step_note
 from ..core.registry import parameter_help, SPECS
+from ..core.step_rule import physics_step_of
 from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
 
 
@@ -198,9 +199,9 @@ def main(argv: list[str] | None = None) -> int:
                    if args.force_profile else None)
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f"--duration {args.duration}: must be > 0")
-        if args.duration < params.physics_time_step * (1.0 - 1e-9):   # (it ran no step)
+        if args.duration < physics_step_of(params) * (1.0 - 1e-9):   # (it ran no step)
             raise ValueError(f"--duration {args.duration}: shorter than one physics step "
-                             f"({params.physics_time_step:g} s); the run takes every step "
+                             f"({physics_step_of(params):g} s); the run takes every step "
                              "that ends by then")
         outputs = {}
         for option, path in (("--csv", args.csv), ("--mcap", args.mcap)):
@@ -231,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         if args.mcap:
-            note = shortened_step_note(params.physics_time_step, args.publish_rate)
+            note = shortened_step_note(physics_step_of(params), args.publish_rate)
             if note:
                 print(f"umbrella_sim: note: the --mcap recording takes a {note}",
                       file=sys.stderr)

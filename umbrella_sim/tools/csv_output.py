@@ -23,7 +23,7 @@ CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate"
                "peak_stress_link_x", "stress_leaf_joint", "stress_link_mid",
                "sleeve_reaction_x", "sleeve_reaction_y",
                "kinetic_energy", "strain_energy", "work", "lock_energy_loss",
-               "constraint_residual", "damping_dissipation", "phase_correction_energy"]
+               "constraint_residual", "damping_dissipation"]
 _ROWS = [STEP_FIELDS.index(c) for c in CSV_COLUMNS if c != "stage"]
 _STAGE_ROW = STEP_FIELDS.index("stage")
 _STAGES = [str(s) for s in sorted(Stage, key=lambda s: s.code)]

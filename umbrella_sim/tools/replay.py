@@ -26,6 +26,7 @@ from ..bag.provenance import build_environment
 from ..bag.reader import LogData, LogError, qos_from_yaml, read_log
 from ..core.driver import RunDriver
 from ..core.forcing import command_force, ForceSchedule
+from ..core.integrators import INTEGRATOR_REVISION
 from ..core.params import physics_step, recorded_params
 from ..ros.messages import (ABSOLUTE_TOPIC_NAMES, COMMAND, joint_state_figures,
                             peak_stress_figures, tip_deflection_figures)
@@ -104,13 +105,20 @@ DEFAULT_TOLERANCE = 1e-6
 
 
 def build_difference(log: LogData) -> str:
-    """Say how the recording's build and floating-point environment differ from this one."""
+    """Say how the recording's integrator, build and floating-point environment differ."""
     recorded = log.metadata.get("umbrella_sim.build", {})
+    notes = []
+    integrator = recorded.get("integrator", "an earlier one (unrecorded)")
+    if integrator != INTEGRATOR_REVISION:
+        notes.append(f"recorded by another integrator ({integrator} there, "
+                     f"{INTEGRATOR_REVISION} here): the physics differs, in stage 2 at least")
     here = build_environment()
     differ = [f"{k} {recorded.get(k, 'unrecorded')!r} there, {v!r} here"
               for k, v in here.items() if recorded.get(k) != v]
-    return ("recorded with another floating-point environment (" + "; ".join(differ)
-            + "): round-off differs from the first step on") if differ else ""
+    if differ:
+        notes.append("recorded with another floating-point environment (" + "; ".join(differ)
+                     + "): round-off differs from the first step on")
+    return "; ".join(notes)
 
 
 def relative_difference(diff: float, scale: float) -> float:
@@ -136,10 +144,13 @@ def _segment_inputs(log: LogData, seg):
     except (KeyError, TypeError, ValueError) as exc:
         raise LogError(f"{log.path}: segment {seg.index}: parameters cannot be used "
                        f"({exc})") from None
-    if abs(physics_step(params.physics_time_step, rate) - step) > 1e-15:
-        raise LogError(f"{log.path}: physics step {step} cannot be reproduced from "
-                       f"time_step and publish_rate (got "
-                       f"{physics_step(params.physics_time_step, rate)})")
+    # the recorded step itself (a recording made under an earlier step rule replays at its
+    # own step), if it is one a run can take: it divides the publication period
+    if not (step > 0.0 and abs(physics_step(step, rate) - step) <= 1e-15):
+        raise LogError(f"{log.path}: physics step {step} cannot be reproduced: it does not "
+                       f"divide the publication period 1/{rate:g} s (a run would take "
+                       f"{physics_step(step, rate) if step > 0.0 else 'none'})")
+    params = params.with_physics_step(step)
     # the force history, the recorded fault and the last publication (only the few command
     # and phase records are decoded)
     applied, t_last, t_fault = [], 0.0, None
@@ -296,13 +307,20 @@ def moved_topics(log: LogData, topics: list[str], namespace: str) -> tuple[dict,
     return names, f" (topics under {recorded} moved to {namespace})"
 
 
+class RosArgumentsError(ValueError):
+    """The ROS arguments (after --ros-args) that rclpy refused, said in one line."""
+
+
 def republish(log: LogData, rate: float, start_offset: float, loop: bool,
               with_commands: bool, topics: list[str] | None, ros_args: list[str],
               wait_for_subscribers: float = 0.0) -> int:
     import rclpy
     from rclpy.duration import Duration
+    from rclpy.exceptions import InvalidParameterTypeException
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
+
+    from ..ros.parameters import wrong_type_text
 
     chosen = [t for t in log.topics() if (with_commands or not _is_command(t, log))
               and (not topics or t in topics)]
@@ -320,9 +338,19 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     # SIGINT/SIGTERM raise KeyboardInterrupt here (stop_signals.interruptible), with the context
     # still valid for the acknowledgements below; rclpy's own handlers would shut it down
     # first, and waiting for them then raised RCLError
-    rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args],
-               signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node("umbrella_replay")
+    try:
+        rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args],
+                   signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:    # RCLError, UnknownROSArgsError: the arguments are wrong
+        reason = " ".join(str(exc).split())
+        if type(exc).__name__ == "UnknownROSArgsError":
+            reason = f"unknown ROS arguments {reason}"
+        raise RosArgumentsError(f"invalid ROS arguments: {reason}") from None
+    try:
+        node = rclpy.create_node("umbrella_replay")
+    except InvalidParameterTypeException as exc:      # -p use_sim_time:=abc
+        rclpy.try_shutdown()
+        raise RosArgumentsError(wrong_type_text(None, exc)) from None
     names, moved = moved_topics(log, chosen, node.get_namespace())
     pubs = {t: node.create_publisher(log.msg_type(t), names[t],
                                      qos_from_yaml(log.channels[t][1])) for t in chosen}
@@ -455,7 +483,7 @@ def main(argv: list[str] | None = None) -> int:
             return 0 if ok else 1
         return republish(log, args.rate, args.start_offset, args.loop, args.with_commands,
                          args.topics, ros_args, args.wait_for_subscribers)
-    except LogError as exc:
+    except (LogError, RosArgumentsError) as exc:
         raise_if_stopped()           # (a stop signal inside a decoding: an interrupt)
         print(f"umbrella_replay: error: {exc}", file=sys.stderr)
         return 2

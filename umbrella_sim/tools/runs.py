@@ -16,7 +16,8 @@ import os
 import numpy as np
 
 from ..bag.reader import LogError, read_log
-from ..core.summary import deploy_start_of, relative_drift, stage2_figures, validity_warnings
+from ..core.summary import (deploy_start_of, mesh_resolution, relative_drift, stage2_figures,
+                            validity_warnings)
 from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_figures,
                             tip_deflection_figures)
 
@@ -141,10 +142,12 @@ class Run:
             return list(self.warnings)
         tip = float(np.abs(self.tip_v).max()) if len(self.tip_v) else 0.0
         peak = float(max(self.peak_leaf.max(), self.peak_link.max()))
+        step = self.params.get("physics_step", self.params.get("time_step"))
         try:
             return validity_warnings(self.params, self.lock_kind, peak, tip,
                                      locked=self.lock_time is not None,
-                                     energy_drift=self.energy_drift)
+                                     energy_drift=self.energy_drift,
+                                     stage2_resolution=mesh_resolution(self.params, step))
         except (KeyError, TypeError):
             return []
 
@@ -222,7 +225,8 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     drift = None
     energy = log.find_topic("energy", required=False)
     if energy:
-        # (the phase correction's term is 0 where the recording does not have it)
+        # (the earlier phase correction's term, in the energy that integrator kept, where an
+        # older recording has it; 0 elsewhere)
         _, e = _series(log, energy, lambda m: _figures(
             {"phase_correction_energy": 0.0, **energy_figures(m)}, *ENERGY_FIGURES), seg, 0)
         e = dict(zip(ENERGY_FIGURES, np.array(e).reshape(-1, len(ENERGY_FIGURES)).T))

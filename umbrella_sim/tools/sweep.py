@@ -262,10 +262,11 @@ def _mcap_step_cases(sweep: Sweep, log) -> None:
     plain one: it must not take (or replace) the plain case's result.
     """
     from ..core.params import shortened_step_note, UmbrellaParams
+    from ..core.step_rule import physics_step_of
 
     rate = MCAP_PUBLISH_RATE
     for case in sweep.cases:
-        step = UmbrellaParams.from_mapping(case.params).physics_time_step
+        step = physics_step_of(UmbrellaParams.from_mapping(case.params))
         note = shortened_step_note(step, rate)
         if note:
             case.case_id = case_id(dict(case.params, mcap_publish_rate=rate), case.duration,

@@ -1,0 +1,169 @@
+"""
+The physics step a mesh's stage-2 stresses need, and what a step leaves unresolved.
+
+How much of a run's stage-2 stress a step leaves to modes it does not resolve: one rule for
+the step chosen for the mesh (``time_step`` 0, or ``step_follows_mesh``) and for the 'coarse
+step' warning.
+
+At the lock the frame stops within a step: its velocity jumps onto the locked constraints and
+every mode of the locked frame (``UmbrellaModel.locked_modes``, linearised at full deployment)
+starts vibrating with the amplitude a_i = |eta_i + i eta_i' / omega_i| of its share of the
+post-lock state (eta = phi^T M0 (q - q_deployed)).  The stage-2 peak stress is a crest where
+these modes' stresses add up: at the fibre point where sum_i a_i |sigma_i(x)| is largest, the
+share of that sum carried by modes the step does not resolve (omega_i h above the scheme's
+limit: 1.5 with stage 2's mode fit, which makes a mode exact up to there; 0.35, a 1 % period
+error, without it) is what the step can get wrong of the crest.  Measured against converged
+runs (docs/validation.md, step convergence): at shares of 2-3 % the stage-2 peaks came out 2
+to 6 % off, at 1 % or less within 1 %.
+
+The step a mesh needs is judged on the lock of the rigid deployment (the undeformed frame
+reaching full deployment, its velocity changed by the run's lock rule, lock.py): it depends
+on the mesh, geometry, material and lock rule, not on V0 (the amplitudes scale with it), and
+matched the share of the simulated runs' own lock states to 0.1 % (plastic lock; the energy
+lock's redistribution depends more on the elastic state at the lock, whose own share the
+'coarse step' warning judges).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+import math
+
+import numpy as np
+
+from .integrators import PHASE_CORRECTION_LIMIT
+from .lock import energy_velocity, plastic_velocity
+from .model import ConstraintSet, UmbrellaModel
+from .params import UmbrellaParams
+from .registry import MIN_PHYSICS_STEP
+
+#: the share of a stage-2 stress crest that modes the step does not resolve may carry
+STRESS_SHARE_LIMIT = 0.01
+#: the automatic step is ceiling / k for the smallest k = 1 .. MAX_STEP_DIVISOR that does it
+MAX_STEP_DIVISOR = 64
+#: the ceiling of the automatic step (time_step 0): the one-element mesh's step, chosen by
+#: its accuracy against converged runs (docs/validation.md) and what keeps it ~15x real time
+AUTO_STEP_CEILING = 1e-4
+#: omega h of a 1 % period error of the plain midpoint rule ((omega h)^2 / 12): the limit of a
+#: resolved mode without the mode fit
+UNFITTED_OMEGA_H = math.sqrt(12 * 0.01)
+
+
+def resolved_omega_h(params: UmbrellaParams) -> float:
+    """Return the largest omega h of a mode the run's stage-2 integration resolves."""
+    fitted = params.phase_correction and params.model == "flexible"
+    return PHASE_CORRECTION_LIMIT if fitted else UNFITTED_OMEGA_H
+
+
+def modal_amplitudes(model: UmbrellaModel, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """Return each locked mode's amplitude |eta_i + i eta_i' / omega_i| in the state (q, qd)."""
+    omega, phi, mass = model.locked_modes
+    u = phi.T @ mass
+    q_deployed = model.rigid_configuration(model.params.alpha_deployed)
+    return np.hypot(u @ (q - q_deployed), (u @ qd) / omega)
+
+
+def lock_amplitudes(model: UmbrellaModel) -> np.ndarray:
+    """
+    Return the modal amplitudes the mesh's lock starts.
+
+    The rigid deployment (alpha1' = 1) stopped at full deployment by the run's lock
+    (params.lock_rule: plastic or energy).
+    """
+    q = model.rigid_configuration(model.params.alpha_deployed)
+    cs = ConstraintSet(locked=True, rigid=False)
+    qd = model.rigid_velocity(q, 1.0)
+    qd = (energy_velocity(model, q, qd, cs)[0] if model.params.lock_rule == "energy" else
+          plastic_velocity(model, q, qd, cs))
+    return modal_amplitudes(model, q, qd)
+
+
+def mode_stresses(model: UmbrellaModel) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return the top and bottom fibre stress of each locked mode, per body (leaf, link).
+
+    Arrays (modes, 2 x stress points) for phi_i of ``locked_modes`` (stresses are linear in
+    the elastic coordinates: those of the mode shape itself).
+    """
+    phi = model.locked_modes[1]
+    return tuple(np.vstack([body.stress_top @ phi[s_e], body.stress_bottom @ phi[s_e]]).T
+                 for body, s_e in ((model.leaf, model.s_leaf), (model.link, model.s_link)))
+
+
+def unresolved_stress_share(model: UmbrellaModel, amplitudes: np.ndarray, h: float,
+                            limit: float, stresses: tuple | None = None) -> dict:
+    """
+    Return, per body, the share of the stage-2 stress crest that unresolved modes carry.
+
+    At the fibre point where sum_i a_i |sigma_i| is largest: the part of that sum from modes
+    with omega_i h > limit (0.0 where every mode is resolved).  stresses: mode_stresses
+    (computed if None).
+    """
+    omega = model.locked_modes[0]
+    unresolved = omega * h > limit
+    out = {}
+    for body, sigma in zip(("leaf", "link"), stresses or mode_stresses(model)):
+        contribution = np.abs(amplitudes[:, None] * sigma)
+        total = contribution.sum(axis=0)
+        at = int(np.argmax(total))
+        out[body] = float(contribution[unresolved, at].sum() / total[at]) if total[at] > 0 else 0.0
+    return out
+
+
+def resolving_divisor(model: UmbrellaModel, time_step: float, limit: float,
+                      amplitudes: np.ndarray) -> int | None:
+    """Return the smallest k whose step time_step / k meets STRESS_SHARE_LIMIT, or None."""
+    largest = min(MAX_STEP_DIVISOR, int(time_step / MIN_PHYSICS_STEP))
+    stresses = mode_stresses(model)
+    for k in range(1, largest + 1):
+        shares = unresolved_stress_share(model, amplitudes, time_step / k, limit, stresses)
+        if max(shares.values()) <= STRESS_SHARE_LIMIT:
+            return k
+    return None
+
+
+def physics_step_of(params: UmbrellaParams) -> float:
+    """
+    Return the integrator's step (s) of these parameters.
+
+    ``time_step`` if it is given (> 0) and ``step_follows_mesh`` is off; else, for the
+    flexible models, the largest ceiling / k (k = 1 .. MAX_STEP_DIVISOR; the ceiling is
+    time_step, or AUTO_STEP_CEILING for time_step 0) whose unresolved modes carry at most
+    STRESS_SHARE_LIMIT of the stage-2 stress crest of the mesh's lock (``lock_amplitudes``),
+    or ceiling / MAX_STEP_DIVISOR if none does (the run then says so: 'coarse step').  The
+    rigid models: the ceiling.
+    """
+    ceiling = params.time_step if params.time_step > 0.0 else AUTO_STEP_CEILING
+    if (params.time_step > 0.0 and not params.step_follows_mesh) or \
+            params.model in ("rigid", "rigid-fe"):
+        return ceiling
+    return ceiling / _mesh_divisor(tuple(sorted(params.replace(time_step=ceiling)
+                                                .as_dict().items())))
+
+
+@lru_cache(maxsize=32)
+def _mesh_divisor(items: tuple) -> int:
+    p = UmbrellaParams.from_mapping(dict(items))
+    try:
+        with np.errstate(all="ignore"):
+            model = UmbrellaModel(p)
+            k = resolving_divisor(model, p.time_step, resolved_omega_h(p),
+                                  lock_amplitudes(model))
+    except (ArithmeticError, ValueError):
+        # parameters that make no model: building the run's says why, naming them
+        return 1
+    return k or min(MAX_STEP_DIVISOR, int(p.time_step / MIN_PHYSICS_STEP))
+
+
+def stage2_resolution(model: UmbrellaModel, q: np.ndarray, qd: np.ndarray, h: float) -> dict:
+    """
+    Return how well the step h resolves the stage-2 stresses of the post-lock state (q, qd).
+
+    {"step": h, "leaf": share, "link": share (unresolved_stress_share), "resolving_step":
+    the largest h / k meeting STRESS_SHARE_LIMIT (h itself if it does; None if no k up to
+    MAX_STEP_DIVISOR does)}: what the 'coarse step' warning reads (summary.py).
+    """
+    limit = resolved_omega_h(model.params)
+    amplitudes = modal_amplitudes(model, q, qd)
+    k = resolving_divisor(model, h, limit, amplitudes)
+    return {"step": h, **unresolved_stress_share(model, amplitudes, h, limit),
+            "resolving_step": None if k is None else h / k}
