@@ -84,7 +84,8 @@ def main():
     print("RTF = simulated s per second (CPU: process time, what the step costs; wall: what a "
           "loaded machine gave)")
     print(f"{'model':>19} {'zeta':>5} {'V0':>5} {'N':>3} {'dofs':>5} {'backend':>8} "
-          f"{'h (us)':>6} {'newton/step 1|2':>15} {'us/step':>8} {'RTF cpu':>8} {'RTF wall':>9} {'target':>9}")
+          f"{'h (us)':>6} {'newton/step 1|2':>15} {'us/step':>8} {'RTF cpu':>8} "
+          f"{'RTF wall':>9} {'target':>9}")
     for v0 in args.v0:
         for n in args.meshes:
             for model, zeta in CASES:
@@ -108,8 +109,8 @@ def bench_case(args, v0, n, model, zeta):
     verdict = ("" if target is None
                else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}")
     print(f"{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} "
-          f"{sim.h * 1e6:>6.3g} {its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x {rtf_wall:>8.2f}x "
-          f"{verdict:>9}")
+          f"{sim.h * 1e6:>6.3g} {its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x "
+          f"{rtf_wall:>8.2f}x {verdict:>9}")
 
 
 if __name__ == "__main__":

@@ -246,10 +246,16 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "(docs/validation.md, step convergence): the deploy time, stage-1 and stage-2 peak "
        "stresses, stage-2 period and amplitude of every studied case, and the stage-2 tip "
        "series within 1 mm up to V0 = -0.2 m/s (at -0.5 m/s, a 0.12-0.16 m amplitude past "
-       "the small-deflection limit, the floating frames' nonlinearity leaves 1-4 mm)",
+       "the small-deflection limit, the floating frames' nonlinearity leaves 1-4 mm). "
+       "flexible-nonlinear: 0 = 0.1 ms at every mesh, its real-time step (its own rule, "
+       "ωh ≤ 0.35, would take 4 µs at N = 4: `step_follows_mesh` takes it), at which its "
+       "stage-2 period and amplitude meet an independent geometrically exact model's "
+       "(docs/validation_nonlinear.md) and its stage-2 peak stresses are not resolved "
+       "('coarse step' says so)",
        low=0.0, high=0.01, rule=f"0, or >= {MIN_PHYSICS_STEP:g} s"),
     _P("step_follows_mesh", bool, False, "-",
-       "with a `time_step` > 0: true = the physics step is the largest `time_step` / k "
+       "with a `time_step` > 0 (or flexible-nonlinear's 0, which stands for 0.1 ms): true = "
+       "the physics step is the largest `time_step` / k "
        "the mesh's stage-2 stresses need (the rule of `time_step` 0, below this ceiling); "
        "false = `time_step` as it is (a run whose step leaves more than 1 % of its "
        "stage-2 stress crest to unresolved modes says so: 'coarse step'). The node still "

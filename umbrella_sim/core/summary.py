@@ -19,7 +19,7 @@ from .forcing import TIME_RESOLUTION
 from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS, step_row,
                       StepBlock)
 from .step_rule import (lock_amplitudes, MAX_STEP_DIVISOR, resolved_omega_h, resolving_divisor,
-                        STRESS_SHARE_LIMIT, unresolved_stress_share)
+                        resolving_step_hint, STRESS_SHARE_LIMIT, unresolved_stress_share)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
@@ -220,7 +220,7 @@ def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     return None
 
 
-def coarse_step_warning(resolution: dict | None, step_chosen: bool = False) -> str | None:
+def coarse_step_warning(resolution: dict | None, hint: str = "") -> str | None:
     """
     Return a warning when the step leaves the modes carrying the stage-2 stresses unresolved.
 
@@ -228,7 +228,8 @@ def coarse_step_warning(resolution: dict | None, step_chosen: bool = False) -> s
     before the lock or for a rigid model.  Past step_rule.STRESS_SHARE_LIMIT the stage-2
     peak stresses, and the period if the first mode is among those modes, are not those of
     the model (docs/validation.md): the text names the shares and the step that resolves
-    them.  step_chosen: the run's step is the one chosen for the mesh (time_step 0).
+    them.  hint: how the run's parameters get that step (step_rule.resolving_step_hint), ''
+    if they already do.
     """
     if not resolution:
         return None
@@ -241,7 +242,7 @@ def coarse_step_warning(resolution: dict | None, step_chosen: bool = False) -> s
                "one) resolves them: give a smaller time_step")
     else:
         fix = f"time_step <= {_rounded_down(enough):.3g} s resolves them" + (
-            "" if step_chosen else " (time_step 0 takes the step chosen for the mesh)")
+            f" ({hint})" if hint else "")
     return (f"coarse step: modes the physics step {h:g} s does not resolve carry "
             f"{100 * shares['leaf']:.3g} % of the leaf's and {100 * shares['link']:.3g} % of the "
             f"link's stage-2 stress crest at the lock (limit {100 * STRESS_SHARE_LIMIT:g} %): "
@@ -357,7 +358,7 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     lw = lock_warning(params, lock_kind)
     if lw:
         out.append(lw)
-    cw = (coarse_step_warning(stage2_resolution, params.get("time_step") == 0.0)
+    cw = (coarse_step_warning(stage2_resolution, resolving_step_hint(params))
           if locked else None)
     if cw:
         out.append(cw)
