@@ -3,7 +3,8 @@
 Regenerate docs/deployment.png.
 
 Deformed shapes through a deployment and the tip
-deflection across the lock (flexible model, thesis data, V0 = -0.2 m/s, N = 2).
+deflection across the lock (flexible model, thesis data, V0 = -0.2 m/s, N = 2).  Each
+element is drawn by its own shape functions (UmbrellaModel.deformed_shape), its nodes as dots.
 """
 import os
 import sys
@@ -25,9 +26,11 @@ times = [0.0, 0.08, 0.16, r.lock.time, 0.2405, 0.2515]
 for t in times:
     s = min(r.samples, key=lambda s: abs(s.time - t))
     mag = 200.0 if s.stage == "deploying" else 5.0
-    leaf, link = m.node_positions(s.q, mag)
+    leaf, link = m.deformed_shape(s.q, mag)
+    nodes, _ = m.node_positions(s.q, mag)
     c = "tab:blue" if s.stage == "deploying" else "tab:red"
-    ax1.plot(leaf[:, 0], leaf[:, 1], "-o", color=c, ms=3, lw=1.5)
+    ax1.plot(leaf[:, 0], leaf[:, 1], "-", color=c, lw=1.5)
+    ax1.plot(nodes[:, 0], nodes[:, 1], "o", color=c, ms=3)
     ax1.plot(link[:, 0], link[:, 1], "-", color=c, lw=1, alpha=0.7)
     ax1.plot([0], [s.sleeve_position], "s", color=c, ms=5)
 ax1.axvline(0, color="k", lw=0.8)
@@ -46,4 +49,4 @@ ax2.set_title("V0 = -0.2 m/s, N = 2 (thesis Fig. 6.4)", fontsize=9)
 fig.tight_layout()
 out = os.path.join(os.path.dirname(os.path.abspath(__file__)), "deployment.png")
 fig.savefig(out, dpi=110)
-print(out)
+print(out, file=sys.stderr)

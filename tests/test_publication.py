@@ -66,7 +66,7 @@ def test_marker_bytes_are_the_built_markers(mesh, model, ns, frame_prefix, magni
         s = driver.publication()
         msgs = encoder.messages(s, ns, magnification, frame_prefix)
         seen.add(s.stage)
-        ref = ros_io.markers_msg(s, driver.sim.model.node_positions(s.q, magnification), ns,
+        ref = ros_io.markers_msg(s, driver.sim.model.deformed_shape(s.q, magnification), ns,
                                  frame_prefix)
         data, expected = msgs["markers"], cdr_bytes(ref)     # (colours: float32 on the wire)
         assert data == expected

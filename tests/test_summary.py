@@ -427,6 +427,29 @@ def captured_figures(monkeypatch):
     return figures
 
 
+def test_recorded_shapes_are_the_models_cubics_at_any_magnification(offline, bags):
+    """
+    The shapes compare draws (the recorded markers, re-magnified) are the model's.
+
+    Each element's cubic (UmbrellaModel.deformed_shape) of the sample at the marker's time,
+    at the recorded magnification and re-scaled to others; the dots are the nodes.
+    """
+    from umbrella_sim.core.model import UmbrellaModel
+    model = UmbrellaModel(PARAMS)
+    run = compare.load_run(str(bags[100.0]))
+    times = np.array([s.time for s in offline.samples])
+    assert len(run.shapes) > 10
+    for tm, leaf, _ in run.shapes[::3]:
+        q = offline.samples[int(np.argmin(np.abs(times - tm)))].q
+        for magnification in (1.0, 37.0, 200.0):
+            _, drawn_leaf, drawn_link = run.shape(tm, magnification)
+            exact = model.deformed_shape(q, magnification)
+            assert np.abs(drawn_leaf - exact[0]).max() < 1e-12
+            assert np.abs(drawn_link - exact[1]).max() < 1e-12
+        nodes = model.node_positions(q, run.magnification)[0]
+        assert np.abs(run.nodes(leaf, "leaf") - nodes).max() < 1e-12
+
+
 def test_shapes_stay_on_screen_with_stage_magnification_and_times(tmp_path,
                                                                   captured_figures):
     """V0 = -1 m/s, --thesis: every leaf drawn within 2 m of the hinge; legend has times."""

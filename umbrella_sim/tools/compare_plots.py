@@ -2,7 +2,8 @@
 umbrella_compare's figures: the runs' signals against time, the deformed shapes, the lock.
 
 Drawn with matplotlib (Agg) from the runs.Run records the recordings gave; the deformed
-shapes from the recorded markers, magnified (stage 1 and stage 2 each its own factor).
+shapes from the recorded markers (each element drawn by its own cubic), magnified (stage 1
+and stage 2 each its own factor).
 """
 from __future__ import annotations
 
@@ -109,8 +110,10 @@ def plot(runs: list[Run], out_dir: str, magnification=(200.0, 5.0)) -> list[str]
                 c, n1 = blues[min(n1, 4)], n1 + 1
             else:
                 c, n2 = reds[min(n2, 3)], n2 + 1
-            ax.plot(leaf[:, 0], leaf[:, 1], "-o", ms=2, color=c, lw=1,
+            ax.plot(leaf[:, 0], leaf[:, 1], "-", color=c, lw=1,
                     label=f"t = {tm:.4f} s (x{mag:.3g})")
+            nodes = r.nodes(leaf, "leaf")
+            ax.plot(nodes[:, 0], nodes[:, 1], "o", ms=2, color=c)
             ax.plot(link[:, 0], link[:, 1], "-", color=c, lw=0.8, alpha=0.7)
         ax.axvline(0, color="k", lw=0.6)
         ax.set_aspect("equal")

@@ -16,6 +16,7 @@ import os
 import numpy as np
 
 from ..bag.reader import LogError, read_log
+from ..core.model import shape_abscissae
 from ..core.summary import (deploy_start_of, mesh_resolution, relative_drift, stage2_figures,
                             validity_warnings)
 from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_figures,
@@ -91,16 +92,27 @@ class Run:
 
         The elastic part is re-scaled from the recorded
         marker magnification to another one (undeformed frames from the joint angles).
+        Each body's recorded points are its nodes and, in a recording since the markers
+        draw each element's cubic, points evenly between them (drawn_abscissae).
         """
         tm, leaf, link = min(self.shapes, key=lambda s: abs(s[0] - t))
-        if self.leaf_node_x is None or self.magnification <= 0:
+        leaf_x = drawn_abscissae(self.leaf_node_x, len(leaf))
+        link_x = drawn_abscissae(self.link_node_x, len(link))
+        if leaf_x is None or link_x is None or self.magnification <= 0:
             return tm, leaf, link
         a1 = np.interp(tm, self.t, self.alpha1)
         a2 = np.interp(tm, self.t, self.alpha2)
-        leaf_u = np.outer(self.leaf_node_x, [math.cos(a1), math.sin(a1)])
-        link_u = link[0] + np.outer(self.link_node_x, [math.cos(a2), math.sin(a2)])
+        leaf_u = np.outer(leaf_x, [math.cos(a1), math.sin(a1)])
+        link_u = link[0] + np.outer(link_x, [math.cos(a2), math.sin(a2)])
         scale = magnification / self.magnification
         return tm, leaf_u + scale * (leaf - leaf_u), link_u + scale * (link - link_u)
+
+    def nodes(self, points: np.ndarray, body: str) -> np.ndarray:
+        """Return the nodes among a body's drawn points (all of them if not known)."""
+        node_x = self.leaf_node_x if body == "leaf" else self.link_node_x
+        if drawn_abscissae(node_x, len(points)) is None:
+            return points
+        return points[::(len(points) - 1) // (len(node_x) - 1)]
 
     def figures(self) -> dict:
         """
@@ -150,6 +162,19 @@ class Run:
                                      stage2_resolution=mesh_resolution(self.params, step))
         except (KeyError, TypeError):
             return []
+
+
+def drawn_abscissae(node_x, n_points: int) -> np.ndarray | None:
+    """
+    Return the body abscissae of a drawn shape of n_points over these nodes, or None.
+
+    Each element in the same number of equal pieces (core.model.shape_abscissae): one
+    (the nodes) in recordings made before the markers drew each element's cubic.
+    """
+    if node_x is None or len(node_x) < 2:
+        return None
+    per, rest = divmod(n_points - 1, len(node_x) - 1)
+    return shape_abscissae(node_x, per) if per >= 1 and not rest else None
 
 
 def _series(log, topic, fn, segment, width: int, stride: int = 1):
