@@ -36,6 +36,10 @@ CASES = (("flexible", 0.0), ("flexible", 0.02), ("flexible-nonlinear", 0.0),
          ("flexible-nonlinear", 0.02))
 
 
+class RunStopped(Exception):
+    """A benchmarked run that ended in a fault (e.g. a fibre turned 90 deg at V0 = -2, N = 1)."""
+
+
 def one_run(params, duration):
     """
     Whole run in 1 ms blocks of simulated time (what the node pays).
@@ -52,7 +56,7 @@ def one_run(params, duration):
         block = sim.advance(per_block)
         block.last                            # the Sample a publication carries
         if block.error:
-            raise SystemExit(f"{params.model}: {block.error}")
+            raise RunStopped(f"stopped at t = {sim.time:.4f} s: {block.error.split(': ', 1)[-1]}")
         if at_lock is None and sim.stage == Stage.LOCKED:
             at_lock = (integ.iterations, sim.steps)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -98,7 +102,11 @@ def bench_case(args, v0, n, model, zeta):
                        time_step=args.time_step)
     walls, cpus = [], []
     for _ in range(args.repeat):
-        wall, cpu, sim, its1, its2 = one_run(p, args.duration)
+        try:
+            wall, cpu, sim, its1, its2 = one_run(p, args.duration)
+        except RunStopped as stopped:
+            print(f"{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {stopped}")
+            return
         walls.append(wall)
         cpus.append(cpu)
     integ = sim.engine.integrator
