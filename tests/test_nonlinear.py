@@ -813,3 +813,31 @@ def test_recording_and_resimulation_of_the_nonlinear_damped_model(tmp_path):
     res = resimulate(log)
     assert res["compared"] > 5
     assert max(res["max_abs_diff"].values()) < 1e-9
+
+
+def test_compare_reads_recordings_of_both_models_and_names_where_each_leaves_validity(
+        tmp_path, capfd):
+    """
+    umbrella_compare on a linear and a geometrically exact recording (V0 = -1, plastic lock).
+
+    Both load and plot; each run's recorded warnings come through: the linear model is sent
+    to flexible-nonlinear for its large deflection, the geometrically exact one names its own
+    limit (small strains) and how to resolve its stage 2 (step_follows_mesh).
+    """
+    from umbrella_sim.ros.recording import record_offline
+    from umbrella_sim.tools import compare
+
+    for model in ("flexible", NL):
+        record_offline(UmbrellaParams(v0=-1.0, model=model, lock="plastic"),
+                       str(tmp_path / model), 0.1)
+    out = tmp_path / "out"
+    assert compare.main([str(tmp_path / "flexible"), str(tmp_path / NL), "--names", "linear",
+                         "exact", "--out", str(out)]) == 0
+    text = capfd.readouterr().out
+    figures = text[text.index("figures"):]
+    linear, exact = figures[:figures.index("\nexact ")], figures[figures.index("\nexact "):]
+    assert "compare model flexible-nonlinear" in linear
+    assert "large deflection" not in exact and "small strains only" in exact
+    assert "step_follows_mesh takes it" in exact
+    assert {p.name for p in out.iterdir()} >= {"compare.json", "tip_deflection.png",
+                                               "stress.png", "shapes.png"}
