@@ -115,7 +115,7 @@ class MidpointUmbrella:
         self.kin_shared = np.zeros(m.n_shared, dtype=bool)
         self.norm_shared = np.zeros(m.n_shared, dtype=bool)
         if m.moving_base:
-            self.kin_shared[[0, 4, 5, 6]] = True
+            self.kin_shared[0] = True
             self.norm_shared[1:] = True
         self.iterations = 0
 
@@ -295,13 +295,28 @@ class MidpointUmbrella:
         w_drive = float(lam_s[1:] @ dqs[1:7]) if drive is not None else 0.0
         t_target = (0.5 * (np.sum(vr0 * pr0) + vs0 @ ps0) + m.strain_energy(qr0)
                     - m.strain_energy(qr) + w_force + float(np.sum(w_fric)) + w_drive)
+        free_bus = m.params.base == "free"
+        if free_bus:
+            # the bus position is cyclic: its momentum p_X (the linear momentum) is exactly
+            # that of the step's start; Newton leaves its tolerance in it, which a uniform
+            # translation velocity removes (p_X is m_total X' + terms without X')
+            vs = vs.copy()
+            vs[1:4] += (ps0[1:4] - m.matvec(mass1, vr, vs)[1][1:4]) / m.total_mass
         vr, vs = self.project(kin1, mass1, qr, vr, vs, stuck, locked,
                               None if drive is None else drive[1])
         pr1, ps1 = m.matvec(mass1, vr, vs)
         if drive is None:
-            t_after = 0.5 * (np.sum(vr * pr1) + vs @ ps1)
-            if t_after > 0.0 and t_after / 1.01 <= t_target <= 1.01 * t_after:
-                scale = math.sqrt(t_target / t_after)
-                vr, vs, pr1, ps1 = vr * scale, vs * scale, pr1 * scale, ps1 * scale
+            # scale the velocity relative to the mass centre's (König: T = |P|^2 / 2m + T_rel),
+            # so the linear momentum stays as it is
+            drift = np.zeros(m.n_shared)
+            if free_bus:
+                drift[1:4] = ps0[1:4] / m.total_mass
+            t_drift = 0.5 * m.total_mass * float(drift @ drift)
+            t_after = 0.5 * (np.sum(vr * pr1) + vs @ ps1) - t_drift
+            t_rel = t_target - t_drift
+            if t_after > 0.0 and t_after / 1.01 <= t_rel <= 1.01 * t_after:
+                scale = math.sqrt(t_rel / t_after)
+                vr, vs = vr * scale, (vs - drift) * scale + drift
+                pr1, ps1 = m.matvec(mass1, vr, vs)
         state = State3D(s.t + h, qr, qs, vr, vs, lam_r, lam_s, stuck, pr1, ps1)
         return state, StepWork(w_force, w_fric, w_drive, it)
