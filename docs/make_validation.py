@@ -34,6 +34,11 @@ from umbrella_sim.tools.compare import (  # noqa: E402
 OUT_DIR = os.path.join(HERE, "validation")
 
 
+def progress(what: str) -> None:
+    """Say on stderr what is being computed (the document itself holds no wall times)."""
+    print(f"make_validation: {what}", file=sys.stderr, flush=True)
+
+
 def lock_time(params):
     return simulate(params, 0.5, stop_after_lock=0.0).lock.time
 
@@ -111,6 +116,7 @@ def step_convergence_section() -> list[str]:
              + ".", ""] + _HEADER
     chosen = []
     for n, v0, lock in CASES:
+        progress(f"step study, chosen step: N = {n}, V0 = {v0:g}, {lock} lock")
         p = UmbrellaParams(v0=v0, elements_per_segment=n, lock=lock)
         e = step_errors(run_steps(p, STUDY_WINDOW), _study_reference(p), STUDY_WINDOW)
         chosen.append(e)
@@ -133,6 +139,7 @@ def step_convergence_section() -> list[str]:
     for n, v0, lock in CASES:
         if n > 4:
             continue
+        progress(f"step study, fixed steps: N = {n}, V0 = {v0:g}, {lock} lock")
         p = UmbrellaParams(v0=v0, elements_per_segment=n, lock=lock)
         for h in STUDY_STEPS:
             e = step_errors(run_steps(p.replace(time_step=h), STUDY_WINDOW), _study_reference(p),
@@ -196,6 +203,7 @@ def mode_fit_lines() -> list[str]:
              "`step_study.locked_mode_flow`):", "",
              "| mode | ω (rad/s) | ωh | frequency error: plain → fit | amplitude: plain → fit "
              "| damping ratio (ζ₁ = 0.002): specified, plain → fit |", "|---|---|---|---|---|---|"]
+    progress("mode fit: single modes, and runs with and without it")
     omega1 = locked_mode_flow(False, 0, periods=1.0).omega
     for k in (0, 3, 5, 7):
         plain, fit = locked_mode_flow(False, k), locked_mode_flow(True, k)
@@ -321,6 +329,7 @@ def main():
              "for the mesh (`time_step` 0; 0.1 ms at N = 1) unless stated.", ""]
 
     # --- Table 6.1
+    progress("Table 6.1")
     lines += ["## Table 6.1: deployment time (s)", "",
               "| V0 (m/s) | thesis deformable | flexible N = 1 | flexible N = 2 "
               "| thesis rigid FEA "
@@ -423,6 +432,7 @@ def main():
               "Deployment time and the first vibration mode are converged from the thesis's "
               "3-element mesh on; the peak stress, a second derivative of the displacement "
               "field, converges more slowly (its location moves with the mesh).", ""]
+    progress("the two locks")
     lines += lock_section()
     lines += step_convergence_section()
     lines += [
@@ -430,11 +440,10 @@ def main():
               "`flexible-nonlinear` beside `flexible` at V0 = −0.2, −1, −2 m/s (mesh series), "
               "the spin-up benchmark of Kane, Ryan & Banerjee (1987) and damped runs: "
               "[validation_nonlinear.md](validation_nonlinear.md) (regenerate: "
-              "`python docs/make_validation_nonlinear.py`).", "",
-              f"_Generated in {time.time() - t_start:.0f} s._", ""]
+              "`python docs/make_validation_nonlinear.py`).", ""]
     with open(os.path.join(HERE, "validation.md"), "w", encoding="utf-8") as fh:
         fh.write("\n".join(lines))
-    print(os.path.join(HERE, "validation.md"))
+    progress(f"written in {time.time() - t_start:.0f} s: {os.path.join(HERE, 'validation.md')}")
 
 
 if __name__ == "__main__":

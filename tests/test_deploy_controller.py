@@ -147,6 +147,9 @@ def test_infeasible_target_is_refused_naming_the_parameter():
     (["-p", "l1:=-1.0"], "l1"),
     (["-p", "targt_time:=1.0"], "unknown parameter 'targt_time' (did you mean 'target_time'?)"),
     (["-p", "qos_overrides./sleeve_force.publisher.depth:=5"], "its topics take none"),
+    # the process's own checks (they were tracebacks, exit 1)
+    (["--bogus-flag"], "unknown ROS arguments ['--bogus-flag']"),
+    (["-p", "use_sim_time:=abc"], "parameter use_sim_time='abc': must be of type bool"),
 ])
 @pytest.mark.ros
 def test_controller_refuses_bad_parameters_with_exit_2(args, culprit):

@@ -30,8 +30,8 @@ from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.registry import SPECS
+from umbrella_sim.ros.commands import REFUSED_RECORD_RATE
 from umbrella_sim.ros.messages import LATCHED
-from umbrella_sim.ros.node import REFUSED_RECORD_RATE
 from umbrella_sim.ros.pacing import MAX_LAG_S
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -264,9 +264,15 @@ def _node(*args, timeout=60):
      "          depth: deep\n", [], "qos_overrides./clock.publisher.depth"),
     ("/**:\n  ros__parameters:\n    v0: -0.5\n    v0: -1.0\n", [], "given twice"),
     (None, ["-p", "time_step:=1e-9"], "time_step"),
+    # ROS's own parameters, which rclpy declares itself (use_sim_time was a traceback)
+    (None, ["-p", "use_sim_time:=abc"],
+     "parameter use_sim_time='abc': must be of type bool, got string"),
+    (None, ["-p", "qos_overrides./clock.publisher.depth:=deep"],
+     "parameter qos_overrides./clock.publisher.depth='deep': must be of type integer"),
 ], ids=["typo", "unknown", "other-node", "unknown-key", "nested", "malformed", "list",
         "no-ros-parameters", "binary", "missing", "no-assign", "bogus-flag", "no-model",
-        "empty-value", "qos-typo", "qos-type", "twice", "tiny-step"])
+        "empty-value", "qos-typo", "qos-type", "twice", "tiny-step", "ros-param-type",
+        "qos-type-argument"])
 @pytest.mark.ros
 def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):
     if content is not None:

@@ -303,6 +303,25 @@ def test_lock_that_does_not_apply_is_named():
         "warnings"] == []
 
 
+def test_the_default_lock_is_the_one_that_applies_and_rigid_fe_reports_its_zeros():
+    """
+    The default lock, auto: energy for the flexible models, plastic for the rigid ones.
+
+    A user who chose no lock gets no 'lock not applicable' warning from a rigid model; rigid-fe
+    reports the zero tip deflection and stresses its constraints hold (their round-off,
+    ~1e-26 m and 1e-14 Pa, printed as amplitudes and stresses before).
+    """
+    assert UmbrellaParams().lock == "auto" and UmbrellaParams().lock_rule == "energy"
+    for model in ("rigid", "rigid-fe"):
+        f = simulate(UmbrellaParams(model=model), 0.3).summary()
+        assert f["lock"] == "plastic" and f["warnings"] == []
+    f = simulate(UmbrellaParams(model="rigid-fe"), 0.3).summary()
+    for key in ("tip_deflection_max", "stage2_tip_amplitude", "peak_stress_leaf",
+                "peak_stress_link", "stress_ratio_max"):
+        assert f[key] == 0.0, key
+    assert simulate(UmbrellaParams(), 0.3).summary()["lock"] == "energy"
+
+
 def test_warnings_in_cli_text_json_and_recording(tmp_path):
     """The CLI's text and JSON, the recording and compare say the same warnings."""
     args = ["--v0", "-2", "--time-step", str(STEP), "--duration", "0.1"]

@@ -309,11 +309,23 @@ def test_table_takes_every_summary_key(tmp_path):
 
     Lists (e.g. validity warnings) are JSON text in both files; a case without a result is no
     row; a summary key that repeats a parameter is not a second column, unless the run took
-    another value (a rigid model's lock: the table said energy where the run stopped plastically).
+    another value (a rigid model's lock: the table said energy where the run stopped plastically);
+    a parameter left to ``auto`` takes the value the run resolved.
     """
     import pyarrow.parquet as pq
 
-    spec = sweep.load_spec(write(tmp_path / "s.yaml", "grid:\n  v0: [-0.5, -1.0, -2.0]\n"))
+    auto = sweep.load_spec(write(tmp_path / "a.yaml", "grid:\n  v0: [-0.5, -1.0]\n"))
+    assert auto.cases[0].params["lock"] == "auto"       # the default: resolved by the run,
+    store = sweep.CaseStore(str(tmp_path / "auto"))      # whose lock is the column
+    for case, lock in zip(auto.cases, ("energy", "plastic")):
+        store.save(sweep.make_record(case, {"case_id": case.case_id, "status": "ok",
+                                            "error": None, "summary": {"lock": lock},
+                                            "worker": "w", "mcap": None}))
+    columns, rows = sweep.table_rows(auto, store)
+    assert [r["lock"] for r in rows] == ["energy", "plastic"] and "lock_used" not in columns
+
+    spec = sweep.load_spec(write(tmp_path / "s.yaml",
+                                 "base: {lock: energy}\ngrid:\n  v0: [-0.5, -1.0, -2.0]\n"))
     store = sweep.CaseStore(str(tmp_path / "out"))
     summaries = [{"deploy_time": 0.09, "warnings": [], "a_new_figure": 1.5, "lock": "energy"},
                  {"deploy_time": 0.045, "warnings": ["step too coarse for the lock", "x"],

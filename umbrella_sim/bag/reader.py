@@ -25,6 +25,7 @@ import importlib
 import json
 import os
 import stat
+import struct
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
@@ -33,6 +34,7 @@ from mcap.stream_reader import breakup_chunk, StreamReader
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 import yaml
+from zstandard import ZstdError
 
 from .format import (ENDED_EARLY_RECORD, MCAP_MAGIC, PARAMETERS_RECORD, SEGMENT_RECORD,
                      TOPICS_RECORD)
@@ -40,6 +42,12 @@ from .format import (ENDED_EARLY_RECORD, MCAP_MAGIC, PARAMETERS_RECORD, SEGMENT_
 
 class LogError(ValueError):
     """A log that cannot be used, with the reason (file, topic) in the message."""
+
+
+#: what the mcap library raises on damaged bytes: its own errors, a short read (EOFError,
+#: struct.error), a bad field (ValueError, AssertionError, KeyError), a chunk that does not
+#: decompress (ZstdError)
+DAMAGED = (McapError, EOFError, struct.error, ValueError, AssertionError, KeyError, ZstdError)
 
 
 @dataclass
@@ -132,7 +140,7 @@ class LogData:
                             topics=None if wanted is None else sorted(wanted),
                             log_time_order=True):
                         yield RawMessage(channel.topic, message.log_time, message.data)
-                except (McapError, EOFError, ValueError, AssertionError, KeyError) as exc:
+                except DAMAGED as exc:
                     raise LogError(f"{self.path}: unreadable MCAP data ({exc})") from None
             return
         for record, topic in _scan(self.path, {}, {}):
@@ -286,7 +294,7 @@ def read_log(path: str, umbrella: bool = True) -> LogData:
     log = LogData(path=mcap_path)
     try:
         _open_indexed(log)
-    except (McapError, EOFError, ValueError, AssertionError, KeyError, OSError):
+    except DAMAGED + (OSError,):
         log.channels.clear()
         log.metadata.clear()
         log.counts.clear()

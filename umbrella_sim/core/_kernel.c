@@ -23,7 +23,7 @@
  *     the scheme's velocity w to the physical v = S w, S = I + Phi diag(s - 1) U^T, a rank-r
  *     change (r = 8 modes at N = 1, 14-16 above) applied by modal sums; its share of the
  *     tangent, left out of the constant iteration matrix, is put back into each Newton
- *     update by Woodbury on the factored matrix of a recent step (mode_fit_prepare).
+ *     update mode by mode (mode_fit_update: LockedModeFit.newton_update).
  * The rigid-FE mode (every elastic coordinate constrained) goes through the same code with
  * a border as large as the mesh, so there it costs what a dense solve costs.
  *
@@ -118,18 +118,14 @@ struct Ctx {
      * step runs in w, v = S w = w + sum_i (s_i - 1) phi_i (u_i . w), with momentum
      * S^T M(q) S w; pc_r modes, rows u_i = M0 phi_i of pc_u and phi_i of pc_phi (pc_r x n),
      * scales s_i in pc_sc, the scheme's modal damping less the law's in pc_dc (NULL:
-     * undamped), and the Newton matrix's modal change d_i in pc_d (the caller's arrays);
+     * undamped), and each mode's Newton shrink d_i / (block_i + d_i) in pc_shrink (the
+     * caller's arrays: LockedModeFit.newton_shrink);
      * pc_r = 0: none.  With the linear elastic law too (pc_acts). */
     int pc_r;
-    const double *pc_u, *pc_phi, *pc_sc, *pc_dc, *pc_d;
+    const double *pc_u, *pc_phi, *pc_sc, *pc_dc, *pc_shrink;
     double *pc_s;          /* the modal sums (r <= n) */
     /* rows Mff phi_i and W phi_i (r x n: the band products of S's columns) */
     double *pc_mphi, *pc_wphi;
-    /* its share of the Newton matrix, put back into each update by Woodbury on the factored
-     * matrix K of a recent step: W = K^-1 [U; 0] (r rows of n + nc), C = (diag(1/d) +
-     * U^T W_q)^-1 (r x r), refreshed every PC_REFRESH_STEPS steps (pc_w_age) */
-    double *pc_w, *pc_cap, *pc_work;
-    int *pc_piv, pc_w_nc, pc_w_age;
     /* within a step: u_i . w0 and u_i . (q - q0) (kept up to date through the Newton
      * updates); w0 = S^-1 v0, S^T p0, Mff w0, W w0 */
     double *pc_eta_w0, *pc_eta_dq, *pc_w0, *pc_sp0, *pc_mw0, *pc_ww0;
@@ -644,7 +640,7 @@ static void gonzalez(int n, double *grad, double delta_f, const double *dq, doub
 void umbrella_free(Ctx *x) {
     if (!x) return;
     free(x->hq); free(x->piv); free(x->jrow_idx); free(x->E); free(x->solved_buf);
-    free(x->pc_w); free(x->pc_piv);
+    free(x->pc_eta_w0);
     free(x);
 }
 
@@ -1105,23 +1101,16 @@ static void modal_combine(int r, int n, const double *rows, const double *s, dou
 /* Stage 2's mode fit from now on (r = 0: none); the arrays stay the caller's (dc may be
  * NULL: undamped).  Returns 0, or SINGULAR if its buffers cannot be allocated. */
 int umbrella_set_mode_fit(Ctx *x, int r, const double *u, const double *phi, const double *sc,
-                          const double *d, const double *dc) {
+                          const double *shrink, const double *dc) {
     const Model *m = x->m;
-    int n = m->n, len = n + x->nbmax - 4;     /* n + nc at most */
-    free(x->pc_w);
-    free(x->pc_piv);
-    x->pc_w = NULL;
-    x->pc_piv = NULL;
+    int n = m->n;
+    free(x->pc_eta_w0);
+    x->pc_eta_w0 = NULL;
     x->pc_r = 0;
     if (r > 0) {
         size_t rn = (size_t)r * n;
-        x->pc_w = calloc((size_t)r * len + 2 * (size_t)r * r + len + 2 * (size_t)r
-                         + 4 * (size_t)n + 2 * rn, sizeof(double));
-        x->pc_piv = malloc(sizeof(int) * (size_t)r);
-        if (!x->pc_w || !x->pc_piv) return SINGULAR;
-        x->pc_cap = x->pc_w + (size_t)r * len;      /* LU of C^-1, then C */
-        x->pc_work = x->pc_cap + 2 * (size_t)r * r;
-        x->pc_eta_w0 = x->pc_work + len;
+        x->pc_eta_w0 = calloc(2 * (size_t)r + 4 * (size_t)n + 2 * rn, sizeof(double));
+        if (!x->pc_eta_w0) return SINGULAR;
         x->pc_eta_dq = x->pc_eta_w0 + r;
         x->pc_w0 = x->pc_eta_dq + r;
         x->pc_sp0 = x->pc_w0 + n;
@@ -1137,80 +1126,42 @@ int umbrella_set_mode_fit(Ctx *x, int r, const double *u, const double *phi, con
     x->pc_u = u;
     x->pc_phi = phi;
     x->pc_sc = sc;
-    x->pc_d = d;
+    x->pc_shrink = shrink;
     x->pc_dc = dc;
-    x->pc_w_nc = -1;        /* W and C are made at the next factored Newton matrix */
     return OK;
 }
 
-/* The Newton matrix K leaves the fit's share U diag(d) U^T out (d = s^2 - 1 + h (c_w - c) /
- * 2: LockedModeFit.newton_change); Woodbury puts it back: (K + [U; 0] diag(d) [U; 0]^T)^-1
- * b = x - W C U^T x_q with x = K^-1 b.  W and C come from the factored K of the step that
- * made them and serve the next PC_REFRESH_STEPS steps (K moves slowly in stage 2: with a
- * K a few steps old Newton converges as with the exact one; the modes of the linearised
- * frame alone, K taken as M0 + h^2/4 K0, cost 0.6 iterations a step more at omega h ~ 1.5). */
-#define PC_REFRESH_STEPS 25
-
-static int mode_fit_prepare(Ctx *x, int nc) {
-    const Model *m = x->m;
-    int n = m->n, r = x->pc_r, len = n + nc;
-    if (x->pc_w_nc == nc && x->pc_w_age < PC_REFRESH_STEPS) return OK;
+/* The Newton update x (n + nc, q-ordered then multipliers) with the fit's share of the
+ * tangent put back mode by mode (LockedModeFit.newton_update): each modal component
+ * g_j = u_j . x_q is shrunk by shrink_j = d_j / (block_j + d_j), d_j the fit's share of the
+ * mode's tangent, block_j the iteration matrix's (1 + (omega_j h)^2 / 4 + h c_j / 2).  The
+ * exact Woodbury correction on the factored matrix took 2.6 Newton iterations a stage-2 step
+ * where this takes 2.06 (N = 1, 2, 4; 2.0 without the fit): the tangent S^T M(q) S is nearer
+ * the modes' own blocks than the factored matrix plus U diag(d) U^T. */
+static void mode_fit_update(Ctx *x, double *upd) {
+    int n = x->m->n, r = x->pc_r;
+    double *g = x->pc_s;
+    modal_dots(r, n, x->pc_u, upd, g);
     for (int j = 0; j < r; j++) {
-        double *w = x->pc_w + (size_t)j * len;
-        memcpy(w, x->pc_u + (size_t)j * n, sizeof(double) * n);
-        memset(w + n, 0, sizeof(double) * nc);
-        arrow_solve_q(x, x->it, nc, w, 0);
+        double shrunk = x->pc_shrink[j] * g[j];
+        x->pc_eta_dq[j] += g[j] - shrunk;          /* u_j . dq gains what is left of g_j */
+        g[j] = shrunk;
     }
-    double *cap = x->pc_cap, *inv = x->pc_work;
-    for (int j = 0; j < r; j++)             /* C^-1 = diag(1/d) + U^T W_q */
-        for (int k = 0; k < r; k++)
-            cap[j * r + k] = dot(n, x->pc_u + (size_t)j * n, x->pc_w + (size_t)k * len)
-                             + (j == k ? 1.0 / x->pc_d[j] : 0.0);
-    if (lu_factor(r, cap, x->pc_piv) != OK) return SINGULAR;
-    double *c = cap + (size_t)r * r;          /* C column-major (c[k r + j] = C_jk), after the LU */
-    for (int k = 0; k < r; k++) {
-        for (int j = 0; j < r; j++) inv[j] = j == k ? 1.0 : 0.0;
-        lu_solve(r, cap, x->pc_piv, inv);
-        memcpy(c + (size_t)k * r, inv, sizeof(double) * r);
-    }
-    x->pc_w_nc = nc;
-    x->pc_w_age = 0;
-    return OK;
-}
-
-/* The Newton update x (n + nc, q-ordered then multipliers) with the fit's share put back
- * (above) */
-static void mode_fit_update(Ctx *x, int nc, double *upd) {
-    int n = x->m->n, r = x->pc_r, len = n + nc;
-    double *s = x->pc_s, *t = x->pc_work;
-    const double *c = x->pc_cap + (size_t)r * r;
-    modal_dots(r, n, x->pc_u, upd, s);
-    /* t = C s, column by column: each t_j summed over k in order, the r sums side by side
-     * (a row-by-row product is one latency-bound chain per row) */
-    for (int j = 0; j < r; j++) t[j] = 0.0;
-    for (int k = 0; k < r; k++) {
-        const double *ck = c + (size_t)k * r;
-        double sk = s[k];
-        for (int j = 0; j < r; j++) t[j] += ck[j] * sk;
-    }
-    /* U^T of the corrected update: s - U^T W_q C s = diag(1/d) C s (C^-1 = diag(1/d) +
-     * U^T W_q), what q gains along the modes */
-    for (int j = 0; j < r; j++) x->pc_eta_dq[j] += t[j] / x->pc_d[j];
-    modal_combine(r, len, x->pc_w, t, -1.0, upd);
+    modal_combine(r, n, x->pc_phi, g, -1.0, upd);
 }
 
 /* At the start of a step from (v0, p0 = M(q0) v0), after Mff v0 and W v0 (x->mv0, wv0):
  * w0 = S^-1 v0 (u_i . S^-1 v = u_i . v / s_i) with Mff w0 and W w0, S^T p0, and u_i . dq of
- * the predictor dq = h v0 */
+ * the predictor dq = h w0 */
 static void mode_fit_start(Ctx *x, const double *v0, const double *p0, double h) {
     int n = x->m->n, r = x->pc_r;
     double *c = x->pc_s;
     modal_dots(r, n, x->pc_u, v0, x->pc_eta_w0);
     for (int j = 0; j < r; j++) {
         double eta_v = x->pc_eta_w0[j];
-        x->pc_eta_dq[j] = h * eta_v;
         c[j] = (1.0 / x->pc_sc[j] - 1.0) * eta_v;
         x->pc_eta_w0[j] = eta_v / x->pc_sc[j];
+        x->pc_eta_dq[j] = h * x->pc_eta_w0[j];
     }
     memcpy(x->pc_w0, v0, sizeof(double) * n);
     memcpy(x->pc_mw0, x->mv0, sizeof(double) * n);
@@ -1272,7 +1223,6 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     double half_h2 = 0.5 * h * h, two_h = 2.0 / h;   /* v1 = 2 dq / h - v0 */
     constraints(x, q0, locked, rigid, phi0);
     double y0 = sleeve_height(x, q0);
-    for (int i = 0; i < n; i++) q[i] = q0[i] + h * v0[i];
     memcpy(lam, lam0, sizeof(double) * nc);
     double last_norm = INFINITY, step_norm = 0.0;
     int converged = 0;
@@ -1289,13 +1239,13 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
      * products; with the fit then v1 = S w1, p0s = S^T p0 */
     const double *w0 = v0, *mw0 = x->mv0, *ww0 = x->wv0, *p0s = p0;
     if (pc) {
-        x->pc_w_age++;
         mode_fit_start(x, v0, p0, h);
         w0 = x->pc_w0;
         mw0 = x->pc_mw0;
         ww0 = x->pc_ww0;
         p0s = x->pc_sp0;
     }
+    for (int i = 0; i < n; i++) q[i] = q0[i] + h * w0[i];   /* predictor: w0 held */
     for (it = 1; it <= max_iter; it++) {
         for (int i = 0; i < n; i++) {
             dq[i] = q[i] - q0[i];
@@ -1371,12 +1321,11 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
             x->it = fresh;
             if (factor_iteration_matrix(x, h, nc) != OK) { status = SINGULAR; goto done; }
             factored = refactored = 1;
-            if (pc && mode_fit_prepare(x, nc) != OK) { status = SINGULAR; goto done; }
         }
         for (int i = 0; i < n; i++) rhs[i] = -0.5 * h * res[i];
         for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
         arrow_solve_q(x, x->it, nc, rhs, 0);
-        if (pc) mode_fit_update(x, nc, rhs);
+        if (pc) mode_fit_update(x, rhs);
         if (nonlinear_law) {
             memcpy(law->q_base, q, sizeof(double) * n);
             memcpy(law->lam_base, lam, sizeof(double) * nc);

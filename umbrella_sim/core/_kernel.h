@@ -218,11 +218,11 @@ UMBRELLA_API Ctx *umbrella_new(const Model *m);
 UMBRELLA_API void umbrella_free(Ctx *x);
 
 /* Stage 2's mode fit (integrators.LockedModeFit) from now on: r modes, rows u = M0 phi and
- * phi (r x n), velocity scales s, the Newton matrix's modal change d, the modal damping
- * change dc (NULL: undamped); the arrays stay the caller's; r = 0: none.  OK, or SINGULAR
- * if its buffers cannot be allocated. */
+ * phi (r x n), velocity scales s, each mode's Newton shrink, the modal damping change dc
+ * (NULL: undamped); the arrays stay the caller's; r = 0: none.  OK, or SINGULAR if its
+ * buffers cannot be allocated. */
 UMBRELLA_API int umbrella_set_mode_fit(Ctx *x, int r, const double *u, const double *phi,
-                                       const double *s, const double *d, const double *dc);
+                                       const double *s, const double *shrink, const double *dc);
 
 /* Step with this elastic law (NULL: the constant K, undamped). */
 UMBRELLA_API void umbrella_set_law(Ctx *x, ElasticLaw *law);

@@ -148,7 +148,7 @@ class FiniteElementEngine(Engine):
     def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
         self.model = model
         self.rigid = params.model == "rigid-fe"
-        self.lock_kind = "plastic" if self.rigid else params.lock
+        self.lock_kind = params.lock_rule
         self.integrator = self._integrator(model)
         self.h = physics_step_of(params)
         self.integrator.tolerance = newton_tolerance(self.h)

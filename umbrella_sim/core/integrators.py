@@ -168,26 +168,24 @@ class LockedModeFit:
 
     def newton_update(self, dq: np.ndarray, h: float) -> np.ndarray:
         """
-        Return the Newton update dq with the fit's share of the tangent put back.
+        Return the Newton update dq with the fit's share of the tangent put back, mode by mode.
 
         The iteration matrix leaves S^T M S - M and the damping change out; in the modes'
         coordinates its block is 1 + h^2 omega^2 / 4 (+ h c / 2 damped) where the tangent's
         adds d = s^2 - 1 + h (c_w - c) / 2, so each modal component of dq is scaled by their
-        ratio (Woodbury for M0-orthonormal modes).  Only how Newton converges changes, not
-        to what.  The compiled kernel does the Woodbury on its factored matrix of a recent
-        step instead (_kernel.c mode_fit_prepare): where the frame has moved from the
-        linearisation the modes alone cost ~0.6 Newton iterations a stage-2 step more at
-        omega h ~ 1.5.
+        ratio (newton_shrink).  Only how Newton converges changes, not to what.  The exact
+        Woodbury correction of the factored matrix by U diag(d) U^T, which the modal-mass
+        correction this replaced used, converges more slowly here: 2.6 Newton iterations a
+        stage-2 step against 2.06 (N = 1; 2.0 without the fit).  _kernel.c mode_fit_update
+        does the same.
         """
-        d = self.newton_change(h)
-        block = 1.0 + 0.25 * (h * self.omega) ** 2 + h * self.damping_ratio * self.omega
-        return dq - self.shapes.T @ (d / (block + d) * (self.modes @ dq))
+        return dq - self.shapes.T @ (self.newton_shrink(h) * (self.modes @ dq))
 
-    def newton_change(self, h: float) -> np.ndarray:
-        """Return d = s^2 - 1 + h (c_w - c) / 2, the fit's modal share of the Newton matrix."""
+    def newton_shrink(self, h: float) -> np.ndarray:
+        """Return each mode's Newton shrink d / (block + d) (newton_update)."""
         d = self.mass_change + 0.5 * h * self.damping_change
-        # (Woodbury takes 1 / d: a share that cancels exactly is kept as a negligible one)
-        return np.where(d == 0.0, -1e-30, d)
+        block = 1.0 + 0.25 * (h * self.omega) ** 2 + h * self.damping_ratio * self.omega
+        return d / (block + d)
 
 
 def _gonzalez(grad_mid: np.ndarray, delta_f: float, dq: np.ndarray, dd: float) -> np.ndarray:
@@ -465,8 +463,8 @@ class MidpointDAE:
         start = self._step_start(s, cs)
         phi0 = m.constraint_residual(q0, cs)
         y0 = m.sleeve_height(q0)
-        # predictor: the previous step's velocity held
-        q = q0 + h * v0
+        # predictor: the previous step's velocity held (the scheme's: w0)
+        q = q0 + h * start.w0
         lam = s.multipliers.copy()
         stiff = m.stiffness
         lu = piv = None

@@ -481,7 +481,7 @@ class CompiledKernel:
         # (the kernel keeps pointers to these arrays)
         damped = bool(np.any(fit.damping_change))
         arrays = [np.ascontiguousarray(a, dtype=float) for a in
-                  (fit.modes, fit.shapes, fit.scale, fit.newton_change(fit.step),
+                  (fit.modes, fit.shapes, fit.scale, fit.newton_shrink(fit.step),
                    fit.damping_change)]
         self._mode_fit = arrays
         ptrs = [_dptr(a) for a in arrays]

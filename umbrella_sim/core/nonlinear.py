@@ -489,7 +489,7 @@ class ElasticMidpointDAE(MidpointDAE):
                      - h * (x.g_t - elastic - force * x.g_y + x.jac_m.T @ lam))
             return np.concatenate([-0.5 * h * resid, -x.phi]), x, damping
 
-        q = q0 + h * v0
+        q = q0 + h * start.w0
         lam = s.multipliers.copy()
         lag_whole = lagged and carried[6] < CARRY_STEPS
         lu, piv = carried[4:6] if lagged else (None, None)

@@ -101,6 +101,13 @@ class _DerivedQuantities:
     def sleeve_start_height(self) -> float:
         return _sleeve_height(self.l1, self.l3, self.alpha0)
 
+    @property
+    def lock_rule(self) -> str:
+        """Return the lock the run takes: energy or plastic (``lock`` auto resolved)."""
+        if self.model in ("rigid", "rigid-fe"):
+            return "plastic"
+        return "energy" if self.lock == "auto" else self.lock
+
     def with_physics_step(self, step: float) -> "UmbrellaParams":
         """Return these parameters with the integrator's step set to step exactly."""
         return self.replace(time_step=step, step_follows_mesh=False)

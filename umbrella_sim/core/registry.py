@@ -21,7 +21,7 @@ MODELS = ("flexible", "flexible-nonlinear", "rigid-fe", "rigid")
 #: smallest physics step (s): the finest step of the convergence studies is 3.125e-7 s; at
 #: 1e-9 s a 1 kHz publication period took 10^6 steps and their outputs' memory
 MIN_PHYSICS_STEP = 1e-7
-LOCKS = ("energy", "plastic")
+LOCKS = ("auto", "energy", "plastic")
 
 # when a change made at runtime (ros2 param set) takes effect
 RESET = "reset"            # on ~/reset (the model or the initial state changes)
@@ -230,9 +230,12 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     _P("elements_per_segment", int, 1, "-",
        "beam elements N on each of O–O'', O''–G and O''–H (1 = the thesis's 3-element "
        "model, 2 = 6-element)", low=1, high=64),
-    _P("lock", str, "energy", "-",
-       "velocity redistribution at the lock: energy (thesis 5.2.2) or plastic (rigid "
-       "models always stop: plastic)", choices=LOCKS),
+    _P("lock", str, "auto", "-",
+       "velocity redistribution at the lock: energy (thesis 5.2.2: keeps the kinetic "
+       "energy), plastic (a perfectly inelastic stop), or auto = the one that applies to "
+       "the model: energy for flexible and flexible-nonlinear, plastic for the rigid models "
+       "(a rigid mechanism stopped at a point keeps no energy to redistribute)",
+       choices=LOCKS),
     _P("time_step", float, 0.0, "s",
        "physics step of the integrator; 0 = chosen for the mesh: the largest 0.1 ms / k "
        "(k = 1 .. 64) at which the locked frame's modes that carry all but 1 % of the "

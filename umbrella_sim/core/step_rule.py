@@ -67,12 +67,12 @@ def lock_amplitudes(model: UmbrellaModel) -> np.ndarray:
     Return the modal amplitudes the mesh's lock starts.
 
     The rigid deployment (alpha1' = 1) stopped at full deployment by the run's lock
-    (params.lock: plastic or energy).
+    (params.lock_rule: plastic or energy).
     """
     q = model.rigid_configuration(model.params.alpha_deployed)
     cs = ConstraintSet(locked=True, rigid=False)
     qd = model.rigid_velocity(q, 1.0)
-    qd = (energy_velocity(model, q, qd, cs)[0] if model.params.lock == "energy" else
+    qd = (energy_velocity(model, q, qd, cs)[0] if model.params.lock_rule == "energy" else
           plastic_velocity(model, q, qd, cs))
     return modal_amplitudes(model, q, qd)
 

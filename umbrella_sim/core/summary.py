@@ -72,6 +72,12 @@ class RunResult:
 #: periods of the thesis frame's first locked mode (~0.05 s), the same for a 1 s offline run
 #: and a 10 min live one, so that runs of different lengths compare
 STAGE2_WINDOW = 0.3
+#: the stage-2 tip series kept for its period: the first step in each STAGE2_WINDOW /
+#: STAGE2_SAMPLES (4.6 us) of the window, i.e. every step at any step above that (the
+#: default 0.1 ms included); a 0.1 us step keeps 65 536 of its 3e6 (1 MB and ~0.1 s to
+#: analyse, where all of them held 48 MB and took ~4 s at a node's stop); the amplitude and
+#: the window's end stay those of every step
+STAGE2_SAMPLES = 1 << 16
 #: validity of the small-deformation (linear elastic field) model: the tip deflection |v_G|
 #: may reach this fraction of the leaf length l1 + l2.  Beyond it the slope of the bent
 #: leaf passes ~0.15 rad, where the neglected terms of the curvature and the membrane strain
@@ -205,7 +211,7 @@ def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dic
 def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     """Return a warning if the lock asked for does not apply to the model (else None)."""
     asked = params.get("lock")
-    if lock_kind is not None and asked is not None and asked != lock_kind:
+    if lock_kind is not None and asked not in (None, "auto") and asked != lock_kind:
         return (f"lock not applicable: lock={asked} does not apply to model="
                 f"{params.get('model')} (a rigid mechanism stopped at a point keeps no "
                 f"kinetic energy to redistribute); the {lock_kind} lock is used; set "
@@ -280,6 +286,12 @@ def _mesh_resolution(items: tuple, step: float) -> dict | None:
     k = resolving_divisor(model, step, limit, amplitudes)
     return {"step": step, **unresolved_stress_share(model, amplitudes, step, limit),
             "resolving_step": None if k is None else step / k}
+
+
+#: rigid-fe's figures of the elastic field, which its constraints hold at zero: their
+#: round-off (1e-26 m, 1e-14 Pa) is reported as the zero the model means
+RIGID_FE_ZEROS = ("tip_deflection_max", "stage2_tip_amplitude", "peak_stress_leaf",
+                  "peak_stress_link", "stress_ratio_max", "tip_deflection_ratio_max")
 
 
 #: an energy balance error (energy_drift) past which a run is named: well above round-off
@@ -363,6 +375,7 @@ class SummaryAccumulator:
                        for b in ("leaf", "link")}
         self._s2_t: list = []
         self._s2_v: list = []
+        self._s2_bin, self._s2_all = -1.0, (math.inf, -math.inf, 0.0)   # (min, max, end)
         # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
         self._start = deploy_start(float(self.params.get("v0", 0.0)), ())
         self._warned: set = set()
@@ -401,8 +414,15 @@ class SummaryAccumulator:
                 self._tip1 = (float(deploying[i]), float(t[i]))
         if self.lock is not None and stage[-1] != 0 and t[0] <= self._stage2_end:
             keep = in_stage2_window(t, self.lock.time)
-            self._s2_t.append(t[keep])
-            self._s2_v.append(v[keep])
+            t2, v2 = t[keep], v[keep]
+            if len(t2):
+                lo, hi, _ = self._s2_all
+                self._s2_all = (min(lo, float(v2.min())), max(hi, float(v2.max())), float(t2[-1]))
+                bins = np.floor((t2 - self.lock.time) * (STAGE2_SAMPLES / STAGE2_WINDOW))
+                first = np.diff(bins, prepend=self._s2_bin) != 0      # (STAGE2_SAMPLES)
+                self._s2_bin = float(bins[-1])
+                self._s2_t.append(t2[first])
+                self._s2_v.append(v2[first])
         for body, (peak, x, ti) in block.peaks.items():
             if peak > self._peaks[body][0]:
                 self._peaks[body] = (peak, x, ti)
@@ -423,6 +443,9 @@ class SummaryAccumulator:
         if self._s2_t:
             out.update(stage2_figures(np.concatenate(self._s2_t), np.concatenate(self._s2_v),
                                       self.lock.time))
+            if out["stage2_tip_amplitude"] is not None:     # of every step, not those kept
+                lo, hi, end = self._s2_all
+                out["stage2_tip_amplitude"], out["stage2_window"][1] = 0.5 * (hi - lo), end
         else:
             out.update(stage2_figures(np.zeros(0), np.zeros(0), None))
         for body in ("leaf", "link"):
@@ -442,6 +465,9 @@ class SummaryAccumulator:
             out["lock_free_velocities"] = list(self.lock.free_velocities)
             if self.lock.stage2_resolution:
                 out["stage2_resolution"] = dict(self.lock.stage2_resolution)
+        if p.get("model") == "rigid-fe":    # (what the rigid model has by construction)
+            out.update(dict.fromkeys(RIGID_FE_ZEROS, 0.0), tip_deflection_max_time=0.0,
+                       peak_stress_leaf_time=0.0, peak_stress_link_time=0.0)
         out["constraint_residual_max"] = self._residual
         out["final_time"] = self.final_time
         out["steps"] = self.steps

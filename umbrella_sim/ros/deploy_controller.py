@@ -18,7 +18,7 @@ import time
 
 
 from . import signals as stop_signals
-from .parameters import declare_from_registry
+from .parameters import declare_from_registry, wrong_type_text
 from .params_file import check_parameter_sources, params_files_in
 from ..core.control import DeployLaw
 from ..core.params import ControllerConfig, UmbrellaParams
@@ -273,18 +273,30 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
+    from rclpy.exceptions import InvalidParameterTypeException
+
+    def fail(text: str) -> int:
+        print(f"deploy_controller: error: {text}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+
     try:                        # rcl's parse errors are tracebacks: check the files first
         files = params_files_in(argv)
     except ValueError as exc:
-        print(f"deploy_controller: error: {exc}", file=sys.stderr)
-        return 2
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+        return fail(str(exc))
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong
+        reason = " ".join(str(exc).split())
+        if type(exc).__name__ == "UnknownROSArgsError":
+            reason = f"unknown ROS arguments {reason}"
+        return fail(f"invalid ROS arguments: {reason} (see --help)")
     try:
         node = _make_node_class()(tuple(files))
     except StartupError as exc:
-        print(f"deploy_controller: error: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
+        return fail(str(exc))
+    except InvalidParameterTypeException as exc:    # ROS's own (-p use_sim_time:=abc)
+        return fail(wrong_type_text(None, exc))
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:

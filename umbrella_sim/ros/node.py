@@ -8,9 +8,10 @@ Threads, chosen deliberately:
   * a two-thread executor serves the sleeve_force subscription (its own callback group)
     and, independently, the ~/reset and ~/pause services and parameter sets.  The compiled
     step is a ctypes call, which releases the GIL, so commands are taken while physics
-    runs.  A command is handed over under a lock and acts from the next publication
-    instant; every applied value is logged and recorded with its sim time, which is the
-    exact force history for an offline re-run.
+    runs.  A command is checked, counted and recorded as it comes, a burst drained in
+    batches (commands.py); the latest accepted value is held under a lock and acts from the
+    next publication instant; every applied value is logged and recorded with its sim time,
+    which is the exact force history for an offline re-run.
 Each message is serialized once (publication.py): the same bytes go to the publisher and to
 the recorder.  With ``lockstep`` the physics thread waits for a command answering each
 joint_states (lockstep.py).  Everything published and every command received (accepted,
@@ -29,6 +30,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.exceptions import InvalidParameterTypeException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -36,9 +38,11 @@ from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
 from . import messages as ros_io
+from .commands import CommandIntake
 from .lockstep import Lockstep
 from .pacing import MAX_LAG_S, Pacer
-from .parameters import coerce_parameter, declare_from_registry, parameter_defaults
+from .parameters import (coerce_parameter, declare_from_registry, parameter_defaults,
+                         set_refusal, wrong_type_text)
 from .params_file import check_parameter_sources, QOS_OVERRIDES, USE_SIM_TIME
 from .publication import PublicationEncoder
 from .recording import RunRecording
@@ -48,7 +52,6 @@ from ..bag.provenance import run_metadata
 from ..bag.writer import BagRecorder, check_record_path, new_bag_recorder
 from ..core.driver import RunDriver
 from ..core.engines import SimulationDiverged
-from ..core.forcing import command_force
 from ..core.params import shortened_step_note, UmbrellaParams
 from ..core.registry import (check_known_names, check_node_parameters, CONTROLLER_PARAMETERS,
                              NODE_PARAMETERS, REGISTRY, RESET, SPECS)
@@ -57,8 +60,6 @@ from ..core.step_rule import physics_step_of
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
                    "paces it by the system clock; a node does not follow the clock it drives "
                    "(use_sim_time stays false here; set it for the other nodes)")
-#: refused commands recorded per wall second at most (the rest are counted only)
-REFUSED_RECORD_RATE = 10
 #: exit codes (also in usage())
 EXIT_OK, EXIT_USAGE, EXIT_FAULT, EXIT_RECORDING = 0, 2, 3, 4
 
@@ -70,7 +71,10 @@ class StartupError(RuntimeError):
 class UmbrellaNode(Node):
 
     def __init__(self, params_files: tuple = (), **kwargs):
-        super().__init__("umbrella_node", **kwargs)
+        try:
+            super().__init__("umbrella_node", **kwargs)
+        except InvalidParameterTypeException as exc:    # -p use_sim_time:=abc: ROS's own
+            raise StartupError(wrong_type_text(self, exc)) from None
         qos_given = self._check_parameter_sources(params_files,
                                                   set(parameter_defaults()))
         if self.get_parameter(USE_SIM_TIME).value:
@@ -95,10 +99,9 @@ class UmbrellaNode(Node):
         self.pending_params = self.model_params
         self._sim_lock = threading.RLock()
         self._epoch = 0                     # counts resets; samples of an older epoch are dropped
-        self._cmd_lock = threading.Lock()
         self.lockstep = Lockstep()            # the handshake of lockstep:=true
-        self.accepted_commands = 0
-        self.refused_commands = 0
+        self.commands = CommandIntake(lambda: self.sim, self._recording_on, self._warn_throttled,
+                                      self.lockstep)
         self.fault: str | None = None
         self.paused = bool(self.node_cfg["start_paused"])     # ~/pause false starts it
         self.finished = Future()
@@ -107,8 +110,6 @@ class UmbrellaNode(Node):
         self.pacer = Pacer(self._stop, self._wake)
         self.recording: RunRecording | None = None
         self.recording_error: str | None = None
-        self.refused_not_recorded = 0
-        self._refused_window = (0.0, 0)       # (wall start, recorded in this 1 s window)
         self._service_waiting = threading.Event()
         self._peers_warned = ""
         self._warned_at: dict[str, float] = {}
@@ -125,16 +126,19 @@ class UmbrellaNode(Node):
             # executor: a slow ~/reset never delays a command and a command flood never
             # delays ~/pause
             self.command_sub = self.create_subscription(
-                ros_io.COMMAND.type, ros_io.COMMAND.name, self._on_force,
+                ros_io.COMMAND.type, ros_io.COMMAND.name, self.commands.on_message,
                 ros_io.own_qos(ros_io.COMMAND.qos),
                 callback_group=MutuallyExclusiveCallbackGroup(),
                 qos_overriding_options=QoSOverridingOptions.with_default_policies())
         except Exception as exc:  # rclpy's errors name the parameter
             files = f" (params files: {', '.join(params_files)})" if params_files else ""
-            raise StartupError(f"qos_overrides: {' '.join(str(exc).split())}{files}") from None
+            text = (wrong_type_text(self, exc) if isinstance(exc, InvalidParameterTypeException)
+                    else f"qos_overrides: {' '.join(str(exc).split())}")
+            raise StartupError(text + files) from None
         self._check_qos_overrides(qos_given)
         self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
         self.command_topic = self.command_sub.topic_name
+        self.commands.subscription = self.command_sub
         services = MutuallyExclusiveCallbackGroup()
         self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
         self.create_service(SetBool, "~/pause", self._on_pause, callback_group=services)
@@ -182,8 +186,7 @@ class UmbrellaNode(Node):
         self.driver_rate = driver.publish_rate
         self.driver = driver
         self.sim = self.driver.sim
-        with self._cmd_lock:
-            self._commanded_force = p.sleeve_force
+        self.commands.hold(p.sleeve_force)
         self.fault = None
         self._phase = "deploying"
         self.get_logger().info(
@@ -238,9 +241,9 @@ class UmbrellaNode(Node):
         # chunk of steps
         held = self._sim_lock.acquire(timeout=60.0)
         try:
-            rec.close(self.sim, self.accepted_commands, self.refused_commands,
+            rec.close(self.sim, self.commands.accepted, self.commands.refused,
                       self.driver.summary.figures(), fault=self.fault, extra={
-                          "refused_not_recorded": str(self.refused_not_recorded),
+                          "refused_not_recorded": str(self.commands.refused_not_recorded),
                           "segments": str(rec.recorder.segment + 1)})
         finally:
             if held:
@@ -264,36 +267,6 @@ class UmbrellaNode(Node):
             rec.publish(key, msg, t)
 
     # ---------------------------------------------------------------- callbacks
-    def _on_force(self, msg) -> None:
-        t = self.sim.time
-        try:
-            force = command_force(msg.data, self.sim.params)
-        except ValueError as exc:
-            reason = str(exc)
-            self.refused_commands += 1
-            now = time.monotonic()
-            start, n = self._refused_window
-            if now - start >= 1.0:
-                start, n = now, 0
-            rec = self._recording_on()
-            if n < REFUSED_RECORD_RATE:       # a flood of bad commands cannot fill the disk
-                if rec is not None:
-                    rec.refused(msg, t)
-                n += 1
-            else:
-                self.refused_not_recorded += 1
-            self._refused_window = (start, n)
-            self._warn_throttled("refused", 1.0, lambda: f"refused sleeve_force command: {reason} "
-                                 f"(refused so far: {self.refused_commands})")
-        else:
-            self.accepted_commands += 1
-            rec = self._recording_on()
-            if rec is not None:
-                rec.command(msg, t)
-            with self._cmd_lock:
-                self._commanded_force = force
-        self.lockstep.command_came()
-
     @contextlib.contextmanager
     def _locked(self):
         """
@@ -352,6 +325,25 @@ class UmbrellaNode(Node):
         self.get_logger().info(f"{response.message} at t = {self.sim.time:.9f} s")
         return response
 
+    def set_parameters_atomically(self, parameter_list) -> SetParametersResult:
+        """
+        Set parameters (rclpy's SetParameters services call this), refusing with our reasons.
+
+        Every refusal names the parameter and says why (ros.parameters.set_refusal): rclpy's
+        descriptor checks, which run before the on-set callback, would answer first with
+        reasons that do not; an unknown name raises ParameterNotDeclaredException (as rclpy
+        does) whose text names it and suggests the closest declared one.
+        """
+        for param in parameter_list:
+            reason = set_refusal(self, param)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        return super().set_parameters_atomically(parameter_list)
+
+    def set_parameters(self, parameter_list) -> list[SetParametersResult]:
+        """Set parameters one at a time (rclpy's semantics), each as set_parameters_atomically."""
+        return [self.set_parameters_atomically([param]) for param in parameter_list]
+
     @staticmethod
     def _coerce_parameters(params: list) -> list:
         return [coerce_parameter(p) for p in params]
@@ -369,7 +361,8 @@ class UmbrellaNode(Node):
     def _validate_parameters(self, params) -> SetParametersResult:
         """Accept or refuse a set (on-set callback); changes nothing."""
         if any(p.name == USE_SIM_TIME and p.value is True for p in params):
-            return SetParametersResult(successful=False, reason=SIM_TIME_REASON)
+            return SetParametersResult(successful=False,
+                                       reason=f"parameter {USE_SIM_TIME}=true: {SIM_TIME_REASON}")
         try:
             self._parameter_candidate(params)
         except ValueError as exc:
@@ -440,8 +433,7 @@ class UmbrellaNode(Node):
 
     def _take_command(self) -> None:
         """At a publication instant: the latest command acts from this step on (sim lock held)."""
-        with self._cmd_lock:
-            force = self._commanded_force
+        force = self.commands.force
         t = self.driver.command(force)
         if t is None:
             return
@@ -523,6 +515,12 @@ class UmbrellaNode(Node):
                         self._warn_throttled("behind", 5.0, lambda: (
                             f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
                             "time x real_time_factor (see diagnostics)"))
+                elif target is not None and not idle:
+                    # between publications (a long period: many chunks), how far behind the
+                    # physics is now, so that diagnostics say so before the period ends
+                    lag = max(lag, self.pacer.lag(target, now))
+                if idle:
+                    lag = 0.0                 # paused or waiting: not behind (anchored anew)
                 if sample is not None:
                     self._publish_sample(sample)
                 if epoch != diag_epoch:     # a reset: sim time restarted, measure from here
@@ -627,14 +625,14 @@ class UmbrellaNode(Node):
                   "requested_real_time_factor": rtf, "lag_s": f"{max(lag, 0.0):.6f}",
                   "max_lag_s": f"{max(self.pacer.max_lag, 0.0):.6f}",
                   "phase": self._phase, "paused": self.paused,
-                  "accepted_commands": self.accepted_commands,
-                  "refused_commands": self.refused_commands, "steps": self.sim.steps,
+                  "accepted_commands": self.commands.accepted,
+                  "refused_commands": self.commands.refused, "steps": self.sim.steps,
                   "lockstep": self.node_cfg["lockstep"],
                   "waiting_for_command": bool(self.lockstep.waiting_since),
                   "lockstep_waits": self.lockstep.waits,
                   "physics_step_s": self.sim.h, "slip_s": f"{self.pacer.slip:.6f}",
                   "re_anchors": self.pacer.re_anchors,
-                  "refused_not_recorded": self.refused_not_recorded,
+                  "refused_not_recorded": self.commands.refused_not_recorded,
                   "clock_publishers": getattr(self, "clock_publishers", 1),
                   "recording": ("off" if self.recording is None else
                                 f"stopped: {self.recording_error}" if self.recording_error

@@ -5,14 +5,22 @@ Every parameter of umbrella_node and deploy_controller is declared statically ty
 (``dynamic_typing=False``) with its range and its rule in the descriptor, read-only when it is
 fixed at start (core.registry.REGISTRY).  ``coerce_parameter`` takes an integer literal for a
 double (``-p v0:=-1``) and a whole double for an integer, as the other interfaces do.
+
+``set_refusal`` says why a runtime set is refused, naming the parameter, before rclpy's own
+checks: rclpy applies the descriptors (read-only, type, range) before any on-set callback and
+its reasons name no parameter for a wrong type ("Wrong parameter type, expected
+'Type.DOUBLE' got 'Type.STRING'"), do not say why for a read-only one, and an undeclared name
+raises ParameterNotDeclaredException with an empty list; a pre-set callback cannot refuse.
 """
 from __future__ import annotations
 
+import re
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
+from rclpy.exceptions import ParameterNotDeclaredException
 
-from ..core.registry import defaults, NOW, REGISTRY, RESET, START
+from ..core.registry import check_known_names, defaults, NOW, REGISTRY, RESET, START
 
 
 # --------------------------------------------------------------------- parameters
@@ -92,8 +100,7 @@ def declare_from_registry(node, names) -> dict:
             values[name] = node.declare_parameter(name, spec.default, descriptor(name)).value
         except InvalidParameterTypeException:
             given = overrides[name]
-            raise ValueError(f"parameter {name}={given.value!r}: must be of type "
-                             f"{spec.type_name}, got {given.type_.name.lower()}") from None
+            raise ValueError(type_refusal(name, given, spec.type_name)) from None
         except Exception:  # noqa: BLE001 - rclpy's range refusal: say the registry's rule
             value = overrides[name].value
             try:
@@ -102,3 +109,89 @@ def declare_from_registry(node, names) -> dict:
                 raise ValueError(str(exc)) from None
             raise
     return values
+
+
+def type_refusal(name: str, given, expected: str) -> str:
+    """Return the refusal of a value of the wrong type: the parameter, the value, both types."""
+    return (f"parameter {name}={given.value!r}: must be of type {expected}, got "
+            f"{given.type_.name.lower()}")
+
+
+def wrong_type_text(node, exc) -> str:
+    """
+    Return rclpy's InvalidParameterTypeException for a -p value as type_refusal says it.
+
+    For the parameters rclpy declares itself from the overrides (use_sim_time,
+    qos_overrides.*), whose exception ends a traceback otherwise; node: the node it was
+    declared on (the value given, from its overrides), or None (the value as rclpy's text
+    has it); the text as it is if it cannot be read.
+    """
+    text = " ".join(str(exc).split())
+    found = re.fullmatch(r"Trying to set parameter '(.+?)' to '(.*)' of type '(\w+)', "
+                         r"expecting type '(?:Type\.)?(\w+)': .*", text)
+    if found is None:
+        return text
+    name, value, got, expected = found.groups()
+    given = getattr(node, "_parameter_overrides", {}).get(name)
+    if given is not None:
+        return type_refusal(name, given, expected.lower())
+    shown = repr(value) if got == "STRING" else value
+    return (f"parameter {name}={shown}: must be of type {expected.lower()}, got "
+            f"{got.lower()}")
+
+
+#: why a read-only parameter is: the registry's are read at start; ROS's own (qos_overrides.*,
+#: start_type_description_service) when the node creates its publishers and services
+_READ_ONLY_WHY = "it is fixed when the node starts; restart the node with -p {name}:=VALUE"
+
+
+def set_refusal(node, param) -> str | None:
+    """
+    Return why node refuses a runtime set of param, naming it; None if rclpy's checks pass.
+
+    In the order a user needs them: an undeclared name raises ``UnknownParameter`` (did you
+    mean ...?, as at start); then read-only (and why), a value that cannot be unset, the
+    wrong type (after ``coerce_parameter``'s exact conversions), and out of the registry's
+    range (its own message, as at start and offline).
+    """
+    from rclpy.parameter import Parameter
+
+    name = param.name
+    if not node.has_parameter(name):
+        try:
+            check_known_names([name], node.get_parameters_by_prefix("").keys(),
+                              f"set on {node.get_fully_qualified_name()}")
+        except ValueError as exc:
+            raise UnknownParameter(str(exc), name) from None
+    descriptor = node.describe_parameter(name)
+    if descriptor.read_only:
+        return f"parameter {name} is read-only: {_READ_ONLY_WHY.format(name=name)}"
+    if param.type_ == Parameter.Type.NOT_SET:
+        return (f"parameter {name} cannot be unset: it is declared with a type "
+                f"({Parameter.Type(descriptor.type).name.lower()}); set a value instead")
+    param = coerce_parameter(param)
+    spec = REGISTRY.get(name)
+    if not descriptor.dynamic_typing and param.type_.value != descriptor.type:
+        expected = spec.type_name if spec else Parameter.Type(descriptor.type).name.lower()
+        return type_refusal(name, param, expected)
+    if spec is not None:
+        try:
+            spec.check(param.value)
+        except ValueError as exc:
+            return str(exc)
+    return None
+
+
+class UnknownParameter(ParameterNotDeclaredException):
+    """
+    A set of a name the node does not declare, as rclpy raises it, with a text naming it.
+
+    rclpy's parameter services put str(exception) in the SetParametersResult's reason.
+    """
+
+    def __init__(self, message: str, name: str):
+        super().__init__([name])
+        self.message = message
+
+    def __str__(self) -> str:
+        return self.message

@@ -312,6 +312,7 @@ class Probe:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.received: dict[str, list] = {}
+        self._clients: dict = {}
         self._lock = threading.Lock()
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
@@ -375,11 +376,21 @@ class Probe:
                      f"(got {pub.get_subscription_count()})")
 
     def call(self, srv_type, name: str, request, timeout: float = 20.0):
-        client = self.node.create_client(srv_type, name)
+        """
+        Call a service and return its response (AssertionError if none within timeout).
+
+        One client per service, kept: a new client per call has to be discovered by the
+        server before its answer can come back, which cost up to ~0.1 s a call.
+        """
+        key = (srv_type, name)
+        client = self._clients.get(key)
+        if client is None:
+            client = self._clients[key] = self.node.create_client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout):
             raise AssertionError(f"service {name} not available within {timeout} s")
         future = client.call_async(request)
-        poll(future.done, timeout, lambda: f"service {name} did not answer within {timeout} s")
+        poll(future.done, timeout, lambda: f"service {name} did not answer within {timeout} s",
+             interval=0.002)
         return future.result()
 
     def close(self):

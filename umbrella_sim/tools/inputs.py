@@ -205,7 +205,7 @@ def check_lock_given(params: UmbrellaParams, given: str | None) -> None:
     A rigid model always stops plastically; a lock from a params file shared with flexible
     runs only gets the validity warning (outputs.lock_warning).
     """
-    if given and params.model in RIGID_MODELS and params.lock != "plastic":
+    if given and params.model in RIGID_MODELS and params.lock == "energy":
         raise ValueError(f"{given}: does not apply to model {params.model}, whose lock "
                          "is always plastic (a rigid mechanism stopped at a point keeps no "
                          "kinetic energy to redistribute); use lock plastic or a flexible "

@@ -307,13 +307,20 @@ def moved_topics(log: LogData, topics: list[str], namespace: str) -> tuple[dict,
     return names, f" (topics under {recorded} moved to {namespace})"
 
 
+class RosArgumentsError(ValueError):
+    """The ROS arguments (after --ros-args) that rclpy refused, said in one line."""
+
+
 def republish(log: LogData, rate: float, start_offset: float, loop: bool,
               with_commands: bool, topics: list[str] | None, ros_args: list[str],
               wait_for_subscribers: float = 0.0) -> int:
     import rclpy
     from rclpy.duration import Duration
+    from rclpy.exceptions import InvalidParameterTypeException
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
+
+    from ..ros.parameters import wrong_type_text
 
     chosen = [t for t in log.topics() if (with_commands or not _is_command(t, log))
               and (not topics or t in topics)]
@@ -331,9 +338,19 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     # SIGINT/SIGTERM raise KeyboardInterrupt here (stop_signals.interruptible), with the context
     # still valid for the acknowledgements below; rclpy's own handlers would shut it down
     # first, and waiting for them then raised RCLError
-    rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args],
-               signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node("umbrella_replay")
+    try:
+        rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args],
+                   signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:    # RCLError, UnknownROSArgsError: the arguments are wrong
+        reason = " ".join(str(exc).split())
+        if type(exc).__name__ == "UnknownROSArgsError":
+            reason = f"unknown ROS arguments {reason}"
+        raise RosArgumentsError(f"invalid ROS arguments: {reason}") from None
+    try:
+        node = rclpy.create_node("umbrella_replay")
+    except InvalidParameterTypeException as exc:      # -p use_sim_time:=abc
+        rclpy.try_shutdown()
+        raise RosArgumentsError(wrong_type_text(None, exc)) from None
     names, moved = moved_topics(log, chosen, node.get_namespace())
     pubs = {t: node.create_publisher(log.msg_type(t), names[t],
                                      qos_from_yaml(log.channels[t][1])) for t in chosen}
@@ -466,7 +483,7 @@ def main(argv: list[str] | None = None) -> int:
             return 0 if ok else 1
         return republish(log, args.rate, args.start_offset, args.loop, args.with_commands,
                          args.topics, ros_args, args.wait_for_subscribers)
-    except LogError as exc:
+    except (LogError, RosArgumentsError) as exc:
         raise_if_stopped()           # (a stop signal inside a decoding: an interrupt)
         print(f"umbrella_replay: error: {exc}", file=sys.stderr)
         return 2

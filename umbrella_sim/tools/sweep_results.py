@@ -109,6 +109,10 @@ def table_rows(sweep: Sweep, store: CaseStore) -> tuple[list[str], list[dict]]:
                 if value == case.params[key]:     # (a rigid model's lock is plastic)
                     used.add(key)
                     continue
+                if case.params[key] == "auto":    # resolved by the run: its column says how
+                    row[key] = value
+                    used.add(key)
+                    continue
                 key = f"{key}_used"
             if key not in summary_keys:
                 summary_keys.append(key)

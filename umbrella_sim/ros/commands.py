@@ -1,0 +1,107 @@
+"""
+The node's sleeve_force command intake: each command checked, counted, recorded, held.
+
+A command is checked against the running model (``core.forcing.command_force``), counted,
+recorded as it came (accepted, or refused: at most REFUSED_RECORD_RATE refused ones a wall
+second, so a flood of bad commands cannot fill the disk) and answers the lockstep handshake;
+the latest accepted value is held for the physics thread, which applies it at the next
+publication instant (node.py).  A burst is drained by the subscription's callback itself,
+up to COMMAND_BATCH commands a turn of the executor, in order.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable
+
+from rclpy.exceptions import InvalidHandle
+
+from ..core.forcing import command_force
+
+#: refused commands recorded per wall second at most (the rest are counted only)
+REFUSED_RECORD_RATE = 10
+#: commands taken in one turn of the executor at most: a burst is drained by the command
+#: callback itself (rclpy's executor costs ~1-2 ms a turn, which held the intake to a few
+#: hundred commands a second and kept ~/pause waiting behind a flood); the bound gives the
+#: executor back between batches
+COMMAND_BATCH = 256
+
+
+class CommandIntake:
+    """
+    The commands a node receives: counts, the refused ones' recording limit, the held value.
+
+    sim() returns the running simulator (its time and model), recording() the recording
+    being written (or None), warn(key, period, text) logs a throttled WARN; lockstep is the
+    node's handshake (every command answers it).
+    """
+
+    def __init__(self, sim: Callable, recording: Callable, warn: Callable, lockstep):
+        self._sim, self._recording, self._warn, self._lockstep = sim, recording, warn, lockstep
+        self.subscription = None            # the node's: a burst is drained from it
+        self.accepted = self.refused = 0
+        self.refused_not_recorded = 0
+        self._refused_window = (0.0, 0)     # (wall start, recorded in this 1 s window)
+        self._lock = threading.Lock()
+        self._force = 0.0
+
+    @property
+    def force(self) -> float:
+        """Return the latest accepted value (the run's initial force until a command)."""
+        with self._lock:
+            return self._force
+
+    def hold(self, force: float) -> None:
+        """Hold force as if commanded (a new run: its sleeve_force parameter)."""
+        with self._lock:
+            self._force = force
+
+    def on_message(self, msg) -> None:
+        """
+        Take a command and those queued behind it (up to COMMAND_BATCH), each in order.
+
+        Inside the subscription's callback its (mutually exclusive) group is held, so taking
+        more from it here is what the executor's next turns would do, without their cost.
+        """
+        self.take(msg)
+        sub = self.subscription
+        for _ in range(COMMAND_BATCH - 1):
+            try:
+                with sub.handle:
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            except InvalidHandle:         # (the node is being destroyed)
+                return
+            if taken is None:
+                return
+            self.take(taken[0])
+
+    def take(self, msg) -> None:
+        """Check, count and record one command; hold it if accepted."""
+        sim = self._sim()
+        t = sim.time
+        try:
+            force = command_force(msg.data, sim.params)
+        except ValueError as exc:
+            reason = str(exc)
+            self.refused += 1
+            now = time.monotonic()
+            start, n = self._refused_window
+            if now - start >= 1.0:
+                start, n = now, 0
+            rec = self._recording()
+            if n < REFUSED_RECORD_RATE:       # a flood of bad commands cannot fill the disk
+                if rec is not None:
+                    rec.refused(msg, t)
+                n += 1
+            else:
+                self.refused_not_recorded += 1
+            self._refused_window = (start, n)
+            self._warn("refused", 1.0, lambda: f"refused sleeve_force command: {reason} "
+                       f"(refused so far: {self.refused})")
+        else:
+            self.accepted += 1
+            rec = self._recording()
+            if rec is not None:
+                rec.command(msg, t)
+            self.hold(force)
+        self._lockstep.command_came()
