@@ -318,8 +318,8 @@ class UmbrellaModel3D:
         vb = self._full_velocities(kin, br, bs)
         for b, bk, (rel_a, full_a, om_a), (rel_b, full_b, om_b) in zip(
                 self.bodies, kin["bodies"], va, vb):
-            g = b.dv_t(bk, ar[:, b.slice], rel_a, full_b) + b.dv_t(bk, br[:, b.slice], rel_b,
-                                                                     full_a)
+            g = (b.dv_t(bk, ar[:, b.slice], rel_a, full_b)
+                 + b.dv_t(bk, br[:, b.slice], rel_b, full_a))
             if self.moving_base:
                 jt = np.einsum("rp,rpin,rpi->rn", b.w, bk["jac"],
                                np.cross(full_b, om_a[:, None]) + np.cross(full_a, om_b[:, None]))
@@ -346,7 +346,7 @@ class UmbrellaModel3D:
                       + np.einsum("rji,ri->j", cb, sv_a))
 
     def _sleeve_and_bus_gradient(self, kin, as_, bs):
-        """The sleeve point's and the bus body's share of the gradient (shared coordinates)."""
+        """Return the sleeve point's and the bus body's share of the gradient (shared part)."""
         bus = kin["bus"]
         out = np.zeros(self.n_shared)
         ey = np.array([0.0, 1.0, 0.0])

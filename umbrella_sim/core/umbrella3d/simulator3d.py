@@ -20,12 +20,12 @@ import math
 
 import numpy as np
 
-from ..integrators import newton_tolerance
-from ..step_rule import physics_step_of
 from .integrator3d import ConvergenceError3D, MidpointUmbrella, State3D
 from .model3d import ROW_STICK, UmbrellaModel3D
 from .outputs3d import Record3D
 from .params3d import UmbrellaRibsParams
+from ..integrators import newton_tolerance
+from ..step_rule import physics_step_of
 
 EVENT_TIME_TOLERANCE = 1e-12
 
@@ -140,7 +140,7 @@ class UmbrellaSimulator3D:
             raise SimulationFailed(f"step after t = {s.t:.9g} s failed: {exc}") from None
 
     def step(self) -> None:
-        """Take one grid step (with the lock if the sleeve reaches the stop in it)."""
+        """Advance by one grid step, with the lock if the sleeve reaches the stop in it."""
         m, s0 = self.model, self.state
         t_next = (self.k + 1) * self.h
         s1, work = self._step(s0, t_next - s0.t, self.locked)
