@@ -226,6 +226,13 @@ class UmbrellaRibsParams:
         own["_shear_factor"] = 1.0 / (2.0 * (1.0 + self.poisson_ratio))
         return RibProperties(k, 2.0 * math.pi * k / self.ribs, planar, own)
 
+    @property
+    def lock_rule(self) -> str:
+        """Return the lock the run takes: the planar rule; plastic for auto on a free bus."""
+        if self.base == "free" and self.planar.lock == "auto":
+            return "plastic"
+        return self.planar.lock_rule
+
     def ribs_list(self) -> list[RibProperties]:
         return [self.rib(k) for k in range(self.ribs)]
 

@@ -229,7 +229,7 @@ class UmbrellaSimulator3D:
         mass = m.mass_matrix(kin)
         drive = integ.drive
         target = None if drive is None else drive(s.t)[1]
-        if self.params.planar.lock == "plastic":
+        if self.params.lock_rule == "plastic":
             vr, vs = integ.project(kin, mass, s.qr, s.vr, s.vs, s.stuck, True, target)
         else:
             vr, vs = self._energy_lock(mass, s)
