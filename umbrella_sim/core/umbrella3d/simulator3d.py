@@ -2,7 +2,8 @@
 The umbrella's run: time grid, sleeve force, the stop and lock, stuck hinges, the base.
 
 ``UmbrellaSimulator3D`` steps on the planar simulator's grid t_k = k h (h: the planar rule for
-the mesh, ``step_rule.physics_step_of``, unless the planar record sets ``time_step``) and
+the mesh, ``step_rule.physics_step_of``, as without the stage-2 mode fit, which this model
+does not have; unless the planar record sets ``time_step``) and
 applies the lock as it does: when the sleeve passes the stop inside a step the step is taken
 again from its start with the length root-found by the Illinois method (|dt| < 1e-12 s), the
 lock is applied there (plastic: the velocity projected onto the locked joints in the mass
@@ -41,7 +42,8 @@ class UmbrellaSimulator3D:
                  tolerance: float | None = None):
         self.params = params.validated()
         self.model = m = UmbrellaModel3D(self.params)
-        self.h = physics_step_of(self.params.planar) if step is None else step
+        self.h = (physics_step_of(self.params.planar.replace(phase_correction=False))
+                  if step is None else step)
         self.integrator = MidpointUmbrella(
             m, newton_tolerance(self.h) if tolerance is None else tolerance)
         self.force = self.params.planar.sleeve_force * m.n_ribs
