@@ -80,7 +80,8 @@ def umbrella_mjcf(p: UmbrellaParams, dt: float, time_constant: float) -> str:
 </mujoco>"""
 
 
-def mujoco_run(p: UmbrellaParams, dt: float = 1e-5, time_constant: float = 2e-5):
+def mujoco_run(p: UmbrellaParams, dt: float = 1e-5, time_constant: float = 2e-5,
+               marks=MARKS):
     """Return (lock instant, {mark: (sleeve height, bus position, bus rotation)})."""
     m = mujoco.MjModel.from_xml_string(umbrella_mjcf(p, dt, time_constant))
     d = mujoco.MjData(m)
@@ -101,7 +102,7 @@ def mujoco_run(p: UmbrellaParams, dt: float = 1e-5, time_constant: float = 2e-5)
     d.qvel[:6] = -np.linalg.solve(mass[:6, :6], mass[:6, 6:] @ d.qvel[6:])
     d.ctrl[0] = -FORCE * RIBS
     y_stop = p.sleeve_stop_height
-    marks, out = list(MARKS), {}
+    marks, out = list(marks), {}
     while True:
         if marks and d.time >= marks[0] - 1e-12:
             rot = np.zeros(9)
@@ -114,7 +115,7 @@ def mujoco_run(p: UmbrellaParams, dt: float = 1e-5, time_constant: float = 2e-5)
     return t0 + (d.time - t0) * (y0 - y_stop) / (y0 - d.qpos[-1]), out
 
 
-def umbrella_run():
+def umbrella_run(marks=MARKS):
     """Return the same figures from the umbrella model."""
     values = {"ribs": RIBS, "sleeve_force": FORCE, "time_step": 1e-4,
               "sleeve_mass": SLEEVE_MASS, "youngs_modulus": STIFF, "base": "free",
@@ -122,7 +123,7 @@ def umbrella_run():
               "hinge_viscous": list(VISCOUS), "hinge_coulomb": list(COULOMB),
               "tip_mass": list(TIP_MASS)}
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values))
-    marks, out = list(MARKS), {}
+    marks, out = list(marks), {}
     while not sim.locked:
         sim.step()
         if marks and sim.time >= marks[0] - 1e-12:
