@@ -155,8 +155,14 @@ class MidpointUmbrella:
         e[ns:, ns:] = np.diag(np.where(shared_active, 0.0, 1.0))
         return b, c, d, e
 
-    def project(self, kin, mass, qr, vr, vs, stuck, locked, target_vs=None):
-        """Return (vr, vs) projected onto J v = c in the mass metric (c: the drive's rates)."""
+    def project(self, kin, mass, qr, vr, vs, stuck, locked, target_vs=None,
+                multipliers=False):
+        """
+        Return (vr, vs) projected onto J v = c in the mass metric (c: the drive's rates).
+
+        With multipliers, also the shared rows' mu (the impulse on the shared coordinates is
+        -J_ss^T mu: on the bus, -mu[1:] with a prescribed base).
+        """
         m = self.model
         j_rr, j_rs, j_ss, active = m.constraint_jacobian(qr, stuck, locked)
         jac = (j_rr, j_rs, j_ss)
@@ -170,6 +176,8 @@ class MidpointUmbrella:
         n, ns = m.n_rib, m.n_shared
         rr = np.concatenate([np.zeros_like(vr), rib_res], 1)
         xs_r, xs_s = f.solve(rr, np.concatenate([np.zeros(ns), sh_res]))
+        if multipliers:
+            return vr + xs_r[:, :n], vs + xs_s[:ns], xs_s[ns:]
         return vr + xs_r[:, :n], vs + xs_s[:ns]
 
     def consistent(self, s: State3D, force: float, locked: bool) -> State3D:
@@ -225,14 +233,15 @@ class MidpointUmbrella:
             pr1, ps1 = m.matvec(mass1, vr1, vs1)
             kinm = m.kinematics(qmr, qms)
             gtr, gts = m.kinetic_gradient(kinm, vr0, vs0, vr1, vs1)
-            # Gonzalez: dq . G_T = f(q1) - f(q0), f = 1/2 v0^T M(q) v1, along the coordinates
-            # f depends on
+            # Gonzalez: dq . G_T = f(q1) - f(q0), f = 1/2 v0^T M(q) v1, the whole dq (the bus
+            # angles' midpoint share included), the correction along the coordinates in
+            # kin_mask only
             p0v = m.matvec(mass1, vr0, vs0)
             delta = 0.5 * (np.sum(p0v[0] * vr1) + p0v[1] @ vs1 - np.sum(pr0 * vr1)
                            - ps0 @ vs1)
             dd = np.sum(dqr * dqr) + np.sum(dqs[kin_mask] ** 2)
             if dd > 0.0:
-                corr = (delta - np.sum(gtr * dqr) - gts[kin_mask] @ dqs[kin_mask]) / dd
+                corr = (delta - np.sum(gtr * dqr) - gts @ dqs) / dd
                 gtr = gtr + corr * dqr
                 gts = gts + corr * np.where(kin_mask, dqs, 0.0)
             # joints: each row's Gonzalez gradient along the rib's coordinates
@@ -302,8 +311,14 @@ class MidpointUmbrella:
             # translation velocity removes (p_X is m_total X' + terms without X')
             vs = vs.copy()
             vs[1:4] += (ps0[1:4] - m.matvec(mass1, vr, vs)[1][1:4]) / m.total_mass
-        vr, vs = self.project(kin1, mass1, qr, vr, vs, stuck, locked,
-                              None if drive is None else drive[1])
+        if drive is None:
+            vr, vs = self.project(kin1, mass1, qr, vr, vs, stuck, locked)
+        else:
+            # the drive's impulse (-mu on the bus coordinates) that puts the bus at its rates
+            # works at the mean of the bus velocities before and after it
+            v_bus = vs[1:7]
+            vr, vs, mu = self.project(kin1, mass1, qr, vr, vs, stuck, locked, drive[1], True)
+            w_drive -= 0.5 * float(mu[1:] @ (v_bus + vs[1:7]))
         pr1, ps1 = m.matvec(mass1, vr, vs)
         if drive is None:
             # scale the velocity relative to the mass centre's (König: T = |P|^2 / 2m + T_rel),
