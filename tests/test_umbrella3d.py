@@ -81,6 +81,9 @@ ASYMMETRIC = {"ribs": 3, "sleeve_force": 10.0, "time_step": 1e-4, "rib1.hinge_co
               "rib1.hinge_viscous": 0.05, "rib2.out_of_plane_rate": 0.2,
               "rib0.tip_mass": 0.05}
 BALANCE_TOLERANCE = 1e-10      # relative to the largest T + V: the discrete balance's round-off
+#: a driven base: a half-sine jolt along X and a spin-up about Y (integrator3d.BaseDrive)
+DRIVE = {"base_accel_x": 20.0, "base_accel_start": 0.02, "base_accel_duration": 0.02,
+         "base_spin_rate": 3.0, "base_spin_ramp": 0.05}
 
 
 def test_energy_balance_with_hinge_friction():
@@ -140,8 +143,7 @@ def test_energy_balance_on_a_driven_base():
     (relative 1e-7 asserted, measured 1e-8); the kinetic energy depends on the spin angle
     through the base's translation (R^T X'), which the discrete gradient includes.
     """
-    values = dict(ASYMMETRIC, base="prescribed", base_accel_x=20.0, base_accel_start=0.02,
-                  base_accel_duration=0.02, base_spin_rate=3.0, base_spin_ramp=0.05)
+    values = dict(ASYMMETRIC, base="prescribed", **DRIVE)
     rec = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values)).run(0.08)
     s = rec.summary()
     drive = rec.arrays()["drive_work"][-1]

@@ -25,6 +25,7 @@ from umbrella_sim.core import UmbrellaParams
 from umbrella_sim.core.umbrella3d.model3d import BusFrame
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+from .test_umbrella3d import DRIVE
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -32,9 +33,6 @@ RIBS, FORCE, SLEEVE_MASS, BUS_MASS, BUS_INERTIA = 3, 10.0, 1e-3, 5.0, 0.2
 VISCOUS, COULOMB, TIP_MASS = (0.0, 0.05, 0.0), (0.0, 0.2, 0.0), (0.05, 0.0, 0.0)
 STIFF = 7.2e12
 MARKS = (0.05, 0.1)
-#: the driven base: a half-sine pulse along X and a spin-up about Y (the umbrella's BaseDrive)
-DRIVE = {"base_accel_x": 20.0, "base_accel_start": 0.02, "base_accel_duration": 0.02,
-         "base_spin_rate": 3.0, "base_spin_ramp": 0.05}
 #: MuJoCo's driven bus: heavy enough that the ribs' reactions (~30 N, ~1 N m) leave its
 #: motion the prescribed one to 1e-6; much heavier (1e8) spoils MuJoCo's own solution
 DRIVEN_MASS = 1e6
