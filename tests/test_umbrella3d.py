@@ -34,7 +34,8 @@ def planar_run(p: UmbrellaParams, duration: float):
     while sim.time < duration - 1e-12:
         s = sim.step()[-1]
         rows.append((s.time, s.alpha1, s.alpha2, s.sleeve_position, s.tip_axial,
-                     s.tip_transverse, s.kinetic_energy + s.strain_energy))
+                     s.tip_transverse, s.kinetic_energy + s.strain_energy,
+                     np.max(np.abs(s.leaf_stress)), np.max(np.abs(s.link_stress))))
     return sim, np.array(rows)
 
 
@@ -60,6 +61,18 @@ def assert_ribs_equal_planar(ribs: int, values: dict, duration: float):
                                    rtol=0, atol=IDENTITY_TOLERANCE)
     # nothing leaves the rib planes
     assert np.max(np.abs(a["tip"][:, :, 2])) < 1e-15
+    # the stresses: with no torsion and no out-of-plane bending, the combined (von Mises)
+    # figure is |axial| + |bending|, the planar model's worst fibre; its peak over the run
+    # is the planar peak, at the same place and instant
+    peaks = sim.record.summary()["peak_stress"]
+    planar_peak = np.max(planar[:, 7:9])
+    np.testing.assert_allclose(peaks["von_mises"][0], planar_peak, rtol=1e-9)
+    body, _, when = peaks["von_mises"][1][0]
+    column = 7 if body == "leaf" else 8
+    assert planar[:, column].max() == pytest.approx(planar_peak, rel=1e-9)
+    assert when == pytest.approx(planar[np.argmax(planar[:, column]), 0], abs=1e-12)
+    for name in ("bending_out_of_plane", "torsion"):
+        assert np.all(peaks[name][0] < 1e-9 * planar_peak)
     energy = a["kinetic_energy"] + a["strain_energy"]
     np.testing.assert_allclose(energy[1:], ribs * planar[:, 6], rtol=1e-9)
 
