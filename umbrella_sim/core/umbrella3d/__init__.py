@@ -10,6 +10,7 @@ The whole umbrella in 3D: N flexible ribs around one sleeve (the planar model's 
     integrator3d  the energy-consistent midpoint step (the planar scheme), friction, drive
     simulator3d   UmbrellaSimulator3D: the grid, the lock, stuck hinges
     outputs3d     Record3D: every step's figures per rib, peaks, spread, energy balance
+    modes3d       the locked umbrella's vibration modes (validation and figures)
 
 No ROS, no file format, no command line (the core layer's rules).  docs/umbrella3d.md
 gives the formulation and its validation.

@@ -16,10 +16,13 @@ of the step's discrete energy balance
 
     T1 = T0 + V0 - V1 + F (y_s0 - y_s1) + W_friction + W_drive.
 
-With a prescribed base (rheonomic joints) the velocity is projected but not scaled.  Every
-linear solve is block-arrow (arrow.py): cost linear in the number of ribs.  The kinetic
-energy's discrete gradient is corrected along the coordinates it depends on only (not the bus
-position, which it does not), so the bus's linear momentum is conserved to round-off.
+With a prescribed base (rheonomic joints) the velocity is projected but not scaled, and the
+drive's work counts, besides its multipliers times the bus's displacement, the projection's
+impulse on the bus times the bus's mean velocity across it.  Every linear solve is
+block-arrow (arrow.py): cost linear in the number of ribs.  The kinetic energy's discrete
+gradient meets dq . G_T = f(q1) - f(q0) over the whole dq, the correction added along the
+ribs' coordinates and the sleeve's only (not the bus's: its position is cyclic), so the bus's
+linear momentum is conserved to round-off.
 """
 from __future__ import annotations
 
