@@ -23,7 +23,7 @@ from .cdr import cdr_bytes, message_definition, qos_yaml, type_name
 from .format import CHUNK_SIZE, EVENTS_RECORD, SEGMENT_RECORD
 from .mcap_stream import (CommittedFile, ended_early_tail, MessageAppender, SpilledChunkIndex,
                           write_all)
-from .paths import check_new_output
+from .paths import absolute_path, check_new_output
 from .. import __version__
 
 
@@ -46,7 +46,8 @@ def new_bag_recorder(namespace: str, metadata, parent: str = ".",
     a bag left from a run a moment ago) the next free NAME_1, NAME_2, ... is used.
     metadata(bag_dir) returns the run's metadata records.
     """
-    base = os.path.join(os.path.abspath(parent), default_bag_name(namespace))
+    base = os.path.join(absolute_path(parent, "recording directory"),
+                        default_bag_name(namespace))
     for k in range(1000):
         bag_dir = base if k == 0 else f"{base}_{k}"
         if os.path.exists(bag_dir):

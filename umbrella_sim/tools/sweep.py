@@ -34,7 +34,7 @@ from .sweep_results import (CaseStore, is_finished, make_record, OutputError, pl
                             write_parquet)
 from .sweep_spec import case_id, load_spec, SpecError, Sweep
 from .. import __version__
-from ..bag.paths import check_new_output
+from ..bag.paths import absolute_path, check_new_output
 from ..core.registry import NODE_PARAMETERS
 from ..ros.signals import deferred
 
@@ -414,14 +414,18 @@ def _write_outputs(sweep, store, out_dir, report, log) -> None:
 
 
 # ------------------------------------------------------------------ command line
-def check_out_dir(path: str) -> None:
-    """Refuse a results directory that cannot be used (a new one, or one to resume into)."""
-    if not os.path.lexists(path):
-        try:
-            check_new_output(path, "--out")
-        except ValueError as exc:
-            raise SpecError(str(exc)) from None
-        return
+def check_out_dir(path: str) -> str:
+    """
+    Return the absolute results directory, or SpecError why it cannot be used.
+
+    A new directory, or one to resume into.
+    """
+    try:
+        path = absolute_path(path, "--out")
+        if not os.path.lexists(path):
+            return check_new_output(path, "--out")
+    except ValueError as exc:
+        raise SpecError(str(exc)) from None
     if not os.path.isdir(path):
         raise SpecError(f"--out {path}: exists and is not a directory")
     if not os.access(path, os.W_OK | os.X_OK):
@@ -429,6 +433,7 @@ def check_out_dir(path: str) -> None:
     cases = os.path.join(path, "cases")
     if os.path.lexists(cases) and not os.path.isdir(cases):
         raise SpecError(f"--out {path}: {cases} exists and is not a directory")
+    return path
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -457,7 +462,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
                             "give one of them")
         if args.scheduler is not None:
             check_scheduler_address(args.scheduler)
-        check_out_dir(args.out)
+        args.out = check_out_dir(args.out)
         sweep = load_spec(args.spec)
     except SpecError as exc:
         ap.exit(2, f"{ap.prog}: error: {exc}\n")
