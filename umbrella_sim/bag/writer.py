@@ -100,12 +100,12 @@ class BagRecorder:
     WRITE_PERIOD = 0.02
 
     def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]], on_error=None,
-                 background: bool = False):
-        bag_dir = check_record_path(bag_dir)
+                 background: bool = False, what: str = "record_path"):
+        bag_dir = check_record_path(bag_dir, what)      # what: the option that named it
         try:
             os.mkdir(bag_dir)
         except OSError as exc:
-            raise ValueError(f"record_path {bag_dir}: {exc.strerror}") from None
+            raise ValueError(f"{what} {bag_dir}: {exc.strerror}") from None
         self.bag_dir = bag_dir
         self.file_name = os.path.basename(bag_dir) + "_0.mcap"
         self.path = os.path.join(bag_dir, self.file_name)
@@ -134,7 +134,7 @@ class BagRecorder:
             self._fh.commit()
         except OSError as exc:
             self._remove_partial()
-            raise ValueError(f"record_path {bag_dir}: cannot start the recording: "
+            raise ValueError(f"{what} {bag_dir}: cannot start the recording: "
                              f"{exc.strerror or exc}") from None
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}

@@ -241,7 +241,8 @@ def main(argv: list[str] | None = None) -> int:
                 result = record_offline(params, args.mcap, args.duration, profile,
                                         publish_rate=args.publish_rate,
                                         marker_magnification=args.marker_magnification,
-                                        on_chunk=on_chunk, states=args.csv_state)
+                                        on_chunk=on_chunk, states=args.csv_state,
+                                        what="--mcap")
             except ValueError as exc:
                 ap.exit(2, f"umbrella_sim: error: {exc}\n")
         else:

@@ -79,11 +79,11 @@ def run_case(task: dict) -> dict:
                 import shutil
                 shutil.rmtree(bag)
             result = record_offline(params, bag, _mcap_duration(task), profile,
-                                    publish_rate=MCAP_PUBLISH_RATE)
+                                    publish_rate=MCAP_PUBLISH_RATE, what="recording")
             out["mcap"] = bag
             if result.recording_error:      # not finished: a resumed sweep runs it again
                 out["summary"] = result.summary()
-                out["error"] = f"recording {bag}: {result.recording_error}"
+                out["error"] = result.recording_error      # names the bag
                 out["status"] = STATUS_ERROR
                 return _finished(out, t0)
         else:
