@@ -373,6 +373,7 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
             except OutputError as exc:
                 write_error = write_error or exc
     if write_error is not None:
+        write_error.cases_kept = report.skipped + (report.ran if made_dir else 0)
         raise write_error
     return report
 
@@ -463,7 +464,18 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         if args.scheduler is not None:
             check_scheduler_address(args.scheduler)
         args.out = check_out_dir(args.out)
-        sweep = load_spec(args.spec)
+        checking = []           # the progress line of a large spec's checking, made once
+
+        def checked(done, total):
+            if not checking:
+                checking.append(Progress(total, lambda d: f"checked {d:.0f}/{total} cases"))
+            checking[0].update(done)
+
+        try:
+            sweep = load_spec(args.spec, progress=checked)
+        finally:
+            if checking:
+                checking[0].close()
     except SpecError as exc:
         ap.exit(2, f"{ap.prog}: error: {exc}\n")
 
@@ -477,8 +489,11 @@ def main(args, ap: argparse.ArgumentParser) -> int:
     except SpecError as exc:
         ap.exit(2, f"{ap.prog}: error: {exc}\n")
     except OutputError as exc:
-        ap.exit(4, f"{ap.prog}: error: cannot write the results: {exc.strerror}; every case "
-                   f"finished before it is kept in {os.path.join(args.out, 'cases')}\n")
+        kept = getattr(exc, "cases_kept", 0)
+        ap.exit(4, f"{ap.prog}: error: cannot write the results: {exc.strerror}; "
+                   + (f"the {kept} case(s) finished before it are kept in "
+                      f"{os.path.join(args.out, 'cases')}\n" if kept else
+                      "no case result was kept\n"))
     except KeyboardInterrupt:       # a second stop, while the table or the plots were made
         print(f"{ap.prog}: interrupted; every finished case is kept in "
               f"{os.path.join(args.out, 'cases')} (and in results.csv if it was written: "
