@@ -40,7 +40,7 @@ from std_srvs.srv import SetBool, Trigger
 from . import messages as ros_io
 from .commands import CommandIntake
 from .lockstep import Lockstep
-from .pacing import MAX_LAG_S, Pacer
+from .pacing import behind_text, MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, parameter_defaults,
                          set_refusal, wrong_type_text)
 from .params_file import check_parameter_sources, QOS_OVERRIDES, USE_SIM_TIME
@@ -617,8 +617,7 @@ class UmbrellaNode(Node):
         elif self._peers_warned:
             level, message = DiagnosticStatus.WARN, self._peers_warned
         elif rtf > 0 and lag > max(0.05, 2.0 / self.driver_rate):
-            level, message = (DiagnosticStatus.WARN,
-                              f"behind real time: measured {measured:.3f}x of {rtf:g}x")
+            level, message = DiagnosticStatus.WARN, behind_text(lag, measured, rtf)
         elif self.driver.summary.warnings():
             level, message = DiagnosticStatus.WARN, "outside the model's validity: " + "; ".join(
                 w.split(":")[0] for w in self.driver.summary.warnings())
