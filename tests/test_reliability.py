@@ -177,6 +177,10 @@ def test_every_parameter_refusal_names_the_parameter_and_why(probe):
         # and a good set still goes through, the integer literal taken as the double
         assert set_param("marker_magnification", I, 100).successful
         assert get("marker_magnification").double_value == 100.0
+        # a whole double for an integer is that integer (node_parameters.md), the type kept
+        assert set_param("elements_per_segment", D, 2.0).successful
+        assert get("elements_per_segment").type == ParameterType.PARAMETER_INTEGER
+        assert get("elements_per_segment").integer_value == 2
         assert "Traceback" not in node.output()
 
 
