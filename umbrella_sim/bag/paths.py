@@ -44,7 +44,10 @@ def absolute_path(path: str, what: str) -> str:
 
     A relative path is relative to the working directory; when another process deleted that
     directory, ``os.getcwd`` fails (FileNotFoundError, a traceback from ``os.path.abspath``).
+    An empty path is refused (it would be the working directory); ``~`` is the home.
     """
+    if not path.strip():        # ('' would be the working directory itself)
+        raise ValueError(f"{what} {path!r}: empty path")
     path = os.path.expanduser(path)
     if os.path.isabs(path):
         return os.path.normpath(path)
@@ -66,9 +69,7 @@ def check_new_output(path: str, what: str) -> str:
     Nothing is created.  A leading ``~`` is the home directory, as in a shell (which does
     not expand it in ``-p record_path:=~/bags/run``).
     """
-    if not path.strip():
-        raise ValueError(f"{what} {path!r}: empty path")
-    path = absolute_path(os.path.expanduser(path).rstrip("/") or "/", what)
+    path = absolute_path(path, what)        # (normalised: no trailing slash)
     if os.path.lexists(path):
         raise ValueError(f"{what} {path}: already exists, not overwriting")
     parent = os.path.dirname(path)
