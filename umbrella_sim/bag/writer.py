@@ -67,8 +67,11 @@ def check_record_path(bag_dir: str, what: str = "record_path") -> str:
     Return the absolute bag directory, or raise ValueError why it cannot be created.
 
     The absolute bag directory, or ValueError naming why it cannot be created (cheap
-    checks before any simulation work; nothing is created; never overwrites).
+    checks before any simulation work; nothing is created; never overwrites).  An empty
+    bag_dir is a new bag in the working directory (new_bag_recorder): that directory's.
     """
+    if not bag_dir:
+        return absolute_path(".", f"{what} '' (a new bag in the working directory)")
     return check_new_output(bag_dir, what)
 
 
@@ -101,7 +104,7 @@ class BagRecorder:
 
     def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]], on_error=None,
                  background: bool = False, what: str = "record_path"):
-        bag_dir = check_record_path(bag_dir, what)      # what: the option that named it
+        bag_dir = check_new_output(bag_dir, what)       # what: the option that named it
         try:
             os.mkdir(bag_dir)
         except OSError as exc:

@@ -48,7 +48,6 @@ from .publication import PublicationEncoder
 from .recording import RunRecording
 from .. import __version__
 from ..bag.cdr import cdr_bytes
-from ..bag.paths import absolute_path
 from ..bag.provenance import run_metadata
 from ..bag.writer import BagRecorder, check_record_path, new_bag_recorder
 from ..core.driver import RunDriver
@@ -93,10 +92,8 @@ class UmbrellaNode(Node):
                 {k: v for k, v in values.items() if k in SPECS}).validated()
             self.node_cfg = check_node_parameters(
                 {k: v for k, v in values.items() if k in NODE_PARAMETERS})
-            if self.node_cfg["record"] and self.node_cfg["record_path"]:   # before any work
+            if self.node_cfg["record"]:         # before any work ('': the working directory)
                 check_record_path(self.node_cfg["record_path"])
-            elif self.node_cfg["record"]:       # a new bag in the working directory
-                absolute_path(".", "record_path '' (a new bag in the working directory)")
         except ValueError as exc:
             raise StartupError(str(exc)) from None
         self.pending_params = self.model_params
