@@ -293,6 +293,9 @@ def test_a_burst_of_commands_is_taken_whole_and_in_order(probe, tmp_path):
         assert node.stop() == 0
     log = read_log(str(bag))
     assert [m.data for _, m in log.decoded("/sleeve_force")] == forces
+    counts = log.metadata["umbrella_sim.counts"]
+    assert counts["commands_accepted"] == str(len(forces))
+    assert counts["commands_dropped_at_stop"] == "0"      # (all taken before the stop)
     applied = [m.data for _, m in log.decoded("/sleeve_force/applied")]
     assert applied[-1] == forces[-1] and applied == sorted(applied)
     assert set(applied) <= set(forces)
@@ -304,6 +307,88 @@ def _published(pub, msg) -> bool:
         return True
     except Exception:        # rclpy's RCLError: 'cannot publish data'
         return False
+
+
+class QueuedCommands:
+    """A command subscription's DDS queue: take_message hands out what it holds, then None."""
+
+    msg_type, raw = Float64, False
+
+    def __init__(self, values):
+        self.values = values          # an iterator: a finite queue, or a flood
+        self.handle = self
+        self.taken = 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def take_message(self, msg_type, raw):
+        value = next(self.values, None)
+        if value is None:
+            return None
+        self.taken += 1
+        return Float64(data=value), None
+
+
+class CommandLog:
+    """What the recording is given: each command and each refused one, with its time."""
+
+    def __init__(self):
+        self.commands, self.refusals = [], []
+
+    def command(self, msg, t):
+        self.commands.append((t, msg.data))
+
+    def refused(self, msg, t):
+        self.refusals.append((t, msg.data))
+
+
+def intake(values):
+    from types import SimpleNamespace
+
+    from umbrella_sim.ros.commands import CommandIntake
+    from umbrella_sim.ros.lockstep import Lockstep
+
+    rec = CommandLog()
+    sim = SimpleNamespace(time=0.25, params=UmbrellaParams())
+    c = CommandIntake(lambda: sim, lambda: rec, lambda *args: None, Lockstep())
+    c.subscription = QueuedCommands(values)
+    return c, rec
+
+
+def test_commands_queued_at_the_stop_are_taken_and_recorded():
+    """
+    At a stop, every command still queued is checked, counted and recorded (none lost).
+
+    At SIGINT the node dropped ~3 250 commands DDS had taken for it, uncounted; now they are
+    taken as during the run, at the run's last time, and the recording's counts say how many.
+    """
+    values = [-1.0 if i % 10 == 9 else 1.0 + i % 7 for i in range(3000)]
+    c, rec = intake(iter(values))
+    text = c.drain_at_stop()
+    assert c.accepted == 2700 and c.refused == 300 and c.taken_at_stop == 3000
+    assert c.dropped_at_stop == 0 and "3000 queued command(s) taken" in text
+    assert rec.commands == [(0.25, v) for v in values if v >= 0]
+    assert len(rec.refusals) == 10          # (the rest past the 10/s recording limit)
+    assert c.counts_record()["commands_taken_at_stop"] == "3000"
+    assert c.force == values[-2]          # the last accepted value held (not applied)
+
+
+def test_a_flood_at_the_stop_is_taken_then_counted_as_dropped_and_the_stop_ends():
+    """A flood that never ends: taken for a while, then only counted, then the stop goes on."""
+    import itertools
+
+    c, rec = intake(itertools.repeat(1.0))
+    text = c.drain_at_stop(period=0.05)
+    queue = c.subscription
+    assert c.taken_at_stop > 0 and c.dropped_at_stop > 0
+    assert c.taken_at_stop + c.dropped_at_stop == queue.taken     # every one taken is counted
+    assert c.accepted == c.taken_at_stop == len(rec.commands)
+    assert f"{c.dropped_at_stop} more counted as dropped" in text
+    assert c.counts_record()["commands_dropped_at_stop"] == str(c.dropped_at_stop)
 
 
 # ------------------------------------------------------------------ offline memory

@@ -232,6 +232,12 @@ class UmbrellaNode(Node):
         else:  # after SIGINT/SIGTERM the context is gone: /rosout cannot take it any more
             print(f"[{level.upper()}] [{self.get_name()}]: {text}", file=sys.stderr, flush=True)
 
+    def drain_commands(self) -> None:
+        """Take the commands still queued at the stop (ros.commands: none left uncounted)."""
+        text = self.commands.drain_at_stop()
+        if text:
+            self._log("info", text)
+
     def close_recording(self) -> None:
         rec = self.recording
         if rec is None:
@@ -243,7 +249,7 @@ class UmbrellaNode(Node):
         try:
             rec.close(self.sim, self.commands.accepted, self.commands.refused,
                       self.driver.summary.figures(), fault=self.fault, extra={
-                          "refused_not_recorded": str(self.commands.refused_not_recorded),
+                          **self.commands.counts_record(),
                           "segments": str(rec.recorder.segment + 1)})
         finally:
             if held:

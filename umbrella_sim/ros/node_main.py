@@ -139,6 +139,7 @@ def _run(argv: list[str], running: list) -> int:
         pass
     finally:
         node.stop()
+        node.drain_commands()       # those still queued: taken or counted, never lost
         node.close_recording()
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
