@@ -28,6 +28,9 @@ COMMAND_BATCH = 256
 #: at a stop, the commands still queued are taken (checked, counted, recorded) for up to this
 #: long (wall s), then for as long again only counted as dropped: none is lost uncounted
 STOP_DRAIN_S = 1.0
+#: ... and until none has come for this long (DDS may still be delivering what was sent
+#: before the stop: an empty queue for a moment is not the end of it)
+STOP_QUIET_S = 0.05
 
 
 class CommandIntake:
@@ -96,20 +99,25 @@ class CommandIntake:
         """
         Take the commands still queued when the run stops: none is left uncounted.
 
-        For `period` s each is taken as during the run (checked, counted, recorded at the
-        run's last time; none is applied: the run has ended) and counted in taken_at_stop;
+        Until none has come for STOP_QUIET_S, for `period` s at most, each is taken as during
+        the run (checked, counted, recorded at the run's last time; none is applied: the run
+        has ended) and counted in taken_at_stop;
         then, a flood still coming, for as long again each is only counted, in
         dropped_at_stop.  Called once the executor no longer spins, before the recording
         is closed (its counts record both).  Returns what it did, in words ('' if nothing).
         """
         if self.subscription is not None:
             with self._intake:
-                start = time.monotonic()
+                start = last = time.monotonic()
                 while time.monotonic() - start < 2 * period:
                     taken = self._queued()
                     if taken is None:
-                        break
-                    if time.monotonic() - start < period:
+                        if time.monotonic() - last >= min(STOP_QUIET_S, period):
+                            break
+                        time.sleep(0.002)
+                        continue
+                    last = time.monotonic()
+                    if last - start < period:
                         self.take(taken)
                         self.taken_at_stop += 1
                     else:
