@@ -44,6 +44,7 @@ from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.summary import stage2_figures, STAGE2_SAMPLES, STAGE2_WINDOW
+from umbrella_sim.ros.messages import SERVICE_QOS
 from umbrella_sim.ros.recording import record_offline
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -307,6 +308,66 @@ def _published(pub, msg) -> bool:
         return True
     except Exception:        # rclpy's RCLError: 'cannot publish data'
         return False
+
+
+@pytest.mark.ros
+def test_a_storm_of_service_calls_is_answered_and_the_run_goes_on(probe, tmp_path):
+    """
+    300 service calls at once, with a command stream: every one answered, the run goes on.
+
+    ``~/pause`` true/false, get_parameters and a refused set_parameters, all sent before the
+    first answer; the last pause is false, so sim time goes on after the storm, the commands
+    are all counted, and SIGINT ends the run cleanly with its recording finalised.  (With
+    the services' default depth, 10, ``~/pause`` kept the last 10 of 100 requests: 88 were
+    never answered.)
+    """
+    probe.subscribe("/joint_states", JointState)
+    bag = tmp_path / "storm"
+    with NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("recording to", timeout=60)
+        srv = "/umbrella_node"
+        # (a client keeps its answers as the server its requests: the default depth, 10,
+        # would lose all but the last 10 of 100 answers waiting for the probe's thread)
+        clients = {name: probe.node.create_client(kind, f"{srv}/{name}",
+                                                  qos_profile=SERVICE_QOS)
+                   for name, kind in (("pause", SetBool), ("get_parameters", GetParameters),
+                                      ("set_parameters", SetParameters))}
+        for client in clients.values():
+            assert client.wait_for_service(timeout_sec=30)
+        pub = probe.publisher("/sleeve_force", Float64,
+                              QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                                         reliability=ReliabilityPolicy.RELIABLE))
+        probe.wait_for_subscribers(pub)
+        futures = []
+        for i in range(100):
+            futures.append(("pause", clients["pause"].call_async(
+                SetBool.Request(data=i % 2 == 0))))
+            futures.append(("get", clients["get_parameters"].call_async(
+                GetParameters.Request(names=["publish_rate", "v0"]))))
+            futures.append(("set", clients["set_parameters"].call_async(
+                SetParameters.Request(parameters=[Parameter(
+                    name="publish_rate", value=_value(ParameterType.PARAMETER_STRING,
+                                                      "fast"))]))))
+            poll(lambda i=i: _published(pub, Float64(data=1.0 + i)), 60,
+                 lambda: "the writer stayed full for 60 s")
+        poll(lambda: all(f.done() for _, f in futures), 120,
+             lambda: "unanswered: " + ", ".join(
+                 f"{k} {sum(not f.done() for kind, f in futures if kind == k)}"
+                 for k in ("pause", "get", "set")))
+        for kind, f in futures:
+            r = f.result()
+            if kind == "pause":
+                assert r.success, r.message
+            elif kind == "get":
+                assert r.values[0].double_value == 100.0
+            else:
+                assert not r.results[0].successful
+                assert "publish_rate='fast'" in r.results[0].reason
+        t_after = max((stamp(m) for m in probe.messages("/joint_states")), default=0.0)
+        probe.wait_for("/joint_states", lambda m: stamp(m) > t_after + 0.1, timeout=60)
+        assert node.stop(signal.SIGINT) == 0
+    counts = read_log(str(bag)).metadata["umbrella_sim.counts"]
+    assert counts["commands_accepted"] == "100", counts
 
 
 class QueuedCommands:

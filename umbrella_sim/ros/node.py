@@ -139,9 +139,9 @@ class UmbrellaNode(Node):
         self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
         self.command_topic = self.command_sub.topic_name
         self.commands.subscription = self.command_sub
-        services = MutuallyExclusiveCallbackGroup()
-        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
-        self.create_service(SetBool, "~/pause", self._on_pause, callback_group=services)
+        g, qos = MutuallyExclusiveCallbackGroup(), ros_io.SERVICE_QOS     # (a storm: deep)
+        self.create_service(Trigger, "~/reset", self._on_reset, qos_profile=qos, callback_group=g)
+        self.create_service(SetBool, "~/pause", self._on_pause, qos_profile=qos, callback_group=g)
         # rclpy's three stages: convert exact int/double literals, validate, then apply
         self.add_pre_set_parameters_callback(self._coerce_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
