@@ -9,7 +9,8 @@ The reliability suite, continued: the command lines under OS errors and careless
 * A full disk under ``umbrella_sim simulate --mcap``: the error names ``--mcap`` and its path.
 * Bad files: plain ``umbrella_replay`` skips and names payloads that do not decode (it
   republished them, exit 0), as --resimulate refuses them.
-* Careless settings: ``--duration 1e9`` needs ``--long-run``; ``--csv X --mcap X`` is refused
+* Careless settings: ``--duration 1e9`` needs ``--long-run`` (a sweep's cases, ``long_run:
+  true``); ``--csv X --mcap X`` is refused
   before any step; ``sweep --out`` that cannot be made does not claim results were kept; a
   large sweep's checking reports its progress and reads the params file once.
 
@@ -173,6 +174,21 @@ def test_a_run_of_years_needs_consent(tmp_path):
     assert not os.listdir(tmp_path)                 # nothing written
     r = cli("simulate", "--duration", "0.01", "--long-run", cwd=tmp_path)
     assert r.returncode == 0, r.stderr              # (a short run needs no consent)
+
+
+def test_a_sweep_of_cases_of_years_needs_consent(tmp_path):
+    """A spec whose duration is 10^13 steps a case: refused unless it says long_run: true."""
+    spec = tmp_path / "spec.yaml"
+    grid = "base: {model: rigid}\ngrid:\n  v0: [-1.0, -2.0]\nduration: 1.0e9\n"
+    spec.write_text(grid)
+    with pytest.raises(sweep_spec.SpecError, match=r"case 1 .*duration 1e\+09: 1e\+13 physics "
+                       r"steps .*give long_run: true"):
+        sweep_spec.load_spec(str(spec))
+    spec.write_text(grid + "long_run: true\n")
+    assert len(sweep_spec.load_spec(str(spec)).cases) == 2
+    spec.write_text(grid + "long_run: yes please\n")
+    with pytest.raises(sweep_spec.SpecError, match="long_run: expected true or false"):
+        sweep_spec.load_spec(str(spec))
 
 
 def test_one_path_for_csv_and_mcap_is_refused_before_the_run(tmp_path):

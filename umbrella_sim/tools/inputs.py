@@ -101,16 +101,17 @@ RECORDING_PARAMS = ("publish_rate", "marker_magnification")
 LONG_RUN_STEPS = 1e8
 
 
-def check_run_length(duration: float, step: float, consent: bool, option: str) -> None:
+def check_run_length(duration: float, step: float, consent: bool, option: str,
+                     what: str = "--duration") -> None:
     """
     Refuse a run of more than LONG_RUN_STEPS physics steps unless the user consented.
 
-    ValueError naming the duration, its steps and how to consent (``--duration 1e9`` was
-    taken and ran for years, writing as it went).
+    ValueError naming the duration (what), its steps and how to consent (option): ``--duration
+    1e9`` was taken and ran for years, writing as it went.
     """
     steps = duration / step
     if steps > LONG_RUN_STEPS and not consent:
-        raise ValueError(f"--duration {duration:g}: {steps:.3g} physics steps of {step:g} s, "
+        raise ValueError(f"{what} {duration:g}: {steps:.3g} physics steps of {step:g} s, "
                          f"more than {LONG_RUN_STEPS:.0e} (hours of computing or more); "
                          f"give {option} to run it anyway")
 

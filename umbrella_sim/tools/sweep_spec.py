@@ -11,6 +11,7 @@ SPEC keys (every parameter name is the one of ``config/umbrella.yaml`` / the nod
     stop_after_lock: 0.2       # end a case this long after its lock (s)
     force: 5.0                 # constant sleeve force F_H (N), = base sleeve_force
     force_profile: f.csv       # or a CSV of t,F rows (path relative to the SPEC)
+    long_run: true             # consent to cases of more than 10^8 physics steps each
 
 The whole SPEC is checked before any case runs (names, values, every case's parameters through
 the same validation as the CLI); errors name the case and the parameter.  ``case_id`` hashes
@@ -28,13 +29,14 @@ from typing import Any
 
 import yaml
 
-from .inputs import check_lock_given, default_params_file, read_force_profile, resolve_params
+from .inputs import (check_lock_given, check_run_length, default_params_file,
+                     LONG_RUN_STEPS, read_force_profile, resolve_params)
 from .. import __version__
 from ..bag.paths import read_text_input
 
 
 SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
-             "force_profile")
+             "force_profile", "long_run")
 
 
 DEFAULT_DURATION = 1.0      # s, as `umbrella-sim simulate`
@@ -106,6 +108,7 @@ def load_spec(path: str, progress=None) -> Sweep:
     from ..core.forcing import command_force
     from ..core.params import UmbrellaParams
     from ..core.registry import check_types
+    from ..core.step_rule import physics_step_of, smallest_step_of
     from ..ros.params_file import load_params_file, load_yaml_as_ros
 
     try:
@@ -146,6 +149,9 @@ def load_spec(path: str, progress=None) -> Sweep:
         raise SpecError(f"sweep spec {path}: no cases: give grid and/or cases")
     duration = _number(f"sweep spec {path}: duration", doc.get("duration", DEFAULT_DURATION),
                        0.0, True)
+    long_run = doc.get("long_run", False)
+    if not isinstance(long_run, bool):
+        raise SpecError(f"sweep spec {path}: long_run: expected true or false")
     stop_after_lock = doc.get("stop_after_lock")
     if stop_after_lock is not None:
         stop_after_lock = _number(f"sweep spec {path}: stop_after_lock", stop_after_lock, 0.0,
@@ -200,6 +206,9 @@ def load_spec(path: str, progress=None) -> Sweep:
             resolved = resolve_params(overrides, params_file, from_file)
             check_lock_given(resolved, f"lock={overrides['lock']}" if "lock" in overrides
                              else None)
+            if duration / smallest_step_of(resolved) > LONG_RUN_STEPS:   # (cheap first)
+                check_run_length(duration, physics_step_of(resolved), long_run,
+                                 "long_run: true", "duration")
             params = resolved.as_dict()
         except ValueError as exc:
             shown = ", ".join(f"{k}={v!r}" for k, v in overrides.items() if k not in base
