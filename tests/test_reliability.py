@@ -6,7 +6,10 @@ The reliability suite: the node and the tools under long runs, bad input and sto
   /diagnostics served inside the period; SIGINT ends the run promptly and the recording
   holds every step taken.
 * Command intake: a burst of commands is taken whole and in order, ``~/pause`` answered
-  during it.
+  during it; the commands still queued at a stop are taken and recorded, a flood still
+  coming is counted as dropped, and the stop ends.
+* A storm of service calls (``~/pause``, parameter gets and sets, 300 at once) with a command
+  stream: every call answered, the run goes on.
 * Runtime parameter sets: every refusal names the parameter and says why (wrong type,
   unknown name with a suggestion, read-only, out of range, unset), and changes nothing.
 * Offline: ``umbrella_sim simulate``'s memory does not grow with the duration, with or
@@ -14,8 +17,13 @@ The reliability suite: the node and the tools under long runs, bad input and sto
 * Damaged recordings: bytes damaged anywhere in a bag give a one-line error naming the file
   (or a recovered log), never a traceback.
 
-What it asserts is behaviour; how fast is for bench/bench_long_period.py and
-bench/bench_commands.py (timeouts here only bound a failure).  The rest of what a user relies
+tests/test_reliability_tools.py holds the command lines' hard cases (a deleted working
+directory, a closed pipe, a full disk under simulate --mcap, undecodable payloads in a
+replay, careless durations and outputs, a large sweep's checking).
+
+What it asserts is behaviour; how fast is for bench/bench_long_period.py,
+bench/bench_commands.py, bench/bench_command_streams.py and bench/bench_inputs.py (timeouts
+here only bound a failure).  The rest of what a user relies
 on is held where it was built: several antennas (test_node.py's
 test_namespaced_nodes_do_not_cross_talk, test_faults.py's
 test_two_nodes_in_one_namespace_are_warned), a full disk (test_faults.py's
