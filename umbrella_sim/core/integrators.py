@@ -124,8 +124,9 @@ class LockedModeFit:
     energy-consistent scheme of the same order (S is constant); the closer the frame stays to
     it, the closer each mode is to exact.  The grid step h is the simulator's: the lock's
     part step uses it too.  For the linear strain only (engines' ``phase_correctable``): with
-    the von Karman strain the axial coordinates follow the foreshortening of the bending,
-    far from the linearisation.
+    the co-rotational strain of flexible-nonlinear the axial coordinates follow the
+    foreshortening of the bending, and its large-motion stage 2 (the links buckle at V0 <= -1)
+    is far from the linearisation; its step rule takes the plain limit (step_rule).
     """
 
     def __init__(self, model: UmbrellaModel, h: float, damping: np.ndarray | None = None):
