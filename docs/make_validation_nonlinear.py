@@ -28,7 +28,8 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
-from umbrella_sim.core.beam_strain import CorotationalStrainEnergy  # noqa: E402
+from umbrella_sim.core.beam_strain import (  # noqa: E402
+    CorotationalStrainEnergy, static_equilibrium)
 from umbrella_sim.core.driver import RunDriver, simulate  # noqa: E402
 from umbrella_sim.core.model import BeamBody  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
@@ -388,15 +389,9 @@ def elastica_section():
             law = CorotationalStrainEnergy(((body, slice(0, body.n_elastic)),), body.n_elastic,
                                            1e7, 1.0, 1.0, 0.0)
             iv, iu = body.elastic_index(n, "v"), body.elastic_index(n, "u")
-            q = np.zeros(body.n_elastic)
-            for frac in np.linspace(0.0, 1.0, 41)[1:]:
-                force = np.zeros(body.n_elastic)
-                force[iv] = frac * load
-                for _ in range(50):
-                    dq = np.linalg.solve(law.tangent(q), force - law.gradient(q))
-                    q += dq
-                    if np.abs(dq).max() < 1e-13:
-                        break
+            force = np.zeros(body.n_elastic)
+            force[iv] = load
+            q = static_equilibrium(law, force)
             cells.append(f"{q[iv] / y - 1:+.1e}, {-q[iu] / (1 - x) - 1:+.1e}")
         lines.append(f"| {load:g} | {math.degrees(psi):.1f} | {y:.5f} | {1 - x:.5f} | "
                      + " | ".join(cells) + " |")

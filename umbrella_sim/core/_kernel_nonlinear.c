@@ -324,12 +324,18 @@ static void cr_midpoint_jacobian(const ElasticLaw *law, int e, const double *qm,
     cr_jacobian(&law->d, e, st, st + CR_Z, jac);
 }
 
-static void cr_force(ElasticLaw *law, const double *q0, const double *q1, double h, double *out) {
+/* the element states of a step q0 -> q1, and its midpoint (for the damping term) */
+static void cr_step_states(ElasticLaw *law, const double *q0, const double *q1) {
     const ElasticData *d = &law->d;
     cr_step_start(law, q0);
     cr_step_current(law, q1);
     if (d->beta > 0.0)
         for (int i = 0; i < d->n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
+}
+
+static void cr_force(ElasticLaw *law, const double *q0, const double *q1, double h, double *out) {
+    const ElasticData *d = &law->d;
+    cr_step_states(law, q0, q1);
     for (int e = 0; e < d->n_el; e++) {
         const double *st0 = law->cr_start + (size_t)e * CR_STATE, *st1 = law->cr_cur + (size_t)e * CR_STATE;
         double jac[3 * CR_Z], sm[3], sigma[3];
@@ -353,10 +359,7 @@ static void cr_iteration_band(ElasticLaw *law, const double *q0, const double *q
     size_t nb = (size_t)d->ne * (2 * d->bw + 1);
     memset(law->band, 0, sizeof(double) * nb);
     law->band_h = h;
-    cr_step_start(law, q0);
-    cr_step_current(law, q1);
-    if (d->beta > 0.0)
-        for (int i = 0; i < d->n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
+    cr_step_states(law, q0, q1);
     for (int e = 0; e < d->n_el; e++) {
         const double *st0 = law->cr_start + (size_t)e * CR_STATE, *st1 = law->cr_cur + (size_t)e * CR_STATE;
         double zm[CR_Z], sm[3], sigma[3], jac[3 * CR_Z], m[CR_Z * CR_Z];

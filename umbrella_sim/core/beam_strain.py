@@ -349,3 +349,22 @@ class CorotationalStrainEnergy:
         jac = self._strain_jacobian(z, self._strains(z))
         rate = np.einsum("eki,ei->ek", jac, self.lin @ qd)
         return self._fibre(rate)
+
+
+def static_equilibrium(law, force: np.ndarray, load_steps: int = 40, iterations: int = 50,
+                       tolerance: float = 1e-13) -> np.ndarray:
+    """
+    Return the elastic coordinates where the law's restoring force equals `force`.
+
+    The load applied in `load_steps` equal increments from zero, Newton's method on
+    gradient(q) = force at each (a large-deflection static solution: the elastica of a
+    clamped beam under a tip load, against which the co-rotational law is checked).
+    """
+    q = np.zeros(len(force))
+    for frac in np.linspace(0.0, 1.0, load_steps + 1)[1:]:
+        for _ in range(iterations):
+            dq = np.linalg.solve(law.tangent(q), frac * force - law.gradient(q))
+            q += dq
+            if np.abs(dq).max() < tolerance:
+                break
+    return q

@@ -339,6 +339,19 @@ def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
     return vp
 
 
+def newton_converged(m, cs, q, step_norm: float, rate: float, tolerance: float) -> bool:
+    """
+    Return whether a Newton iteration of a midpoint step has converged.
+
+    Converged in q when the update |dq| or the estimated remaining error rate/(1-rate)*|dq|
+    (rate: the contraction of the last update) is below tolerance, and the constraints hold
+    at the iterate.
+    """
+    if step_norm < tolerance or (rate < 0.5 and rate / (1 - rate) * step_norm < tolerance):
+        return bool(np.max(np.abs(m.constraint_residual(q, cs))) < PHI_TOLERANCE)
+    return False
+
+
 class MidpointDAE:
     def __init__(self, model: UmbrellaModel, tolerance: float = NEWTON_TOLERANCE,
                  max_iterations: int = 25,
@@ -495,13 +508,9 @@ class MidpointDAE:
             step_norm = np.max(np.abs(dx[:n]))
             if not np.isfinite(step_norm):
                 raise ConvergenceError(f"Newton iterate became non-finite at t = {s.t + h:.9g} s")
-            # stop when the estimated remaining error rate/(1-rate)*|dq| is below tolerance
             rate = step_norm / last_norm if it > 1 else 1.0
-            if step_norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * step_norm
-                                              < self.tolerance):
-                # converged in q; make sure the constraints hold at the final iterate
-                if np.max(np.abs(m.constraint_residual(q, cs))) < PHI_TOLERANCE:
-                    break
+            if newton_converged(m, cs, q, step_norm, rate, self.tolerance):
+                break
             last_norm = step_norm
         else:
             raise ConvergenceError(f"Newton did not converge in {self.max_iterations} iterations "

@@ -88,8 +88,8 @@ import numpy as np
 
 from .beam_strain import CorotationalStrainEnergy, LinearStrainEnergy
 from .engines import FiniteElementEngine
-from .integrators import (iteration_blocks, midpoint_iterate, MidpointDAE,
-                          NEWTON_TOLERANCE, PHI_TOLERANCE, project_keeping_energy)
+from .integrators import (iteration_blocks, midpoint_iterate, MidpointDAE, newton_converged,
+                          NEWTON_TOLERANCE, project_keeping_energy)
 from .kernel import ConvergenceError, DynamicState, ElasticData
 from .model import band_form, ConstraintSet, UmbrellaModel
 from .params import UmbrellaParams
@@ -446,10 +446,8 @@ class ElasticMidpointDAE(MidpointDAE):
             rate = step_norm / last_norm if it > 1 else 1.0
             refresh = self.strain_nonlinear and (
                 (it == 1 and lagged and not lag_whole) or (it > 1 and rate > REFRESH_RATE))
-            if step_norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * step_norm
-                                              < self.tolerance):
-                if np.max(np.abs(m.constraint_residual(q, cs))) < PHI_TOLERANCE:
-                    break
+            if newton_converged(m, cs, q, step_norm, rate, self.tolerance):
+                break
             last_norm = step_norm
         else:
             raise ConvergenceError(f"Newton did not converge in {self.max_iterations} iterations "
