@@ -159,7 +159,7 @@ def test_output_paths_checked_before_any_work(tmp_path):
                         (["--csv", ""], "--csv '': empty path"),
                         (["--mcap", ""], "--mcap '': empty path")]:
         # 10^6 s of physics could not end within run()'s timeout: a refusal came first
-        r = run("umbrella_sim", "simulate", "--duration", "1e6", *args)
+        r = run("umbrella_sim", "simulate", "--duration", "1e6", "--long-run", *args)
         assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr
     r = run("umbrella_sim.tools.compare", "a", "b", "--out", str(tmp_path / "full"))
     assert r.returncode == 2 and "not empty" in r.stderr
@@ -431,7 +431,8 @@ def test_interrupted_offline_run_exits_130_with_its_recording_finalised(
     """
     bag = tmp_path / "long"
     proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim", "simulate", "--set",
-                             "time_step=0.002", "--duration", "1e6", "--mcap", str(bag)],
+                             "time_step=0.002", "--duration", "1e6", "--long-run", "--mcap",
+                             str(bag)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=ROOT, env=ros_env(), preexec_fn=(
                                 (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))

@@ -6,7 +6,11 @@ The reliability suite: the node and the tools under long runs, bad input and sto
   /diagnostics served inside the period; SIGINT ends the run promptly and the recording
   holds every step taken.
 * Command intake: a burst of commands is taken whole and in order, ``~/pause`` answered
-  during it.
+  during it; the commands still queued at a stop are taken and recorded, a flood still
+  coming is counted as dropped, and the stop ends.
+* A flood from one publisher does not hold back another's commands.
+* A storm of service calls (``~/pause``, parameter gets and sets, 300 at once) with a command
+  stream: every call answered, the run goes on.
 * Runtime parameter sets: every refusal names the parameter and says why (wrong type,
   unknown name with a suggestion, read-only, out of range, unset), and changes nothing.
 * Offline: ``umbrella_sim simulate``'s memory does not grow with the duration, with or
@@ -14,8 +18,13 @@ The reliability suite: the node and the tools under long runs, bad input and sto
 * Damaged recordings: bytes damaged anywhere in a bag give a one-line error naming the file
   (or a recovered log), never a traceback.
 
-What it asserts is behaviour; how fast is for bench/bench_long_period.py and
-bench/bench_commands.py (timeouts here only bound a failure).  The rest of what a user relies
+tests/test_reliability_tools.py holds the command lines' hard cases (a deleted working
+directory, a closed pipe, a full disk under simulate --mcap, undecodable payloads in a
+replay, careless durations and outputs, a large sweep's checking).
+
+What it asserts is behaviour; how fast is for bench/bench_long_period.py,
+bench/bench_commands.py, bench/bench_command_streams.py and bench/bench_inputs.py (timeouts
+here only bound a failure).  The rest of what a user relies
 on is held where it was built: several antennas (test_node.py's
 test_namespaced_nodes_do_not_cross_talk, test_faults.py's
 test_two_nodes_in_one_namespace_are_warned), a full disk (test_faults.py's
@@ -44,6 +53,7 @@ from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.summary import stage2_figures, STAGE2_SAMPLES, STAGE2_WINDOW
+from umbrella_sim.ros.messages import SERVICE_QOS
 from umbrella_sim.ros.recording import record_offline
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -177,6 +187,10 @@ def test_every_parameter_refusal_names_the_parameter_and_why(probe):
         # and a good set still goes through, the integer literal taken as the double
         assert set_param("marker_magnification", I, 100).successful
         assert get("marker_magnification").double_value == 100.0
+        # a whole double for an integer is that integer (node_parameters.md), the type kept
+        assert set_param("elements_per_segment", D, 2.0).successful
+        assert get("elements_per_segment").type == ParameterType.PARAMETER_INTEGER
+        assert get("elements_per_segment").integer_value == 2
         assert "Traceback" not in node.output()
 
 
@@ -289,6 +303,9 @@ def test_a_burst_of_commands_is_taken_whole_and_in_order(probe, tmp_path):
         assert node.stop() == 0
     log = read_log(str(bag))
     assert [m.data for _, m in log.decoded("/sleeve_force")] == forces
+    counts = log.metadata["umbrella_sim.counts"]
+    assert counts["commands_accepted"] == str(len(forces))
+    assert counts["commands_dropped_at_stop"] == "0"      # (all taken before the stop)
     applied = [m.data for _, m in log.decoded("/sleeve_force/applied")]
     assert applied[-1] == forces[-1] and applied == sorted(applied)
     assert set(applied) <= set(forces)
@@ -300,6 +317,190 @@ def _published(pub, msg) -> bool:
         return True
     except Exception:        # rclpy's RCLError: 'cannot publish data'
         return False
+
+
+@pytest.mark.ros
+def test_a_storm_of_service_calls_is_answered_and_the_run_goes_on(probe, tmp_path):
+    """
+    300 service calls at once, with a command stream: every one answered, the run goes on.
+
+    ``~/pause`` true/false, get_parameters and a refused set_parameters, all sent before the
+    first answer; the last pause is false, so sim time goes on after the storm, the commands
+    are all counted, and SIGINT ends the run cleanly with its recording finalised.  (With
+    the services' default depth, 10, ``~/pause`` kept the last 10 of 100 requests: 88 were
+    never answered.)
+    """
+    probe.subscribe("/joint_states", JointState)
+    bag = tmp_path / "storm"
+    with NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("recording to", timeout=60)
+        srv = "/umbrella_node"
+        # (a client keeps its answers as the server its requests: the default depth, 10,
+        # would lose all but the last 10 of 100 answers waiting for the probe's thread)
+        clients = {name: probe.node.create_client(kind, f"{srv}/{name}",
+                                                  qos_profile=SERVICE_QOS)
+                   for name, kind in (("pause", SetBool), ("get_parameters", GetParameters),
+                                      ("set_parameters", SetParameters))}
+        for client in clients.values():
+            assert client.wait_for_service(timeout_sec=30)
+        pub = probe.publisher("/sleeve_force", Float64,
+                              QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                                         reliability=ReliabilityPolicy.RELIABLE))
+        probe.wait_for_subscribers(pub)
+        futures = []
+        for i in range(100):
+            futures.append(("pause", clients["pause"].call_async(
+                SetBool.Request(data=i % 2 == 0))))
+            futures.append(("get", clients["get_parameters"].call_async(
+                GetParameters.Request(names=["publish_rate", "v0"]))))
+            futures.append(("set", clients["set_parameters"].call_async(
+                SetParameters.Request(parameters=[Parameter(
+                    name="publish_rate", value=_value(ParameterType.PARAMETER_STRING,
+                                                      "fast"))]))))
+            poll(lambda i=i: _published(pub, Float64(data=1.0 + i)), 60,
+                 lambda: "the writer stayed full for 60 s")
+        poll(lambda: all(f.done() for _, f in futures), 120,
+             lambda: "unanswered: " + ", ".join(
+                 f"{k} {sum(not f.done() for kind, f in futures if kind == k)}"
+                 for k in ("pause", "get", "set")))
+        for kind, f in futures:
+            r = f.result()
+            if kind == "pause":
+                assert r.success, r.message
+            elif kind == "get":
+                assert r.values[0].double_value == 100.0
+            else:
+                assert not r.results[0].successful
+                assert "publish_rate='fast'" in r.results[0].reason
+        t_after = max((stamp(m) for m in probe.messages("/joint_states")), default=0.0)
+        probe.wait_for("/joint_states", lambda m: stamp(m) > t_after + 0.1, timeout=60)
+        assert node.stop(signal.SIGINT) == 0
+    counts = read_log(str(bag)).metadata["umbrella_sim.counts"]
+    assert counts["commands_accepted"] == "100", counts
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_flood_from_one_publisher_does_not_hold_back_another(probe, tmp_path):
+    """
+    A second publisher's commands sent during a flood are taken among the flood's, not after.
+
+    One reliable writer sends 5000 commands as fast as DDS lets it; another sends one after
+    each thousand.  Each of the second's is recorded before the flood's last (a full reader
+    made DDS refuse a sample until the writer's next heartbeat, seconds later: the issue's
+    5 of 6 had not arrived 65 s after).
+    """
+    bag = tmp_path / "flood"
+    probe.subscribe("/diagnostics", DiagnosticArray)
+    every = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                       reliability=ReliabilityPolicy.RELIABLE)
+    flood = [round(1.0 + 0.001 * i, 3) for i in range(5000)]
+    other = [100.0 + k for k in range(4)]
+    with NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}") as node:
+        node.wait_for_log("recording to", timeout=60)
+        pub_a = probe.publisher("/sleeve_force", Float64, every)
+        pub_b = probe.publisher("/sleeve_force", Float64, every)
+        probe.wait_for_subscribers(pub_a)
+        probe.wait_for_subscribers(pub_b)
+        for i, f in enumerate(flood):
+            poll(lambda f=f: _published(pub_a, Float64(data=f)), 60,
+                 lambda: "the writer stayed full for 60 s")
+            if i % 1000 == 999 and i < 4999:
+                poll(lambda: _published(pub_b, Float64(data=other[i // 1000])), 60,
+                     lambda: "the second writer stayed full for 60 s")
+        total = str(len(flood) + len(other))
+        poll(lambda: [m for m in probe.messages("/diagnostics")
+                      if diag_values(m)["accepted_commands"] == total], 120,
+             lambda: "not every command was counted: "
+                     f"{diag_values(probe.messages('/diagnostics')[-1])}")
+        assert node.stop(signal.SIGINT) == 0
+    order = [m.data for _, m in read_log(str(bag)).decoded("/sleeve_force")]
+    assert sorted(order) == sorted(flood + other)       # every one, once
+    last_of_flood = order.index(flood[-1])
+    assert all(order.index(v) < last_of_flood for v in other), \
+        [(v, order.index(v), last_of_flood) for v in other]
+
+
+class QueuedCommands:
+    """A command subscription's DDS queue: take_message hands out what it holds, then None."""
+
+    msg_type, raw = Float64, False
+
+    def __init__(self, values):
+        self.values = values          # an iterator: a finite queue, or a flood
+        self.handle = self
+        self.taken = 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def take_message(self, msg_type, raw):
+        value = next(self.values, None)
+        if value is None:
+            return None
+        self.taken += 1
+        return Float64(data=value), None
+
+
+class CommandLog:
+    """What the recording is given: each command and each refused one, with its time."""
+
+    def __init__(self):
+        self.commands, self.refusals = [], []
+
+    def command(self, msg, t):
+        self.commands.append((t, msg.data))
+
+    def refused(self, msg, t):
+        self.refusals.append((t, msg.data))
+
+
+def intake(values):
+    from types import SimpleNamespace
+
+    from umbrella_sim.ros.commands import CommandIntake
+    from umbrella_sim.ros.lockstep import Lockstep
+
+    rec = CommandLog()
+    sim = SimpleNamespace(time=0.25, params=UmbrellaParams())
+    c = CommandIntake(lambda: sim, lambda: rec, lambda *args: None, Lockstep())
+    c.subscription = QueuedCommands(values)
+    return c, rec
+
+
+def test_commands_queued_at_the_stop_are_taken_and_recorded():
+    """
+    At a stop, every command still queued is checked, counted and recorded (none lost).
+
+    At SIGINT the node dropped ~3 250 commands DDS had taken for it, uncounted; now they are
+    taken as during the run, at the run's last time, and the recording's counts say how many.
+    """
+    values = [-1.0 if i % 10 == 9 else 1.0 + i % 7 for i in range(3000)]
+    c, rec = intake(iter(values))
+    text = c.drain_at_stop()
+    assert c.accepted == 2700 and c.refused == 300 and c.taken_at_stop == 3000
+    assert c.dropped_at_stop == 0 and "3000 queued command(s) taken" in text
+    assert rec.commands == [(0.25, v) for v in values if v >= 0]
+    assert len(rec.refusals) == 10          # (the rest past the 10/s recording limit)
+    assert c.counts_record()["commands_taken_at_stop"] == "3000"
+    assert c.force == values[-2]          # the last accepted value held (not applied)
+
+
+def test_a_flood_at_the_stop_is_taken_then_counted_as_dropped_and_the_stop_ends():
+    """A flood that never ends: taken for a while, then only counted, then the stop goes on."""
+    import itertools
+
+    c, rec = intake(itertools.repeat(1.0))
+    text = c.drain_at_stop(period=0.05)
+    queue = c.subscription
+    assert c.taken_at_stop > 0 and c.dropped_at_stop > 0
+    assert c.taken_at_stop + c.dropped_at_stop == queue.taken     # every one taken is counted
+    assert c.accepted == c.taken_at_stop == len(rec.commands)
+    assert f"{c.dropped_at_stop} more counted as dropped" in text
+    assert c.counts_record()["commands_dropped_at_stop"] == str(c.dropped_at_stop)
 
 
 # ------------------------------------------------------------------ offline memory

@@ -38,6 +38,28 @@ def read_text_input(path: str, what: str) -> str:
         raise ValueError(f"{what} {path}: not UTF-8 text (byte {exc.start})") from None
 
 
+def absolute_path(path: str, what: str) -> str:
+    """
+    Return path made absolute, or ValueError naming it when the working directory is gone.
+
+    A relative path is relative to the working directory; when another process deleted that
+    directory, ``os.getcwd`` fails (FileNotFoundError, a traceback from ``os.path.abspath``).
+    An empty path is refused (it would be the working directory); ``~`` is the home.
+    """
+    if not path.strip():        # ('' would be the working directory itself)
+        raise ValueError(f"{what} {path!r}: empty path")
+    path = os.path.expanduser(path)
+    if os.path.isabs(path):
+        return os.path.normpath(path)
+    try:
+        return os.path.abspath(path)
+    except FileNotFoundError:
+        named = what if path in ("", ".") else f"{what} {path}"
+        raise ValueError(f"{named}: the working directory no longer exists "
+                         "(deleted); give an absolute path or start from an existing "
+                         "directory") from None
+
+
 def check_new_output(path: str, what: str) -> str:
     """
     Return the absolute path of an output to be created.
@@ -47,9 +69,7 @@ def check_new_output(path: str, what: str) -> str:
     Nothing is created.  A leading ``~`` is the home directory, as in a shell (which does
     not expand it in ``-p record_path:=~/bags/run``).
     """
-    if not path.strip():
-        raise ValueError(f"{what} {path!r}: empty path")
-    path = os.path.abspath(os.path.expanduser(path).rstrip("/") or "/")
+    path = absolute_path(path, what)        # (normalised: no trailing slash)
     if os.path.lexists(path):
         raise ValueError(f"{what} {path}: already exists, not overwriting")
     parent = os.path.dirname(path)

@@ -23,7 +23,7 @@ from .cdr import cdr_bytes, message_definition, qos_yaml, type_name
 from .format import CHUNK_SIZE, EVENTS_RECORD, SEGMENT_RECORD
 from .mcap_stream import (CommittedFile, ended_early_tail, MessageAppender, SpilledChunkIndex,
                           write_all)
-from .paths import check_new_output
+from .paths import absolute_path, check_new_output
 from .. import __version__
 
 
@@ -46,7 +46,8 @@ def new_bag_recorder(namespace: str, metadata, parent: str = ".",
     a bag left from a run a moment ago) the next free NAME_1, NAME_2, ... is used.
     metadata(bag_dir) returns the run's metadata records.
     """
-    base = os.path.join(os.path.abspath(parent), default_bag_name(namespace))
+    base = os.path.join(absolute_path(parent, "recording directory"),
+                        default_bag_name(namespace))
     for k in range(1000):
         bag_dir = base if k == 0 else f"{base}_{k}"
         if os.path.exists(bag_dir):
@@ -66,8 +67,11 @@ def check_record_path(bag_dir: str, what: str = "record_path") -> str:
     Return the absolute bag directory, or raise ValueError why it cannot be created.
 
     The absolute bag directory, or ValueError naming why it cannot be created (cheap
-    checks before any simulation work; nothing is created; never overwrites).
+    checks before any simulation work; nothing is created; never overwrites).  An empty
+    bag_dir is a new bag in the working directory (new_bag_recorder): that directory's.
     """
+    if not bag_dir:
+        return absolute_path(".", f"{what} '' (a new bag in the working directory)")
     return check_new_output(bag_dir, what)
 
 
@@ -99,12 +103,12 @@ class BagRecorder:
     WRITE_PERIOD = 0.02
 
     def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]], on_error=None,
-                 background: bool = False):
-        bag_dir = check_record_path(bag_dir)
+                 background: bool = False, what: str = "record_path"):
+        bag_dir = check_new_output(bag_dir, what)       # what: the option that named it
         try:
             os.mkdir(bag_dir)
         except OSError as exc:
-            raise ValueError(f"record_path {bag_dir}: {exc.strerror}") from None
+            raise ValueError(f"{what} {bag_dir}: {exc.strerror}") from None
         self.bag_dir = bag_dir
         self.file_name = os.path.basename(bag_dir) + "_0.mcap"
         self.path = os.path.join(bag_dir, self.file_name)
@@ -133,7 +137,7 @@ class BagRecorder:
             self._fh.commit()
         except OSError as exc:
             self._remove_partial()
-            raise ValueError(f"record_path {bag_dir}: cannot start the recording: "
+            raise ValueError(f"{what} {bag_dir}: cannot start the recording: "
                              f"{exc.strerror or exc}") from None
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}

@@ -151,14 +151,25 @@ def physics_step_of(params: UmbrellaParams) -> float:
     or ceiling / MAX_STEP_DIVISOR if none does (the run then says so: 'coarse step').  The
     rigid models, and flexible-nonlinear without step_follows_mesh: the ceiling.
     """
-    ceiling = params.time_step if params.time_step > 0.0 else AUTO_STEP_CEILING
-    if not params.step_follows_mesh and (params.time_step > 0.0
-                                         or params.model == NONLINEAR_AUTO_STEP):
-        return ceiling
-    if params.model in ("rigid", "rigid-fe"):
+    ceiling, fixed = _ceiling(params)
+    if fixed:
         return ceiling
     return ceiling / _mesh_divisor(tuple(sorted(params.replace(time_step=ceiling)
                                                 .as_dict().items())))
+
+
+def smallest_step_of(params: UmbrellaParams) -> float:
+    """Return a bound physics_step_of(params) never goes below, without the mesh's analysis."""
+    ceiling, fixed = _ceiling(params)
+    return ceiling if fixed else ceiling / MAX_STEP_DIVISOR
+
+
+def _ceiling(params: UmbrellaParams) -> tuple[float, bool]:
+    """Return the step's ceiling, and whether the step is that ceiling (no mesh divisor)."""
+    ceiling = params.time_step if params.time_step > 0.0 else AUTO_STEP_CEILING
+    given = params.time_step > 0.0 or params.model == NONLINEAR_AUTO_STEP
+    fixed = params.model in ("rigid", "rigid-fe") or (given and not params.step_follows_mesh)
+    return ceiling, fixed
 
 
 @lru_cache(maxsize=32)

@@ -25,6 +25,12 @@ REFUSED_RECORD_RATE = 10
 #: hundred commands a second and kept ~/pause waiting behind a flood); the bound gives the
 #: executor back between batches
 COMMAND_BATCH = 256
+#: at a stop, the commands still queued are taken (checked, counted, recorded) for up to this
+#: long (wall s), then for as long again only counted as dropped: none is lost uncounted
+STOP_DRAIN_S = 1.0
+#: ... and until none has come for this long (DDS may still be delivering what was sent
+#: before the stop: an empty queue for a moment is not the end of it)
+STOP_QUIET_S = 0.05
 
 
 class CommandIntake:
@@ -42,6 +48,8 @@ class CommandIntake:
         self.accepted = self.refused = 0
         self.refused_not_recorded = 0
         self._refused_window = (0.0, 0)     # (wall start, recorded in this 1 s window)
+        self.taken_at_stop = self.dropped_at_stop = 0
+        self._intake = threading.Lock()     # the callback's batches and the stop's drain
         self._lock = threading.Lock()
         self._force = 0.0
 
@@ -63,17 +71,63 @@ class CommandIntake:
         Inside the subscription's callback its (mutually exclusive) group is held, so taking
         more from it here is what the executor's next turns would do, without their cost.
         """
-        self.take(msg)
+        with self._intake:
+            self.take(msg)
+            for _ in range(COMMAND_BATCH - 1):
+                taken = self._queued()
+                if taken is None:
+                    return
+                self.take(taken)
+
+    def _queued(self):
+        """Return the next command queued on the subscription, or None."""
         sub = self.subscription
-        for _ in range(COMMAND_BATCH - 1):
-            try:
-                with sub.handle:
-                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            except InvalidHandle:         # (the node is being destroyed)
-                return
-            if taken is None:
-                return
-            self.take(taken[0])
+        try:
+            with sub.handle:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+        except InvalidHandle:         # (the node is being destroyed)
+            return None
+        return None if taken is None else taken[0]
+
+    def counts_record(self) -> dict[str, str]:
+        """Return the counts the recording's umbrella_sim.counts adds for the commands."""
+        return {"refused_not_recorded": str(self.refused_not_recorded),
+                "commands_taken_at_stop": str(self.taken_at_stop),
+                "commands_dropped_at_stop": str(self.dropped_at_stop)}
+
+    def drain_at_stop(self, period: float = STOP_DRAIN_S) -> str:
+        """
+        Take the commands still queued when the run stops: none is left uncounted.
+
+        Until none has come for STOP_QUIET_S, for `period` s at most, each is taken as during
+        the run (checked, counted, recorded at the run's last time; none is applied: the run
+        has ended) and counted in taken_at_stop;
+        then, a flood still coming, for as long again each is only counted, in
+        dropped_at_stop.  Called once the executor no longer spins, before the recording
+        is closed (its counts record both).  Returns what it did, in words ('' if nothing).
+        """
+        if self.subscription is not None:
+            with self._intake:
+                start = last = time.monotonic()
+                while time.monotonic() - start < 2 * period:
+                    taken = self._queued()
+                    if taken is None:
+                        if time.monotonic() - last >= min(STOP_QUIET_S, period):
+                            break
+                        time.sleep(0.002)
+                        continue
+                    last = time.monotonic()
+                    if last - start < period:
+                        self.take(taken)
+                        self.taken_at_stop += 1
+                    else:
+                        self.dropped_at_stop += 1
+        if not (self.taken_at_stop or self.dropped_at_stop):
+            return ""
+        return (f"at the stop: {self.taken_at_stop} queued command(s) taken (counted and "
+                "recorded, not applied: the run had ended)"
+                + (f", {self.dropped_at_stop} more counted as dropped"
+                   if self.dropped_at_stop else ""))
 
     def take(self, msg) -> None:
         """Check, count and record one command; hold it if accepted."""

@@ -265,7 +265,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
     if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
                                                if "--ros-args" in argv else len(argv)]):
-        print(usage())
+        stop_signals.print_for_reader(lambda: print(usage()))   # | head: no traceback
         return 0
     if stop_signals.received:           # during the imports: nothing started yet
         return 0

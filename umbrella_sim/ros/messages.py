@@ -36,6 +36,11 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 #: Gazebo publish it: best effort, keep last 1.  A reliable reader does not match it.
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                        history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+#: the node's own services (~/reset, ~/pause): rclpy's parameter services' depth, 1000, not
+#: the services' default 10, whose request reader kept the last 10 of a storm of calls (the
+#: rest were never answered)
+SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                         history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
 #: a /clock reader that keeps every tick until its callback runs (tests, benchmarks)
 CLOCK_READER_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                               history=HistoryPolicy.KEEP_LAST,

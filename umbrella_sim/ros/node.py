@@ -40,7 +40,7 @@ from std_srvs.srv import SetBool, Trigger
 from . import messages as ros_io
 from .commands import CommandIntake
 from .lockstep import Lockstep
-from .pacing import MAX_LAG_S, Pacer
+from .pacing import behind_text, MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, parameter_defaults,
                          set_refusal, wrong_type_text)
 from .params_file import check_parameter_sources, QOS_OVERRIDES, USE_SIM_TIME
@@ -92,7 +92,7 @@ class UmbrellaNode(Node):
                 {k: v for k, v in values.items() if k in SPECS}).validated()
             self.node_cfg = check_node_parameters(
                 {k: v for k, v in values.items() if k in NODE_PARAMETERS})
-            if self.node_cfg["record"] and self.node_cfg["record_path"]:   # before any work
+            if self.node_cfg["record"]:         # before any work ('': the working directory)
                 check_record_path(self.node_cfg["record_path"])
         except ValueError as exc:
             raise StartupError(str(exc)) from None
@@ -139,9 +139,9 @@ class UmbrellaNode(Node):
         self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
         self.command_topic = self.command_sub.topic_name
         self.commands.subscription = self.command_sub
-        services = MutuallyExclusiveCallbackGroup()
-        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
-        self.create_service(SetBool, "~/pause", self._on_pause, callback_group=services)
+        g, qos = MutuallyExclusiveCallbackGroup(), ros_io.SERVICE_QOS     # (a storm: deep)
+        self.create_service(Trigger, "~/reset", self._on_reset, qos_profile=qos, callback_group=g)
+        self.create_service(SetBool, "~/pause", self._on_pause, qos_profile=qos, callback_group=g)
         # rclpy's three stages: convert exact int/double literals, validate, then apply
         self.add_pre_set_parameters_callback(self._coerce_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -232,6 +232,12 @@ class UmbrellaNode(Node):
         else:  # after SIGINT/SIGTERM the context is gone: /rosout cannot take it any more
             print(f"[{level.upper()}] [{self.get_name()}]: {text}", file=sys.stderr, flush=True)
 
+    def drain_commands(self) -> None:
+        """Take the commands still queued at the stop (ros.commands: none left uncounted)."""
+        text = self.commands.drain_at_stop()
+        if text:
+            self._log("info", text)
+
     def close_recording(self) -> None:
         rec = self.recording
         if rec is None:
@@ -243,7 +249,7 @@ class UmbrellaNode(Node):
         try:
             rec.close(self.sim, self.commands.accepted, self.commands.refused,
                       self.driver.summary.figures(), fault=self.fault, extra={
-                          "refused_not_recorded": str(self.commands.refused_not_recorded),
+                          **self.commands.counts_record(),
                           "segments": str(rec.recorder.segment + 1)})
         finally:
             if held:
@@ -614,8 +620,7 @@ class UmbrellaNode(Node):
         elif self._peers_warned:
             level, message = DiagnosticStatus.WARN, self._peers_warned
         elif rtf > 0 and lag > max(0.05, 2.0 / self.driver_rate):
-            level, message = (DiagnosticStatus.WARN,
-                              f"behind real time: measured {measured:.3f}x of {rtf:g}x")
+            level, message = DiagnosticStatus.WARN, behind_text(lag, measured, rtf)
         elif self.driver.summary.warnings():
             level, message = DiagnosticStatus.WARN, "outside the model's validity: " + "; ".join(
                 w.split(":")[0] for w in self.driver.summary.warnings())

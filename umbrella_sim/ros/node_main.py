@@ -88,7 +88,7 @@ def _run(argv: list[str], running: list) -> int:
         return _stopped_during_start_up()
     if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
                                                if "--ros-args" in argv else len(argv)]):
-        print(usage())
+        stop_signals.print_for_reader(lambda: print(usage()))   # | head: no traceback
         return EXIT_OK
 
     def fail(text: str) -> int:
@@ -139,6 +139,7 @@ def _run(argv: list[str], running: list) -> int:
         pass
     finally:
         node.stop()
+        node.drain_commands()       # those still queued: taken or counted, never lost
         node.close_recording()
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()

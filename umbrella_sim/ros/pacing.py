@@ -20,6 +20,20 @@ MAX_LAG_S = 0.5
 PLAIN_SLEEP_S = 0.005
 
 
+def behind_text(lag: float, measured: float, real_time_factor: float) -> str:
+    """
+    Say how far behind real time a run is, and whether it is catching up.
+
+    lag: how far behind its target the run is now (s); measured: the real-time factor over
+    the last diagnostics interval, which exceeds the requested one while a lag shrinks.
+    """
+    shown = round(measured, 3)
+    trend = ("catching up" if shown > real_time_factor else
+             "keeping pace" if shown == real_time_factor else "falling behind")
+    return (f"behind real time by {lag:.3f} s ({trend}: {shown:.3f}x of {real_time_factor:g}x "
+            "over the last second)")
+
+
 class Pacer:
     """Wall-clock anchors of a run's sim time, its lag and slip; sleeps until a target."""
 

@@ -52,7 +52,9 @@ def _ros_typed_loader():
     """Return the loader class of load_yaml_as_ros (made once: yaml imported on first use)."""
     import yaml
 
-    class RosTyped(yaml.SafeLoader):
+    # libyaml's parser where PyYAML has it (the pure-Python scanner took ~8 of every 10 s of a
+    # large file); the typing below is the resolver's and the constructor's, the same on both
+    class RosTyped(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
 
         def construct_mapping(self, node, deep=False):
             seen = set()

@@ -111,7 +111,7 @@ class RunRecording:
 def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                    publish_rate: float = 100.0, marker_magnification: float = 1.0,
                    on_chunk=None, keep_samples: bool = False,
-                   states: bool = False) -> RunResult:
+                   states: bool = False, what: str = "record_path") -> RunResult:
     """
     Run the physics offline and record it as a live umbrella_node (root namespace) would.
 
@@ -121,7 +121,8 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     at its own time, each value as applied from the step it acts from.  on_chunk(chunk):
     after each chunk (progress, a CSV; with states, their state rows too).  Returns the
     RunResult (figures of every step; with keep_samples, the Sample of every publication);
-    ``error`` set if it diverged, ``recording_error`` if the recording stopped.
+    ``error`` set if it diverged, ``recording_error`` if the recording stopped (naming
+    what, the option that gave bag_dir, and bag_dir).
     """
     node_cfg = node_defaults()
     node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,
@@ -132,7 +133,8 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     sim = driver.sim
     encoder = PublicationEncoder(driver)
     recorder = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, sim.model,
-                                                 driver.backend, source="umbrella_sim simulate"))
+                                                 driver.backend, source="umbrella_sim simulate"),
+                           what=what)
     rec = RunRecording(recorder, {key: "/" + t.name.lstrip("/")
                                   for key, t in messages.TOPICS.items()},
                        "/" + messages.COMMAND.name)
@@ -188,6 +190,6 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                   fault=result.error)
     result.steps, result.lock = sim.steps, sim.lock_event
     result.figures = driver.summary.figures()
-    result.recording_error = rec.error
+    result.recording_error = rec.error and f"{what} {recorder.bag_dir}: {rec.error}"
     result.wall_time = _time.perf_counter() - wall0
     return result

@@ -10,7 +10,7 @@ import sys
 from . import sweep
 from .arguments import ArgumentParser
 from .csv_output import StepCsv
-from .inputs import build_params, read_force_profile
+from .inputs import build_params, check_run_length, LONG_RUN_STEPS, read_force_profile
 from .progress import Progress
 from .. import __version__
 from ..bag.paths import check_new_output
@@ -60,6 +60,9 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument("--time-step", type=float, dest="time_step", action=_Once,
                     help="physics step (s)")
     sp.add_argument("--duration", type=float, default=1.0, help="simulated time (s)")
+    sp.add_argument("--long-run", action="store_true",
+                    help=f"run more than {LONG_RUN_STEPS:.0e} physics steps (refused without "
+                         "it: hours of computing or more)")
     sp.add_argument("--csv", metavar="FILE",
                     help="write the time series of every physics step (its state at the "
                          "step's end; peak stresses: the largest over the step), streamed "
@@ -203,6 +206,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"--duration {args.duration}: shorter than one physics step "
                              f"({physics_step_of(params):g} s); the run takes every step "
                              "that ends by then")
+        check_run_length(args.duration, physics_step_of(params), args.long_run, "--long-run")
         outputs = {}
         for option, path in (("--csv", args.csv), ("--mcap", args.mcap)):
             if path is not None:
@@ -241,7 +245,8 @@ def main(argv: list[str] | None = None) -> int:
                 result = record_offline(params, args.mcap, args.duration, profile,
                                         publish_rate=args.publish_rate,
                                         marker_magnification=args.marker_magnification,
-                                        on_chunk=on_chunk, states=args.csv_state)
+                                        on_chunk=on_chunk, states=args.csv_state,
+                                        what="--mcap")
             except ValueError as exc:
                 ap.exit(2, f"umbrella_sim: error: {exc}\n")
         else:

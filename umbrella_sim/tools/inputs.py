@@ -96,6 +96,26 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
 RECORDING_PARAMS = ("publish_rate", "marker_magnification")
 
 
+#: an offline run of more physics steps than this needs the user's consent (--long-run): at
+#: ~10 us a step (the default model) 10^8 steps take ~20 min, and --csv writes a row each
+LONG_RUN_STEPS = 1e8
+
+
+def check_run_length(duration: float, step: float, consent: bool, option: str,
+                     what: str = "--duration") -> None:
+    """
+    Refuse a run of more than LONG_RUN_STEPS physics steps unless the user consented.
+
+    ValueError naming the duration (what), its steps and how to consent (option): ``--duration
+    1e9`` was taken and ran for years, writing as it went.
+    """
+    steps = duration / step
+    if steps > LONG_RUN_STEPS and not consent:
+        raise ValueError(f"{what} {duration:g}: {steps:.3g} physics steps of {step:g} s, "
+                         f"more than {LONG_RUN_STEPS:.0e} (hours of computing or more); "
+                         f"give {option} to run it anyway")
+
+
 #: models whose lock is always plastic (a rigid mechanism stopped at a point)
 RIGID_MODELS = ("rigid", "rigid-fe")
 

@@ -357,7 +357,8 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
                                      qos_from_yaml(log.channels[t][1])) for t in chosen}
     print(f"replaying up to {total} messages on {len(pubs)} topics from {log.path} at "
           f"{rate:g}x{' (truncated log)' if log.truncated else ''}{moved}", flush=True)
-    sent = 0
+    sent = read = skipped = 0       # skipped: payloads that do not decode
+    first_skipped = ""
     try:        # a stop while waiting for subscribers ends like one while replaying
         time.sleep(0.5)   # let subscribers discover the publishers
         if wait_for_subscribers > 0:
@@ -379,6 +380,16 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
                 delay = target - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
+                try:        # an undecodable payload is skipped and named, as --resimulate
+                    log.decode(m.topic, m.data, index=read, log_time=m.log_time)
+                except LogError as exc:
+                    if not skipped:
+                        first_skipped = str(exc)
+                        print(f"umbrella_replay: skipped: {exc}", file=sys.stderr, flush=True)
+                    skipped += 1
+                    continue
+                finally:
+                    read += 1
                 pubs[m.topic].publish(m.data)
                 sent += 1
             if not loop:
@@ -397,6 +408,9 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
         node.destroy_node()
         rclpy.try_shutdown()
     print(f"replayed {sent} messages", flush=True)
+    if skipped:
+        raise LogError(f"{skipped} message(s) skipped: their payload does not decode (the "
+                       f"first: {first_skipped})")
     return 0
 
 

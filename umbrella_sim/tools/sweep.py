@@ -34,7 +34,7 @@ from .sweep_results import (CaseStore, is_finished, make_record, OutputError, pl
                             write_parquet)
 from .sweep_spec import case_id, load_spec, SpecError, Sweep
 from .. import __version__
-from ..bag.paths import check_new_output
+from ..bag.paths import absolute_path, check_new_output
 from ..core.registry import NODE_PARAMETERS
 from ..ros.signals import deferred
 
@@ -79,11 +79,11 @@ def run_case(task: dict) -> dict:
                 import shutil
                 shutil.rmtree(bag)
             result = record_offline(params, bag, _mcap_duration(task), profile,
-                                    publish_rate=MCAP_PUBLISH_RATE)
+                                    publish_rate=MCAP_PUBLISH_RATE, what="recording")
             out["mcap"] = bag
             if result.recording_error:      # not finished: a resumed sweep runs it again
                 out["summary"] = result.summary()
-                out["error"] = f"recording {bag}: {result.recording_error}"
+                out["error"] = result.recording_error      # names the bag
                 out["status"] = STATUS_ERROR
                 return _finished(out, t0)
         else:
@@ -373,6 +373,7 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
             except OutputError as exc:
                 write_error = write_error or exc
     if write_error is not None:
+        write_error.cases_kept = report.skipped + (report.ran if made_dir else 0)
         raise write_error
     return report
 
@@ -414,14 +415,18 @@ def _write_outputs(sweep, store, out_dir, report, log) -> None:
 
 
 # ------------------------------------------------------------------ command line
-def check_out_dir(path: str) -> None:
-    """Refuse a results directory that cannot be used (a new one, or one to resume into)."""
-    if not os.path.lexists(path):
-        try:
-            check_new_output(path, "--out")
-        except ValueError as exc:
-            raise SpecError(str(exc)) from None
-        return
+def check_out_dir(path: str) -> str:
+    """
+    Return the absolute results directory, or SpecError why it cannot be used.
+
+    A new directory, or one to resume into.
+    """
+    try:
+        path = absolute_path(path, "--out")
+        if not os.path.lexists(path):
+            return check_new_output(path, "--out")
+    except ValueError as exc:
+        raise SpecError(str(exc)) from None
     if not os.path.isdir(path):
         raise SpecError(f"--out {path}: exists and is not a directory")
     if not os.access(path, os.W_OK | os.X_OK):
@@ -429,6 +434,7 @@ def check_out_dir(path: str) -> None:
     cases = os.path.join(path, "cases")
     if os.path.lexists(cases) and not os.path.isdir(cases):
         raise SpecError(f"--out {path}: {cases} exists and is not a directory")
+    return path
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -457,8 +463,19 @@ def main(args, ap: argparse.ArgumentParser) -> int:
                             "give one of them")
         if args.scheduler is not None:
             check_scheduler_address(args.scheduler)
-        check_out_dir(args.out)
-        sweep = load_spec(args.spec)
+        args.out = check_out_dir(args.out)
+        checking = []           # the progress line of a large spec's checking, made once
+
+        def checked(done, total):
+            if not checking:
+                checking.append(Progress(total, lambda d: f"checked {d:.0f}/{total} cases"))
+            checking[0].update(done)
+
+        try:
+            sweep = load_spec(args.spec, progress=checked)
+        finally:
+            if checking:
+                checking[0].close()
     except SpecError as exc:
         ap.exit(2, f"{ap.prog}: error: {exc}\n")
 
@@ -472,8 +489,11 @@ def main(args, ap: argparse.ArgumentParser) -> int:
     except SpecError as exc:
         ap.exit(2, f"{ap.prog}: error: {exc}\n")
     except OutputError as exc:
-        ap.exit(4, f"{ap.prog}: error: cannot write the results: {exc.strerror}; every case "
-                   f"finished before it is kept in {os.path.join(args.out, 'cases')}\n")
+        kept = getattr(exc, "cases_kept", 0)
+        ap.exit(4, f"{ap.prog}: error: cannot write the results: {exc.strerror}; "
+                   + (f"the {kept} case(s) finished before it are kept in "
+                      f"{os.path.join(args.out, 'cases')}\n" if kept else
+                      "no case result was kept\n"))
     except KeyboardInterrupt:       # a second stop, while the table or the plots were made
         print(f"{ap.prog}: interrupted; every finished case is kept in "
               f"{os.path.join(args.out, 'cases')} (and in results.csv if it was written: "

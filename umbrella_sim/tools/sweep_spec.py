@@ -11,6 +11,7 @@ SPEC keys (every parameter name is the one of ``config/umbrella.yaml`` / the nod
     stop_after_lock: 0.2       # end a case this long after its lock (s)
     force: 5.0                 # constant sleeve force F_H (N), = base sleeve_force
     force_profile: f.csv       # or a CSV of t,F rows (path relative to the SPEC)
+    long_run: true             # consent to cases of more than 10^8 physics steps each
 
 The whole SPEC is checked before any case runs (names, values, every case's parameters through
 the same validation as the CLI); errors name the case and the parameter.  ``case_id`` hashes
@@ -28,13 +29,14 @@ from typing import Any
 
 import yaml
 
-from .inputs import check_lock_given, read_force_profile, resolve_params
+from .inputs import (check_lock_given, check_run_length, default_params_file,
+                     LONG_RUN_STEPS, read_force_profile, resolve_params)
 from .. import __version__
 from ..bag.paths import read_text_input
 
 
 SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
-             "force_profile")
+             "force_profile", "long_run")
 
 
 DEFAULT_DURATION = 1.0      # s, as `umbrella-sim simulate`
@@ -92,12 +94,22 @@ def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> st
     return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:16]
 
 
-def load_spec(path: str) -> Sweep:
-    """Read and check the whole SPEC; every case's parameters validated as the CLI does."""
+#: a spec of at least this many cases reports its checking (progress(done, total))
+CHECK_PROGRESS_CASES = 10_000
+
+
+def load_spec(path: str, progress=None) -> Sweep:
+    """
+    Read and check the whole SPEC; every case's parameters validated as the CLI does.
+
+    progress(done, total): called every 1 % of the cases (at least 1000) while they are
+    checked, when there are CHECK_PROGRESS_CASES or more (10^6 cases take minutes).
+    """
     from ..core.forcing import command_force
     from ..core.params import UmbrellaParams
     from ..core.registry import check_types
-    from ..ros.params_file import load_yaml_as_ros
+    from ..core.step_rule import physics_step_of, smallest_step_of
+    from ..ros.params_file import load_params_file, load_yaml_as_ros
 
     try:
         text = read_text_input(path, "sweep spec")
@@ -137,6 +149,9 @@ def load_spec(path: str) -> Sweep:
         raise SpecError(f"sweep spec {path}: no cases: give grid and/or cases")
     duration = _number(f"sweep spec {path}: duration", doc.get("duration", DEFAULT_DURATION),
                        0.0, True)
+    long_run = doc.get("long_run", False)
+    if not isinstance(long_run, bool):
+        raise SpecError(f"sweep spec {path}: long_run: expected true or false")
     stop_after_lock = doc.get("stop_after_lock")
     if stop_after_lock is not None:
         stop_after_lock = _number(f"sweep spec {path}: stop_after_lock", stop_after_lock, 0.0,
@@ -165,6 +180,11 @@ def load_spec(path: str) -> Sweep:
             raise SpecError(f"sweep spec {path}: force_profile: {exc}") from None
     if params_file is not None:
         params_file = rel(params_file)
+    params_file = params_file or default_params_file()
+    try:        # read once for every case (each read it anew: ~14 ms a case, 4 h for 10^6)
+        from_file = load_params_file(params_file) if params_file else None
+    except ValueError as exc:
+        raise SpecError(f"sweep spec {path}: params: {exc}") from None
 
     axes = list(grid)
     overrides_list = [dict(base, **dict(zip(axes, combo)))
@@ -175,13 +195,20 @@ def load_spec(path: str) -> Sweep:
         swept += [n for n in c if n not in swept]
     sweep = Sweep(path=os.path.abspath(path), cases=[], axes=axes, swept=swept, text=text)
     seen: dict[str, int] = {}
+    total = len(overrides_list)
+    every = max(1000, total // 100) if progress and total >= CHECK_PROGRESS_CASES else 0
     for index, overrides in enumerate(overrides_list, start=1):
+        if every and (index % every == 0 or index == total):
+            progress(index, total)
         source = "grid" if index <= len(overrides_list) - len(explicit) else "cases"
         try:
             check_types(overrides)          # typed YAML, as a params file (the node's rule)
-            resolved = resolve_params(overrides, params_file)
+            resolved = resolve_params(overrides, params_file, from_file)
             check_lock_given(resolved, f"lock={overrides['lock']}" if "lock" in overrides
                              else None)
+            if duration / smallest_step_of(resolved) > LONG_RUN_STEPS:   # (cheap first)
+                check_run_length(duration, physics_step_of(resolved), long_run,
+                                 "long_run: true", "duration")
             params = resolved.as_dict()
         except ValueError as exc:
             shown = ", ".join(f"{k}={v!r}" for k, v in overrides.items() if k not in base
