@@ -5,6 +5,7 @@ Static parameter types, descriptors from the one registry, diagnostics on /diagn
 by namespace, /clock QoS, and recording by default.
 """
 import os
+import re
 import subprocess
 import sys
 
@@ -122,9 +123,13 @@ def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
     Here /clock made reliable (ClockQoS is best effort) and joint_states' depth 7: the
     publisher offers them, and the recording's offered_qos_profiles say so.
     """
+    from rcl_interfaces.srv import ListParameters
+    from rclpy.qos import DurabilityPolicy
+
     from umbrella_sim.bag.reader import qos_from_yaml
     bag = tmp_path / "bag"
     with NodeProcess("-p", "qos_overrides./clock.publisher.reliability:=reliable",
+                     "-p", "qos_overrides./clock.publisher.durability:=transient_local",
                      "-p", "qos_overrides./joint_states.publisher.depth:=7",
                      "-p", "v0:=-0.5", "-p", f"record_path:={bag}") as node:
         node.wait_for_log("recording to")
@@ -134,6 +139,11 @@ def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
                     if e.node_name == "umbrella_node"]
         poll(clock_publisher, 20, lambda: "the node's /clock publisher was not discovered")
         assert clock_publisher()[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
+        assert clock_publisher()[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        # the overrides declared are the documented ones: every topic, every policy
+        listed = probe.call(ListParameters, "/umbrella_node/list_parameters",
+                            ListParameters.Request(prefixes=["qos_overrides"])).result.names
+        assert set(listed) == _documented_qos_overrides(), sorted(listed)
         node.wait_for_log("locked at")
         assert node.stop() == 0
     log = read_log(str(bag))
@@ -189,6 +199,27 @@ def test_wrong_parameter_type_at_start_is_refused(args, words):
                        capture_output=True, text=True, env=ros_env(), timeout=60)
     assert r.returncode == 2
     assert all(w in r.stderr for w in words) and "Traceback" not in r.stderr, r.stderr
+
+
+def _documented_qos_overrides(namespace: str = "") -> set[str]:
+    """Return the qos_overrides.* names msg_docs/node_parameters.md promises a node."""
+    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+    with open(os.path.join(root, "msg_docs", "node_parameters.md"), encoding="utf-8") as fh:
+        text = " ".join(fh.read().split())
+    policies = re.search(r"with policies: ((?:`\w+`, )*`\w+`), set a topic's QoS", text)
+    assert policies, "node_parameters.md no longer lists the qos_overrides policies"
+    names = re.findall(r"`(\w+)`", policies.group(1))
+    topics = [(f"{namespace}/{t.name}" if not t.name.startswith("/") else t.name, "publisher")
+              for t in ros_io.TOPICS.values()]
+    topics.append((f"{namespace}/{ros_io.COMMAND.name}", "subscription"))
+    return {f"qos_overrides.{topic}.{side}.{p}" for topic, side in topics for p in names}
+
+
+def test_the_documented_qos_overrides_are_the_declared_policies():
+    """The policies the docs list are the ones the node declares overrides for."""
+    declared = {p.name.lower() for p in ros_io.QOS_OVERRIDE_POLICIES}
+    assert {n.rpartition(".")[2] for n in _documented_qos_overrides()} == declared
+    assert "durability" in declared     # the docs' example of a late joiner's /clock
 
 
 def test_every_registry_entry_is_a_parameter_of_one_kind():

@@ -14,7 +14,8 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PointStamped
 import numpy as np
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSPolicyKind, QoSProfile,
+                       ReliabilityPolicy)
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimension, String
@@ -68,6 +69,13 @@ ABSOLUTE_TOPIC_NAMES = frozenset(t.name for t in TOPICS.values() if t.name.start
 COMMAND = Topic("sleeve_force", Float64, QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL,
     durability=DurabilityPolicy.VOLATILE))
+
+
+#: the policies a qos_overrides.<topic>.publisher|subscription.<policy> parameter sets, for
+#: every topic of TOPICS and COMMAND (rclpy's default set, plus durability: a late joiner
+#: may want /clock or markers transient local)
+QOS_OVERRIDE_POLICIES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
+                         QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
 
 
 def own_qos(qos: QoSProfile) -> QoSProfile:

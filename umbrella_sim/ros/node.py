@@ -115,12 +115,12 @@ class UmbrellaNode(Node):
         self._warned_at: dict[str, float] = {}
 
         # QoS as documented, or as qos_overrides.<topic>.publisher.<policy> parameters set
-        # (history, depth, reliability, durability: the ROS 2 convention; read-only)
+        # (ros_io.QOS_OVERRIDE_POLICIES: the ROS 2 convention; read-only)
         try:
             # (own copies: topics share ros_io's profiles)
             self.pub = {key: self.create_publisher(
                 t.type, t.name, ros_io.own_qos(t.qos),
-                qos_overriding_options=QoSOverridingOptions.with_default_policies())
+                qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
                 for key, t in ros_io.TOPICS.items()}
             # commands and services in their own callback groups, served by a 2-thread
             # executor: a slow ~/reset never delays a command and a command flood never
@@ -129,7 +129,7 @@ class UmbrellaNode(Node):
                 ros_io.COMMAND.type, ros_io.COMMAND.name, self.commands.on_message,
                 ros_io.own_qos(ros_io.COMMAND.qos),
                 callback_group=MutuallyExclusiveCallbackGroup(),
-                qos_overriding_options=QoSOverridingOptions.with_default_policies())
+                qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
         except Exception as exc:  # rclpy's errors name the parameter
             files = f" (params files: {', '.join(params_files)})" if params_files else ""
             text = (wrong_type_text(self, exc) if isinstance(exc, InvalidParameterTypeException)
