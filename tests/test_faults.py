@@ -247,8 +247,9 @@ def _node(*args, timeout=60):
     (None, ["-p", "youngs_modulous:=1.0"], "did you mean 'youngs_modulus'"),
     (None, ["-p", "foo:=1.0"], "unknown parameter 'foo'"),
     ("other_node:\n  ros__parameters:\n    l1: -5.0\n", [], "no section for node /umbrella_node"),
-    ("/**:\n  ros__parameters:\n    l4: 1.0\n", [], "'l4' (did you mean 'l"),
-    ("/**:\n  ros__parameters:\n    l1: {a: 1}\n", [], "'l1.a'"),
+    # (in a section naming the node: in a '/**' one they are another node's, a warning)
+    ("umbrella_node:\n  ros__parameters:\n    l4: 1.0\n", [], "'l4' (did you mean 'l"),
+    ("umbrella_node:\n  ros__parameters:\n    l1: {a: 1}\n", [], "'l1.a'"),
     ("/**:\n  ros__parameters: [1, 2\n", [], "not valid YAML"),
     ("- 1\n- 2\n", [], "expected a mapping"),
     ("/**:\n  l1: 0.5\n", [], "has no ros__parameters"),

@@ -222,6 +222,48 @@ def test_the_documented_qos_overrides_are_the_declared_policies():
     assert "durability" in declared     # the docs' example of a late joiner's /clock
 
 
+def test_a_wildcard_section_may_hold_other_nodes_parameters(tmp_path):
+    """
+    A '/**' params file is shared by every node of a launch: a name this node does not know.
+
+    (robot_state_publisher's publish_frequency, another topic's qos_overrides) is a warning
+    naming it, with a "did you mean"; in a section naming the node it is an error.
+    """
+    from umbrella_sim.ros.params_file import (check_parameter_sources,
+                                              check_qos_override_sources)
+    from umbrella_sim.ros.parameters import parameter_defaults
+
+    known = set(parameter_defaults())
+    shared = tmp_path / "shared.yaml"
+    shared.write_text("/**:\n  ros__parameters:\n    publish_frequency: 30.0\n    v0: 0.0\n"
+                      "    youngs_modulous: 7.0e10\n    target_time: 1.5\n"
+                      "    qos_overrides:\n      /robot_description:\n        publisher:\n"
+                      "          depth: 1\n      /clock:\n        publisher:\n"
+                      "          depth: 2\n")
+    found = check_parameter_sources("/a1/umbrella_node", [str(shared)], [], known,
+                                    shared=CONTROLLER_PARAMETERS)
+    (warning,) = found.warnings
+    assert "'publish_frequency'" in warning and str(shared) in warning
+    assert "'youngs_modulous' (did you mean 'youngs_modulus'?)" in warning
+    assert "target_time" not in warning          # the deploy controller's: taken silently
+    (qos_warning,) = check_qos_override_sources(
+        "/a1/umbrella_node", found, {"qos_overrides./clock.publisher.depth"})
+    assert "gives 'qos_overrides./robot_description.publisher.depth' (" in qos_warning
+    assert "not a parameter of /a1/umbrella_node" in qos_warning    # that one only
+    for section in ("a1/umbrella_node", "/a1/umbrella_node", "/**/umbrella_node"):
+        own = tmp_path / "own.yaml"
+        own.write_text(shared.read_text().replace("/**:", f"{section}:"))
+        with pytest.raises(ValueError, match="unknown parameters 'publish_frequency'"):
+            check_parameter_sources("/a1/umbrella_node", [str(own)], [], known,
+                                    shared=CONTROLLER_PARAMETERS)
+        found = check_parameter_sources("/a1/umbrella_node", [str(own)], [],
+                                        known | {"publish_frequency", "youngs_modulous",
+                                                 "target_time"})
+        with pytest.raises(ValueError, match="robot_description"):
+            check_qos_override_sources("/a1/umbrella_node", found,
+                                       {"qos_overrides./clock.publisher.depth"})
+
+
 def test_every_registry_entry_is_a_parameter_of_one_kind():
     kinds = (set(SPECS), set(NODE_PARAMETERS), set(CONTROLLER_PARAMETERS))
     assert set.union(*kinds) == set(REGISTRY)

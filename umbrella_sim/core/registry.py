@@ -422,6 +422,18 @@ def check_node_parameters(values: Mapping[str, Any]) -> dict:
 NODE_PARAMETERS_LISTED = "umbrella_node --help and in msg_docs/parameters.md"
 
 
+def unknown_names(names, known) -> list[str]:
+    """Return "'name' (did you mean 'closest'?)" for each of names not in known, sorted."""
+    import difflib
+
+    known = set(known)
+    out = []
+    for name in sorted(set(names) - known):
+        close = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.5)
+        out.append(f"{name!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    return out
+
+
 def check_known_names(names, known, source: str,
                       listed: str = NODE_PARAMETERS_LISTED) -> None:
     """
@@ -431,13 +443,7 @@ def check_known_names(names, known, source: str,
     suggestion (difflib) for each; `source` says where the names came from (e.g. "params
     file config/x.yaml", "-p", "--set"); `listed` where the known ones are listed.
     """
-    import difflib
-
-    known = set(known)
-    problems = []
-    for name in sorted(set(names) - known):
-        close = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.5)
-        problems.append(f"{name!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    problems = unknown_names(names, known)
     if problems:
         raise ValueError(f"{source}: unknown parameter{'s' if len(problems) > 1 else ''} "
                          f"{', '.join(problems)}; known parameters are listed by {listed}")

@@ -19,10 +19,10 @@ import time
 
 from . import signals as stop_signals
 from .parameters import declare_from_registry, wrong_type_text
-from .params_file import check_parameter_sources, params_files_in
+from .params_file import check_parameter_sources, check_qos_override_sources, params_files_in
 from ..core.control import DeployLaw
 from ..core.params import ControllerConfig, UmbrellaParams
-from ..core.registry import check_known_names, CONTROLLER_PARAMETERS, defaults, parameter_help
+from ..core.registry import CONTROLLER_PARAMETERS, defaults, parameter_help
 
 
 #: at rest for the plan: rate and angle from the start within this fraction of the plan's
@@ -52,12 +52,14 @@ def _make_node_class():
             known = set(CONTROLLER_PARAMETERS) | set(defaults())
             fqn = self.get_fully_qualified_name()
             try:
-                qos = check_parameter_sources(fqn, params_files, list(
+                found = check_parameter_sources(fqn, params_files, list(
                     self._parameter_overrides), known, CONTROLLER_PARAMETERS_LISTED)
-                check_known_names(qos, (), f"qos_overrides for {fqn} (its topics take none)",
-                                  CONTROLLER_PARAMETERS_LISTED)
+                warnings = found.warnings + check_qos_override_sources(
+                    fqn, found, (), CONTROLLER_PARAMETERS_LISTED, " (its topics take none)")
             except ValueError as exc:
                 raise StartupError(str(exc)) from None
+            for text in warnings:      # another node's, in a '/**' section
+                self.get_logger().warning(text)
             try:
                 values = declare_from_registry(self, CONTROLLER_PARAMETERS)
             except ValueError as exc:

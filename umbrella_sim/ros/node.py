@@ -43,7 +43,8 @@ from .lockstep import Lockstep
 from .pacing import MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, parameter_defaults,
                          set_refusal, wrong_type_text)
-from .params_file import check_parameter_sources, QOS_OVERRIDES, USE_SIM_TIME
+from .params_file import (check_parameter_sources, check_qos_override_sources,
+                          ParameterSources, QOS_OVERRIDES, USE_SIM_TIME)
 from .publication import PublicationEncoder
 from .recording import RunRecording
 from .. import __version__
@@ -53,8 +54,8 @@ from ..bag.writer import BagRecorder, check_record_path, new_bag_recorder
 from ..core.driver import RunDriver
 from ..core.engines import SimulationDiverged
 from ..core.params import shortened_step_note, UmbrellaParams
-from ..core.registry import (check_known_names, check_node_parameters, CONTROLLER_PARAMETERS,
-                             NODE_PARAMETERS, REGISTRY, RESET, SPECS)
+from ..core.registry import (check_node_parameters, CONTROLLER_PARAMETERS, NODE_PARAMETERS,
+                             REGISTRY, RESET, SPECS)
 from ..core.step_rule import physics_step_of
 
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
@@ -154,23 +155,26 @@ class UmbrellaNode(Node):
         self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
 
     # ------------------------------------------------------------------ config
-    def _check_parameter_sources(self, params_files, known: set) -> set:
+    def _check_parameter_sources(self, params_files, known: set) -> ParameterSources:
         """Check the params files and names given for this node (StartupError: which)."""
         try:
-            return check_parameter_sources(
+            found = check_parameter_sources(
                 self.get_fully_qualified_name(), params_files,
                 list(self._parameter_overrides), known,
                 shared=CONTROLLER_PARAMETERS)   # a '/**' file may serve both nodes
         except ValueError as exc:
             raise StartupError(str(exc)) from None
+        for text in found.warnings:       # another node's, in a '/**' section
+            self.get_logger().warning(text)
+        return found
 
-    def _check_qos_overrides(self, given: set) -> None:
+    def _check_qos_overrides(self, given: ParameterSources) -> None:
         """Refuse a qos_overrides.* name given for this node that none of its topics has."""
-        fqn = self.get_fully_qualified_name()
-        declared = {QOS_OVERRIDES + n
-                    for n in self.get_parameters_by_prefix(QOS_OVERRIDES.rstrip("."))}
-        try:
-            check_known_names(given, declared, f"qos_overrides for {fqn}")
+        fqn, prefix = self.get_fully_qualified_name(), QOS_OVERRIDES
+        declared = {prefix + n for n in self.get_parameters_by_prefix(prefix[:-1])}
+        try:        # (a '/**' section's: another node's topics, a warning)
+            for text in check_qos_override_sources(fqn, given, declared):
+                self.get_logger().warning(text)
         except ValueError as exc:
             raise StartupError(str(exc)) from None
 
