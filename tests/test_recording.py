@@ -130,9 +130,9 @@ def test_log_is_self_describing(live_bag):
     mesh = log.metadata["umbrella_sim.mesh"]
     assert json.loads(mesh["coordinates"])[0] == "alpha1"
     bag_yaml = (live_bag / "metadata.yaml").read_text()
-    # version 8 goes with the integer-enum QoS string on every channel (v9 uses names)
-    assert "version: 8" in bag_yaml and "storage_identifier: mcap" in bag_yaml
-    assert "history: 1" in bag_yaml
+    # rosbag2 Jazzy's version 9: QoS policies by name, RIHS01 type hashes (test_bag_format)
+    assert "version: 9" in bag_yaml and "storage_identifier: mcap" in bag_yaml
+    assert "history: keep_last" in bag_yaml and "type_description_hash: RIHS01_" in bag_yaml
     assert "serialized_metadata" in log.metadata["rosbag2"]
 
 

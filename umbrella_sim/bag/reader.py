@@ -231,13 +231,21 @@ def import_type(type_name: str):
         raise LogError(f"message type {type_name!r} is not available here") from None
 
 
-def qos_from_yaml(text: str) -> QoSProfile:
+def _policy(kind, value, default):
+    """Return a QoS policy of rosbag2's YAML: a name (metadata version 9) or number (8)."""
+    if value is None:
+        return kind(default)
+    return kind(value) if isinstance(value, int) else kind[str(value).upper()]
+
+
+def qos_from_yaml(text) -> QoSProfile:
+    """Return the first offered QoS profile of a channel (YAML text) or metadata.yaml (list)."""
     try:
-        prof = (yaml.safe_load(text) or [{}])[0]
-        return QoSProfile(history=HistoryPolicy(int(prof.get("history", 1))),
+        prof = ((yaml.safe_load(text) if isinstance(text, str) else text) or [{}])[0]
+        return QoSProfile(history=_policy(HistoryPolicy, prof.get("history"), 1),
                           depth=max(int(prof.get("depth", 10)), 1),
-                          reliability=ReliabilityPolicy(int(prof.get("reliability", 1))),
-                          durability=DurabilityPolicy(int(prof.get("durability", 2))))
+                          reliability=_policy(ReliabilityPolicy, prof.get("reliability"), 1),
+                          durability=_policy(DurabilityPolicy, prof.get("durability"), 2))
     except Exception:
         return QoSProfile(depth=10)
 
