@@ -264,6 +264,56 @@ def test_a_wildcard_section_may_hold_other_nodes_parameters(tmp_path):
                                        {"qos_overrides./clock.publisher.depth"})
 
 
+class _Logger:
+    def __init__(self):
+        self.lines = []
+
+    def warning(self, text):
+        self.lines.append(("WARN", text))
+
+    def info(self, text):
+        self.lines.append(("INFO", text))
+
+    def debug(self, text):
+        self.lines.append(("DEBUG", text))
+
+
+def test_throttled_warnings_say_how_many_were_held_back(monkeypatch):
+    from umbrella_sim.ros import throttled_log
+
+    now = [100.0]
+    monkeypatch.setattr(throttled_log.time, "monotonic", lambda: now[0])
+    log = _Logger()
+    warn = throttled_log.ThrottledWarnings(log).warn
+    for _ in range(3):
+        warn("behind", 60.0, lambda: "physics cannot keep up")
+        now[0] += 10.0
+    warn("other", 60.0, lambda: "another kind")
+    now[0] += 40.0
+    warn("behind", 60.0, lambda: "physics cannot keep up")
+    assert log.lines == [("WARN", "physics cannot keep up"), ("WARN", "another kind"),
+                         ("WARN", "physics cannot keep up (2 more since the last such warning)")]
+
+
+def test_applied_commands_log_at_debug_with_an_info_summary(monkeypatch):
+    """A controller's 100 commands a second: one INFO line per period, each at DEBUG."""
+    from umbrella_sim.ros import commands
+
+    now = [0.0]
+    monkeypatch.setattr(commands.time, "monotonic", lambda: now[0])
+    intake = commands.CommandIntake(lambda: None, lambda: None, None, None)
+    intake.logger = log = _Logger()
+    for k in range(1001):                 # 10 s of wall time at 100 commands a second
+        now[0] = k / 100
+        intake.applied(7.4499167113638407 + k, k / 100, locked=False)
+    infos = [text for level, text in log.lines if level == "INFO"]
+    assert len(infos) == 3 and len(log.lines) == 1001
+    assert infos[0] == "sleeve force 7.44992 N applied from t = 0.000000000 s"
+    assert infos[1].startswith("sleeve force 507.45 N applied from t = 5.000000000 s; 499 more")
+    assert ("DEBUG", "sleeve force 8.4499167113638407 N applied from t = 0.010000000 s") \
+        in log.lines
+
+
 def test_every_registry_entry_is_a_parameter_of_one_kind():
     kinds = (set(SPECS), set(NODE_PARAMETERS), set(CONTROLLER_PARAMETERS))
     assert set.union(*kinds) == set(REGISTRY)
@@ -279,6 +329,8 @@ def test_the_interface_table_gives_each_topic_the_qos_it_has():
         rows = {cells[1].strip().strip("`"): cells[5] for cells in
                 (line.split("|") for line in fh if line.startswith("| `"))}
     topics = {t.name.lstrip("/"): t for t in (*ros_io.TOPICS.values(), ros_io.COMMAND)}
+    topics.update({ros_io.COMMAND.name + suffix: ros_io.Topic("", None, ros_io.COMMAND_ECHO_QOS)
+                   for suffix in ros_io.COMMAND_ECHO_SUFFIXES.values()})
     for name, topic in topics.items():
         q = topic.qos
         text = rows[name if name != "diagnostics" else "/diagnostics"].replace("*", "").strip()

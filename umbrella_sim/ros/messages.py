@@ -21,6 +21,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimension, String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ..bag.format import APPLIED_SUFFIX, REFUSED_SUFFIX
 from ..core.outputs import energy_balance, Sample
 from ..core.params import UmbrellaParams
 
@@ -70,6 +71,14 @@ COMMAND = Topic("sleeve_force", Float64, QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL,
     durability=DurabilityPolicy.VOLATILE))
 
+
+#: <command>/applied (each value as it starts acting) and <command>/refused (each command
+#: refused), published and recorded: reliable, keep last 100 (a reader keeps up with one a
+#: publication at most; refused ones are published REFUSED_RECORD_RATE a second at most)
+COMMAND_ECHO_SUFFIXES = {"applied": APPLIED_SUFFIX, "refused": REFUSED_SUFFIX}
+COMMAND_ECHO_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                              history=HistoryPolicy.KEEP_LAST,
+                              durability=DurabilityPolicy.VOLATILE)
 
 #: the policies a qos_overrides.<topic>.publisher|subscription.<policy> parameter sets, for
 #: every topic of TOPICS and COMMAND (rclpy's default set, plus durability: a late joiner

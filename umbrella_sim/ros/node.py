@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import contextlib
 import gc
-import math
 import sys
 import threading
 import time
@@ -40,13 +39,14 @@ from std_srvs.srv import SetBool, Trigger
 from . import messages as ros_io
 from .commands import CommandIntake
 from .lockstep import Lockstep
-from .pacing import MAX_LAG_S, Pacer
+from .pacing import lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, parameter_defaults,
                          set_refusal, wrong_type_text)
 from .params_file import (check_parameter_sources, check_qos_override_sources,
                           ParameterSources, QOS_OVERRIDES, USE_SIM_TIME)
 from .publication import PublicationEncoder
 from .recording import RunRecording
+from .throttled_log import ThrottledWarnings
 from .. import __version__
 from ..bag.cdr import cdr_bytes
 from ..bag.provenance import run_metadata
@@ -101,6 +101,7 @@ class UmbrellaNode(Node):
         self._sim_lock = threading.RLock()
         self._epoch = 0                     # counts resets; samples of an older epoch are dropped
         self.lockstep = Lockstep()            # the handshake of lockstep:=true
+        self._warn_throttled = ThrottledWarnings(self.get_logger()).warn
         self.commands = CommandIntake(lambda: self.sim, self._recording_on, self._warn_throttled,
                                       self.lockstep)
         self.fault: str | None = None
@@ -113,7 +114,7 @@ class UmbrellaNode(Node):
         self.recording_error: str | None = None
         self._service_waiting = threading.Event()
         self._peers_warned = ""
-        self._warned_at: dict[str, float] = {}
+        self._measured_rtf: float | None = None     # of the last diagnostics
 
         # QoS as documented, or as qos_overrides.<topic>.publisher.<policy> parameters set
         # (ros_io.QOS_OVERRIDE_POLICIES: the ROS 2 convention; read-only)
@@ -140,6 +141,7 @@ class UmbrellaNode(Node):
         self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
         self.command_topic = self.command_sub.topic_name
         self.commands.subscription = self.command_sub
+        self.commands.connect(self, self.command_topic)
         services = MutuallyExclusiveCallbackGroup()
         self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
         self.create_service(SetBool, "~/pause", self._on_pause, callback_group=services)
@@ -441,13 +443,9 @@ class UmbrellaNode(Node):
         t = self.driver.command(force)
         if t is None:
             return
-        # logged and recorded BEFORE the solver sees it: a fault it causes is in the log and
-        # --resimulate reproduces it
-        note = " (locked: no effect on motion)" if self.sim.stage == "locked" else ""
-        self.get_logger().info(f"sleeve force {force:.17g} N applied from t = {t:.9f} s{note}")
-        rec = self._recording_on()
-        if rec is not None:
-            rec.applied(force, t)
+        # logged, recorded and published BEFORE the solver sees it: a fault it causes is in
+        # the log and --resimulate reproduces it
+        self.commands.applied(force, t, self.sim.stage == "locked")
 
     def _advance_chunk(self) -> bool:
         """Step the next chunk (sim lock held); True if the run is at a publication after it."""
@@ -516,9 +514,9 @@ class UmbrellaNode(Node):
                     elif lag > MAX_LAG_S:
                         self._re_anchor(epoch, now, sim_t, lag)
                     elif lag > max(0.05, 2.0 / self.driver_rate):
-                        self._warn_throttled("behind", 5.0, lambda: (
-                            f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
-                            "time x real_time_factor (see diagnostics)"))
+                        self._warn_throttled("behind", LAG_WARN_PERIOD, lambda: (
+                            f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall time x "
+                            f"real_time_factor; {self._lag_advice()}"))
                 elif target is not None and not idle:
                     # between publications (a long period: many chunks), how far behind the
                     # physics is now, so that diagnostics say so before the period ends
@@ -530,7 +528,7 @@ class UmbrellaNode(Node):
                 if epoch != diag_epoch:     # a reset: sim time restarted, measure from here
                     diag_wall, diag_sim, diag_epoch = now, sim_t, epoch
                 if now - diag_wall >= 1.0:
-                    measured = (sim_t - diag_sim) / (now - diag_wall)
+                    measured = self._measured_rtf = (sim_t - diag_sim) / (now - diag_wall)
                     self._check_namespace_peers()
                     self._publish_diagnostics(sim_t, measured, lag)
                     diag_wall, diag_sim = now, sim_t
@@ -571,23 +569,14 @@ class UmbrellaNode(Node):
             if epoch != self._epoch:
                 return
             self.pacer.re_anchor(now, sim_t, lag)
-        self._warn_throttled("re-anchor", 5.0, lambda: (
+        self._warn_throttled("re-anchor", LAG_WARN_PERIOD, lambda: (
             f"physics cannot keep real time: {lag * 1e3:.0f} ms behind at t = {sim_t:.3f} s; "
             f"pacing re-anchored (lag bounded by {MAX_LAG_S:g} s; total slip "
-            f"{self.pacer.slip:.3f} s in {self.pacer.re_anchors} re-anchors, see diagnostics)"))
+            f"{self.pacer.slip:.3f} s in {self.pacer.re_anchors} re-anchors); "
+            f"{self._lag_advice()}"))
 
-    def _warn_throttled(self, key: str, period: float, text) -> None:
-        """
-        Log a WARN at most once per period (s) per key.
-
-        A WARN at most once per period (s) per key.  rclpy's own throttle_duration_sec
-        inspects the caller's frame on every call (~3.5 ms measured), which throttled the
-        command callback to ~130 commands/s during a flood.
-        """
-        now = time.monotonic()
-        if now - self._warned_at.get(key, -math.inf) >= period:
-            self._warned_at[key] = now
-            self.get_logger().warning(text())
+    def _lag_advice(self) -> str:
+        return lag_advice(self.node_cfg["real_time_factor"], self._measured_rtf)
 
     def _check_namespace_peers(self) -> None:
         """Two simulators in one namespace mix their /clock, commands and resets: warn."""

@@ -16,8 +16,22 @@ import time
 #: the physics may fall this far behind wall time x real_time_factor; past it the pacing is
 #: re-anchored (the backlog is dropped, not caught up) and the slip reported
 MAX_LAG_S = 0.5
-#: pacing waits up to this long are a plain sleep (sleep_until)
 PLAIN_SLEEP_S = 0.005
+
+
+#: wall seconds between two warnings that the physics cannot keep up (each says how many
+#: more came meanwhile; diagnostics report the lag at 1 Hz)
+LAG_WARN_PERIOD = 60.0
+
+
+def lag_advice(real_time_factor: float, measured: float | None) -> str:
+    """Say what makes a node that cannot keep up with real_time_factor keep up."""
+    can = f" (measured {measured:.2f}x)" if measured else ""
+    return (f"this machine cannot step this model at {real_time_factor:g}x real time{can}: "
+            "give a lower real_time_factor, real_time_factor:=0 (as fast as it can; "
+            "sim time is still exact), or, for a closed-loop controller, lockstep:=true "
+            "(the node waits for each command: no command falls behind)")
+#: pacing waits up to this long are a plain sleep (sleep_until)
 
 
 class Pacer:

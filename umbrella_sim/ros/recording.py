@@ -48,8 +48,9 @@ class RunRecording:
             topic = messages.TOPICS[key]
             recorder.add_channel(name, topic.type, (qos or {}).get(key, topic.qos))
             resolved[topic.name.lstrip("/")] = name
-        for suffix in ("", REFUSED_SUFFIX, APPLIED_SUFFIX):
-            recorder.add_channel(command_topic + suffix, Float64, messages.COMMAND.qos)
+        for suffix in ("", REFUSED_SUFFIX, APPLIED_SUFFIX):   # (the last two as published)
+            recorder.add_channel(command_topic + suffix, Float64,
+                                 messages.COMMAND_ECHO_QOS if suffix else messages.COMMAND.qos)
             resolved[messages.COMMAND.name.lstrip("/") + suffix] = command_topic + suffix
         # so that the tools find each topic however it was remapped
         recorder.add_metadata(TOPICS_RECORD, resolved)
