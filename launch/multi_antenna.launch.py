@@ -8,6 +8,8 @@ umbrella_<ns>_<date>-<time> in the working directory, or <record_path>_<ns>) and
 robot_state_publisher with frame_prefix '<ns>/', so one TF tree holds a1/umbrella_base,
 a2/umbrella_base, ...
 Diagnostics of all of them arrive on /diagnostics, named '<ns>/umbrella_node: physics'.
+Nothing publishes /clock: each antenna's robot_state_publisher follows its /<ns>/clock; for
+another use_sim_time node remap one antenna's clock (msg_docs/topic_clock.md).
 The other arguments are those of umbrella.launch.py and apply to every antenna.
 """
 from launch import LaunchDescription

@@ -314,6 +314,19 @@ def test_applied_commands_log_at_debug_with_an_info_summary(monkeypatch):
         in log.lines
 
 
+@pytest.mark.ros
+def test_clock_goes_on_with_the_unchanged_time_while_paused(probe):
+    """As Gazebo: a paused simulator's /clock keeps coming, so use_sim_time nodes see it."""
+    from umbrella_sim.ros.messages import CLOCK_READER_QOS
+
+    probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
+    with NodeProcess("-p", "start_paused:=true", "-p", "record:=false") as node:
+        probe.wait_for_count("/clock", 5, timeout=30)
+        assert node.stop() == 0
+    ticks = probe.messages("/clock")
+    assert len(ticks) >= 5 and {(m.clock.sec, m.clock.nanosec) for m in ticks} == {(0, 0)}
+
+
 def test_every_registry_entry_is_a_parameter_of_one_kind():
     kinds = (set(SPECS), set(NODE_PARAMETERS), set(CONTROLLER_PARAMETERS))
     assert set.union(*kinds) == set(REGISTRY)

@@ -541,6 +541,8 @@ class UmbrellaNode(Node):
                 if waiting:
                     self.lockstep.answered.wait(0.05)
                 elif idle:
+                    if self.paused and self.fault is None:   # as Gazebo: the time, unchanged
+                        self.pub["clock"].publish(ros_io.clock_msg(sim_t))   # (not recorded)
                     self._wake.wait(0.05)
                     self._wake.clear()
         except Exception as exc:  # keep the process informative, never silent
