@@ -55,6 +55,8 @@ def test_main_command_records_and_forwards_signals(tmp_path, sig):
     text = out.read_text()
     assert "recording finalised" in text and "[ERROR]" not in text, text
     (run,) = (tmp_path / "runs").iterdir()
+    # the node's own (rosbag2's) naming, the one convention: umbrella_YYYY_MM_DD-HH_MM_SS
+    assert re.fullmatch(r"umbrella_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?", run.name), run.name
     log = read_log(str(run))
     assert not log.truncated
     # every joint_states publication of the run is in the file: the default 100 Hz over the

@@ -173,6 +173,46 @@ def test_output_paths_checked_before_any_work(tmp_path):
     assert r.returncode == 2 and "--out '': empty path" in r.stderr
 
 
+@pytest.mark.slow
+def test_overwrite_replaces_an_earlier_output_and_nothing_else(tmp_path):
+    """--overwrite (never the default) replaces a file, a recording, a comparison's outputs."""
+    csv, bag, out = tmp_path / "run.csv", tmp_path / "bag", tmp_path / "cmp"
+    csv.write_text("old")
+
+    def simulate_to(*extra):
+        return run("umbrella_sim", "simulate", "--duration", "0.05", "--csv", str(csv),
+                   "--mcap", str(bag), *extra)
+    r = simulate_to()
+    assert r.returncode == 2 and "--overwrite" in r.stderr and csv.read_text() == "old"
+    assert not bag.exists()
+    assert simulate_to("--overwrite").returncode == 0
+    assert csv.read_text().startswith("t") and read_log(str(bag)).count("/joint_states") > 0
+    first = (bag / "metadata.yaml").read_text()
+    r = simulate_to("--overwrite", "--set", "v0=-1.0")        # a new run replaces both
+    assert r.returncode == 0, r.stderr
+    assert read_log(str(bag)).parameters()["v0"] == -1.0 and first != (
+        bag / "metadata.yaml").read_text()
+    # the comparison's outputs, and only those
+    assert run("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(out),
+               "--no-plots").returncode == 0
+    r = run("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(out), "--no-plots")
+    assert r.returncode == 2 and "--overwrite" in r.stderr
+    assert run("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(out),
+               "--no-plots", "--overwrite").returncode == 0
+    # what is not an output of ours is never removed
+    (out / "notes.txt").write_text("mine")
+    r = run("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(out), "--no-plots",
+            "--overwrite")
+    assert r.returncode == 2 and "other than" in r.stderr
+    (bag / "notes.txt").write_text("mine")
+    r = simulate_to("--overwrite")
+    assert r.returncode == 2 and "not a recording" in r.stderr
+    assert (bag / "notes.txt").read_text() == "mine" and (out / "notes.txt").exists()
+    r = run("umbrella_sim", "simulate", "--duration", "0.05", "--csv", str(tmp_path),
+            "--overwrite")
+    assert r.returncode == 2 and "not a regular file" in r.stderr
+
+
 # ------------------------------------------------------------------ solver faults
 def test_offline_fault_recorded_and_reproduced(tmp_path):
     bag = tmp_path / "fault"
