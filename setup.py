@@ -77,7 +77,9 @@ setup(
                            extra_compile_args=["-O3", "-std=c99", "-fvisibility=hidden"],
                            libraries=["m"])],
     cmdclass={"build_ext": BuildKernel},
-    install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "matplotlib"],
+    # every import (tests/test_package_metadata.py); the ROS packages are package.xml's
+    install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "zstandard",
+                      "matplotlib", "dask", "distributed", "pyarrow"],
     extras_require={"test": ["pytest"]},     # (tests_require: gone from setuptools)
     zip_safe=False,      # a shared library, loaded from its file
     maintainer="umbrella_sim developers",

@@ -26,16 +26,21 @@ def _documented_command_lines() -> list[tuple[str, str]]:
     return out
 
 
-def _installed_share_files() -> set[str]:
-    """Return the files setup.py installs under share/umbrella_sim/, relative to it."""
+def setup_distribution():
+    """Return setup.py's Distribution, as setuptools reads it (nothing is built)."""
     from setuptools._distutils.core import run_setup
 
     cwd = os.getcwd()
     os.chdir(ROOT)
     try:
-        dist = run_setup("setup.py", stop_after="init")
+        return run_setup("setup.py", stop_after="init")
     finally:
         os.chdir(cwd)
+
+
+def _installed_share_files() -> set[str]:
+    """Return the files setup.py installs under share/umbrella_sim/, relative to it."""
+    dist = setup_distribution()
     share = "share/umbrella_sim"
     return {os.path.join(target[len(share):].lstrip("/"), os.path.basename(f))
             for target, files in dist.data_files if target.startswith(share) for f in files}
