@@ -265,6 +265,7 @@ def test_a_wildcard_section_may_hold_other_nodes_parameters(tmp_path):
 
 
 class _Logger:
+
     def __init__(self):
         self.lines = []
 
