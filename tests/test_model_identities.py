@@ -221,3 +221,47 @@ def test_hermite_peak_finds_resolved_crests_between_the_ends():
     s0, d0, s1, d1, true = sinusoid(theta, -theta / 2)
     assert np.array_equal(hermite_peak(s0, d0, s1, d1), np.maximum(np.abs(s0), np.abs(s1)))
     assert np.all(true > 3 * np.maximum(np.abs(s0), np.abs(s1)))
+
+
+@pytest.mark.parametrize("n_el", [1, 2, 16])
+def test_drawn_shape_is_each_elements_cubic(n_el):
+    """
+    The drawn shape (markers, plots) is r = R + A (p + N B e) at its points, not chords.
+
+    Every drawn point is Eq. 3.17 at its abscissa; the ends of each element's pieces are
+    its nodes; a cubic transverse field (zero at the leaf's supports) with a linear axial
+    one is drawn exactly, which the straight lines between the nodes are not at N = 1.
+    """
+    from umbrella_sim.core.model import shape_abscissae, shape_pieces_per_element
+    model = UmbrellaModel(UmbrellaParams(elements_per_segment=n_el))
+    rng = np.random.default_rng(n_el)
+    q, _ = random_state(model, rng)
+    for body, drawn in zip((model.leaf, model.link), model.deformed_shape(q)):
+        per = shape_pieces_per_element(len(body.element_length))
+        x = shape_abscissae(body.node_x, per)
+        assert len(drawn) == len(x) >= 17
+        exact = np.array([point_position(model, body, q, xi) for xi in x])
+        assert np.abs(drawn - exact).max() < 1e-12
+        assert np.array_equal(drawn[::per], model.node_positions(q)[body is model.link])
+    # a cubic field on the leaf: v = c x (x - l1) (x - d), u = k x; alpha1 = 0.3
+    p = model.params
+    c, d, k = 1e-2, 0.3, 1e-3
+    v = lambda x: c * x * (x - p.l1) * (x - d)                        # noqa: E731
+    dv = lambda x: c * (3 * x**2 - 2 * (p.l1 + d) * x + p.l1 * d)    # noqa: E731
+    q = np.zeros(model.n)
+    q[0] = 0.3
+    for node, x in enumerate(model.leaf.node_x):
+        for dof, value in (("u", k * x), ("v", v(x)), ("theta", dv(x))):
+            try:
+                q[model.s_leaf.start + model.leaf.elastic_index(node, dof)] = value
+            except KeyError:                  # held by the frame (zero in this field)
+                assert abs(value) < 1e-15
+    leaf, _ = model.deformed_shape(q, magnification=7.0)
+    x = shape_abscissae(model.leaf.node_x, shape_pieces_per_element(2 * n_el))
+    local = np.column_stack([x + 7.0 * k * x, 7.0 * v(x)])
+    exact = local @ np.array([[np.cos(0.3), np.sin(0.3)], [-np.sin(0.3), np.cos(0.3)]])
+    assert np.abs(leaf - exact).max() < 1e-13
+    if n_el == 1:                  # the chords between the 3 nodes miss the field by ~mm
+        nodes = model.node_positions(q, 7.0)[0]
+        chord = np.column_stack([np.interp(x, model.leaf.node_x, nodes[:, i]) for i in (0, 1)])
+        assert np.abs(chord - exact).max() > 1e-3

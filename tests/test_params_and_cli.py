@@ -162,8 +162,14 @@ def test_cli_models_and_csv(tmp_path):
     assert r.returncode == 0, r.stderr
     lines = out.read_text().splitlines()
     header = lines[0].split(",")
-    assert header[0] == "time" and "q[alpha1]" in header and "qd[link.u1]" in header
-    assert "sigma_top[leaf@0.5-]" in header and "sigma_bottom[link@0.5]" in header
+    # every column with its SI unit, the stage (text) without
+    assert header[:3] == ["time (s)", "stage", "alpha1 (rad)"]
+    assert "q[alpha1] (rad)" in header and "qd[link.u1] (m/s)" in header
+    assert "q[leaf.theta1] (rad)" in header and "qd[leaf.theta1] (rad/s)" in header
+    assert "q[R2x] (m)" in header and "alpha1_accel (rad/s^2)" in header
+    assert "sigma_top[leaf@0.5-] (Pa)" in header and "sigma_bottom[link@0.5] (Pa)" in header
+    assert "tip_transverse (m)" in header and "kinetic_energy (J)" in header
+    assert all(h == "stage" or h.endswith(")") for h in header)
     assert len(set(header)) == len(header), "a column name twice (leaf@0.5: two elements')"
     assert len(lines) == 1 + 1 + 15 + 1    # header, t = 0, 15 steps, the lock instant
     again = cli("simulate", "--duration", "0.01", "--csv", str(out))

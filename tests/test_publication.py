@@ -66,7 +66,7 @@ def test_marker_bytes_are_the_built_markers(mesh, model, ns, frame_prefix, magni
         s = driver.publication()
         msgs = encoder.messages(s, ns, magnification, frame_prefix)
         seen.add(s.stage)
-        ref = ros_io.markers_msg(s, driver.sim.model.node_positions(s.q, magnification), ns,
+        ref = ros_io.markers_msg(s, driver.sim.model.deformed_shape(s.q, magnification), ns,
                                  frame_prefix)
         data, expected = msgs["markers"], cdr_bytes(ref)     # (colours: float32 on the wire)
         assert data == expected
@@ -145,3 +145,55 @@ def test_a_recording_does_not_depend_on_the_process_that_made_it(tmp_path):
             "/markers"} <= topics
     assert len(runs[0]) > 300
     assert runs[0] == runs[1]
+
+
+def test_foxglove_layout_plots_the_figures_it_names():
+    """
+    config/umbrella.foxglove.json: each plot path, resolved on the node's messages, is its label.
+
+    The 3D panel shows the markers in their frame; the plots' paths (topic, field, index)
+    give the tip deflection, the peak stresses, alpha1 and y_H of the sample published.
+    """
+    import json
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    layout = json.loads((root / "config" / "umbrella.foxglove.json").read_text("utf-8"))
+    panels = layout["configById"]
+    three_d = panels["3D!umbrella"]
+    assert three_d["followTf"] == ros_io.INERTIAL_FRAME and list(three_d["topics"]) == ["/markers"]
+    driver = RunDriver(UmbrellaParams(v0=-0.5), 100.0)
+    for _ in range(15):                              # past the lock (0.09 s): all non-zero
+        next_period(driver)
+    s = driver.publication()
+    assert s.stage.name.lower() == "locked"
+    messages = built(PublicationEncoder(driver), s, "")
+    expected = {"v_G transverse (m)": s.tip_transverse, "u_G axial (m)": s.tip_axial,
+                "leaf peak |σ| (Pa)": s.peak_stress_leaf,
+                "link peak |σ| (Pa)": s.peak_stress_link,
+                "alpha1 (rad)": s.alpha1, "y_H (m)": s.sleeve_position}
+    drawn = set()
+    for key, panel in panels.items():
+        if not key.startswith("Plot!"):
+            continue
+        for path in panel["paths"]:
+            topic, *fields = re.split(r"\.", path["value"])
+            value = messages[topic.lstrip("/")]
+            for field in fields:
+                name, _, index = field.partition("[")
+                value = getattr(value, name)
+                if index:
+                    value = value[int(index.rstrip("]"))]
+            assert value == pytest.approx(expected[path["label"]], rel=1e-12, abs=0), path
+            assert expected[path["label"]] != 0.0
+            drawn.add(path["label"])
+    assert drawn == set(expected)
+    # every panel is placed in the layout tree
+    placed, stack = set(), [layout["layout"]]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, str):
+            placed.add(node)
+        else:
+            stack += [node["first"], node["second"]]
+    assert placed == set(panels)

@@ -97,6 +97,22 @@ def shape_functions(eta: np.ndarray, le: float):
     return n, dn, d2n
 
 
+#: a drawn body's least number of pieces (markers, plots), its elements split evenly
+SHAPE_PIECES = 16
+
+
+def shape_pieces_per_element(n_elements: int) -> int:
+    """Return the pieces each element of a body of n_elements is drawn in (>= 1)."""
+    return max(1, -(-SHAPE_PIECES // n_elements))
+
+
+def shape_abscissae(node_x, per_element: int) -> np.ndarray:
+    """Return the body abscissae of a drawn shape: each element in per_element equal pieces."""
+    node_x = np.asarray(node_x, dtype=float)
+    eta = np.arange(per_element) / per_element
+    return np.append((node_x[:-1, None] + np.diff(node_x)[:, None] * eta).ravel(), node_x[-1])
+
+
 class BeamBody:
     """
     One Euler-Bernoulli body in its floating frame: mesh, invariants, stiffness, stress.
@@ -185,10 +201,6 @@ class BeamBody:
             raise KeyError(f"{self.name} node {node} {dof} is fixed by the frame")
         return idx
 
-    def node_displacement_index(self) -> np.ndarray:
-        """Return the elastic index of every node's (u, v), shape (nodes, 2); -1: fixed."""
-        return np.asarray(self._full_to_e).reshape(-1, 3)[:, :2].copy()
-
     def displacement(self, e: np.ndarray, x: np.ndarray) -> np.ndarray:
         """(u, v) at body abscissae x (Eq. 3.16): shape (len(x), 2)."""
         x = np.atleast_1d(np.asarray(x, dtype=float))
@@ -200,6 +212,15 @@ class BeamBody:
             n, _, _ = shape_functions(np.array([(xi - self.node_x[ji]) / le]), le)
             out[i] = (n[0] @ self.element_dof_maps[ji]) @ e
         return out
+
+    def shape_matrix(self, per_element: int):
+        """(shape_abscissae, S): S (points, 2, n_elastic) maps e to (u, v) at each point."""
+        eta = np.arange(per_element) / per_element
+        rows = [shape_functions(eta, le)[0] @ b
+                for le, b in zip(self.element_length, self.element_dof_maps)]
+        rows.append(shape_functions(np.ones(1), self.element_length[-1])[0]
+                    @ self.element_dof_maps[-1])
+        return shape_abscissae(self.node_x, per_element), np.concatenate(rows)
 
 
 @dataclass(frozen=True)
@@ -273,6 +294,7 @@ class UmbrellaModel:
         self._link_sbar = self.link.s_bar
         self._link_isbar = np.array([-self.link.s_bar[1], self.link.s_bar[0]])  # I~ S_bar
         self._link_pbar = self.link.p_bar
+        self._shape_maps: dict = {}      # (body, pieces per element) -> deformed_shape's maps
 
     def coordinate_labels(self) -> list[str]:
         """Names of the entries of q, e.g. 'leaf.u2' = axial displacement of leaf node 2."""
@@ -600,26 +622,29 @@ class UmbrellaModel:
         return (float(leaf_top.item(joint)),
                 (1.0 - frac) * link_top.item(2 * j) + frac * link_top.item(2 * j + 1))
 
-    @cached_property
-    def _node_displacement_maps(self) -> tuple:
-        """Per body: (undeformed nodes (n, 2), index into q of each node's (u, v), mask)."""
+    def deformed_shape(self, q, magnification: float = 1.0, per_element: int | None = None):
+        """
+        Inertial (X, Y) of points along the leaf and the link, deformation magnified.
+
+        Each element drawn by its own shape functions (3.4: transverse displacement cubic,
+        axial linear), split into per_element equal pieces: by default
+        shape_pieces_per_element (at least SHAPE_PIECES a body), 1 = the nodes only.  A
+        body's points lie at shape_abscissae(body.node_x, per_element).  The one rule of
+        every drawn shape: markers, umbrella_compare's shapes, the docs' figures.
+        """
+        q = np.asarray(q)
         out = []
-        for body, s_e in ((self.leaf, self.s_leaf), (self.link, self.s_link)):
-            full = body.node_displacement_index()
-            fixed = full < 0                        # held by the frame: no displacement
-            index = np.where(fixed, 0, full + s_e.start)
-            rest = np.column_stack([body.node_x, np.zeros_like(body.node_x)])
-            out.append((rest, index, fixed))
-        return tuple(out)
+        for body, s_e, origin, alpha in (
+                (self.leaf, self.s_leaf, np.zeros(2), q[0]),
+                (self.link, self.s_link, q[[self.i_r2x, self.i_r2y]], q[self.i_alpha2])):
+            k = per_element or shape_pieces_per_element(len(body.element_length))
+            if (body.name, k) not in self._shape_maps:
+                x, s = body.shape_matrix(k)
+                self._shape_maps[body.name, k] = (np.column_stack([x, np.zeros_like(x)]), s)
+            rest, s = self._shape_maps[body.name, k]
+            out.append(origin + (rest + magnification * (s @ q[s_e])) @ rotation(alpha).T)
+        return out
 
     def node_positions(self, q, magnification: float = 1.0):
         """Inertial (X, Y) of the leaf and link nodes, deformation magnified."""
-        q = np.asarray(q)
-        origins = ((np.zeros(2), q[0]),
-                   (q[[self.i_r2x, self.i_r2y]], q[self.i_alpha2]))
-        out = []
-        for (rest, index, fixed), (origin, alpha) in zip(self._node_displacement_maps, origins):
-            disp = q[index]
-            disp[fixed] = 0.0
-            out.append(origin + (rest + magnification * disp) @ rotation(alpha).T)
-        return out
+        return self.deformed_shape(q, magnification, per_element=1)

@@ -234,7 +234,12 @@ def energy_figures(msg) -> dict:
 
 
 def markers_msg(s: Sample, positions, ns: str, frame_prefix: str = "") -> MarkerArray:
-    """LINE_STRIPs of the deformed leaf and link, a sphere at the sleeve."""
+    """
+    LINE_STRIPs of the deformed leaf and link, a sphere at the sleeve.
+
+    positions: the (X, Y) points of each body, as UmbrellaModel.deformed_shape gives them
+    (each element drawn by its own shape functions, not a straight line between nodes).
+    """
     out = MarkerArray()
     colours = (ColorRGBA(r=0.9, g=0.6, b=0.1, a=1.0), ColorRGBA(r=0.2, g=0.5, b=0.9, a=1.0))
     for i, (pts, colour) in enumerate(zip(positions, colours)):
@@ -378,7 +383,7 @@ class MarkerEncoder:
     Building the MarkerArray and serializing it cost 0.3-0.5 ms at N = 2, at once, one
     publication in every ``marker_every``.  The layout is fixed for a mesh, a namespace and a frame
     prefix, so a template serialized once from ``markers_msg`` holds everything but the
-    three stamps, the nodes' points and the sleeve's position; their offsets are found by
+    three stamps, the bodies' points and the sleeve's position; their offsets are found by
     serializing the template with distinct sentinel values in those places.
     """
 
@@ -401,9 +406,9 @@ class MarkerEncoder:
         self._sleeve = _unique_offset(data, struct.pack("<d", sleeve))
 
     def encode(self, time: float, sleeve_position: float, positions) -> bytes:
-        """Return the CDR bytes of markers_msg for these node positions (as node_positions)."""
+        """Return the CDR bytes of markers_msg for these points (as deformed_shape's)."""
         if tuple(len(p) for p in positions) != self._counts:
-            raise ValueError(f"node counts {[len(p) for p in positions]}, the template has "
+            raise ValueError(f"point counts {[len(p) for p in positions]}, the template has "
                              f"{list(self._counts)}")
         buf = bytearray(self._template)
         sec, nsec = stamp_parts(time)

@@ -39,7 +39,7 @@ class PublicationEncoder:
                 self.driver.initial, self.driver.params, self.initial_energy, frame_prefix)
         out: dict = encoder.encode(s)
         if self.count % self.marker_every == 0:
-            positions = self.driver.sim.model.node_positions(s.q, magnification)
+            positions = self.driver.sim.model.deformed_shape(s.q, magnification)
             markers = self._marker_encoders.get((marker_ns, frame_prefix))
             if markers is None:
                 markers = self._marker_encoders[marker_ns, frame_prefix] = \

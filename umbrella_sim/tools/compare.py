@@ -6,7 +6,10 @@ and writes compare.json with: deployment time and its difference to the first ru
 RMS difference of alpha1, its rate, the tip deflection and the peak stresses, the energy
 drift of each run; writes PNG plots mirroring the thesis's figures (alpha1 and its rate and
 acceleration, tip deflection in stage 1 and across the lock, stress at O'' on the leaf and at
-mid-link, deformed shapes).  --thesis adds the thesis's quoted numbers.
+mid-link, deformed shapes) over a window of time (--window; by default the deployment and
+eight periods of the locked frame's vibration), with the thesis's values drawn where it
+has them (its data at V0 = -0.2, -0.5, -1, -2 m/s).  --thesis adds them to the text and
+JSON.  The text is in s, mm, MPa and rad; compare.json in SI units, as each entry says.
 """
 from __future__ import annotations
 
@@ -20,16 +23,14 @@ import numpy as np
 
 from .arguments import ArgumentParser
 from .compare_plots import plot
-from .runs import default_label, load_run, physics_run, Run
+from .runs import (default_label, default_window, load_run, physics_run, Run,
+                   thesis_figures, THESIS_TABLE_6_1, THESIS_V02)
 from ..bag.reader import LogError
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader, raise_if_stopped
 
 
-#: Table 6.1 (deformable FEA, rigid FEA) and the V0 = -0.2 figures quoted in ch. 6
-THESIS_TABLE_6_1 = {-0.5: (0.09040, 0.09033), -1.0: (0.04525, 0.04517), -2.0: (0.02343, 0.02259)}
-THESIS_V02 = {"deploy_time": 0.2259, "tip_deflection_max": 0.665e-3,
-              "tip_deflection_max_time": 0.08, "stage2_tip_amplitude": 0.060,
-              "stage2_tip_period": 0.05}
+__all__ = ["compare", "main", "plot", "print_table", "load_run", "THESIS_TABLE_6_1",
+           "THESIS_V02"]
 
 
 def _spacing(t) -> float:
@@ -83,6 +84,9 @@ SIGNALS = [("alpha1", "rad", lambda r: (r.t, r.alpha1), False),
            ("tip_deflection", "m", lambda r: (r.tip_t, r.tip_v), False),
            ("peak_stress_leaf", "Pa", lambda r: (r.stress_t, r.peak_leaf), True),
            ("peak_stress_link", "Pa", lambda r: (r.stress_t, r.peak_link), True)]
+#: the text's unit of each SI unit of compare.json (one system: s, mm, MPa, rad)
+TEXT_UNITS = {"m": ("mm", 1e3), "Pa": ("MPa", 1e-6), "rad": ("rad", 1.0),
+              "rad/s": ("rad/s", 1.0), "s": ("s", 1.0)}
 
 
 def compare(runs: list[Run], thesis: bool = False) -> dict:
@@ -109,20 +113,13 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
         entry["figures"] = r.figures()
         entry["warnings"] = r.validity()
         if thesis:
-            v0 = r.params.get("v0")
-            th = {}
-            if v0 in THESIS_TABLE_6_1:
-                th["deploy_time_deformable_fea"], th["deploy_time_rigid_fea"] = \
-                    THESIS_TABLE_6_1[v0]
-            if v0 == -0.2:
-                th.update(THESIS_V02)
-            entry["thesis"] = th
+            entry["thesis"] = thesis_figures(r.params)
         out["runs"].append(entry)
     return out
 
 
-def print_table(result: dict, stream=sys.stdout) -> None:
-    w = stream.write
+def print_table(result: dict, stream=None) -> None:
+    w = (stream or sys.stdout).write       # (standard output when called, not when imported)
     w(f"reference run: {result['reference']}\n")
     w(f"{'run':<18} {'model':<9} {'N':>2} {'V0':>6} {'deploy (s)':>11} {'d deploy (s)':>13} "
       f"{'energy drift':>12}\n")
@@ -138,14 +135,16 @@ def print_table(result: dict, stream=sys.stdout) -> None:
         cells = []
         for n, unit, *_ in SIGNALS:
             d = e["differences"][n]
-            cells.append(f"{d['max']:>11.3e}/{d['rms']:.3e} {unit:<5}"[:27].rjust(27))
+            unit, scale = TEXT_UNITS[unit]
+            cells.append(f"{d['max'] * scale:>11.3e}/{d['rms'] * scale:.3e} {unit:<5}"[:27]
+                         .rjust(27))
         w(f"{e['label']:<18} " + " ".join(cells) + "\n")
     w("\nfigures (stage-1 max tip deflection and time, stage-2 amplitude and period):\n")
     for e in result["runs"]:
         f = e["figures"]
 
-        def fmt(key, scale=1.0, spec=".4g"):
-            v = f.get(key)
+        def fmt(key, scale=1.0, spec=".4g", figures=f):
+            v = figures.get(key)
             return "-" if v is None else format(v * scale, spec)
         line = (f"{e['label']:<18} deploy {fmt('deploy_time', 1, '.5f')} s, tip max "
                 f"{fmt('tip_deflection_max', 1e3)} mm at "
@@ -158,9 +157,19 @@ def print_table(result: dict, stream=sys.stdout) -> None:
           f"MPa at {fmt('peak_stress_link_time', 1, '.3f')} s; from {f.get('figures_from')}\n")
         for text in e.get("warnings", []):
             w(f"{'':<18} warning: {text}\n")
-        if e.get("thesis"):
-            th = e["thesis"]
-            w(f"{'':<18} thesis: " + ", ".join(f"{k} {v:g}" for k, v in th.items()) + "\n")
+        th = e.get("thesis") or {}
+        if "deploy_time_deformable_fea" in th:
+            w(f"{'':<18} thesis: deploy {th['deploy_time_deformable_fea']:.5f} s (deformable "
+              f"FEA), {th['deploy_time_rigid_fea']:.5f} s (rigid FEA) (Table 6.1)\n")
+        elif list(th) == ["deploy_time"]:
+            w(f"{'':<18} thesis: deploy {th['deploy_time']:.4f} s (ch. 6, its flexible "
+              "model)\n")
+        elif th:
+            w(f"{'':<18} thesis: deploy {fmt('deploy_time', 1, '.4f', th)} s, tip max "
+              f"{fmt('tip_deflection_max', 1e3, '.3f', th)} mm at "
+              f"{fmt('tip_deflection_max_time', 1, '.3f', th)} s, stage 2 "
+              f"~{fmt('stage2_tip_amplitude', 1e3, '.0f', th)} mm / "
+              f"~{fmt('stage2_tip_period', 1, '.2f', th)} s (ch. 6, read off its plots)\n")
 
 
 @interruptible("umbrella_compare", "--out may hold part of the outputs")
@@ -185,10 +194,21 @@ def main(argv: list[str] | None = None) -> int:
                          "recorded samples")
     ap.add_argument("--magnification", type=float, nargs=2, default=(200.0, 5.0),
                     metavar=("STAGE1", "STAGE2"),
-                    help="deformation magnification of the shapes plot (default 200 5)")
+                    help="deformation magnification of the shapes plot, at most (default "
+                         "200 5; each is reduced to a round number that keeps the shapes "
+                         "on the plot)")
+    ap.add_argument("--window", type=float, nargs=2, metavar=("T0", "T1"),
+                    help="sim-time span of the plots, s (default: from the start of the "
+                         "deployment to 8 periods of the locked frame's first mode after "
+                         "the lock; a run that never locks, all of it).  The table and "
+                         "compare.json are of the whole runs")
     args = ap.parse_args(argv)
     if not all(math.isfinite(m) and m > 0 for m in args.magnification):
         ap.error(f"--magnification {args.magnification}: must be finite numbers > 0")
+    if args.window and not (all(math.isfinite(t) for t in args.window)
+                            and args.window[0] < args.window[1]):
+        ap.error(f"--window {args.window[0]:g} {args.window[1]:g}: two finite times, "
+                 "T0 < T1")
     if args.segment < 0:
         ap.error(f"--segment {args.segment}: must be >= 0")
     if args.names and len(args.names) != len(args.logs):
@@ -202,9 +222,12 @@ def main(argv: list[str] | None = None) -> int:
         out = _check_out_dir(args.out, args.overwrite)      # before reading any log
         runs = [load_run(p, name, args.segment) for p, name in zip(args.logs, names)]
         result = compare(runs, thesis=args.thesis)
+        window = tuple(args.window) if args.window else default_window(runs)
+        if not args.no_plots:
+            result["plot_window"] = list(window)
         if args.physics_rate and not args.no_plots:
             for r in runs:
-                r.physics = physics_run(r.path, args.segment)
+                r.physics = physics_run(r.path, args.segment, until=window[1])
     except LogError as exc:
         raise_if_stopped()           # (a stop signal inside a decoding: an interrupt)
         print(f"umbrella_compare: error: {exc}", file=sys.stderr)
@@ -216,7 +239,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in _earlier_outputs(out) if args.overwrite else ():   # (now: replaced)
             os.unlink(os.path.join(out, name))
         if not args.no_plots:
-            result["plots"] = plot(runs, out, tuple(args.magnification))
+            result["plots"] = plot(runs, out, tuple(args.magnification), window)
         with open(os.path.join(out, "compare.json"), "x", encoding="utf-8") as fh:
             json.dump(result, fh, indent=2)
     except OSError as exc:
@@ -224,7 +247,8 @@ def main(argv: list[str] | None = None) -> int:
               "above is complete)", file=sys.stderr)
         return 4
     print(f"\nwrote {os.path.join(out, 'compare.json')}"
-          + (f" and {len(result['plots'])} plots" if "plots" in result else ""))
+          + (f" and {len(result['plots'])} plots of t = {window[0]:.4g} .. {window[1]:.4g} s "
+             "(--window)" if "plots" in result else ""))
     return 0 if reader_there else EXIT_READER_GONE
 
 

@@ -2,7 +2,8 @@
 ``umbrella_sim simulate --csv``: the time series of every physics step, streamed to a file.
 
 Rows: the state at t = 0, the end of every physics step, and the instant of the lock (the
-state right after it, at the exact lock time between two steps).
+state right after it, at the exact lock time between two steps).  The header names each
+column with its SI unit: ``time (s)``, ``alpha1 (rad)``, ``q[leaf.u2] (m)``, ``stage``.
 The rows come from the run driver's chunks (the compiled loop's per-step rows, and with
 ``--csv-state`` its per-step state rows), written as each chunk ends: memory does not grow
 with the run, and nothing a Python call per step.  The numbers are written by pyarrow's CSV
@@ -24,6 +25,16 @@ CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate"
                "sleeve_reaction_x", "sleeve_reaction_y",
                "kinetic_energy", "strain_energy", "work", "lock_energy_loss",
                "constraint_residual", "damping_dissipation"]
+#: each column's unit, written in the header as 'name (unit)' (constraint_residual:
+#: max(|Phi|, |J q'|), a position's and a velocity's constraints)
+CSV_UNITS = {"time": "s", "stage": "", "alpha1": "rad", "alpha2": "rad", "alpha1_rate": "rad/s",
+             "alpha2_rate": "rad/s", "alpha1_accel": "rad/s^2", "sleeve_position": "m",
+             "sleeve_velocity": "m/s", "sleeve_force": "N", "tip_axial": "m",
+             "tip_transverse": "m", "peak_stress_leaf": "Pa", "peak_stress_leaf_x": "m",
+             "peak_stress_link": "Pa", "peak_stress_link_x": "m", "stress_leaf_joint": "Pa",
+             "stress_link_mid": "Pa", "sleeve_reaction_x": "N", "sleeve_reaction_y": "N",
+             "kinetic_energy": "J", "strain_energy": "J", "work": "J", "lock_energy_loss": "J",
+             "constraint_residual": "m or m/s", "damping_dissipation": "J"}
 _ROWS = [STEP_FIELDS.index(c) for c in CSV_COLUMNS if c != "stage"]
 _STAGE_ROW = STEP_FIELDS.index("stage")
 _STAGES = [str(s) for s in sorted(Stage, key=lambda s: s.code)]
@@ -50,7 +61,7 @@ def state_columns(model) -> list[str]:
 
     'sigma_top[leaf@0.25]' = top-fibre stress at 0.25 m from O (Pa); at a node between two
     elements, each element's own ('leaf@0.5-', 'leaf@0.5+'); top of every point, then bottom,
-    as StepBlock.states holds them.
+    as StepBlock.states holds them.  Names without units (header_names adds them).
     """
     labels = model.coordinate_labels()
     cols = [f"q[{lab}]" for lab in labels] + [f"qd[{lab}]" for lab in labels]
@@ -58,6 +69,22 @@ def state_columns(model) -> list[str]:
         for body, xs in (("leaf", model.leaf.stress_x), ("link", model.link.stress_x)):
             cols += [f"sigma_{fibre}[{body}@{x}]" for x in stress_point_labels(xs)]
     return cols
+
+
+def column_unit(name: str) -> str:
+    """Return the unit of a column of the CSV ('' for stage)."""
+    if name in CSV_UNITS:
+        return CSV_UNITS[name]
+    if name.startswith("sigma_"):
+        return "Pa"
+    kind, coordinate = name[:-1].split("[", 1)          # q[leaf.u2], qd[alpha1], ...
+    angle = coordinate.startswith("alpha") or ".theta" in coordinate
+    return ("rad" if angle else "m") + ("/s" if kind == "qd" else "")
+
+
+def header_names(columns) -> list[str]:
+    """Return the header's names: 'name (unit)', the stage column as its name."""
+    return [f"{c} ({column_unit(c)})" if column_unit(c) else c for c in columns]
 
 
 class StepCsv:
@@ -75,7 +102,7 @@ class StepCsv:
         self._options = pyarrow.csv.WriteOptions(include_header=False, quoting_style="none")
         self.rows = 0
         self._fh = open(path, "wb")
-        self._fh.write((",".join(self.columns) + "\n").encode("utf-8"))
+        self._fh.write((",".join(header_names(self.columns)) + "\n").encode("utf-8"))
 
     def write_sample(self, s: Sample) -> None:
         """Append one state's row (t = 0, the instant of the lock)."""

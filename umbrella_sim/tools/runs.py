@@ -4,7 +4,9 @@ A recorded run as umbrella_compare reads it: its signals, figures, shapes and wa
 ``load_run`` reads one segment of a recording (live or offline) into a ``Run``: the joint
 angles and rate, the tip deflection, the stresses, the energy balance, the deformed shapes
 of its markers, the exact lock instant and the summary figures the recording holds;
-``physics_run`` re-runs the segment for its signals at every physics step.
+``physics_run`` re-runs the segment for its signals at every physics step;
+``default_window`` is the span the plots show unless told; ``thesis_figures`` are the
+thesis's figures (Hu, McGill 2006, ch. 6) for a run of its data.
 """
 from __future__ import annotations
 
@@ -16,6 +18,8 @@ import os
 import numpy as np
 
 from ..bag.reader import LogError, read_log
+from ..core.model import shape_abscissae
+from ..core.params import UmbrellaParams
 from ..core.summary import (deploy_start_of, mesh_resolution, relative_drift, stage2_figures,
                             validity_warnings)
 from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_figures,
@@ -34,8 +38,50 @@ RIGID_MODELS = ("rigid", "rigid-fe")
 
 
 #: the shapes plot draws the largest elastic displacement of a stage at most this fraction
-#: of the leaf length l1 + l2: --magnification is reduced to it (the legend says by how much)
+#: of the leaf length l1 + l2: --magnification is reduced to it (the title says to what)
 SHAPE_DISPLACEMENT_LIMIT = 0.2
+
+#: the plots' default window: the deployment and this many periods of the locked frame's
+#: first mode after the lock (with the thesis's data: t = 0 .. 0.6 s)
+WINDOW_PERIODS = 8
+
+#: Table 6.1 (deformable FEA, rigid FEA) and the V0 = -0.2 figures quoted in ch. 6
+THESIS_TABLE_6_1 = {-0.5: (0.09040, 0.09033), -1.0: (0.04525, 0.04517), -2.0: (0.02343, 0.02259)}
+THESIS_V02 = {"deploy_time": 0.2259, "tip_deflection_max": 0.665e-3,
+              "tip_deflection_max_time": 0.08, "stage2_tip_amplitude": 0.060,
+              "stage2_tip_period": 0.05}
+#: the parameters that are the thesis's data (its figures apply to a run only with these)
+THESIS_DATA = ("l1", "l2", "l3", "section_height", "area", "second_moment_of_area",
+               "youngs_modulus", "density", "alpha0", "alpha_deployed", "sleeve_force",
+               "damping_ratio")
+
+
+def thesis_figures(params: dict) -> dict:
+    """
+    Return the thesis's figures for a run of these parameters ({} where it has none).
+
+    Table 6.1's deployment times at V0 = -0.5, -1, -2 m/s (deploy_time_deformable_fea,
+    deploy_time_rigid_fea) and the V0 = -0.2 m/s figures (THESIS_V02's names; of them a
+    rigid model gets the deployment time only), for a run of the thesis's data (THESIS_DATA
+    as the defaults; any model, mesh and step).
+    """
+    thesis = UmbrellaParams()
+    for name in THESIS_DATA:
+        try:
+            if not math.isclose(float(params[name]), float(getattr(thesis, name)),
+                                rel_tol=1e-9, abs_tol=1e-12):
+                return {}
+        except (KeyError, TypeError, ValueError):
+            return {}
+    v0 = params.get("v0")
+    if v0 in THESIS_TABLE_6_1:
+        deformable, rigid = THESIS_TABLE_6_1[v0]
+        return {"deploy_time_deformable_fea": deformable, "deploy_time_rigid_fea": rigid}
+    if v0 != -0.2:
+        return {}
+    if params.get("model") in RIGID_MODELS:       # (its tip and stresses are not elastic)
+        return {"deploy_time": THESIS_V02["deploy_time"]}
+    return dict(THESIS_V02)
 
 
 @dataclass
@@ -72,6 +118,7 @@ class Run:
     deploy_start: float | None = 0.0     # outputs.deploy_start of the recorded run
     segment: int | None = None           # a segment before the log's last (its own record)
     ended_early: str | None = None       # the recording's write error, if it stopped on one
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def deploy_time(self) -> float | None:
@@ -91,16 +138,42 @@ class Run:
 
         The elastic part is re-scaled from the recorded
         marker magnification to another one (undeformed frames from the joint angles).
+        Each body's recorded points are its nodes and, in a recording since the markers
+        draw each element's cubic, points evenly between them (drawn_abscissae).
         """
         tm, leaf, link = min(self.shapes, key=lambda s: abs(s[0] - t))
-        if self.leaf_node_x is None or self.magnification <= 0:
+        leaf_x = drawn_abscissae(self.leaf_node_x, len(leaf))
+        link_x = drawn_abscissae(self.link_node_x, len(link))
+        if leaf_x is None or link_x is None or self.magnification <= 0:
             return tm, leaf, link
         a1 = np.interp(tm, self.t, self.alpha1)
         a2 = np.interp(tm, self.t, self.alpha2)
-        leaf_u = np.outer(self.leaf_node_x, [math.cos(a1), math.sin(a1)])
-        link_u = link[0] + np.outer(self.link_node_x, [math.cos(a2), math.sin(a2)])
+        leaf_u = np.outer(leaf_x, [math.cos(a1), math.sin(a1)])
+        link_u = link[0] + np.outer(link_x, [math.cos(a2), math.sin(a2)])
         scale = magnification / self.magnification
         return tm, leaf_u + scale * (leaf - leaf_u), link_u + scale * (link - link_u)
+
+    def nodes(self, points: np.ndarray, body: str) -> np.ndarray:
+        """Return the nodes among a body's drawn points (all of them if not known)."""
+        node_x = self.leaf_node_x if body == "leaf" else self.link_node_x
+        if drawn_abscissae(node_x, len(points)) is None:
+            return points
+        return points[::(len(points) - 1) // (len(node_x) - 1)]
+
+    def locked_period(self) -> float | None:
+        """Return the period (s) of the locked frame's first mode, of the run's parameters."""
+        from ..core.model import UmbrellaModel
+        from ..core.params import recorded_params
+
+        if "locked_period" not in self._cache:
+            try:
+                omega = UmbrellaModel(recorded_params(self.params)).locked_modes[0]
+                omega = omega[omega > 0]
+            except (ValueError, KeyError, TypeError, np.linalg.LinAlgError):
+                omega = []
+            self._cache["locked_period"] = (float(2 * math.pi / omega[0]) if len(omega)
+                                            else None)
+        return self._cache["locked_period"]
 
     def figures(self) -> dict:
         """
@@ -150,6 +223,40 @@ class Run:
                                      stage2_resolution=mesh_resolution(self.params, step))
         except (KeyError, TypeError):
             return []
+
+
+def drawn_abscissae(node_x, n_points: int) -> np.ndarray | None:
+    """
+    Return the body abscissae of a drawn shape of n_points over these nodes, or None.
+
+    Each element in the same number of equal pieces (core.model.shape_abscissae): one
+    (the nodes) in recordings made before the markers drew each element's cubic.
+    """
+    if node_x is None or len(node_x) < 2:
+        return None
+    per, rest = divmod(n_points - 1, len(node_x) - 1)
+    return shape_abscissae(node_x, per) if per >= 1 and not rest else None
+
+
+def default_window(runs: list[Run]) -> tuple[float, float]:
+    """
+    Return the span (t0, t1) the plots show unless told (--window).
+
+    Per run: from the start of its deployment (less a tenth of it, when it starts after
+    t = 0) to WINDOW_PERIODS periods of the locked frame's first mode after its lock,
+    within what it recorded; a run that never locked, all of it.  The union of the runs'.
+    """
+    spans = []
+    for r in runs:
+        first, last = float(r.t[0]), float(r.t[-1])
+        if r.lock_time is None:
+            spans.append((first, last))
+            continue
+        start = first if r.deploy_start is None else max(first, r.deploy_start)
+        period = r.locked_period() or (r.figures().get("stage2_tip_period") or 0.0)
+        t1 = r.lock_time + max(WINDOW_PERIODS * period, r.lock_time - start)
+        spans.append((max(first, start - 0.1 * (r.lock_time - start)), min(last, t1)))
+    return min(s[0] for s in spans), max(s[1] for s in spans)
 
 
 def _series(log, topic, fn, segment, width: int, stride: int = 1):
@@ -284,9 +391,9 @@ def _segment_mesh(log, params: dict):
     return np.array(model.leaf.node_x), np.array(model.link.node_x)
 
 
-def physics_run(path: str, segment: int = 0) -> dict:
+def physics_run(path: str, segment: int = 0, until: float | None = None) -> dict:
     """Return the signals of one log's segment at every physics step (a re-run of it)."""
     from .replay import physics_series
 
     log = read_log(path)
-    return physics_series(log, log.segment(segment))
+    return physics_series(log, log.segment(segment), until)
