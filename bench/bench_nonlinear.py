@@ -15,21 +15,25 @@
 # limitations under the License.
 
 """
-Real-time factor of the geometrically nonlinear and the damped models.
+Real-time factor of the geometrically exact and the damped models.
 
-Real-time factor of the geometrically nonlinear model (flexible-nonlinear) and of the damped
-linear one, beside the linear flexible model (simulated seconds per wall second, one process).
+Real-time factor of the geometrically exact model (flexible-nonlinear: co-rotational beams)
+and of the damped linear one, beside the linear flexible model (simulated seconds per wall
+second, one process).
 
 V0 = -0.2, through the lock to t = 1.0 s, at the default (accuracy-chosen) time step, in
 blocks of 1 ms of simulated time through UmbrellaSimulator.advance (the compiled loop with
 every step's outputs, what the node pays), best of --repeat runs; us/step and the CPU
 real-time factor from process time, beside the wall-clock one; each block builds the
 Sample of its last step, as a publication does.  Target: >= 5x at N = 4 for
-flexible-nonlinear.  All four cases run on the compiled kernel (the nonlinear and
-damped ones with the elastic law of _kernel_nonlinear.c attached); UMBRELLA_SIM_KERNEL=numpy
-gives the numpy reference.  The machine is shared, so figures are noisy.
+flexible-nonlinear (at V0 = -0.2; --v0 -1 -2 prints the large-motion cost beside it: more
+Newton iterations a step where the frame swings and buckles).  All four cases run on the
+compiled kernel (the nonlinear and damped ones with the elastic law of _kernel_nonlinear.c
+attached); UMBRELLA_SIM_KERNEL=numpy gives the numpy reference.  The machine is shared, so
+figures are noisy.
 
     python bench/bench_nonlinear.py [--meshes 1 2 4 8] [--repeat 2] [--duration 1.0]
+                                    [--v0 -0.2 -1 -2]
 """
 import argparse
 import os
@@ -45,6 +49,10 @@ from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
 TARGETS = {("flexible-nonlinear", 4): 5.0}
 CASES = (("flexible", 0.0), ("flexible", 0.02), ("flexible-nonlinear", 0.0),
          ("flexible-nonlinear", 0.02))
+
+
+class RunStopped(Exception):
+    """A benchmarked run that ended in a fault (e.g. a fibre turned 90 deg at V0 = -2, N = 1)."""
 
 
 def one_run(params, duration):
@@ -63,7 +71,7 @@ def one_run(params, duration):
         block = sim.advance(per_block)
         block.last                            # the Sample a publication carries
         if block.error:
-            raise SystemExit(f"{params.model}: {block.error}")
+            raise RunStopped(f"stopped at t = {sim.time:.4f} s: {block.error.split(': ', 1)[-1]}")
         if at_lock is None and sim.stage == Stage.LOCKED:
             at_lock = (integ.iterations, sim.steps)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -81,35 +89,51 @@ def main():
     ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8])
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--duration", type=float, default=1.0)
-    ap.add_argument("--time-step", type=float, default=1e-4)
+    ap.add_argument("--time-step", type=float, default=0.0,
+                    help="s; 0 (default): the step chosen for each model and mesh "
+                         "(step_rule.physics_step_of)")
+    ap.add_argument("--v0", type=float, nargs="+", default=[-0.2],
+                    help="initial sleeve velocities (m/s); the target is V0 = -0.2's")
     args = ap.parse_args()
-    print(f"V0 = -0.2, t = 0 -> {args.duration:g} s through the lock, h = {args.time_step:g} s, "
+    print(f"V0 = {', '.join(f'{v:g}' for v in args.v0)}, t = 0 -> {args.duration:g} s through "
+          f"the lock, h = {f'{args.time_step:g} s' if args.time_step else 'chosen per mesh'}, "
           f"best of {args.repeat}, 1 ms blocks; loadavg {os.getloadavg()[0]:.2f} on "
           f"{os.cpu_count()} CPUs")
     print("newton/step 1|2: Newton iterations per step in stage 1 (deploying) | stage 2 (locked)")
     print("RTF = simulated s per second (CPU: process time, what the step costs; wall: what a "
           "loaded machine gave)")
-    print(f"{'model':>19} {'zeta':>5} {'N':>3} {'dofs':>5} {'backend':>8} {'newton/step 1|2':>15} "
-          f"{'us/step':>8} {'RTF cpu':>8} {'RTF wall':>9} {'target':>9}")
-    for n in args.meshes:
-        for model, zeta in CASES:
-            p = UmbrellaParams(v0=-0.2, model=model, damping_ratio=zeta, elements_per_segment=n,
-                               time_step=args.time_step)
-            walls, cpus = [], []
-            for _ in range(args.repeat):
-                wall, cpu, sim, its1, its2 = one_run(p, args.duration)
-                walls.append(wall)
-                cpus.append(cpu)
-            integ = sim.engine.integrator
-            us_step = 1e6 * min(cpus) / sim.steps
-            rtf = args.duration / min(cpus)
-            rtf_wall = args.duration / min(walls)
-            target = TARGETS.get((model, n))
-            verdict = ("" if target is None
-                       else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}")
-            print(f"{model:>19} {zeta:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} "
-                  f"{its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x {rtf_wall:>8.2f}x "
-                  f"{verdict:>9}")
+    print(f"{'model':>19} {'zeta':>5} {'V0':>5} {'N':>3} {'dofs':>5} {'backend':>8} "
+          f"{'h (us)':>6} {'newton/step 1|2':>15} {'us/step':>8} {'RTF cpu':>8} "
+          f"{'RTF wall':>9} {'target':>9}")
+    for v0 in args.v0:
+        for n in args.meshes:
+            for model, zeta in CASES:
+                bench_case(args, v0, n, model, zeta)
+
+
+def bench_case(args, v0, n, model, zeta):
+    """Run one case --repeat times and print its line."""
+    p = UmbrellaParams(v0=v0, model=model, damping_ratio=zeta, elements_per_segment=n,
+                       time_step=args.time_step)
+    walls, cpus = [], []
+    for _ in range(args.repeat):
+        try:
+            wall, cpu, sim, its1, its2 = one_run(p, args.duration)
+        except RunStopped as stopped:
+            print(f"{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {stopped}")
+            return
+        walls.append(wall)
+        cpus.append(cpu)
+    integ = sim.engine.integrator
+    us_step = 1e6 * min(cpus) / sim.steps
+    rtf = args.duration / min(cpus)
+    rtf_wall = args.duration / min(walls)
+    target = TARGETS.get((model, n)) if v0 == -0.2 else None
+    verdict = ("" if target is None
+               else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}")
+    print(f"{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} "
+          f"{sim.h * 1e6:>6.3g} {its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x "
+          f"{rtf_wall:>8.2f}x {verdict:>9}")
 
 
 if __name__ == "__main__":

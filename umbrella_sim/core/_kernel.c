@@ -1240,8 +1240,9 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
     memcpy(lam, lam0, sizeof(double) * nc);
     double last_norm = INFINITY, step_norm = 0.0;
     int converged = 0;
-    /* K, or with a law its bending part Kb (linear in q; the law adds the rest) */
-    const double *k_band = law ? law->d.kb_band : m->k_band;
+    /* K, or with a law its k_band (K for the linear strain, zero for the co-rotational beam,
+     * whose G_U the law adds) */
+    const double *k_band = law ? law->d.k_band : m->k_band;
     const int *ei = m->elastic_idx;
     int ne = m->n_elastic;
     if (!x->q0_products) {
@@ -1260,6 +1261,8 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         p0s = x->pc_sp0;
     }
     for (int i = 0; i < n; i++) q[i] = q0[i] + h * w0[i];   /* predictor: w0 held */
+    /* a predictor outside the law's coordinates (a slope |theta| >= 1) starts from q0 */
+    if (nonlinear_law && !elastic_admissible(law, q)) memcpy(q, q0, sizeof(double) * n);
     for (it = 1; it <= max_iter; it++) {
         for (int i = 0; i < n; i++) {
             dq[i] = q[i] - q0[i];
@@ -1465,18 +1468,24 @@ void umbrella_momentum(Ctx *x, const double *q, const double *v, double *p) {
 }
 
 /* ------------------------------------------------------------------- outputs */
-/* Membrane stress of the nonlinear law at q (per element, 2 stress points each: leaf, then
- * link), or NULL for the linear model, whose fibre stress is bending only. */
+/* The fibre stress of the nonlinear law at q, top of every stress point then bottom (the
+ * co-rotational beam's E (eps -/+ c kappa) in each element's rotated frame), or NULL for the
+ * linear strain, whose fibre stress is the Model's linear rows. */
 static const double *membrane_stress(const Ctx *x, const double *q) {
     if (!(x->law && x->law->d.nonlinear)) return NULL;
-    elastic_membrane_stress(x->law, q);
+    elastic_fibre_stress(x->law, q);
     return x->law->el_stress;
 }
 
-/* Top and bottom fibre stress at stress point k (the section's bending stress,
- * plus the membrane stress of the nonlinear law when there is one). */
-static void fibre_stress(const Model *m, const double *q, const double *membrane, int k,
+/* Top and bottom fibre stress at stress point k: the law's (law_sig, membrane_stress), or the
+ * section's linear rows. */
+static void fibre_stress(const Model *m, const double *q, const double *law_sig, int k,
                          double *top, double *bot) {
+    if (law_sig) {
+        *top = law_sig[k];
+        *bot = law_sig[m->n_stress_leaf + m->n_stress_link + k];
+        return;
+    }
     int W = m->stress_width;
     double t = 0.0, b = 0.0;
     for (int j = 0; j < W; j++) {
@@ -1484,25 +1493,26 @@ static void fibre_stress(const Model *m, const double *q, const double *membrane
         t += m->stress_top[k * W + j] * qj;
         b += m->stress_bottom[k * W + j] * qj;
     }
-    if (membrane) { t += membrane[k / 2]; b += membrane[k / 2]; }
     *top = t;
     *bot = b;
 }
 
 /* Fibre stress at every stress point of (q, v) (top of each point, then bottom: sig[k],
- * sig[npts + k]) and its rate (rate, same order; the fibre stress is linear in q, plus the
- * nonlinear law's membrane stress, quadratic) */
+ * sig[npts + k]) and its rate (rate, same order): the nonlinear law's, or the linear rows of
+ * q and of v */
 static void fibre_stress_and_rate(Ctx *x, const double *q, const double *v, double *sig,
                                   double *rate) {
     const Model *m = x->m;
     int npts = m->n_stress_leaf + m->n_stress_link;
-    const double *membrane = membrane_stress(x, q), *membrane_rate = NULL;
-    if (membrane) {
-        elastic_membrane_stress_rate(x->law, q, v);
-        membrane_rate = x->law->el_stress_rate;
+    const double *law_sig = membrane_stress(x, q);
+    if (law_sig) {
+        elastic_fibre_stress_rate(x->law, q, v);
+        memcpy(sig, law_sig, sizeof(double) * 2 * npts);
+        memcpy(rate, x->law->el_stress_rate, sizeof(double) * 2 * npts);
+        return;
     }
     int W = m->stress_width;
-    for (int k = 0; k < npts; k++) {   /* fibre_stress of q and of v in one pass */
+    for (int k = 0; k < npts; k++) {   /* the linear rows of q and of v in one pass */
         const int *idx = m->stress_idx + (size_t)k * W;
         const double *st = m->stress_top + (size_t)k * W, *sb = m->stress_bottom + (size_t)k * W;
         double t = 0.0, b = 0.0, rt = 0.0, rb = 0.0;
@@ -1512,10 +1522,6 @@ static void fibre_stress_and_rate(Ctx *x, const double *q, const double *v, doub
             b += sb[j] * qj;
             rt += st[j] * vj;
             rb += sb[j] * vj;
-        }
-        if (membrane) {
-            t += membrane[k / 2]; b += membrane[k / 2];
-            rt += membrane_rate[k / 2]; rb += membrane_rate[k / 2];
         }
         sig[k] = t; sig[npts + k] = b;
         rate[k] = rt; rate[npts + k] = rb;

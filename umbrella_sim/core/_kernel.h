@@ -36,7 +36,7 @@
 
 /* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
  * reordered, a function's arguments changed). */
-#define UMBRELLA_ABI_VERSION 2
+#define UMBRELLA_ABI_VERSION 3
 
 /* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
  * exported. */
@@ -185,23 +185,28 @@ typedef struct {
     double *out;
 } SampleCall;
 
-/* The elastic law of _kernel_nonlinear.c (nonlinear.CompiledElasticLaw builds it). */
+/* The elastic law of _kernel_nonlinear.c (nonlinear.CompiledElasticLaw builds it): the linear
+ * strain with Kelvin-Voigt damping (nonlinear = 0: U = 1/2 q.K q, C = beta K), or the
+ * co-rotational beam (nonlinear = 1: beam_strain.CorotationalStrainEnergy, element by element
+ * on its 6 coordinates (u, v, theta of its two nodes): chord d = (l_e + u_b - u_a, v_b - v_a),
+ * section angles asin(theta), D = diag(EA l_e, EI / l_e [[4, 2], [2, 4]]), fibre stress
+ * E (eps -/+ c kappa)). */
 typedef struct {
     int n;                   /* coordinates */
     int ne;                  /* elastic coordinates (Model.n_elastic) */
     int bw;                  /* half bandwidth of the elastic band (Model.bw) */
     int n_el;                /* elements, leaf then link */
-    int n_gauss;             /* Gauss points per element */
-    int nonlinear;           /* 1: eps = mean(u' + v'^2/2); 0: eps = u' */
+    int nonlinear;           /* 0: the linear strain; 1: the co-rotational beam */
     double beta;             /* damping: C = beta B^T D B (s); 0: undamped */
-    double youngs_modulus;   /* E (Pa), for the membrane part of the fibre stress */
+    double youngs_modulus;   /* E (Pa), for the fibre stress */
     const int *elastic_idx;  /* ne: q index of elastic position p */
-    const double *kb_band;   /* ne x (2 bw + 1): bending stiffness (K without its axial part) */
-    const int *el_q;         /* n_el x 6: q index of the element's coordinates, -1 if none */
+    const double *k_band;    /* ne x (2 bw + 1): K (nonlinear = 0), zero (nonlinear = 1: U is
+                              * all the law's) */
+    const int *el_q;         /* n_el x 6: q index of u_a, v_a, theta_a, u_b, v_b, theta_b, -1
+                              * where the frame fixes one */
     const int *el_pos;       /* n_el x 6: their elastic positions, -1 if none */
-    const double *du, *dv;   /* n_el x n_gauss x 6: u', v' at the Gauss points */
-    const double *mean_w;    /* n_el x n_gauss: Gauss weight / l_e (element mean) */
-    const double *ea_l;      /* n_el: EA l_e */
+    const double *el_length; /* n_el: l_e (m) */
+    double ea, ei, fibre;    /* EA (N), EI (N m^2), fibre distance c (m) */
 } ElasticData;
 
 /* Held by Python only as pointers: the stepping context (every work buffer, allocated once)
@@ -273,9 +278,12 @@ UMBRELLA_API int umbrella_find_crossing(Ctx *x, int rigid, const double *q0, con
                                         double *dt_out, double *residual, int *iterations);
 
 /* The elastic law of d (which must outlive it), or NULL (out of memory); its free; the
- * damping dissipation dq . C(q_m) dq / h of its last step (J). */
+ * damping dissipation dq . C(q_m) dq / h of its last step (J); the co-rotational beam's
+ * largest |theta| = |sin psi| (a section's turn from its body frame) over the states it
+ * has stepped from or ended at (0 for the linear strain). */
 UMBRELLA_API ElasticLaw *elastic_new(const ElasticData *d);
 UMBRELLA_API void elastic_free(ElasticLaw *law);
 UMBRELLA_API double elastic_last_dissipation(const ElasticLaw *law);
+UMBRELLA_API double elastic_max_slope(const ElasticLaw *law);
 
 #endif

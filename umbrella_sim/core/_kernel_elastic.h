@@ -13,21 +13,22 @@
 // limitations under the License.
 
 /*
- * Elastic law of the compiled step for the models that nonlinear.py builds: the von Karman
- * (element-mean membrane strain) or linear strain energy U(q), its average-vector-field (AVF)
- * discrete gradient and tangent, and the Kelvin-Voigt damping C(q) = beta B(q)^T D B(q).
+ * Elastic law of the compiled step for the models that nonlinear.py builds: the co-rotational
+ * (geometrically exact) beam of flexible-nonlinear, its energy-consistent discrete gradient,
+ * Newton matrix and fibre stress, or the linear strain U = 1/2 q.K q of a damped flexible
+ * model; and the Kelvin-Voigt damping C(q) = beta B(q)^T D B(q) of either.
  * Internal to the library (its interface with Python: _kernel.h).
  * Implemented in _kernel_nonlinear.c; _kernel.c calls it through the hooks of step() and
  * output_row() when a law is attached (umbrella_set_law), else it uses its constant K.
- * The arithmetic is that of nonlinear.StrainEnergy / ElasticMidpointDAE (the numpy reference
- * the tests compare against step by step).
+ * The arithmetic is that of beam_strain.CorotationalStrainEnergy / LinearStrainEnergy and
+ * ElasticMidpointDAE (the numpy reference the tests compare against step by step).
  */
 #ifndef UMBRELLA_KERNEL_ELASTIC_H
 #define UMBRELLA_KERNEL_ELASTIC_H
 
 #include "_kernel.h"
 
-/* Newton contraction rate above which the iteration matrix is re-factored (nonlinear strain;
+/* Newton contraction rate above which the iteration matrix is re-factored (nonlinear law;
  * nonlinear.REFRESH_RATE) */
 #define ELASTIC_REFRESH_RATE 0.1
 /* a step's last iteration matrix goes on to the next step; one factored this many steps
@@ -39,36 +40,43 @@
 struct ElasticLaw {
     ElasticData d;
     double *band;            /* ne x (2 bw + 1): the law's part of the iteration matrix */
-    double *qa, *qb, *g;     /* n, n, n_el x 6: work */
-    double *el_stress;       /* n_el: membrane stress of the last elastic_membrane_stress */
-    double *el_stress_rate;  /* n_el: its rate, of the last elastic_membrane_stress_rate */
+    double *qa, *qb;         /* n, n: work */
+    double *el_stress;       /* the fibre stress of the last elastic_fibre_stress: top of
+                              * every stress point (two an element, leaf then link), then
+                              * bottom (4 n_el; the co-rotational beam) */
+    double *el_stress_rate;  /* its rate, of the last elastic_fibre_stress_rate (the same
+                              * layout) */
     double *q_base, *lam_base, *dx;   /* line search: n, ne + 4, n + ne + 4 */
     double last_dissipation; /* dq . C(q_m) dq / h of the last elastic_dissipation (J) */
+    double max_slope;        /* the largest |theta| of the states cr_step_start has seen */
     double band_h;           /* step of the band (the linear strain's band is constant) */
     double *energy_q, energy; /* the last elastic_energy: q (n) and U(q) */
-    double *du_mean;         /* n_el x 6: sum_g w_g / l_e u'_g (d eps_e / dq of the linear strain) */
-    double *g_mat;           /* n_el x 6 x 6: sum_g w_g / l_e v'_g v'_g^T (0: linear strain), so
-                              * eps_e = du_mean . x + x . G x / 2 on the element's coordinates x */
-    double *start_q;         /* n: the q0 of the start terms below */
-    double *start_gx;        /* n_el x 6: G x0 at the start of the step (x0: q0's element coords) */
-    double *start_eps;       /* n_el x 2: du_mean . x0, x0 . G x0 */
-    int energy_valid, start_valid;
+    /* the co-rotational beam: per element z = (d, t_a, t_b) and s = (eps, tb_a, tb_b),
+     * 9 doubles, at start_q (the q0 of a step, or the q of the last energy or stress) and at
+     * cur_q (the q1 of the last elastic_force) */
+    double *start_q, *cr_start, *cur_q, *cr_cur;
+    int energy_valid, start_valid, cur_valid;
 };
 
-/* out[i] at the elastic q indices += the AVF gradient of U between q0 and q1 without its
- * bending part + C(q_m) (q1 - q0) / h.  The bending part Kb q_m is the caller's: out holds it
- * on entry (Kb is linear: the band products of the step), and kb_dq = Kb (q1 - q0). */
+/* out[i] at the elastic q indices += the discrete gradient G_U of U between q0 and q1 less
+ * what the caller holds of it + C(q_m) (q1 - q0) / h.  out holds K q_m on entry (the band
+ * products of the step with ElasticData.k_band: all of G_U for the linear strain, zero for
+ * the co-rotational beam), and k_dq = K (q1 - q0). */
 void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h,
-                   const double *kb_dq, double *out);
-/* law->band = h^2/2 d AVF / d q1 + h/2 C(q_m) */
+                   const double *k_dq, double *out);
+/* 1 if q is inside the law's coordinates (the co-rotational beam: every slope |theta| < 1,
+ * a section turned less than 90 deg from its body frame), else 0 */
+int elastic_admissible(const ElasticLaw *law, const double *q);
+/* law->band = h^2/2 (the Newton matrix's d G_U / d q1) + h/2 C(q_m) */
 void elastic_iteration_band(ElasticLaw *law, const double *q0, const double *q1, double h);
-/* U(q); kbq = Kb q at the elastic q indices if the caller has it, else NULL */
-double elastic_energy(ElasticLaw *law, const double *q, const double *kbq);
+/* U(q); kq = K q at the elastic q indices if the caller has it, else NULL */
+double elastic_energy(ElasticLaw *law, const double *q, const double *kq);
 /* dq . C(q_m) dq / h, also kept in law->last_dissipation */
 double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, double h);
-/* law->el_stress[e] = E (1/l_e) int v'^2/2 dx (0 with the linear strain) */
-void elastic_membrane_stress(ElasticLaw *law, const double *q);
-/* law->el_stress_rate[e] = E (1/l_e) int v' v'_t dx, the rate of that stress at (q, v) */
-void elastic_membrane_stress_rate(ElasticLaw *law, const double *q, const double *v);
+/* law->el_stress: the co-rotational beam's fibre stress at q (nothing for the linear strain,
+ * whose stress is the Model's linear rows) */
+void elastic_fibre_stress(ElasticLaw *law, const double *q);
+/* law->el_stress_rate: its rate at (q, v) */
+void elastic_fibre_stress_rate(ElasticLaw *law, const double *q, const double *v);
 
 #endif

@@ -13,23 +13,26 @@
 // limitations under the License.
 
 /*
- * Elastic law of the compiled step (see _kernel_elastic.h): the strain energy of
- * nonlinear.StrainEnergy and the damping of NonlinearUmbrellaModel.damping_matrix, element
- * by element on the elastic band of _kernel.c.
+ * Elastic law of the compiled step (see _kernel_elastic.h).
  *
- *   U = 1/2 q.Kb q + 1/2 sum_e EA l_e eps_e^2,   eps_e = sum_g (w_g / l_e)(u'_g + v'_g^2 / 2)
+ * The co-rotational beam (beam_strain.CorotationalStrainEnergy), element by element in its
+ * body's frame on its coordinates x = (u_a, v_a, theta_a, u_b, v_b, theta_b):
+ * z = (d_x, d_y, theta_a, theta_b) with the chord d = (l + u_b - u_a, v_b - v_a), and
+ *   lambda = |d| / l, beta = atan2(d), tb_i = wrap(asin(theta_i) - beta),
+ *   eps = lambda - 1 + (2 tb_a^2 - tb_a tb_b + 2 tb_b^2) / 30,   s = (eps, tb_a, tb_b),
+ * U_e = 1/2 s.D s, D = diag(EA l, EI / l [[4, 2], [2, 4]]).  Over a step, the discrete
+ * gradient L^T B~^T D (s0 + s1) / 2 with B~ (z1 - z0) = s1 - s0 (lambda by (d0 + d1) / ((|d0| +
+ * |d1|) l), beta by Gonzalez's midpoint discrete gradient, asin(theta) by its secant, Q at the
+ * mean angles), so that dq . G = U(q1) - U(q0) to round-off; s1 from s0 and the accurate angle
+ * increments of the step (an iteration evaluates no angle itself); the Newton matrix
+ * 1/2 L^T [J^T D J + sum_k (D s_mean)_k H_k] L at z_m = (z0 + z1) / 2 (J = ds/dz, H_k the Hessian
+ * of s_k there, Q's pieces at s_mean); the damping C(q_m) = beta L^T J^T D J L at q_m with its
+ * own strains; the fibre stress E (eps -/+ c kappa) at both ends of each element,
+ * kappa = (-4 tb_a - 2 tb_b) / l and (2 tb_a + 4 tb_b) / l.  The same formulas as the numpy
+ * reference.
  *
- * (Kb: the bending stiffness; v'^2 dropped with the linear strain, then U = 1/2 q.K q).
- * Gradient Kb q + sum_g EA w_g eps_e (du_g + v'_g dv_g); tangent Kb + EA l_e g g^T
- * + sum_g EA w_g eps_e dv_g dv_g^T with g = d eps_e / dq; the material tangent (no
- * geometric part) times beta is the Kelvin-Voigt damping C(q).  AVF gradient over a step:
- * 2-point Gauss in s on [0, 1] (exact: the integrand is cubic in s).
- *
- * The element mean over the Gauss points does not depend on the state: elastic_new sums it
- * once into du_mean = sum_g (w_g / l_e) u'_g and G = sum_g (w_g / l_e) v'_g v'_g^T, so that
- * eps_e = du_mean . x + x . G x / 2, g = du_mean + G x, the geometric tangent EA l_e eps_e G
- * and the membrane stress E x . G x / 2 (x: the element's coordinates) cost one 6 x 6
- * product per element instead of a pass over the Gauss points.
+ * The linear strain (a damped flexible model): U = 1/2 q.K q, C = beta K, whose products the
+ * caller's band products with ElasticData.k_band = K already hold.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -37,17 +40,21 @@
 
 #include "_kernel_elastic.h"
 
-#define EDOF 6      /* coordinates of an element: two nodes x (u, v, theta) */
+#define EDOF 6      /* coordinates of an element: u, v, theta of its two nodes */
+#define CR_Z 4      /* its chord and nodal slopes z = (d_x, d_y, theta_a, theta_b) */
+#define CR_STATE 10 /* z, its strains s = (eps, tb_a, tb_b), and the angle increments (beta,
+                     * psi_a, psi_b) of the step to it (at a step's end) */
+/* z index and sign of each coordinate: z = off + L x */
+static const int Z_OF[EDOF] = {0, 1, 2, 0, 1, 3};
+static const double Z_SIGN[EDOF] = {-1.0, -1.0, 1.0, 1.0, 1.0, 1.0};
 
 ElasticLaw *elastic_new(const ElasticData *d) {
-    if (d->n_gauss < 1) return NULL;
     ElasticLaw *law = calloc(1, sizeof(ElasticLaw));
     if (!law) return NULL;
     law->d = *d;
     int w = 2 * d->bw + 1, nc = d->ne + 4;
-    size_t doubles = (size_t)d->ne * w + 4 * (size_t)d->n + (size_t)d->n_el * EDOF + d->n_el
-                     + nc + (size_t)(d->n + nc) + (size_t)d->n_el * (EDOF + EDOF * EDOF)
-                     + d->n + (size_t)d->n_el * (EDOF + 2) + d->n_el;
+    size_t doubles = (size_t)d->ne * w + 6 * (size_t)d->n + 8 * (size_t)d->n_el + nc
+                     + (size_t)(d->n + nc) + 2 * (size_t)d->n_el * CR_STATE;
     law->band = calloc(doubles, sizeof(double));
     if (!law->band) { free(law); return NULL; }
     double *p = law->band + (size_t)d->ne * w;
@@ -55,28 +62,15 @@ ElasticLaw *elastic_new(const ElasticData *d) {
     law->qb = p; p += d->n;
     law->q_base = p; p += d->n;
     law->energy_q = p; p += d->n;
-    law->band_h = -1.0;
-    law->g = p; p += (size_t)d->n_el * EDOF;
-    law->el_stress = p; p += d->n_el;
-    law->el_stress_rate = p; p += d->n_el;
+    law->start_q = p; p += d->n;
+    law->cur_q = p; p += d->n;
+    law->el_stress = p; p += 4 * (size_t)d->n_el;
+    law->el_stress_rate = p; p += 4 * (size_t)d->n_el;
     law->lam_base = p; p += nc;
     law->dx = p; p += d->n + nc;
-    law->du_mean = p; p += (size_t)d->n_el * EDOF;
-    law->g_mat = p; p += (size_t)d->n_el * EDOF * EDOF;
-    law->start_q = p; p += d->n;
-    law->start_gx = p; p += (size_t)d->n_el * EDOF;
-    law->start_eps = p;
-    for (int e = 0; e < d->n_el; e++)
-        for (int gp = 0; gp < d->n_gauss; gp++) {
-            size_t row = ((size_t)e * d->n_gauss + gp) * EDOF;
-            double mw = d->mean_w[(size_t)e * d->n_gauss + gp];
-            double *dm = law->du_mean + (size_t)e * EDOF, *gm = law->g_mat + (size_t)e * EDOF * EDOF;
-            for (int k = 0; k < EDOF; k++) {
-                dm[k] += mw * d->du[row + k];
-                if (d->nonlinear)
-                    for (int l = 0; l < EDOF; l++) gm[k * EDOF + l] += mw * d->dv[row + k] * d->dv[row + l];
-            }
-        }
+    law->cr_start = p; p += (size_t)d->n_el * CR_STATE;
+    law->cr_cur = p;
+    law->band_h = -1.0;
     return law;
 }
 
@@ -86,87 +80,13 @@ void elastic_free(ElasticLaw *law) {
     free(law);
 }
 
-/* eps_e = a + xgx / 2 for the coordinates q, with a = du_mean . x and xgx = x . G x (0 for
- * the linear strain); x: the element's coordinates, gx = G x (0 for the linear strain) */
-static double element_strain(const ElasticLaw *law, int e, const double *q, double *x, double *gx,
-                             double *a_out, double *xgx_out) {
-    const ElasticData *d = &law->d;
-    const int *iq = d->el_q + (size_t)e * EDOF;
-    const double *dm = law->du_mean + (size_t)e * EDOF, *gm = law->g_mat + (size_t)e * EDOF * EDOF;
-    for (int k = 0; k < EDOF; k++) x[k] = iq[k] >= 0 ? q[iq[k]] : 0.0;
-    double a = 0.0, xgx = 0.0;
-    if (!d->nonlinear) {   /* G = 0 */
-        for (int k = 0; k < EDOF; k++) { gx[k] = 0.0; a += dm[k] * x[k]; }
-    } else {
-        for (int k = 0; k < EDOF; k++) {
-            double s = 0.0;
-            for (int l = 0; l < EDOF; l++) s += gm[k * EDOF + l] * x[l];
-            gx[k] = s;
-            a += dm[k] * x[k];
-            xgx += x[k] * s;
-        }
-    }
-    if (a_out) { *a_out = a; *xgx_out = xgx; }
-    return a + 0.5 * xgx;
-}
-
-/* The start terms G x0, du_mean . x0 and x0 . G x0 of every element at q0, kept while q0
- * stays the same: the Newton iterations of a step share them, and the end of a step computes
- * them at q1 for its energy and membrane stress, which the next step then starts from. */
-static void step_start(ElasticLaw *law, const double *q0) {
-    const ElasticData *d = &law->d;
-    if (law->start_valid && memcmp(q0, law->start_q, sizeof(double) * d->n) == 0) return;
-    double x[EDOF];
-    for (int e = 0; e < d->n_el; e++) {
-        double *ce = law->start_eps + 2 * (size_t)e;
-        element_strain(law, e, q0, x, law->start_gx + (size_t)e * EDOF, &ce[0], &ce[1]);
-    }
-    memcpy(law->start_q, q0, sizeof(double) * d->n);
-    law->start_valid = 1;
-}
-
-/* Strain of element e along the step q0 + s (q1 - q0) at the two AVF points s = AVF_S[j]:
- * eps[j] and g_j = d eps / dq there (g: 2 x 6), from the start terms and one G dx
- * (eps(s) = du.x0 + s du.dx + (x0.G x0 + 2 s dx.G x0 + s^2 dx.G dx) / 2, g(s) = du + G x0
- * + s G dx: the same polynomial the Gauss points evaluate, without a G product per point) */
-static const double AVF_S[2] = {0.21132486540518713, 0.78867513459481287};  /* 1/2 -+ 1/(2 sqrt 3) */
-
-static void element_step_strain(const ElasticLaw *law, int e, const double *q0, const double *q1,
-                                double *eps, double *g) {
-    const ElasticData *d = &law->d;
-    const int *iq = d->el_q + (size_t)e * EDOF;
-    const double *dm = law->du_mean + (size_t)e * EDOF, *gm = law->g_mat + (size_t)e * EDOF * EDOF;
-    const double *gx0 = law->start_gx + (size_t)e * EDOF, *ce = law->start_eps + 2 * (size_t)e;
-    double dx[EDOF], gdx[EDOF], lin1 = 0.0, c1 = 0.0, c2 = 0.0;
-    for (int k = 0; k < EDOF; k++) dx[k] = iq[k] >= 0 ? q1[iq[k]] - q0[iq[k]] : 0.0;
-    for (int k = 0; k < EDOF; k++) {
-        double s = 0.0;
-        for (int l = 0; l < EDOF; l++) s += gm[k * EDOF + l] * dx[l];
-        gdx[k] = s;
-        lin1 += dm[k] * dx[k];
-        c1 += dx[k] * gx0[k];
-        c2 += dx[k] * s;
-    }
-    for (int j = 0; j < 2; j++) {
-        double t = AVF_S[j];
-        eps[j] = ce[0] + t * lin1 + 0.5 * (ce[1] + t * (2.0 * c1 + t * c2));
-        for (int k = 0; k < EDOF; k++) g[j * EDOF + k] = dm[k] + gx0[k] + t * gdx[k];
-    }
-}
-
-/* g = d eps_e / dq = du_mean + G x on the element's coordinates */
-static void element_strain_gradient(const ElasticLaw *law, int e, const double *gx, double *g) {
-    const double *dm = law->du_mean + (size_t)e * EDOF;
-    for (int k = 0; k < EDOF; k++) g[k] = dm[k] + gx[k];
-}
-
-/* x . Kb x */
-static double bending_quadratic(const ElasticData *d, const double *x) {
+/* x . K x on the elastic coordinates (K = ElasticData.k_band) */
+static double band_quadratic(const ElasticData *d, const double *x) {
     int ne = d->ne, bw = d->bw, w = 2 * bw + 1;
     double quad = 0.0;
     for (int p = 0; p < ne; p++) {
         int lo = p - bw < 0 ? 0 : p - bw, hi = p + bw >= ne ? ne - 1 : p + bw;
-        const double *r = d->kb_band + (size_t)p * w + bw - p;
+        const double *r = d->k_band + (size_t)p * w + bw - p;
         double s = 0.0;
         for (int j = lo; j <= hi; j++) s += r[j] * x[d->elastic_idx[j]];
         quad += x[d->elastic_idx[p]] * s;
@@ -174,196 +94,443 @@ static double bending_quadratic(const ElasticData *d, const double *x) {
     return quad;
 }
 
-/* y += scale * (grad U(q) - Kb q), the membrane part, at the elastic q indices */
-static void membrane_gradient(const ElasticLaw *law, const double *q, double scale, double *y) {
-    const ElasticData *d = &law->d;
-    double x[EDOF], gx[EDOF], g[EDOF];
-    for (int e = 0; e < d->n_el; e++) {
-        double eps = element_strain(law, e, q, x, gx, NULL, NULL);
-        element_strain_gradient(law, e, gx, g);
-        const int *iq = d->el_q + (size_t)e * EDOF;
-        double nw = scale * d->ea_l[e] * eps;
-        for (int k = 0; k < EDOF; k++)
-            if (iq[k] >= 0) y[iq[k]] += nw * g[k];
-    }
+/* ------------------------------------------------------------------ co-rotational beam */
+static const double CR_ARC = 1.0 / 30.0;
+
+static double wrap_angle(double a) {   /* a in (-pi, pi] (beam_strain.wrap_angle) */
+    const double pi = 3.141592653589793;
+    return a - 2.0 * pi * floor((a + pi) / (2.0 * pi));
 }
 
-/* band += scale * (tangent of U at q), or its material part (geometric = 0); without the
- * bending stiffness Kb, which the caller adds once */
-static void tangent_band(const ElasticLaw *law, const double *q, double scale, int geometric,
-                         double *band) {
-    const ElasticData *d = &law->d;
+/* x: the element's coordinates of q (0 where the frame fixes one); z of x, offset by the
+ * element's length (off = 1) or not (off = 0: the rate of z along a velocity) */
+static void cr_chords(const ElasticData *d, int e, const double *q, int off, double *z) {
+    const int *iq = d->el_q + (size_t)e * EDOF;
+    double x[EDOF];
+    for (int k = 0; k < EDOF; k++) x[k] = iq[k] >= 0 ? q[iq[k]] : 0.0;
+    z[0] = (off ? d->el_length[e] : 0.0) + (x[3] - x[0]);
+    z[1] = x[4] - x[1];
+    z[2] = x[2];
+    z[3] = x[5];
+}
+
+static void cr_strains_from(double lam, double ta, double tb, double *s) {
+    s[0] = lam - 1.0 + (2.0 * ta * ta - ta * tb + 2.0 * tb * tb) * CR_ARC;
+    s[1] = ta;
+    s[2] = tb;
+}
+
+static void cr_strains(const ElasticData *d, int e, const double *z, double *s) {
+    double beta = atan2(z[1], z[0]);
+    cr_strains_from(hypot(z[0], z[1]) / d->el_length[e], wrap_angle(asin(z[2]) - beta),
+                    wrap_angle(asin(z[3]) - beta), s);
+}
+
+/* z and s of element e at q into st (CR_STATE) */
+static void cr_state(const ElasticData *d, int e, const double *q, double *st) {
+    cr_chords(d, e, q, 1, st);
+    cr_strains(d, e, st, st + CR_Z);
+}
+
+/* The principal angle from w0 to w1, atan2(w0 x w1, w0 . w1) (beam_strain.angle_increment):
+ * for |tan| <= 1/16 (a step's increments) by the odd series of atan to t^15 (truncation
+ * below 1e-20 relative), else by atan2 */
+static double angle_increment(const double *w0, const double *w1) {
+    double y = w0[0] * w1[1] - w0[1] * w1[0], x = w0[0] * w1[0] + w0[1] * w1[1];
+    if (x > 0.0 && fabs(y) <= 0.0625 * x) {
+        double r = y / x, u = r * r;
+        return r * (1.0 - u * (1.0 / 3 - u * (1.0 / 5 - u * (1.0 / 7 - u * (1.0 / 9 - u * (1.0 / 11
+                    - u * (1.0 / 13 - u * (1.0 / 15))))))));
+    }
+    return atan2(y, x);
+}
+
+/* asin(t1) - asin(t0) = asin(t1 sqrt(1 - t0^2) - t0 sqrt(1 - t1^2))
+ * (beam_strain.section_angle_increment); a small argument by the series of asin to y^15 */
+static double section_angle_increment(double t0, double t1) {
+    double y = t1 * sqrt(1.0 - t0 * t0) - t0 * sqrt(1.0 - t1 * t1);
+    if (fabs(y) <= 0.0625) {
+        double u = y * y;
+        return y * (1.0 + u * (1.0 / 6 + u * (3.0 / 40 + u * (5.0 / 112 + u * (35.0 / 1152
+                    + u * (63.0 / 2816 + u * (231.0 / 13312 + u * (143.0 / 10240))))))));
+    }
+    return asin(y);
+}
+
+static void angle_gradient(const double *w, double *g) {
+    double r2 = w[0] * w[0] + w[1] * w[1];
+    g[0] = -w[1] / r2;
+    g[1] = w[0] / r2;
+}
+
+/* [[2xy, y^2 - x^2], [y^2 - x^2, -2xy]] / |w|^4 */
+static void angle_hessian(const double *w, double *h) {
+    double x = w[0], y = w[1], r4 = (x * x + y * y) * (x * x + y * y), off = (y * y - x * x) / r4;
+    h[0] = 2.0 * x * y / r4; h[1] = off; h[2] = off; h[3] = -2.0 * x * y / r4;
+}
+
+/* ds/dz (3 x 4, row-major) at z with the angles of s (Q's pieces) */
+static void cr_jacobian(const ElasticData *d, int e, const double *z, const double *s, double *jac) {
+    double gb[2];
+    angle_gradient(z, gb);
+    double ln = hypot(z[0], z[1]), le = d->el_length[e];
+    double *ja = jac + CR_Z, *jb = jac + 2 * CR_Z;
+    ja[0] = jb[0] = -gb[0];
+    ja[1] = jb[1] = -gb[1];
+    ja[2] = 1.0 / sqrt(1.0 - z[2] * z[2]); ja[3] = 0.0;
+    jb[2] = 0.0; jb[3] = 1.0 / sqrt(1.0 - z[3] * z[3]);
+    double qa = (4.0 * s[1] - s[2]) * CR_ARC, qb = (-s[1] + 4.0 * s[2]) * CR_ARC;
+    jac[0] = z[0] / (ln * le) + qa * ja[0] + qb * jb[0];
+    jac[1] = z[1] / (ln * le) + qa * ja[1] + qb * jb[1];
+    jac[2] = qa * ja[2];
+    jac[3] = qb * jb[3];
+}
+
+/* B~ in z (3 x 4) between the states st0, st1 (st1 with the step's angle increments) */
+static void cr_discrete_jacobian(const ElasticData *d, int e, const double *st0, const double *st1,
+                                 double *jac) {
+    const double *inc = st1 + CR_Z + 3;
+    double dw[2] = {st1[0] - st0[0], st1[1] - st0[1]};
+    double wm[2] = {0.5 * (st0[0] + st1[0]), 0.5 * (st0[1] + st1[1])}, gb[2];
+    angle_gradient(wm, gb);            /* Gonzalez in d: gb + (dbeta - gb.dw) dw / |dw|^2 */
+    double dd = dw[0] * dw[0] + dw[1] * dw[1];
+    double corr = dd > 0.0 ? (inc[0] - (gb[0] * dw[0] + gb[1] * dw[1])) / dd : 0.0;
+    gb[0] += corr * dw[0];
+    gb[1] += corr * dw[1];
+    double *ja = jac + CR_Z, *jb = jac + 2 * CR_Z;
+    ja[0] = jb[0] = -gb[0];
+    ja[1] = jb[1] = -gb[1];
+    double da = st1[2] - st0[2], db = st1[3] - st0[3];    /* asin(theta) by its secant */
+    ja[2] = da != 0.0 ? inc[1] / da : 1.0 / sqrt(1.0 - st0[2] * st0[2]); ja[3] = 0.0;
+    jb[2] = 0.0; jb[3] = db != 0.0 ? inc[2] / db : 1.0 / sqrt(1.0 - st0[3] * st0[3]);
+    double l_sum = hypot(st0[0], st0[1]) + hypot(st1[0], st1[1]), le = d->el_length[e];
+    const double *s0 = st0 + CR_Z, *s1 = st1 + CR_Z;
+    double ma = 0.5 * (s0[1] + s1[1]), mb = 0.5 * (s0[2] + s1[2]);
+    double qa = (4.0 * ma - mb) * CR_ARC, qb = (-ma + 4.0 * mb) * CR_ARC;
+    jac[0] = (st0[0] + st1[0]) / (l_sum * le) + qa * ja[0] + qb * jb[0];
+    jac[1] = (st0[1] + st1[1]) / (l_sum * le) + qa * ja[1] + qb * jb[1];
+    jac[2] = qa * ja[2];
+    jac[3] = qb * jb[3];
+}
+
+/* sigma = D s */
+static void cr_resultants(const ElasticData *d, int e, const double *s, double *sigma) {
+    double le = d->el_length[e], k4 = d->ei / le * 4.0, k2 = d->ei / le * 2.0;
+    sigma[0] = d->ea * le * s[0];
+    sigma[1] = k4 * s[1] + k2 * s[2];
+    sigma[2] = k2 * s[1] + k4 * s[2];
+}
+
+/* y[q index] += scale L^T jac^T sigma on the element's coordinates */
+static void cr_scatter_vector(const ElasticData *d, int e, const double *jac, const double *sigma,
+                              double scale, double *y) {
+    const int *iq = d->el_q + (size_t)e * EDOF;
+    double r[CR_Z];
+    for (int i = 0; i < CR_Z; i++)
+        r[i] = jac[i] * sigma[0] + jac[CR_Z + i] * sigma[1] + jac[2 * CR_Z + i] * sigma[2];
+    for (int k = 0; k < EDOF; k++)
+        if (iq[k] >= 0) y[iq[k]] += scale * Z_SIGN[k] * r[Z_OF[k]];
+}
+
+/* m += J^T D J (4 x 4) */
+static void cr_material(const ElasticData *d, int e, const double *jac, double *m) {
+    double dj[3 * CR_Z];
+    for (int i = 0; i < CR_Z; i++) {
+        double col[3] = {jac[i], jac[CR_Z + i], jac[2 * CR_Z + i]}, sg[3];
+        cr_resultants(d, e, col, sg);
+        dj[i] = sg[0]; dj[CR_Z + i] = sg[1]; dj[2 * CR_Z + i] = sg[2];
+    }
+    for (int i = 0; i < CR_Z; i++)
+        for (int j = 0; j < CR_Z; j++)
+            m[i * CR_Z + j] += jac[i] * dj[j] + jac[CR_Z + i] * dj[CR_Z + j]
+                               + jac[2 * CR_Z + i] * dj[2 * CR_Z + j];
+}
+
+/* m += sum_k sigma_k d^2 s_k / dz^2 at z, with jac = ds/dz there and Q's pieces of s */
+static void cr_geometric(const ElasticData *d, int e, const double *z, const double *s,
+                         const double *jac, const double *sigma, double *m) {
+    double hb[4];
+    angle_hessian(z, hb);
+    double qa = (4.0 * s[1] - s[2]) * CR_ARC, qb = (-s[1] + 4.0 * s[2]) * CR_ARC;
+    /* the weights of the Hessians of tb_a, tb_b in sum_k sigma_k H_k */
+    double wa = sigma[1] + sigma[0] * qa, wb = sigma[2] + sigma[0] * qb;
+    for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) m[i * CR_Z + j] -= (wa + wb) * hb[2 * i + j];
+    double ta = z[2], tb = z[3];
+    m[2 * CR_Z + 2] += wa * ta / pow(1.0 - ta * ta, 1.5);
+    m[3 * CR_Z + 3] += wb * tb / pow(1.0 - tb * tb, 1.5);
+    /* lambda = |d| / l: (I - n n^T) / (|d| l) */
+    double ln = hypot(z[0], z[1]), le = d->el_length[e], n0 = z[0] / ln, n1 = z[1] / ln;
+    double c = sigma[0] / (ln * le);
+    m[0] += c * (1.0 - n0 * n0);
+    m[1] -= c * n0 * n1;
+    m[CR_Z] -= c * n0 * n1;
+    m[CR_Z + 1] += c * (1.0 - n1 * n1);
+    /* Q / 30: J_tb^T [[4, -1], [-1, 4]] J_tb / 30 */
+    const double *ja = jac + CR_Z, *jb = jac + 2 * CR_Z;
+    for (int i = 0; i < CR_Z; i++)
+        for (int j = 0; j < CR_Z; j++)
+            m[i * CR_Z + j] += sigma[0] * CR_ARC * (4.0 * ja[i] * ja[j] - ja[i] * jb[j]
+                                                     - jb[i] * ja[j] + 4.0 * jb[i] * jb[j]);
+}
+
+/* band += scale L^T m L on the element's elastic positions */
+static void cr_scatter_band(const ElasticData *d, int e, const double *m, double scale, double *band) {
     int bw = d->bw, w = 2 * bw + 1;
-    double x[EDOF], gx[EDOF], g[EDOF];
-    for (int e = 0; e < d->n_el; e++) {
-        double eps = element_strain(law, e, q, x, gx, NULL, NULL);
-        element_strain_gradient(law, e, gx, g);
-        const int *pos = d->el_pos + (size_t)e * EDOF;
-        const double *gm = law->g_mat + (size_t)e * EDOF * EDOF;
-        double geo = geometric && d->nonlinear ? d->ea_l[e] * eps : 0.0;   /* times G */
-        for (int k = 0; k < EDOF; k++) {
-            if (pos[k] < 0) continue;
-            double *r = band + (size_t)pos[k] * w + bw - pos[k];
-            for (int l = 0; l < EDOF; l++)
-                if (pos[l] >= 0) r[pos[l]] += scale * (d->ea_l[e] * g[k] * g[l] + geo * gm[k * EDOF + l]);
-        }
+    const int *pos = d->el_pos + (size_t)e * EDOF;
+    for (int k = 0; k < EDOF; k++) {
+        if (pos[k] < 0) continue;
+        double *r = band + (size_t)pos[k] * w + bw - pos[k];
+        const double *mk = m + Z_OF[k] * CR_Z;
+        double sk = scale * Z_SIGN[k];
+        for (int l = 0; l < EDOF; l++)
+            if (pos[l] >= 0) r[pos[l]] += sk * Z_SIGN[l] * mk[Z_OF[l]];
     }
 }
 
-/* x . M x with M the material tangent at q (Kb + sum EA l_e g g^T); y (+)= scale M x.
- * kbx: Kb x at the elastic q indices (the step's band products), else NULL: x . Kb x is
- * computed here, and y must be NULL. */
-static double material_apply(const ElasticLaw *law, const double *q, const double *x,
-                             const double *kbx, double scale, double *y) {
+/* the start states (z0, s0) of every element at q0, kept while q0 stays */
+static void cr_step_start(ElasticLaw *law, const double *q0) {
     const ElasticData *d = &law->d;
-    double xe[EDOF], gx[EDOF], g[EDOF], quad = 0.0;
-    if (kbx) {
-        for (int p = 0; p < d->ne; p++) {
-            int i = d->elastic_idx[p];
-            quad += x[i] * kbx[i];
-            if (y) y[i] += scale * kbx[i];
-        }
-    } else {
-        quad += bending_quadratic(d, x);
-    }
+    if (law->start_valid && memcmp(q0, law->start_q, sizeof(double) * d->n) == 0) return;
     for (int e = 0; e < d->n_el; e++) {
-        element_strain(law, e, q, xe, gx, NULL, NULL);
-        element_strain_gradient(law, e, gx, g);
-        const int *iq = d->el_q + (size_t)e * EDOF;
-        double gx = 0.0;
-        for (int k = 0; k < EDOF; k++) if (iq[k] >= 0) gx += g[k] * x[iq[k]];
-        quad += d->ea_l[e] * gx * gx;
-        if (y)
-            for (int k = 0; k < EDOF; k++) if (iq[k] >= 0) y[iq[k]] += scale * d->ea_l[e] * gx * g[k];
+        double *st = law->cr_start + (size_t)e * CR_STATE;
+        cr_state(d, e, q0, st);
+        for (int k = 2; k < CR_Z; k++)
+            if (fabs(st[k]) > law->max_slope) law->max_slope = fabs(st[k]);
     }
-    return quad;
+    memcpy(law->start_q, q0, sizeof(double) * d->n);
+    law->start_valid = 1;
+    law->cur_valid = 0;     /* the current states are increments from the start */
 }
 
+/* the states of every element at q1 (z1, s1 from s0 and the angle increments, which they
+ * keep), for the force and the iteration band of the same q1 (beam_strain.CorotationalStrainEnergy._step_strains) */
+static void cr_step_current(ElasticLaw *law, const double *q1) {
+    const ElasticData *d = &law->d;
+    if (law->cur_valid && memcmp(q1, law->cur_q, sizeof(double) * d->n) == 0) return;
+    for (int e = 0; e < d->n_el; e++) {
+        const double *st0 = law->cr_start + (size_t)e * CR_STATE;
+        double *st1 = law->cr_cur + (size_t)e * CR_STATE, *inc = st1 + CR_Z + 3;
+        cr_chords(d, e, q1, 1, st1);
+        inc[0] = angle_increment(st0, st1);
+        inc[1] = section_angle_increment(st0[2], st1[2]);
+        inc[2] = section_angle_increment(st0[3], st1[3]);
+        cr_strains_from(hypot(st1[0], st1[1]) / d->el_length[e], st0[CR_Z + 1] + inc[1] - inc[0],
+                        st0[CR_Z + 2] + inc[2] - inc[0], st1 + CR_Z);
+    }
+    memcpy(law->cur_q, q1, sizeof(double) * d->n);
+    law->cur_valid = 1;
+}
+
+/* s' = J dz on the element (dz: z1 - z0, or the rate of z) */
+static void cr_strain_change(const double *jac, const double *dz, double *ds) {
+    for (int k = 0; k < 3; k++) {
+        double r = 0.0;
+        for (int i = 0; i < CR_Z; i++) r += jac[k * CR_Z + i] * dz[i];
+        ds[k] = r;
+    }
+}
+
+/* ds/dz at q_m = q0 + (q1 - q0) / 2 with its own strains (the damping's) */
+static void cr_midpoint_jacobian(const ElasticLaw *law, int e, const double *qm, double *jac) {
+    double st[CR_STATE];
+    cr_state(&law->d, e, qm, st);
+    cr_jacobian(&law->d, e, st, st + CR_Z, jac);
+}
+
+/* the element states of a step q0 -> q1, and its midpoint (for the damping term) */
+static void cr_step_states(ElasticLaw *law, const double *q0, const double *q1) {
+    const ElasticData *d = &law->d;
+    cr_step_start(law, q0);
+    cr_step_current(law, q1);
+    if (d->beta > 0.0)
+        for (int i = 0; i < d->n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
+}
+
+static void cr_force(ElasticLaw *law, const double *q0, const double *q1, double h, double *out) {
+    const ElasticData *d = &law->d;
+    cr_step_states(law, q0, q1);
+    for (int e = 0; e < d->n_el; e++) {
+        const double *st0 = law->cr_start + (size_t)e * CR_STATE, *st1 = law->cr_cur + (size_t)e * CR_STATE;
+        double jac[3 * CR_Z], sm[3], sigma[3];
+        cr_discrete_jacobian(d, e, st0, st1, jac);
+        for (int k = 0; k < 3; k++) sm[k] = 0.5 * (st0[CR_Z + k] + st1[CR_Z + k]);
+        cr_resultants(d, e, sm, sigma);
+        cr_scatter_vector(d, e, jac, sigma, 1.0, out);
+        if (d->beta > 0.0) {   /* + C(q_m) dq / h = beta / h L^T J^T D J dz */
+            double jm[3 * CR_Z], dz[CR_Z], ds[3], sd[3];
+            cr_midpoint_jacobian(law, e, law->qa, jm);
+            for (int i = 0; i < CR_Z; i++) dz[i] = st1[i] - st0[i];
+            cr_strain_change(jm, dz, ds);
+            cr_resultants(d, e, ds, sd);
+            cr_scatter_vector(d, e, jm, sd, d->beta / h, out);
+        }
+    }
+}
+
+static void cr_iteration_band(ElasticLaw *law, const double *q0, const double *q1, double h) {
+    const ElasticData *d = &law->d;
+    size_t nb = (size_t)d->ne * (2 * d->bw + 1);
+    memset(law->band, 0, sizeof(double) * nb);
+    law->band_h = h;
+    cr_step_states(law, q0, q1);
+    for (int e = 0; e < d->n_el; e++) {
+        const double *st0 = law->cr_start + (size_t)e * CR_STATE, *st1 = law->cr_cur + (size_t)e * CR_STATE;
+        double zm[CR_Z], sm[3], sigma[3], jac[3 * CR_Z], m[CR_Z * CR_Z];
+        for (int i = 0; i < CR_Z; i++) zm[i] = 0.5 * (st0[i] + st1[i]);
+        for (int k = 0; k < 3; k++) sm[k] = 0.5 * (st0[CR_Z + k] + st1[CR_Z + k]);
+        cr_jacobian(d, e, zm, sm, jac);
+        cr_resultants(d, e, sm, sigma);
+        memset(m, 0, sizeof m);
+        cr_material(d, e, jac, m);
+        cr_geometric(d, e, zm, sm, jac, sigma, m);
+        cr_scatter_band(d, e, m, 0.25 * h * h, law->band);
+        if (d->beta > 0.0) {
+            double jm[3 * CR_Z];
+            cr_midpoint_jacobian(law, e, law->qa, jm);
+            memset(m, 0, sizeof m);
+            cr_material(d, e, jm, m);
+            cr_scatter_band(d, e, m, 0.5 * h * d->beta, law->band);
+        }
+    }
+}
+
+static double cr_energy(ElasticLaw *law, const double *q) {
+    const ElasticData *d = &law->d;
+    cr_step_start(law, q);   /* the element states at q: the next step starts from them */
+    double u = 0.0;
+    for (int e = 0; e < d->n_el; e++) {
+        const double *s = law->cr_start + (size_t)e * CR_STATE + CR_Z;
+        double sigma[3];
+        cr_resultants(d, e, s, sigma);
+        u += s[0] * sigma[0] + s[1] * sigma[1] + s[2] * sigma[2];
+    }
+    return 0.5 * u;
+}
+
+static double cr_dissipation(ElasticLaw *law, const double *q0, const double *q1, double h) {
+    const ElasticData *d = &law->d;
+    double diss = 0.0;
+    for (int i = 0; i < d->n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
+    for (int e = 0; e < d->n_el; e++) {
+        double jm[3 * CR_Z], z0[CR_Z], z1[CR_Z], dz[CR_Z], ds[3], sd[3];
+        cr_midpoint_jacobian(law, e, law->qa, jm);
+        cr_chords(d, e, q0, 1, z0);
+        cr_chords(d, e, q1, 1, z1);
+        for (int i = 0; i < CR_Z; i++) dz[i] = z1[i] - z0[i];
+        cr_strain_change(jm, dz, ds);
+        cr_resultants(d, e, ds, sd);
+        diss += ds[0] * sd[0] + ds[1] * sd[1] + ds[2] * sd[2];
+    }
+    return d->beta * diss / h;
+}
+
+/* E (eps -/+ c kappa) at both ends of every element from s (or its rate: linear in s) */
+static void cr_fibre(const ElasticData *d, int e, const double *s, double *out) {
+    int npts = 2 * d->n_el;
+    double le = d->el_length[e], ka = (-4.0 * s[1] - 2.0 * s[2]) / le, kb = (2.0 * s[1] + 4.0 * s[2]) / le;
+    double em = d->youngs_modulus, c = d->fibre;
+    out[2 * e] = em * (s[0] - c * ka);
+    out[2 * e + 1] = em * (s[0] - c * kb);
+    out[npts + 2 * e] = em * (s[0] + c * ka);
+    out[npts + 2 * e + 1] = em * (s[0] + c * kb);
+}
+
+static void cr_fibre_stress(ElasticLaw *law, const double *q) {
+    const ElasticData *d = &law->d;
+    cr_step_start(law, q);   /* usually kept from the energy of the step that ended at q */
+    for (int e = 0; e < d->n_el; e++) cr_fibre(d, e, law->cr_start + (size_t)e * CR_STATE + CR_Z, law->el_stress);
+}
+
+static void cr_fibre_stress_rate(ElasticLaw *law, const double *q, const double *v) {
+    const ElasticData *d = &law->d;
+    cr_step_start(law, q);
+    for (int e = 0; e < d->n_el; e++) {
+        const double *st = law->cr_start + (size_t)e * CR_STATE;
+        double jac[3 * CR_Z], zd[CR_Z], rate[3];
+        cr_jacobian(d, e, st, st + CR_Z, jac);
+        cr_chords(d, e, v, 0, zd);        /* dz/dt = L v */
+        cr_strain_change(jac, zd, rate);
+        cr_fibre(d, e, rate, law->el_stress_rate);
+    }
+}
+
+/* ------------------------------------------------------------------------------- API */
 void elastic_force(ElasticLaw *law, const double *q0, const double *q1, double h,
-                   const double *kb_dq, double *out) {
+                   const double *k_dq, double *out) {
     const ElasticData *d = &law->d;
-    int n = d->n;
-    if (!d->nonlinear) {   /* U quadratic, C = beta K constant: K (q_m + beta dq / h) */
+    if (d->nonlinear) { cr_force(law, q0, q1, h, out); return; }
+    if (d->beta > 0.0) {   /* K q_m (on entry) + beta K dq / h */
         double c = d->beta / h;
-        for (int i = 0; i < n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]) + c * (q1[i] - q0[i]);
-        if (c > 0.0)
-            for (int p = 0; p < d->ne; p++) { int i = d->elastic_idx[p]; out[i] += c * kb_dq[i]; }
-        membrane_gradient(law, law->qa, 1.0, out);
-        return;
-    }
-    /* AVF: Kb q_m (on entry: Kb q is linear) + the mean of the membrane gradient at the
-     * Gauss points */
-    step_start(law, q0);
-    for (int e = 0; e < d->n_el; e++) {
-        double eps[2], g[2 * EDOF];
-        element_step_strain(law, e, q0, q1, eps, g);
-        const int *iq = d->el_q + (size_t)e * EDOF;
-        double w0 = 0.5 * d->ea_l[e] * eps[0], w1 = 0.5 * d->ea_l[e] * eps[1];
-        for (int k = 0; k < EDOF; k++)
-            if (iq[k] >= 0) out[iq[k]] += w0 * g[k] + w1 * g[EDOF + k];
-    }
-    if (d->beta > 0.0) {
-        for (int i = 0; i < n; i++) {
-            law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
-            law->qb[i] = q1[i] - q0[i];
-        }
-        material_apply(law, law->qa, law->qb, kb_dq, d->beta / h, out);
+        for (int p = 0; p < d->ne; p++) { int i = d->elastic_idx[p]; out[i] += c * k_dq[i]; }
     }
 }
 
 void elastic_iteration_band(ElasticLaw *law, const double *q0, const double *q1, double h) {
     const ElasticData *d = &law->d;
-    int n = d->n;
+    if (d->nonlinear) { cr_iteration_band(law, q0, q1, h); return; }
+    if (law->band_h == h) return;                 /* constant for the linear strain */
     size_t nb = (size_t)d->ne * (2 * d->bw + 1);
-    double kb_scale = 0.25 * h * h + 0.5 * h * d->beta;   /* sum of the scales below */
-    if (!d->nonlinear && law->band_h == h) return;       /* constant for the linear strain */
-    for (size_t k = 0; k < nb; k++) law->band[k] = kb_scale * d->kb_band[k];
+    double scale = 0.25 * h * h + 0.5 * h * d->beta;
+    for (size_t k = 0; k < nb; k++) law->band[k] = scale * d->k_band[k];
     law->band_h = h;
-    if (d->nonlinear) {   /* sum_j h^2/4 s_j (tangent at the AVF point j), one pass */
-        int bw = d->bw, w = 2 * bw + 1;
-        step_start(law, q0);
-        for (int e = 0; e < d->n_el; e++) {
-            double eps[2], g[2 * EDOF];
-            element_step_strain(law, e, q0, q1, eps, g);
-            const int *pos = d->el_pos + (size_t)e * EDOF;
-            const double *gm = law->g_mat + (size_t)e * EDOF * EDOF;
-            double c0 = 0.25 * h * h * AVF_S[0] * d->ea_l[e], c1 = 0.25 * h * h * AVF_S[1] * d->ea_l[e];
-            double geo = c0 * eps[0] + c1 * eps[1];   /* times G */
-            for (int k = 0; k < EDOF; k++) {
-                if (pos[k] < 0) continue;
-                double *r = law->band + (size_t)pos[k] * w + bw - pos[k];
-                double a0 = c0 * g[k], a1 = c1 * g[EDOF + k];
-                for (int l = 0; l < EDOF; l++)
-                    if (pos[l] >= 0) r[pos[l]] += a0 * g[l] + a1 * g[EDOF + l] + geo * gm[k * EDOF + l];
-            }
-        }
-    } else {
-        for (int s = 0; s < 2; s++) {
-            for (int i = 0; i < n; i++) law->qa[i] = q0[i] + AVF_S[s] * (q1[i] - q0[i]);
-            tangent_band(law, law->qa, 0.25 * h * h * AVF_S[s], 1, law->band);
-        }
-    }
-    if (d->beta > 0.0) {
-        for (int i = 0; i < n; i++) law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
-        tangent_band(law, law->qa, 0.5 * h * d->beta, 0, law->band);
-    }
 }
 
-double elastic_energy(ElasticLaw *law, const double *q, const double *kbq) {
+double elastic_energy(ElasticLaw *law, const double *q, const double *kq) {
     const ElasticData *d = &law->d;
     /* asked for the end of a step, then its output row, then the start of the next */
     if (law->energy_valid && memcmp(q, law->energy_q, sizeof(double) * d->n) == 0)
         return law->energy;
-    double u = 0.0;
-    if (kbq)
-        for (int p = 0; p < d->ne; p++) { int i = d->elastic_idx[p]; u += q[i] * kbq[i]; }
-    else
-        u += bending_quadratic(d, q);
-    step_start(law, q);   /* the element strains at q: the next step starts from them */
-    for (int e = 0; e < d->n_el; e++) {
-        const double *ce = law->start_eps + 2 * (size_t)e;
-        double eps = ce[0] + 0.5 * ce[1];
-        u += d->ea_l[e] * eps * eps;
-    }
+    double u;
+    if (d->nonlinear) u = cr_energy(law, q);
+    else if (kq) {
+        u = 0.0;
+        for (int p = 0; p < d->ne; p++) { int i = d->elastic_idx[p]; u += q[i] * kq[i]; }
+        u *= 0.5;
+    } else u = 0.5 * band_quadratic(d, q);
     memcpy(law->energy_q, q, sizeof(double) * d->n);
-    law->energy = 0.5 * u;
+    law->energy = u;
     law->energy_valid = 1;
-    return law->energy;
+    return u;
 }
 
 double elastic_dissipation(ElasticLaw *law, const double *q0, const double *q1, double h) {
     const ElasticData *d = &law->d;
     double diss = 0.0;
     if (d->beta > 0.0) {
-        for (int i = 0; i < d->n; i++) {
-            law->qa[i] = q0[i] + 0.5 * (q1[i] - q0[i]);
-            law->qb[i] = q1[i] - q0[i];
+        if (d->nonlinear) diss = cr_dissipation(law, q0, q1, h);
+        else {
+            for (int i = 0; i < d->n; i++) law->qb[i] = q1[i] - q0[i];
+            diss = d->beta * band_quadratic(d, law->qb) / h;
         }
-        diss = d->beta * material_apply(law, law->qa, law->qb, NULL, 0.0, NULL) / h;
     }
     law->last_dissipation = diss;
     return diss;
 }
 
-void elastic_membrane_stress(ElasticLaw *law, const double *q) {
-    const ElasticData *d = &law->d;
-    step_start(law, q);   /* usually kept from the energy of the step that ended at q */
-    for (int e = 0; e < d->n_el; e++)
-        law->el_stress[e] = d->youngs_modulus * 0.5 * law->start_eps[2 * (size_t)e + 1];
+void elastic_fibre_stress(ElasticLaw *law, const double *q) {
+    if (law->d.nonlinear) cr_fibre_stress(law, q);
 }
 
-void elastic_membrane_stress_rate(ElasticLaw *law, const double *q, const double *v) {
+void elastic_fibre_stress_rate(ElasticLaw *law, const double *q, const double *v) {
+    if (law->d.nonlinear) cr_fibre_stress_rate(law, q, v);
+}
+
+int elastic_admissible(const ElasticLaw *law, const double *q) {
     const ElasticData *d = &law->d;
-    step_start(law, q);   /* G x of q's element coordinates x */
-    for (int e = 0; e < d->n_el; e++) {
-        const int *iq = d->el_q + (size_t)e * EDOF;
-        const double *gx = law->start_gx + (size_t)e * EDOF;
-        double r = 0.0;   /* d/dt (x . G x / 2) = (G x) . x_t */
-        for (int k = 0; k < EDOF; k++) if (iq[k] >= 0) r += gx[k] * v[iq[k]];
-        law->el_stress_rate[e] = d->youngs_modulus * r;
-    }
+    if (!d->nonlinear) return 1;
+    for (int e = 0; e < d->n_el; e++)
+        for (int k = 2; k < EDOF; k += 3) {          /* theta_a, theta_b */
+            int i = d->el_q[(size_t)e * EDOF + k];
+            if (i >= 0 && !(fabs(q[i]) < 1.0)) return 0;
+        }
+    return 1;
 }
 
 double elastic_last_dissipation(const ElasticLaw *law) {
     return law->last_dissipation;
+}
+
+double elastic_max_slope(const ElasticLaw *law) {
+    return law->max_slope;
 }

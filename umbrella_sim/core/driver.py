@@ -122,7 +122,9 @@ class RunDriver:
         self.states = False            # chunks with the state rows of their steps
         first = sim.sample()
         self.initial = first
-        self.summary = SummaryAccumulator(self.params.as_dict(), first, sim.engine.lock_kind)
+        self.summary = SummaryAccumulator(
+            self.params.as_dict(), first, sim.engine.lock_kind,
+            section_slope=getattr(sim.engine, "max_section_slope", None))
         self.publications = 0          # publications taken so far (publication())
         self._hold: dict = {}          # peak stresses over the steps since the last one
         self._last_block: StepBlock | None = None

@@ -138,8 +138,9 @@ class LockedModeFit:
     energy-consistent scheme of the same order (S is constant); the closer the frame stays to
     it, the closer each mode is to exact.  The grid step h is the simulator's: the lock's
     part step uses it too.  For the linear strain only (engines' ``phase_correctable``): with
-    the von Karman strain the axial coordinates follow the foreshortening of the bending,
-    far from the linearisation.
+    the co-rotational strain of flexible-nonlinear the axial coordinates follow the
+    foreshortening of the bending, and its large-motion stage 2 (the links buckle at V0 <= -1)
+    is far from the linearisation; its step rule takes the plain limit (step_rule).
     """
 
     def __init__(self, model: UmbrellaModel, h: float, damping: np.ndarray | None = None):
@@ -352,6 +353,19 @@ def project_keeping_energy(mass: np.ndarray, jac: np.ndarray, v: np.ndarray,
     return vp
 
 
+def newton_converged(m, cs, q, step_norm: float, rate: float, tolerance: float) -> bool:
+    """
+    Return whether a Newton iteration of a midpoint step has converged.
+
+    Converged in q when the update |dq| or the estimated remaining error rate/(1-rate)*|dq|
+    (rate: the contraction of the last update) is below tolerance, and the constraints hold
+    at the iterate.
+    """
+    if step_norm < tolerance or (rate < 0.5 and rate / (1 - rate) * step_norm < tolerance):
+        return bool(np.max(np.abs(m.constraint_residual(q, cs))) < PHI_TOLERANCE)
+    return False
+
+
 class MidpointDAE:
     def __init__(self, model: UmbrellaModel, tolerance: float = NEWTON_TOLERANCE,
                  max_iterations: int = 25,
@@ -508,13 +522,9 @@ class MidpointDAE:
             step_norm = np.max(np.abs(dx[:n]))
             if not np.isfinite(step_norm):
                 raise ConvergenceError(f"Newton iterate became non-finite at t = {s.t + h:.9g} s")
-            # stop when the estimated remaining error rate/(1-rate)*|dq| is below tolerance
             rate = step_norm / last_norm if it > 1 else 1.0
-            if step_norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * step_norm
-                                              < self.tolerance):
-                # converged in q; make sure the constraints hold at the final iterate
-                if np.max(np.abs(m.constraint_residual(q, cs))) < PHI_TOLERANCE:
-                    break
+            if newton_converged(m, cs, q, step_norm, rate, self.tolerance):
+                break
             last_norm = step_norm
         else:
             raise ConvergenceError(f"Newton did not converge in {self.max_iterations} iterations "

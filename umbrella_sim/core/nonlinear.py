@@ -13,72 +13,79 @@
 # limitations under the License.
 
 """
-Geometrically nonlinear beams (thesis §7.2) and structural damping, on the same DAE.
+Geometrically exact beams (thesis §7.2) and structural damping, on the same DAE.
 
 Formulation (model ``flexible-nonlinear``)
 ------------------------------------------
 The same floating frames, coordinates, mass matrix M(q), joints, sleeve, stop and lock as
-``flexible`` (model.py); only the strain energy changes.  Per body, with u, v the axial and
-transverse displacements in the body frame,
+``flexible`` (model.py): the kinetic energy is that of the interpolated field (u linear, v
+cubic in an element, exact kinematics of that field in the moving frames); only the strain
+energy, its discrete gradient, its Newton matrix and the stress recovery change.  They are
+those of a co-rotational Euler-Bernoulli element (Crisfield, Non-linear Finite Element
+Analysis of Solids and Structures vol. 1, ch. 7; Felippa & Haugen, Comput. Methods Appl.
+Mech. Engrg. 194, 2005; Battini & Pacoste, ibid. 191, 2002) in its body's frame: the chord
+d = (l_e + u_b - u_a, v_b - v_a) of an element gives its stretch lambda = |d| / l_e and the
+angle beta = atan2(d) of its co-rotated frame, the nodal slopes theta_i = v'(x_i) the angles
+psi_i = asin(theta_i) of its end sections, and in the co-rotated frame the local linear beam
+with the element mean of its shallow-arch axial strain (Crisfield's shallow-arch local
+element):
 
-    U = 1/2 int EA eps^2 dx + 1/2 int EI v''^2 dx,      eps = u' + 1/2 v'^2
+    tb_i = psi_i - beta,   eps = lambda - 1 + (2 tb_a^2 - tb_a tb_b + 2 tb_b^2) / 30,
+    U_e = 1/2 EA l_e eps^2 + 2 EI / l_e (tb_a^2 + tb_a tb_b + tb_b^2).
 
-(the von Karman / foreshortening strain, exact to second order in the rotation of a fibre
-relative to its floating frame).  With the linear strain u' (thesis Eq. 4.37) the bending
-and axial motions uncouple in U, and a beam spinning at omega sees only the centrifugal
-softening -omega^2 m_ff of the kinetic energy: the classical "premature linearisation"
-failure (Kane, Ryan & Banerjee, J. Guidance Control Dynamics 10(2), 1987) -- a cantilever
-spun above its first bending frequency diverges.  With the quadratic term the axial force
-N = EA eps (the centrifugal tension) multiplies v'^2/2 and supplies the geometric stiffness
-int N v'^2 that balances the softening.  Why this and not a co-rotational or ANCF element:
-it keeps the thesis's coordinates, outputs and mass invariants (the node, recording and
-replay see the same q), the strains in this frame stay small (|v'| < 0.2 even at
-V0 = -2 m/s), and U is a polynomial (quartic in q), for which an exact energy-consistent
-discrete gradient exists.
+The section angle: with small strains |r'| = 1 + eps ~ 1, so the slope of a fibre in its body
+frame is v' = sin psi (the inextensional beam's relation, Crespo da Silva & Glynn, J. Struct.
+Mech. 6, 1978), and psi = asin(v') ties the energy to the slope the kinetic field itself
+carries.  Exact for any rigid rotation of an element in its frame and for large rotations;
+its approximations are those of small strains (|eps|, and the fibre strain c kappa, well
+below 1 %: the summary warns past summary.STRAIN_LIMIT; a stretched section's angle is off by
+eps tan psi).  For small motion it is the linear model (its Hessian at q = 0 is K exactly; to
+second order it is the element-mean von Karman strain u' + v'^2/2, which it replaced: the
+frame's fibres turn by up to ~1.3 rad from their body frame at V0 = -2 m/s, where a strain
+exact to second order in the rotation fails).  Why this and not an ANCF cable or a
+Simo-Reissner beam: both need other coordinates (global slopes, or nodal rotations) and so
+another mass matrix, node, recording and replay; this element keeps the thesis's
+coordinates and puts the whole geometric nonlinearity in U.  An element's energy depends on
+its own 6 coordinates only, so the kernel's band stays as it was.  (A first variant took the
+tangent angle atan2(theta_i, 1 + u'_i) with u'_i recovered from the nodes beside it: exact in
+statics too, but at 4 elements a segment its stage 2 at V0 = -2 m/s ran 9 % slow, since
+that tangent's x component need not agree with the slope the kinetic field carries.)
 
-Membrane locking: with the thesis's shape functions (u linear, v cubic in an element) u' is
-constant in an element while v'^2/2 is quartic, so a pointwise eps cannot vanish when the
-element bends and inextensional bending is charged spurious axial energy (the spin-up tip
-deflection came out 40 % low at 4 elements).  The axial energy therefore uses the element's
-mean membrane strain, 1/2 EA l_e eps_e^2 with eps_e = (1/l_e) int (u' + v'^2/2) dx (5-point
-Gauss, exact for the quartic) -- the standard cure; for small motion eps_e = u' and U is the
-linear model's 1/2 q.K q exactly.  U is a quartic polynomial in q.  Its discrete gradient over
-a step is the average-vector-field (AVF) gradient int_0^1 grad U(q0 + s dq) ds, exact with
-2-point Gauss in s because the integrand is cubic in s; dq . AVF = U(q1) - U(q0) exactly, so
-the midpoint scheme of integrators.py keeps its energy balance with the nonlinear U.  Stress
-recovery: sigma = E (eps_e -/+ c v'') at both ends of every element.
+Limit: the slope coordinates cannot turn a section through 90 deg from its body frame
+(theta = +-1); a step that gets there fails with that explanation, and the summary warns past
+80 deg (summary.SECTION_SLOPE_LIMIT, from the largest slope of every step,
+ElasticEngine.max_section_slope).  The frame's fibres reach ~75 deg at V0 = -2 m/s with the
+plastic lock and ~85 deg with the energy lock (docs/validation_nonlinear.md).
 
-Validity: the strain is exact to second order in the rotation of a fibre relative to its
-floating frame, good for |v'| up to ~0.3 rad (the error of eps grows like v'^4).  Stage 1
-stays inside it at every V0 of the thesis (|v'| ~ 0.2 at V0 = -2 m/s); the stage-2
-vibration at V0 <= -1 m/s (tip amplitudes of 0.2-0.3 m on the 0.5 m segment O''-G) leaves
-it, and there a co-rotational or geometrically exact element is the next step;
-docs/validation_nonlinear.md reports max |v'| beside the figures.
+Discrete gradient (exact energy balance): U_e = 1/2 s.D s in the local strains s = (eps,
+tb_a, tb_b), and per element G_e = B~^T D (s0 + s1) / 2 (Simo & Tarnow, ZAMP 43, 1992) with
+B~ a discrete derivative of s, B~ (q1 - q0) = s1 - s0 exactly: lambda by (d0 + d1) / ((|d0| +
+|d1|) l_e), beta by Gonzalez's midpoint discrete gradient (J. Nonlinear Sci. 6, 1996),
+asin(theta) by its secant, the quadratic Q at the mean angles.  So dq . G = U(q1) - U(q0) to
+round-off, and the midpoint scheme of integrators.py keeps its energy balance.  The Newton
+matrix takes 1/2 [B^T D B + sum_k (D s)_k d^2 s_k / dq^2] at the midpoint (d G / d q1 to
+O(dq^2)).  Stress recovery: sigma = E (eps -/+ c kappa) in the element's rotated frame at both
+its ends, kappa = w'' of the local cubic, (-4 tb_a - 2 tb_b) / l_e and (2 tb_a + 4 tb_b) / l_e.
 
 Time integration: the midpoint step of MidpointDAE (the same residual pieces,
-integrators.midpoint_iterate) with the AVF gradient; full Newton with a backtracking line
-search (a full update can overshoot when the stiff axial directions turn with v' inside a
-step), steps split in halves where Newton still fails, and MidpointDAE's velocity
-projection scaled to the kinetic energy of the step's discrete balance, so the nonlinear
-model balances energy to round-off.  Its stage 2 needs a finer step than the linear model's
-(energy flows between modes, the unresolved ones included): see the step study in
-docs/validation_nonlinear.md.
+integrators.midpoint_iterate) with this discrete gradient; full Newton with a backtracking
+line search (a full update can overshoot when the stiff axial directions turn within a
+step; a predictor outside the slope coordinates starts from q0), steps split in halves where
+Newton still fails, and MidpointDAE's velocity projection scaled to the kinetic energy of
+the step's discrete balance, so that the model balances energy to round-off.
 
 Structural damping (parameter ``damping_ratio`` zeta, models ``flexible`` and
 ``flexible-nonlinear``)
 ------------------------------------------------------------------------------------------
 Stiffness-proportional Rayleigh (Kelvin-Voigt) damping of the strain rates,
-Q_d = -C(q) q', C = beta B(q)^T D B(q) (B = d strain / dq, D = diag(EA, EI); C = beta K for
-the linear strain), beta = 2 zeta / omega_1, with omega_1 the first natural frequency of the
-locked frame linearised about the undeformed deployed configuration (stage 2).  That mode
-then has exactly the ratio zeta; mode i has zeta * omega_i / omega_1 (higher modes decay
-faster); rigid motion (alpha, R) is not damped.  For the nonlinear strain C must follow B(q):
-beta K would damp the axial rate u' of the foreshortening u' = -v'^2/2 of inextensional
-bending through the huge EA and over-damp the bending (it did: the V0 = -0.2 stage-2
-amplitude fell 4x in one cycle at zeta = 0.02).  In the midpoint step the damping force is
--C(q_m) dq/h, so the step dissipates exactly dq . C(q_m) dq / h >= 0; the state carries the
-dissipated energy, and the energy balance reads T + V - (T0 + V0) - W + lock loss +
-dissipation = 0.
+Q_d = -C(q) q', C = beta B(q)^T D B(q) (B = d s / dq; C = beta K for the linear strain),
+beta = 2 zeta / omega_1, with omega_1 the first natural frequency of the locked frame
+linearised about the undeformed deployed configuration (stage 2).  That mode then has
+exactly the ratio zeta; mode i has zeta * omega_i / omega_1 (higher modes decay faster);
+rigid motion (alpha, R), and with the co-rotational strain any rigid rotation of an element,
+is not damped.  In the midpoint step the damping force is -C(q_m) dq/h, so the step
+dissipates exactly dq . C(q_m) dq / h >= 0; the state carries the dissipated energy, and the
+energy balance reads T + V - (T0 + V0) - W + lock loss + dissipation = 0.
 
 Compiled path: the kernel of integrators.py (_kernel.c, bound by kernel.py) with this
 module's elastic law attached (_kernel_nonlinear.c, ``CompiledElasticLaw``): the same
@@ -89,17 +96,16 @@ keeps the plain linear kernel.  Nothing here imports rclpy.
 from __future__ import annotations
 
 import ctypes
-from dataclasses import dataclass
 import math
 
 import numpy as np
 
+from .beam_strain import CorotationalStrainEnergy, LinearStrainEnergy
 from .engines import FiniteElementEngine
-from .integrators import (iteration_blocks, midpoint_iterate, MidpointDAE,
-                          NEWTON_TOLERANCE, PHI_TOLERANCE, project_keeping_energy)
+from .integrators import (iteration_blocks, midpoint_iterate, MidpointDAE, newton_converged,
+                          NEWTON_TOLERANCE, project_keeping_energy)
 from .kernel import ConvergenceError, DynamicState, ElasticData
-from .model import (band_form, BeamBody, ConstraintSet, GAUSS_POINTS, GAUSS_WEIGHTS,
-                    shape_functions, UmbrellaModel)
+from .model import band_form, ConstraintSet, UmbrellaModel
 from .params import UmbrellaParams
 
 NONLINEAR_MODEL = "flexible-nonlinear"
@@ -110,150 +116,28 @@ REFRESH_RATE = 0.1
 #: ended; one factored this many steps ago or less serves that step whole, an older one its
 #: first iteration only (_kernel_elastic.h ELASTIC_CARRY_STEPS)
 CARRY_STEPS = 2
-#: 2-point Gauss-Legendre on [0, 1]: exact AVF integral of the cubic s -> grad U(q0 + s dq)
-_AVF_S = 0.5 + np.array([-0.5, 0.5]) / math.sqrt(3.0)
-
-
-# ------------------------------------------------------------------ strain energy
-@dataclass
-class _BodyDerivatives:
-    du: np.ndarray     # (npts, ne): u' at points
-    dv: np.ndarray     # (npts, ne): v' at points
-    d2v: np.ndarray    # (npts, ne): v'' at points
-
-
-def _derivatives(body: BeamBody, eta: np.ndarray) -> _BodyDerivatives:
-    du, dv, d2v = [], [], []
-    for j, le in enumerate(body.element_length):
-        _, dn, d2n = shape_functions(eta, le)
-        b = body.element_dof_maps[j]
-        du.append(dn[:, 0] @ b)
-        dv.append(dn[:, 1] @ b)
-        d2v.append(d2n[:, 1] @ b)
-    return _BodyDerivatives(np.concatenate(du), np.concatenate(dv), np.concatenate(d2v))
-
-
-class StrainEnergy:
-    """
-    U(q) of both bodies over the whole coordinate vector q (zero on alpha, R).
-
-    nonlinear=False gives the linear model's 1/2 q.K q through the same interface.
-    """
-
-    def __init__(self, bodies, n: int, ea: float, nonlinear: bool):
-        """bodies: [(BeamBody, slice of its elastic coordinates in q)]; n = len(q)."""
-        self.nonlinear = nonlinear
-        du, dv, w, lengths = [], [], [], []
-        self.k_linear = np.zeros((n, n))
-        for body, s_e in bodies:
-            d = _derivatives(body, GAUSS_POINTS)
-            for src, dst in ((d.du, du), (d.dv, dv)):
-                full = np.zeros((len(src), n))
-                full[:, s_e] = src
-                dst.append(full)
-            w.append(np.outer(body.element_length, GAUSS_WEIGHTS).ravel())
-            lengths.append(body.element_length)
-            self.k_linear[s_e, s_e] = body.stiffness
-        self.du = np.vstack(du)
-        self.dv = np.vstack(dv)
-        w = np.concatenate(w)
-        self.element_length = np.concatenate(lengths)
-        n_el, n_gauss = len(self.element_length), len(GAUSS_POINTS)
-        # element mean over its Gauss points: (n_el, nq), rows w_q / l_e
-        self.mean = np.zeros((n_el, n_el * n_gauss))
-        for j in range(n_el):
-            self.mean[j, j * n_gauss:(j + 1) * n_gauss] = w[j * n_gauss:(j + 1) * n_gauss]
-        self.mean /= self.element_length[:, None]
-        self.ea_l = ea * self.element_length           # EA l_e per element
-        self.w_ea = ea * w                              # EA w_q per point
-        self.point_element = np.repeat(np.arange(n_el), n_gauss)
-        # bending (and nothing axial): K minus the axial part int EA u'^2
-        self.k_bending = self.k_linear - self.du.T @ (self.w_ea[:, None] * self.du)
-
-    def membrane_strain(self, q) -> np.ndarray:
-        """Element-mean axial strain (1/l_e) int (u' + v'^2/2) dx, per element."""
-        b = self.dv @ q
-        return self.mean @ (self.du @ q + 0.5 * b * b)
-
-    def energy(self, q) -> float:
-        if not self.nonlinear:
-            return 0.5 * q @ self.k_linear @ q
-        eps = self.membrane_strain(q)
-        return 0.5 * q @ self.k_bending @ q + 0.5 * float(self.ea_l @ (eps * eps))
-
-    def _point_forces(self, q):
-        b = self.dv @ q
-        eps = self.mean @ (self.du @ q + 0.5 * b * b)
-        return b, self.w_ea * eps[self.point_element]   # EA eps_mean w_q at every point
-
-    def gradient(self, q) -> np.ndarray:
-        if not self.nonlinear:
-            return self.k_linear @ q
-        b, nw = self._point_forces(q)
-        return self.k_bending @ q + self.du.T @ nw + self.dv.T @ (nw * b)
-
-    def material_tangent(self, q) -> np.ndarray:
-        """
-        Return B(q)^T D B(q), the tangent without the geometric stiffness.
-
-        B(q)^T D B(q): the tangent without the geometric stiffness; the strain-rate
-        (Kelvin-Voigt) damping is beta times this, so it acts on d eps/dt, never on the
-        foreshortening u' = -v'^2/2 of inextensional bending.
-        """
-        if not self.nonlinear:
-            return self.k_linear
-        b = self.dv @ q
-        g = self.mean @ (self.du + b[:, None] * self.dv)
-        return self.k_bending + g.T @ (self.ea_l[:, None] * g)
-
-    def tangent(self, q) -> np.ndarray:
-        """
-        Return the tangent d grad U / dq.
-
-        d grad U / dq: material part g^T EA l g (g = d eps_mean / dq per element) plus
-        the geometric stiffness int N v' v' (N = EA eps_mean).
-        """
-        if not self.nonlinear:
-            return self.k_linear
-        b, nw = self._point_forces(q)
-        g = self.mean @ (self.du + b[:, None] * self.dv)
-        return (self.k_bending + g.T @ (self.ea_l[:, None] * g)
-                + self.dv.T @ (nw[:, None] * self.dv))
-
-    def discrete_gradient(self, q0, q1) -> np.ndarray:
-        """AVF gradient: dq . G = U(q1) - U(q0) exactly (2-point Gauss in s is exact)."""
-        if not self.nonlinear:
-            return self.k_linear @ (0.5 * (q0 + q1))
-        dq = q1 - q0
-        return 0.5 * (self.gradient(q0 + _AVF_S[0] * dq) + self.gradient(q0 + _AVF_S[1] * dq))
-
-    def discrete_gradient_jacobian(self, q0, q1) -> np.ndarray:
-        """
-        Return d AVF / d q1.
-
-        d AVF / d q1 = int_0^1 s H(q0 + s dq) ds (exact with the same 2 points).
-        """
-        if not self.nonlinear:
-            return 0.5 * self.k_linear
-        dq = q1 - q0
-        return 0.5 * sum(s * self.tangent(q0 + s * dq) for s in _AVF_S)
 
 
 # ------------------------------------------------------------------------- model
 class NonlinearUmbrellaModel(UmbrellaModel):
     """
-    UmbrellaModel with the nonlinear (or linear) strain energy and damping.
+    UmbrellaModel with the co-rotational (or linear) strain energy and damping.
 
-    UmbrellaModel with the strain energy of ``StrainEnergy`` (nonlinear or linear) and
-    the matching stress recovery; the strain-rate damping of ``damping_ratio``.
+    The strain energy of ``CorotationalStrainEnergy`` (model flexible-nonlinear) or
+    ``LinearStrainEnergy`` (a damped flexible model) and the matching stress recovery; the
+    strain-rate damping of ``damping_ratio``.
     """
 
     def __init__(self, params: UmbrellaParams):
         super().__init__(params)
         p = self.params
-        self.strain = StrainEnergy(((self.leaf, self.s_leaf), (self.link, self.s_link)), self.n,
-                                   p.youngs_modulus * p.cross_section_area,
-                                   nonlinear=p.model == NONLINEAR_MODEL)
+        bodies = ((self.leaf, self.s_leaf), (self.link, self.s_link))
+        if p.model == NONLINEAR_MODEL:
+            self.strain = CorotationalStrainEnergy(
+                bodies, self.n, p.youngs_modulus * p.cross_section_area,
+                p.youngs_modulus * p.cross_section_inertia, p.youngs_modulus, p.fibre_distance)
+        else:
+            self.strain = LinearStrainEnergy(bodies, self.n)
         self.first_frequency = locked_first_frequency(self)
         self.damping_beta = 2.0 * p.damping_ratio / self.first_frequency
         # undamped, or damped with the linear strain: C does not depend on q
@@ -282,28 +166,23 @@ class NonlinearUmbrellaModel(UmbrellaModel):
         """
         Return the top/bottom fibre stresses at both ends of every element.
 
-        Top/bottom fibre stress E (eps -/+ c v'') with the element's membrane strain
-        eps = (1/l_e) int (u' + v'^2/2) dx (the strain the energy uses) at both its ends.
+        The co-rotational beam's E (eps -/+ c kappa) in each element's rotated frame
+        (CorotationalStrainEnergy.fibre_stresses); the linear model's for the linear strain.
         """
-        (lt, lb), (kt, kb) = super().stresses(q)
         if not self.strain.nonlinear:
-            return (lt, lb), (kt, kb)
-        b = self.strain.dv @ q
-        extra = np.repeat(self.params.youngs_modulus * (self.strain.mean @ (0.5 * b * b)), 2)
-        n_leaf = len(lt)
-        return ((lt + extra[:n_leaf], lb + extra[:n_leaf]),
-                (kt + extra[n_leaf:], kb + extra[n_leaf:]))
+            return super().stresses(q)
+        return self._per_body(self.strain.fibre_stresses(q))
 
     def stress_rates(self, q, qd):
-        """d/dt of ``stresses``: the linear part of qd, plus E (1/l_e) int v' v'_t dx."""
-        (lt, lb), (kt, kb) = super().stress_rates(q, qd)
+        """d/dt of ``stresses`` along qd."""
         if not self.strain.nonlinear:
-            return (lt, lb), (kt, kb)
-        rate = self.strain.mean @ ((self.strain.dv @ q) * (self.strain.dv @ qd))
-        extra = np.repeat(self.params.youngs_modulus * rate, 2)
-        n_leaf = len(lt)
-        return ((lt + extra[:n_leaf], lb + extra[:n_leaf]),
-                (kt + extra[n_leaf:], kb + extra[n_leaf:]))
+            return super().stress_rates(q, qd)
+        return self._per_body(self.strain.fibre_stress_rates(q, qd))
+
+    def _per_body(self, top_bottom):
+        top, bottom = top_bottom
+        n_leaf = 2 * len(self.leaf.element_length)
+        return (top[:n_leaf], bottom[:n_leaf]), (top[n_leaf:], bottom[n_leaf:])
 
 
 def locked_first_frequency(model: UmbrellaModel) -> float:
@@ -316,47 +195,43 @@ class CompiledElasticLaw:
     """
     The strain energy and damping of a NonlinearUmbrellaModel, handed to _kernel_nonlinear.c.
 
-    Element by element: the q indices of an element's (up to) six coordinates, u' and v' at
-    its Gauss points (rows of StrainEnergy.du / dv), the element-mean weights, EA l_e, and
-    the bending stiffness in the band form of the kernel.  Attached to a CompiledKernel, it
-    replaces the kernel's constant K (umbrella_set_law).
+    The co-rotational beam element by element: the q indices and elastic positions of each
+    element's coordinates (u, v, theta of its two nodes; -1 where the frame fixes one), its
+    length, EA, EI and the fibre distance; or the linear strain's K in the band form of the
+    kernel.  Attached to a CompiledKernel, it replaces the kernel's constant K
+    (umbrella_set_law).
     """
 
     def __init__(self, lib, model: "NonlinearUmbrellaModel"):
         st, p = model.strain, model.params
         idx = np.asarray(model.elastic_indices)
         bw = model.banded_invariants()[0]
-        n_el, n_gauss = len(st.element_length), len(GAUSS_POINTS)
         n_leaf_points = model.stress_rows()[4][0]
         if n_leaf_points != 2 * len(model.leaf.element_length):
             raise ValueError("compiled elastic law: the leaf's stress points are not the two "
                              "ends of each element")
-        el_q = -np.ones((n_el, 6), dtype=np.intc)
-        du = np.zeros((n_el, n_gauss, 6))
-        dv = np.zeros((n_el, n_gauss, 6))
-        for e in range(n_el):
-            rows = slice(e * n_gauss, (e + 1) * n_gauss)
-            cols = np.nonzero(np.any(st.du[rows] != 0.0, axis=0)
-                              | np.any(st.dv[rows] != 0.0, axis=0))[0]
-            el_q[e, :len(cols)] = cols
-            du[e, :, :len(cols)] = st.du[rows][:, cols]
-            dv[e, :, :len(cols)] = st.dv[rows][:, cols]
+        el_q = []
+        for body, s_e in ((model.leaf, model.s_leaf), (model.link, model.s_link)):
+            for maps in body.element_dof_maps:             # (6, n_elastic): one 1 a row
+                el_q.append(np.where(maps.any(axis=1), s_e.start + maps.argmax(axis=1), -1))
+        el_q = np.array(el_q, dtype=np.intc)
         el_pos = np.where(el_q >= 0, np.searchsorted(idx, np.maximum(el_q, 0)), -1)
-        mean_w = np.array([st.mean[e, e * n_gauss:(e + 1) * n_gauss] for e in range(n_el)])
-        arrays = {"elastic_idx": np.ascontiguousarray(idx, dtype=np.intc),
-                  "kb_band": band_form(st.k_bending[np.ix_(idx, idx)], bw),
-                  "el_q": el_q, "el_pos": np.ascontiguousarray(el_pos, dtype=np.intc),
-                  "du": du, "dv": dv, "mean_w": mean_w,
-                  "ea_l": np.ascontiguousarray(st.ea_l, dtype=float)}
-        arrays = {k: np.ascontiguousarray(v) for k, v in arrays.items()}
+        lengths = np.concatenate([model.leaf.element_length, model.link.element_length])
+        k = np.zeros_like(model.stiffness) if st.nonlinear else st.stiffness
+        arrays = {"elastic_idx": np.asarray(idx, dtype=np.intc),
+                  "k_band": band_form(k[np.ix_(idx, idx)], bw),
+                  "el_q": el_q, "el_pos": np.asarray(el_pos, dtype=np.intc),
+                  "el_length": lengths}
+        arrays = {name: np.ascontiguousarray(a) for name, a in arrays.items()}
         self._arrays = arrays   # the struct points into these
         self.struct = ElasticData(
-            n=model.n, ne=len(idx), bw=bw, n_el=n_el, n_gauss=n_gauss,
-            nonlinear=int(st.nonlinear), beta=model.damping_beta,
-            youngs_modulus=p.youngs_modulus,
-            **{k: v.ctypes.data_as(ctypes.POINTER(
-                ctypes.c_int if v.dtype == np.intc else ctypes.c_double))
-               for k, v in arrays.items()})
+            n=model.n, ne=len(idx), bw=bw, n_el=len(lengths), nonlinear=int(st.nonlinear),
+            beta=model.damping_beta, youngs_modulus=p.youngs_modulus,
+            ea=p.youngs_modulus * p.cross_section_area,
+            ei=p.youngs_modulus * p.cross_section_inertia, fibre=p.fibre_distance,
+            **{name: a.ctypes.data_as(ctypes.POINTER(
+                ctypes.c_int if a.dtype == np.intc else ctypes.c_double))
+               for name, a in arrays.items()})
         self.lib = lib
         ptr = lib.elastic_new(ctypes.byref(self.struct))
         if not ptr:
@@ -369,6 +244,10 @@ class CompiledElasticLaw:
 
     def last_dissipation(self) -> float:
         return float(self.lib.elastic_last_dissipation(self.ptr))
+
+    def max_slope(self) -> float:
+        """Return the largest |theta| = |sin psi| of the states the law has stepped through."""
+        return float(self.lib.elastic_max_slope(self.ptr))
 
     def __del__(self):
         ptr = getattr(self, "ptr", None)
@@ -383,7 +262,7 @@ class ElasticMidpointDAE(MidpointDAE):
     Energy-consistent midpoint step with a general strain energy and damping.
 
     The energy-consistent midpoint step of MidpointDAE with a general strain energy
-    (AVF discrete gradient) and the damping force -C dq/h: on the compiled kernel with
+    (its discrete gradient) and the damping force -C dq/h: on the compiled kernel with
     ``CompiledElasticLaw`` attached, or in numpy (kernel="numpy", the reference).
     """
 
@@ -395,6 +274,8 @@ class ElasticMidpointDAE(MidpointDAE):
             self.law = CompiledElasticLaw(self._compiled.lib, model)
             self.law.attach(self._compiled)
         self.strain_nonlinear = model.strain.nonlinear
+        # the largest |theta| = |sin psi| of the states the numpy path stepped from or to
+        self._max_slope = 0.0
         self.refreshes = 0   # iteration matrices re-factored inside a step, for diagnostics
         self.halvings = 0    # steps split in two because Newton failed
         self.backtracks = 0  # line-search step reductions
@@ -441,12 +322,42 @@ class ElasticMidpointDAE(MidpointDAE):
         """
         try:
             return self._step(s, h, force, cs)
-        except ConvergenceError:
+        except ConvergenceError as exc:
             if depth >= self.max_halvings:
-                raise
+                raise self._explained(exc, s) from None
         self.halvings += 1
         mid = self._substeps(s, 0.5 * h, force, cs, depth + 1)
         return self._substeps(mid, 0.5 * h, force, cs, depth + 1)
+
+    def max_section_slope(self) -> float | None:
+        """
+        Return the co-rotational beam's largest |v'| = |sin psi| of every step so far.
+
+        The largest turn of a section from its body frame (the summary's fibre-rotation
+        warning); None for the linear strain.
+        """
+        if not self.strain_nonlinear:
+            return None
+        if self.law is not None:
+            return self.law.max_slope()
+        return self._max_slope
+
+    def _explained(self, exc: ConvergenceError, s: DynamicState) -> ConvergenceError:
+        """
+        Return the step's failure, explained where the co-rotational beam met its limit.
+
+        The slope coordinates theta = sin psi of the floating frames cannot turn a section
+        through 90 deg from its body frame: a step that fails with a slope near 1 says so.
+        """
+        if not self.strain_nonlinear:
+            return exc
+        slope = float(np.max(np.abs(self.model.strain.section_slopes(s.q))))
+        if slope < 0.99:
+            return exc
+        return ConvergenceError(
+            f"{exc}: a fibre has turned {math.degrees(math.asin(min(slope, 1.0))):.1f} deg "
+            f"from its body frame (slope |v'| = {slope:.4f}); flexible-nonlinear's slope "
+            "coordinates end at 90 deg (docs/validation_nonlinear.md)")
 
     def _step(self, s, h, force, cs):
         """Take one step: compiled (_kernel_nonlinear.c hooks) or the numpy reference."""
@@ -462,7 +373,7 @@ class ElasticMidpointDAE(MidpointDAE):
         Take one energy-consistent midpoint step.
 
         M(q1) v1 - M(q0) v0 = h [G_T - G_U - C dq/h - F_H G_y + G_Phi^T lambda], Phi(q1) = 0;
-        G_U the AVF gradient of U, the rest as in MidpointDAE._step (integrators.
+        G_U the discrete gradient of U, the rest as in MidpointDAE._step (integrators.
         midpoint_iterate).  Nonlinear strain: the iteration matrix is re-factored after an
         iteration that contracted by less than REFRESH_RATE (the stiff axial directions turn
         with v' inside a large step, and a frozen matrix then converges slowly; at small
@@ -473,9 +384,12 @@ class ElasticMidpointDAE(MidpointDAE):
         is ~1e-3 off in stage 2, where Newton contracts by only ~1e-2 with it.  A matrix
         factored CARRY_STEPS steps ago or less serves the step whole; an older one its first
         iteration, and the step factors its own at the first iterate, which is close.  A
-        factorisation costs about an iteration: 0.4 iterations more a step than factoring in
-        every step, 12 % less time (N = 2 and 4).  _kernel.c with _kernel_nonlinear.c does
-        the same arithmetic in the same order.
+        factorisation costs about an iteration: re-checked with (an earlier variant of) the
+        co-rotational law, N = 4, V0 = -0.2 and -1 on a shared machine, re-factoring at a
+        contraction rate of 0.03 or 0.01, or in every step, was no faster overall (-1 % to
+        +24 % time) than these rules.  A predictor outside the slope coordinates
+        (|theta| >= 1, on a coarse step) starts from q0.  _kernel.c with _kernel_nonlinear.c
+        does the same arithmetic in the same order.
         """
         from scipy.linalg.lapack import dgetrf, dgetrs     # (as MidpointDAE._step)
 
@@ -504,6 +418,8 @@ class ElasticMidpointDAE(MidpointDAE):
             return np.concatenate([-0.5 * h * resid, -x.phi]), x, damping
 
         q = q0 + h * start.w0
+        if self.strain_nonlinear and not m.strain.admissible(q):
+            q = q0.copy()           # a predictor outside the slope coordinates starts from q0
         lam = s.multipliers.copy()
         lag_whole = lagged and carried[6] < CARRY_STEPS
         lu, piv = carried[4:6] if lagged else (None, None)
@@ -523,9 +439,9 @@ class ElasticMidpointDAE(MidpointDAE):
             it += 1
             if lu is None or refresh:
                 it_mat = np.zeros((n + nc, n + nc))
-                avf_jacobian = m.strain.discrete_gradient_jacobian(q0, q)
+                gradient_jacobian = m.strain.discrete_gradient_jacobian(q0, q)
                 it_mat[:n, :n], jac_c = iteration_blocks(
-                    m, cs, x, h, 0.5 * h * h * avf_jacobian + 0.5 * h * damping)
+                    m, cs, x, h, 0.5 * h * h * gradient_jacobian + 0.5 * h * damping)
                 it_mat[:n, n:] = -jac_c.T
                 it_mat[n:, :n] = m.constraint_jacobian(q, cs)
                 lu, piv, info = dgetrf(it_mat, overwrite_a=True)
@@ -544,10 +460,8 @@ class ElasticMidpointDAE(MidpointDAE):
             rate = step_norm / last_norm if it > 1 else 1.0
             refresh = self.strain_nonlinear and (
                 (it == 1 and lagged and not lag_whole) or (it > 1 and rate > REFRESH_RATE))
-            if step_norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * step_norm
-                                              < self.tolerance):
-                if np.max(np.abs(m.constraint_residual(q, cs))) < PHI_TOLERANCE:
-                    break
+            if newton_converged(m, cs, q, step_norm, rate, self.tolerance):
+                break
             last_norm = step_norm
         else:
             raise ConvergenceError(f"Newton did not converge in {self.max_iterations} iterations "
@@ -567,6 +481,9 @@ class ElasticMidpointDAE(MidpointDAE):
             raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
         if self.strain_nonlinear:
             self._carried = (q, v, nc, h, lu, piv, 0 if refactored else carried[6] + 1)
+            self._max_slope = max(self._max_slope,
+                                  float(np.abs(m.strain.section_slopes(q0)).max()),
+                                  float(np.abs(m.strain.section_slopes(q)).max()))
         return DynamicState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v,
                             s.dissipation + dissipated)
 
@@ -584,14 +501,18 @@ class ElasticEngine(FiniteElementEngine):
         """
         Not with the nonlinear strain.
 
-        Its axial coordinates follow the bending's foreshortening (u' = -v'^2/2), far from the
-        lock's configuration and from the linearised modes the correction is built on (in
-        its earlier, stiffness form, measured from the lock, it moved the stage-2 period at
-        V0 = -0.2 by 1 % where its own size is 1e-5; the modal-mass form is not tried with
-        this strain, and the kernel leaves it out).  The linear strain (damped flexible)
-        takes it.
+        Its axial coordinates follow the bending's foreshortening (inextensible bending
+        shortens the chords), far from the lock's configuration and from the linearised
+        modes the correction is built on (in its earlier, stiffness form, measured from the
+        lock, it moved the von Karman model's stage-2 period at V0 = -0.2 by 1 % where its
+        own size is 1e-5; the modal-mass form is not tried with a nonlinear strain, and the
+        kernel leaves it out).  The linear strain (damped flexible) takes it.
         """
         return not self.rigid and not self.model.strain.nonlinear
+
+    def max_section_slope(self) -> float | None:
+        """Return the largest |v'| of a section over every step so far (None: linear strain)."""
+        return self.integrator.max_section_slope()
 
     def advance(self, s, k0, h, n_steps, force, stage, work, lock_loss, states=False):
         """

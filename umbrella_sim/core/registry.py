@@ -235,10 +235,11 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        rule="≥ −`area`·`yield_strength`, the link's load in tension"),
     # model and numerics
     _P("model", str, "flexible", "-",
-       "flexible: Case 1 then Case 2; flexible-nonlinear: the same with the von Kármán "
-       "membrane strain u' + v'²/2 (geometric stiffening, thesis §7.2; compiled, 1.5–2× the "
-       "cost of a flexible step; its stage 2 at V0 ≤ −1 m/s wants time_step ≤ 0.5 ms, "
-       "docs/validation_nonlinear.md); "
+       "flexible: Case 1 then Case 2; flexible-nonlinear: the same with geometrically exact "
+       "beams (co-rotational Euler–Bernoulli elements in the floating frames: large "
+       "rotations, small strains, thesis §7.2; a fibre may turn up to 90° from its body "
+       "frame, the run stops there and warns past 80°; compiled, 1.3–2× the cost of a "
+       "flexible step; docs/validation_nonlinear.md); "
        "rigid-fe: Case 3 (elastic coordinates constrained); rigid: closed-form two-angle "
        "model", choices=MODELS),
     _P("elements_per_segment", int, 1, "-",
@@ -259,10 +260,16 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "(docs/validation.md, step convergence): the deploy time, stage-1 and stage-2 peak "
        "stresses, stage-2 period and amplitude of every studied case, and the stage-2 tip "
        "series within 1 mm up to V0 = -0.2 m/s (at -0.5 m/s, a 0.12-0.16 m amplitude past "
-       "the small-deflection limit, the floating frames' nonlinearity leaves 1-4 mm)",
+       "the small-deflection limit, the floating frames' nonlinearity leaves 1-4 mm). "
+       "flexible-nonlinear: 0 = 0.1 ms at every mesh, its real-time step (its own rule, "
+       "ωh ≤ 0.35, would take 4 µs at N = 4: `step_follows_mesh` takes it), at which its "
+       "stage-2 period and amplitude meet an independent geometrically exact model's "
+       "(docs/validation_nonlinear.md) and its stage-2 peak stresses are not resolved "
+       "('coarse step' says so)",
        low=0.0, high=0.01, rule=f"0, or >= {MIN_PHYSICS_STEP:g} s"),
     _P("step_follows_mesh", bool, False, "-",
-       "with a `time_step` > 0: true = the physics step is the largest `time_step` / k "
+       "with a `time_step` > 0 (or flexible-nonlinear's 0, which stands for 0.1 ms): true = "
+       "the physics step is the largest `time_step` / k "
        "the mesh's stage-2 stresses need (the rule of `time_step` 0, below this ceiling); "
        "false = `time_step` as it is (a run whose step leaves more than 1 % of its "
        "stage-2 stress crest to unresolved modes says so: 'coarse step'). The node still "

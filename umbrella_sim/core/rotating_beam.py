@@ -15,12 +15,13 @@
 """
 The geometric-stiffening benchmark of the nonlinear beam: a cantilever in prescribed rotation.
 
-A beam of the umbrella's own elements (nonlinear.StrainEnergy: the same membrane strain and
-discrete gradient) clamped to a hub that turns at a prescribed angle: spun up and left turning,
-it vibrates in the plane of rotation at the frequency the published rotating-cantilever tables
-give (Wright, Smith, Thresher & Wang 1982; Yoo & Shin 1998: lambda_f against gamma, in-plane
-sqrt(lambda_f^2 - gamma^2)), and its spin-up follows Kane, Ryan & Banerjee's (1987) beam, where
-the linear model diverges.  tests/test_nonlinear.py and docs/make_validation_nonlinear.py use
+A beam of the umbrella's own elements (beam_strain.CorotationalStrainEnergy: the same
+co-rotational strain energy and discrete gradient as flexible-nonlinear) clamped to a hub
+that turns at a prescribed angle: spun up and left turning, it vibrates in the plane of
+rotation at the frequency the published rotating-cantilever tables give (Wright, Smith,
+Thresher & Wang 1982; Yoo & Shin 1998: lambda_f against gamma, in-plane sqrt(lambda_f^2 -
+gamma^2)), and its spin-up follows Kane, Ryan & Banerjee's (1987) beam, where the linear
+model diverges.  tests/test_nonlinear.py and docs/make_validation_nonlinear.py use
 it; the simulator does not.
 """
 from __future__ import annotations
@@ -29,8 +30,8 @@ import math
 
 import numpy as np
 
+from .beam_strain import CorotationalStrainEnergy, LinearStrainEnergy
 from .model import BeamBody
-from .nonlinear import StrainEnergy
 from .summary import oscillation_period
 
 
@@ -41,14 +42,15 @@ class PrescribedRotationBeam:
 
     A cantilever BeamBody clamped to a hub whose angle theta(t) is prescribed, in the
     hub's floating frame (u = v = theta = 0 at the root), stepped by the implicit midpoint
-    rule with the AVF gradient of U.  The elastic equations are the e-rows of the frame's
+    rule with the discrete gradient of U.  The elastic equations are the e-rows of the frame's
     equations of motion (model.py invariants):
 
         M_ff e'' = w^2 (c + M_ff e) + 2 w W e' - theta'' (g + W^T e) - grad U(e)
 
     (centrifugal, Coriolis, Euler terms).  Used for the spin-up benchmark of Kane, Ryan &
     Banerjee (J. Guidance Control Dynamics 10(2), 1987): with the linear strain the beam
-    diverges once w exceeds its first bending frequency; with the nonlinear strain it does not.
+    diverges once w exceeds its first bending frequency; with the co-rotational strain it does
+    not.
     """
 
     def __init__(self, length: float, n_elements: int, mass_per_length: float, ea: float,
@@ -57,7 +59,9 @@ class PrescribedRotationBeam:
                              mass_per_length=mass_per_length, ea=ea, ei=ei,
                              youngs_modulus=youngs_modulus, fibre=fibre)
         ne = self.body.n_elastic
-        self.strain = StrainEnergy(((self.body, slice(0, ne)),), ne, ea, nonlinear)
+        bodies = ((self.body, slice(0, ne)),)
+        self.strain = (CorotationalStrainEnergy(bodies, ne, ea, ei, youngs_modulus, fibre)
+                       if nonlinear else LinearStrainEnergy(bodies, ne))
         self.i_tip_u = self.body.elastic_index(n_elements, "u")
         self.i_tip_v = self.body.elastic_index(n_elements, "v")
 

@@ -36,6 +36,20 @@ on the mesh, geometry, material and lock rule, not on V0 (the amplitudes scale w
 matched the share of the simulated runs' own lock states to 0.1 % (plastic lock; the energy
 lock's redistribution depends more on the elastic state at the lock, whose own share the
 'coarse step' warning judges).
+
+flexible-nonlinear has no mode fit (integrators.LockedModeFit's modes are the undeformed
+locked frame's, which its large-motion stage 2 leaves: the links buckle at V0 <= -1), so the
+rule's limit for it is 0.35; its time_step 0 is the ceiling itself at every mesh
+(NONLINEAR_AUTO_STEP), and step_follows_mesh takes the rule's step.  The rule would choose
+4 us at N = 4 (plastic lock; 4.8 us energy), 25 times the cost of 0.1 ms, far below real
+time at N = 4 where 0.1 ms runs above 5x (bench/bench_nonlinear.py); the model's targets, its
+stage-2 period and amplitude at V0 = -1 and -2 against an independent geometrically exact
+(ANCF) model, stage 1, are met at 0.1 ms (docs/validation_nonlinear.md), and a finer step
+brings its large-motion stage 2 no closer: that motion amplifies any perturbation, and the
+V0 = -2 period at N = 4 moves between 46.0 and 48.9 ms over steps of 2 us to 0.1 ms
+(49.9 ms the reference).  What 0.1 ms leaves unresolved, the stage-2 peak stresses and the
+small-motion amplitude (-1.7 % at V0 = -0.2, plastic lock, against the resolved step and
+the ANCF model), the 'coarse step' warning says, with the step that resolves them.
 """
 from __future__ import annotations
 
@@ -60,6 +74,11 @@ AUTO_STEP_CEILING = 1e-4
 #: omega h of a 1 % period error of the plain midpoint rule ((omega h)^2 / 12): the limit of a
 #: resolved mode without the mode fit
 UNFITTED_OMEGA_H = math.sqrt(12 * 0.01)
+
+
+#: the model whose time_step 0 is AUTO_STEP_CEILING at every mesh (its real-time step; the
+#: module's docstring says why); step_follows_mesh gives it the rule's step
+NONLINEAR_AUTO_STEP = "flexible-nonlinear"
 
 
 def resolved_omega_h(params: UmbrellaParams) -> float:
@@ -144,11 +163,13 @@ def physics_step_of(params: UmbrellaParams) -> float:
     time_step, or AUTO_STEP_CEILING for time_step 0) whose unresolved modes carry at most
     STRESS_SHARE_LIMIT of the stage-2 stress crest of the mesh's lock (``lock_amplitudes``),
     or ceiling / MAX_STEP_DIVISOR if none does (the run then says so: 'coarse step').  The
-    rigid models: the ceiling.
+    rigid models, and flexible-nonlinear without step_follows_mesh: the ceiling.
     """
     ceiling = params.time_step if params.time_step > 0.0 else AUTO_STEP_CEILING
-    if (params.time_step > 0.0 and not params.step_follows_mesh) or \
-            params.model in ("rigid", "rigid-fe"):
+    if not params.step_follows_mesh and (params.time_step > 0.0
+                                         or params.model == NONLINEAR_AUTO_STEP):
+        return ceiling
+    if params.model in ("rigid", "rigid-fe"):
         return ceiling
     return ceiling / _mesh_divisor(tuple(sorted(params.replace(time_step=ceiling)
                                                 .as_dict().items())))
@@ -166,6 +187,15 @@ def _mesh_divisor(items: tuple) -> int:
         # parameters that make no model: building the run's says why, naming them
         return 1
     return k or min(MAX_STEP_DIVISOR, int(p.time_step / MIN_PHYSICS_STEP))
+
+
+def resolving_step_hint(params: dict) -> str:
+    """Return how a run of these parameters gets the step that resolves its stage 2, or ''."""
+    if params.get("model") == NONLINEAR_AUTO_STEP:
+        return "" if params.get("step_follows_mesh") else "step_follows_mesh takes it"
+    if params.get("time_step") == 0.0:
+        return ""
+    return "time_step 0 takes the step chosen for the mesh"
 
 
 def stage2_resolution(model: UmbrellaModel, q: np.ndarray, qd: np.ndarray, h: float) -> dict:

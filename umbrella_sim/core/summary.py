@@ -25,6 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from functools import cache
 import math
+from typing import Callable
 
 import numpy as np
 
@@ -32,7 +33,7 @@ from .forcing import TIME_RESOLUTION
 from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS, step_row,
                       StepBlock)
 from .step_rule import (lock_amplitudes, MAX_STEP_DIVISOR, resolved_omega_h, resolving_divisor,
-                        STRESS_SHARE_LIMIT, unresolved_stress_share)
+                        resolving_step_hint, STRESS_SHARE_LIMIT, unresolved_stress_share)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
@@ -233,7 +234,7 @@ def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     return None
 
 
-def coarse_step_warning(resolution: dict | None, step_chosen: bool = False) -> str | None:
+def coarse_step_warning(resolution: dict | None, hint: str = "") -> str | None:
     """
     Return a warning when the step leaves the modes carrying the stage-2 stresses unresolved.
 
@@ -241,7 +242,8 @@ def coarse_step_warning(resolution: dict | None, step_chosen: bool = False) -> s
     before the lock or for a rigid model.  Past step_rule.STRESS_SHARE_LIMIT the stage-2
     peak stresses, and the period if the first mode is among those modes, are not those of
     the model (docs/validation.md): the text names the shares and the step that resolves
-    them.  step_chosen: the run's step is the one chosen for the mesh (time_step 0).
+    them.  hint: how the run's parameters get that step (step_rule.resolving_step_hint), ''
+    if they already do.
     """
     if not resolution:
         return None
@@ -254,7 +256,7 @@ def coarse_step_warning(resolution: dict | None, step_chosen: bool = False) -> s
                "one) resolves them: give a smaller time_step")
     else:
         fix = f"time_step <= {_rounded_down(enough):.3g} s resolves them" + (
-            "" if step_chosen else " (time_step 0 takes the step chosen for the mesh)")
+            f" ({hint})" if hint else "")
     return (f"coarse step: modes the physics step {h:g} s does not resolve carry "
             f"{100 * shares['leaf']:.3g} % of the leaf's and {100 * shares['link']:.3g} % of the "
             f"link's stage-2 stress crest at the lock (limit {100 * STRESS_SHARE_LIMIT:g} %): "
@@ -308,6 +310,44 @@ RIGID_FE_ZEROS = ("tip_deflection_max", "stage2_tip_amplitude", "peak_stress_lea
                   "peak_stress_link", "stress_ratio_max", "tip_deflection_ratio_max")
 
 
+#: the geometrically exact beam (flexible-nonlinear) takes a fibre's slope |v'| in its body
+#: frame as sin psi of its turn psi from that frame: its coordinates end at psi = 90 deg (the
+#: run stops there), and near it the small-strain error eps tan(psi) of the section angle grows
+#: (tan 80 deg = 5.7); a run whose fibres turn past this slope (80 deg) is named
+SECTION_SLOPE_LIMIT = math.sin(math.radians(80.0))
+
+
+def geometric_validity_warnings(params: dict, peak_stress: float,
+                                section_slope: float | None = None) -> list[str]:
+    """
+    Return where a run of the geometrically exact model left that model's validity.
+
+    flexible-nonlinear (the co-rotational beam of nonlinear.py) is exact for large rotations
+    and small strains: 'large strain' when the peak fibre strain |sigma| / E (which bounds the
+    membrane strain |eps| too) passes STRAIN_LIMIT (above yield too, where validity_warnings'
+    own large-strain warning gives way to the yield warning); 'fibre rotation' when a section
+    turned past SECTION_SLOPE_LIMIT from its body frame (section_slope: the largest |v'| over
+    every step, from the engine; None when not known, e.g. a recording's figures).  Other
+    models: none.
+    """
+    if params.get("model") != "flexible-nonlinear":
+        return []
+    out = []
+    strain = peak_stress / params["youngs_modulus"]
+    if strain > STRAIN_LIMIT and peak_stress > params["yield_strength"]:
+        out.append(f"large strain: peak |sigma| / youngs_modulus = {100 * strain:.3g} % "
+                   f"(limit {100 * STRAIN_LIMIT:g} %): the co-rotational beam of "
+                   "flexible-nonlinear is exact for large rotations but small strains only")
+    if section_slope is not None and section_slope > SECTION_SLOPE_LIMIT:
+        turn = math.degrees(math.asin(min(section_slope, 1.0)))
+        out.append(f"fibre rotation: a fibre turned {turn:.1f} deg from its body frame (|v'| = "
+                   f"{section_slope:.4f}; limit {math.degrees(math.asin(SECTION_SLOPE_LIMIT)):g}"
+                   " deg): flexible-nonlinear's slope coordinates end at 90 deg, and near it "
+                   "the error eps tan(psi) of its section angles grows "
+                   "(docs/validation_nonlinear.md)")
+    return out
+
+
 #: an energy balance error (energy_drift) past which a run is named: well above round-off
 #: (~1e-13) and the Newton tolerance's share (< 1e-4 in every documented run)
 ENERGY_DRIFT_LIMIT = 1e-3
@@ -316,20 +356,23 @@ ENERGY_DRIFT_LIMIT = 1e-3
 def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                       tip_deflection: float, locked: bool = False,
                       energy_drift: float | None = None,
-                      stage2_resolution: dict | None = None) -> list[str]:
+                      stage2_resolution: dict | None = None,
+                      section_slope: float | None = None) -> list[str]:
     """
     Return where a run left the model's validity: one rule, used everywhere.
 
     Each text starts with a fixed key ('lock not applicable', 'coarse step' once locked,
-    'energy not conserved', 'yield exceeded', 'large strain' (below yield), 'large
-    deflection') before a colon.  stage2_resolution: the lock's (LockEvent), for
-    'coarse step'.
+    'energy not conserved', 'yield exceeded', 'large strain' (below yield; above it too for
+    flexible-nonlinear), 'large deflection' (small-deformation models), 'fibre rotation'
+    (flexible-nonlinear: geometric_validity_warnings)) before a colon.  stage2_resolution:
+    the lock's (LockEvent), for 'coarse step'; section_slope: the largest |v'| of
+    flexible-nonlinear's fibres (geometric_validity_warnings).
     """
     out = []
     lw = lock_warning(params, lock_kind)
     if lw:
         out.append(lw)
-    cw = (coarse_step_warning(stage2_resolution, params.get("time_step") == 0.0)
+    cw = (coarse_step_warning(stage2_resolution, resolving_step_hint(params))
           if locked else None)
     if cw:
         out.append(cw)
@@ -349,14 +392,13 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                    f"(limit {100 * STRAIN_LIMIT:g} %): the small-strain measures and "
                    "Hooke's law of the beam elements no longer hold")
     length = params["l1"] + params["l2"]
-    if tip_deflection > TIP_DEFLECTION_LIMIT * length:
-        beyond = ("the von Karman strain of flexible-nonlinear holds to fibre rotations of "
-                  "~0.3 rad: check them (docs/validation_nonlinear.md)"
-                  if params.get("model") == "flexible-nonlinear" else
-                  "small-deformation theory no longer holds (compare model flexible-nonlinear)")
+    if (tip_deflection > TIP_DEFLECTION_LIMIT * length
+            and params.get("model") != "flexible-nonlinear"):     # (its own: below)
         out.append(f"large deflection: |v_G| reached {tip_deflection * 1e3:.4g} mm = "
                    f"{100 * tip_deflection / length:.3g} % of the leaf length {length:g} m "
-                   f"(limit {100 * TIP_DEFLECTION_LIMIT:g} %): {beyond}")
+                   f"(limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no "
+                   "longer holds (compare model flexible-nonlinear)")
+    out += geometric_validity_warnings(params, peak_stress, section_slope)
     return out
 
 
@@ -370,8 +412,11 @@ class SummaryAccumulator:
     metadata) and, through the recording's metadata, umbrella_compare.
     """
 
-    def __init__(self, params: dict, initial: Sample, lock_kind: str | None = None):
+    def __init__(self, params: dict, initial: Sample, lock_kind: str | None = None,
+                 section_slope: Callable[[], float | None] | None = None):
+        """section_slope: the engine's largest |v'| of a section so far (flexible-nonlinear)."""
         self.params = dict(params)
+        self._section_slope = section_slope
         self.lock_kind = lock_kind
         self.lock: LockEvent | None = None
         self.steps = 0
@@ -497,14 +542,19 @@ class SummaryAccumulator:
                                  self._tip_all, locked=self.lock is not None,
                                  energy_drift=self._balance / self._scale,
                                  stage2_resolution=self.lock.stage2_resolution
-                                 if self.lock else None)
+                                 if self.lock else None,
+                                 section_slope=self._slope())
+
+    def _slope(self) -> float | None:
+        return self._section_slope() if self._section_slope is not None else None
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
         # the warnings depend on the run only through the largest peak stress and tip
         # deflection so far: unchanged (most publications), nothing can be new
         seen = (self._peaks["leaf"][0], self._peaks["link"][0], self._tip_all,
-                self.lock is not None, self._balance / self._scale > ENERGY_DRIFT_LIMIT)
+                self.lock is not None, self._balance / self._scale > ENERGY_DRIFT_LIMIT,
+                self._slope())
         if seen == self._warned_at:
             return []
         self._warned_at = seen

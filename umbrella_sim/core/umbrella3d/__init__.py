@@ -1,0 +1,17 @@
+"""
+The whole umbrella in 3D: N flexible ribs around one sleeve (the planar model's extension).
+
+    params3d      UmbrellaRibsParams: the planar record, the number of ribs, the hub, the
+                  sleeve, the base, and each rib's own values (lists or rib<k>.<name>)
+    beam3d        the 3D Euler-Bernoulli body in its floating frame (axial, two bendings,
+                  St-Venant torsion)
+    model3d       UmbrellaModel3D: layout, mass, gradients, joints of every rib and the bus
+    arrow         block-arrow linear algebra (cost linear in the number of ribs)
+    integrator3d  the energy-consistent midpoint step (the planar scheme), friction, drive
+    simulator3d   UmbrellaSimulator3D: the grid, the lock, stuck hinges
+    outputs3d     Record3D: every step's figures per rib, peaks, spread, energy balance
+    modes3d       the locked umbrella's vibration modes (validation and figures)
+
+No ROS, no file format, no command line (the core layer's rules).  docs/umbrella3d.md
+gives the formulation and its validation.
+"""

@@ -1,0 +1,340 @@
+"""
+The energy-consistent midpoint step of the whole umbrella, on block-arrow linear algebra.
+
+The planar integrator's scheme (``core.integrators.MidpointDAE``) for the umbrella's
+coordinates, step for step the same algorithm so that a rib whose out-of-plane state is zero
+takes the planar model's steps: predictor q0 + h v0, modified Newton on
+
+    M(q1) v1 - M(q0) v0 = h [ G_T - K q_m + Q + G_Phi^T lambda ],   Phi(q1) = 0
+
+(G_T, G_Phi Gonzalez discrete gradients of 1/2 v0^T M(q) v1 and of each joint row; Q the
+sleeve force on y_s, the hinges' friction at the step's mean rate, exact work), one
+iteration matrix per step (M + h^2/4 K + h/2 G at the predictor, the elastic gyroscopic
+block and the Gonzalez columns left out, as the planar one), the same stopping rule, then
+the velocity projected onto the joints in the mass metric and scaled to the kinetic energy
+of the step's discrete energy balance
+
+    T1 = T0 + V0 - V1 + F (y_s0 - y_s1) + W_friction + W_drive.
+
+With a prescribed base (rheonomic joints) the velocity is projected but not scaled, and the
+drive's work counts, besides its multipliers times the bus's displacement, the projection's
+impulse on the bus times the bus's mean velocity across it.  Every linear solve is
+block-arrow (arrow.py): cost linear in the number of ribs.  The kinetic energy's discrete
+gradient meets dq . G_T = f(q1) - f(q0) over the whole dq, the correction added along the
+ribs' coordinates and the sleeve's only (not the bus's: its position is cyclic), so the bus's
+linear momentum is conserved to round-off.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import math
+
+import numpy as np
+
+from . import arrow
+from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
+
+#: constraint residual Newton must reach (m), as the planar integrator
+PHI_TOLERANCE = 1e-11
+
+
+class ConvergenceError3D(ArithmeticError):
+    """Newton did not converge, or a matrix was singular."""
+
+
+@dataclass(frozen=True)
+class State3D:
+    """The umbrella's state: rib part (R, n) and shared part of q, v, multipliers, momentum."""
+
+    t: float
+    qr: np.ndarray
+    qs: np.ndarray
+    vr: np.ndarray
+    vs: np.ndarray
+    lam_r: np.ndarray
+    lam_s: np.ndarray
+    stuck: np.ndarray          # (R,) angle a stuck hinge holds, NaN where free
+    pr: np.ndarray | None = None
+    ps: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class StepWork:
+    """What one step did: work of the sleeve force, of each hinge's friction, of the drive."""
+
+    force: float
+    friction: np.ndarray
+    drive: float
+    iterations: int
+
+
+class BaseDrive:
+    """
+    A prescribed bus motion: a half-sine acceleration pulse in X-Z and a spin-up about Y.
+
+    Position, velocity and acceleration of the bus coordinates [X, Y, Z, psi, beta, gamma]
+    in closed form: a(t) = A sin(pi (t - t0) / T) for t0 <= t <= t0 + T (A = (ax, 0, az)),
+    psi'(t) = Omega min(t / T_r, 1).
+    """
+
+    def __init__(self, params):
+        self.accel = np.array([params.base_accel_x, 0.0, params.base_accel_z])
+        self.t0, self.duration = params.base_accel_start, params.base_accel_duration
+        self.spin, self.ramp = params.base_spin_rate, params.base_spin_ramp
+
+    def __call__(self, t: float):
+        """Return (g, g', g'') of the bus coordinates at t."""
+        g, gd, gdd = np.zeros(6), np.zeros(6), np.zeros(6)
+        tau = min(max(t - self.t0, 0.0), self.duration)
+        w = math.pi / self.duration
+        amp = self.accel
+        gdd[:3] = amp * math.sin(w * tau) if 0.0 < t - self.t0 < self.duration else 0.0
+        gd[:3] = amp / w * (1.0 - math.cos(w * tau))
+        g[:3] = amp / w * (tau - math.sin(w * tau) / w) + gd[:3] * max(t - self.t0 - tau, 0.0)
+        r = self.ramp
+        if t <= r:
+            g[3], gd[3], gdd[3] = self.spin * t * t / (2 * r), self.spin * t / r, self.spin / r
+        else:
+            g[3], gd[3] = self.spin * (r / 2 + t - r), self.spin
+        return g, gd, gdd
+
+
+class MidpointUmbrella:
+    """The step of module docstring for a model; friction and the drive from its parameters."""
+
+    def __init__(self, model: UmbrellaModel3D, tolerance: float = 1e-10,
+                 max_iterations: int = 25):
+        self.model = model
+        self.tolerance = tolerance
+        self.max_iterations = max_iterations
+        p = model.params
+        self.coulomb = np.array([r.hinge_coulomb for r in model.ribs])
+        self.viscous = np.array([r.hinge_viscous for r in model.ribs])
+        self.regularisation = p.hinge_regularisation
+        self.drive = BaseDrive(p) if p.base == "prescribed" else None
+        m = model
+        # coordinates the kinetic energy depends on (Gonzalez correction), and those Newton's
+        # error is measured on (y_s follows the ribs through the joints)
+        self.kin_shared = np.zeros(m.n_shared, dtype=bool)
+        self.norm_shared = np.zeros(m.n_shared, dtype=bool)
+        if m.moving_base:
+            self.kin_shared[0] = True
+            self.norm_shared[1:] = True
+        self.iterations = 0
+
+    # ------------------------------------------------------------ pieces
+    def friction(self, dq_a1: np.ndarray, h: float):
+        """Return (torque at the step's mean rate (R,), its derivative in d alpha1)."""
+        w = dq_a1 / h
+        eps = self.regularisation
+        th = np.tanh(w / eps)
+        torque = -(self.viscous * w + self.coulomb * th)
+        slope = -(self.viscous + self.coulomb * (1.0 - th * th) / eps) / h
+        return torque, slope
+
+    def _blocks(self, mass, jac_c, jac_r, stuck, shared_active, extra_rr=None, sign=-1.0):
+        """Return the arrow blocks of [[A, sign Jc^T], [Jr, Z]] (Z = 1 on inactive rows)."""
+        m = self.model
+        m_rr, m_rs, m_ss = mass
+        j_rr_c, j_rs_c, j_ss_c = jac_c
+        j_rr, j_rs, j_ss = jac_r
+        nr, n, ns, cs = m.n_ribs, m.n_rib, m.n_shared, m.n_shared_rows
+        a_rr = m_rr if extra_rr is None else m_rr + extra_rr
+        b = np.zeros((nr, n + N_RIB_ROWS, n + N_RIB_ROWS))
+        b[:, :n, :n] = a_rr
+        b[:, :n, n:] = sign * j_rr_c.transpose(0, 2, 1)
+        b[:, n:, :n] = j_rr
+        b[:, n + ROW_STICK, n + ROW_STICK] = np.where(np.isnan(stuck), 1.0, 0.0)
+        c = np.zeros((nr, n + N_RIB_ROWS, ns + cs))
+        c[:, :n, :ns] = m_rs
+        c[:, n:, :ns] = j_rs
+        d = np.zeros((nr, ns + cs, n + N_RIB_ROWS))
+        d[:, :ns, :n] = m_rs.transpose(0, 2, 1)
+        d[:, :ns, n:] = sign * j_rs_c.transpose(0, 2, 1)
+        e = np.zeros((ns + cs, ns + cs))
+        e[:ns, :ns] = m_ss
+        e[:ns, ns:] = sign * j_ss_c.T
+        e[ns:, :ns] = j_ss
+        e[ns:, ns:] = np.diag(np.where(shared_active, 0.0, 1.0))
+        return b, c, d, e
+
+    def project(self, kin, mass, qr, vr, vs, stuck, locked, target_vs=None,
+                multipliers=False):
+        """
+        Return (vr, vs) projected onto J v = c in the mass metric (c: the drive's rates).
+
+        With multipliers, also the shared rows' mu (the impulse on the shared coordinates is
+        -J_ss^T mu: on the bus, -mu[1:] with a prescribed base).
+        """
+        m = self.model
+        j_rr, j_rs, j_ss, active = m.constraint_jacobian(qr, stuck, locked)
+        jac = (j_rr, j_rs, j_ss)
+        blocks = self._blocks(mass, jac, jac, stuck, active, sign=1.0)
+        rib_res = -(np.einsum("rij,rj->ri", j_rr, vr) + j_rs @ vs)
+        sh_res = -(j_ss @ vs)
+        if target_vs is not None:
+            sh_res[1:] += target_vs
+        sh_res[~active] = 0.0
+        f = arrow.factor(*blocks)
+        n, ns = m.n_rib, m.n_shared
+        rr = np.concatenate([np.zeros_like(vr), rib_res], 1)
+        xs_r, xs_s = f.solve(rr, np.concatenate([np.zeros(ns), sh_res]))
+        if multipliers:
+            return vr + xs_r[:, :n], vs + xs_s[:ns], xs_s[ns:]
+        return vr + xs_r[:, :n], vs + xs_s[:ns]
+
+    def consistent(self, s: State3D, force: float, locked: bool) -> State3D:
+        """Return s with the multipliers of its consistent accelerations."""
+        m = self.model
+        kin = m.kinematics(s.qr, s.qs)
+        mass = m.mass_matrix(kin)
+        j_rr, j_rs, j_ss, active = m.constraint_jacobian(s.qr, s.stuck, locked)
+        jac = (j_rr, j_rs, j_ss)
+        f = arrow.factor(*self._blocks(mass, jac, jac, s.stuck, active))
+        q_rib = m.rib_quadratic_forces(kin, s.vr) - np.einsum("rij,rj->ri", m.stiffness, s.qr)
+        q_sh = np.zeros(m.n_shared)
+        q_sh[0] = -force
+        bias_r = m.constraint_bias(s.qr, s.vr)
+        bias_s = np.zeros(m.n_shared_rows)
+        if self.drive is not None:
+            bias_s[1:] = self.drive(s.t)[2]
+        x_r, x_s = f.solve(np.concatenate([q_rib, bias_r], 1), np.concatenate([q_sh, bias_s]))
+        n, ns = m.n_rib, m.n_shared
+        return replace(s, lam_r=x_r[:, n:], lam_s=x_s[ns:])
+
+    # ------------------------------------------------------------ the step
+    def step(self, s: State3D, h: float, force: float, locked: bool) -> tuple[State3D, StepWork]:
+        """One step of length h; raises ConvergenceError3D."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self._step(s, h, force, locked)
+
+    def _step(self, s: State3D, h: float, force: float, locked: bool):
+        m = self.model
+        n, ns = m.n_rib, m.n_shared
+        qr0, qs0, vr0, vs0, stuck = s.qr, s.qs, s.vr, s.vs, s.stuck
+        if s.pr is None:
+            pr0, ps0 = m.matvec(m.mass_matrix(m.kinematics(qr0, qs0)), vr0, vs0)
+        else:
+            pr0, ps0 = s.pr, s.ps
+        drive = None
+        if self.drive is not None:
+            drive = self.drive(s.t + h)
+        phi_r0, phi_s0 = m.constraints(qr0, qs0, stuck, locked,
+                                       None if drive is None else drive[0])
+        qr, qs = qr0 + h * vr0, qs0 + h * vs0
+        lam_r, lam_s = s.lam_r.copy(), s.lam_s.copy()
+        half_h2 = 0.5 * h * h
+        factored = None
+        last = np.inf
+        kin_mask = self.kin_shared
+        for it in range(1, self.max_iterations + 1):
+            dqr, dqs = qr - qr0, qs - qs0
+            qmr, qms = qr0 + 0.5 * dqr, qs0 + 0.5 * dqs
+            vr1, vs1 = 2.0 * dqr / h - vr0, 2.0 * dqs / h - vs0
+            kin1 = m.kinematics(qr, qs)
+            mass1 = m.mass_matrix(kin1)
+            pr1, ps1 = m.matvec(mass1, vr1, vs1)
+            kinm = m.kinematics(qmr, qms)
+            gtr, gts = m.kinetic_gradient(kinm, vr0, vs0, vr1, vs1)
+            # Gonzalez: dq . G_T = f(q1) - f(q0), f = 1/2 v0^T M(q) v1, the whole dq (the bus
+            # angles' midpoint share included), the correction along the coordinates in
+            # kin_mask only
+            p0v = m.matvec(mass1, vr0, vs0)
+            delta = 0.5 * (np.sum(p0v[0] * vr1) + p0v[1] @ vs1 - np.sum(pr0 * vr1)
+                           - ps0 @ vs1)
+            dd = np.sum(dqr * dqr) + np.sum(dqs[kin_mask] ** 2)
+            if dd > 0.0:
+                corr = (delta - np.sum(gtr * dqr) - gts @ dqs) / dd
+                gtr = gtr + corr * dqr
+                gts = gts + corr * np.where(kin_mask, dqs, 0.0)
+            # joints: each row's Gonzalez gradient along the rib's coordinates
+            phi_r, phi_s = m.constraints(qr, qs, stuck, locked,
+                                         None if drive is None else drive[0])
+            jm_rr, jm_rs, jm_ss, active = m.constraint_jacobian(qmr, stuck, locked)
+            ddr = np.sum(dqr * dqr, 1)
+            lin = np.einsum("rij,rj->ri", jm_rr, dqr) + jm_rs @ dqs
+            safe = np.where(ddr > 0.0, ddr, 1.0)
+            jg_rr = jm_rr + np.where(ddr[:, None, None] > 0.0, np.einsum(
+                "ri,rj->rij", (phi_r - phi_r0 - lin) / safe[:, None], dqr), 0.0)
+            torque, slope = self.friction(dqr[:, m.i_a1], h)
+            applied_r = -np.einsum("rij,rj->ri", m.stiffness, qmr)
+            applied_r[:, m.i_a1] += torque
+            applied_s = np.zeros(ns)
+            applied_s[0] = -force
+            cons_r = np.einsum("rji,rj->ri", jg_rr, lam_r)
+            cons_s = np.einsum("rji,rj->i", jm_rs, lam_r) + jm_ss.T @ lam_s
+            res_r = pr1 - pr0 - h * (gtr + applied_r + cons_r)
+            res_s = ps1 - ps0 - h * (gts + applied_s + cons_s)
+            if factored is None:
+                j_r = m.constraint_jacobian(qr, stuck, locked)
+                gyro = m.gyroscopic(kinm, dqr / h)
+                extra = 0.25 * h * h * m.stiffness + 0.5 * h * gyro
+                extra[:, m.i_a1, m.i_a1] -= 0.5 * h * h * slope
+                factored = arrow.factor(*self._blocks(
+                    mass1, (jm_rr, jm_rs, jm_ss), j_r[:3], stuck, active, extra))
+            rhs_r = np.concatenate([-0.5 * h * res_r, -phi_r], 1)
+            rhs_s = np.concatenate([-0.5 * h * res_s, -phi_s])
+            rhs_s[ns:][~active] = 0.0
+            x_r, x_s = factored.solve(rhs_r, rhs_s)
+            qr = qr + x_r[:, :n]
+            qs = qs + x_s[:ns]
+            lam_r = lam_r + x_r[:, n:] / half_h2
+            lam_s = lam_s + x_s[ns:] / half_h2
+            norm = max(float(np.max(np.abs(x_r[:, :n]))),
+                       float(np.max(np.abs(x_s[:ns][self.norm_shared]), initial=0.0)))
+            if not math.isfinite(norm):
+                raise ConvergenceError3D(f"Newton iterate became non-finite at t = "
+                                         f"{s.t + h:.9g} s")
+            rate = norm / last if it > 1 else 1.0
+            if norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * norm
+                                         < self.tolerance):
+                pr_, ps_ = m.constraints(qr, qs, stuck, locked,
+                                         None if drive is None else drive[0])
+                if max(np.max(np.abs(pr_)), np.max(np.abs(ps_), initial=0.0)) < PHI_TOLERANCE:
+                    break
+            last = norm
+        else:
+            raise ConvergenceError3D(f"Newton did not converge in {self.max_iterations} "
+                                     f"iterations at t = {s.t + h:.9g} s")
+        self.iterations += it
+        dqr, dqs = qr - qr0, qs - qs0
+        vr, vs = 2.0 * dqr / h - vr0, 2.0 * dqs / h - vs0
+        kin1 = m.kinematics(qr, qs)
+        mass1 = m.mass_matrix(kin1)
+        torque, _ = self.friction(dqr[:, m.i_a1], h)
+        w_fric = torque * dqr[:, m.i_a1]
+        w_force = force * (qs0[0] - qs[0])
+        w_drive = float(lam_s[1:] @ dqs[1:7]) if drive is not None else 0.0
+        t_target = (0.5 * (np.sum(vr0 * pr0) + vs0 @ ps0) + m.strain_energy(qr0)
+                    - m.strain_energy(qr) + w_force + float(np.sum(w_fric)) + w_drive)
+        free_bus = m.params.base == "free"
+        if free_bus:
+            # the bus position is cyclic: its momentum p_X (the linear momentum) is exactly
+            # that of the step's start; Newton leaves its tolerance in it, which a uniform
+            # translation velocity removes (p_X is m_total X' + terms without X')
+            vs = vs.copy()
+            vs[1:4] += (ps0[1:4] - m.matvec(mass1, vr, vs)[1][1:4]) / m.total_mass
+        if drive is None:
+            vr, vs = self.project(kin1, mass1, qr, vr, vs, stuck, locked)
+        else:
+            # the drive's impulse (-mu on the bus coordinates) that puts the bus at its rates
+            # works at the mean of the bus velocities before and after it
+            v_bus = vs[1:7]
+            vr, vs, mu = self.project(kin1, mass1, qr, vr, vs, stuck, locked, drive[1], True)
+            w_drive -= 0.5 * float(mu[1:] @ (v_bus + vs[1:7]))
+        pr1, ps1 = m.matvec(mass1, vr, vs)
+        if drive is None:
+            # scale the velocity relative to the mass centre's (König: T = |P|^2 / 2m + T_rel),
+            # so the linear momentum stays as it is
+            drift = np.zeros(m.n_shared)
+            if free_bus:
+                drift[1:4] = ps0[1:4] / m.total_mass
+            t_drift = 0.5 * m.total_mass * float(drift @ drift)
+            t_after = 0.5 * (np.sum(vr * pr1) + vs @ ps1) - t_drift
+            t_rel = t_target - t_drift
+            if t_after > 0.0 and t_after / 1.01 <= t_rel <= 1.01 * t_after:
+                scale = math.sqrt(t_rel / t_after)
+                vr, vs = vr * scale, (vs - drift) * scale + drift
+                pr1, ps1 = m.matvec(mass1, vr, vs)
+        state = State3D(s.t + h, qr, qs, vr, vs, lam_r, lam_s, stuck, pr1, ps1)
+        return state, StepWork(w_force, w_fric, w_drive, it)

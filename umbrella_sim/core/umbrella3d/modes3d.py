@@ -1,0 +1,87 @@
+"""
+The locked umbrella's vibration modes, linearised at full deployment (validation and figures).
+
+K x = omega^2 M x on the null space of the locked joints' Jacobian, about the undeformed
+deployed configuration (each rib at its deployed angle, the sleeve at the stop), the
+planar ``UmbrellaModel.locked_modes`` for the whole umbrella.  Dense (its cost is cubic in
+the coordinates): for validation and for figures, not for the step.  Each mode is labelled
+by where its energy is: the share of its strain energy in the out-of-plane bending and in
+the twist, the rest in-plane.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .model3d import UmbrellaModel3D
+
+
+def dense(model: UmbrellaModel3D, blocks_rr, blocks_rs=None, blocks_ss=None):
+    """Return the full square matrix of arrow blocks (ribs first, shared coordinates last)."""
+    nr, n, ns = model.n_ribs, model.n_rib, model.n_shared
+    out = np.zeros((nr * n + ns, nr * n + ns))
+    for k in range(nr):
+        out[k * n:(k + 1) * n, k * n:(k + 1) * n] = blocks_rr[k]
+        if blocks_rs is not None:
+            out[k * n:(k + 1) * n, nr * n:] = blocks_rs[k]
+            out[nr * n:, k * n:(k + 1) * n] = blocks_rs[k].T
+    if blocks_ss is not None:
+        out[nr * n:, nr * n:] = blocks_ss
+    return out
+
+
+def deployed_configuration(model: UmbrellaModel3D):
+    """Return (qr, qs) of the undeformed umbrella at full deployment (hub at rest)."""
+    qr = np.array([model.rigid_rib(k, model.alpha_deployed[k]) for k in range(model.n_ribs)])
+    qs = np.zeros(model.n_shared)
+    qs[0] = model.y_stop
+    return qr, qs
+
+
+def locked_modes(model: UmbrellaModel3D):
+    """
+    Return (omega (rad/s, ascending), shapes (coordinates, modes), labels) of the locked frame.
+
+    The bus (a moving base) is held.  labels[i] = (in-plane, out-of-plane bending, twist)
+    shares of mode i's strain energy.
+    """
+    from scipy.linalg import eigh, null_space
+
+    m = model
+    qr, qs = deployed_configuration(m)
+    mass = dense(m, *m.mass_matrix(m.kinematics(qr, qs)))
+    stiff = dense(m, m.stiffness)
+    nr, n, ns = m.n_ribs, m.n_rib, m.n_shared
+    stuck = np.full(nr, np.nan)
+    j_rr, j_rs, j_ss, _ = m.constraint_jacobian(qr, stuck, True)
+    rows = []
+    for k in range(nr):
+        r = np.zeros((j_rr.shape[1] - 1, nr * n + ns))
+        r[:, k * n:(k + 1) * n] = j_rr[k, :-1]
+        r[:, nr * n:] = j_rs[k, :-1]
+        rows.append(r)
+    fixed = np.zeros((ns, nr * n + ns))
+    fixed[:, nr * n:] = np.eye(ns)          # the sleeve at the stop, the bus held
+    z = null_space(np.vstack(rows + [fixed]))
+    w2, psi = eigh(z.T @ stiff @ z, z.T @ mass @ z)
+    shapes = z @ psi
+    labels = [_shares(m, stiff, shapes[:, i]) for i in range(shapes.shape[1])]
+    return np.sqrt(np.maximum(w2, 0.0)), shapes, labels
+
+
+def _shares(m: UmbrellaModel3D, stiff, x):
+    """Return the (in-plane, out-of-plane bending, twist) shares of x's strain energy."""
+    total = x @ stiff @ x
+    parts = []
+    for dofs in (("w", "slope"), ("twist",)):
+        mask = np.zeros(m.n_rib, dtype=bool)
+        for bodies, s_e in ((m.leaf_bodies, m.s_leaf_e), (m.link_bodies, m.s_link_e)):
+            body = bodies[0]
+            for node in range(len(body.node_x)):
+                for d in dofs:
+                    i = body.maybe_index(node, d)
+                    if i >= 0:
+                        mask[s_e.start + i] = True
+        sel = np.concatenate([np.tile(mask, m.n_ribs), np.zeros(m.n_shared, dtype=bool)])
+        xs = np.where(sel, x, 0.0)
+        parts.append(float(xs @ stiff @ xs / total) if total > 0 else 0.0)
+    return (1.0 - parts[0] - parts[1], parts[0], parts[1])

@@ -1,0 +1,150 @@
+"""
+The umbrella's outputs as plain data: every step's figures per rib, peaks, spread, balance.
+
+``Record3D`` keeps, for every physics step, the joint angles and rates of every rib, the
+sleeve, each rib's tip deflection in its leaf frame (axial u, in-plane v, out-of-plane w), the
+energies and the work of the sleeve force, of each hinge's friction and of a prescribed base,
+the energy lost at the lock, each stuck hinge's holding torque, the bus state and, with a
+free-floating bus, the linear and angular momentum.  Stresses: at both ends of every element,
+axial E u', bending E c v'' (in the rib plane) and E c w'' (out of it), the St-Venant shear
+G c_t phi'; the combined figure is the von Mises stress of the worst corner fibre with the
+largest torsion shear, sqrt((|sigma_a| + |sigma_bz| + |sigma_by|)^2 + 3 tau^2), an upper bound
+of the section's von Mises stress.  Each rib's peak of every component over the run is kept
+with where (body, abscissa) and when.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+STRESS_NAMES = ("axial", "bending_in_plane", "bending_out_of_plane", "torsion", "von_mises")
+
+
+class Record3D:
+    """Per-step figures of one run (lists while running; ``arrays()`` stacks them)."""
+
+    def __init__(self, model):
+        self.model = model
+        self.rows: dict[str, list] = {}
+        nr = model.n_ribs
+        self.peak = {name: np.zeros(nr) for name in STRESS_NAMES}
+        self.peak_where = {name: [("", 0.0, 0.0)] * nr for name in STRESS_NAMES}
+        self.work = 0.0
+        self.friction = np.zeros(nr)
+        self.drive = 0.0
+        self.lock_events: list = []
+        self.iterations = 0
+        self._xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
+
+    def _put(self, name, value):
+        self.rows.setdefault(name, []).append(value)
+
+    def add(self, s, locked: bool, force: float, work, lock_loss: float, lock_event=None):
+        m = self.model
+        if work is not None:
+            self.work += work.force
+            self.friction = self.friction + work.friction
+            self.drive += work.drive
+            self.iterations += work.iterations
+        if lock_event is not None:
+            self.lock_events.append(lock_event)
+        kin = None
+        if s.pr is None:
+            kin = m.kinematics(s.qr, s.qs)
+            pr, ps = m.matvec(m.mass_matrix(kin), s.vr, s.vs)
+        else:
+            pr, ps = s.pr, s.ps
+        kinetic = 0.5 * (float(np.sum(pr * s.vr)) + float(ps @ s.vs))
+        put = self._put
+        put("time", s.t)
+        put("locked", locked)
+        put("sleeve_position", s.qs[0])
+        put("sleeve_velocity", s.vs[0])
+        put("sleeve_force", force)
+        put("alpha1", s.qr[:, m.i_a1].copy())
+        put("alpha2", s.qr[:, m.i_a2].copy())
+        put("alpha1_rate", s.vr[:, m.i_a1].copy())
+        put("alpha2_rate", s.vr[:, m.i_a2].copy())
+        put("tip", s.qr[:, list(m.i_tip)].copy())
+        put("kinetic_energy", kinetic)
+        put("strain_energy", m.strain_energy(s.qr))
+        put("work", self.work)
+        put("friction_work", self.friction.copy())
+        put("drive_work", self.drive)
+        put("lock_energy_loss", lock_loss)
+        put("holding_torque", np.where(np.isnan(s.stuck), 0.0, s.lam_r[:, -1]))
+        put("stuck", ~np.isnan(s.stuck))
+        put("stop_reaction", float(s.lam_s[0]))
+        if m.moving_base:
+            put("bus_q", s.qs[1:7].copy())
+            put("bus_v", s.vs[1:7].copy())
+            if m.params.base == "free":
+                kin = kin if kin is not None else m.kinematics(s.qr, s.qs)
+                p, h = m.momentum(kin, s.vr, s.vs)
+                put("linear_momentum", p)
+                put("angular_momentum", h)
+        vm_now = np.zeros(m.n_ribs)
+        for body, comps, xs in zip(("leaf", "link"), m.stress_components(s.qr), self._xs):
+            ax, bz, by, sh = comps
+            vm = np.sqrt((np.abs(ax) + np.abs(bz) + np.abs(by)) ** 2 + 3.0 * sh * sh)
+            vm_now = np.maximum(vm_now, vm.max(1))
+            for name, values in zip(STRESS_NAMES, (ax, bz, by, sh, vm)):
+                a = np.abs(values)
+                where = a.argmax(1)
+                top = a[np.arange(len(where)), where]
+                better = top > self.peak[name]
+                if np.any(better):
+                    self.peak[name] = np.where(better, top, self.peak[name])
+                    lst = list(self.peak_where[name])
+                    for k in np.nonzero(better)[0]:
+                        lst[k] = (body, float(xs[where[k]]), float(s.t))
+                    self.peak_where[name] = lst
+        put("von_mises", vm_now)
+
+    def arrays(self) -> dict:
+        """Return every per-step figure as an array (steps first, then ribs or components)."""
+        return {name: np.array(values) for name, values in self.rows.items()}
+
+    def summary(self) -> dict:
+        """
+        Return the run's figures: lock time, each rib's deployment, spread, peaks, balance.
+
+        A rib's deployment instant is when its leaf angle first reaches its deployed angle
+        (linear between steps); the lag is the latest rib's after the earliest.  The energy
+        balance residual is max |T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss|.
+        """
+        m = self.model
+        a = self.arrays()
+        t = a["time"]
+        alpha = a["alpha1"]
+        deployed = []
+        for k in range(m.n_ribs):
+            gap = alpha[:, k] - m.alpha_deployed[k]
+            hit = np.nonzero(gap <= 0.0)[0]
+            if len(hit) == 0 or hit[0] == 0:
+                deployed.append(np.nan if len(hit) == 0 else t[0])
+                continue
+            i = hit[0]
+            deployed.append(t[i - 1] + (t[i] - t[i - 1]) * gap[i - 1] / (gap[i - 1] - gap[i]))
+        deployed = np.array(deployed)
+        energy = a["kinetic_energy"] + a["strain_energy"]
+        balance = (energy - energy[0] - a["work"] - a["friction_work"].sum(1) - a["drive_work"]
+                   + a["lock_energy_loss"])
+        tip_w = np.abs(a["tip"][:, :, 2])
+        worst = np.unravel_index(np.argmax(tip_w), tip_w.shape)
+        out = {
+            "lock_time": self.lock_events[0][0] if self.lock_events else None,
+            "rib_deploy_time": deployed,
+            "deployment_lag": float(np.nanmax(deployed) - np.nanmin(deployed))
+            if np.any(np.isfinite(deployed)) else np.nan,
+            "max_out_of_plane_tip": float(tip_w[worst]),
+            "max_out_of_plane_tip_rib": int(worst[1]),
+            "max_out_of_plane_tip_time": float(t[worst[0]]),
+            "max_in_plane_tip": np.abs(a["tip"][:, :, 1]).max(0),
+            "energy_balance_residual": float(np.max(np.abs(balance))),
+            "energy_scale": float(np.max(np.abs(energy))),
+            "friction_work": a["friction_work"][-1],
+            "newton_iterations": self.iterations,
+            "peak_stress": {name: (self.peak[name].copy(), list(self.peak_where[name]))
+                            for name in STRESS_NAMES},
+        }
+        return out

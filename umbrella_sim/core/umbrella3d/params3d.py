@@ -1,0 +1,252 @@
+"""
+The whole umbrella's parameters: N ribs around one sleeve, each rib's own values, the base.
+
+``UmbrellaRibsParams`` holds the planar model's record (``UmbrellaParams``: geometry, section,
+material, alpha0, v0, sleeve force, mesh, lock, step) as the value every rib takes unless told
+otherwise, and what the whole umbrella adds: the number of ribs, the hub radius, the sleeve's
+mass, and the base (hub fixed, a prescribed motion, or a free-floating bus).  A rib's own
+value is given either as a list with one entry per rib (``{"tip_mass": [0, 0.1, 0]}``) or as
+an override ``{"rib2.hinge_coulomb": 0.5}`` (ribs are numbered from 0, rib 0 at azimuth 0 on
++X); a name of the planar record (l1, youngs_modulus...) may be overridden per rib as well.
+Every value is SI (m, kg, s, N, Pa, rad).  The specifications use the registry's ``Param``,
+so the later integration can list them with the node's parameters.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from typing import Any, Mapping
+
+from ..params import UmbrellaParams
+from ..registry import Param
+
+BASE_MODES = ("fixed", "prescribed", "free")
+
+_P = Param
+#: the whole umbrella's own parameters (one value each)
+UMBRELLA_SPECS: dict[str, Param] = {p.name: p for p in (
+    _P("ribs", int, 1, "-", "number of ribs N at azimuths 2πk/N about the hub axis Y "
+       "(1 = the planar model)", low=1, high=64),
+    _P("hub_radius", float, 0.0, "m", "radius a of the hub circle on which the leaf hinges "
+       "O_k and the link's sleeve hinges sit", low=0.0, high=10.0),
+    _P("sleeve_mass", float, 0.0, "kg", "mass of the sleeve H sliding on Y (thesis: 0)",
+       low=0.0, high=1e6),
+    _P("poisson_ratio", float, 0.33, "-", "Poisson's ratio ν (shear modulus E / 2(1 + ν))",
+       low=0.0, high=0.5, high_open=True),
+    _P("hinge_regularisation", float, 1e-3, "rad/s",
+       "rate below which a hinge's Coulomb torque is smoothed (τ_c tanh(ω / this))",
+       low=0.0, low_open=True, high=10.0),
+    _P("base", str, "fixed", "-", "fixed hub; prescribed bus motion (base_accel, "
+       "base_spin_rate); free-floating bus (bus_mass, bus_inertia)", choices=BASE_MODES),
+    _P("bus_mass", float, 100.0, "kg", "free-floating bus mass", low=0.0, low_open=True,
+       high=1e9),
+    _P("bus_inertia", float, 10.0, "kg m²", "free-floating bus principal moment of inertia "
+       "(the same about its three axes unless bus_inertia_y is given)", low=0.0,
+       low_open=True, high=1e12),
+    _P("bus_inertia_y", float, 0.0, "kg m²", "bus moment about the hub axis Y; 0 = bus_inertia",
+       low=0.0, high=1e12),
+    _P("base_accel_x", float, 0.0, "m/s²", "prescribed base: peak of a half-sine acceleration "
+       "pulse along X", low=-1e6, high=1e6),
+    _P("base_accel_z", float, 0.0, "m/s²", "prescribed base: the same along Z", low=-1e6,
+       high=1e6),
+    _P("base_accel_start", float, 0.0, "s", "prescribed base: start of the pulse", low=0.0,
+       high=1e6),
+    _P("base_accel_duration", float, 0.02, "s", "prescribed base: length of the pulse",
+       low=0.0, low_open=True, high=1e6),
+    _P("base_spin_rate", float, 0.0, "rad/s", "prescribed base: angular rate about Y reached "
+       "after base_spin_ramp (linear ramp from 0)", low=-1e3, high=1e3),
+    _P("base_spin_ramp", float, 0.05, "s", "prescribed base: ramp time of the spin rate",
+       low=0.0, low_open=True, high=1e6),
+)}
+
+#: a rib's own values (a list, or rib<k>.<name>), besides the names of the planar record
+RIB_SPECS: dict[str, Param] = {p.name: p for p in (
+    _P("tip_mass", float, 0.0, "kg", "point mass at the leaf tip G", low=0.0, high=1e6),
+    _P("tip_offset_x", float, 0.0, "m", "tip mass offset from G along the leaf (leaf frame)",
+       low=-10.0, high=10.0),
+    _P("tip_offset_y", float, 0.0, "m", "tip mass offset, in-plane transverse", low=-10.0,
+       high=10.0),
+    _P("tip_offset_z", float, 0.0, "m", "tip mass offset, out of the rib plane (tangential)",
+       low=-10.0, high=10.0),
+    _P("hinge_coulomb", float, 0.0, "N m", "Coulomb friction torque at the leaf hinge O_k",
+       low=0.0, high=1e6),
+    _P("hinge_viscous", float, 0.0, "N m s", "viscous friction coefficient at O_k", low=0.0,
+       high=1e6),
+    _P("stick_until", float, 0.0, "s", "the leaf hinge is stuck until this time (0 = free)",
+       low=0.0, high=1e6),
+    _P("stick_torque", float, 0.0, "N m", "a stuck hinge breaks free when its holding torque "
+       "exceeds this (0 = only stick_until releases it)", low=0.0, high=1e9),
+    _P("alpha0_offset", float, 0.0, "rad", "initial leaf angle perturbation (taken up "
+       "elastically: the ribs share the sleeve)", low=-0.5, high=0.5),
+    _P("rate_offset", float, 0.0, "rad/s", "initial leaf rate perturbation", low=-1e3,
+       high=1e3),
+    _P("out_of_plane_rate", float, 0.0, "m/s", "initial out-of-plane velocity of the leaf "
+       "tip (a lateral kick; projected onto the joints)", low=-1e3, high=1e3),
+    _P("torsion_constant", float, 0.0, "m⁴", "St-Venant torsion constant J; 0 = that of the "
+       "square of the section (0.1406 b⁴ = 0.8436 I_p)", low=0.0, high=100.0),
+)}
+
+#: names of the planar record a rib may take its own value of
+RIB_PLANAR_NAMES = ("l1", "l2", "l3", "section_height", "area", "second_moment_of_area",
+                    "youngs_modulus", "density")
+_OVERRIDE = re.compile(r"^rib(\d+)\.(\w+)$")
+
+
+@dataclasses.dataclass(frozen=True)
+class RibProperties:
+    """One rib's values, resolved: its planar record and its own (RIB_SPECS)."""
+
+    index: int
+    azimuth: float
+    planar: UmbrellaParams
+    own: Mapping[str, float]
+
+    def __getattr__(self, name: str):
+        own = self.__dict__.get("own", {})
+        if name in own:
+            return own[name]
+        raise AttributeError(name)
+
+    @property
+    def shear_modulus_factor(self) -> float:
+        """Return 1 / (2 (1 + nu)), filled in by UmbrellaRibsParams.rib."""
+        return self.own["_shear_factor"]
+
+    @property
+    def torsion_j(self) -> float:
+        """Return the St-Venant torsion constant J (m^4)."""
+        j = self.own["torsion_constant"]
+        if j > 0.0:
+            return j
+        return 0.8436 * 2.0 * self.planar.cross_section_inertia
+
+    @property
+    def torsion_fibre(self) -> float:
+        """
+        Return c_t with tau_max = G phi' c_t (m).
+
+        For the square section tau_max = T / (0.208 b^3) and T = G J phi' with
+        J = 0.1406 b^4, so c_t = 0.676 b; b is twice the bending fibre distance.
+        """
+        return 0.1406 / 0.208 * 2.0 * self.planar.fibre_distance
+
+
+@dataclasses.dataclass(frozen=True)
+class UmbrellaRibsParams:
+    """The whole umbrella's parameters; see the module docstring."""
+
+    planar: UmbrellaParams = dataclasses.field(default_factory=UmbrellaParams)
+    values: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    per_rib: Mapping[int, Mapping[str, Any]] = dataclasses.field(default_factory=dict)
+
+    def __getattr__(self, name: str):
+        spec = UMBRELLA_SPECS.get(name)
+        if spec is None:
+            raise AttributeError(name)
+        return self.__dict__["values"].get(name, spec.default)
+
+    # ------------------------------------------------------------- building
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any],
+                     planar: UmbrellaParams | None = None) -> "UmbrellaRibsParams":
+        """
+        Build from {name: value}: planar names, umbrella names, rib lists and overrides.
+
+        A planar name with a list value, or rib<k>.<planar name>, is a per-rib value; a planar
+        name with one value sets it for every rib.  Raises ValueError naming the culprit.
+        """
+        planar = planar or UmbrellaParams()
+        base_planar, own, lists, overrides = {}, {}, {}, {}
+        for name, value in values.items():
+            match = _OVERRIDE.match(name)
+            if match:
+                k, key = int(match.group(1)), match.group(2)
+                _rib_spec(key)
+                overrides.setdefault(k, {})[key] = value
+            elif name in UMBRELLA_SPECS:
+                own[name] = UMBRELLA_SPECS[name].coerce(value)
+            elif isinstance(value, (list, tuple)):
+                _rib_spec(name)
+                lists[name] = list(value)
+            elif name in RIB_SPECS:
+                lists[name] = value
+            else:
+                base_planar[name] = value
+        planar = planar.replace(**base_planar) if base_planar else planar
+        n = own.get("ribs", UMBRELLA_SPECS["ribs"].default)
+        per_rib: dict[int, dict] = {k: {} for k in range(n)}
+        for name, value in lists.items():
+            if isinstance(value, list):
+                if len(value) != n:
+                    raise ValueError(f"parameter {name}: a list of {len(value)} values for "
+                                     f"{n} ribs (give one per rib)")
+                for k, v in enumerate(value):
+                    per_rib[k][name] = v
+            else:
+                for k in range(n):
+                    per_rib[k][name] = value
+        for k, vals in overrides.items():
+            if not 0 <= k < n:
+                raise ValueError(f"parameter rib{k}.{next(iter(vals))}: there are ribs "
+                                 f"0 .. {n - 1}")
+            per_rib[k].update(vals)
+        out = cls(planar, own, {k: v for k, v in per_rib.items() if v})
+        return out.validated()
+
+    def validated(self) -> "UmbrellaRibsParams":
+        """Return self if every value is in range, else raise ValueError naming it."""
+        self.planar.validated()
+        for name, value in self.values.items():
+            UMBRELLA_SPECS[name].check(value)
+        if self.planar.model != "flexible":
+            raise ValueError(f"parameter model={self.planar.model!r}: the umbrella model is "
+                             "flexible (3D Euler-Bernoulli beams) only")
+        if self.base == "free" and self.planar.lock == "energy":
+            raise ValueError("parameter lock='energy' with base 'free': the energy lock keeps "
+                             "each rib's kinetic energy and would change the momentum of a "
+                             "free-floating bus; use lock 'plastic'")
+        for k in range(self.ribs):
+            self.rib(k)
+        return self
+
+    def rib(self, k: int) -> RibProperties:
+        """Return rib k's values (its planar record validated, its own values checked)."""
+        vals = dict(self.per_rib.get(k, {}))
+        planar_changes = {n: vals.pop(n) for n in list(vals) if n in RIB_PLANAR_NAMES}
+        try:
+            planar = self.planar.replace(**planar_changes).validated()
+        except ValueError as exc:
+            raise ValueError(f"rib {k}: {exc}") from None
+        own = {name: spec.default for name, spec in RIB_SPECS.items()}
+        for name, value in vals.items():
+            spec = RIB_SPECS[name]
+            own[name] = spec.coerce(value)
+            spec.check(own[name], f"parameter rib{k}.{name}")
+        own["_shear_factor"] = 1.0 / (2.0 * (1.0 + self.poisson_ratio))
+        return RibProperties(k, 2.0 * math.pi * k / self.ribs, planar, own)
+
+    @property
+    def lock_rule(self) -> str:
+        """Return the lock the run takes: the planar rule; plastic for auto on a free bus."""
+        if self.base == "free" and self.planar.lock == "auto":
+            return "plastic"
+        return self.planar.lock_rule
+
+    def ribs_list(self) -> list[RibProperties]:
+        return [self.rib(k) for k in range(self.ribs)]
+
+    def replace(self, **changes: Any) -> "UmbrellaRibsParams":
+        """Return a copy with changes (any name from_mapping takes)."""
+        merged = dict(self.values)
+        for k, vals in self.per_rib.items():
+            for name, value in vals.items():
+                merged[f"rib{k}.{name}"] = value
+        merged.update(changes)
+        return UmbrellaRibsParams.from_mapping(merged, self.planar)
+
+
+def _rib_spec(name: str) -> None:
+    if name not in RIB_SPECS and name not in RIB_PLANAR_NAMES:
+        known = sorted(RIB_SPECS) + list(RIB_PLANAR_NAMES)
+        raise ValueError(f"unknown per-rib parameter {name!r}; a rib takes {', '.join(known)}")

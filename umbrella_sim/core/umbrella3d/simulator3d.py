@@ -1,0 +1,287 @@
+"""
+The umbrella's run: time grid, sleeve force, the stop and lock, stuck hinges, the base.
+
+``UmbrellaSimulator3D`` steps on the planar simulator's grid t_k = k h (h: the planar rule for
+the mesh, ``step_rule.physics_step_of``, as without the stage-2 mode fit, which this model
+does not have; unless the planar record sets ``time_step``) and
+applies the lock as it does: when the sleeve passes the stop inside a step the step is taken
+again from its start with the length root-found by the Illinois method (|dt| < 1e-12 s), the
+lock is applied there (plastic: the velocity projected onto the locked joints in the mass
+metric; energy: each rib's rigid velocities and the link's end velocities redistributed
+keeping the rib's kinetic energy, the planar rule rib by rib, the sleeve's own kinetic
+energy lost), and the step is completed locked.  A stuck hinge (``stick_until`` /
+``stick_torque``) is a joint alpha1 = its angle, released after the step at whose end the
+time has reached stick_until or its holding torque (the joint's multiplier) has reached
+stick_torque.  Every step's figures go to a ``Record3D`` (outputs3d.py).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+import math
+
+import numpy as np
+
+from .integrator3d import ConvergenceError3D, MidpointUmbrella, State3D
+from .model3d import ROW_STICK, UmbrellaModel3D
+from .outputs3d import Record3D
+from .params3d import UmbrellaRibsParams
+from ..integrators import newton_tolerance
+from ..step_rule import physics_step_of
+
+EVENT_TIME_TOLERANCE = 1e-12
+
+
+class SimulationFailed(RuntimeError):
+    """A step failed (Newton, a singular matrix, an impossible energy lock)."""
+
+
+class UmbrellaSimulator3D:
+    """Steps the umbrella; see the module docstring."""
+
+    def __init__(self, params: UmbrellaRibsParams, step: float | None = None,
+                 tolerance: float | None = None):
+        self.params = params.validated()
+        self.model = m = UmbrellaModel3D(self.params)
+        self.h = (physics_step_of(self.params.planar.replace(phase_correction=False))
+                  if step is None else step)
+        self.integrator = MidpointUmbrella(
+            m, newton_tolerance(self.h) if tolerance is None else tolerance)
+        self.force = self.params.planar.sleeve_force * m.n_ribs
+        self.locked = False
+        self.lock_time: float | None = None
+        self.lock_loss = 0.0
+        self.k = 0
+        ribs = m.ribs
+        self.stick_until = np.array([r.stick_until for r in ribs])
+        self.stick_torque = np.array([r.stick_torque for r in ribs])
+        self.state = self.integrator.consistent(self.initial_state(), self.force, False)
+        self.record = Record3D(m)
+        self.record.add(self.state, self.locked, self.force, None, 0.0)
+
+    # ------------------------------------------------------------ start
+    def initial_state(self) -> State3D:
+        """
+        Return the state at t = 0: every rib rigid at the start height of the sleeve.
+
+        Its sleeve moves at v0; per-rib angle, rate and out-of-plane perturbations are applied
+        and projected onto the joints (positions by Newton in the mass metric, velocities by
+        the mass-metric projection); a free bus takes the velocity that makes the momentum
+        zero; a stuck hinge holds its initial angle (its velocity projected to 0).
+        """
+        m, p = self.model, self.params
+        nr, n = m.n_ribs, m.n_rib
+        v0 = p.planar.v0
+        qr, vr = np.zeros((nr, n)), np.zeros((nr, n))
+        for k in range(nr):
+            q = m.rigid_rib(k, m.rib_angle_at_height(k, m.y_start))
+            unit = m.rigid_rib_velocity(k, q, 1.0)
+            qr[k] = q
+            vr[k] = unit * (v0 / (m.sleeve_height_gradient(q, k) @ unit))
+        qs, vs = np.zeros(m.n_shared), np.zeros(m.n_shared)
+        qs[0], vs[0] = m.y_start, v0
+        drive = self.integrator.drive
+        if drive is not None:
+            g, gd, _ = drive(0.0)
+            qs[1:7], vs[1:7] = g, gd
+        offsets = np.array([r.alpha0_offset for r in m.ribs])
+        rates = np.array([r.rate_offset for r in m.ribs])
+        kicks = np.array([r.out_of_plane_rate for r in m.ribs])
+        stuck = np.where((self.stick_until > 0.0) | (self.stick_torque > 0.0),
+                         qr[:, m.i_a1] + offsets, np.nan)
+        if np.any(offsets != 0.0):
+            qr[:, m.i_a1] += offsets
+            qr, qs = self._settle_positions(qr, qs, stuck)
+        perturbed = np.any(rates != 0.0) or np.any(kicks != 0.0) or np.any(~np.isnan(stuck))
+        vr[:, m.i_a1] += rates
+        vr[:, m.i_tip[2]] += kicks
+        kin = m.kinematics(qr, qs)
+        mass = m.mass_matrix(kin)
+        if perturbed or np.any(offsets != 0.0):
+            vr, vs = self.integrator.project(kin, mass, qr, vr, vs, stuck, False,
+                                             None if drive is None else vs[1:7])
+        if p.base == "free":
+            pr, ps = m.matvec(mass, vr, vs)
+            vs = vs.copy()
+            vs[1:7] -= np.linalg.solve(mass[2][1:7, 1:7], ps[1:7])
+        return State3D(0.0, qr, qs, vr, vs, np.zeros((nr, 9)),
+                       np.zeros(m.n_shared_rows), stuck)
+
+    def _settle_positions(self, qr, qs, stuck):
+        """Return the nearest configuration (mass metric) on the joints: Newton projection."""
+        m = self.model
+        integ = self.integrator
+        drive = None if integ.drive is None else integ.drive(0.0)[0]
+        for _ in range(50):
+            phi_r, phi_s = m.constraints(qr, qs, stuck, False, drive)
+            if max(np.max(np.abs(phi_r)), np.max(np.abs(phi_s))) < 1e-13:
+                break
+            kin = m.kinematics(qr, qs)
+            mass = m.mass_matrix(kin)
+            # the projection of 0 onto J dq = -Phi: the same arrow solve as the velocities'
+            j_rr, j_rs, j_ss, active = m.constraint_jacobian(qr, stuck, False)
+            blocks = integ._blocks(mass, (j_rr, j_rs, j_ss), (j_rr, j_rs, j_ss), stuck,
+                                   active, sign=1.0)
+            from . import arrow
+            f = arrow.factor(*blocks)
+            n, ns = m.n_rib, m.n_shared
+            rr = np.concatenate([np.zeros_like(qr), -phi_r], 1)
+            sh = np.concatenate([np.zeros(ns), np.where(active, -phi_s, 0.0)])
+            xr, xs = f.solve(rr, sh)
+            qr, qs = qr + xr[:, :n], qs + xs[:ns]
+        return qr, qs
+
+    # ------------------------------------------------------------ stepping
+    @property
+    def time(self) -> float:
+        return self.state.t
+
+    def _step(self, s, h, locked):
+        try:
+            return self.integrator.step(s, h, self.force, locked)
+        except (ConvergenceError3D, np.linalg.LinAlgError) as exc:
+            raise SimulationFailed(f"step after t = {s.t:.9g} s failed: {exc}") from None
+
+    def step(self) -> None:
+        """Advance by one grid step, with the lock if the sleeve reaches the stop in it."""
+        m, s0 = self.model, self.state
+        t_next = (self.k + 1) * self.h
+        s1, work = self._step(s0, t_next - s0.t, self.locked)
+        lock_event = None
+        if not self.locked and s1.qs[0] - m.y_stop <= 0.0:
+            s_hit, work_hit = self._find_lock(s0, t_next - s0.t)
+            before = self.energy(s_hit)
+            s_locked = self._lock(s_hit)
+            after = self.energy(s_locked)
+            self.locked, self.lock_time = True, s_locked.t
+            self.lock_loss += before - after
+            lock_event = (s_locked.t, before, after)
+            remaining = t_next - s_locked.t
+            if remaining > EVENT_TIME_TOLERANCE:
+                s1, work2 = self._step(s_locked, remaining, True)
+                work = replace(work_hit, force=work_hit.force + work2.force,
+                               friction=work_hit.friction + work2.friction,
+                               drive=work_hit.drive + work2.drive)
+            else:
+                s1, work = s_locked, work_hit
+        s1 = replace(s1, t=t_next)
+        s1 = self._release(s1)
+        self.state = s1
+        self.k += 1
+        self.record.add(s1, self.locked, self.force, work, self.lock_loss, lock_event)
+
+    def run(self, duration: float, after_lock: float | None = None) -> "Record3D":
+        """Step to t = duration (or to after_lock s past the lock); return the record."""
+        while self.time < duration - 1e-12:
+            self.step()
+            if after_lock is not None and self.locked and self.time >= self.lock_time + after_lock:
+                break
+        return self.record
+
+    def _release(self, s: State3D) -> State3D:
+        stuck = s.stuck
+        if np.all(np.isnan(stuck)):
+            return s
+        torque = np.abs(s.lam_r[:, ROW_STICK])
+        free = ~np.isnan(stuck) & (((self.stick_until > 0.0) & (s.t >= self.stick_until - 1e-12))
+                                   | ((self.stick_torque > 0.0) & (torque >= self.stick_torque)))
+        if not np.any(free):
+            return s
+        lam = s.lam_r.copy()
+        lam[free, ROW_STICK] = 0.0
+        return replace(s, stuck=np.where(free, np.nan, stuck), lam_r=lam)
+
+    def _find_lock(self, s0: State3D, h: float):
+        """Illinois root find of y_s(t0 + dt) = y_stop on the step length (the planar rule)."""
+        y_stop = self.model.y_stop
+
+        def at(dt):
+            s, w = self._step(s0, dt, False)
+            return s, w, s.qs[0] - y_stop
+
+        a, fa = 0.0, s0.qs[0] - y_stop
+        b = h
+        sb, wb, fb = at(b)
+        best, w_best, f_best = sb, wb, fb
+        side = 0
+        for _ in range(200):
+            if b - a < EVENT_TIME_TOLERANCE or f_best == 0.0:
+                break
+            c = b - fb * (b - a) / (fb - fa)
+            if not a < c < b:
+                c = 0.5 * (a + b)
+            sc, wc, fc = at(c)
+            if abs(fc) < abs(f_best):
+                best, w_best, f_best = sc, wc, fc
+            if fc > 0.0:
+                a, fa = c, fc
+                if side == -1:
+                    fb *= 0.5
+                side = -1
+            else:
+                b, fb = c, fc
+                if side == 1:
+                    fa *= 0.5
+                side = 1
+        return best, w_best
+
+    # ------------------------------------------------------------ the lock
+    def _lock(self, s: State3D) -> State3D:
+        m, integ = self.model, self.integrator
+        kin = m.kinematics(s.qr, s.qs)
+        mass = m.mass_matrix(kin)
+        drive = integ.drive
+        target = None if drive is None else drive(s.t)[1]
+        if self.params.lock_rule == "plastic":
+            vr, vs = integ.project(kin, mass, s.qr, s.vr, s.vs, s.stuck, True, target)
+        else:
+            vr, vs = self._energy_lock(mass, s)
+        s = replace(s, vr=vr, vs=vs, pr=None, ps=None)
+        return integ.consistent(s, self.force, True)
+
+    def _energy_lock(self, mass, s: State3D):
+        """
+        Return the velocities after the energy lock, rib by rib (Hu, McGill 2006, §5.2.2).
+
+        Only each rib's rigid velocities (alpha1, R2, alpha2) and the link's end ones (u, w
+        at H; slope and twist at O'') change, to satisfy the locked joints and keep the rib's
+        kinetic energy; of the two roots the one closest to the velocity before (mass
+        metric).  The sleeve stops.
+        """
+        m = self.model
+        vr, vs = s.vr.copy(), s.vs.copy()
+        vs[0] = 0.0
+        j_rr = m.constraint_jacobian(s.qr, s.stuck, True)[0]
+        free = [m.i_a1, m.i_rx, m.i_ry, m.i_a2, m.i_uh, m.i_rz, m.i_wh, m.i_s2, m.i_p2]
+        fixed = np.setdiff1d(np.arange(m.n_rib), free)
+        for k in range(m.n_ribs):
+            rows = list(range(8)) + ([ROW_STICK] if not np.isnan(s.stuck[k]) else [])
+            jac = j_rr[k][rows]
+            a_free = jac[:, free]
+            rhs = -jac[:, fixed] @ vr[k, fixed]
+            particular = np.linalg.lstsq(a_free, rhs, rcond=None)[0]
+            null = np.linalg.svd(a_free)[2][-1]
+            mk = mass[0][k]
+            v = vr[k]
+            base = v.copy()
+            base[free] = particular
+            if len(rows) >= len(free):          # a stuck rib: no free direction left
+                vr[k] = base
+                continue
+            z = np.zeros(m.n_rib)
+            z[free] = null
+            t_target = 0.5 * v @ mk @ v
+            qa, qb = 0.5 * z @ mk @ z, z @ mk @ base
+            qc = 0.5 * base @ mk @ base - t_target
+            disc = qb * qb - 4 * qa * qc
+            if disc < 0.0:
+                raise SimulationFailed(f"energy lock impossible for rib {k}: its kinetic "
+                                       "energy is below the least the locked joints allow")
+            roots = [(-qb + sgn * math.sqrt(disc)) / (2 * qa) for sgn in (1.0, -1.0)]
+            cands = [base + r * z for r in roots]
+            vr[k] = min(cands, key=lambda c: (c - v) @ mk @ (c - v))
+        return vr, vs
+
+    # ------------------------------------------------------------ figures
+    def energy(self, s: State3D) -> float:
+        m = self.model
+        return m.kinetic_energy(m.kinematics(s.qr, s.qs), s.vr, s.vs) + m.strain_energy(s.qr)
