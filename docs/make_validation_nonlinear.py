@@ -43,10 +43,10 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
+from umbrella_sim.core.beam import BeamBody  # noqa: E402
 from umbrella_sim.core.beam_strain import (  # noqa: E402
     CorotationalStrainEnergy, static_equilibrium)
 from umbrella_sim.core.driver import RunDriver, simulate  # noqa: E402
-from umbrella_sim.core.model import BeamBody  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.core.rotating_beam import (  # noqa: E402
     rotating_cantilever_chordwise, ROTATING_CANTILEVER_FLAPWISE, rotating_cantilever_frequency,

@@ -16,7 +16,8 @@
 import numpy as np
 import pytest
 
-from umbrella_sim.core.model import shape_functions, UmbrellaModel
+from umbrella_sim.core.beam import shape_functions
+from umbrella_sim.core.model import UmbrellaModel
 from umbrella_sim.core.params import UmbrellaParams
 
 MESHES = [1, 2, 3, 5]
@@ -153,7 +154,7 @@ def test_element_stiffness_has_corrected_sign():
     # G's transverse stiffness of a clamped-guided element: 12 EI / l^3
     assert k[iv, iv] == pytest.approx(12 * ei / le**3, rel=1e-12)
     # full element: the v_i-v_j coupling is negative
-    from umbrella_sim.core.model import GAUSS_POINTS, GAUSS_WEIGHTS
+    from umbrella_sim.core.beam import GAUSS_POINTS, GAUSS_WEIGHTS
     _, _, d2n = shape_functions(GAUSS_POINTS, le)
     ke = ei * np.einsum("q,qi,qj->ij", le * GAUSS_WEIGHTS, d2n[:, 1], d2n[:, 1])
     assert ke[1, 4] == pytest.approx(-12 * ei / le**3, rel=1e-12)
@@ -246,7 +247,7 @@ def test_drawn_shape_is_each_elements_cubic(n_el):
     its nodes; a cubic transverse field (zero at the leaf's supports) with a linear axial
     one is drawn exactly, which the straight lines between the nodes are not at N = 1.
     """
-    from umbrella_sim.core.model import shape_abscissae, shape_pieces_per_element
+    from umbrella_sim.core.beam import shape_abscissae, shape_pieces_per_element
     model = UmbrellaModel(UmbrellaParams(elements_per_segment=n_el))
     rng = np.random.default_rng(n_el)
     q, _ = random_state(model, rng)

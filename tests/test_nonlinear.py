@@ -59,10 +59,11 @@ import math
 import numpy as np
 import pytest
 
+from umbrella_sim.core.beam import BeamBody
 from umbrella_sim.core.beam_strain import CorotationalStrainEnergy, static_equilibrium
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.integrators import load_kernel, newton_tolerance
-from umbrella_sim.core.model import BeamBody, ConstraintSet, Stage
+from umbrella_sim.core.model import ConstraintSet, Stage
 from umbrella_sim.core.nonlinear import ElasticMidpointDAE, NonlinearUmbrellaModel
 from umbrella_sim.core.outputs import STEP_FIELDS
 from umbrella_sim.core.params import UmbrellaParams

@@ -456,3 +456,37 @@ class RigidEngine(Engine):
         before = self.mech.kinetic_energy(*s.q, *s.qd)
         s = DynamicState(s.t, s.q, np.zeros(2), np.zeros(2), np.array([0.0, force]))
         return s, LockEvent(s.t, "plastic", float(before), 0.0, ())
+
+
+def event_root(at, h: float, f0: float):
+    """
+    Return the result of `at` at the root of an event function inside a step of length h.
+
+    at(dt) -> (result, f): the step of length dt from the step's start and the event
+    function there (f0 at dt = 0, opposite signs at 0 and h).  Illinois root finding on dt
+    to EVENT_TIME_TOLERANCE (or an exact zero); the result of the smallest |f| seen.
+    """
+    a, fa, b = 0.0, f0, h
+    best, fb = at(b)
+    f_best = fb
+    side = 0
+    for _ in range(200):
+        if b - a < EVENT_TIME_TOLERANCE or f_best == 0.0:
+            break
+        c = b - fb * (b - a) / (fb - fa)
+        if not a < c < b:
+            c = 0.5 * (a + b)
+        result, fc = at(c)
+        if abs(fc) < abs(f_best):
+            best, f_best = result, fc
+        if fc > 0.0:
+            a, fa = c, fc
+            if side == -1:
+                fb *= 0.5
+            side = -1
+        else:
+            b, fb = c, fc
+            if side == 1:
+                fa *= 0.5
+            side = 1
+    return best

@@ -30,8 +30,8 @@ import math
 
 import numpy as np
 
+from .beam import BeamBody
 from .beam_strain import CorotationalStrainEnergy, LinearStrainEnergy
-from .model import BeamBody
 from .summary import oscillation_period
 
 

@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 from . import nonlinear
-from .engines import (DIVERGENCE_RESIDUAL, EVENT_TIME_TOLERANCE, fault_message,
+from .engines import (DIVERGENCE_RESIDUAL, event_root, EVENT_TIME_TOLERANCE, fault_message,
                       FiniteElementEngine, RigidEngine, SimulationDiverged)
 from .forcing import command_force, ForceSchedule
 from .kernel import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicState, SAMPLE_VECTOR
@@ -314,31 +314,7 @@ class UmbrellaSimulator:
             s = self._checked(lambda: eng.step(s0, dt, force, DEFORMING), DEFORMING)
             return s, eng.sleeve_height(s) - y_stop
 
-        a, fa = 0.0, eng.sleeve_height(s0) - y_stop
-        b = h
-        sb, fb = at(b)
-        best, f_best = sb, fb
-        side = 0
-        for _ in range(200):
-            if b - a < EVENT_TIME_TOLERANCE or f_best == 0.0:
-                break
-            c = b - fb * (b - a) / (fb - fa)
-            if not a < c < b:
-                c = 0.5 * (a + b)
-            sc, fc = at(c)
-            if abs(fc) < abs(f_best):
-                best, f_best = sc, fc
-            if fc > 0.0:
-                a, fa = c, fc
-                if side == -1:
-                    fb *= 0.5
-                side = -1
-            else:
-                b, fb = c, fc
-                if side == 1:
-                    fa *= 0.5
-                side = 1
-        return best
+        return event_root(at, h, eng.sleeve_height(s0) - y_stop)
 
     # -- outputs
     def _fibre_stress(self) -> tuple:

@@ -32,7 +32,7 @@ import os
 import numpy as np
 
 from ..bag.reader import LogError, read_log
-from ..core.model import shape_abscissae
+from ..core.beam import shape_abscissae
 from ..core.params import UmbrellaParams
 from ..core.summary import (deploy_start_of, mesh_resolution, relative_drift, stage2_figures,
                             validity_warnings)

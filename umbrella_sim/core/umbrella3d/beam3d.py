@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import GAUSS_POINTS, GAUSS_WEIGHTS
+from ..beam import element_dof_maps, GAUSS_POINTS, GAUSS_WEIGHTS
 
 DOFS = ("u", "v", "theta", "w", "slope", "twist")
 _DOF = {name: k for k, name in enumerate(DOFS)}
@@ -94,11 +94,7 @@ class BeamBody3D:
         full_to_e[free] = np.arange(ne)
         self._full_to_e = full_to_e
         n_el = len(lengths)
-        self.element_maps = np.zeros((n_el, 12, ne))
-        for j in range(n_el):
-            for c, full in enumerate(range(6 * j, 6 * j + 12)):
-                if full_to_e[full] >= 0:
-                    self.element_maps[j, c, full_to_e[full]] = 1.0
+        self.element_maps = element_dof_maps(n_el, 6, full_to_e, ne)
         xs, ws, shapes = [], [], []
         k = np.zeros((ne, ne))
         m_twist = np.zeros((ne, ne))

@@ -39,10 +39,9 @@ from .integrator3d import ConvergenceError3D, MidpointUmbrella, State3D
 from .model3d import ROW_STICK, UmbrellaModel3D
 from .outputs3d import Record3D
 from .params3d import UmbrellaRibsParams
+from ..engines import event_root, EVENT_TIME_TOLERANCE
 from ..integrators import newton_tolerance
 from ..step_rule import physics_step_of
-
-EVENT_TIME_TOLERANCE = 1e-12
 
 
 class SimulationFailed(RuntimeError):
@@ -210,33 +209,9 @@ class UmbrellaSimulator3D:
 
         def at(dt):
             s, w = self._step(s0, dt, False)
-            return s, w, s.qs[0] - y_stop
+            return (s, w), s.qs[0] - y_stop
 
-        a, fa = 0.0, s0.qs[0] - y_stop
-        b = h
-        sb, wb, fb = at(b)
-        best, w_best, f_best = sb, wb, fb
-        side = 0
-        for _ in range(200):
-            if b - a < EVENT_TIME_TOLERANCE or f_best == 0.0:
-                break
-            c = b - fb * (b - a) / (fb - fa)
-            if not a < c < b:
-                c = 0.5 * (a + b)
-            sc, wc, fc = at(c)
-            if abs(fc) < abs(f_best):
-                best, w_best, f_best = sc, wc, fc
-            if fc > 0.0:
-                a, fa = c, fc
-                if side == -1:
-                    fb *= 0.5
-                side = -1
-            else:
-                b, fb = c, fc
-                if side == 1:
-                    fa *= 0.5
-                side = 1
-        return best, w_best
+        return event_root(at, h, s0.qs[0] - y_stop)
 
     # ------------------------------------------------------------ the lock
     def _lock(self, s: State3D) -> State3D:
