@@ -1,12 +1,29 @@
 #!/usr/bin/env python3
+
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Set up a local virtualenv (.venv) with every dependency, then run the main job or the tests.
 
     python3 bootstrap.py run      # umbrella_node on config/umbrella.yaml, recording MCAP to
-                                  # runs/run-YYYYmmdd-HHMMSS/ (Ctrl-C stops and finalises it)
+                                  # runs/umbrella_YYYY_MM_DD-HH_MM_SS/, the node's own name
+                                  # (Ctrl-C stops and finalises it)
     python3 bootstrap.py test     # the test suite and examples/
 
-Arguments after run go to the node: python3 bootstrap.py run -p v0:=-0.5
+Arguments after run go to the node, which runs in the runs directory (a relative path in
+them is relative to it): python3 bootstrap.py run -p v0:=-0.5
 Environment: UMBRELLA_VENV (default ./.venv), UMBRELLA_RUNS_DIR (default ./runs).
 
 Needs only python3 (3.11); everything else comes from PyPI.  Idempotent: a venv whose
@@ -18,7 +35,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 ROOT = os.path.dirname(os.path.abspath(__file__))
 # (relative to the working directory the command was given in, as a user means them)
@@ -64,12 +80,14 @@ def main(argv) -> int:
     if argv[0] == "run":
         runs = os.path.abspath(os.environ.get("UMBRELLA_RUNS_DIR", os.path.join(ROOT, "runs")))
         os.makedirs(runs, exist_ok=True)
-        bag = os.path.join(runs, time.strftime("run-%Y%m%d-%H%M%S"))
+        # the node records into its working directory under its one naming rule
+        # (umbrella[_ns]_YYYY_MM_DD-HH_MM_SS, rosbag2's; never overwriting), so: there
+        cwd = runs
         cmd = [PY, "-m", "umbrella_sim.node", "--ros-args", "--params-file",
-               os.path.join(ROOT, "config", "umbrella.yaml"), "-p", f"record_path:={bag}"] \
-            + argv[1:]
+               os.path.join(ROOT, "config", "umbrella.yaml")] + argv[1:]
     elif argv[0] == "test":
         # the test suite and the user-facing actuation examples (they must keep working)
+        cwd = ROOT
         cmd = [PY, "-m", "pytest", "-q", os.path.join(ROOT, "tests"),
                os.path.join(ROOT, "examples")] + argv[1:]
         if not argv[1:]:
@@ -82,7 +100,7 @@ def main(argv) -> int:
     # the child has its own session, so a signal reaches it exactly once, from here, whether it
     # came from the terminal (Ctrl-C) or was sent to this process (kill, timeout, a supervisor);
     # the child stops and finalises its recording while this process waits for it
-    child = subprocess.Popen(cmd, cwd=ROOT, env=env, start_new_session=True)
+    child = subprocess.Popen(cmd, cwd=cwd, env=env, start_new_session=True)
 
     def forward(signum, frame):
         if child.poll() is None:

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 from glob import glob
 import os
 import shutil
@@ -77,7 +91,9 @@ setup(
                            extra_compile_args=["-O3", "-std=c99", "-fvisibility=hidden"],
                            libraries=["m"])],
     cmdclass={"build_ext": BuildKernel},
-    install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "matplotlib"],
+    # every import (tests/test_package_metadata.py); the ROS packages are package.xml's
+    install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "zstandard",
+                      "matplotlib", "dask", "distributed", "pyarrow"],
     extras_require={"test": ["pytest"]},     # (tests_require: gone from setuptools)
     zip_safe=False,      # a shared library, loaded from its file
     maintainer="umbrella_sim developers",

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Test the README's main command, `python3 bootstrap.py run`.
 
@@ -55,6 +69,8 @@ def test_main_command_records_and_forwards_signals(tmp_path, sig):
     text = out.read_text()
     assert "recording finalised" in text and "[ERROR]" not in text, text
     (run,) = (tmp_path / "runs").iterdir()
+    # the node's own (rosbag2's) naming, the one convention: umbrella_YYYY_MM_DD-HH_MM_SS
+    assert re.fullmatch(r"umbrella_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?", run.name), run.name
     log = read_log(str(run))
     assert not log.truncated
     # every joint_states publication of the run is in the file: the default 100 Hz over the

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 deploy_controller: the law against the physics core offline, then over DDS in real time.
 
@@ -162,24 +176,33 @@ def test_controller_refuses_bad_parameters_with_exit_2(args, culprit):
 @pytest.mark.ros
 @pytest.mark.slow
 def test_controller_shares_the_node_params_file_and_names_a_typo_in_it(tmp_path):
-    """One '/**' params file serves both nodes; a misspelt name in it is exit 2, not ignored."""
+    """
+    One '/**' params file serves every node of a launch.
+
+    Both nodes take it; a name neither knows there (robot_state_publisher's, or a typo) is
+    a warning naming it with a "did you mean"; in a section naming the node, exit 2.
+    """
     shared = tmp_path / "shared.yaml"
     shared.write_text("/**:\n  ros__parameters:\n    v0: 0.0\n    publish_rate: 100.0\n"
-                      "    record: false\n    target_time: 1.5\n    max_force: 8.0\n")
+                      "    record: false\n    target_time: 1.5\n    max_force: 8.0\n"
+                      "    publish_frequency: 30.0\n")
     with NodeProcess("--params-file", str(shared),
                      module="umbrella_sim.deploy_controller") as controller:
         controller.wait_for_log("waiting for joint_states", timeout=60)
         assert "target 1.5 s" in controller.output()
+        assert "section '/**' gives 'publish_frequency'" in controller.output()
         assert controller.stop() == 0
-    # and the node, which skips the controller's names there (it refused them: exit 2)
+    # and the node, which takes the controller's names there silently
     with NodeProcess("--params-file", str(shared)) as node:
         node.wait_for_log("physics step", timeout=60)
+        assert "section '/**' gives 'publish_frequency'" in node.output()
         assert node.stop() == 0, node.output()
     # and the offline tools, which read the node's file (they refused the controller's names)
     r = subprocess.run([sys.executable, "-m", "umbrella_sim", "simulate", "--params",
                         str(shared), "--duration", "0.01"], capture_output=True, text=True,
                        env=ros_env(), timeout=60)
     assert r.returncode == 0, r.stderr
+    assert "warning: params file" in r.stderr and "gives 'publish_frequency'" in r.stderr
     # a section naming the node alone is the node's: a controller name there is a mistake
     own = tmp_path / "own.yaml"
     own.write_text("umbrella_node:\n  ros__parameters:\n    target_time: 1.5\n")
@@ -189,10 +212,17 @@ def test_controller_shares_the_node_params_file_and_names_a_typo_in_it(tmp_path)
     assert r.returncode == 2 and "unknown parameter 'target_time'" in r.stderr, r.stderr
     typo = tmp_path / "typo.yaml"
     typo.write_text(shared.read_text().replace("max_force", "max_forse"))
+    with NodeProcess("--params-file", str(typo),
+                     module="umbrella_sim.deploy_controller") as controller:
+        controller.wait_for_log("waiting for joint_states", timeout=60)
+        assert "'max_forse' (did you mean 'max_force'?)" in controller.output()
+        assert controller.stop() == 0
+    own_typo = tmp_path / "own_typo.yaml"
+    own_typo.write_text("deploy_controller:\n  ros__parameters:\n    max_forse: 8.0\n")
     r = subprocess.run([sys.executable, "-m", "umbrella_sim.deploy_controller", "--ros-args",
-                        "--params-file", str(typo)], capture_output=True, text=True,
+                        "--params-file", str(own_typo)], capture_output=True, text=True,
                        env=ros_env(), timeout=60)
-    assert r.returncode == 2 and str(typo) in r.stderr, r.stderr
+    assert r.returncode == 2 and str(own_typo) in r.stderr, r.stderr
     assert "'max_forse' (did you mean 'max_force'?)" in r.stderr
 
 

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Test faults and bad input.
 
@@ -115,10 +129,13 @@ def test_node_recording_disk_full_goes_on_and_exits_4(tmp_path, probe):
     probe.subscribe("/joint_states", JointState)
     bag = tmp_path / "full"
     # 15 sim s at 3x real time: ~5 s of wall time after the disk fills, so the probe has
-    # discovered the node and counts messages published after the error even on a busy machine
+    # discovered the node and counts messages published after the error even on a busy machine.
+    # The disk fills inside a chunk that leaves room for the ended-early trailer (~9 kB here;
+    # at 150000 B, once schemas and channels were no longer repeated outside the chunks,
+    # 110 B were left, too few: the file is then a clean prefix without the mark)
     with NodeProcess("-p", "publish_rate:=1000.0", "-p", "duration:=15.0",
                      "-p", "real_time_factor:=3.0", "-p", f"record_path:={bag}",
-                     executable=[sys.executable, "-m", "tests.disk_faults", "150000",
+                     executable=[sys.executable, "-m", "tests.disk_faults", "160000",
                                  str(errno.ENOSPC)], cwd=ROOT) as node:
         node.wait_for_log("recording stopped", timeout=60)
         n_at_error = len(probe.messages("/joint_states"))
@@ -168,6 +185,46 @@ def test_output_paths_checked_before_any_work(tmp_path):
     assert r.returncode == 2 and "not overwriting" in r.stderr
     r = run("umbrella_sim.tools.compare", "a", "b", "--out", "")
     assert r.returncode == 2 and "--out '': empty path" in r.stderr
+
+
+@pytest.mark.slow
+def test_overwrite_replaces_an_earlier_output_and_nothing_else(tmp_path):
+    """--overwrite (never the default) replaces a file, a recording, a comparison's outputs."""
+    csv, bag, out = tmp_path / "run.csv", tmp_path / "bag", tmp_path / "cmp"
+    csv.write_text("old")
+
+    def simulate_to(*extra):
+        return run("umbrella_sim", "simulate", "--duration", "0.05", "--csv", str(csv),
+                   "--mcap", str(bag), *extra)
+    r = simulate_to()
+    assert r.returncode == 2 and "--overwrite" in r.stderr and csv.read_text() == "old"
+    assert not bag.exists()
+    assert simulate_to("--overwrite").returncode == 0
+    assert csv.read_text().startswith("t") and read_log(str(bag)).count("/joint_states") > 0
+    first = (bag / "metadata.yaml").read_text()
+    r = simulate_to("--overwrite", "--set", "v0=-1.0")        # a new run replaces both
+    assert r.returncode == 0, r.stderr
+    assert read_log(str(bag)).parameters()["v0"] == -1.0 and first != (
+        bag / "metadata.yaml").read_text()
+    # the comparison's outputs, and only those
+    assert run("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(out),
+               "--no-plots").returncode == 0
+    r = run("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(out), "--no-plots")
+    assert r.returncode == 2 and "--overwrite" in r.stderr
+    assert run("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(out),
+               "--no-plots", "--overwrite").returncode == 0
+    # what is not an output of ours is never removed
+    (out / "notes.txt").write_text("mine")
+    r = run("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(out), "--no-plots",
+            "--overwrite")
+    assert r.returncode == 2 and "other than" in r.stderr
+    (bag / "notes.txt").write_text("mine")
+    r = simulate_to("--overwrite")
+    assert r.returncode == 2 and "not a recording" in r.stderr
+    assert (bag / "notes.txt").read_text() == "mine" and (out / "notes.txt").exists()
+    r = run("umbrella_sim", "simulate", "--duration", "0.05", "--csv", str(tmp_path),
+            "--overwrite")
+    assert r.returncode == 2 and "not a regular file" in r.stderr
 
 
 # ------------------------------------------------------------------ solver faults
@@ -247,8 +304,9 @@ def _node(*args, timeout=60):
     (None, ["-p", "youngs_modulous:=1.0"], "did you mean 'youngs_modulus'"),
     (None, ["-p", "foo:=1.0"], "unknown parameter 'foo'"),
     ("other_node:\n  ros__parameters:\n    l1: -5.0\n", [], "no section for node /umbrella_node"),
-    ("/**:\n  ros__parameters:\n    l4: 1.0\n", [], "'l4' (did you mean 'l"),
-    ("/**:\n  ros__parameters:\n    l1: {a: 1}\n", [], "'l1.a'"),
+    # (in a section naming the node: in a '/**' one they are another node's, a warning)
+    ("umbrella_node:\n  ros__parameters:\n    l4: 1.0\n", [], "'l4' (did you mean 'l"),
+    ("umbrella_node:\n  ros__parameters:\n    l1: {a: 1}\n", [], "'l1.a'"),
     ("/**:\n  ros__parameters: [1, 2\n", [], "not valid YAML"),
     ("- 1\n- 2\n", [], "expected a mapping"),
     ("/**:\n  l1: 0.5\n", [], "has no ros__parameters"),

@@ -1,6 +1,21 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """MCAP recording, replay and comparison (real node processes, real DDS)."""
 from collections import Counter, defaultdict
 import json
+import math
 import os
 from pathlib import Path
 import re
@@ -24,7 +39,7 @@ from tests.ros_helpers import (keep_every_message, main_thread_sleeps, NodeProce
 from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.step_rule import physics_step_of
-from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
+from umbrella_sim.ros.messages import CLOCK_READER_QOS, COMMAND_ECHO_QOS, LATCHED
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -46,6 +61,9 @@ def live_bag(tmp_path_factory):
     try:
         probe.subscribe("/deployment_phase", String, LATCHED)
         probe.subscribe("/diagnostics", DiagnosticArray)
+        # published live as recorded: each value as it starts acting, each refused command
+        probe.subscribe("/sleeve_force/applied", Float64, COMMAND_ECHO_QOS)
+        probe.subscribe("/sleeve_force/refused", Float64, COMMAND_ECHO_QOS)
         with NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}") as node:
             node.wait_for_log("recording to")
             pub = probe.publisher("/sleeve_force", Float64)
@@ -54,16 +72,20 @@ def live_bag(tmp_path_factory):
                 pub.publish(Float64(data=value))
             pub.publish(Float64(data=15.0))
             # (one writer, reliable: the node took the two refused ones before it)
-            node.wait_for_log(r"sleeve force 15 N applied from t = ")
+            probe.wait_for("/sleeve_force/applied", lambda m: m.data == 15.0, timeout=30)
             pub.publish(Float64(data=25.0))             # applied in a later period
             probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=30)
-            node.wait_for_log(r"sleeve force 25 N applied from t = ")
+            probe.wait_for("/sleeve_force/applied", lambda m: m.data == 25.0, timeout=30)
             probe.wait_for_count("/diagnostics", 1)     # published, so recorded
             assert node.stop(signal.SIGTERM) == 0
             log = node.output()
+        assert [m.data for m in probe.messages("/sleeve_force/applied")] == [15.0, 25.0]
+        refused = [m.data for m in probe.messages("/sleeve_force/refused")]
+        assert len(refused) == 2 and math.isnan(refused[0]) and refused[1] == -2.0
     finally:
         probe.close()
     assert "recording finalised" in log
+    assert "sleeve force 15 N applied from t = " in log      # the first one at INFO
     return bag
 
 
@@ -130,9 +152,9 @@ def test_log_is_self_describing(live_bag):
     mesh = log.metadata["umbrella_sim.mesh"]
     assert json.loads(mesh["coordinates"])[0] == "alpha1"
     bag_yaml = (live_bag / "metadata.yaml").read_text()
-    # version 8 goes with the integer-enum QoS string on every channel (v9 uses names)
-    assert "version: 8" in bag_yaml and "storage_identifier: mcap" in bag_yaml
-    assert "history: 1" in bag_yaml
+    # rosbag2 Jazzy's version 9: QoS policies by name, RIHS01 type hashes (test_bag_format)
+    assert "version: 9" in bag_yaml and "storage_identifier: mcap" in bag_yaml
+    assert "history: keep_last" in bag_yaml and "type_description_hash: RIHS01_" in bag_yaml
     assert "serialized_metadata" in log.metadata["rosbag2"]
 
 

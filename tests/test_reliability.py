@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 The reliability suite: the node and the tools under long runs, bad input and stop signals.
 
@@ -53,7 +67,7 @@ from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.summary import stage2_figures, STAGE2_SAMPLES, STAGE2_WINDOW
-from umbrella_sim.ros.messages import SERVICE_QOS
+from umbrella_sim.ros.messages import COMMAND_ECHO_QOS, SERVICE_QOS
 from umbrella_sim.ros.recording import record_offline
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -282,6 +296,7 @@ def test_a_burst_of_commands_is_taken_whole_and_in_order(probe, tmp_path):
     every = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
                        reliability=ReliabilityPolicy.RELIABLE)
     probe.subscribe("/diagnostics", DiagnosticArray)
+    probe.subscribe("/sleeve_force/applied", Float64, COMMAND_ECHO_QOS)
     forces = [round(0.001 * (i + 1), 3) for i in range(5000)]
     with NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}") as node:
         node.wait_for_log("recording to", timeout=60)
@@ -299,7 +314,8 @@ def test_a_burst_of_commands_is_taken_whole_and_in_order(probe, tmp_path):
                      f"{diag_values(probe.messages('/diagnostics')[-1])}")
         assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=False),
                           timeout=60).success
-        node.wait_for_log(r"sleeve force 5 N applied", timeout=60)
+        # (each applied value is a DEBUG line; the topic has every one)
+        probe.wait_for("/sleeve_force/applied", lambda m: m.data == forces[-1], timeout=60)
         assert node.stop() == 0
     log = read_log(str(bag))
     assert [m.data for _, m in log.decoded("/sleeve_force")] == forces

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 What a ROS 2 user relies on.
 
@@ -5,6 +19,7 @@ Static parameter types, descriptors from the one registry, diagnostics on /diagn
 by namespace, /clock QoS, and recording by default.
 """
 import os
+import re
 import subprocess
 import sys
 
@@ -122,9 +137,13 @@ def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
     Here /clock made reliable (ClockQoS is best effort) and joint_states' depth 7: the
     publisher offers them, and the recording's offered_qos_profiles say so.
     """
+    from rcl_interfaces.srv import ListParameters
+    from rclpy.qos import DurabilityPolicy
+
     from umbrella_sim.bag.reader import qos_from_yaml
     bag = tmp_path / "bag"
     with NodeProcess("-p", "qos_overrides./clock.publisher.reliability:=reliable",
+                     "-p", "qos_overrides./clock.publisher.durability:=transient_local",
                      "-p", "qos_overrides./joint_states.publisher.depth:=7",
                      "-p", "v0:=-0.5", "-p", f"record_path:={bag}") as node:
         node.wait_for_log("recording to")
@@ -134,6 +153,11 @@ def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
                     if e.node_name == "umbrella_node"]
         poll(clock_publisher, 20, lambda: "the node's /clock publisher was not discovered")
         assert clock_publisher()[0].qos_profile.reliability == ReliabilityPolicy.RELIABLE
+        assert clock_publisher()[0].qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        # the overrides declared are the documented ones: every topic, every policy
+        listed = probe.call(ListParameters, "/umbrella_node/list_parameters",
+                            ListParameters.Request(prefixes=["qos_overrides"])).result.names
+        assert set(listed) == _documented_qos_overrides(), sorted(listed)
         node.wait_for_log("locked at")
         assert node.stop() == 0
     log = read_log(str(bag))
@@ -191,6 +215,133 @@ def test_wrong_parameter_type_at_start_is_refused(args, words):
     assert all(w in r.stderr for w in words) and "Traceback" not in r.stderr, r.stderr
 
 
+def _documented_qos_overrides(namespace: str = "") -> set[str]:
+    """Return the qos_overrides.* names msg_docs/node_parameters.md promises a node."""
+    root = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+    with open(os.path.join(root, "msg_docs", "node_parameters.md"), encoding="utf-8") as fh:
+        text = " ".join(fh.read().split())
+    policies = re.search(r"with policies: ((?:`\w+`, )*`\w+`), set a topic's QoS", text)
+    assert policies, "node_parameters.md no longer lists the qos_overrides policies"
+    names = re.findall(r"`(\w+)`", policies.group(1))
+    topics = [(f"{namespace}/{t.name}" if not t.name.startswith("/") else t.name, "publisher")
+              for t in ros_io.TOPICS.values()]
+    topics.append((f"{namespace}/{ros_io.COMMAND.name}", "subscription"))
+    return {f"qos_overrides.{topic}.{side}.{p}" for topic, side in topics for p in names}
+
+
+def test_the_documented_qos_overrides_are_the_declared_policies():
+    """The policies the docs list are the ones the node declares overrides for."""
+    declared = {p.name.lower() for p in ros_io.QOS_OVERRIDE_POLICIES}
+    assert {n.rpartition(".")[2] for n in _documented_qos_overrides()} == declared
+    assert "durability" in declared     # the docs' example of a late joiner's /clock
+
+
+def test_a_wildcard_section_may_hold_other_nodes_parameters(tmp_path):
+    """
+    A '/**' params file is shared by every node of a launch: a name this node does not know.
+
+    (robot_state_publisher's publish_frequency, another topic's qos_overrides) is a warning
+    naming it, with a "did you mean"; in a section naming the node it is an error.
+    """
+    from umbrella_sim.ros.params_file import (check_parameter_sources,
+                                              check_qos_override_sources)
+    from umbrella_sim.ros.parameters import parameter_defaults
+
+    known = set(parameter_defaults())
+    shared = tmp_path / "shared.yaml"
+    shared.write_text("/**:\n  ros__parameters:\n    publish_frequency: 30.0\n    v0: 0.0\n"
+                      "    youngs_modulous: 7.0e10\n    target_time: 1.5\n"
+                      "    qos_overrides:\n      /robot_description:\n        publisher:\n"
+                      "          depth: 1\n      /clock:\n        publisher:\n"
+                      "          depth: 2\n")
+    found = check_parameter_sources("/a1/umbrella_node", [str(shared)], [], known,
+                                    shared=CONTROLLER_PARAMETERS)
+    (warning,) = found.warnings
+    assert "'publish_frequency'" in warning and str(shared) in warning
+    assert "'youngs_modulous' (did you mean 'youngs_modulus'?)" in warning
+    assert "target_time" not in warning          # the deploy controller's: taken silently
+    (qos_warning,) = check_qos_override_sources(
+        "/a1/umbrella_node", found, {"qos_overrides./clock.publisher.depth"})
+    assert "gives 'qos_overrides./robot_description.publisher.depth' (" in qos_warning
+    assert "not a parameter of /a1/umbrella_node" in qos_warning    # that one only
+    for section in ("a1/umbrella_node", "/a1/umbrella_node", "/**/umbrella_node"):
+        own = tmp_path / "own.yaml"
+        own.write_text(shared.read_text().replace("/**:", f"{section}:"))
+        with pytest.raises(ValueError, match="unknown parameters 'publish_frequency'"):
+            check_parameter_sources("/a1/umbrella_node", [str(own)], [], known,
+                                    shared=CONTROLLER_PARAMETERS)
+        found = check_parameter_sources("/a1/umbrella_node", [str(own)], [],
+                                        known | {"publish_frequency", "youngs_modulous",
+                                                 "target_time"})
+        with pytest.raises(ValueError, match="robot_description"):
+            check_qos_override_sources("/a1/umbrella_node", found,
+                                       {"qos_overrides./clock.publisher.depth"})
+
+
+class _Logger:
+
+    def __init__(self):
+        self.lines = []
+
+    def warning(self, text):
+        self.lines.append(("WARN", text))
+
+    def info(self, text):
+        self.lines.append(("INFO", text))
+
+    def debug(self, text):
+        self.lines.append(("DEBUG", text))
+
+
+def test_throttled_warnings_say_how_many_were_held_back(monkeypatch):
+    from umbrella_sim.ros import throttled_log
+
+    now = [100.0]
+    monkeypatch.setattr(throttled_log.time, "monotonic", lambda: now[0])
+    log = _Logger()
+    warn = throttled_log.ThrottledWarnings(log).warn
+    for _ in range(3):
+        warn("behind", 60.0, lambda: "physics cannot keep up")
+        now[0] += 10.0
+    warn("other", 60.0, lambda: "another kind")
+    now[0] += 40.0
+    warn("behind", 60.0, lambda: "physics cannot keep up")
+    assert log.lines == [("WARN", "physics cannot keep up"), ("WARN", "another kind"),
+                         ("WARN", "physics cannot keep up (2 more since the last such warning)")]
+
+
+def test_applied_commands_log_at_debug_with_an_info_summary(monkeypatch):
+    """A controller's 100 commands a second: one INFO line per period, each at DEBUG."""
+    from umbrella_sim.ros import commands
+
+    now = [0.0]
+    monkeypatch.setattr(commands.time, "monotonic", lambda: now[0])
+    intake = commands.CommandIntake(lambda: None, lambda: None, None, None)
+    intake.logger = log = _Logger()
+    for k in range(1001):                 # 10 s of wall time at 100 commands a second
+        now[0] = k / 100
+        intake.applied(7.4499167113638407 + k, k / 100, locked=False)
+    infos = [text for level, text in log.lines if level == "INFO"]
+    assert len(infos) == 3 and len(log.lines) == 1001
+    assert infos[0] == "sleeve force 7.44992 N applied from t = 0.000000000 s"
+    assert infos[1].startswith("sleeve force 507.45 N applied from t = 5.000000000 s; 499 more")
+    assert ("DEBUG", "sleeve force 8.4499167113638407 N applied from t = 0.010000000 s") \
+        in log.lines
+
+
+@pytest.mark.ros
+def test_clock_goes_on_with_the_unchanged_time_while_paused(probe):
+    """As Gazebo: a paused simulator's /clock keeps coming, so use_sim_time nodes see it."""
+    from umbrella_sim.ros.messages import CLOCK_READER_QOS
+
+    probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
+    with NodeProcess("-p", "start_paused:=true", "-p", "record:=false") as node:
+        probe.wait_for_count("/clock", 5, timeout=30)
+        assert node.stop() == 0
+    ticks = probe.messages("/clock")
+    assert len(ticks) >= 5 and {(m.clock.sec, m.clock.nanosec) for m in ticks} == {(0, 0)}
+
+
 def test_every_registry_entry_is_a_parameter_of_one_kind():
     kinds = (set(SPECS), set(NODE_PARAMETERS), set(CONTROLLER_PARAMETERS))
     assert set.union(*kinds) == set(REGISTRY)
@@ -206,6 +357,8 @@ def test_the_interface_table_gives_each_topic_the_qos_it_has():
         rows = {cells[1].strip().strip("`"): cells[5] for cells in
                 (line.split("|") for line in fh if line.startswith("| `"))}
     topics = {t.name.lstrip("/"): t for t in (*ros_io.TOPICS.values(), ros_io.COMMAND)}
+    topics.update({ros_io.COMMAND.name + suffix: ros_io.Topic("", None, ros_io.COMMAND_ECHO_QOS)
+                   for suffix in ros_io.COMMAND_ECHO_SUFFIXES.values()})
     for name, topic in topics.items():
         q = topic.qos
         text = rows[name if name != "diagnostics" else "/diagnostics"].replace("*", "").strip()

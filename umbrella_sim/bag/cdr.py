@@ -1,11 +1,25 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 ROS 2 messages as a recording stores them: their type names, definitions and exact CDR bytes.
 
 ``message_definition`` gives the ros2msg schema of a type (the .msg text with its
 dependencies, as rosbag2 writes it); ``cdr_bytes`` the serialized message trimmed to its exact
 CDR size with zeroed padding (rclpy may return a few bytes more, which rosbags refuses, and
-leaves whatever its buffer held in the alignment gaps); ``qos_yaml`` the offered QoS profile
-as rosbag2's metadata writes it.
+leaves whatever its buffer held in the alignment gaps); ``qos_profiles`` the offered QoS profile
+and ``type_description_hash`` the type's RIHS01 hash as rosbag2 (Jazzy) writes them.
 """
 from __future__ import annotations
 
@@ -92,16 +106,50 @@ def message_definition(full_name: str) -> str:
     return "\n".join(parts) + "\n"
 
 
-def qos_yaml(qos: QoSProfile) -> str:
-    """offered_qos_profiles as rosbag2 writes it (enum values as integers)."""
-    profile = {
-        "history": int(qos.history), "depth": int(qos.depth),
-        "reliability": int(qos.reliability), "durability": int(qos.durability),
+#: the rosbag2 metadata version written: Jazzy's (9: offered_qos_profiles as a list with
+#: the policies' names, each topic's RIHS01 type_description_hash)
+BAG_FORMAT_VERSION = 9
+
+
+def qos_profiles(qos: QoSProfile) -> list[dict]:
+    """Return offered_qos_profiles as rosbag2 (metadata version 9) writes them."""
+    return [{
+        "history": qos.history.name.lower(), "depth": int(qos.depth),
+        "reliability": qos.reliability.name.lower(),
+        "durability": qos.durability.name.lower(),
         "deadline": dict(_INFINITE), "lifespan": dict(_INFINITE),
-        "liveliness": int(qos.liveliness), "liveliness_lease_duration": dict(_INFINITE),
+        "liveliness": qos.liveliness.name.lower(),
+        "liveliness_lease_duration": dict(_INFINITE),
         "avoid_ros_namespace_conventions": False,
-    }
-    return yaml.safe_dump([profile], sort_keys=False).rstrip("\n")
+    }]
+
+
+def qos_yaml(qos: QoSProfile) -> str:
+    """Return offered_qos_profiles as a YAML string, as rosbag2 puts it on an MCAP channel."""
+    return yaml.safe_dump(qos_profiles(qos), sort_keys=False).rstrip("\n")
+
+
+def type_description_hash(full_name: str) -> str:
+    """
+    Return a message type's RIHS01 type description hash ('RIHS01_<64 hex>').
+
+    As rosidl generated it: the interface package ships it in share/<pkg>/msg/<Type>.json
+    beside the .msg; '' where that file is missing (an interface built before Iron).
+    """
+    import json
+
+    pkg, _, name = full_name.split("/")
+    for share in _share_dirs():
+        path = os.path.join(share, pkg, "msg", name + ".json")
+        try:
+            with open(path, encoding="utf-8") as fh:
+                hashes = json.load(fh).get("type_hashes", [])
+        except (OSError, ValueError):
+            continue
+        for entry in hashes:
+            if entry.get("type_name") == full_name:
+                return str(entry.get("hash_string", ""))
+    return ""
 
 
 # --------------------------------------------------------------- exact CDR size

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Under the mcap Writer: the crash-safe file, the chunk index on disk, fast Message records.
 
@@ -7,7 +21,8 @@ torn record); ``SpilledChunkIndex`` keeps the writer's growing chunk index on di
 recording (bounded memory); ``MessageAppender`` appends Message records to the open chunk
 with one ``struct.pack`` each, byte for byte what ``Writer.add_message`` writes;
 ``ended_early_tail`` is the trailer that makes a recording stopped by a write error a
-complete MCAP file again.
+complete MCAP file again; ``keep_definitions_out_of_chunks`` leaves Schema and Channel
+records to the recorder, which writes each once outside the chunks.
 """
 from __future__ import annotations
 
@@ -168,6 +183,35 @@ class SpilledChunkIndex:
         if self._file is not None:
             self._file.close()
             self._file = None
+
+
+def keep_definitions_out_of_chunks(writer: Writer) -> bool:
+    """
+    Make the writer leave Schema and Channel records out of its chunks.
+
+    The recorder writes each once, in the data section outside the chunks, as it is
+    registered: a recording cut short keeps its channels whatever became of its chunks,
+    and no record is repeated (``mcap doctor`` warns of a repeated one; the writer still
+    repeats them in the summary section, as MCAP asks).  False where this mcap version
+    has no chunk builder to replace: its chunks then hold them, once.
+    """
+    try:
+        from mcap._chunk_builder import ChunkBuilder
+    except ImportError:
+        return False
+    if type(getattr(writer, "_Writer__chunk_builder", None)) is not ChunkBuilder:
+        return False
+
+    class MessagesOnly(ChunkBuilder):
+
+        def add_schema(self, schema) -> None:
+            pass
+
+        def add_channel(self, channel) -> None:
+            pass
+
+    writer._Writer__chunk_builder = MessagesOnly()
+    return True
 
 
 class _RawRecords:

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Reading recorded runs back: a bag directory or a single .mcap, finalised or not.
 
@@ -231,13 +245,21 @@ def import_type(type_name: str):
         raise LogError(f"message type {type_name!r} is not available here") from None
 
 
-def qos_from_yaml(text: str) -> QoSProfile:
+def _policy(kind, value, default):
+    """Return a QoS policy of rosbag2's YAML: a name (metadata version 9) or number (8)."""
+    if value is None:
+        return kind(default)
+    return kind(value) if isinstance(value, int) else kind[str(value).upper()]
+
+
+def qos_from_yaml(text) -> QoSProfile:
+    """Return the first offered QoS profile of a channel (YAML text) or metadata.yaml (list)."""
     try:
-        prof = (yaml.safe_load(text) or [{}])[0]
-        return QoSProfile(history=HistoryPolicy(int(prof.get("history", 1))),
+        prof = ((yaml.safe_load(text) if isinstance(text, str) else text) or [{}])[0]
+        return QoSProfile(history=_policy(HistoryPolicy, prof.get("history"), 1),
                           depth=max(int(prof.get("depth", 10)), 1),
-                          reliability=ReliabilityPolicy(int(prof.get("reliability", 1))),
-                          durability=DurabilityPolicy(int(prof.get("durability", 2))))
+                          reliability=_policy(ReliabilityPolicy, prof.get("reliability"), 1),
+                          durability=_policy(DurabilityPolicy, prof.get("durability"), 2))
     except Exception:
         return QoSProfile(depth=10)
 

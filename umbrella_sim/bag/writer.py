@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Writing a recording: one rosbag2 bag directory, crash-safe, never overwriting.
 
@@ -19,10 +33,11 @@ from mcap.writer import CompressionType, IndexType, Writer
 from rclpy.qos import QoSProfile
 import yaml
 
-from .cdr import cdr_bytes, message_definition, qos_yaml, type_name
+from .cdr import (BAG_FORMAT_VERSION, cdr_bytes, message_definition, qos_profiles, qos_yaml,
+                  type_description_hash, type_name)
 from .format import CHUNK_SIZE, EVENTS_RECORD, SEGMENT_RECORD
-from .mcap_stream import (CommittedFile, ended_early_tail, MessageAppender, SpilledChunkIndex,
-                          write_all)
+from .mcap_stream import (CommittedFile, ended_early_tail, keep_definitions_out_of_chunks,
+                          MessageAppender, SpilledChunkIndex, write_all)
 from .paths import absolute_path, check_new_output
 from .. import __version__
 
@@ -129,6 +144,8 @@ class BagRecorder:
             self._chunk_index = SpilledChunkIndex(bag_dir)
             if isinstance(getattr(self._writer, "_Writer__chunk_indices", None), list):
                 self._writer._Writer__chunk_indices = self._chunk_index
+            # Schema and Channel records once each, outside the chunks (add_channel)
+            self._definitions_outside = keep_definitions_out_of_chunks(self._writer)
             self._appender = MessageAppender.create(self._writer)
             self._writer.start(profile="ros2", library=f"umbrella_sim {__version__}")
             for name, data in metadata.items():
@@ -141,7 +158,6 @@ class BagRecorder:
                              f"{exc.strerror or exc}") from None
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}
-        self._schema_written: set[int] = set()
         self._channels: dict[str, tuple[int, str, QoSProfile]] = {}
         self.counts: dict[str, int] = {}
         self._first = self._last = None
@@ -245,28 +261,31 @@ class BagRecorder:
             if topic in self._channels or self._closed:
                 return
             tname = type_name(msg_type)
-            if tname not in self._schemas:
+            new_schema = tname not in self._schemas
+            definition = message_definition(tname).encode("utf-8")
+            if new_schema:
                 self._schemas[tname] = self._writer.register_schema(
-                    name=tname, encoding="ros2msg",
-                    data=message_definition(tname).encode("utf-8"))
+                    name=tname, encoding="ros2msg", data=definition)
+            # what rosbag2 (Jazzy) puts on a channel: the QoS and the type's RIHS01 hash
+            channel_metadata = {"offered_qos_profiles": qos_yaml(qos),
+                                "topic_type_hash": type_description_hash(tname)}
             cid = self._writer.register_channel(
                 topic=topic, message_encoding="cdr", schema_id=self._schemas[tname],
-                metadata={"offered_qos_profiles": qos_yaml(qos)})
+                metadata=channel_metadata)
             self._channels[topic] = (cid, tname, qos)
             self.counts[topic] = 0
-            # the writer puts Schema and Channel records into the chunk being filled; repeat
-            # them outside chunks now, so that a recording cut short by a write error keeps
-            # its channels even if its first chunk never reached the disk (MCAP allows
-            # identical repeats)
+            if not self._definitions_outside:
+                return          # the writer put them into the chunk being filled
+            # once each, outside the chunks, now: a recording cut short by a write error
+            # keeps its channels even if its first chunk never reached the disk
             from mcap.data_stream import RecordBuilder
             from mcap.records import Channel, Schema
             builder = RecordBuilder()
-            if self._schemas[tname] not in self._schema_written:
+            if new_schema:
                 Schema(id=self._schemas[tname], name=tname, encoding="ros2msg",
-                       data=message_definition(tname).encode("utf-8")).write(builder)
-                self._schema_written.add(self._schemas[tname])
+                       data=definition).write(builder)
             Channel(id=cid, topic=topic, message_encoding="cdr", schema_id=self._schemas[tname],
-                    metadata={"offered_qos_profiles": qos_yaml(qos)}).write(builder)
+                    metadata=channel_metadata).write(builder)
             self._fh.write(builder.end())
             try:
                 self._fh.commit()
@@ -433,14 +452,12 @@ class BagRecorder:
         total = sum(self.counts.values())
         topics = [{"topic_metadata": {"name": topic, "type": tname,
                                       "serialization_format": "cdr",
-                                      "offered_qos_profiles": qos_yaml(qos),
-                                      "type_description_hash": ""},
+                                      "offered_qos_profiles": qos_profiles(qos),
+                                      "type_description_hash": type_description_hash(tname)},
                    "message_count": self.counts[topic]}
                   for topic, (_, tname, qos) in self._channels.items()]
         return {
-            # version 8: offered_qos_profiles as a YAML string with integer enums, which is
-            # what qos_yaml() writes (version 9 switched to a list with enum names)
-            "version": 8, "storage_identifier": "mcap",
+            "version": BAG_FORMAT_VERSION, "storage_identifier": "mcap",
             "duration": {"nanoseconds": duration},
             "starting_time": {"nanoseconds_since_epoch": start},
             "message_count": total, "topics_with_message_count": topics,

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Parameters: one registry from which everything else is derived.
 
@@ -429,6 +443,18 @@ def check_node_parameters(values: Mapping[str, Any]) -> dict:
 NODE_PARAMETERS_LISTED = "umbrella_node --help and in msg_docs/parameters.md"
 
 
+def unknown_names(names, known) -> list[str]:
+    """Return "'name' (did you mean 'closest'?)" for each of names not in known, sorted."""
+    import difflib
+
+    known = set(known)
+    out = []
+    for name in sorted(set(names) - known):
+        close = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.5)
+        out.append(f"{name!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    return out
+
+
 def check_known_names(names, known, source: str,
                       listed: str = NODE_PARAMETERS_LISTED) -> None:
     """
@@ -438,13 +464,7 @@ def check_known_names(names, known, source: str,
     suggestion (difflib) for each; `source` says where the names came from (e.g. "params
     file config/x.yaml", "-p", "--set"); `listed` where the known ones are listed.
     """
-    import difflib
-
-    known = set(known)
-    problems = []
-    for name in sorted(set(names) - known):
-        close = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.5)
-        problems.append(f"{name!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    problems = unknown_names(names, known)
     if problems:
         raise ValueError(f"{source}: unknown parameter{'s' if len(problems) > 1 else ''} "
                          f"{', '.join(problems)}; known parameters are listed by {listed}")

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 The node's sleeve_force command intake: each command checked, counted, recorded, held.
 
@@ -18,8 +32,12 @@ from rclpy.exceptions import InvalidHandle
 
 from ..core.forcing import command_force
 
-#: refused commands recorded per wall second at most (the rest are counted only)
+#: refused commands recorded (and published on sleeve_force/refused) per wall second at most
+#: (the rest are counted only)
 REFUSED_RECORD_RATE = 10
+#: wall seconds between INFO lines about applied commands (each is a DEBUG line; a deploy
+#: controller applies one per publication, 100 a second)
+APPLIED_INFO_PERIOD = 5.0
 #: commands taken in one turn of the executor at most: a burst is drained by the command
 #: callback itself (rclpy's executor costs ~1-2 ms a turn, which held the intake to a few
 #: hundred commands a second and kept ~/pause waiting behind a flood); the bound gives the
@@ -52,6 +70,51 @@ class CommandIntake:
         self._intake = threading.Lock()     # the callback's batches and the stop's drain
         self._lock = threading.Lock()
         self._force = 0.0
+        self.logger = None                  # the node's
+        self._echo = {}                     # "applied", "refused" -> the node's publisher
+        self._info_at = -float("inf")       # wall time of the last INFO line on an applied one
+        self._since_info = 0                # applied since that line
+
+    def connect(self, node, command_topic: str) -> None:
+        """
+        Publish each command applied and refused, on <command>/applied and <command>/refused.
+
+        The same topics, types and QoS as the recording's records (messages.COMMAND_ECHO).
+        """
+        from .messages import COMMAND_ECHO_QOS, COMMAND_ECHO_SUFFIXES, own_qos
+        self.logger = node.get_logger()
+        self._echo = {key: node.create_publisher(self.command_type(), command_topic + suffix,
+                                                 own_qos(COMMAND_ECHO_QOS))
+                      for key, suffix in COMMAND_ECHO_SUFFIXES.items()}
+
+    @staticmethod
+    def command_type():
+        from std_msgs.msg import Float64
+        return Float64
+
+    def applied(self, force: float, t: float, locked: bool) -> None:
+        """
+        Log, record and publish F_H = force acting from sim time t (before the solver sees it).
+
+        Each at DEBUG; at INFO the first after APPLIED_INFO_PERIOD wall seconds without one,
+        with how many came since the last.
+        """
+        note = " (locked: no effect on motion)" if locked else ""
+        now = time.monotonic()
+        if now - self._info_at >= APPLIED_INFO_PERIOD:
+            more = (f"; {self._since_info} more applied since the last report (each at DEBUG)"
+                    if self._since_info else "")
+            self.logger.info(f"sleeve force {force:.6g} N applied from t = {t:.9f} s{note}"
+                             f"{more}")
+            self._info_at, self._since_info = now, 0
+        else:
+            self._since_info += 1
+            self.logger.debug(f"sleeve force {force:.17g} N applied from t = {t:.9f} s{note}")
+        rec = self._recording()
+        if rec is not None:
+            rec.applied(force, t)
+        if "applied" in self._echo:
+            self._echo["applied"].publish(self.command_type()(data=float(force)))
 
     @property
     def force(self) -> float:
@@ -146,6 +209,8 @@ class CommandIntake:
             if n < REFUSED_RECORD_RATE:       # a flood of bad commands cannot fill the disk
                 if rec is not None:
                     rec.refused(msg, t)
+                if "refused" in self._echo:
+                    self._echo["refused"].publish(msg)
                 n += 1
             else:
                 self.refused_not_recorded += 1

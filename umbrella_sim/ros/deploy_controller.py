@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 deploy_controller: closed-loop deployment of the umbrella frame over ROS topics.
 
@@ -19,10 +33,10 @@ import time
 
 from . import signals as stop_signals
 from .parameters import declare_from_registry, wrong_type_text
-from .params_file import check_parameter_sources, params_files_in
+from .params_file import check_parameter_sources, check_qos_override_sources, params_files_in
 from ..core.control import DeployLaw
 from ..core.params import ControllerConfig, UmbrellaParams
-from ..core.registry import check_known_names, CONTROLLER_PARAMETERS, defaults, parameter_help
+from ..core.registry import CONTROLLER_PARAMETERS, defaults, parameter_help
 
 
 #: at rest for the plan: rate and angle from the start within this fraction of the plan's
@@ -52,12 +66,14 @@ def _make_node_class():
             known = set(CONTROLLER_PARAMETERS) | set(defaults())
             fqn = self.get_fully_qualified_name()
             try:
-                qos = check_parameter_sources(fqn, params_files, list(
+                found = check_parameter_sources(fqn, params_files, list(
                     self._parameter_overrides), known, CONTROLLER_PARAMETERS_LISTED)
-                check_known_names(qos, (), f"qos_overrides for {fqn} (its topics take none)",
-                                  CONTROLLER_PARAMETERS_LISTED)
+                warnings = found.warnings + check_qos_override_sources(
+                    fqn, found, (), CONTROLLER_PARAMETERS_LISTED, " (its topics take none)")
             except ValueError as exc:
                 raise StartupError(str(exc)) from None
+            for text in warnings:      # another node's, in a '/**' section
+                self.get_logger().warning(text)
             try:
                 values = declare_from_registry(self, CONTROLLER_PARAMETERS)
             except ValueError as exc:

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 ROS 2 message layer: topics, QoS, and Sample -> messages.
 
@@ -14,12 +28,14 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PointStamped
 import numpy as np
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSPolicyKind, QoSProfile,
+                       ReliabilityPolicy)
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimension, String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ..bag.format import APPLIED_SUFFIX, REFUSED_SUFFIX
 from ..core.outputs import energy_balance, Sample
 from ..core.params import UmbrellaParams
 
@@ -73,6 +89,21 @@ ABSOLUTE_TOPIC_NAMES = frozenset(t.name for t in TOPICS.values() if t.name.start
 COMMAND = Topic("sleeve_force", Float64, QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL,
     durability=DurabilityPolicy.VOLATILE))
+
+
+#: <command>/applied (each value as it starts acting) and <command>/refused (each command
+#: refused), published and recorded: reliable, keep last 100 (a reader keeps up with one a
+#: publication at most; refused ones are published REFUSED_RECORD_RATE a second at most)
+COMMAND_ECHO_SUFFIXES = {"applied": APPLIED_SUFFIX, "refused": REFUSED_SUFFIX}
+COMMAND_ECHO_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                              history=HistoryPolicy.KEEP_LAST,
+                              durability=DurabilityPolicy.VOLATILE)
+
+#: the policies a qos_overrides.<topic>.publisher|subscription.<policy> parameter sets, for
+#: every topic of TOPICS and COMMAND (rclpy's default set, plus durability: a late joiner
+#: may want /clock or markers transient local)
+QOS_OVERRIDE_POLICIES = (QoSPolicyKind.HISTORY, QoSPolicyKind.DEPTH,
+                         QoSPolicyKind.RELIABILITY, QoSPolicyKind.DURABILITY)
 
 
 def own_qos(qos: QoSProfile) -> QoSProfile:

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 umbrella_node: the ROS 2 face of the simulator, a thin adapter around the run driver.
 
@@ -22,7 +36,6 @@ from __future__ import annotations
 
 import contextlib
 import gc
-import math
 import sys
 import threading
 import time
@@ -40,12 +53,14 @@ from std_srvs.srv import SetBool, Trigger
 from . import messages as ros_io
 from .commands import CommandIntake
 from .lockstep import Lockstep
-from .pacing import behind_text, MAX_LAG_S, Pacer
+from .pacing import behind_text, lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, parameter_defaults,
                          set_refusal, wrong_type_text)
-from .params_file import check_parameter_sources, QOS_OVERRIDES, USE_SIM_TIME
+from .params_file import (check_parameter_sources, check_qos_override_sources,
+                          ParameterSources, QOS_OVERRIDES, USE_SIM_TIME)
 from .publication import PublicationEncoder
 from .recording import RunRecording
+from .throttled_log import ThrottledWarnings
 from .. import __version__
 from ..bag.cdr import cdr_bytes
 from ..bag.provenance import run_metadata
@@ -53,8 +68,8 @@ from ..bag.writer import BagRecorder, check_record_path, new_bag_recorder
 from ..core.driver import RunDriver
 from ..core.engines import SimulationDiverged
 from ..core.params import shortened_step_note, UmbrellaParams
-from ..core.registry import (check_known_names, check_node_parameters, CONTROLLER_PARAMETERS,
-                             NODE_PARAMETERS, REGISTRY, RESET, SPECS)
+from ..core.registry import (check_node_parameters, CONTROLLER_PARAMETERS, NODE_PARAMETERS,
+                             REGISTRY, RESET, SPECS)
 from ..core.step_rule import physics_step_of
 
 SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
@@ -100,6 +115,7 @@ class UmbrellaNode(Node):
         self._sim_lock = threading.RLock()
         self._epoch = 0                     # counts resets; samples of an older epoch are dropped
         self.lockstep = Lockstep()            # the handshake of lockstep:=true
+        self._warn_throttled = ThrottledWarnings(self.get_logger()).warn
         self.commands = CommandIntake(lambda: self.sim, self._recording_on, self._warn_throttled,
                                       self.lockstep)
         self.fault: str | None = None
@@ -112,15 +128,15 @@ class UmbrellaNode(Node):
         self.recording_error: str | None = None
         self._service_waiting = threading.Event()
         self._peers_warned = ""
-        self._warned_at: dict[str, float] = {}
+        self._measured_rtf: float | None = None     # of the last diagnostics
 
         # QoS as documented, or as qos_overrides.<topic>.publisher.<policy> parameters set
-        # (history, depth, reliability, durability: the ROS 2 convention; read-only)
+        # (ros_io.QOS_OVERRIDE_POLICIES: the ROS 2 convention; read-only)
         try:
             # (own copies: topics share ros_io's profiles)
             self.pub = {key: self.create_publisher(
                 t.type, t.name, ros_io.own_qos(t.qos),
-                qos_overriding_options=QoSOverridingOptions.with_default_policies())
+                qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
                 for key, t in ros_io.TOPICS.items()}
             # commands and services in their own callback groups, served by a 2-thread
             # executor: a slow ~/reset never delays a command and a command flood never
@@ -129,7 +145,7 @@ class UmbrellaNode(Node):
                 ros_io.COMMAND.type, ros_io.COMMAND.name, self.commands.on_message,
                 ros_io.own_qos(ros_io.COMMAND.qos),
                 callback_group=MutuallyExclusiveCallbackGroup(),
-                qos_overriding_options=QoSOverridingOptions.with_default_policies())
+                qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
         except Exception as exc:  # rclpy's errors name the parameter
             files = f" (params files: {', '.join(params_files)})" if params_files else ""
             text = (wrong_type_text(self, exc) if isinstance(exc, InvalidParameterTypeException)
@@ -139,6 +155,7 @@ class UmbrellaNode(Node):
         self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
         self.command_topic = self.command_sub.topic_name
         self.commands.subscription = self.command_sub
+        self.commands.connect(self, self.command_topic)
         g, qos = MutuallyExclusiveCallbackGroup(), ros_io.SERVICE_QOS     # (a storm: deep)
         self.create_service(Trigger, "~/reset", self._on_reset, qos_profile=qos, callback_group=g)
         self.create_service(SetBool, "~/pause", self._on_pause, qos_profile=qos, callback_group=g)
@@ -154,23 +171,26 @@ class UmbrellaNode(Node):
         self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
 
     # ------------------------------------------------------------------ config
-    def _check_parameter_sources(self, params_files, known: set) -> set:
+    def _check_parameter_sources(self, params_files, known: set) -> ParameterSources:
         """Check the params files and names given for this node (StartupError: which)."""
         try:
-            return check_parameter_sources(
+            found = check_parameter_sources(
                 self.get_fully_qualified_name(), params_files,
                 list(self._parameter_overrides), known,
                 shared=CONTROLLER_PARAMETERS)   # a '/**' file may serve both nodes
         except ValueError as exc:
             raise StartupError(str(exc)) from None
+        for text in found.warnings:       # another node's, in a '/**' section
+            self.get_logger().warning(text)
+        return found
 
-    def _check_qos_overrides(self, given: set) -> None:
+    def _check_qos_overrides(self, given: ParameterSources) -> None:
         """Refuse a qos_overrides.* name given for this node that none of its topics has."""
-        fqn = self.get_fully_qualified_name()
-        declared = {QOS_OVERRIDES + n
-                    for n in self.get_parameters_by_prefix(QOS_OVERRIDES.rstrip("."))}
-        try:
-            check_known_names(given, declared, f"qos_overrides for {fqn}")
+        fqn, prefix = self.get_fully_qualified_name(), QOS_OVERRIDES
+        declared = {prefix + n for n in self.get_parameters_by_prefix(prefix[:-1])}
+        try:        # (a '/**' section's: another node's topics, a warning)
+            for text in check_qos_override_sources(fqn, given, declared):
+                self.get_logger().warning(text)
         except ValueError as exc:
             raise StartupError(str(exc)) from None
 
@@ -443,13 +463,9 @@ class UmbrellaNode(Node):
         t = self.driver.command(force)
         if t is None:
             return
-        # logged and recorded BEFORE the solver sees it: a fault it causes is in the log and
-        # --resimulate reproduces it
-        note = " (locked: no effect on motion)" if self.sim.stage == "locked" else ""
-        self.get_logger().info(f"sleeve force {force:.17g} N applied from t = {t:.9f} s{note}")
-        rec = self._recording_on()
-        if rec is not None:
-            rec.applied(force, t)
+        # logged, recorded and published BEFORE the solver sees it: a fault it causes is in
+        # the log and --resimulate reproduces it
+        self.commands.applied(force, t, self.sim.stage == "locked")
 
     def _advance_chunk(self) -> bool:
         """Step the next chunk (sim lock held); True if the run is at a publication after it."""
@@ -518,9 +534,9 @@ class UmbrellaNode(Node):
                     elif lag > MAX_LAG_S:
                         self._re_anchor(epoch, now, sim_t, lag)
                     elif lag > max(0.05, 2.0 / self.driver_rate):
-                        self._warn_throttled("behind", 5.0, lambda: (
-                            f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall "
-                            "time x real_time_factor (see diagnostics)"))
+                        self._warn_throttled("behind", LAG_WARN_PERIOD, lambda: (
+                            f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall time x "
+                            f"real_time_factor; {self._lag_advice()}"))
                 elif target is not None and not idle:
                     # between publications (a long period: many chunks), how far behind the
                     # physics is now, so that diagnostics say so before the period ends
@@ -532,7 +548,7 @@ class UmbrellaNode(Node):
                 if epoch != diag_epoch:     # a reset: sim time restarted, measure from here
                     diag_wall, diag_sim, diag_epoch = now, sim_t, epoch
                 if now - diag_wall >= 1.0:
-                    measured = (sim_t - diag_sim) / (now - diag_wall)
+                    measured = self._measured_rtf = (sim_t - diag_sim) / (now - diag_wall)
                     self._check_namespace_peers()
                     self._publish_diagnostics(sim_t, measured, lag)
                     diag_wall, diag_sim = now, sim_t
@@ -545,6 +561,8 @@ class UmbrellaNode(Node):
                 if waiting:
                     self.lockstep.answered.wait(0.05)
                 elif idle:
+                    if self.paused and self.fault is None:   # as Gazebo: the time, unchanged
+                        self.pub["clock"].publish(ros_io.clock_msg(sim_t))   # (not recorded)
                     self._wake.wait(0.05)
                     self._wake.clear()
         except Exception as exc:  # keep the process informative, never silent
@@ -573,23 +591,14 @@ class UmbrellaNode(Node):
             if epoch != self._epoch:
                 return
             self.pacer.re_anchor(now, sim_t, lag)
-        self._warn_throttled("re-anchor", 5.0, lambda: (
+        self._warn_throttled("re-anchor", LAG_WARN_PERIOD, lambda: (
             f"physics cannot keep real time: {lag * 1e3:.0f} ms behind at t = {sim_t:.3f} s; "
             f"pacing re-anchored (lag bounded by {MAX_LAG_S:g} s; total slip "
-            f"{self.pacer.slip:.3f} s in {self.pacer.re_anchors} re-anchors, see diagnostics)"))
+            f"{self.pacer.slip:.3f} s in {self.pacer.re_anchors} re-anchors); "
+            f"{self._lag_advice()}"))
 
-    def _warn_throttled(self, key: str, period: float, text) -> None:
-        """
-        Log a WARN at most once per period (s) per key.
-
-        A WARN at most once per period (s) per key.  rclpy's own throttle_duration_sec
-        inspects the caller's frame on every call (~3.5 ms measured), which throttled the
-        command callback to ~130 commands/s during a flood.
-        """
-        now = time.monotonic()
-        if now - self._warned_at.get(key, -math.inf) >= period:
-            self._warned_at[key] = now
-            self.get_logger().warning(text())
+    def _lag_advice(self) -> str:
+        return lag_advice(self.node_cfg["real_time_factor"], self._measured_rtf)
 
     def _check_namespace_peers(self) -> None:
         """Two simulators in one namespace mix their /clock, commands and resets: warn."""

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Real-time pacing of the node: the state of sim time t goes out at wall time anchor + t / rtf.
 
@@ -32,6 +46,20 @@ def behind_text(lag: float, measured: float, real_time_factor: float) -> str:
              "keeping pace" if shown == real_time_factor else "falling behind")
     return (f"behind real time by {lag:.3f} s ({trend}: {shown:.3f}x of {real_time_factor:g}x "
             "over the last second)")
+
+
+#: wall seconds between two warnings that the physics cannot keep up (each says how many
+#: more came meanwhile; diagnostics report the lag at 1 Hz)
+LAG_WARN_PERIOD = 60.0
+
+
+def lag_advice(real_time_factor: float, measured: float | None) -> str:
+    """Say what makes a node that cannot keep up with real_time_factor keep up."""
+    can = f" (measured {measured:.2f}x)" if measured else ""
+    return (f"this machine cannot step this model at {real_time_factor:g}x real time{can}: "
+            "give a lower real_time_factor, real_time_factor:=0 (as fast as it can; "
+            "sim time is still exact), or, for a closed-loop controller, lockstep:=true "
+            "(the node waits for each command: no command falls behind)")
 
 
 class Pacer:

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 ROS 2 parameter sources: params YAML files, ``-p`` overrides, and what a node may be given.
 
@@ -9,11 +23,12 @@ and the offline tools read the same files the nodes take.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 import functools
 import re
 
 from ..bag.paths import read_text_input
-from ..core.registry import check_known_names, NODE_PARAMETERS_LISTED
+from ..core.registry import check_known_names, NODE_PARAMETERS_LISTED, unknown_names
 
 
 def _flatten(values: dict, prefix: str = "") -> dict:
@@ -163,20 +178,54 @@ def params_files_in(ros_args: list[str]) -> list[str]:
     return files
 
 
+def names_the_node(pattern: str) -> bool:
+    """
+    Tell whether a params-file section addresses a node by its name.
+
+    'umbrella_node', '/a1/umbrella_node', '/**/umbrella_node' do; a wildcard ('/**', '/*',
+    '/a1/*') does not.
+    """
+    return pattern.strip("/").split("/")[-1] not in ("*", "**")
+
+
+def shared_section_warning(path: str, section: str, node_fqn: str, problems) -> str:
+    """Return the warning for names a wildcard section gives that a node does not know."""
+    what = "parameters" if len(problems) > 1 else "a parameter"
+    return (f"params file {path}: section {section!r} gives {', '.join(problems)}, not "
+            f"{what} of {node_fqn}: ignored here (another node's, in a file shared by every "
+            "node?)")
+
+
+@dataclass
+class ParameterSources:
+    """What check_parameter_sources found: the qos_overrides.* names, and the warnings."""
+
+    #: given by -p or in a section naming the node: one no topic has is an error
+    qos_overrides: set = field(default_factory=set)
+    #: given in a wildcard section ('/**'): one no topic has is another node's (a warning)
+    shared_qos_overrides: dict = field(default_factory=dict)   # name -> (file, section)
+    #: a wildcard section's names the node does not know, each with a "did you mean"
+    warnings: list = field(default_factory=list)
+
+
 def check_parameter_sources(node_fqn: str, params_files, given, known,
-                            listed: str = NODE_PARAMETERS_LISTED, shared=()) -> set:
+                            listed: str = NODE_PARAMETERS_LISTED,
+                            shared=()) -> ParameterSources:
     """
     Check the params files and parameter names a ROS node was started with.
 
-    Every params file has a section for the node, and every parameter given for it (``-p``,
-    ``given``, or a file) is one it knows (``known``, besides ROS_OWN_PARAMETERS): a typo
+    Every params file has a section for the node, and every parameter given for it by
+    name (``-p``, ``given``, or a section that names the node, 'umbrella_node' or
+    '/a1/umbrella_node') is one it knows (``known``, besides ROS_OWN_PARAMETERS): a typo
     is a ValueError naming it, never a silent default.  A wildcard section ('/**', '/*',
-    ...) may also give the sibling umbrella_sim node's parameters (``shared``), so that one
-    file serves both; those are skipped there (in a section naming this node, or -p, they
-    are unknown).  Returns the ``qos_overrides.*`` names given, for the node to check
-    against the QoS its topics declare.
+    ...) serves every node of a launch (robot_state_publisher's ``publish_frequency``
+    there is not a mistake): a name the node does not know there is a warning naming it,
+    with a "did you mean", and rclpy ignores it; the sibling umbrella_sim node's
+    parameters (``shared``) are taken there silently.  Returns the ``qos_overrides.*``
+    names given, for the node to check against the QoS its topics declare.
     """
     known = set(known) | ROS_OWN_PARAMETERS
+    found = ParameterSources()
     in_files = set()
     for path in params_files:
         sections = read_params_file(path)
@@ -185,11 +234,43 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
                              f"(sections: {', '.join(sections)}); use '/**' or the "
                              "node's name")
         for key, values in sections.items():
-            if section_matches(key, node_fqn):
-                names = {n for n in values if not n.startswith(QOS_OVERRIDES)}
-                check_known_names(names - set(shared) if "*" in key else names, known,
-                                  f"params file {path} (for {node_fqn})", listed)
-                in_files |= set(values)
+            if not section_matches(key, node_fqn):
+                continue
+            names = {n for n in values if not n.startswith(QOS_OVERRIDES)}
+            qos = {n for n in values if n.startswith(QOS_OVERRIDES)}
+            if names_the_node(key):
+                check_known_names(names, known, f"params file {path} (for {node_fqn})",
+                                  listed)
+                found.qos_overrides |= qos
+            else:
+                problems = unknown_names(names - set(shared), known)
+                if problems:
+                    found.warnings.append(shared_section_warning(path, key, node_fqn,
+                                                                 problems))
+                found.shared_qos_overrides.update({n: (path, key) for n in qos})
+            in_files |= set(values)
     names = [n for n in given if not n.startswith(QOS_OVERRIDES) and n not in in_files]
     check_known_names(names, known, f"-p for {node_fqn}", listed)
-    return {n for n in (*in_files, *given) if n.startswith(QOS_OVERRIDES)}
+    found.qos_overrides |= {n for n in given if n.startswith(QOS_OVERRIDES)
+                            and n not in in_files}
+    return found
+
+
+def check_qos_override_sources(node_fqn: str, found: ParameterSources, declared,
+                               listed: str = NODE_PARAMETERS_LISTED,
+                               why: str = "") -> list[str]:
+    """
+    Check the qos_overrides.* names given against those a node declared.
+
+    A name given by -p or in a section naming the node that it did not declare is a
+    ValueError (``why`` may say why none is); one of a wildcard section is returned as
+    a warning, as check_parameter_sources treats other parameters.
+    """
+    check_known_names(found.qos_overrides, declared,
+                      f"qos_overrides for {node_fqn}{why}", listed)
+    by_section: dict = {}
+    for name, where in found.shared_qos_overrides.items():
+        by_section.setdefault(where, []).append(name)
+    return [shared_section_warning(path, key, node_fqn, problems)
+            for (path, key), names in sorted(by_section.items())
+            for problems in [unknown_names(names, declared)] if problems]

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 Recording a run: the node's topics, commands and run records into a bag (bag/writer.py).
 
@@ -48,8 +62,9 @@ class RunRecording:
             topic = messages.TOPICS[key]
             recorder.add_channel(name, topic.type, (qos or {}).get(key, topic.qos))
             resolved[topic.name.lstrip("/")] = name
-        for suffix in ("", REFUSED_SUFFIX, APPLIED_SUFFIX):
-            recorder.add_channel(command_topic + suffix, Float64, messages.COMMAND.qos)
+        for suffix in ("", REFUSED_SUFFIX, APPLIED_SUFFIX):   # (the last two as published)
+            recorder.add_channel(command_topic + suffix, Float64,
+                                 messages.COMMAND_ECHO_QOS if suffix else messages.COMMAND.qos)
             resolved[messages.COMMAND.name.lstrip("/") + suffix] = command_topic + suffix
         # so that the tools find each topic however it was remapped
         recorder.add_metadata(TOPICS_RECORD, resolved)

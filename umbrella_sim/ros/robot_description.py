@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 The URDF of the umbrella frame, built from the parameters (no ROS imports).
 
@@ -17,10 +31,14 @@ Links and frames (all in the XY plane of the inertial frame; rotations about +Z)
 
 Loop closure: the mechanism is a closed chain (O - O'' - H - axle - O), which URDF cannot
 express; the tree above leaves out the pin joint between the link's end (x'' = l3) and the
-sleeve.  The node's joint_states satisfy it (|O''H| = l3 with H on the axle, to the
-solver's constraint tolerance), so robot_state_publisher places ``link``'s end on ``sleeve``.
-The elastic deformation is not in the URDF: the frames are the floating frames of the beams,
-and the deformed shapes are the ``markers`` topic.
+sleeve.  For the rigid models the joint_states close it to round-off (2.5e-16 m measured),
+so robot_state_publisher places ``link``'s end on ``sleeve``.  For the flexible models
+alpha1 and alpha2 are the beams' floating frames: the solver pins the *deformed* link's end
+to H, and the URDF's rigid end misses the sleeve by the beams' elastic displacements at
+O'' and H (measured at V0 = -0.5 m/s: up to 9 um while deploying, 0.91 mm in the stage-2
+vibration; tests/test_launch_and_urdf.py holds that identity).  The elastic deformation is
+not in the URDF: the frames are the floating frames of the beams, and the deformed shapes
+(whose link end is on the sleeve) are the ``markers`` topic.
 """
 from __future__ import annotations
 

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 ``SimulatedAntenna``: an ``umbrella_node`` under test plus a probe subscribed to its topics.
 
@@ -18,9 +32,6 @@ from ..ros.messages import PHASES, tip_deflection_figures
 
 
 # ------------------------------------------------------------------ antenna
-APPLIED_RE = r"sleeve force ([0-9.eE+-]+|nan|inf|-inf) N applied from t = ([0-9.]+) s"
-
-
 RESET_LINE = "reset: simulation restarted"
 
 
@@ -76,6 +87,8 @@ class SimulatedAntenna:
         self.topics = {key: t.name if t.name.startswith("/") else prefix + t.name
                        for key, t in ros_io.TOPICS.items()}
         self.topics["sleeve_force"] = prefix + ros_io.COMMAND.name
+        for key, suffix in ros_io.COMMAND_ECHO_SUFFIXES.items():   # sleeve_force/applied ...
+            self.topics[f"sleeve_force_{key}"] = prefix + ros_io.COMMAND.name + suffix
         self._diag = ros_io.diagnostic_name(prefix + "umbrella_node")   # its status name
         self._own_probe = probe is None
         SimulatedAntenna._count += 1
@@ -87,6 +100,9 @@ class SimulatedAntenna:
                               ("diagnostics", DiagnosticArray)):
             self.probe.subscribe(self.topics[key], msg_type, ros_io.TOPICS[key].qos)
         self.probe.subscribe(self.topics["deployment_phase"], String, ros_io.LATCHED)
+        for key in ros_io.COMMAND_ECHO_SUFFIXES:
+            self.probe.subscribe(self.topics[f"sleeve_force_{key}"], Float64,
+                                 ros_io.COMMAND_ECHO_QOS)
         self._float64 = Float64
         self._command_pub = None
         self._runs = 0          # resets so far: waits and figures are of the current run
@@ -348,12 +364,27 @@ class SimulatedAntenna:
 
     def applied_forces(self) -> list[tuple[float, float]]:
         """
-        [(sim time, F)] every commanded value the node applied in this run, from its log.
+        [(sim time, F)] every commanded value the node applied in this run.
 
-        Exact; the ``sleeve_force`` parameter's value, which acts from t = 0, is not a
-        command and is not listed.
+        Each as the node published it on ``sleeve_force/applied`` (the value, as it starts
+        acting), at the instant it acts from: the stamp of the joint state before the first
+        one whose effort (F_H over the step that ends at its stamp) it is.  A value is
+        listed once that joint state has arrived, one publication after the applied
+        message.  Exact (stamps to the nanosecond); the ``sleeve_force`` parameter's value,
+        which acts from t = 0, is not a command and is not listed.
         """
-        return [(float(t), float(f)) for f, t in re.findall(APPLIED_RE, self._run_output())]
+        values = [m.data for m in self.messages("sleeve_force_applied")]
+        states = self.messages("joint_states")
+        out = []
+        for before, after in zip(states, states[1:]):
+            if len(out) < len(values) and after.effort[2] != before.effort[2]:
+                if after.effort[2] != values[len(out)]:
+                    raise AssertionError(
+                        f"joint_states effort {after.effort[2]!r} N at {_stamp(after):.9f} s "
+                        f"is not the applied command {values[len(out)]!r} N (applied: "
+                        f"{values})")
+                out.append((_stamp(before), after.effort[2]))
+        return out
 
     def lock_time(self) -> float | None:
         m = re.search(LOCKED_RE, self._run_output())

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Offline command line: ``umbrella_sim simulate`` (also ``python -m umbrella_sim``)."""
 from __future__ import annotations
 
@@ -13,7 +27,7 @@ from .csv_output import StepCsv
 from .inputs import build_params, check_run_length, LONG_RUN_STEPS, read_force_profile
 from .progress import Progress
 from .. import __version__
-from ..bag.paths import check_new_output
+from ..bag.paths import check_new_output, remove_recording
 from ..core.driver import RunDriver, simulate
 from ..core.params import shortened_step_note
 from ..core.registry import parameter_help, SPECS
@@ -79,6 +93,10 @@ def make_parser() -> argparse.ArgumentParser:
                          "energy_drift and constraint_residual_max, checked at each "
                          "publication instead of each step (they differ in the last digits), "
                          "and --csv, whose rows are then the publications")
+    sp.add_argument("--overwrite", action="store_true",
+                    help="replace an existing --csv file and --mcap recording (a directory "
+                         "of .mcap files and metadata.yaml, nothing else) when the run "
+                         "starts; without it an existing output is an error")
     sp.add_argument("--publish-rate", type=float, default=None, dest="publish_rate",
                     action=_Once,
                     help="publication rate of the --mcap recording (Hz, sim time; also "
@@ -208,9 +226,11 @@ def main(argv: list[str] | None = None) -> int:
                              "that ends by then")
         check_run_length(args.duration, physics_step_of(params), args.long_run, "--long-run")
         outputs = {}
-        for option, path in (("--csv", args.csv), ("--mcap", args.mcap)):
+        for option, path, kind in (("--csv", args.csv, "file"),
+                                   ("--mcap", args.mcap, "recording")):
             if path is not None:
-                outputs[option] = check_new_output(path, option)
+                outputs[option] = check_new_output(path, option,
+                                                   kind if args.overwrite else None)
         if len(set(outputs.values())) < len(outputs):
             raise ValueError(f"--csv and --mcap name the same path {args.csv}: give each "
                              "output its own")
@@ -242,6 +262,8 @@ def main(argv: list[str] | None = None) -> int:
                       file=sys.stderr)
             from ..ros.recording import record_offline
             try:
+                if args.overwrite:          # (the run starts now: the old one goes)
+                    remove_recording(outputs["--mcap"], "--mcap")
                 result = record_offline(params, args.mcap, args.duration, profile,
                                         publish_rate=args.publish_rate,
                                         marker_magnification=args.marker_magnification,

@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 umbrella_compare A B [...] --out DIR: compare recorded runs (live or offline).
 
@@ -179,6 +193,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("logs", nargs="+", help="bag directories or .mcap files (first = reference)")
     ap.add_argument("--out", required=True,
                     help="new (or empty) directory for compare.json and the plots")
+    ap.add_argument("--overwrite", action="store_true",
+                    help="replace the outputs of an earlier umbrella_compare in --out (a "
+                         "directory of compare.json and .png files only)")
     ap.add_argument("--segment", type=int, default=0,
                     help="which segment of each log (a ~/reset starts a new one; default 0)")
     ap.add_argument("--names", nargs="+", help="labels for the runs")
@@ -216,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(set(names)) != len(names):      # same-named bags or files: their paths as given
         names = [p if names.count(n) > 1 else n for p, n in zip(args.logs, names)]
     try:
-        out = _check_out_dir(args.out)          # before reading any log
+        out = _check_out_dir(args.out, args.overwrite)      # before reading any log
         runs = [load_run(p, name, args.segment) for p, name in zip(args.logs, names)]
         result = compare(runs, thesis=args.thesis)
         window = tuple(args.window) if args.window else default_window(runs)
@@ -233,6 +250,8 @@ def main(argv: list[str] | None = None) -> int:
     reader_there = print_for_reader(lambda: print_table(result))
     try:
         os.makedirs(out, exist_ok=True)
+        for name in _earlier_outputs(out) if args.overwrite else ():   # (now: replaced)
+            os.unlink(os.path.join(out, name))
         if not args.no_plots:
             result["plots"] = plot(runs, out, tuple(args.magnification), window)
         with open(os.path.join(out, "compare.json"), "x", encoding="utf-8") as fh:
@@ -247,13 +266,26 @@ def main(argv: list[str] | None = None) -> int:
     return 0 if reader_there else EXIT_READER_GONE
 
 
-def _check_out_dir(path: str) -> str:
-    """--out: a new directory, or an existing empty one; never overwrites."""
+def _earlier_outputs(path: str) -> list[str] | None:
+    """Return the files of an earlier comparison in path, or None if it holds others."""
+    names = os.listdir(path)
+    ours = [n for n in names if (n == "compare.json" or n.endswith(".png"))
+            and os.path.isfile(os.path.join(path, n))
+            and not os.path.islink(os.path.join(path, n))]
+    return names if len(ours) == len(names) else None
+
+
+def _check_out_dir(path: str, overwrite: bool = False) -> str:
+    """--out: a new directory, or an existing empty one (or, overwrite, an earlier --out)."""
     from ..bag.paths import check_new_output
 
     if os.path.isdir(path) and not os.path.islink(path):
-        if os.listdir(path):
-            raise LogError(f"--out {path}: directory is not empty, not overwriting")
+        if os.listdir(path) and not overwrite:
+            raise LogError(f"--out {path}: directory is not empty, not overwriting "
+                           "(--overwrite replaces an earlier comparison's outputs)")
+        if overwrite and _earlier_outputs(path) is None:
+            raise LogError(f"--out {path}: holds files other than an earlier comparison's "
+                           "(compare.json, .png), not overwriting them even with --overwrite")
         if not os.access(path, os.W_OK | os.X_OK):
             raise LogError(f"--out {path}: directory is not writable")
         return path

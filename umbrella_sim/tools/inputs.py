@@ -1,3 +1,17 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """
 What an offline run is given: its parameters (params file, options, --set) and force profile.
 
@@ -11,13 +25,14 @@ from __future__ import annotations
 import csv
 import io
 import math
+import sys
 
 from ..bag.paths import read_text_input
 from ..core.forcing import command_force
 from ..core.params import check_values, UmbrellaParams
 from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
-from ..ros.params_file import load_params_file
+from ..ros.params_file import check_parameter_sources, load_params_file
 from ..ros.share import package_path
 
 
@@ -133,8 +148,9 @@ def resolve_params(overrides: dict, params_file: str | None = None,
     if params_file:
         if from_file is None:
             from_file = load_params_file(params_file)
-        check_known_names(from_file, set(SPECS) | set(NODE_ONLY_PARAMS) | set(SHARED_NAMES),
-                          f"params file {params_file}")
+        params_file_warnings(params_file)       # a name unknown in a section naming the node
+        # (a '/**' section's other names are another node's, as the node takes them)
+        from_file = {k: v for k, v in from_file.items() if k in _KNOWN_IN_FILES}
         try:        # its own values first: an error names the file
             check_values({k: v for k, v in from_file.items()
                           if k in SPECS and k not in overrides})
@@ -149,6 +165,18 @@ def resolve_params(overrides: dict, params_file: str | None = None,
 
 #: deploy_controller's parameters, which a '/**' params file shared with it may hold
 SHARED_NAMES = tuple(CONTROLLER_PARAMETERS)
+_KNOWN_IN_FILES = frozenset(SPECS) | frozenset(NODE_ONLY_PARAMS) | frozenset(SHARED_NAMES)
+
+
+def params_file_warnings(params_file: str) -> list[str]:
+    """
+    Check a params file's names as umbrella_node does; return the warnings to print.
+
+    An unknown name in a section naming umbrella_node is a ValueError (did you mean); in a
+    '/**' section it is another node's: a warning naming it.
+    """
+    return check_parameter_sources("/umbrella_node", [params_file], (), _KNOWN_IN_FILES,
+                                   shared=SHARED_NAMES).warnings
 
 
 #: simulate's options that give a parameter: (argparse dest, parameter)
@@ -201,6 +229,8 @@ def build_params(args) -> UmbrellaParams:
     params_file = args.params or default_params_file()
     from_file = load_params_file(params_file) if params_file else {}
     params = resolve_params(values, params_file, from_file)
+    for text in params_file_warnings(params_file) if params_file else ():
+        print(f"umbrella_sim: warning: {text}", file=sys.stderr)
     check_lock_given(params, lock_given)
     # what shapes a --mcap recording: --publish-rate / --set, else the params file's (a file
     # shared with the node), else the node's default

@@ -1,0 +1,77 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The command lines of the README and msg_docs, as a ROS user types them.
+
+They run from a colcon workspace root, where the source tree's relative paths do not
+exist: every file they hand to the node is the installed one, found through the ament
+index (``$(ros2 pkg prefix --share umbrella_sim)/...``), and setup.py installs it there.
+"""
+import glob
+import os
+import shlex
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARE = "$(ros2 pkg prefix --share umbrella_sim)/"
+
+
+def _documented_command_lines() -> list[tuple[str, str]]:
+    """Return (file, command) of every indented command line, continuations joined."""
+    out = []
+    for path in [os.path.join(ROOT, "README.md"),
+                 *sorted(glob.glob(os.path.join(ROOT, "msg_docs", "*.md")))]:
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read().replace("\\\n", " ")
+        out += [(os.path.relpath(path, ROOT), line.strip()) for line in text.splitlines()
+                if line.startswith("    ") and line.split()
+                and line.split()[0] in ("ros2", "umbrella_node", "deploy_controller")]
+    return out
+
+
+def setup_distribution():
+    """Return setup.py's Distribution, as setuptools reads it (nothing is built)."""
+    from setuptools._distutils.core import run_setup
+
+    cwd = os.getcwd()
+    os.chdir(ROOT)
+    try:
+        return run_setup("setup.py", stop_after="init")
+    finally:
+        os.chdir(cwd)
+
+
+def _installed_share_files() -> set[str]:
+    """Return the files setup.py installs under share/umbrella_sim/, relative to it."""
+    dist = setup_distribution()
+    share = "share/umbrella_sim"
+    return {os.path.join(target[len(share):].lstrip("/"), os.path.basename(f))
+            for target, files in dist.data_files if target.startswith(share) for f in files}
+
+
+def test_every_documented_params_file_is_the_installed_one():
+    commands = _documented_command_lines()
+    given = [(where, words[i + 1]) for where, line in commands
+             for words in [shlex.split(line.replace(SHARE, "@SHARE@/"))]
+             for i, w in enumerate(words[:-1]) if w == "--params-file"]
+    assert given, "no documented --params-file (the README and msg_docs show one)"
+    installed = _installed_share_files()
+    assert "config/umbrella.yaml" in installed, sorted(installed)
+    prefix = "@SHARE@/"
+    for where, path in given:
+        assert path.startswith(prefix), (
+            f"{where}: --params-file {path} exists only in the source tree; give "
+            f"'{SHARE}...' so the command works from a workspace root")
+        assert path[len(prefix):] in installed, (where, path, sorted(installed))
+        assert os.path.exists(os.path.join(ROOT, path[len(prefix):])), (where, path)
