@@ -59,12 +59,12 @@ STREAM, SECOND, FLOOD = 1.0, 100.0, 2.0     # each source's base value (+ index 
 
 
 def load() -> str:
-    return "load %.2f %.2f %.2f" % os.getloadavg()
+    return 'load %.2f %.2f %.2f' % os.getloadavg()
 
 
 def pct(values, q):
     v = sorted(values)
-    return v[min(len(v) - 1, int(q * len(v)))] if v else float("nan")
+    return v[min(len(v) - 1, int(q * len(v)))] if v else float('nan')
 
 
 def publish(pub, msg):
@@ -80,10 +80,10 @@ def publish(pub, msg):
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rate", type=float, default=10000.0, help="stream rate (Hz)")
-    ap.add_argument("--seconds", type=float, default=5.0, help="stream length (s)")
-    ap.add_argument("--flood", type=int, default=20000, help="commands of the stop's flood")
-    ap.add_argument("--node-root", help="run the node from this checkout (PYTHONPATH)")
+    ap.add_argument('--rate', type=float, default=10000.0, help='stream rate (Hz)')
+    ap.add_argument('--seconds', type=float, default=5.0, help='stream length (s)')
+    ap.add_argument('--flood', type=int, default=20000, help="commands of the stop's flood")
+    ap.add_argument('--node-root', help='run the node from this checkout (PYTHONPATH)')
     args = ap.parse_args()
     from diagnostic_msgs.msg import DiagnosticArray
     from rosgraph_msgs.msg import Clock
@@ -93,21 +93,21 @@ def main() -> int:
     from umbrella_sim.bag.reader import read_log
 
     if args.node_root:
-        os.environ["PYTHONPATH"] = os.path.abspath(args.node_root)
-    tmp = tempfile.mkdtemp(prefix="command-streams-")
-    bag = os.path.join(tmp, "bag")
-    probe = Probe("streams_probe")
-    probe.subscribe("/diagnostics", DiagnosticArray)
-    probe.subscribe("/clock", Clock, QoSProfile(depth=1000,
+        os.environ['PYTHONPATH'] = os.path.abspath(args.node_root)
+    tmp = tempfile.mkdtemp(prefix='command-streams-')
+    bag = os.path.join(tmp, 'bag')
+    probe = Probe('streams_probe')
+    probe.subscribe('/diagnostics', DiagnosticArray)
+    probe.subscribe('/clock', Clock, QoSProfile(depth=1000,
                                                 reliability=ReliabilityPolicy.BEST_EFFORT))
     keep_all = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
                           reliability=ReliabilityPolicy.RELIABLE)
-    pub_a = probe.publisher("/sleeve_force", Float64, keep_all)
-    pub_b = probe.publisher("/sleeve_force", Float64, keep_all)
-    node = NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}", cwd=tmp)
+    pub_a = probe.publisher('/sleeve_force', Float64, keep_all)
+    pub_b = probe.publisher('/sleeve_force', Float64, keep_all)
+    node = NodeProcess('-p', 'v0:=0.0', '-p', f'record_path:={bag}', cwd=tmp)
     sent_a, sent_b = {}, {}
     try:
-        node.wait_for_log("recording to", timeout=60)
+        node.wait_for_log('recording to', timeout=60)
         probe.wait_for_subscribers(pub_a)
         probe.wait_for_subscribers(pub_b)
         time.sleep(1.0)
@@ -122,7 +122,7 @@ def main() -> int:
                 k += 1
                 done.wait(0.25)
         other = threading.Thread(target=second, daemon=True)
-        print(f"stream: {n} commands at {args.rate:g} Hz, a second publisher at 4 Hz; {load()}")
+        print(f'stream: {n} commands at {args.rate:g} Hz, a second publisher at 4 Hz; {load()}')
         t0 = time.monotonic()
         other.start()
         i = 0
@@ -138,11 +138,11 @@ def main() -> int:
         other.join()
 
         def counted():
-            msgs = probe.messages("/diagnostics")
+            msgs = probe.messages('/diagnostics')
             if not msgs:
                 return 0
             v = {kv.key: kv.value for kv in msgs[-1].status[0].values}
-            return int(v["accepted_commands"]) + int(v["refused_commands"])
+            return int(v['accepted_commands']) + int(v['refused_commands'])
         total = n + len(sent_b)
         deadline = time.monotonic() + 600
         while counted() < total and time.monotonic() < deadline:
@@ -171,12 +171,12 @@ def main() -> int:
         sent_before_exit = flood_sent[0]
         flooder.join(120)
         probe_clock = [(m.clock.sec + 1e-9 * m.clock.nanosec, wall)
-                       for wall, m in probe.timed("/clock")]
+                       for wall, m in probe.timed('/clock')]
     finally:
         node.close()
         probe.close()
     log = read_log(bag)
-    recv = [(t, msg.data) for t, msg in log.decoded("/sleeve_force")]    # receipt times
+    recv = [(t, msg.data) for t, msg in log.decoded('/sleeve_force')]    # receipt times
     delay_a, delay_b = {}, {}
     for t, v in recv:
         if v >= SECOND:
@@ -190,38 +190,38 @@ def main() -> int:
 
     def seen_at(t):
         k = bisect.bisect_left(sims, t - 1e-9)
-        return clock[k][1] if k < len(clock) else float("nan")
+        return clock[k][1] if k < len(clock) else float('nan')
     da = {i: seen_at(t) - sent_a[i] for i, t in delay_a.items()}
     db = [seen_at(t) - sent_b[k] for k, t in delay_b.items() if k in sent_b]
-    counts = log.metadata["umbrella_sim.counts"]
-    accepted, refused = int(counts["commands_accepted"]), int(counts["commands_refused"])
+    counts = log.metadata['umbrella_sim.counts']
+    accepted, refused = int(counts['commands_accepted']), int(counts['commands_refused'])
     sent = n + len(sent_b) + sent_before_exit
-    print(f"stream sent in {t_end - t0:.2f} s ({n / (t_end - t0):.0f}/s); {load()}")
-    print(f"stream delay send -> taken: p50 {pct(da.values(), 0.5) * 1e3:.1f} ms, p99 "
-          f"{pct(da.values(), 0.99) * 1e3:.1f} ms, max {max(da.values()) * 1e3:.1f} ms; "
+    print(f'stream sent in {t_end - t0:.2f} s ({n / (t_end - t0):.0f}/s); {load()}')
+    print(f'stream delay send -> taken: p50 {pct(da.values(), 0.5) * 1e3:.1f} ms, p99 '
+          f'{pct(da.values(), 0.99) * 1e3:.1f} ms, max {max(da.values()) * 1e3:.1f} ms; '
           f"its last command {da.get(n - 1, float('nan')) * 1e3:.1f} ms (the backlog at its end)")
     print(f"second publisher's delay: p50 {pct(db, 0.5) * 1e3:.1f} ms, max "
-          f"{max(db) * 1e3:.1f} ms ({len(db)} of {len(sent_b)} recorded)")
-    print(f"every stream command counted by diagnostics {t_counted:.2f} s after the last was "
-          "sent (1 Hz diagnostics)")
-    taken = counts.get("commands_taken_at_stop", "n/a")
-    dropped = counts.get("commands_dropped_at_stop", "n/a")
+          f'{max(db) * 1e3:.1f} ms ({len(db)} of {len(sent_b)} recorded)')
+    print(f'every stream command counted by diagnostics {t_counted:.2f} s after the last was '
+          'sent (1 Hz diagnostics)')
+    taken = counts.get('commands_taken_at_stop', 'n/a')
+    dropped = counts.get('commands_dropped_at_stop', 'n/a')
     before_sigint = n + len(sent_b) + sent_before_sigint
-    print(f"stop in a flood: SIGINT -> exit {t_exit:.2f} s (exit {code}); sent {before_sigint} "
-          f"before SIGINT and {sent} before the exit; counted {accepted + refused}, of which "
-          f"taken at the stop {taken}; dropped at the stop {dropped}; sent before SIGINT but "
-          f"not counted {max(0, before_sigint - accepted - refused)}; sent before the exit but "
-          f"not counted {sent - accepted - refused} (in the writer, never delivered)")
-    print(json.dumps({"stream_per_s": n / (t_end - t0),
-                      "stream_delay_p50_ms": pct(da.values(), 0.5) * 1e3,
-                      "stream_last_delay_ms": da.get(n - 1, float("nan")) * 1e3,
-                      "second_delay_max_ms": max(db) * 1e3, "counted_after_s": t_counted,
-                      "sigint_exit_s": t_exit,
-                      "sent_before_sigint_not_counted": max(0, before_sigint - accepted - refused),
-                      "sent_before_exit_not_counted": sent - accepted - refused}))
-    print(f"files: {tmp}")
+    print(f'stop in a flood: SIGINT -> exit {t_exit:.2f} s (exit {code}); sent {before_sigint} '
+          f'before SIGINT and {sent} before the exit; counted {accepted + refused}, of which '
+          f'taken at the stop {taken}; dropped at the stop {dropped}; sent before SIGINT but '
+          f'not counted {max(0, before_sigint - accepted - refused)}; sent before the exit but '
+          f'not counted {sent - accepted - refused} (in the writer, never delivered)')
+    print(json.dumps({'stream_per_s': n / (t_end - t0),
+                      'stream_delay_p50_ms': pct(da.values(), 0.5) * 1e3,
+                      'stream_last_delay_ms': da.get(n - 1, float('nan')) * 1e3,
+                      'second_delay_max_ms': max(db) * 1e3, 'counted_after_s': t_counted,
+                      'sigint_exit_s': t_exit,
+                      'sent_before_sigint_not_counted': max(0, before_sigint - accepted - refused),
+                      'sent_before_exit_not_counted': sent - accepted - refused}))
+    print(f'files: {tmp}')
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

@@ -35,22 +35,22 @@ import time
 
 
 def load() -> str:
-    return "load %.2f %.2f %.2f" % os.getloadavg()
+    return 'load %.2f %.2f %.2f' % os.getloadavg()
 
 
 def timed(what: str, fn):
     c0, w0 = time.process_time(), time.perf_counter()
     result = fn()
-    print(f"{what}: {time.process_time() - c0:.2f} s CPU, {time.perf_counter() - w0:.2f} s "
-          f"wall; {load()}")
+    print(f'{what}: {time.process_time() - c0:.2f} s CPU, {time.perf_counter() - w0:.2f} s '
+          f'wall; {load()}')
     return result
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--megabytes", type=float, default=23.0)
-    ap.add_argument("--cases", type=int, default=10000)
+    ap.add_argument('--megabytes', type=float, default=23.0)
+    ap.add_argument('--cases', type=int, default=10000)
     args = ap.parse_args()
     import yaml
 
@@ -58,31 +58,31 @@ def main() -> int:
     from umbrella_sim.ros.params_file import read_params_file
     from umbrella_sim.tools.sweep_spec import load_spec
 
-    print(f"umbrella_sim from {os.path.dirname(umbrella_sim.__file__)}")
-    tmp = tempfile.mkdtemp(prefix="inputs-")
-    path = os.path.join(tmp, "fleet.yaml")
-    with open(path, "w") as fh:
+    print(f'umbrella_sim from {os.path.dirname(umbrella_sim.__file__)}')
+    tmp = tempfile.mkdtemp(prefix='inputs-')
+    path = os.path.join(tmp, 'fleet.yaml')
+    with open(path, 'w') as fh:
         i = 0
         while fh.tell() < args.megabytes * 1e6:
-            fh.write(f"/a{i}/umbrella_node:\n  ros__parameters:\n    v0: -0.5\n    l1: 0.3\n"
-                     "    youngs_modulus: 72.0e9\n    model: flexible\n"
-                     "    publish_rate: 100.0\n    elements_per_segment: 4\n")
+            fh.write(f'/a{i}/umbrella_node:\n  ros__parameters:\n    v0: -0.5\n    l1: 0.3\n'
+                     '    youngs_modulus: 72.0e9\n    model: flexible\n'
+                     '    publish_rate: 100.0\n    elements_per_segment: 4\n')
             i += 1
-    print(f"params file: {os.path.getsize(path) / 1e6:.1f} MB, {i} sections")
+    print(f'params file: {os.path.getsize(path) / 1e6:.1f} MB, {i} sections')
     text = open(path).read()
     timed("  PyYAML's C loader alone", lambda: yaml.load(text, Loader=yaml.CSafeLoader))
-    timed("  read_params_file (ROS-typed)", lambda: read_params_file(path))
+    timed('  read_params_file (ROS-typed)', lambda: read_params_file(path))
     side = int(round(args.cases ** 0.5))
-    v0 = ", ".join(f"{-0.5 - 0.001 * k:.4f}" for k in range(side))
-    l1 = ", ".join(f"{0.3 + 0.0001 * k:.4f}" for k in range(args.cases // side))
-    spec = os.path.join(tmp, "spec.yaml")
-    with open(spec, "w") as fh:
-        fh.write(f"base: {{model: rigid}}\nduration: 0.05\ngrid:\n  v0: [{v0}]\n  l1: [{l1}]\n")
-    sweep = timed(f"sweep spec of {side * (args.cases // side)} cases: load_spec",
+    v0 = ', '.join(f'{-0.5 - 0.001 * k:.4f}' for k in range(side))
+    l1 = ', '.join(f'{0.3 + 0.0001 * k:.4f}' for k in range(args.cases // side))
+    spec = os.path.join(tmp, 'spec.yaml')
+    with open(spec, 'w') as fh:
+        fh.write(f'base: {{model: rigid}}\nduration: 0.05\ngrid:\n  v0: [{v0}]\n  l1: [{l1}]\n')
+    sweep = timed(f'sweep spec of {side * (args.cases // side)} cases: load_spec',
                   lambda: load_spec(spec))
-    print(f"  {len(sweep.cases)} cases checked")
+    print(f'  {len(sweep.cases)} cases checked')
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     raise SystemExit(main())

@@ -72,7 +72,7 @@ class CommandIntake:
         self._force = 0.0
         self.logger = None                  # the node's
         self._echo = {}                     # "applied", "refused" -> the node's publisher
-        self._info_at = -float("inf")       # wall time of the last INFO line on an applied one
+        self._info_at = -float('inf')       # wall time of the last INFO line on an applied one
         self._since_info = 0                # applied since that line
 
     def connect(self, node, command_topic: str) -> None:
@@ -99,22 +99,22 @@ class CommandIntake:
         Each at DEBUG; at INFO the first after APPLIED_INFO_PERIOD wall seconds without one,
         with how many came since the last.
         """
-        note = " (locked: no effect on motion)" if locked else ""
+        note = ' (locked: no effect on motion)' if locked else ''
         now = time.monotonic()
         if now - self._info_at >= APPLIED_INFO_PERIOD:
-            more = (f"; {self._since_info} more applied since the last report (each at DEBUG)"
-                    if self._since_info else "")
-            self.logger.info(f"sleeve force {force:.6g} N applied from t = {t:.9f} s{note}"
-                             f"{more}")
+            more = (f'; {self._since_info} more applied since the last report (each at DEBUG)'
+                    if self._since_info else '')
+            self.logger.info(f'sleeve force {force:.6g} N applied from t = {t:.9f} s{note}'
+                             f'{more}')
             self._info_at, self._since_info = now, 0
         else:
             self._since_info += 1
-            self.logger.debug(f"sleeve force {force:.17g} N applied from t = {t:.9f} s{note}")
+            self.logger.debug(f'sleeve force {force:.17g} N applied from t = {t:.9f} s{note}')
         rec = self._recording()
         if rec is not None:
             rec.applied(force, t)
-        if "applied" in self._echo:
-            self._echo["applied"].publish(self.command_type()(data=float(force)))
+        if 'applied' in self._echo:
+            self._echo['applied'].publish(self.command_type()(data=float(force)))
 
     @property
     def force(self) -> float:
@@ -154,9 +154,9 @@ class CommandIntake:
 
     def counts_record(self) -> dict[str, str]:
         """Return the counts the recording's umbrella_sim.counts adds for the commands."""
-        return {"refused_not_recorded": str(self.refused_not_recorded),
-                "commands_taken_at_stop": str(self.taken_at_stop),
-                "commands_dropped_at_stop": str(self.dropped_at_stop)}
+        return {'refused_not_recorded': str(self.refused_not_recorded),
+                'commands_taken_at_stop': str(self.taken_at_stop),
+                'commands_dropped_at_stop': str(self.dropped_at_stop)}
 
     def drain_at_stop(self, period: float = STOP_DRAIN_S) -> str:
         """
@@ -186,11 +186,11 @@ class CommandIntake:
                     else:
                         self.dropped_at_stop += 1
         if not (self.taken_at_stop or self.dropped_at_stop):
-            return ""
-        return (f"at the stop: {self.taken_at_stop} queued command(s) taken (counted and "
-                "recorded, not applied: the run had ended)"
-                + (f", {self.dropped_at_stop} more counted as dropped"
-                   if self.dropped_at_stop else ""))
+            return ''
+        return (f'at the stop: {self.taken_at_stop} queued command(s) taken (counted and '
+                'recorded, not applied: the run had ended)'
+                + (f', {self.dropped_at_stop} more counted as dropped'
+                   if self.dropped_at_stop else ''))
 
     def take(self, msg) -> None:
         """Check, count and record one command; hold it if accepted."""
@@ -209,14 +209,14 @@ class CommandIntake:
             if n < REFUSED_RECORD_RATE:       # a flood of bad commands cannot fill the disk
                 if rec is not None:
                     rec.refused(msg, t)
-                if "refused" in self._echo:
-                    self._echo["refused"].publish(msg)
+                if 'refused' in self._echo:
+                    self._echo['refused'].publish(msg)
                 n += 1
             else:
                 self.refused_not_recorded += 1
             self._refused_window = (start, n)
-            self._warn("refused", 1.0, lambda: f"refused sleeve_force command: {reason} "
-                       f"(refused so far: {self.refused})")
+            self._warn('refused', 1.0, lambda: f'refused sleeve_force command: {reason} '
+                       f'(refused so far: {self.refused})')
         else:
             self.accepted += 1
             rec = self._recording()

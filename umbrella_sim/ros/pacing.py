@@ -42,10 +42,10 @@ def behind_text(lag: float, measured: float, real_time_factor: float) -> str:
     the last diagnostics interval, which exceeds the requested one while a lag shrinks.
     """
     shown = round(measured, 3)
-    trend = ("catching up" if shown > real_time_factor else
-             "keeping pace" if shown == real_time_factor else "falling behind")
-    return (f"behind real time by {lag:.3f} s ({trend}: {shown:.3f}x of {real_time_factor:g}x "
-            "over the last second)")
+    trend = ('catching up' if shown > real_time_factor else
+             'keeping pace' if shown == real_time_factor else 'falling behind')
+    return (f'behind real time by {lag:.3f} s ({trend}: {shown:.3f}x of {real_time_factor:g}x '
+            'over the last second)')
 
 
 #: wall seconds between two warnings that the physics cannot keep up (each says how many
@@ -55,11 +55,11 @@ LAG_WARN_PERIOD = 60.0
 
 def lag_advice(real_time_factor: float, measured: float | None) -> str:
     """Say what makes a node that cannot keep up with real_time_factor keep up."""
-    can = f" (measured {measured:.2f}x)" if measured else ""
-    return (f"this machine cannot step this model at {real_time_factor:g}x real time{can}: "
-            "give a lower real_time_factor, real_time_factor:=0 (as fast as it can; "
-            "sim time is still exact), or, for a closed-loop controller, lockstep:=true "
-            "(the node waits for each command: no command falls behind)")
+    can = f' (measured {measured:.2f}x)' if measured else ''
+    return (f'this machine cannot step this model at {real_time_factor:g}x real time{can}: '
+            'give a lower real_time_factor, real_time_factor:=0 (as fast as it can; '
+            'sim time is still exact), or, for a closed-loop controller, lockstep:=true '
+            '(the node waits for each command: no command falls behind)')
 
 
 class Pacer:
