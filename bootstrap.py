@@ -38,65 +38,65 @@ import sys
 
 ROOT = os.path.dirname(os.path.abspath(__file__))
 # (relative to the working directory the command was given in, as a user means them)
-VENV = os.path.abspath(os.environ.get("UMBRELLA_VENV", os.path.join(ROOT, ".venv")))
-PY = os.path.join(VENV, "bin", "python")
-STAMP_NAME = ".umbrella_sim-installed"    # in the venv: digest of what it was installed from
+VENV = os.path.abspath(os.environ.get('UMBRELLA_VENV', os.path.join(ROOT, '.venv')))
+PY = os.path.join(VENV, 'bin', 'python')
+STAMP_NAME = '.umbrella_sim-installed'    # in the venv: digest of what it was installed from
 
 
 def run(cmd, **kw):
-    print("+", " ".join(cmd), flush=True)
+    print('+', ' '.join(cmd), flush=True)
     subprocess.run(cmd, check=True, **kw)
 
 
 def setup() -> None:
-    req = os.path.join(ROOT, "requirements.txt")
+    req = os.path.join(ROOT, 'requirements.txt')
     # what the install depends on: a change to any of these reinstalls (and rebuilds the kernel)
-    inputs = [req, os.path.join(ROOT, "setup.py"),
-              *sorted(glob.glob(os.path.join(ROOT, "umbrella_sim", "core", "_kernel*.[ch]")))]
+    inputs = [req, os.path.join(ROOT, 'setup.py'),
+              *sorted(glob.glob(os.path.join(ROOT, 'umbrella_sim', 'core', '_kernel*.[ch]')))]
     digest = hashlib.sha256()
     for path in inputs:
-        with open(path, "rb") as fh:
+        with open(path, 'rb') as fh:
             digest.update(fh.read())
     digest = digest.hexdigest()
     stamp = os.path.join(VENV, STAMP_NAME)
     if os.path.exists(stamp) and open(stamp).read() == digest and os.path.exists(PY):
         return
     if not os.path.exists(PY):
-        run([sys.executable, "-m", "venv", VENV])
-    run([PY, "-m", "pip", "install", "--disable-pip-version-check", "-q", "--upgrade", "pip"])
-    run([PY, "-m", "pip", "install", "--disable-pip-version-check", "-q", "-r", req])
-    run([PY, "-m", "pip", "install", "--disable-pip-version-check", "-q", "--no-deps", "-e", ROOT])
-    with open(stamp, "w") as fh:
+        run([sys.executable, '-m', 'venv', VENV])
+    run([PY, '-m', 'pip', 'install', '--disable-pip-version-check', '-q', '--upgrade', 'pip'])
+    run([PY, '-m', 'pip', 'install', '--disable-pip-version-check', '-q', '-r', req])
+    run([PY, '-m', 'pip', 'install', '--disable-pip-version-check', '-q', '--no-deps', '-e', ROOT])
+    with open(stamp, 'w') as fh:
         fh.write(digest)
 
 
 def main(argv) -> int:
-    if len(argv) < 1 or argv[0] not in ("run", "test", "setup"):
+    if len(argv) < 1 or argv[0] not in ('run', 'test', 'setup'):
         print(__doc__, file=sys.stderr)
         return 2
     setup()
     env = dict(os.environ, AMENT_PREFIX_PATH=VENV)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    if argv[0] == "run":
-        runs = os.path.abspath(os.environ.get("UMBRELLA_RUNS_DIR", os.path.join(ROOT, "runs")))
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    if argv[0] == 'run':
+        runs = os.path.abspath(os.environ.get('UMBRELLA_RUNS_DIR', os.path.join(ROOT, 'runs')))
         os.makedirs(runs, exist_ok=True)
         # the node records into its working directory under its one naming rule
         # (umbrella[_ns]_YYYY_MM_DD-HH_MM_SS, rosbag2's; never overwriting), so: there
         cwd = runs
-        cmd = [PY, "-m", "umbrella_sim.node", "--ros-args", "--params-file",
-               os.path.join(ROOT, "config", "umbrella.yaml")] + argv[1:]
-    elif argv[0] == "test":
+        cmd = [PY, '-m', 'umbrella_sim.node', '--ros-args', '--params-file',
+               os.path.join(ROOT, 'config', 'umbrella.yaml')] + argv[1:]
+    elif argv[0] == 'test':
         # the test suite and the user-facing actuation examples (they must keep working)
         cwd = ROOT
-        cmd = [PY, "-m", "pytest", "-q", os.path.join(ROOT, "tests"),
-               os.path.join(ROOT, "examples")] + argv[1:]
+        cmd = [PY, '-m', 'pytest', '-q', os.path.join(ROOT, 'tests'),
+               os.path.join(ROOT, 'examples')] + argv[1:]
         if not argv[1:]:
-            print("the whole suite: ~7 min on a quiet 2-core machine; the fast subset (no ROS "
+            print('the whole suite: ~7 min on a quiet 2-core machine; the fast subset (no ROS '
                   'node, nothing slow): python3 bootstrap.py test -m "not ros and not slow"',
                   flush=True)
     else:
         return 0
-    print("+", " ".join(cmd), flush=True)
+    print('+', ' '.join(cmd), flush=True)
     # the child has its own session, so a signal reaches it exactly once, from here, whether it
     # came from the terminal (Ctrl-C) or was sent to this process (kill, timeout, a supervisor);
     # the child stops and finalises its recording while this process waits for it
@@ -111,5 +111,5 @@ def main(argv) -> int:
     return child.wait()
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main(sys.argv[1:]))

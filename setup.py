@@ -20,14 +20,14 @@ from setuptools import Extension, find_packages, setup
 from setuptools.command.build_ext import build_ext
 
 NO_COMPILER = (
-    "umbrella_sim needs a C compiler: the physics step is compiled code "
-    "(umbrella_sim/core/_kernel.c, plain C99 + libm). Install one (Debian/Ubuntu: "
-    "`sudo apt-get install gcc`, or build-essential) and run the installation again.")
+    'umbrella_sim needs a C compiler: the physics step is compiled code '
+    '(umbrella_sim/core/_kernel.c, plain C99 + libm). Install one (Debian/Ubuntu: '
+    '`sudo apt-get install gcc`, or build-essential) and run the installation again.')
 
 
 #: the compiled step: a plain shared library (no Python module init), loaded with ctypes by
 #: umbrella_sim/core/kernel.py from exactly this file, with its interface in _kernel.h
-KERNEL = "umbrella_sim.core.libumbrella_kernel"
+KERNEL = 'umbrella_sim.core.libumbrella_kernel'
 
 
 class BuildKernel(build_ext):
@@ -36,8 +36,8 @@ class BuildKernel(build_ext):
     def get_ext_filename(self, fullname):
         # libumbrella_kernel.so, not a CPython-tagged extension module's name (asked for by
         # the full name, and by its last part alone: build_ext.get_ext_fullpath)
-        if fullname in (KERNEL, KERNEL.rpartition(".")[2]):
-            return os.path.join(*fullname.split(".")) + ".so"
+        if fullname in (KERNEL, KERNEL.rpartition('.')[2]):
+            return os.path.join(*fullname.split('.')) + '.so'
         return super().get_ext_filename(fullname)
 
     def get_export_symbols(self, ext):
@@ -50,69 +50,69 @@ class BuildKernel(build_ext):
         try:
             super().run()
         except Exception as exc:  # distutils raises several types for a missing compiler
-            raise SystemExit(f"error: {NO_COMPILER}\n({type(exc).__name__}: {exc})") from None
+            raise SystemExit(f'error: {NO_COMPILER}\n({type(exc).__name__}: {exc})') from None
 
     def build_extension(self, ext):
         try:
             super().build_extension(ext)
         except Exception as exc:
-            cc = getattr(self.compiler, "compiler", None) or [""]
+            cc = getattr(self.compiler, 'compiler', None) or ['']
             if shutil.which(cc[0]):       # a compiler that ran and failed: not a missing one
-                raise SystemExit(f"error: the compiled step {ext.sources} did not build with "
-                                 f"{cc[0]}: see its messages above ({type(exc).__name__}: "
-                                 f"{exc})") from None
-            raise SystemExit(f"error: {NO_COMPILER}\n({type(exc).__name__}: {exc})") from None
+                raise SystemExit(f'error: the compiled step {ext.sources} did not build with '
+                                 f'{cc[0]}: see its messages above ({type(exc).__name__}: '
+                                 f'{exc})') from None
+            raise SystemExit(f'error: {NO_COMPILER}\n({type(exc).__name__}: {exc})') from None
 
 
-package_name = "umbrella_sim"
+package_name = 'umbrella_sim'
 
 setup(
     name=package_name,
-    version="0.1.0",
-    packages=find_packages(exclude=["tests", "tests.*"]),
+    version='0.1.0',
+    packages=find_packages(exclude=['tests', 'tests.*']),
     data_files=[
-        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
-        ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", glob("config/*.yaml") + glob("config/*.json")),
-        ("share/" + package_name + "/config/sweeps", glob("config/sweeps/*.yaml")),
-        ("share/" + package_name + "/msg_docs", glob("msg_docs/*.md")),
-        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
-        ("share/" + package_name + "/urdf", glob("urdf/*.urdf")),
-        ("share/" + package_name + "/rviz", glob("rviz/*.rviz")),
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')),
+        ('share/' + package_name + '/config/sweeps', glob('config/sweeps/*.yaml')),
+        ('share/' + package_name + '/msg_docs', glob('msg_docs/*.md')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
+        ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
     ],
     # the interface of the compiled step: kernel.py reads it at import
-    package_data={"umbrella_sim.core": ["_kernel.h"]},
+    package_data={'umbrella_sim.core': ['_kernel.h']},
     # the compiled integrator (plain C, loaded with ctypes): required
     ext_modules=[Extension(KERNEL,
-                           ["umbrella_sim/core/_kernel.c",
-                            "umbrella_sim/core/_kernel_nonlinear.c"],
-                           depends=["umbrella_sim/core/_kernel.h",
-                                    "umbrella_sim/core/_kernel_elastic.h"],
-                           extra_compile_args=["-O3", "-std=c99", "-fvisibility=hidden"],
-                           libraries=["m"])],
-    cmdclass={"build_ext": BuildKernel},
+                           ['umbrella_sim/core/_kernel.c',
+                            'umbrella_sim/core/_kernel_nonlinear.c'],
+                           depends=['umbrella_sim/core/_kernel.h',
+                                    'umbrella_sim/core/_kernel_elastic.h'],
+                           extra_compile_args=['-O3', '-std=c99', '-fvisibility=hidden'],
+                           libraries=['m'])],
+    cmdclass={'build_ext': BuildKernel},
     # every import (tests/test_package_metadata.py); the ROS packages are package.xml's
-    install_requires=["setuptools", "numpy", "scipy", "PyYAML", "mcap", "zstandard",
-                      "matplotlib", "dask", "distributed", "pyarrow"],
-    extras_require={"test": ["pytest"]},     # (tests_require: gone from setuptools)
+    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML', 'mcap', 'zstandard',
+                      'matplotlib', 'dask', 'distributed', 'pyarrow'],
+    extras_require={'test': ['pytest']},     # (tests_require: gone from setuptools)
     zip_safe=False,      # a shared library, loaded from its file
-    maintainer="umbrella_sim developers",
-    maintainer_email="dev@umbrella-sim.invalid",
-    description="Real-time flexible umbrella-frame deployment simulator (ROS 2 Jazzy)",
-    license="Apache-2.0",
+    maintainer='umbrella_sim developers',
+    maintainer_email='dev@umbrella-sim.invalid',
+    description='Real-time flexible umbrella-frame deployment simulator (ROS 2 Jazzy)',
+    license='Apache-2.0',
     entry_points={
-        "console_scripts": [
+        'console_scripts': [
             # `ros2 run umbrella_sim <name>`: one naming style, snake_case as ROS executables
-            "umbrella_node = umbrella_sim.tools.entry:node_main",
+            'umbrella_node = umbrella_sim.tools.entry:node_main',
             # (each takes SIGINT/SIGTERM before its heavy imports: stop_signals.py)
-            "umbrella_sim = umbrella_sim.tools.entry:cli_main",
-            "umbrella_replay = umbrella_sim.tools.entry:replay_main",
-            "umbrella_compare = umbrella_sim.tools.entry:compare_main",
+            'umbrella_sim = umbrella_sim.tools.entry:cli_main',
+            'umbrella_replay = umbrella_sim.tools.entry:replay_main',
+            'umbrella_compare = umbrella_sim.tools.entry:compare_main',
             # the earlier names, kept as aliases
-            "umbrella-sim = umbrella_sim.tools.entry:cli_main",
-            "umbrella-replay = umbrella_sim.tools.entry:replay_main",
-            "umbrella-compare = umbrella_sim.tools.entry:compare_main",
-            "deploy_controller = umbrella_sim.tools.entry:controller_main",
+            'umbrella-sim = umbrella_sim.tools.entry:cli_main',
+            'umbrella-replay = umbrella_sim.tools.entry:replay_main',
+            'umbrella-compare = umbrella_sim.tools.entry:compare_main',
+            'deploy_controller = umbrella_sim.tools.entry:controller_main',
         ],
     },
 )

@@ -46,25 +46,25 @@ sys.path.insert(0, ROOT)
 
 from tests.ros_helpers import NodeProcess, Probe  # noqa: E402
 
-PAGE = os.sysconf("SC_PAGE_SIZE")
+PAGE = os.sysconf('SC_PAGE_SIZE')
 
 
 def rss_mb(pid: int) -> float:
-    with open(f"/proc/{pid}/statm") as fh:
+    with open(f'/proc/{pid}/statm') as fh:
         return int(fh.read().split()[1]) * PAGE / 2**20
 
 
 def load() -> str:
-    return "load " + ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    return 'load ' + ', '.join(f'{x:.2f}' for x in os.getloadavg())
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--count", type=int, default=20000)
-    ap.add_argument("--publish-rate", type=float, default=100.0, help="the node's (Hz)")
-    ap.add_argument("--args", nargs=argparse.REMAINDER, default=[],
-                    help="more ROS arguments for the node (e.g. -p start_paused:=true)")
+    ap.add_argument('--count', type=int, default=20000)
+    ap.add_argument('--publish-rate', type=float, default=100.0, help="the node's (Hz)")
+    ap.add_argument('--args', nargs=argparse.REMAINDER, default=[],
+                    help='more ROS arguments for the node (e.g. -p start_paused:=true)')
     args = ap.parse_args()
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -73,18 +73,18 @@ def main() -> int:
 
     from umbrella_sim.bag.reader import read_log
 
-    tmp = tempfile.mkdtemp(prefix="commands-")
-    bag = os.path.join(tmp, "bag")
-    probe = Probe("commands_probe")
-    probe.subscribe("/diagnostics", DiagnosticArray)
+    tmp = tempfile.mkdtemp(prefix='commands-')
+    bag = os.path.join(tmp, 'bag')
+    probe = Probe('commands_probe')
+    probe.subscribe('/diagnostics', DiagnosticArray)
     keep_all = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
                           reliability=ReliabilityPolicy.RELIABLE)
-    pub = probe.publisher("/sleeve_force", Float64, keep_all)
-    node = NodeProcess("-p", f"publish_rate:={args.publish_rate}", "-p", "v0:=0.0",
-                       "-p", f"record_path:={bag}", *args.args, cwd=tmp)
+    pub = probe.publisher('/sleeve_force', Float64, keep_all)
+    node = NodeProcess('-p', f'publish_rate:={args.publish_rate}', '-p', 'v0:=0.0',
+                       '-p', f'record_path:={bag}', *args.args, cwd=tmp)
     rss, pauses = [], []
     try:
-        node.wait_for_log("recording to", timeout=60)
+        node.wait_for_log('recording to', timeout=60)
         probe.wait_for_subscribers(pub)
         time.sleep(1.0)
         rss.append(rss_mb(node.pid))
@@ -95,12 +95,12 @@ def main() -> int:
                 rss.append(rss_mb(node.pid))
                 start = time.monotonic()     # (a resume of a running node: answered as a
                 # pause is, after the same wait for the sim lock; it re-anchors the pacing)
-                probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=False))
+                probe.call(SetBool, '/umbrella_node/pause', SetBool.Request(data=False))
                 pauses.append(time.monotonic() - start)
                 time.sleep(0.2)
         watcher = threading.Thread(target=during, daemon=True)
         watcher.start()
-        print(f"publishing {args.count} commands; {load()}")
+        print(f'publishing {args.count} commands; {load()}')
         t0 = time.monotonic()
         held_back = 0
         for i in range(args.count):
@@ -115,50 +115,50 @@ def main() -> int:
         t_pub = time.monotonic() - t0
 
         def counted():
-            msgs = probe.messages("/diagnostics")
+            msgs = probe.messages('/diagnostics')
             if not msgs:
                 return 0
             v = {kv.key: kv.value for kv in msgs[-1].status[0].values}
-            return int(v["accepted_commands"]) + int(v["refused_commands"])
+            return int(v['accepted_commands']) + int(v['refused_commands'])
         deadline = time.monotonic() + 600
         while counted() < args.count and time.monotonic() < deadline:
             time.sleep(0.05)
         t_counted = time.monotonic() - t0
         stop.set()
         watcher.join()
-        max_lag = max(float({kv.key: kv.value for kv in m.status[0].values}["max_lag_s"])
-                      for m in probe.messages("/diagnostics"))
+        max_lag = max(float({kv.key: kv.value for kv in m.status[0].values}['max_lag_s'])
+                      for m in probe.messages('/diagnostics'))
         rss.append(rss_mb(node.pid))
         code = node.stop()
     finally:
         node.close()
         probe.close()
     log = read_log(bag)
-    times = [t for t, _ in log.decoded("/sleeve_force")]
-    counts = log.metadata["umbrella_sim.counts"]
-    accepted, refused = int(counts["commands_accepted"]), int(counts["commands_refused"])
-    span = times[-1] - times[0] if len(times) > 1 else float("nan")
+    times = [t for t, _ in log.decoded('/sleeve_force')]
+    counts = log.metadata['umbrella_sim.counts']
+    accepted, refused = int(counts['commands_accepted']), int(counts['commands_refused'])
+    span = times[-1] - times[0] if len(times) > 1 else float('nan')
     print(f"published in {t_pub:.2f} s ({args.count / t_pub:.0f}/s; the writer's history was "
-          f"full {held_back} times: DDS flow control holding it back); {load()}")
-    print(f"node intake: {len(times)} accepted recorded over {span:.2f} s of sim time "
-          f"({args.count / span:.0f} commands/s); all counted by diagnostics "
-          f"{t_counted:.1f} s after the first was sent")
+          f'full {held_back} times: DDS flow control holding it back); {load()}')
+    print(f'node intake: {len(times)} accepted recorded over {span:.2f} s of sim time '
+          f'({args.count / span:.0f} commands/s); all counted by diagnostics '
+          f'{t_counted:.1f} s after the first was sent')
     lost = args.count - accepted - refused
-    print(f"counted: {accepted} accepted + {refused} refused = {accepted + refused} of "
+    print(f'counted: {accepted} accepted + {refused} refused = {accepted + refused} of '
           f"{args.count} sent ({'none' if lost == 0 else lost} lost); recorded refused "
           f"{log.count('/sleeve_force/refused')} + not recorded "
           f"{counts.get('refused_not_recorded')}")
-    print(f"node: largest lag behind real time {max_lag * 1e3:.1f} ms; RSS {rss[0]:.1f} MB "
-          f"before, {max(rss):.1f} MB peak, {rss[-1]:.1f} MB after; exit {code}")
+    print(f'node: largest lag behind real time {max_lag * 1e3:.1f} ms; RSS {rss[0]:.1f} MB '
+          f'before, {max(rss):.1f} MB peak, {rss[-1]:.1f} MB after; exit {code}')
     if pauses:
         p = sorted(pauses)
-        print(f"~/pause during the burst: p50 {p[len(p) // 2] * 1e3:.1f} ms, max "
-              f"{p[-1] * 1e3:.1f} ms ({len(p)} calls)")
-    print(json.dumps({"published_per_s": args.count / t_pub, "intake_per_s": args.count / span,
-                      "lost": lost}))
-    print(f"files: {tmp}")
+        print(f'~/pause during the burst: p50 {p[len(p) // 2] * 1e3:.1f} ms, max '
+              f'{p[-1] * 1e3:.1f} ms ({len(p)} calls)')
+    print(json.dumps({'published_per_s': args.count / t_pub, 'intake_per_s': args.count / span,
+                      'lost': lost}))
+    print(f'files: {tmp}')
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

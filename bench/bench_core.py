@@ -54,7 +54,7 @@ import sys
 import tempfile
 import time
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from umbrella_sim.core.driver import RunDriver, simulate  # noqa: E402
 from umbrella_sim.core.params import physics_step, UmbrellaParams  # noqa: E402
@@ -64,10 +64,10 @@ from umbrella_sim.core.step_study import mesh_step  # noqa: E402
 from umbrella_sim.tools.csv_output import StepCsv  # noqa: E402
 
 #: model -> {N: target}
-COST_TARGETS = {"flexible": {2: 10.0, 8: 40.0}}
-RTF_TARGETS = {"flexible": {2: 10.0, 8: 2.0}, "flexible-nonlinear": {4: 5.0}}
+COST_TARGETS = {'flexible': {2: 10.0, 8: 40.0}}
+RTF_TARGETS = {'flexible': {2: 10.0, 8: 2.0}, 'flexible-nonlinear': {4: 5.0}}
 #: at N = 2: simulate's CPU over the node path's, without and with --csv; start-up CPU (s)
-OFFLINE_TARGETS = {"json": 1.3, "csv": 2.0}
+OFFLINE_TARGETS = {'json': 1.3, 'csv': 2.0}
 START_TARGET = 0.5
 PUBLISH_RATE = 1000.0
 DURATION = 1.0
@@ -104,7 +104,7 @@ def block_run(params, time_compiled=False):
     for _ in range(BLOCKS):
         sim.advance(per_block).last
     cpu, wall = time.thread_time() - c0, time.perf_counter() - w0
-    assert sim.lock_event is not None, "the run did not reach the lock"
+    assert sim.lock_event is not None, 'the run did not reach the lock'
     return cpu, wall, sim, None if compiled is None else compiled[0]
 
 
@@ -120,22 +120,22 @@ def node_path_cpu(params) -> float:
 
 def offline_cpu(params, csv: bool) -> float:
     """CPU s per simulated s of umbrella_sim simulate's run (--json; with csv, --csv too)."""
-    with tempfile.TemporaryDirectory(prefix="bench_core_") as tmp:
-        out = StepCsv(os.path.join(tmp, "run.csv")) if csv else None
+    with tempfile.TemporaryDirectory(prefix='bench_core_') as tmp:
+        out = StepCsv(os.path.join(tmp, 'run.csv')) if csv else None
         c0 = time.thread_time()
         result = simulate(params, DURATION, keep_samples=False,
                           on_chunk=(lambda chunk: out.write(chunk.block)) if out else None)
         cpu = time.thread_time() - c0
         if out is not None:
             out.close()
-    return cpu / result.figures["final_time"]
+    return cpu / result.figures['final_time']
 
 
 def cli_start_cpu() -> float:
     """CPU s (user + system) of `umbrella_sim simulate --duration 1e-4 --json`: start-up."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    subprocess.run([os.path.join(os.path.dirname(sys.executable), "umbrella_sim"), "simulate",
-                    "--duration", "1e-4", "--json"], check=True, stdout=subprocess.DEVNULL)
+    subprocess.run([os.path.join(os.path.dirname(sys.executable), 'umbrella_sim'), 'simulate',
+                    '--duration', '1e-4', '--json'], check=True, stdout=subprocess.DEVNULL)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
@@ -152,28 +152,28 @@ def kernel_run(params):
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8, 16])
-    ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--time-step", type=float, default=AUTO_STEP_CEILING,
+    ap.add_argument('--meshes', type=int, nargs='+', default=[1, 2, 4, 8, 16])
+    ap.add_argument('--repeat', type=int, default=3)
+    ap.add_argument('--time-step', type=float, default=AUTO_STEP_CEILING,
                     help="a fixed step for every mesh (default: the one-element mesh's chosen "
-                         "step, 0.1 ms)")
-    ap.add_argument("--mesh-step", action="store_true",
-                    help="each mesh at the step chosen for it (time_step 0, step_study.mesh_step: "
-                         "docs/validation.md), not --time-step")
-    ap.add_argument("--model", default="flexible",
-                    choices=("flexible", "flexible-nonlinear", "rigid-fe"))
-    ap.add_argument("--damping-ratio", type=float, default=0.0)
+                         'step, 0.1 ms)')
+    ap.add_argument('--mesh-step', action='store_true',
+                    help='each mesh at the step chosen for it (time_step 0, step_study.mesh_step: '
+                         'docs/validation.md), not --time-step')
+    ap.add_argument('--model', default='flexible',
+                    choices=('flexible', 'flexible-nonlinear', 'rigid-fe'))
+    ap.add_argument('--damping-ratio', type=float, default=0.0)
     args = ap.parse_args()
     h = physics_step(args.time_step, 1.0 / SAMPLE_PERIOD)
-    steps = ("h = the step chosen for the mesh (time_step 0)" if args.mesh_step else
-             f"h = {h:.6g} s ({round(DURATION / h)} steps)")
+    steps = ('h = the step chosen for the mesh (time_step 0)' if args.mesh_step else
+             f'h = {h:.6g} s ({round(DURATION / h)} steps)')
     cost_targets = COST_TARGETS.get(args.model, {})
     rtf_targets = RTF_TARGETS.get(args.model, {})
-    print(f"{args.model} (damping_ratio {args.damping_ratio:g}), V0 = -0.2, energy lock, "
-          f"t = 0 -> {DURATION:g} s through the lock, "
-          f"{steps}, a Sample every "
-          f"{SAMPLE_PERIOD * 1e3:g} ms; "
-          f"best of {args.repeat}; loadavg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+    print(f'{args.model} (damping_ratio {args.damping_ratio:g}), V0 = -0.2, energy lock, '
+          f't = 0 -> {DURATION:g} s through the lock, '
+          f'{steps}, a Sample every '
+          f'{SAMPLE_PERIOD * 1e3:g} ms; '
+          f'best of {args.repeat}; loadavg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs')
     print(f"{'N':>3} {'h':>5} {'coords':>6} {'newton':>6} {'us/step':>8} {'us/step':>8} "
           f"{'ns/step/coord':>13}"
           f" {'RTF':>7} {'targets (us, RTF)':>18} {'us/1 ms block':>15} {'RTF':>7}")
@@ -194,20 +194,20 @@ def main():
         kernel = 1e6 * min(kernel_run(p) for _ in range(args.repeat))
         newton = sim.engine.newton_iterations() / sim.steps
         rtf = DURATION / min(walls)
-        tgt = ""
+        tgt = ''
         if n in rtf_targets:
             ok = kernel <= cost_targets.get(n, math.inf) and rtf >= rtf_targets[n]
-            cost = f"{cost_targets[n]:>4.0f}" if n in cost_targets else f"{'-':>4}"
+            cost = f'{cost_targets[n]:>4.0f}' if n in cost_targets else f"{'-':>4}"
             tgt = f"{cost}, {rtf_targets[n]:>3.0f}x {'ok' if ok else 'MISS'}"
         total, _, _, compiled = block_run(p, time_compiled=True)
         if compiled is None:
             tail = f"{'-':>7} {'-':>7} {'-':>7}"
         else:
             compiled, total = 1e6 * compiled / BLOCKS, 1e6 * total / BLOCKS
-            tail = f"{compiled:>7.1f} {total - compiled:>7.1f} {1e3 / compiled:>6.1f}x"
-        print(f"{n:>3} {1e6 * sim.h:>5.1f} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} "
-              f"{us:>8.2f} "
-              f"{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18} {tail}", flush=True)
+            tail = f'{compiled:>7.1f} {total - compiled:>7.1f} {1e3 / compiled:>6.1f}x'
+        print(f'{n:>3} {1e6 * sim.h:>5.1f} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} '
+              f'{us:>8.2f} '
+              f'{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18} {tail}', flush=True)
     print(f"\nCPU s per simulated s, best of {args.repeat}: the node's path (1 kHz) and "
           "umbrella_sim simulate's")
     print(f"{'N':>3} {'node':>7} {'simulate':>9} {'ratio':>6} {'--csv':>7} {'ratio':>6} "
@@ -218,19 +218,19 @@ def main():
         node = min(node_path_cpu(p) for _ in range(args.repeat))
         plain = min(offline_cpu(p, csv=False) for _ in range(args.repeat))
         csv = min(offline_cpu(p, csv=True) for _ in range(args.repeat))
-        tgt = ""
-        if n == 2 and args.model == "flexible":
-            ok = (plain / node <= OFFLINE_TARGETS["json"]
-                  and csv / node <= OFFLINE_TARGETS["csv"])
+        tgt = ''
+        if n == 2 and args.model == 'flexible':
+            ok = (plain / node <= OFFLINE_TARGETS['json']
+                  and csv / node <= OFFLINE_TARGETS['csv'])
             tgt = (f"{OFFLINE_TARGETS['json']:g}, {OFFLINE_TARGETS['csv']:g} "
                    f"{'ok' if ok else 'MISS'}")
-        print(f"{n:>3} {node:>7.3f} {plain:>9.3f} {plain / node:>5.2f}x {csv:>7.3f} "
-              f"{csv / node:>5.2f}x {tgt:>12}", flush=True)
+        print(f'{n:>3} {node:>7.3f} {plain:>9.3f} {plain / node:>5.2f}x {csv:>7.3f} '
+              f'{csv / node:>5.2f}x {tgt:>12}', flush=True)
     start = min(cli_start_cpu() for _ in range(args.repeat))
-    print(f"\nstarting umbrella_sim simulate (--duration 1e-4 --json, a child process): "
-          f"{start:.2f} s of CPU (target < {START_TARGET:g} s: "
+    print(f'\nstarting umbrella_sim simulate (--duration 1e-4 --json, a child process): '
+          f'{start:.2f} s of CPU (target < {START_TARGET:g} s: '
           f"{'ok' if start < START_TARGET else 'MISS'})")
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

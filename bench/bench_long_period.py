@@ -47,51 +47,51 @@ sys.path.insert(0, ROOT)
 
 from tests.ros_helpers import NodeProcess, Probe  # noqa: E402
 
-PAGE = os.sysconf("SC_PAGE_SIZE")
+PAGE = os.sysconf('SC_PAGE_SIZE')
 
 
 def rss_mb(pid: int) -> float:
-    with open(f"/proc/{pid}/statm") as fh:
+    with open(f'/proc/{pid}/statm') as fh:
         return int(fh.read().split()[1]) * PAGE / 2**20
 
 
 def load() -> str:
-    return "load " + ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    return 'load ' + ', '.join(f'{x:.2f}' for x in os.getloadavg())
 
 
 def percentiles(values, qs=(50, 99, 100)) -> str:
     if not values:
-        return "none"
+        return 'none'
     v = sorted(values)
-    return ", ".join(f"p{q} {v[min(len(v) - 1, int(q / 100 * len(v)))] * 1e3:.1f} ms"
+    return ', '.join(f'p{q} {v[min(len(v) - 1, int(q / 100 * len(v)))] * 1e3:.1f} ms'
                      for q in qs)
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--minutes", type=float, default=3.0, help="wall minutes (default 3)")
-    ap.add_argument("--interval", type=float, default=2.0, help="RSS sampling period (s)")
-    ap.add_argument("--pause-every", type=float, default=10.0,
-                    help="seconds between two ~/pause true/false pairs")
-    ap.add_argument("--args", nargs=argparse.REMAINDER,
-                    default=["-p", "publish_rate:=1.0", "-p", "time_step:=1e-7"],
+    ap.add_argument('--minutes', type=float, default=3.0, help='wall minutes (default 3)')
+    ap.add_argument('--interval', type=float, default=2.0, help='RSS sampling period (s)')
+    ap.add_argument('--pause-every', type=float, default=10.0,
+                    help='seconds between two ~/pause true/false pairs')
+    ap.add_argument('--args', nargs=argparse.REMAINDER,
+                    default=['-p', 'publish_rate:=1.0', '-p', 'time_step:=1e-7'],
                     help="the node's ROS arguments (default: -p publish_rate:=1.0 -p "
-                         "time_step:=1e-7)")
+                         'time_step:=1e-7)')
     args = ap.parse_args()
     from diagnostic_msgs.msg import DiagnosticArray
     from std_msgs.msg import Float64
     from std_srvs.srv import SetBool
 
-    tmp = tempfile.mkdtemp(prefix="long-period-")
+    tmp = tempfile.mkdtemp(prefix='long-period-')
     print(f"node: umbrella_node --ros-args {' '.join(args.args)}; {load()}")
-    probe = Probe("long_period_probe")
-    probe.subscribe("/diagnostics", DiagnosticArray)
-    pub = probe.publisher("/sleeve_force", Float64)
+    probe = Probe('long_period_probe')
+    probe.subscribe('/diagnostics', DiagnosticArray)
+    pub = probe.publisher('/sleeve_force', Float64)
     node = NodeProcess(*args.args, cwd=tmp)
     rss, pauses, resumes = [], [], []
     try:
-        node.wait_for_log(r"recording to", timeout=60)
+        node.wait_for_log(r'recording to', timeout=60)
         t0 = time.monotonic()
         next_pause = t0 + args.pause_every
         commanded = False
@@ -104,14 +104,14 @@ def main() -> int:
             if time.monotonic() >= next_pause:
                 for data, times in ((True, pauses), (False, resumes)):
                     start = time.monotonic()
-                    probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=data),
+                    probe.call(SetBool, '/umbrella_node/pause', SetBool.Request(data=data),
                                timeout=120.0)
                     times.append(time.monotonic() - start)
                 next_pause = time.monotonic() + args.pause_every
             time.sleep(args.interval)
-        arrivals = [t for t, _ in probe.timed("/diagnostics")]
+        arrivals = [t for t, _ in probe.timed('/diagnostics')]
         gaps = [b - a for a, b in zip(arrivals, arrivals[1:])]
-        last = probe.messages("/diagnostics")[-1] if arrivals else None
+        last = probe.messages('/diagnostics')[-1] if arrivals else None
         start = time.monotonic()
         node.proc.send_signal(signal.SIGINT)
         try:
@@ -123,25 +123,25 @@ def main() -> int:
     finally:
         node.close()
         probe.close()
-    print(f"after {rss[-1][0]:.0f} s: {load()}")
-    print("RSS (MB): " + ", ".join(f"{m:.1f} at {t:.0f} s" for t, m in
+    print(f'after {rss[-1][0]:.0f} s: {load()}')
+    print('RSS (MB): ' + ', '.join(f'{m:.1f} at {t:.0f} s' for t, m in
                                    rss[::max(1, len(rss) // 8)] + rss[-1:]))
-    print(f"RSS growth: {rss[-1][1] - rss[min(len(rss) - 1, 3)][1]:+.1f} MB from "
-          f"{rss[min(len(rss) - 1, 3)][0]:.0f} s to {rss[-1][0]:.0f} s")
-    print(f"~/pause true answered in: {percentiles(pauses)} ({len(pauses)} calls)")
-    print(f"~/pause false answered in: {percentiles(resumes)} ({len(resumes)} calls)")
-    print(f"/diagnostics gaps: {percentiles(gaps)} ({len(arrivals)} statuses)")
+    print(f'RSS growth: {rss[-1][1] - rss[min(len(rss) - 1, 3)][1]:+.1f} MB from '
+          f'{rss[min(len(rss) - 1, 3)][0]:.0f} s to {rss[-1][0]:.0f} s')
+    print(f'~/pause true answered in: {percentiles(pauses)} ({len(pauses)} calls)')
+    print(f'~/pause false answered in: {percentiles(resumes)} ({len(resumes)} calls)')
+    print(f'/diagnostics gaps: {percentiles(gaps)} ({len(arrivals)} statuses)')
     if last is not None:
         values = {kv.key: kv.value for kv in last.status[0].values}
-        print(f"last /diagnostics: {last.status[0].message!r}, sim_time_s "
+        print(f'last /diagnostics: {last.status[0].message!r}, sim_time_s '
               f"{values.get('sim_time_s')}, steps {values.get('steps')}")
-    applied = [line for line in out.splitlines() if "sleeve force 20 N applied" in line]
+    applied = [line for line in out.splitlines() if 'sleeve force 20 N applied' in line]
     print(f"command 20 N: {'applied: ' + applied[0] if applied else 'not applied yet'}"
-          if commanded else "command: not sent")
-    print(f"SIGINT -> exit {code} in {stop_s:.2f} s; {load()}")
-    print(f"files: {tmp}")
+          if commanded else 'command: not sent')
+    print(f'SIGINT -> exit {code} in {stop_s:.2f} s; {load()}')
+    print(f'files: {tmp}')
     return 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

@@ -40,15 +40,15 @@ import os
 import sys
 import time
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from umbrella_sim.core.model import Stage  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
 
-TARGETS = {("flexible-nonlinear", 4): 5.0}
-CASES = (("flexible", 0.0), ("flexible", 0.02), ("flexible-nonlinear", 0.0),
-         ("flexible-nonlinear", 0.02))
+TARGETS = {('flexible-nonlinear', 4): 5.0}
+CASES = (('flexible', 0.0), ('flexible', 0.02), ('flexible-nonlinear', 0.0),
+         ('flexible-nonlinear', 0.02))
 
 
 class RunStopped(Exception):
@@ -75,7 +75,7 @@ def one_run(params, duration):
         if at_lock is None and sim.stage == Stage.LOCKED:
             at_lock = (integ.iterations, sim.steps)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    its1 = its2 = float("nan")
+    its1 = its2 = float('nan')
     if at_lock is not None:
         its1 = at_lock[0] / at_lock[1]
         if sim.steps > at_lock[1]:
@@ -86,22 +86,22 @@ def one_run(params, duration):
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--meshes", type=int, nargs="+", default=[1, 2, 4, 8])
-    ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--duration", type=float, default=1.0)
-    ap.add_argument("--time-step", type=float, default=0.0,
-                    help="s; 0 (default): the step chosen for each model and mesh "
-                         "(step_rule.physics_step_of)")
-    ap.add_argument("--v0", type=float, nargs="+", default=[-0.2],
+    ap.add_argument('--meshes', type=int, nargs='+', default=[1, 2, 4, 8])
+    ap.add_argument('--repeat', type=int, default=2)
+    ap.add_argument('--duration', type=float, default=1.0)
+    ap.add_argument('--time-step', type=float, default=0.0,
+                    help='s; 0 (default): the step chosen for each model and mesh '
+                         '(step_rule.physics_step_of)')
+    ap.add_argument('--v0', type=float, nargs='+', default=[-0.2],
                     help="initial sleeve velocities (m/s); the target is V0 = -0.2's")
     args = ap.parse_args()
     print(f"V0 = {', '.join(f'{v:g}' for v in args.v0)}, t = 0 -> {args.duration:g} s through "
           f"the lock, h = {f'{args.time_step:g} s' if args.time_step else 'chosen per mesh'}, "
-          f"best of {args.repeat}, 1 ms blocks; loadavg {os.getloadavg()[0]:.2f} on "
-          f"{os.cpu_count()} CPUs")
-    print("newton/step 1|2: Newton iterations per step in stage 1 (deploying) | stage 2 (locked)")
-    print("RTF = simulated s per second (CPU: process time, what the step costs; wall: what a "
-          "loaded machine gave)")
+          f'best of {args.repeat}, 1 ms blocks; loadavg {os.getloadavg()[0]:.2f} on '
+          f'{os.cpu_count()} CPUs')
+    print('newton/step 1|2: Newton iterations per step in stage 1 (deploying) | stage 2 (locked)')
+    print('RTF = simulated s per second (CPU: process time, what the step costs; wall: what a '
+          'loaded machine gave)')
     print(f"{'model':>19} {'zeta':>5} {'V0':>5} {'N':>3} {'dofs':>5} {'backend':>8} "
           f"{'h (us)':>6} {'newton/step 1|2':>15} {'us/step':>8} {'RTF cpu':>8} "
           f"{'RTF wall':>9} {'target':>9}")
@@ -120,7 +120,7 @@ def bench_case(args, v0, n, model, zeta):
         try:
             wall, cpu, sim, its1, its2 = one_run(p, args.duration)
         except RunStopped as stopped:
-            print(f"{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {stopped}")
+            print(f'{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {stopped}')
             return
         walls.append(wall)
         cpus.append(cpu)
@@ -129,12 +129,12 @@ def bench_case(args, v0, n, model, zeta):
     rtf = args.duration / min(cpus)
     rtf_wall = args.duration / min(walls)
     target = TARGETS.get((model, n)) if v0 == -0.2 else None
-    verdict = ("" if target is None
+    verdict = ('' if target is None
                else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}")
-    print(f"{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} "
-          f"{sim.h * 1e6:>6.3g} {its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x "
-          f"{rtf_wall:>8.2f}x {verdict:>9}")
+    print(f'{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} '
+          f'{sim.h * 1e6:>6.3g} {its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x '
+          f'{rtf_wall:>8.2f}x {verdict:>9}')
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

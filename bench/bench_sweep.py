@@ -42,7 +42,7 @@ import sys
 import tempfile
 import time
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from umbrella_sim.tools import sweep  # noqa: E402
 
@@ -54,11 +54,11 @@ def noop(x):
 def idle_between_cases(out_dir: str) -> tuple[float, int]:
     """Return the summed gaps between consecutive cases on each worker, and their number."""
     by_worker: dict[str, list] = {}
-    store = os.path.join(out_dir, "cases")
+    store = os.path.join(out_dir, 'cases')
     for name in os.listdir(store):
         with open(os.path.join(store, name)) as fh:
             rec = json.load(fh)
-        by_worker.setdefault(rec["worker"], []).append((rec["started_at"], rec["finished_at"]))
+        by_worker.setdefault(rec['worker'], []).append((rec['started_at'], rec['finished_at']))
     total, gaps = 0.0, 0
     for spans in by_worker.values():
         spans.sort()
@@ -83,37 +83,37 @@ def round_trip(n_workers: int, n: int = 50) -> float:
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cases", type=int, default=24)
-    ap.add_argument("--duration", type=float, default=0.3, help="simulated s per case")
-    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument('--cases', type=int, default=24)
+    ap.add_argument('--duration', type=float, default=0.3, help='simulated s per case')
+    ap.add_argument('--workers', type=int, nargs='+', default=[1, 2])
     args = ap.parse_args()
     v0s = [round(-0.3 - 1.2 * i / max(args.cases - 1, 1), 6) for i in range(args.cases)]
-    print(f"{args.cases} cases: flexible N = 1, V0 = {v0s[0]} .. {v0s[-1]} m/s, "
-          f"{args.duration} s simulated each; {os.cpu_count()} cores (shared machine), "
-          f"load average {os.getloadavg()[0]:.1f}")
+    print(f'{args.cases} cases: flexible N = 1, V0 = {v0s[0]} .. {v0s[-1]} m/s, '
+          f'{args.duration} s simulated each; {os.cpu_count()} cores (shared machine), '
+          f'load average {os.getloadavg()[0]:.1f}')
     print(f"{'workers':>7} {'cluster start':>13} {'wall':>7} {'cases/s':>8} "
           f"{'compute/case':>12} {'idle/case':>10} {'wall overhead/case':>18} "
           f"{'no-op round trip':>16}")
-    with tempfile.TemporaryDirectory(prefix="bench_sweep_") as tmp:
-        spec = os.path.join(tmp, "spec.yaml")
-        with open(spec, "w") as fh:
-            fh.write(f"grid:\n  v0: {v0s}\nduration: {args.duration}\n")
+    with tempfile.TemporaryDirectory(prefix='bench_sweep_') as tmp:
+        spec = os.path.join(tmp, 'spec.yaml')
+        with open(spec, 'w') as fh:
+            fh.write(f'grid:\n  v0: {v0s}\nduration: {args.duration}\n')
         loaded = sweep.load_spec(spec)
         for n in args.workers:
             log = io.StringIO()
-            out = os.path.join(tmp, f"out{n}")
+            out = os.path.join(tmp, f'out{n}')
             report = sweep.run_sweep(loaded, out, workers=n, stream=log)
             assert report.ran == args.cases and report.failed == 0, log.getvalue()
             overhead = (report.run_s * n - report.compute_s) / report.ran
             rt = round_trip(n)
             idle, gaps = idle_between_cases(out)
             compute_ms = report.compute_s / report.ran * 1e3
-            print(f"{n:>7} {report.setup_s:>11.2f} s {report.run_s:>5.2f} s "
-                  f"{report.ran / report.run_s:>8.2f} {compute_ms:>9.1f} ms"
-                  f" {idle / max(gaps, 1) * 1e3:>7.1f} ms {overhead * 1e3:>15.1f} ms"
-                  f" {rt * 1e3:>13.2f} ms"
-                  f"   (load average {os.getloadavg()[0]:.1f})")
+            print(f'{n:>7} {report.setup_s:>11.2f} s {report.run_s:>5.2f} s '
+                  f'{report.ran / report.run_s:>8.2f} {compute_ms:>9.1f} ms'
+                  f' {idle / max(gaps, 1) * 1e3:>7.1f} ms {overhead * 1e3:>15.1f} ms'
+                  f' {rt * 1e3:>13.2f} ms'
+                  f'   (load average {os.getloadavg()[0]:.1f})')
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

@@ -43,7 +43,7 @@ import time
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, os.path.join(HERE, '..'))
 
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams  # noqa: E402
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D  # noqa: E402
@@ -51,10 +51,10 @@ from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D  # noqa
 
 def step_cost(ribs: int, elements: int, steps: int, repeat: int):
     """Return (CPU s per step, coordinates of a rib, Newton iterations per step)."""
-    best = float("inf")
+    best = float('inf')
     for _ in range(repeat):
         sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-            {"ribs": ribs, "elements_per_segment": elements, "time_step": 1e-4}))
+            {'ribs': ribs, 'elements_per_segment': elements, 'time_step': 1e-4}))
         sim.step()                       # warm (imports, first factorisation)
         iterations = sim.integrator.iterations
         t0 = time.thread_time()
@@ -68,7 +68,7 @@ def step_cost(ribs: int, elements: int, steps: int, repeat: int):
 def real_time(ribs: int, elements: int, block: float, duration: float):
     """Return (step h, wall RTF, CPU s per simulated s) of a run in publication blocks."""
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-        {"ribs": ribs, "elements_per_segment": elements}))
+        {'ribs': ribs, 'elements_per_segment': elements}))
     h = sim.h
     per_block = max(1, round(block / h))
     wall0, cpu0 = time.perf_counter(), time.process_time()
@@ -77,21 +77,21 @@ def real_time(ribs: int, elements: int, block: float, duration: float):
         for _ in range(per_block):
             sim.step()
         rows = sim.record.rows          # what a publication reads: the last step's figures
-        published += len(rows["alpha1"][-1]) + len(rows["tip"][-1])
+        published += len(rows['alpha1'][-1]) + len(rows['tip'][-1])
     assert published > 0
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     return h, sim.time / wall, cpu / sim.time
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--ribs", type=int, nargs="+", default=[1, 2, 4, 8, 16])
-    ap.add_argument("--elements", type=int, nargs="+", default=[1, 2])
-    ap.add_argument("--steps", type=int, default=40)
-    ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--duration", type=float, default=0.01)
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--ribs', type=int, nargs='+', default=[1, 2, 4, 8, 16])
+    ap.add_argument('--elements', type=int, nargs='+', default=[1, 2])
+    ap.add_argument('--steps', type=int, default=40)
+    ap.add_argument('--repeat', type=int, default=2)
+    ap.add_argument('--duration', type=float, default=0.01)
     args = ap.parse_args(argv)
-    print("per-step cost (h = 0.1 ms, deployment from t = 0; CPU of this thread)")
+    print('per-step cost (h = 0.1 ms, deployment from t = 0; CPU of this thread)')
     print(f"{'ribs':>5} {'elements':>9} {'coords/rib':>10} {'Newton it':>9} {'us/step':>10} "
           f"{'us/step/rib':>12} {'ns/step/rib/coord':>18}")
     for elements in args.elements:
@@ -99,25 +99,25 @@ def main(argv=None):
         for ribs in args.ribs:
             cost, n_rib, its = step_cost(ribs, elements, args.steps, args.repeat)
             costs.append(cost)
-            print(f"{ribs:5d} {elements:9d} {n_rib:10d} {its:9.2f} {1e6 * cost:10.0f} "
-                  f"{1e6 * cost / ribs:12.0f} {1e9 * cost / ribs / n_rib:18.0f}", flush=True)
+            print(f'{ribs:5d} {elements:9d} {n_rib:10d} {its:9.2f} {1e6 * cost:10.0f} '
+                  f'{1e6 * cost / ribs:12.0f} {1e9 * cost / ribs / n_rib:18.0f}', flush=True)
         if len(costs) > 2:
             fit = np.polyfit(args.ribs, costs, 1)
             worst = np.max(np.abs(np.polyval(fit, args.ribs) / costs - 1))
             quad = np.polyfit(args.ribs, costs, 2)[0] * max(args.ribs) ** 2 / max(costs)
-            print(f"      {elements} element(s): cost = {1e6 * fit[1]:.0f} us + "
-                  f"{1e6 * fit[0]:.0f} us x ribs (largest deviation {100 * worst:.0f} %; "
-                  f"a quadratic term would carry {100 * quad:+.0f} % at {max(args.ribs)} "
-                  "ribs)")
-    print(f"\nreal-time factors over {args.duration} s simulated (step chosen for the mesh)")
+            print(f'      {elements} element(s): cost = {1e6 * fit[1]:.0f} us + '
+                  f'{1e6 * fit[0]:.0f} us x ribs (largest deviation {100 * worst:.0f} %; '
+                  f'a quadratic term would carry {100 * quad:+.0f} % at {max(args.ribs)} '
+                  'ribs)')
+    print(f'\nreal-time factors over {args.duration} s simulated (step chosen for the mesh)')
     print(f"{'ribs':>5} {'elements':>9} {'block':>8} {'step (us)':>10} {'RTF (wall)':>11} "
           f"{'CPU s / sim s':>14} {'target':>30}")
-    for ribs, elements, block, target in ((6, 1, 1e-3, "RTF >= 1 within 0.5 core"),
-                                          (12, 2, 1e-2, "RTF >= 1")):
+    for ribs, elements, block, target in ((6, 1, 1e-3, 'RTF >= 1 within 0.5 core'),
+                                          (12, 2, 1e-2, 'RTF >= 1')):
         h, rtf, cpu = real_time(ribs, elements, block, args.duration)
-        print(f"{ribs:5d} {elements:9d} {1e3 * block:6.0f}ms {1e6 * h:10.2f} {rtf:11.4f} "
-              f"{cpu:14.1f} {target:>30}", flush=True)
+        print(f'{ribs:5d} {elements:9d} {1e3 * block:6.0f}ms {1e6 * h:10.2f} {rtf:11.4f} '
+              f'{cpu:14.1f} {target:>30}', flush=True)
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

@@ -53,14 +53,14 @@ from exudyn.itemInterface import (Cable2D, CoordinateConstraint, MarkerNodeCoord
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, os.path.join(HERE, '..'))
 
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.core.summary import stage2_figures, STAGE2_WINDOW  # noqa: E402
 
-OUT = os.path.join(HERE, "exudyn_umbrella_frame.json")
-DEFAULT_CASES = ("4:-0.2:5e-6", "8:-0.2:5e-6", "4:-1:5e-6", "8:-1:5e-6", "16:-1:5e-6",
-                 "4:-2:2.5e-6", "8:-2:2.5e-6", "16:-2:2.5e-6")
+OUT = os.path.join(HERE, 'exudyn_umbrella_frame.json')
+DEFAULT_CASES = ('4:-0.2:5e-6', '8:-0.2:5e-6', '4:-1:5e-6', '8:-1:5e-6', '16:-1:5e-6',
+                 '4:-2:2.5e-6', '8:-2:2.5e-6', '16:-2:2.5e-6')
 
 
 class Frame:
@@ -79,13 +79,13 @@ class Frame:
         e1 = np.array([math.cos(a1), math.sin(a1)])
         e2 = np.array([math.cos(a2), math.sin(a2)])
         r2 = p.l1 * e1
-        self.nodes = {"leaf": self._chain(np.zeros(2), e1, w1, np.zeros(2), p.l1 + p.l2, 2 * n,
+        self.nodes = {'leaf': self._chain(np.zeros(2), e1, w1, np.zeros(2), p.l1 + p.l2, 2 * n,
                                           p.mass_per_length, ea, ei),
-                      "link": self._chain(r2, e2, w2, w1 * np.array([-r2[1], r2[0]]), p.l3, n,
+                      'link': self._chain(r2, e2, w2, w1 * np.array([-r2[1], r2[0]]), p.l3, n,
                                           p.mass_per_length, ea, ei)}
         ground = mbs.AddNode(NodePointGround(referenceCoordinates=[0, 0, 0]))
         self.m_ground = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground, coordinate=0))
-        leaf, link = self.nodes["leaf"], self.nodes["link"]
+        leaf, link = self.nodes['leaf'], self.nodes['link']
         h_ref = r2 + p.l3 * e2
         self._fix(leaf[0], 0)                                  # O pinned
         self._fix(leaf[0], 1)
@@ -98,7 +98,7 @@ class Frame:
         self.sensors = {k: mbs.AddSensor(SensorNode(
             nodeNumber=nd, outputVariableType=exu.OutputVariableType.Position,
             storeInternal=True, writeToFile=False))
-            for k, nd in (("H", link[n]), ("G", leaf[2 * n]), ("J", leaf[n]))}
+            for k, nd in (('H', link[n]), ('G', leaf[2 * n]), ('J', leaf[n]))}
         mbs.Assemble()
         self.n, self.p = n, p
 
@@ -142,7 +142,7 @@ class Frame:
 
     def tip_in_leaf_frame(self):
         """Return t and v_G: G's distance from the line O-O'' (O at the origin), signed."""
-        g, j = self.series("G"), self.series("J")
+        g, j = self.series('G'), self.series('J')
         u = j[:, 1:3] / np.linalg.norm(j[:, 1:3], axis=1)[:, None]
         return g[:, 0], -g[:, 1] * u[:, 1] + g[:, 2] * u[:, 0]
 
@@ -151,7 +151,7 @@ class Frame:
         size = self.mbs.systemData.ODE2Size()
         mass = np.zeros((size, size))
         p = self.p
-        for name, count, length in (("leaf", 2 * self.n, p.l1 + p.l2), ("link", self.n, p.l3)):
+        for name, count, length in (('leaf', 2 * self.n, p.l1 + p.l2), ('link', self.n, p.l3)):
             L = length / count
             m = p.mass_per_length * L / 420.0 * np.array(
                 [[156, 22 * L, 54, -13 * L], [22 * L, 4 * L * L, 13 * L, -3 * L * L],
@@ -167,7 +167,7 @@ class Frame:
     def constraint_rows(self):
         """Return the constraints' rows (all linear): O, O'', H on the axle, the stop."""
         size = self.mbs.systemData.ODE2Size()
-        leaf, link, n = self.nodes["leaf"], self.nodes["link"], self.n
+        leaf, link, n = self.nodes['leaf'], self.nodes['link'], self.n
 
         def e(node, c):
             r = np.zeros(size)
@@ -182,7 +182,7 @@ def run(n: int, v0: float, h: float, index2: bool) -> dict:
     # stage 1 past the stop: the instant y_H reaches it, by linear interpolation
     first = Frame(p, n, locked=False)
     first.solve(h, 1.15 * 0.0459 / abs(v0), index2=index2)
-    yh = first.series("H")
+    yh = first.series('H')
     k = int(np.argmax(yh[:, 2] <= p.sleeve_stop_height))
     (t_a, y_a), (t_b, y_b) = yh[k - 1, [0, 2]], yh[k, [0, 2]]
     t_lock = t_a + (y_a - p.sleeve_stop_height) / (y_a - y_b) * (t_b - t_a)
@@ -205,42 +205,42 @@ def run(n: int, v0: float, h: float, index2: bool) -> dict:
     third.solve(h, t_lock + STAGE2_WINDOW, t_lock, index2=index2)
     t2, v2 = third.tip_in_leaf_frame()
     figures = stage2_figures(t2, v2, t_lock)
-    return {"elements_per_segment": n, "v0": v0, "time_step": h,
-            "constraints": "index 2" if index2 else "index 3",
-            "deploy_time": t_lock, "tip_deflection_max": tip1,
-            "kinetic_energy_before_lock": 0.5 * qd @ mass @ qd,
-            "kinetic_energy_after_lock": 0.5 * qd_lock @ mass @ qd_lock,
-            "stage2_tip_amplitude": figures["stage2_tip_amplitude"],
-            "stage2_tip_period": figures["stage2_tip_period"]}
+    return {'elements_per_segment': n, 'v0': v0, 'time_step': h,
+            'constraints': 'index 2' if index2 else 'index 3',
+            'deploy_time': t_lock, 'tip_deflection_max': tip1,
+            'kinetic_energy_before_lock': 0.5 * qd @ mass @ qd,
+            'kinetic_energy_after_lock': 0.5 * qd_lock @ mass @ qd_lock,
+            'stage2_tip_amplitude': figures['stage2_tip_amplitude'],
+            'stage2_tip_period': figures['stage2_tip_period']}
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cases", nargs="+", default=list(DEFAULT_CASES),
-                    help="n:V0:h, elements a segment, m/s, s")
-    ap.add_argument("--index2", action="store_true", help="index-2 constraints as well")
-    ap.add_argument("--append", action="store_true",
-                    help="keep the cases the JSON holds (replacing those run again)")
+    ap.add_argument('--cases', nargs='+', default=list(DEFAULT_CASES),
+                    help='n:V0:h, elements a segment, m/s, s')
+    ap.add_argument('--index2', action='store_true', help='index-2 constraints as well')
+    ap.add_argument('--append', action='store_true',
+                    help='keep the cases the JSON holds (replacing those run again)')
     args = ap.parse_args()
     results = []
     if args.append and os.path.exists(OUT):
-        with open(OUT, encoding="utf-8") as fh:
-            results = json.load(fh)["cases"]
+        with open(OUT, encoding='utf-8') as fh:
+            results = json.load(fh)['cases']
     for case in args.cases:
-        n, v0, h = case.split(":")
+        n, v0, h = case.split(':')
         for index2 in ((False, True) if args.index2 else (False,)):
-            print(f"n = {n}, V0 = {v0}, h = {h}, index {2 if index2 else 3}", file=sys.stderr,
+            print(f'n = {n}, V0 = {v0}, h = {h}, index {2 if index2 else 3}', file=sys.stderr,
                   flush=True)
             new = run(int(n), float(v0), float(h), index2)
-            key = ("elements_per_segment", "v0", "time_step", "constraints")
+            key = ('elements_per_segment', 'v0', 'time_step', 'constraints')
             results = [c for c in results if [c[k] for k in key] != [new[k] for k in key]]
             results.append(new)
-            print("  " + json.dumps(results[-1]), file=sys.stderr, flush=True)
-            with open(OUT, "w", encoding="utf-8") as fh:    # after each case: hours in all
-                json.dump({"exudyn": exu.config.Version(), "cases": results}, fh, indent=1)
-                fh.write("\n")
+            print('  ' + json.dumps(results[-1]), file=sys.stderr, flush=True)
+            with open(OUT, 'w', encoding='utf-8') as fh:    # after each case: hours in all
+                json.dump({'exudyn': exu.config.Version(), 'cases': results}, fh, indent=1)
+                fh.write('\n')
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

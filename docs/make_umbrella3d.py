@@ -31,7 +31,7 @@ import sys
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, os.path.join(HERE, '..'))
 
 from tests.test_umbrella3d import ASYMMETRIC, DRIVE, planar_run  # noqa: E402
 from tests.test_umbrella3d_modes import Frame, rib_frame, section_of  # noqa: E402
@@ -42,16 +42,16 @@ from umbrella_sim.core.umbrella3d.modes3d import locked_modes  # noqa: E402
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams  # noqa: E402
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D  # noqa: E402
 
-OUT_DIR = os.path.join(HERE, "umbrella3d")
+OUT_DIR = os.path.join(HERE, 'umbrella3d')
 
 
 def progress(what: str) -> None:
-    print(f"make_umbrella3d: {what}", file=sys.stderr, flush=True)
+    print(f'make_umbrella3d: {what}', file=sys.stderr, flush=True)
 
 
 def plt():
     import matplotlib
-    matplotlib.use("Agg")
+    matplotlib.use('Agg')
     import matplotlib.pyplot as pyplot
     return pyplot
 
@@ -59,7 +59,7 @@ def plt():
 def save(fig, name):
     fig.tight_layout()
     fig.savefig(os.path.join(OUT_DIR, name), dpi=110)
-    return f"![{name[:-4]}](umbrella3d/{name})"
+    return f'![{name[:-4]}](umbrella3d/{name})'
 
 
 # ------------------------------------------------------------------ (a)
@@ -67,55 +67,55 @@ def identity(ribs, values, duration):
     p = UmbrellaParams(**values, phase_correction=False)
     planar_sim, planar = planar_run(p, duration)
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-        {"ribs": ribs, **values, "phase_correction": False}))
+        {'ribs': ribs, **values, 'phase_correction': False}))
     a = sim.run(duration).arrays()
-    d_alpha = np.max(np.abs(a["alpha1"][1:] - planar[:, 1:2]))
-    d_sleeve = np.max(np.abs(a["sleeve_position"][1:] - planar[:, 3]))
-    d_tip = np.max(np.abs(a["tip"][1:, :, 1] - planar[:, 5:6]))
-    return (ribs, values.get("elements_per_segment", 1), values.get("lock", "auto→energy"),
+    d_alpha = np.max(np.abs(a['alpha1'][1:] - planar[:, 1:2]))
+    d_sleeve = np.max(np.abs(a['sleeve_position'][1:] - planar[:, 3]))
+    d_tip = np.max(np.abs(a['tip'][1:, :, 1] - planar[:, 5:6]))
+    return (ribs, values.get('elements_per_segment', 1), values.get('lock', 'auto→energy'),
             sim.h, d_alpha, d_sleeve, d_tip, abs(sim.lock_time - planar_sim.lock_event.time))
 
 
 def section_a(lines):
-    progress("(a) identical ribs against the planar model")
-    rows = [identity(1, {"time_step": 1e-4, "sleeve_force": 10.0}, 0.19),
-            identity(4, {"time_step": 5e-5, "elements_per_segment": 2, "lock": "plastic",
-                         "sleeve_force": 10.0}, 0.19)]
-    lines += ["## (a) N identical ribs are N planar models", "",
-              "Sleeve force 10 N a rib, V0 = −0.2 m/s, 30 ms past the lock; the planar model "
-              "(`umbrella_sim.core.UmbrellaSimulator`) without its stage-2 mode fit "
-              "(`phase_correction: false`), which the 3D model does not have. Largest "
-              "difference over every step and every rib (tests/test_umbrella3d.py asserts "
-              "1e-10, 100 times below Newton's increment tolerance):", "",
-              "| ribs | elements a segment | lock | step (s) | alpha1 (rad) | sleeve (m) | "
-              "tip, in-plane (m) | lock instant (s) |", "|---|---|---|---|---|---|---|---|"]
+    progress('(a) identical ribs against the planar model')
+    rows = [identity(1, {'time_step': 1e-4, 'sleeve_force': 10.0}, 0.19),
+            identity(4, {'time_step': 5e-5, 'elements_per_segment': 2, 'lock': 'plastic',
+                         'sleeve_force': 10.0}, 0.19)]
+    lines += ['## (a) N identical ribs are N planar models', '',
+              'Sleeve force 10 N a rib, V0 = −0.2 m/s, 30 ms past the lock; the planar model '
+              '(`umbrella_sim.core.UmbrellaSimulator`) without its stage-2 mode fit '
+              '(`phase_correction: false`), which the 3D model does not have. Largest '
+              'difference over every step and every rib (tests/test_umbrella3d.py asserts '
+              "1e-10, 100 times below Newton's increment tolerance):", '',
+              '| ribs | elements a segment | lock | step (s) | alpha1 (rad) | sleeve (m) | '
+              'tip, in-plane (m) | lock instant (s) |', '|---|---|---|---|---|---|---|---|']
     for r in rows:
-        lines.append(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:g} | {r[4]:.1e} | {r[5]:.1e} | "
-                     f"{r[6]:.1e} | {r[7]:.1e} |")
-    lines.append("")
+        lines.append(f'| {r[0]} | {r[1]} | {r[2]} | {r[3]:g} | {r[4]:.1e} | {r[5]:.1e} | '
+                     f'{r[6]:.1e} | {r[7]:.1e} |')
+    lines.append('')
 
 
 # ------------------------------------------------------------------ (b)
 def section_b(lines):
-    progress("(b) locked frequencies against a 3D frame")
-    lines += ["## (b) Locked frequencies against an independent 3D frame model", "",
-              "The floating-frame model linearised at full deployment (`modes3d.locked_modes`) "
-              "against a frame assembled in global coordinates from the textbook 12-coordinate "
-              "beam element (Przemieniecki 1968, stiffness Eq. 5.116, consistent mass "
-              "Eq. 11.32), its hinges as multi-point constraints (tests/test_umbrella3d_modes.py)."
-              " Both use the same shape functions, so on one mesh they agree to round-off: this "
+    progress('(b) locked frequencies against a 3D frame')
+    lines += ['## (b) Locked frequencies against an independent 3D frame model', '',
+              'The floating-frame model linearised at full deployment (`modes3d.locked_modes`) '
+              'against a frame assembled in global coordinates from the textbook 12-coordinate '
+              'beam element (Przemieniecki 1968, stiffness Eq. 5.116, consistent mass '
+              'Eq. 11.32), its hinges as multi-point constraints (tests/test_umbrella3d_modes.py).'
+              ' Both use the same shape functions, so on one mesh they agree to round-off: this '
               "checks the floating frames, the joints and the rib's orientation. Rib 0, "
-              "two elements a segment; the kind is where the mode's strain energy is.", "",
-              "| mode | kind (in-plane / out-of-plane bending / twist share) | floating frames "
-              "(Hz) | 3D frame (Hz) | relative difference |", "|---|---|---|---|---|"]
+              "two elements a segment; the kind is where the mode's strain energy is.", '',
+              '| mode | kind (in-plane / out-of-plane bending / twist share) | floating frames '
+              '(Hz) | 3D frame (Hz) | relative difference |', '|---|---|---|---|---|']
     n = 2
-    model = UmbrellaModel3D(UmbrellaRibsParams.from_mapping({"elements_per_segment": n}))
+    model = UmbrellaModel3D(UmbrellaRibsParams.from_mapping({'elements_per_segment': n}))
     omega, _, labels = locked_modes(model)
     ref = rib_frame(UmbrellaParams(elements_per_segment=n), n).modes()
     for i in range(8):
-        lab = " / ".join(f"{x:.2f}" for x in labels[i])
-        lines.append(f"| {i + 1} | {lab} | {omega[i] / 2 / math.pi:.3f} | "
-                     f"{ref[i] / 2 / math.pi:.3f} | {abs(omega[i] / ref[i] - 1):.1e} |")
+        lab = ' / '.join(f'{x:.2f}' for x in labels[i])
+        lines.append(f'| {i + 1} | {lab} | {omega[i] / 2 / math.pi:.3f} | '
+                     f'{ref[i] / 2 / math.pi:.3f} | {abs(omega[i] / ref[i] - 1):.1e} |')
     worst = np.max(np.abs(omega / ref - 1))
     p = UmbrellaParams()
     sec = section_of(p)
@@ -123,41 +123,41 @@ def section_b(lines):
     ids = f.beam(np.zeros(3), np.array([1.0, 0.0, 0.0]), 16, sec, np.array([0.0, 0.0, 1.0]))
     f.fix(ids[0], range(6))
     cant = f.modes()
-    bend = 1.87510 ** 2 * math.sqrt(sec["eiz"] / sec["rho_a"])
-    torsion = math.pi / 2 * math.sqrt(sec["gj"] / sec["rho_ip"])
-    lines += ["", f"All {len(omega)} modes: largest relative difference {worst:.1e}. The frame "
-              "element itself against published formulas (a 1 m cantilever, 16 elements): "
+    bend = 1.87510 ** 2 * math.sqrt(sec['eiz'] / sec['rho_a'])
+    torsion = math.pi / 2 * math.sqrt(sec['gj'] / sec['rho_ip'])
+    lines += ['', f'All {len(omega)} modes: largest relative difference {worst:.1e}. The frame '
+              'element itself against published formulas (a 1 m cantilever, 16 elements): '
               f"first bending {cant[0]:.4f} rad/s against Blevins's λ₁ = 1.87510, "
-              f"{bend:.4f} rad/s ({abs(cant[0] / bend - 1):.1e}); first torsion of the "
+              f'{bend:.4f} rad/s ({abs(cant[0] / bend - 1):.1e}); first torsion of the '
               f"clamped-free shaft π/2L √(GJ/ρI_p) = {torsion:.1f} rad/s, the frame's nearest "
-              f"{cant[np.argmin(np.abs(cant / torsion - 1))]:.1f} rad/s.", ""]
+              f'{cant[np.argmin(np.abs(cant / torsion - 1))]:.1f} rad/s.', '']
 
 
 # ------------------------------------------------------------------ (c)
 def section_c(lines, pyplot):
-    progress("(c) energy and momentum")
+    progress('(c) energy and momentum')
     rec = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(ASYMMETRIC)).run(0.2)
     a, s = rec.arrays(), rec.summary()
-    values = dict(ASYMMETRIC, base="free", bus_mass=5.0, bus_inertia=0.2)
+    values = dict(ASYMMETRIC, base='free', bus_mass=5.0, bus_inertia=0.2)
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), tolerance=1e-12)
     fr = sim.run(0.2)
     b, sb = fr.arrays(), fr.summary()
     driven = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-        dict(ASYMMETRIC, base="prescribed", **DRIVE))).run(0.2)
+        dict(ASYMMETRIC, base='prescribed', **DRIVE))).run(0.2)
     c, sc = driven.arrays(), driven.summary()
     rib_mass = sim.model.total_mass - sim.model.bus_mass - sim.model.sleeve_mass
-    mv = rib_mass * np.max(np.abs(b["sleeve_velocity"]))
+    mv = rib_mass * np.max(np.abs(b['sleeve_velocity']))
     mvl = mv * (sim.params.planar.l1 + sim.params.planar.l2)
-    dp = np.max(np.abs(b["linear_momentum"] - b["linear_momentum"][0]))
-    dh = np.max(np.abs(b["angular_momentum"] - b["angular_momentum"][0]))
-    lines += ["## (c) Energy and momentum", "",
+    dp = np.max(np.abs(b['linear_momentum'] - b['linear_momentum'][0]))
+    dh = np.max(np.abs(b['angular_momentum'] - b['angular_momentum'][0]))
+    lines += ['## (c) Energy and momentum', '',
               "Three ribs, rib 1's hinge with Coulomb (0.3 N m) and viscous (0.05 N m s) "
-              "friction, rib 2 kicked out of its plane (0.2 m/s at the tip), a 50 g tip mass on "
-              "rib 0; sleeve force 10 N a rib, 0.2 s (through the lock). The balance is "
-              "T + V − (T + V)(0) − W_sleeve − W_friction + lock loss.", "",
-              "| base | lock | largest T + V (J) | balance residual (J) | friction work (J) | "
-              "lock loss (J) | linear momentum drift / m v | angular momentum drift / m v L |",
-              "|---|---|---|---|---|---|---|---|",
+              'friction, rib 2 kicked out of its plane (0.2 m/s at the tip), a 50 g tip mass on '
+              'rib 0; sleeve force 10 N a rib, 0.2 s (through the lock). The balance is '
+              'T + V − (T + V)(0) − W_sleeve − W_friction + lock loss.', '',
+              '| base | lock | largest T + V (J) | balance residual (J) | friction work (J) | '
+              'lock loss (J) | linear momentum drift / m v | angular momentum drift / m v L |',
+              '|---|---|---|---|---|---|---|---|',
               f"| fixed | energy | {s['energy_scale']:.3f} | {s['energy_balance_residual']:.1e}"
               f" | {np.sum(s['friction_work']):.4f} | {a['lock_energy_loss'][-1]:.1e} | – | – |",
               f"| free (5 kg, 0.2 kg m²) | plastic | {sb['energy_scale']:.3f} | "
@@ -165,8 +165,8 @@ def section_c(lines, pyplot):
               f"{b['lock_energy_loss'][-1]:.4f} | {dp / mv:.1e} | {dh / mvl:.1e} |",
               f"| driven (X jolt, Y spin-up) | energy | {sc['energy_scale']:.3f} | "
               f"{sc['energy_balance_residual']:.1e} | {np.sum(sc['friction_work']):.4f} | "
-              f"{c['lock_energy_loss'][-1]:.1e} | – | – |", "",
-              "The driven base (20 m/s² along X for 20 ms from 20 ms, spun up to 3 rad/s about "
+              f"{c['lock_energy_loss'][-1]:.1e} | – | – |", '',
+              'The driven base (20 m/s² along X for 20 ms from 20 ms, spun up to 3 rad/s about '
               f"Y in 50 ms) does {c['drive_work'][-1]:.3f} J of work, counted in the balance "
               "as the drive joints' multipliers times the bus's displacement and the "
               "velocity projection's impulse on the bus times its mean velocity. There the "
@@ -174,30 +174,30 @@ def section_c(lines, pyplot):
               "prescribed): the residual is what the projection onto the ribs' joints changes "
               "(1e-8 of T + V up to 80 ms, tests/test_umbrella3d.py; more in stage 2's "
               "vibration), and the energy lock, which keeps each rib's kinetic energy in its "
-              "own velocities, changes the whole energy by the lock-loss column.", "",
+              'own velocities, changes the whole energy by the lock-loss column.', '',
               "The step keeps its discrete energy balance (the velocity scaled to the balance's "
-              "kinetic energy, as the planar integrator) and the linear momentum exactly (a "
-              "cyclic coordinate; projection and scaling act relative to the mass centre). The "
+              'kinetic energy, as the planar integrator) and the linear momentum exactly (a '
+              'cyclic coordinate; projection and scaling act relative to the mass centre). The '
               "midpoint discrete gradient keeps the angular momentum only to the Newton solve's "
-              "error: this run uses a Newton tolerance of 1e-12 (the tests assert 1e-8 before "
-              "the lock, 1e-6 through it, relative to m v L).", ""]
+              'error: this run uses a Newton tolerance of 1e-12 (the tests assert 1e-8 before '
+              'the lock, 1e-6 through it, relative to m v L).', '']
     fig, ax = pyplot.subplots(1, 2, figsize=(10, 3.6))
-    t = a["time"]
-    e = a["kinetic_energy"] + a["strain_energy"]
-    ax[0].plot(t, e - e[0], label="T + V − (T + V)(0)")
-    ax[0].plot(t, a["work"], "--", label="sleeve work")
-    ax[0].plot(t, a["friction_work"].sum(1), label="friction work")
-    ax[0].set(xlabel="t (s)", ylabel="J", title="fixed hub: energy")
+    t = a['time']
+    e = a['kinetic_energy'] + a['strain_energy']
+    ax[0].plot(t, e - e[0], label='T + V − (T + V)(0)')
+    ax[0].plot(t, a['work'], '--', label='sleeve work')
+    ax[0].plot(t, a['friction_work'].sum(1), label='friction work')
+    ax[0].set(xlabel='t (s)', ylabel='J', title='fixed hub: energy')
     ax[0].legend()
-    tb = b["time"]
-    ax[1].semilogy(tb[1:], np.abs(b["linear_momentum"] - b["linear_momentum"][0]).max(1)[1:]
-                   / mv + 1e-20, label="|ΔP| / m v")
-    ax[1].semilogy(tb[1:], np.abs(b["angular_momentum"] - b["angular_momentum"][0]).max(1)[1:]
-                   / mvl + 1e-20, label="|ΔH| / m v L")
-    ax[1].axvline(sim.lock_time, color="grey", lw=0.5)
-    ax[1].set(xlabel="t (s)", title="free bus: momentum drift")
+    tb = b['time']
+    ax[1].semilogy(tb[1:], np.abs(b['linear_momentum'] - b['linear_momentum'][0]).max(1)[1:]
+                   / mv + 1e-20, label='|ΔP| / m v')
+    ax[1].semilogy(tb[1:], np.abs(b['angular_momentum'] - b['angular_momentum'][0]).max(1)[1:]
+                   / mvl + 1e-20, label='|ΔH| / m v L')
+    ax[1].axvline(sim.lock_time, color='grey', lw=0.5)
+    ax[1].set(xlabel='t (s)', title='free bus: momentum drift')
     ax[1].legend()
-    lines += [save(fig, "balance.png"), ""]
+    lines += [save(fig, 'balance.png'), '']
 
 
 # ------------------------------------------------------------------ (d)
@@ -205,112 +205,112 @@ def section_d(lines, pyplot):
     try:
         from tests.test_umbrella3d_multibody import mujoco_run, umbrella_run
     except Exception as exc:          # pytest.importorskip raises its own exception type
-        lines += ["## (d) An asymmetric deployment against MuJoCo", "",
-                  f"Not generated: the MuJoCo comparison could not be imported "
-                  f"({type(exc).__name__}: {exc}).", ""]
+        lines += ['## (d) An asymmetric deployment against MuJoCo', '',
+                  f'Not generated: the MuJoCo comparison could not be imported '
+                  f'({type(exc).__name__}: {exc}).', '']
         return
-    progress("(d) the asymmetric deployment against MuJoCo")
+    progress('(d) the asymmetric deployment against MuJoCo')
     marks = tuple(np.round(np.arange(0.002, 0.158, 0.002), 6))
     t_ref, ref = mujoco_run(UmbrellaParams(), marks=marks)
     t_lock, ours = umbrella_run(marks=marks)
-    lines += ["## (d) An asymmetric deployment against MuJoCo", "",
+    lines += ['## (d) An asymmetric deployment against MuJoCo', '',
               "Three ribs on a free-floating bus (5 kg, 0.2 kg m²); rib 1's hinge stiff "
-              "(Coulomb 0.2 N m, viscous 0.05 N m s), a 50 g tip mass on rib 0; sleeve force "
-              "10 N a rib. The reference is MuJoCo (Todorov, Erez & Tassa, IROS 2012; PyPI "
-              "`mujoco`): rigid leaves and links in a kinematic tree under a free joint, each "
+              '(Coulomb 0.2 N m, viscous 0.05 N m s), a 50 g tip mass on rib 0; sleeve force '
+              '10 N a rib. The reference is MuJoCo (Todorov, Erez & Tassa, IROS 2012; PyPI '
+              '`mujoco`): rigid leaves and links in a kinematic tree under a free joint, each '
               "link's end tied to the sleeve by a `connect` equality, the friction as the "
               "joints' `damping` and `frictionloss`, RK4 at 10 µs. The umbrella model's ribs "
-              "are 100 times stiffer than the default, nearly rigid (tests/"
-              "test_umbrella3d_multibody.py).", "",
-              "| figure | MuJoCo (rigid) | umbrella3d | difference |", "|---|---|---|---|",
-              f"| lock instant (s) | {t_ref:.7f} | {t_lock:.7f} | {abs(t_lock - t_ref):.1e} |"]
+              'are 100 times stiffer than the default, nearly rigid (tests/'
+              'test_umbrella3d_multibody.py).', '',
+              '| figure | MuJoCo (rigid) | umbrella3d | difference |', '|---|---|---|---|',
+              f'| lock instant (s) | {t_ref:.7f} | {t_lock:.7f} | {abs(t_lock - t_ref):.1e} |']
     for mark in (0.05, 0.1):
         (y_r, x_r, r_r), (y, x, r) = ref[mark], ours[mark]
-        lines += [f"| sleeve on the bus at {mark} s (m) | {y_r:.6f} | {y:.6f} | "
-                  f"{abs(y - y_r):.1e} |",
-                  f"| bus X at {mark} s (mm) | {1e3 * x_r[0]:.5f} | {1e3 * x[0]:.5f} | "
-                  f"{abs(x[0] / x_r[0] - 1):.1e} rel. |",
-                  f"| bus Y at {mark} s (mm) | {1e3 * x_r[1]:.4f} | {1e3 * x[1]:.4f} | "
-                  f"{abs(x[1] / x_r[1] - 1):.1e} rel. |",
-                  f"| bus turn about Z at {mark} s (rad) | {-r_r[0, 1]:.6f} | {-r[0, 1]:.6f} |"
-                  f" {abs(r[0, 1] / r_r[0, 1] - 1):.1e} rel. |"]
+        lines += [f'| sleeve on the bus at {mark} s (m) | {y_r:.6f} | {y:.6f} | '
+                  f'{abs(y - y_r):.1e} |',
+                  f'| bus X at {mark} s (mm) | {1e3 * x_r[0]:.5f} | {1e3 * x[0]:.5f} | '
+                  f'{abs(x[0] / x_r[0] - 1):.1e} rel. |',
+                  f'| bus Y at {mark} s (mm) | {1e3 * x_r[1]:.4f} | {1e3 * x[1]:.4f} | '
+                  f'{abs(x[1] / x_r[1] - 1):.1e} rel. |',
+                  f'| bus turn about Z at {mark} s (rad) | {-r_r[0, 1]:.6f} | {-r[0, 1]:.6f} |'
+                  f' {abs(r[0, 1] / r_r[0, 1] - 1):.1e} rel. |']
     t_dref, dref = mujoco_run(UmbrellaParams(), driven=True)
     t_dlock, dours = umbrella_run(driven=True)
-    lines += [f"| driven base: lock instant (s) | {t_dref:.7f} | {t_dlock:.7f} | "
-              f"{abs(t_dlock - t_dref):.1e} |"]
+    lines += [f'| driven base: lock instant (s) | {t_dref:.7f} | {t_dlock:.7f} | '
+              f'{abs(t_dlock - t_dref):.1e} |']
     for mark in (0.05, 0.1):
         y_r, y = dref[mark][0], dours[mark][0]
-        lines.append(f"| driven base: sleeve on the bus at {mark} s (m) | {y_r:.6f} | {y:.6f} |"
-                     f" {abs(y - y_r):.1e} |")
-    lines += ["", "The driven base: the same ribs on a base jolted along X (20 m/s² for 20 ms) "
+        lines.append(f'| driven base: sleeve on the bus at {mark} s (m) | {y_r:.6f} | {y:.6f} |'
+                     f' {abs(y - y_r):.1e} |')
+    lines += ['', 'The driven base: the same ribs on a base jolted along X (20 m/s² for 20 ms) '
               "and spun up to 3 rad/s about Y, the umbrella's base following the prescribed "
               "motion, MuJoCo's a 10⁶ kg body driven by the forces of that motion (the ribs' "
-              "reactions leave its motion the prescribed one to 1e-6)."]
+              'reactions leave its motion the prescribed one to 1e-6).']
     fig, ax = pyplot.subplots(1, 3, figsize=(12, 3.4))
     ts = [m for m in marks if m in ref and m in ours]
-    for i, (title, get) in enumerate((("sleeve height on the bus (m)", lambda v: v[0]),
-                                      ("bus X (mm)", lambda v: 1e3 * v[1][0]),
-                                      ("bus turn about Z (rad)", lambda v: -v[2][0, 1]))):
-        ax[i].plot(ts, [get(ref[m]) for m in ts], "k-", lw=2.5, alpha=0.4, label="MuJoCo")
-        ax[i].plot(ts, [get(ours[m]) for m in ts], "r--", label="umbrella3d")
-        ax[i].set(xlabel="t (s)", title=title)
+    for i, (title, get) in enumerate((('sleeve height on the bus (m)', lambda v: v[0]),
+                                      ('bus X (mm)', lambda v: 1e3 * v[1][0]),
+                                      ('bus turn about Z (rad)', lambda v: -v[2][0, 1]))):
+        ax[i].plot(ts, [get(ref[m]) for m in ts], 'k-', lw=2.5, alpha=0.4, label='MuJoCo')
+        ax[i].plot(ts, [get(ours[m]) for m in ts], 'r--', label='umbrella3d')
+        ax[i].set(xlabel='t (s)', title=title)
     ax[0].legend()
-    lines += ["", save(fig, "mujoco.png"), ""]
+    lines += ['', save(fig, 'mujoco.png'), '']
 
 
 # ------------------------------------------------------------------ (e)
 def section_e(lines, pyplot):
-    progress("(e) mesh convergence")
+    progress('(e) mesh convergence')
     res = {}
     for n in (1, 2, 4, 8, 16, 32):
         omega, _, labels = locked_modes(UmbrellaModel3D(UmbrellaRibsParams.from_mapping(
-            {"elements_per_segment": n})))
+            {'elements_per_segment': n})))
         labels = np.array(labels)
         res[n] = [omega[labels[:, kind] > 0.5][0] / 2 / math.pi for kind in (1, 2, 0)]
-    lines += ["## (e) Convergence with the mesh", "",
-              "Lowest locked frequencies (Hz) by kind; the observed order is log₂ of the ratio "
-              "of successive differences (Strang & Fix 1973, ch. 6: h⁴ for the cubic bending "
-              "element with consistent mass, h² for the linear twist element); the order in row n "
-              "is that of the meshes n/4, n/2, n. The twist-dominated modes are told apart "
-              "from 8 elements a segment on (below, the lowest twist-dominated mode is not the "
-              "same mode from mesh to mesh); their row 32 gives the order 2 of the element, "
+    lines += ['## (e) Convergence with the mesh', '',
+              'Lowest locked frequencies (Hz) by kind; the observed order is log₂ of the ratio '
+              'of successive differences (Strang & Fix 1973, ch. 6: h⁴ for the cubic bending '
+              'element with consistent mass, h² for the linear twist element); the order in row n '
+              'is that of the meshes n/4, n/2, n. The twist-dominated modes are told apart '
+              'from 8 elements a segment on (below, the lowest twist-dominated mode is not the '
+              'same mode from mesh to mesh); their row 32 gives the order 2 of the element, '
               "and 2871.2 Hz is 0.99997 times the clamped-clamped shaft's π/L √(GJ/ρI_p) "
-              "(Blevins), L = 0.5 m: a segment held in twist at both ends.", "",
-              "| elements a segment | out-of-plane bending | order | twist | order | in-plane "
-              "bending | order |", "|---|---|---|---|---|---|---|"]
+              '(Blevins), L = 0.5 m: a segment held in twist at both ends.', '',
+              '| elements a segment | out-of-plane bending | order | twist | order | in-plane '
+              'bending | order |', '|---|---|---|---|---|---|---|']
     ns = sorted(res)
     for i, n in enumerate(ns):
         cells = []
         for kind in range(3):
-            order = "–"
+            order = '–'
             if 2 <= i:
                 a, b, c = (res[ns[j]][kind] for j in (i - 2, i - 1, i))
-                order = f"{math.log2(abs(a - b) / abs(b - c)):.2f}"
-            cells += [f"{res[n][kind]:.4f}", order]
-        lines.append(f"| {n} | " + " | ".join(cells) + " |")
-    progress("(e) a lateral jolt on 1, 2, 4 elements")
+                order = f'{math.log2(abs(a - b) / abs(b - c)):.2f}'
+            cells += [f'{res[n][kind]:.4f}', order]
+        lines.append(f'| {n} | ' + ' | '.join(cells) + ' |')
+    progress('(e) a lateral jolt on 1, 2, 4 elements')
     tips, series = [], []
     for n in (1, 2, 4):
         sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping({
-            "ribs": 2, "sleeve_force": 10.0, "time_step": 5e-5, "elements_per_segment": n,
-            "base": "prescribed", "base_accel_z": 50.0, "base_accel_duration": 0.01,
-            "rib1.hinge_coulomb": 0.3}))
+            'ribs': 2, 'sleeve_force': 10.0, 'time_step': 5e-5, 'elements_per_segment': n,
+            'base': 'prescribed', 'base_accel_z': 50.0, 'base_accel_duration': 0.01,
+            'rib1.hinge_coulomb': 0.3}))
         a = sim.run(0.03).arrays()
-        tips.append(a["tip"][-1, 0, 2])
-        series.append((n, a["time"], a["tip"][:, 0, 2]))
-    lines += ["", "A lateral jolt during the deployment (two ribs, the base accelerated along Z "
+        tips.append(a['tip'][-1, 0, 2])
+        series.append((n, a['time'], a['tip'][:, 0, 2]))
+    lines += ['', 'A lateral jolt during the deployment (two ribs, the base accelerated along Z '
               "by a 10 ms half-sine of 50 m/s², step 50 µs): rib 0's out-of-plane tip "
-              "deflection 30 ms in (mm):", "", "| elements a segment | w_tip (mm) | difference "
-              "to the next mesh |", "|---|---|---|"]
+              'deflection 30 ms in (mm):', '', '| elements a segment | w_tip (mm) | difference '
+              'to the next mesh |', '|---|---|---|']
     for i, n in enumerate((1, 2, 4)):
-        diff = f"{1e3 * abs(tips[i] - tips[i + 1]):.4f}" if i < 2 else "–"
-        lines.append(f"| {n} | {1e3 * tips[i]:.4f} | {diff} |")
+        diff = f'{1e3 * abs(tips[i] - tips[i + 1]):.4f}' if i < 2 else '–'
+        lines.append(f'| {n} | {1e3 * tips[i]:.4f} | {diff} |')
     fig, ax = pyplot.subplots(figsize=(6, 3.4))
     for n, t, w in series:
-        ax.plot(t, 1e3 * w, label=f"{n} element(s) a segment")
-    ax.set(xlabel="t (s)", ylabel="mm", title="rib 0: out-of-plane tip deflection")
+        ax.plot(t, 1e3 * w, label=f'{n} element(s) a segment')
+    ax.set(xlabel='t (s)', ylabel='mm', title='rib 0: out-of-plane tip deflection')
     ax.legend()
-    lines += ["", save(fig, "mesh.png"), ""]
+    lines += ['', save(fig, 'mesh.png'), '']
 
 
 HEADER = """# The whole umbrella in 3D: N flexible ribs on one sleeve
@@ -340,18 +340,18 @@ fit of the planar integrator, the geometrically exact beam option.
 def main():
     os.makedirs(OUT_DIR, exist_ok=True)
     pyplot = plt()
-    lines = [HEADER, f"Generated by `python docs/make_umbrella3d.py` (umbrella_sim at "
+    lines = [HEADER, f'Generated by `python docs/make_umbrella3d.py` (umbrella_sim at '
              f"{git_revision() or 'unknown'}). Thesis data: Al 7075-T6, l1 = l2 = l3 = 0.5 m, "
-             "10 mm square section, Poisson's ratio 0.33.", ""]
+             "10 mm square section, Poisson's ratio 0.33.", '']
     section_a(lines)
     section_b(lines)
     section_c(lines, pyplot)
     section_d(lines, pyplot)
     section_e(lines, pyplot)
-    with open(os.path.join(HERE, "umbrella3d.md"), "w") as f:
-        f.write("\n".join(lines).rstrip() + "\n")
-    progress("wrote docs/umbrella3d.md")
+    with open(os.path.join(HERE, 'umbrella3d.md'), 'w') as f:
+        f.write('\n'.join(lines).rstrip() + '\n')
+    progress('wrote docs/umbrella3d.md')
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

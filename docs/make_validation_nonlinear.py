@@ -41,7 +41,7 @@ import sys
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, os.path.join(HERE, '..'))
 
 from umbrella_sim.core.beam import BeamBody  # noqa: E402
 from umbrella_sim.core.beam_strain import (  # noqa: E402
@@ -53,16 +53,16 @@ from umbrella_sim.core.rotating_beam import (  # noqa: E402
     spin_up, spin_up_quasi_static_tip)
 from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
 
-NL = "flexible-nonlinear"
+NL = 'flexible-nonlinear'
 STAGE2 = 0.3          # s of stage 2 simulated after the lock (the summary's window)
 STEP = 1e-4           # s: the default step, at which the model meets its targets
 #: the independent reference quoted with the issue: ANCF cable elements, Exudyn 1.13.6,
 #: trapezoidal rule, h = 5e-6 s (V0 = -1) and 2.5e-6 s (V0 = -2), n elements a segment,
 #: plastic lock: (V0, n) -> figures
-QUOTED = {(-1.0, 8): {"stage2_tip_amplitude": 253.9e-3, "stage2_tip_period": 48.2e-3},
-          (-2.0, 8): {"stage2_tip_amplitude": 371.4e-3, "stage2_tip_period": 49.45e-3,
-                      "tip_deflection_max": 70.15e-3, "deploy_time": 0.0229751},
-          (-2.0, 16): {"stage2_tip_amplitude": 361.0e-3, "stage2_tip_period": 49.86e-3}}
+QUOTED = {(-1.0, 8): {'stage2_tip_amplitude': 253.9e-3, 'stage2_tip_period': 48.2e-3},
+          (-2.0, 8): {'stage2_tip_amplitude': 371.4e-3, 'stage2_tip_period': 49.45e-3,
+                      'tip_deflection_max': 70.15e-3, 'deploy_time': 0.0229751},
+          (-2.0, 16): {'stage2_tip_amplitude': 361.0e-3, 'stage2_tip_period': 49.86e-3}}
 #: the targets (N = 4): period and amplitude tolerances against the reference's figures
 TARGETS = {-1.0: (48.2e-3, 0.03, 253.9e-3, 0.05), -2.0: (49.9e-3, 0.05, 366e-3, 0.10)}
 #: what the von Karman model gave at N = 4, step 2e-5, plastic lock (measured with the issue)
@@ -73,11 +73,11 @@ def progress(text):
     print(text, file=sys.stderr, flush=True)
 
 
-def fmt(v, scale=1.0, spec=".4f"):
-    return "–" if v is None else format(v * scale, spec)
+def fmt(v, scale=1.0, spec='.4f'):
+    return '–' if v is None else format(v * scale, spec)
 
 
-def run(v0, n, model=NL, h=STEP, lock="plastic", stage2=STAGE2, follows=False):
+def run(v0, n, model=NL, h=STEP, lock='plastic', stage2=STAGE2, follows=False):
     """
     Return the summary, the error and the largest fibre slope |v'| of every step.
 
@@ -88,128 +88,128 @@ def run(v0, n, model=NL, h=STEP, lock="plastic", stage2=STAGE2, follows=False):
     driver = RunDriver(p, period_steps=None)
     r = simulate(p, 1.2 * 0.046 / abs(v0) + stage2, stop_after_lock=stage2, keep_samples=False,
                  driver=driver)
-    slope = getattr(driver.sim.engine, "max_section_slope", lambda: None)()
-    progress(f"V0 = {v0:g} N = {n} {model} h = {h:g} {lock}: done")
+    slope = getattr(driver.sim.engine, 'max_section_slope', lambda: None)()
+    progress(f'V0 = {v0:g} N = {n} {model} h = {h:g} {lock}: done')
     return r.summary(), r.error, slope
 
 
 def turn_degrees(slope):
     """Return the largest turn (deg) of a fibre from its body frame: asin of its slope."""
-    return "–" if slope is None else f"{math.degrees(math.asin(min(slope, 1.0))):.1f}"
+    return '–' if slope is None else f'{math.degrees(math.asin(min(slope, 1.0))):.1f}'
 
 
 def exudyn_results():
-    path = os.path.join(HERE, "exudyn_umbrella_frame.json")
+    path = os.path.join(HERE, 'exudyn_umbrella_frame.json')
     if not os.path.exists(path):
         return None
-    with open(path, encoding="utf-8") as fh:
+    with open(path, encoding='utf-8') as fh:
         return json.load(fh)
 
 
 def reference_section():
-    lines = ["## Against an independent geometrically exact model of the frame", "",
-             "The reference: the same frame of ANCF cable elements (Exudyn 1.13.6, "
+    lines = ['## Against an independent geometrically exact model of the frame', '',
+             'The reference: the same frame of ANCF cable elements (Exudyn 1.13.6, '
              "`ANCFCable2D`: axial strain |r'| − 1, curvature r' × r''/|r'|², cubic position "
-             "and slope fields; Gerstmayr & Irschik, J. Sound Vib. 318, 2008), trapezoidal "
-             "rule, h = 5·10⁻⁶ s at V0 = −1 and 2.5·10⁻⁶ s at V0 = −2, n elements a segment, "
-             "plastic lock, 0.3 s of stage 2, figures by our rules (stage-2 tip amplitude = "
-             "half peak-to-peak, period by `summary.oscillation_period`, tip deflection in "
+             'and slope fields; Gerstmayr & Irschik, J. Sound Vib. 318, 2008), trapezoidal '
+             'rule, h = 5·10⁻⁶ s at V0 = −1 and 2.5·10⁻⁶ s at V0 = −2, n elements a segment, '
+             'plastic lock, 0.3 s of stage 2, figures by our rules (stage-2 tip amplitude = '
+             'half peak-to-peak, period by `summary.oscillation_period`, tip deflection in '
              "the leaf frame O–O''). Ours: N = 4, the default step 0.1 ms, plastic lock. "
-             "The targets: at V0 = −1 the period within 3 % of 48.2 ms and the amplitude "
-             "within 5 % of 253.9 mm; at V0 = −2 within 5 % of 49.9 ms and 10 % of 366 mm "
-             "(the reference moves 3 % from n = 8 to 16 there); stage 1 at V0 = −2: tip "
-             "within 1 % of 70.15 mm, deploy time within 10⁻⁴ of 0.0229751 s.", "",
-             "| V0 (m/s) | figure | reference (n = 8; 16) | target | flexible-nonlinear N = 4 "
-             "| difference | von Kármán model (N = 4, h = 20 µs) |",
-             "|---|---|---|---|---|---|---|"]
+             'The targets: at V0 = −1 the period within 3 % of 48.2 ms and the amplitude '
+             'within 5 % of 253.9 mm; at V0 = −2 within 5 % of 49.9 ms and 10 % of 366 mm '
+             '(the reference moves 3 % from n = 8 to 16 there); stage 1 at V0 = −2: tip '
+             'within 1 % of 70.15 mm, deploy time within 10⁻⁴ of 0.0229751 s.', '',
+             '| V0 (m/s) | figure | reference (n = 8; 16) | target | flexible-nonlinear N = 4 '
+             '| difference | von Kármán model (N = 4, h = 20 µs) |',
+             '|---|---|---|---|---|---|---|']
     ours = {}
     for v0 in (-1.0, -2.0):
         s, err, slope = run(v0, 4)
         ours[v0] = s
         if err:
-            lines.append(f"| {v0:g} | failed: {err} ||||||")
+            lines.append(f'| {v0:g} | failed: {err} ||||||')
             continue
         period, p_tol, amplitude, a_tol = TARGETS[v0]
         ref8, ref16 = QUOTED[(v0, 8)], QUOTED.get((v0, 16))
         vk_period, vk_amplitude = VON_KARMAN[v0]
         for key, scale, unit, target, tol, vk in (
-                ("stage2_tip_period", 1e3, "ms", period, p_tol, vk_period),
-                ("stage2_tip_amplitude", 1e3, "mm", amplitude, a_tol, vk_amplitude)):
-            ref = f"{ref8[key] * scale:.4g}" + (f"; {ref16[key] * scale:.4g}" if ref16 else "")
+                ('stage2_tip_period', 1e3, 'ms', period, p_tol, vk_period),
+                ('stage2_tip_amplitude', 1e3, 'mm', amplitude, a_tol, vk_amplitude)):
+            ref = f'{ref8[key] * scale:.4g}' + (f'; {ref16[key] * scale:.4g}' if ref16 else '')
             lines.append(f"| {v0:g} | stage-2 {key.split('_')[-1]} ({unit}) | {ref} | "
-                         f"{target * scale:.4g} ± {100 * tol:g} % | {s[key] * scale:.2f} | "
-                         f"{100 * (s[key] / target - 1):+.1f} % | {vk * scale:.4g} "
-                         f"({100 * (vk / target - 1):+.1f} %) |")
+                         f'{target * scale:.4g} ± {100 * tol:g} % | {s[key] * scale:.2f} | '
+                         f'{100 * (s[key] / target - 1):+.1f} % | {vk * scale:.4g} '
+                         f'({100 * (vk / target - 1):+.1f} %) |')
         if v0 == -2.0:
-            lines.append(f"| −2 | stage-1 tip (mm) | 70.15 | ± 1 % | "
+            lines.append(f'| −2 | stage-1 tip (mm) | 70.15 | ± 1 % | '
                          f"{s['tip_deflection_max'] * 1e3:.2f} | "
                          f"{100 * (s['tip_deflection_max'] / 70.15e-3 - 1):+.2f} % | 70.4 |")
-            lines.append(f"| −2 | deploy time (s) | 0.0229751 | ± 10⁻⁴ | "
+            lines.append(f'| −2 | deploy time (s) | 0.0229751 | ± 10⁻⁴ | '
                          f"{s['deploy_time']:.7f} | {s['deploy_time'] / 0.0229751 - 1:+.1e} | "
-                         "+3.7e-04 |")
-    lines += ["", "The von Kármán column is the model this one replaced, as measured with "
-              "the issue (its step, 20 µs; at the default step its V0 = −2 period was "
-              "59.2 ms and amplitude 467 mm)."]
+                         '+3.7e-04 |')
+    lines += ['', 'The von Kármán column is the model this one replaced, as measured with '
+              'the issue (its step, 20 µs; at the default step its V0 = −2 period was '
+              '59.2 ms and amplitude 467 mm).']
     data = exudyn_results()
     if data:
-        lines += ["", f"The reference rebuilt here: `docs/exudyn_umbrella_frame.py` (Exudyn "
+        lines += ['', f'The reference rebuilt here: `docs/exudyn_umbrella_frame.py` (Exudyn '
                   f"{data['exudyn']}, the same model as above, written out; its results file "
-                  "`docs/exudyn_umbrella_frame.json`, which holds the cases run so far; the "
+                  '`docs/exudyn_umbrella_frame.json`, which holds the cases run so far; the '
                   "script's default list takes hours). Index-3 constraints are Exudyn's "
-                  "default.", "",
-                  "| V0 (m/s) | n | h (µs) | constraints | deploy time (s) | stage-1 tip (mm) "
-                  "| stage-2 amplitude (mm) | stage-2 period (ms) |",
-                  "|---|---|---|---|---|---|---|---|"]
-        for c in sorted(data["cases"], key=lambda c: (-c["v0"], c["elements_per_segment"],
-                                                      c["constraints"])):
+                  'default.', '',
+                  '| V0 (m/s) | n | h (µs) | constraints | deploy time (s) | stage-1 tip (mm) '
+                  '| stage-2 amplitude (mm) | stage-2 period (ms) |',
+                  '|---|---|---|---|---|---|---|---|']
+        for c in sorted(data['cases'], key=lambda c: (-c['v0'], c['elements_per_segment'],
+                                                      c['constraints'])):
             lines.append(f"| {c['v0']:g} | {c['elements_per_segment']} | "
                          f"{c['time_step'] * 1e6:g} | {c['constraints']} | "
                          f"{c['deploy_time']:.7f} | {c['tip_deflection_max'] * 1e3:.2f} | "
                          f"{fmt(c['stage2_tip_amplitude'], 1e3, '.1f')} | "
                          f"{fmt(c['stage2_tip_period'], 1e3, '.2f')} |")
-        label = {"stage2_tip_period": "stage-2 period", "stage2_tip_amplitude": "stage-2 "
-                 "amplitude", "tip_deflection_max": "stage-1 tip", "deploy_time": "deploy time"}
+        label = {'stage2_tip_period': 'stage-2 period', 'stage2_tip_amplitude': 'stage-2 '
+                 'amplitude', 'tip_deflection_max': 'stage-1 tip', 'deploy_time': 'deploy time'}
         quoted_notes, our_notes = [], []
-        cases = sorted(data["cases"], key=lambda c: (-c["v0"], c["elements_per_segment"]))
+        cases = sorted(data['cases'], key=lambda c: (-c['v0'], c['elements_per_segment']))
         for c in cases:
-            quoted = QUOTED.get((c["v0"], c["elements_per_segment"]))
-            if quoted and c["constraints"] == "index 3":
+            quoted = QUOTED.get((c['v0'], c['elements_per_segment']))
+            if quoted and c['constraints'] == 'index 3':
                 quoted_notes.append(f"V0 = {c['v0']:g}, n = {c['elements_per_segment']}: " +
-                                    ", ".join(f"{label[key]} {c[key] / quoted[key] - 1:+.1e}"
+                                    ', '.join(f'{label[key]} {c[key] / quoted[key] - 1:+.1e}'
                                               for key in quoted))
-            if c["elements_per_segment"] == 4 and c["v0"] in ours \
-                    and c["constraints"] == "index 3":
-                o = ours[c["v0"]]
-                our_notes.append(f"V0 = {c['v0']:g}: " + ", ".join(
-                    f"{label[key]} {100 * (o[key] / c[key] - 1):+.2f} %"
-                    for key in ("stage2_tip_period", "stage2_tip_amplitude",
-                                "tip_deflection_max"))
+            if c['elements_per_segment'] == 4 and c['v0'] in ours \
+                    and c['constraints'] == 'index 3':
+                o = ours[c['v0']]
+                our_notes.append(f"V0 = {c['v0']:g}: " + ', '.join(
+                    f'{label[key]} {100 * (o[key] / c[key] - 1):+.2f} %'
+                    for key in ('stage2_tip_period', 'stage2_tip_amplitude',
+                                'tip_deflection_max'))
                     + f", deploy time {o['deploy_time'] / c['deploy_time'] - 1:+.1e}")
         if quoted_notes:
-            lines += ["", "Its relative differences from the figures quoted above: "
-                      + "; ".join(quoted_notes) + "."]
+            lines += ['', 'Its relative differences from the figures quoted above: '
+                      + '; '.join(quoted_notes) + '.']
         if our_notes:
-            lines += ["", "Ours (N = 4, 0.1 ms) against it at the same mesh (n = 4): "
-                      + "; ".join(our_notes) + "."]
+            lines += ['', 'Ours (N = 4, 0.1 ms) against it at the same mesh (n = 4): '
+                      + '; '.join(our_notes) + '.']
     return lines
 
 
 def mesh_section(meshes):
     steps = (1e-4, 5e-5, 2e-5)
-    lines = ["", "## Mesh and step convergence of the stage-2 figures", "",
-             "Plastic lock, 0.3 s of stage 2; the largest turn of a fibre from its body frame "
+    lines = ['', '## Mesh and step convergence of the stage-2 figures', '',
+             'Plastic lock, 0.3 s of stage 2; the largest turn of a fibre from its body frame '
              "over every step (asin |v'|), and the energy balance error with F = 0 and no "
-             "damping (relative to the largest energy: round-off).", "",
-             "| V0 (m/s) | N | h (µs) | deploy time (s) | stage-1 tip (mm) | stage-2 amplitude "
-             "(mm) | stage-2 period (ms) | peak σ leaf (MPa) | largest turn (deg) | energy "
-             "drift |", "|---|---|---|---|---|---|---|---|---|---|"]
+             'damping (relative to the largest energy: round-off).', '',
+             '| V0 (m/s) | N | h (µs) | deploy time (s) | stage-1 tip (mm) | stage-2 amplitude '
+             '(mm) | stage-2 period (ms) | peak σ leaf (MPa) | largest turn (deg) | energy '
+             'drift |', '|---|---|---|---|---|---|---|---|---|---|']
     figures = {}
     for v0 in (-1.0, -2.0):
         for n in meshes:
             for h in steps:
                 s, err, slope = run(v0, n, h=h)
                 if err:
-                    lines.append(f"| {v0:g} | {n} | {h * 1e6:g} | failed: {err} |||||||")
+                    lines.append(f'| {v0:g} | {n} | {h * 1e6:g} | failed: {err} |||||||')
                     continue
                 figures[v0, n, h] = s
                 lines.append(
@@ -221,106 +221,106 @@ def mesh_section(meshes):
                     f"{s['energy_drift']:.1e} |")
     spread = []
     for v0 in (-1.0, -2.0):
-        for key in ("stage2_tip_period", "stage2_tip_amplitude"):
+        for key in ('stage2_tip_period', 'stage2_tip_amplitude'):
             vals = [figures[v0, n, h][key] for n in meshes if n >= 4 for h in steps
                     if (v0, n, h) in figures and figures[v0, n, h][key] is not None]
             if vals:
                 spread.append(f"V0 = {v0:g}, {key.split('_')[-1]}: "
-                              f"{min(vals) * 1e3:.4g}–{max(vals) * 1e3:.4g}")
-    lines += ["", "Over N ≥ 4 and the three steps: " + "; ".join(spread) + ". Stage 1 and "
-              "the deploy time converge with both (the deploy time at V0 = −2 moves by "
+                              f'{min(vals) * 1e3:.4g}–{max(vals) * 1e3:.4g}')
+    lines += ['', 'Over N ≥ 4 and the three steps: ' + '; '.join(spread) + '. Stage 1 and '
+              'the deploy time converge with both (the deploy time at V0 = −2 moves by '
               "up to ±1.6·10⁻⁴ at N ≥ 4 with the step's phase of the unresolved axial modes "
-              "at the lock). The "
-              "stage-2 figures at V0 = −2 are envelopes of a motion that amplifies any "
-              "perturbation (next sections): they move by a few per cent with the step at "
-              "every mesh."]
+              'at the lock). The '
+              'stage-2 figures at V0 = −2 are envelopes of a motion that amplifies any '
+              'perturbation (next sections): they move by a few per cent with the step at '
+              'every mesh.']
     return lines
 
 
 def small_motion_section():
-    lines = ["", "## Small motion: against the linear model and the ANCF model", "",
+    lines = ['', '## Small motion: against the linear model and the ANCF model', '',
              "N = 4, 0.3 s of stage 2. Relative differences of flexible-nonlinear's figures "
              "from flexible's, each at its own step (`time_step` 0: flexible's chosen for the "
-             "mesh with its stage-2 mode fit, 20 µs (energy lock) or 16.7 µs (plastic); "
+             'mesh with its stage-2 mode fit, 20 µs (energy lock) or 16.7 µs (plastic); '
              "flexible-nonlinear's 0.1 ms), and with flexible-nonlinear at the step its rule "
-             "resolves stage 2 with (`step_follows_mesh`: 4.8 µs energy, 4 µs plastic).", "",
-             "| lock | V0 (m/s) | deploy time | stage-1 tip | stage-2 amplitude | stage-2 "
-             "period | stage-1 tip, resolved | stage-2 amplitude, resolved | stage-2 period, "
-             "resolved |", "|---|---|---|---|---|---|---|---|---|"]
-    keys = ("deploy_time", "tip_deflection_max", "stage2_tip_amplitude", "stage2_tip_period")
+             'resolves stage 2 with (`step_follows_mesh`: 4.8 µs energy, 4 µs plastic).', '',
+             '| lock | V0 (m/s) | deploy time | stage-1 tip | stage-2 amplitude | stage-2 '
+             'period | stage-1 tip, resolved | stage-2 amplitude, resolved | stage-2 period, '
+             'resolved |', '|---|---|---|---|---|---|---|---|---|']
+    keys = ('deploy_time', 'tip_deflection_max', 'stage2_tip_amplitude', 'stage2_tip_period')
     small = {}
-    for lock in ("energy", "plastic"):
+    for lock in ('energy', 'plastic'):
         for v0 in (-0.05, -0.1, -0.2):
-            a = run(v0, 4, model="flexible", h=0.0, lock=lock)[0]
+            a = run(v0, 4, model='flexible', h=0.0, lock=lock)[0]
             b = run(v0, 4, h=0.0, lock=lock)[0]
             c = run(v0, 4, h=0.0, lock=lock, follows=True)[0]
             small[lock, v0] = (a, b, c)
-            cells = [f"{b[k] / a[k] - 1:+.1e}" if k == "deploy_time"
-                     else f"{100 * (b[k] / a[k] - 1):+.2f} %" for k in keys]
-            cells += [f"{100 * (c[k] / a[k] - 1):+.2f} %" for k in keys[1:]]
-            lines.append(f"| {lock} | {v0:g} | " + " | ".join(cells) + " |")
-    data = exudyn_results() or {"cases": []}
-    ancf = [c for c in data["cases"] if c["v0"] == -0.2 and c["elements_per_segment"] == 4
-            and c["constraints"] == "index 3"]
+            cells = [f'{b[k] / a[k] - 1:+.1e}' if k == 'deploy_time'
+                     else f'{100 * (b[k] / a[k] - 1):+.2f} %' for k in keys]
+            cells += [f'{100 * (c[k] / a[k] - 1):+.2f} %' for k in keys[1:]]
+            lines.append(f'| {lock} | {v0:g} | ' + ' | '.join(cells) + ' |')
+    data = exudyn_results() or {'cases': []}
+    ancf = [c for c in data['cases'] if c['v0'] == -0.2 and c['elements_per_segment'] == 4
+            and c['constraints'] == 'index 3']
     if ancf:
         ref = ancf[0]
-        a, b, c = small["plastic", -0.2]
-        lines += ["", "V0 = −0.2, plastic lock, against the ANCF model of the same mesh (n = 4, "
-                  f"h = {ref['time_step'] * 1e6:g} µs; `docs/exudyn_umbrella_frame.py`):", "",
-                  "| figure | ANCF | flexible-nonlinear, resolved | flexible-nonlinear, 0.1 ms "
-                  "| flexible |", "|---|---|---|---|---|"]
-        for k, scale, unit, spec in (("deploy_time", 1, "s", ".8f"),
-                                     ("tip_deflection_max", 1e3, "mm", ".5f"),
-                                     ("stage2_tip_amplitude", 1e3, "mm", ".3f"),
-                                     ("stage2_tip_period", 1e3, "ms", ".4f")):
-            lines.append(f"| {k} ({unit}) | {ref[k] * scale:{spec}} | "
-                         + " | ".join(f"{x[k] * scale:{spec}} ({100 * (x[k] / ref[k] - 1):+.2f}"
-                                      " %)" for x in (c, b, a)) + " |")
-    lines += ["", "The stage-1 tip difference is the geometric terms of U (the leaf's axial "
-              "force coupled with its bending), ∝ V0² (table below). With the energy lock (the "
+        a, b, c = small['plastic', -0.2]
+        lines += ['', 'V0 = −0.2, plastic lock, against the ANCF model of the same mesh (n = 4, '
+                  f"h = {ref['time_step'] * 1e6:g} µs; `docs/exudyn_umbrella_frame.py`):", '',
+                  '| figure | ANCF | flexible-nonlinear, resolved | flexible-nonlinear, 0.1 ms '
+                  '| flexible |', '|---|---|---|---|---|']
+        for k, scale, unit, spec in (('deploy_time', 1, 's', '.8f'),
+                                     ('tip_deflection_max', 1e3, 'mm', '.5f'),
+                                     ('stage2_tip_amplitude', 1e3, 'mm', '.3f'),
+                                     ('stage2_tip_period', 1e3, 'ms', '.4f')):
+            lines.append(f'| {k} ({unit}) | {ref[k] * scale:{spec}} | '
+                         + ' | '.join(f'{x[k] * scale:{spec}} ({100 * (x[k] / ref[k] - 1):+.2f}'
+                                      ' %)' for x in (c, b, a)) + ' |')
+    lines += ['', "The stage-1 tip difference is the geometric terms of U (the leaf's axial "
+              'force coupled with its bending), ∝ V0² (table below). With the energy lock (the '
               "default) every figure is within 1 % of the linear model's. With the plastic "
               "lock the geometrically exact stage-2 amplitude is above the linear model's by "
-              "a few per cent at the resolved step, and the ANCF model of the same mesh agrees "
-              "with it (table above): the lock stops the sleeve within a step, and the short "
-              "axial force that impact puts into the link and the inner leaf acts on their "
-              "bending through the geometric terms, physics the linear model has not. At "
+              'a few per cent at the resolved step, and the ANCF model of the same mesh agrees '
+              'with it (table above): the lock stops the sleeve within a step, and the short '
+              'axial force that impact puts into the link and the inner leaf acts on their '
+              'bending through the geometric terms, physics the linear model has not. At '
               "0.1 ms the step's error takes part of that back ('coarse step' says the stage-2 "
-              "figures are not resolved).", "",
-              "| N | h (µs) | V0 (m/s) | tip linear (mm) | tip nonlinear (mm) | difference | "
-              "deploy time difference |", "|---|---|---|---|---|---|---|"]
+              'figures are not resolved).', '',
+              '| N | h (µs) | V0 (m/s) | tip linear (mm) | tip nonlinear (mm) | difference | '
+              'deploy time difference |', '|---|---|---|---|---|---|---|']
     for n, h in ((2, STEP), (4, STEP), (8, STEP), (4, STEP / 4)):
         for v0 in (-0.05, -0.1, -0.2, -0.4):
             a, b = (simulate(UmbrellaParams(v0=v0, model=model, elements_per_segment=n,
                                             time_step=h), 3.0, stop_after_lock=0.0,
-                             keep_samples=False).summary() for model in ("flexible", NL))
+                             keep_samples=False).summary() for model in ('flexible', NL))
             lines.append(f"| {n} | {h * 1e6:g} | {v0:g} | {a['tip_deflection_max'] * 1e3:.5f} | "
                          f"{b['tip_deflection_max'] * 1e3:.5f} | "
                          f"{100 * (b['tip_deflection_max'] / a['tip_deflection_max'] - 1):+.3f} % "
                          f"| {b['deploy_time'] / a['deploy_time'] - 1:+.1e} |")
-        progress(f"small motion N = {n} h = {h:g}: done")
+        progress(f'small motion N = {n} h = {h:g}: done')
     return lines
 
 
 def rotation_section():
-    lines = ["", "## How far the fibres turn, and the 90° limit of the slope coordinates", "",
+    lines = ['', '## How far the fibres turn, and the 90° limit of the slope coordinates', '',
              "The section angle is asin of the slope v' in the body frame, so a section cannot "
-             "turn through 90° from its body frame: a run that gets there stops with that "
+             'turn through 90° from its body frame: a run that gets there stops with that '
              "fault, and the summary warns past 80° ('fibre rotation'). The largest turn over "
-             "every step (default step, 0.3 s of stage 2):", "",
-             "| V0 (m/s) | lock | N | largest turn (deg) | warnings / fault |",
-             "|---|---|---|---|---|"]
-    for v0, lock, n in ((-1.0, "plastic", 4), (-1.0, "energy", 4), (-2.0, "plastic", 4),
-                        (-2.0, "plastic", 8), (-2.0, "energy", 4), (-2.0, "energy", 8),
-                        (-2.0, "energy", 1), (-3.0, "plastic", 4)):
+             'every step (default step, 0.3 s of stage 2):', '',
+             '| V0 (m/s) | lock | N | largest turn (deg) | warnings / fault |',
+             '|---|---|---|---|---|']
+    for v0, lock, n in ((-1.0, 'plastic', 4), (-1.0, 'energy', 4), (-2.0, 'plastic', 4),
+                        (-2.0, 'plastic', 8), (-2.0, 'energy', 4), (-2.0, 'energy', 8),
+                        (-2.0, 'energy', 1), (-3.0, 'plastic', 4)):
         s, err, slope = run(v0, n, lock=lock)
-        said = ("fault: " + err.split(": ", 1)[-1]) if err else \
-            ", ".join(w.split(":")[0] for w in s["warnings"]) or "none"
-        lines.append(f"| {v0:g} | {lock} | {n} | {turn_degrees(slope)} | {said} |")
-    lines += ["", "The energy lock keeps the sleeve's kinetic energy in the frame, so its "
+        said = ('fault: ' + err.split(': ', 1)[-1]) if err else \
+            ', '.join(w.split(':')[0] for w in s['warnings']) or 'none'
+        lines.append(f'| {v0:g} | {lock} | {n} | {turn_degrees(slope)} | {said} |')
+    lines += ['', "The energy lock keeps the sleeve's kinetic energy in the frame, so its "
               "stage 2 swings further than the plastic one's: at V0 = −2 the leaf's tip turns "
-              "~85° from the leaf frame (N = 1 reaches 90° and stops). The peak fibre strain "
-              "passes 1 % at V0 ≤ −1 (2–4 %: far past yield too), where the small-strain "
-              "assumption of this beam — and of the ANCF reference — no longer holds: the "
+              '~85° from the leaf frame (N = 1 reaches 90° and stops). The peak fibre strain '
+              'passes 1 % at V0 ≤ −1 (2–4 %: far past yield too), where the small-strain '
+              'assumption of this beam — and of the ANCF reference — no longer holds: the '
               "summary says 'large strain'."]
     return lines
 
@@ -336,7 +336,7 @@ def perturbation_growth(v0, h, model=NL, tolerance=1e-11, duration=0.5):
     runs = []
     for tol in (None, tolerance):
         sim = UmbrellaSimulator(UmbrellaParams(v0=v0, model=model, elements_per_segment=4,
-                                               time_step=h, lock="plastic"))
+                                               time_step=h, lock='plastic'))
         if tol is not None:
             sim.engine.integrator.tolerance = tol
         block = sim.advance(round(duration / h))
@@ -349,45 +349,45 @@ def perturbation_growth(v0, h, model=NL, tolerance=1e-11, duration=0.5):
 
 
 def sensitivity_section():
-    lines = ["", "## Sensitivity of the stage-2 motion", "",
-             "Two runs that differ only in the Newton tolerance (default, "
-             "`integrators.newton_tolerance` of the step, against 1e-11: a perturbation of "
-             "up to 1e-8 m a step), N = 4, plastic lock, 0.5 s (0.25 s at 2.5 µs): the time "
-             "after the lock at which their tip deflections first differ by more than 1 µm, "
-             "1 mm and 10 mm, and the largest difference.", "",
-             "| V0 (m/s) | model | h (µs) | lock (s) | > 1 µm (s) | > 1 mm (s) | > 10 mm (s) "
-             "| max difference (mm) |", "|---|---|---|---|---|---|---|---|"]
-    cases = [(v0, model, 1e-4) for v0 in (-0.2, -1.0, -2.0) for model in ("flexible", NL)]
+    lines = ['', '## Sensitivity of the stage-2 motion', '',
+             'Two runs that differ only in the Newton tolerance (default, '
+             '`integrators.newton_tolerance` of the step, against 1e-11: a perturbation of '
+             'up to 1e-8 m a step), N = 4, plastic lock, 0.5 s (0.25 s at 2.5 µs): the time '
+             'after the lock at which their tip deflections first differ by more than 1 µm, '
+             '1 mm and 10 mm, and the largest difference.', '',
+             '| V0 (m/s) | model | h (µs) | lock (s) | > 1 µm (s) | > 1 mm (s) | > 10 mm (s) '
+             '| max difference (mm) |', '|---|---|---|---|---|---|---|---|']
+    cases = [(v0, model, 1e-4) for v0 in (-0.2, -1.0, -2.0) for model in ('flexible', NL)]
     cases += [(-2.0, NL, h) for h in (2.5e-5, 2.5e-6)]
     for v0, model, h in cases:
         lock, after, dmax = perturbation_growth(v0, h, model,
                                                 duration=0.5 if h > 1e-5 else 0.25)
-        lines.append(f"| {v0:g} | {model} | {h * 1e6:g} | {lock:.6f} | "
-                     + " | ".join("–" if a is None else f"{a:.3f}" for a in after)
-                     + f" | {dmax * 1e3:.3g} |")
-        progress(f"sensitivity V0 = {v0:g} {model} h = {h:g}: done")
-    lines += ["", "The linear model keeps such a perturbation at the micrometre level: its "
-              "stage-2 motion is a superposition of modes. The geometrically exact model at "
-              "V0 = −1 and −2 amplifies it to millimetres within a fraction of a second of "
+        lines.append(f'| {v0:g} | {model} | {h * 1e6:g} | {lock:.6f} | '
+                     + ' | '.join('–' if a is None else f'{a:.3f}' for a in after)
+                     + f' | {dmax * 1e3:.3g} |')
+        progress(f'sensitivity V0 = {v0:g} {model} h = {h:g}: done')
+    lines += ['', 'The linear model keeps such a perturbation at the micrometre level: its '
+              'stage-2 motion is a superposition of modes. The geometrically exact model at '
+              'V0 = −1 and −2 amplifies it to millimetres within a fraction of a second of '
               "stage 2 (the link and the inner leaf buckle dynamically there: the link's "
-              "axial force swings to ±25 kN, ten times its Euler load), also at 2.5 µs, which "
+              'axial force swings to ±25 kN, ten times its Euler load), also at 2.5 µs, which '
               "resolves every mode of the mesh: it is the model's motion, not the step's "
-              "aliasing. Its tip series after that time is reproducible bit for bit (same "
-              "build, step and tolerance), not predictable; the envelope figures (amplitude, "
-              "period, peak stress) are what the tables compare, and they move by a few per "
-              "cent with the step and the mesh for the same reason."]
+              'aliasing. Its tip series after that time is reproducible bit for bit (same '
+              'build, step and tolerance), not predictable; the envelope figures (amplitude, '
+              'period, peak stress) are what the tables compare, and they move by a few per '
+              'cent with the step and the mesh for the same reason.']
     return lines
 
 
 def elastica_section():
     from scipy.integrate import solve_bvp
-    lines = ["", "## Statics: the elastica of a tip-loaded cantilever", "",
-             "A cantilever of our element (EA large: inextensible), a dead tip load P, "
-             "P L²/EI = 1 to 10 (Bisshopp & Drucker, Q. Appl. Math. 3, 1945), against the "
+    lines = ['', '## Statics: the elastica of a tip-loaded cantilever', '',
+             'A cantilever of our element (EA large: inextensible), a dead tip load P, '
+             'P L²/EI = 1 to 10 (Bisshopp & Drucker, Q. Appl. Math. 3, 1945), against the '
              "elastica EI ψ'' = −P cos ψ solved by scipy's boundary-value solver (no finite "
-             "elements): relative errors of the tip deflection v and shortening u.", "",
-             "| P L²/EI | tip turn (deg) | v/L | u/L | N = 2: v, u | N = 4: v, u | N = 8: v, u |",
-             "|---|---|---|---|---|---|---|"]
+             'elements): relative errors of the tip deflection v and shortening u.', '',
+             '| P L²/EI | tip turn (deg) | v/L | u/L | N = 2: v, u | N = 4: v, u | N = 8: v, u |',
+             '|---|---|---|---|---|---|---|']
     for load in (1.0, 2.0, 5.0, 10.0):
         s = np.linspace(0.0, 1.0, 50)
         y0 = np.zeros((4, 50))
@@ -399,146 +399,146 @@ def elastica_section():
         psi, _, x, y = sol.sol(1.0)
         cells = []
         for n in (2, 4, 8):
-            body = BeamBody("beam", [(1.0, n)], [(0, "u"), (0, "v"), (0, "theta")],
+            body = BeamBody('beam', [(1.0, n)], [(0, 'u'), (0, 'v'), (0, 'theta')],
                             mass_per_length=1.0, ea=1e7, ei=1.0, youngs_modulus=1.0, fibre=0.0)
             law = CorotationalStrainEnergy(((body, slice(0, body.n_elastic)),), body.n_elastic,
                                            1e7, 1.0, 1.0, 0.0)
-            iv, iu = body.elastic_index(n, "v"), body.elastic_index(n, "u")
+            iv, iu = body.elastic_index(n, 'v'), body.elastic_index(n, 'u')
             force = np.zeros(body.n_elastic)
             force[iv] = load
             q = static_equilibrium(law, force)
-            cells.append(f"{q[iv] / y - 1:+.1e}, {-q[iu] / (1 - x) - 1:+.1e}")
-        lines.append(f"| {load:g} | {math.degrees(psi):.1f} | {y:.5f} | {1 - x:.5f} | "
-                     + " | ".join(cells) + " |")
-    lines += ["", "Fourth-order convergence; 4 elements within 6·10⁻⁴ at a tip turned 82°."]
+            cells.append(f'{q[iv] / y - 1:+.1e}, {-q[iu] / (1 - x) - 1:+.1e}')
+        lines.append(f'| {load:g} | {math.degrees(psi):.1f} | {y:.5f} | {1 - x:.5f} | '
+                     + ' | '.join(cells) + ' |')
+    lines += ['', 'Fourth-order convergence; 4 elements within 6·10⁻⁴ at a tip turned 82°.']
     return lines
 
 
 def spin_up_section():
-    lines = ["", "## Spin-up benchmark (Kane, Ryan & Banerjee 1987)", "",
-             "Cantilever L = 10 m, A = 4·10⁻⁴ m², I = 2·10⁻⁷ m⁴, E = 7·10¹⁰ Pa, ρ = 3000 kg/m³, "
-             "clamped to a hub driven at θ(t) = (Ω/T)[t²/2 + (T/2π)²(cos(2πt/T) − 1)] for "
-             "t ≤ T, Ω(t − T/2) after, Ω = 6 rad/s, T = 15 s (Kane, Ryan & Banerjee, J. "
-             "Guidance Control Dynamics 10(2):139–151, 1987; the same data in the "
-             "`spinupRobotArm` example of AeroBeams.jl). Our beam element (the co-rotational "
-             "beam of flexible-nonlinear), in the hub frame, by "
-             "`rotating_beam.PrescribedRotationBeam` (implicit midpoint, its discrete "
-             "gradient). Reference: the quasi-static tip deflection of the spinning "
-             "cantilever under its Euler load ρA θ̈ x with the exact centrifugal tension "
+    lines = ['', '## Spin-up benchmark (Kane, Ryan & Banerjee 1987)', '',
+             'Cantilever L = 10 m, A = 4·10⁻⁴ m², I = 2·10⁻⁷ m⁴, E = 7·10¹⁰ Pa, ρ = 3000 kg/m³, '
+             'clamped to a hub driven at θ(t) = (Ω/T)[t²/2 + (T/2π)²(cos(2πt/T) − 1)] for '
+             't ≤ T, Ω(t − T/2) after, Ω = 6 rad/s, T = 15 s (Kane, Ryan & Banerjee, J. '
+             'Guidance Control Dynamics 10(2):139–151, 1987; the same data in the '
+             '`spinupRobotArm` example of AeroBeams.jl). Our beam element (the co-rotational '
+             'beam of flexible-nonlinear), in the hub frame, by '
+             '`rotating_beam.PrescribedRotationBeam` (implicit midpoint, its discrete '
+             'gradient). Reference: the quasi-static tip deflection of the spinning '
+             'cantilever under its Euler load ρA θ̈ x with the exact centrifugal tension '
              "N = ρAω²(L² − x²)/2, EI v'''' − (N v')' − ρAω² v = −ρA θ̈ x, solved by scipy's "
-             "boundary-value solver (no finite elements). The published finding: the linear "
+             'boundary-value solver (no finite elements). The published finding: the linear '
              "('conventional') model diverges once ω passes the first bending frequency "
-             "3.516·√(EI/ρAL⁴) = 3.80 rad/s; a model with geometric stiffening stays bounded. "
-             "Tabulated values of the published tip curves (Kane et al. 1987, Fig. 5; Simo & "
-             "Vu-Quoc 1986) were not available to us, and figures read off a plot from memory "
-             "would not be a citation: the test (tests/test_nonlinear.py) checks the "
-             "published finding (linear diverges after ω passes ω₁, stiffened stays bounded "
-             "and straightens once spun up) and the curve against the independent "
-             "quasi-static reference.", "",
-             "| t (s) | quasi-static reference (m) | nonlinear N = 4, h = 10 ms (m) | "
-             "nonlinear N = 8, h = 5 ms (m) | linear N = 4 (m) |", "|---|---|---|---|---|"]
-    runs = {"n4": spin_up(4, True, 20.0, 0.01), "n8": spin_up(8, True, 20.0, 0.005),
-            "lin": spin_up(4, False, 20.0, 0.01)}
-    progress("spin-up: done")
+             '3.516·√(EI/ρAL⁴) = 3.80 rad/s; a model with geometric stiffening stays bounded. '
+             'Tabulated values of the published tip curves (Kane et al. 1987, Fig. 5; Simo & '
+             'Vu-Quoc 1986) were not available to us, and figures read off a plot from memory '
+             'would not be a citation: the test (tests/test_nonlinear.py) checks the '
+             'published finding (linear diverges after ω passes ω₁, stiffened stays bounded '
+             'and straightens once spun up) and the curve against the independent '
+             'quasi-static reference.', '',
+             '| t (s) | quasi-static reference (m) | nonlinear N = 4, h = 10 ms (m) | '
+             'nonlinear N = 8, h = 5 ms (m) | linear N = 4 (m) |', '|---|---|---|---|---|']
+    runs = {'n4': spin_up(4, True, 20.0, 0.01), 'n8': spin_up(8, True, 20.0, 0.005),
+            'lin': spin_up(4, False, 20.0, 0.01)}
+    progress('spin-up: done')
 
     def at(key, tt):
         t, _, v = runs[key]
         i = int(np.searchsorted(t, tt - 1e-9))
-        return f"{v[i]:.4f}" if i < len(t) else "diverged"
+        return f'{v[i]:.4f}' if i < len(t) else 'diverged'
 
     for tt in (2.0, 4.0, 6.0, 7.0, 8.0, 9.0, 10.0, 12.0, 15.0, 18.0):
         lines.append(f"| {tt:g} | {spin_up_quasi_static_tip(tt):.4f} | {at('n4', tt)} | "
                      f"{at('n8', tt)} | {at('lin', tt)} |")
-    t, u, v = runs["n8"]
+    t, u, v = runs['n8']
     after = t > 15.0
     stretch = 3000.0 * 36.0 * 1e3 / (3 * 7e10)
-    lines += ["", f"Nonlinear N = 8: minimum tip deflection {v.min():.4f} m at t = "
-              f"{t[np.argmin(v)]:.2f} s; after the spin-up the mean axial tip stretch is "
-              f"{u[after].mean():.4e} m against ρΩ²L³/(3E) = {stretch:.4e} m (exact for the "
-              f"spinning bar) and |v| stays below {np.abs(v[after]).max() * 1e3:.1f} mm. "
-              f"The linear model passes 100 m (10 beam lengths) at t = "
+    lines += ['', f'Nonlinear N = 8: minimum tip deflection {v.min():.4f} m at t = '
+              f'{t[np.argmin(v)]:.2f} s; after the spin-up the mean axial tip stretch is '
+              f'{u[after].mean():.4e} m against ρΩ²L³/(3E) = {stretch:.4e} m (exact for the '
+              f'spinning bar) and |v| stays below {np.abs(v[after]).max() * 1e3:.1f} mm. '
+              f'The linear model passes 100 m (10 beam lengths) at t = '
               f"{runs['lin'][0][-1]:.2f} s."]
     return lines
 
 
 def rotating_cantilever_section():
-    lines = ["", "## Published benchmark: the rotating cantilever's stiffened frequency", "",
-             "The tabulated benchmark of centrifugal stiffening: the first flapwise natural "
-             "frequency of a uniform cantilever rotating about its root (hub radius 0), "
-             "λ_f = ω_f/√(EI/ρAL⁴) against γ = Ω√(ρAL⁴/EI) (Wright, Smith, Thresher & Wang, "
-             "J. Appl. Mech. 49, 1982; Yoo & Shin, J. Sound Vib. 212(5), 1998). Our beam "
-             "bends in the plane of rotation, whose equation is the flapwise one plus the "
-             "centrifugal softening −ρAΩ²v, so its published value is √(λ_f² − γ²) (exact for "
-             "the linearised inextensible beam; a test checks the table against an "
-             "independent Rayleigh–Ritz solution). Measured: the Kane beam spun up smoothly "
-             "over 8 s to Ω and left turning (`rotating_beam.rotating_cantilever_frequency`), "
-             "the frequency of the small vibration (millimetres on 10 m) the spin-up leaves, "
-             "as the period of the tip deflection in the hub frame over the next 12 s by the "
+    lines = ['', "## Published benchmark: the rotating cantilever's stiffened frequency", '',
+             'The tabulated benchmark of centrifugal stiffening: the first flapwise natural '
+             'frequency of a uniform cantilever rotating about its root (hub radius 0), '
+             'λ_f = ω_f/√(EI/ρAL⁴) against γ = Ω√(ρAL⁴/EI) (Wright, Smith, Thresher & Wang, '
+             'J. Appl. Mech. 49, 1982; Yoo & Shin, J. Sound Vib. 212(5), 1998). Our beam '
+             'bends in the plane of rotation, whose equation is the flapwise one plus the '
+             'centrifugal softening −ρAΩ²v, so its published value is √(λ_f² − γ²) (exact for '
+             'the linearised inextensible beam; a test checks the table against an '
+             'independent Rayleigh–Ritz solution). Measured: the Kane beam spun up smoothly '
+             'over 8 s to Ω and left turning (`rotating_beam.rotating_cantilever_frequency`), '
+             'the frequency of the small vibration (millimetres on 10 m) the spin-up leaves, '
+             'as the period of the tip deflection in the hub frame over the next 12 s by the '
              "stage-2 period's rule (`summary.oscillation_period`), h = 5 ms. The linear "
-             "model follows √(3.516² − γ²): softened instead of stiffened, and unstable "
-             "past γ = 3.516 (the spin-up's divergence).", "",
-             "| γ | published λ_f | published in-plane √(λ_f² − γ²) | nonlinear N = 4 | "
-             "nonlinear N = 8 | linear N = 8 | linear theory √(3.516² − γ²) |",
-             "|---|---|---|---|---|---|---|"]
+             'model follows √(3.516² − γ²): softened instead of stiffened, and unstable '
+             "past γ = 3.516 (the spin-up's divergence).", '',
+             '| γ | published λ_f | published in-plane √(λ_f² − γ²) | nonlinear N = 4 | '
+             'nonlinear N = 8 | linear N = 8 | linear theory √(3.516² − γ²) |',
+             '|---|---|---|---|---|---|---|']
     for gamma in (2, 3, 4, 10):
         published = rotating_cantilever_chordwise(gamma)
         cells = []
         for n_el, nonlinear in ((4, True), (8, True), (8, False)):
             try:
                 w, _ = rotating_cantilever_frequency(gamma, n_el, nonlinear)
-                cells.append(f"{w:.4f} ({100 * (w / published - 1):+.2f} %)")
+                cells.append(f'{w:.4f} ({100 * (w / published - 1):+.2f} %)')
             except RuntimeError:
-                cells.append("diverged")
+                cells.append('diverged')
         soft = ROTATING_CANTILEVER_FLAPWISE[0] ** 2 - gamma ** 2
-        theory = f"{math.sqrt(soft):.4f}" if soft > 0 else "unstable"
-        lines.append(f"| {gamma} | {ROTATING_CANTILEVER_FLAPWISE[gamma]:.4f} | "
+        theory = f'{math.sqrt(soft):.4f}' if soft > 0 else 'unstable'
+        lines.append(f'| {gamma} | {ROTATING_CANTILEVER_FLAPWISE[gamma]:.4f} | '
                      f"{published:.4f} | {' | '.join(cells)} | {theory} |")
-        progress(f"rotating cantilever gamma = {gamma}: done")
-    lines += ["", "The co-rotational beam meets the published frequencies as the von Kármán "
-              "strain did (the vibration is small: both are exact to second order there); "
-              "tests/test_nonlinear.py holds N = 8 within 0.5 %."]
+        progress(f'rotating cantilever gamma = {gamma}: done')
+    lines += ['', 'The co-rotational beam meets the published frequencies as the von Kármán '
+              'strain did (the vibration is small: both are exact to second order there); '
+              'tests/test_nonlinear.py holds N = 8 within 0.5 %.']
     return lines
 
 
 def damping_section():
-    lines = ["", "## Structural damping", ""]
-    for model in ("flexible", NL):
+    lines = ['', '## Structural damping', '']
+    for model in ('flexible', NL):
         r = simulate(UmbrellaParams(v0=-1.0, model=model, damping_ratio=0.02), 1.0,
                      stop_after_lock=1.0)
         s = r.summary()
         last = r.samples[-1]
-        lines.append(f"- {model}, V0 = −1, ζ = 0.02: stage-2 amplitude over 1 s "
+        lines.append(f'- {model}, V0 = −1, ζ = 0.02: stage-2 amplitude over 1 s '
                      f"{fmt(s['stage2_tip_amplitude'], 1e3, '.1f')} mm, dissipated "
-                     f"{last.damping_dissipation:.3f} J of the {r.lock.energy_after:.3f} J left "
+                     f'{last.damping_dissipation:.3f} J of the {r.lock.energy_after:.3f} J left '
                      f"after the lock, energy balance error {s['energy_drift']:.1e}.")
-    lines += ["", "The logarithmic decrement of the stage-2 tip vibration equals ζ within 5 % "
-              "for both models (tests/test_nonlinear.py)."]
-    progress("damping: done")
+    lines += ['', 'The logarithmic decrement of the stage-2 tip vibration equals ζ within 5 % '
+              'for both models (tests/test_nonlinear.py).']
+    progress('damping: done')
     return lines
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--meshes", type=int, nargs="+", default=[2, 4, 8, 16])
+    ap.add_argument('--meshes', type=int, nargs='+', default=[2, 4, 8, 16])
     args = ap.parse_args()
-    lines = ["# Geometrically exact beams and structural damping: validation", "",
-             "Generated by `python docs/make_validation_nonlinear.py`. Thesis data "
-             "(Al 7075-T6, 10 mm square section, "
-             "l1 = l2 = l3 = 0.5 m), the default step 0.1 ms unless a table says otherwise. "
-             "Model `flexible-nonlinear`: the same floating frames, coordinates and mass "
-             "matrix as `flexible`, with the strain energy of a co-rotational Euler–Bernoulli "
+    lines = ['# Geometrically exact beams and structural damping: validation', '',
+             'Generated by `python docs/make_validation_nonlinear.py`. Thesis data '
+             '(Al 7075-T6, 10 mm square section, '
+             'l1 = l2 = l3 = 0.5 m), the default step 0.1 ms unless a table says otherwise. '
+             'Model `flexible-nonlinear`: the same floating frames, coordinates and mass '
+             'matrix as `flexible`, with the strain energy of a co-rotational Euler–Bernoulli '
              "element in each body's frame (Crisfield, Non-linear Finite Element Analysis of "
              "Solids and Structures vol. 1, ch. 7): an element's chord gives its stretch and "
              "rotation, the nodal slopes its section angles ψ = asin v', and the local linear "
-             "beam with its shallow-arch mean strain; exact for large rotations, small "
-             "strains; an energy-consistent discrete gradient (Simo & Tarnow 1992, Gonzalez "
-             "1996). The formulation is argued in the docstring of "
-             "`umbrella_sim/core/nonlinear.py`; the numpy reference is "
-             "`umbrella_sim/core/beam_strain.py`, the compiled law "
-             "`umbrella_sim/core/_kernel_nonlinear.c`. It replaced the von Kármán membrane "
+             'beam with its shallow-arch mean strain; exact for large rotations, small '
+             'strains; an energy-consistent discrete gradient (Simo & Tarnow 1992, Gonzalez '
+             '1996). The formulation is argued in the docstring of '
+             '`umbrella_sim/core/nonlinear.py`; the numpy reference is '
+             '`umbrella_sim/core/beam_strain.py`, the compiled law '
+             '`umbrella_sim/core/_kernel_nonlinear.c`. It replaced the von Kármán membrane '
              "strain u' + v'²/2, exact to second order in a fibre's rotation only, whose stage "
-             "2 ran 5 % (V0 = −1) to 11 % (V0 = −2) slow against the reference below.", ""]
+             '2 ran 5 % (V0 = −1) to 11 % (V0 = −2) slow against the reference below.', '']
     lines += reference_section()
     lines += mesh_section(args.meshes)
     lines += small_motion_section()
@@ -548,9 +548,9 @@ def main():
     lines += spin_up_section()
     lines += rotating_cantilever_section()
     lines += damping_section()
-    with open(os.path.join(HERE, "validation_nonlinear.md"), "w", encoding="utf-8") as fh:
-        fh.write("\n".join(lines) + "\n")
+    with open(os.path.join(HERE, 'validation_nonlinear.md'), 'w', encoding='utf-8') as fh:
+        fh.write('\n'.join(lines) + '\n')
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     main()

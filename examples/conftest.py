@@ -24,7 +24,7 @@ HERE = Path(__file__).resolve().parent
 # The suite's markers (setup.cfg): every example here talks to a real umbrella_node over DDS
 # (ros); this one takes more than ~3 s on a quiet machine (slow).  `pytest -m "not ros"` leaves
 # them out.
-SLOW = {"test_the_deploy_controller_latches_softly"}
+SLOW = {'test_the_deploy_controller_latches_softly'}
 
 
 def pytest_collection_modifyitems(config, items):

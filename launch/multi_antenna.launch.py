@@ -35,8 +35,8 @@ from umbrella_sim.ros import launch_description as umbrella
 def _setup(context, *args, **kwargs):
     values = umbrella.launch_values(context)
     actions = []
-    for ns in umbrella.split_namespaces(context.launch_configurations.get("namespaces",
-                                                                          "a1,a2")):
+    for ns in umbrella.split_namespaces(context.launch_configurations.get('namespaces',
+                                                                          'a1,a2')):
         actions += umbrella.to_launch_actions(umbrella.plan(umbrella.antenna_values(values,
                                                                                     ns)))
     return actions
@@ -44,8 +44,8 @@ def _setup(context, *args, **kwargs):
 
 def generate_launch_description():
     return LaunchDescription(
-        [DeclareLaunchArgument("namespaces", default_value="a1,a2",
+        [DeclareLaunchArgument('namespaces', default_value='a1,a2',
                                description="antennas' namespaces, comma-separated")]
         + [DeclareLaunchArgument(a.name, default_value=a.default, description=a.description)
-           for a in umbrella.arguments() if a.name != "namespace"]
+           for a in umbrella.arguments() if a.name != 'namespace']
         + [OpaqueFunction(function=_setup)])

@@ -32,20 +32,20 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 # a bag the node names itself: umbrella[_ns]_YYYY_MM_DD-HH_MM_SS[_k]
-_BAG = re.compile(r"^umbrella_(\w+_)?\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?$")
+_BAG = re.compile(r'^umbrella_(\w+_)?\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?$')
 
 
 def _bags() -> set:
     return {n for n in os.listdir(ROOT) if _BAG.match(n)}
 
 
-@pytest.fixture(scope="session", autouse=True)
+@pytest.fixture(scope='session', autouse=True)
 def no_recordings_left_in_the_repository():
     """Nodes record by default into their working directory: tests must use temporary ones."""
     before = _bags()
     yield
     left = sorted(_bags() - before)
-    assert not left, f"tests left recordings in {ROOT}: {left}"
+    assert not left, f'tests left recordings in {ROOT}: {left}'
 
 
 # the public test API's fixtures (ros_domain_id, probe, antenna_factory) for our own tests

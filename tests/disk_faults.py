@@ -40,7 +40,7 @@ def full_disk_write(limit: int, code: int, real=os.write):
     return write
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     from umbrella_sim.ros.node_main import main
     limit, code = int(sys.argv.pop(1)), int(sys.argv.pop(1))
     os.write = full_disk_write(limit, code)

@@ -24,8 +24,8 @@ from umbrella_sim.testing import (DOMAIN_ID, NodeProcess, poll, Probe,  # noqa: 
                                   ros_env, SimulatedAntenna, summary_from_recording)
 
 os.environ.update({k: v for k, v in ros_env().items()
-                   if k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
-                            "RMW_IMPLEMENTATION")})
+                   if k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE',
+                            'RMW_IMPLEMENTATION')})
 
 
 def signal_and_collect(proc, signum, ready=None, timeout: float = 90.0) -> tuple[str, str]:
@@ -50,8 +50,8 @@ def stamp(msg) -> float:
     return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
-def keep_every_message(probe, namespace: str = "",
-                       keys=("joint_states", "tip_deflection", "peak_stress")):
+def keep_every_message(probe, namespace: str = '',
+                       keys=('joint_states', 'tip_deflection', 'peak_stress')):
     """
     Subscribe probe to a node's per-publication topics keeping every message; return it.
 
@@ -67,7 +67,7 @@ def keep_every_message(probe, namespace: str = "",
 
     every = QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
                        history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
-    prefix = f"/{namespace.strip('/')}/" if namespace.strip("/") else "/"
+    prefix = f"/{namespace.strip('/')}/" if namespace.strip('/') else '/'
     for key in keys:
         topic = ros_io.TOPICS[key]
         probe.subscribe(prefix + topic.name, topic.type, every)
@@ -91,17 +91,17 @@ def wait_for_stamp_in_last_run(probe, topic: str, t: float, timeout: float = 30.
 
     def seen() -> str:
         msgs = probe.messages(topic)
-        return f"latest stamp {stamp(msgs[-1]):.6f} s" if msgs else "no message"
-    return poll(found, timeout, lambda: f"no message on {topic} stamped past {t:.6f} s in the "
-                                        f"run since the last reset within {timeout} s "
-                                        f"({seen()})")
+        return f'latest stamp {stamp(msgs[-1]):.6f} s' if msgs else 'no message'
+    return poll(found, timeout, lambda: f'no message on {topic} stamped past {t:.6f} s in the '
+                                        f'run since the last reset within {timeout} s '
+                                        f'({seen()})')
 
 
 def cpu_seconds(pid: int) -> float:
     """Return the CPU time (user + system, s) a live process has used so far (proc(5))."""
-    with open(f"/proc/{pid}/stat") as fh:
-        fields = fh.read().rsplit(")", 1)[1].split()      # from field 3, the state, on
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    with open(f'/proc/{pid}/stat') as fh:
+        fields = fh.read().rsplit(')', 1)[1].split()      # from field 3, the state, on
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def main_thread_sleeps(pid: int) -> int:
@@ -110,6 +110,6 @@ def main_thread_sleeps(pid: int) -> int:
 
     Its voluntary context switches (proc(5)): each sleep or blocking wait counts one.
     """
-    with open(f"/proc/{pid}/task/{pid}/status") as fh:
+    with open(f'/proc/{pid}/task/{pid}/status') as fh:
         return next(int(line.split()[1]) for line in fh
-                    if line.startswith("voluntary_ctxt_switches:"))
+                    if line.startswith('voluntary_ctxt_switches:'))

@@ -33,23 +33,23 @@ import re
 
 import pytest
 
-ROOT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "umbrella_sim")
-LAYERS = ("core", "bag", "ros", "tools", "testing")
+ROOT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'umbrella_sim')
+LAYERS = ('core', 'bag', 'ros', 'tools', 'testing')
 #: what each layer may import of the package (besides itself and the package's __init__)
-ALLOWED = {"core": set(), "bag": {"core"}, "ros": {"bag", "core"},
-           "tools": {"ros", "bag", "core"}, "testing": {"tools", "ros", "bag", "core"},
-           "entry": {"tools"}}
+ALLOWED = {'core': set(), 'bag': {'core'}, 'ros': {'bag', 'core'},
+           'tools': {'ros', 'bag', 'core'}, 'testing': {'tools', 'ros', 'bag', 'core'},
+           'entry': {'tools'}}
 #: third-party and standard-library modules a layer must not import (the top name)
 FORBIDDEN = {
-    "core": {"rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs",
-             "geometry_msgs", "visualization_msgs", "rosgraph_msgs", "diagnostic_msgs",
-             "std_srvs", "mcap", "yaml", "argparse", "signal", "launch", "launch_ros",
-             "dask", "distributed", "matplotlib", "csv"},
-    "bag": {"argparse", "signal", "launch", "launch_ros", "dask", "distributed",
-            "matplotlib"},
+    'core': {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'sensor_msgs',
+             'geometry_msgs', 'visualization_msgs', 'rosgraph_msgs', 'diagnostic_msgs',
+             'std_srvs', 'mcap', 'yaml', 'argparse', 'signal', 'launch', 'launch_ros',
+             'dask', 'distributed', 'matplotlib', 'csv'},
+    'bag': {'argparse', 'signal', 'launch', 'launch_ros', 'dask', 'distributed',
+            'matplotlib'},
 }
 #: rclpy modules of a running node: the format layer serialises messages, it runs no node
-BAG_FORBIDDEN_RCLPY = ("rclpy.node", "rclpy.executors", "rclpy.init", "rclpy.signals")
+BAG_FORBIDDEN_RCLPY = ('rclpy.node', 'rclpy.executors', 'rclpy.init', 'rclpy.signals')
 
 
 def _modules() -> dict[str, str]:
@@ -57,45 +57,45 @@ def _modules() -> dict[str, str]:
     out = {}
     for dirpath, _, files in os.walk(ROOT):
         for f in files:
-            if f.endswith(".py"):
+            if f.endswith('.py'):
                 path = os.path.join(dirpath, f)
-                rel = os.path.relpath(path, os.path.dirname(ROOT))[:-3].replace(os.sep, ".")
-                out[rel[:-len(".__init__")] if rel.endswith(".__init__") else rel] = path
+                rel = os.path.relpath(path, os.path.dirname(ROOT))[:-3].replace(os.sep, '.')
+                out[rel[:-len('.__init__')] if rel.endswith('.__init__') else rel] = path
     return out
 
 
 def _imports(name: str, path: str) -> list[tuple[str, int]]:
     """Return (imported module, line) of every import in a module, resolved to absolute."""
-    tree = ast.parse(open(path, encoding="utf-8").read(), path)
-    package = name if path.endswith("__init__.py") else name.rpartition(".")[0]
+    tree = ast.parse(open(path, encoding='utf-8').read(), path)
+    package = name if path.endswith('__init__.py') else name.rpartition('.')[0]
     found = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             found += [(a.name, node.lineno) for a in node.names]
         elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
+            base = node.module or ''
             if node.level:
-                parts = package.split(".")
+                parts = package.split('.')
                 parts = parts[:len(parts) - node.level + 1]
-                base = ".".join(parts + ([base] if base else []))
+                base = '.'.join(parts + ([base] if base else []))
             found.append((base, node.lineno))
-            found += [(f"{base}.{a.name}", node.lineno) for a in node.names]
-        elif (isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "import_module"
+            found += [(f'{base}.{a.name}', node.lineno) for a in node.names]
+        elif (isinstance(node, ast.Call) and getattr(node.func, 'attr', '') == 'import_module'
               and node.args and isinstance(node.args[0], (ast.Constant, ast.JoinedStr))):
             arg = node.args[0]
-            text = arg.value if isinstance(arg, ast.Constant) else "".join(
+            text = arg.value if isinstance(arg, ast.Constant) else ''.join(
                 v.value for v in arg.values if isinstance(v, ast.Constant))
-            found.append((text.rstrip("."), node.lineno))
+            found.append((text.rstrip('.'), node.lineno))
     return found
 
 
 def _layer(module: str) -> str:
-    parts = module.split(".")
+    parts = module.split('.')
     if len(parts) == 1:
-        return "package"
+        return 'package'
     if parts[1] in LAYERS:
         return parts[1]
-    return "entry"
+    return 'entry'
 
 
 MODULES = _modules()
@@ -107,8 +107,8 @@ def _graph() -> dict[str, set[tuple[str, int]]]:
         edges = set()
         for target, line in _imports(name, path):
             while target and target not in MODULES:
-                target = target.rpartition(".")[0]
-            if target and target != name and target.startswith("umbrella_sim"):
+                target = target.rpartition('.')[0]
+            if target and target != name and target.startswith('umbrella_sim'):
                 edges.add((target, line))
         graph[name] = edges
     return graph
@@ -118,37 +118,37 @@ GRAPH = _graph()
 
 
 def test_every_module_is_in_a_layer():
-    entry = sorted(m for m in MODULES if _layer(m) == "entry")
-    assert entry == ["umbrella_sim.__main__", "umbrella_sim.deploy_controller",
-                     "umbrella_sim.node"], entry
+    entry = sorted(m for m in MODULES if _layer(m) == 'entry')
+    assert entry == ['umbrella_sim.__main__', 'umbrella_sim.deploy_controller',
+                     'umbrella_sim.node'], entry
 
 
-@pytest.mark.parametrize("module", sorted(MODULES))
+@pytest.mark.parametrize('module', sorted(MODULES))
 def test_imports_point_down_the_layers(module):
     layer = _layer(module)
     bad = []
     for target, line in sorted(GRAPH[module]):
         to = _layer(target)
-        if target == "umbrella_sim" or to == layer and layer != "entry":
+        if target == 'umbrella_sim' or to == layer and layer != 'entry':
             continue
         if to not in ALLOWED.get(layer, set()):
-            bad.append(f"line {line}: {target} ({to})")
-    assert not bad, f"{module} ({layer}) imports against the layers: " + "; ".join(bad)
+            bad.append(f'line {line}: {target} ({to})')
+    assert not bad, f'{module} ({layer}) imports against the layers: ' + '; '.join(bad)
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES if _layer(m) in FORBIDDEN))
+@pytest.mark.parametrize('module', sorted(m for m in MODULES if _layer(m) in FORBIDDEN))
 def test_lower_layers_import_no_ros_node_format_or_command_line(module):
     layer = _layer(module)
     bad = []
     for target, line in _imports(module, MODULES[module]):
-        top = target.split(".")[0]
-        if top in FORBIDDEN[layer] or (layer == "bag" and target.startswith(BAG_FORBIDDEN_RCLPY)):
-            bad.append(f"line {line}: {target}")
-    assert not bad, f"{module} ({layer}) imports: " + "; ".join(bad)
+        top = target.split('.')[0]
+        if top in FORBIDDEN[layer] or (layer == 'bag' and target.startswith(BAG_FORBIDDEN_RCLPY)):
+            bad.append(f'line {line}: {target}')
+    assert not bad, f'{module} ({layer}) imports: ' + '; '.join(bad)
 
 
 def test_the_package_init_imports_nothing_of_the_package():
-    assert not GRAPH["umbrella_sim"]
+    assert not GRAPH['umbrella_sim']
 
 
 def test_no_import_circles():
@@ -180,7 +180,7 @@ def test_no_import_circles():
     for v in sorted(GRAPH):
         if v not in index:
             visit(v)
-    assert not circles, "import circles: " + "; ".join(" <-> ".join(c) for c in circles)
+    assert not circles, 'import circles: ' + '; '.join(' <-> '.join(c) for c in circles)
 
 
 #: a module this long says why in its docstring ("Why one module:"); the license header
@@ -188,11 +188,11 @@ def test_no_import_circles():
 LONG_MODULE = 650
 
 
-@pytest.mark.parametrize("module", sorted(MODULES))
+@pytest.mark.parametrize('module', sorted(MODULES))
 def test_long_modules_say_why(module):
     path = MODULES[module]
-    text = open(path, encoding="utf-8").read()
-    lines = text.count("\n") - len(re.match(r"(#[^\n]*\n)*\n?", text).group(0).splitlines())
-    doc = ast.get_docstring(ast.parse(text)) or ""
-    assert lines <= LONG_MODULE or "Why one module:" in doc, (
-        f"{module}: {lines} lines; split it, or say in its docstring why it is one module")
+    text = open(path, encoding='utf-8').read()
+    lines = text.count('\n') - len(re.match(r'(#[^\n]*\n)*\n?', text).group(0).splitlines())
+    doc = ast.get_docstring(ast.parse(text)) or ''
+    assert lines <= LONG_MODULE or 'Why one module:' in doc, (
+        f'{module}: {lines} lines; split it, or say in its docstring why it is one module')

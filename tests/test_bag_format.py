@@ -32,10 +32,9 @@ from mcap.stream_reader import breakup_chunk, StreamReader
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 from rosbags.typesys import get_typestore, Stores
-import yaml
-
 from umbrella_sim.bag.cdr import BAG_FORMAT_VERSION, type_description_hash
 from umbrella_sim.bag.reader import qos_from_yaml, read_log, resolve_path
+import yaml
 
 pytestmark = pytest.mark.slow
 
@@ -54,39 +53,39 @@ def doctor(path: str) -> tuple[list[str], list[str]]:
             if in_summary:
                 summary_schemas.add(record.id)
                 if record.id not in data_schemas:
-                    errors.append(f"schema {record.id} in the summary only")
+                    errors.append(f'schema {record.id} in the summary only')
             else:
                 data_schemas[record.id] += 1
                 if data_schemas[record.id] > 1:
-                    warnings.append(f"Duplicate schema records in data section with ID "
-                                    f"{record.id}")
+                    warnings.append(f'Duplicate schema records in data section with ID '
+                                    f'{record.id}')
         elif isinstance(record, Channel):
             if in_summary:
                 summary_channels.add(record.id)
                 if record.id not in data_channels:
-                    errors.append(f"channel {record.id} in the summary only")
+                    errors.append(f'channel {record.id} in the summary only')
             else:
                 if record.id in data_channels:
-                    warnings.append(f"Duplicate channel records in data section with ID "
-                                    f"{record.id}")
+                    warnings.append(f'Duplicate channel records in data section with ID '
+                                    f'{record.id}')
                 data_channels[record.id] = record
                 if record.schema_id and record.schema_id not in data_schemas:
-                    errors.append(f"channel {record.id} before its schema {record.schema_id}")
+                    errors.append(f'channel {record.id} before its schema {record.schema_id}')
         elif isinstance(record, Message):
             if record.channel_id not in data_channels:
-                errors.append(f"message of channel {record.channel_id} before the channel")
+                errors.append(f'message of channel {record.channel_id} before the channel')
             messages += 1
             per_channel[record.channel_id] += 1
             if not in_chunk:
-                warnings.append("message outside chunks")
+                warnings.append('message outside chunks')
 
-    with open(path, "rb") as fh:
+    with open(path, 'rb') as fh:
         for record in StreamReader(fh, skip_magic=False, emit_chunks=True).records:
             if isinstance(record, Header):
                 if not record.library:
-                    warnings.append("empty Header.library")
-                if record.profile != "ros2":
-                    errors.append(f"profile {record.profile!r}")
+                    warnings.append('empty Header.library')
+                if record.profile != 'ros2':
+                    errors.append(f'profile {record.profile!r}')
             elif isinstance(record, Chunk):
                 for inner in breakup_chunk(record, validate_crc=True):
                     examine(inner, True)
@@ -97,27 +96,27 @@ def doctor(path: str) -> tuple[list[str], list[str]]:
             else:
                 examine(record, False)
     if stats is None:
-        errors.append("no Statistics record")
+        errors.append('no Statistics record')
     else:
         if stats.message_count != messages:
-            errors.append(f"statistics: {stats.message_count} messages, {messages} read")
+            errors.append(f'statistics: {stats.message_count} messages, {messages} read')
         if dict(stats.channel_message_counts) != dict(per_channel):
-            errors.append("statistics: per-channel counts differ")
-    errors += [f"channel {c} of a message not in the summary"
+            errors.append('statistics: per-channel counts differ')
+    errors += [f'channel {c} of a message not in the summary'
                for c in per_channel if c not in summary_channels]
-    errors += [f"schema {s} not in the summary" for s in data_schemas if s not in summary_schemas]
+    errors += [f'schema {s} not in the summary' for s in data_schemas if s not in summary_schemas]
     return errors, warnings
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def offline_bag(tmp_path_factory):
     """Record offline with a force profile (so /sleeve_force/applied is in it)."""
-    root = tmp_path_factory.mktemp("format")
-    profile = root / "force.csv"
-    profile.write_text("t,F\n0.0,2.0\n0.05,4.0\n")
-    bag = root / "bag"
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim", "simulate", "--duration", "0.2",
-                        "--force-profile", str(profile), "--mcap", str(bag)],
+    root = tmp_path_factory.mktemp('format')
+    profile = root / 'force.csv'
+    profile.write_text('t,F\n0.0,2.0\n0.05,4.0\n')
+    bag = root / 'bag'
+    r = subprocess.run([sys.executable, '-m', 'umbrella_sim', 'simulate', '--duration', '0.2',
+                        '--force-profile', str(profile), '--mcap', str(bag)],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     return bag
@@ -127,7 +126,7 @@ def test_a_recording_passes_mcap_doctor(offline_bag):
     errors, warnings = doctor(resolve_path(str(offline_bag)))
     assert errors == [] and warnings == []
     # and each Schema and Channel record is in the data section once
-    with open(resolve_path(str(offline_bag)), "rb") as fh:
+    with open(resolve_path(str(offline_bag)), 'rb') as fh:
         seen = Counter()
         for record in StreamReader(fh, emit_chunks=True).records:
             if isinstance(record, DataEnd):
@@ -143,55 +142,55 @@ def test_the_doctor_finds_a_repeated_channel(tmp_path):
     from mcap.data_stream import RecordBuilder
     from mcap.writer import Writer
 
-    path = tmp_path / "repeated.mcap"
-    definition = b"float64 data\n"
-    with open(path, "wb") as fh:
+    path = tmp_path / 'repeated.mcap'
+    definition = b'float64 data\n'
+    with open(path, 'wb') as fh:
         w = Writer(fh)
-        w.start(profile="ros2", library="test")
+        w.start(profile='ros2', library='test')
         # outside the chunks first, as the old recorder did; then the writer's, in its chunk
         builder = RecordBuilder()
-        Schema(id=1, name="std_msgs/msg/Float64", encoding="ros2msg",
+        Schema(id=1, name='std_msgs/msg/Float64', encoding='ros2msg',
                data=definition).write(builder)
-        Channel(id=1, topic="/x", message_encoding="cdr", schema_id=1,
+        Channel(id=1, topic='/x', message_encoding='cdr', schema_id=1,
                 metadata={}).write(builder)
         fh.write(builder.end())
-        sid = w.register_schema("std_msgs/msg/Float64", "ros2msg", definition)
-        cid = w.register_channel("/x", "cdr", sid)
-        w.add_message(cid, 1, b"\x00\x01\x00\x00" + bytes(8), 1)
+        sid = w.register_schema('std_msgs/msg/Float64', 'ros2msg', definition)
+        cid = w.register_channel('/x', 'cdr', sid)
+        w.add_message(cid, 1, b'\x00\x01\x00\x00' + bytes(8), 1)
         w.finish()
     errors, warnings = doctor(str(path))
     assert errors == []
-    assert warnings == ["Duplicate schema records in data section with ID 1",
-                        "Duplicate channel records in data section with ID 1"]
+    assert warnings == ['Duplicate schema records in data section with ID 1',
+                        'Duplicate channel records in data section with ID 1']
 
 
 def test_bag_metadata_is_rosbag2_jazzy_s(offline_bag):
     """Metadata version 9: QoS profiles as lists with policy names, RIHS01 type hashes."""
     store = get_typestore(Stores.ROS2_JAZZY)
-    info = yaml.safe_load((offline_bag / "metadata.yaml").read_text())
-    info = info["rosbag2_bagfile_information"]
-    assert info["version"] == BAG_FORMAT_VERSION == 9 and info["ros_distro"] == "jazzy"
-    topics = {t["topic_metadata"]["name"]: t["topic_metadata"]
-              for t in info["topics_with_message_count"]}
-    assert {"/joint_states", "/clock", "/sleeve_force/applied"} <= set(topics)
+    info = yaml.safe_load((offline_bag / 'metadata.yaml').read_text())
+    info = info['rosbag2_bagfile_information']
+    assert info['version'] == BAG_FORMAT_VERSION == 9 and info['ros_distro'] == 'jazzy'
+    topics = {t['topic_metadata']['name']: t['topic_metadata']
+              for t in info['topics_with_message_count']}
+    assert {'/joint_states', '/clock', '/sleeve_force/applied'} <= set(topics)
     for name, t in topics.items():
         # the wheels' hash (share/<pkg>/msg/<Type>.json) is rosbags' computation of it
-        assert t["type_description_hash"] == store.hash_rihs01(t["type"]), name
-        assert t["type_description_hash"].startswith("RIHS01_")
-        (profile,) = t["offered_qos_profiles"]
-        assert profile["history"] in ("keep_last", "keep_all"), name
-        assert profile["reliability"] in ("reliable", "best_effort"), name
-    assert topics["/clock"]["offered_qos_profiles"][0]["reliability"] == "best_effort"
+        assert t['type_description_hash'] == store.hash_rihs01(t['type']), name
+        assert t['type_description_hash'].startswith('RIHS01_')
+        (profile,) = t['offered_qos_profiles']
+        assert profile['history'] in ('keep_last', 'keep_all'), name
+        assert profile['reliability'] in ('reliable', 'best_effort'), name
+    assert topics['/clock']['offered_qos_profiles'][0]['reliability'] == 'best_effort'
     # the channels carry the same, as rosbag2's MCAP plugin writes them
     log = read_log(str(offline_bag))
     from mcap.reader import make_reader
 
-    with open(log.path, "rb") as fh:
+    with open(log.path, 'rb') as fh:
         summary = make_reader(fh).get_summary()
     for ch in summary.channels.values():
-        assert ch.metadata["topic_type_hash"] == topics[ch.topic]["type_description_hash"]
-        assert yaml.safe_load(ch.metadata["offered_qos_profiles"]) == \
-            topics[ch.topic]["offered_qos_profiles"]
+        assert ch.metadata['topic_type_hash'] == topics[ch.topic]['type_description_hash']
+        assert yaml.safe_load(ch.metadata['offered_qos_profiles']) == \
+            topics[ch.topic]['offered_qos_profiles']
     # and rosbags reads the version-9 bag with those hashes
     from pathlib import Path
 
@@ -199,11 +198,11 @@ def test_bag_metadata_is_rosbag2_jazzy_s(offline_bag):
 
     with AnyReader([Path(offline_bag)], default_typestore=store) as rd:
         assert {c.topic: c.digest for c in rd.connections} == {
-            n: t["type_description_hash"] for n, t in topics.items()}
+            n: t['type_description_hash'] for n, t in topics.items()}
 
 
 def test_type_hash_of_a_type_without_its_description_is_empty():
-    assert type_description_hash("std_msgs/msg/NoSuchType") == ""
+    assert type_description_hash('std_msgs/msg/NoSuchType') == ''
 
 
 def test_old_recordings_still_read(tmp_path):
@@ -215,23 +214,23 @@ def test_old_recordings_still_read(tmp_path):
     from rosbags.rosbag2 import StoragePlugin, Writer
 
     store = get_typestore(Stores.ROS2_JAZZY)
-    Float64 = store.types["std_msgs/msg/Float64"]
+    Float64 = store.types['std_msgs/msg/Float64']
     forever = QosTime(9223372036, 854775807)
     qos = Qos(QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
               forever, forever, QosLiveliness.AUTOMATIC, forever, False)
-    bag = tmp_path / "v8"
+    bag = tmp_path / 'v8'
     with Writer(Path(bag), version=8, storage_plugin=StoragePlugin.MCAP) as w:
-        conn = w.add_connection("/x", "std_msgs/msg/Float64", typestore=store,
+        conn = w.add_connection('/x', 'std_msgs/msg/Float64', typestore=store,
                                 offered_qos_profiles=[qos])
-        w.write(conn, 5, store.serialize_cdr(Float64(data=1.5), "std_msgs/msg/Float64"))
-    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
-    assert info["version"] == 8
+        w.write(conn, 5, store.serialize_cdr(Float64(data=1.5), 'std_msgs/msg/Float64'))
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert info['version'] == 8
     log = read_log(str(bag), umbrella=False)
-    text = log.channels["/x"][1]
-    assert "history: 1" in text.replace("'", "")          # the integer form
+    text = log.channels['/x'][1]
+    assert 'history: 1' in text.replace("'", '')          # the integer form
     q = qos_from_yaml(text)
     assert (q.history, q.depth, q.reliability, q.durability) == (
         HistoryPolicy.KEEP_LAST, 1, ReliabilityPolicy.RELIABLE,
         DurabilityPolicy.TRANSIENT_LOCAL)
-    assert [m.data for _, m in log.decoded("/x")] == [1.5]
+    assert [m.data for _, m in log.decoded('/x')] == [1.5]
     assert os.path.isdir(bag)

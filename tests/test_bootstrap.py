@@ -26,10 +26,9 @@ import subprocess
 import sys
 import time
 
+from bootstrap import ROOT, STAMP_NAME
 import pytest
 from sensor_msgs.msg import JointState
-
-from bootstrap import ROOT, STAMP_NAME
 from tests.ros_helpers import Probe, ros_env, stamp
 from umbrella_sim.bag.reader import read_log
 
@@ -38,28 +37,28 @@ pytestmark = pytest.mark.ros
 
 
 @pytest.mark.skipif(not os.path.exists(STAMP),
-                    reason="not running in a venv made by bootstrap.py (CI always is)")
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+                    reason='not running in a venv made by bootstrap.py (CI always is)')
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_main_command_records_and_forwards_signals(tmp_path, sig):
     # a relative runs directory is the caller's working directory's, as the user means it
     # (the node runs in the repository: it failed there, "parent directory ... does not exist")
-    env = dict(ros_env(), UMBRELLA_VENV=sys.prefix, UMBRELLA_RUNS_DIR="runs")
-    out = tmp_path / "bootstrap.log"
-    probe = Probe("bootstrap_probe")
-    probe.subscribe("/joint_states", JointState)
-    with open(out, "w") as fh:
-        proc = subprocess.Popen([sys.executable, os.path.join(ROOT, "bootstrap.py"), "run"],
+    env = dict(ros_env(), UMBRELLA_VENV=sys.prefix, UMBRELLA_RUNS_DIR='runs')
+    out = tmp_path / 'bootstrap.log'
+    probe = Probe('bootstrap_probe')
+    probe.subscribe('/joint_states', JointState)
+    with open(out, 'w') as fh:
+        proc = subprocess.Popen([sys.executable, os.path.join(ROOT, 'bootstrap.py'), 'run'],
                                 stdout=fh, stderr=subprocess.STDOUT, env=env,
                                 start_new_session=True, cwd=tmp_path)
     try:
         deadline = time.monotonic() + 60
-        while "locked at t" not in out.read_text() and proc.poll() is None:
+        while 'locked at t' not in out.read_text() and proc.poll() is None:
             assert time.monotonic() < deadline, out.read_text()
             time.sleep(0.1)
-        lock = float(re.search(r"locked at t = ([0-9.]+) s", out.read_text()).group(1))
+        lock = float(re.search(r'locked at t = ([0-9.]+) s', out.read_text()).group(1))
         # the node runs on, recording, for 0.5 s of sim time past the lock
-        probe.wait_for("/joint_states", lambda m: stamp(m) > lock + 0.5, timeout=60,
-                       what=f"a state past {lock + 0.5:.6f} s")
+        probe.wait_for('/joint_states', lambda m: stamp(m) > lock + 0.5, timeout=60,
+                       what=f'a state past {lock + 0.5:.6f} s')
         proc.send_signal(sig)                 # to bootstrap.py alone
         assert proc.wait(30) == 0, out.read_text()
     finally:
@@ -67,14 +66,14 @@ def test_main_command_records_and_forwards_signals(tmp_path, sig):
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
     text = out.read_text()
-    assert "recording finalised" in text and "[ERROR]" not in text, text
-    (run,) = (tmp_path / "runs").iterdir()
+    assert 'recording finalised' in text and '[ERROR]' not in text, text
+    (run,) = (tmp_path / 'runs').iterdir()
     # the node's own (rosbag2's) naming, the one convention: umbrella_YYYY_MM_DD-HH_MM_SS
-    assert re.fullmatch(r"umbrella_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?", run.name), run.name
+    assert re.fullmatch(r'umbrella_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?', run.name), run.name
     log = read_log(str(run))
     assert not log.truncated
     # every joint_states publication of the run is in the file: the default 100 Hz over the
     # simulated time recorded (the node may run behind real time on a busy machine)
-    stamps = [t for t, _ in log.decoded("/joint_states")]
+    stamps = [t for t, _ in log.decoded('/joint_states')]
     assert stamps[-1] > 0.15                      # past the lock (t ~ 0.19 s)
     assert len(stamps) >= int(100 * (stamps[-1] - stamps[0])) - 1

@@ -25,15 +25,15 @@ from umbrella_sim.core.outputs import state_row, STEP_FIELDS, StepBlock
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.solver import nonlinear_model_needed, UmbrellaSimulator
 
-needs_kernel = pytest.mark.skipif(load_kernel() is None, reason="compiled kernel not built")
+needs_kernel = pytest.mark.skipif(load_kernel() is None, reason='compiled kernel not built')
 
 
 def test_kernel_is_built_unless_numpy_is_asked_for():
     """Installation requires a C compiler: a missing kernel is an install defect, not a skip."""
-    if os.environ.get("UMBRELLA_SIM_KERNEL") == "numpy":
-        pytest.skip("numpy path forced by UMBRELLA_SIM_KERNEL=numpy")
+    if os.environ.get('UMBRELLA_SIM_KERNEL') == 'numpy':
+        pytest.skip('numpy path forced by UMBRELLA_SIM_KERNEL=numpy')
     assert load_kernel() is not None
-    assert UmbrellaSimulator(UmbrellaParams()).engine.backend == "compiled"
+    assert UmbrellaSimulator(UmbrellaParams()).engine.backend == 'compiled'
 
 
 def simulator(kernel, params):
@@ -56,14 +56,14 @@ def blocks(sim, sizes):
 
 
 @needs_kernel
-@pytest.mark.parametrize("model, n_el, lock, force", [
-    ("flexible", 1, "energy", 0.0), ("flexible", 2, "plastic", 2.0),
-    ("flexible", 4, "energy", 0.0), ("rigid-fe", 2, "energy", 1.0)])
+@pytest.mark.parametrize('model, n_el, lock, force', [
+    ('flexible', 1, 'energy', 0.0), ('flexible', 2, 'plastic', 2.0),
+    ('flexible', 4, 'energy', 0.0), ('rigid-fe', 2, 'energy', 1.0)])
 def test_compiled_step_matches_numpy_reference(model, n_el, lock, force):
     p = UmbrellaParams(v0=-0.5, model=model, elements_per_segment=n_el, lock=lock,
                        sleeve_force=force, time_step=2e-3)
-    ref, sim_ref = run("numpy", p, 0.3)
-    fast, sim_fast = run("compiled", p, 0.3)
+    ref, sim_ref = run('numpy', p, 0.3)
+    fast, sim_fast = run('compiled', p, 0.3)
     assert sim_ref.lock_event is not None
     assert sim_fast.lock_event.time == pytest.approx(sim_ref.lock_event.time, abs=1e-12)
     # a step at the stopping threshold may take one iteration more or less in round-off
@@ -75,15 +75,15 @@ def test_compiled_step_matches_numpy_reference(model, n_el, lock, force):
 
 
 @needs_kernel
-@pytest.mark.parametrize("n_el, t0", [(3, 0.02), (2, 0.12)])
+@pytest.mark.parametrize('n_el, t0', [(3, 0.02), (2, 0.12)])
 def test_compiled_single_step_matches_to_roundoff(n_el, t0):
     """From the same state, one step of either path agrees to round-off (stage 1 and 2)."""
     p = UmbrellaParams(v0=-1.0, elements_per_segment=n_el)
     sim = UmbrellaSimulator(p)
     sim.advance_to(t0, record=False)
     cs = ConstraintSet(locked=sim.stage == Stage.LOCKED, rigid=False)
-    a = MidpointDAE(sim.model, kernel="numpy").step(sim.state, 1e-3, 0.5, cs)
-    b = MidpointDAE(sim.model, kernel="compiled").step(sim.state, 1e-3, 0.5, cs)
+    a = MidpointDAE(sim.model, kernel='numpy').step(sim.state, 1e-3, 0.5, cs)
+    b = MidpointDAE(sim.model, kernel='compiled').step(sim.state, 1e-3, 0.5, cs)
     assert np.abs(a.q - b.q).max() < 1e-13
     assert np.abs(a.qd - b.qd).max() < 1e-12 * max(1.0, np.abs(a.qd).max())
     assert np.abs(a.momentum - b.momentum).max() < 1e-12 * max(1.0, np.abs(a.momentum).max())
@@ -91,7 +91,7 @@ def test_compiled_single_step_matches_to_roundoff(n_el, t0):
 
 
 @needs_kernel
-@pytest.mark.parametrize("zeta", [0.0, 0.02])
+@pytest.mark.parametrize('zeta', [0.0, 0.02])
 def test_compiled_fitted_stage2_steps_match_to_roundoff(zeta):
     """
     Stage 2 with the mode fit (integrators.LockedModeFit): 20 steps of either path agree.
@@ -107,7 +107,7 @@ def test_compiled_fitted_stage2_steps_match_to_roundoff(zeta):
     assert sim.stage == Stage.LOCKED
     cs = ConstraintSet(locked=True, rigid=False)
     out = {}
-    for kernel in ("numpy", "compiled"):
+    for kernel in ('numpy', 'compiled'):
         integ = (ElasticMidpointDAE if zeta else MidpointDAE)(sim.model, kernel=kernel)
         integ.tolerance = 1e-13
         integ.fit_stage2_modes(1e-4)
@@ -117,7 +117,7 @@ def test_compiled_fitted_stage2_steps_match_to_roundoff(zeta):
         for _ in range(20):
             s = integ.step(s, 1e-4, 0.0, cs)
         out[kernel] = s
-    a, b = out["numpy"], out["compiled"]
+    a, b = out['numpy'], out['compiled']
     assert np.abs(a.q - b.q).max() < 1e-12
     assert np.abs(a.qd - b.qd).max() < 1e-10 * np.abs(a.qd).max()
     assert np.abs(a.momentum - b.momentum).max() < 1e-10 * np.abs(a.momentum).max()
@@ -125,20 +125,20 @@ def test_compiled_fitted_stage2_steps_match_to_roundoff(zeta):
 
 
 #: what a row holds as a Sample does, but over the step: the peak stresses and where they are
-STEP_PEAK_FIELDS = ("peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
-                    "peak_stress_link_x")
+STEP_PEAK_FIELDS = ('peak_stress_leaf', 'peak_stress_leaf_x', 'peak_stress_link',
+                    'peak_stress_link_x')
 #: rates over the step that ended at the row (accelerations, the multipliers' reactions): the
 #: state's error divided by that step's length, which the lock's step shortens
-STEP_RATE_FIELDS = ("alpha1_accel", "sleeve_reaction_x", "sleeve_reaction_y")
+STEP_RATE_FIELDS = ('alpha1_accel', 'sleeve_reaction_x', 'sleeve_reaction_y')
 
 
 @needs_kernel
-@pytest.mark.parametrize("model, n_el, lock, force, zeta", [
-    ("flexible", 1, "energy", 0.0, 0.0), ("flexible", 1, "plastic", 1.5, 0.0),
-    ("flexible", 2, "plastic", 1.5, 0.0), ("flexible", 2, "energy", 0.0, 0.0),
-    ("flexible", 4, "energy", 0.0, 0.0), ("rigid-fe", 2, "energy", 0.5, 0.0),
-    ("flexible", 2, "energy", 0.0, 0.02), ("flexible-nonlinear", 2, "plastic", 1.0, 0.0),
-    ("flexible-nonlinear", 2, "energy", 0.0, 0.02)])
+@pytest.mark.parametrize('model, n_el, lock, force, zeta', [
+    ('flexible', 1, 'energy', 0.0, 0.0), ('flexible', 1, 'plastic', 1.5, 0.0),
+    ('flexible', 2, 'plastic', 1.5, 0.0), ('flexible', 2, 'energy', 0.0, 0.0),
+    ('flexible', 4, 'energy', 0.0, 0.0), ('rigid-fe', 2, 'energy', 0.5, 0.0),
+    ('flexible', 2, 'energy', 0.0, 0.02), ('flexible-nonlinear', 2, 'plastic', 1.0, 0.0),
+    ('flexible-nonlinear', 2, 'energy', 0.0, 0.02)])
 def test_compiled_advance_outputs_match_reference_per_step(model, n_el, lock, force, zeta):
     """
     Compare every per-step output of the compiled block loop with the reference.
@@ -152,43 +152,43 @@ def test_compiled_advance_outputs_match_reference_per_step(model, n_el, lock, fo
     p = UmbrellaParams(v0=-0.5, model=model, elements_per_segment=n_el, lock=lock,
                        sleeve_force=force, time_step=1e-3, damping_ratio=zeta)
     sizes = [7, 30, 1, 45, 50, 17]           # uneven blocks, one of them holding the lock
-    ref, ref_blocks = blocks(simulator("numpy", p), sizes)
-    fast, fast_blocks = blocks(simulator("compiled", p), sizes)
+    ref, ref_blocks = blocks(simulator('numpy', p), sizes)
+    fast, fast_blocks = blocks(simulator('compiled', p), sizes)
     assert [b.lock is not None for b in ref_blocks] == [b.lock is not None for b in fast_blocks]
     assert sum(b.lock is not None for b in fast_blocks) == 1
     assert ref.shape == fast.shape == (len(STEP_FIELDS), sum(sizes))
-    assert np.array_equal(ref[STEP_FIELDS.index("stage")], fast[STEP_FIELDS.index("stage")])
-    energy = np.abs(ref[STEP_FIELDS.index("kinetic_energy")]).max() + \
-        np.abs(ref[STEP_FIELDS.index("strain_energy")]).max()
-    time = ref[STEP_FIELDS.index("time")]
+    assert np.array_equal(ref[STEP_FIELDS.index('stage')], fast[STEP_FIELDS.index('stage')])
+    energy = np.abs(ref[STEP_FIELDS.index('kinetic_energy')]).max() + \
+        np.abs(ref[STEP_FIELDS.index('strain_energy')]).max()
+    time = ref[STEP_FIELDS.index('time')]
     lock_time = next(b.lock.time for b in ref_blocks if b.lock is not None)
     step_length = np.minimum(p.time_step, np.where(time > lock_time, time - lock_time, np.inf))
     for i, name in enumerate(STEP_FIELDS):
-        if name in STEP_PEAK_FIELDS and name.endswith("_x"):   # where the peak is: compare
+        if name in STEP_PEAK_FIELDS and name.endswith('_x'):   # where the peak is: compare
             peak = ref[i - 1]                                    # only where it is defined
             defined = peak > max(1e-6 * peak.max(), 1.0)     # Pa; not round-off
             assert np.array_equal(ref[i][defined], fast[i][defined]), name
             continue
         scale = np.abs(ref[i]).max()
-        if name in ("work", "lock_energy_loss", "damping_dissipation"):   # round-off of the
+        if name in ('work', 'lock_energy_loss', 'damping_dissipation'):   # round-off of the
             scale = max(scale, energy)                                     # energy, when ~0
         if name in STEP_RATE_FIELDS:
             scale = scale * p.time_step / step_length
         # the elastic fields of the rigid-FE mode are round-off around 0: floor 1e-12 m,
         # 1e-6 Pa (a strain of 1e-17); the constraint residual is round-off: floor 1e-12 m
-        floor = 1e-6 if name.startswith(("peak_stress", "stress_")) else 1e-12
+        floor = 1e-6 if name.startswith(('peak_stress', 'stress_')) else 1e-12
         assert np.all(np.abs(ref[i] - fast[i]) <= 1e-10 * scale + floor), name
-    if model == "flexible" and zeta == 0:
-        assert not fast[STEP_FIELDS.index("damping_dissipation")].any()
+    if model == 'flexible' and zeta == 0:
+        assert not fast[STEP_FIELDS.index('damping_dissipation')].any()
     if zeta > 0:
-        assert fast[STEP_FIELDS.index("damping_dissipation")][-1] > 0.0
+        assert fast[STEP_FIELDS.index('damping_dissipation')][-1] > 0.0
     last_ref, last_fast = ref_blocks[-1].last, fast_blocks[-1].last
     assert np.abs(last_ref.q - last_fast.q).max() < 1e-10
 
 
-@pytest.mark.parametrize("kernel, model", [
-    ("compiled", "flexible"), ("compiled", "rigid-fe"), ("compiled", "flexible-nonlinear"),
-    ("numpy", "flexible"), ("compiled", "rigid")])
+@pytest.mark.parametrize('kernel, model', [
+    ('compiled', 'flexible'), ('compiled', 'rigid-fe'), ('compiled', 'flexible-nonlinear'),
+    ('numpy', 'flexible'), ('compiled', 'rigid')])
 def test_each_step_row_holds_its_states_sample(kernel, model, monkeypatch):
     """
     A step's row holds the figures of the Sample of the state it reached, to the bit.
@@ -200,34 +200,34 @@ def test_each_step_row_holds_its_states_sample(kernel, model, monkeypatch):
     velocity, from the angles' rates in the row and from the finite-element coordinates in a
     Sample, to round-off, as tests/test_rigid_models.py has it).
     """
-    if kernel == "compiled" and load_kernel() is None:
-        pytest.skip("compiled kernel not built")
-    monkeypatch.setenv("UMBRELLA_SIM_KERNEL", kernel)
+    if kernel == 'compiled' and load_kernel() is None:
+        pytest.skip('compiled kernel not built')
+    monkeypatch.setenv('UMBRELLA_SIM_KERNEL', kernel)
     p = UmbrellaParams(v0=-0.5, model=model, elements_per_segment=2, time_step=1e-3,
-                       damping_ratio=0.02 if model == "flexible-nonlinear" else 0.0,
+                       damping_ratio=0.02 if model == 'flexible-nonlinear' else 0.0,
                        sleeve_force=0.5)
     sim = UmbrellaSimulator(p)
-    kernel_of = getattr(sim.engine, "integrator", None)
+    kernel_of = getattr(sim.engine, 'integrator', None)
     stages = set()
     for _ in range(120):
         block = sim.advance(1)
-        compiled = getattr(kernel_of, "kernel", None)
+        compiled = getattr(kernel_of, 'kernel', None)
         if compiled is not None:
             compiled._final_of = None      # the Sample from umbrella_sample_call, not from the row
         last = block.last
         stages.add(last.stage)
         for i, name in enumerate(STEP_FIELDS):
             if name not in STEP_PEAK_FIELDS:
-                want = float(last.stage.code) if name == "stage" else getattr(last, name)
+                want = float(last.stage.code) if name == 'stage' else getattr(last, name)
                 tol = 1e-14 * max(1.0, abs(want)) if (model, name) == (
-                    "rigid", "sleeve_velocity") else 0.0
+                    'rigid', 'sleeve_velocity') else 0.0
                 assert abs(block.rows[i, 0] - want) <= tol, (name, last.time)
     assert stages == {Stage.DEPLOYING, Stage.LOCKED}
 
 
-@pytest.mark.parametrize("kernel, model", [
-    ("compiled", "flexible"), ("compiled", "flexible-nonlinear"), ("numpy", "flexible"),
-    ("compiled", "rigid")])
+@pytest.mark.parametrize('kernel, model', [
+    ('compiled', 'flexible'), ('compiled', 'flexible-nonlinear'), ('numpy', 'flexible'),
+    ('compiled', 'rigid')])
 def test_state_rows_are_the_samples_states(kernel, model, monkeypatch):
     """
     advance(n, states=True): each step's q, q' and fibre stresses, as its Sample has them.
@@ -236,11 +236,11 @@ def test_state_rows_are_the_samples_states(kernel, model, monkeypatch):
     when stepping one step at a time (the same trajectory to the bit); StepBlock.concatenate
     keeps them, and a block asked for none has None.
     """
-    if kernel == "compiled" and load_kernel() is None:
-        pytest.skip("compiled kernel not built")
-    monkeypatch.setenv("UMBRELLA_SIM_KERNEL", kernel)
+    if kernel == 'compiled' and load_kernel() is None:
+        pytest.skip('compiled kernel not built')
+    monkeypatch.setenv('UMBRELLA_SIM_KERNEL', kernel)
     p = UmbrellaParams(v0=-0.5, model=model, elements_per_segment=2, time_step=1e-3,
-                       damping_ratio=0.02 if model == "flexible-nonlinear" else 0.0)
+                       damping_ratio=0.02 if model == 'flexible-nonlinear' else 0.0)
     by_step = UmbrellaSimulator(p)
     want = [state_row(by_step.advance(1).last) for _ in range(150)]
     sim = UmbrellaSimulator(p)
@@ -255,7 +255,7 @@ def test_state_rows_are_the_samples_states(kernel, model, monkeypatch):
     assert np.array_equal(parts[-1].states[:, -1], state_row(last))
     assert np.array_equal(parts[-1].states[:m.n, -1], last.q)
     assert np.array_equal(parts[-1].states[m.n:2 * m.n, -1], last.qd)
-    assert np.abs(joined.states[2 * m.n:]).max() > (1e6 if model != "rigid" else -1.0)
+    assert np.abs(joined.states[2 * m.n:]).max() > (1e6 if model != 'rigid' else -1.0)
     assert sim.advance(3).states is None
     assert StepBlock.concatenate([parts[-1], sim.advance(2)]).states is None
     assert sim.advance(0, states=True).states.shape == (rows, 0)
@@ -272,9 +272,9 @@ def test_block_size_does_not_change_the_result():
 
 
 @needs_kernel
-@pytest.mark.parametrize("model, n_el, zeta", [
-    ("flexible", 1, 0.0), ("flexible", 4, 0.0), ("rigid-fe", 2, 0.0), ("flexible", 2, 0.02),
-    ("flexible-nonlinear", 2, 0.0), ("flexible-nonlinear", 4, 0.02)])
+@pytest.mark.parametrize('model, n_el, zeta', [
+    ('flexible', 1, 0.0), ('flexible', 4, 0.0), ('rigid-fe', 2, 0.0), ('flexible', 2, 0.02),
+    ('flexible-nonlinear', 2, 0.0), ('flexible-nonlinear', 4, 0.02)])
 def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
     """
     The Sample built from one compiled call (stresses, peaks, energies, residual) vs numpy.
@@ -302,12 +302,12 @@ def test_compiled_sample_matches_numpy_outputs(model, n_el, zeta, monkeypatch):
         for f in fields(fast):
             assert np.array_equal(getattr(fast, f.name), getattr(again, f.name)), f.name
         with monkeypatch.context() as mp:
-            mp.setattr(FiniteElementEngine, "sample_outputs", lambda self, s, stage: None)
+            mp.setattr(FiniteElementEngine, 'sample_outputs', lambda self, s, stage: None)
             ref = sim.sample()
         stages.add(ref.stage)
         for f in fields(ref):
             a, b = getattr(fast, f.name), getattr(ref, f.name)
-            if f.name == "constraint_residual":
+            if f.name == 'constraint_residual':
                 assert a < 1e-11 and b < 1e-11
             elif isinstance(b, (float, np.ndarray, tuple)):
                 a, b = np.asarray(a, float), np.asarray(b, float)
@@ -325,19 +325,19 @@ def test_install_names_a_missing_compiler_apart_from_a_failed_build(tmp_path):
     import sys
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    shutil.copytree(root, tmp_path / "src", ignore=shutil.ignore_patterns(
-        ".git", ".venv", "build", "*.egg-info", "*.so", "__pycache__", ".pytest_cache",
-        "tests", "docs", "bench"))
+    shutil.copytree(root, tmp_path / 'src', ignore=shutil.ignore_patterns(
+        '.git', '.venv', 'build', '*.egg-info', '*.so', '__pycache__', '.pytest_cache',
+        'tests', 'docs', 'bench'))
 
     def build(**env):
-        return subprocess.run([sys.executable, "setup.py", "-q", "build_ext", "--inplace"],
-                              cwd=tmp_path / "src", capture_output=True, text=True,
+        return subprocess.run([sys.executable, 'setup.py', '-q', 'build_ext', '--inplace'],
+                              cwd=tmp_path / 'src', capture_output=True, text=True,
                               env=dict(os.environ, **env), timeout=300)
 
-    missing = build(CC=str(tmp_path / "no-such-cc"))
-    assert missing.returncode != 0 and "needs a C compiler" in missing.stderr, missing.stderr
-    kernel = tmp_path / "src" / "umbrella_sim" / "core" / "_kernel.c"
-    kernel.write_text(kernel.read_text() + "\nthis is not C;\n")
+    missing = build(CC=str(tmp_path / 'no-such-cc'))
+    assert missing.returncode != 0 and 'needs a C compiler' in missing.stderr, missing.stderr
+    kernel = tmp_path / 'src' / 'umbrella_sim' / 'core' / '_kernel.c'
+    kernel.write_text(kernel.read_text() + '\nthis is not C;\n')
     failed = build()
-    assert failed.returncode != 0 and "did not build with" in failed.stderr, failed.stderr
-    assert "needs a C compiler" not in failed.stderr
+    assert failed.returncode != 0 and 'did not build with' in failed.stderr, failed.stderr
+    assert 'needs a C compiler' not in failed.stderr

@@ -49,7 +49,7 @@ def command_gap(bag: str, start: float, end: float) -> float:
     from umbrella_sim.bag.reader import read_log
 
     log = read_log(bag)
-    times = [start] + [t for t, _ in log.decoded(log.find_topic("sleeve_force"))
+    times = [start] + [t for t, _ in log.decoded(log.find_topic('sleeve_force'))
                        if start < t < end] + [end]
     return max(b - a for a, b in zip(times, times[1:]))
 
@@ -61,12 +61,12 @@ def wait_for_controller(antenna, controller, publishers: int = 1,
 
     Its subscriptions to the antenna's topics, and ``publishers`` on sleeve_force in all.
     """
-    controller.wait_for_log("waiting for joint_states", timeout=timeout)
+    controller.wait_for_log('waiting for joint_states', timeout=timeout)
     graph = antenna.probe.node
-    topics = [antenna.topics[name] for name in ("joint_states", "deployment_phase")]
+    topics = [antenna.topics[name] for name in ('joint_states', 'deployment_phase')]
     poll(lambda: all(graph.count_subscribers(t) >= 2 for t in topics)
-         and graph.count_publishers(antenna.topics["sleeve_force"]) >= publishers, timeout,
-         lambda: f"the controller never appeared on {topics} and sleeve_force")
+         and graph.count_publishers(antenna.topics['sleeve_force']) >= publishers, timeout,
+         lambda: f'the controller never appeared on {topics} and sleeve_force')
 
 
 def start_answered(antenna, commands: str) -> None:
@@ -105,7 +105,7 @@ def run_summary(result, first_push: float):
                           for s in result.samples], AFTER)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def constant():
     """Return the constant force deploying in TARGET on the node's grid, and its summary."""
     params = MODEL.replace(time_step=physics_step(physics_step_of(MODEL), RATE))
@@ -114,7 +114,7 @@ def constant():
     return force, run_summary(run, 0.0)
 
 
-@pytest.mark.parametrize("delay", [1, 3])
+@pytest.mark.parametrize('delay', [1, 3])
 def test_law_on_the_physics_core_locks_five_times_softer_in_the_target_time(constant, delay):
     """Commands act `delay` publications after the state they answer (the DDS round trip)."""
     _, ref = constant
@@ -125,7 +125,7 @@ def test_law_on_the_physics_core_locks_five_times_softer_in_the_target_time(cons
     assert abs(s.deploy_time - ref.deploy_time) <= 0.05 * ref.deploy_time
     assert s.stage2_peak_stress * 5 <= ref.stage2_peak_stress
     assert s.stage2_tip_amplitude * 5 <= ref.stage2_tip_amplitude
-    forces = run.column("sleeve_force")
+    forces = run.column('sleeve_force')
     assert forces.min() >= -LIMIT and forces.max() <= LIMIT
     assert forces.min() < 0.0                                  # it did hold the sleeve back
 
@@ -141,36 +141,36 @@ def test_push_only_cannot_lock_five_times_softer(constant):
     cfg = ControllerConfig(target_time=TARGET, max_force=LIMIT, min_force=0.0)
     run, first = simulate_closed_loop(MODEL, cfg, RATE, 1, after_lock=AFTER)
     s = run_summary(run, first)
-    assert run.column("sleeve_force").min() >= 0.0
+    assert run.column('sleeve_force').min() >= 0.0
     assert abs(s.deploy_time - ref.deploy_time) <= 0.05 * ref.deploy_time
     ratio = ref.stage2_tip_amplitude / s.stage2_tip_amplitude
     assert 1.5 < ratio < 5.0
 
 
 def test_infeasible_target_is_refused_naming_the_parameter():
-    with pytest.raises(ValueError, match="target_time=0.1: too short for max_force=8"):
+    with pytest.raises(ValueError, match='target_time=0.1: too short for max_force=8'):
         DeployLaw(MODEL, ControllerConfig(target_time=0.1, max_force=LIMIT))
-    with pytest.raises(ValueError, match="min_force=1"):
+    with pytest.raises(ValueError, match='min_force=1'):
         DeployLaw(MODEL, ControllerConfig(min_force=1.0))
 
 
-@pytest.mark.parametrize("args, culprit", [
-    (["-p", "target_time:=-1.0"], "target_time"),
-    (["-p", "target_time:=0.05"], "too short"),
-    (["-p", "max_force:=fast"], "max_force"),
-    (["-p", "l1:=-1.0"], "l1"),
-    (["-p", "targt_time:=1.0"], "unknown parameter 'targt_time' (did you mean 'target_time'?)"),
-    (["-p", "qos_overrides./sleeve_force.publisher.depth:=5"], "its topics take none"),
+@pytest.mark.parametrize('args, culprit', [
+    (['-p', 'target_time:=-1.0'], 'target_time'),
+    (['-p', 'target_time:=0.05'], 'too short'),
+    (['-p', 'max_force:=fast'], 'max_force'),
+    (['-p', 'l1:=-1.0'], 'l1'),
+    (['-p', 'targt_time:=1.0'], "unknown parameter 'targt_time' (did you mean 'target_time'?)"),
+    (['-p', 'qos_overrides./sleeve_force.publisher.depth:=5'], 'its topics take none'),
     # the process's own checks (they were tracebacks, exit 1)
-    (["--bogus-flag"], "unknown ROS arguments ['--bogus-flag']"),
-    (["-p", "use_sim_time:=abc"], "parameter use_sim_time='abc': must be of type bool"),
+    (['--bogus-flag'], "unknown ROS arguments ['--bogus-flag']"),
+    (['-p', 'use_sim_time:=abc'], "parameter use_sim_time='abc': must be of type bool"),
 ])
 @pytest.mark.ros
 def test_controller_refuses_bad_parameters_with_exit_2(args, culprit):
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim.deploy_controller", "--ros-args",
+    r = subprocess.run([sys.executable, '-m', 'umbrella_sim.deploy_controller', '--ros-args',
                         *args], capture_output=True, text=True, env=ros_env(), timeout=60)
     assert r.returncode == 2, r.stderr
-    assert culprit in r.stderr and "Traceback" not in r.stderr
+    assert culprit in r.stderr and 'Traceback' not in r.stderr
 
 
 @pytest.mark.ros
@@ -182,45 +182,45 @@ def test_controller_shares_the_node_params_file_and_names_a_typo_in_it(tmp_path)
     Both nodes take it; a name neither knows there (robot_state_publisher's, or a typo) is
     a warning naming it with a "did you mean"; in a section naming the node, exit 2.
     """
-    shared = tmp_path / "shared.yaml"
-    shared.write_text("/**:\n  ros__parameters:\n    v0: 0.0\n    publish_rate: 100.0\n"
-                      "    record: false\n    target_time: 1.5\n    max_force: 8.0\n"
-                      "    publish_frequency: 30.0\n")
-    with NodeProcess("--params-file", str(shared),
-                     module="umbrella_sim.deploy_controller") as controller:
-        controller.wait_for_log("waiting for joint_states", timeout=60)
-        assert "target 1.5 s" in controller.output()
+    shared = tmp_path / 'shared.yaml'
+    shared.write_text('/**:\n  ros__parameters:\n    v0: 0.0\n    publish_rate: 100.0\n'
+                      '    record: false\n    target_time: 1.5\n    max_force: 8.0\n'
+                      '    publish_frequency: 30.0\n')
+    with NodeProcess('--params-file', str(shared),
+                     module='umbrella_sim.deploy_controller') as controller:
+        controller.wait_for_log('waiting for joint_states', timeout=60)
+        assert 'target 1.5 s' in controller.output()
         assert "section '/**' gives 'publish_frequency'" in controller.output()
         assert controller.stop() == 0
     # and the node, which takes the controller's names there silently
-    with NodeProcess("--params-file", str(shared)) as node:
-        node.wait_for_log("physics step", timeout=60)
+    with NodeProcess('--params-file', str(shared)) as node:
+        node.wait_for_log('physics step', timeout=60)
         assert "section '/**' gives 'publish_frequency'" in node.output()
         assert node.stop() == 0, node.output()
     # and the offline tools, which read the node's file (they refused the controller's names)
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim", "simulate", "--params",
-                        str(shared), "--duration", "0.01"], capture_output=True, text=True,
+    r = subprocess.run([sys.executable, '-m', 'umbrella_sim', 'simulate', '--params',
+                        str(shared), '--duration', '0.01'], capture_output=True, text=True,
                        env=ros_env(), timeout=60)
     assert r.returncode == 0, r.stderr
-    assert "warning: params file" in r.stderr and "gives 'publish_frequency'" in r.stderr
+    assert 'warning: params file' in r.stderr and "gives 'publish_frequency'" in r.stderr
     # a section naming the node alone is the node's: a controller name there is a mistake
-    own = tmp_path / "own.yaml"
-    own.write_text("umbrella_node:\n  ros__parameters:\n    target_time: 1.5\n")
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim.node", "--ros-args",
-                        "--params-file", str(own)], capture_output=True, text=True,
+    own = tmp_path / 'own.yaml'
+    own.write_text('umbrella_node:\n  ros__parameters:\n    target_time: 1.5\n')
+    r = subprocess.run([sys.executable, '-m', 'umbrella_sim.node', '--ros-args',
+                        '--params-file', str(own)], capture_output=True, text=True,
                        env=ros_env(), timeout=60)
     assert r.returncode == 2 and "unknown parameter 'target_time'" in r.stderr, r.stderr
-    typo = tmp_path / "typo.yaml"
-    typo.write_text(shared.read_text().replace("max_force", "max_forse"))
-    with NodeProcess("--params-file", str(typo),
-                     module="umbrella_sim.deploy_controller") as controller:
-        controller.wait_for_log("waiting for joint_states", timeout=60)
+    typo = tmp_path / 'typo.yaml'
+    typo.write_text(shared.read_text().replace('max_force', 'max_forse'))
+    with NodeProcess('--params-file', str(typo),
+                     module='umbrella_sim.deploy_controller') as controller:
+        controller.wait_for_log('waiting for joint_states', timeout=60)
         assert "'max_forse' (did you mean 'max_force'?)" in controller.output()
         assert controller.stop() == 0
-    own_typo = tmp_path / "own_typo.yaml"
-    own_typo.write_text("deploy_controller:\n  ros__parameters:\n    max_forse: 8.0\n")
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim.deploy_controller", "--ros-args",
-                        "--params-file", str(own_typo)], capture_output=True, text=True,
+    own_typo = tmp_path / 'own_typo.yaml'
+    own_typo.write_text('deploy_controller:\n  ros__parameters:\n    max_forse: 8.0\n')
+    r = subprocess.run([sys.executable, '-m', 'umbrella_sim.deploy_controller', '--ros-args',
+                        '--params-file', str(own_typo)], capture_output=True, text=True,
                        env=ros_env(), timeout=60)
     assert r.returncode == 2 and str(own_typo) in r.stderr, r.stderr
     assert "'max_forse' (did you mean 'max_force'?)" in r.stderr
@@ -239,31 +239,31 @@ def test_controller_over_dds_locks_five_times_softer_than_constant_force(
     whatever CPU the controller process gets on a busy machine.
     """
     force, _ = constant
-    node_params = {"v0": 0.0, "sleeve_force_min": -LIMIT, "publish_rate": RATE,
-                   "time_step": STEP}
+    node_params = {'v0': 0.0, 'sleeve_force_min': -LIMIT, 'publish_rate': RATE,
+                   'time_step': STEP}
 
-    cf = antenna_factory(node_params, record_path=str(tmp_path / "constant"))
-    cf.wait_for_phase("deploying")
+    cf = antenna_factory(node_params, record_path=str(tmp_path / 'constant'))
+    cf.wait_for_phase('deploying')
     cf.publish_force(force)
-    cf.wait_for_phase("locked", timeout=60)
+    cf.wait_for_phase('locked', timeout=60)
     cf.wait_for_sim_time(cf.lock_time() + AFTER, timeout=30)
     assert cf.stop() == 0
-    ref = summary_from_recording(str(tmp_path / "constant"), after_lock=AFTER)
+    ref = summary_from_recording(str(tmp_path / 'constant'), after_lock=AFTER)
 
     from std_msgs.msg import Float64
 
-    bag = str(tmp_path / "controlled")
+    bag = str(tmp_path / 'controlled')
     ctl = antenna_factory(dict(node_params, lockstep=True, start_paused=True), record_path=bag)
-    commands = ctl.topics["sleeve_force"]
+    commands = ctl.topics['sleeve_force']
     ctl.probe.subscribe(commands, Float64)
-    with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
-                     parameters={"target_time": TARGET, "max_force": LIMIT,
-                                 "min_force": -LIMIT}) as controller:
+    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
+                     parameters={'target_time': TARGET, 'max_force': LIMIT,
+                                 'min_force': -LIMIT}) as controller:
         wait_for_controller(ctl, controller)
         start_answered(ctl, commands)
-        ctl.wait_for_phase("locked", timeout=60)
+        ctl.wait_for_phase('locked', timeout=60)
         ctl.wait_for_sim_time(ctl.lock_time() + AFTER, timeout=30)
-        controller.wait_for_log("deployment over")
+        controller.wait_for_log('deployment over')
         log = controller.output()
         assert controller.stop() == 0, controller.output()
     assert ctl.stop() == 0
@@ -272,14 +272,14 @@ def test_controller_over_dds_locks_five_times_softer_than_constant_force(
     assert command_gap(bag, s.first_push_time, s.lock_time) <= 1.0 / RATE + 1e-9
     cfg = ControllerConfig(target_time=TARGET, max_force=LIMIT, min_force=-LIMIT)
     offline = run_summary(*simulate_closed_loop(MODEL, cfg, RATE, 0, after_lock=AFTER))
-    print(f"\nconstant {force:.4f} N: deploy {ref.deploy_time:.4f} s, stage-2 peak stress "
-          f"{ref.stage2_peak_stress / 1e6:.2f} MPa, tip amplitude "
-          f"{ref.stage2_tip_amplitude * 1e3:.2f} mm\ncontroller: deploy {s.deploy_time:.6f} s "
-          f"(offline {offline.deploy_time:.6f} s), stage-2 peak stress "
-          f"{s.stage2_peak_stress / 1e6:.3f} MPa (offline {offline.stage2_peak_stress / 1e6:.3f}),"
-          f" tip amplitude {s.stage2_tip_amplitude * 1e3:.3f} mm (offline "
-          f"{offline.stage2_tip_amplitude * 1e3:.3f})\n{log}")
-    assert "it refuses them" not in log and "publishers on" not in log   # no false alarm
+    print(f'\nconstant {force:.4f} N: deploy {ref.deploy_time:.4f} s, stage-2 peak stress '
+          f'{ref.stage2_peak_stress / 1e6:.2f} MPa, tip amplitude '
+          f'{ref.stage2_tip_amplitude * 1e3:.2f} mm\ncontroller: deploy {s.deploy_time:.6f} s '
+          f'(offline {offline.deploy_time:.6f} s), stage-2 peak stress '
+          f'{s.stage2_peak_stress / 1e6:.3f} MPa (offline {offline.stage2_peak_stress / 1e6:.3f}),'
+          f' tip amplitude {s.stage2_tip_amplitude * 1e3:.3f} mm (offline '
+          f'{offline.stage2_tip_amplitude * 1e3:.3f})\n{log}')
+    assert 'it refuses them' not in log and 'publishers on' not in log   # no false alarm
     assert ref.deploy_time == pytest.approx(TARGET, rel=1e-3)
     # both over the same stage-2 window (each recording went on for a while after it)
     assert AFTER - 1.0 / RATE <= s.stage2_span <= AFTER
@@ -289,7 +289,7 @@ def test_controller_over_dds_locks_five_times_softer_than_constant_force(
     assert s.stage2_tip_amplitude * 5 <= ref.stage2_tip_amplitude
     # lockstep from the first period (the run started from a paused reset the controller had
     # answered): the DDS loop is the offline law at a delay of zero periods
-    for name in ("deploy_time", "stage2_tip_amplitude", "stage2_peak_stress"):
+    for name in ('deploy_time', 'stage2_tip_amplitude', 'stage2_peak_stress'):
         assert getattr(s, name) == pytest.approx(getattr(offline, name), rel=1e-6), name
 
 
@@ -309,11 +309,11 @@ def test_stop_signal_while_commands_flow_is_a_clean_exit(probe, ros_domain_id):
 
     from umbrella_sim.ros import messages as ros_io
 
-    phase = probe.node.create_publisher(String, ros_io.TOPICS["deployment_phase"].name,
-                                        ros_io.TOPICS["deployment_phase"].qos)
-    states = probe.node.create_publisher(JointState, ros_io.TOPICS["joint_states"].name, 10)
+    phase = probe.node.create_publisher(String, ros_io.TOPICS['deployment_phase'].name,
+                                        ros_io.TOPICS['deployment_phase'].qos)
+    states = probe.node.create_publisher(JointState, ros_io.TOPICS['joint_states'].name, 10)
     probe.subscribe(ros_io.COMMAND.name, Float64)
-    phase.publish(String(data="deploying"))
+    phase.publish(String(data='deploying'))
     ended = threading.Event()
     folded = UmbrellaParams().alpha0
 
@@ -331,20 +331,20 @@ def test_stop_signal_while_commands_flow_is_a_clean_exit(probe, ros_domain_id):
     pumper.start()
     try:
         for i in range(8):
-            with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
-                             parameters={"max_force": LIMIT, "min_force": -LIMIT}) as c:
-                c.wait_for_log("waiting for joint_states", timeout=60)
+            with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
+                             parameters={'max_force': LIMIT, 'min_force': -LIMIT}) as c:
+                c.wait_for_log('waiting for joint_states', timeout=60)
                 sent = len(probe.messages(ros_io.COMMAND.name))
                 # each stop at its own instant of the stream: after 20 + 10 i answers
                 poll(lambda: len(probe.messages(ros_io.COMMAND.name)) > sent + 20 + 10 * i, 30,
-                     lambda: f"controller {i} sent "
-                             f"{len(probe.messages(ros_io.COMMAND.name)) - sent} commands "
-                             f"in 30 s (awaited {21 + 10 * i})")
+                     lambda: f'controller {i} sent '
+                             f'{len(probe.messages(ros_io.COMMAND.name)) - sent} commands '
+                             f'in 30 s (awaited {21 + 10 * i})')
                 sig = signal.SIGTERM if i % 2 == 0 else signal.SIGINT
                 rc = c.stop(sig)
                 out = c.output()
-            assert rc == 0, f"controller {i} ({sig.name}): exit {rc}\n{out}"
-            assert "Traceback" not in out, out
+            assert rc == 0, f'controller {i} ({sig.name}): exit {rc}\n{out}'
+            assert 'Traceback' not in out, out
     finally:
         ended.set()
 
@@ -364,25 +364,25 @@ def test_controller_deploys_each_new_run_after_a_reset(antenna_factory, ros_doma
     """
     from std_msgs.msg import Float64
 
-    ctl = antenna_factory({"v0": 0.0, "sleeve_force_min": -LIMIT, "publish_rate": RATE,
-                           "time_step": STEP, "lockstep": True, "start_paused": True})
-    commands = ctl.topics["sleeve_force"]
+    ctl = antenna_factory({'v0': 0.0, 'sleeve_force_min': -LIMIT, 'publish_rate': RATE,
+                           'time_step': STEP, 'lockstep': True, 'start_paused': True})
+    commands = ctl.topics['sleeve_force']
     ctl.probe.subscribe(commands, Float64)
-    with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
-                     parameters={"target_time": TARGET, "max_force": LIMIT,
-                                 "min_force": -LIMIT}) as controller:
+    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
+                     parameters={'target_time': TARGET, 'max_force': LIMIT,
+                                 'min_force': -LIMIT}) as controller:
         wait_for_controller(ctl, controller)
         deploy = []
         for run in range(2):
             start_answered(ctl, commands)
-            ctl.wait_for_phase("locked", timeout=60)
+            ctl.wait_for_phase('locked', timeout=60)
             deploy.append(ctl.lock_time() - ctl.applied_forces()[0][0])
-            controller.wait_for_log("deployment over", count=run + 1)
+            controller.wait_for_log('deployment over', count=run + 1)
             ctl.pause()
-        controller.wait_for_log("a new run; deploying it from its start")
+        controller.wait_for_log('a new run; deploying it from its start')
         out = controller.output()
         assert controller.stop() == 0, out
-    assert "it refuses them" not in out and "not folded at rest" not in out   # no false alarm
+    assert 'it refuses them' not in out and 'not folded at rest' not in out   # no false alarm
     assert deploy[0] == pytest.approx(TARGET, rel=0.05)
     assert deploy[1] == pytest.approx(deploy[0], rel=1e-6), deploy      # the same run again
 
@@ -396,26 +396,26 @@ def test_controller_leaves_a_frame_that_is_not_at_rest_alone(antenna_factory, ro
     Pushing a frame that already deploys faster than the plan only makes its lock harder
     (the controller once pushed the node's default V0 = -0.2 m/s run at full force).
     """
-    antenna = antenna_factory({"v0": -0.2, "publish_rate": RATE, "time_step": STEP,
-                               "start_paused": True})
-    with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
-                     parameters={"target_time": TARGET, "max_force": LIMIT}) as controller:
+    antenna = antenna_factory({'v0': -0.2, 'publish_rate': RATE, 'time_step': STEP,
+                               'start_paused': True})
+    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
+                     parameters={'target_time': TARGET, 'max_force': LIMIT}) as controller:
         wait_for_controller(antenna, controller)
         # reset the paused antenna until the controller has a state of it (the graph shows the
         # controller ~1 s before DDS delivers it data): its t = 0 state, already at v0
         for _ in range(20):
             antenna.reset()
             try:
-                controller.wait_for_log("the frame is not folded at rest", timeout=3.0)
+                controller.wait_for_log('the frame is not folded at rest', timeout=3.0)
                 break
             except AssertionError:
                 continue
         antenna.resume()
-        controller.wait_for_log("the frame is not folded at rest", timeout=30)
-        antenna.wait_for_phase("locked", timeout=30)
+        controller.wait_for_log('the frame is not folded at rest', timeout=30)
+        antenna.wait_for_phase('locked', timeout=30)
         out = controller.output()
         assert controller.stop() == 0, out
-    assert "give umbrella_node v0:=0.0" in out and "deployment over" not in out
+    assert 'give umbrella_node v0:=0.0' in out and 'deployment over' not in out
     assert antenna.applied_forces() == []
     offline = simulate(UmbrellaParams(v0=-0.2, time_step=STEP), 1.0, stop_after_lock=0.0)
     assert antenna.lock_time() == pytest.approx(offline.lock.time, abs=1e-9)   # on its own
@@ -436,23 +436,23 @@ def test_controller_warns_when_its_commands_are_refused_or_others_command(
     # in lockstep from a reset the controller answered (start_answered), as the tests above:
     # free-running, a loaded machine delayed its commands, its window of our own commands
     # grew with the delay it measured, and the refused braking went unnoticed
-    antenna = antenna_factory({"v0": 0.0, "publish_rate": RATE, "time_step": STEP,
-                               "start_paused": True, "lockstep": True})
+    antenna = antenna_factory({'v0': 0.0, 'publish_rate': RATE, 'time_step': STEP,
+                               'start_paused': True, 'lockstep': True})
     antenna.publish_force(0.0)              # a second publisher on the topic, holding 0 N
-    commands = antenna.topics["sleeve_force"]
+    commands = antenna.topics['sleeve_force']
     antenna.probe.subscribe(commands, Float64)
-    with NodeProcess(module="umbrella_sim.deploy_controller", domain_id=ros_domain_id,
-                     parameters={"target_time": TARGET, "max_force": LIMIT,
-                                 "min_force": -LIMIT}) as controller:
+    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
+                     parameters={'target_time': TARGET, 'max_force': LIMIT,
+                                 'min_force': -LIMIT}) as controller:
         wait_for_controller(antenna, controller, publishers=2)
         start_answered(antenna, commands)
-        antenna.wait_for_phase("locked", timeout=60)
-        controller.wait_for_log("deployment over", timeout=30)
+        antenna.wait_for_phase('locked', timeout=60)
+        controller.wait_for_log('deployment over', timeout=30)
         out = controller.output()
         assert controller.stop() == 0, out
-    assert "2 publishers on /sleeve_force" in out, out
-    assert "it refuses them (its sleeve_force_min" in out, out
-    assert "below" in antenna.node.output() or "sleeve_force_min" in antenna.node.output()
+    assert '2 publishers on /sleeve_force' in out, out
+    assert 'it refuses them (its sleeve_force_min' in out, out
+    assert 'below' in antenna.node.output() or 'sleeve_force_min' in antenna.node.output()
     assert min(f for _, f in antenna.applied_forces()) >= 0.0
 
 
@@ -475,7 +475,7 @@ def test_a_command_taken_late_is_not_reported_as_refused(capfd):
     rclpy.init(domain_id=DOMAIN_ID)    # (its publisher and subscriptions: no traffic)
     try:
         node = _make_node_class()()
-        node.phase = "deploying"
+        node.phase = 'deploying'
         period, alpha0 = 0.01, UmbrellaParams().alpha0
 
         def state(t, effort):
@@ -499,4 +499,4 @@ def test_a_command_taken_late_is_not_reported_as_refused(capfd):
     finally:
         rclpy.shutdown()
     err = capfd.readouterr().err
-    assert "first push acting" in err and "none of our commands" not in err, err
+    assert 'first push acting' in err and 'none of our commands' not in err, err

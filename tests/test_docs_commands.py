@@ -24,19 +24,19 @@ import os
 import shlex
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SHARE = "$(ros2 pkg prefix --share umbrella_sim)/"
+SHARE = '$(ros2 pkg prefix --share umbrella_sim)/'
 
 
 def _documented_command_lines() -> list[tuple[str, str]]:
     """Return (file, command) of every indented command line, continuations joined."""
     out = []
-    for path in [os.path.join(ROOT, "README.md"),
-                 *sorted(glob.glob(os.path.join(ROOT, "msg_docs", "*.md")))]:
-        with open(path, encoding="utf-8") as fh:
-            text = fh.read().replace("\\\n", " ")
+    for path in [os.path.join(ROOT, 'README.md'),
+                 *sorted(glob.glob(os.path.join(ROOT, 'msg_docs', '*.md')))]:
+        with open(path, encoding='utf-8') as fh:
+            text = fh.read().replace('\\\n', ' ')
         out += [(os.path.relpath(path, ROOT), line.strip()) for line in text.splitlines()
-                if line.startswith("    ") and line.split()
-                and line.split()[0] in ("ros2", "umbrella_node", "deploy_controller")]
+                if line.startswith('    ') and line.split()
+                and line.split()[0] in ('ros2', 'umbrella_node', 'deploy_controller')]
     return out
 
 
@@ -47,7 +47,7 @@ def setup_distribution():
     cwd = os.getcwd()
     os.chdir(ROOT)
     try:
-        return run_setup("setup.py", stop_after="init")
+        return run_setup('setup.py', stop_after='init')
     finally:
         os.chdir(cwd)
 
@@ -55,23 +55,23 @@ def setup_distribution():
 def _installed_share_files() -> set[str]:
     """Return the files setup.py installs under share/umbrella_sim/, relative to it."""
     dist = setup_distribution()
-    share = "share/umbrella_sim"
-    return {os.path.join(target[len(share):].lstrip("/"), os.path.basename(f))
+    share = 'share/umbrella_sim'
+    return {os.path.join(target[len(share):].lstrip('/'), os.path.basename(f))
             for target, files in dist.data_files if target.startswith(share) for f in files}
 
 
 def test_every_documented_params_file_is_the_installed_one():
     commands = _documented_command_lines()
     given = [(where, words[i + 1]) for where, line in commands
-             for words in [shlex.split(line.replace(SHARE, "@SHARE@/"))]
-             for i, w in enumerate(words[:-1]) if w == "--params-file"]
-    assert given, "no documented --params-file (the README and msg_docs show one)"
+             for words in [shlex.split(line.replace(SHARE, '@SHARE@/'))]
+             for i, w in enumerate(words[:-1]) if w == '--params-file']
+    assert given, 'no documented --params-file (the README and msg_docs show one)'
     installed = _installed_share_files()
-    assert "config/umbrella.yaml" in installed, sorted(installed)
-    prefix = "@SHARE@/"
+    assert 'config/umbrella.yaml' in installed, sorted(installed)
+    prefix = '@SHARE@/'
     for where, path in given:
         assert path.startswith(prefix), (
-            f"{where}: --params-file {path} exists only in the source tree; give "
+            f'{where}: --params-file {path} exists only in the source tree; give '
             f"'{SHARE}...' so the command works from a workspace root")
         assert path[len(prefix):] in installed, (where, path, sorted(installed))
         assert os.path.exists(os.path.join(ROOT, path[len(prefix):])), (where, path)

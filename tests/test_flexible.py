@@ -36,7 +36,7 @@ from umbrella_sim.core.summary import energy_balance_error
 THESIS_DEFORMABLE = {-0.5: 0.09040, -1.0: 0.04525, -2.0: 0.02343}
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def thesis_run():
     """
     V0 = -0.2, N = 1, energy lock, through the lock and 1 s of stage 2.
@@ -51,7 +51,7 @@ def thesis_run():
     return r
 
 
-@pytest.mark.parametrize("v0", sorted(THESIS_DEFORMABLE))
+@pytest.mark.parametrize('v0', sorted(THESIS_DEFORMABLE))
 def test_deployment_time_matches_table_6_1(v0):
     p = UmbrellaParams(v0=v0)
     r = simulate(p, 0.2, stop_after_lock=0.0)
@@ -71,35 +71,35 @@ def test_three_and_six_element_models_agree_at_v0_minus_1():
 
 def test_stage_one_tip_deflection(thesis_run):
     s = thesis_run.summary()
-    assert s["tip_deflection_max"] == pytest.approx(0.665e-3, rel=0.03)
-    assert s["tip_deflection_max_time"] == pytest.approx(0.08, abs=0.005)
+    assert s['tip_deflection_max'] == pytest.approx(0.665e-3, rel=0.03)
+    assert s['tip_deflection_max_time'] == pytest.approx(0.08, abs=0.005)
 
 
 def test_stage_two_vibration(thesis_run):
     s = thesis_run.summary()
-    assert s["stage2_tip_amplitude"] == pytest.approx(0.060, rel=0.10)
-    assert s["stage2_tip_period"] == pytest.approx(0.05, rel=0.10)
+    assert s['stage2_tip_amplitude'] == pytest.approx(0.060, rel=0.10)
+    assert s['stage2_tip_period'] == pytest.approx(0.05, rel=0.10)
 
 
 def test_peak_stresses_leaf_above_link(thesis_run):
     """Fig. 6.3 / 6.5: the leaf carries the higher stress, its peak at O''."""
     s = thesis_run.summary()
-    assert s["peak_stress_leaf"] > s["peak_stress_link"] > 0
-    assert s["peak_stress_leaf_x"] == pytest.approx(0.5, abs=1e-12)   # O'' = l1 along the leaf
+    assert s['peak_stress_leaf'] > s['peak_stress_link'] > 0
+    assert s['peak_stress_leaf_x'] == pytest.approx(0.5, abs=1e-12)   # O'' = l1 along the leaf
 
 
 def test_energy_conserved_without_force(thesis_run):
     """F_H = 0: total energy drifts < 1e-9 through stage 1 and 1 s of stage 2 (energy lock)."""
-    assert thesis_run.lock.kind == "energy"
+    assert thesis_run.lock.kind == 'energy'
     assert thesis_run.samples[-1].time >= thesis_run.lock.time + 1.0 - 1e-9
-    assert thesis_run.summary()["energy_drift"] < 1e-9
+    assert thesis_run.summary()['energy_drift'] < 1e-9
     # (with stage 2's phase correction the integrator keeps T + V + its term)
     e = np.array([mechanical_energy(s) for s in thesis_run.samples])
     assert np.abs(e - e[0]).max() / e[0] < 1e-9
 
 
 def test_constraint_residuals_over_one_second(thesis_run):
-    assert thesis_run.summary()["constraint_residual_max"] < 1e-10
+    assert thesis_run.summary()['constraint_residual_max'] < 1e-10
 
 
 def test_energy_equals_work_with_force():
@@ -107,7 +107,7 @@ def test_energy_equals_work_with_force():
     r = simulate(p, 0.4)
     assert r.error is None and r.lock is not None
     err = energy_balance_error(r)
-    work = r.column("work")
+    work = r.column('work')
     assert work.max() > 0.1                              # the force did real work
     assert np.abs(err).max() / (2.107 + work.max()) < 1e-4
 
@@ -122,13 +122,13 @@ def test_lock_is_found_on_the_trajectory_not_at_the_next_step():
     sim2 = UmbrellaSimulator(UmbrellaParams(v0=-0.5))
     k = int(t_lock / sim2.h)
     sim2.advance_to(k * sim2.h, record=False)
-    s = sim2.engine.step(sim2.state, t_lock - k * sim2.h, 0.0, "deploying")
+    s = sim2.engine.step(sim2.state, t_lock - k * sim2.h, 0.0, 'deploying')
     gap = sim2.model.sleeve_height(s.q) - sim2.model.y_stop
     speed = abs(sim2.model.sleeve_height_gradient(s.q) @ s.qd)
     assert abs(gap) / speed < 1e-9                      # crossing time error, seconds
 
 
-@pytest.mark.parametrize("lock", ["energy", "plastic"])
+@pytest.mark.parametrize('lock', ['energy', 'plastic'])
 def test_lock_velocity_redistribution(lock):
     p = UmbrellaParams(v0=-0.5, lock=lock)
     sim = UmbrellaSimulator(p)
@@ -141,9 +141,9 @@ def test_lock_velocity_redistribution(lock):
     cs = ConstraintSet(locked=True, rigid=False)
     assert np.abs(m.constraint_jacobian(locked_sample.q, cs) @ locked_sample.qd).max() < 1e-12
     assert abs(locked_sample.sleeve_velocity) < 1e-12
-    if lock == "energy":
+    if lock == 'energy':
         assert ev.energy_after == pytest.approx(ev.energy_before, rel=1e-12)
-        assert set(ev.free_velocities) == {"alpha1", "alpha2", "R2x", "R2y", "link.u1"}
+        assert set(ev.free_velocities) == {'alpha1', 'alpha2', 'R2x', 'R2y', 'link.u1'}
     else:
         assert ev.energy_after < ev.energy_before
     # after the lock the sleeve stays at S at every step, within the solver's constraint
@@ -171,7 +171,7 @@ def test_mesh_convergence_of_deployment_time_and_period():
                              0.1, stop_after_lock=0.0).lock.time
         r = simulate(UmbrellaParams(v0=-0.2, elements_per_segment=n, time_step=5e-4),
                      0.6, stop_after_lock=0.35)
-        period[n] = r.summary()["stage2_tip_period"]
+        period[n] = r.summary()['stage2_tip_period']
     for n in (1, 2, 4):
         assert deploy[n] == pytest.approx(deploy[8], rel=1e-4)
         assert period[n] == pytest.approx(period[8], rel=5e-3)
@@ -188,10 +188,10 @@ def test_scheme_balances_energy_before_the_energy_scaling(monkeypatch):
     numpy reference, scaling disabled, F_H = 2 N, through the lock and 0.1 s of stage 2.
     """
     from umbrella_sim.core import integrators
-    monkeypatch.setattr(integrators, "ENERGY_RESTORE_LIMIT", 1.0 - 1e-300)   # never scale
+    monkeypatch.setattr(integrators, 'ENERGY_RESTORE_LIMIT', 1.0 - 1e-300)   # never scale
     p = UmbrellaParams(v0=-0.5, sleeve_force=2.0, time_step=5e-4)
     sim = UmbrellaSimulator(p)
-    sim.engine.integrator = integrators.MidpointDAE(sim.model, kernel="numpy")
+    sim.engine.integrator = integrators.MidpointDAE(sim.model, kernel='numpy')
     b = sim.advance(380)
     assert b.lock is not None and b.error is None
     err = mechanical_energy(b) - b.work + b.lock_energy_loss
@@ -210,7 +210,7 @@ def test_stress_recovery_sign_and_fibres():
     m = UmbrellaSimulator(UmbrellaParams()).model
     e = s.q[m.s_leaf]
     # axial stress of the element O-O'' from its end displacements
-    u_joint = e[m.leaf.elastic_index(1, "u")]
+    u_joint = e[m.leaf.elastic_index(1, 'u')]
     assert mean[0] == pytest.approx(72e9 * u_joint / 0.5, rel=1e-9)
     assert s.peak_stress_leaf == pytest.approx(np.abs(s.leaf_stress).max())
 
@@ -222,10 +222,10 @@ def test_sixteen_elements_per_segment():
     assert r.error is None and len(r.q_labels) == 148
     # mesh convergence: the deploy time of the one-element mesh, and near the rigid closed form
     coarse = simulate(UmbrellaParams(v0=-0.2), 0.4, stop_after_lock=0.0).lock.time
-    assert s["deploy_time"] == pytest.approx(coarse, rel=1e-5)
-    assert s["deploy_time"] == pytest.approx(
+    assert s['deploy_time'] == pytest.approx(coarse, rel=1e-5)
+    assert s['deploy_time'] == pytest.approx(
         deployment_time_by_quadrature(UmbrellaParams(v0=-0.2)), rel=1e-3)
-    assert s["constraint_residual_max"] < 1e-10 and s["energy_drift"] < 1e-4
+    assert s['constraint_residual_max'] < 1e-10 and s['energy_drift'] < 1e-4
 
 
 def test_a_damped_frame_at_rest_has_dissipated_the_energy_it_had_after_the_lock():
@@ -239,12 +239,12 @@ def test_a_damped_frame_at_rest_has_dissipated_the_energy_it_had_after_the_lock(
     at the lock.
     """
     for pc in (True, False):
-        r = simulate(UmbrellaParams(v0=-1.0, damping_ratio=0.3, lock="plastic",
+        r = simulate(UmbrellaParams(v0=-1.0, damping_ratio=0.3, lock='plastic',
                                     phase_correction=pc), 1.0)
         end = r.samples[-1]
         assert end.strain_energy < 1e-12 and end.kinetic_energy < 1e-12      # at rest
-        assert r.summary()["energy_drift"] < 1e-10                           # balance closes
-        at_lock = r.column("time") <= r.lock.time
-        stage2 = end.damping_dissipation - r.column("damping_dissipation")[at_lock][-1]
-        assert r.column("work")[-1] == r.column("work")[at_lock][-1]         # F_H = 0
+        assert r.summary()['energy_drift'] < 1e-10                           # balance closes
+        at_lock = r.column('time') <= r.lock.time
+        stage2 = end.damping_dissipation - r.column('damping_dissipation')[at_lock][-1]
+        assert r.column('work')[-1] == r.column('work')[at_lock][-1]         # F_H = 0
         assert stage2 == pytest.approx(r.lock.energy_after, rel=1e-9)

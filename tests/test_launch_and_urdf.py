@@ -36,52 +36,52 @@ from umbrella_sim.ros.messages import JOINT_NAMES, joint_state_msg
 from umbrella_sim.ros.share import share_dir
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-URDF = os.path.join(ROOT, "urdf", "umbrella.urdf")
+URDF = os.path.join(ROOT, 'urdf', 'umbrella.urdf')
 
 
 # ------------------------------------------------------------------------------- URDF
 def test_urdf_file_is_the_generated_one():
     """Regenerate: .venv/bin/python -m umbrella_sim.ros.robot_description > urdf/umbrella.urdf."""
-    with open(URDF, encoding="utf-8") as fh:
+    with open(URDF, encoding='utf-8') as fh:
         assert fh.read() == rd.urdf()
 
 
 def test_urdf_joints_are_the_published_joint_names():
     robot = ET.parse(URDF).getroot()
-    links = {link.get("name") for link in robot.iter("link")}
-    assert {"umbrella_base", "leaf", "link", "sleeve", "tip"} <= links
-    moving = [j.get("name") for j in robot.iter("joint") if j.get("type") != "fixed"]
+    links = {link.get('name') for link in robot.iter('link')}
+    assert {'umbrella_base', 'leaf', 'link', 'sleeve', 'tip'} <= links
+    moving = [j.get('name') for j in robot.iter('joint') if j.get('type') != 'fixed']
     assert moving == JOINT_NAMES == rd.MOVING_JOINTS
-    for j in robot.iter("joint"):
-        assert j.find("parent").get("link") in links and j.find("child").get("link") in links
-    children = [j.find("child").get("link") for j in robot.iter("joint")]
+    for j in robot.iter('joint'):
+        assert j.find('parent').get('link') in links and j.find('child').get('link') in links
+    children = [j.find('child').get('link') for j in robot.iter('joint')]
     assert len(children) == len(set(children)) == len(links) - 1      # a tree from the base
 
 
 def _forward_kinematics(robot, positions: dict) -> dict:
     """Return 3x3 planar homogeneous transforms base <- link from the URDF's joints."""
-    joints = {j.find("child").get("link"): j for j in robot.iter("joint")}
+    joints = {j.find('child').get('link'): j for j in robot.iter('joint')}
 
     def pose(link):
         if link not in joints:
             return np.eye(3)
         j = joints[link]
-        xyz = [float(v) for v in j.find("origin").get("xyz").split()]
+        xyz = [float(v) for v in j.find('origin').get('xyz').split()]
         t = np.array([[1.0, 0.0, xyz[0]], [0.0, 1.0, xyz[1]], [0.0, 0.0, 1.0]])
-        q = positions.get(j.get("name"), 0.0)
-        if j.get("type") == "revolute":
-            assert j.find("axis").get("xyz") == "0 0 1"
+        q = positions.get(j.get('name'), 0.0)
+        if j.get('type') == 'revolute':
+            assert j.find('axis').get('xyz') == '0 0 1'
             c, s = math.cos(q), math.sin(q)
             t = t @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        elif j.get("type") == "prismatic":
-            axis = [float(v) for v in j.find("axis").get("xyz").split()]
+        elif j.get('type') == 'prismatic':
+            axis = [float(v) for v in j.find('axis').get('xyz').split()]
             t = t @ np.array([[1.0, 0.0, q * axis[0]], [0.0, 1.0, q * axis[1]], [0, 0, 1.0]])
-        return pose(j.find("parent").get("link")) @ t
+        return pose(j.find('parent').get('link')) @ t
     return {name: pose(name) for name in
-            [link.get("name") for link in robot.iter("link")]}
+            [link.get('name') for link in robot.iter('link')]}
 
 
-@pytest.mark.parametrize("model", ["rigid-fe", "flexible"])
+@pytest.mark.parametrize('model', ['rigid-fe', 'flexible'])
 def test_urdf_with_published_joint_states_closes_the_loop(model):
     """
     The URDF's frames are the beams' floating frames, and the sleeve is where H is.
@@ -104,10 +104,10 @@ def test_urdf_with_published_joint_states_closes_the_loop(model):
         rigid = sim.model.node_positions(s.q, 0.0)         # floating frames, undeformed
         (leaf, link) = sim.model.node_positions(s.q, 1.0)   # deformed
         elastic = max(float(np.abs(d - r).max()) for d, r in zip((leaf, link), rigid))
-        assert model == "flexible" or elastic < 1e-12
-        link_end = (frames["link"] @ np.array([p.l3, 0.0, 1.0]))[:2]
-        sleeve = (frames["sleeve"] @ np.array([0.0, 0.0, 1.0]))[:2]
-        tip = (frames["tip"] @ np.array([0.0, 0.0, 1.0]))[:2]
+        assert model == 'flexible' or elastic < 1e-12
+        link_end = (frames['link'] @ np.array([p.l3, 0.0, 1.0]))[:2]
+        sleeve = (frames['sleeve'] @ np.array([0.0, 0.0, 1.0]))[:2]
+        tip = (frames['tip'] @ np.array([0.0, 0.0, 1.0]))[:2]
         assert np.abs(sleeve - link[-1]).max() < 1e-9, (sim.time, sleeve)
         assert np.abs(link_end - link[-1]).max() <= 2 * elastic + 1e-9, (sim.time, link_end)
         assert np.abs(tip - leaf[-1]).max() <= elastic + 1e-9, (sim.time, tip)
@@ -128,20 +128,20 @@ class _Recorder:
 def launch_stubs(monkeypatch):
     """Minimal stand-ins for launch and launch_ros (not on PyPI)."""
     mods = {}
-    for name in ("launch", "launch.actions", "launch_ros", "launch_ros.actions"):
+    for name in ('launch', 'launch.actions', 'launch_ros', 'launch_ros.actions'):
         mods[name] = types.ModuleType(name)
         monkeypatch.setitem(sys.modules, name, mods[name])
-    for cls in ("LaunchDescription",):
-        setattr(mods["launch"], cls, type(cls, (_Recorder,), {}))
-    for cls in ("DeclareLaunchArgument", "LogInfo", "OpaqueFunction"):
-        setattr(mods["launch.actions"], cls, type(cls, (_Recorder,), {}))
-    mods["launch_ros.actions"].Node = type("Node", (_Recorder,), {})
+    for cls in ('LaunchDescription',):
+        setattr(mods['launch'], cls, type(cls, (_Recorder,), {}))
+    for cls in ('DeclareLaunchArgument', 'LogInfo', 'OpaqueFunction'):
+        setattr(mods['launch.actions'], cls, type(cls, (_Recorder,), {}))
+    mods['launch_ros.actions'].Node = type('Node', (_Recorder,), {})
     return mods
 
 
 def _load(name: str):
-    path = os.path.join(ROOT, "launch", name)
-    spec = importlib.util.spec_from_file_location(name.replace(".", "_"), path)
+    path = os.path.join(ROOT, 'launch', name)
+    spec = importlib.util.spec_from_file_location(name.replace('.', '_'), path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -150,134 +150,134 @@ def _load(name: str):
 def _run(description, given: dict):
     """Evaluate a description as ros2 launch would: arguments, then the OpaqueFunctions."""
     actions = description.args[0]
-    declared = {a.args[0]: a.kwargs["default_value"] for a in actions
-                if type(a).__name__ == "DeclareLaunchArgument"}
+    declared = {a.args[0]: a.kwargs['default_value'] for a in actions
+                if type(a).__name__ == 'DeclareLaunchArgument'}
     unknown = set(given) - set(declared)
-    assert not unknown, f"not launch arguments: {unknown}"
+    assert not unknown, f'not launch arguments: {unknown}'
     context = types.SimpleNamespace(launch_configurations={**declared, **given})
     out = []
     for a in actions:
-        if type(a).__name__ == "OpaqueFunction":
-            out += a.kwargs["function"](context)
+        if type(a).__name__ == 'OpaqueFunction':
+            out += a.kwargs['function'](context)
     return declared, out
 
 
 def test_umbrella_launch_declares_the_arguments_and_starts_the_node(launch_stubs):
-    module = _load("umbrella.launch.py")
+    module = _load('umbrella.launch.py')
     declared, actions = _run(module.generate_launch_description(),
-                             {"namespace": "a1", "v0": "-0.5", "elements_per_segment": "2",
-                              "record": "false", "use_sim_time": "true"})
-    for name in ("namespace", "params_file", "record_path", "use_sim_time", "record", "rviz",
+                             {'namespace': 'a1', 'v0': '-0.5', 'elements_per_segment': '2',
+                              'record': 'false', 'use_sim_time': 'true'})
+    for name in ('namespace', 'params_file', 'record_path', 'use_sim_time', 'record', 'rviz',
                  *SPECS, *NODE_PARAMETERS):
-        assert name in declared or name == "frame_prefix"
-    assert os.path.isfile(declared["params_file"])
-    nodes = [a for a in actions if type(a).__name__ == "Node"]
-    umbrella = next(n for n in nodes if n.kwargs["executable"] == "umbrella_node")
-    assert umbrella.kwargs["package"] == "umbrella_sim" and umbrella.kwargs["namespace"] == "a1"
-    params_file, overrides = umbrella.kwargs["parameters"]
-    assert params_file == declared["params_file"]
-    assert overrides == {"v0": -0.5, "elements_per_segment": 2, "record": False,
-                         "frame_prefix": "a1/"}
-    assert isinstance(overrides["v0"], float)
-    assert isinstance(overrides["elements_per_segment"], int)
-    if share_dir("robot_state_publisher") is None:     # always so with PyPI's ROS
-        logs = [a.kwargs.get("msg", a.args[0] if a.args else "") for a in actions
-                if type(a).__name__ == "LogInfo"]
-        assert any("robot_state_publisher is not installed" in m for m in logs)
+        assert name in declared or name == 'frame_prefix'
+    assert os.path.isfile(declared['params_file'])
+    nodes = [a for a in actions if type(a).__name__ == 'Node']
+    umbrella = next(n for n in nodes if n.kwargs['executable'] == 'umbrella_node')
+    assert umbrella.kwargs['package'] == 'umbrella_sim' and umbrella.kwargs['namespace'] == 'a1'
+    params_file, overrides = umbrella.kwargs['parameters']
+    assert params_file == declared['params_file']
+    assert overrides == {'v0': -0.5, 'elements_per_segment': 2, 'record': False,
+                         'frame_prefix': 'a1/'}
+    assert isinstance(overrides['v0'], float)
+    assert isinstance(overrides['elements_per_segment'], int)
+    if share_dir('robot_state_publisher') is None:     # always so with PyPI's ROS
+        logs = [a.kwargs.get('msg', a.args[0] if a.args else '') for a in actions
+                if type(a).__name__ == 'LogInfo']
+        assert any('robot_state_publisher is not installed' in m for m in logs)
 
 
 def test_plan_starts_robot_state_publisher_with_the_urdf_when_installed():
     values = {a.name: a.default for a in ld.arguments()}
-    values.update(namespace="a2", l2="0.6")
-    actions = ld.plan(values, installed=lambda pkg: f"/opt/share/{pkg}")
+    values.update(namespace='a2', l2='0.6')
+    actions = ld.plan(values, installed=lambda pkg: f'/opt/share/{pkg}')
     rsp = next(a for a in actions if isinstance(a, ld.NodeAction)
-               and a.package == "robot_state_publisher")
+               and a.package == 'robot_state_publisher')
     (params,) = rsp.parameters
-    robot = ET.fromstring(params["robot_description"])
-    leaf_tip = next(j for j in robot.iter("joint") if j.get("name") == "leaf_tip")
-    assert leaf_tip.find("origin").get("xyz").split()[0] == "1.1"    # l1 + l2 overridden
-    assert params["frame_prefix"] == "a2/" and params["use_sim_time"] is True
-    assert rsp.namespace == "a2" and rsp.remappings == [("/clock", "/a2/clock")]
+    robot = ET.fromstring(params['robot_description'])
+    leaf_tip = next(j for j in robot.iter('joint') if j.get('name') == 'leaf_tip')
+    assert leaf_tip.find('origin').get('xyz').split()[0] == '1.1'    # l1 + l2 overridden
+    assert params['frame_prefix'] == 'a2/' and params['use_sim_time'] is True
+    assert rsp.namespace == 'a2' and rsp.remappings == [('/clock', '/a2/clock')]
     assert not any(isinstance(a, ld.LogAction) for a in actions)
 
 
 def test_plan_refuses_bad_overrides_before_starting_anything():
     values = {a.name: a.default for a in ld.arguments()}
     with pytest.raises(ValueError, match="parameter v0='fast'"):
-        ld.plan(dict(values, v0="fast"), installed=lambda pkg: None)
-    with pytest.raises(ValueError, match="alpha0"):
-        ld.plan(dict(values, alpha0="0.1"), installed=lambda pkg: None)
-    for flag in ("rviz", "use_sim_time", "robot_state_publisher"):     # a typo is no "false"
+        ld.plan(dict(values, v0='fast'), installed=lambda pkg: None)
+    with pytest.raises(ValueError, match='alpha0'):
+        ld.plan(dict(values, alpha0='0.1'), installed=lambda pkg: None)
+    for flag in ('rviz', 'use_sim_time', 'robot_state_publisher'):     # a typo is no "false"
         with pytest.raises(ValueError, match=f"{flag}:='ture'"):
-            ld.plan(dict(values, **{flag: "ture"}), installed=lambda pkg: None)
+            ld.plan(dict(values, **{flag: 'ture'}), installed=lambda pkg: None)
     # node parameters and the namespace too, before the node is started (they failed there)
-    for name, text, words in (("publish_rate", "0", "publish_rate=0.0"),
-                              ("duration", "-1", "duration=-1.0"),
-                              ("namespace", "1a", "'1a' is not a ROS name token")):
+    for name, text, words in (('publish_rate', '0', 'publish_rate=0.0'),
+                              ('duration', '-1', 'duration=-1.0'),
+                              ('namespace', '1a', "'1a' is not a ROS name token")):
         with pytest.raises(ValueError, match=words):
             ld.plan(dict(values, **{name: text}), installed=lambda pkg: None)
-    assert ld.plan(dict(values, namespace="a1/b_2"), installed=lambda pkg: None)
+    assert ld.plan(dict(values, namespace='a1/b_2'), installed=lambda pkg: None)
 
 
 def test_plan_checks_overrides_on_top_of_the_params_file(tmp_path):
     """l1 = 0.6 with a params file's l3 = 0.9 closes; on the defaults (l3 = 0.5) it would not."""
-    long_link = tmp_path / "long.yaml"
-    long_link.write_text("/**:\n  ros__parameters:\n    l1: 0.9\n    l3: 0.9\n")
+    long_link = tmp_path / 'long.yaml'
+    long_link.write_text('/**:\n  ros__parameters:\n    l1: 0.9\n    l3: 0.9\n')
     values = {a.name: a.default for a in ld.arguments()}
-    (node, *_) = ld.plan(dict(values, params_file=str(long_link), l1="0.6"),
+    (node, *_) = ld.plan(dict(values, params_file=str(long_link), l1='0.6'),
                          installed=lambda pkg: None)
-    assert node.parameters[0] == str(long_link) and node.parameters[1]["l1"] == 0.6
-    with pytest.raises(ValueError, match="l3"):
-        ld.plan(dict(values, l1="0.6"), installed=lambda pkg: None)
+    assert node.parameters[0] == str(long_link) and node.parameters[1]['l1'] == 0.6
+    with pytest.raises(ValueError, match='l3'):
+        ld.plan(dict(values, l1='0.6'), installed=lambda pkg: None)
 
 
 def test_multi_antenna_launch_starts_one_namespaced_antenna_each(launch_stubs):
-    module = _load("multi_antenna.launch.py")
+    module = _load('multi_antenna.launch.py')
     declared, actions = _run(module.generate_launch_description(),
-                             {"namespaces": "a1, a2,a3", "v0": "0"})
-    assert "namespace" not in declared
-    nodes = [a for a in actions if type(a).__name__ == "Node"
-             and a.kwargs["executable"] == "umbrella_node"]
-    assert [n.kwargs["namespace"] for n in nodes] == ["a1", "a2", "a3"]
-    assert [n.kwargs["parameters"][1]["frame_prefix"] for n in nodes] == ["a1/", "a2/", "a3/"]
+                             {'namespaces': 'a1, a2,a3', 'v0': '0'})
+    assert 'namespace' not in declared
+    nodes = [a for a in actions if type(a).__name__ == 'Node'
+             and a.kwargs['executable'] == 'umbrella_node']
+    assert [n.kwargs['namespace'] for n in nodes] == ['a1', 'a2', 'a3']
+    assert [n.kwargs['parameters'][1]['frame_prefix'] for n in nodes] == ['a1/', 'a2/', 'a3/']
     # one record_path for all: a bag directory each (one directory takes one recording)
     _, actions = _run(module.generate_launch_description(),
-                      {"namespaces": "a1,a2", "record_path": "/tmp/bags/run/"})
-    assert [a.kwargs["parameters"][1]["record_path"] for a in actions
-            if type(a).__name__ == "Node" and a.kwargs["executable"] == "umbrella_node"] == \
-        ["/tmp/bags/run_a1", "/tmp/bags/run_a2"]
-    with pytest.raises(ValueError, match="a1 given twice"):
-        ld.split_namespaces("a1,a1")
+                      {'namespaces': 'a1,a2', 'record_path': '/tmp/bags/run/'})
+    assert [a.kwargs['parameters'][1]['record_path'] for a in actions
+            if type(a).__name__ == 'Node' and a.kwargs['executable'] == 'umbrella_node'] == \
+        ['/tmp/bags/run_a1', '/tmp/bags/run_a2']
+    with pytest.raises(ValueError, match='a1 given twice'):
+        ld.split_namespaces('a1,a1')
 
 
 def test_package_xml_declares_what_the_code_imports():
     """Every ROS package that the code, the launch files or the tests import is declared."""
     import re
 
-    pkg = ET.parse(os.path.join(ROOT, "package.xml")).getroot()
-    exec_deps = {d.text for d in pkg.iter("exec_depend")}
-    test_deps = {d.text for d in pkg.iter("test_depend")}
-    ros_pkgs = {"rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs",
-                "geometry_msgs", "visualization_msgs", "rosgraph_msgs", "std_srvs",
-                "diagnostic_msgs", "ament_index_python", "launch", "launch_ros",
-                "ament_flake8", "ament_pep257"}
+    pkg = ET.parse(os.path.join(ROOT, 'package.xml')).getroot()
+    exec_deps = {d.text for d in pkg.iter('exec_depend')}
+    test_deps = {d.text for d in pkg.iter('test_depend')}
+    ros_pkgs = {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'sensor_msgs',
+                'geometry_msgs', 'visualization_msgs', 'rosgraph_msgs', 'std_srvs',
+                'diagnostic_msgs', 'ament_index_python', 'launch', 'launch_ros',
+                'ament_flake8', 'ament_pep257'}
 
     def imported(folder):
         found = set()
         for dirpath, _, files in os.walk(os.path.join(ROOT, folder)):
             for f in files:
-                if f.endswith(".py"):
-                    with open(os.path.join(dirpath, f), encoding="utf-8") as fh:
-                        found |= set(re.findall(r"^\s*(?:from|import) (\w+)", fh.read(), re.M))
+                if f.endswith('.py'):
+                    with open(os.path.join(dirpath, f), encoding='utf-8') as fh:
+                        found |= set(re.findall(r'^\s*(?:from|import) (\w+)', fh.read(), re.M))
         return found & ros_pkgs
 
-    assert imported("umbrella_sim") | imported("launch") <= exec_deps
-    assert imported("tests") <= exec_deps | test_deps
-    assert {"robot_state_publisher", "python3-mcap", "python3-yaml"} <= exec_deps
-    assert pkg.find("export/build_type").text == "ament_python"
+    assert imported('umbrella_sim') | imported('launch') <= exec_deps
+    assert imported('tests') <= exec_deps | test_deps
+    assert {'robot_state_publisher', 'python3-mcap', 'python3-yaml'} <= exec_deps
+    assert pkg.find('export/build_type').text == 'ament_python'
 
 
-@pytest.mark.parametrize("model", ["rigid", "rigid-fe", "flexible"])
+@pytest.mark.parametrize('model', ['rigid', 'rigid-fe', 'flexible'])
 def test_urdf_loop_closure_misses_the_sleeve_by_the_elastic_displacement(model):
     """
     Forward kinematics of the URDF from joint_states, against the deformed mesh.
@@ -305,7 +305,7 @@ def test_urdf_loop_closure_misses_the_sleeve_by_the_elastic_displacement(model):
         miss = np.linalg.norm(urdf_end - sleeve)
         assert miss == pytest.approx(np.linalg.norm(urdf_end - deformed_end), abs=tolerance)
         misses.append(miss)
-    if model == "flexible":
+    if model == 'flexible':
         assert max(misses) > 1e-5        # the floating frames do not close it
     else:
         assert max(misses) < 1e-12

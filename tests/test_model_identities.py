@@ -36,7 +36,7 @@ def point_position(model, body, q, x):
     e = q[model.s_leaf] if leaf else q[model.s_link]
     alpha = q[0] if leaf else q[model.i_alpha2]
     origin = np.zeros(2) if leaf else q[[model.i_r2x, model.i_r2y]]
-    j = min(np.searchsorted(body.node_x, x, side="right") - 1, len(body.element_length) - 1)
+    j = min(np.searchsorted(body.node_x, x, side='right') - 1, len(body.element_length) - 1)
     le = body.element_length[j]
     n, _, _ = shape_functions(np.array([(x - body.node_x[j]) / le]), le)
     u = n[0] @ (body.element_dof_maps[j] @ e)
@@ -60,7 +60,7 @@ def quadrature_kinetic_energy(model, q, qd, points=8):
     return total
 
 
-@pytest.mark.parametrize("n_el", MESHES)
+@pytest.mark.parametrize('n_el', MESHES)
 def test_kinetic_energy_matches_direct_quadrature(n_el):
     model = UmbrellaModel(UmbrellaParams(elements_per_segment=n_el))
     rng = np.random.default_rng(n_el)
@@ -70,7 +70,7 @@ def test_kinetic_energy_matches_direct_quadrature(n_el):
         assert t_matrix == pytest.approx(quadrature_kinetic_energy(model, q, qd), rel=1e-12)
 
 
-@pytest.mark.parametrize("n_el", MESHES)
+@pytest.mark.parametrize('n_el', MESHES)
 def test_mass_matrix_symmetric_positive_definite(n_el):
     model = UmbrellaModel(UmbrellaParams(elements_per_segment=n_el))
     q, _ = random_state(model, np.random.default_rng(0))
@@ -79,7 +79,7 @@ def test_mass_matrix_symmetric_positive_definite(n_el):
     assert np.linalg.eigvalsh(m).min() > 0
 
 
-@pytest.mark.parametrize("n_el", MESHES)
+@pytest.mark.parametrize('n_el', MESHES)
 def test_mass_derivatives_match_complex_step(n_el):
     model = UmbrellaModel(UmbrellaParams(elements_per_segment=n_el))
     rng = np.random.default_rng(10 + n_el)
@@ -119,7 +119,7 @@ def test_gyroscopic_matrix_is_velocity_jacobian_of_qv():
     assert np.abs(model.gyroscopic_matrix(q, qd) + jac).max() < 1e-12
 
 
-@pytest.mark.parametrize("n_el", [1, 2, 4])
+@pytest.mark.parametrize('n_el', [1, 2, 4])
 def test_strain_energy_matches_quadrature_of_curvature_and_strain(n_el):
     """1/2 e^T K e = 1/2 int (EI v''^2 + EA u'^2) dx with v'' and u' by finite differences."""
     p = UmbrellaParams(elements_per_segment=n_el)
@@ -150,13 +150,13 @@ def test_element_stiffness_has_corrected_sign():
     k = model.leaf.stiffness
     ei = p.youngs_modulus * p.cross_section_inertia
     le = p.l2
-    iv = model.leaf.elastic_index(2, "v")       # v of G; v of O'' is removed by the frame
+    iv = model.leaf.elastic_index(2, 'v')       # v of G; v of O'' is removed by the frame
     # G's transverse stiffness of a clamped-guided element: 12 EI / l^3
     assert k[iv, iv] == pytest.approx(12 * ei / le**3, rel=1e-12)
     # full element: the v_i-v_j coupling is negative
     from umbrella_sim.core.beam import GAUSS_POINTS, GAUSS_WEIGHTS
     _, _, d2n = shape_functions(GAUSS_POINTS, le)
-    ke = ei * np.einsum("q,qi,qj->ij", le * GAUSS_WEIGHTS, d2n[:, 1], d2n[:, 1])
+    ke = ei * np.einsum('q,qi,qj->ij', le * GAUSS_WEIGHTS, d2n[:, 1], d2n[:, 1])
     assert ke[1, 4] == pytest.approx(-12 * ei / le**3, rel=1e-12)
 
 
@@ -179,7 +179,7 @@ def test_constraint_jacobian_and_bias_match_complex_step():
     assert np.abs(g - g_cs).max() < 1e-14
 
 
-@pytest.mark.parametrize("model_name", ["flexible", "flexible-nonlinear"])
+@pytest.mark.parametrize('model_name', ['flexible', 'flexible-nonlinear'])
 def test_stress_rates_are_the_time_derivative_of_the_stresses(model_name):
     """d/dt of the fibre stresses along q + t qd, by complex step (membrane: quadratic in q)."""
     from umbrella_sim.core.solver import UmbrellaSimulator
@@ -192,7 +192,7 @@ def test_stress_rates_are_the_time_derivative_of_the_stresses(model_name):
             expected = np.imag(stepped[body][fibre]) / 1e-30
             assert np.allclose(rates[body][fibre], expected, rtol=1e-12,
                                atol=1e-12 * np.abs(expected).max())
-    if model_name == "flexible-nonlinear":      # the membrane part is there and moves
+    if model_name == 'flexible-nonlinear':      # the membrane part is there and moves
         linear = UmbrellaModel.stress_rates(model, q, qd)
         assert np.abs(rates[0][0] - linear[0][0]).max() > 1e-3 * np.abs(rates[0][0]).max()
 
@@ -238,7 +238,7 @@ def test_hermite_peak_finds_resolved_crests_between_the_ends():
     assert np.all(true > 3 * np.maximum(np.abs(s0), np.abs(s1)))
 
 
-@pytest.mark.parametrize("n_el", [1, 2, 16])
+@pytest.mark.parametrize('n_el', [1, 2, 16])
 def test_drawn_shape_is_each_elements_cubic(n_el):
     """
     The drawn shape (markers, plots) is r = R + A (p + N B e) at its points, not chords.
@@ -266,7 +266,7 @@ def test_drawn_shape_is_each_elements_cubic(n_el):
     q = np.zeros(model.n)
     q[0] = 0.3
     for node, x in enumerate(model.leaf.node_x):
-        for dof, value in (("u", k * x), ("v", v(x)), ("theta", dv(x))):
+        for dof, value in (('u', k * x), ('v', v(x)), ('theta', dv(x))):
             try:
                 q[model.s_leaf.start + model.leaf.elastic_index(node, dof)] = value
             except KeyError:                  # held by the frame (zero in this field)

@@ -76,14 +76,14 @@ from umbrella_sim.core.step_rule import (lock_amplitudes, physics_step_of, resol
                                          unresolved_stress_share)
 from umbrella_sim.core.summary import energy_balance_error, SECTION_SLOPE_LIMIT, STRAIN_LIMIT
 
-NL = "flexible-nonlinear"
+NL = 'flexible-nonlinear'
 # these tests' figures were made at a 2 ms step: it keeps the suite short (the default 5e-5 s
 # takes 40x the steps) and puts Newton's re-factoring and line search to work
 STEP = 2e-3
 
 
 def P(**kw):  # noqa: N802 (reads like the UmbrellaParams it builds)
-    return UmbrellaParams(**{"time_step": STEP, **kw})
+    return UmbrellaParams(**{'time_step': STEP, **kw})
 
 
 def test_strain_energy_gradient_tangent_and_discrete_gradient():
@@ -126,13 +126,13 @@ def test_strain_energy_gradient_tangent_and_discrete_gradient():
 
 
 def _free_beam(n, ea=1e4, ei=1.0, length=1.0, fixed=()):
-    body = BeamBody("beam", [(length, n)], list(fixed), mass_per_length=1.0, ea=ea, ei=ei,
+    body = BeamBody('beam', [(length, n)], list(fixed), mass_per_length=1.0, ea=ea, ei=ei,
                     youngs_modulus=1.0, fibre=0.0)
     ne = body.n_elastic
     return body, CorotationalStrainEnergy(((body, slice(0, ne)),), ne, ea, ei, 1.0, 0.0)
 
 
-@pytest.mark.parametrize("angle", [0.3, 1.0, 1.45])
+@pytest.mark.parametrize('angle', [0.3, 1.0, 1.45])
 def test_rigid_rotation_of_a_beam_costs_no_energy(angle):
     """
     A straight beam turned by angle (to 83 deg) from its frame: no strain, U = 0.
@@ -145,9 +145,9 @@ def test_rigid_rotation_of_a_beam_costs_no_energy(angle):
     q = np.zeros(body.n_elastic)
     for stretch in (1.0, 1.001):
         for node, x in enumerate(body.node_x):
-            q[body.elastic_index(node, "u")] = stretch * x * math.cos(angle) - x
-            q[body.elastic_index(node, "v")] = stretch * x * math.sin(angle)
-            q[body.elastic_index(node, "theta")] = stretch * math.sin(angle)
+            q[body.elastic_index(node, 'u')] = stretch * x * math.cos(angle) - x
+            q[body.elastic_index(node, 'v')] = stretch * x * math.sin(angle)
+            q[body.elastic_index(node, 'theta')] = stretch * math.sin(angle)
         s = law.local_strains(q)
         if stretch == 1.0:
             assert np.abs(s).max() < 1e-12 and law.energy(q) < 1e-20
@@ -186,8 +186,8 @@ def test_elastica_of_a_tip_loaded_cantilever():
         v_ref, u_ref, psi_ref = _elastica_tip(load)
         errors = []
         for n in (2, 4, 8):
-            body, law = _free_beam(n, ea=1e7, fixed=[(0, "u"), (0, "v"), (0, "theta")])
-            iv, iu = body.elastic_index(n, "v"), body.elastic_index(n, "u")
+            body, law = _free_beam(n, ea=1e7, fixed=[(0, 'u'), (0, 'v'), (0, 'theta')])
+            iv, iu = body.elastic_index(n, 'v'), body.elastic_index(n, 'u')
             force = np.zeros(body.n_elastic)
             force[iv] = load
             q = static_equilibrium(law, force)      # 40 load steps, Newton each
@@ -197,11 +197,11 @@ def test_elastica_of_a_tip_loaded_cantilever():
         assert math.degrees(psi_ref) > 25.0
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def runs_v02():
     """V0 = -0.2, N = 1, both models through the lock and 0.35 s of stage 2."""
     return {model: simulate(P(v0=-0.2, model=model), 0.6)
-            for model in ("flexible", NL)}
+            for model in ('flexible', NL)}
 
 
 def test_reduces_to_linear_model_for_small_motion(runs_v02):
@@ -216,37 +216,37 @@ def test_reduces_to_linear_model_for_small_motion(runs_v02):
     (physics, not discretisation: the two models share every other term, and a
     discretisation mismatch would not vanish with V0).
     """
-    lin, nl = (runs_v02[k].summary() for k in ("flexible", NL))
+    lin, nl = (runs_v02[k].summary() for k in ('flexible', NL))
     assert runs_v02[NL].error is None
-    assert nl["deploy_time"] == pytest.approx(lin["deploy_time"], rel=1e-5)
-    diff_02 = nl["tip_deflection_max"] / lin["tip_deflection_max"] - 1.0
+    assert nl['deploy_time'] == pytest.approx(lin['deploy_time'], rel=1e-5)
+    diff_02 = nl['tip_deflection_max'] / lin['tip_deflection_max'] - 1.0
     assert -0.01 < diff_02 < 0.0                 # stiffening: less deflection, under 1 %
     slow = [simulate(P(v0=-0.1, model=model), 0.6, stop_after_lock=0.0).summary()
-            for model in ("flexible", NL)]
-    assert slow[1]["deploy_time"] == pytest.approx(slow[0]["deploy_time"], rel=1e-5)
-    diff_01 = slow[1]["tip_deflection_max"] / slow[0]["tip_deflection_max"] - 1.0
+            for model in ('flexible', NL)]
+    assert slow[1]['deploy_time'] == pytest.approx(slow[0]['deploy_time'], rel=1e-5)
+    diff_01 = slow[1]['tip_deflection_max'] / slow[0]['tip_deflection_max'] - 1.0
     assert abs(diff_01) < 0.005                   # the 0.5 % asked
     assert 2.5 < diff_02 / diff_01 < 5.0          # ~V0^2: it vanishes with the motion
     # stage 2 at this amplitude is close to linear too
-    assert nl["stage2_tip_period"] == pytest.approx(lin["stage2_tip_period"], rel=0.03)
-    assert nl["stage2_tip_amplitude"] == pytest.approx(lin["stage2_tip_amplitude"], rel=0.03)
+    assert nl['stage2_tip_period'] == pytest.approx(lin['stage2_tip_period'], rel=0.03)
+    assert nl['stage2_tip_amplitude'] == pytest.approx(lin['stage2_tip_amplitude'], rel=0.03)
 
 
 def test_energy_conserved_without_force(runs_v02):
     """F = 0: discrete gradient + energy-restoring projection balance every step (1e-6)."""
     r = runs_v02[NL]
-    assert r.lock.kind == "energy" and r.samples[-1].time > r.lock.time + 0.3
+    assert r.lock.kind == 'energy' and r.samples[-1].time > r.lock.time + 0.3
     s = r.summary()
-    assert s["energy_drift"] < 1e-6
-    assert s["constraint_residual_max"] < 1e-10
+    assert s['energy_drift'] < 1e-6
+    assert s['constraint_residual_max'] < 1e-10
     fast = simulate(P(v0=-1.0, model=NL), 0.12).summary()   # large motion
-    assert fast["energy_drift"] < 1e-6 and fast["constraint_residual_max"] < 1e-10
+    assert fast['energy_drift'] < 1e-6 and fast['constraint_residual_max'] < 1e-10
 
 
 def test_energy_equals_work_with_force():
     r = simulate(P(v0=-0.2, sleeve_force=3.0, model=NL), 0.3)
     assert r.error is None and r.lock is not None
-    work = r.column("work")
+    work = r.column('work')
     assert work.max() > 0.1
     assert np.abs(energy_balance_error(r)).max() / (2.107 + work.max()) < 1e-4
 
@@ -270,7 +270,7 @@ def test_stress_recovery_is_the_rotated_frame_fibre_stress(runs_v02):
                                                        rel=1e-9)
     assert 0.5 * (bottom[1] - top[1]) == pytest.approx(72e9 * c * (2 * tba + 4 * tbb) / l_e,
                                                        rel=1e-9)
-    u_joint = s.q[1 + m.leaf.elastic_index(1, "u")]
+    u_joint = s.q[1 + m.leaf.elastic_index(1, 'u')]
     assert abs(eps - u_joint / 0.5) > 1e-3 * abs(eps)      # not the linear strain u'
     small = s.q.copy()
     small[m.elastic_indices] *= 1e-6
@@ -289,8 +289,8 @@ def _log_decrement_ratio(r):
     ln|peak|; measured from v = 0, the equilibrium of the locked, unloaded frame (no gravity,
     and F_H no longer acts).
     """
-    v = r.column("tip_transverse")
-    locked = np.array([s.stage == "locked" for s in r.samples])
+    v = r.column('tip_transverse')
+    locked = np.array([s.stage == 'locked' for s in r.samples])
     v = v[locked][5:]
     peaks = []
     for i in range(1, len(v) - 1):
@@ -303,7 +303,7 @@ def _log_decrement_ratio(r):
     return delta / math.sqrt(4 * math.pi ** 2 + delta ** 2)
 
 
-@pytest.mark.parametrize("model", ["flexible", NL])
+@pytest.mark.parametrize('model', ['flexible', NL])
 def test_damping_log_decrement_matches_ratio(model):
     """
     Log decrement of the stage-2 vibration equals zeta (first mode).
@@ -317,10 +317,10 @@ def test_damping_log_decrement_matches_ratio(model):
     r = simulate(p, 2.0, stop_after_lock=0.4)
     assert r.error is None
     assert _log_decrement_ratio(r) == pytest.approx(zeta, rel=0.05)
-    diss = r.column("damping_dissipation")
+    diss = r.column('damping_dissipation')
     assert diss[-1] > 0.3 * r.lock.energy_after            # damping took real energy
     assert np.all(np.diff(diss) >= 0.0)
-    assert r.summary()["energy_drift"] < 1e-4              # ... and the balance reports it
+    assert r.summary()['energy_drift'] < 1e-4              # ... and the balance reports it
 
 
 def test_damping_zero_is_the_undamped_model():
@@ -338,18 +338,18 @@ def test_phase_correction_is_the_linear_strains_only():
     bending, far from the linearised modes the correction is built on: there it stays off.
     """
     runs = {}
-    for model, zeta in ((NL, 0.0), ("flexible", 0.01)):
+    for model, zeta in ((NL, 0.0), ('flexible', 0.01)):
         for pc in (True, False):
             r = simulate(P(v0=-0.5, model=model, damping_ratio=zeta, phase_correction=pc), 1.0,
                          stop_after_lock=0.05)
             runs[model, pc] = r.samples[-1].q
     assert np.array_equal(runs[NL, True], runs[NL, False])
-    assert np.abs(runs["flexible", True] - runs["flexible", False]).max() > 1e-9
+    assert np.abs(runs['flexible', True] - runs['flexible', False]).max() > 1e-9
 
 
 def test_bad_damping_ratio_is_refused_by_name():
-    for bad in (-0.1, 1.0, float("nan")):
-        with pytest.raises(ValueError, match="damping_ratio"):
+    for bad in (-0.1, 1.0, float('nan')):
+        with pytest.raises(ValueError, match='damping_ratio'):
             UmbrellaParams(damping_ratio=bad).validated()
 
 
@@ -357,11 +357,11 @@ def test_sixteen_elements_per_segment_nonlinear():
     r = simulate(P(v0=-0.5, model=NL, elements_per_segment=16), 0.1,
                  stop_after_lock=0.0)
     assert r.error is None and r.lock is not None
-    assert r.summary()["energy_drift"] < 1e-4
+    assert r.summary()['energy_drift'] < 1e-4
 
 
 # ------------------------------------------------------------ compiled path vs numpy
-needs_kernel = pytest.mark.skipif(load_kernel() is None, reason="compiled kernel not built")
+needs_kernel = pytest.mark.skipif(load_kernel() is None, reason='compiled kernel not built')
 
 
 def _simulator(kernel, params):
@@ -371,11 +371,11 @@ def _simulator(kernel, params):
 
 
 @needs_kernel
-@pytest.mark.parametrize("model, zeta, v0, t0, locked, n", [
+@pytest.mark.parametrize('model, zeta, v0, t0, locked, n', [
     (NL, 0.0, -1.0, 0.02, False, 2), (NL, 0.0, -2.0, 0.05, True, 2),
     (NL, 0.02, -2.0, 0.01, False, 2), (NL, 0.05, -1.0, 0.08, True, 2),
-    (NL, 0.0, -2.0, 0.04, True, 4), ("flexible", 0.02, -1.0, 0.02, False, 2),
-    ("flexible", 0.02, -1.0, 0.08, True, 2)])
+    (NL, 0.0, -2.0, 0.04, True, 4), ('flexible', 0.02, -1.0, 0.02, False, 2),
+    ('flexible', 0.02, -1.0, 0.08, True, 2)])
 def test_compiled_elastic_step_matches_numpy_to_roundoff(model, zeta, v0, t0, locked, n):
     """
     From the same state, one step of the compiled path equals the numpy reference.
@@ -386,13 +386,13 @@ def test_compiled_elastic_step_matches_numpy_to_roundoff(model, zeta, v0, t0, lo
     velocities, momenta, multipliers and the dissipated energy to 1e-12 relative.
     """
     p = P(v0=v0, model=model, damping_ratio=zeta, elements_per_segment=n)
-    sim = _simulator("numpy", p)
+    sim = _simulator('numpy', p)
     sim.advance_to(t0, record=False)
     assert (sim.stage == Stage.LOCKED) == locked
     cs = ConstraintSet(locked=sim.stage == Stage.LOCKED, rigid=False)
-    a = ElasticMidpointDAE(sim.model, kernel="numpy").step(sim.state, 2e-3, 0.5, cs)
-    compiled = ElasticMidpointDAE(sim.model, kernel="compiled")
-    assert compiled.backend == "compiled"
+    a = ElasticMidpointDAE(sim.model, kernel='numpy').step(sim.state, 2e-3, 0.5, cs)
+    compiled = ElasticMidpointDAE(sim.model, kernel='compiled')
+    assert compiled.backend == 'compiled'
     b = compiled.step(sim.state, 2e-3, 0.5, cs)
     assert np.abs(a.q - b.q).max() < 1e-13
     assert np.abs(a.qd - b.qd).max() < 1e-12 * np.abs(a.qd).max()
@@ -403,7 +403,7 @@ def test_compiled_elastic_step_matches_numpy_to_roundoff(model, zeta, v0, t0, lo
 
 
 @needs_kernel
-@pytest.mark.parametrize("zeta", [0.0, 0.02])
+@pytest.mark.parametrize('zeta', [0.0, 0.02])
 def test_compiled_elastic_blocks_match_numpy_run(zeta):
     """
     The compiled loop's StepBlocks equal the numpy path's per-step outputs.
@@ -413,13 +413,13 @@ def test_compiled_elastic_blocks_match_numpy_run(zeta):
     """
     p = P(v0=-1.0, model=NL, damping_ratio=zeta, elements_per_segment=2)
     runs = {}
-    for kernel in ("numpy", "compiled"):
+    for kernel in ('numpy', 'compiled'):
         sim = _simulator(kernel, p)
         blocks = [sim.advance(k) for k in (7, 13, 30)]
         assert all(b.error is None for b in blocks)
         rows = np.hstack([np.array([getattr(b, f) for f in STEP_FIELDS]) for b in blocks])
         runs[kernel] = (rows, blocks[-1].last, sim)
-    (ref, ref_last, ref_sim), (fast, fast_last, fast_sim) = runs["numpy"], runs["compiled"]
+    (ref, ref_last, ref_sim), (fast, fast_last, fast_sim) = runs['numpy'], runs['compiled']
     assert ref_sim.lock_event is not None and fast_sim.lock_event is not None
     assert fast_sim.lock_event.time == pytest.approx(ref_sim.lock_event.time, abs=1e-12)
     scale = np.maximum(1.0, np.abs(ref).max(axis=1))[:, None]
@@ -444,7 +444,7 @@ def test_compiled_and_numpy_carry_the_same_iteration_matrices():
     """
     p = P(v0=-1.0, model=NL, elements_per_segment=2, time_step=1e-4)
     runs = {}
-    for kernel in ("numpy", "compiled"):
+    for kernel in ('numpy', 'compiled'):
         sim = _simulator(kernel, p)
         integ = sim.engine.integrator
         integ.tolerance = newton_tolerance(p.time_step)
@@ -457,10 +457,10 @@ def test_compiled_and_numpy_carry_the_same_iteration_matrices():
             rows.append(np.array([getattr(block, f) for f in STEP_FIELDS]))
             counts.append(integ.iterations - before)
         runs[kernel] = (counts, np.hstack(rows))
-    (ref_counts, ref), (fast_counts, fast) = runs["numpy"], runs["compiled"]
+    (ref_counts, ref), (fast_counts, fast) = runs['numpy'], runs['compiled']
     assert ref_counts == fast_counts
     assert sum(ref_counts) > 3 * 4 * 60    # ~4.6 iterations a step: the matrices age here
-    for f in ("alpha1", "tip_axial", "tip_transverse"):          # rad, m
+    for f in ('alpha1', 'tip_axial', 'tip_transverse'):          # rad, m
         i = STEP_FIELDS.index(f)
         assert np.max(np.abs(ref[i] - fast[i])) < 1e-7, f
     scale = np.maximum(1.0, np.abs(ref).max(axis=1))[:, None]
@@ -500,21 +500,21 @@ def test_compiled_blocks_and_single_steps_agree_bit_for_bit():
 #: m/s, 8 elements a segment; plastic lock; stage-2 figures over 0.3 s after the lock), as
 #: quoted with the issue; docs/exudyn_umbrella_frame.py builds it and reproduces them
 ANCF_REFERENCE = {
-    -1.0: {"stage2_tip_period": 48.2e-3, "stage2_tip_amplitude": 253.9e-3},
-    -2.0: {"stage2_tip_period": 49.9e-3, "stage2_tip_amplitude": 366e-3,   # 8 and 16 a segment
-           "tip_deflection_max": 70.15e-3, "deploy_time": 0.0229751},
+    -1.0: {'stage2_tip_period': 48.2e-3, 'stage2_tip_amplitude': 253.9e-3},
+    -2.0: {'stage2_tip_period': 49.9e-3, 'stage2_tip_amplitude': 366e-3,   # 8 and 16 a segment
+           'tip_deflection_max': 70.15e-3, 'deploy_time': 0.0229751},
 }
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def frame_runs():
     """N = 4, the default step, plastic lock, 0.3 s of stage 2: V0 = -1 and -2."""
     return {v0: simulate(UmbrellaParams(v0=v0, model=NL, elements_per_segment=4,
-                                        lock="plastic"), 0.4, stop_after_lock=0.3)
+                                        lock='plastic'), 0.4, stop_after_lock=0.3)
             for v0 in (-1.0, -2.0)}
 
 
-@pytest.mark.parametrize("v0, period_tol, amplitude_tol", [(-1.0, 0.03, 0.05),
+@pytest.mark.parametrize('v0, period_tol, amplitude_tol', [(-1.0, 0.03, 0.05),
                                                            (-2.0, 0.05, 0.10)])
 def test_stage2_matches_the_geometrically_exact_reference(frame_runs, v0, period_tol,
                                                           amplitude_tol):
@@ -527,26 +527,26 @@ def test_stage2_matches_the_geometrically_exact_reference(frame_runs, v0, period
     elements a segment and its motion amplifies any perturbation (docs/validation_nonlinear.md).
     """
     r = frame_runs[v0]
-    assert r.error is None and r.lock.kind == "plastic"
+    assert r.error is None and r.lock.kind == 'plastic'
     s, ref = r.summary(), ANCF_REFERENCE[v0]
-    assert s["stage2_tip_period"] == pytest.approx(ref["stage2_tip_period"], rel=period_tol)
-    assert s["stage2_tip_amplitude"] == pytest.approx(ref["stage2_tip_amplitude"],
+    assert s['stage2_tip_period'] == pytest.approx(ref['stage2_tip_period'], rel=period_tol)
+    assert s['stage2_tip_amplitude'] == pytest.approx(ref['stage2_tip_amplitude'],
                                                       rel=amplitude_tol)
 
 
 def test_stage1_matches_the_geometrically_exact_reference(frame_runs):
     """V0 = -2: stage-1 tip deflection within 1 %, deploy time within 1e-4 relative."""
     s, ref = frame_runs[-2.0].summary(), ANCF_REFERENCE[-2.0]
-    assert s["tip_deflection_max"] == pytest.approx(ref["tip_deflection_max"], rel=0.01)
-    assert s["deploy_time"] == pytest.approx(ref["deploy_time"], rel=1e-4)
+    assert s['tip_deflection_max'] == pytest.approx(ref['tip_deflection_max'], rel=0.01)
+    assert s['deploy_time'] == pytest.approx(ref['deploy_time'], rel=1e-4)
 
 
 def test_energy_is_balanced_to_roundoff_through_the_plastic_lock(frame_runs):
     """F = 0, no damping: T + U + lock loss stays the initial energy to round-off."""
     for r in frame_runs.values():
         s = r.summary()
-        assert s["energy_drift"] < 1e-11
-        assert s["constraint_residual_max"] < 1e-10
+        assert s['energy_drift'] < 1e-11
+        assert s['constraint_residual_max'] < 1e-10
 
 
 def test_small_motion_is_the_linear_model_within_one_percent():
@@ -559,17 +559,17 @@ def test_small_motion_is_the_linear_model_within_one_percent():
     above the linear one, as the ANCF model's is: the next test.
     """
     runs = [simulate(UmbrellaParams(v0=-0.2, model=model, elements_per_segment=4), 0.6,
-                     stop_after_lock=0.3).summary() for model in ("flexible", NL)]
+                     stop_after_lock=0.3).summary() for model in ('flexible', NL)]
     lin, nl = runs
-    assert nl["deploy_time"] == pytest.approx(lin["deploy_time"], rel=1e-5)
-    for figure in ("tip_deflection_max", "stage2_tip_amplitude", "stage2_tip_period"):
+    assert nl['deploy_time'] == pytest.approx(lin['deploy_time'], rel=1e-5)
+    for figure in ('tip_deflection_max', 'stage2_tip_amplitude', 'stage2_tip_period'):
         assert nl[figure] == pytest.approx(lin[figure], rel=0.01), figure
 
 
 #: the ANCF model (as ANCF_REFERENCE) at the same mesh as ours, n = 4 elements a segment,
 #: h = 5e-6 s, V0 = -0.2 m/s, plastic lock: docs/exudyn_umbrella_frame.py's output
-ANCF_SMALL_MOTION = {"deploy_time": 0.22591308, "tip_deflection_max": 0.66391e-3,
-                     "stage2_tip_amplitude": 50.793e-3, "stage2_tip_period": 47.080e-3}
+ANCF_SMALL_MOTION = {'deploy_time': 0.22591308, 'tip_deflection_max': 0.66391e-3,
+                     'stage2_tip_amplitude': 50.793e-3, 'stage2_tip_period': 47.080e-3}
 
 
 def test_small_motion_with_the_plastic_lock_is_the_geometrically_exact_reference():
@@ -583,17 +583,17 @@ def test_small_motion_with_the_plastic_lock_is_the_geometrically_exact_reference
     (at the default 0.1 ms the step's error takes 1.7 % of it back: 'coarse step' says so).
     """
     runs = {model: simulate(UmbrellaParams(v0=-0.2, model=model, elements_per_segment=4,
-                                           lock="plastic", step_follows_mesh=True), 0.6,
+                                           lock='plastic', step_follows_mesh=True), 0.6,
                             stop_after_lock=0.3, keep_samples=False).summary()
-            for model in ("flexible", NL)}
+            for model in ('flexible', NL)}
     nl, ref = runs[NL], ANCF_SMALL_MOTION
-    assert nl["warnings"] == []
-    assert nl["deploy_time"] == pytest.approx(ref["deploy_time"], rel=1e-5)
-    assert nl["tip_deflection_max"] == pytest.approx(ref["tip_deflection_max"], rel=0.01)
-    assert nl["stage2_tip_period"] == pytest.approx(ref["stage2_tip_period"], rel=1e-3)
-    assert nl["stage2_tip_amplitude"] == pytest.approx(ref["stage2_tip_amplitude"], rel=0.01)
-    assert ref["stage2_tip_amplitude"] / runs["flexible"]["stage2_tip_amplitude"] - 1 > 0.02
-    assert nl["stage2_tip_amplitude"] / runs["flexible"]["stage2_tip_amplitude"] - 1 > 0.02
+    assert nl['warnings'] == []
+    assert nl['deploy_time'] == pytest.approx(ref['deploy_time'], rel=1e-5)
+    assert nl['tip_deflection_max'] == pytest.approx(ref['tip_deflection_max'], rel=0.01)
+    assert nl['stage2_tip_period'] == pytest.approx(ref['stage2_tip_period'], rel=1e-3)
+    assert nl['stage2_tip_amplitude'] == pytest.approx(ref['stage2_tip_amplitude'], rel=0.01)
+    assert ref['stage2_tip_amplitude'] / runs['flexible']['stage2_tip_amplitude'] - 1 > 0.02
+    assert nl['stage2_tip_amplitude'] / runs['flexible']['stage2_tip_amplitude'] - 1 > 0.02
 
 
 def test_the_step_of_the_geometrically_exact_model():
@@ -605,7 +605,7 @@ def test_the_step_of_the_geometrically_exact_model():
     0.1 ms says 'coarse step' and how to get that step.
     """
     for n in (1, 2, 4, 8):
-        p = UmbrellaParams(model=NL, elements_per_segment=n, lock="plastic")
+        p = UmbrellaParams(model=NL, elements_per_segment=n, lock='plastic')
         assert physics_step_of(p) == 1e-4
         assert resolved_omega_h(p) == pytest.approx(math.sqrt(0.12))
         h = physics_step_of(p.replace(step_follows_mesh=True))
@@ -619,9 +619,9 @@ def test_the_step_of_the_geometrically_exact_model():
                                              math.sqrt(0.12))
             assert max(shares.values()) > 0.01
     warnings = simulate(P(v0=-0.2, model=NL, elements_per_segment=4, time_step=0.0), 0.3,
-                        stop_after_lock=0.01, keep_samples=False).summary()["warnings"]
-    coarse = [w for w in warnings if w.startswith("coarse step")]
-    assert coarse and "(step_follows_mesh takes it)" in coarse[0]
+                        stop_after_lock=0.01, keep_samples=False).summary()['warnings']
+    coarse = [w for w in warnings if w.startswith('coarse step')]
+    assert coarse and '(step_follows_mesh takes it)' in coarse[0]
 
 
 @pytest.mark.slow
@@ -633,14 +633,14 @@ def test_stage2_figures_converge_with_the_mesh():
     the ANCF reference at 16 elements a segment (49.86 ms, 361.0 mm).
     """
     figures = [simulate(UmbrellaParams(v0=-2.0, model=NL, elements_per_segment=n,
-                                       lock="plastic"), 0.4, stop_after_lock=0.3).summary()
+                                       lock='plastic'), 0.4, stop_after_lock=0.3).summary()
                for n in (8, 16)]
-    for key, tol, ref in (("stage2_tip_period", 0.03, 49.86e-3),
-                          ("stage2_tip_amplitude", 0.03, 361.0e-3)):
+    for key, tol, ref in (('stage2_tip_period', 0.03, 49.86e-3),
+                          ('stage2_tip_amplitude', 0.03, 361.0e-3)):
         a, b = (f[key] for f in figures)
         assert a == pytest.approx(b, rel=tol), key
         for value in (a, b):
-            assert value == pytest.approx(ref, rel=0.05 if "period" in key else 0.10), key
+            assert value == pytest.approx(ref, rel=0.05 if 'period' in key else 0.10), key
 
 
 def test_fibres_turned_ninety_degrees_end_the_run_with_the_reason():
@@ -653,17 +653,17 @@ def test_fibres_turned_ninety_degrees_end_the_run_with_the_reason():
     say 'large strain' (the co-rotational beam's small-strain limit), and neither the
     'large deflection' of the small-deformation models.
     """
-    r = simulate(UmbrellaParams(v0=-3.0, model=NL, elements_per_segment=4, lock="plastic"),
+    r = simulate(UmbrellaParams(v0=-3.0, model=NL, elements_per_segment=4, lock='plastic'),
                  0.2)
-    assert r.error is not None and "slope coordinates end at 90 deg" in r.error
-    for lock, warned in (("energy", True), ("plastic", False)):
+    assert r.error is not None and 'slope coordinates end at 90 deg' in r.error
+    for lock, warned in (('energy', True), ('plastic', False)):
         s = simulate(UmbrellaParams(v0=-2.0, model=NL, elements_per_segment=4, lock=lock),
                      0.35, stop_after_lock=0.3).summary()
-        assert "error" not in s
-        keys = [w.split(":")[0] for w in s["warnings"]]
-        assert ("fibre rotation" in keys) == warned, (lock, s["warnings"])
-        assert "large strain" in keys and "large deflection" not in keys
-        strain = max(s["peak_stress_leaf"], s["peak_stress_link"]) / 72e9
+        assert 'error' not in s
+        keys = [w.split(':')[0] for w in s['warnings']]
+        assert ('fibre rotation' in keys) == warned, (lock, s['warnings'])
+        assert 'large strain' in keys and 'large deflection' not in keys
+        strain = max(s['peak_stress_leaf'], s['peak_stress_link']) / 72e9
         assert strain > STRAIN_LIMIT
     assert SECTION_SLOPE_LIMIT == pytest.approx(math.sin(math.radians(80.0)))
 
@@ -685,9 +685,9 @@ def test_spin_up_benchmark_nonlinear_beam_stays_on_the_stiffened_response():
 def test_spin_up_benchmark_linear_beam_diverges():
     """The known failure of the linear (premature-linearisation) model."""
     t, _, v = spin_up(4, False, 18.0, 0.01)
-    first_bending = 3.516 * math.sqrt(KANE_BEAM["ei"] / (KANE_BEAM["mass_per_length"] * 10.0 ** 4))
+    first_bending = 3.516 * math.sqrt(KANE_BEAM['ei'] / (KANE_BEAM['mass_per_length'] * 10.0 ** 4))
     assert first_bending == pytest.approx(3.80, abs=0.01)
-    assert np.abs(v).max() > 10.0 * KANE_BEAM["length"] or not np.all(np.isfinite(v))
+    assert np.abs(v).max() > 10.0 * KANE_BEAM['length'] or not np.all(np.isfinite(v))
     t_cross = next(tt for tt in np.arange(0, 15, 0.01) if spin_up_angle(tt)[1] > first_bending)
     assert t[-1] > t_cross                               # it left only after w > omega_1
 
@@ -714,7 +714,7 @@ def test_published_rotating_cantilever_table_is_transcribed_right():
         assert math.sqrt(lam) == pytest.approx(published, abs=5e-5)
 
 
-@pytest.mark.parametrize("gamma", [2, 4, 10])
+@pytest.mark.parametrize('gamma', [2, 4, 10])
 def test_rotating_cantilever_nonlinear_beam_has_the_published_stiffened_frequency(gamma):
     """
     The nonlinear beam's in-plane frequency, spun at gamma, is the published stiffened one.
@@ -728,7 +728,7 @@ def test_rotating_cantilever_nonlinear_beam_has_the_published_stiffened_frequenc
     assert measured == pytest.approx(rotating_cantilever_chordwise(gamma), rel=5e-3)
 
 
-@pytest.mark.parametrize("gamma", [2, 3])
+@pytest.mark.parametrize('gamma', [2, 3])
 def test_rotating_cantilever_linear_beam_misses_the_stiffening(gamma):
     """
     The linear strain (premature linearisation): softened, not stiffened.
@@ -747,15 +747,15 @@ def test_cli_runs_the_nonlinear_model_with_damping():
     import json
     import subprocess
     import sys
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim", "simulate", "--model", NL,
-                        "--set", "damping_ratio=0.05", "--v0", "-1.0", "--duration", "0.1",
-                        "--json"], capture_output=True, text=True, timeout=300)
+    r = subprocess.run([sys.executable, '-m', 'umbrella_sim', 'simulate', '--model', NL,
+                        '--set', 'damping_ratio=0.05', '--v0', '-1.0', '--duration', '0.1',
+                        '--json'], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
-    assert s["deploy_time"] == pytest.approx(0.0452, rel=5e-3) and s["energy_drift"] < 1e-4
-    bad = subprocess.run([sys.executable, "-m", "umbrella_sim", "simulate", "--model", NL,
-                          "--set", "damping_ratio=2"], capture_output=True, text=True, timeout=300)
-    assert bad.returncode == 2 and "damping_ratio" in bad.stderr and "Traceback" not in bad.stderr
+    assert s['deploy_time'] == pytest.approx(0.0452, rel=5e-3) and s['energy_drift'] < 1e-4
+    bad = subprocess.run([sys.executable, '-m', 'umbrella_sim', 'simulate', '--model', NL,
+                          '--set', 'damping_ratio=2'], capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and 'damping_ratio' in bad.stderr and 'Traceback' not in bad.stderr
 
 
 def test_failed_nonlinear_solve_is_a_fault_that_keeps_the_log(monkeypatch):
@@ -768,9 +768,9 @@ def test_failed_nonlinear_solve_is_a_fault_that_keeps_the_log(monkeypatch):
     buckling load (UmbrellaParams.sleeve_force_limit, 2.4 kN here); the bound is lifted so
     that the solver itself meets the force.
     """
-    monkeypatch.setattr(UmbrellaParams, "sleeve_force_limit", property(lambda p: math.inf))
+    monkeypatch.setattr(UmbrellaParams, 'sleeve_force_limit', property(lambda p: math.inf))
     r = simulate(P(v0=-0.2, model=NL), 0.1, force_profile=[(0.02, 1e6)])
-    assert r.error is not None and "t = 0.02" in r.error
+    assert r.error is not None and 't = 0.02' in r.error
     assert len(r.samples) == 11 and r.samples[-1].time == pytest.approx(0.02)
     assert all(np.all(np.isfinite(s.q)) for s in r.samples)
 
@@ -789,13 +789,13 @@ def test_node_runs_the_nonlinear_damped_model():
     from umbrella_sim.ros.messages import LATCHED
     probe = Probe()
     try:
-        probe.subscribe("/deployment_phase", String, LATCHED)
-        probe.subscribe("/energy", Float64MultiArray)
-        with NodeProcess("-p", f"model:={NL}", "-p", "damping_ratio:=0.05",
-                         "-p", "v0:=-1.0", "-p", f"time_step:={STEP}") as node:
-            probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=60)
-            lock_t = float(node.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
-            msg = probe.wait_for("/energy", lambda m: m.data[5] > 0.01, timeout=60)
+        probe.subscribe('/deployment_phase', String, LATCHED)
+        probe.subscribe('/energy', Float64MultiArray)
+        with NodeProcess('-p', f'model:={NL}', '-p', 'damping_ratio:=0.05',
+                         '-p', 'v0:=-1.0', '-p', f'time_step:={STEP}') as node:
+            probe.wait_for('/deployment_phase', lambda m: m.data == 'locked', timeout=60)
+            lock_t = float(node.wait_for_log(r'locked at t = ([0-9.]+) s').group(1))
+            msg = probe.wait_for('/energy', lambda m: m.data[5] > 0.01, timeout=60)
             assert node.stop() == 0
     finally:
         probe.close()
@@ -812,16 +812,16 @@ def test_recording_and_resimulation_of_the_nonlinear_damped_model(tmp_path):
     from umbrella_sim.ros.recording import record_offline
     from umbrella_sim.tools.replay import resimulate
 
-    bag = tmp_path / "nl"
+    bag = tmp_path / 'nl'
     p = UmbrellaParams(v0=-1.0, model=NL, damping_ratio=0.02)
     record_offline(p, str(bag), 0.08)
     log = read_log(str(bag))
-    assert log.parameters()["model"] == NL and log.parameters()["damping_ratio"] == 0.02
-    energy = [m.data for _, m in log.decoded("/energy")]
+    assert log.parameters()['model'] == NL and log.parameters()['damping_ratio'] == 0.02
+    energy = [m.data for _, m in log.decoded('/energy')]
     assert len(energy[-1]) == 6 and energy[-1][5] > 0.0          # dissipated energy recorded
     res = resimulate(log)
-    assert res["compared"] > 5
-    assert max(res["max_abs_diff"].values()) < 1e-9
+    assert res['compared'] > 5
+    assert max(res['max_abs_diff'].values()) < 1e-9
 
 
 def test_compare_reads_recordings_of_both_models_and_names_where_each_leaves_validity(
@@ -836,17 +836,17 @@ def test_compare_reads_recordings_of_both_models_and_names_where_each_leaves_val
     from umbrella_sim.ros.recording import record_offline
     from umbrella_sim.tools import compare
 
-    for model in ("flexible", NL):
-        record_offline(UmbrellaParams(v0=-1.0, model=model, lock="plastic"),
+    for model in ('flexible', NL):
+        record_offline(UmbrellaParams(v0=-1.0, model=model, lock='plastic'),
                        str(tmp_path / model), 0.1)
-    out = tmp_path / "out"
-    assert compare.main([str(tmp_path / "flexible"), str(tmp_path / NL), "--names", "linear",
-                         "exact", "--out", str(out)]) == 0
+    out = tmp_path / 'out'
+    assert compare.main([str(tmp_path / 'flexible'), str(tmp_path / NL), '--names', 'linear',
+                         'exact', '--out', str(out)]) == 0
     text = capfd.readouterr().out
-    figures = text[text.index("figures"):]
-    linear, exact = figures[:figures.index("\nexact ")], figures[figures.index("\nexact "):]
-    assert "compare model flexible-nonlinear" in linear
-    assert "large deflection" not in exact and "small strains only" in exact
-    assert "step_follows_mesh takes it" in exact
-    assert {p.name for p in out.iterdir()} >= {"compare.json", "tip_deflection.png",
-                                               "stress.png", "shapes.png"}
+    figures = text[text.index('figures'):]
+    linear, exact = figures[:figures.index('\nexact ')], figures[figures.index('\nexact '):]
+    assert 'compare model flexible-nonlinear' in linear
+    assert 'large deflection' not in exact and 'small strains only' in exact
+    assert 'step_follows_mesh takes it' in exact
+    assert {p.name for p in out.iterdir()} >= {'compare.json', 'tip_deflection.png',
+                                               'stress.png', 'shapes.png'}

@@ -28,15 +28,15 @@ from umbrella_sim.tools.cli import make_parser
 
 def test_msg_docs_parameter_tables_are_current():
     """Regenerate: .venv/bin/python -m umbrella_sim.tools.param_docs."""
-    assert param_docs.main(["--check"]) == 0
+    assert param_docs.main(['--check']) == 0
 
 
 def test_docs_list_every_parameter_with_its_default():
     import os
-    pages = "".join(open(os.path.join(param_docs.msg_docs_dir(), p), encoding="utf-8").read()
+    pages = ''.join(open(os.path.join(param_docs.msg_docs_dir(), p), encoding='utf-8').read()
                     for p in param_docs.PAGES)
     for p in REGISTRY.values():
-        assert f"| `{p.name}` | {p.type_name} | {p.unit} | {p.default_str} |" in pages
+        assert f'| `{p.name}` | {p.type_name} | {p.unit} | {p.default_str} |' in pages
 
 
 def test_dataclass_fields_and_defaults_are_the_registry():
@@ -52,13 +52,13 @@ def test_dataclass_fields_and_defaults_are_the_registry():
 def test_config_file_holds_every_model_parameter_at_its_default():
     import os
     cfg = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                       "config", "umbrella.yaml")
+                       'config', 'umbrella.yaml')
     values = load_params_file(cfg)
     assert set(values) == set(SPECS)
     assert UmbrellaParams.from_mapping(values) == UmbrellaParams()
 
 
-@pytest.mark.parametrize("name", list(REGISTRY))
+@pytest.mark.parametrize('name', list(REGISTRY))
 def test_every_range_is_enforced_at_its_bounds(name):
     """Just outside each finite bound is refused, naming the parameter; the default passes."""
     p = REGISTRY[name]
@@ -68,36 +68,36 @@ def test_every_range_is_enforced_at_its_bounds(name):
             continue
         outside = bound if open_ else bound + outward * (1 if p.type is int else
                                                          max(abs(bound), 1.0) * 1e-9)
-        with pytest.raises(ValueError, match=f"parameter {name}="):
+        with pytest.raises(ValueError, match=f'parameter {name}='):
             p.check(p.type(outside))
     if p.choices:
-        with pytest.raises(ValueError, match="one of"):
-            p.check("nonsense")
+        with pytest.raises(ValueError, match='one of'):
+            p.check('nonsense')
     if p.type is float:
-        with pytest.raises(ValueError, match="finite"):
+        with pytest.raises(ValueError, match='finite'):
             p.check(math.nan)
 
 
 def test_coercion_names_the_parameter_and_keeps_types():
-    assert coerce("v0", "-1") == -1.0 and isinstance(coerce("v0", 1), float)
-    assert coerce("elements_per_segment", "2") == 2
-    assert coerce("elements_per_segment", 3.0) == 3
-    assert coerce("record", "false") is False
-    for name, value in (("elements_per_segment", 2.5), ("v0", True), ("v0", "fast"),
-                        ("model", 3), ("record", "maybe")):
-        with pytest.raises(ValueError, match=f"parameter {name}="):
+    assert coerce('v0', '-1') == -1.0 and isinstance(coerce('v0', 1), float)
+    assert coerce('elements_per_segment', '2') == 2
+    assert coerce('elements_per_segment', 3.0) == 3
+    assert coerce('record', 'false') is False
+    for name, value in (('elements_per_segment', 2.5), ('v0', True), ('v0', 'fast'),
+                        ('model', 3), ('record', 'maybe')):
+        with pytest.raises(ValueError, match=f'parameter {name}='):
             coerce(name, value)
 
 
 def test_help_texts_come_from_the_registry():
-    node_help = "\n".join(parameter_help(REGISTRY.values()))
+    node_help = '\n'.join(parameter_help(REGISTRY.values()))
     for p in REGISTRY.values():
-        assert f"  {p.name} " in node_help and p.range_text() in node_help
-    sim = make_parser()._subparsers._group_actions[0].choices["simulate"]
-    text = sim.format_help().split("parameters (--set NAME=VALUE")[1]
+        assert f'  {p.name} ' in node_help and p.range_text() in node_help
+    sim = make_parser()._subparsers._group_actions[0].choices['simulate']
+    text = sim.format_help().split('parameters (--set NAME=VALUE')[1]
     for name in SPECS:
-        assert f"  {name} " in text
+        assert f'  {name} ' in text
     for name in NODE_PARAMETERS:
-        assert f"  {name} " not in text
-    model = next(a for a in sim._actions if a.dest == "model")
-    assert tuple(model.choices) == SPECS["model"].choices
+        assert f'  {name} ' not in text
+    model = next(a for a in sim._actions if a.dest == 'model')
+    assert tuple(model.choices) == SPECS['model'].choices

@@ -26,29 +26,29 @@ from umbrella_sim.core.rigid import deployment_time_by_quadrature
 from umbrella_sim.ros.params_file import load_params_file
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-CONFIG = os.path.join(ROOT, "config", "umbrella.yaml")
+CONFIG = os.path.join(ROOT, 'config', 'umbrella.yaml')
 
 
-@pytest.mark.parametrize("changes, culprit, rule", [
-    ({"l1": 0.0}, "l1", "> 0"),
-    ({"l2": -0.1}, "l2", "> 0"),
-    ({"youngs_modulus": -1.0}, "youngs_modulus", "> 0"),
-    ({"density": 0.0}, "density", "> 0"),
-    ({"section_height": 0.0}, "section_height", "> 0"),
-    ({"area": 1e-4}, "area", "both or neither"),
-    ({"l3": 0.01}, "parameter l3=0.01", "cannot close"),
-    ({"alpha0": 0.2}, "alpha0", "above alpha_deployed"),
-    ({"alpha0": 1.5707963}, "alpha0", "<= 1.5697963"),    # the toggle: no lever, v0 -> inf
-    ({"alpha0": 1.5698}, "alpha0", "<= 1.5697963"),       # (the bound read 1.5698)
-    ({"sleeve_force_min": -1e6}, "sleeve_force_min", "link in tension"),   # squash: 50 kN
-    ({"area": 1e-4, "second_moment_of_area": 1e-8}, "second_moment_of_area",
-     "no section of height section_height=0.01"),           # I > A (b/2)^2 = 2.5e-9
-    ({"elements_per_segment": 0}, "elements_per_segment", "between"),
-    ({"v0": math.nan}, "v0", "finite"),
-    ({"l1": math.inf}, "l1", "finite"),
-    ({"model": "elastic"}, "model", "one of"),
-    ({"lock": "sticky"}, "lock", "one of"),
-    ({"sleeve_force": -3.0}, "sleeve_force", ">= 0"),
+@pytest.mark.parametrize('changes, culprit, rule', [
+    ({'l1': 0.0}, 'l1', '> 0'),
+    ({'l2': -0.1}, 'l2', '> 0'),
+    ({'youngs_modulus': -1.0}, 'youngs_modulus', '> 0'),
+    ({'density': 0.0}, 'density', '> 0'),
+    ({'section_height': 0.0}, 'section_height', '> 0'),
+    ({'area': 1e-4}, 'area', 'both or neither'),
+    ({'l3': 0.01}, 'parameter l3=0.01', 'cannot close'),
+    ({'alpha0': 0.2}, 'alpha0', 'above alpha_deployed'),
+    ({'alpha0': 1.5707963}, 'alpha0', '<= 1.5697963'),    # the toggle: no lever, v0 -> inf
+    ({'alpha0': 1.5698}, 'alpha0', '<= 1.5697963'),       # (the bound read 1.5698)
+    ({'sleeve_force_min': -1e6}, 'sleeve_force_min', 'link in tension'),   # squash: 50 kN
+    ({'area': 1e-4, 'second_moment_of_area': 1e-8}, 'second_moment_of_area',
+     'no section of height section_height=0.01'),           # I > A (b/2)^2 = 2.5e-9
+    ({'elements_per_segment': 0}, 'elements_per_segment', 'between'),
+    ({'v0': math.nan}, 'v0', 'finite'),
+    ({'l1': math.inf}, 'l1', 'finite'),
+    ({'model': 'elastic'}, 'model', 'one of'),
+    ({'lock': 'sticky'}, 'lock', 'one of'),
+    ({'sleeve_force': -3.0}, 'sleeve_force', '>= 0'),
 ])
 def test_bad_parameters_name_culprit_and_rule(changes, culprit, rule):
     with pytest.raises(ValueError) as exc:
@@ -61,15 +61,15 @@ def test_integers_for_doubles_are_the_doubles():
     p = UmbrellaParams(v0=-1, sleeve_force_min=-8).validated()
     assert p == UmbrellaParams(v0=-1.0, sleeve_force_min=-8.0)
     assert type(p.v0) is float and type(p.sleeve_force_min) is float
-    with pytest.raises(ValueError, match="elements_per_segment=1.5"):
+    with pytest.raises(ValueError, match='elements_per_segment=1.5'):
         UmbrellaParams(elements_per_segment=1.5).validated()      # not the other way round
-    with pytest.raises(ValueError, match="v0=True"):
+    with pytest.raises(ValueError, match='v0=True'):
         UmbrellaParams(v0=True).validated()                      # nor a boolean
 
 
 def test_non_numeric_value_names_parameter():
     with pytest.raises(ValueError, match="parameter l1='abc'"):
-        UmbrellaParams().replace(l1="abc")
+        UmbrellaParams().replace(l1='abc')
 
 
 def test_default_config_is_the_thesis_data():
@@ -82,34 +82,34 @@ def test_default_config_is_the_thesis_data():
 
 
 def test_bad_params_file(tmp_path):
-    bad = tmp_path / "bad.yaml"
-    bad.write_text("foo: [1, 2\n")
-    with pytest.raises(ValueError, match="not valid YAML"):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('foo: [1, 2\n')
+    with pytest.raises(ValueError, match='not valid YAML'):
         load_params_file(str(bad))
-    empty = tmp_path / "empty.yaml"
-    empty.write_text("other_node:\n  ros__parameters: {a: 1}\n")
-    with pytest.raises(ValueError, match="no section for node /umbrella_node"):
+    empty = tmp_path / 'empty.yaml'
+    empty.write_text('other_node:\n  ros__parameters: {a: 1}\n')
+    with pytest.raises(ValueError, match='no section for node /umbrella_node'):
         load_params_file(str(empty))
-    for text, words in (("/**:\n  ros__parameters:\n    v0:\n", "no value for v0"),
-                        ("/**:\n  ros__parameters:\n    v0: -0.5\n    v0: -1.0\n",
+    for text, words in (('/**:\n  ros__parameters:\n    v0:\n', 'no value for v0'),
+                        ('/**:\n  ros__parameters:\n    v0: -0.5\n    v0: -1.0\n',
                          "key 'v0' given twice")):
         bad.write_text(text)        # YAML would give None, or the last value, silently
         with pytest.raises(ValueError, match=words):
             load_params_file(str(bad))
 
 
-@pytest.mark.parametrize("line, words", [
+@pytest.mark.parametrize('line, words', [
     ('v0: "-0.5"', "v0='-0.5': must be of type double, got string"),
     ("step_follows_mesh: 'yes'", "step_follows_mesh='yes': must be of type bool"),
-    ("elements_per_segment: 2.5", "elements_per_segment=2.5: must be of type integer, got double"),
-    ("lock: 1", "lock=1: must be of type string, got integer"),
+    ('elements_per_segment: 2.5', 'elements_per_segment=2.5: must be of type integer, got double'),
+    ('lock: 1', 'lock=1: must be of type string, got integer'),
     ('publish_rate: "50"', "publish_rate='50': must be of type double, got string"),
 ])
 def test_a_params_file_value_of_another_type_is_refused_as_the_node_does(tmp_path, line, words):
     """A quoted number in a params file is a string: the node refuses it, and so does simulate."""
-    path = tmp_path / "typed.yaml"
-    path.write_text(f"/**:\n  ros__parameters:\n    {line}\n")
-    r = cli("simulate", "--params", str(path), "--duration", "0.01")
+    path = tmp_path / 'typed.yaml'
+    path.write_text(f'/**:\n  ros__parameters:\n    {line}\n')
+    r = cli('simulate', '--params', str(path), '--duration', '0.01')
     assert r.returncode == 2 and words in r.stderr and str(path) in r.stderr, r.stderr
 
 
@@ -117,121 +117,121 @@ def test_params_file_numbers_are_typed_as_rcl_types_them(tmp_path):
     """72.0e9 is a double to rcl (strtod), a string to YAML 1.1; quoted numbers are strings."""
     from umbrella_sim.ros.params_file import load_params_file
 
-    path = tmp_path / "typed.yaml"
-    path.write_text("/**:\n  ros__parameters:\n    youngs_modulus: 72.0e9\n    v0: -5e-1\n"
+    path = tmp_path / 'typed.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    youngs_modulus: 72.0e9\n    v0: -5e-1\n'
                     "    l1: .5\n    elements_per_segment: 2\n    lock: '1'\n"
-                    "    host: 10.0.0.1\n    name: 3d\n    dir: 2024_runs\n")
-    assert load_params_file(str(path)) == {"youngs_modulus": 72e9, "v0": -0.5, "l1": 0.5,
-                                           "elements_per_segment": 2, "lock": "1",
-                                           "host": "10.0.0.1", "name": "3d",   # (text that
-                                           "dir": "2024_runs"}   # starts with a number)
+                    '    host: 10.0.0.1\n    name: 3d\n    dir: 2024_runs\n')
+    assert load_params_file(str(path)) == {'youngs_modulus': 72e9, 'v0': -0.5, 'l1': 0.5,
+                                           'elements_per_segment': 2, 'lock': '1',
+                                           'host': '10.0.0.1', 'name': '3d',   # (text that
+                                           'dir': '2024_runs'}   # starts with a number)
 
 
 def test_a_bad_value_in_a_params_file_names_the_file(tmp_path):
-    bad = tmp_path / "fast.yaml"
+    bad = tmp_path / 'fast.yaml'
     bad.write_text('/**:\n  ros__parameters:\n    v0: "fast"\n')
-    r = cli("simulate", "--params", str(bad), "--duration", "0.01")
-    assert r.returncode == 2 and "fast.yaml" in r.stderr and "v0" in r.stderr, r.stderr
-    a_file = tmp_path / "a_file"
-    a_file.write_text("")
-    r = cli("simulate", "--duration", "0.01", "--csv", str(a_file / "x.csv"))
-    assert r.returncode == 2 and f"{a_file} is not a directory" in r.stderr, r.stderr
+    r = cli('simulate', '--params', str(bad), '--duration', '0.01')
+    assert r.returncode == 2 and 'fast.yaml' in r.stderr and 'v0' in r.stderr, r.stderr
+    a_file = tmp_path / 'a_file'
+    a_file.write_text('')
+    r = cli('simulate', '--duration', '0.01', '--csv', str(a_file / 'x.csv'))
+    assert r.returncode == 2 and f'{a_file} is not a directory' in r.stderr, r.stderr
 
 
 def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "umbrella_sim", *args], capture_output=True,
+    return subprocess.run([sys.executable, '-m', 'umbrella_sim', *args], capture_output=True,
                           text=True, cwd=cwd or ROOT, timeout=300)
 
 
 def test_cli_json_summary():
-    r = cli("simulate", "--params", CONFIG, "--v0", "-1.0", "--duration", "0.1", "--json")
+    r = cli('simulate', '--params', CONFIG, '--v0', '-1.0', '--duration', '0.1', '--json')
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
-    for key in ("deploy_time", "tip_deflection_max", "tip_deflection_max_time",
-                "stage2_tip_amplitude", "stage2_tip_period", "peak_stress_leaf",
-                "peak_stress_link", "energy_drift", "constraint_residual_max", "steps",
-                "wall_time", "real_time_factor"):
+    for key in ('deploy_time', 'tip_deflection_max', 'tip_deflection_max_time',
+                'stage2_tip_amplitude', 'stage2_tip_period', 'peak_stress_leaf',
+                'peak_stress_link', 'energy_drift', 'constraint_residual_max', 'steps',
+                'wall_time', 'real_time_factor'):
         assert key in s
     # the frame is stiff in stage 1: the rigid closed form (work-energy quadrature) is close
     rigid = deployment_time_by_quadrature(
         UmbrellaParams.from_mapping(load_params_file(CONFIG)).replace(v0=-1.0))
-    assert s["deploy_time"] == pytest.approx(rigid, rel=5e-3)
+    assert s['deploy_time'] == pytest.approx(rigid, rel=5e-3)
 
 
 def test_cli_takes_negative_numbers_in_exponent_form():
     """``--v0 -5e-1`` is the value -0.5, as ``--v0=-0.5``, not an unknown option."""
-    runs = [cli("simulate", *v0, "--duration", "0.02", "--time-step", "0.001", "--json")
-            for v0 in (["--v0", "-5e-1"], ["--v0=-0.5"], ["--v0", "-0.5"])]
+    runs = [cli('simulate', *v0, '--duration', '0.02', '--time-step', '0.001', '--json')
+            for v0 in (['--v0', '-5e-1'], ['--v0=-0.5'], ['--v0', '-0.5'])]
     assert all(r.returncode == 0 for r in runs), [r.stderr for r in runs]
     summaries = [json.loads(r.stdout) for r in runs]
     for s in summaries:
-        s.pop("wall_time"), s.pop("real_time_factor")
+        s.pop('wall_time'), s.pop('real_time_factor')
     assert summaries[0] == summaries[1] == summaries[2]
 
 
 def test_cli_models_and_csv(tmp_path):
-    out = tmp_path / "run.csv"
-    r = cli("simulate", "--model", "rigid", "--v0", "-2", "--duration", "0.03",
-            "--time-step", "0.002", "--csv", str(out), "--csv-state", "--json")
+    out = tmp_path / 'run.csv'
+    r = cli('simulate', '--model', 'rigid', '--v0', '-2', '--duration', '0.03',
+            '--time-step', '0.002', '--csv', str(out), '--csv-state', '--json')
     assert r.returncode == 0, r.stderr
     lines = out.read_text().splitlines()
-    header = lines[0].split(",")
+    header = lines[0].split(',')
     # every column with its SI unit, the stage (text) without
-    assert header[:3] == ["time (s)", "stage", "alpha1 (rad)"]
-    assert "q[alpha1] (rad)" in header and "qd[link.u1] (m/s)" in header
-    assert "q[leaf.theta1] (rad)" in header and "qd[leaf.theta1] (rad/s)" in header
-    assert "q[R2x] (m)" in header and "alpha1_accel (rad/s^2)" in header
-    assert "sigma_top[leaf@0.5-] (Pa)" in header and "sigma_bottom[link@0.5] (Pa)" in header
-    assert "tip_transverse (m)" in header and "kinetic_energy (J)" in header
-    assert all(h == "stage" or h.endswith(")") for h in header)
+    assert header[:3] == ['time (s)', 'stage', 'alpha1 (rad)']
+    assert 'q[alpha1] (rad)' in header and 'qd[link.u1] (m/s)' in header
+    assert 'q[leaf.theta1] (rad)' in header and 'qd[leaf.theta1] (rad/s)' in header
+    assert 'q[R2x] (m)' in header and 'alpha1_accel (rad/s^2)' in header
+    assert 'sigma_top[leaf@0.5-] (Pa)' in header and 'sigma_bottom[link@0.5] (Pa)' in header
+    assert 'tip_transverse (m)' in header and 'kinetic_energy (J)' in header
+    assert all(h == 'stage' or h.endswith(')') for h in header)
     assert len(set(header)) == len(header), "a column name twice (leaf@0.5: two elements')"
     assert len(lines) == 1 + 1 + 15 + 1    # header, t = 0, 15 steps, the lock instant
-    again = cli("simulate", "--duration", "0.01", "--csv", str(out))
-    assert again.returncode == 2 and "exists" in again.stderr
+    again = cli('simulate', '--duration', '0.01', '--csv', str(out))
+    assert again.returncode == 2 and 'exists' in again.stderr
 
 
 def test_cli_force_profile(tmp_path):
-    prof = tmp_path / "force.csv"
-    prof.write_text("t,F\n0.0,0.0\n0.01,20.0\n")
-    r = cli("simulate", "--v0", "0", "--force-profile", str(prof), "--duration", "0.6",
-            "--time-step", "0.002", "--json")
+    prof = tmp_path / 'force.csv'
+    prof.write_text('t,F\n0.0,0.0\n0.01,20.0\n')
+    r = cli('simulate', '--v0', '0', '--force-profile', str(prof), '--duration', '0.6',
+            '--time-step', '0.002', '--json')
     assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["deploy_time"] > 0.01
-    prof.write_text("t,F\n0.0,1.0\n0.01,-5.0\n")
-    bad = cli("simulate", "--force-profile", str(prof))
-    assert bad.returncode == 2 and "force.csv:3" in bad.stderr and ">= 0" in bad.stderr
+    assert json.loads(r.stdout)['deploy_time'] > 0.01
+    prof.write_text('t,F\n0.0,1.0\n0.01,-5.0\n')
+    bad = cli('simulate', '--force-profile', str(prof))
+    assert bad.returncode == 2 and 'force.csv:3' in bad.stderr and '>= 0' in bad.stderr
 
 
-@pytest.mark.parametrize("args, words", [
-    (["--set", "l1=-1"], "l1"),
-    (["--set", "alpha0=0.1"], "alpha0"),
-    (["--set", "nonsense=1"], "unknown parameter"),
-    (["--force", "nan"], "sleeve_force"),
-    (["--elements-per-segment", "0"], "elements_per_segment"),
-    (["--params", "/nonexistent.yaml"], "/nonexistent.yaml"),
-    (["--duration", "5e-5"], "shorter than one physics step (0.0001 s)"),   # ran 0 steps
+@pytest.mark.parametrize('args, words', [
+    (['--set', 'l1=-1'], 'l1'),
+    (['--set', 'alpha0=0.1'], 'alpha0'),
+    (['--set', 'nonsense=1'], 'unknown parameter'),
+    (['--force', 'nan'], 'sleeve_force'),
+    (['--elements-per-segment', '0'], 'elements_per_segment'),
+    (['--params', '/nonexistent.yaml'], '/nonexistent.yaml'),
+    (['--duration', '5e-5'], 'shorter than one physics step (0.0001 s)'),   # ran 0 steps
     # one parameter given twice: the dedicated option used to win over --set silently
-    (["--force", "5", "--set", "sleeve_force=10"], "--force 5.0"),
-    (["--model", "rigid", "--set", "model=flexible"], "already given by --model rigid"),
-    (["--set", "v0=-1", "--set", "v0=-2"], "already given by --set v0=-1"),
-    (["--v0", "0", "--v0", "-0.5"], "--v0 given twice"),
-    (["--mcap", "/nonexistent/bag", "--publish-rate", "50", "--set", "publish_rate=200"],
-     "already given by --publish-rate 50.0"),
+    (['--force', '5', '--set', 'sleeve_force=10'], '--force 5.0'),
+    (['--model', 'rigid', '--set', 'model=flexible'], 'already given by --model rigid'),
+    (['--set', 'v0=-1', '--set', 'v0=-2'], 'already given by --set v0=-1'),
+    (['--v0', '0', '--v0', '-0.5'], '--v0 given twice'),
+    (['--mcap', '/nonexistent/bag', '--publish-rate', '50', '--set', 'publish_rate=200'],
+     'already given by --publish-rate 50.0'),
 ])
 def test_cli_rejects_bad_input(args, words):
-    r = cli("simulate", *args)
+    r = cli('simulate', *args)
     assert r.returncode == 2
-    assert words in r.stderr and "Traceback" not in r.stderr
+    assert words in r.stderr and 'Traceback' not in r.stderr
 
 
 def test_cli_diverging_run_keeps_csv(tmp_path):
-    out = tmp_path / "div.csv"
+    out = tmp_path / 'div.csv'
     # 2300 N: below the link's buckling load (accepted) but the Newton iteration fails
     # (at a 2 ms step; at a 50 us step Newton follows 2.3 kN)
-    r = cli("simulate", "--v0", "0", "--force", "2300", "--duration", "0.5", "--time-step",
-            "0.002", "--csv", str(out))
+    r = cli('simulate', '--v0', '0', '--force', '2300', '--duration', '0.5', '--time-step',
+            '0.002', '--csv', str(out))
     assert r.returncode == 3
-    assert "error" in r.stderr and "kept" in r.stderr
+    assert 'error' in r.stderr and 'kept' in r.stderr
     assert len(out.read_text().splitlines()) > 3
 
 
@@ -245,18 +245,18 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.solver import UmbrellaSimulator
 
-    with pytest.raises(ValueError, match="sleeve_force_min.*<= 0"):
+    with pytest.raises(ValueError, match='sleeve_force_min.*<= 0'):
         UmbrellaParams(sleeve_force_min=1.0).validated()
-    with pytest.raises(ValueError, match="sleeve_force=-3.*-2"):
+    with pytest.raises(ValueError, match='sleeve_force=-3.*-2'):
         UmbrellaParams(sleeve_force_min=-2.0, sleeve_force=-3.0).validated()
     push_only = UmbrellaSimulator(UmbrellaParams(v0=-0.5))
-    with pytest.raises(ValueError, match=">= 0"):
+    with pytest.raises(ValueError, match='>= 0'):
         push_only.set_sleeve_force(-1.0)
     braking = UmbrellaSimulator(UmbrellaParams(v0=-0.5, sleeve_force_min=-5.0))
     braking.set_sleeve_force(-5.0)
-    with pytest.raises(ValueError, match="-5"):
+    with pytest.raises(ValueError, match='-5'):
         braking.set_sleeve_force(-5.5)
-    with pytest.raises(ValueError, match="-1"):
+    with pytest.raises(ValueError, match='-1'):
         simulate(UmbrellaParams(v0=-0.5), 0.1, force_profile=[(0.0, -1.0)])
     # holding back slows the deployment: the lock comes later than coasting at v0
     coast = simulate(UmbrellaParams(v0=-0.5), 1.0, stop_after_lock=0.0)
@@ -264,38 +264,38 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
                     force_profile=[(0.0, -0.5)], stop_after_lock=0.0)
     assert held.lock.time > coast.lock.time
     assert held.samples[-1].work < 0.0                  # the drive took energy out
-    assert held.summary()["energy_drift"] < 1e-5        # and the balance still closes
+    assert held.summary()['energy_drift'] < 1e-5        # and the balance still closes
 
 
-@pytest.mark.parametrize("text, rows", [
-    ("t,F\n0,5\n0.3,0\n", [(0.0, 5.0), (0.3, 0.0)]),
-    ("# my drive\n\nt [s], F [N]\n0,5\n", [(0.0, 5.0)]),     # a header after a comment
-    ("0,5\n0.3,0,\n", [(0.0, 5.0), (0.3, 0.0)]),             # a trailing comma
-    ("Time (s),Force (N)\n0,5\n", [(0.0, 5.0)]),
-    ("t,sleeve_force\n0,5\n", [(0.0, 5.0)]),       # the topic's name
-    ("\ufefft,F\n0,5\n", [(0.0, 5.0)]),             # a spreadsheet's UTF-8 byte-order mark
+@pytest.mark.parametrize('text, rows', [
+    ('t,F\n0,5\n0.3,0\n', [(0.0, 5.0), (0.3, 0.0)]),
+    ('# my drive\n\nt [s], F [N]\n0,5\n', [(0.0, 5.0)]),     # a header after a comment
+    ('0,5\n0.3,0,\n', [(0.0, 5.0), (0.3, 0.0)]),             # a trailing comma
+    ('Time (s),Force (N)\n0,5\n', [(0.0, 5.0)]),
+    ('t,sleeve_force\n0,5\n', [(0.0, 5.0)]),       # the topic's name
+    ('\ufefft,F\n0,5\n', [(0.0, 5.0)]),             # a spreadsheet's UTF-8 byte-order mark
 ])
 def test_force_profile_rows_and_header(tmp_path, text, rows):
     from umbrella_sim.tools.inputs import read_force_profile
-    prof = tmp_path / "f.csv"
+    prof = tmp_path / 'f.csv'
     prof.write_text(text)
     assert read_force_profile(str(prof)) == rows
 
 
-@pytest.mark.parametrize("text, where, words", [
-    ("0,5 N\n0.3,0\n", "f.csv:1", "not numbers"),     # a bad first row is not a header
-    ("t,F\n0,5 N\n", "f.csv:2", "not numbers"),
-    ("t,5\n0,5\n", "f.csv:1", "not numbers"),         # half a number: not a header either
-    ("0,1,2\n", "f.csv:1", "two columns"),            # a third column is not dropped
-    ("t,F\nF\n", "f.csv:2", "two columns"),
-    ("0,1\n0.5,2\n0.5,3\n", "f.csv:3", "time 0.5 given twice"),   # (the last one won)
-    ("F,t\n0,0\n5,0.1\n", "f.csv:1", "time then force"),   # (was read as t,F)
-    ("force,time\n0,0\n", "f.csv:1", "['force', 'time']"),
-    ("t,F\n0,1_0\n", "f.csv:2", "not numbers"),             # (was 10 N)
+@pytest.mark.parametrize('text, where, words', [
+    ('0,5 N\n0.3,0\n', 'f.csv:1', 'not numbers'),     # a bad first row is not a header
+    ('t,F\n0,5 N\n', 'f.csv:2', 'not numbers'),
+    ('t,5\n0,5\n', 'f.csv:1', 'not numbers'),         # half a number: not a header either
+    ('0,1,2\n', 'f.csv:1', 'two columns'),            # a third column is not dropped
+    ('t,F\nF\n', 'f.csv:2', 'two columns'),
+    ('0,1\n0.5,2\n0.5,3\n', 'f.csv:3', 'time 0.5 given twice'),   # (the last one won)
+    ('F,t\n0,0\n5,0.1\n', 'f.csv:1', 'time then force'),   # (was read as t,F)
+    ('force,time\n0,0\n', 'f.csv:1', "['force', 'time']"),
+    ('t,F\n0,1_0\n', 'f.csv:2', 'not numbers'),             # (was 10 N)
 ])
 def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
     from umbrella_sim.tools.inputs import read_force_profile
-    prof = tmp_path / "f.csv"
+    prof = tmp_path / 'f.csv'
     prof.write_text(text)
     with pytest.raises(ValueError) as exc:
         read_force_profile(str(prof))
@@ -306,28 +306,28 @@ def test_mcap_recording_says_when_its_publications_shorten_the_step(tmp_path):
     """--mcap at a time_step that does not divide the period: the node's step, said so."""
     from umbrella_sim.bag.reader import read_log
 
-    r = cli("simulate", "--time-step", "3e-4", "--duration", "0.05", "--mcap",
-            str(tmp_path / "short"), "--json")
+    r = cli('simulate', '--time-step', '3e-4', '--duration', '0.05', '--mcap',
+            str(tmp_path / 'short'), '--json')
     assert r.returncode == 0, r.stderr
-    assert "physics step 0.000294117647 s, not 0.0003 s" in r.stderr, r.stderr
-    step = read_log(str(tmp_path / "short")).metadata["umbrella_sim.parameters"]["physics_step"]
+    assert 'physics step 0.000294117647 s, not 0.0003 s' in r.stderr, r.stderr
+    step = read_log(str(tmp_path / 'short')).metadata['umbrella_sim.parameters']['physics_step']
     assert float(step) == pytest.approx(0.01 / 34, rel=1e-12)
-    r = cli("simulate", "--time-step", "2e-4", "--duration", "0.05", "--mcap",
-            str(tmp_path / "same"))
-    assert r.returncode == 0 and "note" not in r.stderr, r.stderr
+    r = cli('simulate', '--time-step', '2e-4', '--duration', '0.05', '--mcap',
+            str(tmp_path / 'same'))
+    assert r.returncode == 0 and 'note' not in r.stderr, r.stderr
 
 
 def test_params_file_publish_rate_shapes_the_mcap_recording(tmp_path):
     """A params file shared with the node: its publish_rate is the recording's, unless given."""
     from umbrella_sim.bag.reader import read_log
-    params = tmp_path / "rate.yaml"
-    params.write_text("/**:\n  ros__parameters:\n    publish_rate: 1000.0\n")
+    params = tmp_path / 'rate.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    publish_rate: 1000.0\n')
     counts = []
-    for name, extra in (("file", []), ("flag", ["--publish-rate", "50"]),
-                        ("set", ["--set", "publish_rate=200"])):
+    for name, extra in (('file', []), ('flag', ['--publish-rate', '50']),
+                        ('set', ['--set', 'publish_rate=200'])):
         bag = tmp_path / name
-        r = cli("simulate", "--params", str(params), "--duration", "0.1", "--mcap", str(bag),
+        r = cli('simulate', '--params', str(params), '--duration', '0.1', '--mcap', str(bag),
                 *extra)
         assert r.returncode == 0, r.stderr
-        counts.append(read_log(str(bag)).count("/joint_states"))
+        counts.append(read_log(str(bag)).count('/joint_states'))
     assert counts == [101, 6, 21]       # t = 0 and every period of 0.1 s

@@ -30,7 +30,7 @@ from umbrella_sim.ros.recording import record_offline
 
 
 def built(encoder, s, frame_prefix):
-    return ros_io.sample_messages(s, encoder.driver.params, None, "", encoder.initial_energy,
+    return ros_io.sample_messages(s, encoder.driver.params, None, '', encoder.initial_energy,
                                   frame_prefix)
 
 
@@ -41,7 +41,7 @@ def next_period(driver, force=None):
     assert driver.advance_period()[-1].error is None
 
 
-@pytest.mark.parametrize("frame_prefix", ["", "a/", "ab/", "abc/", "antenna_12/"])
+@pytest.mark.parametrize('frame_prefix', ['', 'a/', 'ab/', 'abc/', 'antenna_12/'])
 def test_encoded_bytes_are_the_built_messages(frame_prefix):
     """Every per-publication topic: the serializer's bytes of the builder's message, exactly."""
     driver = RunDriver(UmbrellaParams(v0=-0.5), 1000.0)
@@ -52,7 +52,7 @@ def test_encoded_bytes_are_the_built_messages(frame_prefix):
         s = driver.publication()
         if period % 37:
             continue
-        msgs = encoder.messages(s, "ns", 1.0, frame_prefix)
+        msgs = encoder.messages(s, 'ns', 1.0, frame_prefix)
         seen.add(s.stage)
         reference = built(encoder, s, frame_prefix)
         for key, ref in reference.items():
@@ -60,12 +60,12 @@ def test_encoded_bytes_are_the_built_messages(frame_prefix):
             assert isinstance(data, bytes), key
             assert data == cdr_bytes(ref), key       # exact size, zero padding, every value
             assert deserialize_message(data, type(ref)) == ref, key
-    assert seen == {"deploying", "locked"}
+    assert seen == {'deploying', 'locked'}
 
 
-@pytest.mark.parametrize("mesh, model, ns, frame_prefix, magnification", [
-    (3, "flexible", "ns", "", 1.0), (1, "flexible", "umbrella", "a/", 50.0),
-    (2, "flexible-nonlinear", "abc", "antenna_12/", 10.0), (4, "rigid-fe", "x", "ab/", 1.0)])
+@pytest.mark.parametrize('mesh, model, ns, frame_prefix, magnification', [
+    (3, 'flexible', 'ns', '', 1.0), (1, 'flexible', 'umbrella', 'a/', 50.0),
+    (2, 'flexible-nonlinear', 'abc', 'antenna_12/', 10.0), (4, 'rigid-fe', 'x', 'ab/', 1.0)])
 def test_marker_bytes_are_the_built_markers(mesh, model, ns, frame_prefix, magnification):
     """
     Markers: the encoder's bytes are those of markers_msg's message, byte for byte.
@@ -82,15 +82,15 @@ def test_marker_bytes_are_the_built_markers(mesh, model, ns, frame_prefix, magni
         seen.add(s.stage)
         ref = ros_io.markers_msg(s, driver.sim.model.deformed_shape(s.q, magnification), ns,
                                  frame_prefix)
-        data, expected = msgs["markers"], cdr_bytes(ref)     # (colours: float32 on the wire)
+        data, expected = msgs['markers'], cdr_bytes(ref)     # (colours: float32 on the wire)
         assert data == expected
         assert deserialize_message(data, ros_io.MarkerArray) == \
             deserialize_message(expected, ros_io.MarkerArray)
         next_period(driver)
-    assert seen == {"deploying", "locked"}
+    assert seen == {'deploying', 'locked'}
 
 
-@pytest.mark.parametrize("publish_rate, marker_rate", [(1000.0, 30.0), (100.0, 30.0),
+@pytest.mark.parametrize('publish_rate, marker_rate', [(1000.0, 30.0), (100.0, 30.0),
                                                        (200.0, 60.0), (50.0, 100.0)])
 def test_markers_at_their_documented_rate(publish_rate, marker_rate):
     """markers: every k-th publication, k = round(publish_rate / marker_rate) >= 1, t = 0 in."""
@@ -99,10 +99,10 @@ def test_markers_at_their_documented_rate(publish_rate, marker_rate):
     k = max(1, round(publish_rate / marker_rate))
     with_markers = []
     for _ in range(int(0.4 * publish_rate)):
-        msgs = encoder.messages(driver.publication(), "ns", 1.0)
-        if "markers" in msgs:
+        msgs = encoder.messages(driver.publication(), 'ns', 1.0)
+        if 'markers' in msgs:
             with_markers.append(driver.sim.time)
-            assert isinstance(deserialize_message(msgs["markers"], ros_io.MarkerArray),
+            assert isinstance(deserialize_message(msgs['markers'], ros_io.MarkerArray),
                               ros_io.MarkerArray)
         next_period(driver)
     assert with_markers[0] == 0.0
@@ -116,19 +116,19 @@ def test_markers_at_their_documented_rate(publish_rate, marker_rate):
 def test_recorded_bytes_are_the_published_bytes(tmp_path):
     """The offline recorder writes the encoder's bytes: they decode to the built messages."""
     params = UmbrellaParams(v0=-0.5)
-    bag = tmp_path / "run"
+    bag = tmp_path / 'run'
     result = record_offline(params, str(bag), 0.05, publish_rate=1000.0, keep_samples=True)
     assert result.error is None
     samples = {ros_io.stamp_ns(s.time): s for s in result.samples}
     reference = PublicationEncoder(RunDriver(params, 1000.0))
-    topics = {"/" + ros_io.TOPICS[k].name: k for k in ros_io.SampleEncoder.GROUPS}
+    topics = {'/' + ros_io.TOPICS[k].name: k for k in ros_io.SampleEncoder.GROUPS}
     checked = 0
-    with open(Path(bag) / "run_0.mcap", "rb") as fh:
+    with open(Path(bag) / 'run_0.mcap', 'rb') as fh:
         for schema, channel, message in make_reader(fh).iter_messages():
             key = topics.get(channel.topic)
-            if key not in ("joint_states", "tip_deflection", "clock"):
+            if key not in ('joint_states', 'tip_deflection', 'clock'):
                 continue        # (peak_stress and energy carry per-period values)
-            ref = built(reference, samples[message.log_time], "")[key]
+            ref = built(reference, samples[message.log_time], '')[key]
             assert len(message.data) == len(cdr_bytes(ref))
             assert deserialize_message(message.data, type(ref)) == ref
             checked += 1
@@ -142,21 +142,21 @@ def test_a_recording_does_not_depend_on_the_process_that_made_it(tmp_path):
     rclpy's serializer leaves the CDR alignment padding as its buffer held it, which differs
     from one process to the next; the encoders' templates have it zeroed (cdr_bytes).
     """
-    code = ("import sys\n"
-            "from umbrella_sim.core.params import UmbrellaParams\n"
-            "from umbrella_sim.ros.recording import record_offline\n"
-            "record_offline(UmbrellaParams(v0=-0.5, elements_per_segment=2), sys.argv[1], 0.3,"
-            " force_profile=[(0.1, 5.0)], publish_rate=200.0)\n")
+    code = ('import sys\n'
+            'from umbrella_sim.core.params import UmbrellaParams\n'
+            'from umbrella_sim.ros.recording import record_offline\n'
+            'record_offline(UmbrellaParams(v0=-0.5, elements_per_segment=2), sys.argv[1], 0.3,'
+            ' force_profile=[(0.1, 5.0)], publish_rate=200.0)\n')
     runs = []
-    for name in ("a", "b"):
-        subprocess.run([sys.executable, "-c", code, str(tmp_path / name)], check=True,
+    for name in ('a', 'b'):
+        subprocess.run([sys.executable, '-c', code, str(tmp_path / name)], check=True,
                        timeout=300)
-        with open(tmp_path / name / f"{name}_0.mcap", "rb") as fh:
+        with open(tmp_path / name / f'{name}_0.mcap', 'rb') as fh:
             runs.append([(channel.topic, message.log_time, message.data)
                          for _, channel, message in make_reader(fh).iter_messages()])
     topics = {topic for topic, _, _ in runs[0]}
-    assert {"/joint_states", "/energy", "/peak_stress", "/tip_deflection", "/clock",
-            "/markers"} <= topics
+    assert {'/joint_states', '/energy', '/peak_stress', '/tip_deflection', '/clock',
+            '/markers'} <= topics
     assert len(runs[0]) > 300
     assert runs[0] == runs[1]
 
@@ -172,42 +172,42 @@ def test_foxglove_layout_plots_the_figures_it_names():
     import re
 
     root = Path(__file__).resolve().parents[1]
-    layout = json.loads((root / "config" / "umbrella.foxglove.json").read_text("utf-8"))
-    panels = layout["configById"]
-    three_d = panels["3D!umbrella"]
-    assert three_d["followTf"] == ros_io.INERTIAL_FRAME and list(three_d["topics"]) == ["/markers"]
+    layout = json.loads((root / 'config' / 'umbrella.foxglove.json').read_text('utf-8'))
+    panels = layout['configById']
+    three_d = panels['3D!umbrella']
+    assert three_d['followTf'] == ros_io.INERTIAL_FRAME and list(three_d['topics']) == ['/markers']
     driver = RunDriver(UmbrellaParams(v0=-0.5), 100.0)
     for _ in range(15):                              # past the lock (0.09 s): all non-zero
         next_period(driver)
     s = driver.publication()
-    assert s.stage.name.lower() == "locked"
-    messages = built(PublicationEncoder(driver), s, "")
-    expected = {"v_G transverse (m)": s.tip_transverse, "u_G axial (m)": s.tip_axial,
-                "leaf peak |σ| (Pa)": s.peak_stress_leaf,
-                "link peak |σ| (Pa)": s.peak_stress_link,
-                "alpha1 (rad)": s.alpha1, "y_H (m)": s.sleeve_position}
+    assert s.stage.name.lower() == 'locked'
+    messages = built(PublicationEncoder(driver), s, '')
+    expected = {'v_G transverse (m)': s.tip_transverse, 'u_G axial (m)': s.tip_axial,
+                'leaf peak |σ| (Pa)': s.peak_stress_leaf,
+                'link peak |σ| (Pa)': s.peak_stress_link,
+                'alpha1 (rad)': s.alpha1, 'y_H (m)': s.sleeve_position}
     drawn = set()
     for key, panel in panels.items():
-        if not key.startswith("Plot!"):
+        if not key.startswith('Plot!'):
             continue
-        for path in panel["paths"]:
-            topic, *fields = re.split(r"\.", path["value"])
-            value = messages[topic.lstrip("/")]
+        for path in panel['paths']:
+            topic, *fields = re.split(r'\.', path['value'])
+            value = messages[topic.lstrip('/')]
             for field in fields:
-                name, _, index = field.partition("[")
+                name, _, index = field.partition('[')
                 value = getattr(value, name)
                 if index:
-                    value = value[int(index.rstrip("]"))]
-            assert value == pytest.approx(expected[path["label"]], rel=1e-12, abs=0), path
-            assert expected[path["label"]] != 0.0
-            drawn.add(path["label"])
+                    value = value[int(index.rstrip(']'))]
+            assert value == pytest.approx(expected[path['label']], rel=1e-12, abs=0), path
+            assert expected[path['label']] != 0.0
+            drawn.add(path['label'])
     assert drawn == set(expected)
     # every panel is placed in the layout tree
-    placed, stack = set(), [layout["layout"]]
+    placed, stack = set(), [layout['layout']]
     while stack:
         node = stack.pop()
         if isinstance(node, str):
             placed.add(node)
         else:
-            stack += [node["first"], node["second"]]
+            stack += [node['first'], node['second']]
     assert placed == set(panels)

@@ -20,38 +20,38 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def readme() -> str:
-    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as fh:
+    with open(os.path.join(ROOT, 'README.md'), encoding='utf-8') as fh:
         return fh.read()
 
 
 def code_lines(text: str) -> list[str]:
     """Return the lines of the indented code blocks (the README has no fenced ones), stripped."""
-    assert "```" not in text
-    return [line.strip() for line in text.splitlines() if line.startswith("    ")]
+    assert '```' not in text
+    return [line.strip() for line in text.splitlines() if line.startswith('    ')]
 
 
 def test_two_commands_need_only_python3():
     """On a fresh machine with python3 alone: set up and run, set up and test; no other."""
-    commands = [line for line in code_lines(readme()) if line.startswith("python3 ")]
-    assert commands == ["python3 bootstrap.py run", "python3 bootstrap.py test"]
+    commands = [line for line in code_lines(readme()) if line.startswith('python3 ')]
+    assert commands == ['python3 bootstrap.py run', 'python3 bootstrap.py test']
 
 
 def test_the_sketch_names_the_symbols_before_the_topic_table_uses_them():
     text = readme()
-    sketch = text.index("](docs/mechanism.png)")
-    table = text.index("## Topics and parameters at a glance")
+    sketch = text.index('](docs/mechanism.png)')
+    table = text.index('## Topics and parameters at a glance')
     assert sketch < table
-    caption = text[sketch:text.index("\n## ", sketch)]
-    for symbol in ("O''", "G", "H", "stop S", "alpha1", "alpha2", "y_H", "F_H"):
+    caption = text[sketch:text.index('\n## ', sketch)]
+    for symbol in ("O''", 'G', 'H', 'stop S', 'alpha1', 'alpha2', 'y_H', 'F_H'):
         assert symbol in caption, symbol
     # and the look at the run comes right after the two commands
-    sections = re.findall(r"^## (.+)$", text, flags=re.M)
-    assert sections[:2] == ["Two commands", "Look at your run"]
+    sections = re.findall(r'^## (.+)$', text, flags=re.M)
+    assert sections[:2] == ['Two commands', 'Look at your run']
 
 
 def test_every_local_link_and_image_exists():
-    links = re.findall(r"\]\(([^)#]+)\)", readme())
-    local = [link for link in links if not re.match(r"[a-z]+://", link)]
-    assert "docs/mechanism.png" in local and "config/umbrella.foxglove.json" in local
+    links = re.findall(r'\]\(([^)#]+)\)', readme())
+    local = [link for link in links if not re.match(r'[a-z]+://', link)]
+    assert 'docs/mechanism.png' in local and 'config/umbrella.foxglove.json' in local
     missing = [link for link in local if not os.path.exists(os.path.join(ROOT, link))]
     assert not missing

@@ -45,47 +45,47 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def run_cli(*args, timeout=300):
-    return subprocess.run([sys.executable, "-m", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, '-m', *args], capture_output=True, text=True,
                           cwd=ROOT, env=ros_env(), timeout=timeout)
 
 
 def mcap_file(bag: Path) -> Path:
-    return bag / (bag.name + "_0.mcap")
+    return bag / (bag.name + '_0.mcap')
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def live_bag(tmp_path_factory):
     """Record a live run: V0 = 0, accepted and refused commands, stopped with SIGTERM."""
-    bag = tmp_path_factory.mktemp("live") / "live_run"
-    probe = Probe("recorder_probe")
+    bag = tmp_path_factory.mktemp('live') / 'live_run'
+    probe = Probe('recorder_probe')
     try:
-        probe.subscribe("/deployment_phase", String, LATCHED)
-        probe.subscribe("/diagnostics", DiagnosticArray)
+        probe.subscribe('/deployment_phase', String, LATCHED)
+        probe.subscribe('/diagnostics', DiagnosticArray)
         # published live as recorded: each value as it starts acting, each refused command
-        probe.subscribe("/sleeve_force/applied", Float64, COMMAND_ECHO_QOS)
-        probe.subscribe("/sleeve_force/refused", Float64, COMMAND_ECHO_QOS)
-        with NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}") as node:
-            node.wait_for_log("recording to")
-            pub = probe.publisher("/sleeve_force", Float64)
+        probe.subscribe('/sleeve_force/applied', Float64, COMMAND_ECHO_QOS)
+        probe.subscribe('/sleeve_force/refused', Float64, COMMAND_ECHO_QOS)
+        with NodeProcess('-p', 'v0:=0.0', '-p', f'record_path:={bag}') as node:
+            node.wait_for_log('recording to')
+            pub = probe.publisher('/sleeve_force', Float64)
             probe.wait_for_subscribers(pub)
-            for value in (float("nan"), -2.0):
+            for value in (float('nan'), -2.0):
                 pub.publish(Float64(data=value))
             pub.publish(Float64(data=15.0))
             # (one writer, reliable: the node took the two refused ones before it)
-            probe.wait_for("/sleeve_force/applied", lambda m: m.data == 15.0, timeout=30)
+            probe.wait_for('/sleeve_force/applied', lambda m: m.data == 15.0, timeout=30)
             pub.publish(Float64(data=25.0))             # applied in a later period
-            probe.wait_for("/deployment_phase", lambda m: m.data == "locked", timeout=30)
-            probe.wait_for("/sleeve_force/applied", lambda m: m.data == 25.0, timeout=30)
-            probe.wait_for_count("/diagnostics", 1)     # published, so recorded
+            probe.wait_for('/deployment_phase', lambda m: m.data == 'locked', timeout=30)
+            probe.wait_for('/sleeve_force/applied', lambda m: m.data == 25.0, timeout=30)
+            probe.wait_for_count('/diagnostics', 1)     # published, so recorded
             assert node.stop(signal.SIGTERM) == 0
             log = node.output()
-        assert [m.data for m in probe.messages("/sleeve_force/applied")] == [15.0, 25.0]
-        refused = [m.data for m in probe.messages("/sleeve_force/refused")]
+        assert [m.data for m in probe.messages('/sleeve_force/applied')] == [15.0, 25.0]
+        refused = [m.data for m in probe.messages('/sleeve_force/refused')]
         assert len(refused) == 2 and math.isnan(refused[0]) and refused[1] == -2.0
     finally:
         probe.close()
-    assert "recording finalised" in log
-    assert "sleeve force 15 N applied from t = " in log      # the first one at INFO
+    assert 'recording finalised' in log
+    assert 'sleeve force 15 N applied from t = ' in log      # the first one at INFO
     return bag
 
 
@@ -93,19 +93,19 @@ def live_bag(tmp_path_factory):
 @pytest.mark.slow
 def test_independent_readers_decode_every_message(live_bag):
     meta = read_log(str(live_bag)).metadata
-    counts = json.loads(meta["umbrella_sim.counts"]["recorded"])
+    counts = json.loads(meta['umbrella_sim.counts']['recorded'])
     # 1) mcap + mcap-ros2-support, through the summary and indexes
     per_topic = Counter()
     times = defaultdict(list)
-    with open(mcap_file(live_bag), "rb") as fh:
+    with open(mcap_file(live_bag), 'rb') as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
         summary = reader.get_summary()
         assert summary.statistics.message_count == sum(counts.values())
-        assert all(ch.message_encoding == "cdr" for ch in summary.channels.values())
-        assert all(summary.schemas[ch.schema_id].encoding == "ros2msg"
+        assert all(ch.message_encoding == 'cdr' for ch in summary.channels.values())
+        assert all(summary.schemas[ch.schema_id].encoding == 'ros2msg'
                    for ch in summary.channels.values())
-        assert all("offered_qos_profiles" in ch.metadata for ch in summary.channels.values())
-        assert summary.chunk_indexes and all(ci.compression == "zstd"
+        assert all('offered_qos_profiles' in ch.metadata for ch in summary.channels.values())
+        assert summary.chunk_indexes and all(ci.compression == 'zstd'
                                              for ci in summary.chunk_indexes)
         for schema, channel, message, decoded in reader.iter_decoded_messages(
                 log_time_order=False):
@@ -114,7 +114,7 @@ def test_independent_readers_decode_every_message(live_bag):
             assert decoded is not None
     assert dict(per_topic) == {k: v for k, v in counts.items() if v}
     for topic, ts in times.items():
-        assert all(b >= a for a, b in zip(ts, ts[1:])), f"{topic} log times not monotonic"
+        assert all(b >= a for a, b in zip(ts, ts[1:])), f'{topic} log times not monotonic'
     # 2) rosbags, on the bag directory and on the .mcap alone (it rejects inexact CDR sizes)
     store = get_typestore(Stores.ROS2_JAZZY)
     for target in (live_bag, mcap_file(live_bag)):
@@ -129,40 +129,40 @@ def test_independent_readers_decode_every_message(live_bag):
 @pytest.mark.ros
 def test_nothing_lost_published_and_received_equal_recorded(live_bag):
     log = read_log(str(live_bag))
-    c = log.metadata["umbrella_sim.counts"]
-    published = json.loads(c["published"])
-    recorded = json.loads(c["recorded"])
+    c = log.metadata['umbrella_sim.counts']
+    published = json.loads(c['published'])
+    recorded = json.loads(c['recorded'])
     for topic, n in published.items():
         assert recorded[topic] == n == log.count(topic), topic
-    assert int(c["commands_accepted"]) == log.count("/sleeve_force") == 2
-    assert int(c["commands_refused"]) == log.count("/sleeve_force/refused") == 2
-    assert log.count("/sleeve_force/applied") == 2
-    assert log.count("/diagnostics") >= 1
-    assert log.metadata["umbrella_sim.events"]["locked"] == "true"
+    assert int(c['commands_accepted']) == log.count('/sleeve_force') == 2
+    assert int(c['commands_refused']) == log.count('/sleeve_force/refused') == 2
+    assert log.count('/sleeve_force/applied') == 2
+    assert log.count('/diagnostics') >= 1
+    assert log.metadata['umbrella_sim.events']['locked'] == 'true'
 
 
 @pytest.mark.ros
 def test_log_is_self_describing(live_bag):
     log = read_log(str(live_bag))
     params = log.parameters()
-    assert params["v0"] == 0.0 and params["model"] == "flexible"
-    assert params["physics_step"] == pytest.approx(physics_step_of(UmbrellaParams()))
-    build = log.metadata["umbrella_sim.build"]
-    assert build["package_version"] and build["git_revision"]
-    mesh = log.metadata["umbrella_sim.mesh"]
-    assert json.loads(mesh["coordinates"])[0] == "alpha1"
-    bag_yaml = (live_bag / "metadata.yaml").read_text()
+    assert params['v0'] == 0.0 and params['model'] == 'flexible'
+    assert params['physics_step'] == pytest.approx(physics_step_of(UmbrellaParams()))
+    build = log.metadata['umbrella_sim.build']
+    assert build['package_version'] and build['git_revision']
+    mesh = log.metadata['umbrella_sim.mesh']
+    assert json.loads(mesh['coordinates'])[0] == 'alpha1'
+    bag_yaml = (live_bag / 'metadata.yaml').read_text()
     # rosbag2 Jazzy's version 9: QoS policies by name, RIHS01 type hashes (test_bag_format)
-    assert "version: 9" in bag_yaml and "storage_identifier: mcap" in bag_yaml
-    assert "history: keep_last" in bag_yaml and "type_description_hash: RIHS01_" in bag_yaml
-    assert "serialized_metadata" in log.metadata["rosbag2"]
+    assert 'version: 9' in bag_yaml and 'storage_identifier: mcap' in bag_yaml
+    assert 'history: keep_last' in bag_yaml and 'type_description_hash: RIHS01_' in bag_yaml
+    assert 'serialized_metadata' in log.metadata['rosbag2']
 
 
 @pytest.mark.ros
 def test_resimulate_live_log_with_force_profile(live_bag):
-    r = run_cli("umbrella_sim.tools.replay", str(live_bag), "--resimulate")
+    r = run_cli('umbrella_sim.tools.replay', str(live_bag), '--resimulate')
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "PASS" in r.stdout and "leaf_hinge" in r.stdout
+    assert 'PASS' in r.stdout and 'leaf_hinge' in r.stdout
 
 
 def test_resimulation_under_another_blas_kernel_passes_and_says_why_it_differs(tmp_path):
@@ -172,17 +172,17 @@ def test_resimulation_under_another_blas_kernel_passes_and_says_why_it_differs(t
     The model's matrices round differently in the last bit: the differences are round-off
     (a user's recording failed at an absolute 1e-9 on 0.84 Pa of a 240 MPa peak stress).
     """
-    bag = tmp_path / "haswell"
-    env = dict(os.environ, OPENBLAS_CORETYPE="Haswell")
-    assert subprocess.run([sys.executable, "-m", "umbrella_sim", "simulate", "--duration",
-                           "1.0", "--mcap", str(bag)], env=env, capture_output=True,
+    bag = tmp_path / 'haswell'
+    env = dict(os.environ, OPENBLAS_CORETYPE='Haswell')
+    assert subprocess.run([sys.executable, '-m', 'umbrella_sim', 'simulate', '--duration',
+                           '1.0', '--mcap', str(bag)], env=env, capture_output=True,
                           timeout=300).returncode == 0
-    assert read_log(str(bag)).metadata["umbrella_sim.build"]["openblas_coretype"] == "Haswell"
-    env.pop("OPENBLAS_CORETYPE")
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
-                        "--resimulate"], env=env, capture_output=True, text=True, timeout=300)
-    assert r.returncode == 0 and "PASS" in r.stdout, r.stdout + r.stderr
-    worst = float(re.search(r"largest relative difference (\S+)", r.stdout).group(1))
+    assert read_log(str(bag)).metadata['umbrella_sim.build']['openblas_coretype'] == 'Haswell'
+    env.pop('OPENBLAS_CORETYPE')
+    r = subprocess.run([sys.executable, '-m', 'umbrella_sim.tools.replay', str(bag),
+                        '--resimulate'], env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and 'PASS' in r.stdout, r.stdout + r.stderr
+    worst = float(re.search(r'largest relative difference (\S+)', r.stdout).group(1))
     assert worst < 1e-9
     if worst > 0.0:       # (on a CPU whose own pick is Haswell the two agree bit for bit)
         assert "openblas_coretype 'Haswell' there, 'auto' here" in r.stdout, r.stdout
@@ -198,95 +198,95 @@ def test_a_remapped_node_s_recording_serves_every_tool(tmp_path):
     """
     from umbrella_sim.testing import summary_from_recording
 
-    bag = tmp_path / "remapped"
-    probe = Probe("remap_probe")
+    bag = tmp_path / 'remapped'
+    probe = Probe('remap_probe')
     try:
-        probe.subscribe("/r1/deployment_phase", String, LATCHED)
-        probe.subscribe("/r1/js", JointState)
-        with NodeProcess("-r", "__ns:=/r1", "-r", "joint_states:=js", "-r",
-                         "sleeve_force:=/cmd", "-p", "v0:=0.0",
-                         "-p", f"record_path:={bag}") as node:
-            node.wait_for_log("recording to")
-            pub = probe.publisher("/cmd", Float64)
+        probe.subscribe('/r1/deployment_phase', String, LATCHED)
+        probe.subscribe('/r1/js', JointState)
+        with NodeProcess('-r', '__ns:=/r1', '-r', 'joint_states:=js', '-r',
+                         'sleeve_force:=/cmd', '-p', 'v0:=0.0',
+                         '-p', f'record_path:={bag}') as node:
+            node.wait_for_log('recording to')
+            pub = probe.publisher('/cmd', Float64)
             probe.wait_for_subscribers(pub)
             pub.publish(Float64(data=20.0))
-            probe.wait_for("/r1/deployment_phase", lambda m: m.data == "locked", timeout=30)
-            lock = float(node.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
+            probe.wait_for('/r1/deployment_phase', lambda m: m.data == 'locked', timeout=30)
+            lock = float(node.wait_for_log(r'locked at t = ([0-9.]+) s').group(1))
             # published past the summary's window below (0.1 s after the lock): recorded
-            probe.wait_for("/r1/js", lambda m: stamp(m) > lock + 0.1,
-                           what=f"a state past {lock + 0.1:.6f} s")
+            probe.wait_for('/r1/js', lambda m: stamp(m) > lock + 0.1,
+                           what=f'a state past {lock + 0.1:.6f} s')
             assert node.stop(signal.SIGTERM) == 0
     finally:
         probe.close()
     log = read_log(str(bag))
-    assert {"/r1/js", "/cmd/applied"} <= set(log.topics())
+    assert {'/r1/js', '/cmd/applied'} <= set(log.topics())
     # the remapped command is still a command: not republished unless --with-commands
     from umbrella_sim.tools.replay import _is_command
     assert sorted(t for t in log.topics() if _is_command(t, log)) == [
-        "/cmd", "/cmd/applied", "/cmd/refused"]
+        '/cmd', '/cmd/applied', '/cmd/refused']
     summary = summary_from_recording(str(bag), after_lock=0.1)
     assert summary.first_push_time is not None and summary.first_push_time > 0
     assert summary.deploy_time == pytest.approx(summary.lock_time - summary.first_push_time)
-    r = run_cli("umbrella_sim.tools.replay", str(bag), "--resimulate")
-    assert r.returncode == 0 and "PASS" in r.stdout, r.stdout + r.stderr
-    r = run_cli("umbrella_sim.tools.compare", str(bag), str(bag), "--out", str(tmp_path / "cmp"),
-                "--no-plots")
+    r = run_cli('umbrella_sim.tools.replay', str(bag), '--resimulate')
+    assert r.returncode == 0 and 'PASS' in r.stdout, r.stdout + r.stderr
+    r = run_cli('umbrella_sim.tools.compare', str(bag), str(bag), '--out', str(tmp_path / 'cmp'),
+                '--no-plots')
     assert r.returncode == 0, r.stderr
-    diffs = json.loads((tmp_path / "cmp" / "compare.json").read_text())["runs"][1]
-    assert diffs["differences"]["alpha1"]["max"] == 0.0
+    diffs = json.loads((tmp_path / 'cmp' / 'compare.json').read_text())['runs'][1]
+    assert diffs['differences']['alpha1']['max'] == 0.0
 
 
 @pytest.mark.ros
 def test_offline_recording_has_the_live_layout(live_bag, tmp_path):
-    bag = tmp_path / "offline_run"
-    r = run_cli("umbrella_sim", "simulate", "--v0", "0", "--force", "10", "--duration", "0.6",
-                "--mcap", str(bag))
+    bag = tmp_path / 'offline_run'
+    r = run_cli('umbrella_sim', 'simulate', '--v0', '0', '--force', '10', '--duration', '0.6',
+                '--mcap', str(bag))
     assert r.returncode == 0, r.stderr
     live, off = read_log(str(live_bag)), read_log(str(bag))
     assert {t: ty for t, (ty, _) in live.channels.items()} == \
         {t: ty for t, (ty, _) in off.channels.items()}
     assert set(live.metadata) == set(off.metadata)
-    again = run_cli("umbrella_sim", "simulate", "--duration", "0.1", "--mcap", str(bag))
-    assert again.returncode == 2 and "not overwriting" in again.stderr
+    again = run_cli('umbrella_sim', 'simulate', '--duration', '0.1', '--mcap', str(bag))
+    assert again.returncode == 2 and 'not overwriting' in again.stderr
 
 
 def recovered_states(bag: Path) -> int:
     """Return the joint states in the complete chunks of a recording so far (0: none yet)."""
     try:
-        return read_log(str(bag)).count("/joint_states")
+        return read_log(str(bag)).count('/joint_states')
     except LogError:
         return 0
 
 
 @pytest.mark.ros
 def test_sigkill_leaves_readable_chunks(tmp_path):
-    bag = tmp_path / "killed"
-    with NodeProcess("-p", "v0:=-0.2", "-p", "real_time_factor:=0.0",
-                     "-p", f"record_path:={bag}") as node:
-        node.wait_for_log("recording to")
+    bag = tmp_path / 'killed'
+    with NodeProcess('-p', 'v0:=-0.2', '-p', 'real_time_factor:=0.0',
+                     '-p', f'record_path:={bag}') as node:
+        node.wait_for_log('recording to')
         # several complete chunks on disk: what the writer had written is what a kill leaves
         poll(lambda: recovered_states(bag) > 100, 60,
-             lambda: f"the recording holds {recovered_states(bag)} joint states in complete "
-                     f"chunks after 60 s (awaited > 100)")
+             lambda: f'the recording holds {recovered_states(bag)} joint states in complete '
+                     f'chunks after 60 s (awaited > 100)')
         node.stop(signal.SIGKILL)
-    assert not (bag / "metadata.yaml").exists()        # never finalised
-    with open(mcap_file(bag), "rb") as fh:
+    assert not (bag / 'metadata.yaml').exists()        # never finalised
+    with open(mcap_file(bag), 'rb') as fh:
         with pytest.raises(Exception):
             make_reader(fh).get_summary().statistics  # no summary section
     # read how: scan records from the start, keep complete chunks (umbrella_sim.bag.reader)
     log = read_log(str(bag))
     assert log.truncated
-    n = log.count("/joint_states")
+    n = log.count('/joint_states')
     assert n > 100
-    t = [tm for tm, _ in log.decoded("/joint_states")]
+    t = [tm for tm, _ in log.decoded('/joint_states')]
     assert np.allclose(np.diff(t), 0.01)               # no gap inside what was recovered
-    assert "umbrella_sim.parameters" in log.metadata   # written at start, outside chunks
-    r = run_cli("umbrella_sim.tools.replay", str(bag), "--resimulate")
-    assert r.returncode == 0 and "truncated log" in r.stdout, r.stdout + r.stderr
+    assert 'umbrella_sim.parameters' in log.metadata   # written at start, outside chunks
+    r = run_cli('umbrella_sim.tools.replay', str(bag), '--resimulate')
+    assert r.returncode == 0 and 'truncated log' in r.stdout, r.stdout + r.stderr
     # a killed Fast DDS participant leaves its shared-memory segments behind
-    fastdds = os.path.join(os.path.dirname(sys.executable), "fastdds")
+    fastdds = os.path.join(os.path.dirname(sys.executable), 'fastdds')
     if os.path.exists(fastdds):
-        subprocess.run([fastdds, "shm", "clean"], capture_output=True, timeout=60)
+        subprocess.run([fastdds, 'shm', 'clean'], capture_output=True, timeout=60)
 
 
 @pytest.mark.ros
@@ -301,27 +301,27 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
     and load, a benchmark figure: a replay that fell behind catches up in a burst (at rate
     2, once, under a load average of 7).
     """
-    bag = tmp_path / "replay_src"
-    assert run_cli("umbrella_sim", "simulate", "--v0", "-0.5", "--duration", "1.0",
-                   "--mcap", str(bag)).returncode == 0
-    recorded = read_log(str(bag)).count("/clock")
-    probe = Probe("replay_probe")
+    bag = tmp_path / 'replay_src'
+    assert run_cli('umbrella_sim', 'simulate', '--v0', '-0.5', '--duration', '1.0',
+                   '--mcap', str(bag)).returncode == 0
+    recorded = read_log(str(bag)).count('/clock')
+    probe = Probe('replay_probe')
     try:
-        probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
-        probe.subscribe("/joint_states", JointState)
+        probe.subscribe('/clock', Clock, CLOCK_READER_QOS)
+        probe.subscribe('/joint_states', JointState)
         for rate in (0.5, 1.0):
-            probe.received["/clock"] = []
-            r = subprocess.run([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
-                                "--rate", str(rate), "--topics", "/clock", "/joint_states",
-                                "--wait-for-subscribers", "20"], capture_output=True,
+            probe.received['/clock'] = []
+            r = subprocess.run([sys.executable, '-m', 'umbrella_sim.tools.replay', str(bag),
+                                '--rate', str(rate), '--topics', '/clock', '/joint_states',
+                                '--wait-for-subscribers', '20'], capture_output=True,
                                text=True, env=ros_env(), timeout=60)
             assert r.returncode == 0, r.stderr
-            assert "not acknowledged" not in r.stdout
+            assert 'not acknowledged' not in r.stdout
             # nothing beyond what was recorded was sent (the replay has ended)
-            sent = int(re.search(r"replayed (\d+) messages", r.stdout).group(1))
-            assert sent == recorded + read_log(str(bag)).count("/joint_states"), r.stdout
-            probe.wait_for_count("/clock", recorded, timeout=30)
-            arrivals = probe.timed("/clock")
+            sent = int(re.search(r'replayed (\d+) messages', r.stdout).group(1))
+            assert sent == recorded + read_log(str(bag)).count('/joint_states'), r.stdout
+            probe.wait_for_count('/clock', recorded, timeout=30)
+            arrivals = probe.timed('/clock')
             assert len(arrivals) == recorded
             stamps = [m.clock.sec + 1e-9 * m.clock.nanosec for _, m in arrivals]
             assert stamps == sorted(stamps)
@@ -331,7 +331,7 @@ def test_replay_republishes_with_recorded_spacing(tmp_path):
         probe.close()
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT])
 @pytest.mark.ros
 def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, signum):
     """
@@ -341,23 +341,23 @@ def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, 
     context must outlive the signal (rclpy's own handlers shut it down at once, and the wait
     then raised RCLError).
     """
-    bag = tmp_path / "loop_src"
-    assert run_cli("umbrella_sim", "simulate", "--v0", "-0.5", "--duration", "0.3",
-                   "--mcap", str(bag)).returncode == 0
-    probe = Probe("replay_stop_probe")
+    bag = tmp_path / 'loop_src'
+    assert run_cli('umbrella_sim', 'simulate', '--v0', '-0.5', '--duration', '0.3',
+                   '--mcap', str(bag)).returncode == 0
+    probe = Probe('replay_stop_probe')
     try:
-        keep_every_message(probe, keys=("joint_states",))     # each one is counted
-        proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
-                                 "--loop", "--topics", "/joint_states",
-                                 "--wait-for-subscribers", "20"],
+        keep_every_message(probe, keys=('joint_states',))     # each one is counted
+        proc = subprocess.Popen([sys.executable, '-m', 'umbrella_sim.tools.replay', str(bag),
+                                 '--loop', '--topics', '/joint_states',
+                                 '--wait-for-subscribers', '20'],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                 env=ros_env())
         out, err = signal_and_collect(
-            proc, signum, lambda: probe.wait_for_count("/joint_states", 20, timeout=30))
+            proc, signum, lambda: probe.wait_for_count('/joint_states', 20, timeout=30))
         assert proc.returncode == 0, err
-        assert "Traceback" not in out + err, err
-        sent = int(re.search(r"replayed (\d+) messages", out).group(1))
-        probe.wait_for_count("/joint_states", sent, timeout=30)  # acknowledged = delivered
+        assert 'Traceback' not in out + err, err
+        sent = int(re.search(r'replayed (\d+) messages', out).group(1))
+        probe.wait_for_count('/joint_states', sent, timeout=30)  # acknowledged = delivered
     finally:
         probe.close()
 
@@ -365,16 +365,16 @@ def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, 
 @pytest.mark.ros
 def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
     """SIGTERM before the first message (no subscriber yet): as a stop while replaying."""
-    bag = tmp_path / "wait_src"
-    assert run_cli("umbrella_sim", "simulate", "--v0", "-0.5", "--duration", "0.05",
-                   "--mcap", str(bag)).returncode == 0
-    proc = subprocess.Popen([sys.executable, "-m", "umbrella_sim.tools.replay", str(bag),
-                             "--topics", "/joint_states", "--wait-for-subscribers", "120"],
+    bag = tmp_path / 'wait_src'
+    assert run_cli('umbrella_sim', 'simulate', '--v0', '-0.5', '--duration', '0.05',
+                   '--mcap', str(bag)).returncode == 0
+    proc = subprocess.Popen([sys.executable, '-m', 'umbrella_sim.tools.replay', str(bag),
+                             '--topics', '/joint_states', '--wait-for-subscribers', '120'],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=ros_env())
 
     def in_the_wait():
-        assert proc.stdout.readline().startswith("replaying up to")
+        assert proc.stdout.readline().startswith('replaying up to')
         # past its discovery pause (one sleep of its main thread), in the wait itself, which
         # sleeps 50 ms a turn: three sleeps of the main thread since the line
         before = main_thread_sleeps(proc.pid)
@@ -384,7 +384,7 @@ def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
 
     out, err = signal_and_collect(proc, signal.SIGTERM, in_the_wait)
     assert proc.returncode == 0, err
-    assert "replayed 0 messages" in out and "Traceback" not in err, (out, err)
+    assert 'replayed 0 messages' in out and 'Traceback' not in err, (out, err)
 
 
 @pytest.mark.ros
@@ -394,48 +394,48 @@ def test_replay_under_a_namespace_moves_the_node_topics(tmp_path, live_bag):
     from umbrella_sim.tools.replay import moved_topics
 
     log = read_log(str(live_bag))
-    names, note = moved_topics(log, log.topics(), "/replay")
-    assert names["/joint_states"] == "/replay/joint_states"
-    assert names["/sleeve_force/applied"] == "/replay/sleeve_force/applied"
-    assert names["/diagnostics"] == "/diagnostics"         # absolute, as the node's own
-    assert moved_topics(log, log.topics(), "/")[0] == {t: t for t in log.topics()}
-    assert "moved to /replay" in note
+    names, note = moved_topics(log, log.topics(), '/replay')
+    assert names['/joint_states'] == '/replay/joint_states'
+    assert names['/sleeve_force/applied'] == '/replay/sleeve_force/applied'
+    assert names['/diagnostics'] == '/diagnostics'         # absolute, as the node's own
+    assert moved_topics(log, log.topics(), '/')[0] == {t: t for t in log.topics()}
+    assert 'moved to /replay' in note
     # over DDS: the subscriber under /replay gets every recorded state
-    probe = Probe("replay_ns_probe")
+    probe = Probe('replay_ns_probe')
     try:
-        keep_every_message(probe, "replay", ("joint_states",))  # each one is counted
-        r = subprocess.run([sys.executable, "-m", "umbrella_sim.tools.replay", str(live_bag),
-                            "--topics", "/joint_states",
-                            "--wait-for-subscribers", "20", "--ros-args", "-r",
-                            "__ns:=/replay"], capture_output=True, text=True, env=ros_env(),
+        keep_every_message(probe, 'replay', ('joint_states',))  # each one is counted
+        r = subprocess.run([sys.executable, '-m', 'umbrella_sim.tools.replay', str(live_bag),
+                            '--topics', '/joint_states',
+                            '--wait-for-subscribers', '20', '--ros-args', '-r',
+                            '__ns:=/replay'], capture_output=True, text=True, env=ros_env(),
                            timeout=120)
-        assert r.returncode == 0 and "no subscriber" not in r.stdout, r.stdout + r.stderr
-        probe.wait_for_count("/replay/joint_states", log.count("/joint_states"), timeout=10)
+        assert r.returncode == 0 and 'no subscriber' not in r.stdout, r.stdout + r.stderr
+        probe.wait_for_count('/replay/joint_states', log.count('/joint_states'), timeout=10)
     finally:
         probe.close()
 
 
 @pytest.mark.slow
 def test_compare_known_runs(tmp_path):
-    a, b = tmp_path / "v05", tmp_path / "v10"
-    for bag, v0 in ((a, "-0.5"), (b, "-1.0")):
-        assert run_cli("umbrella_sim", "simulate", "--v0", v0, "--duration", "0.2",
-                       "--mcap", str(bag)).returncode == 0
-    out = tmp_path / "cmp"
-    r = run_cli("umbrella_sim.tools.compare", str(a), str(b), "--out", str(out), "--thesis")
+    a, b = tmp_path / 'v05', tmp_path / 'v10'
+    for bag, v0 in ((a, '-0.5'), (b, '-1.0')):
+        assert run_cli('umbrella_sim', 'simulate', '--v0', v0, '--duration', '0.2',
+                       '--mcap', str(bag)).returncode == 0
+    out = tmp_path / 'cmp'
+    r = run_cli('umbrella_sim.tools.compare', str(a), str(b), '--out', str(out), '--thesis')
     assert r.returncode == 0, r.stderr
-    result = json.loads((out / "compare.json").read_text())
+    result = json.loads((out / 'compare.json').read_text())
     ta, tb = read_log(str(a)).metadata, read_log(str(b)).metadata
-    expected = float(tb["umbrella_sim.events"]["lock_time"]) - \
-        float(ta["umbrella_sim.events"]["lock_time"])
-    assert result["runs"][1]["deploy_time_difference"] == pytest.approx(expected, abs=1e-12)
+    expected = float(tb['umbrella_sim.events']['lock_time']) - \
+        float(ta['umbrella_sim.events']['lock_time'])
+    assert result['runs'][1]['deploy_time_difference'] == pytest.approx(expected, abs=1e-12)
     # Table 6.1 (deformable FEA): 0.04525 s and 0.09040 s, each within 0.5 %
     assert expected == pytest.approx(0.04525 - 0.09040, abs=0.005 * (0.04525 + 0.09040))
-    assert result["runs"][0]["thesis"]["deploy_time_deformable_fea"] == 0.09040
-    assert "0.0904" in r.stdout and "thesis" in r.stdout
-    for name in ("alpha1.png", "tip_deflection.png", "stress.png", "shapes.png"):
+    assert result['runs'][0]['thesis']['deploy_time_deformable_fea'] == 0.09040
+    assert '0.0904' in r.stdout and 'thesis' in r.stdout
+    for name in ('alpha1.png', 'tip_deflection.png', 'stress.png', 'shapes.png'):
         png = out / name
-        assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
+        assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b'\x89PNG'
 
 
 def test_compare_of_one_run_recorded_at_two_rates_finds_no_difference(tmp_path):
@@ -446,20 +446,20 @@ def test_compare_of_one_run_recorded_at_two_rates_finds_no_difference(tmp_path):
     them, and its peak-holds re-held over the coarser periods are the coarser run's own
     (interpolating 100 Hz samples at 1 kHz made 17 mm of tip and 146 MPa of peak stress).
     """
-    bags = [tmp_path / "r100", tmp_path / "r1000"]
-    for bag, rate in zip(bags, ("100", "1000")):
-        assert run_cli("umbrella_sim", "simulate", "--duration", "0.35", "--mcap", str(bag),
-                       "--publish-rate", rate).returncode == 0
+    bags = [tmp_path / 'r100', tmp_path / 'r1000']
+    for bag, rate in zip(bags, ('100', '1000')):
+        assert run_cli('umbrella_sim', 'simulate', '--duration', '0.35', '--mcap', str(bag),
+                       '--publish-rate', rate).returncode == 0
     for order in (bags, bags[::-1]):
-        out = tmp_path / f"cmp_{order[0].name}"
-        r = run_cli("umbrella_sim.tools.compare", *map(str, order), "--out", str(out),
-                    "--no-plots")
+        out = tmp_path / f'cmp_{order[0].name}'
+        r = run_cli('umbrella_sim.tools.compare', *map(str, order), '--out', str(out),
+                    '--no-plots')
         assert r.returncode == 0, r.stderr
-        diffs = json.loads((out / "compare.json").read_text())["runs"][1]["differences"]
-        scale = {"alpha1": 1.0, "alpha1_rate": 1.0, "tip_deflection": 0.06,
-                 "peak_stress_leaf": 2e8, "peak_stress_link": 1e8}
+        diffs = json.loads((out / 'compare.json').read_text())['runs'][1]['differences']
+        scale = {'alpha1': 1.0, 'alpha1_rate': 1.0, 'tip_deflection': 0.06,
+                 'peak_stress_leaf': 2e8, 'peak_stress_link': 1e8}
         for name, d in diffs.items():
-            assert d["max"] <= 1e-9 * scale[name], (order[0].name, name, d)
+            assert d['max'] <= 1e-9 * scale[name], (order[0].name, name, d)
 
 
 def test_peak_holds_compare_on_the_coarser_grid_when_the_runs_start_apart():
@@ -477,32 +477,32 @@ def test_peak_holds_compare_on_the_coarser_grid_when_the_runs_start_apart():
 
 @pytest.mark.ros
 def test_bad_files_give_clear_errors(tmp_path, live_bag):
-    not_mcap = tmp_path / "x.mcap"
-    not_mcap.write_bytes(b"definitely not an mcap file")
-    truncated = tmp_path / "t.mcap"
+    not_mcap = tmp_path / 'x.mcap'
+    not_mcap.write_bytes(b'definitely not an mcap file')
+    truncated = tmp_path / 't.mcap'
     truncated.write_bytes(mcap_file(live_bag).read_bytes()[:200])
-    missing = tmp_path / "nofile.mcap"
+    missing = tmp_path / 'nofile.mcap'
     # a valid MCAP without the topics compare needs
     from mcap.writer import Writer
-    other = tmp_path / "other.mcap"
-    with open(other, "wb") as fh:
+    other = tmp_path / 'other.mcap'
+    with open(other, 'wb') as fh:
         w = Writer(fh)
         w.start()
-        sid = w.register_schema("x", "jsonschema", b"{}")
-        cid = w.register_channel("/something", "json", sid)
-        w.add_message(cid, 0, b"{}", 0)
+        sid = w.register_schema('x', 'jsonschema', b'{}')
+        cid = w.register_channel('/something', 'json', sid)
+        w.add_message(cid, 0, b'{}', 0)
         w.finish()
-    cases = [(not_mcap, "not an MCAP file"), (truncated, "no channels"),
-             (missing, "no such file"), (other, "umbrella_sim.parameters")]
+    cases = [(not_mcap, 'not an MCAP file'), (truncated, 'no channels'),
+             (missing, 'no such file'), (other, 'umbrella_sim.parameters')]
     for path, words in cases:
-        for tool in (["umbrella_sim.tools.compare", str(path), "--out", str(tmp_path / "o")],
-                     ["umbrella_sim.tools.replay", str(path), "--resimulate"]):
+        for tool in (['umbrella_sim.tools.compare', str(path), '--out', str(tmp_path / 'o')],
+                     ['umbrella_sim.tools.replay', str(path), '--resimulate']):
             r = run_cli(*tool)
             assert r.returncode == 2, (tool, r.stdout, r.stderr)
-            assert words in r.stderr and "Traceback" not in r.stderr, (tool, r.stderr)
+            assert words in r.stderr and 'Traceback' not in r.stderr, (tool, r.stderr)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 @pytest.mark.ros
 def test_signal_stops_physics_then_finalises_the_recording(tmp_path, sig):
     """
@@ -511,25 +511,25 @@ def test_signal_stops_physics_then_finalises_the_recording(tmp_path, sig):
     At 1 kHz the physics thread publishes nearly all the time: the signal must stop it
     before rclpy shuts down, or a publish hits a dead context (it did, 12 times in 12).
     """
-    bag = tmp_path / "interrupted"
-    probe = Probe("interrupt_probe")
+    bag = tmp_path / 'interrupted'
+    probe = Probe('interrupt_probe')
     try:
-        probe.subscribe("/clock", Clock, CLOCK_READER_QOS)
-        with NodeProcess("-p", "v0:=-0.5", "-p", "publish_rate:=1000.0",
-                         "-p", f"record_path:={bag}") as node:
-            node.wait_for_log("recording to")
-            lock = float(node.wait_for_log(r"locked at t = ([0-9.]+) s").group(1))
+        probe.subscribe('/clock', Clock, CLOCK_READER_QOS)
+        with NodeProcess('-p', 'v0:=-0.5', '-p', 'publish_rate:=1000.0',
+                         '-p', f'record_path:={bag}') as node:
+            node.wait_for_log('recording to')
+            lock = float(node.wait_for_log(r'locked at t = ([0-9.]+) s').group(1))
             # publishing for 0.3 s of sim time past the lock
-            probe.wait_for("/clock", lambda m: m.clock.sec + 1e-9 * m.clock.nanosec > lock + 0.3,
-                           what=f"a tick past {lock + 0.3:.6f} s")
+            probe.wait_for('/clock', lambda m: m.clock.sec + 1e-9 * m.clock.nanosec > lock + 0.3,
+                           what=f'a tick past {lock + 0.3:.6f} s')
             assert node.stop(sig) == 0
             out = node.output()
     finally:
         probe.close()
-    assert "recording finalised" in out
-    assert "[ERROR]" not in out and "Failed to publish" not in out, out
-    assert (bag / "metadata.yaml").exists()
-    with open(mcap_file(bag), "rb") as fh:
+    assert 'recording finalised' in out
+    assert '[ERROR]' not in out and 'Failed to publish' not in out, out
+    assert (bag / 'metadata.yaml').exists()
+    with open(mcap_file(bag), 'rb') as fh:
         summary = make_reader(fh).get_summary()
     log = read_log(str(bag))
     assert not log.truncated
@@ -544,11 +544,11 @@ def test_a_recording_from_before_the_phase_correction_re_runs_without_it():
     from umbrella_sim.tools.replay import _segment_inputs
 
     old = {k: v for k, v in UmbrellaParams(time_step=1e-4).as_dict().items()
-           if k != "phase_correction"}
+           if k != 'phase_correction'}
     seg = SimpleNamespace(index=0, offset_ns=0, end_ns=None,
-                          params={**old, "publish_rate": 100.0,
-                                  "physics_step": physics_step(old["time_step"], 100.0)})
-    log = SimpleNamespace(path="old.mcap", find_topic=lambda key, required=False: None)
+                          params={**old, 'publish_rate': 100.0,
+                                  'physics_step': physics_step(old['time_step'], 100.0)})
+    log = SimpleNamespace(path='old.mcap', find_topic=lambda key, required=False: None)
     assert _segment_inputs(log, seg)[0].params.phase_correction is False
-    seg.params["phase_correction"] = True              # what a recording of today holds
+    seg.params['phase_correction'] = True              # what a recording of today holds
     assert _segment_inputs(log, seg)[0].params.phase_correction is True

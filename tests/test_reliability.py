@@ -100,9 +100,9 @@ def test_the_stage2_series_a_summary_keeps_is_bounded():
     assert kept <= STAGE2_SAMPLES + 1
     exact = stage2_figures(t, v, driver.sim.lock_event.time)
     figures = summary.figures()
-    assert figures["stage2_tip_amplitude"] == exact["stage2_tip_amplitude"]
-    assert figures["stage2_window"] == exact["stage2_window"]
-    assert figures["stage2_tip_period"] == pytest.approx(exact["stage2_tip_period"], rel=1e-6)
+    assert figures['stage2_tip_amplitude'] == exact['stage2_tip_amplitude']
+    assert figures['stage2_window'] == exact['stage2_window']
+    assert figures['stage2_tip_period'] == pytest.approx(exact['stage2_tip_period'], rel=1e-6)
     other, _, _ = run_through_stage2(fine, chunk_steps=997)
     assert other.summary.figures() == figures                   # whatever the chunks
 
@@ -118,10 +118,10 @@ def test_the_stage2_series_a_summary_keeps_is_bounded():
 
 # ----------------------------------------------------------- runtime parameter sets
 def _value(kind, v) -> ParameterValue:
-    field = {ParameterType.PARAMETER_DOUBLE: "double_value",
-             ParameterType.PARAMETER_INTEGER: "integer_value",
-             ParameterType.PARAMETER_STRING: "string_value",
-             ParameterType.PARAMETER_BOOL: "bool_value"}.get(kind)
+    field = {ParameterType.PARAMETER_DOUBLE: 'double_value',
+             ParameterType.PARAMETER_INTEGER: 'integer_value',
+             ParameterType.PARAMETER_STRING: 'string_value',
+             ParameterType.PARAMETER_BOOL: 'bool_value'}.get(kind)
     return ParameterValue(type=kind, **({field: v} if field else {}))
 
 
@@ -133,66 +133,66 @@ def test_every_parameter_refusal_names_the_parameter_and_why(probe):
     rclpy's own checks answer first unless the node checks before them: a wrong type named
     no parameter, an unknown name gave an empty list, a read-only one did not say why.
     """
-    with NodeProcess("-p", "record:=false", "-p", "v0:=0.0") as node:
-        node.wait_for_log("physics step")
-        srv = "/umbrella_node"
+    with NodeProcess('-p', 'record:=false', '-p', 'v0:=0.0') as node:
+        node.wait_for_log('physics step')
+        srv = '/umbrella_node'
 
         def set_param(name, kind, v):
             req = SetParameters.Request(parameters=[Parameter(name=name, value=_value(kind, v))])
-            return probe.call(SetParameters, f"{srv}/set_parameters", req).results[0]
+            return probe.call(SetParameters, f'{srv}/set_parameters', req).results[0]
 
         def get(name):
             req = GetParameters.Request(names=[name])
-            return probe.call(GetParameters, f"{srv}/get_parameters", req).values[0]
+            return probe.call(GetParameters, f'{srv}/get_parameters', req).values[0]
 
         D, I, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_INTEGER,
                       ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_BOOL)
         refused = {
             # wrong type: the parameter, the value and both types
-            ("v0", S, "fast"): ["v0", "'fast'", "must be of type double, got string"],
-            ("elements_per_segment", D, 2.5): ["elements_per_segment",
-                                               "must be of type integer, got double"],
-            ("use_sim_time", S, "yes"): ["use_sim_time", "must be of type bool"],
+            ('v0', S, 'fast'): ['v0', "'fast'", 'must be of type double, got string'],
+            ('elements_per_segment', D, 2.5): ['elements_per_segment',
+                                               'must be of type integer, got double'],
+            ('use_sim_time', S, 'yes'): ['use_sim_time', 'must be of type bool'],
             # unknown: named, with the closest declared name
-            ("youngs_modulous", D, 7e10): ["'youngs_modulous'", "did you mean "
+            ('youngs_modulous', D, 7e10): ["'youngs_modulous'", 'did you mean '
                                            "'youngs_modulus'?"],
             # read-only: why, and what to do instead
-            ("record_path", S, "/tmp/elsewhere"): ["record_path is read-only",
-                                                   "fixed when the node starts",
-                                                   "-p record_path:="],
-            ("qos_overrides./clock.publisher.depth", I, 3): [
-                "qos_overrides./clock.publisher.depth is read-only"],
+            ('record_path', S, '/tmp/elsewhere'): ['record_path is read-only',
+                                                   'fixed when the node starts',
+                                                   '-p record_path:='],
+            ('qos_overrides./clock.publisher.depth', I, 3): [
+                'qos_overrides./clock.publisher.depth is read-only'],
             # out of range: the registry's rule, as at start and offline
-            ("publish_rate", D, 1e9): ["publish_rate=1000000000.0", "<= 5000"],
-            ("l1", D, -1.0): ["l1=-1.0", "> 0"],
-            ("model", S, "rigidd"): ["model='rigidd'", "must be one of"],
+            ('publish_rate', D, 1e9): ['publish_rate=1000000000.0', '<= 5000'],
+            ('l1', D, -1.0): ['l1=-1.0', '> 0'],
+            ('model', S, 'rigidd'): ["model='rigidd'", 'must be one of'],
             # a cross-parameter rule (the on-set callback's)
-            ("alpha0", D, 0.1): ["alpha0=0.1"],
+            ('alpha0', D, 0.1): ['alpha0=0.1'],
             # unset (ros2 param delete)
-            ("v0", ParameterType.PARAMETER_NOT_SET, None): ["v0 cannot be unset"],
-            ("use_sim_time", B, True): ["use_sim_time=true", "drives"],
+            ('v0', ParameterType.PARAMETER_NOT_SET, None): ['v0 cannot be unset'],
+            ('use_sim_time', B, True): ['use_sim_time=true', 'drives'],
         }
         for (name, kind, v), expected in refused.items():
             r = set_param(name, kind, v)
             assert not r.successful, (name, v)
             for text in expected:
                 assert text in r.reason, (name, v, r.reason)
-        assert get("v0").type == ParameterType.PARAMETER_DOUBLE
-        assert get("v0").double_value == 0.0
-        assert get("elements_per_segment").integer_value == 1
-        assert get("publish_rate").double_value == 100.0
+        assert get('v0').type == ParameterType.PARAMETER_DOUBLE
+        assert get('v0').double_value == 0.0
+        assert get('elements_per_segment').integer_value == 1
+        assert get('publish_rate').double_value == 100.0
 
         # atomically: one refused, none set, and the refusal names the culprit
         req = SetParametersAtomically.Request(parameters=[
-            Parameter(name="marker_magnification", value=_value(D, 5.0)),
-            Parameter(name="marker_rate", value=_value(S, "fast"))])
-        r = probe.call(SetParametersAtomically, f"{srv}/set_parameters_atomically", req).result
+            Parameter(name='marker_magnification', value=_value(D, 5.0)),
+            Parameter(name='marker_rate', value=_value(S, 'fast'))])
+        r = probe.call(SetParametersAtomically, f'{srv}/set_parameters_atomically', req).result
         assert not r.successful and "marker_rate='fast'" in r.reason, r.reason
-        assert get("marker_magnification").double_value == 1.0
+        assert get('marker_magnification').double_value == 1.0
         # and a good set still goes through, the integer literal taken as the double
-        assert set_param("marker_magnification", I, 100).successful
-        assert get("marker_magnification").double_value == 100.0
-        assert "Traceback" not in node.output()
+        assert set_param('marker_magnification', I, 100).successful
+        assert get('marker_magnification').double_value == 100.0
+        assert 'Traceback' not in node.output()
 
 
 # ----------------------------------------------------------- long publication periods
@@ -208,19 +208,19 @@ def test_a_long_publication_period_keeps_the_node_responsive(probe, tmp_path):
     SIGINT ends the run inside the period, and the recording's summary holds every step
     taken (none of them published).
     """
-    probe.subscribe("/diagnostics", DiagnosticArray)
-    probe.subscribe("/joint_states", JointState)
-    bag = tmp_path / "long"
+    probe.subscribe('/diagnostics', DiagnosticArray)
+    probe.subscribe('/joint_states', JointState)
+    bag = tmp_path / 'long'
     # N = 4: ~10 us a step, so the first period takes minutes on any machine
-    with NodeProcess("-p", "publish_rate:=1.0", "-p", "time_step:=1e-7",
-                     "-p", "elements_per_segment:=4", "-p", f"record_path:={bag}") as node:
-        node.wait_for_log("recording to", timeout=60)
+    with NodeProcess('-p', 'publish_rate:=1.0', '-p', 'time_step:=1e-7',
+                     '-p', 'elements_per_segment:=4', '-p', f'record_path:={bag}') as node:
+        node.wait_for_log('recording to', timeout=60)
         # (the t = 0 state may go out before the probe's reader matches: volatile)
-        poll(lambda: probe.node.count_publishers("/joint_states") >= 1, 30,
+        poll(lambda: probe.node.count_publishers('/joint_states') >= 1, 30,
              lambda: "the node's joint_states publisher was not discovered")
 
         def statuses():
-            return [diag_values(m) for m in probe.messages("/diagnostics")]
+            return [diag_values(m) for m in probe.messages('/diagnostics')]
 
         def advancing(n):
             """Wait for n more statuses, each with sim time past the last's."""
@@ -228,44 +228,44 @@ def test_a_long_publication_period_keeps_the_node_responsive(probe, tmp_path):
 
             def done():
                 new = statuses()[start:]
-                return len(new) >= n and all(float(b["sim_time_s"]) > float(a["sim_time_s"])
+                return len(new) >= n and all(float(b['sim_time_s']) > float(a['sim_time_s'])
                                              for a, b in zip(new, new[1:]))
-            poll(done, 30, lambda: f"no {n} statuses with sim time advancing: {statuses()}")
+            poll(done, 30, lambda: f'no {n} statuses with sim time advancing: {statuses()}')
             return statuses()[-1]
 
         status = advancing(3)
-        assert 0.0 < float(status["sim_time_s"]) < 1.0                  # inside the period
-        assert status["paused"] == "False" and float(status["lag_s"]) > 0.5
+        assert 0.0 < float(status['sim_time_s']) < 1.0                  # inside the period
+        assert status['paused'] == 'False' and float(status['lag_s']) > 0.5
         # a command inside the period: counted and recorded at once, applied at t = 1 s
-        pub = probe.publisher("/sleeve_force", Float64)
+        pub = probe.publisher('/sleeve_force', Float64)
         probe.wait_for_subscribers(pub)
         pub.publish(Float64(data=20.0))
-        poll(lambda: statuses()[-1]["accepted_commands"] == "1", 30,
-             lambda: f"the command was not counted: {statuses()[-1]}")
+        poll(lambda: statuses()[-1]['accepted_commands'] == '1', 30,
+             lambda: f'the command was not counted: {statuses()[-1]}')
         # ~/pause inside the period: answered, and sim time holds
-        assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=True),
+        assert probe.call(SetBool, '/umbrella_node/pause', SetBool.Request(data=True),
                           timeout=60).success
         start = len(statuses())
-        poll(lambda: len(statuses()) >= start + 3, 30, lambda: "no statuses while paused")
+        poll(lambda: len(statuses()) >= start + 3, 30, lambda: 'no statuses while paused')
         held = statuses()[start:]
-        assert all(s["paused"] == "True" for s in held)
-        assert len({s["sim_time_s"] for s in held}) == 1
-        assert float(held[-1]["sim_time_s"]) < 1.0
-        assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=False),
+        assert all(s['paused'] == 'True' for s in held)
+        assert len({s['sim_time_s'] for s in held}) == 1
+        assert float(held[-1]['sim_time_s']) < 1.0
+        assert probe.call(SetBool, '/umbrella_node/pause', SetBool.Request(data=False),
                           timeout=60).success
         status = advancing(2)
-        assert float(status["sim_time_s"]) < 1.0                        # still the period
-        assert all(stamp(m) == 0.0 for m in probe.messages("/joint_states"))
-        assert "applied from" not in node.output()                       # not before t = 1 s
-        steps = int(status["steps"])
+        assert float(status['sim_time_s']) < 1.0                        # still the period
+        assert all(stamp(m) == 0.0 for m in probe.messages('/joint_states'))
+        assert 'applied from' not in node.output()                       # not before t = 1 s
+        steps = int(status['steps'])
         assert node.stop(signal.SIGINT, timeout=60) == 0
         out = node.output()
-    assert "recording finalised" in out
+    assert 'recording finalised' in out
     log = read_log(str(bag))
-    figures = json.loads(log.metadata["umbrella_sim.summary"]["figures"])
-    assert figures["steps"] >= steps and figures["final_time"] < 1.0
-    assert log.count("/joint_states") == 1
-    assert log.count("/sleeve_force") == 1 and log.count("/sleeve_force/applied") == 0
+    figures = json.loads(log.metadata['umbrella_sim.summary']['figures'])
+    assert figures['steps'] >= steps and figures['final_time'] < 1.0
+    assert log.count('/joint_states') == 1
+    assert log.count('/sleeve_force') == 1 and log.count('/sleeve_force/applied') == 0
 
 
 # ------------------------------------------------------------------ command intake
@@ -279,34 +279,34 @@ def test_a_burst_of_commands_is_taken_whole_and_in_order(probe, tmp_path):
     burst; the last value is the one applied.  (One executor turn a command held the intake
     to a few hundred a second; a burst now goes in batches: bench/bench_commands.py.)
     """
-    bag = tmp_path / "burst"
+    bag = tmp_path / 'burst'
     every = QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
                        reliability=ReliabilityPolicy.RELIABLE)
-    probe.subscribe("/diagnostics", DiagnosticArray)
-    probe.subscribe("/sleeve_force/applied", Float64, COMMAND_ECHO_QOS)
+    probe.subscribe('/diagnostics', DiagnosticArray)
+    probe.subscribe('/sleeve_force/applied', Float64, COMMAND_ECHO_QOS)
     forces = [round(0.001 * (i + 1), 3) for i in range(5000)]
-    with NodeProcess("-p", "v0:=0.0", "-p", f"record_path:={bag}") as node:
-        node.wait_for_log("recording to", timeout=60)
-        pub = probe.publisher("/sleeve_force", Float64, every)
+    with NodeProcess('-p', 'v0:=0.0', '-p', f'record_path:={bag}') as node:
+        node.wait_for_log('recording to', timeout=60)
+        pub = probe.publisher('/sleeve_force', Float64, every)
         probe.wait_for_subscribers(pub)
         for f in forces:
             # a full writer history fails the publish after DDS's blocking time: try again
             poll(lambda f=f: _published(pub, Float64(data=f)), 60,
-                 lambda: "the writer stayed full for 60 s")
-        assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=True),
+                 lambda: 'the writer stayed full for 60 s')
+        assert probe.call(SetBool, '/umbrella_node/pause', SetBool.Request(data=True),
                           timeout=60).success
-        poll(lambda: [m for m in probe.messages("/diagnostics")
-                      if diag_values(m)["accepted_commands"] == str(len(forces))], 60,
-             lambda: "not every command was counted: "
+        poll(lambda: [m for m in probe.messages('/diagnostics')
+                      if diag_values(m)['accepted_commands'] == str(len(forces))], 60,
+             lambda: 'not every command was counted: '
                      f"{diag_values(probe.messages('/diagnostics')[-1])}")
-        assert probe.call(SetBool, "/umbrella_node/pause", SetBool.Request(data=False),
+        assert probe.call(SetBool, '/umbrella_node/pause', SetBool.Request(data=False),
                           timeout=60).success
         # (each applied value is a DEBUG line; the topic has every one)
-        probe.wait_for("/sleeve_force/applied", lambda m: m.data == forces[-1], timeout=60)
+        probe.wait_for('/sleeve_force/applied', lambda m: m.data == forces[-1], timeout=60)
         assert node.stop() == 0
     log = read_log(str(bag))
-    assert [m.data for _, m in log.decoded("/sleeve_force")] == forces
-    applied = [m.data for _, m in log.decoded("/sleeve_force/applied")]
+    assert [m.data for _, m in log.decoded('/sleeve_force')] == forces
+    applied = [m.data for _, m in log.decoded('/sleeve_force/applied')]
     assert applied[-1] == forces[-1] and applied == sorted(applied)
     assert set(applied) <= set(forces)
 
@@ -322,12 +322,12 @@ def _published(pub, msg) -> bool:
 # ------------------------------------------------------------------ offline memory
 def peak_rss_mb(args: list[str], cwd) -> float:
     """Return the peak resident memory (MB) of `python -m umbrella_sim.tools.cli ARGS`."""
-    code = ("import resource, subprocess, sys; "
-            "r = subprocess.run(sys.argv[1:]); "
-            "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); "
-            "sys.exit(r.returncode)")
-    r = subprocess.run([sys.executable, "-c", code, sys.executable, "-m",
-                        "umbrella_sim.tools.cli", *args], capture_output=True, text=True,
+    code = ('import resource, subprocess, sys; '
+            'r = subprocess.run(sys.argv[1:]); '
+            'print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); '
+            'sys.exit(r.returncode)')
+    r = subprocess.run([sys.executable, '-c', code, sys.executable, '-m',
+                        'umbrella_sim.tools.cli', *args], capture_output=True, text=True,
                        cwd=cwd, env=ros_env(), timeout=600)
     assert r.returncode == 0, r.stderr
     return int(r.stdout.split()[-1]) / 1024.0
@@ -346,22 +346,22 @@ def test_simulate_memory_does_not_grow_with_the_duration(tmp_path):
     for duration in (2, 20):
         out = tmp_path / str(duration)
         out.mkdir()
-        peaks[duration] = peak_rss_mb(["simulate", "--duration", str(duration),
-                                       "--csv", "run.csv", "--mcap", "bag"], out)
+        peaks[duration] = peak_rss_mb(['simulate', '--duration', str(duration),
+                                       '--csv', 'run.csv', '--mcap', 'bag'], out)
     assert peaks[20] < peaks[2] + 15.0, peaks
 
 
 # ------------------------------------------------------------------ damaged recordings
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def small_bag(tmp_path_factory):
     """Record 0.3 s offline (through the lock); return its .mcap."""
-    bag = tmp_path_factory.mktemp("bags") / "run"
+    bag = tmp_path_factory.mktemp('bags') / 'run'
     record_offline(UmbrellaParams(v0=-0.5), str(bag), 0.3)
-    return bag / "run_0.mcap"
+    return bag / 'run_0.mcap'
 
 
 def tool(module: str, *args, cwd=None):
-    return subprocess.run([sys.executable, "-m", f"umbrella_sim.tools.{module}", *args],
+    return subprocess.run([sys.executable, '-m', f'umbrella_sim.tools.{module}', *args],
                           capture_output=True, text=True, cwd=cwd or ROOT, env=ros_env(),
                           timeout=300)
 
@@ -373,19 +373,19 @@ def test_a_damaged_chunk_is_a_one_line_error(small_bag, tmp_path):
     (zstd's own error escaped the reader: a traceback from replay --resimulate and compare.)
     """
     data = bytearray(small_bag.read_bytes())
-    with open(small_bag, "rb") as fh:
+    with open(small_bag, 'rb') as fh:
         chunk = make_reader(fh).get_summary().chunk_indexes[0]
     middle = chunk.chunk_start_offset + chunk.chunk_length // 2
     data[middle:middle + 64] = bytes(64)
-    damaged = tmp_path / "damaged.mcap"
+    damaged = tmp_path / 'damaged.mcap'
     damaged.write_bytes(bytes(data))
-    for module, args in (("replay", [str(damaged), "--resimulate"]),
-                         ("compare", [str(small_bag), str(damaged), "--out",
-                                      str(tmp_path / "cmp"), "--no-plots"])):
+    for module, args in (('replay', [str(damaged), '--resimulate']),
+                         ('compare', [str(small_bag), str(damaged), '--out',
+                                      str(tmp_path / 'cmp'), '--no-plots'])):
         r = tool(module, *args)
         assert r.returncode == 2, (module, r.stdout, r.stderr)
         lines = r.stderr.strip().splitlines()
-        assert len(lines) == 1 and f"{damaged}: unreadable MCAP data" in lines[0], r.stderr
+        assert len(lines) == 1 and f'{damaged}: unreadable MCAP data' in lines[0], r.stderr
 
 
 def test_damaged_bytes_anywhere_give_a_log_error_or_a_recovered_log(small_bag, tmp_path):
@@ -398,18 +398,18 @@ def test_damaged_bytes_anywhere_give_a_log_error_or_a_recovered_log(small_bag, t
     """
     src = small_bag.read_bytes()
     rng = np.random.default_rng(20240611)
-    path = tmp_path / "damaged.mcap"
-    outcomes = {"error": 0, "read": 0}
+    path = tmp_path / 'damaged.mcap'
+    outcomes = {'error': 0, 'read': 0}
     for _ in range(120):
         data = bytearray(src)
         at = int(rng.integers(len(data)))
-        kind = ("flip", "zero", "cut", "repeat")[int(rng.integers(4))]
-        if kind == "flip":
+        kind = ('flip', 'zero', 'cut', 'repeat')[int(rng.integers(4))]
+        if kind == 'flip':
             for pos in rng.integers(len(data), size=int(rng.integers(1, 9))):
                 data[pos] ^= 1 << int(rng.integers(8))
-        elif kind == "zero":
+        elif kind == 'zero':
             data[at:at + 64] = bytes(len(data[at:at + 64]))
-        elif kind == "cut":
+        elif kind == 'cut':
             del data[at:]
         else:
             data[at:at] = data[at:at + 100]
@@ -420,21 +420,21 @@ def test_damaged_bytes_anywhere_give_a_log_error_or_a_recovered_log(small_bag, t
                 log.decode(m.topic, m.data, index=i, log_time=m.log_time)
         except LogError as exc:
             assert str(path) in str(exc), (kind, at, exc)
-            outcomes["error"] += 1
+            outcomes['error'] += 1
         else:
-            outcomes["read"] += 1
-    assert outcomes["error"] and outcomes["read"], outcomes
+            outcomes['read'] += 1
+    assert outcomes['error'] and outcomes['read'], outcomes
 
 
-@pytest.mark.parametrize("ros_args, culprit", [
-    (["--bogus-flag"], "invalid ROS arguments: unknown ROS arguments ['--bogus-flag']"),
-    (["-p", "use_sim_time:=abc"], "parameter use_sim_time='abc': must be of type bool"),
+@pytest.mark.parametrize('ros_args, culprit', [
+    (['--bogus-flag'], "invalid ROS arguments: unknown ROS arguments ['--bogus-flag']"),
+    (['-p', 'use_sim_time:=abc'], "parameter use_sim_time='abc': must be of type bool"),
 ])
 @pytest.mark.ros
 def test_replay_refuses_bad_ros_arguments_in_one_line(small_bag, ros_args, culprit):
     """umbrella_replay's --ros-args that rclpy refuses: exit 2 naming them (a traceback)."""
-    r = tool("replay", str(small_bag), "--ros-args", *ros_args)
+    r = tool('replay', str(small_bag), '--ros-args', *ros_args)
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"umbrella_replay: error: {culprit}"), \
+    assert len(lines) == 1 and lines[0].startswith(f'umbrella_replay: error: {culprit}'), \
         r.stderr

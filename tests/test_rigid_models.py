@@ -32,7 +32,7 @@ from umbrella_sim.core.rigid import deployment_time_by_quadrature, RigidMechanis
 REFERENCE = {-0.2: 0.2258847, -0.5: 0.0903539, -1.0: 0.0451769, -2.0: 0.0225885}
 
 
-@pytest.mark.parametrize("v0", sorted(REFERENCE))
+@pytest.mark.parametrize('v0', sorted(REFERENCE))
 def test_quadrature_reproduces_reference_table(v0):
     assert deployment_time_by_quadrature(UmbrellaParams(), v0) == \
         pytest.approx(REFERENCE[v0], abs=6e-8)
@@ -45,18 +45,18 @@ def test_initial_velocity_and_energy():
     assert mech.kinetic_energy(*y) == pytest.approx(2.10703, abs=1e-5)
 
 
-@pytest.mark.parametrize("model", ["rigid", "rigid-fe"])
-@pytest.mark.parametrize("v0", sorted(REFERENCE))
+@pytest.mark.parametrize('model', ['rigid', 'rigid-fe'])
+@pytest.mark.parametrize('v0', sorted(REFERENCE))
 def test_rigid_models_agree_with_quadrature(model, v0):
     p = UmbrellaParams(model=model, v0=v0)
     r = simulate(p, 0.3, stop_after_lock=0.0)
     assert r.error is None
     exact = deployment_time_by_quadrature(p)
     assert r.lock.time == pytest.approx(exact, rel=5e-4)          # 0.05 %
-    assert r.summary()["constraint_residual_max"] < 1e-10
+    assert r.summary()['constraint_residual_max'] < 1e-10
 
 
-@pytest.mark.parametrize("model", ["rigid", "rigid-fe"])
+@pytest.mark.parametrize('model', ['rigid', 'rigid-fe'])
 def test_rigid_models_with_constant_force_from_rest(model):
     p = UmbrellaParams(model=model, v0=0.0, sleeve_force=2.0)
     exact = deployment_time_by_quadrature(p)
@@ -65,21 +65,21 @@ def test_rigid_models_with_constant_force_from_rest(model):
     assert r.lock.time == pytest.approx(exact, rel=5e-4)
     # work-energy along the way: T = W (the force's work) at every sample
     for s in r.samples[1:]:
-        if s.stage == "deploying":
+        if s.stage == 'deploying':
             assert s.kinetic_energy == pytest.approx(s.work, rel=1e-4, abs=1e-9)
 
 
 def test_rigid_models_come_to_rest_at_the_lock():
-    for model in ("rigid", "rigid-fe"):
+    for model in ('rigid', 'rigid-fe'):
         r = simulate(UmbrellaParams(model=model, v0=-1.0), 0.08)
         last = r.samples[-1]
-        assert last.stage == "locked"
+        assert last.stage == 'locked'
         assert last.alpha1 == pytest.approx(math.pi / 12, abs=1e-9)
         assert abs(last.alpha1_rate) < 1e-12
         assert r.lock.energy_after == pytest.approx(0.0, abs=1e-12)
 
 
-@pytest.mark.parametrize("v0, force", [(-0.2, 0.0), (0.0, 50.0)])
+@pytest.mark.parametrize('v0, force', [(-0.2, 0.0), (0.0, 50.0)])
 def test_closed_form_fast_path_steps_as_the_generic_path(monkeypatch, v0, force):
     """
     The closed-form model's blocks (RigidEngine.advance) equal step-by-step stepping.
@@ -92,16 +92,16 @@ def test_closed_form_fast_path_steps_as_the_generic_path(monkeypatch, v0, force)
     from umbrella_sim.core.outputs import STEP_FIELDS, step_row
     from umbrella_sim.core.solver import UmbrellaSimulator
 
-    p = UmbrellaParams(model="rigid", v0=v0, sleeve_force=force)
+    p = UmbrellaParams(model='rigid', v0=v0, sleeve_force=force)
     fast = UmbrellaSimulator(p)
     blocks = [fast.advance(100) for _ in range(30)]
-    monkeypatch.setattr(RigidEngine, "advance", lambda self, *args: None)   # generic path
+    monkeypatch.setattr(RigidEngine, 'advance', lambda self, *args: None)   # generic path
     slow = UmbrellaSimulator(p)
     generic = [slow.advance(100) for _ in range(30)]
     assert fast.lock_event is not None and fast.lock_event == slow.lock_event
     for b, g in zip(blocks, generic):
         for i, field in enumerate(STEP_FIELDS):
-            tol = 1e-14 * max(1.0, abs(g.rows[i]).max()) if field == "sleeve_velocity" else 0.0
+            tol = 1e-14 * max(1.0, abs(g.rows[i]).max()) if field == 'sleeve_velocity' else 0.0
             assert abs(b.rows[i] - g.rows[i]).max() <= tol, field
     assert step_row(fast.sample()) == step_row(slow.sample())
     assert fast.state.t == slow.state.t and (fast.state.q == slow.state.q).all()

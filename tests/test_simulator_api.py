@@ -72,21 +72,21 @@ def test_reset_reproduces_the_run():
     sim = UmbrellaSimulator(p)
     first = sim.advance_to(0.12)
     sim.reset()
-    assert sim.time == 0.0 and sim.stage == "deploying" and sim.lock_event is None
+    assert sim.time == 0.0 and sim.stage == 'deploying' and sim.lock_event is None
     assert np.array_equal(trajectory(first), trajectory(sim.advance_to(0.12)))
 
 
-@pytest.mark.parametrize("bad", [-1.0, math.nan, math.inf, -math.inf, "abc"])
+@pytest.mark.parametrize('bad', [-1.0, math.nan, math.inf, -math.inf, 'abc'])
 def test_bad_force_refused_and_not_applied(bad):
     sim = UmbrellaSimulator(UmbrellaParams())
     sim.set_sleeve_force(2.0)
-    with pytest.raises(ValueError, match="sleeve force"):
+    with pytest.raises(ValueError, match='sleeve force'):
         sim.set_sleeve_force(bad)
     assert sim.sleeve_force == 2.0
 
 
 def test_bad_force_profile_refused():
-    with pytest.raises(ValueError, match="sleeve force"):
+    with pytest.raises(ValueError, match='sleeve force'):
         simulate(UmbrellaParams(), 0.01, force_profile=[(0.0, 1.0), (0.005, -2.0)])
 
 
@@ -94,7 +94,7 @@ def test_diverging_run_stops_with_clear_error_and_keeps_samples():
     # 2.3 kN on a 0.4 kg frame (just below the link's buckling load, so accepted): Newton
     # fails after a few steps
     r = simulate(UmbrellaParams(v0=0.0, sleeve_force=2300.0, time_step=API_STEP), 0.5)
-    assert r.error is not None and "t = " in r.error
+    assert r.error is not None and 't = ' in r.error
     assert len(r.samples) >= 3
     assert all(np.all(np.isfinite(s.q)) for s in r.samples)
     assert r.samples[-1].time < 0.5
@@ -113,10 +113,10 @@ def test_outputs_are_consistent():
     for s in r.samples:
         # joint geometry: H on the axle, alpha2 of the link frame
         assert s.sleeve_position == pytest.approx(
-            s.q[r.q_labels.index("R2y")] + (p.l3 + s.q[r.q_labels.index("link.u1")])
+            s.q[r.q_labels.index('R2y')] + (p.l3 + s.q[r.q_labels.index('link.u1')])
             * math.sin(s.alpha2), abs=1e-15)
         assert s.kinetic_energy > 0
-    locked = [s for s in r.samples if s.stage == "locked"]
+    locked = [s for s in r.samples if s.stage == 'locked']
     # the sleeve is at the stop to the solver's constraint tolerance (1e-11 m, issue: 1e-10)
     assert locked and all(abs(s.sleeve_position - p.sleeve_stop_height) < PHI_TOLERANCE
                           for s in locked)
@@ -138,23 +138,23 @@ def test_sleeve_force_bounded_by_what_the_link_carries():
     assert stubby.sleeve_force_limit == pytest.approx(0.01 ** 2 * 500e6, rel=1e-12)
     sim = UmbrellaSimulator(p)
     sim.set_sleeve_force(euler)
-    with pytest.raises(ValueError, match="link can carry"):
+    with pytest.raises(ValueError, match='link can carry'):
         sim.set_sleeve_force(euler * 1.001)
-    with pytest.raises(ValueError, match="sleeve_force"):
+    with pytest.raises(ValueError, match='sleeve_force'):
         UmbrellaParams(sleeve_force=1e9).validated()
 
 
-@pytest.mark.parametrize("kernel", ["compiled", "numpy"])
+@pytest.mark.parametrize('kernel', ['compiled', 'numpy'])
 def test_samples_and_states_cannot_be_changed(kernel, monkeypatch):
     """A Sample's arrays are read-only; the compiled path's share its states', read-only."""
-    monkeypatch.setenv("UMBRELLA_SIM_KERNEL", kernel)
+    monkeypatch.setenv('UMBRELLA_SIM_KERNEL', kernel)
     sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5, elements_per_segment=2))
     s = sim.advance(50).last
     before = s.q.copy()
-    for name in ("q", "qd", "multipliers", "leaf_stress", "link_stress"):
+    for name in ('q', 'qd', 'multipliers', 'leaf_stress', 'link_stress'):
         with pytest.raises(ValueError):
             getattr(s, name).flat[0] = 1.0
-    if kernel == "compiled":
+    if kernel == 'compiled':
         assert s.q is sim.state.q
         with pytest.raises(ValueError):
             sim.state.q[0] = 1.0

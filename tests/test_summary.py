@@ -46,36 +46,36 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STEP = 2.5e-4
 PARAMS = UmbrellaParams(v0=-0.5, time_step=STEP)
 DURATION = 0.45                     # the lock (~0.09 s) and the whole stage-2 window
-FIGURES = ("deploy_time", "tip_deflection_max", "tip_deflection_max_time",
-           "stage2_tip_amplitude", "stage2_tip_period", "peak_stress_leaf",
-           "peak_stress_leaf_x", "peak_stress_leaf_time", "peak_stress_link",
-           "peak_stress_link_x", "peak_stress_link_time")
+FIGURES = ('deploy_time', 'tip_deflection_max', 'tip_deflection_max_time',
+           'stage2_tip_amplitude', 'stage2_tip_period', 'peak_stress_leaf',
+           'peak_stress_leaf_x', 'peak_stress_leaf_time', 'peak_stress_link',
+           'peak_stress_link_x', 'peak_stress_link_time')
 
 
 def run_cli(*args, timeout=300, **kw):
-    return subprocess.run([sys.executable, "-m", "umbrella_sim", "simulate", *args],
+    return subprocess.run([sys.executable, '-m', 'umbrella_sim', 'simulate', *args],
                           capture_output=True, text=True, cwd=ROOT, timeout=timeout, **kw)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def offline():
     return simulate(PARAMS, DURATION)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def bags(tmp_path_factory):
     """Record the same run at 100 Hz and at 1 kHz."""
     out = {}
     for rate in (100.0, 1000.0):
-        bag = tmp_path_factory.mktemp("rate") / f"run_{rate:g}"
+        bag = tmp_path_factory.mktemp('rate') / f'run_{rate:g}'
         record_offline(PARAMS, str(bag), DURATION, publish_rate=rate)
         out[rate] = bag
     return out
 
 
 def recorded_summary(bag):
-    meta = read_log(str(bag)).metadata["umbrella_sim.summary"]
-    return json.loads(meta["figures"]), json.loads(meta["warnings"])
+    meta = read_log(str(bag)).metadata['umbrella_sim.summary']
+    return json.loads(meta['figures']), json.loads(meta['warnings'])
 
 
 def steps_peaks(model, samples, lock_time):
@@ -100,27 +100,27 @@ def test_brute_force_over_every_step_of_the_reference_path(offline):
     while sim.time < DURATION - 1e-12:
         samples += sim.step()
     lock = sim.lock_event.time
-    s1 = [s for s in samples if s.stage == "deploying"]
+    s1 = [s for s in samples if s.stage == 'deploying']
     tip1 = max(s1, key=lambda s: abs(s.tip_transverse))
     s2 = [s for s in samples if s.time > lock and s.time <= lock + STAGE2_WINDOW + 1e-12]
     v2 = [s.tip_transverse for s in s2]
     f = offline.summary()
-    assert f["deploy_time"] == lock
-    assert f["tip_deflection_max"] == abs(tip1.tip_transverse)
-    assert f["tip_deflection_max_time"] == tip1.time
-    assert f["stage2_tip_amplitude"] == 0.5 * (max(v2) - min(v2))
-    assert f["stage2_window"] == [lock, s2[-1].time]
+    assert f['deploy_time'] == lock
+    assert f['tip_deflection_max'] == abs(tip1.tip_transverse)
+    assert f['tip_deflection_max_time'] == tip1.time
+    assert f['stage2_tip_amplitude'] == 0.5 * (max(v2) - min(v2))
+    assert f['stage2_window'] == [lock, s2[-1].time]
     steps = steps_peaks(sim.model, samples, lock)
-    for j, body in enumerate(("leaf", "link")):
+    for j, body in enumerate(('leaf', 'link')):
         peaks, when = max(steps, key=lambda st: st[0][2 * j])
         # the compiled stress recovery rounds differently from numpy's (1 ulp)
-        assert f[f"peak_stress_{body}"] == pytest.approx(peaks[2 * j], rel=1e-12)
-        assert f[f"peak_stress_{body}_x"] == peaks[2 * j + 1]
-        assert f[f"peak_stress_{body}_time"] == when
+        assert f[f'peak_stress_{body}'] == pytest.approx(peaks[2 * j], rel=1e-12)
+        assert f[f'peak_stress_{body}_x'] == peaks[2 * j + 1]
+        assert f[f'peak_stress_{body}_time'] == when
         # a crest between the steps: at least what the grid shows, more than it here
-        on_grid = max(getattr(s, f"peak_stress_{body}") for s in samples)
-        assert f[f"peak_stress_{body}"] > on_grid
-    assert f["stress_ratio_max"] == max(f["peak_stress_leaf"], f["peak_stress_link"]) / 500e6
+        on_grid = max(getattr(s, f'peak_stress_{body}') for s in samples)
+        assert f[f'peak_stress_{body}'] > on_grid
+    assert f['stress_ratio_max'] == max(f['peak_stress_leaf'], f['peak_stress_link']) / 500e6
 
 
 def test_figures_do_not_depend_on_how_the_steps_are_blocked():
@@ -139,24 +139,24 @@ def test_figures_do_not_depend_on_how_the_steps_are_blocked():
             acc.add(b)
         # the energy balance and the constraint residual are taken at each block's end
         return {k: v for k, v in acc.figures().items()
-                if k not in ("energy_drift", "constraint_residual_max")}
+                if k not in ('energy_drift', 'constraint_residual_max')}
 
     locked_at = int(np.argmax(steps.stage != 0))       # the lock is in that step
     singles = [StepBlock.from_rows(np.array([[getattr(steps, f)[i]] for f in STEP_FIELDS]),
                                    lambda: blocks[-1].last, lock if i == locked_at else None)
                for i in range(len(steps))]
     whole = figures([steps])
-    assert whole["stage2_window"] is not None and whole["deploy_time"] == lock.time
+    assert whole['stage2_window'] is not None and whole['deploy_time'] == lock.time
     assert figures(blocks) == whole
     assert figures(singles) == whole
-    for body in ("leaf", "link"):           # the peak over a block: where np.argmax finds it
-        p = getattr(steps, f"peak_stress_{body}")
+    for body in ('leaf', 'link'):           # the peak over a block: where np.argmax finds it
+        p = getattr(steps, f'peak_stress_{body}')
         i = int(np.argmax(p))
-        assert steps.peaks[body] == (p[i], getattr(steps, f"peak_stress_{body}_x")[i],
+        assert steps.peaks[body] == (p[i], getattr(steps, f'peak_stress_{body}_x')[i],
                                      steps.time[i])
     tied = StepBlock.from_rows(np.vstack([np.arange(3.0)] * len(STEP_FIELDS)), lambda: None)
     tied.peak_stress_leaf[:] = 7.0
-    assert tied.peaks["leaf"] == (7.0, 0.0, 0.0)        # the first of equal peaks
+    assert tied.peaks['leaf'] == (7.0, 0.0, 0.0)        # the first of equal peaks
 
 
 def test_figures_do_not_depend_on_the_recording_rate(offline, bags):
@@ -165,11 +165,11 @@ def test_figures_do_not_depend_on_the_recording_rate(offline, bags):
         recorded, warnings = recorded_summary(bag)
         for key in FIGURES:
             assert recorded[key] == pytest.approx(f_sim[key], rel=1e-12, abs=0), (rate, key)
-        assert warnings == f_sim["warnings"]
+        assert warnings == f_sim['warnings']
     # umbrella_compare reports those figures, not the samples'
     runs = [compare.load_run(str(b)) for b in bags.values()]
     figs = [r.figures() for r in runs]
-    assert all(f["figures_from"].startswith("every physics step") for f in figs)
+    assert all(f['figures_from'].startswith('every physics step') for f in figs)
     for key in FIGURES:
         assert figs[0][key] == figs[1][key] == pytest.approx(f_sim[key], rel=1e-12)
 
@@ -181,9 +181,9 @@ def test_figures_from_samples_depend_on_the_rate_and_say_so(bags):
         r = compare.load_run(str(bag))
         r.summary = None
         runs.append(r.figures())
-    assert all("depend on the recording rate" in f["figures_from"] for f in runs)
+    assert all('depend on the recording rate' in f['figures_from'] for f in runs)
     # the 100 Hz samples miss the stage-1 peak the 1 kHz ones come closer to
-    assert runs[0]["tip_deflection_max"] < runs[1]["tip_deflection_max"]
+    assert runs[0]['tip_deflection_max'] < runs[1]['tip_deflection_max']
 
 
 def test_figures_from_samples_of_a_truncated_log_keep_the_stages_apart(bags, tmp_path):
@@ -193,24 +193,24 @@ def test_figures_from_samples_of_a_truncated_log_keep_the_stages_apart(bags, tmp
     That message is published with the first locked state, so its samples are of stage 2:
     the stage-1 figures are those of the samples before it, as the exact lock gives.
     """
-    bag = tmp_path / "long"           # 1.5 s: several chunks, the first ends in stage 2
+    bag = tmp_path / 'long'           # 1.5 s: several chunks, the first ends in stage 2
     record_offline(PARAMS, str(bag), 1.5, publish_rate=100.0)
     whole = compare.load_run(str(bag))
     whole.summary = None
-    cut = tmp_path / "cut"
+    cut = tmp_path / 'cut'
     cut.mkdir()
-    data = (bag / "long_0.mcap").read_bytes()
-    (cut / "cut_0.mcap").write_bytes(data[:int(0.45 * len(data))])     # as by a SIGKILL
+    data = (bag / 'long_0.mcap').read_bytes()
+    (cut / 'cut_0.mcap').write_bytes(data[:int(0.45 * len(data))])     # as by a SIGKILL
     log = read_log(str(cut))
-    assert log.truncated and "umbrella_sim.events" not in log.metadata
-    assert log.decoded(log.find_topic("joint_states"))[-1][0] > whole.lock_time + 0.1
+    assert log.truncated and 'umbrella_sim.events' not in log.metadata
+    assert log.decoded(log.find_topic('joint_states'))[-1][0] > whole.lock_time + 0.1
     run = compare.load_run(str(cut))
     assert not run.lock_time_exact and whole.lock_time_exact
     # the phase message: the first publication at or after the exact lock
     assert whole.lock_time <= run.lock_time < whole.lock_time + 0.01
     f_cut, f_whole = run.figures(), whole.figures()
-    assert f_cut["tip_deflection_max"] == f_whole["tip_deflection_max"]
-    assert f_cut["tip_deflection_max_time"] == f_whole["tip_deflection_max_time"] < \
+    assert f_cut['tip_deflection_max'] == f_whole['tip_deflection_max']
+    assert f_cut['tip_deflection_max_time'] == f_whole['tip_deflection_max_time'] < \
         whole.lock_time
 
 
@@ -221,7 +221,7 @@ def test_published_peak_stress_is_the_peak_since_the_previous_publication(offlin
     per_step = steps_peaks(UmbrellaSimulator(PARAMS).model, steps, offline.lock.time)
     t = np.array([0.0] + [when for _, when in per_step])
     leaf = np.array([steps[0].peak_stress_leaf] + [p[0] for p, _ in per_step])
-    msgs = log.decoded(log.find_topic("peak_stress"))
+    msgs = log.decoded(log.find_topic('peak_stress'))
     prev = None
     for tm, m in msgs:
         window = (t <= tm + 1e-12) & ((t > prev + 1e-12) if prev is not None else (t <= 1e-12))
@@ -230,17 +230,17 @@ def test_published_peak_stress_is_the_peak_since_the_previous_publication(offlin
         prev = tm
     # so the recorded stage-1 peaks hold the true maximum, which 100 Hz samples of the
     # instantaneous value would miss
-    assert max(m.data[0] for _, m in msgs) == offline.summary()["peak_stress_leaf"]
+    assert max(m.data[0] for _, m in msgs) == offline.summary()['peak_stress_leaf']
     instantaneous = [s.peak_stress_leaf for s in steps if round(s.time * 100, 6).is_integer()]
-    assert max(instantaneous) < offline.summary()["peak_stress_leaf"]
+    assert max(instantaneous) < offline.summary()['peak_stress_leaf']
 
 
 def test_energy_drift_of_a_frame_that_never_moves_is_round_off():
     """V0 = 0, no force: nothing moves, and the balance's round-off is no 100 % drift."""
     r = simulate(UmbrellaParams(v0=0.0), 0.02)
-    energies = r.column("kinetic_energy") + r.column("strain_energy")
+    energies = r.column('kinetic_energy') + r.column('strain_energy')
     assert np.abs(energies).max() < 1e-15            # it did not move
-    assert r.summary()["energy_drift"] < 1e-9
+    assert r.summary()['energy_drift'] < 1e-9
     assert energy_drift(r) < 1e-9                    # the sample path, the same rule
 
 
@@ -253,40 +253,40 @@ def test_period_estimator_on_a_known_signal():
     assert math.isnan(oscillation_period(t[:1000], x[:1000]))     # one period only: nan
 
 
-@pytest.mark.parametrize("lock", ["energy", "plastic"])
+@pytest.mark.parametrize('lock', ['energy', 'plastic'])
 def test_stage2_period_is_the_locked_frames_first_mode(lock):
     """The stage-2 tip period = 2 pi / omega_1 of the locked frame (linearised) to 0.5 %."""
     p = UmbrellaParams(v0=-0.5, lock=lock, time_step=STEP)
     f = simulate(p, DURATION, keep_samples=False).figures
     period = 2 * math.pi / locked_first_frequency(UmbrellaSimulator(p).model)
-    assert f["stage2_tip_period"] == pytest.approx(period, rel=5e-3)
-    assert f["stage2_window"][1] == pytest.approx(f["deploy_time"] + STAGE2_WINDOW, abs=STEP)
+    assert f['stage2_tip_period'] == pytest.approx(period, rel=5e-3)
+    assert f['stage2_window'][1] == pytest.approx(f['deploy_time'] + STAGE2_WINDOW, abs=STEP)
 
 
 # ------------------------------------------------------------------ warnings
 FAST = UmbrellaParams(v0=-2.0, time_step=STEP)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def fast_run():
     return simulate(FAST, 0.1)
 
 
 def test_validity_warnings_at_v0_minus_2(fast_run):
     f = fast_run.summary()
-    keys = [w.split(":")[0] for w in f["warnings"]]
+    keys = [w.split(':')[0] for w in f['warnings']]
     # (at 0.25 ms the modes above 6000 rad/s carry 9 % of the link's stage-2 stress crest)
-    assert keys == ["coarse step", "yield exceeded", "large deflection"]
-    assert "compare model flexible-nonlinear" in f["warnings"][2]
+    assert keys == ['coarse step', 'yield exceeded', 'large deflection']
+    assert 'compare model flexible-nonlinear' in f['warnings'][2]
     # the geometrically exact model is not sent to itself: its own limit is named
-    nonlinear = simulate(FAST.replace(model="flexible-nonlinear"), 0.1).summary()["warnings"]
-    assert not [w for w in nonlinear if w.startswith("large deflection")]
-    large = [w for w in nonlinear if w.startswith("large strain")]
-    assert large and "small strains only" in large[0] and "compare" not in large[0]
-    assert f["stress_ratio_max"] > 1.0
-    assert f["tip_deflection_ratio_max"] > TIP_DEFLECTION_LIMIT
+    nonlinear = simulate(FAST.replace(model='flexible-nonlinear'), 0.1).summary()['warnings']
+    assert not [w for w in nonlinear if w.startswith('large deflection')]
+    large = [w for w in nonlinear if w.startswith('large strain')]
+    assert large and 'small strains only' in large[0] and 'compare' not in large[0]
+    assert f['stress_ratio_max'] > 1.0
+    assert f['tip_deflection_ratio_max'] > TIP_DEFLECTION_LIMIT
     quiet = simulate(UmbrellaParams(v0=-0.2, time_step=STEP), 0.1).summary()
-    assert quiet["warnings"] == []
+    assert quiet['warnings'] == []
 
 
 def test_new_warnings_names_each_warning_in_the_block_it_first_holds():
@@ -300,23 +300,23 @@ def test_new_warnings_names_each_warning_in_the_block_it_first_holds():
         acc.add(sim.advance(10))
         if lock_block is None and sim.lock_event is not None:
             lock_block = k
-        now = {w.split(":")[0] for w in acc.warnings()}
+        now = {w.split(':')[0] for w in acc.warnings()}
         for w in acc.new_warnings():
-            key = w.split(":")[0]
+            key = w.split(':')[0]
             assert key not in first and key in now - before
             first[key] = k
         assert set(first) == now               # nothing that holds is left unsaid
         before = now
-    assert set(first) == {"coarse step", "yield exceeded", "large deflection"}
-    assert first["yield exceeded"] != first["large deflection"]   # the second came later
-    assert first["coarse step"] == lock_block          # said with the lock, judged on its state
+    assert set(first) == {'coarse step', 'yield exceeded', 'large deflection'}
+    assert first['yield exceeded'] != first['large deflection']   # the second came later
+    assert first['coarse step'] == lock_block          # said with the lock, judged on its state
 
 
 def test_lock_that_does_not_apply_is_named():
-    f = simulate(UmbrellaParams(model="rigid", lock="energy"), 0.05).summary()
-    assert [w.split(":")[0] for w in f["warnings"]] == ["lock not applicable"]
-    assert simulate(UmbrellaParams(model="rigid", lock="plastic"), 0.05).summary()[
-        "warnings"] == []
+    f = simulate(UmbrellaParams(model='rigid', lock='energy'), 0.05).summary()
+    assert [w.split(':')[0] for w in f['warnings']] == ['lock not applicable']
+    assert simulate(UmbrellaParams(model='rigid', lock='plastic'), 0.05).summary()[
+        'warnings'] == []
 
 
 def test_the_default_lock_is_the_one_that_applies_and_rigid_fe_reports_its_zeros():
@@ -327,35 +327,35 @@ def test_the_default_lock_is_the_one_that_applies_and_rigid_fe_reports_its_zeros
     reports the zero tip deflection and stresses its constraints hold (their round-off,
     ~1e-26 m and 1e-14 Pa, printed as amplitudes and stresses before).
     """
-    assert UmbrellaParams().lock == "auto" and UmbrellaParams().lock_rule == "energy"
-    for model in ("rigid", "rigid-fe"):
+    assert UmbrellaParams().lock == 'auto' and UmbrellaParams().lock_rule == 'energy'
+    for model in ('rigid', 'rigid-fe'):
         f = simulate(UmbrellaParams(model=model), 0.3).summary()
-        assert f["lock"] == "plastic" and f["warnings"] == []
-    f = simulate(UmbrellaParams(model="rigid-fe"), 0.3).summary()
-    for key in ("tip_deflection_max", "stage2_tip_amplitude", "peak_stress_leaf",
-                "peak_stress_link", "stress_ratio_max"):
+        assert f['lock'] == 'plastic' and f['warnings'] == []
+    f = simulate(UmbrellaParams(model='rigid-fe'), 0.3).summary()
+    for key in ('tip_deflection_max', 'stage2_tip_amplitude', 'peak_stress_leaf',
+                'peak_stress_link', 'stress_ratio_max'):
         assert f[key] == 0.0, key
-    assert simulate(UmbrellaParams(), 0.3).summary()["lock"] == "energy"
+    assert simulate(UmbrellaParams(), 0.3).summary()['lock'] == 'energy'
 
 
 def test_warnings_in_cli_text_json_and_recording(tmp_path):
     """The CLI's text and JSON, the recording and compare say the same warnings."""
-    args = ["--v0", "-2", "--time-step", str(STEP), "--duration", "0.1"]
-    keys = ["coarse step", "yield exceeded", "large deflection"]
+    args = ['--v0', '-2', '--time-step', str(STEP), '--duration', '0.1']
+    keys = ['coarse step', 'yield exceeded', 'large deflection']
     text = run_cli(*args)
     assert text.returncode == 0, text.stderr
     for key in keys:
-        assert f"umbrella_sim: warning: {key}" in text.stderr
-    js = run_cli(*args, "--json")
+        assert f'umbrella_sim: warning: {key}' in text.stderr
+    js = run_cli(*args, '--json')
     summary = json.loads(js.stdout)
-    assert [w.split(":")[0] for w in summary["warnings"]] == keys
-    assert summary["stage2_resolution"]["link"] > 0.01          # the figure it names
-    bag = tmp_path / "fast"
-    rec = run_cli(*args, "--mcap", str(bag))
+    assert [w.split(':')[0] for w in summary['warnings']] == keys
+    assert summary['stage2_resolution']['link'] > 0.01          # the figure it names
+    bag = tmp_path / 'fast'
+    rec = run_cli(*args, '--mcap', str(bag))
     assert rec.returncode == 0, rec.stderr
     _, warnings = recorded_summary(bag)
-    assert [w.split(":")[0] for w in warnings] == keys
-    assert [w.split(":")[0] for w in compare.load_run(str(bag)).validity()] == keys
+    assert [w.split(':')[0] for w in warnings] == keys
+    assert [w.split(':')[0] for w in compare.load_run(str(bag)).validity()] == keys
 
 
 @pytest.mark.ros
@@ -363,83 +363,83 @@ def test_warnings_in_cli_text_json_and_recording(tmp_path):
 def test_node_warns_once_and_diagnostics_say_warn(antenna_factory, tmp_path):
     from diagnostic_msgs.msg import DiagnosticStatus
 
-    bag = tmp_path / "node_fast"
+    bag = tmp_path / 'node_fast'
     # 8 s of wall time: several 1 Hz diagnostics (a 'behind real time' WARN, which takes
     # precedence on a loaded machine, cannot hide them all)
-    antenna = antenna_factory({"v0": -2.0, "time_step": STEP, "real_time_factor": 0.05,
-                               "duration": 0.4}, record_path=str(bag))
+    antenna = antenna_factory({'v0': -2.0, 'time_step': STEP, 'real_time_factor': 0.05,
+                               'duration': 0.4}, record_path=str(bag))
     msg = antenna.wait_for(
-        "diagnostics", lambda m: m.status[0].level == DiagnosticStatus.WARN
+        'diagnostics', lambda m: m.status[0].level == DiagnosticStatus.WARN
         and "outside the model's validity" in m.status[0].message, timeout=60,
         what="a WARN diagnostic on the model's validity")
     values = {kv.key: kv.value for kv in msg.status[0].values}
-    keys = ["coarse step", "yield exceeded", "large deflection"]
-    assert values["warning_0"].split(":")[0] in keys
+    keys = ['coarse step', 'yield exceeded', 'large deflection']
+    assert values['warning_0'].split(':')[0] in keys
     assert antenna.node.proc.wait(timeout=120) == 0
     log = antenna.node.output()
     assert all(log.count(key) == 1 for key in keys), log
     _, warnings = recorded_summary(bag)
-    assert [w.split(":")[0] for w in warnings] == keys
+    assert [w.split(':')[0] for w in warnings] == keys
 
 
 # ------------------------------------------------------------------ CLI small items
 def test_text_summary_has_units_and_rounding():
-    out = run_cli("--v0", "-0.5", "--time-step", str(STEP), "--duration", "0.2")
+    out = run_cli('--v0', '-0.5', '--time-step', str(STEP), '--duration', '0.2')
     lines = dict(line.split(None, 1) for line in out.stdout.splitlines())
-    assert lines["deploy_time"].endswith(" s") and len(lines["deploy_time"]) == len("0.090000 s")
-    assert lines["tip_deflection_max"].endswith(" mm")
-    assert lines["peak_stress_leaf"].endswith(" MPa")
-    assert lines["energy_drift"].endswith(" -")
+    assert lines['deploy_time'].endswith(' s') and len(lines['deploy_time']) == len('0.090000 s')
+    assert lines['tip_deflection_max'].endswith(' mm')
+    assert lines['peak_stress_leaf'].endswith(' MPa')
+    assert lines['energy_drift'].endswith(' -')
 
 
 def test_closed_stdout_ends_quietly():
     """Umbrella_sim simulate | head: the reader went away; no traceback, exit 141."""
-    p = subprocess.Popen([sys.executable, "-m", "umbrella_sim", "simulate", "--duration",
-                          "0.05", "--time-step", "1e-3"], cwd=ROOT, stdout=subprocess.PIPE,
+    p = subprocess.Popen([sys.executable, '-m', 'umbrella_sim', 'simulate', '--duration',
+                          '0.05', '--time-step', '1e-3'], cwd=ROOT, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE)
     p.stdout.close()
     err = p.stderr.read().decode()
     assert p.wait(timeout=120) == 141
-    assert "Traceback" not in err and "BrokenPipe" not in err
+    assert 'Traceback' not in err and 'BrokenPipe' not in err
 
 
 def test_node_parameters_on_simulate_are_not_ignored(tmp_path):
-    out = run_cli("--duration", "0.01", "--set", "publish_rate=10")
-    assert out.returncode == 2 and "publish_rate" in out.stderr and "--mcap" in out.stderr
-    out = run_cli("--duration", "0.01", "--set", "real_time_factor=2")
-    assert out.returncode == 2 and "real_time_factor" in out.stderr
-    bag = tmp_path / "rate10"
-    out = run_cli("--duration", "0.5", "--time-step", "1e-3", "--set", "publish_rate=10",
-                  "--mcap", str(bag))
+    out = run_cli('--duration', '0.01', '--set', 'publish_rate=10')
+    assert out.returncode == 2 and 'publish_rate' in out.stderr and '--mcap' in out.stderr
+    out = run_cli('--duration', '0.01', '--set', 'real_time_factor=2')
+    assert out.returncode == 2 and 'real_time_factor' in out.stderr
+    bag = tmp_path / 'rate10'
+    out = run_cli('--duration', '0.5', '--time-step', '1e-3', '--set', 'publish_rate=10',
+                  '--mcap', str(bag))
     assert out.returncode == 0, out.stderr
     log = read_log(str(bag))
-    assert len(log.decoded(log.find_topic("joint_states"))) == 6     # 0, 0.1, ... 0.5 s
+    assert len(log.decoded(log.find_topic('joint_states'))) == 6     # 0, 0.1, ... 0.5 s
 
 
 def test_rigid_model_with_energy_lock_refused():
-    out = run_cli("--duration", "0.01", "--model", "rigid", "--lock", "energy")
-    assert out.returncode == 2 and "--lock energy" in out.stderr and "rigid" in out.stderr
-    out = run_cli("--duration", "0.01", "--model", "rigid-fe", "--set", "lock=energy")
-    assert out.returncode == 2 and "lock=energy" in out.stderr
+    out = run_cli('--duration', '0.01', '--model', 'rigid', '--lock', 'energy')
+    assert out.returncode == 2 and '--lock energy' in out.stderr and 'rigid' in out.stderr
+    out = run_cli('--duration', '0.01', '--model', 'rigid-fe', '--set', 'lock=energy')
+    assert out.returncode == 2 and 'lock=energy' in out.stderr
 
 
 def test_failure_message_names_one_time():
     r = simulate(UmbrellaParams(v0=0.0, sleeve_force=2300.0, time_step=2e-3), 0.5)
-    assert r.error is not None and r.error.count("t = ") == 1
-    assert f"t = {r.samples[-1].time:.9g} s" in r.error
+    assert r.error is not None and r.error.count('t = ') == 1
+    assert f't = {r.samples[-1].time:.9g} s' in r.error
 
 
 # ------------------------------------------------------------------ plots
 @pytest.fixture
 def captured_figures(monkeypatch):
     import matplotlib
-    matplotlib.use("Agg")
+    matplotlib.use('Agg')
     from matplotlib.figure import Figure
     figures = {}
 
     def savefig(self, path, *a, **kw):
         figures[os.path.basename(path)] = self
-    monkeypatch.setattr(Figure, "savefig", savefig)
+    monkeypatch.setattr(Figure, 'savefig', savefig)
     return figures
 
 
@@ -462,48 +462,48 @@ def test_recorded_shapes_are_the_models_cubics_at_any_magnification(offline, bag
             assert np.abs(drawn_leaf - exact[0]).max() < 1e-12
             assert np.abs(drawn_link - exact[1]).max() < 1e-12
         nodes = model.node_positions(q, run.magnification)[0]
-        assert np.abs(run.nodes(leaf, "leaf") - nodes).max() < 1e-12
+        assert np.abs(run.nodes(leaf, 'leaf') - nodes).max() < 1e-12
 
 
 def test_shapes_stay_on_screen_with_stage_magnification_and_times(tmp_path,
                                                                   captured_figures):
     """V0 = -1 m/s, --thesis: every leaf drawn within 2 m of the hinge; legend has times."""
-    bag = tmp_path / "v1"
+    bag = tmp_path / 'v1'
     record_offline(UmbrellaParams(v0=-1.0, time_step=STEP), str(bag), 0.15)
     run = compare.load_run(str(bag))
     snaps = compare_plots.shape_snapshots(run, (200.0, 5.0))
-    assert {s[0] for s in snaps} == {"deploying", "locked"}
+    assert {s[0] for s in snaps} == {'deploying', 'locked'}
     for stage, tm, mag, leaf, link in snaps:
-        assert (tm < run.lock_time) == (stage == "deploying")
-        assert mag <= (200.0 if stage == "deploying" else 5.0)
+        assert (tm < run.lock_time) == (stage == 'deploying')
+        assert mag <= (200.0 if stage == 'deploying' else 5.0)
         assert np.abs(leaf).max() < 2.0 and np.abs(link).max() < 2.0
-    assert compare.main([str(bag), "--thesis", "--out", str(tmp_path / "out")]) == 0
-    axes = captured_figures["shapes.png"].axes       # one row: stage 1, stage 2
+    assert compare.main([str(bag), '--thesis', '--out', str(tmp_path / 'out')]) == 0
+    axes = captured_figures['shapes.png'].axes       # one row: stage 1, stage 2
     labels = [t.get_text() for ax in axes for t in ax.get_legend().get_texts()]
-    labels.remove("undeformed")                        # (the frame at the first stage-2 shape)
-    assert len(labels) == len(snaps) and all(lb.startswith("t = ") for lb in labels)
+    labels.remove('undeformed')                        # (the frame at the first stage-2 shape)
+    assert len(labels) == len(snaps) and all(lb.startswith('t = ') for lb in labels)
     for line in (ln for ax in axes for ln in ax.get_lines()):
         assert np.abs(line.get_xydata()).max() < 2.0
 
 
 def test_stress_plot_has_yield_line_and_no_zero_rigid_stress(tmp_path, captured_figures):
-    flex, rigid = tmp_path / "flex", tmp_path / "rigid"
+    flex, rigid = tmp_path / 'flex', tmp_path / 'rigid'
     record_offline(UmbrellaParams(v0=-0.5, time_step=STEP), str(flex), 0.15)
-    record_offline(UmbrellaParams(v0=-0.5, model="rigid", lock="plastic"), str(rigid), 0.15)
-    assert compare.main([str(flex), str(rigid), "--names", "flex", "rigid", "--out",
-                         str(tmp_path / "out")]) == 0
-    fig = captured_figures["stress.png"]
+    record_offline(UmbrellaParams(v0=-0.5, model='rigid', lock='plastic'), str(rigid), 0.15)
+    assert compare.main([str(flex), str(rigid), '--names', 'flex', 'rigid', '--out',
+                         str(tmp_path / 'out')]) == 0
+    fig = captured_figures['stress.png']
     for ax in fig.axes:
         labels = [ln.get_label() for ln in ax.get_lines()]
         # the yield line where the stresses come within 5 x of it, else said off scale
         reach = max(abs(ax.dataLim.y0), abs(ax.dataLim.y1))
         if reach >= 100.0:
-            assert any(lb.startswith("yield 500 MPa") for lb in labels)
+            assert any(lb.startswith('yield 500 MPa') for lb in labels)
         else:
-            assert "yield 500 MPa: off this scale" in [t.get_text() for t in ax.texts]
-        drawn = [ln for ln in ax.get_lines() if ln.get_label().startswith("rigid")]
+            assert 'yield 500 MPa: off this scale' in [t.get_text() for t in ax.texts]
+        drawn = [ln for ln in ax.get_lines() if ln.get_label().startswith('rigid')]
         assert drawn and all(len(ln.get_xdata()) == 0 for ln in drawn)
-        assert any("rigid model, no stress" in lb for lb in labels)
+        assert any('rigid model, no stress' in lb for lb in labels)
 
 
 def test_compare_plots_a_window_round_the_lock_with_the_thesis_in_mm_and_readable_shapes(
@@ -516,31 +516,31 @@ def test_compare_plots_a_window_round_the_lock_with_the_thesis_in_mm_and_readabl
     in mm like ours; shapes.png has one row a run, every text inside the figure, legends of
     8 pt or more, round magnifications, and none on the rigid run's panels.
     """
-    flex, rigid = tmp_path / "flex", tmp_path / "rigid"
+    flex, rigid = tmp_path / 'flex', tmp_path / 'rigid'
     params = UmbrellaParams(time_step=STEP)
     record_offline(params, str(flex), 1.0)
-    record_offline(UmbrellaParams(model="rigid"), str(rigid), 1.0)
-    out = tmp_path / "out"
-    assert compare.main([str(flex), str(rigid), "--names", "flex", "rigid", "--thesis",
-                         "--out", str(out)]) == 0
+    record_offline(UmbrellaParams(model='rigid'), str(rigid), 1.0)
+    out = tmp_path / 'out'
+    assert compare.main([str(flex), str(rigid), '--names', 'flex', 'rigid', '--thesis',
+                         '--out', str(out)]) == 0
     text = capfd.readouterr().out
-    assert "thesis: deploy 0.2259 s, tip max 0.665 mm at 0.080 s, stage 2 ~60 mm" in text
-    result = json.loads((out / "compare.json").read_text())
-    lock = result["runs"][0]["deploy_time"]
+    assert 'thesis: deploy 0.2259 s, tip max 0.665 mm at 0.080 s, stage 2 ~60 mm' in text
+    result = json.loads((out / 'compare.json').read_text())
+    lock = result['runs'][0]['deploy_time']
     period = 2 * math.pi / locked_first_frequency(UmbrellaModel(params))
-    assert result["plot_window"] == pytest.approx([0.0, lock + 8 * period], abs=1e-3)
-    for name in ("alpha1.png", "tip_deflection.png", "stress.png"):
+    assert result['plot_window'] == pytest.approx([0.0, lock + 8 * period], abs=1e-3)
+    for name in ('alpha1.png', 'tip_deflection.png', 'stress.png'):
         for ax in captured_figures[name].axes:
             lo, hi = ax.get_xlim()
             assert lo >= -0.05 and hi <= lock + 8.5 * period, (name, lo, hi)
-    tip = captured_figures["tip_deflection.png"].axes
-    assert any(ln.get_label().startswith("thesis: 0.665 mm at 0.08 s") for ln in tip[0].lines)
-    assert any(ln.get_label().startswith("thesis: ±60 mm") for ln in tip[1].lines)
-    assert any(ln.get_label() == "thesis deployed: 0.2259 s"
-               for ln in captured_figures["alpha1.png"].axes[0].lines)
+    tip = captured_figures['tip_deflection.png'].axes
+    assert any(ln.get_label().startswith('thesis: 0.665 mm at 0.08 s') for ln in tip[0].lines)
+    assert any(ln.get_label().startswith('thesis: ±60 mm') for ln in tip[1].lines)
+    assert any(ln.get_label() == 'thesis deployed: 0.2259 s'
+               for ln in captured_figures['alpha1.png'].axes[0].lines)
 
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    fig = captured_figures["shapes.png"]
+    fig = captured_figures['shapes.png']
     FigureCanvasAgg(fig).draw()                  # (closed by compare: a canvas to lay it out)
     box = fig.bbox
     width, height = box.width, box.height
@@ -554,21 +554,21 @@ def test_compare_plots_a_window_round_the_lock_with_the_thesis_in_mm_and_readabl
         assert min(t.get_fontsize() for t in ax.get_legend().get_texts()) >= 8
     titles = [ax.get_title() for ax in fig.axes]
     for title in titles[:2]:                                  # flexible: x 1, 2 or 5 x 10^k
-        m = float(title.rsplit("×", 1)[1])
+        m = float(title.rsplit('×', 1)[1])
         assert compare_plots.round_magnification(m) == m
-    assert "×200" in titles[0]
+    assert '×200' in titles[0]
     for title in titles[2:]:                                  # rigid: nothing to magnify
-        assert "×" not in title and "rigid model" in title
+        assert '×' not in title and 'rigid model' in title
     # --window: the plots of that span; a backwards span refused before any log is read
-    assert compare.main([str(flex), "--window", "0.2", "0.3", "--out",
-                         str(tmp_path / "w")]) == 0
-    for ax in captured_figures["alpha1.png"].axes:
+    assert compare.main([str(flex), '--window', '0.2', '0.3', '--out',
+                         str(tmp_path / 'w')]) == 0
+    for ax in captured_figures['alpha1.png'].axes:
         lo, hi = ax.get_xlim()
         assert 0.2 - 1e-9 <= lo and hi <= 0.3 + 1e-9
     with pytest.raises(SystemExit) as stop:
-        compare.main([str(tmp_path / "nothing"), "--window", "0.3", "0.2", "--out",
-                      str(tmp_path / "w2")])
-    assert stop.value.code == 2 and "--window 0.3 0.2" in capfd.readouterr().err
+        compare.main([str(tmp_path / 'nothing'), '--window', '0.3', '0.2', '--out',
+                      str(tmp_path / 'w2')])
+    assert stop.value.code == 2 and '--window 0.3 0.2' in capfd.readouterr().err
 
 
 def test_physics_rate_plots_draw_every_step_of_the_recorded_run(
@@ -582,28 +582,28 @@ def test_physics_rate_plots_draw_every_step_of_the_recorded_run(
     bag = bags[100.0]
     run = compare.load_run(str(bag))
     series = compare.physics_run(str(bag))
-    t = series["time"]
+    t = series['time']
     assert np.allclose(np.diff(t), STEP, rtol=1e-6, atol=0)
     assert len(t) >= round(DURATION / STEP) - 1
     at = np.searchsorted(t, run.t[1:] - 1e-9)                 # the publication instants
     assert np.allclose(t[at], run.t[1:], rtol=0, atol=1e-9)
-    assert np.array_equal(series["alpha1"][at], run.alpha1[1:])
+    assert np.array_equal(series['alpha1'][at], run.alpha1[1:])
     f = offline.summary()
-    lock = f["deploy_time"]
-    stage1 = np.abs(series["tip_transverse"][t <= lock])
-    assert stage1.max() == pytest.approx(f["tip_deflection_max"], rel=1e-12)
+    lock = f['deploy_time']
+    stage1 = np.abs(series['tip_transverse'][t <= lock])
+    assert stage1.max() == pytest.approx(f['tip_deflection_max'], rel=1e-12)
     assert np.abs(run.tip_v[run.tip_t <= lock]).max() < 0.99 * stage1.max()
-    assert series["peak_stress_leaf"].max() == pytest.approx(f["peak_stress_leaf"], rel=1e-12)
-    assert compare.main([str(bag), "--physics-rate", "--out", str(tmp_path / "out")]) == 0
+    assert series['peak_stress_leaf'].max() == pytest.approx(f['peak_stress_leaf'], rel=1e-12)
+    assert compare.main([str(bag), '--physics-rate', '--out', str(tmp_path / 'out')]) == 0
     # stage 1 (its own column) at every step up to the lock; stage 2 zoomed on its first
     # period, every step as a line too
-    stage1, zoom = captured_figures["alpha1.png"].axes[:2]
+    stage1, zoom = captured_figures['alpha1.png'].axes[:2]
     assert np.array_equal(stage1.get_lines()[0].get_xdata(), t[t <= lock + 1e-12])
     drawn = zoom.get_lines()[0].get_xdata()
     assert drawn[0] == pytest.approx(lock, abs=STEP) and np.allclose(np.diff(drawn), STEP)
     period = 2 * math.pi / locked_first_frequency(UmbrellaModel(PARAMS))
     assert drawn[-1] - drawn[0] == pytest.approx(period, abs=2 * STEP)
-    drawn = captured_figures["tip_deflection.png"].axes[1].get_lines()[0].get_xdata()
+    drawn = captured_figures['tip_deflection.png'].axes[1].get_lines()[0].get_xdata()
     assert len(drawn) == len(t)
 
 
@@ -618,19 +618,19 @@ def test_a_step_too_coarse_for_the_locked_frame_is_named():
     """
     small = UmbrellaParams(l1=0.01, l2=0.01, l3=0.01, section_height=0.001, time_step=1e-4)
     coarse = simulate(small, 0.01).summary()
-    (text,) = [w for w in coarse["warnings"] if w.startswith("coarse step")]
-    assert coarse["stage2_resolution"]["leaf"] > 0.5          # the first mode among them
-    assert "no step down to" in text                          # not even 0.1 ms / 64
+    (text,) = [w for w in coarse['warnings'] if w.startswith('coarse step')]
+    assert coarse['stage2_resolution']['leaf'] > 0.5          # the first mode among them
+    assert 'no step down to' in text                          # not even 0.1 ms / 64
     finer = small.replace(time_step=1e-6)
-    text = [w for w in simulate(finer, 0.01).summary()["warnings"]
-            if w.startswith("coarse step")]
-    enough = float(text[0].rsplit("time_step <= ", 1)[1].split()[0]) if text else 1e-6
+    text = [w for w in simulate(finer, 0.01).summary()['warnings']
+            if w.startswith('coarse step')]
+    enough = float(text[0].rsplit('time_step <= ', 1)[1].split()[0]) if text else 1e-6
     assert enough <= 1e-6
     fine = simulate(small.replace(time_step=enough), 0.01)
     assert fine.lock is not None
-    assert not [w for w in fine.summary()["warnings"] if w.startswith("coarse step")]
-    assert not [w for w in simulate(UmbrellaParams(v0=-0.1), 0.05).summary()["warnings"]
-                if w.startswith("coarse step")]
+    assert not [w for w in fine.summary()['warnings'] if w.startswith('coarse step')]
+    assert not [w for w in simulate(UmbrellaParams(v0=-0.1), 0.05).summary()['warnings']
+                if w.startswith('coarse step')]
 
 
 def test_a_run_that_does_not_conserve_energy_says_so():
@@ -647,28 +647,28 @@ def test_a_run_that_does_not_conserve_energy_says_so():
     from umbrella_sim.core.summary import SummaryAccumulator
     sim = UmbrellaSimulator(UmbrellaParams(v0=-1.0, time_step=STEP))
     acc = SummaryAccumulator(sim.params.as_dict(), sim.sample(), sim.engine.lock_kind)
-    kinetic = STEP_FIELDS.index("kinetic_energy")
+    kinetic = STEP_FIELDS.index('kinetic_energy')
     while sim.time < 0.1:
         block = sim.advance(40)
         rows = block.rows.copy()
-        rows[kinetic] *= np.where(rows[STEP_FIELDS.index("stage")] > 0, 1.01, 1.0)
+        rows[kinetic] *= np.where(rows[STEP_FIELDS.index('stage')] > 0, 1.01, 1.0)
         acc.add(StepBlock.from_rows(rows, lambda b=block: b.last, block.lock, block.error))
     assert acc.lock is not None
     summary = acc.figures()
-    assert summary["energy_drift"] > 1e-3
-    assert [w for w in summary["warnings"] if w.startswith("energy not conserved")]
-    quiet = simulate(UmbrellaParams(v0=-0.5, model="flexible-nonlinear"), 0.15).summary()
-    assert quiet["energy_drift"] < 1e-6
-    assert not [w for w in quiet["warnings"] if w.startswith("energy not conserved")]
+    assert summary['energy_drift'] > 1e-3
+    assert [w for w in summary['warnings'] if w.startswith('energy not conserved')]
+    quiet = simulate(UmbrellaParams(v0=-0.5, model='flexible-nonlinear'), 0.15).summary()
+    assert quiet['energy_drift'] < 1e-6
+    assert not [w for w in quiet['warnings'] if w.startswith('energy not conserved')]
 
 
 def test_a_soft_section_strained_past_the_small_strain_limit_is_warned_about():
     """E = 1 kPa: 116 % strain, far below yield, and no warning said so."""
     f = simulate(UmbrellaParams(youngs_modulus=1e3, time_step=STEP), 0.3).summary()
-    strain = max(f["peak_stress_leaf"], f["peak_stress_link"]) / 1e3
+    strain = max(f['peak_stress_leaf'], f['peak_stress_link']) / 1e3
     assert strain > 0.01
-    text = next(w for w in f["warnings"] if w.startswith("large strain:"))
-    assert f"{100 * strain:.3g} %" in text and "yield exceeded" not in " ".join(f["warnings"])
+    text = next(w for w in f['warnings'] if w.startswith('large strain:'))
+    assert f'{100 * strain:.3g} %' in text and 'yield exceeded' not in ' '.join(f['warnings'])
 
 
 def test_deploy_time_runs_from_the_first_push_on_every_path(tmp_path):
@@ -683,27 +683,27 @@ def test_deploy_time_runs_from_the_first_push_on_every_path(tmp_path):
 
     rest = UmbrellaParams(v0=0.0, time_step=STEP)
     now = simulate(rest.replace(sleeve_force=5.0), 1.0, stop_after_lock=0.0).summary()
-    bag = tmp_path / "late"
+    bag = tmp_path / 'late'
     late_run = record_offline(rest, str(bag), 1.2, [(0.0, 0.0), (0.1, 5.0)])
     late = late_run.summary()
-    assert now["deploy_start"] == 0.0 and late["deploy_start"] == pytest.approx(0.1, abs=1e-12)
-    assert late["lock_time"] == pytest.approx(late["deploy_time"] + 0.1, abs=1e-12)
+    assert now['deploy_start'] == 0.0 and late['deploy_start'] == pytest.approx(0.1, abs=1e-12)
+    assert late['lock_time'] == pytest.approx(late['deploy_time'] + 0.1, abs=1e-12)
     # the same motion shifted by 0.1 s: the same deploy time (the lock's root find on a
     # shifted step grid)
-    assert late["deploy_time"] == pytest.approx(now["deploy_time"], rel=1e-9)
-    assert compare.load_run(str(bag)).deploy_time == pytest.approx(late["deploy_time"],
+    assert late['deploy_time'] == pytest.approx(now['deploy_time'], rel=1e-9)
+    assert compare.load_run(str(bag)).deploy_time == pytest.approx(late['deploy_time'],
                                                                    abs=1e-12)
-    assert summary_from_recording(str(bag)).deploy_time == pytest.approx(late["deploy_time"],
+    assert summary_from_recording(str(bag)).deploy_time == pytest.approx(late['deploy_time'],
                                                                          abs=1e-12)
     # never pushed: no start (compare said None, the summary 0.0)
-    assert simulate(rest, 0.05).summary()["deploy_start"] is None
+    assert simulate(rest, 0.05).summary()['deploy_start'] is None
     # a sleeve_force parameter that a profile row at t = 0 replaces by 0 does not start it
-    bag2 = tmp_path / "replaced"
+    bag2 = tmp_path / 'replaced'
     replaced = record_offline(rest.replace(sleeve_force=3.0), str(bag2), 1.2,
                               [(0.0, 0.0), (0.1, 5.0)]).summary()
-    assert replaced["deploy_start"] == pytest.approx(0.1, abs=1e-12)
-    assert replaced["deploy_time"] == pytest.approx(late["deploy_time"], rel=1e-9)
+    assert replaced['deploy_start'] == pytest.approx(0.1, abs=1e-12)
+    assert replaced['deploy_time'] == pytest.approx(late['deploy_time'], rel=1e-9)
     assert compare.load_run(str(bag2)).deploy_time == pytest.approx(
-        replaced["deploy_time"], abs=1e-9)      # (the recording's 1 ns stamps)
+        replaced['deploy_time'], abs=1e-9)      # (the recording's 1 ns stamps)
     assert summary_from_recording(str(bag2)).deploy_time == pytest.approx(
-        replaced["deploy_time"], abs=1e-9)      # (the recording's 1 ns stamps)
+        replaced['deploy_time'], abs=1e-9)      # (the recording's 1 ns stamps)

@@ -29,7 +29,7 @@ from umbrella_sim.testing.processes import _shm_segments
 
 def own_segments(pid: int) -> set:
     """Return the node's own Fast DDS participant segments (not the port mailboxes)."""
-    return {p for p in _shm_segments(pid) if "fastrtps_port" not in p}
+    return {p for p in _shm_segments(pid) if 'fastrtps_port' not in p}
 
 
 def process_gone(pid: int) -> bool:
@@ -41,9 +41,9 @@ def process_gone(pid: int) -> bool:
 
 
 def test_domain_id_from_the_environment(monkeypatch):
-    monkeypatch.setenv(DOMAIN_ID_ENV, "42")
+    monkeypatch.setenv(DOMAIN_ID_ENV, '42')
     assert default_domain_id() == 42
-    monkeypatch.setenv(DOMAIN_ID_ENV, "many")
+    monkeypatch.setenv(DOMAIN_ID_ENV, 'many')
     with pytest.raises(ValueError, match=DOMAIN_ID_ENV):
         default_domain_id()
     monkeypatch.delenv(DOMAIN_ID_ENV)
@@ -67,48 +67,48 @@ def test_summary_figures_are_taken_on_either_side_of_the_lock():
 @pytest.mark.ros
 @pytest.mark.slow
 def test_waits_fail_saying_what_was_awaited_and_what_was_seen(antenna_factory):
-    antenna = antenna_factory({"v0": 0.0})          # at rest: it never locks
-    antenna.wait_for_phase("deploying")
+    antenna = antenna_factory({'v0': 0.0})          # at rest: it never locks
+    antenna.wait_for_phase('deploying')
     with pytest.raises(AssertionError) as exc:
-        antenna.wait_for_phase("locked", timeout=1.0)
+        antenna.wait_for_phase('locked', timeout=1.0)
     text = str(exc.value)
-    assert "'locked'" in text and "deploying" in text and "1.0 s" in text
+    assert "'locked'" in text and 'deploying' in text and '1.0 s' in text
     with pytest.raises(AssertionError) as exc:
-        antenna.wait_for("joint_states", lambda m: m.position[0] < 1.0, timeout=0.5,
-                         what="alpha1 < 1 rad")
+        antenna.wait_for('joint_states', lambda m: m.position[0] < 1.0, timeout=0.5,
+                         what='alpha1 < 1 rad')
     text = str(exc.value)
-    assert "alpha1 < 1 rad" in text and "/joint_states" in text and "last: " in text
+    assert 'alpha1 < 1 rad' in text and '/joint_states' in text and 'last: ' in text
     with pytest.raises(ValueError, match="phase 'done'"):
-        antenna.wait_for_phase("done")
-    with pytest.raises(AssertionError, match="never reached 1000"):
+        antenna.wait_for_phase('done')
+    with pytest.raises(AssertionError, match='never reached 1000'):
         antenna.wait_for_sim_time(1000.0, timeout=0.5)
     # mistakes named at once, not as a timeout later
-    with pytest.raises(ValueError, match="link can carry"):
+    with pytest.raises(ValueError, match='link can carry'):
         antenna.publish_force(5000.0)               # the node would refuse it
-    with pytest.raises(ValueError, match="sleeve force"):
+    with pytest.raises(ValueError, match='sleeve force'):
         antenna.publish_force(math.nan)
     with pytest.raises(ValueError, match="'energy'.*does not subscribe.*joint_states"):
-        antenna.messages("energy")
+        antenna.messages('energy')
     with pytest.raises(ValueError, match="'joint_state'.*receives.*joint_states"):
-        antenna.wait_for("joint_state", lambda m: True)
+        antenna.wait_for('joint_state', lambda m: True)
     with pytest.raises(ValueError, match="already runs in namespace '/'"):
-        antenna_factory({"v0": 0.0})                # one topic set for two nodes
+        antenna_factory({'v0': 0.0})                # one topic set for two nodes
 
 
 @pytest.mark.ros
 def test_startup_failure_reports_the_node_output():
-    node = NodeProcess(parameters={"l1": -1.0})
+    node = NodeProcess(parameters={'l1': -1.0})
     with pytest.raises(AssertionError) as exc:
-        node.wait_for_log("physics step", timeout=30)
-    assert "exited (code 2)" in str(exc.value) and "l1" in str(exc.value)
+        node.wait_for_log('physics step', timeout=30)
+    assert 'exited (code 2)' in str(exc.value) and 'l1' in str(exc.value)
     node.close()
     assert not os.path.exists(node.log_path)
 
 
 @pytest.mark.ros
 def test_close_leaves_no_process_log_or_shared_memory(antenna_factory):
-    antenna = antenna_factory({"v0": -0.5})
-    antenna.wait_for_phase("locked", timeout=30)
+    antenna = antenna_factory({'v0': -0.5})
+    antenna.wait_for_phase('locked', timeout=30)
     pid, log = antenna.node.pid, antenna.node.log_path
     segments = own_segments(pid)
     antenna.close()
@@ -119,8 +119,8 @@ def test_close_leaves_no_process_log_or_shared_memory(antenna_factory):
 
 @pytest.mark.ros
 def test_a_killed_node_leaves_no_shared_memory_either(ros_domain_id):
-    with NodeProcess(parameters={"v0": 0.0}, domain_id=ros_domain_id) as node:
-        node.wait_for_log("physics step")
+    with NodeProcess(parameters={'v0': 0.0}, domain_id=ros_domain_id) as node:
+        node.wait_for_log('physics step')
         segments = own_segments(node.pid)
         assert node.stop(sig=signal.SIGKILL) == -signal.SIGKILL
         assert process_gone(node.pid)
@@ -140,9 +140,9 @@ def test_live_summary_of_a_constant_force_run_matches_the_offline_core(antenna_f
     from umbrella_sim.core.params import UmbrellaParams
 
     # every publication of the window must reach the probe, also on a loaded machine
-    antenna = antenna_factory({"v0": 0.0, "publish_rate": 200.0},
+    antenna = antenna_factory({'v0': 0.0, 'publish_rate': 200.0},
                               probe=keep_every_message(probe))
-    antenna.wait_for_phase("deploying")
+    antenna.wait_for_phase('deploying')
     antenna.play_force_profile([(0.0, 30.0)])
     summary = antenna.summary(after_lock=0.2)
     offline = simulate(UmbrellaParams(v0=0.0, time_step=antenna.physics_step),
@@ -162,7 +162,7 @@ def test_a_child_process_has_the_domain_it_was_given(monkeypatch):
     monkeypatch.delenv(DOMAIN_ID_ENV, raising=False)
     code = "import os, umbrella_sim.testing as t; print(t.DOMAIN_ID, os.environ['ROS_DOMAIN_ID'])"
     for domain in (17, 93):
-        out = subprocess.run([sys.executable, "-c", code], env=ros_env(domain),
+        out = subprocess.run([sys.executable, '-c', code], env=ros_env(domain),
                              capture_output=True, text=True, check=True).stdout.split()
         assert out == [str(domain), str(domain)]
 
@@ -181,20 +181,20 @@ if sys.argv[1] == "interrupt":                  # Ctrl-C while a wait is under w
 """
 
 
-@pytest.mark.parametrize("how", ["exit", "interrupt"])
+@pytest.mark.parametrize('how', ['exit', 'interrupt'])
 @pytest.mark.ros
 @pytest.mark.slow
 def test_a_forgotten_close_or_a_ctrl_c_still_stops_the_node(tmp_path, how):
     """An antenna never closed goes at exit; Ctrl-C interrupts a wait (rclpy takes no signal)."""
-    script = tmp_path / "forgetful.py"
+    script = tmp_path / 'forgetful.py'
     script.write_text(FORGETFUL_TEST)
     r = subprocess.run([sys.executable, str(script), how], capture_output=True, text=True,
                        env=ros_env(), timeout=120)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert "terminate called" not in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert 'terminate called' not in r.stderr and 'Traceback' not in r.stderr, r.stderr
     pid = int(r.stdout.split()[1])
     assert process_gone(pid)
-    assert ("interrupted" in r.stdout) == (how == "interrupt")
+    assert ('interrupted' in r.stdout) == (how == 'interrupt')
 
 
 @pytest.mark.ros
@@ -212,30 +212,30 @@ def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path, probe):
     from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.params import UmbrellaParams
 
-    bag = tmp_path / "two_runs"
+    bag = tmp_path / 'two_runs'
     # the live figures are compared with the recording's: the probe must keep every message
-    antenna = antenna_factory({"v0": -0.5, "start_paused": True}, record_path=str(bag),
+    antenna = antenna_factory({'v0': -0.5, 'start_paused': True}, record_path=str(bag),
                               probe=keep_every_message(probe))
-    assert antenna.phases() == ["deploying"] or antenna.wait_for_phase("deploying") is None
-    with pytest.raises(AssertionError, match="never reached"):
+    assert antenna.phases() == ['deploying'] or antenna.wait_for_phase('deploying') is None
+    with pytest.raises(AssertionError, match='never reached'):
         antenna.wait_for_sim_time(1e-3, timeout=1.0)       # held at t = 0
-    antenna.wait_for("diagnostics", lambda m: True, timeout=20.0)
+    antenna.wait_for('diagnostics', lambda m: True, timeout=20.0)
     # held at t = 0 (its t = 0 state, volatile, may have gone before the probe matched)
-    assert antenna.sim_time() in (None, 0.0) and antenna.diagnostics()["paused"] == "True"
+    assert antenna.sim_time() in (None, 0.0) and antenna.diagnostics()['paused'] == 'True'
     antenna.resume()
-    antenna.wait_for_phase("locked", timeout=30)
+    antenna.wait_for_phase('locked', timeout=30)
     first = antenna.lock_time()
     offline = simulate(UmbrellaParams(v0=-0.5), 0.2, stop_after_lock=0.0).lock.time
     assert first == pytest.approx(offline, abs=1e-9)      # the whole run, from t = 0
     antenna.pause()
     antenna.reset()
-    assert antenna.phases() == ["deploying"] and antenna.lock_time() is None
+    assert antenna.phases() == ['deploying'] and antenna.lock_time() is None
     assert antenna.sim_time() == 0.0 and antenna.applied_forces() == []   # its t = 0 state
     # the new run begins with its t = 0 state, as the first did (and its recording segment)
-    assert [m.header.stamp for m in antenna.messages("joint_states")] == [Time()]
-    assert len(antenna.messages("peak_stress")) == 1
+    assert [m.header.stamp for m in antenna.messages('joint_states')] == [Time()]
+    assert len(antenna.messages('peak_stress')) == 1
     antenna.resume()
-    antenna.wait_for_phase("locked", timeout=30)
+    antenna.wait_for_phase('locked', timeout=30)
     assert antenna.lock_time() == first
     summary = antenna.summary()
     assert summary.lock_time == first and summary.deploy_time == first
@@ -260,17 +260,17 @@ def test_start_paused_pause_resume_and_reset(antenna_factory, tmp_path, probe):
 @pytest.mark.slow
 def test_antennas_in_two_namespaces_keep_their_own_diagnostics(antenna_factory):
     """/diagnostics is every node's: each antenna reads its own node's status only."""
-    paused = antenna_factory({"v0": 0.0, "start_paused": True}, namespace="a1")
-    running = antenna_factory({"v0": 0.0}, namespace="a2")
+    paused = antenna_factory({'v0': 0.0, 'start_paused': True}, namespace='a1')
+    running = antenna_factory({'v0': 0.0}, namespace='a2')
     for antenna in (paused, running):        # each node's own (1 Hz), both on one topic
-        antenna.wait_for("diagnostics", lambda m: True, timeout=10.0)
-    both = {"a1/umbrella_node: physics", "a2/umbrella_node: physics"}
-    poll(lambda: {m.status[0].name for m in paused.probe.messages("/diagnostics")} == both,
+        antenna.wait_for('diagnostics', lambda m: True, timeout=10.0)
+    both = {'a1/umbrella_node: physics', 'a2/umbrella_node: physics'}
+    poll(lambda: {m.status[0].name for m in paused.probe.messages('/diagnostics')} == both,
          10.0, lambda: "a probe never got both nodes' statuses on /diagnostics")
-    for antenna, ns, state in ((paused, "a1", "True"), (running, "a2", "False")):
-        names = {m.status[0].name for m in antenna.messages("diagnostics")}
-        assert names == {f"{ns}/umbrella_node: physics"}, names
-        assert antenna.diagnostics()["paused"] == state
+    for antenna, ns, state in ((paused, 'a1', 'True'), (running, 'a2', 'False')):
+        names = {m.status[0].name for m in antenna.messages('diagnostics')}
+        assert names == {f'{ns}/umbrella_node: physics'}, names
+        assert antenna.diagnostics()['paused'] == state
 
 
 @pytest.mark.ros
@@ -278,13 +278,13 @@ def test_reset_before_a_paused_start_was_resumed_begins_the_new_run(antenna_fact
     """A start_paused antenna reset before any resume: its new run is seen from t = 0."""
     from builtin_interfaces.msg import Time
 
-    antenna = antenna_factory({"v0": -0.5, "start_paused": True})
+    antenna = antenna_factory({'v0': -0.5, 'start_paused': True})
     antenna.reset()
-    assert [m.header.stamp for m in antenna.messages("joint_states")] == [Time()]
+    assert [m.header.stamp for m in antenna.messages('joint_states')] == [Time()]
     antenna.resume()
-    antenna.wait_for_phase("locked", timeout=30)
+    antenna.wait_for_phase('locked', timeout=30)
     antenna.wait_for_sim_time(antenna.lock_time() + 0.05)
-    assert antenna.messages("joint_states")[0].header.stamp == Time()
+    assert antenna.messages('joint_states')[0].header.stamp == Time()
 
 
 @pytest.mark.ros
@@ -294,12 +294,12 @@ def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factor
     from umbrella_sim.core.driver import simulate
     from umbrella_sim.core.params import UmbrellaParams
 
-    antenna = antenna_factory({"v0": 0.0, "start_paused": True},
+    antenna = antenna_factory({'v0': 0.0, 'start_paused': True},
                               probe=keep_every_message(probe))     # (a summary: see above)
-    with pytest.raises(AssertionError, match="l1"):
+    with pytest.raises(AssertionError, match='l1'):
         antenna.set_parameters(l1=-1.0)
     antenna.set_parameters(v0=-0.5, sleeve_force_min=-5.0)
-    with pytest.raises(ValueError, match="sleeve_force_min"):
+    with pytest.raises(ValueError, match='sleeve_force_min'):
         antenna.publish_force(-2.0)              # not before the reset: the node refuses it
     antenna.reset()
     antenna.resume()
@@ -308,7 +308,7 @@ def test_parameters_set_at_run_time_apply_to_the_antenna_on_reset(antenna_factor
     assert summary.deploy_time == pytest.approx(offline, abs=1e-9)   # moved from t = 0
     antenna.publish_force(-2.0)                  # accepted now, by the antenna and the node
     poll(lambda: [f for _, f in antenna.applied_forces()] == [-2.0], 10.0,
-         lambda: f"applied: {antenna.applied_forces()}")
+         lambda: f'applied: {antenna.applied_forces()}')
 
 
 @pytest.mark.ros
@@ -316,13 +316,13 @@ def test_a_relative_record_path_is_the_tests_working_directory(
         antenna_factory, tmp_path, monkeypatch):
     """The node runs in a temporary directory: record_path="bag" still lands in the test's."""
     monkeypatch.chdir(tmp_path)
-    antenna = antenna_factory({"v0": -0.5}, record_path="bag")
-    antenna.wait_for_phase("locked", timeout=30)
+    antenna = antenna_factory({'v0': -0.5}, record_path='bag')
+    antenna.wait_for_phase('locked', timeout=30)
     lock = antenna.lock_time()
     antenna.wait_for_sim_time(lock + 0.35)
     assert antenna.stop() == 0
     antenna.close()                          # (it used to take the bag with its directory)
-    assert summary_from_recording("bag").lock_time == pytest.approx(lock, abs=1e-9)
+    assert summary_from_recording('bag').lock_time == pytest.approx(lock, abs=1e-9)
 
 
 def test_sim_time_is_none_before_the_first_state():
@@ -331,9 +331,9 @@ def test_sim_time_is_none_before_the_first_state():
 
     antenna = object.__new__(SimulatedAntenna)     # its topics only: no node
     antenna.messages = lambda key: []
-    antenna.topics = {"joint_states": "/joint_states"}
+    antenna.topics = {'joint_states': '/joint_states'}
     assert antenna.sim_time() is None
-    with pytest.raises(AssertionError, match=r"never reached 0\.000000 s .*no joint state yet"):
+    with pytest.raises(AssertionError, match=r'never reached 0\.000000 s .*no joint state yet'):
         antenna.wait_for_sim_time(0.0, timeout=0.05)
 
 
@@ -347,8 +347,8 @@ def test_two_sessions_on_one_machine_get_two_domains():
 
     start = FREE_DOMAINS[-1]        # the last, so that the next one wraps around
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from umbrella_sim.testing import reserve_domain; "
-         f"print(reserve_domain({start}), flush=True); sys.stdin.read()"],
+        [sys.executable, '-c', 'import sys; from umbrella_sim.testing import reserve_domain; '
+         f'print(reserve_domain({start}), flush=True); sys.stdin.read()'],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         held = int(holder.stdout.readline())
@@ -367,20 +367,20 @@ def test_compare_draws_a_segment_of_another_mesh(antenna_factory, tmp_path):
 
     from umbrella_sim.testing import ros_env
 
-    bag = tmp_path / "two_meshes"
-    antenna = antenna_factory({"v0": -1.0}, record_path=str(bag))
-    antenna.wait_for_phase("locked", timeout=30)
+    bag = tmp_path / 'two_meshes'
+    antenna = antenna_factory({'v0': -1.0}, record_path=str(bag))
+    antenna.wait_for_phase('locked', timeout=30)
     antenna.set_parameters(elements_per_segment=2)
     antenna.reset()
-    antenna.wait_for_phase("locked", timeout=30)
+    antenna.wait_for_phase('locked', timeout=30)
     antenna.wait_for_sim_time(antenna.lock_time() + 0.05)
     assert antenna.stop() == 0
-    out = tmp_path / "cmp"
-    r = subprocess.run([sys.executable, "-m", "umbrella_sim.tools.compare", str(bag), "--segment",
-                        "1", "--out", str(out)], capture_output=True, text=True,
+    out = tmp_path / 'cmp'
+    r = subprocess.run([sys.executable, '-m', 'umbrella_sim.tools.compare', str(bag), '--segment',
+                        '1', '--out', str(out)], capture_output=True, text=True,
                        env=ros_env(), timeout=300)
-    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
-    assert (out / "shapes.png").stat().st_size > 10_000
+    assert r.returncode == 0 and 'Traceback' not in r.stderr, r.stderr
+    assert (out / 'shapes.png').stat().st_size > 10_000
 
 
 def test_a_summary_of_a_window_the_probe_never_saw_is_an_error_not_nan():
@@ -398,26 +398,26 @@ def test_a_summary_of_a_window_the_probe_never_saw_is_an_error_not_nan():
     late = [tip(1.88 + 0.01 * k) for k in range(5)]           # all past the window
     stress = [Float64MultiArray(data=[1e8] * 8) for _ in late]
     antenna = object.__new__(SimulatedAntenna)               # its figures only: no node
-    antenna.parameters = {"v0": -0.5}
+    antenna.parameters = {'v0': -0.5}
     antenna.wait_for_phase = antenna.wait_for_sim_time = lambda *args: None
     antenna.lock_time = lambda: 0.0904
     antenna.applied_forces = lambda: []
-    antenna.messages = lambda key: {"tip_deflection": late, "peak_stress": stress}[key]
+    antenna.messages = lambda key: {'tip_deflection': late, 'peak_stress': stress}[key]
     antenna._timed_run = lambda key: {
-        "deployment_phase": [(0.5, String(data="locked"))],
-        "tip_deflection": [(2.0 + k, m) for k, m in enumerate(late)],
-        "peak_stress": [(2.0 + k, m) for k, m in enumerate(stress)]}[key]
-    with pytest.raises(AssertionError, match=r"no stage-2 tip samples in \(0\.090400, "
-                                             r"0\.290400\] s .*at 1\.880000 s: this "
+        'deployment_phase': [(0.5, String(data='locked'))],
+        'tip_deflection': [(2.0 + k, m) for k, m in enumerate(late)],
+        'peak_stress': [(2.0 + k, m) for k, m in enumerate(stress)]}[key]
+    with pytest.raises(AssertionError, match=r'no stage-2 tip samples in \(0\.090400, '
+                                             r'0\.290400\] s .*at 1\.880000 s: this '
                                              r"antenna's probe subscribed after the window"):
         antenna.summary(after_lock=0.2)
     # a window shorter than a publication period holds none: said so, not blamed on the probe
     on_time = [tip(0.01 * k) for k in range(40)]
     stress[:] = [Float64MultiArray(data=[1e8] * 8) for _ in on_time]
     late[:] = on_time
-    with pytest.raises(AssertionError, match="after_lock is shorter than a publication period"):
+    with pytest.raises(AssertionError, match='after_lock is shorter than a publication period'):
         antenna.summary(after_lock=0.004)
-    with pytest.raises(ValueError, match="after_lock=None: seconds"):      # (a TypeError)
+    with pytest.raises(ValueError, match='after_lock=None: seconds'):      # (a TypeError)
         antenna.summary(after_lock=None)
 
 
@@ -427,14 +427,14 @@ def test_the_real_time_factor_after_a_reset_is_measured_from_the_reset(antenna_f
     """Sim time goes back at a reset: the first status after it read -6.2x and -3.0x."""
     from umbrella_sim.testing import poll
 
-    antenna = antenna_factory({"v0": -0.2})
+    antenna = antenna_factory({'v0': -0.2})
     antenna.wait_for_sim_time(1.5, timeout=30)      # well past a diagnostics period
     antenna.reset()
-    poll(lambda: len(antenna.messages("diagnostics")) >= 2, 20,
-         lambda: "fewer than two diagnostics after the reset")
+    poll(lambda: len(antenna.messages('diagnostics')) >= 2, 20,
+         lambda: 'fewer than two diagnostics after the reset')
     statuses = [{kv.key: kv.value for kv in m.status[0].values}
-                for m in antenna.messages("diagnostics")]
-    measured = [(float(v["measured_real_time_factor"]), float(v["sim_time_s"]))
+                for m in antenna.messages('diagnostics')]
+    measured = [(float(v['measured_real_time_factor']), float(v['sim_time_s']))
                 for v in statuses]
     # sim time over the wall time (at least 1 s) since the previous status or the reset:
     # positive and at most the sim time itself (across the reset it went negative), below
@@ -454,10 +454,10 @@ def test_a_force_profile_is_played_row_by_row(antenna_factory):
     """
     # at a tenth of real time: a command's way over DDS (the probe sees a state, publishes,
     # the node takes it at its next period), ~0.1 s on a loaded machine, is 10 ms of sim time
-    antenna = antenna_factory({"v0": 0.0, "real_time_factor": 0.1})
+    antenna = antenna_factory({'v0': 0.0, 'real_time_factor': 0.1})
     antenna.play_force_profile([(0.1, 5.0), (0.3, 0.0), (0.35, 5.0)], timeout=60)
     poll(lambda: len(antenna.applied_forces()) >= 3, 10,
-         lambda: f"applied only {antenna.applied_forces()}")
+         lambda: f'applied only {antenna.applied_forces()}')
     (t1, f1), (t2, f2), (t3, f3) = antenna.applied_forces()[:3]
     assert (f1, f2, f3) == (5.0, 0.0, 5.0)
     assert t2 - t1 == pytest.approx(0.2, abs=0.05) and 0.0 < t3 - t2 <= 0.1

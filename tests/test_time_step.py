@@ -29,8 +29,8 @@ from umbrella_sim.core.step_study import (locked_mode_flow, mesh_step, observed_
                                           within_targets)
 
 
-@pytest.mark.parametrize("n_el", [1, 2])
-@pytest.mark.parametrize("field", ["tip_transverse", "alpha1"])
+@pytest.mark.parametrize('n_el', [1, 2])
+@pytest.mark.parametrize('field', ['tip_transverse', 'alpha1'])
 def test_observed_order_is_two_in_the_asymptotic_range(n_el, field):
     """
     Check the observed order of convergence is two in the asymptotic range.
@@ -42,7 +42,7 @@ def test_observed_order_is_two_in_the_asymptotic_range(n_el, field):
     assert observed_order(p, (8e-6, 4e-6, 2e-6), 0.004, field) == pytest.approx(2.0, abs=0.15)
 
 
-@pytest.mark.parametrize("n_el, lock", [(1, "energy"), (2, "plastic")])
+@pytest.mark.parametrize('n_el, lock', [(1, 'energy'), (2, 'plastic')])
 def test_default_step_against_a_fine_step_run(n_el, lock):
     """
     Check the default step against a fine-step run of the same code.
@@ -57,22 +57,22 @@ def test_default_step_against_a_fine_step_run(n_el, lock):
     assert default.h == mesh_step(p)
     assert (default.h == 1e-4) == (n_el == 1)         # finer on the finer mesh
     err = step_errors(default, fine, window)
-    assert err["deploy_time"] < TARGETS["deploy_time"]
-    assert err["stage2_period"] < TARGETS["stage2_period"]
-    assert err["stage1_peak_leaf"] < TARGETS["peak_stress"]
-    assert err["stage1_peak_link"] < TARGETS["peak_stress"]
+    assert err['deploy_time'] < TARGETS['deploy_time']
+    assert err['stage2_period'] < TARGETS['stage2_period']
+    assert err['stage1_peak_leaf'] < TARGETS['peak_stress']
+    assert err['stage1_peak_link'] < TARGETS['peak_stress']
     # and the step matters: at 40x the default step the stage-2 peak stresses are off by
     # more than that, and so is the plain midpoint rule's period (the phase correction keeps
     # the period a tenth as far off)
     coarse = step_errors(run_steps(p.replace(time_step=2e-3), window), fine, window)
-    assert max(coarse["stage2_peak_leaf"], coarse["stage2_peak_link"]) > TARGETS["peak_stress"]
+    assert max(coarse['stage2_peak_leaf'], coarse['stage2_peak_link']) > TARGETS['peak_stress']
     plain = step_errors(run_steps(p.replace(time_step=2e-3, phase_correction=False), window),
                         fine, window)
-    assert plain["stage2_period"] > TARGETS["stage2_period"]
-    assert coarse["stage2_period"] < 0.2 * plain["stage2_period"]
+    assert plain['stage2_period'] > TARGETS['stage2_period']
+    assert coarse['stage2_period'] < 0.2 * plain['stage2_period']
 
 
-@pytest.mark.parametrize("v0, needed", [(-0.5, 1e-5), (-2.0, 5e-6)])
+@pytest.mark.parametrize('v0, needed', [(-0.5, 1e-5), (-2.0, 5e-6)])
 def test_step_the_deploy_time_of_a_fast_deployment_needs(v0, needed):
     """
     Check the step a fast deployment's deploy time needs, against a fine-step run.
@@ -84,10 +84,10 @@ def test_step_the_deploy_time_of_a_fast_deployment_needs(v0, needed):
     p = UmbrellaParams(v0=v0, elements_per_segment=1)
     ref = run_steps(p.replace(time_step=6.25e-7), 0.0).deploy_time
     err = abs(run_steps(p.replace(time_step=needed), 0.0).deploy_time - ref) / ref
-    assert err < TARGETS["deploy_time"]
+    assert err < TARGETS['deploy_time']
     if v0 == -2.0:   # the default step does not do it (README): 4.7e-5 when last measured
         default = run_steps(p, 0.0).deploy_time
-        assert abs(default - ref) / ref > TARGETS["deploy_time"]
+        assert abs(default - ref) / ref > TARGETS['deploy_time']
 
 
 @pytest.mark.slow
@@ -107,26 +107,26 @@ def test_step_the_stage2_peak_stresses_need():
         fine = run_steps(p.replace(time_step=1.25e-6), window)
         fixed = p.replace(time_step=1e-4)
         err = step_errors(run_steps(fixed, window), fine, window)
-        assert max(err["stage2_peak_leaf"], err["stage2_peak_link"]) > TARGETS["peak_stress"]
-        assert _warnings(fixed, "coarse step")
+        assert max(err['stage2_peak_leaf'], err['stage2_peak_link']) > TARGETS['peak_stress']
+        assert _warnings(fixed, 'coarse step')
         chosen = run_steps(p, window)
         assert chosen.h == mesh_step(p) < 1e-4
         err = step_errors(chosen, fine, window)
-        assert err["stage2_peak_leaf"] < TARGETS["peak_stress"]
-        assert err["stage2_peak_link"] < TARGETS["peak_stress"]
-        assert err["stage2_tip_series_m"] < TARGETS["stage2_tip_series_m"]
-        assert not _warnings(p, "coarse step")
+        assert err['stage2_peak_leaf'] < TARGETS['peak_stress']
+        assert err['stage2_peak_link'] < TARGETS['peak_stress']
+        assert err['stage2_tip_series_m'] < TARGETS['stage2_tip_series_m']
+        assert not _warnings(p, 'coarse step')
 
 
 def _warnings(p: UmbrellaParams, key: str) -> list:
     """Return the warnings of p's run through the lock that start with key."""
     from umbrella_sim.core.driver import simulate
 
-    return [w for w in simulate(p, 0.3, keep_samples=False).figures["warnings"]
+    return [w for w in simulate(p, 0.3, keep_samples=False).figures['warnings']
             if w.startswith(key)]
 
 
-@pytest.mark.parametrize("n_el, v0, lock", [(2, -0.5, "plastic"), (4, -0.2, "plastic")])
+@pytest.mark.parametrize('n_el, v0, lock', [(2, -0.5, 'plastic'), (4, -0.2, 'plastic')])
 @pytest.mark.slow
 def test_the_mesh_step_meets_every_target_where_the_fixed_step_misses_one(n_el, v0, lock):
     """
@@ -141,15 +141,15 @@ def test_the_mesh_step_meets_every_target_where_the_fixed_step_misses_one(n_el, 
     window = 0.5
     fine = run_steps(p.replace(time_step=1.25e-6), window)
     fixed = step_errors(run_steps(p.replace(time_step=1e-4), window), fine, window)
-    assert max(fixed["stage2_peak_leaf"], fixed["stage2_peak_link"]) > TARGETS["peak_stress"]
+    assert max(fixed['stage2_peak_leaf'], fixed['stage2_peak_link']) > TARGETS['peak_stress']
     run = run_steps(p, window)
     assert run.h == mesh_step(p)
     err = step_errors(run, fine, window)
     assert within_targets(err), err
 
 
-@pytest.mark.parametrize("n_el, v0, lock", [(1, -0.2, "energy"), (1, -0.2, "plastic"),
-                                            (2, -0.5, "energy")])
+@pytest.mark.parametrize('n_el, v0, lock', [(1, -0.2, 'energy'), (1, -0.2, 'plastic'),
+                                            (2, -0.5, 'energy')])
 def test_the_mode_fit_keeps_the_tip_series_at_the_chosen_step(n_el, v0, lock):
     """
     Check what stage 2's mode fit does at the step chosen for the mesh.
@@ -164,12 +164,12 @@ def test_the_mode_fit_keeps_the_tip_series_at_the_chosen_step(n_el, v0, lock):
     window = 0.5
     fine = run_steps(p.replace(time_step=2.5e-6), window)
     fitted = step_errors(run_steps(p, window), fine, window)
-    assert fitted["stage2_tip_series_m"] < TARGETS["stage2_tip_series_m"]
-    assert fitted["stage2_period"] < TARGETS["stage2_period"]
-    assert fitted["stage2_amplitude"] < TARGETS["stage2_amplitude"]
+    assert fitted['stage2_tip_series_m'] < TARGETS['stage2_tip_series_m']
+    assert fitted['stage2_period'] < TARGETS['stage2_period']
+    assert fitted['stage2_amplitude'] < TARGETS['stage2_amplitude']
     plain = step_errors(run_steps(p.replace(phase_correction=False), window), fine, window)
-    assert plain["stage2_tip_series_m"] > TARGETS["stage2_tip_series_m"]
-    assert fitted["stage2_tip_series_m"] < 0.5 * plain["stage2_tip_series_m"]
+    assert plain['stage2_tip_series_m'] > TARGETS['stage2_tip_series_m']
+    assert fitted['stage2_tip_series_m'] < 0.5 * plain['stage2_tip_series_m']
 
 
 def test_the_fitted_stage2_is_exact_in_the_linear_range():
@@ -217,7 +217,7 @@ def test_the_fitted_stage2_is_exact_in_the_linear_range():
     assert np.max(np.abs(stage2(1e-4, False) - fine)) > 0.05 * amplitude
 
 
-@pytest.mark.parametrize("k", [0, 3, 5, 7])
+@pytest.mark.parametrize('k', [0, 3, 5, 7])
 def test_the_mode_fit_gives_each_resolved_mode_its_exact_period_and_amplitude(k):
     """
     Check the discrete period and amplitude of single modes of the locked frame.
@@ -243,7 +243,7 @@ def test_the_mode_fit_gives_each_resolved_mode_its_exact_period_and_amplitude(k)
     assert max(abs(fitted.energy_change), abs(plain.energy_change)) < (1e-8 if k == 0 else 1e-12)
 
 
-@pytest.mark.parametrize("k", [3, 5, 7])
+@pytest.mark.parametrize('k', [3, 5, 7])
 def test_the_mode_fit_gives_each_resolved_mode_its_damping_ratio(k):
     """
     Check the damping ratio and frequency of single damped modes of the locked frame.
@@ -284,7 +284,7 @@ def test_newton_error_is_far_below_the_step_error():
         if tolerance is not None:
             sim.engine.integrator.tolerance = tolerance
         block = sim.advance(round(duration / h))
-        assert sim.stage == "locked"
+        assert sim.stage == 'locked'
         energy = mechanical_energy(block) - block.work + block.lock_energy_loss
         assert abs(energy[-1] - energy[-100]) < 1e-10 * abs(energy[-1])
         return block.tip_transverse
@@ -307,9 +307,9 @@ def test_sampled_peak_shortfall_of_a_narrow_crest():
     crest = 1.0 + np.maximum(0.0, 1.0 - np.abs(t - 0.5) / 4e-3)
     ref = StepRun(1e-3, 0.0, t, np.ones_like(t), np.zeros_like(t), crest, 2.0 * crest)
     assert sampled_peak_shortfall(ref, 4e-3, 1.0) == pytest.approx(
-        {"leaf": 0.25, "link": 0.25})
-    assert sampled_peak_shortfall(ref, 1e-3, 1.0) == {"leaf": 0.0, "link": 0.0}
-    with pytest.raises(ValueError, match="not a multiple"):
+        {'leaf': 0.25, 'link': 0.25})
+    assert sampled_peak_shortfall(ref, 1e-3, 1.0) == {'leaf': 0.0, 'link': 0.0}
+    with pytest.raises(ValueError, match='not a multiple'):
         sampled_peak_shortfall(ref, 2.5e-3, 1.0)
 
 
@@ -340,12 +340,12 @@ def test_the_step_chosen_for_the_mesh_is_the_step_of_every_run(tmp_path):
     assert driver.sim.h == driver.step == pytest.approx(1e-3 / driver.period_steps)
     assert driver.step <= h and driver.step == pytest.approx(h, rel=1e-12)
 
-    bag = tmp_path / "mesh"
+    bag = tmp_path / 'mesh'
     q = p.replace(elements_per_segment=2)
     record_offline(q, str(bag), 0.05, publish_rate=1000.0)
     log = read_log(str(bag))
-    assert log.parameters()["time_step"] == 0.0
-    assert float(log.parameters()["physics_step"]) == pytest.approx(mesh_step(q), rel=1e-12)
+    assert log.parameters()['time_step'] == 0.0
+    assert float(log.parameters()['physics_step']) == pytest.approx(mesh_step(q), rel=1e-12)
     res = resimulate(log)
-    assert res["compared"] > 40
-    assert max(res["max_abs_diff"].values()) < 1e-12
+    assert res['compared'] > 40
+    assert max(res['max_abs_diff'].values()) < 1e-12

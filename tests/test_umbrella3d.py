@@ -57,81 +57,81 @@ def assert_ribs_equal_planar(ribs: int, values: dict, duration: float):
     p = UmbrellaParams(**values, phase_correction=False)
     planar_sim, planar = planar_run(p, duration)
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-        {"ribs": ribs, **values, "phase_correction": False}))
+        {'ribs': ribs, **values, 'phase_correction': False}))
     assert sim.h == planar_sim.h
     a = sim.run(duration).arrays()
-    assert len(a["time"]) - 1 == len(planar)
-    np.testing.assert_allclose(a["time"][1:], planar[:, 0], rtol=0, atol=1e-15)
+    assert len(a['time']) - 1 == len(planar)
+    np.testing.assert_allclose(a['time'][1:], planar[:, 0], rtol=0, atol=1e-15)
     # the lock: the same instant (the Illinois root find's tolerance is 1e-12 s)
     assert sim.lock_time == pytest.approx(planar_sim.lock_event.time, abs=1e-11)
-    for name, column in (("alpha1", 1), ("alpha2", 2)):
+    for name, column in (('alpha1', 1), ('alpha2', 2)):
         np.testing.assert_allclose(a[name][1:], np.repeat(planar[:, column:column + 1], ribs, 1),
                                    rtol=0, atol=IDENTITY_TOLERANCE, err_msg=name)
-    np.testing.assert_allclose(a["sleeve_position"][1:], planar[:, 3], rtol=0,
+    np.testing.assert_allclose(a['sleeve_position'][1:], planar[:, 3], rtol=0,
                                atol=IDENTITY_TOLERANCE)
     for d, column in ((0, 4), (1, 5)):
-        np.testing.assert_allclose(a["tip"][1:, :, d],
+        np.testing.assert_allclose(a['tip'][1:, :, d],
                                    np.repeat(planar[:, column:column + 1], ribs, 1),
                                    rtol=0, atol=IDENTITY_TOLERANCE)
     # nothing leaves the rib planes
-    assert np.max(np.abs(a["tip"][:, :, 2])) < 1e-15
+    assert np.max(np.abs(a['tip'][:, :, 2])) < 1e-15
     # the stresses: with no torsion and no out-of-plane bending, the combined (von Mises)
     # figure is |axial| + |bending|, the planar model's worst fibre; its peak over the run
     # is the planar peak, at the same place and instant
-    peaks = sim.record.summary()["peak_stress"]
+    peaks = sim.record.summary()['peak_stress']
     planar_peak = np.max(planar[:, 7:9])
-    np.testing.assert_allclose(peaks["von_mises"][0], planar_peak, rtol=1e-9)
-    body, _, when = peaks["von_mises"][1][0]
-    column = 7 if body == "leaf" else 8
+    np.testing.assert_allclose(peaks['von_mises'][0], planar_peak, rtol=1e-9)
+    body, _, when = peaks['von_mises'][1][0]
+    column = 7 if body == 'leaf' else 8
     assert planar[:, column].max() == pytest.approx(planar_peak, rel=1e-9)
     assert when == pytest.approx(planar[np.argmax(planar[:, column]), 0], abs=1e-12)
-    for name in ("bending_out_of_plane", "torsion"):
+    for name in ('bending_out_of_plane', 'torsion'):
         assert np.all(peaks[name][0] < 1e-9 * planar_peak)
-    energy = a["kinetic_energy"] + a["strain_energy"]
+    energy = a['kinetic_energy'] + a['strain_energy']
     np.testing.assert_allclose(energy[1:], ribs * planar[:, 6], rtol=1e-9)
 
 
 def test_one_rib_is_the_planar_model():
     """ribs: 1, the energy lock (the default), the planar default mesh and step."""
-    assert_ribs_equal_planar(1, {"time_step": 1e-4, "sleeve_force": 10.0}, 0.19)
+    assert_ribs_equal_planar(1, {'time_step': 1e-4, 'sleeve_force': 10.0}, 0.19)
 
 
 @pytest.mark.slow
 def test_identical_ribs_are_each_the_planar_model():
     """Four ribs, two elements a segment, plastic lock: each rib the planar model."""
-    assert_ribs_equal_planar(4, {"time_step": 5e-5, "elements_per_segment": 2,
-                                 "lock": "plastic", "sleeve_force": 10.0}, 0.19)
+    assert_ribs_equal_planar(4, {'time_step': 5e-5, 'elements_per_segment': 2,
+                                 'lock': 'plastic', 'sleeve_force': 10.0}, 0.19)
 
 
 # ---------------------------------------------------------------- (c) balances
-ASYMMETRIC = {"ribs": 3, "sleeve_force": 10.0, "time_step": 1e-4, "rib1.hinge_coulomb": 0.3,
-              "rib1.hinge_viscous": 0.05, "rib2.out_of_plane_rate": 0.2,
-              "rib0.tip_mass": 0.05}
+ASYMMETRIC = {'ribs': 3, 'sleeve_force': 10.0, 'time_step': 1e-4, 'rib1.hinge_coulomb': 0.3,
+              'rib1.hinge_viscous': 0.05, 'rib2.out_of_plane_rate': 0.2,
+              'rib0.tip_mass': 0.05}
 BALANCE_TOLERANCE = 1e-10      # relative to the largest T + V: the discrete balance's round-off
 #: a driven base: a half-sine jolt along X and a spin-up about Y (integrator3d.BaseDrive)
-DRIVE = {"base_accel_x": 20.0, "base_accel_start": 0.02, "base_accel_duration": 0.02,
-         "base_spin_rate": 3.0, "base_spin_ramp": 0.05}
+DRIVE = {'base_accel_x': 20.0, 'base_accel_start': 0.02, 'base_accel_duration': 0.02,
+         'base_spin_rate': 3.0, 'base_spin_ramp': 0.05}
 
 
 def test_energy_balance_with_hinge_friction():
     """T + V - (T + V)(0) = W_sleeve + W_friction: the step keeps its discrete balance."""
     rec = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(ASYMMETRIC)).run(0.05)
     s = rec.summary()
-    assert s["energy_balance_residual"] < BALANCE_TOLERANCE * s["energy_scale"]
+    assert s['energy_balance_residual'] < BALANCE_TOLERANCE * s['energy_scale']
     # the friction is there and is a loss, of the order of the work (not a rounding)
-    friction = s["friction_work"]
-    assert friction[1] < -1e-3 * rec.arrays()["work"][-1]
+    friction = s['friction_work']
+    assert friction[1] < -1e-3 * rec.arrays()['work'][-1]
     assert friction[0] == friction[2] == 0.0
     # the kicked rib leaves its plane; the sleeve keeps the others in theirs but for the
     # coupling through it
-    assert s["max_out_of_plane_tip_rib"] == 2
+    assert s['max_out_of_plane_tip_rib'] == 2
 
 
 def momentum_scales(sim, a):
     """Return the ribs' mass x the largest sleeve speed (N s), and that x the rib's length."""
     p = sim.params.planar
     rib_mass = sim.model.total_mass - sim.model.bus_mass - sim.model.sleeve_mass
-    linear = rib_mass * np.max(np.abs(a["sleeve_velocity"]))
+    linear = rib_mass * np.max(np.abs(a['sleeve_velocity']))
     return linear, linear * (p.l1 + p.l2)
 
 
@@ -145,18 +145,18 @@ def test_free_floating_bus_keeps_its_momentum_and_energy():
     made with a Newton tolerance of 1e-12 (m, rad) and the drift asserted below 1e-8 of the
     scale m v L.
     """
-    values = dict(ASYMMETRIC, base="free", bus_mass=5.0, bus_inertia=0.2)
+    values = dict(ASYMMETRIC, base='free', bus_mass=5.0, bus_inertia=0.2)
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), tolerance=1e-12)
     rec = sim.run(0.05)
     a = rec.arrays()
-    p, h = a["linear_momentum"], a["angular_momentum"]
+    p, h = a['linear_momentum'], a['angular_momentum']
     linear, scale = momentum_scales(sim, a)
     assert np.max(np.abs(p - p[0])) < 1e-12 * linear
     assert np.max(np.abs(h - h[0])) < 1e-8 * scale
     # the bus moved in reaction (the check is not of a bus that stays put)
-    assert np.max(np.abs(a["bus_q"][-1])) > 1e-4
+    assert np.max(np.abs(a['bus_q'][-1])) > 1e-4
     s = rec.summary()
-    assert s["energy_balance_residual"] < BALANCE_TOLERANCE * s["energy_scale"]
+    assert s['energy_balance_residual'] < BALANCE_TOLERANCE * s['energy_scale']
 
 
 def test_energy_balance_on_a_driven_base():
@@ -170,27 +170,27 @@ def test_energy_balance_on_a_driven_base():
     (relative 1e-7 asserted, measured 1e-8); the kinetic energy depends on the spin angle
     through the base's translation (R^T X'), which the discrete gradient includes.
     """
-    values = dict(ASYMMETRIC, base="prescribed", **DRIVE)
+    values = dict(ASYMMETRIC, base='prescribed', **DRIVE)
     rec = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values)).run(0.08)
     s = rec.summary()
-    drive = rec.arrays()["drive_work"][-1]
-    assert abs(drive) > 0.1 * s["energy_scale"]
-    assert s["energy_balance_residual"] < 1e-7 * s["energy_scale"]
+    drive = rec.arrays()['drive_work'][-1]
+    assert abs(drive) > 0.1 * s['energy_scale']
+    assert s['energy_balance_residual'] < 1e-7 * s['energy_scale']
 
 
 @pytest.mark.slow
 def test_free_bus_through_the_plastic_lock():
     """Across the lock: the plastic lock's loss accounted, momentum kept (internal impact)."""
-    values = dict(ASYMMETRIC, base="free", bus_mass=5.0, bus_inertia=0.2)
+    values = dict(ASYMMETRIC, base='free', bus_mass=5.0, bus_inertia=0.2)
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), tolerance=1e-12)
     rec = sim.run(0.2)
     a = rec.arrays()
-    assert sim.lock_time is not None and sim.params.lock_rule == "plastic"
-    assert a["lock_energy_loss"][-1] > 0.01 * a["work"][-1]
+    assert sim.lock_time is not None and sim.params.lock_rule == 'plastic'
+    assert a['lock_energy_loss'][-1] > 0.01 * a['work'][-1]
     s = rec.summary()
-    assert s["energy_balance_residual"] < BALANCE_TOLERANCE * s["energy_scale"]
+    assert s['energy_balance_residual'] < BALANCE_TOLERANCE * s['energy_scale']
     linear, scale = momentum_scales(sim, a)
-    p, h = a["linear_momentum"], a["angular_momentum"]
+    p, h = a['linear_momentum'], a['angular_momentum']
     assert np.max(np.abs(p - p[0])) < 1e-12 * linear
     assert np.max(np.abs(h - h[0])) < 1e-6 * scale
 
@@ -218,34 +218,34 @@ def test_a_stuck_hinge_holds_the_sleeve_force_until_its_release_time():
     (a suddenly applied load on an undamped linear frame: at most twice the static response);
     it is released at the first grid step that reaches 50 ms, and the energy balance holds.
     """
-    values = {"ribs": 3, "sleeve_force": 10.0, "time_step": 1e-4, "v0": 0.0,
-              "rib1.stick_until": 0.05}
+    values = {'ribs': 3, 'sleeve_force': 10.0, 'time_step': 1e-4, 'v0': 0.0,
+              'rib1.stick_until': 0.05}
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values))
     rec = sim.run(0.06)
     a = rec.arrays()
-    stuck = a["stuck"][:, 1]
-    assert not np.any(a["stuck"][:, [0, 2]])
+    stuck = a['stuck'][:, 1]
+    assert not np.any(a['stuck'][:, [0, 2]])
     last = np.nonzero(stuck)[0].max()
-    assert a["time"][last] < 0.05 <= a["time"][last + 1] and not np.any(stuck[last + 1:])
-    assert np.ptp(a["alpha1"][:last + 1, 1]) < 1e-11
+    assert a['time'][last] < 0.05 <= a['time'][last + 1] and not np.any(stuck[last + 1:])
+    assert np.ptp(a['alpha1'][:last + 1, 1]) < 1e-11
     static = static_holding_torque(sim.params.planar, 3)
-    torque = a["holding_torque"][1:last + 1, 1]
+    torque = a['holding_torque'][1:last + 1, 1]
     assert np.mean(torque) == pytest.approx(static, rel=0.03)
     assert 1.5 * static < np.max(np.abs(torque)) < 2.0 * static
     s = rec.summary()
-    assert s["energy_balance_residual"] < BALANCE_TOLERANCE * s["energy_scale"]
+    assert s['energy_balance_residual'] < BALANCE_TOLERANCE * s['energy_scale']
 
 
 def test_a_stuck_hinge_breaks_free_at_its_torque_threshold():
     """stick_torque 1.5 x the static torque: released once the oscillating torque reaches it."""
     p = UmbrellaParams(v0=0.0, sleeve_force=10.0)
     threshold = 1.5 * static_holding_torque(p, 3)
-    values = {"ribs": 3, "sleeve_force": 10.0, "time_step": 1e-4, "v0": 0.0,
-              "rib1.stick_torque": threshold}
+    values = {'ribs': 3, 'sleeve_force': 10.0, 'time_step': 1e-4, 'v0': 0.0,
+              'rib1.stick_torque': threshold}
     a = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values)).run(0.03).arrays()
-    stuck = a["stuck"][:, 1]
+    stuck = a['stuck'][:, 1]
     assert stuck[0] and not stuck[-1]
     last = np.nonzero(stuck)[0].max()
     assert not np.any(stuck[last + 1:])
     # held while below the threshold; the step that reached it released the hinge
-    assert np.all(np.abs(a["holding_torque"][:last + 1, 1]) < threshold)
+    assert np.all(np.abs(a['holding_torque'][:last + 1, 1]) < threshold)

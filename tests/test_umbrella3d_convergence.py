@@ -38,7 +38,7 @@ from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
 def modes_by_kind(n: int):
     """Return the two lowest (out-of-plane bending, torsion, in-plane) frequencies (rad/s)."""
     omega, _, labels = locked_modes(UmbrellaModel3D(UmbrellaRibsParams.from_mapping(
-        {"elements_per_segment": n})))
+        {'elements_per_segment': n})))
     labels = np.array(labels)
     return [omega[labels[:, kind] > 0.5][:2] for kind in (1, 2, 0)]
 
@@ -72,10 +72,10 @@ def test_a_lateral_jolt_converges_with_the_mesh():
     tips = []
     for n in (1, 2, 4):
         sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping({
-            "ribs": 2, "sleeve_force": 10.0, "time_step": 5e-5, "elements_per_segment": n,
-            "base": "prescribed", "base_accel_z": 50.0, "base_accel_duration": 0.01,
-            "rib1.hinge_coulomb": 0.3}))
-        tips.append(sim.run(0.03).arrays()["tip"][-1, 0, 2])
+            'ribs': 2, 'sleeve_force': 10.0, 'time_step': 5e-5, 'elements_per_segment': n,
+            'base': 'prescribed', 'base_accel_z': 50.0, 'base_accel_duration': 0.01,
+            'rib1.hinge_coulomb': 0.3}))
+        tips.append(sim.run(0.03).arrays()['tip'][-1, 0, 2])
     w1, w2, w4 = tips
     assert abs(w4) > 1e-3                    # a deflection, not a rounding
     assert abs(w2 - w4) < 0.5 * abs(w1 - w2)

@@ -119,9 +119,9 @@ class Frame:
 def section_of(p: UmbrellaParams, nu=0.33):
     area, inertia, e = p.cross_section_area, p.cross_section_inertia, p.youngs_modulus
     shear = e / (2 * (1 + nu))
-    return {"ea": e * area, "eiz": e * inertia, "eiy": e * inertia,
-            "gj": shear * 0.8436 * 2 * inertia, "rho_a": p.mass_per_length,
-            "rho_ip": p.density * 2 * inertia}
+    return {'ea': e * area, 'eiz': e * inertia, 'eiy': e * inertia,
+            'gj': shear * 0.8436 * 2 * inertia, 'rho_a': p.mass_per_length,
+            'rho_ip': p.density * 2 * inertia}
 
 
 def rib_frame(p: UmbrellaParams, n: int, hub: float = 0.0):
@@ -143,10 +143,10 @@ def rib_frame(p: UmbrellaParams, n: int, hub: float = 0.0):
     return f
 
 
-@pytest.mark.parametrize("n", [1, 2, 4])
+@pytest.mark.parametrize('n', [1, 2, 4])
 def test_locked_frequencies_equal_an_independent_3d_frame_model(n):
     p = UmbrellaParams(elements_per_segment=n)
-    model = UmbrellaModel3D(UmbrellaRibsParams.from_mapping({"elements_per_segment": n}))
+    model = UmbrellaModel3D(UmbrellaRibsParams.from_mapping({'elements_per_segment': n}))
     omega, _, labels = locked_modes(model)
     reference = rib_frame(p, n).modes()
     assert len(omega) == len(reference)
@@ -165,7 +165,7 @@ def test_several_ribs_and_a_hub_radius_repeat_the_rib_modes():
     """The sleeve held, the ribs decouple: each frequency N-fold, whatever the azimuth."""
     n = 1
     model = UmbrellaModel3D(UmbrellaRibsParams.from_mapping(
-        {"ribs": 3, "elements_per_segment": n, "hub_radius": 0.1, "sleeve_mass": 0.5}))
+        {'ribs': 3, 'elements_per_segment': n, 'hub_radius': 0.1, 'sleeve_mass': 0.5}))
     omega, _, _ = locked_modes(model)
     single = rib_frame(UmbrellaParams(elements_per_segment=n), n, hub=0.1).modes()
     np.testing.assert_allclose(omega, np.repeat(single, 3), rtol=1e-9)
@@ -179,8 +179,8 @@ def test_the_frame_element_gives_the_published_cantilever_frequencies():
     ids = f.beam(np.zeros(3), np.array([1.0, 0.0, 0.0]), 16, sec, np.array([0.0, 0.0, 1.0]))
     f.fix(ids[0], range(6))
     omega = f.modes()
-    bend = [lam**2 * math.sqrt(sec["eiz"] / sec["rho_a"]) for lam in (1.87510, 4.69409)]
-    torsion = math.pi / 2 * math.sqrt(sec["gj"] / sec["rho_ip"])
+    bend = [lam**2 * math.sqrt(sec['eiz'] / sec['rho_a']) for lam in (1.87510, 4.69409)]
+    torsion = math.pi / 2 * math.sqrt(sec['gj'] / sec['rho_ip'])
     # bending: each frequency twice (both planes, square section)
     np.testing.assert_allclose(omega[[0, 1, 2, 3]], np.repeat(bend, 2), rtol=2e-4)
     assert np.min(np.abs(omega / torsion - 1)) < 2e-3

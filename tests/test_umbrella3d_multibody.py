@@ -39,9 +39,10 @@ from umbrella_sim.core import UmbrellaParams
 from umbrella_sim.core.umbrella3d.model3d import BusFrame
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+
 from .test_umbrella3d import DRIVE
 
-mujoco = pytest.importorskip("mujoco")
+mujoco = pytest.importorskip('mujoco')
 
 RIBS, FORCE, SLEEVE_MASS, BUS_MASS, BUS_INERTIA = 3, 10.0, 1e-3, 5.0, 0.2
 VISCOUS, COULOMB, TIP_MASS = (0.0, 0.05, 0.0), (0.0, 0.2, 0.0), (0.05, 0.0, 0.0)
@@ -68,7 +69,7 @@ def umbrella_mjcf(p: UmbrellaParams, dt: float, time_constant: float,
         ml, mk = rho_a * (l1 + l2), rho_a * l3
         il, ik = ml * (l1 + l2) ** 2 / 12, mk * l3 ** 2 / 12
         tip = (f'<body pos="{l1 + l2} 0 0"><inertial pos="0 0 0" mass="{TIP_MASS[k]}" '
-               'diaginertia="1e-9 1e-9 1e-9"/></body>' if TIP_MASS[k] > 0 else "")
+               'diaginertia="1e-9 1e-9 1e-9"/></body>' if TIP_MASS[k] > 0 else '')
         ribs.append(f"""
       <body name="leaf{k}" quat="{math.cos(psi / 2)} 0 {math.sin(psi / 2)} 0">
         <joint name="leaf_hinge{k}" type="hinge" axis="0 0 1" damping="{VISCOUS[k]}"
@@ -82,17 +83,17 @@ def umbrella_mjcf(p: UmbrellaParams, dt: float, time_constant: float,
           <site name="H{k}" pos="{l3} 0 0"/>
         </body>
       </body>""")
-    ties = "".join(f'\n    <connect site1="H{k}" site2="S" solref="{time_constant} 1"/>'
+    ties = ''.join(f'\n    <connect site1="H{k}" site2="S" solref="{time_constant} 1"/>'
                    for k in range(RIBS))
     if driven:
         joints = ('<joint name="base_x" type="slide" axis="1 0 0"/>'
                   '<joint name="base_z" type="slide" axis="0 0 1"/>'
                   '<joint name="base_spin" type="hinge" axis="0 1 0"/>')
         mass = inertia = DRIVEN_MASS
-        drives = "".join(f'\n    <motor name="{j}" joint="{j}" gear="1"/>'
-                         for j in ("base_x", "base_z", "base_spin"))
+        drives = ''.join(f'\n    <motor name="{j}" joint="{j}" gear="1"/>'
+                         for j in ('base_x', 'base_z', 'base_spin'))
     else:
-        joints, mass, inertia, drives = "<freejoint/>", BUS_MASS, BUS_INERTIA, ""
+        joints, mass, inertia, drives = '<freejoint/>', BUS_MASS, BUS_INERTIA, ''
     return f"""<mujoco>
   <option timestep="{dt}" gravity="0 0 0" integrator="RK4"/>
   <worldbody>
@@ -117,11 +118,11 @@ def umbrella_mjcf(p: UmbrellaParams, dt: float, time_constant: float,
 
 def base_acceleration(t: float):
     """Return the driven base's (acceleration along X, angular acceleration about Y)."""
-    start, length = DRIVE["base_accel_start"], DRIVE["base_accel_duration"]
-    ax = (DRIVE["base_accel_x"] * math.sin(math.pi * (t - start) / length)
+    start, length = DRIVE['base_accel_start'], DRIVE['base_accel_duration']
+    ax = (DRIVE['base_accel_x'] * math.sin(math.pi * (t - start) / length)
           if 0.0 < t - start < length else 0.0)
-    ramp = DRIVE["base_spin_ramp"]
-    spin = DRIVE["base_spin_rate"] / ramp if t < ramp else 0.0
+    ramp = DRIVE['base_spin_ramp']
+    spin = DRIVE['base_spin_rate'] / ramp if t < ramp else 0.0
     return ax, spin
 
 
@@ -148,7 +149,7 @@ def mujoco_run(p: UmbrellaParams, dt: float = 1e-5, time_constant: float = 2e-5,
         mujoco.mj_fullM(m, d, mass)
         # the bus's velocity making the whole momentum zero (as the umbrella model starts)
         d.qvel[:6] = -np.linalg.solve(mass[:6, :6], mass[:6, 6:] @ d.qvel[6:])
-    d.ctrl[m.actuator("sleeve_force").id] = -FORCE * RIBS
+    d.ctrl[m.actuator('sleeve_force').id] = -FORCE * RIBS
     y_stop = p.sleeve_stop_height
     marks, out = list(marks), {}
     while True:
@@ -167,22 +168,22 @@ def mujoco_run(p: UmbrellaParams, dt: float = 1e-5, time_constant: float = 2e-5,
         t0, y0 = d.time, d.qpos[-1]
         if driven:              # the force the heavy bus needs, at the step's middle
             ax, spin = base_acceleration(d.time + 0.5 * dt)
-            d.ctrl[m.actuator("base_x").id] = DRIVEN_MASS * ax
-            d.ctrl[m.actuator("base_spin").id] = DRIVEN_MASS * spin
+            d.ctrl[m.actuator('base_x').id] = DRIVEN_MASS * ax
+            d.ctrl[m.actuator('base_spin').id] = DRIVEN_MASS * spin
         mujoco.mj_step(m, d)
     return t0 + (d.time - t0) * (y0 - y_stop) / (y0 - d.qpos[-1]), out
 
 
 def umbrella_run(marks=MARKS, driven: bool = False):
     """Return the same figures from the umbrella model."""
-    values = {"ribs": RIBS, "sleeve_force": FORCE, "time_step": 1e-4,
-              "sleeve_mass": SLEEVE_MASS, "youngs_modulus": STIFF,
-              "hinge_viscous": list(VISCOUS), "hinge_coulomb": list(COULOMB),
-              "tip_mass": list(TIP_MASS)}
+    values = {'ribs': RIBS, 'sleeve_force': FORCE, 'time_step': 1e-4,
+              'sleeve_mass': SLEEVE_MASS, 'youngs_modulus': STIFF,
+              'hinge_viscous': list(VISCOUS), 'hinge_coulomb': list(COULOMB),
+              'tip_mass': list(TIP_MASS)}
     if driven:
-        values.update(DRIVE, base="prescribed")
+        values.update(DRIVE, base='prescribed')
     else:
-        values.update(base="free", bus_mass=BUS_MASS, bus_inertia=BUS_INERTIA)
+        values.update(base='free', bus_mass=BUS_MASS, bus_inertia=BUS_INERTIA)
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values))
     marks, out = list(marks), {}
     while not sim.locked:

@@ -28,35 +28,35 @@ import pytest
 from umbrella_sim.core.umbrella3d.params3d import (RIB_PLANAR_NAMES, RIB_SPECS,
                                                    UMBRELLA_SPECS, UmbrellaRibsParams)
 
-PAGE = os.path.join(os.path.dirname(__file__), "..", "msg_docs", "umbrella3d_parameters.md")
-_BLOCK = re.compile(r"(<!-- BEGIN GENERATED: (\w+) -->\n).*?(<!-- END GENERATED: \2 -->)", re.S)
+PAGE = os.path.join(os.path.dirname(__file__), '..', 'msg_docs', 'umbrella3d_parameters.md')
+_BLOCK = re.compile(r'(<!-- BEGIN GENERATED: (\w+) -->\n).*?(<!-- END GENERATED: \2 -->)', re.S)
 
 
 def rows(specs) -> str:
     """Return the markdown table of a group of specifications."""
-    out = ["| name | type | unit | default | range | meaning |", "|---|---|---|---|---|---|"]
+    out = ['| name | type | unit | default | range | meaning |', '|---|---|---|---|---|---|']
     for p in specs.values():
-        cell = [f"`{p.name}`", p.type_name, p.unit, p.default_str, p.range_text(), p.doc]
-        out.append("| " + " | ".join(c.replace("|", "\\|") for c in cell) + " |")
-    return "\n".join(out) + "\n"
+        cell = [f'`{p.name}`', p.type_name, p.unit, p.default_str, p.range_text(), p.doc]
+        out.append('| ' + ' | '.join(c.replace('|', '\\|') for c in cell) + ' |')
+    return '\n'.join(out) + '\n'
 
 
 def generated(text: str) -> str:
-    tables = {"umbrella": rows(UMBRELLA_SPECS), "rib": rows(RIB_SPECS)}
+    tables = {'umbrella': rows(UMBRELLA_SPECS), 'rib': rows(RIB_SPECS)}
     return _BLOCK.sub(lambda m: m.group(1) + tables[m.group(2)] + m.group(3), text)
 
 
 def test_the_parameter_page_is_current():
-    text = open(PAGE, encoding="utf-8").read()
-    assert generated(text) == text, "regenerate: python tests/test_umbrella3d_params.py"
+    text = open(PAGE, encoding='utf-8').read()
+    assert generated(text) == text, 'regenerate: python tests/test_umbrella3d_params.py'
     for name in RIB_PLANAR_NAMES:
-        assert f"`{name}`" in text
+        assert f'`{name}`' in text
 
 
 def test_per_rib_values_as_lists_and_overrides():
-    p = UmbrellaRibsParams.from_mapping({"ribs": 3, "tip_mass": [0.0, 0.1, 0.0],
-                                         "rib2.hinge_coulomb": 0.5, "rib0.l2": 0.6,
-                                         "youngs_modulus": 7e10})
+    p = UmbrellaRibsParams.from_mapping({'ribs': 3, 'tip_mass': [0.0, 0.1, 0.0],
+                                         'rib2.hinge_coulomb': 0.5, 'rib0.l2': 0.6,
+                                         'youngs_modulus': 7e10})
     assert [r.tip_mass for r in p.ribs_list()] == [0.0, 0.1, 0.0]
     assert [r.hinge_coulomb for r in p.ribs_list()] == [0.0, 0.0, 0.5]
     assert [r.planar.l2 for r in p.ribs_list()] == [0.6, 0.5, 0.5]
@@ -64,14 +64,14 @@ def test_per_rib_values_as_lists_and_overrides():
     assert p.replace(ribs=3).rib(2).hinge_coulomb == 0.5
 
 
-@pytest.mark.parametrize("values, culprit", [
-    ({"ribs": 3, "tip_mass": [0.0, 0.1]}, "tip_mass"),
-    ({"ribs": 2, "rib5.tip_mass": 0.1}, "rib5.tip_mass"),
-    ({"ribs": 2, "rib1.stiffness": 1.0}, "stiffness"),
-    ({"ribs": 2, "rib1.hinge_coulomb": -1.0}, "rib1.hinge_coulomb"),
-    ({"ribs": 0}, "ribs"),
-    ({"base": "free", "lock": "energy"}, "lock"),
-    ({"model": "rigid"}, "model"),
+@pytest.mark.parametrize('values, culprit', [
+    ({'ribs': 3, 'tip_mass': [0.0, 0.1]}, 'tip_mass'),
+    ({'ribs': 2, 'rib5.tip_mass': 0.1}, 'rib5.tip_mass'),
+    ({'ribs': 2, 'rib1.stiffness': 1.0}, 'stiffness'),
+    ({'ribs': 2, 'rib1.hinge_coulomb': -1.0}, 'rib1.hinge_coulomb'),
+    ({'ribs': 0}, 'ribs'),
+    ({'base': 'free', 'lock': 'energy'}, 'lock'),
+    ({'model': 'rigid'}, 'model'),
 ])
 def test_bad_values_name_the_culprit(values, culprit):
     with pytest.raises(ValueError, match=re.escape(culprit)):
@@ -79,13 +79,13 @@ def test_bad_values_name_the_culprit(values, culprit):
 
 
 def test_a_free_bus_takes_the_plastic_lock_by_default():
-    assert UmbrellaRibsParams.from_mapping({"base": "free"}).lock_rule == "plastic"
-    assert UmbrellaRibsParams.from_mapping({}).lock_rule == "energy"
+    assert UmbrellaRibsParams.from_mapping({'base': 'free'}).lock_rule == 'plastic'
+    assert UmbrellaRibsParams.from_mapping({}).lock_rule == 'energy'
 
 
-if __name__ == "__main__":
-    with open(PAGE, encoding="utf-8") as fh:
+if __name__ == '__main__':
+    with open(PAGE, encoding='utf-8') as fh:
         page = fh.read()
-    with open(PAGE, "w", encoding="utf-8") as fh:
+    with open(PAGE, 'w', encoding='utf-8') as fh:
         fh.write(generated(page))
     sys.exit(0)

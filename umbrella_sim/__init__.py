@@ -30,7 +30,7 @@ import os as _os
 # Measured on the shared 2-core machine: one nonlinear step at N = 16 took 0.76 s with
 # OpenBLAS's default threads and 0.03 s with one.  Set before numpy is first imported (any
 # entry point that imports umbrella_sim first); an explicit setting by the user wins.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    _os.environ.setdefault(_var, "1")
+for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
+    _os.environ.setdefault(_var, '1')
 
-__version__ = "0.1.0"
+__version__ = '0.1.0'

@@ -31,38 +31,38 @@ from rclpy.serialization import serialize_message
 import yaml
 
 
-DELIMITER = "=" * 80
+DELIMITER = '=' * 80
 
 
-_PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
-               "int32", "uint32", "int64", "uint64", "string", "wstring"}
+_PRIMITIVES = {'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
+               'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring'}
 
 
-_INFINITE = {"sec": 9223372036, "nsec": 854775807}
+_INFINITE = {'sec': 9223372036, 'nsec': 854775807}
 
 
 # ------------------------------------------------------------------ type metadata
 def type_name(msg_or_type) -> str:
     """'sensor_msgs/msg/JointState' for a message class or instance."""
     cls = msg_or_type if isinstance(msg_or_type, type) else type(msg_or_type)
-    pkg = cls.__module__.split(".")[0]
-    return f"{pkg}/msg/{cls.__name__}"
+    pkg = cls.__module__.split('.')[0]
+    return f'{pkg}/msg/{cls.__name__}'
 
 
 def _share_dirs() -> list[str]:
-    dirs = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    dirs = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
     dirs.append(sys.prefix)
-    return [os.path.join(d, "share") for d in dirs]
+    return [os.path.join(d, 'share') for d in dirs]
 
 
 def _msg_text(full_name: str) -> str:
-    pkg, _, name = full_name.split("/")
+    pkg, _, name = full_name.split('/')
     for share in _share_dirs():
-        path = os.path.join(share, pkg, "msg", name + ".msg")
+        path = os.path.join(share, pkg, 'msg', name + '.msg')
         if os.path.isfile(path):
-            with open(path, encoding="utf-8") as fh:
+            with open(path, encoding='utf-8') as fh:
                 return fh.read()
-    raise FileNotFoundError(f"message definition {full_name}.msg not found under "
+    raise FileNotFoundError(f'message definition {full_name}.msg not found under '
                             "AMENT_PREFIX_PATH or the interpreter's share/")
 
 
@@ -70,14 +70,14 @@ def _dependencies(pkg: str, text: str) -> list[str]:
     """Message types used by the fields of a .msg text (constants are always primitive)."""
     deps = []
     for line in text.splitlines():
-        line = line.split("#", 1)[0].strip()
+        line = line.split('#', 1)[0].strip()
         if not line:
             continue
-        base = line.split()[0].split("[", 1)[0].split("<=", 1)[0]
+        base = line.split()[0].split('[', 1)[0].split('<=', 1)[0]
         if base in _PRIMITIVES:
             continue
-        p, n = (base.split("/")[0], base.split("/")[-1]) if "/" in base else (pkg, base)
-        deps.append(f"{p}/msg/{n}")
+        p, n = (base.split('/')[0], base.split('/')[-1]) if '/' in base else (pkg, base)
+        deps.append(f'{p}/msg/{n}')
     return deps
 
 
@@ -96,14 +96,14 @@ def message_definition(full_name: str) -> str:
             return
         texts[name] = _msg_text(name)
         order.append(name)
-        for dep in _dependencies(name.split("/")[0], texts[name]):
+        for dep in _dependencies(name.split('/')[0], texts[name]):
             visit(dep)
 
     visit(full_name)
-    parts = [texts[order[0]].rstrip("\n")]
+    parts = [texts[order[0]].rstrip('\n')]
     for name in order[1:]:
-        parts.append(f"{DELIMITER}\nMSG: {name}\n{texts[name].rstrip(chr(10))}")
-    return "\n".join(parts) + "\n"
+        parts.append(f'{DELIMITER}\nMSG: {name}\n{texts[name].rstrip(chr(10))}')
+    return '\n'.join(parts) + '\n'
 
 
 #: the rosbag2 metadata version written: Jazzy's (9: offered_qos_profiles as a list with
@@ -114,19 +114,19 @@ BAG_FORMAT_VERSION = 9
 def qos_profiles(qos: QoSProfile) -> list[dict]:
     """Return offered_qos_profiles as rosbag2 (metadata version 9) writes them."""
     return [{
-        "history": qos.history.name.lower(), "depth": int(qos.depth),
-        "reliability": qos.reliability.name.lower(),
-        "durability": qos.durability.name.lower(),
-        "deadline": dict(_INFINITE), "lifespan": dict(_INFINITE),
-        "liveliness": qos.liveliness.name.lower(),
-        "liveliness_lease_duration": dict(_INFINITE),
-        "avoid_ros_namespace_conventions": False,
+        'history': qos.history.name.lower(), 'depth': int(qos.depth),
+        'reliability': qos.reliability.name.lower(),
+        'durability': qos.durability.name.lower(),
+        'deadline': dict(_INFINITE), 'lifespan': dict(_INFINITE),
+        'liveliness': qos.liveliness.name.lower(),
+        'liveliness_lease_duration': dict(_INFINITE),
+        'avoid_ros_namespace_conventions': False,
     }]
 
 
 def qos_yaml(qos: QoSProfile) -> str:
     """Return offered_qos_profiles as a YAML string, as rosbag2 puts it on an MCAP channel."""
-    return yaml.safe_dump(qos_profiles(qos), sort_keys=False).rstrip("\n")
+    return yaml.safe_dump(qos_profiles(qos), sort_keys=False).rstrip('\n')
 
 
 def type_description_hash(full_name: str) -> str:
@@ -138,24 +138,24 @@ def type_description_hash(full_name: str) -> str:
     """
     import json
 
-    pkg, _, name = full_name.split("/")
+    pkg, _, name = full_name.split('/')
     for share in _share_dirs():
-        path = os.path.join(share, pkg, "msg", name + ".json")
+        path = os.path.join(share, pkg, 'msg', name + '.json')
         try:
-            with open(path, encoding="utf-8") as fh:
-                hashes = json.load(fh).get("type_hashes", [])
+            with open(path, encoding='utf-8') as fh:
+                hashes = json.load(fh).get('type_hashes', [])
         except (OSError, ValueError):
             continue
         for entry in hashes:
-            if entry.get("type_name") == full_name:
-                return str(entry.get("hash_string", ""))
-    return ""
+            if entry.get('type_name') == full_name:
+                return str(entry.get('hash_string', ''))
+    return ''
 
 
 # --------------------------------------------------------------- exact CDR size
-_SIZES = {"boolean": 1, "octet": 1, "char": 1, "uint8": 1, "int8": 1, "int16": 2, "uint16": 2,
-          "int32": 4, "uint32": 4, "float": 4, "int64": 8, "uint64": 8, "double": 8,
-          "long double": 16, "wchar": 2}
+_SIZES = {'boolean': 1, 'octet': 1, 'char': 1, 'uint8': 1, 'int8': 1, 'int16': 2, 'uint16': 2,
+          'int32': 4, 'uint32': 4, 'float': 4, 'int64': 8, 'uint64': 8, 'double': 8,
+          'long double': 16, 'wchar': 2}
 
 
 def _align(pos: int, n: int, pads: list | None = None) -> int:
@@ -184,27 +184,27 @@ def _cdr_end(msg, pos: int, pads: list | None = None) -> int:
 
 def _field_size(ftype: str):
     """Return size(value, pos, pads) -> end position of one field of IDL type ftype."""
-    if ftype.startswith("sequence<"):
-        items = _items_size(ftype[len("sequence<"):-1].rsplit(",", 1)[0].strip())
+    if ftype.startswith('sequence<'):
+        items = _items_size(ftype[len('sequence<'):-1].rsplit(',', 1)[0].strip())
         return lambda value, pos, pads: items(value, _align(pos, 4, pads) + 4, pads)
-    if ftype.endswith("]"):
-        return _items_size(ftype[:ftype.index("[")])
+    if ftype.endswith(']'):
+        return _items_size(ftype[:ftype.index('[')])
     items = _items_size(ftype)
     return lambda value, pos, pads: items((value,), pos, pads)
 
 
 def _items_size(ftype: str):
     """Return size(values, pos, pads) -> end position of consecutive items of IDL type ftype."""
-    if ftype.startswith("wstring"):
+    if ftype.startswith('wstring'):
         def size(values, pos, pads):
             for v in values:
                 pos = _align(pos, 4, pads) + 4 + 4 * (len(v) + 1)
             return pos
         return size
-    if ftype.startswith("string"):
+    if ftype.startswith('string'):
         def size(values, pos, pads):
             for v in values:
-                pos = _align(pos, 4, pads) + 4 + len(v.encode("utf-8")) + 1
+                pos = _align(pos, 4, pads) + 4 + len(v.encode('utf-8')) + 1
             return pos
         return size
     n = _SIZES.get(ftype)
@@ -236,7 +236,7 @@ def cdr_bytes(msg, data: bytes | None = None) -> bytes:
     pads: list = []
     size = 4 + _cdr_end(msg, 0, pads)           # 4-byte encapsulation header
     if size > len(data):
-        raise RuntimeError(f"CDR size walk overran the payload for {type_name(msg)}")
+        raise RuntimeError(f'CDR size walk overran the payload for {type_name(msg)}')
     if not pads:
         return data[:size]
     out = bytearray(data[:size])

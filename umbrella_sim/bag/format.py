@@ -21,28 +21,28 @@ carries metadata records, each named here once (msg_docs/recording.md describes 
 """
 
 #: the MCAP file's magic bytes (its first and last eight)
-MCAP_MAGIC = b"\x89MCAP0\r\n"
+MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: uncompressed bytes a chunk holds before it is compressed and written
 CHUNK_SIZE = 64 * 1024
 #: every parameter of the run (JSON values), including the physics step used
-PARAMETERS_RECORD = "umbrella_sim.parameters"
+PARAMETERS_RECORD = 'umbrella_sim.parameters'
 #: version, git revision, kernel, floating-point environment
-BUILD_RECORD = "umbrella_sim.build"
+BUILD_RECORD = 'umbrella_sim.build'
 #: model, lock, mesh: coordinate labels and node positions
-MESH_RECORD = "umbrella_sim.mesh"
+MESH_RECORD = 'umbrella_sim.mesh'
 #: + ".K": a ~/reset started segment K (its log-time offset and parameters)
-SEGMENT_RECORD = "umbrella_sim.segment"
+SEGMENT_RECORD = 'umbrella_sim.segment'
 #: the exact lock instant and the fault of the (last) segment; + ".K" for an earlier one
-EVENTS_RECORD = "umbrella_sim.events"
+EVENTS_RECORD = 'umbrella_sim.events'
 #: messages published and recorded per topic, commands accepted and refused
-COUNTS_RECORD = "umbrella_sim.counts"
+COUNTS_RECORD = 'umbrella_sim.counts'
 #: the run's summary figures of every physics step and its warnings
-SUMMARY_RECORD = "umbrella_sim.summary"
+SUMMARY_RECORD = 'umbrella_sim.summary'
 #: the node's own topic name (joint_states, sleeve_force/applied...) -> the name recorded,
 #: which a remapping (-r joint_states:=js, a namespace) may have changed
-TOPICS_RECORD = "umbrella_sim.topics"
+TOPICS_RECORD = 'umbrella_sim.topics'
 #: a recording stopped by a write error says so in this record
-ENDED_EARLY_RECORD = "umbrella_sim.recording_error"
+ENDED_EARLY_RECORD = 'umbrella_sim.recording_error'
 #: the command topic's records beside it: each value as applied, and refused commands
-APPLIED_SUFFIX = "/applied"
-REFUSED_SUFFIX = "/refused"
+APPLIED_SUFFIX = '/applied'
+REFUSED_SUFFIX = '/refused'

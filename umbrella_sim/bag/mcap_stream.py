@@ -199,7 +199,7 @@ def keep_definitions_out_of_chunks(writer: Writer) -> bool:
         from mcap._chunk_builder import ChunkBuilder
     except ImportError:
         return False
-    if type(getattr(writer, "_Writer__chunk_builder", None)) is not ChunkBuilder:
+    if type(getattr(writer, '_Writer__chunk_builder', None)) is not ChunkBuilder:
         return False
 
     class MessagesOnly(ChunkBuilder):
@@ -226,7 +226,7 @@ class _RawRecords:
 
 #: a Message record up to its data: opcode, record length, channel id, sequence, log time,
 #: publish time (the MCAP specification's Message record)
-_MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+_MESSAGE_HEAD = struct.Struct('<BQHIQQ')
 
 
 class _PackedMessageIndex(MessageIndex):
@@ -236,7 +236,7 @@ class _PackedMessageIndex(MessageIndex):
         stream.start_record(Opcode.MESSAGE_INDEX)
         stream.write2(self.channel_id)
         stream.write4(len(self.records) * 16)
-        stream.write(struct.pack(f"<{2 * len(self.records)}Q",
+        stream.write(struct.pack(f'<{2 * len(self.records)}Q',
                                  *itertools.chain.from_iterable(self.records)))
         stream.finish_record()
 
@@ -259,12 +259,12 @@ class MessageAppender:
         self.finish_full_chunk = finish_full_chunk
 
     @classmethod
-    def create(cls, writer: Writer) -> "MessageAppender | None":
-        stats = getattr(writer, "_Writer__statistics", None)
-        chunk = getattr(writer, "_Writer__chunk_builder", None)
-        finish = getattr(writer, "_Writer__maybe_finalize_chunk", None)
-        needed = (hasattr(stats, "channel_message_counts") and hasattr(chunk, "message_indices")
-                  and hasattr(getattr(chunk, "record_writer", None), "_buffer")
+    def create(cls, writer: Writer) -> 'MessageAppender | None':
+        stats = getattr(writer, '_Writer__statistics', None)
+        chunk = getattr(writer, '_Writer__chunk_builder', None)
+        finish = getattr(writer, '_Writer__maybe_finalize_chunk', None)
+        needed = (hasattr(stats, 'channel_message_counts') and hasattr(chunk, 'message_indices')
+                  and hasattr(getattr(chunk, 'record_writer', None), '_buffer')
                   and callable(finish))
         return cls(stats, chunk, finish) if needed else None
 

@@ -36,25 +36,25 @@ def read_text_input(path: str, what: str) -> str:
     try:
         st = os.stat(path)
     except OSError as exc:
-        raise ValueError(f"{what} {path}: {exc.strerror}") from None
+        raise ValueError(f'{what} {path}: {exc.strerror}') from None
     if not stat.S_ISREG(st.st_mode):
-        raise ValueError(f"{what} {path}: not a regular file")
+        raise ValueError(f'{what} {path}: not a regular file')
     try:
-        with open(path, "rb") as fh:
+        with open(path, 'rb') as fh:
             data = fh.read()
     except OSError as exc:
-        raise ValueError(f"{what} {path}: {exc.strerror}") from None
-    if b"\0" in data:
-        raise ValueError(f"{what} {path}: binary data (NUL bytes), not a text file")
+        raise ValueError(f'{what} {path}: {exc.strerror}') from None
+    if b'\0' in data:
+        raise ValueError(f'{what} {path}: binary data (NUL bytes), not a text file')
     try:
-        return data.decode("utf-8")
+        return data.decode('utf-8')
     except UnicodeDecodeError as exc:
-        raise ValueError(f"{what} {path}: not UTF-8 text (byte {exc.start})") from None
+        raise ValueError(f'{what} {path}: not UTF-8 text (byte {exc.start})') from None
 
 
 #: what --overwrite may replace: a regular file, or a recording (a bag directory holding
 #: nothing but .mcap files and metadata.yaml); never anything else
-OVERWRITABLE = ("file", "recording")
+OVERWRITABLE = ('file', 'recording')
 
 
 def check_new_output(path: str, what: str, overwrite: str | None = None) -> str:
@@ -69,19 +69,19 @@ def check_new_output(path: str, what: str, overwrite: str | None = None) -> str:
     ``-p record_path:=~/bags/run``).
     """
     if not path.strip():
-        raise ValueError(f"{what} {path!r}: empty path")
-    path = os.path.abspath(os.path.expanduser(path).rstrip("/") or "/")
+        raise ValueError(f'{what} {path!r}: empty path')
+    path = os.path.abspath(os.path.expanduser(path).rstrip('/') or '/')
     if os.path.lexists(path):
         if overwrite is None:
-            raise ValueError(f"{what} {path}: already exists, not overwriting (--overwrite "
-                             "replaces it)")
+            raise ValueError(f'{what} {path}: already exists, not overwriting (--overwrite '
+                             'replaces it)')
         _check_replaceable(path, what, overwrite)
     parent = os.path.dirname(path)
     if not os.path.isdir(parent):
-        why = "is not a directory" if os.path.exists(parent) else "does not exist"
-        raise ValueError(f"{what} {path}: parent directory {parent} {why}")
+        why = 'is not a directory' if os.path.exists(parent) else 'does not exist'
+        raise ValueError(f'{what} {path}: parent directory {parent} {why}')
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise ValueError(f"{what} {path}: parent directory {parent} is not writable")
+        raise ValueError(f'{what} {path}: parent directory {parent} is not writable')
     return path
 
 
@@ -90,7 +90,7 @@ def _recording_entries(path: str) -> list[str] | None:
     if not os.path.isdir(path) or os.path.islink(path):
         return None
     entries = os.listdir(path)
-    ours = [e for e in entries if e == "metadata.yaml" or e.endswith(".mcap")]
+    ours = [e for e in entries if e == 'metadata.yaml' or e.endswith('.mcap')]
     files = all(os.path.isfile(os.path.join(path, e)) and not
                 os.path.islink(os.path.join(path, e)) for e in entries)
     return entries if entries and len(ours) == len(entries) and files else None
@@ -98,16 +98,16 @@ def _recording_entries(path: str) -> list[str] | None:
 
 def _check_replaceable(path: str, what: str, kind: str) -> None:
     """Raise ValueError unless path is what --overwrite may replace (kind: OVERWRITABLE)."""
-    if kind == "file":
+    if kind == 'file':
         st = os.lstat(path)
         if not stat.S_ISREG(st.st_mode):
-            raise ValueError(f"{what} {path}: exists and is not a regular file, not "
-                             "overwriting it even with --overwrite")
-    elif kind == "recording":
+            raise ValueError(f'{what} {path}: exists and is not a regular file, not '
+                             'overwriting it even with --overwrite')
+    elif kind == 'recording':
         if _recording_entries(path) is None:
-            raise ValueError(f"{what} {path}: exists and is not a recording (a directory of "
-                             ".mcap files and metadata.yaml only), not removing it even with "
-                             "--overwrite")
+            raise ValueError(f'{what} {path}: exists and is not a recording (a directory of '
+                             '.mcap files and metadata.yaml only), not removing it even with '
+                             '--overwrite')
     else:
         raise ValueError(f"overwrite={kind!r}: one of {', '.join(OVERWRITABLE)}")
 
@@ -118,11 +118,11 @@ def remove_recording(path: str, what: str) -> None:
         return
     entries = _recording_entries(path)
     if entries is None:
-        raise ValueError(f"{what} {path}: no longer a recording, not removing it")
+        raise ValueError(f'{what} {path}: no longer a recording, not removing it')
     try:
         for entry in entries:
             os.unlink(os.path.join(path, entry))
         os.rmdir(path)
     except OSError as exc:
-        raise ValueError(f"{what} {path}: cannot remove the old recording: "
-                         f"{exc.strerror or exc}") from None
+        raise ValueError(f'{what} {path}: cannot remove the old recording: '
+                         f'{exc.strerror or exc}') from None

@@ -35,15 +35,15 @@ from ..core.integrators import INTEGRATOR_REVISION
 def git_revision() -> str:
     here = os.path.dirname(os.path.abspath(__file__))
     try:
-        out = subprocess.run(["git", "-C", here, "rev-parse", "HEAD"], capture_output=True,
+        out = subprocess.run(['git', '-C', here, 'rev-parse', 'HEAD'], capture_output=True,
                              text=True, timeout=5)
         if out.returncode == 0:
-            dirty = subprocess.run(["git", "-C", here, "status", "--porcelain", "--", "."],
+            dirty = subprocess.run(['git', '-C', here, 'status', '--porcelain', '--', '.'],
                                    capture_output=True, text=True, timeout=5).stdout.strip()
-            return out.stdout.strip() + ("+dirty" if dirty else "")
+            return out.stdout.strip() + ('+dirty' if dirty else '')
     except (OSError, subprocess.SubprocessError):
         pass
-    return "unknown"
+    return 'unknown'
 
 
 def build_environment() -> dict[str, str]:
@@ -61,13 +61,13 @@ def build_environment() -> dict[str, str]:
 
     cpu = platform.machine()
     try:
-        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
-            cpu = next((line.split(":", 1)[1].strip() for line in fh
-                        if line.startswith("model name")), cpu)
+        with open('/proc/cpuinfo', encoding='utf-8', errors='replace') as fh:
+            cpu = next((line.split(':', 1)[1].strip() for line in fh
+                        if line.startswith('model name')), cpu)
     except OSError:
         pass
-    return {"numpy": numpy.__version__,
-            "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE", "auto"), "cpu": cpu}
+    return {'numpy': numpy.__version__,
+            'openblas_coretype': os.environ.get('OPENBLAS_CORETYPE', 'auto'), 'cpu': cpu}
 
 
 def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: str,
@@ -75,18 +75,18 @@ def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: st
     """Metadata records that make a log reproducible from the file alone."""
     all_params = dict(params.as_dict())
     all_params.update(node_cfg)
-    all_params["physics_step"] = physics_step
+    all_params['physics_step'] = physics_step
     return {
         PARAMETERS_RECORD: {k: json.dumps(v) for k, v in all_params.items()},
-        BUILD_RECORD: {"package_version": __version__, "git_revision": git_revision(),
-                       "kernel": backend, "integrator": INTEGRATOR_REVISION, "source": source,
-                       "python": sys.version.split()[0], **build_environment()},
+        BUILD_RECORD: {'package_version': __version__, 'git_revision': git_revision(),
+                       'kernel': backend, 'integrator': INTEGRATOR_REVISION, 'source': source,
+                       'python': sys.version.split()[0], **build_environment()},
         MESH_RECORD: {
-            "model": params.model, "lock": params.lock,
-            "elements_per_segment": str(params.elements_per_segment),
-            "coordinates": json.dumps(model.coordinate_labels()),
-            "leaf_node_x": json.dumps(list(model.leaf.node_x)),
-            "link_node_x": json.dumps(list(model.link.node_x)),
+            'model': params.model, 'lock': params.lock,
+            'elements_per_segment': str(params.elements_per_segment),
+            'coordinates': json.dumps(model.coordinate_labels()),
+            'leaf_node_x': json.dumps(list(model.leaf.node_x)),
+            'link_node_x': json.dumps(list(model.link.node_x)),
         },
     }
 
@@ -99,9 +99,9 @@ def events_metadata(sim, fault: str | None = None) -> dict[str, dict[str, str]]:
     solver fault that ended the run, if any (at the last good state's time).
     """
     ev = sim.lock_event
-    out = {"locked": "false"} if ev is None else {
-        "locked": "true", "lock_time": repr(ev.time), "lock_kind": ev.kind,
-        "energy_before": repr(ev.energy_before), "energy_after": repr(ev.energy_after)}
+    out = {'locked': 'false'} if ev is None else {
+        'locked': 'true', 'lock_time': repr(ev.time), 'lock_kind': ev.kind,
+        'energy_before': repr(ev.energy_before), 'energy_after': repr(ev.energy_after)}
     if fault is not None:
         out.update(fault=fault, fault_time=repr(sim.time))
     return {EVENTS_RECORD: out}
@@ -115,6 +115,6 @@ def summary_metadata(figures: dict) -> dict[str, dict[str, str]]:
     physics, not the recorded samples.
     """
     return {SUMMARY_RECORD: {
-        "figures": json.dumps({k: v for k, v in figures.items() if k != "warnings"}),
-        "warnings": json.dumps(figures.get("warnings", [])),
-        "source": "every physics step"}}
+        'figures': json.dumps({k: v for k, v in figures.items() if k != 'warnings'}),
+        'warnings': json.dumps(figures.get('warnings', [])),
+        'source': 'every physics step'}}

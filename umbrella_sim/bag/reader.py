@@ -101,12 +101,12 @@ class LogData:
         Through the recording's topic record (a remapped or namespaced node's names), else
         (older recordings) the one topic whose name ends in it.
         """
-        recorded = self.metadata.get(TOPICS_RECORD, {}).get(suffix.lstrip("/"))
+        recorded = self.metadata.get(TOPICS_RECORD, {}).get(suffix.lstrip('/'))
         if recorded in self.channels:
             return recorded
-        matches = [t for t in self.channels if t == suffix or t.endswith("/" + suffix.lstrip("/"))]
-        matches = [t for t in matches if not t.endswith(("/refused", "/applied"))
-                   or suffix.endswith(("/refused", "/applied"))]
+        matches = [t for t in self.channels if t == suffix or t.endswith('/' + suffix.lstrip('/'))]
+        matches = [t for t in matches if not t.endswith(('/refused', '/applied'))
+                   or suffix.endswith(('/refused', '/applied'))]
         if len(matches) == 1:
             return matches[0]
         if not matches:
@@ -121,13 +121,13 @@ class LogData:
             try:
                 self._types[topic] = import_type(self.channels[topic][0])
             except LogError as exc:
-                raise LogError(f"{self.path}: topic {topic}: {exc}") from None
+                raise LogError(f'{self.path}: topic {topic}: {exc}') from None
         return self._types[topic]
 
     def truncation_note(self) -> str:
         """Return ' (...)' saying the file is truncated, for errors about missing messages."""
-        return (" (the file is truncated: only its complete chunks could be read; a killed "
-                "recorder loses the chunk it was filling)") if self.truncated else ""
+        return (' (the file is truncated: only its complete chunks could be read; a killed '
+                'recorder loses the chunk it was filling)') if self.truncated else ''
 
     def count(self, topic: str) -> int:
         return self.counts.get(topic, 0)
@@ -147,7 +147,7 @@ class LogData:
         """
         wanted = None if topics is None else set(topics)
         if self.indexed:
-            with open(self.path, "rb") as fh:
+            with open(self.path, 'rb') as fh:
                 reader = make_reader(fh)
                 try:
                     for _, channel, message in reader.iter_messages(
@@ -155,7 +155,7 @@ class LogData:
                             log_time_order=True):
                         yield RawMessage(channel.topic, message.log_time, message.data)
                 except DAMAGED as exc:
-                    raise LogError(f"{self.path}: unreadable MCAP data ({exc})") from None
+                    raise LogError(f'{self.path}: unreadable MCAP data ({exc})') from None
             return
         for record, topic in _scan(self.path, {}, {}):
             if isinstance(record, Message) and (wanted is None or topic in wanted):
@@ -166,7 +166,7 @@ class LogData:
         """Every message in memory (small logs and tests only; tools use iter_raw)."""
         return list(self.iter_raw())
 
-    def iter_decoded(self, topic: str, segment: "Segment | None" = None):
+    def iter_decoded(self, topic: str, segment: 'Segment | None' = None):
         """(time in s, message) of one topic: log time, or the segment's sim time."""
         cls = self.msg_type(topic)
         for i, m in enumerate(self.iter_raw([topic])):
@@ -179,7 +179,7 @@ class LogData:
                 t = m.log_time * 1e-9
             yield t, self.decode(topic, m.data, cls, i, m.log_time)
 
-    def decoded(self, topic: str, segment: "Segment | None" = None) -> list[tuple[float, object]]:
+    def decoded(self, topic: str, segment: 'Segment | None' = None) -> list[tuple[float, object]]:
         """[(time in s, message)] of one topic, in time order (see iter_decoded)."""
         out = list(self.iter_decoded(topic, segment))
         out.sort(key=lambda tm: tm[0])
@@ -191,41 +191,41 @@ class LogData:
         try:
             return deserialize_message(data, cls)
         except Exception as exc:      # rclpy raises RMWError / RuntimeError on bad CDR
-            where = "" if index is None else f" message {index} (log time {log_time} ns)"
-            reason = " ".join(str(exc).split())
-            raise LogError(f"{self.path}: topic {topic}{where}: payload does not decode as "
-                           f"{self.channels[topic][0]} ({reason})") from None
+            where = '' if index is None else f' message {index} (log time {log_time} ns)'
+            reason = ' '.join(str(exc).split())
+            raise LogError(f'{self.path}: topic {topic}{where}: payload does not decode as '
+                           f'{self.channels[topic][0]} ({reason})') from None
 
     # ----------------------------------------------------------------- metadata
     @property
     def ended_early(self) -> str | None:
         """Why the recording stopped early (write error), or None."""
         rec = self.metadata.get(ENDED_EARLY_RECORD)
-        return rec.get("error", "unknown error") if rec else None
+        return rec.get('error', 'unknown error') if rec else None
 
     def parameters(self) -> dict:
         rec = self.metadata.get(PARAMETERS_RECORD)
         if rec is None:
-            raise LogError(f"{self.path}: no {PARAMETERS_RECORD} metadata record "
-                           "(not recorded by umbrella_sim?)")
+            raise LogError(f'{self.path}: no {PARAMETERS_RECORD} metadata record '
+                           '(not recorded by umbrella_sim?)')
         try:
             return {k: json.loads(v) for k, v in rec.items()}
         except (TypeError, ValueError):
-            raise LogError(f"{self.path}: {PARAMETERS_RECORD} holds values that are not "
-                           "JSON") from None
+            raise LogError(f'{self.path}: {PARAMETERS_RECORD} holds values that are not '
+                           'JSON') from None
 
     def segments(self) -> list[Segment]:
         """Segment 0 (start parameters), then one per ~/reset recorded."""
         starts = [(0, 0, self.parameters())]
         for name, rec in self.metadata.items():
-            if not name.startswith(SEGMENT_RECORD + "."):
+            if not name.startswith(SEGMENT_RECORD + '.'):
                 continue
             try:
                 # a JSON object of JSON texts, as in umbrella_sim.parameters
-                params = {k: json.loads(v) for k, v in json.loads(rec["parameters"]).items()}
-                starts.append((int(rec["index"]), int(rec["log_time_offset_ns"]), params))
+                params = {k: json.loads(v) for k, v in json.loads(rec['parameters']).items()}
+                starts.append((int(rec['index']), int(rec['log_time_offset_ns']), params))
             except (KeyError, TypeError, ValueError):
-                raise LogError(f"{self.path}: metadata record {name} is malformed") from None
+                raise LogError(f'{self.path}: metadata record {name} is malformed') from None
         starts.sort()
         return [Segment(k, off, starts[i + 1][1] if i + 1 < len(starts) else None, params)
                 for i, (k, off, params) in enumerate(starts)]
@@ -233,16 +233,16 @@ class LogData:
     def segment(self, index: int) -> Segment:
         segs = self.segments()
         if not 0 <= index < len(segs):
-            raise LogError(f"{self.path}: no segment {index} (the log has {len(segs)})")
+            raise LogError(f'{self.path}: no segment {index} (the log has {len(segs)})')
         return segs[index]
 
 
 def import_type(type_name: str):
     try:
-        pkg, kind, name = type_name.split("/")
-        return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+        pkg, kind, name = type_name.split('/')
+        return getattr(importlib.import_module(f'{pkg}.{kind}'), name)
     except (ValueError, ImportError, AttributeError):
-        raise LogError(f"message type {type_name!r} is not available here") from None
+        raise LogError(f'message type {type_name!r} is not available here') from None
 
 
 def _policy(kind, value, default):
@@ -256,10 +256,10 @@ def qos_from_yaml(text) -> QoSProfile:
     """Return the first offered QoS profile of a channel (YAML text) or metadata.yaml (list)."""
     try:
         prof = ((yaml.safe_load(text) if isinstance(text, str) else text) or [{}])[0]
-        return QoSProfile(history=_policy(HistoryPolicy, prof.get("history"), 1),
-                          depth=max(int(prof.get("depth", 10)), 1),
-                          reliability=_policy(ReliabilityPolicy, prof.get("reliability"), 1),
-                          durability=_policy(DurabilityPolicy, prof.get("durability"), 2))
+        return QoSProfile(history=_policy(HistoryPolicy, prof.get('history'), 1),
+                          depth=max(int(prof.get('depth', 10)), 1),
+                          reliability=_policy(ReliabilityPolicy, prof.get('reliability'), 1),
+                          durability=_policy(DurabilityPolicy, prof.get('durability'), 2))
     except Exception:
         return QoSProfile(depth=10)
 
@@ -268,32 +268,32 @@ def _regular_file(path: str) -> None:
     try:
         st = os.stat(path)
     except OSError as exc:
-        raise LogError(f"{path}: {exc.strerror}") from None
+        raise LogError(f'{path}: {exc.strerror}') from None
     if not stat.S_ISREG(st.st_mode):
-        raise LogError(f"{path}: not a regular file (a FIFO, device or socket cannot be read "
-                       "as a log)")
+        raise LogError(f'{path}: not a regular file (a FIFO, device or socket cannot be read '
+                       'as a log)')
 
 
 def resolve_path(path: str) -> str:
     """Return the .mcap of a bag directory (metadata.yaml, else the only .mcap), or the file."""
     if os.path.isdir(path):
-        meta = os.path.join(path, "metadata.yaml")
+        meta = os.path.join(path, 'metadata.yaml')
         if os.path.isfile(meta):
             try:
-                with open(meta, "rb") as fh:
-                    info = yaml.safe_load(fh.read().decode("utf-8"))["rosbag2_bagfile_information"]
-                return os.path.join(path, os.path.basename(info["relative_file_paths"][0]))
+                with open(meta, 'rb') as fh:
+                    info = yaml.safe_load(fh.read().decode('utf-8'))['rosbag2_bagfile_information']
+                return os.path.join(path, os.path.basename(info['relative_file_paths'][0]))
             except (KeyError, IndexError, TypeError, UnicodeDecodeError, yaml.YAMLError):
-                raise LogError(f"{meta}: not a rosbag2 metadata file") from None
+                raise LogError(f'{meta}: not a rosbag2 metadata file') from None
             except OSError as exc:
-                raise LogError(f"{meta}: {exc.strerror}") from None
-        found = [f for f in sorted(os.listdir(path)) if f.endswith(".mcap")]
+                raise LogError(f'{meta}: {exc.strerror}') from None
+        found = [f for f in sorted(os.listdir(path)) if f.endswith('.mcap')]
         if len(found) != 1:
-            raise LogError(f"{path}: a bag directory needs metadata.yaml or exactly one .mcap "
-                           f"(found {len(found)})")
+            raise LogError(f'{path}: a bag directory needs metadata.yaml or exactly one .mcap '
+                           f'(found {len(found)})')
         return os.path.join(path, found[0])
     if not os.path.lexists(path):
-        raise LogError(f"{path}: no such file or directory")
+        raise LogError(f'{path}: no such file or directory')
     return path
 
 
@@ -307,12 +307,12 @@ def read_log(path: str, umbrella: bool = True) -> LogData:
     mcap_path = resolve_path(path)
     _regular_file(mcap_path)
     try:
-        with open(mcap_path, "rb") as fh:
+        with open(mcap_path, 'rb') as fh:
             head = fh.read(len(MCAP_MAGIC))
     except OSError as exc:
-        raise LogError(f"{mcap_path}: {exc.strerror}") from None
+        raise LogError(f'{mcap_path}: {exc.strerror}') from None
     if head != MCAP_MAGIC:
-        raise LogError(f"{mcap_path}: not an MCAP file (bad magic bytes)")
+        raise LogError(f'{mcap_path}: not an MCAP file (bad magic bytes)')
     log = LogData(path=mcap_path)
     try:
         _open_indexed(log)
@@ -322,11 +322,11 @@ def read_log(path: str, umbrella: bool = True) -> LogData:
         log.counts.clear()
         _open_recovering(log)
     if not log.channels:
-        raise LogError(f"{mcap_path}: no channels (empty or unreadable MCAP)")
+        raise LogError(f'{mcap_path}: no channels (empty or unreadable MCAP)')
     if umbrella:
         if PARAMETERS_RECORD not in log.metadata:
-            raise LogError(f"{mcap_path}: not an umbrella_sim recording (no "
-                           f"{PARAMETERS_RECORD} metadata record)")
+            raise LogError(f'{mcap_path}: not an umbrella_sim recording (no '
+                           f'{PARAMETERS_RECORD} metadata record)')
         log.segments()          # malformed segment records fail here, not half-way
     for topic, (tname, _) in log.channels.items():
         if log.counts.get(topic):
@@ -335,15 +335,15 @@ def read_log(path: str, umbrella: bool = True) -> LogData:
 
 
 def _open_indexed(log: LogData) -> None:
-    with open(log.path, "rb") as fh:
+    with open(log.path, 'rb') as fh:
         reader = make_reader(fh)
         summary = reader.get_summary()
         if summary is None or summary.statistics is None:
-            raise McapError("no summary")
+            raise McapError('no summary')
         for ch in summary.channels.values():
             schema = summary.schemas.get(ch.schema_id)
-            log.channels[ch.topic] = (schema.name if schema else "",
-                                      ch.metadata.get("offered_qos_profiles", ""))
+            log.channels[ch.topic] = (schema.name if schema else '',
+                                      ch.metadata.get('offered_qos_profiles', ''))
             log.counts[ch.topic] = log.counts.get(ch.topic, 0) + \
                 summary.statistics.channel_message_counts.get(ch.id, 0)
         for m in reader.iter_metadata():
@@ -378,25 +378,25 @@ def _scan(path: str, schemas: dict, channels: dict, state: dict | None = None):
             topic = ch.topic
         yield record, topic
 
-    with open(path, "rb") as fh:
+    with open(path, 'rb') as fh:
         try:
             for record in StreamReader(fh, skip_magic=False).records:
                 yield from take(record)
         except Exception:
             if state is not None:
-                state["truncated"] = True
+                state['truncated'] = True
 
 
 def _open_recovering(log: LogData) -> None:
     """One pass over the records of a file without a usable summary (a killed writer)."""
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
-    state = {"truncated": False}
+    state = {'truncated': False}
     for record, topic in _scan(log.path, schemas, channels, state):
         if isinstance(record, Channel):
             schema = schemas.get(record.schema_id)
-            log.channels[record.topic] = (schema.name if schema else "",
-                                          record.metadata.get("offered_qos_profiles", ""))
+            log.channels[record.topic] = (schema.name if schema else '',
+                                          record.metadata.get('offered_qos_profiles', ''))
             log.counts.setdefault(record.topic, 0)
         elif isinstance(record, Message):
             log.counts[topic] += 1
@@ -405,4 +405,4 @@ def _open_recovering(log: LogData) -> None:
                               record.log_time if hi is None else max(hi, record.log_time))
         elif isinstance(record, Metadata):
             log.metadata[record.name] = dict(record.metadata)
-    log.truncated = state["truncated"]
+    log.truncated = state['truncated']

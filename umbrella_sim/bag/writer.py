@@ -43,17 +43,17 @@ from .. import __version__
 
 
 # ---------------------------------------------------------------------- recorder
-def default_bag_name(namespace: str = "/", when: float | None = None) -> str:
+def default_bag_name(namespace: str = '/', when: float | None = None) -> str:
     """Return umbrella[_ns]_YYYY_MM_DD-HH_MM_SS, as ros2 bag record names its bags."""
     import time
 
-    ns = namespace.strip("/").replace("/", "_")
-    stamp = time.strftime("%Y_%m_%d-%H_%M_%S", time.localtime(when))
-    return "_".join(["umbrella"] + ([ns] if ns else []) + [stamp])
+    ns = namespace.strip('/').replace('/', '_')
+    stamp = time.strftime('%Y_%m_%d-%H_%M_%S', time.localtime(when))
+    return '_'.join(['umbrella'] + ([ns] if ns else []) + [stamp])
 
 
-def new_bag_recorder(namespace: str, metadata, parent: str = ".",
-                     on_error=None, background: bool = False) -> "BagRecorder":
+def new_bag_recorder(namespace: str, metadata, parent: str = '.',
+                     on_error=None, background: bool = False) -> 'BagRecorder':
     """
     Open a new timestamped bag directory in parent (default: the working directory).
 
@@ -63,7 +63,7 @@ def new_bag_recorder(namespace: str, metadata, parent: str = ".",
     """
     base = os.path.join(os.path.abspath(parent), default_bag_name(namespace))
     for k in range(1000):
-        bag_dir = base if k == 0 else f"{base}_{k}"
+        bag_dir = base if k == 0 else f'{base}_{k}'
         if os.path.exists(bag_dir):
             continue
         try:
@@ -73,10 +73,10 @@ def new_bag_recorder(namespace: str, metadata, parent: str = ".",
             if os.path.exists(bag_dir):      # taken meanwhile by another process: next name
                 continue
             raise
-    raise ValueError(f"recording: no free bag directory name {base}_N in {parent}")
+    raise ValueError(f'recording: no free bag directory name {base}_N in {parent}')
 
 
-def check_record_path(bag_dir: str, what: str = "record_path") -> str:
+def check_record_path(bag_dir: str, what: str = 'record_path') -> str:
     """
     Return the absolute bag directory, or raise ValueError why it cannot be created.
 
@@ -119,9 +119,9 @@ class BagRecorder:
         try:
             os.mkdir(bag_dir)
         except OSError as exc:
-            raise ValueError(f"record_path {bag_dir}: {exc.strerror}") from None
+            raise ValueError(f'record_path {bag_dir}: {exc.strerror}') from None
         self.bag_dir = bag_dir
-        self.file_name = os.path.basename(bag_dir) + "_0.mcap"
+        self.file_name = os.path.basename(bag_dir) + '_0.mcap'
         self.path = os.path.join(bag_dir, self.file_name)
         self.error: str | None = None
         self.on_error = on_error
@@ -138,20 +138,20 @@ class BagRecorder:
             # the writer's growing chunk index goes to disk (mcap's private list, replaced
             # where this mcap version has it; otherwise it stays in memory as before)
             self._chunk_index = SpilledChunkIndex(bag_dir)
-            if isinstance(getattr(self._writer, "_Writer__chunk_indices", None), list):
+            if isinstance(getattr(self._writer, '_Writer__chunk_indices', None), list):
                 self._writer._Writer__chunk_indices = self._chunk_index
             # Schema and Channel records once each, outside the chunks (add_channel)
             self._definitions_outside = keep_definitions_out_of_chunks(self._writer)
             self._appender = MessageAppender.create(self._writer)
-            self._writer.start(profile="ros2", library=f"umbrella_sim {__version__}")
+            self._writer.start(profile='ros2', library=f'umbrella_sim {__version__}')
             for name, data in metadata.items():
                 self._writer.add_metadata(name, data)
             self._written_records = set(metadata)
             self._fh.commit()
         except OSError as exc:
             self._remove_partial()
-            raise ValueError(f"record_path {bag_dir}: cannot start the recording: "
-                             f"{exc.strerror or exc}") from None
+            raise ValueError(f'record_path {bag_dir}: cannot start the recording: '
+                             f'{exc.strerror or exc}') from None
         self._lock = threading.Lock()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, str, QoSProfile]] = {}
@@ -168,7 +168,7 @@ class BagRecorder:
             self._writing = False
             self._stop_writer = False
             self._writer_thread = threading.Thread(target=self._write_queued,
-                                                   name="recorder", daemon=True)
+                                                   name='recorder', daemon=True)
             self._writer_thread.start()
 
     def _write_queued(self) -> None:
@@ -189,7 +189,7 @@ class BagRecorder:
                 except Exception as exc:  # never lose the thread silently: stop the recording
                     with self._lock:
                         if not self._closed:
-                            self._fail(OSError(f"{type(exc).__name__}: {exc}"), "recording",
+                            self._fail(OSError(f'{type(exc).__name__}: {exc}'), 'recording',
                                        None)
             with self._cv:
                 self._writing = False
@@ -223,18 +223,18 @@ class BagRecorder:
 
     def _fail(self, exc: OSError, what: str, t_ns: int | None) -> None:
         """Stop recording after a write error (called with the lock held)."""
-        self.error = f"{what}: {exc.strerror or exc} (errno {exc.errno})" if exc.errno else \
-            f"{what}: {exc}"
+        self.error = f'{what}: {exc.strerror or exc} (errno {exc.errno})' if exc.errno else \
+            f'{what}: {exc}'
         self._closed = True
         # what the file holds: the messages of the chunks written before the failure (the
         # chunk being filled was only in memory)
         counts, last = self._on_disk
         self.counts = {topic: counts.get(topic, 0) for topic in self.counts}
         self._last = last
-        meta = {"ended_early": "true", "error": self.error,
-                "last_log_time_ns": "" if last is None else str(last),
-                "failed_at_log_time_ns": "" if t_ns is None else str(t_ns),
-                "recorded": json.dumps(self.counts)}
+        meta = {'ended_early': 'true', 'error': self.error,
+                'last_log_time_ns': '' if last is None else str(last),
+                'failed_at_log_time_ns': '' if t_ns is None else str(t_ns),
+                'recorded': json.dumps(self.counts)}
         try:
             write_all(self._fh.fd, ended_early_tail(meta))
         except OSError:
@@ -258,15 +258,15 @@ class BagRecorder:
                 return
             tname = type_name(msg_type)
             new_schema = tname not in self._schemas
-            definition = message_definition(tname).encode("utf-8")
+            definition = message_definition(tname).encode('utf-8')
             if new_schema:
                 self._schemas[tname] = self._writer.register_schema(
-                    name=tname, encoding="ros2msg", data=definition)
+                    name=tname, encoding='ros2msg', data=definition)
             # what rosbag2 (Jazzy) puts on a channel: the QoS and the type's RIHS01 hash
-            channel_metadata = {"offered_qos_profiles": qos_yaml(qos),
-                                "topic_type_hash": type_description_hash(tname)}
+            channel_metadata = {'offered_qos_profiles': qos_yaml(qos),
+                                'topic_type_hash': type_description_hash(tname)}
             cid = self._writer.register_channel(
-                topic=topic, message_encoding="cdr", schema_id=self._schemas[tname],
+                topic=topic, message_encoding='cdr', schema_id=self._schemas[tname],
                 metadata=channel_metadata)
             self._channels[topic] = (cid, tname, qos)
             self.counts[topic] = 0
@@ -278,15 +278,15 @@ class BagRecorder:
             from mcap.records import Channel, Schema
             builder = RecordBuilder()
             if new_schema:
-                Schema(id=self._schemas[tname], name=tname, encoding="ros2msg",
+                Schema(id=self._schemas[tname], name=tname, encoding='ros2msg',
                        data=definition).write(builder)
-            Channel(id=cid, topic=topic, message_encoding="cdr", schema_id=self._schemas[tname],
+            Channel(id=cid, topic=topic, message_encoding='cdr', schema_id=self._schemas[tname],
                     metadata=channel_metadata).write(builder)
             self._fh.write(builder.end())
             try:
                 self._fh.commit()
             except OSError as exc:
-                self._fail(exc, f"writing channel {topic}", None)
+                self._fail(exc, f'writing channel {topic}', None)
 
     def add_metadata(self, name: str, values: dict[str, str]) -> None:
         """Write a metadata record now (outside the chunks: it survives a crash); once a name."""
@@ -299,7 +299,7 @@ class BagRecorder:
             try:
                 self._fh.commit()
             except OSError as exc:
-                self._fail(exc, f"writing {name}", None)
+                self._fail(exc, f'writing {name}', None)
 
     def drained_counts(self) -> dict[str, int]:
         """Return the messages recorded per topic, once every queued message is written."""
@@ -324,16 +324,16 @@ class BagRecorder:
             if self._closed:
                 return self.segment
             if ended_events is not None:
-                self._writer.add_metadata(f"{EVENTS_RECORD}.{self.segment}", ended_events)
+                self._writer.add_metadata(f'{EVENTS_RECORD}.{self.segment}', ended_events)
             self.segment += 1
             self.offset_ns = (self._last if self._last is not None else self.offset_ns) + gap_ns
-            self._writer.add_metadata(f"{SEGMENT_RECORD}.{self.segment}", {
-                "index": str(self.segment), "log_time_offset_ns": str(self.offset_ns),
-                "parameters": json.dumps(parameters)})
+            self._writer.add_metadata(f'{SEGMENT_RECORD}.{self.segment}', {
+                'index': str(self.segment), 'log_time_offset_ns': str(self.offset_ns),
+                'parameters': json.dumps(parameters)})
             try:
                 self._fh.commit()
             except OSError as exc:
-                self._fail(exc, f"writing segment {self.segment}", None)
+                self._fail(exc, f'writing segment {self.segment}', None)
             return self.segment
 
     def write(self, topic: str, msg, t_ns: int, data: bytes | None = None) -> bool:
@@ -385,7 +385,7 @@ class BagRecorder:
                 try:
                     wrote = self._fh.commit()
                 except OSError as exc:
-                    self._fail(exc, f"writing {topic}", t_ns)
+                    self._fail(exc, f'writing {topic}', t_ns)
                     return False
                 self.counts[topic] = seq + 1
                 if self._first is None or t_ns < self._first:
@@ -411,31 +411,31 @@ class BagRecorder:
                     self._writer.add_metadata(name, data)
                 self._fh.commit()          # the counts and events first: they are small
                 info = self._bag_info()
-                self._writer.add_metadata("rosbag2", {
-                    "serialized_metadata": yaml.safe_dump(info, sort_keys=False),
-                    "ROS_DISTRO": "jazzy"})
+                self._writer.add_metadata('rosbag2', {
+                    'serialized_metadata': yaml.safe_dump(info, sort_keys=False),
+                    'ROS_DISTRO': 'jazzy'})
                 self._writer.finish()
                 self._release_index()
                 self._fh.commit()
                 self._fh.close()
             except OSError as exc:
                 self._closed = False
-                self._fail(exc, "finalising", None)
+                self._fail(exc, 'finalising', None)
                 return
             try:
                 self._write_bag_info()
             except OSError as exc:
-                self.error = f"writing metadata.yaml: {exc.strerror or exc}"
+                self.error = f'writing metadata.yaml: {exc.strerror or exc}'
                 if self.on_error is not None:
                     self.on_error(self.error)
 
     def _write_bag_info(self) -> None:
-        path = os.path.join(self.bag_dir, "metadata.yaml")
-        text = yaml.safe_dump({"rosbag2_bagfile_information": self._bag_info()},
+        path = os.path.join(self.bag_dir, 'metadata.yaml')
+        text = yaml.safe_dump({'rosbag2_bagfile_information': self._bag_info()},
                               sort_keys=False)
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         try:
-            write_all(fd, text.encode("utf-8"))
+            write_all(fd, text.encode('utf-8'))
         except OSError:
             os.close(fd)
             os.unlink(path)       # no half-written metadata.yaml: readers fall back to the .mcap
@@ -446,21 +446,21 @@ class BagRecorder:
         start = self._first or 0
         duration = (self._last or 0) - start
         total = sum(self.counts.values())
-        topics = [{"topic_metadata": {"name": topic, "type": tname,
-                                      "serialization_format": "cdr",
-                                      "offered_qos_profiles": qos_profiles(qos),
-                                      "type_description_hash": type_description_hash(tname)},
-                   "message_count": self.counts[topic]}
+        topics = [{'topic_metadata': {'name': topic, 'type': tname,
+                                      'serialization_format': 'cdr',
+                                      'offered_qos_profiles': qos_profiles(qos),
+                                      'type_description_hash': type_description_hash(tname)},
+                   'message_count': self.counts[topic]}
                   for topic, (_, tname, qos) in self._channels.items()]
         return {
-            "version": BAG_FORMAT_VERSION, "storage_identifier": "mcap",
-            "duration": {"nanoseconds": duration},
-            "starting_time": {"nanoseconds_since_epoch": start},
-            "message_count": total, "topics_with_message_count": topics,
-            "compression_format": "", "compression_mode": "",
-            "relative_file_paths": [self.file_name],
-            "files": [{"path": self.file_name,
-                       "starting_time": {"nanoseconds_since_epoch": start},
-                       "duration": {"nanoseconds": duration}, "message_count": total}],
-            "custom_data": {}, "ros_distro": "jazzy",
+            'version': BAG_FORMAT_VERSION, 'storage_identifier': 'mcap',
+            'duration': {'nanoseconds': duration},
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': total, 'topics_with_message_count': topics,
+            'compression_format': '', 'compression_mode': '',
+            'relative_file_paths': [self.file_name],
+            'files': [{'path': self.file_name,
+                       'starting_time': {'nanoseconds_since_epoch': start},
+                       'duration': {'nanoseconds': duration}, 'message_count': total}],
+            'custom_data': {}, 'ros_distro': 'jazzy',
         }

@@ -38,15 +38,15 @@ import importlib
 
 #: the public names, by the module that defines them (imported on first use: importing a
 #: module of this package does not import the whole physics)
-_PUBLIC = {"UmbrellaParams": "params", "ControllerConfig": "params", "REGISTRY": "registry",
-           "UmbrellaModel": "model", "UmbrellaSimulator": "solver", "RunDriver": "driver",
-           "Chunk": "driver", "simulate": "driver", "Sample": "outputs",
-           "StepBlock": "outputs", "RunResult": "summary", "SummaryAccumulator": "summary",
-           "ForceSchedule": "forcing"}
+_PUBLIC = {'UmbrellaParams': 'params', 'ControllerConfig': 'params', 'REGISTRY': 'registry',
+           'UmbrellaModel': 'model', 'UmbrellaSimulator': 'solver', 'RunDriver': 'driver',
+           'Chunk': 'driver', 'simulate': 'driver', 'Sample': 'outputs',
+           'StepBlock': 'outputs', 'RunResult': 'summary', 'SummaryAccumulator': 'summary',
+           'ForceSchedule': 'forcing'}
 __all__ = sorted(_PUBLIC)
 
 
 def __getattr__(name: str):
     if name not in _PUBLIC:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(f".{_PUBLIC[name]}", __name__), name)
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    return getattr(importlib.import_module(f'.{_PUBLIC[name]}', __name__), name)

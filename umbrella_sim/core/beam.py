@@ -28,7 +28,7 @@ import numpy as np
 GAUSS_POINTS, GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(5)
 GAUSS_POINTS = 0.5 * (GAUSS_POINTS + 1.0)
 GAUSS_WEIGHTS = 0.5 * GAUSS_WEIGHTS
-_DOF = {"u": 0, "v": 1, "theta": 2}
+_DOF = {'u': 0, 'v': 1, 'theta': 2}
 
 
 def shape_functions(eta: np.ndarray, le: float):
@@ -131,12 +131,12 @@ class BeamBody:
         self.mass = float(w.sum())
         self.first_moment = float(w @ x)                          # int rho x
         self.j0 = float(w @ x**2)                                 # int rho x^2
-        self.s_bar = np.einsum("q,qie->ie", w, s)                 # int rho S      (2, ne)
-        self.c = np.einsum("q,q,qe->e", w, x, su)                 # int rho x S_u  (ne)
-        self.g = np.einsum("q,q,qe->e", w, x, sv)                 # int rho x S_v  (ne)
-        self.m_ff = np.einsum("q,qie,qif->ef", w, s, s)           # int rho S^T S  (ne, ne)
-        self.w_skew = (np.einsum("q,qe,qf->ef", w, su, sv)
-                       - np.einsum("q,qe,qf->ef", w, sv, su))     # int rho (Su^T Sv - Sv^T Su)
+        self.s_bar = np.einsum('q,qie->ie', w, s)                 # int rho S      (2, ne)
+        self.c = np.einsum('q,q,qe->e', w, x, su)                 # int rho x S_u  (ne)
+        self.g = np.einsum('q,q,qe->e', w, x, sv)                 # int rho x S_v  (ne)
+        self.m_ff = np.einsum('q,qie,qif->ef', w, s, s)           # int rho S^T S  (ne, ne)
+        self.w_skew = (np.einsum('q,qe,qf->ef', w, su, sv)
+                       - np.einsum('q,qe,qf->ef', w, sv, su))     # int rho (Su^T Sv - Sv^T Su)
         self.p_bar = np.array([self.first_moment, 0.0])
 
         # --- stiffness (4.37, 4.42): EI v''^2 + EA u'^2, exact quadrature
@@ -144,8 +144,8 @@ class BeamBody:
         for j, le in enumerate(lengths):
             _, dn, d2n = shape_functions(GAUSS_POINTS, le)
             b = self.element_dof_maps[j]
-            ke = (ei * np.einsum("q,qi,qj->ij", le * GAUSS_WEIGHTS, d2n[:, 1], d2n[:, 1])
-                  + ea * np.einsum("q,qi,qj->ij", le * GAUSS_WEIGHTS, dn[:, 0], dn[:, 0]))
+            ke = (ei * np.einsum('q,qi,qj->ij', le * GAUSS_WEIGHTS, d2n[:, 1], d2n[:, 1])
+                  + ea * np.einsum('q,qi,qj->ij', le * GAUSS_WEIGHTS, dn[:, 0], dn[:, 0]))
             k += b.T @ ke @ b
         self.stiffness = k
 
@@ -167,13 +167,13 @@ class BeamBody:
     def elastic_index(self, node: int, dof: str) -> int:
         idx = int(self._full_to_e[3 * node + _DOF[dof]])
         if idx < 0:
-            raise KeyError(f"{self.name} node {node} {dof} is fixed by the frame")
+            raise KeyError(f'{self.name} node {node} {dof} is fixed by the frame')
         return idx
 
     def displacement(self, e: np.ndarray, x: np.ndarray) -> np.ndarray:
         """(u, v) at body abscissae x (Eq. 3.16): shape (len(x), 2)."""
         x = np.atleast_1d(np.asarray(x, dtype=float))
-        j = np.clip(np.searchsorted(self.node_x, x, side="right") - 1, 0,
+        j = np.clip(np.searchsorted(self.node_x, x, side='right') - 1, 0,
                     len(self.element_length) - 1)
         out = np.empty((len(x), 2))
         for i, (xi, ji) in enumerate(zip(x, j)):

@@ -103,7 +103,7 @@ def gonzalez(grad_mid: np.ndarray, dw: np.ndarray, df: np.ndarray) -> np.ndarray
     grad f(w_m) for dw = 0.
     """
     dd = _dot(dw, dw)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid='ignore', divide='ignore'):
         corr = np.where(dd > 0.0, (df - _dot(grad_mid, dw)) / dd, 0.0)
     return grad_mid + corr[..., None] * dw
 
@@ -247,7 +247,7 @@ class CorotationalStrainEnergy:
             hes[:, 1 + k, 2 + k, 2 + k] = th / (1.0 - th * th) ** 1.5
         unit = d / ln[:, None]
         ang = jac[:, 1:]
-        hes[:, 0] = (np.einsum("eai,ab,ebj->eij", ang, _Q_HESSIAN, ang) / 30.0
+        hes[:, 0] = (np.einsum('eai,ab,ebj->eij', ang, _Q_HESSIAN, ang) / 30.0
                      + dq[:, 0, None, None] * hes[:, 1] + dq[:, 1, None, None] * hes[:, 2])
         hes[:, 0, 0:2, 0:2] += ((np.eye(2) - unit[:, :, None] * unit[:, None, :])
                                 / (ln * l0)[:, None, None])
@@ -281,10 +281,10 @@ class CorotationalStrainEnergy:
     # -------------------------------------------------------------------- energy
     def energy(self, q) -> float:
         s = self.local_strains(q)
-        return 0.5 * float(np.einsum("ei,eij,ej->", s, self.stiffness, s))
+        return 0.5 * float(np.einsum('ei,eij,ej->', s, self.stiffness, s))
 
     def _stress_resultants(self, s):
-        return np.einsum("eij,ej->ei", self.stiffness, s)   # D s = (N l_e, M-like, M-like)
+        return np.einsum('eij,ej->ei', self.stiffness, s)   # D s = (N l_e, M-like, M-like)
 
     def gradient(self, q) -> np.ndarray:
         z = self.chords_and_slopes(q)
@@ -293,17 +293,17 @@ class CorotationalStrainEnergy:
 
     def _assemble_vector(self, jac, sigma):
         """sum_e L_e^T jac_e^T sigma_e."""
-        return np.einsum("eiq,ei->q", self.lin, np.einsum("eki,ek->ei", jac, sigma))
+        return np.einsum('eiq,ei->q', self.lin, np.einsum('eki,ek->ei', jac, sigma))
 
     def _assemble_matrix(self, zmat):
         """sum_e L_e^T zmat_e L_e for per-element 6 x 6 matrices."""
-        return np.einsum("eip,eij,ejq->pq", self.lin, zmat, self.lin)
+        return np.einsum('eip,eij,ejq->pq', self.lin, zmat, self.lin)
 
     def material_tangent(self, q) -> np.ndarray:
         """B(q)^T D B(q): the Kelvin-Voigt damping is beta times this (strain rates)."""
         z = self.chords_and_slopes(q)
         jac = self._strain_jacobian(z, self._strains(z))
-        return self._assemble_matrix(np.einsum("eki,ekl,elj->eij", jac, self.stiffness, jac))
+        return self._assemble_matrix(np.einsum('eki,ekl,elj->eij', jac, self.stiffness, jac))
 
     def tangent(self, q) -> np.ndarray:
         """Return d grad U / dq = B^T D B + sum_k (D s)_k d^2 s_k / dq^2."""
@@ -311,8 +311,8 @@ class CorotationalStrainEnergy:
         s = self._strains(z)
         jac, hes = self._strain_jacobian(z, s, hessians=True)
         sigma = self._stress_resultants(s)
-        return self._assemble_matrix(np.einsum("eki,ekl,elj->eij", jac, self.stiffness, jac)
-                                     + np.einsum("ek,ekij->eij", sigma, hes))
+        return self._assemble_matrix(np.einsum('eki,ekl,elj->eij', jac, self.stiffness, jac)
+                                     + np.einsum('ek,ekij->eij', sigma, hes))
 
     def discrete_gradient(self, q0, q1) -> np.ndarray:
         """G = sum_e L_e^T B~_e^T D (s0 + s1) / 2: dq . G = U(q1) - U(q0) to round-off."""
@@ -335,8 +335,8 @@ class CorotationalStrainEnergy:
         jac, hes = self._strain_jacobian(0.5 * (z0 + z1), s_mean, hessians=True)
         sigma = self._stress_resultants(s_mean)
         return 0.5 * self._assemble_matrix(
-            np.einsum("eki,ekl,elj->eij", jac, self.stiffness, jac)
-            + np.einsum("ek,ekij->eij", sigma, hes))
+            np.einsum('eki,ekl,elj->eij', jac, self.stiffness, jac)
+            + np.einsum('ek,ekij->eij', sigma, hes))
 
     # -------------------------------------------------------------------- stress
     def fibre_stresses(self, q):
@@ -361,7 +361,7 @@ class CorotationalStrainEnergy:
         """d/dt of fibre_stresses along qd: the same map of s' = B(q) q'."""
         z = self.chords_and_slopes(q)
         jac = self._strain_jacobian(z, self._strains(z))
-        rate = np.einsum("eki,ei->ek", jac, self.lin @ qd)
+        rate = np.einsum('eki,ei->ek', jac, self.lin @ qd)
         return self._fibre(rate)
 
 

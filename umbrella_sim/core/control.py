@@ -75,8 +75,8 @@ class DeployLaw:
         p, c = self.params, self.cfg
         self.span = p.alpha0 - p.alpha_deployed
         if c.creep_angle >= self.span:
-            raise ValueError(f"parameter creep_angle={c.creep_angle}: must be below "
-                             f"alpha0 - alpha_deployed = {self.span:.6g} rad")
+            raise ValueError(f'parameter creep_angle={c.creep_angle}: must be below '
+                             f'alpha0 - alpha_deployed = {self.span:.6g} rad')
         self.lock_rate = c.lock_rate if c.lock_rate > 0 else 0.25 * self.span / c.target_time
         near_stop = p.alpha_deployed + self.span * np.linspace(0.0, 0.5, 21)
         self.braking_authority = min(-c.min_force * self.lever(a) / self.inertia(a)
@@ -137,9 +137,9 @@ class DeployLaw:
 
         fastest = duration(np.inf)
         if fastest > c.target_time:
-            raise ValueError(f"parameter target_time={c.target_time:g}: too short for "
-                             f"max_force={c.max_force:g} N (and the braking at min_force="
-                             f"{c.min_force:g} N): the fastest plan takes {fastest:.4g} s")
+            raise ValueError(f'parameter target_time={c.target_time:g}: too short for '
+                             f'max_force={c.max_force:g} N (and the braking at min_force='
+                             f'{c.min_force:g} N): the fastest plan takes {fastest:.4g} s')
         lo, hi = 1e-6, float(np.max(np.minimum(push, brake)))
         if dec <= 0:
             lo = max(lo, s_e) if c.lock_rate > 0 else lo
@@ -212,11 +212,11 @@ def constant_force_for(params: UmbrellaParams, target_time: float, rtol: float =
         run = simulate(p.replace(sleeve_force=force), 20.0 * target_time, stop_after_lock=0.0,
                        keep_samples=False)
         if run.lock is None:
-            raise ValueError(f"no lock within {20 * target_time:g} s at F = {force:g} N")
+            raise ValueError(f'no lock within {20 * target_time:g} s at F = {force:g} N')
         if abs(run.lock.time - target_time) <= rtol * target_time:
             return force
         force *= (run.lock.time / target_time) ** 2
-    raise ValueError(f"no constant force found deploying in {target_time:g} s")
+    raise ValueError(f'no constant force found deploying in {target_time:g} s')
 
 
 def simulate_closed_loop(params: UmbrellaParams, cfg: ControllerConfig,

@@ -81,7 +81,7 @@ class Chunk:
 
 def chunk_steps_for(params: UmbrellaParams, coordinates: int) -> int:
     """Return the steps of a chunk for a model of that many coordinates (CHUNK_WORK)."""
-    weight = NONLINEAR_WEIGHT if params.model == "flexible-nonlinear" else 1
+    weight = NONLINEAR_WEIGHT if params.model == 'flexible-nonlinear' else 1
     return max(MIN_CHUNK_STEPS, min(MAX_CHUNK_STEPS, CHUNK_WORK // (coordinates * weight)))
 
 
@@ -106,7 +106,7 @@ class RunDriver:
             params = params.with_physics_step(step)
         elif period_steps is not None and not (isinstance(period_steps, int)
                                                and period_steps >= 1):
-            raise ValueError(f"period_steps={period_steps!r}: must be a whole number >= 1")
+            raise ValueError(f'period_steps={period_steps!r}: must be a whole number >= 1')
         self.publish_rate = publish_rate
         self.period_steps = period_steps
         self.sim = sim = UmbrellaSimulator(params)
@@ -124,7 +124,7 @@ class RunDriver:
         self.initial = first
         self.summary = SummaryAccumulator(
             self.params.as_dict(), first, sim.engine.lock_kind,
-            section_slope=getattr(sim.engine, "max_section_slope", None))
+            section_slope=getattr(sim.engine, 'max_section_slope', None))
         self.publications = 0          # publications taken so far (publication())
         self._hold: dict = {}          # peak stresses over the steps since the last one
         self._last_block: StepBlock | None = None
@@ -231,9 +231,9 @@ class RunDriver:
             return s
         # (dataclasses.replace re-runs __init__: a per-publication cost)
         return build_frozen(Sample, {
-            **s.__dict__, "peak_stress_leaf": hold["leaf"][0],
-            "peak_stress_leaf_x": hold["leaf"][1], "peak_stress_link": hold["link"][0],
-            "peak_stress_link_x": hold["link"][1]})
+            **s.__dict__, 'peak_stress_leaf': hold['leaf'][0],
+            'peak_stress_leaf_x': hold['leaf'][1], 'peak_stress_link': hold['link'][0],
+            'peak_stress_link_x': hold['link'][1]})
 
     # ------------------------------------------------------------------- the loop
     def run(self, duration: float, *, stop_after_lock: float | None = None,

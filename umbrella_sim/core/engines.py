@@ -57,8 +57,8 @@ def fault_message(t_good: float, reason: str) -> str:
     reason: what failed (an integrator's own 'at t = ...' is dropped: the failed step is
     the one after t_good, and the recording's fault_time is t_good).
     """
-    reason = re.sub(r" at t = \S+ s", "", reason)
-    return f"solver failed in the step after t = {t_good:.9g} s: {reason}"
+    reason = re.sub(r' at t = \S+ s', '', reason)
+    return f'solver failed in the step after t = {t_good:.9g} s: {reason}'
 
 
 class Engine(abc.ABC):
@@ -161,7 +161,7 @@ class FiniteElementEngine(Engine):
 
     def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
         self.model = model
-        self.rigid = params.model == "rigid-fe"
+        self.rigid = params.model == 'rigid-fe'
         self.lock_kind = params.lock_rule
         self.integrator = self._integrator(model)
         self.h = physics_step_of(params)
@@ -205,7 +205,7 @@ class FiniteElementEngine(Engine):
         kernel = self.integrator.kernel
         # an elastic law (nonlinear.py) carries its dissipation and halves failed steps:
         # its crossing goes through its own step
-        if kernel is None or getattr(kernel, "elastic_law", None) is not None:
+        if kernel is None or getattr(kernel, 'elastic_law', None) is not None:
             return None
         integ = self.integrator
         status, state, dt, its, residual = kernel.find_crossing(
@@ -213,8 +213,8 @@ class FiniteElementEngine(Engine):
             DIVERGENCE_RESIDUAL, EVENT_TIME_TOLERANCE)
         integ.iterations += its
         if status == ADVANCE_DIVERGED:
-            raise SimulationDiverged(fault_message(s.t, f"constraint residual {residual:.3g} "
-                                                        f"past tolerance {DIVERGENCE_RESIDUAL:g}"))
+            raise SimulationDiverged(fault_message(s.t, f'constraint residual {residual:.3g} '
+                                                        f'past tolerance {DIVERGENCE_RESIDUAL:g}'))
         if status != ADVANCE_DONE:
             raise SimulationDiverged(fault_message(s.t, integ.kernel_error(status, s.t + dt)))
         return state
@@ -233,10 +233,10 @@ class FiniteElementEngine(Engine):
         if status == ADVANCE_DONE:
             stop = None
         elif status == ADVANCE_CROSSING:
-            stop = "crossing"
+            stop = 'crossing'
         elif status == ADVANCE_DIVERGED:
-            stop = fault_message(t, f"constraint residual {residual:.3g} past tolerance "
-                                    f"{DIVERGENCE_RESIDUAL:g}")
+            stop = fault_message(t, f'constraint residual {residual:.3g} past tolerance '
+                                    f'{DIVERGENCE_RESIDUAL:g}')
         else:
             stop = fault_message(t, integ.kernel_error(status, t + h))
         state = kernel.state(t, self.model.n_constraints(cs)) if done else s
@@ -274,7 +274,7 @@ class FiniteElementEngine(Engine):
         cs = self._cs[LOCKED]
         before = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
         free: tuple = ()
-        if self.lock_kind == "energy":
+        if self.lock_kind == 'energy':
             try:
                 qd, free = energy_velocity(m, s.q, s.qd, cs)
             except LockImpossible as exc:
@@ -292,12 +292,12 @@ class RigidEngine(Engine):
     """Closed-form two-angle model (4.120-4.125), RK4 with projection, sub-stepped."""
 
     max_substep = 1e-4
-    backend = "closed-form rigid (Python)"
+    backend = 'closed-form rigid (Python)'
 
     def __init__(self, params: UmbrellaParams, model: UmbrellaModel):
         self.model = model
         self.mech = RigidMechanism(params)
-        self.lock_kind = "plastic"
+        self.lock_kind = 'plastic'
 
     def initial(self, force: float) -> DynamicState:
         y = self.mech.initial_state(self.model.params.v0)
@@ -350,7 +350,7 @@ class RigidEngine(Engine):
                     break
                 h1 = mech.sleeve_height(y1[0], y1[1])
                 if h1 - self.model.y_stop <= 0.0:
-                    stop = "crossing"
+                    stop = 'crossing'
                     break
                 work += force * (height - h1)
                 y, height = y1, h1
@@ -379,8 +379,8 @@ class RigidEngine(Engine):
             for name, values in columns.items():
                 rows[_STEP_ROW[name]] = values
             if len(columns) != len(STEP_FIELDS):
-                raise RuntimeError("RigidEngine.advance fills " + ", ".join(
-                    sorted(columns)) + f", not every one of {STEP_FIELDS}")
+                raise RuntimeError('RigidEngine.advance fills ' + ', '.join(
+                    sorted(columns)) + f', not every one of {STEP_FIELDS}')
         state_rows = None
         if states:
             state_rows = np.array(kept).T if done else np.zeros((self._state_rows(), 0))
@@ -403,13 +403,13 @@ class RigidEngine(Engine):
 
     def _zero_figures(self) -> dict:
         """Return the step figures of the elastic field, which has none here: zeros."""
-        if not hasattr(self, "_zeros"):
+        if not hasattr(self, '_zeros'):
             m = self.model
             zero = tuple(np.zeros((2, len(b.stress_x))) for b in (m.leaf, m.link))
             peaks = step_peaks((zero, zero), (zero, zero), 1.0,
                                (m.leaf.stress_x, m.link.stress_x))
-            names = ("peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
-                     "peak_stress_link_x", "stress_leaf_joint", "stress_link_mid")
+            names = ('peak_stress_leaf', 'peak_stress_leaf_x', 'peak_stress_link',
+                     'peak_stress_link_x', 'stress_leaf_joint', 'stress_link_mid')
             values = (*peaks, *m.reference_stresses(zero[0][0], zero[1][0]))
             self._zeros = dict(zip(names, (float(v) for v in values)),
                                tip_axial=0.0, tip_transverse=0.0, strain_energy=0.0,
@@ -419,9 +419,9 @@ class RigidEngine(Engine):
     def _check(self, y, res: float) -> str | None:
         """Why the state y, residual res, cannot be taken (UmbrellaSimulator._checked's rule)."""
         if not all(math.isfinite(v) for v in y):
-            return "the state became non-finite"
+            return 'the state became non-finite'
         if not res <= DIVERGENCE_RESIDUAL:
-            return f"constraint residual {res:.3g} past tolerance {DIVERGENCE_RESIDUAL:g}"
+            return f'constraint residual {res:.3g} past tolerance {DIVERGENCE_RESIDUAL:g}'
         if y[0] >= ALPHA1_AXLE:
             return AXLE_REASON
         return None
@@ -455,7 +455,7 @@ class RigidEngine(Engine):
     def lock(self, s: DynamicState, force: float):
         before = self.mech.kinetic_energy(*s.q, *s.qd)
         s = DynamicState(s.t, s.q, np.zeros(2), np.zeros(2), np.array([0.0, force]))
-        return s, LockEvent(s.t, "plastic", float(before), 0.0, ())
+        return s, LockEvent(s.t, 'plastic', float(before), 0.0, ())
 
 
 def event_root(at, h: float, f0: float):

@@ -56,7 +56,7 @@ class ForceSchedule:
         (``solver.command_force`` with the model's bounds), raising ValueError.
         """
         if not (math.isfinite(step) and step > 0.0):
-            raise ValueError(f"physics step {step}: must be a finite number > 0")
+            raise ValueError(f'physics step {step}: must be a finite number > 0')
         self.step = float(step)
         self._check = check or float
         self.initial = self._check(initial)
@@ -68,7 +68,7 @@ class ForceSchedule:
     def step_index(self, t: float) -> int:
         """Return the first step that starts at or after t (within 1 ns)."""
         if not (math.isfinite(t) and t >= 0.0):
-            raise ValueError(f"force schedule time {t}: must be finite and >= 0")
+            raise ValueError(f'force schedule time {t}: must be finite and >= 0')
         return max(0, math.ceil((t - TIME_RESOLUTION) / self.step))
 
     def add(self, t: float, force: float) -> int:
@@ -76,8 +76,8 @@ class ForceSchedule:
         f = self._check(force)
         k = self.step_index(t)
         if self._k and k < self._k[-1]:
-            raise ValueError(f"force schedule time {t} s goes backwards (the previous value "
-                             f"acts from t = {self._k[-1] * self.step:.9g} s)")
+            raise ValueError(f'force schedule time {t} s goes backwards (the previous value '
+                             f'acts from t = {self._k[-1] * self.step:.9g} s)')
         if self._k and k == self._k[-1]:
             self._f[-1] = f
         else:
@@ -112,15 +112,15 @@ def validate_force(force: float, limit: float | None = None, minimum: float = 0.
     try:
         f = float(force)
     except (TypeError, ValueError):
-        raise ValueError(f"sleeve force {force!r}: not a number") from None
+        raise ValueError(f'sleeve force {force!r}: not a number') from None
     # the same range as the sleeve_force parameter: one rule (registry.REGISTRY)
-    SPECS["sleeve_force"].check(f, what="sleeve force F_H")
+    SPECS['sleeve_force'].check(f, what='sleeve force F_H')
     if f < minimum:
-        raise ValueError(f"sleeve force F_H={f}: must be >= {minimum:g} (sleeve_force_min; "
-                         "below 0 only for a drive that can hold the sleeve back)")
+        raise ValueError(f'sleeve force F_H={f}: must be >= {minimum:g} (sleeve_force_min; '
+                         'below 0 only for a drive that can hold the sleeve back)')
     if limit is not None and f > limit:
-        raise ValueError(f"sleeve force {f:g} N: above {limit:.6g} N, the axial load the link "
-                         "can carry (Euler buckling / squash load)")
+        raise ValueError(f'sleeve force {f:g} N: above {limit:.6g} N, the axial load the link '
+                         'can carry (Euler buckling / squash load)')
     return f
 
 

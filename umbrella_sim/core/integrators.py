@@ -90,7 +90,7 @@ def newton_tolerance(h: float) -> float:
 #: what integrates a run, for its recording: a re-simulation by an integrator of another
 #: revision differs in the physics (here: stage 2, whose modified modal masses of earlier
 #: revisions became the mode fit), not in round-off
-INTEGRATOR_REVISION = "midpoint-dae, stage-2 locked-mode fit"
+INTEGRATOR_REVISION = 'midpoint-dae, stage-2 locked-mode fit'
 
 #: modes the stage-2 fit makes exact: omega h at most this, i.e. modes the step samples at
 #: least ~4 times a period (pi / 2 = 1.57).  Beyond, the scheme's modal mass s^2 that makes
@@ -154,7 +154,7 @@ class LockedModeFit:
         self.shapes = np.ascontiguousarray(phi.T)
         # each mode's damping coefficient (mass-normalised: 2 zeta omega)
         c = np.zeros_like(self.omega) if damping is None else np.einsum(
-            "ji,jk,ki->i", phi, damping, phi)
+            'ji,jk,ki->i', phi, damping, phi)
         self.damping_ratio = c / (2.0 * self.omega)
         zeta = self.damping_ratio.astype(complex)
         root = np.sqrt(zeta ** 2 - 1.0)
@@ -375,26 +375,26 @@ class MidpointDAE:
         self.max_iterations = max_iterations
         self.iterations = 0  # Newton iterations done, for diagnostics
         self.mode_fit: LockedModeFit | None = None   # stage 2, once locked
-        kernel = kernel or os.environ.get("UMBRELLA_SIM_KERNEL", "auto")
-        if kernel not in ("auto", "compiled", "numpy"):
-            raise ValueError(f"UMBRELLA_SIM_KERNEL={kernel!r}: must be auto, compiled or numpy")
+        kernel = kernel or os.environ.get('UMBRELLA_SIM_KERNEL', 'auto')
+        if kernel not in ('auto', 'compiled', 'numpy'):
+            raise ValueError(f'UMBRELLA_SIM_KERNEL={kernel!r}: must be auto, compiled or numpy')
         self._compiled = None
-        if kernel != "numpy":
+        if kernel != 'numpy':
             lib = load_kernel()
             refused = kernel_refusal()
             if lib is not None:
                 self._compiled = CompiledKernel(lib, model, PHI_TOLERANCE)
             elif refused is None:
-                raise RuntimeError(f"the compiled kernel {LIBRARY} is not built: reinstall "
-                                   "(python3 bootstrap.py setup; it needs a C compiler), or set "
-                                   "UMBRELLA_SIM_KERNEL=numpy for the slow numpy reference path")
-            elif kernel == "compiled":
+                raise RuntimeError(f'the compiled kernel {LIBRARY} is not built: reinstall '
+                                   '(python3 bootstrap.py setup; it needs a C compiler), or set '
+                                   'UMBRELLA_SIM_KERNEL=numpy for the slow numpy reference path')
+            elif kernel == 'compiled':
                 raise RuntimeError(refused)
             # else a library of another interface: the numpy path (load_kernel warned)
 
     @property
     def backend(self) -> str:
-        return "compiled" if self._compiled is not None else "numpy"
+        return 'compiled' if self._compiled is not None else 'numpy'
 
     def fit_stage2_modes(self, h: float) -> None:
         """Use ``LockedModeFit`` for grid step h in stage 2 (from ``lock_at`` on)."""
@@ -429,7 +429,7 @@ class MidpointDAE:
         return float(self.model.strain_energy(q))
 
     @property
-    def kernel(self) -> "CompiledKernel | None":
+    def kernel(self) -> 'CompiledKernel | None':
         """Return the compiled multi-step path, None on the numpy path."""
         return self._compiled
 
@@ -460,7 +460,7 @@ class MidpointDAE:
             out, its = self._compiled.step(s, h, force, cs, self.tolerance, self.max_iterations)
             self.iterations += its
             return out
-        with np.errstate(over="ignore", invalid="ignore"):
+        with np.errstate(over='ignore', invalid='ignore'):
             return self._step(s, h, force, cs)
 
     def _step(self, s: DynamicState, h: float, force: float, cs: ConstraintSet) -> DynamicState:
@@ -512,7 +512,7 @@ class MidpointDAE:
                 it_mat[n:, :n] = jac
                 lu, piv, info = dgetrf(it_mat, overwrite_a=True)
                 if info != 0:
-                    raise ConvergenceError(f"singular iteration matrix at t = {s.t + h:.9g} s")
+                    raise ConvergenceError(f'singular iteration matrix at t = {s.t + h:.9g} s')
             rhs[:n] = -0.5 * h * resid
             rhs[n:] = -phi
             dx = dgetrs(lu, piv, rhs)[0]
@@ -521,14 +521,14 @@ class MidpointDAE:
             lam = lam + dx[n:] / half_h2
             step_norm = np.max(np.abs(dx[:n]))
             if not np.isfinite(step_norm):
-                raise ConvergenceError(f"Newton iterate became non-finite at t = {s.t + h:.9g} s")
+                raise ConvergenceError(f'Newton iterate became non-finite at t = {s.t + h:.9g} s')
             rate = step_norm / last_norm if it > 1 else 1.0
             if newton_converged(m, cs, q, step_norm, rate, self.tolerance):
                 break
             last_norm = step_norm
         else:
-            raise ConvergenceError(f"Newton did not converge in {self.max_iterations} iterations "
-                                   f"at t = {s.t + h:.9g} s (|dq| = {np.max(np.abs(dx[:n])):.3g})")
+            raise ConvergenceError(f'Newton did not converge in {self.max_iterations} iterations '
+                                   f'at t = {s.t + h:.9g} s (|dq| = {np.max(np.abs(dx[:n])):.3g})')
         self.iterations += it
         v = start.end_velocity(q - q0, h)
         mass1 = m.mass_matrix(q)
@@ -536,7 +536,7 @@ class MidpointDAE:
                     - self.strain_energy(q, cs) + force * (y0 - m.sleeve_height(q)))
         v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
         if v is None:
-            raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
+            raise ConvergenceError(f'mass matrix not positive definite at t = {s.t + h:.9g} s')
         return DynamicState(s.t + h, q, v, (v - v0) / h, lam, mass1 @ v)
 
     def with_constraints(self, s: DynamicState, force: float, cs: ConstraintSet) -> DynamicState:

@@ -64,9 +64,9 @@ from .model import ConstraintSet, UmbrellaModel
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 #: the interface, installed with the package
-HEADER = os.path.join(HERE, "_kernel.h")
+HEADER = os.path.join(HERE, '_kernel.h')
 #: the compiled step, built by setup.py (plain C, no Python module init)
-LIBRARY = os.path.join(HERE, "libumbrella_kernel.so")
+LIBRARY = os.path.join(HERE, 'libumbrella_kernel.so')
 
 
 class HeaderError(ValueError):
@@ -74,12 +74,12 @@ class HeaderError(ValueError):
 
 
 # ------------------------------------------------------------------ header parser
-_SCALARS = {"int": ctypes.c_int, "long": ctypes.c_long, "double": ctypes.c_double}
-_IDENT = r"[A-Za-z_]\w*"
-_PY = r"[a-z_][a-z0-9_]*"        # a Python name of a list entry
+_SCALARS = {'int': ctypes.c_int, 'long': ctypes.c_long, 'double': ctypes.c_double}
+_IDENT = r'[A-Za-z_]\w*'
+_PY = r'[a-z_][a-z0-9_]*'        # a Python name of a list entry
 #: the export attribute the library's API is marked with (setup.py: -fvisibility=hidden)
 _EXPORT = '__attribute__((visibility("default")))'
-_GUARD = "UMBRELLA_KERNEL_H"
+_GUARD = 'UMBRELLA_KERNEL_H'
 
 
 @dataclass(frozen=True)
@@ -96,62 +96,62 @@ class Interface:
     def names(self, name: str) -> tuple[str, ...]:
         """Return the Python names of the X-macro list name."""
         if name not in self.lists:
-            raise HeaderError(f"{HEADER}: no list {name}")
+            raise HeaderError(f'{HEADER}: no list {name}')
         return tuple(py for _, py in self.lists[name])
 
     def abi_figures(self) -> list[int]:
         """Return what umbrella_abi must report after the version (_kernel.h)."""
-        figures = [ctypes.sizeof(self.structs[c]) for c, _ in self.lists["UMBRELLA_ABI_STRUCTS"]]
+        figures = [ctypes.sizeof(self.structs[c]) for c, _ in self.lists['UMBRELLA_ABI_STRUCTS']]
         return figures + [len(self.lists[self.counts[c]])
-                          for c, _ in self.lists["UMBRELLA_ABI_COUNTS"]]
+                          for c, _ in self.lists['UMBRELLA_ABI_COUNTS']]
 
     def abi_labels(self) -> list[str]:
         """Return a reader's name for each of abi_figures."""
-        return ([f"sizeof({c})" for c, _ in self.lists["UMBRELLA_ABI_STRUCTS"]]
+        return ([f'sizeof({c})' for c, _ in self.lists['UMBRELLA_ABI_STRUCTS']]
                 + [f"{c} (the {py.replace('_', ' ')})"
-                   for c, py in self.lists["UMBRELLA_ABI_COUNTS"]])
+                   for c, py in self.lists['UMBRELLA_ABI_COUNTS']])
 
 
 def _statements(text: str, path: str):
     """Yield (line, statement) of C text: a directive, or a declaration ending in ';'."""
     def blank(match):       # a comment becomes spaces, its newlines kept (line numbers)
-        return re.sub(r"[^\n]", " ", match.group())
+        return re.sub(r'[^\n]', ' ', match.group())
 
-    text = re.sub(r"/\*.*?\*/|//[^\n]*", blank, text, flags=re.S)
-    if "/*" in text or "*/" in text:
-        raise HeaderError(f"{path}: an unterminated comment")
-    lines = text.split("\n")
-    buf, start, depth, i = "", 0, 0, 0
+    text = re.sub(r'/\*.*?\*/|//[^\n]*', blank, text, flags=re.S)
+    if '/*' in text or '*/' in text:
+        raise HeaderError(f'{path}: an unterminated comment')
+    lines = text.split('\n')
+    buf, start, depth, i = '', 0, 0, 0
     while i < len(lines):
         line = lines[i]
         i += 1
-        if line.strip().startswith("#"):
+        if line.strip().startswith('#'):
             if buf.strip():
                 raise HeaderError(f"{path}:{start}: a declaration without its ';': "
                                   f"{' '.join(buf.split())[:60]!r}")
             first = i
-            while line.rstrip().endswith("\\"):          # a continued directive
+            while line.rstrip().endswith('\\'):          # a continued directive
                 if i == len(lines):
-                    raise HeaderError(f"{path}:{first}: a directive continued past the end")
-                line = line.rstrip()[:-1] + " " + lines[i]
+                    raise HeaderError(f'{path}:{first}: a directive continued past the end')
+                line = line.rstrip()[:-1] + ' ' + lines[i]
                 i += 1
-            yield first, " ".join(line.split())
+            yield first, ' '.join(line.split())
             continue
-        for ch in line + "\n":
+        for ch in line + '\n':
             if not buf.strip():
                 start = i
             buf += ch
-            depth += (ch == "{") - (ch == "}")
+            depth += (ch == '{') - (ch == '}')
             if depth < 0:
                 raise HeaderError(f"{path}:{i}: an unbalanced '}}'")
-            if ch == ";" and depth == 0:
-                yield start, " ".join(buf.split())
-                buf = ""
+            if ch == ';' and depth == 0:
+                yield start, ' '.join(buf.split())
+                buf = ''
     if buf.strip():
         raise HeaderError(f"{path}:{start}: a declaration without its ';': {buf.strip()[:60]!r}")
 
 
-def parse_header(text: str, path: str = "<header>") -> Interface:
+def parse_header(text: str, path: str = '<header>') -> Interface:
     """
     Return the Interface that the header text declares.
 
@@ -168,18 +168,18 @@ def parse_header(text: str, path: str = "<header>") -> Interface:
     functions: dict = {}
 
     def fail(line, why, stmt):
-        raise HeaderError(f"{path}:{line}: {why}: {stmt[:80]!r}")
+        raise HeaderError(f'{path}:{line}: {why}: {stmt[:80]!r}')
 
     def new_name(line, name, stmt):
         if name in structs or name in opaque or name in lists or name in entries \
                 or name in counts or name in functions:
-            fail(line, f"{name} declared twice", stmt)
+            fail(line, f'{name} declared twice', stmt)
 
     def ctype(line, const, base, star, stmt, result=False):
         """Return the ctypes type of 'const? base *?'."""
         if base in _SCALARS:
             return ctypes.POINTER(_SCALARS[base]) if star else _SCALARS[base]
-        if base == "void" and result and not star and not const:
+        if base == 'void' and result and not star and not const:
             return None
         if base in structs and star:
             return ctypes.POINTER(structs[base])
@@ -190,122 +190,122 @@ def parse_header(text: str, path: str = "<header>") -> Interface:
 
     def declarators(line, decl, stmt):
         """[(name, ctypes type)] of 'const? base *?name, *?name...'."""
-        m = re.fullmatch(rf"(const )?({_IDENT}) (.+)", decl)
+        m = re.fullmatch(rf'(const )?({_IDENT}) (.+)', decl)
         if not m:
-            fail(line, f"not a declaration the parser reads ({decl!r})", stmt)
+            fail(line, f'not a declaration the parser reads ({decl!r})', stmt)
         out = []
-        for part in m.group(3).split(","):
-            d = re.fullmatch(rf"(\*?)({_IDENT})", part)
+        for part in m.group(3).split(','):
+            d = re.fullmatch(rf'(\*?)({_IDENT})', part)
             if not d:
-                fail(line, f"not a declarator the parser reads ({part.strip()!r})", stmt)
+                fail(line, f'not a declarator the parser reads ({part.strip()!r})', stmt)
             out.append((d.group(2), ctype(line, m.group(1), m.group(2), d.group(1), stmt)))
         return out
 
     for line, text_ in _statements(text, path):
         # one spelling: no space next to ( ) { } , ; and '*' bound to what follows
-        stmt = re.sub(r"\s*\*\s*", " *", text_)
-        stmt = re.sub(r"\s*([(){},;])\s*", r"\1", stmt)
-        if stmt in (f"#ifndef {_GUARD}", f"#define {_GUARD}", "#endif"):
+        stmt = re.sub(r'\s*\*\s*', ' *', text_)
+        stmt = re.sub(r'\s*([(){},;])\s*', r'\1', stmt)
+        if stmt in (f'#ifndef {_GUARD}', f'#define {_GUARD}', '#endif'):
             guard.append(stmt)
-        elif m := re.fullmatch(r"#define UMBRELLA_ABI_VERSION (\d+)", stmt):
+        elif m := re.fullmatch(r'#define UMBRELLA_ABI_VERSION (\d+)', stmt):
             if version is not None:
-                fail(line, "UMBRELLA_ABI_VERSION declared twice", text_)
+                fail(line, 'UMBRELLA_ABI_VERSION declared twice', text_)
             version = int(m.group(1))
-        elif stmt == f"#define UMBRELLA_API {_EXPORT}":
+        elif stmt == f'#define UMBRELLA_API {_EXPORT}':
             export = True
-        elif m := re.fullmatch(rf"#define (UMBRELLA_{_IDENT})\(X\)((?:X\({_IDENT},{_PY}\))+)",
+        elif m := re.fullmatch(rf'#define (UMBRELLA_{_IDENT})\(X\)((?:X\({_IDENT},{_PY}\))+)',
                                stmt):
-            pairs = tuple(re.findall(rf"X\(({_IDENT}),({_PY})\)", m.group(2)))
+            pairs = tuple(re.findall(rf'X\(({_IDENT}),({_PY})\)', m.group(2)))
             for column in zip(*pairs):
                 if len(set(column)) != len(column):
-                    fail(line, "a name twice in one list", text_)
+                    fail(line, 'a name twice in one list', text_)
             new_name(line, m.group(1), text_)
             lists[m.group(1)] = pairs
-        elif m := re.fullmatch(rf"#define ({_IDENT})\(name,py\)(?:{_IDENT}##)?name,", stmt):
+        elif m := re.fullmatch(rf'#define ({_IDENT})\(name,py\)(?:{_IDENT}##)?name,', stmt):
             new_name(line, m.group(1), text_)
             entries.add(m.group(1))
-        elif m := re.fullmatch(rf"enum\{{({_IDENT})\(({_IDENT})\)({_IDENT})\}};", stmt):
+        elif m := re.fullmatch(rf'enum\{{({_IDENT})\(({_IDENT})\)({_IDENT})\}};', stmt):
             listed, entry, count = m.groups()
             if listed not in lists or entry not in entries:
-                fail(line, "an enum of a list or entry macro not declared before it", text_)
+                fail(line, 'an enum of a list or entry macro not declared before it', text_)
             new_name(line, count, text_)
             counts[count] = listed
-        elif m := re.fullmatch(rf"typedef struct ({_IDENT}) \1;", stmt):
+        elif m := re.fullmatch(rf'typedef struct ({_IDENT}) \1;', stmt):
             new_name(line, m.group(1), text_)
             opaque.add(m.group(1))
-        elif m := re.fullmatch(rf"typedef struct\{{(.+;)\}}({_IDENT});", stmt):
+        elif m := re.fullmatch(rf'typedef struct\{{(.+;)\}}({_IDENT});', stmt):
             name = m.group(2)
             new_name(line, name, text_)
-            fields = [f for member in m.group(1).split(";")[:-1]
+            fields = [f for member in m.group(1).split(';')[:-1]
                       for f in declarators(line, member, text_)]
             if len({f for f, _ in fields}) != len(fields):
-                fail(line, f"struct {name}: a member twice", text_)
+                fail(line, f'struct {name}: a member twice', text_)
             structs[name] = type(name, (ctypes.Structure,), {
-                "_fields_": fields, "__doc__": f"{name} of _kernel.h (generated)."})
-        elif m := re.fullmatch(rf"UMBRELLA_API (const )?({_IDENT}) (\*?)({_IDENT})\((.*)\);",
+                '_fields_': fields, '__doc__': f'{name} of _kernel.h (generated).'})
+        elif m := re.fullmatch(rf'UMBRELLA_API (const )?({_IDENT}) (\*?)({_IDENT})\((.*)\);',
                                stmt):
             const, base, star, name, params = m.groups()
             new_name(line, name, text_)
             restype = ctype(line, const, base, star, text_, result=True)
-            argtypes = [] if params == "void" else [
-                t for param in params.split(",") for _, t in declarators(line, param, text_)]
+            argtypes = [] if params == 'void' else [
+                t for param in params.split(',') for _, t in declarators(line, param, text_)]
             functions[name] = (restype, argtypes)
         else:
-            fail(line, "a statement the parser does not read", text_)
+            fail(line, 'a statement the parser does not read', text_)
     missing = [what for what, ok in (
-        ("the include guard", guard == [f"#ifndef {_GUARD}", f"#define {_GUARD}", "#endif"]),
-        ("UMBRELLA_ABI_VERSION", version is not None), ("UMBRELLA_API", export),
-        ("UMBRELLA_ABI_STRUCTS", "UMBRELLA_ABI_STRUCTS" in lists),
-        ("UMBRELLA_ABI_COUNTS", "UMBRELLA_ABI_COUNTS" in lists),
-        ("umbrella_abi", "umbrella_abi" in functions)) if not ok]
+        ('the include guard', guard == [f'#ifndef {_GUARD}', f'#define {_GUARD}', '#endif']),
+        ('UMBRELLA_ABI_VERSION', version is not None), ('UMBRELLA_API', export),
+        ('UMBRELLA_ABI_STRUCTS', 'UMBRELLA_ABI_STRUCTS' in lists),
+        ('UMBRELLA_ABI_COUNTS', 'UMBRELLA_ABI_COUNTS' in lists),
+        ('umbrella_abi', 'umbrella_abi' in functions)) if not ok]
     if missing:
         raise HeaderError(f"{path}: no {', no '.join(missing)}")
-    for c, _ in lists["UMBRELLA_ABI_STRUCTS"]:
+    for c, _ in lists['UMBRELLA_ABI_STRUCTS']:
         if c not in structs:
-            raise HeaderError(f"{path}: UMBRELLA_ABI_STRUCTS names {c}, not a struct declared")
-    for c, _ in lists["UMBRELLA_ABI_COUNTS"]:
+            raise HeaderError(f'{path}: UMBRELLA_ABI_STRUCTS names {c}, not a struct declared')
+    for c, _ in lists['UMBRELLA_ABI_COUNTS']:
         if c not in counts:
-            raise HeaderError(f"{path}: UMBRELLA_ABI_COUNTS names {c}, not an enum count")
+            raise HeaderError(f'{path}: UMBRELLA_ABI_COUNTS names {c}, not an enum count')
     return Interface(version, structs, frozenset(opaque), lists, counts, functions)
 
 
 def _read_header(path: str) -> Interface:
-    with open(path, encoding="utf-8") as fh:
+    with open(path, encoding='utf-8') as fh:
         return parse_header(fh.read(), path)
 
 
 #: the interface of _kernel.h
 INTERFACE = _read_header(HEADER)
-ModelStruct = INTERFACE.structs["Model"]
-AdvanceCall = INTERFACE.structs["AdvanceCall"]
-SampleCall = INTERFACE.structs["SampleCall"]
-ElasticData = INTERFACE.structs["ElasticData"]
+ModelStruct = INTERFACE.structs['Model']
+AdvanceCall = INTERFACE.structs['AdvanceCall']
+SampleCall = INTERFACE.structs['SampleCall']
+ElasticData = INTERFACE.structs['ElasticData']
 #: the fields of one physics step's output row, in the order the compiled loop writes them
-STEP_FIELDS = INTERFACE.names("UMBRELLA_STEP_FIELDS")
+STEP_FIELDS = INTERFACE.names('UMBRELLA_STEP_FIELDS')
 #: what a compiled Sample vector holds (sample_vector), then the fibre stress at every
 #: stress point (top of every point, then bottom; leaf points first); the names are the
 #: Sample's, but the sleeve reaction's two components
-SAMPLE_VECTOR = INTERFACE.names("UMBRELLA_SAMPLE_FIELDS")
+SAMPLE_VECTOR = INTERFACE.names('UMBRELLA_SAMPLE_FIELDS')
 #: status code of each name (ok = 0)
-STATUS = {name: code for code, name in enumerate(INTERFACE.names("UMBRELLA_STATUS_CODES"))}
+STATUS = {name: code for code, name in enumerate(INTERFACE.names('UMBRELLA_STATUS_CODES'))}
 
 # ------------------------------------------------------------------ status texts
 #: the leaf angle at which the leaf lies along the axle: a stage-1 state there is a fault
 #: (_kernel.c step_taken, UmbrellaSimulator._checked, RigidEngine._check)
 ALPHA1_AXLE = math.pi / 2
-AXLE_REASON = ("the leaf reached the axle (alpha1 = pi/2): the frame folded back past its "
-               "start (v0 > 0 or a sleeve force below 0 drove it there), where the model has "
-               "no stop")
-_ERRORS = {"no_convergence": "Newton did not converge",
-           "non_finite": "Newton iterate became non-finite",
-           "singular": "singular iteration matrix",
-           "not_positive_definite": "mass matrix not positive definite",
-           "no_memory": "out of memory", "axle": AXLE_REASON}
+AXLE_REASON = ('the leaf reached the axle (alpha1 = pi/2): the frame folded back past its '
+               'start (v0 > 0 or a sleeve force below 0 drove it there), where the model has '
+               'no stop')
+_ERRORS = {'no_convergence': 'Newton did not converge',
+           'non_finite': 'Newton iterate became non-finite',
+           'singular': 'singular iteration matrix',
+           'not_positive_definite': 'mass matrix not positive definite',
+           'no_memory': 'out of memory', 'axle': AXLE_REASON}
 #: the failure each status code stands for
 KERNEL_ERRORS = {STATUS[name]: text for name, text in _ERRORS.items()}
 #: umbrella_advance_call's codes that are not failures
 ADVANCE_DONE, ADVANCE_CROSSING, ADVANCE_DIVERGED = (STATUS[k] for k in
-                                                    ("ok", "crossing", "diverged"))
+                                                    ('ok', 'crossing', 'diverged'))
 
 
 def kernel_error(status: int, t: float) -> str:
@@ -347,8 +347,8 @@ def load_kernel(path: str | None = None):
         _loaded[path] = lib
         if why is not None:
             _refused[path] = why
-            print(f"umbrella_sim: {why}; stepping on the numpy reference path (slow) instead: "
-                  "rebuild the kernel (python3 bootstrap.py setup, or pip install -e .)",
+            print(f'umbrella_sim: {why}; stepping on the numpy reference path (slow) instead: '
+                  'rebuild the kernel (python3 bootstrap.py setup, or pip install -e .)',
                   file=sys.stderr, flush=True)
     return _loaded[path]
 
@@ -365,13 +365,13 @@ def _open(path: str):
     try:
         lib = ctypes.CDLL(path)
     except OSError as exc:
-        return None, f"the compiled kernel {path} does not load ({exc})"
+        return None, f'the compiled kernel {path} does not load ({exc})'
     try:
         abi = lib.umbrella_abi
     except AttributeError:
-        return None, (f"the compiled kernel {path} is not of this interface: it has no "
-                      f"umbrella_abi (ABI version {INTERFACE.version} of {HEADER} expected)")
-    abi.restype, abi.argtypes = INTERFACE.functions["umbrella_abi"]
+        return None, (f'the compiled kernel {path} is not of this interface: it has no '
+                      f'umbrella_abi (ABI version {INTERFACE.version} of {HEADER} expected)')
+    abi.restype, abi.argtypes = INTERFACE.functions['umbrella_abi']
     expected = INTERFACE.abi_figures()
     figures = (ctypes.c_int * (len(expected) + 1))(*([-1] * (len(expected) + 1)))
     version = abi(figures, len(figures))
@@ -383,13 +383,13 @@ def _open(path: str):
     if not differs and got[-1] != -1:
         differs.append(f"more ABI figures than the header's {len(expected)}")
     if differs:
-        return None, (f"the compiled kernel {path} does not match {HEADER}: "
-                      + "; ".join(differs))
+        return None, (f'the compiled kernel {path} does not match {HEADER}: '
+                      + '; '.join(differs))
     for name, (restype, argtypes) in INTERFACE.functions.items():
         try:
             fn = getattr(lib, name)
         except AttributeError:
-            return None, f"the compiled kernel {path} lacks {name} (declared in {HEADER})"
+            return None, f'the compiled kernel {path} lacks {name} (declared in {HEADER})'
         fn.restype, fn.argtypes = restype, argtypes
     return lib, None
 
@@ -423,18 +423,18 @@ class CompiledKernel:
         s_idx, s_top, s_bot, s_x, (n_leaf, n_link) = m.stress_rows()
         elastic = np.ascontiguousarray(m.elastic_indices, dtype=np.intc)
         link = m.link
-        keep = {"c_full": np.zeros(n), "g_full": np.zeros(n),
-                "sbar": np.ascontiguousarray(link.s_bar),
-                "isbar": np.ascontiguousarray([-link.s_bar[1], link.s_bar[0]]),
-                "mff_band": np.ascontiguousarray(mff_band),
-                "k_band": np.ascontiguousarray(k_band), "w_band": np.ascontiguousarray(w_band),
-                "stress_top": np.ascontiguousarray(s_top),
-                "stress_bottom": np.ascontiguousarray(s_bot),
-                "stress_x": np.ascontiguousarray(s_x)}
-        keep["c_full"][m.s_leaf], keep["c_full"][m.s_link] = m.leaf.c, link.c
-        keep["g_full"][m.s_leaf], keep["g_full"][m.s_link] = m.leaf.g, link.g
-        ints = {"body": body, "elastic_idx": elastic,
-                "stress_idx": np.ascontiguousarray(s_idx)}
+        keep = {'c_full': np.zeros(n), 'g_full': np.zeros(n),
+                'sbar': np.ascontiguousarray(link.s_bar),
+                'isbar': np.ascontiguousarray([-link.s_bar[1], link.s_bar[0]]),
+                'mff_band': np.ascontiguousarray(mff_band),
+                'k_band': np.ascontiguousarray(k_band), 'w_band': np.ascontiguousarray(w_band),
+                'stress_top': np.ascontiguousarray(s_top),
+                'stress_bottom': np.ascontiguousarray(s_bot),
+                'stress_x': np.ascontiguousarray(s_x)}
+        keep['c_full'][m.s_leaf], keep['c_full'][m.s_link] = m.leaf.c, link.c
+        keep['g_full'][m.s_leaf], keep['g_full'][m.s_link] = m.leaf.g, link.g
+        ints = {'body': body, 'elastic_idx': elastic,
+                'stress_idx': np.ascontiguousarray(s_idx)}
         self._keep = (keep, ints)  # the struct points into these arrays
         self.struct = ModelStruct(
             n=n, n_link=link.n_elastic, i_r2x=m.i_r2x, i_r2y=m.i_r2y, i_alpha2=m.i_alpha2,
@@ -443,15 +443,15 @@ class CompiledKernel:
             n_stress_leaf=n_leaf, n_stress_link=n_link, stress_width=s_idx.shape[1],
             l1=m.params.l1, l3=m.params.l3, y_stop=m.y_stop, j0_leaf=m.leaf.j0,
             j0_link=link.j0, pbar0=link.p_bar[0], link_mass=link.mass,
-            **dict(zip(("ref_leaf_point", "ref_link_element", "ref_link_frac"),
+            **dict(zip(('ref_leaf_point', 'ref_link_element', 'ref_link_frac'),
                        m.reference_stress_points)),
             **{k: _dptr(v) for k, v in keep.items()},
             **{k: v.ctypes.data_as(_ip) for k, v in ints.items()})
         ctx = lib.umbrella_new(ctypes.byref(self.struct))
         if not ctx:
             # (umbrella_new: its buffers, or the LU of the constant elastic mass band)
-            raise MemoryError("the compiled kernel could not be set up: out of memory, or a "
-                              "singular elastic mass matrix")
+            raise MemoryError('the compiled kernel could not be set up: out of memory, or a '
+                              'singular elastic mass matrix')
         self._ctx = ctypes.c_void_p(ctx)
         self._free = lib.umbrella_free
         nc_max = 4 + len(elastic)
@@ -466,14 +466,14 @@ class CompiledKernel:
         self.lam = self._state_buf[4 * n:self._state_len]
         self._final = self._state_buf[self._state_len:]
         self.acc = np.zeros(3)                     # work, lock loss, damping dissipation (J)
-        self._ptr = {k: _dptr(getattr(self, k)) for k in ("q", "v", "p", "lam", "acc", "accel")}
+        self._ptr = {k: _dptr(getattr(self, k)) for k in ('q', 'v', 'p', 'lam', 'acc', 'accel')}
         self._its = ctypes.c_int(0)
         ptr = self._ptr
         # the state whose copy holds its Sample vector (the last advance's), that copy's
         # vector, and the constraint set it was made with
         self._final_cs = self._final_of = self._final_copy = None
-        self._call = AdvanceCall(phi_tol=phi_tol, q=ptr["q"], v=ptr["v"], lam=ptr["lam"],
-                                 p=ptr["p"], acc=ptr["acc"], accel=ptr["accel"],
+        self._call = AdvanceCall(phi_tol=phi_tol, q=ptr['q'], v=ptr['v'], lam=ptr['lam'],
+                                 p=ptr['p'], acc=ptr['acc'], accel=ptr['accel'],
                                  final=_dptr(self._final))
         self._call_ref = ctypes.byref(self._call)
         self._setting = None     # what _call holds besides the state and k0, n_steps
@@ -485,7 +485,7 @@ class CompiledKernel:
         self._lam1 = np.zeros(nc_max)
 
     def __del__(self):
-        ctx = getattr(self, "_ctx", None)
+        ctx = getattr(self, '_ctx', None)
         if ctx is not None and ctx.value:
             self._free(ctx)
             self._ctx = None
@@ -503,7 +503,7 @@ class CompiledKernel:
             ptrs[4] = None
         if self.lib.umbrella_set_mode_fit(self._ctx, len(fit.scale), *ptrs):
             raise MemoryError("the compiled kernel could not allocate the stage-2 mode fit's "
-                              "buffers")
+                              'buffers')
 
     def last_dissipation(self) -> float:
         """Return the damping dissipation of the last step taken (J; with the mode fit's)."""
@@ -549,7 +549,7 @@ class CompiledKernel:
         if s.momentum is not None:
             self.p[:] = s.momentum
         else:
-            self.lib.umbrella_momentum(self._ctx, self._ptr["q"], self._ptr["v"], self._ptr["p"])
+            self.lib.umbrella_momentum(self._ctx, self._ptr['q'], self._ptr['v'], self._ptr['p'])
 
     def advance(self, cs: ConstraintSet, k0: int, h: float, n_steps: int, force: float,
                 tol: float, max_iter: int, div_tol: float, states: bool = False):
@@ -585,10 +585,10 @@ class CompiledKernel:
         # once per publication: the frozen dataclass's per-field __init__ costs 3 us, so its
         # __dict__ is set whole (outputs.build_frozen's way)
         self._made = made = object.__new__(DynamicState)
-        object.__setattr__(made, "__dict__", {
-            "t": t, "q": b[:n], "qd": b[n:2 * n], "qdd": b[3 * n:4 * n],
-            "multipliers": b[4 * n:4 * n + nc], "momentum": b[2 * n:3 * n],
-            "dissipation": self.acc.item(2)})
+        object.__setattr__(made, '__dict__', {
+            't': t, 'q': b[:n], 'qd': b[n:2 * n], 'qdd': b[3 * n:4 * n],
+            'multipliers': b[4 * n:4 * n + nc], 'momentum': b[2 * n:3 * n],
+            'dissipation': self.acc.item(2)})
         if self._final_cs is not None and self._final_of is None:
             self._final_of, self._final_copy = self._made, b[self._state_len:]
         return self._made
@@ -608,8 +608,8 @@ class CompiledKernel:
             ptr = self._ptr
             # one call struct on the buffers (the state last made), one for any other state
             calls = [SampleCall(out=_dptr(out)) for _ in range(2)]
-            calls[0].q, calls[0].v, calls[0].p, calls[0].lam = (ptr["q"], ptr["v"], ptr["p"],
-                                                                ptr["lam"])
+            calls[0].q, calls[0].v, calls[0].p, calls[0].lam = (ptr['q'], ptr['v'], ptr['p'],
+                                                                ptr['lam'])
             self._sample_buf = (out, calls, [ctypes.byref(c) for c in calls], [None, None])
         out, calls, refs, flags = self._sample_buf
         which = 0 if s is self._made else 1          # the buffers hold it: no conversion

@@ -74,9 +74,9 @@ def energy_velocity(model: UmbrellaModel, q, qd, cs: ConstraintSet) -> tuple[np.
     c = 0.5 * base @ mass @ base - t_target
     disc = b * b - 4 * a * c
     if disc < 0.0:
-        raise LockImpossible("energy lock impossible: the kinetic energy before the lock is "
-                             "below the least energy compatible with the lock "
-                             f"({c + t_target - b * b / (4 * a):.6g} J > {t_target:.6g} J)")
+        raise LockImpossible('energy lock impossible: the kinetic energy before the lock is '
+                             'below the least energy compatible with the lock '
+                             f'({c + t_target - b * b / (4 * a):.6g} J > {t_target:.6g} J)')
     roots = [(-b + sgn * math.sqrt(disc)) / (2 * a) for sgn in (1.0, -1.0)]
     candidates = [base + r * z for r in roots]
     best = min(candidates, key=lambda v: (v - qd) @ mass @ (v - qd))

@@ -46,8 +46,8 @@ from .params import UmbrellaParams
 class Stage(enum.StrEnum):
     """Stage of the deployment; compares equal to its name string ("deploying", "locked")."""
 
-    DEPLOYING = "deploying"     # Case 1: the sleeve slides down the axle
-    LOCKED = "locked"           # Case 2: the sleeve held at the stop S
+    DEPLOYING = 'deploying'     # Case 1: the sleeve slides down the axle
+    LOCKED = 'locked'           # Case 2: the sleeve held at the stop S
 
     @property
     def code(self) -> int:
@@ -105,11 +105,11 @@ class UmbrellaModel:
         n = p.elements_per_segment
         area, inertia = p.cross_section_area, p.cross_section_inertia
         rho_a, e_mod = p.mass_per_length, p.youngs_modulus
-        common = {"mass_per_length": rho_a, "ea": e_mod * area, "ei": e_mod * inertia,
-                  "youngs_modulus": e_mod, "fibre": p.fibre_distance}
-        self.leaf = BeamBody("leaf", [(p.l1, n), (p.l2, n)],
-                             [(0, "u"), (0, "v"), (n, "v")], **common)
-        self.link = BeamBody("link", [(p.l3, n)], [(0, "u"), (0, "v"), (n, "v")], **common)
+        common = {'mass_per_length': rho_a, 'ea': e_mod * area, 'ei': e_mod * inertia,
+                  'youngs_modulus': e_mod, 'fibre': p.fibre_distance}
+        self.leaf = BeamBody('leaf', [(p.l1, n), (p.l2, n)],
+                             [(0, 'u'), (0, 'v'), (n, 'v')], **common)
+        self.link = BeamBody('link', [(p.l3, n)], [(0, 'u'), (0, 'v'), (n, 'v')], **common)
         n1, n2 = self.leaf.n_elastic, self.link.n_elastic
         self.i_alpha1 = 0
         self.s_leaf = slice(1, 1 + n1)
@@ -117,11 +117,11 @@ class UmbrellaModel:
         self.s_link = slice(4 + n1, 4 + n1 + n2)
         self.n = 4 + n1 + n2
         # coordinates used by the joints
-        self.i_u_joint = 1 + self.leaf.elastic_index(n, "u")        # leaf u at O''
-        self.i_u_sleeve = 4 + n1 + self.link.elastic_index(n, "u")  # link u at H
+        self.i_u_joint = 1 + self.leaf.elastic_index(n, 'u')        # leaf u at O''
+        self.i_u_sleeve = 4 + n1 + self.link.elastic_index(n, 'u')  # link u at H
         tip = 2 * n
-        self.i_tip_u = 1 + self.leaf.elastic_index(tip, "u")
-        self.i_tip_v = 1 + self.leaf.elastic_index(tip, "v")
+        self.i_tip_u = 1 + self.leaf.elastic_index(tip, 'u')
+        self.i_tip_v = 1 + self.leaf.elastic_index(tip, 'v')
         self.elastic_indices = np.r_[np.arange(1, 1 + n1), np.arange(4 + n1, 4 + n1 + n2)]
         self.y_stop = p.sleeve_stop_height
 
@@ -158,18 +158,18 @@ class UmbrellaModel:
 
     def coordinate_labels(self) -> list[str]:
         """Names of the entries of q, e.g. 'leaf.u2' = axial displacement of leaf node 2."""
-        labels = ["alpha1"]
+        labels = ['alpha1']
         for body in (self.leaf, self.link):
-            names = [""] * body.n_elastic
+            names = [''] * body.n_elastic
             for node in range(len(body.node_x)):
-                for dof in ("u", "v", "theta"):
+                for dof in ('u', 'v', 'theta'):
                     try:
-                        names[body.elastic_index(node, dof)] = f"{body.name}.{dof}{node}"
+                        names[body.elastic_index(node, dof)] = f'{body.name}.{dof}{node}'
                     except KeyError:
                         pass
             labels += names
             if body is self.leaf:
-                labels += ["R2x", "R2y", "alpha2"]
+                labels += ['R2x', 'R2y', 'alpha2']
         return labels
 
     # ------------------------------------------------- structure (compiled kernel)
@@ -465,7 +465,7 @@ class UmbrellaModel:
         """(leaf stress point at O'', link element holding l3/2, where in it)."""
         n = self.params.elements_per_segment
         x_mid = 0.5 * self.params.l3
-        j = min(int(np.searchsorted(self.link.node_x, x_mid, side="right")) - 1, n - 1)
+        j = min(int(np.searchsorted(self.link.node_x, x_mid, side='right')) - 1, n - 1)
         frac = float((x_mid - self.link.node_x[j]) / self.link.element_length[j])
         return 2 * n - 1, j, frac
 

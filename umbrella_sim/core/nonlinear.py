@@ -108,7 +108,7 @@ from .kernel import ConvergenceError, DynamicState, ElasticData
 from .model import band_form, ConstraintSet, UmbrellaModel
 from .params import UmbrellaParams
 
-NONLINEAR_MODEL = "flexible-nonlinear"
+NONLINEAR_MODEL = 'flexible-nonlinear'
 #: Newton contraction rate above which the nonlinear step re-factors its iteration matrix
 #: (_kernel_elastic.h ELASTIC_REFRESH_RATE)
 REFRESH_RATE = 0.1
@@ -202,14 +202,14 @@ class CompiledElasticLaw:
     (umbrella_set_law).
     """
 
-    def __init__(self, lib, model: "NonlinearUmbrellaModel"):
+    def __init__(self, lib, model: 'NonlinearUmbrellaModel'):
         st, p = model.strain, model.params
         idx = np.asarray(model.elastic_indices)
         bw = model.banded_invariants()[0]
         n_leaf_points = model.stress_rows()[4][0]
         if n_leaf_points != 2 * len(model.leaf.element_length):
             raise ValueError("compiled elastic law: the leaf's stress points are not the two "
-                             "ends of each element")
+                             'ends of each element')
         el_q = []
         for body, s_e in ((model.leaf, model.s_leaf), (model.link, model.s_link)):
             for maps in body.element_dof_maps:             # (6, n_elastic): one 1 a row
@@ -218,10 +218,10 @@ class CompiledElasticLaw:
         el_pos = np.where(el_q >= 0, np.searchsorted(idx, np.maximum(el_q, 0)), -1)
         lengths = np.concatenate([model.leaf.element_length, model.link.element_length])
         k = np.zeros_like(model.stiffness) if st.nonlinear else st.stiffness
-        arrays = {"elastic_idx": np.asarray(idx, dtype=np.intc),
-                  "k_band": band_form(k[np.ix_(idx, idx)], bw),
-                  "el_q": el_q, "el_pos": np.asarray(el_pos, dtype=np.intc),
-                  "el_length": lengths}
+        arrays = {'elastic_idx': np.asarray(idx, dtype=np.intc),
+                  'k_band': band_form(k[np.ix_(idx, idx)], bw),
+                  'el_q': el_q, 'el_pos': np.asarray(el_pos, dtype=np.intc),
+                  'el_length': lengths}
         arrays = {name: np.ascontiguousarray(a) for name, a in arrays.items()}
         self._arrays = arrays   # the struct points into these
         self.struct = ElasticData(
@@ -235,7 +235,7 @@ class CompiledElasticLaw:
         self.lib = lib
         ptr = lib.elastic_new(ctypes.byref(self.struct))
         if not ptr:
-            raise MemoryError("the compiled elastic law could not allocate its buffers")
+            raise MemoryError('the compiled elastic law could not allocate its buffers')
         self.ptr = ctypes.c_void_p(ptr)
 
     def attach(self, kernel) -> None:
@@ -250,7 +250,7 @@ class CompiledElasticLaw:
         return float(self.lib.elastic_max_slope(self.ptr))
 
     def __del__(self):
-        ptr = getattr(self, "ptr", None)
+        ptr = getattr(self, 'ptr', None)
         if ptr is not None and ptr.value:
             self.lib.elastic_free(ptr)
             self.ptr = None
@@ -309,7 +309,7 @@ class ElasticMidpointDAE(MidpointDAE):
     max_halvings = 6
 
     def step(self, s: DynamicState, h: float, force: float, cs: ConstraintSet) -> DynamicState:
-        with np.errstate(over="ignore", invalid="ignore"):
+        with np.errstate(over='ignore', invalid='ignore'):
             return self._substeps(s, h, force, cs, 0)
 
     def _substeps(self, s, h, force, cs, depth):
@@ -355,9 +355,9 @@ class ElasticMidpointDAE(MidpointDAE):
         if slope < 0.99:
             return exc
         return ConvergenceError(
-            f"{exc}: a fibre has turned {math.degrees(math.asin(min(slope, 1.0))):.1f} deg "
+            f'{exc}: a fibre has turned {math.degrees(math.asin(min(slope, 1.0))):.1f} deg '
             f"from its body frame (slope |v'| = {slope:.4f}); flexible-nonlinear's slope "
-            "coordinates end at 90 deg (docs/validation_nonlinear.md)")
+            'coordinates end at 90 deg (docs/validation_nonlinear.md)')
 
     def _step(self, s, h, force, cs):
         """Take one step: compiled (_kernel_nonlinear.c hooks) or the numpy reference."""
@@ -446,14 +446,14 @@ class ElasticMidpointDAE(MidpointDAE):
                 it_mat[n:, :n] = m.constraint_jacobian(q, cs)
                 lu, piv, info = dgetrf(it_mat, overwrite_a=True)
                 if info != 0:
-                    raise ConvergenceError(f"singular iteration matrix at t = {s.t + h:.9g} s")
+                    raise ConvergenceError(f'singular iteration matrix at t = {s.t + h:.9g} s')
                 self.refreshes += int(it > 1)
                 refactored = True
             dx = dgetrs(lu, piv, f)[0]
             dx[:n] = start.newton_update(dx[:n], h)
             step_norm = np.max(np.abs(dx[:n]))
             if not np.isfinite(step_norm):
-                raise ConvergenceError(f"Newton iterate became non-finite at t = {s.t + h:.9g} s")
+                raise ConvergenceError(f'Newton iterate became non-finite at t = {s.t + h:.9g} s')
             base, f_base, alpha = (q, lam), f_norm, 1.0
             q = q + dx[:n]
             lam = lam + dx[n:] / lam_scale
@@ -464,8 +464,8 @@ class ElasticMidpointDAE(MidpointDAE):
                 break
             last_norm = step_norm
         else:
-            raise ConvergenceError(f"Newton did not converge in {self.max_iterations} iterations "
-                                   f"at t = {s.t + h:.9g} s (|dq| = {step_norm:.3g})")
+            raise ConvergenceError(f'Newton did not converge in {self.max_iterations} iterations '
+                                   f'at t = {s.t + h:.9g} s (|dq| = {step_norm:.3g})')
         self.iterations += it
         dq = q - q0
         dissipated = float(dq @ (m.damping_matrix(q0 + 0.5 * dq) @ dq / h
@@ -478,7 +478,7 @@ class ElasticMidpointDAE(MidpointDAE):
                     + force * (y0 - m.sleeve_height(q)) - dissipated)
         v = project_keeping_energy(mass1, m.constraint_jacobian(q, cs), v, t_target)
         if v is None:
-            raise ConvergenceError(f"mass matrix not positive definite at t = {s.t + h:.9g} s")
+            raise ConvergenceError(f'mass matrix not positive definite at t = {s.t + h:.9g} s')
         if self.strain_nonlinear:
             self._carried = (q, v, nc, h, lu, piv, 0 if refactored else carried[6] + 1)
             self._max_slope = max(self._max_slope,
@@ -527,7 +527,7 @@ class ElasticEngine(FiniteElementEngine):
         if out is None:
             return None
         state, rows, work, stop, state_rows = out
-        return state, rows, work, None if stop is None else "crossing", state_rows
+        return state, rows, work, None if stop is None else 'crossing', state_rows
 
 
 def build(params: UmbrellaParams):

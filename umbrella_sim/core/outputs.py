@@ -33,9 +33,9 @@ def build_frozen(cls, values: dict):
     instance's __dict__ as it is.
     """
     if len(values) != _field_count(cls):
-        raise TypeError(f"{cls.__name__} has {_field_count(cls)} fields, {len(values)} given")
+        raise TypeError(f'{cls.__name__} has {_field_count(cls)} fields, {len(values)} given')
     obj = object.__new__(cls)
-    object.__setattr__(obj, "__dict__", values)
+    object.__setattr__(obj, '__dict__', values)
     return obj
 
 
@@ -94,8 +94,8 @@ def mechanical_energy(s):
 
     Of a Sample, or per step of a StepBlock or per sample of a RunResult (arrays).
     """
-    if hasattr(s, "column"):                        # a RunResult: its sample columns
-        return s.column("kinetic_energy") + s.column("strain_energy")
+    if hasattr(s, 'column'):                        # a RunResult: its sample columns
+        return s.column('kinetic_energy') + s.column('strain_energy')
     return s.kinetic_energy + s.strain_energy
 
 
@@ -124,7 +124,7 @@ def step_row(s: Sample, peaks: tuple | None = None) -> list[float]:
     peaks: the step's (peak_stress_leaf, its x, peak_stress_link, its x) (``step_peaks``)
     in place of the sample's own, which are those of its instant.
     """
-    row = [float(s.stage.code) if f == "stage" else float(getattr(s, f)) for f in STEP_FIELDS]
+    row = [float(s.stage.code) if f == 'stage' else float(getattr(s, f)) for f in STEP_FIELDS]
     if peaks is not None:
         row[_STEP_PEAKS] = [float(v) for v in peaks]
     return row
@@ -167,7 +167,7 @@ def hermite_peak(s0, d0, s1, d1) -> np.ndarray:
     disc = qb * qb - 4.0 * qa * d0
     real = disc >= 0.0
     r = -0.5 * (qb + np.copysign(np.sqrt(np.where(real, disc, 0.0)), qb))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide='ignore', invalid='ignore'):
         for t in (np.where(r != 0.0, d0 / r, np.nan), np.where(qa != 0.0, r / qa, np.nan)):
             val = np.abs(s0 + t * (d0 + t * (a + t * b)))
             resolved = np.abs(2.0 * a + 6.0 * b * t) <= RESOLVED_CREST * val
@@ -233,37 +233,37 @@ class StepBlock:
     i.e. ``state_row`` of each step's Sample.
     """
 
-    __slots__ = ("rows", "make_last", "lock", "error", "states", "_last", "_peaks")
+    __slots__ = ('rows', 'make_last', 'lock', 'error', 'states', '_last', '_peaks')
 
     def __init__(self, rows: np.ndarray, make_last: Callable[[], Sample],
                  lock: LockEvent | None = None, error: str | None = None,
                  states: np.ndarray | None = None):
         if len(rows) != len(STEP_FIELDS):
-            raise ValueError(f"a block has {len(STEP_FIELDS)} rows, not {len(rows)}")
+            raise ValueError(f'a block has {len(STEP_FIELDS)} rows, not {len(rows)}')
         if states is not None and states.shape[1] != rows.shape[1]:
-            raise ValueError(f"a block of {rows.shape[1]} steps with state rows of "
-                             f"{states.shape[1]}")
+            raise ValueError(f'a block of {rows.shape[1]} steps with state rows of '
+                             f'{states.shape[1]}')
         _set = object.__setattr__        # (read-only: __setattr__ refuses)
-        _set(self, "rows", rows)
-        _set(self, "make_last", make_last)
-        _set(self, "lock", lock)
-        _set(self, "error", error)
-        _set(self, "states", states)
-        _set(self, "_last", None)
-        _set(self, "_peaks", None)
+        _set(self, 'rows', rows)
+        _set(self, 'make_last', make_last)
+        _set(self, 'lock', lock)
+        _set(self, 'error', error)
+        _set(self, 'states', states)
+        _set(self, '_last', None)
+        _set(self, '_peaks', None)
 
     def __setattr__(self, name, value):
-        raise AttributeError(f"StepBlock is read-only (cannot set {name!r})")
+        raise AttributeError(f'StepBlock is read-only (cannot set {name!r})')
 
     @property
     def last(self) -> Sample:
         if self._last is None:
-            object.__setattr__(self, "_last", self.make_last())
+            object.__setattr__(self, '_last', self.make_last())
         return self._last
 
     @classmethod
     def from_rows(cls, rows: np.ndarray, make_last: Callable[[], Sample], lock=None,
-                  error=None, states: np.ndarray | None = None) -> "StepBlock":
+                  error=None, states: np.ndarray | None = None) -> 'StepBlock':
         """
         Build a block from its rows (len(STEP_FIELDS), steps).
 
@@ -277,7 +277,7 @@ class StepBlock:
         return self.rows.shape[1]
 
     @classmethod
-    def concatenate(cls, blocks: list["StepBlock"]) -> "StepBlock":
+    def concatenate(cls, blocks: list['StepBlock']) -> 'StepBlock':
         """
         Return one block of consecutive blocks' steps (the last block's final state).
 
@@ -307,24 +307,24 @@ class StepBlock:
                 # one fancy index and one tolist for the five rows (a publication's ~10
                 # steps: Python floats beat numpy calls)
                 t, *rows = self.rows.take(_PEAK_ROWS, axis=0).tolist()
-                for body, peaks, where in (("leaf", rows[0], rows[1]),
-                                           ("link", rows[2], rows[3])):
+                for body, peaks, where in (('leaf', rows[0], rows[1]),
+                                           ('link', rows[2], rows[3])):
                     i = peaks.index(max(peaks))
                     out[body] = (peaks[i], where[i], t[i])
-            object.__setattr__(self, "_peaks", out)
+            object.__setattr__(self, '_peaks', out)
         return self._peaks
 
 
 def _step_field(row: int, name: str) -> property:
-    return property(lambda block: block.rows[row], doc=f"{name} at every step of the block")
+    return property(lambda block: block.rows[row], doc=f'{name} at every step of the block')
 
 
 for _row, _name in enumerate(STEP_FIELDS):
     setattr(StepBlock, _name, _step_field(_row, _name))
 del _row, _name
 #: the rows of a step's peak stresses and where (step_peaks)
-_STEP_PEAKS = slice(STEP_FIELDS.index("peak_stress_leaf"),
-                    STEP_FIELDS.index("peak_stress_link_x") + 1)
+_STEP_PEAKS = slice(STEP_FIELDS.index('peak_stress_leaf'),
+                    STEP_FIELDS.index('peak_stress_link_x') + 1)
 #: rows StepBlock.peaks and SummaryAccumulator.add read together
 _PEAK_ROWS = np.array([STEP_FIELDS.index(f) for f in (
-    "time", "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link", "peak_stress_link_x")])
+    'time', 'peak_stress_leaf', 'peak_stress_leaf_x', 'peak_stress_link', 'peak_stress_link_x')])

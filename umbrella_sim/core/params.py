@@ -34,10 +34,10 @@ from .registry import (check_known_names, check_types, coerce, CONTROLLER_PARAME
 
 #: parameters added after recordings were made, with the value an older recording (which
 #: does not list them) was made with: replay re-runs it so
-RECORDED_BEFORE_ADDED = {"phase_correction": False, "step_follows_mesh": False}
+RECORDED_BEFORE_ADDED = {'phase_correction': False, 'step_follows_mesh': False}
 
 
-def recorded_params(values: Mapping[str, Any]) -> "UmbrellaParams":
+def recorded_params(values: Mapping[str, Any]) -> 'UmbrellaParams':
     """
     Return the model a recording's parameters describe, validated (ValueError if none).
 
@@ -118,16 +118,16 @@ class _DerivedQuantities:
     @property
     def lock_rule(self) -> str:
         """Return the lock the run takes: energy or plastic (``lock`` auto resolved)."""
-        if self.model in ("rigid", "rigid-fe"):
-            return "plastic"
-        return "energy" if self.lock == "auto" else self.lock
+        if self.model in ('rigid', 'rigid-fe'):
+            return 'plastic'
+        return 'energy' if self.lock == 'auto' else self.lock
 
-    def with_physics_step(self, step: float) -> "UmbrellaParams":
+    def with_physics_step(self, step: float) -> 'UmbrellaParams':
         """Return these parameters with the integrator's step set to step exactly."""
         return self.replace(time_step=step, step_follows_mesh=False)
 
     # ---------------------------------------------------------------- building
-    def replace(self, **changes: Any) -> "UmbrellaParams":
+    def replace(self, **changes: Any) -> 'UmbrellaParams':
         unknown = sorted(set(changes) - set(SPECS))
         if unknown:
             raise ValueError(_unknown_message(unknown))
@@ -137,15 +137,15 @@ class _DerivedQuantities:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], base: "UmbrellaParams | None" = None,
-                     ignore_unknown: bool = False) -> "UmbrellaParams":
+    def from_mapping(cls, values: Mapping[str, Any], base: 'UmbrellaParams | None' = None,
+                     ignore_unknown: bool = False) -> 'UmbrellaParams':
         base = base or cls()
         unknown = sorted(set(values) - set(SPECS))
         if unknown and not ignore_unknown:
             raise ValueError(_unknown_message(unknown))
         return base.replace(**{k: v for k, v in values.items() if k in SPECS})
 
-    def validated(self, pairs: bool = True) -> "UmbrellaParams":
+    def validated(self, pairs: bool = True) -> 'UmbrellaParams':
         """Return self if valid, else raise ValueError (validate; pairs: its pair rule)."""
         validate(self, pairs)
         return self
@@ -153,20 +153,20 @@ class _DerivedQuantities:
 
 def _unknown_message(unknown: list[str]) -> str:
     try:
-        check_known_names(unknown, SPECS, "parameters")
+        check_known_names(unknown, SPECS, 'parameters')
     except ValueError as exc:
         return str(exc)
-    return ""
+    return ''
 
 
 #: the physics' parameters as one frozen record; fields and defaults from SPECS
 UmbrellaParams = dataclasses.make_dataclass(
-    "UmbrellaParams", [(p.name, p.type, dataclasses.field(default=p.default))
+    'UmbrellaParams', [(p.name, p.type, dataclasses.field(default=p.default))
                        for p in SPECS.values()],
     bases=(_DerivedQuantities,), frozen=True)
 UmbrellaParams.__module__ = __name__     # pickles as umbrella_sim.core.params.UmbrellaParams
 UmbrellaParams.__doc__ = ("The physics' parameters (SI), one field per entry of SPECS; "
-                          "immutable: change with replace(), check with validated().")
+                          'immutable: change with replace(), check with validated().')
 
 
 def _sleeve_height(l1: float, l3: float, alpha: float) -> float:
@@ -201,44 +201,44 @@ def validate(p: UmbrellaParams, pairs: bool = True) -> None:
     _check_each(p, SPECS)
     # the rules that tie parameters together (each registry entry's `rule` names its own)
     if pairs and (p.area > 0.0) != (p.second_moment_of_area > 0.0):
-        raise ValueError("parameters area and second_moment_of_area: give both or neither")
+        raise ValueError('parameters area and second_moment_of_area: give both or neither')
     if (p.area == 0.0 or p.second_moment_of_area == 0.0) and p.section_height <= 0.0:
-        raise ValueError(f"parameter section_height={p.section_height}: must be > 0 "
-                         "unless area and second_moment_of_area are given")
+        raise ValueError(f'parameter section_height={p.section_height}: must be > 0 '
+                         'unless area and second_moment_of_area are given')
     if p.area > 0.0 and p.second_moment_of_area > 0.0 and p.section_height > 0.0:
         most = p.area * (0.5 * p.section_height) ** 2   # every fibre at the outer ones
         if p.second_moment_of_area > most * (1.0 + 1e-12):
             raise ValueError(
-                f"parameter second_moment_of_area={p.second_moment_of_area}: more than "
-                f"area * (section_height / 2)^2 = {most:.6g} m^4, which no section of "
-                f"height section_height={p.section_height} m has (its outer fibre, where "
+                f'parameter second_moment_of_area={p.second_moment_of_area}: more than '
+                f'area * (section_height / 2)^2 = {most:.6g} m^4, which no section of '
+                f'height section_height={p.section_height} m has (its outer fibre, where '
                 "the stress is recovered, is at section_height / 2): give the section's "
-                "height, or section_height 0 for the rectangle of that area and I")
+                'height, or section_height 0 for the rectangle of that area and I')
     if not p.alpha_deployed < p.alpha0:
-        raise ValueError(f"parameter alpha0={p.alpha0}: must be above alpha_deployed="
-                         f"{p.alpha_deployed} and below pi/2")
-    for name in ("alpha0", "alpha_deployed"):
+        raise ValueError(f'parameter alpha0={p.alpha0}: must be above alpha_deployed='
+                         f'{p.alpha_deployed} and below pi/2')
+    for name in ('alpha0', 'alpha_deployed'):
         reach = p.l1 * abs(math.cos(getattr(p, name)))
         if reach >= p.l3:     # the link is what the user usually shortened: named first
-            raise ValueError(f"parameter l3={p.l3}: the link is too short, geometry cannot "
-                             f"close: l1*|cos({name})| = {reach:.6g} m must be < l3 "
-                             f"(l1={p.l1}, {name}={getattr(p, name):.6g})")
+            raise ValueError(f'parameter l3={p.l3}: the link is too short, geometry cannot '
+                             f'close: l1*|cos({name})| = {reach:.6g} m must be < l3 '
+                             f'(l1={p.l1}, {name}={getattr(p, name):.6g})')
     if 0.0 < p.time_step < MIN_PHYSICS_STEP:
-        raise ValueError(f"parameter time_step={p.time_step}: must be 0 (the step chosen for "
-                         f"the mesh) or >= {MIN_PHYSICS_STEP:g} s")
+        raise ValueError(f'parameter time_step={p.time_step}: must be 0 (the step chosen for '
+                         f'the mesh) or >= {MIN_PHYSICS_STEP:g} s')
     if p.sleeve_force_min < -p.sleeve_force_tension_limit:
-        raise ValueError(f"parameter sleeve_force_min={p.sleeve_force_min}: must be >= "
-                         f"{-p.sleeve_force_tension_limit:.6g} N: a force holding the sleeve "
-                         "back puts the link in tension, which it carries up to its squash "
-                         "load area * yield_strength")
+        raise ValueError(f'parameter sleeve_force_min={p.sleeve_force_min}: must be >= '
+                         f'{-p.sleeve_force_tension_limit:.6g} N: a force holding the sleeve '
+                         'back puts the link in tension, which it carries up to its squash '
+                         'load area * yield_strength')
     if p.sleeve_force < p.sleeve_force_min:
-        raise ValueError(f"parameter sleeve_force={p.sleeve_force}: must be >= "
-                         f"{p.sleeve_force_min:g} = sleeve_force_min (F_H pushes the sleeve "
-                         "along -Y)")
+        raise ValueError(f'parameter sleeve_force={p.sleeve_force}: must be >= '
+                         f'{p.sleeve_force_min:g} = sleeve_force_min (F_H pushes the sleeve '
+                         'along -Y)')
     if p.sleeve_force > p.sleeve_force_limit:
-        raise ValueError(f"parameter sleeve_force={p.sleeve_force}: must be <= "
-                         f"{p.sleeve_force_limit:.6g} N, the load the link can carry "
-                         "(Euler buckling / squash load, msg_docs/topic_sleeve_force.md)")
+        raise ValueError(f'parameter sleeve_force={p.sleeve_force}: must be <= '
+                         f'{p.sleeve_force_limit:.6g} N, the load the link can carry '
+                         '(Euler buckling / squash load, msg_docs/topic_sleeve_force.md)')
 
 
 def physics_step(time_step: float, publish_rate: float) -> float:
@@ -257,9 +257,9 @@ def shortened_step_note(time_step: float, publish_rate: float) -> str | None:
     step = physics_step(time_step, publish_rate)
     if abs(step - time_step) <= 1e-12 * time_step:
         return None
-    return (f"physics step {step:.9g} s, not {time_step:g} s: the largest step <= it that "
-            f"divides the {1e3 / publish_rate:g} ms publication period (publish_rate "
-            f"{publish_rate:g} Hz), so the states differ from a run at {time_step:g} s by the "
+    return (f'physics step {step:.9g} s, not {time_step:g} s: the largest step <= it that '
+            f'divides the {1e3 / publish_rate:g} ms publication period (publish_rate '
+            f'{publish_rate:g} Hz), so the states differ from a run at {time_step:g} s by the '
             "step's error; a time_step dividing the period keeps them the same")
 
 
@@ -269,7 +269,7 @@ def _check_fields(record, specs: Mapping[str, Param]) -> None:
         value = getattr(record, name)
         if not isinstance(value, spec.type) or (spec.type is not bool
                                                 and isinstance(value, bool)):
-            raise ValueError(f"parameter {name}={value!r}: must be of type {spec.type_name}")
+            raise ValueError(f'parameter {name}={value!r}: must be of type {spec.type_name}')
         spec.check(value)
 
 
@@ -279,7 +279,7 @@ class _ControllerChecks:
     def __post_init__(self):
         _exact_fields(self, CONTROLLER_PARAMETERS)
 
-    def validated(self) -> "ControllerConfig":
+    def validated(self) -> 'ControllerConfig':
         """Return self if every value is in its range, else raise ValueError naming it."""
         _check_fields(self, CONTROLLER_PARAMETERS)
         return self
@@ -287,7 +287,7 @@ class _ControllerChecks:
 
 #: deploy_controller's parameters as one frozen record; fields and defaults from the registry
 ControllerConfig = dataclasses.make_dataclass(
-    "ControllerConfig", [(p.name, p.type, dataclasses.field(default=p.default))
+    'ControllerConfig', [(p.name, p.type, dataclasses.field(default=p.default))
                          for p in CONTROLLER_PARAMETERS.values()],
     bases=(_ControllerChecks,), frozen=True)
 ControllerConfig.__module__ = __name__

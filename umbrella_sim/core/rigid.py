@@ -168,6 +168,6 @@ def deployment_time_by_quadrature(params: UmbrellaParams, v0: float | None = Non
             return math.sqrt(generalized_mass(a0) / (2.0 * force * dy0))
         return math.sqrt(generalized_mass(a) * (a0 - a) / (2.0 * energy(a)))
 
-    val, _ = integrate.quad(g, ad, a0, weight="alg", wvar=(0.0, -0.5),
+    val, _ = integrate.quad(g, ad, a0, weight='alg', wvar=(0.0, -0.5),
                             epsabs=0.0, epsrel=1e-12, limit=200)
     return val

@@ -55,15 +55,15 @@ class PrescribedRotationBeam:
 
     def __init__(self, length: float, n_elements: int, mass_per_length: float, ea: float,
                  ei: float, youngs_modulus: float, fibre: float, nonlinear: bool):
-        self.body = BeamBody("beam", [(length, n_elements)], [(0, "u"), (0, "v"), (0, "theta")],
+        self.body = BeamBody('beam', [(length, n_elements)], [(0, 'u'), (0, 'v'), (0, 'theta')],
                              mass_per_length=mass_per_length, ea=ea, ei=ei,
                              youngs_modulus=youngs_modulus, fibre=fibre)
         ne = self.body.n_elastic
         bodies = ((self.body, slice(0, ne)),)
         self.strain = (CorotationalStrainEnergy(bodies, ne, ea, ei, youngs_modulus, fibre)
                        if nonlinear else LinearStrainEnergy(bodies, ne))
-        self.i_tip_u = self.body.elastic_index(n_elements, "u")
-        self.i_tip_v = self.body.elastic_index(n_elements, "v")
+        self.i_tip_u = self.body.elastic_index(n_elements, 'u')
+        self.i_tip_v = self.body.elastic_index(n_elements, 'v')
 
     def simulate(self, angle_rate, angle_accel, duration: float, h: float,
                  tolerance: float = 1e-10, max_iterations: int = 30):
@@ -124,8 +124,8 @@ def spin_up_angle(t: float, omega: float = 6.0, ramp: float = 15.0):
 
 #: the spin-up beam of Kane, Ryan & Banerjee (1987): L = 10 m, A = 4e-4 m^2, I = 2e-7 m^4,
 #: E = 7e10 Pa, rho = 3000 kg/m^3 (EA, EI, rho A as in the AeroBeams.jl spinupRobotArm example)
-KANE_BEAM = {"length": 10.0, "mass_per_length": 1.2, "ea": 2.8e7, "ei": 1.4e4,
-             "youngs_modulus": 7e10, "fibre": 0.01}
+KANE_BEAM = {'length': 10.0, 'mass_per_length': 1.2, 'ea': 2.8e7, 'ei': 1.4e4,
+             'youngs_modulus': 7e10, 'fibre': 0.01}
 
 
 def spin_up(n_elements: int, nonlinear: bool, duration: float, h: float):
@@ -145,7 +145,7 @@ def spin_up_quasi_static_tip(t: float) -> float:
     of the spin-up benchmark.
     """
     from scipy.integrate import solve_bvp
-    length, rho_a, ei = KANE_BEAM["length"], KANE_BEAM["mass_per_length"], KANE_BEAM["ei"]
+    length, rho_a, ei = KANE_BEAM['length'], KANE_BEAM['mass_per_length'], KANE_BEAM['ei']
     _, w, wd = spin_up_angle(t)
 
     def rhs(x, y):
@@ -157,7 +157,7 @@ def spin_up_quasi_static_tip(t: float) -> float:
     sol = solve_bvp(rhs, lambda a, b: np.array([a[0], a[1], b[2], b[3]]), x, np.zeros((4, 60)),
                     tol=1e-8)
     if sol.status != 0:
-        raise RuntimeError(f"quasi-static spin-up reference at t = {t:g} s: {sol.message}")
+        raise RuntimeError(f'quasi-static spin-up reference at t = {t:g} s: {sol.message}')
     return float(sol.sol(length)[0])
 
 
@@ -195,17 +195,17 @@ def rotating_cantilever_frequency(gamma: float, n_elements: int, nonlinear: bool
     over the next `after` s (the stage-2 period's rule).  Returns
     (frequency / sqrt(EI / (rho A L^4)), max |v_tip| (m)).
     """
-    length, rho_a, ei = KANE_BEAM["length"], KANE_BEAM["mass_per_length"], KANE_BEAM["ei"]
+    length, rho_a, ei = KANE_BEAM['length'], KANE_BEAM['mass_per_length'], KANE_BEAM['ei']
     scale = math.sqrt(ei / (rho_a * length ** 4))
     omega = gamma * scale
     beam = PrescribedRotationBeam(n_elements=n_elements, nonlinear=nonlinear, **KANE_BEAM)
     t, _, v = beam.simulate(lambda s: spin_up_angle(s, omega, ramp)[1],
                             lambda s: spin_up_angle(s, omega, ramp)[2], ramp + after, h)
     if t[-1] < ramp + after - h / 2:
-        raise RuntimeError(f"rotating cantilever at gamma = {gamma:g}: the run stopped at "
-                           f"t = {t[-1]:g} s")
+        raise RuntimeError(f'rotating cantilever at gamma = {gamma:g}: the run stopped at '
+                           f't = {t[-1]:g} s')
     keep = t > ramp
     period = oscillation_period(t[keep], v[keep])
     if not math.isfinite(period):
-        raise RuntimeError(f"rotating cantilever at gamma = {gamma:g}: fewer than two periods")
+        raise RuntimeError(f'rotating cantilever at gamma = {gamma:g}: fewer than two periods')
     return 2.0 * math.pi / period / scale, float(np.abs(v[keep]).max())

@@ -45,19 +45,19 @@ from .step_rule import physics_step_of
 
 def nonlinear_model_needed(p: UmbrellaParams) -> bool:
     """Say whether nonlinear.py steps p (the nonlinear model, or the damped linear one)."""
-    return p.model == "flexible-nonlinear" or (p.model == "flexible" and p.damping_ratio > 0.0)
+    return p.model == 'flexible-nonlinear' or (p.model == 'flexible' and p.damping_ratio > 0.0)
 
 
 class ModelError(ValueError):
     """Valid parameters whose model cannot be built (e.g. a singular mass matrix)."""
 
     def __init__(self, params: UmbrellaParams, reason: BaseException):
-        changed = [f"{name}={getattr(params, name)!r}" for name, spec in SPECS.items()
+        changed = [f'{name}={getattr(params, name)!r}' for name, spec in SPECS.items()
                    if getattr(params, name) != spec.default]
         super().__init__(
-            f"the parameters do not give a model that can be simulated "
-            f"({type(reason).__name__}: {reason}); set away from the defaults: "
-            + (", ".join(changed) if changed else "none"))
+            f'the parameters do not give a model that can be simulated '
+            f'({type(reason).__name__}: {reason}); set away from the defaults: '
+            + (', '.join(changed) if changed else 'none'))
 
 
 # ------------------------------------------------------------------- simulator
@@ -83,7 +83,7 @@ class UmbrellaSimulator:
                 model, engine = nonlinear.build(p)
             else:
                 model = UmbrellaModel(p)
-                engine = (RigidEngine if p.model == "rigid" else FiniteElementEngine)(p, model)
+                engine = (RigidEngine if p.model == 'rigid' else FiniteElementEngine)(p, model)
             state = engine.initial(force)
         except (ArithmeticError, MemoryError, ValueError) as exc:   # (LinAlgError too)
             raise ModelError(p, exc) from None
@@ -206,7 +206,7 @@ class UmbrellaSimulator:
                     done += k
                 if stop is None:
                     break
-                if stop != "crossing":
+                if stop != 'crossing':
                     error = stop
                     break
             start, t_start = self._fibre_stress(), self.time
@@ -276,7 +276,7 @@ class UmbrellaSimulator:
         """Take every grid step that ends at or before t (ValueError for a t already past)."""
         if not t >= self.time - 1e-12 * max(1.0, abs(t)):     # (NaN too)
             raise ValueError(f"advance_to({t!r}): before the simulator's time "
-                             f"{self.time:.9g} s (it only goes forward; reset() starts again)")
+                             f'{self.time:.9g} s (it only goes forward; reset() starts again)')
         out: list[Sample] = []
         while (self._k + 1) * self.h <= t + 1e-12 * max(1.0, abs(t)):
             out.extend(self.step(record))
@@ -288,12 +288,12 @@ class UmbrellaSimulator:
         except (ConvergenceError, np.linalg.LinAlgError) as exc:
             raise SimulationDiverged(fault_message(self.time, str(exc))) from None
         if not (np.all(np.isfinite(s.q)) and np.all(np.isfinite(s.qd))):
-            raise SimulationDiverged(fault_message(self.time, "the state became non-finite"))
+            raise SimulationDiverged(fault_message(self.time, 'the state became non-finite'))
         res = self.engine.residual(s, stage)
         if not res <= DIVERGENCE_RESIDUAL:
             raise SimulationDiverged(fault_message(
-                self.time, f"constraint residual {res:.3g} past tolerance "
-                           f"{DIVERGENCE_RESIDUAL:g}"))
+                self.time, f'constraint residual {res:.3g} past tolerance '
+                           f'{DIVERGENCE_RESIDUAL:g}'))
         if stage == DEFORMING and s.q[0] >= ALPHA1_AXLE:
             raise SimulationDiverged(fault_message(self.time, AXLE_REASON))
         return s
@@ -331,22 +331,22 @@ class UmbrellaSimulator:
         m, eng = self.model, self.engine
         q, qd, qdd = eng.fe_state(s)
         stage = stage if type(stage) is Stage else Stage(stage)
-        common = {"time": s.t, "stage": stage, "q": _frozen(q), "qd": _frozen(qd),
-                  "alpha1_accel": qdd.item(0), "sleeve_force": force,
-                  "multipliers": _frozen(s.multipliers), "work": float(work),
-                  "lock_energy_loss": float(lock_loss),
-                  "damping_dissipation": float(s.dissipation)}
+        common = {'time': s.t, 'stage': stage, 'q': _frozen(q), 'qd': _frozen(qd),
+                  'alpha1_accel': qdd.item(0), 'sleeve_force': force,
+                  'multipliers': _frozen(s.multipliers), 'work': float(work),
+                  'lock_energy_loss': float(lock_loss),
+                  'damping_dissipation': float(s.dissipation)}
         vector = eng.sample_outputs(s, stage)
         if vector is not None:
             # compiled (integrators.SAMPLE_VECTOR): the rest in one list and the stresses as
             # views of the vector (read-only, of its own), without a numpy call per figure
             n = len(SAMPLE_VECTOR)
             values = dict(zip(SAMPLE_VECTOR, vector[:n].tolist()))
-            values["sleeve_reaction"] = (values.pop("sleeve_reaction_x"),
-                                         values.pop("sleeve_reaction_y"))
+            values['sleeve_reaction'] = (values.pop('sleeve_reaction_x'),
+                                         values.pop('sleeve_reaction_y'))
             stress = vector[n:].reshape(2, -1)
             n_leaf = m.leaf.n_stress_points
-            values["leaf_stress"], values["link_stress"] = stress[:, :n_leaf], stress[:, n_leaf:]
+            values['leaf_stress'], values['link_stress'] = stress[:, :n_leaf], stress[:, n_leaf:]
             values.update(common)
             return build_frozen(Sample, values)
         (lt, lb), (kt, kb) = m.stresses(q)
@@ -360,21 +360,21 @@ class UmbrellaSimulator:
         # per-field setattr)
         return build_frozen(Sample, {
             **common,
-            "alpha1": q.item(0), "alpha2": q.item(ia), "alpha1_rate": qd.item(0),
-            "alpha2_rate": qd.item(ia),
-            "sleeve_position": float(m.sleeve_height(q)),
-            "sleeve_velocity": float(m.sleeve_height_gradient(q) @ qd),
-            "tip_axial": tip_axial, "tip_transverse": tip_transverse,
-            "leaf_stress": _frozen((lt, lb)), "link_stress": _frozen((kt, kb)),
-            "peak_stress_leaf": float(leaf_abs[il]),
-            "peak_stress_leaf_x": float(m.leaf.stress_x[il]),
-            "peak_stress_link": float(link_abs[ik]),
-            "peak_stress_link_x": float(m.link.stress_x[ik]),
-            "stress_leaf_joint": joint_stress, "stress_link_mid": mid_link_stress,
-            "sleeve_reaction": eng.sleeve_reaction(s, stage),
-            "kinetic_energy": eng.kinetic_energy(s, stage),
-            "strain_energy": eng.strain_energy(s, stage),
-            "constraint_residual": eng.residual(s, stage)})
+            'alpha1': q.item(0), 'alpha2': q.item(ia), 'alpha1_rate': qd.item(0),
+            'alpha2_rate': qd.item(ia),
+            'sleeve_position': float(m.sleeve_height(q)),
+            'sleeve_velocity': float(m.sleeve_height_gradient(q) @ qd),
+            'tip_axial': tip_axial, 'tip_transverse': tip_transverse,
+            'leaf_stress': _frozen((lt, lb)), 'link_stress': _frozen((kt, kb)),
+            'peak_stress_leaf': float(leaf_abs[il]),
+            'peak_stress_leaf_x': float(m.leaf.stress_x[il]),
+            'peak_stress_link': float(link_abs[ik]),
+            'peak_stress_link_x': float(m.link.stress_x[ik]),
+            'stress_leaf_joint': joint_stress, 'stress_link_mid': mid_link_stress,
+            'sleeve_reaction': eng.sleeve_reaction(s, stage),
+            'kinetic_energy': eng.kinetic_energy(s, stage),
+            'strain_energy': eng.strain_energy(s, stage),
+            'constraint_residual': eng.residual(s, stage)})
 
 
 def _frozen(a) -> np.ndarray:
@@ -388,4 +388,4 @@ def _frozen(a) -> np.ndarray:
 
 def _check_steps(n_steps) -> None:
     if isinstance(n_steps, bool) or not float(n_steps).is_integer() or n_steps < 0:
-        raise ValueError(f"n_steps={n_steps!r}: must be a whole number >= 0")
+        raise ValueError(f'n_steps={n_steps!r}: must be a whole number >= 0')

@@ -78,12 +78,12 @@ UNFITTED_OMEGA_H = math.sqrt(12 * 0.01)
 
 #: the model whose time_step 0 is AUTO_STEP_CEILING at every mesh (its real-time step; the
 #: module's docstring says why); step_follows_mesh gives it the rule's step
-NONLINEAR_AUTO_STEP = "flexible-nonlinear"
+NONLINEAR_AUTO_STEP = 'flexible-nonlinear'
 
 
 def resolved_omega_h(params: UmbrellaParams) -> float:
     """Return the largest omega h of a mode the run's stage-2 integration resolves."""
-    fitted = params.phase_correction and params.model == "flexible"
+    fitted = params.phase_correction and params.model == 'flexible'
     return PHASE_CORRECTION_LIMIT if fitted else UNFITTED_OMEGA_H
 
 
@@ -105,7 +105,7 @@ def lock_amplitudes(model: UmbrellaModel) -> np.ndarray:
     q = model.rigid_configuration(model.params.alpha_deployed)
     cs = ConstraintSet(locked=True, rigid=False)
     qd = model.rigid_velocity(q, 1.0)
-    qd = (energy_velocity(model, q, qd, cs)[0] if model.params.lock_rule == "energy" else
+    qd = (energy_velocity(model, q, qd, cs)[0] if model.params.lock_rule == 'energy' else
           plastic_velocity(model, q, qd, cs))
     return modal_amplitudes(model, q, qd)
 
@@ -134,7 +134,7 @@ def unresolved_stress_share(model: UmbrellaModel, amplitudes: np.ndarray, h: flo
     omega = model.locked_modes[0]
     unresolved = omega * h > limit
     out = {}
-    for body, sigma in zip(("leaf", "link"), stresses or mode_stresses(model)):
+    for body, sigma in zip(('leaf', 'link'), stresses or mode_stresses(model)):
         contribution = np.abs(amplitudes[:, None] * sigma)
         total = contribution.sum(axis=0)
         at = int(np.argmax(total))
@@ -169,7 +169,7 @@ def physics_step_of(params: UmbrellaParams) -> float:
     if not params.step_follows_mesh and (params.time_step > 0.0
                                          or params.model == NONLINEAR_AUTO_STEP):
         return ceiling
-    if params.model in ("rigid", "rigid-fe"):
+    if params.model in ('rigid', 'rigid-fe'):
         return ceiling
     return ceiling / _mesh_divisor(tuple(sorted(params.replace(time_step=ceiling)
                                                 .as_dict().items())))
@@ -179,7 +179,7 @@ def physics_step_of(params: UmbrellaParams) -> float:
 def _mesh_divisor(items: tuple) -> int:
     p = UmbrellaParams.from_mapping(dict(items))
     try:
-        with np.errstate(all="ignore"):
+        with np.errstate(all='ignore'):
             model = UmbrellaModel(p)
             k = resolving_divisor(model, p.time_step, resolved_omega_h(p),
                                   lock_amplitudes(model))
@@ -191,11 +191,11 @@ def _mesh_divisor(items: tuple) -> int:
 
 def resolving_step_hint(params: dict) -> str:
     """Return how a run of these parameters gets the step that resolves its stage 2, or ''."""
-    if params.get("model") == NONLINEAR_AUTO_STEP:
-        return "" if params.get("step_follows_mesh") else "step_follows_mesh takes it"
-    if params.get("time_step") == 0.0:
-        return ""
-    return "time_step 0 takes the step chosen for the mesh"
+    if params.get('model') == NONLINEAR_AUTO_STEP:
+        return '' if params.get('step_follows_mesh') else 'step_follows_mesh takes it'
+    if params.get('time_step') == 0.0:
+        return ''
+    return 'time_step 0 takes the step chosen for the mesh'
 
 
 def stage2_resolution(model: UmbrellaModel, q: np.ndarray, qd: np.ndarray, h: float) -> dict:
@@ -209,5 +209,5 @@ def stage2_resolution(model: UmbrellaModel, q: np.ndarray, qd: np.ndarray, h: fl
     limit = resolved_omega_h(model.params)
     amplitudes = modal_amplitudes(model, q, qd)
     k = resolving_divisor(model, h, limit, amplitudes)
-    return {"step": h, **unresolved_stress_share(model, amplitudes, h, limit),
-            "resolving_step": None if k is None else h / k}
+    return {'step': h, **unresolved_stress_share(model, amplitudes, h, limit),
+            'resolving_step': None if k is None else h / k}

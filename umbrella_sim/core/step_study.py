@@ -37,8 +37,8 @@ from .step_rule import physics_step_of
 from .summary import oscillation_period
 
 #: issue-level accuracy targets for the default step (relative unless stated)
-TARGETS = {"deploy_time": 1e-5, "stage2_period": 5e-4, "stage2_amplitude": 5e-3,
-           "stage2_tip_series_m": 1e-3, "peak_stress": 0.03}
+TARGETS = {'deploy_time': 1e-5, 'stage2_period': 5e-4, 'stage2_amplitude': 5e-3,
+           'stage2_tip_series_m': 1e-3, 'peak_stress': 0.03}
 
 
 def mesh_step(params: UmbrellaParams) -> float:
@@ -75,12 +75,12 @@ class StepRun:
 
     def figures(self, window: float) -> dict:
         s1, s2 = self.stage_mask(0), self.stage_mask(1, window)
-        out = {"deploy_time": self.deploy_time}
-        for body in ("leaf", "link"):
-            peak = getattr(self, f"peak_stress_{body}")
-            out[f"stage1_peak_{body}"] = float(peak[s1].max()) if s1.any() else math.nan
-            out[f"stage2_peak_{body}"] = float(peak[s2].max()) if s2.any() else math.nan
-        out["stage2_period"] = fundamental_period(self.time[s2], self.tip_transverse[s2])
+        out = {'deploy_time': self.deploy_time}
+        for body in ('leaf', 'link'):
+            peak = getattr(self, f'peak_stress_{body}')
+            out[f'stage1_peak_{body}'] = float(peak[s1].max()) if s1.any() else math.nan
+            out[f'stage2_peak_{body}'] = float(peak[s2].max()) if s2.any() else math.nan
+        out['stage2_period'] = fundamental_period(self.time[s2], self.tip_transverse[s2])
         return out
 
 
@@ -91,14 +91,14 @@ def run_steps(params: UmbrellaParams, window: float) -> StepRun:
     error = driver.run(10.0, stop_after_lock=window,
                        on_chunk=lambda chunk: parts.append(chunk.block))
     if error:
-        raise RuntimeError(f"{driver.step:g} s step: {error}")
+        raise RuntimeError(f'{driver.step:g} s step: {error}')
     if driver.sim.lock_event is None:
-        raise RuntimeError("no lock within 10 s")
+        raise RuntimeError('no lock within 10 s')
 
     def cat(name):
         return np.concatenate([getattr(p, name) for p in parts])
-    return StepRun(driver.step, driver.sim.lock_event.time, cat("time"), cat("stage"),
-                   cat("tip_transverse"), cat("peak_stress_leaf"), cat("peak_stress_link"))
+    return StepRun(driver.step, driver.sim.lock_event.time, cat('time'), cat('stage'),
+                   cat('tip_transverse'), cat('peak_stress_leaf'), cat('peak_stress_link'))
 
 
 def step_errors(run: StepRun, ref: StepRun, window: float) -> dict:
@@ -110,21 +110,21 @@ def step_errors(run: StepRun, ref: StepRun, window: float) -> dict:
     linearly, so its step must be much finer).
     """
     a, b = run.figures(window), ref.figures(window)
-    out = {"deploy_time": abs(a["deploy_time"] - b["deploy_time"]) / b["deploy_time"],
-           "stage2_period": abs(a["stage2_period"] - b["stage2_period"]) / b["stage2_period"]}
-    for key in ("stage1_peak_leaf", "stage1_peak_link", "stage2_peak_leaf", "stage2_peak_link"):
+    out = {'deploy_time': abs(a['deploy_time'] - b['deploy_time']) / b['deploy_time'],
+           'stage2_period': abs(a['stage2_period'] - b['stage2_period']) / b['stage2_period']}
+    for key in ('stage1_peak_leaf', 'stage1_peak_link', 'stage2_peak_leaf', 'stage2_peak_link'):
         out[key] = abs(a[key] - b[key]) / b[key]
     t_end = min(run.deploy_time, ref.deploy_time) + window
     mask = (run.stage_mask(1) & (run.time <= t_end)
             & (run.time >= max(run.deploy_time, ref.deploy_time)))
     ref2 = ref.stage_mask(1)
     tip_ref = np.interp(run.time[mask], ref.time[ref2], ref.tip_transverse[ref2])
-    out["stage2_tip_series_m"] = float(np.max(np.abs(run.tip_transverse[mask] - tip_ref)))
+    out['stage2_tip_series_m'] = float(np.max(np.abs(run.tip_transverse[mask] - tip_ref)))
     window_ref = ref2 & (ref.time <= t_end)
     amplitude = 0.5 * float(np.ptp(ref.tip_transverse[window_ref]))
-    out["stage2_tip_amplitude_m"] = amplitude
+    out['stage2_tip_amplitude_m'] = amplitude
     window_run = run.stage_mask(1) & (run.time <= t_end)
-    out["stage2_amplitude"] = abs(0.5 * float(np.ptp(run.tip_transverse[window_run]))
+    out['stage2_amplitude'] = abs(0.5 * float(np.ptp(run.tip_transverse[window_run]))
                                   - amplitude) / amplitude
     return out
 
@@ -145,22 +145,22 @@ def sampled_peak_shortfall(ref: StepRun, h: float, window: float) -> dict:
         raise ValueError(f"step {h:g} s is not a multiple of the reference's {ref.h:g} s")
     mask = ref.stage_mask(1, window)
     out = {}
-    for body in ("leaf", "link"):
-        stress = getattr(ref, f"peak_stress_{body}")[mask]
+    for body in ('leaf', 'link'):
+        stress = getattr(ref, f'peak_stress_{body}')[mask]
         out[body] = 1.0 - min(stress[j::k].max() for j in range(k)) / stress.max()
     return out
 
 
 def within_targets(err: dict) -> bool:
-    return (err["deploy_time"] <= TARGETS["deploy_time"]
-            and err["stage2_period"] <= TARGETS["stage2_period"]
-            and err["stage2_amplitude"] <= TARGETS["stage2_amplitude"]
-            and err["stage2_tip_series_m"] <= TARGETS["stage2_tip_series_m"]
-            and max(err[k] for k in err if "_peak_" in k) <= TARGETS["peak_stress"])
+    return (err['deploy_time'] <= TARGETS['deploy_time']
+            and err['stage2_period'] <= TARGETS['stage2_period']
+            and err['stage2_amplitude'] <= TARGETS['stage2_amplitude']
+            and err['stage2_tip_series_m'] <= TARGETS['stage2_tip_series_m']
+            and max(err[k] for k in err if '_peak_' in k) <= TARGETS['peak_stress'])
 
 
 def observed_order(params: UmbrellaParams, steps: tuple[float, float, float], duration: float,
-                   field: str = "tip_transverse") -> float:
+                   field: str = 'tip_transverse') -> float:
     """
     Return the observed order of convergence in the step.
 
@@ -178,7 +178,7 @@ def observed_order(params: UmbrellaParams, steps: tuple[float, float, float], du
         error = driver.run(duration, on_chunk=lambda chunk: parts.append(getattr(chunk.block,
                                                                                  field)))
         if error or driver.sim.lock_event is not None:
-            raise RuntimeError(error or "the lock is inside the horizon")
+            raise RuntimeError(error or 'the lock is inside the horizon')
         every = int(round(r ** k))
         series.append(np.concatenate(parts)[every - 1::every])
     e1 = float(np.max(np.abs(series[0] - series[1])))

@@ -39,7 +39,7 @@ from .step_rule import (lock_amplitudes, MAX_STEP_DIVISOR, resolved_omega_h, res
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
 ENERGY_SCALE_FLOOR = 1e-9
 _TIME, _STAGE, _TIP, _FORCE, _RESIDUAL = (STEP_FIELDS.index(f) for f in (
-    "time", "stage", "tip_transverse", "sleeve_force", "constraint_residual"))
+    'time', 'stage', 'tip_transverse', 'sleeve_force', 'constraint_residual'))
 
 
 class _StepFieldBasis:
@@ -183,8 +183,8 @@ def deploy_start_of(params, applied) -> float | None:
     from .registry import defaults
 
     given = {**defaults(), **dict(params)}
-    return deploy_start(float(given["v0"]),
-                        [(0.0, float(given["sleeve_force"])), *applied])
+    return deploy_start(float(given['v0']),
+                        [(0.0, float(given['sleeve_force'])), *applied])
 
 
 def in_stage2_window(t, lock_time: float, window: float = STAGE2_WINDOW):
@@ -209,32 +209,32 @@ def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dic
     Over the window (lock, lock + STAGE2_WINDOW], or the part of it the run covers
     (reported as stage2_window): the amplitude of v and oscillation_period(t, v).
     """
-    out = {"stage2_window": None, "stage2_tip_amplitude": None, "stage2_tip_period": None}
+    out = {'stage2_window': None, 'stage2_tip_amplitude': None, 'stage2_tip_period': None}
     if lock_time is None:
         return out
     keep = in_stage2_window(t, lock_time)
     t, v = t[keep], v[keep]
     if len(v) <= 8:
         return out
-    out["stage2_window"] = [float(lock_time), float(t[-1])]
-    out["stage2_tip_amplitude"] = amplitude(v)
+    out['stage2_window'] = [float(lock_time), float(t[-1])]
+    out['stage2_tip_amplitude'] = amplitude(v)
     period = oscillation_period(t, v)
-    out["stage2_tip_period"] = None if math.isnan(period) else period
+    out['stage2_tip_period'] = None if math.isnan(period) else period
     return out
 
 
 def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     """Return a warning if the lock asked for does not apply to the model (else None)."""
-    asked = params.get("lock")
-    if lock_kind is not None and asked not in (None, "auto") and asked != lock_kind:
-        return (f"lock not applicable: lock={asked} does not apply to model="
+    asked = params.get('lock')
+    if lock_kind is not None and asked not in (None, 'auto') and asked != lock_kind:
+        return (f'lock not applicable: lock={asked} does not apply to model='
                 f"{params.get('model')} (a rigid mechanism stopped at a point keeps no "
-                f"kinetic energy to redistribute); the {lock_kind} lock is used; set "
-                f"lock={lock_kind} to silence this")
+                f'kinetic energy to redistribute); the {lock_kind} lock is used; set '
+                f'lock={lock_kind} to silence this')
     return None
 
 
-def coarse_step_warning(resolution: dict | None, hint: str = "") -> str | None:
+def coarse_step_warning(resolution: dict | None, hint: str = '') -> str | None:
     """
     Return a warning when the step leaves the modes carrying the stage-2 stresses unresolved.
 
@@ -247,20 +247,20 @@ def coarse_step_warning(resolution: dict | None, hint: str = "") -> str | None:
     """
     if not resolution:
         return None
-    shares = {body: resolution[body] for body in ("leaf", "link")}
+    shares = {body: resolution[body] for body in ('leaf', 'link')}
     if max(shares.values()) <= STRESS_SHARE_LIMIT:
         return None
-    h, enough = resolution["step"], resolution["resolving_step"]
+    h, enough = resolution['step'], resolution['resolving_step']
     if enough is None:
-        fix = (f"no step down to {h / MAX_STEP_DIVISOR:.3g} s (1/{MAX_STEP_DIVISOR} of this "
-               "one) resolves them: give a smaller time_step")
+        fix = (f'no step down to {h / MAX_STEP_DIVISOR:.3g} s (1/{MAX_STEP_DIVISOR} of this '
+               'one) resolves them: give a smaller time_step')
     else:
-        fix = f"time_step <= {_rounded_down(enough):.3g} s resolves them" + (
-            f" ({hint})" if hint else "")
-    return (f"coarse step: modes the physics step {h:g} s does not resolve carry "
+        fix = f'time_step <= {_rounded_down(enough):.3g} s resolves them' + (
+            f' ({hint})' if hint else '')
+    return (f'coarse step: modes the physics step {h:g} s does not resolve carry '
             f"{100 * shares['leaf']:.3g} % of the leaf's and {100 * shares['link']:.3g} % of the "
             f"link's stage-2 stress crest at the lock (limit {100 * STRESS_SHARE_LIMIT:g} %): "
-            f"the stage-2 peak stresses are not those of the model; {fix}")
+            f'the stage-2 peak stresses are not those of the model; {fix}')
 
 
 def _rounded_down(x: float) -> float:
@@ -294,20 +294,20 @@ def _mesh_resolution(items: tuple, step: float) -> dict | None:
         p = UmbrellaParams.from_mapping(dict(items))
     except ValueError:
         return None
-    if p.model not in ("flexible", "flexible-nonlinear"):
+    if p.model not in ('flexible', 'flexible-nonlinear'):
         return None
     model = UmbrellaModel(p)
     amplitudes = lock_amplitudes(model)
     limit = resolved_omega_h(p)
     k = resolving_divisor(model, step, limit, amplitudes)
-    return {"step": step, **unresolved_stress_share(model, amplitudes, step, limit),
-            "resolving_step": None if k is None else step / k}
+    return {'step': step, **unresolved_stress_share(model, amplitudes, step, limit),
+            'resolving_step': None if k is None else step / k}
 
 
 #: rigid-fe's figures of the elastic field, which its constraints hold at zero: their
 #: round-off (1e-26 m, 1e-14 Pa) is reported as the zero the model means
-RIGID_FE_ZEROS = ("tip_deflection_max", "stage2_tip_amplitude", "peak_stress_leaf",
-                  "peak_stress_link", "stress_ratio_max", "tip_deflection_ratio_max")
+RIGID_FE_ZEROS = ('tip_deflection_max', 'stage2_tip_amplitude', 'peak_stress_leaf',
+                  'peak_stress_link', 'stress_ratio_max', 'tip_deflection_ratio_max')
 
 
 #: the geometrically exact beam (flexible-nonlinear) takes a fibre's slope |v'| in its body
@@ -330,21 +330,21 @@ def geometric_validity_warnings(params: dict, peak_stress: float,
     every step, from the engine; None when not known, e.g. a recording's figures).  Other
     models: none.
     """
-    if params.get("model") != "flexible-nonlinear":
+    if params.get('model') != 'flexible-nonlinear':
         return []
     out = []
-    strain = peak_stress / params["youngs_modulus"]
-    if strain > STRAIN_LIMIT and peak_stress > params["yield_strength"]:
-        out.append(f"large strain: peak |sigma| / youngs_modulus = {100 * strain:.3g} % "
-                   f"(limit {100 * STRAIN_LIMIT:g} %): the co-rotational beam of "
-                   "flexible-nonlinear is exact for large rotations but small strains only")
+    strain = peak_stress / params['youngs_modulus']
+    if strain > STRAIN_LIMIT and peak_stress > params['yield_strength']:
+        out.append(f'large strain: peak |sigma| / youngs_modulus = {100 * strain:.3g} % '
+                   f'(limit {100 * STRAIN_LIMIT:g} %): the co-rotational beam of '
+                   'flexible-nonlinear is exact for large rotations but small strains only')
     if section_slope is not None and section_slope > SECTION_SLOPE_LIMIT:
         turn = math.degrees(math.asin(min(section_slope, 1.0)))
         out.append(f"fibre rotation: a fibre turned {turn:.1f} deg from its body frame (|v'| = "
-                   f"{section_slope:.4f}; limit {math.degrees(math.asin(SECTION_SLOPE_LIMIT)):g}"
+                   f'{section_slope:.4f}; limit {math.degrees(math.asin(SECTION_SLOPE_LIMIT)):g}'
                    " deg): flexible-nonlinear's slope coordinates end at 90 deg, and near it "
-                   "the error eps tan(psi) of its section angles grows "
-                   "(docs/validation_nonlinear.md)")
+                   'the error eps tan(psi) of its section angles grows '
+                   '(docs/validation_nonlinear.md)')
     return out
 
 
@@ -377,27 +377,27 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     if cw:
         out.append(cw)
     if energy_drift is not None and energy_drift > ENERGY_DRIFT_LIMIT:
-        out.append(f"energy not conserved: the energy balance is off by {100 * energy_drift:.3g}"
+        out.append(f'energy not conserved: the energy balance is off by {100 * energy_drift:.3g}'
                    f" % of the run's energy (limit {100 * ENERGY_DRIFT_LIMIT:g} %): a step "
-                   "too coarse for this motion, whose energy restoration was skipped (more "
-                   "than 1 % a step); use a smaller time_step")
-    ys = params["yield_strength"]
+                   'too coarse for this motion, whose energy restoration was skipped (more '
+                   'than 1 % a step); use a smaller time_step')
+    ys = params['yield_strength']
     if peak_stress > ys:
-        out.append(f"yield exceeded: peak |sigma| {peak_stress / 1e6:.4g} MPa is "
-                   f"{peak_stress / ys:.3g} x yield_strength {ys / 1e6:.4g} MPa; the linear "
-                   "elastic material law no longer holds")
-    strain = peak_stress / params["youngs_modulus"]
+        out.append(f'yield exceeded: peak |sigma| {peak_stress / 1e6:.4g} MPa is '
+                   f'{peak_stress / ys:.3g} x yield_strength {ys / 1e6:.4g} MPa; the linear '
+                   'elastic material law no longer holds')
+    strain = peak_stress / params['youngs_modulus']
     if strain > STRAIN_LIMIT and peak_stress <= ys:      # (past yield: the warning above)
-        out.append(f"large strain: peak |sigma| / youngs_modulus = {100 * strain:.3g} % "
-                   f"(limit {100 * STRAIN_LIMIT:g} %): the small-strain measures and "
+        out.append(f'large strain: peak |sigma| / youngs_modulus = {100 * strain:.3g} % '
+                   f'(limit {100 * STRAIN_LIMIT:g} %): the small-strain measures and '
                    "Hooke's law of the beam elements no longer hold")
-    length = params["l1"] + params["l2"]
+    length = params['l1'] + params['l2']
     if (tip_deflection > TIP_DEFLECTION_LIMIT * length
-            and params.get("model") != "flexible-nonlinear"):     # (its own: below)
-        out.append(f"large deflection: |v_G| reached {tip_deflection * 1e3:.4g} mm = "
-                   f"{100 * tip_deflection / length:.3g} % of the leaf length {length:g} m "
-                   f"(limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no "
-                   "longer holds (compare model flexible-nonlinear)")
+            and params.get('model') != 'flexible-nonlinear'):     # (its own: below)
+        out.append(f'large deflection: |v_G| reached {tip_deflection * 1e3:.4g} mm = '
+                   f'{100 * tip_deflection / length:.3g} % of the leaf length {length:g} m '
+                   f'(limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no '
+                   'longer holds (compare model flexible-nonlinear)')
     out += geometric_validity_warnings(params, peak_stress, section_slope)
     return out
 
@@ -427,16 +427,16 @@ class SummaryAccumulator:
         self._balance = 0.0
         self._residual = float(initial.constraint_residual)
         self._tip1 = ((abs(initial.tip_transverse), float(initial.time))
-                      if initial.stage == "deploying" else (None, None))
+                      if initial.stage == 'deploying' else (None, None))
         self._tip_all = abs(initial.tip_transverse)
-        self._peaks = {b: (getattr(initial, f"peak_stress_{b}"),
-                           getattr(initial, f"peak_stress_{b}_x"), float(initial.time))
-                       for b in ("leaf", "link")}
+        self._peaks = {b: (getattr(initial, f'peak_stress_{b}'),
+                           getattr(initial, f'peak_stress_{b}_x'), float(initial.time))
+                       for b in ('leaf', 'link')}
         self._s2_t: list = []
         self._s2_v: list = []
         self._s2_bin, self._s2_all = -1.0, (math.inf, -math.inf, 0.0)   # (min, max, end)
         # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
-        self._start = deploy_start(float(self.params.get("v0", 0.0)), ())
+        self._start = deploy_start(float(self.params.get('v0', 0.0)), ())
         self._warned: set = set()
         self._warned_at: tuple | None = None   # (peak, tip) the last new_warnings saw
 
@@ -494,51 +494,51 @@ class SummaryAccumulator:
         """Return the physics figures of the run so far (no wall-clock ones), JSON-ready."""
         p = self.params
         start = self._start if self._start is not None else 0.0    # (None: never pushed)
-        out: dict = {"deploy_time": self.lock.time - start if self.lock else None,
-                     "deploy_start": self._start,
-                     "lock_time": self.lock.time if self.lock else None,
-                     "tip_deflection_max": self._tip1[0],
-                     "tip_deflection_max_time": self._tip1[1]}
+        out: dict = {'deploy_time': self.lock.time - start if self.lock else None,
+                     'deploy_start': self._start,
+                     'lock_time': self.lock.time if self.lock else None,
+                     'tip_deflection_max': self._tip1[0],
+                     'tip_deflection_max_time': self._tip1[1]}
         if self._s2_t:
             out.update(stage2_figures(np.concatenate(self._s2_t), np.concatenate(self._s2_v),
                                       self.lock.time))
-            if out["stage2_tip_amplitude"] is not None:     # of every step, not those kept
+            if out['stage2_tip_amplitude'] is not None:     # of every step, not those kept
                 lo, hi, end = self._s2_all
-                out["stage2_tip_amplitude"], out["stage2_window"][1] = 0.5 * (hi - lo), end
+                out['stage2_tip_amplitude'], out['stage2_window'][1] = 0.5 * (hi - lo), end
         else:
             out.update(stage2_figures(np.zeros(0), np.zeros(0), None))
-        for body in ("leaf", "link"):
+        for body in ('leaf', 'link'):
             peak, x, t = self._peaks[body]
-            out[f"peak_stress_{body}"] = peak
-            out[f"peak_stress_{body}_x"] = x
-            out[f"peak_stress_{body}_time"] = t
-        out["yield_strength"] = p.get("yield_strength")
-        out["stress_ratio_max"] = max(out["peak_stress_leaf"], out["peak_stress_link"]) / \
-            p["yield_strength"]
-        out["tip_deflection_ratio_max"] = self._tip_all / (p["l1"] + p["l2"])
-        out["energy_drift"] = self._balance / self._scale
+            out[f'peak_stress_{body}'] = peak
+            out[f'peak_stress_{body}_x'] = x
+            out[f'peak_stress_{body}_time'] = t
+        out['yield_strength'] = p.get('yield_strength')
+        out['stress_ratio_max'] = max(out['peak_stress_leaf'], out['peak_stress_link']) / \
+            p['yield_strength']
+        out['tip_deflection_ratio_max'] = self._tip_all / (p['l1'] + p['l2'])
+        out['energy_drift'] = self._balance / self._scale
         if self.lock:
-            out["lock"] = self.lock.kind
-            out["lock_energy_before"] = self.lock.energy_before
-            out["lock_energy_after"] = self.lock.energy_after
-            out["lock_free_velocities"] = list(self.lock.free_velocities)
+            out['lock'] = self.lock.kind
+            out['lock_energy_before'] = self.lock.energy_before
+            out['lock_energy_after'] = self.lock.energy_after
+            out['lock_free_velocities'] = list(self.lock.free_velocities)
             if self.lock.stage2_resolution:
-                out["stage2_resolution"] = dict(self.lock.stage2_resolution)
-        if p.get("model") == "rigid-fe":    # (what the rigid model has by construction)
+                out['stage2_resolution'] = dict(self.lock.stage2_resolution)
+        if p.get('model') == 'rigid-fe':    # (what the rigid model has by construction)
             out.update(dict.fromkeys(RIGID_FE_ZEROS, 0.0), tip_deflection_max_time=0.0,
                        peak_stress_leaf_time=0.0, peak_stress_link_time=0.0)
-        out["constraint_residual_max"] = self._residual
-        out["final_time"] = self.final_time
-        out["steps"] = self.steps
-        out["warnings"] = self.warnings()
+        out['constraint_residual_max'] = self._residual
+        out['final_time'] = self.final_time
+        out['steps'] = self.steps
+        out['warnings'] = self.warnings()
         if self.error:
-            out["error"] = self.error
+            out['error'] = self.error
         return out
 
     def warnings(self) -> list[str]:
         """Return the validity warnings so far (validity_warnings)."""
         return validity_warnings(self.params, self.lock_kind,
-                                 max(self._peaks["leaf"][0], self._peaks["link"][0]),
+                                 max(self._peaks['leaf'][0], self._peaks['link'][0]),
                                  self._tip_all, locked=self.lock is not None,
                                  energy_drift=self._balance / self._scale,
                                  stage2_resolution=self.lock.stage2_resolution
@@ -552,14 +552,14 @@ class SummaryAccumulator:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
         # the warnings depend on the run only through the largest peak stress and tip
         # deflection so far: unchanged (most publications), nothing can be new
-        seen = (self._peaks["leaf"][0], self._peaks["link"][0], self._tip_all,
+        seen = (self._peaks['leaf'][0], self._peaks['link'][0], self._tip_all,
                 self.lock is not None, self._balance / self._scale > ENERGY_DRIFT_LIMIT,
                 self._slope())
         if seen == self._warned_at:
             return []
         self._warned_at = seen
-        fresh = [w for w in self.warnings() if w.split(":")[0] not in self._warned]
-        self._warned.update(w.split(":")[0] for w in fresh)
+        fresh = [w for w in self.warnings() if w.split(':')[0] not in self._warned]
+        self._warned.update(w.split(':')[0] for w in fresh)
         return fresh
 
 
@@ -581,20 +581,20 @@ def summarize(r: RunResult) -> dict:
     if r.figures is not None:
         out = dict(r.figures)
     elif not r.samples:
-        return {"error": r.error, "steps": r.steps}
+        return {'error': r.error, 'steps': r.steps}
     else:
         acc = SummaryAccumulator(r.params, r.samples[0], r.lock.kind if r.lock else None)
         if len(r.samples) > 1:
             block = blocks_from_samples(r.samples[1:])
             acc.add(replace(block, lock=r.lock, error=r.error))
         out = acc.figures()
-        out["figures_from"] = "samples"
-    out["steps"] = r.steps
-    out["wall_time"] = r.wall_time
-    ft = out.get("final_time")
-    out["real_time_factor"] = float(ft / r.wall_time) if r.wall_time > 0 and ft else None
+        out['figures_from'] = 'samples'
+    out['steps'] = r.steps
+    out['wall_time'] = r.wall_time
+    ft = out.get('final_time')
+    out['real_time_factor'] = float(ft / r.wall_time) if r.wall_time > 0 and ft else None
     if r.error:
-        out["error"] = r.error
+        out['error'] = r.error
     return out
 
 
@@ -615,4 +615,4 @@ def relative_drift(balance_error, energy, work) -> float:
 
 def energy_drift(r: RunResult) -> float:
     """Return max |energy balance error| relative to the largest mechanical energy."""
-    return relative_drift(energy_balance_error(r), mechanical_energy(r), r.column("work"))
+    return relative_drift(energy_balance_error(r), mechanical_energy(r), r.column('work'))

@@ -64,7 +64,7 @@ class CommandIntake:
         self._force = 0.0
         self.logger = None                  # the node's
         self._echo = {}                     # "applied", "refused" -> the node's publisher
-        self._info_at = -float("inf")       # wall time of the last INFO line on an applied one
+        self._info_at = -float('inf')       # wall time of the last INFO line on an applied one
         self._since_info = 0                # applied since that line
 
     def connect(self, node, command_topic: str) -> None:
@@ -91,22 +91,22 @@ class CommandIntake:
         Each at DEBUG; at INFO the first after APPLIED_INFO_PERIOD wall seconds without one,
         with how many came since the last.
         """
-        note = " (locked: no effect on motion)" if locked else ""
+        note = ' (locked: no effect on motion)' if locked else ''
         now = time.monotonic()
         if now - self._info_at >= APPLIED_INFO_PERIOD:
-            more = (f"; {self._since_info} more applied since the last report (each at DEBUG)"
-                    if self._since_info else "")
-            self.logger.info(f"sleeve force {force:.6g} N applied from t = {t:.9f} s{note}"
-                             f"{more}")
+            more = (f'; {self._since_info} more applied since the last report (each at DEBUG)'
+                    if self._since_info else '')
+            self.logger.info(f'sleeve force {force:.6g} N applied from t = {t:.9f} s{note}'
+                             f'{more}')
             self._info_at, self._since_info = now, 0
         else:
             self._since_info += 1
-            self.logger.debug(f"sleeve force {force:.17g} N applied from t = {t:.9f} s{note}")
+            self.logger.debug(f'sleeve force {force:.17g} N applied from t = {t:.9f} s{note}')
         rec = self._recording()
         if rec is not None:
             rec.applied(force, t)
-        if "applied" in self._echo:
-            self._echo["applied"].publish(self.command_type()(data=float(force)))
+        if 'applied' in self._echo:
+            self._echo['applied'].publish(self.command_type()(data=float(force)))
 
     @property
     def force(self) -> float:
@@ -155,14 +155,14 @@ class CommandIntake:
             if n < REFUSED_RECORD_RATE:       # a flood of bad commands cannot fill the disk
                 if rec is not None:
                     rec.refused(msg, t)
-                if "refused" in self._echo:
-                    self._echo["refused"].publish(msg)
+                if 'refused' in self._echo:
+                    self._echo['refused'].publish(msg)
                 n += 1
             else:
                 self.refused_not_recorded += 1
             self._refused_window = (start, n)
-            self._warn("refused", 1.0, lambda: f"refused sleeve_force command: {reason} "
-                       f"(refused so far: {self.refused})")
+            self._warn('refused', 1.0, lambda: f'refused sleeve_force command: {reason} '
+                       f'(refused so far: {self.refused})')
         else:
             self.accepted += 1
             rec = self._recording()

@@ -42,7 +42,7 @@ from ..core.registry import CONTROLLER_PARAMETERS, defaults, parameter_help
 #: at rest for the plan: rate and angle from the start within this fraction of the plan's
 #: cruise rate and of its span
 REST_FRACTION = 0.05
-CONTROLLER_PARAMETERS_LISTED = ("deploy_controller --help and in msg_docs/deploy_controller.md "
+CONTROLLER_PARAMETERS_LISTED = ('deploy_controller --help and in msg_docs/deploy_controller.md '
                                 "(and umbrella_node's, for the model)")
 
 
@@ -60,7 +60,7 @@ def _make_node_class():
         """joint_states + deployment_phase -> sleeve_force, one command per joint state."""
 
         def __init__(self, params_files: tuple = ()):
-            super().__init__("deploy_controller")
+            super().__init__('deploy_controller')
             # a misspelt name is an error, never a silent default; the node's own names are
             # taken (and not used: the numerics), so one params file can serve both nodes
             known = set(CONTROLLER_PARAMETERS) | set(defaults())
@@ -69,7 +69,7 @@ def _make_node_class():
                 found = check_parameter_sources(fqn, params_files, list(
                     self._parameter_overrides), known, CONTROLLER_PARAMETERS_LISTED)
                 warnings = found.warnings + check_qos_override_sources(
-                    fqn, found, (), CONTROLLER_PARAMETERS_LISTED, " (its topics take none)")
+                    fqn, found, (), CONTROLLER_PARAMETERS_LISTED, ' (its topics take none)')
             except ValueError as exc:
                 raise StartupError(str(exc)) from None
             for text in warnings:      # another node's, in a '/**' section
@@ -81,12 +81,12 @@ def _make_node_class():
             # the frame the law's rigid model describes: umbrella_node's own parameter names
             model = {}
             for name, default in UmbrellaParams().as_dict().items():
-                if name in ("model", "lock", "time_step", "step_follows_mesh",
-                            "elements_per_segment", "v0"):
+                if name in ('model', 'lock', 'time_step', 'step_follows_mesh',
+                            'elements_per_segment', 'v0'):
                     continue    # the numerics do not enter the law; it plans from rest
                 model[name] = self.declare_parameter(name, default, ParameterDescriptor(
                     name=name, read_only=True, dynamic_typing=True,
-                    description="model parameter: give the value umbrella_node has")).value
+                    description='model parameter: give the value umbrella_node has')).value
             try:
                 cfg = ControllerConfig(**values).validated()
                 self.law = DeployLaw(UmbrellaParams.from_mapping(model), cfg)
@@ -97,10 +97,10 @@ def _make_node_class():
             latest = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                                 history=HistoryPolicy.KEEP_LAST,
                                 durability=DurabilityPolicy.VOLATILE)
-            self.create_subscription(JointState, ros_io.TOPICS["joint_states"].name,
+            self.create_subscription(JointState, ros_io.TOPICS['joint_states'].name,
                                      self._on_state, latest)
-            self.create_subscription(String, ros_io.TOPICS["deployment_phase"].name,
-                                     self._on_phase, ros_io.TOPICS["deployment_phase"].qos)
+            self.create_subscription(String, ros_io.TOPICS['deployment_phase'].name,
+                                     self._on_phase, ros_io.TOPICS['deployment_phase'].qos)
             self.phase: str | None = None
             self.commanding = False
             self.done = False
@@ -113,14 +113,14 @@ def _make_node_class():
             self._not_ours = 0        # consecutive states applying none of our commands
             self._publishers_checked = -math.inf     # wall time of the last check
             self.get_logger().info(
-                f"target {cfg.target_time:g} s, force in [{cfg.min_force:g}, "
-                f"{cfg.max_force:g}] N, lock rate {self.law.lock_rate:.4g} rad/s, "
-                f"deceleration {self.law.deceleration:.4g} rad/s^2; waiting for joint_states")
+                f'target {cfg.target_time:g} s, force in [{cfg.min_force:g}, '
+                f'{cfg.max_force:g}] N, lock rate {self.law.lock_rate:.4g} rad/s, '
+                f'deceleration {self.law.deceleration:.4g} rad/s^2; waiting for joint_states')
 
         def _restart(self, why: str) -> None:
             """Deploy a new run of the simulation (~/reset, a restarted node) afresh."""
             if self.commanding or self.done:
-                self.get_logger().info(f"{why}: a new run; deploying it from its start")
+                self.get_logger().info(f'{why}: a new run; deploying it from its start')
             self.law.t_start = None
             self.commanding = self.done = False
             self._last_stamp = None
@@ -130,42 +130,42 @@ def _make_node_class():
             self._not_ours = 0
 
         def _on_phase(self, msg) -> None:
-            if msg.data == "deploying" and self.phase in ("locked", "fault"):
-                self._restart(f"phase {self.phase} -> deploying")
+            if msg.data == 'deploying' and self.phase in ('locked', 'fault'):
+                self._restart(f'phase {self.phase} -> deploying')
             self.phase = msg.data
-            if msg.data != "deploying" and self.commanding and not self.done:
+            if msg.data != 'deploying' and self.commanding and not self.done:
                 self.done = True
                 self.pub.publish(Float64(data=0.0))
                 delays = sorted(self._delays)
-                spread = (f"{1e3 * delays[0]:.1f}..{1e3 * delays[-1]:.1f} ms" if delays
-                          else "not measured")
-                self.get_logger().info(f"phase {msg.data} (last state t = "
-                                       f"{self._last_stamp or 0.0:.6f} s): deployment over, "
-                                       f"commanding 0 N; command delay {spread} (last 15)")
+                spread = (f'{1e3 * delays[0]:.1f}..{1e3 * delays[-1]:.1f} ms' if delays
+                          else 'not measured')
+                self.get_logger().info(f'phase {msg.data} (last state t = '
+                                       f'{self._last_stamp or 0.0:.6f} s): deployment over, '
+                                       f'commanding 0 N; command delay {spread} (last 15)')
 
         def _on_state(self, msg) -> None:
             t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
             if self._last_stamp is not None and t < self._last_stamp - 1e-9:
                 # sim time went back: the simulation restarted (its plan and its time base
                 # are no longer this run's; a stale plan latched hard at 100x the energy)
-                self._restart(f"sim time went back from {self._last_stamp:.6f} s to "
-                              f"{t:.6f} s")
-            if self.done or self.phase != "deploying":
+                self._restart(f'sim time went back from {self._last_stamp:.6f} s to '
+                              f'{t:.6f} s')
+            if self.done or self.phase != 'deploying':
                 if self.done:               # (sim time going back then means a new run)
                     self._last_stamp = t
                 return
             now = time.monotonic()
             if self._last_wall is not None and self.commanding and now - self._last_wall > 0.05:
                 self.get_logger().warn(
-                    f"no joint_states for {1e3 * (now - self._last_wall):.0f} ms (wall) up to "
-                    f"t = {t:.3f} s: the command was held meanwhile", throttle_duration_sec=1.0)
+                    f'no joint_states for {1e3 * (now - self._last_wall):.0f} ms (wall) up to '
+                    f't = {t:.3f} s: the command was held meanwhile', throttle_duration_sec=1.0)
             self._last_wall = now
             if self._last_stamp is not None and t > self._last_stamp:
                 # the publication period: the smallest spacing seen (states may be skipped)
                 self._period = min(self._period or math.inf, t - self._last_stamp)
             self._last_stamp = t
             state = ros_io.joint_state_figures(msg)
-            effort = state["sleeve_force"]
+            effort = state['sleeve_force']
             if effort != self._last_effort and self._period:
                 self._measure_delay(t, effort)
             self._last_effort = effort
@@ -173,8 +173,8 @@ def _make_node_class():
                 if self.commanding and effort != 0.0 and self._period:
                     # the first state carrying our push: it acted from one period before
                     self.law.start(t - self._period)
-                    self.get_logger().info(f"first push acting from t = "
-                                           f"{self.law.t_start:.6f} s")
+                    self.get_logger().info(f'first push acting from t = '
+                                           f'{self.law.t_start:.6f} s')
                 elif not self.commanding and not self._at_rest(t, state):
                     self.done = True        # idle until a new run
                     return
@@ -183,7 +183,7 @@ def _make_node_class():
                     self._send(t, self.law.cfg.max_force)
                     return
             self._check_commands_applied(t, effort)
-            self._send(t, self.law.force(t, state["alpha1"], state["alpha1_rate"], self.lead()))
+            self._send(t, self.law.force(t, state['alpha1'], state['alpha1_rate'], self.lead()))
 
         def _at_rest(self, t: float, state: dict) -> bool:
             """
@@ -194,16 +194,16 @@ def _make_node_class():
             its lock harder.
             """
             p, law = self.law.params, self.law
-            rate, angle = state["alpha1_rate"], state["alpha1"]
+            rate, angle = state['alpha1_rate'], state['alpha1']
             if abs(rate) <= REST_FRACTION * law.cruise and \
                     abs(angle - p.alpha0) <= REST_FRACTION * law.span:
                 return True
             self.get_logger().error(
-                f"the frame is not folded at rest at t = {t:.6f} s (alpha1 = {angle:.6g} rad, "
+                f'the frame is not folded at rest at t = {t:.6f} s (alpha1 = {angle:.6g} rad, '
                 f"alpha1' = {rate:.6g} rad/s; the plan starts at alpha0 = {p.alpha0:.6g} rad "
-                f"at rest and cruises at {law.cruise:.4g} rad/s): give umbrella_node v0:=0.0 "
-                "(and no other sleeve_force command); not commanding this run (a ~/reset "
-                "starts a new one)")
+                f'at rest and cruises at {law.cruise:.4g} rad/s): give umbrella_node v0:=0.0 '
+                '(and no other sleeve_force command); not commanding this run (a ~/reset '
+                'starts a new one)')
             return False
 
         def _check_commands_applied(self, t: float, effort: float) -> None:
@@ -226,19 +226,19 @@ def _make_node_class():
                 n = self.count_publishers(self.pub.topic_name)
                 if n > 1:
                     self.get_logger().warn(
-                        f"{n} publishers on {self.pub.topic_name}: the node applies "
-                        "whichever command came last, so another node commanding the sleeve "
-                        "fights this one; stop it", throttle_duration_sec=5.0)
+                        f'{n} publishers on {self.pub.topic_name}: the node applies '
+                        'whichever command came last, so another node commanding the sleeve '
+                        'fights this one; stop it', throttle_duration_sec=5.0)
             period = self._period or 0.0
             window = (self._delays[-1] if self._delays else period) + 3 * period
             ours = {f for ts, f in self._sent if ts >= t - window - 1e-9}
             self._not_ours = 0 if effort in ours else self._not_ours + 1
             if self._not_ours >= 3:
                 self.get_logger().warn(
-                    f"the node applies {effort:.6g} N at t = {t:.6f} s, none of our commands "
-                    f"of the last {window:g} s (latest {self._sent[-1][1]:.6g} N): it refuses "
-                    "them (its sleeve_force_min / sleeve_force_limit; see its log) or another "
-                    "node commands it", throttle_duration_sec=2.0)
+                    f'the node applies {effort:.6g} N at t = {t:.6f} s, none of our commands '
+                    f'of the last {window:g} s (latest {self._sent[-1][1]:.6g} N): it refuses '
+                    'them (its sleeve_force_min / sleeve_force_limit; see its log) or another '
+                    'node commands it', throttle_duration_sec=2.0)
 
         def _send(self, t: float, force: float) -> None:
             self._sent.append((t, float(force)))
@@ -279,8 +279,8 @@ def main(argv: list[str] | None = None) -> int:
     # initialize wait set: the given context is not valid") and the process exited 1.
     stop_signals.install()
     argv = list(sys.argv if argv is None else argv)
-    if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
-                                               if "--ros-args" in argv else len(argv)]):
+    if any(a in ('-h', '--help') for a in argv[1:argv.index('--ros-args')
+                                               if '--ros-args' in argv else len(argv)]):
         print(usage())
         return 0
     if stop_signals.received:           # during the imports: nothing started yet
@@ -292,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.exceptions import InvalidParameterTypeException
 
     def fail(text: str) -> int:
-        print(f"deploy_controller: error: {text}", file=sys.stderr)
+        print(f'deploy_controller: error: {text}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
 
@@ -303,10 +303,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong
-        reason = " ".join(str(exc).split())
-        if type(exc).__name__ == "UnknownROSArgsError":
-            reason = f"unknown ROS arguments {reason}"
-        return fail(f"invalid ROS arguments: {reason} (see --help)")
+        reason = ' '.join(str(exc).split())
+        if type(exc).__name__ == 'UnknownROSArgsError':
+            reason = f'unknown ROS arguments {reason}'
+        return fail(f'invalid ROS arguments: {reason} (see --help)')
     try:
         node = _make_node_class()(tuple(files))
     except StartupError as exc:
@@ -327,11 +327,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def usage() -> str:
-    lines = ["usage: deploy_controller [--help] [--ros-args -p name:=value ... "
-             "-r __ns:=/NAMESPACE]", "",
-             "Closed-loop deployment: joint_states -> sleeve_force (see msg_docs/"
-             "deploy_controller.md).", "", "controller parameters (read-only):"]
+    lines = ['usage: deploy_controller [--help] [--ros-args -p name:=value ... '
+             '-r __ns:=/NAMESPACE]', '',
+             'Closed-loop deployment: joint_states -> sleeve_force (see msg_docs/'
+             'deploy_controller.md).', '', 'controller parameters (read-only):']
     lines += parameter_help(CONTROLLER_PARAMETERS.values())
     lines.append("model parameters: the same names and values as umbrella_node's "
-                 "(l1, alpha0, ...)")
-    return "\n".join(lines)
+                 '(l1, alpha0, ...)')
+    return '\n'.join(lines)

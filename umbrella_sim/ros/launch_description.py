@@ -55,38 +55,38 @@ class LogAction:
 
 def default_params_file() -> str:
     """Return the package's config/umbrella.yaml (installed, or of the source checkout)."""
-    return package_path("config", "umbrella.yaml") or os.path.join("config", "umbrella.yaml")
+    return package_path('config', 'umbrella.yaml') or os.path.join('config', 'umbrella.yaml')
 
 
 def arguments() -> list[Argument]:
     """Return the launch arguments: the node's setup, then one override per model parameter."""
     out = [
-        Argument("namespace", "", "ROS namespace of the antenna (e.g. a1); '' = root"),
-        Argument("params_file", default_params_file(), "ROS 2 params file for umbrella_node"),
-        Argument("record", "true", "record to an MCAP bag (true | false)"),
-        Argument("record_path", "", "bag directory; '' = umbrella_<ns>_<date>-<time> in the "
-                                    "working directory"),
-        Argument("use_sim_time", "true",
+        Argument('namespace', '', "ROS namespace of the antenna (e.g. a1); '' = root"),
+        Argument('params_file', default_params_file(), 'ROS 2 params file for umbrella_node'),
+        Argument('record', 'true', 'record to an MCAP bag (true | false)'),
+        Argument('record_path', '', "bag directory; '' = umbrella_<ns>_<date>-<time> in the "
+                                    'working directory'),
+        Argument('use_sim_time', 'true',
                  "robot_state_publisher and RViz follow the node's /clock (sim time)"),
-        Argument("robot_state_publisher", "true",
-                 "start robot_state_publisher with the URDF, if it is installed"),
-        Argument("rviz", "false", "start RViz with rviz/umbrella.rviz, if it is installed"),
+        Argument('robot_state_publisher', 'true',
+                 'start robot_state_publisher with the URDF, if it is installed'),
+        Argument('rviz', 'false', 'start RViz with rviz/umbrella.rviz, if it is installed'),
     ]
-    own = {a.name for a in out} | {"frame_prefix"}      # set from namespace
+    own = {a.name for a in out} | {'frame_prefix'}      # set from namespace
     for name, p in REGISTRY.items():
         if name in own:
             continue
-        out.append(Argument(name, "", f"override {name} ({p.unit}, default from params_file): "
-                                      f"{p.doc}"))
+        out.append(Argument(name, '', f'override {name} ({p.unit}, default from params_file): '
+                                      f'{p.doc}'))
     return out
 
 
 def _truthy(value: str, name: str) -> bool:
     """Return a true/false launch argument by the registry's rule (a typo is an error)."""
     try:
-        return REGISTRY["record"].coerce(value)
+        return REGISTRY['record'].coerce(value)
     except ValueError:
-        raise ValueError(f"launch argument {name}:={value!r}: must be true or false") from None
+        raise ValueError(f'launch argument {name}:={value!r}: must be true or false') from None
 
 
 def overrides(values: dict[str, str], params_file: str | None = None) -> dict:
@@ -98,7 +98,7 @@ def overrides(values: dict[str, str], params_file: str | None = None) -> dict:
     """
     out = {}
     for name, text in values.items():
-        if name in REGISTRY and text not in ("", None):
+        if name in REGISTRY and text not in ('', None):
             out[name] = REGISTRY[name].coerce(text)
             if name not in SPECS:           # a node parameter: its range, as the node's
                 REGISTRY[name].check(out[name])
@@ -119,8 +119,8 @@ def antenna_values(values: dict[str, str], ns: str) -> dict[str, str]:
     cannot take two recordings.
     """
     out = dict(values, namespace=ns)
-    if values.get("record_path"):
-        out["record_path"] = f"{values['record_path'].rstrip('/')}_{ns}"
+    if values.get('record_path'):
+        out['record_path'] = f"{values['record_path'].rstrip('/')}_{ns}"
     return out
 
 
@@ -130,28 +130,28 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
 
     installed(package) returns the package's share directory or None (tests pass their own).
     """
-    ns = values.get("namespace", "").strip("/")
-    bad = [t for t in ns.split("/") if ns and not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", t)]
+    ns = values.get('namespace', '').strip('/')
+    bad = [t for t in ns.split('/') if ns and not re.fullmatch(r'[A-Za-z_][A-Za-z0-9_]*', t)]
     if bad:         # (ROS names: a token starts with a letter or _, then letters, digits, _)
-        raise ValueError(f"launch argument namespace:={ns!r}: {bad[0]!r} is not a ROS name "
-                         "token (a letter or _ first, then letters, digits or _)")
-    rel = f"/{ns}" if ns else ""
-    sim_time = _truthy(values.get("use_sim_time", "true"), "use_sim_time")
-    params = [values.get("params_file") or default_params_file()]
+        raise ValueError(f'launch argument namespace:={ns!r}: {bad[0]!r} is not a ROS name '
+                         'token (a letter or _ first, then letters, digits or _)')
+    rel = f'/{ns}' if ns else ''
+    sim_time = _truthy(values.get('use_sim_time', 'true'), 'use_sim_time')
+    params = [values.get('params_file') or default_params_file()]
     node_params = overrides(values, params[0])
-    node_params["record"] = _truthy(values.get("record", "true"), "record")
-    if values.get("record_path"):
-        node_params["record_path"] = values["record_path"]
+    node_params['record'] = _truthy(values.get('record', 'true'), 'record')
+    if values.get('record_path'):
+        node_params['record_path'] = values['record_path']
     # one TF tree for every antenna: frames a1/umbrella_base, a1/leaf, ... (see frames in
     # msg_docs/README.md); the node's messages name the same frames
-    prefix = f"{ns}/" if ns else ""
-    node_params["frame_prefix"] = prefix
+    prefix = f'{ns}/' if ns else ''
+    node_params['frame_prefix'] = prefix
     params.append(node_params)
-    actions: list = [NodeAction(PACKAGE, "umbrella_node", "umbrella_node", ns, params)]
+    actions: list = [NodeAction(PACKAGE, 'umbrella_node', 'umbrella_node', ns, params)]
     # TF consumers read sim time from this antenna's clock (relative: /<ns>/clock)
-    clock = [("/clock", f"{rel}/clock")] if ns else []
-    if _truthy(values.get("robot_state_publisher", "true"), "robot_state_publisher"):
-        if installed("robot_state_publisher"):
+    clock = [('/clock', f'{rel}/clock')] if ns else []
+    if _truthy(values.get('robot_state_publisher', 'true'), 'robot_state_publisher'):
+        if installed('robot_state_publisher'):
             from .params_file import load_params_file
             from .robot_description import urdf
             # the geometry the node will run: the params file, then the overrides
@@ -159,30 +159,30 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
             given.update({k: v for k, v in node_params.items() if k in SPECS})
             model = UmbrellaParams.from_mapping(given)
             actions.append(NodeAction(
-                "robot_state_publisher", "robot_state_publisher", "robot_state_publisher", ns,
-                [{"robot_description": urdf(model), "use_sim_time": sim_time,
-                  "frame_prefix": prefix}], clock))
+                'robot_state_publisher', 'robot_state_publisher', 'robot_state_publisher', ns,
+                [{'robot_description': urdf(model), 'use_sim_time': sim_time,
+                  'frame_prefix': prefix}], clock))
         else:
             actions.append(LogAction(
-                "robot_state_publisher is not installed: no TF frames and no robot_description "
+                'robot_state_publisher is not installed: no TF frames and no robot_description '
                 f"for {rel or '/'}; RViz can still show {rel}/markers in frame "
-                f"{prefix}umbrella_base (apt install ros-jazzy-robot-state-publisher)"))
-    if _truthy(values.get("rviz", "false"), "rviz"):
+                f'{prefix}umbrella_base (apt install ros-jazzy-robot-state-publisher)'))
+    if _truthy(values.get('rviz', 'false'), 'rviz'):
         share = installed(PACKAGE)
-        if installed("rviz2") and share:
-            actions.append(NodeAction("rviz2", "rviz2", "rviz2", ns,
-                                      [{"use_sim_time": sim_time}], clock,
-                                      ["-d", os.path.join(share, "rviz", "umbrella.rviz")]))
+        if installed('rviz2') and share:
+            actions.append(NodeAction('rviz2', 'rviz2', 'rviz2', ns,
+                                      [{'use_sim_time': sim_time}], clock,
+                                      ['-d', os.path.join(share, 'rviz', 'umbrella.rviz')]))
         else:
-            actions.append(LogAction("rviz2 is not installed: not starting RViz"))
+            actions.append(LogAction('rviz2 is not installed: not starting RViz'))
     return actions
 
 
 def split_namespaces(text: str) -> list[str]:
     """Return the namespaces of 'a1,a2 a3' (commas or spaces), refusing duplicates."""
-    names = [n.strip().strip("/") for n in text.replace(",", " ").split()]
+    names = [n.strip().strip('/') for n in text.replace(',', ' ').split()]
     if not names:
-        raise ValueError("namespaces: give at least one, e.g. a1,a2")
+        raise ValueError('namespaces: give at least one, e.g. a1,a2')
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise ValueError(f"namespaces: {', '.join(dup)} given twice")
@@ -201,7 +201,7 @@ def to_launch_actions(planned: list) -> list:
         else:
             out.append(Node(package=a.package, executable=a.executable, name=a.name,
                             namespace=a.namespace, parameters=a.parameters,
-                            remappings=a.remappings, arguments=a.arguments, output="screen"))
+                            remappings=a.remappings, arguments=a.arguments, output='screen'))
     return out
 
 

@@ -39,10 +39,10 @@ from ..bag.format import APPLIED_SUFFIX, REFUSED_SUFFIX
 from ..core.outputs import energy_balance, Sample
 from ..core.params import UmbrellaParams
 
-INERTIAL_FRAME = "umbrella_base"   # X toward the leaf, Y up the axle, origin at the hinge O
-LEAF_FRAME = "leaf"                # origin O, x' through O''
-JOINT_NAMES = ["leaf_hinge", "link_hinge", "sleeve_slider"]
-PHASES = ("deploying", "locked", "fault")
+INERTIAL_FRAME = 'umbrella_base'   # X toward the leaf, Y up the axle, origin at the hinge O
+LEAF_FRAME = 'leaf'                # origin O, x' through O''
+JOINT_NAMES = ['leaf_hinge', 'link_hinge', 'sleeve_slider']
+PHASES = ('deploying', 'locked', 'fault')
 
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                       history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
@@ -66,22 +66,22 @@ class Topic:
 
 
 TOPICS = {
-    "clock": Topic("clock", Clock, CLOCK_QOS),
-    "joint_states": Topic("joint_states", JointState, RELIABLE),
-    "tip_deflection": Topic("tip_deflection", PointStamped, RELIABLE),
-    "peak_stress": Topic("peak_stress", Float64MultiArray, RELIABLE),
-    "markers": Topic("markers", MarkerArray, RELIABLE),
-    "deployment_phase": Topic("deployment_phase", String, LATCHED),
-    "energy": Topic("energy", Float64MultiArray, RELIABLE),
+    'clock': Topic('clock', Clock, CLOCK_QOS),
+    'joint_states': Topic('joint_states', JointState, RELIABLE),
+    'tip_deflection': Topic('tip_deflection', PointStamped, RELIABLE),
+    'peak_stress': Topic('peak_stress', Float64MultiArray, RELIABLE),
+    'markers': Topic('markers', MarkerArray, RELIABLE),
+    'deployment_phase': Topic('deployment_phase', String, LATCHED),
+    'energy': Topic('energy', Float64MultiArray, RELIABLE),
     # absolute, as diagnostic_updater publishes: one aggregator sees every antenna
-    "diagnostics": Topic("/diagnostics", DiagnosticArray, RELIABLE),
+    'diagnostics': Topic('/diagnostics', DiagnosticArray, RELIABLE),
 }
 #: the node's topics that its namespace does not move
-ABSOLUTE_TOPIC_NAMES = frozenset(t.name for t in TOPICS.values() if t.name.startswith("/"))
+ABSOLUTE_TOPIC_NAMES = frozenset(t.name for t in TOPICS.values() if t.name.startswith('/'))
 #: keep all: with a reliable publisher, a burst of commands faster than the node takes them
 #: is held back by DDS flow control instead of being overwritten in the reader's history
 #: (keep-last 10 lost ~4 % of a 5 kHz stream); every received value is counted and recorded
-COMMAND = Topic("sleeve_force", Float64, QoSProfile(
+COMMAND = Topic('sleeve_force', Float64, QoSProfile(
     depth=100, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL,
     durability=DurabilityPolicy.VOLATILE))
 
@@ -89,7 +89,7 @@ COMMAND = Topic("sleeve_force", Float64, QoSProfile(
 #: <command>/applied (each value as it starts acting) and <command>/refused (each command
 #: refused), published and recorded: reliable, keep last 100 (a reader keeps up with one a
 #: publication at most; refused ones are published REFUSED_RECORD_RATE a second at most)
-COMMAND_ECHO_SUFFIXES = {"applied": APPLIED_SUFFIX, "refused": REFUSED_SUFFIX}
+COMMAND_ECHO_SUFFIXES = {'applied': APPLIED_SUFFIX, 'refused': REFUSED_SUFFIX}
 COMMAND_ECHO_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                               history=HistoryPolicy.KEEP_LAST,
                               durability=DurabilityPolicy.VOLATILE)
@@ -126,7 +126,7 @@ def stamp(t: float) -> Time:
 
 
 #: a builtin_interfaces/Time in CDR (int32 sec, uint32 nanosec), as the encoders pack it
-_STAMP = struct.Struct("<iI")
+_STAMP = struct.Struct('<iI')
 
 
 def clock_msg(t: float) -> Clock:
@@ -140,7 +140,7 @@ def joint_state_values(s: Sample) -> tuple:
             (0.0, 0.0, s.sleeve_force))
 
 
-def joint_state_msg(s: Sample, frame_prefix: str = "") -> JointState:
+def joint_state_msg(s: Sample, frame_prefix: str = '') -> JointState:
     msg = JointState()
     msg.header.stamp = stamp(s.time)
     msg.header.frame_id = frame_prefix + INERTIAL_FRAME
@@ -155,7 +155,7 @@ def tip_deflection_values(s: Sample) -> tuple:
     return (s.tip_axial, s.tip_transverse, 0.0)
 
 
-def tip_deflection_msg(s: Sample, frame_prefix: str = "") -> PointStamped:
+def tip_deflection_msg(s: Sample, frame_prefix: str = '') -> PointStamped:
     msg = PointStamped()
     msg.header.stamp = stamp(s.time)
     msg.header.frame_id = frame_prefix + LEAF_FRAME
@@ -164,22 +164,22 @@ def tip_deflection_msg(s: Sample, frame_prefix: str = "") -> PointStamped:
     return msg
 
 
-PEAK_STRESS_LABELS = ("body: leaf,link",
-                      "field: peak_abs_stress_Pa,position_m,stress_ratio,reference_stress_Pa")
-ENERGY_LABEL = "field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J,damping_J"
+PEAK_STRESS_LABELS = ('body: leaf,link',
+                      'field: peak_abs_stress_Pa,position_m,stress_ratio,reference_stress_Pa')
+ENERGY_LABEL = 'field: kinetic_J,strain_J,work_J,lock_loss_J,balance_error_J,damping_J'
 
 
 #: the peak_stress data, in order: per body, peak |sigma|, where, ratio to yield, and the
 #: reference stress (top fibre; leaf at O'', link at mid-span: the thesis's Fig. 6.5, 6.6)
-PEAK_STRESS_FIELDS = ("peak_stress_leaf", "peak_stress_leaf_x", "stress_ratio_leaf",
-                      "stress_leaf_joint", "peak_stress_link", "peak_stress_link_x",
-                      "stress_ratio_link", "stress_link_mid")
+PEAK_STRESS_FIELDS = ('peak_stress_leaf', 'peak_stress_leaf_x', 'stress_ratio_leaf',
+                      'stress_leaf_joint', 'peak_stress_link', 'peak_stress_link_x',
+                      'stress_ratio_link', 'stress_link_mid')
 #: the energy data, in order (ENERGY_LABEL)
-ENERGY_FIELDS = ("kinetic_energy", "strain_energy", "work", "lock_energy_loss",
-                 "energy_balance", "damping_dissipation")
+ENERGY_FIELDS = ('kinetic_energy', 'strain_energy', 'work', 'lock_energy_loss',
+                 'energy_balance', 'damping_dissipation')
 #: what recordings made before the stage-2 mode fit carry after ENERGY_FIELDS: the earlier
 #: phase correction's term, in the energy that integrator kept (T + V + it)
-LEGACY_ENERGY_FIELDS = ("phase_correction_energy",)
+LEGACY_ENERGY_FIELDS = ('phase_correction_energy',)
 
 
 def peak_stress_values(s: Sample, yield_strength: float) -> tuple:
@@ -226,15 +226,15 @@ def joint_state_figures(msg) -> dict:
     the sleeve's position, velocity and force.
     """
     position, velocity, effort = msg.position, msg.velocity, msg.effort
-    return {"alpha1": position[0], "link_angle": position[1],
-            "alpha2": position[0] + position[1], "sleeve_position": position[2],
-            "alpha1_rate": velocity[0], "link_angle_rate": velocity[1],
-            "sleeve_velocity": velocity[2], "sleeve_force": effort[2]}
+    return {'alpha1': position[0], 'link_angle': position[1],
+            'alpha2': position[0] + position[1], 'sleeve_position': position[2],
+            'alpha1_rate': velocity[0], 'link_angle_rate': velocity[1],
+            'sleeve_velocity': velocity[2], 'sleeve_force': effort[2]}
 
 
 def tip_deflection_figures(msg) -> dict:
     """Return tip_axial and tip_transverse (m, leaf frame)."""
-    return {"tip_axial": msg.point.x, "tip_transverse": msg.point.y}
+    return {'tip_axial': msg.point.x, 'tip_transverse': msg.point.y}
 
 
 def peak_stress_figures(msg) -> dict:
@@ -247,7 +247,7 @@ def energy_figures(msg) -> dict:
     return dict(zip(ENERGY_FIELDS + LEGACY_ENERGY_FIELDS, msg.data))
 
 
-def markers_msg(s: Sample, positions, ns: str, frame_prefix: str = "") -> MarkerArray:
+def markers_msg(s: Sample, positions, ns: str, frame_prefix: str = '') -> MarkerArray:
     """
     LINE_STRIPs of the deformed leaf and link, a sphere at the sleeve.
 
@@ -300,7 +300,7 @@ def diagnostics_msg(t: float, name: str, level: bytes, message: str,
     msg = DiagnosticArray()
     msg.header.stamp = stamp(t)
     st = DiagnosticStatus(level=level, name=name, message=message,
-                          hardware_id="umbrella_sim")
+                          hardware_id='umbrella_sim')
     st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
     msg.status = [st]
     return msg
@@ -320,17 +320,17 @@ class SampleEncoder:
     """
 
     #: topic key -> doubles at the end of the message, as groups (a sequence or a struct)
-    GROUPS = {"energy": (len(ENERGY_FIELDS),), "clock": (), "joint_states": (3, 3, 3),
-              "tip_deflection": (3,), "peak_stress": (len(PEAK_STRESS_FIELDS),)}
+    GROUPS = {'energy': (len(ENERGY_FIELDS),), 'clock': (), 'joint_states': (3, 3, 3),
+              'tip_deflection': (3,), 'peak_stress': (len(PEAK_STRESS_FIELDS),)}
     #: topics with a stamp (header.stamp, Clock.clock) right after the 4-byte CDR header
-    STAMPED = ("clock", "joint_states", "tip_deflection")
+    STAMPED = ('clock', 'joint_states', 'tip_deflection')
 
     def __init__(self, first: Sample, params: UmbrellaParams, initial_energy: float,
-                 frame_prefix: str = ""):
+                 frame_prefix: str = ''):
         from ..bag.cdr import cdr_bytes  # the exact-size rule, one place
         self.yield_strength = params.yield_strength
         self.initial_energy = initial_energy
-        msgs = sample_messages(first, params, None, "", initial_energy, frame_prefix)
+        msgs = sample_messages(first, params, None, '', initial_energy, frame_prefix)
         self._layouts = {k: self._layout(cdr_bytes(msgs[k]), g,
                                          k in self.STAMPED)
                          for k, g in self.GROUPS.items()}
@@ -350,43 +350,43 @@ class SampleEncoder:
         for k in reversed(groups):
             starts.append(end - 8 * k)
             end = starts[-1] - 8
-        fields, consts, pos = ["<"], [], 0
+        fields, consts, pos = ['<'], [], 0
         if stamped:
-            fields += ["4s", _STAMP.format.lstrip("<")]
+            fields += ['4s', _STAMP.format.lstrip('<')]
             consts.append(template[:4])
             pos = 4 + _STAMP.size
         for start, k in zip(reversed(starts), groups):
-            fields += [f"{start - pos}s", f"{k}d"]
+            fields += [f'{start - pos}s', f'{k}d']
             consts.append(template[pos:start])
             pos = start + 8 * k
         if pos != len(template):
-            fields.append(f"{len(template) - pos}s")
+            fields.append(f'{len(template) - pos}s')
             consts.append(template[pos:])
-        layout = struct.Struct("".join(fields))
+        layout = struct.Struct(''.join(fields))
         if layout.size != len(template):
-            raise ValueError(f"a {len(template)}-byte template, a {layout.size}-byte layout")
+            raise ValueError(f'a {len(template)}-byte template, a {layout.size}-byte layout')
         return layout, tuple(consts)
 
     def encode(self, s: Sample) -> dict[str, bytes]:
         """Return the CDR bytes of every per-publication topic of s, keyed as TOPICS."""
         sec, nsec = stamp_parts(s.time)
         layouts = self._layouts
-        energy, energy_c = layouts["energy"]
-        clock, clock_c = layouts["clock"]
-        joints, joints_c = layouts["joint_states"]
-        tip, tip_c = layouts["tip_deflection"]
-        peak, peak_c = layouts["peak_stress"]
+        energy, energy_c = layouts['energy']
+        clock, clock_c = layouts['clock']
+        joints, joints_c = layouts['joint_states']
+        tip, tip_c = layouts['tip_deflection']
+        peak, peak_c = layouts['peak_stress']
         position, velocity, effort = joint_state_values(s)
         # each pack's arguments in _layout's order: the header (and stamp) if STAMPED, then
         # for each of GROUPS[key] its constant bytes and its doubles
         return {
-            "energy": energy.pack(energy_c[0], *energy_values(s, self.initial_energy)),
-            "clock": clock.pack(clock_c[0], sec, nsec),
-            "joint_states": joints.pack(joints_c[0], sec, nsec, joints_c[1], *position,
+            'energy': energy.pack(energy_c[0], *energy_values(s, self.initial_energy)),
+            'clock': clock.pack(clock_c[0], sec, nsec),
+            'joint_states': joints.pack(joints_c[0], sec, nsec, joints_c[1], *position,
                                         joints_c[2], *velocity, joints_c[3], *effort),
-            "tip_deflection": tip.pack(tip_c[0], sec, nsec, tip_c[1],
+            'tip_deflection': tip.pack(tip_c[0], sec, nsec, tip_c[1],
                                        *tip_deflection_values(s)),
-            "peak_stress": peak.pack(peak_c[0], *peak_stress_values(s, self.yield_strength)),
+            'peak_stress': peak.pack(peak_c[0], *peak_stress_values(s, self.yield_strength)),
         }
 
 
@@ -401,7 +401,7 @@ class MarkerEncoder:
     serializing the template with distinct sentinel values in those places.
     """
 
-    def __init__(self, positions, ns: str, frame_prefix: str = ""):
+    def __init__(self, positions, ns: str, frame_prefix: str = ''):
         from ..bag.cdr import cdr_bytes  # the exact-size rule, one place
         self._counts = tuple(len(p) for p in positions)
         sentinels = iter(_sentinel_doubles(2 * sum(self._counts) + 1))   # x, y; sleeve
@@ -416,14 +416,14 @@ class MarkerEncoder:
         self._stamps = [_unique_offset(data, _STAMP.pack(_SENTINEL_SEC + i, _SENTINEL_NSEC + i))
                         for i in range(len(msg.markers))]
         # each strip's points: (x, y, z) doubles in a row from the first point's x
-        self._points = [_unique_offset(data, struct.pack("<d", float(p[0, 0]))) for p in probe]
-        self._sleeve = _unique_offset(data, struct.pack("<d", sleeve))
+        self._points = [_unique_offset(data, struct.pack('<d', float(p[0, 0]))) for p in probe]
+        self._sleeve = _unique_offset(data, struct.pack('<d', sleeve))
 
     def encode(self, time: float, sleeve_position: float, positions) -> bytes:
         """Return the CDR bytes of markers_msg for these points (as deformed_shape's)."""
         if tuple(len(p) for p in positions) != self._counts:
-            raise ValueError(f"point counts {[len(p) for p in positions]}, the template has "
-                             f"{list(self._counts)}")
+            raise ValueError(f'point counts {[len(p) for p in positions]}, the template has '
+                             f'{list(self._counts)}')
         buf = bytearray(self._template)
         sec, nsec = stamp_parts(time)
         for offset in self._stamps:
@@ -431,8 +431,8 @@ class MarkerEncoder:
         for offset, pts in zip(self._points, positions):
             xyz = np.zeros((len(pts), 3))
             xyz[:, :2] = pts
-            buf[offset:offset + xyz.nbytes] = xyz.astype("<f8").tobytes()
-        struct.pack_into("<d", buf, self._sleeve, sleeve_position)
+            buf[offset:offset + xyz.nbytes] = xyz.astype('<f8').tobytes()
+        struct.pack_into('<d', buf, self._sleeve, sleeve_position)
         return bytes(buf)
 
 
@@ -455,24 +455,24 @@ def _sentinel_doubles(n: int) -> list[float]:
 def _unique_offset(data: bytes, pattern: bytes) -> int:
     at = data.find(pattern)
     if at < 0 or data.find(pattern, at + 1) >= 0:
-        raise RuntimeError("marker template: a sentinel is missing or not unique")
+        raise RuntimeError('marker template: a sentinel is missing or not unique')
     return at
 
 
 def sample_messages(s: Sample, params: UmbrellaParams, positions, marker_ns: str,
-                    initial_energy: float, frame_prefix: str = "") -> dict:
+                    initial_energy: float, frame_prefix: str = '') -> dict:
     """
     Return the per-publication messages of one sample, keyed by topic key.
 
     No markers when positions is None: they go out at their own (display) rate.
     """
     out = {
-        "energy": energy_msg(s, initial_energy),
-        "clock": clock_msg(s.time),
-        "joint_states": joint_state_msg(s, frame_prefix),
-        "tip_deflection": tip_deflection_msg(s, frame_prefix),
-        "peak_stress": peak_stress_msg(s, params.yield_strength),
+        'energy': energy_msg(s, initial_energy),
+        'clock': clock_msg(s.time),
+        'joint_states': joint_state_msg(s, frame_prefix),
+        'tip_deflection': tip_deflection_msg(s, frame_prefix),
+        'peak_stress': peak_stress_msg(s, params.yield_strength),
     }
     if positions is not None:
-        out["markers"] = markers_msg(s, positions, marker_ns, frame_prefix)
+        out['markers'] = markers_msg(s, positions, marker_ns, frame_prefix)
     return out

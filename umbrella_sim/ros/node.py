@@ -72,9 +72,9 @@ from ..core.registry import (check_node_parameters, CONTROLLER_PARAMETERS, NODE_
                              REGISTRY, RESET, SPECS)
 from ..core.step_rule import physics_step_of
 
-SIM_TIME_REASON = ("umbrella_node publishes /clock (the sim time every message carries) and "
-                   "paces it by the system clock; a node does not follow the clock it drives "
-                   "(use_sim_time stays false here; set it for the other nodes)")
+SIM_TIME_REASON = ('umbrella_node publishes /clock (the sim time every message carries) and '
+                   'paces it by the system clock; a node does not follow the clock it drives '
+                   '(use_sim_time stays false here; set it for the other nodes)')
 #: exit codes (also in usage())
 EXIT_OK, EXIT_USAGE, EXIT_FAULT, EXIT_RECORDING = 0, 2, 3, 4
 
@@ -87,7 +87,7 @@ class UmbrellaNode(Node):
 
     def __init__(self, params_files: tuple = (), **kwargs):
         try:
-            super().__init__("umbrella_node", **kwargs)
+            super().__init__('umbrella_node', **kwargs)
         except InvalidParameterTypeException as exc:    # -p use_sim_time:=abc: ROS's own
             raise StartupError(wrong_type_text(self, exc)) from None
         qos_given = self._check_parameter_sources(params_files,
@@ -97,7 +97,7 @@ class UmbrellaNode(Node):
             # paces it by the system clock; following its own /clock would only cost a
             # callback a publication (rclpy's time source), which slowed it several fold
             self.set_parameters([Parameter(USE_SIM_TIME, Parameter.Type.BOOL, False)])
-            self.get_logger().info(f"{USE_SIM_TIME}:=true not taken: {SIM_TIME_REASON}")
+            self.get_logger().info(f'{USE_SIM_TIME}:=true not taken: {SIM_TIME_REASON}')
         try:
             values = declare_from_registry(self, parameter_defaults())
         except ValueError as exc:
@@ -107,8 +107,8 @@ class UmbrellaNode(Node):
                 {k: v for k, v in values.items() if k in SPECS}).validated()
             self.node_cfg = check_node_parameters(
                 {k: v for k, v in values.items() if k in NODE_PARAMETERS})
-            if self.node_cfg["record"] and self.node_cfg["record_path"]:   # before any work
-                check_record_path(self.node_cfg["record_path"])
+            if self.node_cfg['record'] and self.node_cfg['record_path']:   # before any work
+                check_record_path(self.node_cfg['record_path'])
         except ValueError as exc:
             raise StartupError(str(exc)) from None
         self.pending_params = self.model_params
@@ -119,7 +119,7 @@ class UmbrellaNode(Node):
         self.commands = CommandIntake(lambda: self.sim, self._recording_on, self._warn_throttled,
                                       self.lockstep)
         self.fault: str | None = None
-        self.paused = bool(self.node_cfg["start_paused"])     # ~/pause false starts it
+        self.paused = bool(self.node_cfg['start_paused'])     # ~/pause false starts it
         self.finished = Future()
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -127,7 +127,7 @@ class UmbrellaNode(Node):
         self.recording: RunRecording | None = None
         self.recording_error: str | None = None
         self._service_waiting = threading.Event()
-        self._peers_warned = ""
+        self._peers_warned = ''
         self._measured_rtf: float | None = None     # of the last diagnostics
 
         # QoS as documented, or as qos_overrides.<topic>.publisher.<policy> parameters set
@@ -147,7 +147,7 @@ class UmbrellaNode(Node):
                 callback_group=MutuallyExclusiveCallbackGroup(),
                 qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
         except Exception as exc:  # rclpy's errors name the parameter
-            files = f" (params files: {', '.join(params_files)})" if params_files else ""
+            files = f" (params files: {', '.join(params_files)})" if params_files else ''
             text = (wrong_type_text(self, exc) if isinstance(exc, InvalidParameterTypeException)
                     else f"qos_overrides: {' '.join(str(exc).split())}")
             raise StartupError(text + files) from None
@@ -157,18 +157,18 @@ class UmbrellaNode(Node):
         self.commands.subscription = self.command_sub
         self.commands.connect(self, self.command_topic)
         services = MutuallyExclusiveCallbackGroup()
-        self.create_service(Trigger, "~/reset", self._on_reset, callback_group=services)
-        self.create_service(SetBool, "~/pause", self._on_pause, callback_group=services)
+        self.create_service(Trigger, '~/reset', self._on_reset, callback_group=services)
+        self.create_service(SetBool, '~/pause', self._on_pause, callback_group=services)
         # rclpy's three stages: convert exact int/double literals, validate, then apply
         self.add_pre_set_parameters_callback(self._coerce_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self._marker_ns = self.get_namespace().strip("/") or "umbrella"
+        self._marker_ns = self.get_namespace().strip('/') or 'umbrella'
         try:
             self._install_driver(self._make_driver(self.model_params))
         except ValueError as exc:     # a ModelError names the parameters
             raise StartupError(str(exc)) from None
-        self._thread = threading.Thread(target=self._physics_loop, name="physics", daemon=True)
+        self._thread = threading.Thread(target=self._physics_loop, name='physics', daemon=True)
 
     # ------------------------------------------------------------------ config
     def _check_parameter_sources(self, params_files, known: set) -> ParameterSources:
@@ -197,8 +197,8 @@ class UmbrellaNode(Node):
     def _make_driver(self, p: UmbrellaParams) -> tuple[RunDriver, PublicationEncoder]:
         """Build the model, its run driver and encoder (ValueError if it cannot be)."""
         cfg = self.node_cfg                 # a publish_rate set applies here
-        driver = RunDriver(p, cfg["publish_rate"])
-        return driver, PublicationEncoder(driver, cfg["marker_rate"])
+        driver = RunDriver(p, cfg['publish_rate'])
+        return driver, PublicationEncoder(driver, cfg['marker_rate'])
 
     def _install_driver(self, made: tuple[RunDriver, PublicationEncoder]) -> None:
         driver, self.encoder = made
@@ -208,12 +208,12 @@ class UmbrellaNode(Node):
         self.sim = self.driver.sim
         self.commands.hold(p.sleeve_force)
         self.fault = None
-        self._phase = "deploying"
+        self._phase = 'deploying'
         self.get_logger().info(
-            f"umbrella_sim {__version__}: model {p.model}, N = {p.elements_per_segment}, "
-            f"v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s "
-            f"({self.driver.period_steps} per publication at "
-            f"{self.driver_rate:g} Hz), kernel {self.driver.backend}")
+            f'umbrella_sim {__version__}: model {p.model}, N = {p.elements_per_segment}, '
+            f'v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s '
+            f'({self.driver.period_steps} per publication at '
+            f'{self.driver_rate:g} Hz), kernel {self.driver.backend}')
         note = shortened_step_note(physics_step_of(p), self.driver_rate)
         if note:
             self.get_logger().info(note)
@@ -223,7 +223,7 @@ class UmbrellaNode(Node):
             cfg = dict(self.node_cfg, record_path=bag_dir)
             return run_metadata(self.model_params, cfg, self.driver.step, self.sim.model,
                                 self.driver.backend,
-                                source=f"umbrella_node {self.get_fully_qualified_name()}")
+                                source=f'umbrella_node {self.get_fully_qualified_name()}')
         try:
             # compression and file writes on the recorder's own thread, not the publishing one
             if path:
@@ -237,20 +237,20 @@ class UmbrellaNode(Node):
         self.recording = RunRecording(
             recorder, {key: pub.topic_name for key, pub in self.pub.items()},
             self.command_topic, {key: pub.qos_profile for key, pub in self.pub.items()})
-        self.get_logger().info(f"recording to {self.recording.path}")
+        self.get_logger().info(f'recording to {self.recording.path}')
 
     def _on_recording_error(self, reason: str) -> None:
         """Report a write error of the recorder (called once)."""
         self.recording_error = reason
-        self._log("error", f"recording stopped: {reason}; {self.recording.path} keeps what was "
-                           "written before (readable, marked as ended early); the simulation "
-                           f"and its topics go on; exit code {EXIT_RECORDING} at the end")
+        self._log('error', f'recording stopped: {reason}; {self.recording.path} keeps what was '
+                           'written before (readable, marked as ended early); the simulation '
+                           f'and its topics go on; exit code {EXIT_RECORDING} at the end')
 
     def _log(self, level: str, text: str) -> None:
         if self.context.ok():
             getattr(self.get_logger(), level)(text)
         else:  # after SIGINT/SIGTERM the context is gone: /rosout cannot take it any more
-            print(f"[{level.upper()}] [{self.get_name()}]: {text}", file=sys.stderr, flush=True)
+            print(f'[{level.upper()}] [{self.get_name()}]: {text}', file=sys.stderr, flush=True)
 
     def close_recording(self) -> None:
         rec = self.recording
@@ -263,14 +263,14 @@ class UmbrellaNode(Node):
         try:
             rec.close(self.sim, self.commands.accepted, self.commands.refused,
                       self.driver.summary.figures(), fault=self.fault, extra={
-                          "refused_not_recorded": str(self.commands.refused_not_recorded),
-                          "segments": str(rec.recorder.segment + 1)})
+                          'refused_not_recorded': str(self.commands.refused_not_recorded),
+                          'segments': str(rec.recorder.segment + 1)})
         finally:
             if held:
                 self._sim_lock.release()
         if not had_error and rec.error is None:
-            self._log("info", f"recording finalised: {rec.path} "
-                              f"({sum(rec.recorder.counts.values())} messages)")
+            self._log('info', f'recording finalised: {rec.path} '
+                              f'({sum(rec.recorder.counts.values())} messages)')
 
     def _recording_on(self) -> RunRecording | None:
         """Return the recording if it is being written (not off, not stopped by an error)."""
@@ -308,8 +308,8 @@ class UmbrellaNode(Node):
             driver = self._make_driver(self.pending_params.validated())
         except ValueError as exc:
             response.success = False
-            response.message = (f"reset refused: {exc}; the run goes on (set other values "
-                                "and call ~/reset again)")
+            response.message = (f'reset refused: {exc}; the run goes on (set other values '
+                                'and call ~/reset again)')
             self.get_logger().error(response.message)
             return response
         with self._locked():
@@ -321,18 +321,18 @@ class UmbrellaNode(Node):
             rec = self._recording_on()
             if rec is not None:
                 meta = run_metadata(self.model_params, self.node_cfg, self.driver.step,
-                                    self.sim.model, self.driver.backend, source="~/reset")
+                                    self.sim.model, self.driver.backend, source='~/reset')
                 k = rec.start_segment(meta, self.driver, ended, fault)
-                self.get_logger().info(f"recording segment {k} (reset; log time offset "
-                                       f"{rec.recorder.offset_ns * 1e-9:.9f} s)")
-            self._publish_phase("deploying")
+                self.get_logger().info(f'recording segment {k} (reset; log time offset '
+                                       f'{rec.recorder.offset_ns * 1e-9:.9f} s)')
+            self._publish_phase('deploying')
             # the new run's t = 0 state, as at start (paused or not): every run, and every
             # recording segment, begins with its initial state
             self._publish_sample(self._sample_messages())
         self._wake.set()
         response.success = True
-        response.message = "reset to t = 0"
-        self.get_logger().info("reset: simulation restarted at t = 0 s")
+        response.message = 'reset to t = 0'
+        self.get_logger().info('reset: simulation restarted at t = 0 s')
         return response
 
     def _on_pause(self, request, response):
@@ -341,8 +341,8 @@ class UmbrellaNode(Node):
             self._anchor()
         self._wake.set()
         response.success = True
-        response.message = "paused" if self.paused else "running"
-        self.get_logger().info(f"{response.message} at t = {self.sim.time:.9f} s")
+        response.message = 'paused' if self.paused else 'running'
+        self.get_logger().info(f'{response.message} at t = {self.sim.time:.9f} s')
         return response
 
     def set_parameters_atomically(self, parameter_list) -> SetParametersResult:
@@ -382,7 +382,7 @@ class UmbrellaNode(Node):
         """Accept or refuse a set (on-set callback); changes nothing."""
         if any(p.name == USE_SIM_TIME and p.value is True for p in params):
             return SetParametersResult(successful=False,
-                                       reason=f"parameter {USE_SIM_TIME}=true: {SIM_TIME_REASON}")
+                                       reason=f'parameter {USE_SIM_TIME}=true: {SIM_TIME_REASON}')
         try:
             self._parameter_candidate(params)
         except ValueError as exc:
@@ -395,19 +395,19 @@ class UmbrellaNode(Node):
         self.pending_params = candidate
         with self._locked():
             self.node_cfg = cfg
-            if "real_time_factor" in node:
+            if 'real_time_factor' in node:
                 self._anchor()
         on_reset = sorted(n for n in {**core, **node} if REGISTRY[n].applies == RESET)
         if on_reset:
             self.get_logger().info(f"parameters {', '.join(on_reset)} set; they apply on "
-                                   "~/reset")
+                                   '~/reset')
 
     # --------------------------------------------------------------- physics
     def start(self) -> None:
         """Open the recording (StartupError if it cannot be) and start the physics thread."""
-        if self.node_cfg["record"]:     # not before: a stop during start-up creates nothing
-            self._open_recording(self.node_cfg["record_path"])
-        self._publish_phase("deploying")
+        if self.node_cfg['record']:     # not before: a stop during start-up creates nothing
+            self._open_recording(self.node_cfg['record_path'])
+        self._publish_phase('deploying')
         self._anchor()
         self._thread.start()
 
@@ -427,29 +427,29 @@ class UmbrellaNode(Node):
 
     def _publish_phase(self, phase: str) -> None:
         self._phase = phase
-        self._publish("deployment_phase", ros_io.phase_msg(phase), self.sim.time)
+        self._publish('deployment_phase', ros_io.phase_msg(phase), self.sim.time)
 
     def _sample_messages(self) -> tuple[int, float, dict]:
         """Build the publication's messages under the sim lock, to be published later."""
         cfg = self.node_cfg
         return self._epoch, self.sim.time, self.encoder.messages(
-            self.driver.publication(), self._marker_ns, cfg["marker_magnification"],
-            cfg["frame_prefix"])
+            self.driver.publication(), self._marker_ns, cfg['marker_magnification'],
+            cfg['frame_prefix'])
 
     def _publish_sample(self, sample: tuple[int, float, dict]) -> None:
         epoch, t, msgs = sample
         with self._sim_lock:
             if epoch != self._epoch:          # a reset came in meanwhile: the sample is stale
                 return
-            if "joint_states" in msgs:
+            if 'joint_states' in msgs:
                 self.lockstep.published()
             for key, msg in msgs.items():
                 self._publish(key, msg, t)
 
     def _waiting_for_command(self) -> bool:
         """Lockstep: no command has answered the last joint_states yet (sim lock held)."""
-        return self.lockstep.waiting(self.node_cfg["lockstep"], self.driver.at_publication,
-                                     self.sim.stage == "deploying")
+        return self.lockstep.waiting(self.node_cfg['lockstep'], self.driver.at_publication,
+                                     self.sim.stage == 'deploying')
 
     def _take_command(self) -> None:
         """At a publication instant: the latest command acts from this step on (sim lock held)."""
@@ -459,7 +459,7 @@ class UmbrellaNode(Node):
             return
         # logged, recorded and published BEFORE the solver sees it: a fault it causes is in
         # the log and --resimulate reproduces it
-        self.commands.applied(force, t, self.sim.stage == "locked")
+        self.commands.applied(force, t, self.sim.stage == 'locked')
 
     def _advance_chunk(self) -> bool:
         """Step the next chunk (sim lock held); True if the run is at a publication after it."""
@@ -469,13 +469,13 @@ class UmbrellaNode(Node):
             chunk = self.driver.advance()
         finally:
             for text in self.driver.summary.new_warnings():   # each logged once
-                self.get_logger().warning(f"t = {self.sim.time:.6f} s: {text}")
+                self.get_logger().warning(f't = {self.sim.time:.6f} s: {text}')
         ev = chunk.lock
         if ev is not None:
             self.get_logger().info(
-                f"locked at t = {ev.time:.9f} s (energy {ev.energy_before:.6g} J -> "
-                f"{ev.energy_after:.6g} J, {ev.kind} lock)")
-            self._publish_phase("locked")
+                f'locked at t = {ev.time:.9f} s (energy {ev.energy_before:.6g} J -> '
+                f'{ev.energy_after:.6g} J, {ev.kind} lock)')
+            self._publish_phase('locked')
         if chunk.error is not None:
             raise SimulationDiverged(chunk.error)
         return chunk.at_publication
@@ -498,11 +498,11 @@ class UmbrellaNode(Node):
                 with self._sim_lock:
                     waiting = not self.paused and self._waiting_for_command()
                     idle = self.paused or self.fault is not None or waiting
-                    duration = self.node_cfg["duration"]
+                    duration = self.node_cfg['duration']
                     if waiting:
                         self._lockstep_wait()
                     elif not idle:
-                        if self.lockstep.go(self.node_cfg["lockstep"]):
+                        if self.lockstep.go(self.node_cfg['lockstep']):
                             self._anchor()          # the command came: pace from now
                         try:
                             # a chunk of steps, at most to the next publication: the lock
@@ -513,12 +513,12 @@ class UmbrellaNode(Node):
                             # the state stays at the last good step (maybe between
                             # publications): nothing more is published from it
                             self.fault = str(exc)
-                            log.error(f"simulation fault: {exc}; " + (
-                                f"the run ends (duration {duration:g} s is set; exit code "
-                                f"{EXIT_FAULT})" if duration > 0 else "call ~/reset to restart"))
-                            self._publish_phase("fault")
+                            log.error(f'simulation fault: {exc}; ' + (
+                                f'the run ends (duration {duration:g} s is set; exit code '
+                                f'{EXIT_FAULT})' if duration > 0 else 'call ~/reset to restart'))
+                            self._publish_phase('fault')
                     sim_t = self.sim.time
-                    target = self.pacer.target(sim_t, self.node_cfg["real_time_factor"])
+                    target = self.pacer.target(sim_t, self.node_cfg['real_time_factor'])
                     epoch = self._epoch
                 now = time.monotonic()
                 if target is not None and sample is not None:
@@ -528,9 +528,9 @@ class UmbrellaNode(Node):
                     elif lag > MAX_LAG_S:
                         self._re_anchor(epoch, now, sim_t, lag)
                     elif lag > max(0.05, 2.0 / self.driver_rate):
-                        self._warn_throttled("behind", LAG_WARN_PERIOD, lambda: (
-                            f"physics cannot keep up: {lag * 1e3:.1f} ms behind wall time x "
-                            f"real_time_factor; {self._lag_advice()}"))
+                        self._warn_throttled('behind', LAG_WARN_PERIOD, lambda: (
+                            f'physics cannot keep up: {lag * 1e3:.1f} ms behind wall time x '
+                            f'real_time_factor; {self._lag_advice()}'))
                 elif target is not None and not idle:
                     # between publications (a long period: many chunks), how far behind the
                     # physics is now, so that diagnostics say so before the period ends
@@ -550,17 +550,17 @@ class UmbrellaNode(Node):
                 if duration > 0 and self.fault is not None:
                     break
                 if duration > 0 and sample is not None and sim_t >= duration - 1e-12:
-                    log.info(f"duration {duration:g} s reached at t = {sim_t:.9f} s")
+                    log.info(f'duration {duration:g} s reached at t = {sim_t:.9f} s')
                     break
                 if waiting:
                     self.lockstep.answered.wait(0.05)
                 elif idle:
                     if self.paused and self.fault is None:   # as Gazebo: the time, unchanged
-                        self.pub["clock"].publish(ros_io.clock_msg(sim_t))   # (not recorded)
+                        self.pub['clock'].publish(ros_io.clock_msg(sim_t))   # (not recorded)
                     self._wake.wait(0.05)
                     self._wake.clear()
         except Exception as exc:  # keep the process informative, never silent
-            log.error(f"physics thread stopped: {exc!r}")
+            log.error(f'physics thread stopped: {exc!r}')
             self.fault = repr(exc)
         finally:
             if not self.finished.done():
@@ -575,9 +575,9 @@ class UmbrellaNode(Node):
         """
         waited = self.lockstep.wait_turn()
         if waited >= 5.0:
-            self._warn_throttled("lockstep", 5.0, lambda: (
-                f"lockstep: no sleeve_force command for {waited:.0f} s (wall) since the "
-                f"joint_states of t = {self.sim.time:.6f} s; the simulation waits for it"))
+            self._warn_throttled('lockstep', 5.0, lambda: (
+                f'lockstep: no sleeve_force command for {waited:.0f} s (wall) since the '
+                f'joint_states of t = {self.sim.time:.6f} s; the simulation waits for it'))
 
     def _re_anchor(self, epoch: int, now: float, sim_t: float, lag: float) -> None:
         """Re-anchor the pacing (pacing.py's overload policy), unless a reset came meanwhile."""
@@ -585,70 +585,70 @@ class UmbrellaNode(Node):
             if epoch != self._epoch:
                 return
             self.pacer.re_anchor(now, sim_t, lag)
-        self._warn_throttled("re-anchor", LAG_WARN_PERIOD, lambda: (
-            f"physics cannot keep real time: {lag * 1e3:.0f} ms behind at t = {sim_t:.3f} s; "
-            f"pacing re-anchored (lag bounded by {MAX_LAG_S:g} s; total slip "
-            f"{self.pacer.slip:.3f} s in {self.pacer.re_anchors} re-anchors); "
-            f"{self._lag_advice()}"))
+        self._warn_throttled('re-anchor', LAG_WARN_PERIOD, lambda: (
+            f'physics cannot keep real time: {lag * 1e3:.0f} ms behind at t = {sim_t:.3f} s; '
+            f'pacing re-anchored (lag bounded by {MAX_LAG_S:g} s; total slip '
+            f'{self.pacer.slip:.3f} s in {self.pacer.re_anchors} re-anchors); '
+            f'{self._lag_advice()}'))
 
     def _lag_advice(self) -> str:
-        return lag_advice(self.node_cfg["real_time_factor"], self._measured_rtf)
+        return lag_advice(self.node_cfg['real_time_factor'], self._measured_rtf)
 
     def _check_namespace_peers(self) -> None:
         """Two simulators in one namespace mix their /clock, commands and resets: warn."""
         try:
-            clocks = self.count_publishers(self.pub["clock"].topic_name)
+            clocks = self.count_publishers(self.pub['clock'].topic_name)
             same = sum(1 for n, ns in self.get_node_names_and_namespaces()
                        if (n, ns) == (self.get_name(), self.get_namespace()))
         except Exception:             # the graph is gone (shutting down)
             return
         self.clock_publishers = clocks
-        text = ""
+        text = ''
         if same > 1:
-            text = (f"{same} nodes named {self.get_fully_qualified_name()}: their topics, "
-                    "commands and ~/reset mix; give each its own namespace (-r __ns:=/NAME)")
+            text = (f'{same} nodes named {self.get_fully_qualified_name()}: their topics, '
+                    'commands and ~/reset mix; give each its own namespace (-r __ns:=/NAME)')
         elif clocks > 1:
             text = (f"{clocks} publishers on {self.pub['clock'].topic_name}: another simulator "
-                    "or a replay in this namespace; sim time will jump")
+                    'or a replay in this namespace; sim time will jump')
         if text and text != self._peers_warned:
             self.get_logger().warning(text)
         self._peers_warned = text
 
     def _publish_diagnostics(self, sim_t: float, measured: float, lag: float) -> None:
-        rtf = self.node_cfg["real_time_factor"]
+        rtf = self.node_cfg['real_time_factor']
         if self.fault:
-            level, message = DiagnosticStatus.ERROR, f"fault: {self.fault}"
+            level, message = DiagnosticStatus.ERROR, f'fault: {self.fault}'
         elif self.recording_error:
-            level, message = DiagnosticStatus.ERROR, f"recording stopped: {self.recording_error}"
+            level, message = DiagnosticStatus.ERROR, f'recording stopped: {self.recording_error}'
         elif self._peers_warned:
             level, message = DiagnosticStatus.WARN, self._peers_warned
         elif rtf > 0 and lag > max(0.05, 2.0 / self.driver_rate):
             level, message = (DiagnosticStatus.WARN,
-                              f"behind real time: measured {measured:.3f}x of {rtf:g}x")
+                              f'behind real time: measured {measured:.3f}x of {rtf:g}x')
         elif self.driver.summary.warnings():
-            level, message = DiagnosticStatus.WARN, "outside the model's validity: " + "; ".join(
-                w.split(":")[0] for w in self.driver.summary.warnings())
+            level, message = DiagnosticStatus.WARN, "outside the model's validity: " + '; '.join(
+                w.split(':')[0] for w in self.driver.summary.warnings())
         else:
             level, message = DiagnosticStatus.OK, self._phase
-        values = {"sim_time_s": f"{sim_t:.6f}", "measured_real_time_factor": f"{measured:.4f}",
-                  "requested_real_time_factor": rtf, "lag_s": f"{max(lag, 0.0):.6f}",
-                  "max_lag_s": f"{max(self.pacer.max_lag, 0.0):.6f}",
-                  "phase": self._phase, "paused": self.paused,
-                  "accepted_commands": self.commands.accepted,
-                  "refused_commands": self.commands.refused, "steps": self.sim.steps,
-                  "lockstep": self.node_cfg["lockstep"],
-                  "waiting_for_command": bool(self.lockstep.waiting_since),
-                  "lockstep_waits": self.lockstep.waits,
-                  "physics_step_s": self.sim.h, "slip_s": f"{self.pacer.slip:.6f}",
-                  "re_anchors": self.pacer.re_anchors,
-                  "refused_not_recorded": self.commands.refused_not_recorded,
-                  "clock_publishers": getattr(self, "clock_publishers", 1),
-                  "recording": ("off" if self.recording is None else
-                                f"stopped: {self.recording_error}" if self.recording_error
-                                else "ok")}
+        values = {'sim_time_s': f'{sim_t:.6f}', 'measured_real_time_factor': f'{measured:.4f}',
+                  'requested_real_time_factor': rtf, 'lag_s': f'{max(lag, 0.0):.6f}',
+                  'max_lag_s': f'{max(self.pacer.max_lag, 0.0):.6f}',
+                  'phase': self._phase, 'paused': self.paused,
+                  'accepted_commands': self.commands.accepted,
+                  'refused_commands': self.commands.refused, 'steps': self.sim.steps,
+                  'lockstep': self.node_cfg['lockstep'],
+                  'waiting_for_command': bool(self.lockstep.waiting_since),
+                  'lockstep_waits': self.lockstep.waits,
+                  'physics_step_s': self.sim.h, 'slip_s': f'{self.pacer.slip:.6f}',
+                  're_anchors': self.pacer.re_anchors,
+                  'refused_not_recorded': self.commands.refused_not_recorded,
+                  'clock_publishers': getattr(self, 'clock_publishers', 1),
+                  'recording': ('off' if self.recording is None else
+                                f'stopped: {self.recording_error}' if self.recording_error
+                                else 'ok')}
         for i, text in enumerate(self.driver.summary.warnings()):
-            values[f"warning_{i}"] = text
+            values[f'warning_{i}'] = text
         # the status name carries the namespace: every antenna publishes on /diagnostics
-        self._publish("diagnostics", ros_io.diagnostics_msg(
+        self._publish('diagnostics', ros_io.diagnostics_msg(
             sim_t, ros_io.diagnostic_name(self.get_fully_qualified_name()), level, message,
             values), sim_t)

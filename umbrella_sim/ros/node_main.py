@@ -38,34 +38,34 @@ from ..core.registry import NODE_PARAMETERS, parameter_help, SPECS
 
 
 def usage() -> str:
-    lines = ["usage: umbrella_node [--help] [--ros-args -p name:=value ... --params-file FILE",
-             "                      -r __ns:=/NAMESPACE]", "",
-             "Real-time flexible umbrella-frame deployment simulator (ROS 2 node).", "",
-             "model parameters (a runtime set applies on ~/reset):"]
+    lines = ['usage: umbrella_node [--help] [--ros-args -p name:=value ... --params-file FILE',
+             '                      -r __ns:=/NAMESPACE]', '',
+             'Real-time flexible umbrella-frame deployment simulator (ROS 2 node).', '',
+             'model parameters (a runtime set applies on ~/reset):']
     lines += parameter_help(SPECS.values())
-    lines.append("node parameters:")
+    lines.append('node parameters:')
     lines += parameter_help(NODE_PARAMETERS.values())
-    lines += ["", "topics: " + ", ".join(t.name for t in ros_io.TOPICS.values())
-              + f"; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= "
-              "sleeve_force_min, 0 by default)",
-              "services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)",
-              "exit: SIGINT/SIGTERM stop the physics, then finalise the recording (during "
-              f"start-up: nothing is started); code {EXIT_OK} on a clean stop or when duration "
-              f"is reached, {EXIT_USAGE} for "
-              "invalid arguments, parameters or params files, "
-              f"{EXIT_FAULT} if the simulation ended in a fault, {EXIT_RECORDING} if the "
-              "recording stopped on a write error (the run itself went on)",
-              f"details: {msg_docs_location()}"]
-    return "\n".join(lines)
+    lines += ['', 'topics: ' + ', '.join(t.name for t in ros_io.TOPICS.values())
+              + f'; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= '
+              'sleeve_force_min, 0 by default)',
+              'services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)',
+              'exit: SIGINT/SIGTERM stop the physics, then finalise the recording (during '
+              f'start-up: nothing is started); code {EXIT_OK} on a clean stop or when duration '
+              f'is reached, {EXIT_USAGE} for '
+              'invalid arguments, parameters or params files, '
+              f'{EXIT_FAULT} if the simulation ended in a fault, {EXIT_RECORDING} if the '
+              'recording stopped on a write error (the run itself went on)',
+              f'details: {msg_docs_location()}']
+    return '\n'.join(lines)
 
 
 def msg_docs_location() -> str:
     """Return where the interface docs are here: the source tree's, or the installed ones."""
-    found = package_path("msg_docs", "README.md")
+    found = package_path('msg_docs', 'README.md')
     if found:
         return os.path.dirname(found) + os.sep
-    return "msg_docs/ of the umbrella_sim sources (the package share directory of a colcon " \
-           "install)"
+    return 'msg_docs/ of the umbrella_sim sources (the package share directory of a colcon ' \
+           'install)'
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -90,8 +90,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _stopped_during_start_up() -> int:
     """Exit quietly after a stop signal that came before the node was running."""
-    print(f"umbrella_node: stopped by {stop_signals.name(stop_signals.received[0])} during "
-          "start-up; nothing was started", file=sys.stderr)
+    print(f'umbrella_node: stopped by {stop_signals.name(stop_signals.received[0])} during '
+          'start-up; nothing was started', file=sys.stderr)
     rclpy.try_shutdown()
     return EXIT_OK
 
@@ -100,13 +100,13 @@ def _run(argv: list[str], running: list) -> int:
     stop_requested = stop_signals.received      # every stop signal since the process began
     if stop_requested:          # during the imports: before any ROS or simulation work
         return _stopped_during_start_up()
-    if any(a in ("-h", "--help") for a in argv[1:argv.index("--ros-args")
-                                               if "--ros-args" in argv else len(argv)]):
+    if any(a in ('-h', '--help') for a in argv[1:argv.index('--ros-args')
+                                               if '--ros-args' in argv else len(argv)]):
         print(usage())
         return EXIT_OK
 
     def fail(text: str) -> int:
-        print(f"umbrella_node: error: {text}", file=sys.stderr)
+        print(f'umbrella_node: error: {text}', file=sys.stderr)
         rclpy.try_shutdown()
         return EXIT_USAGE
 
@@ -117,16 +117,16 @@ def _run(argv: list[str], running: list) -> int:
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong
-        reason = " ".join(str(exc).split())
-        if type(exc).__name__ == "UnknownROSArgsError":
-            reason = f"unknown ROS arguments {reason}"
-        return fail(f"invalid ROS arguments: {reason} (see --help)")
+        reason = ' '.join(str(exc).split())
+        if type(exc).__name__ == 'UnknownROSArgsError':
+            reason = f'unknown ROS arguments {reason}'
+        return fail(f'invalid ROS arguments: {reason} (see --help)')
     if stop_requested:
         return _stopped_during_start_up()
     leftover = rclpy.utilities.remove_ros_args(argv)[1:]
     if leftover:
-        return fail(f"unexpected arguments {leftover}; parameters go after --ros-args as "
-                    "-p name:=value or --params-file FILE")
+        return fail(f'unexpected arguments {leftover}; parameters go after --ros-args as '
+                    '-p name:=value or --params-file FILE')
     try:
         node = UmbrellaNode(params_files=tuple(files))
     except StartupError as exc:

@@ -40,11 +40,11 @@ LAG_WARN_PERIOD = 60.0
 
 def lag_advice(real_time_factor: float, measured: float | None) -> str:
     """Say what makes a node that cannot keep up with real_time_factor keep up."""
-    can = f" (measured {measured:.2f}x)" if measured else ""
-    return (f"this machine cannot step this model at {real_time_factor:g}x real time{can}: "
-            "give a lower real_time_factor, real_time_factor:=0 (as fast as it can; "
-            "sim time is still exact), or, for a closed-loop controller, lockstep:=true "
-            "(the node waits for each command: no command falls behind)")
+    can = f' (measured {measured:.2f}x)' if measured else ''
+    return (f'this machine cannot step this model at {real_time_factor:g}x real time{can}: '
+            'give a lower real_time_factor, real_time_factor:=0 (as fast as it can; '
+            'sim time is still exact), or, for a closed-loop controller, lockstep:=true '
+            '(the node waits for each command: no command falls behind)')
 #: pacing waits up to this long are a plain sleep (sleep_until)
 
 

@@ -38,8 +38,8 @@ from ..core.registry import check_known_names, defaults, NOW, REGISTRY, RESET, S
 
 
 # --------------------------------------------------------------------- parameters
-_APPLIES = {RESET: "a runtime set applies on ~/reset", NOW: "a runtime set applies at once",
-            START: "read-only: fixed when the node starts"}
+_APPLIES = {RESET: 'a runtime set applies on ~/reset', NOW: 'a runtime set applies at once',
+            START: 'read-only: fixed when the node starts'}
 
 
 _ROS_TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETER_INTEGER,
@@ -49,16 +49,16 @@ _ROS_TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETE
 def descriptor(name: str) -> ParameterDescriptor:
     """Build the statically typed descriptor of a parameter from the registry."""
     p = REGISTRY[name]
-    constraints = [f"range {p.range_text()}" if p.low is not None or p.high is not None
-                   else ("one of " + p.range_text() if p.choices else "")]
+    constraints = [f'range {p.range_text()}' if p.low is not None or p.high is not None
+                   else ('one of ' + p.range_text() if p.choices else '')]
     if p.rule:
-        constraints.append(p.rule.replace("`", ""))
+        constraints.append(p.rule.replace('`', ''))
     constraints.append(_APPLIES[p.applies])
-    if name == "sleeve_force":
-        constraints.append("command the running force on the sleeve_force topic")
+    if name == 'sleeve_force':
+        constraints.append('command the running force on the sleeve_force topic')
     d = ParameterDescriptor(
-        name=name, type=_ROS_TYPES[p.type], description=f"{p.doc} ({p.unit})",
-        additional_constraints="; ".join(c for c in constraints if c),
+        name=name, type=_ROS_TYPES[p.type], description=f'{p.doc} ({p.unit})',
+        additional_constraints='; '.join(c for c in constraints if c),
         read_only=p.applies == START, dynamic_typing=False)
     if p.low is not None and p.high is not None:
         if p.type is int:
@@ -127,8 +127,8 @@ def declare_from_registry(node, names) -> dict:
 
 def type_refusal(name: str, given, expected: str) -> str:
     """Return the refusal of a value of the wrong type: the parameter, the value, both types."""
-    return (f"parameter {name}={given.value!r}: must be of type {expected}, got "
-            f"{given.type_.name.lower()}")
+    return (f'parameter {name}={given.value!r}: must be of type {expected}, got '
+            f'{given.type_.name.lower()}')
 
 
 def wrong_type_text(node, exc) -> str:
@@ -140,23 +140,23 @@ def wrong_type_text(node, exc) -> str:
     declared on (the value given, from its overrides), or None (the value as rclpy's text
     has it); the text as it is if it cannot be read.
     """
-    text = " ".join(str(exc).split())
+    text = ' '.join(str(exc).split())
     found = re.fullmatch(r"Trying to set parameter '(.+?)' to '(.*)' of type '(\w+)', "
                          r"expecting type '(?:Type\.)?(\w+)': .*", text)
     if found is None:
         return text
     name, value, got, expected = found.groups()
-    given = getattr(node, "_parameter_overrides", {}).get(name)
+    given = getattr(node, '_parameter_overrides', {}).get(name)
     if given is not None:
         return type_refusal(name, given, expected.lower())
-    shown = repr(value) if got == "STRING" else value
-    return (f"parameter {name}={shown}: must be of type {expected.lower()}, got "
-            f"{got.lower()}")
+    shown = repr(value) if got == 'STRING' else value
+    return (f'parameter {name}={shown}: must be of type {expected.lower()}, got '
+            f'{got.lower()}')
 
 
 #: why a read-only parameter is: the registry's are read at start; ROS's own (qos_overrides.*,
 #: start_type_description_service) when the node creates its publishers and services
-_READ_ONLY_WHY = "it is fixed when the node starts; restart the node with -p {name}:=VALUE"
+_READ_ONLY_WHY = 'it is fixed when the node starts; restart the node with -p {name}:=VALUE'
 
 
 def set_refusal(node, param) -> str | None:
@@ -173,16 +173,16 @@ def set_refusal(node, param) -> str | None:
     name = param.name
     if not node.has_parameter(name):
         try:
-            check_known_names([name], node.get_parameters_by_prefix("").keys(),
-                              f"set on {node.get_fully_qualified_name()}")
+            check_known_names([name], node.get_parameters_by_prefix('').keys(),
+                              f'set on {node.get_fully_qualified_name()}')
         except ValueError as exc:
             raise UnknownParameter(str(exc), name) from None
     descriptor = node.describe_parameter(name)
     if descriptor.read_only:
-        return f"parameter {name} is read-only: {_READ_ONLY_WHY.format(name=name)}"
+        return f'parameter {name} is read-only: {_READ_ONLY_WHY.format(name=name)}'
     if param.type_ == Parameter.Type.NOT_SET:
-        return (f"parameter {name} cannot be unset: it is declared with a type "
-                f"({Parameter.Type(descriptor.type).name.lower()}); set a value instead")
+        return (f'parameter {name} cannot be unset: it is declared with a type '
+                f'({Parameter.Type(descriptor.type).name.lower()}); set a value instead')
     param = coerce_parameter(param)
     spec = REGISTRY.get(name)
     if not descriptor.dynamic_typing and param.type_.value != descriptor.type:

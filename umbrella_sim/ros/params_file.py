@@ -31,13 +31,13 @@ from ..bag.paths import read_text_input
 from ..core.registry import check_known_names, NODE_PARAMETERS_LISTED, unknown_names
 
 
-def _flatten(values: dict, prefix: str = "") -> dict:
+def _flatten(values: dict, prefix: str = '') -> dict:
     """Nested mappings are dotted parameter names in ROS 2 (`a: {b: 1}` is `a.b`)."""
     out = {}
     for key, value in values.items():
-        name = f"{prefix}{key}"
+        name = f'{prefix}{key}'
         if isinstance(value, dict):
-            out.update(_flatten(value, name + "."))
+            out.update(_flatten(value, name + '.'))
         else:
             out[name] = value
     return out
@@ -45,8 +45,8 @@ def _flatten(values: dict, prefix: str = "") -> dict:
 
 #: a plain (unquoted) scalar rcl's params parser reads as a double: strtod's forms, which
 #: include 72.0e9 (YAML 1.1, and so PyYAML, wants a sign in the exponent: a string to it)
-_ROS_DOUBLE = re.compile(r"(?:[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|[-+]?\.(inf|Inf|INF)"
-                         r"|\.(nan|NaN|NAN))$")      # the whole value (PyYAML: match only)
+_ROS_DOUBLE = re.compile(r'(?:[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|[-+]?\.(inf|Inf|INF)'
+                         r'|\.(nan|NaN|NAN))$')      # the whole value (PyYAML: match only)
 
 
 def load_yaml_as_ros(text: str):
@@ -75,12 +75,12 @@ def _ros_typed_loader():
                 key = self.construct_object(key_node, deep=deep)
                 if key in seen:
                     raise yaml.MarkedYAMLError(
-                        problem=f"key {key!r} given twice", problem_mark=key_node.start_mark)
+                        problem=f'key {key!r} given twice', problem_mark=key_node.start_mark)
                 seen.add(key)
             return super().construct_mapping(node, deep)
 
-    RosTyped.add_implicit_resolver("tag:yaml.org,2002:float", _ROS_DOUBLE,
-                                   list("-+0123456789."))
+    RosTyped.add_implicit_resolver('tag:yaml.org,2002:float', _ROS_DOUBLE,
+                                   list('-+0123456789.'))
     return RosTyped
 
 
@@ -94,29 +94,29 @@ def read_params_file(path: str) -> dict[str, dict]:
     """
     import yaml  # local import: only the file path needs it
 
-    text = read_text_input(path, "params file")
+    text = read_text_input(path, 'params file')
     try:
         doc = load_yaml_as_ros(text)
     except yaml.YAMLError as exc:
-        reason = " ".join(str(exc).split())
-        raise ValueError(f"params file {path}: not valid YAML ({reason})") from None
+        reason = ' '.join(str(exc).split())
+        raise ValueError(f'params file {path}: not valid YAML ({reason})') from None
     if not isinstance(doc, dict) or not doc:
-        raise ValueError(f"params file {path}: expected a mapping of node names to "
-                         "{ros__parameters: {...}}")
+        raise ValueError(f'params file {path}: expected a mapping of node names to '
+                         '{ros__parameters: {...}}')
     sections = {}
     for key, section in doc.items():
-        values = section.get("ros__parameters") if isinstance(section, dict) else None
+        values = section.get('ros__parameters') if isinstance(section, dict) else None
         if not isinstance(values, dict):
-            raise ValueError(f"params file {path}: section {key!r} has no ros__parameters "
-                             "mapping")
-        extra = sorted(set(section) - {"ros__parameters"})
+            raise ValueError(f'params file {path}: section {key!r} has no ros__parameters '
+                             'mapping')
+        extra = sorted(set(section) - {'ros__parameters'})
         if extra:
-            raise ValueError(f"params file {path}: section {key!r}: only ros__parameters is "
+            raise ValueError(f'params file {path}: section {key!r}: only ros__parameters is '
                              f"allowed, found {', '.join(map(str, extra))}")
         sections[str(key)] = _flatten(values)
         empty = sorted(name for name, value in sections[str(key)].items() if value is None)
         if empty:
-            raise ValueError(f"params file {path}: section {key!r}: no value for "
+            raise ValueError(f'params file {path}: section {key!r}: no value for '
                              f"{', '.join(empty)}")
     return sections
 
@@ -129,13 +129,13 @@ def section_matches(pattern: str, node_fqn: str) -> bool:
     node_fqn (ROS 2 rules: '/**' any namespace depth, '*' one token, no leading slash means
     relative to the root).
     """
-    tokens = pattern.strip("/").split("/")
-    regex = "".join("(/[^/]+)*" if t == "**" else "/[^/]+" if t == "*" else "/" + re.escape(t)
+    tokens = pattern.strip('/').split('/')
+    regex = ''.join('(/[^/]+)*' if t == '**' else '/[^/]+' if t == '*' else '/' + re.escape(t)
                     for t in tokens)
     return re.fullmatch(regex, node_fqn) is not None
 
 
-def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:
+def load_params_file(path: str, node_name: str = 'umbrella_node') -> dict:
     """
     Return the parameters of a params YAML for node_name.
 
@@ -146,22 +146,22 @@ def load_params_file(path: str, node_name: str = "umbrella_node") -> dict:
     sections = read_params_file(path)
     merged: dict = {}
     for key, values in sections.items():
-        if section_matches(key, "/" + node_name):
+        if section_matches(key, '/' + node_name):
             merged.update(values)
-    if not any(section_matches(key, "/" + node_name) for key in sections):
-        raise ValueError(f"params file {path}: no section for node /{node_name} (sections: "
+    if not any(section_matches(key, '/' + node_name) for key in sections):
+        raise ValueError(f'params file {path}: no section for node /{node_name} (sections: '
                          f"{', '.join(sections)}); use '/**' or '{node_name}'")
     return merged
 
 
 #: the prefix of rclpy's QoS override parameters, and the parameters every rclpy node has
-QOS_OVERRIDES = "qos_overrides."
+QOS_OVERRIDES = 'qos_overrides.'
 
 
-USE_SIM_TIME = "use_sim_time"
+USE_SIM_TIME = 'use_sim_time'
 
 
-ROS_OWN_PARAMETERS = frozenset({USE_SIM_TIME, "start_type_description_service"})
+ROS_OWN_PARAMETERS = frozenset({USE_SIM_TIME, 'start_type_description_service'})
 
 
 def params_files_in(ros_args: list[str]) -> list[str]:
@@ -170,7 +170,7 @@ def params_files_in(ros_args: list[str]) -> list[str]:
 
     ValueError naming the file and the problem (rcl's own parse errors are tracebacks).
     """
-    files = [ros_args[i + 1] for i, a in enumerate(ros_args[:-1]) if a == "--params-file"]
+    files = [ros_args[i + 1] for i, a in enumerate(ros_args[:-1]) if a == '--params-file']
     for path in files:
         read_params_file(path)
     return files
@@ -183,15 +183,15 @@ def names_the_node(pattern: str) -> bool:
     'umbrella_node', '/a1/umbrella_node', '/**/umbrella_node' do; a wildcard ('/**', '/*',
     '/a1/*') does not.
     """
-    return pattern.strip("/").split("/")[-1] not in ("*", "**")
+    return pattern.strip('/').split('/')[-1] not in ('*', '**')
 
 
 def shared_section_warning(path: str, section: str, node_fqn: str, problems) -> str:
     """Return the warning for names a wildcard section gives that a node does not know."""
-    what = "parameters" if len(problems) > 1 else "a parameter"
+    what = 'parameters' if len(problems) > 1 else 'a parameter'
     return (f"params file {path}: section {section!r} gives {', '.join(problems)}, not "
             f"{what} of {node_fqn}: ignored here (another node's, in a file shared by every "
-            "node?)")
+            'node?)')
 
 
 @dataclass
@@ -228,7 +228,7 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
     for path in params_files:
         sections = read_params_file(path)
         if not any(section_matches(key, node_fqn) for key in sections):
-            raise ValueError(f"params file {path}: no section for node {node_fqn} "
+            raise ValueError(f'params file {path}: no section for node {node_fqn} '
                              f"(sections: {', '.join(sections)}); use '/**' or the "
                              "node's name")
         for key, values in sections.items():
@@ -237,7 +237,7 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
             names = {n for n in values if not n.startswith(QOS_OVERRIDES)}
             qos = {n for n in values if n.startswith(QOS_OVERRIDES)}
             if names_the_node(key):
-                check_known_names(names, known, f"params file {path} (for {node_fqn})",
+                check_known_names(names, known, f'params file {path} (for {node_fqn})',
                                   listed)
                 found.qos_overrides |= qos
             else:
@@ -248,7 +248,7 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
                 found.shared_qos_overrides.update({n: (path, key) for n in qos})
             in_files |= set(values)
     names = [n for n in given if not n.startswith(QOS_OVERRIDES) and n not in in_files]
-    check_known_names(names, known, f"-p for {node_fqn}", listed)
+    check_known_names(names, known, f'-p for {node_fqn}', listed)
     found.qos_overrides |= {n for n in given if n.startswith(QOS_OVERRIDES)
                             and n not in in_files}
     return found
@@ -256,7 +256,7 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
 
 def check_qos_override_sources(node_fqn: str, found: ParameterSources, declared,
                                listed: str = NODE_PARAMETERS_LISTED,
-                               why: str = "") -> list[str]:
+                               why: str = '') -> list[str]:
     """
     Check the qos_overrides.* names given against those a node declared.
 
@@ -265,7 +265,7 @@ def check_qos_override_sources(node_fqn: str, found: ParameterSources, declared,
     a warning, as check_parameter_sources treats other parameters.
     """
     check_known_names(found.qos_overrides, declared,
-                      f"qos_overrides for {node_fqn}{why}", listed)
+                      f'qos_overrides for {node_fqn}{why}', listed)
     by_section: dict = {}
     for name, where in found.shared_qos_overrides.items():
         by_section.setdefault(where, []).append(name)

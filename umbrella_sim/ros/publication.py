@@ -34,7 +34,7 @@ class PublicationEncoder:
     """The messages of a run's publications, keyed as messages.TOPICS (CDR bytes)."""
 
     def __init__(self, driver: RunDriver,
-                 marker_rate: float = NODE_PARAMETERS["marker_rate"].default):
+                 marker_rate: float = NODE_PARAMETERS['marker_rate'].default):
         self.driver = driver
         self.initial_energy = mechanical_energy(driver.initial)
         rate = driver.publish_rate
@@ -45,7 +45,7 @@ class PublicationEncoder:
         self._marker_encoders: dict = {}            # by (marker namespace, frame_prefix)
 
     def messages(self, s: Sample, marker_ns: str, magnification: float,
-                 frame_prefix: str = "") -> dict[str, bytes]:
+                 frame_prefix: str = '') -> dict[str, bytes]:
         """Return what the publication of s (RunDriver.publication()) publishes."""
         encoder = self._encoders.get(frame_prefix)
         if encoder is None:
@@ -58,6 +58,6 @@ class PublicationEncoder:
             if markers is None:
                 markers = self._marker_encoders[marker_ns, frame_prefix] = \
                     messages.MarkerEncoder(positions, marker_ns, frame_prefix)
-            out["markers"] = markers.encode(s.time, s.sleeve_position, positions)
+            out['markers'] = markers.encode(s.time, s.sleeve_position, positions)
         self.count += 1
         return out

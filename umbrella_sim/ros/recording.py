@@ -61,11 +61,11 @@ class RunRecording:
         for key, name in self.topics.items():
             topic = messages.TOPICS[key]
             recorder.add_channel(name, topic.type, (qos or {}).get(key, topic.qos))
-            resolved[topic.name.lstrip("/")] = name
-        for suffix in ("", REFUSED_SUFFIX, APPLIED_SUFFIX):   # (the last two as published)
+            resolved[topic.name.lstrip('/')] = name
+        for suffix in ('', REFUSED_SUFFIX, APPLIED_SUFFIX):   # (the last two as published)
             recorder.add_channel(command_topic + suffix, Float64,
                                  messages.COMMAND_ECHO_QOS if suffix else messages.COMMAND.qos)
-            resolved[messages.COMMAND.name.lstrip("/") + suffix] = command_topic + suffix
+            resolved[messages.COMMAND.name.lstrip('/') + suffix] = command_topic + suffix
         # so that the tools find each topic however it was remapped
         recorder.add_metadata(TOPICS_RECORD, resolved)
 
@@ -104,7 +104,7 @@ class RunRecording:
         """Start a new segment (a ~/reset) with these run records; keep the ended one's events."""
         return self.recorder.start_segment(
             metadata[PARAMETERS_RECORD], gap_ns=messages.stamp_ns(driver.step),
-            ended_events=events_metadata(ended_sim, fault)["umbrella_sim.events"])
+            ended_events=events_metadata(ended_sim, fault)['umbrella_sim.events'])
 
     def close(self, sim, accepted: int, refused: int, figures: dict,
               fault: str | None = None, extra: dict | None = None) -> None:
@@ -116,9 +116,9 @@ class RunRecording:
         """
         recorded = self.recorder.drained_counts()
         self.recorder.close({
-            COUNTS_RECORD: {"published": json.dumps(self.published),
-                            "commands_accepted": str(accepted),
-                            "commands_refused": str(refused), "recorded": json.dumps(recorded),
+            COUNTS_RECORD: {'published': json.dumps(self.published),
+                            'commands_accepted': str(accepted),
+                            'commands_refused': str(refused), 'recorded': json.dumps(recorded),
                             **(extra or {})},
             **events_metadata(sim, fault), **summary_metadata(figures)})
 
@@ -147,35 +147,35 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     sim = driver.sim
     encoder = PublicationEncoder(driver)
     recorder = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, sim.model,
-                                                 driver.backend, source="umbrella_sim simulate"))
-    rec = RunRecording(recorder, {key: "/" + t.name.lstrip("/")
+                                                 driver.backend, source='umbrella_sim simulate'))
+    rec = RunRecording(recorder, {key: '/' + t.name.lstrip('/')
                                   for key, t in messages.TOPICS.items()},
-                       "/" + messages.COMMAND.name)
-    state = {"next_diag": 1.0, "i_cmd": 0}
+                       '/' + messages.COMMAND.name)
+    state = {'next_diag': 1.0, 'i_cmd': 0}
     wall0 = _time.perf_counter()
     result = RunResult(params=sim.params.as_dict())
 
     def commands_until(t):
         # each command at its own time, as the node records one at receipt
-        while state["i_cmd"] < len(profile) and profile[state["i_cmd"]][0] <= t + 1e-12:
-            t_cmd, f_cmd = profile[state["i_cmd"]]
+        while state['i_cmd'] < len(profile) and profile[state['i_cmd']][0] <= t + 1e-12:
+            t_cmd, f_cmd = profile[state['i_cmd']]
             rec.command(Float64(data=float(f_cmd)), t_cmd)
-            state["i_cmd"] += 1
+            state['i_cmd'] += 1
 
     def publication(s):
         t = s.time
         if keep_samples:
             result.samples.append(s)
-        for key, msg in encoder.messages(s, "umbrella", marker_magnification).items():
+        for key, msg in encoder.messages(s, 'umbrella', marker_magnification).items():
             rec.publish(key, msg, t)
-        if t >= state["next_diag"] - 1e-12:
+        if t >= state['next_diag'] - 1e-12:
             wall = _time.perf_counter() - wall0
-            rec.publish("diagnostics", messages.diagnostics_msg(
-                t, "umbrella_sim offline: physics", DiagnosticStatus.OK, "offline",
-                {"sim_time_s": f"{t:.6f}", "measured_real_time_factor":
-                 f"{t / wall:.4f}" if wall > 0 else "inf", "steps": sim.steps,
-                 "physics_step_s": sim.h}), t)
-            state["next_diag"] += 1.0
+            rec.publish('diagnostics', messages.diagnostics_msg(
+                t, 'umbrella_sim offline: physics', DiagnosticStatus.OK, 'offline',
+                {'sim_time_s': f'{t:.6f}', 'measured_real_time_factor':
+                 f'{t / wall:.4f}' if wall > 0 else 'inf', 'steps': sim.steps,
+                 'physics_step_s': sim.h}), t)
+            state['next_diag'] += 1.0
 
     def chunk_done(chunk: Chunk):
         with deferred():    # a stop signal lands between chunks, never inside a write
@@ -183,9 +183,9 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
             for t, f in chunk.applied:      # at the step it acts from, as the node records
                 rec.applied(f, t)
             if chunk.lock is not None:
-                rec.publish("deployment_phase", messages.phase_msg("locked"), sim.time)
+                rec.publish('deployment_phase', messages.phase_msg('locked'), sim.time)
             if chunk.error is not None:
-                rec.publish("deployment_phase", messages.phase_msg("fault"), sim.time)
+                rec.publish('deployment_phase', messages.phase_msg('fault'), sim.time)
         if on_chunk is not None:
             on_chunk(chunk)
 
@@ -194,12 +194,12 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
             publication(s)
 
     try:
-        rec.publish("deployment_phase", messages.phase_msg("deploying"), 0.0)
+        rec.publish('deployment_phase', messages.phase_msg('deploying'), 0.0)
         commands_until(0.0)
         publication(driver.publication())
         result.error = driver.run(duration, on_chunk=chunk_done, on_publication=published)
     finally:    # interrupted: the summary of every step computed, as the node's at a stop
-        rec.close(sim, accepted=state["i_cmd"], refused=0, figures=driver.summary.figures(),
+        rec.close(sim, accepted=state['i_cmd'], refused=0, figures=driver.summary.figures(),
                   fault=result.error)
     result.steps, result.lock = sim.steps, sim.lock_event
     result.figures = driver.summary.figures()

@@ -26,7 +26,7 @@ from __future__ import annotations
 import os
 import sys
 
-PACKAGE = "umbrella_sim"
+PACKAGE = 'umbrella_sim'
 #: the directory above the umbrella_sim package (a source checkout's root holds package.xml)
 _ABOVE_PACKAGE = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -46,13 +46,13 @@ def share_dir(package: str = PACKAGE) -> str | None:
 
 def _roots() -> list[str]:
     roots = []
-    if os.path.isfile(os.path.join(_ABOVE_PACKAGE, "package.xml")):
+    if os.path.isfile(os.path.join(_ABOVE_PACKAGE, 'package.xml')):
         roots.append(_ABOVE_PACKAGE)
     indexed = share_dir()
     if indexed:
         roots.append(indexed)
-    roots.append(os.path.join(_ABOVE_PACKAGE, "..", "..", "..", "share", PACKAGE))
-    roots.append(os.path.join(sys.prefix, "share", PACKAGE))
+    roots.append(os.path.join(_ABOVE_PACKAGE, '..', '..', '..', 'share', PACKAGE))
+    roots.append(os.path.join(sys.prefix, 'share', PACKAGE))
     return roots
 
 

@@ -179,8 +179,8 @@ def interruptible(tool: str, kept: str):
             try:
                 return main(argv)
             except KeyboardInterrupt as exc:
-                how = str(exc) or "SIGINT"
-                print(f"{tool}: interrupted by {how}; {kept}", file=sys.stderr)
+                how = str(exc) or 'SIGINT'
+                print(f'{tool}: interrupted by {how}; {kept}', file=sys.stderr)
                 return EXIT_INTERRUPTED
             except BrokenPipeError:
                 stdout_reader_gone()

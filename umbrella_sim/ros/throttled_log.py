@@ -38,7 +38,7 @@ class ThrottledWarnings:
         if now - self._at.get(key, -math.inf) >= period:
             more = self._more.pop(key, 0)
             self._at[key] = now
-            self.logger.warning(text() + (f" ({more} more since the last such warning)"
-                                          if more else ""))
+            self.logger.warning(text() + (f' ({more} more since the last such warning)'
+                                          if more else ''))
         else:
             self._more[key] = self._more.get(key, 0) + 1

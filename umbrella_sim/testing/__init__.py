@@ -58,10 +58,10 @@ from .processes import (default_domain_id, DOMAIN_ID, DOMAIN_ID_ENV, NodeProcess
                         remove_stale_shm, reserve_domain, ros_env)
 from .summary import RunSummary, summarize_run, SUMMARY_AFTER_LOCK, summary_from_recording
 
-__all__ = ["antenna_factory", "default_domain_id", "DOMAIN_ID", "DOMAIN_ID_ENV", "NodeProcess",
-           "poll", "Probe", "probe", "remove_stale_shm", "reserve_domain", "ros_domain_id",
-           "ros_env", "RunSummary", "SimulatedAntenna", "summarize_run", "SUMMARY_AFTER_LOCK",
-           "summary_from_recording"]
+__all__ = ['antenna_factory', 'default_domain_id', 'DOMAIN_ID', 'DOMAIN_ID_ENV', 'NodeProcess',
+           'poll', 'Probe', 'probe', 'remove_stale_shm', 'reserve_domain', 'ros_domain_id',
+           'ros_env', 'RunSummary', 'SimulatedAntenna', 'summarize_run', 'SUMMARY_AFTER_LOCK',
+           'summary_from_recording']
 
 
 # ------------------------------------------------------------------ fixtures
@@ -71,7 +71,7 @@ except ImportError:                                    # pragma: no cover
     pytest = None
 
 if pytest is not None:
-    @pytest.fixture(scope="session")
+    @pytest.fixture(scope='session')
     def ros_domain_id() -> int:
         """Return the ROS domain of this session (UMBRELLA_TEST_DOMAIN_ID, else a free one)."""
         return DOMAIN_ID
@@ -89,7 +89,7 @@ if pytest is not None:
         started: list[SimulatedAntenna] = []
 
         def start(parameters: dict | None = None, **kwargs) -> SimulatedAntenna:
-            kwargs.setdefault("domain_id", ros_domain_id)
+            kwargs.setdefault('domain_id', ros_domain_id)
             antenna = SimulatedAntenna(parameters, **kwargs)
             started.append(antenna)
             return antenna

@@ -32,10 +32,10 @@ from ..ros.messages import PHASES, tip_deflection_figures
 
 
 # ------------------------------------------------------------------ antenna
-RESET_LINE = "reset: simulation restarted"
+RESET_LINE = 'reset: simulation restarted'
 
 
-LOCKED_RE = r"locked at t = ([0-9.]+) s"
+LOCKED_RE = r'locked at t = ([0-9.]+) s'
 
 
 class SimulatedAntenna:
@@ -54,7 +54,7 @@ class SimulatedAntenna:
     _count = 0          # probe node names stay unique within a process
     _live: dict = {}    # (domain, namespace) -> the NodeProcess of the last antenna there
 
-    def __init__(self, parameters: dict | None = None, namespace: str = "",
+    def __init__(self, parameters: dict | None = None, namespace: str = '',
                  record_path: str | None = None, domain_id: int | None = None,
                  probe: Probe | None = None, startup_timeout: float = 30.0):
         from diagnostic_msgs.msg import DiagnosticArray
@@ -69,39 +69,39 @@ class SimulatedAntenna:
             # the node runs in a temporary directory of its own (NodeProcess): a relative
             # path means the test's working directory, where the test will look for it
             record_path = os.path.abspath(os.path.expanduser(str(record_path)))
-            self.parameters["record_path"] = record_path
+            self.parameters['record_path'] = record_path
         else:                                  # recording is optional: off unless asked for
-            self.parameters.setdefault("record", False)
+            self.parameters.setdefault('record', False)
         self.record_path = record_path
-        self.namespace = namespace.strip("/")
+        self.namespace = namespace.strip('/')
         domain = (probe.domain_id if probe is not None
                   else DOMAIN_ID if domain_id is None else domain_id)
         self._key = (domain, self.namespace)
         other = SimulatedAntenna._live.get(self._key)
         if other is not None and other.running:
             raise ValueError(f"an antenna already runs in namespace '/{self.namespace}' on ROS "
-                             f"domain {domain}: their topics would be one; give each antenna "
-                             "its own namespace (namespace=...)")
-        prefix = f"/{self.namespace}/" if self.namespace else "/"
+                             f'domain {domain}: their topics would be one; give each antenna '
+                             'its own namespace (namespace=...)')
+        prefix = f'/{self.namespace}/' if self.namespace else '/'
         # relative names resolve under the namespace; absolute ones (/diagnostics) do not
-        self.topics = {key: t.name if t.name.startswith("/") else prefix + t.name
+        self.topics = {key: t.name if t.name.startswith('/') else prefix + t.name
                        for key, t in ros_io.TOPICS.items()}
-        self.topics["sleeve_force"] = prefix + ros_io.COMMAND.name
+        self.topics['sleeve_force'] = prefix + ros_io.COMMAND.name
         for key, suffix in ros_io.COMMAND_ECHO_SUFFIXES.items():   # sleeve_force/applied ...
-            self.topics[f"sleeve_force_{key}"] = prefix + ros_io.COMMAND.name + suffix
-        self._diag = ros_io.diagnostic_name(prefix + "umbrella_node")   # its status name
+            self.topics[f'sleeve_force_{key}'] = prefix + ros_io.COMMAND.name + suffix
+        self._diag = ros_io.diagnostic_name(prefix + 'umbrella_node')   # its status name
         self._own_probe = probe is None
         SimulatedAntenna._count += 1
-        self.probe = probe or Probe(f"antenna_probe_{SimulatedAntenna._count}",
+        self.probe = probe or Probe(f'antenna_probe_{SimulatedAntenna._count}',
                                     domain_id=domain_id)
         self.domain_id = self.probe.domain_id
-        for key, msg_type in (("joint_states", JointState), ("tip_deflection", PointStamped),
-                              ("peak_stress", Float64MultiArray),
-                              ("diagnostics", DiagnosticArray)):
+        for key, msg_type in (('joint_states', JointState), ('tip_deflection', PointStamped),
+                              ('peak_stress', Float64MultiArray),
+                              ('diagnostics', DiagnosticArray)):
             self.probe.subscribe(self.topics[key], msg_type, ros_io.TOPICS[key].qos)
-        self.probe.subscribe(self.topics["deployment_phase"], String, ros_io.LATCHED)
+        self.probe.subscribe(self.topics['deployment_phase'], String, ros_io.LATCHED)
         for key in ros_io.COMMAND_ECHO_SUFFIXES:
-            self.probe.subscribe(self.topics[f"sleeve_force_{key}"], Float64,
+            self.probe.subscribe(self.topics[f'sleeve_force_{key}'], Float64,
                                  ros_io.COMMAND_ECHO_QOS)
         self._float64 = Float64
         self._command_pub = None
@@ -116,20 +116,20 @@ class SimulatedAntenna:
                                            self.probe if self._own_probe else None, self._key)
         try:
             self.physics_step = float(self.node.wait_for_log(
-                r"physics step ([0-9.eE+-]+) s", timeout=startup_timeout).group(1))
+                r'physics step ([0-9.eE+-]+) s', timeout=startup_timeout).group(1))
             # (a node started paused published its t = 0 state before this probe matched:
             # the latched phase arrives late, a joint state would not)
-            first = "deployment_phase" if self.parameters.get("start_paused") else "joint_states"
+            first = 'deployment_phase' if self.parameters.get('start_paused') else 'joint_states'
             poll(lambda: self.probe.messages(self.topics[first]) or not self.node.running,
                  startup_timeout,
-                 lambda: f"no message on {self.topics[first]} within "
+                 lambda: f'no message on {self.topics[first]} within '
                          f"{startup_timeout} s of the node's start (node "
                          f"{'running' if self.node.running else 'exited'}); node output:\n"
-                         f"{self.node.output()[-2000:]}")
+                         f'{self.node.output()[-2000:]}')
             if not self.probe.messages(self.topics[first]):
-                raise AssertionError(f"the node exited (code {self.node.proc.returncode}) "
-                                     f"before its first message on {self.topics[first]}; "
-                                     f"node output:\n{self.node.output()[-2000:]}")
+                raise AssertionError(f'the node exited (code {self.node.proc.returncode}) '
+                                     f'before its first message on {self.topics[first]}; '
+                                     f'node output:\n{self.node.output()[-2000:]}')
         except BaseException:
             self.close()
             raise
@@ -155,7 +155,7 @@ class SimulatedAntenna:
         """Return the sleeve_force publisher, made and matched with the node's subscription."""
         if self._command_pub is None:
             from ..ros import messages as ros_io
-            self._command_pub = self.probe.publisher(self.topics["sleeve_force"], self._float64,
+            self._command_pub = self.probe.publisher(self.topics['sleeve_force'], self._float64,
                                                      ros_io.COMMAND.qos)
             self.probe.wait_for_subscribers(self._command_pub, timeout=timeout)
         return self._command_pub
@@ -172,7 +172,7 @@ class SimulatedAntenna:
         ``umbrella_sim simulate --force-profile`` (offline, the same physics).
         """
         rows = sorted(profile, key=lambda tf: tf[0])
-        self.wait_for("joint_states", lambda m: True, timeout, "a first joint state")
+        self.wait_for('joint_states', lambda m: True, timeout, 'a first joint state')
         self._command_publisher(timeout)    # matched first: its ~0.4 s not inside the profile
         t0 = self.sim_time()
         for t_rel, force in rows:
@@ -197,23 +197,23 @@ class SimulatedAntenna:
 
         request = SetParameters.Request(parameters=[
             Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])
-        results = self.probe.call(SetParameters, self._service("set_parameters"), request,
+        results = self.probe.call(SetParameters, self._service('set_parameters'), request,
                                   timeout).results
         for (name, value), r in zip(values.items(), results):
             if r.successful:
                 spec = REGISTRY.get(name)
                 (self._pending if spec is not None and spec.applies == RESET
                  else self.parameters)[name] = value
-        refused = [f"{name}: {r.reason}" for name, r in zip(values, results) if not r.successful]
+        refused = [f'{name}: {r.reason}' for name, r in zip(values, results) if not r.successful]
         if refused:
             raise AssertionError(f"parameters refused: {'; '.join(refused)}")
 
     def pause(self, paused: bool = True) -> None:
         """Pause (or resume) the simulation: ``~/pause``; sim time holds while paused."""
         from std_srvs.srv import SetBool
-        r = self.probe.call(SetBool, self._service("pause"), SetBool.Request(data=paused))
+        r = self.probe.call(SetBool, self._service('pause'), SetBool.Request(data=paused))
         if not r.success:
-            raise AssertionError(f"~/pause {paused}: refused: {r.message}")
+            raise AssertionError(f'~/pause {paused}: refused: {r.message}')
 
     def resume(self) -> None:
         """Resume a paused run (also the start of one made with ``start_paused``)."""
@@ -232,16 +232,16 @@ class SimulatedAntenna:
         """
         from std_srvs.srv import Trigger
         resets = self.node.output().count(RESET_LINE)
-        topic = self.topics["deployment_phase"]
+        topic = self.topics['deployment_phase']
 
         def runs_begun():
-            return [m.data for m in self.probe.messages(topic)].count("deploying")
+            return [m.data for m in self.probe.messages(topic)].count('deploying')
         begun = runs_begun()
         marks = {key: len(self._received(key)) for key, topic in self.topics.items()
                  if topic in self.probe.received}
-        r = self.probe.call(Trigger, self._service("reset"), Trigger.Request(), timeout)
+        r = self.probe.call(Trigger, self._service('reset'), Trigger.Request(), timeout)
         if not r.success:
-            raise AssertionError(f"~/reset refused: {r.message}")
+            raise AssertionError(f'~/reset refused: {r.message}')
         self._runs += 1
         self._marks = marks
         self.parameters.update(self._pending)     # the model parameters set apply now
@@ -250,34 +250,34 @@ class SimulatedAntenna:
              lambda: f"no '{RESET_LINE}' in the node's log within {timeout} s")
         poll(lambda: runs_begun() > begun, timeout,
              lambda: f"no new 'deploying' on {topic} within {timeout} s of ~/reset")
-        poll(lambda: self.messages("joint_states"), timeout,
+        poll(lambda: self.messages('joint_states'), timeout,
              lambda: f"no t = 0 state on {self.topics['joint_states']} within {timeout} s of "
-                     "~/reset")
+                     '~/reset')
 
     def _service(self, name: str) -> str:
-        return (f"/{self.namespace}" if self.namespace else "") + f"/umbrella_node/{name}"
+        return (f'/{self.namespace}' if self.namespace else '') + f'/umbrella_node/{name}'
 
     # --------------------------------------------------------------- waits
     def sim_time(self) -> float | None:
         """Stamp of the latest joint state of this run received (s); None before the first."""
-        states = self.messages("joint_states")
+        states = self.messages('joint_states')
         return _stamp(states[-1]) if states else None
 
     def _sim_time_text(self) -> str:
         t = self.sim_time()
-        return "no joint state yet" if t is None else f"latest stamp {t:.6f} s"
+        return 'no joint state yet' if t is None else f'latest stamp {t:.6f} s'
 
     def phases(self) -> list[str]:
         """Return the deployment phases of this run, in order ("deploying" first)."""
-        return [m.data for _, m in self._timed_run("deployment_phase")]
+        return [m.data for _, m in self._timed_run('deployment_phase')]
 
     def wait_for_phase(self, phase: str, timeout: float = 20.0) -> None:
         if phase not in PHASES:
             raise ValueError(f"phase {phase!r}: must be one of {', '.join(PHASES)}")
         poll(lambda: phase in self.phases(), timeout,
-             lambda: f"deployment_phase never became {phase!r} within {timeout} s on "
+             lambda: f'deployment_phase never became {phase!r} within {timeout} s on '
                      f"{self.topics['deployment_phase']} (saw {self.phases() or 'nothing'}; "
-                     f"{self._sim_time_text()}; node "
+                     f'{self._sim_time_text()}; node '
                      f"{'running' if self.node.running else 'exited'})")
 
     def wait_for_sim_time(self, t: float, timeout: float = 20.0) -> None:
@@ -286,18 +286,18 @@ class SimulatedAntenna:
             return now is not None and now >= t
 
         poll(reached, timeout,
-             lambda: f"sim time never reached {t:.6f} s within {timeout} s on "
+             lambda: f'sim time never reached {t:.6f} s within {timeout} s on '
                      f"{self.topics['joint_states']} ({self._sim_time_text()})")
 
-    def wait_for(self, key: str, predicate, timeout: float = 20.0, what: str = "the condition"):
+    def wait_for(self, key: str, predicate, timeout: float = 20.0, what: str = 'the condition'):
         """Return this run's first message on a node topic (``"joint_states"``...) that fits."""
         topic = self._received_topic(key)
 
         def failure():
             msgs = self.messages(key)
-            last = f"; last: {_brief(msgs[-1])}" if msgs else ""
-            return (f"no message on {topic} satisfying {what} within {timeout} s "
-                    f"(got {len(msgs)}{last})")
+            last = f'; last: {_brief(msgs[-1])}' if msgs else ''
+            return (f'no message on {topic} satisfying {what} within {timeout} s '
+                    f'(got {len(msgs)}{last})')
         return poll(lambda: [m for m in self.messages(key) if predicate(m)][:1], timeout,
                     failure)[0]
 
@@ -308,25 +308,25 @@ class SimulatedAntenna:
     def _received(self, key: str) -> list:
         """Return [(arrival, message)] received on a key's topic, this node's only."""
         timed = self.probe.timed(self._received_topic(key))
-        if key == "diagnostics":            # /diagnostics is every node's: this node's only
+        if key == 'diagnostics':            # /diagnostics is every node's: this node's only
             timed = [(a, m) for a, m in timed if m.status and m.status[0].name == self._diag]
         return timed
 
     def _timed_run(self, key: str) -> list:
         """Return [(arrival, message)] of this run on a topic the antenna receives."""
         timed = self._received(key)
-        if key == "deployment_phase":       # each run's phases start with "deploying"
-            starts = [i for i, (_, m) in enumerate(timed) if m.data == "deploying"]
+        if key == 'deployment_phase':       # each run's phases start with "deploying"
+            starts = [i for i, (_, m) in enumerate(timed) if m.data == 'deploying']
             return timed[starts[-1]:] if starts and self._runs else timed
         if not self._runs:
             return timed
-        if key != "diagnostics" and hasattr(timed[-1][1] if timed else None, "header"):
+        if key != 'diagnostics' and hasattr(timed[-1][1] if timed else None, 'header'):
             i = self._run_index(timed, self._marks.get(key, 0))
             return [] if i is None else timed[i:]
         # unstamped, or diagnostics (1 Hz: its first stamp of a new run need not fall below
         # the last of the old one): what arrived since the run's first joint state
-        states = self._received("joint_states")
-        i = self._run_index(states, self._marks.get("joint_states", 0))
+        states = self._received('joint_states')
+        i = self._run_index(states, self._marks.get('joint_states', 0))
         return [] if i is None else [(a, m) for a, m in timed if a >= states[i][0]]
 
     def _run_index(self, timed: list, mark: int) -> int | None:
@@ -349,11 +349,11 @@ class SimulatedAntenna:
         """Return the topic of a key the antenna receives (else ValueError: which it does)."""
         received = [k for k, name in self.topics.items() if name in self.probe.received]
         if key not in received:
-            what = ("receives" if key not in self.topics
-                    else "does not subscribe to it; it receives")
+            what = ('receives' if key not in self.topics
+                    else 'does not subscribe to it; it receives')
             raise ValueError(f"topic key {key!r}: the antenna {what} {', '.join(received)} "
-                             f"(subscribe to others with antenna.probe.subscribe"
-                             f"(antenna.topics[key], type, qos))")
+                             f'(subscribe to others with antenna.probe.subscribe'
+                             f'(antenna.topics[key], type, qos))')
         return self.topics[key]
 
     # --------------------------------------------------------- what happened
@@ -373,16 +373,16 @@ class SimulatedAntenna:
         message.  Exact (stamps to the nanosecond); the ``sleeve_force`` parameter's value,
         which acts from t = 0, is not a command and is not listed.
         """
-        values = [m.data for m in self.messages("sleeve_force_applied")]
-        states = self.messages("joint_states")
+        values = [m.data for m in self.messages('sleeve_force_applied')]
+        states = self.messages('joint_states')
         out = []
         for before, after in zip(states, states[1:]):
             if len(out) < len(values) and after.effort[2] != before.effort[2]:
                 if after.effort[2] != values[len(out)]:
                     raise AssertionError(
-                        f"joint_states effort {after.effort[2]!r} N at {_stamp(after):.9f} s "
-                        f"is not the applied command {values[len(out)]!r} N (applied: "
-                        f"{values})")
+                        f'joint_states effort {after.effort[2]!r} N at {_stamp(after):.9f} s '
+                        f'is not the applied command {values[len(out)]!r} N (applied: '
+                        f'{values})')
                 out.append((_stamp(before), after.effort[2]))
         return out
 
@@ -392,7 +392,7 @@ class SimulatedAntenna:
 
     def diagnostics(self) -> dict:
         """Return the key/values of the latest diagnostics message ({} before the first)."""
-        msgs = self.messages("diagnostics")
+        msgs = self.messages('diagnostics')
         return {kv.key: kv.value for kv in msgs[-1].status[0].values} if msgs else {}
 
     def summary(self, after_lock: float = SUMMARY_AFTER_LOCK,
@@ -410,52 +410,52 @@ class SimulatedAntenna:
         or taken in; a recording gives the exact figures (:func:`summary_from_recording`).
         """
         if after_lock is None or not after_lock > 0:
-            raise ValueError(f"after_lock={after_lock!r}: seconds of sim time after the lock "
-                             "(> 0); a live run has no end to summarise to (None, the whole "
-                             "run, is for summary_from_recording)")
-        self.wait_for_phase("locked", timeout)
+            raise ValueError(f'after_lock={after_lock!r}: seconds of sim time after the lock '
+                             '(> 0); a live run has no end to summarise to (None, the whole '
+                             'run, is for summary_from_recording)')
+        self.wait_for_phase('locked', timeout)
         lock = poll(self.lock_time, timeout, lambda: "no 'locked at' line in the node's log")
         end = lock + after_lock
         self.wait_for_sim_time(end, timeout)
         # joint_states sets the sim time; the tip and stress streams (one message each per
         # publication) may still be in flight behind it on a busy machine: wait for them too
-        tips = poll(lambda: [m for m in self.messages("tip_deflection")
+        tips = poll(lambda: [m for m in self.messages('tip_deflection')
                              if _stamp(m) > end + 1e-9][:1] and
-                    self.messages("tip_deflection"), timeout,
-                    lambda: f"tip_deflection never reached sim time {lock + after_lock:.6f} s "
-                            f"within {timeout} s")
-        poll(lambda: len(self.messages("peak_stress")) >= len(tips), timeout,
+                    self.messages('tip_deflection'), timeout,
+                    lambda: f'tip_deflection never reached sim time {lock + after_lock:.6f} s '
+                            f'within {timeout} s')
+        poll(lambda: len(self.messages('peak_stress')) >= len(tips), timeout,
              lambda: f"peak_stress lags tip_deflection ({len(self.messages('peak_stress'))} "
-                     f"vs {len(tips)} messages) after {timeout} s")
-        phase_arrival = next(t for t, m in self._timed_run("deployment_phase")
-                             if m.data == "locked")
-        tip = [(_stamp(m), tip_deflection_figures(m)["tip_transverse"])
-               for m in self.messages("tip_deflection")]
-        cut = next(a for a, m in self._timed_run("tip_deflection") if _stamp(m) > end + 1e-9)
+                     f'vs {len(tips)} messages) after {timeout} s')
+        phase_arrival = next(t for t, m in self._timed_run('deployment_phase')
+                             if m.data == 'locked')
+        tip = [(_stamp(m), tip_deflection_figures(m)['tip_transverse'])
+               for m in self.messages('tip_deflection')]
+        cut = next(a for a, m in self._timed_run('tip_deflection') if _stamp(m) > end + 1e-9)
 
         def when(arrival):  # no stamp: before, in or after the window by when it arrived
             return -math.inf if arrival <= phase_arrival else end if arrival < cut else math.inf
-        stress = [(when(arrival), peak_stress(m)) for arrival, m in self._timed_run("peak_stress")]
+        stress = [(when(arrival), peak_stress(m)) for arrival, m in self._timed_run('peak_stress')]
         from ..core.summary import deploy_start_of
 
         applied = self.applied_forces()
         out = summarize_run(applied, lock, deploy_start_of(self.parameters, applied) == 0.0,
                             tip, stress, after_lock)
-        window = f"({lock:.6f}, {end:.6f}] s of sim time"
+        window = f'({lock:.6f}, {end:.6f}] s of sim time'
         if out.stage2_samples == 0:
             first = min((t for t, _ in tip), default=math.inf)
             why = (f"its first tip message is at {first:.6f} s: this antenna's probe "
-                   "subscribed after the window" if first > end else
-                   "no publication falls in it: after_lock is shorter than a publication "
-                   "period")
-            raise AssertionError(f"no stage-2 tip samples in {window}: {why}; take a summary "
-                                 "of a window it saw, or summary_from_recording")
+                   'subscribed after the window' if first > end else
+                   'no publication falls in it: after_lock is shorter than a publication '
+                   'period')
+            raise AssertionError(f'no stage-2 tip samples in {window}: {why}; take a summary '
+                                 'of a window it saw, or summary_from_recording')
         if not any(w == end for w, _ in stress):
             raise AssertionError(
                 f"no peak_stress message of {window} received between the 'locked' phase "
-                "message and the first tip message past the window (messages on different "
-                "topics have no mutual order): take a longer after_lock, or "
-                "summary_from_recording")
+                'message and the first tip message past the window (messages on different '
+                'topics have no mutual order): take a longer after_lock, or '
+                'summary_from_recording')
         return out
 
     # ------------------------------------------------------------- lifetime

@@ -35,14 +35,14 @@ import time
 from typing import Any, Callable, Iterable
 
 #: environment variable that sets the default ROS domain of tests
-DOMAIN_ID_ENV = "UMBRELLA_TEST_DOMAIN_ID"
+DOMAIN_ID_ENV = 'UMBRELLA_TEST_DOMAIN_ID'
 
 
 #: the domains handed out by default, and where a process holding one says so (a lock file)
 FREE_DOMAINS = range(10, 100)
 
 
-_DOMAIN_LOCKS = os.path.join(tempfile.gettempdir(), "umbrella_sim_ros_domains")
+_DOMAIN_LOCKS = os.path.join(tempfile.gettempdir(), 'umbrella_sim_ros_domains')
 
 
 _held_domain_locks: list = []      # open lock files: a domain is held while its process lives
@@ -67,7 +67,7 @@ def reserve_domain(first: int) -> int:
     for k in range(span):
         domain = FREE_DOMAINS[(first - FREE_DOMAINS[0] + k) % span]
         try:
-            fh = open(os.path.join(_DOMAIN_LOCKS, f"{domain}.lock"), "a")
+            fh = open(os.path.join(_DOMAIN_LOCKS, f'{domain}.lock'), 'a')
         except OSError:
             continue
         try:
@@ -93,9 +93,9 @@ def default_domain_id() -> int:
     try:
         domain = int(value)
     except ValueError:
-        raise ValueError(f"{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232") from None
+        raise ValueError(f'{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232') from None
     if not 0 <= domain <= 232:
-        raise ValueError(f"{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232")
+        raise ValueError(f'{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232')
     return domain
 
 
@@ -109,9 +109,9 @@ def ros_env(domain_id: int | None = None) -> dict:
     # the domain goes in DOMAIN_ID_ENV too: a child that imports this module (a test helper,
     # a user's wrapper around the node) then has the same DOMAIN_ID instead of one from its pid
     env.update({DOMAIN_ID_ENV: domain}, ROS_DOMAIN_ID=domain,
-               ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               RMW_IMPLEMENTATION="rmw_fastrtps_cpp", PYTHONUNBUFFERED="1",
-               RCUTILS_LOGGING_BUFFERED_STREAM="0")
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               RMW_IMPLEMENTATION='rmw_fastrtps_cpp', PYTHONUNBUFFERED='1',
+               RCUTILS_LOGGING_BUFFERED_STREAM='0')
     return env
 
 
@@ -130,28 +130,28 @@ def poll(condition: Callable[[], Any], timeout: float, failure: Callable[[], str
 
 def _brief(msg, limit: int = 160) -> str:
     text = repr(msg)
-    return text if len(text) <= limit else text[:limit] + "..."
+    return text if len(text) <= limit else text[:limit] + '...'
 
 
 # ------------------------------------------------------------- shared memory
-_SHM = "/dev/shm/"
+_SHM = '/dev/shm/'
 
 
 def _shm_segments(pid: int) -> set[str]:
     """Fast DDS segments a live process has mapped or open."""
     found = set()
     try:
-        with open(f"/proc/{pid}/maps", encoding="utf-8", errors="replace") as fh:
+        with open(f'/proc/{pid}/maps', encoding='utf-8', errors='replace') as fh:
             for line in fh:
-                path = line.rstrip("\n").split(" ")[-1]
-                if path.startswith(_SHM + "fastrtps_"):
+                path = line.rstrip('\n').split(' ')[-1]
+                if path.startswith(_SHM + 'fastrtps_'):
                     found.add(path)
-        for fd in os.listdir(f"/proc/{pid}/fd"):
+        for fd in os.listdir(f'/proc/{pid}/fd'):
             try:
-                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+                target = os.readlink(f'/proc/{pid}/fd/{fd}')
             except OSError:
                 continue
-            if target.startswith(_SHM + "fastrtps_") or target.startswith(_SHM + "sem.fastrtps_"):
+            if target.startswith(_SHM + 'fastrtps_') or target.startswith(_SHM + 'sem.fastrtps_'):
                 found.add(target)
     except OSError:
         pass
@@ -161,10 +161,10 @@ def _shm_segments(pid: int) -> set[str]:
 def _segment_family(path: str) -> set[str]:
     """Return a segment, its lock file (_el) and its named semaphore (sem.<name>_mutex)."""
     name = os.path.basename(path)
-    name = name[len("sem."):] if name.startswith("sem.") else name
-    name = name[:-len("_mutex")] if name.endswith("_mutex") else name
-    name = name[:-len("_el")] if name.endswith("_el") else name
-    return {_SHM + name, _SHM + name + "_el", _SHM + "sem." + name + "_mutex"}
+    name = name[len('sem.'):] if name.startswith('sem.') else name
+    name = name[:-len('_mutex')] if name.endswith('_mutex') else name
+    name = name[:-len('_el')] if name.endswith('_el') else name
+    return {_SHM + name, _SHM + name + '_el', _SHM + 'sem.' + name + '_mutex'}
 
 
 def remove_stale_shm(paths: Iterable[str]) -> list[str]:
@@ -177,11 +177,11 @@ def remove_stale_shm(paths: Iterable[str]) -> list[str]:
     participant is gone, and a port file unlinked under it would cut it off from the domain.
     """
     families = [_segment_family(p) for p in set(paths)
-                if not os.path.basename(p).removeprefix("sem.").startswith("fastrtps_port")]
+                if not os.path.basename(p).removeprefix('sem.').startswith('fastrtps_port')]
     if not families:
         return []
     in_use: set[str] = set()
-    for entry in os.listdir("/proc"):
+    for entry in os.listdir('/proc'):
         if entry.isdigit():
             in_use |= _shm_segments(int(entry))
     removed = []
@@ -210,21 +210,21 @@ class NodeProcess:
     """
 
     def __init__(self, *ros_args: str, executable: list[str] | None = None,
-                 module: str = "umbrella_sim.node", parameters: dict | None = None,
+                 module: str = 'umbrella_sim.node', parameters: dict | None = None,
                  namespace: str | None = None, domain_id: int | None = None,
                  cwd: str | None = None):
         self.domain_id = DOMAIN_ID if domain_id is None else domain_id
         args = list(ros_args)
         if namespace:
-            args += ["-r", f"__ns:=/{namespace.strip('/')}"]
+            args += ['-r', f"__ns:=/{namespace.strip('/')}"]
         for name, value in (parameters or {}).items():
-            args += ["-p", f"{name}:={_ros_literal(value)}"]
-        fd, self.log_path = tempfile.mkstemp(prefix="umbrella_node-", suffix=".log")
-        self.log = os.fdopen(fd, "w+")
-        self.command = (executable or [sys.executable, "-m", module]) + ["--ros-args", *args]
+            args += ['-p', f'{name}:={_ros_literal(value)}']
+        fd, self.log_path = tempfile.mkstemp(prefix='umbrella_node-', suffix='.log')
+        self.log = os.fdopen(fd, 'w+')
+        self.command = (executable or [sys.executable, '-m', module]) + ['--ros-args', *args]
         # the node records by default into its working directory: unless cwd is given it
         # runs in a temporary one, removed by close(), so tests never leave bags behind
-        self._own_cwd = None if cwd else tempfile.mkdtemp(prefix="umbrella_node_")
+        self._own_cwd = None if cwd else tempfile.mkdtemp(prefix='umbrella_node_')
         self.cwd = cwd or self._own_cwd
         self.proc = subprocess.Popen(self.command, stdout=self.log, stderr=subprocess.STDOUT,
                                      env=ros_env(self.domain_id), start_new_session=True,
@@ -240,7 +240,7 @@ class NodeProcess:
         return self.proc.poll() is None
 
     def output(self) -> str:
-        with open(self.log_path, encoding="utf-8", errors="replace") as fh:
+        with open(self.log_path, encoding='utf-8', errors='replace') as fh:
             return fh.read()
 
     def wait_for_log(self, pattern: str, timeout: float = 20.0, count: int = 1):
@@ -251,12 +251,12 @@ class NodeProcess:
                 return matches[count - 1]
             if not self.running:
                 raise AssertionError(
-                    f"process exited (code {self.proc.returncode}) before {count} log "
-                    f"line(s) matching {pattern!r}; output:\n{self.output()}")
+                    f'process exited (code {self.proc.returncode}) before {count} log '
+                    f'line(s) matching {pattern!r}; output:\n{self.output()}')
             return None
         self.shm |= _shm_segments(self.pid)
-        return poll(found, timeout, lambda: f"no {count} log line(s) matching {pattern!r} "
-                                            f"within {timeout} s; output:\n{self.output()}")
+        return poll(found, timeout, lambda: f'no {count} log line(s) matching {pattern!r} '
+                                            f'within {timeout} s; output:\n{self.output()}')
 
     def stop(self, sig=signal.SIGTERM, timeout: float = 10.0) -> int:
         """
@@ -298,7 +298,7 @@ class NodeProcess:
 
 def _ros_literal(value) -> str:
     if isinstance(value, bool):
-        return "true" if value else "false"
+        return 'true' if value else 'false'
     if isinstance(value, float):
         return repr(value)
     return str(value)
@@ -308,14 +308,14 @@ def _ros_literal(value) -> str:
 class Probe:
     """The test's own rclpy node (its own context) spinning in a background thread."""
 
-    def __init__(self, name: str = "probe", domain_id: int | None = None):
+    def __init__(self, name: str = 'probe', domain_id: int | None = None):
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
 
         self.domain_id = DOMAIN_ID if domain_id is None else domain_id
-        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-        os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+        os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
         self.rclpy = rclpy
         self.context = rclpy.Context()
         # no rclpy signal handlers: Ctrl-C stays a KeyboardInterrupt of the test runner (which
@@ -363,13 +363,13 @@ class Probe:
     _poll = staticmethod(poll)
 
     def wait_for(self, topic: str, predicate=lambda m: True, timeout: float = 20.0,
-                 what: str = "the condition"):
+                 what: str = 'the condition'):
         """Return the first message on topic satisfying predicate, waiting for it."""
         def failure():
             msgs = self.messages(topic)
-            last = f"; last: {_brief(msgs[-1])}" if msgs else ""
-            return (f"no message on {topic} satisfying {what} within {timeout} s "
-                    f"(got {len(msgs)}{last})")
+            last = f'; last: {_brief(msgs[-1])}' if msgs else ''
+            return (f'no message on {topic} satisfying {what} within {timeout} s '
+                    f'(got {len(msgs)}{last})')
         found = poll(lambda: [m for m in self.messages(topic) if predicate(m)][:1], timeout,
                      failure)
         return found[0]
@@ -377,8 +377,8 @@ class Probe:
     def wait_for_count(self, topic: str, count: int, timeout: float = 20.0) -> list:
         """Return the first ``count`` messages on topic, waiting for them."""
         poll(lambda: len(self.messages(topic)) >= count, timeout,
-             lambda: f"fewer than {count} messages on {topic} within {timeout} s"
-                     f" (got {len(self.messages(topic))})")
+             lambda: f'fewer than {count} messages on {topic} within {timeout} s'
+                     f' (got {len(self.messages(topic))})')
         return self.messages(topic)[:count]
 
     def publisher(self, topic: str, msg_type, qos=10):
@@ -386,8 +386,8 @@ class Probe:
 
     def wait_for_subscribers(self, pub, count: int = 1, timeout: float = 20.0):
         poll(lambda: pub.get_subscription_count() >= count, timeout,
-             lambda: f"no {count} subscriber(s) on {pub.topic_name} within {timeout} s "
-                     f"(got {pub.get_subscription_count()})")
+             lambda: f'no {count} subscriber(s) on {pub.topic_name} within {timeout} s '
+                     f'(got {pub.get_subscription_count()})')
 
     def call(self, srv_type, name: str, request, timeout: float = 20.0):
         """
@@ -401,9 +401,9 @@ class Probe:
         if client is None:
             client = self._clients[key] = self.node.create_client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout):
-            raise AssertionError(f"service {name} not available within {timeout} s")
+            raise AssertionError(f'service {name} not available within {timeout} s')
         future = client.call_async(request)
-        poll(future.done, timeout, lambda: f"service {name} did not answer within {timeout} s",
+        poll(future.done, timeout, lambda: f'service {name} did not answer within {timeout} s',
              interval=0.002)
         return future.result()
 

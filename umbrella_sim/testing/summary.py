@@ -58,7 +58,7 @@ SUMMARY_AFTER_LOCK = STAGE2_WINDOW
 def peak_stress(msg) -> float:
     """Return the larger of the leaf's and the link's peak |sigma| of a peak_stress message."""
     figures = peak_stress_figures(msg)
-    return max(figures["peak_stress_leaf"], figures["peak_stress_link"])
+    return max(figures['peak_stress_leaf'], figures['peak_stress_link'])
 
 
 def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
@@ -109,16 +109,16 @@ def summary_from_recording(path: str,
     seg = log.segments()[-1]
     params = seg.params
     events = log.metadata.get(EVENTS_RECORD, {})      # the last segment's
-    lock_time = float(events["lock_time"]) if events.get("lock_time") else None
-    applied_topic = log.find_topic("sleeve_force/applied", required=False)
+    lock_time = float(events['lock_time']) if events.get('lock_time') else None
+    applied_topic = log.find_topic('sleeve_force/applied', required=False)
     applied = ([(t, m.data) for t, m in log.decoded(applied_topic, seg)]
                if applied_topic else [])
-    tip = [(t, tip_deflection_figures(m)["tip_transverse"])
-           for t, m in log.decoded(log.find_topic("tip_deflection"), seg)]
-    stress = [(t, peak_stress(m)) for t, m in log.decoded(log.find_topic("peak_stress"), seg)]
+    tip = [(t, tip_deflection_figures(m)['tip_transverse'])
+           for t, m in log.decoded(log.find_topic('tip_deflection'), seg)]
+    stress = [(t, peak_stress(m)) for t, m in log.decoded(log.find_topic('peak_stress'), seg)]
     if lock_time is None:          # a torn recording: the first 'locked' phase message
-        locked = [t for t, m in log.decoded(log.find_topic("deployment_phase"), seg)
-                  if m.data == "locked"]
+        locked = [t for t, m in log.decoded(log.find_topic('deployment_phase'), seg)
+                  if m.data == 'locked']
         lock_time = locked[0] if locked else None
     return summarize_run(applied, lock_time, deploy_start_of(params, applied) == 0.0, tip,
                          stress, after_lock)

@@ -26,7 +26,7 @@ import argparse
 import re
 
 #: a negative decimal number, with an optional exponent
-NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+NEGATIVE_NUMBER = re.compile(r'^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$')
 
 
 class ArgumentParser(argparse.ArgumentParser):

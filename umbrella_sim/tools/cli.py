@@ -40,65 +40,65 @@ class _Once(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None):
         if getattr(namespace, self.dest) is not None:
-            parser.error(f"{option_string} given twice (give each parameter once)")
+            parser.error(f'{option_string} given twice (give each parameter once)')
         setattr(namespace, self.dest, values)
 
 
 def make_parser() -> argparse.ArgumentParser:
-    ap = ArgumentParser(prog="umbrella_sim",
-                        description="Flexible umbrella-frame deployment simulator.")
-    ap.add_argument("--version", action="version", version=f"umbrella_sim {__version__}")
-    sub = ap.add_subparsers(dest="command", required=True)
-    sp = sub.add_parser("simulate", help="run one simulation offline",
-                        description="Run the physics core offline and report the result. "
-                                    "Units SI (m, s, N, Pa, rad).",
+    ap = ArgumentParser(prog='umbrella_sim',
+                        description='Flexible umbrella-frame deployment simulator.')
+    ap.add_argument('--version', action='version', version=f'umbrella_sim {__version__}')
+    sub = ap.add_subparsers(dest='command', required=True)
+    sp = sub.add_parser('simulate', help='run one simulation offline',
+                        description='Run the physics core offline and report the result. '
+                                    'Units SI (m, s, N, Pa, rad).',
                         formatter_class=argparse.RawDescriptionHelpFormatter,
-                        epilog="parameters (--set NAME=VALUE, or a --params file):\n"
-                               + "\n".join(parameter_help(SPECS.values())))
-    sp.add_argument("--params", metavar="FILE",
-                    help="ROS 2 params YAML (default: config/umbrella.yaml)")
-    sp.add_argument("--set", action="append", metavar="NAME=VALUE",
-                    help="override one parameter (repeatable; each parameter once, here or "
-                         "by its own option)")
-    sp.add_argument("--model", choices=SPECS["model"].choices, action=_Once)
-    sp.add_argument("--elements-per-segment", type=int, dest="elements_per_segment",
+                        epilog='parameters (--set NAME=VALUE, or a --params file):\n'
+                               + '\n'.join(parameter_help(SPECS.values())))
+    sp.add_argument('--params', metavar='FILE',
+                    help='ROS 2 params YAML (default: config/umbrella.yaml)')
+    sp.add_argument('--set', action='append', metavar='NAME=VALUE',
+                    help='override one parameter (repeatable; each parameter once, here or '
+                         'by its own option)')
+    sp.add_argument('--model', choices=SPECS['model'].choices, action=_Once)
+    sp.add_argument('--elements-per-segment', type=int, dest='elements_per_segment',
                     action=_Once)
-    sp.add_argument("--v0", type=float, action=_Once,
-                    help="initial sleeve velocity along Y (m/s)")
+    sp.add_argument('--v0', type=float, action=_Once,
+                    help='initial sleeve velocity along Y (m/s)')
     force = sp.add_mutually_exclusive_group()
-    force.add_argument("--force", type=float, action=_Once,
-                       help="constant sleeve force F_H >= 0 (N)")
-    force.add_argument("--force-profile", metavar="CSV",
-                       help="CSV of t,F rows: F_H held from each t until the next")
-    sp.add_argument("--lock", choices=SPECS["lock"].choices, action=_Once)
-    sp.add_argument("--time-step", type=float, dest="time_step", action=_Once,
-                    help="physics step (s)")
-    sp.add_argument("--duration", type=float, default=1.0, help="simulated time (s)")
-    sp.add_argument("--csv", metavar="FILE",
-                    help="write the time series of every physics step (its state at the "
+    force.add_argument('--force', type=float, action=_Once,
+                       help='constant sleeve force F_H >= 0 (N)')
+    force.add_argument('--force-profile', metavar='CSV',
+                       help='CSV of t,F rows: F_H held from each t until the next')
+    sp.add_argument('--lock', choices=SPECS['lock'].choices, action=_Once)
+    sp.add_argument('--time-step', type=float, dest='time_step', action=_Once,
+                    help='physics step (s)')
+    sp.add_argument('--duration', type=float, default=1.0, help='simulated time (s)')
+    sp.add_argument('--csv', metavar='FILE',
+                    help='write the time series of every physics step (its state at the '
                          "step's end; peak stresses: the largest over the step), streamed "
-                         "as the run goes")
-    sp.add_argument("--csv-state", action="store_true",
+                         'as the run goes')
+    sp.add_argument('--csv-state', action='store_true',
                     help="add q, q' and the fibre stress at every stress point to the CSV")
-    sp.add_argument("--json", action="store_true", help="print one JSON summary")
-    sp.add_argument("--mcap", metavar="BAG_DIR",
+    sp.add_argument('--json', action='store_true', help='print one JSON summary')
+    sp.add_argument('--mcap', metavar='BAG_DIR',
                     help="record the node's topics to a new bag directory (BAG_DIR/"
-                         "BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the same "
-                         "states and summary as without it when the physics step divides the "
+                         'BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the same '
+                         'states and summary as without it when the physics step divides the '
                          "publication period (the default's does; else the recording takes "
-                         "the largest step that does, as the node, and says so), but for "
-                         "energy_drift and constraint_residual_max, checked at each "
-                         "publication instead of each step (they differ in the last digits), "
-                         "and --csv, whose rows are then the publications")
-    sp.add_argument("--overwrite", action="store_true",
-                    help="replace an existing --csv file and --mcap recording (a directory "
-                         "of .mcap files and metadata.yaml, nothing else) when the run "
-                         "starts; without it an existing output is an error")
-    sp.add_argument("--publish-rate", type=float, default=None, dest="publish_rate",
+                         'the largest step that does, as the node, and says so), but for '
+                         'energy_drift and constraint_residual_max, checked at each '
+                         'publication instead of each step (they differ in the last digits), '
+                         'and --csv, whose rows are then the publications')
+    sp.add_argument('--overwrite', action='store_true',
+                    help='replace an existing --csv file and --mcap recording (a directory '
+                         'of .mcap files and metadata.yaml, nothing else) when the run '
+                         'starts; without it an existing output is an error')
+    sp.add_argument('--publish-rate', type=float, default=None, dest='publish_rate',
                     action=_Once,
-                    help="publication rate of the --mcap recording (Hz, sim time; also "
+                    help='publication rate of the --mcap recording (Hz, sim time; also '
                          "--set publish_rate=... or the params file's; default 100); the "
-                         "summary is the same at any rate whose period the step divides")
+                         'summary is the same at any rate whose period the step divides')
     sp.set_defaults(marker_magnification=None)
     sweep.add_parser(sub)
     return ap
@@ -106,34 +106,34 @@ def make_parser() -> argparse.ArgumentParser:
 
 #: text summary: key -> (unit, scale, format); keys in this order, then any others
 TEXT_FIELDS = {
-    "deploy_time": ("s", 1.0, ".6f"),
-    "deploy_start": ("s", 1.0, ".6f"),
-    "lock_time": ("s", 1.0, ".6f"),
-    "tip_deflection_max": ("mm", 1e3, ".4g"),
-    "tip_deflection_max_time": ("s", 1.0, ".4f"),
-    "stage2_tip_amplitude": ("mm", 1e3, ".4g"),
-    "stage2_tip_period": ("s", 1.0, ".5f"),
-    "stage2_window": ("s", 1.0, ".4f"),
-    "peak_stress_leaf": ("MPa", 1e-6, ".4g"),
-    "peak_stress_leaf_x": ("m", 1.0, ".4g"),
-    "peak_stress_leaf_time": ("s", 1.0, ".4f"),
-    "peak_stress_link": ("MPa", 1e-6, ".4g"),
-    "peak_stress_link_x": ("m", 1.0, ".4g"),
-    "peak_stress_link_time": ("s", 1.0, ".4f"),
-    "yield_strength": ("MPa", 1e-6, ".4g"),
-    "stress_ratio_max": ("-", 1.0, ".3g"),
-    "tip_deflection_ratio_max": ("% of l1+l2", 100.0, ".3g"),
-    "lock": ("", None, ""),
-    "lock_energy_before": ("J", 1.0, ".6g"),
-    "lock_energy_after": ("J", 1.0, ".6g"),
-    "lock_free_velocities": ("", None, ""),
-    "energy_drift": ("-", 1.0, ".2e"),
-    "constraint_residual_max": ("m, m/s", 1.0, ".1e"),
-    "final_time": ("s", 1.0, ".4f"),
-    "steps": ("", None, ""),
-    "wall_time": ("s", 1.0, ".2f"),
-    "real_time_factor": ("-", 1.0, ".3g"),
-    "figures_from": ("", None, ""),
+    'deploy_time': ('s', 1.0, '.6f'),
+    'deploy_start': ('s', 1.0, '.6f'),
+    'lock_time': ('s', 1.0, '.6f'),
+    'tip_deflection_max': ('mm', 1e3, '.4g'),
+    'tip_deflection_max_time': ('s', 1.0, '.4f'),
+    'stage2_tip_amplitude': ('mm', 1e3, '.4g'),
+    'stage2_tip_period': ('s', 1.0, '.5f'),
+    'stage2_window': ('s', 1.0, '.4f'),
+    'peak_stress_leaf': ('MPa', 1e-6, '.4g'),
+    'peak_stress_leaf_x': ('m', 1.0, '.4g'),
+    'peak_stress_leaf_time': ('s', 1.0, '.4f'),
+    'peak_stress_link': ('MPa', 1e-6, '.4g'),
+    'peak_stress_link_x': ('m', 1.0, '.4g'),
+    'peak_stress_link_time': ('s', 1.0, '.4f'),
+    'yield_strength': ('MPa', 1e-6, '.4g'),
+    'stress_ratio_max': ('-', 1.0, '.3g'),
+    'tip_deflection_ratio_max': ('% of l1+l2', 100.0, '.3g'),
+    'lock': ('', None, ''),
+    'lock_energy_before': ('J', 1.0, '.6g'),
+    'lock_energy_after': ('J', 1.0, '.6g'),
+    'lock_free_velocities': ('', None, ''),
+    'energy_drift': ('-', 1.0, '.2e'),
+    'constraint_residual_max': ('m, m/s', 1.0, '.1e'),
+    'final_time': ('s', 1.0, '.4f'),
+    'steps': ('', None, ''),
+    'wall_time': ('s', 1.0, '.2f'),
+    'real_time_factor': ('-', 1.0, '.3g'),
+    'figures_from': ('', None, ''),
 }
 
 
@@ -145,22 +145,22 @@ def format_summary(summary: dict) -> str:
     """
     lines = []
     keys = [k for k in TEXT_FIELDS if k in summary]
-    keys += sorted(k for k in summary if k not in TEXT_FIELDS and k not in ("warnings", "error"))
+    keys += sorted(k for k in summary if k not in TEXT_FIELDS and k not in ('warnings', 'error'))
     for key in keys:
         value = summary[key]
-        unit, scale, spec = TEXT_FIELDS.get(key, ("", None, ""))
+        unit, scale, spec = TEXT_FIELDS.get(key, ('', None, ''))
         if value is None:
-            text = "-"
+            text = '-'
         elif isinstance(value, list) and scale is None:
-            text = ", ".join(str(v) for v in value) or "-"
+            text = ', '.join(str(v) for v in value) or '-'
         elif isinstance(value, list):
-            text = " to ".join(format(v * scale, spec) for v in value) + f" {unit}"
+            text = ' to '.join(format(v * scale, spec) for v in value) + f' {unit}'
         elif scale is None or isinstance(value, str):
             text = str(value)
         else:
-            text = f"{format(value * scale, spec)} {unit}".rstrip()
-        lines.append(f"{key:28s} {text}")
-    return "\n".join(lines)
+            text = f'{format(value * scale, spec)} {unit}'.rstrip()
+        lines.append(f'{key:28s} {text}')
+    return '\n'.join(lines)
 
 
 class CsvStream:
@@ -183,7 +183,7 @@ class CsvStream:
                 self._out.write(chunk.block, chunk.lock_sample)
                 self.rows = self._out.rows
         except OSError as exc:
-            self.error = f"--csv {self.path}: {exc.strerror or exc}"
+            self.error = f'--csv {self.path}: {exc.strerror or exc}'
             self.close()
             try:
                 os.unlink(self.path)
@@ -195,51 +195,51 @@ class CsvStream:
             try:
                 self._out.close()
             except OSError as exc:
-                self.error = self.error or f"--csv {self.path}: {exc.strerror or exc}"
+                self.error = self.error or f'--csv {self.path}: {exc.strerror or exc}'
             self._out = None
 
 
 def write_stdout(text: str) -> bool:
     """Print text; False if the reader went away (``umbrella_sim simulate | head``)."""
-    return print_for_reader(lambda: sys.stdout.write(text + "\n"))
+    return print_for_reader(lambda: sys.stdout.write(text + '\n'))
 
 
-@interruptible("umbrella_sim", "what was written is complete (a --mcap recording is "
-               "finalised up to the interruption, --csv holds every step before it)")
+@interruptible('umbrella_sim', 'what was written is complete (a --mcap recording is '
+               'finalised up to the interruption, --csv holds every step before it)')
 def main(argv: list[str] | None = None) -> int:
     ap = make_parser()
     args = ap.parse_args(argv)
-    if args.command == "sweep":
+    if args.command == 'sweep':
         return sweep.main(args, ap)
     try:
         params = build_params(args)
         profile = (read_force_profile(args.force_profile, params)
                    if args.force_profile else None)
         if not (math.isfinite(args.duration) and args.duration > 0):
-            raise ValueError(f"--duration {args.duration}: must be > 0")
+            raise ValueError(f'--duration {args.duration}: must be > 0')
         if args.duration < physics_step_of(params) * (1.0 - 1e-9):   # (it ran no step)
-            raise ValueError(f"--duration {args.duration}: shorter than one physics step "
-                             f"({physics_step_of(params):g} s); the run takes every step "
-                             "that ends by then")
+            raise ValueError(f'--duration {args.duration}: shorter than one physics step '
+                             f'({physics_step_of(params):g} s); the run takes every step '
+                             'that ends by then')
         outputs = {}
-        for option, path, kind in (("--csv", args.csv, "file"),
-                                   ("--mcap", args.mcap, "recording")):
+        for option, path, kind in (('--csv', args.csv, 'file'),
+                                   ('--mcap', args.mcap, 'recording')):
             if path is not None:
                 outputs[option] = check_new_output(path, option,
                                                    kind if args.overwrite else None)
         if len(set(outputs.values())) < len(outputs):
-            raise ValueError(f"--csv and --mcap name the same path {args.csv}: give each "
-                             "output its own")
+            raise ValueError(f'--csv and --mcap name the same path {args.csv}: give each '
+                             'output its own')
         if args.csv_state and not args.csv:
-            raise ValueError("--csv-state adds columns to --csv FILE: give --csv too")
+            raise ValueError('--csv-state adds columns to --csv FILE: give --csv too')
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
-            raise ValueError(f"--publish-rate {args.publish_rate}: must be in [1, 5000] Hz")
+            raise ValueError(f'--publish-rate {args.publish_rate}: must be in [1, 5000] Hz')
         # the model, before the run (a ModelError names the parameters); --mcap's recording
         # builds its own on the publication grid
         driver = RunDriver(params, force_profile=profile)
     except ValueError as exc:
-        ap.exit(2, f"umbrella_sim: error: {exc}\n")
-    progress = (Progress(args.duration, lambda t: f"t = {t:.3f} of {args.duration:g} s")
+        ap.exit(2, f'umbrella_sim: error: {exc}\n')
+    progress = (Progress(args.duration, lambda t: f't = {t:.3f} of {args.duration:g} s')
                 if sys.stderr.isatty() and not args.json else None)
     csv = (CsvStream(args.csv, driver.initial, driver.sim.model if args.csv_state else None)
            if args.csv else None)
@@ -254,18 +254,18 @@ def main(argv: list[str] | None = None) -> int:
         if args.mcap:
             note = shortened_step_note(physics_step_of(params), args.publish_rate)
             if note:
-                print(f"umbrella_sim: note: the --mcap recording takes a {note}",
+                print(f'umbrella_sim: note: the --mcap recording takes a {note}',
                       file=sys.stderr)
             from ..ros.recording import record_offline
             try:
                 if args.overwrite:          # (the run starts now: the old one goes)
-                    remove_recording(outputs["--mcap"], "--mcap")
+                    remove_recording(outputs['--mcap'], '--mcap')
                 result = record_offline(params, args.mcap, args.duration, profile,
                                         publish_rate=args.publish_rate,
                                         marker_magnification=args.marker_magnification,
                                         on_chunk=on_chunk, states=args.csv_state)
             except ValueError as exc:
-                ap.exit(2, f"umbrella_sim: error: {exc}\n")
+                ap.exit(2, f'umbrella_sim: error: {exc}\n')
         else:
             result = simulate(params, args.duration, keep_samples=False, on_chunk=on_chunk,
                               states=args.csv_state, driver=driver)
@@ -275,23 +275,23 @@ def main(argv: list[str] | None = None) -> int:
     if progress:
         progress.close()
     summary = result.summary()
-    for text in summary.get("warnings", []):
-        print(f"umbrella_sim: warning: {text}", file=sys.stderr)
+    for text in summary.get('warnings', []):
+        print(f'umbrella_sim: warning: {text}', file=sys.stderr)
     reader_there = write_stdout(json.dumps(summary, indent=2, sort_keys=True) if args.json
                                 else format_summary(summary))
-    output_error = getattr(result, "recording_error", None) or (csv.error if csv else None)
+    output_error = getattr(result, 'recording_error', None) or (csv.error if csv else None)
     if output_error:
-        print(f"umbrella_sim: error: output incomplete: {output_error} (the summary above "
-              "is complete)", file=sys.stderr)
+        print(f'umbrella_sim: error: output incomplete: {output_error} (the summary above '
+              'is complete)', file=sys.stderr)
     if result.error:
-        kept = (f" (kept the {csv.rows} rows before it in {args.csv})"
-                if csv is not None and not csv.error else "")
-        print(f"umbrella_sim: error: {result.error}{kept}", file=sys.stderr)
+        kept = (f' (kept the {csv.rows} rows before it in {args.csv})'
+                if csv is not None and not csv.error else '')
+        print(f'umbrella_sim: error: {result.error}{kept}', file=sys.stderr)
         return 3
     if output_error:
         return 4
     return 0 if reader_there else EXIT_READER_GONE
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

@@ -43,8 +43,8 @@ from ..bag.reader import LogError
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader, raise_if_stopped
 
 
-__all__ = ["compare", "main", "plot", "print_table", "load_run", "THESIS_TABLE_6_1",
-           "THESIS_V02"]
+__all__ = ['compare', 'main', 'plot', 'print_table', 'load_run', 'THESIS_TABLE_6_1',
+           'THESIS_V02']
 
 
 def _spacing(t) -> float:
@@ -62,9 +62,9 @@ def _on_grid(t, y, grid, peak_hold: bool):
         return np.interp(grid, t, y)
     tol = 1e-9                      # stamps are exact to the recording's 1 ns
     period = grid[1] - grid[0] if len(grid) > 1 else 0.0     # (the first: one period too)
-    hi = np.searchsorted(t, grid + tol, side="right")
+    hi = np.searchsorted(t, grid + tol, side='right')
     lo = np.searchsorted(t, np.concatenate(([grid[0] - period], grid[:-1])) + tol,
-                         side="right")
+                         side='right')
     out = np.interp(grid, t, y)     # (a period with no sample of the finer run)
     for k in np.nonzero(hi > lo)[0]:
         out[k] = y[lo[k]:hi[k]].max()
@@ -87,48 +87,48 @@ def _diff(ref_t, ref_y, t, y, peak_hold: bool = False):
         sign = 1.0
     keep = (ref_t >= lo - 1e-9) & (ref_t <= hi + 1e-9)
     if keep.sum() < 2:
-        raise LogError("runs do not overlap in time")
+        raise LogError('runs do not overlap in time')
     d = sign * (_on_grid(t, y, ref_t[keep], peak_hold) - ref_y[keep])
     return float(np.abs(d).max()), float(np.sqrt(np.mean(d * d)))
 
 
 #: (name, unit, (t, y) of a run, y is a peak-hold over each publication period)
-SIGNALS = [("alpha1", "rad", lambda r: (r.t, r.alpha1), False),
-           ("alpha1_rate", "rad/s", lambda r: (r.t, r.alpha1_rate), False),
-           ("tip_deflection", "m", lambda r: (r.tip_t, r.tip_v), False),
-           ("peak_stress_leaf", "Pa", lambda r: (r.stress_t, r.peak_leaf), True),
-           ("peak_stress_link", "Pa", lambda r: (r.stress_t, r.peak_link), True)]
+SIGNALS = [('alpha1', 'rad', lambda r: (r.t, r.alpha1), False),
+           ('alpha1_rate', 'rad/s', lambda r: (r.t, r.alpha1_rate), False),
+           ('tip_deflection', 'm', lambda r: (r.tip_t, r.tip_v), False),
+           ('peak_stress_leaf', 'Pa', lambda r: (r.stress_t, r.peak_leaf), True),
+           ('peak_stress_link', 'Pa', lambda r: (r.stress_t, r.peak_link), True)]
 #: the text's unit of each SI unit of compare.json (one system: s, mm, MPa, rad)
-TEXT_UNITS = {"m": ("mm", 1e3), "Pa": ("MPa", 1e-6), "rad": ("rad", 1.0),
-              "rad/s": ("rad/s", 1.0), "s": ("s", 1.0)}
+TEXT_UNITS = {'m': ('mm', 1e3), 'Pa': ('MPa', 1e-6), 'rad': ('rad', 1.0),
+              'rad/s': ('rad/s', 1.0), 's': ('s', 1.0)}
 
 
 def compare(runs: list[Run], thesis: bool = False) -> dict:
     ref = runs[0]
-    out = {"reference": ref.label, "runs": []}
+    out = {'reference': ref.label, 'runs': []}
     for r in runs:
-        entry = {"label": r.label, "path": r.path, "model": r.params.get("model"),
-                 "elements_per_segment": r.params.get("elements_per_segment"),
-                 "v0": r.params.get("v0"), "deploy_time": r.deploy_time,
-                 "deploy_start": r.deploy_start, "lock_time": r.lock_time,
-                 "deploy_time_difference": (None if r.deploy_time is None or ref.deploy_time
+        entry = {'label': r.label, 'path': r.path, 'model': r.params.get('model'),
+                 'elements_per_segment': r.params.get('elements_per_segment'),
+                 'v0': r.params.get('v0'), 'deploy_time': r.deploy_time,
+                 'deploy_start': r.deploy_start, 'lock_time': r.lock_time,
+                 'deploy_time_difference': (None if r.deploy_time is None or ref.deploy_time
                                             is None else r.deploy_time - ref.deploy_time),
-                 "energy_drift": r.energy_drift, "differences": {}}
+                 'energy_drift': r.energy_drift, 'differences': {}}
         for name, unit, get, peak_hold in SIGNALS:
             rt, ry = get(ref)
             t, y = get(r)
             try:
                 mx, rms = _diff(rt, ry, t, y, peak_hold)
             except LogError as exc:     # which runs, and what each holds
-                raise LogError(f"{exc}: {ref.path} ({len(rt)} samples, t = {rt[0]:g} .. "
-                               f"{rt[-1]:g} s) and {r.path} ({len(t)} samples, t = "
-                               f"{t[0]:g} .. {t[-1]:g} s)") from None
-            entry["differences"][name] = {"max": mx, "rms": rms, "unit": unit}
-        entry["figures"] = r.figures()
-        entry["warnings"] = r.validity()
+                raise LogError(f'{exc}: {ref.path} ({len(rt)} samples, t = {rt[0]:g} .. '
+                               f'{rt[-1]:g} s) and {r.path} ({len(t)} samples, t = '
+                               f'{t[0]:g} .. {t[-1]:g} s)') from None
+            entry['differences'][name] = {'max': mx, 'rms': rms, 'unit': unit}
+        entry['figures'] = r.figures()
+        entry['warnings'] = r.validity()
         if thesis:
-            entry["thesis"] = thesis_figures(r.params)
-        out["runs"].append(entry)
+            entry['thesis'] = thesis_figures(r.params)
+        out['runs'].append(entry)
     return out
 
 
@@ -137,47 +137,47 @@ def print_table(result: dict, stream=None) -> None:
     w(f"reference run: {result['reference']}\n")
     w(f"{'run':<18} {'model':<9} {'N':>2} {'V0':>6} {'deploy (s)':>11} {'d deploy (s)':>13} "
       f"{'energy drift':>12}\n")
-    for e in result["runs"]:
-        dt = e["deploy_time"]
-        dd = e["deploy_time_difference"]
+    for e in result['runs']:
+        dt = e['deploy_time']
+        dd = e['deploy_time_difference']
         w(f"{e['label']:<18} {str(e['model']):<9} {str(e['elements_per_segment']):>2} "
           f"{e['v0']:>6g} {('%.7f' % dt) if dt is not None else '-':>11} "
           f"{('%+.3e' % dd) if dd is not None else '-':>13} "
           f"{('%.2e' % e['energy_drift']) if e['energy_drift'] is not None else '-':>12}\n")
-    w(f"\n{'run':<18} " + " ".join(f"{n + ' max/rms':>27}" for n, *_ in SIGNALS) + "\n")
-    for e in result["runs"]:
+    w(f"\n{'run':<18} " + ' '.join(f"{n + ' max/rms':>27}" for n, *_ in SIGNALS) + '\n')
+    for e in result['runs']:
         cells = []
         for n, unit, *_ in SIGNALS:
-            d = e["differences"][n]
+            d = e['differences'][n]
             unit, scale = TEXT_UNITS[unit]
             cells.append(f"{d['max'] * scale:>11.3e}/{d['rms'] * scale:.3e} {unit:<5}"[:27]
                          .rjust(27))
-        w(f"{e['label']:<18} " + " ".join(cells) + "\n")
-    w("\nfigures (stage-1 max tip deflection and time, stage-2 amplitude and period):\n")
-    for e in result["runs"]:
-        f = e["figures"]
+        w(f"{e['label']:<18} " + ' '.join(cells) + '\n')
+    w('\nfigures (stage-1 max tip deflection and time, stage-2 amplitude and period):\n')
+    for e in result['runs']:
+        f = e['figures']
 
-        def fmt(key, scale=1.0, spec=".4g", figures=f):
+        def fmt(key, scale=1.0, spec='.4g', figures=f):
             v = figures.get(key)
-            return "-" if v is None else format(v * scale, spec)
+            return '-' if v is None else format(v * scale, spec)
         line = (f"{e['label']:<18} deploy {fmt('deploy_time', 1, '.5f')} s, tip max "
                 f"{fmt('tip_deflection_max', 1e3)} mm at "
                 f"{fmt('tip_deflection_max_time', 1, '.3f')} s, "
                 f"stage 2 {fmt('stage2_tip_amplitude', 1e3)} mm / "
                 f"{fmt('stage2_tip_period', 1, '.4f')} s")
-        w(line + "\n")
+        w(line + '\n')
         w(f"{'':<18} peak |sigma| leaf {fmt('peak_stress_leaf', 1e-6)} MPa at "
           f"{fmt('peak_stress_leaf_time', 1, '.3f')} s, link {fmt('peak_stress_link', 1e-6)} "
           f"MPa at {fmt('peak_stress_link_time', 1, '.3f')} s; from {f.get('figures_from')}\n")
-        for text in e.get("warnings", []):
+        for text in e.get('warnings', []):
             w(f"{'':<18} warning: {text}\n")
-        th = e.get("thesis") or {}
-        if "deploy_time_deformable_fea" in th:
+        th = e.get('thesis') or {}
+        if 'deploy_time_deformable_fea' in th:
             w(f"{'':<18} thesis: deploy {th['deploy_time_deformable_fea']:.5f} s (deformable "
               f"FEA), {th['deploy_time_rigid_fea']:.5f} s (rigid FEA) (Table 6.1)\n")
-        elif list(th) == ["deploy_time"]:
+        elif list(th) == ['deploy_time']:
             w(f"{'':<18} thesis: deploy {th['deploy_time']:.4f} s (ch. 6, its flexible "
-              "model)\n")
+              'model)\n')
         elif th:
             w(f"{'':<18} thesis: deploy {fmt('deploy_time', 1, '.4f', th)} s, tip max "
               f"{fmt('tip_deflection_max', 1e3, '.3f', th)} mm at "
@@ -186,47 +186,47 @@ def print_table(result: dict, stream=None) -> None:
               f"~{fmt('stage2_tip_period', 1, '.2f', th)} s (ch. 6, read off its plots)\n")
 
 
-@interruptible("umbrella_compare", "--out may hold part of the outputs")
+@interruptible('umbrella_compare', '--out may hold part of the outputs')
 def main(argv: list[str] | None = None) -> int:
-    ap = ArgumentParser(prog="umbrella_compare", description=__doc__,
+    ap = ArgumentParser(prog='umbrella_compare', description=__doc__,
                         formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("logs", nargs="+", help="bag directories or .mcap files (first = reference)")
-    ap.add_argument("--out", required=True,
-                    help="new (or empty) directory for compare.json and the plots")
-    ap.add_argument("--overwrite", action="store_true",
-                    help="replace the outputs of an earlier umbrella_compare in --out (a "
-                         "directory of compare.json and .png files only)")
-    ap.add_argument("--segment", type=int, default=0,
-                    help="which segment of each log (a ~/reset starts a new one; default 0)")
-    ap.add_argument("--names", nargs="+", help="labels for the runs")
-    ap.add_argument("--thesis", action="store_true", help="add the thesis's numbers")
-    ap.add_argument("--no-plots", action="store_true")
-    ap.add_argument("--physics-rate", action="store_true",
+    ap.add_argument('logs', nargs='+', help='bag directories or .mcap files (first = reference)')
+    ap.add_argument('--out', required=True,
+                    help='new (or empty) directory for compare.json and the plots')
+    ap.add_argument('--overwrite', action='store_true',
+                    help='replace the outputs of an earlier umbrella_compare in --out (a '
+                         'directory of compare.json and .png files only)')
+    ap.add_argument('--segment', type=int, default=0,
+                    help='which segment of each log (a ~/reset starts a new one; default 0)')
+    ap.add_argument('--names', nargs='+', help='labels for the runs')
+    ap.add_argument('--thesis', action='store_true', help="add the thesis's numbers")
+    ap.add_argument('--no-plots', action='store_true')
+    ap.add_argument('--physics-rate', action='store_true',
                     help="re-run each log's recorded commands (as umbrella_replay "
-                         "--resimulate does) and draw the leaf angle, rate, acceleration, tip "
-                         "deflection and peak stresses from every physics step instead of the "
-                         "recorded samples")
-    ap.add_argument("--magnification", type=float, nargs=2, default=(200.0, 5.0),
-                    metavar=("STAGE1", "STAGE2"),
-                    help="deformation magnification of the shapes plot, at most (default "
-                         "200 5; each is reduced to a round number that keeps the shapes "
-                         "on the plot)")
-    ap.add_argument("--window", type=float, nargs=2, metavar=("T0", "T1"),
-                    help="sim-time span of the plots, s (default: from the start of the "
+                         '--resimulate does) and draw the leaf angle, rate, acceleration, tip '
+                         'deflection and peak stresses from every physics step instead of the '
+                         'recorded samples')
+    ap.add_argument('--magnification', type=float, nargs=2, default=(200.0, 5.0),
+                    metavar=('STAGE1', 'STAGE2'),
+                    help='deformation magnification of the shapes plot, at most (default '
+                         '200 5; each is reduced to a round number that keeps the shapes '
+                         'on the plot)')
+    ap.add_argument('--window', type=float, nargs=2, metavar=('T0', 'T1'),
+                    help='sim-time span of the plots, s (default: from the start of the '
                          "deployment to 8 periods of the locked frame's first mode after "
-                         "the lock; a run that never locks, all of it).  The table and "
-                         "compare.json are of the whole runs")
+                         'the lock; a run that never locks, all of it).  The table and '
+                         'compare.json are of the whole runs')
     args = ap.parse_args(argv)
     if not all(math.isfinite(m) and m > 0 for m in args.magnification):
-        ap.error(f"--magnification {args.magnification}: must be finite numbers > 0")
+        ap.error(f'--magnification {args.magnification}: must be finite numbers > 0')
     if args.window and not (all(math.isfinite(t) for t in args.window)
                             and args.window[0] < args.window[1]):
-        ap.error(f"--window {args.window[0]:g} {args.window[1]:g}: two finite times, "
-                 "T0 < T1")
+        ap.error(f'--window {args.window[0]:g} {args.window[1]:g}: two finite times, '
+                 'T0 < T1')
     if args.segment < 0:
-        ap.error(f"--segment {args.segment}: must be >= 0")
+        ap.error(f'--segment {args.segment}: must be >= 0')
     if args.names and len(args.names) != len(args.logs):
-        ap.error(f"--names: {len(args.names)} labels for {len(args.logs)} logs")
+        ap.error(f'--names: {len(args.names)} labels for {len(args.logs)} logs')
     if args.names and len(set(args.names)) != len(args.names):
         ap.error(f"--names {' '.join(args.names)}: each run needs a label of its own")
     names = args.names or [default_label(p) for p in args.logs]
@@ -238,13 +238,13 @@ def main(argv: list[str] | None = None) -> int:
         result = compare(runs, thesis=args.thesis)
         window = tuple(args.window) if args.window else default_window(runs)
         if not args.no_plots:
-            result["plot_window"] = list(window)
+            result['plot_window'] = list(window)
         if args.physics_rate and not args.no_plots:
             for r in runs:
                 r.physics = physics_run(r.path, args.segment, until=window[1])
     except LogError as exc:
         raise_if_stopped()           # (a stop signal inside a decoding: an interrupt)
-        print(f"umbrella_compare: error: {exc}", file=sys.stderr)
+        print(f'umbrella_compare: error: {exc}', file=sys.stderr)
         return 2
     # (umbrella_compare ... | head): the outputs are still written
     reader_there = print_for_reader(lambda: print_table(result))
@@ -253,23 +253,23 @@ def main(argv: list[str] | None = None) -> int:
         for name in _earlier_outputs(out) if args.overwrite else ():   # (now: replaced)
             os.unlink(os.path.join(out, name))
         if not args.no_plots:
-            result["plots"] = plot(runs, out, tuple(args.magnification), window)
-        with open(os.path.join(out, "compare.json"), "x", encoding="utf-8") as fh:
+            result['plots'] = plot(runs, out, tuple(args.magnification), window)
+        with open(os.path.join(out, 'compare.json'), 'x', encoding='utf-8') as fh:
             json.dump(result, fh, indent=2)
     except OSError as exc:
-        print(f"umbrella_compare: error: writing to {out}: {exc.strerror or exc} (the table "
-              "above is complete)", file=sys.stderr)
+        print(f'umbrella_compare: error: writing to {out}: {exc.strerror or exc} (the table '
+              'above is complete)', file=sys.stderr)
         return 4
     print(f"\nwrote {os.path.join(out, 'compare.json')}"
           + (f" and {len(result['plots'])} plots of t = {window[0]:.4g} .. {window[1]:.4g} s "
-             "(--window)" if "plots" in result else ""))
+             '(--window)' if 'plots' in result else ''))
     return 0 if reader_there else EXIT_READER_GONE
 
 
 def _earlier_outputs(path: str) -> list[str] | None:
     """Return the files of an earlier comparison in path, or None if it holds others."""
     names = os.listdir(path)
-    ours = [n for n in names if (n == "compare.json" or n.endswith(".png"))
+    ours = [n for n in names if (n == 'compare.json' or n.endswith('.png'))
             and os.path.isfile(os.path.join(path, n))
             and not os.path.islink(os.path.join(path, n))]
     return names if len(ours) == len(names) else None
@@ -281,19 +281,19 @@ def _check_out_dir(path: str, overwrite: bool = False) -> str:
 
     if os.path.isdir(path) and not os.path.islink(path):
         if os.listdir(path) and not overwrite:
-            raise LogError(f"--out {path}: directory is not empty, not overwriting "
+            raise LogError(f'--out {path}: directory is not empty, not overwriting '
                            "(--overwrite replaces an earlier comparison's outputs)")
         if overwrite and _earlier_outputs(path) is None:
             raise LogError(f"--out {path}: holds files other than an earlier comparison's "
-                           "(compare.json, .png), not overwriting them even with --overwrite")
+                           '(compare.json, .png), not overwriting them even with --overwrite')
         if not os.access(path, os.W_OK | os.X_OK):
-            raise LogError(f"--out {path}: directory is not writable")
+            raise LogError(f'--out {path}: directory is not writable')
         return path
     try:
-        return check_new_output(path, "--out")
+        return check_new_output(path, '--out')
     except ValueError as exc:
         raise LogError(str(exc)) from None
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

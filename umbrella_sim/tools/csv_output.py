@@ -32,25 +32,25 @@ from ..core.model import Stage
 from ..core.outputs import Sample, state_row, STEP_FIELDS, step_row, StepBlock
 
 #: the CSV's columns: every field of a step's row, stage as text first after time
-CSV_COLUMNS = ["time", "stage", "alpha1", "alpha2", "alpha1_rate", "alpha2_rate", "alpha1_accel",
-               "sleeve_position", "sleeve_velocity", "sleeve_force", "tip_axial",
-               "tip_transverse", "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_link",
-               "peak_stress_link_x", "stress_leaf_joint", "stress_link_mid",
-               "sleeve_reaction_x", "sleeve_reaction_y",
-               "kinetic_energy", "strain_energy", "work", "lock_energy_loss",
-               "constraint_residual", "damping_dissipation"]
+CSV_COLUMNS = ['time', 'stage', 'alpha1', 'alpha2', 'alpha1_rate', 'alpha2_rate', 'alpha1_accel',
+               'sleeve_position', 'sleeve_velocity', 'sleeve_force', 'tip_axial',
+               'tip_transverse', 'peak_stress_leaf', 'peak_stress_leaf_x', 'peak_stress_link',
+               'peak_stress_link_x', 'stress_leaf_joint', 'stress_link_mid',
+               'sleeve_reaction_x', 'sleeve_reaction_y',
+               'kinetic_energy', 'strain_energy', 'work', 'lock_energy_loss',
+               'constraint_residual', 'damping_dissipation']
 #: each column's unit, written in the header as 'name (unit)' (constraint_residual:
 #: max(|Phi|, |J q'|), a position's and a velocity's constraints)
-CSV_UNITS = {"time": "s", "stage": "", "alpha1": "rad", "alpha2": "rad", "alpha1_rate": "rad/s",
-             "alpha2_rate": "rad/s", "alpha1_accel": "rad/s^2", "sleeve_position": "m",
-             "sleeve_velocity": "m/s", "sleeve_force": "N", "tip_axial": "m",
-             "tip_transverse": "m", "peak_stress_leaf": "Pa", "peak_stress_leaf_x": "m",
-             "peak_stress_link": "Pa", "peak_stress_link_x": "m", "stress_leaf_joint": "Pa",
-             "stress_link_mid": "Pa", "sleeve_reaction_x": "N", "sleeve_reaction_y": "N",
-             "kinetic_energy": "J", "strain_energy": "J", "work": "J", "lock_energy_loss": "J",
-             "constraint_residual": "m or m/s", "damping_dissipation": "J"}
-_ROWS = [STEP_FIELDS.index(c) for c in CSV_COLUMNS if c != "stage"]
-_STAGE_ROW = STEP_FIELDS.index("stage")
+CSV_UNITS = {'time': 's', 'stage': '', 'alpha1': 'rad', 'alpha2': 'rad', 'alpha1_rate': 'rad/s',
+             'alpha2_rate': 'rad/s', 'alpha1_accel': 'rad/s^2', 'sleeve_position': 'm',
+             'sleeve_velocity': 'm/s', 'sleeve_force': 'N', 'tip_axial': 'm',
+             'tip_transverse': 'm', 'peak_stress_leaf': 'Pa', 'peak_stress_leaf_x': 'm',
+             'peak_stress_link': 'Pa', 'peak_stress_link_x': 'm', 'stress_leaf_joint': 'Pa',
+             'stress_link_mid': 'Pa', 'sleeve_reaction_x': 'N', 'sleeve_reaction_y': 'N',
+             'kinetic_energy': 'J', 'strain_energy': 'J', 'work': 'J', 'lock_energy_loss': 'J',
+             'constraint_residual': 'm or m/s', 'damping_dissipation': 'J'}
+_ROWS = [STEP_FIELDS.index(c) for c in CSV_COLUMNS if c != 'stage']
+_STAGE_ROW = STEP_FIELDS.index('stage')
 _STAGES = [str(s) for s in sorted(Stage, key=lambda s: s.code)]
 
 
@@ -61,11 +61,11 @@ def stress_point_labels(xs) -> list[str]:
     Stresses are recovered at both ends of every element, so an inner node has two: the
     element ending there (x-) and the one starting there (x+).
     """
-    texts = [f"{x:.6g}" for x in xs]
+    texts = [f'{x:.6g}' for x in xs]
     out = list(texts)
     for i in range(len(texts) - 1):
         if texts[i] == texts[i + 1]:
-            out[i], out[i + 1] = texts[i] + "-", texts[i + 1] + "+"
+            out[i], out[i + 1] = texts[i] + '-', texts[i + 1] + '+'
     return out
 
 
@@ -78,10 +78,10 @@ def state_columns(model) -> list[str]:
     as StepBlock.states holds them.  Names without units (header_names adds them).
     """
     labels = model.coordinate_labels()
-    cols = [f"q[{lab}]" for lab in labels] + [f"qd[{lab}]" for lab in labels]
-    for fibre in ("top", "bottom"):
-        for body, xs in (("leaf", model.leaf.stress_x), ("link", model.link.stress_x)):
-            cols += [f"sigma_{fibre}[{body}@{x}]" for x in stress_point_labels(xs)]
+    cols = [f'q[{lab}]' for lab in labels] + [f'qd[{lab}]' for lab in labels]
+    for fibre in ('top', 'bottom'):
+        for body, xs in (('leaf', model.leaf.stress_x), ('link', model.link.stress_x)):
+            cols += [f'sigma_{fibre}[{body}@{x}]' for x in stress_point_labels(xs)]
     return cols
 
 
@@ -89,16 +89,16 @@ def column_unit(name: str) -> str:
     """Return the unit of a column of the CSV ('' for stage)."""
     if name in CSV_UNITS:
         return CSV_UNITS[name]
-    if name.startswith("sigma_"):
-        return "Pa"
-    kind, coordinate = name[:-1].split("[", 1)          # q[leaf.u2], qd[alpha1], ...
-    angle = coordinate.startswith("alpha") or ".theta" in coordinate
-    return ("rad" if angle else "m") + ("/s" if kind == "qd" else "")
+    if name.startswith('sigma_'):
+        return 'Pa'
+    kind, coordinate = name[:-1].split('[', 1)          # q[leaf.u2], qd[alpha1], ...
+    angle = coordinate.startswith('alpha') or '.theta' in coordinate
+    return ('rad' if angle else 'm') + ('/s' if kind == 'qd' else '')
 
 
 def header_names(columns) -> list[str]:
     """Return the header's names: 'name (unit)', the stage column as its name."""
-    return [f"{c} ({column_unit(c)})" if column_unit(c) else c for c in columns]
+    return [f'{c} ({column_unit(c)})' if column_unit(c) else c for c in columns]
 
 
 class StepCsv:
@@ -112,11 +112,11 @@ class StepCsv:
         self.path = path
         self.with_states = model is not None
         self.columns = CSV_COLUMNS + (state_columns(model) if model is not None else [])
-        self._names = [f"c{i}" for i in range(len(self.columns))]
-        self._options = pyarrow.csv.WriteOptions(include_header=False, quoting_style="none")
+        self._names = [f'c{i}' for i in range(len(self.columns))]
+        self._options = pyarrow.csv.WriteOptions(include_header=False, quoting_style='none')
         self.rows = 0
-        self._fh = open(path, "wb")
-        self._fh.write((",".join(header_names(self.columns)) + "\n").encode("utf-8"))
+        self._fh = open(path, 'wb')
+        self._fh.write((','.join(header_names(self.columns)) + '\n').encode('utf-8'))
 
     def write_sample(self, s: Sample) -> None:
         """Append one state's row (t = 0, the instant of the lock)."""

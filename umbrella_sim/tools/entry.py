@@ -51,24 +51,24 @@ def _offline_tool(module: str, tool: str) -> int:
     if threading.current_thread() is threading.main_thread():
         signals.interrupt_on_stop_signals()
     try:
-        main = importlib.import_module(f"umbrella_sim.tools.{module}").main
+        main = importlib.import_module(f'umbrella_sim.tools.{module}').main
     except KeyboardInterrupt as exc:
         print(f"{tool}: interrupted by {str(exc) or 'SIGINT'} while starting; nothing was "
-              "done", file=sys.stderr)
+              'done', file=sys.stderr)
         return signals.EXIT_INTERRUPTED
     return main()
 
 
 def cli_main() -> int:
     """Run ``umbrella_sim`` (simulate, sweep)."""
-    return _offline_tool("cli", "umbrella_sim")
+    return _offline_tool('cli', 'umbrella_sim')
 
 
 def replay_main() -> int:
     """Run ``umbrella_replay``."""
-    return _offline_tool("replay", "umbrella_replay")
+    return _offline_tool('replay', 'umbrella_replay')
 
 
 def compare_main() -> int:
     """Run ``umbrella_compare``."""
-    return _offline_tool("compare", "umbrella_compare")
+    return _offline_tool('compare', 'umbrella_compare')

@@ -38,12 +38,12 @@ from ..ros.share import package_path
 
 def default_params_file() -> str | None:
     """Return the package's config/umbrella.yaml (the source checkout's, or installed)."""
-    return package_path("config", "umbrella.yaml")
+    return package_path('config', 'umbrella.yaml')
 
 
 def _number(text: str) -> float:
     """Return a CSV field as a number: Python's float forms but for digit separators (1_0)."""
-    if "_" in text:
+    if '_' in text:
         raise ValueError(text)
     return float(text)
 
@@ -67,52 +67,52 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
     model (params) accepts.
     """
     rows: list[tuple[float, float]] = []
-    text = read_text_input(path, "force profile").removeprefix("\ufeff")   # (Excel's BOM)
+    text = read_text_input(path, 'force profile').removeprefix('\ufeff')   # (Excel's BOM)
     try:
-        parsed = list(csv.reader(io.StringIO(text, newline="")))
+        parsed = list(csv.reader(io.StringIO(text, newline='')))
     except csv.Error as exc:
-        raise ValueError(f"force profile {path}: not CSV ({exc})") from None
+        raise ValueError(f'force profile {path}: not CSV ({exc})') from None
     first = True
     for lineno, row in enumerate(parsed, start=1):
-        if not row or row[0].strip().startswith("#"):
+        if not row or row[0].strip().startswith('#'):
             continue
         if len(row) < 2 or any(field.strip() for field in row[2:]):
-            raise ValueError(f"force profile {path}:{lineno}: expected two columns t,F, "
-                             f"got {row}")
+            raise ValueError(f'force profile {path}:{lineno}: expected two columns t,F, '
+                             f'got {row}')
         header, first = first and not any(map(_is_number, row[:2])), False
         if header:
             names = [field.strip().lower() for field in row[:2]]
-            if names[0].startswith("f") and names[1].startswith("t"):   # (any other names)
-                raise ValueError(f"force profile {path}:{lineno}: header {row[:2]}: the "
-                                 "columns are time then force (t,F), not force then time")
+            if names[0].startswith('f') and names[1].startswith('t'):   # (any other names)
+                raise ValueError(f'force profile {path}:{lineno}: header {row[:2]}: the '
+                                 'columns are time then force (t,F), not force then time')
             continue
         try:
             t, f = _number(row[0]), _number(row[1])
         except ValueError:
-            raise ValueError(f"force profile {path}:{lineno}: not numbers: {row[:2]}") from None
+            raise ValueError(f'force profile {path}:{lineno}: not numbers: {row[:2]}') from None
         if not math.isfinite(t) or t < 0.0:
-            raise ValueError(f"force profile {path}:{lineno}: time {t} must be finite and >= 0")
+            raise ValueError(f'force profile {path}:{lineno}: time {t} must be finite and >= 0')
         if rows and t < rows[-1][0]:
-            raise ValueError(f"force profile {path}:{lineno}: time {t} goes backwards")
+            raise ValueError(f'force profile {path}:{lineno}: time {t} goes backwards')
         if rows and t == rows[-1][0]:     # which one acts? one force per instant
-            raise ValueError(f"force profile {path}:{lineno}: time {t} given twice (the row "
-                             "before has it too): one force per instant")
+            raise ValueError(f'force profile {path}:{lineno}: time {t} given twice (the row '
+                             'before has it too): one force per instant')
         try:
             command_force(f, params or UmbrellaParams())
         except ValueError as exc:
-            raise ValueError(f"force profile {path}:{lineno}: {exc}") from None
+            raise ValueError(f'force profile {path}:{lineno}: {exc}') from None
         rows.append((t, f))
     if not rows:
-        raise ValueError(f"force profile {path}: no (t, F) rows")
+        raise ValueError(f'force profile {path}: no (t, F) rows')
     return rows
 
 
 #: node parameters that ``--set`` may give offline: they shape the --mcap recording
-RECORDING_PARAMS = ("publish_rate", "marker_magnification")
+RECORDING_PARAMS = ('publish_rate', 'marker_magnification')
 
 
 #: models whose lock is always plastic (a rigid mechanism stopped at a point)
-RIGID_MODELS = ("rigid", "rigid-fe")
+RIGID_MODELS = ('rigid', 'rigid-fe')
 
 
 def resolve_params(overrides: dict, params_file: str | None = None,
@@ -135,7 +135,7 @@ def resolve_params(overrides: dict, params_file: str | None = None,
             check_values({k: v for k, v in from_file.items()
                           if k in SPECS and k not in overrides})
         except ValueError as exc:
-            raise ValueError(f"params file {params_file}: {exc}") from None
+            raise ValueError(f'params file {params_file}: {exc}') from None
         values.update(from_file)
     for name in (*NODE_ONLY_PARAMS, *SHARED_NAMES):   # a file shared with the nodes: theirs
         values.pop(name, None)
@@ -155,21 +155,21 @@ def params_file_warnings(params_file: str) -> list[str]:
     An unknown name in a section naming umbrella_node is a ValueError (did you mean); in a
     '/**' section it is another node's: a warning naming it.
     """
-    return check_parameter_sources("/umbrella_node", [params_file], (), _KNOWN_IN_FILES,
+    return check_parameter_sources('/umbrella_node', [params_file], (), _KNOWN_IN_FILES,
                                    shared=SHARED_NAMES).warnings
 
 
 #: simulate's options that give a parameter: (argparse dest, parameter)
-CLI_FLAGS = (("model", "model"), ("elements_per_segment", "elements_per_segment"),
-             ("v0", "v0"), ("force", "sleeve_force"), ("lock", "lock"),
-             ("time_step", "time_step"), ("publish_rate", "publish_rate"))
+CLI_FLAGS = (('model', 'model'), ('elements_per_segment', 'elements_per_segment'),
+             ('v0', 'v0'), ('force', 'sleeve_force'), ('lock', 'lock'),
+             ('time_step', 'time_step'), ('publish_rate', 'publish_rate'))
 
 
 def _given_once(given: dict, name: str, how: str) -> None:
     """Record that the command line gives parameter name (how); refuse a second time."""
     if name in given:
-        raise ValueError(f"{how}: {name} is already given by {given[name]} (give each "
-                         "parameter once)")
+        raise ValueError(f'{how}: {name} is already given by {given[name]} (give each '
+                         'parameter once)')
     given[name] = how
 
 
@@ -183,34 +183,34 @@ def build_params(args) -> UmbrellaParams:
         if name in flags:
             _given_once(given, name, f"--{flag.replace('_', '-')} {flags[name]}")
     for item in args.set or []:
-        if "=" not in item:
-            raise ValueError(f"--set {item!r}: expected name=value")
-        name, value = (x.strip() for x in item.split("=", 1))
-        _given_once(given, name, f"--set {name}={value}")
+        if '=' not in item:
+            raise ValueError(f'--set {item!r}: expected name=value')
+        name, value = (x.strip() for x in item.split('=', 1))
+        _given_once(given, name, f'--set {name}={value}')
         if name in RECORDING_PARAMS:
             if not args.mcap:
                 raise ValueError(f"--set {name}={value}: a parameter of umbrella_node's "
-                                 "publication; offline it only shapes a --mcap recording "
-                                 "(the summary comes from every physics step whatever the "
-                                 "rate): add --mcap BAG_DIR")
+                                 'publication; offline it only shapes a --mcap recording '
+                                 '(the summary comes from every physics step whatever the '
+                                 'rate): add --mcap BAG_DIR')
             setattr(args, name, NODE_PARAMETERS[name].coerce(value))
             NODE_PARAMETERS[name].check(getattr(args, name))
             continue
         if name in NODE_PARAMETERS:
-            raise ValueError(f"--set {name}: a parameter of the live umbrella_node only, with "
-                             "no meaning offline (see --duration, --mcap, --publish-rate)")
-        check_known_names([name], SPECS, "--set")
+            raise ValueError(f'--set {name}: a parameter of the live umbrella_node only, with '
+                             'no meaning offline (see --duration, --mcap, --publish-rate)')
+        check_known_names([name], SPECS, '--set')
         values[name] = value
-        if name == "lock":
-            lock_given = f"--set lock={value}"
+        if name == 'lock':
+            lock_given = f'--set lock={value}'
     values.update({name: value for name, value in flags.items() if name in SPECS})
     if args.lock is not None:
-        lock_given = f"--lock {args.lock}"
+        lock_given = f'--lock {args.lock}'
     params_file = args.params or default_params_file()
     from_file = load_params_file(params_file) if params_file else {}
     params = resolve_params(values, params_file, from_file)
     for text in params_file_warnings(params_file) if params_file else ():
-        print(f"umbrella_sim: warning: {text}", file=sys.stderr)
+        print(f'umbrella_sim: warning: {text}', file=sys.stderr)
     check_lock_given(params, lock_given)
     # what shapes a --mcap recording: --publish-rate / --set, else the params file's (a file
     # shared with the node), else the node's default
@@ -222,7 +222,7 @@ def build_params(args) -> UmbrellaParams:
                 setattr(args, name, spec.coerce(from_file[name]))
                 spec.check(getattr(args, name))
             except ValueError as exc:
-                raise ValueError(f"params file {params_file}: {exc}") from None
+                raise ValueError(f'params file {params_file}: {exc}') from None
         elif getattr(args, name) is None:
             setattr(args, name, spec.default)
     return params
@@ -235,8 +235,8 @@ def check_lock_given(params: UmbrellaParams, given: str | None) -> None:
     A rigid model always stops plastically; a lock from a params file shared with flexible
     runs only gets the validity warning (outputs.lock_warning).
     """
-    if given and params.model in RIGID_MODELS and params.lock == "energy":
-        raise ValueError(f"{given}: does not apply to model {params.model}, whose lock "
-                         "is always plastic (a rigid mechanism stopped at a point keeps no "
-                         "kinetic energy to redistribute); use lock plastic or a flexible "
-                         "model")
+    if given and params.model in RIGID_MODELS and params.lock == 'energy':
+        raise ValueError(f'{given}: does not apply to model {params.model}, whose lock '
+                         'is always plastic (a rigid mechanism stopped at a point keeps no '
+                         'kinetic energy to redistribute); use lock plastic or a flexible '
+                         'model')

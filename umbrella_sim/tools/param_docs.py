@@ -31,27 +31,27 @@ import sys
 from ..core.registry import NOW, REGISTRY, RESET, START
 from ..ros.share import package_path
 
-PAGES = ("parameters.md", "node_parameters.md", "deploy_controller.md")
-_APPLIES = {RESET: "on `~/reset`", NOW: "at once", START: "read-only (at start)"}
-_BLOCK = re.compile(r"(<!-- BEGIN GENERATED: (\w+) -->\n).*?(<!-- END GENERATED: \2 -->)",
+PAGES = ('parameters.md', 'node_parameters.md', 'deploy_controller.md')
+_APPLIES = {RESET: 'on `~/reset`', NOW: 'at once', START: 'read-only (at start)'}
+_BLOCK = re.compile(r'(<!-- BEGIN GENERATED: (\w+) -->\n).*?(<!-- END GENERATED: \2 -->)',
                     re.S)
 
 
 def _cell(text: str) -> str:
-    return text.replace("|", "\\|")
+    return text.replace('|', '\\|')
 
 
 def table(group: str) -> str:
     """Return the markdown table of one parameter group."""
-    rows = ["| name | type | unit | default | range | applies | meaning |",
-            "|---|---|---|---|---|---|---|"]
+    rows = ['| name | type | unit | default | range | applies | meaning |',
+            '|---|---|---|---|---|---|---|']
     for p in REGISTRY.values():
         if p.group != group:
             continue
-        rng = _cell(p.range_text()) + (f"; {_cell(p.rule)}" if p.rule else "")
-        rows.append(f"| `{p.name}` | {p.type_name} | {p.unit} | {_cell(p.default_str)} | "
-                    f"{rng} | {_APPLIES[p.applies]} | {_cell(p.doc)} |")
-    return "\n".join(rows) + "\n"
+        rng = _cell(p.range_text()) + (f'; {_cell(p.rule)}' if p.rule else '')
+        rows.append(f'| `{p.name}` | {p.type_name} | {p.unit} | {_cell(p.default_str)} | '
+                    f'{rng} | {_APPLIES[p.applies]} | {_cell(p.doc)} |')
+    return '\n'.join(rows) + '\n'
 
 
 def render(text: str) -> str:
@@ -61,29 +61,29 @@ def render(text: str) -> str:
 
 def msg_docs_dir() -> str:
     """Return the msg_docs/ directory the tables are written in (the source checkout's)."""
-    return package_path("msg_docs") or "msg_docs"
+    return package_path('msg_docs') or 'msg_docs'
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description="Regenerate the parameter tables of msg_docs/.")
-    ap.add_argument("--check", action="store_true", help="only report stale pages")
-    ap.add_argument("--dir", default=msg_docs_dir(), help="the msg_docs directory")
+    ap = argparse.ArgumentParser(description='Regenerate the parameter tables of msg_docs/.')
+    ap.add_argument('--check', action='store_true', help='only report stale pages')
+    ap.add_argument('--dir', default=msg_docs_dir(), help='the msg_docs directory')
     args = ap.parse_args(argv)
     stale = []
     for page in PAGES:
         path = os.path.join(args.dir, page)
-        with open(path, encoding="utf-8") as fh:
+        with open(path, encoding='utf-8') as fh:
             text = fh.read()
         new = render(text)
         if new != text:
             stale.append(path)
             if not args.check:
-                with open(path, "w", encoding="utf-8") as fh:
+                with open(path, 'w', encoding='utf-8') as fh:
                     fh.write(new)
     for path in stale:
-        print(("out of date: " if args.check else "rewrote ") + path)
+        print(('out of date: ' if args.check else 'rewrote ') + path)
     return 1 if stale and args.check else 0
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

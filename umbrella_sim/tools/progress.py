@@ -31,15 +31,15 @@ class Progress:
         self.total, self.what, self.width = total, what, width
         self.done, self.failed = 0.0, 0
         self.stream = stream or sys.stderr     # (at call time: a redirected stderr)
-        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.tty = hasattr(self.stream, 'isatty') and self.stream.isatty()
         self.t0 = time.monotonic()
 
     @staticmethod
     def _hms(s: float) -> str:
         s = int(round(s))
-        return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+        return f'{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}'
 
-    def update(self, done: float, failed: bool = False, note: str = "") -> None:
+    def update(self, done: float, failed: bool = False, note: str = '') -> None:
         """Note that `done` of the total is reached (a failed item: counted as such)."""
         if not math.isfinite(done):         # (a chunk that took no step)
             return
@@ -52,12 +52,12 @@ class Progress:
                 f"{f', {self.failed} failed' if self.failed else ''}  elapsed "
                 f"{self._hms(elapsed)}  ETA {self._hms(eta) if math.isfinite(eta) else '-'}")
         if self.tty:
-            self.stream.write("\r" + line)
+            self.stream.write('\r' + line)
         else:
-            self.stream.write(line + (f"  ({note})" if note else "") + "\n")
+            self.stream.write(line + (f'  ({note})' if note else '') + '\n')
         self.stream.flush()
 
     def close(self) -> None:
         if self.tty and self.done:
-            self.stream.write("\n")
+            self.stream.write('\n')
             self.stream.flush()

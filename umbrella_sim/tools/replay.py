@@ -47,7 +47,7 @@ from ..ros.messages import (ABSOLUTE_TOPIC_NAMES, COMMAND, joint_state_figures,
 from ..ros.signals import interruptible, raise_if_stopped
 
 #: the node's command topic and its records (each as the node names it, before remapping)
-COMMAND_SUFFIXES = tuple(COMMAND.name + s for s in ("", REFUSED_SUFFIX, APPLIED_SUFFIX))
+COMMAND_SUFFIXES = tuple(COMMAND.name + s for s in ('', REFUSED_SUFFIX, APPLIED_SUFFIX))
 ACK_TIMEOUT_S = 3.5      # > Fast DDS's default 3 s heartbeat period, which prompts the acks
 
 
@@ -56,22 +56,22 @@ def _is_command(topic: str, log: LogData) -> bool:
     recorded = log.metadata.get(TOPICS_RECORD, {})
     if any(recorded.get(s) == topic for s in COMMAND_SUFFIXES):
         return True
-    return any(topic.endswith("/" + s) or topic == s for s in COMMAND_SUFFIXES)
+    return any(topic.endswith('/' + s) or topic == s for s in COMMAND_SUFFIXES)
 
 
 # ------------------------------------------------------------------- resimulate
 #: the signals compared, by the node's names (joint names for joint_states), and the Sample's
 #: figure each is (the link's joint: alpha2 - alpha1)
-SIGNALS = {"leaf_hinge": "alpha1", "link_hinge": "link_angle", "sleeve_slider": "sleeve_position",
-           "leaf_hinge_rate": "alpha1_rate", "sleeve_velocity": "sleeve_velocity",
-           "sleeve_force": "sleeve_force", "tip_axial": "tip_axial",
-           "tip_transverse": "tip_transverse", "peak_stress_leaf": "peak_stress_leaf",
-           "peak_stress_link": "peak_stress_link"}
+SIGNALS = {'leaf_hinge': 'alpha1', 'link_hinge': 'link_angle', 'sleeve_slider': 'sleeve_position',
+           'leaf_hinge_rate': 'alpha1_rate', 'sleeve_velocity': 'sleeve_velocity',
+           'sleeve_force': 'sleeve_force', 'tip_axial': 'tip_axial',
+           'tip_transverse': 'tip_transverse', 'peak_stress_leaf': 'peak_stress_leaf',
+           'peak_stress_link': 'peak_stress_link'}
 
 
 def _reference(s, name: str) -> float:
     """Return a Sample's figure of that name (link_angle: the link's joint, alpha2 - alpha1)."""
-    return s.alpha2 - s.alpha1 if name == "link_angle" else getattr(s, name)
+    return s.alpha2 - s.alpha1 if name == 'link_angle' else getattr(s, name)
 
 
 def resimulate(log: LogData) -> dict:
@@ -86,29 +86,29 @@ def resimulate(log: LogData) -> dict:
     """
     diffs = dict.fromkeys(SIGNALS, 0.0)
     scales = dict.fromkeys(SIGNALS, 0.0)
-    out = {"compared": 0, "max_abs_diff": diffs, "scale": scales, "segments": [],
-           "problems": []}
+    out = {'compared': 0, 'max_abs_diff': diffs, 'scale': scales, 'segments': [],
+           'problems': []}
     for seg in log.segments():
         res = _resimulate_segment(log, seg, diffs, scales)
-        out["compared"] += res["compared"]
-        out["segments"].append(res)
-        out["problems"] += [f"segment {seg.index}: {p}" for p in res["problems"]]
-    if out["compared"] == 0:
-        raise LogError(f"{log.path}: no joint_states messages to compare"
+        out['compared'] += res['compared']
+        out['segments'].append(res)
+        out['problems'] += [f'segment {seg.index}: {p}' for p in res['problems']]
+    if out['compared'] == 0:
+        raise LogError(f'{log.path}: no joint_states messages to compare'
                        + log.truncation_note())
     for group in SCALE_GROUPS:        # one scale for the signals of one quantity
         common = max(scales[name] for name in group)
         for name in group:
             scales[name] = common
-    out["relative_diff"] = {name: relative_difference(diffs[name], scales[name])
+    out['relative_diff'] = {name: relative_difference(diffs[name], scales[name])
                             for name in SIGNALS}
     return out
 
 
 #: signals that measure one quantity: relative to the larger's magnitude (the tip's axial
 #: displacement is ~10^-3 of its transverse one; round-off is of the deflection's size)
-SCALE_GROUPS = (("tip_axial", "tip_transverse"), ("peak_stress_leaf", "peak_stress_link"),
-                ("leaf_hinge", "link_hinge"))
+SCALE_GROUPS = (('tip_axial', 'tip_transverse'), ('peak_stress_leaf', 'peak_stress_link'),
+                ('leaf_hinge', 'link_hinge'))
 
 
 #: --resimulate's default tolerance, relative: the same build on the same machine gives 0;
@@ -120,19 +120,19 @@ DEFAULT_TOLERANCE = 1e-6
 
 def build_difference(log: LogData) -> str:
     """Say how the recording's integrator, build and floating-point environment differ."""
-    recorded = log.metadata.get("umbrella_sim.build", {})
+    recorded = log.metadata.get('umbrella_sim.build', {})
     notes = []
-    integrator = recorded.get("integrator", "an earlier one (unrecorded)")
+    integrator = recorded.get('integrator', 'an earlier one (unrecorded)')
     if integrator != INTEGRATOR_REVISION:
-        notes.append(f"recorded by another integrator ({integrator} there, "
-                     f"{INTEGRATOR_REVISION} here): the physics differs, in stage 2 at least")
+        notes.append(f'recorded by another integrator ({integrator} there, '
+                     f'{INTEGRATOR_REVISION} here): the physics differs, in stage 2 at least')
     here = build_environment()
     differ = [f"{k} {recorded.get(k, 'unrecorded')!r} there, {v!r} here"
               for k, v in here.items() if recorded.get(k) != v]
     if differ:
-        notes.append("recorded with another floating-point environment (" + "; ".join(differ)
-                     + "): round-off differs from the first step on")
-    return "; ".join(notes)
+        notes.append('recorded with another floating-point environment (' + '; '.join(differ)
+                     + '): round-off differs from the first step on')
+    return '; '.join(notes)
 
 
 def relative_difference(diff: float, scale: float) -> float:
@@ -153,33 +153,33 @@ def _segment_inputs(log: LogData, seg):
     p_all = seg.params
     try:
         params = recorded_params(p_all)
-        rate = float(p_all["publish_rate"])
-        step = float(p_all["physics_step"])
+        rate = float(p_all['publish_rate'])
+        step = float(p_all['physics_step'])
     except (KeyError, TypeError, ValueError) as exc:
-        raise LogError(f"{log.path}: segment {seg.index}: parameters cannot be used "
-                       f"({exc})") from None
+        raise LogError(f'{log.path}: segment {seg.index}: parameters cannot be used '
+                       f'({exc})') from None
     # the recorded step itself (a recording made under an earlier step rule replays at its
     # own step), if it is one a run can take: it divides the publication period
     if not (step > 0.0 and abs(physics_step(step, rate) - step) <= 1e-15):
-        raise LogError(f"{log.path}: physics step {step} cannot be reproduced: it does not "
-                       f"divide the publication period 1/{rate:g} s (a run would take "
+        raise LogError(f'{log.path}: physics step {step} cannot be reproduced: it does not '
+                       f'divide the publication period 1/{rate:g} s (a run would take '
                        f"{physics_step(step, rate) if step > 0.0 else 'none'})")
     params = params.with_physics_step(step)
     # the force history, the recorded fault and the last publication (only the few command
     # and phase records are decoded)
     applied, t_last, t_fault = [], 0.0, None
-    for key in ("sleeve_force/applied", "deployment_phase", "joint_states"):
+    for key in ('sleeve_force/applied', 'deployment_phase', 'joint_states'):
         topic = log.find_topic(key, required=False)
         for m in (log.iter_raw([topic]) if topic else ()):
             if not _in_segment(seg, m):
                 continue
             t = (m.log_time - seg.offset_ns) * 1e-9
-            if key == "joint_states":
+            if key == 'joint_states':
                 t_last = max(t_last, t)
                 continue
             msg = log.decode(m.topic, m.data)
-            if key == "deployment_phase":
-                if msg.data == "fault" and t_fault is None:
+            if key == 'deployment_phase':
+                if msg.data == 'fault' and t_fault is None:
                     t_fault = t
             else:
                 applied.append((t, msg.data))
@@ -187,7 +187,7 @@ def _segment_inputs(log: LogData, seg):
         schedule = ForceSchedule(step, params.sleeve_force, applied,
                                  check=lambda f: command_force(f, params))
     except ValueError as exc:
-        raise LogError(f"{log.path}: segment {seg.index}: sleeve_force/applied: {exc}") from None
+        raise LogError(f'{log.path}: segment {seg.index}: sleeve_force/applied: {exc}') from None
     return RunDriver(params, rate, force_profile=schedule), t_last, t_fault
 
 
@@ -204,8 +204,8 @@ def physics_series(log: LogData, seg, until: float | None = None) -> dict:
     or at until (sim time) if that comes first.
     """
     driver, t_last, t_fault = _segment_inputs(log, seg)
-    names = ("time", "alpha1", "alpha1_rate", "tip_transverse", "peak_stress_leaf",
-             "peak_stress_link")
+    names = ('time', 'alpha1', 'alpha1_rate', 'tip_transverse', 'peak_stress_leaf',
+             'peak_stress_link')
     parts = {n: [] for n in names}
 
     def on_chunk(chunk) -> None:
@@ -225,13 +225,13 @@ def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
     one.
     """
     driver, t_last, t_fault = _segment_inputs(log, seg)
-    topics = {"joint": log.find_topic("joint_states"),
-              "tip": log.find_topic("tip_deflection", required=False),
-              "peak": log.find_topic("peak_stress", required=False)}
+    topics = {'joint': log.find_topic('joint_states'),
+              'tip': log.find_topic('tip_deflection', required=False),
+              'peak': log.find_topic('peak_stress', required=False)}
     by_topic = {t: k for k, t in topics.items() if t}
     sim = driver.sim
-    res = {"index": seg.index, "compared": 0, "problems": [], "fault": None,
-           "recorded_fault": t_fault}
+    res = {'index': seg.index, 'compared': 0, 'problems': [], 'fault': None,
+           'recorded_fault': t_fault}
 
     def groups():
         group, t_group = {}, None
@@ -255,12 +255,12 @@ def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
         t_now = s.time
         while pending[0] is not None and pending[0][0] < t_now + 1e-9:
             t, group = pending[0]
-            if "joint" in group:
+            if 'joint' in group:
                 if abs(t - t_now) > 1e-9:
-                    raise LogError(f"{log.path}: recorded publication at t = {t} s is not on "
-                                   f"the re-simulated grid (t = {t_now})")
+                    raise LogError(f'{log.path}: recorded publication at t = {t} s is not on '
+                                   f'the re-simulated grid (t = {t_now})')
                 _compare_publication(s, group, diffs, scales)
-                res["compared"] += 1
+                res['compared'] += 1
             pending[0] = next(stream, None)
 
     compare_until(driver.publication())
@@ -271,32 +271,32 @@ def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
         t_end = max(t_end, t_fault + 1.0 / driver.publish_rate)
     error = driver.run(t_end, on_publication=compare_until)
     if error is not None:
-        res["fault"] = {"time": sim.time, "reason": error}
+        res['fault'] = {'time': sim.time, 'reason': error}
         if pending[0] is not None:
-            res["problems"].append(f"the re-simulation faulted at t = {sim.time:.9f} s "
-                                   f"({error}) where the log goes on to t = "
-                                   f"{pending[0][0]:.9f} s")
+            res['problems'].append(f'the re-simulation faulted at t = {sim.time:.9f} s '
+                                   f'({error}) where the log goes on to t = '
+                                   f'{pending[0][0]:.9f} s')
     if t_fault is not None:
         if error is None:
-            res["problems"].append(f"the log faults at t = {t_fault:.9f} s; "
-                                   "the re-simulation does not")
+            res['problems'].append(f'the log faults at t = {t_fault:.9f} s; '
+                                   'the re-simulation does not')
         elif abs(sim.time - t_fault) > 1e-9:
-            res["problems"].append(f"the log faults at t = {t_fault:.9f} s, the "
-                                   f"re-simulation at t = {sim.time:.9f} s")
+            res['problems'].append(f'the log faults at t = {t_fault:.9f} s, the '
+                                   f're-simulation at t = {sim.time:.9f} s')
     return res
 
 
 def _compare_publication(s, group: dict, diffs: dict, scales: dict) -> None:
-    rec = joint_state_figures(group["joint"])
-    if "tip" in group:
-        rec.update(tip_deflection_figures(group["tip"]))
-    if "peak" in group:
-        rec.update(peak_stress_figures(group["peak"]))
+    rec = joint_state_figures(group['joint'])
+    if 'tip' in group:
+        rec.update(tip_deflection_figures(group['tip']))
+    if 'peak' in group:
+        rec.update(peak_stress_figures(group['peak']))
     rec = {signal: rec[name] for signal, name in SIGNALS.items() if name in rec}
     ref = {signal: _reference(s, name) for signal, name in SIGNALS.items() if signal in rec}
     for name in rec:
         d = abs(rec[name] - ref[name])
-        diffs[name] = max(diffs[name], d if d == d else float("inf"))    # NaN counts as inf
+        diffs[name] = max(diffs[name], d if d == d else float('inf'))    # NaN counts as inf
         scales[name] = max(scales[name], abs(rec[name]))
 
 
@@ -311,15 +311,15 @@ def moved_topics(log: LogData, topics: list[str], namespace: str) -> tuple[dict,
     itself; the node's absolute topics (``/diagnostics``) stay.  Without it nothing moves.
     """
     names = {t: t for t in topics}
-    if namespace == "/":
-        return names, ""
+    if namespace == '/':
+        return names, ''
 
-    recorded = posixpath.dirname(log.find_topic("joint_states"))
-    under = recorded.rstrip("/") + "/"
+    recorded = posixpath.dirname(log.find_topic('joint_states'))
+    under = recorded.rstrip('/') + '/'
     for t in topics:
         if t.startswith(under) and t not in ABSOLUTE_TOPIC_NAMES:
-            names[t] = namespace.rstrip("/") + "/" + t[len(under):]
-    return names, f" (topics under {recorded} moved to {namespace})"
+            names[t] = namespace.rstrip('/') + '/' + t[len(under):]
+    return names, f' (topics under {recorded} moved to {namespace})'
 
 
 class RosArgumentsError(ValueError):
@@ -345,31 +345,31 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
             raise LogError(f"{log.path}: topics not in the log: {', '.join(missing)}")
     total = sum(log.count(t) for t in chosen)
     if total == 0:
-        raise LogError(f"{log.path}: nothing to replay{log.truncation_note()}")
+        raise LogError(f'{log.path}: nothing to replay{log.truncation_note()}')
     first = next(log.iter_raw(chosen))
     t0 = first.log_time + int(round(start_offset * 1e9))
     if log.time_range[1] is not None and t0 > log.time_range[1]:
-        raise LogError(f"{log.path}: --start-offset {start_offset} s is past the end of the log")
+        raise LogError(f'{log.path}: --start-offset {start_offset} s is past the end of the log')
     # SIGINT/SIGTERM raise KeyboardInterrupt here (stop_signals.interruptible), with the context
     # still valid for the acknowledgements below; rclpy's own handlers would shut it down
     # first, and waiting for them then raised RCLError
     try:
-        rclpy.init(args=["umbrella_replay", "--ros-args", *ros_args],
+        rclpy.init(args=['umbrella_replay', '--ros-args', *ros_args],
                    signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:    # RCLError, UnknownROSArgsError: the arguments are wrong
-        reason = " ".join(str(exc).split())
-        if type(exc).__name__ == "UnknownROSArgsError":
-            reason = f"unknown ROS arguments {reason}"
-        raise RosArgumentsError(f"invalid ROS arguments: {reason}") from None
+        reason = ' '.join(str(exc).split())
+        if type(exc).__name__ == 'UnknownROSArgsError':
+            reason = f'unknown ROS arguments {reason}'
+        raise RosArgumentsError(f'invalid ROS arguments: {reason}') from None
     try:
-        node = rclpy.create_node("umbrella_replay")
+        node = rclpy.create_node('umbrella_replay')
     except InvalidParameterTypeException as exc:      # -p use_sim_time:=abc
         rclpy.try_shutdown()
         raise RosArgumentsError(wrong_type_text(None, exc)) from None
     names, moved = moved_topics(log, chosen, node.get_namespace())
     pubs = {t: node.create_publisher(log.msg_type(t), names[t],
                                      qos_from_yaml(log.channels[t][1])) for t in chosen}
-    print(f"replaying up to {total} messages on {len(pubs)} topics from {log.path} at "
+    print(f'replaying up to {total} messages on {len(pubs)} topics from {log.path} at '
           f"{rate:g}x{' (truncated log)' if log.truncated else ''}{moved}", flush=True)
     sent = 0
     try:        # a stop while waiting for subscribers ends like one while replaying
@@ -380,7 +380,7 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
                 if time.monotonic() > deadline:
                     idle = sorted(names[t] for t, p in pubs.items()
                                   if p.get_subscription_count() == 0)
-                    print(f"no subscriber after {wait_for_subscribers:g} s on: "
+                    print(f'no subscriber after {wait_for_subscribers:g} s on: '
                           f"{', '.join(idle)}; replaying anyway", flush=True)
                     break
                 time.sleep(0.05)
@@ -406,103 +406,103 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
         unacked = [t for t, pub in pubs.items()
                    if not pub.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))]
         if unacked:
-            print(f"not acknowledged by every subscriber within {ACK_TIMEOUT_S:g} s: "
+            print(f'not acknowledged by every subscriber within {ACK_TIMEOUT_S:g} s: '
                   f"{', '.join(unacked)}", flush=True)
         node.destroy_node()
         rclpy.try_shutdown()
-    print(f"replayed {sent} messages", flush=True)
+    print(f'replayed {sent} messages', flush=True)
     return 0
 
 
-@interruptible("umbrella_replay", "nothing was written")
+@interruptible('umbrella_replay', 'nothing was written')
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     ros_args = []
-    if "--ros-args" in argv:
-        i = argv.index("--ros-args")
+    if '--ros-args' in argv:
+        i = argv.index('--ros-args')
         argv, ros_args = argv[:i], argv[i + 1:]
-    ap = ArgumentParser(prog="umbrella_replay", description=__doc__,
+    ap = ArgumentParser(prog='umbrella_replay', description=__doc__,
                         formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("log", help="bag directory or .mcap file")
-    ap.add_argument("--rate", type=float, default=None, help="playback rate factor (1)")
-    ap.add_argument("--start-offset", type=float, default=0.0,
-                    help="skip the first S seconds of the log")
-    ap.add_argument("--loop", action="store_true", help="replay until interrupted")
-    ap.add_argument("--topics", nargs="+", help="only these topics")
-    ap.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="SECONDS",
-                    help="before replaying, wait up to SECONDS until every replayed topic "
-                         "has a subscriber")
-    ap.add_argument("--with-commands", action="store_true",
-                    help="also republish the recorded sleeve_force commands")
-    ap.add_argument("--resimulate", action="store_true",
-                    help="re-run the physics from the log and compare, no ROS traffic")
-    ap.add_argument("--tolerance", type=float, default=None,
-                    help="largest accepted difference for --resimulate, relative to the "
+    ap.add_argument('log', help='bag directory or .mcap file')
+    ap.add_argument('--rate', type=float, default=None, help='playback rate factor (1)')
+    ap.add_argument('--start-offset', type=float, default=0.0,
+                    help='skip the first S seconds of the log')
+    ap.add_argument('--loop', action='store_true', help='replay until interrupted')
+    ap.add_argument('--topics', nargs='+', help='only these topics')
+    ap.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='SECONDS',
+                    help='before replaying, wait up to SECONDS until every replayed topic '
+                         'has a subscriber')
+    ap.add_argument('--with-commands', action='store_true',
+                    help='also republish the recorded sleeve_force commands')
+    ap.add_argument('--resimulate', action='store_true',
+                    help='re-run the physics from the log and compare, no ROS traffic')
+    ap.add_argument('--tolerance', type=float, default=None,
+                    help='largest accepted difference for --resimulate, relative to the '
                          "largest recorded magnitude of the signal's quantity (>= 0; "
-                         f"{DEFAULT_TOLERANCE:g})")
+                         f'{DEFAULT_TOLERANCE:g})')
     args = ap.parse_args(argv)
     # argument values: an argparse usage error (exit 2) before any file is read
     if args.resimulate:     # what only republishing takes: refused, not ignored
         given = [flag for flag, value in (
-            ("--rate", args.rate is not None), ("--start-offset", args.start_offset != 0.0),
-            ("--loop", args.loop), ("--topics", args.topics),
-            ("--wait-for-subscribers", args.wait_for_subscribers != 0.0),
-            ("--with-commands", args.with_commands), ("--ros-args", ros_args)) if value]
+            ('--rate', args.rate is not None), ('--start-offset', args.start_offset != 0.0),
+            ('--loop', args.loop), ('--topics', args.topics),
+            ('--wait-for-subscribers', args.wait_for_subscribers != 0.0),
+            ('--with-commands', args.with_commands), ('--ros-args', ros_args)) if value]
         if given:
             ap.error(f"{', '.join(given)}: options of republishing; --resimulate re-runs the "
-                     "whole log without ROS traffic")
+                     'whole log without ROS traffic')
     elif args.tolerance is not None:
-        ap.error("--tolerance: an option of --resimulate (republishing compares nothing)")
+        ap.error('--tolerance: an option of --resimulate (republishing compares nothing)')
     args.rate = 1.0 if args.rate is None else args.rate
     args.tolerance = DEFAULT_TOLERANCE if args.tolerance is None else args.tolerance
     if not (math.isfinite(args.tolerance) and args.tolerance >= 0):
-        ap.error(f"--tolerance {args.tolerance}: must be a finite number >= 0")
+        ap.error(f'--tolerance {args.tolerance}: must be a finite number >= 0')
     if not (math.isfinite(args.rate) and 1e-6 <= args.rate <= 1e6):
-        ap.error(f"--rate {args.rate}: must be a number in [1e-6, 1e6]")
+        ap.error(f'--rate {args.rate}: must be a number in [1e-6, 1e6]')
     if not (math.isfinite(args.start_offset) and 0 <= args.start_offset <= 1e9):
-        ap.error(f"--start-offset {args.start_offset}: must be a number in [0, 1e9] s")
+        ap.error(f'--start-offset {args.start_offset}: must be a number in [0, 1e9] s')
     if not (math.isfinite(args.wait_for_subscribers) and args.wait_for_subscribers >= 0):
-        ap.error(f"--wait-for-subscribers {args.wait_for_subscribers}: must be >= 0")
+        ap.error(f'--wait-for-subscribers {args.wait_for_subscribers}: must be >= 0')
     try:
         log = read_log(args.log)
         if args.resimulate:
             res = resimulate(log)
-            worst = max(res["relative_diff"].values())
-            notes = [n for n in ("truncated log" if log.truncated else "",
-                                 f"recording ended early: {log.ended_early}"
-                                 if log.ended_early else "",
+            worst = max(res['relative_diff'].values())
+            notes = [n for n in ('truncated log' if log.truncated else '',
+                                 f'recording ended early: {log.ended_early}'
+                                 if log.ended_early else '',
                                  f"{len(res['segments'])} segments (resets)"
-                                 if len(res["segments"]) > 1 else "") if n]
+                                 if len(res['segments']) > 1 else '') if n]
             print(f"resimulated {res['compared']} publications of {log.path}"
-                  + (f" ({'; '.join(notes)})" if notes else ""))
-            for seg in res["segments"]:
-                if seg["fault"]:
+                  + (f" ({'; '.join(notes)})" if notes else ''))
+            for seg in res['segments']:
+                if seg['fault']:
                     print(f"segment {seg['index']}: fault reproduced at t = "
                           f"{seg['fault']['time']:.9f} s: {seg['fault']['reason']}"
-                          if seg["recorded_fault"] is not None else
+                          if seg['recorded_fault'] is not None else
                           f"segment {seg['index']}: re-simulation faulted at t = "
                           f"{seg['fault']['time']:.9f} s: {seg['fault']['reason']}")
             print(f"{'signal':<20} {'max |recorded - resimulated|':>30} "
                   f"{'relative to max |recorded|':>28}")
-            for name, d in res["max_abs_diff"].items():
+            for name, d in res['max_abs_diff'].items():
                 print(f"{name:<20} {d:>30.3e} {res['relative_diff'][name]:>28.3e}")
-            for problem in res["problems"]:
-                print(f"problem: {problem}")
-            ok = worst <= args.tolerance and not res["problems"]
+            for problem in res['problems']:
+                print(f'problem: {problem}')
+            ok = worst <= args.tolerance and not res['problems']
             note = build_difference(log)
             print(f"{'PASS' if ok else 'FAIL'}: largest relative difference {worst:.3e} "
-                  f"(tolerance {args.tolerance:g})"
-                  + (f"; {len(res['problems'])} problem(s)" if res["problems"] else ""))
+                  f'(tolerance {args.tolerance:g})'
+                  + (f"; {len(res['problems'])} problem(s)" if res['problems'] else ''))
             if note and worst > 0.0:
-                print(f"note: {note}")
+                print(f'note: {note}')
             return 0 if ok else 1
         return republish(log, args.rate, args.start_offset, args.loop, args.with_commands,
                          args.topics, ros_args, args.wait_for_subscribers)
     except (LogError, RosArgumentsError) as exc:
         raise_if_stopped()           # (a stop signal inside a decoding: an interrupt)
-        print(f"umbrella_replay: error: {exc}", file=sys.stderr)
+        print(f'umbrella_replay: error: {exc}', file=sys.stderr)
         return 2
 
 
-if __name__ == "__main__":
+if __name__ == '__main__':
     sys.exit(main())

@@ -40,15 +40,15 @@ from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_fig
                             tip_deflection_figures)
 
 #: the figures compared between runs (outputs.SummaryAccumulator names)
-FIGURE_KEYS = ("deploy_time", "deploy_start", "lock_time", "tip_deflection_max",
-               "tip_deflection_max_time", "stage2_tip_amplitude", "stage2_tip_period",
-               "stage2_window",
-               "peak_stress_leaf", "peak_stress_leaf_x", "peak_stress_leaf_time",
-               "peak_stress_link", "peak_stress_link_x", "peak_stress_link_time",
-               "stress_ratio_max", "tip_deflection_ratio_max")
+FIGURE_KEYS = ('deploy_time', 'deploy_start', 'lock_time', 'tip_deflection_max',
+               'tip_deflection_max_time', 'stage2_tip_amplitude', 'stage2_tip_period',
+               'stage2_window',
+               'peak_stress_leaf', 'peak_stress_leaf_x', 'peak_stress_leaf_time',
+               'peak_stress_link', 'peak_stress_link_x', 'peak_stress_link_time',
+               'stress_ratio_max', 'tip_deflection_ratio_max')
 
 
-RIGID_MODELS = ("rigid", "rigid-fe")
+RIGID_MODELS = ('rigid', 'rigid-fe')
 
 
 #: the shapes plot draws the largest elastic displacement of a stage at most this fraction
@@ -61,13 +61,13 @@ WINDOW_PERIODS = 8
 
 #: Table 6.1 (deformable FEA, rigid FEA) and the V0 = -0.2 figures quoted in ch. 6
 THESIS_TABLE_6_1 = {-0.5: (0.09040, 0.09033), -1.0: (0.04525, 0.04517), -2.0: (0.02343, 0.02259)}
-THESIS_V02 = {"deploy_time": 0.2259, "tip_deflection_max": 0.665e-3,
-              "tip_deflection_max_time": 0.08, "stage2_tip_amplitude": 0.060,
-              "stage2_tip_period": 0.05}
+THESIS_V02 = {'deploy_time': 0.2259, 'tip_deflection_max': 0.665e-3,
+              'tip_deflection_max_time': 0.08, 'stage2_tip_amplitude': 0.060,
+              'stage2_tip_period': 0.05}
 #: the parameters that are the thesis's data (its figures apply to a run only with these)
-THESIS_DATA = ("l1", "l2", "l3", "section_height", "area", "second_moment_of_area",
-               "youngs_modulus", "density", "alpha0", "alpha_deployed", "sleeve_force",
-               "damping_ratio")
+THESIS_DATA = ('l1', 'l2', 'l3', 'section_height', 'area', 'second_moment_of_area',
+               'youngs_modulus', 'density', 'alpha0', 'alpha_deployed', 'sleeve_force',
+               'damping_ratio')
 
 
 def thesis_figures(params: dict) -> dict:
@@ -87,14 +87,14 @@ def thesis_figures(params: dict) -> dict:
                 return {}
         except (KeyError, TypeError, ValueError):
             return {}
-    v0 = params.get("v0")
+    v0 = params.get('v0')
     if v0 in THESIS_TABLE_6_1:
         deformable, rigid = THESIS_TABLE_6_1[v0]
-        return {"deploy_time_deformable_fea": deformable, "deploy_time_rigid_fea": rigid}
+        return {'deploy_time_deformable_fea': deformable, 'deploy_time_rigid_fea': rigid}
     if v0 != -0.2:
         return {}
-    if params.get("model") in RIGID_MODELS:       # (its tip and stresses are not elastic)
-        return {"deploy_time": THESIS_V02["deploy_time"]}
+    if params.get('model') in RIGID_MODELS:       # (its tip and stresses are not elastic)
+        return {'deploy_time': THESIS_V02['deploy_time']}
     return dict(THESIS_V02)
 
 
@@ -144,7 +144,7 @@ class Run:
     @property
     def rigid(self) -> bool:
         """Say whether the model has no elastic field (its zero stress is not a result)."""
-        return self.params.get("model") in RIGID_MODELS
+        return self.params.get('model') in RIGID_MODELS
 
     def shape(self, t: float, magnification: float):
         """
@@ -169,7 +169,7 @@ class Run:
 
     def nodes(self, points: np.ndarray, body: str) -> np.ndarray:
         """Return the nodes among a body's drawn points (all of them if not known)."""
-        node_x = self.leaf_node_x if body == "leaf" else self.link_node_x
+        node_x = self.leaf_node_x if body == 'leaf' else self.link_node_x
         if drawn_abscissae(node_x, len(points)) is None:
             return points
         return points[::(len(points) - 1) // (len(node_x) - 1)]
@@ -179,15 +179,15 @@ class Run:
         from ..core.model import UmbrellaModel
         from ..core.params import recorded_params
 
-        if "locked_period" not in self._cache:
+        if 'locked_period' not in self._cache:
             try:
                 omega = UmbrellaModel(recorded_params(self.params)).locked_modes[0]
                 omega = omega[omega > 0]
             except (ValueError, KeyError, TypeError, np.linalg.LinAlgError):
                 omega = []
-            self._cache["locked_period"] = (float(2 * math.pi / omega[0]) if len(omega)
+            self._cache['locked_period'] = (float(2 * math.pi / omega[0]) if len(omega)
                                             else None)
-        return self._cache["locked_period"]
+        return self._cache['locked_period']
 
     def figures(self) -> dict:
         """
@@ -198,29 +198,29 @@ class Run:
         """
         if self.summary is not None:
             out = {k: self.summary.get(k) for k in FIGURE_KEYS}
-            out["figures_from"] = "every physics step (recording metadata)"
+            out['figures_from'] = 'every physics step (recording metadata)'
             return out
-        out = {"deploy_time": self.deploy_time, "deploy_start": self.deploy_start,
-               "lock_time": self.lock_time}
+        out = {'deploy_time': self.deploy_time, 'deploy_start': self.deploy_start,
+               'lock_time': self.lock_time}
         lock = self.lock_time if self.lock_time is not None else math.inf
         s1 = self.tip_t <= lock if self.lock_time_exact else self.tip_t < lock
         if s1.any():
             i = int(np.argmax(np.abs(self.tip_v[s1])))
-            out["tip_deflection_max"] = float(abs(self.tip_v[s1][i]))
-            out["tip_deflection_max_time"] = float(self.tip_t[s1][i])
+            out['tip_deflection_max'] = float(abs(self.tip_v[s1][i]))
+            out['tip_deflection_max_time'] = float(self.tip_t[s1][i])
         out.update(stage2_figures(self.tip_t, self.tip_v, self.lock_time))
-        for body, peaks in (("leaf", self.peak_leaf), ("link", self.peak_link)):
+        for body, peaks in (('leaf', self.peak_leaf), ('link', self.peak_link)):
             i = int(np.argmax(peaks))
-            out[f"peak_stress_{body}"] = float(peaks[i])
-            out[f"peak_stress_{body}_time"] = float(self.stress_t[i])
-        rate = self.params.get("publish_rate")
+            out[f'peak_stress_{body}'] = float(peaks[i])
+            out[f'peak_stress_{body}_time'] = float(self.stress_t[i])
+        rate = self.params.get('publish_rate')
         why = (f"the summary record is of the log's last run, not of segment {self.segment}"
                if self.segment is not None else
-               f"the recording ended early ({self.ended_early}) before its summary record"
+               f'the recording ended early ({self.ended_early}) before its summary record'
                if self.ended_early else
-               "the log has no summary record (an older recording, or its writer was killed)")
-        out["figures_from"] = (f"recorded samples at {rate} Hz: {why}, so these figures "
-                               "depend on the recording rate")
+               'the log has no summary record (an older recording, or its writer was killed)')
+        out['figures_from'] = (f'recorded samples at {rate} Hz: {why}, so these figures '
+                               'depend on the recording rate')
         return out
 
     def validity(self) -> list:
@@ -229,7 +229,7 @@ class Run:
             return list(self.warnings)
         tip = float(np.abs(self.tip_v).max()) if len(self.tip_v) else 0.0
         peak = float(max(self.peak_leaf.max(), self.peak_link.max()))
-        step = self.params.get("physics_step", self.params.get("time_step"))
+        step = self.params.get('physics_step', self.params.get('time_step'))
         try:
             return validity_warnings(self.params, self.lock_kind, peak, tip,
                                      locked=self.lock_time is not None,
@@ -267,7 +267,7 @@ def default_window(runs: list[Run]) -> tuple[float, float]:
             spans.append((first, last))
             continue
         start = first if r.deploy_start is None else max(first, r.deploy_start)
-        period = r.locked_period() or (r.figures().get("stage2_tip_period") or 0.0)
+        period = r.locked_period() or (r.figures().get('stage2_tip_period') or 0.0)
         t1 = r.lock_time + max(WINDOW_PERIODS * period, r.lock_time - start)
         spans.append((max(first, start - 0.1 * (r.lock_time - start)), min(last, t1)))
     return min(s[0] for s in spans), max(s[1] for s in spans)
@@ -287,31 +287,31 @@ def _series(log, topic, fn, segment, width: int, stride: int = 1):
         try:
             row = fn(m)
         except (IndexError, KeyError, AttributeError, TypeError) as exc:
-            raise LogError(f"{log.path}: topic {topic}: message {i} lacks the fields "
-                           f"umbrella_sim writes ({exc})") from None
+            raise LogError(f'{log.path}: topic {topic}: message {i} lacks the fields '
+                           f'umbrella_sim writes ({exc})') from None
         t.append(tm)
         rows.append(row)
     if not t and width:
-        raise LogError(f"{log.path}: topic {topic} has no messages"
-                       + (f" in segment {segment.index}" if segment.index else "")
+        raise LogError(f'{log.path}: topic {topic} has no messages'
+                       + (f' in segment {segment.index}' if segment.index else '')
                        + log.truncation_note())
-    order = np.argsort(np.array(t), kind="stable")
+    order = np.argsort(np.array(t), kind='stable')
     return np.array(t)[order], [rows[i] for i in order]
 
 
 def default_label(path: str) -> str:
     """Return a run's label: its bag directory's name, or its .mcap file's without .mcap."""
     name = os.path.basename(os.path.normpath(path)) or path
-    return name[:-len(".mcap")] if name.endswith(".mcap") and len(name) > 5 else name
+    return name[:-len('.mcap')] if name.endswith('.mcap') and len(name) > 5 else name
 
 
 #: the stress figures of a Run, in the order of its fields
-STRESS_FIGURES = ("peak_stress_leaf", "peak_stress_link", "stress_leaf_joint", "stress_link_mid")
+STRESS_FIGURES = ('peak_stress_leaf', 'peak_stress_link', 'stress_leaf_joint', 'stress_link_mid')
 
 
 #: the energy figures compare reads
-ENERGY_FIGURES = ("kinetic_energy", "strain_energy", "work", "energy_balance",
-                  "phase_correction_energy")
+ENERGY_FIGURES = ('kinetic_energy', 'strain_energy', 'work', 'energy_balance',
+                  'phase_correction_energy')
 
 
 def _figures(figures: dict, *names: str) -> tuple:
@@ -322,41 +322,41 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     log = read_log(path)
     seg = log.segment(segment)
     params = seg.params
-    t, js = _series(log, log.find_topic("joint_states"),
-                    lambda m: _figures(joint_state_figures(m), "alpha1", "alpha1_rate",
-                                       "alpha2"), seg, 3)
-    tt, tip = _series(log, log.find_topic("tip_deflection"),
-                      lambda m: tip_deflection_figures(m)["tip_transverse"], seg, 1)
-    ts, st = _series(log, log.find_topic("peak_stress"),
+    t, js = _series(log, log.find_topic('joint_states'),
+                    lambda m: _figures(joint_state_figures(m), 'alpha1', 'alpha1_rate',
+                                       'alpha2'), seg, 3)
+    tt, tip = _series(log, log.find_topic('tip_deflection'),
+                      lambda m: tip_deflection_figures(m)['tip_transverse'], seg, 1)
+    ts, st = _series(log, log.find_topic('peak_stress'),
                      lambda m: _figures(peak_stress_figures(m), *STRESS_FIGURES), seg,
                      len(STRESS_FIGURES))
     st = np.array(st)
     # umbrella_sim.events.K: segment K ended by a reset; umbrella_sim.events: the last one
     last = len(log.segments()) - 1
-    events = log.metadata.get("umbrella_sim.events" if segment == last
-                              else f"umbrella_sim.events.{segment}", {})
+    events = log.metadata.get('umbrella_sim.events' if segment == last
+                              else f'umbrella_sim.events.{segment}', {})
     deploy, exact = None, True
-    if events.get("locked") == "true":
-        deploy = float(events["lock_time"])
+    if events.get('locked') == 'true':
+        deploy = float(events['lock_time'])
     else:
-        phase = log.find_topic("deployment_phase", required=False)
-        locked = [tm for tm, m in log.iter_decoded(phase, seg) if m.data == "locked"] \
+        phase = log.find_topic('deployment_phase', required=False)
+        locked = [tm for tm, m in log.iter_decoded(phase, seg) if m.data == 'locked'] \
             if phase else []
         deploy, exact = (min(locked), False) if locked else (None, True)
     drift = None
-    energy = log.find_topic("energy", required=False)
+    energy = log.find_topic('energy', required=False)
     if energy:
         # (the earlier phase correction's term, in the energy that integrator kept, where an
         # older recording has it; 0 elsewhere)
         _, e = _series(log, energy, lambda m: _figures(
-            {"phase_correction_energy": 0.0, **energy_figures(m)}, *ENERGY_FIGURES), seg, 0)
+            {'phase_correction_energy': 0.0, **energy_figures(m)}, *ENERGY_FIGURES), seg, 0)
         e = dict(zip(ENERGY_FIGURES, np.array(e).reshape(-1, len(ENERGY_FIGURES)).T))
-        if len(e["work"]):
-            mechanical = (e["kinetic_energy"] + e["strain_energy"]
-                          + e["phase_correction_energy"])
-            drift = relative_drift(e["energy_balance"], mechanical, e["work"])
+        if len(e['work']):
+            mechanical = (e['kinetic_energy'] + e['strain_energy']
+                          + e['phase_correction_energy'])
+            drift = relative_drift(e['energy_balance'], mechanical, e['work'])
     shapes = []
-    markers = log.find_topic("markers", required=False)
+    markers = log.find_topic('markers', required=False)
     if markers:           # at most ~2000 shapes kept, whatever the log's length
         stride = max(1, log.count(markers) // 2000)
 
@@ -367,28 +367,28 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     if label is None:
         label = default_label(path)
     a = np.array(js)
-    mesh = log.metadata.get("umbrella_sim.mesh", {})       # the first segment's
-    leaf_x = np.array(json.loads(mesh["leaf_node_x"])) if "leaf_node_x" in mesh else None
-    link_x = np.array(json.loads(mesh["link_node_x"])) if "link_node_x" in mesh else None
+    mesh = log.metadata.get('umbrella_sim.mesh', {})       # the first segment's
+    leaf_x = np.array(json.loads(mesh['leaf_node_x'])) if 'leaf_node_x' in mesh else None
+    link_x = np.array(json.loads(mesh['link_node_x'])) if 'link_node_x' in mesh else None
     if segment and leaf_x is not None:      # a later segment: its own mesh (a reset may change N)
         leaf_x, link_x = _segment_mesh(log, params)
     summary = warnings = None
-    record = log.metadata.get("umbrella_sim.summary") if segment == last else None
-    if record and "figures" in record:
+    record = log.metadata.get('umbrella_sim.summary') if segment == last else None
+    if record and 'figures' in record:
         try:
-            summary = json.loads(record["figures"])
-            warnings = json.loads(record.get("warnings", "[]"))
+            summary = json.loads(record['figures'])
+            warnings = json.loads(record.get('warnings', '[]'))
         except ValueError:
-            raise LogError(f"{log.path}: metadata umbrella_sim.summary is not valid JSON") \
+            raise LogError(f'{log.path}: metadata umbrella_sim.summary is not valid JSON') \
                 from None
-    applied_topic = log.find_topic("sleeve_force/applied", required=False)
+    applied_topic = log.find_topic('sleeve_force/applied', required=False)
     applied = ([(tm, m.data) for tm, m in log.iter_decoded(applied_topic, seg)]
                if applied_topic else [])
     start = deploy_start_of(params, applied)
     return Run(label, log.path, params, t, a[:, 0], a[:, 1], tt, np.array(tip), ts,
                *st.T, deploy, drift, shapes,
-               float(params.get("marker_magnification", 1.0)), a[:, 2], leaf_x, link_x,
-               summary, warnings, events.get("lock_kind"), lock_time_exact=exact,
+               float(params.get('marker_magnification', 1.0)), a[:, 2], leaf_x, link_x,
+               summary, warnings, events.get('lock_kind'), lock_time_exact=exact,
                deploy_start=start, segment=segment if segment != last else None,
                ended_early=log.ended_early or None)
 

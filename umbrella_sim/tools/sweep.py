@@ -53,7 +53,7 @@ from ..core.registry import NODE_PARAMETERS
 from ..ros.signals import deferred
 
 #: the publication rate of a case's --mcap recording: the node's default, as simulate --mcap
-MCAP_PUBLISH_RATE = NODE_PARAMETERS["publish_rate"].default
+MCAP_PUBLISH_RATE = NODE_PARAMETERS['publish_rate'].default
 CONNECT_TIMEOUT = 10.0      # s to reach a --scheduler
 WORKER_TIMEOUT = 30.0       # s for a first worker to join it
 
@@ -78,46 +78,46 @@ def run_case(task: dict) -> dict:
     """
     from ..core.params import UmbrellaParams
 
-    out = {"case_id": task["case_id"], "worker": f"{socket.gethostname()}:{os.getpid()}",
-           "umbrella_sim": __version__, "summary": {}, "error": None, "mcap": None,
-           "started_at": time.time()}      # the worker's clock (gaps between its cases)
+    out = {'case_id': task['case_id'], 'worker': f'{socket.gethostname()}:{os.getpid()}',
+           'umbrella_sim': __version__, 'summary': {}, 'error': None, 'mcap': None,
+           'started_at': time.time()}      # the worker's clock (gaps between its cases)
     t0 = time.perf_counter()
     try:
-        params = UmbrellaParams.from_mapping(task["params"]).validated()
-        profile = [tuple(row) for row in task["force_profile"]] if task["force_profile"] else None
-        if task["mcap_dir"]:
+        params = UmbrellaParams.from_mapping(task['params']).validated()
+        profile = [tuple(row) for row in task['force_profile']] if task['force_profile'] else None
+        if task['mcap_dir']:
             from ..ros.recording import record_offline
 
-            bag = os.path.join(task["mcap_dir"], task["case_id"])
+            bag = os.path.join(task['mcap_dir'], task['case_id'])
             if os.path.exists(bag):     # left by an unfinished earlier attempt of this case
                 import shutil
                 shutil.rmtree(bag)
             result = record_offline(params, bag, _mcap_duration(task), profile,
                                     publish_rate=MCAP_PUBLISH_RATE)
-            out["mcap"] = bag
+            out['mcap'] = bag
             if result.recording_error:      # not finished: a resumed sweep runs it again
-                out["summary"] = result.summary()
-                out["error"] = f"recording {bag}: {result.recording_error}"
-                out["status"] = STATUS_ERROR
+                out['summary'] = result.summary()
+                out['error'] = f'recording {bag}: {result.recording_error}'
+                out['status'] = STATUS_ERROR
                 return _finished(out, t0)
         else:
             from ..core.driver import simulate
 
-            result = simulate(params, task["duration"], force_profile=profile,
-                              stop_after_lock=task["stop_after_lock"], keep_samples=False)
-        out["summary"] = result.summary()
-        out["error"] = result.error
-        out["status"] = STATUS_DIVERGED if result.error else STATUS_OK
+            result = simulate(params, task['duration'], force_profile=profile,
+                              stop_after_lock=task['stop_after_lock'], keep_samples=False)
+        out['summary'] = result.summary()
+        out['error'] = result.error
+        out['status'] = STATUS_DIVERGED if result.error else STATUS_OK
     except Exception as exc:  # noqa: BLE001 - the case's row carries it
         tb = traceback.format_exc(limit=-3).strip().splitlines()
-        out["error"] = f"{type(exc).__name__}: {exc} [{' | '.join(tb[-3:-1])}]"
-        out["status"] = STATUS_ERROR
+        out['error'] = f"{type(exc).__name__}: {exc} [{' | '.join(tb[-3:-1])}]"
+        out['status'] = STATUS_ERROR
     return _finished(out, t0)
 
 
 def _finished(out: dict, t0: float) -> dict:
-    out["case_wall_time"] = time.perf_counter() - t0
-    out["finished_at"] = time.time()
+    out['case_wall_time'] = time.perf_counter() - t0
+    out['finished_at'] = time.time()
     return out
 
 
@@ -129,24 +129,24 @@ def _mcap_duration(task: dict) -> float:
     plain run that failed stopped at its fault, not at the end: the recording then takes
     the whole duration, so that it meets the same fault and the case reports it.
     """
-    if task["stop_after_lock"] is None:
-        return task["duration"]
+    if task['stop_after_lock'] is None:
+        return task['duration']
     from ..core.driver import simulate
     from ..core.params import UmbrellaParams
 
-    params = UmbrellaParams.from_mapping(task["params"]).validated()
-    profile = [tuple(row) for row in task["force_profile"]] if task["force_profile"] else None
-    probe = simulate(params, task["duration"], force_profile=profile,
-                     stop_after_lock=task["stop_after_lock"], keep_samples=False)
+    params = UmbrellaParams.from_mapping(task['params']).validated()
+    profile = [tuple(row) for row in task['force_profile']] if task['force_profile'] else None
+    probe = simulate(params, task['duration'], force_profile=profile,
+                     stop_after_lock=task['stop_after_lock'], keep_samples=False)
     if probe.error is not None:
-        return task["duration"]
-    return min(task["duration"], probe.figures["final_time"])
+        return task['duration']
+    return min(task['duration'], probe.figures['final_time'])
 
 
 # ------------------------------------------------------------------ progress
 def case_progress(total: int, stream=None) -> Progress:
     """Return the sweep's progress line: bar, cases done of total, failures, elapsed, ETA."""
-    return Progress(total, lambda done: f"{done:.0f}/{total} cases", stream)
+    return Progress(total, lambda done: f'{done:.0f}/{total} cases', stream)
 
 
 # ------------------------------------------------------------------ running
@@ -157,8 +157,8 @@ class SweepReport:
     ran: int = 0
     failed: int = 0             # rows of the table whose status is not ok
     interrupted: bool = False
-    csv: str = ""
-    parquet: str = ""
+    csv: str = ''
+    parquet: str = ''
     plots: list = field(default_factory=list)
     setup_s: float = 0.0        # wall time to start or reach the cluster and check its workers
     run_s: float = 0.0          # wall time from the first submission to the last result
@@ -172,12 +172,12 @@ def check_scheduler_address(address: str) -> str:
     [tcp:// | tls://]HOST:PORT, the addresses ``dask scheduler`` prints; checked before any
     work, where distributed would raise a ValueError from deep inside its client.
     """
-    scheme, sep, rest = address.rpartition("://")
-    host, colon, port = rest.rpartition(":")
-    if (sep and scheme not in ("tcp", "tls")) or not colon or not host.strip("[]") \
+    scheme, sep, rest = address.rpartition('://')
+    host, colon, port = rest.rpartition(':')
+    if (sep and scheme not in ('tcp', 'tls')) or not colon or not host.strip('[]') \
             or not port.isdigit() or not 0 < int(port) < 65536:
-        raise SpecError(f"--scheduler {address!r}: not a scheduler address: expected "
-                        "tcp://HOST:PORT (as `dask scheduler` prints it)")
+        raise SpecError(f'--scheduler {address!r}: not a scheduler address: expected '
+                        'tcp://HOST:PORT (as `dask scheduler` prints it)')
     return address
 
 
@@ -187,14 +187,14 @@ def _client(workers: int | None, scheduler: str | None, log: Callable[[str], Non
     try:
         from distributed import Client, LocalCluster
     except ImportError as exc:
-        raise SpecError(f"umbrella-sim sweep needs dask and distributed ({exc}); "
-                        "install requirements.txt") from None
+        raise SpecError(f'umbrella-sim sweep needs dask and distributed ({exc}); '
+                        'install requirements.txt') from None
 
     if scheduler:
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT)
         except (OSError, ValueError) as exc:
-            raise SpecError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+            raise SpecError(f'--scheduler {scheduler}: cannot connect ({exc})') from None
         return client, None
     n = workers or os.cpu_count() or 1
     # loopback only, every port (scheduler, its HTTP server, workers) picked free by the OS
@@ -203,13 +203,13 @@ def _client(workers: int | None, scheduler: str | None, log: Callable[[str], Non
     before = set(SpecCluster._instances)
     try:
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               host="127.0.0.1", scheduler_port=0,
-                               dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+                               host='127.0.0.1', scheduler_port=0,
+                               dashboard_address='127.0.0.1:0', silence_logs=logging.ERROR)
     except KeyboardInterrupt:
         _drop_unstarted_clusters(set(SpecCluster._instances) - before)
         raise
     log(f"local Dask cluster: {n} worker process{'es' if n > 1 else ''} at "
-        f"{cluster.scheduler_address}")
+        f'{cluster.scheduler_address}')
     return Client(cluster), cluster
 
 
@@ -252,17 +252,17 @@ def _check_workers(client, scheduler: str | None, log) -> None:
         try:
             client.wait_for_workers(1, timeout=WORKER_TIMEOUT)
         except Exception:  # noqa: BLE001 - distributed raises its own TimeoutError
-            raise SpecError(f"--scheduler {scheduler}: no worker joined within "
-                            f"{WORKER_TIMEOUT:g} s") from None
+            raise SpecError(f'--scheduler {scheduler}: no worker joined within '
+                            f'{WORKER_TIMEOUT:g} s') from None
     try:
         versions = client.run(worker_version)
     except Exception as exc:  # noqa: BLE001 - e.g. ModuleNotFoundError on a worker
-        raise SpecError(f"workers cannot run umbrella_sim: {type(exc).__name__}: {exc}") from None
+        raise SpecError(f'workers cannot run umbrella_sim: {type(exc).__name__}: {exc}') from None
     wrong = {w: v for w, v in versions.items() if v != __version__}
     if wrong:
-        raise SpecError(f"workers run other umbrella_sim versions than {__version__}: {wrong}")
+        raise SpecError(f'workers run other umbrella_sim versions than {__version__}: {wrong}')
     if scheduler:
-        log(f"Dask cluster {scheduler}: {len(versions)} worker(s)")
+        log(f'Dask cluster {scheduler}: {len(versions)} worker(s)')
     else:
         client.run(_ignore_sigint)
 
@@ -285,7 +285,7 @@ def _mcap_step_cases(sweep: Sweep, log) -> None:
         if note:
             case.case_id = case_id(dict(case.params, mcap_publish_rate=rate), case.duration,
                                    case.stop_after_lock, case.force_profile)
-            log(f"case {case.index}: the --mcap recording takes a {note}")
+            log(f'case {case.index}: the --mcap recording takes a {note}')
 
 
 def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
@@ -299,19 +299,19 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
     stream = stream or sys.stderr
 
     def log(msg):
-        stream.write(msg + "\n")
+        stream.write(msg + '\n')
         stream.flush()
 
     store = CaseStore(out_dir)
-    mcap_dir = os.path.join(os.path.abspath(out_dir), "mcap") if mcap else None
+    mcap_dir = os.path.join(os.path.abspath(out_dir), 'mcap') if mcap else None
     if mcap:
         _mcap_step_cases(sweep, log)
     todo = [c for c in sweep.cases if not is_finished(store.load(c.case_id), mcap)]
     report = SweepReport(total=len(sweep.cases), skipped=len(sweep.cases) - len(todo))
     for index, same in sweep.duplicates:
-        log(f"case {index} has the same parameters as case {same}: run once")
+        log(f'case {index} has the same parameters as case {same}: run once')
     if report.skipped:
-        log(f"{report.skipped} of {report.total} cases already in {out_dir}: skipped")
+        log(f'{report.skipped} of {report.total} cases already in {out_dir}: skipped')
     client = cluster = None
     futures = []
     made_dir = False
@@ -331,7 +331,7 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
             by_key = {}
             for case in todo:
                 fut = client.submit(run_case, case.task(mcap_dir), pure=False,
-                                    key=f"umbrella-case-{case.case_id}-{os.getpid()}")
+                                    key=f'umbrella-case-{case.case_id}-{os.getpid()}')
                 by_key[fut.key] = case
                 futures.append(fut)
             progress = case_progress(len(todo), stream)
@@ -341,34 +341,34 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
                     try:
                         result = fut.result()
                     except Exception as exc:  # noqa: BLE001 - lost workers, cancelled tasks
-                        result = {"case_id": case.case_id, "status": STATUS_ERROR,
-                                  "error": f"{type(exc).__name__}: {exc}", "summary": {},
-                                  "worker": None, "mcap": None}
+                        result = {'case_id': case.case_id, 'status': STATUS_ERROR,
+                                  'error': f'{type(exc).__name__}: {exc}', 'summary': {},
+                                  'worker': None, 'mcap': None}
                     store.save(make_record(case, result))
                     report.ran += 1
                     report.run_s = time.perf_counter() - t1
-                    report.compute_s += result.get("case_wall_time") or 0.0
-                    failed = result["status"] != STATUS_OK
+                    report.compute_s += result.get('case_wall_time') or 0.0
+                    failed = result['status'] != STATUS_OK
                     progress.update(progress.done + 1, failed,
-                                    f"case {case.index}: {case.label(sweep.swept)}"
-                                    + (f": {result['status']}" if failed else ""))
+                                    f'case {case.index}: {case.label(sweep.swept)}'
+                                    + (f": {result['status']}" if failed else ''))
                     fut.release()
             finally:
                 progress.close()
-            log(f"{report.ran} case(s) in {report.run_s:.1f} s "
-                f"({report.ran / max(report.run_s, 1e-9):.2f} cases/s, "
-                f"{report.compute_s:.1f} s of computing; cluster ready in "
-                f"{report.setup_s:.1f} s)")
+            log(f'{report.ran} case(s) in {report.run_s:.1f} s '
+                f'({report.ran / max(report.run_s, 1e-9):.2f} cases/s, '
+                f'{report.compute_s:.1f} s of computing; cluster ready in '
+                f'{report.setup_s:.1f} s)')
     except KeyboardInterrupt:
         report.interrupted = True
         if made_dir:
-            log(f"interrupted: {report.ran} case(s) of {len(todo)} finished in this run are "
-                f"kept in {out_dir}; run the same command again to finish the rest")
+            log(f'interrupted: {report.ran} case(s) of {len(todo)} finished in this run are '
+                f'kept in {out_dir}; run the same command again to finish the rest')
         else:
-            log(f"interrupted before any case ran; {out_dir} left as it was")
+            log(f'interrupted before any case ran; {out_dir} left as it was')
     except OutputError as exc:      # DIR cannot take results: stop, keep what the store has
         write_error = exc
-        log(f"cannot write the results: {exc.strerror}; stopping the sweep")
+        log(f'cannot write the results: {exc.strerror}; stopping the sweep')
     finally:
         if client is not None:
             try:
@@ -396,16 +396,16 @@ def _prepare_dir(sweep, store, out_dir, mcap_dir) -> None:
         os.makedirs(store.dir, exist_ok=True)
         if mcap_dir:
             os.makedirs(mcap_dir, exist_ok=True)
-        with open(os.path.join(out_dir, "spec.yaml"), "w", encoding="utf-8") as fh:
+        with open(os.path.join(out_dir, 'spec.yaml'), 'w', encoding='utf-8') as fh:
             fh.write(sweep.text)
     except OSError as exc:
-        raise OutputError(exc.errno, f"{exc.filename}: {exc.strerror}") from None
+        raise OutputError(exc.errno, f'{exc.filename}: {exc.strerror}') from None
 
 
 def _write_outputs(sweep, store, out_dir, report, log) -> None:
     columns, rows = table_rows(sweep, store)
-    report.csv = os.path.join(out_dir, "results.csv")
-    report.parquet = os.path.join(out_dir, "results.parquet")
+    report.csv = os.path.join(out_dir, 'results.csv')
+    report.parquet = os.path.join(out_dir, 'results.parquet')
     path = report.csv
     try:
         with deferred():        # a stop signal while the table is written: after it
@@ -414,17 +414,17 @@ def _write_outputs(sweep, store, out_dir, report, log) -> None:
             try:
                 write_parquet(report.parquet, columns, rows)
             except ImportError:
-                report.parquet = ""
-                log("results.parquet not written: pyarrow is not installed")
-            ok = sum(r["status"] == STATUS_OK for r in rows)
+                report.parquet = ''
+                log('results.parquet not written: pyarrow is not installed')
+            ok = sum(r['status'] == STATUS_OK for r in rows)
             report.failed = len(rows) - ok
-            log(f"{len(rows)} of {len(sweep.cases)} cases in {report.csv}: {ok} ok"
-                + (f", {report.failed} failed (see the error column)" if report.failed
-                   else ""))
+            log(f'{len(rows)} of {len(sweep.cases)} cases in {report.csv}: {ok} ok'
+                + (f', {report.failed} failed (see the error column)' if report.failed
+                   else ''))
         path = out_dir
         report.plots = plot(sweep, rows, out_dir)
     except OSError as exc:
-        raise OutputError(exc.errno, f"{path}: {exc.strerror}") from None
+        raise OutputError(exc.errno, f'{path}: {exc.strerror}') from None
 
 
 # ------------------------------------------------------------------ command line
@@ -432,49 +432,49 @@ def check_out_dir(path: str) -> None:
     """Refuse a results directory that cannot be used (a new one, or one to resume into)."""
     if not os.path.lexists(path):
         try:
-            check_new_output(path, "--out")
+            check_new_output(path, '--out')
         except ValueError as exc:
             raise SpecError(str(exc)) from None
         return
     if not os.path.isdir(path):
-        raise SpecError(f"--out {path}: exists and is not a directory")
+        raise SpecError(f'--out {path}: exists and is not a directory')
     if not os.access(path, os.W_OK | os.X_OK):
-        raise SpecError(f"--out {path}: directory is not writable")
-    cases = os.path.join(path, "cases")
+        raise SpecError(f'--out {path}: directory is not writable')
+    cases = os.path.join(path, 'cases')
     if os.path.lexists(cases) and not os.path.isdir(cases):
-        raise SpecError(f"--out {path}: {cases} exists and is not a directory")
+        raise SpecError(f'--out {path}: {cases} exists and is not a directory')
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
-    sp = sub.add_parser("sweep", help="run a parameter sweep on Dask",
-                        description="Run every case of SPEC.yaml (base / grid / cases, see "
-                                    "docs/sweeps.md) offline, in parallel on Dask; write "
-                                    "DIR/results.csv, DIR/results.parquet and plots.")
-    sp.add_argument("spec", metavar="SPEC.yaml", help="the sweep: base, grid, cases, run options")
-    sp.add_argument("--out", required=True, metavar="DIR",
-                    help="results directory; re-running into it skips finished cases")
-    sp.add_argument("--workers", type=int, metavar="N",
-                    help="local worker processes (default: one per core)")
-    sp.add_argument("--scheduler", metavar="tcp://HOST:PORT",
-                    help="run on this existing Dask cluster instead of a local one")
-    sp.add_argument("--mcap", action="store_true",
-                    help="keep a recording per case in DIR/mcap/<case_id>/")
+    sp = sub.add_parser('sweep', help='run a parameter sweep on Dask',
+                        description='Run every case of SPEC.yaml (base / grid / cases, see '
+                                    'docs/sweeps.md) offline, in parallel on Dask; write '
+                                    'DIR/results.csv, DIR/results.parquet and plots.')
+    sp.add_argument('spec', metavar='SPEC.yaml', help='the sweep: base, grid, cases, run options')
+    sp.add_argument('--out', required=True, metavar='DIR',
+                    help='results directory; re-running into it skips finished cases')
+    sp.add_argument('--workers', type=int, metavar='N',
+                    help='local worker processes (default: one per core)')
+    sp.add_argument('--scheduler', metavar='tcp://HOST:PORT',
+                    help='run on this existing Dask cluster instead of a local one')
+    sp.add_argument('--mcap', action='store_true',
+                    help='keep a recording per case in DIR/mcap/<case_id>/')
     return sp
 
 
 def main(args, ap: argparse.ArgumentParser) -> int:
     try:
         if args.workers is not None and args.workers < 1:
-            raise SpecError(f"--workers {args.workers}: must be >= 1")
+            raise SpecError(f'--workers {args.workers}: must be >= 1')
         if args.workers is not None and args.scheduler:
             raise SpecError("--workers and --scheduler: the cluster's workers are its own; "
-                            "give one of them")
+                            'give one of them')
         if args.scheduler is not None:
             check_scheduler_address(args.scheduler)
         check_out_dir(args.out)
         sweep = load_spec(args.spec)
     except SpecError as exc:
-        ap.exit(2, f"{ap.prog}: error: {exc}\n")
+        ap.exit(2, f'{ap.prog}: error: {exc}\n')
 
     def stop(signum, frame):
         raise KeyboardInterrupt
@@ -484,14 +484,14 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         report = run_sweep(sweep, args.out, workers=args.workers, scheduler=args.scheduler,
                            mcap=args.mcap)
     except SpecError as exc:
-        ap.exit(2, f"{ap.prog}: error: {exc}\n")
+        ap.exit(2, f'{ap.prog}: error: {exc}\n')
     except OutputError as exc:
-        ap.exit(4, f"{ap.prog}: error: cannot write the results: {exc.strerror}; every case "
+        ap.exit(4, f'{ap.prog}: error: cannot write the results: {exc.strerror}; every case '
                    f"finished before it is kept in {os.path.join(args.out, 'cases')}\n")
     except KeyboardInterrupt:       # a second stop, while the table or the plots were made
-        print(f"{ap.prog}: interrupted; every finished case is kept in "
+        print(f'{ap.prog}: interrupted; every finished case is kept in '
               f"{os.path.join(args.out, 'cases')} (and in results.csv if it was written: "
-              "it is written whole); run the same command again to finish",
+              'it is written whole); run the same command again to finish',
               file=sys.stderr)
         return 130
     finally:

@@ -31,7 +31,7 @@ from .sweep_spec import Case, Sweep
 from ..core.registry import REGISTRY
 
 #: a case's status in the table
-STATUS_OK, STATUS_DIVERGED, STATUS_ERROR = "ok", "diverged", "error"
+STATUS_OK, STATUS_DIVERGED, STATUS_ERROR = 'ok', 'diverged', 'error'
 
 
 class OutputError(OSError):
@@ -41,7 +41,7 @@ class OutputError(OSError):
 #: statuses of a case that is done: re-running the sweep skips it
 FINISHED = (STATUS_OK, STATUS_DIVERGED)
 #: the plots drawn into DIR
-PLOTS = ("deploy_time.png", "peak_stress.png", "tip_deflection.png")
+PLOTS = ('deploy_time.png', 'peak_stress.png', 'tip_deflection.png')
 
 
 # ------------------------------------------------------------------ the store
@@ -49,14 +49,14 @@ class CaseStore:
     """DIR/cases/<case_id>.json: one file per case result, each written atomically."""
 
     def __init__(self, out_dir: str):
-        self.dir = os.path.join(out_dir, "cases")     # made by the first save
+        self.dir = os.path.join(out_dir, 'cases')     # made by the first save
 
     def path(self, cid: str) -> str:
-        return os.path.join(self.dir, cid + ".json")
+        return os.path.join(self.dir, cid + '.json')
 
     def load(self, cid: str) -> dict | None:
         try:
-            with open(self.path(cid), encoding="utf-8") as fh:
+            with open(self.path(cid), encoding='utf-8') as fh:
                 return json.load(fh)
         except FileNotFoundError:
             return None
@@ -64,25 +64,25 @@ class CaseStore:
             return None             # unreadable: the case runs again
 
     def save(self, record: dict) -> None:
-        tmp = self.path(record["case_id"]) + f".{os.getpid()}.tmp"
+        tmp = self.path(record['case_id']) + f'.{os.getpid()}.tmp'
         try:
             os.makedirs(self.dir, exist_ok=True)
-            with open(tmp, "w", encoding="utf-8") as fh:
+            with open(tmp, 'w', encoding='utf-8') as fh:
                 json.dump(record, fh, indent=1, default=_jsonable)     # summary keys in order
                 fh.flush()
                 os.fsync(fh.fileno())
-            os.replace(tmp, self.path(record["case_id"]))
+            os.replace(tmp, self.path(record['case_id']))
         except OSError as exc:
             try:
                 os.unlink(tmp)
             except OSError:
                 pass
             raise OutputError(exc.errno, f"{self.path(record['case_id'])}: "
-                                         f"{exc.strerror}") from None
+                                         f'{exc.strerror}') from None
 
 
 def _jsonable(value):
-    if hasattr(value, "tolist"):
+    if hasattr(value, 'tolist'):
         return value.tolist()
     if isinstance(value, tuple):
         return list(value)
@@ -90,9 +90,9 @@ def _jsonable(value):
 
 
 def is_finished(record: dict | None, mcap: bool) -> bool:
-    if record is None or record.get("status") not in FINISHED:
+    if record is None or record.get('status') not in FINISHED:
         return False
-    return not mcap or bool(record.get("mcap")) and os.path.isdir(record["mcap"])
+    return not mcap or bool(record.get('mcap')) and os.path.isdir(record['mcap'])
 
 
 def make_record(case: Case, result: dict) -> dict:
@@ -109,40 +109,40 @@ def table_rows(sweep: Sweep, store: CaseStore) -> tuple[list[str], list[dict]]:
         rec = store.load(case.case_id)
         if rec is None:
             continue
-        row = {"case": case.index, "case_id": case.case_id, "status": rec.get("status"),
-               "error": rec.get("error")}
+        row = {'case': case.index, 'case_id': case.case_id, 'status': rec.get('status'),
+               'error': rec.get('error')}
         row.update({name: case.params.get(name, case.overrides.get(name)) for name in sweep.swept})
         row.update(case.params)
         row.update(duration=case.duration, stop_after_lock=case.stop_after_lock,
                    force_profile=case.force_profile_path)
-        used = row["_same"] = set()     # summary keys that repeat their parameter's value
-        for key, value in (rec.get("summary") or {}).items():
-            if key == "error":
+        used = row['_same'] = set()     # summary keys that repeat their parameter's value
+        for key, value in (rec.get('summary') or {}).items():
+            if key == 'error':
                 continue
             if key in case.params:      # the parameter's column, unless the run took another
                 if value == case.params[key]:     # (a rigid model's lock is plastic)
                     used.add(key)
                     continue
-                if case.params[key] == "auto":    # resolved by the run: its column says how
+                if case.params[key] == 'auto':    # resolved by the run: its column says how
                     row[key] = value
                     used.add(key)
                     continue
-                key = f"{key}_used"
+                key = f'{key}_used'
             if key not in summary_keys:
                 summary_keys.append(key)
             row[key] = value
-        row.update(worker=rec.get("worker"), mcap=rec.get("mcap"))
+        row.update(worker=rec.get('worker'), mcap=rec.get('mcap'))
         rows.append(row)
-    for key in [k for k in summary_keys if k.endswith("_used")]:   # in every row, then:
+    for key in [k for k in summary_keys if k.endswith('_used')]:   # in every row, then:
         for row in rows:        # the value the run took (none for a run that has no summary)
-            name = key[:-len("_used")]
-            row.setdefault(key, row.get(name) if name in row["_same"] else None)
+            name = key[:-len('_used')]
+            row.setdefault(key, row.get(name) if name in row['_same'] else None)
     for row in rows:
-        del row["_same"]
-    columns = ["case", "case_id", "status"] + list(sweep.swept)
+        del row['_same']
+    columns = ['case', 'case_id', 'status'] + list(sweep.swept)
     columns += [n for n in (rows[0] if rows else {}) if n not in columns and n not in
-                ("error", "worker", "mcap") and n not in summary_keys]
-    columns += summary_keys + ["error", "worker", "mcap"]
+                ('error', 'worker', 'mcap') and n not in summary_keys]
+    columns += summary_keys + ['error', 'worker', 'mcap']
     return columns, rows
 
 
@@ -153,13 +153,13 @@ def _cell(value):
 
 
 def write_csv(path: str, columns: list[str], rows: list[dict]) -> None:
-    tmp = path + ".tmp"
+    tmp = path + '.tmp'
     try:
-        with open(tmp, "w", newline="", encoding="utf-8") as fh:
+        with open(tmp, 'w', newline='', encoding='utf-8') as fh:
             w = csv.writer(fh)
             w.writerow(columns)
             for row in rows:
-                w.writerow(["" if row.get(c) is None else _cell(row.get(c)) for c in columns])
+                w.writerow(['' if row.get(c) is None else _cell(row.get(c)) for c in columns])
         os.replace(tmp, path)
     except BaseException:       # a full disk, an interrupt: no half table left beside it
         try:
@@ -182,7 +182,7 @@ def write_parquet(path: str, columns: list[str], rows: list[dict]) -> None:
         elif len(kinds) > 1:
             values = [None if v is None else str(v) for v in values]
         arrays[c] = pa.array(values) if kinds else pa.nulls(len(values), pa.string())
-    tmp = path + ".tmp"
+    tmp = path + '.tmp'
     pq.write_table(pa.table(arrays), tmp)
     os.replace(tmp, path)
 
@@ -190,33 +190,33 @@ def write_parquet(path: str, columns: list[str], rows: list[dict]) -> None:
 # ------------------------------------------------------------------ plots
 def _series(sweep: Sweep, rows: list[dict]):
     """Group the rows: x = the first grid axis, a series per combination of the others."""
-    x_name = sweep.axes[0] if sweep.axes else "case"
+    x_name = sweep.axes[0] if sweep.axes else 'case'
     others = [n for n in sweep.swept if n != x_name]
     groups: dict[tuple, list[dict]] = {}
     for row in rows:
-        if row.get("status") not in FINISHED:
+        if row.get('status') not in FINISHED:
             continue
         groups.setdefault(tuple(row.get(n) for n in others), []).append(row)
 
     def label(key):
         parts = []
-        closed_form = dict(zip(others, key)).get("model") == "rigid"
+        closed_form = dict(zip(others, key)).get('model') == 'rigid'
         for name, value in zip(others, key):
-            if name == "model":
+            if name == 'model':
                 parts.insert(0, str(value))
-            elif name == "elements_per_segment":
+            elif name == 'elements_per_segment':
                 if not closed_form:             # the closed-form rigid model has no mesh
-                    parts.append(f"N = {value}")
+                    parts.append(f'N = {value}')
             else:
-                parts.append(f"{name} = {value}")
-        return ", ".join(parts) or "all cases"
+                parts.append(f'{name} = {value}')
+        return ', '.join(parts) or 'all cases'
 
     return x_name, [(label(k), sorted(g, key=lambda r: _sort_key(r.get(x_name))))
                     for k, g in groups.items()]
 
 
 def _sort_key(v):
-    return (0, v, "") if isinstance(v, (int, float)) else (1, 0, str(v))
+    return (0, v, '') if isinstance(v, (int, float)) else (1, 0, str(v))
 
 
 def _reference_series(series):
@@ -226,7 +226,7 @@ def _reference_series(series):
     The rigid model's if swept (Table 6.1's "time prolonged"), else the first.
     """
     for label, g in series:
-        if g and all(r.get("model") == "rigid" for r in g):
+        if g and all(r.get('model') == 'rigid' for r in g):
             return label, g
     return series[0]
 
@@ -240,7 +240,7 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     time}} drawn as open markers (e.g. the thesis's Table 6.1).
     """
     import matplotlib
-    matplotlib.use("Agg")
+    matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
     x_name, series = _series(sweep, rows)
@@ -249,9 +249,9 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     xs_all = sorted({r.get(x_name) for _, g in series for r in g}, key=_sort_key)
     numeric = all(isinstance(x, (int, float)) for x in xs_all)
     pos = {x: (x if numeric else i) for i, x in enumerate(xs_all)}
-    unit = REGISTRY[x_name].unit if x_name in REGISTRY else "-"
-    xlabel = x_name if unit == "-" else f"{x_name} ({unit})"
-    colours = {label: f"C{i % 10}" for i, (label, _) in enumerate(series)}
+    unit = REGISTRY[x_name].unit if x_name in REGISTRY else '-'
+    xlabel = x_name if unit == '-' else f'{x_name} ({unit})'
+    colours = {label: f'C{i % 10}' for i, (label, _) in enumerate(series)}
     written = []
 
     def points(g, key, scale):
@@ -276,37 +276,37 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     # deployment time, and its difference to the rigid model (Table 6.1 "time prolonged")
     if len(series) > 1 or reference:
         fig, (ax, ax_d) = plt.subplots(2, 1, figsize=(7, 6.5), sharex=True,
-                                       gridspec_kw={"height_ratios": [3, 2]})
+                                       gridspec_kw={'height_ratios': [3, 2]})
     else:
         fig, ax = plt.subplots(figsize=(7, 4.5))
         ax_d = None
     ref_label, ref_rows = _reference_series(series)
-    ref = {r.get(x_name): r["deploy_time"] for r in ref_rows
-           if isinstance(r.get("deploy_time"), (int, float))}
+    ref = {r.get(x_name): r['deploy_time'] for r in ref_rows
+           if isinstance(r.get('deploy_time'), (int, float))}
     for label, g in series:
-        pts = points(g, "deploy_time", 1.0)
+        pts = points(g, 'deploy_time', 1.0)
         if pts:
-            ax.plot(*zip(*pts), "o-", color=colours[label], label=label)
-        diff = [(pos[r.get(x_name)], (r["deploy_time"] - ref[r.get(x_name)]) * 1e3) for r in g
-                if isinstance(r.get("deploy_time"), (int, float)) and r.get(x_name) in ref]
+            ax.plot(*zip(*pts), 'o-', color=colours[label], label=label)
+        diff = [(pos[r.get(x_name)], (r['deploy_time'] - ref[r.get(x_name)]) * 1e3) for r in g
+                if isinstance(r.get('deploy_time'), (int, float)) and r.get(x_name) in ref]
         if diff and label != ref_label and ax_d is not None:
-            ax_d.plot(*zip(*diff), "o-", color=colours[label], label=label)
+            ax_d.plot(*zip(*diff), 'o-', color=colours[label], label=label)
     for i, (label, values) in enumerate((reference or {}).items()):
         pts = sorted((pos[x], t) for x, t in values.items() if x in pos and t is not None)
-        style = {"marker": "Dx+^v"[i % 5], "ms": 9, "ls": "none", "color": "k", "mfc": "none",
-                 "label": label}
+        style = {'marker': 'Dx+^v'[i % 5], 'ms': 9, 'ls': 'none', 'color': 'k', 'mfc': 'none',
+                 'label': label}
         if pts:
             ax.plot(*zip(*pts), **style)
             diff = [(pos[x], (t - ref[x]) * 1e3) for x, t in values.items()
                     if x in ref and x in pos and t is not None]
             if diff and ax_d is not None:
                 ax_d.plot(*zip(*sorted(diff)), **style)
-    ax.set_ylabel("deployment time (s)")
+    ax.set_ylabel('deployment time (s)')
     if ax_d is not None:
-        ax_d.set_ylabel(f"minus {ref_label} (ms)")
-        ax_d.axhline(0.0, color="k", lw=0.8)
-    finish(fig, [a for a in (ax, ax_d) if a is not None], "deploy_time.png",
-           f"deployment time vs {x_name} (thesis Table 6.1)")
+        ax_d.set_ylabel(f'minus {ref_label} (ms)')
+        ax_d.axhline(0.0, color='k', lw=0.8)
+    finish(fig, [a for a in (ax, ax_d) if a is not None], 'deploy_time.png',
+           f'deployment time vs {x_name} (thesis Table 6.1)')
 
     def elastic(keys):
         """Series with elastic deformation: rigid models (zero up to round-off) left out."""
@@ -318,23 +318,23 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
 
     # peak stresses with the yield line
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, g in elastic(["peak_stress_leaf", "peak_stress_link"]):
-        for key, style, body in (("peak_stress_leaf", "o-", "leaf"),
-                                 ("peak_stress_link", "s--", "link")):
+    for label, g in elastic(['peak_stress_leaf', 'peak_stress_link']):
+        for key, style, body in (('peak_stress_leaf', 'o-', 'leaf'),
+                                 ('peak_stress_link', 's--', 'link')):
             pts = points(g, key, 1e-6)
             if pts:
-                ax.plot(*zip(*pts), style, color=colours[label], label=f"{label}: {body}")
-    for y in sorted({r["yield_strength"] for _, g in series for r in g
-                     if isinstance(r.get("yield_strength"), (int, float))}):
-        ax.axhline(y * 1e-6, color="r", lw=1.2, ls="-.", label=f"yield strength {y * 1e-6:g} MPa")
-    ax.set_ylabel("peak |stress| (MPa)")
-    finish(fig, [ax], "peak_stress.png", f"peak stress vs {x_name}")
+                ax.plot(*zip(*pts), style, color=colours[label], label=f'{label}: {body}')
+    for y in sorted({r['yield_strength'] for _, g in series for r in g
+                     if isinstance(r.get('yield_strength'), (int, float))}):
+        ax.axhline(y * 1e-6, color='r', lw=1.2, ls='-.', label=f'yield strength {y * 1e-6:g} MPa')
+    ax.set_ylabel('peak |stress| (MPa)')
+    finish(fig, [ax], 'peak_stress.png', f'peak stress vs {x_name}')
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, g in elastic(["tip_deflection_max"]):
-        pts = points(g, "tip_deflection_max", 1e3)
+    for label, g in elastic(['tip_deflection_max']):
+        pts = points(g, 'tip_deflection_max', 1e3)
         if pts:
-            ax.plot(*zip(*pts), "o-", color=colours[label], label=label)
-    ax.set_ylabel("stage-1 max transverse deflection of G (mm)")
-    finish(fig, [ax], "tip_deflection.png", f"stage-1 max tip deflection vs {x_name}")
+            ax.plot(*zip(*pts), 'o-', color=colours[label], label=label)
+    ax.set_ylabel('stage-1 max transverse deflection of G (mm)')
+    finish(fig, [ax], 'tip_deflection.png', f'stage-1 max tip deflection vs {x_name}')
     return written

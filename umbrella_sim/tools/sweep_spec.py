@@ -47,8 +47,8 @@ from .. import __version__
 from ..bag.paths import read_text_input
 
 
-SPEC_KEYS = ("params", "base", "grid", "cases", "duration", "stop_after_lock", "force",
-             "force_profile")
+SPEC_KEYS = ('params', 'base', 'grid', 'cases', 'duration', 'stop_after_lock', 'force',
+             'force_profile')
 
 
 DEFAULT_DURATION = 1.0      # s, as `umbrella-sim simulate`
@@ -67,16 +67,16 @@ class Case:
     stop_after_lock: float | None
     force_profile: list | None  # [(t, F)] read from the CSV, or None
     force_profile_path: str | None
-    case_id: str = ""
+    case_id: str = ''
 
     def label(self, names) -> str:
-        return ", ".join(f"{n}={self.overrides[n]}" for n in names if n in self.overrides)
+        return ', '.join(f'{n}={self.overrides[n]}' for n in names if n in self.overrides)
 
     def task(self, mcap_dir: str | None) -> dict:
         """Return what a worker needs (plain data, pickles anywhere)."""
-        return {"case_id": self.case_id, "params": self.params, "duration": self.duration,
-                "stop_after_lock": self.stop_after_lock, "force_profile": self.force_profile,
-                "mcap_dir": mcap_dir}
+        return {'case_id': self.case_id, 'params': self.params, 'duration': self.duration,
+                'stop_after_lock': self.stop_after_lock, 'force_profile': self.force_profile,
+                'mcap_dir': mcap_dir}
 
 
 @dataclass
@@ -86,24 +86,24 @@ class Sweep:
     axes: list                  # grid parameter names, in SPEC order
     swept: list                 # every parameter name the grid or the cases set
     duplicates: list = field(default_factory=list)   # (index, index of the same case)
-    text: str = ""              # the SPEC as read (copied to DIR/spec.yaml)
+    text: str = ''              # the SPEC as read (copied to DIR/spec.yaml)
 
 
 # ------------------------------------------------------------------ the SPEC
 def _number(where: str, value: Any, low: float, low_open: bool) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
             or (value <= low if low_open else value < low):
-        raise SpecError(f"{where}: {value!r} must be a finite number "
+        raise SpecError(f'{where}: {value!r} must be a finite number '
                         f"{'>' if low_open else '>='} {low:g}")
     return float(value)
 
 
 def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> str:
     """Key of a case in the store: its full parameters, run options and package version."""
-    doc = {"umbrella_sim": __version__, "params": params, "duration": duration,
-           "stop_after_lock": stop_after_lock, "force_profile": force_profile}
-    blob = json.dumps(doc, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(blob.encode("utf-8")).hexdigest()[:16]
+    doc = {'umbrella_sim': __version__, 'params': params, 'duration': duration,
+           'stop_after_lock': stop_after_lock, 'force_profile': force_profile}
+    blob = json.dumps(doc, sort_keys=True, separators=(',', ':'))
+    return hashlib.sha256(blob.encode('utf-8')).hexdigest()[:16]
 
 
 def load_spec(path: str) -> Sweep:
@@ -114,14 +114,14 @@ def load_spec(path: str) -> Sweep:
     from ..ros.params_file import load_yaml_as_ros
 
     try:
-        text = read_text_input(path, "sweep spec")
+        text = read_text_input(path, 'sweep spec')
         doc = load_yaml_as_ros(text)        # typed as a params file is
     except ValueError as exc:       # missing, not a regular file, unreadable, not text
         raise SpecError(str(exc)) from None
     except yaml.YAMLError as exc:
-        raise SpecError(f"sweep spec {path}: not valid YAML ({exc})") from None
+        raise SpecError(f'sweep spec {path}: not valid YAML ({exc})') from None
     if not isinstance(doc, dict):
-        raise SpecError(f"sweep spec {path}: expected a mapping with base/grid/cases")
+        raise SpecError(f'sweep spec {path}: expected a mapping with base/grid/cases')
     unknown = sorted(set(doc) - set(SPEC_KEYS))
     if unknown:
         raise SpecError(f"sweep spec {path}: unknown key(s) {', '.join(map(str, unknown))}; "
@@ -131,52 +131,52 @@ def load_spec(path: str) -> Sweep:
     def rel(p):
         return p if os.path.isabs(p) else os.path.join(here, p)
 
-    params_file = doc.get("params")
+    params_file = doc.get('params')
     if params_file is not None and not isinstance(params_file, str):
-        raise SpecError(f"sweep spec {path}: params: expected a file name")
-    base = doc.get("base") or {}
-    grid = doc.get("grid") or {}
-    explicit = doc.get("cases") or []
+        raise SpecError(f'sweep spec {path}: params: expected a file name')
+    base = doc.get('base') or {}
+    grid = doc.get('grid') or {}
+    explicit = doc.get('cases') or []
     if not isinstance(base, dict):
-        raise SpecError(f"sweep spec {path}: base: expected a mapping of parameter overrides")
+        raise SpecError(f'sweep spec {path}: base: expected a mapping of parameter overrides')
     if not isinstance(grid, dict):
-        raise SpecError(f"sweep spec {path}: grid: expected a mapping name -> list of values")
+        raise SpecError(f'sweep spec {path}: grid: expected a mapping name -> list of values')
     for name, values in grid.items():
         if not isinstance(values, list) or not values:
-            raise SpecError(f"sweep spec {path}: grid: {name}: "
-                            "expected a non-empty list of values")
+            raise SpecError(f'sweep spec {path}: grid: {name}: '
+                            'expected a non-empty list of values')
     if not isinstance(explicit, list) or not all(isinstance(c, dict) for c in explicit):
-        raise SpecError(f"sweep spec {path}: cases: expected a list of mappings of overrides")
+        raise SpecError(f'sweep spec {path}: cases: expected a list of mappings of overrides')
     if not grid and not explicit:
-        raise SpecError(f"sweep spec {path}: no cases: give grid and/or cases")
-    duration = _number(f"sweep spec {path}: duration", doc.get("duration", DEFAULT_DURATION),
+        raise SpecError(f'sweep spec {path}: no cases: give grid and/or cases')
+    duration = _number(f'sweep spec {path}: duration', doc.get('duration', DEFAULT_DURATION),
                        0.0, True)
-    stop_after_lock = doc.get("stop_after_lock")
+    stop_after_lock = doc.get('stop_after_lock')
     if stop_after_lock is not None:
-        stop_after_lock = _number(f"sweep spec {path}: stop_after_lock", stop_after_lock, 0.0,
+        stop_after_lock = _number(f'sweep spec {path}: stop_after_lock', stop_after_lock, 0.0,
                                   False)
     base = dict(base)
-    if doc.get("force") is not None:
-        if doc.get("force_profile") is not None:
-            raise SpecError(f"sweep spec {path}: give force or force_profile, not both")
+    if doc.get('force') is not None:
+        if doc.get('force_profile') is not None:
+            raise SpecError(f'sweep spec {path}: give force or force_profile, not both')
         # force is every case's sleeve_force: no part of the SPEC may set its own
-        for where, c in (("base", base), ("grid", grid), *(("cases", c) for c in explicit)):
-            if "sleeve_force" in c:
-                raise SpecError(f"sweep spec {path}: force and {where}: sleeve_force both set "
+        for where, c in (('base', base), ('grid', grid), *(('cases', c) for c in explicit)):
+            if 'sleeve_force' in c:
+                raise SpecError(f'sweep spec {path}: force and {where}: sleeve_force both set '
                                 "(force is every case's sleeve_force; sweep sleeve_force "
-                                "without it)")
-        if isinstance(doc["force"], bool) or not isinstance(doc["force"], (int, float)):
+                                'without it)')
+        if isinstance(doc['force'], bool) or not isinstance(doc['force'], (int, float)):
             raise SpecError(f"sweep spec {path}: force: {doc['force']!r} is not a number")
-        base["sleeve_force"] = doc["force"]     # its range is checked with each case's model
+        base['sleeve_force'] = doc['force']     # its range is checked with each case's model
     profile = profile_path = None
-    if doc.get("force_profile") is not None:
-        if not isinstance(doc["force_profile"], str):
-            raise SpecError(f"sweep spec {path}: force_profile: expected a CSV file name")
-        profile_path = rel(doc["force_profile"])
+    if doc.get('force_profile') is not None:
+        if not isinstance(doc['force_profile'], str):
+            raise SpecError(f'sweep spec {path}: force_profile: expected a CSV file name')
+        profile_path = rel(doc['force_profile'])
         try:
             profile = [list(row) for row in read_force_profile(profile_path)]
         except ValueError as exc:
-            raise SpecError(f"sweep spec {path}: force_profile: {exc}") from None
+            raise SpecError(f'sweep spec {path}: force_profile: {exc}') from None
     if params_file is not None:
         params_file = rel(params_file)
 
@@ -190,24 +190,24 @@ def load_spec(path: str) -> Sweep:
     sweep = Sweep(path=os.path.abspath(path), cases=[], axes=axes, swept=swept, text=text)
     seen: dict[str, int] = {}
     for index, overrides in enumerate(overrides_list, start=1):
-        source = "grid" if index <= len(overrides_list) - len(explicit) else "cases"
+        source = 'grid' if index <= len(overrides_list) - len(explicit) else 'cases'
         try:
             check_types(overrides)          # typed YAML, as a params file (the node's rule)
             resolved = resolve_params(overrides, params_file)
-            check_lock_given(resolved, f"lock={overrides['lock']}" if "lock" in overrides
+            check_lock_given(resolved, f"lock={overrides['lock']}" if 'lock' in overrides
                              else None)
             params = resolved.as_dict()
         except ValueError as exc:
-            shown = ", ".join(f"{k}={v!r}" for k, v in overrides.items() if k not in base
-                              or source == "cases")
-            raise SpecError(f"sweep spec {path}: case {index} ({source}: {shown}): "
-                            f"{exc}") from None
+            shown = ', '.join(f'{k}={v!r}' for k, v in overrides.items() if k not in base
+                              or source == 'cases')
+            raise SpecError(f'sweep spec {path}: case {index} ({source}: {shown}): '
+                            f'{exc}') from None
         for t, f in profile or []:
             try:
                 command_force(f, UmbrellaParams(**params))
             except ValueError as exc:
-                raise SpecError(f"sweep spec {path}: case {index}: force_profile at t = {t:g} s: "
-                                f"{exc}") from None
+                raise SpecError(f'sweep spec {path}: case {index}: force_profile at t = {t:g} s: '
+                                f'{exc}') from None
         case = Case(index=index, overrides=overrides, params=params, duration=duration,
                     stop_after_lock=stop_after_lock, force_profile=profile,
                     force_profile_path=profile_path)

@@ -49,9 +49,9 @@ class ArrowFactor:
         """Return (x_ribs (R, m), x_shared (s,)) of the system for the right-hand side."""
         from scipy.linalg import lu_solve
 
-        y = np.einsum("rij,rj->ri", self.b_inv, r_ribs)
-        x_s = lu_solve(self.schur_lu, r_shared - np.einsum("rij,rj->i", self.d, y))
-        return y - np.einsum("rij,j->ri", self.b_inv_c, x_s), x_s
+        y = np.einsum('rij,rj->ri', self.b_inv, r_ribs)
+        x_s = lu_solve(self.schur_lu, r_shared - np.einsum('rij,rj->i', self.d, y))
+        return y - np.einsum('rij,j->ri', self.b_inv_c, x_s), x_s
 
 
 def factor(b: np.ndarray, c: np.ndarray, d: np.ndarray, e: np.ndarray) -> ArrowFactor:
@@ -60,5 +60,5 @@ def factor(b: np.ndarray, c: np.ndarray, d: np.ndarray, e: np.ndarray) -> ArrowF
 
     b_inv = np.linalg.inv(b)
     b_inv_c = b_inv @ c
-    schur = e - np.einsum("rij,rjk->ik", d, b_inv_c)
+    schur = e - np.einsum('rij,rjk->ik', d, b_inv_c)
     return ArrowFactor(b_inv, b_inv_c, d, lu_factor(schur))

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..beam import element_dof_maps, GAUSS_POINTS, GAUSS_WEIGHTS
 
-DOFS = ("u", "v", "theta", "w", "slope", "twist")
+DOFS = ('u', 'v', 'theta', 'w', 'slope', 'twist')
 _DOF = {name: k for k, name in enumerate(DOFS)}
 
 
@@ -107,12 +107,12 @@ class BeamBody3D:
             shapes.append(n @ b)
             xs.append(self.node_x[j] + le * GAUSS_POINTS)
             ws.append(wq)
-            ke = (s["ea"] * np.einsum("q,qi,qj->ij", wq, dn[:, 0], dn[:, 0])
-                  + s["ei_z"] * np.einsum("q,qi,qj->ij", wq, d2n[:, 1], d2n[:, 1])
-                  + s["ei_y"] * np.einsum("q,qi,qj->ij", wq, d2n[:, 2], d2n[:, 2])
-                  + s["gj"] * np.einsum("q,qi,qj->ij", wq, dphi, dphi))
+            ke = (s['ea'] * np.einsum('q,qi,qj->ij', wq, dn[:, 0], dn[:, 0])
+                  + s['ei_z'] * np.einsum('q,qi,qj->ij', wq, d2n[:, 1], d2n[:, 1])
+                  + s['ei_y'] * np.einsum('q,qi,qj->ij', wq, d2n[:, 2], d2n[:, 2])
+                  + s['gj'] * np.einsum('q,qi,qj->ij', wq, dphi, dphi))
             k += b.T @ ke @ b
-            m_twist += b.T @ (s["rho_ip"] * np.einsum("q,qi,qj->ij", wq, nphi, nphi)) @ b
+            m_twist += b.T @ (s['rho_ip'] * np.einsum('q,qi,qj->ij', wq, nphi, nphi)) @ b
             _, dn2, d2n2, _, dphi2 = shape_functions_3d(np.array([0.0, 1.0]), le)
             axial.append(dn2[:, 0] @ b)
             bend_z.append(d2n2[:, 1] @ b)
@@ -120,23 +120,23 @@ class BeamBody3D:
             twist.append(dphi2 @ b)
             px.append(self.node_x[j] + np.array([0.0, le]))
         self.quad_x = np.concatenate(xs)
-        self.quad_w = np.concatenate(ws) * s["rho_a"]
+        self.quad_w = np.concatenate(ws) * s['rho_a']
         self.quad_shape = np.concatenate(shapes)             # (P, 3, ne)
         self.stiffness = k
         self.twist_mass = m_twist
         self.mass = float(self.quad_w.sum())
         # stress recovery at both ends of every element (Pa per unit coordinate)
         self.stress_x = np.concatenate(px)
-        self.stress_axial = s["youngs"] * np.concatenate(axial)
-        self.stress_bend_z = s["youngs"] * s["fibre"] * np.concatenate(bend_z)
-        self.stress_bend_y = s["youngs"] * s["fibre"] * np.concatenate(bend_y)
-        self.stress_shear = s["shear"] * s["torsion_fibre"] * np.concatenate(twist)
+        self.stress_axial = s['youngs'] * np.concatenate(axial)
+        self.stress_bend_z = s['youngs'] * s['fibre'] * np.concatenate(bend_z)
+        self.stress_bend_y = s['youngs'] * s['fibre'] * np.concatenate(bend_y)
+        self.stress_shear = s['shear'] * s['torsion_fibre'] * np.concatenate(twist)
 
     def index(self, node: int, dof: str) -> int:
         """Return the elastic index of a nodal coordinate (KeyError if it is removed)."""
         idx = int(self._full_to_e[6 * node + _DOF[dof]])
         if idx < 0:
-            raise KeyError(f"{self.name} node {node} {dof} is fixed")
+            raise KeyError(f'{self.name} node {node} {dof} is fixed')
         return idx
 
     def maybe_index(self, node: int, dof: str) -> int:
@@ -158,14 +158,14 @@ class BeamBody3D:
             if i >= 0:
                 s[row, i] += coef
 
-        for row, dof in enumerate(("u", "v", "w")):
+        for row, dof in enumerate(('u', 'v', 'w')):
             add(row, dof, 1.0)
         # theta x d with theta = (tx, ty, tz) = (twist, -slope, theta)
-        add(0, "slope", -d[2])          # ty dz
-        add(0, "theta", -d[1])          # -tz dy
-        add(1, "theta", d[0])           # tz dx
-        add(1, "twist", -d[2])          # -tx dz
-        add(2, "twist", d[1])           # tx dy
-        add(2, "slope", d[0])           # -ty dx
+        add(0, 'slope', -d[2])          # ty dz
+        add(0, 'theta', -d[1])          # -tz dy
+        add(1, 'theta', d[0])           # tz dx
+        add(1, 'twist', -d[2])          # -tx dz
+        add(2, 'twist', d[1])           # tx dy
+        add(2, 'slope', d[0])           # -ty dx
         x = np.array([self.node_x[node], 0.0, 0.0]) + d
         return x, s

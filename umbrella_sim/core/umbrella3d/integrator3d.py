@@ -125,7 +125,7 @@ class MidpointUmbrella:
         self.coulomb = np.array([r.hinge_coulomb for r in model.ribs])
         self.viscous = np.array([r.hinge_viscous for r in model.ribs])
         self.regularisation = p.hinge_regularisation
-        self.drive = BaseDrive(p) if p.base == "prescribed" else None
+        self.drive = BaseDrive(p) if p.base == 'prescribed' else None
         m = model
         # coordinates the kinetic energy depends on (Gonzalez correction), and those Newton's
         # error is measured on (y_s follows the ribs through the joints)
@@ -184,7 +184,7 @@ class MidpointUmbrella:
         j_rr, j_rs, j_ss, active = m.constraint_jacobian(qr, stuck, locked)
         jac = (j_rr, j_rs, j_ss)
         blocks = self._blocks(mass, jac, jac, stuck, active, sign=1.0)
-        rib_res = -(np.einsum("rij,rj->ri", j_rr, vr) + j_rs @ vs)
+        rib_res = -(np.einsum('rij,rj->ri', j_rr, vr) + j_rs @ vs)
         sh_res = -(j_ss @ vs)
         if target_vs is not None:
             sh_res[1:] += target_vs
@@ -205,7 +205,7 @@ class MidpointUmbrella:
         j_rr, j_rs, j_ss, active = m.constraint_jacobian(s.qr, s.stuck, locked)
         jac = (j_rr, j_rs, j_ss)
         f = arrow.factor(*self._blocks(mass, jac, jac, s.stuck, active))
-        q_rib = m.rib_quadratic_forces(kin, s.vr) - np.einsum("rij,rj->ri", m.stiffness, s.qr)
+        q_rib = m.rib_quadratic_forces(kin, s.vr) - np.einsum('rij,rj->ri', m.stiffness, s.qr)
         q_sh = np.zeros(m.n_shared)
         q_sh[0] = -force
         bias_r = m.constraint_bias(s.qr, s.vr)
@@ -219,7 +219,7 @@ class MidpointUmbrella:
     # ------------------------------------------------------------ the step
     def step(self, s: State3D, h: float, force: float, locked: bool) -> tuple[State3D, StepWork]:
         """One step of length h; raises ConvergenceError3D."""
-        with np.errstate(over="ignore", invalid="ignore"):
+        with np.errstate(over='ignore', invalid='ignore'):
             return self._step(s, h, force, locked)
 
     def _step(self, s: State3D, h: float, force: float, locked: bool):
@@ -266,17 +266,17 @@ class MidpointUmbrella:
                                          None if drive is None else drive[0])
             jm_rr, jm_rs, jm_ss, active = m.constraint_jacobian(qmr, stuck, locked)
             ddr = np.sum(dqr * dqr, 1)
-            lin = np.einsum("rij,rj->ri", jm_rr, dqr) + jm_rs @ dqs
+            lin = np.einsum('rij,rj->ri', jm_rr, dqr) + jm_rs @ dqs
             safe = np.where(ddr > 0.0, ddr, 1.0)
             jg_rr = jm_rr + np.where(ddr[:, None, None] > 0.0, np.einsum(
-                "ri,rj->rij", (phi_r - phi_r0 - lin) / safe[:, None], dqr), 0.0)
+                'ri,rj->rij', (phi_r - phi_r0 - lin) / safe[:, None], dqr), 0.0)
             torque, slope = self.friction(dqr[:, m.i_a1], h)
-            applied_r = -np.einsum("rij,rj->ri", m.stiffness, qmr)
+            applied_r = -np.einsum('rij,rj->ri', m.stiffness, qmr)
             applied_r[:, m.i_a1] += torque
             applied_s = np.zeros(ns)
             applied_s[0] = -force
-            cons_r = np.einsum("rji,rj->ri", jg_rr, lam_r)
-            cons_s = np.einsum("rji,rj->i", jm_rs, lam_r) + jm_ss.T @ lam_s
+            cons_r = np.einsum('rji,rj->ri', jg_rr, lam_r)
+            cons_s = np.einsum('rji,rj->i', jm_rs, lam_r) + jm_ss.T @ lam_s
             res_r = pr1 - pr0 - h * (gtr + applied_r + cons_r)
             res_s = ps1 - ps0 - h * (gts + applied_s + cons_s)
             if factored is None:
@@ -297,8 +297,8 @@ class MidpointUmbrella:
             norm = max(float(np.max(np.abs(x_r[:, :n]))),
                        float(np.max(np.abs(x_s[:ns][self.norm_shared]), initial=0.0)))
             if not math.isfinite(norm):
-                raise ConvergenceError3D(f"Newton iterate became non-finite at t = "
-                                         f"{s.t + h:.9g} s")
+                raise ConvergenceError3D(f'Newton iterate became non-finite at t = '
+                                         f'{s.t + h:.9g} s')
             rate = norm / last if it > 1 else 1.0
             if norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * norm
                                          < self.tolerance):
@@ -308,8 +308,8 @@ class MidpointUmbrella:
                     break
             last = norm
         else:
-            raise ConvergenceError3D(f"Newton did not converge in {self.max_iterations} "
-                                     f"iterations at t = {s.t + h:.9g} s")
+            raise ConvergenceError3D(f'Newton did not converge in {self.max_iterations} '
+                                     f'iterations at t = {s.t + h:.9g} s')
         self.iterations += it
         dqr, dqs = qr - qr0, qs - qs0
         vr, vs = 2.0 * dqr / h - vr0, 2.0 * dqs / h - vs0
@@ -321,7 +321,7 @@ class MidpointUmbrella:
         w_drive = float(lam_s[1:] @ dqs[1:7]) if drive is not None else 0.0
         t_target = (0.5 * (np.sum(vr0 * pr0) + vs0 @ ps0) + m.strain_energy(qr0)
                     - m.strain_energy(qr) + w_force + float(np.sum(w_fric)) + w_drive)
-        free_bus = m.params.base == "free"
+        free_bus = m.params.base == 'free'
         if free_bus:
             # the bus position is cyclic: its momentum p_X (the linear momentum) is exactly
             # that of the step's start; Newton leaves its tolerance in it, which a uniform

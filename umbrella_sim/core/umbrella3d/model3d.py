@@ -93,7 +93,7 @@ class BusFrame:
     dbasis: np.ndarray         # dbasis[j, :, i] = d b_i / d theta_j
 
     @classmethod
-    def of(cls, theta) -> "BusFrame":
+    def of(cls, theta) -> 'BusFrame':
         ry, rx, rz = (_elem_rot(1, theta[0]), _elem_rot(0, theta[1]), _elem_rot(2, theta[2]))
         ex, ey, ez = np.eye(3)
         b_psi = rz.T @ rx.T @ ey
@@ -138,7 +138,7 @@ class _BodyStack:
         t = self.n_trans
         alpha, e = qb[:, t], qb[:, t + 1:]
         c, s = np.cos(alpha)[:, None], np.sin(alpha)[:, None]
-        y = self.x + np.einsum("rpie,re->rpi", self.shape, e)
+        y = self.x + np.einsum('rpie,re->rpi', self.shape, e)
         qy = _rot_z(c, s, y)
         rho = qy + qb[:, None, :3] if t else qy
         cs = c[..., None]
@@ -151,36 +151,36 @@ class _BodyStack:
             jac[:, :, :, :3] = np.eye(3)
         jac[:, :, :, t] = _ez_cross(qy)
         jac[:, :, :, t + 1:] = qs
-        return {"rho": rho, "jac": jac, "qs": qs, "c": c, "s": s}
+        return {'rho': rho, 'jac': jac, 'qs': qs, 'c': c, 's': s}
 
     def velocity(self, kin, vb):
         """Return the points' velocities in the rib frame for body velocities vb (R, n)."""
-        return np.einsum("rpin,rn->rpi", kin["jac"], vb)
+        return np.einsum('rpin,rn->rpi', kin['jac'], vb)
 
     def dv_t(self, kin, ab, vrel_a, vother):
         """Return sum_p w (d(J a)/dq)^T V (R, n): the kinetic energy's geometric gradient."""
         t = self.n_trans
         out = np.zeros(ab.shape)
         qz = vrel_a - ab[:, None, :3] if t else vrel_a            # Q Z_a
-        out[:, t] = np.einsum("rp,rpi,rpi->r", self.w, _ez_cross(qz), vother)
-        out[:, t + 1:] = ab[:, t, None] * np.einsum("rp,rpie,rpi->re", self.w, kin["qs"],
+        out[:, t] = np.einsum('rp,rpi,rpi->r', self.w, _ez_cross(qz), vother)
+        out[:, t + 1:] = ab[:, t, None] * np.einsum('rp,rpie,rpi->re', self.w, kin['qs'],
                                                     _ez_cross_t(vother))
         return out
 
     def mass(self, kin):
-        jw = kin["jac"] * self.sqrt_w[:, :, None, None]
+        jw = kin['jac'] * self.sqrt_w[:, :, None, None]
         jw = jw.reshape(jw.shape[0], -1, self.n)
         return np.matmul(jw.transpose(0, 2, 1), jw) + self.twist_mass
 
     def gyroscopic(self, kin, vb, vrel):
         """Return 2 sum w J^T d(J v)/dq (R, n, n) without the elastic-elastic block."""
         t = self.n_trans
-        dv = np.zeros_like(kin["jac"])
+        dv = np.zeros_like(kin['jac'])
         qz = vrel - vb[:, None, :3] if t else vrel
         dv[:, :, :, t] = _ez_cross(qz)
         dv[:, :, :, t + 1:] = vb[:, t, None, None, None] * _ez_cross(
-            kin["qs"].transpose(0, 1, 3, 2)).transpose(0, 1, 3, 2)
-        g = 2.0 * np.einsum("rp,rpia,rpib->rab", self.w, kin["jac"], dv)
+            kin['qs'].transpose(0, 1, 3, 2)).transpose(0, 1, 3, 2)
+        g = 2.0 * np.einsum('rp,rpia,rpib->rab', self.w, kin['jac'], dv)
         g[:, t + 1:, t + 1:] = 0.0
         return g
 
@@ -201,16 +201,16 @@ class UmbrellaModel3D:
             q = rib.planar
             area, inertia, e_mod = q.cross_section_area, q.cross_section_inertia, q.youngs_modulus
             shear = e_mod * rib.shear_modulus_factor
-            section = {"rho_a": q.mass_per_length, "rho_ip": q.density * 2.0 * inertia,
-                       "ea": e_mod * area, "ei_z": e_mod * inertia, "ei_y": e_mod * inertia,
-                       "gj": shear * rib.torsion_j, "youngs": e_mod, "shear": shear,
-                       "fibre": q.fibre_distance, "torsion_fibre": rib.torsion_fibre}
-            leaf = BeamBody3D("leaf", [(q.l1, n), (q.l2, n)],
-                              [(0, "u"), (0, "v"), (0, "w"), (0, "slope"), (0, "twist"),
-                               (n, "v")], section)
-            link = BeamBody3D("link", [(q.l3, n)],
-                              [(0, "u"), (0, "v"), (0, "w"), (n, "v"), (n, "slope"),
-                               (n, "twist")], section)
+            section = {'rho_a': q.mass_per_length, 'rho_ip': q.density * 2.0 * inertia,
+                       'ea': e_mod * area, 'ei_z': e_mod * inertia, 'ei_y': e_mod * inertia,
+                       'gj': shear * rib.torsion_j, 'youngs': e_mod, 'shear': shear,
+                       'fibre': q.fibre_distance, 'torsion_fibre': rib.torsion_fibre}
+            leaf = BeamBody3D('leaf', [(q.l1, n), (q.l2, n)],
+                              [(0, 'u'), (0, 'v'), (0, 'w'), (0, 'slope'), (0, 'twist'),
+                               (n, 'v')], section)
+            link = BeamBody3D('link', [(q.l3, n)],
+                              [(0, 'u'), (0, 'v'), (0, 'w'), (n, 'v'), (n, 'slope'),
+                               (n, 'twist')], section)
             x_tip, s_tip = leaf.attached_point(
                 2 * n, (rib.tip_offset_x, rib.tip_offset_y, rib.tip_offset_z))
             tips.append([(x_tip, s_tip, rib.tip_mass)])
@@ -225,12 +225,12 @@ class UmbrellaModel3D:
         self.n_rib = 5 + nl + nk
         self.i_a1, self.i_rx, self.i_ry, self.i_rz, self.i_a2 = 0, 1 + nl, 2 + nl, 3 + nl, 4 + nl
         self.s_leaf_e, self.s_link_e = slice(1, 1 + nl), slice(5 + nl, 5 + nl + nk)
-        self.i_u1, self.i_w1 = 1 + lf.index(n, "u"), 1 + lf.index(n, "w")
-        self.i_s1, self.i_p1 = 1 + lf.index(n, "slope"), 1 + lf.index(n, "twist")
-        self.i_s2, self.i_p2 = 5 + nl + lk.index(0, "slope"), 5 + nl + lk.index(0, "twist")
-        self.i_uh, self.i_wh = 5 + nl + lk.index(n, "u"), 5 + nl + lk.index(n, "w")
+        self.i_u1, self.i_w1 = 1 + lf.index(n, 'u'), 1 + lf.index(n, 'w')
+        self.i_s1, self.i_p1 = 1 + lf.index(n, 'slope'), 1 + lf.index(n, 'twist')
+        self.i_s2, self.i_p2 = 5 + nl + lk.index(0, 'slope'), 5 + nl + lk.index(0, 'twist')
+        self.i_uh, self.i_wh = 5 + nl + lk.index(n, 'u'), 5 + nl + lk.index(n, 'w')
         tip = 2 * n
-        self.i_tip = tuple(1 + lf.index(tip, d) for d in ("u", "v", "w"))
+        self.i_tip = tuple(1 + lf.index(tip, d) for d in ('u', 'v', 'w'))
         self.l1 = np.array([r.planar.l1 for r in ribs])
         self.l3 = np.array([r.planar.l3 for r in ribs])
         self.alpha_deployed = np.array([_deployed_angle(r.planar, p.planar) for r in ribs])
@@ -244,9 +244,9 @@ class UmbrellaModel3D:
                              np.stack([s, z, c], -1)], -1)
         self.hub_radius = p.hub_radius
         self.sleeve_mass = p.sleeve_mass
-        self.moving_base = p.base != "fixed"
+        self.moving_base = p.base != 'fixed'
         self.n_shared = 7 if self.moving_base else 1
-        self.n_shared_rows = 1 + (6 if p.base == "prescribed" else 0)
+        self.n_shared_rows = 1 + (6 if p.base == 'prescribed' else 0)
         self.stiffness = np.zeros((nr, self.n_rib, self.n_rib))
         for b in self.bodies:
             self.stiffness[:, b.slice, b.slice] = b.stiffness
@@ -260,9 +260,9 @@ class UmbrellaModel3D:
     # -------------------------------------------------------------- kinematics
     def kinematics(self, qr: np.ndarray, qs: np.ndarray) -> dict:
         """Every body's point kinematics at (qr (R, n_rib), qs) and the bus frame."""
-        out = {"bodies": [b.kin(qr[:, b.slice]) for b in self.bodies], "qr": qr, "qs": qs}
+        out = {'bodies': [b.kin(qr[:, b.slice]) for b in self.bodies], 'qr': qr, 'qs': qs}
         if self.moving_base:
-            out["bus"] = BusFrame.of(qs[4:7])
+            out['bus'] = BusFrame.of(qs[4:7])
         return out
 
     def _hub_point(self, rho):
@@ -272,15 +272,15 @@ class UmbrellaModel3D:
     def _full_velocities(self, kin, vr, vs):
         """Per body: (relative velocity, full velocity, omega) in each rib's frame."""
         out = []
-        for b, bk in zip(self.bodies, kin["bodies"]):
+        for b, bk in zip(self.bodies, kin['bodies']):
             vrel = b.velocity(bk, vr[:, b.slice])
             if not self.moving_base:
                 out.append((vrel, vrel, None))
                 continue
-            bus = kin["bus"]
-            om = np.einsum("rji,j->ri", self.psi, bus.basis @ vs[4:7])
-            vx = np.einsum("rji,j->ri", self.psi, bus.rot.T @ vs[1:4])
-            full = vx[:, None] + np.cross(om[:, None], self._hub_point(bk["rho"])) + vrel
+            bus = kin['bus']
+            om = np.einsum('rji,j->ri', self.psi, bus.basis @ vs[4:7])
+            vx = np.einsum('rji,j->ri', self.psi, bus.rot.T @ vs[1:4])
+            full = vx[:, None] + np.cross(om[:, None], self._hub_point(bk['rho'])) + vrel
             out.append((vrel, full, om))
         return out
 
@@ -292,25 +292,25 @@ class UmbrellaModel3D:
         m_rs = np.zeros((nr, n, ns))
         m_ss = np.zeros((ns, ns))
         m_ss[0, 0] = self.sleeve_mass
-        for b, bk in zip(self.bodies, kin["bodies"]):
+        for b, bk in zip(self.bodies, kin['bodies']):
             m_rr[:, b.slice, b.slice] = b.mass(bk)
         if not self.moving_base:
             return m_rr, m_rs, m_ss
-        bus, ys = kin["bus"], kin["qs"][0]
+        bus, ys = kin['bus'], kin['qs'][0]
         s1 = np.array([0.0, self.sleeve_mass * ys, 0.0])
         ic = self.bus_inertia + self.sleeve_mass * ys * ys * np.diag([1.0, 0.0, 1.0])
-        for b, bk in zip(self.bodies, kin["bodies"]):
-            sp = self._hub_point(bk["rho"])
-            g = np.einsum("rki,rp,rpin->rkn", self.psi, b.w, bk["jac"])
-            lm = np.einsum("rki,rp,rpin->rkn", self.psi, b.w,
-                           np.cross(sp[..., None, :], bk["jac"].transpose(0, 1, 3, 2))
+        for b, bk in zip(self.bodies, kin['bodies']):
+            sp = self._hub_point(bk['rho'])
+            g = np.einsum('rki,rp,rpin->rkn', self.psi, b.w, bk['jac'])
+            lm = np.einsum('rki,rp,rpin->rkn', self.psi, b.w,
+                           np.cross(sp[..., None, :], bk['jac'].transpose(0, 1, 3, 2))
                            .transpose(0, 1, 3, 2))
-            m_rs[:, b.slice, 1:4] = np.einsum("rkn,jk->rnj", g, bus.rot)
-            m_rs[:, b.slice, 4:7] = np.einsum("rkn,kj->rnj", lm, bus.basis)
-            s1 += np.einsum("rki,rp,rpi->k", self.psi, b.w, sp)
-            second = np.einsum("rp,rpi,rpj->rij", b.w, sp, sp)
+            m_rs[:, b.slice, 1:4] = np.einsum('rkn,jk->rnj', g, bus.rot)
+            m_rs[:, b.slice, 4:7] = np.einsum('rkn,kj->rnj', lm, bus.basis)
+            s1 += np.einsum('rki,rp,rpi->k', self.psi, b.w, sp)
+            second = np.einsum('rp,rpi,rpj->rij', b.w, sp, sp)
             local = np.trace(second, axis1=1, axis2=2)[:, None, None] * np.eye(3) - second
-            ic += np.einsum("rki,rij,rlj->kl", self.psi, local, self.psi)
+            ic += np.einsum('rki,rij,rlj->kl', self.psi, local, self.psi)
         m_ss[0, 1:4] = m_ss[1:4, 0] = self.sleeve_mass * bus.rot[:, 1]
         m_ss[1:4, 1:4] = self.total_mass * np.eye(3)
         m_ss[1:4, 4:7] = bus.rot @ np.cross(bus.basis.T, s1).T
@@ -321,24 +321,24 @@ class UmbrellaModel3D:
     @staticmethod
     def matvec(mass, vr, vs):
         m_rr, m_rs, m_ss = mass
-        return (np.einsum("rij,rj->ri", m_rr, vr) + m_rs @ vs,
-                np.einsum("rij,ri->j", m_rs, vr) + m_ss @ vs)
+        return (np.einsum('rij,rj->ri', m_rr, vr) + m_rs @ vs,
+                np.einsum('rij,ri->j', m_rs, vr) + m_ss @ vs)
 
     def kinetic_gradient(self, kin, ar, as_, br, bs):
         """Return d/dq [1/2 a^T M(q) b] as (rib part (R, n), shared part)."""
-        gr = np.zeros_like(kin["qr"])
+        gr = np.zeros_like(kin['qr'])
         gs = np.zeros(self.n_shared)
         va = self._full_velocities(kin, ar, as_)
         vb = self._full_velocities(kin, br, bs)
         for b, bk, (rel_a, full_a, om_a), (rel_b, full_b, om_b) in zip(
-                self.bodies, kin["bodies"], va, vb):
+                self.bodies, kin['bodies'], va, vb):
             g = (b.dv_t(bk, ar[:, b.slice], rel_a, full_b)
                  + b.dv_t(bk, br[:, b.slice], rel_b, full_a))
             if self.moving_base:
-                jt = np.einsum("rp,rpin,rpi->rn", b.w, bk["jac"],
+                jt = np.einsum('rp,rpin,rpi->rn', b.w, bk['jac'],
                                np.cross(full_b, om_a[:, None]) + np.cross(full_a, om_b[:, None]))
                 g = g + jt
-                gs[4:7] += self._theta_gradient(kin["bus"], b.w, self._hub_point(bk["rho"]),
+                gs[4:7] += self._theta_gradient(kin['bus'], b.w, self._hub_point(bk['rho']),
                                                 rel_a, rel_b, full_a, full_b, om_a, om_b,
                                                 as_[4:7], bs[4:7])
             gr[:, b.slice] = 0.5 * g
@@ -348,23 +348,23 @@ class UmbrellaModel3D:
 
     def _theta_gradient(self, bus, w, sp, rel_a, rel_b, full_a, full_b, om_a, om_b, ta, tb):
         """Return d/d theta of 1/2 sum w V_a . V_b over a body's points (rib frames)."""
-        b_loc = np.einsum("rki,kj->rji", self.psi, bus.basis)          # (R, j, 3)
-        ca = np.einsum("rki,jkl,l->rji", self.psi, bus.dbasis, ta)
-        cb = np.einsum("rki,jkl,l->rji", self.psi, bus.dbasis, tb)
+        b_loc = np.einsum('rki,kj->rji', self.psi, bus.basis)          # (R, j, 3)
+        ca = np.einsum('rki,jkl,l->rji', self.psi, bus.dbasis, ta)
+        cb = np.einsum('rki,jkl,l->rji', self.psi, bus.dbasis, tb)
         u_a = np.cross(om_a[:, None], sp) + rel_a
         u_b = np.cross(om_b[:, None], sp) + rel_b
-        a_ab = np.einsum("rp,rpi->ri", w, np.cross(u_a, full_b) + np.cross(u_b, full_a))
-        sv_a = np.einsum("rp,rpi->ri", w, np.cross(sp, full_a))
-        sv_b = np.einsum("rp,rpi->ri", w, np.cross(sp, full_b))
-        return 0.5 * (np.einsum("rji,ri->j", b_loc, a_ab) + np.einsum("rji,ri->j", ca, sv_b)
-                      + np.einsum("rji,ri->j", cb, sv_a))
+        a_ab = np.einsum('rp,rpi->ri', w, np.cross(u_a, full_b) + np.cross(u_b, full_a))
+        sv_a = np.einsum('rp,rpi->ri', w, np.cross(sp, full_a))
+        sv_b = np.einsum('rp,rpi->ri', w, np.cross(sp, full_b))
+        return 0.5 * (np.einsum('rji,ri->j', b_loc, a_ab) + np.einsum('rji,ri->j', ca, sv_b)
+                      + np.einsum('rji,ri->j', cb, sv_a))
 
     def _sleeve_and_bus_gradient(self, kin, as_, bs):
         """Return the sleeve point's and the bus body's share of the gradient (shared part)."""
-        bus = kin["bus"]
+        bus = kin['bus']
         out = np.zeros(self.n_shared)
         ey = np.array([0.0, 1.0, 0.0])
-        sp = kin["qs"][0] * ey
+        sp = kin['qs'][0] * ey
         vels = []
         for v in (as_, bs):
             om = bus.basis @ v[4:7]
@@ -375,8 +375,8 @@ class UmbrellaModel3D:
         out[0] = 0.5 * m * (ey @ np.cross(vb, om_a) + ey @ np.cross(va, om_b))
         out[4:7] = self._theta_gradient_single(bus, m, sp, rel_a, rel_b, va, vb, om_a, om_b,
                                                as_[4:7], bs[4:7])
-        ca = np.einsum("jkl,l->jk", bus.dbasis, as_[4:7])
-        cb = np.einsum("jkl,l->jk", bus.dbasis, bs[4:7])
+        ca = np.einsum('jkl,l->jk', bus.dbasis, as_[4:7])
+        cb = np.einsum('jkl,l->jk', bus.dbasis, bs[4:7])
         ib = self.bus_inertia
         out[4:7] += 0.5 * (ca @ (ib @ om_b) + cb @ (ib @ om_a))
         return out
@@ -385,15 +385,15 @@ class UmbrellaModel3D:
     def _theta_gradient_single(bus, m, sp, rel_a, rel_b, va, vb, om_a, om_b, ta, tb):
         u_a, u_b = np.cross(om_a, sp) + rel_a, np.cross(om_b, sp) + rel_b
         a_ab = m * (np.cross(u_a, vb) + np.cross(u_b, va))
-        ca = np.einsum("jkl,l->jk", bus.dbasis, ta)
-        cb = np.einsum("jkl,l->jk", bus.dbasis, tb)
+        ca = np.einsum('jkl,l->jk', bus.dbasis, ta)
+        cb = np.einsum('jkl,l->jk', bus.dbasis, tb)
         return 0.5 * (bus.basis.T @ a_ab + ca @ (m * np.cross(sp, vb))
                       + cb @ (m * np.cross(sp, va)))
 
     def gyroscopic(self, kin, vr):
         """Return -dQv/dq' of the rib frames' own motion (R, n, n), Newton matrix only."""
         g = np.zeros((self.n_ribs, self.n_rib, self.n_rib))
-        for b, bk in zip(self.bodies, kin["bodies"]):
+        for b, bk in zip(self.bodies, kin['bodies']):
             vb = vr[:, b.slice]
             g[:, b.slice, b.slice] = b.gyroscopic(bk, vb, b.velocity(bk, vb))
         return g
@@ -403,10 +403,10 @@ class UmbrellaModel3D:
         return 0.5 * float(np.sum(pr * vr) + ps @ vs)
 
     def strain_energy(self, qr) -> float:
-        return 0.5 * float(np.einsum("ri,rij,rj->", qr, self.stiffness, qr))
+        return 0.5 * float(np.einsum('ri,rij,rj->', qr, self.stiffness, qr))
 
     def strain_energy_per_rib(self, qr) -> np.ndarray:
-        return 0.5 * np.einsum("ri,rij,rj->r", qr, self.stiffness, qr)
+        return 0.5 * np.einsum('ri,rij,rj->r', qr, self.stiffness, qr)
 
     # -------------------------------------------------------------- joints
     def sleeve_heights(self, qr) -> np.ndarray:
@@ -502,14 +502,14 @@ class UmbrellaModel3D:
         this serves the consistent multipliers of a start, Newton's first guess).
         """
         out = np.zeros_like(vr)
-        for b, bk in zip(self.bodies, kin["bodies"]):
+        for b, bk in zip(self.bodies, kin['bodies']):
             vb = vr[:, b.slice]
             t = b.n_trans
             w = vb[:, t, None, None]
-            qy = bk["jac"][:, :, :, t]                     # e_z x Q Y
+            qy = bk['jac'][:, :, :, t]                     # e_z x Q Y
             acc = w * w * _ez_cross(qy) + 2.0 * w * _ez_cross(
-                np.einsum("rpie,re->rpi", bk["qs"], vb[:, t + 1:]))
-            out[:, b.slice] = -np.einsum("rp,rpin,rpi->rn", b.w, bk["jac"], acc)
+                np.einsum('rpie,re->rpi', bk['qs'], vb[:, t + 1:]))
+            out[:, b.slice] = -np.einsum('rp,rpin,rpi->rn', b.w, bk['jac'], acc)
         return out
 
     # -------------------------------------------------------------- configurations
@@ -554,18 +554,18 @@ class UmbrellaModel3D:
     def momentum(self, kin, vr, vs):
         """Return (linear momentum P, angular momentum H about the origin), inertial."""
         if not self.moving_base:
-            raise ValueError("momentum: the hub is fixed (the base takes any momentum)")
-        bus = kin["bus"]
-        x = kin["qs"][1:4]
+            raise ValueError('momentum: the hub is fixed (the base takes any momentum)')
+        bus = kin['bus']
+        x = kin['qs'][1:4]
         h_body = self.bus_inertia @ (bus.basis @ vs[4:7])
         p_body = self.bus_mass * (bus.rot.T @ vs[1:4])
-        for b, bk, (_, full, _) in zip(self.bodies, kin["bodies"],
+        for b, bk, (_, full, _) in zip(self.bodies, kin['bodies'],
                                        self._full_velocities(kin, vr, vs)):
-            sp = self._hub_point(bk["rho"])
-            p_body = p_body + np.einsum("rki,rp,rpi->k", self.psi, b.w, full)
-            h_body = h_body + np.einsum("rki,rp,rpi->k", self.psi, b.w, np.cross(sp, full))
+            sp = self._hub_point(bk['rho'])
+            p_body = p_body + np.einsum('rki,rp,rpi->k', self.psi, b.w, full)
+            h_body = h_body + np.einsum('rki,rp,rpi->k', self.psi, b.w, np.cross(sp, full))
         ey = np.array([0.0, 1.0, 0.0])
-        sp = kin["qs"][0] * ey
+        sp = kin['qs'][0] * ey
         v_s = bus.rot.T @ vs[1:4] + np.cross(bus.basis @ vs[4:7], sp) + vs[0] * ey
         p_body = p_body + self.sleeve_mass * v_s
         h_body = h_body + self.sleeve_mass * np.cross(sp, v_s)
@@ -578,10 +578,10 @@ class UmbrellaModel3D:
         out = []
         for bodies, s_e in ((self.leaf_bodies, self.s_leaf_e), (self.link_bodies, self.s_link_e)):
             e = qr[:, s_e]
-            out.append(tuple(np.einsum("rpe,re->rp", np.array([getattr(b, name) for b in bodies]),
+            out.append(tuple(np.einsum('rpe,re->rp', np.array([getattr(b, name) for b in bodies]),
                                        e)
-                             for name in ("stress_axial", "stress_bend_z", "stress_bend_y",
-                                          "stress_shear")))
+                             for name in ('stress_axial', 'stress_bend_z', 'stress_bend_y',
+                                          'stress_shear')))
         return out
 
 

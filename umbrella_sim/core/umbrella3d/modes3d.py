@@ -86,7 +86,7 @@ def _shares(m: UmbrellaModel3D, stiff, x):
     """Return the (in-plane, out-of-plane bending, twist) shares of x's strain energy."""
     total = x @ stiff @ x
     parts = []
-    for dofs in (("w", "slope"), ("twist",)):
+    for dofs in (('w', 'slope'), ('twist',)):
         mask = np.zeros(m.n_rib, dtype=bool)
         for bodies, s_e in ((m.leaf_bodies, m.s_leaf_e), (m.link_bodies, m.s_link_e)):
             body = bodies[0]

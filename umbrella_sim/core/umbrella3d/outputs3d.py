@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-STRESS_NAMES = ("axial", "bending_in_plane", "bending_out_of_plane", "torsion", "von_mises")
+STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
 
 
 class Record3D:
@@ -41,7 +41,7 @@ class Record3D:
         self.rows: dict[str, list] = {}
         nr = model.n_ribs
         self.peak = {name: np.zeros(nr) for name in STRESS_NAMES}
-        self.peak_where = {name: [("", 0.0, 0.0)] * nr for name in STRESS_NAMES}
+        self.peak_where = {name: [('', 0.0, 0.0)] * nr for name in STRESS_NAMES}
         self.work = 0.0
         self.friction = np.zeros(nr)
         self.drive = 0.0
@@ -69,35 +69,35 @@ class Record3D:
             pr, ps = s.pr, s.ps
         kinetic = 0.5 * (float(np.sum(pr * s.vr)) + float(ps @ s.vs))
         put = self._put
-        put("time", s.t)
-        put("locked", locked)
-        put("sleeve_position", s.qs[0])
-        put("sleeve_velocity", s.vs[0])
-        put("sleeve_force", force)
-        put("alpha1", s.qr[:, m.i_a1].copy())
-        put("alpha2", s.qr[:, m.i_a2].copy())
-        put("alpha1_rate", s.vr[:, m.i_a1].copy())
-        put("alpha2_rate", s.vr[:, m.i_a2].copy())
-        put("tip", s.qr[:, list(m.i_tip)].copy())
-        put("kinetic_energy", kinetic)
-        put("strain_energy", m.strain_energy(s.qr))
-        put("work", self.work)
-        put("friction_work", self.friction.copy())
-        put("drive_work", self.drive)
-        put("lock_energy_loss", lock_loss)
-        put("holding_torque", np.where(np.isnan(s.stuck), 0.0, s.lam_r[:, -1]))
-        put("stuck", ~np.isnan(s.stuck))
-        put("stop_reaction", float(s.lam_s[0]))
+        put('time', s.t)
+        put('locked', locked)
+        put('sleeve_position', s.qs[0])
+        put('sleeve_velocity', s.vs[0])
+        put('sleeve_force', force)
+        put('alpha1', s.qr[:, m.i_a1].copy())
+        put('alpha2', s.qr[:, m.i_a2].copy())
+        put('alpha1_rate', s.vr[:, m.i_a1].copy())
+        put('alpha2_rate', s.vr[:, m.i_a2].copy())
+        put('tip', s.qr[:, list(m.i_tip)].copy())
+        put('kinetic_energy', kinetic)
+        put('strain_energy', m.strain_energy(s.qr))
+        put('work', self.work)
+        put('friction_work', self.friction.copy())
+        put('drive_work', self.drive)
+        put('lock_energy_loss', lock_loss)
+        put('holding_torque', np.where(np.isnan(s.stuck), 0.0, s.lam_r[:, -1]))
+        put('stuck', ~np.isnan(s.stuck))
+        put('stop_reaction', float(s.lam_s[0]))
         if m.moving_base:
-            put("bus_q", s.qs[1:7].copy())
-            put("bus_v", s.vs[1:7].copy())
-            if m.params.base == "free":
+            put('bus_q', s.qs[1:7].copy())
+            put('bus_v', s.vs[1:7].copy())
+            if m.params.base == 'free':
                 kin = kin if kin is not None else m.kinematics(s.qr, s.qs)
                 p, h = m.momentum(kin, s.vr, s.vs)
-                put("linear_momentum", p)
-                put("angular_momentum", h)
+                put('linear_momentum', p)
+                put('angular_momentum', h)
         vm_now = np.zeros(m.n_ribs)
-        for body, comps, xs in zip(("leaf", "link"), m.stress_components(s.qr), self._xs):
+        for body, comps, xs in zip(('leaf', 'link'), m.stress_components(s.qr), self._xs):
             ax, bz, by, sh = comps
             vm = np.sqrt((np.abs(ax) + np.abs(bz) + np.abs(by)) ** 2 + 3.0 * sh * sh)
             vm_now = np.maximum(vm_now, vm.max(1))
@@ -112,7 +112,7 @@ class Record3D:
                     for k in np.nonzero(better)[0]:
                         lst[k] = (body, float(xs[where[k]]), float(s.t))
                     self.peak_where[name] = lst
-        put("von_mises", vm_now)
+        put('von_mises', vm_now)
 
     def arrays(self) -> dict:
         """Return every per-step figure as an array (steps first, then ribs or components)."""
@@ -128,8 +128,8 @@ class Record3D:
         """
         m = self.model
         a = self.arrays()
-        t = a["time"]
-        alpha = a["alpha1"]
+        t = a['time']
+        alpha = a['alpha1']
         deployed = []
         for k in range(m.n_ribs):
             gap = alpha[:, k] - m.alpha_deployed[k]
@@ -140,25 +140,25 @@ class Record3D:
             i = hit[0]
             deployed.append(t[i - 1] + (t[i] - t[i - 1]) * gap[i - 1] / (gap[i - 1] - gap[i]))
         deployed = np.array(deployed)
-        energy = a["kinetic_energy"] + a["strain_energy"]
-        balance = (energy - energy[0] - a["work"] - a["friction_work"].sum(1) - a["drive_work"]
-                   + a["lock_energy_loss"])
-        tip_w = np.abs(a["tip"][:, :, 2])
+        energy = a['kinetic_energy'] + a['strain_energy']
+        balance = (energy - energy[0] - a['work'] - a['friction_work'].sum(1) - a['drive_work']
+                   + a['lock_energy_loss'])
+        tip_w = np.abs(a['tip'][:, :, 2])
         worst = np.unravel_index(np.argmax(tip_w), tip_w.shape)
         out = {
-            "lock_time": self.lock_events[0][0] if self.lock_events else None,
-            "rib_deploy_time": deployed,
-            "deployment_lag": float(np.nanmax(deployed) - np.nanmin(deployed))
+            'lock_time': self.lock_events[0][0] if self.lock_events else None,
+            'rib_deploy_time': deployed,
+            'deployment_lag': float(np.nanmax(deployed) - np.nanmin(deployed))
             if np.any(np.isfinite(deployed)) else np.nan,
-            "max_out_of_plane_tip": float(tip_w[worst]),
-            "max_out_of_plane_tip_rib": int(worst[1]),
-            "max_out_of_plane_tip_time": float(t[worst[0]]),
-            "max_in_plane_tip": np.abs(a["tip"][:, :, 1]).max(0),
-            "energy_balance_residual": float(np.max(np.abs(balance))),
-            "energy_scale": float(np.max(np.abs(energy))),
-            "friction_work": a["friction_work"][-1],
-            "newton_iterations": self.iterations,
-            "peak_stress": {name: (self.peak[name].copy(), list(self.peak_where[name]))
+            'max_out_of_plane_tip': float(tip_w[worst]),
+            'max_out_of_plane_tip_rib': int(worst[1]),
+            'max_out_of_plane_tip_time': float(t[worst[0]]),
+            'max_in_plane_tip': np.abs(a['tip'][:, :, 1]).max(0),
+            'energy_balance_residual': float(np.max(np.abs(balance))),
+            'energy_scale': float(np.max(np.abs(energy))),
+            'friction_work': a['friction_work'][-1],
+            'newton_iterations': self.iterations,
+            'peak_stress': {name: (self.peak[name].copy(), list(self.peak_where[name]))
                             for name in STRESS_NAMES},
         }
         return out

@@ -35,76 +35,76 @@ from typing import Any, Mapping
 from ..params import UmbrellaParams
 from ..registry import Param
 
-BASE_MODES = ("fixed", "prescribed", "free")
+BASE_MODES = ('fixed', 'prescribed', 'free')
 
 _P = Param
 #: the whole umbrella's own parameters (one value each)
 UMBRELLA_SPECS: dict[str, Param] = {p.name: p for p in (
-    _P("ribs", int, 1, "-", "number of ribs N at azimuths 2πk/N about the hub axis Y "
-       "(1 = the planar model)", low=1, high=64),
-    _P("hub_radius", float, 0.0, "m", "radius a of the hub circle on which the leaf hinges "
+    _P('ribs', int, 1, '-', 'number of ribs N at azimuths 2πk/N about the hub axis Y '
+       '(1 = the planar model)', low=1, high=64),
+    _P('hub_radius', float, 0.0, 'm', 'radius a of the hub circle on which the leaf hinges '
        "O_k and the link's sleeve hinges sit", low=0.0, high=10.0),
-    _P("sleeve_mass", float, 0.0, "kg", "mass of the sleeve H sliding on Y (thesis: 0)",
+    _P('sleeve_mass', float, 0.0, 'kg', 'mass of the sleeve H sliding on Y (thesis: 0)',
        low=0.0, high=1e6),
-    _P("poisson_ratio", float, 0.33, "-", "Poisson's ratio ν (shear modulus E / 2(1 + ν))",
+    _P('poisson_ratio', float, 0.33, '-', "Poisson's ratio ν (shear modulus E / 2(1 + ν))",
        low=0.0, high=0.5, high_open=True),
-    _P("hinge_regularisation", float, 1e-3, "rad/s",
+    _P('hinge_regularisation', float, 1e-3, 'rad/s',
        "rate below which a hinge's Coulomb torque is smoothed (τ_c tanh(ω / this))",
        low=0.0, low_open=True, high=10.0),
-    _P("base", str, "fixed", "-", "fixed hub; prescribed bus motion (base_accel, "
-       "base_spin_rate); free-floating bus (bus_mass, bus_inertia)", choices=BASE_MODES),
-    _P("bus_mass", float, 100.0, "kg", "free-floating bus mass", low=0.0, low_open=True,
+    _P('base', str, 'fixed', '-', 'fixed hub; prescribed bus motion (base_accel, '
+       'base_spin_rate); free-floating bus (bus_mass, bus_inertia)', choices=BASE_MODES),
+    _P('bus_mass', float, 100.0, 'kg', 'free-floating bus mass', low=0.0, low_open=True,
        high=1e9),
-    _P("bus_inertia", float, 10.0, "kg m²", "free-floating bus principal moment of inertia "
-       "(the same about its three axes unless bus_inertia_y is given)", low=0.0,
+    _P('bus_inertia', float, 10.0, 'kg m²', 'free-floating bus principal moment of inertia '
+       '(the same about its three axes unless bus_inertia_y is given)', low=0.0,
        low_open=True, high=1e12),
-    _P("bus_inertia_y", float, 0.0, "kg m²", "bus moment about the hub axis Y; 0 = bus_inertia",
+    _P('bus_inertia_y', float, 0.0, 'kg m²', 'bus moment about the hub axis Y; 0 = bus_inertia',
        low=0.0, high=1e12),
-    _P("base_accel_x", float, 0.0, "m/s²", "prescribed base: peak of a half-sine acceleration "
-       "pulse along X", low=-1e6, high=1e6),
-    _P("base_accel_z", float, 0.0, "m/s²", "prescribed base: the same along Z", low=-1e6,
+    _P('base_accel_x', float, 0.0, 'm/s²', 'prescribed base: peak of a half-sine acceleration '
+       'pulse along X', low=-1e6, high=1e6),
+    _P('base_accel_z', float, 0.0, 'm/s²', 'prescribed base: the same along Z', low=-1e6,
        high=1e6),
-    _P("base_accel_start", float, 0.0, "s", "prescribed base: start of the pulse", low=0.0,
+    _P('base_accel_start', float, 0.0, 's', 'prescribed base: start of the pulse', low=0.0,
        high=1e6),
-    _P("base_accel_duration", float, 0.02, "s", "prescribed base: length of the pulse",
+    _P('base_accel_duration', float, 0.02, 's', 'prescribed base: length of the pulse',
        low=0.0, low_open=True, high=1e6),
-    _P("base_spin_rate", float, 0.0, "rad/s", "prescribed base: angular rate about Y reached "
-       "after base_spin_ramp (linear ramp from 0)", low=-1e3, high=1e3),
-    _P("base_spin_ramp", float, 0.05, "s", "prescribed base: ramp time of the spin rate",
+    _P('base_spin_rate', float, 0.0, 'rad/s', 'prescribed base: angular rate about Y reached '
+       'after base_spin_ramp (linear ramp from 0)', low=-1e3, high=1e3),
+    _P('base_spin_ramp', float, 0.05, 's', 'prescribed base: ramp time of the spin rate',
        low=0.0, low_open=True, high=1e6),
 )}
 
 #: a rib's own values (a list, or rib<k>.<name>), besides the names of the planar record
 RIB_SPECS: dict[str, Param] = {p.name: p for p in (
-    _P("tip_mass", float, 0.0, "kg", "point mass at the leaf tip G", low=0.0, high=1e6),
-    _P("tip_offset_x", float, 0.0, "m", "tip mass offset from G along the leaf (leaf frame)",
+    _P('tip_mass', float, 0.0, 'kg', 'point mass at the leaf tip G', low=0.0, high=1e6),
+    _P('tip_offset_x', float, 0.0, 'm', 'tip mass offset from G along the leaf (leaf frame)',
        low=-10.0, high=10.0),
-    _P("tip_offset_y", float, 0.0, "m", "tip mass offset, in-plane transverse", low=-10.0,
+    _P('tip_offset_y', float, 0.0, 'm', 'tip mass offset, in-plane transverse', low=-10.0,
        high=10.0),
-    _P("tip_offset_z", float, 0.0, "m", "tip mass offset, out of the rib plane (tangential)",
+    _P('tip_offset_z', float, 0.0, 'm', 'tip mass offset, out of the rib plane (tangential)',
        low=-10.0, high=10.0),
-    _P("hinge_coulomb", float, 0.0, "N m", "Coulomb friction torque at the leaf hinge O_k",
+    _P('hinge_coulomb', float, 0.0, 'N m', 'Coulomb friction torque at the leaf hinge O_k',
        low=0.0, high=1e6),
-    _P("hinge_viscous", float, 0.0, "N m s", "viscous friction coefficient at O_k", low=0.0,
+    _P('hinge_viscous', float, 0.0, 'N m s', 'viscous friction coefficient at O_k', low=0.0,
        high=1e6),
-    _P("stick_until", float, 0.0, "s", "the leaf hinge is stuck until this time (0 = free)",
+    _P('stick_until', float, 0.0, 's', 'the leaf hinge is stuck until this time (0 = free)',
        low=0.0, high=1e6),
-    _P("stick_torque", float, 0.0, "N m", "a stuck hinge breaks free when its holding torque "
-       "exceeds this (0 = only stick_until releases it)", low=0.0, high=1e9),
-    _P("alpha0_offset", float, 0.0, "rad", "initial leaf angle perturbation (taken up "
-       "elastically: the ribs share the sleeve)", low=-0.5, high=0.5),
-    _P("rate_offset", float, 0.0, "rad/s", "initial leaf rate perturbation", low=-1e3,
+    _P('stick_torque', float, 0.0, 'N m', 'a stuck hinge breaks free when its holding torque '
+       'exceeds this (0 = only stick_until releases it)', low=0.0, high=1e9),
+    _P('alpha0_offset', float, 0.0, 'rad', 'initial leaf angle perturbation (taken up '
+       'elastically: the ribs share the sleeve)', low=-0.5, high=0.5),
+    _P('rate_offset', float, 0.0, 'rad/s', 'initial leaf rate perturbation', low=-1e3,
        high=1e3),
-    _P("out_of_plane_rate", float, 0.0, "m/s", "initial out-of-plane velocity of the leaf "
-       "tip (a lateral kick; projected onto the joints)", low=-1e3, high=1e3),
-    _P("torsion_constant", float, 0.0, "m⁴", "St-Venant torsion constant J; 0 = that of the "
-       "square of the section (0.1406 b⁴ = 0.8436 I_p)", low=0.0, high=100.0),
+    _P('out_of_plane_rate', float, 0.0, 'm/s', 'initial out-of-plane velocity of the leaf '
+       'tip (a lateral kick; projected onto the joints)', low=-1e3, high=1e3),
+    _P('torsion_constant', float, 0.0, 'm⁴', 'St-Venant torsion constant J; 0 = that of the '
+       'square of the section (0.1406 b⁴ = 0.8436 I_p)', low=0.0, high=100.0),
 )}
 
 #: names of the planar record a rib may take its own value of
-RIB_PLANAR_NAMES = ("l1", "l2", "l3", "section_height", "area", "second_moment_of_area",
-                    "youngs_modulus", "density")
-_OVERRIDE = re.compile(r"^rib(\d+)\.(\w+)$")
+RIB_PLANAR_NAMES = ('l1', 'l2', 'l3', 'section_height', 'area', 'second_moment_of_area',
+                    'youngs_modulus', 'density')
+_OVERRIDE = re.compile(r'^rib(\d+)\.(\w+)$')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,7 +117,7 @@ class RibProperties:
     own: Mapping[str, float]
 
     def __getattr__(self, name: str):
-        own = self.__dict__.get("own", {})
+        own = self.__dict__.get('own', {})
         if name in own:
             return own[name]
         raise AttributeError(name)
@@ -125,12 +125,12 @@ class RibProperties:
     @property
     def shear_modulus_factor(self) -> float:
         """Return 1 / (2 (1 + nu)), filled in by UmbrellaRibsParams.rib."""
-        return self.own["_shear_factor"]
+        return self.own['_shear_factor']
 
     @property
     def torsion_j(self) -> float:
         """Return the St-Venant torsion constant J (m^4)."""
-        j = self.own["torsion_constant"]
+        j = self.own['torsion_constant']
         if j > 0.0:
             return j
         return 0.8436 * 2.0 * self.planar.cross_section_inertia
@@ -158,12 +158,12 @@ class UmbrellaRibsParams:
         spec = UMBRELLA_SPECS.get(name)
         if spec is None:
             raise AttributeError(name)
-        return self.__dict__["values"].get(name, spec.default)
+        return self.__dict__['values'].get(name, spec.default)
 
     # ------------------------------------------------------------- building
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any],
-                     planar: UmbrellaParams | None = None) -> "UmbrellaRibsParams":
+                     planar: UmbrellaParams | None = None) -> 'UmbrellaRibsParams':
         """
         Build from {name: value}: planar names, umbrella names, rib lists and overrides.
 
@@ -188,13 +188,13 @@ class UmbrellaRibsParams:
             else:
                 base_planar[name] = value
         planar = planar.replace(**base_planar) if base_planar else planar
-        n = own.get("ribs", UMBRELLA_SPECS["ribs"].default)
+        n = own.get('ribs', UMBRELLA_SPECS['ribs'].default)
         per_rib: dict[int, dict] = {k: {} for k in range(n)}
         for name, value in lists.items():
             if isinstance(value, list):
                 if len(value) != n:
-                    raise ValueError(f"parameter {name}: a list of {len(value)} values for "
-                                     f"{n} ribs (give one per rib)")
+                    raise ValueError(f'parameter {name}: a list of {len(value)} values for '
+                                     f'{n} ribs (give one per rib)')
                 for k, v in enumerate(value):
                     per_rib[k][name] = v
             else:
@@ -202,21 +202,21 @@ class UmbrellaRibsParams:
                     per_rib[k][name] = value
         for k, vals in overrides.items():
             if not 0 <= k < n:
-                raise ValueError(f"parameter rib{k}.{next(iter(vals))}: there are ribs "
-                                 f"0 .. {n - 1}")
+                raise ValueError(f'parameter rib{k}.{next(iter(vals))}: there are ribs '
+                                 f'0 .. {n - 1}')
             per_rib[k].update(vals)
         out = cls(planar, own, {k: v for k, v in per_rib.items() if v})
         return out.validated()
 
-    def validated(self) -> "UmbrellaRibsParams":
+    def validated(self) -> 'UmbrellaRibsParams':
         """Return self if every value is in range, else raise ValueError naming it."""
         self.planar.validated()
         for name, value in self.values.items():
             UMBRELLA_SPECS[name].check(value)
-        if self.planar.model != "flexible":
-            raise ValueError(f"parameter model={self.planar.model!r}: the umbrella model is "
-                             "flexible (3D Euler-Bernoulli beams) only")
-        if self.base == "free" and self.planar.lock == "energy":
+        if self.planar.model != 'flexible':
+            raise ValueError(f'parameter model={self.planar.model!r}: the umbrella model is '
+                             'flexible (3D Euler-Bernoulli beams) only')
+        if self.base == 'free' and self.planar.lock == 'energy':
             raise ValueError("parameter lock='energy' with base 'free': the energy lock keeps "
                              "each rib's kinetic energy and would change the momentum of a "
                              "free-floating bus; use lock 'plastic'")
@@ -231,31 +231,31 @@ class UmbrellaRibsParams:
         try:
             planar = self.planar.replace(**planar_changes).validated()
         except ValueError as exc:
-            raise ValueError(f"rib {k}: {exc}") from None
+            raise ValueError(f'rib {k}: {exc}') from None
         own = {name: spec.default for name, spec in RIB_SPECS.items()}
         for name, value in vals.items():
             spec = RIB_SPECS[name]
             own[name] = spec.coerce(value)
-            spec.check(own[name], f"parameter rib{k}.{name}")
-        own["_shear_factor"] = 1.0 / (2.0 * (1.0 + self.poisson_ratio))
+            spec.check(own[name], f'parameter rib{k}.{name}')
+        own['_shear_factor'] = 1.0 / (2.0 * (1.0 + self.poisson_ratio))
         return RibProperties(k, 2.0 * math.pi * k / self.ribs, planar, own)
 
     @property
     def lock_rule(self) -> str:
         """Return the lock the run takes: the planar rule; plastic for auto on a free bus."""
-        if self.base == "free" and self.planar.lock == "auto":
-            return "plastic"
+        if self.base == 'free' and self.planar.lock == 'auto':
+            return 'plastic'
         return self.planar.lock_rule
 
     def ribs_list(self) -> list[RibProperties]:
         return [self.rib(k) for k in range(self.ribs)]
 
-    def replace(self, **changes: Any) -> "UmbrellaRibsParams":
+    def replace(self, **changes: Any) -> 'UmbrellaRibsParams':
         """Return a copy with changes (any name from_mapping takes)."""
         merged = dict(self.values)
         for k, vals in self.per_rib.items():
             for name, value in vals.items():
-                merged[f"rib{k}.{name}"] = value
+                merged[f'rib{k}.{name}'] = value
         merged.update(changes)
         return UmbrellaRibsParams.from_mapping(merged, self.planar)
 

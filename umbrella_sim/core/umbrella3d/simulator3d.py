@@ -112,7 +112,7 @@ class UmbrellaSimulator3D:
         if perturbed or np.any(offsets != 0.0):
             vr, vs = self.integrator.project(kin, mass, qr, vr, vs, stuck, False,
                                              None if drive is None else vs[1:7])
-        if p.base == "free":
+        if p.base == 'free':
             pr, ps = m.matvec(mass, vr, vs)
             vs = vs.copy()
             vs[1:7] -= np.linalg.solve(mass[2][1:7, 1:7], ps[1:7])
@@ -152,7 +152,7 @@ class UmbrellaSimulator3D:
         try:
             return self.integrator.step(s, h, self.force, locked)
         except (ConvergenceError3D, np.linalg.LinAlgError) as exc:
-            raise SimulationFailed(f"step after t = {s.t:.9g} s failed: {exc}") from None
+            raise SimulationFailed(f'step after t = {s.t:.9g} s failed: {exc}') from None
 
     def step(self) -> None:
         """Advance by one grid step, with the lock if the sleeve reaches the stop in it."""
@@ -182,7 +182,7 @@ class UmbrellaSimulator3D:
         self.k += 1
         self.record.add(s1, self.locked, self.force, work, self.lock_loss, lock_event)
 
-    def run(self, duration: float, after_lock: float | None = None) -> "Record3D":
+    def run(self, duration: float, after_lock: float | None = None) -> 'Record3D':
         """Step to t = duration (or to after_lock s past the lock); return the record."""
         while self.time < duration - 1e-12:
             self.step()
@@ -220,7 +220,7 @@ class UmbrellaSimulator3D:
         mass = m.mass_matrix(kin)
         drive = integ.drive
         target = None if drive is None else drive(s.t)[1]
-        if self.params.lock_rule == "plastic":
+        if self.params.lock_rule == 'plastic':
             vr, vs = integ.project(kin, mass, s.qr, s.vr, s.vs, s.stuck, True, target)
         else:
             vr, vs = self._energy_lock(mass, s)
@@ -263,8 +263,8 @@ class UmbrellaSimulator3D:
             qc = 0.5 * base @ mk @ base - t_target
             disc = qb * qb - 4 * qa * qc
             if disc < 0.0:
-                raise SimulationFailed(f"energy lock impossible for rib {k}: its kinetic "
-                                       "energy is below the least the locked joints allow")
+                raise SimulationFailed(f'energy lock impossible for rib {k}: its kinetic '
+                                       'energy is below the least the locked joints allow')
             roots = [(-qb + sgn * math.sqrt(disc)) / (2 * qa) for sgn in (1.0, -1.0)]
             cands = [base + r * z for r in roots]
             vr[k] = min(cands, key=lambda c: (c - v) @ mk @ (c - v))
