@@ -53,13 +53,11 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from bench.process_figures import counted_commands, load  # noqa: E402
 from tests.ros_helpers import NodeProcess, Probe  # noqa: E402
 
+
 STREAM, SECOND, FLOOD = 1.0, 100.0, 2.0     # each source's base value (+ index x 1e-6 / + k)
-
-
-def load() -> str:
-    return 'load %.2f %.2f %.2f' % os.getloadavg()
 
 
 def pct(values, q):
@@ -137,15 +135,9 @@ def main() -> int:
         done.set()
         other.join()
 
-        def counted():
-            msgs = probe.messages('/diagnostics')
-            if not msgs:
-                return 0
-            v = {kv.key: kv.value for kv in msgs[-1].status[0].values}
-            return int(v['accepted_commands']) + int(v['refused_commands'])
         total = n + len(sent_b)
         deadline = time.monotonic() + 600
-        while counted() < total and time.monotonic() < deadline:
+        while counted_commands(probe) < total and time.monotonic() < deadline:
             time.sleep(0.02)
         t_counted = time.monotonic() - t_end
         # the stop in a flood

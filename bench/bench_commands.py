@@ -44,18 +44,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from bench.process_figures import counted_commands, load, rss_mb  # noqa: E402
 from tests.ros_helpers import NodeProcess, Probe  # noqa: E402
-
-PAGE = os.sysconf('SC_PAGE_SIZE')
-
-
-def rss_mb(pid: int) -> float:
-    with open(f'/proc/{pid}/statm') as fh:
-        return int(fh.read().split()[1]) * PAGE / 2**20
-
-
-def load() -> str:
-    return 'load ' + ', '.join(f'{x:.2f}' for x in os.getloadavg())
 
 
 def main() -> int:
@@ -114,14 +104,8 @@ def main() -> int:
                     time.sleep(0.001)
         t_pub = time.monotonic() - t0
 
-        def counted():
-            msgs = probe.messages('/diagnostics')
-            if not msgs:
-                return 0
-            v = {kv.key: kv.value for kv in msgs[-1].status[0].values}
-            return int(v['accepted_commands']) + int(v['refused_commands'])
         deadline = time.monotonic() + 600
-        while counted() < args.count and time.monotonic() < deadline:
+        while counted_commands(probe) < args.count and time.monotonic() < deadline:
             time.sleep(0.05)
         t_counted = time.monotonic() - t0
         stop.set()

@@ -45,18 +45,8 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
+from bench.process_figures import load, rss_mb  # noqa: E402
 from tests.ros_helpers import NodeProcess, Probe  # noqa: E402
-
-PAGE = os.sysconf('SC_PAGE_SIZE')
-
-
-def rss_mb(pid: int) -> float:
-    with open(f'/proc/{pid}/statm') as fh:
-        return int(fh.read().split()[1]) * PAGE / 2**20
-
-
-def load() -> str:
-    return 'load ' + ', '.join(f'{x:.2f}' for x in os.getloadavg())
 
 
 def percentiles(values, qs=(50, 99, 100)) -> str:

@@ -113,3 +113,33 @@ def main_thread_sleeps(pid: int) -> int:
     with open(f'/proc/{pid}/task/{pid}/status') as fh:
         return next(int(line.split()[1]) for line in fh
                     if line.startswith('voluntary_ctxt_switches:'))
+
+
+def parameter_value(kind: int, v):
+    """Return a rcl_interfaces ParameterValue of that ParameterType holding v."""
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    field = {ParameterType.PARAMETER_DOUBLE: 'double_value',
+             ParameterType.PARAMETER_INTEGER: 'integer_value',
+             ParameterType.PARAMETER_STRING: 'string_value',
+             ParameterType.PARAMETER_BOOL: 'bool_value'}.get(kind)
+    return ParameterValue(type=kind, **({field: v} if field else {}))
+
+
+def parameter_calls(probe, node: str):
+    """
+    Return set_param(name, kind, value) -> SetParametersResult and get(name) -> ParameterValue.
+
+    Each a call of the node's own parameter service (as ``ros2 param set/get`` makes).
+    """
+    from rcl_interfaces.msg import Parameter
+    from rcl_interfaces.srv import GetParameters, SetParameters
+
+    def set_param(name, kind, v):
+        req = SetParameters.Request(parameters=[Parameter(name=name,
+                                                          value=parameter_value(kind, v))])
+        return probe.call(SetParameters, f'{node}/set_parameters', req).results[0]
+
+    def get(name):
+        req = GetParameters.Request(names=[name])
+        return probe.call(GetParameters, f'{node}/get_parameters', req).values[0]
+    return set_param, get

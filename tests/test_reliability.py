@@ -55,14 +55,14 @@ from diagnostic_msgs.msg import DiagnosticArray
 from mcap.reader import make_reader
 import numpy as np
 import pytest
-from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.msg import Parameter, ParameterType
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool
 
-from tests.ros_helpers import NodeProcess, poll, ros_env, stamp
+from tests.ros_helpers import NodeProcess, parameter_calls, parameter_value, poll, ros_env, stamp
 from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.params import UmbrellaParams
@@ -126,13 +126,6 @@ def test_the_stage2_series_a_summary_keeps_is_bounded():
 
 
 # ----------------------------------------------------------- runtime parameter sets
-def _value(kind, v) -> ParameterValue:
-    field = {ParameterType.PARAMETER_DOUBLE: 'double_value',
-             ParameterType.PARAMETER_INTEGER: 'integer_value',
-             ParameterType.PARAMETER_STRING: 'string_value',
-             ParameterType.PARAMETER_BOOL: 'bool_value'}.get(kind)
-    return ParameterValue(type=kind, **({field: v} if field else {}))
-
 
 @pytest.mark.ros
 def test_every_parameter_refusal_names_the_parameter_and_why(probe):
@@ -145,14 +138,7 @@ def test_every_parameter_refusal_names_the_parameter_and_why(probe):
     with NodeProcess('-p', 'record:=false', '-p', 'v0:=0.0') as node:
         node.wait_for_log('physics step')
         srv = '/umbrella_node'
-
-        def set_param(name, kind, v):
-            req = SetParameters.Request(parameters=[Parameter(name=name, value=_value(kind, v))])
-            return probe.call(SetParameters, f'{srv}/set_parameters', req).results[0]
-
-        def get(name):
-            req = GetParameters.Request(names=[name])
-            return probe.call(GetParameters, f'{srv}/get_parameters', req).values[0]
+        set_param, get = parameter_calls(probe, srv)
 
         D, I, S, B = (ParameterType.PARAMETER_DOUBLE, ParameterType.PARAMETER_INTEGER,
                       ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_BOOL)
@@ -193,8 +179,8 @@ def test_every_parameter_refusal_names_the_parameter_and_why(probe):
 
         # atomically: one refused, none set, and the refusal names the culprit
         req = SetParametersAtomically.Request(parameters=[
-            Parameter(name='marker_magnification', value=_value(D, 5.0)),
-            Parameter(name='marker_rate', value=_value(S, 'fast'))])
+            Parameter(name='marker_magnification', value=parameter_value(D, 5.0)),
+            Parameter(name='marker_rate', value=parameter_value(S, 'fast'))])
         r = probe.call(SetParametersAtomically, f'{srv}/set_parameters_atomically', req).result
         assert not r.successful and "marker_rate='fast'" in r.reason, r.reason
         assert get('marker_magnification').double_value == 1.0
@@ -371,8 +357,8 @@ def test_a_storm_of_service_calls_is_answered_and_the_run_goes_on(probe, tmp_pat
                 GetParameters.Request(names=['publish_rate', 'v0']))))
             futures.append(('set', clients['set_parameters'].call_async(
                 SetParameters.Request(parameters=[Parameter(
-                    name='publish_rate', value=_value(ParameterType.PARAMETER_STRING,
-                                                      'fast'))]))))
+                    name='publish_rate',
+                    value=parameter_value(ParameterType.PARAMETER_STRING, 'fast'))]))))
             poll(lambda i=i: _published(pub, Float64(data=1.0 + i)), 60,
                  lambda: 'the writer stayed full for 60 s')
         poll(lambda: all(f.done() for _, f in futures), 120,

@@ -25,12 +25,12 @@ import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import pytest
-from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import DescribeParameters
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from tests.ros_helpers import NodeProcess, poll, Probe, ros_env
+from tests.ros_helpers import NodeProcess, parameter_calls, poll, Probe, ros_env
 from umbrella_sim.bag.reader import read_log
 from umbrella_sim.core.registry import (CONTROLLER_PARAMETERS, NODE_PARAMETERS, REGISTRY, SPECS,
                                         START)
@@ -43,13 +43,6 @@ def probe():
     p = Probe('conventions_probe')
     yield p
     p.close()
-
-
-def _value(kind: int, v) -> ParameterValue:
-    field = {ParameterType.PARAMETER_INTEGER: 'integer_value',
-             ParameterType.PARAMETER_DOUBLE: 'double_value',
-             ParameterType.PARAMETER_STRING: 'string_value'}[kind]
-    return ParameterValue(type=kind, **{field: v})
 
 
 def test_descriptors_come_from_the_registry():
@@ -87,14 +80,7 @@ def test_live_node_conventions(probe, tmp_path):
                      cwd=str(tmp_path)) as node:
         node.wait_for_log('physics step')
         srv = '/a1/umbrella_node'
-
-        def set_param(name, kind, v):
-            req = SetParameters.Request(parameters=[Parameter(name=name, value=_value(kind, v))])
-            return probe.call(SetParameters, f'{srv}/set_parameters', req).results[0]
-
-        def get(name):
-            req = GetParameters.Request(names=[name])
-            return probe.call(GetParameters, f'{srv}/get_parameters', req).values[0]
+        set_param, get = parameter_calls(probe, srv)
 
         # started with -p v0:=0 and real_time_factor:=2 (integers): declared as doubles
         assert get('v0').type == ParameterType.PARAMETER_DOUBLE and get('v0').double_value == 0

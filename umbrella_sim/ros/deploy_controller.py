@@ -33,7 +33,7 @@ import time
 
 from . import signals as stop_signals
 from .parameters import declare_from_registry, wrong_type_text
-from .params_file import check_parameter_sources, check_qos_override_sources, params_files_in
+from .params_file import check_parameter_sources, check_qos_override_sources, init_ros
 from ..core.control import DeployLaw
 from ..core.params import ControllerConfig, UmbrellaParams
 from ..core.registry import CONTROLLER_PARAMETERS, defaults, parameter_help
@@ -286,27 +286,18 @@ def main(argv: list[str] | None = None) -> int:
     if stop_signals.received:           # during the imports: nothing started yet
         return 0
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
-
     from rclpy.exceptions import InvalidParameterTypeException
+    from rclpy.executors import SingleThreadedExecutor
 
     def fail(text: str) -> int:
         print(f'deploy_controller: error: {text}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
 
-    try:                        # rcl's parse errors are tracebacks: check the files first
-        files = params_files_in(argv)
+    try:
+        files = init_ros(argv)
     except ValueError as exc:
         return fail(str(exc))
-    try:
-        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong
-        reason = ' '.join(str(exc).split())
-        if type(exc).__name__ == 'UnknownROSArgsError':
-            reason = f'unknown ROS arguments {reason}'
-        return fail(f'invalid ROS arguments: {reason} (see --help)')
     try:
         node = _make_node_class()(tuple(files))
     except StartupError as exc:

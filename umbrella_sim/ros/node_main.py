@@ -28,11 +28,10 @@ import sys
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
-from rclpy.signals import SignalHandlerOptions
 
 from . import messages as ros_io, signals as stop_signals
 from .node import EXIT_FAULT, EXIT_OK, EXIT_RECORDING, EXIT_USAGE, StartupError, UmbrellaNode
-from .params_file import params_files_in
+from .params_file import init_ros
 from .share import package_path
 from ..core.registry import NODE_PARAMETERS, parameter_help, SPECS
 
@@ -110,17 +109,10 @@ def _run(argv: list[str], running: list) -> int:
         rclpy.try_shutdown()
         return EXIT_USAGE
 
-    try:                        # rcl's parse errors are tracebacks: check the files first
-        files = params_files_in(argv)
+    try:
+        files = init_ros(argv)
     except ValueError as exc:
         return fail(str(exc))
-    try:
-        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong
-        reason = ' '.join(str(exc).split())
-        if type(exc).__name__ == 'UnknownROSArgsError':
-            reason = f'unknown ROS arguments {reason}'
-        return fail(f'invalid ROS arguments: {reason} (see --help)')
     if stop_requested:
         return _stopped_during_start_up()
     leftover = rclpy.utilities.remove_ros_args(argv)[1:]

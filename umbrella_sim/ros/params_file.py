@@ -274,3 +274,26 @@ def check_qos_override_sources(node_fqn: str, found: ParameterSources, declared,
     return [shared_section_warning(path, key, node_fqn, problems)
             for (path, key), names in sorted(by_section.items())
             for problems in [unknown_names(names, declared)] if problems]
+
+
+def init_ros(argv: list[str]) -> list[str]:
+    """
+    Check a process's params files, then initialise rclpy with its arguments.
+
+    Return the ``--params-file`` arguments (params_files_in), or ValueError naming what is
+    wrong: a params file, or ROS arguments rcl refuses (its parse errors are tracebacks, so
+    the files are checked first).  rclpy installs no signal handlers: the process's own stop
+    signals (signals.py) stay in charge.
+    """
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    files = params_files_in(argv)
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:    # RCLError, UnknownROSArgsError...: the arguments are wrong
+        reason = ' '.join(str(exc).split())
+        if type(exc).__name__ == 'UnknownROSArgsError':
+            reason = f'unknown ROS arguments {reason}'
+        raise ValueError(f'invalid ROS arguments: {reason} (see --help)') from None
+    return files
