@@ -215,6 +215,7 @@ def test_stress_recovery_sign_and_fibres():
     assert s.peak_stress_leaf == pytest.approx(np.abs(s.leaf_stress).max())
 
 
+@pytest.mark.slow      # 16 s: the step chosen for 48 elements is 1.6 us
 def test_sixteen_elements_per_segment():
     """The issue's largest mesh (48 elements, 148 coordinates) through the lock."""
     r = simulate(UmbrellaParams(v0=-0.2, elements_per_segment=16), 0.4)

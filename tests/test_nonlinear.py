@@ -714,6 +714,7 @@ def test_published_rotating_cantilever_table_is_transcribed_right():
         assert math.sqrt(lam) == pytest.approx(published, abs=5e-5)
 
 
+@pytest.mark.slow      # 3-5 s each
 @pytest.mark.parametrize('gamma', [2, 4, 10])
 def test_rotating_cantilever_nonlinear_beam_has_the_published_stiffened_frequency(gamma):
     """

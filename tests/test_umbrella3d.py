@@ -91,6 +91,7 @@ def assert_ribs_equal_planar(ribs: int, values: dict, duration: float):
     np.testing.assert_allclose(energy[1:], ribs * planar[:, 6], rtol=1e-9)
 
 
+@pytest.mark.slow      # ~4 s
 def test_one_rib_is_the_planar_model():
     """ribs: 1, the energy lock (the default), the planar default mesh and step."""
     assert_ribs_equal_planar(1, {'time_step': 1e-4, 'sleeve_force': 10.0}, 0.19)
@@ -135,6 +136,7 @@ def momentum_scales(sim, a):
     return linear, linear * (p.l1 + p.l2)
 
 
+@pytest.mark.slow      # ~4 s
 def test_free_floating_bus_keeps_its_momentum_and_energy():
     """
     A free bus: linear momentum kept to round-off, angular to Newton's tolerance.
@@ -159,6 +161,7 @@ def test_free_floating_bus_keeps_its_momentum_and_energy():
     assert s['energy_balance_residual'] < BALANCE_TOLERANCE * s['energy_scale']
 
 
+@pytest.mark.slow      # ~4 s
 def test_energy_balance_on_a_driven_base():
     """
     A base jolted along X while spun about Y: the drive's work is accounted.
