@@ -57,18 +57,39 @@ def energy_velocity(model: UmbrellaModel, q, qd, cs: ConstraintSet) -> tuple[np.
     """
     m = model
     free = [m.i_alpha1, m.i_r2x, m.i_r2y, m.i_alpha2, m.i_u_sleeve]
-    fixed = np.setdiff1d(np.arange(m.n), free)
-    jac = m.constraint_jacobian(q, cs)
+    best = velocity_keeping_energy(m.constraint_jacobian(q, cs), m.mass_matrix(q), qd, free)
+    labels = m.coordinate_labels()
+    return best, tuple(labels[i] for i in free)
+
+
+def locked_velocity_base(jac: np.ndarray, v: np.ndarray, free) -> np.ndarray:
+    """
+    Return v with its `free` entries set to satisfy jac v = 0 (least squares).
+
+    The other entries keep their values: the particular solution of the energy lock, to which
+    a multiple of the free entries' null direction is added (velocity_keeping_energy).
+    """
+    fixed = np.setdiff1d(np.arange(len(v)), free)
     a_free = jac[:, free]
-    rhs = -jac[:, fixed] @ qd[fixed]
-    particular = np.linalg.lstsq(a_free, rhs, rcond=None)[0]
-    null = np.linalg.svd(a_free)[2][-1]
-    base = qd.copy()
-    base[free] = particular
-    z = np.zeros(m.n)
-    z[free] = null
-    mass = m.mass_matrix(q)
-    t_target = 0.5 * qd @ mass @ qd
+    rhs = -jac[:, fixed] @ v[fixed]
+    base = v.copy()
+    base[free] = np.linalg.lstsq(a_free, rhs, rcond=None)[0]
+    return base
+
+
+def velocity_keeping_energy(jac: np.ndarray, mass: np.ndarray, v: np.ndarray,
+                            free) -> np.ndarray:
+    """
+    Return the velocity after an energy lock: jac v' = 0, v' M v' = v M v (thesis 5.2.2).
+
+    Only the `free` entries change: locked_velocity_base plus r times the null direction of
+    jac's free columns, r a root of the kinetic energy's quadratic; of the two roots, the one
+    closest to v in the mass metric.  Raises LockImpossible if there is none.
+    """
+    base = locked_velocity_base(jac, v, free)
+    z = np.zeros(len(v))
+    z[free] = np.linalg.svd(jac[:, free])[2][-1]
+    t_target = 0.5 * v @ mass @ v
     a = 0.5 * z @ mass @ z
     b = z @ mass @ base
     c = 0.5 * base @ mass @ base - t_target
@@ -78,7 +99,4 @@ def energy_velocity(model: UmbrellaModel, q, qd, cs: ConstraintSet) -> tuple[np.
                              'below the least energy compatible with the lock '
                              f'({c + t_target - b * b / (4 * a):.6g} J > {t_target:.6g} J)')
     roots = [(-b + sgn * math.sqrt(disc)) / (2 * a) for sgn in (1.0, -1.0)]
-    candidates = [base + r * z for r in roots]
-    best = min(candidates, key=lambda v: (v - qd) @ mass @ (v - qd))
-    labels = m.coordinate_labels()
-    return best, tuple(labels[i] for i in free)
+    return min((base + r * z for r in roots), key=lambda w: (w - v) @ mass @ (w - v))

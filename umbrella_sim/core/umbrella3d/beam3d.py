@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..beam import element_dof_maps, GAUSS_POINTS, GAUSS_WEIGHTS
+from ..beam import element_dof_maps, GAUSS_POINTS, GAUSS_WEIGHTS, shape_functions
 
 DOFS = ('u', 'v', 'theta', 'w', 'slope', 'twist')
 _DOF = {name: k for k, name in enumerate(DOFS)}
@@ -49,24 +49,17 @@ def shape_functions_3d(eta: np.ndarray, le: float):
     Shapes (len(eta), 3, 12), (len(eta), 3, 12), (len(eta), 3, 12), (len(eta), 12),
     (len(eta), 12) over the element's coordinates (node i's six, node j's six).
     """
-    eta = np.asarray(eta, dtype=float)
-    k = len(eta)
-    h = [1 - 3 * eta**2 + 2 * eta**3, le * (eta - 2 * eta**2 + eta**3),
-         3 * eta**2 - 2 * eta**3, le * (eta**3 - eta**2)]
-    dh = [(-6 * eta + 6 * eta**2) / le, 1 - 4 * eta + 3 * eta**2,
-          (6 * eta - 6 * eta**2) / le, 3 * eta**2 - 2 * eta]
-    d2h = [(-6 + 12 * eta) / le**2, (-4 + 6 * eta) / le,
-           (6 - 12 * eta) / le**2, (6 * eta - 2) / le]
+    planar = shape_functions(eta, le)       # the same axial/twist lines and Hermite cubics
+    k = planar[0].shape[0]
     n, dn, d2n = (np.zeros((k, 3, 12)) for _ in range(3))
-    n[:, 0, 0], n[:, 0, 6] = 1 - eta, eta
-    dn[:, 0, 0], dn[:, 0, 6] = -1.0 / le, 1.0 / le
-    for row, cols in ((1, (1, 2, 7, 8)), (2, (3, 4, 9, 10))):
-        for c, f, df, d2f in zip(cols, h, dh, d2h):
-            n[:, row, c], dn[:, row, c], d2n[:, row, c] = f, df, d2f
+    for out, plane in zip((n, dn, d2n), planar):
+        out[:, 0, [0, 6]] = plane[:, 0, [0, 3]]
+        out[:, 1, [1, 2, 7, 8]] = plane[:, 1, [1, 2, 4, 5]]      # v and its slope
+        out[:, 2, [3, 4, 9, 10]] = plane[:, 1, [1, 2, 4, 5]]     # w and its slope
     nphi = np.zeros((k, 12))
     dphi = np.zeros((k, 12))
-    nphi[:, 5], nphi[:, 11] = 1 - eta, eta
-    dphi[:, 5], dphi[:, 11] = -1.0 / le, 1.0 / le
+    nphi[:, [5, 11]] = planar[0][:, 0, [0, 3]]
+    dphi[:, [5, 11]] = planar[1][:, 0, [0, 3]]
     return n, dn, d2n, nphi, dphi
 
 

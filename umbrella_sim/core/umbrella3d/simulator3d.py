@@ -31,7 +31,6 @@ stick_torque.  Every step's figures go to a ``Record3D`` (outputs3d.py).
 from __future__ import annotations
 
 from dataclasses import replace
-import math
 
 import numpy as np
 
@@ -41,6 +40,7 @@ from .outputs3d import Record3D
 from .params3d import UmbrellaRibsParams
 from ..engines import event_root, EVENT_TIME_TOLERANCE
 from ..integrators import newton_tolerance
+from ..lock import locked_velocity_base, LockImpossible, velocity_keeping_energy
 from ..step_rule import physics_step_of
 
 
@@ -241,33 +241,18 @@ class UmbrellaSimulator3D:
         vs[0] = 0.0
         j_rr = m.constraint_jacobian(s.qr, s.stuck, True)[0]
         free = [m.i_a1, m.i_rx, m.i_ry, m.i_a2, m.i_uh, m.i_rz, m.i_wh, m.i_s2, m.i_p2]
-        fixed = np.setdiff1d(np.arange(m.n_rib), free)
         for k in range(m.n_ribs):
             rows = list(range(8)) + ([ROW_STICK] if not np.isnan(s.stuck[k]) else [])
             jac = j_rr[k][rows]
-            a_free = jac[:, free]
-            rhs = -jac[:, fixed] @ vr[k, fixed]
-            particular = np.linalg.lstsq(a_free, rhs, rcond=None)[0]
-            null = np.linalg.svd(a_free)[2][-1]
-            mk = mass[0][k]
-            v = vr[k]
-            base = v.copy()
-            base[free] = particular
             if len(rows) >= len(free):          # a stuck rib: no free direction left
-                vr[k] = base
+                vr[k] = locked_velocity_base(jac, vr[k], free)
                 continue
-            z = np.zeros(m.n_rib)
-            z[free] = null
-            t_target = 0.5 * v @ mk @ v
-            qa, qb = 0.5 * z @ mk @ z, z @ mk @ base
-            qc = 0.5 * base @ mk @ base - t_target
-            disc = qb * qb - 4 * qa * qc
-            if disc < 0.0:
-                raise SimulationFailed(f'energy lock impossible for rib {k}: its kinetic '
-                                       'energy is below the least the locked joints allow')
-            roots = [(-qb + sgn * math.sqrt(disc)) / (2 * qa) for sgn in (1.0, -1.0)]
-            cands = [base + r * z for r in roots]
-            vr[k] = min(cands, key=lambda c: (c - v) @ mk @ (c - v))
+            try:
+                vr[k] = velocity_keeping_energy(jac, mass[0][k], vr[k], free)
+            except LockImpossible:
+                raise SimulationFailed(
+                    f'energy lock impossible for rib {k}: its kinetic energy is below the '
+                    'least the locked joints allow') from None
         return vr, vs
 
     # ------------------------------------------------------------ figures
