@@ -460,7 +460,8 @@ class ElasticMidpointDAE(MidpointDAE):
             rate = step_norm / last_norm if it > 1 else 1.0
             refresh = self.strain_nonlinear and (
                 (it == 1 and lagged and not lag_whole) or (it > 1 and rate > REFRESH_RATE))
-            if newton_converged(m, cs, q, step_norm, rate, self.tolerance):
+            if newton_converged(step_norm, rate, self.tolerance,
+                                lambda: np.max(np.abs(m.constraint_residual(q, cs)))):
                 break
             last_norm = step_norm
         else:

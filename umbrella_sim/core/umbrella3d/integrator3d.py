@@ -47,9 +47,7 @@ import numpy as np
 
 from . import arrow
 from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
-
-#: constraint residual Newton must reach (m), as the planar integrator
-PHI_TOLERANCE = 1e-11
+from ..integrators import newton_converged
 
 
 class ConvergenceError3D(ArithmeticError):
@@ -300,12 +298,13 @@ class MidpointUmbrella:
                 raise ConvergenceError3D(f'Newton iterate became non-finite at t = '
                                          f'{s.t + h:.9g} s')
             rate = norm / last if it > 1 else 1.0
-            if norm < self.tolerance or (rate < 0.5 and rate / (1 - rate) * norm
-                                         < self.tolerance):
+
+            def residual():
                 pr_, ps_ = m.constraints(qr, qs, stuck, locked,
                                          None if drive is None else drive[0])
-                if max(np.max(np.abs(pr_)), np.max(np.abs(ps_), initial=0.0)) < PHI_TOLERANCE:
-                    break
+                return max(np.max(np.abs(pr_)), np.max(np.abs(ps_), initial=0.0))
+            if newton_converged(norm, rate, self.tolerance, residual):
+                break
             last = norm
         else:
             raise ConvergenceError3D(f'Newton did not converge in {self.max_iterations} '
