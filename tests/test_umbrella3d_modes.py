@@ -171,16 +171,24 @@ def test_several_ribs_and_a_hub_radius_repeat_the_rib_modes():
     np.testing.assert_allclose(omega, np.repeat(single, 3), rtol=1e-9)
 
 
-def test_the_frame_element_gives_the_published_cantilever_frequencies():
-    """Blevins Table 8-1 (bending) and the clamped-free shaft (torsion), 16 elements."""
-    p = UmbrellaParams()
-    sec = section_of(p)
+def cantilever_check():
+    """
+    Return a 1 m cantilever of the thesis's section on 16 frame elements, and its references.
+
+    (its frequencies, Blevins Table 8-1's first two bending ones, the clamped-free shaft's
+    first torsion one pi/2L sqrt(GJ / rho I_p)), in rad/s.
+    """
+    sec = section_of(UmbrellaParams())
     f = Frame()
     ids = f.beam(np.zeros(3), np.array([1.0, 0.0, 0.0]), 16, sec, np.array([0.0, 0.0, 1.0]))
     f.fix(ids[0], range(6))
-    omega = f.modes()
     bend = [lam**2 * math.sqrt(sec['eiz'] / sec['rho_a']) for lam in (1.87510, 4.69409)]
-    torsion = math.pi / 2 * math.sqrt(sec['gj'] / sec['rho_ip'])
+    return f.modes(), bend, math.pi / 2 * math.sqrt(sec['gj'] / sec['rho_ip'])
+
+
+def test_the_frame_element_gives_the_published_cantilever_frequencies():
+    """Blevins Table 8-1 (bending) and the clamped-free shaft (torsion), 16 elements."""
+    omega, bend, torsion = cantilever_check()
     # bending: each frequency twice (both planes, square section)
     np.testing.assert_allclose(omega[[0, 1, 2, 3]], np.repeat(bend, 2), rtol=2e-4)
     assert np.min(np.abs(omega / torsion - 1)) < 2e-3
