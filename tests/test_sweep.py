@@ -28,7 +28,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -36,6 +35,7 @@ import pytest
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.rigid import deployment_time_by_quadrature
+from umbrella_sim.testing import poll
 from umbrella_sim.tools import cli, sweep, sweep_results
 from umbrella_sim.tools.compare import THESIS_TABLE_6_1
 
@@ -122,12 +122,7 @@ def physics(rows):
 
 
 def wait_for(predicate, timeout, what):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.1)
-    pytest.fail(f'timed out after {timeout} s waiting for {what}')
+    poll(predicate, timeout, lambda: f'timed out after {timeout} s waiting for {what}', 0.1)
 
 
 def scheduler_address(path):
