@@ -41,15 +41,29 @@ def _documented_command_lines() -> list[tuple[str, str]]:
 
 
 def setup_distribution():
-    """Return setup.py's Distribution, as setuptools reads it (nothing is built)."""
-    from setuptools._distutils.core import run_setup
+    """
+    Return setup.py's Distribution, as setuptools reads it (nothing is built).
 
+    setup.py runs with setuptools.setup replaced by a recorder of its arguments, which then
+    make a setuptools Distribution: setuptools' private ``run_setup`` failed under a system
+    Python whose stdlib still ships distutils (Debian's 3.11: 'MinimalDistribution' object has
+    no attribute 'set_defaults').
+    """
+    import runpy
+    from unittest import mock
+
+    import setuptools
+    from setuptools.dist import Distribution
+
+    arguments = {}
     cwd = os.getcwd()
     os.chdir(ROOT)
     try:
-        return run_setup('setup.py', stop_after='init')
+        with mock.patch.object(setuptools, 'setup', lambda **kw: arguments.update(kw)):
+            runpy.run_path('setup.py', run_name='__main__')
     finally:
         os.chdir(cwd)
+    return Distribution(arguments)
 
 
 def _installed_share_files() -> set[str]:
