@@ -574,12 +574,12 @@ class UmbrellaModel3D:
         return p, np.cross(x, p) + bus.rot @ h_body
 
     def stress_components(self, qr):
-        """Per body: (axial, bending z, bending y, torsion shear) (R, points) each, Pa."""
+        """Per body: (axial, bending z, bending y, torsion shear) (..., R, points) each, Pa."""
         out = []
         for bodies, s_e in ((self.leaf_bodies, self.s_leaf_e), (self.link_bodies, self.s_link_e)):
-            e = qr[:, s_e]
-            out.append(tuple(np.einsum('rpe,re->rp', np.array([getattr(b, name) for b in bodies]),
-                                       e)
+            e = qr[..., s_e]
+            out.append(tuple(np.einsum('rpe,...re->...rp',
+                                       np.array([getattr(b, name) for b in bodies]), e)
                              for name in ('stress_axial', 'stress_bend_z', 'stress_bend_y',
                                           'stress_shear')))
         return out

@@ -53,6 +53,7 @@ class Record3D:
         self.rows.setdefault(name, []).append(value)
 
     def add(self, s, locked: bool, force: float, work, lock_loss: float, lock_event=None):
+        """Add the figures of state s, reached by a step that did work (None: the start)."""
         m = self.model
         if work is not None:
             self.work += work.force
@@ -68,27 +69,13 @@ class Record3D:
         else:
             pr, ps = s.pr, s.ps
         kinetic = 0.5 * (float(np.sum(pr * s.vr)) + float(ps @ s.vs))
-        put = self._put
-        put('time', s.t)
-        put('locked', locked)
-        put('sleeve_position', s.qs[0])
-        put('sleeve_velocity', s.vs[0])
-        put('sleeve_force', force)
-        put('alpha1', s.qr[:, m.i_a1].copy())
-        put('alpha2', s.qr[:, m.i_a2].copy())
-        put('alpha1_rate', s.vr[:, m.i_a1].copy())
-        put('alpha2_rate', s.vr[:, m.i_a2].copy())
-        put('tip', s.qr[:, list(m.i_tip)].copy())
-        put('kinetic_energy', kinetic)
-        put('strain_energy', m.strain_energy(s.qr))
-        put('work', self.work)
-        put('friction_work', self.friction.copy())
-        put('drive_work', self.drive)
-        put('lock_energy_loss', lock_loss)
-        put('holding_torque', np.where(np.isnan(s.stuck), 0.0, s.lam_r[:, -1]))
-        put('stuck', ~np.isnan(s.stuck))
-        put('stop_reaction', float(s.lam_s[0]))
+        one = {name: np.asarray(getattr(s, name))[None]
+               for name in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
+        self._put_steps(np.array([s.t]), one, np.array([kinetic]),
+                        np.array([m.strain_energy(s.qr)]), np.array([self.work]),
+                        self.friction[None], np.array([self.drive]), locked, force, lock_loss)
         if m.moving_base:
+            put = self._put
             put('bus_q', s.qs[1:7].copy())
             put('bus_v', s.vs[1:7].copy())
             if m.params.base == 'free':
@@ -96,23 +83,71 @@ class Record3D:
                 p, h = m.momentum(kin, s.vr, s.vs)
                 put('linear_momentum', p)
                 put('angular_momentum', h)
-        vm_now = np.zeros(m.n_ribs)
-        for body, comps, xs in zip(('leaf', 'link'), m.stress_components(s.qr), self._xs):
+
+    def add_steps(self, rows: dict, locked: bool, force: float, lock_loss: float):
+        """
+        Add the figures of a run of steps (the compiled step's rows, kernel3d.row_layout).
+
+        rows: arrays with the steps first: t, qr, qs, vr, vs, lam_r, lam_s, stuck, kinetic,
+        strain, work_force, work_friction, iterations (hub fixed: no drive, no bus).
+        """
+        work = self.work + np.cumsum(rows['work_force'])
+        friction = self.friction + np.cumsum(rows['work_friction'], 0)
+        self.work, self.friction = float(work[-1]), friction[-1].copy()
+        self.iterations += int(np.sum(rows['iterations']))
+        self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work, friction,
+                        np.full(len(work), self.drive), locked, force, lock_loss)
+
+    def _put_steps(self, t, st, kinetic, strain, work, friction, drive, locked, force,
+                   lock_loss):
+        """Append k steps' figures (arrays with the steps first) and update the peaks."""
+        m = self.model
+        k = len(t)
+        qr, vr, stuck = st['qr'], st['vr'], st['stuck']
+        free = np.isnan(stuck)
+        columns = {
+            'time': t, 'locked': [locked] * k, 'sleeve_position': st['qs'][:, 0],
+            'sleeve_velocity': st['vs'][:, 0], 'sleeve_force': [force] * k,
+            'alpha1': qr[:, :, m.i_a1], 'alpha2': qr[:, :, m.i_a2],
+            'alpha1_rate': vr[:, :, m.i_a1], 'alpha2_rate': vr[:, :, m.i_a2],
+            'tip': qr[:, :, list(m.i_tip)], 'kinetic_energy': kinetic,
+            'strain_energy': strain, 'work': work, 'friction_work': friction,
+            'drive_work': drive, 'lock_energy_loss': [lock_loss] * k,
+            'holding_torque': np.where(free, 0.0, st['lam_r'][:, :, -1]), 'stuck': ~free,
+            'stop_reaction': st['lam_s'][:, 0]}
+        for name, values in columns.items():
+            values = np.array(values, copy=True)
+            self.rows.setdefault(name, []).extend(
+                values.tolist() if values.ndim == 1 else list(values))
+        # stresses: each rib's worst point per step; the peaks over the steps in the order
+        # they happened (step by step, the leaf before the link: the first of equal ones)
+        tops = {name: [] for name in STRESS_NAMES}
+        wheres = {name: [] for name in STRESS_NAMES}
+        vm_now = np.zeros((k, m.n_ribs))
+        for comps in m.stress_components(qr):
             ax, bz, by, sh = comps
             vm = np.sqrt((np.abs(ax) + np.abs(bz) + np.abs(by)) ** 2 + 3.0 * sh * sh)
-            vm_now = np.maximum(vm_now, vm.max(1))
+            vm_now = np.maximum(vm_now, vm.max(-1))
             for name, values in zip(STRESS_NAMES, (ax, bz, by, sh, vm)):
                 a = np.abs(values)
-                where = a.argmax(1)
-                top = a[np.arange(len(where)), where]
-                better = top > self.peak[name]
-                if np.any(better):
-                    self.peak[name] = np.where(better, top, self.peak[name])
-                    lst = list(self.peak_where[name])
-                    for k in np.nonzero(better)[0]:
-                        lst[k] = (body, float(xs[where[k]]), float(s.t))
-                    self.peak_where[name] = lst
-        put('von_mises', vm_now)
+                where = a.argmax(-1)
+                tops[name].append(np.take_along_axis(a, where[..., None], -1)[..., 0])
+                wheres[name].append(where)
+        for name in STRESS_NAMES:
+            top = np.stack(tops[name], 1).reshape(2 * k, m.n_ribs)   # (step, body) order
+            first = top.argmax(0)
+            best = top[first, np.arange(m.n_ribs)]
+            better = best > self.peak[name]
+            if np.any(better):
+                self.peak[name] = np.where(better, best, self.peak[name])
+                lst = list(self.peak_where[name])
+                for r in np.nonzero(better)[0]:
+                    step, body = divmod(int(first[r]), 2)
+                    point = wheres[name][body][step, r]
+                    lst[r] = (('leaf', 'link')[body], float(self._xs[body][point]),
+                              float(t[step]))
+                self.peak_where[name] = lst
+        self.rows.setdefault('von_mises', []).extend(list(vm_now))
 
     def arrays(self) -> dict:
         """Return every per-step figure as an array (steps first, then ribs or components)."""
