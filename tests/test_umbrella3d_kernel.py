@@ -133,7 +133,8 @@ def test_compiled_equals_numpy_while_hinges_stick_and_rub():
     assert compiled.record.friction[2] < 0.0 and compiled.record.friction[0] < 0.0
     for name, peak in compiled.record.peak.items():
         want = numpy_sim.record.peak[name]
-        bound = 10.0 * np.abs(reference.record.peak[name] - want) + 1e-12 * want
+        # as the rows: the figure's largest spread (over the ribs)
+        bound = 10.0 * np.max(np.abs(reference.record.peak[name] - want)) + 1e-12 * want
         assert np.all(np.abs(peak - want) <= bound), name
         assert compiled.record.peak_where[name] == numpy_sim.record.peak_where[name]
 

@@ -222,7 +222,8 @@ typedef struct {
     double sleeve_mass, y_stop, regularisation;
     const double *l1, *l3, *coulomb, *viscous;       /* n_ribs */
     const double *stick_until, *stick_torque;        /* n_ribs (0: not that release) */
-    const double *stiffness, *const_mass;            /* n_ribs x n_rib x n_rib */
+    const double *stiffness, *const_mass;            /* n_ribs x n_rib x n_rib: K, and the
+                                                      * part of M that does not move */
     const double *leaf_x, *leaf_w, *leaf_shape;
     const double *link_x, *link_w, *link_shape;
 } Model3D;

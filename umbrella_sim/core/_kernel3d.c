@@ -52,15 +52,18 @@ struct Ctx3D {
     int R, n, ns, cs, s, mb;
     Kin k1[2], km[2];
     double *mass;                      /* R x n x n: M(q1) */
-    double *B, *Y, *C, *D;             /* R x mb x mb, R x mb x s, R x mb x s, R x s x mb */
-    int *piv;                          /* R x mb */
+    /* a rib's block [[A, sign Jc^T], [Jr, Z]] factored through its bodies: A is block
+     * diagonal (leaf, link), each LU'd; W = A^-1 sign Jc^T; T = Z - Jr W, LU'd; Y = B^-1 C */
+    double *Af, *W, *T, *Jf, *Y;       /* R x (nb0^2 + nb1^2), R x n x 9, R x 81, R x 9 x n,
+                                        * R x mb x s */
+    int *apiv, *tpiv;                  /* R x n, R x 9 */
     double E[MAXS * MAXS], S[MAXS * MAXS];
     int spiv[MAXS];
     double *jm, *jr, *jg;              /* R x 9 x n: J(q_m), J(q), Gonzalez J */
     double *vp_a, *vp_b;               /* R x P x 3 (largest body) */
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
-    double work_force, *work_fric;
+    double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
     int iterations;
 };
 
@@ -83,12 +86,13 @@ static void kin_free(Kin *k) { free(k->qy); free(k->jac); free(k->qs); }
 void umbrella3d_free(Ctx3D *x) {
     if (!x) return;
     for (int j = 0; j < 2; j++) { kin_free(&x->k1[j]); kin_free(&x->km[j]); }
-    double *bufs[] = {x->mass, x->B, x->Y, x->C, x->D, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
+    double *bufs[] = {x->mass, x->Af, x->W, x->T, x->Jf, x->Y, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
                       x->gyro, x->ycol, x->fric, x->work_fric};
     for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
-    free(x->piv);
+    free(x->apiv);
+    free(x->tpiv);
     free(x);
 }
 
@@ -109,8 +113,10 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
     int mb = x->mb, s = x->s, N = R * n;
     int pmax = x->b[0].np > x->b[1].np ? x->b[0].np : x->b[1].np;
 #define ALLOC(f, k) (x->f = calloc((size_t)(k), sizeof(double))) != NULL
-    ok = ok && ALLOC(mass, R * n * n) && ALLOC(B, R * mb * mb) && ALLOC(Y, R * mb * s)
-        && ALLOC(C, R * mb * s) && ALLOC(D, R * mb * s) && ALLOC(jm, R * ROWS * n)
+    int nb0 = x->b[0].nb, nb1 = x->b[1].nb;
+    ok = ok && ALLOC(mass, R * n * n) && ALLOC(Af, R * (nb0 * nb0 + nb1 * nb1))
+        && ALLOC(W, R * n * ROWS) && ALLOC(T, R * ROWS * ROWS) && ALLOC(Jf, R * ROWS * n)
+        && ALLOC(Y, R * mb * s) && ALLOC(jm, R * ROWS * n)
         && ALLOC(jr, R * ROWS * n) && ALLOC(jg, R * ROWS * n) && ALLOC(vp_a, R * pmax * 3)
         && ALLOC(vp_b, R * pmax * 3) && ALLOC(q0, N + MAXS) && ALLOC(v0, N + MAXS)
         && ALLOC(p0, N + MAXS) && ALLOC(l0, R * ROWS + MAXS) && ALLOC(q, N + MAXS)
@@ -121,8 +127,9 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
         && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R);
 #undef ALLOC
-    x->piv = ok ? calloc((size_t)R * mb, sizeof(int)) : NULL;
-    if (!ok || !x->piv) { umbrella3d_free(x); return NULL; }
+    x->apiv = ok ? calloc((size_t)R * n, sizeof(int)) : NULL;
+    x->tpiv = ok ? calloc((size_t)R * ROWS, sizeof(int)) : NULL;
+    if (!ok || !x->apiv || !x->tpiv) { umbrella3d_free(x); return NULL; }
     return x;
 }
 
@@ -168,29 +175,43 @@ static void kinematics(const Ctx3D *x, int j, const double *q, Kin *k) {
     }
 }
 
-/* M(q) of every rib (R x n x n): the constant part, plus sum_p w J^T J per body. */
+/* M(q) of every rib (R x n x n): the constant part (Model3D.const_mass: the twist's rotary
+ * inertia and each body's elastic block sum_p w S^T S, which the rotation leaves alone),
+ * plus sum_p w J^T J in the rows and columns of each body's frame coordinates. */
 static void mass_matrix(Ctx3D *x, const Kin *k) {
     const Model3D *m = x->m;
     int R = x->R, n = x->n;
     memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
-        int P = b->np, nb = b->nb;
+        int P = b->np, nb = b->nb, t = b->t;
         for (int r = 0; r < R; r++) {
             double *M = x->mass + (size_t)r * n * n + b->off * n + b->off;
             for (int pt = 0; pt < P; pt++) {
                 double w = b->w[r * P + pt];
                 const double *J = k[j].jac + (size_t)(r * P + pt) * 3 * nb;
-                for (int a = 0; a < nb; a++) {
+                for (int a = 0; a <= t; a++) {
                     double ja0 = w * J[a], ja1 = w * J[nb + a], ja2 = w * J[2 * nb + a];
-                    if (ja0 == 0.0 && ja1 == 0.0 && ja2 == 0.0) continue;
                     double *Ma = M + a * n;
                     for (int c = a; c < nb; c++)
                         Ma[c] += ja0 * J[c] + ja1 * J[nb + c] + ja2 * J[2 * nb + c];
                 }
             }
-            for (int a = 0; a < nb; a++)
-                for (int c = 0; c < a; c++) M[a * n + c] = M[c * n + a];
+            for (int a = 0; a <= t; a++)
+                for (int c = a + 1; c < nb; c++) M[c * n + a] = M[a * n + c];
+        }
+    }
+}
+
+/* y = A v of rib r's n x n matrix A, block diagonal in the bodies (M, K, their sums) */
+static void body_matvec(const Ctx3D *x, const double *A, const double *v, double *y) {
+    int n = x->n;
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        for (int a = b->off; a < b->off + b->nb; a++) {
+            double acc = 0.0;
+            for (int c = b->off; c < b->off + b->nb; c++) acc += A[a * n + c] * v[c];
+            y[a] = acc;
         }
     }
 }
@@ -198,14 +219,8 @@ static void mass_matrix(Ctx3D *x, const Kin *k) {
 /* (pr, ps) = M (vr, vs) (the hub fixed: no rib-shared block) */
 static void matvec(const Ctx3D *x, const double *v, double *p) {
     int R = x->R, n = x->n;
-    for (int r = 0; r < R; r++) {
-        const double *M = x->mass + (size_t)r * n * n;
-        for (int a = 0; a < n; a++) {
-            double acc = 0.0;
-            for (int c = 0; c < n; c++) acc += M[a * n + c] * v[r * n + c];
-            p[r * n + a] = acc;
-        }
-    }
+    for (int r = 0; r < R; r++)
+        body_matvec(x, x->mass + (size_t)r * n * n, v + r * n, p + r * n);
     p[R * n] = x->m->sleeve_mass * v[R * n];
 }
 
@@ -363,8 +378,59 @@ static double max_abs(int k, const double *a) {
 }
 
 /* ------------------------------------------------------------------ arrow algebra */
+/* X = A^-1 X for the ROWS right-hand sides of X (N x ROWS, row-major), with lu_factor's A
+ * and piv (lu_solve's substitutions, a row of X at a time) */
+static void lu_solve_rows(int N, const double *A, const int *piv, double *X) {
+    for (int k = 0; k < N; k++)
+        if (piv[k] != k)
+            for (int c = 0; c < ROWS; c++) {
+                double t = X[k * ROWS + c];
+                X[k * ROWS + c] = X[piv[k] * ROWS + c];
+                X[piv[k] * ROWS + c] = t;
+            }
+    for (int i = 0; i < N; i++)
+        for (int j = 0; j < i; j++) {
+            double f = A[i * N + j];
+            if (f != 0.0)
+                for (int c = 0; c < ROWS; c++) X[i * ROWS + c] -= f * X[j * ROWS + c];
+        }
+    for (int i = N - 1; i >= 0; i--) {
+        for (int j = N - 1; j > i; j--) {
+            double f = A[i * N + j];
+            if (f != 0.0)
+                for (int c = 0; c < ROWS; c++) X[i * ROWS + c] -= f * X[j * ROWS + c];
+        }
+        for (int c = 0; c < ROWS; c++) X[i * ROWS + c] *= A[i * N + i];
+    }
+}
+
+/* rib r's block, factored (arrow_factor), solved for v (mb) in place:
+ * x = A^-1 v_top, lambda = T^-1 (v_bottom - Jr x), x -= W lambda */
+static void rib_solve(const Ctx3D *x, int r, double *v) {
+    int n = x->n;
+    const double *A = x->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        lu_solve(b->nb, A, x->apiv + r * n + b->off, v + b->off);
+        A += b->nb * b->nb;
+    }
+    const double *J = x->Jf + (size_t)r * ROWS * n, *W = x->W + (size_t)r * n * ROWS;
+    for (int i = 0; i < ROWS; i++) {
+        double acc = 0.0;
+        for (int a = 0; a < n; a++) if (J[i * n + a] != 0.0) acc += J[i * n + a] * v[a];
+        v[n + i] -= acc;
+    }
+    lu_solve(ROWS, x->T + r * ROWS * ROWS, x->tpiv + r * ROWS, v + n);
+    for (int a = 0; a < n; a++) {
+        double acc = 0.0;
+        for (int i = 0; i < ROWS; i++) acc += W[a * ROWS + i] * v[n + i];
+        v[a] -= acc;
+    }
+}
+
 /* Factor [[M + extra, sign Jc^T], [Jr, Z]] (integrator3d._blocks) in arrow form: each rib's
- * block by LU, B^-1 C, the Schur complement of the shared unknowns by LU. */
+ * block through its bodies (rib_solve), B^-1 C, the Schur complement of the shared unknowns
+ * by LU. */
 static int arrow_factor(Ctx3D *x, const double *extra, const double *jc, const double *jr,
                         const double *stuck, int locked, double sign) {
     int R = x->R, n = x->n, mb = x->mb, s = x->s, ns = x->ns;
@@ -374,24 +440,41 @@ static int arrow_factor(Ctx3D *x, const double *extra, const double *jc, const d
     x->E[0] = msl; x->E[1] = sign * L; x->E[s] = L; x->E[s + 1] = 1.0 - L;
     memcpy(x->S, x->E, sizeof(double) * s * s);
     for (int r = 0; r < R; r++) {
-        double *B = x->B + (size_t)r * mb * mb;
         const double *M = x->mass + (size_t)r * n * n;
+        const double *Ex = extra ? extra + (size_t)r * n * n : NULL;
         const double *Jc = jc + r * ROWS * n, *Jr = jr + r * ROWS * n;
-        memset(B, 0, sizeof(double) * mb * mb);
-        for (int a = 0; a < n; a++) {
-            for (int c = 0; c < n; c++)
-                B[a * mb + c] = M[a * n + c] + (extra ? extra[(size_t)r * n * n + a * n + c] : 0.0);
-            for (int i = 0; i < ROWS; i++) B[a * mb + n + i] = sign * Jc[i * n + a];
+        double *A = x->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
+        double *W = x->W + (size_t)r * n * ROWS, *T = x->T + r * ROWS * ROWS;
+        for (int a = 0; a < n; a++)
+            for (int i = 0; i < ROWS; i++) W[a * ROWS + i] = sign * Jc[i * n + a];
+        for (int j = 0; j < 2; j++) {
+            const Body *b = &x->b[j];
+            int nb = b->nb, o = b->off;
+            for (int a = 0; a < nb; a++)
+                for (int c = 0; c < nb; c++)
+                    A[a * nb + c] = M[(o + a) * n + o + c] + (Ex ? Ex[(o + a) * n + o + c] : 0.0);
+            if (lu_factor(nb, A, x->apiv + r * n + o) != OK) return SINGULAR;
+            lu_solve_rows(nb, A, x->apiv + r * n + o, W + o * ROWS);
+            A += nb * nb;
         }
-        for (int i = 0; i < ROWS; i++) memcpy(B + (n + i) * mb, Jr + i * n, sizeof(double) * n);
-        B[(n + ROW_STICK) * mb + n + ROW_STICK] = 1.0 - stuck_on(stuck[r]);
-        if (lu_factor(mb, B, x->piv + r * mb) != OK) return SINGULAR;
+        memset(T, 0, sizeof(double) * ROWS * ROWS);
+        for (int i = 0; i < ROWS; i++)                 /* T = -Jr W over Jr's nonzeros */
+            for (int a = 0; a < n; a++) {
+                double f = Jr[i * n + a];
+                if (f == 0.0) continue;
+                for (int k = 0; k < ROWS; k++) T[i * ROWS + k] -= f * W[a * ROWS + k];
+            }
+        T[ROW_STICK * ROWS + ROW_STICK] += 1.0 - stuck_on(stuck[r]);
+        if (lu_factor(ROWS, T, x->tpiv + r * ROWS) != OK) return SINGULAR;
+        memcpy(x->Jf + (size_t)r * ROWS * n, Jr, sizeof(double) * ROWS * n);
         /* C: row n + 7 of y_s is J_rs = -1; D: y_s's row at n + 7 is sign J_rs^T */
         double *Y = x->Y + (size_t)r * mb * s;
         for (int c = 0; c < s; c++) {
             memset(x->ycol, 0, sizeof(double) * mb);
-            if (c < ns) x->ycol[n + 7] = -1.0;
-            lu_solve(mb, B, x->piv + r * mb, x->ycol);
+            if (c < ns) {
+                x->ycol[n + 7] = -1.0;
+                rib_solve(x, r, x->ycol);
+            }
             for (int a = 0; a < mb; a++) Y[a * s + c] = x->ycol[a];
         }
         for (int c = 0; c < s; c++) x->S[c] -= sign * -1.0 * Y[(n + 7) * s + c];
@@ -405,7 +488,7 @@ static void arrow_solve(Ctx3D *x, double *rr, double *rs, double sign) {
     double z[MAXS];
     memcpy(z, rs, sizeof(double) * s);
     for (int r = 0; r < R; r++) {
-        lu_solve(mb, x->B + (size_t)r * mb * mb, x->piv + r * mb, rr + r * mb);
+        rib_solve(x, r, rr + r * mb);
         z[0] -= sign * -1.0 * rr[r * mb + n + 7];
     }
     lu_solve(s, x->S, x->spiv, z);
@@ -421,16 +504,12 @@ static void arrow_solve(Ctx3D *x, double *rr, double *rs, double sign) {
 }
 
 /* ------------------------------------------------------------------ the step */
-static double strain_energy(const Ctx3D *x, const double *q) {
+static double strain_energy(Ctx3D *x, const double *q) {
     int n = x->n;
     double e = 0.0;
     for (int r = 0; r < x->R; r++) {
-        const double *K = x->m->stiffness + (size_t)r * n * n, *qr = q + r * n;
-        for (int a = 0; a < n; a++) {
-            double acc = 0.0;
-            for (int c = 0; c < n; c++) acc += K[a * n + c] * qr[c];
-            e += qr[a] * acc;
-        }
+        body_matvec(x, x->m->stiffness + (size_t)r * n * n, q + r * n, x->ycol);
+        for (int a = 0; a < n; a++) e += q[r * n + a] * x->ycol[a];
     }
     return 0.5 * e;
 }
@@ -522,11 +601,10 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
                     for (int a = 0; a < n; a++) G[i * n + a] += f * dq[a];
                 }
             friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
-            const double *K = m->stiffness + (size_t)r * n * n;
             const double *lam = x->lam + r * ROWS;
+            body_matvec(x, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
             for (int a = 0; a < n; a++) {
-                double applied = 0.0, cons = 0.0;
-                for (int c = 0; c < n; c++) applied -= K[a * n + c] * x->qm[r * n + c];
+                double applied = -x->ycol[a], cons = 0.0;
                 if (a == m->i_a1) applied += x->fric[r];
                 for (int i = 0; i < ROWS; i++) cons += G[i * n + a] * lam[i];
                 x->res[r * n + a] = x->p1[r * n + a] - p0[r * n + a]
@@ -596,7 +674,8 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     double t0 = 0.0;
     for (int i = 0; i < N; i++) t0 += v0[i] * p0[i];
     t0 = 0.5 * (t0 + v0[N] * p0[N]);
-    double t_target = t0 + strain_energy(x, q0) - strain_energy(x, q) + x->work_force + w_fric;
+    x->strain = strain_energy(x, q);
+    double t_target = t0 + strain_energy(x, q0) - x->strain + x->work_force + w_fric;
     if (project(x, q, v, stuck, locked) != OK) return SINGULAR;
     matvec(x, v, x->p);
     double t_after = 0.0;
@@ -646,7 +725,7 @@ static void commit(Ctx3D *x, Advance3DCall *a) {
 }
 
 /* the committed state's output row (Advance3DCall) */
-static void write_row(const Ctx3D *x, const Advance3DCall *a, double *o) {
+static void write_row(Ctx3D *x, const Advance3DCall *a, double *o) {
     int R = x->R, N = R * x->n, ns = x->ns;
     *o++ = a->t;
     put(&o, a->qr, N); put(&o, a->qs, ns); put(&o, a->vr, N); put(&o, a->vs, ns);
@@ -654,7 +733,7 @@ static void write_row(const Ctx3D *x, const Advance3DCall *a, double *o) {
     double kin = 0.0;
     for (int i = 0; i < N + ns; i++) kin += x->v[i] * x->p[i];
     *o++ = 0.5 * kin;
-    *o++ = strain_energy(x, x->q);
+    *o++ = x->strain;
     *o++ = x->work_force;
     put(&o, x->work_fric, R);
     *o++ = x->iterations;

@@ -69,9 +69,12 @@ class CompiledStep3D:
         self.max_iterations = max_iterations
         m = model
         nr, n = m.n_ribs, m.n_rib
+        # what of M does not move: the twist's inertia, each body's elastic block
         const_mass = np.zeros((nr, n, n))
         for b in m.bodies:
+            e = slice(b.offset + b.n_trans + 1, b.offset + b.n)
             const_mass[:, b.slice, b.slice] = b.twist_mass
+            const_mass[:, e, e] += np.einsum('rp,rpie,rpif->ref', b.w, b.shape, b.shape)
         leaf, link = m.leaf, m.link
         arrays = {
             'l1': m.l1, 'l3': m.l3,
