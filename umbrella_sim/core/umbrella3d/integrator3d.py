@@ -40,7 +40,7 @@ linear momentum is conserved to round-off.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 import math
 import os
 import sys
@@ -48,43 +48,15 @@ import sys
 import numpy as np
 
 from . import arrow
+from .kernel3d import CompiledStep3D
 from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
+from .state3d import ConvergenceError3D, State3D, StepWork
 from ..integrators import newton_converged, PHI_TOLERANCE
 from ..kernel import kernel_refusal, LIBRARY, load_kernel
 
 #: why a run steps on the numpy path although the compiled step was asked for ('auto'),
 #: said once a process on stderr
 _SAID: set = set()
-
-
-class ConvergenceError3D(ArithmeticError):
-    """Newton did not converge, or a matrix was singular."""
-
-
-@dataclass(frozen=True)
-class State3D:
-    """The umbrella's state: rib part (R, n) and shared part of q, v, multipliers, momentum."""
-
-    t: float
-    qr: np.ndarray
-    qs: np.ndarray
-    vr: np.ndarray
-    vs: np.ndarray
-    lam_r: np.ndarray
-    lam_s: np.ndarray
-    stuck: np.ndarray          # (R,) angle a stuck hinge holds, NaN where free
-    pr: np.ndarray | None = None
-    ps: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class StepWork:
-    """What one step did: work of the sleeve force, of each hinge's friction, of the drive."""
-
-    force: float
-    friction: np.ndarray
-    drive: float
-    iterations: int
 
 
 class BaseDrive:
@@ -164,7 +136,6 @@ class MidpointUmbrella:
             why = kernel_refusal() or (f'the compiled kernel {LIBRARY} is not built (python3 '
                                        'bootstrap.py setup; it needs a C compiler)')
         if why is None:
-            from .kernel3d import CompiledStep3D
             return CompiledStep3D(lib, self.model, self.tolerance, PHI_TOLERANCE,
                                   self.max_iterations)
         if kernel == 'compiled':

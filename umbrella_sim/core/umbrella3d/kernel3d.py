@@ -29,8 +29,8 @@ import ctypes
 
 import numpy as np
 
-from .integrator3d import ConvergenceError3D, State3D, StepWork
 from .model3d import N_RIB_ROWS, UmbrellaModel3D
+from .state3d import ConvergenceError3D, State3D, StepWork
 from ..kernel import INTERFACE, kernel_error, STATUS
 
 Model3DStruct = INTERFACE.structs['Model3D']
@@ -177,5 +177,5 @@ class CompiledStep3D:
 
 
 def status_error(status: int, t: float) -> ArithmeticError:
-    """Return the error of a failed compiled step (integrator3d.ConvergenceError3D)."""
+    """Return the error of a failed compiled step (state3d.ConvergenceError3D)."""
     return ConvergenceError3D(kernel_error(status, t))
