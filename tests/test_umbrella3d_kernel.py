@@ -44,7 +44,7 @@ from umbrella_sim.core.kernel import load_kernel
 from umbrella_sim.core.umbrella3d import integrator3d
 from umbrella_sim.core.umbrella3d.integrator3d import MidpointUmbrella
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
-from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+from umbrella_sim.core.umbrella3d.simulator3d import SimulationFailed, UmbrellaSimulator3D
 
 AGREEMENT = 1e-10
 needs_kernel = pytest.mark.skipif(load_kernel() is None,
@@ -221,3 +221,16 @@ def test_a_moving_base_steps_on_numpy(capfd):
         MidpointUmbrella(sim.model, kernel='compiled')
     with pytest.raises(ValueError, match='auto, compiled or numpy'):
         MidpointUmbrella(sim.model, kernel='fast')
+
+
+@needs_kernel
+def test_a_failed_compiled_step_is_a_clear_error_that_keeps_the_steps_done():
+    """Newton allowed one iteration: the run stops naming the step and why; the rows stay."""
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(ASYMMETRIC))
+    sim.advance(3)
+    sim.integrator.compiled.call.max_iter = 1
+    with pytest.raises(SimulationFailed, match=r'after t = 0\.0003 s failed: Newton did not '
+                       r'converge at t = 0\.0004 s'):
+        sim.advance(5)
+    assert sim.k == 3 and len(sim.record.rows['time']) == 4
+    assert sim.state.t == pytest.approx(3e-4, abs=1e-15)

@@ -130,9 +130,8 @@ class Record3D:
             vm_now = np.maximum(vm_now, vm.max(-1))
             for name, values in zip(STRESS_NAMES, (ax, bz, by, sh, vm)):
                 a = np.abs(values)
-                where = a.argmax(-1)
-                tops[name].append(np.take_along_axis(a, where[..., None], -1)[..., 0])
-                wheres[name].append(where)
+                tops[name].append(a.max(-1))
+                wheres[name].append(a.argmax(-1))
         for name in STRESS_NAMES:
             top = np.stack(tops[name], 1).reshape(2 * k, m.n_ribs)   # (step, body) order
             first = top.argmax(0)
