@@ -212,15 +212,21 @@ def test_numpy_path_when_the_library_is_absent(monkeypatch, capfd):
 
 def test_a_moving_base_steps_on_numpy(capfd):
     """The compiled step has the hub fixed: a free bus or a driven hub take the numpy path."""
-    monkey = {'ribs': 2, 'time_step': 1e-4, 'base': 'free'}
+    values = {'ribs': 2, 'time_step': 1e-4, 'base': 'free'}
     integrator3d._SAID.discard(next((w for w in integrator3d._SAID if "'free'" in w), None))
-    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(monkey))
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values))
     assert sim.integrator.backend == 'numpy'
     assert "base: 'free'" in capfd.readouterr().err
     with pytest.raises(RuntimeError, match='hub fixed'):
         MidpointUmbrella(sim.model, kernel='compiled')
-    with pytest.raises(ValueError, match='auto, compiled or numpy'):
+    with pytest.raises(ValueError, match="kernel='fast': must be auto, compiled or numpy"):
         MidpointUmbrella(sim.model, kernel='fast')
+
+
+def test_a_bad_kernel_choice_in_the_environment_is_named(monkeypatch):
+    monkeypatch.setenv('UMBRELLA_SIM_KERNEL', 'fast')
+    with pytest.raises(ValueError, match="UMBRELLA_SIM_KERNEL='fast': must be auto"):
+        UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping({'ribs': 2}))
 
 
 @needs_kernel

@@ -118,13 +118,14 @@ class MidpointUmbrella:
             self.kin_shared[0] = True
             self.norm_shared[1:] = True
         self.iterations = 0
-        self.compiled = self._compiled_step(
-            kernel or os.environ.get('UMBRELLA_SIM_KERNEL', 'auto'))
+        self.compiled = self._compiled_step(kernel)
 
-    def _compiled_step(self, kernel: str):
+    def _compiled_step(self, kernel: str | None):
         """Return the compiled step (kernel3d.CompiledStep3D) the kernel choice gives, or None."""
+        name = 'kernel' if kernel else 'UMBRELLA_SIM_KERNEL'
+        kernel = kernel or os.environ.get('UMBRELLA_SIM_KERNEL', 'auto')
         if kernel not in ('auto', 'compiled', 'numpy'):
-            raise ValueError(f'kernel {kernel!r}: must be auto, compiled or numpy')
+            raise ValueError(f'{name}={kernel!r}: must be auto, compiled or numpy')
         if kernel == 'numpy':
             return None
         why = None
