@@ -175,18 +175,19 @@ static void kinematics(const Ctx3D *x, int j, const double *q, Kin *k) {
     }
 }
 
-/* M(q) of every rib (R x n x n): the constant part (Model3D.const_mass: the twist's rotary
+/* M(q) of every rib (R x n x n; its body blocks: the blocks between bodies stay 0): the constant part (Model3D.const_mass: the twist's rotary
  * inertia and each body's elastic block sum_p w S^T S, which the rotation leaves alone),
  * plus sum_p w J^T J in the rows and columns of each body's frame coordinates. */
 static void mass_matrix(Ctx3D *x, const Kin *k) {
     const Model3D *m = x->m;
     int R = x->R, n = x->n;
-    memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
         int P = b->np, nb = b->nb, t = b->t;
         for (int r = 0; r < R; r++) {
             double *M = x->mass + (size_t)r * n * n + b->off * n + b->off;
+            const double *M0 = m->const_mass + (size_t)r * n * n + b->off * n + b->off;
+            for (int a = 0; a < nb; a++) memcpy(M + a * n, M0 + a * n, sizeof(double) * nb);
             for (int pt = 0; pt < P; pt++) {
                 double w = b->w[r * P + pt];
                 const double *J = k[j].jac + (size_t)(r * P + pt) * 3 * nb;
@@ -617,10 +618,15 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             jacobian(x, q, stuck, x->jr);
             for (int i = 0; i < N; i++) x->tmp[i] = x->dq[i] / h;
             gyroscopic(x, x->km, x->tmp);
-            for (int r = 0; r < R; r++) {
+            for (int r = 0; r < R; r++) {         /* (the body blocks arrow_factor reads) */
                 double *G = x->gyro + (size_t)r * n * n;
                 const double *K = m->stiffness + (size_t)r * n * n;
-                for (int a = 0; a < n * n; a++) G[a] = 0.25 * h * h * K[a] + 0.5 * h * G[a];
+                for (int j = 0; j < 2; j++) {
+                    const Body *b = &x->b[j];
+                    for (int a = b->off; a < b->off + b->nb; a++)
+                        for (int c = b->off; c < b->off + b->nb; c++)
+                            G[a * n + c] = 0.25 * h * h * K[a * n + c] + 0.5 * h * G[a * n + c];
+                }
                 G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
             }
             if (arrow_factor(x, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
