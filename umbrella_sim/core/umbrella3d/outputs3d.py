@@ -105,20 +105,22 @@ class Record3D:
         k = len(t)
         qr, vr, stuck = st['qr'], st['vr'], st['stuck']
         free = np.isnan(stuck)
+        for name, value in (('locked', locked), ('sleeve_force', force),
+                            ('lock_energy_loss', lock_loss)):
+            self.rows.setdefault(name, []).extend([value] * k)
         columns = {
-            'time': t, 'locked': [locked] * k, 'sleeve_position': st['qs'][:, 0],
-            'sleeve_velocity': st['vs'][:, 0], 'sleeve_force': [force] * k,
+            'time': t, 'sleeve_position': st['qs'][:, 0], 'sleeve_velocity': st['vs'][:, 0],
             'alpha1': qr[:, :, m.i_a1], 'alpha2': qr[:, :, m.i_a2],
             'alpha1_rate': vr[:, :, m.i_a1], 'alpha2_rate': vr[:, :, m.i_a2],
             'tip': qr[:, :, list(m.i_tip)], 'kinetic_energy': kinetic,
             'strain_energy': strain, 'work': work, 'friction_work': friction,
-            'drive_work': drive, 'lock_energy_loss': [lock_loss] * k,
+            'drive_work': drive,
             'holding_torque': np.where(free, 0.0, st['lam_r'][:, :, -1]), 'stuck': ~free,
             'stop_reaction': st['lam_s'][:, 0]}
         for name, values in columns.items():
-            values = np.array(values, copy=True)
+            values = np.asarray(values)
             self.rows.setdefault(name, []).extend(
-                values.tolist() if values.ndim == 1 else list(values))
+                values.tolist() if values.ndim == 1 else list(values.copy()))
         # stresses: each rib's worst point per step; the peaks over the steps in the order
         # they happened (step by step, the leaf before the link: the first of equal ones)
         tops = {name: [] for name in STRESS_NAMES}
