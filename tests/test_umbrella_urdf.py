@@ -256,3 +256,47 @@ def test_urdf_of_a_flexible_state_misses_the_sleeve_by_the_elastic_displacement(
             np.testing.assert_allclose(urdf_end + elastic, rim, rtol=0, atol=1e-10)
             largest = max(largest, float(np.linalg.norm(urdf_end - rim)))
     assert largest > 1e-7          # the floating frames do not close the loops themselves
+
+
+# --------------------------------------------------------------------------- launch
+def test_launch_passes_the_whole_umbrellas_urdf_to_robot_state_publisher(tmp_path):
+    """
+    The params file's ribs, hub, per-rib lists and overrides make robot_description.
+
+    Tested through launch_description.plan (launch and robot_state_publisher are not on
+    PyPI: the test says where they would be installed); without robot_state_publisher the
+    plan logs that it is missing and starts the node alone.
+    """
+    from umbrella_sim.ros import launch_description as ld
+
+    params_file = tmp_path / 'ribs.yaml'
+    params_file.write_text('/**:\n  ros__parameters:\n    ribs: 4\n    hub_radius: 0.05\n'
+                           '    tip_mass: [0.0, 0.0, 0.1, 0.0]\n    rib1:\n      l2: 0.6\n'
+                           '    publish_rate: 200.0\n')
+    values = {a.name: a.default for a in ld.arguments()}
+    values.update(params_file=str(params_file), namespace='a3')
+    actions = ld.plan(values, installed=lambda pkg: f'/opt/share/{pkg}')
+    rsp = next(a for a in actions if isinstance(a, ld.NodeAction)
+               and a.package == 'robot_state_publisher')
+    (given,) = rsp.parameters
+    robot = ET.fromstring(given['robot_description'])
+    assert given['robot_description'] == rd.urdf(UmbrellaRibsParams.from_mapping(
+        {'ribs': 4, 'hub_radius': 0.05, 'tip_mass': [0.0, 0.0, 0.1, 0.0], 'rib1.l2': 0.6}))
+    moving = [j.get('name') for j in robot.iter('joint') if j.get('type') != 'fixed']
+    assert moving == rd.joint_names(4)[-1:] + rd.joint_names(4)[:-1]   # sleeve first
+    tips = {j.get('name'): float(j.find('origin').get('xyz').split()[0])
+            for j in robot.iter('joint') if j.get('name').endswith('leaf_tip')}
+    assert tips == {'rib0/leaf_tip': 1.0, 'rib1/leaf_tip': 1.1, 'rib2/leaf_tip': 1.0,
+                    'rib3/leaf_tip': 1.0}
+    assert given['frame_prefix'] == 'a3/'
+    # no robot_state_publisher: the node alone and a log line saying so
+    actions = ld.plan(values, installed=lambda pkg: None)
+    assert [a.executable for a in actions if isinstance(a, ld.NodeAction)] == ['umbrella_node']
+    assert any('robot_state_publisher is not installed' in a.msg for a in actions
+               if isinstance(a, ld.LogAction))
+    # a bad umbrella value is refused, naming it, before anything is started
+    params_file.write_text('/**:\n  ros__parameters:\n    ribs: 3\n'
+                           '    tip_mass: [0.0, 0.0, 0.1, 0.0]\n')
+    for installed in (None, '/opt/share'):
+        with pytest.raises(ValueError, match='tip_mass: a list of 4 values for 3 ribs'):
+            ld.plan(values, installed=lambda pkg: installed)
