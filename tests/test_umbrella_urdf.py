@@ -44,7 +44,7 @@ def _vector(text: str | None, default=(0.0, 0.0, 0.0)) -> np.ndarray:
 
 
 def _rpy(r: float, p: float, y: float) -> np.ndarray:
-    """URDF's fixed-axis roll, pitch, yaw: Rz(yaw) Ry(pitch) Rx(roll)."""
+    """Return the rotation of URDF's fixed-axis rpy: Rz(yaw) Ry(pitch) Rx(roll)."""
     cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p),
                               math.cos(y), math.sin(y))
     rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
@@ -159,7 +159,7 @@ def _rigid_state(model: UmbrellaModel3D, y: float):
 
 
 def _joint_positions(model: UmbrellaModel3D, qr, qs) -> dict:
-    """The joint_states values the node publishes for a 3D state (robot_description's names)."""
+    """Return the joint_states values the node publishes for a 3D state (URDF names)."""
     out = {'sleeve_slider': qs[0]}
     for k in range(model.n_ribs):
         out[f'rib{k}/leaf_hinge'] = qr[k, model.i_a1]

@@ -255,8 +255,8 @@ def _umbrella_urdf(params: UmbrellaRibsParams, name: str) -> str:
         leaf, link, tip = f'rib{k}/{LEAF}', f'rib{k}/{LINK}', f'rib{k}/{TIP}'
         leaf_len, m = p.l1 + p.l2, p.mass_per_length
         parts += [
-            f'  <!-- rib {k} at azimuth {psi:.6g} rad: alpha1 about e_t, the joint frame\'s z '
-            '-->\n',
+            f'  <!-- rib {k} at azimuth {psi:.6g} rad: alpha1 about e_t, the z of its joint '
+            'frame -->\n',
             _box_link(leaf, leaf_len, side, m * leaf_len, '0.9 0.6 0.1 1'),
             _box_link(link, p.l3, side, m * p.l3, '0.2 0.5 0.9 1'),
             _point_mass_link(tip, rib.tip_mass,
