@@ -225,6 +225,44 @@ def test_urdf_forward_kinematics_is_the_models_rigid_geometry(height_fraction):
             assert abs(axis @ e_r) < 1e-15 and abs(axis[1]) < 1e-15
 
 
+def test_mujoco_reads_the_urdf_with_the_models_bodies_and_masses():
+    """
+    MuJoCo's URDF reader, a parser of its own, puts every body where the model has it.
+
+    At a rigid state of five unequal ribs: each leaf's and link's points from MuJoCo's
+    forward kinematics are the model's, and each body's mass and centre of mass (MuJoCo
+    fuses the fixed tip, with rib 4's tip mass off the rib's plane, into its leaf) are the
+    model's mass-weighted points'.  MuJoCo refuses a massless moving body: the thesis's
+    massless sleeve is given a microgram for the check.
+    """
+    mujoco = pytest.importorskip('mujoco')
+    params = UmbrellaRibsParams.from_mapping({**UNEQUAL, 'sleeve_mass': 0.0})
+    model = UmbrellaModel3D(params)
+    spec = mujoco.MjSpec.from_string(rd.urdf(params))
+    spec.body('sleeve').mass, spec.body('sleeve').inertia = 1e-9, [1e-12] * 3
+    mj = spec.compile()
+    data = mujoco.MjData(mj)
+    qr, qs = _rigid_state(model, 0.5 * (model.y_start + model.y_stop))
+    for name, value in _joint_positions(model, qr, qs).items():
+        data.qpos[mj.jnt_qposadr[mj.joint(name).id]] = value
+    mujoco.mj_kinematics(mj, data)
+    mujoco.mj_comPos(mj, data)
+    points = _model_points(model, qr, qs)
+    for k in range(model.n_ribs):
+        for i, body in enumerate((f'rib{k}/leaf', f'rib{k}/link')):
+            b = mj.body(body).id
+            x = (model.leaf_bodies, model.link_bodies)[i][k].quad_x
+            frame = data.xmat[b].reshape(3, 3)
+            np.testing.assert_allclose(data.xpos[b] + np.outer(x, frame[:, 0]),
+                                       points[i][k, :len(x)], rtol=0, atol=1e-12)
+            w = (model.leaf, model.link)[i].w[k]
+            assert mj.body_mass[b] == pytest.approx(w.sum(), rel=1e-8)
+            np.testing.assert_allclose(data.xipos[b], w @ points[i][k] / w.sum(), rtol=0,
+                                       atol=1e-8)
+    np.testing.assert_allclose(data.xpos[mj.body('sleeve').id], [0.0, qs[0], 0.0],
+                               atol=1e-15)
+
+
 def test_urdf_of_a_flexible_state_misses_the_sleeve_by_the_elastic_displacement():
     """
     With flexible ribs the URDF's rigid frames miss each pin by the elastic displacements.
