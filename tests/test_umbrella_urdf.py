@@ -227,7 +227,7 @@ def test_urdf_forward_kinematics_is_the_models_rigid_geometry(height_fraction):
 
 def test_mujoco_reads_the_urdf_with_the_models_bodies_and_masses():
     """
-    MuJoCo's URDF reader, a parser of its own, puts every body where the model has it.
+    Read by MuJoCo, a URDF parser of its own, the URDF puts every body where the model does.
 
     At a rigid state of five unequal ribs: each leaf's and link's points from MuJoCo's
     forward kinematics are the model's, and each body's mass and centre of mass (MuJoCo
