@@ -100,6 +100,11 @@ def _box_link(name: str, length: float, b: float, mass: float, rgba: str) -> str
 """
 
 
+def _section_side(p: UmbrellaParams) -> float:
+    """Return the drawn section's side b: the section height, else that of a square."""
+    return p.section_height if p.section_height > 0 else math.sqrt(p.cross_section_area)
+
+
 def joint_names(ribs: int = 1) -> list[str]:
     """
     Return the moving joints of the URDF for this many ribs, in joint_states' order.
@@ -130,7 +135,7 @@ def urdf(params: UmbrellaParams | UmbrellaRibsParams | None = None,
             return _umbrella_urdf(params, name)
         params = params.rib(0).planar
     p = (params or UmbrellaParams()).validated()
-    b = p.section_height if p.section_height > 0 else math.sqrt(p.cross_section_area)
+    b = _section_side(p)
     leaf_len, link_len = p.l1 + p.l2, p.l3
     axle = p.sleeve_start_height + 0.1 * leaf_len
     top = p.l1 + p.l3                                   # y_H can never exceed l1 + l3
@@ -183,11 +188,6 @@ def urdf(params: UmbrellaParams | UmbrellaRibsParams | None = None,
     return ''.join(parts)
 
 
-def _section_side(p: UmbrellaParams) -> float:
-    """Return the drawn section's side b: the section height, else that of a square."""
-    return p.section_height if p.section_height > 0 else math.sqrt(p.cross_section_area)
-
-
 def _exact(*values: float) -> str:
     """Return the numbers as Python writes them back exactly (shortest round trip; no -0)."""
     return ' '.join(repr(float(v) + 0.0) for v in values)
@@ -208,14 +208,21 @@ def _joint(name: str, kind: str, parent: str, child: str, xyz, rpy=(0.0, 0.0, 0.
     return text + '\n  </joint>\n'
 
 
+def _point_mass(mass: float, xyz=(0.0, 0.0, 0.0)) -> str:
+    """Return the inertial element of a point mass at xyz ('' if the mass is 0)."""
+    if mass <= 0.0:
+        return ''
+    return (f'    <inertial><origin xyz="{_exact(*xyz)}" rpy="0 0 0"/>'
+            f'<mass value="{_exact(mass)}"/>\n'
+            '      <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>\n')
+
+
 def _point_mass_link(name: str, mass: float, xyz=(0.0, 0.0, 0.0)) -> str:
     """Return a link with no geometry, carrying a point mass at xyz (none if mass is 0)."""
-    if mass <= 0.0:
+    inertial = _point_mass(mass, xyz)
+    if not inertial:
         return f'  <link name={quoteattr(name)}/>\n'
-    return (f'  <link name={quoteattr(name)}>\n    <inertial><origin xyz="'
-            f'{" ".join(f"{v:.9g}" for v in xyz)}" rpy="0 0 0"/><mass value="{mass:.9g}"/>\n'
-            '      <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>\n'
-            '  </link>\n')
+    return f'  <link name={quoteattr(name)}>\n{inertial}  </link>\n'
 
 
 def _umbrella_urdf(params: UmbrellaRibsParams, name: str) -> str:
@@ -242,9 +249,7 @@ def _umbrella_urdf(params: UmbrellaRibsParams, name: str) -> str:
   <link name="{SLEEVE}">
     <visual><origin xyz="0 0 0" {up}/><geometry>{rim}</geometry>
       <material name="sleeve_colour"><color rgba="0.8 0.1 0.1 1"/></material></visual>
-""" + (f"""    <inertial><origin xyz="0 0 0" rpy="0 0 0"/><mass value="{params.sleeve_mass:.9g}"/>
-      <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>
-""" if params.sleeve_mass > 0.0 else '') + '  </link>\n',
+""" + _point_mass(params.sleeve_mass) + '  </link>\n',
              '  <!-- y_H: sleeve height on the hub axis; effort = F_H, acting along -Y.  Loop '
              "closures (not in URDF): each rib's link end x'' = l3 is pinned to the sleeve's "
              'rim at radius a -->\n',
