@@ -68,9 +68,9 @@ def figures(ribs: int, elements: int, calls: int, repeat: int) -> dict:
     qr, qs, t = sim.state.qr, sim.state.qs, sim.time
     markers = UmbrellaMarkers(sim.model, 'umbrella', 'a1/')
     data = markers.encode(t, qr, qs, 10.0)               # builds the template once
-    points = sum(len(b) for b in markers.shapes.bodies(qr, qs))
+    points = sum(len(b) for b in markers.shapes.bodies(qr))
     return {
-        'points': best_time(lambda: markers.shapes.positions(qr, qs, 10.0), calls, repeat),
+        'points': best_time(lambda: markers.shapes.positions(qr, 10.0), calls, repeat),
         'bytes': best_time(lambda: markers.encode(t, qr, qs, 10.0), calls, repeat),
         'message': best_time(lambda: cdr_bytes(markers.message(t, qr, qs, 10.0)),
                              max(1, calls // 10), repeat),

@@ -60,14 +60,14 @@ def test_points_are_the_models_deformed_positions(deformed):
     sim, qr, qs = deformed
     m = sim.model
     quad = [np.array([b.quad_x for b in bodies]) for bodies in (m.leaf_bodies, m.link_bodies)]
-    drawn = UmbrellaShapes(m, abscissae=quad).positions(qr, qs)
+    drawn = UmbrellaShapes(m, abscissae=quad).positions(qr)
     kin = m.kinematics(qr, qs)
     for body, points, x in zip(('leaf', 'link'), drawn, quad):
         exact = _in_hub_frame(m, kin['bodies'][0 if body == 'leaf' else 1]['rho'])
         np.testing.assert_allclose(points, exact[:, :x.shape[1]], rtol=0, atol=1e-14,
                                    err_msg=body)
     # the state is deformed, in and out of the rib planes (the check is not of rigid frames)
-    rigid = UmbrellaShapes(m, abscissae=quad).positions(qr, qs, 0.0)
+    rigid = UmbrellaShapes(m, abscissae=quad).positions(qr, 0.0)
     elastic = drawn[0] - rigid[0]
     out_of_plane = np.einsum('rpi,ri->rp', elastic, m.psi[:, :, 2])
     assert np.abs(elastic).max() > 1e-5 and np.abs(out_of_plane[2]).max() > 1e-5
@@ -85,7 +85,7 @@ def test_drawn_nodes_are_the_nodal_coordinates_and_magnification_scales_them(def
     m = sim.model
     shapes = UmbrellaShapes(m)
     magnification = 30.0
-    drawn = shapes.positions(qr, qs, magnification)
+    drawn = shapes.positions(qr, magnification)
     for i, (bodies, elastic, angle) in enumerate(((m.leaf_bodies, m.s_leaf_e, m.i_a1),
                                                   (m.link_bodies, m.s_link_e, m.i_a2))):
         per = shape_pieces_per_element(len(bodies[0].element_length))
@@ -103,8 +103,8 @@ def test_drawn_nodes_are_the_nodal_coordinates_and_magnification_scales_them(def
                 rho = rho + qr[k, [m.i_rx, m.i_ry, m.i_rz]]
             exact = (rho + [m.hub_radius, 0.0, 0.0]) @ m.psi[k].T
             np.testing.assert_allclose(drawn[i][k, ::per], exact, rtol=0, atol=1e-13)
-    rigid = shapes.positions(qr, qs, 0.0)
-    once = shapes.positions(qr, qs, 1.0)
+    rigid = shapes.positions(qr, 0.0)
+    once = shapes.positions(qr, 1.0)
     for d, r, o in zip(drawn, rigid, once):
         np.testing.assert_allclose(d, r + magnification * (o - r), rtol=0, atol=1e-13)
 
@@ -115,7 +115,7 @@ def test_marker_array_of_n_ribs_and_its_bytes(deformed):
     m = sim.model
     markers = UmbrellaMarkers(m, 'a1', 'a1/')
     msg = markers.message(sim.time, qr, qs, 20.0)
-    leaf, link = markers.shapes.positions(qr, qs, 20.0)
+    leaf, link = markers.shapes.positions(qr, 20.0)
     assert [x.id for x in msg.markers] == list(range(2 * m.n_ribs + 2))
     for k in range(m.n_ribs):
         for body, points in ((msg.markers[2 * k], leaf[k]), (msg.markers[2 * k + 1], link[k])):

@@ -15,8 +15,8 @@
 """
 The whole umbrella's ``markers``: every rib's deformed leaf and link, the sleeve, the hub.
 
-``UmbrellaShapes`` places the drawn points of every rib of a 3D state (the simulator's
-``state.qr``, ``state.qs``) in ``umbrella_base``: each body's points at abscissae x of its
+``UmbrellaShapes`` places the drawn points of every rib of a 3D state (the rib coordinates,
+the simulator's ``state.qr``) in ``umbrella_base``: each body's points at abscissae x of its
 floating frame, x + m S(x) e (S the 3D element's shape functions of the element holding x:
 axial linear, both bendings cubic; e the body's elastic coordinates; m the magnification),
 turned by the body's angle about the rib's tangential axis, the link's moved to its origin
@@ -25,9 +25,9 @@ model's (UmbrellaModel.deformed_shape): each element in shape_pieces_per_element
 pieces, only the elastic displacement in the body's own frame magnified.  Every matrix is
 built once; a state costs a few einsums over all ribs at once.
 
-``UmbrellaMarkers`` turns them into the MarkerArray (messages.markers_msg: rib k's leaf id
-2k, link 2k + 1, then the sleeve and the hub) or straight into its CDR bytes
-(messages.MarkerEncoder), which the node publishes.  With one rib the markers are the
+``UmbrellaMarkers`` turns them and the sleeve's height (``state.qs[0]``) into the
+MarkerArray (messages.markers_msg: rib k's leaf id 2k, link 2k + 1, then the sleeve and the
+hub) or straight into its CDR bytes (messages.MarkerEncoder), which the node publishes.  With one rib the markers are the
 planar ones, unchanged: the frame from the hinge O (where the planar model has it, the hub
 radius left out) and the sleeve a sphere, no hub.
 
@@ -92,8 +92,8 @@ class UmbrellaShapes:
         self._frames = np.eye(3)[None] if self.planar else m.psi
         self._hub = np.array([0.0 if self.planar else m.hub_radius, 0.0, 0.0])
 
-    def positions(self, qr, qs, magnification: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-        """Return (leaf, link) points of every rib, (R, P, 3) each, at the state (qr, qs)."""
+    def positions(self, qr, magnification: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """Return (leaf, link) points of every rib, (R, P, 3) each, at rib coordinates qr."""
         qr = np.asarray(qr)
         out = []
         for i, (rest, shape, elastic, angle) in enumerate(
@@ -107,9 +107,9 @@ class UmbrellaShapes:
             out.append(np.einsum('rij,rpj->rpi', self._frames, rho + self._hub))
         return out[0], out[1]
 
-    def bodies(self, qr, qs, magnification: float = 1.0) -> list[np.ndarray]:
+    def bodies(self, qr, magnification: float = 1.0) -> list[np.ndarray]:
         """Return the points body by body, rib by rib: [leaf 0, link 0, leaf 1, ...]."""
-        leaf, link = self.positions(qr, qs, magnification)
+        leaf, link = self.positions(qr, magnification)
         return [body for k in range(len(leaf)) for body in (leaf[k], link[k])]
 
 
@@ -130,15 +130,15 @@ class UmbrellaMarkers:
 
     def message(self, time: float, qr, qs, magnification: float = 1.0):
         """Return the visualization_msgs/MarkerArray of the state (qr, qs) at sim time."""
-        bodies = self.shapes.bodies(qr, qs, magnification)
+        bodies = self.shapes.bodies(qr, magnification)
         return markers_msg(SleeveAt(time, float(qs[0])), bodies, self.ns, self.frame_prefix,
                            self.hub_radius)
 
     def encode(self, time: float, qr, qs, magnification: float = 1.0) -> bytes:
         """Return the CDR bytes of message(time, qr, qs, magnification) (what is published)."""
-        leaf, link = self.shapes.positions(qr, qs, magnification)
+        leaf, link = self.shapes.positions(qr, magnification)
         if self._encoder is None:
-            self._encoder = MarkerEncoder(self.shapes.bodies(qr, qs), self.ns,
+            self._encoder = MarkerEncoder(self.shapes.bodies(qr), self.ns,
                                           self.frame_prefix, self.hub_radius)
         # rib by rib, leaf then link: the bodies' order, as one array
         return self._encoder.encode_points(time, float(qs[0]),
