@@ -27,9 +27,9 @@ built once; a state costs a few einsums over all ribs at once.
 
 ``UmbrellaMarkers`` turns them and the sleeve's height (``state.qs[0]``) into the
 MarkerArray (messages.markers_msg: rib k's leaf id 2k, link 2k + 1, then the sleeve and the
-hub) or straight into its CDR bytes (messages.MarkerEncoder), which the node publishes.  With one rib the markers are the
-planar ones, unchanged: the frame from the hinge O (where the planar model has it, the hub
-radius left out) and the sleeve a sphere, no hub.
+hub) or straight into its CDR bytes (messages.MarkerEncoder), which the node publishes.
+With one rib the markers are the planar ones, unchanged: the frame from the hinge O (where
+the planar model has it, the hub radius left out) and the sleeve a sphere, no hub.
 
 ``umbrella_base`` is the hub (the 3D model's bus frame): with a moving base the markers
 move with the bus, whose motion is reported apart.
