@@ -22,9 +22,13 @@ takes the planar model's steps: predictor q0 + h v0, modified Newton on
     M(q1) v1 - M(q0) v0 = h [ G_T - K q_m + Q + G_Phi^T lambda ],   Phi(q1) = 0
 
 (G_T, G_Phi Gonzalez discrete gradients of 1/2 v0^T M(q) v1 and of each joint row; Q the
-sleeve force on y_s, the hinges' friction at the step's mean rate, exact work), one
-iteration matrix per step (M + h^2/4 K + h/2 G at the predictor, the elastic gyroscopic
-block and the Gonzalez columns left out, as the planar one), the same stopping rule, then
+sleeve force on y_s, the hinges' friction at the step's mean rate, exact work), the
+iteration matrix M + h^2/4 K + h/2 G (at the iterate it is factored at; the elastic
+gyroscopic block and the Gonzalez columns left out, as the planar one) kept across steps:
+a step that starts where the step before ended, with its length, lock and stuck hinges,
+takes that step's matrix, which serves at most CARRY_STEPS steps and is factored anew at
+the iterate after an iteration that contracts the update by less than REFRESH_RATE
+(``_kept_factor``; the same rule in _kernel3d.c), the same stopping rule, then
 the velocity projected onto the joints in the mass metric and scaled to the kinetic energy
 of the step's discrete energy balance
 
@@ -53,6 +57,14 @@ from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
 from .state3d import ConvergenceError3D, State3D, StepWork
 from ..integrators import newton_converged, PHI_TOLERANCE
 from ..kernel import kernel_refusal, LIBRARY, load_kernel
+
+#: steps an iteration matrix serves at most (the first included), and the contraction of a
+#: Newton update above which the matrix is factored anew at the iterate (_kernel3d.c's
+#: CARRY_STEPS, REFRESH_RATE).  Measured (ribs 6, 1 element, h = 0.1 ms, deployment): a
+#: fresh matrix every step took 2.00 Newton iterations a step, kept 2.00 and 0.125
+#: factorisations a step (2.03, 0.126 at ribs 12, 2 elements).
+CARRY_STEPS = 8
+REFRESH_RATE = 0.1
 
 #: why a run steps on the numpy path although the compiled step was asked for ('auto'),
 #: said once a process on stderr
@@ -118,6 +130,9 @@ class MidpointUmbrella:
             self.kin_shared[0] = True
             self.norm_shared[1:] = True
         self.iterations = 0
+        self.factorisations = 0     # of the iteration matrix
+        #: the last step's iteration matrix: (factor, uses, end q and v, h, locked, stuck)
+        self._kept = None
         self.compiled = self._compiled_step(kernel)
 
     def _compiled_step(self, kernel: str | None):
@@ -238,9 +253,29 @@ class MidpointUmbrella:
         if self.compiled is not None:
             state, work = self.compiled.step(s, h, force, locked)
             self.iterations += work.iterations
+            self.factorisations += work.factorisations
             return state, work
         with np.errstate(over='ignore', invalid='ignore'):
             return self._step(s, h, force, locked)
+
+    def _kept_factor(self, s: State3D, h: float, locked: bool):
+        """
+        Return (the kept iteration matrix, its uses) if it serves a step from s, else None.
+
+        It serves when s is where the step that used it ended (bit for bit), with the same
+        length (to 1e-9), lock and stuck hinges, and it has served fewer than CARRY_STEPS
+        steps: a rule of the trajectory alone.
+        """
+        kept = self._kept
+        if kept is None:
+            return None
+        factor, uses, qr, qs, vr, vs, h_kept, locked_kept, stuck = kept
+        if (uses >= CARRY_STEPS or locked_kept != locked or abs(h_kept - h) > 1e-9 * h
+                or not np.array_equal(stuck, np.isnan(s.stuck))):
+            return None
+        pairs = ((qr, s.qr), (qs, s.qs), (vr, s.vr), (vs, s.vs))
+        same = all(np.array_equal(a, b) for a, b in pairs)
+        return (factor, uses) if same else None
 
     def _step(self, s: State3D, h: float, force: float, locked: bool):
         m = self.model
@@ -258,7 +293,10 @@ class MidpointUmbrella:
         qr, qs = qr0 + h * vr0, qs0 + h * vs0
         lam_r, lam_s = s.lam_r.copy(), s.lam_s.copy()
         half_h2 = 0.5 * h * h
-        factored = None
+        kept = self._kept_factor(s, h, locked)
+        factored, uses = kept if kept is not None else (None, 0)
+        self._kept = None
+        factorisations = 0
         last = np.inf
         kin_mask = self.kin_shared
         for it in range(1, self.max_iterations + 1):
@@ -306,6 +344,8 @@ class MidpointUmbrella:
                 extra[:, m.i_a1, m.i_a1] -= 0.5 * h * h * slope
                 factored = arrow.factor(*self._blocks(
                     mass1, (jm_rr, jm_rs, jm_ss), j_r[:3], stuck, active, extra))
+                uses = 0
+                factorisations += 1
             rhs_r = np.concatenate([-0.5 * h * res_r, -phi_r], 1)
             rhs_s = np.concatenate([-0.5 * h * res_s, -phi_s])
             rhs_s[ns:][~active] = 0.0
@@ -327,11 +367,14 @@ class MidpointUmbrella:
                 return max(np.max(np.abs(pr_)), np.max(np.abs(ps_), initial=0.0))
             if newton_converged(norm, rate, self.tolerance, residual):
                 break
+            if it > 1 and rate > REFRESH_RATE:
+                factored = None
             last = norm
         else:
             raise ConvergenceError3D(f'Newton did not converge in {self.max_iterations} '
                                      f'iterations at t = {s.t + h:.9g} s')
         self.iterations += it
+        self.factorisations += factorisations
         dqr, dqs = qr - qr0, qs - qs0
         vr, vs = 2.0 * dqr / h - vr0, 2.0 * dqs / h - vs0
         kin1 = m.kinematics(qr, qs)
@@ -372,4 +415,5 @@ class MidpointUmbrella:
                 vr, vs = vr * scale, (vs - drift) * scale + drift
                 pr1, ps1 = m.matvec(mass1, vr, vs)
         state = State3D(s.t + h, qr, qs, vr, vs, lam_r, lam_s, stuck, pr1, ps1)
-        return state, StepWork(w_force, w_fric, w_drive, it)
+        self._kept = (factored, uses + 1, qr, qs, vr, vs, h, locked, np.isnan(stuck))
+        return state, StepWork(w_force, w_fric, w_drive, it, factorisations)

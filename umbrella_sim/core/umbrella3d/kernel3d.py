@@ -48,7 +48,8 @@ def row_layout(model: UmbrellaModel3D) -> dict:
     parts = (('t', ()), ('qr', (nr, n)), ('qs', (model.n_shared,)), ('vr', (nr, n)),
              ('vs', (model.n_shared,)), ('lam_r', (nr, N_RIB_ROWS)),
              ('lam_s', (model.n_shared_rows,)), ('stuck', (nr,)), ('kinetic', ()),
-             ('strain', ()), ('work_force', ()), ('work_friction', (nr,)), ('iterations', ()))
+             ('strain', ()), ('work_force', ()), ('work_friction', (nr,)), ('iterations', ()),
+             ('factorisations', ()))
     out, k = {}, 0
     for name, shape in parts:
         size = int(np.prod(shape)) if shape else 1
@@ -154,7 +155,7 @@ class CompiledStep3D:
             raise status_error(status, s.t + h)
         row = self.rows(1)
         work = StepWork(float(row['work_force'][0]), row['work_friction'][0].copy(), 0.0,
-                        int(row['iterations'][0]))
+                        int(row['iterations'][0]), int(row['factorisations'][0]))
         return self._state(), work
 
     def advance(self, s: State3D, k0: int, h: float, n_steps: int, force: float,

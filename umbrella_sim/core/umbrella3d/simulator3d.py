@@ -214,6 +214,7 @@ class UmbrellaSimulator3D:
                 self.state = state
                 self.k += done
                 self.integrator.iterations += int(rows['iterations'].sum())
+                self.integrator.factorisations += int(rows['factorisations'].sum())
                 self.record.add_steps(rows, self.locked, self.force, self.lock_loss)
             if status == STATUS['crossing']:
                 self.step()                     # the lock, here
