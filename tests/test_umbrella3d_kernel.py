@@ -247,20 +247,19 @@ def test_a_failed_compiled_step_is_a_clear_error_that_keeps_the_steps_done():
 
 
 @needs_kernel
-def test_kept_iteration_matrix_reaches_the_fresh_matrix_solution(monkeypatch):
+def test_kept_iteration_matrix_reaches_the_fresh_matrix_solution():
     """
     The iteration matrix kept across steps changes how Newton converges, not to what.
 
     The compiled run (the matrix kept) against the numpy run that factors it every step
-    (CARRY_STEPS 1, the scheme before): each step's solution differs by the Newton
+    (carry_steps 1, the planar scheme's rule): each step's solution differs by the Newton
     tolerance at most, so after k steps the positions agree within k times it; both runs
     balance energy and hold the joints.
     """
     p = UmbrellaRibsParams.from_mapping(ASYMMETRIC)
     kept = UmbrellaSimulator3D(p, kernel='compiled')
     a = kept.run(0.02).arrays()
-    monkeypatch.setattr(integrator3d, 'CARRY_STEPS', 1)
-    fresh = UmbrellaSimulator3D(p, kernel='numpy')
+    fresh = UmbrellaSimulator3D(p, kernel='numpy', carry_steps=1)
     b = fresh.run(0.02).arrays()
     steps = kept.k
     assert fresh.integrator.factorisations >= steps

@@ -38,9 +38,8 @@
 #define ROW_STICK 8    /* the stuck hinge's row */
 #define MAXS 16        /* shared unknowns at most (coordinates + rows) */
 /* the iteration matrix kept across steps (modified Newton; integrator3d.MidpointUmbrella):
- * it serves at most CARRY_STEPS steps, and is factored anew at the iterate after an
+ * it serves at most Model3D.carry_steps steps, and is factored anew at the iterate after an
  * iteration that contracted the update by less than REFRESH_RATE */
-#define CARRY_STEPS 8
 #define REFRESH_RATE 0.1
 
 typedef struct {
@@ -585,12 +584,12 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
 
 /* Whether the kept iteration matrix serves a step of length h from (q0, v0): the step
  * starts where the committed step that used it ended, with the same length (to 1e-9), lock
- * and stuck hinges, and the matrix has served fewer than CARRY_STEPS steps.  A rule of the
+ * and stuck hinges, and the matrix has served fewer than carry_steps steps.  A rule of the
  * trajectory alone (integrator3d.MidpointUmbrella._kept_factor is the same), so runs of
  * steps and single steps take the same iterates. */
 static int kept_serves(const Ctx3D *x, const double *stuck, int locked, double h) {
     if (!x->kept || x->kept_locked != locked || fabs(x->kept_h - h) > 1e-9 * h
-        || x->slot[x->kept_slot].uses >= CARRY_STEPS)
+        || x->slot[x->kept_slot].uses >= x->m->carry_steps)
         return 0;
     for (int r = 0; r < x->R; r++)
         if (x->kept_stuck[r] != !isnan(stuck[r])) return 0;

@@ -109,11 +109,17 @@ class MidpointUmbrella:
     kernel: 'auto' (UMBRELLA_SIM_KERNEL, else auto: the compiled step, _kernel3d.c, when the
     library is built and the hub fixed, else this numpy reference with a note on stderr),
     'compiled' (an error if it cannot be), or 'numpy'.  ``backend`` says which steps.
+    carry_steps: the steps an iteration matrix serves at most (1: factored every step, the
+    planar scheme's rule).
     """
 
     def __init__(self, model: UmbrellaModel3D, tolerance: float = 1e-10,
-                 max_iterations: int = 25, kernel: str | None = None):
+                 max_iterations: int = 25, kernel: str | None = None,
+                 carry_steps: int = CARRY_STEPS):
+        if carry_steps < 1:
+            raise ValueError(f'carry_steps={carry_steps}: must be 1 or more')
         self.model = model
+        self.carry_steps = carry_steps
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         p = model.params
@@ -153,7 +159,7 @@ class MidpointUmbrella:
                                        'bootstrap.py setup; it needs a C compiler)')
         if why is None:
             return CompiledStep3D(lib, self.model, self.tolerance, PHI_TOLERANCE,
-                                  self.max_iterations)
+                                  self.max_iterations, self.carry_steps)
         if kernel == 'compiled':
             raise RuntimeError(why)
         if why not in _SAID:
@@ -263,14 +269,14 @@ class MidpointUmbrella:
         Return (the kept iteration matrix, its uses) if it serves a step from s, else None.
 
         It serves when s is where the step that used it ended (bit for bit), with the same
-        length (to 1e-9), lock and stuck hinges, and it has served fewer than CARRY_STEPS
+        length (to 1e-9), lock and stuck hinges, and it has served fewer than carry_steps
         steps: a rule of the trajectory alone.
         """
         kept = self._kept
         if kept is None:
             return None
         factor, uses, qr, qs, vr, vs, h_kept, locked_kept, stuck = kept
-        if (uses >= CARRY_STEPS or locked_kept != locked or abs(h_kept - h) > 1e-9 * h
+        if (uses >= self.carry_steps or locked_kept != locked or abs(h_kept - h) > 1e-9 * h
                 or not np.array_equal(stuck, np.isnan(s.stuck))):
             return None
         pairs = ((qr, s.qr), (qs, s.qs), (vr, s.vr), (vs, s.vs))

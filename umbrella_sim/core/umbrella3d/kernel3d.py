@@ -62,7 +62,7 @@ class CompiledStep3D:
     """The compiled step of one model (hub fixed); see the module docstring."""
 
     def __init__(self, lib, model: UmbrellaModel3D, tolerance: float, phi_tolerance: float,
-                 max_iterations: int):
+                 max_iterations: int, carry_steps: int = 1):
         if model.moving_base:
             raise ValueError('the compiled 3D step has the hub fixed (base: fixed)')
         self.lib, self.model = lib, model
@@ -94,7 +94,7 @@ class CompiledStep3D:
             leaf_points=leaf.x.shape[1], leaf_elastic=leaf.shape.shape[-1],
             link_points=link.x.shape[1], link_elastic=link.shape.shape[-1],
             link_offset=link.offset, sleeve_mass=m.sleeve_mass, y_stop=m.y_stop,
-            regularisation=m.params.hinge_regularisation,
+            regularisation=m.params.hinge_regularisation, carry_steps=carry_steps,
             **{k: _ptr(v) for k, v in self._arrays.items()})
         ctx = lib.umbrella3d_new(ctypes.byref(self.struct))
         if not ctx:

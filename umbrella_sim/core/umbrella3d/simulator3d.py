@@ -63,13 +63,15 @@ class UmbrellaSimulator3D:
     """Steps the umbrella; see the module docstring."""
 
     def __init__(self, params: UmbrellaRibsParams, step: float | None = None,
-                 tolerance: float | None = None, kernel: str | None = None):
+                 tolerance: float | None = None, kernel: str | None = None,
+                 carry_steps: int | None = None):
         self.params = params.validated()
         self.model = m = UmbrellaModel3D(self.params)
         self.h = (physics_step_of(self.params.planar.replace(phase_correction=False))
                   if step is None else step)
         self.integrator = MidpointUmbrella(
-            m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel)
+            m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel,
+            **({} if carry_steps is None else {'carry_steps': carry_steps}))
         self.force = self.params.planar.sleeve_force * m.n_ribs
         self.locked = False
         self.lock_time: float | None = None
