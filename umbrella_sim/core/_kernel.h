@@ -246,6 +246,12 @@ typedef struct {
     double *qr, *qs, *vr, *vs, *lam_r, *lam_s, *pr, *ps, *stuck;
     double *out;
     int n_done, iterations;   /* out: committed steps, Newton iterations */
+    /* stage 2's mode fit of the locked steps (integrator3d.MidpointUmbrella.fit_stage2_modes:
+     * each rib's LockedModeFit), fit_modes a rib (0: none; padded with s = 1, shrink 0):
+     * u = (M0 phi)^T and phi^T rows (R x fit_modes x n_rib), s and the Newton shrink
+     * (R x fit_modes) */
+    int fit_modes;
+    const double *fit_u, *fit_phi, *fit_scale, *fit_shrink;
 } Advance3DCall;
 
 /* Held by Python only as pointers: the stepping contexts (every work buffer, allocated

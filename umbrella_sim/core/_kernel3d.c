@@ -82,6 +82,8 @@ struct Ctx3D {
     double *vp_a, *vp_b;               /* R x P x 3 (largest body) */
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
+    double *w0, *sp0, *sp1, *fitc;     /* the mode fit's: w0 = S^-1 v0, S^T p0, S^T p1;
+                                        * modal sums (n: a rib has n modes at most) */
     double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
     int iterations, factorisations;
 };
@@ -126,7 +128,7 @@ void umbrella3d_free(Ctx3D *x) {
     double *bufs[] = {x->mass, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
-                      x->gyro, x->ycol, x->fric, x->work_fric};
+                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp0, x->sp1, x->fitc};
     for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
     free(x);
 }
@@ -159,7 +161,8 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(p1, N + MAXS) && ALLOC(gt, N + MAXS) && ALLOC(res, N + MAXS)
         && ALLOC(tmp, N + MAXS) && ALLOC(phi0, R * ROWS + MAXS) && ALLOC(phi, R * ROWS + MAXS)
         && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
-        && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R);
+        && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R)
+        && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS) && ALLOC(fitc, n);
 #undef ALLOC
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
@@ -582,6 +585,37 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
     return OK;
 }
 
+/* ------------------------------------------------------------------ the mode fit */
+/* Stage 2's mode fit (integrators.LockedModeFit, rib by rib): S = I + Phi diag(s - 1) U^T */
+typedef struct { int r; const double *u, *phi, *sc, *shrink; } Fit3D;
+
+enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
+
+/* v (the rib coordinates, R x n) mapped in place, rib by rib, as LockedModeFit's maps:
+ * to_scheme v + Phi diag(1/s - 1) U^T v, to_physical v + Phi diag(s - 1) U^T v, transpose
+ * v + U diag(s - 1) Phi^T v, newton_update v - Phi diag(shrink) U^T v; a rib's block of v at
+ * stride apart (n for R x n, mb for the arrow's right-hand sides) */
+static void fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *v, int stride) {
+    int n = x->n, r = f->r;
+    double *c = x->fitc;
+    for (int k = 0; k < x->R; k++) {
+        double *vk = v + (size_t)k * stride;
+        const double *in = (kind == TRANSPOSE ? f->phi : f->u) + (size_t)k * r * n;
+        const double *out = (kind == TRANSPOSE ? f->u : f->phi) + (size_t)k * r * n;
+        for (int j = 0; j < r; j++) {
+            double s = f->sc[k * r + j], d = 0.0;
+            for (int a = 0; a < n; a++) d += in[j * n + a] * vk[a];
+            c[j] = d * (kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -f->shrink[k * r + j]
+                        : s - 1.0);
+        }
+        for (int a = 0; a < n; a++) {
+            double acc = 0.0;
+            for (int j = 0; j < r; j++) acc += out[j * n + a] * c[j];
+            vk[a] += acc;
+        }
+    }
+}
+
 /* Whether the kept iteration matrix serves a step of length h from (q0, v0): the step
  * starts where the committed step that used it ended, with the same length (to 1e-9), lock
  * and stuck hinges, and the matrix has served fewer than carry_steps steps.  A rule of the
@@ -599,18 +633,28 @@ static int kept_serves(const Ctx3D *x, const double *stuck, int locked, double h
 
 /* One step of length h from (q0, v0, l0, p0) into (q, v, lam, p); the works. */
 static int step(Ctx3D *x, const double *stuck, int locked, double h, double force, double tol,
-                double phi_tol, int max_iter) {
+                double phi_tol, int max_iter, const Fit3D *fit) {
     const Model3D *m = x->m;
     int R = x->R, n = x->n, N = R * n, ns = x->ns, mb = x->mb, cs = x->cs;
     const double half_h2 = 0.5 * h * h;
     double *q = x->q, *q0 = x->q0, *v0 = x->v0, *p0 = x->p0;
+    /* the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0) */
+    const double *w0 = v0, *sp0 = p0;
+    if (fit) {
+        memcpy(x->w0, v0, sizeof(double) * (N + ns));
+        fit_map(x, fit, TO_SCHEME, x->w0, n);
+        memcpy(x->sp0, p0, sizeof(double) * (N + ns));
+        fit_map(x, fit, TRANSPOSE, x->sp0, n);
+        w0 = x->w0;
+        sp0 = x->sp0;
+    }
     constraints(x, q0, stuck, locked, x->phi0);
-    for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * v0[i];
+    for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * w0[i];
     memcpy(x->lam, x->l0, sizeof(double) * (R * ROWS + cs));
     /* modified Newton: the kept matrix if it serves, else (and after a slow iteration) one
      * factored at the iterate into the slot not kept */
     int lagged = kept_serves(x, stuck, locked, h);
-    Fact *fit = lagged ? &x->slot[x->kept_slot] : NULL;
+    Fact *ff = lagged ? &x->slot[x->kept_slot] : NULL;
     Fact *fresh = &x->slot[x->kept ? 1 - x->kept_slot : 0];
     int factored = lagged, refactored = 0, it;
     x->pend_slot = -1;
@@ -619,14 +663,21 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         for (int i = 0; i < N + ns; i++) {
             x->dq[i] = q[i] - q0[i];
             x->qm[i] = q0[i] + 0.5 * x->dq[i];
-            x->v1[i] = 2.0 * x->dq[i] / h - v0[i];
+            x->v1[i] = 2.0 * x->dq[i] / h - w0[i];
         }
+        if (fit) fit_map(x, fit, TO_PHYSICAL, x->v1, n);
         for (int j = 0; j < 2; j++) {
             kinematics(x, j, q, &x->k1[j]);
             kinematics(x, j, x->qm, &x->km[j]);
         }
         mass_matrix(x, x->k1);
         matvec(x, x->v1, x->p1);
+        const double *sp1 = x->p1;        /* the scheme's momentum S^T M(q1) v1 */
+        if (fit) {
+            memcpy(x->sp1, x->p1, sizeof(double) * (N + ns));
+            fit_map(x, fit, TRANSPOSE, x->sp1, n);
+            sp1 = x->sp1;
+        }
         kinetic_gradient(x, x->km, v0, x->v1, x->gt);
         /* Gonzalez along the rib coordinates: dq . G_T = f(q1) - f(q0) */
         matvec(x, v0, x->tmp);
@@ -663,7 +714,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
                 double applied = -x->ycol[a], cons = 0.0;
                 if (a == m->i_a1) applied += x->fric[r];
                 for (int i = 0; i < ROWS; i++) cons += G[i * n + a] * lam[i];
-                x->res[r * n + a] = x->p1[r * n + a] - p0[r * n + a]
+                x->res[r * n + a] = sp1[r * n + a] - sp0[r * n + a]
                     - h * (x->gt[r * n + a] + applied + cons);
             }
             cons_s -= lam[7];
@@ -686,7 +737,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             }
             if (arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
                 return SINGULAR;
-            fit = fresh;
+            ff = fresh;
             factored = refactored = 1;
             x->factorisations++;
         }
@@ -697,7 +748,8 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         double rs[MAXS];
         rs[0] = -0.5 * h * x->res[N];
         rs[ns] = locked ? -x->phi[R * ROWS] : 0.0;
-        arrow_solve(x, fit, x->rr, rs, -1.0);
+        arrow_solve(x, ff, x->rr, rs, -1.0);
+        if (fit) fit_map(x, fit, NEWTON, x->rr, mb);
         double norm = 0.0;
         int finite = 1;
         for (int r = 0; r < R; r++) {
@@ -722,12 +774,13 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     }
     if (it > max_iter) return NO_CONVERGENCE;
     x->iterations = it;
-    x->pend_slot = (int)(fit - x->slot);
-    x->pend_uses = refactored ? 1 : fit->uses + 1;
+    x->pend_slot = (int)(ff - x->slot);
+    x->pend_uses = refactored ? 1 : ff->uses + 1;
     x->pend_h = h;
     /* velocities, works, the energy target */
     double *v = x->v;
-    for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - v0[i]; }
+    for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - w0[i]; }
+    if (fit) fit_map(x, fit, TO_PHYSICAL, v, n);
     for (int j = 0; j < 2; j++) kinematics(x, j, q, &x->k1[j]);
     mass_matrix(x, x->k1);
     double w_fric = 0.0;
@@ -837,12 +890,14 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
     a->iterations = 0;
     int N = x->R * x->n;
     int steps = a->single ? 1 : a->n_steps;
+    Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink};
+    if (a->fit_modes > x->n) return SINGULAR;
     for (int k = 0; k < steps; k++) {
         load(x, a);
         double t_next = a->single ? a->t + a->h : (double)(a->k0 + k + 1) * a->h;
         x->factorisations = 0;
         int status = step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol, a->phi_tol,
-                          a->max_iter);
+                          a->max_iter, a->locked && a->fit_modes > 0 ? &fit : NULL);
         if (status != OK) return status;
         if (!a->single && !a->locked && x->q[N] - x->m->y_stop <= 0.0) return CROSSING;
         a->iterations += x->iterations;

@@ -120,6 +120,26 @@ class CompiledStep3D:
             self._free(ctx)
             self._ctx = None
 
+    def set_mode_fit(self, fits) -> None:
+        """
+        Fit the locked steps' modes from now on: each rib's integrators.LockedModeFit.
+
+        The call keeps pointers to the arrays (Advance3DCall.fit_*), padded to the most
+        modes a rib has (s = 1, shrink 0: no change).
+        """
+        nr, n = self.model.n_ribs, self.model.n_rib
+        r = max(len(f.scale) for f in fits)
+        u, phi = np.zeros((nr, r, n)), np.zeros((nr, r, n))
+        scale, shrink = np.ones((nr, r)), np.zeros((nr, r))
+        for k, f in enumerate(fits):
+            m = len(f.scale)
+            u[k, :m], phi[k, :m] = f.modes, f.shapes
+            scale[k, :m], shrink[k, :m] = f.scale, f.newton_shrink(f.step)
+        self._fit = (u, phi, scale, shrink)
+        c = self.call
+        c.fit_u, c.fit_phi, c.fit_scale, c.fit_shrink = (_ptr(a) for a in self._fit)
+        c.fit_modes = r
+
     def _set_capacity(self, cap: int) -> None:
         self.out = np.zeros((cap, self.row_len))
         self.call.out = _ptr(self.out)

@@ -16,8 +16,10 @@
 The umbrella's run: time grid, sleeve force, the stop and lock, stuck hinges, the base.
 
 ``UmbrellaSimulator3D`` steps on the planar simulator's grid t_k = k h (h: the planar rule for
-the mesh, ``step_rule.physics_step_of``, as without the stage-2 mode fit, which this model
-does not have; unless the planar record sets ``time_step``) and
+the mesh, ``step_rule.physics_step_of``, with the stage-2 mode fit where it applies: the hub
+fixed and ``phase_correction`` on, each rib's locked modes fitted from the lock on
+(integrator3d.MidpointUmbrella.fit_stage2_modes); else the rule without it; unless the
+planar record sets ``time_step``) and
 applies the lock as it does: when the sleeve passes the stop inside a step the step is taken
 again from its start with the length root-found by the Illinois method (|dt| < 1e-12 s), the
 lock is applied there (plastic: the velocity projected onto the locked joints in the mass
@@ -67,11 +69,17 @@ class UmbrellaSimulator3D:
                  carry_steps: int | None = None):
         self.params = params.validated()
         self.model = m = UmbrellaModel3D(self.params)
-        self.h = (physics_step_of(self.params.planar.replace(phase_correction=False))
+        planar = self.params.planar
+        #: stage 2's mode fit: the planar rule's, rib by rib, with the hub fixed
+        self.mode_fit = planar.phase_correction and not m.moving_base
+        self.h = (physics_step_of(planar if self.mode_fit
+                                  else planar.replace(phase_correction=False))
                   if step is None else step)
         self.integrator = MidpointUmbrella(
             m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel,
             **({} if carry_steps is None else {'carry_steps': carry_steps}))
+        if self.mode_fit:
+            self.integrator.fit_stage2_modes(self.h)
         self.force = self.params.planar.sleeve_force * m.n_ribs
         self.locked = False
         self.lock_time: float | None = None
@@ -177,6 +185,7 @@ class UmbrellaSimulator3D:
             s_hit, work_hit = self._find_lock(s0, t_next - s0.t)
             before = self.energy(s_hit)
             s_locked = self._lock(s_hit)
+            self.integrator.lock_at()
             after = self.energy(s_locked)
             self.locked, self.lock_time = True, s_locked.t
             self.lock_loss += before - after
