@@ -45,7 +45,23 @@
 typedef struct {
     int t, nb, ne, np, off;            /* translations, coordinates, elastic, points, offset */
     const double *x, *w, *shape;       /* R x P x 3, R x P, R x P x 3 x ne */
+    double *inv;                       /* R x INV_LEN(ne): the inertia invariants (invariants) */
 } Body;
+
+/* The inertia invariants of a body (the floating frame's: Shabana's S-bar, I-bar), per rib,
+ * sums over its points p (weights w, y = x + S e, in-plane rows 0, 1): the mass m = sum w,
+ * c = sum w x, Sb = sum w S (3 x ne), I0 = sum w (x0^2 + x1^2), g = sum w (x0 S0 + x1 S1),
+ * h = sum w (x0 S1 - x1 S0), C = sum w (S0^T S0 + S1^T S1), D[c][a] = sum w (S0c S1a - S1c
+ * S0a) (ne x ne).  With them M(q)'s frame rows are rotation combinations of constants:
+ * M_uu = m I, M_ua = e_z x R (c + Sb e), M_ue = R Sb, M_aa = I0 + 2 g.e + e^T C e,
+ * M_ae = h + D^T e, and so are their gradients (kinetic_gradient); the sums the quadrature
+ * loops did, rearranged. */
+#define INV_LEN(ne) (5 + 5 * (ne) + 2 * (ne) * (ne))
+enum { INV_M = 0, INV_C = 1, INV_I0 = 4, INV_SB = 5 };
+#define INV_G(ne) (5 + 3 * (ne))
+#define INV_H(ne) (5 + 4 * (ne))
+#define INV_CC(ne) (5 + 5 * (ne))
+#define INV_D(ne) (5 + 5 * (ne) + (ne) * (ne))
 
 typedef struct {                       /* one body's point kinematics, every rib */
     double *qy, *jac, *qs;             /* R x P x 3, R x P x 3 x nb, R x P x 3 x ne */
@@ -67,7 +83,7 @@ struct Ctx3D {
     const Model3D *m;
     Body b[2];
     int R, n, ns, cs, s, mb;
-    Kin k1[2], km[2];
+    Kin km[2];                         /* the point kinematics at q_m (gyroscopic) */
     double *mass;                      /* R x n x n: M(q1) */
     /* the iteration matrix's two slots (a step factors into the one not kept, so a step not
      * committed leaves the kept one intact) and the projection's mass matrix */
@@ -93,6 +109,35 @@ static void body_of(Body *b, int t, int ne, int np, int off, const double *x, co
                     const double *shape) {
     b->t = t; b->ne = ne; b->nb = t + 1 + ne; b->np = np; b->off = off;
     b->x = x; b->w = w; b->shape = shape;
+    b->inv = NULL;
+}
+
+static int invariants(Body *b, int R) {
+    int ne = b->ne, P = b->np, L = INV_LEN(ne);
+    b->inv = calloc((size_t)R * L, sizeof(double));
+    if (!b->inv) return 0;
+    for (int r = 0; r < R; r++) {
+        double *v = b->inv + (size_t)r * L;
+        for (int pt = 0; pt < P; pt++) {
+            int rp = r * P + pt;
+            double w = b->w[rp];
+            const double *xp = b->x + rp * 3, *S = b->shape + (size_t)rp * 3 * ne;
+            const double *S0 = S, *S1 = S + ne;
+            v[INV_M] += w;
+            for (int i = 0; i < 3; i++) v[INV_C + i] += w * xp[i];
+            v[INV_I0] += w * (xp[0] * xp[0] + xp[1] * xp[1]);
+            for (int i = 0; i < 3 * ne; i++) v[INV_SB + i] += w * S[i];
+            for (int a = 0; a < ne; a++) {
+                v[INV_G(ne) + a] += w * (xp[0] * S0[a] + xp[1] * S1[a]);
+                v[INV_H(ne) + a] += w * (xp[0] * S1[a] - xp[1] * S0[a]);
+                for (int c = 0; c < ne; c++) {
+                    v[INV_CC(ne) + a * ne + c] += w * (S0[a] * S0[c] + S1[a] * S1[c]);
+                    v[INV_D(ne) + c * ne + a] += w * (S0[c] * S1[a] - S1[c] * S0[a]);
+                }
+            }
+        }
+    }
+    return 1;
 }
 
 static int kin_alloc(Kin *k, const Body *b, int R) {
@@ -122,7 +167,7 @@ static int fact_alloc(Fact *f, const Ctx3D *x) {
 
 void umbrella3d_free(Ctx3D *x) {
     if (!x) return;
-    for (int j = 0; j < 2; j++) { kin_free(&x->k1[j]); kin_free(&x->km[j]); }
+    for (int j = 0; j < 2; j++) { kin_free(&x->km[j]); free(x->b[j].inv); }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
     free(x->kept_q); free(x->kept_v); free(x->kept_stuck);
     double *bufs[] = {x->mass, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
@@ -146,7 +191,9 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
     body_of(&x->b[1], 3, m->link_elastic, m->link_points, m->link_offset, m->link_x,
             m->link_w, m->link_shape);
     int ok = 1;
-    for (int j = 0; j < 2; j++) ok &= kin_alloc(&x->k1[j], &x->b[j], R) & kin_alloc(&x->km[j], &x->b[j], R);
+    for (int j = 0; j < 2; j++)
+        ok &= kin_alloc(&x->km[j], &x->b[j], R)
+            & invariants(&x->b[j], R);
     int mb = x->mb, N = R * n;
     int pmax = x->b[0].np > x->b[1].np ? x->b[0].np : x->b[1].np;
 #define ALLOC(f, k) (x->f = calloc((size_t)(k), sizeof(double))) != NULL
@@ -212,27 +259,47 @@ static void kinematics(const Ctx3D *x, int j, const double *q, Kin *k) {
     }
 }
 
-/* M(q) of every rib (R x n x n; its body blocks: the blocks between bodies stay 0): the constant part (Model3D.const_mass: the twist's rotary
- * inertia and each body's elastic block sum_p w S^T S, which the rotation leaves alone),
- * plus sum_p w J^T J in the rows and columns of each body's frame coordinates. */
-static void mass_matrix(Ctx3D *x, const Kin *k) {
+/* M(q) of every rib (R x n x n; its body blocks: the blocks between bodies stay 0): the
+ * constant part (Model3D.const_mass: the twist's rotary inertia and each body's elastic
+ * block sum_p w S^T S, which the rotation leaves alone), plus sum_p w J^T J in the rows and
+ * columns of each body's frame coordinates, from the inertia invariants (Body.inv). */
+static void mass_matrix(Ctx3D *x, const double *q) {
     const Model3D *m = x->m;
     int R = x->R, n = x->n;
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
-        int P = b->np, nb = b->nb, t = b->t;
+        int nb = b->nb, t = b->t, ne = b->ne, L = INV_LEN(ne);
         for (int r = 0; r < R; r++) {
             double *M = x->mass + (size_t)r * n * n + b->off * n + b->off;
             const double *M0 = m->const_mass + (size_t)r * n * n + b->off * n + b->off;
+            const double *inv = b->inv + (size_t)r * L, *qb = q + r * n + b->off;
+            const double *e = qb + t + 1, *Sb = inv + INV_SB, *g = inv + INV_G(ne);
+            const double *h = inv + INV_H(ne), *C = inv + INV_CC(ne), *D = inv + INV_D(ne);
             for (int a = 0; a < nb; a++) memcpy(M + a * n, M0 + a * n, sizeof(double) * nb);
-            for (int pt = 0; pt < P; pt++) {
-                double w = b->w[r * P + pt];
-                const double *J = k[j].jac + (size_t)(r * P + pt) * 3 * nb;
-                for (int a = 0; a <= t; a++) {
-                    double ja0 = w * J[a], ja1 = w * J[nb + a], ja2 = w * J[2 * nb + a];
-                    double *Ma = M + a * n;
-                    for (int c = a; c < nb; c++)
-                        Ma[c] += ja0 * J[c] + ja1 * J[nb + c] + ja2 * J[2 * nb + c];
+            double *Ma = M + t * n;                   /* the angle's row */
+            double aa = inv[INV_I0];
+            for (int a = 0; a < ne; a++) {
+                double ce = 0.0, de = h[a];
+                for (int c = 0; c < ne; c++) { ce += C[a * ne + c] * e[c]; de += D[c * ne + a] * e[c]; }
+                aa += (2.0 * g[a] + ce) * e[a];
+                Ma[t + 1 + a] += de;
+            }
+            Ma[t] += aa;
+            if (t) {
+                double cs = cos(qb[t]), sn = sin(qb[t]), y[3];
+                for (int i = 0; i < 3; i++) {
+                    double acc = inv[INV_C + i];
+                    for (int a = 0; a < ne; a++) acc += Sb[i * ne + a] * e[a];
+                    y[i] = acc;
+                }
+                double ry0 = cs * y[0] - sn * y[1], ry1 = sn * y[0] + cs * y[1];
+                for (int i = 0; i < 3; i++) M[i * n + i] += inv[INV_M];
+                M[t] += -ry1;
+                M[n + t] += ry0;
+                for (int a = 0; a < ne; a++) {
+                    M[t + 1 + a] += cs * Sb[a] - sn * Sb[ne + a];
+                    M[n + t + 1 + a] += sn * Sb[a] + cs * Sb[ne + a];
+                    M[2 * n + t + 1 + a] += Sb[2 * ne + a];
                 }
             }
             for (int a = 0; a <= t; a++)
@@ -279,39 +346,51 @@ static void point_velocity(const Ctx3D *x, int j, const Kin *k, const double *v,
     }
 }
 
-/* out += sum_p w (d(J a)/dq)^T V of body j (model3d _BodyStack.dv_t), rib r */
-static void dv_t(const Ctx3D *x, int j, const Kin *k, int r, const double *ab,
-                 const double *rel_a, const double *vo, double *out) {
-    const Body *b = &x->b[j];
-    int P = b->np, ne = b->ne, t = b->t;
-    double acc_t = 0.0;
-    for (int pt = 0; pt < P; pt++) {
-        int rp = r * P + pt;
-        double w = b->w[rp];
-        const double *ra = rel_a + rp * 3, *o = vo + rp * 3;
-        double qz0 = ra[0] - (t ? ab[0] : 0.0), qz1 = ra[1] - (t ? ab[1] : 0.0);
-        acc_t += w * (-qz1 * o[0] + qz0 * o[1]);
-        const double *qs = k->qs + (size_t)rp * 3 * ne;
-        double f = ab[t] * w;
-        for (int a = 0; a < ne; a++) out[t + 1 + a] += f * (qs[a] * o[1] - qs[ne + a] * o[0]);
-    }
-    out[t] += acc_t;
-}
-
-/* d/dq [1/2 a^T M(q) b] of the rib coordinates (the hub fixed: none of the shared ones) */
-static void kinetic_gradient(Ctx3D *x, const Kin *k, const double *a, const double *bv,
+/* d/dq [1/2 a^T M(q) b] of the rib coordinates (the hub fixed: none of the shared ones),
+ * from the inertia invariants: M's frame rows depend on the angle (through R) and the
+ * elastic coordinates e (mass_matrix) */
+static void kinetic_gradient(Ctx3D *x, const double *q, const double *a, const double *bv,
                              double *g) {
     int R = x->R, n = x->n;
     memset(g, 0, sizeof(double) * (R * n + x->ns));
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
-        point_velocity(x, j, &k[j], a, x->vp_a);
-        point_velocity(x, j, &k[j], bv, x->vp_b);
+        int t = b->t, ne = b->ne, L = INV_LEN(ne);
         for (int r = 0; r < R; r++) {
-            double *o = g + r * n + b->off;
-            dv_t(x, j, &k[j], r, a + r * n + b->off, x->vp_a, x->vp_b, o);
-            dv_t(x, j, &k[j], r, bv + r * n + b->off, x->vp_b, x->vp_a, o);
-            for (int c = 0; c < b->nb; c++) o[c] *= 0.5;
+            const double *inv = b->inv + (size_t)r * L, *qb = q + r * n + b->off;
+            const double *ab = a + r * n + b->off, *bb = bv + r * n + b->off;
+            const double *e = qb + t + 1, *ae = ab + t + 1, *be = bb + t + 1;
+            const double *gg = inv + INV_G(ne), *C = inv + INV_CC(ne), *D = inv + INV_D(ne);
+            double *o = g + r * n + b->off, *oe = o + t + 1;
+            double aw = ab[t], bw = bb[t];
+            for (int c = 0; c < ne; c++) {           /* M_aa, M_ae */
+                double ce = 0.0, da = 0.0, db = 0.0;
+                for (int k = 0; k < ne; k++) {
+                    ce += C[c * ne + k] * e[k];
+                    da += D[c * ne + k] * ae[k];
+                    db += D[c * ne + k] * be[k];
+                }
+                oe[c] += aw * bw * (gg[c] + ce) + 0.5 * (aw * db + bw * da);
+            }
+            if (!t) continue;
+            const double *Sb = inv + INV_SB;
+            double cs = cos(qb[t]), sn = sin(qb[t]), y[3];
+            for (int i = 0; i < 3; i++) {
+                double acc = inv[INV_C + i];
+                for (int k = 0; k < ne; k++) acc += Sb[i * ne + k] * e[k];
+                y[i] = acc;
+            }
+            double ry0 = cs * y[0] - sn * y[1], ry1 = sn * y[0] + cs * y[1];
+            /* d/dangle: M_ua' = -(R y) in plane, M_ue' = e_z x R Sb */
+            double ga = -(ab[0] * ry0 + ab[1] * ry1) * bw - (bb[0] * ry0 + bb[1] * ry1) * aw;
+            for (int k = 0; k < ne; k++) {
+                double rs0 = cs * Sb[k] - sn * Sb[ne + k], rs1 = sn * Sb[k] + cs * Sb[ne + k];
+                /* column k of e_z x R Sb: (-rs1, rs0, 0) */
+                double ka = -ab[0] * rs1 + ab[1] * rs0, kb = -bb[0] * rs1 + bb[1] * rs0;
+                ga += ka * be[k] + kb * ae[k];
+                oe[k] += 0.5 * (ka * bw + kb * aw);   /* d/de_k of M_ua */
+            }
+            o[t] += 0.5 * ga;
         }
     }
 }
@@ -666,11 +745,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             x->v1[i] = 2.0 * x->dq[i] / h - w0[i];
         }
         if (fit) fit_map(x, fit, TO_PHYSICAL, x->v1, n);
-        for (int j = 0; j < 2; j++) {
-            kinematics(x, j, q, &x->k1[j]);
-            kinematics(x, j, x->qm, &x->km[j]);
-        }
-        mass_matrix(x, x->k1);
+        mass_matrix(x, q);
         matvec(x, x->v1, x->p1);
         const double *sp1 = x->p1;        /* the scheme's momentum S^T M(q1) v1 */
         if (fit) {
@@ -678,7 +753,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             fit_map(x, fit, TRANSPOSE, x->sp1, n);
             sp1 = x->sp1;
         }
-        kinetic_gradient(x, x->km, v0, x->v1, x->gt);
+        kinetic_gradient(x, x->qm, v0, x->v1, x->gt);
         /* Gonzalez along the rib coordinates: dq . G_T = f(q1) - f(q0) */
         matvec(x, v0, x->tmp);
         double delta = 0.0, dd = 0.0, gdq = 0.0;
@@ -723,6 +798,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         if (!factored) {
             jacobian(x, q, stuck, x->jr);
             for (int i = 0; i < N; i++) x->tmp[i] = x->dq[i] / h;
+            for (int j = 0; j < 2; j++) kinematics(x, j, x->qm, &x->km[j]);
             gyroscopic(x, x->km, x->tmp);
             for (int r = 0; r < R; r++) {         /* (the body blocks arrow_factor reads) */
                 double *G = x->gyro + (size_t)r * n * n;
@@ -781,8 +857,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     double *v = x->v;
     for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - w0[i]; }
     if (fit) fit_map(x, fit, TO_PHYSICAL, v, n);
-    for (int j = 0; j < 2; j++) kinematics(x, j, q, &x->k1[j]);
-    mass_matrix(x, x->k1);
+    mass_matrix(x, q);
     double w_fric = 0.0;
     for (int r = 0; r < R; r++) {
         double torque;
@@ -822,8 +897,7 @@ static void load(Ctx3D *x, const Advance3DCall *a) {
         memcpy(x->p0, a->pr, sizeof(double) * N);
         memcpy(x->p0 + N, a->ps, sizeof(double) * x->ns);
     } else {
-        for (int j = 0; j < 2; j++) kinematics(x, j, x->q0, &x->k1[j]);
-        mass_matrix(x, x->k1);
+        mass_matrix(x, x->q0);
         matvec(x, x->v0, x->p0);
     }
 }
