@@ -79,8 +79,12 @@ typedef struct {
     int uses;                          /* steps it served (iteration slots) */
 } Fact;
 
+/* the nonzeros of a rib's matrix (rows_of) */
+typedef struct { int *ptr, *col; } Rows;
+
 struct Ctx3D {
     const Model3D *m;
+    Rows mrows, krows;                 /* of M(q) (frame rows, columns: all) and K */
     Body b[2];
     int R, n, ns, cs, s, mb;
     Kin km[2];                         /* the point kinematics at q_m (gyroscopic) */
@@ -169,6 +173,7 @@ void umbrella3d_free(Ctx3D *x) {
     if (!x) return;
     for (int j = 0; j < 2; j++) { kin_free(&x->km[j]); free(x->b[j].inv); }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
+    free(x->mrows.ptr); free(x->mrows.col); free(x->krows.ptr); free(x->krows.col);
     free(x->kept_q); free(x->kept_v); free(x->kept_stuck);
     double *bufs[] = {x->mass, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
@@ -177,6 +182,8 @@ void umbrella3d_free(Ctx3D *x) {
     for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
     free(x);
 }
+
+static int rows_of(const Ctx3D *x, const double *A, int frame, Rows *p);
 
 Ctx3D *umbrella3d_new(const Model3D *m) {
     if (m->n_shared + m->n_shared_rows > MAXS) return NULL;
@@ -211,6 +218,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R)
         && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS) && ALLOC(fitc, n);
 #undef ALLOC
+    ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
     x->pend_slot = -1;
@@ -308,16 +316,40 @@ static void mass_matrix(Ctx3D *x, const double *q) {
     }
 }
 
-/* y = A v of rib r's n x n matrix A, block diagonal in the bodies (M, K, their sums) */
-static void body_matvec(const Ctx3D *x, const double *A, const double *v, double *y) {
-    int n = x->n;
+/* The nonzeros of a rib's n x n matrix, block diagonal in the bodies (M, K), every rib's
+ * union, row by row (columns ascending); rows_of builds it at the context from the constant
+ * matrices (R x n x n), the frame rows and columns of each body (frame: M(q)'s moving ones)
+ * included.  K and M's elastic blocks are banded by the elements: 3-4 nonzeros a row. */
+
+static int rows_of(const Ctx3D *x, const double *A, int frame, Rows *p) {
+    int R = x->R, n = x->n, k = 0;
+    p->ptr = malloc(sizeof(int) * (n + 1));
+    p->col = malloc(sizeof(int) * (n * n > 0 ? n * n : 1));
+    if (!p->ptr || !p->col) return 0;
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
+        int nf = frame ? b->t + 1 : 0;
         for (int a = b->off; a < b->off + b->nb; a++) {
-            double acc = 0.0;
-            for (int c = b->off; c < b->off + b->nb; c++) acc += A[a * n + c] * v[c];
-            y[a] = acc;
+            p->ptr[a] = k;
+            for (int c = b->off; c < b->off + b->nb; c++) {
+                int keep = a - b->off < nf || c - b->off < nf;
+                for (int r = 0; r < R && !keep; r++) keep = A[(size_t)r * n * n + a * n + c] != 0.0;
+                if (keep) p->col[k++] = c;
+            }
         }
+    }
+    p->ptr[n] = k;
+    return 1;
+}
+
+/* y = A v of rib r's n x n matrix A over its nonzeros p (the dense sum's order) */
+static void rows_matvec(const Ctx3D *x, const Rows *p, const double *A, const double *v,
+                        double *y) {
+    for (int a = 0; a < x->n; a++) {
+        const double *Aa = A + a * x->n;
+        double acc = 0.0;
+        for (int k = p->ptr[a]; k < p->ptr[a + 1]; k++) acc += Aa[p->col[k]] * v[p->col[k]];
+        y[a] = acc;
     }
 }
 
@@ -325,7 +357,7 @@ static void body_matvec(const Ctx3D *x, const double *A, const double *v, double
 static void matvec(const Ctx3D *x, const double *v, double *p) {
     int R = x->R, n = x->n;
     for (int r = 0; r < R; r++)
-        body_matvec(x, x->mass + (size_t)r * n * n, v + r * n, p + r * n);
+        rows_matvec(x, &x->mrows, x->mass + (size_t)r * n * n, v + r * n, p + r * n);
     p[R * n] = x->m->sleeve_mass * v[R * n];
 }
 
@@ -625,7 +657,7 @@ static double strain_energy(Ctx3D *x, const double *q) {
     int n = x->n;
     double e = 0.0;
     for (int r = 0; r < x->R; r++) {
-        body_matvec(x, x->m->stiffness + (size_t)r * n * n, q + r * n, x->ycol);
+        rows_matvec(x, &x->krows, x->m->stiffness + (size_t)r * n * n, q + r * n, x->ycol);
         for (int a = 0; a < n; a++) e += q[r * n + a] * x->ycol[a];
     }
     return 0.5 * e;
@@ -784,7 +816,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
                 }
             friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
             const double *lam = x->lam + r * ROWS;
-            body_matvec(x, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
+            rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
             for (int a = 0; a < n; a++) {
                 double applied = -x->ycol[a], cons = 0.0;
                 if (a == m->i_a1) applied += x->fric[r];
