@@ -103,7 +103,8 @@ struct Ctx3D {
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
     double *w0, *sp0, *sp1, *fitc;     /* the mode fit's: w0 = S^-1 v0, S^T p0, S^T p1;
-                                        * modal sums (n: a rib has n modes at most) */
+                                        * modal sums, then a rib's (n + n: a rib has n
+                                        * modes at most) */
     double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
     int iterations, factorisations;
 };
@@ -216,7 +217,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(tmp, N + MAXS) && ALLOC(phi0, R * ROWS + MAXS) && ALLOC(phi, R * ROWS + MAXS)
         && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
         && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R)
-        && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS) && ALLOC(fitc, n);
+        && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS) && ALLOC(fitc, 2 * n);
 #undef ALLOC
     ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
@@ -708,22 +709,35 @@ enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
  * stride apart (n for R x n, mb for the arrow's right-hand sides) */
 static void fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *v, int stride) {
     int n = x->n, r = f->r;
-    double *c = x->fitc;
+    double *c = x->fitc, *acc = x->fitc + n;
     for (int k = 0; k < x->R; k++) {
         double *vk = v + (size_t)k * stride;
         const double *in = (kind == TRANSPOSE ? f->phi : f->u) + (size_t)k * r * n;
         const double *out = (kind == TRANSPOSE ? f->u : f->phi) + (size_t)k * r * n;
-        for (int j = 0; j < r; j++) {
-            double s = f->sc[k * r + j], d = 0.0;
+        int j = 0;
+        for (; j + 4 <= r; j += 4) {          /* four modes' sums at once, each in order */
+            const double *i0 = in + j * n, *i1 = i0 + n, *i2 = i1 + n, *i3 = i2 + n;
+            double d0 = 0.0, d1 = 0.0, d2 = 0.0, d3 = 0.0;
+            for (int a = 0; a < n; a++) {
+                d0 += i0[a] * vk[a]; d1 += i1[a] * vk[a];
+                d2 += i2[a] * vk[a]; d3 += i3[a] * vk[a];
+            }
+            c[j] = d0; c[j + 1] = d1; c[j + 2] = d2; c[j + 3] = d3;
+        }
+        for (; j < r; j++) {
+            double d = 0.0;
             for (int a = 0; a < n; a++) d += in[j * n + a] * vk[a];
-            c[j] = d * (kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -f->shrink[k * r + j]
-                        : s - 1.0);
+            c[j] = d;
         }
-        for (int a = 0; a < n; a++) {
-            double acc = 0.0;
-            for (int j = 0; j < r; j++) acc += out[j * n + a] * c[j];
-            vk[a] += acc;
+        for (j = 0; j < r; j++) {
+            double s = f->sc[k * r + j];
+            c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -f->shrink[k * r + j]
+                : s - 1.0;
         }
+        for (int a = 0; a < n; a++) acc[a] = 0.0;
+        for (j = 0; j < r; j++)               /* by rows of out: each acc[a] in j's order */
+            for (int a = 0; a < n; a++) acc[a] += out[j * n + a] * c[j];
+        for (int a = 0; a < n; a++) vk[a] += acc[a];
     }
 }
 
