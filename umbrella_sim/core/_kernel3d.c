@@ -22,8 +22,12 @@
  * Layout: every per-rib array is rib-major (rib r's block contiguous); a body (leaf, link)
  * of a rib has t translations (0, 3), its angle, its elastic coordinates, at an offset in
  * the rib's coordinates; its points' kinematics (umbrella3d/model3d.py _BodyStack.kin) are
- * rho = R(alpha) (x + S e) [+ R2], Jacobian [I3 | e_z x R y | R S].  The linear algebra is
- * block-arrow (umbrella3d/arrow.py): each rib's (n + 9) block factored alone, the shared
+ * rho = R(alpha) (x + S e) [+ R2], Jacobian [I3 | e_z x R y | R S].  M(q), M v and the
+ * kinetic gradient come from each body's inertia invariants (Body.inv, summed over the
+ * points once at the context): rotation combinations of constants, no point loop; the
+ * points' kinematics only for the gyroscopic term of a fresh iteration matrix.  M v and K q
+ * run over the rib's nonzeros (Rows: K and the elastic mass blocks are banded).  The linear
+ * algebra is block-arrow (umbrella3d/arrow.py): each rib's (n + 9) block factored alone, the shared
  * unknowns (sleeve, stop multiplier) through their Schur complement: cost linear in the ribs.
  * The iteration matrix is kept across steps (kept_serves: the numpy reference's rule).
  */
@@ -217,7 +221,8 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(tmp, N + MAXS) && ALLOC(phi0, R * ROWS + MAXS) && ALLOC(phi, R * ROWS + MAXS)
         && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
         && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R)
-        && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS) && ALLOC(fitc, 2 * n);
+        && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS)
+        && ALLOC(fitc, 2 * n);
 #undef ALLOC
     ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
@@ -268,6 +273,19 @@ static void kinematics(const Ctx3D *x, int j, const double *q, Kin *k) {
     }
 }
 
+/* R(angle) (c + Sb e), in plane (ry[0], ry[1]): the body's first moment, rotated */
+static void first_moment(const double *inv, int ne, const double *e, double cs, double sn,
+                         double *ry) {
+    double y[2];
+    for (int i = 0; i < 2; i++) {
+        double acc = inv[INV_C + i];
+        for (int a = 0; a < ne; a++) acc += inv[INV_SB + i * ne + a] * e[a];
+        y[i] = acc;
+    }
+    ry[0] = cs * y[0] - sn * y[1];
+    ry[1] = sn * y[0] + cs * y[1];
+}
+
 /* M(q) of every rib (R x n x n; its body blocks: the blocks between bodies stay 0): the
  * constant part (Model3D.const_mass: the twist's rotary inertia and each body's elastic
  * block sum_p w S^T S, which the rotation leaves alone), plus sum_p w J^T J in the rows and
@@ -289,22 +307,20 @@ static void mass_matrix(Ctx3D *x, const double *q) {
             double aa = inv[INV_I0];
             for (int a = 0; a < ne; a++) {
                 double ce = 0.0, de = h[a];
-                for (int c = 0; c < ne; c++) { ce += C[a * ne + c] * e[c]; de += D[c * ne + a] * e[c]; }
+                for (int c = 0; c < ne; c++) {
+                    ce += C[a * ne + c] * e[c];
+                    de += D[c * ne + a] * e[c];
+                }
                 aa += (2.0 * g[a] + ce) * e[a];
                 Ma[t + 1 + a] += de;
             }
             Ma[t] += aa;
             if (t) {
-                double cs = cos(qb[t]), sn = sin(qb[t]), y[3];
-                for (int i = 0; i < 3; i++) {
-                    double acc = inv[INV_C + i];
-                    for (int a = 0; a < ne; a++) acc += Sb[i * ne + a] * e[a];
-                    y[i] = acc;
-                }
-                double ry0 = cs * y[0] - sn * y[1], ry1 = sn * y[0] + cs * y[1];
+                double cs = cos(qb[t]), sn = sin(qb[t]), ry[2];
+                first_moment(inv, ne, e, cs, sn, ry);
                 for (int i = 0; i < 3; i++) M[i * n + i] += inv[INV_M];
-                M[t] += -ry1;
-                M[n + t] += ry0;
+                M[t] += -ry[1];
+                M[n + t] += ry[0];
                 for (int a = 0; a < ne; a++) {
                     M[t + 1 + a] += cs * Sb[a] - sn * Sb[ne + a];
                     M[n + t + 1 + a] += sn * Sb[a] + cs * Sb[ne + a];
@@ -407,15 +423,11 @@ static void kinetic_gradient(Ctx3D *x, const double *q, const double *a, const d
             }
             if (!t) continue;
             const double *Sb = inv + INV_SB;
-            double cs = cos(qb[t]), sn = sin(qb[t]), y[3];
-            for (int i = 0; i < 3; i++) {
-                double acc = inv[INV_C + i];
-                for (int k = 0; k < ne; k++) acc += Sb[i * ne + k] * e[k];
-                y[i] = acc;
-            }
-            double ry0 = cs * y[0] - sn * y[1], ry1 = sn * y[0] + cs * y[1];
+            double cs = cos(qb[t]), sn = sin(qb[t]), ry[2];
+            first_moment(inv, ne, e, cs, sn, ry);
             /* d/dangle: M_ua' = -(R y) in plane, M_ue' = e_z x R Sb */
-            double ga = -(ab[0] * ry0 + ab[1] * ry1) * bw - (bb[0] * ry0 + bb[1] * ry1) * aw;
+            double ga = -(ab[0] * ry[0] + ab[1] * ry[1]) * bw
+                - (bb[0] * ry[0] + bb[1] * ry[1]) * aw;
             for (int k = 0; k < ne; k++) {
                 double rs0 = cs * Sb[k] - sn * Sb[ne + k], rs1 = sn * Sb[k] + cs * Sb[ne + k];
                 /* column k of e_z x R Sb: (-rs1, rs0, 0) */
