@@ -46,10 +46,14 @@
  * iteration that contracted the update by less than REFRESH_RATE */
 #define REFRESH_RATE 0.1
 
+/* the nonzeros of a matrix, row by row (columns ascending): rows_of, sparse_of */
+typedef struct { int *ptr, *col; } Rows;
+
 typedef struct {
     int t, nb, ne, np, off;            /* translations, coordinates, elastic, points, offset */
     const double *x, *w, *shape;       /* R x P x 3, R x P, R x P x 3 x ne */
     double *inv;                       /* R x INV_LEN(ne): the inertia invariants (invariants) */
+    Rows c_rows, d_rows, d_cols;       /* the nonzeros of C, D, D^T (every rib's) */
 } Body;
 
 /* The inertia invariants of a body (the floating frame's: Shabana's S-bar, I-bar), per rib,
@@ -82,9 +86,6 @@ typedef struct {
     int spiv[MAXS];
     int uses;                          /* steps it served (iteration slots) */
 } Fact;
-
-/* the nonzeros of a rib's matrix (rows_of) */
-typedef struct { int *ptr, *col; } Rows;
 
 struct Ctx3D {
     const Model3D *m;
@@ -121,6 +122,27 @@ static void body_of(Body *b, int t, int ne, int np, int off, const double *x, co
     b->inv = NULL;
 }
 
+/* the nonzeros of every rib's ne x ne matrix at A + r L (transposed: of A^T) */
+static int sparse_of(int R, int ne, const double *A, int L, int transposed, Rows *p) {
+    int k = 0;
+    p->ptr = malloc(sizeof(int) * (ne + 1));
+    p->col = malloc(sizeof(int) * (ne * ne > 0 ? ne * ne : 1));
+    if (!p->ptr || !p->col) return 0;
+    for (int a = 0; a < ne; a++) {
+        p->ptr[a] = k;
+        for (int c = 0; c < ne; c++) {
+            int keep = 0;
+            for (int r = 0; r < R && !keep; r++)
+                keep = A[(size_t)r * L + (transposed ? c * ne + a : a * ne + c)] != 0.0;
+            if (keep) p->col[k++] = c;
+        }
+    }
+    p->ptr[ne] = k;
+    return 1;
+}
+
+static void rows_free(Rows *p) { free(p->ptr); free(p->col); }
+
 static int invariants(Body *b, int R) {
     int ne = b->ne, P = b->np, L = INV_LEN(ne);
     b->inv = calloc((size_t)R * L, sizeof(double));
@@ -146,7 +168,9 @@ static int invariants(Body *b, int R) {
             }
         }
     }
-    return 1;
+    return sparse_of(R, ne, b->inv + INV_CC(ne), L, 0, &b->c_rows)
+        && sparse_of(R, ne, b->inv + INV_D(ne), L, 0, &b->d_rows)
+        && sparse_of(R, ne, b->inv + INV_D(ne), L, 1, &b->d_cols);
 }
 
 static int kin_alloc(Kin *k, const Body *b, int R) {
@@ -176,9 +200,13 @@ static int fact_alloc(Fact *f, const Ctx3D *x) {
 
 void umbrella3d_free(Ctx3D *x) {
     if (!x) return;
-    for (int j = 0; j < 2; j++) { kin_free(&x->km[j]); free(x->b[j].inv); }
+    for (int j = 0; j < 2; j++) {
+        kin_free(&x->km[j]);
+        free(x->b[j].inv);
+        rows_free(&x->b[j].c_rows); rows_free(&x->b[j].d_rows); rows_free(&x->b[j].d_cols);
+    }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
-    free(x->mrows.ptr); free(x->mrows.col); free(x->krows.ptr); free(x->krows.col);
+    rows_free(&x->mrows); rows_free(&x->krows);
     free(x->kept_q); free(x->kept_v); free(x->kept_stuck);
     double *bufs[] = {x->mass, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
@@ -224,6 +252,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS)
         && ALLOC(fitc, 2 * n);
 #undef ALLOC
+    if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
     ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
@@ -288,8 +317,9 @@ static void first_moment(const double *inv, int ne, const double *e, double cs, 
 
 /* M(q) of every rib (R x n x n; its body blocks: the blocks between bodies stay 0): the
  * constant part (Model3D.const_mass: the twist's rotary inertia and each body's elastic
- * block sum_p w S^T S, which the rotation leaves alone), plus sum_p w J^T J in the rows and
- * columns of each body's frame coordinates, from the inertia invariants (Body.inv). */
+ * block sum_p w S^T S, which the rotation leaves alone: copied once, at the context), plus
+ * sum_p w J^T J in the rows and columns of each body's frame coordinates, from the inertia
+ * invariants (Body.inv). */
 static void mass_matrix(Ctx3D *x, const double *q) {
     const Model3D *m = x->m;
     int R = x->R, n = x->n;
@@ -302,15 +332,16 @@ static void mass_matrix(Ctx3D *x, const double *q) {
             const double *inv = b->inv + (size_t)r * L, *qb = q + r * n + b->off;
             const double *e = qb + t + 1, *Sb = inv + INV_SB, *g = inv + INV_G(ne);
             const double *h = inv + INV_H(ne), *C = inv + INV_CC(ne), *D = inv + INV_D(ne);
-            for (int a = 0; a < nb; a++) memcpy(M + a * n, M0 + a * n, sizeof(double) * nb);
+            /* the frame rows anew (the elastic block stays M0's from the context on) */
+            for (int a = 0; a <= t; a++) memcpy(M + a * n, M0 + a * n, sizeof(double) * nb);
             double *Ma = M + t * n;                   /* the angle's row */
             double aa = inv[INV_I0];
             for (int a = 0; a < ne; a++) {
                 double ce = 0.0, de = h[a];
-                for (int c = 0; c < ne; c++) {
-                    ce += C[a * ne + c] * e[c];
-                    de += D[c * ne + a] * e[c];
-                }
+                for (int k = b->c_rows.ptr[a]; k < b->c_rows.ptr[a + 1]; k++)
+                    ce += C[a * ne + b->c_rows.col[k]] * e[b->c_rows.col[k]];
+                for (int k = b->d_cols.ptr[a]; k < b->d_cols.ptr[a + 1]; k++)
+                    de += D[b->d_cols.col[k] * ne + a] * e[b->d_cols.col[k]];
                 aa += (2.0 * g[a] + ce) * e[a];
                 Ma[t + 1 + a] += de;
             }
@@ -414,8 +445,10 @@ static void kinetic_gradient(Ctx3D *x, const double *q, const double *a, const d
             double aw = ab[t], bw = bb[t];
             for (int c = 0; c < ne; c++) {           /* M_aa, M_ae */
                 double ce = 0.0, da = 0.0, db = 0.0;
-                for (int k = 0; k < ne; k++) {
-                    ce += C[c * ne + k] * e[k];
+                for (int i = b->c_rows.ptr[c]; i < b->c_rows.ptr[c + 1]; i++)
+                    ce += C[c * ne + b->c_rows.col[i]] * e[b->c_rows.col[i]];
+                for (int i = b->d_rows.ptr[c]; i < b->d_rows.ptr[c + 1]; i++) {
+                    int k = b->d_rows.col[i];
                     da += D[c * ne + k] * ae[k];
                     db += D[c * ne + k] * be[k];
                 }
