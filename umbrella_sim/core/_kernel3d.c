@@ -54,6 +54,8 @@ typedef struct {
     const double *x, *w, *shape;       /* R x P x 3, R x P, R x P x 3 x ne */
     double *inv;                       /* R x INV_LEN(ne): the inertia invariants (invariants) */
     Rows c_rows, d_rows, d_cols;       /* the nonzeros of C, D, D^T (every rib's) */
+    double *elu;                       /* R x ne x ne: the LU of M's elastic block (constant;
+                                        * no pivoting: it is positive definite), elastic_lu */
 } Body;
 
 /* The inertia invariants of a body (the floating frame's: Shabana's S-bar, I-bar), per rib,
@@ -85,6 +87,8 @@ typedef struct {
     double S[MAXS * MAXS];
     int spiv[MAXS];
     int uses;                          /* steps it served (iteration slots) */
+    int elastic_first;                 /* the bodies' blocks factored elastic coordinates
+                                        * first, from Body.elu (the projection's M) */
 } Fact;
 
 struct Ctx3D {
@@ -203,6 +207,7 @@ void umbrella3d_free(Ctx3D *x) {
     for (int j = 0; j < 2; j++) {
         kin_free(&x->km[j]);
         free(x->b[j].inv);
+        free(x->b[j].elu);
         rows_free(&x->b[j].c_rows); rows_free(&x->b[j].d_rows); rows_free(&x->b[j].d_cols);
     }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
@@ -217,6 +222,50 @@ void umbrella3d_free(Ctx3D *x) {
 }
 
 static int rows_of(const Ctx3D *x, const double *A, int frame, Rows *p);
+
+/* Body.elu: each rib's LU (lu_factor's packing, no pivoting) of the body's elastic block of
+ * M, which no motion changes (mass_matrix) */
+static int elastic_lu(Body *b, const double *M0, int R, int n) {
+    int ne = b->ne, o = b->off + b->t + 1;
+    b->elu = malloc(sizeof(double) * ((size_t)R * ne * ne > 0 ? (size_t)R * ne * ne : 1));
+    if (!b->elu) return 0;
+    for (int r = 0; r < R; r++) {
+        double *E = b->elu + (size_t)r * ne * ne;
+        for (int a = 0; a < ne; a++)
+            for (int c = 0; c < ne; c++)
+                E[a * ne + c] = M0[(size_t)r * n * n + (o + a) * n + o + c];
+        for (int k = 0; k < ne; k++) {
+            if (!(E[k * ne + k] > 0.0)) return 0;
+            double inv = 1.0 / E[k * ne + k];
+            lu_eliminate(ne, E, k, k + 1, inv);
+            E[k * ne + k] = inv;
+        }
+    }
+    return 1;
+}
+
+/* body j's coordinate at place i of the elastic-first order (elastic, then frame) */
+static int elastic_first(const Body *b, int i) { return i < b->ne ? b->t + 1 + i : i - b->ne; }
+
+/* lu_factor of body j's block A (nb x nb, elastic-first order) whose elastic rows and columns
+ * are the constant elastic block E = b->elu's (E's LU copied, not recomputed): the frame
+ * rows eliminated through E, then the frame block's Schur complement with pivoting */
+static int factor_elastic_first(const Body *b, int r, double *A, int *piv) {
+    int nb = b->nb, ne = b->ne;
+    const double *E = b->elu + (size_t)r * ne * ne;
+    for (int a = 0; a < ne; a++) memcpy(A + a * nb, E + a * ne, sizeof(double) * ne);
+    for (int k = 0; k < ne; k++) {
+        piv[k] = k;
+        double inv = A[k * nb + k];
+        for (int i = k + 1; i < ne; i++) {      /* E's rows: its factors, the frame columns */
+            double f = A[i * nb + k];
+            if (f != 0.0)
+                for (int j = ne; j < nb; j++) A[i * nb + j] -= f * A[k * nb + j];
+        }
+        lu_eliminate(nb, A, k, ne, inv);        /* the frame rows */
+    }
+    return lu_factor_from(nb, ne, A, piv);
+}
 
 Ctx3D *umbrella3d_new(const Model3D *m) {
     if (m->n_shared + m->n_shared_rows > MAXS) return NULL;
@@ -253,10 +302,13 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(fitc, 2 * n);
 #undef ALLOC
     if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
+    ok = ok && elastic_lu(&x->b[0], m->const_mass, R, n)
+        && elastic_lu(&x->b[1], m->const_mass, R, n);
     ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
     x->pend_slot = -1;
+    x->pm.elastic_first = 1;
     return x;
 }
 
@@ -606,7 +658,15 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v) {
     const double *A = f->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
-        lu_solve(b->nb, A, f->apiv + r * n + b->off, v + b->off);
+        const int *piv = f->apiv + r * n + b->off;
+        if (f->elastic_first) {
+            double y[b->nb];
+            for (int i = 0; i < b->nb; i++) y[i] = v[b->off + elastic_first(b, i)];
+            lu_solve(b->nb, A, piv, y);
+            for (int i = 0; i < b->nb; i++) v[b->off + elastic_first(b, i)] = y[i];
+        } else {
+            lu_solve(b->nb, A, piv, v + b->off);
+        }
         A += b->nb * b->nb;
     }
     const double *J = f->Jf + (size_t)r * ROWS * n, *W = f->W + (size_t)r * n * ROWS;
@@ -645,11 +705,28 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
         for (int j = 0; j < 2; j++) {
             const Body *b = &x->b[j];
             int nb = b->nb, o = b->off;
-            for (int a = 0; a < nb; a++)
-                for (int c = 0; c < nb; c++)
-                    A[a * nb + c] = M[(o + a) * n + o + c] + (Ex ? Ex[(o + a) * n + o + c] : 0.0);
-            if (lu_factor(nb, A, f->apiv + r * n + o) != OK) return SINGULAR;
-            lu_solve_rows(nb, A, f->apiv + r * n + o, W + o * ROWS);
+            int *piv = f->apiv + r * n + o;
+            if (f->elastic_first) {             /* (no extra: M's elastic block is E) */
+                double Y[nb * ROWS];
+                for (int a = 0; a < nb; a++) {
+                    int ia = o + elastic_first(b, a);
+                    for (int c = 0; c < nb; c++)
+                        A[a * nb + c] = M[ia * n + o + elastic_first(b, c)];
+                    memcpy(Y + a * ROWS, W + ia * ROWS, sizeof(double) * ROWS);
+                }
+                if (factor_elastic_first(b, r, A, piv) != OK) return SINGULAR;
+                lu_solve_rows(nb, A, piv, Y);
+                for (int a = 0; a < nb; a++)
+                    memcpy(W + (o + elastic_first(b, a)) * ROWS, Y + a * ROWS,
+                           sizeof(double) * ROWS);
+            } else {
+                for (int a = 0; a < nb; a++)
+                    for (int c = 0; c < nb; c++)
+                        A[a * nb + c] = M[(o + a) * n + o + c]
+                            + (Ex ? Ex[(o + a) * n + o + c] : 0.0);
+                if (lu_factor(nb, A, piv) != OK) return SINGULAR;
+                lu_solve_rows(nb, A, piv, W + o * ROWS);
+            }
             A += nb * nb;
         }
         memset(T, 0, sizeof(double) * ROWS * ROWS);

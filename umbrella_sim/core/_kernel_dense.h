@@ -22,6 +22,12 @@
 /* LU with partial pivoting of the row-major N x N A in place (the diagonal keeps the
  * reciprocals of the pivots); OK, or SINGULAR. */
 int lu_factor(int N, double *A, int *piv);
+/* lu_factor's steps k0.. of A whose first k0 columns are already eliminated (piv[0..k0)
+ * set by the caller) */
+int lu_factor_from(int N, int k0, double *A, int *piv);
+/* one elimination step: rows i0.. of A lose column k by pivot row k (inv: 1 / its pivot),
+ * their factors stored in column k */
+void lu_eliminate(int N, double *A, int k, int i0, double inv);
 /* b = A^-1 b with lu_factor's A and piv. */
 void lu_solve(int N, const double *A, const int *piv, double *b);
 
