@@ -333,23 +333,24 @@ lock itself stays in Python). The numpy step (integrator3d.py) is the reference 
 against (tests/test_umbrella3d_kernel.py) and steps a driven or free-floating hub, or any run
 without the library (said once on stderr; `UMBRELLA_SIM_KERNEL=numpy` asks for it). Measured
 on the 2 shared cores (bench/bench_umbrella3d.py, CPU per step at h = 0.1 ms, deployment):
-compiled 2.4 us + 8.1 us x ribs at 1 element a segment, 0.8 us + 17.7 us x ribs at 2 (numpy:
+compiled 3.4 us + 7.9 us x ribs at 1 element a segment, 0.8 us + 16.1 us x ribs at 2 (numpy:
 1.84 ms + 98 us x ribs, 1.88 ms + 276 us x ribs), 2.0 Newton iterations and 0.125
 factorisations a step: the iteration matrix is kept across steps (modified Newton, at most 8
 steps, re-factored after a slow iteration; `carry_steps`; a fresh one each step cost 17.2 and
 48.8 us x ribs before the inertia invariants). M(q), M v and the kinetic gradient come from
 each body's inertia invariants (the floating frame's S-bar and I-bar sums, taken over the
 points once: M's frame rows are rotation combinations of constants, no point loop a step),
-M v and K q run over the nonzeros (K and the elastic mass blocks are banded): 15.2 -> 8.1 and
-42.3 -> 17.7 us x ribs. What remains a step (perf, 12 x 2 in stage 2): the projection's own
-factorisation of M(q)'s blocks (a quarter), the Newton solves, the fit's modal passes.
+M v and K q run over the nonzeros (K and the elastic mass blocks are banded), the projection
+factors M(q)'s blocks from the constant elastic block's LU: 15.2 -> 7.9 and 42.3 -> 16.1 us x
+ribs. What remains a step (perf, 12 x 2 in stage 2): the projection's factorisation (a
+fifth), the Newton solves, the fit's modal passes; Record3D's figures in 1 ms blocks.
 With the hub fixed the 3D model takes the planar stage-2 mode fit rib by rib (the sleeve at
 the stop decouples the ribs: each rib's locked modes exact in phase and amplitude, T + V
 conserved; tests/test_umbrella3d_mode_fit.py), hence the planar rule's fitted
 step: 0.1 ms at 1 element, 33 us at 2 (9.1 us without the fit). Ribs 6 x 1 in 1 ms blocks run
-at 1.34 x real time deploying (0.7 CPU s a simulated second, with Record3D's figures: about
-0.2 of them) and 0.90 x in stage 2 (1.1 CPU s; 80-84 us a step); ribs 12 x 2 in 10 ms blocks
-at 0.157 x (6.3 CPU s) and 0.099 x (10.1 CPU s). The issue's targets (6 x 1 within 0.5 core,
+at 1.36 x real time deploying (0.7 CPU s a simulated second, with Record3D's figures: about
+0.2 of them) and 0.97 x in stage 2 (1.0 CPU s; 80 us a step); ribs 12 x 2 in 10 ms blocks at
+0.174 x (5.8 CPU s) and 0.098 x (10.2 CPU s). The issue's targets (6 x 1 within 0.5 core,
 12 x 2 in real time) are not reached: they need about 8 us (6 x 1, the figures included) and
 2.8 us (12 x 2) a rib and step at these steps.
 
