@@ -31,6 +31,8 @@ from __future__ import annotations
 import numpy as np
 
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
+#: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
+BODIES = ('leaf', 'link')
 
 
 class Record3D:
@@ -49,11 +51,8 @@ class Record3D:
         self.iterations = 0
         self._xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
 
-    def _put(self, name, value):
-        self.rows.setdefault(name, []).append(value)
-
     def add(self, s, locked: bool, force: float, work, lock_loss: float, lock_event=None):
-        m = self.model
+        """Take the state at the end of a step (work: the step's StepWork, None at t = 0)."""
         if work is not None:
             self.work += work.force
             self.friction = self.friction + work.friction
@@ -61,6 +60,31 @@ class Record3D:
             self.iterations += work.iterations
         if lock_event is not None:
             self.lock_events.append(lock_event)
+        row = self.row(s, locked, force, lock_loss, (self.work, self.friction, self.drive))
+        for name in STRESS_NAMES:
+            top, (body, x) = row[f'stress_{name}'], row[f'stress_{name}_at'].T
+            better = top > self.peak[name]
+            if np.any(better):
+                self.peak[name] = np.where(better, top, self.peak[name])
+                lst = list(self.peak_where[name])
+                for k in np.nonzero(better)[0]:
+                    lst[k] = (BODIES[int(body[k])], float(x[k]), float(s.t))
+                self.peak_where[name] = lst
+        rows = self.rows
+        for name, value in row.items():
+            rows.setdefault(name, []).append(value)
+
+    def row(self, s, locked: bool, force: float, lock_loss: float, totals) -> dict:
+        """
+        Return the figures of the state s (no side effect): a row of the record.
+
+        totals: the work of the sleeve force, each hinge's friction work and the drive's work
+        from t = 0 to s.  Each stress component's figure is, per rib, the largest |value| over
+        both bodies' stress points (the leaf's first on a tie) with where: (body, x), body 0
+        the leaf (x from O), 1 the link (x from O'').
+        """
+        m = self.model
+        work, friction, drive = totals
         kin = None
         if s.pr is None:
             kin = m.kinematics(s.qr, s.qs)
@@ -68,51 +92,47 @@ class Record3D:
         else:
             pr, ps = s.pr, s.ps
         kinetic = 0.5 * (float(np.sum(pr * s.vr)) + float(ps @ s.vs))
-        put = self._put
-        put('time', s.t)
-        put('locked', locked)
-        put('sleeve_position', s.qs[0])
-        put('sleeve_velocity', s.vs[0])
-        put('sleeve_force', force)
-        put('alpha1', s.qr[:, m.i_a1].copy())
-        put('alpha2', s.qr[:, m.i_a2].copy())
-        put('alpha1_rate', s.vr[:, m.i_a1].copy())
-        put('alpha2_rate', s.vr[:, m.i_a2].copy())
-        put('tip', s.qr[:, list(m.i_tip)].copy())
-        put('kinetic_energy', kinetic)
-        put('strain_energy', m.strain_energy(s.qr))
-        put('work', self.work)
-        put('friction_work', self.friction.copy())
-        put('drive_work', self.drive)
-        put('lock_energy_loss', lock_loss)
-        put('holding_torque', np.where(np.isnan(s.stuck), 0.0, s.lam_r[:, -1]))
-        put('stuck', ~np.isnan(s.stuck))
-        put('stop_reaction', float(s.lam_s[0]))
+        out = {
+            'time': s.t, 'locked': locked, 'sleeve_position': s.qs[0],
+            'sleeve_velocity': s.vs[0], 'sleeve_force': force,
+            'alpha1': s.qr[:, m.i_a1].copy(), 'alpha2': s.qr[:, m.i_a2].copy(),
+            'alpha1_rate': s.vr[:, m.i_a1].copy(), 'alpha2_rate': s.vr[:, m.i_a2].copy(),
+            'tip': s.qr[:, list(m.i_tip)].copy(), 'kinetic_energy': kinetic,
+            'strain_energy': m.strain_energy(s.qr), 'work': work,
+            'friction_work': np.array(friction, dtype=float), 'drive_work': drive,
+            'lock_energy_loss': lock_loss,
+            'holding_torque': np.where(np.isnan(s.stuck), 0.0, s.lam_r[:, -1]),
+            'stuck': ~np.isnan(s.stuck), 'stop_reaction': float(s.lam_s[0])}
         if m.moving_base:
-            put('bus_q', s.qs[1:7].copy())
-            put('bus_v', s.vs[1:7].copy())
+            out['bus_q'] = s.qs[1:7].copy()
+            out['bus_v'] = s.vs[1:7].copy()
             if m.params.base == 'free':
                 kin = kin if kin is not None else m.kinematics(s.qr, s.qs)
-                p, h = m.momentum(kin, s.vr, s.vs)
-                put('linear_momentum', p)
-                put('angular_momentum', h)
-        vm_now = np.zeros(m.n_ribs)
-        for body, comps, xs in zip(('leaf', 'link'), m.stress_components(s.qr), self._xs):
+                out['linear_momentum'], out['angular_momentum'] = m.momentum(kin, s.vr, s.vs)
+        nr = m.n_ribs
+        tops = {name: np.full((2, nr), -1.0) for name in STRESS_NAMES}
+        at = {name: np.zeros((2, nr)) for name in STRESS_NAMES}
+        for body, (comps, xs) in enumerate(zip(m.stress_components(s.qr), self._xs)):
             ax, bz, by, sh = comps
             vm = np.sqrt((np.abs(ax) + np.abs(bz) + np.abs(by)) ** 2 + 3.0 * sh * sh)
-            vm_now = np.maximum(vm_now, vm.max(1))
             for name, values in zip(STRESS_NAMES, (ax, bz, by, sh, vm)):
                 a = np.abs(values)
                 where = a.argmax(1)
-                top = a[np.arange(len(where)), where]
-                better = top > self.peak[name]
-                if np.any(better):
-                    self.peak[name] = np.where(better, top, self.peak[name])
-                    lst = list(self.peak_where[name])
-                    for k in np.nonzero(better)[0]:
-                        lst[k] = (body, float(xs[where[k]]), float(s.t))
-                    self.peak_where[name] = lst
-        put('von_mises', vm_now)
+                tops[name][body] = a[np.arange(nr), where]
+                at[name][body] = xs[where]
+        for name in STRESS_NAMES:
+            body = tops[name].argmax(0)             # (the leaf on a tie)
+            ribs = np.arange(nr)
+            out[f'stress_{name}'] = tops[name][body, ribs]
+            out[f'stress_{name}_at'] = np.stack([body.astype(float), at[name][body, ribs]], 1)
+        out['von_mises'] = out['stress_von_mises']
+        return out
+
+    def take(self) -> dict:
+        """Return the rows added since the last take as arrays (``arrays``), and drop them."""
+        out = self.arrays()
+        self.rows = {}
+        return out
 
     def arrays(self) -> dict:
         """Return every per-step figure as an array (steps first, then ribs or components)."""
@@ -130,19 +150,10 @@ class Record3D:
         a = self.arrays()
         t = a['time']
         alpha = a['alpha1']
-        deployed = []
-        for k in range(m.n_ribs):
-            gap = alpha[:, k] - m.alpha_deployed[k]
-            hit = np.nonzero(gap <= 0.0)[0]
-            if len(hit) == 0 or hit[0] == 0:
-                deployed.append(np.nan if len(hit) == 0 else t[0])
-                continue
-            i = hit[0]
-            deployed.append(t[i - 1] + (t[i] - t[i - 1]) * gap[i - 1] / (gap[i - 1] - gap[i]))
-        deployed = np.array(deployed)
+        deployed = np.array([first_reach(t, alpha[:, k] - m.alpha_deployed[k])
+                             for k in range(m.n_ribs)])
         energy = a['kinetic_energy'] + a['strain_energy']
-        balance = (energy - energy[0] - a['work'] - a['friction_work'].sum(1) - a['drive_work']
-                   + a['lock_energy_loss'])
+        balance = energy_balance3d(a, energy[0])
         tip_w = np.abs(a['tip'][:, :, 2])
         worst = np.unravel_index(np.argmax(tip_w), tip_w.shape)
         out = {
@@ -162,3 +173,37 @@ class Record3D:
                             for name in STRESS_NAMES},
         }
         return out
+
+
+def first_reach(t: np.ndarray, gap: np.ndarray, before: tuple | None = None) -> float:
+    """
+    Return when gap first reaches 0 from above (linear between steps); nan if it does not.
+
+    A rib's deployment instant (gap: its leaf angle less its deployed angle); t[0] if it
+    starts there.  before: (t, gap) of the step before t[0], for a record taken in parts.
+    """
+    hit = np.nonzero(gap <= 0.0)[0]
+    if len(hit) == 0:
+        return np.nan
+    i = hit[0]
+    if i == 0:
+        if before is None or before[1] <= 0.0:
+            return float(t[0])
+        t0, g0 = before
+    else:
+        t0, g0 = t[i - 1], gap[i - 1]
+    return float(t0 + (t[i] - t0) * g0 / (g0 - gap[i]))
+
+
+def energy_balance3d(rows: dict, initial_energy: float) -> np.ndarray:
+    """
+    Return T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss of rows (J).
+
+    rows: a Record3D's arrays (one figure a step) or one row (a Sample3D).
+
+    The umbrella's energy balance, one rule: 0 for a run that keeps its energy (friction
+    work is negative: the hinges take energy out).
+    """
+    return (rows['kinetic_energy'] + rows['strain_energy'] - initial_energy - rows['work']
+            - np.sum(rows['friction_work'], axis=-1) - rows['drive_work']
+            + rows['lock_energy_loss'])

@@ -105,6 +105,41 @@ RIB_SPECS: dict[str, Param] = {p.name: p for p in (
 RIB_PLANAR_NAMES = ('l1', 'l2', 'l3', 'section_height', 'area', 'second_moment_of_area',
                     'youngs_modulus', 'density')
 _OVERRIDE = re.compile(r'^rib(\d+)\.(\w+)$')
+#: a node's name of a rib's own values, a list with one entry per rib: rib.<name>
+RIB_LIST_PREFIX = 'rib.'
+
+
+def rib_list_specs() -> dict[str, Param]:
+    """Return {name: spec} of every value a rib may have its own of (RIB_SPECS, planar)."""
+    from ..registry import REGISTRY
+
+    return {**RIB_SPECS, **{name: REGISTRY[name] for name in RIB_PLANAR_NAMES}}
+
+
+def umbrella_values(values: Mapping[str, Any]) -> dict:
+    """
+    Return from_mapping's values of a node's umbrella parameters (those not at rest dropped).
+
+    values: the umbrella's own parameters (UMBRELLA_SPECS names) and rib.<name> lists
+    (None or [] where not given).  With ribs 1 (the planar model, exactly) no umbrella value
+    may differ from its default and no rib list be given: ValueError naming it.
+    """
+    out = {}
+    for name, value in values.items():
+        if name.startswith(RIB_LIST_PREFIX):
+            if value is not None and len(value):
+                out[name[len(RIB_LIST_PREFIX):]] = [float(v) for v in value]
+        else:
+            out[name] = UMBRELLA_SPECS[name].coerce(value)
+    if out.get('ribs', 1) == 1:
+        given = sorted((RIB_LIST_PREFIX + n if n not in UMBRELLA_SPECS else n)
+                       for n, v in out.items()
+                       if n != 'ribs' and (n not in UMBRELLA_SPECS
+                                           or v != UMBRELLA_SPECS[n].default))
+        if given:
+            raise ValueError(f"parameter {given[0]}: set with ribs 1 (the planar model, which "
+                             'has no hub, bus or per-rib values); set ribs >= 2')
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -246,6 +281,20 @@ class UmbrellaRibsParams:
         if self.base == 'free' and self.planar.lock == 'auto':
             return 'plastic'
         return self.planar.lock_rule
+
+    @property
+    def sleeve_force_limit(self) -> float:
+        """Return the largest F per rib (the planar record's: each link carries F)."""
+        return self.planar.sleeve_force_limit
+
+    @property
+    def sleeve_force_min(self) -> float:
+        """Return the smallest F per rib (the planar record's)."""
+        return self.planar.sleeve_force_min
+
+    def with_physics_step(self, step: float) -> 'UmbrellaRibsParams':
+        """Return these parameters with the integrator's step set to step exactly."""
+        return dataclasses.replace(self, planar=self.planar.with_physics_step(step))
 
     def ribs_list(self) -> list[RibProperties]:
         return [self.rib(k) for k in range(self.ribs)]

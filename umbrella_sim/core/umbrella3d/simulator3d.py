@@ -55,13 +55,15 @@ class UmbrellaSimulator3D:
                  tolerance: float | None = None):
         self.params = params.validated()
         self.model = m = UmbrellaModel3D(self.params)
-        self.h = (physics_step_of(self.params.planar.replace(phase_correction=False))
-                  if step is None else step)
+        self.h = self.grid_step(self.params) if step is None else step
         self.integrator = MidpointUmbrella(
             m, newton_tolerance(self.h) if tolerance is None else tolerance)
         self.force = self.params.planar.sleeve_force * m.n_ribs
         self.locked = False
         self.lock_time: float | None = None
+        #: (the state right after the lock, the work of the step up to it, the record's
+        #: work totals before that step); None before the lock
+        self.lock_state = None
         self.lock_loss = 0.0
         self.k = 0
         ribs = m.ribs
@@ -70,6 +72,11 @@ class UmbrellaSimulator3D:
         self.state = self.integrator.consistent(self.initial_state(), self.force, False)
         self.record = Record3D(m)
         self.record.add(self.state, self.locked, self.force, None, 0.0)
+
+    @staticmethod
+    def grid_step(params: UmbrellaRibsParams) -> float:
+        """Return the physics step of these parameters (the planar rule, no mode fit)."""
+        return physics_step_of(params.planar.replace(phase_correction=False))
 
     # ------------------------------------------------------------ start
     def initial_state(self) -> State3D:
@@ -164,6 +171,8 @@ class UmbrellaSimulator3D:
             s_hit, work_hit = self._find_lock(s0, t_next - s0.t)
             before = self.energy(s_hit)
             s_locked = self._lock(s_hit)
+            rec = self.record
+            self.lock_state = (s_locked, work_hit, (rec.work, rec.friction, rec.drive))
             after = self.energy(s_locked)
             self.locked, self.lock_time = True, s_locked.t
             self.lock_loss += before - after
