@@ -27,7 +27,9 @@ from __future__ import annotations
 from . import messages
 from ..core.driver import RunDriver
 from ..core.outputs import mechanical_energy, Sample
+from ..core.params import UmbrellaParams
 from ..core.registry import NODE_PARAMETERS
+from ..core.umbrella3d.params3d import UmbrellaRibsParams
 
 
 class PublicationEncoder:
@@ -61,3 +63,22 @@ class PublicationEncoder:
             out['markers'] = markers.encode(s.time, s.sleeve_position, positions)
         self.count += 1
         return out
+
+
+def run_driver(planar: UmbrellaParams, umbrella: dict, publish_rate: float | None,
+               marker_rate: float = NODE_PARAMETERS['marker_rate'].default):
+    """
+    Return the run driver of a node's parameters and the encoder of its publications.
+
+    planar: the planar record; umbrella: the umbrella's values (params3d.umbrella_values):
+    with ribs >= 2 the umbrella of N ribs, each rib taking planar unless it has its own value
+    (ribs_messages.RibsPublicationEncoder), else the planar model.  ValueError if the model
+    cannot be made.
+    """
+    if umbrella.get('ribs', 1) > 1:
+        from .ribs_messages import RibsPublicationEncoder
+
+        driver = RunDriver(UmbrellaRibsParams.from_mapping(umbrella, planar), publish_rate)
+        return driver, RibsPublicationEncoder(driver)
+    driver = RunDriver(planar, publish_rate)
+    return driver, PublicationEncoder(driver, marker_rate)

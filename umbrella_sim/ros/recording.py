@@ -32,6 +32,7 @@ from std_msgs.msg import Float64
 
 from . import messages
 from .publication import PublicationEncoder
+from .ribs_messages import RIB_TOPICS
 from .signals import deferred
 from ..bag.format import (APPLIED_SUFFIX, COUNTS_RECORD, PARAMETERS_RECORD, REFUSED_SUFFIX,
                           TOPICS_RECORD)
@@ -40,6 +41,9 @@ from ..bag.writer import BagRecorder
 from ..core.driver import Chunk, RunDriver
 from ..core.registry import node_defaults
 from ..core.summary import RunResult
+
+#: every topic a run may record: the planar model's, and the umbrella's per-rib ones
+TOPICS = {**messages.TOPICS, **RIB_TOPICS}
 
 
 class RunRecording:
@@ -59,7 +63,7 @@ class RunRecording:
         self.published: dict[str, int] = {}       # resolved name -> messages published
         resolved = {}       # the node's own topic name -> the name recorded (remapped)
         for key, name in self.topics.items():
-            topic = messages.TOPICS[key]
+            topic = TOPICS[key]
             recorder.add_channel(name, topic.type, (qos or {}).get(key, topic.qos))
             resolved[topic.name.lstrip('/')] = name
         for suffix in ('', REFUSED_SUFFIX, APPLIED_SUFFIX):   # (the last two as published)

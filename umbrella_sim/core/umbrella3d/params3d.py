@@ -137,7 +137,7 @@ def umbrella_values(values: Mapping[str, Any]) -> dict:
                        if n != 'ribs' and (n not in UMBRELLA_SPECS
                                            or v != UMBRELLA_SPECS[n].default))
         if given:
-            raise ValueError(f"parameter {given[0]}: set with ribs 1 (the planar model, which "
+            raise ValueError(f'parameter {given[0]}: set with ribs 1 (the planar model, which '
                              'has no hub, bus or per-rib values); set ribs >= 2')
     return out
 

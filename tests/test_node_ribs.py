@@ -1,0 +1,102 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+umbrella_node with ribs >= 2: its parameters, joint names, per-rib topics, lockstep, recording.
+
+The physics of the umbrella is the core's (tests/test_umbrella3d*.py) through the run driver
+(tests/test_umbrella3d_driver.py); here the node's face of it: the umbrella's parameters
+refused at start naming the culprit, 2N + 1 joints named rib<k>/..., the per-rib arrays as
+their layouts say, the lockstep handshake, and an MCAP recording of all of it with the
+umbrella's summary figures.
+"""
+import json
+import subprocess
+import sys
+
+import pytest
+
+from umbrella_sim.bag.format import MESH_RECORD, PARAMETERS_RECORD, SUMMARY_RECORD
+from umbrella_sim.bag.reader import read_log
+from umbrella_sim.ros.ribs_messages import rib_joint_names, STRESS_FIELDS, TIP_FIELDS
+from umbrella_sim.testing import ros_env, SimulatedAntenna
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.mark.parametrize('args, culprit', [
+    (['-p', 'rib.tip_mass:=[0.1]'], 'rib.tip_mass'),         # ribs 1 is the planar model
+    (['-p', 'hub_radius:=0.1'], 'hub_radius'),
+    (['-p', 'ribs:=3', '-p', 'rib.tip_mass:=[0.0, 0.1]'], 'tip_mass'),
+    (['-p', 'ribs:=3', '-p', 'base:=wobbly'], 'base'),
+    (['-p', 'ribs:=3', '-p', 'rib.stick_until:=[0.0, -1.0, 0.0]'], 'stick_until'),
+    (['-p', 'ribs:=3', '-p', 'rib.stick_until:=[a, b, c]'], 'rib.stick_until'),
+])
+def test_invalid_umbrella_parameters_exit_2_naming_them(args, culprit):
+    r = subprocess.run([sys.executable, '-m', 'umbrella_sim.node', '--ros-args', *args],
+                       capture_output=True, text=True, env=ros_env(), timeout=60)
+    assert r.returncode == 2, r.stderr
+    assert culprit in r.stderr and 'Traceback' not in r.stderr
+
+
+def test_the_umbrella_node_in_lockstep_publishes_and_records_every_rib(tmp_path):
+    """
+    Two ribs in lockstep: each publication waits for its command; everything is recorded.
+
+    Commands answer 12 joint states one by one; the node takes exactly one publication
+    period per answer (lockstep, whatever the step costs), the sleeve joint's effort is the
+    whole sleeve's force 2 F, each rib topic carries one row per rib as its layout says, and
+    the bag holds every publication of every rib topic with the umbrella's figures.
+    """
+    bag = tmp_path / 'ribs'
+    period = 1.0 / 500.0
+    with SimulatedAntenna({'ribs': 2, 'v0': 0.0, 'time_step': 2e-4, 'publish_rate': 500.0,
+                           'lockstep': True, 'rib.tip_mass': [0.0, 0.05]},
+                          record_path=str(bag)) as antenna:
+        first = antenna.messages('joint_states')[0]
+        assert list(first.name) == rib_joint_names(2) == [
+            'rib0/leaf_hinge', 'rib0/link_hinge', 'rib1/leaf_hinge', 'rib1/link_hinge',
+            'sleeve_slider']
+        for i in range(12):
+            antenna.publish_force(10.0 + i)
+            antenna.wait_for_sim_time((i + 1) * period - 1e-9)
+        states = antenna.rib_states()
+        # lockstep: the node waited for each command; one period per command, no more
+        antenna.wait_for('joint_states', lambda m: True)
+        assert max(s['time'] for s in states) == pytest.approx(12 * period, abs=1e-9)
+        assert antenna.applied_forces()[-1] == (pytest.approx(11 * period, abs=1e-9), 21.0)
+        assert states[-1]['sleeve_force'] == 2 * 21.0
+        # the rib arrays: one row a rib, the fields of the layouts
+        tips = antenna.rib_arrays('rib_tip_deflection')
+        stresses = antenna.rib_arrays('rib_peak_stress')
+        assert len(tips[-1]) == len(stresses[-1]) == 2
+        assert list(tips[-1][0]) == list(TIP_FIELDS)
+        assert list(stresses[-1][1]) == list(STRESS_FIELDS)
+        # the heavier tip (rib 1) bends its leaf more in its plane under the same push
+        assert abs(tips[-1][1]['in_plane_m']) > abs(tips[-1][0]['in_plane_m'])
+        # von Mises bounds each component (it is their upper bound's combination)
+        for row in stresses[-1]:
+            assert row['von_mises_Pa'] >= max(row['axial_Pa'], row['bending_in_plane_Pa'],
+                                              row['torsion_Pa'])
+        published = len(antenna.messages('joint_states'))
+        assert antenna.stop() == 0
+    log = read_log(str(bag))
+    for key in ('joint_states', 'rib_tip_deflection', 'rib_peak_stress', 'energy'):
+        assert log.count(log.find_topic(key)) >= published, key
+    assert log.metadata[MESH_RECORD]['ribs'] == '2'
+    params = {k: json.loads(v) for k, v in log.metadata[PARAMETERS_RECORD].items()}
+    assert params['ribs'] == 2 and params['tip_mass'] == [0.0, 0.05]
+    figures = json.loads(log.metadata[SUMMARY_RECORD]['figures'])
+    assert figures['ribs'] == 2 and len(figures['peak_stress']['von_mises']['value']) == 2
+    assert figures['energy_drift'] < 1e-9
