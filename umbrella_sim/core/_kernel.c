@@ -35,8 +35,9 @@
  *   - M(q) is never formed: products M(q) v use the band and a few border vectors;
  *   - stage 2's mode fit (integrators.LockedModeFit: the phase_correction parameter) maps
  *     the scheme's velocity w to the physical v = S w, S = I + Phi diag(s - 1) U^T, a rank-r
- *     change (r = 8 modes at N = 1, 14-16 above) applied by modal sums; its share of the
- *     tangent, left out of the constant iteration matrix, is put back into each Newton
+ *     change (r modes: those with omega h <= 1.5) applied by modal sums, five r x n passes a
+ *     Newton iteration (the Mff and W products of S w by the band, not by modal rows); its
+ *     share of the tangent, left out of the constant iteration matrix, is put back into each Newton
  *     update mode by mode (mode_fit_update: LockedModeFit.newton_update).
  * The rigid-FE mode (every elastic coordinate constrained) goes through the same code with
  * a border as large as the mesh, so there it costs what a dense solve costs.
@@ -138,8 +139,6 @@ struct Ctx {
     int pc_r;
     const double *pc_u, *pc_phi, *pc_sc, *pc_dc, *pc_shrink;
     double *pc_s;          /* the modal sums (r <= n) */
-    /* rows Mff phi_i and W phi_i (r x n: the band products of S's columns) */
-    double *pc_mphi, *pc_wphi;
     /* within a step: u_i . w0 and u_i . (q - q0) (kept up to date through the Newton
      * updates); w0 = S^-1 v0, S^T p0, Mff w0, W w0 */
     double *pc_eta_w0, *pc_eta_dq, *pc_w0, *pc_sp0, *pc_mw0, *pc_ww0;
@@ -1122,19 +1121,13 @@ int umbrella_set_mode_fit(Ctx *x, int r, const double *u, const double *phi, con
     x->pc_eta_w0 = NULL;
     x->pc_r = 0;
     if (r > 0) {
-        size_t rn = (size_t)r * n;
-        x->pc_eta_w0 = calloc(2 * (size_t)r + 4 * (size_t)n + 2 * rn, sizeof(double));
+        x->pc_eta_w0 = calloc(2 * (size_t)r + 4 * (size_t)n, sizeof(double));
         if (!x->pc_eta_w0) return SINGULAR;
         x->pc_eta_dq = x->pc_eta_w0 + r;
         x->pc_w0 = x->pc_eta_dq + r;
         x->pc_sp0 = x->pc_w0 + n;
         x->pc_mw0 = x->pc_sp0 + n;
         x->pc_ww0 = x->pc_mw0 + n;
-        x->pc_mphi = x->pc_ww0 + n;               /* zeroed: the band products fill the */
-        x->pc_wphi = x->pc_mphi + rn;             /* elastic entries only */
-        for (int j = 0; j < r; j++)
-            band_matvec2(m, m->mff_band, x->pc_mphi + (size_t)j * n, m->w_band,
-                         x->pc_wphi + (size_t)j * n, phi + (size_t)j * n);
     }
     x->pc_r = r;
     x->pc_u = u;
@@ -1178,11 +1171,9 @@ static void mode_fit_start(Ctx *x, const double *v0, const double *p0, double h)
         x->pc_eta_dq[j] = h * x->pc_eta_w0[j];
     }
     memcpy(x->pc_w0, v0, sizeof(double) * n);
-    memcpy(x->pc_mw0, x->mv0, sizeof(double) * n);
-    memcpy(x->pc_ww0, x->wv0, sizeof(double) * n);
     modal_combine(r, n, x->pc_phi, c, 1.0, x->pc_w0);
-    modal_combine(r, n, x->pc_mphi, c, 1.0, x->pc_mw0);
-    modal_combine(r, n, x->pc_wphi, c, 1.0, x->pc_ww0);
+    /* Mff w0 and W w0: band products (of the elastic entries), not r x n passes */
+    band_matvec2(x->m, x->m->mff_band, x->pc_mw0, x->m->w_band, x->pc_ww0, x->pc_w0);
     modal_dots(r, n, x->pc_phi, p0, c);               /* S^T p0 = p0 + U diag(s-1) Phi^T p0 */
     for (int j = 0; j < r; j++) c[j] *= x->pc_sc[j] - 1.0;
     memcpy(x->pc_sp0, p0, sizeof(double) * n);
@@ -1285,8 +1276,7 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         if (pc) {                  /* v1 = S w1: the physical velocity, and its products */
             mode_fit_sums(x, two_h);
             modal_combine(x->pc_r, n, x->pc_phi, x->pc_s, 1.0, v1);
-            modal_combine(x->pc_r, n, x->pc_mphi, x->pc_s, 1.0, x->mffv);
-            modal_combine(x->pc_r, n, x->pc_wphi, x->pc_s, 1.0, x->wb);
+            band_matvec2(m, m->mff_band, x->mffv, m->w_band, x->wb, v1);
         }
         mass_data_from_products(x, q);
         constraints(x, q, locked, rigid, phi);
