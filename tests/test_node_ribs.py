@@ -19,7 +19,7 @@ The physics of the umbrella is the core's (tests/test_umbrella3d*.py) through th
 (tests/test_umbrella3d_driver.py); here the node's face of it: the umbrella's parameters
 refused at start naming the culprit, 2N + 1 joints named rib<k>/..., the per-rib arrays as
 their layouts say, the lockstep handshake, and an MCAP recording of all of it with the
-umbrella's summary figures.
+umbrella's summary figures, which re-runs offline to the same values.
 """
 import json
 import subprocess
@@ -31,6 +31,7 @@ from umbrella_sim.bag.format import MESH_RECORD, PARAMETERS_RECORD, SUMMARY_RECO
 from umbrella_sim.bag.reader import read_log
 from umbrella_sim.ros.ribs_messages import rib_joint_names, STRESS_FIELDS, TIP_FIELDS
 from umbrella_sim.testing import ros_env, SimulatedAntenna
+from umbrella_sim.tools.replay import DEFAULT_TOLERANCE, resimulate
 
 pytestmark = pytest.mark.ros
 
@@ -96,7 +97,12 @@ def test_the_umbrella_node_in_lockstep_publishes_and_records_every_rib(tmp_path)
         assert log.count(log.find_topic(key)) >= published, key
     assert log.metadata[MESH_RECORD]['ribs'] == '2'
     params = {k: json.loads(v) for k, v in log.metadata[PARAMETERS_RECORD].items()}
-    assert params['ribs'] == 2 and params['tip_mass'] == [0.0, 0.05]
+    assert params['ribs'] == 2 and params['rib.tip_mass'] == [0.0, 0.05]
     figures = json.loads(log.metadata[SUMMARY_RECORD]['figures'])
     assert figures['ribs'] == 2 and len(figures['peak_stress']['von_mises']['value']) == 2
     assert figures['energy_drift'] < 1e-9
+    # the recording re-runs offline from its parameters and applied forces: every rib's
+    # published values again (umbrella_replay --resimulate)
+    res = resimulate(log)
+    assert res['compared'] == log.count(log.find_topic('joint_states')) and not res['problems']
+    assert max(res['relative_diff'].values()) <= DEFAULT_TOLERANCE

@@ -297,9 +297,11 @@ def simulate(params: UmbrellaParams, duration: float,
                            force_profile=force_profile)
     driver.states = states
     sim = driver.sim
-    result = RunResult(params=sim.params.as_dict(), q_labels=sim.model.coordinate_labels(),
-                       leaf_stress_x=list(sim.model.leaf.stress_x),
-                       link_stress_x=list(sim.model.link.stress_x))
+    result = RunResult(params=sim.params.as_dict())
+    if isinstance(sim, UmbrellaSimulator):   # (the planar model's coordinates and stresses)
+        result.q_labels = sim.model.coordinate_labels()
+        result.leaf_stress_x = list(sim.model.leaf.stress_x)
+        result.link_stress_x = list(sim.model.link.stress_x)
     if keep_samples:
         result.samples.append(driver.initial)
 

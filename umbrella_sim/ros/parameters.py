@@ -128,10 +128,9 @@ def declare_from_registry(node, names) -> dict:
 
 def known_parameter_names() -> set[str]:
     """Return every name umbrella_node declares: the registry's, the umbrella's, rib.<name>."""
-    from ..core.umbrella3d.params3d import RIB_LIST_PREFIX, rib_list_specs, UMBRELLA_SPECS
+    from ..core.umbrella3d.params3d import umbrella_parameter_names
 
-    return (set(parameter_defaults()) | set(UMBRELLA_SPECS)
-            | {RIB_LIST_PREFIX + n for n in rib_list_specs()})
+    return set(parameter_defaults()) | umbrella_parameter_names()
 
 
 def declare_umbrella(node) -> dict:

@@ -66,19 +66,21 @@ class PublicationEncoder:
 
 
 def run_driver(planar: UmbrellaParams, umbrella: dict, publish_rate: float | None,
-               marker_rate: float = NODE_PARAMETERS['marker_rate'].default):
+               marker_rate: float = NODE_PARAMETERS['marker_rate'].default,
+               force_profile=None):
     """
     Return the run driver of a node's parameters and the encoder of its publications.
 
     planar: the planar record; umbrella: the umbrella's values (params3d.umbrella_values):
     with ribs >= 2 the umbrella of N ribs, each rib taking planar unless it has its own value
     (ribs_messages.RibsPublicationEncoder), else the planar model.  ValueError if the model
-    cannot be made.
+    cannot be made; force_profile: RunDriver's.
     """
     if umbrella.get('ribs', 1) > 1:
         from .ribs_messages import RibsPublicationEncoder
 
-        driver = RunDriver(UmbrellaRibsParams.from_mapping(umbrella, planar), publish_rate)
+        driver = RunDriver(UmbrellaRibsParams.of_node(umbrella, planar), publish_rate,
+                           force_profile=force_profile)
         return driver, RibsPublicationEncoder(driver)
-    driver = RunDriver(planar, publish_rate)
+    driver = RunDriver(planar, publish_rate, force_profile=force_profile)
     return driver, PublicationEncoder(driver, marker_rate)

@@ -116,24 +116,29 @@ def rib_list_specs() -> dict[str, Param]:
     return {**RIB_SPECS, **{name: REGISTRY[name] for name in RIB_PLANAR_NAMES}}
 
 
+def umbrella_parameter_names() -> frozenset:
+    """Return the names of the umbrella's parameters on a node: its own, rib.<name> lists."""
+    return frozenset(UMBRELLA_SPECS) | {RIB_LIST_PREFIX + n for n in rib_list_specs()}
+
+
 def umbrella_values(values: Mapping[str, Any]) -> dict:
     """
-    Return from_mapping's values of a node's umbrella parameters (those not at rest dropped).
+    Return a node's umbrella parameters typed (rib lists not given dropped), by their names.
 
     values: the umbrella's own parameters (UMBRELLA_SPECS names) and rib.<name> lists
-    (None or [] where not given).  With ribs 1 (the planar model, exactly) no umbrella value
-    may differ from its default and no rib list be given: ValueError naming it.
+    (None or [] where not given); the result is what ``UmbrellaRibsParams.of_node`` takes.
+    With ribs 1 (the planar model, exactly) no umbrella value may differ from its default
+    and no rib list be given: ValueError naming it.
     """
     out = {}
     for name, value in values.items():
         if name.startswith(RIB_LIST_PREFIX):
             if value is not None and len(value):
-                out[name[len(RIB_LIST_PREFIX):]] = [float(v) for v in value]
+                out[name] = [float(v) for v in value]
         else:
             out[name] = UMBRELLA_SPECS[name].coerce(value)
     if out.get('ribs', 1) == 1:
-        given = sorted((RIB_LIST_PREFIX + n if n not in UMBRELLA_SPECS else n)
-                       for n, v in out.items()
+        given = sorted(n for n, v in out.items()
                        if n != 'ribs' and (n not in UMBRELLA_SPECS
                                            or v != UMBRELLA_SPECS[n].default))
         if given:
@@ -243,6 +248,13 @@ class UmbrellaRibsParams:
         out = cls(planar, own, {k: v for k, v in per_rib.items() if v})
         return out.validated()
 
+    @classmethod
+    def of_node(cls, umbrella: Mapping[str, Any], planar: UmbrellaParams
+                ) -> 'UmbrellaRibsParams':
+        """Build from a node's umbrella parameters (umbrella_values: rib.<name> lists)."""
+        return cls.from_mapping({name[len(RIB_LIST_PREFIX):] if name.startswith(RIB_LIST_PREFIX)
+                                 else name: value for name, value in umbrella.items()}, planar)
+
     def validated(self) -> 'UmbrellaRibsParams':
         """Return self if every value is in range, else raise ValueError naming it."""
         self.planar.validated()
@@ -281,6 +293,24 @@ class UmbrellaRibsParams:
         if self.base == 'free' and self.planar.lock == 'auto':
             return 'plastic'
         return self.planar.lock_rule
+
+    def as_dict(self) -> dict:
+        """
+        Return every value by name, JSON-ready.
+
+        The planar record's, the umbrella's own, and each rib's own as a list of N (a name
+        no rib has its own value of is left out).
+        """
+        out = {**self.planar.as_dict(), **{n: getattr(self, n) for n in UMBRELLA_SPECS}}
+        for name in sorted({n for vals in self.per_rib.values() for n in vals}):
+            out[name] = [getattr(rib, name) if name in RIB_SPECS else getattr(rib.planar, name)
+                         for rib in self.ribs_list()]
+        return out
+
+    @property
+    def sleeve_force(self) -> float:
+        """Return F per rib at t = 0 (the planar record's; the sleeve takes N F)."""
+        return self.planar.sleeve_force
 
     @property
     def sleeve_force_limit(self) -> float:
