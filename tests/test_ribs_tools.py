@@ -13,12 +13,13 @@
 # limitations under the License.
 
 """
-The command lines with the umbrella of N ribs: simulate, its --mcap, replay's re-simulation.
+The command lines with the umbrella of N ribs: simulate, --mcap, re-simulation, sweeps.
 
 ``umbrella_sim simulate --set ribs=N --set rib.<name>=[...]`` runs the umbrella through the
 run driver and prints its figures; ``--mcap`` records it as umbrella_node does; re-running a
 recording (``umbrella_replay --resimulate``) from its parameters and applied forces gives
-every published value of every rib again, exactly on this build; what the tools do not read
+every published value of every rib again, exactly on this build; a sweep varies the rib
+parameters as any other; what the tools do not read
 yet (per-rib CSV, umbrella_compare) is refused naming why.
 """
 import json
@@ -30,6 +31,8 @@ from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.tools import cli
 from umbrella_sim.tools.replay import resimulate, RIB_SIGNALS
 from umbrella_sim.tools.runs import load_run
+from umbrella_sim.tools.sweep import run_case
+from umbrella_sim.tools.sweep_spec import load_spec, SpecError
 
 RUN = ['simulate', '--set', 'ribs=2', '--set', 'rib.stick_until=[0.0, 0.01]',
        '--set', 'rib.hinge_coulomb=[0.0, 0.05]', '--v0', '0', '--force', '40',
@@ -69,3 +72,31 @@ def test_simulate_refuses_what_the_umbrella_cannot_take_naming_it(
         cli.main(args)
     assert exc.value.code == 2
     assert culprit in capsys.readouterr().err
+
+
+def test_a_sweep_over_rib_parameters(tmp_path):
+    """
+    A grid over a rib's stick time: every case runs the umbrella; the stuck one locks later.
+
+    Each case's parameters hold the umbrella's (rib.<name> lists in the case id); a hinge
+    stuck for 10 ms while the others push holds the whole umbrella back (one sleeve), so its
+    lock comes after the free case's; both keep the energy balance with friction work.
+    """
+    spec = tmp_path / 'spec.yaml'
+    spec.write_text('base: {ribs: 2, v0: 0.0, time_step: 0.0002, '
+                    'rib.hinge_coulomb: [0.0, 0.05]}\n'
+                    'grid: {rib.stick_until: [[0.0, 0.0], [0.0, 0.01]]}\n'
+                    'duration: 0.3\nstop_after_lock: 0.005\nforce: 60.0\n')
+    sweep = load_spec(str(spec))
+    assert [c.params['rib.stick_until'] for c in sweep.cases] == [[0.0, 0.0], [0.0, 0.01]]
+    assert len({c.case_id for c in sweep.cases}) == 2
+    free, stuck = (run_case(c.task(None)) for c in sweep.cases)
+    assert free['status'] == stuck['status'] == 'ok'
+    assert free['summary']['ribs'] == 2
+    assert stuck['summary']['lock_time'] > free['summary']['lock_time']
+    for case in (free, stuck):
+        assert case['summary']['energy_drift'] < 1e-10
+        assert case['summary']['friction_work'][1] < 0.0
+    spec.write_text('base: {ribs: 2}\ngrid: {rib.stick_until: [[0.0, 0.01, 0.0]]}\n')
+    with pytest.raises(SpecError, match='case 1.*stick_until'):
+        load_spec(str(spec))

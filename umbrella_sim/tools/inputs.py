@@ -143,7 +143,8 @@ def resolve_params(overrides: dict, params_file: str | None = None,
     Return an offline run's parameters, validated (a ValueError names the parameter).
 
     The params file (default config/umbrella.yaml, its node-only keys skipped), then the
-    overrides; from_file: that file's parameters, if the caller has read them.
+    overrides; from_file: that file's parameters, if the caller has read them.  The planar
+    record only: the umbrella's values (UMBRELLA_NAMES) are the caller's to take.
     """
     values: dict = {}
     params_file = params_file or default_params_file()
@@ -162,7 +163,7 @@ def resolve_params(overrides: dict, params_file: str | None = None,
     # a file shared with the nodes: theirs; the umbrella's: build_params's
     for name in (*NODE_ONLY_PARAMS, *SHARED_NAMES, *UMBRELLA_NAMES):
         values.pop(name, None)
-    values.update(overrides)
+    values.update({k: v for k, v in overrides.items() if k not in UMBRELLA_NAMES})
     return UmbrellaParams.from_mapping(values).validated()
 
 
