@@ -173,3 +173,26 @@ def test_run_driver_summary_of_the_umbrella_through_the_lock():
     # every rib deployed, before the lock's step ended
     assert all(t is not None and t <= ref.lock_time + ref.h for t in figures['rib_deploy_time'])
     assert not math.isnan(figures['deployment_lag'])
+
+
+def test_the_summary_reports_a_free_bus_and_its_momentum():
+    """
+    A free-floating bus: the summary gives its state and momenta, the momentum kept.
+
+    The step keeps the linear momentum of a free bus to round-off (tests/test_umbrella3d.py);
+    the driver's figures are those of the run's last state: the bus moved in reaction, the
+    linear momentum is the initial one, and the energy balance with friction holds.
+    """
+    params = UmbrellaRibsParams.from_mapping(dict(STUCK, base='free', bus_mass=5.0,
+                                                  bus_inertia=0.2))
+    driver = RunDriver(params)
+    driver.run(0.02)
+    figures = driver.summary.figures()
+    first = driver.initial
+    assert len(figures['bus_q']) == len(figures['bus_v']) == 6
+    assert max(abs(v) for v in figures['bus_v']) > 1e-6      # the bus moved in reaction
+    scale = float(np.max(np.abs(first.linear_momentum))) + driver.sim.model.total_mass * max(
+        abs(figures['bus_v'][0]), abs(figures['bus_v'][1]), abs(figures['bus_v'][2]))
+    np.testing.assert_allclose(figures['linear_momentum'], first.linear_momentum, rtol=0,
+                               atol=1e-12 * scale)
+    assert figures['energy_drift'] < BALANCE_TOLERANCE
