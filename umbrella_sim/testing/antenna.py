@@ -485,6 +485,10 @@ class SimulatedAntenna:
         first tip message past the window, so a publication at either end may be left out
         or taken in; a recording gives the exact figures (:func:`summary_from_recording`).
         """
+        if self.ribs > 1:
+            raise ValueError("summary() reads the planar rib's topics; an umbrella of "
+                             f'{self.ribs} ribs has umbrella_figures(), rib_states(), '
+                             'rib_arrays() and energy_balance()')
         if after_lock is None or not after_lock > 0:
             raise ValueError(f'after_lock={after_lock!r}: seconds of sim time after the lock '
                              '(> 0); a live run has no end to summarise to (None, the whole '
