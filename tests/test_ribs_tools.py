@@ -28,7 +28,7 @@ import pytest
 
 from umbrella_sim.bag.format import MESH_RECORD, PARAMETERS_RECORD
 from umbrella_sim.bag.reader import LogError, read_log
-from umbrella_sim.tools import cli
+from umbrella_sim.tools import cli, compare
 from umbrella_sim.tools.replay import resimulate, RIB_SIGNALS
 from umbrella_sim.tools.runs import load_run
 from umbrella_sim.tools.sweep import run_case
@@ -57,6 +57,25 @@ def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_pat
     assert max(res['max_abs_diff'].values()) == 0.0     # the same run, on the same build
     with pytest.raises(LogError, match='umbrella of 2 ribs'):
         load_run(str(bag))
+    # umbrella_compare: per-rib figures and differences against the first run; a free hinge
+    # (no stick) deploys the frame earlier than the stuck one
+    free = tmp_path / 'free'
+    assert cli.main([*[a if a != 'rib.stick_until=[0.0, 0.01]' else 'rib.stick_until=[0.0, 0.0]'
+                       for a in RUN], '--duration', '0.3', '--mcap', str(free),
+                     '--publish-rate', '500']) == 0
+    out = tmp_path / 'cmp'
+    capsys.readouterr()
+    assert compare.main([str(bag), str(free), '--out', str(out)]) == 0
+    assert 'rib1' in capsys.readouterr().out
+    result = json.loads((out / 'compare.json').read_text())
+    ref, other = result['runs']
+    assert ref['alpha1_max_difference'] == [0.0, 0.0] and ref['ribs'] == 2
+    assert min(other['alpha1_max_difference']) > 0.0
+    assert sorted(p.rsplit('/', 1)[1] for p in result['plots']) == [
+        'ribs_alpha1.png', 'ribs_tip_out_of_plane.png', 'ribs_top_view.png']
+    planar = tmp_path / 'planar'
+    assert cli.main(['simulate', '--duration', '0.01', '--mcap', str(planar)]) == 0
+    assert compare.main([str(bag), str(planar), '--out', str(tmp_path / 'mixed')]) == 2
 
 
 @pytest.mark.parametrize('args, culprit', [
