@@ -106,3 +106,25 @@ def test_the_umbrella_node_in_lockstep_publishes_and_records_every_rib(tmp_path)
     res = resimulate(log)
     assert res['compared'] == log.count(log.find_topic('joint_states')) and not res['problems']
     assert max(res['relative_diff'].values()) <= DEFAULT_TOLERANCE
+
+
+def test_a_reset_restarts_the_umbrella_with_the_planar_parameters_set():
+    """
+    A planar parameter set at run time applies to every rib on ~/reset; ribs stays fixed.
+
+    sleeve_force 30 N per rib, set while the umbrella runs at 10 N: after ~/reset the new
+    run starts at t = 0 with the same 2N + 1 joints and the sleeve pushed with 2 x 30 N; a
+    set of ribs is refused (read-only: it sets the topics and joint names).
+    """
+    with SimulatedAntenna({'ribs': 2, 'v0': 0.0, 'time_step': 2e-4, 'publish_rate': 500.0,
+                           'sleeve_force': 10.0, 'real_time_factor': 0.0}) as antenna:
+        antenna.wait_for_sim_time(0.01)
+        with pytest.raises(AssertionError, match='ribs is read-only'):
+            antenna.set_parameters(ribs=3)
+        antenna.set_parameters(sleeve_force=30.0)
+        antenna.reset()
+        first = antenna.messages('joint_states')[0]
+        assert first.header.stamp.sec == first.header.stamp.nanosec == 0
+        assert list(first.name) == rib_joint_names(2)
+        state = antenna.wait_for('joint_states', lambda m: m.header.stamp.nanosec > 0)
+        assert state.effort[-1] == 2 * 30.0
