@@ -28,6 +28,9 @@ import re
 from .share import PACKAGE, package_path, share_dir
 from ..core.params import UmbrellaParams
 from ..core.registry import REGISTRY, SPECS
+# params3d's rule of a rib's override name rib<k>.<name> (kept there, read here)
+from ..core.umbrella3d.params3d import _OVERRIDE as RIB_OVERRIDE
+from ..core.umbrella3d.params3d import RIB_SPECS, UMBRELLA_SPECS, UmbrellaRibsParams
 
 
 @dataclass(frozen=True)
@@ -89,12 +92,12 @@ def _truthy(value: str, name: str) -> bool:
         raise ValueError(f'launch argument {name}:={value!r}: must be true or false') from None
 
 
-def overrides(values: dict[str, str], params_file: str | None = None) -> dict:
+def overrides(values: dict[str, str]) -> dict:
     """
     Typed parameter overrides from launch-argument strings ('' = not given).
 
-    The model overrides are checked as a whole now, not after the node has started, on top
-    of the params file's model values (as the node will take them).
+    A node parameter is checked against its range here; the model's values are checked as
+    a whole, on top of the params file's, by described_model (as the node will take them).
     """
     out = {}
     for name, text in values.items():
@@ -102,12 +105,6 @@ def overrides(values: dict[str, str], params_file: str | None = None) -> dict:
             out[name] = REGISTRY[name].coerce(text)
             if name not in SPECS:           # a node parameter: its range, as the node's
                 REGISTRY[name].check(out[name])
-    model = {k: v for k, v in out.items() if k in SPECS}
-    if model:
-        from .params_file import load_params_file
-        base = ({k: v for k, v in load_params_file(params_file).items() if k in SPECS}
-                if params_file else {})
-        UmbrellaParams.from_mapping({**base, **model}).validated()
     return out
 
 
@@ -124,6 +121,31 @@ def antenna_values(values: dict[str, str], ns: str) -> dict[str, str]:
     return out
 
 
+def _is_model_name(name: str) -> bool:
+    """Tell whether a parameter is the model's: planar, the whole umbrella's, or a rib's."""
+    return (name in SPECS or name in UMBRELLA_SPECS or name in RIB_SPECS
+            or RIB_OVERRIDE.match(name) is not None)
+
+
+def described_model(params_file: str,
+                    node_params: dict) -> UmbrellaParams | UmbrellaRibsParams:
+    """
+    Return the model the node will run: its params file's values, then the overrides.
+
+    Checked as a whole now, not after the node has started.  The planar parameters, or the
+    whole umbrella's where any of its names (ribs, hub_radius, a rib's own value,
+    rib<k>.<name>, a list of one value per rib) is given: what robot_description.urdf
+    describes.  ValueError naming a bad value.
+    """
+    from .params_file import load_params_file
+
+    given = {k: v for k, v in load_params_file(params_file).items() if _is_model_name(k)}
+    given.update({k: v for k, v in node_params.items() if _is_model_name(k)})
+    if all(k in SPECS and not isinstance(v, (list, tuple)) for k, v in given.items()):
+        return UmbrellaParams.from_mapping(given).validated()
+    return UmbrellaRibsParams.from_mapping(given)
+
+
 def plan(values: dict[str, str], installed=share_dir) -> list:
     """
     Return the actions for one antenna, given the launch arguments' string values.
@@ -138,7 +160,7 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
     rel = f'/{ns}' if ns else ''
     sim_time = _truthy(values.get('use_sim_time', 'true'), 'use_sim_time')
     params = [values.get('params_file') or default_params_file()]
-    node_params = overrides(values, params[0])
+    node_params = overrides(values)
     node_params['record'] = _truthy(values.get('record', 'true'), 'record')
     if values.get('record_path'):
         node_params['record_path'] = values['record_path']
@@ -147,17 +169,13 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
     prefix = f'{ns}/' if ns else ''
     node_params['frame_prefix'] = prefix
     params.append(node_params)
+    model = described_model(params[0], node_params)     # a bad value: refused before starting
     actions: list = [NodeAction(PACKAGE, 'umbrella_node', 'umbrella_node', ns, params)]
     # TF consumers read sim time from this antenna's clock (relative: /<ns>/clock)
     clock = [('/clock', f'{rel}/clock')] if ns else []
     if _truthy(values.get('robot_state_publisher', 'true'), 'robot_state_publisher'):
         if installed('robot_state_publisher'):
-            from .params_file import load_params_file
             from .robot_description import urdf
-            # the geometry the node will run: the params file, then the overrides
-            given = {k: v for k, v in load_params_file(params[0]).items() if k in SPECS}
-            given.update({k: v for k, v in node_params.items() if k in SPECS})
-            model = UmbrellaParams.from_mapping(given)
             actions.append(NodeAction(
                 'robot_state_publisher', 'robot_state_publisher', 'robot_state_publisher', ns,
                 [{'robot_description': urdf(model), 'use_sim_time': sim_time,

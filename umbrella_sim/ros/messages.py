@@ -22,6 +22,7 @@ not import this module.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 import struct
 
 from builtin_interfaces.msg import Time
@@ -252,40 +253,59 @@ def energy_figures(msg) -> dict:
     return dict(zip(ENERGY_FIELDS + LEGACY_ENERGY_FIELDS, msg.data))
 
 
-def markers_msg(s: Sample, positions, ns: str, frame_prefix: str = '') -> MarkerArray:
+def markers_msg(s: Sample, positions, ns: str, frame_prefix: str = '',
+                hub_radius: float | None = None) -> MarkerArray:
     """
-    LINE_STRIPs of the deformed leaf and link, a sphere at the sleeve.
+    LINE_STRIPs of the deformed bodies (id i: positions[i]), the sleeve, the hub.
 
-    positions: the (X, Y) points of each body, as UmbrellaModel.deformed_shape gives them
-    (each element drawn by its own shape functions, not a straight line between nodes).
+    positions: each body's points, leaf then link: (X, Y) of the planar model, as
+    UmbrellaModel.deformed_shape gives them (each element drawn by its own shape functions,
+    not a straight line between nodes), or (X, Y, Z) of every rib in turn
+    (umbrella_markers.UmbrellaShapes).  hub_radius None: the planar sleeve, a SPHERE on the
+    axle (id len(positions)); a radius: the whole umbrella's sleeve and hub, rings of that
+    radius about the hub axis Y (CYLINDERs at y_H and at 0, ids len(positions) and + 1).
     """
     out = MarkerArray()
     colours = (ColorRGBA(r=0.9, g=0.6, b=0.1, a=1.0), ColorRGBA(r=0.2, g=0.5, b=0.9, a=1.0))
-    for i, (pts, colour) in enumerate(zip(positions, colours)):
+    header = (stamp(s.time), frame_prefix + INERTIAL_FRAME)
+
+    def marker(i: int, kind: int) -> Marker:
         m = Marker()
-        m.header.stamp = stamp(s.time)
-        m.header.frame_id = frame_prefix + INERTIAL_FRAME
+        m.header.stamp, m.header.frame_id = header
         m.ns = ns
         m.id = i
-        m.type = Marker.LINE_STRIP
+        m.type = kind
         m.action = Marker.ADD
         m.pose.orientation.w = 1.0
+        return m
+
+    for i, pts in enumerate(positions):
+        m = marker(i, Marker.LINE_STRIP)
         m.scale.x = 0.01
-        m.color = colour
-        m.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in pts]
+        m.color = colours[i % 2]
+        pts = np.asarray(pts, dtype=float)
+        z = pts[:, 2] if pts.shape[1] > 2 else np.zeros(len(pts))
+        m.points = [Point(x=float(x), y=float(y), z=float(zz))
+                    for x, y, zz in zip(pts[:, 0], pts[:, 1], z)]
         out.markers.append(m)
-    m = Marker()
-    m.header.stamp = stamp(s.time)
-    m.header.frame_id = frame_prefix + INERTIAL_FRAME
-    m.ns = ns
-    m.id = 2
-    m.type = Marker.SPHERE
-    m.action = Marker.ADD
-    m.pose.position = Point(x=0.0, y=s.sleeve_position, z=0.0)
-    m.pose.orientation.w = 1.0
-    m.scale.x = m.scale.y = m.scale.z = 0.03
-    m.color = ColorRGBA(r=0.8, g=0.1, b=0.1, a=1.0)
-    out.markers.append(m)
+    n = len(positions)
+    if hub_radius is None:
+        m = marker(n, Marker.SPHERE)
+        m.pose.position = Point(x=0.0, y=s.sleeve_position, z=0.0)
+        m.scale.x = m.scale.y = m.scale.z = 0.03
+        m.color = ColorRGBA(r=0.8, g=0.1, b=0.1, a=1.0)
+        out.markers.append(m)
+        return out
+    for i, y, colour in ((n, s.sleeve_position, ColorRGBA(r=0.8, g=0.1, b=0.1, a=1.0)),
+                         (n + 1, 0.0, ColorRGBA(r=0.4, g=0.4, b=0.4, a=1.0))):
+        m = marker(i, Marker.CYLINDER)
+        m.pose.position = Point(x=0.0, y=y, z=0.0)
+        # the cylinder's axis (z) onto +Y: a quarter turn about -X
+        m.pose.orientation.x, m.pose.orientation.w = -math.sqrt(0.5), math.sqrt(0.5)
+        m.scale.x = m.scale.y = 2.0 * hub_radius + 0.03
+        m.scale.z = 0.03
+        m.color = colour
+        out.markers.append(m)
     return out
 
 
@@ -400,44 +420,57 @@ class MarkerEncoder:
     ``markers_msg`` straight to CDR bytes: what it builds, serialized, without the messages.
 
     Building the MarkerArray and serializing it cost 0.3-0.5 ms at N = 2, at once, one
-    publication in every ``marker_every``.  The layout is fixed for a mesh, a namespace and a frame
-    prefix, so a template serialized once from ``markers_msg`` holds everything but the
-    three stamps, the bodies' points and the sleeve's position; their offsets are found by
-    serializing the template with distinct sentinel values in those places.
+    publication in every ``marker_every``.  The layout is fixed for a mesh, a namespace, a
+    frame prefix and a hub, so a template serialized once from ``markers_msg`` holds
+    everything but the stamps, the bodies' points and the sleeve's position; their offsets
+    are found by serializing the template with distinct sentinel values in those places.
+    Each encode writes them all at once through index arrays (no loop over the bodies).
     """
 
-    def __init__(self, positions, ns: str, frame_prefix: str = ''):
+    def __init__(self, positions, ns: str, frame_prefix: str = '',
+                 hub_radius: float | None = None):
         from ..bag.cdr import cdr_bytes  # the exact-size rule, one place
         self._counts = tuple(len(p) for p in positions)
-        sentinels = iter(_sentinel_doubles(2 * sum(self._counts) + 1))   # x, y; sleeve
-        probe = [np.array([[next(sentinels), next(sentinels)] for _ in range(n)])
-                 for n in self._counts]
-        sleeve = next(sentinels)
-        msg = markers_msg(_SentinelSample(0.0, sleeve), probe, ns, frame_prefix)
+        total = sum(self._counts)
+        sentinels = _sentinel_doubles(3 * total + 1)                # x, y, z; sleeve
+        probe = np.array(sentinels[:3 * total]).reshape(total, 3)
+        bodies = np.split(probe, np.cumsum(self._counts)[:-1])
+        sleeve = sentinels[-1]
+        msg = markers_msg(SleeveAt(0.0, sleeve), bodies, ns, frame_prefix, hub_radius)
         for i, m in enumerate(msg.markers):
             m.header.stamp = Time(sec=_SENTINEL_SEC + i, nanosec=_SENTINEL_NSEC + i)
         data = cdr_bytes(msg)
         self._template = bytes(data)
-        self._stamps = [_unique_offset(data, _STAMP.pack(_SENTINEL_SEC + i, _SENTINEL_NSEC + i))
-                        for i in range(len(msg.markers))]
-        # each strip's points: (x, y, z) doubles in a row from the first point's x
-        self._points = [_unique_offset(data, struct.pack('<d', float(p[0, 0]))) for p in probe]
-        self._sleeve = _unique_offset(data, struct.pack('<d', sleeve))
+        # every stamp's sec and nsec as 4-byte words (CDR aligns them to 4)
+        stamps = np.array([_unique_offset(data, _STAMP.pack(_SENTINEL_SEC + i,
+                                                            _SENTINEL_NSEC + i))
+                           for i in range(len(msg.markers))])
+        self._stamp_words = (stamps[:, None] // 4 + np.arange(2)).ravel()
+        # each strip's points: (x, y, z) doubles in a row from its first point's x; CDR
+        # aligns doubles to 8 from the 4-byte header, so they are doubles of data[4:]
+        firsts = [_unique_offset(data, struct.pack('<d', float(b[0, 0]))) for b in bodies]
+        self._point_doubles = np.concatenate(
+            [(f - 4) // 8 + np.arange(3 * n) for f, n in zip(firsts, self._counts)])
+        self._sleeve_double = (_unique_offset(data, struct.pack('<d', sleeve)) - 4) // 8
 
     def encode(self, time: float, sleeve_position: float, positions) -> bytes:
-        """Return the CDR bytes of markers_msg for these points (as deformed_shape's)."""
+        """Return the CDR bytes of markers_msg for these points ((X, Y) or (X, Y, Z) each)."""
         if tuple(len(p) for p in positions) != self._counts:
             raise ValueError(f'point counts {[len(p) for p in positions]}, the template has '
                              f'{list(self._counts)}')
+        pts = np.concatenate(positions) if len(positions) > 1 else np.asarray(positions[0])
+        if pts.shape[1] == 2:
+            pts = np.column_stack([pts, np.zeros(len(pts))])
+        return self.encode_points(time, sleeve_position, pts)
+
+    def encode_points(self, time: float, sleeve_position: float, points) -> bytes:
+        """Return encode's bytes for every body's (X, Y, Z) points in one (total, 3) array."""
         buf = bytearray(self._template)
-        sec, nsec = stamp_parts(time)
-        for offset in self._stamps:
-            _STAMP.pack_into(buf, offset, sec, nsec)
-        for offset, pts in zip(self._points, positions):
-            xyz = np.zeros((len(pts), 3))
-            xyz[:, :2] = pts
-            buf[offset:offset + xyz.nbytes] = xyz.astype('<f8').tobytes()
-        struct.pack_into('<d', buf, self._sleeve, sleeve_position)
+        words = np.frombuffer(buf, dtype='<u4', count=len(buf) // 4)
+        words[self._stamp_words] = np.tile(stamp_parts(time), len(self._stamp_words) // 2)
+        doubles = np.frombuffer(buf, dtype='<f8', offset=4, count=(len(buf) - 4) // 8)
+        doubles[self._point_doubles] = np.ravel(points)
+        doubles[self._sleeve_double] = sleeve_position
         return bytes(buf)
 
 
@@ -445,8 +478,8 @@ _SENTINEL_SEC, _SENTINEL_NSEC = 0x5E7E_0000, 0x2A5E_0000
 
 
 @dataclass(frozen=True)
-class _SentinelSample:
-    """What markers_msg reads of a Sample."""
+class SleeveAt:
+    """What markers_msg reads of a Sample: the sim time and the sleeve's height."""
 
     time: float
     sleeve_position: float
