@@ -51,6 +51,11 @@ def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_pat
     assert log.metadata[MESH_RECORD]['ribs'] == '2'
     assert json.loads(log.metadata[PARAMETERS_RECORD]['rib.stick_until']) == [0.0, 0.01]
     assert log.count(log.find_topic('rib_peak_stress')) == 21       # t = 0 and 20 periods
+    # markers of every rib (2N + 2: leaf and link of each, the sleeve and the hub) every
+    # round(500 / 30) = 17th publication, t = 0 included
+    markers = log.decoded(log.find_topic('markers'))
+    assert [t for t, _ in markers] == [0.0, pytest.approx(17 * 0.002)]
+    assert [m.id for m in markers[-1][1].markers] == list(range(6))
     res = resimulate(log)
     assert res['compared'] == 21 and not res['problems']
     assert set(res['max_abs_diff']) == set(RIB_SIGNALS)

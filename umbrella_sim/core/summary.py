@@ -75,8 +75,8 @@ def _linear_figures(rows: np.ndarray) -> np.ndarray:
     block.
     """
     out = _LINEAR_COEFFICIENTS[0] * rows[_LINEAR_FIELDS[0]]
-    for coefficients, field in zip(_LINEAR_COEFFICIENTS[1:], _LINEAR_FIELDS[1:]):
-        out += coefficients * rows[field]
+    for coefficients, row in zip(_LINEAR_COEFFICIENTS[1:], _LINEAR_FIELDS[1:]):
+        out += coefficients * rows[row]
     return out
 
 

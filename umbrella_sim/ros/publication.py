@@ -25,6 +25,7 @@ both produce the same bytes at the same sim times.
 from __future__ import annotations
 
 from . import messages
+from .ribs_messages import RibsPublicationEncoder
 from ..core.driver import RunDriver
 from ..core.outputs import mechanical_energy, Sample
 from ..core.params import UmbrellaParams
@@ -39,9 +40,7 @@ class PublicationEncoder:
                  marker_rate: float = NODE_PARAMETERS['marker_rate'].default):
         self.driver = driver
         self.initial_energy = mechanical_energy(driver.initial)
-        rate = driver.publish_rate
-        # markers on every marker_every-th publication (t = 0 included)
-        self.marker_every = max(1, round(rate / marker_rate)) if rate else 1
+        self.marker_every = messages.marker_every(driver.publish_rate, marker_rate)
         self.count = 0                   # publications encoded so far
         self._encoders: dict[str, messages.SampleEncoder] = {}     # by frame_prefix
         self._marker_encoders: dict = {}            # by (marker namespace, frame_prefix)
@@ -77,10 +76,8 @@ def run_driver(planar: UmbrellaParams, umbrella: dict, publish_rate: float | Non
     cannot be made; force_profile: RunDriver's.
     """
     if umbrella.get('ribs', 1) > 1:
-        from .ribs_messages import RibsPublicationEncoder
-
         driver = RunDriver(UmbrellaRibsParams.of_node(umbrella, planar), publish_rate,
                            force_profile=force_profile)
-        return driver, RibsPublicationEncoder(driver)
+        return driver, RibsPublicationEncoder(driver, marker_rate)
     driver = RunDriver(planar, publish_rate, force_profile=force_profile)
     return driver, PublicationEncoder(driver, marker_rate)

@@ -43,8 +43,10 @@ import json
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from .messages import clock_msg, INERTIAL_FRAME, RELIABLE, stamp, Topic, TOPICS
+from .messages import (clock_msg, INERTIAL_FRAME, marker_every, RELIABLE, stamp, Topic,
+                       TOPICS)
 from ..bag.cdr import cdr_bytes
+from ..core.registry import NODE_PARAMETERS
 from ..core.umbrella3d.outputs3d import energy_balance3d, STRESS_NAMES
 
 #: the topics of the umbrella's ribs (besides messages.TOPICS' joint_states, energy, clock)
@@ -113,21 +115,42 @@ def rib_messages(s, yield_strength: float, initial_energy: float,
 
 
 class RibsPublicationEncoder:
-    """What a publication of the umbrella carries, as CDR bytes (PublicationEncoder's role)."""
+    """
+    What a publication of the umbrella carries, as CDR bytes (PublicationEncoder's role).
 
-    def __init__(self, driver, marker_rate: float | None = None):
+    The per-publication topics above, and on every marker_every-th publication (t = 0
+    included) the markers of every rib (umbrella_markers.UmbrellaMarkers, of the simulator's
+    state: a publication is always of the current state).
+    """
+
+    def __init__(self, driver, marker_rate: float = NODE_PARAMETERS['marker_rate'].default):
         self.driver = driver
         first = driver.initial
         self.initial_energy = float(first.kinetic_energy + first.strain_energy)
         self.yield_strength = driver.params.planar.yield_strength
+        self.marker_every = marker_every(driver.publish_rate, marker_rate)
         self.count = 0
+        self._markers: dict = {}        # by (marker namespace, frame_prefix)
 
-    def messages(self, s, marker_ns: str = '', magnification: float = 1.0,
+    def messages(self, s, marker_ns: str = 'umbrella', magnification: float = 1.0,
                  frame_prefix: str = '') -> dict[str, bytes]:
         """Return what the publication of s (RunDriver.publication()) publishes."""
-        self.count += 1
-        return {key: cdr_bytes(msg) for key, msg in rib_messages(
+        out = {key: cdr_bytes(msg) for key, msg in rib_messages(
             s, self.yield_strength, self.initial_energy, frame_prefix).items()}
+        if self.count % self.marker_every == 0:
+            from .umbrella_markers import UmbrellaMarkers
+
+            sim = self.driver.sim
+            if sim.time != s.time:
+                raise ValueError(f'markers of t = {s.time} s asked with the simulator at '
+                                 f't = {sim.time} s (a publication is of the current state)')
+            markers = self._markers.get((marker_ns, frame_prefix))
+            if markers is None:
+                markers = self._markers[marker_ns, frame_prefix] = UmbrellaMarkers(
+                    sim.model, marker_ns, frame_prefix)
+            out['markers'] = markers.encode(s.time, sim.state.qr, sim.state.qs, magnification)
+        self.count += 1
+        return out
 
 
 #: the umbrella's summary figures (Summary3D.figures) diagnostics carry: key -> figure
