@@ -43,6 +43,9 @@ pytestmark = pytest.mark.ros
     (['-p', 'ribs:=3', '-p', 'base:=wobbly'], 'base'),
     (['-p', 'ribs:=3', '-p', 'rib.stick_until:=[0.0, -1.0, 0.0]'], 'stick_until'),
     (['-p', 'ribs:=3', '-p', 'rib.stick_until:=[a, b, c]'], 'rib.stick_until'),
+    (['-p', 'ribs:=3', '-p', 'rib5.l2:=0.6'], 'rib5.l2'),           # ribs 0 .. 2
+    (['-p', 'ribs:=3', '-p', 'rib1.lx:=0.6'], 'rib1.lx'),
+    (['-p', 'ribs:=3', '-p', 'rib1.l2:=-0.6'], 'l2'),
 ])
 def test_invalid_umbrella_parameters_exit_2_naming_them(args, culprit):
     r = subprocess.run([sys.executable, '-m', 'umbrella_sim.node', '--ros-args', *args],

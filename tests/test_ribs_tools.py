@@ -28,6 +28,8 @@ import pytest
 
 from umbrella_sim.bag.format import MESH_RECORD, PARAMETERS_RECORD
 from umbrella_sim.bag.reader import LogError, read_log
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.umbrella3d.params3d import node_model
 from umbrella_sim.tools import cli, compare
 from umbrella_sim.tools.replay import resimulate, RIB_SIGNALS
 from umbrella_sim.tools.runs import load_run
@@ -124,3 +126,20 @@ def test_a_sweep_over_rib_parameters(tmp_path):
     spec.write_text('base: {ribs: 2}\ngrid: {rib.stick_until: [[0.0, 0.01, 0.0]]}\n')
     with pytest.raises(SpecError, match='case 1.*stick_until'):
         load_spec(str(spec))
+
+
+def test_a_nodes_parameters_make_the_model_by_one_rule():
+    """
+    params3d.node_model: what the node, the launch file's URDF and the tools build.
+
+    rib.<name> lists give every rib a value, rib<k>.<name> one rib's over it; ribs 1 (the
+    default) is the planar model, and refuses the umbrella's values, naming them.
+    """
+    model = node_model({'ribs': 3, 'l1': 0.5, 'rib.tip_mass': [0.0, 0.1, 0.2],
+                        'rib2.tip_mass': 0.3, 'rib1.l2': 0.6, 'publish_rate': 200.0})
+    ribs = model.ribs_list()
+    assert [r.tip_mass for r in ribs] == [0.0, 0.1, 0.3]
+    assert [r.planar.l2 for r in ribs] == [0.5, 0.6, 0.5]
+    assert isinstance(node_model({'l2': 0.6}), UmbrellaParams)
+    with pytest.raises(ValueError, match='rib1.l2'):
+        node_model({'rib1.l2': 0.6})

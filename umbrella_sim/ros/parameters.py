@@ -103,27 +103,34 @@ def declare_from_registry(node, names) -> dict:
     is taken as the double before rclpy's type check sees it.  ValueError naming the
     parameter, the value given and the rule it breaks.
     """
-    from rclpy.exceptions import InvalidParameterTypeException
-
     overrides = node._parameter_overrides     # (rclpy keeps what -p and files gave here)
     for name, override in list(overrides.items()):
         overrides[name] = coerce_parameter(override)
-    values = {}
-    for name in names:
-        spec = REGISTRY[name]
+    return {name: _declared(node, REGISTRY[name], descriptor(name)) for name in names}
+
+
+def _declared(node, spec, d: ParameterDescriptor, name: str | None = None):
+    """
+    Declare one parameter of spec (by name, else spec.name) with descriptor d; its value.
+
+    ValueError naming the parameter, the value given and the rule it breaks (rclpy's own
+    refusals of a wrong type or an out-of-range value name neither).
+    """
+    from rclpy.exceptions import InvalidParameterTypeException
+
+    name = name or spec.name
+    try:
+        return node.declare_parameter(name, spec.default, d).value
+    except InvalidParameterTypeException:
+        given = node._parameter_overrides[name]
+        raise ValueError(type_refusal(name, given, spec.type_name)) from None
+    except Exception:  # noqa: BLE001 - rclpy's range refusal: say the registry's rule
+        value = node._parameter_overrides[name].value
         try:
-            values[name] = node.declare_parameter(name, spec.default, descriptor(name)).value
-        except InvalidParameterTypeException:
-            given = overrides[name]
-            raise ValueError(type_refusal(name, given, spec.type_name)) from None
-        except Exception:  # noqa: BLE001 - rclpy's range refusal: say the registry's rule
-            value = overrides[name].value
-            try:
-                spec.check(value)
-            except ValueError as exc:
-                raise ValueError(str(exc)) from None
-            raise
-    return values
+            spec.check(value, f'parameter {name}')
+        except ValueError as exc:
+            raise ValueError(str(exc)) from None
+        raise
 
 
 def known_parameter_names() -> set[str]:
@@ -138,14 +145,16 @@ def declare_umbrella(node) -> dict:
     Declare the umbrella's parameters on node (read-only); return params3d.umbrella_values.
 
     Its own (params3d.UMBRELLA_SPECS: ribs, hub_radius, base...) typed as the registry's,
-    and each rib's own values as rib.<name> double arrays, one entry per rib (not given:
-    None, every rib takes the planar or default value).  Fixed at start: the number of ribs
+    each rib's own values as rib.<name> double arrays, one entry per rib (not given: None,
+    every rib takes the planar or default value), and the rib<k>.<name> overrides given (a
+    double each).  Fixed at start: the number of ribs
     sets the topics and the joint names.  ValueError naming the parameter.
     """
     from rclpy.exceptions import InvalidParameterTypeException
     from rclpy.parameter import Parameter
 
-    from ..core.umbrella3d.params3d import (RIB_LIST_PREFIX, rib_list_specs, UMBRELLA_SPECS,
+    from ..core.umbrella3d.params3d import (RIB_LIST_PREFIX, rib_list_specs,
+                                            rib_override_spec, UMBRELLA_SPECS,
                                             umbrella_values)
 
     overrides = node._parameter_overrides
@@ -153,12 +162,7 @@ def declare_umbrella(node) -> dict:
     for name, spec in UMBRELLA_SPECS.items():
         if name in overrides:
             overrides[name] = coerce_parameter(overrides[name], spec)
-        d = descriptor(name, replace(spec, applies=START))
-        try:
-            values[name] = node.declare_parameter(name, spec.default, d).value
-        except InvalidParameterTypeException:
-            raise ValueError(type_refusal(name, overrides[name], spec.type_name)) from None
-        spec.check(values[name])
+        values[name] = _declared(node, spec, descriptor(name, replace(spec, applies=START)))
     for name, spec in rib_list_specs().items():
         ros_name = RIB_LIST_PREFIX + name
         d = ParameterDescriptor(
@@ -176,6 +180,14 @@ def declare_umbrella(node) -> dict:
                 ros_name, Parameter.Type.DOUBLE_ARRAY, d).value
         except InvalidParameterTypeException:
             raise ValueError(type_refusal(ros_name, overrides[ros_name], 'double[]')) from None
+    for name in sorted(overrides):      # rib<k>.<name>: one rib's value, where given
+        spec = rib_override_spec(name)
+        if spec is None:
+            continue
+        overrides[name] = coerce_parameter(overrides[name], spec)
+        d = descriptor(name, replace(spec, name=name, applies=START,
+                                     doc=f"rib {name[3:name.index('.')]}'s own: {spec.doc}"))
+        values[name] = _declared(node, spec, d, name)
     return umbrella_values(values)
 
 

@@ -30,7 +30,7 @@ from ..core.driver import RunDriver
 from ..core.outputs import mechanical_energy, Sample
 from ..core.params import UmbrellaParams
 from ..core.registry import NODE_PARAMETERS
-from ..core.umbrella3d.params3d import UmbrellaRibsParams
+from ..core.umbrella3d.params3d import umbrella_model, UmbrellaRibsParams
 
 
 class PublicationEncoder:
@@ -75,9 +75,8 @@ def run_driver(planar: UmbrellaParams, umbrella: dict, publish_rate: float | Non
     (ribs_messages.RibsPublicationEncoder), else the planar model.  ValueError if the model
     cannot be made; force_profile: RunDriver's.
     """
-    if umbrella.get('ribs', 1) > 1:
-        driver = RunDriver(UmbrellaRibsParams.of_node(umbrella, planar), publish_rate,
-                           force_profile=force_profile)
-        return driver, RibsPublicationEncoder(driver, marker_rate)
-    driver = RunDriver(planar, publish_rate, force_profile=force_profile)
-    return driver, PublicationEncoder(driver, marker_rate)
+    driver = RunDriver(umbrella_model(planar, umbrella), publish_rate,
+                       force_profile=force_profile)
+    encoder = (RibsPublicationEncoder if isinstance(driver.params, UmbrellaRibsParams)
+               else PublicationEncoder)
+    return driver, encoder(driver, marker_rate)

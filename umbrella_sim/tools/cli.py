@@ -31,7 +31,7 @@ from ..bag.paths import check_new_output, remove_recording
 from ..core.driver import RunDriver, simulate, simulator_class
 from ..core.params import shortened_step_note
 from ..core.registry import parameter_help, SPECS
-from ..core.umbrella3d.params3d import UmbrellaRibsParams
+from ..core.umbrella3d.params3d import umbrella_model
 from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
 
 
@@ -221,8 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f'--duration {args.duration}: must be > 0')
         # the planar model, or with ribs >= 2 the umbrella of N ribs
-        run = (UmbrellaRibsParams.of_node(args.umbrella, params)
-               if args.umbrella.get('ribs', 1) > 1 else params)
+        run = umbrella_model(params, args.umbrella)
         step = simulator_class(run).grid_step(run)
         if args.duration < step * (1.0 - 1e-9):   # (it ran no step)
             raise ValueError(f'--duration {args.duration}: shorter than one physics step '

@@ -42,8 +42,8 @@ from ..core.driver import RunDriver
 from ..core.forcing import command_force, ForceSchedule
 from ..core.integrators import INTEGRATOR_REVISION
 from ..core.params import physics_step, recorded_params
-from ..core.umbrella3d.params3d import (umbrella_parameter_names, umbrella_values,
-                                        UmbrellaRibsParams)
+from ..core.umbrella3d.params3d import (umbrella_model, umbrella_parameter_names,
+                                        umbrella_values, UmbrellaRibsParams)
 from ..ros.messages import (ABSOLUTE_TOPIC_NAMES, COMMAND, joint_state_figures,
                             peak_stress_figures, tip_deflection_figures)
 from ..ros.signals import interruptible, raise_if_stopped
@@ -180,10 +180,7 @@ def _segment_inputs(log: LogData, seg):
         raise LogError(f'{log.path}: physics step {step} cannot be reproduced: it does not '
                        f'divide the publication period 1/{rate:g} s (a run would take '
                        f"{physics_step(step, rate) if step > 0.0 else 'none'})")
-    umbrella = recorded_umbrella(p_all)
-    if umbrella.get('ribs', 1) > 1:
-        params = UmbrellaRibsParams.of_node(umbrella, params)
-    params = params.with_physics_step(step)
+    params = umbrella_model(params, recorded_umbrella(p_all)).with_physics_step(step)
     # the force history, the recorded fault and the last publication (only the few command
     # and phase records are decoded)
     applied, t_last, t_fault = [], 0.0, None

@@ -117,13 +117,12 @@ def case_models(params: dict) -> tuple:
     """
     from ..core.params import UmbrellaParams
     from ..core.registry import SPECS
-    from ..core.umbrella3d.params3d import umbrella_values, UmbrellaRibsParams
+    from ..core.umbrella3d.params3d import umbrella_model, umbrella_values
 
     planar = UmbrellaParams.from_mapping({k: v for k, v in params.items()
                                           if k in SPECS}).validated()
     umbrella = umbrella_values({k: v for k, v in params.items() if k in UMBRELLA_NAMES})
-    run = UmbrellaRibsParams.of_node(umbrella, planar) if umbrella.get('ribs', 1) > 1 else planar
-    return planar, umbrella, run
+    return planar, umbrella, umbrella_model(planar, umbrella)
 
 
 #: a spec of at least this many cases reports its checking (progress(done, total))
@@ -139,7 +138,7 @@ def load_spec(path: str, progress=None) -> Sweep:
     """
     from ..core.forcing import command_force
     from ..core.registry import check_types
-    from ..core.umbrella3d.params3d import umbrella_values, UmbrellaRibsParams
+    from ..core.umbrella3d.params3d import umbrella_model, umbrella_values
     from ..core.step_rule import physics_step_of, smallest_step_of
     from ..ros.params_file import load_params_file, load_yaml_as_ros
 
@@ -244,8 +243,7 @@ def load_spec(path: str, progress=None) -> Sweep:
             # the umbrella of N ribs (ribs, hub..., rib.<name> lists), checked with its model
             umbrella = umbrella_values({k: v for k, v in {**(from_file or {}), **overrides}
                                         .items() if k in UMBRELLA_NAMES})
-            if umbrella.get('ribs', 1) > 1:
-                UmbrellaRibsParams.of_node(umbrella, resolved)
+            umbrella_model(resolved, umbrella)
             params = {**resolved.as_dict(), **umbrella}
         except ValueError as exc:
             shown = ', '.join(f'{k}={v!r}' for k, v in overrides.items() if k not in base

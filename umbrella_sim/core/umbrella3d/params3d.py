@@ -117,8 +117,24 @@ def rib_list_specs() -> dict[str, Param]:
 
 
 def umbrella_parameter_names() -> frozenset:
-    """Return the names of the umbrella's parameters on a node: its own, rib.<name> lists."""
-    return frozenset(UMBRELLA_SPECS) | {RIB_LIST_PREFIX + n for n in rib_list_specs()}
+    """
+    Return the names of the umbrella's parameters on a node.
+
+    Its own (UMBRELLA_SPECS), rib.<name> lists (one value per rib) and rib<k>.<name>
+    overrides of one rib (k < the largest number of ribs).
+    """
+    names = rib_list_specs()
+    return (frozenset(UMBRELLA_SPECS) | {RIB_LIST_PREFIX + n for n in names}
+            | {f'rib{k}.{n}' for k in range(UMBRELLA_SPECS['ribs'].high) for n in names})
+
+
+def rib_override_spec(name: str) -> Param | None:
+    """Return the spec of a rib<k>.<name> override (None: not one; ValueError: no such name)."""
+    match = _OVERRIDE.match(name)
+    if match is None:
+        return None
+    _rib_spec(match.group(2))
+    return rib_list_specs()[match.group(2)]
 
 
 def umbrella_values(values: Mapping[str, Any]) -> dict:
@@ -135,8 +151,10 @@ def umbrella_values(values: Mapping[str, Any]) -> dict:
         if name.startswith(RIB_LIST_PREFIX):
             if value is not None and len(value):
                 out[name] = [float(v) for v in value]
-        else:
+        elif name in UMBRELLA_SPECS:
             out[name] = UMBRELLA_SPECS[name].coerce(value)
+        else:                                   # rib<k>.<name>: one rib's value
+            out[name] = rib_override_spec(name).coerce(value)
     if out.get('ribs', 1) == 1:
         given = sorted(n for n, v in out.items()
                        if n != 'ribs' and (n not in UMBRELLA_SPECS
@@ -251,7 +269,7 @@ class UmbrellaRibsParams:
     @classmethod
     def of_node(cls, umbrella: Mapping[str, Any], planar: UmbrellaParams
                 ) -> 'UmbrellaRibsParams':
-        """Build from a node's umbrella parameters (umbrella_values: rib.<name> lists)."""
+        """Build from a node's umbrella parameters (umbrella_values: rib.<name> lists...)."""
         return cls.from_mapping({name[len(RIB_LIST_PREFIX):] if name.startswith(RIB_LIST_PREFIX)
                                  else name: value for name, value in umbrella.items()}, planar)
 
@@ -343,3 +361,33 @@ def _rib_spec(name: str) -> None:
     if name not in RIB_SPECS and name not in RIB_PLANAR_NAMES:
         known = sorted(RIB_SPECS) + list(RIB_PLANAR_NAMES)
         raise ValueError(f"unknown per-rib parameter {name!r}; a rib takes {', '.join(known)}")
+
+
+def node_model(values: Mapping[str, Any]) -> 'UmbrellaParams | UmbrellaRibsParams':
+    """
+    Return the model a node's parameters make (name -> value, as a params file flattens them).
+
+    The planar record's names and the umbrella's (umbrella_parameter_names); the others are
+    not the model's and are left out.  ribs >= 2: the umbrella of N ribs, else the planar
+    model.  ValueError naming a bad value.
+    """
+    from ..registry import SPECS
+
+    planar = UmbrellaParams.from_mapping({k: v for k, v in values.items()
+                                          if k in SPECS}).validated()
+    names = umbrella_parameter_names()
+    return umbrella_model(planar, umbrella_values({k: v for k, v in values.items()
+                                                   if k in names}))
+
+
+def umbrella_model(planar: UmbrellaParams, umbrella: Mapping[str, Any]
+                   ) -> 'UmbrellaParams | UmbrellaRibsParams':
+    """
+    Return the model of a planar record and a node's umbrella values (umbrella_values).
+
+    ribs >= 2: the umbrella of N ribs, each rib taking planar unless it has its own value;
+    else planar itself (ribs 1 is the planar model, exactly).  ValueError naming a value.
+    """
+    if umbrella.get('ribs', 1) > 1:
+        return UmbrellaRibsParams.of_node(umbrella, planar)
+    return planar
