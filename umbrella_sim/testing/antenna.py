@@ -100,9 +100,7 @@ class SimulatedAntenna:
                               ('diagnostics', DiagnosticArray)):
             self.probe.subscribe(self.topics[key], msg_type, ros_io.TOPICS[key].qos)
         self.probe.subscribe(self.topics['deployment_phase'], String, ros_io.LATCHED)
-        #: the umbrella of N ribs (ribs >= 2): its per-rib topics and its energy
-        self.ribs = int(self.parameters.get('ribs', 1))
-        if self.ribs > 1:
+        if self.ribs > 1:          # the umbrella of N ribs: its per-rib topics and energy
             from ..ros.ribs_messages import RIB_TOPICS
 
             for key, t in {**RIB_TOPICS, 'energy': ros_io.TOPICS['energy']}.items():
@@ -365,6 +363,11 @@ class SimulatedAntenna:
         return self.topics[key]
 
     # --------------------------------------------------------- the ribs
+    @property
+    def ribs(self) -> int:
+        """Return the number of ribs the node runs (its ribs parameter; 1: the planar model)."""
+        return int(self.parameters.get('ribs', 1))
+
     def rib_states(self) -> list[dict]:
         """
         Return this run's joint states of an umbrella of N ribs, by the Sample's names.
