@@ -85,9 +85,11 @@ setup(
     # the compiled integrator (plain C, loaded with ctypes): required
     ext_modules=[Extension(KERNEL,
                            ['umbrella_sim/core/_kernel.c',
-                            'umbrella_sim/core/_kernel_nonlinear.c'],
+                            'umbrella_sim/core/_kernel_nonlinear.c',
+                            'umbrella_sim/core/_kernel3d.c'],
                            depends=['umbrella_sim/core/_kernel.h',
-                                    'umbrella_sim/core/_kernel_elastic.h'],
+                                    'umbrella_sim/core/_kernel_elastic.h',
+                                    'umbrella_sim/core/_kernel_dense.h'],
                            extra_compile_args=['-O3', '-std=c99', '-fvisibility=hidden'],
                            libraries=['m'])],
     cmdclass={'build_ext': BuildKernel},

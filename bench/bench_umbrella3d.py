@@ -17,23 +17,26 @@
 """
 Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x elements, RTF.
 
-  * us/step: CPU time of this thread per step of UmbrellaSimulator3D.step (the midpoint
-    step, its Newton iterations, the projection and every step's figures in Record3D), over
-    --steps steps of the deployment from t = 0 (no lock), best of --repeat; and that divided
-    by the number of ribs: it must stay flat (block-arrow algebra: a step costs linearly in
-    the ribs), and by the coordinates of a rib;
+  * us/step: CPU time of this thread per grid step (the midpoint step, its Newton
+    iterations, the projection and every step's figures in Record3D), over --steps steps of
+    the deployment from t = 0 (no lock), best of --repeat, on both paths: the compiled step
+    (_kernel3d.c, UmbrellaSimulator3D.advance: the steps in one call, the figures added as a
+    run) and the numpy reference (UmbrellaSimulator3D.step, one step a call); and that
+    divided by the number of ribs: it must stay flat (block-arrow algebra: a step costs
+    linearly in the ribs), and by the coordinates of a rib;
   * real-time factors: simulated seconds per wall second, and CPU seconds per simulated
     second, of the runs the node would make: ribs 6 x 1 element in blocks of 1 ms (a 1 kHz
     publication), ribs 12 x 2 elements in blocks of 10 ms (100 Hz), each at the step chosen
     for its mesh (the planar rule without the stage-2 mode fit, which the 3D model does
-    not have), over --duration simulated seconds; the figures of the last step of each block
-    are read as a publication would.
+    not have), over --duration simulated seconds, on the compiled path (advance a block at a
+    time, as a driver would); the figures of the last step of each block are read as a
+    publication would.
 The machine is shared (2 cores): CPU time is what the step costs, wall RTF what a user saw.
 Targets (the issue): ribs 6 x 1 real time at 1 kHz within 0.5 core, ribs 12 x 2 real time
 at 100 Hz.
 
     python bench/bench_umbrella3d.py [--ribs 1 2 4 8 16] [--elements 1 2] [--steps 40]
-                                     [--repeat 2] [--duration 0.01]
+                                     [--repeat 2] [--duration 0.05] [--no-numpy]
 """
 import argparse
 import os
@@ -49,17 +52,21 @@ from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams  # noqa: E4
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D  # noqa: E402
 
 
-def step_cost(ribs: int, elements: int, steps: int, repeat: int):
+def step_cost(ribs: int, elements: int, steps: int, repeat: int, kernel: str):
     """Return (CPU s per step, coordinates of a rib, Newton iterations per step)."""
     best = float('inf')
     for _ in range(repeat):
         sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-            {'ribs': ribs, 'elements_per_segment': elements, 'time_step': 1e-4}))
+            {'ribs': ribs, 'elements_per_segment': elements, 'time_step': 1e-4}),
+            kernel=kernel)
         sim.step()                       # warm (imports, first factorisation)
         iterations = sim.integrator.iterations
         t0 = time.thread_time()
-        for _ in range(steps):
-            sim.step()
+        if kernel == 'compiled':
+            sim.advance(steps)
+        else:
+            for _ in range(steps):
+                sim.step()
         best = min(best, (time.thread_time() - t0) / steps)
         per_step = (sim.integrator.iterations - iterations) / steps
     return best, sim.model.n_rib, per_step
@@ -68,14 +75,13 @@ def step_cost(ribs: int, elements: int, steps: int, repeat: int):
 def real_time(ribs: int, elements: int, block: float, duration: float):
     """Return (step h, wall RTF, CPU s per simulated s) of a run in publication blocks."""
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-        {'ribs': ribs, 'elements_per_segment': elements}))
+        {'ribs': ribs, 'elements_per_segment': elements}), kernel='compiled')
     h = sim.h
     per_block = max(1, round(block / h))
     wall0, cpu0 = time.perf_counter(), time.process_time()
     published = 0
     while sim.time < duration - 1e-12:
-        for _ in range(per_block):
-            sim.step()
+        sim.advance(per_block)
         rows = sim.record.rows          # what a publication reads: the last step's figures
         published += len(rows['alpha1'][-1]) + len(rows['tip'][-1])
     assert published > 0
@@ -89,26 +95,29 @@ def main(argv=None):
     ap.add_argument('--elements', type=int, nargs='+', default=[1, 2])
     ap.add_argument('--steps', type=int, default=40)
     ap.add_argument('--repeat', type=int, default=2)
-    ap.add_argument('--duration', type=float, default=0.01)
+    ap.add_argument('--duration', type=float, default=0.05)
+    ap.add_argument('--no-numpy', action='store_true', help='the compiled path only')
     args = ap.parse_args(argv)
     print('per-step cost (h = 0.1 ms, deployment from t = 0; CPU of this thread)')
-    print(f"{'ribs':>5} {'elements':>9} {'coords/rib':>10} {'Newton it':>9} {'us/step':>10} "
-          f"{'us/step/rib':>12} {'ns/step/rib/coord':>18}")
-    for elements in args.elements:
-        costs = []
-        for ribs in args.ribs:
-            cost, n_rib, its = step_cost(ribs, elements, args.steps, args.repeat)
-            costs.append(cost)
-            print(f'{ribs:5d} {elements:9d} {n_rib:10d} {its:9.2f} {1e6 * cost:10.0f} '
-                  f'{1e6 * cost / ribs:12.0f} {1e9 * cost / ribs / n_rib:18.0f}', flush=True)
-        if len(costs) > 2:
-            fit = np.polyfit(args.ribs, costs, 1)
-            worst = np.max(np.abs(np.polyval(fit, args.ribs) / costs - 1))
-            quad = np.polyfit(args.ribs, costs, 2)[0] * max(args.ribs) ** 2 / max(costs)
-            print(f'      {elements} element(s): cost = {1e6 * fit[1]:.0f} us + '
-                  f'{1e6 * fit[0]:.0f} us x ribs (largest deviation {100 * worst:.0f} %; '
-                  f'a quadratic term would carry {100 * quad:+.0f} % at {max(args.ribs)} '
-                  'ribs)')
+    print(f"{'path':>9} {'ribs':>5} {'elements':>9} {'coords/rib':>10} {'Newton it':>9} "
+          f"{'us/step':>10} {'us/step/rib':>12} {'ns/step/rib/coord':>18}")
+    for kernel in ('compiled',) + (() if args.no_numpy else ('numpy',)):
+        for elements in args.elements:
+            costs = []
+            for ribs in args.ribs:
+                cost, n_rib, its = step_cost(ribs, elements, args.steps, args.repeat, kernel)
+                costs.append(cost)
+                print(f'{kernel:>9} {ribs:5d} {elements:9d} {n_rib:10d} {its:9.2f} '
+                      f'{1e6 * cost:10.1f} {1e6 * cost / ribs:12.1f} '
+                      f'{1e9 * cost / ribs / n_rib:18.0f}', flush=True)
+            if len(costs) > 2:
+                fit = np.polyfit(args.ribs, costs, 1)
+                worst = np.max(np.abs(np.polyval(fit, args.ribs) / costs - 1))
+                quad = np.polyfit(args.ribs, costs, 2)[0] * max(args.ribs) ** 2 / max(costs)
+                print(f'          {kernel}, {elements} element(s): cost = {1e6 * fit[1]:.1f} us '
+                      f'+ {1e6 * fit[0]:.1f} us x ribs (largest deviation {100 * worst:.0f} %; '
+                      f'a quadratic term would carry {100 * quad:+.0f} % at {max(args.ribs)} '
+                      'ribs)')
     print(f'\nreal-time factors over {args.duration} s simulated (step chosen for the mesh)')
     print(f"{'ribs':>5} {'elements':>9} {'block':>8} {'step (us)':>10} {'RTF (wall)':>11} "
           f"{'CPU s / sim s':>14} {'target':>30}")

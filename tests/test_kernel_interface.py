@@ -170,10 +170,13 @@ def test_a_library_with_another_struct_size_is_refused(tmp_path, capfd):
         #define SIZE(name, py) (int)sizeof(name),
         #define COUNT(name, py) name,
         int umbrella_abi(int *figures, int n) {
-            /* a Model of one int more, a step row of one field less */
+            /* a Model of one int more, a step row of one field less (N_FIELDS: the
+             * count after N_STATUS, which follows the structs' sizes) */
             const int all[] = {UMBRELLA_ABI_STRUCTS(SIZE) UMBRELLA_ABI_COUNTS(COUNT)};
+            const int structs[] = {UMBRELLA_ABI_STRUCTS(SIZE)};
+            const int fields = (int)(sizeof(structs) / sizeof(structs[0])) + 1;
             for (int k = 0; k < n && k < (int)(sizeof(all) / sizeof(all[0])); k++)
-                figures[k] = all[k] - (k == 5) + 8 * (k == 0);
+                figures[k] = all[k] - (k == fields) + 8 * (k == 0);
             return UMBRELLA_ABI_VERSION;
         }""")
     model = ctypes.sizeof(kernel.ModelStruct)

@@ -331,3 +331,24 @@ def test_params_file_publish_rate_shapes_the_mcap_recording(tmp_path):
         assert r.returncode == 0, r.stderr
         counts.append(read_log(str(bag)).count('/joint_states'))
     assert counts == [101, 6, 21]       # t = 0 and every period of 0.1 s
+
+
+def test_a_params_file_is_parsed_once_per_text(tmp_path, monkeypatch):
+    """Checked before rclpy.init and again by the node: the same text is parsed once."""
+    from umbrella_sim.ros import params_file
+    path = tmp_path / 'p.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    v0: -0.5\n')
+    parses = []
+    real = params_file.load_yaml_as_ros
+    monkeypatch.setattr(params_file, 'load_yaml_as_ros',
+                        lambda text: parses.append(text) or real(text))
+    first = params_file.read_params_file(str(path))
+    first['/**']['v0'] = 99.0                        # a caller's copy: the cache keeps its own
+    assert params_file.read_params_file(str(path)) == {'/**': {'v0': -0.5}}
+    assert len(parses) == 1
+    path.write_text('/**:\n  ros__parameters:\n    v0: -0.25\n')     # changed: read anew
+    assert params_file.read_params_file(str(path)) == {'/**': {'v0': -0.25}}
+    path.write_text('/**:\n  ros__parameters:\n    v0:\n')            # and checked anew
+    with pytest.raises(ValueError, match='no value for v0'):
+        params_file.read_params_file(str(path))
+    assert len(parses) == 3

@@ -50,6 +50,7 @@
 
 #include "_kernel.h"          /* the interface: structs, codes, fields, API */
 #include "_kernel_elastic.h"   /* the nonlinear / damped elastic law (_kernel_nonlinear.c) */
+#include "_kernel_dense.h"     /* the dense LU it shares with the 3D step (_kernel3d.c) */
 
 #define JW 3   /* nonzeros of a joint/stop constraint row */
 
@@ -301,8 +302,8 @@ static void band_solve(int n, int bw, const double *A, double *x) {
 }
 
 /* dense LU with partial pivoting, row-major; the diagonal keeps the reciprocals of the
- * pivots */
-static int lu_factor(int N, double *A, int *piv) {
+ * pivots (_kernel_dense.h: the 3D step's too) */
+int lu_factor(int N, double *A, int *piv) {
     for (int k = 0; k < N; k++) {
         int p = k;
         double best = fabs(A[k * N + k]);
@@ -325,7 +326,7 @@ static int lu_factor(int N, double *A, int *piv) {
 }
 
 /* b = A^-1 b with lu_factor's A and piv (each row's latest unknown last, as band_solve) */
-static void lu_solve(int N, const double *A, const int *piv, double *b) {
+void lu_solve(int N, const double *A, const int *piv, double *b) {
     for (int k = 0; k < N; k++)
         if (piv[k] != k) { double t = b[k]; b[k] = b[piv[k]]; b[piv[k]] = t; }
     for (int i = 0; i < N; i++) {

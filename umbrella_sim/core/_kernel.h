@@ -36,7 +36,7 @@
 
 /* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
  * reordered, a function's arguments changed). */
-#define UMBRELLA_ABI_VERSION 3
+#define UMBRELLA_ABI_VERSION 4
 
 /* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
  * exported. */
@@ -209,9 +209,47 @@ typedef struct {
     double ea, ei, fibre;    /* EA (N), EI (N m^2), fibre distance c (m) */
 } ElasticData;
 
-/* Held by Python only as pointers: the stepping context (every work buffer, allocated once)
- * and an elastic law. */
+/* The whole umbrella in 3D with its hub fixed (umbrella3d.kernel3d builds it from
+ * umbrella3d.model3d.UmbrellaModel3D): N ribs of n_rib coordinates each around one sleeve
+ * (n_shared = 1: y_s; n_shared_rows = 1: the stop), the rib coordinates' indices, and per
+ * body (leaf, link) of every rib its quadrature and attached points: rest positions x
+ * (R x P x 3), weights w (R x P), shapes S (R x P x 3 x elastic).  Arrays rib-major; the
+ * caller keeps them alive. */
+typedef struct {
+    int n_ribs, n_rib, n_shared, n_shared_rows;
+    int i_a1, i_rx, i_ry, i_rz, i_a2, i_u1, i_w1, i_s1, i_p1, i_s2, i_p2, i_uh, i_wh;
+    int leaf_points, leaf_elastic, link_points, link_elastic, link_offset;
+    double sleeve_mass, y_stop, regularisation;
+    const double *l1, *l3, *coulomb, *viscous;       /* n_ribs */
+    const double *stick_until, *stick_torque;        /* n_ribs (0: not that release) */
+    const double *stiffness, *const_mass;            /* n_ribs x n_rib x n_rib: K, and the
+                                                      * part of M that does not move */
+    const double *leaf_x, *leaf_w, *leaf_shape;
+    const double *link_x, *link_w, *link_shape;
+} Model3D;
+
+/* umbrella3d_advance's arguments (kept by the caller, updated in place): the state (t, q, v,
+ * multipliers, p = M v, stuck: the angle a stuck hinge holds, NaN where free), advanced in
+ * place.  single: one step of length h, no event (the lock's root find takes these);
+ * else up to n_steps grid steps t_k -> (k + 1) h from k0, stopping before a step in which
+ * the sleeve reaches the stop unlocked (CROSSING, that step not committed), a stuck hinge
+ * released after the step that frees it (its time, or its multiplier's torque).  have_p:
+ * p holds M(q) v (else it is computed).  Each committed step writes a row into out (row_len
+ * doubles, step-major): t, qr, qs, vr, vs, lam_r, lam_s, stuck, kinetic and strain energy,
+ * the sleeve force's work, each hinge's friction work, Newton iterations. */
+typedef struct {
+    int locked, single, have_p, n_steps, max_iter, row_len;
+    long k0;
+    double h, force, tol, phi_tol, t;
+    double *qr, *qs, *vr, *vs, *lam_r, *lam_s, *pr, *ps, *stuck;
+    double *out;
+    int n_done, iterations;   /* out: committed steps, Newton iterations */
+} Advance3DCall;
+
+/* Held by Python only as pointers: the stepping contexts (every work buffer, allocated
+ * once; planar and 3D) and an elastic law. */
 typedef struct Ctx Ctx;
+typedef struct Ctx3D Ctx3D;
 typedef struct ElasticLaw ElasticLaw;
 
 /* What umbrella_abi reports after the version, in this order: the size of each of these
@@ -220,7 +258,9 @@ typedef struct ElasticLaw ElasticLaw;
     X(Model, model) \
     X(AdvanceCall, advance_call) \
     X(SampleCall, sample_call) \
-    X(ElasticData, elastic_data)
+    X(ElasticData, elastic_data) \
+    X(Model3D, model3d) \
+    X(Advance3DCall, advance3d_call)
 #define UMBRELLA_ABI_COUNTS(X) \
     X(N_STATUS, status_codes) \
     X(N_FIELDS, step_fields) \
@@ -285,5 +325,12 @@ UMBRELLA_API ElasticLaw *elastic_new(const ElasticData *d);
 UMBRELLA_API void elastic_free(ElasticLaw *law);
 UMBRELLA_API double elastic_last_dissipation(const ElasticLaw *law);
 UMBRELLA_API double elastic_max_slope(const ElasticLaw *law);
+
+/* The 3D umbrella's context for the model (which must outlive it), or NULL (out of memory);
+ * its free; its steps (Advance3DCall): OK, CROSSING, or the failure (NO_CONVERGENCE,
+ * NON_FINITE, SINGULAR) of the step that stopped it, not committed. */
+UMBRELLA_API Ctx3D *umbrella3d_new(const Model3D *m);
+UMBRELLA_API void umbrella3d_free(Ctx3D *x);
+UMBRELLA_API int umbrella3d_advance(Ctx3D *x, Advance3DCall *a);
 
 #endif

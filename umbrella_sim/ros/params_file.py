@@ -97,6 +97,9 @@ def read_params_file(path: str) -> dict[str, dict]:
     import yaml  # local import: only the file path needs it
 
     text = read_text_input(path, 'params file')
+    known = _parsed.get(path)
+    if known is not None and known[0] == text:       # the same text: parsed once
+        return {key: dict(values) for key, values in known[1].items()}
     try:
         doc = load_yaml_as_ros(text)
     except yaml.YAMLError as exc:
@@ -120,7 +123,13 @@ def read_params_file(path: str) -> dict[str, dict]:
         if empty:
             raise ValueError(f'params file {path}: section {key!r}: no value for '
                              f"{', '.join(empty)}")
-    return sections
+    _parsed[path] = (text, sections)
+    return {key: dict(values) for key, values in sections.items()}
+
+
+#: the last text read from each params file and its sections: a process checks its files
+#: before rclpy.init and again as its node starts, and parsing a large file is what costs
+_parsed: dict[str, tuple[str, dict]] = {}
 
 
 def section_matches(pattern: str, node_fqn: str) -> bool:

@@ -46,8 +46,10 @@ from ..outputs import LockEvent
 from ..summary import (deploy_start, ENERGY_SCALE_FLOOR, validity_warnings)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
-#: a segment), so a chunk stays near the planar rule's ~10 ms (driver.CHUNK_WORK)
+#: a segment), so a chunk stays near the planar rule's ~10 ms (driver.CHUNK_WORK); the
+#: compiled step (fixed hub) ~0.1 ms at 6 ribs: COMPILED_CHUNK_STEPS
 CHUNK_STEPS = 4
+COMPILED_CHUNK_STEPS = 64
 
 
 class Sample3D:
@@ -163,22 +165,20 @@ def _larger(held: tuple, new: tuple) -> tuple:
 
 
 class Engine3D:
-    """What the driver and its consumers read of an engine: its backend and lock kind."""
+    """What the driver and its consumers read of an engine: its lock kind and backend."""
 
-    backend = 'numpy'
-
-    def __init__(self, lock_kind: str):
-        self.lock_kind = lock_kind
+    def __init__(self, lock_kind: str, backend: str):
+        self.lock_kind, self.backend = lock_kind, backend
 
 
 class DrivenSimulator3D(UmbrellaSimulator3D):
     """UmbrellaSimulator3D with the run driver's surface; see the module docstring."""
 
-    chunk_steps = CHUNK_STEPS
-
     def __init__(self, params: UmbrellaRibsParams):
         super().__init__(params)
-        self.engine = Engine3D(self.params.lock_rule)
+        compiled = self.integrator.compiled is not None
+        self.engine = Engine3D(self.params.lock_rule, 'compiled' if compiled else 'numpy')
+        self.chunk_steps = COMPILED_CHUNK_STEPS if compiled else CHUNK_STEPS
         self._force_per_rib = command_force(self.params.planar.sleeve_force, self.params)
         # the record's row of t = 0 is the initial sample: the blocks hold the steps' rows
         self._current = Sample3D.of_row({k: v[-1] for k, v in self.record.take().items()})
@@ -229,13 +229,16 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
             raise ValueError('the umbrella of N ribs offers no state rows (states=True)')
         applied, error = [], None
         locked_before = self.locked
-        for _ in range(int(n_steps)):
+        k_end = self.k + int(n_steps)
+        while self.k < k_end:
             f = schedule.force_at(self.k)
             if f != self._force_per_rib:
                 self.set_sleeve_force(f)
                 applied.append((self.time, f))
-            try:
-                self.step()
+            change = schedule.next_change(self.k)
+            try:       # (compiled: in runs of steps; the lock's step taken here)
+                self.advance((k_end if change is None else min(change, k_end)) - self.k,
+                             stop_at_lock=until_lock and not self.locked)
             except SimulationFailed as exc:
                 error = str(exc)
                 break

@@ -40,44 +40,23 @@ linear momentum is conserved to round-off.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 import math
+import os
+import sys
 
 import numpy as np
 
 from . import arrow
+from .kernel3d import CompiledStep3D
 from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
-from ..integrators import newton_converged
+from .state3d import ConvergenceError3D, State3D, StepWork
+from ..integrators import newton_converged, PHI_TOLERANCE
+from ..kernel import kernel_refusal, LIBRARY, load_kernel
 
-
-class ConvergenceError3D(ArithmeticError):
-    """Newton did not converge, or a matrix was singular."""
-
-
-@dataclass(frozen=True)
-class State3D:
-    """The umbrella's state: rib part (R, n) and shared part of q, v, multipliers, momentum."""
-
-    t: float
-    qr: np.ndarray
-    qs: np.ndarray
-    vr: np.ndarray
-    vs: np.ndarray
-    lam_r: np.ndarray
-    lam_s: np.ndarray
-    stuck: np.ndarray          # (R,) angle a stuck hinge holds, NaN where free
-    pr: np.ndarray | None = None
-    ps: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class StepWork:
-    """What one step did: work of the sleeve force, of each hinge's friction, of the drive."""
-
-    force: float
-    friction: np.ndarray
-    drive: float
-    iterations: int
+#: why a run steps on the numpy path although the compiled step was asked for ('auto'),
+#: said once a process on stderr
+_SAID: set = set()
 
 
 class BaseDrive:
@@ -112,10 +91,16 @@ class BaseDrive:
 
 
 class MidpointUmbrella:
-    """The step of module docstring for a model; friction and the drive from its parameters."""
+    """
+    The step of module docstring for a model; friction and the drive from its parameters.
+
+    kernel: 'auto' (UMBRELLA_SIM_KERNEL, else auto: the compiled step, _kernel3d.c, when the
+    library is built and the hub fixed, else this numpy reference with a note on stderr),
+    'compiled' (an error if it cannot be), or 'numpy'.  ``backend`` says which steps.
+    """
 
     def __init__(self, model: UmbrellaModel3D, tolerance: float = 1e-10,
-                 max_iterations: int = 25):
+                 max_iterations: int = 25, kernel: str | None = None):
         self.model = model
         self.tolerance = tolerance
         self.max_iterations = max_iterations
@@ -133,6 +118,39 @@ class MidpointUmbrella:
             self.kin_shared[0] = True
             self.norm_shared[1:] = True
         self.iterations = 0
+        self.compiled = self._compiled_step(kernel)
+
+    def _compiled_step(self, kernel: str | None):
+        """Return the compiled step (kernel3d.CompiledStep3D) the kernel choice gives, or None."""
+        name = 'kernel' if kernel else 'UMBRELLA_SIM_KERNEL'
+        kernel = kernel or os.environ.get('UMBRELLA_SIM_KERNEL', 'auto')
+        if kernel not in ('auto', 'compiled', 'numpy'):
+            raise ValueError(f'{name}={kernel!r}: must be auto, compiled or numpy')
+        if kernel == 'numpy':
+            return None
+        why = None
+        lib = load_kernel()
+        if self.model.moving_base:
+            why = ('the compiled 3D step has the hub fixed (base: '
+                   f'{self.model.params.base!r} steps on the numpy reference path)')
+        elif lib is None:
+            why = kernel_refusal() or (f'the compiled kernel {LIBRARY} is not built (python3 '
+                                       'bootstrap.py setup; it needs a C compiler)')
+        if why is None:
+            return CompiledStep3D(lib, self.model, self.tolerance, PHI_TOLERANCE,
+                                  self.max_iterations)
+        if kernel == 'compiled':
+            raise RuntimeError(why)
+        if why not in _SAID:
+            _SAID.add(why)
+            print(f'umbrella_sim: {why}; the 3D umbrella steps on the numpy reference path '
+                  '(slow)', file=sys.stderr, flush=True)
+        return None
+
+    @property
+    def backend(self) -> str:
+        """Return 'compiled' or 'numpy': what takes the steps."""
+        return 'compiled' if self.compiled is not None else 'numpy'
 
     # ------------------------------------------------------------ pieces
     def friction(self, dq_a1: np.ndarray, h: float):
@@ -217,6 +235,10 @@ class MidpointUmbrella:
     # ------------------------------------------------------------ the step
     def step(self, s: State3D, h: float, force: float, locked: bool) -> tuple[State3D, StepWork]:
         """One step of length h; raises ConvergenceError3D."""
+        if self.compiled is not None:
+            state, work = self.compiled.step(s, h, force, locked)
+            self.iterations += work.iterations
+            return state, work
         with np.errstate(over='ignore', invalid='ignore'):
             return self._step(s, h, force, locked)
 

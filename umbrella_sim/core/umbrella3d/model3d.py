@@ -574,15 +574,16 @@ class UmbrellaModel3D:
         return p, np.cross(x, p) + bus.rot @ h_body
 
     def stress_components(self, qr):
-        """Per body: (axial, bending z, bending y, torsion shear) (R, points) each, Pa."""
-        out = []
-        for bodies, s_e in ((self.leaf_bodies, self.s_leaf_e), (self.link_bodies, self.s_link_e)):
-            e = qr[:, s_e]
-            out.append(tuple(np.einsum('rpe,re->rp', np.array([getattr(b, name) for b in bodies]),
-                                       e)
-                             for name in ('stress_axial', 'stress_bend_z', 'stress_bend_y',
-                                          'stress_shear')))
-        return out
+        """Per body: (axial, bending z, bending y, torsion shear) (..., R, points) each, Pa."""
+        if not hasattr(self, '_stress_rows'):
+            # per body, every rib's four recovery matrices stacked: (R, 4 points, elastic)
+            self._stress_rows = [
+                (np.concatenate([np.array([getattr(b, name) for b in bodies]) for name in (
+                    'stress_axial', 'stress_bend_z', 'stress_bend_y', 'stress_shear')], 1), s_e)
+                for bodies, s_e in ((self.leaf_bodies, self.s_leaf_e),
+                                    (self.link_bodies, self.s_link_e))]
+        return [tuple(np.split(np.einsum('rpe,...re->...rp', rows, qr[..., s_e]), 4, -1))
+                for rows, s_e in self._stress_rows]
 
 
 def _deployed_angle(rib, base) -> float:

@@ -24,7 +24,9 @@ axial E u', bending E c v'' (in the rib plane) and E c w'' (out of it), the St-V
 G c_t phi'; the combined figure is the von Mises stress of the worst corner fibre with the
 largest torsion shear, sqrt((|sigma_a| + |sigma_bz| + |sigma_by|)^2 + 3 tau^2), an upper bound
 of the section's von Mises stress.  Each rib's peak of every component over the run is kept
-with where (body, abscissa) and when.
+with where (body, abscissa) and when; every step's row has each rib's largest of every
+component over both bodies (``stress_<name>``) and where (``stress_<name>_at``: body code,
+0 leaf 1 link, and x), the leaf's on a tie.
 """
 from __future__ import annotations
 
@@ -51,8 +53,12 @@ class Record3D:
         self.iterations = 0
         self._xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
 
+    def _put(self, name, value):
+        self.rows.setdefault(name, []).append(value)
+
     def add(self, s, locked: bool, force: float, work, lock_loss: float, lock_event=None):
-        """Take the state at the end of a step (work: the step's StepWork, None at t = 0)."""
+        """Add the figures of state s, reached by a step that did work (None: the start)."""
+        m = self.model
         if work is not None:
             self.work += work.force
             self.friction = self.friction + work.friction
@@ -60,31 +66,6 @@ class Record3D:
             self.iterations += work.iterations
         if lock_event is not None:
             self.lock_events.append(lock_event)
-        row = self.row(s, locked, force, lock_loss, (self.work, self.friction, self.drive))
-        for name in STRESS_NAMES:
-            top, (body, x) = row[f'stress_{name}'], row[f'stress_{name}_at'].T
-            better = top > self.peak[name]
-            if np.any(better):
-                self.peak[name] = np.where(better, top, self.peak[name])
-                lst = list(self.peak_where[name])
-                for k in np.nonzero(better)[0]:
-                    lst[k] = (BODIES[int(body[k])], float(x[k]), float(s.t))
-                self.peak_where[name] = lst
-        rows = self.rows
-        for name, value in row.items():
-            rows.setdefault(name, []).append(value)
-
-    def row(self, s, locked: bool, force: float, lock_loss: float, totals) -> dict:
-        """
-        Return the figures of the state s (no side effect): a row of the record.
-
-        totals: the work of the sleeve force, each hinge's friction work and the drive's work
-        from t = 0 to s.  Each stress component's figure is, per rib, the largest |value| over
-        both bodies' stress points (the leaf's first on a tie) with where: (body, x), body 0
-        the leaf (x from O), 1 the link (x from O'').
-        """
-        m = self.model
-        work, friction, drive = totals
         kin = None
         if s.pr is None:
             kin = m.kinematics(s.qr, s.qs)
@@ -92,41 +73,101 @@ class Record3D:
         else:
             pr, ps = s.pr, s.ps
         kinetic = 0.5 * (float(np.sum(pr * s.vr)) + float(ps @ s.vs))
-        out = {
-            'time': s.t, 'locked': locked, 'sleeve_position': s.qs[0],
-            'sleeve_velocity': s.vs[0], 'sleeve_force': force,
-            'alpha1': s.qr[:, m.i_a1].copy(), 'alpha2': s.qr[:, m.i_a2].copy(),
-            'alpha1_rate': s.vr[:, m.i_a1].copy(), 'alpha2_rate': s.vr[:, m.i_a2].copy(),
-            'tip': s.qr[:, list(m.i_tip)].copy(), 'kinetic_energy': kinetic,
-            'strain_energy': m.strain_energy(s.qr), 'work': work,
-            'friction_work': np.array(friction, dtype=float), 'drive_work': drive,
-            'lock_energy_loss': lock_loss,
-            'holding_torque': np.where(np.isnan(s.stuck), 0.0, s.lam_r[:, -1]),
-            'stuck': ~np.isnan(s.stuck), 'stop_reaction': float(s.lam_s[0])}
+        one = {name: np.asarray(getattr(s, name))[None]
+               for name in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
+        self._put_steps(np.array([s.t]), one, np.array([kinetic]),
+                        np.array([m.strain_energy(s.qr)]), np.array([self.work]),
+                        self.friction[None], np.array([self.drive]), locked, force, lock_loss)
         if m.moving_base:
-            out['bus_q'] = s.qs[1:7].copy()
-            out['bus_v'] = s.vs[1:7].copy()
+            put = self._put
+            put('bus_q', s.qs[1:7].copy())
+            put('bus_v', s.vs[1:7].copy())
             if m.params.base == 'free':
                 kin = kin if kin is not None else m.kinematics(s.qr, s.qs)
-                out['linear_momentum'], out['angular_momentum'] = m.momentum(kin, s.vr, s.vs)
-        nr = m.n_ribs
-        tops = {name: np.full((2, nr), -1.0) for name in STRESS_NAMES}
-        at = {name: np.zeros((2, nr)) for name in STRESS_NAMES}
-        for body, (comps, xs) in enumerate(zip(m.stress_components(s.qr), self._xs)):
+                p, h = m.momentum(kin, s.vr, s.vs)
+                put('linear_momentum', p)
+                put('angular_momentum', h)
+
+    def add_steps(self, rows: dict, locked: bool, force: float, lock_loss: float):
+        """
+        Add the figures of a run of steps (the compiled step's rows, kernel3d.row_layout).
+
+        rows: arrays with the steps first: t, qr, qs, vr, vs, lam_r, lam_s, stuck, kinetic,
+        strain, work_force, work_friction, iterations (hub fixed: no drive, no bus).
+        """
+        work = self.work + np.cumsum(rows['work_force'])
+        friction = self.friction + np.cumsum(rows['work_friction'], 0)
+        self.work, self.friction = float(work[-1]), friction[-1].copy()
+        self.iterations += int(np.sum(rows['iterations']))
+        self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work, friction,
+                        np.full(len(work), self.drive), locked, force, lock_loss)
+
+    def _put_steps(self, t, st, kinetic, strain, work, friction, drive, locked, force,
+                   lock_loss):
+        """Append k steps' figures (arrays with the steps first) and update the peaks."""
+        m = self.model
+        k = len(t)
+        qr, vr, stuck = st['qr'], st['vr'], st['stuck']
+        free = np.isnan(stuck)
+        for name, value in (('locked', locked), ('sleeve_force', force),
+                            ('lock_energy_loss', lock_loss)):
+            self.rows.setdefault(name, []).extend([value] * k)
+        columns = {
+            'time': t, 'sleeve_position': st['qs'][:, 0], 'sleeve_velocity': st['vs'][:, 0],
+            'alpha1': qr[:, :, m.i_a1], 'alpha2': qr[:, :, m.i_a2],
+            'alpha1_rate': vr[:, :, m.i_a1], 'alpha2_rate': vr[:, :, m.i_a2],
+            'tip': qr[:, :, list(m.i_tip)], 'kinetic_energy': kinetic,
+            'strain_energy': strain, 'work': work, 'friction_work': friction,
+            'drive_work': drive,
+            'holding_torque': np.where(free, 0.0, st['lam_r'][:, :, -1]), 'stuck': ~free,
+            'stop_reaction': st['lam_s'][:, 0]}
+        for name, values in columns.items():
+            values = np.asarray(values)
+            self.rows.setdefault(name, []).extend(
+                values.tolist() if values.ndim == 1 else list(values.copy()))
+        # stresses: each rib's worst point per step; the peaks over the steps in the order
+        # they happened (step by step, the leaf before the link: the first of equal ones)
+        tops = {name: [] for name in STRESS_NAMES}
+        wheres = {name: [] for name in STRESS_NAMES}
+        vm_now = np.zeros((k, m.n_ribs))
+        for comps in m.stress_components(qr):
             ax, bz, by, sh = comps
             vm = np.sqrt((np.abs(ax) + np.abs(bz) + np.abs(by)) ** 2 + 3.0 * sh * sh)
+            vm_now = np.maximum(vm_now, vm.max(-1))
             for name, values in zip(STRESS_NAMES, (ax, bz, by, sh, vm)):
                 a = np.abs(values)
-                where = a.argmax(1)
-                tops[name][body] = a[np.arange(nr), where]
-                at[name][body] = xs[where]
+                tops[name].append(a.max(-1))
+                wheres[name].append(a.argmax(-1))
         for name in STRESS_NAMES:
-            body = tops[name].argmax(0)             # (the leaf on a tie)
-            ribs = np.arange(nr)
-            out[f'stress_{name}'] = tops[name][body, ribs]
-            out[f'stress_{name}_at'] = np.stack([body.astype(float), at[name][body, ribs]], 1)
-        out['von_mises'] = out['stress_von_mises']
-        return out
+            # this step's worst over both bodies and where (the leaf's on a tie)
+            by_body = np.stack(tops[name], 1)                          # (step, body, rib)
+            body = by_body.argmax(1)
+            steps, ribs = np.arange(k)[:, None], np.arange(m.n_ribs)[None]
+            point = np.stack(wheres[name], 1)[steps, body, ribs]
+            x = np.where(body == 0, self._xs[0][np.minimum(point, len(self._xs[0]) - 1)],
+                         self._xs[1][np.minimum(point, len(self._xs[1]) - 1)])
+            self.rows.setdefault(f'stress_{name}', []).extend(
+                list(by_body[steps, body, ribs]))
+            self.rows.setdefault(f'stress_{name}_at', []).extend(
+                list(np.stack([body.astype(float), x], -1)))
+            top = by_body.reshape(2 * k, m.n_ribs)   # (step, body) order
+            first = top.argmax(0)
+            best = top[first, np.arange(m.n_ribs)]
+            better = best > self.peak[name]
+            if np.any(better):
+                self.peak[name] = np.where(better, best, self.peak[name])
+                lst = list(self.peak_where[name])
+                for r in np.nonzero(better)[0]:
+                    step, body = divmod(int(first[r]), 2)
+                    point = wheres[name][body][step, r]
+                    lst[r] = (('leaf', 'link')[body], float(self._xs[body][point]),
+                              float(t[step]))
+                self.peak_where[name] = lst
+        self.rows.setdefault('von_mises', []).extend(list(vm_now))
+
+    def arrays(self) -> dict:
+        """Return every per-step figure as an array (steps first, then ribs or components)."""
+        return {name: np.array(values) for name, values in self.rows.items()}
 
     def take(self) -> dict:
         """Return the rows added since the last take as arrays (``arrays``), and drop them."""
@@ -134,9 +175,18 @@ class Record3D:
         self.rows = {}
         return out
 
-    def arrays(self) -> dict:
-        """Return every per-step figure as an array (steps first, then ribs or components)."""
-        return {name: np.array(values) for name, values in self.rows.items()}
+    def row(self, s, locked: bool, force: float, lock_loss: float, totals) -> dict:
+        """
+        Return the figures of the state s as a row, without adding it (``add``'s rule).
+
+        totals: the work of the sleeve force, each hinge's friction work and the drive's work
+        from t = 0 to s.
+        """
+        scratch = Record3D(self.model)
+        scratch.work, friction, scratch.drive = totals
+        scratch.friction = np.array(friction, dtype=float)
+        scratch.add(s, locked, force, None, lock_loss)
+        return {name: values[0] for name, values in scratch.arrays().items()}
 
     def summary(self) -> dict:
         """
@@ -195,14 +245,13 @@ def first_reach(t: np.ndarray, gap: np.ndarray, before: tuple | None = None) -> 
     return float(t0 + (t[i] - t0) * g0 / (g0 - gap[i]))
 
 
-def energy_balance3d(rows: dict, initial_energy: float) -> np.ndarray:
+def energy_balance3d(rows, initial_energy: float) -> np.ndarray:
     """
     Return T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss of rows (J).
 
-    rows: a Record3D's arrays (one figure a step) or one row (a Sample3D).
-
-    The umbrella's energy balance, one rule: 0 for a run that keeps its energy (friction
-    work is negative: the hinges take energy out).
+    rows: a Record3D's arrays (one figure a step) or one row (a Sample3D).  The umbrella's
+    energy balance, one rule: 0 for a run that keeps its energy (friction work is negative:
+    the hinges take energy out).
     """
     return (rows['kinetic_energy'] + rows['strain_energy'] - initial_energy - rows['work']
             - np.sum(rows['friction_work'], axis=-1) - rows['drive_work']

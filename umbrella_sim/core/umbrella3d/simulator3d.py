@@ -27,10 +27,16 @@ energy lost), and the step is completed locked.  A stuck hinge (``stick_until`` 
 ``stick_torque``) is a joint alpha1 = its angle, released after the step at whose end the
 time has reached stick_until or its holding torque (the joint's multiplier) has reached
 stick_torque.  Every step's figures go to a ``Record3D`` (outputs3d.py).
+
+With the compiled step (``MidpointUmbrella.backend`` 'compiled': hub fixed, library built),
+``advance`` and ``run`` take the grid steps in runs of up to ADVANCE_BLOCK steps a call
+(_kernel3d.c: the same steps and release; a run stops before the step that reaches the stop,
+which ``step`` then takes here, with the lock); ``step`` alone takes one step a call.
 """
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 
 import numpy as np
 
@@ -40,8 +46,13 @@ from .outputs3d import Record3D
 from .params3d import UmbrellaRibsParams
 from ..engines import event_root, EVENT_TIME_TOLERANCE
 from ..integrators import newton_tolerance
+from ..kernel import kernel_error, STATUS
 from ..lock import locked_velocity_base, LockImpossible, velocity_keeping_energy
 from ..step_rule import physics_step_of
+
+
+#: grid steps a compiled call takes at most (its output rows: ~0.3 MB at 12 ribs x 2 elements)
+ADVANCE_BLOCK = 256
 
 
 class SimulationFailed(RuntimeError):
@@ -52,12 +63,12 @@ class UmbrellaSimulator3D:
     """Steps the umbrella; see the module docstring."""
 
     def __init__(self, params: UmbrellaRibsParams, step: float | None = None,
-                 tolerance: float | None = None):
+                 tolerance: float | None = None, kernel: str | None = None):
         self.params = params.validated()
         self.model = m = UmbrellaModel3D(self.params)
         self.h = self.grid_step(self.params) if step is None else step
         self.integrator = MidpointUmbrella(
-            m, newton_tolerance(self.h) if tolerance is None else tolerance)
+            m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel)
         self.force = self.params.planar.sleeve_force * m.n_ribs
         self.locked = False
         self.lock_time: float | None = None
@@ -191,10 +202,53 @@ class UmbrellaSimulator3D:
         self.k += 1
         self.record.add(s1, self.locked, self.force, work, self.lock_loss, lock_event)
 
+    def advance(self, steps: int, stop_at_lock: bool = False) -> None:
+        """
+        Take `steps` grid steps (as many calls of ``step``; compiled: in runs of them).
+
+        stop_at_lock: return after the step in which the lock happens, if it does.
+        """
+        target = self.k + steps
+        compiled = self.integrator.compiled
+        while self.k < target:
+            if compiled is None:
+                self.step()
+                if stop_at_lock and self.locked:
+                    return
+                continue
+            status, done, rows, state = compiled.advance(
+                self.state, self.k, self.h, min(target - self.k, ADVANCE_BLOCK), self.force,
+                self.locked)
+            if done:
+                self.state = state
+                self.k += done
+                self.integrator.iterations += int(rows['iterations'].sum())
+                self.record.add_steps(rows, self.locked, self.force, self.lock_loss)
+            if status == STATUS['crossing']:
+                self.step()                     # the lock, here
+                if stop_at_lock:
+                    return
+            elif status != STATUS['ok']:
+                raise SimulationFailed(f'step after t = {self.state.t:.9g} s failed: '
+                                       f'{kernel_error(status, self.state.t + self.h)}')
+
+    def _steps_to(self, t_end: float) -> int:
+        """Return the grid steps from now until the time reaches t_end (within 1e-12 s)."""
+        n = max(1, math.ceil((t_end - 1e-12) / self.h) - self.k)
+        while n > 1 and (self.k + n - 1) * self.h >= t_end - 1e-12:
+            n -= 1
+        while (self.k + n) * self.h < t_end - 1e-12:
+            n += 1
+        return n
+
     def run(self, duration: float, after_lock: float | None = None) -> 'Record3D':
         """Step to t = duration (or to after_lock s past the lock); return the record."""
         while self.time < duration - 1e-12:
-            self.step()
+            t_end = duration
+            if after_lock is not None and self.locked:
+                t_end = min(t_end, self.lock_time + after_lock)
+            self.advance(self._steps_to(t_end) if self.integrator.compiled else 1,
+                         stop_at_lock=after_lock is not None and not self.locked)
             if after_lock is not None and self.locked and self.time >= self.lock_time + after_lock:
                 break
         return self.record

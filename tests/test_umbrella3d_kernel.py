@@ -1,0 +1,242 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The whole umbrella's compiled step (_kernel3d.c) against its numpy reference (integrator3d).
+
+The two paths compute the same iterates of the same algorithm; they differ in the order of
+sums (and LU solves where numpy inverts a rib's block), about 1e-16 relative per operation.
+How far that carries over a run is the run's own sensitivity: a hinge stuck on its joint
+(whose multiplier, the holding torque, is the step's Newton increment divided by h^2 / 2),
+Coulomb friction regularised over 1e-3 rad/s (a torque slope of 50 N m s at 0.05 N m), stage
+2's vibration.  The test measures it: the numpy path against itself with its initial rates
+moved by one unit in the last place.  Asserted: every figure of the compiled run within ten
+times that spread of the reference (plus 1e-12 of the figure's scale, the round-off of
+figures the run does not amplify), and the positions (angles times the rib's lengths, the
+sleeve, the tips) within 1e-10 of the rib's length, two orders below the Newton tolerance
+(1e-8 at h = 1e-4 s): a term computed differently or a stopping decision taken differently
+shows above both.
+
+The lock instant is found by the Illinois root find to EVENT_TIME_TOLERANCE (1e-12 s) on
+either path; its bracket may close on either side of the root, so the two lock instants
+agree to that tolerance (and the sleeve's difference before it over its speed), not to
+round-off.  The locked steps are therefore compared from one locked state, taken by both.
+"""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from umbrella_sim.core.engines import EVENT_TIME_TOLERANCE
+from umbrella_sim.core.integrators import PHI_TOLERANCE
+from umbrella_sim.core.kernel import load_kernel
+from umbrella_sim.core.umbrella3d import integrator3d
+from umbrella_sim.core.umbrella3d.integrator3d import MidpointUmbrella
+from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+from umbrella_sim.core.umbrella3d.simulator3d import SimulationFailed, UmbrellaSimulator3D
+
+AGREEMENT = 1e-10
+needs_kernel = pytest.mark.skipif(load_kernel() is None,
+                                  reason='the compiled kernel is not built')
+
+#: an asymmetric umbrella from rest: a hinge stuck until 4 ms, one until its torque reaches
+#: 1.5 N m, Coulomb and viscous friction, an out-of-plane kick, a tip mass off the plane
+ASYMMETRIC = {'ribs': 4, 'elements_per_segment': 1, 'time_step': 1e-4, 'sleeve_force': 10.0,
+              'v0': 0.0, 'rib1.stick_until': 0.004, 'rib3.stick_torque': 1.5,
+              'rib2.hinge_coulomb': 0.05, 'rib0.hinge_viscous': 0.01,
+              'rib2.out_of_plane_rate': 0.3, 'rib0.tip_mass': 0.01, 'rib0.tip_offset_z': 0.02}
+
+
+def both(values: dict):
+    """Return the compiled and the numpy simulator of values."""
+    p = UmbrellaRibsParams.from_mapping(values)
+    compiled = UmbrellaSimulator3D(p, kernel='compiled')
+    assert compiled.integrator.backend == 'compiled'
+    return compiled, UmbrellaSimulator3D(p, kernel='numpy')
+
+
+#: positions, compared on the rib's length: (figure, the length it is multiplied by)
+POSITIONS = (('alpha1', 'l1'), ('alpha2', 'l3'), ('sleeve_position', None), ('tip', None))
+
+
+def perturbed_reference(values: dict) -> UmbrellaSimulator3D:
+    """Return the numpy simulator of values with its initial rates one ulp up."""
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), kernel='numpy')
+    s = sim.state
+    sim.state = replace(s, vr=np.nextafter(s.vr, np.inf), pr=None, ps=None)
+    return sim
+
+
+def assert_rows_agree(a: dict, b: dict, spread: dict, model, rows=slice(None)):
+    """Assert a agrees with b within 10 x the reference's ulp spread (module docstring)."""
+    assert a.keys() == b.keys()
+    for name in a:
+        x, y = np.asarray(a[name], float)[rows], np.asarray(b[name], float)[rows]
+        z = np.asarray(spread[name], float)[rows]
+        assert x.shape == y.shape, name
+        bound = 10.0 * np.max(np.abs(z - y)) + 1e-12 * np.max(np.abs(y))
+        assert np.max(np.abs(x - y)) <= bound, name
+    length = max(np.max(model.l1), np.max(model.l3))
+    for name, lever in POSITIONS:
+        x, y = np.asarray(a[name])[rows], np.asarray(b[name])[rows]
+        arm = 1.0 if lever is None else getattr(model, lever)
+        assert np.max(np.abs((x - y) * arm)) <= AGREEMENT * length, name
+
+
+def assert_states_agree(s, t, u=None):
+    """Assert s agrees with t: to 1e-10 relative, or within 10 x its ulp spread u - t."""
+    assert s.t == t.t
+    np.testing.assert_array_equal(np.isnan(s.stuck), np.isnan(t.stuck))
+    for name in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'pr', 'ps'):
+        x, y = getattr(s, name), getattr(t, name)
+        bound = AGREEMENT * max(np.max(np.abs(y)), 1e-300)
+        if u is not None:
+            bound = max(bound, 10.0 * np.max(np.abs(getattr(u, name) - y)))
+        assert np.max(np.abs(x - y)) <= bound, name
+
+
+def assert_on_the_joints(sim: UmbrellaSimulator3D):
+    """Assert the state's joints hold: Phi to Newton's residual, J v to round-off."""
+    m, s = sim.model, sim.state
+    phi_r, phi_s = m.constraints(s.qr, s.qs, s.stuck, sim.locked)
+    assert max(np.max(np.abs(phi_r)), np.max(np.abs(phi_s))) < PHI_TOLERANCE
+    j_rr, j_rs, j_ss, active = m.constraint_jacobian(s.qr, s.stuck, sim.locked)
+    jv = np.einsum('rij,rj->ri', j_rr, s.vr) + j_rs @ s.vs
+    assert np.max(np.abs(jv)) < 1e-12 * np.max(np.abs(s.vr))
+    assert np.all(np.abs((j_ss @ s.vs)[active]) < 1e-12 * np.max(np.abs(s.vr)))
+
+
+@needs_kernel
+def test_compiled_equals_numpy_while_hinges_stick_and_rub():
+    """40 ms: a stuck hinge released by time, one by its torque, friction, a kick."""
+    compiled, numpy_sim = both(ASYMMETRIC)
+    a = compiled.run(0.04).arrays()
+    b = numpy_sim.run(0.04).arrays()
+    reference = perturbed_reference(ASYMMETRIC)
+    spread = reference.run(0.04).arrays()
+    stuck = b['stuck']
+    assert stuck[0, 1] and stuck[0, 3] and not stuck[-1, 1]      # both rules happened
+    assert not stuck[-1, 3] and stuck[len(stuck) // 4, 3]
+    assert_rows_agree(a, b, spread, compiled.model)
+    assert_on_the_joints(compiled)
+    assert compiled.record.friction[2] < 0.0 and compiled.record.friction[0] < 0.0
+    for name, peak in compiled.record.peak.items():
+        want = numpy_sim.record.peak[name]
+        # as the rows: the figure's largest spread (over the ribs)
+        bound = 10.0 * np.max(np.abs(reference.record.peak[name] - want)) + 1e-12 * want
+        assert np.all(np.abs(peak - want) <= bound), name
+        assert compiled.record.peak_where[name] == numpy_sim.record.peak_where[name]
+
+
+@pytest.mark.slow
+@needs_kernel
+@pytest.mark.parametrize('lock', ['plastic', 'energy'])
+def test_compiled_equals_numpy_through_the_lock(lock):
+    """A deployment to the lock and 5 ms past it, each lock rule."""
+    values = dict(ASYMMETRIC, lock=lock)
+    compiled, numpy_sim = both(values)
+    a = compiled.run(1.0, after_lock=0.005).arrays()
+    b = numpy_sim.run(1.0, after_lock=0.005).arrays()
+    spread = perturbed_reference(values).run(1.0, after_lock=0.005).arrays()
+    deploying = ~b['locked']
+    assert 1000 < np.count_nonzero(deploying) < len(deploying) - 40
+    n = np.count_nonzero(deploying)
+    assert_rows_agree(*({k: v[:n] for k, v in r.items()} for r in (a, b, spread)),
+                      compiled.model)
+    # the root find closes its bracket within EVENT_TIME_TOLERANCE; the sleeve's paths to
+    # the stop differ by what they differ before, which moves the root by that / its speed
+    last = np.count_nonzero(deploying) - 1
+    gap = abs(a['sleeve_position'][last] - b['sleeve_position'][last])
+    shift = gap / abs(b['sleeve_velocity'][last])
+    assert abs(compiled.lock_time - numpy_sim.lock_time) <= 2 * (EVENT_TIME_TOLERANCE + shift)
+    # the compiled run's own balances, through the lock
+    for sim in (compiled, numpy_sim):
+        s = sim.record.summary()
+        assert s['energy_balance_residual'] < 1e-9 * s['energy_scale']
+        assert_on_the_joints(sim)
+    # locked steps from one state (and the reference's from it moved by one ulp)
+    s_c = s_n = numpy_sim.state
+    s_u = replace(s_n, vr=np.nextafter(s_n.vr, np.inf), pr=None, ps=None)
+    h = numpy_sim.h
+    for _ in range(20):
+        s_c, w_c = compiled.integrator.step(s_c, h, compiled.force, True)
+        s_n, w_n = numpy_sim.integrator.step(s_n, h, numpy_sim.force, True)
+        s_u, _ = numpy_sim.integrator.step(s_u, h, numpy_sim.force, True)
+        assert w_c.iterations == w_n.iterations
+        assert w_c.force == pytest.approx(w_n.force, abs=AGREEMENT * abs(a['work'][-1]))
+    assert_states_agree(s_c, s_n, s_u)
+
+
+@needs_kernel
+def test_runs_of_steps_equal_steps_one_at_a_time():
+    """Runs of grid steps (advance: one compiled call) are step's steps, figures alike."""
+    p = UmbrellaRibsParams.from_mapping(ASYMMETRIC)
+    runs, single = UmbrellaSimulator3D(p), UmbrellaSimulator3D(p)
+    runs.advance(150)
+    for _ in range(150):
+        single.step()
+    assert runs.k == single.k == 150
+    a = single.record.arrays()
+    assert_rows_agree(runs.record.arrays(), a, a, runs.model)
+    assert_states_agree(runs.state, single.state)
+    assert runs.integrator.iterations == single.integrator.iterations
+
+
+def test_numpy_path_when_the_library_is_absent(monkeypatch, capfd):
+    """No library: the numpy reference steps, and says so once; 'compiled' is an error."""
+    monkeypatch.setattr(integrator3d, 'load_kernel', lambda: None)
+    monkeypatch.setattr(integrator3d, 'kernel_refusal', lambda: None)
+    monkeypatch.setattr(integrator3d, '_SAID', set())
+    p = UmbrellaRibsParams.from_mapping({'ribs': 2, 'time_step': 1e-4})
+    for _ in range(2):
+        sim = UmbrellaSimulator3D(p)
+        assert sim.integrator.backend == 'numpy'
+    err = capfd.readouterr().err
+    assert err.count('not built') == 1 and 'numpy reference path' in err
+    sim.run(0.001)
+    assert sim.k == 10
+    with pytest.raises(RuntimeError, match='not built'):
+        UmbrellaSimulator3D(p, kernel='compiled')
+
+
+def test_a_moving_base_steps_on_numpy(capfd):
+    """The compiled step has the hub fixed: a free bus or a driven hub take the numpy path."""
+    values = {'ribs': 2, 'time_step': 1e-4, 'base': 'free'}
+    integrator3d._SAID.discard(next((w for w in integrator3d._SAID if "'free'" in w), None))
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values))
+    assert sim.integrator.backend == 'numpy'
+    assert "base: 'free'" in capfd.readouterr().err
+    with pytest.raises(RuntimeError, match='hub fixed'):
+        MidpointUmbrella(sim.model, kernel='compiled')
+    with pytest.raises(ValueError, match="kernel='fast': must be auto, compiled or numpy"):
+        MidpointUmbrella(sim.model, kernel='fast')
+
+
+def test_a_bad_kernel_choice_in_the_environment_is_named(monkeypatch):
+    monkeypatch.setenv('UMBRELLA_SIM_KERNEL', 'fast')
+    with pytest.raises(ValueError, match="UMBRELLA_SIM_KERNEL='fast': must be auto"):
+        UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping({'ribs': 2}))
+
+
+@needs_kernel
+def test_a_failed_compiled_step_is_a_clear_error_that_keeps_the_steps_done():
+    """Newton allowed one iteration: the run stops naming the step and why; the rows stay."""
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(ASYMMETRIC))
+    sim.advance(3)
+    sim.integrator.compiled.call.max_iter = 1
+    with pytest.raises(SimulationFailed, match=r'after t = 0\.0003 s failed: Newton did not '
+                       r'converge at t = 0\.0004 s'):
+        sim.advance(5)
+    assert sim.k == 3 and len(sim.record.rows['time']) == 4
+    assert sim.state.t == pytest.approx(3e-4, abs=1e-15)

@@ -1,0 +1,782 @@
+// Copyright 2026 umbrella_sim developers
+//
+// Licensed under the Apache License, Version 2.0 (the "License");
+// you may not use this file except in compliance with the License.
+// You may obtain a copy of the License at
+//
+//     http://www.apache.org/licenses/LICENSE-2.0
+//
+// Unless required by applicable law or agreed to in writing, software
+// distributed under the License is distributed on an "AS IS" BASIS,
+// WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+// See the License for the specific language governing permissions and
+// limitations under the License.
+
+/*
+ * The compiled step of the whole umbrella in 3D, hub fixed: umbrella3d/integrator3d.py's
+ * MidpointUmbrella step (the numpy reference, which documents the scheme) operation for
+ * operation, rib by rib, and the simulator's grid loop around it (umbrella3d/simulator3d.py:
+ * the stop's crossing ends a run of steps, the lock itself stays in Python; a stuck hinge's
+ * release).
+ *
+ * Layout: every per-rib array is rib-major (rib r's block contiguous); a body (leaf, link)
+ * of a rib has t translations (0, 3), its angle, its elastic coordinates, at an offset in
+ * the rib's coordinates; its points' kinematics (umbrella3d/model3d.py _BodyStack.kin) are
+ * rho = R(alpha) (x + S e) [+ R2], Jacobian [I3 | e_z x R y | R S].  The linear algebra is
+ * block-arrow (umbrella3d/arrow.py): each rib's (n + 9) block factored alone, the shared
+ * unknowns (sleeve, stop multiplier) through their Schur complement: cost linear in the ribs.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "_kernel.h"
+#include "_kernel_dense.h"
+
+#define ROWS 9         /* joint rows of a rib (model3d.N_RIB_ROWS) */
+#define ROW_STICK 8    /* the stuck hinge's row */
+#define MAXS 16        /* shared unknowns at most (coordinates + rows) */
+
+typedef struct {
+    int t, nb, ne, np, off;            /* translations, coordinates, elastic, points, offset */
+    const double *x, *w, *shape;       /* R x P x 3, R x P, R x P x 3 x ne */
+} Body;
+
+typedef struct {                       /* one body's point kinematics, every rib */
+    double *qy, *jac, *qs;             /* R x P x 3, R x P x 3 x nb, R x P x 3 x ne */
+} Kin;
+
+struct Ctx3D {
+    const Model3D *m;
+    Body b[2];
+    int R, n, ns, cs, s, mb;
+    Kin k1[2], km[2];
+    double *mass;                      /* R x n x n: M(q1) */
+    /* a rib's block [[A, sign Jc^T], [Jr, Z]] factored through its bodies: A is block
+     * diagonal (leaf, link), each LU'd; W = A^-1 sign Jc^T; T = Z - Jr W, LU'd; Y = B^-1 C */
+    double *Af, *W, *T, *Jf, *Y;       /* R x (nb0^2 + nb1^2), R x n x 9, R x 81, R x 9 x n,
+                                        * R x mb x s */
+    int *apiv, *tpiv;                  /* R x n, R x 9 */
+    double E[MAXS * MAXS], S[MAXS * MAXS];
+    int spiv[MAXS];
+    double *jm, *jr, *jg;              /* R x 9 x n: J(q_m), J(q), Gonzalez J */
+    double *vp_a, *vp_b;               /* R x P x 3 (largest body) */
+    double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
+    double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
+    double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
+    int iterations;
+};
+
+/* ------------------------------------------------------------------ context */
+static void body_of(Body *b, int t, int ne, int np, int off, const double *x, const double *w,
+                    const double *shape) {
+    b->t = t; b->ne = ne; b->nb = t + 1 + ne; b->np = np; b->off = off;
+    b->x = x; b->w = w; b->shape = shape;
+}
+
+static int kin_alloc(Kin *k, const Body *b, int R) {
+    k->qy = malloc(sizeof(double) * R * b->np * 3);
+    k->jac = calloc((size_t)R * b->np * 3 * b->nb, sizeof(double));
+    k->qs = malloc(sizeof(double) * R * b->np * 3 * b->ne);
+    return k->qy && k->jac && k->qs;
+}
+
+static void kin_free(Kin *k) { free(k->qy); free(k->jac); free(k->qs); }
+
+void umbrella3d_free(Ctx3D *x) {
+    if (!x) return;
+    for (int j = 0; j < 2; j++) { kin_free(&x->k1[j]); kin_free(&x->km[j]); }
+    double *bufs[] = {x->mass, x->Af, x->W, x->T, x->Jf, x->Y, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
+                      x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
+                      x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
+                      x->gyro, x->ycol, x->fric, x->work_fric};
+    for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
+    free(x->apiv);
+    free(x->tpiv);
+    free(x);
+}
+
+Ctx3D *umbrella3d_new(const Model3D *m) {
+    if (m->n_shared + m->n_shared_rows > MAXS) return NULL;
+    Ctx3D *x = calloc(1, sizeof(Ctx3D));
+    if (!x) return NULL;
+    x->m = m;
+    int R = m->n_ribs, n = m->n_rib;
+    x->R = R; x->n = n; x->ns = m->n_shared; x->cs = m->n_shared_rows;
+    x->s = x->ns + x->cs; x->mb = n + ROWS;
+    body_of(&x->b[0], 0, m->leaf_elastic, m->leaf_points, 0, m->leaf_x, m->leaf_w,
+            m->leaf_shape);
+    body_of(&x->b[1], 3, m->link_elastic, m->link_points, m->link_offset, m->link_x,
+            m->link_w, m->link_shape);
+    int ok = 1;
+    for (int j = 0; j < 2; j++) ok &= kin_alloc(&x->k1[j], &x->b[j], R) & kin_alloc(&x->km[j], &x->b[j], R);
+    int mb = x->mb, s = x->s, N = R * n;
+    int pmax = x->b[0].np > x->b[1].np ? x->b[0].np : x->b[1].np;
+#define ALLOC(f, k) (x->f = calloc((size_t)(k), sizeof(double))) != NULL
+    int nb0 = x->b[0].nb, nb1 = x->b[1].nb;
+    ok = ok && ALLOC(mass, R * n * n) && ALLOC(Af, R * (nb0 * nb0 + nb1 * nb1))
+        && ALLOC(W, R * n * ROWS) && ALLOC(T, R * ROWS * ROWS) && ALLOC(Jf, R * ROWS * n)
+        && ALLOC(Y, R * mb * s) && ALLOC(jm, R * ROWS * n)
+        && ALLOC(jr, R * ROWS * n) && ALLOC(jg, R * ROWS * n) && ALLOC(vp_a, R * pmax * 3)
+        && ALLOC(vp_b, R * pmax * 3) && ALLOC(q0, N + MAXS) && ALLOC(v0, N + MAXS)
+        && ALLOC(p0, N + MAXS) && ALLOC(l0, R * ROWS + MAXS) && ALLOC(q, N + MAXS)
+        && ALLOC(v, N + MAXS) && ALLOC(lam, R * ROWS + MAXS) && ALLOC(p, N + MAXS)
+        && ALLOC(dq, N + MAXS) && ALLOC(qm, N + MAXS) && ALLOC(v1, N + MAXS)
+        && ALLOC(p1, N + MAXS) && ALLOC(gt, N + MAXS) && ALLOC(res, N + MAXS)
+        && ALLOC(tmp, N + MAXS) && ALLOC(phi0, R * ROWS + MAXS) && ALLOC(phi, R * ROWS + MAXS)
+        && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
+        && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R);
+#undef ALLOC
+    x->apiv = ok ? calloc((size_t)R * n, sizeof(int)) : NULL;
+    x->tpiv = ok ? calloc((size_t)R * ROWS, sizeof(int)) : NULL;
+    if (!ok || !x->apiv || !x->tpiv) { umbrella3d_free(x); return NULL; }
+    return x;
+}
+
+/* ------------------------------------------------------------------ kinematics */
+/* Every rib's point kinematics of body b at the rib coordinates q (R x n). */
+static void kinematics(const Ctx3D *x, int j, const double *q, Kin *k) {
+    const Body *b = &x->b[j];
+    int R = x->R, n = x->n, P = b->np, ne = b->ne, nb = b->nb, t = b->t;
+    for (int r = 0; r < R; r++) {
+        const double *qb = q + r * n + b->off;
+        double c = cos(qb[t]), sn = sin(qb[t]);
+        const double *e = qb + t + 1;
+        for (int pt = 0; pt < P; pt++) {
+            int rp = r * P + pt;
+            const double *S = b->shape + (size_t)rp * 3 * ne;
+            const double *xp = b->x + rp * 3;
+            double y[3];
+            for (int i = 0; i < 3; i++) {
+                double acc = xp[i];
+                for (int a = 0; a < ne; a++) acc += S[i * ne + a] * e[a];
+                y[i] = acc;
+            }
+            double *qy = k->qy + rp * 3;
+            qy[0] = c * y[0] - sn * y[1];
+            qy[1] = sn * y[0] + c * y[1];
+            qy[2] = y[2];
+            double *qs = k->qs + (size_t)rp * 3 * ne;
+            for (int a = 0; a < ne; a++) {
+                qs[a] = c * S[a] - sn * S[ne + a];
+                qs[ne + a] = sn * S[a] + c * S[ne + a];
+                qs[2 * ne + a] = S[2 * ne + a];
+            }
+            double *J = k->jac + (size_t)rp * 3 * nb;
+            for (int i = 0; i < 3; i++) {
+                double *row = J + i * nb;
+                for (int a = 0; a < t; a++) row[a] = (a == i) ? 1.0 : 0.0;
+                memcpy(row + t + 1, qs + i * ne, sizeof(double) * ne);
+            }
+            J[t] = -qy[1];
+            J[nb + t] = qy[0];
+            J[2 * nb + t] = 0.0;
+        }
+    }
+}
+
+/* M(q) of every rib (R x n x n; its body blocks: the blocks between bodies stay 0): the constant part (Model3D.const_mass: the twist's rotary
+ * inertia and each body's elastic block sum_p w S^T S, which the rotation leaves alone),
+ * plus sum_p w J^T J in the rows and columns of each body's frame coordinates. */
+static void mass_matrix(Ctx3D *x, const Kin *k) {
+    const Model3D *m = x->m;
+    int R = x->R, n = x->n;
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        int P = b->np, nb = b->nb, t = b->t;
+        for (int r = 0; r < R; r++) {
+            double *M = x->mass + (size_t)r * n * n + b->off * n + b->off;
+            const double *M0 = m->const_mass + (size_t)r * n * n + b->off * n + b->off;
+            for (int a = 0; a < nb; a++) memcpy(M + a * n, M0 + a * n, sizeof(double) * nb);
+            for (int pt = 0; pt < P; pt++) {
+                double w = b->w[r * P + pt];
+                const double *J = k[j].jac + (size_t)(r * P + pt) * 3 * nb;
+                for (int a = 0; a <= t; a++) {
+                    double ja0 = w * J[a], ja1 = w * J[nb + a], ja2 = w * J[2 * nb + a];
+                    double *Ma = M + a * n;
+                    for (int c = a; c < nb; c++)
+                        Ma[c] += ja0 * J[c] + ja1 * J[nb + c] + ja2 * J[2 * nb + c];
+                }
+            }
+            for (int a = 0; a <= t; a++)
+                for (int c = a + 1; c < nb; c++) M[c * n + a] = M[a * n + c];
+        }
+    }
+}
+
+/* y = A v of rib r's n x n matrix A, block diagonal in the bodies (M, K, their sums) */
+static void body_matvec(const Ctx3D *x, const double *A, const double *v, double *y) {
+    int n = x->n;
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        for (int a = b->off; a < b->off + b->nb; a++) {
+            double acc = 0.0;
+            for (int c = b->off; c < b->off + b->nb; c++) acc += A[a * n + c] * v[c];
+            y[a] = acc;
+        }
+    }
+}
+
+/* (pr, ps) = M (vr, vs) (the hub fixed: no rib-shared block) */
+static void matvec(const Ctx3D *x, const double *v, double *p) {
+    int R = x->R, n = x->n;
+    for (int r = 0; r < R; r++)
+        body_matvec(x, x->mass + (size_t)r * n * n, v + r * n, p + r * n);
+    p[R * n] = x->m->sleeve_mass * v[R * n];
+}
+
+/* every point's velocity J vb of body j (R x P x 3) */
+static void point_velocity(const Ctx3D *x, int j, const Kin *k, const double *v, double *vp) {
+    const Body *b = &x->b[j];
+    int P = b->np, nb = b->nb;
+    for (int r = 0; r < x->R; r++) {
+        const double *vb = v + r * x->n + b->off;
+        for (int pt = 0; pt < P; pt++) {
+            const double *J = k->jac + (size_t)(r * P + pt) * 3 * nb;
+            for (int i = 0; i < 3; i++) {
+                double acc = 0.0;
+                for (int a = 0; a < nb; a++) acc += J[i * nb + a] * vb[a];
+                vp[(r * P + pt) * 3 + i] = acc;
+            }
+        }
+    }
+}
+
+/* out += sum_p w (d(J a)/dq)^T V of body j (model3d _BodyStack.dv_t), rib r */
+static void dv_t(const Ctx3D *x, int j, const Kin *k, int r, const double *ab,
+                 const double *rel_a, const double *vo, double *out) {
+    const Body *b = &x->b[j];
+    int P = b->np, ne = b->ne, t = b->t;
+    double acc_t = 0.0;
+    for (int pt = 0; pt < P; pt++) {
+        int rp = r * P + pt;
+        double w = b->w[rp];
+        const double *ra = rel_a + rp * 3, *o = vo + rp * 3;
+        double qz0 = ra[0] - (t ? ab[0] : 0.0), qz1 = ra[1] - (t ? ab[1] : 0.0);
+        acc_t += w * (-qz1 * o[0] + qz0 * o[1]);
+        const double *qs = k->qs + (size_t)rp * 3 * ne;
+        double f = ab[t] * w;
+        for (int a = 0; a < ne; a++) out[t + 1 + a] += f * (qs[a] * o[1] - qs[ne + a] * o[0]);
+    }
+    out[t] += acc_t;
+}
+
+/* d/dq [1/2 a^T M(q) b] of the rib coordinates (the hub fixed: none of the shared ones) */
+static void kinetic_gradient(Ctx3D *x, const Kin *k, const double *a, const double *bv,
+                             double *g) {
+    int R = x->R, n = x->n;
+    memset(g, 0, sizeof(double) * (R * n + x->ns));
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        point_velocity(x, j, &k[j], a, x->vp_a);
+        point_velocity(x, j, &k[j], bv, x->vp_b);
+        for (int r = 0; r < R; r++) {
+            double *o = g + r * n + b->off;
+            dv_t(x, j, &k[j], r, a + r * n + b->off, x->vp_a, x->vp_b, o);
+            dv_t(x, j, &k[j], r, bv + r * n + b->off, x->vp_b, x->vp_a, o);
+            for (int c = 0; c < b->nb; c++) o[c] *= 0.5;
+        }
+    }
+}
+
+/* 2 sum w J^T d(J v)/dq of every rib (R x n x n), without the elastic-elastic block */
+static void gyroscopic(Ctx3D *x, const Kin *k, const double *v) {
+    int R = x->R, n = x->n;
+    memset(x->gyro, 0, sizeof(double) * R * n * n);
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        int P = b->np, nb = b->nb, ne = b->ne, t = b->t;
+        point_velocity(x, j, &k[j], v, x->vp_a);
+        for (int r = 0; r < R; r++) {
+            double *G = x->gyro + (size_t)r * n * n + b->off * n + b->off;
+            const double *vb = v + r * n + b->off;
+            for (int pt = 0; pt < P; pt++) {
+                int rp = r * P + pt;
+                double w2 = 2.0 * b->w[rp];
+                const double *J = k[j].jac + (size_t)rp * 3 * nb;
+                const double *vr = x->vp_a + rp * 3;
+                const double *qs = k[j].qs + (size_t)rp * 3 * ne;
+                double qz0 = vr[0] - (t ? vb[0] : 0.0), qz1 = vr[1] - (t ? vb[1] : 0.0);
+                double d0 = -qz1, d1 = qz0;          /* column t of dv: e_z x qz */
+                for (int a = 0; a < nb; a++) {
+                    double g = J[a] * d0 + J[nb + a] * d1;
+                    G[a * n + t] += w2 * g;
+                    if (a > t) continue;             /* the elastic-elastic block: left out */
+                    for (int e = 0; e < ne; e++) {   /* vb[t] e_z x (R S) */
+                        double c0 = -vb[t] * qs[ne + e], c1 = vb[t] * qs[e];
+                        G[a * n + t + 1 + e] += w2 * (J[a] * c0 + J[nb + a] * c1);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/* ------------------------------------------------------------------ joints */
+static double stuck_on(double s) { return isnan(s) ? 0.0 : 1.0; }
+
+/* Phi (R x 9, then the shared rows) at (qr, qs) */
+static void constraints(const Ctx3D *x, const double *q, const double *stuck, int locked,
+                        double *phi) {
+    const Model3D *m = x->m;
+    int n = x->n;
+    for (int r = 0; r < x->R; r++) {
+        const double *qr = q + r * n;
+        double a1 = qr[m->i_a1], a2 = qr[m->i_a2];
+        double c1 = cos(a1), s1 = sin(a1), c2 = cos(a2), s2 = sin(a2);
+        double r1 = m->l1[r] + qr[m->i_u1], r3 = m->l3[r] + qr[m->i_uh];
+        double sl1 = qr[m->i_s1], tw1 = qr[m->i_p1], sl2 = qr[m->i_s2], tw2 = qr[m->i_p2];
+        double *f = phi + r * ROWS;
+        f[0] = r1 * c1 - qr[m->i_rx];
+        f[1] = r1 * s1 - qr[m->i_ry];
+        f[2] = qr[m->i_w1] - qr[m->i_rz];
+        f[3] = c1 * sl1 - s1 * tw1 - c2 * sl2 + s2 * tw2;
+        f[4] = s1 * sl1 + c1 * tw1 - s2 * sl2 - c2 * tw2;
+        f[5] = qr[m->i_rx] + r3 * c2;
+        f[6] = qr[m->i_rz] + qr[m->i_wh];
+        f[7] = qr[m->i_ry] + r3 * s2 - q[x->R * n];
+        f[8] = isnan(stuck[r]) ? 0.0 : a1 - stuck[r];
+    }
+    phi[x->R * ROWS] = locked ? q[x->R * n] - m->y_stop : 0.0;
+}
+
+/* J_rr (R x 9 x n) at q (J_rs: -1 at row 7 of y_s; J_ss: the stop's 1 when locked) */
+static void jacobian(const Ctx3D *x, const double *q, const double *stuck, double *J) {
+    const Model3D *m = x->m;
+    int n = x->n;
+    memset(J, 0, sizeof(double) * x->R * ROWS * n);
+    for (int r = 0; r < x->R; r++) {
+        const double *qr = q + r * n;
+        double *j = J + r * ROWS * n;
+        double a1 = qr[m->i_a1], a2 = qr[m->i_a2];
+        double c1 = cos(a1), s1 = sin(a1), c2 = cos(a2), s2 = sin(a2);
+        double r1 = m->l1[r] + qr[m->i_u1], r3 = m->l3[r] + qr[m->i_uh];
+        double sl1 = qr[m->i_s1], tw1 = qr[m->i_p1], sl2 = qr[m->i_s2], tw2 = qr[m->i_p2];
+#define JS(row, col, val) j[(row) * n + (col)] = (val)
+        JS(0, m->i_a1, -r1 * s1); JS(0, m->i_u1, c1); JS(0, m->i_rx, -1.0);
+        JS(1, m->i_a1, r1 * c1); JS(1, m->i_u1, s1); JS(1, m->i_ry, -1.0);
+        JS(2, m->i_w1, 1.0); JS(2, m->i_rz, -1.0);
+        JS(3, m->i_a1, -s1 * sl1 - c1 * tw1);
+        JS(4, m->i_a1, c1 * sl1 - s1 * tw1);
+        JS(3, m->i_s1, c1); JS(4, m->i_s1, s1);
+        JS(3, m->i_p1, -s1); JS(4, m->i_p1, c1);
+        JS(3, m->i_a2, s2 * sl2 + c2 * tw2);
+        JS(4, m->i_a2, -c2 * sl2 + s2 * tw2);
+        JS(3, m->i_s2, -c2); JS(4, m->i_s2, -s2);
+        JS(3, m->i_p2, s2); JS(4, m->i_p2, -c2);
+        JS(5, m->i_rx, 1.0); JS(5, m->i_a2, -r3 * s2); JS(5, m->i_uh, c2);
+        JS(6, m->i_rz, 1.0); JS(6, m->i_wh, 1.0);
+        JS(7, m->i_ry, 1.0); JS(7, m->i_a2, r3 * c2); JS(7, m->i_uh, s2);
+        JS(8, m->i_a1, stuck_on(stuck[r]));
+#undef JS
+    }
+}
+
+static double max_abs(int k, const double *a) {
+    double best = 0.0;
+    for (int i = 0; i < k; i++) if (fabs(a[i]) > best || isnan(a[i])) best = isnan(a[i]) ? NAN : fabs(a[i]);
+    return best;
+}
+
+/* ------------------------------------------------------------------ arrow algebra */
+/* X = A^-1 X for the ROWS right-hand sides of X (N x ROWS, row-major), with lu_factor's A
+ * and piv (lu_solve's substitutions, a row of X at a time) */
+static void lu_solve_rows(int N, const double *A, const int *piv, double *X) {
+    for (int k = 0; k < N; k++)
+        if (piv[k] != k)
+            for (int c = 0; c < ROWS; c++) {
+                double t = X[k * ROWS + c];
+                X[k * ROWS + c] = X[piv[k] * ROWS + c];
+                X[piv[k] * ROWS + c] = t;
+            }
+    for (int i = 0; i < N; i++)
+        for (int j = 0; j < i; j++) {
+            double f = A[i * N + j];
+            if (f != 0.0)
+                for (int c = 0; c < ROWS; c++) X[i * ROWS + c] -= f * X[j * ROWS + c];
+        }
+    for (int i = N - 1; i >= 0; i--) {
+        for (int j = N - 1; j > i; j--) {
+            double f = A[i * N + j];
+            if (f != 0.0)
+                for (int c = 0; c < ROWS; c++) X[i * ROWS + c] -= f * X[j * ROWS + c];
+        }
+        for (int c = 0; c < ROWS; c++) X[i * ROWS + c] *= A[i * N + i];
+    }
+}
+
+/* rib r's block, factored (arrow_factor), solved for v (mb) in place:
+ * x = A^-1 v_top, lambda = T^-1 (v_bottom - Jr x), x -= W lambda */
+static void rib_solve(const Ctx3D *x, int r, double *v) {
+    int n = x->n;
+    const double *A = x->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        lu_solve(b->nb, A, x->apiv + r * n + b->off, v + b->off);
+        A += b->nb * b->nb;
+    }
+    const double *J = x->Jf + (size_t)r * ROWS * n, *W = x->W + (size_t)r * n * ROWS;
+    for (int i = 0; i < ROWS; i++) {
+        double acc = 0.0;
+        for (int a = 0; a < n; a++) if (J[i * n + a] != 0.0) acc += J[i * n + a] * v[a];
+        v[n + i] -= acc;
+    }
+    lu_solve(ROWS, x->T + r * ROWS * ROWS, x->tpiv + r * ROWS, v + n);
+    for (int a = 0; a < n; a++) {
+        double acc = 0.0;
+        for (int i = 0; i < ROWS; i++) acc += W[a * ROWS + i] * v[n + i];
+        v[a] -= acc;
+    }
+}
+
+/* Factor [[M + extra, sign Jc^T], [Jr, Z]] (integrator3d._blocks) in arrow form: each rib's
+ * block through its bodies (rib_solve), B^-1 C, the Schur complement of the shared unknowns
+ * by LU. */
+static int arrow_factor(Ctx3D *x, const double *extra, const double *jc, const double *jr,
+                        const double *stuck, int locked, double sign) {
+    int R = x->R, n = x->n, mb = x->mb, s = x->s, ns = x->ns;
+    const double msl = x->m->sleeve_mass;
+    double L = locked ? 1.0 : 0.0;
+    /* the corner: [[m_ss, sign J_ss^T], [J_ss, 1 - active]] */
+    x->E[0] = msl; x->E[1] = sign * L; x->E[s] = L; x->E[s + 1] = 1.0 - L;
+    memcpy(x->S, x->E, sizeof(double) * s * s);
+    for (int r = 0; r < R; r++) {
+        const double *M = x->mass + (size_t)r * n * n;
+        const double *Ex = extra ? extra + (size_t)r * n * n : NULL;
+        const double *Jc = jc + r * ROWS * n, *Jr = jr + r * ROWS * n;
+        double *A = x->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
+        double *W = x->W + (size_t)r * n * ROWS, *T = x->T + r * ROWS * ROWS;
+        for (int a = 0; a < n; a++)
+            for (int i = 0; i < ROWS; i++) W[a * ROWS + i] = sign * Jc[i * n + a];
+        for (int j = 0; j < 2; j++) {
+            const Body *b = &x->b[j];
+            int nb = b->nb, o = b->off;
+            for (int a = 0; a < nb; a++)
+                for (int c = 0; c < nb; c++)
+                    A[a * nb + c] = M[(o + a) * n + o + c] + (Ex ? Ex[(o + a) * n + o + c] : 0.0);
+            if (lu_factor(nb, A, x->apiv + r * n + o) != OK) return SINGULAR;
+            lu_solve_rows(nb, A, x->apiv + r * n + o, W + o * ROWS);
+            A += nb * nb;
+        }
+        memset(T, 0, sizeof(double) * ROWS * ROWS);
+        for (int i = 0; i < ROWS; i++)                 /* T = -Jr W over Jr's nonzeros */
+            for (int a = 0; a < n; a++) {
+                double f = Jr[i * n + a];
+                if (f == 0.0) continue;
+                for (int k = 0; k < ROWS; k++) T[i * ROWS + k] -= f * W[a * ROWS + k];
+            }
+        T[ROW_STICK * ROWS + ROW_STICK] += 1.0 - stuck_on(stuck[r]);
+        if (lu_factor(ROWS, T, x->tpiv + r * ROWS) != OK) return SINGULAR;
+        memcpy(x->Jf + (size_t)r * ROWS * n, Jr, sizeof(double) * ROWS * n);
+        /* C: row n + 7 of y_s is J_rs = -1; D: y_s's row at n + 7 is sign J_rs^T */
+        double *Y = x->Y + (size_t)r * mb * s;
+        for (int c = 0; c < s; c++) {
+            memset(x->ycol, 0, sizeof(double) * mb);
+            if (c < ns) {
+                x->ycol[n + 7] = -1.0;
+                rib_solve(x, r, x->ycol);
+            }
+            for (int a = 0; a < mb; a++) Y[a * s + c] = x->ycol[a];
+        }
+        for (int c = 0; c < s; c++) x->S[c] -= sign * -1.0 * Y[(n + 7) * s + c];
+    }
+    return lu_factor(s, x->S, x->spiv) == OK ? OK : SINGULAR;
+}
+
+/* Solve the factored arrow system for (rr (R x mb), rs (s)), in place. */
+static void arrow_solve(Ctx3D *x, double *rr, double *rs, double sign) {
+    int R = x->R, n = x->n, mb = x->mb, s = x->s;
+    double z[MAXS];
+    memcpy(z, rs, sizeof(double) * s);
+    for (int r = 0; r < R; r++) {
+        rib_solve(x, r, rr + r * mb);
+        z[0] -= sign * -1.0 * rr[r * mb + n + 7];
+    }
+    lu_solve(s, x->S, x->spiv, z);
+    memcpy(rs, z, sizeof(double) * s);
+    for (int r = 0; r < R; r++) {
+        const double *Y = x->Y + (size_t)r * mb * s;
+        for (int a = 0; a < mb; a++) {
+            double acc = 0.0;
+            for (int c = 0; c < s; c++) acc += Y[a * s + c] * z[c];
+            rr[r * mb + a] -= acc;
+        }
+    }
+}
+
+/* ------------------------------------------------------------------ the step */
+static double strain_energy(Ctx3D *x, const double *q) {
+    int n = x->n;
+    double e = 0.0;
+    for (int r = 0; r < x->R; r++) {
+        body_matvec(x, x->m->stiffness + (size_t)r * n * n, q + r * n, x->ycol);
+        for (int a = 0; a < n; a++) e += q[r * n + a] * x->ycol[a];
+    }
+    return 0.5 * e;
+}
+
+static void friction(const Ctx3D *x, int r, double dq_a1, double h, double *torque,
+                     double *slope) {
+    const Model3D *m = x->m;
+    double w = dq_a1 / h, eps = m->regularisation, th = tanh(w / eps);
+    *torque = -(m->viscous[r] * w + m->coulomb[r] * th);
+    if (slope) *slope = -(m->viscous[r] + m->coulomb[r] * (1.0 - th * th) / eps) / h;
+}
+
+/* v projected onto J v = 0 in the mass metric (M = x->mass at q) */
+static int project(Ctx3D *x, const double *q, double *v, const double *stuck, int locked) {
+    int R = x->R, n = x->n, mb = x->mb, ns = x->ns;
+    jacobian(x, q, stuck, x->jr);
+    if (arrow_factor(x, NULL, x->jr, x->jr, stuck, locked, 1.0) != OK) return SINGULAR;
+    for (int r = 0; r < R; r++) {
+        double *rr = x->rr + r * mb;
+        const double *J = x->jr + r * ROWS * n;
+        memset(rr, 0, sizeof(double) * n);
+        for (int i = 0; i < ROWS; i++) {
+            double acc = 0.0;
+            for (int c = 0; c < n; c++) acc += J[i * n + c] * v[r * n + c];
+            rr[n + i] = -acc;
+        }
+        rr[n + 7] += v[R * n];           /* -J_rs v_s = y_s' */
+    }
+    double rs[MAXS] = {0.0};
+    rs[ns] = locked ? -v[R * n] : 0.0;
+    arrow_solve(x, x->rr, rs, 1.0);
+    for (int r = 0; r < R; r++)
+        for (int a = 0; a < n; a++) v[r * n + a] += x->rr[r * mb + a];
+    v[R * n] += rs[0];
+    return OK;
+}
+
+/* One step of length h from (q0, v0, l0, p0) into (q, v, lam, p); the works. */
+static int step(Ctx3D *x, const double *stuck, int locked, double h, double force, double tol,
+                double phi_tol, int max_iter) {
+    const Model3D *m = x->m;
+    int R = x->R, n = x->n, N = R * n, ns = x->ns, mb = x->mb, cs = x->cs;
+    const double half_h2 = 0.5 * h * h;
+    double *q = x->q, *q0 = x->q0, *v0 = x->v0, *p0 = x->p0;
+    constraints(x, q0, stuck, locked, x->phi0);
+    for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * v0[i];
+    memcpy(x->lam, x->l0, sizeof(double) * (R * ROWS + cs));
+    int factored = 0, it;
+    double last = INFINITY;
+    for (it = 1; it <= max_iter; it++) {
+        for (int i = 0; i < N + ns; i++) {
+            x->dq[i] = q[i] - q0[i];
+            x->qm[i] = q0[i] + 0.5 * x->dq[i];
+            x->v1[i] = 2.0 * x->dq[i] / h - v0[i];
+        }
+        for (int j = 0; j < 2; j++) {
+            kinematics(x, j, q, &x->k1[j]);
+            kinematics(x, j, x->qm, &x->km[j]);
+        }
+        mass_matrix(x, x->k1);
+        matvec(x, x->v1, x->p1);
+        kinetic_gradient(x, x->km, v0, x->v1, x->gt);
+        /* Gonzalez along the rib coordinates: dq . G_T = f(q1) - f(q0) */
+        matvec(x, v0, x->tmp);
+        double delta = 0.0, dd = 0.0, gdq = 0.0;
+        for (int i = 0; i < N + ns; i++) delta += (x->tmp[i] - p0[i]) * x->v1[i];
+        delta *= 0.5;
+        for (int i = 0; i < N; i++) { dd += x->dq[i] * x->dq[i]; gdq += x->gt[i] * x->dq[i]; }
+        gdq += x->gt[N] * x->dq[N];
+        if (dd > 0.0) {
+            double corr = (delta - gdq) / dd;
+            for (int i = 0; i < N; i++) x->gt[i] += corr * x->dq[i];
+        }
+        constraints(x, q, stuck, locked, x->phi);
+        jacobian(x, x->qm, stuck, x->jm);
+        memcpy(x->jg, x->jm, sizeof(double) * R * ROWS * n);
+        double cons_s = locked ? x->lam[R * ROWS] : 0.0;
+        for (int r = 0; r < R; r++) {
+            const double *dq = x->dq + r * n, *J = x->jm + r * ROWS * n;
+            double *G = x->jg + r * ROWS * n;
+            double ddr = 0.0;
+            for (int a = 0; a < n; a++) ddr += dq[a] * dq[a];
+            if (ddr > 0.0)
+                for (int i = 0; i < ROWS; i++) {
+                    double lin = 0.0;
+                    for (int a = 0; a < n; a++) lin += J[i * n + a] * dq[a];
+                    if (i == 7) lin -= x->dq[N];
+                    double f = (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr;
+                    for (int a = 0; a < n; a++) G[i * n + a] += f * dq[a];
+                }
+            friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
+            const double *lam = x->lam + r * ROWS;
+            body_matvec(x, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
+            for (int a = 0; a < n; a++) {
+                double applied = -x->ycol[a], cons = 0.0;
+                if (a == m->i_a1) applied += x->fric[r];
+                for (int i = 0; i < ROWS; i++) cons += G[i * n + a] * lam[i];
+                x->res[r * n + a] = x->p1[r * n + a] - p0[r * n + a]
+                    - h * (x->gt[r * n + a] + applied + cons);
+            }
+            cons_s -= lam[7];
+        }
+        x->res[N] = x->p1[N] - p0[N] - h * (x->gt[N] - force + cons_s);
+        if (!factored) {
+            jacobian(x, q, stuck, x->jr);
+            for (int i = 0; i < N; i++) x->tmp[i] = x->dq[i] / h;
+            gyroscopic(x, x->km, x->tmp);
+            for (int r = 0; r < R; r++) {         /* (the body blocks arrow_factor reads) */
+                double *G = x->gyro + (size_t)r * n * n;
+                const double *K = m->stiffness + (size_t)r * n * n;
+                for (int j = 0; j < 2; j++) {
+                    const Body *b = &x->b[j];
+                    for (int a = b->off; a < b->off + b->nb; a++)
+                        for (int c = b->off; c < b->off + b->nb; c++)
+                            G[a * n + c] = 0.25 * h * h * K[a * n + c] + 0.5 * h * G[a * n + c];
+                }
+                G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
+            }
+            if (arrow_factor(x, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
+                return SINGULAR;
+            factored = 1;
+        }
+        for (int r = 0; r < R; r++) {
+            for (int a = 0; a < n; a++) x->rr[r * mb + a] = -0.5 * h * x->res[r * n + a];
+            for (int i = 0; i < ROWS; i++) x->rr[r * mb + n + i] = -x->phi[r * ROWS + i];
+        }
+        double rs[MAXS];
+        rs[0] = -0.5 * h * x->res[N];
+        rs[ns] = locked ? -x->phi[R * ROWS] : 0.0;
+        arrow_solve(x, x->rr, rs, -1.0);
+        double norm = 0.0;
+        int finite = 1;
+        for (int r = 0; r < R; r++) {
+            for (int a = 0; a < n; a++) {
+                double d = x->rr[r * mb + a];
+                q[r * n + a] += d;
+                if (!isfinite(d)) finite = 0;
+                else if (fabs(d) > norm) norm = fabs(d);
+            }
+            for (int i = 0; i < ROWS; i++) x->lam[r * ROWS + i] += x->rr[r * mb + n + i] / half_h2;
+        }
+        q[N] += rs[0];
+        x->lam[R * ROWS] += rs[ns] / half_h2;
+        if (!finite) return NON_FINITE;
+        double rate = it > 1 ? norm / last : 1.0;
+        if (norm < tol || (rate < 0.5 && rate / (1.0 - rate) * norm < tol)) {
+            constraints(x, q, stuck, locked, x->phi);
+            if (max_abs(R * ROWS + cs, x->phi) < phi_tol) break;
+        }
+        last = norm;
+    }
+    if (it > max_iter) return NO_CONVERGENCE;
+    x->iterations = it;
+    /* velocities, works, the energy target */
+    double *v = x->v;
+    for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - v0[i]; }
+    for (int j = 0; j < 2; j++) kinematics(x, j, q, &x->k1[j]);
+    mass_matrix(x, x->k1);
+    double w_fric = 0.0;
+    for (int r = 0; r < R; r++) {
+        double torque;
+        friction(x, r, x->dq[r * n + m->i_a1], h, &torque, NULL);
+        x->work_fric[r] = torque * x->dq[r * n + m->i_a1];
+        w_fric += x->work_fric[r];
+    }
+    x->work_force = force * (q0[N] - q[N]);
+    double t0 = 0.0;
+    for (int i = 0; i < N; i++) t0 += v0[i] * p0[i];
+    t0 = 0.5 * (t0 + v0[N] * p0[N]);
+    x->strain = strain_energy(x, q);
+    double t_target = t0 + strain_energy(x, q0) - x->strain + x->work_force + w_fric;
+    if (project(x, q, v, stuck, locked) != OK) return SINGULAR;
+    matvec(x, v, x->p);
+    double t_after = 0.0;
+    for (int i = 0; i < N + ns; i++) t_after += v[i] * x->p[i];
+    t_after *= 0.5;
+    if (t_after > 0.0 && t_after / 1.01 <= t_target && t_target <= 1.01 * t_after) {
+        double scale = sqrt(t_target / t_after);
+        for (int i = 0; i < N + ns; i++) v[i] *= scale;
+        matvec(x, v, x->p);
+    }
+    return OK;
+}
+
+/* ------------------------------------------------------------------ the grid loop */
+static void load(Ctx3D *x, const Advance3DCall *a) {
+    int R = x->R, n = x->n, N = R * n;
+    memcpy(x->q0, a->qr, sizeof(double) * N);
+    memcpy(x->q0 + N, a->qs, sizeof(double) * x->ns);
+    memcpy(x->v0, a->vr, sizeof(double) * N);
+    memcpy(x->v0 + N, a->vs, sizeof(double) * x->ns);
+    memcpy(x->l0, a->lam_r, sizeof(double) * R * ROWS);
+    memcpy(x->l0 + R * ROWS, a->lam_s, sizeof(double) * x->cs);
+    if (a->have_p) {
+        memcpy(x->p0, a->pr, sizeof(double) * N);
+        memcpy(x->p0 + N, a->ps, sizeof(double) * x->ns);
+    } else {
+        for (int j = 0; j < 2; j++) kinematics(x, j, x->q0, &x->k1[j]);
+        mass_matrix(x, x->k1);
+        matvec(x, x->v0, x->p0);
+    }
+}
+
+static void put(double **o, const double *src, int k) { memcpy(*o, src, sizeof(double) * k); *o += k; }
+
+/* commit the step into the call's state */
+static void commit(Ctx3D *x, Advance3DCall *a) {
+    int R = x->R, n = x->n, N = R * n, ns = x->ns, cs = x->cs;
+    memcpy(a->qr, x->q, sizeof(double) * N);
+    memcpy(a->qs, x->q + N, sizeof(double) * ns);
+    memcpy(a->vr, x->v, sizeof(double) * N);
+    memcpy(a->vs, x->v + N, sizeof(double) * ns);
+    memcpy(a->lam_r, x->lam, sizeof(double) * R * ROWS);
+    memcpy(a->lam_s, x->lam + R * ROWS, sizeof(double) * cs);
+    memcpy(a->pr, x->p, sizeof(double) * N);
+    memcpy(a->ps, x->p + N, sizeof(double) * ns);
+    a->have_p = 1;
+}
+
+/* the committed state's output row (Advance3DCall) */
+static void write_row(Ctx3D *x, const Advance3DCall *a, double *o) {
+    int R = x->R, N = R * x->n, ns = x->ns;
+    *o++ = a->t;
+    put(&o, a->qr, N); put(&o, a->qs, ns); put(&o, a->vr, N); put(&o, a->vs, ns);
+    put(&o, a->lam_r, R * ROWS); put(&o, a->lam_s, x->cs); put(&o, a->stuck, R);
+    double kin = 0.0;
+    for (int i = 0; i < N + ns; i++) kin += x->v[i] * x->p[i];
+    *o++ = 0.5 * kin;
+    *o++ = x->strain;
+    *o++ = x->work_force;
+    put(&o, x->work_fric, R);
+    *o++ = x->iterations;
+}
+
+/* the simulator's release (UmbrellaSimulator3D._release) after a committed step */
+static void release(Ctx3D *x, Advance3DCall *a) {
+    const Model3D *m = x->m;
+    for (int r = 0; r < x->R; r++) {
+        if (isnan(a->stuck[r])) continue;
+        double torque = fabs(a->lam_r[r * ROWS + ROW_STICK]);
+        if ((m->stick_until[r] > 0.0 && a->t >= m->stick_until[r] - 1e-12)
+            || (m->stick_torque[r] > 0.0 && torque >= m->stick_torque[r])) {
+            a->stuck[r] = NAN;
+            a->lam_r[r * ROWS + ROW_STICK] = 0.0;
+        }
+    }
+}
+
+int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
+    a->n_done = 0;
+    a->iterations = 0;
+    int N = x->R * x->n;
+    int steps = a->single ? 1 : a->n_steps;
+    for (int k = 0; k < steps; k++) {
+        load(x, a);
+        double t_next = a->single ? a->t + a->h : (double)(a->k0 + k + 1) * a->h;
+        int status = step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol, a->phi_tol,
+                          a->max_iter);
+        if (status != OK) return status;
+        if (!a->single && !a->locked && x->q[N] - x->m->y_stop <= 0.0) return CROSSING;
+        a->iterations += x->iterations;
+        a->t = t_next;
+        commit(x, a);
+        if (!a->single) release(x, a);
+        if (a->out) write_row(x, a, a->out + (size_t)k * a->row_len);
+        a->n_done++;
+    }
+    return OK;
+}

@@ -1,0 +1,181 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The binding of the whole umbrella's compiled step (_kernel3d.c, declared in _kernel.h).
+
+``CompiledStep3D`` hands an ``UmbrellaModel3D`` with its hub fixed to the library once
+(``Model3D``: indices, the bodies' points, weights and shapes, stiffness and constant mass)
+and keeps every buffer a call uses: the state advanced in place and the rows of the steps
+taken (``Advance3DCall``).  ``step`` is ``MidpointUmbrella.step`` (the numpy reference) in one
+call; ``advance`` takes up to n grid steps of ``UmbrellaSimulator3D.step`` in one call,
+stopping before the step in which the sleeve reaches the stop (the lock is Python's).  The
+library is the planar kernel's (kernel.load_kernel: ABI-checked against the header).
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from .model3d import N_RIB_ROWS, UmbrellaModel3D
+from .state3d import ConvergenceError3D, State3D, StepWork
+from ..kernel import INTERFACE, kernel_error, STATUS
+
+Model3DStruct = INTERFACE.structs['Model3D']
+Advance3DCall = INTERFACE.structs['Advance3DCall']
+_dp = ctypes.POINTER(ctypes.c_double)
+
+
+def _ptr(a: np.ndarray):
+    return a.ctypes.data_as(_dp)
+
+
+def row_layout(model: UmbrellaModel3D) -> dict:
+    """Return name -> (slice of an output row, shape of a step's value) (Advance3DCall)."""
+    nr, n = model.n_ribs, model.n_rib
+    parts = (('t', ()), ('qr', (nr, n)), ('qs', (model.n_shared,)), ('vr', (nr, n)),
+             ('vs', (model.n_shared,)), ('lam_r', (nr, N_RIB_ROWS)),
+             ('lam_s', (model.n_shared_rows,)), ('stuck', (nr,)), ('kinetic', ()),
+             ('strain', ()), ('work_force', ()), ('work_friction', (nr,)), ('iterations', ()))
+    out, k = {}, 0
+    for name, shape in parts:
+        size = int(np.prod(shape)) if shape else 1
+        out[name] = (slice(k, k + size), shape)
+        k += size
+    return out
+
+
+class CompiledStep3D:
+    """The compiled step of one model (hub fixed); see the module docstring."""
+
+    def __init__(self, lib, model: UmbrellaModel3D, tolerance: float, phi_tolerance: float,
+                 max_iterations: int):
+        if model.moving_base:
+            raise ValueError('the compiled 3D step has the hub fixed (base: fixed)')
+        self.lib, self.model = lib, model
+        self.tolerance, self.phi_tolerance = tolerance, phi_tolerance
+        self.max_iterations = max_iterations
+        m = model
+        nr, n = m.n_ribs, m.n_rib
+        # what of M does not move: the twist's inertia, each body's elastic block
+        const_mass = np.zeros((nr, n, n))
+        for b in m.bodies:
+            e = slice(b.offset + b.n_trans + 1, b.offset + b.n)
+            const_mass[:, b.slice, b.slice] = b.twist_mass
+            const_mass[:, e, e] += np.einsum('rp,rpie,rpif->ref', b.w, b.shape, b.shape)
+        leaf, link = m.leaf, m.link
+        arrays = {
+            'l1': m.l1, 'l3': m.l3,
+            'coulomb': np.array([r.hinge_coulomb for r in m.ribs], dtype=float),
+            'viscous': np.array([r.hinge_viscous for r in m.ribs], dtype=float),
+            'stick_until': np.array([r.stick_until for r in m.ribs], dtype=float),
+            'stick_torque': np.array([r.stick_torque for r in m.ribs], dtype=float),
+            'stiffness': m.stiffness, 'const_mass': const_mass,
+            'leaf_x': leaf.x, 'leaf_w': leaf.w, 'leaf_shape': leaf.shape,
+            'link_x': link.x, 'link_w': link.w, 'link_shape': link.shape}
+        self._arrays = {k: np.ascontiguousarray(v, dtype=float) for k, v in arrays.items()}
+        self.struct = Model3DStruct(
+            n_ribs=nr, n_rib=n, n_shared=m.n_shared, n_shared_rows=m.n_shared_rows,
+            **{f'i_{k}': getattr(m, f'i_{k}') for k in (
+                'a1', 'rx', 'ry', 'rz', 'a2', 'u1', 'w1', 's1', 'p1', 's2', 'p2', 'uh', 'wh')},
+            leaf_points=leaf.x.shape[1], leaf_elastic=leaf.shape.shape[-1],
+            link_points=link.x.shape[1], link_elastic=link.shape.shape[-1],
+            link_offset=link.offset, sleeve_mass=m.sleeve_mass, y_stop=m.y_stop,
+            regularisation=m.params.hinge_regularisation,
+            **{k: _ptr(v) for k, v in self._arrays.items()})
+        ctx = lib.umbrella3d_new(ctypes.byref(self.struct))
+        if not ctx:
+            raise MemoryError('the compiled 3D step could not be set up: out of memory')
+        self._ctx = ctypes.c_void_p(ctx)
+        self._free = lib.umbrella3d_free
+        self.layout = row_layout(m)
+        self.row_len = max(s.stop for s, _ in self.layout.values())
+        self.buf = {'qr': np.zeros((nr, n)), 'qs': np.zeros(m.n_shared),
+                    'vr': np.zeros((nr, n)), 'vs': np.zeros(m.n_shared),
+                    'lam_r': np.zeros((nr, N_RIB_ROWS)), 'lam_s': np.zeros(m.n_shared_rows),
+                    'pr': np.zeros((nr, n)), 'ps': np.zeros(m.n_shared),
+                    'stuck': np.zeros(nr)}
+        self.call = Advance3DCall(row_len=self.row_len, max_iter=max_iterations,
+                                  tol=tolerance, phi_tol=phi_tolerance,
+                                  **{k: _ptr(v) for k, v in self.buf.items()})
+        self._call_ref = ctypes.byref(self.call)
+        self._set_capacity(1)
+
+    def __del__(self):
+        ctx = getattr(self, '_ctx', None)
+        if ctx is not None and ctx.value:
+            self._free(ctx)
+            self._ctx = None
+
+    def _set_capacity(self, cap: int) -> None:
+        self.out = np.zeros((cap, self.row_len))
+        self.call.out = _ptr(self.out)
+        self.capacity = cap
+
+    def _load(self, s: State3D, force: float, locked: bool, h: float) -> None:
+        b = self.buf
+        for k in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck'):
+            b[k][...] = getattr(s, k)
+        have_p = s.pr is not None
+        if have_p:
+            b['pr'][...], b['ps'][...] = s.pr, s.ps
+        c = self.call
+        c.have_p, c.t, c.h, c.force, c.locked = int(have_p), s.t, h, force, int(locked)
+
+    def _state(self) -> State3D:
+        b = self.buf
+        return State3D(self.call.t, *(b[k].copy() for k in (
+            'qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck', 'pr', 'ps')))
+
+    def rows(self, count: int) -> dict:
+        """Return the last call's first count rows by name (views: steps first)."""
+        block = self.out[:count]
+        return {name: block[:, sl].reshape((count,) + shape)
+                for name, (sl, shape) in self.layout.items()}
+
+    def step(self, s: State3D, h: float, force: float, locked: bool):
+        """Return (State3D, StepWork) of one step of length h (MidpointUmbrella.step's)."""
+        self._load(s, force, locked, h)
+        self.call.single = 1
+        status = self.lib.umbrella3d_advance(self._ctx, self._call_ref)
+        if status != STATUS['ok']:
+            raise status_error(status, s.t + h)
+        row = self.rows(1)
+        work = StepWork(float(row['work_force'][0]), row['work_friction'][0].copy(), 0.0,
+                        int(row['iterations'][0]))
+        return self._state(), work
+
+    def advance(self, s: State3D, k0: int, h: float, n_steps: int, force: float,
+                locked: bool):
+        """
+        Take up to n_steps grid steps t_k -> (k + 1) h from s at t_k0.
+
+        Return (status, steps done, rows (dict of the steps' figures), the state reached).
+        Status 'ok', 'crossing' (the next step reaches the stop unlocked: not taken), or a
+        failure code (kernel.STATUS) of the step not taken.
+        """
+        if n_steps > self.capacity:
+            self._set_capacity(max(n_steps, 2 * self.capacity))
+        self._load(s, force, locked, h)
+        c = self.call
+        c.single, c.k0, c.n_steps = 0, k0, n_steps
+        status = self.lib.umbrella3d_advance(self._ctx, self._call_ref)
+        done = c.n_done
+        return status, done, self.rows(done), (self._state() if done else s)
+
+
+def status_error(status: int, t: float) -> ArithmeticError:
+    """Return the error of a failed compiled step (state3d.ConvergenceError3D)."""
+    return ConvergenceError3D(kernel_error(status, t))

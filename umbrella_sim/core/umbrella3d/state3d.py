@@ -1,0 +1,50 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The whole umbrella's state and a step's work (integrator3d.py, kernel3d.py step them)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class ConvergenceError3D(ArithmeticError):
+    """Newton did not converge, or a matrix was singular."""
+
+
+@dataclass(frozen=True)
+class State3D:
+    """The umbrella's state: rib part (R, n) and shared part of q, v, multipliers, momentum."""
+
+    t: float
+    qr: np.ndarray
+    qs: np.ndarray
+    vr: np.ndarray
+    vs: np.ndarray
+    lam_r: np.ndarray
+    lam_s: np.ndarray
+    stuck: np.ndarray          # (R,) angle a stuck hinge holds, NaN where free
+    pr: np.ndarray | None = None
+    ps: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class StepWork:
+    """What one step did: work of the sleeve force, of each hinge's friction, of the drive."""
+
+    force: float
+    friction: np.ndarray
+    drive: float
+    iterations: int
