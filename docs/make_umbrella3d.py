@@ -66,7 +66,7 @@ def identity(ribs, values, duration):
     p = UmbrellaParams(**values, phase_correction=False)
     planar_sim, planar = planar_run(p, duration)
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-        {'ribs': ribs, **values, 'phase_correction': False}))
+        {'ribs': ribs, **values, 'phase_correction': False}), carry_steps=1)
     a = sim.run(duration).arrays()
     d_alpha = np.max(np.abs(a['alpha1'][1:] - planar[:, 1:2]))
     d_sleeve = np.max(np.abs(a['sleeve_position'][1:] - planar[:, 3]))
@@ -83,7 +83,9 @@ def section_a(lines):
     lines += ['## (a) N identical ribs are N planar models', '',
               'Sleeve force 10 N a rib, V0 = −0.2 m/s, 30 ms past the lock; the planar model '
               '(`umbrella_sim.core.UmbrellaSimulator`) without its stage-2 mode fit '
-              '(`phase_correction: false`), which the 3D model does not have. Largest '
+              '(`phase_correction: false`; with it, tests/test_umbrella3d.py), the 3D '
+              'iteration matrix factored every step as the planar one (`carry_steps: 1`). '
+              'Largest '
               'difference over every step and every rib (tests/test_umbrella3d.py asserts '
               "1e-10, 100 times below Newton's increment tolerance):", '',
               '| ribs | elements a segment | lock | step (s) | alpha1 (rad) | sleeve (m) | '
@@ -330,20 +332,25 @@ the energy scaling, and runs of grid steps in one call (`UmbrellaSimulator3D.adv
 lock itself stays in Python). The numpy step (integrator3d.py) is the reference it is tested
 against (tests/test_umbrella3d_kernel.py) and steps a driven or free-floating hub, or any run
 without the library (said once on stderr; `UMBRELLA_SIM_KERNEL=numpy` asks for it). Measured
-on the 2 shared cores (bench/bench_umbrella3d.py, CPU per step at h = 0.1 ms, 2 Newton
-iterations): compiled 4.2 us + 17.2 us x ribs at 1 element a segment, 1.9 us + 48.8 us x ribs
-at 2 (numpy: 1.84 ms + 98 us x ribs, 1.88 ms + 276 us x ribs). Real time is not reached at
-the steps the planar rule chooses for these meshes without the stage-2 mode fit: ribs 6 x 1
-element at h = 33 us runs at 0.29 x real time (3.4 CPU s a simulated second, with Record3D's
-figures), ribs 12 x 2 at h = 9.1 us at 0.015 x (65 CPU s). The issue's targets (ribs 6 x 1
-within 0.5 core, 12 x 2 in real time) need about 2.8 us and 0.76 us a rib and step at those
-steps, less than one factorisation of a rib's block: a longer step (the planar stage-2 mode fit, or
-a step rule of the 3D model's own) and an iteration matrix kept across steps, not compilation.
+on the 2 shared cores (bench/bench_umbrella3d.py, CPU per step at h = 0.1 ms, deployment):
+compiled 1.3 us + 15.2 us x ribs at 1 element a segment, 0.1 us + 42.3 us x ribs at 2 (numpy:
+1.84 ms + 98 us x ribs, 1.88 ms + 276 us x ribs), 2.0 Newton iterations and 0.125
+factorisations a step: the iteration matrix is kept across steps (modified Newton, at most 8
+steps, re-factored after a slow iteration; `carry_steps`; a fresh one each step cost 17.2 and
+48.8 us x ribs). With the hub fixed the 3D model takes the planar stage-2 mode fit rib by rib
+(the sleeve at the stop decouples the ribs: each rib's locked modes exact in phase and
+amplitude, T + V conserved; tests/test_umbrella3d_mode_fit.py), hence the planar rule's fitted
+step: 0.1 ms at 1 element, 33 us at 2 (9.1 us without the fit). Ribs 6 x 1 in 1 ms blocks run
+at 0.85 x real time deploying (1.2 CPU s a simulated second, with Record3D's figures) and 0.62 x
+in stage 2 (1.6 CPU s; 2.8 Newton iterations a step, 128-135 us); ribs 12 x 2 in 10 ms blocks
+at 0.067 x (15 CPU s) and 0.049 x. The issue's targets (6 x 1 within 0.5 core, 12 x 2 in real
+time) are not reached: they need about 8 us (6 x 1) and 2.8 us (12 x 2) a rib and step at
+these steps.
 
 The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
-recording and tools for N ribs (the ROS side still runs the planar model), the stage-2 mode
-fit of the planar integrator, the geometrically exact beam option, the compiled step for a
-driven or free-floating hub.
+recording and tools for N ribs (the ROS side still runs the planar model), the geometrically
+exact beam option, the compiled step (and the stage-2 mode fit) for a driven or free-floating
+hub.
 """
 
 

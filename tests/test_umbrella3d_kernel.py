@@ -165,15 +165,19 @@ def test_compiled_equals_numpy_through_the_lock(lock):
         s = sim.record.summary()
         assert s['energy_balance_residual'] < 1e-9 * s['energy_scale']
         assert_on_the_joints(sim)
-    # locked steps from one state (and the reference's from it moved by one ulp)
+    # locked steps from one state (and the reference's from it moved by one ulp), each by an
+    # integrator of its own (an iteration matrix is kept along the trajectory it served)
     s_c = s_n = numpy_sim.state
     s_u = replace(s_n, vr=np.nextafter(s_n.vr, np.inf), pr=None, ps=None)
     h = numpy_sim.h
+    step_c, step_n, step_u = (MidpointUmbrella(numpy_sim.model, numpy_sim.integrator.tolerance,
+                                               kernel=k).step
+                              for k in ('compiled', 'numpy', 'numpy'))
     for _ in range(20):
-        s_c, w_c = compiled.integrator.step(s_c, h, compiled.force, True)
-        s_n, w_n = numpy_sim.integrator.step(s_n, h, numpy_sim.force, True)
-        s_u, _ = numpy_sim.integrator.step(s_u, h, numpy_sim.force, True)
-        assert w_c.iterations == w_n.iterations
+        s_c, w_c = step_c(s_c, h, compiled.force, True)
+        s_n, w_n = step_n(s_n, h, numpy_sim.force, True)
+        s_u, _ = step_u(s_u, h, numpy_sim.force, True)
+        assert (w_c.iterations, w_c.factorisations) == (w_n.iterations, w_n.factorisations)
         assert w_c.force == pytest.approx(w_n.force, abs=AGREEMENT * abs(a['work'][-1]))
     assert_states_agree(s_c, s_n, s_u)
 
@@ -240,3 +244,32 @@ def test_a_failed_compiled_step_is_a_clear_error_that_keeps_the_steps_done():
         sim.advance(5)
     assert sim.k == 3 and len(sim.record.rows['time']) == 4
     assert sim.state.t == pytest.approx(3e-4, abs=1e-15)
+
+
+@needs_kernel
+def test_kept_iteration_matrix_reaches_the_fresh_matrix_solution():
+    """
+    The iteration matrix kept across steps changes how Newton converges, not to what.
+
+    The compiled run (the matrix kept) against the numpy run that factors it every step
+    (carry_steps 1, the planar scheme's rule): each step's solution differs by the Newton
+    tolerance at most, so after k steps the positions agree within k times it; both runs
+    balance energy and hold the joints.
+    """
+    p = UmbrellaRibsParams.from_mapping(ASYMMETRIC)
+    kept = UmbrellaSimulator3D(p, kernel='compiled')
+    a = kept.run(0.02).arrays()
+    fresh = UmbrellaSimulator3D(p, kernel='numpy', carry_steps=1)
+    b = fresh.run(0.02).arrays()
+    steps = kept.k
+    assert fresh.integrator.factorisations >= steps
+    assert kept.integrator.factorisations < steps / 2
+    length = max(np.max(kept.model.l1), np.max(kept.model.l3))
+    bound = steps * kept.integrator.tolerance * length
+    for name, lever in POSITIONS:
+        arm = 1.0 if lever is None else getattr(kept.model, lever)
+        assert np.max(np.abs((np.asarray(a[name]) - b[name]) * arm)) <= bound, name
+    for sim in (kept, fresh):
+        s = sim.record.summary()
+        assert s['energy_balance_residual'] < 1e-9 * s['energy_scale']
+        assert_on_the_joints(sim)

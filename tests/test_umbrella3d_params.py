@@ -19,13 +19,15 @@ msg_docs/umbrella3d_parameters.md holds one table row per specification of
 umbrella_sim.core.umbrella3d.params3d (name, type, unit, default, range, meaning), generated
 by ``rows()`` below: ``python tests/test_umbrella3d_params.py`` rewrites the tables.
 """
+import math
 import os
 import re
 import sys
 
 import pytest
 
-from umbrella_sim.core.umbrella3d.params3d import (RIB_PLANAR_NAMES, RIB_SPECS,
+from umbrella_sim.core.umbrella3d.model3d import UmbrellaModel3D
+from umbrella_sim.core.umbrella3d.params3d import (RIB_PLANAR_NAMES, rib_reach, RIB_SPECS,
                                                    UMBRELLA_SPECS, UmbrellaRibsParams)
 
 PAGE = os.path.join(os.path.dirname(__file__), '..', 'msg_docs', 'umbrella3d_parameters.md')
@@ -76,6 +78,37 @@ def test_per_rib_values_as_lists_and_overrides():
 def test_bad_values_name_the_culprit(values, culprit):
     with pytest.raises(ValueError, match=re.escape(culprit)):
         UmbrellaRibsParams.from_mapping(values)
+
+
+@pytest.mark.parametrize('values, height', [
+    ({'ribs': 3, 'rib1.l1': 0.2}, 'start'),      # leaf + link shorter than the start height
+    ({'ribs': 3, 'rib2.l3': 2.0}, 'start'),      # the link holds the sleeve above it
+    ({'ribs': 2, 'rib1.l3': 0.8}, 'stop'),
+])
+def test_a_rib_that_cannot_reach_the_sleeve_is_named_before_any_step(values, height):
+    """Its lengths and the height it misses, at validation (not scipy's root-find error)."""
+    with pytest.raises(ValueError) as err:
+        UmbrellaRibsParams.from_mapping(values)
+    k, name = next(iter((k, n) for k, n in (key.split('.') for key in values if '.' in key)))
+    text = str(err.value)
+    assert text.startswith(f'rib {k[3:]}: ') and f'{name}={values[k + "." + name]:g} m' in text
+    assert f"sleeve's {height} height" in text
+    planar = UmbrellaRibsParams.from_mapping({}).planar
+    lowest, highest = rib_reach(*(values.get(f'{k}.{n}', getattr(planar, n))
+                                  for n in ('l1', 'l3')))[1:]
+    y = getattr(planar, f'sleeve_{height}_height')
+    assert not lowest <= y <= highest
+
+
+def test_a_short_link_reaches_the_start_height_from_its_lowest_angle():
+    """A link shorter than the leaf: the rib's start angle puts the sleeve where it starts."""
+    l1, l3 = 0.51, 0.495
+    m = UmbrellaModel3D(UmbrellaRibsParams.from_mapping({'ribs': 2, 'rib1.l1': l1,
+                                                         'rib1.l3': l3}))
+    a = m.rib_angle_at_height(1, m.y_start)
+    assert rib_reach(l1, l3)[0] < a
+    assert l1 * math.sin(a) + math.sqrt(l3 ** 2 - (l1 * math.cos(a)) ** 2) == pytest.approx(
+        m.y_start, abs=1e-14)
 
 
 def test_a_free_bus_takes_the_plastic_lock_by_default():

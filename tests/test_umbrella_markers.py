@@ -151,8 +151,9 @@ def test_one_rib_markers_are_the_planar_markers():
     """
     values = {'time_step': 1e-4, 'sleeve_force': 10.0, 'phase_correction': False}
     planar = UmbrellaSimulator(UmbrellaParams(**values))
+    # (the iteration matrix factored every step, the planar scheme's rule: test_umbrella3d.py)
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-        {'ribs': 1, 'hub_radius': 0.05, **values}))
+        {'ribs': 1, 'hub_radius': 0.05, **values}), carry_steps=1)
     markers = UmbrellaMarkers(sim.model, 'umbrella')
     magnification = 50.0
     for _ in range(3):

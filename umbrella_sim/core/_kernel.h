@@ -220,6 +220,8 @@ typedef struct {
     int i_a1, i_rx, i_ry, i_rz, i_a2, i_u1, i_w1, i_s1, i_p1, i_s2, i_p2, i_uh, i_wh;
     int leaf_points, leaf_elastic, link_points, link_elastic, link_offset;
     double sleeve_mass, y_stop, regularisation;
+    int carry_steps;                                 /* steps an iteration matrix serves at
+                                                      * most (1: factored every step) */
     const double *l1, *l3, *coulomb, *viscous;       /* n_ribs */
     const double *stick_until, *stick_torque;        /* n_ribs (0: not that release) */
     const double *stiffness, *const_mass;            /* n_ribs x n_rib x n_rib: K, and the
@@ -244,6 +246,12 @@ typedef struct {
     double *qr, *qs, *vr, *vs, *lam_r, *lam_s, *pr, *ps, *stuck;
     double *out;
     int n_done, iterations;   /* out: committed steps, Newton iterations */
+    /* stage 2's mode fit of the locked steps (integrator3d.MidpointUmbrella.fit_stage2_modes:
+     * each rib's LockedModeFit), fit_modes a rib (0: none; padded with s = 1, shrink 0):
+     * u = (M0 phi)^T and phi^T rows (R x fit_modes x n_rib), s and the Newton shrink
+     * (R x fit_modes) */
+    int fit_modes;
+    const double *fit_u, *fit_phi, *fit_scale, *fit_shrink;
 } Advance3DCall;
 
 /* Held by Python only as pointers: the stepping contexts (every work buffer, allocated

@@ -25,6 +25,7 @@
  * rho = R(alpha) (x + S e) [+ R2], Jacobian [I3 | e_z x R y | R S].  The linear algebra is
  * block-arrow (umbrella3d/arrow.py): each rib's (n + 9) block factored alone, the shared
  * unknowns (sleeve, stop multiplier) through their Schur complement: cost linear in the ribs.
+ * The iteration matrix is kept across steps (kept_serves: the numpy reference's rule).
  */
 #include <math.h>
 #include <stdlib.h>
@@ -36,6 +37,10 @@
 #define ROWS 9         /* joint rows of a rib (model3d.N_RIB_ROWS) */
 #define ROW_STICK 8    /* the stuck hinge's row */
 #define MAXS 16        /* shared unknowns at most (coordinates + rows) */
+/* the iteration matrix kept across steps (modified Newton; integrator3d.MidpointUmbrella):
+ * it serves at most Model3D.carry_steps steps, and is factored anew at the iterate after an
+ * iteration that contracted the update by less than REFRESH_RATE */
+#define REFRESH_RATE 0.1
 
 typedef struct {
     int t, nb, ne, np, off;            /* translations, coordinates, elastic, points, offset */
@@ -46,25 +51,41 @@ typedef struct {                       /* one body's point kinematics, every rib
     double *qy, *jac, *qs;             /* R x P x 3, R x P x 3 x nb, R x P x 3 x ne */
 } Kin;
 
+/* A factored arrow matrix: a rib's block [[A, sign Jc^T], [Jr, Z]] factored through its
+ * bodies: A is block diagonal (leaf, link), each LU'd; W = A^-1 sign Jc^T; T = Z - Jr W,
+ * LU'd; Y = B^-1 C; S the LU of the shared unknowns' Schur complement. */
+typedef struct {
+    double *Af, *W, *T, *Jf, *Y;       /* R x (nb0^2 + nb1^2), R x n x 9, R x 81, R x 9 x n,
+                                        * R x mb x s */
+    int *apiv, *tpiv;                  /* R x n, R x 9 */
+    double S[MAXS * MAXS];
+    int spiv[MAXS];
+    int uses;                          /* steps it served (iteration slots) */
+} Fact;
+
 struct Ctx3D {
     const Model3D *m;
     Body b[2];
     int R, n, ns, cs, s, mb;
     Kin k1[2], km[2];
     double *mass;                      /* R x n x n: M(q1) */
-    /* a rib's block [[A, sign Jc^T], [Jr, Z]] factored through its bodies: A is block
-     * diagonal (leaf, link), each LU'd; W = A^-1 sign Jc^T; T = Z - Jr W, LU'd; Y = B^-1 C */
-    double *Af, *W, *T, *Jf, *Y;       /* R x (nb0^2 + nb1^2), R x n x 9, R x 81, R x 9 x n,
-                                        * R x mb x s */
-    int *apiv, *tpiv;                  /* R x n, R x 9 */
-    double E[MAXS * MAXS], S[MAXS * MAXS];
-    int spiv[MAXS];
+    /* the iteration matrix's two slots (a step factors into the one not kept, so a step not
+     * committed leaves the kept one intact) and the projection's mass matrix */
+    Fact slot[2], pm;
+    double E[MAXS * MAXS];
+    /* the kept iteration matrix: its slot, and the end of the committed step that used it
+     * (q, v, length, lock, the stuck hinges); a step that starts there takes it */
+    int kept, kept_slot, kept_locked, pend_slot, pend_uses;
+    double kept_h, pend_h, *kept_q, *kept_v;
+    unsigned char *kept_stuck;
     double *jm, *jr, *jg;              /* R x 9 x n: J(q_m), J(q), Gonzalez J */
     double *vp_a, *vp_b;               /* R x P x 3 (largest body) */
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
+    double *w0, *sp0, *sp1, *fitc;     /* the mode fit's: w0 = S^-1 v0, S^T p0, S^T p1;
+                                        * modal sums (n: a rib has n modes at most) */
     double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
-    int iterations;
+    int iterations, factorisations;
 };
 
 /* ------------------------------------------------------------------ context */
@@ -83,16 +104,32 @@ static int kin_alloc(Kin *k, const Body *b, int R) {
 
 static void kin_free(Kin *k) { free(k->qy); free(k->jac); free(k->qs); }
 
+static void fact_free(Fact *f) {
+    free(f->Af); free(f->W); free(f->T); free(f->Jf); free(f->Y); free(f->apiv); free(f->tpiv);
+}
+
+static int fact_alloc(Fact *f, const Ctx3D *x) {
+    int R = x->R, n = x->n, nb0 = x->b[0].nb, nb1 = x->b[1].nb;
+    f->Af = calloc((size_t)R * (nb0 * nb0 + nb1 * nb1), sizeof(double));
+    f->W = calloc((size_t)R * n * ROWS, sizeof(double));
+    f->T = calloc((size_t)R * ROWS * ROWS, sizeof(double));
+    f->Jf = calloc((size_t)R * ROWS * n, sizeof(double));
+    f->Y = calloc((size_t)R * x->mb * x->s, sizeof(double));
+    f->apiv = calloc((size_t)R * n, sizeof(int));
+    f->tpiv = calloc((size_t)R * ROWS, sizeof(int));
+    return f->Af && f->W && f->T && f->Jf && f->Y && f->apiv && f->tpiv;
+}
+
 void umbrella3d_free(Ctx3D *x) {
     if (!x) return;
     for (int j = 0; j < 2; j++) { kin_free(&x->k1[j]); kin_free(&x->km[j]); }
-    double *bufs[] = {x->mass, x->Af, x->W, x->T, x->Jf, x->Y, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
+    fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
+    free(x->kept_q); free(x->kept_v); free(x->kept_stuck);
+    double *bufs[] = {x->mass, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
-                      x->gyro, x->ycol, x->fric, x->work_fric};
+                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp0, x->sp1, x->fitc};
     for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
-    free(x->apiv);
-    free(x->tpiv);
     free(x);
 }
 
@@ -110,13 +147,12 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
             m->link_w, m->link_shape);
     int ok = 1;
     for (int j = 0; j < 2; j++) ok &= kin_alloc(&x->k1[j], &x->b[j], R) & kin_alloc(&x->km[j], &x->b[j], R);
-    int mb = x->mb, s = x->s, N = R * n;
+    int mb = x->mb, N = R * n;
     int pmax = x->b[0].np > x->b[1].np ? x->b[0].np : x->b[1].np;
 #define ALLOC(f, k) (x->f = calloc((size_t)(k), sizeof(double))) != NULL
-    int nb0 = x->b[0].nb, nb1 = x->b[1].nb;
-    ok = ok && ALLOC(mass, R * n * n) && ALLOC(Af, R * (nb0 * nb0 + nb1 * nb1))
-        && ALLOC(W, R * n * ROWS) && ALLOC(T, R * ROWS * ROWS) && ALLOC(Jf, R * ROWS * n)
-        && ALLOC(Y, R * mb * s) && ALLOC(jm, R * ROWS * n)
+    ok = ok && fact_alloc(&x->slot[0], x) && fact_alloc(&x->slot[1], x) && fact_alloc(&x->pm, x);
+    ok = ok && ALLOC(mass, R * n * n) && ALLOC(jm, R * ROWS * n)
+        && ALLOC(kept_q, N + MAXS) && ALLOC(kept_v, N + MAXS)
         && ALLOC(jr, R * ROWS * n) && ALLOC(jg, R * ROWS * n) && ALLOC(vp_a, R * pmax * 3)
         && ALLOC(vp_b, R * pmax * 3) && ALLOC(q0, N + MAXS) && ALLOC(v0, N + MAXS)
         && ALLOC(p0, N + MAXS) && ALLOC(l0, R * ROWS + MAXS) && ALLOC(q, N + MAXS)
@@ -125,11 +161,12 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(p1, N + MAXS) && ALLOC(gt, N + MAXS) && ALLOC(res, N + MAXS)
         && ALLOC(tmp, N + MAXS) && ALLOC(phi0, R * ROWS + MAXS) && ALLOC(phi, R * ROWS + MAXS)
         && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
-        && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R);
+        && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R)
+        && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS) && ALLOC(fitc, n);
 #undef ALLOC
-    x->apiv = ok ? calloc((size_t)R * n, sizeof(int)) : NULL;
-    x->tpiv = ok ? calloc((size_t)R * ROWS, sizeof(int)) : NULL;
-    if (!ok || !x->apiv || !x->tpiv) { umbrella3d_free(x); return NULL; }
+    x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
+    if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
+    x->pend_slot = -1;
     return x;
 }
 
@@ -407,21 +444,21 @@ static void lu_solve_rows(int N, const double *A, const int *piv, double *X) {
 
 /* rib r's block, factored (arrow_factor), solved for v (mb) in place:
  * x = A^-1 v_top, lambda = T^-1 (v_bottom - Jr x), x -= W lambda */
-static void rib_solve(const Ctx3D *x, int r, double *v) {
+static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v) {
     int n = x->n;
-    const double *A = x->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
+    const double *A = f->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
-        lu_solve(b->nb, A, x->apiv + r * n + b->off, v + b->off);
+        lu_solve(b->nb, A, f->apiv + r * n + b->off, v + b->off);
         A += b->nb * b->nb;
     }
-    const double *J = x->Jf + (size_t)r * ROWS * n, *W = x->W + (size_t)r * n * ROWS;
+    const double *J = f->Jf + (size_t)r * ROWS * n, *W = f->W + (size_t)r * n * ROWS;
     for (int i = 0; i < ROWS; i++) {
         double acc = 0.0;
         for (int a = 0; a < n; a++) if (J[i * n + a] != 0.0) acc += J[i * n + a] * v[a];
         v[n + i] -= acc;
     }
-    lu_solve(ROWS, x->T + r * ROWS * ROWS, x->tpiv + r * ROWS, v + n);
+    lu_solve(ROWS, f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
     for (int a = 0; a < n; a++) {
         double acc = 0.0;
         for (int i = 0; i < ROWS; i++) acc += W[a * ROWS + i] * v[n + i];
@@ -432,20 +469,20 @@ static void rib_solve(const Ctx3D *x, int r, double *v) {
 /* Factor [[M + extra, sign Jc^T], [Jr, Z]] (integrator3d._blocks) in arrow form: each rib's
  * block through its bodies (rib_solve), B^-1 C, the Schur complement of the shared unknowns
  * by LU. */
-static int arrow_factor(Ctx3D *x, const double *extra, const double *jc, const double *jr,
-                        const double *stuck, int locked, double sign) {
+static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc,
+                        const double *jr, const double *stuck, int locked, double sign) {
     int R = x->R, n = x->n, mb = x->mb, s = x->s, ns = x->ns;
     const double msl = x->m->sleeve_mass;
     double L = locked ? 1.0 : 0.0;
     /* the corner: [[m_ss, sign J_ss^T], [J_ss, 1 - active]] */
     x->E[0] = msl; x->E[1] = sign * L; x->E[s] = L; x->E[s + 1] = 1.0 - L;
-    memcpy(x->S, x->E, sizeof(double) * s * s);
+    memcpy(f->S, x->E, sizeof(double) * s * s);
     for (int r = 0; r < R; r++) {
         const double *M = x->mass + (size_t)r * n * n;
         const double *Ex = extra ? extra + (size_t)r * n * n : NULL;
         const double *Jc = jc + r * ROWS * n, *Jr = jr + r * ROWS * n;
-        double *A = x->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
-        double *W = x->W + (size_t)r * n * ROWS, *T = x->T + r * ROWS * ROWS;
+        double *A = f->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
+        double *W = f->W + (size_t)r * n * ROWS, *T = f->T + r * ROWS * ROWS;
         for (int a = 0; a < n; a++)
             for (int i = 0; i < ROWS; i++) W[a * ROWS + i] = sign * Jc[i * n + a];
         for (int j = 0; j < 2; j++) {
@@ -454,8 +491,8 @@ static int arrow_factor(Ctx3D *x, const double *extra, const double *jc, const d
             for (int a = 0; a < nb; a++)
                 for (int c = 0; c < nb; c++)
                     A[a * nb + c] = M[(o + a) * n + o + c] + (Ex ? Ex[(o + a) * n + o + c] : 0.0);
-            if (lu_factor(nb, A, x->apiv + r * n + o) != OK) return SINGULAR;
-            lu_solve_rows(nb, A, x->apiv + r * n + o, W + o * ROWS);
+            if (lu_factor(nb, A, f->apiv + r * n + o) != OK) return SINGULAR;
+            lu_solve_rows(nb, A, f->apiv + r * n + o, W + o * ROWS);
             A += nb * nb;
         }
         memset(T, 0, sizeof(double) * ROWS * ROWS);
@@ -466,36 +503,36 @@ static int arrow_factor(Ctx3D *x, const double *extra, const double *jc, const d
                 for (int k = 0; k < ROWS; k++) T[i * ROWS + k] -= f * W[a * ROWS + k];
             }
         T[ROW_STICK * ROWS + ROW_STICK] += 1.0 - stuck_on(stuck[r]);
-        if (lu_factor(ROWS, T, x->tpiv + r * ROWS) != OK) return SINGULAR;
-        memcpy(x->Jf + (size_t)r * ROWS * n, Jr, sizeof(double) * ROWS * n);
+        if (lu_factor(ROWS, T, f->tpiv + r * ROWS) != OK) return SINGULAR;
+        memcpy(f->Jf + (size_t)r * ROWS * n, Jr, sizeof(double) * ROWS * n);
         /* C: row n + 7 of y_s is J_rs = -1; D: y_s's row at n + 7 is sign J_rs^T */
-        double *Y = x->Y + (size_t)r * mb * s;
+        double *Y = f->Y + (size_t)r * mb * s;
         for (int c = 0; c < s; c++) {
             memset(x->ycol, 0, sizeof(double) * mb);
             if (c < ns) {
                 x->ycol[n + 7] = -1.0;
-                rib_solve(x, r, x->ycol);
+                rib_solve(x, f, r, x->ycol);
             }
             for (int a = 0; a < mb; a++) Y[a * s + c] = x->ycol[a];
         }
-        for (int c = 0; c < s; c++) x->S[c] -= sign * -1.0 * Y[(n + 7) * s + c];
+        for (int c = 0; c < s; c++) f->S[c] -= sign * -1.0 * Y[(n + 7) * s + c];
     }
-    return lu_factor(s, x->S, x->spiv) == OK ? OK : SINGULAR;
+    return lu_factor(s, f->S, f->spiv) == OK ? OK : SINGULAR;
 }
 
 /* Solve the factored arrow system for (rr (R x mb), rs (s)), in place. */
-static void arrow_solve(Ctx3D *x, double *rr, double *rs, double sign) {
+static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double sign) {
     int R = x->R, n = x->n, mb = x->mb, s = x->s;
     double z[MAXS];
     memcpy(z, rs, sizeof(double) * s);
     for (int r = 0; r < R; r++) {
-        rib_solve(x, r, rr + r * mb);
+        rib_solve(x, f, r, rr + r * mb);
         z[0] -= sign * -1.0 * rr[r * mb + n + 7];
     }
-    lu_solve(s, x->S, x->spiv, z);
+    lu_solve(s, f->S, f->spiv, z);
     memcpy(rs, z, sizeof(double) * s);
     for (int r = 0; r < R; r++) {
-        const double *Y = x->Y + (size_t)r * mb * s;
+        const double *Y = f->Y + (size_t)r * mb * s;
         for (int a = 0; a < mb; a++) {
             double acc = 0.0;
             for (int c = 0; c < s; c++) acc += Y[a * s + c] * z[c];
@@ -527,7 +564,7 @@ static void friction(const Ctx3D *x, int r, double dq_a1, double h, double *torq
 static int project(Ctx3D *x, const double *q, double *v, const double *stuck, int locked) {
     int R = x->R, n = x->n, mb = x->mb, ns = x->ns;
     jacobian(x, q, stuck, x->jr);
-    if (arrow_factor(x, NULL, x->jr, x->jr, stuck, locked, 1.0) != OK) return SINGULAR;
+    if (arrow_factor(x, &x->pm, NULL, x->jr, x->jr, stuck, locked, 1.0) != OK) return SINGULAR;
     for (int r = 0; r < R; r++) {
         double *rr = x->rr + r * mb;
         const double *J = x->jr + r * ROWS * n;
@@ -541,37 +578,106 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
     }
     double rs[MAXS] = {0.0};
     rs[ns] = locked ? -v[R * n] : 0.0;
-    arrow_solve(x, x->rr, rs, 1.0);
+    arrow_solve(x, &x->pm, x->rr, rs, 1.0);
     for (int r = 0; r < R; r++)
         for (int a = 0; a < n; a++) v[r * n + a] += x->rr[r * mb + a];
     v[R * n] += rs[0];
     return OK;
 }
 
+/* ------------------------------------------------------------------ the mode fit */
+/* Stage 2's mode fit (integrators.LockedModeFit, rib by rib): S = I + Phi diag(s - 1) U^T */
+typedef struct { int r; const double *u, *phi, *sc, *shrink; } Fit3D;
+
+enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
+
+/* v (the rib coordinates, R x n) mapped in place, rib by rib, as LockedModeFit's maps:
+ * to_scheme v + Phi diag(1/s - 1) U^T v, to_physical v + Phi diag(s - 1) U^T v, transpose
+ * v + U diag(s - 1) Phi^T v, newton_update v - Phi diag(shrink) U^T v; a rib's block of v at
+ * stride apart (n for R x n, mb for the arrow's right-hand sides) */
+static void fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *v, int stride) {
+    int n = x->n, r = f->r;
+    double *c = x->fitc;
+    for (int k = 0; k < x->R; k++) {
+        double *vk = v + (size_t)k * stride;
+        const double *in = (kind == TRANSPOSE ? f->phi : f->u) + (size_t)k * r * n;
+        const double *out = (kind == TRANSPOSE ? f->u : f->phi) + (size_t)k * r * n;
+        for (int j = 0; j < r; j++) {
+            double s = f->sc[k * r + j], d = 0.0;
+            for (int a = 0; a < n; a++) d += in[j * n + a] * vk[a];
+            c[j] = d * (kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -f->shrink[k * r + j]
+                        : s - 1.0);
+        }
+        for (int a = 0; a < n; a++) {
+            double acc = 0.0;
+            for (int j = 0; j < r; j++) acc += out[j * n + a] * c[j];
+            vk[a] += acc;
+        }
+    }
+}
+
+/* Whether the kept iteration matrix serves a step of length h from (q0, v0): the step
+ * starts where the committed step that used it ended, with the same length (to 1e-9), lock
+ * and stuck hinges, and the matrix has served fewer than carry_steps steps.  A rule of the
+ * trajectory alone (integrator3d.MidpointUmbrella._kept_factor is the same), so runs of
+ * steps and single steps take the same iterates. */
+static int kept_serves(const Ctx3D *x, const double *stuck, int locked, double h) {
+    if (!x->kept || x->kept_locked != locked || fabs(x->kept_h - h) > 1e-9 * h
+        || x->slot[x->kept_slot].uses >= x->m->carry_steps)
+        return 0;
+    for (int r = 0; r < x->R; r++)
+        if (x->kept_stuck[r] != !isnan(stuck[r])) return 0;
+    size_t bytes = sizeof(double) * (x->R * x->n + x->ns);
+    return memcmp(x->q0, x->kept_q, bytes) == 0 && memcmp(x->v0, x->kept_v, bytes) == 0;
+}
+
 /* One step of length h from (q0, v0, l0, p0) into (q, v, lam, p); the works. */
 static int step(Ctx3D *x, const double *stuck, int locked, double h, double force, double tol,
-                double phi_tol, int max_iter) {
+                double phi_tol, int max_iter, const Fit3D *fit) {
     const Model3D *m = x->m;
     int R = x->R, n = x->n, N = R * n, ns = x->ns, mb = x->mb, cs = x->cs;
     const double half_h2 = 0.5 * h * h;
     double *q = x->q, *q0 = x->q0, *v0 = x->v0, *p0 = x->p0;
+    /* the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0) */
+    const double *w0 = v0, *sp0 = p0;
+    if (fit) {
+        memcpy(x->w0, v0, sizeof(double) * (N + ns));
+        fit_map(x, fit, TO_SCHEME, x->w0, n);
+        memcpy(x->sp0, p0, sizeof(double) * (N + ns));
+        fit_map(x, fit, TRANSPOSE, x->sp0, n);
+        w0 = x->w0;
+        sp0 = x->sp0;
+    }
     constraints(x, q0, stuck, locked, x->phi0);
-    for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * v0[i];
+    for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * w0[i];
     memcpy(x->lam, x->l0, sizeof(double) * (R * ROWS + cs));
-    int factored = 0, it;
+    /* modified Newton: the kept matrix if it serves, else (and after a slow iteration) one
+     * factored at the iterate into the slot not kept */
+    int lagged = kept_serves(x, stuck, locked, h);
+    Fact *ff = lagged ? &x->slot[x->kept_slot] : NULL;
+    Fact *fresh = &x->slot[x->kept ? 1 - x->kept_slot : 0];
+    int factored = lagged, refactored = 0, it;
+    x->pend_slot = -1;
     double last = INFINITY;
     for (it = 1; it <= max_iter; it++) {
         for (int i = 0; i < N + ns; i++) {
             x->dq[i] = q[i] - q0[i];
             x->qm[i] = q0[i] + 0.5 * x->dq[i];
-            x->v1[i] = 2.0 * x->dq[i] / h - v0[i];
+            x->v1[i] = 2.0 * x->dq[i] / h - w0[i];
         }
+        if (fit) fit_map(x, fit, TO_PHYSICAL, x->v1, n);
         for (int j = 0; j < 2; j++) {
             kinematics(x, j, q, &x->k1[j]);
             kinematics(x, j, x->qm, &x->km[j]);
         }
         mass_matrix(x, x->k1);
         matvec(x, x->v1, x->p1);
+        const double *sp1 = x->p1;        /* the scheme's momentum S^T M(q1) v1 */
+        if (fit) {
+            memcpy(x->sp1, x->p1, sizeof(double) * (N + ns));
+            fit_map(x, fit, TRANSPOSE, x->sp1, n);
+            sp1 = x->sp1;
+        }
         kinetic_gradient(x, x->km, v0, x->v1, x->gt);
         /* Gonzalez along the rib coordinates: dq . G_T = f(q1) - f(q0) */
         matvec(x, v0, x->tmp);
@@ -608,7 +714,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
                 double applied = -x->ycol[a], cons = 0.0;
                 if (a == m->i_a1) applied += x->fric[r];
                 for (int i = 0; i < ROWS; i++) cons += G[i * n + a] * lam[i];
-                x->res[r * n + a] = x->p1[r * n + a] - p0[r * n + a]
+                x->res[r * n + a] = sp1[r * n + a] - sp0[r * n + a]
                     - h * (x->gt[r * n + a] + applied + cons);
             }
             cons_s -= lam[7];
@@ -629,9 +735,11 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
                 }
                 G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
             }
-            if (arrow_factor(x, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
+            if (arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
                 return SINGULAR;
-            factored = 1;
+            ff = fresh;
+            factored = refactored = 1;
+            x->factorisations++;
         }
         for (int r = 0; r < R; r++) {
             for (int a = 0; a < n; a++) x->rr[r * mb + a] = -0.5 * h * x->res[r * n + a];
@@ -640,7 +748,8 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         double rs[MAXS];
         rs[0] = -0.5 * h * x->res[N];
         rs[ns] = locked ? -x->phi[R * ROWS] : 0.0;
-        arrow_solve(x, x->rr, rs, -1.0);
+        arrow_solve(x, ff, x->rr, rs, -1.0);
+        if (fit) fit_map(x, fit, NEWTON, x->rr, mb);
         double norm = 0.0;
         int finite = 1;
         for (int r = 0; r < R; r++) {
@@ -660,13 +769,18 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             constraints(x, q, stuck, locked, x->phi);
             if (max_abs(R * ROWS + cs, x->phi) < phi_tol) break;
         }
+        if (it > 1 && rate > REFRESH_RATE) factored = 0;
         last = norm;
     }
     if (it > max_iter) return NO_CONVERGENCE;
     x->iterations = it;
+    x->pend_slot = (int)(ff - x->slot);
+    x->pend_uses = refactored ? 1 : ff->uses + 1;
+    x->pend_h = h;
     /* velocities, works, the energy target */
     double *v = x->v;
-    for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - v0[i]; }
+    for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - w0[i]; }
+    if (fit) fit_map(x, fit, TO_PHYSICAL, v, n);
     for (int j = 0; j < 2; j++) kinematics(x, j, q, &x->k1[j]);
     mass_matrix(x, x->k1);
     double w_fric = 0.0;
@@ -716,9 +830,20 @@ static void load(Ctx3D *x, const Advance3DCall *a) {
 
 static void put(double **o, const double *src, int k) { memcpy(*o, src, sizeof(double) * k); *o += k; }
 
-/* commit the step into the call's state */
+/* commit the step into the call's state; its iteration matrix is kept (kept_serves) */
 static void commit(Ctx3D *x, Advance3DCall *a) {
     int R = x->R, n = x->n, N = R * n, ns = x->ns, cs = x->cs;
+    if (x->pend_slot >= 0) {
+        x->kept = 1;
+        x->kept_slot = x->pend_slot;
+        x->slot[x->kept_slot].uses = x->pend_uses;
+        x->kept_h = x->pend_h;
+        x->kept_locked = a->locked;
+        memcpy(x->kept_q, x->q, sizeof(double) * (N + ns));
+        memcpy(x->kept_v, x->v, sizeof(double) * (N + ns));
+        for (int r = 0; r < R; r++) x->kept_stuck[r] = !isnan(a->stuck[r]);
+        x->pend_slot = -1;
+    }
     memcpy(a->qr, x->q, sizeof(double) * N);
     memcpy(a->qs, x->q + N, sizeof(double) * ns);
     memcpy(a->vr, x->v, sizeof(double) * N);
@@ -743,6 +868,7 @@ static void write_row(Ctx3D *x, const Advance3DCall *a, double *o) {
     *o++ = x->work_force;
     put(&o, x->work_fric, R);
     *o++ = x->iterations;
+    *o++ = x->factorisations;
 }
 
 /* the simulator's release (UmbrellaSimulator3D._release) after a committed step */
@@ -764,11 +890,14 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
     a->iterations = 0;
     int N = x->R * x->n;
     int steps = a->single ? 1 : a->n_steps;
+    Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink};
+    if (a->fit_modes > x->n) return SINGULAR;
     for (int k = 0; k < steps; k++) {
         load(x, a);
         double t_next = a->single ? a->t + a->h : (double)(a->k0 + k + 1) * a->h;
+        x->factorisations = 0;
         int status = step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol, a->phi_tol,
-                          a->max_iter);
+                          a->max_iter, a->locked && a->fit_modes > 0 ? &fit : NULL);
         if (status != OK) return status;
         if (!a->single && !a->locked && x->q[N] - x->m->y_stop <= 0.0) return CROSSING;
         a->iterations += x->iterations;

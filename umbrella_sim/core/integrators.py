@@ -141,10 +141,21 @@ class LockedModeFit:
     the co-rotational strain of flexible-nonlinear the axial coordinates follow the
     foreshortening of the bending, and its large-motion stage 2 (the links buckle at V0 <= -1)
     is far from the linearisation; its step rule takes the plain limit (step_rule).
+    ``of_modes`` fits given modes (the 3D umbrella's, rib by rib: umbrella3d/integrator3d.py).
     """
 
     def __init__(self, model: UmbrellaModel, h: float, damping: np.ndarray | None = None):
-        omega, phi, mass = model.locked_modes
+        self._fit(*model.locked_modes, h, damping)
+
+    @classmethod
+    def of_modes(cls, omega: np.ndarray, phi: np.ndarray, mass: np.ndarray, h: float,
+                 damping: np.ndarray | None = None) -> 'LockedModeFit':
+        """Return the fit of the modes (omega ascending, phi mass-normalised in mass)."""
+        fit = cls.__new__(cls)
+        fit._fit(omega, phi, mass, h, damping)
+        return fit
+
+    def _fit(self, omega, phi, mass, h, damping):
         keep = omega * h <= PHASE_CORRECTION_LIMIT
         self.step = h
         self.omega = omega[keep]

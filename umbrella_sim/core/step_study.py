@@ -232,12 +232,21 @@ def locked_mode_flow(phase_correction: bool, k: int, damping_ratio: float = 0.0,
     for _ in range(round(periods * 2 * math.pi / omega[k] / h)):
         s = engine.step(s, h, 0.0, Stage.LOCKED)
         eta.append(phi[:, k] @ mass @ (s.q - q_deployed))
-    eta = np.array(eta)
+    return mode_flow_of(np.array(eta), h, float(omega[k]), started, (energy(s) - e0) / e0)
+
+
+def mode_flow_of(eta: np.ndarray, h: float, omega: float, started: float,
+                 energy_change: float) -> ModeFlow:
+    """
+    Return the ModeFlow of a modal coordinate's series eta (steps h) of a linear flow.
+
+    eta_(n+1) = a eta_n + b eta_(n-1) exactly: its roots z give the discrete eigenvalue
+    log(z) / h (Prony's method), eta_n = Re(C z^n) the amplitude |C| (over `started`).
+    """
     a, b = np.linalg.lstsq(np.column_stack([eta[1:-1], eta[:-2]]), eta[2:], rcond=None)[0]
     z = np.roots([1.0, -a, -b])[0]
     lam = np.log(z) / h
     powers = z ** np.arange(len(eta))
     c = np.linalg.lstsq(np.column_stack([powers.real, -powers.imag]), eta, rcond=None)[0]
-    return ModeFlow(float(omega[k]), float(abs(lam) / omega[k] - 1.0),
-                    float(-lam.real / abs(lam)), math.hypot(*c) / started,
-                    float((energy(s) - e0) / e0))
+    return ModeFlow(omega, float(abs(lam) / omega - 1.0), float(-lam.real / abs(lam)),
+                    math.hypot(*c) / started, float(energy_change))

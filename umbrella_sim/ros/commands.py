@@ -162,7 +162,8 @@ class CommandIntake:
         """
         Take the commands still queued when the run stops: none is left uncounted.
 
-        Until none has come for STOP_QUIET_S, for `period` s at most, each is taken as during
+        Until none has come for STOP_QUIET_S (at once when no publisher of commands is
+        matched: none can be on its way), for `period` s at most, each is taken as during
         the run (checked, counted, recorded at the run's last time; none is applied: the run
         has ended) and counted in taken_at_stop;
         then, a flood still coming, for as long again each is only counted, in
@@ -175,7 +176,8 @@ class CommandIntake:
                 while time.monotonic() - start < 2 * period:
                     taken = self._queued()
                     if taken is None:
-                        if time.monotonic() - last >= min(STOP_QUIET_S, period):
+                        if (time.monotonic() - last >= min(STOP_QUIET_S, period)
+                                or not self._publishers_matched()):
                             break
                         time.sleep(0.002)
                         continue
@@ -191,6 +193,13 @@ class CommandIntake:
                 'recorded, not applied: the run had ended)'
                 + (f', {self.dropped_at_stop} more counted as dropped'
                    if self.dropped_at_stop else ''))
+
+    def _publishers_matched(self) -> bool:
+        """Say whether a publisher of commands is matched (one that may still be delivering)."""
+        try:
+            return self.subscription.get_publisher_count() > 0
+        except Exception:      # (a subscription already destroyed: nothing can come)
+            return False
 
     def take(self, msg) -> None:
         """Check, count and record one command; hold it if accepted."""

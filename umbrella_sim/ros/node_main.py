@@ -38,6 +38,9 @@ from .share import package_path
 from ..core.registry import NODE_PARAMETERS, parameter_help, SPECS, START
 from ..core.umbrella3d.params3d import rib_list_specs, UMBRELLA_SPECS
 
+#: the main thread's executor wait (s): a stop signal is seen when it returns
+SPIN_TIMEOUT_S = 0.02
+
 
 def usage() -> str:
     lines = ['usage: umbrella_node [--help] [--ros-args -p name:=value ... --params-file FILE',
@@ -144,9 +147,10 @@ def _run(argv: list[str], running: list) -> int:
     executor.add_node(node)
     ok = True
     try:
-        # the timeout lets a signal's Python handler run while the executor waits
+        # the timeout lets a signal's Python handler run while the executor waits (it runs
+        # only when the wait returns: the timeout bounds how late a stop is seen)
         while not node.finished.done() and not stop_requested:
-            executor.spin_once(timeout_sec=0.1)
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
         node.stop()
         ok = bool(node.finished.result()) if node.finished.done() else node.fault is None
     except (KeyboardInterrupt, ExternalShutdownException):

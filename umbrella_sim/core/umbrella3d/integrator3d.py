@@ -22,9 +22,13 @@ takes the planar model's steps: predictor q0 + h v0, modified Newton on
     M(q1) v1 - M(q0) v0 = h [ G_T - K q_m + Q + G_Phi^T lambda ],   Phi(q1) = 0
 
 (G_T, G_Phi Gonzalez discrete gradients of 1/2 v0^T M(q) v1 and of each joint row; Q the
-sleeve force on y_s, the hinges' friction at the step's mean rate, exact work), one
-iteration matrix per step (M + h^2/4 K + h/2 G at the predictor, the elastic gyroscopic
-block and the Gonzalez columns left out, as the planar one), the same stopping rule, then
+sleeve force on y_s, the hinges' friction at the step's mean rate, exact work), the
+iteration matrix M + h^2/4 K + h/2 G (at the iterate it is factored at; the elastic
+gyroscopic block and the Gonzalez columns left out, as the planar one) kept across steps:
+a step that starts where the step before ended, with its length, lock and stuck hinges,
+takes that step's matrix, which serves at most CARRY_STEPS steps and is factored anew at
+the iterate after an iteration that contracts the update by less than REFRESH_RATE
+(``_kept_factor``; the same rule in _kernel3d.c), the same stopping rule, then
 the velocity projected onto the joints in the mass metric and scaled to the kinetic energy
 of the step's discrete energy balance
 
@@ -37,6 +41,12 @@ block-arrow (arrow.py): cost linear in the number of ribs.  The kinetic energy's
 gradient meets dq . G_T = f(q1) - f(q0) over the whole dq, the correction added along the
 ribs' coordinates and the sleeve's only (not the bus's: its position is cyclic), so the bus's
 linear momentum is conserved to round-off.
+
+Stage 2 with the hub fixed may take the planar stage-2 mode fit (``fit_stage2_modes``,
+``lock_at``): with the sleeve at the stop the ribs are decoupled, so each rib's locked modes
+(modes3d.rib_locked_modes) are fitted as the planar frame's (integrators.LockedModeFit: each
+resolved mode exact in phase and amplitude, T + V conserved), rib by rib: the scheme's
+velocity w_k = S_k^-1 v_k, momentum S_k^T M v, each Newton update shrunk mode by mode.
 """
 from __future__ import annotations
 
@@ -50,9 +60,18 @@ import numpy as np
 from . import arrow
 from .kernel3d import CompiledStep3D
 from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
+from .modes3d import rib_locked_modes
 from .state3d import ConvergenceError3D, State3D, StepWork
-from ..integrators import newton_converged, PHI_TOLERANCE
+from ..integrators import LockedModeFit, newton_converged, PHI_TOLERANCE
 from ..kernel import kernel_refusal, LIBRARY, load_kernel
+
+#: steps an iteration matrix serves at most (the first included), and the contraction of a
+#: Newton update above which the matrix is factored anew at the iterate (_kernel3d.c's
+#: CARRY_STEPS, REFRESH_RATE).  Measured (ribs 6, 1 element, h = 0.1 ms, deployment): a
+#: fresh matrix every step took 2.00 Newton iterations a step, kept 2.00 and 0.125
+#: factorisations a step (2.03, 0.126 at ribs 12, 2 elements).
+CARRY_STEPS = 8
+REFRESH_RATE = 0.1
 
 #: why a run steps on the numpy path although the compiled step was asked for ('auto'),
 #: said once a process on stderr
@@ -97,11 +116,17 @@ class MidpointUmbrella:
     kernel: 'auto' (UMBRELLA_SIM_KERNEL, else auto: the compiled step, _kernel3d.c, when the
     library is built and the hub fixed, else this numpy reference with a note on stderr),
     'compiled' (an error if it cannot be), or 'numpy'.  ``backend`` says which steps.
+    carry_steps: the steps an iteration matrix serves at most (1: factored every step, the
+    planar scheme's rule).
     """
 
     def __init__(self, model: UmbrellaModel3D, tolerance: float = 1e-10,
-                 max_iterations: int = 25, kernel: str | None = None):
+                 max_iterations: int = 25, kernel: str | None = None,
+                 carry_steps: int = CARRY_STEPS):
+        if carry_steps < 1:
+            raise ValueError(f'carry_steps={carry_steps}: must be 1 or more')
         self.model = model
+        self.carry_steps = carry_steps
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         p = model.params
@@ -118,6 +143,12 @@ class MidpointUmbrella:
             self.kin_shared[0] = True
             self.norm_shared[1:] = True
         self.iterations = 0
+        self.factorisations = 0     # of the iteration matrix
+        #: stage 2's mode fit, each rib's (fit_stage2_modes), acting from lock_at on
+        self.mode_fits: list[LockedModeFit] | None = None
+        self.fit_active = False
+        #: the last step's iteration matrix: (factor, uses, end q and v, h, locked, stuck)
+        self._kept = None
         self.compiled = self._compiled_step(kernel)
 
     def _compiled_step(self, kernel: str | None):
@@ -138,7 +169,7 @@ class MidpointUmbrella:
                                        'bootstrap.py setup; it needs a C compiler)')
         if why is None:
             return CompiledStep3D(lib, self.model, self.tolerance, PHI_TOLERANCE,
-                                  self.max_iterations)
+                                  self.max_iterations, self.carry_steps)
         if kernel == 'compiled':
             raise RuntimeError(why)
         if why not in _SAID:
@@ -146,6 +177,25 @@ class MidpointUmbrella:
             print(f'umbrella_sim: {why}; the 3D umbrella steps on the numpy reference path '
                   '(slow)', file=sys.stderr, flush=True)
         return None
+
+    def fit_stage2_modes(self, h: float) -> None:
+        """Fit each rib's locked modes for grid step h (LockedModeFit), from lock_at on."""
+        if self.model.moving_base:
+            raise ValueError('the 3D stage-2 mode fit has the hub fixed (base: fixed): with a '
+                             'moving base the locked ribs stay coupled through it')
+        self.mode_fits = [LockedModeFit.of_modes(*modes, h)
+                          for modes in rib_locked_modes(self.model)]
+
+    def lock_at(self) -> None:
+        """Start stage 2's mode fit (if any): the lock has happened."""
+        if self.mode_fits is not None:
+            self.fit_active = True
+            if self.compiled is not None:
+                self.compiled.set_mode_fit(self.mode_fits)
+
+    def stage2_fits(self, locked: bool) -> list[LockedModeFit] | None:
+        """Return the ribs' mode fits acting on a step (stage 2, from the lock), else None."""
+        return self.mode_fits if self.fit_active and locked else None
 
     @property
     def backend(self) -> str:
@@ -238,9 +288,29 @@ class MidpointUmbrella:
         if self.compiled is not None:
             state, work = self.compiled.step(s, h, force, locked)
             self.iterations += work.iterations
+            self.factorisations += work.factorisations
             return state, work
         with np.errstate(over='ignore', invalid='ignore'):
             return self._step(s, h, force, locked)
+
+    def _kept_factor(self, s: State3D, h: float, locked: bool):
+        """
+        Return (the kept iteration matrix, its uses) if it serves a step from s, else None.
+
+        It serves when s is where the step that used it ended (bit for bit), with the same
+        length (to 1e-9), lock and stuck hinges, and it has served fewer than carry_steps
+        steps: a rule of the trajectory alone.
+        """
+        kept = self._kept
+        if kept is None:
+            return None
+        factor, uses, qr, qs, vr, vs, h_kept, locked_kept, stuck = kept
+        if (uses >= self.carry_steps or locked_kept != locked or abs(h_kept - h) > 1e-9 * h
+                or not np.array_equal(stuck, np.isnan(s.stuck))):
+            return None
+        pairs = ((qr, s.qr), (qs, s.qs), (vr, s.vr), (vs, s.vs))
+        same = all(np.array_equal(a, b) for a, b in pairs)
+        return (factor, uses) if same else None
 
     def _step(self, s: State3D, h: float, force: float, locked: bool):
         m = self.model
@@ -255,16 +325,27 @@ class MidpointUmbrella:
             drive = self.drive(s.t + h)
         phi_r0, phi_s0 = m.constraints(qr0, qs0, stuck, locked,
                                        None if drive is None else drive[0])
-        qr, qs = qr0 + h * vr0, qs0 + h * vs0
+        # the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0)
+        fits = self.stage2_fits(locked)
+        wr0, spr0 = vr0, pr0
+        if fits is not None:
+            wr0 = _by_rib(LockedModeFit.to_scheme, fits, vr0)
+            spr0 = _by_rib(LockedModeFit.transpose, fits, pr0)
+        qr, qs = qr0 + h * wr0, qs0 + h * vs0
         lam_r, lam_s = s.lam_r.copy(), s.lam_s.copy()
         half_h2 = 0.5 * h * h
-        factored = None
+        kept = self._kept_factor(s, h, locked)
+        factored, uses = kept if kept is not None else (None, 0)
+        self._kept = None
+        factorisations = 0
         last = np.inf
         kin_mask = self.kin_shared
         for it in range(1, self.max_iterations + 1):
             dqr, dqs = qr - qr0, qs - qs0
             qmr, qms = qr0 + 0.5 * dqr, qs0 + 0.5 * dqs
-            vr1, vs1 = 2.0 * dqr / h - vr0, 2.0 * dqs / h - vs0
+            vr1, vs1 = 2.0 * dqr / h - wr0, 2.0 * dqs / h - vs0
+            if fits is not None:
+                vr1 = _by_rib(LockedModeFit.to_physical, fits, vr1)
             kin1 = m.kinematics(qr, qs)
             mass1 = m.mass_matrix(kin1)
             pr1, ps1 = m.matvec(mass1, vr1, vs1)
@@ -297,7 +378,8 @@ class MidpointUmbrella:
             applied_s[0] = -force
             cons_r = np.einsum('rji,rj->ri', jg_rr, lam_r)
             cons_s = np.einsum('rji,rj->i', jm_rs, lam_r) + jm_ss.T @ lam_s
-            res_r = pr1 - pr0 - h * (gtr + applied_r + cons_r)
+            scheme_pr1 = pr1 if fits is None else _by_rib(LockedModeFit.transpose, fits, pr1)
+            res_r = scheme_pr1 - spr0 - h * (gtr + applied_r + cons_r)
             res_s = ps1 - ps0 - h * (gts + applied_s + cons_s)
             if factored is None:
                 j_r = m.constraint_jacobian(qr, stuck, locked)
@@ -306,10 +388,14 @@ class MidpointUmbrella:
                 extra[:, m.i_a1, m.i_a1] -= 0.5 * h * h * slope
                 factored = arrow.factor(*self._blocks(
                     mass1, (jm_rr, jm_rs, jm_ss), j_r[:3], stuck, active, extra))
+                uses = 0
+                factorisations += 1
             rhs_r = np.concatenate([-0.5 * h * res_r, -phi_r], 1)
             rhs_s = np.concatenate([-0.5 * h * res_s, -phi_s])
             rhs_s[ns:][~active] = 0.0
             x_r, x_s = factored.solve(rhs_r, rhs_s)
+            if fits is not None:
+                x_r[:, :n] = [f.newton_update(d, h) for f, d in zip(fits, x_r[:, :n])]
             qr = qr + x_r[:, :n]
             qs = qs + x_s[:ns]
             lam_r = lam_r + x_r[:, n:] / half_h2
@@ -327,13 +413,18 @@ class MidpointUmbrella:
                 return max(np.max(np.abs(pr_)), np.max(np.abs(ps_), initial=0.0))
             if newton_converged(norm, rate, self.tolerance, residual):
                 break
+            if it > 1 and rate > REFRESH_RATE:
+                factored = None
             last = norm
         else:
             raise ConvergenceError3D(f'Newton did not converge in {self.max_iterations} '
                                      f'iterations at t = {s.t + h:.9g} s')
         self.iterations += it
+        self.factorisations += factorisations
         dqr, dqs = qr - qr0, qs - qs0
-        vr, vs = 2.0 * dqr / h - vr0, 2.0 * dqs / h - vs0
+        vr, vs = 2.0 * dqr / h - wr0, 2.0 * dqs / h - vs0
+        if fits is not None:
+            vr = _by_rib(LockedModeFit.to_physical, fits, vr)
         kin1 = m.kinematics(qr, qs)
         mass1 = m.mass_matrix(kin1)
         torque, _ = self.friction(dqr[:, m.i_a1], h)
@@ -372,4 +463,10 @@ class MidpointUmbrella:
                 vr, vs = vr * scale, (vs - drift) * scale + drift
                 pr1, ps1 = m.matvec(mass1, vr, vs)
         state = State3D(s.t + h, qr, qs, vr, vs, lam_r, lam_s, stuck, pr1, ps1)
-        return state, StepWork(w_force, w_fric, w_drive, it)
+        self._kept = (factored, uses + 1, qr, qs, vr, vs, h, locked, np.isnan(stuck))
+        return state, StepWork(w_force, w_fric, w_drive, it, factorisations)
+
+
+def _by_rib(rule, fits, rows: np.ndarray) -> np.ndarray:
+    """Return rule(fit_k, rows[k]) of each rib k (a LockedModeFit map, rib by rib)."""
+    return np.array([rule(f, row) for f, row in zip(fits, rows)])

@@ -48,7 +48,8 @@ def row_layout(model: UmbrellaModel3D) -> dict:
     parts = (('t', ()), ('qr', (nr, n)), ('qs', (model.n_shared,)), ('vr', (nr, n)),
              ('vs', (model.n_shared,)), ('lam_r', (nr, N_RIB_ROWS)),
              ('lam_s', (model.n_shared_rows,)), ('stuck', (nr,)), ('kinetic', ()),
-             ('strain', ()), ('work_force', ()), ('work_friction', (nr,)), ('iterations', ()))
+             ('strain', ()), ('work_force', ()), ('work_friction', (nr,)), ('iterations', ()),
+             ('factorisations', ()))
     out, k = {}, 0
     for name, shape in parts:
         size = int(np.prod(shape)) if shape else 1
@@ -61,7 +62,7 @@ class CompiledStep3D:
     """The compiled step of one model (hub fixed); see the module docstring."""
 
     def __init__(self, lib, model: UmbrellaModel3D, tolerance: float, phi_tolerance: float,
-                 max_iterations: int):
+                 max_iterations: int, carry_steps: int = 1):
         if model.moving_base:
             raise ValueError('the compiled 3D step has the hub fixed (base: fixed)')
         self.lib, self.model = lib, model
@@ -93,7 +94,7 @@ class CompiledStep3D:
             leaf_points=leaf.x.shape[1], leaf_elastic=leaf.shape.shape[-1],
             link_points=link.x.shape[1], link_elastic=link.shape.shape[-1],
             link_offset=link.offset, sleeve_mass=m.sleeve_mass, y_stop=m.y_stop,
-            regularisation=m.params.hinge_regularisation,
+            regularisation=m.params.hinge_regularisation, carry_steps=carry_steps,
             **{k: _ptr(v) for k, v in self._arrays.items()})
         ctx = lib.umbrella3d_new(ctypes.byref(self.struct))
         if not ctx:
@@ -118,6 +119,26 @@ class CompiledStep3D:
         if ctx is not None and ctx.value:
             self._free(ctx)
             self._ctx = None
+
+    def set_mode_fit(self, fits) -> None:
+        """
+        Fit the locked steps' modes from now on: each rib's integrators.LockedModeFit.
+
+        The call keeps pointers to the arrays (Advance3DCall.fit_*), padded to the most
+        modes a rib has (s = 1, shrink 0: no change).
+        """
+        nr, n = self.model.n_ribs, self.model.n_rib
+        r = max(len(f.scale) for f in fits)
+        u, phi = np.zeros((nr, r, n)), np.zeros((nr, r, n))
+        scale, shrink = np.ones((nr, r)), np.zeros((nr, r))
+        for k, f in enumerate(fits):
+            m = len(f.scale)
+            u[k, :m], phi[k, :m] = f.modes, f.shapes
+            scale[k, :m], shrink[k, :m] = f.scale, f.newton_shrink(f.step)
+        self._fit = (u, phi, scale, shrink)
+        c = self.call
+        c.fit_u, c.fit_phi, c.fit_scale, c.fit_shrink = (_ptr(a) for a in self._fit)
+        c.fit_modes = r
 
     def _set_capacity(self, cap: int) -> None:
         self.out = np.zeros((cap, self.row_len))
@@ -154,7 +175,7 @@ class CompiledStep3D:
             raise status_error(status, s.t + h)
         row = self.rows(1)
         work = StepWork(float(row['work_force'][0]), row['work_friction'][0].copy(), 0.0,
-                        int(row['iterations'][0]))
+                        int(row['iterations'][0]), int(row['factorisations'][0]))
         return self._state(), work
 
     def advance(self, s: State3D, k0: int, h: float, n_steps: int, force: float,

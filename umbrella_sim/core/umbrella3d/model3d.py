@@ -53,7 +53,7 @@ import math
 import numpy as np
 
 from .beam3d import BeamBody3D
-from .params3d import UmbrellaRibsParams
+from .params3d import rigid_rib_angle, UmbrellaRibsParams
 
 N_RIB_ROWS = 9
 ROW_STICK = 8
@@ -544,11 +544,7 @@ class UmbrellaModel3D:
         base = self.params.planar
         if (rib.l1, rib.l3) == (base.l1, base.l3) and y == self.y_start:
             return base.alpha0
-        from scipy.optimize import brentq
-
-        def f(a):
-            return rib.l1 * math.sin(a) + math.sqrt(rib.l3 ** 2 - (rib.l1 * math.cos(a)) ** 2) - y
-        return brentq(f, 1e-9, math.pi / 2, xtol=1e-15)
+        return rigid_rib_angle(rib.l1, rib.l3, y)
 
     # -------------------------------------------------------------- figures
     def momentum(self, kin, vr, vs):
@@ -590,9 +586,4 @@ def _deployed_angle(rib, base) -> float:
     """Return the leaf angle at which a rib's rigid geometry puts H at the common stop."""
     if (rib.l1, rib.l3) == (base.l1, base.l3):
         return base.alpha_deployed
-    from scipy.optimize import brentq
-
-    y = base.sleeve_stop_height
-    return brentq(lambda a: rib.l1 * math.sin(a)
-                  + math.sqrt(rib.l3 ** 2 - (rib.l1 * math.cos(a)) ** 2) - y,
-                  1e-9, math.pi / 2, xtol=1e-15)
+    return rigid_rib_angle(rib.l1, rib.l3, base.sleeve_stop_height)

@@ -82,6 +82,29 @@ def locked_modes(model: UmbrellaModel3D):
     return np.sqrt(np.maximum(w2, 0.0)), shapes, labels
 
 
+def rib_locked_modes(model: UmbrellaModel3D) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """
+    Return each rib's (omega, phi, mass) of the locked umbrella, the sleeve at the stop.
+
+    With the sleeve stopped and the hub fixed the ribs are decoupled: rib k's modes are
+    K_k x = omega^2 M_k x on the null space of its joints (a stuck hinge's row left out) at
+    its undeformed deployed configuration, omega ascending, phi (n_rib, modes) mass-
+    normalised in M_k = mass: the planar ``UmbrellaModel.locked_modes`` of one rib.
+    """
+    from scipy.linalg import eigh, null_space
+
+    m = model
+    qr, qs = deployed_configuration(m)
+    mass = m.mass_matrix(m.kinematics(qr, qs))[0]
+    j_rr = m.constraint_jacobian(qr, np.full(m.n_ribs, np.nan), True)[0]
+    out = []
+    for k in range(m.n_ribs):
+        z = null_space(j_rr[k, :-1])
+        w2, psi = eigh(z.T @ m.stiffness[k] @ z, z.T @ mass[k] @ z)
+        out.append((np.sqrt(np.maximum(w2, 0.0)), z @ psi, mass[k]))
+    return out
+
+
 def _shares(m: UmbrellaModel3D, stiff, x):
     """Return the (in-plane, out-of-plane bending, twist) shares of x's strain energy."""
     total = x @ stiff @ x

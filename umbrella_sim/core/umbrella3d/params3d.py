@@ -286,8 +286,20 @@ class UmbrellaRibsParams:
                              "each rib's kinetic energy and would change the momentum of a "
                              "free-floating bus; use lock 'plastic'")
         for k in range(self.ribs):
-            self.rib(k)
+            self._check_reach(self.rib(k))
         return self
+
+    def _check_reach(self, rib: 'RibProperties') -> None:
+        """Raise ValueError naming the rib if its lengths cannot put the sleeve where it runs."""
+        l1, l3 = rib.planar.l1, rib.planar.l3
+        _, lowest, highest = rib_reach(l1, l3)
+        for what, y in (('start', self.planar.sleeve_start_height),
+                        ('stop', self.planar.sleeve_stop_height)):
+            if not lowest - 1e-12 <= y <= highest + 1e-12:
+                raise ValueError(
+                    f'rib {rib.index}: its leaf l1={l1:g} m and link l3={l3:g} m cannot reach '
+                    f"the sleeve's {what} height {y:.6g} m (a rigid rib of these lengths puts "
+                    f'the sleeve between {lowest:.6g} and {highest:.6g} m)')
 
     def rib(self, k: int) -> RibProperties:
         """Return rib k's values (its planar record validated, its own values checked)."""
@@ -355,6 +367,31 @@ class UmbrellaRibsParams:
                 merged[f'rib{k}.{name}'] = value
         merged.update(changes)
         return UmbrellaRibsParams.from_mapping(merged, self.planar)
+
+
+def rib_reach(l1: float, l3: float) -> tuple[float, float, float]:
+    """
+    Return (lowest leaf angle, lowest, highest sleeve height) of a rigid rib (leaf l1, link l3).
+
+    The sleeve's height y(a) = l1 sin a + sqrt(l3^2 - (l1 cos a)^2) rises with the leaf
+    angle a from the lowest angle (acos(l3 / l1) when the link is the shorter, below which it
+    cannot reach the axis; else just above 0) to pi / 2, where it is l1 + l3.
+    """
+    low = max(1e-9, math.acos(min(1.0, l3 / l1)))
+    return low, _rigid_height(l1, l3, low), l1 + l3
+
+
+def _rigid_height(l1: float, l3: float, a: float) -> float:
+    return l1 * math.sin(a) + math.sqrt(max(l3 ** 2 - (l1 * math.cos(a)) ** 2, 0.0))
+
+
+def rigid_rib_angle(l1: float, l3: float, y: float) -> float:
+    """Return the leaf angle at which a rigid rib (leaf l1, link l3) puts the sleeve at y."""
+    from scipy.optimize import brentq
+
+    # (within the rib's reach: the parameters' validation checks the sleeve's heights)
+    return brentq(lambda a: _rigid_height(l1, l3, a) - y, rib_reach(l1, l3)[0], math.pi / 2,
+                  xtol=1e-15)
 
 
 def _rib_spec(name: str) -> None:

@@ -16,8 +16,10 @@
 The umbrella's run: time grid, sleeve force, the stop and lock, stuck hinges, the base.
 
 ``UmbrellaSimulator3D`` steps on the planar simulator's grid t_k = k h (h: the planar rule for
-the mesh, ``step_rule.physics_step_of``, as without the stage-2 mode fit, which this model
-does not have; unless the planar record sets ``time_step``) and
+the mesh, ``step_rule.physics_step_of``, with the stage-2 mode fit where it applies: the hub
+fixed and ``phase_correction`` on, each rib's locked modes fitted from the lock on
+(integrator3d.MidpointUmbrella.fit_stage2_modes); else the rule without it; unless the
+planar record sets ``time_step``) and
 applies the lock as it does: when the sleeve passes the stop inside a step the step is taken
 again from its start with the length root-found by the Illinois method (|dt| < 1e-12 s), the
 lock is applied there (plastic: the velocity projected onto the locked joints in the mass
@@ -63,12 +65,18 @@ class UmbrellaSimulator3D:
     """Steps the umbrella; see the module docstring."""
 
     def __init__(self, params: UmbrellaRibsParams, step: float | None = None,
-                 tolerance: float | None = None, kernel: str | None = None):
+                 tolerance: float | None = None, kernel: str | None = None,
+                 carry_steps: int | None = None):
         self.params = params.validated()
         self.model = m = UmbrellaModel3D(self.params)
+        #: stage 2's mode fit: the planar rule's, rib by rib, with the hub fixed
+        self.mode_fit = self.fits_modes(self.params)
         self.h = self.grid_step(self.params) if step is None else step
         self.integrator = MidpointUmbrella(
-            m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel)
+            m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel,
+            **({} if carry_steps is None else {'carry_steps': carry_steps}))
+        if self.mode_fit:
+            self.integrator.fit_stage2_modes(self.h)
         self.force = self.params.planar.sleeve_force * m.n_ribs
         self.locked = False
         self.lock_time: float | None = None
@@ -85,9 +93,16 @@ class UmbrellaSimulator3D:
         self.record.add(self.state, self.locked, self.force, None, 0.0)
 
     @staticmethod
-    def grid_step(params: UmbrellaRibsParams) -> float:
-        """Return the physics step of these parameters (the planar rule, no mode fit)."""
-        return physics_step_of(params.planar.replace(phase_correction=False))
+    def fits_modes(params: UmbrellaRibsParams) -> bool:
+        """Say whether stage 2 takes the planar mode fit: phase_correction, the hub fixed."""
+        return params.planar.phase_correction and params.base == 'fixed'
+
+    @classmethod
+    def grid_step(cls, params: UmbrellaRibsParams) -> float:
+        """Return the physics step of these parameters (the planar rule, its mode fit's)."""
+        planar = params.planar
+        return physics_step_of(planar if cls.fits_modes(params)
+                               else planar.replace(phase_correction=False))
 
     # ------------------------------------------------------------ start
     def initial_state(self) -> State3D:
@@ -182,6 +197,7 @@ class UmbrellaSimulator3D:
             s_hit, work_hit = self._find_lock(s0, t_next - s0.t)
             before = self.energy(s_hit)
             s_locked = self._lock(s_hit)
+            self.integrator.lock_at()
             rec = self.record
             self.lock_state = (s_locked, work_hit, (rec.work, rec.friction, rec.drive))
             after = self.energy(s_locked)
@@ -223,6 +239,7 @@ class UmbrellaSimulator3D:
                 self.state = state
                 self.k += done
                 self.integrator.iterations += int(rows['iterations'].sum())
+                self.integrator.factorisations += int(rows['factorisations'].sum())
                 self.record.add_steps(rows, self.locked, self.force, self.lock_loss)
             if status == STATUS['crossing']:
                 self.step()                     # the lock, here

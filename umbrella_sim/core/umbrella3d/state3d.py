@@ -48,3 +48,4 @@ class StepWork:
     friction: np.ndarray
     drive: float
     iterations: int
+    factorisations: int = 0    # of the iteration matrix (a kept one serves without)
