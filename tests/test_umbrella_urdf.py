@@ -308,9 +308,10 @@ def test_launch_passes_the_whole_umbrellas_urdf_to_robot_state_publisher(tmp_pat
     from umbrella_sim.ros import launch_description as ld
 
     params_file = tmp_path / 'ribs.yaml'
+    # (the node's forms: a rib's own values as rib.<name> lists or rib<k>.<name>)
     params_file.write_text('/**:\n  ros__parameters:\n    ribs: 4\n    hub_radius: 0.05\n'
-                           '    tip_mass: [0.0, 0.0, 0.1, 0.0]\n    rib1:\n      l2: 0.6\n'
-                           '    publish_rate: 200.0\n')
+                           '    rib:\n      tip_mass: [0.0, 0.0, 0.1, 0.0]\n'
+                           '    rib1:\n      l2: 0.6\n    publish_rate: 200.0\n')
     values = {a.name: a.default for a in ld.arguments()}
     values.update(params_file=str(params_file), namespace='a3')
     actions = ld.plan(values, installed=lambda pkg: f'/opt/share/{pkg}')
@@ -334,7 +335,7 @@ def test_launch_passes_the_whole_umbrellas_urdf_to_robot_state_publisher(tmp_pat
                if isinstance(a, ld.LogAction))
     # a bad umbrella value is refused, naming it, before anything is started
     params_file.write_text('/**:\n  ros__parameters:\n    ribs: 3\n'
-                           '    tip_mass: [0.0, 0.0, 0.1, 0.0]\n')
+                           '    rib:\n      tip_mass: [0.0, 0.0, 0.1, 0.0]\n')
     for installed in (None, '/opt/share'):
         with pytest.raises(ValueError, match='tip_mass: a list of 4 values for 3 ribs'):
             ld.plan(values, installed=lambda pkg: installed)

@@ -81,14 +81,23 @@ def run_metadata(params, node_cfg: dict, physics_step: float, model, backend: st
         BUILD_RECORD: {'package_version': __version__, 'git_revision': git_revision(),
                        'kernel': backend, 'integrator': INTEGRATOR_REVISION, 'source': source,
                        'python': sys.version.split()[0], **build_environment()},
-        MESH_RECORD: {
-            'model': params.model, 'lock': params.lock,
-            'elements_per_segment': str(params.elements_per_segment),
-            'coordinates': json.dumps(model.coordinate_labels()),
-            'leaf_node_x': json.dumps(list(model.leaf.node_x)),
-            'link_node_x': json.dumps(list(model.link.node_x)),
-        },
+        MESH_RECORD: mesh_record(params, model),
     }
+
+
+def mesh_record(params, model) -> dict[str, str]:
+    """
+    Return the mesh record: the model, its lock, its mesh and its coordinates.
+
+    The umbrella of N ribs (a model without coordinate_labels) gives its number of ribs.
+    """
+    out = {'model': params.model, 'lock': params.lock,
+           'elements_per_segment': str(params.elements_per_segment)}
+    if not hasattr(model, 'coordinate_labels'):
+        return {**out, 'ribs': str(model.n_ribs)}
+    return {**out, 'coordinates': json.dumps(model.coordinate_labels()),
+            'leaf_node_x': json.dumps(list(model.leaf.node_x)),
+            'link_node_x': json.dumps(list(model.link.node_x))}
 
 
 def events_metadata(sim, fault: str | None = None) -> dict[str, dict[str, str]]:

@@ -46,11 +46,12 @@ import time as _time
 from typing import Callable, Iterable
 
 from .forcing import command_force, ForceSchedule
-from .outputs import build_frozen, LockEvent, Sample, StepBlock
+from .outputs import LockEvent, Sample, StepBlock
 from .params import physics_step, UmbrellaParams
 from .solver import UmbrellaSimulator
-from .step_rule import physics_step_of
 from .summary import RunResult, SummaryAccumulator
+from .umbrella3d.driven3d import DrivenSimulator3D
+from .umbrella3d.params3d import UmbrellaRibsParams
 
 #: the work of one chunk, in coordinate-steps of the linear model (a nonlinear step counts
 #: NONLINEAR_WEIGHT times): ~10 ms of compiled stepping on this project's reference machine
@@ -79,6 +80,18 @@ class Chunk:
         return float(self.block.time[-1]) if len(self.block) else math.nan
 
 
+def simulator_class(params) -> type:
+    """
+    Return the simulator of these parameters: the planar model's, or the umbrella's.
+
+    UmbrellaParams: UmbrellaSimulator (the thesis's planar rib, every planar model);
+    UmbrellaRibsParams: the umbrella of N ribs in 3D (umbrella3d.driven3d).
+    """
+    if isinstance(params, UmbrellaRibsParams):
+        return DrivenSimulator3D
+    return UmbrellaSimulator
+
+
 def chunk_steps_for(params: UmbrellaParams, coordinates: int) -> int:
     """Return the steps of a chunk for a model of that many coordinates (CHUNK_WORK)."""
     weight = NONLINEAR_WEIGHT if params.model == 'flexible-nonlinear' else 1
@@ -100,8 +113,9 @@ class RunDriver:
                  period_steps: int | None = None,
                  force_profile: Iterable[tuple[float, float]] | ForceSchedule | None = None,
                  chunk_steps: int | None = None):
+        simulator = simulator_class(params)
         if publish_rate is not None:
-            step = physics_step(physics_step_of(params), publish_rate)
+            step = physics_step(simulator.grid_step(params), publish_rate)
             period_steps = round((1.0 / publish_rate) / step)
             params = params.with_physics_step(step)
         elif period_steps is not None and not (isinstance(period_steps, int)
@@ -109,7 +123,7 @@ class RunDriver:
             raise ValueError(f'period_steps={period_steps!r}: must be a whole number >= 1')
         self.publish_rate = publish_rate
         self.period_steps = period_steps
-        self.sim = sim = UmbrellaSimulator(params)
+        self.sim = sim = simulator(params)
         self.params = sim.params
         self.step = sim.h
         if isinstance(force_profile, ForceSchedule):
@@ -118,13 +132,17 @@ class RunDriver:
             self.schedule = ForceSchedule(
                 self.step, sim.sleeve_force, sorted(force_profile or [], key=lambda tf: tf[0]),
                 check=lambda f: command_force(f, sim.params))
-        self.chunk_steps = chunk_steps or chunk_steps_for(self.params, sim.model.n)
         self.states = False            # chunks with the state rows of their steps
         first = sim.sample()
         self.initial = first
-        self.summary = SummaryAccumulator(
-            self.params.as_dict(), first, sim.engine.lock_kind,
-            section_slope=getattr(sim.engine, 'max_section_slope', None))
+        if simulator is UmbrellaSimulator:
+            self.chunk_steps = chunk_steps or chunk_steps_for(self.params, sim.model.n)
+            self.summary = SummaryAccumulator(
+                self.params.as_dict(), first, sim.engine.lock_kind,
+                section_slope=getattr(sim.engine, 'max_section_slope', None))
+        else:
+            self.chunk_steps = chunk_steps or sim.chunk_steps
+            self.summary = sim.new_summary(first)
         self.publications = 0          # publications taken so far (publication())
         self._hold: dict = {}          # peak stresses over the steps since the last one
         self._last_block: StepBlock | None = None
@@ -182,9 +200,7 @@ class RunDriver:
         block, applied = self.sim.advance_schedule(self.schedule, max(n, 0), self.states,
                                                    until_lock=True)
         self.summary.add(block)
-        for body, (peak, x, _) in block.peaks.items():
-            if peak > self._hold.get(body, (-1.0, 0.0))[0]:
-                self._hold[body] = (peak, x)
+        self._hold = block.merge_peaks(self._hold)
         if len(block):
             self._last_block = block
         return Chunk(block, tuple(applied), block.lock, block.error,
@@ -227,13 +243,7 @@ class RunDriver:
         s = self.state_sample()
         hold, self._hold = self._hold, {}
         self.publications += 1
-        if not hold:
-            return s
-        # (dataclasses.replace re-runs __init__: a per-publication cost)
-        return build_frozen(Sample, {
-            **s.__dict__, 'peak_stress_leaf': hold['leaf'][0],
-            'peak_stress_leaf_x': hold['leaf'][1], 'peak_stress_link': hold['link'][0],
-            'peak_stress_link_x': hold['link'][1]})
+        return s.with_peaks(hold) if hold else s
 
     # ------------------------------------------------------------------- the loop
     def run(self, duration: float, *, stop_after_lock: float | None = None,
@@ -287,9 +297,11 @@ def simulate(params: UmbrellaParams, duration: float,
                            force_profile=force_profile)
     driver.states = states
     sim = driver.sim
-    result = RunResult(params=sim.params.as_dict(), q_labels=sim.model.coordinate_labels(),
-                       leaf_stress_x=list(sim.model.leaf.stress_x),
-                       link_stress_x=list(sim.model.link.stress_x))
+    result = RunResult(params=sim.params.as_dict())
+    if isinstance(sim, UmbrellaSimulator):   # (the planar model's coordinates and stresses)
+        result.q_labels = sim.model.coordinate_labels()
+        result.leaf_stress_x = list(sim.model.leaf.stress_x)
+        result.link_stress_x = list(sim.model.link.stress_x)
     if keep_samples:
         result.samples.append(driver.initial)
 

@@ -87,6 +87,14 @@ class Sample:
         """Return the stop's force on the sleeve, Y (N; 0 before the lock): sleeve_reaction[1]."""
         return self.sleeve_reaction[1]
 
+    def with_peaks(self, hold: dict) -> 'Sample':
+        """Return this sample with the peak stresses (and where) held (StepBlock.merge_peaks)."""
+        # (dataclasses.replace re-runs __init__: a per-publication cost)
+        return build_frozen(Sample, {
+            **self.__dict__, 'peak_stress_leaf': hold['leaf'][0],
+            'peak_stress_leaf_x': hold['leaf'][1], 'peak_stress_link': hold['link'][0],
+            'peak_stress_link_x': hold['link'][1]})
+
 
 def mechanical_energy(s):
     """
@@ -313,6 +321,18 @@ class StepBlock:
                     out[body] = (peaks[i], where[i], t[i])
             object.__setattr__(self, '_peaks', out)
         return self._peaks
+
+    def merge_peaks(self, hold: dict) -> dict:
+        """
+        Return {body: (peak, x)}: the held peaks, with this block's where they are larger.
+
+        A publication's peak-hold over the steps since the last one (RunDriver), updated in
+        place and returned.
+        """
+        for body, (peak, x, _) in self.peaks.items():
+            if peak > hold.get(body, (-1.0, 0.0))[0]:
+                hold[body] = (peak, x)
+        return hold
 
 
 def _step_field(row: int, name: str) -> property:

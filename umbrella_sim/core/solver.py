@@ -64,6 +64,9 @@ class ModelError(ValueError):
 class UmbrellaSimulator:
     """Steps one model in time; see the module docstring for the time grid and the lock."""
 
+    #: the physics step of a model's parameters (step_rule's rule)
+    grid_step = staticmethod(physics_step_of)
+
     def __init__(self, params: UmbrellaParams):
         self.reset(params)
 

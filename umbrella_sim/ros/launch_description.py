@@ -29,8 +29,7 @@ from .share import PACKAGE, package_path, share_dir
 from ..core.params import UmbrellaParams
 from ..core.registry import REGISTRY, SPECS
 # params3d's rule of a rib's override name rib<k>.<name> (kept there, read here)
-from ..core.umbrella3d.params3d import _OVERRIDE as RIB_OVERRIDE
-from ..core.umbrella3d.params3d import RIB_SPECS, UMBRELLA_SPECS, UmbrellaRibsParams
+from ..core.umbrella3d.params3d import node_model, UmbrellaRibsParams
 
 
 @dataclass(frozen=True)
@@ -121,29 +120,19 @@ def antenna_values(values: dict[str, str], ns: str) -> dict[str, str]:
     return out
 
 
-def _is_model_name(name: str) -> bool:
-    """Tell whether a parameter is the model's: planar, the whole umbrella's, or a rib's."""
-    return (name in SPECS or name in UMBRELLA_SPECS or name in RIB_SPECS
-            or RIB_OVERRIDE.match(name) is not None)
-
-
 def described_model(params_file: str,
                     node_params: dict) -> UmbrellaParams | UmbrellaRibsParams:
     """
     Return the model the node will run: its params file's values, then the overrides.
 
-    Checked as a whole now, not after the node has started.  The planar parameters, or the
-    whole umbrella's where any of its names (ribs, hub_radius, a rib's own value,
-    rib<k>.<name>, a list of one value per rib) is given: what robot_description.urdf
-    describes.  ValueError naming a bad value.
+    Checked as a whole now, not after the node has started, by the node's own rule
+    (params3d.node_model): the planar parameters, or with ribs >= 2 the whole umbrella's
+    (hub_radius..., a rib's own values as rib.<name> lists or rib<k>.<name>): what
+    robot_description.urdf describes.  ValueError naming a bad value.
     """
     from .params_file import load_params_file
 
-    given = {k: v for k, v in load_params_file(params_file).items() if _is_model_name(k)}
-    given.update({k: v for k, v in node_params.items() if _is_model_name(k)})
-    if all(k in SPECS and not isinstance(v, (list, tuple)) for k, v in given.items()):
-        return UmbrellaParams.from_mapping(given).validated()
-    return UmbrellaRibsParams.from_mapping(given)
+    return node_model({**load_params_file(params_file), **node_params})
 
 
 def plan(values: dict[str, str], installed=share_dir) -> list:

@@ -135,6 +135,11 @@ def stamp(t: float) -> Time:
 _STAMP = struct.Struct('<iI')
 
 
+def marker_every(publish_rate: float | None, marker_rate: float) -> int:
+    """Return k: markers on every k-th publication (t = 0 included), round(rate / marker_rate)."""
+    return max(1, round(publish_rate / marker_rate)) if publish_rate else 1
+
+
 def clock_msg(t: float) -> Clock:
     return Clock(clock=stamp(t))
 

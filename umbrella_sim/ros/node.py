@@ -54,12 +54,14 @@ from . import messages as ros_io
 from .commands import CommandIntake
 from .lockstep import Lockstep
 from .pacing import behind_text, lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer
-from .parameters import (coerce_parameter, declare_from_registry, parameter_defaults,
-                         set_refusal, wrong_type_text)
+from .parameters import (coerce_parameter, declare_from_registry, declare_umbrella,
+                         known_parameter_names, parameter_defaults, set_refusal,
+                         wrong_type_text)
 from .params_file import (check_parameter_sources, check_qos_override_sources,
                           ParameterSources, QOS_OVERRIDES, USE_SIM_TIME)
-from .publication import PublicationEncoder
+from .publication import PublicationEncoder, run_driver
 from .recording import RunRecording
+from .ribs_messages import node_topics, ribs_diagnostics
 from .throttled_log import ThrottledWarnings
 from .. import __version__
 from ..bag.cdr import cdr_bytes
@@ -90,8 +92,7 @@ class UmbrellaNode(Node):
             super().__init__('umbrella_node', **kwargs)
         except InvalidParameterTypeException as exc:    # -p use_sim_time:=abc: ROS's own
             raise StartupError(wrong_type_text(self, exc)) from None
-        qos_given = self._check_parameter_sources(params_files,
-                                                  set(parameter_defaults()))
+        qos_given = self._check_parameter_sources(params_files, known_parameter_names())
         if self.get_parameter(USE_SIM_TIME).value:
             # a params file for every node ('/**') may set it: this node drives /clock and
             # paces it by the system clock; following its own /clock would only cost a
@@ -100,8 +101,10 @@ class UmbrellaNode(Node):
             self.get_logger().info(f'{USE_SIM_TIME}:=true not taken: {SIM_TIME_REASON}')
         try:
             values = declare_from_registry(self, parameter_defaults())
+            self.umbrella = declare_umbrella(self)      # (N ribs, ribs >= 2: fixed at start)
         except ValueError as exc:
             raise StartupError(str(exc)) from None
+        self.ribs = self.umbrella.get('ribs', 1)
         try:
             self.model_params = UmbrellaParams.from_mapping(
                 {k: v for k, v in values.items() if k in SPECS}).validated()
@@ -137,7 +140,7 @@ class UmbrellaNode(Node):
             self.pub = {key: self.create_publisher(
                 t.type, t.name, ros_io.own_qos(t.qos),
                 qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
-                for key, t in ros_io.TOPICS.items()}
+                for key, t in node_topics(self.ribs).items()}
             # commands and services in their own callback groups, served by a 2-thread
             # executor: a slow ~/reset never delays a command and a command flood never
             # delays ~/pause
@@ -197,12 +200,11 @@ class UmbrellaNode(Node):
     def _make_driver(self, p: UmbrellaParams) -> tuple[RunDriver, PublicationEncoder]:
         """Build the model, its run driver and encoder (ValueError if it cannot be)."""
         cfg = self.node_cfg                 # a publish_rate set applies here
-        driver = RunDriver(p, cfg['publish_rate'])
-        return driver, PublicationEncoder(driver, cfg['marker_rate'])
+        return run_driver(p, self.umbrella, cfg['publish_rate'], cfg['marker_rate'])
 
     def _install_driver(self, made: tuple[RunDriver, PublicationEncoder]) -> None:
         driver, self.encoder = made
-        p = self.model_params = driver.params
+        p = self.model_params = driver.params.planar if self.ribs > 1 else driver.params
         self.driver_rate = driver.publish_rate
         self.driver = driver
         self.sim = self.driver.sim
@@ -211,6 +213,7 @@ class UmbrellaNode(Node):
         self._phase = 'deploying'
         self.get_logger().info(
             f'umbrella_sim {__version__}: model {p.model}, N = {p.elements_per_segment}, '
+            + (f'{self.ribs} ribs (3D umbrella), ' if self.ribs > 1 else '') +
             f'v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s '
             f'({self.driver.period_steps} per publication at '
             f'{self.driver_rate:g} Hz), kernel {self.driver.backend}')
@@ -218,12 +221,15 @@ class UmbrellaNode(Node):
         if note:
             self.get_logger().info(note)
 
+    def _metadata(self, source: str, **cfg) -> dict:
+        """Return the run's metadata records (every parameter, the umbrella's too)."""
+        return run_metadata(self.model_params, dict(self.node_cfg, **self.umbrella, **cfg),
+                            self.driver.step, self.sim.model, self.driver.backend, source)
+
     def _open_recording(self, path: str) -> None:
         def metadata(bag_dir):
-            cfg = dict(self.node_cfg, record_path=bag_dir)
-            return run_metadata(self.model_params, cfg, self.driver.step, self.sim.model,
-                                self.driver.backend,
-                                source=f'umbrella_node {self.get_fully_qualified_name()}')
+            return self._metadata(f'umbrella_node {self.get_fully_qualified_name()}',
+                                  record_path=bag_dir)
         try:
             # compression and file writes on the recorder's own thread, not the publishing one
             if path:
@@ -326,9 +332,7 @@ class UmbrellaNode(Node):
             self.lockstep.restart()
             rec = self._recording_on()
             if rec is not None:
-                meta = run_metadata(self.model_params, self.node_cfg, self.driver.step,
-                                    self.sim.model, self.driver.backend, source='~/reset')
-                k = rec.start_segment(meta, self.driver, ended, fault)
+                k = rec.start_segment(self._metadata('~/reset'), self.driver, ended, fault)
                 self.get_logger().info(f'recording segment {k} (reset; log time offset '
                                        f'{rec.recorder.offset_ns * 1e-9:.9f} s)')
             self._publish_phase('deploying')
@@ -653,6 +657,7 @@ class UmbrellaNode(Node):
                                 else 'ok')}
         for i, text in enumerate(self.driver.summary.warnings()):
             values[f'warning_{i}'] = text
+        values.update(ribs_diagnostics(self.driver.summary.figures()) if self.ribs > 1 else {})
         # the status name carries the namespace: every antenna publishes on /diagnostics
         self._publish('diagnostics', ros_io.diagnostics_msg(
             sim_t, ros_io.diagnostic_name(self.get_fully_qualified_name()), level, message,

@@ -28,6 +28,7 @@ raises ParameterNotDeclaredException with an empty list; a pre-set callback cann
 """
 from __future__ import annotations
 
+from dataclasses import replace
 import re
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -46,9 +47,9 @@ _ROS_TYPES = {float: ParameterType.PARAMETER_DOUBLE, int: ParameterType.PARAMETE
               str: ParameterType.PARAMETER_STRING, bool: ParameterType.PARAMETER_BOOL}
 
 
-def descriptor(name: str) -> ParameterDescriptor:
-    """Build the statically typed descriptor of a parameter from the registry."""
-    p = REGISTRY[name]
+def descriptor(name: str, spec=None) -> ParameterDescriptor:
+    """Build the statically typed descriptor of a parameter from the registry (or spec)."""
+    p = REGISTRY[name] if spec is None else spec
     constraints = [f'range {p.range_text()}' if p.low is not None or p.high is not None
                    else ('one of ' + p.range_text() if p.choices else '')]
     if p.rule:
@@ -70,7 +71,7 @@ def descriptor(name: str) -> ParameterDescriptor:
     return d
 
 
-def coerce_parameter(param):
+def coerce_parameter(param, spec=None):
     """
     Return param with the registry's type where the value converts exactly, else unchanged.
 
@@ -80,7 +81,7 @@ def coerce_parameter(param):
     refuses it.
     """
     from rclpy.parameter import Parameter
-    spec = REGISTRY.get(param.name)
+    spec = REGISTRY.get(param.name) if spec is None else spec
     if spec is None or param.type_ not in (Parameter.Type.INTEGER, Parameter.Type.DOUBLE):
         return param
     value = spec.exact(param.value)
@@ -102,27 +103,92 @@ def declare_from_registry(node, names) -> dict:
     is taken as the double before rclpy's type check sees it.  ValueError naming the
     parameter, the value given and the rule it breaks.
     """
-    from rclpy.exceptions import InvalidParameterTypeException
-
     overrides = node._parameter_overrides     # (rclpy keeps what -p and files gave here)
     for name, override in list(overrides.items()):
         overrides[name] = coerce_parameter(override)
-    values = {}
-    for name in names:
-        spec = REGISTRY[name]
+    return {name: _declared(node, REGISTRY[name], descriptor(name)) for name in names}
+
+
+def _declared(node, spec, d: ParameterDescriptor, name: str | None = None):
+    """
+    Declare one parameter of spec (by name, else spec.name) with descriptor d; its value.
+
+    ValueError naming the parameter, the value given and the rule it breaks (rclpy's own
+    refusals of a wrong type or an out-of-range value name neither).
+    """
+    from rclpy.exceptions import InvalidParameterTypeException
+
+    name = name or spec.name
+    try:
+        return node.declare_parameter(name, spec.default, d).value
+    except InvalidParameterTypeException:
+        given = node._parameter_overrides[name]
+        raise ValueError(type_refusal(name, given, spec.type_name)) from None
+    except Exception:  # noqa: BLE001 - rclpy's range refusal: say the registry's rule
+        value = node._parameter_overrides[name].value
         try:
-            values[name] = node.declare_parameter(name, spec.default, descriptor(name)).value
+            spec.check(value, f'parameter {name}')
+        except ValueError as exc:
+            raise ValueError(str(exc)) from None
+        raise
+
+
+def known_parameter_names() -> set[str]:
+    """Return every name umbrella_node declares: the registry's, the umbrella's, rib.<name>."""
+    from ..core.umbrella3d.params3d import umbrella_parameter_names
+
+    return set(parameter_defaults()) | umbrella_parameter_names()
+
+
+def declare_umbrella(node) -> dict:
+    """
+    Declare the umbrella's parameters on node (read-only); return params3d.umbrella_values.
+
+    Its own (params3d.UMBRELLA_SPECS: ribs, hub_radius, base...) typed as the registry's,
+    each rib's own values as rib.<name> double arrays, one entry per rib (not given: None,
+    every rib takes the planar or default value), and the rib<k>.<name> overrides given (a
+    double each).  Fixed at start: the number of ribs
+    sets the topics and the joint names.  ValueError naming the parameter.
+    """
+    from rclpy.exceptions import InvalidParameterTypeException
+    from rclpy.parameter import Parameter
+
+    from ..core.umbrella3d.params3d import (RIB_LIST_PREFIX, rib_list_specs,
+                                            rib_override_spec, UMBRELLA_SPECS,
+                                            umbrella_values)
+
+    overrides = node._parameter_overrides
+    values = {}
+    for name, spec in UMBRELLA_SPECS.items():
+        if name in overrides:
+            overrides[name] = coerce_parameter(overrides[name], spec)
+        values[name] = _declared(node, spec, descriptor(name, replace(spec, applies=START)))
+    for name, spec in rib_list_specs().items():
+        ros_name = RIB_LIST_PREFIX + name
+        d = ParameterDescriptor(
+            name=ros_name, type=ParameterType.PARAMETER_DOUBLE_ARRAY, read_only=True,
+            dynamic_typing=False,
+            description=f'per rib, one value each (rib 0 first): {spec.doc} ({spec.unit})',
+            additional_constraints=f'each {spec.range_text()}; not given: every rib takes '
+                                   f'{name} (its default or the planar value)')
+        given = overrides.get(ros_name)
+        if given is not None and given.type_ == Parameter.Type.INTEGER_ARRAY:
+            overrides[ros_name] = Parameter(ros_name, Parameter.Type.DOUBLE_ARRAY,
+                                            [float(v) for v in given.value])
+        try:
+            values[ros_name] = node.declare_parameter(
+                ros_name, Parameter.Type.DOUBLE_ARRAY, d).value
         except InvalidParameterTypeException:
-            given = overrides[name]
-            raise ValueError(type_refusal(name, given, spec.type_name)) from None
-        except Exception:  # noqa: BLE001 - rclpy's range refusal: say the registry's rule
-            value = overrides[name].value
-            try:
-                spec.check(value)
-            except ValueError as exc:
-                raise ValueError(str(exc)) from None
-            raise
-    return values
+            raise ValueError(type_refusal(ros_name, overrides[ros_name], 'double[]')) from None
+    for name in sorted(overrides):      # rib<k>.<name>: one rib's value, where given
+        spec = rib_override_spec(name)
+        if spec is None:
+            continue
+        overrides[name] = coerce_parameter(overrides[name], spec)
+        d = descriptor(name, replace(spec, name=name, applies=START,
+                                     doc=f"rib {name[3:name.index('.')]}'s own: {spec.doc}"))
+        values[name] = _declared(node, spec, d, name)
+    return umbrella_values(values)
 
 
 def type_refusal(name: str, given, expected: str) -> str:

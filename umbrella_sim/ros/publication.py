@@ -25,9 +25,12 @@ both produce the same bytes at the same sim times.
 from __future__ import annotations
 
 from . import messages
+from .ribs_messages import RibsPublicationEncoder
 from ..core.driver import RunDriver
 from ..core.outputs import mechanical_energy, Sample
+from ..core.params import UmbrellaParams
 from ..core.registry import NODE_PARAMETERS
+from ..core.umbrella3d.params3d import umbrella_model, UmbrellaRibsParams
 
 
 class PublicationEncoder:
@@ -37,9 +40,7 @@ class PublicationEncoder:
                  marker_rate: float = NODE_PARAMETERS['marker_rate'].default):
         self.driver = driver
         self.initial_energy = mechanical_energy(driver.initial)
-        rate = driver.publish_rate
-        # markers on every marker_every-th publication (t = 0 included)
-        self.marker_every = max(1, round(rate / marker_rate)) if rate else 1
+        self.marker_every = messages.marker_every(driver.publish_rate, marker_rate)
         self.count = 0                   # publications encoded so far
         self._encoders: dict[str, messages.SampleEncoder] = {}     # by frame_prefix
         self._marker_encoders: dict = {}            # by (marker namespace, frame_prefix)
@@ -61,3 +62,21 @@ class PublicationEncoder:
             out['markers'] = markers.encode(s.time, s.sleeve_position, positions)
         self.count += 1
         return out
+
+
+def run_driver(planar: UmbrellaParams, umbrella: dict, publish_rate: float | None,
+               marker_rate: float = NODE_PARAMETERS['marker_rate'].default,
+               force_profile=None):
+    """
+    Return the run driver of a node's parameters and the encoder of its publications.
+
+    planar: the planar record; umbrella: the umbrella's values (params3d.umbrella_values):
+    with ribs >= 2 the umbrella of N ribs, each rib taking planar unless it has its own value
+    (ribs_messages.RibsPublicationEncoder), else the planar model.  ValueError if the model
+    cannot be made; force_profile: RunDriver's.
+    """
+    driver = RunDriver(umbrella_model(planar, umbrella), publish_rate,
+                       force_profile=force_profile)
+    encoder = (RibsPublicationEncoder if isinstance(driver.params, UmbrellaRibsParams)
+               else PublicationEncoder)
+    return driver, encoder(driver, marker_rate)

@@ -31,7 +31,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from std_msgs.msg import Float64
 
 from . import messages
-from .publication import PublicationEncoder
+from .publication import run_driver
+from .ribs_messages import node_topics, RIB_TOPICS
 from .signals import deferred
 from ..bag.format import (APPLIED_SUFFIX, COUNTS_RECORD, PARAMETERS_RECORD, REFUSED_SUFFIX,
                           TOPICS_RECORD)
@@ -40,6 +41,9 @@ from ..bag.writer import BagRecorder
 from ..core.driver import Chunk, RunDriver
 from ..core.registry import node_defaults
 from ..core.summary import RunResult
+
+#: every topic a run may record: the planar model's, and the umbrella's per-rib ones
+TOPICS = {**messages.TOPICS, **RIB_TOPICS}
 
 
 class RunRecording:
@@ -59,7 +63,7 @@ class RunRecording:
         self.published: dict[str, int] = {}       # resolved name -> messages published
         resolved = {}       # the node's own topic name -> the name recorded (remapped)
         for key, name in self.topics.items():
-            topic = messages.TOPICS[key]
+            topic = TOPICS[key]
             recorder.add_channel(name, topic.type, (qos or {}).get(key, topic.qos))
             resolved[topic.name.lstrip('/')] = name
         for suffix in ('', REFUSED_SUFFIX, APPLIED_SUFFIX):   # (the last two as published)
@@ -126,7 +130,8 @@ class RunRecording:
 def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                    publish_rate: float = 100.0, marker_magnification: float = 1.0,
                    on_chunk=None, keep_samples: bool = False,
-                   states: bool = False, what: str = 'record_path') -> RunResult:
+                   states: bool = False, what: str = 'record_path',
+                   umbrella: dict | None = None) -> RunResult:
     """
     Run the physics offline and record it as a live umbrella_node (root namespace) would.
 
@@ -137,21 +142,24 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     after each chunk (progress, a CSV; with states, their state rows too).  Returns the
     RunResult (figures of every step; with keep_samples, the Sample of every publication);
     ``error`` set if it diverged, ``recording_error`` if the recording stopped (naming
-    what, the option that gave bag_dir, and bag_dir).
+    what, the option that gave bag_dir, and bag_dir).  umbrella: the umbrella's values
+    (params3d.umbrella_values): with ribs >= 2 the umbrella of N ribs, recorded as the node
+    records it (publication.run_driver).
     """
+    umbrella = umbrella or {}
     node_cfg = node_defaults()
     node_cfg.update(publish_rate=publish_rate, real_time_factor=0.0, duration=duration,
-                    record_path=bag_dir, marker_magnification=marker_magnification)
+                    record_path=bag_dir, marker_magnification=marker_magnification, **umbrella)
     profile = sorted(force_profile or [], key=lambda tf: tf[0])
-    driver = RunDriver(params, publish_rate, force_profile=profile)   # (checked before the bag)
+    # (checked before the bag)
+    driver, encoder = run_driver(params, umbrella, publish_rate, force_profile=profile)
     driver.states = states
     sim = driver.sim
-    encoder = PublicationEncoder(driver)
     recorder = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, sim.model,
                                                  driver.backend, source='umbrella_sim simulate'),
                            what=what)
     rec = RunRecording(recorder, {key: '/' + t.name.lstrip('/')
-                                  for key, t in messages.TOPICS.items()},
+                                  for key, t in node_topics(umbrella.get('ribs', 1)).items()},
                        '/' + messages.COMMAND.name)
     state = {'next_diag': 1.0, 'i_cmd': 0}
     wall0 = _time.perf_counter()

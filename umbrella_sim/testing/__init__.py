@@ -46,6 +46,13 @@ Everything here talks over real DDS, so:
 * **Summaries.**  :meth:`SimulatedAntenna.summary` computes the deploy time, the stage-2 peak
   stress and tip amplitude from the node's topics and log; :func:`summary_from_recording`
   computes the same figures, exactly on sim time, from an MCAP recording (``record_path``).
+* **The umbrella of N ribs.**  ``SimulatedAntenna({"ribs": 3, "rib.stick_until": [0.0,
+  0.05, 0.0]})`` runs it (a rib's own values as ``rib.<name>`` lists, one per rib):
+  :meth:`SimulatedAntenna.rib_states` (per-rib joint angles and rates),
+  :meth:`~SimulatedAntenna.rib_arrays` (``rib_tip_deflection``, ``rib_peak_stress``),
+  :meth:`~SimulatedAntenna.energy_balance` and :meth:`~SimulatedAntenna.umbrella_figures`
+  (each rib's deployment instant, the lag of the latest, friction work...); see
+  examples/test_umbrella_ribs.py.
 
 Pytest fixtures (import them into your ``conftest.py``): ``ros_domain_id``, ``probe`` and
 ``antenna_factory`` (starts :class:`SimulatedAntenna` objects and stops them at teardown).

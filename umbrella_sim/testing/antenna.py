@@ -100,6 +100,12 @@ class SimulatedAntenna:
                               ('diagnostics', DiagnosticArray)):
             self.probe.subscribe(self.topics[key], msg_type, ros_io.TOPICS[key].qos)
         self.probe.subscribe(self.topics['deployment_phase'], String, ros_io.LATCHED)
+        if self.ribs > 1:          # the umbrella of N ribs: its per-rib topics and energy
+            from ..ros.ribs_messages import RIB_TOPICS
+
+            for key, t in {**RIB_TOPICS, 'energy': ros_io.TOPICS['energy']}.items():
+                self.topics[key] = prefix + t.name
+                self.probe.subscribe(self.topics[key], Float64MultiArray, t.qos)
         for key in ros_io.COMMAND_ECHO_SUFFIXES:
             self.probe.subscribe(self.topics[f'sleeve_force_{key}'], Float64,
                                  ros_io.COMMAND_ECHO_QOS)
@@ -356,6 +362,78 @@ class SimulatedAntenna:
                              f'(antenna.topics[key], type, qos))')
         return self.topics[key]
 
+    # --------------------------------------------------------- the ribs
+    @property
+    def ribs(self) -> int:
+        """Return the number of ribs the node runs (its ribs parameter; 1: the planar model)."""
+        return int(self.parameters.get('ribs', 1))
+
+    def rib_states(self) -> list[dict]:
+        """
+        Return this run's joint states of an umbrella of N ribs, by the Sample's names.
+
+        One dict per joint_states message: time (s), then per rib (lists, rib 0 first)
+        alpha1, link_angle, alpha2 and their rates, and the sleeve's position, velocity and
+        force (ribs_messages.rib_joint_figures).  ValueError for an antenna of ribs 1.
+        """
+        from ..ros.ribs_messages import rib_joint_figures
+
+        self._need_ribs()
+        return [{'time': _stamp(m), **rib_joint_figures(m)}
+                for m in self.messages('joint_states')]
+
+    def rib_arrays(self, key: str) -> list[list[dict]]:
+        """
+        Return this run's rib_tip_deflection or rib_peak_stress messages, {field: value} a rib.
+
+        Fields as the layout labels them (msg_docs/topic_ribs.md): axial_m, in_plane_m,
+        out_of_plane_m; axial_Pa ... von_mises_Pa, von_mises_body, von_mises_x_m,
+        von_mises_ratio.
+        """
+        from ..ros.ribs_messages import rib_array_figures
+
+        self._need_ribs()
+        return [rib_array_figures(m) for m in self.messages(key)]
+
+    def energy_balance(self) -> list[dict]:
+        """Return this run's energy messages of the umbrella by field name (J)."""
+        from ..ros.ribs_messages import rib_energy_figures
+
+        self._need_ribs()
+        return [rib_energy_figures(m) for m in self.messages('energy')]
+
+    def umbrella_figures(self, predicate=lambda figures: True, timeout: float = 20.0) -> dict:
+        """
+        Return the umbrella's summary figures of the first diagnostics that fits predicate.
+
+        The figures of every physics step so far (ribs_messages.ribs_diagnostics, decoded):
+        ribs, rib_deploy_time_s (None: not yet), deployment_lag_s, latest_rib,
+        max_out_of_plane_tip_m, energy_balance_residual_J, energy_scale_J, friction_work_J,
+        peak_von_mises_Pa, and sim_time_s.  Waits (timeout s) for one that fits.
+        """
+        import json
+
+        from ..ros.ribs_messages import DIAGNOSTIC_FIGURES
+
+        self._need_ribs()
+
+        def figures(m):
+            values = {kv.key: kv.value for kv in m.status[0].values}
+            if not set(DIAGNOSTIC_FIGURES) <= set(values):
+                return None
+            out = {k: json.loads(values[k]) for k in DIAGNOSTIC_FIGURES}
+            out['sim_time_s'] = float(values['sim_time_s'])
+            return out
+
+        return figures(self.wait_for('diagnostics', lambda m: (
+            figures(m) is not None and predicate(figures(m))), timeout,
+            'the umbrella figures asked for'))
+
+    def _need_ribs(self) -> None:
+        if self.ribs < 2:
+            raise ValueError('this antenna runs the planar model (ribs 1): start it with '
+                             "parameters {'ribs': N >= 2} for the umbrella's per-rib topics")
+
     # --------------------------------------------------------- what happened
     def _run_output(self) -> str:
         """Return the node's log since this run began (after the last reset line, if any)."""
@@ -376,14 +454,15 @@ class SimulatedAntenna:
         values = [m.data for m in self.messages('sleeve_force_applied')]
         states = self.messages('joint_states')
         out = []
+        # the sleeve_slider's effort (the last joint): F, or N F on the sleeve of N ribs
         for before, after in zip(states, states[1:]):
-            if len(out) < len(values) and after.effort[2] != before.effort[2]:
-                if after.effort[2] != values[len(out)]:
+            if len(out) < len(values) and after.effort[-1] != before.effort[-1]:
+                if after.effort[-1] != values[len(out)] * self.ribs:
                     raise AssertionError(
-                        f'joint_states effort {after.effort[2]!r} N at {_stamp(after):.9f} s '
-                        f'is not the applied command {values[len(out)]!r} N (applied: '
-                        f'{values})')
-                out.append((_stamp(before), after.effort[2]))
+                        f'joint_states effort {after.effort[-1]!r} N at {_stamp(after):.9f} s '
+                        f'is not the applied command {values[len(out)]!r} N x {self.ribs} '
+                        f'rib(s) (applied: {values})')
+                out.append((_stamp(before), values[len(out)]))
         return out
 
     def lock_time(self) -> float | None:
@@ -409,6 +488,10 @@ class SimulatedAntenna:
         first tip message past the window, so a publication at either end may be left out
         or taken in; a recording gives the exact figures (:func:`summary_from_recording`).
         """
+        if self.ribs > 1:
+            raise ValueError("summary() reads the planar rib's topics; an umbrella of "
+                             f'{self.ribs} ribs has umbrella_figures(), rib_states(), '
+                             'rib_arrays() and energy_balance()')
         if after_lock is None or not after_lock > 0:
             raise ValueError(f'after_lock={after_lock!r}: seconds of sim time after the lock '
                              '(> 0); a live run has no end to summarise to (None, the whole '

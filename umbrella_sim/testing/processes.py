@@ -297,6 +297,8 @@ class NodeProcess:
 
 
 def _ros_literal(value) -> str:
+    if isinstance(value, (list, tuple)):        # a ROS array: rib.<name> per-rib values
+        return '[' + ', '.join(_ros_literal(v) for v in value) + ']'
     if isinstance(value, bool):
         return 'true' if value else 'false'
     if isinstance(value, float):

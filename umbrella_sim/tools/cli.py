@@ -28,10 +28,10 @@ from .inputs import build_params, check_run_length, LONG_RUN_STEPS, read_force_p
 from .progress import Progress
 from .. import __version__
 from ..bag.paths import check_new_output, remove_recording
-from ..core.driver import RunDriver, simulate
+from ..core.driver import RunDriver, simulate, simulator_class
 from ..core.params import shortened_step_note
 from ..core.registry import parameter_help, SPECS
-from ..core.step_rule import physics_step_of
+from ..core.umbrella3d.params3d import umbrella_model
 from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
 
 
@@ -220,11 +220,13 @@ def main(argv: list[str] | None = None) -> int:
                    if args.force_profile else None)
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f'--duration {args.duration}: must be > 0')
-        if args.duration < physics_step_of(params) * (1.0 - 1e-9):   # (it ran no step)
+        # the planar model, or with ribs >= 2 the umbrella of N ribs
+        run = umbrella_model(params, args.umbrella)
+        step = simulator_class(run).grid_step(run)
+        if args.duration < step * (1.0 - 1e-9):   # (it ran no step)
             raise ValueError(f'--duration {args.duration}: shorter than one physics step '
-                             f'({physics_step_of(params):g} s); the run takes every step '
-                             'that ends by then')
-        check_run_length(args.duration, physics_step_of(params), args.long_run, '--long-run')
+                             f'({step:g} s); the run takes every step that ends by then')
+        check_run_length(args.duration, step, args.long_run, '--long-run')
         outputs = {}
         for option, path, kind in (('--csv', args.csv, 'file'),
                                    ('--mcap', args.mcap, 'recording')):
@@ -234,13 +236,16 @@ def main(argv: list[str] | None = None) -> int:
         if len(set(outputs.values())) < len(outputs):
             raise ValueError(f'--csv and --mcap name the same path {args.csv}: give each '
                              'output its own')
+        if args.csv and run is not params:
+            raise ValueError(f'--csv {args.csv}: the umbrella of N ribs (ribs >= 2) writes no '
+                             'CSV of its steps; record its per-rib topics with --mcap BAG_DIR')
         if args.csv_state and not args.csv:
             raise ValueError('--csv-state adds columns to --csv FILE: give --csv too')
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
             raise ValueError(f'--publish-rate {args.publish_rate}: must be in [1, 5000] Hz')
         # the model, before the run (a ModelError names the parameters); --mcap's recording
         # builds its own on the publication grid
-        driver = RunDriver(params, force_profile=profile)
+        driver = RunDriver(run, force_profile=profile)
     except ValueError as exc:
         ap.exit(2, f'umbrella_sim: error: {exc}\n')
     progress = (Progress(args.duration, lambda t: f't = {t:.3f} of {args.duration:g} s')
@@ -256,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         if args.mcap:
-            note = shortened_step_note(physics_step_of(params), args.publish_rate)
+            note = shortened_step_note(step, args.publish_rate)
             if note:
                 print(f'umbrella_sim: note: the --mcap recording takes a {note}',
                       file=sys.stderr)
@@ -268,11 +273,11 @@ def main(argv: list[str] | None = None) -> int:
                                         publish_rate=args.publish_rate,
                                         marker_magnification=args.marker_magnification,
                                         on_chunk=on_chunk, states=args.csv_state,
-                                        what='--mcap')
+                                        what='--mcap', umbrella=args.umbrella)
             except ValueError as exc:
                 ap.exit(2, f'umbrella_sim: error: {exc}\n')
         else:
-            result = simulate(params, args.duration, keep_samples=False, on_chunk=on_chunk,
+            result = simulate(run, args.duration, keep_samples=False, on_chunk=on_chunk,
                               states=args.csv_state, driver=driver)
     finally:
         if csv is not None:

@@ -24,6 +24,7 @@ mid-link, deformed shapes) over a window of time (--window; by default the deplo
 eight periods of the locked frame's vibration), with the thesis's values drawn where it
 has them (its data at V0 = -0.2, -0.5, -1, -2 m/s).  --thesis adds them to the text and
 JSON.  The text is in s, mm, MPa and rad; compare.json in SI units, as each entry says.
+Recordings of the umbrella of N ribs are compared rib by rib (compare_ribs.py).
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ from .arguments import ArgumentParser
 from .compare_plots import plot
 from .runs import (default_label, default_window, load_run, physics_run, Run,
                    thesis_figures, THESIS_TABLE_6_1, THESIS_V02)
-from ..bag.reader import LogError
+from ..bag.reader import LogError, read_log
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader, raise_if_stopped
 
 
@@ -234,26 +235,37 @@ def main(argv: list[str] | None = None) -> int:
         names = [p if names.count(n) > 1 else n for p, n in zip(args.logs, names)]
     try:
         out = _check_out_dir(args.out, args.overwrite)      # before reading any log
-        runs = [load_run(p, name, args.segment) for p, name in zip(args.logs, names)]
-        result = compare(runs, thesis=args.thesis)
-        window = tuple(args.window) if args.window else default_window(runs)
-        if not args.no_plots:
-            result['plot_window'] = list(window)
-        if args.physics_rate and not args.no_plots:
-            for r in runs:
-                r.physics = physics_run(r.path, args.segment, until=window[1])
+        if _ribs_logs(args):                # the umbrella of N ribs: its own comparison
+            from .compare_ribs import compare_ribs, load_ribs_run, plot_ribs, print_ribs_table
+
+            runs = [load_ribs_run(p, name, args.segment) for p, name in zip(args.logs, names)]
+            result = compare_ribs(runs)
+            table, draw, span = print_ribs_table, lambda: plot_ribs(runs, out), ''
+        else:
+            runs = [load_run(p, name, args.segment) for p, name in zip(args.logs, names)]
+            result = compare(runs, thesis=args.thesis)
+            window = tuple(args.window) if args.window else default_window(runs)
+            if not args.no_plots:
+                result['plot_window'] = list(window)
+            if args.physics_rate and not args.no_plots:
+                for r in runs:
+                    r.physics = physics_run(r.path, args.segment, until=window[1])
+            table, span = print_table, f' of t = {window[0]:.4g} .. {window[1]:.4g} s (--window)'
+
+            def draw():
+                return plot(runs, out, tuple(args.magnification), window)
     except LogError as exc:
         raise_if_stopped()           # (a stop signal inside a decoding: an interrupt)
         print(f'umbrella_compare: error: {exc}', file=sys.stderr)
         return 2
     # (umbrella_compare ... | head): the outputs are still written
-    reader_there = print_for_reader(lambda: print_table(result))
+    reader_there = print_for_reader(lambda: table(result))
     try:
         os.makedirs(out, exist_ok=True)
         for name in _earlier_outputs(out) if args.overwrite else ():   # (now: replaced)
             os.unlink(os.path.join(out, name))
         if not args.no_plots:
-            result['plots'] = plot(runs, out, tuple(args.magnification), window)
+            result['plots'] = draw()
         with open(os.path.join(out, 'compare.json'), 'x', encoding='utf-8') as fh:
             json.dump(result, fh, indent=2)
     except OSError as exc:
@@ -261,9 +273,24 @@ def main(argv: list[str] | None = None) -> int:
               'above is complete)', file=sys.stderr)
         return 4
     print(f"\nwrote {os.path.join(out, 'compare.json')}"
-          + (f" and {len(result['plots'])} plots of t = {window[0]:.4g} .. {window[1]:.4g} s "
-             '(--window)' if 'plots' in result else ''))
+          + (f" and {len(result['plots'])} plots{span}" if 'plots' in result else ''))
     return 0 if reader_there else EXIT_READER_GONE
+
+
+def _ribs_logs(args) -> bool:
+    """Say whether the logs are of the umbrella of N ribs (LogError: a mix, or its options)."""
+    from .compare_ribs import is_ribs_log
+
+    ribs = [is_ribs_log(read_log(p).segment(args.segment).params) for p in args.logs]
+    if any(ribs) and not all(ribs):
+        raise LogError(f"{', '.join(p for p, r in zip(args.logs, ribs) if r)}: recordings of "
+                       'the umbrella of N ribs among planar ones: compare like with like')
+    given = [o for o, on in (('--thesis', args.thesis), ('--physics-rate', args.physics_rate),
+                             ('--window', args.window)) if on]
+    if any(ribs) and given:
+        raise LogError(f"{', '.join(given)}: options of the planar comparison; recordings of "
+                       'the umbrella of N ribs are compared over every publication')
+    return any(ribs)
 
 
 def _earlier_outputs(path: str) -> list[str] | None:

@@ -32,6 +32,8 @@ from ..core.forcing import command_force
 from ..core.params import check_values, UmbrellaParams
 from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
+from ..core.umbrella3d.params3d import (RIB_LIST_PREFIX, umbrella_parameter_names,
+                                        umbrella_values)
 from ..ros.params_file import check_parameter_sources, load_params_file
 from ..ros.share import package_path
 
@@ -141,7 +143,8 @@ def resolve_params(overrides: dict, params_file: str | None = None,
     Return an offline run's parameters, validated (a ValueError names the parameter).
 
     The params file (default config/umbrella.yaml, its node-only keys skipped), then the
-    overrides; from_file: that file's parameters, if the caller has read them.
+    overrides; from_file: that file's parameters, if the caller has read them.  The planar
+    record only: the umbrella's values (UMBRELLA_NAMES) are the caller's to take.
     """
     values: dict = {}
     params_file = params_file or default_params_file()
@@ -157,15 +160,19 @@ def resolve_params(overrides: dict, params_file: str | None = None,
         except ValueError as exc:
             raise ValueError(f'params file {params_file}: {exc}') from None
         values.update(from_file)
-    for name in (*NODE_ONLY_PARAMS, *SHARED_NAMES):   # a file shared with the nodes: theirs
+    # a file shared with the nodes: theirs; the umbrella's: build_params's
+    for name in (*NODE_ONLY_PARAMS, *SHARED_NAMES, *UMBRELLA_NAMES):
         values.pop(name, None)
-    values.update(overrides)
+    values.update({k: v for k, v in overrides.items() if k not in UMBRELLA_NAMES})
     return UmbrellaParams.from_mapping(values).validated()
 
 
 #: deploy_controller's parameters, which a '/**' params file shared with it may hold
 SHARED_NAMES = tuple(CONTROLLER_PARAMETERS)
-_KNOWN_IN_FILES = frozenset(SPECS) | frozenset(NODE_ONLY_PARAMS) | frozenset(SHARED_NAMES)
+#: the umbrella of N ribs' parameters (umbrella3d_parameters.md): its own, rib.<name> lists
+UMBRELLA_NAMES = umbrella_parameter_names()
+_KNOWN_IN_FILES = (frozenset(SPECS) | frozenset(NODE_ONLY_PARAMS) | frozenset(SHARED_NAMES)
+                   | UMBRELLA_NAMES)
 
 
 def params_file_warnings(params_file: str) -> list[str]:
@@ -193,8 +200,29 @@ def _given_once(given: dict, name: str, how: str) -> None:
     given[name] = how
 
 
+def umbrella_value(name: str, value):
+    """Return an umbrella parameter's value from --set text: a rib.<name> list as YAML."""
+    if name.startswith(RIB_LIST_PREFIX) and isinstance(value, str):
+        import yaml
+
+        try:
+            value = yaml.safe_load(value)
+        except yaml.YAMLError:
+            value = None
+        if not isinstance(value, list):
+            raise ValueError(f'--set {name}: a list, one value per rib ([0.0, 0.1, 0.0])')
+    return value
+
+
 def build_params(args) -> UmbrellaParams:
+    """
+    Return the planar record of the options, --set and the params file (validated).
+
+    The umbrella's values (UMBRELLA_NAMES) go to args.umbrella (params3d.umbrella_values:
+    {} for the planar model).
+    """
     values: dict = {}
+    umbrella: dict = {}
     given: dict = {}            # parameter -> the option that gave it, to refuse a second
     lock_given = None
     flags = {name: getattr(args, flag) for flag, name in CLI_FLAGS
@@ -216,6 +244,9 @@ def build_params(args) -> UmbrellaParams:
             setattr(args, name, NODE_PARAMETERS[name].coerce(value))
             NODE_PARAMETERS[name].check(getattr(args, name))
             continue
+        if name in UMBRELLA_NAMES:
+            umbrella[name] = umbrella_value(name, value)
+            continue
         if name in NODE_PARAMETERS:
             raise ValueError(f'--set {name}: a parameter of the live umbrella_node only, with '
                              'no meaning offline (see --duration, --mcap, --publish-rate)')
@@ -232,6 +263,9 @@ def build_params(args) -> UmbrellaParams:
     for text in params_file_warnings(params_file) if params_file else ():
         print(f'umbrella_sim: warning: {text}', file=sys.stderr)
     check_lock_given(params, lock_given)
+    for name in UMBRELLA_NAMES & set(from_file):
+        umbrella.setdefault(name, from_file[name])
+    args.umbrella = umbrella_values(umbrella)
     # what shapes a --mcap recording: --publish-rate / --set, else the params file's (a file
     # shared with the node), else the node's default
     for name in RECORDING_PARAMS:

@@ -42,6 +42,8 @@ from ..core.driver import RunDriver
 from ..core.forcing import command_force, ForceSchedule
 from ..core.integrators import INTEGRATOR_REVISION
 from ..core.params import physics_step, recorded_params
+from ..core.umbrella3d.params3d import (umbrella_model, umbrella_parameter_names,
+                                        umbrella_values, UmbrellaRibsParams)
 from ..ros.messages import (ABSOLUTE_TOPIC_NAMES, COMMAND, joint_state_figures,
                             peak_stress_figures, tip_deflection_figures)
 from ..ros.signals import interruptible, raise_if_stopped
@@ -69,6 +71,18 @@ SIGNALS = {'leaf_hinge': 'alpha1', 'link_hinge': 'link_angle', 'sleeve_slider': 
            'peak_stress_link': 'peak_stress_link'}
 
 
+#: the signals of a recording of the umbrella of N ribs: each the largest difference over
+#: the joints of joint_states (positions, velocities), the sleeve's force, and every value
+#: of the ribs' arrays (msg_docs/topic_ribs.md)
+RIB_SIGNALS = ('joint_position', 'joint_velocity', 'sleeve_force', 'rib_tip_deflection',
+               'rib_peak_stress')
+
+
+def recorded_umbrella(params: dict) -> dict:
+    """Return the umbrella's values of a recording's parameters ({}: the planar model)."""
+    return umbrella_values({k: v for k, v in params.items() if k in umbrella_parameter_names()})
+
+
 def _reference(s, name: str) -> float:
     """Return a Sample's figure of that name (link_angle: the link's joint, alpha2 - alpha1)."""
     return s.alpha2 - s.alpha1 if name == 'link_angle' else getattr(s, name)
@@ -84,8 +98,10 @@ def resimulate(log: LogData) -> dict:
     reproduced at the same sim time, a fault the log does not show is a problem.  Streams:
     one publication's messages in memory at a time.
     """
-    diffs = dict.fromkeys(SIGNALS, 0.0)
-    scales = dict.fromkeys(SIGNALS, 0.0)
+    signals = (RIB_SIGNALS if any(recorded_umbrella(seg.params).get('ribs', 1) > 1
+                                  for seg in log.segments()) else SIGNALS)
+    diffs = dict.fromkeys(signals, 0.0)
+    scales = dict.fromkeys(signals, 0.0)
     out = {'compared': 0, 'max_abs_diff': diffs, 'scale': scales, 'segments': [],
            'problems': []}
     for seg in log.segments():
@@ -96,12 +112,12 @@ def resimulate(log: LogData) -> dict:
     if out['compared'] == 0:
         raise LogError(f'{log.path}: no joint_states messages to compare'
                        + log.truncation_note())
-    for group in SCALE_GROUPS:        # one scale for the signals of one quantity
+    for group in SCALE_GROUPS if signals is SIGNALS else ():   # one scale a quantity
         common = max(scales[name] for name in group)
         for name in group:
             scales[name] = common
     out['relative_diff'] = {name: relative_difference(diffs[name], scales[name])
-                            for name in SIGNALS}
+                            for name in signals}
     return out
 
 
@@ -164,7 +180,7 @@ def _segment_inputs(log: LogData, seg):
         raise LogError(f'{log.path}: physics step {step} cannot be reproduced: it does not '
                        f'divide the publication period 1/{rate:g} s (a run would take '
                        f"{physics_step(step, rate) if step > 0.0 else 'none'})")
-    params = params.with_physics_step(step)
+    params = umbrella_model(params, recorded_umbrella(p_all)).with_physics_step(step)
     # the force history, the recorded fault and the last publication (only the few command
     # and phase records are decoded)
     applied, t_last, t_fault = [], 0.0, None
@@ -225,9 +241,13 @@ def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
     one.
     """
     driver, t_last, t_fault = _segment_inputs(log, seg)
+    ribs = isinstance(driver.params, UmbrellaRibsParams)
     topics = {'joint': log.find_topic('joint_states'),
-              'tip': log.find_topic('tip_deflection', required=False),
-              'peak': log.find_topic('peak_stress', required=False)}
+              'tip': log.find_topic('rib_tip_deflection' if ribs else 'tip_deflection',
+                                    required=False),
+              'peak': log.find_topic('rib_peak_stress' if ribs else 'peak_stress',
+                                     required=False)}
+    compare = _ribs_comparison(driver) if ribs else _compare_publication
     by_topic = {t: k for k, t in topics.items() if t}
     sim = driver.sim
     res = {'index': seg.index, 'compared': 0, 'problems': [], 'fault': None,
@@ -259,7 +279,7 @@ def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
                 if abs(t - t_now) > 1e-9:
                     raise LogError(f'{log.path}: recorded publication at t = {t} s is not on '
                                    f'the re-simulated grid (t = {t_now})')
-                _compare_publication(s, group, diffs, scales)
+                compare(s, group, diffs, scales)
                 res['compared'] += 1
             pending[0] = next(stream, None)
 
@@ -284,6 +304,31 @@ def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:
             res['problems'].append(f'the log faults at t = {t_fault:.9f} s, the '
                                    f're-simulation at t = {sim.time:.9f} s')
     return res
+
+
+def _ribs_comparison(driver):
+    """Return the comparison of a publication of the umbrella: its messages re-encoded."""
+    from ..ros.ribs_messages import rib_messages
+
+    first = driver.initial
+    energy0 = float(first.kinetic_energy + first.strain_energy)
+    yield_strength = driver.params.planar.yield_strength
+
+    def compare(s, group: dict, diffs: dict, scales: dict) -> None:
+        ref = rib_messages(s, yield_strength, energy0)
+        joint, ref_joint = group['joint'], ref['joint_states']
+        pairs = {'joint_position': (joint.position, ref_joint.position),
+                 'joint_velocity': (joint.velocity, ref_joint.velocity),
+                 'sleeve_force': (joint.effort[-1:], ref_joint.effort[-1:])}
+        for key, name in (('tip', 'rib_tip_deflection'), ('peak', 'rib_peak_stress')):
+            if key in group:
+                pairs[name] = (group[key].data, ref[name].data)
+        for name, (rec, res) in pairs.items():
+            rec, res = np.asarray(rec, dtype=float), np.asarray(res, dtype=float)
+            d = float(np.max(np.abs(rec - res))) if rec.shape == res.shape else math.inf
+            diffs[name] = max(diffs[name], d if d == d else math.inf)    # NaN counts as inf
+            scales[name] = max(scales[name], float(np.max(np.abs(rec))))
+    return compare
 
 
 def _compare_publication(s, group: dict, diffs: dict, scales: dict) -> None:

@@ -322,6 +322,13 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     log = read_log(path)
     seg = log.segment(segment)
     params = seg.params
+    ribs = params.get('ribs', 1)
+    if isinstance(ribs, int) and ribs > 1:
+        raise LogError(f'{log.path}: a recording of the umbrella of {ribs} ribs: this tool '
+                       "reads the planar rib's topics (tip_deflection, peak_stress); per-rib "
+                       'plots are not implemented yet (umbrella_replay --resimulate checks '
+                       "the recording; its summary figures are in its metadata's "
+                       'umbrella_sim.summary)')
     t, js = _series(log, log.find_topic('joint_states'),
                     lambda m: _figures(joint_state_figures(m), 'alpha1', 'alpha1_rate',
                                        'alpha2'), seg, 3)

@@ -46,7 +46,7 @@ from .progress import Progress
 from .sweep_results import (CaseStore, is_finished, make_record, OutputError, plot,
                             STATUS_DIVERGED, STATUS_ERROR, STATUS_OK, table_rows, write_csv,
                             write_parquet)
-from .sweep_spec import case_id, load_spec, SpecError, Sweep
+from .sweep_spec import case_id, case_models, load_spec, SpecError, Sweep
 from .. import __version__
 from ..bag.paths import absolute_path, check_new_output
 from ..core.registry import NODE_PARAMETERS
@@ -76,14 +76,12 @@ def run_case(task: dict) -> dict:
 
     Never raises: an exception becomes the case's error so the other cases go on.
     """
-    from ..core.params import UmbrellaParams
-
     out = {'case_id': task['case_id'], 'worker': f'{socket.gethostname()}:{os.getpid()}',
            'umbrella_sim': __version__, 'summary': {}, 'error': None, 'mcap': None,
            'started_at': time.time()}      # the worker's clock (gaps between its cases)
     t0 = time.perf_counter()
     try:
-        params = UmbrellaParams.from_mapping(task['params']).validated()
+        params, umbrella, run = case_models(task['params'])
         profile = [tuple(row) for row in task['force_profile']] if task['force_profile'] else None
         if task['mcap_dir']:
             from ..ros.recording import record_offline
@@ -93,7 +91,8 @@ def run_case(task: dict) -> dict:
                 import shutil
                 shutil.rmtree(bag)
             result = record_offline(params, bag, _mcap_duration(task), profile,
-                                    publish_rate=MCAP_PUBLISH_RATE, what='recording')
+                                    publish_rate=MCAP_PUBLISH_RATE, what='recording',
+                                    umbrella=umbrella)
             out['mcap'] = bag
             if result.recording_error:      # not finished: a resumed sweep runs it again
                 out['summary'] = result.summary()
@@ -103,7 +102,7 @@ def run_case(task: dict) -> dict:
         else:
             from ..core.driver import simulate
 
-            result = simulate(params, task['duration'], force_profile=profile,
+            result = simulate(run, task['duration'], force_profile=profile,
                               stop_after_lock=task['stop_after_lock'], keep_samples=False)
         out['summary'] = result.summary()
         out['error'] = result.error
@@ -132,9 +131,8 @@ def _mcap_duration(task: dict) -> float:
     if task['stop_after_lock'] is None:
         return task['duration']
     from ..core.driver import simulate
-    from ..core.params import UmbrellaParams
 
-    params = UmbrellaParams.from_mapping(task['params']).validated()
+    params = case_models(task['params'])[2]
     profile = [tuple(row) for row in task['force_profile']] if task['force_profile'] else None
     probe = simulate(params, task['duration'], force_profile=profile,
                      stop_after_lock=task['stop_after_lock'], keep_samples=False)
@@ -275,12 +273,13 @@ def _mcap_step_cases(sweep: Sweep, log) -> None:
     time_step that does not divide it the recorded run is another computation than the
     plain one: it must not take (or replace) the plain case's result.
     """
-    from ..core.params import shortened_step_note, UmbrellaParams
-    from ..core.step_rule import physics_step_of
+    from ..core.driver import simulator_class
+    from ..core.params import shortened_step_note
 
     rate = MCAP_PUBLISH_RATE
     for case in sweep.cases:
-        step = physics_step_of(UmbrellaParams.from_mapping(case.params))
+        run = case_models(case.params)[2]
+        step = simulator_class(run).grid_step(run)
         note = shortened_step_note(step, rate)
         if note:
             case.case_id = case_id(dict(case.params, mcap_publish_rate=rate), case.duration,

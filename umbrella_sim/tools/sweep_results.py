@@ -113,6 +113,9 @@ def table_rows(sweep: Sweep, store: CaseStore) -> tuple[list[str], list[dict]]:
                'error': rec.get('error')}
         row.update({name: case.params.get(name, case.overrides.get(name)) for name in sweep.swept})
         row.update(case.params)
+        for name, value in row.items():     # a rib.<name> list: one value, for the plots
+            if isinstance(value, list):
+                row[name] = tuple(value)
         row.update(duration=case.duration, stop_after_lock=case.stop_after_lock,
                    force_profile=case.force_profile_path)
         used = row['_same'] = set()     # summary keys that repeat their parameter's value

@@ -44,7 +44,7 @@ from typing import Any
 import yaml
 
 from .inputs import (check_lock_given, check_run_length, default_params_file,
-                     LONG_RUN_STEPS, read_force_profile, resolve_params)
+                     LONG_RUN_STEPS, read_force_profile, resolve_params, UMBRELLA_NAMES)
 from .. import __version__
 from ..bag.paths import read_text_input
 
@@ -108,6 +108,23 @@ def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> st
     return hashlib.sha256(blob.encode('utf-8')).hexdigest()[:16]
 
 
+def case_models(params: dict) -> tuple:
+    """
+    Return (the planar record, the umbrella's values, the run's parameters) of a case.
+
+    params: a case's (Case.params: the planar record's values and the umbrella's, by their
+    node names); the run's: UmbrellaRibsParams with ribs >= 2, else the planar record.
+    """
+    from ..core.params import UmbrellaParams
+    from ..core.registry import SPECS
+    from ..core.umbrella3d.params3d import umbrella_model, umbrella_values
+
+    planar = UmbrellaParams.from_mapping({k: v for k, v in params.items()
+                                          if k in SPECS}).validated()
+    umbrella = umbrella_values({k: v for k, v in params.items() if k in UMBRELLA_NAMES})
+    return planar, umbrella, umbrella_model(planar, umbrella)
+
+
 #: a spec of at least this many cases reports its checking (progress(done, total))
 CHECK_PROGRESS_CASES = 10_000
 
@@ -120,8 +137,8 @@ def load_spec(path: str, progress=None) -> Sweep:
     checked, when there are CHECK_PROGRESS_CASES or more (10^6 cases take minutes).
     """
     from ..core.forcing import command_force
-    from ..core.params import UmbrellaParams
     from ..core.registry import check_types
+    from ..core.umbrella3d.params3d import umbrella_model, umbrella_values
     from ..core.step_rule import physics_step_of, smallest_step_of
     from ..ros.params_file import load_params_file, load_yaml_as_ros
 
@@ -223,7 +240,11 @@ def load_spec(path: str, progress=None) -> Sweep:
             if duration / smallest_step_of(resolved) > LONG_RUN_STEPS:   # (cheap first)
                 check_run_length(duration, physics_step_of(resolved), long_run,
                                  'long_run: true', 'duration')
-            params = resolved.as_dict()
+            # the umbrella of N ribs (ribs, hub..., rib.<name> lists), checked with its model
+            umbrella = umbrella_values({k: v for k, v in {**(from_file or {}), **overrides}
+                                        .items() if k in UMBRELLA_NAMES})
+            umbrella_model(resolved, umbrella)
+            params = {**resolved.as_dict(), **umbrella}
         except ValueError as exc:
             shown = ', '.join(f'{k}={v!r}' for k, v in overrides.items() if k not in base
                               or source == 'cases')
@@ -231,7 +252,7 @@ def load_spec(path: str, progress=None) -> Sweep:
                             f'{exc}') from None
         for t, f in profile or []:
             try:
-                command_force(f, UmbrellaParams(**params))
+                command_force(f, resolved)
             except ValueError as exc:
                 raise SpecError(f'sweep spec {path}: case {index}: force_profile at t = {t:g} s: '
                                 f'{exc}') from None

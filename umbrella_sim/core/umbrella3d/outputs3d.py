@@ -24,13 +24,17 @@ axial E u', bending E c v'' (in the rib plane) and E c w'' (out of it), the St-V
 G c_t phi'; the combined figure is the von Mises stress of the worst corner fibre with the
 largest torsion shear, sqrt((|sigma_a| + |sigma_bz| + |sigma_by|)^2 + 3 tau^2), an upper bound
 of the section's von Mises stress.  Each rib's peak of every component over the run is kept
-with where (body, abscissa) and when.
+with where (body, abscissa) and when; every step's row has each rib's largest of every
+component over both bodies (``stress_<name>``) and where (``stress_<name>_at``: body code,
+0 leaf 1 link, and x), the leaf's on a tie.
 """
 from __future__ import annotations
 
 import numpy as np
 
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
+#: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
+BODIES = ('leaf', 'link')
 
 
 class Record3D:
@@ -135,7 +139,18 @@ class Record3D:
                 tops[name].append(a.max(-1))
                 wheres[name].append(a.argmax(-1))
         for name in STRESS_NAMES:
-            top = np.stack(tops[name], 1).reshape(2 * k, m.n_ribs)   # (step, body) order
+            # this step's worst over both bodies and where (the leaf's on a tie)
+            by_body = np.stack(tops[name], 1)                          # (step, body, rib)
+            body = by_body.argmax(1)
+            steps, ribs = np.arange(k)[:, None], np.arange(m.n_ribs)[None]
+            point = np.stack(wheres[name], 1)[steps, body, ribs]
+            x = np.where(body == 0, self._xs[0][np.minimum(point, len(self._xs[0]) - 1)],
+                         self._xs[1][np.minimum(point, len(self._xs[1]) - 1)])
+            self.rows.setdefault(f'stress_{name}', []).extend(
+                list(by_body[steps, body, ribs]))
+            self.rows.setdefault(f'stress_{name}_at', []).extend(
+                list(np.stack([body.astype(float), x], -1)))
+            top = by_body.reshape(2 * k, m.n_ribs)   # (step, body) order
             first = top.argmax(0)
             best = top[first, np.arange(m.n_ribs)]
             better = best > self.peak[name]
@@ -154,6 +169,25 @@ class Record3D:
         """Return every per-step figure as an array (steps first, then ribs or components)."""
         return {name: np.array(values) for name, values in self.rows.items()}
 
+    def take(self) -> dict:
+        """Return the rows added since the last take as arrays (``arrays``), and drop them."""
+        out = self.arrays()
+        self.rows = {}
+        return out
+
+    def row(self, s, locked: bool, force: float, lock_loss: float, totals) -> dict:
+        """
+        Return the figures of the state s as a row, without adding it (``add``'s rule).
+
+        totals: the work of the sleeve force, each hinge's friction work and the drive's work
+        from t = 0 to s.
+        """
+        scratch = Record3D(self.model)
+        scratch.work, friction, scratch.drive = totals
+        scratch.friction = np.array(friction, dtype=float)
+        scratch.add(s, locked, force, None, lock_loss)
+        return {name: values[0] for name, values in scratch.arrays().items()}
+
     def summary(self) -> dict:
         """
         Return the run's figures: lock time, each rib's deployment, spread, peaks, balance.
@@ -166,19 +200,10 @@ class Record3D:
         a = self.arrays()
         t = a['time']
         alpha = a['alpha1']
-        deployed = []
-        for k in range(m.n_ribs):
-            gap = alpha[:, k] - m.alpha_deployed[k]
-            hit = np.nonzero(gap <= 0.0)[0]
-            if len(hit) == 0 or hit[0] == 0:
-                deployed.append(np.nan if len(hit) == 0 else t[0])
-                continue
-            i = hit[0]
-            deployed.append(t[i - 1] + (t[i] - t[i - 1]) * gap[i - 1] / (gap[i - 1] - gap[i]))
-        deployed = np.array(deployed)
+        deployed = np.array([first_reach(t, alpha[:, k] - m.alpha_deployed[k])
+                             for k in range(m.n_ribs)])
         energy = a['kinetic_energy'] + a['strain_energy']
-        balance = (energy - energy[0] - a['work'] - a['friction_work'].sum(1) - a['drive_work']
-                   + a['lock_energy_loss'])
+        balance = energy_balance3d(a, energy[0])
         tip_w = np.abs(a['tip'][:, :, 2])
         worst = np.unravel_index(np.argmax(tip_w), tip_w.shape)
         out = {
@@ -198,3 +223,36 @@ class Record3D:
                             for name in STRESS_NAMES},
         }
         return out
+
+
+def first_reach(t: np.ndarray, gap: np.ndarray, before: tuple | None = None) -> float:
+    """
+    Return when gap first reaches 0 from above (linear between steps); nan if it does not.
+
+    A rib's deployment instant (gap: its leaf angle less its deployed angle); t[0] if it
+    starts there.  before: (t, gap) of the step before t[0], for a record taken in parts.
+    """
+    hit = np.nonzero(gap <= 0.0)[0]
+    if len(hit) == 0:
+        return np.nan
+    i = hit[0]
+    if i == 0:
+        if before is None or before[1] <= 0.0:
+            return float(t[0])
+        t0, g0 = before
+    else:
+        t0, g0 = t[i - 1], gap[i - 1]
+    return float(t0 + (t[i] - t0) * g0 / (g0 - gap[i]))
+
+
+def energy_balance3d(rows, initial_energy: float) -> np.ndarray:
+    """
+    Return T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss of rows (J).
+
+    rows: a Record3D's arrays (one figure a step) or one row (a Sample3D).  The umbrella's
+    energy balance, one rule: 0 for a run that keeps its energy (friction work is negative:
+    the hinges take energy out).
+    """
+    return (rows['kinetic_energy'] + rows['strain_energy'] - initial_energy - rows['work']
+            - np.sum(rows['friction_work'], axis=-1) - rows['drive_work']
+            + rows['lock_energy_loss'])

@@ -105,6 +105,64 @@ RIB_SPECS: dict[str, Param] = {p.name: p for p in (
 RIB_PLANAR_NAMES = ('l1', 'l2', 'l3', 'section_height', 'area', 'second_moment_of_area',
                     'youngs_modulus', 'density')
 _OVERRIDE = re.compile(r'^rib(\d+)\.(\w+)$')
+#: a node's name of a rib's own values, a list with one entry per rib: rib.<name>
+RIB_LIST_PREFIX = 'rib.'
+
+
+def rib_list_specs() -> dict[str, Param]:
+    """Return {name: spec} of every value a rib may have its own of (RIB_SPECS, planar)."""
+    from ..registry import REGISTRY
+
+    return {**RIB_SPECS, **{name: REGISTRY[name] for name in RIB_PLANAR_NAMES}}
+
+
+def umbrella_parameter_names() -> frozenset:
+    """
+    Return the names of the umbrella's parameters on a node.
+
+    Its own (UMBRELLA_SPECS), rib.<name> lists (one value per rib) and rib<k>.<name>
+    overrides of one rib (k < the largest number of ribs).
+    """
+    names = rib_list_specs()
+    return (frozenset(UMBRELLA_SPECS) | {RIB_LIST_PREFIX + n for n in names}
+            | {f'rib{k}.{n}' for k in range(UMBRELLA_SPECS['ribs'].high) for n in names})
+
+
+def rib_override_spec(name: str) -> Param | None:
+    """Return the spec of a rib<k>.<name> override (None: not one; ValueError: no such name)."""
+    match = _OVERRIDE.match(name)
+    if match is None:
+        return None
+    _rib_spec(match.group(2))
+    return rib_list_specs()[match.group(2)]
+
+
+def umbrella_values(values: Mapping[str, Any]) -> dict:
+    """
+    Return a node's umbrella parameters typed (rib lists not given dropped), by their names.
+
+    values: the umbrella's own parameters (UMBRELLA_SPECS names) and rib.<name> lists
+    (None or [] where not given); the result is what ``UmbrellaRibsParams.of_node`` takes.
+    With ribs 1 (the planar model, exactly) no umbrella value may differ from its default
+    and no rib list be given: ValueError naming it.
+    """
+    out = {}
+    for name, value in values.items():
+        if name.startswith(RIB_LIST_PREFIX):
+            if value is not None and len(value):
+                out[name] = [float(v) for v in value]
+        elif name in UMBRELLA_SPECS:
+            out[name] = UMBRELLA_SPECS[name].coerce(value)
+        else:                                   # rib<k>.<name>: one rib's value
+            out[name] = rib_override_spec(name).coerce(value)
+    if out.get('ribs', 1) == 1:
+        given = sorted(n for n, v in out.items()
+                       if n != 'ribs' and (n not in UMBRELLA_SPECS
+                                           or v != UMBRELLA_SPECS[n].default))
+        if given:
+            raise ValueError(f'parameter {given[0]}: set with ribs 1 (the planar model, which '
+                             'has no hub, bus or per-rib values); set ribs >= 2')
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -208,6 +266,13 @@ class UmbrellaRibsParams:
         out = cls(planar, own, {k: v for k, v in per_rib.items() if v})
         return out.validated()
 
+    @classmethod
+    def of_node(cls, umbrella: Mapping[str, Any], planar: UmbrellaParams
+                ) -> 'UmbrellaRibsParams':
+        """Build from a node's umbrella parameters (umbrella_values: rib.<name> lists...)."""
+        return cls.from_mapping({name[len(RIB_LIST_PREFIX):] if name.startswith(RIB_LIST_PREFIX)
+                                 else name: value for name, value in umbrella.items()}, planar)
+
     def validated(self) -> 'UmbrellaRibsParams':
         """Return self if every value is in range, else raise ValueError naming it."""
         self.planar.validated()
@@ -259,6 +324,38 @@ class UmbrellaRibsParams:
             return 'plastic'
         return self.planar.lock_rule
 
+    def as_dict(self) -> dict:
+        """
+        Return every value by name, JSON-ready.
+
+        The planar record's, the umbrella's own, and each rib's own as a list of N (a name
+        no rib has its own value of is left out).
+        """
+        out = {**self.planar.as_dict(), **{n: getattr(self, n) for n in UMBRELLA_SPECS}}
+        for name in sorted({n for vals in self.per_rib.values() for n in vals}):
+            out[name] = [getattr(rib, name) if name in RIB_SPECS else getattr(rib.planar, name)
+                         for rib in self.ribs_list()]
+        return out
+
+    @property
+    def sleeve_force(self) -> float:
+        """Return F per rib at t = 0 (the planar record's; the sleeve takes N F)."""
+        return self.planar.sleeve_force
+
+    @property
+    def sleeve_force_limit(self) -> float:
+        """Return the largest F per rib (the planar record's: each link carries F)."""
+        return self.planar.sleeve_force_limit
+
+    @property
+    def sleeve_force_min(self) -> float:
+        """Return the smallest F per rib (the planar record's)."""
+        return self.planar.sleeve_force_min
+
+    def with_physics_step(self, step: float) -> 'UmbrellaRibsParams':
+        """Return these parameters with the integrator's step set to step exactly."""
+        return dataclasses.replace(self, planar=self.planar.with_physics_step(step))
+
     def ribs_list(self) -> list[RibProperties]:
         return [self.rib(k) for k in range(self.ribs)]
 
@@ -301,3 +398,33 @@ def _rib_spec(name: str) -> None:
     if name not in RIB_SPECS and name not in RIB_PLANAR_NAMES:
         known = sorted(RIB_SPECS) + list(RIB_PLANAR_NAMES)
         raise ValueError(f"unknown per-rib parameter {name!r}; a rib takes {', '.join(known)}")
+
+
+def node_model(values: Mapping[str, Any]) -> 'UmbrellaParams | UmbrellaRibsParams':
+    """
+    Return the model a node's parameters make (name -> value, as a params file flattens them).
+
+    The planar record's names and the umbrella's (umbrella_parameter_names); the others are
+    not the model's and are left out.  ribs >= 2: the umbrella of N ribs, else the planar
+    model.  ValueError naming a bad value.
+    """
+    from ..registry import SPECS
+
+    planar = UmbrellaParams.from_mapping({k: v for k, v in values.items()
+                                          if k in SPECS}).validated()
+    names = umbrella_parameter_names()
+    return umbrella_model(planar, umbrella_values({k: v for k, v in values.items()
+                                                   if k in names}))
+
+
+def umbrella_model(planar: UmbrellaParams, umbrella: Mapping[str, Any]
+                   ) -> 'UmbrellaParams | UmbrellaRibsParams':
+    """
+    Return the model of a planar record and a node's umbrella values (umbrella_values).
+
+    ribs >= 2: the umbrella of N ribs, each rib taking planar unless it has its own value;
+    else planar itself (ribs 1 is the planar model, exactly).  ValueError naming a value.
+    """
+    if umbrella.get('ribs', 1) > 1:
+        return UmbrellaRibsParams.of_node(umbrella, planar)
+    return planar

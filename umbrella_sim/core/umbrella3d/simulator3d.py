@@ -69,12 +69,9 @@ class UmbrellaSimulator3D:
                  carry_steps: int | None = None):
         self.params = params.validated()
         self.model = m = UmbrellaModel3D(self.params)
-        planar = self.params.planar
         #: stage 2's mode fit: the planar rule's, rib by rib, with the hub fixed
-        self.mode_fit = planar.phase_correction and not m.moving_base
-        self.h = (physics_step_of(planar if self.mode_fit
-                                  else planar.replace(phase_correction=False))
-                  if step is None else step)
+        self.mode_fit = self.fits_modes(self.params)
+        self.h = self.grid_step(self.params) if step is None else step
         self.integrator = MidpointUmbrella(
             m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel,
             **({} if carry_steps is None else {'carry_steps': carry_steps}))
@@ -83,6 +80,9 @@ class UmbrellaSimulator3D:
         self.force = self.params.planar.sleeve_force * m.n_ribs
         self.locked = False
         self.lock_time: float | None = None
+        #: (the state right after the lock, the work of the step up to it, the record's
+        #: work totals before that step); None before the lock
+        self.lock_state = None
         self.lock_loss = 0.0
         self.k = 0
         ribs = m.ribs
@@ -91,6 +91,18 @@ class UmbrellaSimulator3D:
         self.state = self.integrator.consistent(self.initial_state(), self.force, False)
         self.record = Record3D(m)
         self.record.add(self.state, self.locked, self.force, None, 0.0)
+
+    @staticmethod
+    def fits_modes(params: UmbrellaRibsParams) -> bool:
+        """Say whether stage 2 takes the planar mode fit: phase_correction, the hub fixed."""
+        return params.planar.phase_correction and params.base == 'fixed'
+
+    @classmethod
+    def grid_step(cls, params: UmbrellaRibsParams) -> float:
+        """Return the physics step of these parameters (the planar rule, its mode fit's)."""
+        planar = params.planar
+        return physics_step_of(planar if cls.fits_modes(params)
+                               else planar.replace(phase_correction=False))
 
     # ------------------------------------------------------------ start
     def initial_state(self) -> State3D:
@@ -186,6 +198,8 @@ class UmbrellaSimulator3D:
             before = self.energy(s_hit)
             s_locked = self._lock(s_hit)
             self.integrator.lock_at()
+            rec = self.record
+            self.lock_state = (s_locked, work_hit, (rec.work, rec.friction, rec.drive))
             after = self.energy(s_locked)
             self.locked, self.lock_time = True, s_locked.t
             self.lock_loss += before - after

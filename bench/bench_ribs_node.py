@@ -1,0 +1,116 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+What the umbrella of N ribs costs the node: the step through the run driver, and live rates.
+
+  * offline, per --ribs: CPU time per physics step of UmbrellaSimulator3D's own loop and of
+    the RunDriver's (its chunks, the per-rib peak-hold, the summary) with a publication
+    every 1 ms encoded as the node does (ribs_messages.RibsPublicationEncoder), per step and
+    per step and rib; the encoder's cost per publication;
+  * live (--live): umbrella_node with ribs --live-ribs at 1 kHz: the measured real-time
+    factor its diagnostics report at real_time_factor 1 (with recording) and whether it
+    says it is behind; and in lockstep, a commander answering every joint_states for
+    --periods publications: sim seconds per wall second.
+The machine is shared (2 cores): wall figures are noisy; the CPU time is what a step costs.
+
+    python bench/bench_ribs_node.py [--ribs 2 3 6] [--duration 0.02] [--live]
+                                    [--live-ribs 6] [--periods 40]
+"""
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, '..'))
+
+from umbrella_sim.core.driver import RunDriver  # noqa: E402
+from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams  # noqa: E402
+from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D  # noqa: E402
+
+STEP = 1e-4          # s: 10 steps a 1 kHz publication
+
+
+def offline(ribs: int, duration: float) -> None:
+    from umbrella_sim.ros.ribs_messages import RibsPublicationEncoder
+
+    params = UmbrellaRibsParams.from_mapping({'ribs': ribs, 'time_step': STEP})
+    sim = UmbrellaSimulator3D(params)
+    t0 = time.thread_time()
+    sim.run(duration)
+    own = (time.thread_time() - t0) / sim.k
+    driver = RunDriver(params, 1000.0)
+    encoder = RibsPublicationEncoder(driver)
+    encoder.messages(driver.publication())     # (warm: the message modules' first use)
+    encoding = [0.0]
+
+    def published(sample):
+        t = time.thread_time()
+        encoder.messages(sample)
+        encoding[0] += time.thread_time() - t
+
+    t0 = time.thread_time()
+    driver.run(duration, on_publication=published)
+    driven = (time.thread_time() - t0) / driver.sim.steps
+    per_publication = encoding[0] / max(driver.publications - 1, 1)
+    print(f'ribs {ribs:2d}: own loop {own * 1e3:.2f} ms/step ({own / ribs * 1e3:.2f} per rib); '
+          f'run driver + 1 kHz publications {driven * 1e3:.2f} ms/step '
+          f'({driven / ribs * 1e3:.2f} per rib); encoding {per_publication * 1e3:.3f} ms a '
+          f'publication; real-time factor at {STEP * 1e6:.0f} us steps '
+          f'{STEP / driven:.3f}')
+
+
+def live(ribs: int, periods: int) -> None:
+    from umbrella_sim.testing import SimulatedAntenna
+
+    with tempfile.TemporaryDirectory() as tmp:
+        with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1000.0},
+                              record_path=os.path.join(tmp, 'bag')) as antenna:
+            status = antenna.wait_for('diagnostics', lambda m: True, timeout=30)
+            status = antenna.wait_for('diagnostics', lambda m: m is not status, timeout=30)
+            values = {kv.key: kv.value for kv in status.status[0].values}
+            print(f'live ribs {ribs}, real_time_factor 1, recording: measured '
+                  f"{values['measured_real_time_factor']}, lag {values['lag_s']} s; status "
+                  f'{status.status[0].message!r}')
+    with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1000.0,
+                           'lockstep': True, 'v0': 0.0}) as antenna:
+        antenna.publish_force(5.0)
+        antenna.wait_for_sim_time(0.001)
+        wall, sim = time.monotonic(), antenna.sim_time()
+        for i in range(periods):
+            antenna.publish_force(5.0)
+            antenna.wait_for_sim_time(sim + (i + 1) * 0.001 - 1e-9)
+        rate = (antenna.sim_time() - sim) / (time.monotonic() - wall)
+        print(f'live ribs {ribs}, lockstep at 1 kHz over {periods} periods: real-time '
+              f'factor {rate:.4f}')
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--ribs', type=int, nargs='+', default=[2, 3, 6])
+    ap.add_argument('--duration', type=float, default=0.02)
+    ap.add_argument('--live', action='store_true')
+    ap.add_argument('--live-ribs', type=int, default=6)
+    ap.add_argument('--periods', type=int, default=40)
+    args = ap.parse_args()
+    for ribs in args.ribs:
+        offline(ribs, args.duration)
+    if args.live:
+        live(args.live_ribs, args.periods)
+
+
+if __name__ == '__main__':
+    main()

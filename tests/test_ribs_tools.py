@@ -1,0 +1,145 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The command lines with the umbrella of N ribs: simulate, --mcap, re-simulation, sweeps.
+
+``umbrella_sim simulate --set ribs=N --set rib.<name>=[...]`` runs the umbrella through the
+run driver and prints its figures; ``--mcap`` records it as umbrella_node does; re-running a
+recording (``umbrella_replay --resimulate``) from its parameters and applied forces gives
+every published value of every rib again, exactly on this build; a sweep varies the rib
+parameters as any other; what the tools do not read
+yet (per-rib CSV, umbrella_compare) is refused naming why.
+"""
+import json
+
+import pytest
+
+from umbrella_sim.bag.format import MESH_RECORD, PARAMETERS_RECORD
+from umbrella_sim.bag.reader import LogError, read_log
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.umbrella3d.params3d import node_model
+from umbrella_sim.tools import cli, compare
+from umbrella_sim.tools.replay import resimulate, RIB_SIGNALS
+from umbrella_sim.tools.runs import load_run
+from umbrella_sim.tools.sweep import run_case
+from umbrella_sim.tools.sweep_spec import load_spec, SpecError
+
+RUN = ['simulate', '--set', 'ribs=2', '--set', 'rib.stick_until=[0.0, 0.01]',
+       '--set', 'rib.hinge_coulomb=[0.0, 0.05]', '--v0', '0', '--force', '40',
+       '--time-step', '2e-4', '--duration', '0.04']
+
+
+def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_path, capsys):
+    bag = tmp_path / 'ribs'
+    assert cli.main([*RUN, '--json', '--mcap', str(bag), '--publish-rate', '500']) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert figures['ribs'] == 2 and figures['steps'] == 200
+    # the rubbing rib's hinge took energy out; the balance holds with it
+    assert figures['friction_work'][1] < 0.0 == figures['friction_work'][0]
+    assert figures['energy_drift'] < 1e-10
+    log = read_log(str(bag))
+    assert log.metadata[MESH_RECORD]['ribs'] == '2'
+    assert json.loads(log.metadata[PARAMETERS_RECORD]['rib.stick_until']) == [0.0, 0.01]
+    assert log.count(log.find_topic('rib_peak_stress')) == 21       # t = 0 and 20 periods
+    # markers of every rib (2N + 2: leaf and link of each, the sleeve and the hub) every
+    # round(500 / 30) = 17th publication, t = 0 included
+    markers = log.decoded(log.find_topic('markers'))
+    assert [t for t, _ in markers] == [0.0, pytest.approx(17 * 0.002)]
+    assert [m.id for m in markers[-1][1].markers] == list(range(6))
+    res = resimulate(log)
+    assert res['compared'] == 21 and not res['problems']
+    assert set(res['max_abs_diff']) == set(RIB_SIGNALS)
+    assert max(res['max_abs_diff'].values()) == 0.0     # the same run, on the same build
+    with pytest.raises(LogError, match='umbrella of 2 ribs'):
+        load_run(str(bag))
+    # umbrella_compare: per-rib figures and differences against the first run; a free hinge
+    # (no stick) deploys the frame earlier than the stuck one
+    free = tmp_path / 'free'
+    assert cli.main([*[a if a != 'rib.stick_until=[0.0, 0.01]' else 'rib.stick_until=[0.0, 0.0]'
+                       for a in RUN], '--duration', '0.3', '--mcap', str(free),
+                     '--publish-rate', '500']) == 0
+    out = tmp_path / 'cmp'
+    capsys.readouterr()
+    assert compare.main([str(bag), str(free), '--out', str(out)]) == 0
+    assert 'rib1' in capsys.readouterr().out
+    result = json.loads((out / 'compare.json').read_text())
+    ref, other = result['runs']
+    assert ref['alpha1_max_difference'] == [0.0, 0.0] and ref['ribs'] == 2
+    assert min(other['alpha1_max_difference']) > 0.0
+    assert sorted(p.rsplit('/', 1)[1] for p in result['plots']) == [
+        'ribs_alpha1.png', 'ribs_tip_out_of_plane.png', 'ribs_top_view.png']
+    planar = tmp_path / 'planar'
+    assert cli.main(['simulate', '--duration', '0.01', '--mcap', str(planar)]) == 0
+    assert compare.main([str(bag), str(planar), '--out', str(tmp_path / 'mixed')]) == 2
+
+
+@pytest.mark.parametrize('args, culprit', [
+    (['simulate', '--set', 'rib.tip_mass=[0.1]', '--duration', '0.01'], 'rib.tip_mass'),
+    ([*RUN, '--set', 'rib.tip_mass=0.1'], 'rib.tip_mass'),
+    ([*RUN, '--set', 'rib.tip_mass=[0.1, 0.0, 0.0]'], 'tip_mass'),
+    ([*RUN, '--csv', 'out.csv'], '--csv'),
+])
+def test_simulate_refuses_what_the_umbrella_cannot_take_naming_it(
+        args, culprit, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(args)
+    assert exc.value.code == 2
+    assert culprit in capsys.readouterr().err
+
+
+def test_a_sweep_over_rib_parameters(tmp_path):
+    """
+    A grid over a rib's stick time: every case runs the umbrella; the stuck one locks later.
+
+    Each case's parameters hold the umbrella's (rib.<name> lists in the case id); a hinge
+    stuck for 10 ms while the others push holds the whole umbrella back (one sleeve), so its
+    lock comes after the free case's; both keep the energy balance with friction work.
+    """
+    spec = tmp_path / 'spec.yaml'
+    spec.write_text('base: {ribs: 2, v0: 0.0, time_step: 0.0002, '
+                    'rib.hinge_coulomb: [0.0, 0.05]}\n'
+                    'grid: {rib.stick_until: [[0.0, 0.0], [0.0, 0.01]]}\n'
+                    'duration: 0.3\nstop_after_lock: 0.005\nforce: 60.0\n')
+    sweep = load_spec(str(spec))
+    assert [c.params['rib.stick_until'] for c in sweep.cases] == [[0.0, 0.0], [0.0, 0.01]]
+    assert len({c.case_id for c in sweep.cases}) == 2
+    free, stuck = (run_case(c.task(None)) for c in sweep.cases)
+    assert free['status'] == stuck['status'] == 'ok'
+    assert free['summary']['ribs'] == 2
+    assert stuck['summary']['lock_time'] > free['summary']['lock_time']
+    for case in (free, stuck):
+        assert case['summary']['energy_drift'] < 1e-10
+        assert case['summary']['friction_work'][1] < 0.0
+    spec.write_text('base: {ribs: 2}\ngrid: {rib.stick_until: [[0.0, 0.01, 0.0]]}\n')
+    with pytest.raises(SpecError, match='case 1.*stick_until'):
+        load_spec(str(spec))
+
+
+def test_a_nodes_parameters_make_the_model_by_one_rule():
+    """
+    params3d.node_model: what the node, the launch file's URDF and the tools build.
+
+    rib.<name> lists give every rib a value, rib<k>.<name> one rib's over it; ribs 1 (the
+    default) is the planar model, and refuses the umbrella's values, naming them.
+    """
+    model = node_model({'ribs': 3, 'l1': 0.5, 'rib.tip_mass': [0.0, 0.1, 0.2],
+                        'rib2.tip_mass': 0.3, 'rib1.l2': 0.6, 'publish_rate': 200.0})
+    ribs = model.ribs_list()
+    assert [r.tip_mass for r in ribs] == [0.0, 0.1, 0.3]
+    assert [r.planar.l2 for r in ribs] == [0.5, 0.6, 0.5]
+    assert isinstance(node_model({'l2': 0.6}), UmbrellaParams)
+    with pytest.raises(ValueError, match='rib1.l2'):
+        node_model({'rib1.l2': 0.6})

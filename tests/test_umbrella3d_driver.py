@@ -1,0 +1,219 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The run driver steps the umbrella of N ribs as the umbrella's own loop does.
+
+``RunDriver`` over ``UmbrellaRibsParams`` (umbrella3d.driven3d) takes the steps a chunk at a
+time, with the sleeve force from a ForceSchedule, stops its chunks at the lock, holds each
+rib's peak stresses over a publication period and sums the run up.  Its steps are the
+simulator's own (``advance``: compiled runs of steps with a fixed hub, else ``step``), so its
+record must be ``UmbrellaSimulator3D.run``'s with the same force changes: every figure
+exactly (the same arithmetic in the same order), the running sums of work to round-off
+(ACCUMULATED).  The summary is checked against ``Record3D.summary`` of the whole
+record (the same rules, fed in parts), and the physics it reports: the energy balance with
+the hinges' friction work, a stuck rib held at its angle until its release time.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from umbrella_sim.core.driver import RunDriver
+from umbrella_sim.core.umbrella3d.driven3d import DrivenSimulator3D
+from umbrella_sim.core.umbrella3d.outputs3d import STRESS_NAMES
+from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+
+#: rib 1 stuck for 20 ms and rubbing in its hinge, from rest, pushed hard (locks at ~0.21 s)
+STUCK = {'ribs': 2, 'sleeve_force': 60.0, 'time_step': 2e-4, 'v0': 0.0,
+         'rib1.stick_until': 0.02, 'rib1.hinge_coulomb': 0.05, 'rib1.hinge_viscous': 0.01}
+#: the force per rib from 30 ms on
+PUSH = (0.03, 80.0)
+BALANCE_TOLERANCE = 1e-10      # relative to the largest T + V (tests/test_umbrella3d.py)
+
+
+def reference(params, duration: float, push=None, after_lock=None):
+    """Return UmbrellaSimulator3D's own run (F per rib changed at push), and its record."""
+    sim = UmbrellaSimulator3D(params)
+    if push is not None:
+        sim.advance(round(push[0] / sim.h))
+        sim.force = push[1] * sim.model.n_ribs
+    sim.run(duration, after_lock)
+    return sim, sim.record.arrays()
+
+
+def ref_backend(params) -> str:
+    """Return the backend UmbrellaSimulator3D takes for params (the compiled step, or numpy)."""
+    return 'numpy' if UmbrellaSimulator3D(params).integrator.compiled is None else 'compiled'
+
+
+def driven(params, duration: float, push=None, after_lock=None, **kwargs):
+    """Return a RunDriver's run of params: the driver, every chunk and every publication."""
+    driver = RunDriver(params, force_profile=[push] if push else None, **kwargs)
+    chunks, publications = [], []
+    driver.run(duration, stop_after_lock=after_lock, on_chunk=chunks.append,
+               on_publication=publications.append)
+    return driver, chunks, publications
+
+
+def stacked(driver, chunks) -> dict:
+    """Return the driven run's rows, its initial sample's first (Record3D.arrays' form)."""
+    first = driver.initial.fields()
+    rows = [c.block.rows for c in chunks if len(c.block)]
+    out = {}
+    for name in rows[0]:
+        start = np.asarray(first['stage'] == 'locked') if name == 'locked' else first[name]
+        out[name] = np.concatenate([np.asarray(start)[None], *(r[name] for r in rows)])
+    return out
+
+
+#: the running sums of work: the compiled step's record adds a run of steps' work to the
+#: total by a cumulative sum, so where its runs start (the driver's chunks, a force change)
+#: moves their last bit; every other figure is the same arithmetic on the same states
+ACCUMULATED = ('work', 'friction_work', 'drive_work')
+
+
+def assert_same_record(got: dict, want: dict) -> None:
+    """Assert two records equal: exactly, the running sums of work to their round-off."""
+    assert set(got) == set(want)
+    for name in want:
+        if name in ACCUMULATED:
+            scale = float(np.max(np.abs(want[name]))) or 1.0
+            np.testing.assert_allclose(got[name], want[name], rtol=0, atol=1e-14 * scale,
+                                       err_msg=name)
+        else:
+            np.testing.assert_array_equal(got[name], want[name], err_msg=name)
+
+
+def test_run_driver_takes_the_umbrellas_own_steps():
+    """
+    Step for step the record of the simulator's own loop, exactly, through a force change.
+
+    Every figure of every step (joint angles and rates per rib, tip deflections, stresses,
+    energies, friction work, the stuck flag and holding torque) equals the loop's; the
+    force the schedule gave acts from its step; each publication holds, per rib, the largest
+    stress of every component over the steps since the previous one; the stuck rib stays at
+    its angle until its release time; the energy balance with the friction work holds.
+    """
+    params = UmbrellaRibsParams.from_mapping(STUCK)
+    driver, chunks, publications = driven(params, 0.06, PUSH, period_steps=10)
+    assert isinstance(driver.sim, DrivenSimulator3D)
+    assert driver.backend == ref_backend(params)
+    ref, a = reference(params, 0.06, PUSH)
+    got = stacked(driver, chunks)
+    assert len(got['time']) == len(a['time']) == ref.k + 1
+    assert_same_record(got, a)
+    # the push: acting from its step, as the schedule's one rule says
+    applied = [tf for c in chunks for tf in c.applied]
+    assert applied == [(pytest.approx(PUSH[0], abs=1e-12), PUSH[1])]
+    assert driver.sim.sleeve_force == PUSH[1]
+    assert got['sleeve_force'][-1] == PUSH[1] * 2
+    # publications every 10 steps, each holding the largest stress since the previous one
+    assert len(publications) == ref.k // 10
+    for i, pub in enumerate(publications):
+        assert pub.time == pytest.approx(a['time'][10 * (i + 1)], abs=1e-12)
+        period = slice(10 * i + 1, 10 * (i + 1) + 1)
+        for name in STRESS_NAMES:
+            np.testing.assert_array_equal(getattr(pub, f'stress_{name}'),
+                                          a[f'stress_{name}'][period].max(0))
+    # the stuck rib held exactly at its initial angle until 20 ms, then moving
+    stuck = got['stuck'][:, 1]
+    last = np.nonzero(stuck)[0].max()
+    assert got['time'][last] < 0.02 <= got['time'][last + 1]
+    assert np.ptp(got['alpha1'][:last + 1, 1]) == 0.0
+    assert abs(got['alpha1'][-1, 1] - got['alpha1'][0, 1]) > 1e-3
+    figures = driver.summary.figures()
+    assert figures['energy_drift'] < BALANCE_TOLERANCE
+    assert figures['friction_work'][1] < -1e-3 * got['work'][-1]
+    assert figures['friction_work'][0] == 0.0
+    assert figures['steps'] == ref.k and figures['lock_time'] is None
+
+
+def test_the_planar_path_is_unchanged_by_the_umbrella():
+    """The planar parameters still drive the planar simulator, its block and its Sample."""
+    from umbrella_sim.core import UmbrellaParams, UmbrellaSimulator
+
+    driver = RunDriver(UmbrellaParams(time_step=1e-4), publish_rate=1000.0)
+    assert type(driver.sim) is UmbrellaSimulator
+    driver.advance_period()
+    s = driver.publication()
+    assert {'peak_stress_leaf', 'q', 'tip_transverse'} <= set(s.__dict__)
+
+
+@pytest.mark.slow      # ~6 s: two runs of ~1100 steps through the lock
+def test_run_driver_summary_of_the_umbrella_through_the_lock():
+    """
+    Through the lock: the chunk stops at it, the lock sample stands at the stop, the summary.
+
+    The summary figures of the driven run (from its chunks) are Record3D.summary's of the
+    loop's whole record: each rib's deployment instant, the lag of the latest, the largest
+    out-of-plane tip, each rib's peak stress of every component with where and when.
+    """
+    params = UmbrellaRibsParams.from_mapping(STUCK)
+    driver, chunks, _ = driven(params, 0.4, after_lock=0.01, publish_rate=1000.0)
+    ref, a = reference(params.with_physics_step(driver.step), 0.4, after_lock=0.01)
+    got = stacked(driver, chunks)
+    assert_same_record(got, a)
+    locks = [c for c in chunks if c.lock is not None]
+    assert len(locks) == 1 and locks[0].block.time[-1] >= ref.lock_time
+    assert locks[0].lock.time == ref.lock_time and locks[0].lock.kind == ref.params.lock_rule
+    s = locks[0].lock_sample
+    m = ref.model
+    # right after the lock: the sleeve at the stop (the root find's 1e-12 s times its speed),
+    # at rest (both lock rules stop it)
+    assert s.time == ref.lock_time and s.stage == 'locked'
+    assert s.sleeve_position == pytest.approx(m.y_stop, abs=1e-9)
+    assert s.sleeve_velocity == 0.0
+    figures, summary = driver.summary.figures(), ref.record.summary()
+    assert figures['lock_time'] == ref.lock_time
+    np.testing.assert_array_equal(figures['rib_deploy_time'], summary['rib_deploy_time'])
+    assert figures['deployment_lag'] == summary['deployment_lag'] > 0.0
+    assert figures['latest_rib'] == int(np.argmax(summary['rib_deploy_time']))
+    assert figures['max_out_of_plane_tip'] == summary['max_out_of_plane_tip']
+    # (the residual is round-off of the running sums of work: ACCUMULATED)
+    assert figures['energy_balance_residual'] == pytest.approx(
+        summary['energy_balance_residual'], rel=0, abs=1e-13 * summary['energy_scale'])
+    assert figures['energy_drift'] < BALANCE_TOLERANCE
+    for name in STRESS_NAMES:
+        top, where = summary['peak_stress'][name]
+        peak = figures['peak_stress'][name]
+        np.testing.assert_array_equal(peak['value'], top)
+        assert [(b, x, t) for b, x, t in zip(peak['body'], peak['x'], peak['time'])] == where
+    # every rib deployed, before the lock's step ended
+    assert all(t is not None and t <= ref.lock_time + ref.h for t in figures['rib_deploy_time'])
+    assert not math.isnan(figures['deployment_lag'])
+
+
+def test_the_summary_reports_a_free_bus_and_its_momentum():
+    """
+    A free-floating bus: the summary gives its state and momenta, the momentum kept.
+
+    The step keeps the linear momentum of a free bus to round-off (tests/test_umbrella3d.py);
+    the driver's figures are those of the run's last state: the bus moved in reaction, the
+    linear momentum is the initial one, and the energy balance with friction holds.
+    """
+    params = UmbrellaRibsParams.from_mapping(dict(STUCK, base='free', bus_mass=5.0,
+                                                  bus_inertia=0.2))
+    driver = RunDriver(params)
+    driver.run(0.02)
+    figures = driver.summary.figures()
+    first = driver.initial
+    assert len(figures['bus_q']) == len(figures['bus_v']) == 6
+    assert max(abs(v) for v in figures['bus_v']) > 1e-6      # the bus moved in reaction
+    scale = float(np.max(np.abs(first.linear_momentum))) + driver.sim.model.total_mass * max(
+        abs(figures['bus_v'][0]), abs(figures['bus_v'][1]), abs(figures['bus_v'][2]))
+    np.testing.assert_allclose(figures['linear_momentum'], first.linear_momentum, rtol=0,
+                               atol=1e-12 * scale)
+    assert figures['energy_drift'] < BALANCE_TOLERANCE

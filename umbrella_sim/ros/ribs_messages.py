@@ -1,0 +1,209 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The umbrella of N ribs on ROS topics: joint states per rib, per-rib tip and stress arrays.
+
+With ``ribs`` >= 2 the node publishes, at every publication (msg_docs/topic_ribs.md):
+
+* ``joint_states`` (sensor_msgs/JointState): ``rib<k>/leaf_hinge`` (alpha1 of rib k),
+  ``rib<k>/link_hinge`` (its link's angle relative to the leaf, alpha2 - alpha1) for k = 0 ..
+  N - 1, rib 0 at azimuth 0 on +X, then ``sleeve_slider`` (the sleeve's height on +Y; its
+  effort the whole sleeve's force N F, along -Y);
+* ``rib_tip_deflection`` (std_msgs/Float64MultiArray, N x 3): each rib's tip G in its leaf
+  frame: axial u, in-plane transverse v, out-of-plane w (tangential, the rib's +Z turned by
+  its azimuth), m;
+* ``rib_peak_stress`` (std_msgs/Float64MultiArray, N x 8): each rib's largest |stress| since
+  the previous publication of every component (axial, in-plane bending, out-of-plane bending,
+  torsion shear, the combined von Mises figure; Pa), then where the von Mises peak is (body
+  0 leaf from O, 1 link from O''; x in m) and its ratio to ``yield_strength``;
+* ``energy`` (std_msgs/Float64MultiArray, 7): T, V, the sleeve force's work, the lock's loss,
+  the balance error, the hinges' friction work (<= 0) and a driven base's work, J;
+* ``clock``.
+
+Labels in the layouts name the dimensions and fields, as the planar topics' do.  The message
+builders and their readers (``rib_figures``) are here; the encoder is the node's and the
+offline recorder's (publication.py's role for the planar model).
+"""
+from __future__ import annotations
+
+import json
+
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from .messages import (clock_msg, INERTIAL_FRAME, marker_every, RELIABLE, stamp, Topic,
+                       TOPICS)
+from ..bag.cdr import cdr_bytes
+from ..core.registry import NODE_PARAMETERS
+from ..core.umbrella3d.outputs3d import energy_balance3d, STRESS_NAMES
+
+#: the topics of the umbrella's ribs (besides messages.TOPICS' joint_states, energy, clock)
+RIB_TOPICS = {
+    'rib_tip_deflection': Topic('rib_tip_deflection', Float64MultiArray, RELIABLE),
+    'rib_peak_stress': Topic('rib_peak_stress', Float64MultiArray, RELIABLE),
+}
+RIB_LABEL = 'rib'
+
+
+def node_topics(ribs: int) -> dict[str, Topic]:
+    """Return umbrella_node's topics: messages.TOPICS, and with ribs >= 2 RIB_TOPICS."""
+    return {**TOPICS, **(RIB_TOPICS if ribs > 1 else {})}
+
+
+TIP_FIELDS = ('axial_m', 'in_plane_m', 'out_of_plane_m')
+STRESS_FIELDS = tuple(f'{name}_Pa' for name in STRESS_NAMES) + (
+    'von_mises_body', 'von_mises_x_m', 'von_mises_ratio')
+ENERGY_FIELDS = ('kinetic_J', 'strain_J', 'work_J', 'lock_loss_J', 'balance_error_J',
+                 'friction_work_J', 'drive_work_J')
+SLEEVE_JOINT = 'sleeve_slider'
+
+
+def rib_joint_names(ribs: int) -> list[str]:
+    """Return the joint names of an umbrella of that many ribs (rib0/leaf_hinge first)."""
+    return [f'rib{k}/{joint}' for k in range(ribs) for joint in ('leaf_hinge', 'link_hinge')] \
+        + [SLEEVE_JOINT]
+
+
+def _array(rows, fields) -> Float64MultiArray:
+    msg = Float64MultiArray()
+    n, m = len(rows), len(fields)
+    msg.layout.dim = [MultiArrayDimension(label=RIB_LABEL, size=n, stride=n * m),
+                      MultiArrayDimension(label='field: ' + ','.join(fields), size=m, stride=m)]
+    msg.data = [float(v) for row in rows for v in row]
+    return msg
+
+
+def rib_messages(s, yield_strength: float, initial_energy: float,
+                 frame_prefix: str = '') -> dict:
+    """Return the per-publication messages of a Sample3D, keyed as the node's topics."""
+    ribs = len(s.alpha1)
+    joints = JointState()
+    joints.header.stamp = stamp(s.time)
+    joints.header.frame_id = frame_prefix + INERTIAL_FRAME
+    joints.name = rib_joint_names(ribs)
+    link = s.alpha2 - s.alpha1
+    link_rate = s.alpha2_rate - s.alpha1_rate
+    joints.position = [float(v) for k in range(ribs) for v in (s.alpha1[k], link[k])] + [
+        float(s.sleeve_position)]
+    joints.velocity = [float(v) for k in range(ribs)
+                       for v in (s.alpha1_rate[k], link_rate[k])] + [float(s.sleeve_velocity)]
+    joints.effort = [0.0] * (2 * ribs) + [float(s.sleeve_force)]
+    at = s.stress_von_mises_at
+    stress = [[*(getattr(s, f'stress_{name}')[k] for name in STRESS_NAMES), at[k, 0], at[k, 1],
+               s.stress_von_mises[k] / yield_strength] for k in range(ribs)]
+    energy = Float64MultiArray()
+    energy.layout.dim = [MultiArrayDimension(label='field: ' + ','.join(ENERGY_FIELDS),
+                                             size=len(ENERGY_FIELDS), stride=len(ENERGY_FIELDS))]
+    energy.data = [float(s.kinetic_energy), float(s.strain_energy), float(s.work),
+                   float(s.lock_energy_loss), float(energy_balance3d(s, initial_energy)),
+                   float(sum(s.friction_work)), float(s.drive_work)]
+    return {'clock': clock_msg(s.time), 'joint_states': joints, 'energy': energy,
+            'rib_tip_deflection': _array(s.tip, TIP_FIELDS),
+            'rib_peak_stress': _array(stress, STRESS_FIELDS)}
+
+
+class RibsPublicationEncoder:
+    """
+    What a publication of the umbrella carries, as CDR bytes (PublicationEncoder's role).
+
+    The per-publication topics above, and on every marker_every-th publication (t = 0
+    included) the markers of every rib (umbrella_markers.UmbrellaMarkers, of the simulator's
+    state: a publication is always of the current state).
+    """
+
+    def __init__(self, driver, marker_rate: float = NODE_PARAMETERS['marker_rate'].default):
+        self.driver = driver
+        first = driver.initial
+        self.initial_energy = float(first.kinetic_energy + first.strain_energy)
+        self.yield_strength = driver.params.planar.yield_strength
+        self.marker_every = marker_every(driver.publish_rate, marker_rate)
+        self.count = 0
+        self._markers: dict = {}        # by (marker namespace, frame_prefix)
+
+    def messages(self, s, marker_ns: str = 'umbrella', magnification: float = 1.0,
+                 frame_prefix: str = '') -> dict[str, bytes]:
+        """Return what the publication of s (RunDriver.publication()) publishes."""
+        out = {key: cdr_bytes(msg) for key, msg in rib_messages(
+            s, self.yield_strength, self.initial_energy, frame_prefix).items()}
+        if self.count % self.marker_every == 0:
+            from .umbrella_markers import UmbrellaMarkers
+
+            sim = self.driver.sim
+            if sim.time != s.time:
+                raise ValueError(f'markers of t = {s.time} s asked with the simulator at '
+                                 f't = {sim.time} s (a publication is of the current state)')
+            markers = self._markers.get((marker_ns, frame_prefix))
+            if markers is None:
+                markers = self._markers[marker_ns, frame_prefix] = UmbrellaMarkers(
+                    sim.model, marker_ns, frame_prefix)
+            out['markers'] = markers.encode(s.time, sim.state.qr, sim.state.qs, magnification)
+        self.count += 1
+        return out
+
+
+#: the umbrella's summary figures (Summary3D.figures) diagnostics carry: key -> figure
+DIAGNOSTIC_FIGURES = {'ribs': 'ribs', 'rib_deploy_time_s': 'rib_deploy_time',
+                      'deployment_lag_s': 'deployment_lag', 'latest_rib': 'latest_rib',
+                      'max_out_of_plane_tip_m': 'max_out_of_plane_tip',
+                      'max_out_of_plane_tip_rib': 'max_out_of_plane_tip_rib',
+                      'energy_balance_residual_J': 'energy_balance_residual',
+                      'energy_scale_J': 'energy_scale', 'friction_work_J': 'friction_work',
+                      'peak_von_mises_Pa': None}
+
+
+def ribs_diagnostics(figures: dict) -> dict[str, str]:
+    """
+    Return the diagnostics values of the umbrella's summary figures so far (JSON text each).
+
+    Every physics step's (Summary3D): each rib's deployment instant (null: not yet), the lag
+    of the latest rib after the earliest, the largest out-of-plane tip and its rib, the energy
+    balance's largest residual and scale, each rib's friction work and von Mises peak.
+    """
+    out = {}
+    for key, name in DIAGNOSTIC_FIGURES.items():
+        value = (figures['peak_stress']['von_mises']['value'] if name is None
+                 else figures.get(name))
+        out[key] = json.dumps(value)
+    return out
+
+
+# --------------------------------------------------------- reading them back
+def rib_array_figures(msg) -> list[dict]:
+    """Return a rib_tip_deflection or rib_peak_stress message as one {field: value} a rib."""
+    fields = msg.layout.dim[1].label.split(': ', 1)[1].split(',')
+    m = len(fields)
+    return [dict(zip(fields, msg.data[k * m:(k + 1) * m])) for k in range(msg.layout.dim[0].size)]
+
+
+def rib_joint_figures(msg) -> dict:
+    """
+    Return the joint state of an umbrella by the Sample3D's names, per rib (lists).
+
+    alpha1, link_angle, alpha2, their rates, and the sleeve's position, velocity and force.
+    """
+    names = list(msg.name)
+    ribs = (len(names) - 1) // 2
+    pos, vel = list(msg.position), list(msg.velocity)
+    a1, link = pos[0:2 * ribs:2], pos[1:2 * ribs:2]
+    r1, link_rate = vel[0:2 * ribs:2], vel[1:2 * ribs:2]
+    i = names.index(SLEEVE_JOINT)
+    return {'alpha1': a1, 'link_angle': link, 'alpha2': [a + b for a, b in zip(a1, link)],
+            'alpha1_rate': r1, 'link_angle_rate': link_rate, 'sleeve_position': pos[i],
+            'sleeve_velocity': vel[i], 'sleeve_force': list(msg.effort)[i]}
+
+
+def rib_energy_figures(msg) -> dict:
+    """Return the umbrella's energy message by field name (J)."""
+    return dict(zip(ENERGY_FIELDS, msg.data))

@@ -1,0 +1,214 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+umbrella_compare of recordings of the umbrella of N ribs: per-rib series, figures, top view.
+
+A recording of ``ribs`` >= 2 (msg_docs/topic_ribs.md) is read as each rib's series: the leaf
+angle alpha1 (joint_states), the tip's in-plane and out-of-plane deflection
+(rib_tip_deflection, published with the joint states of the same instant) and the held von
+Mises peak (rib_peak_stress); its summary figures (every physics step's: each rib's
+deployment instant, the lag of the latest, the largest out-of-plane tip, the energy balance)
+come from the recording's metadata.  Compared with the first run: the difference of each
+rib's deployment instant and the largest difference of each rib's leaf angle on the first
+run's publication times.  Plots: alpha1 of every rib, the out-of-plane tip of every rib, and
+a top view of the tips (X-Z plane) at the end of each run.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import json
+import math
+import os
+import sys
+
+import numpy as np
+
+from ..bag.format import SUMMARY_RECORD
+from ..bag.reader import LogError, read_log
+
+
+@dataclass
+class RibsRun:
+    """One recording of the umbrella, as per-rib series (steps first, then ribs)."""
+
+    label: str
+    path: str
+    params: dict
+    figures: dict
+    t: np.ndarray               # publication times (s)
+    alpha1: np.ndarray          # (T, N) rad
+    tip: np.ndarray             # (T', N, 3) axial, in-plane, out-of-plane (m)
+    von_mises: np.ndarray       # (T', N) Pa, held over each period
+
+    @property
+    def ribs(self) -> int:
+        return self.alpha1.shape[1]
+
+
+def is_ribs_log(params: dict) -> bool:
+    """Say whether a recording's parameters are those of the umbrella of N ribs (N >= 2)."""
+    ribs = params.get('ribs', 1)
+    return isinstance(ribs, int) and ribs > 1
+
+
+def load_ribs_run(path: str, label: str, segment: int = 0) -> RibsRun:
+    """Read a recording of the umbrella of N ribs (LogError naming what it lacks)."""
+    from ..ros.ribs_messages import rib_array_figures, rib_joint_figures
+
+    log = read_log(path)
+    seg = log.segment(segment)
+
+    def series(key, fn):
+        rows = [(t, fn(m)) for t, m in log.decoded(log.find_topic(key), seg)]
+        if not rows:
+            raise LogError(f'{log.path}: topic {key} has no messages' + log.truncation_note())
+        return np.array([t for t, _ in rows]), np.array([r for _, r in rows], dtype=float)
+
+    t, alpha1 = series('joint_states', lambda m: rib_joint_figures(m)['alpha1'])
+    _, tip = series('rib_tip_deflection', lambda m: [
+        [r['axial_m'], r['in_plane_m'], r['out_of_plane_m']] for r in rib_array_figures(m)])
+    _, vm = series('rib_peak_stress', lambda m: [r['von_mises_Pa']
+                                                 for r in rib_array_figures(m)])
+    figures = json.loads(log.metadata.get(SUMMARY_RECORD, {}).get('figures', '{}'))
+    return RibsRun(label, log.path, seg.params, figures, t, alpha1, tip, vm)
+
+
+def compare_ribs(runs: list[RibsRun]) -> dict:
+    """Return the comparison: each run's figures, and its per-rib differences to the first."""
+    ref = runs[0]
+    out = {'reference': ref.label, 'runs': []}
+    for r in runs:
+        f = r.figures
+        entry = {'label': r.label, 'path': r.path, 'ribs': r.ribs,
+                 'lock_time': f.get('lock_time'), 'rib_deploy_time': f.get('rib_deploy_time'),
+                 'deployment_lag': f.get('deployment_lag'), 'latest_rib': f.get('latest_rib'),
+                 'max_out_of_plane_tip': f.get('max_out_of_plane_tip'),
+                 'max_out_of_plane_tip_rib': f.get('max_out_of_plane_tip_rib'),
+                 'peak_von_mises': (f.get('peak_stress') or {}).get('von_mises', {}).get('value'),
+                 'friction_work': f.get('friction_work'), 'energy_drift': f.get('energy_drift'),
+                 'units': 'SI (s, m, Pa, J, rad)'}
+        if r.ribs == ref.ribs:
+            mine, theirs = entry['rib_deploy_time'] or [], ref.figures.get('rib_deploy_time') or []
+            entry['rib_deploy_time_difference'] = [
+                None if a is None or b is None else a - b for a, b in zip(mine, theirs)]
+            entry['alpha1_max_difference'] = _alpha_differences(ref, r)
+        out['runs'].append(entry)
+    return out
+
+
+def _alpha_differences(ref: RibsRun, r: RibsRun) -> list[float] | None:
+    """Return each rib's largest |alpha1 - alpha1_ref| on the reference's times both cover."""
+    keep = (ref.t >= r.t[0] - 1e-12) & (ref.t <= r.t[-1] + 1e-12)
+    if len(r.t) < 2 or not keep.any():
+        return None
+    return [float(np.max(np.abs(np.interp(ref.t[keep], r.t, r.alpha1[:, k])
+                                - ref.alpha1[keep, k]))) for k in range(r.ribs)]
+
+
+def print_ribs_table(result: dict, stream=None) -> None:
+    w = (stream or sys.stdout).write
+    w(f"reference run: {result['reference']} (the umbrella of N ribs)\n")
+    w(f"{'run':<18} {'ribs':>4} {'lock (s)':>11} {'lag (s)':>10} {'latest':>6} "
+      f"{'max w tip (mm)':>14} {'energy drift':>12}\n")
+    for e in result['runs']:
+        def num(v, spec):
+            return '-' if v is None else format(v, spec)
+        w(f"{e['label']:<18} {e['ribs']:>4} {num(e['lock_time'], '.7f'):>11} "
+          f"{num(e['deployment_lag'], '.3e'):>10} {num(e['latest_rib'], 'd'):>6} "
+          f"{num(e['max_out_of_plane_tip'] and e['max_out_of_plane_tip'] * 1e3, '.4g'):>14} "
+          f"{num(e['energy_drift'], '.2e'):>12}\n")
+    w('\nper rib: deployment instant (s), its difference to the reference (s), max |d alpha1| '
+      '(rad), peak von Mises (MPa)\n')
+    for e in result['runs']:
+        deploy = e['rib_deploy_time'] or []
+        for k in range(e['ribs']):
+            d = (e.get('rib_deploy_time_difference') or [None] * e['ribs'])[k]
+            a = (e.get('alpha1_max_difference') or [None] * e['ribs'])[k]
+            vm = (e['peak_von_mises'] or [None] * e['ribs'])[k]
+            t = deploy[k] if k < len(deploy) else None
+            w(f"{e['label']:<18} rib{k:<3} {'-' if t is None else format(t, '.7f'):>11} "
+              f"{'-' if d is None else format(d, '+.3e'):>11} "
+              f"{'-' if a is None else format(a, '.3e'):>10} "
+              f"{'-' if vm is None else format(vm * 1e-6, '.4g'):>9}\n")
+
+
+def plot_ribs(runs: list[RibsRun], out_dir: str) -> list[str]:
+    """Write ribs_alpha1.png, ribs_tip_out_of_plane.png and ribs_top_view.png; their paths."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    written = []
+    for name, ylabel, get in (
+            ('ribs_alpha1.png', 'leaf angle alpha1 (rad)', lambda r: (r.t, r.alpha1)),
+            ('ribs_tip_out_of_plane.png', 'out-of-plane tip deflection w (mm)',
+             lambda r: (r.t[:len(r.tip)], r.tip[:len(r.t), :, 2] * 1e3))):
+        fig, axes = plt.subplots(len(runs), 1, figsize=(7, 2.8 * len(runs)), sharex=True,
+                                 squeeze=False)
+        for ax, r in zip(axes[:, 0], runs):
+            t, y = get(r)
+            for k in range(r.ribs):
+                ax.plot(t, y[:, k], lw=1.0, label=f'rib{k}')
+            ax.set_ylabel(ylabel)
+            ax.set_title(r.label, fontsize=9)
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7, ncol=min(r.ribs, 6))
+        axes[-1, 0].set_xlabel('sim time (s)')
+        fig.tight_layout()
+        written.append(_save(fig, plt, out_dir, name))
+    fig, ax = plt.subplots(figsize=(5.5, 5.5))
+    tips = [top_view_tips(r) for r in runs]
+    reach = 1.15 * max(max(float(np.abs(xz).max()) for xz in tips), 1e-3)
+    ax.set_xlim(-reach, reach)          # (square and centred: two ribs lie on one line)
+    ax.set_ylim(-reach, reach)
+    for i, (r, xz) in enumerate(zip(runs, tips)):
+        ax.plot(*np.vstack([xz, xz[:1]]).T, 'o-', color=f'C{i % 10}', label=r.label)
+        for k, (x, z) in enumerate(xz):
+            ax.annotate(f'{k}', (x, z), fontsize=7)
+    ax.set_aspect('equal')
+    ax.set_xlabel('X (m)')
+    ax.set_ylabel('Z (m)')
+    ax.set_title('tips G at the end of each run, seen from +Y (top view)', fontsize=9)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    written.append(_save(fig, plt, out_dir, 'ribs_top_view.png'))
+    return written
+
+
+def top_view_tips(r: RibsRun) -> np.ndarray:
+    """
+    Return each rib's tip G at the run's last publication in the X-Z plane (N, 2), m.
+
+    Rib k at azimuth psi_k = 2 pi k / N about +Y: radial axis e_r = (cos psi, 0, -sin psi),
+    tangential e_t = e_r x e_Y = (sin psi, 0, cos psi); G's radial distance from the axis is
+    a + (l1 + l2 + u) cos alpha1 - v sin alpha1 (a the hub radius, u, v its deflection in
+    the leaf frame), and w is along e_t.
+    """
+    p = r.params
+    n = r.ribs
+    psi = 2.0 * math.pi * np.arange(n) / n
+    u, v, w = r.tip[-1].T
+    a1 = r.alpha1[min(len(r.alpha1), len(r.tip)) - 1]
+    radial = (p.get('hub_radius', 0.0) + (p.get('l1', 0.5) + p.get('l2', 0.5) + u) * np.cos(a1)
+              - v * np.sin(a1))
+    return np.stack([radial * np.cos(psi) + w * np.sin(psi),
+                     -radial * np.sin(psi) + w * np.cos(psi)], 1)
+
+
+def _save(fig, plt, out_dir: str, name: str) -> str:
+    path = os.path.join(out_dir, name)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
