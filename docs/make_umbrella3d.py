@@ -348,9 +348,10 @@ With the hub fixed the 3D model takes the planar stage-2 mode fit rib by rib (th
 the stop decouples the ribs: each rib's locked modes exact in phase and amplitude, T + V
 conserved; tests/test_umbrella3d_mode_fit.py), hence the planar rule's fitted
 step: 0.1 ms at 1 element, 33 us at 2 (9.1 us without the fit). Ribs 6 x 1 in 1 ms blocks run
-at 1.36 x real time deploying (0.7 CPU s a simulated second, with Record3D's figures: about
-0.2 of them) and 0.97 x in stage 2 (1.0 CPU s; 80 us a step); ribs 12 x 2 in 10 ms blocks at
-0.174 x (5.8 CPU s) and 0.098 x (10.2 CPU s). The issue's targets (6 x 1 within 0.5 core,
+at 1.1-1.15 x real time deploying (0.9 CPU s a simulated second, with Record3D's figures and
+each rib's stress rows: about 0.4 of them; the steps alone 0.5) and 0.87 x in stage 2 (1.2 CPU
+s; 80 us a step); ribs 12 x 2 in 10 ms blocks at 0.167 x (6.0 CPU s) and 0.099 x (10.1 CPU
+s). The issue's targets (6 x 1 within 0.5 core,
 12 x 2 in real time) are not reached: they need about 8 us (6 x 1, the figures included) and
 2.8 us (12 x 2) a rib and step at these steps.
 
