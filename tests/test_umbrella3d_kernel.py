@@ -34,6 +34,7 @@ agree to that tolerance (and the sleeve's difference before it over its speed), 
 round-off.  The locked steps are therefore compared from one locked state, taken by both.
 """
 from dataclasses import replace
+import math
 
 import numpy as np
 import pytest
@@ -273,3 +274,26 @@ def test_kept_iteration_matrix_reaches_the_fresh_matrix_solution():
         s = sim.record.summary()
         assert s['energy_balance_residual'] < 1e-9 * s['energy_scale']
         assert_on_the_joints(sim)
+
+
+@needs_kernel
+def test_a_leaf_at_the_axle_before_the_lock_is_a_fault_naming_the_rib():
+    """
+    The planar rule (a stage-1 leaf at alpha1 = pi/2 is a fault) holds for every rib.
+
+    Started 2 deg from the fold with the sleeve moving and rib 1's hinge stuck, the stuck rib
+    holds the sleeve and its elastic rebound swings ribs 0 and 2 (mirror images) back to the
+    axle; both paths stop at the same step with the state of the last good one.
+    """
+    p = UmbrellaRibsParams.from_mapping({'ribs': 3, 'v0': -0.2, 'stick_until': [0.0, 0.04, 0.0]})
+    ends = []
+    for kernel in ('compiled', 'numpy'):
+        sim = UmbrellaSimulator3D(p, kernel=kernel)
+        with pytest.raises(SimulationFailed, match=r'rib 0: the leaf reached the axle'):
+            sim.run(0.1)
+        alpha1 = sim.state.qr[:, sim.model.i_a1]
+        assert np.all(alpha1 < math.pi / 2) and alpha1[0] > alpha1[1]    # rib 1 held
+        assert len(sim.record.arrays()['time']) == sim.k + 1           # every good step kept
+        ends.append((sim.k, alpha1))
+    assert ends[0][0] == ends[1][0]
+    assert ends[0][1] == pytest.approx(ends[1][1], abs=1e-9)

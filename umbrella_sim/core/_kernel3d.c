@@ -1142,6 +1142,10 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
                           a->max_iter, a->locked && a->fit_modes > 0 ? &fit : NULL);
         if (status != OK) return status;
         if (!a->single && !a->locked && x->q[N] - x->m->y_stop <= 0.0) return CROSSING;
+        /* a leaf at the axle before the lock: the planar kernel's fault (ALPHA1_AXLE), any rib */
+        if (!a->locked)
+            for (int r = 0; r < x->R; r++)
+                if (x->q[r * x->n + x->m->i_a1] >= 1.57079632679489661923) return AXLE;
         a->iterations += x->iterations;
         a->t = t_next;
         commit(x, a);

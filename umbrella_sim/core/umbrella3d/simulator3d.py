@@ -48,7 +48,7 @@ from .outputs3d import Record3D
 from .params3d import UmbrellaRibsParams
 from ..engines import event_root, EVENT_TIME_TOLERANCE
 from ..integrators import newton_tolerance
-from ..kernel import kernel_error, STATUS
+from ..kernel import ALPHA1_AXLE, kernel_error, STATUS
 from ..lock import locked_velocity_base, LockImpossible, velocity_keeping_energy
 from ..step_rule import physics_step_of
 
@@ -192,6 +192,10 @@ class UmbrellaSimulator3D:
         m, s0 = self.model, self.state
         t_next = (self.k + 1) * self.h
         s1, work = self._step(s0, t_next - s0.t, self.locked)
+        if not self.locked and s1.qs[0] - m.y_stop > 0.0:
+            at_axle = np.nonzero(s1.qr[:, m.i_a1] >= ALPHA1_AXLE)[0]
+            if len(at_axle):
+                raise self._at_axle(int(at_axle[0]))
         lock_event = None
         if not self.locked and s1.qs[0] - m.y_stop <= 0.0:
             s_hit, work_hit = self._find_lock(s0, t_next - s0.t)
@@ -245,6 +249,8 @@ class UmbrellaSimulator3D:
                 self.step()                     # the lock, here
                 if stop_at_lock:
                     return
+            elif status == STATUS['axle']:      # (the state: the last step before it)
+                raise self._at_axle(int(np.argmax(self.state.qr[:, self.model.i_a1])))
             elif status != STATUS['ok']:
                 raise SimulationFailed(f'step after t = {self.state.t:.9g} s failed: '
                                        f'{kernel_error(status, self.state.t + self.h)}')
@@ -269,6 +275,14 @@ class UmbrellaSimulator3D:
             if after_lock is not None and self.locked and self.time >= self.lock_time + after_lock:
                 break
         return self.record
+
+    def _at_axle(self, rib: int) -> SimulationFailed:
+        """Return the fault of a step that took a leaf to the axle before the lock."""
+        return SimulationFailed(
+            f'step after t = {self.state.t:.9g} s failed: rib {rib}: the leaf reached the axle '
+            f'(alpha1 = pi/2 = {ALPHA1_AXLE:.6g} rad) before the lock: the rib folded back past '
+            'its start, where the model has no stop (a stuck or slowed rib can hold the sleeve '
+            'while the others swing there; the planar model: a fault too)')
 
     def _release(self, s: State3D) -> State3D:
         stuck = s.stuck
