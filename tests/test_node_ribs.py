@@ -29,7 +29,8 @@ import pytest
 
 from umbrella_sim.bag.format import MESH_RECORD, PARAMETERS_RECORD, SUMMARY_RECORD
 from umbrella_sim.bag.reader import read_log
-from umbrella_sim.ros.ribs_messages import rib_joint_names, STRESS_FIELDS, TIP_FIELDS
+from umbrella_sim.ros.ribs_messages import STRESS_FIELDS, TIP_FIELDS
+from umbrella_sim.ros.robot_description import joint_names
 from umbrella_sim.testing import ros_env, SimulatedAntenna
 from umbrella_sim.tools.replay import DEFAULT_TOLERANCE, resimulate
 
@@ -88,7 +89,7 @@ def test_the_umbrella_node_in_lockstep_publishes_and_records_every_rib(tmp_path)
         t0 = stalled_at(antenna)            # ... which then waits for an answer
         # (the t = 0 state of a paused start may go out before the probe matched)
         first = antenna.messages('joint_states')[0]
-        assert list(first.name) == rib_joint_names(2) == [
+        assert list(first.name) == joint_names(2) == [
             'rib0/leaf_hinge', 'rib0/link_hinge', 'rib1/leaf_hinge', 'rib1/link_hinge',
             'sleeve_slider']
         for i in range(1, 11):
@@ -150,6 +151,6 @@ def test_a_reset_restarts_the_umbrella_with_the_planar_parameters_set():
         antenna.reset()
         first = antenna.messages('joint_states')[0]
         assert first.header.stamp.sec == first.header.stamp.nanosec == 0
-        assert list(first.name) == rib_joint_names(2)
+        assert list(first.name) == joint_names(2)
         state = antenna.wait_for('joint_states', lambda m: m.header.stamp.nanosec > 0)
         assert state.effort[-1] == 2 * 30.0

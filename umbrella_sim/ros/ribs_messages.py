@@ -45,6 +45,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from .messages import (clock_msg, INERTIAL_FRAME, marker_every, RELIABLE, stamp, Topic,
                        TOPICS)
+from .robot_description import joint_names
 from ..bag.cdr import cdr_bytes
 from ..core.registry import NODE_PARAMETERS
 from ..core.umbrella3d.outputs3d import energy_balance3d, STRESS_NAMES
@@ -67,13 +68,8 @@ STRESS_FIELDS = tuple(f'{name}_Pa' for name in STRESS_NAMES) + (
     'von_mises_body', 'von_mises_x_m', 'von_mises_ratio')
 ENERGY_FIELDS = ('kinetic_J', 'strain_J', 'work_J', 'lock_loss_J', 'balance_error_J',
                  'friction_work_J', 'drive_work_J')
-SLEEVE_JOINT = 'sleeve_slider'
-
-
-def rib_joint_names(ribs: int) -> list[str]:
-    """Return the joint names of an umbrella of that many ribs (rib0/leaf_hinge first)."""
-    return [f'rib{k}/{joint}' for k in range(ribs) for joint in ('leaf_hinge', 'link_hinge')] \
-        + [SLEEVE_JOINT]
+#: the sleeve's joint: the last of joint_states (robot_description.joint_names)
+SLEEVE_JOINT = joint_names(2)[-1]
 
 
 def _array(rows, fields) -> Float64MultiArray:
@@ -92,7 +88,7 @@ def rib_messages(s, yield_strength: float, initial_energy: float,
     joints = JointState()
     joints.header.stamp = stamp(s.time)
     joints.header.frame_id = frame_prefix + INERTIAL_FRAME
-    joints.name = rib_joint_names(ribs)
+    joints.name = joint_names(ribs)
     link = s.alpha2 - s.alpha1
     link_rate = s.alpha2_rate - s.alpha1_rate
     joints.position = [float(v) for k in range(ribs) for v in (s.alpha1[k], link[k])] + [
