@@ -243,7 +243,7 @@ def test_a_failed_compiled_step_is_a_clear_error_that_keeps_the_steps_done():
     with pytest.raises(SimulationFailed, match=r'after t = 0\.0003 s failed: Newton did not '
                        r'converge at t = 0\.0004 s'):
         sim.advance(5)
-    assert sim.k == 3 and len(sim.record.rows['time']) == 4
+    assert sim.k == 3 and len(sim.record.arrays()['time']) == 4
     assert sim.state.t == pytest.approx(3e-4, abs=1e-15)
 
 

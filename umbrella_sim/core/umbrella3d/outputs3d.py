@@ -38,11 +38,11 @@ BODIES = ('leaf', 'link')
 
 
 class Record3D:
-    """Per-step figures of one run (lists while running; ``arrays()`` stacks them)."""
+    """Per-step figures of one run (blocks of steps while running; ``arrays()`` joins them)."""
 
     def __init__(self, model):
         self.model = model
-        self.rows: dict[str, list] = {}
+        self.rows: dict[str, list] = {}     # name -> arrays, each a block of steps (first)
         nr = model.n_ribs
         self.peak = {name: np.zeros(nr) for name in STRESS_NAMES}
         self.peak_where = {name: [('', 0.0, 0.0)] * nr for name in STRESS_NAMES}
@@ -54,7 +54,7 @@ class Record3D:
         self._xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
 
     def _put(self, name, value):
-        self.rows.setdefault(name, []).append(value)
+        self.rows.setdefault(name, []).append(np.array(value)[None])
 
     def add(self, s, locked: bool, force: float, work, lock_loss: float, lock_event=None):
         """Add the figures of state s, reached by a step that did work (None: the start)."""
@@ -111,7 +111,7 @@ class Record3D:
         free = np.isnan(stuck)
         for name, value in (('locked', locked), ('sleeve_force', force),
                             ('lock_energy_loss', lock_loss)):
-            self.rows.setdefault(name, []).extend([value] * k)
+            self.rows.setdefault(name, []).append(np.full(k, value))
         columns = {
             'time': t, 'sleeve_position': st['qs'][:, 0], 'sleeve_velocity': st['vs'][:, 0],
             'alpha1': qr[:, :, m.i_a1], 'alpha2': qr[:, :, m.i_a2],
@@ -121,10 +121,8 @@ class Record3D:
             'drive_work': drive,
             'holding_torque': np.where(free, 0.0, st['lam_r'][:, :, -1]), 'stuck': ~free,
             'stop_reaction': st['lam_s'][:, 0]}
-        for name, values in columns.items():
-            values = np.asarray(values)
-            self.rows.setdefault(name, []).extend(
-                values.tolist() if values.ndim == 1 else list(values.copy()))
+        for name, values in columns.items():        # (copies: the rows' buffers are reused)
+            self.rows.setdefault(name, []).append(np.array(values))
         # stresses: each rib's worst point per step; the peaks over the steps in the order
         # they happened (step by step, the leaf before the link: the first of equal ones)
         tops = {name: [] for name in STRESS_NAMES}
@@ -146,10 +144,9 @@ class Record3D:
             point = np.stack(wheres[name], 1)[steps, body, ribs]
             x = np.where(body == 0, self._xs[0][np.minimum(point, len(self._xs[0]) - 1)],
                          self._xs[1][np.minimum(point, len(self._xs[1]) - 1)])
-            self.rows.setdefault(f'stress_{name}', []).extend(
-                list(by_body[steps, body, ribs]))
-            self.rows.setdefault(f'stress_{name}_at', []).extend(
-                list(np.stack([body.astype(float), x], -1)))
+            self.rows.setdefault(f'stress_{name}', []).append(by_body[steps, body, ribs])
+            self.rows.setdefault(f'stress_{name}_at', []).append(
+                np.stack([body.astype(float), x], -1))
             top = by_body.reshape(2 * k, m.n_ribs)   # (step, body) order
             first = top.argmax(0)
             best = top[first, np.arange(m.n_ribs)]
@@ -163,11 +160,11 @@ class Record3D:
                     lst[r] = (('leaf', 'link')[body], float(self._xs[body][point]),
                               float(t[step]))
                 self.peak_where[name] = lst
-        self.rows.setdefault('von_mises', []).extend(list(vm_now))
+        self.rows.setdefault('von_mises', []).append(vm_now)
 
     def arrays(self) -> dict:
         """Return every per-step figure as an array (steps first, then ribs or components)."""
-        return {name: np.array(values) for name, values in self.rows.items()}
+        return {name: np.concatenate(values) for name, values in self.rows.items()}
 
     def take(self) -> dict:
         """Return the rows added since the last take as arrays (``arrays``), and drop them."""
