@@ -36,7 +36,7 @@
 
 /* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
  * reordered, a function's arguments changed). */
-#define UMBRELLA_ABI_VERSION 4
+#define UMBRELLA_ABI_VERSION 5
 
 /* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
  * exported. */
@@ -209,9 +209,9 @@ typedef struct {
     double ea, ei, fibre;    /* EA (N), EI (N m^2), fibre distance c (m) */
 } ElasticData;
 
-/* The whole umbrella in 3D with its hub fixed (umbrella3d.kernel3d builds it from
+/* The whole umbrella in 3D (umbrella3d.kernel3d builds it from
  * umbrella3d.model3d.UmbrellaModel3D): N ribs of n_rib coordinates each around one sleeve
- * (n_shared = 1: y_s; n_shared_rows = 1: the stop), the rib coordinates' indices, and per
+ * (hub fixed: n_shared = 1: y_s; n_shared_rows = 1: the stop; a moving base: below), the rib coordinates' indices, and per
  * body (leaf, link) of every rib its quadrature and attached points: rest positions x
  * (R x P x 3), weights w (R x P), shapes S (R x P x 3 x elastic).  Arrays rib-major; the
  * caller keeps them alive. */
@@ -228,6 +228,11 @@ typedef struct {
                                                       * part of M that does not move */
     const double *leaf_x, *leaf_w, *leaf_shape;
     const double *link_x, *link_w, *link_shape;
+    /* a moving base (n_shared = 7: y_s, the bus's X (3) and angles psi, beta, gamma;
+     * n_shared_rows 7: a prescribed drive's rows, 1: a free bus): _kernel3d_base.h */
+    double hub_radius, total_mass;                   /* m; kg: ribs, sleeve and bus */
+    const double *bus_inertia;                       /* 3 x 3 (kg m^2, bus frame) */
+    const double *rib_frames;                        /* n_ribs x 3 x 3: psi (rib -> bus) */
 } Model3D;
 
 /* umbrella3d_advance's arguments (kept by the caller, updated in place): the state (t, q, v,
@@ -238,7 +243,9 @@ typedef struct {
  * released after the step that frees it (its time, or its multiplier's torque).  have_p:
  * p holds M(q) v (else it is computed).  Each committed step writes a row into out (row_len
  * doubles, step-major): t, qr, qs, vr, vs, lam_r, lam_s, stuck, kinetic and strain energy,
- * the sleeve force's work, each hinge's friction work, Newton iterations. */
+ * the sleeve force's work, each hinge's friction work, Newton iterations, factorisations,
+ * the drive's work (0 without a drive) and, with a free bus, its linear and angular
+ * momentum (3 + 3, inertial). */
 typedef struct {
     int locked, single, have_p, n_steps, max_iter, row_len;
     long k0;
@@ -252,6 +259,9 @@ typedef struct {
      * (R x fit_modes) */
     int fit_modes;
     const double *fit_u, *fit_phi, *fit_scale, *fit_shrink;
+    /* a prescribed base: the bus's coordinates and rates the drive gives at each step's end
+     * (n_steps x 6 each; single: 1 x 6) */
+    const double *drive_q, *drive_v;
 } Advance3DCall;
 
 /* Held by Python only as pointers: the stepping contexts (every work buffer, allocated

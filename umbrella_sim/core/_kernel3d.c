@@ -91,6 +91,9 @@ typedef struct {
                                         * first, from Body.elu (the projection's M) */
 } Fact;
 
+/* a moving base's context (_kernel3d_base.h) */
+typedef struct Base3D Base3D;
+
 struct Ctx3D {
     const Model3D *m;
     Rows mrows, krows;                 /* of M(q) (frame rows, columns: all) and K */
@@ -116,7 +119,11 @@ struct Ctx3D {
                                         * modes at most) */
     double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
     int iterations, factorisations;
+    Base3D *base;                      /* a moving base's (n_shared 7), else NULL */
 };
+
+static Base3D *base_new(Ctx3D *x);
+static void base_free(Base3D *B);
 
 /* ------------------------------------------------------------------ context */
 static void body_of(Body *b, int t, int ne, int np, int off, const double *x, const double *w,
@@ -204,6 +211,7 @@ static int fact_alloc(Fact *f, const Ctx3D *x) {
 
 void umbrella3d_free(Ctx3D *x) {
     if (!x) return;
+    base_free(x->base);
     for (int j = 0; j < 2; j++) {
         kin_free(&x->km[j]);
         free(x->b[j].inv);
@@ -306,6 +314,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && elastic_lu(&x->b[1], m->const_mass, R, n);
     ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
+    if (ok && x->ns > 1) ok = (x->base = base_new(x)) != NULL;
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
     x->pend_slot = -1;
     x->pm.elastic_first = 1;
@@ -683,18 +692,12 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v) {
     }
 }
 
-/* Factor [[M + extra, sign Jc^T], [Jr, Z]] (integrator3d._blocks) in arrow form: each rib's
- * block through its bodies (rib_solve), B^-1 C, the Schur complement of the shared unknowns
- * by LU. */
-static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc,
-                        const double *jr, const double *stuck, int locked, double sign) {
-    int R = x->R, n = x->n, mb = x->mb, s = x->s, ns = x->ns;
-    const double msl = x->m->sleeve_mass;
-    double L = locked ? 1.0 : 0.0;
-    /* the corner: [[m_ss, sign J_ss^T], [J_ss, 1 - active]] */
-    x->E[0] = msl; x->E[1] = sign * L; x->E[s] = L; x->E[s + 1] = 1.0 - L;
-    memcpy(f->S, x->E, sizeof(double) * s * s);
-    for (int r = 0; r < R; r++) {
+/* Factor rib r's block [[M + extra, sign Jc^T], [Jr, Z]] through its bodies (rib_solve):
+ * each body's block LU'd, W = A^-1 sign Jc^T, T = Z - Jr W LU'd. */
+static int rib_factor(Ctx3D *x, Fact *f, int r, const double *extra, const double *jc,
+                      const double *jr, const double *stuck, double sign) {
+    int n = x->n;
+    {
         const double *M = x->mass + (size_t)r * n * n;
         const double *Ex = extra ? extra + (size_t)r * n * n : NULL;
         const double *Jc = jc + r * ROWS * n, *Jr = jr + r * ROWS * n;
@@ -739,6 +742,22 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
         T[ROW_STICK * ROWS + ROW_STICK] += 1.0 - stuck_on(stuck[r]);
         if (lu_factor(ROWS, T, f->tpiv + r * ROWS) != OK) return SINGULAR;
         memcpy(f->Jf + (size_t)r * ROWS * n, Jr, sizeof(double) * ROWS * n);
+    }
+    return OK;
+}
+
+/* Factor [[M + extra, sign Jc^T], [Jr, Z]] (integrator3d._blocks) in arrow form: each rib's
+ * block (rib_factor), B^-1 C, the Schur complement of the shared unknowns by LU. */
+static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc,
+                        const double *jr, const double *stuck, int locked, double sign) {
+    int R = x->R, n = x->n, mb = x->mb, s = x->s, ns = x->ns;
+    const double msl = x->m->sleeve_mass;
+    double L = locked ? 1.0 : 0.0;
+    /* the corner: [[m_ss, sign J_ss^T], [J_ss, 1 - active]] */
+    x->E[0] = msl; x->E[1] = sign * L; x->E[s] = L; x->E[s + 1] = 1.0 - L;
+    memcpy(f->S, x->E, sizeof(double) * s * s);
+    for (int r = 0; r < R; r++) {
+        if (rib_factor(x, f, r, extra, jc, jr, stuck, sign) != OK) return SINGULAR;
         /* C: row n + 7 of y_s is J_rs = -1; D: y_s's row at n + 7 is sign J_rs^T */
         double *Y = f->Y + (size_t)r * mb * s;
         for (int c = 0; c < s; c++) {
@@ -1052,6 +1071,8 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     return OK;
 }
 
+#include "_kernel3d_base.h"
+
 /* ------------------------------------------------------------------ the grid loop */
 static void load(Ctx3D *x, const Advance3DCall *a) {
     int R = x->R, n = x->n, N = R * n;
@@ -1064,6 +1085,8 @@ static void load(Ctx3D *x, const Advance3DCall *a) {
     if (a->have_p) {
         memcpy(x->p0, a->pr, sizeof(double) * N);
         memcpy(x->p0 + N, a->ps, sizeof(double) * x->ns);
+    } else if (x->base) {
+        base_momenta(x, x->q0, x->v0, x->p0);
     } else {
         mass_matrix(x, x->q0);
         matvec(x, x->v0, x->p0);
@@ -1111,6 +1134,7 @@ static void write_row(Ctx3D *x, const Advance3DCall *a, double *o) {
     put(&o, x->work_fric, R);
     *o++ = x->iterations;
     *o++ = x->factorisations;
+    base_row(x, x->q, x->p, o);
 }
 
 /* the simulator's release (UmbrellaSimulator3D._release) after a committed step */
@@ -1138,8 +1162,17 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
         load(x, a);
         double t_next = a->single ? a->t + a->h : (double)(a->k0 + k + 1) * a->h;
         x->factorisations = 0;
-        int status = step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol, a->phi_tol,
+        int status;
+        if (x->base) {
+            x->base->drive_q = a->drive_q ? a->drive_q + 6 * k : NULL;
+            x->base->drive_v = a->drive_v ? a->drive_v + 6 * k : NULL;
+            if (x->base->prescribed && !a->drive_q) return SINGULAR;
+            status = base_step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol,
+                               a->phi_tol, a->max_iter);
+        } else {
+            status = step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol, a->phi_tol,
                           a->max_iter, a->locked && a->fit_modes > 0 ? &fit : NULL);
+        }
         if (status != OK) return status;
         if (!a->single && !a->locked && x->q[N] - x->m->y_stop <= 0.0) return CROSSING;
         /* a leaf at the axle before the lock: the planar kernel's fault (ALPHA1_AXLE), any rib */

@@ -94,18 +94,25 @@ class BaseDrive:
 
     def __call__(self, t: float):
         """Return (g, g', g'') of the bus coordinates at t."""
-        g, gd, gdd = np.zeros(6), np.zeros(6), np.zeros(6)
-        tau = min(max(t - self.t0, 0.0), self.duration)
+        g, gd, gdd = self.profile(np.array([t], dtype=float))
+        return g[0], gd[0], gdd[0]
+
+    def profile(self, t: np.ndarray):
+        """Return (g, g', g'') of the bus coordinates at the instants t: (len(t), 6) each."""
+        g, gd, gdd = (np.zeros((len(t), 6)) for _ in range(3))
+        tau = np.clip(t - self.t0, 0.0, self.duration)
         w = math.pi / self.duration
         amp = self.accel
-        gdd[:3] = amp * math.sin(w * tau) if 0.0 < t - self.t0 < self.duration else 0.0
-        gd[:3] = amp / w * (1.0 - math.cos(w * tau))
-        g[:3] = amp / w * (tau - math.sin(w * tau) / w) + gd[:3] * max(t - self.t0 - tau, 0.0)
+        pulse = (0.0 < t - self.t0) & (t - self.t0 < self.duration)
+        gdd[:, :3] = np.where(pulse[:, None], amp * np.sin(w * tau)[:, None], 0.0)
+        gd[:, :3] = amp / w * (1.0 - np.cos(w * tau))[:, None]
+        g[:, :3] = (amp / w * (tau - np.sin(w * tau) / w)[:, None]
+                    + gd[:, :3] * np.maximum(t - self.t0 - tau, 0.0)[:, None])
         r = self.ramp
-        if t <= r:
-            g[3], gd[3], gdd[3] = self.spin * t * t / (2 * r), self.spin * t / r, self.spin / r
-        else:
-            g[3], gd[3] = self.spin * (r / 2 + t - r), self.spin
+        ramp = t <= r
+        g[:, 3] = np.where(ramp, self.spin * t * t / (2 * r), self.spin * (r / 2 + t - r))
+        gd[:, 3] = np.where(ramp, self.spin * t / r, self.spin)
+        gdd[:, 3] = np.where(ramp, self.spin / r, 0.0)
         return g, gd, gdd
 
 
@@ -113,8 +120,9 @@ class MidpointUmbrella:
     """
     The step of module docstring for a model; friction and the drive from its parameters.
 
-    kernel: 'auto' (UMBRELLA_SIM_KERNEL, else auto: the compiled step, _kernel3d.c, when the
-    library is built and the hub fixed, else this numpy reference with a note on stderr),
+    kernel: 'auto' (UMBRELLA_SIM_KERNEL, else auto: the compiled step, _kernel3d.c and, for
+    a driven or free base, _kernel3d_base.h, when the library is built, else this numpy
+    reference with a note on stderr),
     'compiled' (an error if it cannot be), or 'numpy'.  ``backend`` says which steps.
     carry_steps: the steps an iteration matrix serves at most (1: factored every step, the
     planar scheme's rule).
@@ -161,15 +169,12 @@ class MidpointUmbrella:
             return None
         why = None
         lib = load_kernel()
-        if self.model.moving_base:
-            why = ('the compiled 3D step has the hub fixed (base: '
-                   f'{self.model.params.base!r} steps on the numpy reference path)')
-        elif lib is None:
+        if lib is None:
             why = kernel_refusal() or (f'the compiled kernel {LIBRARY} is not built (python3 '
                                        'bootstrap.py setup; it needs a C compiler)')
         if why is None:
             return CompiledStep3D(lib, self.model, self.tolerance, PHI_TOLERANCE,
-                                  self.max_iterations, self.carry_steps)
+                                  self.max_iterations, self.carry_steps, self.drive)
         if kernel == 'compiled':
             raise RuntimeError(why)
         if why not in _SAID:

@@ -15,10 +15,12 @@
 """
 The binding of the whole umbrella's compiled step (_kernel3d.c, declared in _kernel.h).
 
-``CompiledStep3D`` hands an ``UmbrellaModel3D`` with its hub fixed to the library once
-(``Model3D``: indices, the bodies' points, weights and shapes, stiffness and constant mass)
-and keeps every buffer a call uses: the state advanced in place and the rows of the steps
-taken (``Advance3DCall``).  ``step`` is ``MidpointUmbrella.step`` (the numpy reference) in one
+``CompiledStep3D`` hands an ``UmbrellaModel3D`` to the library once (``Model3D``: indices,
+the bodies' points, weights and shapes, stiffness and constant mass; with a moving base the
+rib frames, the hub radius, the bus inertia and the total mass) and keeps every buffer a
+call uses: the state advanced in place, the rows of the steps taken (``Advance3DCall``)
+and, with a driven base, the drive's bus coordinates and rates at the steps' ends
+(integrator3d.BaseDrive.profile: the drive's one rule, evaluated here for a run of steps).  ``step`` is ``MidpointUmbrella.step`` (the numpy reference) in one
 call; ``advance`` takes up to n grid steps of ``UmbrellaSimulator3D.step`` in one call,
 stopping before the step in which the sleeve reaches the stop (the lock is Python's).  The
 library is the planar kernel's (kernel.load_kernel: ABI-checked against the header).
@@ -49,7 +51,9 @@ def row_layout(model: UmbrellaModel3D) -> dict:
              ('vs', (model.n_shared,)), ('lam_r', (nr, N_RIB_ROWS)),
              ('lam_s', (model.n_shared_rows,)), ('stuck', (nr,)), ('kinetic', ()),
              ('strain', ()), ('work_force', ()), ('work_friction', (nr,)), ('iterations', ()),
-             ('factorisations', ()))
+             ('factorisations', ()), ('work_drive', ()))
+    if model.params.base == 'free':
+        parts += (('linear_momentum', (3,)), ('angular_momentum', (3,)))
     out, k = {}, 0
     for name, shape in parts:
         size = int(np.prod(shape)) if shape else 1
@@ -59,13 +63,13 @@ def row_layout(model: UmbrellaModel3D) -> dict:
 
 
 class CompiledStep3D:
-    """The compiled step of one model (hub fixed); see the module docstring."""
+    """The compiled step of one model (drive: its BaseDrive); see the module docstring."""
 
     def __init__(self, lib, model: UmbrellaModel3D, tolerance: float, phi_tolerance: float,
-                 max_iterations: int, carry_steps: int = 1):
-        if model.moving_base:
-            raise ValueError('the compiled 3D step has the hub fixed (base: fixed)')
-        self.lib, self.model = lib, model
+                 max_iterations: int, carry_steps: int = 1, drive=None):
+        if (drive is None) != (model.params.base != 'prescribed'):
+            raise ValueError('the compiled 3D step: a drive is for a prescribed base only')
+        self.lib, self.model, self.drive = lib, model, drive
         self.tolerance, self.phi_tolerance = tolerance, phi_tolerance
         self.max_iterations = max_iterations
         m = model
@@ -85,7 +89,8 @@ class CompiledStep3D:
             'stick_torque': np.array([r.stick_torque for r in m.ribs], dtype=float),
             'stiffness': m.stiffness, 'const_mass': const_mass,
             'leaf_x': leaf.x, 'leaf_w': leaf.w, 'leaf_shape': leaf.shape,
-            'link_x': link.x, 'link_w': link.w, 'link_shape': link.shape}
+            'link_x': link.x, 'link_w': link.w, 'link_shape': link.shape,
+            'bus_inertia': m.bus_inertia, 'rib_frames': m.psi}
         self._arrays = {k: np.ascontiguousarray(v, dtype=float) for k, v in arrays.items()}
         self.struct = Model3DStruct(
             n_ribs=nr, n_rib=n, n_shared=m.n_shared, n_shared_rows=m.n_shared_rows,
@@ -95,6 +100,7 @@ class CompiledStep3D:
             link_points=link.x.shape[1], link_elastic=link.shape.shape[-1],
             link_offset=link.offset, sleeve_mass=m.sleeve_mass, y_stop=m.y_stop,
             regularisation=m.params.hinge_regularisation, carry_steps=carry_steps,
+            hub_radius=m.hub_radius, total_mass=m.total_mass,
             **{k: _ptr(v) for k, v in self._arrays.items()})
         ctx = lib.umbrella3d_new(ctypes.byref(self.struct))
         if not ctx:
@@ -112,6 +118,7 @@ class CompiledStep3D:
                                   tol=tolerance, phi_tol=phi_tolerance,
                                   **{k: _ptr(v) for k, v in self.buf.items()})
         self._call_ref = ctypes.byref(self.call)
+        self._drive = (np.zeros((1, 6)), np.zeros((1, 6)))
         self._set_capacity(1)
 
     def __del__(self):
@@ -145,6 +152,14 @@ class CompiledStep3D:
         self.call.out = _ptr(self.out)
         self.capacity = cap
 
+    def _set_drive(self, times: np.ndarray) -> None:
+        """Hand the drive's bus coordinates and rates at the steps' ends to the call."""
+        if self.drive is None:
+            return
+        g, gd, _ = self.drive.profile(times)
+        self._drive = (np.ascontiguousarray(g), np.ascontiguousarray(gd))
+        self.call.drive_q, self.call.drive_v = (_ptr(a) for a in self._drive)
+
     def _load(self, s: State3D, force: float, locked: bool, h: float) -> None:
         b = self.buf
         for k in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck'):
@@ -169,12 +184,14 @@ class CompiledStep3D:
     def step(self, s: State3D, h: float, force: float, locked: bool):
         """Return (State3D, StepWork) of one step of length h (MidpointUmbrella.step's)."""
         self._load(s, force, locked, h)
+        self._set_drive(np.array([s.t + h]))
         self.call.single = 1
         status = self.lib.umbrella3d_advance(self._ctx, self._call_ref)
         if status != STATUS['ok']:
             raise status_error(status, s.t + h)
         row = self.rows(1)
-        work = StepWork(float(row['work_force'][0]), row['work_friction'][0].copy(), 0.0,
+        work = StepWork(float(row['work_force'][0]), row['work_friction'][0].copy(),
+                        float(row['work_drive'][0]),
                         int(row['iterations'][0]), int(row['factorisations'][0]))
         return self._state(), work
 
@@ -190,6 +207,7 @@ class CompiledStep3D:
         if n_steps > self.capacity:
             self._set_capacity(max(n_steps, 2 * self.capacity))
         self._load(s, force, locked, h)
+        self._set_drive(np.arange(k0 + 1, k0 + n_steps + 1) * h)
         c = self.call
         c.single, c.k0, c.n_steps = 0, k0, n_steps
         status = self.lib.umbrella3d_advance(self._ctx, self._call_ref)

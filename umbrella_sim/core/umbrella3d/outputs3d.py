@@ -93,14 +93,24 @@ class Record3D:
         Add the figures of a run of steps (the compiled step's rows, kernel3d.row_layout).
 
         rows: arrays with the steps first: t, qr, qs, vr, vs, lam_r, lam_s, stuck, kinetic,
-        strain, work_force, work_friction, iterations (hub fixed: no drive, no bus).
+        strain, work_force, work_friction, iterations, work_drive and, with a free bus,
+        linear_momentum and angular_momentum (``add``'s figures of each state).
         """
         work = self.work + np.cumsum(rows['work_force'])
         friction = self.friction + np.cumsum(rows['work_friction'], 0)
+        drive = self.drive + np.cumsum(rows['work_drive'])
         self.work, self.friction = float(work[-1]), friction[-1].copy()
+        self.drive = float(drive[-1])
         self.iterations += int(np.sum(rows['iterations']))
         self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work, friction,
-                        np.full(len(work), self.drive), locked, force, lock_loss)
+                        drive, locked, force, lock_loss)
+        if self.model.moving_base:
+            bus = {'bus_q': rows['qs'][:, 1:7], 'bus_v': rows['vs'][:, 1:7]}
+            if self.model.params.base == 'free':
+                bus['linear_momentum'] = rows['linear_momentum']
+                bus['angular_momentum'] = rows['angular_momentum']
+            for name, values in bus.items():     # (copies: the rows' buffers are reused)
+                self.rows.setdefault(name, []).append(np.array(values))
 
     def _put_steps(self, t, st, kinetic, strain, work, friction, drive, locked, force,
                    lock_loss):

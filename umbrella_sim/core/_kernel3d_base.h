@@ -1,0 +1,729 @@
+// Copyright 2026 umbrella_sim developers
+//
+// Licensed under the Apache License, Version 2.0 (the "License");
+// you may not use this file except in compliance with the License.
+// You may obtain a copy of the License at
+//
+//     http://www.apache.org/licenses/LICENSE-2.0
+//
+// Unless required by applicable law or agreed to in writing, software
+// distributed under the License is distributed on an "AS IS" BASIS,
+// WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+// See the License for the specific language governing permissions and
+// limitations under the License.
+
+/*
+ * The compiled 3D step with a moving base: the hub driven by a prescribed bus motion, or a
+ * free-floating bus (umbrella3d/model3d.py, the bus coordinates [X (3), psi, beta, gamma]
+ * after y_s).  _kernel3d.c includes this file after its own step: these functions take
+ * that file's helpers for what the base leaves as it is (each rib's own mass blocks and
+ * kinetic gradient from the inertia invariants, the joints, the rib blocks of the arrow
+ * factorisation, friction, the kept iteration matrix's rule) and add the base's terms,
+ * point by point as the numpy reference computes them (model3d.UmbrellaModel3D: mass_matrix,
+ * kinetic_gradient, _theta_gradient, _sleeve_and_bus_gradient): the rib-bus block M_rs and
+ * the shared block M_ss of M(q), their share of the kinetic energy's gradient, the arrow
+ * algebra's full border (every shared column), the drive's rows.  base_step is
+ * integrator3d.MidpointUmbrella._step for a moving base (no stage-2 mode fit: the locked
+ * ribs stay coupled through the bus), operation for operation.
+ *
+ * Frames: psi_r (Model3D.rib_frames) maps rib r's frame to the bus frame; the bus frame's
+ * attitude R = Ry(psi) Rx(beta) Rz(gamma) maps it to the inertial one; omega = B theta'
+ * (bus frame).  A point's velocity in rib r's frame: psi^T R^T X' + omega_r x s + J v_b,
+ * s = rho + a e_r its place from the bus origin.
+ */
+#define NB 7            /* shared coordinates with a moving base: y_s, X (3), the angles (3) */
+
+/* The bus attitude (model3d.BusFrame): rot (row-major, R[i][k] = rot[3 i + k]), basis
+ * (basis[3 k + i]: component k of b_i) and dbasis (dbasis[9 j + 3 k + i]: component k of
+ * d b_i / d theta_j). */
+typedef struct { double rot[9], basis[9], dbasis[27]; } BusFrame3;
+
+struct Base3D {
+    int prescribed, free_bus;
+    Kin kin[2];                  /* the bodies' points at the iterate (M(q)) */
+    double *mrs;                 /* R x n x NB: M_rs at the last base_mass_matrix */
+    double mss[NB * NB];
+    double *fmrs[3];             /* the M_rs each factorisation holds (slot 0, 1, pm) */
+    const double *drive_q, *drive_v;   /* the step's drive: the bus's place and rates */
+    double work_drive;           /* the last step's drive work */
+};
+
+static void cross3(const double *a, const double *b, double *c) {
+    c[0] = a[1] * b[2] - a[2] * b[1];
+    c[1] = a[2] * b[0] - a[0] * b[2];
+    c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static double dot3(const double *a, const double *b) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* y = A v, y = A^T v of a row-major 3 x 3 */
+static void mv3(const double *A, const double *v, double *y) {
+    for (int i = 0; i < 3; i++) y[i] = A[3 * i] * v[0] + A[3 * i + 1] * v[1] + A[3 * i + 2] * v[2];
+}
+
+static void mtv3(const double *A, const double *v, double *y) {
+    for (int i = 0; i < 3; i++) y[i] = A[i] * v[0] + A[3 + i] * v[1] + A[6 + i] * v[2];
+}
+
+static void mm3(const double *A, const double *B, double *C) {
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++)
+            C[3 * i + k] = A[3 * i] * B[k] + A[3 * i + 1] * B[3 + k] + A[3 * i + 2] * B[6 + k];
+}
+
+/* model3d.BusFrame.of */
+static void bus_frame(const double *theta, BusFrame3 *f) {
+    double cp = cos(theta[0]), sp = sin(theta[0]), cb = cos(theta[1]), sb = sin(theta[1]);
+    double cg = cos(theta[2]), sg = sin(theta[2]);
+    const double ry[9] = {cp, 0, sp, 0, 1, 0, -sp, 0, cp};
+    const double rx[9] = {1, 0, 0, 0, cb, -sb, 0, sb, cb};
+    const double rz[9] = {cg, -sg, 0, sg, cg, 0, 0, 0, 1};
+    const double ex[3] = {1, 0, 0}, ey[3] = {0, 1, 0}, ez[3] = {0, 0, 1};
+    double t[9], rxey[3], bpsi[3], bbeta[3], c[3], d[3];
+    mm3(ry, rx, t);
+    mm3(t, rz, f->rot);
+    mtv3(rx, ey, rxey);
+    mtv3(rz, rxey, bpsi);
+    mtv3(rz, ex, bbeta);
+    for (int k = 0; k < 3; k++) {
+        f->basis[3 * k] = bpsi[k];
+        f->basis[3 * k + 1] = bbeta[k];
+        f->basis[3 * k + 2] = ez[k];
+    }
+    memset(f->dbasis, 0, sizeof(f->dbasis));
+    cross3(ex, rxey, c);
+    mtv3(rz, c, d);
+    for (int k = 0; k < 3; k++) f->dbasis[9 + 3 * k] = -d[k];
+    cross3(ez, bpsi, c);
+    for (int k = 0; k < 3; k++) f->dbasis[18 + 3 * k] = -c[k];
+    cross3(ez, bbeta, c);
+    for (int k = 0; k < 3; k++) f->dbasis[18 + 3 * k + 1] = -c[k];
+}
+
+/* d omega / d theta_j for rates t: sum_i t_i d b_i / d theta_j (out: 3 x 3, row j) */
+static void dbasis_rates(const BusFrame3 *f, const double *t, double *out) {
+    for (int j = 0; j < 3; j++)
+        for (int k = 0; k < 3; k++) {
+            const double *row = f->dbasis + 9 * j + 3 * k;
+            out[3 * j + k] = row[0] * t[0] + row[1] * t[1] + row[2] * t[2];
+        }
+}
+
+/* point pt of body j of rib r at kinematics k: s = rho + a e_r (out) and its Jacobian */
+static const double *base_point(const Ctx3D *x, int j, const Kin *k, const double *q, int r,
+                                int pt, double *s) {
+    const Body *b = &x->b[j];
+    int rp = r * b->np + pt;
+    const double *qy = k->qy + rp * 3, *qb = q + r * x->n + b->off;
+    for (int i = 0; i < 3; i++) s[i] = qy[i] + (b->t ? qb[i] : 0.0);
+    s[0] += x->m->hub_radius;
+    return k->jac + (size_t)rp * 3 * b->nb;
+}
+
+/* ------------------------------------------------------------------ context */
+static void base_free(Base3D *B) {
+    if (!B) return;
+    for (int j = 0; j < 2; j++) kin_free(&B->kin[j]);
+    free(B->mrs);
+    for (int j = 0; j < 3; j++) free(B->fmrs[j]);
+    free(B);
+}
+
+/* the moving base's buffers (NULL: out of memory, or the hub fixed: n_shared 1) */
+static Base3D *base_new(Ctx3D *x) {
+    const Model3D *m = x->m;
+    Base3D *B = calloc(1, sizeof(Base3D));
+    if (!B) return NULL;
+    B->prescribed = m->n_shared_rows > 1;
+    B->free_bus = !B->prescribed;
+    size_t k = (size_t)x->R * x->n * NB;
+    int ok = 1;
+    for (int j = 0; j < 2; j++) ok &= kin_alloc(&B->kin[j], &x->b[j], x->R);
+    ok = ok && (B->mrs = calloc(k, sizeof(double)));
+    for (int j = 0; j < 3; j++) ok = ok && (B->fmrs[j] = calloc(k, sizeof(double)));
+    if (!ok) { base_free(B); return NULL; }
+    return B;
+}
+
+/* ------------------------------------------------------------------ inertia */
+/* M(q): the rib blocks (mass_matrix), M_rs (B->mrs) and M_ss (B->mss) from the points */
+static void base_mass_matrix(Ctx3D *x, const double *q) {
+    const Model3D *m = x->m;
+    Base3D *B = x->base;
+    int R = x->R, n = x->n, N = R * n;
+    mass_matrix(x, q);
+    BusFrame3 f;
+    bus_frame(q + N + 4, &f);
+    double ys = q[N], msl = m->sleeve_mass;
+    double s1[3] = {0.0, msl * ys, 0.0}, ic[9];
+    memcpy(ic, m->bus_inertia, sizeof(ic));
+    ic[0] += msl * ys * ys;
+    ic[8] += msl * ys * ys;
+    memset(B->mrs, 0, sizeof(double) * N * NB);
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        int nb = b->nb;
+        kinematics(x, j, q, &B->kin[j]);
+        for (int r = 0; r < R; r++) {
+            const double *ps = m->rib_frames + 9 * r;
+            double gs[3 * nb], ls[3 * nb], sw[3] = {0, 0, 0}, sec[9] = {0};
+            memset(gs, 0, sizeof(gs));
+            memset(ls, 0, sizeof(ls));
+            for (int pt = 0; pt < b->np; pt++) {
+                double w = b->w[r * b->np + pt], s[3];
+                const double *J = base_point(x, j, &B->kin[j], q, r, pt, s);
+                for (int a = 0; a < nb; a++) {
+                    double col[3] = {J[a], J[nb + a], J[2 * nb + a]}, c[3];
+                    cross3(s, col, c);
+                    for (int i = 0; i < 3; i++) {
+                        gs[i * nb + a] += w * col[i];
+                        ls[i * nb + a] += w * c[i];
+                    }
+                }
+                for (int i = 0; i < 3; i++) {
+                    sw[i] += w * s[i];
+                    for (int k = 0; k < 3; k++) sec[3 * i + k] += w * s[i] * s[k];
+                }
+            }
+            double *Mr = B->mrs + (size_t)r * n * NB + b->off * NB;
+            for (int a = 0; a < nb; a++) {
+                double g[3] = {gs[a], gs[nb + a], gs[2 * nb + a]};
+                double l[3] = {ls[a], ls[nb + a], ls[2 * nb + a]}, gb[3], lb[3], rg[3];
+                mv3(ps, g, gb);
+                mv3(ps, l, lb);
+                mv3(f.rot, gb, rg);
+                for (int i = 0; i < 3; i++) {
+                    Mr[a * NB + 1 + i] = rg[i];
+                    Mr[a * NB + 4 + i] = f.basis[i] * lb[0] + f.basis[3 + i] * lb[1]
+                        + f.basis[6 + i] * lb[2];
+                }
+            }
+            double swb[3], local[9], t1[9];
+            mv3(ps, sw, swb);
+            for (int i = 0; i < 3; i++) s1[i] += swb[i];
+            double tr = sec[0] + sec[4] + sec[8];
+            for (int i = 0; i < 9; i++) local[i] = (i % 4 == 0 ? tr : 0.0) - sec[i];
+            mm3(ps, local, t1);
+            for (int i = 0; i < 3; i++)           /* ic += psi local psi^T */
+                for (int k = 0; k < 3; k++)
+                    ic[3 * i + k] += t1[3 * i] * ps[3 * k] + t1[3 * i + 1] * ps[3 * k + 1]
+                        + t1[3 * i + 2] * ps[3 * k + 2];
+        }
+    }
+    double *S = B->mss;
+    memset(S, 0, sizeof(double) * NB * NB);
+    S[0] = msl;
+    for (int i = 0; i < 3; i++) {
+        S[1 + i] = S[(1 + i) * NB] = msl * f.rot[3 * i + 1];
+        S[(1 + i) * NB + 1 + i] = m->total_mass;
+    }
+    for (int c = 0; c < 3; c++) {
+        double bc[3] = {f.basis[c], f.basis[3 + c], f.basis[6 + c]}, bx[3], rb[3], ib[3];
+        cross3(bc, s1, bx);
+        mv3(f.rot, bx, rb);
+        for (int i = 0; i < 3; i++)
+            S[(1 + i) * NB + 4 + c] = S[(4 + c) * NB + 1 + i] = rb[i];
+        mv3(ic, bc, ib);
+        for (int i = 0; i < 3; i++)
+            S[(4 + i) * NB + 4 + c] = f.basis[i] * ib[0] + f.basis[3 + i] * ib[1]
+                + f.basis[6 + i] * ib[2];
+    }
+}
+
+/* p = M v with the border (M as base_mass_matrix left it) */
+static void base_matvec(Ctx3D *x, const double *v, double *p) {
+    const Base3D *B = x->base;
+    int R = x->R, n = x->n, N = R * n;
+    matvec(x, v, p);
+    const double *vs = v + N;
+    double *pss = p + N;
+    for (int i = 0; i < NB; i++) {
+        double acc = 0.0;
+        for (int c = 0; c < NB; c++) acc += B->mss[i * NB + c] * vs[c];
+        pss[i] = acc;
+    }
+    for (int r = 0; r < R; r++) {
+        const double *Mr = B->mrs + (size_t)r * n * NB, *vr = v + r * n;
+        double *pr = p + r * n;
+        for (int a = 0; a < n; a++) {
+            double acc = 0.0;
+            for (int c = 1; c < NB; c++) {
+                acc += Mr[a * NB + c] * vs[c];
+                pss[c] += Mr[a * NB + c] * vr[a];
+            }
+            pr[a] += acc;
+        }
+    }
+}
+
+/* d/dq [1/2 a^T M(q) b] (kinetic_gradient's rib part, then the base's terms from the
+ * points at q: the kinematics into x->km, which the iteration matrix's gyroscopic term
+ * reads) */
+static void base_kinetic_gradient(Ctx3D *x, const double *q, const double *a,
+                                  const double *bv, double *g) {
+    const Model3D *m = x->m;
+    int R = x->R, n = x->n, N = R * n;
+    kinetic_gradient(x, q, a, bv, g);
+    BusFrame3 f;
+    bus_frame(q + N + 4, &f);
+    const double *ta = a + N + 4, *tb = bv + N + 4;
+    double oma_bus[3], omb_bus[3], vxa_bus[3], vxb_bus[3], dba[9], dbb[9];
+    mv3(f.basis, ta, oma_bus);
+    mv3(f.basis, tb, omb_bus);
+    mtv3(f.rot, a + N + 1, vxa_bus);
+    mtv3(f.rot, bv + N + 1, vxb_bus);
+    dbasis_rates(&f, ta, dba);
+    dbasis_rates(&f, tb, dbb);
+    double A[3] = {0, 0, 0}, sva[3] = {0, 0, 0}, svb[3] = {0, 0, 0};
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        int nb = b->nb, ne = b->ne, t = b->t;
+        kinematics(x, j, q, &x->km[j]);
+        for (int r = 0; r < R; r++) {
+            const double *ps = m->rib_frames + 9 * r;
+            const double *ab = a + r * n + b->off, *bb = bv + r * n + b->off;
+            double om_a[3], om_b[3], vx_a[3], vx_b[3];
+            mtv3(ps, oma_bus, om_a);
+            mtv3(ps, omb_bus, om_b);
+            mtv3(ps, vxa_bus, vx_a);
+            mtv3(ps, vxb_bus, vx_b);
+            double *o = g + r * n + b->off;
+            double ar[3] = {0, 0, 0}, sa[3] = {0, 0, 0}, sb[3] = {0, 0, 0};
+            for (int pt = 0; pt < b->np; pt++) {
+                int rp = r * b->np + pt;
+                double w = b->w[rp], s[3];
+                const double *J = base_point(x, j, &x->km[j], q, r, pt, s);
+                const double *qs = x->km[j].qs + (size_t)rp * 3 * ne;
+                double rel_a[3], rel_b[3], ext_a[3], ext_b[3], full_a[3], full_b[3], c[3];
+                for (int i = 0; i < 3; i++) {
+                    double sa_ = 0.0, sb_ = 0.0;
+                    for (int k = 0; k < nb; k++) {
+                        sa_ += J[i * nb + k] * ab[k];
+                        sb_ += J[i * nb + k] * bb[k];
+                    }
+                    rel_a[i] = sa_;
+                    rel_b[i] = sb_;
+                }
+                cross3(om_a, s, c);
+                for (int i = 0; i < 3; i++) ext_a[i] = vx_a[i] + c[i];
+                cross3(om_b, s, c);
+                for (int i = 0; i < 3; i++) ext_b[i] = vx_b[i] + c[i];
+                for (int i = 0; i < 3; i++) {
+                    full_a[i] = rel_a[i] + ext_a[i];
+                    full_b[i] = rel_b[i] + ext_b[i];
+                }
+                /* dv_t's share of the base's velocities */
+                double qa0 = rel_a[0] - (t ? ab[0] : 0.0), qa1 = rel_a[1] - (t ? ab[1] : 0.0);
+                double qb0 = rel_b[0] - (t ? bb[0] : 0.0), qb1 = rel_b[1] - (t ? bb[1] : 0.0);
+                o[t] += 0.5 * w * ((-qa1 * ext_b[0] + qa0 * ext_b[1])
+                                   + (-qb1 * ext_a[0] + qb0 * ext_a[1]));
+                for (int e = 0; e < ne; e++) {
+                    double s0 = qs[e], s1 = qs[ne + e];
+                    o[t + 1 + e] += 0.5 * w * (ab[t] * (s0 * ext_b[1] - s1 * ext_b[0])
+                                               + bb[t] * (s0 * ext_a[1] - s1 * ext_a[0]));
+                }
+                /* J^T (V_b x omega_a + V_a x omega_b) */
+                double c1[3], c2[3];
+                cross3(full_b, om_a, c1);
+                cross3(full_a, om_b, c2);
+                for (int i = 0; i < 3; i++) c[i] = c1[i] + c2[i];
+                for (int k = 0; k < nb; k++)
+                    o[k] += 0.5 * w * (J[k] * c[0] + J[nb + k] * c[1] + J[2 * nb + k] * c[2]);
+                /* the angles' share (_theta_gradient) */
+                double u_a[3], u_b[3];
+                cross3(om_a, s, u_a);
+                cross3(om_b, s, u_b);
+                for (int i = 0; i < 3; i++) { u_a[i] += rel_a[i]; u_b[i] += rel_b[i]; }
+                cross3(u_a, full_b, c1);
+                cross3(u_b, full_a, c2);
+                for (int i = 0; i < 3; i++) ar[i] += w * (c1[i] + c2[i]);
+                cross3(s, full_a, c1);
+                cross3(s, full_b, c2);
+                for (int i = 0; i < 3; i++) { sa[i] += w * c1[i]; sb[i] += w * c2[i]; }
+            }
+            double y[3];
+            mv3(ps, ar, y);
+            for (int i = 0; i < 3; i++) A[i] += y[i];
+            mv3(ps, sa, y);
+            for (int i = 0; i < 3; i++) sva[i] += y[i];
+            mv3(ps, sb, y);
+            for (int i = 0; i < 3; i++) svb[i] += y[i];
+        }
+    }
+    /* the sleeve point and the bus body (_sleeve_and_bus_gradient) */
+    double msl = m->sleeve_mass, ey[3] = {0, 1, 0}, sp[3] = {0, q[N], 0};
+    double va[3], vb[3], c[3], ua[3], ub[3], c1[3], c2[3];
+    mtv3(f.rot, a + N + 1, va);
+    mtv3(f.rot, bv + N + 1, vb);
+    cross3(oma_bus, sp, ua);
+    cross3(omb_bus, sp, ub);
+    ua[1] += a[N];
+    ub[1] += bv[N];
+    for (int i = 0; i < 3; i++) { va[i] += ua[i]; vb[i] += ub[i]; }
+    cross3(vb, oma_bus, c1);
+    cross3(va, omb_bus, c2);
+    g[N] += 0.5 * msl * (dot3(ey, c1) + dot3(ey, c2));
+    cross3(ua, vb, c1);
+    cross3(ub, va, c2);
+    double sva_s[3], svb_s[3], ia[3], ibv[3];
+    for (int i = 0; i < 3; i++) c[i] = msl * (c1[i] + c2[i]);
+    cross3(sp, va, sva_s);
+    cross3(sp, vb, svb_s);
+    mv3(m->bus_inertia, oma_bus, ia);
+    mv3(m->bus_inertia, omb_bus, ibv);
+    for (int j = 0; j < 3; j++) {
+        double bj[3] = {f.basis[j], f.basis[3 + j], f.basis[6 + j]};
+        g[N + 4 + j] += 0.5 * (dot3(bj, A) + dot3(dba + 3 * j, svb) + dot3(dbb + 3 * j, sva));
+        g[N + 4 + j] += 0.5 * (dot3(bj, c) + msl * dot3(dba + 3 * j, svb_s)
+                               + msl * dot3(dbb + 3 * j, sva_s));
+        g[N + 4 + j] += 0.5 * (dot3(dba + 3 * j, ibv) + dot3(dbb + 3 * j, ia));
+    }
+}
+
+/* ------------------------------------------------------------------ joints */
+/* Phi with the drive's rows (the bus at the drive's place) */
+static void base_constraints(Ctx3D *x, const double *q, const double *stuck, int locked,
+                             double *phi) {
+    constraints(x, q, stuck, locked, phi);
+    if (x->base->prescribed)
+        for (int j = 0; j < 6; j++)
+            phi[x->R * ROWS + 1 + j] = q[x->R * x->n + 1 + j] - x->base->drive_q[j];
+}
+
+/* ------------------------------------------------------------------ arrow algebra */
+static double *base_fact_mrs(Ctx3D *x, const Fact *f) {
+    return x->base->fmrs[f == &x->pm ? 2 : (int)(f - x->slot)];
+}
+
+/* arrow_factor with the base's border: C's columns M_rs and J_rs, the corner [[M_ss, sign
+ * J_ss^T], [J_ss, 1 - active]] (the drive's rows active, the stop's when locked) */
+static int base_arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc,
+                             const double *jr, const double *stuck, int locked, double sign) {
+    Base3D *B = x->base;
+    int R = x->R, n = x->n, mb = x->mb, s = x->s, ns = x->ns;
+    double *fm = base_fact_mrs(x, f), L = locked ? 1.0 : 0.0, *S = f->S;
+    memcpy(fm, B->mrs, sizeof(double) * R * n * NB);
+    memset(S, 0, sizeof(double) * s * s);
+    for (int i = 0; i < ns; i++)
+        for (int c = 0; c < ns; c++) S[i * s + c] = B->mss[i * NB + c];
+    S[ns] = sign * L;
+    S[ns * s] = L;
+    S[ns * s + ns] = 1.0 - L;
+    if (B->prescribed)
+        for (int j = 1; j < 7; j++) {
+            S[j * s + ns + j] = sign;
+            S[(ns + j) * s + j] = 1.0;
+        }
+    for (int r = 0; r < R; r++) {
+        if (rib_factor(x, f, r, extra, jc, jr, stuck, sign) != OK) return SINGULAR;
+        double *Y = f->Y + (size_t)r * mb * s;
+        const double *Mr = fm + (size_t)r * n * NB;
+        for (int c = 0; c < s; c++) {
+            memset(x->ycol, 0, sizeof(double) * mb);
+            if (c < ns) {
+                for (int a = 0; a < n; a++) x->ycol[a] = Mr[a * NB + c];
+                if (c == 0) x->ycol[n + 7] = -1.0;
+                rib_solve(x, f, r, x->ycol);
+            }
+            for (int a = 0; a < mb; a++) Y[a * s + c] = x->ycol[a];
+        }
+        for (int i = 0; i < ns; i++)          /* S -= D Y, D = [M_rs^T, sign J_rs^T] */
+            for (int c = 0; c < ns; c++) {
+                double acc = i == 0 ? -sign * Y[(n + 7) * s + c] : 0.0;
+                for (int a = 0; a < n; a++) acc += Mr[a * NB + i] * Y[a * s + c];
+                S[i * s + c] -= acc;
+            }
+    }
+    return lu_factor(s, S, f->spiv) == OK ? OK : SINGULAR;
+}
+
+static void base_arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double sign) {
+    int R = x->R, n = x->n, mb = x->mb, s = x->s, ns = x->ns;
+    const double *fm = base_fact_mrs(x, f);
+    double z[MAXS];
+    memcpy(z, rs, sizeof(double) * s);
+    for (int r = 0; r < R; r++) {
+        double *v = rr + r * mb;
+        const double *Mr = fm + (size_t)r * n * NB;
+        rib_solve(x, f, r, v);
+        z[0] += sign * v[n + 7];
+        for (int a = 0; a < n; a++)
+            for (int i = 0; i < ns; i++) z[i] -= Mr[a * NB + i] * v[a];
+    }
+    lu_solve(s, f->S, f->spiv, z);
+    memcpy(rs, z, sizeof(double) * s);
+    for (int r = 0; r < R; r++) {
+        const double *Y = f->Y + (size_t)r * mb * s;
+        for (int a = 0; a < mb; a++) {
+            double acc = 0.0;
+            for (int c = 0; c < s; c++) acc += Y[a * s + c] * z[c];
+            rr[r * mb + a] -= acc;
+        }
+    }
+}
+
+/* v projected onto J v = c in the mass metric (M as base_mass_matrix left it; c: the
+ * drive's rates, target); mu: the shared rows' multipliers (the bus's impulse -mu[1:]) */
+static int base_project(Ctx3D *x, const double *q, double *v, const double *stuck, int locked,
+                        const double *target, double *mu) {
+    int R = x->R, n = x->n, mb = x->mb, ns = x->ns, N = R * n;
+    jacobian(x, q, stuck, x->jr);
+    if (base_arrow_factor(x, &x->pm, NULL, x->jr, x->jr, stuck, locked, 1.0) != OK)
+        return SINGULAR;
+    for (int r = 0; r < R; r++) {
+        double *rr = x->rr + r * mb;
+        const double *J = x->jr + r * ROWS * n;
+        memset(rr, 0, sizeof(double) * n);
+        for (int i = 0; i < ROWS; i++) {
+            double acc = 0.0;
+            for (int c = 0; c < n; c++) acc += J[i * n + c] * v[r * n + c];
+            rr[n + i] = -acc;
+        }
+        rr[n + 7] += v[N];
+    }
+    double rs[MAXS] = {0.0};
+    rs[ns] = locked ? -v[N] : 0.0;
+    if (target)
+        for (int j = 0; j < 6; j++) rs[ns + 1 + j] = target[j] - v[N + 1 + j];
+    base_arrow_solve(x, &x->pm, x->rr, rs, 1.0);
+    for (int r = 0; r < R; r++)
+        for (int a = 0; a < n; a++) v[r * n + a] += x->rr[r * mb + a];
+    for (int i = 0; i < ns; i++) v[N + i] += rs[i];
+    if (mu) memcpy(mu, rs + ns, sizeof(double) * x->cs);
+    return OK;
+}
+
+/* ------------------------------------------------------------------ the step */
+/* step() for a moving base (integrator3d.MidpointUmbrella._step): the same modified Newton
+ * and kept iteration matrix, the base's terms; then the free bus's linear momentum restored
+ * (a uniform translation velocity), the projection (onto the drive's rates, its impulse's
+ * work counted) and, without a drive, the energy scaling relative to the mass centre. */
+static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double force,
+                     double tol, double phi_tol, int max_iter) {
+    const Model3D *m = x->m;
+    Base3D *B = x->base;
+    int R = x->R, n = x->n, N = R * n, ns = x->ns, mb = x->mb, cs = x->cs;
+    const double half_h2 = 0.5 * h * h;
+    double *q = x->q, *q0 = x->q0, *v0 = x->v0, *p0 = x->p0;
+    base_constraints(x, q0, stuck, locked, x->phi0);
+    for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * v0[i];
+    memcpy(x->lam, x->l0, sizeof(double) * (R * ROWS + cs));
+    int lagged = kept_serves(x, stuck, locked, h);
+    Fact *ff = lagged ? &x->slot[x->kept_slot] : NULL;
+    Fact *fresh = &x->slot[x->kept ? 1 - x->kept_slot : 0];
+    int factored = lagged, refactored = 0, it;
+    x->pend_slot = -1;
+    double last = INFINITY;
+    for (it = 1; it <= max_iter; it++) {
+        for (int i = 0; i < N + ns; i++) {
+            x->dq[i] = q[i] - q0[i];
+            x->qm[i] = q0[i] + 0.5 * x->dq[i];
+            x->v1[i] = 2.0 * x->dq[i] / h - v0[i];
+        }
+        base_mass_matrix(x, q);
+        base_matvec(x, x->v1, x->p1);
+        base_kinetic_gradient(x, x->qm, v0, x->v1, x->gt);
+        /* Gonzalez over the whole dq, the correction along the ribs' and the sleeve's */
+        base_matvec(x, v0, x->tmp);
+        double delta = 0.0, dd = 0.0, gdq = 0.0;
+        for (int i = 0; i < N + ns; i++) delta += (x->tmp[i] - p0[i]) * x->v1[i];
+        delta *= 0.5;
+        for (int i = 0; i < N; i++) { dd += x->dq[i] * x->dq[i]; gdq += x->gt[i] * x->dq[i]; }
+        for (int i = N; i < N + ns; i++) gdq += x->gt[i] * x->dq[i];
+        dd += x->dq[N] * x->dq[N];
+        if (dd > 0.0) {
+            double corr = (delta - gdq) / dd;
+            for (int i = 0; i <= N; i++) x->gt[i] += corr * x->dq[i];
+        }
+        base_constraints(x, q, stuck, locked, x->phi);
+        jacobian(x, x->qm, stuck, x->jm);
+        memcpy(x->jg, x->jm, sizeof(double) * R * ROWS * n);
+        double cons_s[NB] = {0.0};
+        cons_s[0] = locked ? x->lam[R * ROWS] : 0.0;
+        if (B->prescribed)
+            for (int j = 1; j < 7; j++) cons_s[j] = x->lam[R * ROWS + j];
+        for (int r = 0; r < R; r++) {
+            const double *dq = x->dq + r * n, *J = x->jm + r * ROWS * n;
+            double *G = x->jg + r * ROWS * n;
+            double ddr = 0.0;
+            for (int a = 0; a < n; a++) ddr += dq[a] * dq[a];
+            if (ddr > 0.0)
+                for (int i = 0; i < ROWS; i++) {
+                    double lin = 0.0;
+                    for (int a = 0; a < n; a++) lin += J[i * n + a] * dq[a];
+                    if (i == 7) lin -= x->dq[N];
+                    double fr = (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr;
+                    for (int a = 0; a < n; a++) G[i * n + a] += fr * dq[a];
+                }
+            friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
+            const double *lam = x->lam + r * ROWS;
+            rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
+            for (int a = 0; a < n; a++) {
+                double applied = -x->ycol[a], cons = 0.0;
+                if (a == m->i_a1) applied += x->fric[r];
+                for (int i = 0; i < ROWS; i++) cons += G[i * n + a] * lam[i];
+                x->res[r * n + a] = x->p1[r * n + a] - p0[r * n + a]
+                    - h * (x->gt[r * n + a] + applied + cons);
+            }
+            cons_s[0] -= lam[7];
+        }
+        for (int i = 0; i < ns; i++)
+            x->res[N + i] = x->p1[N + i] - p0[N + i]
+                - h * (x->gt[N + i] + (i == 0 ? -force : 0.0) + cons_s[i]);
+        if (!factored) {
+            jacobian(x, q, stuck, x->jr);
+            for (int i = 0; i < N; i++) x->tmp[i] = x->dq[i] / h;
+            /* (x->km: the points at q_m, base_kinetic_gradient's) */
+            gyroscopic(x, x->km, x->tmp);
+            for (int r = 0; r < R; r++) {
+                double *G = x->gyro + (size_t)r * n * n;
+                const double *K = m->stiffness + (size_t)r * n * n;
+                for (int j = 0; j < 2; j++) {
+                    const Body *b = &x->b[j];
+                    for (int a = b->off; a < b->off + b->nb; a++)
+                        for (int c = b->off; c < b->off + b->nb; c++)
+                            G[a * n + c] = 0.25 * h * h * K[a * n + c] + 0.5 * h * G[a * n + c];
+                }
+                G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
+            }
+            if (base_arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
+                return SINGULAR;
+            ff = fresh;
+            factored = refactored = 1;
+            x->factorisations++;
+        }
+        for (int r = 0; r < R; r++) {
+            for (int a = 0; a < n; a++) x->rr[r * mb + a] = -0.5 * h * x->res[r * n + a];
+            for (int i = 0; i < ROWS; i++) x->rr[r * mb + n + i] = -x->phi[r * ROWS + i];
+        }
+        double rs[MAXS];
+        for (int i = 0; i < ns; i++) rs[i] = -0.5 * h * x->res[N + i];
+        for (int i = 0; i < cs; i++) rs[ns + i] = -x->phi[R * ROWS + i];
+        if (!locked) rs[ns] = 0.0;
+        base_arrow_solve(x, ff, x->rr, rs, -1.0);
+        double norm = 0.0;
+        int finite = 1;
+        for (int r = 0; r < R; r++) {
+            for (int a = 0; a < n; a++) {
+                double d = x->rr[r * mb + a];
+                q[r * n + a] += d;
+                if (!isfinite(d)) finite = 0;
+                else if (fabs(d) > norm) norm = fabs(d);
+            }
+            for (int i = 0; i < ROWS; i++) x->lam[r * ROWS + i] += x->rr[r * mb + n + i] / half_h2;
+        }
+        for (int i = 0; i < ns; i++) {
+            q[N + i] += rs[i];
+            if (!isfinite(rs[i])) finite = 0;
+            else if (i > 0 && fabs(rs[i]) > norm) norm = fabs(rs[i]);
+        }
+        for (int i = 0; i < cs; i++) x->lam[R * ROWS + i] += rs[ns + i] / half_h2;
+        if (!finite) return NON_FINITE;
+        double rate = it > 1 ? norm / last : 1.0;
+        if (norm < tol || (rate < 0.5 && rate / (1.0 - rate) * norm < tol)) {
+            base_constraints(x, q, stuck, locked, x->phi);
+            if (max_abs(R * ROWS + cs, x->phi) < phi_tol) break;
+        }
+        if (it > 1 && rate > REFRESH_RATE) factored = 0;
+        last = norm;
+    }
+    if (it > max_iter) return NO_CONVERGENCE;
+    x->iterations = it;
+    x->pend_slot = (int)(ff - x->slot);
+    x->pend_uses = refactored ? 1 : ff->uses + 1;
+    x->pend_h = h;
+    /* velocities, works, the energy target */
+    double *v = x->v;
+    for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - v0[i]; }
+    base_mass_matrix(x, q);
+    double w_fric = 0.0;
+    for (int r = 0; r < R; r++) {
+        double torque;
+        friction(x, r, x->dq[r * n + m->i_a1], h, &torque, NULL);
+        x->work_fric[r] = torque * x->dq[r * n + m->i_a1];
+        w_fric += x->work_fric[r];
+    }
+    x->work_force = force * (q0[N] - q[N]);
+    double w_drive = 0.0;
+    if (B->prescribed)
+        for (int j = 1; j < 7; j++) w_drive += x->lam[R * ROWS + j] * x->dq[N + j];
+    double t0 = 0.0;
+    for (int i = 0; i < N + ns; i++) t0 += v0[i] * p0[i];
+    t0 *= 0.5;
+    x->strain = strain_energy(x, q);
+    double t_target = t0 + strain_energy(x, q0) - x->strain + x->work_force + w_fric + w_drive;
+    double drift[NB] = {0.0};
+    if (B->free_bus) {
+        /* the bus position is cyclic: its momentum p_X is the step's start's */
+        base_matvec(x, v, x->p);
+        for (int i = 1; i < 4; i++) {
+            drift[i] = p0[N + i] / m->total_mass;
+            v[N + i] += (p0[N + i] - x->p[N + i]) / m->total_mass;
+        }
+    }
+    if (B->prescribed) {
+        double v_bus[6], mu[NB];
+        memcpy(v_bus, v + N + 1, sizeof(v_bus));
+        if (base_project(x, q, v, stuck, locked, B->drive_v, mu) != OK) return SINGULAR;
+        for (int j = 0; j < 6; j++) w_drive -= 0.5 * mu[1 + j] * (v_bus[j] + v[N + 1 + j]);
+        base_matvec(x, v, x->p);
+    } else {
+        if (base_project(x, q, v, stuck, locked, NULL, NULL) != OK) return SINGULAR;
+        base_matvec(x, v, x->p);
+        /* the scaling relative to the mass centre's velocity (König) */
+        double t_drift = 0.0, t_after = 0.0;
+        for (int i = 0; i < NB; i++) t_drift += drift[i] * drift[i];
+        t_drift *= 0.5 * m->total_mass;
+        for (int i = 0; i < N + ns; i++) t_after += v[i] * x->p[i];
+        t_after = 0.5 * t_after - t_drift;
+        double t_rel = t_target - t_drift;
+        if (t_after > 0.0 && t_after / 1.01 <= t_rel && t_rel <= 1.01 * t_after) {
+            double scale = sqrt(t_rel / t_after);
+            for (int i = 0; i < N; i++) v[i] *= scale;
+            for (int i = 0; i < ns; i++) v[N + i] = (v[N + i] - drift[i]) * scale + drift[i];
+            base_matvec(x, v, x->p);
+        }
+    }
+    B->work_drive = w_drive;
+    return OK;
+}
+
+/* the state's p = M(q) v (load: a call without p) */
+static void base_momenta(Ctx3D *x, const double *q, const double *v, double *p) {
+    base_mass_matrix(x, q);
+    base_matvec(x, v, p);
+}
+
+/* a row's base figures after the hub fixed's: the drive's work, and a free bus's linear and
+ * angular momentum (inertial, about the origin) from the generalised momenta: P = p_X,
+ * H = X x P + R B^-T p_theta (p_theta = B^T h, h the bus-frame angular momentum about the
+ * bus origin: model3d.UmbrellaModel3D.momentum's sums) */
+static double *base_row(const Ctx3D *x, const double *q, const double *p, double *o) {
+    int N = x->R * x->n;
+    *o++ = x->base ? x->base->work_drive : 0.0;
+    if (!x->base || !x->base->free_bus) return o;
+    BusFrame3 f;
+    bus_frame(q + N + 4, &f);
+    const double *P = p + N + 1, *pt = p + N + 4, *b = f.basis;
+    /* B^T h = p_theta: h by Cramer's rule on the 3 x 3 B^T */
+    double bt[9], det, h[3], xp[3], rh[3];
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 3; k++) bt[3 * i + k] = b[3 * k + i];
+    det = bt[0] * (bt[4] * bt[8] - bt[5] * bt[7]) - bt[1] * (bt[3] * bt[8] - bt[5] * bt[6])
+        + bt[2] * (bt[3] * bt[7] - bt[4] * bt[6]);
+    for (int c = 0; c < 3; c++) {
+        double mcol[9];
+        memcpy(mcol, bt, sizeof(mcol));
+        for (int i = 0; i < 3; i++) mcol[3 * i + c] = pt[i];
+        h[c] = (mcol[0] * (mcol[4] * mcol[8] - mcol[5] * mcol[7])
+                - mcol[1] * (mcol[3] * mcol[8] - mcol[5] * mcol[6])
+                + mcol[2] * (mcol[3] * mcol[7] - mcol[4] * mcol[6])) / det;
+    }
+    cross3(q + N + 1, P, xp);
+    mv3(f.rot, h, rh);
+    for (int i = 0; i < 3; i++) *o++ = P[i];
+    for (int i = 0; i < 3; i++) *o++ = xp[i] + rh[i];
+    return o;
+}
