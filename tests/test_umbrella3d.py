@@ -33,15 +33,22 @@ its numpy reference differ by ~1e-8 m, a Newton stopping decision, as the 3D one
 
 (c) Energy: T + V - (T + V)(0) = W_sleeve + W_friction - lock loss to the round-off of the
 discrete balance the step keeps (relative 1e-9 asserted); momentum of a free-floating bus.
+A moving base's balances are asserted on both paths, the compiled step (_kernel3d_base.h)
+and its numpy reference (slow).
 """
 import numpy as np
 import pytest
 
 from umbrella_sim.core import UmbrellaParams, UmbrellaSimulator
+from umbrella_sim.core.kernel import load_kernel
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
 
 IDENTITY_TOLERANCE = 1e-10
+#: the paths a moving base's balances are asserted on: the compiled step, the numpy reference
+BASE_KERNELS = [pytest.param('compiled', marks=pytest.mark.skipif(
+                    load_kernel() is None, reason='the compiled kernel is not built')),
+                pytest.param('numpy', marks=pytest.mark.slow)]
 
 
 def planar_run(p: UmbrellaParams, duration: float):
@@ -152,8 +159,8 @@ def momentum_scales(sim, a):
     return linear, linear * (p.l1 + p.l2)
 
 
-@pytest.mark.slow      # ~4 s
-def test_free_floating_bus_keeps_its_momentum_and_energy():
+@pytest.mark.parametrize('kernel', BASE_KERNELS)      # numpy ~4 s
+def test_free_floating_bus_keeps_its_momentum_and_energy(kernel):
     """
     A free bus: linear momentum kept to round-off, angular to Newton's tolerance.
 
@@ -164,7 +171,8 @@ def test_free_floating_bus_keeps_its_momentum_and_energy():
     scale m v L.
     """
     values = dict(ASYMMETRIC, base='free', bus_mass=5.0, bus_inertia=0.2)
-    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), tolerance=1e-12)
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), tolerance=1e-12,
+                              kernel=kernel)
     rec = sim.run(0.05)
     a = rec.arrays()
     p, h = a['linear_momentum'], a['angular_momentum']
@@ -177,8 +185,8 @@ def test_free_floating_bus_keeps_its_momentum_and_energy():
     assert s['energy_balance_residual'] < BALANCE_TOLERANCE * s['energy_scale']
 
 
-@pytest.mark.slow      # ~4 s
-def test_energy_balance_on_a_driven_base():
+@pytest.mark.parametrize('kernel', BASE_KERNELS)      # numpy ~4 s
+def test_energy_balance_on_a_driven_base(kernel):
     """
     A base jolted along X while spun about Y: the drive's work is accounted.
 
@@ -190,18 +198,19 @@ def test_energy_balance_on_a_driven_base():
     through the base's translation (R^T X'), which the discrete gradient includes.
     """
     values = dict(ASYMMETRIC, base='prescribed', **DRIVE)
-    rec = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values)).run(0.08)
+    rec = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), kernel=kernel).run(0.08)
     s = rec.summary()
     drive = rec.arrays()['drive_work'][-1]
     assert abs(drive) > 0.1 * s['energy_scale']
     assert s['energy_balance_residual'] < 1e-7 * s['energy_scale']
 
 
-@pytest.mark.slow
-def test_free_bus_through_the_plastic_lock():
+@pytest.mark.parametrize('kernel', BASE_KERNELS)
+def test_free_bus_through_the_plastic_lock(kernel):
     """Across the lock: the plastic lock's loss accounted, momentum kept (internal impact)."""
     values = dict(ASYMMETRIC, base='free', bus_mass=5.0, bus_inertia=0.2)
-    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), tolerance=1e-12)
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), tolerance=1e-12,
+                              kernel=kernel)
     rec = sim.run(0.2)
     a = rec.arrays()
     assert sim.lock_time is not None and sim.params.lock_rule == 'plastic'
