@@ -24,7 +24,8 @@ The whole umbrella in 3D: N flexible ribs around one sleeve (the planar model's 
     state3d       State3D, StepWork: the umbrella's state and what a step did
     integrator3d  the energy-consistent midpoint step (the planar scheme), friction, drive:
                   the numpy reference, and the choice of the compiled step
-    kernel3d      CompiledStep3D: the binding of the compiled step (_kernel3d.c, hub fixed)
+    kernel3d      CompiledStep3D: the binding of the compiled step (_kernel3d.c; a moving
+                  base: _kernel3d_base.h)
     simulator3d   UmbrellaSimulator3D: the grid, the lock, stuck hinges
     outputs3d     Record3D: every step's figures per rib, peaks, spread, energy balance
     modes3d       the locked umbrella's vibration modes (validation and figures)

@@ -20,10 +20,11 @@ the bodies' points, weights and shapes, stiffness and constant mass; with a movi
 rib frames, the hub radius, the bus inertia and the total mass) and keeps every buffer a
 call uses: the state advanced in place, the rows of the steps taken (``Advance3DCall``)
 and, with a driven base, the drive's bus coordinates and rates at the steps' ends
-(integrator3d.BaseDrive.profile: the drive's one rule, evaluated here for a run of steps).  ``step`` is ``MidpointUmbrella.step`` (the numpy reference) in one
-call; ``advance`` takes up to n grid steps of ``UmbrellaSimulator3D.step`` in one call,
-stopping before the step in which the sleeve reaches the stop (the lock is Python's).  The
-library is the planar kernel's (kernel.load_kernel: ABI-checked against the header).
+(integrator3d.BaseDrive.profile: the drive's one rule, evaluated here for a run of steps).
+``step`` is ``MidpointUmbrella.step`` (the numpy reference) in one call; ``advance`` takes up
+to n grid steps of ``UmbrellaSimulator3D.step`` in one call, stopping before the step in
+which the sleeve reaches the stop (the lock is Python's).  The library is the planar
+kernel's (kernel.load_kernel: ABI-checked against the header).
 """
 from __future__ import annotations
 
