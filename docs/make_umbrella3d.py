@@ -325,12 +325,12 @@ the ribs only through a few unknowns, so a step costs linearly in the number of 
 thesis's §5.2.2); on a free bus `lock: auto` is plastic (the energy lock would change the
 momentum).
 
-The step is compiled for a fixed hub (umbrella_sim/core/_kernel3d.c, in the planar kernel's
+The step is compiled (umbrella_sim/core/_kernel3d.c, in the planar kernel's
 library, its interface declared in _kernel.h and checked at load): the Newton iteration, each
 rib's block factored through its two bodies, the arrow's Schur complement, the projection and
 the energy scaling, and runs of grid steps in one call (`UmbrellaSimulator3D.advance`; the
 lock itself stays in Python). The numpy step (integrator3d.py) is the reference it is tested
-against (tests/test_umbrella3d_kernel.py) and steps a driven or free-floating hub, or any run
+against (tests/test_umbrella3d_kernel.py) and steps any run
 without the library (said once on stderr; `UMBRELLA_SIM_KERNEL=numpy` asks for it). Measured
 on the 2 shared cores (bench/bench_umbrella3d.py, CPU per step at h = 0.1 ms, deployment):
 compiled 3.4 us + 7.9 us x ribs at 1 element a segment, 0.8 us + 16.1 us x ribs at 2 (numpy:
@@ -355,10 +355,23 @@ s). The issue's targets (6 x 1 within 0.5 core,
 12 x 2 in real time) are not reached: they need about 8 us (6 x 1, the figures included) and
 2.8 us (12 x 2) a rib and step at these steps.
 
+A driven hub and a free-floating bus step compiled too (umbrella_sim/core/_kernel3d_base.h: the
+bus's border of M(q), its share of the kinetic energy's gradient, the arrow's full border of
+seven shared coordinates, the drive's rows, the free bus's linear momentum restored and its
+momenta in the rows; the drive's profile evaluated in Python for a run of steps), equal to the
+numpy reference within its round-off spread (tests/test_umbrella3d_kernel.py: an asymmetric
+deployment, runs of steps, through the lock; tests/test_umbrella3d.py: the momentum and the
+drive's work balanced on both paths). Measured (CPU per step at h = 0.1 ms, deployment, 1
+element a segment, load ~5 on the 2 cores; 3 / 6 ribs): hub fixed 28 / 53 us, driven (a jolt in
+X-Z, a spin-up about Y) 84 / 164 us (3.0 Newton iterations a step while the base accelerates or
+spins up, 2.0 when it does not), free bus 68 / 131 us (numpy: 8.2 / 9.1 ms and 6.3 / 6.9 ms). A
+moving base has no stage-2 mode fit (the locked ribs stay coupled through the bus), so its step
+is the planar rule's without it, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks take 4.9
+(driven) and 4.7 (free) CPU s a simulated second, 0.2 x real time on one core (hub fixed: 0.9).
+
 The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
 recording and tools for N ribs (the ROS side still runs the planar model), the geometrically
-exact beam option, the compiled step (and the stage-2 mode fit) for a driven or free-floating
-hub.
+exact beam option.
 """
 
 
