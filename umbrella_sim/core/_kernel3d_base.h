@@ -539,31 +539,32 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         }
         base_constraints(x, q, stuck, locked, x->phi);
         jacobian(x, x->qm, stuck, x->jm);
-        memcpy(x->jg, x->jm, sizeof(double) * R * ROWS * n);
         double cons_s[NB] = {0.0};
         cons_s[0] = locked ? x->lam[R * ROWS] : 0.0;
         if (B->prescribed)
             for (int j = 1; j < 7; j++) cons_s[j] = x->lam[R * ROWS + j];
         for (int r = 0; r < R; r++) {
+            /* the joints' Gonzalez Jacobian G = J(q_m) + f dq^T (f: each row's correction),
+             * in the residual as G^T lam = J^T lam + dq (f . lam) */
             const double *dq = x->dq + r * n, *J = x->jm + r * ROWS * n;
-            double *G = x->jg + r * ROWS * n;
-            double ddr = 0.0;
-            for (int a = 0; a < n; a++) ddr += dq[a] * dq[a];
-            if (ddr > 0.0)
-                for (int i = 0; i < ROWS; i++) {
-                    double lin = 0.0;
-                    for (int a = 0; a < n; a++) lin += J[i * n + a] * dq[a];
-                    if (i == 7) lin -= x->dq[N];
-                    double fr = (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr;
-                    for (int a = 0; a < n; a++) G[i * n + a] += fr * dq[a];
-                }
-            friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
             const double *lam = x->lam + r * ROWS;
+            double ddr = 0.0, flam = 0.0, jl[n];
+            for (int a = 0; a < n; a++) { ddr += dq[a] * dq[a]; jl[a] = 0.0; }
+            for (int i = 0; i < ROWS; i++) {
+                double lin = 0.0;
+                for (int a = 0; a < n; a++) {
+                    lin += J[i * n + a] * dq[a];
+                    jl[a] += J[i * n + a] * lam[i];
+                }
+                if (i == 7) lin -= x->dq[N];
+                if (ddr > 0.0)
+                    flam += (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr * lam[i];
+            }
+            friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
             rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
             for (int a = 0; a < n; a++) {
-                double applied = -x->ycol[a], cons = 0.0;
+                double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
-                for (int i = 0; i < ROWS; i++) cons += G[i * n + a] * lam[i];
                 x->res[r * n + a] = x->p1[r * n + a] - p0[r * n + a]
                     - h * (x->gt[r * n + a] + applied + cons);
             }
