@@ -40,7 +40,9 @@ typedef struct { double rot[9], basis[9], dbasis[27]; } BusFrame3;
 
 struct Base3D {
     int prescribed, free_bus;
-    Kin kin[2];                  /* the bodies' points at the iterate (M(q)) */
+    double *xs[2], *ss[2];       /* per body, every rib's sum_p w x_p x S_pe (R x ne x 3) and
+                                  * sum_p w S_pk x S_pe (R x ne x ne x 3, [k][e]): the
+                                  * elastic columns of M_rs without a point loop */
     double *mrs;                 /* R x n x NB: M_rs at the last base_mass_matrix */
     double mss[NB * NB];
     double *fmrs[3];             /* the M_rs each factorisation holds (slot 0, 1, pm) */
@@ -111,21 +113,10 @@ static void dbasis_rates(const BusFrame3 *f, const double *t, double *out) {
         }
 }
 
-/* point pt of body j of rib r at kinematics k: s = rho + a e_r (out) and its Jacobian */
-static const double *base_point(const Ctx3D *x, int j, const Kin *k, const double *q, int r,
-                                int pt, double *s) {
-    const Body *b = &x->b[j];
-    int rp = r * b->np + pt;
-    const double *qy = k->qy + rp * 3, *qb = q + r * x->n + b->off;
-    for (int i = 0; i < 3; i++) s[i] = qy[i] + (b->t ? qb[i] : 0.0);
-    s[0] += x->m->hub_radius;
-    return k->jac + (size_t)rp * 3 * b->nb;
-}
-
 /* ------------------------------------------------------------------ context */
 static void base_free(Base3D *B) {
     if (!B) return;
-    for (int j = 0; j < 2; j++) kin_free(&B->kin[j]);
+    for (int j = 0; j < 2; j++) { free(B->xs[j]); free(B->ss[j]); }
     free(B->mrs);
     for (int j = 0; j < 3; j++) free(B->fmrs[j]);
     free(B);
@@ -140,7 +131,30 @@ static Base3D *base_new(Ctx3D *x) {
     B->free_bus = !B->prescribed;
     size_t k = (size_t)x->R * x->n * NB;
     int ok = 1;
-    for (int j = 0; j < 2; j++) ok &= kin_alloc(&B->kin[j], &x->b[j], x->R);
+    for (int j = 0; j < 2; j++) {
+        const Body *b = &x->b[j];
+        int ne = b->ne;
+        B->xs[j] = calloc((size_t)x->R * ne * 3 + 1, sizeof(double));
+        B->ss[j] = calloc((size_t)x->R * ne * ne * 3 + 1, sizeof(double));
+        if (!B->xs[j] || !B->ss[j]) { ok = 0; continue; }
+        for (int r = 0; r < x->R; r++)
+            for (int pt = 0; pt < b->np; pt++) {
+                int rp = r * b->np + pt;
+                double w = b->w[rp], c[3];
+                const double *xp = b->x + rp * 3, *S = b->shape + (size_t)rp * 3 * ne;
+                for (int e = 0; e < ne; e++) {
+                    double se[3] = {S[e], S[ne + e], S[2 * ne + e]};
+                    cross3(xp, se, c);
+                    for (int i = 0; i < 3; i++) B->xs[j][((size_t)r * ne + e) * 3 + i] += w * c[i];
+                    for (int k2 = 0; k2 < ne; k2++) {
+                        double sk[3] = {S[k2], S[ne + k2], S[2 * ne + k2]};
+                        cross3(sk, se, c);
+                        double *o = B->ss[j] + (((size_t)r * ne + k2) * ne + e) * 3;
+                        for (int i = 0; i < 3; i++) o[i] += w * c[i];
+                    }
+                }
+            }
+    }
     ok = ok && (B->mrs = calloc(k, sizeof(double)));
     for (int j = 0; j < 3; j++) ok = ok && (B->fmrs[j] = calloc(k, sizeof(double)));
     if (!ok) { base_free(B); return NULL; }
@@ -148,7 +162,11 @@ static Base3D *base_new(Ctx3D *x) {
 }
 
 /* ------------------------------------------------------------------ inertia */
-/* M(q): the rib blocks (mass_matrix), M_rs (B->mrs) and M_ss (B->mss) from the points */
+/* M(q): the rib blocks (mass_matrix), M_rs (B->mrs) and M_ss (B->mss).  Per body and rib
+ * (J = [I3 | e_z x R y | R S], s = R y + d, d = the body origin + a e_r): the points' sums
+ * sum w s, sum w s s^T and the angle's column by a loop over y = x + S e; the elastic
+ * columns sum w J_e = R Sb_e and sum w s x J_e = R (xs_e + sum_k e_k ss_ke) + d x R Sb_e
+ * from the invariants. */
 static void base_mass_matrix(Ctx3D *x, const double *q) {
     const Model3D *m = x->m;
     Base3D *B = x->base;
@@ -164,27 +182,62 @@ static void base_mass_matrix(Ctx3D *x, const double *q) {
     memset(B->mrs, 0, sizeof(double) * N * NB);
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
-        int nb = b->nb;
-        kinematics(x, j, q, &B->kin[j]);
+        int nb = b->nb, ne = b->ne, t = b->t, L = INV_LEN(ne);
         for (int r = 0; r < R; r++) {
-            const double *ps = m->rib_frames + 9 * r;
+            const double *ps = m->rib_frames + 9 * r, *qb = q + r * n + b->off;
+            const double *e = qb + t + 1, *inv = b->inv + (size_t)r * L, *Sb = inv + INV_SB;
+            const double *xs = B->xs[j] + (size_t)r * ne * 3;
+            const double *ss = B->ss[j] + (size_t)r * ne * ne * 3;
+            double cs = cos(qb[t]), sn = sin(qb[t]);
+            double d[3] = {m->hub_radius + (t ? qb[0] : 0.0), t ? qb[1] : 0.0, t ? qb[2] : 0.0};
             double gs[3 * nb], ls[3 * nb], sw[3] = {0, 0, 0}, sec[9] = {0};
             memset(gs, 0, sizeof(gs));
             memset(ls, 0, sizeof(ls));
             for (int pt = 0; pt < b->np; pt++) {
-                double w = b->w[r * b->np + pt], s[3];
-                const double *J = base_point(x, j, &B->kin[j], q, r, pt, s);
-                for (int a = 0; a < nb; a++) {
-                    double col[3] = {J[a], J[nb + a], J[2 * nb + a]}, c[3];
-                    cross3(s, col, c);
-                    for (int i = 0; i < 3; i++) {
-                        gs[i * nb + a] += w * col[i];
-                        ls[i * nb + a] += w * c[i];
-                    }
-                }
+                int rp = r * b->np + pt;
+                double w = b->w[rp], y[3], sp[3], jt[3], c[3];
+                const double *xp = b->x + rp * 3, *S = b->shape + (size_t)rp * 3 * ne;
                 for (int i = 0; i < 3; i++) {
-                    sw[i] += w * s[i];
-                    for (int k = 0; k < 3; k++) sec[3 * i + k] += w * s[i] * s[k];
+                    double acc = xp[i];
+                    for (int a = 0; a < ne; a++) acc += S[i * ne + a] * e[a];
+                    y[i] = acc;
+                }
+                jt[0] = -(sn * y[0] + cs * y[1]);             /* e_z x R y */
+                jt[1] = cs * y[0] - sn * y[1];
+                jt[2] = 0.0;
+                sp[0] = jt[1] + d[0];
+                sp[1] = -jt[0] + d[1];
+                sp[2] = y[2] + d[2];
+                cross3(sp, jt, c);
+                for (int i = 0; i < 3; i++) {
+                    gs[i * nb + t] += w * jt[i];
+                    ls[i * nb + t] += w * c[i];
+                    sw[i] += w * sp[i];
+                    for (int k = 0; k < 3; k++) sec[3 * i + k] += w * sp[i] * sp[k];
+                }
+            }
+            for (int i = 0; i < t; i++) {                /* the translations: I3 */
+                double col[3] = {0, 0, 0}, c[3];
+                col[i] = 1.0;
+                gs[i * nb + i] = inv[INV_M];
+                cross3(sw, col, c);
+                for (int k = 0; k < 3; k++) ls[k * nb + i] = c[k];
+            }
+            for (int a = 0; a < ne; a++) {               /* the elastic columns */
+                double v[3], rsb[3], rv[3], c[3];
+                for (int i = 0; i < 3; i++) v[i] = xs[a * 3 + i];
+                for (int k = 0; k < ne; k++)
+                    for (int i = 0; i < 3; i++) v[i] += e[k] * ss[(k * ne + a) * 3 + i];
+                rsb[0] = cs * Sb[a] - sn * Sb[ne + a];
+                rsb[1] = sn * Sb[a] + cs * Sb[ne + a];
+                rsb[2] = Sb[2 * ne + a];
+                rv[0] = cs * v[0] - sn * v[1];
+                rv[1] = sn * v[0] + cs * v[1];
+                rv[2] = v[2];
+                cross3(d, rsb, c);
+                for (int i = 0; i < 3; i++) {
+                    gs[i * nb + t + 1 + a] = rsb[i];
+                    ls[i * nb + t + 1 + a] = rv[i] + c[i];
                 }
             }
             double *Mr = B->mrs + (size_t)r * n * NB + b->off * NB;
@@ -258,9 +311,10 @@ static void base_matvec(Ctx3D *x, const double *v, double *p) {
     }
 }
 
-/* d/dq [1/2 a^T M(q) b] (kinetic_gradient's rib part, then the base's terms from the
- * points at q: the kinematics into x->km, which the iteration matrix's gyroscopic term
- * reads) */
+/* d/dq [1/2 a^T M(q) b]: kinetic_gradient's rib part, then the base's terms, point by point
+ * (model3d's dv_t with the base's share of the points' velocities, J^T (V_b x omega_a + V_a x
+ * omega_b), _theta_gradient), each point's y = x + S e and S a_e, S b_e taken from its shape
+ * (J = [I3 | e_z x R y | R S]: J^T u's elastic rows are S^T R^T u) */
 static void base_kinetic_gradient(Ctx3D *x, const double *q, const double *a,
                                   const double *bv, double *g) {
     const Model3D *m = x->m;
@@ -279,58 +333,73 @@ static void base_kinetic_gradient(Ctx3D *x, const double *q, const double *a,
     double A[3] = {0, 0, 0}, sva[3] = {0, 0, 0}, svb[3] = {0, 0, 0};
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
-        int nb = b->nb, ne = b->ne, t = b->t;
-        kinematics(x, j, q, &x->km[j]);
+        int ne = b->ne, t = b->t;
         for (int r = 0; r < R; r++) {
-            const double *ps = m->rib_frames + 9 * r;
+            const double *ps = m->rib_frames + 9 * r, *qb = q + r * n + b->off;
             const double *ab = a + r * n + b->off, *bb = bv + r * n + b->off;
+            const double *e = qb + t + 1, *ae = ab + t + 1, *be = bb + t + 1;
+            double cs = cos(qb[t]), sn = sin(qb[t]);
+            double d[3] = {m->hub_radius + (t ? qb[0] : 0.0), t ? qb[1] : 0.0, t ? qb[2] : 0.0};
             double om_a[3], om_b[3], vx_a[3], vx_b[3];
             mtv3(ps, oma_bus, om_a);
             mtv3(ps, omb_bus, om_b);
             mtv3(ps, vxa_bus, vx_a);
             mtv3(ps, vxb_bus, vx_b);
-            double *o = g + r * n + b->off;
+            double *o = g + r * n + b->off, *oe = o + t + 1;
             double ar[3] = {0, 0, 0}, sa[3] = {0, 0, 0}, sb[3] = {0, 0, 0};
             for (int pt = 0; pt < b->np; pt++) {
                 int rp = r * b->np + pt;
-                double w = b->w[rp], s[3];
-                const double *J = base_point(x, j, &x->km[j], q, r, pt, s);
-                const double *qs = x->km[j].qs + (size_t)rp * 3 * ne;
-                double rel_a[3], rel_b[3], ext_a[3], ext_b[3], full_a[3], full_b[3], c[3];
+                double w = b->w[rp];
+                const double *xp = b->x + rp * 3, *S = b->shape + (size_t)rp * 3 * ne;
+                double y[3], Sa[3], Sb[3];
                 for (int i = 0; i < 3; i++) {
-                    double sa_ = 0.0, sb_ = 0.0;
-                    for (int k = 0; k < nb; k++) {
-                        sa_ += J[i * nb + k] * ab[k];
-                        sb_ += J[i * nb + k] * bb[k];
+                    const double *Si = S + i * ne;
+                    double yi = xp[i], sai = 0.0, sbi = 0.0;
+                    for (int k = 0; k < ne; k++) {
+                        yi += Si[k] * e[k];
+                        sai += Si[k] * ae[k];
+                        sbi += Si[k] * be[k];
                     }
-                    rel_a[i] = sa_;
-                    rel_b[i] = sb_;
+                    y[i] = yi; Sa[i] = sai; Sb[i] = sbi;
                 }
-                cross3(om_a, s, c);
-                for (int i = 0; i < 3; i++) ext_a[i] = vx_a[i] + c[i];
-                cross3(om_b, s, c);
-                for (int i = 0; i < 3; i++) ext_b[i] = vx_b[i] + c[i];
+                double ry[3] = {cs * y[0] - sn * y[1], sn * y[0] + cs * y[1], y[2]};
+                double jt[3] = {-ry[1], ry[0], 0.0};           /* the angle's column */
+                double s[3] = {ry[0] + d[0], ry[1] + d[1], ry[2] + d[2]};
+                double qz_a[3], qz_b[3], rel_a[3], rel_b[3], ext_a[3], ext_b[3];
+                double full_a[3], full_b[3], c[3], c1[3], c2[3];
+                qz_a[0] = ab[t] * jt[0] + cs * Sa[0] - sn * Sa[1];
+                qz_a[1] = ab[t] * jt[1] + sn * Sa[0] + cs * Sa[1];
+                qz_a[2] = Sa[2];
+                qz_b[0] = bb[t] * jt[0] + cs * Sb[0] - sn * Sb[1];
+                qz_b[1] = bb[t] * jt[1] + sn * Sb[0] + cs * Sb[1];
+                qz_b[2] = Sb[2];
+                cross3(om_a, s, c1);
+                cross3(om_b, s, c2);
                 for (int i = 0; i < 3; i++) {
+                    rel_a[i] = qz_a[i] + (t ? ab[i] : 0.0);
+                    rel_b[i] = qz_b[i] + (t ? bb[i] : 0.0);
+                    ext_a[i] = vx_a[i] + c1[i];
+                    ext_b[i] = vx_b[i] + c2[i];
                     full_a[i] = rel_a[i] + ext_a[i];
                     full_b[i] = rel_b[i] + ext_b[i];
                 }
-                /* dv_t's share of the base's velocities */
-                double qa0 = rel_a[0] - (t ? ab[0] : 0.0), qa1 = rel_a[1] - (t ? ab[1] : 0.0);
-                double qb0 = rel_b[0] - (t ? bb[0] : 0.0), qb1 = rel_b[1] - (t ? bb[1] : 0.0);
-                o[t] += 0.5 * w * ((-qa1 * ext_b[0] + qa0 * ext_b[1])
-                                   + (-qb1 * ext_a[0] + qb0 * ext_a[1]));
-                for (int e = 0; e < ne; e++) {
-                    double s0 = qs[e], s1 = qs[ne + e];
-                    o[t + 1 + e] += 0.5 * w * (ab[t] * (s0 * ext_b[1] - s1 * ext_b[0])
-                                               + bb[t] * (s0 * ext_a[1] - s1 * ext_a[0]));
-                }
                 /* J^T (V_b x omega_a + V_a x omega_b) */
-                double c1[3], c2[3];
                 cross3(full_b, om_a, c1);
                 cross3(full_a, om_b, c2);
                 for (int i = 0; i < 3; i++) c[i] = c1[i] + c2[i];
-                for (int k = 0; k < nb; k++)
-                    o[k] += 0.5 * w * (J[k] * c[0] + J[nb + k] * c[1] + J[2 * nb + k] * c[2]);
+                double hw = 0.5 * w;
+                for (int k = 0; k < t; k++) o[k] += hw * c[k];
+                /* dv_t's share of the base's velocities, and the angle's row of J^T c */
+                o[t] += hw * ((-qz_a[1] * ext_b[0] + qz_a[0] * ext_b[1])
+                              + (-qz_b[1] * ext_a[0] + qz_b[0] * ext_a[1])
+                              + jt[0] * c[0] + jt[1] * c[1]);
+                /* the elastic rows: S^T R^T (P, Q, 0) (dv_t) + S^T R^T c */
+                double P = ab[t] * ext_b[1] + bb[t] * ext_a[1];
+                double Q = -(ab[t] * ext_b[0] + bb[t] * ext_a[0]);
+                double u0 = P + c[0], u1 = Q + c[1];
+                double U[3] = {hw * (cs * u0 + sn * u1), hw * (-sn * u0 + cs * u1), hw * c[2]};
+                for (int k = 0; k < ne; k++)
+                    oe[k] += S[k] * U[0] + S[ne + k] * U[1] + S[2 * ne + k] * U[2];
                 /* the angles' share (_theta_gradient) */
                 double u_a[3], u_b[3];
                 cross3(om_a, s, u_a);
@@ -343,13 +412,13 @@ static void base_kinetic_gradient(Ctx3D *x, const double *q, const double *a,
                 cross3(s, full_b, c2);
                 for (int i = 0; i < 3; i++) { sa[i] += w * c1[i]; sb[i] += w * c2[i]; }
             }
-            double y[3];
-            mv3(ps, ar, y);
-            for (int i = 0; i < 3; i++) A[i] += y[i];
-            mv3(ps, sa, y);
-            for (int i = 0; i < 3; i++) sva[i] += y[i];
-            mv3(ps, sb, y);
-            for (int i = 0; i < 3; i++) svb[i] += y[i];
+            double yv[3];
+            mv3(ps, ar, yv);
+            for (int i = 0; i < 3; i++) A[i] += yv[i];
+            mv3(ps, sa, yv);
+            for (int i = 0; i < 3; i++) sva[i] += yv[i];
+            mv3(ps, sb, yv);
+            for (int i = 0; i < 3; i++) svb[i] += yv[i];
         }
     }
     /* the sleeve point and the bus body (_sleeve_and_bus_gradient) */
@@ -576,7 +645,7 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         if (!factored) {
             jacobian(x, q, stuck, x->jr);
             for (int i = 0; i < N; i++) x->tmp[i] = x->dq[i] / h;
-            /* (x->km: the points at q_m, base_kinetic_gradient's) */
+            for (int j = 0; j < 2; j++) kinematics(x, j, x->qm, &x->km[j]);
             gyroscopic(x, x->km, x->tmp);
             for (int r = 0; r < R; r++) {
                 double *G = x->gyro + (size_t)r * n * n;

@@ -46,8 +46,9 @@ from ..outputs import LockEvent
 from ..summary import (deploy_start, ENERGY_SCALE_FLOOR, validity_warnings)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
-#: a segment), so a chunk stays near the planar rule's ~10 ms (driver.CHUNK_WORK); the
-#: compiled step (fixed hub) ~0.1 ms at 6 ribs: COMPILED_CHUNK_STEPS
+#: a segment; 6 to 9 ms with a moving base), so a chunk stays near the planar rule's ~10 ms
+#: (driver.CHUNK_WORK); the compiled step ~0.05 ms at 6 ribs (fixed hub; 0.13 to 0.16 ms with
+#: a moving base): COMPILED_CHUNK_STEPS
 CHUNK_STEPS = 4
 COMPILED_CHUNK_STEPS = 64
 
