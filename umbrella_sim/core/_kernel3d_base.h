@@ -18,13 +18,17 @@
  * after y_s).  _kernel3d.c includes this file after its own step: these functions take
  * that file's helpers for what the base leaves as it is (each rib's own mass blocks and
  * kinetic gradient from the inertia invariants, the joints, the rib blocks of the arrow
- * factorisation, friction, the kept iteration matrix's rule) and add the base's terms,
- * point by point as the numpy reference computes them (model3d.UmbrellaModel3D: mass_matrix,
- * kinetic_gradient, _theta_gradient, _sleeve_and_bus_gradient): the rib-bus block M_rs and
- * the shared block M_ss of M(q), their share of the kinetic energy's gradient, the arrow
- * algebra's full border (every shared column), the drive's rows.  base_step is
- * integrator3d.MidpointUmbrella._step for a moving base (no stage-2 mode fit: the locked
- * ribs stay coupled through the bus), operation for operation.
+ * factorisation, friction, the kept iteration matrix's rule) and add the base's terms as
+ * the numpy reference defines them (model3d.UmbrellaModel3D: mass_matrix, kinetic_gradient,
+ * _theta_gradient, _sleeve_and_bus_gradient; summed over the points, or for M_rs's elastic
+ * columns from invariants): the rib-bus block M_rs and the shared block M_ss of M(q), their
+ * share of the kinetic energy's gradient, the arrow algebra's full border (every shared
+ * column), the drive's rows.  base_step is integrator3d.MidpointUmbrella._step for a moving
+ * base (no stage-2 mode fit: the locked ribs stay coupled through the bus), step for step
+ * the same algorithm (its states equal the reference's to round-off).
+ *
+ * One file for the base: its functions serve base_step and one another, and leave
+ * _kernel3d.c's (the hub fixed's step) as they are.
  *
  * Frames: psi_r (Model3D.rib_frames) maps rib r's frame to the bus frame; the bus frame's
  * attitude R = Ry(psi) Rx(beta) Rz(gamma) maps it to the inertial one; omega = B theta'
