@@ -19,8 +19,8 @@ The command lines with the umbrella of N ribs: simulate, --mcap, re-simulation, 
 run driver and prints its figures; ``--mcap`` records it as umbrella_node does; re-running a
 recording (``umbrella_replay --resimulate``) from its parameters and applied forces gives
 every published value of every rib again, exactly on this build; a sweep varies the rib
-parameters as any other; what the tools do not read
-yet (per-rib CSV, umbrella_compare) is refused naming why.
+parameters as any other; what the tools do not offer for it (``--csv-state``) is refused
+naming why.
 """
 import json
 
@@ -89,7 +89,7 @@ def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_pat
     (['simulate', '--set', 'rib.tip_mass=[0.1]', '--duration', '0.01'], 'rib.tip_mass'),
     ([*RUN, '--set', 'rib.tip_mass=0.1'], 'rib.tip_mass'),
     ([*RUN, '--set', 'rib.tip_mass=[0.1, 0.0, 0.0]'], 'tip_mass'),
-    ([*RUN, '--csv', 'out.csv'], '--csv'),
+    ([*RUN, '--csv', 'out.csv', '--csv-state'], '--csv-state'),
 ])
 def test_simulate_refuses_what_the_umbrella_cannot_take_naming_it(
         args, culprit, tmp_path, capsys, monkeypatch):

@@ -23,7 +23,7 @@ import sys
 
 from . import sweep
 from .arguments import ArgumentParser
-from .csv_output import StepCsv
+from .csv_output import StepCsv, UmbrellaStepCsv
 from .inputs import build_params, check_run_length, LONG_RUN_STEPS, read_force_profile
 from .progress import Progress
 from .. import __version__
@@ -80,7 +80,9 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument('--csv', metavar='FILE',
                     help='write the time series of every physics step (its state at the '
                          "step's end; peak stresses: the largest over the step), streamed "
-                         'as the run goes')
+                         'as the run goes; the umbrella of N ribs: the sleeve, the energies '
+                         "and each rib's figures, named by the rib (rib0_alpha1, rib0_tip_w, "
+                         'rib0_stress_von_mises, ...)')
     sp.add_argument('--csv-state', action='store_true',
                     help="add q, q' and the fibre stress at every stress point to the CSV")
     sp.add_argument('--json', action='store_true', help='print one JSON summary')
@@ -169,8 +171,10 @@ def format_summary(summary: dict) -> str:
 class CsvStream:
     """--csv FILE while the run goes: a write error stops the file (removed), not the run."""
 
-    def __init__(self, path: str, initial, state_model=None):
+    def __init__(self, path: str, initial, state_model=None, umbrella: bool = False):
+        """Stream to path; umbrella: the umbrella of N ribs' columns (initial a Sample3D)."""
         self.path, self.initial, self.state_model = path, initial, state_model
+        self.umbrella = umbrella
         self.error: str | None = None
         self.rows = 0
         self._out = None
@@ -181,7 +185,8 @@ class CsvStream:
         try:
             with deferred():    # a stop signal lands between chunks, never inside a row
                 if self._out is None:
-                    self._out = StepCsv(self.path, self.state_model)
+                    self._out = (UmbrellaStepCsv(self.path, self.initial) if self.umbrella
+                                 else StepCsv(self.path, self.state_model))
                     self._out.write_sample(self.initial)
                 self._out.write(chunk.block, chunk.lock_sample)
                 self.rows = self._out.rows
@@ -236,9 +241,10 @@ def main(argv: list[str] | None = None) -> int:
         if len(set(outputs.values())) < len(outputs):
             raise ValueError(f'--csv and --mcap name the same path {args.csv}: give each '
                              'output its own')
-        if args.csv and run is not params:
-            raise ValueError(f'--csv {args.csv}: the umbrella of N ribs (ribs >= 2) writes no '
-                             'CSV of its steps; record its per-rib topics with --mcap BAG_DIR')
+        if args.csv_state and run is not params:
+            raise ValueError('--csv-state: the umbrella of N ribs (ribs >= 2) offers no state '
+                             "rows (q, q' and every stress point); its --csv has each rib's "
+                             'figures')
         if args.csv_state and not args.csv:
             raise ValueError('--csv-state adds columns to --csv FILE: give --csv too')
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
@@ -250,8 +256,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.exit(2, f'umbrella_sim: error: {exc}\n')
     progress = (Progress(args.duration, lambda t: f't = {t:.3f} of {args.duration:g} s')
                 if sys.stderr.isatty() and not args.json else None)
-    csv = (CsvStream(args.csv, driver.initial, driver.sim.model if args.csv_state else None)
-           if args.csv else None)
+    csv = (CsvStream(args.csv, driver.initial, driver.sim.model if args.csv_state else None,
+                     umbrella=run is not params) if args.csv else None)
 
     def on_chunk(chunk) -> None:
         if csv is not None:
