@@ -96,14 +96,15 @@ def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
         stage2_span=float(t2[-1] - lock_time) if len(t2) else 0.0)
 
 
-def summary_from_recording(path: str,
-                           after_lock: float | None = SUMMARY_AFTER_LOCK) -> RunSummary:
+def summary_from_recording(path: str, after_lock: float | None = SUMMARY_AFTER_LOCK):
     """
     Return the run summary of a finalised (or torn) MCAP recording of umbrella_node.
 
     Of its last run (a ~/reset starts a new segment); every figure is on that run's sim
     time, stage 2 over ``after_lock`` s after the lock as :meth:`SimulatedAntenna.summary`
     (None: to the end of the recording), so neither depends on when the node was stopped.
+    A RunSummary; of a recording of the umbrella of N ribs (``ribs`` >= 2), a
+    RibsRunSummary (ribs_summary.py: each rib's figures, from its rib topics).
     """
     log = read_log(path)
     seg = log.segments()[-1]
@@ -113,12 +114,17 @@ def summary_from_recording(path: str,
     applied_topic = log.find_topic('sleeve_force/applied', required=False)
     applied = ([(t, m.data) for t, m in log.decoded(applied_topic, seg)]
                if applied_topic else [])
-    tip = [(t, tip_deflection_figures(m)['tip_transverse'])
-           for t, m in log.decoded(log.find_topic('tip_deflection'), seg)]
-    stress = [(t, peak_stress(m)) for t, m in log.decoded(log.find_topic('peak_stress'), seg)]
     if lock_time is None:          # a torn recording: the first 'locked' phase message
         locked = [t for t, m in log.decoded(log.find_topic('deployment_phase'), seg)
                   if m.data == 'locked']
         lock_time = locked[0] if locked else None
-    return summarize_run(applied, lock_time, deploy_start_of(params, applied) == 0.0, tip,
-                         stress, after_lock)
+    started_moving = deploy_start_of(params, applied) == 0.0
+    ribs = params.get('ribs', 1)
+    if isinstance(ribs, int) and ribs > 1:
+        from .ribs_summary import ribs_summary_of_log
+
+        return ribs_summary_of_log(log, seg, applied, lock_time, started_moving, after_lock)
+    tip = [(t, tip_deflection_figures(m)['tip_transverse'])
+           for t, m in log.decoded(log.find_topic('tip_deflection'), seg)]
+    stress = [(t, peak_stress(m)) for t, m in log.decoded(log.find_topic('peak_stress'), seg)]
+    return summarize_run(applied, lock_time, started_moving, tip, stress, after_lock)
