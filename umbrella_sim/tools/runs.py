@@ -324,11 +324,11 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     params = seg.params
     ribs = params.get('ribs', 1)
     if isinstance(ribs, int) and ribs > 1:
-        raise LogError(f'{log.path}: a recording of the umbrella of {ribs} ribs: this tool '
-                       "reads the planar rib's topics (tip_deflection, peak_stress); per-rib "
-                       'plots are not implemented yet (umbrella_replay --resimulate checks '
-                       "the recording; its summary figures are in its metadata's "
-                       'umbrella_sim.summary)')
+        raise LogError(f'{log.path}: a recording of the umbrella of {ribs} ribs: load_run '
+                       "reads the planar rib's topics (tip_deflection, peak_stress); "
+                       'compare_ribs.load_ribs_run reads its per-rib series (umbrella_compare '
+                       'compares such recordings rib by rib, with per-rib plots and a top '
+                       'view)')
     t, js = _series(log, log.find_topic('joint_states'),
                     lambda m: _figures(joint_state_figures(m), 'alpha1', 'alpha1_rate',
                                        'alpha2'), seg, 3)
