@@ -181,3 +181,18 @@ def test_csv_state_is_refused_for_the_umbrella_naming_it(tmp_path, capsys):
         cli.main([*RUN, '--csv', str(tmp_path / 'x.csv'), '--csv-state'])
     assert exc.value.code == 2 and '--csv-state' in capsys.readouterr().err
     assert not (tmp_path / 'x.csv').exists()
+
+
+def test_the_text_summary_gives_each_ribs_figures_with_units(capsys):
+    """simulate's text: a figure a line, per-rib lists rib 0 first, each with its unit."""
+    assert cli.main([*RUN[:-1], '0.05']) == 0
+    lines = dict(line.split(None, 1) for line in capsys.readouterr().out.splitlines())
+    assert lines['ribs'] == '3'
+    assert lines['rib_deploy_time'] == '-, -, - s'            # not deployed by 0.05 s
+    assert lines['friction_work'].endswith(' J') and len(lines['friction_work'].split(',')) == 3
+    assert lines['max_in_plane_tip'].endswith(' mm')
+    for name in STRESS_NAMES:
+        values, unit = lines[f'peak_{name}'].rsplit(' ', 1)
+        assert unit == 'MPa' and len(values.split(', ')) == 3
+    assert lines['peak_von_mises_at'].count(' m at ') == 3
+    assert not any('{' in text for text in lines.values())     # no Python dict written out

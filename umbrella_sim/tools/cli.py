@@ -139,7 +139,24 @@ TEXT_FIELDS = {
     'wall_time': ('s', 1.0, '.2f'),
     'real_time_factor': ('-', 1.0, '.3g'),
     'figures_from': ('', None, ''),
+    # the umbrella of N ribs (Summary3D): lists are per rib, rib 0 first
+    'ribs': ('', None, ''),
+    'rib_deploy_time': ('s', 1.0, '.6f'),
+    'deployment_lag': ('s', 1.0, '.3e'),
+    'latest_rib': ('', None, ''),
+    'max_out_of_plane_tip': ('mm', 1e3, '.4g'),
+    'max_out_of_plane_tip_rib': ('', None, ''),
+    'max_out_of_plane_tip_time': ('s', 1.0, '.4f'),
+    'max_in_plane_tip': ('mm', 1e3, '.4g'),
+    'peak_stress': ('MPa', 1e-6, '.4g'),
+    'friction_work': ('J', 1.0, '.4g'),
+    'drive_work': ('J', 1.0, '.4g'),
+    'lock_energy_loss': ('J', 1.0, '.4g'),
+    'energy_balance_residual': ('J', 1.0, '.2e'),
+    'energy_scale': ('J', 1.0, '.6g'),
 }
+#: the summary's lists that are per rib (the others with a unit: a range, 'from to')
+PER_RIB = ('rib_deploy_time', 'max_in_plane_tip', 'friction_work')
 
 
 def format_summary(summary: dict) -> str:
@@ -154,6 +171,13 @@ def format_summary(summary: dict) -> str:
     for key in keys:
         value = summary[key]
         unit, scale, spec = TEXT_FIELDS.get(key, ('', None, ''))
+        if key == 'peak_stress' and isinstance(value, dict):    # the umbrella's, per rib
+            lines += _rib_peaks(value, unit, scale, spec)
+            continue
+        if key in PER_RIB and isinstance(value, list):
+            text = ', '.join('-' if v is None else format(v * scale, spec) for v in value)
+            lines.append(f'{key:28s} {text} {unit}')
+            continue
         if value is None:
             text = '-'
         elif isinstance(value, list) and scale is None:
@@ -166,6 +190,19 @@ def format_summary(summary: dict) -> str:
             text = f'{format(value * scale, spec)} {unit}'.rstrip()
         lines.append(f'{key:28s} {text}')
     return '\n'.join(lines)
+
+
+def _rib_peaks(peaks: dict, unit: str, scale: float, spec: str) -> list[str]:
+    """Return the umbrella's peak stresses as text: a line a component, each rib's peak."""
+    lines = []
+    for name, peak in peaks.items():
+        values = ', '.join(format(v * scale, spec) for v in peak['value'])
+        lines.append(f"{'peak_' + name:28s} {values} {unit}")
+        if name == 'von_mises':
+            where = ', '.join(f'{b} {x:.4g} m at {t:.4f} s'
+                              for b, x, t in zip(peak['body'], peak['x'], peak['time']))
+            lines.append(f"{'peak_von_mises_at':28s} {where}")
+    return lines
 
 
 class CsvStream:
