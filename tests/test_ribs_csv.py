@@ -184,7 +184,7 @@ def test_csv_state_is_refused_for_the_umbrella_naming_it(tmp_path, capsys):
 
 
 def test_the_text_summary_gives_each_ribs_figures_with_units(capsys):
-    """simulate's text: a figure a line, per-rib lists rib 0 first, each with its unit."""
+    """The text of simulate: a figure a line, per-rib lists rib 0 first, each with its unit."""
     assert cli.main([*RUN[:-1], '0.05']) == 0
     lines = dict(line.split(None, 1) for line in capsys.readouterr().out.splitlines())
     assert lines['ribs'] == '3'

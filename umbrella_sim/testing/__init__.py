@@ -67,8 +67,8 @@ from __future__ import annotations
 from .antenna import SimulatedAntenna
 from .processes import (default_domain_id, DOMAIN_ID, DOMAIN_ID_ENV, NodeProcess, poll, Probe,
                         remove_stale_shm, reserve_domain, ros_env)
-from .ribs_summary import RibsRunSummary, summarize_ribs
-from .summary import RunSummary, summarize_run, SUMMARY_AFTER_LOCK, summary_from_recording
+from .summary import (RibsRunSummary, RunSummary, summarize_ribs, summarize_run,
+                      SUMMARY_AFTER_LOCK, summary_from_recording)
 
 __all__ = ['antenna_factory', 'default_domain_id', 'DOMAIN_ID', 'DOMAIN_ID_ENV', 'NodeProcess',
            'poll', 'Probe', 'probe', 'remove_stale_shm', 'reserve_domain',
