@@ -126,3 +126,53 @@ def test_a_planar_recording_still_gives_a_run_summary(tmp_path):
     bag = str(tmp_path / 'planar')
     assert cli.main(['simulate', '--duration', '0.3', '--mcap', bag]) == 0
     assert type(summary_from_recording(bag)) is RunSummary
+
+
+def test_compare_takes_a_torn_recordings_figures_from_its_samples(every_step, tmp_path):
+    """
+    umbrella_compare of a recording whose writer was killed (no summary record).
+
+    Its figures are those of its samples, and say so; with a publication every step they are
+    the summary's of the same run stopped at its last sample (each series' own end).
+    """
+    import os
+
+    from umbrella_sim.core.driver import simulate
+    from umbrella_sim.core.umbrella3d.params3d import node_model
+    from umbrella_sim.tools.compare_ribs import compare_ribs, load_ribs_run
+
+    bag, figures = every_step
+    log = read_log(bag)
+    torn = tmp_path / 'torn.mcap'
+    with open(log.path, 'rb') as fh:
+        data = fh.read()
+    torn.write_bytes(data[:int(len(data) * 0.93)])     # a killed writer: its last chunks lost
+    run = load_ribs_run(str(torn), 'torn')
+    got = run.figures
+    assert 'no summary record' in got['figures_from'] and '5000.0 Hz' in got['figures_from']
+    assert len(run.t) < figures['steps'] + 1 and os.path.getsize(torn) < len(data)
+    params = node_model(read_log(str(torn)).segment(0).params)
+
+    def summary_to(t_end):
+        return simulate(params, t_end + STEP / 2, keep_samples=False).figures
+
+    assert run.t[-1] > figures['lock_time']             # (it deployed before the cut)
+    # the lock: the events record's, or with it lost the 'locked' phase message's time, the
+    # publication that followed the lock (here the next step)
+    assert 0.0 <= got['lock_time'] - figures['lock_time'] < STEP
+    assert got['rib_deploy_time'] == pytest.approx(figures['rib_deploy_time'], abs=1e-9)
+    stress_end = float(read_log(str(torn)).decoded(
+        read_log(str(torn)).find_topic('rib_peak_stress'))[-1][0])
+    want = summary_to(stress_end)
+    for name in STRESS_NAMES:
+        assert got['peak_stress'][name]['value'] == want['peak_stress'][name]['value']
+    assert got['peak_stress']['von_mises']['body'] == want['peak_stress']['von_mises']['body']
+    assert got['max_in_plane_tip'] == summary_to(float(run_tip_end(torn)))['max_in_plane_tip']
+    table = compare_ribs([run])['runs'][0]
+    assert table['figures_from'] == got['figures_from']
+    assert table['peak_von_mises'] == want['peak_stress']['von_mises']['value']
+
+
+def run_tip_end(path) -> float:
+    log = read_log(str(path))
+    return log.decoded(log.find_topic('rib_tip_deflection'))[-1][0]

@@ -21,16 +21,14 @@ summary (core.summary.STAGE2_WINDOW), so that a live and a recorded summary of o
 however long the node ran on.
 
 The umbrella of N ribs (RibsRunSummary, of its rib topics): the run summary's definitions
-(core.umbrella3d's Summary3D) applied to the publications instead of every physics step:
-each rib's deployment instant where its leaf angle first reaches its deployed angle, linear
-between samples (outputs3d.first_reach), the lag and the latest rib
-(outputs3d.deployment_spread), the largest out-of-plane tip
-(outputs3d.largest_out_of_plane_tip), each stress component's peak (StepBlock3D.peaks: the
-first sample holding the largest); the deploy time and each rib's stage-2 figures are
-summarize_run's, of the rib's in-plane tip and von Mises peak.  From sampling: the peaks
-are exact (each publication holds the largest value of every step since the previous one),
-their times the publication's that held them (up to a period late); the deployment instants
-and the tips are of the samples (with a publication every physics step, Summary3D's figures).
+(core.umbrella3d's Summary3D) applied to the publications instead of every physics step
+(sampled3d.sampled_figures: each rib's deployment instant, linear between samples, the lag
+and the latest rib, the largest tips, each stress component's peak); the deploy time and
+each rib's stage-2 figures are summarize_run's, of the rib's in-plane tip and von Mises
+peak.  From sampling: the peaks are exact (each publication holds the largest value of every
+step since the previous one), their times the publication's that held them (up to a period
+late); the deployment instants and the tips are of the samples (with a publication every
+physics step, Summary3D's figures).
 """
 from __future__ import annotations
 
@@ -43,9 +41,8 @@ from ..bag.format import EVENTS_RECORD
 from ..bag.reader import read_log
 from ..core.summary import (amplitude, deploy_start, deploy_start_of, in_stage2_window,
                             STAGE2_WINDOW)
-from ..core.umbrella3d.driven3d import StepBlock3D
-from ..core.umbrella3d.outputs3d import (BODIES, deployment_spread, first_reach,
-                                         largest_out_of_plane_tip, STRESS_NAMES)
+from ..core.umbrella3d.outputs3d import STRESS_NAMES
+from ..core.umbrella3d.sampled3d import sampled_figures
 from ..ros.messages import peak_stress_figures, tip_deflection_figures
 
 
@@ -192,52 +189,40 @@ def summarize_ribs(alpha_deployed, applied: list, lock_time: float | None,
     and stresses [(t, rib_array_figures)], energy [(t, rib_energy_figures)], in time order
     (ribs_messages' readers of joint_states, rib_tip_deflection, rib_peak_stress, energy).
     """
-    alpha_deployed = np.asarray(alpha_deployed, dtype=float)
     ribs = len(alpha_deployed)
     if not joints or not tips or not stresses:
         raise ValueError('no publications of the umbrella (joint_states, rib_tip_deflection, '
                          'rib_peak_stress) to summarise')
-    t_joint = np.array([t for t, _ in joints])
-    alpha1 = np.array([f['alpha1'] for _, f in joints], dtype=float)
-    if alpha1.shape[1] != ribs:
-        raise ValueError(f'joint_states of {alpha1.shape[1]} ribs for a model of {ribs}')
-    deployed = [first_reach(t_joint, alpha1[:, k] - alpha_deployed[k]) for k in range(ribs)]
     t_tip = np.array([t for t, _ in tips])
     tip = np.array([[(r['axial_m'], r['in_plane_m'], r['out_of_plane_m']) for r in rows]
                     for _, rows in tips], dtype=float)
-    w, w_rib, w_time = largest_out_of_plane_tip(t_tip, tip)
-    rows = {'time': np.array([t for t, _ in stresses])}
-    for name in STRESS_NAMES:
-        rows[f'stress_{name}'] = np.array([[r[f'{name}_Pa'] for r in rs] for _, rs in stresses])
-        rows[f'stress_{name}_at'] = np.full(rows[f'stress_{name}'].shape + (2,), np.nan)
-    rows['stress_von_mises_at'] = np.array([[(r['von_mises_body'], r['von_mises_x_m'])
-                                             for r in rs] for _, rs in stresses])
-    peaks = StepBlock3D(rows, None).peaks          # Summary3D's peak rule, sample by sample
+    t_stress = np.array([t for t, _ in stresses])
+    vm = np.array([[r['von_mises_Pa'] for r in rs] for _, rs in stresses])
+    f = sampled_figures(
+        alpha_deployed, np.array([t for t, _ in joints]), [j['alpha1'] for _, j in joints],
+        t_tip, tip, t_stress,
+        {name: [[r[f'{name}_Pa'] for r in rs] for _, rs in stresses] for name in STRESS_NAMES},
+        [[(r['von_mises_body'], r['von_mises_x_m']) for r in rs] for _, rs in stresses])
     stage2 = tuple(summarize_run(applied, lock_time, started_moving,
                                  list(zip(t_tip.tolist(), tip[:, k, 1].tolist())),
-                                 list(zip(rows['time'].tolist(),
-                                          rows['stress_von_mises'][:, k].tolist())),
-                                 after_lock) for k in range(ribs))
-    sleeve = stage2[0]
+                                 list(zip(t_stress.tolist(), vm[:, k].tolist())), after_lock)
+                   for k in range(ribs))
+    sleeve, peaks = stage2[0], f['peak_stress']
     return RibsRunSummary(
         ribs=ribs, first_push_time=sleeve.first_push_time, lock_time=lock_time,
-        deploy_time=sleeve.deploy_time, **_spread(deployed),
-        peak_stress={name: tuple(p[0].tolist()) for name, p in peaks.items()},
-        peak_stress_time={name: tuple(p[2].tolist()) for name, p in peaks.items()},
-        peak_von_mises_at=tuple((BODIES[int(b)], float(x))
-                                for b, x in peaks['von_mises'][1]),
-        max_out_of_plane_tip=w, max_out_of_plane_tip_rib=w_rib, max_out_of_plane_tip_time=w_time,
-        max_in_plane_tip=tuple(np.abs(tip[:, :, 1]).max(0).tolist()),
+        deploy_time=sleeve.deploy_time, rib_deploy_time=tuple(f['rib_deploy_time']),
+        deployment_lag=f['deployment_lag'], latest_rib=f['latest_rib'],
+        peak_stress={name: tuple(p['value']) for name, p in peaks.items()},
+        peak_stress_time={name: tuple(p['time']) for name, p in peaks.items()},
+        peak_von_mises_at=tuple(zip(peaks['von_mises']['body'], peaks['von_mises']['x'])),
+        max_out_of_plane_tip=f['max_out_of_plane_tip'],
+        max_out_of_plane_tip_rib=f['max_out_of_plane_tip_rib'],
+        max_out_of_plane_tip_time=f['max_out_of_plane_tip_time'],
+        max_in_plane_tip=tuple(f['max_in_plane_tip']),
         friction_work=energy[-1][1]['friction_work_J'] if energy else None,
         energy_balance_residual=max((abs(e['balance_error_J']) for _, e in energy),
                                     default=0.0),
         stage2=stage2, samples=len(joints))
-
-
-def _spread(deployed) -> dict:
-    spread = deployment_spread(deployed)
-    spread['rib_deploy_time'] = tuple(spread['rib_deploy_time'])
-    return spread
 
 
 def ribs_summary_of_log(log, seg, applied: list, lock_time: float | None,
