@@ -112,17 +112,21 @@ class StepCsv:
 
     def __init__(self, path: str, model=None):
         """Create the file (path checked by the caller) and write the header; model: states."""
+        self.with_states = model is not None
+        self.columns = CSV_COLUMNS + (state_columns(model) if model is not None else [])
+        self._open(path, header_names(self.columns))
+
+    def _open(self, path: str, header: list[str]) -> None:
+        """Create the file and write its header (one name a column, with its unit)."""
         import pyarrow.csv      # (here: pyarrow's import costs a tenth of a second)
 
         self._csv = pyarrow.csv
         self.path = path
-        self.with_states = model is not None
-        self.columns = CSV_COLUMNS + (state_columns(model) if model is not None else [])
-        self._names = [f'c{i}' for i in range(len(self.columns))]
+        self._names = [f'c{i}' for i in range(len(header))]
         self._options = pyarrow.csv.WriteOptions(include_header=False, quoting_style='none')
         self.rows = 0
         self._fh = open(path, 'wb')
-        self._fh.write((','.join(header_names(self.columns)) + '\n').encode('utf-8'))
+        self._fh.write((','.join(header) + '\n').encode('utf-8'))
 
     def write_sample(self, s: Sample) -> None:
         """Append one state's row (t = 0, the instant of the lock)."""
@@ -238,20 +242,11 @@ class UmbrellaStepCsv(StepCsv):
 
     def __init__(self, path: str, initial):
         """Create the file (path checked by the caller) and write the header; initial: t = 0."""
-        import pyarrow.csv
-
-        self._csv = pyarrow.csv
-        self.path = path
         self.with_states = False
         self._columns = umbrella_columns(initial)
         self.columns = [c[0] for c in self._columns]
         self.initial_energy = float(initial.kinetic_energy + initial.strain_energy)
-        self._names = [f'c{i}' for i in range(len(self.columns))]
-        self._options = pyarrow.csv.WriteOptions(include_header=False, quoting_style='none')
-        self.rows = 0
-        self._fh = open(path, 'wb')
-        header = [f'{n} ({u})' if u else n for n, u, _, _ in self._columns]
-        self._fh.write((','.join(header) + '\n').encode('utf-8'))
+        self._open(path, [f'{n} ({u})' if u else n for n, u, _, _ in self._columns])
 
     def write_sample(self, s) -> None:
         """Append one state's row (t = 0, the instant of the lock): a Sample3D."""
