@@ -196,3 +196,20 @@ def test_the_text_summary_gives_each_ribs_figures_with_units(capsys):
         assert unit == 'MPa' and len(values.split(', ')) == 3
     assert lines['peak_von_mises_at'].count(' m at ') == 3
     assert not any('{' in text for text in lines.values())     # no Python dict written out
+
+
+@pytest.mark.parametrize('model', [[], ['--set', 'ribs=3', '--set', 'rib.tip_mass=[0, 0, 0.01]']],
+                         ids=['planar', 'ribs'])
+def test_the_csv_is_every_step_with_or_without_a_recording(model, tmp_path, capsys):
+    """--mcap steps the same run on the publication grid: the same summary, the same rows."""
+    run = ['simulate', *model, '--time-step', '2e-4', '--duration', '0.3', '--json']
+    plain, recorded = tmp_path / 'plain.csv', tmp_path / 'recorded.csv'
+    assert cli.main([*run, '--csv', str(plain)]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert cli.main([*run, '--csv', str(recorded), '--mcap', str(tmp_path / 'bag'),
+                     '--publish-rate', '500']) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert recorded.read_bytes() == plain.read_bytes()
+    assert len(plain.read_text().splitlines()) == figures['steps'] + 3   # header, t = 0, lock
+    for key in ('deploy_time', 'energy_drift', 'constraint_residual_max', 'peak_stress'):
+        assert again.get(key) == figures.get(key)

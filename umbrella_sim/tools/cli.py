@@ -89,12 +89,10 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument('--mcap', metavar='BAG_DIR',
                     help="record the node's topics to a new bag directory (BAG_DIR/"
                          'BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the same '
-                         'states and summary as without it when the physics step divides the '
-                         "publication period (the default's does; else the recording takes "
-                         'the largest step that does, as the node, and says so), but for '
-                         'energy_drift and constraint_residual_max, checked at each '
-                         'publication instead of each step (they differ in the last digits), '
-                         'and --csv, whose rows are then the publications')
+                         'states, summary and --csv rows (every physics step) as without it '
+                         "when the physics step divides the publication period (the default's "
+                         'does; else the recording takes the largest step that does, as the '
+                         'node, and says so)')
     sp.add_argument('--overwrite', action='store_true',
                     help='replace an existing --csv file and --mcap recording (a directory '
                          'of .mcap files and metadata.yaml, nothing else) when the run '
