@@ -356,18 +356,20 @@ s). The issue's targets (6 x 1 within 0.5 core,
 2.8 us (12 x 2) a rib and step at these steps.
 
 A driven hub and a free-floating bus step compiled too (umbrella_sim/core/_kernel3d_base.h: the
-bus's border of M(q), its share of the kinetic energy's gradient, the arrow's full border of
-seven shared coordinates, the drive's rows, the free bus's linear momentum restored and its
-momenta in the rows; the drive's profile evaluated in Python for a run of steps), equal to the
-numpy reference within its round-off spread (tests/test_umbrella3d_kernel.py: an asymmetric
-deployment, runs of steps, through the lock; tests/test_umbrella3d.py: the momentum and the
-drive's work balanced on both paths). Measured (CPU per step at h = 0.1 ms, deployment, 1
-element a segment, load ~5 on the 2 cores; 3 / 6 ribs): hub fixed 28 / 53 us, driven (a jolt in
-X-Z, a spin-up about Y) 84 / 164 us (3.0 Newton iterations a step while the base accelerates or
-spins up, 2.0 when it does not), free bus 68 / 131 us (numpy: 8.2 / 9.1 ms and 6.3 / 6.9 ms). A
+bus's border of M(q) (its elastic columns from invariants), its share of the kinetic energy's
+gradient, the arrow's full border of seven shared coordinates, the drive's rows, the free bus's
+linear momentum restored and its momenta in the rows; the drive's profile evaluated in Python
+for a run of steps), equal to the numpy reference within its round-off spread
+(tests/test_umbrella3d_kernel.py: an asymmetric deployment, runs of steps, through the lock;
+tests/test_umbrella3d.py: the momentum and the drive's work balanced on both paths). Measured
+(bench/bench_umbrella3d.py --base, CPU per step at h = 0.1 ms, deployment, 1 element a segment,
+load ~1 on the 2 cores; 3 / 6 ribs): hub fixed 26 / 50 us, driven (a jolt in X-Z, a spin-up
+about Y) 69 / 133 us (3.0 Newton iterations a step while the base accelerates or spins up, 2.0
+when it does not), free bus 58 / 109 us (numpy: 2.0 / 2.2 ms, 6.9 / 7.7 ms, 5.4 / 5.8 ms). A
 moving base has no stage-2 mode fit (the locked ribs stay coupled through the bus), so its step
-is the planar rule's without it, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks take 4.9
-(driven) and 4.7 (free) CPU s a simulated second, 0.2 x real time on one core (hub fixed: 0.9).
+is the planar rule's without it, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks take 3.7
+(driven) and 3.6 (free) CPU s a simulated second, 0.27-0.28 x real time (hub fixed, 0.1 ms: 0.8
+CPU s, 1.25 x).
 
 The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
 recording and tools for N ribs (the ROS side still runs the planar model), the geometrically
