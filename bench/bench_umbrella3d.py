@@ -32,17 +32,17 @@ Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x ele
     seconds from t = 0 (deployment; --after-lock: stage 2, from the lock on), on the
     compiled path (advance a block at a time, as a driver would); the figures of the last
     step of each block are read as a publication would.
-  * --base: the hub fixed (default), driven (prescribed: a half-sine jolt in X-Z and a
-    spin-up about Y, BASE_VALUES) or a free-floating bus (the default bus); a moving base
-    has no stage-2 mode fit, so its step for the mesh is the planar rule's without it
-    (33 us at 1 element, 9.1 us at 2).
+  * --base: every figure with the hub fixed (default), driven (prescribed: a half-sine jolt
+    in X-Z and a spin-up about Y, BASE_VALUES) or on a free-floating bus (the default bus); a
+    moving base has no stage-2 mode fit, so its step for the mesh is the planar rule's
+    without it (33 us at 1 element, 9.1 us at 2).
 The machine is shared (2 cores): CPU time is what the step costs, wall RTF what a user saw.
 Targets (the issue): ribs 6 x 1 real time at 1 kHz within 0.5 core, ribs 12 x 2 real time
 at 100 Hz.
 
     python bench/bench_umbrella3d.py [--ribs 1 2 4 8 16] [--elements 1 2] [--steps 40]
                                      [--repeat 2] [--duration 0.05] [--no-numpy]
-                                     [--after-lock] [--base fixed prescribed free]
+                                     [--after-lock] [--base fixed|prescribed|free]
 """
 import argparse
 import os
@@ -64,16 +64,17 @@ BASE_VALUES = {'fixed': {},
                               'base_accel_duration': 0.02, 'base_spin_rate': 3.0,
                               'base_spin_ramp': 0.05},
                'free': {'base': 'free'}}
+#: the base of every figure (set from --base)
+BASE = BASE_VALUES['fixed']
 
 
-def step_cost(ribs: int, elements: int, steps: int, repeat: int, kernel: str,
-              base: str = 'fixed'):
+def step_cost(ribs: int, elements: int, steps: int, repeat: int, kernel: str):
     """Return (CPU s per step, coordinates of a rib, Newton iterations per step)."""
     best = float('inf')
     for _ in range(repeat):
         sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-            {'ribs': ribs, 'elements_per_segment': elements, 'time_step': 1e-4,
-             **BASE_VALUES[base]}), kernel=kernel)
+            {'ribs': ribs, 'elements_per_segment': elements, 'time_step': 1e-4, **BASE}),
+            kernel=kernel)
         sim.step()                       # warm (imports, first factorisation)
         iterations = sim.integrator.iterations
         t0 = time.thread_time()
@@ -87,12 +88,10 @@ def step_cost(ribs: int, elements: int, steps: int, repeat: int, kernel: str,
     return best, sim.model.n_rib, per_step
 
 
-def real_time(ribs: int, elements: int, block: float, duration: float, after_lock: bool,
-              base: str = 'fixed'):
+def real_time(ribs: int, elements: int, block: float, duration: float, after_lock: bool):
     """Return (step h, wall RTF, CPU s per simulated s) of a run in publication blocks."""
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-        {'ribs': ribs, 'elements_per_segment': elements, **BASE_VALUES[base]}),
-        kernel='compiled')
+        {'ribs': ribs, 'elements_per_segment': elements, **BASE}), kernel='compiled')
     h = sim.h
     per_block = max(1, round(block / h))
     if after_lock:
@@ -119,43 +118,40 @@ def main(argv=None):
     ap.add_argument('--no-numpy', action='store_true', help='the compiled path only')
     ap.add_argument('--after-lock', action='store_true',
                     help='real-time factors of stage 2 (from the lock on, the mode fit acting)')
-    ap.add_argument('--base', nargs='+', default=['fixed'], choices=list(BASE_VALUES),
-                    help='the bases measured (BASE_VALUES)')
+    ap.add_argument('--base', default='fixed', choices=list(BASE_VALUES),
+                    help='the hub fixed, driven (prescribed) or a free bus (BASE_VALUES)')
     args = ap.parse_args(argv)
+    global BASE
+    BASE = BASE_VALUES[args.base]
+    print(f'base: {args.base} {BASE}')
     print('per-step cost (h = 0.1 ms, deployment from t = 0; CPU of this thread)')
-    print(f"{'base':>10} {'path':>9} {'ribs':>5} {'elements':>9} {'coords/rib':>10} "
-          f"{'Newton it':>9} {'us/step':>10} {'us/step/rib':>12} {'ns/step/rib/coord':>18}")
-    for base in args.base:
-        for kernel in ('compiled',) + (() if args.no_numpy else ('numpy',)):
-            for elements in args.elements:
-                costs = []
-                for ribs in args.ribs:
-                    cost, n_rib, its = step_cost(ribs, elements, args.steps, args.repeat,
-                                                 kernel, base)
-                    costs.append(cost)
-                    print(f'{base:>10} {kernel:>9} {ribs:5d} {elements:9d} {n_rib:10d} '
-                          f'{its:9.2f} {1e6 * cost:10.1f} {1e6 * cost / ribs:12.1f} '
-                          f'{1e9 * cost / ribs / n_rib:18.0f}', flush=True)
-                if len(costs) > 2:
-                    fit = np.polyfit(args.ribs, costs, 1)
-                    worst = np.max(np.abs(np.polyval(fit, args.ribs) / costs - 1))
-                    quad = np.polyfit(args.ribs, costs, 2)[0] * max(args.ribs) ** 2 / max(costs)
-                    print(f'          {base}, {kernel}, {elements} element(s): cost = '
-                          f'{1e6 * fit[1]:.1f} us + {1e6 * fit[0]:.1f} us x ribs (largest '
-                          f'deviation {100 * worst:.0f} %; a quadratic term would carry '
-                          f'{100 * quad:+.0f} % at {max(args.ribs)} ribs)')
+    print(f"{'path':>9} {'ribs':>5} {'elements':>9} {'coords/rib':>10} {'Newton it':>9} "
+          f"{'us/step':>10} {'us/step/rib':>12} {'ns/step/rib/coord':>18}")
+    for kernel in ('compiled',) + (() if args.no_numpy else ('numpy',)):
+        for elements in args.elements:
+            costs = []
+            for ribs in args.ribs:
+                cost, n_rib, its = step_cost(ribs, elements, args.steps, args.repeat, kernel)
+                costs.append(cost)
+                print(f'{kernel:>9} {ribs:5d} {elements:9d} {n_rib:10d} {its:9.2f} '
+                      f'{1e6 * cost:10.1f} {1e6 * cost / ribs:12.1f} '
+                      f'{1e9 * cost / ribs / n_rib:18.0f}', flush=True)
+            if len(costs) > 2:
+                fit = np.polyfit(args.ribs, costs, 1)
+                worst = np.max(np.abs(np.polyval(fit, args.ribs) / costs - 1))
+                quad = np.polyfit(args.ribs, costs, 2)[0] * max(args.ribs) ** 2 / max(costs)
+                print(f'          {kernel}, {elements} element(s): cost = {1e6 * fit[1]:.1f} us '
+                      f'+ {1e6 * fit[0]:.1f} us x ribs (largest deviation {100 * worst:.0f} %; '
+                      f'a quadratic term would carry {100 * quad:+.0f} % at {max(args.ribs)} '
+                      'ribs)')
     print(f'\nreal-time factors over {args.duration} s simulated (step chosen for the mesh)')
-    print(f"{'base':>10} {'ribs':>5} {'elements':>9} {'block':>8} {'step (us)':>10} "
-          f"{'RTF (wall)':>11} {'CPU s / sim s':>14} {'target':>30}")
-    for base in args.base:
-        for ribs, elements, block, target in ((6, 1, 1e-3, 'RTF >= 1 within 0.5 core'),
-                                              (12, 2, 1e-2, 'RTF >= 1')):
-            if elements not in args.elements:
-                continue
-            h, rtf, cpu = real_time(ribs, elements, block, args.duration, args.after_lock,
-                                    base)
-            print(f'{base:>10} {ribs:5d} {elements:9d} {1e3 * block:6.0f}ms {1e6 * h:10.2f} '
-                  f'{rtf:11.4f} {cpu:14.1f} {target:>30}', flush=True)
+    print(f"{'ribs':>5} {'elements':>9} {'block':>8} {'step (us)':>10} {'RTF (wall)':>11} "
+          f"{'CPU s / sim s':>14} {'target':>30}")
+    for ribs, elements, block, target in ((6, 1, 1e-3, 'RTF >= 1 within 0.5 core'),
+                                          (12, 2, 1e-2, 'RTF >= 1')):
+        h, rtf, cpu = real_time(ribs, elements, block, args.duration, args.after_lock)
+        print(f'{ribs:5d} {elements:9d} {1e3 * block:6.0f}ms {1e6 * h:10.2f} {rtf:11.4f} '
+              f'{cpu:14.1f} {target:>30}', flush=True)
 
 
 if __name__ == '__main__':
