@@ -100,8 +100,12 @@ def rib_joint_values(s) -> np.ndarray:
 
 def rib_stress_values(s, yield_strength: float) -> np.ndarray:
     """Return rib_peak_stress's data of a Sample3D: (ribs, STRESS_FIELDS)."""
-    return np.column_stack([*(getattr(s, f'stress_{name}') for name in STRESS_NAMES),
-                            s.stress_von_mises_at, s.stress_von_mises / yield_strength])
+    out = np.empty((len(s.alpha1), len(STRESS_FIELDS)))
+    for j, name in enumerate(STRESS_NAMES):
+        out[:, j] = s[f'stress_{name}']
+    out[:, -3:-1] = s.stress_von_mises_at
+    out[:, -1] = s.stress_von_mises / yield_strength
+    return out
 
 
 def rib_energy_values(s, initial_energy: float) -> list[float]:

@@ -168,7 +168,9 @@ class Record3D:
 
     def take(self) -> dict:
         """Return the rows added since the last take as arrays (``arrays``), and drop them."""
-        out = self.arrays()
+        # (one block of steps: its own arrays, which nothing else holds)
+        out = {name: values[0] if len(values) == 1 else np.concatenate(values)
+               for name, values in self.rows.items()}
         self.rows = {}
         return out
 
