@@ -23,7 +23,8 @@ What the umbrella of N ribs costs the node: the step through the run driver, and
     factor its diagnostics report at real_time_factor 1 (with recording), whether it says
     it is behind, and the node process's CPU share (its CPU time, every thread, over the
     wall time between --live-windows + 1 diagnostics, from /proc/<pid>/stat: 1.0 is one
-    core busy); and in lockstep, a commander answering every joint_states for
+    core busy; its busiest threads' too, the physics thread first), and CPU seconds a sim
+    second; and in lockstep, a commander answering every joint_states for
     --periods publications: sim seconds per wall second.
 The machine is shared (2 cores): wall figures are noisy; the CPU time is what a step costs.
 
@@ -75,11 +76,22 @@ def offline(ribs: int, duration: float) -> None:
           f'{STEP / driven:.3f}')
 
 
-def cpu_seconds(pid: int) -> float:
-    """Return the CPU time (user + system, every thread) of a process so far (s)."""
-    with open(f'/proc/{pid}/stat') as fh:
+def cpu_seconds(stat: str) -> float:
+    """Return the CPU time (user + system) of a /proc stat file so far (s)."""
+    with open(stat) as fh:
         fields = fh.read().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')   # utime, stime
+
+
+def thread_cpu_seconds(pid: int) -> dict:
+    """Return {thread id: CPU time so far (s)} of every thread of a process."""
+    out = {}
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        try:
+            out[tid] = cpu_seconds(f'/proc/{pid}/task/{tid}/stat')
+        except FileNotFoundError:        # (ended meanwhile)
+            pass
+    return out
 
 
 def live(ribs: int, periods: int, windows: int) -> None:
@@ -90,7 +102,9 @@ def live(ribs: int, periods: int, windows: int) -> None:
         with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1000.0},
                               record_path=os.path.join(tmp, 'bag')) as antenna:
             antenna.wait_for('diagnostics', lambda m: True, timeout=30)
-            cpu, wall = cpu_seconds(antenna.node.pid), time.monotonic()
+            pid = antenna.node.pid
+            cpu, threads, wall = cpu_seconds(f'/proc/{pid}/stat'), thread_cpu_seconds(pid), \
+                time.monotonic()
             sim = antenna.sim_time()
             first, rates = len(antenna.messages('diagnostics')), []
             for i in range(first, first + windows):   # (after the start-up's)
@@ -98,12 +112,16 @@ def live(ribs: int, periods: int, windows: int) -> None:
                               lambda: 'no diagnostics within 30 s')[0]
                 values = {kv.key: kv.value for kv in status.status[0].values}
                 rates.append(values['measured_real_time_factor'])
-            cpu = cpu_seconds(antenna.node.pid) - cpu
+            cpu = cpu_seconds(f'/proc/{pid}/stat') - cpu
+            threads = sorted((v - threads.get(k, 0.0) for k, v in thread_cpu_seconds(pid).items()),
+                             reverse=True)
             wall, sim = time.monotonic() - wall, antenna.sim_time() - sim
             print(f'live ribs {ribs}, real_time_factor 1, recording: measured '
                   f"{', '.join(rates)} (a second each; {sim / wall:.3f} over {wall:.1f} s), "
                   f"lag {values['lag_s']} s; node CPU share {cpu / wall:.3f} core, "
-                  f'{cpu / sim:.3f} CPU s a sim s; load {os.getloadavg()[0]:.2f}; status '
+                  f'{cpu / sim:.3f} CPU s a sim s (its busiest threads: '
+                  f"{', '.join(f'{c / wall:.3f}' for c in threads[:4])} core); "
+                  f'load {os.getloadavg()[0]:.2f}; status '
                   f'{status.status[0].message!r}')
     with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1000.0,
                            'lockstep': True, 'v0': 0.0}) as antenna:
