@@ -69,9 +69,9 @@ def offline(ribs: int, duration: float) -> None:
     driver.run(duration, on_publication=published)
     driven = (time.thread_time() - t0) / driver.sim.steps
     per_publication = encoding[0] / max(driver.publications - 1, 1)
-    print(f'ribs {ribs:2d}: own loop {own * 1e3:.2f} ms/step ({own / ribs * 1e3:.2f} per rib); '
-          f'run driver + 1 kHz publications {driven * 1e3:.2f} ms/step '
-          f'({driven / ribs * 1e3:.2f} per rib); encoding {per_publication * 1e3:.3f} ms a '
+    print(f'ribs {ribs:2d}: own loop {own * 1e3:.3f} ms/step ({own / ribs * 1e3:.3f} per rib); '
+          f'run driver + 1 kHz publications {driven * 1e3:.3f} ms/step '
+          f'({driven / ribs * 1e3:.3f} per rib); encoding {per_publication * 1e3:.3f} ms a '
           f'publication; real-time factor at {STEP * 1e6:.0f} us steps '
           f'{STEP / driven:.3f}')
 
