@@ -51,7 +51,10 @@ class Record3D:
         self.drive = 0.0
         self.lock_events: list = []
         self.iterations = 0
-        self._xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
+        # a stress point's x along its body: the leaf's points, then the link's
+        xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
+        self._leaf_points, self._x_of = len(xs[0]), np.concatenate(xs)
+        self._peaks = np.zeros((nr, len(STRESS_NAMES)))     # peak's values, a column each
 
     def _put(self, name, value):
         self.rows.setdefault(name, []).append(np.array(value)[None])
@@ -123,44 +126,41 @@ class Record3D:
             'stop_reaction': st['lam_s'][:, 0]}
         for name, values in columns.items():        # (copies: the rows' buffers are reused)
             self.rows.setdefault(name, []).append(np.array(values))
-        # stresses: each rib's worst point per step; the peaks over the steps in the order
-        # they happened (step by step, the leaf before the link: the first of equal ones)
-        tops = {name: [] for name in STRESS_NAMES}
-        wheres = {name: [] for name in STRESS_NAMES}
-        vm_now = np.zeros((k, m.n_ribs))
-        for comps in m.stress_components(qr):
-            ax, bz, by, sh = comps
-            vm = np.sqrt((np.abs(ax) + np.abs(bz) + np.abs(by)) ** 2 + 3.0 * sh * sh)
-            vm_now = np.maximum(vm_now, vm.max(-1))
-            for name, values in zip(STRESS_NAMES, (ax, bz, by, sh, vm)):
-                a = np.abs(values)
-                tops[name].append(a.max(-1))
-                wheres[name].append(a.argmax(-1))
-        for name in STRESS_NAMES:
-            # this step's worst over both bodies and where (the leaf's on a tie)
-            by_body = np.stack(tops[name], 1)                          # (step, body, rib)
-            body = by_body.argmax(1)
-            steps, ribs = np.arange(k)[:, None], np.arange(m.n_ribs)[None]
-            point = np.stack(wheres[name], 1)[steps, body, ribs]
-            x = np.where(body == 0, self._xs[0][np.minimum(point, len(self._xs[0]) - 1)],
-                         self._xs[1][np.minimum(point, len(self._xs[1]) - 1)])
-            self.rows.setdefault(f'stress_{name}', []).append(by_body[steps, body, ribs])
-            self.rows.setdefault(f'stress_{name}_at', []).append(
-                np.stack([body.astype(float), x], -1))
-            top = by_body.reshape(2 * k, m.n_ribs)   # (step, body) order
-            first = top.argmax(0)
-            best = top[first, np.arange(m.n_ribs)]
-            better = best > self.peak[name]
-            if np.any(better):
-                self.peak[name] = np.where(better, best, self.peak[name])
-                lst = list(self.peak_where[name])
-                for r in np.nonzero(better)[0]:
-                    step, body = divmod(int(first[r]), 2)
-                    point = wheres[name][body][step, r]
-                    lst[r] = (('leaf', 'link')[body], float(self._xs[body][point]),
-                              float(t[step]))
-                self.peak_where[name] = lst
-        self.rows.setdefault('von_mises', []).append(vm_now)
+        # stresses: each rib's worst point per step, and where: the first of the largest in
+        # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
+        # argmax); every component at once, in STRESS_NAMES' order
+        blocks = np.concatenate(m.stress_blocks(qr), -1)    # (step, rib, 4, leaf + link point)
+        sh = blocks[:, :, 3]
+        mag = np.abs(blocks)
+        vm = np.sqrt((mag[:, :, 0] + mag[:, :, 1] + mag[:, :, 2]) ** 2 + 3.0 * sh * sh)
+        every = np.concatenate([mag, vm[:, :, None]], 2)       # (step, rib, 5, point)
+        top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
+        at = np.empty(top.shape + (2,))
+        at[..., 0] = point >= self._leaf_points                  # the body's code
+        at[..., 1] = self._x_of[point]
+        put = self.rows.setdefault
+        for j, name in enumerate(STRESS_NAMES):
+            put(f'stress_{name}', []).append(top[:, :, j])
+            put(f'stress_{name}_at', []).append(at[:, :, j])
+        put('von_mises', []).append(np.maximum(top[:, :, -1], 0.0))
+        # the peaks over these steps, rib by rib: the first of the largest step by step (the
+        # leaf before the link: each step's own rule above)
+        best = top.max(0)                                       # (rib, 5)
+        better = best > self._peaks
+        if not better.any():
+            return
+        first = top.argmax(0)
+        self._peaks = np.where(better, best, self._peaks)
+        for j in np.nonzero(better.any(0))[0]:
+            name = STRESS_NAMES[j]
+            self.peak[name] = self._peaks[:, j].copy()
+            lst = list(self.peak_where[name])
+            for r in np.nonzero(better[:, j])[0]:
+                step = first[r, j]
+                i = point[step, r, j]
+                lst[r] = (BODIES[int(i >= self._leaf_points)], float(self._x_of[i]),
+                          float(t[step]))
+            self.peak_where[name] = lst
 
     def arrays(self) -> dict:
         """Return every per-step figure as an array (steps first, then ribs or components)."""
@@ -168,7 +168,9 @@ class Record3D:
 
     def take(self) -> dict:
         """Return the rows added since the last take as arrays (``arrays``), and drop them."""
-        out = self.arrays()
+        # (one block of steps: its own arrays, which nothing else holds)
+        out = {name: values[0] if len(values) == 1 else np.concatenate(values)
+               for name, values in self.rows.items()}
         self.rows = {}
         return out
 
