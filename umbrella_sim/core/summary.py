@@ -287,8 +287,8 @@ def coarse_step_warning(resolution: dict | None, hint: str = '',
         return (f'coarse step: modes the physics step {h:g} s does not resolve carry {crest}, '
                 f'and at a tip deflection of {100 * deflection:.3g} % of the leaf (past '
                 f'{100 * COUPLING_DEFLECTION:g} %) the frame couples its modes: the stage-2 '
-                'peak stresses are step-sensitive there (3-5 % off in the step study); '
-                f'{fix}')
+                'peak stresses may be several % off (3-5 % at one element per segment in '
+                f'the step study); {fix}')
     return (f'coarse step: modes the physics step {h:g} s does not resolve carry {crest} '
             f'(limit {100 * STRESS_SHARE_LIMIT:g} %): the stage-2 peak stresses are not those '
             f'of the model; {fix}')
