@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..outputs import hermite_peak
+
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
 #: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
 BODIES = ('leaf', 'link')
@@ -55,6 +57,9 @@ class Record3D:
         xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
         self._leaf_points, self._x_of = len(xs[0]), np.concatenate(xs)
         self._peaks = np.zeros((nr, len(STRESS_NAMES)))     # peak's values, a column each
+        #: the last step's (time, stress components, their rates, von Mises, its rate,
+        #: locked): the start of the next step's crests (_crests)
+        self._last_stress = None
 
     def _put(self, name, value):
         self.rows.setdefault(name, []).append(np.array(value)[None])
@@ -129,11 +134,8 @@ class Record3D:
         # stresses: each rib's worst point per step, and where: the first of the largest in
         # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
         # argmax); every component at once, in STRESS_NAMES' order
-        blocks = np.concatenate(m.stress_blocks(qr), -1)    # (step, rib, 4, leaf + link point)
-        sh = blocks[:, :, 3]
-        mag = np.abs(blocks)
-        vm = np.sqrt((mag[:, :, 0] + mag[:, :, 1] + mag[:, :, 2]) ** 2 + 3.0 * sh * sh)
-        every = np.concatenate([mag, vm[:, :, None]], 2)       # (step, rib, 5, point)
+        every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
+                             np.concatenate(m.stress_blocks(st['vr']), -1), locked)
         top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
         at = np.empty(top.shape + (2,))
         at[..., 0] = point >= self._leaf_points                  # the body's code
@@ -161,6 +163,57 @@ class Record3D:
                 lst[r] = (BODIES[int(i >= self._leaf_points)], float(self._x_of[i]),
                           float(t[step]))
             self.peak_where[name] = lst
+
+    def _crests(self, t, stress, rate, locked: bool) -> np.ndarray:
+        """
+        Return each step's largest |stress| of every component and von Mises, per point.
+
+        stress, rate: (step, rib, 4, point), the components and their rates at the steps'
+        ends (stresses are linear in the elastic coordinates: their rates are those of the
+        elastic velocities).  Over a step from the previous one, the crest of the cubic
+        Hermite interpolant of the ends' values and rates (outputs.hermite_peak, the planar
+        model's rule: a crest between two steps counts where the step resolves it), of each
+        signed component and of the combined figure sqrt((|axial| + |bending z| + |bending
+        y|)^2 + 3 shear^2) with its rate; the end's own value for the first step of a run,
+        and for a step across the lock, whose velocity jumps.  Returns (step, rib, 5, point).
+        """
+        def combined(s, r):
+            total = np.abs(s[:, :, 0]) + np.abs(s[:, :, 1]) + np.abs(s[:, :, 2])
+            vm = np.sqrt(total * total + 3.0 * s[:, :, 3] * s[:, :, 3])
+            growth = (np.sign(s[:, :, 0]) * r[:, :, 0] + np.sign(s[:, :, 1]) * r[:, :, 1]
+                      + np.sign(s[:, :, 2]) * r[:, :, 2])
+            with np.errstate(divide='ignore', invalid='ignore'):
+                vm_rate = np.where(vm > 0.0, (total * growth + 3.0 * s[:, :, 3] * r[:, :, 3])
+                                   / vm, 0.0)
+            return vm, vm_rate
+
+        vm, vm_rate = combined(stress, rate)
+        end = np.concatenate([np.abs(stress), vm[:, :, None]], 2)
+        last = self._last_stress
+        self._last_stress = (float(t[-1]), stress[-1], rate[-1], vm[-1], vm_rate[-1], locked)
+        if last is None:
+            if len(t) == 1:
+                return end
+            last = (float(t[0]), stress[0], rate[0], vm[0], vm_rate[0], locked)
+            first = 1
+        else:
+            first = 0
+        if last[5] != locked:                   # (across the lock: the ends' own values)
+            first = max(first, 1)
+            if len(t) == 1:
+                return end
+            last = (float(t[0]), stress[0], rate[0], vm[0], vm_rate[0], locked)
+        t0 = np.concatenate([[last[0]], t[:-1]])[first:]
+        h = (t[first:] - t0)[:, None, None, None]
+        s0 = np.concatenate([last[1][None], stress[:-1]])[first:]
+        r0 = np.concatenate([last[2][None], rate[:-1]])[first:]
+        v0 = np.concatenate([last[3][None], vm[:-1]])[first:]
+        w0 = np.concatenate([last[4][None], vm_rate[:-1]])[first:]
+        out = end.copy()
+        out[first:, :, :4] = hermite_peak(s0, h * r0, stress[first:], h * rate[first:])
+        out[first:, :, 4] = hermite_peak(v0, h[:, :, 0] * w0, vm[first:],
+                                         h[:, :, 0] * vm_rate[first:])
+        return out
 
     def arrays(self) -> dict:
         """Return every per-step figure as an array (steps first, then ribs or components)."""
