@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..outputs import hermite_peak
+from ..outputs import hermite_crests
 
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
 #: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
@@ -203,16 +203,18 @@ class Record3D:
             if len(t) == 1:
                 return end
             last = (float(t[0]), stress[0], rate[0], vm[0], vm_rate[0], locked)
-        t0 = np.concatenate([[last[0]], t[:-1]])[first:]
-        h = (t[first:] - t0)[:, None, None, None]
-        s0 = np.concatenate([last[1][None], stress[:-1]])[first:]
-        r0 = np.concatenate([last[2][None], rate[:-1]])[first:]
-        v0 = np.concatenate([last[3][None], vm[:-1]])[first:]
-        w0 = np.concatenate([last[4][None], vm_rate[:-1]])[first:]
+        # every channel (the four components, signed, and von Mises) of both ends at once:
+        # (step, rib, 5, point)
+        values = np.concatenate([stress, vm[:, :, None]], 2)
+        rates = np.concatenate([rate, vm_rate[:, :, None]], 2)
+        before = np.concatenate([np.concatenate([last[1], last[3][:, None]], 1)[None],
+                                 values[:-1]])
+        rate_before = np.concatenate([np.concatenate([last[2], last[4][:, None]], 1)[None],
+                                      rates[:-1]])
+        h = (t - np.concatenate([[last[0]], t[:-1]]))[first:, None, None, None]
         out = end.copy()
-        out[first:, :, :4] = hermite_peak(s0, h * r0, stress[first:], h * rate[first:])
-        out[first:, :, 4] = hermite_peak(v0, h[:, :, 0] * w0, vm[first:],
-                                         h[:, :, 0] * vm_rate[first:])
+        out[first:] = hermite_crests(before[first:], h * rate_before[first:], values[first:],
+                                     h * rates[first:])
         return out
 
     def arrays(self) -> dict:
