@@ -94,6 +94,7 @@ typedef struct {
 struct Ctx3D {
     const Model3D *m;
     Rows mrows, krows;                 /* of M(q) (frame rows, columns: all) and K */
+    Rows jrows;                        /* of a rib's joint Jacobian (ROWS x n; jacobian_rows) */
     Body b[2];
     int R, n, ns, cs, s, mb;
     Kin km[2];                         /* the point kinematics at q_m (gyroscopic) */
@@ -211,7 +212,7 @@ void umbrella3d_free(Ctx3D *x) {
         rows_free(&x->b[j].c_rows); rows_free(&x->b[j].d_rows); rows_free(&x->b[j].d_cols);
     }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
-    rows_free(&x->mrows); rows_free(&x->krows);
+    rows_free(&x->mrows); rows_free(&x->krows); rows_free(&x->jrows);
     free(x->kept_q); free(x->kept_v); free(x->kept_stuck);
     double *bufs[] = {x->mass, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
@@ -222,6 +223,7 @@ void umbrella3d_free(Ctx3D *x) {
 }
 
 static int rows_of(const Ctx3D *x, const double *A, int frame, Rows *p);
+static int jacobian_rows(Ctx3D *x);
 
 /* Body.elu: each rib's LU (lu_factor's packing, no pivoting) of the body's elastic block of
  * M, which no motion changes (mass_matrix) */
@@ -304,7 +306,8 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
     if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
     ok = ok && elastic_lu(&x->b[0], m->const_mass, R, n)
         && elastic_lu(&x->b[1], m->const_mass, R, n);
-    ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows);
+    ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows)
+        && jacobian_rows(x);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
     x->pend_slot = -1;
@@ -618,6 +621,32 @@ static void jacobian(const Ctx3D *x, const double *q, const double *stuck, doubl
     }
 }
 
+/* Ctx3D.jrows: the nonzeros of jacobian's rows, read off jacobian itself at a generic
+ * configuration (every rib's coordinates distinct, non-zero; a hinge stuck) */
+static int jacobian_rows(Ctx3D *x) {
+    int R = x->R, n = x->n, N = R * n, k = 0;
+    double *q = malloc(sizeof(double) * (N + MAXS)), *st = malloc(sizeof(double) * R);
+    x->jrows.ptr = malloc(sizeof(int) * (ROWS + 1));
+    x->jrows.col = malloc(sizeof(int) * ROWS * n);
+    int ok = q && st && x->jrows.ptr && x->jrows.col;
+    if (ok) {
+        for (int i = 0; i < N + MAXS; i++) q[i] = 0.3 + 0.0137 * i;
+        for (int r = 0; r < R; r++) st[r] = 0.1;
+        jacobian(x, q, st, x->jr);
+        for (int i = 0; i < ROWS; i++) {
+            x->jrows.ptr[i] = k;
+            for (int a = 0; a < n; a++) {
+                int keep = 0;
+                for (int r = 0; r < R && !keep; r++) keep = x->jr[(size_t)r * ROWS * n + i * n + a] != 0.0;
+                if (keep) x->jrows.col[k++] = a;
+            }
+        }
+        x->jrows.ptr[ROWS] = k;
+    }
+    free(q); free(st);
+    return ok;
+}
+
 static double max_abs(int k, const double *a) {
     double best = 0.0;
     for (int i = 0; i < k; i++) if (fabs(a[i]) > best || isnan(a[i])) best = isnan(a[i]) ? NAN : fabs(a[i]);
@@ -652,11 +681,12 @@ static void lu_solve_rows(int N, const double *A, const int *piv, double *X) {
 }
 
 /* rib r's block, factored (arrow_factor), solved for v (mb) in place:
- * x = A^-1 v_top, lambda = T^-1 (v_bottom - Jr x), x -= W lambda */
-static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v) {
+ * x = A^-1 v_top, lambda = T^-1 (v_bottom - Jr x), x -= W lambda (top_zero: v_top = 0, so
+ * x = 0 and Jr x = 0: the bodies' solves left out) */
+static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_zero) {
     int n = x->n;
     const double *A = f->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
-    for (int j = 0; j < 2; j++) {
+    for (int j = 0; j < 2 && !top_zero; j++) {
         const Body *b = &x->b[j];
         const int *piv = f->apiv + r * n + b->off;
         if (f->elastic_first) {
@@ -670,9 +700,10 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v) {
         A += b->nb * b->nb;
     }
     const double *J = f->Jf + (size_t)r * ROWS * n, *W = f->W + (size_t)r * n * ROWS;
-    for (int i = 0; i < ROWS; i++) {
+    const Rows *jp = &x->jrows;
+    for (int i = 0; i < ROWS && !top_zero; i++) {
         double acc = 0.0;
-        for (int a = 0; a < n; a++) if (J[i * n + a] != 0.0) acc += J[i * n + a] * v[a];
+        for (int k = jp->ptr[i]; k < jp->ptr[i + 1]; k++) acc += J[i * n + jp->col[k]] * v[jp->col[k]];
         v[n + i] -= acc;
     }
     lu_solve(ROWS, f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
@@ -731,7 +762,8 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
         }
         memset(T, 0, sizeof(double) * ROWS * ROWS);
         for (int i = 0; i < ROWS; i++)                 /* T = -Jr W over Jr's nonzeros */
-            for (int a = 0; a < n; a++) {
+            for (int k = x->jrows.ptr[i]; k < x->jrows.ptr[i + 1]; k++) {
+                int a = x->jrows.col[k];
                 double f = Jr[i * n + a];
                 if (f == 0.0) continue;
                 for (int k = 0; k < ROWS; k++) T[i * ROWS + k] -= f * W[a * ROWS + k];
@@ -745,7 +777,7 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
             memset(x->ycol, 0, sizeof(double) * mb);
             if (c < ns) {
                 x->ycol[n + 7] = -1.0;
-                rib_solve(x, f, r, x->ycol);
+                rib_solve(x, f, r, x->ycol, 1);
             }
             for (int a = 0; a < mb; a++) Y[a * s + c] = x->ycol[a];
         }
@@ -760,7 +792,7 @@ static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double 
     double z[MAXS];
     memcpy(z, rs, sizeof(double) * s);
     for (int r = 0; r < R; r++) {
-        rib_solve(x, f, r, rr + r * mb);
+        rib_solve(x, f, r, rr + r * mb, 0);
         z[0] -= sign * -1.0 * rr[r * mb + n + 7];
     }
     lu_solve(s, f->S, f->spiv, z);
@@ -805,7 +837,8 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
         memset(rr, 0, sizeof(double) * n);
         for (int i = 0; i < ROWS; i++) {
             double acc = 0.0;
-            for (int c = 0; c < n; c++) acc += J[i * n + c] * v[r * n + c];
+            for (int k = x->jrows.ptr[i]; k < x->jrows.ptr[i + 1]; k++)
+                acc += J[i * n + x->jrows.col[k]] * v[r * n + x->jrows.col[k]];
             rr[n + i] = -acc;
         }
         rr[n + 7] += v[R * n];           /* -J_rs v_s = y_s' */
@@ -945,7 +978,8 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             if (ddr > 0.0)
                 for (int i = 0; i < ROWS; i++) {
                     double lin = 0.0;
-                    for (int a = 0; a < n; a++) lin += J[i * n + a] * dq[a];
+                    for (int k = x->jrows.ptr[i]; k < x->jrows.ptr[i + 1]; k++)
+                        lin += J[i * n + x->jrows.col[k]] * dq[x->jrows.col[k]];
                     if (i == 7) lin -= x->dq[N];
                     double f = (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr;
                     for (int a = 0; a < n; a++) G[i * n + a] += f * dq[a];
