@@ -56,6 +56,10 @@ typedef struct {
     Rows c_rows, d_rows, d_cols;       /* the nonzeros of C, D, D^T (every rib's) */
     double *elu;                       /* R x ne x ne: the LU of M's elastic block (constant;
                                         * no pivoting: it is positive definite), elastic_lu */
+    double *elu_it, elu_h;             /* the same of the iteration matrix's elastic block,
+                                        * M + h^2/4 K (constant for a step length: elu_h) */
+    Rows lpat[2], upat[2];             /* the nonzeros of elu's, elu_it's rows: L (columns
+                                        * below the diagonal), U (above) (elastic_rows) */
 } Body;
 
 /* The inertia invariants of a body (the floating frame's: Shabana's S-bar, I-bar), per rib,
@@ -88,7 +92,8 @@ typedef struct {
     int spiv[MAXS];
     int uses;                          /* steps it served (iteration slots) */
     int elastic_first;                 /* the bodies' blocks factored elastic coordinates
-                                        * first, from Body.elu (the projection's M) */
+                                        * first, from Body.elu (1: the projection's M) or
+                                        * Body.elu_it (2: the iteration matrix) */
 } Fact;
 
 struct Ctx3D {
@@ -208,7 +213,8 @@ void umbrella3d_free(Ctx3D *x) {
     for (int j = 0; j < 2; j++) {
         kin_free(&x->km[j]);
         free(x->b[j].inv);
-        free(x->b[j].elu);
+        free(x->b[j].elu); free(x->b[j].elu_it);
+        for (int k = 0; k < 2; k++) { rows_free(&x->b[j].lpat[k]); rows_free(&x->b[j].upat[k]); }
         rows_free(&x->b[j].c_rows); rows_free(&x->b[j].d_rows); rows_free(&x->b[j].d_cols);
     }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
@@ -225,17 +231,42 @@ void umbrella3d_free(Ctx3D *x) {
 static int rows_of(const Ctx3D *x, const double *A, int frame, Rows *p);
 static int jacobian_rows(Ctx3D *x);
 
-/* Body.elu: each rib's LU (lu_factor's packing, no pivoting) of the body's elastic block of
- * M, which no motion changes (mass_matrix) */
-static int elastic_lu(Body *b, const double *M0, int R, int n) {
+/* the nonzeros of the rows of every rib's elastic LU E (R x ne x ne), their union: lo the
+ * columns left of the diagonal (L), up those right of it (U); the storage is the context's */
+static void elastic_rows(const Body *b, const double *E, int R, Rows *lo, Rows *up) {
+    int ne = b->ne, kl = 0, ku = 0;
+    for (int a = 0; a < ne; a++) {
+        lo->ptr[a] = kl;
+        up->ptr[a] = ku;
+        for (int c = 0; c < ne; c++) {
+            int keep = 0;
+            for (int r = 0; r < R && !keep; r++) keep = E[(size_t)r * ne * ne + a * ne + c] != 0.0;
+            if (keep && c < a) lo->col[kl++] = c;
+            if (keep && c > a) up->col[ku++] = c;
+        }
+    }
+    lo->ptr[ne] = kl;
+    up->ptr[ne] = ku;
+}
+
+static int rows_alloc(Rows *p, int ne) {
+    p->ptr = malloc(sizeof(int) * (ne + 1));
+    p->col = malloc(sizeof(int) * (ne * ne > 0 ? ne * ne : 1));
+    return p->ptr && p->col;
+}
+
+/* each rib's LU (lu_factor's packing, no pivoting: positive definite) of the body's elastic
+ * block of M0 + c K into E (R x ne x ne), and its nonzeros (elastic_rows) */
+static int elastic_lu_of(const Body *b, const double *M0, const double *K, double c, int R,
+                         int n, double *out, Rows *lo, Rows *up) {
     int ne = b->ne, o = b->off + b->t + 1;
-    b->elu = malloc(sizeof(double) * ((size_t)R * ne * ne > 0 ? (size_t)R * ne * ne : 1));
-    if (!b->elu) return 0;
     for (int r = 0; r < R; r++) {
-        double *E = b->elu + (size_t)r * ne * ne;
+        double *E = out + (size_t)r * ne * ne;
         for (int a = 0; a < ne; a++)
-            for (int c = 0; c < ne; c++)
-                E[a * ne + c] = M0[(size_t)r * n * n + (o + a) * n + o + c];
+            for (int k = 0; k < ne; k++) {
+                size_t at = (size_t)r * n * n + (o + a) * n + o + k;
+                E[a * ne + k] = M0[at] + (K ? c * K[at] + 0.0 : 0.0);
+            }
         for (int k = 0; k < ne; k++) {
             if (!(E[k * ne + k] > 0.0)) return 0;
             double inv = 1.0 / E[k * ne + k];
@@ -243,18 +274,96 @@ static int elastic_lu(Body *b, const double *M0, int R, int n) {
             E[k * ne + k] = inv;
         }
     }
+    elastic_rows(b, out, R, lo, up);
     return 1;
+}
+
+/* Body.elu: of M's elastic block, which no motion changes (mass_matrix); the storage of
+ * Body.elu_it, made at a step's length (iteration_elastic) */
+static int elastic_lu(Body *b, const double *M0, int R, int n) {
+    size_t size = (size_t)R * b->ne * b->ne > 0 ? (size_t)R * b->ne * b->ne : 1;
+    b->elu = malloc(sizeof(double) * size);
+    b->elu_it = malloc(sizeof(double) * size);
+    b->elu_h = NAN;
+    if (!b->elu || !b->elu_it) return 0;
+    for (int k = 0; k < 2; k++)
+        if (!rows_alloc(&b->lpat[k], b->ne) || !rows_alloc(&b->upat[k], b->ne)) return 0;
+    return elastic_lu_of(b, M0, NULL, 0.0, R, n, b->elu, &b->lpat[0], &b->upat[0]);
+}
+
+/* Body.elu_it at the step length h: the elastic block of the iteration matrix M + h^2/4 K
+ * (+ h/2 the gyroscopic term, which leaves that block alone: gyroscopic) */
+static int iteration_elastic(Ctx3D *x, double h) {
+    for (int j = 0; j < 2; j++) {
+        Body *b = &x->b[j];
+        if (b->elu_h == h) continue;
+        b->elu_h = NAN;
+        if (!elastic_lu_of(b, x->m->const_mass, x->m->stiffness, 0.25 * h * h, x->R, x->n,
+                           b->elu_it, &b->lpat[1], &b->upat[1]))
+            return SINGULAR;
+        b->elu_h = h;
+    }
+    return OK;
+}
+
+/* y = A^-1 y (nrhs right-hand sides, row-major nb x nrhs) of factor_elastic_first's A and
+ * piv: lu_solve's substitutions over the nonzeros, the elastic rows' of E's LU (lo, up),
+ * the frame rows and columns dense */
+static void ef_solve(const Body *b, const Rows *lo, const Rows *up, const double *A,
+                     const int *piv, double *y, int nrhs) {
+    int nb = b->nb, ne = b->ne;
+    for (int k = ne; k < nb; k++)
+        if (piv[k] != k)
+            for (int c = 0; c < nrhs; c++) {
+                double t = y[k * nrhs + c];
+                y[k * nrhs + c] = y[piv[k] * nrhs + c];
+                y[piv[k] * nrhs + c] = t;
+            }
+    for (int i = 0; i < nb; i++) {
+        double *yi = y + i * nrhs;
+        const double *Ai = A + i * nb;
+        if (i < ne) {
+            for (int k = lo->ptr[i]; k < lo->ptr[i + 1]; k++) {
+                int j = lo->col[k];
+                double f = Ai[j];
+                for (int c = 0; c < nrhs; c++) yi[c] -= f * y[j * nrhs + c];
+            }
+        } else {
+            for (int j = 0; j < i; j++) {
+                double f = Ai[j];
+                if (f != 0.0)
+                    for (int c = 0; c < nrhs; c++) yi[c] -= f * y[j * nrhs + c];
+            }
+        }
+    }
+    for (int i = nb - 1; i >= 0; i--) {
+        double *yi = y + i * nrhs;
+        const double *Ai = A + i * nb;
+        for (int j = nb - 1; j > i && j >= ne; j--) {
+            double f = Ai[j];
+            if (f != 0.0)
+                for (int c = 0; c < nrhs; c++) yi[c] -= f * y[j * nrhs + c];
+        }
+        if (i < ne)
+            for (int k = up->ptr[i + 1] - 1; k >= up->ptr[i]; k--) {
+                int j = up->col[k];
+                double f = Ai[j];
+                for (int c = 0; c < nrhs; c++) yi[c] -= f * y[j * nrhs + c];
+            }
+        for (int c = 0; c < nrhs; c++) yi[c] *= Ai[i];
+    }
 }
 
 /* body j's coordinate at place i of the elastic-first order (elastic, then frame) */
 static int elastic_first(const Body *b, int i) { return i < b->ne ? b->t + 1 + i : i - b->ne; }
 
 /* lu_factor of body j's block A (nb x nb, elastic-first order) whose elastic rows and columns
- * are the constant elastic block E = b->elu's (E's LU copied, not recomputed): the frame
- * rows eliminated through E, then the frame block's Schur complement with pivoting */
-static int factor_elastic_first(const Body *b, int r, double *A, int *piv) {
+ * are a constant elastic block, its LU E (b->elu's or b->elu_it's rib r: copied, not
+ * recomputed): the frame rows eliminated through E, then the frame block's Schur complement
+ * with pivoting */
+static int factor_elastic_first(const Body *b, const double *elu, int r, double *A, int *piv) {
     int nb = b->nb, ne = b->ne;
-    const double *E = b->elu + (size_t)r * ne * ne;
+    const double *E = elu + (size_t)r * ne * ne;
     for (int a = 0; a < ne; a++) memcpy(A + a * nb, E + a * ne, sizeof(double) * ne);
     for (int k = 0; k < ne; k++) {
         piv[k] = k;
@@ -312,6 +421,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
     x->pend_slot = -1;
     x->pm.elastic_first = 1;
+    x->slot[0].elastic_first = x->slot[1].elastic_first = 2;
     return x;
 }
 
@@ -691,8 +801,9 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_z
         const int *piv = f->apiv + r * n + b->off;
         if (f->elastic_first) {
             double y[b->nb];
+            int kind = f->elastic_first - 1;
             for (int i = 0; i < b->nb; i++) y[i] = v[b->off + elastic_first(b, i)];
-            lu_solve(b->nb, A, piv, y);
+            ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, y, 1);
             for (int i = 0; i < b->nb; i++) v[b->off + elastic_first(b, i)] = y[i];
         } else {
             lu_solve(b->nb, A, piv, v + b->off);
@@ -737,16 +848,20 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
             const Body *b = &x->b[j];
             int nb = b->nb, o = b->off;
             int *piv = f->apiv + r * n + o;
-            if (f->elastic_first) {             /* (no extra: M's elastic block is E) */
+            if (f->elastic_first) {             /* (M + extra's elastic block: E's) */
                 double Y[nb * ROWS];
+                int kind = f->elastic_first - 1;
                 for (int a = 0; a < nb; a++) {
                     int ia = o + elastic_first(b, a);
-                    for (int c = 0; c < nb; c++)
-                        A[a * nb + c] = M[ia * n + o + elastic_first(b, c)];
+                    for (int c = 0; c < nb; c++) {
+                        int ic = o + elastic_first(b, c);
+                        A[a * nb + c] = M[ia * n + ic] + (Ex ? Ex[ia * n + ic] : 0.0);
+                    }
                     memcpy(Y + a * ROWS, W + ia * ROWS, sizeof(double) * ROWS);
                 }
-                if (factor_elastic_first(b, r, A, piv) != OK) return SINGULAR;
-                lu_solve_rows(nb, A, piv, Y);
+                if (factor_elastic_first(b, kind ? b->elu_it : b->elu, r, A, piv) != OK)
+                    return SINGULAR;
+                ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, Y, ROWS);
                 for (int a = 0; a < nb; a++)
                     memcpy(W + (o + elastic_first(b, a)) * ROWS, Y + a * ROWS,
                            sizeof(double) * ROWS);
@@ -1013,7 +1128,8 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
                 }
                 G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
             }
-            if (arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
+            if (iteration_elastic(x, h) != OK
+                || arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
                 return SINGULAR;
             ff = fresh;
             factored = refactored = 1;
