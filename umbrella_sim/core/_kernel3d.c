@@ -113,7 +113,7 @@ struct Ctx3D {
     int kept, kept_slot, kept_locked, pend_slot, pend_uses;
     double kept_h, pend_h, *kept_q, *kept_v;
     unsigned char *kept_stuck;
-    double *jm, *jr, *jg;              /* R x 9 x n: J(q_m), J(q), Gonzalez J */
+    double *jm, *jr;                   /* R x 9 x n: J(q_m), J(q) */
     double *vp_a, *vp_b;               /* R x P x 3 (largest body) */
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
@@ -121,6 +121,9 @@ struct Ctx3D {
                                         * modal sums, then a rib's (n + n: a rib has n
                                         * modes at most) */
     double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
+    double strain0;                    /* V(q0) when strain0_ok: a run's step after the first
+                                        * starts where the last one committed (V(q1)) */
+    int strain0_ok;
     int iterations, factorisations;
 };
 
@@ -220,7 +223,7 @@ void umbrella3d_free(Ctx3D *x) {
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
     rows_free(&x->mrows); rows_free(&x->krows); rows_free(&x->jrows);
     free(x->kept_q); free(x->kept_v); free(x->kept_stuck);
-    double *bufs[] = {x->mass, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
+    double *bufs[] = {x->mass, x->jm, x->jr, x->vp_a, x->vp_b,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
                       x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp0, x->sp1, x->fitc};
@@ -400,7 +403,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
     ok = ok && fact_alloc(&x->slot[0], x) && fact_alloc(&x->slot[1], x) && fact_alloc(&x->pm, x);
     ok = ok && ALLOC(mass, R * n * n) && ALLOC(jm, R * ROWS * n)
         && ALLOC(kept_q, N + MAXS) && ALLOC(kept_v, N + MAXS)
-        && ALLOC(jr, R * ROWS * n) && ALLOC(jg, R * ROWS * n) && ALLOC(vp_a, R * pmax * 3)
+        && ALLOC(jr, R * ROWS * n) && ALLOC(vp_a, R * pmax * 3)
         && ALLOC(vp_b, R * pmax * 3) && ALLOC(q0, N + MAXS) && ALLOC(v0, N + MAXS)
         && ALLOC(p0, N + MAXS) && ALLOC(l0, R * ROWS + MAXS) && ALLOC(q, N + MAXS)
         && ALLOC(v, N + MAXS) && ALLOC(lam, R * ROWS + MAXS) && ALLOC(p, N + MAXS)
@@ -572,6 +575,28 @@ static void matvec(const Ctx3D *x, const double *v, double *p) {
     for (int r = 0; r < R; r++)
         rows_matvec(x, &x->mrows, x->mass + (size_t)r * n * n, v + r * n, p + r * n);
     p[R * n] = x->m->sleeve_mass * v[R * n];
+}
+
+/* matvec of two vectors at once (M's nonzeros read once): pa = M a, pb = M b */
+static void matvec2(const Ctx3D *x, const double *a, double *pa, const double *b, double *pb) {
+    int R = x->R, n = x->n;
+    const Rows *p = &x->mrows;
+    for (int r = 0; r < R; r++) {
+        const double *M = x->mass + (size_t)r * n * n, *ar = a + r * n, *br = b + r * n;
+        for (int i = 0; i < n; i++) {
+            const double *Mi = M + i * n;
+            double acc_a = 0.0, acc_b = 0.0;
+            for (int k = p->ptr[i]; k < p->ptr[i + 1]; k++) {
+                double mk = Mi[p->col[k]];
+                acc_a += mk * ar[p->col[k]];
+                acc_b += mk * br[p->col[k]];
+            }
+            pa[r * n + i] = acc_a;
+            pb[r * n + i] = acc_b;
+        }
+    }
+    pa[R * n] = x->m->sleeve_mass * a[R * n];
+    pb[R * n] = x->m->sleeve_mass * b[R * n];
 }
 
 /* every point's velocity J vb of body j (R x P x 3) */
@@ -1062,7 +1087,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         }
         if (fit) fit_map(x, fit, TO_PHYSICAL, x->v1, n);
         mass_matrix(x, q);
-        matvec(x, x->v1, x->p1);
+        matvec2(x, x->v1, x->p1, v0, x->tmp);     /* (M(q1) v0: Gonzalez's, below) */
         const double *sp1 = x->p1;        /* the scheme's momentum S^T M(q1) v1 */
         if (fit) {
             memcpy(x->sp1, x->p1, sizeof(double) * (N + ns));
@@ -1071,7 +1096,6 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         }
         kinetic_gradient(x, x->qm, v0, x->v1, x->gt);
         /* Gonzalez along the rib coordinates: dq . G_T = f(q1) - f(q0) */
-        matvec(x, v0, x->tmp);
         double delta = 0.0, dd = 0.0, gdq = 0.0;
         for (int i = 0; i < N + ns; i++) delta += (x->tmp[i] - p0[i]) * x->v1[i];
         delta *= 0.5;
@@ -1083,29 +1107,31 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         }
         constraints(x, q, stuck, locked, x->phi);
         jacobian(x, x->qm, stuck, x->jm);
-        memcpy(x->jg, x->jm, sizeof(double) * R * ROWS * n);
         double cons_s = locked ? x->lam[R * ROWS] : 0.0;
+        const Rows *jp = &x->jrows;
         for (int r = 0; r < R; r++) {
+            /* the joints' Gonzalez Jacobian G = J(q_m) + f dq^T (f: each row's correction),
+             * in the residual as G^T lam = J^T lam + dq (f . lam), J over its nonzeros */
             const double *dq = x->dq + r * n, *J = x->jm + r * ROWS * n;
-            double *G = x->jg + r * ROWS * n;
-            double ddr = 0.0;
-            for (int a = 0; a < n; a++) ddr += dq[a] * dq[a];
-            if (ddr > 0.0)
-                for (int i = 0; i < ROWS; i++) {
-                    double lin = 0.0;
-                    for (int k = x->jrows.ptr[i]; k < x->jrows.ptr[i + 1]; k++)
-                        lin += J[i * n + x->jrows.col[k]] * dq[x->jrows.col[k]];
-                    if (i == 7) lin -= x->dq[N];
-                    double f = (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr;
-                    for (int a = 0; a < n; a++) G[i * n + a] += f * dq[a];
-                }
-            friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
             const double *lam = x->lam + r * ROWS;
+            double ddr = 0.0, flam = 0.0, jl[n];
+            for (int a = 0; a < n; a++) { ddr += dq[a] * dq[a]; jl[a] = 0.0; }
+            for (int i = 0; i < ROWS; i++) {
+                double lin = 0.0;
+                for (int k = jp->ptr[i]; k < jp->ptr[i + 1]; k++) {
+                    int a = jp->col[k];
+                    lin += J[i * n + a] * dq[a];
+                    jl[a] += J[i * n + a] * lam[i];
+                }
+                if (i == 7) lin -= x->dq[N];
+                if (ddr > 0.0)
+                    flam += (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr * lam[i];
+            }
+            friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
             rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
             for (int a = 0; a < n; a++) {
-                double applied = -x->ycol[a], cons = 0.0;
+                double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
-                for (int i = 0; i < ROWS; i++) cons += G[i * n + a] * lam[i];
                 x->res[r * n + a] = sp1[r * n + a] - sp0[r * n + a]
                     - h * (x->gt[r * n + a] + applied + cons);
             }
@@ -1187,8 +1213,9 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     double t0 = 0.0;
     for (int i = 0; i < N; i++) t0 += v0[i] * p0[i];
     t0 = 0.5 * (t0 + v0[N] * p0[N]);
+    double strain0 = x->strain0_ok ? x->strain0 : strain_energy(x, q0);
     x->strain = strain_energy(x, q);
-    double t_target = t0 + strain_energy(x, q0) - x->strain + x->work_force + w_fric;
+    double t_target = t0 + strain0 - x->strain + x->work_force + w_fric;
     if (project(x, q, v, stuck, locked) != OK) return SINGULAR;
     matvec(x, v, x->p);
     double t_after = 0.0;
@@ -1196,8 +1223,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     t_after *= 0.5;
     if (t_after > 0.0 && t_after / 1.01 <= t_target && t_target <= 1.01 * t_after) {
         double scale = sqrt(t_target / t_after);
-        for (int i = 0; i < N + ns; i++) v[i] *= scale;
-        matvec(x, v, x->p);
+        for (int i = 0; i < N + ns; i++) { v[i] *= scale; x->p[i] *= scale; }
     }
     return OK;
 }
@@ -1288,6 +1314,8 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
         load(x, a);
         double t_next = a->single ? a->t + a->h : (double)(a->k0 + k + 1) * a->h;
         x->factorisations = 0;
+        x->strain0_ok = k > 0;         /* (the state loaded: the last step's committed one) */
+        x->strain0 = x->strain;
         int status = step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol, a->phi_tol,
                           a->max_iter, a->locked && a->fit_modes > 0 ? &fit : NULL);
         if (status != OK) return status;
