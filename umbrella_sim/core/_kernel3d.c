@@ -1029,10 +1029,22 @@ static void fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *v, int str
             c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -f->shrink[k * r + j]
                 : s - 1.0;
         }
-        for (int a = 0; a < n; a++) acc[a] = 0.0;
-        for (j = 0; j < r; j++)               /* by rows of out: each acc[a] in j's order */
-            for (int a = 0; a < n; a++) acc[a] += out[j * n + a] * c[j];
-        for (int a = 0; a < n; a++) vk[a] += acc[a];
+        int a = 0;
+        for (; a + 4 <= n; a += 4) {          /* four rows' sums at once, each in j's order */
+            double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+            for (j = 0; j < r; j++) {
+                const double *o = out + j * n + a;
+                double cj = c[j];
+                s0 += o[0] * cj; s1 += o[1] * cj; s2 += o[2] * cj; s3 += o[3] * cj;
+            }
+            acc[a] = s0; acc[a + 1] = s1; acc[a + 2] = s2; acc[a + 3] = s3;
+        }
+        for (; a < n; a++) {
+            double sa = 0.0;
+            for (j = 0; j < r; j++) sa += out[j * n + a] * c[j];
+            acc[a] = sa;
+        }
+        for (a = 0; a < n; a++) vk[a] += acc[a];
     }
 }
 
