@@ -843,11 +843,13 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_z
         v[n + i] -= acc;
     }
     lu_solve(ROWS, f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
-    for (int a = 0; a < n; a++) {
-        double acc = 0.0;
-        for (int i = 0; i < ROWS; i++) acc += W[a * ROWS + i] * v[n + i];
-        v[a] -= acc;
+    double acc[n];                             /* W lambda: every row's sum at once, in i's order */
+    for (int a = 0; a < n; a++) acc[a] = 0.0;
+    for (int i = 0; i < ROWS; i++) {
+        double li = v[n + i];
+        for (int a = 0; a < n; a++) acc[a] += W[a * ROWS + i] * li;
     }
+    for (int a = 0; a < n; a++) v[a] -= acc[a];
 }
 
 /* Factor [[M + extra, sign Jc^T], [Jr, Z]] (integrator3d._blocks) in arrow form: each rib's
@@ -867,8 +869,10 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
         const double *Jc = jc + r * ROWS * n, *Jr = jr + r * ROWS * n;
         double *A = f->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
         double *W = f->W + (size_t)r * n * ROWS, *T = f->T + r * ROWS * ROWS;
-        for (int a = 0; a < n; a++)
-            for (int i = 0; i < ROWS; i++) W[a * ROWS + i] = sign * Jc[i * n + a];
+        memset(W, 0, sizeof(double) * n * ROWS);      /* sign Jc^T, over Jc's nonzeros */
+        for (int i = 0; i < ROWS; i++)
+            for (int k = x->jrows.ptr[i]; k < x->jrows.ptr[i + 1]; k++)
+                W[x->jrows.col[k] * ROWS + i] = sign * Jc[i * n + x->jrows.col[k]];
         for (int j = 0; j < 2; j++) {
             const Body *b = &x->b[j];
             int nb = b->nb, o = b->off;
