@@ -930,13 +930,15 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
     return lu_factor(s, f->S, f->spiv) == OK ? OK : SINGULAR;
 }
 
-/* Solve the factored arrow system for (rr (R x mb), rs (s)), in place. */
-static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double sign) {
+/* Solve the factored arrow system for (rr (R x mb), rs (s)), in place (top_zero: every rib's
+ * first n right-hand sides are 0, rib_solve's) */
+static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double sign,
+                        int top_zero) {
     int R = x->R, n = x->n, mb = x->mb, s = x->s;
     double z[MAXS];
     memcpy(z, rs, sizeof(double) * s);
     for (int r = 0; r < R; r++) {
-        rib_solve(x, f, r, rr + r * mb, 0);
+        rib_solve(x, f, r, rr + r * mb, top_zero);
         z[0] -= sign * -1.0 * rr[r * mb + n + 7];
     }
     lu_solve(s, f->S, f->spiv, z);
@@ -989,7 +991,7 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
     }
     double rs[MAXS] = {0.0};
     rs[ns] = locked ? -v[R * n] : 0.0;
-    arrow_solve(x, &x->pm, x->rr, rs, 1.0);
+    arrow_solve(x, &x->pm, x->rr, rs, 1.0, 1);     /* (M dv = -J^T mu: no top) */
     for (int r = 0; r < R; r++)
         for (int a = 0; a < n; a++) v[r * n + a] += x->rr[r * mb + a];
     v[R * n] += rs[0];
@@ -1184,7 +1186,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         double rs[MAXS];
         rs[0] = -0.5 * h * x->res[N];
         rs[ns] = locked ? -x->phi[R * ROWS] : 0.0;
-        arrow_solve(x, ff, x->rr, rs, -1.0);
+        arrow_solve(x, ff, x->rr, rs, -1.0, 0);
         if (fit) fit_map(x, fit, NEWTON, x->rr, mb);
         double norm = 0.0;
         int finite = 1;
