@@ -29,6 +29,11 @@
  * run over the rib's nonzeros (Rows: K and the elastic mass blocks are banded).  The linear
  * algebra is block-arrow (umbrella3d/arrow.py): each rib's (n + 9) block factored alone, the shared
  * unknowns (sleeve, stop multiplier) through their Schur complement: cost linear in the ribs.
+ * A body's block (the projection's M, the iteration matrix M + h^2/4 K + h/2 G) is factored
+ * elastic coordinates first from its elastic block's LU, which no motion changes (of M once,
+ * of the iteration matrix once a step length), and solved over that LU's nonzeros (ef_solve);
+ * the joint Jacobian's products run over its nonzeros (jrows).  Pivoting, summation order and
+ * so round-off differ from the numpy reference's dense algebra.
  * The iteration matrix is kept across steps (kept_serves: the numpy reference's rule).
  */
 #include <math.h>
