@@ -370,8 +370,8 @@ Gonzalez joint term as J^T lambda + dq (f . lambda), the mode fit's sums in regi
 had been a fifth of a stage-2 step). What remains a step (perf, 6 x 1 deploying): the
 projection about 0.4 of it (its factorisation every step: the 9 right-hand sides M^-1 J^T, the
 9 x 9 joint block), the Newton iterations' mass products, kinetic gradient and solves; in
-stage 2 the mode fit's modal passes (about 11 a step: a quarter of it) and the 2.81 iterations (a
-fresh iteration matrix each step takes 2.07 but costs more).
+stage 2 the mode fit's modal passes (about 11 a step: a quarter of it) and the 2.81
+iterations (a fresh iteration matrix each step takes 2.07 but costs more).
 With the hub fixed the 3D model takes the planar stage-2 mode fit rib by rib (the sleeve at
 the stop decouples the ribs: each rib's locked modes exact in phase and amplitude, T + V
 conserved; tests/test_umbrella3d_mode_fit.py), hence the planar rule's fitted
@@ -382,9 +382,9 @@ s; 80 us a step); ribs 12 x 2 in 10 ms blocks at 0.167 x (6.0 CPU s) and 0.099 x
 s). With the cheaper step (load ~4.8): 6 x 1 0.8 CPU s a simulated second deploying, of which
 the step 0.32 and Record3D's figures about 0.37 (a run's Record3D.add_steps in 10-step blocks,
 37 us a step), 0.51 core for the step alone in stage 2; 12 x 2 4.6 CPU s a simulated second
-deploying (the step alone 3.8-3.9), the step alone 6.3-6.7 in stage 2. The issue's targets (6 x 1 within 0.5 core,
-12 x 2 in real time) are not reached: they need about 8 us (6 x 1, the figures included) and
-2.8 us (12 x 2) a rib and step at these steps.
+deploying (the step alone 3.8-3.9), the step alone 6.3-6.7 in stage 2. The issue's targets
+(6 x 1 within 0.5 core, 12 x 2 in real time) are not reached: they need about 8 us (6 x 1,
+the figures included) and 2.8 us (12 x 2) a rib and step at these steps.
 
 The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
 recording and tools for N ribs (the ROS side still runs the planar model), the geometrically
