@@ -18,7 +18,8 @@ An asymmetric deployment of the umbrella of N ribs, tested over DDS: copy it to 
 Three ribs around one sleeve; rib 1's hinge sticks until RELEASE and rubs (Coulomb friction)
 after it.  The umbrella's parameters go to the node as any other: ``ribs`` and per-rib lists
 ``rib.<name>`` (one value per rib, rib 0 first).  The antenna reads the per-rib joint states,
-the energy topic and the umbrella's summary figures (diagnostics) back.
+the energy topic and the umbrella's summary figures (diagnostics) back; a recording of the
+same run (``record_path``) gives each rib's figures to ``summary_from_recording``.
 
 The node starts paused and the antenna resumes it once its probe is connected, so the probe
 sees the run from t = 0; the node paces it at real time (the compiled 3D step keeps up at 3
@@ -72,3 +73,40 @@ def test_a_sticking_hinge_holds_its_rib_then_the_umbrella_deploys(antenna_factor
     swept = start - math.pi / 12
     assert -energy[-1]['friction_work_J'] >= 0.99 * COULOMB * swept
     assert figures['friction_work_J'][0] == figures['friction_work_J'][2] == 0.0
+
+
+def test_a_recording_of_it_gives_each_ribs_figures(antenna_factory, tmp_path):
+    """
+    The same run recorded (record_path): summary_from_recording reads each rib's figures.
+
+    From the rib topics of the recording (RibsRunSummary): each rib's deployment instant
+    (of the publications, 250 Hz here), the peaks of every stress component (exact: each
+    publication holds the largest of every physics step since the previous one), the
+    friction work; the node's own figures of every physics step (diagnostics) are the
+    reference.
+    """
+    from umbrella_sim.testing import summary_from_recording
+
+    period = 1.0 / 250.0
+    antenna = antenna_factory({
+        'ribs': 3, 'v0': 0.0, 'sleeve_force': 40.0, 'time_step': 2e-4, 'publish_rate': 250.0,
+        'rib.stick_until': [0.0, RELEASE, 0.0], 'rib.hinge_coulomb': [0.0, COULOMB, 0.0],
+        'start_paused': True}, record_path=tmp_path / 'ribs')
+    antenna.resume()
+    antenna.wait_for_phase('locked', timeout=180)
+    figures = antenna.umbrella_figures(lambda f: None not in f['rib_deploy_time_s'],
+                                       timeout=60)
+    lock = antenna.lock_time()
+    antenna.stop()                      # (the node finalises its recording)
+    summary = summary_from_recording(antenna.record_path, after_lock=None)
+    assert summary.ribs == 3 and abs(summary.lock_time - lock) < 1e-6
+    # ribs 0 and 2, mirror images about rib 1's plane, have the same figures
+    assert summary.rib_deploy_time[0] == summary.rib_deploy_time[2]
+    assert summary.peak_stress['von_mises'][0] == summary.peak_stress['von_mises'][2]
+    # each rib's leaf angle reached its deployed angle by the first publication after the
+    # instant read from the samples (the node's every-step instant is never later)
+    for got, every_step in zip(summary.rib_deploy_time, figures['rib_deploy_time_s']):
+        assert got - period < every_step <= math.ceil(got / period - 1e-9) * period + 1e-12
+    # the rubbing hinge's work (it only grows in size): the recording ends at or after the
+    # last energy message the probe received
+    assert summary.friction_work <= antenna.energy_balance()[-1]['friction_work_J'] < 0.0

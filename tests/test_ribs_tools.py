@@ -19,10 +19,11 @@ The command lines with the umbrella of N ribs: simulate, --mcap, re-simulation, 
 run driver and prints its figures; ``--mcap`` records it as umbrella_node does; re-running a
 recording (``umbrella_replay --resimulate``) from its parameters and applied forces gives
 every published value of every rib again, exactly on this build; a sweep varies the rib
-parameters as any other; what the tools do not read
-yet (per-rib CSV, umbrella_compare) is refused naming why.
+parameters as any other; what the tools do not offer for it (``--csv-state``) is refused
+naming why.
 """
 import json
+import os
 
 import pytest
 
@@ -30,7 +31,7 @@ from umbrella_sim.bag.format import MESH_RECORD, PARAMETERS_RECORD
 from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.umbrella3d.params3d import node_model
-from umbrella_sim.tools import cli, compare
+from umbrella_sim.tools import cli, compare, sweep_results
 from umbrella_sim.tools.replay import resimulate, RIB_SIGNALS
 from umbrella_sim.tools.runs import load_run
 from umbrella_sim.tools.sweep import run_case
@@ -62,7 +63,7 @@ def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_pat
     assert res['compared'] == 21 and not res['problems']
     assert set(res['max_abs_diff']) == set(RIB_SIGNALS)
     assert max(res['max_abs_diff'].values()) == 0.0     # the same run, on the same build
-    with pytest.raises(LogError, match='umbrella of 2 ribs'):
+    with pytest.raises(LogError, match='umbrella of 2 ribs.*compare_ribs.load_ribs_run'):
         load_run(str(bag))
     # umbrella_compare: per-rib figures and differences against the first run; a free hinge
     # (no stick) deploys the frame earlier than the stuck one
@@ -89,7 +90,7 @@ def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_pat
     (['simulate', '--set', 'rib.tip_mass=[0.1]', '--duration', '0.01'], 'rib.tip_mass'),
     ([*RUN, '--set', 'rib.tip_mass=0.1'], 'rib.tip_mass'),
     ([*RUN, '--set', 'rib.tip_mass=[0.1, 0.0, 0.0]'], 'tip_mass'),
-    ([*RUN, '--csv', 'out.csv'], '--csv'),
+    ([*RUN, '--csv', 'out.csv', '--csv-state'], '--csv-state'),
 ])
 def test_simulate_refuses_what_the_umbrella_cannot_take_naming_it(
         args, culprit, tmp_path, capsys, monkeypatch):
@@ -100,7 +101,7 @@ def test_simulate_refuses_what_the_umbrella_cannot_take_naming_it(
     assert culprit in capsys.readouterr().err
 
 
-def test_a_sweep_over_rib_parameters(tmp_path):
+def test_a_sweep_over_rib_parameters(tmp_path, monkeypatch):
     """
     A grid over a rib's stick time: every case runs the umbrella; the stuck one locks later.
 
@@ -123,9 +124,42 @@ def test_a_sweep_over_rib_parameters(tmp_path):
     for case in (free, stuck):
         assert case['summary']['energy_drift'] < 1e-10
         assert case['summary']['friction_work'][1] < 0.0
+    # the plots draw each case's worst rib (its von Mises peak, its in-plane tip) and the
+    # largest out-of-plane tip, against the swept rib parameter
+    drawn = plotted_lines(monkeypatch)
+    rows = [{**c.params, 'rib.stick_until': tuple(c.params['rib.stick_until']),
+             'case': c.index, 'status': r['status'], **r['summary']}
+            for c, r in zip(sweep.cases, (free, stuck))]     # (as table_rows gives them)
+    written = sweep_results.plot(sweep, rows, str(tmp_path))
+    assert sorted(os.path.basename(p) for p in written) == sorted(sweep_results.PLOTS)
+    peaks = drawn['all cases: von Mises, worst rib']
+    assert peaks == [pytest.approx(max(r['peak_stress']['von_mises']['value']) * 1e-6)
+                     for r in rows]
+    assert drawn['all cases: in-plane |v|, widest rib'] == [
+        pytest.approx(max(r['max_in_plane_tip']) * 1e3) for r in rows]
+    assert len(drawn['all cases: out-of-plane |w|, any rib']) == 2
+    assert min(drawn['deploy_time']) > 0.0
     spec.write_text('base: {ribs: 2}\ngrid: {rib.stick_until: [[0.0, 0.01, 0.0]]}\n')
     with pytest.raises(SpecError, match='case 1.*stick_until'):
         load_spec(str(spec))
+
+
+def plotted_lines(monkeypatch) -> dict:
+    """Record what the plots draw: {legend label: the y values}; deploy times by curve."""
+    from matplotlib.axes import Axes
+
+    drawn = {}
+    real = Axes.plot
+
+    def plot(ax, *args, **kwargs):
+        label = kwargs.get('label', '')
+        ys = list(args[1]) if len(args) > 1 else []
+        key = label if 'von Mises' in label or '|' in label else 'deploy_time'
+        drawn.setdefault(key, []).extend(ys)
+        return real(ax, *args, **kwargs)
+
+    monkeypatch.setattr(Axes, 'plot', plot)
+    return drawn
 
 
 def test_a_nodes_parameters_make_the_model_by_one_rule():

@@ -74,6 +74,7 @@ def test_per_rib_values_as_lists_and_overrides():
     ({'ribs': 0}, 'ribs'),
     ({'base': 'free', 'lock': 'energy'}, 'lock'),
     ({'model': 'rigid'}, 'model'),
+    ({'ribs': 3, 'damping_ratio': 0.02}, 'damping_ratio'),     # not silently undamped
 ])
 def test_bad_values_name_the_culprit(values, culprit):
     with pytest.raises(ValueError, match=re.escape(culprit)):

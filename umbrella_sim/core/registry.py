@@ -287,7 +287,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'stiffness-proportional Rayleigh) damping β = 2ζ/ω1, ω1 the first mode of the locked '
        'frame linearised at full deployment, mode i gets ζω_i/ω1; the dissipated energy is '
        'reported (`energy` topic); 0 = undamped (the thesis); no effect on rigid-fe and '
-       'rigid', low=0.0, high=1.0, high_open=True),
+       'rigid; the umbrella of N ribs (ribs ≥ 2) refuses it (its 3D beams are undamped)',
+       low=0.0, high=1.0, high_open=True),
     # the node
     _P('publish_rate', float, 100.0, 'Hz',
        'publication rate (sim time) of joint_states, tip_deflection, peak_stress, energy, '

@@ -52,7 +52,11 @@ Everything here talks over real DDS, so:
   :meth:`~SimulatedAntenna.rib_arrays` (``rib_tip_deflection``, ``rib_peak_stress``),
   :meth:`~SimulatedAntenna.energy_balance` and :meth:`~SimulatedAntenna.umbrella_figures`
   (each rib's deployment instant, the lag of the latest, friction work...); see
-  examples/test_umbrella_ribs.py.
+  examples/test_umbrella_ribs.py.  :func:`summary_from_recording` of its recording returns a
+  :class:`RibsRunSummary`: each rib's deployment instant, the lag, each rib's peak of every
+  stress component, the largest tips, friction work and each rib's stage-2 figures, by the
+  run summary's definitions applied to the publications (exactly the summary's with a
+  publication every physics step; the peaks exact at any rate).
 
 Pytest fixtures (import them into your ``conftest.py``): ``ros_domain_id``, ``probe`` and
 ``antenna_factory`` (starts :class:`SimulatedAntenna` objects and stops them at teardown).
@@ -63,12 +67,13 @@ from __future__ import annotations
 from .antenna import SimulatedAntenna
 from .processes import (default_domain_id, DOMAIN_ID, DOMAIN_ID_ENV, NodeProcess, poll, Probe,
                         remove_stale_shm, reserve_domain, ros_env)
-from .summary import RunSummary, summarize_run, SUMMARY_AFTER_LOCK, summary_from_recording
+from .summary import (RibsRunSummary, RunSummary, summarize_ribs, summarize_run,
+                      SUMMARY_AFTER_LOCK, summary_from_recording)
 
 __all__ = ['antenna_factory', 'default_domain_id', 'DOMAIN_ID', 'DOMAIN_ID_ENV', 'NodeProcess',
-           'poll', 'Probe', 'probe', 'remove_stale_shm', 'reserve_domain', 'ros_domain_id',
-           'ros_env', 'RunSummary', 'SimulatedAntenna', 'summarize_run', 'SUMMARY_AFTER_LOCK',
-           'summary_from_recording']
+           'poll', 'Probe', 'probe', 'remove_stale_shm', 'reserve_domain',
+           'RibsRunSummary', 'ros_domain_id', 'ros_env', 'RunSummary', 'SimulatedAntenna',
+           'summarize_ribs', 'summarize_run', 'SUMMARY_AFTER_LOCK', 'summary_from_recording']
 
 
 # ------------------------------------------------------------------ fixtures

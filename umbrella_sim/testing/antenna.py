@@ -491,7 +491,8 @@ class SimulatedAntenna:
         if self.ribs > 1:
             raise ValueError("summary() reads the planar rib's topics; an umbrella of "
                              f'{self.ribs} ribs has umbrella_figures(), rib_states(), '
-                             'rib_arrays() and energy_balance()')
+                             'rib_arrays() and energy_balance(), and its recording '
+                             '(record_path) summary_from_recording(), a RibsRunSummary')
         if after_lock is None or not after_lock > 0:
             raise ValueError(f'after_lock={after_lock!r}: seconds of sim time after the lock '
                              '(> 0); a live run has no end to summarise to (None, the whole '

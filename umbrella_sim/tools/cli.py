@@ -23,7 +23,7 @@ import sys
 
 from . import sweep
 from .arguments import ArgumentParser
-from .csv_output import StepCsv
+from .csv_output import StepCsv, UmbrellaStepCsv
 from .inputs import build_params, check_run_length, LONG_RUN_STEPS, read_force_profile
 from .progress import Progress
 from .. import __version__
@@ -80,19 +80,19 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument('--csv', metavar='FILE',
                     help='write the time series of every physics step (its state at the '
                          "step's end; peak stresses: the largest over the step), streamed "
-                         'as the run goes')
+                         'as the run goes; the umbrella of N ribs: the sleeve, the energies '
+                         "and each rib's figures, named by the rib (rib0_alpha1, rib0_tip_w, "
+                         'rib0_stress_von_mises, ...)')
     sp.add_argument('--csv-state', action='store_true',
                     help="add q, q' and the fibre stress at every stress point to the CSV")
     sp.add_argument('--json', action='store_true', help='print one JSON summary')
     sp.add_argument('--mcap', metavar='BAG_DIR',
                     help="record the node's topics to a new bag directory (BAG_DIR/"
                          'BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the same '
-                         'states and summary as without it when the physics step divides the '
-                         "publication period (the default's does; else the recording takes "
-                         'the largest step that does, as the node, and says so), but for '
-                         'energy_drift and constraint_residual_max, checked at each '
-                         'publication instead of each step (they differ in the last digits), '
-                         'and --csv, whose rows are then the publications')
+                         'states, summary and --csv rows (every physics step) as without it '
+                         "when the physics step divides the publication period (the default's "
+                         'does; else the recording takes the largest step that does, as the '
+                         'node, and says so)')
     sp.add_argument('--overwrite', action='store_true',
                     help='replace an existing --csv file and --mcap recording (a directory '
                          'of .mcap files and metadata.yaml, nothing else) when the run '
@@ -137,7 +137,24 @@ TEXT_FIELDS = {
     'wall_time': ('s', 1.0, '.2f'),
     'real_time_factor': ('-', 1.0, '.3g'),
     'figures_from': ('', None, ''),
+    # the umbrella of N ribs (Summary3D): lists are per rib, rib 0 first
+    'ribs': ('', None, ''),
+    'rib_deploy_time': ('s', 1.0, '.6f'),
+    'deployment_lag': ('s', 1.0, '.3e'),
+    'latest_rib': ('', None, ''),
+    'max_out_of_plane_tip': ('mm', 1e3, '.4g'),
+    'max_out_of_plane_tip_rib': ('', None, ''),
+    'max_out_of_plane_tip_time': ('s', 1.0, '.4f'),
+    'max_in_plane_tip': ('mm', 1e3, '.4g'),
+    'peak_stress': ('MPa', 1e-6, '.4g'),
+    'friction_work': ('J', 1.0, '.4g'),
+    'drive_work': ('J', 1.0, '.4g'),
+    'lock_energy_loss': ('J', 1.0, '.4g'),
+    'energy_balance_residual': ('J', 1.0, '.2e'),
+    'energy_scale': ('J', 1.0, '.6g'),
 }
+#: the summary's lists that are per rib (the others with a unit: a range, 'from to')
+PER_RIB = ('rib_deploy_time', 'max_in_plane_tip', 'friction_work')
 
 
 def format_summary(summary: dict) -> str:
@@ -152,6 +169,13 @@ def format_summary(summary: dict) -> str:
     for key in keys:
         value = summary[key]
         unit, scale, spec = TEXT_FIELDS.get(key, ('', None, ''))
+        if key == 'peak_stress' and isinstance(value, dict):    # the umbrella's, per rib
+            lines += _rib_peaks(value, unit, scale, spec)
+            continue
+        if key in PER_RIB and isinstance(value, list):
+            text = ', '.join('-' if v is None else format(v * scale, spec) for v in value)
+            lines.append(f'{key:28s} {text} {unit}')
+            continue
         if value is None:
             text = '-'
         elif isinstance(value, list) and scale is None:
@@ -166,11 +190,26 @@ def format_summary(summary: dict) -> str:
     return '\n'.join(lines)
 
 
+def _rib_peaks(peaks: dict, unit: str, scale: float, spec: str) -> list[str]:
+    """Return the umbrella's peak stresses as text: a line a component, each rib's peak."""
+    lines = []
+    for name, peak in peaks.items():
+        values = ', '.join(format(v * scale, spec) for v in peak['value'])
+        lines.append(f"{'peak_' + name:28s} {values} {unit}")
+        if name == 'von_mises':
+            where = ', '.join(f'{b} {x:.4g} m at {t:.4f} s'
+                              for b, x, t in zip(peak['body'], peak['x'], peak['time']))
+            lines.append(f"{'peak_von_mises_at':28s} {where}")
+    return lines
+
+
 class CsvStream:
     """--csv FILE while the run goes: a write error stops the file (removed), not the run."""
 
-    def __init__(self, path: str, initial, state_model=None):
+    def __init__(self, path: str, initial, state_model=None, umbrella: bool = False):
+        """Stream to path; umbrella: the umbrella of N ribs' columns (initial a Sample3D)."""
         self.path, self.initial, self.state_model = path, initial, state_model
+        self.umbrella = umbrella
         self.error: str | None = None
         self.rows = 0
         self._out = None
@@ -181,7 +220,8 @@ class CsvStream:
         try:
             with deferred():    # a stop signal lands between chunks, never inside a row
                 if self._out is None:
-                    self._out = StepCsv(self.path, self.state_model)
+                    self._out = (UmbrellaStepCsv(self.path, self.initial) if self.umbrella
+                                 else StepCsv(self.path, self.state_model))
                     self._out.write_sample(self.initial)
                 self._out.write(chunk.block, chunk.lock_sample)
                 self.rows = self._out.rows
@@ -236,9 +276,10 @@ def main(argv: list[str] | None = None) -> int:
         if len(set(outputs.values())) < len(outputs):
             raise ValueError(f'--csv and --mcap name the same path {args.csv}: give each '
                              'output its own')
-        if args.csv and run is not params:
-            raise ValueError(f'--csv {args.csv}: the umbrella of N ribs (ribs >= 2) writes no '
-                             'CSV of its steps; record its per-rib topics with --mcap BAG_DIR')
+        if args.csv_state and run is not params:
+            raise ValueError('--csv-state: the umbrella of N ribs (ribs >= 2) offers no state '
+                             "rows (q, q' and every stress point); its --csv has each rib's "
+                             'figures')
         if args.csv_state and not args.csv:
             raise ValueError('--csv-state adds columns to --csv FILE: give --csv too')
         if not (math.isfinite(args.publish_rate) and 1.0 <= args.publish_rate <= 5000.0):
@@ -250,8 +291,8 @@ def main(argv: list[str] | None = None) -> int:
         ap.exit(2, f'umbrella_sim: error: {exc}\n')
     progress = (Progress(args.duration, lambda t: f't = {t:.3f} of {args.duration:g} s')
                 if sys.stderr.isatty() and not args.json else None)
-    csv = (CsvStream(args.csv, driver.initial, driver.sim.model if args.csv_state else None)
-           if args.csv else None)
+    csv = (CsvStream(args.csv, driver.initial, driver.sim.model if args.csv_state else None,
+                     umbrella=run is not params) if args.csv else None)
 
     def on_chunk(chunk) -> None:
         if csv is not None:

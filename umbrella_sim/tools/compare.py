@@ -24,7 +24,11 @@ mid-link, deformed shapes) over a window of time (--window; by default the deplo
 eight periods of the locked frame's vibration), with the thesis's values drawn where it
 has them (its data at V0 = -0.2, -0.5, -1, -2 m/s).  --thesis adds them to the text and
 JSON.  The text is in s, mm, MPa and rad; compare.json in SI units, as each entry says.
-Recordings of the umbrella of N ribs are compared rib by rib (compare_ribs.py).
+Recordings of the umbrella of N ribs (ribs >= 2) are compared rib by rib: each run's lock,
+each rib's deployment instant and its difference to the first run's, the lag of the latest
+rib, each rib's largest leaf-angle difference and von Mises peak; plots of every rib's alpha1
+and out-of-plane tip and a top view of the tips (ribs_alpha1.png, ribs_tip_out_of_plane.png,
+ribs_top_view.png); --thesis, --physics-rate and --window are the planar rib's.
 """
 from __future__ import annotations
 

@@ -35,8 +35,11 @@ import sys
 
 import numpy as np
 
+from .runs import recorded_lock
 from ..bag.format import SUMMARY_RECORD
 from ..bag.reader import LogError, read_log
+from ..core.umbrella3d.outputs3d import STRESS_NAMES
+from ..core.umbrella3d.sampled3d import sampled_figures
 
 
 @dataclass
@@ -64,7 +67,13 @@ def is_ribs_log(params: dict) -> bool:
 
 
 def load_ribs_run(path: str, label: str, segment: int = 0) -> RibsRun:
-    """Read a recording of the umbrella of N ribs (LogError naming what it lacks)."""
+    """
+    Read a recording of the umbrella of N ribs (LogError naming what it lacks).
+
+    Its figures are the summary record's (every physics step), or, of a recording without
+    one (its writer killed) or of a segment before the last (the record is the last run's),
+    the same figures of the recorded samples (sampled3d.sampled_figures), which says so.
+    """
     from ..ros.ribs_messages import rib_array_figures, rib_joint_figures
 
     log = read_log(path)
@@ -77,12 +86,48 @@ def load_ribs_run(path: str, label: str, segment: int = 0) -> RibsRun:
         return np.array([t for t, _ in rows]), np.array([r for _, r in rows], dtype=float)
 
     t, alpha1 = series('joint_states', lambda m: rib_joint_figures(m)['alpha1'])
-    _, tip = series('rib_tip_deflection', lambda m: [
+    tip_t, tip = series('rib_tip_deflection', lambda m: [
         [r['axial_m'], r['in_plane_m'], r['out_of_plane_m']] for r in rib_array_figures(m)])
-    _, vm = series('rib_peak_stress', lambda m: [r['von_mises_Pa']
-                                                 for r in rib_array_figures(m)])
-    figures = json.loads(log.metadata.get(SUMMARY_RECORD, {}).get('figures', '{}'))
-    return RibsRun(label, log.path, seg.params, figures, t, alpha1, tip, vm)
+    stress_t, stress = series('rib_peak_stress', lambda m: [
+        [r[f] for f in STRESS_FIELDS] for r in rib_array_figures(m)])
+    last = segment == len(log.segments()) - 1
+    record = log.metadata.get(SUMMARY_RECORD, {}) if last else {}
+    try:
+        figures = json.loads(record['figures']) if 'figures' in record else None
+    except ValueError:
+        raise LogError(f'{log.path}: metadata {SUMMARY_RECORD} is not valid JSON') from None
+    if figures is None:
+        figures = _sampled(log, seg, t, alpha1, tip_t, tip, stress_t, stress)
+        why = (f"the summary record is of the log's last run, not of segment {segment}"
+               if not last else
+               f'the recording ended early ({log.ended_early}) before its summary record'
+               if log.ended_early else
+               'the log has no summary record (its writer was killed)')
+        figures['figures_from'] = (f"recorded samples at {seg.params.get('publish_rate')} "
+                                   f'Hz: {why}, so these figures depend on the recording rate')
+    return RibsRun(label, log.path, seg.params, figures, t, alpha1, tip, stress[:, :, 4])
+
+
+#: what load_ribs_run reads of rib_peak_stress: every component's peak, von Mises's place
+STRESS_FIELDS = tuple(f'{name}_Pa' for name in STRESS_NAMES) + ('von_mises_body',
+                                                                'von_mises_x_m')
+
+
+def _sampled(log, seg, t, alpha1, tip_t, tip, stress_t, stress) -> dict:
+    """Return a segment's figures of its samples, with its lock (runs.recorded_lock)."""
+    from ..core.umbrella3d.model3d import UmbrellaModel3D
+    from ..core.umbrella3d.params3d import node_model
+
+    try:
+        model = UmbrellaModel3D(node_model(seg.params))     # (each rib's deployed angle)
+    except ValueError as exc:
+        raise LogError(f"{log.path}: the recording's parameters cannot be used ({exc})") \
+            from None
+    figures = sampled_figures(
+        model.alpha_deployed, t, alpha1, tip_t, tip, stress_t,
+        {name: stress[:, :, i] for i, name in enumerate(STRESS_NAMES)}, stress[:, :, 5:7])
+    figures['lock_time'] = recorded_lock(log, seg.index)[1]
+    return figures
 
 
 def compare_ribs(runs: list[RibsRun]) -> dict:
@@ -99,6 +144,8 @@ def compare_ribs(runs: list[RibsRun]) -> dict:
                  'peak_von_mises': (f.get('peak_stress') or {}).get('von_mises', {}).get('value'),
                  'friction_work': f.get('friction_work'), 'energy_drift': f.get('energy_drift'),
                  'units': 'SI (s, m, Pa, J, rad)'}
+        if f.get('figures_from'):
+            entry['figures_from'] = f['figures_from']
         if r.ribs == ref.ribs:
             mine, theirs = entry['rib_deploy_time'] or [], ref.figures.get('rib_deploy_time') or []
             entry['rib_deploy_time_difference'] = [
@@ -129,6 +176,9 @@ def print_ribs_table(result: dict, stream=None) -> None:
           f"{num(e['deployment_lag'], '.3e'):>10} {num(e['latest_rib'], 'd'):>6} "
           f"{num(e['max_out_of_plane_tip'] and e['max_out_of_plane_tip'] * 1e3, '.4g'):>14} "
           f"{num(e['energy_drift'], '.2e'):>12}\n")
+    for e in result['runs']:
+        if e.get('figures_from'):
+            w(f"{e['label']}: figures from {e['figures_from']}\n")
     w('\nper rib: deployment instant (s), its difference to the reference (s), max |d alpha1| '
       '(rad), peak von Mises (MPa)\n')
     for e in result['runs']:

@@ -318,17 +318,36 @@ def _figures(figures: dict, *names: str) -> tuple:
     return tuple(figures[n] for n in names)
 
 
+def recorded_lock(log, segment: int) -> tuple[dict, float | None, bool]:
+    """
+    Return a segment's events record, its lock instant (None: no lock) and whether exact.
+
+    The events record's (umbrella_sim.events.K: segment K ended by a reset;
+    umbrella_sim.events: the last one), else the first 'locked' phase message's time (not
+    exact: the publication after the lock).
+    """
+    last = len(log.segments()) - 1
+    events = log.metadata.get('umbrella_sim.events' if segment == last
+                              else f'umbrella_sim.events.{segment}', {})
+    if events.get('locked') == 'true':
+        return events, float(events['lock_time']), True
+    phase = log.find_topic('deployment_phase', required=False)
+    locked = ([tm for tm, m in log.iter_decoded(phase, log.segment(segment))
+               if m.data == 'locked'] if phase else [])
+    return events, (min(locked) if locked else None), not locked
+
+
 def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     log = read_log(path)
     seg = log.segment(segment)
     params = seg.params
     ribs = params.get('ribs', 1)
     if isinstance(ribs, int) and ribs > 1:
-        raise LogError(f'{log.path}: a recording of the umbrella of {ribs} ribs: this tool '
-                       "reads the planar rib's topics (tip_deflection, peak_stress); per-rib "
-                       'plots are not implemented yet (umbrella_replay --resimulate checks '
-                       "the recording; its summary figures are in its metadata's "
-                       'umbrella_sim.summary)')
+        raise LogError(f'{log.path}: a recording of the umbrella of {ribs} ribs: load_run '
+                       "reads the planar rib's topics (tip_deflection, peak_stress); "
+                       'compare_ribs.load_ribs_run reads its per-rib series (umbrella_compare '
+                       'compares such recordings rib by rib, with per-rib plots and a top '
+                       'view)')
     t, js = _series(log, log.find_topic('joint_states'),
                     lambda m: _figures(joint_state_figures(m), 'alpha1', 'alpha1_rate',
                                        'alpha2'), seg, 3)
@@ -338,18 +357,8 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
                      lambda m: _figures(peak_stress_figures(m), *STRESS_FIGURES), seg,
                      len(STRESS_FIGURES))
     st = np.array(st)
-    # umbrella_sim.events.K: segment K ended by a reset; umbrella_sim.events: the last one
     last = len(log.segments()) - 1
-    events = log.metadata.get('umbrella_sim.events' if segment == last
-                              else f'umbrella_sim.events.{segment}', {})
-    deploy, exact = None, True
-    if events.get('locked') == 'true':
-        deploy = float(events['lock_time'])
-    else:
-        phase = log.find_topic('deployment_phase', required=False)
-        locked = [tm for tm, m in log.iter_decoded(phase, seg) if m.data == 'locked'] \
-            if phase else []
-        deploy, exact = (min(locked), False) if locked else (None, True)
+    events, deploy, exact = recorded_lock(log, segment)
     drift = None
     energy = log.find_topic('energy', required=False)
     if energy:

@@ -19,7 +19,9 @@ DIR keeps an append-only store, ``DIR/cases/<case_id>.json``, one file per finis
 written atomically the moment its result arrives, so that re-running the same SPEC into the
 same DIR skips them.  From the store: ``results.csv`` and ``results.parquet`` (one row per
 case: status, error, every parameter, every key of the summary) and the plots of deployment
-time, peak stress and tip deflection against the swept parameter.
+time, peak stress and tip deflection against the swept parameter (of a case of the umbrella
+of N ribs: its worst rib's von Mises peak, its widest rib's in-plane tip and the largest
+out-of-plane tip, over the whole run).
 """
 from __future__ import annotations
 
@@ -246,9 +248,11 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
+    rows = [_plotted(r) for r in rows]
     x_name, series = _series(sweep, rows)
     if not series:
         return []
+    umbrella = any(WORST_RIB_STRESS in r for r in rows)
     xs_all = sorted({r.get(x_name) for _, g in series for r in g}, key=_sort_key)
     numeric = all(isinstance(x, (int, float)) for x in xs_all)
     pos = {x: (x if numeric else i) for i, x in enumerate(xs_all)}
@@ -309,7 +313,7 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
         ax_d.set_ylabel(f'minus {ref_label} (ms)')
         ax_d.axhline(0.0, color='k', lw=0.8)
     finish(fig, [a for a in (ax, ax_d) if a is not None], 'deploy_time.png',
-           f'deployment time vs {x_name} (thesis Table 6.1)')
+           f'deployment time vs {x_name}' + ('' if umbrella else ' (thesis Table 6.1)'))
 
     def elastic(keys):
         """Series with elastic deformation: rigid models (zero up to round-off) left out."""
@@ -321,9 +325,10 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
 
     # peak stresses with the yield line
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, g in elastic(['peak_stress_leaf', 'peak_stress_link']):
+    for label, g in elastic(['peak_stress_leaf', 'peak_stress_link', WORST_RIB_STRESS]):
         for key, style, body in (('peak_stress_leaf', 'o-', 'leaf'),
-                                 ('peak_stress_link', 's--', 'link')):
+                                 ('peak_stress_link', 's--', 'link'),
+                                 (WORST_RIB_STRESS, 'D-', 'von Mises, worst rib')):
             pts = points(g, key, 1e-6)
             if pts:
                 ax.plot(*zip(*pts), style, color=colours[label], label=f'{label}: {body}')
@@ -334,10 +339,36 @@ def plot(sweep: Sweep, rows: list[dict], out_dir: str,
     finish(fig, [ax], 'peak_stress.png', f'peak stress vs {x_name}')
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, g in elastic(['tip_deflection_max']):
-        pts = points(g, 'tip_deflection_max', 1e3)
-        if pts:
-            ax.plot(*zip(*pts), 'o-', color=colours[label], label=label)
-    ax.set_ylabel('stage-1 max transverse deflection of G (mm)')
-    finish(fig, [ax], 'tip_deflection.png', f'stage-1 max tip deflection vs {x_name}')
+    tips = (('tip_deflection_max', 'o-', 'stage 1' if umbrella else ''),
+            (WIDEST_RIB_TIP, 'D-', 'in-plane |v|, widest rib'),
+            ('max_out_of_plane_tip', '^:', 'out-of-plane |w|, any rib'))
+    for label, g in elastic([key for key, _, _ in tips]):
+        for key, style, what in tips:
+            pts = points(g, key, 1e3)
+            if pts:
+                ax.plot(*zip(*pts), style, color=colours[label],
+                        label=f'{label}: {what}' if what else label)
+    if umbrella:        # (the umbrella's summary: the largest over the whole run)
+        ax.set_ylabel('max tip deflection of G (mm)')
+        finish(fig, [ax], 'tip_deflection.png', f'max tip deflection vs {x_name}')
+    else:
+        ax.set_ylabel('stage-1 max transverse deflection of G (mm)')
+        finish(fig, [ax], 'tip_deflection.png', f'stage-1 max tip deflection vs {x_name}')
     return written
+
+
+#: what the plots draw of a case of the umbrella of N ribs (its summary's per-rib figures):
+#: the worst rib's von Mises peak (Pa) and the widest rib's in-plane tip (m), whole run
+WORST_RIB_STRESS, WIDEST_RIB_TIP = 'peak_von_mises_worst_rib', 'max_in_plane_tip_widest_rib'
+
+
+def _plotted(row: dict) -> dict:
+    """Return a row as the plots read it: a case of the umbrella with its worst rib's figures."""
+    peaks = row.get('peak_stress')
+    if not isinstance(peaks, dict) or not isinstance(row.get('max_in_plane_tip'), list):
+        return row
+    try:
+        return dict(row, **{WORST_RIB_STRESS: max(peaks['von_mises']['value']),
+                            WIDEST_RIB_TIP: max(row['max_in_plane_tip'])})
+    except (KeyError, TypeError, ValueError):       # (a summary of another shape: as is)
+        return row

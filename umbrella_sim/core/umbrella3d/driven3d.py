@@ -33,11 +33,10 @@ model; the figures' ``sleeve_force`` is the whole sleeve's.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from .outputs3d import BODIES, energy_balance3d, first_reach, STRESS_NAMES
+from .outputs3d import (BODIES, deployment_spread, energy_balance3d, first_reach,
+                        largest_out_of_plane_tip, STRESS_NAMES)
 from .params3d import UmbrellaRibsParams
 from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
@@ -291,10 +290,8 @@ class Summary3D:
         self._deployed = np.array([first_reach(np.array([initial.time]),
                                                np.array([initial.alpha1[k] - m.alpha_deployed[k]]))
                                    for k in range(m.n_ribs)])
-        tip = np.abs(initial.tip)
-        k = int(tip[:, 2].argmax())
-        self._oop = (float(tip[k, 2]), k, float(initial.time))
-        self._in_plane = tip[:, 1].copy()
+        self._oop = largest_out_of_plane_tip(np.array([initial.time]), initial.tip[None])
+        self._in_plane = np.abs(initial.tip[:, 1])
         t0 = np.full(m.n_ribs, float(initial.time))
         self._peaks = {name: (getattr(initial, f'stress_{name}'),
                               getattr(initial, f'stress_{name}_at'), t0)
@@ -325,11 +322,10 @@ class Summary3D:
         self._scale = max(self._scale, float(np.abs(energy).max()))
         self._balance = max(self._balance,
                             float(np.abs(energy_balance3d(rows, self._e0)).max()))
-        tip = np.abs(rows['tip'])
-        i, k = np.unravel_index(np.argmax(tip[:, :, 2]), tip.shape[:2])
-        if tip[i, k, 2] > self._oop[0]:
-            self._oop = (float(tip[i, k, 2]), int(k), float(t[i]))
-        self._in_plane = np.maximum(self._in_plane, tip[:, :, 1].max(0))
+        oop = largest_out_of_plane_tip(t, rows['tip'])
+        if oop[0] > self._oop[0]:
+            self._oop = oop
+        self._in_plane = np.maximum(self._in_plane, np.abs(rows['tip'][:, :, 1]).max(0))
         self._peaks = block.merge_peaks(self._peaks)
         self.steps += len(block)
         self.final_time = float(t[-1])
@@ -341,18 +337,12 @@ class Summary3D:
 
     def figures(self) -> dict:
         """Return the run's figures so far, JSON-ready (lists per rib, ribs numbered from 0)."""
-        deployed = self._deployed
-        reached = np.isfinite(deployed)
-        latest = int(np.nanargmax(deployed)) if reached.any() else None
         start = self._start if self._start is not None else 0.0
         out = {'ribs': self.sim.model.n_ribs,
                'lock_time': self.lock.time if self.lock else None,
                'deploy_time': self.lock.time - start if self.lock else None,
                'deploy_start': self._start,
-               'rib_deploy_time': [None if math.isnan(v) else float(v) for v in deployed],
-               'deployment_lag': float(np.nanmax(deployed) - np.nanmin(deployed))
-               if reached.any() else None,
-               'latest_rib': latest,
+               **deployment_spread(self._deployed),
                'max_out_of_plane_tip': self._oop[0],
                'max_out_of_plane_tip_rib': self._oop[1],
                'max_out_of_plane_tip_time': self._oop[2],

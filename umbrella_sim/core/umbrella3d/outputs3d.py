@@ -201,16 +201,16 @@ class Record3D:
                              for k in range(m.n_ribs)])
         energy = a['kinetic_energy'] + a['strain_energy']
         balance = energy_balance3d(a, energy[0])
-        tip_w = np.abs(a['tip'][:, :, 2])
-        worst = np.unravel_index(np.argmax(tip_w), tip_w.shape)
+        spread = deployment_spread(deployed)
+        w, rib, when = largest_out_of_plane_tip(t, a['tip'])
         out = {
             'lock_time': self.lock_events[0][0] if self.lock_events else None,
             'rib_deploy_time': deployed,
-            'deployment_lag': float(np.nanmax(deployed) - np.nanmin(deployed))
-            if np.any(np.isfinite(deployed)) else np.nan,
-            'max_out_of_plane_tip': float(tip_w[worst]),
-            'max_out_of_plane_tip_rib': int(worst[1]),
-            'max_out_of_plane_tip_time': float(t[worst[0]]),
+            'deployment_lag': (np.nan if spread['deployment_lag'] is None
+                               else spread['deployment_lag']),
+            'max_out_of_plane_tip': w,
+            'max_out_of_plane_tip_rib': rib,
+            'max_out_of_plane_tip_time': when,
             'max_in_plane_tip': np.abs(a['tip'][:, :, 1]).max(0),
             'energy_balance_residual': float(np.max(np.abs(balance))),
             'energy_scale': float(np.max(np.abs(energy))),
@@ -240,6 +240,33 @@ def first_reach(t: np.ndarray, gap: np.ndarray, before: tuple | None = None) -> 
     else:
         t0, g0 = t[i - 1], gap[i - 1]
     return float(t0 + (t[i] - t0) * g0 / (g0 - gap[i]))
+
+
+def deployment_spread(deployed) -> dict:
+    """
+    Return the spread of the ribs' deployment instants (first_reach each; NaN: not reached).
+
+    rib_deploy_time (a list, None where not reached), deployment_lag (the latest rib's
+    deployment after the earliest's, of the ribs that deployed; None if none did) and
+    latest_rib (the first of the latest; None if none did).
+    """
+    deployed = np.asarray(deployed, dtype=float)
+    reached = np.isfinite(deployed)
+    return {'rib_deploy_time': [float(v) if ok else None for v, ok in zip(deployed, reached)],
+            'deployment_lag': float(np.nanmax(deployed) - np.nanmin(deployed))
+            if reached.any() else None,
+            'latest_rib': int(np.nanargmax(deployed)) if reached.any() else None}
+
+
+def largest_out_of_plane_tip(t: np.ndarray, tip: np.ndarray) -> tuple[float, int, float]:
+    """
+    Return the largest |w| of the ribs' tips over rows of them, its rib and when (the first).
+
+    t: (T,) s; tip: (T, ribs, 3), u, v, w of each rib's G in its leaf frame (m).
+    """
+    w = np.abs(np.asarray(tip)[:, :, 2])
+    i, k = np.unravel_index(np.argmax(w), w.shape)
+    return float(w[i, k]), int(k), float(t[i])
 
 
 def energy_balance3d(rows, initial_energy: float) -> np.ndarray:

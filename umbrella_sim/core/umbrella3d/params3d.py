@@ -281,6 +281,10 @@ class UmbrellaRibsParams:
         if self.planar.model != 'flexible':
             raise ValueError(f'parameter model={self.planar.model!r}: the umbrella model is '
                              'flexible (3D Euler-Bernoulli beams) only')
+        if self.planar.damping_ratio != 0.0:
+            raise ValueError(f'parameter damping_ratio={self.planar.damping_ratio:g}: the '
+                             "umbrella's 3D beams have no structural damping (only the "
+                             'planar model, ribs 1, has it); its hinges take hinge_viscous')
         if self.base == 'free' and self.planar.lock == 'energy':
             raise ValueError("parameter lock='energy' with base 'free': the energy lock keeps "
                              "each rib's kinetic energy and would change the momentum of a "
