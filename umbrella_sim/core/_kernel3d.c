@@ -263,8 +263,32 @@ static int rows_alloc(Rows *p, int ne) {
     return p->ptr && p->col;
 }
 
+/* the nonzeros an LU without pivoting of any M0 + c K can have (the elastic blocks' union
+ * over the ribs, filled in by the elimination), as elastic_rows: Body.elu_it's, whatever the
+ * step length it was made at (a kept iteration matrix may outlive a later length's LU) */
+static int elastic_pattern(const Body *b, const double *M0, const double *K, int R, int n,
+                           Rows *lo, Rows *up) {
+    int ne = b->ne, o = b->off + b->t + 1;
+    double *B = calloc((size_t)ne * ne > 0 ? (size_t)ne * ne : 1, sizeof(double));
+    if (!B) return 0;
+    for (int r = 0; r < R; r++)
+        for (int a = 0; a < ne; a++)
+            for (int c = 0; c < ne; c++) {
+                size_t at = (size_t)r * n * n + (o + a) * n + o + c;
+                if (M0[at] != 0.0 || K[at] != 0.0) B[a * ne + c] = 1.0;
+            }
+    for (int k = 0; k < ne; k++)
+        for (int i = k + 1; i < ne; i++)
+            if (B[i * ne + k] != 0.0)
+                for (int j = k + 1; j < ne; j++)
+                    if (B[k * ne + j] != 0.0) B[i * ne + j] = 1.0;
+    elastic_rows(b, B, 1, lo, up);
+    free(B);
+    return 1;
+}
+
 /* each rib's LU (lu_factor's packing, no pivoting: positive definite) of the body's elastic
- * block of M0 + c K into E (R x ne x ne), and its nonzeros (elastic_rows) */
+ * block of M0 + c K into E (R x ne x ne), and its nonzeros (elastic_rows; lo NULL: not) */
 static int elastic_lu_of(const Body *b, const double *M0, const double *K, double c, int R,
                          int n, double *out, Rows *lo, Rows *up) {
     int ne = b->ne, o = b->off + b->t + 1;
@@ -282,21 +306,22 @@ static int elastic_lu_of(const Body *b, const double *M0, const double *K, doubl
             E[k * ne + k] = inv;
         }
     }
-    elastic_rows(b, out, R, lo, up);
+    if (lo) elastic_rows(b, out, R, lo, up);
     return 1;
 }
 
 /* Body.elu: of M's elastic block, which no motion changes (mass_matrix); the storage of
  * Body.elu_it, made at a step's length (iteration_elastic) */
-static int elastic_lu(Body *b, const double *M0, int R, int n) {
+static int elastic_lu(Body *b, const double *M0, const double *K, int R, int n) {
     size_t size = (size_t)R * b->ne * b->ne > 0 ? (size_t)R * b->ne * b->ne : 1;
-    b->elu = malloc(sizeof(double) * size);
-    b->elu_it = malloc(sizeof(double) * size);
+    b->elu = calloc(size, sizeof(double));
+    b->elu_it = calloc(size, sizeof(double));
     b->elu_h = NAN;
     if (!b->elu || !b->elu_it) return 0;
     for (int k = 0; k < 2; k++)
         if (!rows_alloc(&b->lpat[k], b->ne) || !rows_alloc(&b->upat[k], b->ne)) return 0;
-    return elastic_lu_of(b, M0, NULL, 0.0, R, n, b->elu, &b->lpat[0], &b->upat[0]);
+    return elastic_lu_of(b, M0, NULL, 0.0, R, n, b->elu, &b->lpat[0], &b->upat[0])
+        && elastic_pattern(b, M0, K, R, n, &b->lpat[1], &b->upat[1]);
 }
 
 /* Body.elu_it at the step length h: the elastic block of the iteration matrix M + h^2/4 K
@@ -307,7 +332,7 @@ static int iteration_elastic(Ctx3D *x, double h) {
         if (b->elu_h == h) continue;
         b->elu_h = NAN;
         if (!elastic_lu_of(b, x->m->const_mass, x->m->stiffness, 0.25 * h * h, x->R, x->n,
-                           b->elu_it, &b->lpat[1], &b->upat[1]))
+                           b->elu_it, NULL, NULL))
             return SINGULAR;
         b->elu_h = h;
     }
@@ -421,8 +446,8 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(fitc, 2 * n);
 #undef ALLOC
     if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
-    ok = ok && elastic_lu(&x->b[0], m->const_mass, R, n)
-        && elastic_lu(&x->b[1], m->const_mass, R, n);
+    ok = ok && elastic_lu(&x->b[0], m->const_mass, m->stiffness, R, n)
+        && elastic_lu(&x->b[1], m->const_mass, m->stiffness, R, n);
     ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows)
         && jacobian_rows(x);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
