@@ -20,13 +20,16 @@ What the umbrella of N ribs costs the node: the step through the run driver, and
     every 1 ms encoded as the node does (ribs_messages.RibsPublicationEncoder), per step and
     per step and rib; the encoder's cost per publication;
   * live (--live): umbrella_node with ribs --live-ribs at 1 kHz: the measured real-time
-    factor its diagnostics report at real_time_factor 1 (with recording) and whether it
-    says it is behind; and in lockstep, a commander answering every joint_states for
+    factor its diagnostics report at real_time_factor 1 (with recording), whether it says
+    it is behind, and the node process's CPU share (its CPU time, every thread, over the
+    wall time between --live-windows + 1 diagnostics, from /proc/<pid>/stat: 1.0 is one
+    core busy; its busiest threads' too, the physics thread first), and CPU seconds a sim
+    second; and in lockstep, a commander answering every joint_states for
     --periods publications: sim seconds per wall second.
 The machine is shared (2 cores): wall figures are noisy; the CPU time is what a step costs.
 
     python bench/bench_ribs_node.py [--ribs 2 3 6] [--duration 0.02] [--live]
-                                    [--live-ribs 6] [--periods 40]
+                                    [--live-ribs 6] [--live-windows 3] [--periods 40]
 """
 import argparse
 import os
@@ -66,24 +69,59 @@ def offline(ribs: int, duration: float) -> None:
     driver.run(duration, on_publication=published)
     driven = (time.thread_time() - t0) / driver.sim.steps
     per_publication = encoding[0] / max(driver.publications - 1, 1)
-    print(f'ribs {ribs:2d}: own loop {own * 1e3:.2f} ms/step ({own / ribs * 1e3:.2f} per rib); '
-          f'run driver + 1 kHz publications {driven * 1e3:.2f} ms/step '
-          f'({driven / ribs * 1e3:.2f} per rib); encoding {per_publication * 1e3:.3f} ms a '
+    print(f'ribs {ribs:2d}: own loop {own * 1e3:.3f} ms/step ({own / ribs * 1e3:.3f} per rib); '
+          f'run driver + 1 kHz publications {driven * 1e3:.3f} ms/step '
+          f'({driven / ribs * 1e3:.3f} per rib); encoding {per_publication * 1e3:.3f} ms a '
           f'publication; real-time factor at {STEP * 1e6:.0f} us steps '
           f'{STEP / driven:.3f}')
 
 
-def live(ribs: int, periods: int) -> None:
+def cpu_seconds(stat: str) -> float:
+    """Return the CPU time (user + system) of a /proc stat file so far (s)."""
+    with open(stat) as fh:
+        fields = fh.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')   # utime, stime
+
+
+def thread_cpu_seconds(pid: int) -> dict:
+    """Return {thread id: CPU time so far (s)} of every thread of a process."""
+    out = {}
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        try:
+            out[tid] = cpu_seconds(f'/proc/{pid}/task/{tid}/stat')
+        except FileNotFoundError:        # (ended meanwhile)
+            pass
+    return out
+
+
+def live(ribs: int, periods: int, windows: int) -> None:
     from umbrella_sim.testing import SimulatedAntenna
+    from umbrella_sim.testing.processes import poll
 
     with tempfile.TemporaryDirectory() as tmp:
         with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1000.0},
                               record_path=os.path.join(tmp, 'bag')) as antenna:
-            status = antenna.wait_for('diagnostics', lambda m: True, timeout=30)
-            status = antenna.wait_for('diagnostics', lambda m: m is not status, timeout=30)
-            values = {kv.key: kv.value for kv in status.status[0].values}
+            antenna.wait_for('diagnostics', lambda m: True, timeout=30)
+            pid = antenna.node.pid
+            cpu, threads, wall = cpu_seconds(f'/proc/{pid}/stat'), thread_cpu_seconds(pid), \
+                time.monotonic()
+            sim = antenna.sim_time()
+            first, rates = len(antenna.messages('diagnostics')), []
+            for i in range(first, first + windows):   # (after the start-up's)
+                status = poll(lambda: antenna.messages('diagnostics')[i:i + 1], 30,
+                              lambda: 'no diagnostics within 30 s')[0]
+                values = {kv.key: kv.value for kv in status.status[0].values}
+                rates.append(values['measured_real_time_factor'])
+            cpu = cpu_seconds(f'/proc/{pid}/stat') - cpu
+            threads = sorted((v - threads.get(k, 0.0) for k, v in thread_cpu_seconds(pid).items()),
+                             reverse=True)
+            wall, sim = time.monotonic() - wall, antenna.sim_time() - sim
             print(f'live ribs {ribs}, real_time_factor 1, recording: measured '
-                  f"{values['measured_real_time_factor']}, lag {values['lag_s']} s; status "
+                  f"{', '.join(rates)} (a second each; {sim / wall:.3f} over {wall:.1f} s), "
+                  f"lag {values['lag_s']} s; node CPU share {cpu / wall:.3f} core, "
+                  f'{cpu / sim:.3f} CPU s a sim s (its busiest threads: '
+                  f"{', '.join(f'{c / wall:.3f}' for c in threads[:4])} core); "
+                  f'load {os.getloadavg()[0]:.2f}; status '
                   f'{status.status[0].message!r}')
     with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1000.0,
                            'lockstep': True, 'v0': 0.0}) as antenna:
@@ -104,12 +142,13 @@ def main() -> None:
     ap.add_argument('--duration', type=float, default=0.02)
     ap.add_argument('--live', action='store_true')
     ap.add_argument('--live-ribs', type=int, default=6)
+    ap.add_argument('--live-windows', type=int, default=3)
     ap.add_argument('--periods', type=int, default=40)
     args = ap.parse_args()
     for ribs in args.ribs:
         offline(ribs, args.duration)
     if args.live:
-        live(args.live_ribs, args.periods)
+        live(args.live_ribs, args.periods, args.live_windows)
 
 
 if __name__ == '__main__':

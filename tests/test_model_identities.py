@@ -280,3 +280,28 @@ def test_drawn_shape_is_each_elements_cubic(n_el):
         nodes = model.node_positions(q, 7.0)[0]
         chord = np.column_stack([np.interp(x, model.leaf.node_x, nodes[:, i]) for i in (0, 1)])
         assert np.abs(chord - exact).max() > 1e-3
+
+
+def test_hermite_crests_give_each_rows_largest_crest_and_where():
+    """
+    hermite_crests skips the points whose bound cannot pass their row's largest end value.
+
+    Rows of 12 stress points (sinusoids of w h up to 1.2, and some slow), against hermite_peak
+    on every point: the same largest value of each row and the same point holding it; where
+    a point is skipped, its ends' value stands, at most its crest.
+    """
+    from umbrella_sim.core.outputs import hermite_crests, hermite_peak
+    rng = np.random.default_rng(11)
+    theta = rng.uniform(0.0, 1.2, (4000, 12)) * rng.choice([1.0, 0.05], (4000, 1))
+    phi = rng.uniform(0.0, 2 * np.pi, (4000, 12))
+    amp = rng.uniform(0.1, 1.0, (4000, 12))
+    s0, s1 = amp * np.cos(phi), amp * np.cos(theta + phi)
+    d0, d1 = -amp * theta * np.sin(phi), -amp * theta * np.sin(theta + phi)
+    every = hermite_peak(s0, d0, s1, d1)
+    crests = hermite_crests(s0, d0, s1, d1)
+    assert np.array_equal(crests.max(-1), every.max(-1))
+    assert np.array_equal(crests.argmax(-1), every.argmax(-1))
+    ends = np.maximum(np.abs(s0), np.abs(s1))
+    assert np.all((crests == every) | (crests == ends))
+    assert np.sum(crests != every) > 1000          # points skipped, exercised
+    assert np.sum(every.max(-1) > ends.max(-1)) > 100     # crests inside the step, exercised

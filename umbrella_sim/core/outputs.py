@@ -168,7 +168,35 @@ def hermite_peak(s0, d0, s1, d1) -> np.ndarray:
     same arithmetic.
     """
     s0, d0, s1, d1 = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (s0, d0, s1, d1)))
-    best = np.maximum(np.abs(s0), np.abs(s1))
+    return _hermite_crest(s0, d0, s1, d1, np.maximum(np.abs(s0), np.abs(s1)))
+
+
+#: |p(t)| <= max(|s0|, |s1|) + HERMITE_RATE_BOUND (|d0| + |d1|) on [0, 1]: the value basis
+#: functions of the cubic Hermite interpolant sum to 1 there and are >= 0, the slope basis
+#: functions are at most 4/27 in magnitude
+HERMITE_RATE_BOUND = 4.0 / 27.0
+
+
+def hermite_crests(s0, d0, s1, d1) -> np.ndarray:
+    """
+    Return hermite_peak of same-shape arrays whose last axis is a body's stress points.
+
+    What the largest over the last axis needs: where a point's bound (HERMITE_RATE_BOUND)
+    cannot pass the largest end value of its row, its own end values stand (its crest lies
+    between them and that bound), and the interpolant is solved for the others only.
+    """
+    ends = np.maximum(np.abs(s0), np.abs(s1))
+    reach = ends + HERMITE_RATE_BOUND * (np.abs(d0) + np.abs(d1))
+    may = reach > ends.max(-1, keepdims=True)
+    if not may.any():
+        return ends
+    out = ends.copy()
+    out[may] = _hermite_crest(s0[may], d0[may], s1[may], d1[may], ends[may])
+    return out
+
+
+def _hermite_crest(s0, d0, s1, d1, best) -> np.ndarray:
+    """Return hermite_peak of arrays of one shape, best = the larger |end value|."""
     a = 3.0 * (s1 - s0) - 2.0 * d0 - d1
     b = 2.0 * (s0 - s1) + d0 + d1
     qa, qb = 3.0 * b, 2.0 * a               # p'(t) = qa t^2 + qb t + d0

@@ -32,8 +32,8 @@ import numpy as np
 from .forcing import TIME_RESOLUTION
 from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS, step_row,
                       StepBlock)
-from .step_rule import (lock_amplitudes, MAX_STEP_DIVISOR, resolved_omega_h, resolving_divisor,
-                        resolving_step_hint, STRESS_SHARE_LIMIT, unresolved_stress_share)
+from .step_rule import (COUPLING_DEFLECTION, lock_amplitudes, MAX_STEP_DIVISOR, resolution_of,
+                        resolving_step_hint, STRESS_SHARE_LIMIT)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
@@ -252,7 +252,8 @@ def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     return None
 
 
-def coarse_step_warning(resolution: dict | None, hint: str = '') -> str | None:
+def coarse_step_warning(resolution: dict | None, hint: str = '',
+                        deflection: float = 0.0) -> str | None:
     """
     Return a warning when the step leaves the modes carrying the stage-2 stresses unresolved.
 
@@ -260,25 +261,37 @@ def coarse_step_warning(resolution: dict | None, hint: str = '') -> str | None:
     before the lock or for a rigid model.  Past step_rule.STRESS_SHARE_LIMIT the stage-2
     peak stresses, and the period if the first mode is among those modes, are not those of
     the model (docs/validation.md): the text names the shares and the step that resolves
-    them.  hint: how the run's parameters get that step (step_rule.resolving_step_hint), ''
-    if they already do.
+    them.  deflection: the run's largest tip deflection over the leaf length; past
+    step_rule.COUPLING_DEFLECTION any share at all is named (the modes couple there), with
+    the step that resolves every mode.  hint: how the run's parameters get that step
+    (step_rule.resolving_step_hint), '' if they already do.
     """
     if not resolution:
         return None
     shares = {body: resolution[body] for body in ('leaf', 'link')}
-    if max(shares.values()) <= STRESS_SHARE_LIMIT:
+    coupled = deflection > COUPLING_DEFLECTION and 'coupled_step' in resolution
+    limit = 0.0 if coupled else STRESS_SHARE_LIMIT
+    if max(shares.values()) <= limit:
         return None
-    h, enough = resolution['step'], resolution['resolving_step']
+    h = resolution['step']
+    enough = resolution['coupled_step' if coupled else 'resolving_step']
     if enough is None:
         fix = (f'no step down to {h / MAX_STEP_DIVISOR:.3g} s (1/{MAX_STEP_DIVISOR} of this '
                'one) resolves them: give a smaller time_step')
     else:
         fix = f'time_step <= {_rounded_down(enough):.3g} s resolves them' + (
             f' ({hint})' if hint else '')
-    return (f'coarse step: modes the physics step {h:g} s does not resolve carry '
-            f"{100 * shares['leaf']:.3g} % of the leaf's and {100 * shares['link']:.3g} % of the "
-            f"link's stage-2 stress crest at the lock (limit {100 * STRESS_SHARE_LIMIT:g} %): "
-            f'the stage-2 peak stresses are not those of the model; {fix}')
+    crest = (f"{100 * shares['leaf']:.3g} % of the leaf's and {100 * shares['link']:.3g} % of "
+             "the link's stage-2 stress crest at the lock")
+    if coupled:
+        return (f'coarse step: modes the physics step {h:g} s does not resolve carry {crest}, '
+                f'and at a tip deflection of {100 * deflection:.3g} % of the leaf (past '
+                f'{100 * COUPLING_DEFLECTION:g} %) the frame couples its modes: the stage-2 '
+                'peak stresses may be several % off (3-5 % at one element per segment in '
+                f'the step study); {fix}')
+    return (f'coarse step: modes the physics step {h:g} s does not resolve carry {crest} '
+            f'(limit {100 * STRESS_SHARE_LIMIT:g} %): the stage-2 peak stresses are not those '
+            f'of the model; {fix}')
 
 
 def _rounded_down(x: float) -> float:
@@ -315,11 +328,7 @@ def _mesh_resolution(items: tuple, step: float) -> dict | None:
     if p.model not in ('flexible', 'flexible-nonlinear'):
         return None
     model = UmbrellaModel(p)
-    amplitudes = lock_amplitudes(model)
-    limit = resolved_omega_h(p)
-    k = resolving_divisor(model, step, limit, amplitudes)
-    return {'step': step, **unresolved_stress_share(model, amplitudes, step, limit),
-            'resolving_step': None if k is None else step / k}
+    return resolution_of(model, lock_amplitudes(model), step)
 
 
 #: rigid-fe's figures of the elastic field, which its constraints hold at zero: their
@@ -390,8 +399,9 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     lw = lock_warning(params, lock_kind)
     if lw:
         out.append(lw)
-    cw = (coarse_step_warning(stage2_resolution, resolving_step_hint(params))
-          if locked else None)
+    length = params['l1'] + params['l2']
+    cw = (coarse_step_warning(stage2_resolution, resolving_step_hint(params),
+                              tip_deflection / length) if locked else None)
     if cw:
         out.append(cw)
     if energy_drift is not None and energy_drift > ENERGY_DRIFT_LIMIT:
@@ -409,7 +419,6 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
         out.append(f'large strain: peak |sigma| / youngs_modulus = {100 * strain:.3g} % '
                    f'(limit {100 * STRAIN_LIMIT:g} %): the small-strain measures and '
                    "Hooke's law of the beam elements no longer hold")
-    length = params['l1'] + params['l2']
     if (tip_deflection > TIP_DEFLECTION_LIMIT * length
             and params.get('model') != 'flexible-nonlinear'):     # (its own: below)
         out.append(f'large deflection: |v_G| reached {tip_deflection * 1e3:.4g} mm = '

@@ -336,6 +336,53 @@ def diagnostics_msg(t: float, name: str, level: bytes, message: str,
     return msg
 
 
+def template_layout(template: bytes, groups: tuple, stamped: bool) -> tuple:
+    """
+    Return (Struct of the whole message, its constant byte runs) for a template.
+
+    template: a message's exact CDR bytes (``cdr_bytes``) whose variable part is a stamp
+    (``stamped``: header.stamp or Clock.clock, right after the 4-byte CDR header) and
+    groups of doubles (their counts, in order) that end the message.  CDR (XCDR1, 8-aligned
+    doubles): the last group of doubles ends the message; before each later sequence of
+    doubles sit its 4-byte count and 4 pad bytes, since every group of doubles ends
+    8-aligned.  The Struct packs, in order: the constant bytes before the stamp (the CDR
+    header), the stamp if any, then before each group the constant bytes up to it (``Ns``
+    fields: the template's own bytes) and its doubles.
+    """
+    starts, end = [], len(template)
+    for k in reversed(groups):
+        starts.append(end - 8 * k)
+        end = starts[-1] - 8
+    fields, consts, pos = ['<'], [], 0
+    if stamped:
+        fields += ['4s', _STAMP.format.lstrip('<')]
+        consts.append(template[:4])
+        pos = 4 + _STAMP.size
+    for start, k in zip(reversed(starts), groups):
+        fields += [f'{start - pos}s', f'{k}d']
+        consts.append(template[pos:start])
+        pos = start + 8 * k
+    if pos != len(template):
+        fields.append(f'{len(template) - pos}s')
+        consts.append(template[pos:])
+    layout = struct.Struct(''.join(fields))
+    if layout.size != len(template):
+        raise ValueError(f'a {len(template)}-byte template, a {layout.size}-byte layout')
+    return layout, tuple(consts)
+
+
+def template_layouts(messages: dict, groups: dict, stamped) -> dict:
+    """
+    Return {key: template_layout of messages[key]} for every key of groups (its doubles).
+
+    The templates are the builders' messages serialized by ``cdr_bytes`` (exact size, zero
+    padding, as ``ros2 bag record`` writes them); stamped: the keys with a stamp.
+    """
+    from ..bag.cdr import cdr_bytes  # the exact-size rule, one place
+    return {key: template_layout(cdr_bytes(messages[key]), g, key in stamped)
+            for key, g in groups.items()}
+
+
 class SampleEncoder:
     """
     The per-publication topics of a Sample straight to CDR bytes (the publication hot path).
@@ -357,45 +404,11 @@ class SampleEncoder:
 
     def __init__(self, first: Sample, params: UmbrellaParams, initial_energy: float,
                  frame_prefix: str = ''):
-        from ..bag.cdr import cdr_bytes  # the exact-size rule, one place
         self.yield_strength = params.yield_strength
         self.initial_energy = initial_energy
-        msgs = sample_messages(first, params, None, '', initial_energy, frame_prefix)
-        self._layouts = {k: self._layout(cdr_bytes(msgs[k]), g,
-                                         k in self.STAMPED)
-                         for k, g in self.GROUPS.items()}
-
-    @staticmethod
-    def _layout(template: bytes, groups: tuple, stamped: bool) -> tuple:
-        """
-        Return (Struct of the whole message, its constant byte runs) for a template.
-
-        CDR (XCDR1, 8-aligned doubles): the last group of doubles ends the message; before
-        each later sequence of doubles sit its 4-byte count and 4 pad bytes, since every
-        group of doubles ends 8-aligned.  The Struct packs, in order: the constant bytes
-        before the stamp (the CDR header), the stamp if any, then before each group the
-        constant bytes up to it (``Ns`` fields: the template's own bytes) and its doubles.
-        """
-        starts, end = [], len(template)
-        for k in reversed(groups):
-            starts.append(end - 8 * k)
-            end = starts[-1] - 8
-        fields, consts, pos = ['<'], [], 0
-        if stamped:
-            fields += ['4s', _STAMP.format.lstrip('<')]
-            consts.append(template[:4])
-            pos = 4 + _STAMP.size
-        for start, k in zip(reversed(starts), groups):
-            fields += [f'{start - pos}s', f'{k}d']
-            consts.append(template[pos:start])
-            pos = start + 8 * k
-        if pos != len(template):
-            fields.append(f'{len(template) - pos}s')
-            consts.append(template[pos:])
-        layout = struct.Struct(''.join(fields))
-        if layout.size != len(template):
-            raise ValueError(f'a {len(template)}-byte template, a {layout.size}-byte layout')
-        return layout, tuple(consts)
+        self._layouts = template_layouts(
+            sample_messages(first, params, None, '', initial_energy, frame_prefix),
+            self.GROUPS, self.STAMPED)
 
     def encode(self, s: Sample) -> dict[str, bytes]:
         """Return the CDR bytes of every per-publication topic of s, keyed as TOPICS."""
@@ -407,8 +420,8 @@ class SampleEncoder:
         tip, tip_c = layouts['tip_deflection']
         peak, peak_c = layouts['peak_stress']
         position, velocity, effort = joint_state_values(s)
-        # each pack's arguments in _layout's order: the header (and stamp) if STAMPED, then
-        # for each of GROUPS[key] its constant bytes and its doubles
+        # each pack's arguments in template_layout's order: the header (and stamp) if
+        # STAMPED, then for each of GROUPS[key] its constant bytes and its doubles
         return {
             'energy': energy.pack(energy_c[0], *energy_values(s, self.initial_energy)),
             'clock': clock.pack(clock_c[0], sec, nsec),

@@ -33,20 +33,21 @@ With ``ribs`` >= 2 the node publishes, at every publication (msg_docs/topic_ribs
 * ``clock``.
 
 Labels in the layouts name the dimensions and fields, as the planar topics' do.  The message
-builders and their readers (``rib_figures``) are here; the encoder is the node's and the
-offline recorder's (publication.py's role for the planar model).
+builders and their readers (``rib_figures``) are here, and the encoder of the node and the
+offline recorder (publication.py's role for the planar model): the builders' bytes, packed on
+templates as the planar topics' (messages.SampleEncoder).
 """
 from __future__ import annotations
 
 import json
 
+import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from .messages import (clock_msg, INERTIAL_FRAME, marker_every, RELIABLE, stamp, Topic,
-                       TOPICS)
+from .messages import (clock_msg, INERTIAL_FRAME, marker_every, RELIABLE, stamp,
+                       stamp_parts, template_layouts, Topic, TOPICS)
 from .robot_description import joint_names
-from ..bag.cdr import cdr_bytes
 from ..core.registry import NODE_PARAMETERS
 from ..core.umbrella3d.outputs3d import energy_balance3d, STRESS_NAMES
 
@@ -72,51 +73,124 @@ ENERGY_FIELDS = ('kinetic_J', 'strain_J', 'work_J', 'lock_loss_J', 'balance_erro
 SLEEVE_JOINT = joint_names(2)[-1]
 
 
-def _array(rows, fields) -> Float64MultiArray:
+def _array(values: np.ndarray, fields) -> Float64MultiArray:
+    """Return a rib array of values (ribs, len(fields)), its layout labelled."""
     msg = Float64MultiArray()
-    n, m = len(rows), len(fields)
+    n, m = values.shape
     msg.layout.dim = [MultiArrayDimension(label=RIB_LABEL, size=n, stride=n * m),
                       MultiArrayDimension(label='field: ' + ','.join(fields), size=m, stride=m)]
-    msg.data = [float(v) for row in rows for v in row]
+    msg.data = values.ravel().tolist()
     return msg
+
+
+def rib_joint_values(s) -> np.ndarray:
+    """
+    Return joint_states' position, velocity and effort of a Sample3D: (3, 2 N + 1).
+
+    Per rib alpha1 and the link's angle relative to the leaf (alpha2 - alpha1), their rates,
+    no effort; then the sleeve's height, velocity and the whole sleeve's force.
+    """
+    ribs = len(s.alpha1)
+    out = np.zeros((3, 2 * ribs + 1))
+    out[0, 0:2 * ribs:2], out[0, 1:2 * ribs:2] = s.alpha1, s.alpha2 - s.alpha1
+    out[1, 0:2 * ribs:2], out[1, 1:2 * ribs:2] = s.alpha1_rate, s.alpha2_rate - s.alpha1_rate
+    out[:, -1] = s.sleeve_position, s.sleeve_velocity, s.sleeve_force
+    return out
+
+
+def rib_stress_values(s, yield_strength: float) -> np.ndarray:
+    """Return rib_peak_stress's data of a Sample3D: (ribs, STRESS_FIELDS)."""
+    out = np.empty((len(s.alpha1), len(STRESS_FIELDS)))
+    for j, name in enumerate(STRESS_NAMES):
+        out[:, j] = s[f'stress_{name}']
+    out[:, -3:-1] = s.stress_von_mises_at
+    out[:, -1] = s.stress_von_mises / yield_strength
+    return out
+
+
+def rib_energy_values(s, initial_energy: float) -> list[float]:
+    """Return the umbrella's energy data of a Sample3D (ENERGY_FIELDS, J)."""
+    return [float(s.kinetic_energy), float(s.strain_energy), float(s.work),
+            float(s.lock_energy_loss), float(energy_balance3d(s, initial_energy)),
+            float(sum(s.friction_work)), float(s.drive_work)]
 
 
 def rib_messages(s, yield_strength: float, initial_energy: float,
                  frame_prefix: str = '') -> dict:
     """Return the per-publication messages of a Sample3D, keyed as the node's topics."""
-    ribs = len(s.alpha1)
     joints = JointState()
     joints.header.stamp = stamp(s.time)
     joints.header.frame_id = frame_prefix + INERTIAL_FRAME
-    joints.name = joint_names(ribs)
-    link = s.alpha2 - s.alpha1
-    link_rate = s.alpha2_rate - s.alpha1_rate
-    joints.position = [float(v) for k in range(ribs) for v in (s.alpha1[k], link[k])] + [
-        float(s.sleeve_position)]
-    joints.velocity = [float(v) for k in range(ribs)
-                       for v in (s.alpha1_rate[k], link_rate[k])] + [float(s.sleeve_velocity)]
-    joints.effort = [0.0] * (2 * ribs) + [float(s.sleeve_force)]
-    at = s.stress_von_mises_at
-    stress = [[*(getattr(s, f'stress_{name}')[k] for name in STRESS_NAMES), at[k, 0], at[k, 1],
-               s.stress_von_mises[k] / yield_strength] for k in range(ribs)]
+    joints.name = joint_names(len(s.alpha1))
+    joints.position, joints.velocity, joints.effort = rib_joint_values(s).tolist()
     energy = Float64MultiArray()
     energy.layout.dim = [MultiArrayDimension(label='field: ' + ','.join(ENERGY_FIELDS),
                                              size=len(ENERGY_FIELDS), stride=len(ENERGY_FIELDS))]
-    energy.data = [float(s.kinetic_energy), float(s.strain_energy), float(s.work),
-                   float(s.lock_energy_loss), float(energy_balance3d(s, initial_energy)),
-                   float(sum(s.friction_work)), float(s.drive_work)]
+    energy.data = rib_energy_values(s, initial_energy)
     return {'clock': clock_msg(s.time), 'joint_states': joints, 'energy': energy,
-            'rib_tip_deflection': _array(s.tip, TIP_FIELDS),
-            'rib_peak_stress': _array(stress, STRESS_FIELDS)}
+            'rib_tip_deflection': _array(np.asarray(s.tip, dtype=float), TIP_FIELDS),
+            'rib_peak_stress': _array(rib_stress_values(s, yield_strength), STRESS_FIELDS)}
+
+
+class RibsSampleEncoder:
+    """
+    The per-publication topics of a Sample3D straight to CDR bytes (SampleEncoder's rule).
+
+    The bytes of ``rib_messages``'s messages, serialized as ``cdr_bytes`` does: a template
+    of each, serialized once, holds the constant part (the joint names, layouts, labels,
+    frame id) and each publication packs the stamp and the doubles between its constant
+    bytes (messages.template_layout), one ``struct`` call a topic.
+    """
+
+    @staticmethod
+    def groups(ribs: int) -> dict:
+        """Return topic key -> the groups of doubles of its message for ribs (template_layout)."""
+        joints = 2 * ribs + 1
+        return {'clock': (), 'joint_states': (joints, joints, joints),
+                'energy': (len(ENERGY_FIELDS),),
+                'rib_tip_deflection': (ribs * len(TIP_FIELDS),),
+                'rib_peak_stress': (ribs * len(STRESS_FIELDS),)}
+
+    #: topics with a stamp right after the 4-byte CDR header
+    STAMPED = ('clock', 'joint_states')
+
+    def __init__(self, first, yield_strength: float, initial_energy: float,
+                 frame_prefix: str = ''):
+        self.yield_strength, self.initial_energy = yield_strength, initial_energy
+        self._layouts = template_layouts(
+            rib_messages(first, yield_strength, initial_energy, frame_prefix),
+            self.groups(len(first.alpha1)), self.STAMPED)
+
+    def encode(self, s) -> dict[str, bytes]:
+        """Return the CDR bytes of every per-publication topic of s, keyed as the node's."""
+        sec, nsec = stamp_parts(s.time)
+        layouts = self._layouts
+        clock, clock_c = layouts['clock']
+        joints, joints_c = layouts['joint_states']
+        energy, energy_c = layouts['energy']
+        tip, tip_c = layouts['rib_tip_deflection']
+        stress, stress_c = layouts['rib_peak_stress']
+        position, velocity, effort = rib_joint_values(s).tolist()
+        # in template_layout's order: the header and stamp if stamped, then each group's
+        # constant bytes and its doubles
+        return {
+            'clock': clock.pack(clock_c[0], sec, nsec),
+            'joint_states': joints.pack(joints_c[0], sec, nsec, joints_c[1], *position,
+                                        joints_c[2], *velocity, joints_c[3], *effort),
+            'energy': energy.pack(energy_c[0], *rib_energy_values(s, self.initial_energy)),
+            'rib_tip_deflection': tip.pack(tip_c[0], *np.ravel(s.tip).tolist()),
+            'rib_peak_stress': stress.pack(
+                stress_c[0], *rib_stress_values(s, self.yield_strength).ravel().tolist()),
+        }
 
 
 class RibsPublicationEncoder:
     """
     What a publication of the umbrella carries, as CDR bytes (PublicationEncoder's role).
 
-    The per-publication topics above, and on every marker_every-th publication (t = 0
-    included) the markers of every rib (umbrella_markers.UmbrellaMarkers, of the simulator's
-    state: a publication is always of the current state).
+    The per-publication topics above (RibsSampleEncoder), and on every marker_every-th
+    publication (t = 0 included) the markers of every rib (umbrella_markers.UmbrellaMarkers,
+    of the simulator's state: a publication is always of the current state).
     """
 
     def __init__(self, driver, marker_rate: float = NODE_PARAMETERS['marker_rate'].default):
@@ -126,13 +200,17 @@ class RibsPublicationEncoder:
         self.yield_strength = driver.params.planar.yield_strength
         self.marker_every = marker_every(driver.publish_rate, marker_rate)
         self.count = 0
+        self._encoders: dict[str, RibsSampleEncoder] = {}   # by frame_prefix
         self._markers: dict = {}        # by (marker namespace, frame_prefix)
 
     def messages(self, s, marker_ns: str = 'umbrella', magnification: float = 1.0,
                  frame_prefix: str = '') -> dict[str, bytes]:
         """Return what the publication of s (RunDriver.publication()) publishes."""
-        out = {key: cdr_bytes(msg) for key, msg in rib_messages(
-            s, self.yield_strength, self.initial_energy, frame_prefix).items()}
+        encoder = self._encoders.get(frame_prefix)
+        if encoder is None:
+            encoder = self._encoders[frame_prefix] = RibsSampleEncoder(
+                self.driver.initial, self.yield_strength, self.initial_energy, frame_prefix)
+        out = encoder.encode(s)
         if self.count % self.marker_every == 0:
             from .umbrella_markers import UmbrellaMarkers
 

@@ -42,7 +42,8 @@ from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
 from ..model import Stage
 from ..outputs import LockEvent
-from ..summary import (deploy_start, ENERGY_SCALE_FLOOR, validity_warnings)
+from ..summary import (deploy_start, ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR,
+                       validity_warnings)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
 #: a segment), so a chunk stays near the planar rule's ~10 ms (driver.CHUNK_WORK); the
@@ -93,12 +94,60 @@ class Sample3D:
         values['stage'] = Stage.LOCKED if values.pop('locked') else Stage.DEPLOYING
         return cls(values)
 
-    def with_peaks(self, hold: dict) -> 'Sample3D':
+    def with_peaks(self, hold: 'RibPeaks') -> 'Sample3D':
         """Return this sample with each rib's stress figures the held ones (merge_peaks)."""
         values = dict(self._values)
-        for name, (top, at, _) in hold.items():
-            values[f'stress_{name}'], values[f'stress_{name}_at'] = top, at
+        for j, name in enumerate(STRESS_NAMES):
+            values[f'stress_{name}'], values[f'stress_{name}_at'] = hold.value[:, j], hold.at[:, j]
         return Sample3D(values)
+
+
+_COMPONENTS = np.arange(len(STRESS_NAMES))[None]
+
+
+class RibPeaks:
+    """
+    Each rib's largest |value| of every stress component, where and when (read-only).
+
+    value (ribs, components), at (ribs, components, 2: body code and x, as Sample3D's),
+    when (ribs, components) s; the components in STRESS_NAMES' order.
+    """
+
+    __slots__ = ('value', 'at', 'when')
+
+    def __init__(self, value: np.ndarray, at: np.ndarray, when: np.ndarray):
+        self.value, self.at, self.when = value, at, when
+
+    @classmethod
+    def of_rows(cls, rows: dict, i=None) -> 'RibPeaks':
+        """
+        Return the peaks of Record3D rows (steps first): the first step with the largest.
+
+        i: the step of each rib and component to take instead ((ribs, components) indices;
+        0 for a Sample3D's figures taken as one step's rows).
+        """
+        value = np.stack([rows[f'stress_{name}'] for name in STRESS_NAMES], -1)
+        at = np.stack([rows[f'stress_{name}_at'] for name in STRESS_NAMES], -2)
+        i = value.argmax(0) if i is None else np.broadcast_to(i, value.shape[1:])
+        ribs, components = np.arange(value.shape[1])[:, None], _COMPONENTS
+        return cls(value[i, ribs, components], at[i, ribs, components],
+                   np.asarray(rows['time'])[i])
+
+    def __getitem__(self, name: str) -> tuple:
+        """Return (value, at, when) of one component (STRESS_NAMES), rib by rib."""
+        j = STRESS_NAMES.index(name)
+        return self.value[:, j], self.at[:, j], self.when[:, j]
+
+    def items(self):
+        """Yield (component, (value, at, when)) in STRESS_NAMES' order."""
+        return ((name, self[name]) for name in STRESS_NAMES)
+
+    def merged(self, new: 'RibPeaks') -> 'RibPeaks':
+        """Return, rib by rib and component by component, the larger (these held on a tie)."""
+        better = new.value > self.value
+        return RibPeaks(np.where(better, new.value, self.value),
+                        np.where(better[..., None], new.at, self.at),
+                        np.where(better, new.when, self.when))
 
 
 class StepBlock3D:
@@ -130,37 +179,18 @@ class StepBlock3D:
         return self._last
 
     @property
-    def peaks(self) -> dict:
-        """
-        Return {component: (each rib's largest |value| over the steps, where, when)}.
-
-        where: (ribs, 2), body code and x (Sample3D); when: (ribs,) s; the first step holding
-        the largest value.  {} for a block without steps.
-        """
-        if self._peaks is None:
-            out = {}
-            if len(self):
-                t, ribs = self.rows['time'], None
-                for name in STRESS_NAMES:
-                    values = self.rows[f'stress_{name}']
-                    i = values.argmax(0)
-                    ribs = np.arange(values.shape[1]) if ribs is None else ribs
-                    out[name] = (values[i, ribs], self.rows[f'stress_{name}_at'][i, ribs], t[i])
-            self._peaks = out
+    def peaks(self) -> RibPeaks | None:
+        """Return each rib's largest stresses over the steps (RibPeaks; None: no steps)."""
+        if self._peaks is None and len(self):
+            self._peaks = RibPeaks.of_rows(self.rows)
         return self._peaks
 
-    def merge_peaks(self, hold: dict) -> dict:
-        """Return the held peaks (peaks' form) with this block's larger ones, rib by rib."""
-        if not hold:
-            return dict(self.peaks)
-        return {name: _larger(hold[name], peak) for name, peak in self.peaks.items()} or hold
-
-
-def _larger(held: tuple, new: tuple) -> tuple:
-    """Return, rib by rib, the larger of two (value, where, when) peaks (held on a tie)."""
-    better = new[0] > held[0]
-    return (np.where(better, new[0], held[0]), np.where(better[:, None], new[1], held[1]),
-            np.where(better, new[2], held[2]))
+    def merge_peaks(self, hold) -> RibPeaks:
+        """Return the held peaks (RibPeaks, or {}: none yet) with this block's larger ones."""
+        peaks = self.peaks
+        if peaks is None:
+            return hold
+        return hold.merged(peaks) if hold else peaks
 
 
 class Engine3D:
@@ -292,13 +322,14 @@ class Summary3D:
                                    for k in range(m.n_ribs)])
         self._oop = largest_out_of_plane_tip(np.array([initial.time]), initial.tip[None])
         self._in_plane = np.abs(initial.tip[:, 1])
-        t0 = np.full(m.n_ribs, float(initial.time))
-        self._peaks = {name: (getattr(initial, f'stress_{name}'),
-                              getattr(initial, f'stress_{name}_at'), t0)
-                       for name in STRESS_NAMES}
+        self._peaks = RibPeaks.of_rows(
+            {name: np.asarray(v)[None] for name, v in initial.fields().items()
+             if name.startswith('stress_') or name == 'time'}, 0)
         self._final = initial
         self._start = deploy_start(float(sim.params.planar.v0), ())
         self._warned: set = set()
+        self._warned_at = None
+        self._planar = sim.params.planar.as_dict()     # (a frozen record)
 
     def add(self, block: StepBlock3D) -> None:
         """Take the steps of one block."""
@@ -314,9 +345,13 @@ class Summary3D:
             self._start = deploy_start(0.0, zip([self.final_time, *t[:-1].tolist()],
                                                 rows['sleeve_force'].tolist()))
         t_before, alpha_before = self._last
-        for k in np.nonzero(np.isnan(self._deployed))[0]:
-            self._deployed[k] = first_reach(t, rows['alpha1'][:, k] - m.alpha_deployed[k],
-                                            (t_before, alpha_before[k] - m.alpha_deployed[k]))
+        ribs = np.nonzero(np.isnan(self._deployed))[0]
+        if len(ribs):          # (first_reach of the ribs whose leaf reached its angle)
+            gap = rows['alpha1'][:, ribs] - m.alpha_deployed[ribs]
+            for j in np.nonzero((gap <= 0.0).any(0))[0]:
+                k = ribs[j]
+                self._deployed[k] = first_reach(t, gap[:, j], (
+                    t_before, alpha_before[k] - m.alpha_deployed[k]))
         self._last = (float(t[-1]), rows['alpha1'][-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(np.abs(energy).max()))
@@ -372,13 +407,20 @@ class Summary3D:
 
     def warnings(self) -> list[str]:
         """Return the validity warnings: summary's one rule, on the worst rib's figures."""
-        return validity_warnings(self.sim.params.planar.as_dict(), self.lock_kind,
+        return validity_warnings(self._planar, self.lock_kind,
                                  float(self._peaks['von_mises'][0].max()),
                                  float(self._in_plane.max()), locked=self.lock is not None,
                                  energy_drift=self.energy_drift)
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
+        # the warnings depend on the run only through these (SummaryAccumulator's rule):
+        # unchanged (most chunks once the peaks are reached), nothing can be new
+        seen = (self._peaks['von_mises'][0].max(), self._in_plane.max(), self.lock is not None,
+                self.energy_drift > ENERGY_DRIFT_LIMIT)
+        if seen == self._warned_at:
+            return []
+        self._warned_at = seen
         fresh = [w for w in self.warnings() if w.split(':')[0] not in self._warned]
         self._warned.update(w.split(':')[0] for w in fresh)
         return fresh

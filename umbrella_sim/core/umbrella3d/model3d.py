@@ -571,6 +571,10 @@ class UmbrellaModel3D:
 
     def stress_components(self, qr):
         """Per body: (axial, bending z, bending y, torsion shear) (..., R, points) each, Pa."""
+        return [tuple(b[..., i, :] for i in range(4)) for b in self.stress_blocks(qr)]
+
+    def stress_blocks(self, qr):
+        """Per body the four components of stress_components stacked: (..., R, 4, points), Pa."""
         if not hasattr(self, '_stress_rows'):
             # per body, every rib's four recovery matrices stacked: (R, 4 points, elastic)
             self._stress_rows = [
@@ -578,8 +582,11 @@ class UmbrellaModel3D:
                     'stress_axial', 'stress_bend_z', 'stress_bend_y', 'stress_shear')], 1), s_e)
                 for bodies, s_e in ((self.leaf_bodies, self.s_leaf_e),
                                     (self.link_bodies, self.s_link_e))]
-        return [tuple(np.split(np.einsum('rpe,...re->...rp', rows, qr[..., s_e]), 4, -1))
-                for rows, s_e in self._stress_rows]
+        out = []
+        for rows, s_e in self._stress_rows:
+            stress = np.einsum('rpe,...re->...rp', rows, qr[..., s_e])
+            out.append(stress.reshape(stress.shape[:-1] + (4, -1)))
+        return out
 
 
 def _deployed_angle(rib, base) -> float:

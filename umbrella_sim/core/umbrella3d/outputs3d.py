@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..outputs import hermite_crests
+
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
 #: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
 BODIES = ('leaf', 'link')
@@ -51,7 +53,13 @@ class Record3D:
         self.drive = 0.0
         self.lock_events: list = []
         self.iterations = 0
-        self._xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
+        # a stress point's x along its body: the leaf's points, then the link's
+        xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
+        self._leaf_points, self._x_of = len(xs[0]), np.concatenate(xs)
+        self._peaks = np.zeros((nr, len(STRESS_NAMES)))     # peak's values, a column each
+        #: the last step's (time, stress components, their rates, von Mises, its rate,
+        #: locked): the start of the next step's crests (_crests)
+        self._last_stress = None
 
     def _put(self, name, value):
         self.rows.setdefault(name, []).append(np.array(value)[None])
@@ -123,44 +131,91 @@ class Record3D:
             'stop_reaction': st['lam_s'][:, 0]}
         for name, values in columns.items():        # (copies: the rows' buffers are reused)
             self.rows.setdefault(name, []).append(np.array(values))
-        # stresses: each rib's worst point per step; the peaks over the steps in the order
-        # they happened (step by step, the leaf before the link: the first of equal ones)
-        tops = {name: [] for name in STRESS_NAMES}
-        wheres = {name: [] for name in STRESS_NAMES}
-        vm_now = np.zeros((k, m.n_ribs))
-        for comps in m.stress_components(qr):
-            ax, bz, by, sh = comps
-            vm = np.sqrt((np.abs(ax) + np.abs(bz) + np.abs(by)) ** 2 + 3.0 * sh * sh)
-            vm_now = np.maximum(vm_now, vm.max(-1))
-            for name, values in zip(STRESS_NAMES, (ax, bz, by, sh, vm)):
-                a = np.abs(values)
-                tops[name].append(a.max(-1))
-                wheres[name].append(a.argmax(-1))
-        for name in STRESS_NAMES:
-            # this step's worst over both bodies and where (the leaf's on a tie)
-            by_body = np.stack(tops[name], 1)                          # (step, body, rib)
-            body = by_body.argmax(1)
-            steps, ribs = np.arange(k)[:, None], np.arange(m.n_ribs)[None]
-            point = np.stack(wheres[name], 1)[steps, body, ribs]
-            x = np.where(body == 0, self._xs[0][np.minimum(point, len(self._xs[0]) - 1)],
-                         self._xs[1][np.minimum(point, len(self._xs[1]) - 1)])
-            self.rows.setdefault(f'stress_{name}', []).append(by_body[steps, body, ribs])
-            self.rows.setdefault(f'stress_{name}_at', []).append(
-                np.stack([body.astype(float), x], -1))
-            top = by_body.reshape(2 * k, m.n_ribs)   # (step, body) order
-            first = top.argmax(0)
-            best = top[first, np.arange(m.n_ribs)]
-            better = best > self.peak[name]
-            if np.any(better):
-                self.peak[name] = np.where(better, best, self.peak[name])
-                lst = list(self.peak_where[name])
-                for r in np.nonzero(better)[0]:
-                    step, body = divmod(int(first[r]), 2)
-                    point = wheres[name][body][step, r]
-                    lst[r] = (('leaf', 'link')[body], float(self._xs[body][point]),
-                              float(t[step]))
-                self.peak_where[name] = lst
-        self.rows.setdefault('von_mises', []).append(vm_now)
+        # stresses: each rib's worst point per step, and where: the first of the largest in
+        # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
+        # argmax); every component at once, in STRESS_NAMES' order
+        every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
+                             np.concatenate(m.stress_blocks(st['vr']), -1), locked)
+        top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
+        at = np.empty(top.shape + (2,))
+        at[..., 0] = point >= self._leaf_points                  # the body's code
+        at[..., 1] = self._x_of[point]
+        put = self.rows.setdefault
+        for j, name in enumerate(STRESS_NAMES):
+            put(f'stress_{name}', []).append(top[:, :, j])
+            put(f'stress_{name}_at', []).append(at[:, :, j])
+        put('von_mises', []).append(np.maximum(top[:, :, -1], 0.0))
+        # the peaks over these steps, rib by rib: the first of the largest step by step (the
+        # leaf before the link: each step's own rule above)
+        best = top.max(0)                                       # (rib, 5)
+        better = best > self._peaks
+        if not better.any():
+            return
+        first = top.argmax(0)
+        self._peaks = np.where(better, best, self._peaks)
+        for j in np.nonzero(better.any(0))[0]:
+            name = STRESS_NAMES[j]
+            self.peak[name] = self._peaks[:, j].copy()
+            lst = list(self.peak_where[name])
+            for r in np.nonzero(better[:, j])[0]:
+                step = first[r, j]
+                i = point[step, r, j]
+                lst[r] = (BODIES[int(i >= self._leaf_points)], float(self._x_of[i]),
+                          float(t[step]))
+            self.peak_where[name] = lst
+
+    def _crests(self, t, stress, rate, locked: bool) -> np.ndarray:
+        """
+        Return each step's largest |stress| of every component and von Mises, per point.
+
+        stress, rate: (step, rib, 4, point), the components and their rates at the steps'
+        ends (stresses are linear in the elastic coordinates: their rates are those of the
+        elastic velocities).  Over a step from the previous one, the crest of the cubic
+        Hermite interpolant of the ends' values and rates (outputs.hermite_peak, the planar
+        model's rule: a crest between two steps counts where the step resolves it), of each
+        signed component and of the combined figure sqrt((|axial| + |bending z| + |bending
+        y|)^2 + 3 shear^2) with its rate; the end's own value for the first step of a run,
+        and for a step across the lock, whose velocity jumps.  Returns (step, rib, 5, point).
+        """
+        def combined(s, r):
+            total = np.abs(s[:, :, 0]) + np.abs(s[:, :, 1]) + np.abs(s[:, :, 2])
+            vm = np.sqrt(total * total + 3.0 * s[:, :, 3] * s[:, :, 3])
+            growth = (np.sign(s[:, :, 0]) * r[:, :, 0] + np.sign(s[:, :, 1]) * r[:, :, 1]
+                      + np.sign(s[:, :, 2]) * r[:, :, 2])
+            with np.errstate(divide='ignore', invalid='ignore'):
+                vm_rate = np.where(vm > 0.0, (total * growth + 3.0 * s[:, :, 3] * r[:, :, 3])
+                                   / vm, 0.0)
+            return vm, vm_rate
+
+        vm, vm_rate = combined(stress, rate)
+        end = np.concatenate([np.abs(stress), vm[:, :, None]], 2)
+        last = self._last_stress
+        self._last_stress = (float(t[-1]), stress[-1], rate[-1], vm[-1], vm_rate[-1], locked)
+        if last is None:
+            if len(t) == 1:
+                return end
+            last = (float(t[0]), stress[0], rate[0], vm[0], vm_rate[0], locked)
+            first = 1
+        else:
+            first = 0
+        if last[5] != locked:                   # (across the lock: the ends' own values)
+            first = max(first, 1)
+            if len(t) == 1:
+                return end
+            last = (float(t[0]), stress[0], rate[0], vm[0], vm_rate[0], locked)
+        # every channel (the four components, signed, and von Mises) of both ends at once:
+        # (step, rib, 5, point)
+        values = np.concatenate([stress, vm[:, :, None]], 2)
+        rates = np.concatenate([rate, vm_rate[:, :, None]], 2)
+        before = np.concatenate([np.concatenate([last[1], last[3][:, None]], 1)[None],
+                                 values[:-1]])
+        rate_before = np.concatenate([np.concatenate([last[2], last[4][:, None]], 1)[None],
+                                      rates[:-1]])
+        h = (t - np.concatenate([[last[0]], t[:-1]]))[first:, None, None, None]
+        out = end.copy()
+        out[first:] = hermite_crests(before[first:], h * rate_before[first:], values[first:],
+                                     h * rates[first:])
+        return out
 
     def arrays(self) -> dict:
         """Return every per-step figure as an array (steps first, then ribs or components)."""
@@ -168,7 +223,9 @@ class Record3D:
 
     def take(self) -> dict:
         """Return the rows added since the last take as arrays (``arrays``), and drop them."""
-        out = self.arrays()
+        # (one block of steps: its own arrays, which nothing else holds)
+        out = {name: values[0] if len(values) == 1 else np.concatenate(values)
+               for name, values in self.rows.items()}
         self.rows = {}
         return out
 
