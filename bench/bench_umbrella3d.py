@@ -24,6 +24,10 @@ Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x ele
     run) and the numpy reference (UmbrellaSimulator3D.step, one step a call); and that
     divided by the number of ribs: it must stay flat (block-arrow algebra: a step costs
     linearly in the ribs), and by the coordinates of a rib;
+  * kernel us/step: the compiled step alone (CompiledStep3D.advance: --kernel-steps steps
+    in one call, no Record3D), best of --repeat, at the step chosen for the mesh (as the
+    real-time factors below), in stage 1 (from t = 0) and in stage 2 (from the lock on, the
+    mode fit acting), with the Newton iterations and factorisations a step;
   * real-time factors: simulated seconds per wall second, and CPU seconds per simulated
     second, of the runs the node would make: ribs 6 x 1 element in blocks of 1 ms (a 1 kHz
     publication), ribs 12 x 2 elements in blocks of 10 ms (100 Hz), each at the step chosen
@@ -66,6 +70,30 @@ BASE_VALUES = {'fixed': {},
                'free': {'base': 'free'}}
 #: the base of every figure (set from --base)
 BASE = BASE_VALUES['fixed']
+
+
+def kernel_cost(sim: UmbrellaSimulator3D, steps: int, repeat: int):
+    """Return (CPU s, iterations, factorisations) a step of the compiled step alone from now."""
+    compiled, best = sim.integrator.compiled, float('inf')
+    for _ in range(repeat):
+        t0 = time.thread_time()
+        _, done, rows, _ = compiled.advance(sim.state, sim.k, sim.h, steps, sim.force,
+                                            sim.locked)
+        best = min(best, (time.thread_time() - t0) / done)
+    return best, rows['iterations'].mean(), rows['factorisations'].mean()
+
+
+def kernel_stages(ribs: int, elements: int, steps: int, repeat: int, stage2: bool):
+    """Return (step h, kernel_cost in stage 1 from t = 0, in stage 2 from the lock or None)."""
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
+        {'ribs': ribs, 'elements_per_segment': elements, **BASE}), kernel='compiled')
+    sim.advance(2)                        # (the first factorisation, at the grid's step)
+    deploying = kernel_cost(sim, steps, repeat)
+    if not stage2:
+        return sim.h, deploying, None
+    sim.run(1.0, after_lock=0.0)
+    sim.advance(2)
+    return sim.h, deploying, kernel_cost(sim, steps, repeat)
 
 
 def step_cost(ribs: int, elements: int, steps: int, repeat: int, kernel: str):
@@ -120,6 +148,11 @@ def main(argv=None):
                     help='real-time factors of stage 2 (from the lock on, the mode fit acting)')
     ap.add_argument('--base', default='fixed', choices=list(BASE_VALUES),
                     help='the hub fixed, driven (prescribed) or a free bus (BASE_VALUES)')
+    ap.add_argument('--kernel-ribs', type=int, nargs='*', default=[1, 3, 6, 12],
+                    help='ribs of the kernel table (none: no table)')
+    ap.add_argument('--kernel-steps', type=int, default=1000)
+    ap.add_argument('--no-stage2', action='store_true',
+                    help='no kernel figures of stage 2 (each needs a run to the lock)')
     args = ap.parse_args(argv)
     global BASE
     BASE = BASE_VALUES[args.base]
@@ -144,6 +177,29 @@ def main(argv=None):
                       f'+ {1e6 * fit[0]:.1f} us x ribs (largest deviation {100 * worst:.0f} %; '
                       f'a quadratic term would carry {100 * quad:+.0f} % at {max(args.ribs)} '
                       'ribs)')
+    if args.kernel_ribs:
+        print('\nthe compiled step alone (no Record3D; step chosen for the mesh; CPU of this '
+              'thread)')
+        print(f"{'ribs':>5} {'elements':>9} {'step (us)':>10} {'stage':>6} {'us/step':>9} "
+              f"{'us/step/rib':>12} {'Newton it':>10} {'factorisations':>15} {'core':>6}")
+    for elements in args.elements if args.kernel_ribs else ():
+        by_stage = {1: [], 2: []}
+        for ribs in args.kernel_ribs:
+            h, *stages = kernel_stages(ribs, elements, args.kernel_steps, args.repeat,
+                                       not args.no_stage2)
+            for stage, figures in enumerate(stages, 1):
+                if figures is None:
+                    continue
+                cost, its, facts = figures
+                by_stage[stage].append(cost)
+                print(f'{ribs:5d} {elements:9d} {1e6 * h:10.2f} {stage:6d} {1e6 * cost:9.1f} '
+                      f'{1e6 * cost / ribs:12.2f} {its:10.2f} {facts:15.3f} {cost / h:6.2f}',
+                      flush=True)
+        for stage, costs in by_stage.items():
+            if len(costs) > 1:
+                fit = 1e6 * np.polyfit(args.kernel_ribs, costs, 1)
+                print(f'          {elements} element(s), stage {stage}: {fit[1]:.1f} us + '
+                      f'{fit[0]:.2f} us x ribs')
     print(f'\nreal-time factors over {args.duration} s simulated (step chosen for the mesh)')
     print(f"{'ribs':>5} {'elements':>9} {'block':>8} {'step (us)':>10} {'RTF (wall)':>11} "
           f"{'CPU s / sim s':>14} {'target':>30}")

@@ -333,17 +333,45 @@ lock itself stays in Python). The numpy step (integrator3d.py) is the reference 
 against (tests/test_umbrella3d_kernel.py) and steps any run
 without the library (said once on stderr; `UMBRELLA_SIM_KERNEL=numpy` asks for it). Measured
 on the 2 shared cores (bench/bench_umbrella3d.py, CPU per step at h = 0.1 ms, deployment):
-compiled 3.4 us + 7.9 us x ribs at 1 element a segment, 0.8 us + 16.1 us x ribs at 2 (numpy:
+compiled 3.4 us + 7.9 us x ribs at 1 element a segment, 0.8 us + 16.1 us x ribs at 2 (11.9 us
++ 6.6 us x ribs and 6.6 us + 14.6 us x ribs with the cheaper step below, at load ~4.6; numpy:
 1.84 ms + 98 us x ribs, 1.88 ms + 276 us x ribs), 2.0 Newton iterations and 0.125
 factorisations a step: the iteration matrix is kept across steps (modified Newton, at most 8
 steps, re-factored after a slow iteration; `carry_steps`; a fresh one each step cost 17.2 and
-48.8 us x ribs before the inertia invariants). M(q), M v and the kinetic gradient come from
+48.8 us x ribs before the inertia invariants; in stage 2 too 8 is the best, 16 the same, 32
+slower). M(q), M v and the kinetic gradient come from
 each body's inertia invariants (the floating frame's S-bar and I-bar sums, taken over the
 points once: M's frame rows are rotation combinations of constants, no point loop a step),
 M v and K q run over the nonzeros (K and the elastic mass blocks are banded), the projection
 factors M(q)'s blocks from the constant elastic block's LU: 15.2 -> 7.9 and 42.3 -> 16.1 us x
-ribs. What remains a step (perf, 12 x 2 in stage 2): the projection's factorisation (a
-fifth), the Newton solves, the fit's modal passes; Record3D's figures in 1 ms blocks.
+ribs. The compiled step alone (no Record3D, at the mesh's step; the bench's second table;
+CPU us a step, best of two runs, before and after in turn at load 0.9-1.4 on the 2 cores):
+
+| ribs x elements | step | stage 1 before | stage 1 after | stage 2 before | stage 2 after |
+|---|---|---|---|---|---|
+| 1 x 1 | 100 us | 7.4 | 5.7 | 12.5 | 9.4 |
+| 3 x 1 | 100 us | 21.2 | 15.8 | 35.5 | 25.6 |
+| 6 x 1 | 100 us | 42.2 | 31.3 | 70.0 | 49.9 |
+| 12 x 1 | 100 us | 83.2 | 61.4 | 138.0 | 98.9 |
+| 1 x 2 | 33.3 us | 14.5 | 10.3 | 25.7 | 17.1 |
+| 3 x 2 | 33.3 us | 42.5 | 29.9 | 75.1 | 49.4 |
+| 6 x 2 | 33.3 us | 84.9 | 59.1 | 150.3 | 98.3 |
+| 12 x 2 | 33.3 us | 172.1 | 120.6 | 306.5 | 201.2 |
+
+Linear in the ribs (fit over 1-12 ribs, intercepts within 2 us): 6.9 -> 5.1 us x ribs in stage
+1 and 11.4 -> 8.2 in stage 2 at 1 element, 14.4 -> 10.0 and 25.6 -> 16.8-17.2 at 2 (2.0 Newton
+iterations a step in stage 1, 2.81 and 2.20 in stage 2, 0.125 factorisations a step of the
+iteration matrix and one of the projection's). What made it cheaper (perf): the joint
+Jacobian's products over its nonzeros, no bodies' solves of a zero right-hand side (the shared
+columns, the projection's solve), the iteration matrix factored elastic coordinates first as
+the projection's (its elastic block M + h²/4 K is constant for a step length) and both bodies'
+solves over the nonzeros of the elastic LUs, a Newton iteration's two mass products in one
+pass, the Gonzalez joint term as J^T lambda + dq (f . lambda), the mode fit's sums in registers
+(they had been a fifth of a stage-2 step). What remains a step (perf, 6 x 1 deploying): the
+projection about 0.4 of it (its factorisation every step: the 9 right-hand sides M^-1 J^T, the
+9 x 9 joint block), the Newton iterations' mass products, kinetic gradient and solves; in stage
+2 the mode fit's modal passes (about 11 a step: a quarter of it) and the 2.81 iterations (a
+fresh iteration matrix each step takes 2.07 but costs more).
 With the hub fixed the 3D model takes the planar stage-2 mode fit rib by rib (the sleeve at
 the stop decouples the ribs: each rib's locked modes exact in phase and amplitude, T + V
 conserved; tests/test_umbrella3d_mode_fit.py), hence the planar rule's fitted
@@ -351,9 +379,13 @@ step: 0.1 ms at 1 element, 33 us at 2 (9.1 us without the fit). Ribs 6 x 1 in 1 
 at 1.1-1.15 x real time deploying (0.9 CPU s a simulated second, with Record3D's figures and
 each rib's stress rows: about 0.4 of them; the steps alone 0.5) and 0.87 x in stage 2 (1.2 CPU
 s; 80 us a step); ribs 12 x 2 in 10 ms blocks at 0.167 x (6.0 CPU s) and 0.099 x (10.1 CPU
-s). The issue's targets (6 x 1 within 0.5 core,
-12 x 2 in real time) are not reached: they need about 8 us (6 x 1, the figures included) and
-2.8 us (12 x 2) a rib and step at these steps.
+s). With the cheaper step (the same runs as the table): 6 x 1 at 1.41 x real time deploying
+(1.16-1.24 x before; 0.7 CPU s a simulated second, of which the step 0.31 and Record3D's
+figures about 0.37: a run's Record3D.add_steps in 10-step blocks, 37 us a step at load ~4),
+0.50 core for the step alone in stage 2; 12 x 2 at 0.23 x deploying (0.16-0.17 x before; 4.3
+CPU s, the step alone 3.6), the step alone 6.0 cores in stage 2. The issue's targets
+(6 x 1 within 0.5 core, 12 x 2 in real time) are not reached: they need about 8 us (6 x 1,
+the figures included) and 2.8 us (12 x 2) a rib and step at these steps.
 
 A driven hub and a free-floating bus step compiled too (umbrella_sim/core/_kernel3d_base.h: the
 bus's border of M(q) (its elastic columns from invariants), its share of the kinetic energy's

@@ -29,6 +29,11 @@
  * run over the rib's nonzeros (Rows: K and the elastic mass blocks are banded).  The linear
  * algebra is block-arrow (umbrella3d/arrow.py): each rib's (n + 9) block factored alone, the shared
  * unknowns (sleeve, stop multiplier) through their Schur complement: cost linear in the ribs.
+ * A body's block (the projection's M, the iteration matrix M + h^2/4 K + h/2 G) is factored
+ * elastic coordinates first from its elastic block's LU, which no motion changes (of M once,
+ * of the iteration matrix once a step length), and solved over that LU's nonzeros (ef_solve);
+ * the joint Jacobian's products run over its nonzeros (jrows).  Pivoting, summation order and
+ * so round-off differ from the numpy reference's dense algebra.
  * The iteration matrix is kept across steps (kept_serves: the numpy reference's rule).
  */
 #include <math.h>
@@ -56,6 +61,10 @@ typedef struct {
     Rows c_rows, d_rows, d_cols;       /* the nonzeros of C, D, D^T (every rib's) */
     double *elu;                       /* R x ne x ne: the LU of M's elastic block (constant;
                                         * no pivoting: it is positive definite), elastic_lu */
+    double *elu_it, elu_h;             /* the same of the iteration matrix's elastic block,
+                                        * M + h^2/4 K (constant for a step length: elu_h) */
+    Rows lpat[2], upat[2];             /* the nonzeros of elu's, elu_it's rows: L (columns
+                                        * below the diagonal), U (above) (elastic_rows) */
 } Body;
 
 /* The inertia invariants of a body (the floating frame's: Shabana's S-bar, I-bar), per rib,
@@ -88,7 +97,8 @@ typedef struct {
     int spiv[MAXS];
     int uses;                          /* steps it served (iteration slots) */
     int elastic_first;                 /* the bodies' blocks factored elastic coordinates
-                                        * first, from Body.elu (the projection's M) */
+                                        * first, from Body.elu (1: the projection's M) or
+                                        * Body.elu_it (2: the iteration matrix) */
 } Fact;
 
 /* a moving base's context (_kernel3d_base.h) */
@@ -97,6 +107,7 @@ typedef struct Base3D Base3D;
 struct Ctx3D {
     const Model3D *m;
     Rows mrows, krows;                 /* of M(q) (frame rows, columns: all) and K */
+    Rows jrows;                        /* of a rib's joint Jacobian (ROWS x n; jacobian_rows) */
     Body b[2];
     int R, n, ns, cs, s, mb;
     Kin km[2];                         /* the point kinematics at q_m (gyroscopic) */
@@ -110,7 +121,7 @@ struct Ctx3D {
     int kept, kept_slot, kept_locked, pend_slot, pend_uses;
     double kept_h, pend_h, *kept_q, *kept_v;
     unsigned char *kept_stuck;
-    double *jm, *jr, *jg;              /* R x 9 x n: J(q_m), J(q), Gonzalez J */
+    double *jm, *jr;                   /* R x 9 x n: J(q_m), J(q) */
     double *vp_a, *vp_b;               /* R x P x 3 (largest body) */
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
@@ -118,6 +129,9 @@ struct Ctx3D {
                                         * modal sums, then a rib's (n + n: a rib has n
                                         * modes at most) */
     double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
+    double strain0;                    /* V(q0) when strain0_ok: a run's step after the first
+                                        * starts where the last one committed (V(q1)) */
+    int strain0_ok;
     int iterations, factorisations;
     Base3D *base;                      /* a moving base's (n_shared 7), else NULL */
 };
@@ -215,13 +229,14 @@ void umbrella3d_free(Ctx3D *x) {
     for (int j = 0; j < 2; j++) {
         kin_free(&x->km[j]);
         free(x->b[j].inv);
-        free(x->b[j].elu);
+        free(x->b[j].elu); free(x->b[j].elu_it);
+        for (int k = 0; k < 2; k++) { rows_free(&x->b[j].lpat[k]); rows_free(&x->b[j].upat[k]); }
         rows_free(&x->b[j].c_rows); rows_free(&x->b[j].d_rows); rows_free(&x->b[j].d_cols);
     }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
-    rows_free(&x->mrows); rows_free(&x->krows);
+    rows_free(&x->mrows); rows_free(&x->krows); rows_free(&x->jrows);
     free(x->kept_q); free(x->kept_v); free(x->kept_stuck);
-    double *bufs[] = {x->mass, x->jm, x->jr, x->jg, x->vp_a, x->vp_b,
+    double *bufs[] = {x->mass, x->jm, x->jr, x->vp_a, x->vp_b,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
                       x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp0, x->sp1, x->fitc};
@@ -230,18 +245,68 @@ void umbrella3d_free(Ctx3D *x) {
 }
 
 static int rows_of(const Ctx3D *x, const double *A, int frame, Rows *p);
+static int jacobian_rows(Ctx3D *x);
 
-/* Body.elu: each rib's LU (lu_factor's packing, no pivoting) of the body's elastic block of
- * M, which no motion changes (mass_matrix) */
-static int elastic_lu(Body *b, const double *M0, int R, int n) {
+/* the nonzeros of the rows of every rib's elastic LU E (R x ne x ne), their union: lo the
+ * columns left of the diagonal (L), up those right of it (U); the storage is the context's */
+static void elastic_rows(const Body *b, const double *E, int R, Rows *lo, Rows *up) {
+    int ne = b->ne, kl = 0, ku = 0;
+    for (int a = 0; a < ne; a++) {
+        lo->ptr[a] = kl;
+        up->ptr[a] = ku;
+        for (int c = 0; c < ne; c++) {
+            int keep = 0;
+            for (int r = 0; r < R && !keep; r++) keep = E[(size_t)r * ne * ne + a * ne + c] != 0.0;
+            if (keep && c < a) lo->col[kl++] = c;
+            if (keep && c > a) up->col[ku++] = c;
+        }
+    }
+    lo->ptr[ne] = kl;
+    up->ptr[ne] = ku;
+}
+
+static int rows_alloc(Rows *p, int ne) {
+    p->ptr = malloc(sizeof(int) * (ne + 1));
+    p->col = malloc(sizeof(int) * (ne * ne > 0 ? ne * ne : 1));
+    return p->ptr && p->col;
+}
+
+/* the nonzeros an LU without pivoting of any M0 + c K can have (the elastic blocks' union
+ * over the ribs, filled in by the elimination), as elastic_rows: Body.elu_it's, whatever the
+ * step length it was made at (a kept iteration matrix may outlive a later length's LU) */
+static int elastic_pattern(const Body *b, const double *M0, const double *K, int R, int n,
+                           Rows *lo, Rows *up) {
     int ne = b->ne, o = b->off + b->t + 1;
-    b->elu = malloc(sizeof(double) * ((size_t)R * ne * ne > 0 ? (size_t)R * ne * ne : 1));
-    if (!b->elu) return 0;
-    for (int r = 0; r < R; r++) {
-        double *E = b->elu + (size_t)r * ne * ne;
+    double *B = calloc((size_t)ne * ne > 0 ? (size_t)ne * ne : 1, sizeof(double));
+    if (!B) return 0;
+    for (int r = 0; r < R; r++)
         for (int a = 0; a < ne; a++)
-            for (int c = 0; c < ne; c++)
-                E[a * ne + c] = M0[(size_t)r * n * n + (o + a) * n + o + c];
+            for (int c = 0; c < ne; c++) {
+                size_t at = (size_t)r * n * n + (o + a) * n + o + c;
+                if (M0[at] != 0.0 || K[at] != 0.0) B[a * ne + c] = 1.0;
+            }
+    for (int k = 0; k < ne; k++)
+        for (int i = k + 1; i < ne; i++)
+            if (B[i * ne + k] != 0.0)
+                for (int j = k + 1; j < ne; j++)
+                    if (B[k * ne + j] != 0.0) B[i * ne + j] = 1.0;
+    elastic_rows(b, B, 1, lo, up);
+    free(B);
+    return 1;
+}
+
+/* each rib's LU (lu_factor's packing, no pivoting: positive definite) of the body's elastic
+ * block of M0 + c K into E (R x ne x ne), and its nonzeros (elastic_rows; lo NULL: not) */
+static int elastic_lu_of(const Body *b, const double *M0, const double *K, double c, int R,
+                         int n, double *out, Rows *lo, Rows *up) {
+    int ne = b->ne, o = b->off + b->t + 1;
+    for (int r = 0; r < R; r++) {
+        double *E = out + (size_t)r * ne * ne;
+        for (int a = 0; a < ne; a++)
+            for (int k = 0; k < ne; k++) {
+                size_t at = (size_t)r * n * n + (o + a) * n + o + k;
+                E[a * ne + k] = M0[at] + (K ? c * K[at] + 0.0 : 0.0);
+            }
         for (int k = 0; k < ne; k++) {
             if (!(E[k * ne + k] > 0.0)) return 0;
             double inv = 1.0 / E[k * ne + k];
@@ -249,18 +314,97 @@ static int elastic_lu(Body *b, const double *M0, int R, int n) {
             E[k * ne + k] = inv;
         }
     }
+    if (lo) elastic_rows(b, out, R, lo, up);
     return 1;
+}
+
+/* Body.elu: of M's elastic block, which no motion changes (mass_matrix); the storage of
+ * Body.elu_it, made at a step's length (iteration_elastic) */
+static int elastic_lu(Body *b, const double *M0, const double *K, int R, int n) {
+    size_t size = (size_t)R * b->ne * b->ne > 0 ? (size_t)R * b->ne * b->ne : 1;
+    b->elu = calloc(size, sizeof(double));
+    b->elu_it = calloc(size, sizeof(double));
+    b->elu_h = NAN;
+    if (!b->elu || !b->elu_it) return 0;
+    for (int k = 0; k < 2; k++)
+        if (!rows_alloc(&b->lpat[k], b->ne) || !rows_alloc(&b->upat[k], b->ne)) return 0;
+    return elastic_lu_of(b, M0, NULL, 0.0, R, n, b->elu, &b->lpat[0], &b->upat[0])
+        && elastic_pattern(b, M0, K, R, n, &b->lpat[1], &b->upat[1]);
+}
+
+/* Body.elu_it at the step length h: the elastic block of the iteration matrix M + h^2/4 K
+ * (+ h/2 the gyroscopic term, which leaves that block alone: gyroscopic) */
+static int iteration_elastic(Ctx3D *x, double h) {
+    for (int j = 0; j < 2; j++) {
+        Body *b = &x->b[j];
+        if (b->elu_h == h) continue;
+        b->elu_h = NAN;
+        if (!elastic_lu_of(b, x->m->const_mass, x->m->stiffness, 0.25 * h * h, x->R, x->n,
+                           b->elu_it, NULL, NULL))
+            return SINGULAR;
+        b->elu_h = h;
+    }
+    return OK;
+}
+
+/* y = A^-1 y (nrhs right-hand sides, row-major nb x nrhs) of factor_elastic_first's A and
+ * piv: lu_solve's substitutions over the nonzeros, the elastic rows' of E's LU (lo, up),
+ * the frame rows and columns dense */
+static void ef_solve(const Body *b, const Rows *lo, const Rows *up, const double *A,
+                     const int *piv, double *y, int nrhs) {
+    int nb = b->nb, ne = b->ne;
+    for (int k = ne; k < nb; k++)
+        if (piv[k] != k)
+            for (int c = 0; c < nrhs; c++) {
+                double t = y[k * nrhs + c];
+                y[k * nrhs + c] = y[piv[k] * nrhs + c];
+                y[piv[k] * nrhs + c] = t;
+            }
+    for (int i = 0; i < nb; i++) {
+        double *yi = y + i * nrhs;
+        const double *Ai = A + i * nb;
+        if (i < ne) {
+            for (int k = lo->ptr[i]; k < lo->ptr[i + 1]; k++) {
+                int j = lo->col[k];
+                double f = Ai[j];
+                for (int c = 0; c < nrhs; c++) yi[c] -= f * y[j * nrhs + c];
+            }
+        } else {
+            for (int j = 0; j < i; j++) {
+                double f = Ai[j];
+                if (f != 0.0)
+                    for (int c = 0; c < nrhs; c++) yi[c] -= f * y[j * nrhs + c];
+            }
+        }
+    }
+    for (int i = nb - 1; i >= 0; i--) {
+        double *yi = y + i * nrhs;
+        const double *Ai = A + i * nb;
+        for (int j = nb - 1; j > i && j >= ne; j--) {
+            double f = Ai[j];
+            if (f != 0.0)
+                for (int c = 0; c < nrhs; c++) yi[c] -= f * y[j * nrhs + c];
+        }
+        if (i < ne)
+            for (int k = up->ptr[i + 1] - 1; k >= up->ptr[i]; k--) {
+                int j = up->col[k];
+                double f = Ai[j];
+                for (int c = 0; c < nrhs; c++) yi[c] -= f * y[j * nrhs + c];
+            }
+        for (int c = 0; c < nrhs; c++) yi[c] *= Ai[i];
+    }
 }
 
 /* body j's coordinate at place i of the elastic-first order (elastic, then frame) */
 static int elastic_first(const Body *b, int i) { return i < b->ne ? b->t + 1 + i : i - b->ne; }
 
 /* lu_factor of body j's block A (nb x nb, elastic-first order) whose elastic rows and columns
- * are the constant elastic block E = b->elu's (E's LU copied, not recomputed): the frame
- * rows eliminated through E, then the frame block's Schur complement with pivoting */
-static int factor_elastic_first(const Body *b, int r, double *A, int *piv) {
+ * are a constant elastic block, its LU E (b->elu's or b->elu_it's rib r: copied, not
+ * recomputed): the frame rows eliminated through E, then the frame block's Schur complement
+ * with pivoting */
+static int factor_elastic_first(const Body *b, const double *elu, int r, double *A, int *piv) {
     int nb = b->nb, ne = b->ne;
-    const double *E = b->elu + (size_t)r * ne * ne;
+    const double *E = elu + (size_t)r * ne * ne;
     for (int a = 0; a < ne; a++) memcpy(A + a * nb, E + a * ne, sizeof(double) * ne);
     for (int k = 0; k < ne; k++) {
         piv[k] = k;
@@ -297,7 +441,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
     ok = ok && fact_alloc(&x->slot[0], x) && fact_alloc(&x->slot[1], x) && fact_alloc(&x->pm, x);
     ok = ok && ALLOC(mass, R * n * n) && ALLOC(jm, R * ROWS * n)
         && ALLOC(kept_q, N + MAXS) && ALLOC(kept_v, N + MAXS)
-        && ALLOC(jr, R * ROWS * n) && ALLOC(jg, R * ROWS * n) && ALLOC(vp_a, R * pmax * 3)
+        && ALLOC(jr, R * ROWS * n) && ALLOC(vp_a, R * pmax * 3)
         && ALLOC(vp_b, R * pmax * 3) && ALLOC(q0, N + MAXS) && ALLOC(v0, N + MAXS)
         && ALLOC(p0, N + MAXS) && ALLOC(l0, R * ROWS + MAXS) && ALLOC(q, N + MAXS)
         && ALLOC(v, N + MAXS) && ALLOC(lam, R * ROWS + MAXS) && ALLOC(p, N + MAXS)
@@ -310,14 +454,16 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(fitc, 2 * n);
 #undef ALLOC
     if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
-    ok = ok && elastic_lu(&x->b[0], m->const_mass, R, n)
-        && elastic_lu(&x->b[1], m->const_mass, R, n);
-    ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows);
+    ok = ok && elastic_lu(&x->b[0], m->const_mass, m->stiffness, R, n)
+        && elastic_lu(&x->b[1], m->const_mass, m->stiffness, R, n);
+    ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows)
+        && jacobian_rows(x);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
     if (ok && x->ns > 1) ok = (x->base = base_new(x)) != NULL;
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
     x->pend_slot = -1;
     x->pm.elastic_first = 1;
+    x->slot[0].elastic_first = x->slot[1].elastic_first = 2;
     return x;
 }
 
@@ -468,6 +614,28 @@ static void matvec(const Ctx3D *x, const double *v, double *p) {
     for (int r = 0; r < R; r++)
         rows_matvec(x, &x->mrows, x->mass + (size_t)r * n * n, v + r * n, p + r * n);
     p[R * n] = x->m->sleeve_mass * v[R * n];
+}
+
+/* matvec of two vectors at once (M's nonzeros read once): pa = M a, pb = M b */
+static void matvec2(const Ctx3D *x, const double *a, double *pa, const double *b, double *pb) {
+    int R = x->R, n = x->n;
+    const Rows *p = &x->mrows;
+    for (int r = 0; r < R; r++) {
+        const double *M = x->mass + (size_t)r * n * n, *ar = a + r * n, *br = b + r * n;
+        for (int i = 0; i < n; i++) {
+            const double *Mi = M + i * n;
+            double acc_a = 0.0, acc_b = 0.0;
+            for (int k = p->ptr[i]; k < p->ptr[i + 1]; k++) {
+                double mk = Mi[p->col[k]];
+                acc_a += mk * ar[p->col[k]];
+                acc_b += mk * br[p->col[k]];
+            }
+            pa[r * n + i] = acc_a;
+            pb[r * n + i] = acc_b;
+        }
+    }
+    pa[R * n] = x->m->sleeve_mass * a[R * n];
+    pb[R * n] = x->m->sleeve_mass * b[R * n];
 }
 
 /* every point's velocity J vb of body j (R x P x 3) */
@@ -627,6 +795,32 @@ static void jacobian(const Ctx3D *x, const double *q, const double *stuck, doubl
     }
 }
 
+/* Ctx3D.jrows: the nonzeros of jacobian's rows, read off jacobian itself at a generic
+ * configuration (every rib's coordinates distinct, non-zero; a hinge stuck) */
+static int jacobian_rows(Ctx3D *x) {
+    int R = x->R, n = x->n, N = R * n, k = 0;
+    double *q = malloc(sizeof(double) * (N + MAXS)), *st = malloc(sizeof(double) * R);
+    x->jrows.ptr = malloc(sizeof(int) * (ROWS + 1));
+    x->jrows.col = malloc(sizeof(int) * ROWS * n);
+    int ok = q && st && x->jrows.ptr && x->jrows.col;
+    if (ok) {
+        for (int i = 0; i < N + MAXS; i++) q[i] = 0.3 + 0.0137 * i;
+        for (int r = 0; r < R; r++) st[r] = 0.1;
+        jacobian(x, q, st, x->jr);
+        for (int i = 0; i < ROWS; i++) {
+            x->jrows.ptr[i] = k;
+            for (int a = 0; a < n; a++) {
+                int keep = 0;
+                for (int r = 0; r < R && !keep; r++) keep = x->jr[(size_t)r * ROWS * n + i * n + a] != 0.0;
+                if (keep) x->jrows.col[k++] = a;
+            }
+        }
+        x->jrows.ptr[ROWS] = k;
+    }
+    free(q); free(st);
+    return ok;
+}
+
 static double max_abs(int k, const double *a) {
     double best = 0.0;
     for (int i = 0; i < k; i++) if (fabs(a[i]) > best || isnan(a[i])) best = isnan(a[i]) ? NAN : fabs(a[i]);
@@ -660,18 +854,36 @@ static void lu_solve_rows(int N, const double *A, const int *piv, double *X) {
     }
 }
 
+/* lu_solve of the ROWS x ROWS T (the same operations, in the same order; ROWS a constant) */
+static void lu_solve_rows9(const double *A, const int *piv, double *b) {
+    for (int k = 0; k < ROWS; k++)
+        if (piv[k] != k) { double t = b[k]; b[k] = b[piv[k]]; b[piv[k]] = t; }
+    for (int i = 0; i < ROWS; i++) {
+        double acc = b[i];
+        for (int j = 0; j < i; j++) acc -= A[i * ROWS + j] * b[j];
+        b[i] = acc;
+    }
+    for (int i = ROWS - 1; i >= 0; i--) {
+        double acc = b[i];
+        for (int j = ROWS - 1; j > i; j--) acc -= A[i * ROWS + j] * b[j];
+        b[i] = acc * A[i * ROWS + i];
+    }
+}
+
 /* rib r's block, factored (arrow_factor), solved for v (mb) in place:
- * x = A^-1 v_top, lambda = T^-1 (v_bottom - Jr x), x -= W lambda */
-static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v) {
+ * x = A^-1 v_top, lambda = T^-1 (v_bottom - Jr x), x -= W lambda (top_zero: v_top = 0, so
+ * x = 0 and Jr x = 0: the bodies' solves left out) */
+static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_zero) {
     int n = x->n;
     const double *A = f->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
-    for (int j = 0; j < 2; j++) {
+    for (int j = 0; j < 2 && !top_zero; j++) {
         const Body *b = &x->b[j];
         const int *piv = f->apiv + r * n + b->off;
         if (f->elastic_first) {
             double y[b->nb];
+            int kind = f->elastic_first - 1;
             for (int i = 0; i < b->nb; i++) y[i] = v[b->off + elastic_first(b, i)];
-            lu_solve(b->nb, A, piv, y);
+            ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, y, 1);
             for (int i = 0; i < b->nb; i++) v[b->off + elastic_first(b, i)] = y[i];
         } else {
             lu_solve(b->nb, A, piv, v + b->off);
@@ -679,17 +891,20 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v) {
         A += b->nb * b->nb;
     }
     const double *J = f->Jf + (size_t)r * ROWS * n, *W = f->W + (size_t)r * n * ROWS;
-    for (int i = 0; i < ROWS; i++) {
+    const Rows *jp = &x->jrows;
+    for (int i = 0; i < ROWS && !top_zero; i++) {
         double acc = 0.0;
-        for (int a = 0; a < n; a++) if (J[i * n + a] != 0.0) acc += J[i * n + a] * v[a];
+        for (int k = jp->ptr[i]; k < jp->ptr[i + 1]; k++) acc += J[i * n + jp->col[k]] * v[jp->col[k]];
         v[n + i] -= acc;
     }
-    lu_solve(ROWS, f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
-    for (int a = 0; a < n; a++) {
-        double acc = 0.0;
-        for (int i = 0; i < ROWS; i++) acc += W[a * ROWS + i] * v[n + i];
-        v[a] -= acc;
+    lu_solve_rows9(f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
+    double acc[n];                             /* W lambda: every row's sum at once, in i's order */
+    for (int a = 0; a < n; a++) acc[a] = 0.0;
+    for (int i = 0; i < ROWS; i++) {
+        double li = v[n + i];
+        for (int a = 0; a < n; a++) acc[a] += W[a * ROWS + i] * li;
     }
+    for (int a = 0; a < n; a++) v[a] -= acc[a];
 }
 
 /* Factor rib r's block [[M + extra, sign Jc^T], [Jr, Z]] through its bodies (rib_solve):
@@ -703,22 +918,28 @@ static int rib_factor(Ctx3D *x, Fact *f, int r, const double *extra, const doubl
         const double *Jc = jc + r * ROWS * n, *Jr = jr + r * ROWS * n;
         double *A = f->Af + (size_t)r * (x->b[0].nb * x->b[0].nb + x->b[1].nb * x->b[1].nb);
         double *W = f->W + (size_t)r * n * ROWS, *T = f->T + r * ROWS * ROWS;
-        for (int a = 0; a < n; a++)
-            for (int i = 0; i < ROWS; i++) W[a * ROWS + i] = sign * Jc[i * n + a];
+        memset(W, 0, sizeof(double) * n * ROWS);      /* sign Jc^T, over Jc's nonzeros */
+        for (int i = 0; i < ROWS; i++)
+            for (int k = x->jrows.ptr[i]; k < x->jrows.ptr[i + 1]; k++)
+                W[x->jrows.col[k] * ROWS + i] = sign * Jc[i * n + x->jrows.col[k]];
         for (int j = 0; j < 2; j++) {
             const Body *b = &x->b[j];
             int nb = b->nb, o = b->off;
             int *piv = f->apiv + r * n + o;
-            if (f->elastic_first) {             /* (no extra: M's elastic block is E) */
+            if (f->elastic_first) {             /* (M + extra's elastic block: E's) */
                 double Y[nb * ROWS];
+                int kind = f->elastic_first - 1;
                 for (int a = 0; a < nb; a++) {
                     int ia = o + elastic_first(b, a);
-                    for (int c = 0; c < nb; c++)
-                        A[a * nb + c] = M[ia * n + o + elastic_first(b, c)];
+                    for (int c = 0; c < nb; c++) {
+                        int ic = o + elastic_first(b, c);
+                        A[a * nb + c] = M[ia * n + ic] + (Ex ? Ex[ia * n + ic] : 0.0);
+                    }
                     memcpy(Y + a * ROWS, W + ia * ROWS, sizeof(double) * ROWS);
                 }
-                if (factor_elastic_first(b, r, A, piv) != OK) return SINGULAR;
-                lu_solve_rows(nb, A, piv, Y);
+                if (factor_elastic_first(b, kind ? b->elu_it : b->elu, r, A, piv) != OK)
+                    return SINGULAR;
+                ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, Y, ROWS);
                 for (int a = 0; a < nb; a++)
                     memcpy(W + (o + elastic_first(b, a)) * ROWS, Y + a * ROWS,
                            sizeof(double) * ROWS);
@@ -734,7 +955,8 @@ static int rib_factor(Ctx3D *x, Fact *f, int r, const double *extra, const doubl
         }
         memset(T, 0, sizeof(double) * ROWS * ROWS);
         for (int i = 0; i < ROWS; i++)                 /* T = -Jr W over Jr's nonzeros */
-            for (int a = 0; a < n; a++) {
+            for (int k = x->jrows.ptr[i]; k < x->jrows.ptr[i + 1]; k++) {
+                int a = x->jrows.col[k];
                 double f = Jr[i * n + a];
                 if (f == 0.0) continue;
                 for (int k = 0; k < ROWS; k++) T[i * ROWS + k] -= f * W[a * ROWS + k];
@@ -764,7 +986,7 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
             memset(x->ycol, 0, sizeof(double) * mb);
             if (c < ns) {
                 x->ycol[n + 7] = -1.0;
-                rib_solve(x, f, r, x->ycol);
+                rib_solve(x, f, r, x->ycol, 1);
             }
             for (int a = 0; a < mb; a++) Y[a * s + c] = x->ycol[a];
         }
@@ -773,13 +995,15 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
     return lu_factor(s, f->S, f->spiv) == OK ? OK : SINGULAR;
 }
 
-/* Solve the factored arrow system for (rr (R x mb), rs (s)), in place. */
-static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double sign) {
+/* Solve the factored arrow system for (rr (R x mb), rs (s)), in place (top_zero: every rib's
+ * first n right-hand sides are 0, rib_solve's) */
+static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double sign,
+                        int top_zero) {
     int R = x->R, n = x->n, mb = x->mb, s = x->s;
     double z[MAXS];
     memcpy(z, rs, sizeof(double) * s);
     for (int r = 0; r < R; r++) {
-        rib_solve(x, f, r, rr + r * mb);
+        rib_solve(x, f, r, rr + r * mb, top_zero);
         z[0] -= sign * -1.0 * rr[r * mb + n + 7];
     }
     lu_solve(s, f->S, f->spiv, z);
@@ -824,14 +1048,15 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
         memset(rr, 0, sizeof(double) * n);
         for (int i = 0; i < ROWS; i++) {
             double acc = 0.0;
-            for (int c = 0; c < n; c++) acc += J[i * n + c] * v[r * n + c];
+            for (int k = x->jrows.ptr[i]; k < x->jrows.ptr[i + 1]; k++)
+                acc += J[i * n + x->jrows.col[k]] * v[r * n + x->jrows.col[k]];
             rr[n + i] = -acc;
         }
         rr[n + 7] += v[R * n];           /* -J_rs v_s = y_s' */
     }
     double rs[MAXS] = {0.0};
     rs[ns] = locked ? -v[R * n] : 0.0;
-    arrow_solve(x, &x->pm, x->rr, rs, 1.0);
+    arrow_solve(x, &x->pm, x->rr, rs, 1.0, 1);     /* (M dv = -J^T mu: no top) */
     for (int r = 0; r < R; r++)
         for (int a = 0; a < n; a++) v[r * n + a] += x->rr[r * mb + a];
     v[R * n] += rs[0];
@@ -875,10 +1100,22 @@ static void fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *v, int str
             c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -f->shrink[k * r + j]
                 : s - 1.0;
         }
-        for (int a = 0; a < n; a++) acc[a] = 0.0;
-        for (j = 0; j < r; j++)               /* by rows of out: each acc[a] in j's order */
-            for (int a = 0; a < n; a++) acc[a] += out[j * n + a] * c[j];
-        for (int a = 0; a < n; a++) vk[a] += acc[a];
+        int a = 0;
+        for (; a + 4 <= n; a += 4) {          /* four rows' sums at once, each in j's order */
+            double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+            for (j = 0; j < r; j++) {
+                const double *o = out + j * n + a;
+                double cj = c[j];
+                s0 += o[0] * cj; s1 += o[1] * cj; s2 += o[2] * cj; s3 += o[3] * cj;
+            }
+            acc[a] = s0; acc[a + 1] = s1; acc[a + 2] = s2; acc[a + 3] = s3;
+        }
+        for (; a < n; a++) {
+            double sa = 0.0;
+            for (j = 0; j < r; j++) sa += out[j * n + a] * c[j];
+            acc[a] = sa;
+        }
+        for (a = 0; a < n; a++) vk[a] += acc[a];
     }
 }
 
@@ -933,7 +1170,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         }
         if (fit) fit_map(x, fit, TO_PHYSICAL, x->v1, n);
         mass_matrix(x, q);
-        matvec(x, x->v1, x->p1);
+        matvec2(x, x->v1, x->p1, v0, x->tmp);     /* (M(q1) v0: Gonzalez's, below) */
         const double *sp1 = x->p1;        /* the scheme's momentum S^T M(q1) v1 */
         if (fit) {
             memcpy(x->sp1, x->p1, sizeof(double) * (N + ns));
@@ -942,7 +1179,6 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         }
         kinetic_gradient(x, x->qm, v0, x->v1, x->gt);
         /* Gonzalez along the rib coordinates: dq . G_T = f(q1) - f(q0) */
-        matvec(x, v0, x->tmp);
         double delta = 0.0, dd = 0.0, gdq = 0.0;
         for (int i = 0; i < N + ns; i++) delta += (x->tmp[i] - p0[i]) * x->v1[i];
         delta *= 0.5;
@@ -954,28 +1190,31 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         }
         constraints(x, q, stuck, locked, x->phi);
         jacobian(x, x->qm, stuck, x->jm);
-        memcpy(x->jg, x->jm, sizeof(double) * R * ROWS * n);
         double cons_s = locked ? x->lam[R * ROWS] : 0.0;
+        const Rows *jp = &x->jrows;
         for (int r = 0; r < R; r++) {
+            /* the joints' Gonzalez Jacobian G = J(q_m) + f dq^T (f: each row's correction),
+             * in the residual as G^T lam = J^T lam + dq (f . lam), J over its nonzeros */
             const double *dq = x->dq + r * n, *J = x->jm + r * ROWS * n;
-            double *G = x->jg + r * ROWS * n;
-            double ddr = 0.0;
-            for (int a = 0; a < n; a++) ddr += dq[a] * dq[a];
-            if (ddr > 0.0)
-                for (int i = 0; i < ROWS; i++) {
-                    double lin = 0.0;
-                    for (int a = 0; a < n; a++) lin += J[i * n + a] * dq[a];
-                    if (i == 7) lin -= x->dq[N];
-                    double f = (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr;
-                    for (int a = 0; a < n; a++) G[i * n + a] += f * dq[a];
-                }
-            friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
             const double *lam = x->lam + r * ROWS;
+            double ddr = 0.0, flam = 0.0, jl[n];
+            for (int a = 0; a < n; a++) { ddr += dq[a] * dq[a]; jl[a] = 0.0; }
+            for (int i = 0; i < ROWS; i++) {
+                double lin = 0.0;
+                for (int k = jp->ptr[i]; k < jp->ptr[i + 1]; k++) {
+                    int a = jp->col[k];
+                    lin += J[i * n + a] * dq[a];
+                    jl[a] += J[i * n + a] * lam[i];
+                }
+                if (i == 7) lin -= x->dq[N];
+                if (ddr > 0.0)
+                    flam += (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr * lam[i];
+            }
+            friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
             rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
             for (int a = 0; a < n; a++) {
-                double applied = -x->ycol[a], cons = 0.0;
+                double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
-                for (int i = 0; i < ROWS; i++) cons += G[i * n + a] * lam[i];
                 x->res[r * n + a] = sp1[r * n + a] - sp0[r * n + a]
                     - h * (x->gt[r * n + a] + applied + cons);
             }
@@ -998,7 +1237,8 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
                 }
                 G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
             }
-            if (arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
+            if (iteration_elastic(x, h) != OK
+                || arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
                 return SINGULAR;
             ff = fresh;
             factored = refactored = 1;
@@ -1011,7 +1251,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         double rs[MAXS];
         rs[0] = -0.5 * h * x->res[N];
         rs[ns] = locked ? -x->phi[R * ROWS] : 0.0;
-        arrow_solve(x, ff, x->rr, rs, -1.0);
+        arrow_solve(x, ff, x->rr, rs, -1.0, 0);
         if (fit) fit_map(x, fit, NEWTON, x->rr, mb);
         double norm = 0.0;
         int finite = 1;
@@ -1056,8 +1296,9 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     double t0 = 0.0;
     for (int i = 0; i < N; i++) t0 += v0[i] * p0[i];
     t0 = 0.5 * (t0 + v0[N] * p0[N]);
+    double strain0 = x->strain0_ok ? x->strain0 : strain_energy(x, q0);
     x->strain = strain_energy(x, q);
-    double t_target = t0 + strain_energy(x, q0) - x->strain + x->work_force + w_fric;
+    double t_target = t0 + strain0 - x->strain + x->work_force + w_fric;
     if (project(x, q, v, stuck, locked) != OK) return SINGULAR;
     matvec(x, v, x->p);
     double t_after = 0.0;
@@ -1065,8 +1306,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     t_after *= 0.5;
     if (t_after > 0.0 && t_after / 1.01 <= t_target && t_target <= 1.01 * t_after) {
         double scale = sqrt(t_target / t_after);
-        for (int i = 0; i < N + ns; i++) v[i] *= scale;
-        matvec(x, v, x->p);
+        for (int i = 0; i < N + ns; i++) { v[i] *= scale; x->p[i] *= scale; }
     }
     return OK;
 }
@@ -1162,6 +1402,8 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
         load(x, a);
         double t_next = a->single ? a->t + a->h : (double)(a->k0 + k + 1) * a->h;
         x->factorisations = 0;
+        x->strain0_ok = k > 0;         /* (the state loaded: the last step's committed one) */
+        x->strain0 = x->strain;
         int status;
         if (x->base) {
             x->base->drive_q = a->drive_q ? a->drive_q + 6 * k : NULL;

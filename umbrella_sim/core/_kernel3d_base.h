@@ -498,7 +498,7 @@ static int base_arrow_factor(Ctx3D *x, Fact *f, const double *extra, const doubl
             if (c < ns) {
                 for (int a = 0; a < n; a++) x->ycol[a] = Mr[a * NB + c];
                 if (c == 0) x->ycol[n + 7] = -1.0;
-                rib_solve(x, f, r, x->ycol);
+                rib_solve(x, f, r, x->ycol, c == 0);
             }
             for (int a = 0; a < mb; a++) Y[a * s + c] = x->ycol[a];
         }
@@ -520,7 +520,7 @@ static void base_arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, do
     for (int r = 0; r < R; r++) {
         double *v = rr + r * mb;
         const double *Mr = fm + (size_t)r * n * NB;
-        rib_solve(x, f, r, v);
+        rib_solve(x, f, r, v, 0);
         z[0] += sign * v[n + 7];
         for (int a = 0; a < n; a++)
             for (int i = 0; i < ns; i++) z[i] -= Mr[a * NB + i] * v[a];
@@ -662,7 +662,8 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
                 }
                 G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
             }
-            if (base_arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
+            if (iteration_elastic(x, h) != OK
+                || base_arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
                 return SINGULAR;
             ff = fresh;
             factored = refactored = 1;

@@ -69,7 +69,9 @@ from ..kernel import kernel_refusal, LIBRARY, load_kernel
 #: Newton update above which the matrix is factored anew at the iterate (_kernel3d.c's
 #: CARRY_STEPS, REFRESH_RATE).  Measured (ribs 6, 1 element, h = 0.1 ms, deployment): a
 #: fresh matrix every step took 2.00 Newton iterations a step, kept 2.00 and 0.125
-#: factorisations a step (2.03, 0.126 at ribs 12, 2 elements).
+#: factorisations a step (2.03, 0.126 at ribs 12, 2 elements).  Stage 2 (the mode fit
+#: acting), compiled step alone, us a step at carry_steps 1/2/4/8/16/32: ribs 6 x 1 61.8/54.1/
+#: 52.2/50.3/50.2/50.5 (2.07-3.04 iterations a step), ribs 12 x 2 314/255/234/214/214/223.
 CARRY_STEPS = 8
 REFRESH_RATE = 0.1
 
