@@ -394,14 +394,15 @@ linear momentum restored and its momenta in the rows; the drive's profile evalua
 for a run of steps), equal to the numpy reference within its round-off spread
 (tests/test_umbrella3d_kernel.py: an asymmetric deployment, runs of steps, through the lock;
 tests/test_umbrella3d.py: the momentum and the drive's work balanced on both paths). Measured
-(bench/bench_umbrella3d.py --base, CPU per step at h = 0.1 ms, deployment, 1 element a segment,
-load ~1 on the 2 cores; 3 / 6 ribs): hub fixed 26 / 50 us, driven (a jolt in X-Z, a spin-up
-about Y) 69 / 133 us (3.0 Newton iterations a step while the base accelerates or spins up, 2.0
-when it does not), free bus 58 / 109 us (numpy: 2.0 / 2.2 ms, 6.9 / 7.7 ms, 5.4 / 5.8 ms). A
-moving base has no stage-2 mode fit (the locked ribs stay coupled through the bus), so its step
-is the planar rule's without it, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks take 3.7
-(driven) and 3.6 (free) CPU s a simulated second, 0.27-0.28 x real time (hub fixed, 0.1 ms: 0.8
-CPU s, 1.25 x).
+(bench/bench_umbrella3d.py --base, CPU per step at h = 0.1 ms with Record3D's figures,
+deployment, 1 element a segment, load ~0.8 on the 2 cores; 3 / 6 ribs): hub fixed 28 / 56 us,
+driven (a jolt in X-Z, a spin-up about Y) 74 / 144 us (3.0 Newton iterations a step while the
+base accelerates or spins up, 2.0 when it does not), free bus 61 / 121 us (numpy: 1.9 / 2.2 ms,
+6.9 / 7.5 ms, 5.5 / 5.9 ms); the compiled step alone at a moving base's step 48 / 94 us
+(driven), 48 / 92 us (free), 15 us a rib (hub fixed, 0.1 ms: 5.1). A moving base has no stage-2
+mode fit (the locked ribs stay coupled through the bus), so its step is the planar rule's
+without it, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks take 3.6 (driven) and 3.5 (free) CPU
+s a simulated second, 0.28-0.29 x real time (hub fixed, 0.1 ms: 0.7 CPU s, 1.5 x).
 
 The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
 recording and tools for N ribs (the ROS side still runs the planar model), the geometrically
