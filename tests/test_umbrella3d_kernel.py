@@ -27,9 +27,9 @@ figures the run does not amplify), and the positions (angles times the rib's len
 sleeve, the tips) within 1e-10 of the rib's length, two orders below the Newton tolerance
 (1e-8 at h = 1e-4 s): a term computed differently or a stopping decision taken differently
 shows above both.  A run may amplify round-off past that cap by itself: the driven hub's
-deployment from rest to the lock (0.47 s, spun at 3 rad/s) spreads the reference's sleeve by 5.0e-11 m
-at the lock from one ulp of its initial rates (2.7e-11 at 25 N a rib, 0.3 s); there the
-positions' cap is twice the reference's own spread (the compiled run: 5.4e-11).
+deployment from rest to the lock (0.47 s, spun at 3 rad/s) spreads the reference's sleeve
+by 5.0e-11 m at the lock from one ulp of its initial rates (2.7e-11 at 25 N a rib, 0.3 s);
+there the positions' cap is twice the reference's own spread (the compiled run: 5.4e-11).
 
 The same holds with a moving base (_kernel3d_base.h): a driven hub (a jolt in X-Z, a spin-up
 about Y) and a free-floating bus, whose run also keeps the bus's momenta (rows compared as
