@@ -229,6 +229,7 @@ def test_sixteen_elements_per_segment():
     assert s['constraint_residual_max'] < 1e-10 and s['energy_drift'] < 1e-4
 
 
+@pytest.mark.slow      # ~2.5 s
 def test_a_damped_frame_at_rest_has_dissipated_the_energy_it_had_after_the_lock():
     """
     Damping brings the locked frame to rest: T and V go to zero, whatever the integration.

@@ -219,6 +219,7 @@ def test_a_refused_library_leaves_the_numpy_path(tmp_path, monkeypatch, capfd):
         MidpointDAE(model, kernel='auto')
 
 
+@pytest.mark.slow      # a build of the kernel, ~6 s
 @needs_cc
 def test_a_regular_build_has_the_library_and_its_header_and_loads_them(tmp_path):
     """

@@ -549,6 +549,7 @@ def test_energy_is_balanced_to_roundoff_through_the_plastic_lock(frame_runs):
         assert s['constraint_residual_max'] < 1e-10
 
 
+@pytest.mark.slow      # ~2.5 s
 def test_small_motion_is_the_linear_model_within_one_percent():
     """
     V0 = -0.2, N = 4, the default step and lock: every figure within 1 % of flexible's.

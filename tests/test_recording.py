@@ -438,6 +438,7 @@ def test_compare_known_runs(tmp_path):
         assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b'\x89PNG'
 
 
+@pytest.mark.slow      # ~2.5 s
 def test_compare_of_one_run_recorded_at_two_rates_finds_no_difference(tmp_path):
     """
     The same physics recorded at 100 Hz and 1 kHz: every difference is zero, either order.

@@ -156,7 +156,8 @@ def assert_on_the_joints(sim: UmbrellaSimulator3D):
 
 
 @needs_kernel
-@pytest.mark.parametrize('base', BASES)
+@pytest.mark.parametrize('base', [pytest.param(base, marks=[pytest.mark.slow] if base != 'fixed'
+                                               else []) for base in BASES])   # numpy ~2.3 s
 def test_compiled_equals_numpy_while_hinges_stick_and_rub(base):
     """A stuck hinge released by time, one by its torque, friction, a kick; each base."""
     values = dict(ASYMMETRIC, **BASES[base])
