@@ -1135,6 +1135,30 @@ static int kept_serves(const Ctx3D *x, const double *stuck, int locked, double h
 }
 
 /* One step of length h from (q0, v0, l0, p0) into (q, v, lam, p); the works. */
+/* The iteration matrix's body blocks at the iterate q (x->dq, x->qm its step): the joint
+ * Jacobian into x->jr, and per rib h^2/4 K + h/2 G (G the gyroscopic tangent of the midpoint
+ * velocity dq / h) less h^2/2 the hinge friction's slope, into x->gyro: what arrow_factor and
+ * base_arrow_factor read */
+static void iteration_blocks(Ctx3D *x, const double *q, const double *stuck, double h) {
+    const Model3D *m = x->m;
+    int R = m->n_ribs, n = m->n_rib, N = R * n;
+    jacobian(x, q, stuck, x->jr);
+    for (int i = 0; i < N; i++) x->tmp[i] = x->dq[i] / h;
+    for (int j = 0; j < 2; j++) kinematics(x, j, x->qm, &x->km[j]);
+    gyroscopic(x, x->km, x->tmp);
+    for (int r = 0; r < R; r++) {
+        double *G = x->gyro + (size_t)r * n * n;
+        const double *K = m->stiffness + (size_t)r * n * n;
+        for (int j = 0; j < 2; j++) {
+            const Body *b = &x->b[j];
+            for (int a = b->off; a < b->off + b->nb; a++)
+                for (int c = b->off; c < b->off + b->nb; c++)
+                    G[a * n + c] = 0.25 * h * h * K[a * n + c] + 0.5 * h * G[a * n + c];
+        }
+        G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
+    }
+}
+
 static int step(Ctx3D *x, const double *stuck, int locked, double h, double force, double tol,
                 double phi_tol, int max_iter, const Fit3D *fit) {
     const Model3D *m = x->m;
@@ -1222,21 +1246,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         }
         x->res[N] = x->p1[N] - p0[N] - h * (x->gt[N] - force + cons_s);
         if (!factored) {
-            jacobian(x, q, stuck, x->jr);
-            for (int i = 0; i < N; i++) x->tmp[i] = x->dq[i] / h;
-            for (int j = 0; j < 2; j++) kinematics(x, j, x->qm, &x->km[j]);
-            gyroscopic(x, x->km, x->tmp);
-            for (int r = 0; r < R; r++) {         /* (the body blocks arrow_factor reads) */
-                double *G = x->gyro + (size_t)r * n * n;
-                const double *K = m->stiffness + (size_t)r * n * n;
-                for (int j = 0; j < 2; j++) {
-                    const Body *b = &x->b[j];
-                    for (int a = b->off; a < b->off + b->nb; a++)
-                        for (int c = b->off; c < b->off + b->nb; c++)
-                            G[a * n + c] = 0.25 * h * h * K[a * n + c] + 0.5 * h * G[a * n + c];
-                }
-                G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
-            }
+            iteration_blocks(x, q, stuck, h);
             if (iteration_elastic(x, h) != OK
                 || arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
                 return SINGULAR;

@@ -647,21 +647,7 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
             x->res[N + i] = x->p1[N + i] - p0[N + i]
                 - h * (x->gt[N + i] + (i == 0 ? -force : 0.0) + cons_s[i]);
         if (!factored) {
-            jacobian(x, q, stuck, x->jr);
-            for (int i = 0; i < N; i++) x->tmp[i] = x->dq[i] / h;
-            for (int j = 0; j < 2; j++) kinematics(x, j, x->qm, &x->km[j]);
-            gyroscopic(x, x->km, x->tmp);
-            for (int r = 0; r < R; r++) {
-                double *G = x->gyro + (size_t)r * n * n;
-                const double *K = m->stiffness + (size_t)r * n * n;
-                for (int j = 0; j < 2; j++) {
-                    const Body *b = &x->b[j];
-                    for (int a = b->off; a < b->off + b->nb; a++)
-                        for (int c = b->off; c < b->off + b->nb; c++)
-                            G[a * n + c] = 0.25 * h * h * K[a * n + c] + 0.5 * h * G[a * n + c];
-                }
-                G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
-            }
+            iteration_blocks(x, q, stuck, h);
             if (iteration_elastic(x, h) != OK
                 || base_arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
                 return SINGULAR;
