@@ -1159,6 +1159,39 @@ static void iteration_blocks(Ctx3D *x, const double *q, const double *stuck, dou
     }
 }
 
+/* A Newton update of the ribs' coordinates and joint multipliers from x->rr (each rib's
+ * block of mb: its n coordinates, then its ROWS multipliers times h^2 / 2); returns the
+ * largest |coordinate update|, and clears *finite if one is not finite */
+static double rib_update(Ctx3D *x, double *q, int mb, double half_h2, int *finite) {
+    const Model3D *m = x->m;
+    int R = m->n_ribs, n = m->n_rib;
+    double norm = 0.0;
+    for (int r = 0; r < R; r++) {
+        for (int a = 0; a < n; a++) {
+            double d = x->rr[r * mb + a];
+            q[r * n + a] += d;
+            if (!isfinite(d)) *finite = 0;
+            else if (fabs(d) > norm) norm = fabs(d);
+        }
+        for (int i = 0; i < ROWS; i++) x->lam[r * ROWS + i] += x->rr[r * mb + n + i] / half_h2;
+    }
+    return norm;
+}
+
+/* Each hinge's friction work over the step taken (x->dq) into x->work_fric; their sum */
+static double friction_works(Ctx3D *x, double h) {
+    const Model3D *m = x->m;
+    int n = m->n_rib;
+    double w_fric = 0.0;
+    for (int r = 0; r < m->n_ribs; r++) {
+        double torque;
+        friction(x, r, x->dq[r * n + m->i_a1], h, &torque, NULL);
+        x->work_fric[r] = torque * x->dq[r * n + m->i_a1];
+        w_fric += x->work_fric[r];
+    }
+    return w_fric;
+}
+
 static int step(Ctx3D *x, const double *stuck, int locked, double h, double force, double tol,
                 double phi_tol, int max_iter, const Fit3D *fit) {
     const Model3D *m = x->m;
@@ -1263,17 +1296,8 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         rs[ns] = locked ? -x->phi[R * ROWS] : 0.0;
         arrow_solve(x, ff, x->rr, rs, -1.0, 0);
         if (fit) fit_map(x, fit, NEWTON, x->rr, mb);
-        double norm = 0.0;
         int finite = 1;
-        for (int r = 0; r < R; r++) {
-            for (int a = 0; a < n; a++) {
-                double d = x->rr[r * mb + a];
-                q[r * n + a] += d;
-                if (!isfinite(d)) finite = 0;
-                else if (fabs(d) > norm) norm = fabs(d);
-            }
-            for (int i = 0; i < ROWS; i++) x->lam[r * ROWS + i] += x->rr[r * mb + n + i] / half_h2;
-        }
+        double norm = rib_update(x, q, mb, half_h2, &finite);
         q[N] += rs[0];
         x->lam[R * ROWS] += rs[ns] / half_h2;
         if (!finite) return NON_FINITE;
@@ -1295,13 +1319,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - w0[i]; }
     if (fit) fit_map(x, fit, TO_PHYSICAL, v, n);
     mass_matrix(x, q);
-    double w_fric = 0.0;
-    for (int r = 0; r < R; r++) {
-        double torque;
-        friction(x, r, x->dq[r * n + m->i_a1], h, &torque, NULL);
-        x->work_fric[r] = torque * x->dq[r * n + m->i_a1];
-        w_fric += x->work_fric[r];
-    }
+    double w_fric = friction_works(x, h);
     x->work_force = force * (q0[N] - q[N]);
     double t0 = 0.0;
     for (int i = 0; i < N; i++) t0 += v0[i] * p0[i];

@@ -664,17 +664,8 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         for (int i = 0; i < cs; i++) rs[ns + i] = -x->phi[R * ROWS + i];
         if (!locked) rs[ns] = 0.0;
         base_arrow_solve(x, ff, x->rr, rs, -1.0);
-        double norm = 0.0;
         int finite = 1;
-        for (int r = 0; r < R; r++) {
-            for (int a = 0; a < n; a++) {
-                double d = x->rr[r * mb + a];
-                q[r * n + a] += d;
-                if (!isfinite(d)) finite = 0;
-                else if (fabs(d) > norm) norm = fabs(d);
-            }
-            for (int i = 0; i < ROWS; i++) x->lam[r * ROWS + i] += x->rr[r * mb + n + i] / half_h2;
-        }
+        double norm = rib_update(x, q, mb, half_h2, &finite);
         for (int i = 0; i < ns; i++) {
             q[N + i] += rs[i];
             if (!isfinite(rs[i])) finite = 0;
@@ -699,13 +690,7 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
     double *v = x->v;
     for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - v0[i]; }
     base_mass_matrix(x, q);
-    double w_fric = 0.0;
-    for (int r = 0; r < R; r++) {
-        double torque;
-        friction(x, r, x->dq[r * n + m->i_a1], h, &torque, NULL);
-        x->work_fric[r] = torque * x->dq[r * n + m->i_a1];
-        w_fric += x->work_fric[r];
-    }
+    double w_fric = friction_works(x, h);
     x->work_force = force * (q0[N] - q[N]);
     double w_drive = 0.0;
     if (B->prescribed)
