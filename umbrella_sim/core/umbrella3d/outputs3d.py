@@ -57,8 +57,8 @@ class Record3D:
         xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
         self._leaf_points, self._x_of = len(xs[0]), np.concatenate(xs)
         self._peaks = np.zeros((nr, len(STRESS_NAMES)))     # peak's values, a column each
-        #: the last step's (time, stress components, their rates, von Mises, its rate,
-        #: locked): the start of the next step's crests (_crests)
+        #: the last step's (time, its five channels' values and rates (_crests), locked):
+        #: the start of the next step's crests
         self._last_stress = None
 
     def _put(self, name, value):
@@ -198,33 +198,22 @@ class Record3D:
             return vm, vm_rate
 
         vm, vm_rate = combined(stress, rate)
-        end = np.concatenate([np.abs(stress), vm[:, :, None]], 2)
-        last = self._last_stress
-        self._last_stress = (float(t[-1]), stress[-1], rate[-1], vm[-1], vm_rate[-1], locked)
-        if last is None:
-            if len(t) == 1:
-                return end
-            last = (float(t[0]), stress[0], rate[0], vm[0], vm_rate[0], locked)
-            first = 1
-        else:
-            first = 0
-        if last[5] != locked:                   # (across the lock: the ends' own values)
-            first = max(first, 1)
-            if len(t) == 1:
-                return end
-            last = (float(t[0]), stress[0], rate[0], vm[0], vm_rate[0], locked)
-        # every channel (the four components, signed, and von Mises) of both ends at once:
-        # (step, rib, 5, point)
+        # every channel (the four components, signed, and von Mises): (step, rib, 5, point)
         values = np.concatenate([stress, vm[:, :, None]], 2)
         rates = np.concatenate([rate, vm_rate[:, :, None]], 2)
-        before = np.concatenate([np.concatenate([last[1], last[3][:, None]], 1)[None],
-                                 values[:-1]])
-        rate_before = np.concatenate([np.concatenate([last[2], last[4][:, None]], 1)[None],
-                                      rates[:-1]])
+        end = np.abs(values)
+        last = self._last_stress
+        self._last_stress = (float(t[-1]), values[-1], rates[-1], locked)
+        first = 0
+        if last is None or last[3] != locked:    # (a run's first step, or across the lock)
+            last, first = (float(t[0]), values[0], rates[0], locked), 1
+            if len(t) == 1:
+                return end
+        before = np.concatenate([last[1][None], values[:-1]])[first:]
+        rate_before = np.concatenate([last[2][None], rates[:-1]])[first:]
         h = (t - np.concatenate([[last[0]], t[:-1]]))[first:, None, None, None]
         out = end.copy()
-        out[first:] = hermite_crests(before[first:], h * rate_before[first:], values[first:],
-                                     h * rates[first:])
+        out[first:] = hermite_crests(before, h * rate_before, values[first:], h * rates[first:])
         return out
 
     def arrays(self) -> dict:
