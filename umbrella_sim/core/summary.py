@@ -429,6 +429,28 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     return out
 
 
+class WarningsSaid:
+    """
+    Which validity warnings a run has said: each once, by its key (the text before ':').
+
+    new(inputs, warnings): the warnings not said yet, judged again only when the figures the
+    warnings depend on (inputs, a tuple) changed since the last call; unchanged (most chunks
+    once the peaks are reached), nothing can be new.
+    """
+
+    def __init__(self):
+        self._keys: set = set()
+        self._inputs: tuple | None = None
+
+    def new(self, inputs: tuple, warnings: Callable[[], list[str]]) -> list[str]:
+        if inputs == self._inputs:
+            return []
+        self._inputs = inputs
+        fresh = [w for w in warnings() if w.split(':')[0] not in self._keys]
+        self._keys.update(w.split(':')[0] for w in fresh)
+        return fresh
+
+
 class SummaryAccumulator:
     """
     Summary figures of a run from every physics step (StepBlocks).
@@ -464,8 +486,7 @@ class SummaryAccumulator:
         self._s2_bin, self._s2_all = -1.0, (math.inf, -math.inf, 0.0)   # (min, max, end)
         # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
         self._start = deploy_start(float(self.params.get('v0', 0.0)), ())
-        self._warned: set = set()
-        self._warned_at: tuple | None = None   # (peak, tip) the last new_warnings saw
+        self._said = WarningsSaid()
 
     def add(self, block: StepBlock) -> None:
         """Take the steps of one block."""
@@ -577,17 +598,11 @@ class SummaryAccumulator:
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
-        # the warnings depend on the run only through the largest peak stress and tip
-        # deflection so far: unchanged (most publications), nothing can be new
-        seen = (self._peaks['leaf'][0], self._peaks['link'][0], self._tip_all,
-                self.lock is not None, self._balance / self._scale > ENERGY_DRIFT_LIMIT,
-                self._slope())
-        if seen == self._warned_at:
-            return []
-        self._warned_at = seen
-        fresh = [w for w in self.warnings() if w.split(':')[0] not in self._warned]
-        self._warned.update(w.split(':')[0] for w in fresh)
-        return fresh
+        # the warnings depend on the run only through these
+        return self._said.new((self._peaks['leaf'][0], self._peaks['link'][0], self._tip_all,
+                               self.lock is not None,
+                               self._balance / self._scale > ENERGY_DRIFT_LIMIT, self._slope()),
+                              self.warnings)
 
 
 def blocks_from_samples(samples: list) -> StepBlock:

@@ -43,7 +43,7 @@ from ..forcing import command_force
 from ..model import Stage
 from ..outputs import LockEvent
 from ..summary import (deploy_start, ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR,
-                       validity_warnings)
+                       validity_warnings, WarningsSaid)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
 #: a segment; 6 to 9 ms with a moving base), so a chunk stays near the planar rule's ~10 ms
@@ -328,8 +328,7 @@ class Summary3D:
              if name.startswith('stress_') or name == 'time'}, 0)
         self._final = initial
         self._start = deploy_start(float(sim.params.planar.v0), ())
-        self._warned: set = set()
-        self._warned_at = None
+        self._said = WarningsSaid()
         self._planar = sim.params.planar.as_dict()     # (a frozen record)
 
     def add(self, block: StepBlock3D) -> None:
@@ -415,13 +414,7 @@ class Summary3D:
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
-        # the warnings depend on the run only through these (SummaryAccumulator's rule):
-        # unchanged (most chunks once the peaks are reached), nothing can be new
-        seen = (self._peaks['von_mises'][0].max(), self._in_plane.max(), self.lock is not None,
-                self.energy_drift > ENERGY_DRIFT_LIMIT)
-        if seen == self._warned_at:
-            return []
-        self._warned_at = seen
-        fresh = [w for w in self.warnings() if w.split(':')[0] not in self._warned]
-        self._warned.update(w.split(':')[0] for w in fresh)
-        return fresh
+        # the warnings depend on the run only through these
+        return self._said.new((self._peaks['von_mises'][0].max(), self._in_plane.max(),
+                               self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT),
+                              self.warnings)
