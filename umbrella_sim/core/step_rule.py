@@ -152,11 +152,11 @@ def unresolved_stress_share(model: UmbrellaModel, amplitudes: np.ndarray, h: flo
 
 
 def resolving_divisor(model: UmbrellaModel, time_step: float, limit: float,
-                      amplitudes: np.ndarray, share_limit: float = STRESS_SHARE_LIMIT
-                      ) -> int | None:
+                      amplitudes: np.ndarray, share_limit: float = STRESS_SHARE_LIMIT,
+                      stresses: tuple | None = None) -> int | None:
     """Return the smallest k whose step time_step / k meets share_limit, or None."""
     largest = min(MAX_STEP_DIVISOR, int(time_step / MIN_PHYSICS_STEP))
-    stresses = mode_stresses(model)
+    stresses = stresses or mode_stresses(model)
     for k in range(1, largest + 1):
         shares = unresolved_stress_share(model, amplitudes, time_step / k, limit, stresses)
         if max(shares.values()) <= share_limit:
@@ -240,8 +240,9 @@ def resolution_of(model: UmbrellaModel, amplitudes: np.ndarray, h: float) -> dic
     resolving_step)}.
     """
     limit = resolved_omega_h(model.params)
-    k = resolving_divisor(model, h, limit, amplitudes)
-    k_all = resolving_divisor(model, h, limit, amplitudes, share_limit=0.0)
-    return {'step': h, **unresolved_stress_share(model, amplitudes, h, limit),
+    stresses = mode_stresses(model)
+    k = resolving_divisor(model, h, limit, amplitudes, stresses=stresses)
+    k_all = resolving_divisor(model, h, limit, amplitudes, share_limit=0.0, stresses=stresses)
+    return {'step': h, **unresolved_stress_share(model, amplitudes, h, limit, stresses),
             'resolving_step': None if k is None else h / k,
             'coupled_step': None if k_all is None else h / k_all}
