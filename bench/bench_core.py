@@ -164,7 +164,7 @@ def main():
                     choices=('flexible', 'flexible-nonlinear', 'rigid-fe'))
     ap.add_argument('--damping-ratio', type=float, default=0.0)
     ap.add_argument('--v0', type=float, default=-0.2,
-                    help='initial sleeve velocity (m/s); -0.5: stage 2 past the modes\' '
+                    help="initial sleeve velocity (m/s); -0.5: stage 2 past the modes' "
                          'coupling, where time_step 0 takes the step its lock needs')
     args = ap.parse_args()
     h = physics_step(args.time_step, 1.0 / SAMPLE_PERIOD)
