@@ -103,6 +103,8 @@ typedef struct {
 
 /* a moving base's context (_kernel3d_base.h) */
 typedef struct Base3D Base3D;
+/* the steps' stress figures (_kernel3d_figures.h) */
+typedef struct Figures3D Figures3D;
 
 struct Ctx3D {
     const Model3D *m;
@@ -134,10 +136,13 @@ struct Ctx3D {
     int strain0_ok;
     int iterations, factorisations;
     Base3D *base;                      /* a moving base's (n_shared 7), else NULL */
+    Figures3D *fig;                    /* the rows' stress figures (umbrella3d_set_stress),
+                                        * else NULL */
 };
 
 static Base3D *base_new(Ctx3D *x);
 static void base_free(Base3D *B);
+static void figures_free(Figures3D *f);
 
 /* ------------------------------------------------------------------ context */
 static void body_of(Body *b, int t, int ne, int np, int off, const double *x, const double *w,
@@ -226,6 +231,7 @@ static int fact_alloc(Fact *f, const Ctx3D *x) {
 void umbrella3d_free(Ctx3D *x) {
     if (!x) return;
     base_free(x->base);
+    figures_free(x->fig);
     for (int j = 0; j < 2; j++) {
         kin_free(&x->km[j]);
         free(x->b[j].inv);
@@ -1340,6 +1346,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
 }
 
 #include "_kernel3d_base.h"
+#include "_kernel3d_figures.h"
 
 /* ------------------------------------------------------------------ the grid loop */
 static void load(Ctx3D *x, const Advance3DCall *a) {
@@ -1426,9 +1433,12 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
     int steps = a->single ? 1 : a->n_steps;
     Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink};
     if (a->fit_modes > x->n) return SINGULAR;
+    int figures = x->fig && !a->single && a->out;
+    if (figures) figures_start(x, a);
     for (int k = 0; k < steps; k++) {
         load(x, a);
         double t_next = a->single ? a->t + a->h : (double)(a->k0 + k + 1) * a->h;
+        double t_before = a->t;
         x->factorisations = 0;
         x->strain0_ok = k > 0;         /* (the state loaded: the last step's committed one) */
         x->strain0 = x->strain;
@@ -1454,6 +1464,9 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
         commit(x, a);
         if (!a->single) release(x, a);
         if (a->out) write_row(x, a, a->out + (size_t)k * a->row_len);
+        if (figures)
+            figure_row(x, a, t_next - t_before,
+                       a->out + (size_t)(k + 1) * a->row_len - FIG_CHANNELS * 3 * x->R);
         a->n_done++;
     }
     return OK;
