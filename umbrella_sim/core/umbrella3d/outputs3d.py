@@ -61,6 +61,12 @@ class Record3D:
         #: the start of the next step's crests; after the compiled step's figures (time,
         #: qr, vr, locked, 'state'): the channels computed from them when needed
         self._last_stress = None
+        #: each rib's largest of every stress channel over the steps added since the last
+        #: ``take`` (value, at, when: driven3d.RibPeaks' arrays; None: no steps), and those
+        #: of the rows the last ``take`` returned (``taken_peaks``)
+        self._held = None
+        self.taken_peaks = None
+        self._rib_comp = (np.arange(nr)[:, None], np.arange(len(STRESS_NAMES))[None])
 
     def _put(self, name, value):
         self.rows.setdefault(name, []).append(np.array(value)[None])
@@ -178,12 +184,15 @@ class Record3D:
             put(f'stress_{name}_at', []).append(at[:, :, j])
         put('von_mises', []).append(np.maximum(top[:, :, -1], 0.0))
         # the peaks over these steps, rib by rib: the first of the largest step by step (the
-        # leaf before the link: each step's own rule above)
-        best = top.max(0)                                       # (rib, 5)
+        # leaf before the link: each step's own rule above; a NaN the largest, as argmax)
+        first = top.argmax(0)                                   # (rib, 5)
+        ribs, comps = self._rib_comp
+        best = top[first, ribs, comps]
+        held = (best, at[first, ribs, comps], t[first])
+        self._held = held if self._held is None else merged_peaks(self._held, held)
         better = best > self._peaks
         if not better.any():
             return
-        first = top.argmax(0)
         self._peaks = np.where(better, best, self._peaks)
         for j in np.nonzero(better.any(0))[0]:
             name = STRESS_NAMES[j]
@@ -233,11 +242,18 @@ class Record3D:
         return {name: np.concatenate(values) for name, values in self.rows.items()}
 
     def take(self) -> dict:
-        """Return the rows added since the last take as arrays (``arrays``), and drop them."""
+        """
+        Return the rows added since the last take as arrays (``arrays``), and drop them.
+
+        ``taken_peaks`` is then their peaks: each rib's largest of every stress channel, the
+        first step holding it (value and where, (ribs, 5) and (ribs, 5, 2), and when, s;
+        None: no steps), driven3d.RibPeaks.of_rows' of the rows.
+        """
         # (one block of steps: its own arrays, which nothing else holds)
         out = {name: values[0] if len(values) == 1 else np.concatenate(values)
                for name, values in self.rows.items()}
         self.rows = {}
+        self.taken_peaks, self._held = self._held, None
         return out
 
     def row(self, s, locked: bool, force: float, lock_loss: float, totals) -> dict:
@@ -306,6 +322,19 @@ def _channels(stress, rate):
         vm_rate = np.where(vm > 0.0, (total * growth + 3.0 * s[:, :, 3] * r[:, :, 3]) / vm, 0.0)
     return (np.concatenate([stress, vm[:, :, None]], 2),
             np.concatenate([rate, vm_rate[:, :, None]], 2))
+
+
+def merged_peaks(held: tuple, new: tuple) -> tuple:
+    """
+    Return two runs of steps' peaks (value, at, when) as those of both, held's before new's.
+
+    Rib by rib and channel by channel the first of the largest (argmax's rule over the steps
+    of both: held's on a tie, a NaN the largest).
+    """
+    value, at, when = held
+    better = (new[0] > value) | (np.isnan(new[0]) & ~np.isnan(value))
+    return (np.where(better, new[0], value), np.where(better[..., None], new[1], at),
+            np.where(better, new[2], when))
 
 
 def first_reach(t: np.ndarray, gap: np.ndarray, before: tuple | None = None) -> float:
