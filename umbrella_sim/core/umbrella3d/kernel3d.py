@@ -193,6 +193,7 @@ class CompiledStep3D:
         self.out = np.zeros((cap, self.row_len))
         self.call.out = _ptr(self.out)
         self.capacity = cap
+        self._views: dict = {}          # rows' views of out, by count
 
     def _set_drive(self, times: np.ndarray) -> None:
         """Hand the drive's bus coordinates and rates at the steps' ends to the call."""
@@ -218,10 +219,15 @@ class CompiledStep3D:
             'qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck', 'pr', 'ps')))
 
     def rows(self, count: int) -> dict:
-        """Return the last call's first count rows by name (views: steps first)."""
-        block = self.out[:count]
-        return {name: block[:, sl].reshape((count,) + shape)
-                for name, (sl, shape) in self.layout.items()}
+        """Return the last call's first count rows by name (views of out: steps first)."""
+        views = self._views.get(count)
+        if views is None:       # (made once a count: out is the same buffer every call)
+            views = self._views[count] = {}
+            for name, (sl, shape) in self.layout.items():
+                view = self.out[:count, sl]
+                view.shape = (count,) + shape           # (a view, never a copy)
+                views[name] = view
+        return dict(views)
 
     def step(self, s: State3D, h: float, force: float, locked: bool):
         """Return (State3D, StepWork) of one step of length h (MidpointUmbrella.step's)."""
