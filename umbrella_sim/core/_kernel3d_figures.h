@@ -38,6 +38,7 @@
 struct Figures3D {
     int pl, pk, P;                     /* stress points of the leaf, the link, a rib's */
     double *rows[2];                   /* R x 4 pb x ne: each body's recovery rows */
+    int *ptr[2], *col[2];              /* their nonzeros (any rib's), row by row */
     double *x;                         /* P: each point's x along its body */
     double *val[2], *rate[2];          /* R x 5 x P: a state's channels (two: a step's ends) */
     int cur;                           /* the buffer of the last committed state */
@@ -46,7 +47,9 @@ struct Figures3D {
 
 static void figures_free(Figures3D *f) {
     if (!f) return;
-    for (int j = 0; j < 2; j++) { free(f->rows[j]); free(f->val[j]); free(f->rate[j]); }
+    for (int j = 0; j < 2; j++) {
+        free(f->rows[j]); free(f->val[j]); free(f->rate[j]); free(f->ptr[j]); free(f->col[j]);
+    }
     free(f->x);
     free(f);
 }
@@ -71,6 +74,22 @@ int umbrella3d_set_stress(Ctx3D *x, int leaf_points, int link_points, const doub
         f->rate[j] = calloc((size_t)R * FIG_CHANNELS * P, sizeof(double));
         ok = ok && f->rows[j] && f->val[j] && f->rate[j];
         if (f->rows[j] && len) memcpy(f->rows[j], src[j], sizeof(double) * len);
+        /* the nonzeros of each row over the ribs (a recovery row reads its element's
+         * coordinates of one kind: a few of the body's) */
+        int nrow = 4 * (j ? link_points : leaf_points), ne = x->b[j].ne, nnz = 0;
+        f->ptr[j] = malloc(sizeof(int) * (nrow + 1));
+        f->col[j] = malloc(sizeof(int) * (nrow * ne + 1));
+        ok = ok && f->ptr[j] && f->col[j];
+        for (int i = 0; ok && i < nrow; i++) {
+            f->ptr[j][i] = nnz;
+            for (int e = 0; e < ne; e++) {
+                int any = 0;
+                for (int r = 0; r < R && !any; r++)
+                    any = src[j][((size_t)r * nrow + i) * ne + e] != 0.0;
+                if (any) f->col[j][nnz++] = e;
+            }
+        }
+        if (ok) f->ptr[j][nrow] = nnz;
     }
     f->x = malloc(sizeof(double) * P);
     if (!ok || !f->x) { figures_free(f); return SINGULAR; }
@@ -95,11 +114,17 @@ static void figure_channels(const Ctx3D *x, const Figures3D *f, const double *q,
             const double *qe = q + (size_t)r * n + b->off + b->t + 1;
             const double *ve = v + (size_t)r * n + b->off + b->t + 1;
             const double *A = f->rows[j] + (size_t)r * 4 * pb * ne;
+            const int *ptr = f->ptr[j], *col = f->col[j];
             for (int c = 0; c < 4; c++)
                 for (int p = 0; p < pb; p++) {
-                    const double *row = A + (size_t)(c * pb + p) * ne;
+                    int i = c * pb + p;
+                    const double *row = A + (size_t)i * ne;
                     double s = 0.0, d = 0.0;
-                    for (int e = 0; e < ne; e++) { s += row[e] * qe[e]; d += row[e] * ve[e]; }
+                    for (int k = ptr[i]; k < ptr[i + 1]; k++) {  /* (ascending, as dense) */
+                        int e = col[k];
+                        s += row[e] * qe[e];
+                        d += row[e] * ve[e];
+                    }
                     sv[c * P + first + p] = s;
                     sr[c * P + first + p] = d;
                 }
