@@ -207,7 +207,7 @@ def main(argv=None):
                                           (12, 2, 1e-2, 'RTF >= 1')):
         h, rtf, cpu = real_time(ribs, elements, block, args.duration, args.after_lock)
         print(f'{ribs:5d} {elements:9d} {1e3 * block:6.0f}ms {1e6 * h:10.2f} {rtf:11.4f} '
-              f'{cpu:14.1f} {target:>30}', flush=True)
+              f'{cpu:14.2f} {target:>30}', flush=True)
 
 
 if __name__ == '__main__':
