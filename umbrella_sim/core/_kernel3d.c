@@ -887,10 +887,11 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_z
         const int *piv = f->apiv + r * n + b->off;
         if (f->elastic_first) {
             double y[b->nb];
-            int kind = f->elastic_first - 1;
-            for (int i = 0; i < b->nb; i++) y[i] = v[b->off + elastic_first(b, i)];
+            int kind = f->elastic_first - 1, map[b->nb];
+            for (int i = 0; i < b->nb; i++) map[i] = b->off + elastic_first(b, i);
+            for (int i = 0; i < b->nb; i++) y[i] = v[map[i]];
             ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, y, 1);
-            for (int i = 0; i < b->nb; i++) v[b->off + elastic_first(b, i)] = y[i];
+            for (int i = 0; i < b->nb; i++) v[map[i]] = y[i];
         } else {
             lu_solve(b->nb, A, piv, v + b->off);
         }
@@ -904,13 +905,13 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_z
         v[n + i] -= acc;
     }
     lu_solve_rows9(f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
-    double acc[n];                             /* W lambda: every row's sum at once, in i's order */
-    for (int a = 0; a < n; a++) acc[a] = 0.0;
-    for (int i = 0; i < ROWS; i++) {
-        double li = v[n + i];
-        for (int a = 0; a < n; a++) acc[a] += W[a * ROWS + i] * li;
+    const double *lam = v + n;
+    for (int a = 0; a < n; a++) {              /* W lambda: a row's sum, in i's order */
+        const double *Wa = W + a * ROWS;
+        double acc = 0.0;
+        for (int i = 0; i < ROWS; i++) acc += Wa[i] * lam[i];
+        v[a] -= acc;
     }
-    for (int a = 0; a < n; a++) v[a] -= acc[a];
 }
 
 /* Factor rib r's block [[M + extra, sign Jc^T], [Jr, Z]] through its bodies (rib_solve):
@@ -934,21 +935,24 @@ static int rib_factor(Ctx3D *x, Fact *f, int r, const double *extra, const doubl
             int *piv = f->apiv + r * n + o;
             if (f->elastic_first) {             /* (M + extra's elastic block: E's) */
                 double Y[nb * ROWS];
-                int kind = f->elastic_first - 1;
+                int kind = f->elastic_first - 1, map[nb];
+                for (int a = 0; a < nb; a++) map[a] = o + elastic_first(b, a);
                 for (int a = 0; a < nb; a++) {
-                    int ia = o + elastic_first(b, a);
-                    for (int c = 0; c < nb; c++) {
-                        int ic = o + elastic_first(b, c);
-                        A[a * nb + c] = M[ia * n + ic] + (Ex ? Ex[ia * n + ic] : 0.0);
+                    const double *Ma = M + (size_t)map[a] * n;
+                    double *Aa = A + a * nb;
+                    if (Ex) {
+                        const double *Ea = Ex + (size_t)map[a] * n;
+                        for (int c = 0; c < nb; c++) Aa[c] = Ma[map[c]] + Ea[map[c]];
+                    } else {
+                        for (int c = 0; c < nb; c++) Aa[c] = Ma[map[c]] + 0.0;
                     }
-                    memcpy(Y + a * ROWS, W + ia * ROWS, sizeof(double) * ROWS);
+                    memcpy(Y + a * ROWS, W + map[a] * ROWS, sizeof(double) * ROWS);
                 }
                 if (factor_elastic_first(b, kind ? b->elu_it : b->elu, r, A, piv) != OK)
                     return SINGULAR;
                 ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, Y, ROWS);
                 for (int a = 0; a < nb; a++)
-                    memcpy(W + (o + elastic_first(b, a)) * ROWS, Y + a * ROWS,
-                           sizeof(double) * ROWS);
+                    memcpy(W + map[a] * ROWS, Y + a * ROWS, sizeof(double) * ROWS);
             } else {
                 for (int a = 0; a < nb; a++)
                     for (int c = 0; c < nb; c++)
