@@ -25,9 +25,10 @@ Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x ele
     divided by the number of ribs: it must stay flat (block-arrow algebra: a step costs
     linearly in the ribs), and by the coordinates of a rib;
   * kernel us/step: the compiled step alone (CompiledStep3D.advance: --kernel-steps steps
-    in one call, no Record3D), best of --repeat, at the step chosen for the mesh (as the
-    real-time factors below), in stage 1 (from t = 0) and in stage 2 (from the lock on, the
-    mode fit acting), with the Newton iterations and factorisations a step;
+    in one call, with the rows' stress figures it computes, no Record3D), best of
+    --repeat, at the step chosen for the mesh (as the real-time factors below), in stage 1
+    (from t = 0) and in stage 2 (from the lock on, the mode fit acting), with the Newton
+    iterations and factorisations a step;
   * real-time factors: simulated seconds per wall second, and CPU seconds per simulated
     second, of the runs the node would make: ribs 6 x 1 element in blocks of 1 ms (a 1 kHz
     publication), ribs 12 x 2 elements in blocks of 10 ms (100 Hz), each at the step chosen
@@ -178,8 +179,8 @@ def main(argv=None):
                       f'a quadratic term would carry {100 * quad:+.0f} % at {max(args.ribs)} '
                       'ribs)')
     if args.kernel_ribs:
-        print('\nthe compiled step alone (no Record3D; step chosen for the mesh; CPU of this '
-              'thread)')
+        print('\nthe compiled step alone (its stress figures, no Record3D; step chosen for the '
+              'mesh; CPU of this thread)')
         print(f"{'ribs':>5} {'elements':>9} {'step (us)':>10} {'stage':>6} {'us/step':>9} "
               f"{'us/step/rib':>12} {'Newton it':>10} {'factorisations':>15} {'core':>6}")
     for elements in args.elements if args.kernel_ribs else ():
@@ -207,7 +208,7 @@ def main(argv=None):
                                           (12, 2, 1e-2, 'RTF >= 1')):
         h, rtf, cpu = real_time(ribs, elements, block, args.duration, args.after_lock)
         print(f'{ribs:5d} {elements:9d} {1e3 * block:6.0f}ms {1e6 * h:10.2f} {rtf:11.4f} '
-              f'{cpu:14.1f} {target:>30}', flush=True)
+              f'{cpu:14.2f} {target:>30}', flush=True)
 
 
 if __name__ == '__main__':

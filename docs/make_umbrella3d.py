@@ -387,6 +387,32 @@ CPU s, the step alone 3.6), the step alone 6.0 cores in stage 2. The issue's tar
 (6 x 1 within 0.5 core, 12 x 2 in real time) are not reached: they need about 8 us (6 x 1,
 the figures included) and 2.8 us (12 x 2) a rib and step at these steps.
 
+Record3D's per-step figures are computed in the compiled advance
+(umbrella_sim/core/_kernel3d_figures.h: at every stress point of every rib the four components
+and von Mises with their rates, over the recovery rows' nonzeros, the Hermite crest of each step,
+each rib's largest and where, as the rows' last 15 R doubles); Record3D's numpy rule stays the
+reference (tests/test_umbrella3d_kernel.py, test_compiled_stress_figures_equal_record3d_numpy:
+every base through the lock; the stress rows move by at most 1.5e-15 of their largest, every
+other figure is the same bit for bit), and Record3D keeps each chunk's peaks as its steps come
+(the summary and the publication no longer stack them). The same runs before and after in turn
+(bench/bench_umbrella3d.py, load 1.5-1.7): 6 x 1 in 1 ms blocks 0.66-0.67 -> 0.44-0.45 CPU s a
+simulated second deploying (1.49-1.51 -> 2.22-2.26 x real time) and 0.87-0.88 -> 0.65-0.67 in
+stage 2 (1.14-1.15 -> 1.49-1.54 x); 12 x 2 in 10 ms blocks 5.6 -> 4.0 CPU s deploying (0.18 ->
+0.25 x) and 8.2-8.3 -> 6.4 in stage 2 (0.12 -> 0.16 x). The node at 1 kHz with recording
+(bench/bench_ribs_node.py --live, load 1.7-3.2, mostly stage 2): 1.32-1.39 -> 0.95-1.06 CPU s a
+simulated second, 0.48-0.65 -> 0.71-1.00 x real time (real time over 8 s where the machine
+gave it 0.95 core). A 1 ms block of the run driver (6 x 1, 0.4 s from rest: the lock at 0.23
+s; bench_ribs_node's parts): the compiled steps and their figures 432-445 us, Record3D's rows
+77-85, the summary 44-47, the publication's sample 9, its encoding 51-55. The step alone
+(its figures included) 31.4-31.8 us in stage 1 and 50.3-51.0 in stage 2 at 6 x 1, 121-125 and
+204 at 12 x 2 (a rib's W lambda summed along W's rows, the bodies' elastic-first order mapped
+once: 32.6-33.1 -> 31.4 and 128 -> 121-122 us in stage 1, bit for bit the same). What
+remains is the step itself (stage 2: of which the 2.81 Newton
+iterations, the projection's factorisation and the mode fit's modal passes; a predictor from
+the previous step's increment or a second-order extrapolation took 2.77-2.95 iterations a
+step, no fewer: stage 2's iterations are set by the fitted modes at omega h near 1) and the
+node's Python per publication.
+
 A driven hub and a free-floating bus step compiled too (umbrella_sim/core/_kernel3d_base.h: the
 bus's border of M(q) (its elastic columns from invariants), its share of the kinetic energy's
 gradient, the arrow's full border of seven shared coordinates, the drive's rows, the free bus's

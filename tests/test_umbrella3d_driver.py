@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 
 from umbrella_sim.core.driver import RunDriver
-from umbrella_sim.core.umbrella3d.driven3d import DrivenSimulator3D
+from umbrella_sim.core.umbrella3d.driven3d import DrivenSimulator3D, RibPeaks
 from umbrella_sim.core.umbrella3d.outputs3d import STRESS_NAMES
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
@@ -139,6 +139,30 @@ def test_run_driver_takes_the_umbrellas_own_steps():
     assert figures['friction_work'][1] < -1e-3 * got['work'][-1]
     assert figures['friction_work'][0] == 0.0
     assert figures['steps'] == ref.k and figures['lock_time'] is None
+
+
+@pytest.mark.parametrize('kernel', ['compiled', pytest.param('numpy', marks=pytest.mark.slow)])
+def test_each_chunks_peaks_are_those_of_its_rows(kernel, monkeypatch):
+    """
+    A chunk's peaks, kept by Record3D as its steps come, are RibPeaks.of_rows of its rows.
+
+    Every chunk of a run through a release and the lock (the compiled step's runs of steps
+    and the lock's step; the numpy path's steps one at a time): each rib's largest of every
+    component, where and when, the first step holding it.
+    """
+    monkeypatch.setenv('UMBRELLA_SIM_KERNEL', kernel)
+    params = UmbrellaRibsParams.from_mapping(STUCK)
+    driver, chunks, _ = driven(params, 1.0, after_lock=0.004, period_steps=7)
+    assert driver.backend == kernel and driver.sim.locked
+    for chunk in chunks:
+        block = chunk.block
+        if not len(block):
+            continue
+        want = RibPeaks.of_rows(block.rows)
+        got = block.peaks
+        assert got is not None and got is not want
+        for a, b in ((got.value, want.value), (got.at, want.at), (got.when, want.when)):
+            np.testing.assert_array_equal(a, b)
 
 
 def test_the_planar_path_is_unchanged_by_the_umbrella():

@@ -157,16 +157,17 @@ class StepBlock3D:
 
     ``last`` is the Sample3D of the final state, ``lock`` the LockEvent if the lock happened
     in these steps, ``error`` the fault that ended them early; ``states`` is None (the
-    umbrella's state rows are not offered).
+    umbrella's state rows are not offered).  peaks: the rows' RibPeaks if known (Record3D's
+    taken_peaks), else made from the rows when first asked.
     """
 
     states = None
 
     def __init__(self, rows: dict, last: Sample3D, lock: LockEvent | None = None,
-                 error: str | None = None):
+                 error: str | None = None, peaks: 'RibPeaks | None' = None):
         self.rows, self.lock, self.error = rows, lock, error
         self._last = last
-        self._peaks = None
+        self._peaks = peaks
 
     def __len__(self) -> int:
         return len(self.rows['time']) if self.rows else 0
@@ -275,10 +276,12 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
             if until_lock and self.locked and not locked_before:
                 break
         rows = self.record.take()
+        peaks = self.record.taken_peaks
         if rows:
             self._current = Sample3D.of_row({name: v[-1] for name, v in rows.items()})
         lock = self.lock_event if self.locked and not locked_before else None
-        return StepBlock3D(rows, self._current, lock, error), applied
+        return StepBlock3D(rows, self._current, lock, error,
+                           None if peaks is None else RibPeaks(*peaks)), applied
 
     # ------------------------------------------------------------------- outputs
     def sample(self) -> Sample3D:

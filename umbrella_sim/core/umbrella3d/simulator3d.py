@@ -238,7 +238,7 @@ class UmbrellaSimulator3D:
                 continue
             status, done, rows, state = compiled.advance(
                 self.state, self.k, self.h, min(target - self.k, ADVANCE_BLOCK), self.force,
-                self.locked)
+                self.locked, self.record.crest_continues(self.locked))
             if done:
                 self.state = state
                 self.k += done
