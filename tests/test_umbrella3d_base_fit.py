@@ -49,6 +49,7 @@ from umbrella_sim.core.umbrella3d.modes3d import (deployed_configuration, free_l
                                                   rib_locked_modes)
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+from umbrella_sim.core.umbrella3d.stage2fit import stage2_fit
 from umbrella_sim.core.umbrella3d.state3d import State3D
 
 H = 1e-4
@@ -158,6 +159,20 @@ def test_the_fit_gives_each_free_mode_its_exact_period_and_amplitude(kernel, k):
     assert np.max(np.abs(angular)) < 1e-6 * rib_mass * speed * float(np.max(m.l1))
     # the bus moves with the mode (it is the free system's)
     assert np.max(np.abs(s.vs[1:])) > 1e-3 * speed
+
+
+def test_the_free_fit_turned_to_an_attitude_is_the_fit_at_that_attitude():
+    """WholeFit.at_attitude (the lock's, in the run) against the eigenproblem solved there."""
+    m = UmbrellaModel3D(UmbrellaRibsParams.from_mapping(FREE))
+    attitude = np.array([0.7, 0.2, -0.3])
+    turned, solved = stage2_fit(m, H).at_attitude(attitude), stage2_fit(m, H, attitude)
+    rng = np.random.default_rng(1)
+    vr, vs = rng.standard_normal((m.n_ribs, m.n_rib)), rng.standard_normal(m.n_shared)
+    for name in ('to_scheme', 'to_physical', 'transpose'):
+        for x, y in zip(getattr(turned, name)(vr, vs), getattr(solved, name)(vr, vs)):
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-9, err_msg=name)
+    for x, y in zip(turned.newton_update(vr, vs, H), solved.newton_update(vr, vs, H)):
+        np.testing.assert_allclose(x, y, rtol=0, atol=1e-9)
 
 
 def test_a_driven_hubs_fit_is_each_ribs_in_the_hubs_frame():

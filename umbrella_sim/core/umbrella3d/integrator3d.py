@@ -159,7 +159,6 @@ class MidpointUmbrella:
         #: stage 2's mode fit (fit_stage2_modes: stage2fit.RibFits or WholeFit), acting
         #: from lock_at on
         self.mode_fit: RibFits | WholeFit | None = None
-        self._fit_step = None
         self.fit_active = False
         #: the last step's iteration matrix: (factor, uses, end q and v, h, locked, stuck)
         self._kept = None
@@ -192,17 +191,17 @@ class MidpointUmbrella:
     def fit_stage2_modes(self, h: float) -> None:
         """Fit the base's locked modes (stage2fit.stage2_fit) for grid step h, from lock_at on."""
         self.mode_fit = stage2_fit(self.model, h)
-        self._fit_step = h
 
     def lock_at(self, state: State3D | None = None) -> None:
         """
         Start stage 2's mode fit (if any): the lock has happened (in state, if given).
 
-        A free bus's modes are those at the bus's attitude at the lock (the state's).
+        A free bus's modes are those at the bus's attitude at the lock (the state's:
+        stage2fit.WholeFit.at_attitude).
         """
         if self.mode_fit is not None:
             if state is not None and self.mode_fit.whole and np.any(state.qs[4:7] != 0.0):
-                self.mode_fit = stage2_fit(self.model, self._fit_step, state.qs[4:7])
+                self.mode_fit = self.mode_fit.at_attitude(state.qs[4:7])
             self.fit_active = True
             if self.compiled is not None:
                 self.compiled.set_mode_fit(self.mode_fit)

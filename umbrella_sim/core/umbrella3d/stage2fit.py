@@ -30,7 +30,8 @@ modes, by base:
 * a free-floating bus (``WholeFit``): the bus couples the locked ribs, so the modes are the
   whole free system's (modes3d.free_locked_modes: bus + locked ribs, the six rigid-body
   modes left out, which the midpoint rule integrates exactly), one fit over every
-  coordinate, linearised at the bus's attitude at the lock.  Its U is zero on the bus's
+  coordinate, linearised at the bus's attitude at the lock (``at_attitude``: the modes at
+  rest turned to it, exactly, without an eigenproblem in the run).  Its U is zero on the bus's
   rows (each elastic mode carries no linear or angular momentum), so the scheme's momentum
   of the bus's coordinates is the physical one: the step keeps the free system's momentum
   as without the fit, and its energy T + V (S w is the physical velocity).  The cost is the
@@ -43,9 +44,11 @@ their arrays to _kernel3d.c (fit_map) and _kernel3d_base.h (base_fit_map).
 """
 from __future__ import annotations
 
+from copy import copy
+
 import numpy as np
 
-from .model3d import UmbrellaModel3D
+from .model3d import BusFrame, UmbrellaModel3D
 from .modes3d import free_locked_modes, rib_locked_modes
 from ..integrators import LockedModeFit
 
@@ -106,6 +109,29 @@ class WholeFit:
     def newton_update(self, dr, ds, h: float):
         """Return the Newton update shrunk mode by mode (LockedModeFit.newton_update)."""
         return self._apply(LockedModeFit.newton_update, dr, ds, h)
+
+    def at_attitude(self, attitude) -> 'WholeFit':
+        """
+        Return this fit (of the bus at rest at attitude 0) for the bus at attitude.
+
+        The kinetic energy is the body frame's: T(q, v) = T0(J v) (T0 at attitude 0), J =
+        diag(I, R^T, B0^-1 B) on (the ribs' and y_s, the bus's X', its angles' rates; B the
+        rate basis, omega_body = B theta'), so M(attitude) = J^T M0 J (to round-off): each
+        mode turns to J^-1 phi, mass-normalised in M(attitude) with the same frequency, and
+        U = M phi to J^T U (zero on the bus's rows, as at rest).
+        """
+        bus, rest = BusFrame.of(np.asarray(attitude, dtype=float)), BusFrame.of(np.zeros(3))
+        turn = np.linalg.solve(rest.basis, bus.basis)            # B0^-1 B
+        k = self.shape[0] * self.shape[1] + 1
+        x, theta = slice(k, k + 3), slice(k + 3, k + 6)
+        fit = copy(self.fit)
+        fit.shapes, fit.modes = self.fit.shapes.copy(), self.fit.modes.copy()
+        # (rows of modes: phi^T J^-T, u^T J)
+        fit.shapes[:, x] = self.fit.shapes[:, x] @ bus.rot.T
+        fit.shapes[:, theta] = np.linalg.solve(turn, self.fit.shapes[:, theta].T).T
+        fit.modes[:, x] = self.fit.modes[:, x] @ bus.rot.T
+        fit.modes[:, theta] = self.fit.modes[:, theta] @ turn
+        return WholeFit(fit, *self.shape)
 
 
 def stage2_fit(model: UmbrellaModel3D, h: float, attitude=None) -> RibFits | WholeFit:
