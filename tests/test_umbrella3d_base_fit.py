@@ -129,6 +129,28 @@ FREE_MODES = [('compiled', 3), ('compiled', 5), ('compiled', 20), ('compiled', 3
               ('compiled', 41), ('numpy', 20), ('numpy', 41)]
 
 
+@pytest.mark.parametrize('values', [
+    {'ribs': 6}, {'ribs': 6, 'bus_mass': 5.0, 'bus_inertia': 0.2},
+    {'ribs': 6, 'elements_per_segment': 2}], ids=['6x1', '6x1-light-bus', '6x2'])
+def test_a_free_bus_runs_at_the_fixed_hubs_step_with_the_same_modes_resolved(values):
+    """
+    The step follows the fit (UmbrellaSimulator3D.fits_modes): the free system resolves there.
+
+    At the planar rule's fitted step (0.1 ms at 1 element, 33 us at 2) the free system's
+    modes past the fit's limit (omega h > 1.5) are as many as the ribs' on a fixed hub (the
+    links' and leaves' axial modes, which barely move the bus), so the modes that carry the
+    stage-2 stresses, which the rule judges on a rib, are resolved on a free bus too.
+    """
+    p = UmbrellaRibsParams.from_mapping(dict(values, base='free'))
+    h = UmbrellaSimulator3D.grid_step(p)
+    assert h == UmbrellaSimulator3D.grid_step(UmbrellaRibsParams.from_mapping(values))
+    m = UmbrellaModel3D(p)
+    free = free_locked_modes(m)[0]
+    fixed = np.concatenate([omega for omega, _, _ in rib_locked_modes(m)])
+    assert np.count_nonzero(free * h > 1.5) == np.count_nonzero(fixed * h > 1.5) > 0
+    assert len(free) == len(fixed)
+
+
 @pytest.mark.parametrize('kernel, k', [
     (kernel, k) if kernel == 'numpy' else pytest.param(kernel, k, marks=KERNELS[1].marks)
     for kernel, k in FREE_MODES])
