@@ -431,10 +431,35 @@ deployment, 1 element a segment, load ~0.8 on the 2 cores; 3 / 6 ribs): hub fixe
 driven (a jolt in X-Z, a spin-up about Y) 74 / 144 us (3.0 Newton iterations a step while the
 base accelerates or spins up, 2.0 when it does not), free bus 61 / 121 us (numpy: 1.9 / 2.2 ms,
 6.9 / 7.5 ms, 5.5 / 5.9 ms); the compiled step alone at a moving base's step 48 / 94 us
-(driven), 48 / 92 us (free), 15 us a rib (hub fixed, 0.1 ms: 5.1). A moving base has no stage-2
-mode fit (the locked ribs stay coupled through the bus), so its step is the planar rule's
-without it, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks take 3.6 (driven) and 3.5 (free) CPU
-s a simulated second, 0.28-0.29 x real time (hub fixed, 0.1 ms: 0.7 CPU s, 1.5 x).
+(driven), 48 / 92 us (free), 15 us a rib (hub fixed, 0.1 ms: 5.1). Those were at the planar
+rule's step without the stage-2 mode fit, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks took
+3.6 (driven) and 3.5 (free) CPU s a simulated second, 0.28-0.29 x real time.
+
+A moving base now takes the stage-2 mode fit too (umbrella_sim/core/umbrella3d/stage2fit.py,
+tests/test_umbrella3d_base_fit.py), hence the fixed hub's step (0.1 ms at 1 element, 33 us at
+2). A driven hub's ribs are fitted rib by rib in the hub's frame (their locked modes are the
+fixed hub's there; the drive is a base excitation the midpoint rule integrates; with the drive
+zero a run is the fixed hub's to the two steps' difference, 1.5e-8 m at the tips). A free bus
+couples the locked ribs, so its fit is of the whole free system's elastic modes (bus + locked
+ribs, modes3d.free_locked_modes: the six rigid-body modes left out, each elastic mode without
+linear or angular momentum, so the scheme's momentum of the bus's coordinates is the physical
+one), linearised at the bus's attitude at the lock: a free mode alone turns at the
+eigenproblem's frequency (Prony, 1e-7) with its amplitude (1e-6), T + V and the linear momentum
+kept to round-off, the angular momentum to the Newton tolerance; with a 5 kg bus the modes that
+move it are up to 25 % stiffer than a rib's on a fixed hub, which a rib-by-rib fit would leave
+off. Measured (bench/bench_umbrella3d.py --base, ribs 6 x 1, CPU time, load ~5 on the 2 cores;
+before / after): the compiled step alone, driven 94.7 / 106.5 us deploying and 96.9 / 128.1 us in
+stage 2, free 93.0 / 92.4 and 93.5 / 165.9 us (the whole fit's dense maps, 84 modes of 145
+coordinates, about 70 us of it); CPU s a simulated second in 1 ms blocks with Record3D's
+figures, driven 3.9 / 1.6 deploying and 4.0 / 1.8 in stage 2, free 3.6 / 1.7 and 3.7 / 2.6
+(hub fixed 0.7 and 0.9-1.2). The free system's fit is dense: its cost grows as the square of
+the ribs (12 x 2 at 33 us: 372 modes of 499 coordinates, 1.22 ms a stage-2 step against 0.42
+unfitted; the driven hub's 0.51). The fitted stage 2 at 0.1 ms against the same code
+converged (2.5 us, no fit), tips in and out of plane 0.1 s past a plastic lock at V0 = -0.5
+(3 ribs, a tip mass, a kicked rib; times from each run's lock): free bus (5 kg) 1.27 mm,
+driven 1.17 mm (hub fixed 0.96 mm) of 195 / 140 mm amplitude, where the unfitted 33 us step
+the moving bases took before gave 4.07 / 2.46 mm (2.38) and 0.1 ms unfitted 7.4 / 5.2 mm
+(5.22) (tests/test_umbrella3d_base_fit.py, slow).
 
 The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
 recording and tools for N ribs (the ROS side still runs the planar model), the geometrically

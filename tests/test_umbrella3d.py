@@ -224,6 +224,10 @@ def test_free_bus_through_the_plastic_lock(kernel):
     rec = sim.run(0.2)
     a = rec.arrays()
     assert sim.lock_time is not None and sim.params.lock_rule == 'plastic'
+    # stage 2 with the free system's mode fit (stage2fit.WholeFit), at the bus's attitude
+    # at the lock
+    assert sim.integrator.fit_active and sim.integrator.mode_fit.whole
+    assert np.any(sim.lock_state[0].qs[4:7] != 0.0) and np.count_nonzero(a['locked']) > 100
     assert a['lock_energy_loss'][-1] > 0.01 * a['work'][-1]
     s = rec.summary()
     assert s['energy_balance_residual'] < BALANCE_TOLERANCE * s['energy_scale']

@@ -304,13 +304,12 @@ def test_numpy_path_when_the_library_is_absent(monkeypatch, capfd):
 @needs_kernel
 @pytest.mark.parametrize('base', ['prescribed', 'free'])
 def test_a_moving_base_steps_compiled_without_a_word(base, capfd):
-    """A driven hub or a free bus take the compiled step (auto), the stage-2 fit stays off."""
+    """A driven hub or a free bus take the compiled step (auto), with the stage-2 fit."""
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
         {'ribs': 2, 'time_step': 1e-4, **BASES[base]}))
-    assert sim.integrator.backend == 'compiled' and not sim.mode_fit
+    assert sim.integrator.backend == 'compiled' and sim.mode_fit
+    assert sim.integrator.mode_fit.whole == (base == 'free')
     assert capfd.readouterr().err == ''
-    with pytest.raises(ValueError, match='the 3D stage-2 mode fit has the hub fixed'):
-        sim.integrator.fit_stage2_modes(sim.h)
     with pytest.raises(ValueError, match="kernel='fast': must be auto, compiled or numpy"):
         MidpointUmbrella(sim.model, kernel='fast')
 

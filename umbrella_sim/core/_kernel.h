@@ -259,6 +259,10 @@ typedef struct {
      * (R x fit_modes) */
     int fit_modes;
     const double *fit_u, *fit_phi, *fit_scale, *fit_shrink;
+    /* fit_whole 1: one fit of the whole system's modes (a free bus: stage2fit.WholeFit),
+     * fit_modes rows over every coordinate (ribs', then the shared: fit_modes x (n_ribs
+     * n_rib + n_shared) each), s and shrink (fit_modes) */
+    int fit_whole;
     /* a prescribed base: the bus's coordinates and rates the drive gives at each step's end
      * (n_steps x 6 each; single: 1 x 6) */
     const double *drive_q, *drive_v;

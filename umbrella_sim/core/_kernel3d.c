@@ -1075,7 +1075,7 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
 
 /* ------------------------------------------------------------------ the mode fit */
 /* Stage 2's mode fit (integrators.LockedModeFit, rib by rib): S = I + Phi diag(s - 1) U^T */
-typedef struct { int r; const double *u, *phi, *sc, *shrink; } Fit3D;
+typedef struct { int r; const double *u, *phi, *sc, *shrink; int whole; } Fit3D;
 
 enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
 
@@ -1435,8 +1435,9 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
     a->iterations = 0;
     int N = x->R * x->n;
     int steps = a->single ? 1 : a->n_steps;
-    Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink};
-    if (a->fit_modes > x->n) return SINGULAR;
+    Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink, a->fit_whole};
+    if (a->fit_modes > (a->fit_whole ? N + x->ns : x->n) || (a->fit_whole && !x->base))
+        return SINGULAR;
     int figures = x->fig && !a->single && a->out;
     if (figures) figures_start(x, a);
     for (int k = 0; k < steps; k++) {
@@ -1452,7 +1453,8 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
             x->base->drive_v = a->drive_v ? a->drive_v + 6 * k : NULL;
             if (x->base->prescribed && !a->drive_q) return SINGULAR;
             status = base_step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol,
-                               a->phi_tol, a->max_iter);
+                               a->phi_tol, a->max_iter,
+                               a->locked && a->fit_modes > 0 ? &fit : NULL);
         } else {
             status = step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol, a->phi_tol,
                           a->max_iter, a->locked && a->fit_modes > 0 ? &fit : NULL);

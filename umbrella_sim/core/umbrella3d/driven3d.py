@@ -354,7 +354,8 @@ class Summary3D:
             for j in np.nonzero((gap <= 0.0).any(0))[0]:
                 k = ribs[j]
                 self._deployed[k] = first_reach(t, gap[:, j], (
-                    t_before, alpha_before[k] - m.alpha_deployed[k]))
+                    t_before, alpha_before[k] - m.alpha_deployed[k]),
+                    None if self.lock is None else self.lock.time)
         self._last = (float(t[-1]), rows['alpha1'][-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(np.abs(energy).max()))

@@ -169,23 +169,31 @@ class CompiledStep3D:
                                                 _ptr(blocks[0]), _ptr(blocks[1]), _ptr(x))
         return status == STATUS['ok']
 
-    def set_mode_fit(self, fits) -> None:
+    def set_mode_fit(self, fit) -> None:
         """
-        Fit the locked steps' modes from now on: each rib's integrators.LockedModeFit.
+        Fit the locked steps' modes from now on: a stage2fit.RibFits or WholeFit.
 
-        The call keeps pointers to the arrays (Advance3DCall.fit_*), padded to the most
-        modes a rib has (s = 1, shrink 0: no change).
+        The call keeps pointers to the arrays (Advance3DCall.fit_*): each rib's
+        LockedModeFit padded to the most modes a rib has (s = 1, shrink 0: no change), or
+        the whole free system's (fit_whole: rows over every coordinate).
         """
-        nr, n = self.model.n_ribs, self.model.n_rib
-        r = max(len(f.scale) for f in fits)
-        u, phi = np.zeros((nr, r, n)), np.zeros((nr, r, n))
-        scale, shrink = np.ones((nr, r)), np.zeros((nr, r))
-        for k, f in enumerate(fits):
-            m = len(f.scale)
-            u[k, :m], phi[k, :m] = f.modes, f.shapes
-            scale[k, :m], shrink[k, :m] = f.scale, f.newton_shrink(f.step)
-        self._fit = (u, phi, scale, shrink)
         c = self.call
+        if fit.whole:
+            f = fit.fit
+            self._fit = tuple(np.ascontiguousarray(a) for a in (
+                f.modes, f.shapes, f.scale, f.newton_shrink(f.step)))
+            c.fit_whole, r = 1, len(f.scale)
+        else:
+            nr, n = self.model.n_ribs, self.model.n_rib
+            r = max(len(f.scale) for f in fit.fits)
+            u, phi = np.zeros((nr, r, n)), np.zeros((nr, r, n))
+            scale, shrink = np.ones((nr, r)), np.zeros((nr, r))
+            for k, f in enumerate(fit.fits):
+                m = len(f.scale)
+                u[k, :m], phi[k, :m] = f.modes, f.shapes
+                scale[k, :m], shrink[k, :m] = f.scale, f.newton_shrink(f.step)
+            self._fit = (u, phi, scale, shrink)
+            c.fit_whole = 0
         c.fit_u, c.fit_phi, c.fit_scale, c.fit_shrink = (_ptr(a) for a in self._fit)
         c.fit_modes = r
 
