@@ -329,7 +329,8 @@ The umbrella's stage 2 stays on its grid step: the planar model's stage 2 takes 
 where its lock's tip deflection passes 7 % of the leaf (the modes' coupling,
 docs/validation.md, amplitude), the umbrella's does not yet, so its stage-2 peaks and tip
 series at such amplitudes carry the planar model's errors at the grid step (at N = 1,
-V0 = -0.5: 3 % and 4 mm; give a finer `time_step` for them).
+V0 = -0.5: 3 % and 4 mm): its summary's 'coarse step' names the `time_step` that
+resolves them.
 
 The step is compiled (umbrella_sim/core/_kernel3d.c, in the planar kernel's
 library, its interface declared in _kernel.h and checked at load): the Newton iteration, each

@@ -263,3 +263,25 @@ def test_the_summary_reports_a_free_bus_and_its_momentum():
     np.testing.assert_allclose(figures['linear_momentum'], first.linear_momentum, rtol=0,
                                atol=1e-12 * scale)
     assert figures['energy_drift'] < BALANCE_TOLERANCE
+
+
+def test_an_umbrella_past_the_coupling_deflection_names_the_step_its_stage2_needs():
+    """
+    Three ribs pushed by 10 N: a stage-2 tip deflection of 13 % of the leaf at 0.1 ms.
+
+    The umbrella's stage 2 stays on its grid step; past the modes' coupling (7 %) the
+    summary says 'coarse step' with the step stage 2 needs (step_rule.stage2_step_needed,
+    the planar rule); at that step, given, nothing is said, nor at V0 = -0.2 alone (6.3 %).
+    """
+    def coarse(values, duration):
+        driver = RunDriver(UmbrellaRibsParams.from_mapping(values))
+        assert driver.run(duration) is None
+        figures = driver.summary.figures()
+        return figures, [w for w in figures['warnings'] if w.startswith('coarse step')]
+
+    figures, (text,) = coarse({'ribs': 3, 'sleeve_force': 10.0}, 0.25)
+    assert max(figures['max_in_plane_tip']) > 0.07 * 1.0 and 'couples its modes' in text
+    enough = float(text.rsplit('time_step <= ', 1)[1].split()[0])
+    assert enough < 1e-4
+    assert not coarse({'ribs': 3, 'sleeve_force': 10.0, 'time_step': enough}, 0.25)[1]
+    assert not coarse({'ribs': 3}, 0.6)[1]

@@ -42,7 +42,7 @@ from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
 from ..model import Stage
 from ..outputs import LockEvent
-from ..summary import (deploy_start, ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR,
+from ..summary import (deploy_start, ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR, mesh_resolution,
                        validity_warnings, WarningsSaid)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
@@ -410,11 +410,20 @@ class Summary3D:
         return out
 
     def warnings(self) -> list[str]:
-        """Return the validity warnings: summary's one rule, on the worst rib's figures."""
+        """
+        Return the validity warnings: summary's one rule, on the worst rib's figures.
+
+        'coarse step' judges the planar rib's mesh at the umbrella's step and its largest
+        in-plane tip deflection (summary.mesh_resolution): the umbrella's stage 2 stays on
+        its grid step, so past the modes' coupling it names the step a run should give.
+        """
+        locked = self.lock is not None
         return validity_warnings(self._planar, self.lock_kind,
                                  float(self._peaks['von_mises'][0].max()),
-                                 float(self._in_plane.max()), locked=self.lock is not None,
-                                 energy_drift=self.energy_drift)
+                                 float(self._in_plane.max()), locked=locked,
+                                 energy_drift=self.energy_drift,
+                                 stage2_resolution=(mesh_resolution(self._planar, self.sim.h)
+                                                    if locked else None))
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
