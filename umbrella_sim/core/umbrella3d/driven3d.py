@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .corotational3d import out_of_plane_warnings
 from .outputs3d import (BODIES, deployment_spread, energy_balance3d, first_reach,
                         largest_out_of_plane_tip, STRESS_NAMES)
 from .params3d import UmbrellaRibsParams
@@ -405,16 +406,24 @@ class Summary3D:
             out['error'] = self.error
         return out
 
+    def _geometry(self):
+        """Return the co-rotational ribs' largest section slope and out-of-plane rotation."""
+        m = self.sim.model
+        return (getattr(m, 'max_section_slope', None), getattr(m, 'max_out_of_plane', None))
+
     def warnings(self) -> list[str]:
         """Return the validity warnings: summary's one rule, on the worst rib's figures."""
+        slope, out_of_plane = self._geometry()
         return validity_warnings(self._planar, self.lock_kind,
                                  float(self._peaks['von_mises'][0].max()),
                                  float(self._in_plane.max()), locked=self.lock is not None,
-                                 energy_drift=self.energy_drift)
+                                 energy_drift=self.energy_drift, section_slope=slope
+                                 ) + out_of_plane_warnings(self._planar, out_of_plane)
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
         # the warnings depend on the run only through these
         return self._said.new((self._peaks['von_mises'][0].max(), self._in_plane.max(),
-                               self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT),
+                               self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
+                               *self._geometry()),
                               self.warnings)

@@ -145,7 +145,7 @@ class Record3D:
         # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
         # argmax); every component at once, in STRESS_NAMES' order
         every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
-                             np.concatenate(m.stress_blocks(st['vr']), -1), locked)
+                             np.concatenate(m.stress_rate_blocks(qr, st['vr']), -1), locked)
         top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
         at = np.empty(top.shape + (2,))
         at[..., 0] = point >= self._leaf_points                  # the body's code

@@ -42,8 +42,9 @@ import math
 
 import numpy as np
 
+from .corotational3d import umbrella_model
 from .integrator3d import ConvergenceError3D, MidpointUmbrella, State3D
-from .model3d import ROW_STICK, UmbrellaModel3D
+from .model3d import ROW_STICK
 from .outputs3d import Record3D
 from .params3d import UmbrellaRibsParams
 from ..engines import event_root, EVENT_TIME_TOLERANCE
@@ -68,7 +69,7 @@ class UmbrellaSimulator3D:
                  tolerance: float | None = None, kernel: str | None = None,
                  carry_steps: int | None = None):
         self.params = params.validated()
-        self.model = m = UmbrellaModel3D(self.params)
+        self.model = m = umbrella_model(self.params)
         #: stage 2's mode fit: the planar rule's, rib by rib, with the hub fixed
         self.mode_fit = self.fits_modes(self.params)
         self.h = self.grid_step(self.params) if step is None else step
@@ -94,8 +95,13 @@ class UmbrellaSimulator3D:
 
     @staticmethod
     def fits_modes(params: UmbrellaRibsParams) -> bool:
-        """Say whether stage 2 takes the planar mode fit: phase_correction, the hub fixed."""
-        return params.planar.phase_correction and params.base == 'fixed'
+        """
+        Say whether stage 2 takes the planar mode fit: phase_correction, the hub fixed.
+
+        Not with flexible-nonlinear (as the planar model: step_rule.py says why).
+        """
+        return (params.planar.phase_correction and params.base == 'fixed'
+                and params.planar.model == 'flexible')
 
     @classmethod
     def grid_step(cls, params: UmbrellaRibsParams) -> float:
@@ -183,7 +189,9 @@ class UmbrellaSimulator3D:
 
     def _step(self, s, h, locked):
         try:
-            return self.integrator.step(s, h, self.force, locked)
+            out = self.integrator.step(s, h, self.force, locked)
+            self.model.note_state(out[0].qr)
+            return out
         except (ConvergenceError3D, np.linalg.LinAlgError) as exc:
             raise SimulationFailed(f'step after t = {s.t:.9g} s failed: {exc}') from None
 
