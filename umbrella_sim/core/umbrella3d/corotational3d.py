@@ -132,15 +132,23 @@ class RibCorotationalStrain:
 
     def __init__(self, model: UmbrellaModel3D):
         m = model
-        lin, lengths = [], []
+        lin, lengths, places = [], [], []
         for bodies, s_e in ((m.leaf_bodies, m.s_leaf_e), (m.link_bodies, m.s_link_e)):
             for maps in bodies[0].element_maps:          # (12, n_elastic)
                 rows = np.zeros((9, m.n_rib))
                 for k, (b, a) in enumerate(_Z_ROWS):
                     rows[k, s_e] = maps[b] - (maps[a] if a is not None else 0.0)
                 lin.append(rows)
+                places.append(np.where(maps.any(1), s_e.start + maps.argmax(1), m.n_rib))
             lengths.append(np.array([b.element_length for b in bodies]))
         self.lin = np.array(lin)                               # (E, 9, n_rib)
+        #: each element's 12 coordinates' places in the rib's vector (n_rib: a fixed one)
+        self.places = np.array(places)
+        self.to_z = np.zeros((9, 12))                          # z - offset = to_z x_e
+        for k, (b, a) in enumerate(_Z_ROWS):
+            self.to_z[k, b] = 1.0
+            if a is not None:
+                self.to_z[k, a] = -1.0
         self.length = np.concatenate(lengths, 1)               # (R, E)
         self.n_leaf = len(m.leaf_bodies[0].element_length)
         sec = m.sections
@@ -262,7 +270,13 @@ class RibCorotationalStrain:
         return np.einsum('eiq,rei->rq', self.lin, np.einsum('reki,rek->rei', jac, sigma))
 
     def _assemble_matrix(self, zmat):
-        return np.einsum('eip,reij,ejq->rpq', self.lin, zmat, self.lin)
+        """sum_e L_e^T zmat_e L_e (R, n_rib, n_rib): each element's 12 x 12 block added."""
+        blocks = self.to_z.T @ zmat @ self.to_z                # (R, E, 12, 12)
+        n = self.lin.shape[-1]
+        out = np.zeros((len(zmat), n + 1, n + 1))             # (the last: fixed ones)
+        for e, at in enumerate(self.places):
+            out[:, at[:, None], at[None, :]] += blocks[:, e]
+        return out[:, :n, :n]
 
     def gradient(self, qr) -> np.ndarray:
         """Return dU/dq of every rib (R, n_rib)."""
@@ -365,7 +379,7 @@ def _tiled(law: RibCorotationalStrain, k: int) -> RibCorotationalStrain:
     if k == 1:
         return law
     out = object.__new__(RibCorotationalStrain)
-    out.lin, out.n_leaf = law.lin, law.n_leaf
+    out.lin, out.n_leaf, out.places, out.to_z = law.lin, law.n_leaf, law.places, law.to_z
     out.length = np.tile(law.length, (k, 1))
     out.stiffness = np.tile(law.stiffness, (k, 1, 1, 1))
     out.section = {name: np.tile(v, (k, 1)) for name, v in law.section.items()}
