@@ -66,7 +66,8 @@ def main():
     args = ap.parse_args()
     print(f'load {os.getloadavg()[0]:.2f} (2 cores); h = 0.1 ms, V0 = -1, plastic lock; '
           f'numpy path, carry_steps {args.carry}')
-    print('| model | ribs x elements | stage 1 us/step (its, fact) | stage 2 us/step (its, fact) |')
+    print('| model | ribs x elements | stage 1 us/step (its, fact) '
+          '| stage 2 us/step (its, fact) |')
     print('|---|---|---|---|')
     for ribs in args.ribs:
         for elements in args.elements:
