@@ -405,8 +405,10 @@ without it, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks take 3.6 (driven) and 
 s a simulated second, 0.28-0.29 x real time (hub fixed, 0.1 ms: 0.7 CPU s, 1.5 x).
 
 The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
-recording and tools for N ribs (the ROS side still runs the planar model), the geometrically
-exact beam option.
+recording and tools for N ribs (the ROS side still runs the planar model). The geometrically
+exact option, `model: flexible-nonlinear` (each rib's beams co-rotational: the planar
+element in the rib's plane, out-of-plane bending and torsion small rotations in its
+co-rotated frame; numpy step), is docs/umbrella3d_nonlinear.md.
 """
 
 
