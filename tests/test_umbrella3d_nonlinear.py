@@ -39,6 +39,7 @@ import numpy as np
 import pytest
 
 from umbrella_sim.core import UmbrellaParams, UmbrellaSimulator
+from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.umbrella3d.corotational3d import (CorotationalUmbrellaModel3D,
                                                          OUT_OF_PLANE_LIMIT,
                                                          out_of_plane_warnings, umbrella_model)
@@ -201,6 +202,18 @@ def test_out_of_plane_warning_past_its_limit():
     assert len(said) == 1 and said[0].startswith('out-of-plane rotation:')
 
 
+def test_a_run_says_when_its_ribs_leave_the_out_of_plane_limit():
+    """Through the run driver: a rib kicked hard out of its plane is named, a nudge is not."""
+    for kick, said in ((0.5, False), (20.0, True)):
+        driver = RunDriver(ribs_params({'ribs': 2, 'v0': -0.5, 'time_step': 1e-4,
+                                        'rib1.out_of_plane_rate': kick}))
+        driver.run(0.01)
+        rotation = driver.sim.model.max_out_of_plane
+        assert (rotation > OUT_OF_PLANE_LIMIT) == said
+        warnings = driver.summary.figures()['warnings']
+        assert any(w.startswith('out-of-plane rotation:') for w in warnings) == said
+
+
 # ---------------------------------------------------------------- (c) balances
 def test_energy_balance_with_no_force_and_with_friction():
     """T + V - (T + V)(0) = W_sleeve + W_friction to round-off: F = 0, then friction and F."""
@@ -270,6 +283,7 @@ def small_motion_difference(v0: float):
             for d in (1, 2)]
 
 
+@pytest.mark.slow      # ~5 s (numpy: six runs of 200 steps)
 def test_small_motion_is_the_linear_umbrella():
     """V0 = -0.2 scaled down by 10 and 100: the relative difference shrinks with it."""
     coarse, fine = small_motion_difference(-0.02), small_motion_difference(-0.002)
