@@ -157,12 +157,54 @@ def test_compiled_advance_outputs_match_reference_per_step(model, n_el, lock, fo
     assert [b.lock is not None for b in ref_blocks] == [b.lock is not None for b in fast_blocks]
     assert sum(b.lock is not None for b in fast_blocks) == 1
     assert ref.shape == fast.shape == (len(STEP_FIELDS), sum(sizes))
+    assert_same_rows(ref, fast, ref_blocks, p.time_step)
+    if model == 'flexible' and zeta == 0:
+        assert not fast[STEP_FIELDS.index('damping_dissipation')].any()
+    if zeta > 0:
+        assert fast[STEP_FIELDS.index('damping_dissipation')][-1] > 0.0
+    last_ref, last_fast = ref_blocks[-1].last, fast_blocks[-1].last
+    assert np.abs(last_ref.q - last_fast.q).max() < 1e-10
+
+
+@needs_kernel
+def test_stage2_substeps_give_the_same_grid_rows_on_both_paths():
+    """
+    Compare the grid rows of a stage 2 taken in substeps (its lock past the modes' coupling).
+
+    N = 1, V0 = -0.5, time_step 0: the grid stays at 0.1 ms and stage 2 takes 4 physics steps
+    a grid step (step_rule.stage2_step_needed).  The compiled loop runs the physics steps and
+    folds their rows (outputs.fold_substeps); the reference steps them one by one with the
+    peak stresses over them (UmbrellaSimulator._physics_steps): the same rows, to round-off.
+    """
+    p = UmbrellaParams(v0=-0.5)
+    sizes = [500, 400, 3, 40, 1, 56]     # the lock in the second block; stage 2 after it
+    ref_sim, fast_sim = simulator('numpy', p), simulator('compiled', p)
+    ref, ref_blocks = blocks(ref_sim, sizes)
+    fast, fast_blocks = blocks(fast_sim, sizes)
+    assert ref_sim.h == fast_sim.h == 1e-4
+    assert ref_sim.stage2_substeps == fast_sim.stage2_substeps == 4
+    assert fast_sim.lock_event.stage2_resolution['step'] == pytest.approx(2.5e-5)
+    time = fast[STEP_FIELDS.index('time')]
+    assert np.allclose(np.diff(time), 1e-4, rtol=1e-9, atol=0)     # one row a grid step
+    assert_same_rows(ref, fast, ref_blocks, p.time_step or 1e-4)
+    last_ref, last_fast = ref_blocks[-1].last, fast_blocks[-1].last
+    assert np.abs(last_ref.q - last_fast.q).max() < 1e-10
+
+
+def assert_same_rows(ref: np.ndarray, fast: np.ndarray, ref_blocks: list, step: float) -> None:
+    """
+    Check two paths' rows of the same steps to round-off amplified over the run.
+
+    1e-10 of each field's scale; a rate over the step (STEP_RATE_FIELDS) to that over the
+    step's length (the lock's step, which the lock instant shortens, divides the same state
+    error by its length); where a peak is, only where it is defined.
+    """
     assert np.array_equal(ref[STEP_FIELDS.index('stage')], fast[STEP_FIELDS.index('stage')])
     energy = np.abs(ref[STEP_FIELDS.index('kinetic_energy')]).max() + \
         np.abs(ref[STEP_FIELDS.index('strain_energy')]).max()
     time = ref[STEP_FIELDS.index('time')]
     lock_time = next(b.lock.time for b in ref_blocks if b.lock is not None)
-    step_length = np.minimum(p.time_step, np.where(time > lock_time, time - lock_time, np.inf))
+    step_length = np.minimum(step, np.where(time > lock_time, time - lock_time, np.inf))
     for i, name in enumerate(STEP_FIELDS):
         if name in STEP_PEAK_FIELDS and name.endswith('_x'):   # where the peak is: compare
             peak = ref[i - 1]                                    # only where it is defined
@@ -173,17 +215,11 @@ def test_compiled_advance_outputs_match_reference_per_step(model, n_el, lock, fo
         if name in ('work', 'lock_energy_loss', 'damping_dissipation'):   # round-off of the
             scale = max(scale, energy)                                     # energy, when ~0
         if name in STEP_RATE_FIELDS:
-            scale = scale * p.time_step / step_length
+            scale = scale * step / step_length
         # the elastic fields of the rigid-FE mode are round-off around 0: floor 1e-12 m,
         # 1e-6 Pa (a strain of 1e-17); the constraint residual is round-off: floor 1e-12 m
         floor = 1e-6 if name.startswith(('peak_stress', 'stress_')) else 1e-12
         assert np.all(np.abs(ref[i] - fast[i]) <= 1e-10 * scale + floor), name
-    if model == 'flexible' and zeta == 0:
-        assert not fast[STEP_FIELDS.index('damping_dissipation')].any()
-    if zeta > 0:
-        assert fast[STEP_FIELDS.index('damping_dissipation')][-1] > 0.0
-    last_ref, last_fast = ref_blocks[-1].last, fast_blocks[-1].last
-    assert np.abs(last_ref.q - last_fast.q).max() < 1e-10
 
 
 @pytest.mark.parametrize('kernel, model', [

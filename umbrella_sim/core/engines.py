@@ -36,8 +36,10 @@ from .lock import energy_velocity, LockImpossible
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import LockEvent, STEP_FIELDS, step_peaks
 from .params import UmbrellaParams
+from .registry import MIN_PHYSICS_STEP
 from .rigid import RigidMechanism
-from .step_rule import physics_step_of, stage2_resolution
+from .step_rule import (follows_lock, MAX_STEP_DIVISOR, physics_step_of,
+                        stage2_resolution)
 
 #: the row of each STEP_FIELDS name
 _STEP_ROW = {name: row for row, name in enumerate(STEP_FIELDS)}
@@ -168,6 +170,9 @@ class FiniteElementEngine(Engine):
         self.integrator.tolerance = newton_tolerance(self.h)
         if params.phase_correction and self.phase_correctable:   # LockedModeFit
             self.integrator.fit_stage2_modes(self.h)
+        #: physics steps a stage-2 grid step takes (from the lock on: step_rule.follows_lock)
+        self.stage2_substeps = 1
+        self._follows_lock = follows_lock(params)
         self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
                     for stage in Stage}
 
@@ -283,9 +288,25 @@ class FiniteElementEngine(Engine):
             qd = self.integrator.project_velocity(s.q, s.qd, cs)
         s = self.integrator.with_constraints(replace(s, qd=qd), force, cs)
         after = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
-        self.integrator.lock_at()
         resolution = None if self.rigid else stage2_resolution(m, s.q, s.qd, self.h)
+        if resolution is not None and self._follows_lock:
+            self._follow(resolution['needed_step'])
+            if self.stage2_substeps > 1:       # (judged again at the step stage 2 takes)
+                resolution = stage2_resolution(m, s.q, s.qd, self.h / self.stage2_substeps)
+        self.integrator.lock_at()
         return s, LockEvent(s.t, self.lock_kind, float(before), float(after), free, resolution)
+
+    def _follow(self, needed: float | None) -> None:
+        """Take stage 2 in the substeps its lock needs (None: the finest the rule allows)."""
+        k = (round(self.h / needed) if needed is not None else
+             min(MAX_STEP_DIVISOR, int(self.h / MIN_PHYSICS_STEP)))
+        if k <= 1:
+            return
+        self.stage2_substeps = k
+        integ = self.integrator
+        integ.tolerance = newton_tolerance(self.h / k)
+        if integ.mode_fit is not None:
+            integ.fit_stage2_modes(self.h / k)
 
 
 class RigidEngine(Engine):

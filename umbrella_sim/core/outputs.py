@@ -376,3 +376,25 @@ _STEP_PEAKS = slice(STEP_FIELDS.index('peak_stress_leaf'),
 #: rows StepBlock.peaks and SummaryAccumulator.add read together
 _PEAK_ROWS = np.array([STEP_FIELDS.index(f) for f in (
     'time', 'peak_stress_leaf', 'peak_stress_leaf_x', 'peak_stress_link', 'peak_stress_link_x')])
+
+
+def fold_substeps(rows: np.ndarray, states: np.ndarray | None, m: int
+                  ) -> tuple[np.ndarray, np.ndarray | None]:
+    """
+    Return the grid steps' rows (and state rows) of physics steps taken m to a grid step.
+
+    rows: (len(STEP_FIELDS), steps) of consecutive physics steps, the first starting a grid
+    step; each group of m ends a grid step (a last, shorter group: the steps a fault left).
+    A grid step's row is its last physics step's, with the step's peak stresses the largest
+    of its physics steps' (and where); its state row, its last one's.
+    """
+    steps = rows.shape[1]
+    ends = np.minimum(np.arange(m - 1, steps + m - 1, m), steps - 1)
+    out = rows[:, ends]
+    for peak in (_STEP_PEAKS.start, _STEP_PEAKS.start + 2):       # leaf, link: value, x
+        value = rows[peak]
+        padded = np.full(len(ends) * m, -np.inf)
+        padded[:steps] = value
+        at = np.argmax(padded.reshape(-1, m), axis=1) + m * np.arange(len(ends))
+        out[peak], out[peak + 1] = value[at], rows[peak + 1, at]
+    return out, None if states is None else states[:, ends]

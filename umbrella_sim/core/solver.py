@@ -21,11 +21,16 @@ start of the next step.  ``step()`` and ``advance_to(t)`` therefore give identic
 however the calls are split.  When the sleeve reaches the stop S inside a step, the crossing
 time is root-found by re-taking the step from its start with a shorter length (Illinois
 method, |dt| < 1e-12 s), the lock is applied there, and the step is completed under Case 2,
-so the grid is kept.
+so the grid is kept.  Where the step is chosen for the run (step_rule.follows_lock), a lock
+whose stage 2 needs a finer step (step_rule.stage2_step_needed: stage-2 tip deflections past
+the modes' coupling) makes every stage-2 grid step k equal physics steps
+(``stage2_substeps``); the grid, the outputs (one per grid step, the peak stresses over its
+physics steps) and the inputs stay on t_k = k h.
 """
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 from typing import Callable
 
 import numpy as np
@@ -36,8 +41,8 @@ from .engines import (DIVERGENCE_RESIDUAL, event_root, EVENT_TIME_TOLERANCE, fau
 from .forcing import command_force, ForceSchedule
 from .kernel import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicState, SAMPLE_VECTOR
 from .model import DEFORMING, LOCKED, Stage, UmbrellaModel
-from .outputs import (build_frozen, LockEvent, Sample, state_row, STEP_FIELDS, step_peaks,
-                      step_row, StepBlock)
+from .outputs import (build_frozen, fold_substeps, LockEvent, Sample, state_row, STEP_FIELDS,
+                      step_peaks, step_row, StepBlock)
 from .params import UmbrellaParams
 from .registry import SPECS
 from .step_rule import physics_step_of
@@ -101,6 +106,7 @@ class UmbrellaSimulator:
         self._lock_loss = 0.0
         self.lock_event: LockEvent | None = None
         self._locked_at = None
+        self._substep_peaks = None
         self.steps = 0
 
     # -- inputs
@@ -125,6 +131,14 @@ class UmbrellaSimulator:
     def state(self) -> DynamicState:
         return self._state
 
+    @property
+    def stage2_substeps(self) -> int:
+        """Return the physics steps a stage-2 grid step takes (1 until a lock needs more)."""
+        return getattr(self.engine, 'stage2_substeps', 1)
+
+    def _substeps(self, stage: Stage) -> int:
+        return self.stage2_substeps if stage == LOCKED else 1
+
     # -- stepping
     def step(self, record: bool = True) -> list[Sample]:
         """
@@ -137,7 +151,7 @@ class UmbrellaSimulator:
         t_next = (self._k + 1) * self.h
         out: list[Sample] = []
         stage = self._stage
-        s1 = self._checked(lambda: eng.step(s0, t_next - s0.t, force, stage), stage)
+        s1, self._substep_peaks = self._physics_steps(s0, t_next - s0.t, force, stage)
         work = force * (eng.sleeve_height(s0) - eng.sleeve_height(s1))
         lock_loss = 0.0
         lock_event = None
@@ -152,7 +166,7 @@ class UmbrellaSimulator:
                 out.append(self._sample(*locked_at))
             remaining = t_next - s_locked.t
             if remaining > EVENT_TIME_TOLERANCE:
-                s1 = self._checked(lambda: eng.step(s_locked, remaining, force, LOCKED), LOCKED)
+                s1 = self._physics_steps(s_locked, remaining, force, LOCKED)[0]
                 work += force * (eng.sleeve_height(s_locked) - eng.sleeve_height(s1))
             else:
                 s1 = s_locked
@@ -164,6 +178,29 @@ class UmbrellaSimulator:
         if record:
             out.append(self.sample())
         return out
+
+    def _physics_steps(self, s0: DynamicState, dt: float, force: float, stage: Stage
+                       ) -> tuple[DynamicState, tuple | None]:
+        """
+        Return the state dt after s0: one physics step, or stage 2's substeps.
+
+        With substeps, also the largest fibre stress over them and where (step_peaks: leaf,
+        x, link, x), else None.
+        """
+        eng, m = self.engine, self._substeps(stage)
+        if m == 1:
+            return self._checked(lambda: eng.step(s0, dt, force, stage), stage), None
+        n = max(1, math.ceil(dt / (self.h / m) * (1.0 - 1e-9)))
+        xs = (self.model.leaf.stress_x, self.model.link.stress_x)
+        s, start, peaks = s0, self._fibre_stress_of(s0), None
+        for _ in range(n):
+            s = self._checked(lambda s=s: eng.step(s, dt / n, force, stage), stage)
+            end = self._fibre_stress_of(s)
+            step = step_peaks(start, end, dt / n, xs)
+            peaks = step if peaks is None else tuple(
+                v for body in (0, 2) for v in max(peaks[body:body + 2], step[body:body + 2]))
+            start = end
+        return s, peaks
 
     def _commit(self, s1, stage, force, work, lock_loss, lock_event, steps) -> None:
         """Only after everything succeeded: a failure leaves the last good state."""
@@ -198,13 +235,21 @@ class UmbrellaSimulator:
         lock_before = self.lock_event
         force = self._force
         while done < n_steps:
-            fast = self.engine.advance(self._state, self._k, self.h, n_steps - done, force,
-                                       self._stage, self._work, self._lock_loss, states)
+            m = self._substeps(self._stage)
+            fast = self.engine.advance(self._state, self._k * m, self.h / m,
+                                       (n_steps - done) * m, force, self._stage, self._work,
+                                       self._lock_loss, states)
             if fast is not None:
                 state, block, work, stop, block_states = fast
+                if m > 1 and block.shape[1]:     # (copies: the engine's buffers are kept)
+                    whole = block.shape[1] // m          # (a fault may end one early)
+                    block, block_states = fold_substeps(block, block_states, m)
+                    block[STEP_FIELDS.index('time'), :whole] = (
+                        self._k + 1 + np.arange(whole)) * self.h
                 k = block.shape[1]
                 if k:      # (the engine's buffers: copied before its next call)
-                    parts.append((block.copy(), block_states.copy() if states else None))
+                    parts.append((block.copy() if m == 1 else block,
+                                  block_states.copy() if states and m == 1 else block_states))
                     self._commit(state, self._stage, force, work - self._work, 0.0, None, k)
                     done += k
                 if stop is None:
@@ -219,8 +264,9 @@ class UmbrellaSimulator:
                 error = str(exc)
                 break
             m, sample = self.model, self.sample()
-            row = step_row(sample, step_peaks(start, self._fibre_stress(), self.time - t_start,
-                                              (m.leaf.stress_x, m.link.stress_x)))
+            row = step_row(sample, self._substep_peaks or step_peaks(
+                start, self._fibre_stress(), self.time - t_start,
+                (m.leaf.stress_x, m.link.stress_x)))
             parts.append((np.array(row)[:, None], state_row(sample)[:, None] if states else None))
             done += 1
             if until_lock and self.lock_event is not lock_before:
@@ -322,7 +368,10 @@ class UmbrellaSimulator:
     # -- outputs
     def _fibre_stress(self) -> tuple:
         """Return the fibre stresses and their rates of the current state (step_peaks)."""
-        q, qd, _ = self.engine.fe_state(self._state)
+        return self._fibre_stress_of(self._state)
+
+    def _fibre_stress_of(self, s: DynamicState) -> tuple:
+        q, qd, _ = self.engine.fe_state(s)
         return self.model.stresses(q), self.model.stress_rates(q, qd)
 
     def sample(self) -> Sample:

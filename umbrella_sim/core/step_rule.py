@@ -30,6 +30,12 @@ error, without it) is what the step can get wrong of the crest.  Measured agains
 runs (docs/validation.md, step convergence): at shares of 2-3 % the stage-2 peaks came out 2
 to 6 % off, at 1 % or less within 1 %.
 
+Past a stage-2 tip deflection of COUPLING_DEFLECTION the floating frames' nonlinearity
+couples the modes, which the fit does not make exact: the step stage 2 needs is then finer
+(``stage2_step_needed``), judged on the run's own lock state, and where the step is chosen
+for the run (``follows_lock``) stage 2 takes it, k physics steps a grid step
+(solver.UmbrellaSimulator.stage2_substeps); elsewhere 'coarse step' names it.
+
 The step a mesh needs is judged on the lock of the rigid deployment (the undeformed frame
 reaching full deployment, its velocity changed by the run's lock rule, lock.py): it depends
 on the mesh, geometry, material and lock rule, not on V0 (the amplitudes scale with it), and
@@ -75,6 +81,15 @@ STRESS_SHARE_LIMIT = 0.01
 #: -0.4, both locks), where 50 us, resolving every mode, met them all; finer meshes at their
 #: chosen step met them up to 9.9 % and missed from 12.4 % (V0 = -0.4, energy lock)
 COUPLING_DEFLECTION = 0.07
+#: past COUPLING_DEFLECTION the coupling also moves the first mode's phase by an error that
+#: grows like the amplitude squared times the step squared, so the tip series' error (the
+#: amplitude times that phase) stays put when the step falls like the deflection to this
+#: power: stage 2 takes at most AUTO_STEP_CEILING (COUPLING_DEFLECTION / d)^1.5, the step that
+#: met every target up to COUPLING_DEFLECTION, besides resolving every mode carrying stress.
+#: In the step study (docs/validation.md, amplitude) every mode resolved was not enough at
+#: N = 1, V0 = -0.5, energy lock (d = 15.8 %: tip series 2.3 mm at 50 us); the rule's 25 us
+#: gave 0.7 mm (3 of 4 steps a 0.1 ms: 1.2 mm)
+COUPLING_EXPONENT = 1.5
 #: the automatic step is ceiling / k for the smallest k = 1 .. MAX_STEP_DIVISOR that does it
 MAX_STEP_DIVISOR = 64
 #: the ceiling of the automatic step (time_step 0): the one-element mesh's step, chosen by
@@ -214,19 +229,69 @@ def resolving_step_hint(params: dict) -> str:
     """Return how a run of these parameters gets the step that resolves its stage 2, or ''."""
     if params.get('model') == NONLINEAR_AUTO_STEP:
         return '' if params.get('step_follows_mesh') else 'step_follows_mesh takes it'
-    if params.get('time_step') == 0.0:
+    if params.get('time_step') == 0.0 or params.get('step_follows_mesh'):
         return ''
-    return 'time_step 0 takes the step chosen for the mesh'
+    return ('time_step 0 takes the step chosen for the mesh, and in stage 2 the step its '
+            'lock needs')
 
 
 def stage2_resolution(model: UmbrellaModel, q: np.ndarray, qd: np.ndarray, h: float) -> dict:
     """
     Return how well the step h resolves the stage-2 stresses of the post-lock state (q, qd).
 
-    ``resolution_of`` the modal amplitudes of that state: what the 'coarse step' warning
-    reads (summary.py).
+    ``resolution_of`` the modal amplitudes of that state, with "deflection": the stage-2 tip
+    deflection they can reach (``tip_crest``) over the leaf length l1 + l2, and "needed_step"
+    (``stage2_step_needed``): what the 'coarse step' warning reads (summary.py), and the
+    step stage 2 takes where the step is chosen for the run (``follows_lock``).
     """
-    return resolution_of(model, modal_amplitudes(model, q, qd), h)
+    amplitudes = modal_amplitudes(model, q, qd)
+    p = model.params
+    out = resolution_of(model, amplitudes, h)
+    out['deflection'] = tip_crest(model, amplitudes) / (p.l1 + p.l2)
+    out['needed_step'] = stage2_step_needed(out, out['deflection'])
+    return out
+
+
+def tip_crest(model: UmbrellaModel, amplitudes: np.ndarray) -> float:
+    """
+    Return the largest stage-2 tip deflection these modal amplitudes can add up to (m).
+
+    sum_i a_i |v_G(phi_i)|: a bound the stage-2 motion comes within 1-3 % of (N = 1 to 8,
+    V0 = -0.2 to -1, both locks: the first mode carries ~92 % of it).
+    """
+    return float(np.abs(model.locked_modes[1][model.i_tip_v]) @ amplitudes)
+
+
+def stage2_step_needed(resolution: dict, deflection: float) -> float | None:
+    """
+    Return the largest step / k that stage 2 needs at this tip deflection (over l1 + l2).
+
+    One rule for the step a run's stage 2 takes (``follows_lock``) and for the 'coarse step'
+    warning.  resolution: ``resolution_of`` at the step h.  Up to COUPLING_DEFLECTION its
+    "resolving_step" (at most STRESS_SHARE_LIMIT of the crest left to unresolved modes);
+    past it the modes couple: every mode carrying stage-2 stress resolved ("coupled_step")
+    and at most AUTO_STEP_CEILING (COUPLING_DEFLECTION / deflection)^COUPLING_EXPONENT.
+    None if no k up to MAX_STEP_DIVISOR does it.
+    """
+    if deflection <= COUPLING_DEFLECTION:
+        return resolution['resolving_step']
+    h, modes = resolution['step'], resolution['coupled_step']
+    if modes is None:
+        return None
+    phase = AUTO_STEP_CEILING * (COUPLING_DEFLECTION / deflection) ** COUPLING_EXPONENT
+    k = max(round(h / modes), math.ceil(h / phase * (1.0 - 1e-9)))
+    return None if k > min(MAX_STEP_DIVISOR, int(h / MIN_PHYSICS_STEP)) else h / k
+
+
+def follows_lock(params: UmbrellaParams) -> bool:
+    """
+    Return whether the run's stage 2 takes the step its own lock needs.
+
+    Where the step is chosen for the run (``time_step`` 0, or ``step_follows_mesh``) and the
+    model is the linear one whose stage 2 the rule was measured on (flexible): its stage 2
+    steps every grid step in k equal substeps, ``stage2_step_needed`` of the lock state.
+    """
+    return params.model == 'flexible' and not _ceiling(params)[1]
 
 
 def resolution_of(model: UmbrellaModel, amplitudes: np.ndarray, h: float) -> dict:

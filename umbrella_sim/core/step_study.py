@@ -66,6 +66,8 @@ class StepRun:
     tip_transverse: np.ndarray
     peak_stress_leaf: np.ndarray
     peak_stress_link: np.ndarray
+    #: the physics step of stage 2 (h, or h / k where the lock needs it: step_rule)
+    stage2_step: float = math.nan
 
     def stage_mask(self, code: int, window: float | None = None) -> np.ndarray:
         mask = self.stage == code
@@ -97,8 +99,10 @@ def run_steps(params: UmbrellaParams, window: float) -> StepRun:
 
     def cat(name):
         return np.concatenate([getattr(p, name) for p in parts])
-    return StepRun(driver.step, driver.sim.lock_event.time, cat('time'), cat('stage'),
-                   cat('tip_transverse'), cat('peak_stress_leaf'), cat('peak_stress_link'))
+    lock = driver.sim.lock_event
+    return StepRun(driver.step, lock.time, cat('time'), cat('stage'), cat('tip_transverse'),
+                   cat('peak_stress_leaf'), cat('peak_stress_link'),
+                   driver.step / getattr(driver.sim, 'stage2_substeps', 1))
 
 
 def step_errors(run: StepRun, ref: StepRun, window: float) -> dict:

@@ -33,7 +33,7 @@ from .forcing import TIME_RESOLUTION
 from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS, step_row,
                       StepBlock)
 from .step_rule import (COUPLING_DEFLECTION, lock_amplitudes, MAX_STEP_DIVISOR, resolution_of,
-                        resolving_step_hint, STRESS_SHARE_LIMIT)
+                        resolving_step_hint, stage2_step_needed, STRESS_SHARE_LIMIT)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
@@ -258,37 +258,42 @@ def coarse_step_warning(resolution: dict | None, hint: str = '',
     Return a warning when the step leaves the modes carrying the stage-2 stresses unresolved.
 
     resolution: the lock's (LockEvent.stage2_resolution, step_rule.stage2_resolution), None
-    before the lock or for a rigid model.  Past step_rule.STRESS_SHARE_LIMIT the stage-2
+    before the lock or for a rigid model.  The step stage 2 needs is
+    step_rule.stage2_step_needed at the stage-2 tip deflection (over the leaf length): the
+    lock state's own ("deflection" in the lock's resolution), else the run's largest,
+    deflection.  Up to step_rule.COUPLING_DEFLECTION, past STRESS_SHARE_LIMIT the stage-2
     peak stresses, and the period if the first mode is among those modes, are not those of
-    the model (docs/validation.md): the text names the shares and the step that resolves
-    them.  deflection: the run's largest tip deflection over the leaf length; past
-    step_rule.COUPLING_DEFLECTION any share at all is named (the modes couple there), with
-    the step that resolves every mode.  hint: how the run's parameters get that step
-    (step_rule.resolving_step_hint), '' if they already do.
+    the model (docs/validation.md); past it the modes couple, and any mode carrying stress
+    unresolved, or a step coarser than the coupling's, takes the stage-2 peaks and the tip
+    series several % off.  The text names the shares and the step that resolves them.
+    hint: how the run's parameters get that step (step_rule.resolving_step_hint), '' if
+    they already do.
     """
     if not resolution:
         return None
-    shares = {body: resolution[body] for body in ('leaf', 'link')}
-    coupled = deflection > COUPLING_DEFLECTION and 'coupled_step' in resolution
-    limit = 0.0 if coupled else STRESS_SHARE_LIMIT
-    if max(shares.values()) <= limit:
-        return None
+    deflection = resolution.get('deflection', deflection)
     h = resolution['step']
-    enough = resolution['coupled_step' if coupled else 'resolving_step']
+    enough = stage2_step_needed(resolution, deflection)
+    if enough is not None and enough >= h * (1.0 - 1e-9):
+        return None
     if enough is None:
         fix = (f'no step down to {h / MAX_STEP_DIVISOR:.3g} s (1/{MAX_STEP_DIVISOR} of this '
                'one) resolves them: give a smaller time_step')
     else:
         fix = f'time_step <= {_rounded_down(enough):.3g} s resolves them' + (
             f' ({hint})' if hint else '')
-    crest = (f"{100 * shares['leaf']:.3g} % of the leaf's and {100 * shares['link']:.3g} % of "
-             "the link's stage-2 stress crest at the lock")
-    if coupled:
-        return (f'coarse step: modes the physics step {h:g} s does not resolve carry {crest}, '
-                f'and at a tip deflection of {100 * deflection:.3g} % of the leaf (past '
-                f'{100 * COUPLING_DEFLECTION:g} %) the frame couples its modes: the stage-2 '
-                'peak stresses may be several % off (3-5 % at one element per segment in '
-                f'the step study); {fix}')
+    crest = (f"{100 * resolution['leaf']:.3g} % of the leaf's and "
+             f"{100 * resolution['link']:.3g} % of the link's stage-2 stress crest at the lock")
+    if deflection > COUPLING_DEFLECTION:
+        modes = (f'modes the physics step {h:g} s does not resolve carry {crest}, and'
+                 if max(resolution['leaf'], resolution['link']) > 0.0 else
+                 f'the physics step {h:g} s resolves every mode carrying stage-2 stress, but')
+        return (f'coarse step: {modes} at a tip deflection of {100 * deflection:.3g} % of the '
+                f'leaf (past {100 * COUPLING_DEFLECTION:g} %) the frame couples its modes: the '
+                'stage-2 '
+                'peak stresses may be several % off and the tip series several mm (3-5 % and '
+                '2-4 mm at one element per segment in the step study); '
+                f'{fix}')
     return (f'coarse step: modes the physics step {h:g} s does not resolve carry {crest} '
             f'(limit {100 * STRESS_SHARE_LIMIT:g} %): the stage-2 peak stresses are not those '
             f'of the model; {fix}')
