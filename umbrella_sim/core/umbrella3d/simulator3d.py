@@ -30,10 +30,13 @@ energy lost), and the step is completed locked.  A stuck hinge (``stick_until`` 
 time has reached stick_until or its holding torque (the joint's multiplier) has reached
 stick_torque.  Every step's figures go to a ``Record3D`` (outputs3d.py).
 
-With the compiled step (``MidpointUmbrella.backend`` 'compiled': the library built),
-``advance`` and ``run`` take the grid steps in runs of up to ADVANCE_BLOCK steps a call
-(_kernel3d.c: the same steps and release; a run stops before the step that reaches the stop,
-which ``step`` then takes here, with the lock); ``step`` alone takes one step a call.
+The model is the parameters' (corotational3d.umbrella_model): the linear 3D beams, or with
+``model: flexible-nonlinear`` the co-rotational ribs, which step on the numpy path and take
+no stage-2 mode fit.  With the compiled step (``MidpointUmbrella.backend`` 'compiled': the
+library built), ``advance`` and ``run`` take the grid steps in runs of up to ADVANCE_BLOCK
+steps a call (_kernel3d.c: the same steps and release; a run stops before the step that
+reaches the stop, which ``step`` then takes here, with the lock); ``step`` alone takes one
+step a call.
 """
 from __future__ import annotations
 
