@@ -35,6 +35,8 @@ asymmetric umbrella (a kicked rib, a rubbing hinge, a tip mass) through the plas
 with the joints held; a free bus's momentum; small motion equals the linear umbrella, the
 difference shrinking with the amplitude.
 """
+import math
+
 import numpy as np
 import pytest
 
@@ -146,19 +148,27 @@ def test_gradient_tangent_and_discrete_gradient(model):
     assert np.abs(balance).max() < 1e-13 * law.energy_per_rib(q1).max()
 
 
-def test_rigid_turns_of_an_element_strain_nothing(model):
-    """An element turned rigidly in the rib plane stores no energy (large angles too)."""
+def test_rigid_motions_of_an_element_strain_nothing(model):
+    """
+    An element moved rigidly stores no energy: a large turn in its rib's plane, a tilt, a roll.
+
+    The turn beta, then the tilt eps about the turned element's in-plane normal, then the roll
+    phi about its axis: chord l (cos eps cos beta, cos eps sin beta, sin eps), slopes v' =
+    cos eps sin beta, w' = sin eps, twists phi (an element inside the leaf: every coordinate
+    free).
+    """
     law = model.strain
-    lin = law.lin[0]                                    # the leaf's first element
-    for angle in (0.3, 1.2, -1.4):              # (a section turns less than 90 deg)
-        # u_b - u_a, v_b - v_a of the turned chord; both slopes sin(angle)
-        z = np.array([law.length[0, 0] * (np.cos(angle) - 1.0),
-                      law.length[0, 0] * np.sin(angle), 0.0, np.sin(angle), np.sin(angle),
-                      0.0, 0.0, 0.0, 0.0])
+    lin, length = law.lin[1], law.length[0, 1]
+    for beta, eps, roll in ((0.3, 0.0, 0.0), (1.2, 0.0, 0.0), (-1.4, 0.0, 0.0),
+                            (0.0, 0.1, 0.0), (1.2, 0.1, 0.05), (-0.8, -0.3, 0.2)):
+        slope, out = math.cos(eps) * math.sin(beta), math.sin(eps)
+        z = np.array([length * (math.cos(eps) * math.cos(beta) - 1.0),
+                      length * math.cos(eps) * math.sin(beta), length * out,
+                      slope, slope, out, out, roll, roll])
         q = np.linalg.lstsq(lin, z, rcond=None)[0]
         assert np.abs(lin @ q - z).max() < 1e-14
-        s = law.strains(np.tile(q, (model.n_ribs, 1)))[0, 0]
-        assert np.abs(s).max() < 1e-13
+        s = law.strains(np.tile(q, (model.n_ribs, 1)))[0, 1]
+        assert np.abs(s).max() < 1e-13, (beta, eps, roll)
 
 
 def test_turned_hinge_rows_and_their_derivatives(model):

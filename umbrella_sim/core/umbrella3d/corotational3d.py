@@ -27,7 +27,11 @@ theta_i = v'_i and w'_i and the twists phi_i (the body's coordinates, beam3d.DOF
 
     lambda = |d| / l_e                 (the 3D chord: an out-of-plane tilt stretches it)
     beta = atan2(d_y, d_x)             (the co-rotated frame's turn in the rib plane)
-    tb_i = asin(theta_i) - beta        (the planar element's local in-plane rotations)
+    psi_i = asin(theta_i / sqrt(1 - w'_i^2))
+                                       (the section's turn in the rib plane: the planar
+                                        element's asin(theta), the unit tangent's
+                                        out-of-plane part taken out of its in-plane length)
+    tb_i = psi_i - beta                (the planar element's local in-plane rotations)
     c_i = w'_i - d_z / |d|             (local out-of-plane rotations: the section's
                                         out-of-plane slope less the chord's, both sines)
     tau = phi_b - phi_a                (the twist: phi is the section's rotation about its
@@ -40,29 +44,32 @@ With the out-of-plane state zero (d_z = w' = phi = 0) this is the planar element
 last bit but the chord length's rounding (sqrt against hypot), and its out-of-plane
 gradient vanishes: a rib that stays in its plane is the planar flexible-nonlinear rib.  Its
 Hessian at q = 0 is the linear 3D element's K (beam3d.py), so small motion is the linear
-umbrella.  Invariant under any rigid turn of an element in its rib's plane (w, w', phi and
-|d| do not change), and under a rigid out-of-plane tilt to third order in its angle (c_i =
-sin - sin of the turned chord, as the planar element's sections; the 3D chord keeps the
-tilt from straining the element, and gives a compressed link its out-of-plane P-delta
-stiffness, as the in-plane chord does in the plane).
+umbrella.  Any rigid motion of an element strains nothing: a turn beta in the rib's plane
+(however large), a tilt eps out of it and a roll (v' = cos eps sin beta, w' = sin eps,
+equal twists give tb = c = tau = 0 and lambda = 1 exactly; tests/test_umbrella3d_nonlinear.py).
+The 3D chord keeps a tilt from straining the element and gives a compressed link its
+out-of-plane P-delta stiffness, as the in-plane chord does in the plane.
 
-What the choice leaves out, and so its limit: out-of-plane rotations and twist are small
-rotations (a rotation vector of out-of-plane slope and twist), measured about the turned
-section's own axes; the terms of second order in them and the products of them with the
-element's local in-plane rotations tb_i (small by the co-rotational split) are dropped, as
-Crisfield's local element drops them in the plane; the kinetic field is the body's (the
+What the choice leaves out, and so its limit: the deformation out of the plane is measured
+as small rotations (c_i, tau: sine differences and a twist difference, about the turned
+section's own axes), so the couplings of bending in two planes with torsion that finite
+rotations bring (the products of c, tb and tau: second order in the local rotations,
+small by the co-rotational split) are dropped, as Crisfield's local element drops them in
+the plane; the kinetic field is the body's (the
 twist's rotary inertia about the body's x axis, the tip mass's offset by the linear small
 rotation, beam3d.BeamBody3D.attached_point).  Past OUT_OF_PLANE_LIMIT (0.1 rad) of any node's
 |w'| or |phi| the run's summary warns (out_of_plane_warnings, with the planar model's
 geometric validity warnings of summary.py).  The joints follow the
 material twist: the O'' hinge keeps the two sections' hinge axes parallel, each section's
-small rotation turned by its body's angle plus the section's own angle psi = asin(theta)
-(the linear model's rows with alpha + psi for alpha; the same rows when psi = 0).
+small rotation turned by its body's angle plus the section's own angle asin(theta) (the
+linear model's rows with alpha + psi for alpha; the same rows when theta = 0; w'^2 left out
+of psi there, third order in a row of small rotations).
 
 Energy balance: the midpoint step's elastic force is the element's discrete gradient G_e =
 B~^T D (s0 + s1) / 2 with B~ (q1 - q0) = s1 - s0 exactly (the planar element's: lambda by
-(d0 + d1) / ((|d0| + |d1|) l_e), beta by Gonzalez's gradient in (d_x, d_y), asin(theta) by
-its secant; here also d_z / |d| by Gonzalez's gradient in d, Q at the mean rotations), so
+(d0 + d1) / ((|d0| + |d1|) l_e), beta by Gonzalez's gradient in (d_x, d_y), psi by its
+secant in theta, here Gonzalez's gradient in (theta, w'), the same when w' does not move;
+d_z / |d| by Gonzalez's gradient in d, Q at the mean rotations), so
 dq . G = U(q1) - U(q0) to round-off; the Newton matrix takes h^2/2 of 1/2 [B^T D B + sum_k
 (D s)_k d^2 s_k / dq^2] at the midpoint.  Stress recovery at both ends of every element, in
 its co-rotated frame: axial E eps, bending E c kappa (kappa = (-4 t_a - 2 t_b) / l_e and
@@ -176,7 +183,7 @@ class RibCorotationalStrain:
         """Return s = (eps, tb_a, tb_b, c_a, c_b, tau) of every element (R, E, 6)."""
         z = self.chords(qr)
         beta = np.arctan2(z[..., 1], z[..., 0])
-        psi = np.arcsin(z[..., 3:5])
+        psi = np.arcsin(_section_sine(z))
         return self._strains_from(z, wrap_angle(psi - beta[..., None]))
 
     def _strains_from(self, z, tb):
@@ -192,9 +199,11 @@ class RibCorotationalStrain:
         jac = np.zeros(z.shape[:-1] + (6, 9))
         g_beta = angle_gradient(d[..., 0:2])
         g_sine = _grad_sine(d, length)
+        sec = _section_derivatives(z)
         for k in range(2):
             jac[..., 1 + k, 0:2] = -g_beta
-            jac[..., 1 + k, 3 + k] = 1.0 / np.sqrt(1.0 - z[..., 3 + k] ** 2)
+            jac[..., 1 + k, 3 + k] = sec[0][..., k]
+            jac[..., 1 + k, 5 + k] = sec[1][..., k]
             jac[..., 3 + k, 0:3] = -g_sine
             jac[..., 3 + k, 5 + k] = 1.0
         jac[..., 5, 7], jac[..., 5, 8] = -1.0, 1.0
@@ -209,9 +218,10 @@ class RibCorotationalStrain:
         h_beta = angle_hessian(d[..., 0:2])
         h_sine = _hess_sine(d, length)
         for k in range(2):
-            th = z[..., 3 + k]
             hes[..., 1 + k, 0:2, 0:2] = -h_beta
-            hes[..., 1 + k, 3 + k, 3 + k] = th / (1.0 - th * th) ** 1.5
+            hes[..., 1 + k, 3 + k, 3 + k] = sec[2][..., k]
+            hes[..., 1 + k, 3 + k, 5 + k] = hes[..., 1 + k, 5 + k, 3 + k] = sec[3][..., k]
+            hes[..., 1 + k, 5 + k, 5 + k] = sec[4][..., k]
             hes[..., 3 + k, 0:3, 0:3] = -h_sine
         unit = d / length[..., None]
         j_tb, j_c = jac[..., 1:3, :], jac[..., 3:5, :]
@@ -227,9 +237,10 @@ class RibCorotationalStrain:
     def _step_strains(self, z0, z1):
         """Return s0, s1 (s1 from s0 and the accurate angle increments) and d beta."""
         beta0 = np.arctan2(z0[..., 1], z0[..., 0])
-        tb0 = wrap_angle(np.arcsin(z0[..., 3:5]) - beta0[..., None])
+        g0 = _section_sine(z0)
+        tb0 = wrap_angle(np.arcsin(g0) - beta0[..., None])
         s0 = self._strains_from(z0, tb0)
-        dpsi = section_angle_increment(z0[..., 3:5], z1[..., 3:5])
+        dpsi = section_angle_increment(g0, _section_sine(z1))
         dbeta = angle_increment(z0[..., 0:2], z1[..., 0:2])
         s1 = self._strains_from(z1, tb0 + dpsi - dbeta[..., None])
         return s0, s1, dbeta, dpsi
@@ -244,13 +255,15 @@ class RibCorotationalStrain:
         dm = 0.5 * (d0 + d1)
         g_sine = _gonzalez3(_grad_sine(dm, np.sqrt(np.sum(dm * dm, -1))), d1 - d0,
                             d1[..., 2] / l1 - d0[..., 2] / l0)
+        sec = _section_derivatives(0.5 * (z0 + z1), hessians=False)
         for k in range(2):
-            th0, th1 = z0[..., 3 + k], z1[..., 3 + k]
-            dth = th1 - th0
-            moved = dth != 0.0
+            # psi of (theta, w'): Gonzalez's gradient in the pair (the planar element's secant
+            # in theta when w' does not move)
+            pair = [3 + k, 5 + k]
+            g_psi = gonzalez(np.stack([sec[0][..., k], sec[1][..., k]], -1),
+                             z1[..., pair] - z0[..., pair], dpsi[..., k])
             jac[..., 1 + k, 0:2] = -g_beta
-            jac[..., 1 + k, 3 + k] = np.where(moved, dpsi[..., k] / np.where(moved, dth, 1.0),
-                                              1.0 / np.sqrt(1.0 - th0 * th0))
+            jac[..., 1 + k, 3 + k], jac[..., 1 + k, 5 + k] = g_psi[..., 0], g_psi[..., 1]
             jac[..., 3 + k, 0:3] = -g_sine
             jac[..., 3 + k, 5 + k] = 1.0
         jac[..., 5, 7], jac[..., 5, 8] = -1.0, 1.0
@@ -365,8 +378,38 @@ class RibCorotationalStrain:
         return float(np.max(np.abs(z[..., 5:9]), initial=0.0))
 
     def section_slope(self, qr) -> float:
-        """Return the largest |theta| = |sin psi| of any node (the planar model's measure)."""
-        return float(np.max(np.abs(self.chords(qr)[..., 3:5]), initial=0.0))
+        """Return the largest |sin psi| of any section's turn in its rib's plane (planar's)."""
+        return float(np.max(np.abs(_section_sine(self.chords(qr))), initial=0.0))
+
+
+def _section_sine(z):
+    """
+    Return sin psi = theta / sqrt(1 - w'^2) at both ends (..., 2): psi the section's turn.
+
+    The planar element's sin psi = v' with the unit tangent's out-of-plane part w' taken out
+    of its in-plane length (|r'| = 1): so a rigid tilt of a turned element turns none of its
+    sections; theta itself where w' = 0.
+    """
+    return z[..., 3:5] / np.sqrt(1.0 - z[..., 5:7] ** 2)
+
+
+def _section_derivatives(z, hessians: bool = True):
+    """
+    Return d psi / d theta, d psi / d w' and (hessians) the second derivatives of psi.
+
+    psi = asin(g), g = theta s, s = (1 - w'^2)^(-1/2), at both ends (..., 2) each: psi_t,
+    psi_w, psi_tt, psi_tw, psi_ww.
+    """
+    th, w = z[..., 3:5], z[..., 5:7]
+    s = 1.0 / np.sqrt(1.0 - w * w)
+    g = th * s
+    pg = 1.0 / np.sqrt(1.0 - g * g)
+    g_w = th * w * s ** 3
+    if not hessians:
+        return pg * s, pg * g_w
+    pgg = g * pg ** 3
+    return (pg * s, pg * g_w, pgg * s * s, pgg * s * g_w + pg * w * s ** 3,
+            pgg * g_w * g_w + pg * th * (s ** 3 + 3.0 * w * w * s ** 5))
 
 
 def _quad(x):
