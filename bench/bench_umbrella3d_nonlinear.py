@@ -25,7 +25,7 @@ the same runs of the linear model (flexible, numpy path, no mode fit) beside it.
 compiled step takes the linear beams only, so this numpy step is the model's product path.
 Prints the figures and the machine's load; no figure is asserted.
 
-    PYTHONPATH=. python bench/bench_umbrella3d_nonlinear.py [--steps 100] [--carry 8]
+    PYTHONPATH=. python bench/bench_umbrella3d_nonlinear.py [--steps 100] [--carry K]
 """
 import argparse
 import os
@@ -60,12 +60,13 @@ def measure(model: str, ribs: int, elements: int, steps: int, carry: int):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     ap.add_argument('--steps', type=int, default=100)
-    ap.add_argument('--carry', type=int, default=8, help='carry_steps of the iteration matrix')
+    ap.add_argument('--carry', type=int, default=None,
+                    help="carry_steps of the iteration matrix (default: each model's)")
     ap.add_argument('--ribs', type=int, nargs='+', default=[3, 6])
     ap.add_argument('--elements', type=int, nargs='+', default=[1, 2])
     args = ap.parse_args()
     print(f'load {os.getloadavg()[0]:.2f} (2 cores); h = 0.1 ms, V0 = -1, plastic lock; '
-          f'numpy path, carry_steps {args.carry}')
+          f"numpy path, carry_steps {args.carry or 'the model default'}")
     print('| model | ribs x elements | stage 1 us/step (its, fact) '
           '| stage 2 us/step (its, fact) |')
     print('|---|---|---|---|')

@@ -439,6 +439,12 @@ class CorotationalUmbrellaModel3D(UmbrellaModel3D):
     #: the compiled step (_kernel3d.c) has the linear beams only
     compiled_step_refusal = ('model flexible-nonlinear: the compiled umbrella step has the '
                              'linear beams only')
+    #: a fresh iteration matrix every step: the buckled links' tangent changes faster than a
+    #: kept one serves (bench/bench_umbrella3d_nonlinear.py, CPU us a step at 1 / 2 / 4 / 8,
+    #: load ~4.7, noisy by ~10 %: 3 x 1 stage 1 4303 / 4125 / 4248 / 4779, stage 2 5411 /
+    #: 5730 / 6305 / 6309; 6 x 2 stage 1 6702 / 5565 / 6393 / 6924, stage 2 8515 / 9921 /
+    #: 10710 / 9788; 2.0-2.1 Newton iterations a step in stage 1, 3.4-4.1 in stage 2)
+    carry_steps = 1
 
     def __init__(self, params):
         super().__init__(params)

@@ -78,7 +78,8 @@ class UmbrellaSimulator3D:
         self.h = self.grid_step(self.params) if step is None else step
         self.integrator = MidpointUmbrella(
             m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel,
-            **({} if carry_steps is None else {'carry_steps': carry_steps}))
+            **({} if carry_steps is None and m.carry_steps is None
+               else {'carry_steps': m.carry_steps if carry_steps is None else carry_steps}))
         if self.mode_fit:
             self.integrator.fit_stage2_modes(self.h)
         self.force = self.params.planar.sleeve_force * m.n_ribs
