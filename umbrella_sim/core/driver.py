@@ -49,6 +49,7 @@ from .forcing import command_force, ForceSchedule
 from .outputs import LockEvent, Sample, StepBlock
 from .params import physics_step, UmbrellaParams
 from .solver import UmbrellaSimulator
+from .step_rule import follows_lock
 from .summary import RunResult, SummaryAccumulator
 from .umbrella3d.driven3d import DrivenSimulator3D
 from .umbrella3d.params3d import UmbrellaRibsParams
@@ -117,7 +118,7 @@ class RunDriver:
         if publish_rate is not None:
             step = physics_step(simulator.grid_step(params), publish_rate)
             period_steps = round((1.0 / publish_rate) / step)
-            params = params.with_physics_step(step)
+            params = params.with_physics_step(step, follows_lock(params))
         elif period_steps is not None and not (isinstance(period_steps, int)
                                                and period_steps >= 1):
             raise ValueError(f'period_steps={period_steps!r}: must be a whole number >= 1')

@@ -122,9 +122,16 @@ class _DerivedQuantities:
             return 'plastic'
         return 'energy' if self.lock == 'auto' else self.lock
 
-    def with_physics_step(self, step: float) -> 'UmbrellaParams':
-        """Return these parameters with the integrator's step set to step exactly."""
-        return self.replace(time_step=step, step_follows_mesh=False)
+    def with_physics_step(self, step: float, follows_lock: bool = False) -> 'UmbrellaParams':
+        """
+        Return these parameters with the integrator's step set to step exactly.
+
+        follows_lock: the step was chosen for the run (step_rule.follows_lock of the
+        parameters it came from), so stage 2 still takes the step its lock needs: kept as
+        step_follows_mesh, whose rule leaves a step the mesh's stresses already resolve as
+        it is.
+        """
+        return self.replace(time_step=step, step_follows_mesh=follows_lock)
 
     # ---------------------------------------------------------------- building
     def replace(self, **changes: Any) -> 'UmbrellaParams':

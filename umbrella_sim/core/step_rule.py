@@ -291,7 +291,8 @@ def follows_lock(params: UmbrellaParams) -> bool:
     model is the linear one whose stage 2 the rule was measured on (flexible): its stage 2
     steps every grid step in k equal substeps, ``stage2_step_needed`` of the lock state.
     """
-    return params.model == 'flexible' and not _ceiling(params)[1]
+    return (isinstance(params, UmbrellaParams) and params.model == 'flexible'
+            and not _ceiling(params)[1])
 
 
 def resolution_of(model: UmbrellaModel, amplitudes: np.ndarray, h: float) -> dict:

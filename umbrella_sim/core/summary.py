@@ -257,17 +257,13 @@ def coarse_step_warning(resolution: dict | None, hint: str = '',
     """
     Return a warning when the step leaves the modes carrying the stage-2 stresses unresolved.
 
-    resolution: the lock's (LockEvent.stage2_resolution, step_rule.stage2_resolution), None
-    before the lock or for a rigid model.  The step stage 2 needs is
-    step_rule.stage2_step_needed at the stage-2 tip deflection (over the leaf length): the
-    lock state's own ("deflection" in the lock's resolution), else the run's largest,
-    deflection.  Up to step_rule.COUPLING_DEFLECTION, past STRESS_SHARE_LIMIT the stage-2
-    peak stresses, and the period if the first mode is among those modes, are not those of
-    the model (docs/validation.md); past it the modes couple, and any mode carrying stress
-    unresolved, or a step coarser than the coupling's, takes the stage-2 peaks and the tip
-    series several % off.  The text names the shares and the step that resolves them.
-    hint: how the run's parameters get that step (step_rule.resolving_step_hint), '' if
-    they already do.
+    resolution: the lock's (LockEvent.stage2_resolution), None before the lock or for a
+    rigid model.  The step stage 2 needs: step_rule.stage2_step_needed at the lock's stage-2
+    tip deflection over the leaf (its "deflection"; else the run's largest, deflection).
+    Coarser, the stage-2 peaks (and the tip series past step_rule.COUPLING_DEFLECTION,
+    where the modes couple) are not those of the model (docs/validation.md).  The text names
+    the shares and that step; hint: how the run's parameters get it
+    (step_rule.resolving_step_hint), '' if they already do.
     """
     if not resolution:
         return None

@@ -42,6 +42,7 @@ from ..core.driver import RunDriver
 from ..core.forcing import command_force, ForceSchedule
 from ..core.integrators import INTEGRATOR_REVISION
 from ..core.params import physics_step, recorded_params
+from ..core.step_rule import follows_lock
 from ..core.umbrella3d.params3d import (umbrella_model, umbrella_parameter_names,
                                         umbrella_values, UmbrellaRibsParams)
 from ..ros.messages import (ABSOLUTE_TOPIC_NAMES, COMMAND, joint_state_figures,
@@ -180,7 +181,8 @@ def _segment_inputs(log: LogData, seg):
         raise LogError(f'{log.path}: physics step {step} cannot be reproduced: it does not '
                        f'divide the publication period 1/{rate:g} s (a run would take '
                        f"{physics_step(step, rate) if step > 0.0 else 'none'})")
-    params = umbrella_model(params, recorded_umbrella(p_all)).with_physics_step(step)
+    params = umbrella_model(params, recorded_umbrella(p_all))
+    params = params.with_physics_step(step, follows_lock(params))
     # the force history, the recorded fault and the last publication (only the few command
     # and phase records are decoded)
     applied, t_last, t_fault = [], 0.0, None

@@ -357,9 +357,10 @@ class UmbrellaRibsParams:
         """Return the smallest F per rib (the planar record's)."""
         return self.planar.sleeve_force_min
 
-    def with_physics_step(self, step: float) -> 'UmbrellaRibsParams':
+    def with_physics_step(self, step: float, follows_lock: bool = False
+                          ) -> 'UmbrellaRibsParams':
         """Return these parameters with the integrator's step set to step exactly."""
-        return dataclasses.replace(self, planar=self.planar.with_physics_step(step))
+        return dataclasses.replace(self, planar=self.planar.with_physics_step(step, follows_lock))
 
     def ribs_list(self) -> list[RibProperties]:
         return [self.rib(k) for k in range(self.ribs)]
