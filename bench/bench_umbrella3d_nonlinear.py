@@ -15,15 +15,16 @@
 # limitations under the License.
 
 """
-Cost of the umbrella's co-rotational ribs (model flexible-nonlinear, numpy path) per step.
+Cost of the umbrella's co-rotational ribs (model flexible-nonlinear) per step, both paths.
 
-For ribs x elements, CPU time of this thread per grid step (UmbrellaSimulator3D.step: the
-midpoint step, its Newton iterations, the projection, Record3D's figures) at h = 0.1 ms, V0
-= -1 m/s (the links buckle), plastic lock: stage 1 over --steps steps from t = 0, stage 2
-over --steps steps from the lock on; the Newton iterations and factorisations a step; and
-the same runs of the linear model (flexible, numpy path, no mode fit) beside it.  The
-compiled step takes the linear beams only, so this numpy step is the model's product path.
-Prints the figures and the machine's load; no figure is asserted.
+For ribs x elements, CPU time of this thread per grid step (the midpoint step, its Newton
+iterations, the projection, Record3D's figures) at h = 0.1 ms, V0 = -1 m/s (the links
+buckle), plastic lock: stage 1 over --steps steps from t = 0, stage 2 over --steps steps
+from the lock on; the Newton iterations and factorisations a step; on the compiled step
+(_kernel3d.c with _kernel3d_nonlinear.h, UmbrellaSimulator3D.advance: the steps in one
+call) and the numpy reference (UmbrellaSimulator3D.step); and the same runs of the linear
+model (flexible, no mode fit) beside them.  Prints the figures and the machine's load; no
+figure is asserted.
 
     PYTHONPATH=. python bench/bench_umbrella3d_nonlinear.py [--steps 100] [--carry K]
 """
@@ -40,20 +41,23 @@ def per_step(sim, steps: int):
     integ = sim.integrator
     it0, f0 = integ.iterations, integ.factorisations
     t0 = time.thread_time()
-    for _ in range(steps):
-        sim.step()
+    if integ.compiled is not None:
+        sim.advance(steps)
+    else:
+        for _ in range(steps):
+            sim.step()
     cpu = time.thread_time() - t0
     return 1e6 * cpu / steps, (integ.iterations - it0) / steps, (integ.factorisations - f0) / steps
 
 
-def measure(model: str, ribs: int, elements: int, steps: int, carry: int):
+def measure(model: str, ribs: int, elements: int, steps: int, carry: int, kernel: str):
     values = {'ribs': ribs, 'elements_per_segment': elements, 'model': model, 'v0': -1.0,
               'lock': 'plastic', 'time_step': 1e-4, 'phase_correction': False}
-    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), kernel='numpy',
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values), kernel=kernel,
                               carry_steps=carry)
     stage1 = per_step(sim, steps)
     while not sim.locked:
-        sim.step()
+        sim.advance(10 ** 6, stop_at_lock=True)
     return stage1, per_step(sim, steps)
 
 
@@ -66,16 +70,18 @@ def main():
     ap.add_argument('--elements', type=int, nargs='+', default=[1, 2])
     args = ap.parse_args()
     print(f'load {os.getloadavg()[0]:.2f} (2 cores); h = 0.1 ms, V0 = -1, plastic lock; '
-          f"numpy path, carry_steps {args.carry or 'the model default'}")
-    print('| model | ribs x elements | stage 1 us/step (its, fact) '
+          f"carry_steps {args.carry or 'the model default'}")
+    print('| model | path | ribs x elements | stage 1 us/step (its, fact) '
           '| stage 2 us/step (its, fact) |')
-    print('|---|---|---|---|')
+    print('|---|---|---|---|---|')
     for ribs in args.ribs:
         for elements in args.elements:
             for model in ('flexible', 'flexible-nonlinear'):
-                s1, s2 = measure(model, ribs, elements, args.steps, args.carry)
-                print(f'| {model} | {ribs} x {elements} | {s1[0]:.0f} ({s1[1]:.2f}, {s1[2]:.2f}) '
-                      f'| {s2[0]:.0f} ({s2[1]:.2f}, {s2[2]:.2f}) |', flush=True)
+                for kernel in ('compiled', 'numpy'):
+                    s1, s2 = measure(model, ribs, elements, args.steps, args.carry, kernel)
+                    print(f'| {model} | {kernel} | {ribs} x {elements} '
+                          f'| {s1[0]:.0f} ({s1[1]:.2f}, {s1[2]:.2f}) '
+                          f'| {s2[0]:.0f} ({s2[1]:.2f}, {s2[2]:.2f}) |', flush=True)
     print(f'load {os.getloadavg()[0]:.2f}')
 
 

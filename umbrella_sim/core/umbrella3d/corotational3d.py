@@ -174,8 +174,8 @@ class RibCorotationalStrain:
 
     # ------------------------------------------------------------ kinematics
     def chords(self, qr: np.ndarray) -> np.ndarray:
-        """Return z of every element (R, E, 9) (module docstring): linear in q."""
-        z = np.einsum('eiq,rq->rei', self.lin, qr)
+        """Return z of every element (..., R, E, 9) (module docstring): linear in q."""
+        z = np.einsum('eiq,...rq->...rei', self.lin, qr)
         z[..., 0] += self.length
         return z
 
@@ -436,9 +436,13 @@ class CorotationalUmbrellaModel3D(UmbrellaModel3D):
     The linear ``stiffness`` stays as the Hessian at q = 0 (the locked modes of modes3d).
     """
 
-    #: the compiled step (_kernel3d.c) has the linear beams only
-    compiled_step_refusal = ('model flexible-nonlinear: the compiled umbrella step has the '
-                             'linear beams only')
+    @property
+    def compiled_step_refusal(self):
+        """The compiled step takes the co-rotational ribs with the hub fixed only."""
+        if self.moving_base:
+            return ('model flexible-nonlinear with a moving base: the compiled umbrella step '
+                    'takes the co-rotational ribs with the hub fixed only')
+        return None
     #: a fresh iteration matrix every step: the buckled links' tangent changes faster than a
     #: kept one serves (bench/bench_umbrella3d_nonlinear.py, CPU us a step at 1 / 2 / 4 / 8,
     #: load ~4.7, noisy by ~10 %: 3 x 1 stage 1 4303 / 4125 / 4248 / 4779, stage 2 5411 /
@@ -472,6 +476,19 @@ class CorotationalUmbrellaModel3D(UmbrellaModel3D):
 
     def elastic_step_matrix(self, qr0, qr1, h: float) -> np.ndarray:
         return 0.5 * h * h * self.strain.discrete_gradient_jacobian(qr0, qr1)
+
+    def compiled_law(self) -> dict:
+        """Return Model3D's nl_* fields of this law (_kernel3d_nonlinear.h)."""
+        st, n = self.strain, self.n_rib
+        k = st.stiffness
+        d = np.stack([k[..., 0, 0], k[..., 1, 1] / 4.0, k[..., 3, 3] / 4.0, k[..., 5, 5]], -1)
+        pattern = (self.stiffness != 0.0).astype(float)
+        for at in st.places:
+            at = at[at < n]
+            pattern[:, at[:, None], at[None, :]] = 1.0
+        return {'nl_elements': len(st.places), 'nl_i_t1': self.i_t1, 'nl_i_t2': self.i_t2,
+                'nl_places': st.places, 'nl_length': st.length, 'nl_stiffness': d,
+                'nl_pattern': pattern}
 
     def note_state(self, qr) -> None:
         self.max_out_of_plane = max(self.max_out_of_plane,

@@ -430,6 +430,10 @@ class UmbrellaModel3D:
         """Return the Newton matrix's elastic block h^2/2 dG/dq1 (R, n, n): h^2/4 K."""
         return 0.25 * h * h * self.stiffness
 
+    def compiled_law(self):
+        """Return the compiled step's elastic law fields (Model3D.nl_*), None: the linear K."""
+        return None
+
     def note_state(self, qr) -> None:
         """Note a stepped state (a model's validity measures; the linear beams have none)."""
 

@@ -257,6 +257,7 @@ class UmbrellaSimulator3D:
                 self.integrator.iterations += int(rows['iterations'].sum())
                 self.integrator.factorisations += int(rows['factorisations'].sum())
                 self.record.add_steps(rows, self.locked, self.force, self.lock_loss)
+                self.model.note_state(rows['qr'])
             if status == STATUS['crossing']:
                 self.step()                     # the lock, here
                 if stop_at_lock:
