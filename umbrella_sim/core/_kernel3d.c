@@ -35,6 +35,8 @@
  * the joint Jacobian's products run over its nonzeros (jrows).  Pivoting, summation order and
  * so round-off differ from the numpy reference's dense algebra.
  * The iteration matrix is kept across steps (kept_serves: the numpy reference's rule).
+ * Model flexible-nonlinear (the co-rotational ribs): _kernel3d_nonlinear.h, whose hooks
+ * here act under Model3D.nl_elements only.
  */
 #include <math.h>
 #include <stdlib.h>

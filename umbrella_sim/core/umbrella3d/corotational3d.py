@@ -75,9 +75,11 @@ dq . G = U(q1) - U(q0) to round-off; the Newton matrix takes h^2/2 of 1/2 [B^T D
 its co-rotated frame: axial E eps, bending E c kappa (kappa = (-4 t_a - 2 t_b) / l_e and
 (2 t_a + 4 t_b) / l_e of tb or c), torsion G c_t tau / l_e.
 
-Numpy only (the compiled step, _kernel3d.c, has the linear beams): the integrator takes
-this model on its numpy reference path.  No stage-2 mode fit, as the planar
-flexible-nonlinear model (step_rule.py).  Nothing here imports rclpy.
+Compiled: _kernel3d_nonlinear.h does the same arithmetic element by element in the
+compiled step (hub fixed; hooks in _kernel3d.c), which tests/test_umbrella3d_nonlinear.py
+holds equal to this numpy reference through the lock; a moving base steps on the numpy path.
+No stage-2 mode fit, as the planar flexible-nonlinear model (step_rule.py).  Nothing here
+imports rclpy.
 """
 from __future__ import annotations
 
@@ -443,12 +445,6 @@ class CorotationalUmbrellaModel3D(UmbrellaModel3D):
             return ('model flexible-nonlinear with a moving base: the compiled umbrella step '
                     'takes the co-rotational ribs with the hub fixed only')
         return None
-    #: a fresh iteration matrix every step: the buckled links' tangent changes faster than a
-    #: kept one serves (bench/bench_umbrella3d_nonlinear.py, CPU us a step at 1 / 2 / 4 / 8,
-    #: load ~4.7, noisy by ~10 %: 3 x 1 stage 1 4303 / 4125 / 4248 / 4779, stage 2 5411 /
-    #: 5730 / 6305 / 6309; 6 x 2 stage 1 6702 / 5565 / 6393 / 6924, stage 2 8515 / 9921 /
-    #: 10710 / 9788; 2.0-2.1 Newton iterations a step in stage 1, 3.4-4.1 in stage 2)
-    carry_steps = 1
 
     def __init__(self, params):
         super().__init__(params)

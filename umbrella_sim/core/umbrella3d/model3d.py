@@ -414,9 +414,6 @@ class UmbrellaModel3D:
     # the elastic law's pieces the step takes (corotational3d.py: the co-rotational beams')
     #: why the compiled step cannot take this model (None: it can)
     compiled_step_refusal = None
-    #: the steps a kept iteration matrix serves at most for this model (None: the
-    #: integrator's, integrator3d.CARRY_STEPS)
-    carry_steps = None
 
     def elastic_force(self, qr) -> np.ndarray:
         """Return dU/dq of every rib (R, n): K q."""

@@ -31,12 +31,12 @@ time has reached stick_until or its holding torque (the joint's multiplier) has 
 stick_torque.  Every step's figures go to a ``Record3D`` (outputs3d.py).
 
 The model is the parameters' (corotational3d.umbrella_model): the linear 3D beams, or with
-``model: flexible-nonlinear`` the co-rotational ribs, which step on the numpy path and take
-no stage-2 mode fit.  With the compiled step (``MidpointUmbrella.backend`` 'compiled': the
-library built), ``advance`` and ``run`` take the grid steps in runs of up to ADVANCE_BLOCK
-steps a call (_kernel3d.c: the same steps and release; a run stops before the step that
-reaches the stop, which ``step`` then takes here, with the lock); ``step`` alone takes one
-step a call.
+``model: flexible-nonlinear`` the co-rotational ribs (compiled with the hub fixed:
+_kernel3d_nonlinear.h), which take no stage-2 mode fit.  With the compiled step
+(``MidpointUmbrella.backend`` 'compiled': the library built), ``advance`` and ``run`` take
+the grid steps in runs of up to ADVANCE_BLOCK steps a call (_kernel3d.c: the same steps and
+release; a run stops before the step that reaches the stop, which ``step`` then takes here,
+with the lock); ``step`` alone takes one step a call.
 """
 from __future__ import annotations
 
@@ -78,8 +78,7 @@ class UmbrellaSimulator3D:
         self.h = self.grid_step(self.params) if step is None else step
         self.integrator = MidpointUmbrella(
             m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel,
-            **({} if carry_steps is None and m.carry_steps is None
-               else {'carry_steps': m.carry_steps if carry_steps is None else carry_steps}))
+            **({} if carry_steps is None else {'carry_steps': carry_steps}))
         if self.mode_fit:
             self.integrator.fit_stage2_modes(self.h)
         self.force = self.params.planar.sleeve_force * m.n_ribs
