@@ -152,8 +152,8 @@ def step_convergence_section() -> list[str]:
               '(0.12–0.16 m at the tip, 12–16 % of the leaf) is past the small-deflection limit '
               "the runs warn about ('large deflection'); there the fit, which makes each mode's "
               'linear part exact, not their coupling, leaves the stage-2 peaks 3–9 % and the '
-              'tip series up to 3.9 mm off at the grid step (the fixed steps below), and the '
-              "lock's step meets every target. Against the same reference, stage 2 started "
+              "tip series up to 3.9 mm off at the grid step (below: the amplitude study, the "
+              "mesh's step given), and the lock's step meets every target. Against the same reference, stage 2 started "
               "from the reference's own lock state at 0.1 ms (N = 1, V0 = −0.5, energy lock) "
               'tracks it to 2.5 % of the amplitude, and to 2.6·10⁻⁵ of it when that state is '
               'scaled by 10⁻³ (the linear range; tests/test_time_step.py).', '']

@@ -161,7 +161,8 @@ def _warnings(p: UmbrellaParams, key: str) -> list:
             if w.startswith(key)]
 
 
-@pytest.mark.parametrize('n_el, v0, lock', [(2, -0.5, 'plastic'), (4, -0.2, 'plastic')])
+@pytest.mark.parametrize('n_el, v0, lock', [(2, -0.5, 'plastic'), (4, -0.2, 'plastic'),
+                                            (4, -0.5, 'energy')])
 @pytest.mark.slow
 def test_the_mesh_step_meets_every_target_where_the_fixed_step_misses_one(n_el, v0, lock):
     """
@@ -169,8 +170,9 @@ def test_the_mesh_step_meets_every_target_where_the_fixed_step_misses_one(n_el, 
 
     0.5 s of stage 2 against a 1.25 us reference: at 0.1 ms the stage-2 peak stresses are
     more than 3 % off in these cases (docs/validation.md); the step chosen for the mesh
-    (time_step 0) meets the deploy time, the stage-2 period and amplitude, both stages'
-    peak stresses and the tip series.
+    (time_step 0; at N = 4, V0 = -0.5 with stage 2 in the step its lock needs, 10 us, where
+    the mesh's 20 us left the link's peak 9 % off) meets the deploy time, the stage-2 period
+    and amplitude, both stages' peak stresses and the tip series.
     """
     p = UmbrellaParams(v0=v0, elements_per_segment=n_el, lock=lock)
     window = 0.5

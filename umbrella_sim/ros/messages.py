@@ -86,9 +86,13 @@ TOPICS = {
 ABSOLUTE_TOPIC_NAMES = frozenset(t.name for t in TOPICS.values() if t.name.startswith('/'))
 #: keep all: with a reliable publisher, a burst of commands faster than the node takes them
 #: is held back by DDS flow control instead of being overwritten in the reader's history
-#: (keep-last 10 lost ~4 % of a 5 kHz stream); every received value is counted and recorded
+#: (keep-last 10 lost ~4 % of a 5 kHz stream); every received value is counted and recorded.
+#: depth 10 000: the reader's queue before flow control holds the publishers back (Fast DDS
+#: takes it from the depth); once full, a second publisher's command waited for its writer's
+#: next heartbeat, behind a whole flood of another's (a loaded node fell 400-1000 behind a
+#: flood: 3 of 7 runs of the flood test put one after it at depth 100, none of 18 at 10 000)
 COMMAND = Topic('sleeve_force', Float64, QoSProfile(
-    depth=100, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL,
+    depth=10000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL,
     durability=DurabilityPolicy.VOLATILE))
 
 
