@@ -440,7 +440,7 @@ class CorotationalUmbrellaModel3D(UmbrellaModel3D):
 
     @property
     def compiled_step_refusal(self):
-        """The compiled step takes the co-rotational ribs with the hub fixed only."""
+        """Say why the compiled step cannot take this model: it has the hub fixed only."""
         if self.moving_base:
             return ('model flexible-nonlinear with a moving base: the compiled umbrella step '
                     'takes the co-rotational ribs with the hub fixed only')
