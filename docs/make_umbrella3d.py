@@ -408,7 +408,7 @@ The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node,
 recording and tools for N ribs (the ROS side still runs the planar model). The geometrically
 exact option, `model: flexible-nonlinear` (each rib's beams co-rotational: the planar
 element in the rib's plane, out-of-plane bending and torsion small rotations in its
-co-rotated frame; compiled with the hub fixed, _kernel3d_nonlinear.h), is
+co-rotated frame; compiled, _kernel3d_nonlinear.h), is
 docs/umbrella3d_nonlinear.md.
 """
 

@@ -21,7 +21,8 @@
  * elastic force (nl_force, the discrete gradient for K q_m), its Newton block (nl_block for
  * h^2/4 K) and the elastic LU of the iteration matrix made at each factorisation
  * (nl_iteration_elastic), the strain energy (nl_energy), and the elastic LU's pattern
- * (Model3D.nl_pattern: the elements' full blocks).
+ * (Model3D.nl_pattern: the elements' full blocks); in _kernel3d_base.h's step (a moving
+ * base) the elastic force and the elastic LU.
  *
  * An element's z = (d_x, d_y, d_z, theta_a, theta_b, w'_a, w'_b, phi_a, phi_b) from its 12
  * coordinates (u, v, theta, w, slope, twist of node a, then b: NL_B, NL_A below), its strains

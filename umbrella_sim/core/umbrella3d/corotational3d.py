@@ -76,8 +76,8 @@ its co-rotated frame: axial E eps, bending E c kappa (kappa = (-4 t_a - 2 t_b) /
 (2 t_a + 4 t_b) / l_e of tb or c), torsion G c_t tau / l_e.
 
 Compiled: _kernel3d_nonlinear.h does the same arithmetic element by element in the
-compiled step (hub fixed; hooks in _kernel3d.c), which tests/test_umbrella3d_nonlinear.py
-holds equal to this numpy reference through the lock; a moving base steps on the numpy path.
+compiled step (hooks in _kernel3d.c and _kernel3d_base.h), which
+tests/test_umbrella3d_nonlinear.py holds equal to this numpy reference through the lock.
 No stage-2 mode fit, as the planar flexible-nonlinear model (step_rule.py).  Nothing here
 imports rclpy.
 """
@@ -437,14 +437,6 @@ class CorotationalUmbrellaModel3D(UmbrellaModel3D):
 
     The linear ``stiffness`` stays as the Hessian at q = 0 (the locked modes of modes3d).
     """
-
-    @property
-    def compiled_step_refusal(self):
-        """Say why the compiled step cannot take this model: it has the hub fixed only."""
-        if self.moving_base:
-            return ('model flexible-nonlinear with a moving base: the compiled umbrella step '
-                    'takes the co-rotational ribs with the hub fixed only')
-        return None
 
     def __init__(self, params):
         super().__init__(params)

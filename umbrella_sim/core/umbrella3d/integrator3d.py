@@ -169,9 +169,9 @@ class MidpointUmbrella:
             raise ValueError(f'{name}={kernel!r}: must be auto, compiled or numpy')
         if kernel == 'numpy':
             return None
-        why = self.model.compiled_step_refusal
-        lib = load_kernel() if why is None else None
-        if why is None and lib is None:
+        why = None
+        lib = load_kernel()
+        if lib is None:
             why = kernel_refusal() or (f'the compiled kernel {LIBRARY} is not built (python3 '
                                        'bootstrap.py setup; it needs a C compiler)')
         if why is None:

@@ -412,9 +412,6 @@ class UmbrellaModel3D:
         return 0.5 * np.einsum('ri,rij,rj->r', qr, self.stiffness, qr)
 
     # the elastic law's pieces the step takes (corotational3d.py: the co-rotational beams')
-    #: why the compiled step cannot take this model (None: it can)
-    compiled_step_refusal = None
-
     def elastic_force(self, qr) -> np.ndarray:
         """Return dU/dq of every rib (R, n): K q."""
         return np.einsum('rij,rj->ri', self.stiffness, qr)

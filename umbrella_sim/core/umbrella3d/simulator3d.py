@@ -31,8 +31,8 @@ time has reached stick_until or its holding torque (the joint's multiplier) has 
 stick_torque.  Every step's figures go to a ``Record3D`` (outputs3d.py).
 
 The model is the parameters' (corotational3d.umbrella_model): the linear 3D beams, or with
-``model: flexible-nonlinear`` the co-rotational ribs (compiled with the hub fixed:
-_kernel3d_nonlinear.h), which take no stage-2 mode fit.  With the compiled step
+``model: flexible-nonlinear`` the co-rotational ribs (compiled: _kernel3d_nonlinear.h),
+which take no stage-2 mode fit.  With the compiled step
 (``MidpointUmbrella.backend`` 'compiled': the library built), ``advance`` and ``run`` take
 the grid steps in runs of up to ADVANCE_BLOCK steps a call (_kernel3d.c: the same steps and
 release; a run stops before the step that reaches the stop, which ``step`` then takes here,
