@@ -28,6 +28,9 @@ the plastic lock (lock instants 3e-15 s apart), 5.8e-12 through the energy lock.
 tolerance asserted, 1e-10, is the linear identity's (tests/test_umbrella3d.py): any term
 that differed shows above it (a Newton tolerance of 1e-13 alone leaves 1.5e-9).
 
+The compiled step (_kernel3d_nonlinear.h) takes the numpy reference's steps to round-off,
+on the fixed hub and on a free bus, through the lock.
+
 (b) The law: its Hessian at q = 0 is the linear 3D beam's K, its discrete gradient gives
 the energy increment exactly, the O'' hinge's turned rows' Jacobian and bias are their
 derivatives.  (c) Energy balance to round-off with F = 0 and with hinge friction; an
