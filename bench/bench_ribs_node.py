@@ -18,7 +18,9 @@ What the umbrella of N ribs costs the node: the step through the run driver, and
   * offline, per --ribs: CPU time per physics step of UmbrellaSimulator3D's own loop and of
     the RunDriver's (its chunks, the per-rib peak-hold, the summary) with a publication
     every 1 ms encoded as the node does (ribs_messages.RibsPublicationEncoder), per step and
-    per step and rib; the encoder's cost per publication;
+    per step and rib; the encoder's cost per publication; and a 1 ms block's parts: the
+    compiled steps (with their stress figures), Record3D's rows, the summary, the
+    publication's sample, the encoding;
   * live (--live): umbrella_node with ribs --live-ribs at 1 kHz: the measured real-time
     factor its diagnostics report at real_time_factor 1 (with recording), whether it says
     it is behind, and the node process's CPU share (its CPU time, every thread, over the
@@ -65,6 +67,7 @@ def offline(ribs: int, duration: float) -> None:
         encoder.messages(sample)
         encoding[0] += time.thread_time() - t
 
+    parts = timed_parts(driver)
     t0 = time.thread_time()
     driver.run(duration, on_publication=published)
     driven = (time.thread_time() - t0) / driver.sim.steps
@@ -74,6 +77,38 @@ def offline(ribs: int, duration: float) -> None:
           f'({driven / ribs * 1e3:.3f} per rib); encoding {per_publication * 1e3:.3f} ms a '
           f'publication; real-time factor at {STEP * 1e6:.0f} us steps '
           f'{STEP / driven:.3f}')
+    blocks = driver.sim.steps * STEP / 1e-3
+    print('          a 1 ms block (10 steps) of the run driver: '
+          + ', '.join(f'{name} {cpu / blocks * 1e6:.0f} us' for name, cpu in parts.items())
+          + f', encoding {encoding[0] / blocks * 1e6:.0f} us (of '
+          f'{driven * 10 * 1e6:.0f} us; CPU of this thread)')
+
+
+def timed_parts(driver) -> dict:
+    """
+    Time what a run driver's chunk does, part by part (CPU of this thread, summed in place).
+
+    The compiled call (its steps and stress figures), Record3D's rows of them, the summary,
+    and the publication's sample (its peak-hold); returns {part: CPU s so far}.
+    """
+    sim = driver.sim
+    parts = {'compiled steps': 0.0, 'Record3D': 0.0, 'Summary3D': 0.0, 'publication': 0.0}
+    for name, owner, method in (('compiled steps', sim.integrator.compiled, 'advance'),
+                                ('Record3D', sim.record, 'add_steps'),
+                                ('Summary3D', driver.summary, 'add'),
+                                ('publication', driver, 'publication')):
+        if owner is None:
+            continue
+
+        def timed(*args, _f=getattr(owner, method), _name=name, **kwargs):
+            t = time.thread_time()
+            try:
+                return _f(*args, **kwargs)
+            finally:
+                parts[_name] += time.thread_time() - t
+
+        setattr(owner, method, timed)
+    return parts
 
 
 def cpu_seconds(stat: str) -> float:

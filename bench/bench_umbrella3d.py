@@ -25,21 +25,23 @@ Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x ele
     divided by the number of ribs: it must stay flat (block-arrow algebra: a step costs
     linearly in the ribs), and by the coordinates of a rib;
   * kernel us/step: the compiled step alone (CompiledStep3D.advance: --kernel-steps steps
-    in one call, no Record3D), best of --repeat, at the step chosen for the mesh (as the
-    real-time factors below), in stage 1 (from t = 0) and in stage 2 (from the lock on, the
-    mode fit acting), with the Newton iterations and factorisations a step;
+    in one call, with the rows' stress figures it computes, no Record3D), best of
+    --repeat, at the step chosen for the mesh (as the real-time factors below), in stage 1
+    (from t = 0) and in stage 2 (from the lock on, the mode fit acting), with the Newton
+    iterations and factorisations a step;
   * real-time factors: simulated seconds per wall second, and CPU seconds per simulated
     second, of the runs the node would make: ribs 6 x 1 element in blocks of 1 ms (a 1 kHz
     publication), ribs 12 x 2 elements in blocks of 10 ms (100 Hz), each at the step chosen
     for its mesh (UmbrellaSimulator3D's default: the planar rule with the stage-2 mode fit,
-    which the 3D model takes rib by rib with the hub fixed), over --duration simulated
+    which the 3D model takes on every base: stage2fit.py), over --duration simulated
     seconds from t = 0 (deployment; --after-lock: stage 2, from the lock on), on the
     compiled path (advance a block at a time, as a driver would); the figures of the last
     step of each block are read as a publication would.
   * --base: every figure with the hub fixed (default), driven (prescribed: a half-sine jolt
-    in X-Z and a spin-up about Y, BASE_VALUES) or on a free-floating bus (the default bus); a
-    moving base has no stage-2 mode fit, so its step for the mesh is the planar rule's
-    without it (33 us at 1 element, 9.1 us at 2).
+    in X-Z and a spin-up about Y, BASE_VALUES) or on a free-floating bus (the default bus);
+    a moving base takes its stage-2 mode fit (umbrella3d/stage2fit.py: the ribs' modes in the
+    driven hub's frame, the free system's modes of a free bus), so its step for the mesh is
+    the fixed hub's (0.1 ms at 1 element, 33 us at 2; without the fit 33 and 9.1 us).
 The machine is shared (2 cores): CPU time is what the step costs, wall RTF what a user saw.
 Targets (the issue): ribs 6 x 1 real time at 1 kHz within 0.5 core, ribs 12 x 2 real time
 at 100 Hz.
@@ -178,8 +180,8 @@ def main(argv=None):
                       f'a quadratic term would carry {100 * quad:+.0f} % at {max(args.ribs)} '
                       'ribs)')
     if args.kernel_ribs:
-        print('\nthe compiled step alone (no Record3D; step chosen for the mesh; CPU of this '
-              'thread)')
+        print('\nthe compiled step alone (its stress figures, no Record3D; step chosen for the '
+              'mesh; CPU of this thread)')
         print(f"{'ribs':>5} {'elements':>9} {'step (us)':>10} {'stage':>6} {'us/step':>9} "
               f"{'us/step/rib':>12} {'Newton it':>10} {'factorisations':>15} {'core':>6}")
     for elements in args.elements if args.kernel_ribs else ():
@@ -207,7 +209,7 @@ def main(argv=None):
                                           (12, 2, 1e-2, 'RTF >= 1')):
         h, rtf, cpu = real_time(ribs, elements, block, args.duration, args.after_lock)
         print(f'{ribs:5d} {elements:9d} {1e3 * block:6.0f}ms {1e6 * h:10.2f} {rtf:11.4f} '
-              f'{cpu:14.1f} {target:>30}', flush=True)
+              f'{cpu:14.2f} {target:>30}', flush=True)
 
 
 if __name__ == '__main__':

@@ -325,6 +325,13 @@ the ribs only through a few unknowns, so a step costs linearly in the number of 
 thesis's §5.2.2); on a free bus `lock: auto` is plastic (the energy lock would change the
 momentum).
 
+The umbrella's stage 2 stays on its grid step: the planar model's stage 2 takes a finer step
+where its lock's tip deflection passes 7 % of the leaf (the modes' coupling,
+docs/validation.md, amplitude), the umbrella's does not yet, so its stage-2 peaks and tip
+series at such amplitudes carry the planar model's errors at the grid step (at N = 1,
+V0 = -0.5: 3 % and 4 mm): its summary's 'coarse step' names the `time_step` that
+resolves them.
+
 The step is compiled (umbrella_sim/core/_kernel3d.c, in the planar kernel's
 library, its interface declared in _kernel.h and checked at load): the Newton iteration, each
 rib's block factored through its two bodies, the arrow's Schur complement, the projection and
@@ -387,6 +394,32 @@ CPU s, the step alone 3.6), the step alone 6.0 cores in stage 2. The issue's tar
 (6 x 1 within 0.5 core, 12 x 2 in real time) are not reached: they need about 8 us (6 x 1,
 the figures included) and 2.8 us (12 x 2) a rib and step at these steps.
 
+Record3D's per-step figures are computed in the compiled advance
+(umbrella_sim/core/_kernel3d_figures.h: at every stress point of every rib the four components
+and von Mises with their rates, over the recovery rows' nonzeros, the Hermite crest of each step,
+each rib's largest and where, as the rows' last 15 R doubles); Record3D's numpy rule stays the
+reference (tests/test_umbrella3d_kernel.py, test_compiled_stress_figures_equal_record3d_numpy:
+every base through the lock; the stress rows move by at most 1.5e-15 of their largest, every
+other figure is the same bit for bit), and Record3D keeps each chunk's peaks as its steps come
+(the summary and the publication no longer stack them). The same runs before and after in turn
+(bench/bench_umbrella3d.py, load 1.5-1.7): 6 x 1 in 1 ms blocks 0.66-0.67 -> 0.44-0.45 CPU s a
+simulated second deploying (1.49-1.51 -> 2.22-2.26 x real time) and 0.87-0.88 -> 0.65-0.67 in
+stage 2 (1.14-1.15 -> 1.49-1.54 x); 12 x 2 in 10 ms blocks 5.6 -> 4.0 CPU s deploying (0.18 ->
+0.25 x) and 8.2-8.3 -> 6.4 in stage 2 (0.12 -> 0.16 x). The node at 1 kHz with recording
+(bench/bench_ribs_node.py --live, load 1.7-3.2, mostly stage 2): 1.32-1.39 -> 0.95-1.06 CPU s a
+simulated second, 0.48-0.65 -> 0.71-1.00 x real time (real time over 8 s where the machine
+gave it 0.95 core). A 1 ms block of the run driver (6 x 1, 0.4 s from rest: the lock at 0.23
+s; bench_ribs_node's parts): the compiled steps and their figures 432-445 us, Record3D's rows
+77-85, the summary 44-47, the publication's sample 9, its encoding 51-55. The step alone
+(its figures included) 31.4-31.8 us in stage 1 and 50.3-51.0 in stage 2 at 6 x 1, 121-125 and
+204 at 12 x 2 (a rib's W lambda summed along W's rows, the bodies' elastic-first order mapped
+once: 32.6-33.1 -> 31.4 and 128 -> 121-122 us in stage 1, bit for bit the same). What
+remains is the step itself (stage 2: of which the 2.81 Newton
+iterations, the projection's factorisation and the mode fit's modal passes; a predictor from
+the previous step's increment or a second-order extrapolation took 2.77-2.95 iterations a
+step, no fewer: stage 2's iterations are set by the fitted modes at omega h near 1) and the
+node's Python per publication.
+
 A driven hub and a free-floating bus step compiled too (umbrella_sim/core/_kernel3d_base.h: the
 bus's border of M(q) (its elastic columns from invariants), its share of the kinetic energy's
 gradient, the arrow's full border of seven shared coordinates, the drive's rows, the free bus's
@@ -399,10 +432,35 @@ deployment, 1 element a segment, load ~0.8 on the 2 cores; 3 / 6 ribs): hub fixe
 driven (a jolt in X-Z, a spin-up about Y) 74 / 144 us (3.0 Newton iterations a step while the
 base accelerates or spins up, 2.0 when it does not), free bus 61 / 121 us (numpy: 1.9 / 2.2 ms,
 6.9 / 7.5 ms, 5.5 / 5.9 ms); the compiled step alone at a moving base's step 48 / 94 us
-(driven), 48 / 92 us (free), 15 us a rib (hub fixed, 0.1 ms: 5.1). A moving base has no stage-2
-mode fit (the locked ribs stay coupled through the bus), so its step is the planar rule's
-without it, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks take 3.6 (driven) and 3.5 (free) CPU
-s a simulated second, 0.28-0.29 x real time (hub fixed, 0.1 ms: 0.7 CPU s, 1.5 x).
+(driven), 48 / 92 us (free), 15 us a rib (hub fixed, 0.1 ms: 5.1). Those were at the planar
+rule's step without the stage-2 mode fit, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks took
+3.6 (driven) and 3.5 (free) CPU s a simulated second, 0.28-0.29 x real time.
+
+A moving base now takes the stage-2 mode fit too (umbrella_sim/core/umbrella3d/stage2fit.py,
+tests/test_umbrella3d_base_fit.py), hence the fixed hub's step (0.1 ms at 1 element, 33 us at
+2). A driven hub's ribs are fitted rib by rib in the hub's frame (their locked modes are the
+fixed hub's there; the drive is a base excitation the midpoint rule integrates; with the drive
+zero a run is the fixed hub's to the two steps' difference, 1.5e-8 m at the tips). A free bus
+couples the locked ribs, so its fit is of the whole free system's elastic modes (bus + locked
+ribs, modes3d.free_locked_modes: the six rigid-body modes left out, each elastic mode without
+linear or angular momentum, so the scheme's momentum of the bus's coordinates is the physical
+one), linearised at the bus's attitude at the lock: a free mode alone turns at the
+eigenproblem's frequency (Prony, 1e-7) with its amplitude (1e-6), T + V and the linear momentum
+kept to round-off, the angular momentum to the Newton tolerance; with a 5 kg bus the modes that
+move it are up to 25 % stiffer than a rib's on a fixed hub, which a rib-by-rib fit would leave
+off. Measured (bench/bench_umbrella3d.py --base, ribs 6 x 1, CPU time, load ~5 on the 2 cores;
+before / after): the compiled step alone, driven 94.7 / 106.5 us deploying and 96.9 / 128.1 us in
+stage 2, free 93.0 / 92.4 and 93.5 / 165.9 us (the whole fit's dense maps, 84 modes of 145
+coordinates, about 70 us of it); CPU s a simulated second in 1 ms blocks with Record3D's
+figures, driven 3.9 / 1.6 deploying and 4.0 / 1.8 in stage 2, free 3.6 / 1.7 and 3.7 / 2.6
+(hub fixed 0.7 and 0.9-1.2). The free system's fit is dense: its cost grows as the square of
+the ribs (12 x 2 at 33 us: 372 modes of 499 coordinates, 1.22 ms a stage-2 step against 0.42
+unfitted; the driven hub's 0.51). The fitted stage 2 at 0.1 ms against the same code
+converged (2.5 us, no fit), tips in and out of plane 0.1 s past a plastic lock at V0 = -0.5
+(3 ribs, a tip mass, a kicked rib; times from each run's lock): free bus (5 kg) 1.27 mm,
+driven 1.17 mm (hub fixed 0.96 mm) of 195 / 140 mm amplitude, where the unfitted 33 us step
+the moving bases took before gave 4.07 / 2.46 mm (2.38) and 0.1 ms unfitted 7.4 / 5.2 mm
+(5.22) (tests/test_umbrella3d_base_fit.py, slow).
 
 The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
 recording and tools for N ribs (the ROS side still runs the planar model). The geometrically

@@ -54,15 +54,16 @@ def test_a_sticking_hinge_holds_its_rib_then_the_umbrella_deploys(antenna_factor
     final = states[-1]['alpha1']
     assert all(abs(a - math.pi / 12) < 5e-3 for a in final)          # rad
     assert min(s['alpha1'][STUCK_RIB] for s in states) < start - 1.0  # it did swing down
-    # the spread between ribs: the lag of the latest rib's deployment after the earliest;
-    # ribs 0 and 2 are mirror images about rib 1's plane (azimuths 0, 120, 240 deg), so they
-    # deploy together, and rib 1 apart from them
+    # the spread between ribs: the lag of the latest rib's deployment after the earliest.
+    # One sleeve drives them all: held by rib 1 until its release, they reach their deployed
+    # angles together, in the step the sleeve reaches the stop, so each rib deploys at the
+    # lock's own instant (the node's log gives it to 1e-6 s) and the lag is 0
     assert figures['ribs'] == 3
     deployed = figures['rib_deploy_time_s']
-    assert figures['deployment_lag_s'] == max(deployed) - min(deployed) > 0.0
+    assert all(abs(t - antenna.lock_time()) < 1e-6 for t in deployed)
+    assert deployed[0] == deployed[STUCK_RIB] == deployed[2]
+    assert figures['deployment_lag_s'] == max(deployed) - min(deployed) == 0.0
     assert deployed[figures['latest_rib']] == max(deployed)
-    assert abs(deployed[0] - deployed[2]) < 1e-9
-    assert abs(deployed[STUCK_RIB] - deployed[0]) == figures['deployment_lag_s']
     # the energy balance with the hinge's friction work, at every publication:
     # T + V - (T + V)(0) = W_sleeve + W_friction - lock loss, to the step's round-off
     energy = antenna.energy_balance()

@@ -119,14 +119,16 @@ def test_the_summary_is_the_rows_figures(run):
     Summary3D took the same steps: its per-rib figures are the rows' (first_reach's rule).
 
     Its deployment instants are interpolated between the physics steps (the lock's own row
-    left out: the summary takes steps), within a step of the lock.
+    left out: the summary takes steps), the lock's own instant for a rib that reaches its
+    deployed angle in the lock's step.
     """
     (cols, _), figures = run
     steps = np.array(cols['time']) != figures['lock_time']
     t = cols['time'][steps]
     alpha_deployed = math.pi / 12
     for k in range(3):
-        deployed = first_reach(t, cols[f'rib{k}_alpha1'][steps] - alpha_deployed)
+        deployed = first_reach(t, cols[f'rib{k}_alpha1'][steps] - alpha_deployed,
+                               lock=figures['lock_time'])
         assert deployed == pytest.approx(figures['rib_deploy_time'][k], rel=1e-14)
         assert abs(deployed - figures['lock_time']) < 2e-4
         assert cols[f'rib{k}_stress_von_mises'].max() == \

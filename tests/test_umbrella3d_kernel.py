@@ -251,6 +251,39 @@ def test_runs_of_steps_equal_steps_one_at_a_time(base):
     assert runs.integrator.iterations == single.integrator.iterations
 
 
+@needs_kernel
+@pytest.mark.parametrize('base', BASES)
+def test_compiled_stress_figures_equal_record3d_numpy(base):
+    """
+    The compiled step's stress figures are Record3D's (numpy) of the same steps, to round-off.
+
+    Two compiled runs through the lock and 5 ms past it, one whose rows carry the figures
+    (_kernel3d_figures.h), one whose Record3D computes them from the rows' states: the
+    states are the same bit for bit; each rib's largest of every component and von Mises,
+    the Hermite crest of every step, agree to the round-off of the recovery's sums (1e-12 of
+    the component's largest), the places (body, x) and the peaks' places and instants equal.
+    """
+    values = dict(ASYMMETRIC, **BASES[base], **AT_SPEED)
+    p = UmbrellaRibsParams.from_mapping(values)
+    runs = UmbrellaSimulator3D(p, kernel='compiled'), UmbrellaSimulator3D(p, kernel='compiled')
+    runs[1].integrator.compiled.set_figures(False)
+    assert runs[0].integrator.compiled.figures and not runs[1].integrator.compiled.figures
+    a, b = (sim.run(1.0, after_lock=0.005).arrays() for sim in runs)
+    assert np.count_nonzero(b['locked']) > 40 and np.count_nonzero(~b['locked']) > 1000
+    assert a.keys() == b.keys()
+    for name in a:
+        if name.startswith('stress_') and not name.endswith('_at') or name == 'von_mises':
+            scale = np.max(np.abs(b[name]))
+            assert scale > 0.0, name
+            np.testing.assert_allclose(a[name], b[name], rtol=0, atol=1e-12 * scale,
+                                       err_msg=name)
+        else:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    for name, peak in runs[1].record.peak.items():
+        np.testing.assert_allclose(runs[0].record.peak[name], peak, rtol=1e-12, err_msg=name)
+        assert runs[0].record.peak_where[name] == runs[1].record.peak_where[name]
+
+
 def test_numpy_path_when_the_library_is_absent(monkeypatch, capfd):
     """No library: the numpy reference steps, and says so once; 'compiled' is an error."""
     monkeypatch.setattr(integrator3d, 'load_kernel', lambda: None)
@@ -271,13 +304,12 @@ def test_numpy_path_when_the_library_is_absent(monkeypatch, capfd):
 @needs_kernel
 @pytest.mark.parametrize('base', ['prescribed', 'free'])
 def test_a_moving_base_steps_compiled_without_a_word(base, capfd):
-    """A driven hub or a free bus take the compiled step (auto), the stage-2 fit stays off."""
+    """A driven hub or a free bus take the compiled step (auto), with the stage-2 fit."""
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
         {'ribs': 2, 'time_step': 1e-4, **BASES[base]}))
-    assert sim.integrator.backend == 'compiled' and not sim.mode_fit
+    assert sim.integrator.backend == 'compiled' and sim.mode_fit
+    assert sim.integrator.mode_fit.whole == (base == 'free')
     assert capfd.readouterr().err == ''
-    with pytest.raises(ValueError, match='the 3D stage-2 mode fit has the hub fixed'):
-        sim.integrator.fit_stage2_modes(sim.h)
     with pytest.raises(ValueError, match="kernel='fast': must be auto, compiled or numpy"):
         MidpointUmbrella(sim.model, kernel='fast')
 

@@ -268,9 +268,17 @@ typedef struct {
      * (R x fit_modes) */
     int fit_modes;
     const double *fit_u, *fit_phi, *fit_scale, *fit_shrink;
+    /* fit_whole 1: one fit of the whole system's modes (a free bus: stage2fit.WholeFit),
+     * fit_modes rows over every coordinate (ribs', then the shared: fit_modes x (n_ribs
+     * n_rib + n_shared) each), s and shrink (fit_modes) */
+    int fit_whole;
     /* a prescribed base: the bus's coordinates and rates the drive gives at each step's end
      * (n_steps x 6 each; single: 1 x 6) */
     const double *drive_q, *drive_v;
+    /* the stress figures (umbrella3d_set_stress), not single: 1 if the run's first step
+     * takes its crests from the state it starts at (the steps' record continues in the same
+     * stage), 0 if that state's own values stand (a record's first, or across the lock) */
+    int crest_from_state;
 } Advance3DCall;
 
 /* Held by Python only as pointers: the stepping contexts (every work buffer, allocated
@@ -359,5 +367,16 @@ UMBRELLA_API double elastic_max_slope(const ElasticLaw *law);
 UMBRELLA_API Ctx3D *umbrella3d_new(const Model3D *m);
 UMBRELLA_API void umbrella3d_free(Ctx3D *x);
 UMBRELLA_API int umbrella3d_advance(Ctx3D *x, Advance3DCall *a);
+
+/* Each committed step of an advance (not single) ends its row with every rib's stress
+ * figures (_kernel3d_figures.h; row_len counts them): the largest over its points of the
+ * four components and von Mises, the Hermite crest over the step (ribs x 5), and where
+ * (ribs x 5 x 2: body code 0 leaf / 1 link, x).  The recovery rows of each body, every
+ * rib's (ribs x 4 x points x elastic: model3d.stress_blocks' axial, bending z, bending y,
+ * shear), and each point's x (leaf points, then link points) are copied.  No points: no
+ * figures.  OK, or SINGULAR (out of memory: no figures). */
+UMBRELLA_API int umbrella3d_set_stress(Ctx3D *x, int leaf_points, int link_points,
+                                       const double *leaf_rows, const double *link_rows,
+                                       const double *point_x);
 
 #endif

@@ -105,6 +105,8 @@ typedef struct {
 
 /* a moving base's context (_kernel3d_base.h) */
 typedef struct Base3D Base3D;
+/* the steps' stress figures (_kernel3d_figures.h) */
+typedef struct Figures3D Figures3D;
 
 struct Ctx3D {
     const Model3D *m;
@@ -136,10 +138,13 @@ struct Ctx3D {
     int strain0_ok;
     int iterations, factorisations;
     Base3D *base;                      /* a moving base's (n_shared 7), else NULL */
+    Figures3D *fig;                    /* the rows' stress figures (umbrella3d_set_stress),
+                                        * else NULL */
 };
 
 static Base3D *base_new(Ctx3D *x);
 static void base_free(Base3D *B);
+static void figures_free(Figures3D *f);
 
 #include "_kernel3d_nonlinear.h"   /* the co-rotational ribs (hooks: nl_elements) */
 
@@ -230,6 +235,7 @@ static int fact_alloc(Fact *f, const Ctx3D *x) {
 void umbrella3d_free(Ctx3D *x) {
     if (!x) return;
     base_free(x->base);
+    figures_free(x->fig);
     for (int j = 0; j < 2; j++) {
         kin_free(&x->km[j]);
         free(x->b[j].inv);
@@ -888,10 +894,11 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_z
         const int *piv = f->apiv + r * n + b->off;
         if (f->elastic_first) {
             double y[b->nb];
-            int kind = f->elastic_first - 1;
-            for (int i = 0; i < b->nb; i++) y[i] = v[b->off + elastic_first(b, i)];
+            int kind = f->elastic_first - 1, map[b->nb];
+            for (int i = 0; i < b->nb; i++) map[i] = b->off + elastic_first(b, i);
+            for (int i = 0; i < b->nb; i++) y[i] = v[map[i]];
             ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, y, 1);
-            for (int i = 0; i < b->nb; i++) v[b->off + elastic_first(b, i)] = y[i];
+            for (int i = 0; i < b->nb; i++) v[map[i]] = y[i];
         } else {
             lu_solve(b->nb, A, piv, v + b->off);
         }
@@ -905,13 +912,13 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_z
         v[n + i] -= acc;
     }
     lu_solve_rows9(f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
-    double acc[n];                             /* W lambda: every row's sum at once, in i's order */
-    for (int a = 0; a < n; a++) acc[a] = 0.0;
-    for (int i = 0; i < ROWS; i++) {
-        double li = v[n + i];
-        for (int a = 0; a < n; a++) acc[a] += W[a * ROWS + i] * li;
+    const double *lam = v + n;
+    for (int a = 0; a < n; a++) {              /* W lambda: a row's sum, in i's order */
+        const double *Wa = W + a * ROWS;
+        double acc = 0.0;
+        for (int i = 0; i < ROWS; i++) acc += Wa[i] * lam[i];
+        v[a] -= acc;
     }
-    for (int a = 0; a < n; a++) v[a] -= acc[a];
 }
 
 /* Factor rib r's block [[M + extra, sign Jc^T], [Jr, Z]] through its bodies (rib_solve):
@@ -935,21 +942,24 @@ static int rib_factor(Ctx3D *x, Fact *f, int r, const double *extra, const doubl
             int *piv = f->apiv + r * n + o;
             if (f->elastic_first) {             /* (M + extra's elastic block: E's) */
                 double Y[nb * ROWS];
-                int kind = f->elastic_first - 1;
+                int kind = f->elastic_first - 1, map[nb];
+                for (int a = 0; a < nb; a++) map[a] = o + elastic_first(b, a);
                 for (int a = 0; a < nb; a++) {
-                    int ia = o + elastic_first(b, a);
-                    for (int c = 0; c < nb; c++) {
-                        int ic = o + elastic_first(b, c);
-                        A[a * nb + c] = M[ia * n + ic] + (Ex ? Ex[ia * n + ic] : 0.0);
+                    const double *Ma = M + (size_t)map[a] * n;
+                    double *Aa = A + a * nb;
+                    if (Ex) {
+                        const double *Ea = Ex + (size_t)map[a] * n;
+                        for (int c = 0; c < nb; c++) Aa[c] = Ma[map[c]] + Ea[map[c]];
+                    } else {
+                        for (int c = 0; c < nb; c++) Aa[c] = Ma[map[c]] + 0.0;
                     }
-                    memcpy(Y + a * ROWS, W + ia * ROWS, sizeof(double) * ROWS);
+                    memcpy(Y + a * ROWS, W + map[a] * ROWS, sizeof(double) * ROWS);
                 }
                 if (factor_elastic_first(b, kind ? b->elu_it : b->elu, r, A, piv) != OK)
                     return SINGULAR;
                 ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, Y, ROWS);
                 for (int a = 0; a < nb; a++)
-                    memcpy(W + (o + elastic_first(b, a)) * ROWS, Y + a * ROWS,
-                           sizeof(double) * ROWS);
+                    memcpy(W + map[a] * ROWS, Y + a * ROWS, sizeof(double) * ROWS);
             } else {
                 for (int a = 0; a < nb; a++)
                     for (int c = 0; c < nb; c++)
@@ -1073,7 +1083,7 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
 
 /* ------------------------------------------------------------------ the mode fit */
 /* Stage 2's mode fit (integrators.LockedModeFit, rib by rib): S = I + Phi diag(s - 1) U^T */
-typedef struct { int r; const double *u, *phi, *sc, *shrink; } Fit3D;
+typedef struct { int r; const double *u, *phi, *sc, *shrink; int whole; } Fit3D;
 
 enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
 
@@ -1352,6 +1362,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
 }
 
 #include "_kernel3d_base.h"
+#include "_kernel3d_figures.h"
 
 /* ------------------------------------------------------------------ the grid loop */
 static void load(Ctx3D *x, const Advance3DCall *a) {
@@ -1436,11 +1447,15 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
     a->iterations = 0;
     int N = x->R * x->n;
     int steps = a->single ? 1 : a->n_steps;
-    Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink};
-    if (a->fit_modes > x->n) return SINGULAR;
+    Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink, a->fit_whole};
+    if (a->fit_modes > (a->fit_whole ? N + x->ns : x->n) || (a->fit_whole && !x->base))
+        return SINGULAR;
+    int figures = x->fig && !a->single && a->out;
+    if (figures) figures_start(x, a);
     for (int k = 0; k < steps; k++) {
         load(x, a);
         double t_next = a->single ? a->t + a->h : (double)(a->k0 + k + 1) * a->h;
+        double t_before = a->t;
         x->factorisations = 0;
         x->strain0_ok = k > 0;         /* (the state loaded: the last step's committed one) */
         x->strain0 = x->strain;
@@ -1450,7 +1465,8 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
             x->base->drive_v = a->drive_v ? a->drive_v + 6 * k : NULL;
             if (x->base->prescribed && !a->drive_q) return SINGULAR;
             status = base_step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol,
-                               a->phi_tol, a->max_iter);
+                               a->phi_tol, a->max_iter,
+                               a->locked && a->fit_modes > 0 ? &fit : NULL);
         } else {
             status = step(x, a->stuck, a->locked, t_next - a->t, a->force, a->tol, a->phi_tol,
                           a->max_iter, a->locked && a->fit_modes > 0 ? &fit : NULL);
@@ -1466,6 +1482,9 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
         commit(x, a);
         if (!a->single) release(x, a);
         if (a->out) write_row(x, a, a->out + (size_t)k * a->row_len);
+        if (figures)
+            figure_row(x, a, t_next - t_before,
+                       a->out + (size_t)(k + 1) * a->row_len - FIG_CHANNELS * 3 * x->R);
         a->n_done++;
     }
     return OK;

@@ -24,8 +24,9 @@
  * columns from invariants): the rib-bus block M_rs and the shared block M_ss of M(q), their
  * share of the kinetic energy's gradient, the arrow algebra's full border (every shared
  * column), the drive's rows.  base_step is integrator3d.MidpointUmbrella._step for a moving
- * base (no stage-2 mode fit: the locked ribs stay coupled through the bus), step for step
- * the same algorithm (its states equal the reference's to round-off).
+ * base, step for step the same algorithm (its states equal the reference's to round-off),
+ * with stage 2's mode fit (base_fit_map: a driven hub's ribs' fits in the hub's frame, or a
+ * free bus's one fit of the whole free system's modes; umbrella3d/stage2fit.py).
  *
  * One file for the base: its functions serve base_step and one another, and leave
  * _kernel3d.c's (the hub fixed's step) as they are.
@@ -51,6 +52,8 @@ struct Base3D {
     double mss[NB * NB];
     double *fmrs[3];             /* the M_rs each factorisation holds (slot 0, 1, pm) */
     const double *drive_q, *drive_v;   /* the step's drive: the bus's place and rates */
+    double *fitv, *fitc, *fita;  /* a whole fit's (base_fit_map): v gathered, the modal
+                                  * sums, the change (N + NB each) */
     double work_drive;           /* the last step's drive work */
 };
 
@@ -122,6 +125,9 @@ static void base_free(Base3D *B) {
     if (!B) return;
     for (int j = 0; j < 2; j++) { free(B->xs[j]); free(B->ss[j]); }
     free(B->mrs);
+    free(B->fitv);
+    free(B->fitc);
+    free(B->fita);
     for (int j = 0; j < 3; j++) free(B->fmrs[j]);
     free(B);
 }
@@ -160,6 +166,9 @@ static Base3D *base_new(Ctx3D *x) {
             }
     }
     ok = ok && (B->mrs = calloc(k, sizeof(double)));
+    size_t len = (size_t)x->R * x->n + NB;
+    ok = ok && (B->fitv = calloc(len, sizeof(double))) && (B->fitc = calloc(len, sizeof(double)))
+        && (B->fita = calloc(len, sizeof(double)));
     for (int j = 0; j < 3; j++) ok = ok && (B->fmrs[j] = calloc(k, sizeof(double)));
     if (!ok) { base_free(B); return NULL; }
     return B;
@@ -568,20 +577,79 @@ static int base_project(Ctx3D *x, const double *q, double *v, const double *stuc
     return OK;
 }
 
+/* ------------------------------------------------------------------ the mode fit */
+/* Stage 2's mode fit with a moving base (umbrella3d/stage2fit.py), fit_map's maps: a driven
+ * hub's, each rib's fit in the hub's frame (fit_map; the shared coordinates as they are); a
+ * free bus's (f->whole), one fit of the whole free system's modes, its rows u and phi over
+ * every coordinate (the ribs', then the shared ones: N + ns).  vr: the ribs' blocks at
+ * stride apart (n, or mb for the arrow's right-hand sides), vs: the shared coordinates. */
+static void base_fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *vr, int stride,
+                         double *vs) {
+    if (!f->whole) {
+        fit_map(x, f, kind, vr, stride);
+        return;
+    }
+    const Base3D *B = x->base;
+    int R = x->R, n = x->n, N = R * n, L = N + x->ns, r = f->r;
+    double *g = B->fitv, *c = B->fitc, *acc = B->fita;
+    for (int k = 0; k < R; k++) memcpy(g + k * n, vr + (size_t)k * stride, sizeof(double) * n);
+    memcpy(g + N, vs, sizeof(double) * x->ns);
+    const double *in = kind == TRANSPOSE ? f->phi : f->u;
+    const double *out = kind == TRANSPOSE ? f->u : f->phi;
+    int j = 0;
+    for (; j + 4 <= r; j += 4) {              /* four modes' sums at once, each in order */
+        const double *i0 = in + (size_t)j * L, *i1 = i0 + L, *i2 = i1 + L, *i3 = i2 + L;
+        double d0 = 0.0, d1 = 0.0, d2 = 0.0, d3 = 0.0;
+        for (int a = 0; a < L; a++) {
+            d0 += i0[a] * g[a]; d1 += i1[a] * g[a];
+            d2 += i2[a] * g[a]; d3 += i3[a] * g[a];
+        }
+        c[j] = d0; c[j + 1] = d1; c[j + 2] = d2; c[j + 3] = d3;
+    }
+    for (; j < r; j++) {
+        double d = 0.0;
+        for (int a = 0; a < L; a++) d += in[(size_t)j * L + a] * g[a];
+        c[j] = d;
+    }
+    for (j = 0; j < r; j++) {
+        double s = f->sc[j];
+        c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -f->shrink[j] : s - 1.0;
+    }
+    memset(acc, 0, sizeof(double) * L);
+    for (j = 0; j < r; j++) {                 /* the rows' sums, each in j's order */
+        const double *o = out + (size_t)j * L;
+        double cj = c[j];
+        for (int a = 0; a < L; a++) acc[a] += o[a] * cj;
+    }
+    for (int k = 0; k < R; k++)
+        for (int a = 0; a < n; a++) vr[(size_t)k * stride + a] += acc[k * n + a];
+    for (int i = 0; i < x->ns; i++) vs[i] += acc[N + i];
+}
+
 /* ------------------------------------------------------------------ the step */
 /* step() for a moving base (integrator3d.MidpointUmbrella._step): the same modified Newton
  * and kept iteration matrix, the base's terms; then the free bus's linear momentum restored
  * (a uniform translation velocity), the projection (onto the drive's rates, its impulse's
  * work counted) and, without a drive, the energy scaling relative to the mass centre. */
 static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double force,
-                     double tol, double phi_tol, int max_iter) {
+                     double tol, double phi_tol, int max_iter, const Fit3D *fit) {
     const Model3D *m = x->m;
     Base3D *B = x->base;
     int R = x->R, n = x->n, N = R * n, ns = x->ns, mb = x->mb, cs = x->cs;
     const double half_h2 = 0.5 * h * h;
     double *q = x->q, *q0 = x->q0, *v0 = x->v0, *p0 = x->p0;
+    /* the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0) */
+    const double *w0 = v0, *sp0 = p0;
+    if (fit) {
+        memcpy(x->w0, v0, sizeof(double) * (N + ns));
+        base_fit_map(x, fit, TO_SCHEME, x->w0, n, x->w0 + N);
+        memcpy(x->sp0, p0, sizeof(double) * (N + ns));
+        base_fit_map(x, fit, TRANSPOSE, x->sp0, n, x->sp0 + N);
+        w0 = x->w0;
+        sp0 = x->sp0;
+    }
     base_constraints(x, q0, stuck, locked, x->phi0);
-    for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * v0[i];
+    for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * w0[i];
     memcpy(x->lam, x->l0, sizeof(double) * (R * ROWS + cs));
     int lagged = kept_serves(x, stuck, locked, h);
     Fact *ff = lagged ? &x->slot[x->kept_slot] : NULL;
@@ -593,10 +661,17 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         for (int i = 0; i < N + ns; i++) {
             x->dq[i] = q[i] - q0[i];
             x->qm[i] = q0[i] + 0.5 * x->dq[i];
-            x->v1[i] = 2.0 * x->dq[i] / h - v0[i];
+            x->v1[i] = 2.0 * x->dq[i] / h - w0[i];
         }
+        if (fit) base_fit_map(x, fit, TO_PHYSICAL, x->v1, n, x->v1 + N);
         base_mass_matrix(x, q);
         base_matvec(x, x->v1, x->p1);
+        const double *sp1 = x->p1;        /* the scheme's momentum S^T M(q1) v1 */
+        if (fit) {
+            memcpy(x->sp1, x->p1, sizeof(double) * (N + ns));
+            base_fit_map(x, fit, TRANSPOSE, x->sp1, n, x->sp1 + N);
+            sp1 = x->sp1;
+        }
         base_kinetic_gradient(x, x->qm, v0, x->v1, x->gt);
         /* Gonzalez over the whole dq, the correction along the ribs' and the sleeve's */
         base_matvec(x, v0, x->tmp);
@@ -640,13 +715,13 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
             for (int a = 0; a < n; a++) {
                 double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
-                x->res[r * n + a] = x->p1[r * n + a] - p0[r * n + a]
+                x->res[r * n + a] = sp1[r * n + a] - sp0[r * n + a]
                     - h * (x->gt[r * n + a] + applied + cons);
             }
             cons_s[0] -= lam[7];
         }
         for (int i = 0; i < ns; i++)
-            x->res[N + i] = x->p1[N + i] - p0[N + i]
+            x->res[N + i] = sp1[N + i] - sp0[N + i]
                 - h * (x->gt[N + i] + (i == 0 ? -force : 0.0) + cons_s[i]);
         if (!factored) {
             iteration_blocks(x, q, stuck, h);
@@ -666,6 +741,7 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         for (int i = 0; i < cs; i++) rs[ns + i] = -x->phi[R * ROWS + i];
         if (!locked) rs[ns] = 0.0;
         base_arrow_solve(x, ff, x->rr, rs, -1.0);
+        if (fit) base_fit_map(x, fit, NEWTON, x->rr, mb, rs);
         int finite = 1;
         double norm = rib_update(x, q, mb, half_h2, &finite);
         for (int i = 0; i < ns; i++) {
@@ -690,7 +766,8 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
     x->pend_h = h;
     /* velocities, works, the energy target */
     double *v = x->v;
-    for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - v0[i]; }
+    for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - w0[i]; }
+    if (fit) base_fit_map(x, fit, TO_PHYSICAL, v, n, v + N);
     base_mass_matrix(x, q);
     double w_fric = friction_works(x, h);
     x->work_force = force * (q0[N] - q[N]);

@@ -89,9 +89,10 @@ def newton_tolerance(h: float) -> float:
 
 #: what integrates a run, for its recording: a re-simulation by an integrator of another
 #: revision differs in the physics (here: stage 2, whose modified modal masses of earlier
-#: revisions became the mode fit), not in round-off
-INTEGRATOR_REVISION = ('midpoint-dae, stage-2 locked-mode fit, stage-2 substeps past the '
-                       'coupling deflection')
+#: revisions became the mode fit; the umbrella's moving bases, which took no fit and the
+#: unfitted step before), not in round-off
+INTEGRATOR_REVISION = ('midpoint-dae, stage-2 locked-mode fit (on a moving base too), stage-2 '
+                       'substeps past the coupling deflection')
 
 #: modes the stage-2 fit makes exact: omega h at most this, i.e. modes the step samples at
 #: least ~4 times a period (pi / 2 = 1.57).  Beyond, the scheme's modal mass s^2 that makes

@@ -202,7 +202,8 @@ def summarize_ribs(alpha_deployed, applied: list, lock_time: float | None,
         alpha_deployed, np.array([t for t, _ in joints]), [j['alpha1'] for _, j in joints],
         t_tip, tip, t_stress,
         {name: [[r[f'{name}_Pa'] for r in rs] for _, rs in stresses] for name in STRESS_NAMES},
-        [[(r['von_mises_body'], r['von_mises_x_m']) for r in rs] for _, rs in stresses])
+        [[(r['von_mises_body'], r['von_mises_x_m']) for r in rs] for _, rs in stresses],
+        lock_time)
     stage2 = tuple(summarize_run(applied, lock_time, started_moving,
                                  list(zip(t_tip.tolist(), tip[:, k, 1].tolist())),
                                  list(zip(t_stress.tolist(), vm[:, k].tolist())), after_lock)

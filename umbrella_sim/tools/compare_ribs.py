@@ -123,10 +123,12 @@ def _sampled(log, seg, t, alpha1, tip_t, tip, stress_t, stress) -> dict:
     except ValueError as exc:
         raise LogError(f"{log.path}: the recording's parameters cannot be used ({exc})") \
             from None
+    lock_time = recorded_lock(log, seg.index)[1]
     figures = sampled_figures(
         model.alpha_deployed, t, alpha1, tip_t, tip, stress_t,
-        {name: stress[:, :, i] for i, name in enumerate(STRESS_NAMES)}, stress[:, :, 5:7])
-    figures['lock_time'] = recorded_lock(log, seg.index)[1]
+        {name: stress[:, :, i] for i, name in enumerate(STRESS_NAMES)}, stress[:, :, 5:7],
+        lock_time)
+    figures['lock_time'] = lock_time
     return figures
 
 

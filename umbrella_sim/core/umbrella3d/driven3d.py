@@ -43,7 +43,7 @@ from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
 from ..model import Stage
 from ..outputs import LockEvent
-from ..summary import (deploy_start, ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR,
+from ..summary import (deploy_start, ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR, mesh_resolution,
                        validity_warnings, WarningsSaid)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
@@ -158,16 +158,17 @@ class StepBlock3D:
 
     ``last`` is the Sample3D of the final state, ``lock`` the LockEvent if the lock happened
     in these steps, ``error`` the fault that ended them early; ``states`` is None (the
-    umbrella's state rows are not offered).
+    umbrella's state rows are not offered).  peaks: the rows' RibPeaks if known (Record3D's
+    taken_peaks), else made from the rows when first asked.
     """
 
     states = None
 
     def __init__(self, rows: dict, last: Sample3D, lock: LockEvent | None = None,
-                 error: str | None = None):
+                 error: str | None = None, peaks: 'RibPeaks | None' = None):
         self.rows, self.lock, self.error = rows, lock, error
         self._last = last
-        self._peaks = None
+        self._peaks = peaks
 
     def __len__(self) -> int:
         return len(self.rows['time']) if self.rows else 0
@@ -276,10 +277,12 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
             if until_lock and self.locked and not locked_before:
                 break
         rows = self.record.take()
+        peaks = self.record.taken_peaks
         if rows:
             self._current = Sample3D.of_row({name: v[-1] for name, v in rows.items()})
         lock = self.lock_event if self.locked and not locked_before else None
-        return StepBlock3D(rows, self._current, lock, error), applied
+        return StepBlock3D(rows, self._current, lock, error,
+                           None if peaks is None else RibPeaks(*peaks)), applied
 
     # ------------------------------------------------------------------- outputs
     def sample(self) -> Sample3D:
@@ -352,7 +355,8 @@ class Summary3D:
             for j in np.nonzero((gap <= 0.0).any(0))[0]:
                 k = ribs[j]
                 self._deployed[k] = first_reach(t, gap[:, j], (
-                    t_before, alpha_before[k] - m.alpha_deployed[k]))
+                    t_before, alpha_before[k] - m.alpha_deployed[k]),
+                    None if self.lock is None else self.lock.time)
         self._last = (float(t[-1]), rows['alpha1'][-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(np.abs(energy).max()))
@@ -412,12 +416,24 @@ class Summary3D:
         return (getattr(m, 'max_section_slope', None), getattr(m, 'max_out_of_plane', None))
 
     def warnings(self) -> list[str]:
-        """Return the validity warnings: summary's one rule, on the worst rib's figures."""
+        """
+        Return the validity warnings: summary's one rule, on the worst rib's figures.
+
+        'coarse step' judges the planar rib's mesh at the umbrella's step and its largest
+        in-plane tip deflection (summary.mesh_resolution): the umbrella's stage 2 stays on
+        its grid step, so past the modes' coupling it names the step a run should give.  The
+        co-rotational ribs' 'fibre rotation' and 'out-of-plane rotation' from their largest
+        section slope and out-of-plane rotation (_geometry).
+        """
+        locked = self.lock is not None
         slope, out_of_plane = self._geometry()
         return validity_warnings(self._planar, self.lock_kind,
                                  float(self._peaks['von_mises'][0].max()),
-                                 float(self._in_plane.max()), locked=self.lock is not None,
-                                 energy_drift=self.energy_drift, section_slope=slope
+                                 float(self._in_plane.max()), locked=locked,
+                                 energy_drift=self.energy_drift,
+                                 stage2_resolution=(mesh_resolution(self._planar, self.sim.h)
+                                                    if locked else None),
+                                 section_slope=slope
                                  ) + out_of_plane_warnings(self._planar, out_of_plane)
 
     def new_warnings(self) -> list[str]:

@@ -42,11 +42,13 @@ gradient meets dq . G_T = f(q1) - f(q0) over the whole dq, the correction added 
 ribs' coordinates and the sleeve's only (not the bus's: its position is cyclic), so the bus's
 linear momentum is conserved to round-off.
 
-Stage 2 with the hub fixed may take the planar stage-2 mode fit (``fit_stage2_modes``,
-``lock_at``): with the sleeve at the stop the ribs are decoupled, so each rib's locked modes
-(modes3d.rib_locked_modes) are fitted as the planar frame's (integrators.LockedModeFit: each
-resolved mode exact in phase and amplitude, T + V conserved), rib by rib: the scheme's
-velocity w_k = S_k^-1 v_k, momentum S_k^T M v, each Newton update shrunk mode by mode.
+Stage 2 may take the planar stage-2 mode fit (``fit_stage2_modes``, ``lock_at``;
+integrators.LockedModeFit: each resolved mode exact in phase and amplitude, T + V conserved):
+the scheme's velocity w = S^-1 v, momentum S^T M v, each Newton update shrunk mode by mode.
+Which modes, by base (stage2fit.py): the hub fixed or driven, each rib's locked modes in the
+hub's frame, rib by rib (with the sleeve at the stop the ribs are decoupled there); a
+free-floating bus, the elastic modes of the whole free system (bus + locked ribs), one fit
+over every coordinate, which leaves the bus's momenta the physical ones.
 """
 from __future__ import annotations
 
@@ -60,9 +62,9 @@ import numpy as np
 from . import arrow
 from .kernel3d import CompiledStep3D
 from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
-from .modes3d import rib_locked_modes
+from .stage2fit import RibFits, stage2_fit, WholeFit
 from .state3d import ConvergenceError3D, State3D, StepWork
-from ..integrators import LockedModeFit, newton_converged, PHI_TOLERANCE
+from ..integrators import newton_converged, PHI_TOLERANCE
 from ..kernel import kernel_refusal, LIBRARY, load_kernel
 
 #: steps an iteration matrix serves at most (the first included), and the contraction of a
@@ -154,8 +156,9 @@ class MidpointUmbrella:
             self.norm_shared[1:] = True
         self.iterations = 0
         self.factorisations = 0     # of the iteration matrix
-        #: stage 2's mode fit, each rib's (fit_stage2_modes), acting from lock_at on
-        self.mode_fits: list[LockedModeFit] | None = None
+        #: stage 2's mode fit (fit_stage2_modes: stage2fit.RibFits or WholeFit), acting
+        #: from lock_at on
+        self.mode_fit: RibFits | WholeFit | None = None
         self.fit_active = False
         #: the last step's iteration matrix: (factor, uses, end q and v, h, locked, stuck)
         self._kept = None
@@ -186,23 +189,26 @@ class MidpointUmbrella:
         return None
 
     def fit_stage2_modes(self, h: float) -> None:
-        """Fit each rib's locked modes for grid step h (LockedModeFit), from lock_at on."""
-        if self.model.moving_base:
-            raise ValueError('the 3D stage-2 mode fit has the hub fixed (base: fixed): with a '
-                             'moving base the locked ribs stay coupled through it')
-        self.mode_fits = [LockedModeFit.of_modes(*modes, h)
-                          for modes in rib_locked_modes(self.model)]
+        """Fit the base's locked modes (stage2fit.stage2_fit) for grid step h, from lock_at on."""
+        self.mode_fit = stage2_fit(self.model, h)
 
-    def lock_at(self) -> None:
-        """Start stage 2's mode fit (if any): the lock has happened."""
-        if self.mode_fits is not None:
+    def lock_at(self, state: State3D | None = None) -> None:
+        """
+        Start stage 2's mode fit (if any): the lock has happened (in state, if given).
+
+        A free bus's modes are those at the bus's attitude at the lock (the state's:
+        stage2fit.WholeFit.at_attitude).
+        """
+        if self.mode_fit is not None:
+            if state is not None and self.mode_fit.whole and np.any(state.qs[4:7] != 0.0):
+                self.mode_fit = self.mode_fit.at_attitude(state.qs[4:7])
             self.fit_active = True
             if self.compiled is not None:
-                self.compiled.set_mode_fit(self.mode_fits)
+                self.compiled.set_mode_fit(self.mode_fit)
 
-    def stage2_fits(self, locked: bool) -> list[LockedModeFit] | None:
-        """Return the ribs' mode fits acting on a step (stage 2, from the lock), else None."""
-        return self.mode_fits if self.fit_active and locked else None
+    def stage2_fits(self, locked: bool) -> RibFits | WholeFit | None:
+        """Return the mode fit acting on a step (stage 2, from the lock), else None."""
+        return self.mode_fit if self.fit_active and locked else None
 
     @property
     def backend(self) -> str:
@@ -333,12 +339,12 @@ class MidpointUmbrella:
         phi_r0, phi_s0 = m.constraints(qr0, qs0, stuck, locked,
                                        None if drive is None else drive[0])
         # the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0)
-        fits = self.stage2_fits(locked)
-        wr0, spr0 = vr0, pr0
-        if fits is not None:
-            wr0 = _by_rib(LockedModeFit.to_scheme, fits, vr0)
-            spr0 = _by_rib(LockedModeFit.transpose, fits, pr0)
-        qr, qs = qr0 + h * wr0, qs0 + h * vs0
+        fit = self.stage2_fits(locked)
+        wr0, ws0, spr0, sps0 = vr0, vs0, pr0, ps0
+        if fit is not None:
+            wr0, ws0 = fit.to_scheme(vr0, vs0)
+            spr0, sps0 = fit.transpose(pr0, ps0)
+        qr, qs = qr0 + h * wr0, qs0 + h * ws0
         lam_r, lam_s = s.lam_r.copy(), s.lam_s.copy()
         half_h2 = 0.5 * h * h
         kept = self._kept_factor(s, h, locked)
@@ -350,9 +356,9 @@ class MidpointUmbrella:
         for it in range(1, self.max_iterations + 1):
             dqr, dqs = qr - qr0, qs - qs0
             qmr, qms = qr0 + 0.5 * dqr, qs0 + 0.5 * dqs
-            vr1, vs1 = 2.0 * dqr / h - wr0, 2.0 * dqs / h - vs0
-            if fits is not None:
-                vr1 = _by_rib(LockedModeFit.to_physical, fits, vr1)
+            vr1, vs1 = 2.0 * dqr / h - wr0, 2.0 * dqs / h - ws0
+            if fit is not None:
+                vr1, vs1 = fit.to_physical(vr1, vs1)
             kin1 = m.kinematics(qr, qs)
             mass1 = m.mass_matrix(kin1)
             pr1, ps1 = m.matvec(mass1, vr1, vs1)
@@ -385,9 +391,9 @@ class MidpointUmbrella:
             applied_s[0] = -force
             cons_r = np.einsum('rji,rj->ri', jg_rr, lam_r)
             cons_s = np.einsum('rji,rj->i', jm_rs, lam_r) + jm_ss.T @ lam_s
-            scheme_pr1 = pr1 if fits is None else _by_rib(LockedModeFit.transpose, fits, pr1)
+            scheme_pr1, scheme_ps1 = (pr1, ps1) if fit is None else fit.transpose(pr1, ps1)
             res_r = scheme_pr1 - spr0 - h * (gtr + applied_r + cons_r)
-            res_s = ps1 - ps0 - h * (gts + applied_s + cons_s)
+            res_s = scheme_ps1 - sps0 - h * (gts + applied_s + cons_s)
             if factored is None:
                 j_r = m.constraint_jacobian(qr, stuck, locked)
                 gyro = m.gyroscopic(kinm, dqr / h)
@@ -401,8 +407,8 @@ class MidpointUmbrella:
             rhs_s = np.concatenate([-0.5 * h * res_s, -phi_s])
             rhs_s[ns:][~active] = 0.0
             x_r, x_s = factored.solve(rhs_r, rhs_s)
-            if fits is not None:
-                x_r[:, :n] = [f.newton_update(d, h) for f, d in zip(fits, x_r[:, :n])]
+            if fit is not None:
+                x_r[:, :n], x_s[:ns] = fit.newton_update(x_r[:, :n], x_s[:ns], h)
             qr = qr + x_r[:, :n]
             qs = qs + x_s[:ns]
             lam_r = lam_r + x_r[:, n:] / half_h2
@@ -429,9 +435,9 @@ class MidpointUmbrella:
         self.iterations += it
         self.factorisations += factorisations
         dqr, dqs = qr - qr0, qs - qs0
-        vr, vs = 2.0 * dqr / h - wr0, 2.0 * dqs / h - vs0
-        if fits is not None:
-            vr = _by_rib(LockedModeFit.to_physical, fits, vr)
+        vr, vs = 2.0 * dqr / h - wr0, 2.0 * dqs / h - ws0
+        if fit is not None:
+            vr, vs = fit.to_physical(vr, vs)
         kin1 = m.kinematics(qr, qs)
         mass1 = m.mass_matrix(kin1)
         torque, _ = self.friction(dqr[:, m.i_a1], h)
@@ -472,8 +478,3 @@ class MidpointUmbrella:
         state = State3D(s.t + h, qr, qs, vr, vs, lam_r, lam_s, stuck, pr1, ps1)
         self._kept = (factored, uses + 1, qr, qs, vr, vs, h, locked, np.isnan(stuck))
         return state, StepWork(w_force, w_fric, w_drive, it, factorisations)
-
-
-def _by_rib(rule, fits, rows: np.ndarray) -> np.ndarray:
-    """Return rule(fit_k, rows[k]) of each rib k (a LockedModeFit map, rib by rib)."""
-    return np.array([rule(f, row) for f, row in zip(fits, rows)])

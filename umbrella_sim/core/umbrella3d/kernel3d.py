@@ -23,8 +23,10 @@ and, with a driven base, the drive's bus coordinates and rates at the steps' end
 (integrator3d.BaseDrive.profile: the drive's one rule, evaluated here for a run of steps).
 ``step`` is ``MidpointUmbrella.step`` (the numpy reference) in one call; ``advance`` takes up
 to n grid steps of ``UmbrellaSimulator3D.step`` in one call, stopping before the step in
-which the sleeve reaches the stop (the lock is Python's).  The library is the planar
-kernel's (kernel.load_kernel: ABI-checked against the header).
+which the sleeve reaches the stop (the lock is Python's); its rows end with each step's
+stress figures (``figures``, _kernel3d_figures.h: Record3D's rule, which Record3D then takes
+as they are).  The library is the planar kernel's (kernel.load_kernel: ABI-checked against
+the header).
 """
 from __future__ import annotations
 
@@ -39,14 +41,22 @@ from ..kernel import INTERFACE, kernel_error, STATUS
 Model3DStruct = INTERFACE.structs['Model3D']
 Advance3DCall = INTERFACE.structs['Advance3DCall']
 _dp = ctypes.POINTER(ctypes.c_double)
+#: the channels of the rows' stress figures (outputs3d.STRESS_NAMES)
+FIGURE_CHANNELS = 5
 
 
 def _ptr(a: np.ndarray):
     return a.ctypes.data_as(_dp)
 
 
-def row_layout(model: UmbrellaModel3D) -> dict:
-    """Return name -> (slice of an output row, shape of a step's value) (Advance3DCall)."""
+def row_layout(model: UmbrellaModel3D, figures: bool = False) -> dict:
+    """
+    Return name -> (slice of an output row, shape of a step's value) (Advance3DCall).
+
+    figures: the rows end with each rib's stress figures (umbrella3d_set_stress):
+    stress_top (ribs, 5: the largest of each channel of outputs3d.STRESS_NAMES over the
+    step) and stress_at (ribs, 5, 2: where, body code and x).
+    """
     nr, n = model.n_ribs, model.n_rib
     parts = (('t', ()), ('qr', (nr, n)), ('qs', (model.n_shared,)), ('vr', (nr, n)),
              ('vs', (model.n_shared,)), ('lam_r', (nr, N_RIB_ROWS)),
@@ -55,6 +65,8 @@ def row_layout(model: UmbrellaModel3D) -> dict:
              ('factorisations', ()), ('work_drive', ()))
     if model.params.base == 'free':
         parts += (('linear_momentum', (3,)), ('angular_momentum', (3,)))
+    if figures:
+        parts += (('stress_top', (nr, FIGURE_CHANNELS)), ('stress_at', (nr, FIGURE_CHANNELS, 2)))
     out, k = {}, 0
     for name, shape in parts:
         size = int(np.prod(shape)) if shape else 1
@@ -67,7 +79,7 @@ class CompiledStep3D:
     """The compiled step of one model (drive: its BaseDrive); see the module docstring."""
 
     def __init__(self, lib, model: UmbrellaModel3D, tolerance: float, phi_tolerance: float,
-                 max_iterations: int, carry_steps: int = 1, drive=None):
+                 max_iterations: int, carry_steps: int = 1, drive=None, figures: bool = True):
         if (drive is None) != (model.params.base != 'prescribed'):
             raise ValueError('the compiled 3D step: a drive is for a prescribed base only')
         self.lib, self.model, self.drive = lib, model, drive
@@ -118,19 +130,17 @@ class CompiledStep3D:
             raise MemoryError('the compiled 3D step could not be set up: out of memory')
         self._ctx = ctypes.c_void_p(ctx)
         self._free = lib.umbrella3d_free
-        self.layout = row_layout(m)
-        self.row_len = max(s.stop for s, _ in self.layout.values())
         self.buf = {'qr': np.zeros((nr, n)), 'qs': np.zeros(m.n_shared),
                     'vr': np.zeros((nr, n)), 'vs': np.zeros(m.n_shared),
                     'lam_r': np.zeros((nr, N_RIB_ROWS)), 'lam_s': np.zeros(m.n_shared_rows),
                     'pr': np.zeros((nr, n)), 'ps': np.zeros(m.n_shared),
                     'stuck': np.zeros(nr)}
-        self.call = Advance3DCall(row_len=self.row_len, max_iter=max_iterations,
-                                  tol=tolerance, phi_tol=phi_tolerance,
+        self.call = Advance3DCall(max_iter=max_iterations, tol=tolerance,
+                                  phi_tol=phi_tolerance,
                                   **{k: _ptr(v) for k, v in self.buf.items()})
         self._call_ref = ctypes.byref(self.call)
         self._drive = (np.zeros((1, 6)), np.zeros((1, 6)))
-        self._set_capacity(1)
+        self.set_figures(figures)
 
     def __del__(self):
         ctx = getattr(self, '_ctx', None)
@@ -138,23 +148,64 @@ class CompiledStep3D:
             self._free(ctx)
             self._ctx = None
 
-    def set_mode_fit(self, fits) -> None:
+    def set_figures(self, on: bool) -> None:
         """
-        Fit the locked steps' modes from now on: each rib's integrators.LockedModeFit.
+        Say whether advance's rows carry the steps' stress figures (``figures``).
 
-        The call keeps pointers to the arrays (Advance3DCall.fit_*), padded to the most
-        modes a rib has (s = 1, shrink 0: no change).
+        On: the library computes them (umbrella3d_set_stress: Record3D's rule), if it can;
+        off: Record3D computes them from the rows' states.
         """
-        nr, n = self.model.n_ribs, self.model.n_rib
-        r = max(len(f.scale) for f in fits)
-        u, phi = np.zeros((nr, r, n)), np.zeros((nr, r, n))
-        scale, shrink = np.ones((nr, r)), np.zeros((nr, r))
-        for k, f in enumerate(fits):
-            m = len(f.scale)
-            u[k, :m], phi[k, :m] = f.modes, f.shapes
-            scale[k, :m], shrink[k, :m] = f.scale, f.newton_shrink(f.step)
-        self._fit = (u, phi, scale, shrink)
+        if on:
+            on = self._set_stress()
+        else:
+            self.lib.umbrella3d_set_stress(self._ctx, 0, 0, None, None, None)
+        #: advance's rows carry the steps' stress figures (stress_top, stress_at)
+        self.figures = on
+        self.layout = row_layout(self.model, on)
+        self.row_len = self.call.row_len = max(s.stop for s, _ in self.layout.values())
+        self._set_capacity(1)
+
+    def _set_stress(self) -> bool:
+        """Hand the stress recovery to the library (umbrella3d_set_stress); True if taken."""
+        m = self.model
+        if m.compiled_law() is not None:   # (the co-rotational ribs': Record3D's, numpy)
+            return False
+        blocks = []
+        for bodies in (m.leaf_bodies, m.link_bodies):       # (model3d.stress_blocks' rows)
+            blocks.append(np.ascontiguousarray(np.stack([np.stack([
+                getattr(b, name) for name in ('stress_axial', 'stress_bend_z', 'stress_bend_y',
+                                              'stress_shear')]) for b in bodies]), dtype=float))
+        x = np.ascontiguousarray(np.concatenate([m.leaf_bodies[0].stress_x,
+                                                 m.link_bodies[0].stress_x]), dtype=float)
+        status = self.lib.umbrella3d_set_stress(self._ctx, blocks[0].shape[2], blocks[1].shape[2],
+                                                _ptr(blocks[0]), _ptr(blocks[1]), _ptr(x))
+        return status == STATUS['ok']
+
+    def set_mode_fit(self, fit) -> None:
+        """
+        Fit the locked steps' modes from now on: a stage2fit.RibFits or WholeFit.
+
+        The call keeps pointers to the arrays (Advance3DCall.fit_*): each rib's
+        LockedModeFit padded to the most modes a rib has (s = 1, shrink 0: no change), or
+        the whole free system's (fit_whole: rows over every coordinate).
+        """
         c = self.call
+        if fit.whole:
+            f = fit.fit
+            self._fit = tuple(np.ascontiguousarray(a) for a in (
+                f.modes, f.shapes, f.scale, f.newton_shrink(f.step)))
+            c.fit_whole, r = 1, len(f.scale)
+        else:
+            nr, n = self.model.n_ribs, self.model.n_rib
+            r = max(len(f.scale) for f in fit.fits)
+            u, phi = np.zeros((nr, r, n)), np.zeros((nr, r, n))
+            scale, shrink = np.ones((nr, r)), np.zeros((nr, r))
+            for k, f in enumerate(fit.fits):
+                m = len(f.scale)
+                u[k, :m], phi[k, :m] = f.modes, f.shapes
+                scale[k, :m], shrink[k, :m] = f.scale, f.newton_shrink(f.step)
+            self._fit = (u, phi, scale, shrink)
+            c.fit_whole = 0
         c.fit_u, c.fit_phi, c.fit_scale, c.fit_shrink = (_ptr(a) for a in self._fit)
         c.fit_modes = r
 
@@ -162,6 +213,7 @@ class CompiledStep3D:
         self.out = np.zeros((cap, self.row_len))
         self.call.out = _ptr(self.out)
         self.capacity = cap
+        self._views: dict = {}          # rows' views of out, by count
 
     def _set_drive(self, times: np.ndarray) -> None:
         """Hand the drive's bus coordinates and rates at the steps' ends to the call."""
@@ -187,10 +239,15 @@ class CompiledStep3D:
             'qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck', 'pr', 'ps')))
 
     def rows(self, count: int) -> dict:
-        """Return the last call's first count rows by name (views: steps first)."""
-        block = self.out[:count]
-        return {name: block[:, sl].reshape((count,) + shape)
-                for name, (sl, shape) in self.layout.items()}
+        """Return the last call's first count rows by name (views of out: steps first)."""
+        views = self._views.get(count)
+        if views is None:       # (made once a count: out is the same buffer every call)
+            views = self._views[count] = {}
+            for name, (sl, shape) in self.layout.items():
+                view = self.out[:count, sl]
+                view.shape = (count,) + shape           # (a view, never a copy)
+                views[name] = view
+        return dict(views)
 
     def step(self, s: State3D, h: float, force: float, locked: bool):
         """Return (State3D, StepWork) of one step of length h (MidpointUmbrella.step's)."""
@@ -207,9 +264,12 @@ class CompiledStep3D:
         return self._state(), work
 
     def advance(self, s: State3D, k0: int, h: float, n_steps: int, force: float,
-                locked: bool):
+                locked: bool, crest_from_state: bool = False):
         """
         Take up to n_steps grid steps t_k -> (k + 1) h from s at t_k0.
+
+        crest_from_state: the first step's stress figures take their crests from s (the
+        record continues in the same stage: Record3D.crest_continues), else its own values.
 
         Return (status, steps done, rows (dict of the steps' figures), the state reached).
         Status 'ok', 'crossing' (the next step reaches the stop unlocked: not taken), or a
@@ -221,6 +281,7 @@ class CompiledStep3D:
         self._set_drive(np.arange(k0 + 1, k0 + n_steps + 1) * h)
         c = self.call
         c.single, c.k0, c.n_steps = 0, k0, n_steps
+        c.crest_from_state = int(crest_from_state)
         status = self.lib.umbrella3d_advance(self._ctx, self._call_ref)
         done = c.n_done
         return status, done, self.rows(done), (self._state() if done else s)

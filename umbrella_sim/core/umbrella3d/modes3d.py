@@ -105,6 +105,48 @@ def rib_locked_modes(model: UmbrellaModel3D) -> list[tuple[np.ndarray, np.ndarra
     return out
 
 
+def free_locked_modes(model: UmbrellaModel3D, attitude=None):
+    """
+    Return (omega, phi, mass) of the locked umbrella on a free-floating bus: its elastic modes.
+
+    K x = omega^2 M x over every coordinate (the ribs', rib-major, then the shared ones:
+    y_s and the bus's), on the null space of the locked joints (a stuck hinge's row left out)
+    and the stop, at the undeformed deployed configuration with the bus at rest at its
+    attitude (psi, beta, gamma; None: 0).  Any change of the bus coordinates alone moves
+    the whole umbrella rigidly, so the rigid-body modes span the bus coordinates' unit
+    vectors, and the elastic modes are the eigenvectors M-orthogonal to them: the rows
+    e_b^T M of the bus coordinates b are imposed with the joints, which leaves the six
+    rigid-body modes out (omega 0: the midpoint rule integrates them exactly) and makes each
+    elastic mode carry no linear or angular momentum, U = M phi zero on the bus's rows.
+    omega ascending, phi (coordinates, modes) mass-normalised in mass (dense, the whole
+    system's): the modes the stage-2 fit of a free bus makes exact (stage2fit.WholeFit).
+    """
+    from scipy.linalg import eigh, null_space
+
+    m = model
+    if m.params.base != 'free':
+        raise ValueError('free_locked_modes: the bus is not free-floating (base: free)')
+    qr, qs = deployed_configuration(m)
+    if attitude is not None:
+        qs[4:7] = attitude
+    mass = dense(m, *m.mass_matrix(m.kinematics(qr, qs)))
+    stiff = dense(m, m.stiffness)
+    nr, n, ns = m.n_ribs, m.n_rib, m.n_shared
+    j_rr, j_rs, _, _ = m.constraint_jacobian(qr, np.full(nr, np.nan), True)
+    rows = []
+    for k in range(nr):
+        r = np.zeros((j_rr.shape[1] - 1, nr * n + ns))
+        r[:, k * n:(k + 1) * n] = j_rr[k, :-1]
+        r[:, nr * n:] = j_rs[k, :-1]
+        rows.append(r)
+    stop = np.zeros((1, nr * n + ns))
+    stop[0, nr * n] = 1.0
+    momenta = mass[nr * n + 1:]            # e_b^T M of the bus's six coordinates
+    z = null_space(np.vstack(rows + [stop, momenta]))
+    w2, psi = eigh(z.T @ stiff @ z, z.T @ mass @ z)
+    return np.sqrt(np.maximum(w2, 0.0)), z @ psi, mass
+
+
 def _shares(m: UmbrellaModel3D, stiff, x):
     """Return the (in-plane, out-of-plane bending, twist) shares of x's strain energy."""
     total = x @ stiff @ x

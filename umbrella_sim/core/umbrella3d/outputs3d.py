@@ -58,8 +58,15 @@ class Record3D:
         self._leaf_points, self._x_of = len(xs[0]), np.concatenate(xs)
         self._peaks = np.zeros((nr, len(STRESS_NAMES)))     # peak's values, a column each
         #: the last step's (time, its five channels' values and rates (_crests), locked):
-        #: the start of the next step's crests
+        #: the start of the next step's crests; after the compiled step's figures (time,
+        #: qr, vr, locked, 'state'): the channels computed from them when needed
         self._last_stress = None
+        #: each rib's largest of every stress channel over the steps added since the last
+        #: ``take`` (value, at, when: driven3d.RibPeaks' arrays; None: no steps), and those
+        #: of the rows the last ``take`` returned (``taken_peaks``)
+        self._held = None
+        self.taken_peaks = None
+        self._rib_comp = (np.arange(nr)[:, None], np.arange(len(STRESS_NAMES))[None])
 
     def _put(self, name, value):
         self.rows.setdefault(name, []).append(np.array(value)[None])
@@ -102,7 +109,11 @@ class Record3D:
 
         rows: arrays with the steps first: t, qr, qs, vr, vs, lam_r, lam_s, stuck, kinetic,
         strain, work_force, work_friction, iterations, work_drive and, with a free bus,
-        linear_momentum and angular_momentum (``add``'s figures of each state).
+        linear_momentum and angular_momentum (``add``'s figures of each state); and maybe
+        the steps' stress figures, stress_top (step, rib, 5) and stress_at (step, rib, 5, 2),
+        computed by the compiled step with ``_crests``' rule (kernel3d.row_layout; their
+        first step's crest from the last step added if ``crest_continues``), else computed
+        here.
         """
         work = self.work + np.cumsum(rows['work_force'])
         friction = self.friction + np.cumsum(rows['work_friction'], 0)
@@ -110,8 +121,11 @@ class Record3D:
         self.work, self.friction = float(work[-1]), friction[-1].copy()
         self.drive = float(drive[-1])
         self.iterations += int(np.sum(rows['iterations']))
+        figures = None
+        if 'stress_top' in rows:        # (the compiled step's: _crests' rule, computed there)
+            figures = rows['stress_top'], rows['stress_at']
         self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work, friction,
-                        drive, locked, force, lock_loss)
+                        drive, locked, force, lock_loss, figures)
         if self.model.moving_base:
             bus = {'bus_q': rows['qs'][:, 1:7], 'bus_v': rows['vs'][:, 1:7]}
             if self.model.params.base == 'free':
@@ -120,9 +134,18 @@ class Record3D:
             for name, values in bus.items():     # (copies: the rows' buffers are reused)
                 self.rows.setdefault(name, []).append(np.array(values))
 
+    def crest_continues(self, locked: bool) -> bool:
+        """Say whether the next step's stress crests start from the last step added."""
+        last = self._last_stress
+        return last is not None and last[3] == locked
+
     def _put_steps(self, t, st, kinetic, strain, work, friction, drive, locked, force,
-                   lock_loss):
-        """Append k steps' figures (arrays with the steps first) and update the peaks."""
+                   lock_loss, figures=None):
+        """
+        Append k steps' figures (arrays with the steps first) and update the peaks.
+
+        figures: (top, at) of the steps' stresses (add_steps), else computed here (_crests).
+        """
         m = self.model
         k = len(t)
         qr, vr, stuck = st['qr'], st['vr'], st['stuck']
@@ -144,24 +167,33 @@ class Record3D:
         # stresses: each rib's worst point per step, and where: the first of the largest in
         # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
         # argmax); every component at once, in STRESS_NAMES' order
-        every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
-                             np.concatenate(m.stress_rate_blocks(qr, st['vr']), -1), locked)
-        top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
-        at = np.empty(top.shape + (2,))
-        at[..., 0] = point >= self._leaf_points                  # the body's code
-        at[..., 1] = self._x_of[point]
+        if figures is None:
+            every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
+                                 np.concatenate(m.stress_rate_blocks(qr, st['vr']), -1),
+                                 locked)
+            top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
+            at = np.empty(top.shape + (2,))
+            at[..., 0] = point >= self._leaf_points                  # the body's code
+            at[..., 1] = self._x_of[point]
+        else:      # (the next step's crests start from the last state: its channels if asked)
+            top, at = np.array(figures[0]), np.array(figures[1])
+            self._last_stress = (float(t[-1]), qr[-1].copy(), st['vr'][-1].copy(), locked,
+                                 'state')
         put = self.rows.setdefault
         for j, name in enumerate(STRESS_NAMES):
             put(f'stress_{name}', []).append(top[:, :, j])
             put(f'stress_{name}_at', []).append(at[:, :, j])
         put('von_mises', []).append(np.maximum(top[:, :, -1], 0.0))
         # the peaks over these steps, rib by rib: the first of the largest step by step (the
-        # leaf before the link: each step's own rule above)
-        best = top.max(0)                                       # (rib, 5)
+        # leaf before the link: each step's own rule above; a NaN the largest, as argmax)
+        first = top.argmax(0)                                   # (rib, 5)
+        ribs, comps = self._rib_comp
+        best = top[first, ribs, comps]
+        held = (best, at[first, ribs, comps], t[first])
+        self._held = held if self._held is None else merged_peaks(self._held, held)
         better = best > self._peaks
         if not better.any():
             return
-        first = top.argmax(0)
         self._peaks = np.where(better, best, self._peaks)
         for j in np.nonzero(better.any(0))[0]:
             name = STRESS_NAMES[j]
@@ -169,9 +201,8 @@ class Record3D:
             lst = list(self.peak_where[name])
             for r in np.nonzero(better[:, j])[0]:
                 step = first[r, j]
-                i = point[step, r, j]
-                lst[r] = (BODIES[int(i >= self._leaf_points)], float(self._x_of[i]),
-                          float(t[step]))
+                body, x = at[step, r, j]
+                lst[r] = (BODIES[int(body)], float(x), float(t[step]))
             self.peak_where[name] = lst
 
     def _crests(self, t, stress, rate, locked: bool) -> np.ndarray:
@@ -179,7 +210,7 @@ class Record3D:
         Return each step's largest |stress| of every component and von Mises, per point.
 
         stress, rate: (step, rib, 4, point), the components and their rates at the steps'
-        ends (stresses are linear in the elastic coordinates: their rates are those of the
+        ends (the model's stress_rate_blocks: for the linear beams, the stresses of the
         elastic velocities).  Over a step from the previous one, the crest of the cubic
         Hermite interpolant of the ends' values and rates (outputs.hermite_peak, the planar
         model's rule: a crest between two steps counts where the step resolves it), of each
@@ -187,22 +218,15 @@ class Record3D:
         y|)^2 + 3 shear^2) with its rate; the end's own value for the first step of a run,
         and for a step across the lock, whose velocity jumps.  Returns (step, rib, 5, point).
         """
-        def combined(s, r):
-            total = np.abs(s[:, :, 0]) + np.abs(s[:, :, 1]) + np.abs(s[:, :, 2])
-            vm = np.sqrt(total * total + 3.0 * s[:, :, 3] * s[:, :, 3])
-            growth = (np.sign(s[:, :, 0]) * r[:, :, 0] + np.sign(s[:, :, 1]) * r[:, :, 1]
-                      + np.sign(s[:, :, 2]) * r[:, :, 2])
-            with np.errstate(divide='ignore', invalid='ignore'):
-                vm_rate = np.where(vm > 0.0, (total * growth + 3.0 * s[:, :, 3] * r[:, :, 3])
-                                   / vm, 0.0)
-            return vm, vm_rate
-
-        vm, vm_rate = combined(stress, rate)
-        # every channel (the four components, signed, and von Mises): (step, rib, 5, point)
-        values = np.concatenate([stress, vm[:, :, None]], 2)
-        rates = np.concatenate([rate, vm_rate[:, :, None]], 2)
+        values, rates = _channels(stress, rate)
         end = np.abs(values)
         last = self._last_stress
+        if last is not None and len(last) == 5 and last[3] == locked:   # (compiled rows)
+            q, v = last[1][None], last[2][None]
+            st_values, st_rates = _channels(
+                np.concatenate(self.model.stress_blocks(q), -1),
+                np.concatenate(self.model.stress_rate_blocks(q, v), -1))
+            last = (last[0], st_values[0], st_rates[0], last[3])
         self._last_stress = (float(t[-1]), values[-1], rates[-1], locked)
         first = 0
         if last is None or last[3] != locked:    # (a run's first step, or across the lock)
@@ -221,11 +245,18 @@ class Record3D:
         return {name: np.concatenate(values) for name, values in self.rows.items()}
 
     def take(self) -> dict:
-        """Return the rows added since the last take as arrays (``arrays``), and drop them."""
+        """
+        Return the rows added since the last take as arrays (``arrays``), and drop them.
+
+        ``taken_peaks`` is then their peaks: each rib's largest of every stress channel, the
+        first step holding it (value and where, (ribs, 5) and (ribs, 5, 2), and when, s;
+        None: no steps), driven3d.RibPeaks.of_rows' of the rows.
+        """
         # (one block of steps: its own arrays, which nothing else holds)
         out = {name: values[0] if len(values) == 1 else np.concatenate(values)
                for name, values in self.rows.items()}
         self.rows = {}
+        self.taken_peaks, self._held = self._held, None
         return out
 
     def row(self, s, locked: bool, force: float, lock_loss: float, totals) -> dict:
@@ -246,14 +277,16 @@ class Record3D:
         Return the run's figures: lock time, each rib's deployment, spread, peaks, balance.
 
         A rib's deployment instant is when its leaf angle first reaches its deployed angle
-        (linear between steps); the lag is the latest rib's after the earliest.  The energy
+        (linear between steps; the lock's instant where it does so in the lock's step:
+        first_reach); the lag is the latest rib's after the earliest.  The energy
         balance residual is max |T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss|.
         """
         m = self.model
         a = self.arrays()
         t = a['time']
         alpha = a['alpha1']
-        deployed = np.array([first_reach(t, alpha[:, k] - m.alpha_deployed[k])
+        lock = self.lock_events[0][0] if self.lock_events else None
+        deployed = np.array([first_reach(t, alpha[:, k] - m.alpha_deployed[k], lock=lock)
                              for k in range(m.n_ribs)])
         energy = a['kinetic_energy'] + a['strain_energy']
         balance = energy_balance3d(a, energy[0])
@@ -278,12 +311,54 @@ class Record3D:
         return out
 
 
-def first_reach(t: np.ndarray, gap: np.ndarray, before: tuple | None = None) -> float:
+def _channels(stress, rate):
+    """
+    Return every stress channel's values and rates: the four components, then von Mises.
+
+    stress, rate: (step, rib, 4, point); returns two (step, rib, 5, point): the combined
+    figure sqrt((|axial| + |bending z| + |bending y|)^2 + 3 shear^2) and its rate.
+    """
+    s, r = stress, rate
+    total = np.abs(s[:, :, 0]) + np.abs(s[:, :, 1]) + np.abs(s[:, :, 2])
+    vm = np.sqrt(total * total + 3.0 * s[:, :, 3] * s[:, :, 3])
+    growth = (np.sign(s[:, :, 0]) * r[:, :, 0] + np.sign(s[:, :, 1]) * r[:, :, 1]
+              + np.sign(s[:, :, 2]) * r[:, :, 2])
+    with np.errstate(divide='ignore', invalid='ignore'):
+        vm_rate = np.where(vm > 0.0, (total * growth + 3.0 * s[:, :, 3] * r[:, :, 3]) / vm, 0.0)
+    return (np.concatenate([stress, vm[:, :, None]], 2),
+            np.concatenate([rate, vm_rate[:, :, None]], 2))
+
+
+def merged_peaks(held: tuple, new: tuple) -> tuple:
+    """
+    Return two runs of steps' peaks (value, at, when) as those of both, held's before new's.
+
+    Rib by rib and channel by channel the first of the largest (argmax's rule over the steps
+    of both: held's on a tie, a NaN the largest).
+    """
+    value, at, when = held
+    better = (new[0] > value) | (np.isnan(new[0]) & ~np.isnan(value))
+    return (np.where(better, new[0], value), np.where(better[..., None], new[1], at),
+            np.where(better, new[2], when))
+
+
+#: how far (s) a lock instant may lie past the sample it is recorded at (integer ns)
+LOCK_INSTANT_TOLERANCE = 1e-9
+
+
+def first_reach(t: np.ndarray, gap: np.ndarray, before: tuple | None = None,
+                lock: float | None = None) -> float:
     """
     Return when gap first reaches 0 from above (linear between steps); nan if it does not.
 
     A rib's deployment instant (gap: its leaf angle less its deployed angle); t[0] if it
     starts there.  before: (t, gap) of the step before t[0], for a record taken in parts.
+    lock: the lock's instant, if the run locked: a rib whose leaf reaches its deployed angle
+    in the step (or between the samples) the lock falls in deploys at the lock, the lock's
+    own instant.  The sleeve at the stop is every rib at its deployed angle, but for the
+    rib's elastic deformation (its leaf angle 7e-6 rad past it at the lock, V0 = -0.5,
+    identical ribs): a line between the steps around the lock, across which the velocity
+    jumps, put it 3.4 us before the lock at a 0.2 ms step (5.6 us with a rubbing hinge).
     """
     hit = np.nonzero(gap <= 0.0)[0]
     if len(hit) == 0:
@@ -295,6 +370,8 @@ def first_reach(t: np.ndarray, gap: np.ndarray, before: tuple | None = None) -> 
         t0, g0 = before
     else:
         t0, g0 = t[i - 1], gap[i - 1]
+    if lock is not None and t0 < lock <= t[i] + LOCK_INSTANT_TOLERANCE:
+        return float(lock)
     return float(t0 + (t[i] - t0) * g0 / (g0 - gap[i]))
 
 

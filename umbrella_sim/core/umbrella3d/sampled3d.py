@@ -17,7 +17,8 @@ The umbrella's per-rib summary figures of samples (publications) instead of ever
 
 Summary3D's definitions (driven3d) applied to the instants a recording or a live subscriber
 has: each rib's deployment instant where its leaf angle first reaches its deployed angle,
-linear between samples (outputs3d.first_reach), the lag and the latest rib
+linear between samples, the lock's instant between the samples the lock falls in
+(outputs3d.first_reach), the lag and the latest rib
 (outputs3d.deployment_spread), the largest out-of-plane tip (outputs3d.
 largest_out_of_plane_tip) and each rib's largest in-plane one, each stress component's peak
 (StepBlock3D.peaks: the first sample holding the largest).  The keys and shapes are
@@ -37,14 +38,16 @@ from .outputs3d import (BODIES, deployment_spread, first_reach, largest_out_of_p
 
 def sampled_figures(alpha_deployed, t: np.ndarray, alpha1: np.ndarray, tip_t: np.ndarray,
                     tip: np.ndarray, stress_t: np.ndarray, stress: dict,
-                    von_mises_at: np.ndarray | None = None) -> dict:
+                    von_mises_at: np.ndarray | None = None,
+                    lock_time: float | None = None) -> dict:
     """
     Return Summary3D's per-rib figures of samples (SI units; lists per rib, rib 0 first).
 
     alpha_deployed: each rib's deployed leaf angle (the model's); t, alpha1 (T, ribs): the
     leaf angles' samples; tip_t, tip (T', ribs, 3): the tips' (u, v, w); stress_t, stress
     {component: (T'', ribs)}: each rib's held peak of every component (outputs3d.
-    STRESS_NAMES), von_mises_at (T'', ribs, 2) where (body code, x) if known.  Returns
+    STRESS_NAMES), von_mises_at (T'', ribs, 2) where (body code, x) if known, lock_time
+    the lock's instant (None: the run did not lock, or it is not known).  Returns
     rib_deploy_time, deployment_lag, latest_rib, max_out_of_plane_tip (_rib, _time),
     max_in_plane_tip and peak_stress {component: {value, body, x, time}} (body and x None
     where the samples do not say).
@@ -56,7 +59,7 @@ def sampled_figures(alpha_deployed, t: np.ndarray, alpha1: np.ndarray, tip_t: np
     if alpha1.shape[1:] != (ribs,) or tip.shape[1:] != (ribs, 3):
         raise ValueError(f'samples of {alpha1.shape[1:]} / {tip.shape[1:]} ribs for a model '
                          f'of {ribs}')
-    deployed = [first_reach(np.asarray(t), alpha1[:, k] - alpha_deployed[k])
+    deployed = [first_reach(np.asarray(t), alpha1[:, k] - alpha_deployed[k], lock=lock_time)
                 for k in range(ribs)]
     w, w_rib, w_time = largest_out_of_plane_tip(np.asarray(tip_t), tip)
     rows = {'time': np.asarray(stress_t, dtype=float)}

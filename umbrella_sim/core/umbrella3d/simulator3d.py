@@ -16,10 +16,11 @@
 The umbrella's run: time grid, sleeve force, the stop and lock, stuck hinges, the base.
 
 ``UmbrellaSimulator3D`` steps on the planar simulator's grid t_k = k h (h: the planar rule for
-the mesh, ``step_rule.physics_step_of``, with the stage-2 mode fit where it applies: the hub
-fixed and ``phase_correction`` on, each rib's locked modes fitted from the lock on
-(integrator3d.MidpointUmbrella.fit_stage2_modes); else the rule without it; unless the
-planar record sets ``time_step``) and
+the mesh, ``step_rule.physics_step_of``, with the stage-2 mode fit where it applies:
+``phase_correction`` on, on every base, the locked modes fitted from the lock on
+(integrator3d.MidpointUmbrella.fit_stage2_modes: each rib's in the hub's frame with the hub
+fixed or driven, the free system's with a free bus: stage2fit.py); else the rule without
+it; unless the planar record sets ``time_step``) and
 applies the lock as it does: when the sleeve passes the stop inside a step the step is taken
 again from its start with the length root-found by the Illinois method (|dt| < 1e-12 s), the
 lock is applied there (plastic: the velocity projected onto the locked joints in the mass
@@ -73,7 +74,7 @@ class UmbrellaSimulator3D:
                  carry_steps: int | None = None):
         self.params = params.validated()
         self.model = m = umbrella_model(self.params)
-        #: stage 2's mode fit: the planar rule's, rib by rib, with the hub fixed
+        #: stage 2's mode fit (the planar rule's: stage2fit.py for each base)
         self.mode_fit = self.fits_modes(self.params)
         self.h = self.grid_step(self.params) if step is None else step
         self.integrator = MidpointUmbrella(
@@ -99,12 +100,16 @@ class UmbrellaSimulator3D:
     @staticmethod
     def fits_modes(params: UmbrellaRibsParams) -> bool:
         """
-        Say whether stage 2 takes the planar mode fit: phase_correction, the hub fixed.
+        Say whether stage 2 takes the planar mode fit: phase_correction, on every base.
 
-        Not with flexible-nonlinear (as the planar model: step_rule.py says why).
+        A driven hub's ribs have the fixed hub's locked modes in the hub's frame, and a free
+        bus's system has the same count of them resolved at the planar rule's step (6 ribs,
+        1 element, bus 5 to 100 kg: 84 of 90 at 0.1 ms either way; the free system's modes
+        that couple to the bus are a few % stiffer), so the step follows the mode fit there
+        as with the hub fixed.  Not with flexible-nonlinear (as the planar model: step_rule.py
+        says why).
         """
-        return (params.planar.phase_correction and params.base == 'fixed'
-                and params.planar.model == 'flexible')
+        return params.planar.phase_correction and params.planar.model == 'flexible'
 
     @classmethod
     def grid_step(cls, params: UmbrellaRibsParams) -> float:
@@ -212,7 +217,7 @@ class UmbrellaSimulator3D:
             s_hit, work_hit = self._find_lock(s0, t_next - s0.t)
             before = self.energy(s_hit)
             s_locked = self._lock(s_hit)
-            self.integrator.lock_at()
+            self.integrator.lock_at(s_locked)
             rec = self.record
             self.lock_state = (s_locked, work_hit, (rec.work, rec.friction, rec.drive))
             after = self.energy(s_locked)
@@ -249,7 +254,7 @@ class UmbrellaSimulator3D:
                 continue
             status, done, rows, state = compiled.advance(
                 self.state, self.k, self.h, min(target - self.k, ADVANCE_BLOCK), self.force,
-                self.locked)
+                self.locked, self.record.crest_continues(self.locked))
             if done:
                 self.state = state
                 self.k += done
