@@ -463,8 +463,11 @@ the moving bases took before gave 4.07 / 2.46 mm (2.38) and 0.1 ms unfitted 7.4 
 (5.22) (tests/test_umbrella3d_base_fit.py, slow).
 
 The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
-recording and tools for N ribs (the ROS side still runs the planar model), the geometrically
-exact beam option.
+recording and tools for N ribs (the ROS side still runs the planar model). The geometrically
+exact option, `model: flexible-nonlinear` (each rib's beams co-rotational: the planar
+element in the rib's plane, out-of-plane bending and torsion small rotations in its
+co-rotated frame; compiled, _kernel3d_nonlinear.h), is
+docs/umbrella3d_nonlinear.md.
 """
 
 

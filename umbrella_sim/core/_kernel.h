@@ -233,6 +233,15 @@ typedef struct {
     double hub_radius, total_mass;                   /* m; kg: ribs, sleeve and bus */
     const double *bus_inertia;                       /* 3 x 3 (kg m^2, bus frame) */
     const double *rib_frames;                        /* n_ribs x 3 x 3: psi (rib -> bus) */
+    /* model flexible-nonlinear (umbrella3d/corotational3d.py; _kernel3d_nonlinear.h): the
+     * elements a rib (0: the linear beams), each's 12 coordinates' places in the rib's
+     * (n_rib: a fixed one), and per rib and element its length and D (EA l_e, EI_z / l_e,
+     * EI_y / l_e, GJ / l_e); the leaf's and the link's slope at O''; the elastic LU's
+     * pattern (1 where an element block can reach) */
+    int nl_elements, nl_i_t1, nl_i_t2;
+    const int *nl_places;                            /* nl_elements x 12 */
+    const double *nl_length, *nl_stiffness;          /* n_ribs x nl_elements (x 4) */
+    const double *nl_pattern;                        /* n_ribs x n_rib x n_rib */
 } Model3D;
 
 /* umbrella3d_advance's arguments (kept by the caller, updated in place): the state (t, q, v,

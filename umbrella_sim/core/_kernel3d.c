@@ -35,6 +35,8 @@
  * the joint Jacobian's products run over its nonzeros (jrows).  Pivoting, summation order and
  * so round-off differ from the numpy reference's dense algebra.
  * The iteration matrix is kept across steps (kept_serves: the numpy reference's rule).
+ * Model flexible-nonlinear (the co-rotational ribs): _kernel3d_nonlinear.h, whose hooks
+ * here act under Model3D.nl_elements only.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -143,6 +145,8 @@ struct Ctx3D {
 static Base3D *base_new(Ctx3D *x);
 static void base_free(Base3D *B);
 static void figures_free(Figures3D *f);
+
+#include "_kernel3d_nonlinear.h"   /* the co-rotational ribs (hooks: nl_elements) */
 
 /* ------------------------------------------------------------------ context */
 static void body_of(Body *b, int t, int ne, int np, int off, const double *x, const double *w,
@@ -460,8 +464,9 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(fitc, 2 * n);
 #undef ALLOC
     if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
-    ok = ok && elastic_lu(&x->b[0], m->const_mass, m->stiffness, R, n)
-        && elastic_lu(&x->b[1], m->const_mass, m->stiffness, R, n);
+    const double *pattern = m->nl_elements ? m->nl_pattern : m->stiffness;
+    ok = ok && elastic_lu(&x->b[0], m->const_mass, pattern, R, n)
+        && elastic_lu(&x->b[1], m->const_mass, pattern, R, n);
     ok = ok && rows_of(x, m->const_mass, 1, &x->mrows) && rows_of(x, m->stiffness, 0, &x->krows)
         && jacobian_rows(x);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
@@ -765,6 +770,7 @@ static void constraints(const Ctx3D *x, const double *q, const double *stuck, in
         f[6] = qr[m->i_rz] + qr[m->i_wh];
         f[7] = qr[m->i_ry] + r3 * s2 - q[x->R * n];
         f[8] = isnan(stuck[r]) ? 0.0 : a1 - stuck[r];
+        if (m->nl_elements) nl_hinge_rows(m, qr, f, NULL, n);
     }
     phi[x->R * ROWS] = locked ? q[x->R * n] - m->y_stop : 0.0;
 }
@@ -798,6 +804,7 @@ static void jacobian(const Ctx3D *x, const double *q, const double *stuck, doubl
         JS(7, m->i_ry, 1.0); JS(7, m->i_a2, r3 * c2); JS(7, m->i_uh, s2);
         JS(8, m->i_a1, stuck_on(stuck[r]));
 #undef JS
+        if (m->nl_elements) nl_hinge_rows(m, qr, NULL, j, n);
     }
 }
 
@@ -1030,6 +1037,7 @@ static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double 
 
 /* ------------------------------------------------------------------ the step */
 static double strain_energy(Ctx3D *x, const double *q) {
+    if (x->m->nl_elements) return nl_energy(x, q);
     int n = x->n;
     double e = 0.0;
     for (int r = 0; r < x->R; r++) {
@@ -1159,12 +1167,14 @@ static void iteration_blocks(Ctx3D *x, const double *q, const double *stuck, dou
     for (int r = 0; r < R; r++) {
         double *G = x->gyro + (size_t)r * n * n;
         const double *K = m->stiffness + (size_t)r * n * n;
+        double ck = m->nl_elements ? 0.0 : 0.25 * h * h;
         for (int j = 0; j < 2; j++) {
             const Body *b = &x->b[j];
             for (int a = b->off; a < b->off + b->nb; a++)
                 for (int c = b->off; c < b->off + b->nb; c++)
-                    G[a * n + c] = 0.25 * h * h * K[a * n + c] + 0.5 * h * G[a * n + c];
+                    G[a * n + c] = ck * K[a * n + c] + 0.5 * h * G[a * n + c];
         }
+        if (m->nl_elements) nl_block(x, r, x->q0 + r * n, q + r * n, 0.5 * h * h, G);
         G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
     }
 }
@@ -1278,7 +1288,9 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
                     flam += (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr * lam[i];
             }
             friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
-            rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
+            if (m->nl_elements) nl_force(x, r, q0 + r * n, q + r * n, x->ycol);
+            else rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n,
+                             x->ycol);
             for (int a = 0; a < n; a++) {
                 double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
@@ -1290,7 +1302,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         x->res[N] = x->p1[N] - p0[N] - h * (x->gt[N] - force + cons_s);
         if (!factored) {
             iteration_blocks(x, q, stuck, h);
-            if (iteration_elastic(x, h) != OK
+            if ((m->nl_elements ? nl_iteration_elastic(x) : iteration_elastic(x, h)) != OK
                 || arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
                 return SINGULAR;
             ff = fresh;

@@ -709,7 +709,9 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
                     flam += (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr * lam[i];
             }
             friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
-            rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n, x->ycol);
+            if (m->nl_elements) nl_force(x, r, q0 + r * n, q + r * n, x->ycol);
+            else rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n,
+                             x->ycol);
             for (int a = 0; a < n; a++) {
                 double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
@@ -723,7 +725,7 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
                 - h * (x->gt[N + i] + (i == 0 ? -force : 0.0) + cons_s[i]);
         if (!factored) {
             iteration_blocks(x, q, stuck, h);
-            if (iteration_elastic(x, h) != OK
+            if ((m->nl_elements ? nl_iteration_elastic(x) : iteration_elastic(x, h)) != OK
                 || base_arrow_factor(x, fresh, x->gyro, x->jm, x->jr, stuck, locked, -1.0) != OK)
                 return SINGULAR;
             ff = fresh;

@@ -239,7 +239,10 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'beams (co-rotational Euler–Bernoulli elements in the floating frames: large '
        'rotations, small strains, thesis §7.2; a fibre may turn up to 90° from its body '
        'frame, the run stops there and warns past 80°; compiled, 1.3–2× the cost of a '
-       'flexible step; docs/validation_nonlinear.md); '
+       "flexible step; docs/validation_nonlinear.md; with `ribs` ≥ 2 every rib's beams "
+       "co-rotational in the rib's plane with out-of-plane bending and torsion as small "
+       'rotations in the co-rotated frame, warned past 0.1 rad, compiled, '
+       "2.3–3.5× the linear ribs' cost: docs/umbrella3d_nonlinear.md); "
        'rigid-fe: Case 3 (elastic coordinates constrained); rigid: closed-form two-angle '
        'model', choices=MODELS),
     _P('elements_per_segment', int, 1, '-',

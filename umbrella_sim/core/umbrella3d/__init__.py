@@ -19,6 +19,9 @@ The whole umbrella in 3D: N flexible ribs around one sleeve (the planar model's 
                   sleeve, the base, and each rib's own values (lists or rib<k>.<name>)
     beam3d        the 3D Euler-Bernoulli body in its floating frame (axial, two bendings,
                   St-Venant torsion)
+    corotational3d  model flexible-nonlinear: each rib's beams co-rotational (the planar
+                  element in the rib's plane, out-of-plane bending and torsion small in its
+                  co-rotated frame); compiled: _kernel3d_nonlinear.h
     model3d       UmbrellaModel3D: layout, mass, gradients, joints of every rib and the bus
     arrow         block-arrow linear algebra (cost linear in the number of ribs)
     state3d       State3D, StepWork: the umbrella's state and what a step did

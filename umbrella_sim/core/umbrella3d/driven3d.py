@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .corotational3d import out_of_plane_warnings
 from .outputs3d import (BODIES, deployment_spread, energy_balance3d, first_reach,
                         largest_out_of_plane_tip, STRESS_NAMES)
 from .params3d import UmbrellaRibsParams
@@ -409,25 +410,36 @@ class Summary3D:
             out['error'] = self.error
         return out
 
+    def _geometry(self):
+        """Return the co-rotational ribs' largest section slope and out-of-plane rotation."""
+        m = self.sim.model
+        return (getattr(m, 'max_section_slope', None), getattr(m, 'max_out_of_plane', None))
+
     def warnings(self) -> list[str]:
         """
         Return the validity warnings: summary's one rule, on the worst rib's figures.
 
         'coarse step' judges the planar rib's mesh at the umbrella's step and its largest
         in-plane tip deflection (summary.mesh_resolution): the umbrella's stage 2 stays on
-        its grid step, so past the modes' coupling it names the step a run should give.
+        its grid step, so past the modes' coupling it names the step a run should give.  The
+        co-rotational ribs' 'fibre rotation' and 'out-of-plane rotation' from their largest
+        section slope and out-of-plane rotation (_geometry).
         """
         locked = self.lock is not None
+        slope, out_of_plane = self._geometry()
         return validity_warnings(self._planar, self.lock_kind,
                                  float(self._peaks['von_mises'][0].max()),
                                  float(self._in_plane.max()), locked=locked,
                                  energy_drift=self.energy_drift,
                                  stage2_resolution=(mesh_resolution(self._planar, self.sim.h)
-                                                    if locked else None))
+                                                    if locked else None),
+                                 section_slope=slope
+                                 ) + out_of_plane_warnings(self._planar, out_of_plane)
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
         # the warnings depend on the run only through these
         return self._said.new((self._peaks['von_mises'][0].max(), self._in_plane.max(),
-                               self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT),
+                               self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
+                               *self._geometry()),
                               self.warnings)

@@ -284,7 +284,7 @@ class MidpointUmbrella:
         j_rr, j_rs, j_ss, active = m.constraint_jacobian(s.qr, s.stuck, locked)
         jac = (j_rr, j_rs, j_ss)
         f = arrow.factor(*self._blocks(mass, jac, jac, s.stuck, active))
-        q_rib = m.rib_quadratic_forces(kin, s.vr) - np.einsum('rij,rj->ri', m.stiffness, s.qr)
+        q_rib = m.rib_quadratic_forces(kin, s.vr) - m.elastic_force(s.qr)
         q_sh = np.zeros(m.n_shared)
         q_sh[0] = -force
         bias_r = m.constraint_bias(s.qr, s.vr)
@@ -385,7 +385,7 @@ class MidpointUmbrella:
             jg_rr = jm_rr + np.where(ddr[:, None, None] > 0.0, np.einsum(
                 'ri,rj->rij', (phi_r - phi_r0 - lin) / safe[:, None], dqr), 0.0)
             torque, slope = self.friction(dqr[:, m.i_a1], h)
-            applied_r = -np.einsum('rij,rj->ri', m.stiffness, qmr)
+            applied_r = -m.elastic_step_force(qr0, qr, qmr)
             applied_r[:, m.i_a1] += torque
             applied_s = np.zeros(ns)
             applied_s[0] = -force
@@ -397,7 +397,7 @@ class MidpointUmbrella:
             if factored is None:
                 j_r = m.constraint_jacobian(qr, stuck, locked)
                 gyro = m.gyroscopic(kinm, dqr / h)
-                extra = 0.25 * h * h * m.stiffness + 0.5 * h * gyro
+                extra = m.elastic_step_matrix(qr0, qr, h) + 0.5 * h * gyro
                 extra[:, m.i_a1, m.i_a1] -= 0.5 * h * h * slope
                 factored = arrow.factor(*self._blocks(
                     mass1, (jm_rr, jm_rs, jm_ss), j_r[:3], stuck, active, extra))

@@ -115,6 +115,16 @@ class CompiledStep3D:
             regularisation=m.params.hinge_regularisation, carry_steps=carry_steps,
             hub_radius=m.hub_radius, total_mass=m.total_mass,
             **{k: _ptr(v) for k, v in self._arrays.items()})
+        law = model.compiled_law()
+        if law is not None:      # the co-rotational ribs (_kernel3d_nonlinear.h)
+            self._law = {k: np.ascontiguousarray(v, dtype=np.intc if k == 'nl_places' else float)
+                         for k, v in law.items() if isinstance(v, np.ndarray)}
+            for k, v in law.items():
+                if isinstance(v, np.ndarray):
+                    v = self._law[k]
+                    v = v.ctypes.data_as(ctypes.POINTER(ctypes.c_int)) if k == 'nl_places' \
+                        else _ptr(v)
+                setattr(self.struct, k, v)
         ctx = lib.umbrella3d_new(ctypes.byref(self.struct))
         if not ctx:
             raise MemoryError('the compiled 3D step could not be set up: out of memory')
@@ -158,6 +168,8 @@ class CompiledStep3D:
     def _set_stress(self) -> bool:
         """Hand the stress recovery to the library (umbrella3d_set_stress); True if taken."""
         m = self.model
+        if m.compiled_law() is not None:   # (the co-rotational ribs': Record3D's, numpy)
+            return False
         blocks = []
         for bodies in (m.leaf_bodies, m.link_bodies):       # (model3d.stress_blocks' rows)
             blocks.append(np.ascontiguousarray(np.stack([np.stack([

@@ -197,6 +197,8 @@ class UmbrellaModel3D:
         n = p.planar.elements_per_segment
         self.elements = n
         leaves, links, tips = [], [], []
+        #: each rib's section constants (BeamBody3D's section dict)
+        self.sections = []
         for rib in ribs:
             q = rib.planar
             area, inertia, e_mod = q.cross_section_area, q.cross_section_inertia, q.youngs_modulus
@@ -205,6 +207,7 @@ class UmbrellaModel3D:
                        'ea': e_mod * area, 'ei_z': e_mod * inertia, 'ei_y': e_mod * inertia,
                        'gj': shear * rib.torsion_j, 'youngs': e_mod, 'shear': shear,
                        'fibre': q.fibre_distance, 'torsion_fibre': rib.torsion_fibre}
+            self.sections.append(section)
             leaf = BeamBody3D('leaf', [(q.l1, n), (q.l2, n)],
                               [(0, 'u'), (0, 'v'), (0, 'w'), (0, 'slope'), (0, 'twist'),
                                (n, 'v')], section)
@@ -408,6 +411,26 @@ class UmbrellaModel3D:
     def strain_energy_per_rib(self, qr) -> np.ndarray:
         return 0.5 * np.einsum('ri,rij,rj->r', qr, self.stiffness, qr)
 
+    # the elastic law's pieces the step takes (corotational3d.py: the co-rotational beams')
+    def elastic_force(self, qr) -> np.ndarray:
+        """Return dU/dq of every rib (R, n): K q."""
+        return np.einsum('rij,rj->ri', self.stiffness, qr)
+
+    def elastic_step_force(self, qr0, qr1, qm) -> np.ndarray:
+        """Return the step's discrete gradient of U (R, n): K q_m (qm: the midpoint)."""
+        return np.einsum('rij,rj->ri', self.stiffness, qm)
+
+    def elastic_step_matrix(self, qr0, qr1, h: float) -> np.ndarray:
+        """Return the Newton matrix's elastic block h^2/2 dG/dq1 (R, n, n): h^2/4 K."""
+        return 0.25 * h * h * self.stiffness
+
+    def compiled_law(self):
+        """Return the compiled step's elastic law fields (Model3D.nl_*), None: the linear K."""
+        return None
+
+    def note_state(self, qr) -> None:
+        """Note a stepped state (a model's validity measures; the linear beams have none)."""
+
     # -------------------------------------------------------------- joints
     def sleeve_heights(self, qr) -> np.ndarray:
         """Return y_H of every rib's link end (R,)."""
@@ -572,6 +595,10 @@ class UmbrellaModel3D:
     def stress_components(self, qr):
         """Per body: (axial, bending z, bending y, torsion shear) (..., R, points) each, Pa."""
         return [tuple(b[..., i, :] for i in range(4)) for b in self.stress_blocks(qr)]
+
+    def stress_rate_blocks(self, qr, vr):
+        """Return d/dt of stress_blocks along vr (linear in q: stress_blocks of vr)."""
+        return self.stress_blocks(vr)
 
     def stress_blocks(self, qr):
         """Per body the four components of stress_components stacked: (..., R, 4, points), Pa."""

@@ -169,7 +169,8 @@ class Record3D:
         # argmax); every component at once, in STRESS_NAMES' order
         if figures is None:
             every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
-                                 np.concatenate(m.stress_blocks(st['vr']), -1), locked)
+                                 np.concatenate(m.stress_rate_blocks(qr, st['vr']), -1),
+                                 locked)
             top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
             at = np.empty(top.shape + (2,))
             at[..., 0] = point >= self._leaf_points                  # the body's code
@@ -209,7 +210,7 @@ class Record3D:
         Return each step's largest |stress| of every component and von Mises, per point.
 
         stress, rate: (step, rib, 4, point), the components and their rates at the steps'
-        ends (stresses are linear in the elastic coordinates: their rates are those of the
+        ends (the model's stress_rate_blocks: for the linear beams, the stresses of the
         elastic velocities).  Over a step from the previous one, the crest of the cubic
         Hermite interpolant of the ends' values and rates (outputs.hermite_peak, the planar
         model's rule: a crest between two steps counts where the step resolves it), of each
@@ -221,8 +222,10 @@ class Record3D:
         end = np.abs(values)
         last = self._last_stress
         if last is not None and len(last) == 5 and last[3] == locked:   # (compiled rows)
+            q, v = last[1][None], last[2][None]
             st_values, st_rates = _channels(
-                *(np.concatenate(self.model.stress_blocks(a[None]), -1) for a in last[1:3]))
+                np.concatenate(self.model.stress_blocks(q), -1),
+                np.concatenate(self.model.stress_rate_blocks(q, v), -1))
             last = (last[0], st_values[0], st_rates[0], last[3])
         self._last_stress = (float(t[-1]), values[-1], rates[-1], locked)
         first = 0

@@ -278,9 +278,10 @@ class UmbrellaRibsParams:
         self.planar.validated()
         for name, value in self.values.items():
             UMBRELLA_SPECS[name].check(value)
-        if self.planar.model != 'flexible':
+        if self.planar.model not in ('flexible', 'flexible-nonlinear'):
             raise ValueError(f'parameter model={self.planar.model!r}: the umbrella model is '
-                             'flexible (3D Euler-Bernoulli beams) only')
+                             'flexible (3D Euler-Bernoulli beams) or flexible-nonlinear '
+                             '(co-rotational beams) only')
         if self.planar.damping_ratio != 0.0:
             raise ValueError(f'parameter damping_ratio={self.planar.damping_ratio:g}: the '
                              "umbrella's 3D beams have no structural damping (only the "

@@ -31,10 +31,13 @@ energy lost), and the step is completed locked.  A stuck hinge (``stick_until`` 
 time has reached stick_until or its holding torque (the joint's multiplier) has reached
 stick_torque.  Every step's figures go to a ``Record3D`` (outputs3d.py).
 
-With the compiled step (``MidpointUmbrella.backend`` 'compiled': the library built),
-``advance`` and ``run`` take the grid steps in runs of up to ADVANCE_BLOCK steps a call
-(_kernel3d.c: the same steps and release; a run stops before the step that reaches the stop,
-which ``step`` then takes here, with the lock); ``step`` alone takes one step a call.
+The model is the parameters' (corotational3d.umbrella_model): the linear 3D beams, or with
+``model: flexible-nonlinear`` the co-rotational ribs (compiled: _kernel3d_nonlinear.h),
+which take no stage-2 mode fit.  With the compiled step
+(``MidpointUmbrella.backend`` 'compiled': the library built), ``advance`` and ``run`` take
+the grid steps in runs of up to ADVANCE_BLOCK steps a call (_kernel3d.c: the same steps and
+release; a run stops before the step that reaches the stop, which ``step`` then takes here,
+with the lock); ``step`` alone takes one step a call.
 """
 from __future__ import annotations
 
@@ -43,8 +46,9 @@ import math
 
 import numpy as np
 
+from .corotational3d import umbrella_model
 from .integrator3d import ConvergenceError3D, MidpointUmbrella, State3D
-from .model3d import ROW_STICK, UmbrellaModel3D
+from .model3d import ROW_STICK
 from .outputs3d import Record3D
 from .params3d import UmbrellaRibsParams
 from ..engines import event_root, EVENT_TIME_TOLERANCE
@@ -69,7 +73,7 @@ class UmbrellaSimulator3D:
                  tolerance: float | None = None, kernel: str | None = None,
                  carry_steps: int | None = None):
         self.params = params.validated()
-        self.model = m = UmbrellaModel3D(self.params)
+        self.model = m = umbrella_model(self.params)
         #: stage 2's mode fit (the planar rule's: stage2fit.py for each base)
         self.mode_fit = self.fits_modes(self.params)
         self.h = self.grid_step(self.params) if step is None else step
@@ -102,9 +106,10 @@ class UmbrellaSimulator3D:
         bus's system has the same count of them resolved at the planar rule's step (6 ribs,
         1 element, bus 5 to 100 kg: 84 of 90 at 0.1 ms either way; the free system's modes
         that couple to the bus are a few % stiffer), so the step follows the mode fit there
-        as with the hub fixed.
+        as with the hub fixed.  Not with flexible-nonlinear (as the planar model: step_rule.py
+        says why).
         """
-        return params.planar.phase_correction
+        return params.planar.phase_correction and params.planar.model == 'flexible'
 
     @classmethod
     def grid_step(cls, params: UmbrellaRibsParams) -> float:
@@ -192,7 +197,9 @@ class UmbrellaSimulator3D:
 
     def _step(self, s, h, locked):
         try:
-            return self.integrator.step(s, h, self.force, locked)
+            out = self.integrator.step(s, h, self.force, locked)
+            self.model.note_state(out[0].qr)
+            return out
         except (ConvergenceError3D, np.linalg.LinAlgError) as exc:
             raise SimulationFailed(f'step after t = {s.t:.9g} s failed: {exc}') from None
 
@@ -254,6 +261,7 @@ class UmbrellaSimulator3D:
                 self.integrator.iterations += int(rows['iterations'].sum())
                 self.integrator.factorisations += int(rows['factorisations'].sum())
                 self.record.add_steps(rows, self.locked, self.force, self.lock_loss)
+                self.model.note_state(rows['qr'])
             if status == STATUS['crossing']:
                 self.step()                     # the lock, here
                 if stop_at_lock:
