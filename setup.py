@@ -90,6 +90,8 @@ setup(
                            depends=['umbrella_sim/core/_kernel.h',
                                     'umbrella_sim/core/_kernel_elastic.h',
                                     'umbrella_sim/core/_kernel_dense.h',
+                                    'umbrella_sim/core/_kernel_crest.h',
+                                    'umbrella_sim/core/_kernel3d_nonlinear.h',
                                     'umbrella_sim/core/_kernel3d_base.h',
                                     'umbrella_sim/core/_kernel3d_figures.h'],
                            extra_compile_args=['-O3', '-std=c99', '-fvisibility=hidden'],

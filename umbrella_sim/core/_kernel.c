@@ -51,6 +51,7 @@
 #include "_kernel.h"          /* the interface: structs, codes, fields, API */
 #include "_kernel_elastic.h"   /* the nonlinear / damped elastic law (_kernel_nonlinear.c) */
 #include "_kernel_dense.h"     /* the dense LU it shares with the 3D step (_kernel3d.c) */
+#include "_kernel_crest.h"     /* a step's stress crest, the 3D figures' rule too */
 
 #define JW 3   /* nonzeros of a joint/stop constraint row */
 
@@ -1525,30 +1526,10 @@ static void fibre_stress_and_rate(Ctx *x, const double *q, const double *v, doub
     }
 }
 
-#define RESOLVED_CREST 1.0   /* outputs.RESOLVED_CREST */
-
-/* The largest |p| on [0, 1] of the cubic p with p(0) = s0, p(1) = s1, p'(0) = d0, p'(1) = d1
- * (a fibre's stress over a step: values and rates times the step at its ends), a crest
- * inside counted where |p''| <= RESOLVED_CREST |p| (outputs.hermite_peak, the same
- * arithmetic) */
+/* The largest |p| on [0, 1] of a fibre's stress cubic over a step (hermite_crest from the
+ * larger |end value|: outputs.hermite_peak, the same arithmetic) */
 static double hermite_peak(double s0, double d0, double s1, double d1) {
-    double best = fabs(s0) > fabs(s1) ? fabs(s0) : fabs(s1);
-    double a = 3.0 * (s1 - s0) - 2.0 * d0 - d1, b = 2.0 * (s0 - s1) + d0 + d1;
-    /* p(t) = s0 + t (d0 + t (a + t b)); p'(t) = 3 b t^2 + 2 a t + d0 = 0 */
-    double qa = 3.0 * b, qb = 2.0 * a, disc = qb * qb - 4.0 * qa * d0;
-    if (!(disc >= 0.0)) return best;
-    double r = -0.5 * (qb + copysign(sqrt(disc), qb)), roots[2];
-    int nr = 0;
-    if (r != 0.0) roots[nr++] = d0 / r;
-    if (qa != 0.0) roots[nr++] = r / qa;
-    for (int i = 0; i < nr; i++) {
-        double t = roots[i];
-        if (t > 0.0 && t < 1.0) {
-            double val = fabs(s0 + t * (d0 + t * (a + t * b)));
-            if (fabs(2.0 * a + 6.0 * b * t) <= RESOLVED_CREST * val && val > best) best = val;
-        }
-    }
-    return best;
+    return hermite_crest(s0, d0, s1, d1, fabs(s0) > fabs(s1) ? fabs(s0) : fabs(s1));
 }
 
 /* A state's own peak stress of each body (leaf, its x, link, its x into peaks): the largest

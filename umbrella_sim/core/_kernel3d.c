@@ -44,6 +44,7 @@
 
 #include "_kernel.h"
 #include "_kernel_dense.h"
+#include "_kernel_crest.h"    /* a step's stress crest (outputs.hermite_peak) */
 
 #define ROWS 9         /* joint rows of a rib (model3d.N_RIB_ROWS) */
 #define ROW_STICK 8    /* the stuck hinge's row */

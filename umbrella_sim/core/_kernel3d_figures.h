@@ -31,7 +31,6 @@
 
 #define FIG_CHANNELS 5         /* outputs3d.STRESS_NAMES */
 #define FIG_HERMITE_RATE_BOUND (4.0 / 27.0)   /* outputs.HERMITE_RATE_BOUND */
-#define FIG_RESOLVED_CREST 1.0                /* outputs.RESOLVED_CREST */
 
 struct Figures3D {
     int pl, pk, P;                     /* stress points of the leaf, the link, a rib's */
@@ -139,25 +138,6 @@ static void figure_channels(const Ctx3D *x, const Figures3D *f, const double *q,
     }
 }
 
-/* outputs._hermite_crest of one point (best: its larger |end value|) */
-static double fig_crest(double s0, double d0, double s1, double d1, double best) {
-    double a = 3.0 * (s1 - s0) - 2.0 * d0 - d1, b = 2.0 * (s0 - s1) + d0 + d1;
-    double qa = 3.0 * b, qb = 2.0 * a, disc = qb * qb - 4.0 * qa * d0;
-    if (!(disc >= 0.0)) return best;
-    double r = -0.5 * (qb + copysign(sqrt(disc), qb)), roots[2];
-    int nr = 0;
-    if (r != 0.0) roots[nr++] = d0 / r;
-    if (qa != 0.0) roots[nr++] = r / qa;
-    for (int i = 0; i < nr; i++) {
-        double t = roots[i];
-        if (t > 0.0 && t < 1.0) {
-            double val = fabs(s0 + t * (d0 + t * (a + t * b)));
-            if (fabs(2.0 * a + 6.0 * b * t) <= FIG_RESOLVED_CREST * val && val > best) best = val;
-        }
-    }
-    return best;
-}
-
 /* max(|s0|, |s1|), NaN if either is (np.maximum) */
 static double fig_ends(double s0, double s1) {
     double e0 = fabs(s0), e1 = fabs(s1);
@@ -193,7 +173,7 @@ static void figure_row(Ctx3D *x, const Advance3DCall *a, double h, double *o) {
                     double s0 = v0[k0 + p], e = fig_ends(s0, s1);
                     double d0 = h * r0[k0 + p], d1 = h * r1[k0 + p];
                     double reach = e + FIG_HERMITE_RATE_BOUND * (fabs(d0) + fabs(d1));
-                    value = !nan_row && reach > row_end ? fig_crest(s0, d0, s1, d1, e) : e;
+                    value = !nan_row && reach > row_end ? hermite_crest(s0, d0, s1, d1, e) : e;
                 }
                 /* the first of the largest; a NaN the largest (np.argmax) */
                 if (!found || isnan(value) || value > best) {

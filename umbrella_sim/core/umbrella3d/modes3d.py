@@ -67,12 +67,7 @@ def locked_modes(model: UmbrellaModel3D):
     nr, n, ns = m.n_ribs, m.n_rib, m.n_shared
     stuck = np.full(nr, np.nan)
     j_rr, j_rs, j_ss, _ = m.constraint_jacobian(qr, stuck, True)
-    rows = []
-    for k in range(nr):
-        r = np.zeros((j_rr.shape[1] - 1, nr * n + ns))
-        r[:, k * n:(k + 1) * n] = j_rr[k, :-1]
-        r[:, nr * n:] = j_rs[k, :-1]
-        rows.append(r)
+    rows = _joint_rows(m, j_rr, j_rs)
     fixed = np.zeros((ns, nr * n + ns))
     fixed[:, nr * n:] = np.eye(ns)          # the sleeve at the stop, the bus held
     z = null_space(np.vstack(rows + [fixed]))
@@ -133,12 +128,7 @@ def free_locked_modes(model: UmbrellaModel3D, attitude=None):
     stiff = dense(m, m.stiffness)
     nr, n, ns = m.n_ribs, m.n_rib, m.n_shared
     j_rr, j_rs, _, _ = m.constraint_jacobian(qr, np.full(nr, np.nan), True)
-    rows = []
-    for k in range(nr):
-        r = np.zeros((j_rr.shape[1] - 1, nr * n + ns))
-        r[:, k * n:(k + 1) * n] = j_rr[k, :-1]
-        r[:, nr * n:] = j_rs[k, :-1]
-        rows.append(r)
+    rows = _joint_rows(m, j_rr, j_rs)
     stop = np.zeros((1, nr * n + ns))
     stop[0, nr * n] = 1.0
     momenta = mass[nr * n + 1:]            # e_b^T M of the bus's six coordinates
@@ -164,3 +154,15 @@ def _shares(m: UmbrellaModel3D, stiff, x):
         xs = np.where(sel, x, 0.0)
         parts.append(float(xs @ stiff @ xs / total) if total > 0 else 0.0)
     return (1.0 - parts[0] - parts[1], parts[0], parts[1])
+
+
+def _joint_rows(m, j_rr: np.ndarray, j_rs: np.ndarray) -> list[np.ndarray]:
+    """Return each rib's locked joint rows over every coordinate (the sleeve's row left out)."""
+    nr, n, ns = m.n_ribs, m.n_rib, m.n_shared
+    rows = []
+    for k in range(nr):
+        r = np.zeros((j_rr.shape[1] - 1, nr * n + ns))
+        r[:, k * n:(k + 1) * n] = j_rr[k, :-1]
+        r[:, nr * n:] = j_rs[k, :-1]
+        rows.append(r)
+    return rows
