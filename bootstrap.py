@@ -91,7 +91,7 @@ def main(argv) -> int:
         cmd = [PY, '-m', 'pytest', '-q', os.path.join(ROOT, 'tests'),
                os.path.join(ROOT, 'examples')] + argv[1:]
         if not argv[1:]:
-            print('the whole suite: ~9 min on a quiet 2-core machine; the fast subset (no ROS '
+            print('the whole suite: ~10 min on a quiet 2-core machine; the fast subset (no ROS '
                   'node, nothing slow): python3 bootstrap.py test -m "not ros and not slow"',
                   flush=True)
     else:

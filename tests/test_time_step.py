@@ -187,6 +187,7 @@ def test_the_mesh_step_meets_every_target_where_the_fixed_step_misses_one(n_el, 
 
 @pytest.mark.parametrize('n_el, v0, lock', [(1, -0.2, 'energy'), (1, -0.2, 'plastic'),
                                             (2, -0.5, 'energy')])
+@pytest.mark.slow       # (a step study: 0.5 s of stage 2 against a fine run, ~2 s a case)
 def test_the_mode_fit_keeps_the_tip_series_at_the_chosen_step(n_el, v0, lock):
     """
     Check what stage 2's mode fit does at the step chosen for the mesh.
@@ -210,6 +211,7 @@ def test_the_mode_fit_keeps_the_tip_series_at_the_chosen_step(n_el, v0, lock):
     assert fitted['stage2_tip_series_m'] < 0.5 * plain['stage2_tip_series_m']
 
 
+@pytest.mark.slow       # (a step study against a fine run, ~2 s)
 def test_the_fitted_stage2_is_exact_in_the_linear_range():
     """
     Check the whole fitted stage 2 at 0.1 ms against a converged run, in the linear range.
