@@ -1088,6 +1088,49 @@ typedef struct { int r; const double *u, *phi, *sc, *shrink; int whole; } Fit3D;
 
 enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
 
+/* acc = out^T diag(factor) in v over L coordinates: the mode fit's correction of v for the
+ * map `kind` (fit_map), the r modes' rows in (projection) and out (shapes) L apart, their
+ * scales sc and Newton shrinks shrink; c: r doubles of scratch.  Each sum in order: four
+ * modes' (then four rows') sums at once. */
+static void modal_correction(const double *in, const double *out, const double *sc,
+                             const double *shrink, int r, int L, int kind, const double *v,
+                             double *c, double *acc) {
+    int j = 0;
+    for (; j + 4 <= r; j += 4) {
+        const double *i0 = in + (size_t)j * L, *i1 = i0 + L, *i2 = i1 + L, *i3 = i2 + L;
+        double d0 = 0.0, d1 = 0.0, d2 = 0.0, d3 = 0.0;
+        for (int a = 0; a < L; a++) {
+            d0 += i0[a] * v[a]; d1 += i1[a] * v[a];
+            d2 += i2[a] * v[a]; d3 += i3[a] * v[a];
+        }
+        c[j] = d0; c[j + 1] = d1; c[j + 2] = d2; c[j + 3] = d3;
+    }
+    for (; j < r; j++) {
+        double d = 0.0;
+        for (int a = 0; a < L; a++) d += in[(size_t)j * L + a] * v[a];
+        c[j] = d;
+    }
+    for (j = 0; j < r; j++) {
+        double s = sc[j];
+        c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -shrink[j] : s - 1.0;
+    }
+    int a = 0;
+    for (; a + 4 <= L; a += 4) {
+        double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+        for (j = 0; j < r; j++) {
+            const double *o = out + (size_t)j * L + a;
+            double cj = c[j];
+            s0 += o[0] * cj; s1 += o[1] * cj; s2 += o[2] * cj; s3 += o[3] * cj;
+        }
+        acc[a] = s0; acc[a + 1] = s1; acc[a + 2] = s2; acc[a + 3] = s3;
+    }
+    for (; a < L; a++) {
+        double sa = 0.0;
+        for (j = 0; j < r; j++) sa += out[(size_t)j * L + a] * c[j];
+        acc[a] = sa;
+    }
+}
+
 /* v (the rib coordinates, R x n) mapped in place, rib by rib, as LockedModeFit's maps:
  * to_scheme v + Phi diag(1/s - 1) U^T v, to_physical v + Phi diag(s - 1) U^T v, transpose
  * v + U diag(s - 1) Phi^T v, newton_update v - Phi diag(shrink) U^T v; a rib's block of v at
@@ -1097,44 +1140,11 @@ static void fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *v, int str
     double *c = x->fitc, *acc = x->fitc + n;
     for (int k = 0; k < x->R; k++) {
         double *vk = v + (size_t)k * stride;
-        const double *in = (kind == TRANSPOSE ? f->phi : f->u) + (size_t)k * r * n;
-        const double *out = (kind == TRANSPOSE ? f->u : f->phi) + (size_t)k * r * n;
-        int j = 0;
-        for (; j + 4 <= r; j += 4) {          /* four modes' sums at once, each in order */
-            const double *i0 = in + j * n, *i1 = i0 + n, *i2 = i1 + n, *i3 = i2 + n;
-            double d0 = 0.0, d1 = 0.0, d2 = 0.0, d3 = 0.0;
-            for (int a = 0; a < n; a++) {
-                d0 += i0[a] * vk[a]; d1 += i1[a] * vk[a];
-                d2 += i2[a] * vk[a]; d3 += i3[a] * vk[a];
-            }
-            c[j] = d0; c[j + 1] = d1; c[j + 2] = d2; c[j + 3] = d3;
-        }
-        for (; j < r; j++) {
-            double d = 0.0;
-            for (int a = 0; a < n; a++) d += in[j * n + a] * vk[a];
-            c[j] = d;
-        }
-        for (j = 0; j < r; j++) {
-            double s = f->sc[k * r + j];
-            c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -f->shrink[k * r + j]
-                : s - 1.0;
-        }
-        int a = 0;
-        for (; a + 4 <= n; a += 4) {          /* four rows' sums at once, each in j's order */
-            double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-            for (j = 0; j < r; j++) {
-                const double *o = out + j * n + a;
-                double cj = c[j];
-                s0 += o[0] * cj; s1 += o[1] * cj; s2 += o[2] * cj; s3 += o[3] * cj;
-            }
-            acc[a] = s0; acc[a + 1] = s1; acc[a + 2] = s2; acc[a + 3] = s3;
-        }
-        for (; a < n; a++) {
-            double sa = 0.0;
-            for (j = 0; j < r; j++) sa += out[j * n + a] * c[j];
-            acc[a] = sa;
-        }
-        for (a = 0; a < n; a++) vk[a] += acc[a];
+        size_t rib = (size_t)k * r;
+        modal_correction((kind == TRANSPOSE ? f->phi : f->u) + rib * n,
+                         (kind == TRANSPOSE ? f->u : f->phi) + rib * n, f->sc + rib,
+                         f->shrink + rib, r, n, kind, vk, c, acc);
+        for (int a = 0; a < n; a++) vk[a] += acc[a];
     }
 }
 

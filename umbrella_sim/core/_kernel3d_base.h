@@ -590,37 +590,12 @@ static void base_fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *vr, i
         return;
     }
     const Base3D *B = x->base;
-    int R = x->R, n = x->n, N = R * n, L = N + x->ns, r = f->r;
-    double *g = B->fitv, *c = B->fitc, *acc = B->fita;
+    int R = x->R, n = x->n, N = R * n;
+    double *g = B->fitv, *acc = B->fita;
     for (int k = 0; k < R; k++) memcpy(g + k * n, vr + (size_t)k * stride, sizeof(double) * n);
     memcpy(g + N, vs, sizeof(double) * x->ns);
-    const double *in = kind == TRANSPOSE ? f->phi : f->u;
-    const double *out = kind == TRANSPOSE ? f->u : f->phi;
-    int j = 0;
-    for (; j + 4 <= r; j += 4) {              /* four modes' sums at once, each in order */
-        const double *i0 = in + (size_t)j * L, *i1 = i0 + L, *i2 = i1 + L, *i3 = i2 + L;
-        double d0 = 0.0, d1 = 0.0, d2 = 0.0, d3 = 0.0;
-        for (int a = 0; a < L; a++) {
-            d0 += i0[a] * g[a]; d1 += i1[a] * g[a];
-            d2 += i2[a] * g[a]; d3 += i3[a] * g[a];
-        }
-        c[j] = d0; c[j + 1] = d1; c[j + 2] = d2; c[j + 3] = d3;
-    }
-    for (; j < r; j++) {
-        double d = 0.0;
-        for (int a = 0; a < L; a++) d += in[(size_t)j * L + a] * g[a];
-        c[j] = d;
-    }
-    for (j = 0; j < r; j++) {
-        double s = f->sc[j];
-        c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -f->shrink[j] : s - 1.0;
-    }
-    memset(acc, 0, sizeof(double) * L);
-    for (j = 0; j < r; j++) {                 /* the rows' sums, each in j's order */
-        const double *o = out + (size_t)j * L;
-        double cj = c[j];
-        for (int a = 0; a < L; a++) acc[a] += o[a] * cj;
-    }
+    modal_correction(kind == TRANSPOSE ? f->phi : f->u, kind == TRANSPOSE ? f->u : f->phi,
+                     f->sc, f->shrink, f->r, N + x->ns, kind, g, B->fitc, acc);
     for (int k = 0; k < R; k++)
         for (int a = 0; a < n; a++) vr[(size_t)k * stride + a] += acc[k * n + a];
     for (int i = 0; i < x->ns; i++) vs[i] += acc[N + i];
