@@ -332,22 +332,6 @@ int lu_factor_from(int N, int k0, double *A, int *piv) {
     return OK;
 }
 
-/* b = A^-1 b with lu_factor's A and piv (each row's latest unknown last, as band_solve) */
-void lu_solve(int N, const double *A, const int *piv, double *b) {
-    for (int k = 0; k < N; k++)
-        if (piv[k] != k) { double t = b[k]; b[k] = b[piv[k]]; b[piv[k]] = t; }
-    for (int i = 0; i < N; i++) {
-        double acc = b[i];
-        for (int j = 0; j < i; j++) acc -= A[i * N + j] * b[j];
-        b[i] = acc;
-    }
-    for (int i = N - 1; i >= 0; i--) {
-        double acc = b[i];
-        for (int j = N - 1; j > i; j--) acc -= A[i * N + j] * b[j];
-        b[i] = acc * A[i * N + i];
-    }
-}
-
 /* X = A^-1 X for nrhs right-hand sides stored row-major (n x nrhs) */
 static void band_solve_multi(int n, int bw, const double *A, double *X, int nrhs) {
     int w = 2 * bw + 1;

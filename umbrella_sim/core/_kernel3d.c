@@ -868,22 +868,6 @@ static void lu_solve_rows(int N, const double *A, const int *piv, double *X) {
     }
 }
 
-/* lu_solve of the ROWS x ROWS T (the same operations, in the same order; ROWS a constant) */
-static void lu_solve_rows9(const double *A, const int *piv, double *b) {
-    for (int k = 0; k < ROWS; k++)
-        if (piv[k] != k) { double t = b[k]; b[k] = b[piv[k]]; b[piv[k]] = t; }
-    for (int i = 0; i < ROWS; i++) {
-        double acc = b[i];
-        for (int j = 0; j < i; j++) acc -= A[i * ROWS + j] * b[j];
-        b[i] = acc;
-    }
-    for (int i = ROWS - 1; i >= 0; i--) {
-        double acc = b[i];
-        for (int j = ROWS - 1; j > i; j--) acc -= A[i * ROWS + j] * b[j];
-        b[i] = acc * A[i * ROWS + i];
-    }
-}
-
 /* rib r's block, factored (arrow_factor), solved for v (mb) in place:
  * x = A^-1 v_top, lambda = T^-1 (v_bottom - Jr x), x -= W lambda (top_zero: v_top = 0, so
  * x = 0 and Jr x = 0: the bodies' solves left out) */
@@ -912,7 +896,7 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_z
         for (int k = jp->ptr[i]; k < jp->ptr[i + 1]; k++) acc += J[i * n + jp->col[k]] * v[jp->col[k]];
         v[n + i] -= acc;
     }
-    lu_solve_rows9(f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
+    lu_solve(ROWS, f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
     const double *lam = v + n;
     for (int a = 0; a < n; a++) {              /* W lambda: a row's sum, in i's order */
         const double *Wa = W + a * ROWS;

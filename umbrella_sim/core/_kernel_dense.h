@@ -28,7 +28,22 @@ int lu_factor_from(int N, int k0, double *A, int *piv);
 /* one elimination step: rows i0.. of A lose column k by pivot row k (inv: 1 / its pivot),
  * their factors stored in column k */
 void lu_eliminate(int N, double *A, int k, int i0, double inv);
-/* b = A^-1 b with lu_factor's A and piv. */
-void lu_solve(int N, const double *A, const int *piv, double *b);
+/* b = A^-1 b with lu_factor's A and piv (each row's latest unknown last, as band_solve);
+ * inline, so a call with a constant N (the 3D step's ROWS x ROWS joint blocks) is compiled
+ * for that size */
+static inline void lu_solve(int N, const double *A, const int *piv, double *b) {
+    for (int k = 0; k < N; k++)
+        if (piv[k] != k) { double t = b[k]; b[k] = b[piv[k]]; b[piv[k]] = t; }
+    for (int i = 0; i < N; i++) {
+        double acc = b[i];
+        for (int j = 0; j < i; j++) acc -= A[i * N + j] * b[j];
+        b[i] = acc;
+    }
+    for (int i = N - 1; i >= 0; i--) {
+        double acc = b[i];
+        for (int j = N - 1; j > i; j--) acc -= A[i * N + j] * b[j];
+        b[i] = acc * A[i * N + i];
+    }
+}
 
 #endif
