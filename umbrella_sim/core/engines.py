@@ -76,6 +76,8 @@ class Engine(abc.ABC):
     """
 
     lock_kind: str
+    #: physics steps a stage-2 grid step takes (an engine whose lock may need more sets it)
+    stage2_substeps = 1
 
     @property
     @abc.abstractmethod
@@ -170,8 +172,7 @@ class FiniteElementEngine(Engine):
         self.integrator.tolerance = newton_tolerance(self.h)
         if params.phase_correction and self.phase_correctable:   # LockedModeFit
             self.integrator.fit_stage2_modes(self.h)
-        #: physics steps a stage-2 grid step takes (from the lock on: step_rule.follows_lock)
-        self.stage2_substeps = 1
+        self.stage2_substeps = 1       # (until the lock: step_rule.follows_lock)
         self._follows_lock = follows_lock(params)
         self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
                     for stage in Stage}

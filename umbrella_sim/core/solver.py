@@ -134,7 +134,7 @@ class UmbrellaSimulator:
     @property
     def stage2_substeps(self) -> int:
         """Return the physics steps a stage-2 grid step takes (1 until a lock needs more)."""
-        return getattr(self.engine, 'stage2_substeps', 1)
+        return self.engine.stage2_substeps
 
     def _substeps(self, stage: Stage) -> int:
         return self.stage2_substeps if stage == LOCKED else 1
