@@ -307,6 +307,10 @@ def _ros_literal(value) -> str:
 
 
 # ------------------------------------------------------------------- probe
+#: the depth of a probe's keep-last readers, at least: 10 s of a 100 Hz topic
+PROBE_DEPTH = 1000
+
+
 class Probe:
     """The test's own rclpy node (its own context) spinning in a background thread."""
 
@@ -343,9 +347,24 @@ class Probe:
                 raise
 
     def subscribe(self, topic: str, msg_type, qos=10):
-        """Keep every message on topic with its arrival time (time.monotonic())."""
+        """
+        Keep every message on topic with its arrival time (time.monotonic()).
+
+        Its keep-last reader is PROBE_DEPTH deep at least, whatever the publisher's depth
+        (10 for the node's joint_states): a probe that fell behind on a loaded machine lost
+        states, and the test API's matching of joint_states to sleeve_force/applied failed.
+        """
         if topic in self.received:
             return
+        from rclpy.qos import HistoryPolicy, QoSProfile
+
+        from ..ros.messages import own_qos
+
+        if isinstance(qos, int):
+            qos = QoSProfile(depth=max(qos, PROBE_DEPTH))
+        elif qos.history == HistoryPolicy.KEEP_LAST and qos.depth < PROBE_DEPTH:
+            qos = own_qos(qos)
+            qos.depth = PROBE_DEPTH
         self.received[topic] = []
 
         def cb(msg, topic=topic):
