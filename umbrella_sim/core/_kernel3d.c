@@ -68,6 +68,7 @@ typedef struct {
                                         * M + h^2/4 K (constant for a step length: elu_h) */
     Rows lpat[2], upat[2];             /* the nonzeros of elu's, elu_it's rows: L (columns
                                         * below the diagonal), U (above) (elastic_rows) */
+    Rows lcol[2];                      /* lpat's by column: the rows below the diagonal */
 } Body;
 
 /* The inertia invariants of a body (the floating frame's: Shabana's S-bar, I-bar), per rib,
@@ -241,7 +242,9 @@ void umbrella3d_free(Ctx3D *x) {
         kin_free(&x->km[j]);
         free(x->b[j].inv);
         free(x->b[j].elu); free(x->b[j].elu_it);
-        for (int k = 0; k < 2; k++) { rows_free(&x->b[j].lpat[k]); rows_free(&x->b[j].upat[k]); }
+        for (int k = 0; k < 2; k++) {
+            rows_free(&x->b[j].lpat[k]); rows_free(&x->b[j].upat[k]); rows_free(&x->b[j].lcol[k]);
+        }
         rows_free(&x->b[j].c_rows); rows_free(&x->b[j].d_rows); rows_free(&x->b[j].d_cols);
     }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
@@ -280,6 +283,20 @@ static int rows_alloc(Rows *p, int ne) {
     p->ptr = malloc(sizeof(int) * (ne + 1));
     p->col = malloc(sizeof(int) * (ne * ne > 0 ? ne * ne : 1));
     return p->ptr && p->col;
+}
+
+/* lo's nonzeros column by column (rows ascending): cols */
+static int columns_of(const Rows *lo, int ne, Rows *cols) {
+    if (!rows_alloc(cols, ne)) return 0;
+    int k = 0;
+    for (int c = 0; c < ne; c++) {
+        cols->ptr[c] = k;
+        for (int a = c + 1; a < ne; a++)
+            for (int i = lo->ptr[a]; i < lo->ptr[a + 1]; i++)
+                if (lo->col[i] == c) cols->col[k++] = a;
+    }
+    cols->ptr[ne] = k;
+    return 1;
 }
 
 /* the nonzeros an LU without pivoting of any M0 + c K can have (the elastic blocks' union
@@ -340,7 +357,9 @@ static int elastic_lu(Body *b, const double *M0, const double *K, int R, int n) 
     for (int k = 0; k < 2; k++)
         if (!rows_alloc(&b->lpat[k], b->ne) || !rows_alloc(&b->upat[k], b->ne)) return 0;
     return elastic_lu_of(b, M0, NULL, 0.0, R, n, b->elu, &b->lpat[0], &b->upat[0])
-        && elastic_pattern(b, M0, K, R, n, &b->lpat[1], &b->upat[1]);
+        && elastic_pattern(b, M0, K, R, n, &b->lpat[1], &b->upat[1])
+        && columns_of(&b->lpat[0], b->ne, &b->lcol[0])
+        && columns_of(&b->lpat[1], b->ne, &b->lcol[1]);
 }
 
 /* Body.elu_it at the step length h: the elastic block of the iteration matrix M + h^2/4 K
@@ -410,22 +429,34 @@ static void ef_solve(const Body *b, const Rows *lo, const Rows *up, const double
 static int elastic_first(const Body *b, int i) { return i < b->ne ? b->t + 1 + i : i - b->ne; }
 
 /* lu_factor of body j's block A (nb x nb, elastic-first order) whose elastic rows and columns
- * are a constant elastic block, its LU E (b->elu's or b->elu_it's rib r: copied, not
- * recomputed): the frame rows eliminated through E, then the frame block's Schur complement
- * with pivoting */
-static int factor_elastic_first(const Body *b, const double *elu, int r, double *A, int *piv) {
+ * are a constant elastic block, its LU E (b->elu's or b->elu_it's rib r, kind 0 or 1: copied,
+ * not recomputed): the frame rows eliminated through E, then the frame block's Schur
+ * complement with pivoting.  lu_eliminate's operations over E's nonzeros (lcol, upat: an
+ * entry left out would lose f * 0) */
+static int factor_elastic_first(const Body *b, const double *elu, int kind, int r, double *A,
+                                int *piv) {
     int nb = b->nb, ne = b->ne;
     const double *E = elu + (size_t)r * ne * ne;
+    const Rows *lc = &b->lcol[kind], *up = &b->upat[kind];
     for (int a = 0; a < ne; a++) memcpy(A + a * nb, E + a * ne, sizeof(double) * ne);
     for (int k = 0; k < ne; k++) {
         piv[k] = k;
         double inv = A[k * nb + k];
-        for (int i = k + 1; i < ne; i++) {      /* E's rows: its factors, the frame columns */
-            double f = A[i * nb + k];
+        const double *Ak = A + k * nb;
+        for (int l = lc->ptr[k]; l < lc->ptr[k + 1]; l++) {   /* E's rows: its factors, */
+            double *Ai = A + lc->col[l] * nb;                    /* the frame columns */
+            double f = Ai[k];
             if (f != 0.0)
-                for (int j = ne; j < nb; j++) A[i * nb + j] -= f * A[k * nb + j];
+                for (int j = ne; j < nb; j++) Ai[j] -= f * Ak[j];
         }
-        lu_eliminate(nb, A, k, ne, inv);        /* the frame rows */
+        for (int i = ne; i < nb; i++) {         /* the frame rows (lu_eliminate's) */
+            double *Ai = A + i * nb;
+            double f = Ai[k] * inv;
+            Ai[k] = f;
+            if (f == 0.0) continue;
+            for (int l = up->ptr[k]; l < up->ptr[k + 1]; l++) Ai[up->col[l]] -= f * Ak[up->col[l]];
+            for (int j = ne; j < nb; j++) Ai[j] -= f * Ak[j];
+        }
     }
     return lu_factor_from(nb, ne, A, piv);
 }
@@ -929,18 +960,19 @@ static int rib_factor(Ctx3D *x, Fact *f, int r, const double *extra, const doubl
                 double Y[nb * ROWS];
                 int kind = f->elastic_first - 1, map[nb];
                 for (int a = 0; a < nb; a++) map[a] = o + elastic_first(b, a);
-                for (int a = 0; a < nb; a++) {
+                for (int a = 0; a < nb; a++) {   /* (the elastic block: E's, below) */
                     const double *Ma = M + (size_t)map[a] * n;
                     double *Aa = A + a * nb;
+                    int c0 = a < b->ne ? b->ne : 0;
                     if (Ex) {
                         const double *Ea = Ex + (size_t)map[a] * n;
-                        for (int c = 0; c < nb; c++) Aa[c] = Ma[map[c]] + Ea[map[c]];
+                        for (int c = c0; c < nb; c++) Aa[c] = Ma[map[c]] + Ea[map[c]];
                     } else {
-                        for (int c = 0; c < nb; c++) Aa[c] = Ma[map[c]] + 0.0;
+                        for (int c = c0; c < nb; c++) Aa[c] = Ma[map[c]] + 0.0;
                     }
                     memcpy(Y + a * ROWS, W + map[a] * ROWS, sizeof(double) * ROWS);
                 }
-                if (factor_elastic_first(b, kind ? b->elu_it : b->elu, r, A, piv) != OK)
+                if (factor_elastic_first(b, kind ? b->elu_it : b->elu, kind, r, A, piv) != OK)
                     return SINGULAR;
                 ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, Y, ROWS);
                 for (int a = 0; a < nb; a++)
