@@ -22,7 +22,8 @@
  * h^2/4 K) and the elastic LU of the iteration matrix made at each factorisation
  * (nl_iteration_elastic), the strain energy (nl_energy), and the elastic LU's pattern
  * (Model3D.nl_pattern: the elements' full blocks); in _kernel3d_base.h's step (a moving
- * base) the elastic force and the elastic LU.
+ * base) the elastic force and the elastic LU; in _kernel3d_figures.h the stress figures'
+ * components (nl_stress_components, at the end).
  *
  * An element's z = (d_x, d_y, d_z, theta_a, theta_b, w'_a, w'_b, phi_a, phi_b) from its 12
  * coordinates (u, v, theta, w, slope, twist of node a, then b: NL_B, NL_A below), its strains
@@ -38,13 +39,19 @@ static int elastic_lu_of(const Body *b, const double *M0, const double *K, doubl
 
 static double nl_wrap(double a) { return a - 2.0 * NL_PI * floor((a + NL_PI) / (2.0 * NL_PI)); }
 
-/* the element e of a rib (coordinates qr): z, its length */
-static double nl_z(const Model3D *m, int r, int e, const double *qr, double *z) {
+/* z - (l_e, 0, ...) of the element e of a rib from its coordinates qr (of velocities vr:
+ * dz/dt) */
+static void nl_chord_part(const Model3D *m, int e, const double *qr, double *z) {
     const int *p = m->nl_places + e * 12;
     double xe[12];
     for (int i = 0; i < 12; i++) xe[i] = p[i] < m->n_rib ? qr[p[i]] : 0.0;
-    double le = m->nl_length[r * m->nl_elements + e];
     for (int k = 0; k < 9; k++) z[k] = xe[NL_B[k]] - (NL_A[k] >= 0 ? xe[NL_A[k]] : 0.0);
+}
+
+/* the element e of rib r (coordinates qr): z, its length */
+static double nl_z(const Model3D *m, int r, int e, const double *qr, double *z) {
+    double le = m->nl_length[r * m->nl_elements + e];
+    nl_chord_part(m, e, qr, z);
     z[0] += le;
     return le;
 }
@@ -325,5 +332,43 @@ static void nl_hinge_rows(const Model3D *m, const double *qr, double *f, double 
         j3[m->nl_i_t2] = d32 * g2; j4[m->nl_i_t2] = d42 * g2;
         j3[m->i_s2] = -c2; j4[m->i_s2] = -s2;
         j3[m->i_p2] = s2; j4[m->i_p2] = -c2;
+    }
+}
+
+/* ------------------------------------------------------------------ the stress figures
+ * Rib r's four stress components at both ends of every element (points 2e, 2e + 1: the
+ * leaf's elements, then the link's) and their rates, for _kernel3d_figures.h's channels
+ * (figure_channels: von Mises, crests and the largest are its rule, the linear beams'):
+ * corotational3d.RibCorotationalStrain.stress_blocks, the numpy reference, in the
+ * element's co-rotated frame from its strains s (nl_strains) and their rates ds/dz dz/dt:
+ * axial E eps, bending E c kappa of tb and of c (kappa = (-4 t_a - 2 t_b) / l_e at end a,
+ * (2 t_a + 4 t_b) / l_e at end b), torsion shear G c_t tau / l_e.  moduli: rib r's E, E c,
+ * G c_t; sv, sr: component k of point p at k P + p. */
+static void nl_components(const double *moduli, double le, const double *s, double *out,
+                          int P) {
+    double axial = moduli[0] * s[0], shear = moduli[2] * s[5] / le;
+    out[0] = out[1] = axial;
+    out[P] = moduli[1] * ((-4.0 * s[1] - 2.0 * s[2]) / le);
+    out[P + 1] = moduli[1] * ((2.0 * s[1] + 4.0 * s[2]) / le);
+    out[2 * P] = moduli[1] * ((-4.0 * s[3] - 2.0 * s[4]) / le);
+    out[2 * P + 1] = moduli[1] * ((2.0 * s[3] + 4.0 * s[4]) / le);
+    out[3 * P] = out[3 * P + 1] = shear;
+}
+
+static void nl_stress_components(const Model3D *m, int r, const double *qr, const double *vr,
+                                 const double *moduli, int P, double *sv, double *sr) {
+    for (int e = 0; e < m->nl_elements; e++) {
+        double z[9], dz[9], s[6], ds[6], J[54];
+        double le = nl_z(m, r, e, qr, z);
+        nl_strains(z, le, s);
+        nl_jacobian(z, le, s, J, NULL);
+        nl_chord_part(m, e, vr, dz);
+        for (int k = 0; k < 6; k++) {
+            double d = 0.0;
+            for (int i = 0; i < 9; i++) d += J[k * 9 + i] * dz[i];
+            ds[k] = d;
+        }
+        nl_components(moduli, le, s, sv + 2 * e, P);
+        nl_components(moduli, le, ds, sr + 2 * e, P);
     }
 }

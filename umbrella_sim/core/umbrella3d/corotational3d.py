@@ -77,7 +77,9 @@ its co-rotated frame: axial E eps, bending E c kappa (kappa = (-4 t_a - 2 t_b) /
 
 Compiled: _kernel3d_nonlinear.h does the same arithmetic element by element in the
 compiled step (hooks in _kernel3d.c and _kernel3d_base.h), which
-tests/test_umbrella3d_nonlinear.py holds equal to this numpy reference through the lock.
+tests/test_umbrella3d_nonlinear.py holds equal to this numpy reference through the lock;
+and the per-step stress figures (stress_blocks' components, _kernel3d_figures.h's crests and
+places), which the same tests hold equal to Record3D's numpy ones.
 No stage-2 mode fit, as the planar flexible-nonlinear model (step_rule.py).  Nothing here
 imports rclpy.
 """
