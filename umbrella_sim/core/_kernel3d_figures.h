@@ -139,13 +139,13 @@ static double fig_sign(double s) { return s > 0.0 ? 1.0 : s < 0.0 ? -1.0 : s; }
 /* the five channels of the state (q, v) at every point of every rib into val, rate
  * (R x 5 x P: channel-major per rib): the four components, then von Mises (Record3D's
  * combined) */
-static void figure_channels(const Ctx3D *x, const Figures3D *f, const double *q,
+static void figure_channels(Ctx3D *x, const Figures3D *f, const double *q,
                             const double *v, double *val, double *rate) {
     int R = x->R, n = x->n, P = f->P;
     for (int r = 0; r < R; r++) {
         double *sv = val + (size_t)r * FIG_CHANNELS * P, *sr = rate + (size_t)r * FIG_CHANNELS * P;
         if (f->moduli)         /* the co-rotational ribs' (_kernel3d_nonlinear.h) */
-            nl_stress_components(x->m, r, q + (size_t)r * n, v + (size_t)r * n,
+            nl_stress_components(x, r, q + (size_t)r * n, v + (size_t)r * n,
                                  f->moduli + 3 * r, P, sv, sr);
         for (int j = 0; !f->moduli && j < 2; j++) {
             const Body *b = &x->b[j];

@@ -70,12 +70,6 @@ static void nl_strains_from(const double *z, double le, const double *tb, double
     s[5] = z[8] - z[7];
 }
 
-static void nl_strains(const double *z, double le, double *s) {
-    double beta = atan2(z[1], z[0]), tb[2];
-    for (int k = 0; k < 2; k++) tb[k] = nl_wrap(asin(nl_sine(z, k)) - beta);
-    nl_strains_from(z, le, tb, s);
-}
-
 /* sigma = D s (D of rib r's element e: EA l, EI_z / l, EI_y / l, GJ / l) */
 static void nl_stress(const Model3D *m, int r, int e, const double *s, double *sig) {
     const double *k = m->nl_stiffness + ((size_t)r * m->nl_elements + e) * 4;
@@ -163,18 +157,87 @@ static void nl_gonzalez(int k, double *g, const double *dd, double df) {
         for (int i = 0; i < k; i++) g[i] += (df - gd) / d2 * dd[i];
 }
 
-/* s0 and s1 of a step z0 -> z1 (s1 from s0 and the accurate increments) */
-static void nl_step_strains(const double *z0, const double *z1, double le, double *s0,
-                            double *s1, double *dbeta, double *dpsi) {
-    nl_strains(z0, le, s0);
+/* ------------------------------------------------------------------ kept strains
+ * An element's strains at a configuration and what a step from there reads of them: z, s
+ * (beta = atan2(d_y, d_x), tb = wrap(asin(sin psi) - beta), nl_strains_from), sin psi at
+ * both ends and its cosine, |d|.  Computed once a configuration and
+ * kept for the two latest of each rib (a step's start and end: the Newton iterations'
+ * forces and blocks, the strain energy at both ends, the stress figures and the next step
+ * read them), the same arithmetic as computed where read. */
+typedef struct {
+    double z[9], s[6], g[2], cg[2], len, le;
+} NlStart;
+
+struct NlStarts {
+    double *key;                       /* R x 2 x n: the configuration a slot holds */
+    int *have;                         /* R x 2: the slot holds one */
+    int *latest;                       /* R: the slot last filled or read */
+    NlStart *el;                       /* R x 2 x nl_elements */
+};
+
+static void nl_starts_free(NlStarts *c) {
+    if (!c) return;
+    free(c->key); free(c->have); free(c->latest); free(c->el);
+    free(c);
+}
+
+static NlStarts *nl_starts_new(const Ctx3D *x) {
+    NlStarts *c = calloc(1, sizeof(NlStarts));
+    if (!c) return NULL;
+    int R = x->R, n = x->n, E = x->m->nl_elements;
+    c->key = calloc((size_t)R * 2 * n, sizeof(double));
+    c->have = calloc((size_t)R * 2, sizeof(int));
+    c->latest = calloc((size_t)R, sizeof(int));
+    c->el = calloc((size_t)R * 2 * E, sizeof(NlStart));
+    if (!c->key || !c->have || !c->latest || !c->el) { nl_starts_free(c); return NULL; }
+    return c;
+}
+
+/* the elements of rib r at its coordinates qr, kept or computed into the slot not read last */
+static const NlStart *nl_starts(Ctx3D *x, int r, const double *qr) {
+    const Model3D *m = x->m;
+    NlStarts *c = x->nl;
+    int n = x->n, E = m->nl_elements;
+    for (int k = 0; k < 2; k++) {
+        int slot = 2 * r + k;
+        if (c->have[slot] && !memcmp(c->key + (size_t)slot * n, qr, sizeof(double) * n)) {
+            c->latest[r] = k;
+            return c->el + (size_t)slot * E;
+        }
+    }
+    int k = 1 - c->latest[r], slot = 2 * r + k;
+    NlStart *out = c->el + (size_t)slot * E;
+    for (int e = 0; e < E; e++) {
+        NlStart *st = out + e;
+        double *z = st->z, tb[2];
+        st->le = nl_z(m, r, e, qr, z);
+        double beta = atan2(z[1], z[0]);
+        for (int j = 0; j < 2; j++) {
+            st->g[j] = nl_sine(z, j);
+            tb[j] = nl_wrap(asin(st->g[j]) - beta);
+            st->cg[j] = sqrt(1.0 - st->g[j] * st->g[j]);
+        }
+        nl_strains_from(z, st->le, tb, st->s);
+        st->len = sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2]);
+    }
+    memcpy(c->key + (size_t)slot * n, qr, sizeof(double) * n);
+    c->have[slot] = 1;
+    c->latest[r] = k;
+    return out;
+}
+
+/* s1 of a step from the kept start st to z1 (from s0 and the accurate increments) */
+static void nl_step_strains(const NlStart *st, const double *z1, double *s1, double *dbeta,
+                            double *dpsi) {
+    const double *z0 = st->z;
     *dbeta = atan2(z0[0] * z1[1] - z0[1] * z1[0], z0[0] * z1[0] + z0[1] * z1[1]);
     double tb[2];
     for (int k = 0; k < 2; k++) {
-        double g0 = nl_sine(z0, k), g1 = nl_sine(z1, k);
-        dpsi[k] = asin(g1 * sqrt(1.0 - g0 * g0) - g0 * sqrt(1.0 - g1 * g1));
-        tb[k] = s0[1 + k] + dpsi[k] - *dbeta;
+        double g1 = nl_sine(z1, k);
+        dpsi[k] = asin(g1 * st->cg[k] - st->g[k] * sqrt(1.0 - g1 * g1));
+        tb[k] = st->s[1 + k] + dpsi[k] - *dbeta;
     }
-    nl_strains_from(z1, le, tb, s1);
+    nl_strains_from(z1, st->le, tb, s1);
 }
 
 /* add T^T g (g: 9, d/dz) to an element's 12 coordinates' places in out (n: skipped) */
@@ -189,16 +252,18 @@ static void nl_scatter(const Model3D *m, int e, const double *g, double *out) {
 }
 
 /* rib r's discrete gradient of U over the step q0 -> q1 into out (n): dq . G = dU */
-static void nl_force(const Ctx3D *x, int r, const double *q0, const double *q1, double *out) {
+static void nl_force(Ctx3D *x, int r, const double *q0, const double *q1, double *out) {
     const Model3D *m = x->m;
     memset(out, 0, sizeof(double) * x->n);
+    const NlStart *start = nl_starts(x, r, q0);
     for (int e = 0; e < m->nl_elements; e++) {
-        double z0[9], z1[9], s0[6], s1[6], dbeta, dpsi[2], B[54], sig[6], sm[6], g[9];
-        double le = nl_z(m, r, e, q0, z0);
-        nl_z(m, r, e, q1, z1);
-        nl_step_strains(z0, z1, le, s0, s1, &dbeta, dpsi);
+        const NlStart *st = start + e;
+        const double *z0 = st->z, *s0 = st->s;
+        double z1[9], s1[6], dbeta, dpsi[2], B[54], sig[6], sm[6], g[9];
+        double le = nl_z(m, r, e, q1, z1);
+        nl_step_strains(st, z1, s1, &dbeta, dpsi);
         memset(B, 0, sizeof(B));
-        double l0 = sqrt(z0[0] * z0[0] + z0[1] * z0[1] + z0[2] * z0[2]);
+        double l0 = st->len;
         double l1 = sqrt(z1[0] * z1[0] + z1[1] * z1[1] + z1[2] * z1[2]);
         double dm[3], dd[3];
         for (int i = 0; i < 3; i++) { dm[i] = 0.5 * (z0[i] + z1[i]); dd[i] = z1[i] - z0[i]; }
@@ -234,16 +299,18 @@ static void nl_force(const Ctx3D *x, int r, const double *q0, const double *q1, 
 
 /* add c times the Newton matrix's dG/dq1 of rib r (1/2 [B^T D B + sum sigma_k H_k] at the
  * midpoint, sigma = D (s0 + s1) / 2) into G (n x n, row-major) */
-static void nl_block(const Ctx3D *x, int r, const double *q0, const double *q1, double c,
+static void nl_block(Ctx3D *x, int r, const double *q0, const double *q1, double c,
                      double *G) {
     const Model3D *m = x->m;
     int n = x->n;
+    const NlStart *start = nl_starts(x, r, q0);
     for (int e = 0; e < m->nl_elements; e++) {
-        double z0[9], z1[9], zm[9], s0[6], s1[6], sm[6], dbeta, dpsi[2], J[54], H[486];
+        const NlStart *st = start + e;
+        const double *z0 = st->z, *s0 = st->s;
+        double z1[9], zm[9], s1[6], sm[6], dbeta, dpsi[2], J[54], H[486];
         double sig[6], DJ[54], Z[81], A[144];
-        double le = nl_z(m, r, e, q0, z0);
-        nl_z(m, r, e, q1, z1);
-        nl_step_strains(z0, z1, le, s0, s1, &dbeta, dpsi);
+        double le = nl_z(m, r, e, q1, z1);
+        nl_step_strains(st, z1, s1, &dbeta, dpsi);
         for (int i = 0; i < 9; i++) zm[i] = 0.5 * (z0[i] + z1[i]);
         for (int i = 0; i < 6; i++) sm[i] = 0.5 * (s0[i] + s1[i]);
         nl_jacobian(zm, le, sm, J, H);
@@ -282,17 +349,18 @@ static void nl_block(const Ctx3D *x, int r, const double *q0, const double *q1, 
 }
 
 /* the strain energy of every rib at q */
-static double nl_energy(const Ctx3D *x, const double *q) {
+static double nl_energy(Ctx3D *x, const double *q) {
     const Model3D *m = x->m;
     double u = 0.0;
-    for (int r = 0; r < x->R; r++)
+    for (int r = 0; r < x->R; r++) {
+        const NlStart *start = nl_starts(x, r, q + (size_t)r * x->n);
         for (int e = 0; e < m->nl_elements; e++) {
-            double z[9], s[6], sig[6];
-            double le = nl_z(m, r, e, q + (size_t)r * x->n, z);
-            nl_strains(z, le, s);
+            const double *s = start[e].s;
+            double sig[6];
             nl_stress(m, r, e, s, sig);
             for (int k = 0; k < 6; k++) u += 0.5 * s[k] * sig[k];
         }
+    }
     return u;
 }
 
@@ -340,7 +408,7 @@ static void nl_hinge_rows(const Model3D *m, const double *qr, double *f, double 
  * leaf's elements, then the link's) and their rates, for _kernel3d_figures.h's channels
  * (figure_channels: von Mises, crests and the largest are its rule, the linear beams'):
  * corotational3d.RibCorotationalStrain.stress_blocks, the numpy reference, in the
- * element's co-rotated frame from its strains s (nl_strains) and their rates ds/dz dz/dt:
+ * element's co-rotated frame from its strains s (nl_starts) and their rates ds/dz dz/dt:
  * axial E eps, bending E c kappa of tb and of c (kappa = (-4 t_a - 2 t_b) / l_e at end a,
  * (2 t_a + 4 t_b) / l_e at end b), torsion shear G c_t tau / l_e.  moduli: rib r's E, E c,
  * G c_t; sv, sr: component k of point p at k P + p. */
@@ -355,12 +423,13 @@ static void nl_components(const double *moduli, double le, const double *s, doub
     out[3 * P] = out[3 * P + 1] = shear;
 }
 
-static void nl_stress_components(const Model3D *m, int r, const double *qr, const double *vr,
+static void nl_stress_components(Ctx3D *x, int r, const double *qr, const double *vr,
                                  const double *moduli, int P, double *sv, double *sr) {
+    const Model3D *m = x->m;
+    const NlStart *start = nl_starts(x, r, qr);
     for (int e = 0; e < m->nl_elements; e++) {
-        double z[9], dz[9], s[6], ds[6], J[54];
-        double le = nl_z(m, r, e, qr, z);
-        nl_strains(z, le, s);
+        const double *z = start[e].z, *s = start[e].s;
+        double le = start[e].le, dz[9], ds[6], J[54];
         nl_jacobian(z, le, s, J, NULL);
         nl_chord_part(m, e, vr, dz);
         for (int k = 0; k < 6; k++) {
