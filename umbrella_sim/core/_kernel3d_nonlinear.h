@@ -87,12 +87,14 @@ static void nl_eps_row(double *J, const double *s) {
         J[i] += dt0 * J[9 + i] + dt1 * J[18 + i] + dc0 * J[27 + i] + dc1 * J[36 + i];
 }
 
-/* psi's derivatives at end k: d/dtheta, d/dw', and the second ones (tt, tw, ww) */
-static void nl_section(const double *z, int k, double *d) {
+/* psi's derivatives at end k: d/dtheta, d/dw', and if second the second ones (tt, tw, ww) */
+static void nl_section(const double *z, int k, double *d, int second) {
     double th = z[3 + k], w = z[5 + k];
     double s = 1.0 / sqrt(1.0 - w * w), g = th * s, pg = 1.0 / sqrt(1.0 - g * g);
-    double gw = th * w * s * s * s, pgg = g * pg * pg * pg;
+    double gw = th * w * s * s * s;
     d[0] = pg * s; d[1] = pg * gw;
+    if (!second) return;
+    double pgg = g * pg * pg * pg;
     d[2] = pgg * s * s; d[3] = pgg * s * gw + pg * w * s * s * s;
     d[4] = pgg * gw * gw + pg * th * (s * s * s + 3.0 * w * w * s * s * s * s * s);
 }
@@ -104,7 +106,7 @@ static void nl_jacobian(const double *z, double le, const double *s, double *J, 
     double gb[2] = {-z[1] / r2, z[0] / r2};
     double gs[3] = {-z[2] * z[0] / l3, -z[2] * z[1] / l3, 1.0 / len - z[2] * z[2] / l3};
     double sec[2][5];
-    for (int k = 0; k < 2; k++) nl_section(z, k, sec[k]);
+    for (int k = 0; k < 2; k++) nl_section(z, k, sec[k], H != NULL);
     memset(J, 0, sizeof(double) * 54);
     for (int k = 0; k < 2; k++) {
         double *t = J + 9 * (1 + k), *c = J + 9 * (3 + k);
@@ -277,7 +279,7 @@ static void nl_force(Ctx3D *x, int r, const double *q0, const double *q1, double
         for (int i = 0; i < 9; i++) zm[i] = 0.5 * (z0[i] + z1[i]);
         for (int k = 0; k < 2; k++) {
             double sec[5];
-            nl_section(zm, k, sec);
+            nl_section(zm, k, sec, 0);
             double gp[2] = {sec[0], sec[1]}, dp[2] = {z1[3 + k] - z0[3 + k], z1[5 + k] - z0[5 + k]};
             nl_gonzalez(2, gp, dp, dpsi[k]);
             double *t = B + 9 * (1 + k), *c = B + 9 * (3 + k);
