@@ -25,10 +25,11 @@ compiled step (_kernel3d.c with _kernel3d_nonlinear.h, UmbrellaSimulator3D.advan
 steps in one call, their stress figures computed there, _kernel3d_figures.h) and the numpy
 reference (UmbrellaSimulator3D.step, Record3D's numpy figures); and the same runs of the
 linear model (flexible, no mode fit) beside them.  Prints the figures and the machine's
-load; no figure is asserted.  The co-rotational ribs' figures, once Record3D's numpy (45 of
-112 us a step at 6 x 1 in stage 1), computed in the library: compiled 6 x 1 112 -> 69 us a
-step in stage 1 and 131 -> 105 in stage 2, 6 x 2 191 -> 135 and 307 -> 243 (best of two,
-load 3.3-3.6; docs/umbrella3d_nonlinear.md).
+load; no figure is asserted.  The co-rotational ribs' stress figures, once Record3D's numpy
+(45 of 112 us a step at 6 x 1 in stage 1), computed in the library, their elements' strains
+kept from one iteration to the next: compiled 6 x 1 94 -> 59 us a step in stage 1 and 134 ->
+91 in stage 2, 6 x 2 193 -> 114 and 300 -> 214 (best of two, load 4.4-4.5;
+docs/umbrella3d_nonlinear.md).
 
     PYTHONPATH=. python bench/bench_umbrella3d_nonlinear.py [--steps 100] [--carry K]
         [--ribs 3 6] [--elements 1 2] [--paths compiled numpy]
