@@ -325,6 +325,7 @@ class Summary3D:
         self._deployed = np.array([first_reach(np.array([initial.time]),
                                                np.array([initial.alpha1[k] - m.alpha_deployed[k]]))
                                    for k in range(m.n_ribs)])
+        self._undeployed = bool(np.isnan(self._deployed).any())
         self._oop = largest_out_of_plane_tip(np.array([initial.time]), initial.tip[None])
         self._in_plane = np.abs(initial.tip[:, 1])
         self._peaks = RibPeaks.of_rows(
@@ -349,23 +350,24 @@ class Summary3D:
             self._start = deploy_start(0.0, zip([self.final_time, *t[:-1].tolist()],
                                                 rows['sleeve_force'].tolist()))
         t_before, alpha_before = self._last
-        ribs = np.nonzero(np.isnan(self._deployed))[0]
-        if len(ribs):          # (first_reach of the ribs whose leaf reached its angle)
+        if self._undeployed:        # (first_reach of the ribs whose leaf reached its angle)
+            ribs = np.nonzero(np.isnan(self._deployed))[0]
             gap = rows['alpha1'][:, ribs] - m.alpha_deployed[ribs]
             for j in np.nonzero((gap <= 0.0).any(0))[0]:
                 k = ribs[j]
                 self._deployed[k] = first_reach(t, gap[:, j], (
                     t_before, alpha_before[k] - m.alpha_deployed[k]),
                     None if self.lock is None else self.lock.time)
+            self._undeployed = bool(np.isnan(self._deployed).any())
         self._last = (float(t[-1]), rows['alpha1'][-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(np.abs(energy).max()))
         self._balance = max(self._balance,
-                            float(np.abs(energy_balance3d(rows, self._e0)).max()))
-        oop = largest_out_of_plane_tip(t, rows['tip'])
-        if oop[0] > self._oop[0]:
-            self._oop = oop
-        self._in_plane = np.maximum(self._in_plane, np.abs(rows['tip'][:, :, 1]).max(0))
+                            float(np.abs(energy_balance3d(rows, self._e0, energy)).max()))
+        tip = rows['tip']
+        if np.abs(tip[:, :, 2]).max() > self._oop[0]:
+            self._oop = largest_out_of_plane_tip(t, tip)
+        self._in_plane = np.maximum(self._in_plane, np.abs(tip[:, :, 1]).max(0))
         self._peaks = block.merge_peaks(self._peaks)
         self.steps += len(block)
         self.final_time = float(t[-1])
