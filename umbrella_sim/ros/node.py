@@ -291,12 +291,20 @@ class UmbrellaNode(Node):
 
     def _publish(self, key: str, msg, t: float) -> None:
         """Publish a message, or the exact CDR bytes of one, and record the same bytes."""
-        if not isinstance(msg, bytes):  # (the encoders' bytes are exact and zero-padded)
-            msg = cdr_bytes(msg)        # once: the publisher and the recorder share it
-        self.pub[key].publish(msg)
+        self._publish_all({key: msg}, t)
+
+    def _publish_all(self, msgs: dict, t: float) -> None:
+        """Publish messages of sim time t (topic key -> message or CDR), then record them."""
+        pub = self.pub
+        out = {}
+        for key, msg in msgs.items():
+            if not isinstance(msg, bytes):  # (the encoders' bytes are exact and zero-padded)
+                msg = cdr_bytes(msg)        # once: the publisher and the recorder share it
+            pub[key].publish(msg)
+            out[key] = msg
         rec = self._recording_on()
-        if rec is not None:
-            rec.publish(key, msg, t)
+        if rec is not None:             # (in one go: a publication's messages, in order)
+            rec.publish_all(out, t)
 
     # ---------------------------------------------------------------- callbacks
     @contextlib.contextmanager
@@ -453,8 +461,7 @@ class UmbrellaNode(Node):
                 return
             if 'joint_states' in msgs:
                 self.lockstep.published()
-            for key, msg in msgs.items():
-                self._publish(key, msg, t)
+            self._publish_all(msgs, t)
 
     def _waiting_for_command(self) -> bool:
         """Lockstep: no command has answered the last joint_states yet (sim lock held)."""
