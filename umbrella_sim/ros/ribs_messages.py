@@ -92,31 +92,35 @@ def rib_joint_values(s) -> tuple[list, list, list]:
     Per rib alpha1 and the link's angle relative to the leaf (alpha2 - alpha1), their rates,
     no effort; then the sleeve's height, velocity and the whole sleeve's force.
     """
-    alpha1, rate1 = s.alpha1, s.alpha1_rate
-    position = [v for pair in zip(alpha1.tolist(), (s.alpha2 - alpha1).tolist()) for v in pair]
-    velocity = [v for pair in zip(rate1.tolist(), (s.alpha2_rate - rate1).tolist())
-                for v in pair]
-    position.append(float(s.sleeve_position))
-    velocity.append(float(s.sleeve_velocity))
-    return position, velocity, [0.0] * (2 * len(alpha1)) + [float(s.sleeve_force)]
+    v = s.fields()
+    alpha1, rate1 = v['alpha1'], v['alpha1_rate']
+    position = [x for pair in zip(alpha1.tolist(), (v['alpha2'] - alpha1).tolist())
+                for x in pair]
+    velocity = [x for pair in zip(rate1.tolist(), (v['alpha2_rate'] - rate1).tolist())
+                for x in pair]
+    position.append(float(v['sleeve_position']))
+    velocity.append(float(v['sleeve_velocity']))
+    return position, velocity, [0.0] * (2 * len(alpha1)) + [float(v['sleeve_force'])]
 
 
 def rib_stress_values(s, yield_strength: float, out: np.ndarray | None = None) -> np.ndarray:
     """Return rib_peak_stress's data of a Sample3D: (ribs, STRESS_FIELDS) (into out if given)."""
+    v = s.fields()
     if out is None:
-        out = np.empty((len(s.alpha1), len(STRESS_FIELDS)))
+        out = np.empty((len(v['alpha1']), len(STRESS_FIELDS)))
     for j, name in enumerate(_STRESS_ROWS):
-        out[:, j] = s[name]
-    out[:, -3:-1] = s.stress_von_mises_at
-    np.divide(s.stress_von_mises, yield_strength, out=out[:, -1])
+        out[:, j] = v[name]
+    out[:, -3:-1] = v['stress_von_mises_at']
+    np.divide(v['stress_von_mises'], yield_strength, out=out[:, -1])
     return out
 
 
 def rib_energy_values(s, initial_energy: float) -> list[float]:
     """Return the umbrella's energy data of a Sample3D (ENERGY_FIELDS, J)."""
-    return [float(s.kinetic_energy), float(s.strain_energy), float(s.work),
-            float(s.lock_energy_loss), float(energy_balance3d(s, initial_energy)),
-            sum(s.friction_work.tolist()), float(s.drive_work)]
+    v = s.fields()
+    return [float(v['kinetic_energy']), float(v['strain_energy']), float(v['work']),
+            float(v['lock_energy_loss']), float(energy_balance3d(v, initial_energy)),
+            sum(v['friction_work'].tolist()), float(v['drive_work'])]
 
 
 def rib_messages(s, yield_strength: float, initial_energy: float,

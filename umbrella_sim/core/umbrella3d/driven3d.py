@@ -147,6 +147,8 @@ class RibPeaks:
     def merged(self, new: 'RibPeaks') -> 'RibPeaks':
         """Return, rib by rib and component by component, the larger (these held on a tie)."""
         better = new.value > self.value
+        if not better.any():
+            return self
         return RibPeaks(np.where(better, new.value, self.value),
                         np.where(better[..., None], new.at, self.at),
                         np.where(better, new.when, self.when))
