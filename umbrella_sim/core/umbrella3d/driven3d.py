@@ -214,6 +214,7 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         self.engine = Engine3D(self.params.lock_rule, 'compiled' if compiled else 'numpy')
         self.chunk_steps = COMPILED_CHUNK_STEPS if compiled else CHUNK_STEPS
         self._force_per_rib = command_force(self.params.planar.sleeve_force, self.params)
+        self._lock_event: LockEvent | None = None      # (lock_event, once it happened)
         # the record's row of t = 0 is the initial sample: the blocks hold the steps' rows
         self._current = Sample3D.of_row({k: v[-1] for k, v in self.record.take().items()})
 
@@ -243,10 +244,11 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
 
     @property
     def lock_event(self) -> LockEvent | None:
-        if not self.record.lock_events:
-            return None
-        t, before, after = self.record.lock_events[0]
-        return LockEvent(t, self.params.lock_rule, before, after)
+        event = self._lock_event
+        if event is None and self.record.lock_events:      # (made once: it never changes)
+            t, before, after = self.record.lock_events[0]
+            event = self._lock_event = LockEvent(t, self.params.lock_rule, before, after)
+        return event
 
     # ------------------------------------------------------------------- stepping
     def advance_schedule(self, schedule, n_steps: int, states: bool = False,
