@@ -354,7 +354,8 @@ class Summary3D:
             self._start = deploy_start(0.0, zip([self.final_time, *t[:-1].tolist()],
                                                 rows['sleeve_force'].tolist()))
         t_before, alpha_before = self._last
-        if self._undeployed:        # (first_reach of the ribs whose leaf reached its angle)
+        if self._undeployed and (rows['alpha1'] <= m.alpha_deployed).any():
+            # (first_reach of the ribs whose leaf reached its angle)
             ribs = np.nonzero(np.isnan(self._deployed))[0]
             gap = rows['alpha1'][:, ribs] - m.alpha_deployed[ribs]
             for j in np.nonzero((gap <= 0.0).any(0))[0]:

@@ -76,6 +76,9 @@ class Record3D:
         self.taken_peaks = None
         self._rib_comp = (np.arange(nr)[:, None], np.arange(len(STRESS_NAMES))[None])
         self._tip = np.array(model.i_tip)
+        #: no hinge ever sticks (none has stick_until or stick_torque): stuck is NaN throughout
+        self._never_stuck = all(r.stick_until <= 0.0 and r.stick_torque <= 0.0
+                                for r in model.ribs)
         #: the rows of a constant figure (locked, sleeve_force, lock_energy_loss) by (name,
         #: steps, value): shared by the blocks, read-only
         self._constant_rows: dict = {}
@@ -169,14 +172,14 @@ class Record3D:
         last = self._last_stress
         return last is not None and last[3] == locked
 
-    def _constant(self, name: str, k: int, value) -> np.ndarray:
-        """Return the rows of a figure constant over k steps (np.full's; shared, read-only)."""
-        key = (name, k, type(value), value, math.copysign(1.0, value))   # (0.0 is not -0.0)
+    def _constant(self, name: str, shape, value) -> np.ndarray:
+        """Return the rows of a figure constant over steps (np.full's; shared, read-only)."""
+        key = (name, shape, type(value), value, math.copysign(1.0, value))   # (0.0 not -0.0)
         rows = self._constant_rows.get(key)
         if rows is None:
             if len(self._constant_rows) > 64:        # (values change seldom: a few at once)
                 self._constant_rows.clear()
-            rows = self._constant_rows[key] = np.full(k, value)
+            rows = self._constant_rows[key] = np.full(shape, value)
             rows.flags.writeable = False
         return rows
 
@@ -191,8 +194,7 @@ class Record3D:
         """
         m = self.model
         k = len(t)
-        qr, vr, stuck, lam_r = st['qr'], st['vr'], st['stuck'], st['lam_r']
-        free = np.isnan(stuck)
+        qr, vr = st['qr'], st['vr']
         put = self.rows.setdefault
         put('locked', []).append(self._constant('locked', k, locked))
         put('sleeve_force', []).append(self._constant('sleeve_force', k, force))
@@ -210,8 +212,13 @@ class Record3D:
         put('work', []).append(work)
         put('friction_work', []).append(friction)
         put('drive_work', []).append(drive)
-        put('holding_torque', []).append(np.where(free, 0.0, lam_r[:, :, -1]))
-        put('stuck', []).append(~free)
+        if self._never_stuck:       # (every hinge free at every step)
+            put('holding_torque', []).append(self._constant('holding_torque', qr.shape[:2], 0.0))
+            put('stuck', []).append(self._constant('stuck', qr.shape[:2], False))
+        else:
+            free = np.isnan(st['stuck'])
+            put('holding_torque', []).append(np.where(free, 0.0, st['lam_r'][:, :, -1]))
+            put('stuck', []).append(~free)
         put('stop_reaction', []).append(st['lam_s'][:, 0].copy())
         # stresses: each rib's worst point per step, and where: the first of the largest in
         # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
