@@ -420,6 +420,27 @@ the previous step's increment or a second-order extrapolation took 2.77-2.95 ite
 step, no fewer: stage 2's iterations are set by the fitted modes at omega h near 1) and the
 node's Python per publication.
 
+The node's work per 1 ms publication beside the step (6 x 1, bench/bench_ribs_node.py, the
+same runs of main and this change in turn at load 4.2; deploying / 10 ms after the lock):
+Record3D's rows 105-112 -> 58-66 us / 99 -> 61-69 (the run's peaks kept as arrays, updated
+with np.where where a rib's is larger, instead of a loop over ribs; the constant rows shared),
+the summary 55-59 -> 30-35 / 46 -> 26-29 (the deployed ribs' search only in a block where a
+leaf reached its angle, the out-of-plane tip's argmax only for a larger tip, T + V reused by
+the energy balance, the held peaks kept when none is larger), the encoding 56-58 -> 37-43 /
+59-64 -> 39-46 (the joint values as lists, a sample's figures from one mapping, the stress
+rows in a reused buffer), and a whole 1 ms block with the compiled call stubbed
+(bench_ribs_node's outside_kernel: every part but the step) 192-200 -> 123 us / 193-195 ->
+121-124; all of it bit for bit the same rows, figures and CDR bytes. The node records a
+publication's messages in one call (RunRecording.publish_all, BagRecorder.write_all) and checks
+the acting force once per value. What the live node spends beside the step at real time
+(threads over 4 s at load 3.6, per simulated second): the physics thread's Python about 0.12
+CPU s and its DDS writes to a subscriber 0.07-0.10 (rclpy with a subscriber in another
+process: 98 us a publication of the five topics against 33 without one; FastDDS's shared-memory
+push and the reliable writer's timer notification, each a futex wake), FastDDS's event thread
+0.02-0.05, the executor's 20 ms wait loop 0.02, the recorder's thread 0.015-0.03 (zstd and
+the MCAP records, 24 us a publication): about 0.3 core beside the step, not yet the 0.15-0.2
+that the 0.5-core target leaves beside a 0.25-0.3-core step.
+
 A driven hub and a free-floating bus step compiled too (umbrella_sim/core/_kernel3d_base.h: the
 bus's border of M(q) (its elastic columns from invariants), its share of the kinetic energy's
 gradient, the arrow's full border of seven shared coordinates, the drive's rows, the free bus's

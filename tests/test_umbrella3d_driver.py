@@ -165,6 +165,33 @@ def test_each_chunks_peaks_are_those_of_its_rows(kernel, monkeypatch):
             np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize('kernel', ['compiled', pytest.param('numpy', marks=pytest.mark.slow)])
+def test_the_runs_peaks_are_the_first_largest_of_every_step(kernel, monkeypatch):
+    """
+    Record3D's peaks of the run, kept as its steps come, are those of all its rows at once.
+
+    A run through a release and the lock: each rib's largest of every component over every
+    step (RibPeaks.of_rows of the whole record: the first step holding it), where and when;
+    a component that never exceeds 0 keeps no place ('').
+    """
+    monkeypatch.setenv('UMBRELLA_SIM_KERNEL', kernel)
+    sim, rows = reference(UmbrellaRibsParams.from_mapping(STUCK), 1.0, after_lock=0.004)
+    assert sim.locked and ref_backend(sim.params) == kernel
+    want = RibPeaks.of_rows(rows)
+    peaks = sim.record.summary()['peak_stress']
+    for j, name in enumerate(STRESS_NAMES):
+        value, where = peaks[name]
+        reached = want.value[:, j] > 0.0
+        assert reached.any()
+        np.testing.assert_array_equal(value, np.where(reached, want.value[:, j], 0.0))
+        for rib, (body, x, t) in enumerate(where):
+            if not reached[rib]:
+                assert (body, x, t) == ('', 0.0, 0.0)
+                continue
+            code, at = want.at[rib, j]
+            assert (body, x, t) == (('leaf', 'link')[int(code)], at, want.when[rib, j])
+
+
 def test_the_planar_path_is_unchanged_by_the_umbrella():
     """The planar parameters still drive the planar simulator, its block and its Sample."""
     from umbrella_sim.core import UmbrellaParams, UmbrellaSimulator

@@ -147,6 +147,8 @@ class RibPeaks:
     def merged(self, new: 'RibPeaks') -> 'RibPeaks':
         """Return, rib by rib and component by component, the larger (these held on a tie)."""
         better = new.value > self.value
+        if not better.any():
+            return self
         return RibPeaks(np.where(better, new.value, self.value),
                         np.where(better[..., None], new.at, self.at),
                         np.where(better, new.when, self.when))
@@ -212,6 +214,7 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         self.engine = Engine3D(self.params.lock_rule, 'compiled' if compiled else 'numpy')
         self.chunk_steps = COMPILED_CHUNK_STEPS if compiled else CHUNK_STEPS
         self._force_per_rib = command_force(self.params.planar.sleeve_force, self.params)
+        self._lock_event: LockEvent | None = None      # (lock_event, once it happened)
         # the record's row of t = 0 is the initial sample: the blocks hold the steps' rows
         self._current = Sample3D.of_row({k: v[-1] for k, v in self.record.take().items()})
 
@@ -241,10 +244,11 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
 
     @property
     def lock_event(self) -> LockEvent | None:
-        if not self.record.lock_events:
-            return None
-        t, before, after = self.record.lock_events[0]
-        return LockEvent(t, self.params.lock_rule, before, after)
+        event = self._lock_event
+        if event is None and self.record.lock_events:      # (made once: it never changes)
+            t, before, after = self.record.lock_events[0]
+            event = self._lock_event = LockEvent(t, self.params.lock_rule, before, after)
+        return event
 
     # ------------------------------------------------------------------- stepping
     def advance_schedule(self, schedule, n_steps: int, states: bool = False,
@@ -325,6 +329,7 @@ class Summary3D:
         self._deployed = np.array([first_reach(np.array([initial.time]),
                                                np.array([initial.alpha1[k] - m.alpha_deployed[k]]))
                                    for k in range(m.n_ribs)])
+        self._undeployed = bool(np.isnan(self._deployed).any())
         self._oop = largest_out_of_plane_tip(np.array([initial.time]), initial.tip[None])
         self._in_plane = np.abs(initial.tip[:, 1])
         self._peaks = RibPeaks.of_rows(
@@ -349,23 +354,25 @@ class Summary3D:
             self._start = deploy_start(0.0, zip([self.final_time, *t[:-1].tolist()],
                                                 rows['sleeve_force'].tolist()))
         t_before, alpha_before = self._last
-        ribs = np.nonzero(np.isnan(self._deployed))[0]
-        if len(ribs):          # (first_reach of the ribs whose leaf reached its angle)
+        if self._undeployed and (rows['alpha1'] <= m.alpha_deployed).any():
+            # (first_reach of the ribs whose leaf reached its angle)
+            ribs = np.nonzero(np.isnan(self._deployed))[0]
             gap = rows['alpha1'][:, ribs] - m.alpha_deployed[ribs]
             for j in np.nonzero((gap <= 0.0).any(0))[0]:
                 k = ribs[j]
                 self._deployed[k] = first_reach(t, gap[:, j], (
                     t_before, alpha_before[k] - m.alpha_deployed[k]),
                     None if self.lock is None else self.lock.time)
+            self._undeployed = bool(np.isnan(self._deployed).any())
         self._last = (float(t[-1]), rows['alpha1'][-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(np.abs(energy).max()))
         self._balance = max(self._balance,
-                            float(np.abs(energy_balance3d(rows, self._e0)).max()))
-        oop = largest_out_of_plane_tip(t, rows['tip'])
-        if oop[0] > self._oop[0]:
-            self._oop = oop
-        self._in_plane = np.maximum(self._in_plane, np.abs(rows['tip'][:, :, 1]).max(0))
+                            float(np.abs(energy_balance3d(rows, self._e0, energy)).max()))
+        tip = rows['tip']
+        if np.abs(tip[:, :, 2]).max() > self._oop[0]:
+            self._oop = largest_out_of_plane_tip(t, tip)
+        self._in_plane = np.maximum(self._in_plane, np.abs(tip[:, :, 1]).max(0))
         self._peaks = block.merge_peaks(self._peaks)
         self.steps += len(block)
         self.final_time = float(t[-1])

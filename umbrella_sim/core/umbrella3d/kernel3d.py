@@ -297,7 +297,8 @@ class CompiledStep3D:
         if n_steps > self.capacity:
             self._set_capacity(max(n_steps, 2 * self.capacity))
         self._load(s, force, locked, h)
-        self._set_drive(np.arange(k0 + 1, k0 + n_steps + 1) * h)
+        if self.drive is not None:
+            self._set_drive(np.arange(k0 + 1, k0 + n_steps + 1) * h)
         c = self.call
         c.single, c.k0, c.n_steps = 0, k0, n_steps
         c.crest_from_state = int(crest_from_state)

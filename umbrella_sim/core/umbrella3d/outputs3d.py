@@ -30,6 +30,8 @@ component over both bodies (``stress_<name>``) and where (``stress_<name>_at``: 
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..outputs import hermite_crests
@@ -37,6 +39,8 @@ from ..outputs import hermite_crests
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
 #: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
 BODIES = ('leaf', 'link')
+#: Record3D's row names of each stress channel's value and where, in STRESS_NAMES' order
+_STRESS_ROWS = tuple((f'stress_{name}', f'stress_{name}_at') for name in STRESS_NAMES)
 
 
 class Record3D:
@@ -46,8 +50,6 @@ class Record3D:
         self.model = model
         self.rows: dict[str, list] = {}     # name -> arrays, each a block of steps (first)
         nr = model.n_ribs
-        self.peak = {name: np.zeros(nr) for name in STRESS_NAMES}
-        self.peak_where = {name: [('', 0.0, 0.0)] * nr for name in STRESS_NAMES}
         self.work = 0.0
         self.friction = np.zeros(nr)
         self.drive = 0.0
@@ -56,7 +58,13 @@ class Record3D:
         # a stress point's x along its body: the leaf's points, then the link's
         xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
         self._leaf_points, self._x_of = len(xs[0]), np.concatenate(xs)
-        self._peaks = np.zeros((nr, len(STRESS_NAMES)))     # peak's values, a column each
+        #: each rib's peak of every stress channel over the run (a column each, in
+        #: STRESS_NAMES' order), where (body code, NaN before any peak; x) and when
+        #: (``peak``, ``peak_where``)
+        self._peaks = np.zeros((nr, len(STRESS_NAMES)))
+        self._peak_at = np.zeros((nr, len(STRESS_NAMES), 2))
+        self._peak_at[..., 0] = np.nan
+        self._peak_when = np.zeros((nr, len(STRESS_NAMES)))
         #: the last step's (time, its five channels' values and rates (_crests), locked):
         #: the start of the next step's crests; after the compiled step's figures (time,
         #: qr, vr, locked, 'state'): the channels computed from them when needed
@@ -67,6 +75,27 @@ class Record3D:
         self._held = None
         self.taken_peaks = None
         self._rib_comp = (np.arange(nr)[:, None], np.arange(len(STRESS_NAMES))[None])
+        self._tip = np.array(model.i_tip)
+        #: no hinge ever sticks (none has stick_until or stick_torque): stuck is NaN throughout
+        self._never_stuck = all(r.stick_until <= 0.0 and r.stick_torque <= 0.0
+                                for r in model.ribs)
+        #: the rows of a constant figure (locked, sleeve_force, lock_energy_loss) by (name,
+        #: steps, value): shared by the blocks, read-only
+        self._constant_rows: dict = {}
+
+    @property
+    def peak(self) -> dict:
+        """Return each rib's peak of every stress channel over the run (name -> (ribs,))."""
+        return {name: self._peaks[:, j].copy() for j, name in enumerate(STRESS_NAMES)}
+
+    @property
+    def peak_where(self) -> dict:
+        """Return where and when each peak is: name -> [(body, x, t)] a rib ('' before one)."""
+        out = {}
+        for j, name in enumerate(STRESS_NAMES):
+            out[name] = [('' if np.isnan(body) else BODIES[int(body)], float(x), float(when))
+                         for (body, x), when in zip(self._peak_at[:, j], self._peak_when[:, j])]
+        return out
 
     def _put(self, name, value):
         self.rows.setdefault(name, []).append(np.array(value)[None])
@@ -92,7 +121,8 @@ class Record3D:
                for name in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
         self._put_steps(np.array([s.t]), one, np.array([kinetic]),
                         np.array([m.strain_energy(s.qr)]), np.array([self.work]),
-                        self.friction[None], np.array([self.drive]), locked, force, lock_loss)
+                        self.friction[None].copy(), np.array([self.drive]), locked, force,
+                        lock_loss)
         if m.moving_base:
             put = self._put
             put('bus_q', s.qs[1:7].copy())
@@ -115,12 +145,15 @@ class Record3D:
         first step's crest from the last step added if ``crest_continues``), else computed
         here.
         """
-        work = self.work + np.cumsum(rows['work_force'])
-        friction = self.friction + np.cumsum(rows['work_friction'], 0)
-        drive = self.drive + np.cumsum(rows['work_drive'])
+        work = rows['work_force'].cumsum()
+        work += self.work
+        friction = rows['work_friction'].cumsum(0)
+        friction += self.friction
+        drive = rows['work_drive'].cumsum()
+        drive += self.drive
         self.work, self.friction = float(work[-1]), friction[-1].copy()
         self.drive = float(drive[-1])
-        self.iterations += int(np.sum(rows['iterations']))
+        self.iterations += int(rows['iterations'].sum())
         figures = None
         if 'stress_top' in rows:        # (the compiled step's: _crests' rule, computed there)
             figures = rows['stress_top'], rows['stress_at']
@@ -139,31 +172,54 @@ class Record3D:
         last = self._last_stress
         return last is not None and last[3] == locked
 
+    def _constant(self, name: str, shape, value) -> np.ndarray:
+        """Return the rows of a figure constant over steps (np.full's; shared, read-only)."""
+        key = (name, shape, type(value), value, math.copysign(1.0, value))   # (0.0 not -0.0)
+        rows = self._constant_rows.get(key)
+        if rows is None:
+            if len(self._constant_rows) > 64:        # (values change seldom: a few at once)
+                self._constant_rows.clear()
+            rows = self._constant_rows[key] = np.full(shape, value)
+            rows.flags.writeable = False
+        return rows
+
     def _put_steps(self, t, st, kinetic, strain, work, friction, drive, locked, force,
                    lock_loss, figures=None):
         """
         Append k steps' figures (arrays with the steps first) and update the peaks.
 
-        figures: (top, at) of the steps' stresses (add_steps), else computed here (_crests).
+        t, st's arrays, kinetic and strain may be views of a buffer reused (copied here);
+        work, friction, drive are the caller's own (kept).  figures: (top, at) of the steps'
+        stresses (add_steps), else computed here (_crests).
         """
         m = self.model
         k = len(t)
-        qr, vr, stuck = st['qr'], st['vr'], st['stuck']
-        free = np.isnan(stuck)
-        for name, value in (('locked', locked), ('sleeve_force', force),
-                            ('lock_energy_loss', lock_loss)):
-            self.rows.setdefault(name, []).append(np.full(k, value))
-        columns = {
-            'time': t, 'sleeve_position': st['qs'][:, 0], 'sleeve_velocity': st['vs'][:, 0],
-            'alpha1': qr[:, :, m.i_a1], 'alpha2': qr[:, :, m.i_a2],
-            'alpha1_rate': vr[:, :, m.i_a1], 'alpha2_rate': vr[:, :, m.i_a2],
-            'tip': qr[:, :, list(m.i_tip)], 'kinetic_energy': kinetic,
-            'strain_energy': strain, 'work': work, 'friction_work': friction,
-            'drive_work': drive,
-            'holding_torque': np.where(free, 0.0, st['lam_r'][:, :, -1]), 'stuck': ~free,
-            'stop_reaction': st['lam_s'][:, 0]}
-        for name, values in columns.items():        # (copies: the rows' buffers are reused)
-            self.rows.setdefault(name, []).append(np.array(values))
+        qr, vr = st['qr'], st['vr']
+        put = self.rows.setdefault
+        put('locked', []).append(self._constant('locked', k, locked))
+        put('sleeve_force', []).append(self._constant('sleeve_force', k, force))
+        put('lock_energy_loss', []).append(self._constant('lock_energy_loss', k, lock_loss))
+        i_a1, i_a2 = m.i_a1, m.i_a2
+        for name, values in (        # (copies: the rows' buffers are reused)
+                ('time', t), ('sleeve_position', st['qs'][:, 0]),
+                ('sleeve_velocity', st['vs'][:, 0]), ('alpha1', qr[:, :, i_a1]),
+                ('alpha2', qr[:, :, i_a2]), ('alpha1_rate', vr[:, :, i_a1]),
+                ('alpha2_rate', vr[:, :, i_a2])):
+            put(name, []).append(values.copy())
+        put('tip', []).append(qr[:, :, self._tip])         # (a new array)
+        put('kinetic_energy', []).append(kinetic.copy())
+        put('strain_energy', []).append(strain.copy())
+        put('work', []).append(work)
+        put('friction_work', []).append(friction)
+        put('drive_work', []).append(drive)
+        if self._never_stuck:       # (every hinge free at every step)
+            put('holding_torque', []).append(self._constant('holding_torque', qr.shape[:2], 0.0))
+            put('stuck', []).append(self._constant('stuck', qr.shape[:2], False))
+        else:
+            free = np.isnan(st['stuck'])
+            put('holding_torque', []).append(np.where(free, 0.0, st['lam_r'][:, :, -1]))
+            put('stuck', []).append(~free)
+        put('stop_reaction', []).append(st['lam_s'][:, 0].copy())
         # stresses: each rib's worst point per step, and where: the first of the largest in
         # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
         # argmax); every component at once, in STRESS_NAMES' order
@@ -176,13 +232,11 @@ class Record3D:
             at[..., 0] = point >= self._leaf_points                  # the body's code
             at[..., 1] = self._x_of[point]
         else:      # (the next step's crests start from the last state: its channels if asked)
-            top, at = np.array(figures[0]), np.array(figures[1])
-            self._last_stress = (float(t[-1]), qr[-1].copy(), st['vr'][-1].copy(), locked,
-                                 'state')
-        put = self.rows.setdefault
-        for j, name in enumerate(STRESS_NAMES):
-            put(f'stress_{name}', []).append(top[:, :, j])
-            put(f'stress_{name}_at', []).append(at[:, :, j])
+            top, at = figures[0].copy(), figures[1].copy()
+            self._last_stress = (float(t[-1]), qr[-1].copy(), vr[-1].copy(), locked, 'state')
+        for j, (name, name_at) in enumerate(_STRESS_ROWS):
+            put(name, []).append(top[:, :, j])
+            put(name_at, []).append(at[:, :, j])
         put('von_mises', []).append(np.maximum(top[:, :, -1], 0.0))
         # the peaks over these steps, rib by rib: the first of the largest step by step (the
         # leaf before the link: each step's own rule above; a NaN the largest, as argmax)
@@ -191,19 +245,12 @@ class Record3D:
         best = top[first, ribs, comps]
         held = (best, at[first, ribs, comps], t[first])
         self._held = held if self._held is None else merged_peaks(self._held, held)
+        # the run's: a larger one only (a NaN never)
         better = best > self._peaks
-        if not better.any():
-            return
-        self._peaks = np.where(better, best, self._peaks)
-        for j in np.nonzero(better.any(0))[0]:
-            name = STRESS_NAMES[j]
-            self.peak[name] = self._peaks[:, j].copy()
-            lst = list(self.peak_where[name])
-            for r in np.nonzero(better[:, j])[0]:
-                step = first[r, j]
-                body, x = at[step, r, j]
-                lst[r] = (BODIES[int(body)], float(x), float(t[step]))
-            self.peak_where[name] = lst
+        if better.any():
+            self._peaks = np.where(better, best, self._peaks)
+            self._peak_at = np.where(better[..., None], held[1], self._peak_at)
+            self._peak_when = np.where(better, held[2], self._peak_when)
 
     def _crests(self, t, stress, rate, locked: bool) -> np.ndarray:
         """
@@ -402,14 +449,15 @@ def largest_out_of_plane_tip(t: np.ndarray, tip: np.ndarray) -> tuple[float, int
     return float(w[i, k]), int(k), float(t[i])
 
 
-def energy_balance3d(rows, initial_energy: float) -> np.ndarray:
+def energy_balance3d(rows, initial_energy: float, energy=None) -> np.ndarray:
     """
     Return T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss of rows (J).
 
     rows: a Record3D's arrays (one figure a step) or one row (a Sample3D).  The umbrella's
     energy balance, one rule: 0 for a run that keeps its energy (friction work is negative:
-    the hinges take energy out).
+    the hinges take energy out).  energy: T + V of rows if the caller has it already.
     """
-    return (rows['kinetic_energy'] + rows['strain_energy'] - initial_energy - rows['work']
-            - np.sum(rows['friction_work'], axis=-1) - rows['drive_work']
-            + rows['lock_energy_loss'])
+    if energy is None:
+        energy = rows['kinetic_energy'] + rows['strain_energy']
+    return (energy - initial_energy - rows['work'] - rows['friction_work'].sum(-1)
+            - rows['drive_work'] + rows['lock_energy_loss'])
