@@ -264,7 +264,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'stresses, stage-2 period and amplitude and the stage-2 tip series within 1 mm of '
        'every studied case (N = 1-8, V0 = -0.2 and -0.5 m/s, both locks). Past a stage-2 '
        'tip deflection of 7 % of the leaf (V0 = -0.5: 12-16 %) the modes couple and stage 2 '
-       'of flexible takes the step its lock needs, k physics steps a grid step (every mode '
+       "of flexible (the umbrella of N ribs too: its worst rib's lock) takes the step its "
+       'lock needs, k physics steps a grid step (every mode '
        'carrying stage-2 stress resolved, and at most 0.1 ms (7 % / deflection)^1.5: 25 us '
        'at N = 1, V0 = -0.5); the grid, inputs and outputs stay at the grid step. '
        'flexible-nonlinear: 0 = 0.1 ms at every mesh, its real-time step (its own rule, '

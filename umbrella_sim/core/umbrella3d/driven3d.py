@@ -244,7 +244,8 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         if not self.record.lock_events:
             return None
         t, before, after = self.record.lock_events[0]
-        return LockEvent(t, self.params.lock_rule, before, after)
+        return LockEvent(t, self.params.lock_rule, before, after,
+                         stage2_resolution=self.stage2_resolution)
 
     # ------------------------------------------------------------------- stepping
     def advance_schedule(self, schedule, n_steps: int, states: bool = False,
@@ -419,11 +420,13 @@ class Summary3D:
         """
         Return the validity warnings: summary's one rule, on the worst rib's figures.
 
-        'coarse step' judges the planar rib's mesh at the umbrella's step and its largest
-        in-plane tip deflection (summary.mesh_resolution): the umbrella's stage 2 stays on
-        its grid step, so past the modes' coupling it names the step a run should give.  The
-        co-rotational ribs' 'fibre rotation' and 'out-of-plane rotation' from their largest
-        section slope and out-of-plane rotation (_geometry).
+        'coarse step' judges the lock's worst rib at the step stage 2 takes
+        (UmbrellaSimulator3D.stage2_resolution: substeps3d.py; silent where stage 2 takes
+        the substeps its lock needs); the co-rotational ribs, which take no substeps, the
+        planar rib's mesh at the umbrella's step and its largest in-plane tip deflection
+        (summary.mesh_resolution).  The co-rotational ribs' 'fibre rotation' and
+        'out-of-plane rotation' from their largest section slope and out-of-plane rotation
+        (_geometry).
         """
         locked = self.lock is not None
         slope, out_of_plane = self._geometry()
@@ -431,10 +434,14 @@ class Summary3D:
                                  float(self._peaks['von_mises'][0].max()),
                                  float(self._in_plane.max()), locked=locked,
                                  energy_drift=self.energy_drift,
-                                 stage2_resolution=(mesh_resolution(self._planar, self.sim.h)
-                                                    if locked else None),
+                                 stage2_resolution=self._stage2_resolution() if locked else None,
                                  section_slope=slope
                                  ) + out_of_plane_warnings(self._planar, out_of_plane)
+
+    def _stage2_resolution(self) -> dict | None:
+        """Return the lock's stage-2 resolution (the worst rib's), else the mesh's."""
+        own = self.sim.stage2_resolution
+        return own if own is not None else mesh_resolution(self._planar, self.sim.h)
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""

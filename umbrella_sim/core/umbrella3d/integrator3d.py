@@ -64,7 +64,7 @@ from .kernel3d import CompiledStep3D
 from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
 from .stage2fit import RibFits, stage2_fit, WholeFit
 from .state3d import ConvergenceError3D, State3D, StepWork
-from ..integrators import newton_converged, PHI_TOLERANCE
+from ..integrators import newton_converged, newton_tolerance, PHI_TOLERANCE
 from ..kernel import kernel_refusal, LIBRARY, load_kernel
 
 #: steps an iteration matrix serves at most (the first included), and the contraction of a
@@ -191,6 +191,20 @@ class MidpointUmbrella:
     def fit_stage2_modes(self, h: float) -> None:
         """Fit the base's locked modes (stage2fit.stage2_fit) for grid step h, from lock_at on."""
         self.mode_fit = stage2_fit(self.model, h)
+
+    def take_substeps(self, h: float, tolerance: float | None = None) -> None:
+        """
+        Step stage 2 in physics steps of h (substeps3d.py): Newton's tolerance and the fit.
+
+        The planar engine's rule at its substeps (engines.FiniteElementEngine._follow):
+        the Newton tolerance (tolerance: given; None: the step h's, newton_tolerance), the
+        modes fitted for h.  Before ``lock_at``.
+        """
+        self.tolerance = newton_tolerance(h) if tolerance is None else tolerance
+        if self.compiled is not None:
+            self.compiled.set_tolerance(self.tolerance)
+        if self.mode_fit is not None:
+            self.fit_stage2_modes(h)
 
     def lock_at(self, state: State3D | None = None) -> None:
         """

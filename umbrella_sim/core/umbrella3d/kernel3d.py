@@ -209,6 +209,11 @@ class CompiledStep3D:
         c.fit_u, c.fit_phi, c.fit_scale, c.fit_shrink = (_ptr(a) for a in self._fit)
         c.fit_modes = r
 
+    # ---------------------------------------------------- stage-2 substeps (substeps3d.py)
+    def set_tolerance(self, tolerance: float) -> None:
+        """Set Newton's increment tolerance of the steps from now on (a stage-2 substep's)."""
+        self.tolerance = self.call.tol = tolerance
+
     def _set_capacity(self, cap: int) -> None:
         self.out = np.zeros((cap, self.row_len))
         self.call.out = _ptr(self.out)

@@ -103,7 +103,8 @@ class Record3D:
                 put('linear_momentum', p)
                 put('angular_momentum', h)
 
-    def add_steps(self, rows: dict, locked: bool, force: float, lock_loss: float):
+    def add_steps(self, rows: dict, locked: bool, force: float, lock_loss: float,
+                  substeps: int = 1, times=None):
         """
         Add the figures of a run of steps (the compiled step's rows, kernel3d.row_layout).
 
@@ -113,8 +114,11 @@ class Record3D:
         the steps' stress figures, stress_top (step, rib, 5) and stress_at (step, rib, 5, 2),
         computed by the compiled step with ``_crests``' rule (kernel3d.row_layout; their
         first step's crest from the last step added if ``crest_continues``), else computed
-        here.
+        here.  substeps: the rows are physics steps taken that many a grid step (stage 2's
+        substeps), kept as grid rows (fold_substeps3d) at times (the grid's).
         """
+        if substeps > 1:
+            rows = self._grid_rows(rows, locked, substeps, times)
         work = self.work + np.cumsum(rows['work_force'])
         friction = self.friction + np.cumsum(rows['work_friction'], 0)
         drive = self.drive + np.cumsum(rows['work_drive'])
@@ -168,13 +172,7 @@ class Record3D:
         # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
         # argmax); every component at once, in STRESS_NAMES' order
         if figures is None:
-            every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
-                                 np.concatenate(m.stress_rate_blocks(qr, st['vr']), -1),
-                                 locked)
-            top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
-            at = np.empty(top.shape + (2,))
-            at[..., 0] = point >= self._leaf_points                  # the body's code
-            at[..., 1] = self._x_of[point]
+            top, at = self._step_figures(t, qr, st['vr'], locked)
         else:      # (the next step's crests start from the last state: its channels if asked)
             top, at = np.array(figures[0]), np.array(figures[1])
             self._last_stress = (float(t[-1]), qr[-1].copy(), st['vr'][-1].copy(), locked,
@@ -204,6 +202,53 @@ class Record3D:
                 body, x = at[step, r, j]
                 lst[r] = (BODIES[int(body)], float(x), float(t[step]))
             self.peak_where[name] = lst
+
+    def _step_figures(self, t, qr, vr, locked: bool):
+        """Return each step's (top, at) of every stress channel: (step, rib, 5), (.., 2)."""
+        m = self.model
+        every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
+                             np.concatenate(m.stress_rate_blocks(qr, vr), -1), locked)
+        top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
+        at = np.empty(top.shape + (2,))
+        at[..., 0] = point >= self._leaf_points                  # the body's code
+        at[..., 1] = self._x_of[point]
+        return top, at
+
+    # ---------------------------------------------------- stage-2 substeps (substeps3d.py)
+    def _grid_rows(self, rows: dict, locked: bool, substeps: int, times) -> dict:
+        """Return physics steps' rows as their grid steps' (fold_substeps3d), at times."""
+        if 'stress_top' not in rows:        # (each physics step's crests, from the last)
+            rows = dict(rows)
+            rows['stress_top'], rows['stress_at'] = self._step_figures(
+                rows['t'], rows['qr'], rows['vr'], locked)
+        out = fold_substeps3d(rows, substeps)
+        if times is not None:
+            out['t'] = np.asarray(times, dtype=float)
+        return out
+
+    def add_substeps(self, states, works, locked: bool, force: float, lock_loss: float):
+        """
+        Add one grid step taken in physics steps: their states and works (``add``'s rule).
+
+        The grid step's row is its last state's figures with each stress channel's largest
+        over its physics steps (each a Hermite crest from the one before: ``_crests``).
+        """
+        m = self.model
+        rows = {name: np.array([getattr(s, name) for s in states])
+                for name in ('t', 'qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
+        rows['kinetic'] = np.array([0.5 * (float(np.sum(s.pr * s.vr)) + float(s.ps @ s.vs))
+                                    for s in states])
+        rows['strain'] = np.array([m.strain_energy(s.qr) for s in states])
+        for name, field in (('work_force', 'force'), ('work_friction', 'friction'),
+                            ('work_drive', 'drive'), ('iterations', 'iterations'),
+                            ('factorisations', 'factorisations')):
+            rows[name] = np.array([getattr(w, field) for w in works])
+        if m.params.base == 'free':
+            s = states[-1]
+            momenta = m.momentum(m.kinematics(s.qr, s.qs), s.vr, s.vs)
+            for name, value in zip(('linear_momentum', 'angular_momentum'), momenta):
+                rows[name] = np.repeat(np.asarray(value)[None], len(states), 0)
+        self.add_steps(rows, locked, force, lock_loss, len(states), [states[-1].t])
 
     def _crests(self, t, stress, rate, locked: bool) -> np.ndarray:
         """
@@ -309,6 +354,41 @@ class Record3D:
                             for name in STRESS_NAMES},
         }
         return out
+
+
+#: the rows of a run of steps that add up over a grid step's physics steps (the rest: its last)
+_SUMMED_ROWS = ('work_force', 'work_friction', 'work_drive', 'iterations', 'factorisations')
+
+
+def fold_substeps3d(rows: dict, m: int) -> dict:
+    """
+    Return the grid steps' rows of physics steps taken m to a grid step (kernel3d.row_layout).
+
+    rows: consecutive physics steps, steps first, the first starting a grid step; each group
+    of m ends a grid step (a last, shorter group: the steps a fault left).  A grid step's
+    row is its last physics step's, with the works and counts summed over its steps and each
+    stress channel's largest over them, with where (stress_top, stress_at: the first of the
+    largest; outputs.fold_substeps' rule for the planar model).
+    """
+    steps = len(rows['t'])
+    groups = -(-steps // m)
+    ends = np.minimum(np.arange(m - 1, groups * m, m), steps - 1)
+    starts = np.arange(0, groups * m, m)
+    out = {}
+    for name, values in rows.items():
+        if name in _SUMMED_ROWS:
+            out[name] = np.add.reduceat(np.asarray(values), starts, axis=0)
+        elif name not in ('stress_top', 'stress_at'):
+            out[name] = np.array(values[ends])
+    top = np.asarray(rows['stress_top'])                    # (step, rib, 5)
+    padded = np.full((groups * m,) + top.shape[1:], -np.inf)
+    padded[:steps] = np.where(np.isnan(top), np.inf, top)       # (a NaN the largest)
+    pick = padded.reshape((groups, m) + top.shape[1:]).argmax(1) + (
+        m * np.arange(groups))[:, None, None]
+    ribs, comps = np.indices(top.shape[1:])
+    out['stress_top'] = top[pick, ribs[None], comps[None]]
+    out['stress_at'] = np.asarray(rows['stress_at'])[pick, ribs[None], comps[None]]
+    return out
 
 
 def _channels(stress, rate):
