@@ -187,7 +187,7 @@ def test_the_free_fit_turned_to_an_attitude_is_the_fit_at_that_attitude():
     """WholeFit.at_attitude (the lock's, in the run) against the eigenproblem solved there."""
     m = UmbrellaModel3D(UmbrellaRibsParams.from_mapping(FREE))
     attitude = np.array([0.7, 0.2, -0.3])
-    turned, solved = stage2_fit(m, H).at_attitude(attitude), stage2_fit(m, H, attitude)
+    turned, solved = stage2_fit(m, H).at_attitude(attitude), stage2_fit(m, H, attitude=attitude)
     rng = np.random.default_rng(1)
     vr, vs = rng.standard_normal((m.n_ribs, m.n_rib)), rng.standard_normal(m.n_shared)
     for name in ('to_scheme', 'to_physical', 'transpose'):

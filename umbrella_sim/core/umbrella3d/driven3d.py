@@ -293,10 +293,11 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         """Return the Sample3D right after the lock, at its instant (None before the lock)."""
         if self.lock_state is None:
             return None
-        s, hit, (work, friction, drive) = self.lock_state
+        s, hit, (work, friction, drive, damping) = self.lock_state
         return Sample3D.of_row(self.record.row(
             s, True, self.force, self.lock_loss,
-            (work + hit.force, friction + hit.friction, drive + hit.drive)))
+            (work + hit.force, friction + hit.friction, drive + hit.drive,
+             damping + hit.damping)))
 
     def new_summary(self, initial: Sample3D) -> 'Summary3D':
         return Summary3D(self, initial)

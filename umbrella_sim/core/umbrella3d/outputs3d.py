@@ -51,6 +51,8 @@ class Record3D:
         self.work = 0.0
         self.friction = np.zeros(nr)
         self.drive = 0.0
+        #: the energy the beams' damping dissipated so far (J, >= 0: damping3d.py)
+        self.damping = 0.0
         self.lock_events: list = []
         self.iterations = 0
         # a stress point's x along its body: the leaf's points, then the link's
@@ -78,6 +80,7 @@ class Record3D:
             self.work += work.force
             self.friction = self.friction + work.friction
             self.drive += work.drive
+            self.damping += work.damping
             self.iterations += work.iterations
         if lock_event is not None:
             self.lock_events.append(lock_event)
@@ -92,7 +95,8 @@ class Record3D:
                for name in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
         self._put_steps(np.array([s.t]), one, np.array([kinetic]),
                         np.array([m.strain_energy(s.qr)]), np.array([self.work]),
-                        self.friction[None], np.array([self.drive]), locked, force, lock_loss)
+                        self.friction[None], np.array([self.drive]), locked, force, lock_loss,
+                        damping=np.array([self.damping]))
         if m.moving_base:
             put = self._put
             put('bus_q', s.qs[1:7].copy())
@@ -124,12 +128,15 @@ class Record3D:
         drive = self.drive + np.cumsum(rows['work_drive'])
         self.work, self.friction = float(work[-1]), friction[-1].copy()
         self.drive = float(drive[-1])
+        damping = self.damping + np.cumsum(rows['work_damping']) if 'work_damping' in rows \
+            else np.full(len(work), self.damping)
+        self.damping = float(damping[-1])
         self.iterations += int(np.sum(rows['iterations']))
         figures = None
         if 'stress_top' in rows:        # (the compiled step's: _crests' rule, computed there)
             figures = rows['stress_top'], rows['stress_at']
         self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work, friction,
-                        drive, locked, force, lock_loss, figures)
+                        drive, locked, force, lock_loss, figures, damping)
         if self.model.moving_base:
             bus = {'bus_q': rows['qs'][:, 1:7], 'bus_v': rows['vs'][:, 1:7]}
             if self.model.params.base == 'free':
@@ -144,7 +151,7 @@ class Record3D:
         return last is not None and last[3] == locked
 
     def _put_steps(self, t, st, kinetic, strain, work, friction, drive, locked, force,
-                   lock_loss, figures=None):
+                   lock_loss, figures=None, damping=None):
         """
         Append k steps' figures (arrays with the steps first) and update the peaks.
 
@@ -163,7 +170,7 @@ class Record3D:
             'alpha1_rate': vr[:, :, m.i_a1], 'alpha2_rate': vr[:, :, m.i_a2],
             'tip': qr[:, :, list(m.i_tip)], 'kinetic_energy': kinetic,
             'strain_energy': strain, 'work': work, 'friction_work': friction,
-            'drive_work': drive,
+            'drive_work': drive, 'damping_dissipation': damping,
             'holding_torque': np.where(free, 0.0, st['lam_r'][:, :, -1]), 'stuck': ~free,
             'stop_reaction': st['lam_s'][:, 0]}
         for name, values in columns.items():        # (copies: the rows' buffers are reused)
@@ -236,6 +243,7 @@ class Record3D:
         m = self.model
         rows = {name: np.array([getattr(s, name) for s in states])
                 for name in ('t', 'qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
+        rows['work_damping'] = np.array([w.damping for w in works])
         rows['kinetic'] = np.array([0.5 * (float(np.sum(s.pr * s.vr)) + float(s.ps @ s.vs))
                                     for s in states])
         rows['strain'] = np.array([m.strain_energy(s.qr) for s in states])
@@ -309,10 +317,11 @@ class Record3D:
         Return the figures of the state s as a row, without adding it (``add``'s rule).
 
         totals: the work of the sleeve force, each hinge's friction work and the drive's work
-        from t = 0 to s.
+        from t = 0 to s (and the damping's dissipation, if given).
         """
         scratch = Record3D(self.model)
-        scratch.work, friction, scratch.drive = totals
+        scratch.work, friction, scratch.drive, *damping = totals
+        scratch.damping = float(damping[0]) if damping else 0.0
         scratch.friction = np.array(friction, dtype=float)
         scratch.add(s, locked, force, None, lock_loss)
         return {name: values[0] for name, values in scratch.arrays().items()}
@@ -324,7 +333,8 @@ class Record3D:
         A rib's deployment instant is when its leaf angle first reaches its deployed angle
         (linear between steps; the lock's instant where it does so in the lock's step:
         first_reach); the lag is the latest rib's after the earliest.  The energy
-        balance residual is max |T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss|.
+        balance residual is max |T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss
+        + damping dissipation|.
         """
         m = self.model
         a = self.arrays()
@@ -349,6 +359,7 @@ class Record3D:
             'energy_balance_residual': float(np.max(np.abs(balance))),
             'energy_scale': float(np.max(np.abs(energy))),
             'friction_work': a['friction_work'][-1],
+            'damping_dissipation': float(a['damping_dissipation'][-1]),
             'newton_iterations': self.iterations,
             'peak_stress': {name: (self.peak[name].copy(), list(self.peak_where[name]))
                             for name in STRESS_NAMES},
@@ -357,7 +368,8 @@ class Record3D:
 
 
 #: the rows of a run of steps that add up over a grid step's physics steps (the rest: its last)
-_SUMMED_ROWS = ('work_force', 'work_friction', 'work_drive', 'iterations', 'factorisations')
+_SUMMED_ROWS = ('work_force', 'work_friction', 'work_drive', 'work_damping', 'iterations',
+                'factorisations')
 
 
 def fold_substeps3d(rows: dict, m: int) -> dict:
@@ -484,12 +496,12 @@ def largest_out_of_plane_tip(t: np.ndarray, tip: np.ndarray) -> tuple[float, int
 
 def energy_balance3d(rows, initial_energy: float) -> np.ndarray:
     """
-    Return T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss of rows (J).
+    Return T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss + dissipation (J).
 
     rows: a Record3D's arrays (one figure a step) or one row (a Sample3D).  The umbrella's
     energy balance, one rule: 0 for a run that keeps its energy (friction work is negative:
-    the hinges take energy out).
+    the hinges take energy out; the beams' damping dissipation is positive, energy out).
     """
     return (rows['kinetic_energy'] + rows['strain_energy'] - initial_energy - rows['work']
             - np.sum(rows['friction_work'], axis=-1) - rows['drive_work']
-            + rows['lock_energy_loss'])
+            + rows['lock_energy_loss'] + rows['damping_dissipation'])

@@ -236,7 +236,8 @@ class UmbrellaSimulator3D:
             self._judge_stage2(s_locked)
             self.integrator.lock_at(s_locked)
             rec = self.record
-            self.lock_state = (s_locked, work_hit, (rec.work, rec.friction, rec.drive))
+            self.lock_state = (s_locked, work_hit, (rec.work, rec.friction, rec.drive,
+                                                    rec.damping))
             after = self.energy(s_locked)
             self.locked, self.lock_time = True, s_locked.t
             self.lock_loss += before - after
@@ -246,7 +247,8 @@ class UmbrellaSimulator3D:
                 s1, work2 = self._locked_steps(s_locked, remaining)
                 work = replace(work_hit, force=work_hit.force + work2.force,
                                friction=work_hit.friction + work2.friction,
-                               drive=work_hit.drive + work2.drive)
+                               drive=work_hit.drive + work2.drive,
+                               damping=work_hit.damping + work2.damping)
             else:
                 s1, work = s_locked, work_hit
         s1 = replace(s1, t=t_next)
@@ -331,6 +333,7 @@ class UmbrellaSimulator3D:
             work = replace(work, force=work.force + w.force,
                            friction=work.friction + w.friction, drive=work.drive + w.drive,
                            iterations=work.iterations + w.iterations,
+                           damping=work.damping + w.damping,
                            factorisations=work.factorisations + w.factorisations)
         return s, work
 
