@@ -182,7 +182,8 @@ class MidpointUmbrella:
                                        'bootstrap.py setup; it needs a C compiler)')
         if why is None:
             return CompiledStep3D(lib, self.model, self.tolerance, PHI_TOLERANCE,
-                                  self.max_iterations, self.carry_steps, self.drive)
+                                  self.max_iterations, self.carry_steps, self.drive,
+                                  damping_beta=self.damping_beta)
         if kernel == 'compiled':
             raise RuntimeError(why)
         if why not in _SAID:
