@@ -295,7 +295,10 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'stiffness-proportional Rayleigh) damping β = 2ζ/ω1, ω1 the first mode of the locked '
        'frame linearised at full deployment, mode i gets ζω_i/ω1; the dissipated energy is '
        'reported (`energy` topic); 0 = undamped (the thesis); no effect on rigid-fe and '
-       'rigid; the umbrella of N ribs (ribs ≥ 2) refuses it (its 3D beams are undamped)',
+       'rigid; the umbrella of N ribs (ribs ≥ 2, model flexible) damps its 3D beams alike '
+       '(axial, both bendings and torsion: C = βK with the β of its planar rib, so each '
+       "rib's first in-plane mode has ζ, its out-of-plane modes ζω_i/ω1; the `energy` topic's "
+       '`damping_dissipation_J`); its co-rotational ribs (flexible-nonlinear) refuse it',
        low=0.0, high=1.0, high_open=True),
     # the node
     _P('publish_rate', float, 100.0, 'Hz',

@@ -68,7 +68,7 @@ TIP_FIELDS = ('axial_m', 'in_plane_m', 'out_of_plane_m')
 STRESS_FIELDS = tuple(f'{name}_Pa' for name in STRESS_NAMES) + (
     'von_mises_body', 'von_mises_x_m', 'von_mises_ratio')
 ENERGY_FIELDS = ('kinetic_J', 'strain_J', 'work_J', 'lock_loss_J', 'balance_error_J',
-                 'friction_work_J', 'drive_work_J')
+                 'friction_work_J', 'drive_work_J', 'damping_dissipation_J')
 #: the sleeve's joint: the last of joint_states (robot_description.joint_names)
 SLEEVE_JOINT = joint_names(2)[-1]
 
@@ -112,7 +112,7 @@ def rib_energy_values(s, initial_energy: float) -> list[float]:
     """Return the umbrella's energy data of a Sample3D (ENERGY_FIELDS, J)."""
     return [float(s.kinetic_energy), float(s.strain_energy), float(s.work),
             float(s.lock_energy_loss), float(energy_balance3d(s, initial_energy)),
-            float(sum(s.friction_work)), float(s.drive_work)]
+            float(sum(s.friction_work)), float(s.drive_work), float(s.damping_dissipation)]
 
 
 def rib_messages(s, yield_strength: float, initial_energy: float,

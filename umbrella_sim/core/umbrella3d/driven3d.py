@@ -61,10 +61,10 @@ class Sample3D:
     time, stage (model.Stage), sleeve_position, sleeve_velocity, sleeve_force (the whole
     sleeve's, N), alpha1, alpha2, alpha1_rate, alpha2_rate (per rib, rad, rad/s), tip (ribs,
     3: u, v, w of G in the leaf frame, m), kinetic_energy, strain_energy, work, friction_work
-    (per rib), drive_work, lock_energy_loss (J), holding_torque, stuck (per rib),
-    stop_reaction, stress_<component> (per rib, Pa) and stress_<component>_at (ribs, 2: body
-    0 leaf / 1 link, x along it), and with a moving base bus_q, bus_v (and the momenta of a
-    free bus).
+    (per rib), drive_work, damping_dissipation, lock_energy_loss (J), holding_torque, stuck
+    (per rib), stop_reaction, stress_<component> (per rib, Pa) and stress_<component>_at
+    (ribs, 2: body 0 leaf / 1 link, x along it), and with a moving base bus_q, bus_v (and
+    the momenta of a free bus).
     """
 
     __slots__ = ('_values',)
@@ -394,6 +394,7 @@ class Summary3D:
                'energy_drift': self.energy_drift,
                'friction_work': np.asarray(self._final.friction_work).tolist(),
                'drive_work': float(self._final.drive_work),
+               'damping_dissipation': float(self._final.damping_dissipation),
                'lock_energy_loss': float(self._final.lock_energy_loss),
                'peak_stress': {name: {'value': top.tolist(),
                                       'body': [BODIES[int(b)] for b in at[:, 0]],
