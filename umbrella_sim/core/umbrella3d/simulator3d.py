@@ -63,7 +63,8 @@ from ..lock import locked_velocity_base, LockImpossible, velocity_keeping_energy
 from ..step_rule import follows_lock, physics_step_of, substeps_for
 
 
-#: grid steps a compiled call takes at most (its output rows: ~0.3 MB at 12 ribs x 2 elements)
+#: physics steps a compiled call takes at most (its output rows: ~0.3 MB at 12 ribs x 2
+#: elements): grid steps, or in stage 2's substeps this / their count
 ADVANCE_BLOCK = 256
 
 
@@ -272,9 +273,10 @@ class UmbrellaSimulator3D:
                     return
                 continue
             sub = self.stage2_substeps if self.locked else 1
+            grid = min(target - self.k, max(1, ADVANCE_BLOCK // sub))   # (physics steps a call)
             status, done, rows, state = compiled.advance(
-                self.state, self.k * sub, self.h / sub, min(target - self.k, ADVANCE_BLOCK) * sub,
-                self.force, self.locked, self.record.crest_continues(self.locked))
+                self.state, self.k * sub, self.h / sub, grid * sub, self.force, self.locked,
+                self.record.crest_continues(self.locked))
             if done:
                 self.integrator.iterations += int(rows['iterations'].sum())
                 self.integrator.factorisations += int(rows['factorisations'].sum())
