@@ -132,8 +132,8 @@ def test_ribs_with_the_stage2_mode_fit_are_the_planar_model_with_its_fit(kernel,
     """
     Three ribs at the fitted rule's 0.1 ms, energy lock: one path both.
 
-    The step given: the planar default's stage 2 takes, past the modes' coupling (this lock's
-    tip deflection, 0.1 ms), the finer step its lock needs, which the umbrella's does not.
+    The step given: both models' stage 2 stays on it (the fit's identity alone); at
+    time_step 0 both take the substeps their lock needs (tests/test_umbrella3d_substeps.py).
     """
     monkeypatch.setenv('UMBRELLA_SIM_KERNEL', kernel)
     assert_ribs_equal_planar(3, {'time_step': 1e-4, 'sleeve_force': 10.0}, 0.19, kernel,
