@@ -18,15 +18,21 @@
 Cost of the umbrella's co-rotational ribs (model flexible-nonlinear) per step, both paths.
 
 For ribs x elements, CPU time of this thread per grid step (the midpoint step, its Newton
-iterations, the projection, Record3D's figures) at h = 0.1 ms, V0 = -1 m/s (the links
-buckle), plastic lock: stage 1 over --steps steps from t = 0, stage 2 over --steps steps
-from the lock on; the Newton iterations and factorisations a step; on the compiled step
-(_kernel3d.c with _kernel3d_nonlinear.h, UmbrellaSimulator3D.advance: the steps in one
-call) and the numpy reference (UmbrellaSimulator3D.step); and the same runs of the linear
-model (flexible, no mode fit) beside them.  Prints the figures and the machine's load; no
-figure is asserted.
+iterations, the projection, the per-step stress figures and Record3D's rows) at h = 0.1 ms,
+V0 = -1 m/s (the links buckle), plastic lock: stage 1 over --steps steps from t = 0, stage 2
+over --steps steps from the lock on; the Newton iterations and factorisations a step; on the
+compiled step (_kernel3d.c with _kernel3d_nonlinear.h, UmbrellaSimulator3D.advance: the
+steps in one call, their stress figures computed there, _kernel3d_figures.h) and the numpy
+reference (UmbrellaSimulator3D.step, Record3D's numpy figures); and the same runs of the
+linear model (flexible, no mode fit) beside them.  Prints the figures and the machine's
+load; no figure is asserted.  The co-rotational ribs' stress figures, once Record3D's numpy
+(45 of 112 us a step at 6 x 1 in stage 1), computed in the library, their elements' strains
+kept from one iteration to the next: compiled 6 x 1 94 -> 59 us a step in stage 1 and 134 ->
+91 in stage 2, 6 x 2 193 -> 114 and 300 -> 214 (best of two, load 4.4-4.5;
+docs/umbrella3d_nonlinear.md).
 
     PYTHONPATH=. python bench/bench_umbrella3d_nonlinear.py [--steps 100] [--carry K]
+        [--ribs 3 6] [--elements 1 2] [--paths compiled numpy]
 """
 import argparse
 import os
@@ -68,6 +74,8 @@ def main():
                     help="carry_steps of the iteration matrix (default: each model's)")
     ap.add_argument('--ribs', type=int, nargs='+', default=[3, 6])
     ap.add_argument('--elements', type=int, nargs='+', default=[1, 2])
+    ap.add_argument('--paths', nargs='+', choices=('compiled', 'numpy'),
+                    default=['compiled', 'numpy'], help='the steps measured (default both)')
     args = ap.parse_args()
     print(f'load {os.getloadavg()[0]:.2f} (2 cores); h = 0.1 ms, V0 = -1, plastic lock; '
           f"carry_steps {args.carry or 'the model default'}")
@@ -77,7 +85,7 @@ def main():
     for ribs in args.ribs:
         for elements in args.elements:
             for model in ('flexible', 'flexible-nonlinear'):
-                for kernel in ('compiled', 'numpy'):
+                for kernel in args.paths:
                     s1, s2 = measure(model, ribs, elements, args.steps, args.carry, kernel)
                     print(f'| {model} | {kernel} | {ribs} x {elements} '
                           f'| {s1[0]:.0f} ({s1[1]:.2f}, {s1[2]:.2f}) '

@@ -385,4 +385,14 @@ UMBRELLA_API int umbrella3d_set_stress(Ctx3D *x, int leaf_points, int link_point
                                        const double *leaf_rows, const double *link_rows,
                                        const double *point_x);
 
+/* The same figures of the co-rotational ribs (Model3D.nl_elements: model flexible-nonlinear,
+ * _kernel3d_nonlinear.h's nl_stress_components): their points both ends of every element
+ * (leaf_points + link_points = 2 nl_elements: the leaf's, then the link's), the components
+ * from the elements' co-rotated strains with each rib's moduli (ribs x 3: E, E c, G c_t:
+ * axial, bending and torsion shear), each point's x; moduli and x are copied.  OK, or
+ * SINGULAR (points not those, or out of memory: no figures). */
+UMBRELLA_API int umbrella3d_set_corotational_stress(Ctx3D *x, int leaf_points,
+                                                    int link_points, const double *moduli,
+                                                    const double *point_x);
+
 #endif

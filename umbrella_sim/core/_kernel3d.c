@@ -108,6 +108,8 @@ typedef struct {
 typedef struct Base3D Base3D;
 /* the steps' stress figures (_kernel3d_figures.h) */
 typedef struct Figures3D Figures3D;
+/* the co-rotational ribs' element strains of the latest configurations (_kernel3d_nonlinear.h) */
+typedef struct NlStarts NlStarts;
 
 struct Ctx3D {
     const Model3D *m;
@@ -143,6 +145,7 @@ struct Ctx3D {
     Base3D *base;                      /* a moving base's (n_shared 7), else NULL */
     Figures3D *fig;                    /* the rows' stress figures (umbrella3d_set_stress),
                                         * else NULL */
+    NlStarts *nl;                      /* the co-rotational ribs' (nl_elements), else NULL */
 };
 
 static Base3D *base_new(Ctx3D *x);
@@ -240,6 +243,7 @@ void umbrella3d_free(Ctx3D *x) {
     if (!x) return;
     base_free(x->base);
     figures_free(x->fig);
+    nl_starts_free(x->nl);
     for (int j = 0; j < 2; j++) {
         kin_free(&x->km[j]);
         free(x->b[j].inv);
@@ -477,6 +481,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && jacobian_rows(x);
     x->kept_stuck = ok ? calloc((size_t)R, 1) : NULL;
     if (ok && x->ns > 1) ok = (x->base = base_new(x)) != NULL;
+    if (ok && m->nl_elements) ok = (x->nl = nl_starts_new(x)) != NULL;
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
     x->pend_slot = -1;
     x->pm.elastic_first = 1;

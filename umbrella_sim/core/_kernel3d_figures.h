@@ -26,7 +26,11 @@
  * run's first step (Advance3DCall.crest_from_state 0: the step before was across the lock
  * or there was none); the largest over the rib's points of each of the five channels and
  * where (the first point holding it: body code 0 leaf / 1 link, x along it).  The figures
- * are the last 15 R doubles of a row: R x 5 largest values, then R x 5 x 2 places.
+ * are the last 15 R doubles of a row: R x 5 largest values, then R x 5 x 2 places.  The
+ * co-rotational ribs (model flexible-nonlinear, umbrella3d_set_corotational_stress) take
+ * the same rule with their components from the elements' co-rotated strains at both ends
+ * of every element (_kernel3d_nonlinear.h's nl_stress_components; numpy reference
+ * corotational3d.RibCorotationalStrain.stress_blocks) in place of the recovery rows.
  */
 
 #define FIG_CHANNELS 5         /* outputs3d.STRESS_NAMES */
@@ -36,6 +40,8 @@ struct Figures3D {
     int pl, pk, P;                     /* stress points of the leaf, the link, a rib's */
     double *rows[2];                   /* R x 4 pb x ne: each body's recovery rows */
     int *ptr[2], *col[2];              /* their nonzeros (any rib's), row by row */
+    double *moduli;                    /* R x 3, the co-rotational ribs' (rows NULL): E, E c,
+                                        * G c_t (nl_stress_components) */
     double *x;                         /* P: each point's x along its body */
     double *val[2], *rate[2];          /* R x 5 x P: a state's channels (two: a step's ends) */
     int cur;                           /* the buffer of the last committed state */
@@ -48,6 +54,7 @@ static void figures_free(Figures3D *f) {
         free(f->rows[j]); free(f->val[j]); free(f->rate[j]); free(f->ptr[j]); free(f->col[j]);
     }
     free(f->x);
+    free(f->moduli);
     free(f);
 }
 
@@ -95,17 +102,52 @@ int umbrella3d_set_stress(Ctx3D *x, int leaf_points, int link_points, const doub
     return OK;
 }
 
+/* ------------------------------------------------------------------ co-rotational ribs
+ * The figures of the co-rotational ribs (model flexible-nonlinear): the same channels,
+ * crests and places, the components from each element's co-rotated strains
+ * (nl_stress_components) at both ends of every element; moduli (R x 3: E, E c, G c_t) and
+ * each point's x copied. */
+int umbrella3d_set_corotational_stress(Ctx3D *x, int leaf_points, int link_points,
+                                       const double *moduli, const double *point_x) {
+    figures_free(x->fig);
+    x->fig = NULL;
+    int R = x->R, P = leaf_points + link_points;
+    if (leaf_points < 0 || link_points < 0 || P != 2 * x->m->nl_elements || P == 0)
+        return SINGULAR;
+    Figures3D *f = calloc(1, sizeof(Figures3D));
+    if (!f) return SINGULAR;
+    f->pl = leaf_points;
+    f->pk = link_points;
+    f->P = P;
+    int ok = 1;
+    for (int j = 0; j < 2; j++) {
+        f->val[j] = calloc((size_t)R * FIG_CHANNELS * P, sizeof(double));
+        f->rate[j] = calloc((size_t)R * FIG_CHANNELS * P, sizeof(double));
+        ok = ok && f->val[j] && f->rate[j];
+    }
+    f->moduli = malloc(sizeof(double) * 3 * R);
+    f->x = malloc(sizeof(double) * P);
+    if (!ok || !f->moduli || !f->x) { figures_free(f); return SINGULAR; }
+    memcpy(f->moduli, moduli, sizeof(double) * 3 * R);
+    memcpy(f->x, point_x, sizeof(double) * P);
+    x->fig = f;
+    return OK;
+}
+
 static double fig_sign(double s) { return s > 0.0 ? 1.0 : s < 0.0 ? -1.0 : s; }
 
 /* the five channels of the state (q, v) at every point of every rib into val, rate
  * (R x 5 x P: channel-major per rib): the four components, then von Mises (Record3D's
  * combined) */
-static void figure_channels(const Ctx3D *x, const Figures3D *f, const double *q,
+static void figure_channels(Ctx3D *x, const Figures3D *f, const double *q,
                             const double *v, double *val, double *rate) {
     int R = x->R, n = x->n, P = f->P;
     for (int r = 0; r < R; r++) {
         double *sv = val + (size_t)r * FIG_CHANNELS * P, *sr = rate + (size_t)r * FIG_CHANNELS * P;
-        for (int j = 0; j < 2; j++) {
+        if (f->moduli)         /* the co-rotational ribs' (_kernel3d_nonlinear.h) */
+            nl_stress_components(x, r, q + (size_t)r * n, v + (size_t)r * n,
+                                 f->moduli + 3 * r, P, sv, sr);
+        for (int j = 0; !f->moduli && j < 2; j++) {
             const Body *b = &x->b[j];
             int pb = j ? f->pk : f->pl, first = j ? f->pl : 0, ne = b->ne;
             const double *qe = q + (size_t)r * n + b->off + b->t + 1;

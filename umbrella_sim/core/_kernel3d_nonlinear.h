@@ -22,7 +22,8 @@
  * h^2/4 K) and the elastic LU of the iteration matrix made at each factorisation
  * (nl_iteration_elastic), the strain energy (nl_energy), and the elastic LU's pattern
  * (Model3D.nl_pattern: the elements' full blocks); in _kernel3d_base.h's step (a moving
- * base) the elastic force and the elastic LU.
+ * base) the elastic force and the elastic LU; in _kernel3d_figures.h the stress figures'
+ * components (nl_stress_components, at the end).
  *
  * An element's z = (d_x, d_y, d_z, theta_a, theta_b, w'_a, w'_b, phi_a, phi_b) from its 12
  * coordinates (u, v, theta, w, slope, twist of node a, then b: NL_B, NL_A below), its strains
@@ -38,13 +39,19 @@ static int elastic_lu_of(const Body *b, const double *M0, const double *K, doubl
 
 static double nl_wrap(double a) { return a - 2.0 * NL_PI * floor((a + NL_PI) / (2.0 * NL_PI)); }
 
-/* the element e of a rib (coordinates qr): z, its length */
-static double nl_z(const Model3D *m, int r, int e, const double *qr, double *z) {
+/* z - (l_e, 0, ...) of the element e of a rib from its coordinates qr (of velocities vr:
+ * dz/dt) */
+static void nl_chord_part(const Model3D *m, int e, const double *qr, double *z) {
     const int *p = m->nl_places + e * 12;
     double xe[12];
     for (int i = 0; i < 12; i++) xe[i] = p[i] < m->n_rib ? qr[p[i]] : 0.0;
-    double le = m->nl_length[r * m->nl_elements + e];
     for (int k = 0; k < 9; k++) z[k] = xe[NL_B[k]] - (NL_A[k] >= 0 ? xe[NL_A[k]] : 0.0);
+}
+
+/* the element e of rib r (coordinates qr): z, its length */
+static double nl_z(const Model3D *m, int r, int e, const double *qr, double *z) {
+    double le = m->nl_length[r * m->nl_elements + e];
+    nl_chord_part(m, e, qr, z);
     z[0] += le;
     return le;
 }
@@ -61,12 +68,6 @@ static void nl_strains_from(const double *z, double le, const double *tb, double
     s[0] = len / le - 1.0 + (qt + qc) / 30.0;
     s[1] = tb[0]; s[2] = tb[1]; s[3] = c0; s[4] = c1;
     s[5] = z[8] - z[7];
-}
-
-static void nl_strains(const double *z, double le, double *s) {
-    double beta = atan2(z[1], z[0]), tb[2];
-    for (int k = 0; k < 2; k++) tb[k] = nl_wrap(asin(nl_sine(z, k)) - beta);
-    nl_strains_from(z, le, tb, s);
 }
 
 /* sigma = D s (D of rib r's element e: EA l, EI_z / l, EI_y / l, GJ / l) */
@@ -86,12 +87,14 @@ static void nl_eps_row(double *J, const double *s) {
         J[i] += dt0 * J[9 + i] + dt1 * J[18 + i] + dc0 * J[27 + i] + dc1 * J[36 + i];
 }
 
-/* psi's derivatives at end k: d/dtheta, d/dw', and the second ones (tt, tw, ww) */
-static void nl_section(const double *z, int k, double *d) {
+/* psi's derivatives at end k: d/dtheta, d/dw', and if second the second ones (tt, tw, ww) */
+static void nl_section(const double *z, int k, double *d, int second) {
     double th = z[3 + k], w = z[5 + k];
     double s = 1.0 / sqrt(1.0 - w * w), g = th * s, pg = 1.0 / sqrt(1.0 - g * g);
-    double gw = th * w * s * s * s, pgg = g * pg * pg * pg;
+    double gw = th * w * s * s * s;
     d[0] = pg * s; d[1] = pg * gw;
+    if (!second) return;
+    double pgg = g * pg * pg * pg;
     d[2] = pgg * s * s; d[3] = pgg * s * gw + pg * w * s * s * s;
     d[4] = pgg * gw * gw + pg * th * (s * s * s + 3.0 * w * w * s * s * s * s * s);
 }
@@ -103,7 +106,7 @@ static void nl_jacobian(const double *z, double le, const double *s, double *J, 
     double gb[2] = {-z[1] / r2, z[0] / r2};
     double gs[3] = {-z[2] * z[0] / l3, -z[2] * z[1] / l3, 1.0 / len - z[2] * z[2] / l3};
     double sec[2][5];
-    for (int k = 0; k < 2; k++) nl_section(z, k, sec[k]);
+    for (int k = 0; k < 2; k++) nl_section(z, k, sec[k], H != NULL);
     memset(J, 0, sizeof(double) * 54);
     for (int k = 0; k < 2; k++) {
         double *t = J + 9 * (1 + k), *c = J + 9 * (3 + k);
@@ -156,18 +159,87 @@ static void nl_gonzalez(int k, double *g, const double *dd, double df) {
         for (int i = 0; i < k; i++) g[i] += (df - gd) / d2 * dd[i];
 }
 
-/* s0 and s1 of a step z0 -> z1 (s1 from s0 and the accurate increments) */
-static void nl_step_strains(const double *z0, const double *z1, double le, double *s0,
-                            double *s1, double *dbeta, double *dpsi) {
-    nl_strains(z0, le, s0);
+/* ------------------------------------------------------------------ kept strains
+ * An element's strains at a configuration and what a step from there reads of them: z, s
+ * (beta = atan2(d_y, d_x), tb = wrap(asin(sin psi) - beta), nl_strains_from), sin psi at
+ * both ends and its cosine, |d|.  Computed once a configuration and
+ * kept for the two latest of each rib (a step's start and end: the Newton iterations'
+ * forces and blocks, the strain energy at both ends, the stress figures and the next step
+ * read them), the same arithmetic as computed where read. */
+typedef struct {
+    double z[9], s[6], g[2], cg[2], len, le;
+} NlStart;
+
+struct NlStarts {
+    double *key;                       /* R x 2 x n: the configuration a slot holds */
+    int *have;                         /* R x 2: the slot holds one */
+    int *latest;                       /* R: the slot last filled or read */
+    NlStart *el;                       /* R x 2 x nl_elements */
+};
+
+static void nl_starts_free(NlStarts *c) {
+    if (!c) return;
+    free(c->key); free(c->have); free(c->latest); free(c->el);
+    free(c);
+}
+
+static NlStarts *nl_starts_new(const Ctx3D *x) {
+    NlStarts *c = calloc(1, sizeof(NlStarts));
+    if (!c) return NULL;
+    int R = x->R, n = x->n, E = x->m->nl_elements;
+    c->key = calloc((size_t)R * 2 * n, sizeof(double));
+    c->have = calloc((size_t)R * 2, sizeof(int));
+    c->latest = calloc((size_t)R, sizeof(int));
+    c->el = calloc((size_t)R * 2 * E, sizeof(NlStart));
+    if (!c->key || !c->have || !c->latest || !c->el) { nl_starts_free(c); return NULL; }
+    return c;
+}
+
+/* the elements of rib r at its coordinates qr, kept or computed into the slot not read last */
+static const NlStart *nl_starts(Ctx3D *x, int r, const double *qr) {
+    const Model3D *m = x->m;
+    NlStarts *c = x->nl;
+    int n = x->n, E = m->nl_elements;
+    for (int k = 0; k < 2; k++) {
+        int slot = 2 * r + k;
+        if (c->have[slot] && !memcmp(c->key + (size_t)slot * n, qr, sizeof(double) * n)) {
+            c->latest[r] = k;
+            return c->el + (size_t)slot * E;
+        }
+    }
+    int k = 1 - c->latest[r], slot = 2 * r + k;
+    NlStart *out = c->el + (size_t)slot * E;
+    for (int e = 0; e < E; e++) {
+        NlStart *st = out + e;
+        double *z = st->z, tb[2];
+        st->le = nl_z(m, r, e, qr, z);
+        double beta = atan2(z[1], z[0]);
+        for (int j = 0; j < 2; j++) {
+            st->g[j] = nl_sine(z, j);
+            tb[j] = nl_wrap(asin(st->g[j]) - beta);
+            st->cg[j] = sqrt(1.0 - st->g[j] * st->g[j]);
+        }
+        nl_strains_from(z, st->le, tb, st->s);
+        st->len = sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2]);
+    }
+    memcpy(c->key + (size_t)slot * n, qr, sizeof(double) * n);
+    c->have[slot] = 1;
+    c->latest[r] = k;
+    return out;
+}
+
+/* s1 of a step from the kept start st to z1 (from s0 and the accurate increments) */
+static void nl_step_strains(const NlStart *st, const double *z1, double *s1, double *dbeta,
+                            double *dpsi) {
+    const double *z0 = st->z;
     *dbeta = atan2(z0[0] * z1[1] - z0[1] * z1[0], z0[0] * z1[0] + z0[1] * z1[1]);
     double tb[2];
     for (int k = 0; k < 2; k++) {
-        double g0 = nl_sine(z0, k), g1 = nl_sine(z1, k);
-        dpsi[k] = asin(g1 * sqrt(1.0 - g0 * g0) - g0 * sqrt(1.0 - g1 * g1));
-        tb[k] = s0[1 + k] + dpsi[k] - *dbeta;
+        double g1 = nl_sine(z1, k);
+        dpsi[k] = asin(g1 * st->cg[k] - st->g[k] * sqrt(1.0 - g1 * g1));
+        tb[k] = st->s[1 + k] + dpsi[k] - *dbeta;
     }
-    nl_strains_from(z1, le, tb, s1);
+    nl_strains_from(z1, st->le, tb, s1);
 }
 
 /* add T^T g (g: 9, d/dz) to an element's 12 coordinates' places in out (n: skipped) */
@@ -182,16 +254,18 @@ static void nl_scatter(const Model3D *m, int e, const double *g, double *out) {
 }
 
 /* rib r's discrete gradient of U over the step q0 -> q1 into out (n): dq . G = dU */
-static void nl_force(const Ctx3D *x, int r, const double *q0, const double *q1, double *out) {
+static void nl_force(Ctx3D *x, int r, const double *q0, const double *q1, double *out) {
     const Model3D *m = x->m;
     memset(out, 0, sizeof(double) * x->n);
+    const NlStart *start = nl_starts(x, r, q0);
     for (int e = 0; e < m->nl_elements; e++) {
-        double z0[9], z1[9], s0[6], s1[6], dbeta, dpsi[2], B[54], sig[6], sm[6], g[9];
-        double le = nl_z(m, r, e, q0, z0);
-        nl_z(m, r, e, q1, z1);
-        nl_step_strains(z0, z1, le, s0, s1, &dbeta, dpsi);
+        const NlStart *st = start + e;
+        const double *z0 = st->z, *s0 = st->s;
+        double z1[9], s1[6], dbeta, dpsi[2], B[54], sig[6], sm[6], g[9];
+        double le = nl_z(m, r, e, q1, z1);
+        nl_step_strains(st, z1, s1, &dbeta, dpsi);
         memset(B, 0, sizeof(B));
-        double l0 = sqrt(z0[0] * z0[0] + z0[1] * z0[1] + z0[2] * z0[2]);
+        double l0 = st->len;
         double l1 = sqrt(z1[0] * z1[0] + z1[1] * z1[1] + z1[2] * z1[2]);
         double dm[3], dd[3];
         for (int i = 0; i < 3; i++) { dm[i] = 0.5 * (z0[i] + z1[i]); dd[i] = z1[i] - z0[i]; }
@@ -205,7 +279,7 @@ static void nl_force(const Ctx3D *x, int r, const double *q0, const double *q1, 
         for (int i = 0; i < 9; i++) zm[i] = 0.5 * (z0[i] + z1[i]);
         for (int k = 0; k < 2; k++) {
             double sec[5];
-            nl_section(zm, k, sec);
+            nl_section(zm, k, sec, 0);
             double gp[2] = {sec[0], sec[1]}, dp[2] = {z1[3 + k] - z0[3 + k], z1[5 + k] - z0[5 + k]};
             nl_gonzalez(2, gp, dp, dpsi[k]);
             double *t = B + 9 * (1 + k), *c = B + 9 * (3 + k);
@@ -227,16 +301,18 @@ static void nl_force(const Ctx3D *x, int r, const double *q0, const double *q1, 
 
 /* add c times the Newton matrix's dG/dq1 of rib r (1/2 [B^T D B + sum sigma_k H_k] at the
  * midpoint, sigma = D (s0 + s1) / 2) into G (n x n, row-major) */
-static void nl_block(const Ctx3D *x, int r, const double *q0, const double *q1, double c,
+static void nl_block(Ctx3D *x, int r, const double *q0, const double *q1, double c,
                      double *G) {
     const Model3D *m = x->m;
     int n = x->n;
+    const NlStart *start = nl_starts(x, r, q0);
     for (int e = 0; e < m->nl_elements; e++) {
-        double z0[9], z1[9], zm[9], s0[6], s1[6], sm[6], dbeta, dpsi[2], J[54], H[486];
+        const NlStart *st = start + e;
+        const double *z0 = st->z, *s0 = st->s;
+        double z1[9], zm[9], s1[6], sm[6], dbeta, dpsi[2], J[54], H[486];
         double sig[6], DJ[54], Z[81], A[144];
-        double le = nl_z(m, r, e, q0, z0);
-        nl_z(m, r, e, q1, z1);
-        nl_step_strains(z0, z1, le, s0, s1, &dbeta, dpsi);
+        double le = nl_z(m, r, e, q1, z1);
+        nl_step_strains(st, z1, s1, &dbeta, dpsi);
         for (int i = 0; i < 9; i++) zm[i] = 0.5 * (z0[i] + z1[i]);
         for (int i = 0; i < 6; i++) sm[i] = 0.5 * (s0[i] + s1[i]);
         nl_jacobian(zm, le, sm, J, H);
@@ -275,17 +351,18 @@ static void nl_block(const Ctx3D *x, int r, const double *q0, const double *q1, 
 }
 
 /* the strain energy of every rib at q */
-static double nl_energy(const Ctx3D *x, const double *q) {
+static double nl_energy(Ctx3D *x, const double *q) {
     const Model3D *m = x->m;
     double u = 0.0;
-    for (int r = 0; r < x->R; r++)
+    for (int r = 0; r < x->R; r++) {
+        const NlStart *start = nl_starts(x, r, q + (size_t)r * x->n);
         for (int e = 0; e < m->nl_elements; e++) {
-            double z[9], s[6], sig[6];
-            double le = nl_z(m, r, e, q + (size_t)r * x->n, z);
-            nl_strains(z, le, s);
+            const double *s = start[e].s;
+            double sig[6];
             nl_stress(m, r, e, s, sig);
             for (int k = 0; k < 6; k++) u += 0.5 * s[k] * sig[k];
         }
+    }
     return u;
 }
 
@@ -325,5 +402,44 @@ static void nl_hinge_rows(const Model3D *m, const double *qr, double *f, double 
         j3[m->nl_i_t2] = d32 * g2; j4[m->nl_i_t2] = d42 * g2;
         j3[m->i_s2] = -c2; j4[m->i_s2] = -s2;
         j3[m->i_p2] = s2; j4[m->i_p2] = -c2;
+    }
+}
+
+/* ------------------------------------------------------------------ the stress figures
+ * Rib r's four stress components at both ends of every element (points 2e, 2e + 1: the
+ * leaf's elements, then the link's) and their rates, for _kernel3d_figures.h's channels
+ * (figure_channels: von Mises, crests and the largest are its rule, the linear beams'):
+ * corotational3d.RibCorotationalStrain.stress_blocks, the numpy reference, in the
+ * element's co-rotated frame from its strains s (nl_starts) and their rates ds/dz dz/dt:
+ * axial E eps, bending E c kappa of tb and of c (kappa = (-4 t_a - 2 t_b) / l_e at end a,
+ * (2 t_a + 4 t_b) / l_e at end b), torsion shear G c_t tau / l_e.  moduli: rib r's E, E c,
+ * G c_t; sv, sr: component k of point p at k P + p. */
+static void nl_components(const double *moduli, double le, const double *s, double *out,
+                          int P) {
+    double axial = moduli[0] * s[0], shear = moduli[2] * s[5] / le;
+    out[0] = out[1] = axial;
+    out[P] = moduli[1] * ((-4.0 * s[1] - 2.0 * s[2]) / le);
+    out[P + 1] = moduli[1] * ((2.0 * s[1] + 4.0 * s[2]) / le);
+    out[2 * P] = moduli[1] * ((-4.0 * s[3] - 2.0 * s[4]) / le);
+    out[2 * P + 1] = moduli[1] * ((2.0 * s[3] + 4.0 * s[4]) / le);
+    out[3 * P] = out[3 * P + 1] = shear;
+}
+
+static void nl_stress_components(Ctx3D *x, int r, const double *qr, const double *vr,
+                                 const double *moduli, int P, double *sv, double *sr) {
+    const Model3D *m = x->m;
+    const NlStart *start = nl_starts(x, r, qr);
+    for (int e = 0; e < m->nl_elements; e++) {
+        const double *z = start[e].z, *s = start[e].s;
+        double le = start[e].le, dz[9], ds[6], J[54];
+        nl_jacobian(z, le, s, J, NULL);
+        nl_chord_part(m, e, vr, dz);
+        for (int k = 0; k < 6; k++) {
+            double d = 0.0;
+            for (int i = 0; i < 9; i++) d += J[k * 9 + i] * dz[i];
+            ds[k] = d;
+        }
+        nl_components(moduli, le, s, sv + 2 * e, P);
+        nl_components(moduli, le, ds, sr + 2 * e, P);
     }
 }

@@ -77,7 +77,9 @@ its co-rotated frame: axial E eps, bending E c kappa (kappa = (-4 t_a - 2 t_b) /
 
 Compiled: _kernel3d_nonlinear.h does the same arithmetic element by element in the
 compiled step (hooks in _kernel3d.c and _kernel3d_base.h), which
-tests/test_umbrella3d_nonlinear.py holds equal to this numpy reference through the lock.
+tests/test_umbrella3d_nonlinear.py holds equal to this numpy reference through the lock;
+and the per-step stress figures (stress_blocks' components, _kernel3d_figures.h's crests and
+places), which the same tests hold equal to Record3D's numpy ones.
 No stage-2 mode fit, as the planar flexible-nonlinear model (step_rule.py).  Nothing here
 imports rclpy.
 """
@@ -159,6 +161,9 @@ class RibCorotationalStrain:
             if a is not None:
                 self.to_z[k, a] = -1.0
         self.length = np.concatenate(lengths, 1)               # (R, E)
+        #: each element's z entries 3-8 (nodal slopes theta, w' and twists phi: one
+        #: coordinate each, at its place; n_rib where it is fixed, 0)
+        self.node_places = self.places[:, [b for b, _ in _Z_ROWS[3:]]]
         self.n_leaf = len(m.leaf_bodies[0].element_length)
         sec = m.sections
         per_rib = {name: np.array([s[name] for s in sec])[:, None]
@@ -374,14 +379,19 @@ class RibCorotationalStrain:
         return [comp[..., :n].reshape(lead + comp.shape[1:-1] + (n,)),
                 comp[..., n:].reshape(lead + comp.shape[1:-1] + (-1,))]
 
+    def _nodal(self, qr) -> np.ndarray:
+        """Return z's entries 3-8 of every element (..., R, E, 6): chords' without products."""
+        return np.concatenate([qr, np.zeros(qr.shape[:-1] + (1,))], -1)[..., self.node_places]
+
     def out_of_plane_rotation(self, qr) -> float:
         """Return the largest |w'| or |phi| of any node (rad): OUT_OF_PLANE_LIMIT's measure."""
-        z = self.chords(qr)
-        return float(np.max(np.abs(z[..., 5:9]), initial=0.0))
+        return float(np.max(np.abs(self._nodal(qr)[..., 2:6]), initial=0.0))
 
     def section_slope(self, qr) -> float:
         """Return the largest |sin psi| of any section's turn in its rib's plane (planar's)."""
-        return float(np.max(np.abs(_section_sine(self.chords(qr))), initial=0.0))
+        nodal = self._nodal(qr)
+        return float(np.max(np.abs(_turned_sine(nodal[..., 0:2], nodal[..., 2:4])),
+                            initial=0.0))
 
 
 def _section_sine(z):
@@ -392,7 +402,12 @@ def _section_sine(z):
     of its in-plane length (|r'| = 1): so a rigid tilt of a turned element turns none of its
     sections; theta itself where w' = 0.
     """
-    return z[..., 3:5] / np.sqrt(1.0 - z[..., 5:7] ** 2)
+    return _turned_sine(z[..., 3:5], z[..., 5:7])
+
+
+def _turned_sine(theta, slope):
+    """Return sin psi = theta / sqrt(1 - w'^2) of slopes theta, w' (_section_sine's)."""
+    return theta / np.sqrt(1.0 - slope ** 2)
 
 
 def _section_derivatives(z, hessians: bool = True):
@@ -425,6 +440,7 @@ def _tiled(law: RibCorotationalStrain, k: int) -> RibCorotationalStrain:
         return law
     out = object.__new__(RibCorotationalStrain)
     out.lin, out.n_leaf, out.places, out.to_z = law.lin, law.n_leaf, law.places, law.to_z
+    out.node_places = law.node_places
     out.length = np.tile(law.length, (k, 1))
     out.stiffness = np.tile(law.stiffness, (k, 1, 1, 1))
     out.section = {name: np.tile(v, (k, 1)) for name, v in law.section.items()}

@@ -25,8 +25,9 @@ and, with a driven base, the drive's bus coordinates and rates at the steps' end
 to n grid steps of ``UmbrellaSimulator3D.step`` in one call, stopping before the step in
 which the sleeve reaches the stop (the lock is Python's); its rows end with each step's
 stress figures (``figures``, _kernel3d_figures.h: Record3D's rule, which Record3D then takes
-as they are).  The library is the planar kernel's (kernel.load_kernel: ABI-checked against
-the header).
+as they are; the co-rotational ribs' components from their elements' strains,
+umbrella3d_set_corotational_stress).  The library is the planar kernel's
+(kernel.load_kernel: ABI-checked against the header).
 """
 from __future__ import annotations
 
@@ -169,17 +170,35 @@ class CompiledStep3D:
     def _set_stress(self) -> bool:
         """Hand the stress recovery to the library (umbrella3d_set_stress); True if taken."""
         m = self.model
-        if m.compiled_law() is not None:   # (the co-rotational ribs': Record3D's, numpy)
-            return False
+        x = np.ascontiguousarray(np.concatenate([m.leaf_bodies[0].stress_x,
+                                                 m.link_bodies[0].stress_x]), dtype=float)
+        if m.compiled_law() is not None:
+            return self._set_corotational_stress(x)
         blocks = []
         for bodies in (m.leaf_bodies, m.link_bodies):       # (model3d.stress_blocks' rows)
             blocks.append(np.ascontiguousarray(np.stack([np.stack([
                 getattr(b, name) for name in ('stress_axial', 'stress_bend_z', 'stress_bend_y',
                                               'stress_shear')]) for b in bodies]), dtype=float))
-        x = np.ascontiguousarray(np.concatenate([m.leaf_bodies[0].stress_x,
-                                                 m.link_bodies[0].stress_x]), dtype=float)
         status = self.lib.umbrella3d_set_stress(self._ctx, blocks[0].shape[2], blocks[1].shape[2],
                                                 _ptr(blocks[0]), _ptr(blocks[1]), _ptr(x))
+        return status == STATUS['ok']
+
+    def _set_corotational_stress(self, x: np.ndarray) -> bool:
+        """
+        Hand the co-rotational ribs' stress recovery to the library; True if taken.
+
+        umbrella3d_set_corotational_stress: the components from the elements' co-rotated
+        strains (corotational3d.RibCorotationalStrain.stress_blocks' rule) with each rib's
+        E, E c and G c_t, at both ends of every element (x: each point's, leaf then link).
+        """
+        m = self.model
+        sec = m.strain.section                          # (each (ribs, 1))
+        moduli = np.ascontiguousarray(np.concatenate([
+            sec['youngs'], sec['youngs'] * sec['fibre'], sec['shear'] * sec['torsion_fibre']],
+            1), dtype=float)
+        leaf = 2 * m.strain.n_leaf
+        status = self.lib.umbrella3d_set_corotational_stress(
+            self._ctx, leaf, len(x) - leaf, _ptr(moduli), _ptr(x))
         return status == STATUS['ok']
 
     def set_mode_fit(self, fit) -> None:
