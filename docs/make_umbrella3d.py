@@ -325,12 +325,60 @@ the ribs only through a few unknowns, so a step costs linearly in the number of 
 thesis's §5.2.2); on a free bus `lock: auto` is plastic (the energy lock would change the
 momentum).
 
-The umbrella's stage 2 stays on its grid step: the planar model's stage 2 takes a finer step
-where its lock's tip deflection passes 7 % of the leaf (the modes' coupling,
-docs/validation.md, amplitude), the umbrella's does not yet, so its stage-2 peaks and tip
-series at such amplitudes carry the planar model's errors at the grid step (at N = 1,
-V0 = -0.5: 3 % and 4 mm): its summary's 'coarse step' names the `time_step` that
-resolves them.
+The umbrella's stage 2 takes the planar model's stage-2 step: where the step is chosen for
+the run (`time_step` 0, or `step_follows_mesh`: step_rule.follows_lock of the planar
+record), a lock whose stage-2 tip deflection passes 7 % of the leaf (the modes' coupling,
+docs/validation.md, amplitude) makes every stage-2 grid step k physics steps
+(step_rule.stage2_step_needed and substeps_for, the planar engine's rule). The umbrella
+judges it at the lock on each rib's in-plane state, mapped onto the planar model of the
+rib's own planar record (umbrella_sim/core/umbrella3d/substeps3d.py: its locked modes'
+amplitudes, the tip crest they add up to, the stress shares the step leaves), and takes the
+worst rib's (the smallest step needed; on a tie the rib deflected most): N identical ribs
+take the planar model's substeps and stay each the planar model at `time_step` 0
+(tests/test_umbrella3d_substeps.py: 3 ribs at 10 N a rib, 3 physics steps a 0.1 ms grid
+step, within the identity's 1e-10). The rule reads the in-plane modes only; the ribs'
+out-of-plane and torsion modes take the mode fit at the step the in-plane ones need. The
+numpy step takes a grid step's physics steps one by one (`UmbrellaSimulator3D.step`), the
+compiled advance k of them per grid step in one call; either way Record3D keeps one row a
+grid step, its last physics step's figures with each stress channel's largest over its
+physics steps (each physics step's Hermite crest; outputs3d.fold_substeps3d, the planar
+outputs.fold_substeps' rule). From one locked state (4 asymmetric ribs, V0 = -0.5, 5 physics
+steps a grid step) the two paths' 40 grid rows agree within the numpy reference's own ulp
+spread on every base, with the same Newton iterations (tests/test_umbrella3d_substeps.py).
+With a `time_step` given, stage 2 stays on it and its summary's 'coarse step' (the lock's
+worst rib, judged at the step stage 2 takes) names the `time_step` that resolves it; the
+node, the driver and replay pin the physics step by the planar model's rule
+(`with_physics_step(step, follows_lock)`), so a recording made at `time_step` 0 is
+re-simulated with its substeps. The co-rotational ribs (`flexible-nonlinear`) take none, as
+the planar model. Stage 2 then costs about k times as much: ribs 6 x 1 at 10 N a rib (3
+substeps) 1.74 CPU s a simulated second of stage 2 against 0.61 on the 0.1 ms grid step alone,
+12 x 2 (2 substeps of 33 us) 14.3 against 7.7 (compiled, Record3D's figures included, best of
+two 20 ms runs at load ~5.4 on the 2 cores); the fit's modes refitted at the lock took 2-5 ms
+(56 ms for a free bus at 12 x 2).
+
+The 3D beams take the planar model's structural damping (`damping_ratio` ζ, model
+`flexible`; umbrella_sim/core/umbrella3d/damping3d.py): stiffness-proportional Rayleigh
+(Kelvin–Voigt) damping of every strain rate, axial, both bendings and the twist, C = βK over
+each rib's elastic coordinates, its force −C dq/h in the midpoint step (h/2 C in the
+iteration matrix), so a step dissipates exactly dq·C dq/h ≥ 0, which the step's energy
+target takes off and the record carries (`damping_dissipation`: the `energy` topic, the
+summary, the CSV; the energy balance adds it back). One β for the umbrella, 2ζ/ω1 with ω1
+the first mode of its planar rib (the planar record's) locked at full deployment
+(nonlinear.damping_beta_of, the planar model's one definition), not the umbrella's own first
+locked mode: C = βK is the material's property, which every rib shares, and the planar rib's
+ω1 is what makes N identical damped ribs each the damped planar model (within 1e-10, 3 ribs,
+ζ = 0.05, the mode fit and stage 2's substeps included; N times its dissipation). The
+umbrella's own first locked mode is out of plane (rib 0 of the default: 70.6 rad/s against the
+in-plane ω1 = 133.7 rad/s): taking it would damp the deployment's dominant in-plane mode at
+1.9ζ. Each rib's first in-plane mode then decays with exactly ζ (measured by the logarithmic
+decrement over six periods: 0.0500000003 for ζ = 0.05 with the mode fit, 0.0499985 without,
+whose midpoint rule scales a ratio by sinc(ωh/2)²), its out-of-plane ones with ζω_i/ω1
+(0.0263863 measured, 0.0263863 expected). Stage 2's mode fit takes each mode's damping
+φᵀCφ (integrators.LockedModeFit: exact decay a step), rib by rib or the free bus's whole
+system. Compiled in _kernel3d_damping.h (the step and the moving base's step; equal to the
+numpy reference within its ulp spread, on every base); the energy balance closes to 1e-10 of
+T + V with the dissipation (tests/test_umbrella3d_damping.py). The co-rotational ribs
+(`flexible-nonlinear`) refuse `damping_ratio`, naming it.
 
 The step is compiled (umbrella_sim/core/_kernel3d.c, in the planar kernel's
 library, its interface declared in _kernel.h and checked at load): the Newton iteration, each

@@ -68,7 +68,7 @@ TIP_FIELDS = ('axial_m', 'in_plane_m', 'out_of_plane_m')
 STRESS_FIELDS = tuple(f'{name}_Pa' for name in STRESS_NAMES) + (
     'von_mises_body', 'von_mises_x_m', 'von_mises_ratio')
 ENERGY_FIELDS = ('kinetic_J', 'strain_J', 'work_J', 'lock_loss_J', 'balance_error_J',
-                 'friction_work_J', 'drive_work_J')
+                 'friction_work_J', 'drive_work_J', 'damping_dissipation_J')
 #: the sleeve's joint: the last of joint_states (robot_description.joint_names)
 SLEEVE_JOINT = joint_names(2)[-1]
 #: a Sample3D's figures of each stress component, in STRESS_NAMES' order
@@ -120,7 +120,8 @@ def rib_energy_values(s, initial_energy: float) -> list[float]:
     v = s.fields()
     return [float(v['kinetic_energy']), float(v['strain_energy']), float(v['work']),
             float(v['lock_energy_loss']), float(energy_balance3d(v, initial_energy)),
-            sum(v['friction_work'].tolist()), float(v['drive_work'])]
+            sum(v['friction_work'].tolist()), float(v['drive_work']),
+            float(v['damping_dissipation'])]
 
 
 def rib_messages(s, yield_strength: float, initial_energy: float,

@@ -61,10 +61,10 @@ class Sample3D:
     time, stage (model.Stage), sleeve_position, sleeve_velocity, sleeve_force (the whole
     sleeve's, N), alpha1, alpha2, alpha1_rate, alpha2_rate (per rib, rad, rad/s), tip (ribs,
     3: u, v, w of G in the leaf frame, m), kinetic_energy, strain_energy, work, friction_work
-    (per rib), drive_work, lock_energy_loss (J), holding_torque, stuck (per rib),
-    stop_reaction, stress_<component> (per rib, Pa) and stress_<component>_at (ribs, 2: body
-    0 leaf / 1 link, x along it), and with a moving base bus_q, bus_v (and the momenta of a
-    free bus).
+    (per rib), drive_work, damping_dissipation, lock_energy_loss (J), holding_torque, stuck
+    (per rib), stop_reaction, stress_<component> (per rib, Pa) and stress_<component>_at
+    (ribs, 2: body 0 leaf / 1 link, x along it), and with a moving base bus_q, bus_v (and
+    the momenta of a free bus).
     """
 
     __slots__ = ('_values',)
@@ -246,8 +246,9 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
     def lock_event(self) -> LockEvent | None:
         event = self._lock_event
         if event is None and self.record.lock_events:      # (made once: it never changes)
-            t, before, after = self.record.lock_events[0]
-            event = self._lock_event = LockEvent(t, self.params.lock_rule, before, after)
+            t, before, after = self.record.lock_events[0]    # (judged at the lock: its step)
+            event = self._lock_event = LockEvent(t, self.params.lock_rule, before, after,
+                                                 stage2_resolution=self.stage2_resolution)
         return event
 
     # ------------------------------------------------------------------- stepping
@@ -296,10 +297,11 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         """Return the Sample3D right after the lock, at its instant (None before the lock)."""
         if self.lock_state is None:
             return None
-        s, hit, (work, friction, drive) = self.lock_state
+        s, hit, (work, friction, drive, damping) = self.lock_state
         return Sample3D.of_row(self.record.row(
             s, True, self.force, self.lock_loss,
-            (work + hit.force, friction + hit.friction, drive + hit.drive)))
+            (work + hit.force, friction + hit.friction, drive + hit.drive,
+             damping + hit.damping)))
 
     def new_summary(self, initial: Sample3D) -> 'Summary3D':
         return Summary3D(self, initial)
@@ -399,6 +401,7 @@ class Summary3D:
                'energy_drift': self.energy_drift,
                'friction_work': np.asarray(self._final.friction_work).tolist(),
                'drive_work': float(self._final.drive_work),
+               'damping_dissipation': float(self._final.damping_dissipation),
                'lock_energy_loss': float(self._final.lock_energy_loss),
                'peak_stress': {name: {'value': top.tolist(),
                                       'body': [BODIES[int(b)] for b in at[:, 0]],
@@ -426,11 +429,13 @@ class Summary3D:
         """
         Return the validity warnings: summary's one rule, on the worst rib's figures.
 
-        'coarse step' judges the planar rib's mesh at the umbrella's step and its largest
-        in-plane tip deflection (summary.mesh_resolution): the umbrella's stage 2 stays on
-        its grid step, so past the modes' coupling it names the step a run should give.  The
-        co-rotational ribs' 'fibre rotation' and 'out-of-plane rotation' from their largest
-        section slope and out-of-plane rotation (_geometry).
+        'coarse step' judges the lock's worst rib at the step stage 2 takes
+        (UmbrellaSimulator3D.stage2_resolution: substeps3d.py; silent where stage 2 takes
+        the substeps its lock needs); the co-rotational ribs, which take no substeps, the
+        planar rib's mesh at the umbrella's step and its largest in-plane tip deflection
+        (summary.mesh_resolution).  The co-rotational ribs' 'fibre rotation' and
+        'out-of-plane rotation' from their largest section slope and out-of-plane rotation
+        (_geometry).
         """
         locked = self.lock is not None
         slope, out_of_plane = self._geometry()
@@ -438,10 +443,14 @@ class Summary3D:
                                  float(self._peaks['von_mises'][0].max()),
                                  float(self._in_plane.max()), locked=locked,
                                  energy_drift=self.energy_drift,
-                                 stage2_resolution=(mesh_resolution(self._planar, self.sim.h)
-                                                    if locked else None),
+                                 stage2_resolution=self._stage2_resolution() if locked else None,
                                  section_slope=slope
                                  ) + out_of_plane_warnings(self._planar, out_of_plane)
+
+    def _stage2_resolution(self) -> dict | None:
+        """Return the lock's stage-2 resolution (the worst rib's), else the mesh's."""
+        own = self.sim.stage2_resolution
+        return own if own is not None else mesh_resolution(self._planar, self.sim.h)
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
