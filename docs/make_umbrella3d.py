@@ -427,6 +427,36 @@ projection about 0.4 of it (its factorisation every step: the 9 right-hand sides
 9 x 9 joint block), the Newton iterations' mass products, kinetic gradient and solves; in stage
 2 the mode fit's modal passes (about 11 a step: a quarter of it) and the 2.81 iterations (a
 fresh iteration matrix each step takes 2.07 but costs more).
+Since: a body block's factor gathers only the frame rows and columns (the elastic block is
+its constant LU's) and eliminates the frame rows over that LU's nonzeros, the dense LU is
+inline (the 9 x 9 joint blocks factored by code compiled for that size), both bit for bit the
+same runs (6 x 1, 12 x 2 and 3 x 2 in both stages, a prescribed base, a free bus, the
+co-rotational ribs); and a fresh iteration matrix's gyroscopic term comes from the inertia
+invariants instead of every point's kinematics and velocity (within 7.3e-16 relative of the
+point sums; a run moves by what Newton's decisions make of that, at most 3e-8 relative over
+100-300 steps). 6 x 1 deploying 496.6 -> 455.8 thousand instructions a step (callgrind, inside
+umbrella3d_advance: the wall clock cannot resolve a few per cent on the loaded cores); the
+bench's compiled step alone, before -> after, best of two runs in turn at load 4.8-5.0 (CPU us
+a step, deploying / stage 2): 6 x 1 31.9 -> 29.7 / 50.9 -> 48.6, 12 x 1 62.7 -> 58.4 / 99.3 ->
+95.6, 6 x 2 58.6 -> 51.5 / 97.9 -> 91.4, 12 x 2 119.2 -> 105.7 / 204.8 -> 191.7 (interleaved
+best-of-10 runs: 0.95 / 0.955 of before at 6 x 1, 0.87-0.88 / 0.92-0.94 at 12 x 2). Still
+0.30 and 0.49 core for 6 x 1, 3.2 and 5.8 cores for 12 x 2: the issue's ~22 and ~25 us (6 x 1)
+are not reached, and what stands in the way was measured. The projection is 0.35-0.4 of a
+step (the step without it, wrong but timed: 40 -> 24 us at 6 x 1, 150 -> 97 at 12 x 2): a full
+factorisation of [[M(q1), J^T], [J, 0]] every step, already through the constant elastic LU;
+what is left of it is spread over its gather, the 9 right-hand sides (about a third of it),
+the 9 x 9 block and the shared column. Newton's second iteration is not a mere
+confirmation: with the update tolerance a thousand times looser (1e-5) 6 x 1 still takes 1.88
+iterations deploying and 2.815 in stage 2, since the constraints must hold to PHI_TOLERANCE
+(1e-11 m) and the kept matrix's joint rows (up to 8 steps old) leave (J(q) - J_kept) dq in
+them after an update (the second update deploying is 0.15-2.5e-8, about the tolerance, so a
+contraction rate carried from the last step would stop at one iteration only in some steps,
+and only with fresh rows). Fresh joint rows each iteration (the numpy step, 24 steps from
+the same state) take stage 2 from 2.79 to 2.29 iterations and leave deploying at 2.0, but
+refreshing them (the 9 x 9 block, its LU, the shared column, per rib and iteration) costs
+about what the half iteration saves. -march=native changed nothing measurable; 12 x 2 in real
+time needs 33 us a step, 3.2 (deploying) to 5.8 (stage 2) times today's CPU a step, which 2
+threads on the 2 shared cores cannot give even perfectly parallel.
 With the hub fixed the 3D model takes the planar stage-2 mode fit rib by rib (the sleeve at
 the stop decouples the ribs: each rib's locked modes exact in phase and amplitude, T + V
 conserved; tests/test_umbrella3d_mode_fit.py), hence the planar rule's fitted
