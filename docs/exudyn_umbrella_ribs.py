@@ -54,10 +54,10 @@ import os
 import sys
 
 import exudyn as exu
-from exudyn.itemInterface import (CoordinateConstraint, GenericJoint, MarkerNodeCoordinate,
-                                  MarkerNodeRigid, NodePointGround, NodeRigidBodyEP,
-                                  ObjectBeamGeometricallyExact, ObjectGround, ObjectRigidBody,
-                                  SensorNode)
+from exudyn.itemInterface import (CoordinateConstraint, GenericJoint, MarkerBodyRigid,
+                                  MarkerNodeCoordinate, MarkerNodeRigid, NodePointGround,
+                                  NodeRigidBodyEP, ObjectBeamGeometricallyExact, ObjectGround,
+                                  ObjectRigidBody, SensorNode)
 from exudyn.rigidBodyUtilities import (AngularVelocity2EulerParameters_t,
                                        RotationMatrix2EulerParameters)
 import numpy as np
@@ -73,8 +73,10 @@ OUT = os.path.join(HERE, 'exudyn_umbrella_ribs.json')
 V0 = -1.0
 POISSON = 0.33
 STAGE2 = 0.13
+SERIES_STEP = 2e-4
 #: n:h:m:d, elements a segment, step (s), rib 1's tip mass (kg) and its offset along e_t (m)
-DEFAULT_CASES = ('4:2e-5:0.01:0.01', '8:1e-5:0.01:0.01')
+DEFAULT_CASES = ('4:2e-5:0.01:0.01', '8:1e-5:0.01:0.01', '4:2e-5:0.1:0.07', '8:1e-5:0.1:0.07',
+                 '16:5e-6:0.1:0.07')
 
 
 def rib_axes(azimuth):
@@ -179,7 +181,6 @@ class Ribs:
         pos = mbs.GetNodeOutput(node_b, exu.OutputVariableType.Position,
                                 configuration=exu.ConfigurationType.Reference)
         if node_a is None:
-            from exudyn.itemInterface import MarkerBodyRigid
             ma = mbs.AddMarker(MarkerBodyRigid(bodyNumber=self.ground, localPosition=list(pos)))
             rot_a = frame
         else:
@@ -191,7 +192,7 @@ class Ribs:
                                    rotationMarker1=(self._rotation(node_b).T @ frame).tolist()))
 
     def _tip_mass(self, node):
-        """A point mass at d along the section's z (= e_t) from G, sharing G's node."""
+        """Add a point mass at d along the section's z (= e_t) from G, on G's node."""
         mass, offset = self.tip
         c = np.array([0.0, 0.0, offset])
         j = mass * (c @ c * np.eye(3) - np.outer(c, c))      # about the node (a point)
@@ -307,10 +308,11 @@ def run(n: int, h: float, tip: tuple) -> dict:
             'stage2_max_out_of_plane_tip': float(np.abs(w2).max()),
             'stage2_out_of_plane_amplitude': fig_w['stage2_tip_amplitude'],
             'stage2_out_of_plane_period': fig_w['stage2_tip_period']}
-    # rib 1's out-of-plane tip w(t), every 10th sample (rib 0's stays in its plane)
+    # rib 1's out-of-plane tip w(t) every SERIES_STEP (rib 0's stays in its plane)
+    every = max(1, round(SERIES_STEP / h))
     out['rib1']['out_of_plane_tip_series'] = [
-        [float(a), float(b)] for a, b in zip(np.concatenate([t1, t2])[::10],
-                                             np.concatenate([w1, w2])[::10])]
+        [round(float(a), 9), round(float(b), 9)] for a, b in zip(
+            np.concatenate([t1, t2])[::every], np.concatenate([w1, w2])[::every])]
     out['rib1']['max_out_of_plane_rotation_stage1'] = rot1
     out['rib1']['max_out_of_plane_rotation'] = max(rot1, rot2)
     return out
