@@ -20,20 +20,25 @@ What the umbrella of N ribs costs the node: the step through the run driver, and
     every 1 ms encoded as the node does (ribs_messages.RibsPublicationEncoder), per step and
     per step and rib; the encoder's cost per publication; and a 1 ms block's parts: the
     compiled steps (with their stress figures), Record3D's rows, the summary, the
-    publication's sample, the encoding;
+    publication's sample, the encoding; and what a block costs beside the kernel (the
+    compiled call stubbed: outside_kernel); from the start (deploying) or, with
+    --after-lock S, from S s after the lock (stage 2);
   * live (--live): umbrella_node with ribs --live-ribs at 1 kHz: the measured real-time
     factor its diagnostics report at real_time_factor 1 (with recording), whether it says
     it is behind, and the node process's CPU share (its CPU time, every thread, over the
     wall time between --live-windows + 1 diagnostics, from /proc/<pid>/stat: 1.0 is one
     core busy; its busiest threads' too, the physics thread first), and CPU seconds a sim
-    second; and in lockstep, a commander answering every joint_states for
+    second: after the lock (stage 2: 6 x 1 locks at 0.23 s) or, with --live-deploying, in a
+    slow deployment (stage 1); and in lockstep, a commander answering every joint_states for
     --periods publications: sim seconds per wall second.
 The machine is shared (2 cores): wall figures are noisy; the CPU time is what a step costs.
 
-    python bench/bench_ribs_node.py [--ribs 2 3 6] [--duration 0.02] [--live]
+    python bench/bench_ribs_node.py [--ribs 2 3 6] [--duration 0.02] [--after-lock S] [--live]
                                     [--live-ribs 6] [--live-windows 3] [--periods 40]
+                                    [--live-deploying]
 """
 import argparse
+import math
 import os
 import sys
 import tempfile
@@ -49,17 +54,21 @@ from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D  # noqa
 STEP = 1e-4          # s: 10 steps a 1 kHz publication
 
 
-def offline(ribs: int, duration: float) -> None:
+def offline(ribs: int, duration: float, after_lock: float | None = None) -> None:
     from umbrella_sim.ros.ribs_messages import RibsPublicationEncoder
 
     params = UmbrellaRibsParams.from_mapping({'ribs': ribs, 'time_step': STEP})
     sim = UmbrellaSimulator3D(params)
-    t0 = time.thread_time()
-    sim.run(duration)
-    own = (time.thread_time() - t0) / sim.k
+    if after_lock is not None:
+        sim.run(10.0, after_lock=after_lock)
+    k0, t0 = sim.k, time.thread_time()
+    sim.run(sim.time + duration)
+    own = (time.thread_time() - t0) / (sim.k - k0)
     driver = RunDriver(params, 1000.0)
     encoder = RibsPublicationEncoder(driver)
     encoder.messages(driver.publication())     # (warm: the message modules' first use)
+    if after_lock is not None:
+        driver.run(10.0, stop_after_lock=after_lock, on_publication=encoder.messages)
     encoding = [0.0]
 
     def published(sample):
@@ -68,20 +77,64 @@ def offline(ribs: int, duration: float) -> None:
         encoding[0] += time.thread_time() - t
 
     parts = timed_parts(driver)
-    t0 = time.thread_time()
-    driver.run(duration, on_publication=published)
-    driven = (time.thread_time() - t0) / driver.sim.steps
-    per_publication = encoding[0] / max(driver.publications - 1, 1)
-    print(f'ribs {ribs:2d}: own loop {own * 1e3:.3f} ms/step ({own / ribs * 1e3:.3f} per rib); '
-          f'run driver + 1 kHz publications {driven * 1e3:.3f} ms/step '
+    k0, t0 = driver.sim.steps, time.thread_time()
+    driver.run(driver.time + duration, on_publication=published)
+    steps = driver.sim.steps - k0
+    driven = (time.thread_time() - t0) / steps
+    per_publication = encoding[0] / max(steps * STEP / 1e-3 - 1, 1)
+    stage = ('' if after_lock is None
+             else f', {after_lock:g} s after the lock at {driver.sim.lock_time:.4f} s')
+    print(f'ribs {ribs:2d}{stage}: own loop {own * 1e3:.3f} ms/step ({own / ribs * 1e3:.3f} per '
+          f'rib); run driver + 1 kHz publications {driven * 1e3:.3f} ms/step '
           f'({driven / ribs * 1e3:.3f} per rib); encoding {per_publication * 1e3:.3f} ms a '
           f'publication; real-time factor at {STEP * 1e6:.0f} us steps '
           f'{STEP / driven:.3f}')
-    blocks = driver.sim.steps * STEP / 1e-3
+    blocks = steps * STEP / 1e-3
     print('          a 1 ms block (10 steps) of the run driver: '
           + ', '.join(f'{name} {cpu / blocks * 1e6:.0f} us' for name, cpu in parts.items())
           + f', encoding {encoding[0] / blocks * 1e6:.0f} us (of '
           f'{driven * 10 * 1e6:.0f} us; CPU of this thread)')
+    print(f'          without the compiled call: {outside_kernel(driver, encoder):.0f} us a 1 ms '
+          'block (best of 9)')
+
+
+def outside_kernel(driver, encoder, blocks: int = 200, repeats: int = 9) -> float:
+    """
+    Return the CPU (us) a 1 ms block of the driver and its encoding costs beside the kernel.
+
+    The compiled call is stubbed (it returns the last block's rows again, its state moved
+    on in time), so that what is timed is everything else a publication costs the physics
+    thread: the call's Python side, Record3D's rows, the summary, the publication's sample
+    and its encoding (no markers); best of repeats.  The rows repeat, so that the run's
+    peaks never grow (Record3D's update of them is skipped: a little less than a run's).
+    The driver is spent afterwards.
+    """
+    compiled = driver.sim.integrator.compiled
+    library, call = compiled.lib, compiled.call
+
+    class Stub:
+
+        def __getattr__(self, name):
+            return getattr(library, name)
+
+        @staticmethod
+        def umbrella3d_advance(ctx, ref):
+            call.n_done = call.n_steps
+            call.t = call.t + call.n_steps * call.h
+            return 0
+
+    compiled.lib = Stub()
+    encoder.marker_every = 10 ** 9
+    encoder.count = 1
+    best = math.inf
+    for _ in range(repeats):
+        t0 = time.thread_time()
+        for _ in range(blocks):
+            driver.advance()
+            encoder.messages(driver.publication())
+        best = min(best, (time.thread_time() - t0) / blocks)
+    compiled.lib = library
+    return best * 1e6
 
 
 def timed_parts(driver) -> dict:
@@ -129,12 +182,17 @@ def thread_cpu_seconds(pid: int) -> dict:
     return out
 
 
-def live(ribs: int, periods: int, windows: int) -> None:
+#: a slow deployment for --live-deploying: from rest at 0.05 N a rib (6 x 1: the lock at 6.7 s)
+DEPLOYING = {'v0': 0.0, 'sleeve_force': 0.05}
+
+
+def live(ribs: int, periods: int, windows: int, deploying: bool = False) -> None:
     from umbrella_sim.testing import SimulatedAntenna
     from umbrella_sim.testing.processes import poll
 
     with tempfile.TemporaryDirectory() as tmp:
-        with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1000.0},
+        with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1000.0,
+                               **(DEPLOYING if deploying else {})},
                               record_path=os.path.join(tmp, 'bag')) as antenna:
             antenna.wait_for('diagnostics', lambda m: True, timeout=30)
             pid = antenna.node.pid
@@ -179,11 +237,15 @@ def main() -> None:
     ap.add_argument('--live-ribs', type=int, default=6)
     ap.add_argument('--live-windows', type=int, default=3)
     ap.add_argument('--periods', type=int, default=40)
+    ap.add_argument('--after-lock', type=float, default=None, metavar='S',
+                    help='offline: time the steps from S s after the lock (stage 2)')
+    ap.add_argument('--live-deploying', action='store_true',
+                    help=f'live: a slow deployment ({DEPLOYING}), timed before its lock')
     args = ap.parse_args()
     for ribs in args.ribs:
-        offline(ribs, args.duration)
+        offline(ribs, args.duration, args.after_lock)
     if args.live:
-        live(args.live_ribs, args.periods, args.live_windows)
+        live(args.live_ribs, args.periods, args.live_windows, args.live_deploying)
 
 
 if __name__ == '__main__':

@@ -325,12 +325,60 @@ the ribs only through a few unknowns, so a step costs linearly in the number of 
 thesis's §5.2.2); on a free bus `lock: auto` is plastic (the energy lock would change the
 momentum).
 
-The umbrella's stage 2 stays on its grid step: the planar model's stage 2 takes a finer step
-where its lock's tip deflection passes 7 % of the leaf (the modes' coupling,
-docs/validation.md, amplitude), the umbrella's does not yet, so its stage-2 peaks and tip
-series at such amplitudes carry the planar model's errors at the grid step (at N = 1,
-V0 = -0.5: 3 % and 4 mm): its summary's 'coarse step' names the `time_step` that
-resolves them.
+The umbrella's stage 2 takes the planar model's stage-2 step: where the step is chosen for
+the run (`time_step` 0, or `step_follows_mesh`: step_rule.follows_lock of the planar
+record), a lock whose stage-2 tip deflection passes 7 % of the leaf (the modes' coupling,
+docs/validation.md, amplitude) makes every stage-2 grid step k physics steps
+(step_rule.stage2_step_needed and substeps_for, the planar engine's rule). The umbrella
+judges it at the lock on each rib's in-plane state, mapped onto the planar model of the
+rib's own planar record (umbrella_sim/core/umbrella3d/substeps3d.py: its locked modes'
+amplitudes, the tip crest they add up to, the stress shares the step leaves), and takes the
+worst rib's (the smallest step needed; on a tie the rib deflected most): N identical ribs
+take the planar model's substeps and stay each the planar model at `time_step` 0
+(tests/test_umbrella3d_substeps.py: 3 ribs at 10 N a rib, 3 physics steps a 0.1 ms grid
+step, within the identity's 1e-10). The rule reads the in-plane modes only; the ribs'
+out-of-plane and torsion modes take the mode fit at the step the in-plane ones need. The
+numpy step takes a grid step's physics steps one by one (`UmbrellaSimulator3D.step`), the
+compiled advance k of them per grid step in one call; either way Record3D keeps one row a
+grid step, its last physics step's figures with each stress channel's largest over its
+physics steps (each physics step's Hermite crest; outputs3d.fold_substeps3d, the planar
+outputs.fold_substeps' rule). From one locked state (4 asymmetric ribs, V0 = -0.5, 5 physics
+steps a grid step) the two paths' 40 grid rows agree within the numpy reference's own ulp
+spread on every base, with the same Newton iterations (tests/test_umbrella3d_substeps.py).
+With a `time_step` given, stage 2 stays on it and its summary's 'coarse step' (the lock's
+worst rib, judged at the step stage 2 takes) names the `time_step` that resolves it; the
+node, the driver and replay pin the physics step by the planar model's rule
+(`with_physics_step(step, follows_lock)`), so a recording made at `time_step` 0 is
+re-simulated with its substeps. The co-rotational ribs (`flexible-nonlinear`) take none, as
+the planar model. Stage 2 then costs about k times as much: ribs 6 x 1 at 10 N a rib (3
+substeps) 1.74 CPU s a simulated second of stage 2 against 0.61 on the 0.1 ms grid step alone,
+12 x 2 (2 substeps of 33 us) 14.3 against 7.7 (compiled, Record3D's figures included, best of
+two 20 ms runs at load ~5.4 on the 2 cores); the fit's modes refitted at the lock took 2-5 ms
+(56 ms for a free bus at 12 x 2).
+
+The 3D beams take the planar model's structural damping (`damping_ratio` ζ, model
+`flexible`; umbrella_sim/core/umbrella3d/damping3d.py): stiffness-proportional Rayleigh
+(Kelvin–Voigt) damping of every strain rate, axial, both bendings and the twist, C = βK over
+each rib's elastic coordinates, its force −C dq/h in the midpoint step (h/2 C in the
+iteration matrix), so a step dissipates exactly dq·C dq/h ≥ 0, which the step's energy
+target takes off and the record carries (`damping_dissipation`: the `energy` topic, the
+summary, the CSV; the energy balance adds it back). One β for the umbrella, 2ζ/ω1 with ω1
+the first mode of its planar rib (the planar record's) locked at full deployment
+(nonlinear.damping_beta_of, the planar model's one definition), not the umbrella's own first
+locked mode: C = βK is the material's property, which every rib shares, and the planar rib's
+ω1 is what makes N identical damped ribs each the damped planar model (within 1e-10, 3 ribs,
+ζ = 0.05, the mode fit and stage 2's substeps included; N times its dissipation). The
+umbrella's own first locked mode is out of plane (rib 0 of the default: 70.6 rad/s against the
+in-plane ω1 = 133.7 rad/s): taking it would damp the deployment's dominant in-plane mode at
+1.9ζ. Each rib's first in-plane mode then decays with exactly ζ (measured by the logarithmic
+decrement over six periods: 0.0500000003 for ζ = 0.05 with the mode fit, 0.0499985 without,
+whose midpoint rule scales a ratio by sinc(ωh/2)²), its out-of-plane ones with ζω_i/ω1
+(0.0263863 measured, 0.0263863 expected). Stage 2's mode fit takes each mode's damping
+φᵀCφ (integrators.LockedModeFit: exact decay a step), rib by rib or the free bus's whole
+system. Compiled in _kernel3d_damping.h (the step and the moving base's step; equal to the
+numpy reference within its ulp spread, on every base); the energy balance closes to 1e-10 of
+T + V with the dissipation (tests/test_umbrella3d_damping.py). The co-rotational ribs
+(`flexible-nonlinear`) refuse `damping_ratio`, naming it.
 
 The step is compiled (umbrella_sim/core/_kernel3d.c, in the planar kernel's
 library, its interface declared in _kernel.h and checked at load): the Newton iteration, each
@@ -419,6 +467,27 @@ iterations, the projection's factorisation and the mode fit's modal passes; a pr
 the previous step's increment or a second-order extrapolation took 2.77-2.95 iterations a
 step, no fewer: stage 2's iterations are set by the fitted modes at omega h near 1) and the
 node's Python per publication.
+
+The node's work per 1 ms publication beside the step (6 x 1, bench/bench_ribs_node.py, the
+same runs of main and this change in turn at load 4.2; deploying / 10 ms after the lock):
+Record3D's rows 105-112 -> 58-66 us / 99 -> 61-69 (the run's peaks kept as arrays, updated
+with np.where where a rib's is larger, instead of a loop over ribs; the constant rows shared),
+the summary 55-59 -> 30-35 / 46 -> 26-29 (the deployed ribs' search only in a block where a
+leaf reached its angle, the out-of-plane tip's argmax only for a larger tip, T + V reused by
+the energy balance, the held peaks kept when none is larger), the encoding 56-58 -> 37-43 /
+59-64 -> 39-46 (the joint values as lists, a sample's figures from one mapping, the stress
+rows in a reused buffer), and a whole 1 ms block with the compiled call stubbed
+(bench_ribs_node's outside_kernel: every part but the step) 192-200 -> 123 us / 193-195 ->
+121-124; all of it bit for bit the same rows, figures and CDR bytes. The node records a
+publication's messages in one call (RunRecording.publish_all, BagRecorder.write_all) and checks
+the acting force once per value. What the live node spends beside the step at real time
+(threads over 4 s at load 3.6, per simulated second): the physics thread's Python about 0.12
+CPU s and its DDS writes to a subscriber 0.07-0.10 (rclpy with a subscriber in another
+process: 98 us a publication of the five topics against 33 without one; FastDDS's shared-memory
+push and the reliable writer's timer notification, each a futex wake), FastDDS's event thread
+0.02-0.05, the executor's 20 ms wait loop 0.02, the recorder's thread 0.015-0.03 (zstd and
+the MCAP records, 24 us a publication): about 0.3 core beside the step, not yet the 0.15-0.2
+that the 0.5-core target leaves beside a 0.25-0.3-core step.
 
 A driven hub and a free-floating bus step compiled too (umbrella_sim/core/_kernel3d_base.h: the
 bus's border of M(q) (its elastic columns from invariants), its share of the kinetic energy's

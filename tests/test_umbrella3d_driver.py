@@ -165,6 +165,33 @@ def test_each_chunks_peaks_are_those_of_its_rows(kernel, monkeypatch):
             np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize('kernel', ['compiled', pytest.param('numpy', marks=pytest.mark.slow)])
+def test_the_runs_peaks_are_the_first_largest_of_every_step(kernel, monkeypatch):
+    """
+    Record3D's peaks of the run, kept as its steps come, are those of all its rows at once.
+
+    A run through a release and the lock: each rib's largest of every component over every
+    step (RibPeaks.of_rows of the whole record: the first step holding it), where and when;
+    a component that never exceeds 0 keeps no place ('').
+    """
+    monkeypatch.setenv('UMBRELLA_SIM_KERNEL', kernel)
+    sim, rows = reference(UmbrellaRibsParams.from_mapping(STUCK), 1.0, after_lock=0.004)
+    assert sim.locked and ref_backend(sim.params) == kernel
+    want = RibPeaks.of_rows(rows)
+    peaks = sim.record.summary()['peak_stress']
+    for j, name in enumerate(STRESS_NAMES):
+        value, where = peaks[name]
+        reached = want.value[:, j] > 0.0
+        assert reached.any()
+        np.testing.assert_array_equal(value, np.where(reached, want.value[:, j], 0.0))
+        for rib, (body, x, t) in enumerate(where):
+            if not reached[rib]:
+                assert (body, x, t) == ('', 0.0, 0.0)
+                continue
+            code, at = want.at[rib, j]
+            assert (body, x, t) == (('leaf', 'link')[int(code)], at, want.when[rib, j])
+
+
 def test_the_planar_path_is_unchanged_by_the_umbrella():
     """The planar parameters still drive the planar simulator, its block and its Sample."""
     from umbrella_sim.core import UmbrellaParams, UmbrellaSimulator
@@ -265,23 +292,32 @@ def test_the_summary_reports_a_free_bus_and_its_momentum():
     assert figures['energy_drift'] < BALANCE_TOLERANCE
 
 
-def test_an_umbrella_past_the_coupling_deflection_names_the_step_its_stage2_needs():
+def test_an_umbrella_past_the_coupling_deflection_takes_the_step_its_stage2_needs():
     """
     Three ribs pushed by 10 N: a stage-2 tip deflection of 13 % of the leaf at 0.1 ms.
 
-    The umbrella's stage 2 stays on its grid step; past the modes' coupling (7 %) the
-    summary says 'coarse step' with the step stage 2 needs (step_rule.stage2_step_needed,
-    the planar rule); at that step, given, nothing is said, nor at V0 = -0.2 alone (6.3 %).
+    Past the modes' coupling (7 %) the umbrella's stage 2 takes the step its lock needs
+    (step_rule.stage2_step_needed, the planar rule judged on the worst rib: substeps3d.py),
+    in substeps of its 0.1 ms grid step, where the step is chosen for the run (time_step
+    0): nothing is said.  With the grid step given, stage 2 stays on it and the summary says
+    'coarse step' with the step stage 2 needs; at that step, given, nothing is said, nor at
+    V0 = -0.2 alone (6.3 %).
     """
     def coarse(values, duration):
         driver = RunDriver(UmbrellaRibsParams.from_mapping(values))
         assert driver.run(duration) is None
         figures = driver.summary.figures()
-        return figures, [w for w in figures['warnings'] if w.startswith('coarse step')]
+        return driver.sim, figures, [w for w in figures['warnings']
+                                     if w.startswith('coarse step')]
 
-    figures, (text,) = coarse({'ribs': 3, 'sleeve_force': 10.0}, 0.25)
-    assert max(figures['max_in_plane_tip']) > 0.07 * 1.0 and 'couples its modes' in text
+    sim, figures, said = coarse({'ribs': 3, 'sleeve_force': 10.0}, 0.25)
+    assert max(figures['max_in_plane_tip']) > 0.07 * 1.0 and not said
+    assert sim.h == 1e-4 and sim.stage2_substeps == 3
+    assert sim.stage2_resolution['deflection'] > 0.07
+    sim, figures, (text,) = coarse({'ribs': 3, 'sleeve_force': 10.0, 'time_step': 1e-4}, 0.25)
+    assert sim.stage2_substeps == 1 and 'couples its modes' in text
+    assert 'time_step 0 takes' in text      # (how the run gets it: resolving_step_hint)
     enough = float(text.rsplit('time_step <= ', 1)[1].split()[0])
     assert enough < 1e-4
-    assert not coarse({'ribs': 3, 'sleeve_force': 10.0, 'time_step': enough}, 0.25)[1]
-    assert not coarse({'ribs': 3}, 0.6)[1]
+    assert not coarse({'ribs': 3, 'sleeve_force': 10.0, 'time_step': enough}, 0.25)[2]
+    assert not coarse({'ribs': 3}, 0.6)[2]

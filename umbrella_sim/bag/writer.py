@@ -352,11 +352,16 @@ class BagRecorder:
         and True means queued; a later write error shows in ``error``, ``on_error`` and the
         next call.
         """
+        return self.write_all(((topic, msg, t_ns, data),))
+
+    def write_all(self, records) -> bool:
+        """Record messages (topic, msg, t_ns, data) in order, each as ``write`` does."""
         if self._closed:
             return False
-        t_ns += self.offset_ns
+        offset = self.offset_ns
+        batch = [(topic, msg, t_ns + offset, data) for topic, msg, t_ns, data in records]
         if self._queue is not None:
-            self._queue.append((topic, msg, t_ns, data))
+            self._queue.extend(batch)
             if len(self._queue) >= self.QUEUE_LIMIT:      # full: wait for the writer
                 with self._cv:
                     self._cv.notify_all()
@@ -364,10 +369,7 @@ class BagRecorder:
                            and self._writer_thread.is_alive()):
                         self._cv.wait(0.1)
             return True
-        return self._write_now(topic, msg, t_ns, data)
-
-    def _write_now(self, topic: str, msg, t_ns: int, data: bytes | None) -> bool:
-        return self._write_many(((topic, msg, t_ns, data),))
+        return self._write_many(batch)
 
     def _write_many(self, batch) -> bool:
         """Write messages (topic, msg, t_ns, data) in order; False once the recording stopped."""

@@ -242,6 +242,9 @@ typedef struct {
     const int *nl_places;                            /* nl_elements x 12 */
     const double *nl_length, *nl_stiffness;          /* n_ribs x nl_elements (x 4) */
     const double *nl_pattern;                        /* n_ribs x n_rib x n_rib */
+    /* the beams' structural damping C = beta K (s; 0: none; the linear beams only:
+     * umbrella3d/damping3d.py, _kernel3d_damping.h) */
+    double damping_beta;
 } Model3D;
 
 /* umbrella3d_advance's arguments (kept by the caller, updated in place): the state (t, q, v,
@@ -253,7 +256,7 @@ typedef struct {
  * p holds M(q) v (else it is computed).  Each committed step writes a row into out (row_len
  * doubles, step-major): t, qr, qs, vr, vs, lam_r, lam_s, stuck, kinetic and strain energy,
  * the sleeve force's work, each hinge's friction work, Newton iterations, factorisations,
- * the drive's work (0 without a drive) and, with a free bus, its linear and angular
+ * the beams' damping's dissipation (0 undamped), the drive's work (0 without a drive) and, with a free bus, its linear and angular
  * momentum (3 + 3, inertial). */
 typedef struct {
     int locked, single, have_p, n_steps, max_iter, row_len;
@@ -279,6 +282,9 @@ typedef struct {
      * takes its crests from the state it starts at (the steps' record continues in the same
      * stage), 0 if that state's own values stand (a record's first, or across the lock) */
     int crest_from_state;
+    /* a damped fit (Model3D.damping_beta): each fitted mode's damping change c_w - c
+     * (fit_scale's layout); NULL: undamped */
+    const double *fit_damping;
 } Advance3DCall;
 
 /* Held by Python only as pointers: the stepping contexts (every work buffer, allocated

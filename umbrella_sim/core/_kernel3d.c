@@ -136,6 +136,8 @@ struct Ctx3D {
                                         * modal sums, then a rib's (n + n: a rib has n
                                         * modes at most) */
     double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
+    double *damp, work_damp;           /* the beams' damping force C dq / h (N + ns) and the
+                                        * last step's dissipation (_kernel3d_damping.h) */
     double strain0;                    /* V(q0) when strain0_ok: a run's step after the first
                                         * starts where the last one committed (V(q1)) */
     int strain0_ok;
@@ -148,6 +150,7 @@ struct Ctx3D {
 
 static Base3D *base_new(Ctx3D *x);
 static void base_free(Base3D *B);
+static double stiffness_weight(const Model3D *m, double h);      /* _kernel3d_damping.h */
 static void figures_free(Figures3D *f);
 
 #include "_kernel3d_nonlinear.h"   /* the co-rotational ribs (hooks: nl_elements) */
@@ -254,7 +257,8 @@ void umbrella3d_free(Ctx3D *x) {
     double *bufs[] = {x->mass, x->jm, x->jr, x->vp_a, x->vp_b,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
-                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp0, x->sp1, x->fitc};
+                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp0, x->sp1, x->fitc,
+                      x->damp};
     for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
     free(x);
 }
@@ -354,7 +358,8 @@ static int iteration_elastic(Ctx3D *x, double h) {
         Body *b = &x->b[j];
         if (b->elu_h == h) continue;
         b->elu_h = NAN;
-        if (!elastic_lu_of(b, x->m->const_mass, x->m->stiffness, 0.25 * h * h, x->R, x->n,
+        if (!elastic_lu_of(b, x->m->const_mass, x->m->stiffness, stiffness_weight(x->m, h),
+                           x->R, x->n,
                            b->elu_it, NULL, NULL))
             return SINGULAR;
         b->elu_h = h;
@@ -466,7 +471,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
         && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R)
         && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS)
-        && ALLOC(fitc, 2 * n);
+        && ALLOC(fitc, 2 * n) && ALLOC(damp, N + MAXS);
 #undef ALLOC
     if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
     const double *pattern = m->nl_elements ? m->nl_pattern : m->stiffness;
@@ -1073,9 +1078,14 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
 
 /* ------------------------------------------------------------------ the mode fit */
 /* Stage 2's mode fit (integrators.LockedModeFit, rib by rib): S = I + Phi diag(s - 1) U^T */
-typedef struct { int r; const double *u, *phi, *sc, *shrink; int whole; } Fit3D;
+typedef struct {
+    int r; const double *u, *phi, *sc, *shrink; int whole;
+    const double *damp;                /* each mode's damping change (NULL: undamped) */
+} Fit3D;
 
 enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
+
+#include "_kernel3d_damping.h"
 
 /* acc = out^T diag(factor) in v over L coordinates: the mode fit's correction of v for the
  * map `kind` (fit_map), the r modes' rows in (projection) and out (shapes) L apart, their
@@ -1167,7 +1177,7 @@ static void iteration_blocks(Ctx3D *x, const double *q, const double *stuck, dou
     for (int r = 0; r < R; r++) {
         double *G = x->gyro + (size_t)r * n * n;
         const double *K = m->stiffness + (size_t)r * n * n;
-        double ck = m->nl_elements ? 0.0 : 0.25 * h * h;
+        double ck = m->nl_elements ? 0.0 : stiffness_weight(m, h);
         for (int j = 0; j < 2; j++) {
             const Body *b = &x->b[j];
             for (int a = b->off; a < b->off + b->nb; a++)
@@ -1217,6 +1227,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     const Model3D *m = x->m;
     int R = x->R, n = x->n, N = R * n, ns = x->ns, mb = x->mb, cs = x->cs;
     const double half_h2 = 0.5 * h * h;
+    const int damped = m->damping_beta != 0.0;
     double *q = x->q, *q0 = x->q0, *v0 = x->v0, *p0 = x->p0;
     /* the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0) */
     const double *w0 = v0, *sp0 = p0;
@@ -1267,6 +1278,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         }
         constraints(x, q, stuck, locked, x->phi);
         jacobian(x, x->qm, stuck, x->jm);
+        if (damped) damping_forces(x, fit, h, x->damp);
         double cons_s = locked ? x->lam[R * ROWS] : 0.0;
         const Rows *jp = &x->jrows;
         for (int r = 0; r < R; r++) {
@@ -1291,6 +1303,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             if (m->nl_elements) nl_force(x, r, q0 + r * n, q + r * n, x->ycol);
             else rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n,
                              x->ycol);
+            if (damped) damping_add(x, r, x->ycol);
             for (int a = 0; a < n; a++) {
                 double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
@@ -1348,7 +1361,8 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     t0 = 0.5 * (t0 + v0[N] * p0[N]);
     double strain0 = x->strain0_ok ? x->strain0 : strain_energy(x, q0);
     x->strain = strain_energy(x, q);
-    double t_target = t0 + strain0 - x->strain + x->work_force + w_fric;
+    x->work_damp = damped ? damping_work(x, fit, h) : 0.0;
+    double t_target = t0 + strain0 - x->strain + x->work_force + w_fric - x->work_damp;
     if (project(x, q, v, stuck, locked) != OK) return SINGULAR;
     matvec(x, v, x->p);
     double t_after = 0.0;
@@ -1425,6 +1439,7 @@ static void write_row(Ctx3D *x, const Advance3DCall *a, double *o) {
     put(&o, x->work_fric, R);
     *o++ = x->iterations;
     *o++ = x->factorisations;
+    *o++ = x->work_damp;
     base_row(x, x->q, x->p, o);
 }
 
@@ -1447,7 +1462,8 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
     a->iterations = 0;
     int N = x->R * x->n;
     int steps = a->single ? 1 : a->n_steps;
-    Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink, a->fit_whole};
+    Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink, a->fit_whole,
+                 a->fit_damping};
     if (a->fit_modes > (a->fit_whole ? N + x->ns : x->n) || (a->fit_whole && !x->base))
         return SINGULAR;
     int figures = x->fig && !a->single && a->out;

@@ -612,6 +612,7 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
     Base3D *B = x->base;
     int R = x->R, n = x->n, N = R * n, ns = x->ns, mb = x->mb, cs = x->cs;
     const double half_h2 = 0.5 * h * h;
+    const int damped = m->damping_beta != 0.0;
     double *q = x->q, *q0 = x->q0, *v0 = x->v0, *p0 = x->p0;
     /* the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0) */
     const double *w0 = v0, *sp0 = p0;
@@ -662,6 +663,7 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         }
         base_constraints(x, q, stuck, locked, x->phi);
         jacobian(x, x->qm, stuck, x->jm);
+        if (damped) damping_forces(x, fit, h, x->damp);
         double cons_s[NB] = {0.0};
         cons_s[0] = locked ? x->lam[R * ROWS] : 0.0;
         if (B->prescribed)
@@ -687,6 +689,7 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
             if (m->nl_elements) nl_force(x, r, q0 + r * n, q + r * n, x->ycol);
             else rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->qm + r * n,
                              x->ycol);
+            if (damped) damping_add(x, r, x->ycol);
             for (int a = 0; a < n; a++) {
                 double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
@@ -697,7 +700,8 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         }
         for (int i = 0; i < ns; i++)
             x->res[N + i] = sp1[N + i] - sp0[N + i]
-                - h * (x->gt[N + i] + (i == 0 ? -force : 0.0) + cons_s[i]);
+                - h * (x->gt[N + i] + (i == 0 ? -force : 0.0) + cons_s[i]
+                       - (damped ? x->damp[N + i] : 0.0));
         if (!factored) {
             iteration_blocks(x, q, stuck, h);
             if ((m->nl_elements ? nl_iteration_elastic(x) : iteration_elastic(x, h)) != OK
@@ -753,7 +757,9 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
     for (int i = 0; i < N + ns; i++) t0 += v0[i] * p0[i];
     t0 *= 0.5;
     x->strain = strain_energy(x, q);
-    double t_target = t0 + strain_energy(x, q0) - x->strain + x->work_force + w_fric + w_drive;
+    x->work_damp = damped ? damping_work(x, fit, h) : 0.0;
+    double t_target = t0 + strain_energy(x, q0) - x->strain + x->work_force + w_fric + w_drive
+        - x->work_damp;
     double drift[NB] = {0.0};
     if (B->free_bus) {
         /* the bus position is cyclic: its momentum p_X is the step's start's */

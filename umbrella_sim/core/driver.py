@@ -145,6 +145,9 @@ class RunDriver:
             self.chunk_steps = chunk_steps or sim.chunk_steps
             self.summary = sim.new_summary(first)
         self.publications = 0          # publications taken so far (publication())
+        #: the last force value command_force accepted for these parameters (each
+        #: publication of the node asks again for the force acting: checked once)
+        self._accepted: float | None = None
         self._hold: dict = {}          # peak stresses over the steps since the last one
         self._last_block: StepBlock | None = None
 
@@ -161,7 +164,9 @@ class RunDriver:
         """
         k = self.sim.step_index
         if force == self.schedule.force_at(k):
-            command_force(force, self.sim.params)      # (refused all the same if invalid)
+            if force != self._accepted:         # (refused all the same if invalid)
+                command_force(force, self.sim.params)
+                self._accepted = force
             return None
         self.schedule.add(self.sim.time, force)
         return k * self.step

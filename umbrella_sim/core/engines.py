@@ -36,10 +36,8 @@ from .lock import energy_velocity, LockImpossible
 from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import LockEvent, STEP_FIELDS, step_peaks
 from .params import UmbrellaParams
-from .registry import MIN_PHYSICS_STEP
 from .rigid import RigidMechanism
-from .step_rule import (follows_lock, MAX_STEP_DIVISOR, physics_step_of,
-                        stage2_resolution)
+from .step_rule import follows_lock, physics_step_of, stage2_resolution, substeps_for
 
 #: the row of each STEP_FIELDS name
 _STEP_ROW = {name: row for row, name in enumerate(STEP_FIELDS)}
@@ -299,8 +297,7 @@ class FiniteElementEngine(Engine):
 
     def _follow(self, needed: float | None) -> None:
         """Take stage 2 in the substeps its lock needs (None: the finest the rule allows)."""
-        k = (round(self.h / needed) if needed is not None else
-             min(MAX_STEP_DIVISOR, int(self.h / MIN_PHYSICS_STEP)))
+        k = substeps_for(self.h, needed)
         if k <= 1:
             return
         self.stage2_substeps = k

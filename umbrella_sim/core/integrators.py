@@ -92,7 +92,7 @@ def newton_tolerance(h: float) -> float:
 #: revisions became the mode fit; the umbrella's moving bases, which took no fit and the
 #: unfitted step before), not in round-off
 INTEGRATOR_REVISION = ('midpoint-dae, stage-2 locked-mode fit (on a moving base too), stage-2 '
-                       'substeps past the coupling deflection')
+                       'substeps past the coupling deflection (the umbrella of N ribs too)')
 
 #: modes the stage-2 fit makes exact: omega h at most this, i.e. modes the step samples at
 #: least ~4 times a period (pi / 2 = 1.57).  Beyond, the scheme's modal mass s^2 that makes

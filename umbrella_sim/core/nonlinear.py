@@ -139,7 +139,7 @@ class NonlinearUmbrellaModel(UmbrellaModel):
         else:
             self.strain = LinearStrainEnergy(bodies, self.n)
         self.first_frequency = locked_first_frequency(self)
-        self.damping_beta = 2.0 * p.damping_ratio / self.first_frequency
+        self.damping_beta = damping_beta_of(self)
         # undamped, or damped with the linear strain: C does not depend on q
         self._constant_damping = (self.damping_beta * self.stiffness
                                   if self.damping_beta == 0.0 or not self.strain.nonlinear
@@ -188,6 +188,16 @@ class NonlinearUmbrellaModel(UmbrellaModel):
 def locked_first_frequency(model: UmbrellaModel) -> float:
     """Return omega_1 (rad/s) of the locked frame linearised at full deployment."""
     return float(model.locked_modes[0][0])
+
+
+def damping_beta_of(model: UmbrellaModel) -> float:
+    """
+    Return beta (s) of C = beta K: 2 zeta / omega_1 (zeta: the model's damping_ratio).
+
+    omega_1: locked_first_frequency, the planar frame's (the umbrella's 3D beams take its
+    planar record's: umbrella3d/damping3d.py).
+    """
+    return 2.0 * model.params.damping_ratio / locked_first_frequency(model)
 
 
 # ------------------------------------------------------------ compiled elastic law

@@ -264,7 +264,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'stresses, stage-2 period and amplitude and the stage-2 tip series within 1 mm of '
        'every studied case (N = 1-8, V0 = -0.2 and -0.5 m/s, both locks). Past a stage-2 '
        'tip deflection of 7 % of the leaf (V0 = -0.5: 12-16 %) the modes couple and stage 2 '
-       'of flexible takes the step its lock needs, k physics steps a grid step (every mode '
+       "of flexible (the umbrella of N ribs too: its worst rib's lock) takes the step its "
+       'lock needs, k physics steps a grid step (every mode '
        'carrying stage-2 stress resolved, and at most 0.1 ms (7 % / deflection)^1.5: 25 us '
        'at N = 1, V0 = -0.5); the grid, inputs and outputs stay at the grid step. '
        'flexible-nonlinear: 0 = 0.1 ms at every mesh, its real-time step (its own rule, '
@@ -294,7 +295,10 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'stiffness-proportional Rayleigh) damping β = 2ζ/ω1, ω1 the first mode of the locked '
        'frame linearised at full deployment, mode i gets ζω_i/ω1; the dissipated energy is '
        'reported (`energy` topic); 0 = undamped (the thesis); no effect on rigid-fe and '
-       'rigid; the umbrella of N ribs (ribs ≥ 2) refuses it (its 3D beams are undamped)',
+       'rigid; the umbrella of N ribs (ribs ≥ 2, model flexible) damps its 3D beams alike '
+       '(axial, both bendings and torsion: C = βK with the β of its planar rib, so each '
+       "rib's first in-plane mode has ζ, its out-of-plane modes ζω_i/ω1; the `energy` topic's "
+       '`damping_dissipation_J`); its co-rotational ribs (flexible-nonlinear) refuse it',
        low=0.0, high=1.0, high_open=True),
     # the node
     _P('publish_rate', float, 100.0, 'Hz',

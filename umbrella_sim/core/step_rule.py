@@ -289,10 +289,25 @@ def follows_lock(params: UmbrellaParams) -> bool:
 
     Where the step is chosen for the run (``time_step`` 0, or ``step_follows_mesh``) and the
     model is the linear one whose stage 2 the rule was measured on (flexible): its stage 2
-    steps every grid step in k equal substeps, ``stage2_step_needed`` of the lock state.
+    steps every grid step in k equal substeps, ``stage2_step_needed`` of the lock state
+    (``substeps_for``).  params: the planar model's, or the umbrella's (its planar record:
+    umbrella3d/substeps3d.py judges its ribs).
     """
+    params = getattr(params, 'planar', params)     # (the umbrella's: its planar record's)
     return (isinstance(params, UmbrellaParams) and params.model == 'flexible'
             and not _ceiling(params)[1])
+
+
+def substeps_for(h: float, needed: float | None) -> int:
+    """
+    Return the physics steps a stage-2 grid step h takes for the step needed (1 or more).
+
+    needed: ``stage2_step_needed`` (h / k, or None: no k up to MAX_STEP_DIVISOR does it,
+    then the finest the rule allows).
+    """
+    if needed is not None:
+        return max(1, round(h / needed))
+    return max(1, min(MAX_STEP_DIVISOR, int(h / MIN_PHYSICS_STEP)))
 
 
 def resolution_of(model: UmbrellaModel, amplitudes: np.ndarray, h: float) -> dict:

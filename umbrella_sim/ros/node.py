@@ -289,14 +289,15 @@ class UmbrellaNode(Node):
         rec = self.recording
         return rec if rec is not None and rec.error is None else None
 
-    def _publish(self, key: str, msg, t: float) -> None:
-        """Publish a message, or the exact CDR bytes of one, and record the same bytes."""
-        if not isinstance(msg, bytes):  # (the encoders' bytes are exact and zero-padded)
-            msg = cdr_bytes(msg)        # once: the publisher and the recorder share it
-        self.pub[key].publish(msg)
+    def _publish(self, msgs: dict, t: float) -> None:
+        """Publish messages (key -> message or its exact CDR), then record the same bytes."""
+        # (the encoders' bytes are exact and zero-padded; a message: serialized once)
+        msgs = {key: m if isinstance(m, bytes) else cdr_bytes(m) for key, m in msgs.items()}
+        for key, msg in msgs.items():
+            self.pub[key].publish(msg)
         rec = self._recording_on()
-        if rec is not None:
-            rec.publish(key, msg, t)
+        if rec is not None:             # (a publication's messages in one go, in order)
+            rec.publish_all(msgs, t)
 
     # ---------------------------------------------------------------- callbacks
     @contextlib.contextmanager
@@ -437,7 +438,7 @@ class UmbrellaNode(Node):
 
     def _publish_phase(self, phase: str) -> None:
         self._phase = phase
-        self._publish('deployment_phase', ros_io.phase_msg(phase), self.sim.time)
+        self._publish({'deployment_phase': ros_io.phase_msg(phase)}, self.sim.time)
 
     def _sample_messages(self) -> tuple[int, float, dict]:
         """Build the publication's messages under the sim lock, to be published later."""
@@ -453,8 +454,7 @@ class UmbrellaNode(Node):
                 return
             if 'joint_states' in msgs:
                 self.lockstep.published()
-            for key, msg in msgs.items():
-                self._publish(key, msg, t)
+            self._publish(msgs, t)
 
     def _waiting_for_command(self) -> bool:
         """Lockstep: no command has answered the last joint_states yet (sim lock held)."""
@@ -659,6 +659,6 @@ class UmbrellaNode(Node):
             values[f'warning_{i}'] = text
         values.update(ribs_diagnostics(self.driver.summary.figures()) if self.ribs > 1 else {})
         # the status name carries the namespace: every antenna publishes on /diagnostics
-        self._publish('diagnostics', ros_io.diagnostics_msg(
+        self._publish({'diagnostics': ros_io.diagnostics_msg(
             sim_t, ros_io.diagnostic_name(self.get_fully_qualified_name()), level, message,
-            values), sim_t)
+            values)}, sim_t)

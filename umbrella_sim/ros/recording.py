@@ -83,12 +83,20 @@ class RunRecording:
 
     def publish(self, key: str, msg, t: float) -> None:
         """Record what topic key published at sim time t (exact CDR bytes, or a message)."""
-        name = self.topics[key]
-        self.published[name] = self.published.get(name, 0) + 1
-        if isinstance(msg, bytes):      # the encoders' exact CDR, as published
-            self.recorder.write(name, None, messages.stamp_ns(t), msg)
-        else:
-            self.recorder.write(name, msg, messages.stamp_ns(t))
+        self.publish_all({key: msg}, t)
+
+    def publish_all(self, msgs: dict, t: float) -> None:
+        """Record what topics published at sim time t: key -> exact CDR bytes or a message."""
+        t_ns = messages.stamp_ns(t)
+        published, records = self.published, []
+        for key, msg in msgs.items():
+            name = self.topics[key]
+            published[name] = published.get(name, 0) + 1
+            if isinstance(msg, bytes):      # the encoders' exact CDR, as published
+                records.append((name, None, t_ns, msg))
+            else:
+                records.append((name, msg, t_ns, None))
+        self.recorder.write_all(records)
 
     def command(self, msg, t: float) -> None:
         """Record a command received at sim time t."""

@@ -68,9 +68,11 @@ TIP_FIELDS = ('axial_m', 'in_plane_m', 'out_of_plane_m')
 STRESS_FIELDS = tuple(f'{name}_Pa' for name in STRESS_NAMES) + (
     'von_mises_body', 'von_mises_x_m', 'von_mises_ratio')
 ENERGY_FIELDS = ('kinetic_J', 'strain_J', 'work_J', 'lock_loss_J', 'balance_error_J',
-                 'friction_work_J', 'drive_work_J')
+                 'friction_work_J', 'drive_work_J', 'damping_dissipation_J')
 #: the sleeve's joint: the last of joint_states (robot_description.joint_names)
 SLEEVE_JOINT = joint_names(2)[-1]
+#: a Sample3D's figures of each stress component, in STRESS_NAMES' order
+_STRESS_ROWS = tuple(f'stress_{name}' for name in STRESS_NAMES)
 
 
 def _array(values: np.ndarray, fields) -> Float64MultiArray:
@@ -83,36 +85,43 @@ def _array(values: np.ndarray, fields) -> Float64MultiArray:
     return msg
 
 
-def rib_joint_values(s) -> np.ndarray:
+def rib_joint_values(s) -> tuple[list, list, list]:
     """
-    Return joint_states' position, velocity and effort of a Sample3D: (3, 2 N + 1).
+    Return joint_states' position, velocity and effort of a Sample3D: 3 lists of 2 N + 1.
 
     Per rib alpha1 and the link's angle relative to the leaf (alpha2 - alpha1), their rates,
     no effort; then the sleeve's height, velocity and the whole sleeve's force.
     """
-    ribs = len(s.alpha1)
-    out = np.zeros((3, 2 * ribs + 1))
-    out[0, 0:2 * ribs:2], out[0, 1:2 * ribs:2] = s.alpha1, s.alpha2 - s.alpha1
-    out[1, 0:2 * ribs:2], out[1, 1:2 * ribs:2] = s.alpha1_rate, s.alpha2_rate - s.alpha1_rate
-    out[:, -1] = s.sleeve_position, s.sleeve_velocity, s.sleeve_force
-    return out
+    v = s.fields()
+    alpha1, rate1 = v['alpha1'], v['alpha1_rate']
+    position = [x for pair in zip(alpha1.tolist(), (v['alpha2'] - alpha1).tolist())
+                for x in pair]
+    velocity = [x for pair in zip(rate1.tolist(), (v['alpha2_rate'] - rate1).tolist())
+                for x in pair]
+    position.append(float(v['sleeve_position']))
+    velocity.append(float(v['sleeve_velocity']))
+    return position, velocity, [0.0] * (2 * len(alpha1)) + [float(v['sleeve_force'])]
 
 
-def rib_stress_values(s, yield_strength: float) -> np.ndarray:
-    """Return rib_peak_stress's data of a Sample3D: (ribs, STRESS_FIELDS)."""
-    out = np.empty((len(s.alpha1), len(STRESS_FIELDS)))
-    for j, name in enumerate(STRESS_NAMES):
-        out[:, j] = s[f'stress_{name}']
-    out[:, -3:-1] = s.stress_von_mises_at
-    out[:, -1] = s.stress_von_mises / yield_strength
+def rib_stress_values(s, yield_strength: float, out: np.ndarray | None = None) -> np.ndarray:
+    """Return rib_peak_stress's data of a Sample3D: (ribs, STRESS_FIELDS) (into out if given)."""
+    v = s.fields()
+    if out is None:
+        out = np.empty((len(v['alpha1']), len(STRESS_FIELDS)))
+    for j, name in enumerate(_STRESS_ROWS):
+        out[:, j] = v[name]
+    out[:, -3:-1] = v['stress_von_mises_at']
+    np.divide(v['stress_von_mises'], yield_strength, out=out[:, -1])
     return out
 
 
 def rib_energy_values(s, initial_energy: float) -> list[float]:
     """Return the umbrella's energy data of a Sample3D (ENERGY_FIELDS, J)."""
-    return [float(s.kinetic_energy), float(s.strain_energy), float(s.work),
-            float(s.lock_energy_loss), float(energy_balance3d(s, initial_energy)),
-            float(sum(s.friction_work)), float(s.drive_work)]
+    v = s.fields()
+    return [float(v['kinetic_energy']), float(v['strain_energy']), float(v['work']),
+            float(v['lock_energy_loss']), float(energy_balance3d(v, initial_energy)),
+            sum(v['friction_work'].tolist()), float(v['drive_work']),
+            float(v['damping_dissipation'])]
 
 
 def rib_messages(s, yield_strength: float, initial_energy: float,
@@ -122,7 +131,7 @@ def rib_messages(s, yield_strength: float, initial_energy: float,
     joints.header.stamp = stamp(s.time)
     joints.header.frame_id = frame_prefix + INERTIAL_FRAME
     joints.name = joint_names(len(s.alpha1))
-    joints.position, joints.velocity, joints.effort = rib_joint_values(s).tolist()
+    joints.position, joints.velocity, joints.effort = rib_joint_values(s)
     energy = Float64MultiArray()
     energy.layout.dim = [MultiArrayDimension(label='field: ' + ','.join(ENERGY_FIELDS),
                                              size=len(ENERGY_FIELDS), stride=len(ENERGY_FIELDS))]
@@ -160,6 +169,7 @@ class RibsSampleEncoder:
         self._layouts = template_layouts(
             rib_messages(first, yield_strength, initial_energy, frame_prefix),
             self.groups(len(first.alpha1)), self.STAMPED)
+        self._stress = np.empty((len(first.alpha1), len(STRESS_FIELDS)))   # (reused)
 
     def encode(self, s) -> dict[str, bytes]:
         """Return the CDR bytes of every per-publication topic of s, keyed as the node's."""
@@ -170,7 +180,7 @@ class RibsSampleEncoder:
         energy, energy_c = layouts['energy']
         tip, tip_c = layouts['rib_tip_deflection']
         stress, stress_c = layouts['rib_peak_stress']
-        position, velocity, effort = rib_joint_values(s).tolist()
+        position, velocity, effort = rib_joint_values(s)
         # in template_layout's order: the header and stamp if stamped, then each group's
         # constant bytes and its doubles
         return {
@@ -178,9 +188,9 @@ class RibsSampleEncoder:
             'joint_states': joints.pack(joints_c[0], sec, nsec, joints_c[1], *position,
                                         joints_c[2], *velocity, joints_c[3], *effort),
             'energy': energy.pack(energy_c[0], *rib_energy_values(s, self.initial_energy)),
-            'rib_tip_deflection': tip.pack(tip_c[0], *np.ravel(s.tip).tolist()),
-            'rib_peak_stress': stress.pack(
-                stress_c[0], *rib_stress_values(s, self.yield_strength).ravel().tolist()),
+            'rib_tip_deflection': tip.pack(tip_c[0], *s.tip.ravel().tolist()),
+            'rib_peak_stress': stress.pack(stress_c[0], *rib_stress_values(
+                s, self.yield_strength, self._stress).ravel().tolist()),
         }
 
 

@@ -149,6 +149,7 @@ TEXT_FIELDS = {
     'peak_stress': ('MPa', 1e-6, '.4g'),
     'friction_work': ('J', 1.0, '.4g'),
     'drive_work': ('J', 1.0, '.4g'),
+    'damping_dissipation': ('J', 1.0, '.4g'),
     'lock_energy_loss': ('J', 1.0, '.4g'),
     'energy_balance_residual': ('J', 1.0, '.2e'),
     'energy_scale': ('J', 1.0, '.6g'),

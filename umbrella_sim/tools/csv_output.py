@@ -187,7 +187,8 @@ SLEEVE_FIGURES = (
     ('sleeve_position', 'm', None), ('sleeve_velocity', 'm/s', None),
     ('sleeve_force', 'N', None), ('stop_reaction', 'N', None),
     ('kinetic_energy', 'J', None), ('strain_energy', 'J', None), ('work', 'J', None),
-    ('drive_work', 'J', None), ('lock_energy_loss', 'J', None))
+    ('drive_work', 'J', None), ('damping_dissipation', 'J', None),
+    ('lock_energy_loss', 'J', None))
 RIB_FIGURES = (
     ('alpha1', 'rad', None), ('alpha2', 'rad', None), ('alpha1_rate', 'rad/s', None),
     ('alpha2_rate', 'rad/s', None), ('tip', 'm', ('u', 'v', 'w')),

@@ -61,10 +61,10 @@ class Sample3D:
     time, stage (model.Stage), sleeve_position, sleeve_velocity, sleeve_force (the whole
     sleeve's, N), alpha1, alpha2, alpha1_rate, alpha2_rate (per rib, rad, rad/s), tip (ribs,
     3: u, v, w of G in the leaf frame, m), kinetic_energy, strain_energy, work, friction_work
-    (per rib), drive_work, lock_energy_loss (J), holding_torque, stuck (per rib),
-    stop_reaction, stress_<component> (per rib, Pa) and stress_<component>_at (ribs, 2: body
-    0 leaf / 1 link, x along it), and with a moving base bus_q, bus_v (and the momenta of a
-    free bus).
+    (per rib), drive_work, damping_dissipation, lock_energy_loss (J), holding_torque, stuck
+    (per rib), stop_reaction, stress_<component> (per rib, Pa) and stress_<component>_at
+    (ribs, 2: body 0 leaf / 1 link, x along it), and with a moving base bus_q, bus_v (and
+    the momenta of a free bus).
     """
 
     __slots__ = ('_values',)
@@ -147,6 +147,8 @@ class RibPeaks:
     def merged(self, new: 'RibPeaks') -> 'RibPeaks':
         """Return, rib by rib and component by component, the larger (these held on a tie)."""
         better = new.value > self.value
+        if not better.any():
+            return self
         return RibPeaks(np.where(better, new.value, self.value),
                         np.where(better[..., None], new.at, self.at),
                         np.where(better, new.when, self.when))
@@ -212,6 +214,7 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         self.engine = Engine3D(self.params.lock_rule, 'compiled' if compiled else 'numpy')
         self.chunk_steps = COMPILED_CHUNK_STEPS if compiled else CHUNK_STEPS
         self._force_per_rib = command_force(self.params.planar.sleeve_force, self.params)
+        self._lock_event: LockEvent | None = None      # (lock_event, once it happened)
         # the record's row of t = 0 is the initial sample: the blocks hold the steps' rows
         self._current = Sample3D.of_row({k: v[-1] for k, v in self.record.take().items()})
 
@@ -241,10 +244,12 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
 
     @property
     def lock_event(self) -> LockEvent | None:
-        if not self.record.lock_events:
-            return None
-        t, before, after = self.record.lock_events[0]
-        return LockEvent(t, self.params.lock_rule, before, after)
+        event = self._lock_event
+        if event is None and self.record.lock_events:      # (made once: it never changes)
+            t, before, after = self.record.lock_events[0]    # (judged at the lock: its step)
+            event = self._lock_event = LockEvent(t, self.params.lock_rule, before, after,
+                                                 stage2_resolution=self.stage2_resolution)
+        return event
 
     # ------------------------------------------------------------------- stepping
     def advance_schedule(self, schedule, n_steps: int, states: bool = False,
@@ -292,10 +297,11 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         """Return the Sample3D right after the lock, at its instant (None before the lock)."""
         if self.lock_state is None:
             return None
-        s, hit, (work, friction, drive) = self.lock_state
+        s, hit, (work, friction, drive, damping) = self.lock_state
         return Sample3D.of_row(self.record.row(
             s, True, self.force, self.lock_loss,
-            (work + hit.force, friction + hit.friction, drive + hit.drive)))
+            (work + hit.force, friction + hit.friction, drive + hit.drive,
+             damping + hit.damping)))
 
     def new_summary(self, initial: Sample3D) -> 'Summary3D':
         return Summary3D(self, initial)
@@ -325,6 +331,7 @@ class Summary3D:
         self._deployed = np.array([first_reach(np.array([initial.time]),
                                                np.array([initial.alpha1[k] - m.alpha_deployed[k]]))
                                    for k in range(m.n_ribs)])
+        self._undeployed = bool(np.isnan(self._deployed).any())
         self._oop = largest_out_of_plane_tip(np.array([initial.time]), initial.tip[None])
         self._in_plane = np.abs(initial.tip[:, 1])
         self._peaks = RibPeaks.of_rows(
@@ -349,23 +356,25 @@ class Summary3D:
             self._start = deploy_start(0.0, zip([self.final_time, *t[:-1].tolist()],
                                                 rows['sleeve_force'].tolist()))
         t_before, alpha_before = self._last
-        ribs = np.nonzero(np.isnan(self._deployed))[0]
-        if len(ribs):          # (first_reach of the ribs whose leaf reached its angle)
+        if self._undeployed and (rows['alpha1'] <= m.alpha_deployed).any():
+            # (first_reach of the ribs whose leaf reached its angle)
+            ribs = np.nonzero(np.isnan(self._deployed))[0]
             gap = rows['alpha1'][:, ribs] - m.alpha_deployed[ribs]
             for j in np.nonzero((gap <= 0.0).any(0))[0]:
                 k = ribs[j]
                 self._deployed[k] = first_reach(t, gap[:, j], (
                     t_before, alpha_before[k] - m.alpha_deployed[k]),
                     None if self.lock is None else self.lock.time)
+            self._undeployed = bool(np.isnan(self._deployed).any())
         self._last = (float(t[-1]), rows['alpha1'][-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(np.abs(energy).max()))
         self._balance = max(self._balance,
-                            float(np.abs(energy_balance3d(rows, self._e0)).max()))
-        oop = largest_out_of_plane_tip(t, rows['tip'])
-        if oop[0] > self._oop[0]:
-            self._oop = oop
-        self._in_plane = np.maximum(self._in_plane, np.abs(rows['tip'][:, :, 1]).max(0))
+                            float(np.abs(energy_balance3d(rows, self._e0, energy)).max()))
+        tip = rows['tip']
+        if np.abs(tip[:, :, 2]).max() > self._oop[0]:
+            self._oop = largest_out_of_plane_tip(t, tip)
+        self._in_plane = np.maximum(self._in_plane, np.abs(tip[:, :, 1]).max(0))
         self._peaks = block.merge_peaks(self._peaks)
         self.steps += len(block)
         self.final_time = float(t[-1])
@@ -392,6 +401,7 @@ class Summary3D:
                'energy_drift': self.energy_drift,
                'friction_work': np.asarray(self._final.friction_work).tolist(),
                'drive_work': float(self._final.drive_work),
+               'damping_dissipation': float(self._final.damping_dissipation),
                'lock_energy_loss': float(self._final.lock_energy_loss),
                'peak_stress': {name: {'value': top.tolist(),
                                       'body': [BODIES[int(b)] for b in at[:, 0]],
@@ -419,11 +429,13 @@ class Summary3D:
         """
         Return the validity warnings: summary's one rule, on the worst rib's figures.
 
-        'coarse step' judges the planar rib's mesh at the umbrella's step and its largest
-        in-plane tip deflection (summary.mesh_resolution): the umbrella's stage 2 stays on
-        its grid step, so past the modes' coupling it names the step a run should give.  The
-        co-rotational ribs' 'fibre rotation' and 'out-of-plane rotation' from their largest
-        section slope and out-of-plane rotation (_geometry).
+        'coarse step' judges the lock's worst rib at the step stage 2 takes
+        (UmbrellaSimulator3D.stage2_resolution: substeps3d.py; silent where stage 2 takes
+        the substeps its lock needs); the co-rotational ribs, which take no substeps, the
+        planar rib's mesh at the umbrella's step and its largest in-plane tip deflection
+        (summary.mesh_resolution).  The co-rotational ribs' 'fibre rotation' and
+        'out-of-plane rotation' from their largest section slope and out-of-plane rotation
+        (_geometry).
         """
         locked = self.lock is not None
         slope, out_of_plane = self._geometry()
@@ -431,10 +443,14 @@ class Summary3D:
                                  float(self._peaks['von_mises'][0].max()),
                                  float(self._in_plane.max()), locked=locked,
                                  energy_drift=self.energy_drift,
-                                 stage2_resolution=(mesh_resolution(self._planar, self.sim.h)
-                                                    if locked else None),
+                                 stage2_resolution=self._stage2_resolution() if locked else None,
                                  section_slope=slope
                                  ) + out_of_plane_warnings(self._planar, out_of_plane)
+
+    def _stage2_resolution(self) -> dict | None:
+        """Return the lock's stage-2 resolution (the worst rib's), else the mesh's."""
+        own = self.sim.stage2_resolution
+        return own if own is not None else mesh_resolution(self._planar, self.sim.h)
 
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""

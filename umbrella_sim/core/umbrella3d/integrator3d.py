@@ -60,11 +60,12 @@ import sys
 import numpy as np
 
 from . import arrow
+from .damping3d import damping_beta, damping_force
 from .kernel3d import CompiledStep3D
 from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
 from .stage2fit import RibFits, stage2_fit, WholeFit
 from .state3d import ConvergenceError3D, State3D, StepWork
-from ..integrators import newton_converged, PHI_TOLERANCE
+from ..integrators import newton_converged, newton_tolerance, PHI_TOLERANCE
 from ..kernel import kernel_refusal, LIBRARY, load_kernel
 
 #: steps an iteration matrix serves at most (the first included), and the contraction of a
@@ -146,6 +147,8 @@ class MidpointUmbrella:
         self.viscous = np.array([r.hinge_viscous for r in model.ribs])
         self.regularisation = p.hinge_regularisation
         self.drive = BaseDrive(p) if p.base == 'prescribed' else None
+        #: the beams' structural damping C = beta K (damping3d.py; 0: undamped)
+        self.damping_beta = damping_beta(p)
         m = model
         # coordinates the kinetic energy depends on (Gonzalez correction), and those Newton's
         # error is measured on (y_s follows the ribs through the joints)
@@ -179,7 +182,8 @@ class MidpointUmbrella:
                                        'bootstrap.py setup; it needs a C compiler)')
         if why is None:
             return CompiledStep3D(lib, self.model, self.tolerance, PHI_TOLERANCE,
-                                  self.max_iterations, self.carry_steps, self.drive)
+                                  self.max_iterations, self.carry_steps, self.drive,
+                                  damping_beta=self.damping_beta)
         if kernel == 'compiled':
             raise RuntimeError(why)
         if why not in _SAID:
@@ -190,7 +194,21 @@ class MidpointUmbrella:
 
     def fit_stage2_modes(self, h: float) -> None:
         """Fit the base's locked modes (stage2fit.stage2_fit) for grid step h, from lock_at on."""
-        self.mode_fit = stage2_fit(self.model, h)
+        self.mode_fit = stage2_fit(self.model, h, self.damping_beta)
+
+    def take_substeps(self, h: float, tolerance: float | None = None) -> None:
+        """
+        Step stage 2 in physics steps of h (substeps3d.py): Newton's tolerance and the fit.
+
+        The planar engine's rule at its substeps (engines.FiniteElementEngine._follow):
+        the Newton tolerance (tolerance: given; None: the step h's, newton_tolerance), the
+        modes fitted for h.  Before ``lock_at``.
+        """
+        self.tolerance = newton_tolerance(h) if tolerance is None else tolerance
+        if self.compiled is not None:
+            self.compiled.set_tolerance(self.tolerance)
+        if self.mode_fit is not None:
+            self.fit_stage2_modes(h)
 
     def lock_at(self, state: State3D | None = None) -> None:
         """
@@ -347,6 +365,7 @@ class MidpointUmbrella:
         qr, qs = qr0 + h * wr0, qs0 + h * ws0
         lam_r, lam_s = s.lam_r.copy(), s.lam_s.copy()
         half_h2 = 0.5 * h * h
+        beta = self.damping_beta
         kept = self._kept_factor(s, h, locked)
         factored, uses = kept if kept is not None else (None, 0)
         self._kept = None
@@ -389,6 +408,8 @@ class MidpointUmbrella:
             applied_r[:, m.i_a1] += torque
             applied_s = np.zeros(ns)
             applied_s[0] = -force
+            if beta:
+                applied_r, applied_s = self._damped(applied_r, applied_s, dqr, dqs, h, fit)
             cons_r = np.einsum('rji,rj->ri', jg_rr, lam_r)
             cons_s = np.einsum('rji,rj->i', jm_rs, lam_r) + jm_ss.T @ lam_s
             scheme_pr1, scheme_ps1 = (pr1, ps1) if fit is None else fit.transpose(pr1, ps1)
@@ -398,6 +419,8 @@ class MidpointUmbrella:
                 j_r = m.constraint_jacobian(qr, stuck, locked)
                 gyro = m.gyroscopic(kinm, dqr / h)
                 extra = m.elastic_step_matrix(qr0, qr, h) + 0.5 * h * gyro
+                if beta:
+                    extra += 0.5 * h * beta * m.stiffness
                 extra[:, m.i_a1, m.i_a1] -= 0.5 * h * h * slope
                 factored = arrow.factor(*self._blocks(
                     mass1, (jm_rr, jm_rs, jm_ss), j_r[:3], stuck, active, extra))
@@ -444,8 +467,13 @@ class MidpointUmbrella:
         w_fric = torque * dqr[:, m.i_a1]
         w_force = force * (qs0[0] - qs[0])
         w_drive = float(lam_s[1:] @ dqs[1:7]) if drive is not None else 0.0
+        # the damping's dissipation dq . C dq / h (+ the fit's share): the work it took
+        w_damp = 0.0
+        if beta:
+            fr, fs = self._damped(np.zeros_like(dqr), np.zeros(ns), dqr, dqs, h, fit)
+            w_damp = -(float(np.sum(fr * dqr)) + float(fs @ dqs))
         t_target = (0.5 * (np.sum(vr0 * pr0) + vs0 @ ps0) + m.strain_energy(qr0)
-                    - m.strain_energy(qr) + w_force + float(np.sum(w_fric)) + w_drive)
+                    - m.strain_energy(qr) + w_force + float(np.sum(w_fric)) + w_drive - w_damp)
         free_bus = m.params.base == 'free'
         if free_bus:
             # the bus position is cyclic: its momentum p_X (the linear momentum) is exactly
@@ -477,4 +505,12 @@ class MidpointUmbrella:
                 pr1, ps1 = m.matvec(mass1, vr, vs)
         state = State3D(s.t + h, qr, qs, vr, vs, lam_r, lam_s, stuck, pr1, ps1)
         self._kept = (factored, uses + 1, qr, qs, vr, vs, h, locked, np.isnan(stuck))
-        return state, StepWork(w_force, w_fric, w_drive, it, factorisations)
+        return state, StepWork(w_force, w_fric, w_drive, it, factorisations, w_damp)
+
+    def _damped(self, applied_r, applied_s, dqr, dqs, h, fit):
+        """Return the applied forces with the damping's over the step dq (damping3d.py)."""
+        applied_r = applied_r + damping_force(self.model.stiffness, self.damping_beta, dqr, h)
+        if fit is not None:         # (the fit's share: its damped modes' exact decay)
+            fr, fs = fit.damping_force(dqr, dqs, h)
+            applied_r, applied_s = applied_r - fr, applied_s - fs
+        return applied_r, applied_s

@@ -63,7 +63,7 @@ def row_layout(model: UmbrellaModel3D, figures: bool = False) -> dict:
              ('vs', (model.n_shared,)), ('lam_r', (nr, N_RIB_ROWS)),
              ('lam_s', (model.n_shared_rows,)), ('stuck', (nr,)), ('kinetic', ()),
              ('strain', ()), ('work_force', ()), ('work_friction', (nr,)), ('iterations', ()),
-             ('factorisations', ()), ('work_drive', ()))
+             ('factorisations', ()), ('work_damping', ()), ('work_drive', ()))
     if model.params.base == 'free':
         parts += (('linear_momentum', (3,)), ('angular_momentum', (3,)))
     if figures:
@@ -80,7 +80,8 @@ class CompiledStep3D:
     """The compiled step of one model (drive: its BaseDrive); see the module docstring."""
 
     def __init__(self, lib, model: UmbrellaModel3D, tolerance: float, phi_tolerance: float,
-                 max_iterations: int, carry_steps: int = 1, drive=None, figures: bool = True):
+                 max_iterations: int, carry_steps: int = 1, drive=None, figures: bool = True,
+                 damping_beta: float = 0.0):
         if (drive is None) != (model.params.base != 'prescribed'):
             raise ValueError('the compiled 3D step: a drive is for a prescribed base only')
         self.lib, self.model, self.drive = lib, model, drive
@@ -114,7 +115,7 @@ class CompiledStep3D:
             link_points=link.x.shape[1], link_elastic=link.shape.shape[-1],
             link_offset=link.offset, sleeve_mass=m.sleeve_mass, y_stop=m.y_stop,
             regularisation=m.params.hinge_regularisation, carry_steps=carry_steps,
-            hub_radius=m.hub_radius, total_mass=m.total_mass,
+            hub_radius=m.hub_radius, total_mass=m.total_mass, damping_beta=damping_beta,
             **{k: _ptr(v) for k, v in self._arrays.items()})
         law = model.compiled_law()
         if law is not None:      # the co-rotational ribs (_kernel3d_nonlinear.h)
@@ -206,27 +207,36 @@ class CompiledStep3D:
 
         The call keeps pointers to the arrays (Advance3DCall.fit_*): each rib's
         LockedModeFit padded to the most modes a rib has (s = 1, shrink 0: no change), or
-        the whole free system's (fit_whole: rows over every coordinate).
+        the whole free system's (fit_whole: rows over every coordinate); a damped fit's
+        damping changes (fit_damping, the damped beams': damping3d.py).
         """
         c = self.call
         if fit.whole:
             f = fit.fit
             self._fit = tuple(np.ascontiguousarray(a) for a in (
-                f.modes, f.shapes, f.scale, f.newton_shrink(f.step)))
+                f.modes, f.shapes, f.scale, f.newton_shrink(f.step), f.damping_change))
             c.fit_whole, r = 1, len(f.scale)
         else:
             nr, n = self.model.n_ribs, self.model.n_rib
             r = max(len(f.scale) for f in fit.fits)
             u, phi = np.zeros((nr, r, n)), np.zeros((nr, r, n))
-            scale, shrink = np.ones((nr, r)), np.zeros((nr, r))
+            scale, shrink, damping = np.ones((nr, r)), np.zeros((nr, r)), np.zeros((nr, r))
             for k, f in enumerate(fit.fits):
                 m = len(f.scale)
                 u[k, :m], phi[k, :m] = f.modes, f.shapes
                 scale[k, :m], shrink[k, :m] = f.scale, f.newton_shrink(f.step)
-            self._fit = (u, phi, scale, shrink)
+                damping[k, :m] = f.damping_change
+            self._fit = (u, phi, scale, shrink, damping)
             c.fit_whole = 0
-        c.fit_u, c.fit_phi, c.fit_scale, c.fit_shrink = (_ptr(a) for a in self._fit)
+        c.fit_u, c.fit_phi, c.fit_scale, c.fit_shrink = (_ptr(a) for a in self._fit[:4])
+        # (a damped fit's damping change: the damped beams' only, damping3d.py)
+        c.fit_damping = _ptr(self._fit[4]) if self.struct.damping_beta else None
         c.fit_modes = r
+
+    # ---------------------------------------------------- stage-2 substeps (substeps3d.py)
+    def set_tolerance(self, tolerance: float) -> None:
+        """Set Newton's increment tolerance of the steps from now on (a stage-2 substep's)."""
+        self.tolerance = self.call.tol = tolerance
 
     def _set_capacity(self, cap: int) -> None:
         self.out = np.zeros((cap, self.row_len))
@@ -279,7 +289,8 @@ class CompiledStep3D:
         row = self.rows(1)
         work = StepWork(float(row['work_force'][0]), row['work_friction'][0].copy(),
                         float(row['work_drive'][0]),
-                        int(row['iterations'][0]), int(row['factorisations'][0]))
+                        int(row['iterations'][0]), int(row['factorisations'][0]),
+                        float(row['work_damping'][0]))
         return self._state(), work
 
     def advance(self, s: State3D, k0: int, h: float, n_steps: int, force: float,
@@ -297,7 +308,8 @@ class CompiledStep3D:
         if n_steps > self.capacity:
             self._set_capacity(max(n_steps, 2 * self.capacity))
         self._load(s, force, locked, h)
-        self._set_drive(np.arange(k0 + 1, k0 + n_steps + 1) * h)
+        if self.drive is not None:
+            self._set_drive(np.arange(k0 + 1, k0 + n_steps + 1) * h)
         c = self.call
         c.single, c.k0, c.n_steps = 0, k0, n_steps
         c.crest_from_state = int(crest_from_state)

@@ -30,6 +30,8 @@ component over both bodies (``stress_<name>``) and where (``stress_<name>_at``: 
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..outputs import hermite_crests
@@ -37,6 +39,8 @@ from ..outputs import hermite_crests
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
 #: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
 BODIES = ('leaf', 'link')
+#: Record3D's row names of each stress channel's value and where, in STRESS_NAMES' order
+_STRESS_ROWS = tuple((f'stress_{name}', f'stress_{name}_at') for name in STRESS_NAMES)
 
 
 class Record3D:
@@ -46,17 +50,23 @@ class Record3D:
         self.model = model
         self.rows: dict[str, list] = {}     # name -> arrays, each a block of steps (first)
         nr = model.n_ribs
-        self.peak = {name: np.zeros(nr) for name in STRESS_NAMES}
-        self.peak_where = {name: [('', 0.0, 0.0)] * nr for name in STRESS_NAMES}
         self.work = 0.0
         self.friction = np.zeros(nr)
         self.drive = 0.0
+        #: the energy the beams' damping dissipated so far (J, >= 0: damping3d.py)
+        self.damping = 0.0
         self.lock_events: list = []
         self.iterations = 0
         # a stress point's x along its body: the leaf's points, then the link's
         xs = (model.leaf_bodies[0].stress_x, model.link_bodies[0].stress_x)
         self._leaf_points, self._x_of = len(xs[0]), np.concatenate(xs)
-        self._peaks = np.zeros((nr, len(STRESS_NAMES)))     # peak's values, a column each
+        #: each rib's peak of every stress channel over the run (a column each, in
+        #: STRESS_NAMES' order), where (body code, NaN before any peak; x) and when
+        #: (``peak``, ``peak_where``)
+        self._peaks = np.zeros((nr, len(STRESS_NAMES)))
+        self._peak_at = np.zeros((nr, len(STRESS_NAMES), 2))
+        self._peak_at[..., 0] = np.nan
+        self._peak_when = np.zeros((nr, len(STRESS_NAMES)))
         #: the last step's (time, its five channels' values and rates (_crests), locked):
         #: the start of the next step's crests; after the compiled step's figures (time,
         #: qr, vr, locked, 'state'): the channels computed from them when needed
@@ -67,6 +77,27 @@ class Record3D:
         self._held = None
         self.taken_peaks = None
         self._rib_comp = (np.arange(nr)[:, None], np.arange(len(STRESS_NAMES))[None])
+        self._tip = np.array(model.i_tip)
+        #: no hinge ever sticks (none has stick_until or stick_torque): stuck is NaN throughout
+        self._never_stuck = all(r.stick_until <= 0.0 and r.stick_torque <= 0.0
+                                for r in model.ribs)
+        #: the rows of a constant figure (locked, sleeve_force, lock_energy_loss) by (name,
+        #: steps, value): shared by the blocks, read-only
+        self._constant_rows: dict = {}
+
+    @property
+    def peak(self) -> dict:
+        """Return each rib's peak of every stress channel over the run (name -> (ribs,))."""
+        return {name: self._peaks[:, j].copy() for j, name in enumerate(STRESS_NAMES)}
+
+    @property
+    def peak_where(self) -> dict:
+        """Return where and when each peak is: name -> [(body, x, t)] a rib ('' before one)."""
+        out = {}
+        for j, name in enumerate(STRESS_NAMES):
+            out[name] = [('' if np.isnan(body) else BODIES[int(body)], float(x), float(when))
+                         for (body, x), when in zip(self._peak_at[:, j], self._peak_when[:, j])]
+        return out
 
     def _put(self, name, value):
         self.rows.setdefault(name, []).append(np.array(value)[None])
@@ -78,6 +109,7 @@ class Record3D:
             self.work += work.force
             self.friction = self.friction + work.friction
             self.drive += work.drive
+            self.damping += work.damping
             self.iterations += work.iterations
         if lock_event is not None:
             self.lock_events.append(lock_event)
@@ -92,7 +124,8 @@ class Record3D:
                for name in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
         self._put_steps(np.array([s.t]), one, np.array([kinetic]),
                         np.array([m.strain_energy(s.qr)]), np.array([self.work]),
-                        self.friction[None], np.array([self.drive]), locked, force, lock_loss)
+                        self.friction[None].copy(), np.array([self.drive]), locked, force,
+                        lock_loss, damping=np.array([self.damping]))
         if m.moving_base:
             put = self._put
             put('bus_q', s.qs[1:7].copy())
@@ -103,7 +136,8 @@ class Record3D:
                 put('linear_momentum', p)
                 put('angular_momentum', h)
 
-    def add_steps(self, rows: dict, locked: bool, force: float, lock_loss: float):
+    def add_steps(self, rows: dict, locked: bool, force: float, lock_loss: float,
+                  substeps: int = 1, times=None):
         """
         Add the figures of a run of steps (the compiled step's rows, kernel3d.row_layout).
 
@@ -113,19 +147,31 @@ class Record3D:
         the steps' stress figures, stress_top (step, rib, 5) and stress_at (step, rib, 5, 2),
         computed by the compiled step with ``_crests``' rule (kernel3d.row_layout; their
         first step's crest from the last step added if ``crest_continues``), else computed
-        here.
+        here.  substeps: the rows are physics steps taken that many a grid step (stage 2's
+        substeps), kept as grid rows (fold_substeps3d) at times (the grid's).
         """
-        work = self.work + np.cumsum(rows['work_force'])
-        friction = self.friction + np.cumsum(rows['work_friction'], 0)
-        drive = self.drive + np.cumsum(rows['work_drive'])
+        if substeps > 1:
+            rows = self._grid_rows(rows, locked, substeps, times)
+        work = np.cumsum(rows['work_force'])
+        work += self.work
+        friction = np.cumsum(rows['work_friction'], 0)
+        friction += self.friction
+        drive = np.cumsum(rows['work_drive'])
+        drive += self.drive
         self.work, self.friction = float(work[-1]), friction[-1].copy()
         self.drive = float(drive[-1])
+        if 'work_damping' in rows:
+            damping = np.cumsum(rows['work_damping'])
+            damping += self.damping
+        else:
+            damping = self._constant('damping_dissipation', len(work), self.damping)
+        self.damping = float(damping[-1])
         self.iterations += int(np.sum(rows['iterations']))
         figures = None
         if 'stress_top' in rows:        # (the compiled step's: _crests' rule, computed there)
             figures = rows['stress_top'], rows['stress_at']
         self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work, friction,
-                        drive, locked, force, lock_loss, figures)
+                        drive, locked, force, lock_loss, figures, damping)
         if self.model.moving_base:
             bus = {'bus_q': rows['qs'][:, 1:7], 'bus_v': rows['vs'][:, 1:7]}
             if self.model.params.base == 'free':
@@ -139,50 +185,66 @@ class Record3D:
         last = self._last_stress
         return last is not None and last[3] == locked
 
+    def _constant(self, name: str, shape, value) -> np.ndarray:
+        """Return the rows of a figure constant over steps (np.full's; shared, read-only)."""
+        key = (name, shape, type(value), value, math.copysign(1.0, value))   # (0.0 not -0.0)
+        rows = self._constant_rows.get(key)
+        if rows is None:
+            if len(self._constant_rows) > 64:        # (values change seldom: a few at once)
+                self._constant_rows.clear()
+            rows = self._constant_rows[key] = np.full(shape, value)
+            rows.flags.writeable = False
+        return rows
+
     def _put_steps(self, t, st, kinetic, strain, work, friction, drive, locked, force,
-                   lock_loss, figures=None):
+                   lock_loss, figures=None, damping=None):
         """
         Append k steps' figures (arrays with the steps first) and update the peaks.
 
-        figures: (top, at) of the steps' stresses (add_steps), else computed here (_crests).
+        t, st's arrays, kinetic and strain may be views of a buffer reused (copied here);
+        work, friction, drive are the caller's own (kept).  figures: (top, at) of the steps'
+        stresses (add_steps), else computed here (_crests).
         """
         m = self.model
         k = len(t)
-        qr, vr, stuck = st['qr'], st['vr'], st['stuck']
-        free = np.isnan(stuck)
-        for name, value in (('locked', locked), ('sleeve_force', force),
-                            ('lock_energy_loss', lock_loss)):
-            self.rows.setdefault(name, []).append(np.full(k, value))
-        columns = {
-            'time': t, 'sleeve_position': st['qs'][:, 0], 'sleeve_velocity': st['vs'][:, 0],
-            'alpha1': qr[:, :, m.i_a1], 'alpha2': qr[:, :, m.i_a2],
-            'alpha1_rate': vr[:, :, m.i_a1], 'alpha2_rate': vr[:, :, m.i_a2],
-            'tip': qr[:, :, list(m.i_tip)], 'kinetic_energy': kinetic,
-            'strain_energy': strain, 'work': work, 'friction_work': friction,
-            'drive_work': drive,
-            'holding_torque': np.where(free, 0.0, st['lam_r'][:, :, -1]), 'stuck': ~free,
-            'stop_reaction': st['lam_s'][:, 0]}
-        for name, values in columns.items():        # (copies: the rows' buffers are reused)
-            self.rows.setdefault(name, []).append(np.array(values))
+        qr, vr = st['qr'], st['vr']
+        put = self.rows.setdefault
+        put('locked', []).append(self._constant('locked', k, locked))
+        put('sleeve_force', []).append(self._constant('sleeve_force', k, force))
+        put('lock_energy_loss', []).append(self._constant('lock_energy_loss', k, lock_loss))
+        i_a1, i_a2 = m.i_a1, m.i_a2
+        for name, values in (        # (copies: the rows' buffers are reused)
+                ('time', t), ('sleeve_position', st['qs'][:, 0]),
+                ('sleeve_velocity', st['vs'][:, 0]), ('alpha1', qr[:, :, i_a1]),
+                ('alpha2', qr[:, :, i_a2]), ('alpha1_rate', vr[:, :, i_a1]),
+                ('alpha2_rate', vr[:, :, i_a2])):
+            put(name, []).append(values.copy())
+        put('tip', []).append(qr[:, :, self._tip])         # (a new array)
+        put('kinetic_energy', []).append(kinetic.copy())
+        put('strain_energy', []).append(strain.copy())
+        put('work', []).append(work)
+        put('friction_work', []).append(friction)
+        put('drive_work', []).append(drive)
+        put('damping_dissipation', []).append(damping)
+        if self._never_stuck:       # (every hinge free at every step)
+            put('holding_torque', []).append(self._constant('holding_torque', qr.shape[:2], 0.0))
+            put('stuck', []).append(self._constant('stuck', qr.shape[:2], False))
+        else:
+            free = np.isnan(st['stuck'])
+            put('holding_torque', []).append(np.where(free, 0.0, st['lam_r'][:, :, -1]))
+            put('stuck', []).append(~free)
+        put('stop_reaction', []).append(st['lam_s'][:, 0].copy())
         # stresses: each rib's worst point per step, and where: the first of the largest in
         # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
         # argmax); every component at once, in STRESS_NAMES' order
         if figures is None:
-            every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
-                                 np.concatenate(m.stress_rate_blocks(qr, st['vr']), -1),
-                                 locked)
-            top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
-            at = np.empty(top.shape + (2,))
-            at[..., 0] = point >= self._leaf_points                  # the body's code
-            at[..., 1] = self._x_of[point]
+            top, at = self._step_figures(t, qr, st['vr'], locked)
         else:      # (the next step's crests start from the last state: its channels if asked)
-            top, at = np.array(figures[0]), np.array(figures[1])
-            self._last_stress = (float(t[-1]), qr[-1].copy(), st['vr'][-1].copy(), locked,
-                                 'state')
-        put = self.rows.setdefault
-        for j, name in enumerate(STRESS_NAMES):
-            put(f'stress_{name}', []).append(top[:, :, j])
-            put(f'stress_{name}_at', []).append(at[:, :, j])
+            top, at = figures[0].copy(), figures[1].copy()
+            self._last_stress = (float(t[-1]), qr[-1].copy(), vr[-1].copy(), locked, 'state')
+        for j, (name, name_at) in enumerate(_STRESS_ROWS):
+            put(name, []).append(top[:, :, j])
+            put(name_at, []).append(at[:, :, j])
         put('von_mises', []).append(np.maximum(top[:, :, -1], 0.0))
         # the peaks over these steps, rib by rib: the first of the largest step by step (the
         # leaf before the link: each step's own rule above; a NaN the largest, as argmax)
@@ -191,19 +253,60 @@ class Record3D:
         best = top[first, ribs, comps]
         held = (best, at[first, ribs, comps], t[first])
         self._held = held if self._held is None else merged_peaks(self._held, held)
+        # the run's: a larger one only (a NaN never)
         better = best > self._peaks
-        if not better.any():
-            return
-        self._peaks = np.where(better, best, self._peaks)
-        for j in np.nonzero(better.any(0))[0]:
-            name = STRESS_NAMES[j]
-            self.peak[name] = self._peaks[:, j].copy()
-            lst = list(self.peak_where[name])
-            for r in np.nonzero(better[:, j])[0]:
-                step = first[r, j]
-                body, x = at[step, r, j]
-                lst[r] = (BODIES[int(body)], float(x), float(t[step]))
-            self.peak_where[name] = lst
+        if better.any():
+            self._peaks = np.where(better, best, self._peaks)
+            self._peak_at = np.where(better[..., None], held[1], self._peak_at)
+            self._peak_when = np.where(better, held[2], self._peak_when)
+
+    def _step_figures(self, t, qr, vr, locked: bool):
+        """Return each step's (top, at) of every stress channel: (step, rib, 5), (.., 2)."""
+        m = self.model
+        every = self._crests(t, np.concatenate(m.stress_blocks(qr), -1),
+                             np.concatenate(m.stress_rate_blocks(qr, vr), -1), locked)
+        top, point = every.max(-1), every.argmax(-1)           # (step, rib, 5)
+        at = np.empty(top.shape + (2,))
+        at[..., 0] = point >= self._leaf_points                  # the body's code
+        at[..., 1] = self._x_of[point]
+        return top, at
+
+    # ---------------------------------------------------- stage-2 substeps (substeps3d.py)
+    def _grid_rows(self, rows: dict, locked: bool, substeps: int, times) -> dict:
+        """Return physics steps' rows as their grid steps' (fold_substeps3d), at times."""
+        if 'stress_top' not in rows:        # (each physics step's crests, from the last)
+            rows = dict(rows)
+            rows['stress_top'], rows['stress_at'] = self._step_figures(
+                rows['t'], rows['qr'], rows['vr'], locked)
+        out = fold_substeps3d(rows, substeps)
+        if times is not None:
+            out['t'] = np.asarray(times, dtype=float)
+        return out
+
+    def add_substeps(self, states, works, locked: bool, force: float, lock_loss: float):
+        """
+        Add one grid step taken in physics steps: their states and works (``add``'s rule).
+
+        The grid step's row is its last state's figures with each stress channel's largest
+        over its physics steps (each a Hermite crest from the one before: ``_crests``).
+        """
+        m = self.model
+        rows = {name: np.array([getattr(s, name) for s in states])
+                for name in ('t', 'qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
+        rows['work_damping'] = np.array([w.damping for w in works])
+        rows['kinetic'] = np.array([0.5 * (float(np.sum(s.pr * s.vr)) + float(s.ps @ s.vs))
+                                    for s in states])
+        rows['strain'] = np.array([m.strain_energy(s.qr) for s in states])
+        for name, field in (('work_force', 'force'), ('work_friction', 'friction'),
+                            ('work_drive', 'drive'), ('iterations', 'iterations'),
+                            ('factorisations', 'factorisations')):
+            rows[name] = np.array([getattr(w, field) for w in works])
+        if m.params.base == 'free':
+            s = states[-1]
+            momenta = m.momentum(m.kinematics(s.qr, s.qs), s.vr, s.vs)
+            for name, value in zip(('linear_momentum', 'angular_momentum'), momenta):
+                rows[name] = np.repeat(np.asarray(value)[None], len(states), 0)
+        self.add_steps(rows, locked, force, lock_loss, len(states), [states[-1].t])
 
     def _crests(self, t, stress, rate, locked: bool) -> np.ndarray:
         """
@@ -264,10 +367,11 @@ class Record3D:
         Return the figures of the state s as a row, without adding it (``add``'s rule).
 
         totals: the work of the sleeve force, each hinge's friction work and the drive's work
-        from t = 0 to s.
+        from t = 0 to s (and the damping's dissipation, if given).
         """
         scratch = Record3D(self.model)
-        scratch.work, friction, scratch.drive = totals
+        scratch.work, friction, scratch.drive, *damping = totals
+        scratch.damping = float(damping[0]) if damping else 0.0
         scratch.friction = np.array(friction, dtype=float)
         scratch.add(s, locked, force, None, lock_loss)
         return {name: values[0] for name, values in scratch.arrays().items()}
@@ -279,7 +383,8 @@ class Record3D:
         A rib's deployment instant is when its leaf angle first reaches its deployed angle
         (linear between steps; the lock's instant where it does so in the lock's step:
         first_reach); the lag is the latest rib's after the earliest.  The energy
-        balance residual is max |T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss|.
+        balance residual is max |T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss
+        + damping dissipation|.
         """
         m = self.model
         a = self.arrays()
@@ -304,11 +409,48 @@ class Record3D:
             'energy_balance_residual': float(np.max(np.abs(balance))),
             'energy_scale': float(np.max(np.abs(energy))),
             'friction_work': a['friction_work'][-1],
+            'damping_dissipation': float(a['damping_dissipation'][-1]),
             'newton_iterations': self.iterations,
             'peak_stress': {name: (self.peak[name].copy(), list(self.peak_where[name]))
                             for name in STRESS_NAMES},
         }
         return out
+
+
+#: the rows of a run of steps that add up over a grid step's physics steps (the rest: its last)
+_SUMMED_ROWS = ('work_force', 'work_friction', 'work_drive', 'work_damping', 'iterations',
+                'factorisations')
+
+
+def fold_substeps3d(rows: dict, m: int) -> dict:
+    """
+    Return the grid steps' rows of physics steps taken m to a grid step (kernel3d.row_layout).
+
+    rows: consecutive physics steps, steps first, the first starting a grid step; each group
+    of m ends a grid step (a last, shorter group: the steps a fault left).  A grid step's
+    row is its last physics step's, with the works and counts summed over its steps and each
+    stress channel's largest over them, with where (stress_top, stress_at: the first of the
+    largest; outputs.fold_substeps' rule for the planar model).
+    """
+    steps = len(rows['t'])
+    groups = -(-steps // m)
+    ends = np.minimum(np.arange(m - 1, groups * m, m), steps - 1)
+    starts = np.arange(0, groups * m, m)
+    out = {}
+    for name, values in rows.items():
+        if name in _SUMMED_ROWS:
+            out[name] = np.add.reduceat(np.asarray(values), starts, axis=0)
+        elif name not in ('stress_top', 'stress_at'):
+            out[name] = np.array(values[ends])
+    top = np.asarray(rows['stress_top'])                    # (step, rib, 5)
+    padded = np.full((groups * m,) + top.shape[1:], -np.inf)
+    padded[:steps] = np.where(np.isnan(top), np.inf, top)       # (a NaN the largest)
+    pick = padded.reshape((groups, m) + top.shape[1:]).argmax(1) + (
+        m * np.arange(groups))[:, None, None]
+    ribs, comps = np.indices(top.shape[1:])
+    out['stress_top'] = top[pick, ribs[None], comps[None]]
+    out['stress_at'] = np.asarray(rows['stress_at'])[pick, ribs[None], comps[None]]
+    return out
 
 
 def _channels(stress, rate):
@@ -402,14 +544,16 @@ def largest_out_of_plane_tip(t: np.ndarray, tip: np.ndarray) -> tuple[float, int
     return float(w[i, k]), int(k), float(t[i])
 
 
-def energy_balance3d(rows, initial_energy: float) -> np.ndarray:
+def energy_balance3d(rows, initial_energy: float, energy=None) -> np.ndarray:
     """
-    Return T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss of rows (J).
+    Return T + V - (T + V)(0) - W_F - W_friction - W_drive + lock loss + dissipation (J).
 
     rows: a Record3D's arrays (one figure a step) or one row (a Sample3D).  The umbrella's
     energy balance, one rule: 0 for a run that keeps its energy (friction work is negative:
-    the hinges take energy out).
+    the hinges take energy out; the beams' damping dissipation is positive, energy out).
+    energy: T + V of rows if the caller has it already.
     """
-    return (rows['kinetic_energy'] + rows['strain_energy'] - initial_energy - rows['work']
-            - np.sum(rows['friction_work'], axis=-1) - rows['drive_work']
-            + rows['lock_energy_loss'])
+    if energy is None:
+        energy = rows['kinetic_energy'] + rows['strain_energy']
+    return (energy - initial_energy - rows['work'] - np.sum(rows['friction_work'], axis=-1)
+            - rows['drive_work'] + rows['lock_energy_loss'] + rows['damping_dissipation'])

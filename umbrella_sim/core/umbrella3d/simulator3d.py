@@ -29,7 +29,11 @@ keeping the rib's kinetic energy, the planar rule rib by rib, the sleeve's own k
 energy lost), and the step is completed locked.  A stuck hinge (``stick_until`` /
 ``stick_torque``) is a joint alpha1 = its angle, released after the step at whose end the
 time has reached stick_until or its holding torque (the joint's multiplier) has reached
-stick_torque.  Every step's figures go to a ``Record3D`` (outputs3d.py).
+stick_torque.  Every step's figures go to a ``Record3D`` (outputs3d.py).  Where the step is
+chosen for the run (step_rule.follows_lock), a lock whose worst rib needs a finer stage-2
+step (substeps3d.py: the planar rule on each rib's in-plane state) makes every stage-2 grid
+step k physics steps (``stage2_substeps``; the grid, the inputs and Record3D's rows stay on
+t_k = k h, a row's peaks the largest over its physics steps).
 
 The model is the parameters' (corotational3d.umbrella_model): the linear 3D beams, or with
 ``model: flexible-nonlinear`` the co-rotational ribs (compiled: _kernel3d_nonlinear.h),
@@ -51,14 +55,16 @@ from .integrator3d import ConvergenceError3D, MidpointUmbrella, State3D
 from .model3d import ROW_STICK
 from .outputs3d import Record3D
 from .params3d import UmbrellaRibsParams
+from .substeps3d import stage2_resolution
 from ..engines import event_root, EVENT_TIME_TOLERANCE
 from ..integrators import newton_tolerance
 from ..kernel import ALPHA1_AXLE, kernel_error, STATUS
 from ..lock import locked_velocity_base, LockImpossible, velocity_keeping_energy
-from ..step_rule import physics_step_of
+from ..step_rule import follows_lock, physics_step_of, substeps_for
 
 
-#: grid steps a compiled call takes at most (its output rows: ~0.3 MB at 12 ribs x 2 elements)
+#: physics steps a compiled call takes at most (its output rows: ~0.3 MB at 12 ribs x 2
+#: elements): grid steps, or in stage 2's substeps this / their count
 ADVANCE_BLOCK = 256
 
 
@@ -82,6 +88,14 @@ class UmbrellaSimulator3D:
             **({} if carry_steps is None else {'carry_steps': carry_steps}))
         if self.mode_fit:
             self.integrator.fit_stage2_modes(self.h)
+        #: the physics steps a stage-2 grid step takes (1 until a lock needs more:
+        #: ``_judge_stage2``), and how well the stage-2 step resolves the lock's modes (the
+        #: worst rib's step_rule.stage2_resolution; None before the lock, co-rotational ribs)
+        self.stage2_substeps = 1
+        self.stage2_resolution: dict | None = None
+        self._follows_lock = step is None and follows_lock(self.params)
+        #: a Newton tolerance given: kept at the substeps (else theirs, newton_tolerance)
+        self._tolerance = tolerance
         self.force = self.params.planar.sleeve_force * m.n_ribs
         self.locked = False
         self.lock_time: float | None = None
@@ -207,6 +221,9 @@ class UmbrellaSimulator3D:
         """Advance by one grid step, with the lock if the sleeve reaches the stop in it."""
         m, s0 = self.model, self.state
         t_next = (self.k + 1) * self.h
+        if self.locked and self.stage2_substeps > 1:
+            self._substep_grid(s0, t_next)
+            return
         s1, work = self._step(s0, t_next - s0.t, self.locked)
         if not self.locked and s1.qs[0] - m.y_stop > 0.0:
             at_axle = np.nonzero(s1.qr[:, m.i_a1] >= ALPHA1_AXLE)[0]
@@ -217,19 +234,22 @@ class UmbrellaSimulator3D:
             s_hit, work_hit = self._find_lock(s0, t_next - s0.t)
             before = self.energy(s_hit)
             s_locked = self._lock(s_hit)
+            self._judge_stage2(s_locked)
             self.integrator.lock_at(s_locked)
             rec = self.record
-            self.lock_state = (s_locked, work_hit, (rec.work, rec.friction, rec.drive))
+            self.lock_state = (s_locked, work_hit, (rec.work, rec.friction, rec.drive,
+                                                    rec.damping))
             after = self.energy(s_locked)
             self.locked, self.lock_time = True, s_locked.t
             self.lock_loss += before - after
             lock_event = (s_locked.t, before, after)
             remaining = t_next - s_locked.t
             if remaining > EVENT_TIME_TOLERANCE:
-                s1, work2 = self._step(s_locked, remaining, True)
+                s1, work2 = self._locked_steps(s_locked, remaining)
                 work = replace(work_hit, force=work_hit.force + work2.force,
                                friction=work_hit.friction + work2.friction,
-                               drive=work_hit.drive + work2.drive)
+                               drive=work_hit.drive + work2.drive,
+                               damping=work_hit.damping + work2.damping)
             else:
                 s1, work = s_locked, work_hit
         s1 = replace(s1, t=t_next)
@@ -252,16 +272,24 @@ class UmbrellaSimulator3D:
                 if stop_at_lock and self.locked:
                     return
                 continue
+            sub = self.stage2_substeps if self.locked else 1
+            grid = min(target - self.k, max(1, ADVANCE_BLOCK // sub))   # (physics steps a call)
             status, done, rows, state = compiled.advance(
-                self.state, self.k, self.h, min(target - self.k, ADVANCE_BLOCK), self.force,
-                self.locked, self.record.crest_continues(self.locked))
+                self.state, self.k * sub, self.h / sub, grid * sub, self.force, self.locked,
+                self.record.crest_continues(self.locked))
             if done:
-                self.state = state
-                self.k += done
                 self.integrator.iterations += int(rows['iterations'].sum())
                 self.integrator.factorisations += int(rows['factorisations'].sum())
-                self.record.add_steps(rows, self.locked, self.force, self.lock_loss)
                 self.model.note_state(rows['qr'])
+                times = None
+                if sub > 1:     # (grid rows, the peaks over their physics steps)
+                    times = (self.k + 1 + np.arange(-(-done // sub))) * self.h
+                    if done % sub:          # (a fault's last grid step: its own time)
+                        times[-1] = state.t
+                    state = replace(state, t=float(times[-1]))
+                self.record.add_steps(rows, self.locked, self.force, self.lock_loss, sub, times)
+                self.state = state
+                self.k += done // sub
             if status == STATUS['crossing']:
                 self.step()                     # the lock, here
                 if stop_at_lock:
@@ -271,6 +299,67 @@ class UmbrellaSimulator3D:
             elif status != STATUS['ok']:
                 raise SimulationFailed(f'step after t = {self.state.t:.9g} s failed: '
                                        f'{kernel_error(status, self.state.t + self.h)}')
+
+    # ------------------------------------------------------------ stage-2 substeps
+    def _judge_stage2(self, s: State3D) -> None:
+        """
+        Judge the stage-2 step on the lock's state s: the worst rib's (substeps3d.py).
+
+        Where the step is chosen for the run (step_rule.follows_lock), stage 2 then takes
+        the substeps its lock needs (step_rule.substeps_for: the planar engine's rule), the
+        Newton tolerance and mode fit of that step (MidpointUmbrella.take_substeps).
+        """
+        if self.params.planar.model != 'flexible':
+            return
+        resolution = stage2_resolution(self.model, s.qr, s.vr, self.h)
+        if self._follows_lock:
+            k = substeps_for(self.h, resolution['needed_step'])
+            if k > 1:
+                self.stage2_substeps = k
+                self.integrator.take_substeps(self.h / k, self._tolerance)
+                # (judged again at the step stage 2 takes, as the planar engine)
+                resolution = stage2_resolution(self.model, s.qr, s.vr, self.h / k)
+        self.stage2_resolution = resolution
+
+    def _locked_steps(self, s: State3D, dt: float):
+        """
+        Return the state dt after s in stage 2 and the work: its physics steps (n of dt / n).
+
+        n: the fewest steps no longer than the stage-2 step h / stage2_substeps (the planar
+        simulator's _physics_steps).
+        """
+        n = max(1, math.ceil(dt / (self.h / self.stage2_substeps) * (1.0 - 1e-9)))
+        s, work = self._step(s, dt / n, True)
+        for _ in range(n - 1):
+            s, w = self._step(s, dt / n, True)
+            work = replace(work, force=work.force + w.force,
+                           friction=work.friction + w.friction, drive=work.drive + w.drive,
+                           iterations=work.iterations + w.iterations,
+                           damping=work.damping + w.damping,
+                           factorisations=work.factorisations + w.factorisations)
+        return s, work
+
+    def _substep_grid(self, s0: State3D, t_next: float) -> None:
+        """
+        Take a stage-2 grid step in its physics steps (``step`` past a lock that needs them).
+
+        Each physics step's figures go to the record, which keeps the grid step's row: its
+        last step's figures, the peaks the largest over its steps (Record3D.add_substeps).
+        A stuck hinge is released after the physics step that releases it (as the compiled
+        advance).
+        """
+        n = max(1, math.ceil((t_next - s0.t) / (self.h / self.stage2_substeps) * (1.0 - 1e-9)))
+        dt = (t_next - s0.t) / n
+        states, works, s = [], [], s0
+        for _ in range(n):
+            s, work = self._step(s, dt, True)
+            s = self._release(s)
+            states.append(s)
+            works.append(work)
+        states[-1] = s = replace(s, t=t_next)
+        self.state = s
+        self.k += 1
+        self.record.add_substeps(states, works, True, self.force, self.lock_loss)
 
     def _steps_to(self, t_end: float) -> int:
         """Return the grid steps from now until the time reaches t_end (within 1e-12 s)."""

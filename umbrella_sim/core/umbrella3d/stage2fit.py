@@ -80,6 +80,10 @@ class RibFits:
         """Return the Newton update shrunk mode by mode (LockedModeFit.newton_update)."""
         return np.array([f.newton_update(d, h) for f, d in zip(self.fits, dr)]), ds
 
+    def damping_force(self, dr, ds, h: float):
+        """Return the fit's share of the damping force (LockedModeFit.damping_force)."""
+        return np.array([f.damping_force(d, h) for f, d in zip(self.fits, dr)]), 0.0 * ds
+
 
 class WholeFit:
     """One LockedModeFit of the free system's elastic modes over every coordinate."""
@@ -110,6 +114,10 @@ class WholeFit:
         """Return the Newton update shrunk mode by mode (LockedModeFit.newton_update)."""
         return self._apply(LockedModeFit.newton_update, dr, ds, h)
 
+    def damping_force(self, dr, ds, h: float):
+        """Return the fit's share of the damping force (LockedModeFit.damping_force)."""
+        return self._apply(LockedModeFit.damping_force, dr, ds, h)
+
     def at_attitude(self, attitude) -> 'WholeFit':
         """
         Return this fit (of the bus at rest at attitude 0) for the bus at attitude.
@@ -134,9 +142,23 @@ class WholeFit:
         return WholeFit(fit, *self.shape)
 
 
-def stage2_fit(model: UmbrellaModel3D, h: float, attitude=None) -> RibFits | WholeFit:
-    """Return the stage-2 fit of the model's base for grid step h (module docstring)."""
+def stage2_fit(model: UmbrellaModel3D, h: float, beta: float = 0.0,
+               attitude=None) -> RibFits | WholeFit:
+    """
+    Return the stage-2 fit of the model's base for grid step h (module docstring).
+
+    beta: the beams' damping C = beta K (damping3d.py), each mode fitted with its own
+    damping phi^T C phi (LockedModeFit: exact decay too).
+    """
     if model.params.base == 'free':
-        return WholeFit(LockedModeFit.of_modes(*free_locked_modes(model, attitude), h),
+        n = model.n_ribs * model.n_rib
+        damping = None
+        if beta:
+            damping = np.zeros((n + model.n_shared,) * 2)
+            for k in range(model.n_ribs):
+                rows = slice(k * model.n_rib, (k + 1) * model.n_rib)
+                damping[rows, rows] = beta * model.stiffness[k]
+        return WholeFit(LockedModeFit.of_modes(*free_locked_modes(model, attitude), h, damping),
                         model.n_ribs, model.n_rib)
-    return RibFits([LockedModeFit.of_modes(*modes, h) for modes in rib_locked_modes(model)])
+    return RibFits([LockedModeFit.of_modes(*modes, h, beta * model.stiffness[k] if beta else None)
+                    for k, modes in enumerate(rib_locked_modes(model))])

@@ -49,3 +49,4 @@ class StepWork:
     drive: float
     iterations: int
     factorisations: int = 0    # of the iteration matrix (a kept one serves without)
+    damping: float = 0.0       # the energy the beams' damping dissipated (J, >= 0)

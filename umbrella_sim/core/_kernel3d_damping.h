@@ -1,0 +1,76 @@
+// Copyright 2026 umbrella_sim developers
+//
+// Licensed under the Apache License, Version 2.0 (the "License");
+// you may not use this file except in compliance with the License.
+// You may obtain a copy of the License at
+//
+//     http://www.apache.org/licenses/LICENSE-2.0
+//
+// Unless required by applicable law or agreed to in writing, software
+// distributed under the License is distributed on an "AS IS" BASIS,
+// WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+// See the License for the specific language governing permissions and
+// limitations under the License.
+
+/* The beams' structural damping of the umbrella's 3D step (umbrella3d/damping3d.py: the planar
+ * model's, C = beta K over every rib's elastic coordinates): the damping force -C dq / h in
+ * the step's residual (step, base_step), h/2 C in its iteration matrix (stiffness_weight:
+ * M + (h^2/4 + h beta/2) K), and the step's dissipation dq . C dq / h; with a damped mode fit
+ * (Fit3D.damp), its share U diag(c_w - c) U^T dq / h (integrators.LockedModeFit.
+ * damping_force), rib by rib or the whole free system's.  Included by _kernel3d.c after the
+ * mode fit's maps. */
+
+/* the weight of K in the iteration matrix's elastic blocks: h^2/4, + h beta / 2 damped */
+static double stiffness_weight(const Model3D *m, double h) {
+    return 0.25 * h * h + 0.5 * h * m->damping_beta;
+}
+
+/* y (N + ns) = C dq / h + the fit's share, at the iterate's step x->dq */
+static void damping_forces(Ctx3D *x, const Fit3D *fit, double h, double *y) {
+    const Model3D *m = x->m;
+    int R = x->R, n = x->n, N = R * n, L = N + x->ns;
+    double c = m->damping_beta / h;
+    for (int r = 0; r < R; r++) {
+        double *yr = y + (size_t)r * n;
+        rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->dq + (size_t)r * n, yr);
+        for (int a = 0; a < n; a++) yr[a] *= c;
+    }
+    for (int i = N; i < L; i++) y[i] = 0.0;
+    if (!fit || !fit->damp) return;
+    if (fit->whole) {                  /* the free system's modes: rows over every coordinate */
+        for (int j = 0; j < fit->r; j++) {
+            const double *u = fit->u + (size_t)j * L;
+            double d = 0.0;
+            for (int a = 0; a < L; a++) d += u[a] * x->dq[a];
+            d *= fit->damp[j] / h;
+            for (int a = 0; a < L; a++) y[a] += u[a] * d;
+        }
+        return;
+    }
+    for (int r = 0; r < R; r++) {      /* each rib's modes */
+        const double *dq = x->dq + (size_t)r * n;
+        double *yr = y + (size_t)r * n;
+        for (int j = 0; j < fit->r; j++) {
+            const double *u = fit->u + ((size_t)r * fit->r + j) * n;
+            double d = 0.0;
+            for (int a = 0; a < n; a++) d += u[a] * dq[a];
+            d *= fit->damp[(size_t)r * fit->r + j] / h;
+            for (int a = 0; a < n; a++) yr[a] += u[a] * d;
+        }
+    }
+}
+
+/* y (rib r's n) += its damping force's negative (damping_forces' x->damp) */
+static void damping_add(const Ctx3D *x, int r, double *y) {
+    const double *d = x->damp + (size_t)r * x->n;
+    for (int a = 0; a < x->n; a++) y[a] += d[a];
+}
+
+/* the step's dissipation dq . (C dq / h + the fit's share) >= 0 at the step taken (x->dq) */
+static double damping_work(Ctx3D *x, const Fit3D *fit, double h) {
+    int L = x->R * x->n + x->ns;
+    damping_forces(x, fit, h, x->damp);
+    double w = 0.0;
+    for (int i = 0; i < L; i++) w += x->damp[i] * x->dq[i];
+    return w;
+}
