@@ -45,7 +45,10 @@ Needs Exudyn (``pip install exudyn``; never a dependency of umbrella_sim).  Writ
 docs/exudyn_umbrella_ribs.json (tests/test_umbrella3d_exudyn.py compares with it); progress
 on stderr.
 
-    python docs/exudyn_umbrella_ribs.py [--cases 4:2e-5 8:1e-5 ...] [--append]
+    python docs/exudyn_umbrella_ribs.py [--cases n:h:m:d ...] [--append] [--out FILE]
+
+The default cases (tip masses 0.01 kg at 0.01 m and 0.1 kg at 0.07 m; n = 4, 8, and 16 for
+the second) take 22, 47, 22, 49 and 307 CPU s on a loaded 2-core machine.
 """
 import argparse
 import json
@@ -244,6 +247,7 @@ class Ribs:
         """Return the velocities projected onto the locked joints (Exudyn's M and C_q)."""
         solver = exu.MainSolverStatic()
         s = exu.SimulationSettings()
+        s.solution.file.write = False
         solver.InitializeSolver(self.mbs, s)
         n2 = solver.GetODE2size()
         solver.ComputeMassMatrix(self.mbs)
