@@ -302,36 +302,6 @@ static void band_solve(int n, int bw, const double *A, double *x) {
     else band_solve_bw(n, bw, A, x);
 }
 
-/* dense LU with partial pivoting, row-major; the diagonal keeps the reciprocals of the
- * pivots (_kernel_dense.h: the 3D step's too) */
-void lu_eliminate(int N, double *A, int k, int i0, double inv) {
-    for (int i = i0; i < N; i++) {
-        double f = A[i * N + k] * inv;
-        A[i * N + k] = f;
-        if (f != 0.0)
-            for (int j = k + 1; j < N; j++) A[i * N + j] -= f * A[k * N + j];
-    }
-}
-
-int lu_factor(int N, double *A, int *piv) { return lu_factor_from(N, 0, A, piv); }
-
-int lu_factor_from(int N, int k0, double *A, int *piv) {
-    for (int k = k0; k < N; k++) {
-        int p = k;
-        double best = fabs(A[k * N + k]);
-        for (int i = k + 1; i < N; i++)
-            if (fabs(A[i * N + k]) > best) { best = fabs(A[i * N + k]); p = i; }
-        if (best == 0.0 || !isfinite(best)) return SINGULAR;
-        piv[k] = p;
-        if (p != k)
-            for (int j = 0; j < N; j++) { double t = A[k * N + j]; A[k * N + j] = A[p * N + j]; A[p * N + j] = t; }
-        double inv = 1.0 / A[k * N + k];
-        lu_eliminate(N, A, k, k + 1, inv);
-        A[k * N + k] = inv;
-    }
-    return OK;
-}
-
 /* X = A^-1 X for nrhs right-hand sides stored row-major (n x nrhs) */
 static void band_solve_multi(int n, int bw, const double *A, double *X, int nrhs) {
     int w = 2 * bw + 1;

@@ -22,10 +22,10 @@
  * Layout: every per-rib array is rib-major (rib r's block contiguous); a body (leaf, link)
  * of a rib has t translations (0, 3), its angle, its elastic coordinates, at an offset in
  * the rib's coordinates; its points' kinematics (umbrella3d/model3d.py _BodyStack.kin) are
- * rho = R(alpha) (x + S e) [+ R2], Jacobian [I3 | e_z x R y | R S].  M(q), M v and the
- * kinetic gradient come from each body's inertia invariants (Body.inv, summed over the
- * points once at the context): rotation combinations of constants, no point loop; the
- * points' kinematics only for the gyroscopic term of a fresh iteration matrix.  M v and K q
+ * rho = R(alpha) (x + S e) [+ R2], Jacobian [I3 | e_z x R y | R S].  M(q), M v, the
+ * kinetic gradient and a fresh iteration matrix's gyroscopic term come from each body's
+ * inertia invariants (Body.inv, summed over the points once at the context): rotation
+ * combinations of constants, no point loop.  M v and K q
  * run over the rib's nonzeros (Rows: K and the elastic mass blocks are banded).  The linear
  * algebra is block-arrow (umbrella3d/arrow.py): each rib's (n + 9) block factored alone, the shared
  * unknowns (sleeve, stop multiplier) through their Schur complement: cost linear in the ribs.
@@ -68,6 +68,7 @@ typedef struct {
                                         * M + h^2/4 K (constant for a step length: elu_h) */
     Rows lpat[2], upat[2];             /* the nonzeros of elu's, elu_it's rows: L (columns
                                         * below the diagonal), U (above) (elastic_rows) */
+    Rows lcol[2];                      /* lpat's by column: the rows below the diagonal */
 } Body;
 
 /* The inertia invariants of a body (the floating frame's: Shabana's S-bar, I-bar), per rib,
@@ -84,10 +85,6 @@ enum { INV_M = 0, INV_C = 1, INV_I0 = 4, INV_SB = 5 };
 #define INV_H(ne) (5 + 4 * (ne))
 #define INV_CC(ne) (5 + 5 * (ne))
 #define INV_D(ne) (5 + 5 * (ne) + (ne) * (ne))
-
-typedef struct {                       /* one body's point kinematics, every rib */
-    double *qy, *jac, *qs;             /* R x P x 3, R x P x 3 x nb, R x P x 3 x ne */
-} Kin;
 
 /* A factored arrow matrix: a rib's block [[A, sign Jc^T], [Jr, Z]] factored through its
  * bodies: A is block diagonal (leaf, link), each LU'd; W = A^-1 sign Jc^T; T = Z - Jr W,
@@ -117,7 +114,6 @@ struct Ctx3D {
     Rows jrows;                        /* of a rib's joint Jacobian (ROWS x n; jacobian_rows) */
     Body b[2];
     int R, n, ns, cs, s, mb;
-    Kin km[2];                         /* the point kinematics at q_m (gyroscopic) */
     double *mass;                      /* R x n x n: M(q1) */
     /* the iteration matrix's two slots (a step factors into the one not kept, so a step not
      * committed leaves the kept one intact) and the projection's mass matrix */
@@ -129,7 +125,6 @@ struct Ctx3D {
     double kept_h, pend_h, *kept_q, *kept_v;
     unsigned char *kept_stuck;
     double *jm, *jr;                   /* R x 9 x n: J(q_m), J(q) */
-    double *vp_a, *vp_b;               /* R x P x 3 (largest body) */
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
     double *w0, *sp0, *sp1, *fitc;     /* the mode fit's: w0 = S^-1 v0, S^T p0, S^T p1;
@@ -214,15 +209,6 @@ static int invariants(Body *b, int R) {
         && sparse_of(R, ne, b->inv + INV_D(ne), L, 1, &b->d_cols);
 }
 
-static int kin_alloc(Kin *k, const Body *b, int R) {
-    k->qy = malloc(sizeof(double) * R * b->np * 3);
-    k->jac = calloc((size_t)R * b->np * 3 * b->nb, sizeof(double));
-    k->qs = malloc(sizeof(double) * R * b->np * 3 * b->ne);
-    return k->qy && k->jac && k->qs;
-}
-
-static void kin_free(Kin *k) { free(k->qy); free(k->jac); free(k->qs); }
-
 static void fact_free(Fact *f) {
     free(f->Af); free(f->W); free(f->T); free(f->Jf); free(f->Y); free(f->apiv); free(f->tpiv);
 }
@@ -245,16 +231,17 @@ void umbrella3d_free(Ctx3D *x) {
     figures_free(x->fig);
     nl_starts_free(x->nl);
     for (int j = 0; j < 2; j++) {
-        kin_free(&x->km[j]);
         free(x->b[j].inv);
         free(x->b[j].elu); free(x->b[j].elu_it);
-        for (int k = 0; k < 2; k++) { rows_free(&x->b[j].lpat[k]); rows_free(&x->b[j].upat[k]); }
+        for (int k = 0; k < 2; k++) {
+            rows_free(&x->b[j].lpat[k]); rows_free(&x->b[j].upat[k]); rows_free(&x->b[j].lcol[k]);
+        }
         rows_free(&x->b[j].c_rows); rows_free(&x->b[j].d_rows); rows_free(&x->b[j].d_cols);
     }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
     rows_free(&x->mrows); rows_free(&x->krows); rows_free(&x->jrows);
     free(x->kept_q); free(x->kept_v); free(x->kept_stuck);
-    double *bufs[] = {x->mass, x->jm, x->jr, x->vp_a, x->vp_b,
+    double *bufs[] = {x->mass, x->jm, x->jr,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
                       x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp0, x->sp1, x->fitc,
@@ -288,6 +275,20 @@ static int rows_alloc(Rows *p, int ne) {
     p->ptr = malloc(sizeof(int) * (ne + 1));
     p->col = malloc(sizeof(int) * (ne * ne > 0 ? ne * ne : 1));
     return p->ptr && p->col;
+}
+
+/* lo's nonzeros column by column (rows ascending): cols */
+static int columns_of(const Rows *lo, int ne, Rows *cols) {
+    if (!rows_alloc(cols, ne)) return 0;
+    int k = 0;
+    for (int c = 0; c < ne; c++) {
+        cols->ptr[c] = k;
+        for (int a = c + 1; a < ne; a++)
+            for (int i = lo->ptr[a]; i < lo->ptr[a + 1]; i++)
+                if (lo->col[i] == c) cols->col[k++] = a;
+    }
+    cols->ptr[ne] = k;
+    return 1;
 }
 
 /* the nonzeros an LU without pivoting of any M0 + c K can have (the elastic blocks' union
@@ -348,7 +349,9 @@ static int elastic_lu(Body *b, const double *M0, const double *K, int R, int n) 
     for (int k = 0; k < 2; k++)
         if (!rows_alloc(&b->lpat[k], b->ne) || !rows_alloc(&b->upat[k], b->ne)) return 0;
     return elastic_lu_of(b, M0, NULL, 0.0, R, n, b->elu, &b->lpat[0], &b->upat[0])
-        && elastic_pattern(b, M0, K, R, n, &b->lpat[1], &b->upat[1]);
+        && elastic_pattern(b, M0, K, R, n, &b->lpat[1], &b->upat[1])
+        && columns_of(&b->lpat[0], b->ne, &b->lcol[0])
+        && columns_of(&b->lpat[1], b->ne, &b->lcol[1]);
 }
 
 /* Body.elu_it at the step length h: the elastic block of the iteration matrix M + h^2/4 K
@@ -419,22 +422,34 @@ static void ef_solve(const Body *b, const Rows *lo, const Rows *up, const double
 static int elastic_first(const Body *b, int i) { return i < b->ne ? b->t + 1 + i : i - b->ne; }
 
 /* lu_factor of body j's block A (nb x nb, elastic-first order) whose elastic rows and columns
- * are a constant elastic block, its LU E (b->elu's or b->elu_it's rib r: copied, not
- * recomputed): the frame rows eliminated through E, then the frame block's Schur complement
- * with pivoting */
-static int factor_elastic_first(const Body *b, const double *elu, int r, double *A, int *piv) {
+ * are a constant elastic block, its LU E (b->elu's or b->elu_it's rib r, kind 0 or 1: copied,
+ * not recomputed): the frame rows eliminated through E, then the frame block's Schur
+ * complement with pivoting.  lu_eliminate's operations over E's nonzeros (lcol, upat: an
+ * entry left out would lose f * 0) */
+static int factor_elastic_first(const Body *b, const double *elu, int kind, int r, double *A,
+                                int *piv) {
     int nb = b->nb, ne = b->ne;
     const double *E = elu + (size_t)r * ne * ne;
+    const Rows *lc = &b->lcol[kind], *up = &b->upat[kind];
     for (int a = 0; a < ne; a++) memcpy(A + a * nb, E + a * ne, sizeof(double) * ne);
     for (int k = 0; k < ne; k++) {
         piv[k] = k;
         double inv = A[k * nb + k];
-        for (int i = k + 1; i < ne; i++) {      /* E's rows: its factors, the frame columns */
-            double f = A[i * nb + k];
+        const double *Ak = A + k * nb;
+        for (int l = lc->ptr[k]; l < lc->ptr[k + 1]; l++) {   /* E's rows: its factors, */
+            double *Ai = A + lc->col[l] * nb;                    /* the frame columns */
+            double f = Ai[k];
             if (f != 0.0)
-                for (int j = ne; j < nb; j++) A[i * nb + j] -= f * A[k * nb + j];
+                for (int j = ne; j < nb; j++) Ai[j] -= f * Ak[j];
         }
-        lu_eliminate(nb, A, k, ne, inv);        /* the frame rows */
+        for (int i = ne; i < nb; i++) {         /* the frame rows (lu_eliminate's) */
+            double *Ai = A + i * nb;
+            double f = Ai[k] * inv;
+            Ai[k] = f;
+            if (f == 0.0) continue;
+            for (int l = up->ptr[k]; l < up->ptr[k + 1]; l++) Ai[up->col[l]] -= f * Ak[up->col[l]];
+            for (int j = ne; j < nb; j++) Ai[j] -= f * Ak[j];
+        }
     }
     return lu_factor_from(nb, ne, A, piv);
 }
@@ -453,16 +468,13 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
             m->link_w, m->link_shape);
     int ok = 1;
     for (int j = 0; j < 2; j++)
-        ok &= kin_alloc(&x->km[j], &x->b[j], R)
-            & invariants(&x->b[j], R);
+        ok &= invariants(&x->b[j], R);
     int mb = x->mb, N = R * n;
-    int pmax = x->b[0].np > x->b[1].np ? x->b[0].np : x->b[1].np;
 #define ALLOC(f, k) (x->f = calloc((size_t)(k), sizeof(double))) != NULL
     ok = ok && fact_alloc(&x->slot[0], x) && fact_alloc(&x->slot[1], x) && fact_alloc(&x->pm, x);
     ok = ok && ALLOC(mass, R * n * n) && ALLOC(jm, R * ROWS * n)
         && ALLOC(kept_q, N + MAXS) && ALLOC(kept_v, N + MAXS)
-        && ALLOC(jr, R * ROWS * n) && ALLOC(vp_a, R * pmax * 3)
-        && ALLOC(vp_b, R * pmax * 3) && ALLOC(q0, N + MAXS) && ALLOC(v0, N + MAXS)
+        && ALLOC(jr, R * ROWS * n) && ALLOC(q0, N + MAXS) && ALLOC(v0, N + MAXS)
         && ALLOC(p0, N + MAXS) && ALLOC(l0, R * ROWS + MAXS) && ALLOC(q, N + MAXS)
         && ALLOC(v, N + MAXS) && ALLOC(lam, R * ROWS + MAXS) && ALLOC(p, N + MAXS)
         && ALLOC(dq, N + MAXS) && ALLOC(qm, N + MAXS) && ALLOC(v1, N + MAXS)
@@ -490,47 +502,6 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
 }
 
 /* ------------------------------------------------------------------ kinematics */
-/* Every rib's point kinematics of body b at the rib coordinates q (R x n). */
-static void kinematics(const Ctx3D *x, int j, const double *q, Kin *k) {
-    const Body *b = &x->b[j];
-    int R = x->R, n = x->n, P = b->np, ne = b->ne, nb = b->nb, t = b->t;
-    for (int r = 0; r < R; r++) {
-        const double *qb = q + r * n + b->off;
-        double c = cos(qb[t]), sn = sin(qb[t]);
-        const double *e = qb + t + 1;
-        for (int pt = 0; pt < P; pt++) {
-            int rp = r * P + pt;
-            const double *S = b->shape + (size_t)rp * 3 * ne;
-            const double *xp = b->x + rp * 3;
-            double y[3];
-            for (int i = 0; i < 3; i++) {
-                double acc = xp[i];
-                for (int a = 0; a < ne; a++) acc += S[i * ne + a] * e[a];
-                y[i] = acc;
-            }
-            double *qy = k->qy + rp * 3;
-            qy[0] = c * y[0] - sn * y[1];
-            qy[1] = sn * y[0] + c * y[1];
-            qy[2] = y[2];
-            double *qs = k->qs + (size_t)rp * 3 * ne;
-            for (int a = 0; a < ne; a++) {
-                qs[a] = c * S[a] - sn * S[ne + a];
-                qs[ne + a] = sn * S[a] + c * S[ne + a];
-                qs[2 * ne + a] = S[2 * ne + a];
-            }
-            double *J = k->jac + (size_t)rp * 3 * nb;
-            for (int i = 0; i < 3; i++) {
-                double *row = J + i * nb;
-                for (int a = 0; a < t; a++) row[a] = (a == i) ? 1.0 : 0.0;
-                memcpy(row + t + 1, qs + i * ne, sizeof(double) * ne);
-            }
-            J[t] = -qy[1];
-            J[nb + t] = qy[0];
-            J[2 * nb + t] = 0.0;
-        }
-    }
-}
-
 /* R(angle) (c + Sb e), in plane (ry[0], ry[1]): the body's first moment, rotated */
 static void first_moment(const double *inv, int ne, const double *e, double cs, double sn,
                          double *ry) {
@@ -660,23 +631,6 @@ static void matvec2(const Ctx3D *x, const double *a, double *pa, const double *b
     pb[R * n] = x->m->sleeve_mass * b[R * n];
 }
 
-/* every point's velocity J vb of body j (R x P x 3) */
-static void point_velocity(const Ctx3D *x, int j, const Kin *k, const double *v, double *vp) {
-    const Body *b = &x->b[j];
-    int P = b->np, nb = b->nb;
-    for (int r = 0; r < x->R; r++) {
-        const double *vb = v + r * x->n + b->off;
-        for (int pt = 0; pt < P; pt++) {
-            const double *J = k->jac + (size_t)(r * P + pt) * 3 * nb;
-            for (int i = 0; i < 3; i++) {
-                double acc = 0.0;
-                for (int a = 0; a < nb; a++) acc += J[i * nb + a] * vb[a];
-                vp[(r * P + pt) * 3 + i] = acc;
-            }
-        }
-    }
-}
-
 /* d/dq [1/2 a^T M(q) b] of the rib coordinates (the hub fixed: none of the shared ones),
  * from the inertia invariants: M's frame rows depend on the angle (through R) and the
  * elastic coordinates e (mass_matrix) */
@@ -724,35 +678,49 @@ static void kinetic_gradient(Ctx3D *x, const double *q, const double *a, const d
     }
 }
 
-/* 2 sum w J^T d(J v)/dq of every rib (R x n x n), without the elastic-elastic block */
-static void gyroscopic(Ctx3D *x, const Kin *k, const double *v) {
+/* 2 sum w J^T d(J v)/dq of every rib (R x n x n) at q (the midpoint), without the
+ * elastic-elastic block, from the inertia invariants (no point loop): with y = x + S e, omega = v's angle rate and e' its elastic rates, dv's column t is
+ * e_z x (omega e_z x R y + R S e') = -omega (R y) + e_z x R S e' in plane, its elastic
+ * columns omega e_z x R S; so the translation rows 2 (-omega R (c + Sb e) + e_z x R Sb e'),
+ * 2 omega e_z x R Sb; the angle row 2 (g + C e) . e' (column t), 2 omega (g + C e) (elastic
+ * columns); the elastic rows' column t 2 (-omega (g + C e) - D e') */
+static void gyroscopic(Ctx3D *x, const double *q, const double *v) {
     int R = x->R, n = x->n;
     memset(x->gyro, 0, sizeof(double) * R * n * n);
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
-        int P = b->np, nb = b->nb, ne = b->ne, t = b->t;
-        point_velocity(x, j, &k[j], v, x->vp_a);
+        int t = b->t, ne = b->ne, L = INV_LEN(ne);
         for (int r = 0; r < R; r++) {
-            double *G = x->gyro + (size_t)r * n * n + b->off * n + b->off;
-            const double *vb = v + r * n + b->off;
-            for (int pt = 0; pt < P; pt++) {
-                int rp = r * P + pt;
-                double w2 = 2.0 * b->w[rp];
-                const double *J = k[j].jac + (size_t)rp * 3 * nb;
-                const double *vr = x->vp_a + rp * 3;
-                const double *qs = k[j].qs + (size_t)rp * 3 * ne;
-                double qz0 = vr[0] - (t ? vb[0] : 0.0), qz1 = vr[1] - (t ? vb[1] : 0.0);
-                double d0 = -qz1, d1 = qz0;          /* column t of dv: e_z x qz */
-                for (int a = 0; a < nb; a++) {
-                    double g = J[a] * d0 + J[nb + a] * d1;
-                    G[a * n + t] += w2 * g;
-                    if (a > t) continue;             /* the elastic-elastic block: left out */
-                    for (int e = 0; e < ne; e++) {   /* vb[t] e_z x (R S) */
-                        double c0 = -vb[t] * qs[ne + e], c1 = vb[t] * qs[e];
-                        G[a * n + t + 1 + e] += w2 * (J[a] * c0 + J[nb + a] * c1);
-                    }
-                }
+            const double *inv = b->inv + (size_t)r * L, *qb = q + r * n + b->off;
+            const double *vb = v + r * n + b->off, *e = qb + t + 1, *ed = vb + t + 1;
+            const double *g = inv + INV_G(ne), *C = inv + INV_CC(ne), *D = inv + INV_D(ne);
+            double *G = x->gyro + (size_t)r * n * n + b->off * n + b->off, w = vb[t];
+            double gtt = 0.0;
+            for (int k = 0; k < ne; k++) {
+                double ge = g[k], de = 0.0;
+                for (int i = b->c_rows.ptr[k]; i < b->c_rows.ptr[k + 1]; i++)
+                    ge += C[k * ne + b->c_rows.col[i]] * e[b->c_rows.col[i]];
+                for (int i = b->d_rows.ptr[k]; i < b->d_rows.ptr[k + 1]; i++)
+                    de += D[k * ne + b->d_rows.col[i]] * ed[b->d_rows.col[i]];
+                G[(t + 1 + k) * n + t] = 2.0 * (-w * ge - de);
+                G[t * n + t + 1 + k] = 2.0 * w * ge;
+                gtt += ge * ed[k];
             }
+            G[t * n + t] = 2.0 * gtt;
+            if (!t) continue;
+            const double *Sb = inv + INV_SB;
+            double cs = cos(qb[t]), sn = sin(qb[t]), ry[2], s0 = 0.0, s1 = 0.0;
+            first_moment(inv, ne, e, cs, sn, ry);
+            for (int k = 0; k < ne; k++) {
+                s0 += Sb[k] * ed[k];
+                s1 += Sb[ne + k] * ed[k];
+                double rs0 = cs * Sb[k] - sn * Sb[ne + k], rs1 = sn * Sb[k] + cs * Sb[ne + k];
+                G[t + 1 + k] = -2.0 * w * rs1;
+                G[n + t + 1 + k] = 2.0 * w * rs0;
+            }
+            double rs0 = cs * s0 - sn * s1, rs1 = sn * s0 + cs * s1;
+            G[t] = 2.0 * (-w * ry[0] - rs1);
+            G[n + t] = 2.0 * (-w * ry[1] + rs0);
         }
     }
 }
@@ -939,18 +907,19 @@ static int rib_factor(Ctx3D *x, Fact *f, int r, const double *extra, const doubl
                 double Y[nb * ROWS];
                 int kind = f->elastic_first - 1, map[nb];
                 for (int a = 0; a < nb; a++) map[a] = o + elastic_first(b, a);
-                for (int a = 0; a < nb; a++) {
+                for (int a = 0; a < nb; a++) {   /* (the elastic block: E's, below) */
                     const double *Ma = M + (size_t)map[a] * n;
                     double *Aa = A + a * nb;
+                    int c0 = a < b->ne ? b->ne : 0;
                     if (Ex) {
                         const double *Ea = Ex + (size_t)map[a] * n;
-                        for (int c = 0; c < nb; c++) Aa[c] = Ma[map[c]] + Ea[map[c]];
+                        for (int c = c0; c < nb; c++) Aa[c] = Ma[map[c]] + Ea[map[c]];
                     } else {
-                        for (int c = 0; c < nb; c++) Aa[c] = Ma[map[c]] + 0.0;
+                        for (int c = c0; c < nb; c++) Aa[c] = Ma[map[c]] + 0.0;
                     }
                     memcpy(Y + a * ROWS, W + map[a] * ROWS, sizeof(double) * ROWS);
                 }
-                if (factor_elastic_first(b, kind ? b->elu_it : b->elu, r, A, piv) != OK)
+                if (factor_elastic_first(b, kind ? b->elu_it : b->elu, kind, r, A, piv) != OK)
                     return SINGULAR;
                 ef_solve(b, &b->lpat[kind], &b->upat[kind], A, piv, Y, ROWS);
                 for (int a = 0; a < nb; a++)
@@ -1172,8 +1141,7 @@ static void iteration_blocks(Ctx3D *x, const double *q, const double *stuck, dou
     int R = m->n_ribs, n = m->n_rib, N = R * n;
     jacobian(x, q, stuck, x->jr);
     for (int i = 0; i < N; i++) x->tmp[i] = x->dq[i] / h;
-    for (int j = 0; j < 2; j++) kinematics(x, j, x->qm, &x->km[j]);
-    gyroscopic(x, x->km, x->tmp);
+    gyroscopic(x, x->qm, x->tmp);
     for (int r = 0; r < R; r++) {
         double *G = x->gyro + (size_t)r * n * n;
         const double *K = m->stiffness + (size_t)r * n * n;
