@@ -1,0 +1,357 @@
+#!/usr/bin/env python3
+
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+Two ribs of the umbrella with geometrically exact 3D beams in Exudyn: the 3D reference.
+
+An independent model of the umbrella of two ribs (azimuths 0 and pi about Y, hub radius 0,
+sleeve mass 0) for the co-rotational ribs (model flexible-nonlinear, docs/
+umbrella3d_nonlinear.md): every leaf O-O''-G and link O''-H of Exudyn's geometrically exact
+3D beam elements (ObjectBeamGeometricallyExact: two rigid-body nodes with Euler parameters,
+finite rotations, axial, shear, bending in both planes and torsion; Simo-Reissner's strain
+measures), n elements a segment.  The leaf hinged at O about its rib's tangential axis e_t
+(a revolute joint to the ground), the link hinged to the leaf at O'' about the sections'
+common e_t axis (a revolute joint between the two nodes), the link's end H on the axle
+(x = z = 0) hinged to the sleeve about e_t (the sleeve does not turn: the hub is fixed), the
+two H's at one height y (the sleeve).  Rib 1 carries a point mass m at its leaf tip G
+offset by d along e_t (an Exudyn rigid body sharing G's node, its centre of mass at d along
+the section's z axis), so that the leaf's in-plane acceleration twists and bends it out of
+its plane.  Started as the rigid mechanism at alpha0 with the sleeve at V0, no gravity, no
+sleeve force.  Stage 1 to the instant the sleeve reaches the stop (found from the run, then
+run again to exactly that instant), the plastic lock (the velocities projected onto the
+locked joints in the mass metric, Exudyn's own mass matrix and constraint Jacobian at the
+lock), then stage 2 with the sleeve held.  Time integration: Newmark beta = 1/4,
+gamma = 1/2 (the trapezoidal rule), index-3 constraints.
+
+The section is the thesis's square (E, rho, b = 0.01 m) with the umbrella's torsion
+constant J = 0.1406 b^4 and G = E / 2(1 + nu), nu = 0.33; shear stiffness G A (5/6): the
+shear a slender beam's (b / l = 0.02) bending barely feels; the rotary inertia rho I of the
+sections (the Euler-Bernoulli model has none of bending: ~(b / l)^2 of the mass).
+
+Needs Exudyn (``pip install exudyn``; never a dependency of umbrella_sim).  Writes
+docs/exudyn_umbrella_ribs.json (tests/test_umbrella3d_exudyn.py compares with it); progress
+on stderr.
+
+    python docs/exudyn_umbrella_ribs.py [--cases n:h:m:d ...] [--append] [--out FILE]
+
+The default cases (tip masses 0.01 kg at 0.01 m and 0.1 kg at 0.07 m; n = 4, 8, and 16 for
+the second) take 22, 47, 22, 49 and 307 CPU s on a loaded 2-core machine.
+"""
+import argparse
+import json
+import math
+import os
+import sys
+
+import exudyn as exu
+from exudyn.itemInterface import (CoordinateConstraint, GenericJoint, MarkerBodyRigid,
+                                  MarkerNodeCoordinate, MarkerNodeRigid, NodePointGround,
+                                  NodeRigidBodyEP, ObjectBeamGeometricallyExact, ObjectGround,
+                                  ObjectRigidBody, SensorNode)
+from exudyn.rigidBodyUtilities import (AngularVelocity2EulerParameters_t,
+                                       RotationMatrix2EulerParameters)
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, '..'))
+
+from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
+from umbrella_sim.core.summary import stage2_figures  # noqa: E402
+
+OUT = os.path.join(HERE, 'exudyn_umbrella_ribs.json')
+#: the case: two ribs, V0 = -1 m/s, rib 1's tip mass and its offset out of the plane
+V0 = -1.0
+POISSON = 0.33
+STAGE2 = 0.13
+SERIES_STEP = 2e-4
+#: n:h:m:d, elements a segment, step (s), rib 1's tip mass (kg) and its offset along e_t (m)
+DEFAULT_CASES = ('4:2e-5:0.01:0.01', '8:1e-5:0.01:0.01', '4:2e-5:0.1:0.07', '8:1e-5:0.1:0.07',
+                 '16:5e-6:0.1:0.07')
+
+
+def rib_axes(azimuth):
+    """Return e_r, e_Y, e_t of the rib at this azimuth (model3d's frame)."""
+    c, s = math.cos(azimuth), math.sin(azimuth)
+    return np.array([c, 0.0, -s]), np.array([0.0, 1.0, 0.0]), np.array([s, 0.0, c])
+
+
+class Ribs:
+    """The two ribs' Exudyn system."""
+
+    def __init__(self, p: UmbrellaParams, n: int, locked: bool, tip: tuple):
+        self.sc = exu.SystemContainer()
+        mbs = self.mbs = self.sc.AddSystem()
+        self.p, self.n, self.tip = p, n, tip
+        b = p.section_height
+        area, inertia = p.cross_section_area, p.cross_section_inertia
+        youngs, shear = p.youngs_modulus, p.youngs_modulus / (2.0 * (1.0 + POISSON))
+        torsion = 0.1406 * b ** 4
+        section = exu.BeamSection()
+        section.stiffnessMatrix = np.diag([youngs * area, shear * area * 5 / 6,
+                                           shear * area * 5 / 6, shear * torsion,
+                                           youngs * inertia, youngs * inertia])
+        section.inertia = p.density * np.diag([2 * inertia, inertia, inertia])
+        section.massPerLength = p.mass_per_length
+        self.section = section
+        a1 = p.alpha0
+        a2 = math.acos(-p.l1 / p.l3 * math.cos(a1))
+        da2 = -p.l1 * math.sin(a1) / (p.l3 * math.sin(a2))
+        w1 = p.v0 / (p.l1 * math.cos(a1) + p.l3 * math.cos(a2) * da2)
+        w2 = da2 * w1
+        ground_node = mbs.AddNode(NodePointGround(referenceCoordinates=[0, 0, 0]))
+        self.m_ground = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=ground_node,
+                                                           coordinate=0))
+        self.ground = mbs.AddObject(ObjectGround())
+        self.ribs, self.sensors = [], []
+        h_nodes = []
+        for k in range(2):
+            er, ey, et = rib_axes(math.pi * k)
+            frame = np.column_stack([er, ey, et])
+            d1 = math.cos(a1) * er + math.sin(a1) * ey
+            d2 = math.cos(a2) * er + math.sin(a2) * ey
+            r2 = p.l1 * d1
+            leaf = self._chain(np.zeros(3), d1, et, w1 * et, np.zeros(3), p.l1 + p.l2, 2 * n)
+            link = self._chain(r2, d2, et, w2 * et, w1 * np.cross(et, r2), p.l3, n)
+            # O: the leaf hinged to the ground about e_t
+            self._hinge(None, leaf[0], frame, [1, 1, 1, 1, 1, 0])
+            # O'': the link hinged to the leaf about e_t
+            self._hinge(leaf[n], link[0], frame, [1, 1, 1, 1, 1, 0])
+            # H on the axle, hinged to the (non-turning) sleeve about e_t
+            self._hinge(None, link[n], frame, [1, 0, 1, 1, 1, 0])
+            h_nodes.append(link[n])
+            if k == 1:
+                self._tip_mass(leaf[2 * n])
+            self.ribs.append({'leaf': leaf, 'link': link, 'axes': (er, ey, et)})
+            self.sensors.append({
+                key: [mbs.AddSensor(SensorNode(nodeNumber=nd, outputVariableType=var,
+                                               storeInternal=True, writeToFile=False))
+                      for nd in nodes]
+                for key, var, nodes in (
+                    ('G', exu.OutputVariableType.Position, [leaf[2 * n]]),
+                    ('J', exu.OutputVariableType.Position, [leaf[n]]),
+                    ('H', exu.OutputVariableType.Position, [link[n]]),
+                    ('R', exu.OutputVariableType.RotationMatrix, leaf + link))})
+        ma = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=h_nodes[0], coordinate=1))
+        mb = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=h_nodes[1], coordinate=1))
+        mbs.AddObject(CoordinateConstraint(markerNumbers=[ma, mb]))      # one sleeve
+        h_ref = r2 + p.l3 * d2
+        mh = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=h_nodes[0], coordinate=1))
+        mbs.AddObject(CoordinateConstraint(markerNumbers=[self.m_ground, mh],
+                                           offset=p.sleeve_stop_height - h_ref[1],
+                                           activeConnector=locked))       # the stop
+        mbs.Assemble()
+
+    def _chain(self, origin, direction, et, omega, base_velocity, length, count):
+        """Nodes and beam elements of a straight body turning at omega (a vector), rigidly."""
+        le = length / count
+        rot = np.column_stack([direction, np.cross(et, direction), et])
+        ep = RotationMatrix2EulerParameters(rot)
+        ep_t = AngularVelocity2EulerParameters_t(omega, ep)
+        nodes = []
+        for k in range(count + 1):
+            r = origin + direction * le * k
+            v = base_velocity + np.cross(omega, direction * le * k)
+            nodes.append(self.mbs.AddNode(NodeRigidBodyEP(
+                referenceCoordinates=list(r) + list(ep),
+                initialVelocities=list(v) + list(ep_t))))
+        for k in range(count):
+            self.mbs.AddObject(ObjectBeamGeometricallyExact(
+                nodeNumbers=[nodes[k], nodes[k + 1]], physicsLength=le,
+                sectionData=self.section))
+        return nodes
+
+    def _rotation(self, node):
+        return np.array(self.mbs.GetNodeOutput(node, exu.OutputVariableType.RotationMatrix,
+                                               configuration=exu.ConfigurationType.Reference)
+                        ).reshape(3, 3)
+
+    def _hinge(self, node_a, node_b, frame, axes):
+        """Join node_b to node_a (None: the ground) in the joint frame, z = e_t free."""
+        mbs = self.mbs
+        pos = mbs.GetNodeOutput(node_b, exu.OutputVariableType.Position,
+                                configuration=exu.ConfigurationType.Reference)
+        if node_a is None:
+            ma = mbs.AddMarker(MarkerBodyRigid(bodyNumber=self.ground, localPosition=list(pos)))
+            rot_a = frame
+        else:
+            ma = mbs.AddMarker(MarkerNodeRigid(nodeNumber=node_a))
+            rot_a = self._rotation(node_a).T @ frame
+        mb = mbs.AddMarker(MarkerNodeRigid(nodeNumber=node_b))
+        mbs.AddObject(GenericJoint(markerNumbers=[ma, mb], constrainedAxes=axes,
+                                   rotationMarker0=rot_a.tolist(),
+                                   rotationMarker1=(self._rotation(node_b).T @ frame).tolist()))
+
+    def _tip_mass(self, node):
+        """Add a point mass at d along the section's z (= e_t) from G, on G's node."""
+        mass, offset = self.tip
+        c = np.array([0.0, 0.0, offset])
+        j = mass * (c @ c * np.eye(3) - np.outer(c, c))      # about the node (a point)
+        j += 1e-12 * np.eye(3)
+        self.mbs.AddObject(ObjectRigidBody(
+            nodeNumber=node, physicsMass=mass, physicsCenterOfMass=list(c),
+            physicsInertia=[j[0, 0], j[1, 1], j[2, 2], j[1, 2], j[0, 2], j[0, 1]]))
+
+    def solve(self, h, t_end, t_start=0.0):
+        s = exu.SimulationSettings()
+        ti = s.timeIntegration
+        ti.numberOfSteps = max(1, int(round((t_end - t_start) / h)))
+        ti.startTime, ti.endTime = t_start, t_end
+        ga = ti.generalizedAlpha
+        ga.useNewmark, ga.newmarkBeta, ga.newmarkGamma = True, 0.25, 0.5
+        ga.useIndex2Constraints = True
+        ti.newton.relativeTolerance = 1e-8
+        ti.newton.absoluteTolerance = 1e-6
+        ti.verboseMode = 0
+        s.linearSolverType = exu.LinearSolverType.EigenSparse
+        s.solution.file.write = False
+        s.solution.sensors.writePeriod = (t_end - t_start) / ti.numberOfSteps
+        s.show.statistics = s.show.computationTime = False
+        self.mbs.SolveDynamic(s)
+
+    def series(self, rib, key, i=0):
+        return np.array(self.mbs.GetSensorStoredData(self.sensors[rib][key][i]))
+
+    def tips(self, rib):
+        """Return t, the in-plane tip deflection v (leaf frame O-O'') and the out-of-plane w."""
+        er, ey, et = self.ribs[rib]['axes']
+        g, j = self.series(rib, 'G'), self.series(rib, 'J')
+        gx, gy = g[:, 1:4] @ er, g[:, 1:4] @ ey
+        jx, jy = j[:, 1:4] @ er, j[:, 1:4] @ ey
+        norm = np.hypot(jx, jy)
+        return g[:, 0], (-gx * jy + gy * jx) / norm, g[:, 1:4] @ et
+
+    def out_of_plane_rotation(self, rib):
+        """Return the largest |asin| of the sections' axis and in-plane normal along e_t."""
+        et = self.ribs[rib]['axes'][2]
+        worst = 0.0
+        for i in range(len(self.sensors[rib]['R'])):
+            r = self.series(rib, 'R', i)[:, 1:10].reshape(-1, 3, 3)
+            worst = max(worst, float(np.abs(np.arcsin(np.clip(r[:, :, 0:2].transpose(
+                0, 2, 1) @ et, -1, 1))).max()))
+        return worst
+
+    def lock_projection(self):
+        """Return the velocities projected onto the locked joints (Exudyn's M and C_q)."""
+        solver = exu.MainSolverStatic()
+        s = exu.SimulationSettings()
+        s.solution.file.write = False
+        solver.InitializeSolver(self.mbs, s)
+        n2 = solver.GetODE2size()
+        solver.ComputeMassMatrix(self.mbs)
+        mass = np.array(solver.GetSystemMassMatrix())[:n2, :n2]
+        solver.ComputeJacobianODE2RHS(self.mbs, scalarFactor_ODE2=-1, scalarFactor_ODE2_t=0,
+                                      scalarFactor_ODE1=0)
+        solver.ComputeJacobianAE(self.mbs, scalarFactor_ODE2=1., scalarFactor_ODE2_t=0.,
+                                 scalarFactor_ODE1=0., velocityLevel=False)
+        rows = np.array(solver.GetSystemJacobian())[:n2, n2:].T
+        solver.FinalizeSolver(self.mbs, s)
+        rows = rows[np.abs(rows).max(1) > 0]
+        qd = np.array(self.mbs.systemData.GetODE2Coordinates_t(
+            configuration=exu.ConfigurationType.Initial))
+        # the Euler parameters' normalisation leaves M singular: the metric M + a G0^T G0
+        # with G0 the rows the velocities keep already (all but the stop) is M on the
+        # velocities that keep them, so the projection is M's
+        kept = rows[np.abs(rows @ qd) < 1e-6 * np.abs(qd).max()]
+        metric = mass + np.mean(np.diag(mass)) * kept.T @ kept
+        m_inv_gt = np.linalg.solve(metric, rows.T)
+        lam = np.linalg.lstsq(rows @ m_inv_gt, rows @ qd, rcond=None)[0]
+        return qd - m_inv_gt @ lam, mass
+
+
+def run(n: int, h: float, tip: tuple) -> dict:
+    p = UmbrellaParams(v0=V0)
+    first = Ribs(p, n, locked=False, tip=tip)
+    first.solve(h, 1.1 * 0.0459 / abs(V0))
+    yh = first.series(0, 'H')
+    k = int(np.argmax(yh[:, 2] <= p.sleeve_stop_height))
+    (t_a, y_a), (t_b, y_b) = yh[k - 1, [0, 2]], yh[k, [0, 2]]
+    t_lock = t_a + (y_a - p.sleeve_stop_height) / (y_a - y_b) * (t_b - t_a)
+    second = Ribs(p, n, locked=False, tip=tip)
+    steps = math.ceil(t_lock / h)
+    second.solve(t_lock / steps, t_lock)
+    stage1 = [second.tips(r) for r in range(2)]
+    rot1 = second.out_of_plane_rotation(1)
+    q = np.array(second.mbs.systemData.GetODE2Coordinates())
+    qd = np.array(second.mbs.systemData.GetODE2Coordinates_t())
+    third = Ribs(p, n, locked=True, tip=tip)
+    initial = exu.ConfigurationType.Initial
+    third.mbs.systemData.SetODE2Coordinates(q.tolist(), configuration=initial)
+    third.mbs.systemData.SetODE2Coordinates_t(qd.tolist(), configuration=initial)
+    qd_lock, mass = third.lock_projection()
+    third.mbs.systemData.SetODE2Coordinates_t(qd_lock.tolist(), configuration=initial)
+    third.solve(h, t_lock + STAGE2, t_lock)
+    out = {'elements_per_segment': n, 'time_step': h, 'v0': V0, 'ribs': 2,
+           'tip_mass_rib1': tip[0], 'tip_offset_z_rib1': tip[1], 'stage2': STAGE2,
+           'deploy_time': t_lock,
+           'kinetic_energy_before_lock': 0.5 * qd @ mass @ qd,
+           'kinetic_energy_after_lock': 0.5 * qd_lock @ mass @ qd_lock}
+    rot2 = third.out_of_plane_rotation(1)
+    for r in range(2):
+        t1, v1, w1 = stage1[r]     # (rib 1's t1, w1 are kept for its series below)
+        t2, v2, w2 = third.tips(r)
+        fig_v = stage2_figures(t2, v2, t_lock)
+        fig_w = stage2_figures(t2, w2, t_lock)
+        out[f'rib{r}'] = {
+            'stage1_max_in_plane_tip': float(np.abs(v1).max()),
+            'stage1_max_out_of_plane_tip': float(np.abs(w1).max()),
+            'stage2_in_plane_amplitude': fig_v['stage2_tip_amplitude'],
+            'stage2_in_plane_period': fig_v['stage2_tip_period'],
+            'stage2_max_out_of_plane_tip': float(np.abs(w2).max()),
+            'stage2_out_of_plane_amplitude': fig_w['stage2_tip_amplitude'],
+            'stage2_out_of_plane_period': fig_w['stage2_tip_period']}
+    # rib 1's out-of-plane tip w(t) every SERIES_STEP (rib 0's stays in its plane)
+    every = max(1, round(SERIES_STEP / h))
+    out['rib1']['out_of_plane_tip_series'] = [
+        [round(float(a), 9), round(float(b), 9)] for a, b in zip(
+            np.concatenate([t1, t2])[::every], np.concatenate([w1, w2])[::every])]
+    out['rib1']['max_out_of_plane_rotation_stage1'] = rot1
+    out['rib1']['max_out_of_plane_rotation'] = max(rot1, rot2)
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument('--cases', nargs='+', default=list(DEFAULT_CASES),
+                    help='n:h:m:d, elements a segment, step (s), tip mass (kg), offset (m)')
+    ap.add_argument('--append', action='store_true',
+                    help='keep the cases the JSON holds (replacing those run again)')
+    ap.add_argument('--out', default=OUT, help='the JSON written (default: %(default)s)')
+    args = ap.parse_args()
+    results = []
+    if args.append and os.path.exists(args.out):
+        with open(args.out, encoding='utf-8') as fh:
+            results = json.load(fh)['cases']
+    for case in args.cases:
+        n, h, m, d = case.split(':')
+        print(f'n = {n}, h = {h}, m = {m}, d = {d}', file=sys.stderr, flush=True)
+        new = run(int(n), float(h), (float(m), float(d)))
+        key = ('elements_per_segment', 'time_step', 'tip_mass_rib1', 'tip_offset_z_rib1')
+        results = [c for c in results if [c[k] for k in key] != [new[k] for k in key]]
+        results.append(new)
+        short = {k: v for k, v in new.items() if not k.startswith('rib')}
+        print('  ' + json.dumps(short), file=sys.stderr, flush=True)
+        for r in ('rib0', 'rib1'):
+            print('  ' + r + ' ' + json.dumps({k: v for k, v in new[r].items()
+                                              if not k.endswith('series')}),
+                  file=sys.stderr, flush=True)
+        with open(args.out, 'w', encoding='utf-8') as fh:
+            json.dump({'exudyn': exu.config.Version(), 'cases': results}, fh, indent=1)
+            fh.write('\n')
+
+
+if __name__ == '__main__':
+    main()
