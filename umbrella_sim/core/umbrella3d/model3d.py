@@ -61,8 +61,12 @@ ROW_STICK = 8
 
 def _rot_z(c, s, v):
     """Rotate v (..., 3) about z by the angle of (c, s) (broadcast over leading axes)."""
-    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1],
-                     v[..., 2]], -1)
+    x, y = v[..., 0], v[..., 1]
+    out = np.empty(np.broadcast_shapes(np.shape(c), x.shape) + (3,))
+    out[..., 0] = c * x - s * y
+    out[..., 1] = s * x + c * y
+    out[..., 2] = v[..., 2]
+    return out
 
 
 def _cross(a, b):
@@ -87,12 +91,20 @@ def _cross(a, b):
 
 def _ez_cross(v):
     """Return e_z x v."""
-    return np.stack([-v[..., 1], v[..., 0], np.zeros_like(v[..., 2])], -1)
+    out = np.empty(v.shape)
+    np.negative(v[..., 1], out=out[..., 0])
+    out[..., 1] = v[..., 0]
+    out[..., 2] = 0.0
+    return out
 
 
 def _ez_cross_t(v):
     """Return (e_z x)^T v = -(e_z x v)."""
-    return np.stack([v[..., 1], -v[..., 0], np.zeros_like(v[..., 2])], -1)
+    out = np.empty(v.shape)
+    out[..., 0] = v[..., 1]
+    np.negative(v[..., 0], out=out[..., 1])
+    out[..., 2] = 0.0
+    return out
 
 
 def _elem_rot(axis: int, a: float) -> np.ndarray:
@@ -164,8 +176,11 @@ class _BodyStack:
         cs = c[..., None]
         ss = s[..., None]
         sh = self.shape
-        qs = np.stack([cs * sh[:, :, 0] - ss * sh[:, :, 1], ss * sh[:, :, 0] + cs * sh[:, :, 1],
-                       sh[:, :, 2]], 2)
+        qs = np.empty(np.broadcast_shapes(cs.shape, sh[:, :, 0].shape)[:2] + (3,)
+                      + sh.shape[3:])
+        qs[:, :, 0] = cs * sh[:, :, 0] - ss * sh[:, :, 1]
+        qs[:, :, 1] = ss * sh[:, :, 0] + cs * sh[:, :, 1]
+        qs[:, :, 2] = sh[:, :, 2]
         jac = np.zeros(qb.shape[:1] + self.x.shape[1:] + (self.n,))
         if t:
             jac[:, :, :, :3] = np.eye(3)
