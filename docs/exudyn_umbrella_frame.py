@@ -63,6 +63,28 @@ DEFAULT_CASES = ('4:-0.2:5e-6', '8:-0.2:5e-6', '4:-1:5e-6', '8:-1:5e-6', '16:-1:
                  '4:-2:2.5e-6', '8:-2:2.5e-6', '16:-2:2.5e-6')
 
 
+def trapezoidal_settings(h, t_end, t_start=0.0, index2=False):
+    """
+    Return Exudyn's settings of a reference run from t_start to t_end at the step h.
+
+    Newmark beta = 1/4, gamma = 1/2 (the trapezoidal rule), index-3 constraints (index2:
+    index 2), every step's sensors kept, no solution file, quiet; Newton's tolerances the
+    caller's.  Shared by docs/exudyn_umbrella_ribs.py.
+    """
+    s = exu.SimulationSettings()
+    ti = s.timeIntegration
+    ti.numberOfSteps = max(1, int(round((t_end - t_start) / h)))
+    ti.startTime, ti.endTime = t_start, t_end
+    ga = ti.generalizedAlpha
+    ga.useNewmark, ga.newmarkBeta, ga.newmarkGamma = True, 0.25, 0.5
+    ga.useIndex2Constraints = index2
+    ti.verboseMode = 0
+    s.solution.file.write = False
+    s.solution.sensors.writePeriod = (t_end - t_start) / ti.numberOfSteps
+    s.show.statistics = s.show.computationTime = False
+    return s
+
+
 class Frame:
     """The frame's Exudyn system: nodes, elements, joints, the (inactive) lock, sensors."""
 
@@ -123,18 +145,9 @@ class Frame:
                                                 activeConnector=active))
 
     def solve(self, h, t_end, t_start=0.0, index2=False):
-        s = exu.SimulationSettings()
+        s = trapezoidal_settings(h, t_end, t_start, index2)
         ti = s.timeIntegration
-        ti.numberOfSteps = max(1, int(round((t_end - t_start) / h)))
-        ti.startTime, ti.endTime = t_start, t_end
-        ga = ti.generalizedAlpha
-        ga.useNewmark, ga.newmarkBeta, ga.newmarkGamma = True, 0.25, 0.5
-        ga.useIndex2Constraints = index2
         ti.newton.relativeTolerance = ti.newton.absoluteTolerance = 1e-10
-        ti.verboseMode = 0
-        s.solution.file.write = False
-        s.solution.sensors.writePeriod = (t_end - t_start) / ti.numberOfSteps
-        s.show.statistics = s.show.computationTime = False
         self.mbs.SolveDynamic(s)
 
     def series(self, key):

@@ -67,7 +67,9 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, '..'))
+sys.path.insert(0, HERE)
 
+from exudyn_umbrella_frame import trapezoidal_settings  # noqa: E402, I100
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.core.summary import stage2_figures  # noqa: E402
 
@@ -205,20 +207,11 @@ class Ribs:
             physicsInertia=[j[0, 0], j[1, 1], j[2, 2], j[1, 2], j[0, 2], j[0, 1]]))
 
     def solve(self, h, t_end, t_start=0.0):
-        s = exu.SimulationSettings()
+        s = trapezoidal_settings(h, t_end, t_start, index2=True)
         ti = s.timeIntegration
-        ti.numberOfSteps = max(1, int(round((t_end - t_start) / h)))
-        ti.startTime, ti.endTime = t_start, t_end
-        ga = ti.generalizedAlpha
-        ga.useNewmark, ga.newmarkBeta, ga.newmarkGamma = True, 0.25, 0.5
-        ga.useIndex2Constraints = True
         ti.newton.relativeTolerance = 1e-8
         ti.newton.absoluteTolerance = 1e-6
-        ti.verboseMode = 0
         s.linearSolverType = exu.LinearSolverType.EigenSparse
-        s.solution.file.write = False
-        s.solution.sensors.writePeriod = (t_end - t_start) / ti.numberOfSteps
-        s.show.statistics = s.show.computationTime = False
         self.mbs.SolveDynamic(s)
 
     def series(self, rib, key, i=0):
