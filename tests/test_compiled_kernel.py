@@ -75,7 +75,7 @@ def test_compiled_step_matches_numpy_reference(model, n_el, lock, force):
 
 
 @needs_kernel
-@pytest.mark.parametrize('n_el, t0', [(3, 0.02), (2, 0.12)])
+@pytest.mark.parametrize('n_el, t0', [(3, 0.02), pytest.param(2, 0.12, marks=pytest.mark.slow)])
 def test_compiled_single_step_matches_to_roundoff(n_el, t0):
     """From the same state, one step of either path agrees to round-off (stage 1 and 2)."""
     p = UmbrellaParams(v0=-1.0, elements_per_segment=n_el)
@@ -137,7 +137,8 @@ STEP_RATE_FIELDS = ('alpha1_accel', 'sleeve_reaction_x', 'sleeve_reaction_y')
     ('flexible', 1, 'energy', 0.0, 0.0), ('flexible', 1, 'plastic', 1.5, 0.0),
     ('flexible', 2, 'plastic', 1.5, 0.0), ('flexible', 2, 'energy', 0.0, 0.0),
     ('flexible', 4, 'energy', 0.0, 0.0), ('rigid-fe', 2, 'energy', 0.5, 0.0),
-    ('flexible', 2, 'energy', 0.0, 0.02), ('flexible-nonlinear', 2, 'plastic', 1.0, 0.0),
+    ('flexible', 2, 'energy', 0.0, 0.02),
+    pytest.param('flexible-nonlinear', 2, 'plastic', 1.0, 0.0, marks=pytest.mark.slow),
     ('flexible-nonlinear', 2, 'energy', 0.0, 0.02)])
 def test_compiled_advance_outputs_match_reference_per_step(model, n_el, lock, force, zeta):
     """

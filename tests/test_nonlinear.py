@@ -372,9 +372,10 @@ def _simulator(kernel, params):
 
 @needs_kernel
 @pytest.mark.parametrize('model, zeta, v0, t0, locked, n', [
-    (NL, 0.0, -1.0, 0.02, False, 2), (NL, 0.0, -2.0, 0.05, True, 2),
+    (NL, 0.0, -1.0, 0.02, False, 2), pytest.param(NL, 0.0, -2.0, 0.05, True, 2, marks=pytest.mark.slow),
     (NL, 0.02, -2.0, 0.01, False, 2), (NL, 0.05, -1.0, 0.08, True, 2),
-    (NL, 0.0, -2.0, 0.04, True, 4), ('flexible', 0.02, -1.0, 0.02, False, 2),
+    pytest.param(NL, 0.0, -2.0, 0.04, True, 4, marks=pytest.mark.slow),
+    ('flexible', 0.02, -1.0, 0.02, False, 2),
     ('flexible', 0.02, -1.0, 0.08, True, 2)])
 def test_compiled_elastic_step_matches_numpy_to_roundoff(model, zeta, v0, t0, locked, n):
     """
@@ -403,7 +404,7 @@ def test_compiled_elastic_step_matches_numpy_to_roundoff(model, zeta, v0, t0, lo
 
 
 @needs_kernel
-@pytest.mark.parametrize('zeta', [0.0, 0.02])
+@pytest.mark.parametrize('zeta', [0.0, pytest.param(0.02, marks=pytest.mark.slow)])
 def test_compiled_elastic_blocks_match_numpy_run(zeta):
     """
     The compiled loop's StepBlocks equal the numpy path's per-step outputs.

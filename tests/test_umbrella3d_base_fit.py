@@ -152,7 +152,8 @@ def test_a_free_bus_runs_at_the_fixed_hubs_step_with_the_same_modes_resolved(val
 
 
 @pytest.mark.parametrize('kernel, k', [
-    (kernel, k) if kernel == 'numpy' else pytest.param(kernel, k, marks=KERNELS[1].marks)
+    (kernel, k) if kernel == 'numpy' else pytest.param(
+        kernel, k, marks=KERNELS[1].marks + ((pytest.mark.slow,) if k == 3 else ()))
     for kernel, k in FREE_MODES])
 def test_the_fit_gives_each_free_mode_its_exact_period_and_amplitude(kernel, k):
     """
