@@ -372,7 +372,8 @@ def _simulator(kernel, params):
 
 @needs_kernel
 @pytest.mark.parametrize('model, zeta, v0, t0, locked, n', [
-    (NL, 0.0, -1.0, 0.02, False, 2), pytest.param(NL, 0.0, -2.0, 0.05, True, 2, marks=pytest.mark.slow),
+    (NL, 0.0, -1.0, 0.02, False, 2),
+    pytest.param(NL, 0.0, -2.0, 0.05, True, 2, marks=pytest.mark.slow),
     (NL, 0.02, -2.0, 0.01, False, 2), (NL, 0.05, -1.0, 0.08, True, 2),
     pytest.param(NL, 0.0, -2.0, 0.04, True, 4, marks=pytest.mark.slow),
     ('flexible', 0.02, -1.0, 0.02, False, 2),
