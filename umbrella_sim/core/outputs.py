@@ -388,13 +388,30 @@ def fold_substeps(rows: np.ndarray, states: np.ndarray | None, m: int
     A grid step's row is its last physics step's, with the step's peak stresses the largest
     of its physics steps' (and where); its state row, its last one's.
     """
-    steps = rows.shape[1]
-    ends = np.minimum(np.arange(m - 1, steps + m - 1, m), steps - 1)
+    ends = substep_ends(rows.shape[1], m)
     out = rows[:, ends]
     for peak in (_STEP_PEAKS.start, _STEP_PEAKS.start + 2):       # leaf, link: value, x
-        value = rows[peak]
-        padded = np.full(len(ends) * m, -np.inf)
-        padded[:steps] = value
-        at = np.argmax(padded.reshape(-1, m), axis=1) + m * np.arange(len(ends))
-        out[peak], out[peak + 1] = value[at], rows[peak + 1, at]
+        at = first_largest_of_substeps(rows[peak], m)
+        out[peak], out[peak + 1] = rows[peak, at], rows[peak + 1, at]
     return out, None if states is None else states[:, ends]
+
+
+def substep_ends(steps: int, m: int) -> np.ndarray:
+    """Return each grid step's last physics step of `steps` taken m a grid step (fold)."""
+    return np.minimum(np.arange(m - 1, steps + m - 1, m), steps - 1)
+
+
+def first_largest_of_substeps(values: np.ndarray, m: int) -> np.ndarray:
+    """
+    Return each grid step's physics step of the largest of values (steps first), element-wise.
+
+    Groups of m consecutive steps along the first axis, the last one possibly shorter; the
+    first of the largest (argmax's: a NaN the largest).  The one rule of a grid step's peak
+    over its substeps, for fold_substeps and the umbrella's (outputs3d.fold_substeps3d).
+    """
+    steps = len(values)
+    groups = -(-steps // m)
+    padded = np.full((groups * m,) + values.shape[1:], -np.inf)
+    padded[:steps] = values
+    first = (m * np.arange(groups)).reshape((groups,) + (1,) * (values.ndim - 1))
+    return padded.reshape((groups, m) + values.shape[1:]).argmax(1) + first

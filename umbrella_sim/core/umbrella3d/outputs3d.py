@@ -34,7 +34,7 @@ import math
 
 import numpy as np
 
-from ..outputs import hermite_crests
+from ..outputs import first_largest_of_substeps, hermite_crests, substep_ends
 
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
 #: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
@@ -124,8 +124,8 @@ class Record3D:
                for name in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
         self._put_steps(np.array([s.t]), one, np.array([kinetic]),
                         np.array([m.strain_energy(s.qr)]), np.array([self.work]),
-                        self.friction[None].copy(), np.array([self.drive]), locked, force,
-                        lock_loss, damping=np.array([self.damping]))
+                        self.friction[None].copy(), np.array([self.drive]),
+                        np.array([self.damping]), locked, force, lock_loss)
         if m.moving_base:
             put = self._put
             put('bus_q', s.qs[1:7].copy())
@@ -171,7 +171,7 @@ class Record3D:
         if 'stress_top' in rows:        # (the compiled step's: _crests' rule, computed there)
             figures = rows['stress_top'], rows['stress_at']
         self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work, friction,
-                        drive, locked, force, lock_loss, figures, damping)
+                        drive, damping, locked, force, lock_loss, figures)
         if self.model.moving_base:
             bus = {'bus_q': rows['qs'][:, 1:7], 'bus_v': rows['vs'][:, 1:7]}
             if self.model.params.base == 'free':
@@ -196,14 +196,14 @@ class Record3D:
             rows.flags.writeable = False
         return rows
 
-    def _put_steps(self, t, st, kinetic, strain, work, friction, drive, locked, force,
-                   lock_loss, figures=None, damping=None):
+    def _put_steps(self, t, st, kinetic, strain, work, friction, drive, damping, locked,
+                   force, lock_loss, figures=None):
         """
         Append k steps' figures (arrays with the steps first) and update the peaks.
 
         t, st's arrays, kinetic and strain may be views of a buffer reused (copied here);
-        work, friction, drive are the caller's own (kept).  figures: (top, at) of the steps'
-        stresses (add_steps), else computed here (_crests).
+        work, friction, drive, damping are the caller's own (kept).  figures: (top, at) of the
+        steps' stresses (add_steps), else computed here (_crests).
         """
         m = self.model
         k = len(t)
@@ -433,9 +433,8 @@ def fold_substeps3d(rows: dict, m: int) -> dict:
     largest; outputs.fold_substeps' rule for the planar model).
     """
     steps = len(rows['t'])
-    groups = -(-steps // m)
-    ends = np.minimum(np.arange(m - 1, groups * m, m), steps - 1)
-    starts = np.arange(0, groups * m, m)
+    ends = substep_ends(steps, m)
+    starts = np.arange(0, steps, m)
     out = {}
     for name, values in rows.items():
         if name in _SUMMED_ROWS:
@@ -443,10 +442,7 @@ def fold_substeps3d(rows: dict, m: int) -> dict:
         elif name not in ('stress_top', 'stress_at'):
             out[name] = np.array(values[ends])
     top = np.asarray(rows['stress_top'])                    # (step, rib, 5)
-    padded = np.full((groups * m,) + top.shape[1:], -np.inf)
-    padded[:steps] = np.where(np.isnan(top), np.inf, top)       # (a NaN the largest)
-    pick = padded.reshape((groups, m) + top.shape[1:]).argmax(1) + (
-        m * np.arange(groups))[:, None, None]
+    pick = first_largest_of_substeps(np.where(np.isnan(top), np.inf, top), m)   # (NaN: largest)
     ribs, comps = np.indices(top.shape[1:])
     out['stress_top'] = top[pick, ribs[None], comps[None]]
     out['stress_at'] = np.asarray(rows['stress_at'])[pick, ribs[None], comps[None]]
