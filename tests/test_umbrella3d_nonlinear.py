@@ -43,6 +43,7 @@ import math
 import numpy as np
 import pytest
 
+from tests.test_umbrella3d_kernel import assert_compiled_figures_are_record3ds
 from umbrella_sim.core import UmbrellaParams, UmbrellaSimulator
 from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.kernel import load_kernel
@@ -169,25 +170,8 @@ def test_compiled_stress_figures_equal_record3d_numpy(base, elements):
     values = {'ribs': 3, 'elements_per_segment': elements, 'v0': -1.0, 'lock': 'plastic',
               'time_step': 1e-4, 'base': base, 'rib1.out_of_plane_rate': 0.5,
               'rib2.hinge_coulomb': 0.2}
-    p = ribs_params(values)
-    runs = UmbrellaSimulator3D(p, kernel='compiled'), UmbrellaSimulator3D(p, kernel='compiled')
-    runs[1].integrator.compiled.set_figures(False)
-    assert runs[0].integrator.compiled.figures and not runs[1].integrator.compiled.figures
-    a, b = (sim.run(1.0, after_lock=0.005).arrays() for sim in runs)
-    assert np.count_nonzero(b['locked']) > 40 and np.count_nonzero(~b['locked']) > 400
-    assert a.keys() == b.keys()
-    for name in a:
-        if name.startswith('stress_') and not name.endswith('_at') or name == 'von_mises':
-            scale = np.max(np.abs(b[name]))
-            assert scale > 0.0, name
-            np.testing.assert_allclose(a[name], b[name], rtol=FIGURES_RTOL,
-                                       atol=FIGURES_FLOOR * scale, err_msg=name)
-        else:
-            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
-    for name, peak in runs[1].record.peak.items():
-        np.testing.assert_allclose(runs[0].record.peak[name], peak, rtol=FIGURES_RTOL,
-                                   err_msg=name)
-        assert runs[0].record.peak_where[name] == runs[1].record.peak_where[name]
+    assert_compiled_figures_are_record3ds(ribs_params(values), deploying=400, rtol=FIGURES_RTOL,
+                                          floor=FIGURES_FLOOR, peak_rtol=FIGURES_RTOL)
 
 
 # ---------------------------------------------------------------- (b) the law
