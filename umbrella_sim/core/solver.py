@@ -30,7 +30,6 @@ physics steps) and the inputs stay on t_k = k h.
 from __future__ import annotations
 
 from dataclasses import replace
-import math
 from typing import Callable
 
 import numpy as np
@@ -45,7 +44,7 @@ from .outputs import (build_frozen, fold_substeps, LockEvent, Sample, state_row,
                       step_peaks, step_row, StepBlock)
 from .params import UmbrellaParams
 from .registry import SPECS
-from .step_rule import physics_step_of
+from .step_rule import physics_step_of, stage2_physics_steps
 
 
 def nonlinear_model_needed(p: UmbrellaParams) -> bool:
@@ -190,7 +189,7 @@ class UmbrellaSimulator:
         eng, m = self.engine, self._substeps(stage)
         if m == 1:
             return self._checked(lambda: eng.step(s0, dt, force, stage), stage), None
-        n = max(1, math.ceil(dt / (self.h / m) * (1.0 - 1e-9)))
+        n = stage2_physics_steps(dt, self.h, m)
         xs = (self.model.leaf.stress_x, self.model.link.stress_x)
         s, start, peaks = s0, self._fibre_stress_of(s0), None
         for _ in range(n):

@@ -310,6 +310,11 @@ def substeps_for(h: float, needed: float | None) -> int:
     return max(1, min(MAX_STEP_DIVISOR, int(h / MIN_PHYSICS_STEP)))
 
 
+def stage2_physics_steps(dt: float, h: float, substeps: int) -> int:
+    """Return the fewest physics steps, none longer than h / substeps, that take dt (>= 1)."""
+    return max(1, math.ceil(dt / (h / substeps) * (1.0 - 1e-9)))
+
+
 def resolution_of(model: UmbrellaModel, amplitudes: np.ndarray, h: float) -> dict:
     """
     Return how well the step h resolves the stage-2 stresses of these modal amplitudes.

@@ -60,7 +60,7 @@ from ..engines import event_root, EVENT_TIME_TOLERANCE
 from ..integrators import newton_tolerance
 from ..kernel import ALPHA1_AXLE, kernel_error, STATUS
 from ..lock import locked_velocity_base, LockImpossible, velocity_keeping_energy
-from ..step_rule import follows_lock, physics_step_of, substeps_for
+from ..step_rule import follows_lock, physics_step_of, stage2_physics_steps, substeps_for
 
 
 #: physics steps a compiled call takes at most (its output rows: ~0.3 MB at 12 ribs x 2
@@ -328,15 +328,11 @@ class UmbrellaSimulator3D:
         n: the fewest steps no longer than the stage-2 step h / stage2_substeps (the planar
         simulator's _physics_steps).
         """
-        n = max(1, math.ceil(dt / (self.h / self.stage2_substeps) * (1.0 - 1e-9)))
+        n = stage2_physics_steps(dt, self.h, self.stage2_substeps)
         s, work = self._step(s, dt / n, True)
         for _ in range(n - 1):
             s, w = self._step(s, dt / n, True)
-            work = replace(work, force=work.force + w.force,
-                           friction=work.friction + w.friction, drive=work.drive + w.drive,
-                           iterations=work.iterations + w.iterations,
-                           damping=work.damping + w.damping,
-                           factorisations=work.factorisations + w.factorisations)
+            work = work.plus(w)
         return s, work
 
     def _substep_grid(self, s0: State3D, t_next: float) -> None:
@@ -348,7 +344,7 @@ class UmbrellaSimulator3D:
         A stuck hinge is released after the physics step that releases it (as the compiled
         advance).
         """
-        n = max(1, math.ceil((t_next - s0.t) / (self.h / self.stage2_substeps) * (1.0 - 1e-9)))
+        n = stage2_physics_steps(t_next - s0.t, self.h, self.stage2_substeps)
         dt = (t_next - s0.t) / n
         states, works, s = [], [], s0
         for _ in range(n):

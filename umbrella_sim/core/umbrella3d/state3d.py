@@ -50,3 +50,10 @@ class StepWork:
     iterations: int
     factorisations: int = 0    # of the iteration matrix (a kept one serves without)
     damping: float = 0.0       # the energy the beams' damping dissipated (J, >= 0)
+
+    def plus(self, other: 'StepWork') -> 'StepWork':
+        """Return what this step and the next (other) did together: every figure summed."""
+        return StepWork(self.force + other.force, self.friction + other.friction,
+                        self.drive + other.drive, self.iterations + other.iterations,
+                        self.factorisations + other.factorisations,
+                        self.damping + other.damping)
