@@ -184,8 +184,7 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
         t = s.time
         if keep_samples:
             result.samples.append(s)
-        for key, msg in encoder.messages(s, 'umbrella', marker_magnification).items():
-            rec.publish(key, msg, t)
+        rec.publish_all(encoder.messages(s, 'umbrella', marker_magnification), t)
         if t >= state['next_diag'] - 1e-12:
             wall = _time.perf_counter() - wall0
             rec.publish('diagnostics', messages.diagnostics_msg(
