@@ -49,7 +49,7 @@ from .messages import (clock_msg, INERTIAL_FRAME, marker_every, RELIABLE, stamp,
                        stamp_parts, template_layouts, Topic, TOPICS)
 from .robot_description import joint_names
 from ..core.registry import NODE_PARAMETERS
-from ..core.umbrella3d.outputs3d import energy_balance3d, STRESS_NAMES
+from ..core.umbrella3d.outputs3d import energy_balance3d, STRESS_NAMES, STRESS_ROWS
 
 #: the topics of the umbrella's ribs (besides messages.TOPICS' joint_states, energy, clock)
 RIB_TOPICS = {
@@ -71,8 +71,6 @@ ENERGY_FIELDS = ('kinetic_J', 'strain_J', 'work_J', 'lock_loss_J', 'balance_erro
                  'friction_work_J', 'drive_work_J', 'damping_dissipation_J')
 #: the sleeve's joint: the last of joint_states (robot_description.joint_names)
 SLEEVE_JOINT = joint_names(2)[-1]
-#: a Sample3D's figures of each stress component, in STRESS_NAMES' order
-_STRESS_ROWS = tuple(f'stress_{name}' for name in STRESS_NAMES)
 
 
 def _array(values: np.ndarray, fields) -> Float64MultiArray:
@@ -108,7 +106,7 @@ def rib_stress_values(s, yield_strength: float, out: np.ndarray | None = None) -
     v = s.fields()
     if out is None:
         out = np.empty((len(v['alpha1']), len(STRESS_FIELDS)))
-    for j, name in enumerate(_STRESS_ROWS):
+    for j, (name, _) in enumerate(STRESS_ROWS):
         out[:, j] = v[name]
     out[:, -3:-1] = v['stress_von_mises_at']
     np.divide(v['stress_von_mises'], yield_strength, out=out[:, -1])

@@ -40,7 +40,7 @@ STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 
 #: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
 BODIES = ('leaf', 'link')
 #: Record3D's row names of each stress channel's value and where, in STRESS_NAMES' order
-_STRESS_ROWS = tuple((f'stress_{name}', f'stress_{name}_at') for name in STRESS_NAMES)
+STRESS_ROWS = tuple((f'stress_{name}', f'stress_{name}_at') for name in STRESS_NAMES)
 
 
 class Record3D:
@@ -242,7 +242,7 @@ class Record3D:
         else:      # (the next step's crests start from the last state: its channels if asked)
             top, at = figures[0].copy(), figures[1].copy()
             self._last_stress = (float(t[-1]), qr[-1].copy(), vr[-1].copy(), locked, 'state')
-        for j, (name, name_at) in enumerate(_STRESS_ROWS):
+        for j, (name, name_at) in enumerate(STRESS_ROWS):
             put(name, []).append(top[:, :, j])
             put(name_at, []).append(at[:, :, j])
         put('von_mises', []).append(np.maximum(top[:, :, -1], 0.0))
