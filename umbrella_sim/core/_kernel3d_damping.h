@@ -32,6 +32,10 @@ static void damping_forces(Ctx3D *x, const Fit3D *fit, double h, double *y) {
     double c = m->damping_beta / h;
     for (int r = 0; r < R; r++) {
         double *yr = y + (size_t)r * n;
+        if (m->nl_elements) {          /* the co-rotational ribs: C(q_m) (_kernel3d_nonlinear.h) */
+            nl_damping_force(m, r, n, x->q0 + (size_t)r * n, x->dq + (size_t)r * n, c, yr);
+            continue;
+        }
         rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->dq + (size_t)r * n, yr);
         for (int a = 0; a < n; a++) yr[a] *= c;
     }

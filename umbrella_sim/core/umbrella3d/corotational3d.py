@@ -312,6 +312,18 @@ class RibCorotationalStrain:
         jac, hes = self._jacobian(z, s, hessians=True)
         return self._assemble_matrix(self._tangent_blocks(jac, hes, s))
 
+    def material_tangent(self, qr) -> np.ndarray:
+        """
+        Return B^T D B of every rib (R, n_rib, n_rib), B = ds/dq: the material tangent.
+
+        The Kelvin-Voigt damping of the co-rotated strain rates is beta times it
+        (damping3d.py; nonlinear.py's planar CorotationalStrainEnergy.material_tangent).
+        """
+        z = self.chords(qr)
+        jac = self._jacobian(z, self.strains(qr))
+        return self._assemble_matrix(np.einsum('reki,rekl,relj->reij', jac, self.stiffness,
+                                               jac))
+
     def _tangent_blocks(self, jac, hes, s):
         sigma = np.einsum('reij,rej->rei', self.stiffness, s)
         return (np.einsum('reki,rekl,relj->reij', jac, self.stiffness, jac)
@@ -480,6 +492,10 @@ class CorotationalUmbrellaModel3D(UmbrellaModel3D):
 
     def elastic_step_matrix(self, qr0, qr1, h: float) -> np.ndarray:
         return 0.5 * h * h * self.strain.discrete_gradient_jacobian(qr0, qr1)
+
+    def material_tangent(self, qm) -> np.ndarray:
+        """Return B(q_m)^T D B(q_m) (R, n, n): the damping C / beta (damping3d.py)."""
+        return self.strain.material_tangent(qm)
 
     def compiled_law(self) -> dict:
         """Return Model3D's nl_* fields of this law (_kernel3d_nonlinear.h)."""

@@ -51,6 +51,10 @@ def damping_beta(params) -> float:
     return damping_beta_of(planar_model(planar))
 
 
-def damping_force(stiffness: np.ndarray, beta: float, dqr: np.ndarray, h: float) -> np.ndarray:
-    """Return each rib's damping force -beta K dq / h over a step (R, n)."""
-    return -beta / h * np.einsum('rij,rj->ri', stiffness, dqr)
+def damping_force(tangent: np.ndarray, beta: float, dqr: np.ndarray, h: float) -> np.ndarray:
+    """
+    Return each rib's damping force -beta B^T D B dq / h over a step (R, n).
+
+    tangent: each rib's B^T D B at the step's midpoint (R, n, n): K for the linear beams.
+    """
+    return -beta / h * np.einsum('rij,rj->ri', tangent, dqr)
