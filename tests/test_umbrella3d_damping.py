@@ -174,9 +174,3 @@ def test_the_locked_modes_decay_as_rayleigh_damping_says(fit):
     omega, zeta = decay_ratio(sim, out_of_plane)
     assert omega < 0.6 * omega_1
     assert zeta == pytest.approx(ZETA * omega / omega_1, rel=tolerance)
-
-
-def test_the_corotational_ribs_refuse_damping_naming_it():
-    with pytest.raises(ValueError, match='damping_ratio=0.05 with model .flexible-nonlinear.'):
-        UmbrellaRibsParams.from_mapping({'ribs': 2, 'damping_ratio': 0.05,
-                                         'model': 'flexible-nonlinear'}).validated()
