@@ -80,9 +80,10 @@ def test_the_energy_balance_closes_with_the_dissipation(base):
     The dissipation the balance adds back is the steps' dq . C(q_m) dq / h with beta =
     2 zeta / omega_1 (to 1e-9 over the first 300 steps, a hinge's release in them): the
     step scales its velocity to the energy target net of the dissipation it reports, so the
-    balance alone would close with any dissipation.  A prescribed base's step is not scaled to its energy target, so its balance is Newton's:
-    at the default tolerance (1e-8) 2.0e-6 of T + V, at 1e-10 5.0e-8 (the linear ribs':
-    1.6e-7 at 1e-8); the run is solved to 1e-10 there.
+    balance alone would close with any dissipation.  A prescribed base's step is not scaled
+    to its energy target, so its balance is Newton's: at the default tolerance (1e-8) 2.0e-6
+    of T + V, at 1e-10 5.0e-8 (the linear ribs': 1.6e-7 at 1e-8); the run is solved to 1e-10
+    there.
     """
     values = dict(ASYMMETRIC, **NONLINEAR, damping_ratio=ZETA, **AT_SPEED, **BASES[base])
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values),

@@ -23,7 +23,9 @@
  * (nl_iteration_elastic), the strain energy (nl_energy), and the elastic LU's pattern
  * (Model3D.nl_pattern: the elements' full blocks); in _kernel3d_base.h's step (a moving
  * base) the elastic force and the elastic LU; in _kernel3d_figures.h the stress figures'
- * components (nl_stress_components, at the end).
+ * components (nl_stress_components, at the end); with damping_beta, the structural damping
+ * of the co-rotated strain rates (nl_damping_force in _kernel3d_damping.h's damping_forces,
+ * nl_damping_block in iteration_blocks: its own section below).
  *
  * An element's z = (d_x, d_y, d_z, theta_a, theta_b, w'_a, w'_b, phi_a, phi_b) from its 12
  * coordinates (u, v, theta, w, slope, twist of node a, then b: NL_B, NL_A below), its strains

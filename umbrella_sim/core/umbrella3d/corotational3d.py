@@ -75,6 +75,13 @@ dq . G = U(q1) - U(q0) to round-off; the Newton matrix takes h^2/2 of 1/2 [B^T D
 its co-rotated frame: axial E eps, bending E c kappa (kappa = (-4 t_a - 2 t_b) / l_e and
 (2 t_a + 4 t_b) / l_e of tb or c), torsion G c_t tau / l_e.
 
+Structural damping (damping_ratio zeta; damping3d.py): C(q) = beta B(q)^T D B(q), the
+Kelvin-Voigt damping of the co-rotated strain rates s' = B q' (B = ds/dq, D the elements'
+EA l, EI / l blocks and GJ / l), the planar co-rotational model's (nonlinear.py), with the
+linear ribs' beta; its force -C(q_m) dq / h in the midpoint step
+(RibCorotationalStrain.material_tangent at the step's midpoint).  A rigid motion of an
+element has s' = 0 and is not damped.
+
 Compiled: _kernel3d_nonlinear.h does the same arithmetic element by element in the
 compiled step (hooks in _kernel3d.c and _kernel3d_base.h), which
 tests/test_umbrella3d_nonlinear.py holds equal to this numpy reference through the lock;
