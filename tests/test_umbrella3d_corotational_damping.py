@@ -18,23 +18,23 @@ The umbrella's damped co-rotational ribs (damping3d.py, corotational3d.py) again
 Model flexible-nonlinear with damping_ratio zeta: C(q) = beta B(q)^T D B(q), the Kelvin-Voigt
 damping of the co-rotated strain rates, the planar co-rotational model's (nonlinear.py).
 (a) Three identical ribs are each the damped planar flexible-nonlinear model through the
-lock (V0 = -1, the links buckle) to the undamped identity's 1e-10 (test_umbrella3d_nonlinear.
-py: both codes solved to 1e-14), on both paths, and dissipate 3 times its energy to 1e-9.
-(b) The energy balance T + V - (T + V)(0) = W_F + W_friction + W_drive - lock loss -
-dissipation closes to the linear damped ribs' tolerance (1e-10 of T + V; a prescribed base
-1e-6) with the dissipation of the order of the work, on every base, and that dissipation
-is the steps' dq . C(q_m) dq / h with beta recomputed from zeta and omega_1, to 1e-9.
-(c) The compiled step (_kernel3d_nonlinear.h's damping) takes the numpy reference's steps within 10 x the
-reference's ulp spread (test_umbrella3d_kernel.assert_rows_agree).  (d) The locked
-umbrella's modes decay as the discrete Rayleigh damping says: rib 0's first in-plane mode
-(the planar rib's first, whose omega_1 sets beta) with zeta, its first out-of-plane mode with
-zeta omega / omega_1, each as the midpoint rule maps them (midpoint_ratio: the linear ribs'
-measured ratios meet it to 5e-9).  The co-rotational law's quadratic terms shift the
-modal coordinate's mean by a part of its amplitude squared, which the logarithmic decrement
-of the peaks reads as a ratio 0.6 x amplitude higher (5.9e-4 relative at 1e-3 of the modal
-unit, 6.0e-6 at 1e-5); the first in-plane ratio is therefore taken to vanishing amplitude
-(Richardson's from 2e-5 and 1e-5), the out-of-plane one (a quadratic shift: 6e-12 at 1e-5)
-at 1e-5.
+lock (V0 = -1, the links buckle) to the undamped identity's 1e-10
+(test_umbrella3d_nonlinear.py: both codes solved to 1e-14), on both paths, and dissipate 3
+times its energy to 1e-9.  (b) The energy balance T + V - (T + V)(0) = W_F + W_friction +
+W_drive - lock loss - dissipation closes to the linear damped ribs' tolerance (1e-10 of T +
+V; a prescribed base 1e-6) with the dissipation of the order of the work, on every base, and
+that dissipation is the steps' dq . C(q_m) dq / h with beta recomputed from zeta and
+omega_1, to 1e-9.  (c) The compiled step (_kernel3d_nonlinear.h's damping) takes the numpy
+reference's steps within 10 x the reference's ulp spread
+(test_umbrella3d_kernel.assert_rows_agree).  (d) The locked umbrella's modes decay as the
+discrete Rayleigh damping says: rib 0's first in-plane mode (the planar rib's first, whose
+omega_1 sets beta) with zeta, its first out-of-plane mode with zeta omega / omega_1, each as
+the midpoint rule maps them (midpoint_ratio: the linear ribs' measured ratios meet it to
+5e-9). The co-rotational law's quadratic terms shift the modal coordinate's mean by a part
+of its amplitude squared, which the logarithmic decrement of the peaks reads as a ratio 0.6
+x amplitude higher (5.9e-4 relative at 1e-3 of the modal unit, 6.0e-6 at 1e-5); the first
+in-plane ratio is therefore taken to vanishing amplitude (Richardson's from 2e-5 and 1e-5),
+the out-of-plane one (a quadratic shift: 6e-12 at 1e-5) at 1e-5.
 """
 import math
 
