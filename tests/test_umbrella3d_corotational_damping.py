@@ -41,14 +41,12 @@ import math
 import numpy as np
 import pytest
 
-from tests.test_umbrella3d import BALANCE_TOLERANCE, momentum_scales
-from tests.test_umbrella3d_damping import decay_ratio
+from tests.test_umbrella3d_damping import (advanced_with_spread, assert_damped_run_balances,
+                                           decay_ratio, first_locked_modes)
 from tests.test_umbrella3d_kernel import (assert_rows_agree, ASYMMETRIC, AT_SPEED, BASES,
                                           needs_kernel)
 from tests.test_umbrella3d_nonlinear import assert_ribs_equal_planar_nonlinear
 from umbrella_sim.core.nonlinear import locked_first_frequency
-from umbrella_sim.core.umbrella3d.damping3d import damping_beta
-from umbrella_sim.core.umbrella3d.modes3d import rib_locked_modes
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
 from umbrella_sim.core.umbrella3d.substeps3d import planar_model
@@ -97,21 +95,7 @@ def test_the_energy_balance_closes_with_the_dissipation(base):
         tangent = sim.model.material_tangent(s0.qr + 0.5 * dq)
         expected += beta / sim.h * float(np.einsum('ri,rij,rj->', dq, tangent, dq))
     assert sim.record.damping == pytest.approx(expected, rel=1e-9)
-    rec = sim.run(1.0, after_lock=0.01)
-    s = rec.summary()
-    tolerance = BALANCE_TOLERANCE if base != 'prescribed' else 1e-6   # (not scaled: kernel's)
-    assert s['energy_balance_residual'] < tolerance * s['energy_scale']
-    a = rec.arrays()
-    # the dissipation is there, grows, and is of the order of the work (not a rounding)
-    assert np.all(np.diff(a['damping_dissipation']) >= 0.0)
-    assert s['damping_dissipation'] > 1e-3 * abs(a['work'][-1])
-    # the same run undamped dissipates nothing
-    undamped = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
-        dict(values, damping_ratio=0.0))).run(1.0, after_lock=0.01).summary()
-    assert undamped['damping_dissipation'] == 0.0
-    if base == 'free':     # the damping is internal: the bus's momentum stays
-        p = a['linear_momentum']
-        assert np.max(np.abs(p - p[0])) < 1e-12 * momentum_scales(sim, a)[0]
+    assert_damped_run_balances(sim, values, base)
 
 
 # ---------------------------------------------------------------- (c) compiled = numpy
@@ -122,15 +106,9 @@ def test_damped_compiled_steps_equal_numpy(base):
     """The damped co-rotational step on both paths, within the numpy reference's ulp spread."""
     values = dict(ASYMMETRIC, **NONLINEAR, damping_ratio=ZETA, **AT_SPEED, **BASES[base])
     p = UmbrellaRibsParams.from_mapping(values)
-    runs = [UmbrellaSimulator3D(p, kernel=k) for k in ('compiled', 'numpy', 'numpy')]
-    s = runs[2].state
-    runs[2].state = type(s)(s.t, s.qr, s.qs, np.nextafter(s.vr, np.inf), s.vs, s.lam_r,
-                            s.lam_s, s.stuck)
-    for sim in runs:
-        sim.advance(150)
-    a, b, spread = (sim.record.arrays() for sim in runs)
+    a, b, spread, model = advanced_with_spread(p, 150)
     assert a['damping_dissipation'][-1] > 1e-3 * abs(a['work'][-1])
-    assert_rows_agree(a, b, spread, runs[0].model)
+    assert_rows_agree(a, b, spread, model)
 
 
 # ---------------------------------------------------------------- (d) the modes' decay
@@ -166,12 +144,7 @@ def test_the_locked_modes_decay_as_rayleigh_damping_says():
                                          'time_step': 1e-4})
     sim = UmbrellaSimulator3D(p, kernel='compiled', tolerance=1e-12)
     assert not sim.mode_fit
-    m = sim.model
-    omega_1 = locked_first_frequency(planar_model(p.planar))
-    assert sim.integrator.damping_beta == damping_beta(p) == pytest.approx(2 * ZETA / omega_1)
-    phi = rib_locked_modes(m)[0][1]
-    tip_v, tip_w = (np.abs(phi[i, :6]) for i in m.i_tip[1:])
-    in_plane, out_of_plane = int(np.argmax(tip_v > tip_w)), int(np.argmax(tip_w > tip_v))
+    omega_1, in_plane, out_of_plane = first_locked_modes(sim)
     omega, coarse = decay_ratio(sim, in_plane, amplitude=2e-5)
     assert omega == pytest.approx(omega_1, rel=1e-9)      # the planar rib's first mode
     fine = decay_ratio(sim, in_plane, amplitude=1e-5)[1]

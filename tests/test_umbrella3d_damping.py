@@ -66,7 +66,17 @@ def test_damped_identical_ribs_are_the_damped_planar_model(kernel, monkeypatch):
 def test_the_energy_balance_closes_with_the_dissipation(base):
     """Asymmetric ribs (friction, a stuck hinge, a kick), damped, through the lock."""
     values = dict(ASYMMETRIC, time_step=0.0, damping_ratio=ZETA, **AT_SPEED, **BASES[base])
-    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values))
+    assert_damped_run_balances(UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values)),
+                               values, base)
+
+
+def assert_damped_run_balances(sim: UmbrellaSimulator3D, values: dict, base: str) -> None:
+    """
+    Run sim through the lock (10 ms past it): its balance closes with the dissipation.
+
+    The dissipation grows, is of the order of the work, the same run undamped dissipates
+    nothing, and a free bus keeps its momentum (the damping is internal).
+    """
     rec = sim.run(1.0, after_lock=0.01)
     s = rec.summary()
     tolerance = BALANCE_TOLERANCE if base != 'prescribed' else 1e-6   # (not scaled: kernel's)
@@ -96,15 +106,9 @@ def test_damped_compiled_steps_equal_numpy(base):
     """
     values = dict(ASYMMETRIC, time_step=0.0, damping_ratio=ZETA, **AT_SPEED, **BASES[base])
     p = UmbrellaRibsParams.from_mapping(values)
-    runs = [UmbrellaSimulator3D(p, kernel=k) for k in ('compiled', 'numpy', 'numpy')]
-    s = runs[2].state
-    runs[2].state = type(s)(s.t, s.qr, s.qs, np.nextafter(s.vr, np.inf), s.vs, s.lam_r,
-                            s.lam_s, s.stuck)
-    for sim in runs:
-        sim.advance(150)
-    a, b, spread = (sim.record.arrays() for sim in runs)
+    a, b, spread, model = advanced_with_spread(p, 150)
     assert a['damping_dissipation'][-1] > 0.0
-    assert_rows_agree(a, b, spread, runs[0].model)
+    assert_rows_agree(a, b, spread, model)
     start = UmbrellaSimulator3D(p, kernel='compiled')
     start.run(1.0, after_lock=0.001)
     assert start.stage2_substeps > 1
@@ -115,6 +119,35 @@ def test_damped_compiled_steps_equal_numpy(base):
     a, b, spread = (sim.record.arrays() for sim in runs)
     assert a['damping_dissipation'][-1] > a['damping_dissipation'][1] > 0.0
     assert_rows_agree(a, b, spread, start.model)
+
+
+def advanced_with_spread(p: UmbrellaRibsParams, steps: int):
+    """
+    Return the rows of steps grid steps compiled, numpy, and numpy from a velocity one ulp up.
+
+    (a, b, spread: the compared runs and the reference's own round-off spread; the model.)
+    """
+    runs = [UmbrellaSimulator3D(p, kernel=k) for k in ('compiled', 'numpy', 'numpy')]
+    s = runs[2].state
+    runs[2].state = type(s)(s.t, s.qr, s.qs, np.nextafter(s.vr, np.inf), s.vs, s.lam_r,
+                            s.lam_s, s.stuck)
+    for sim in runs:
+        sim.advance(steps)
+    return (*(sim.record.arrays() for sim in runs), runs[0].model)
+
+
+def first_locked_modes(sim: UmbrellaSimulator3D) -> tuple[float, int, int]:
+    """
+    Return omega_1 and rib 0's first in-plane and out-of-plane locked modes' indices.
+
+    omega_1: the planar rib's first locked mode, whose 2 zeta / omega_1 is sim's beta.
+    """
+    m, p = sim.model, sim.params
+    omega_1 = locked_first_frequency(planar_model(p.planar))
+    assert sim.integrator.damping_beta == damping_beta(p) == pytest.approx(2 * ZETA / omega_1)
+    phi = rib_locked_modes(m)[0][1]
+    tip_v, tip_w = (np.abs(phi[i, :6]) for i in m.i_tip[1:])
+    return omega_1, int(np.argmax(tip_v > tip_w)), int(np.argmax(tip_w > tip_v))
 
 
 def decay_ratio(sim: UmbrellaSimulator3D, mode: int, periods: int = 6,
@@ -161,12 +194,7 @@ def test_the_locked_modes_decay_as_rayleigh_damping_says(fit):
     p = UmbrellaRibsParams.from_mapping({'ribs': 3, 'damping_ratio': ZETA, 'time_step': 1e-4,
                                          'phase_correction': fit})
     sim = UmbrellaSimulator3D(p, kernel='compiled')
-    m = sim.model
-    omega_1 = locked_first_frequency(planar_model(p.planar))
-    assert sim.integrator.damping_beta == damping_beta(p) == pytest.approx(2 * ZETA / omega_1)
-    phi = rib_locked_modes(m)[0][1]
-    tip_v, tip_w = (np.abs(phi[i, :6]) for i in m.i_tip[1:])
-    in_plane, out_of_plane = int(np.argmax(tip_v > tip_w)), int(np.argmax(tip_w > tip_v))
+    omega_1, in_plane, out_of_plane = first_locked_modes(sim)
     tolerance = 1e-6 if fit else 1e-4
     omega, zeta = decay_ratio(sim, in_plane)
     assert omega == pytest.approx(omega_1, rel=1e-9)      # the planar rib's first mode

@@ -323,6 +323,16 @@ static void nl_add_block(const Model3D *m, int e, const double *Z, double c, int
     }
 }
 
+/* D J (6 x 9) of rib r's element e: its stresses of each column of J (ds/dz), column by column */
+static void nl_stress_columns(const Model3D *m, int r, int e, const double *J, double *DJ) {
+    for (int i = 0; i < 9; i++) {
+        double col[6], out[6];
+        for (int k = 0; k < 6; k++) col[k] = J[k * 9 + i];
+        nl_stress(m, r, e, col, out);
+        for (int k = 0; k < 6; k++) DJ[k * 9 + i] = out[k];
+    }
+}
+
 /* add c times the Newton matrix's dG/dq1 of rib r (1/2 [B^T D B + sum sigma_k H_k] at the
  * midpoint, sigma = D (s0 + s1) / 2) into G (n x n, row-major) */
 static void nl_block(Ctx3D *x, int r, const double *q0, const double *q1, double c,
@@ -341,12 +351,7 @@ static void nl_block(Ctx3D *x, int r, const double *q0, const double *q1, double
         for (int i = 0; i < 6; i++) sm[i] = 0.5 * (s0[i] + s1[i]);
         nl_jacobian(zm, le, sm, J, H);
         nl_stress(m, r, e, sm, sig);
-        for (int i = 0; i < 9; i++) {       /* D J, column by column */
-            double col[6], out[6];
-            for (int k = 0; k < 6; k++) col[k] = J[k * 9 + i];
-            nl_stress(m, r, e, col, out);
-            for (int k = 0; k < 6; k++) DJ[k * 9 + i] = out[k];
-        }
+        nl_stress_columns(m, r, e, J, DJ);
         for (int i = 0; i < 9; i++)
             for (int j = 0; j < 9; j++) {
                 double v = 0.0;
@@ -408,12 +413,7 @@ static void nl_damping_block(const Model3D *m, int r, int n, const double *qm, d
     for (int e = 0; e < m->nl_elements; e++) {
         double z[9], s[6], J[54], DJ[54], Z[81];
         nl_damping_jacobian(m, r, e, qm, z, s, J);
-        for (int i = 0; i < 9; i++) {       /* D J, column by column */
-            double col[6], out[6];
-            for (int k = 0; k < 6; k++) col[k] = J[k * 9 + i];
-            nl_stress(m, r, e, col, out);
-            for (int k = 0; k < 6; k++) DJ[k * 9 + i] = out[k];
-        }
+        nl_stress_columns(m, r, e, J, DJ);
         for (int i = 0; i < 9; i++)
             for (int j = 0; j < 9; j++) {
                 double v = 0.0;
