@@ -378,7 +378,8 @@ whose midpoint rule scales a ratio by sinc(ωh/2)²), its out-of-plane ones with
 system. Compiled in _kernel3d_damping.h (the step and the moving base's step; equal to the
 numpy reference within its ulp spread, on every base); the energy balance closes to 1e-10 of
 T + V with the dissipation (tests/test_umbrella3d_damping.py). The co-rotational ribs
-(`flexible-nonlinear`) refuse `damping_ratio`, naming it.
+(`flexible-nonlinear`) damp their co-rotated strain rates with the same β, C(q) = βBᵀDB at
+the step's midpoint, as the planar flexible-nonlinear model (docs/umbrella3d_nonlinear.md).
 
 The step is compiled (umbrella_sim/core/_kernel3d.c, in the planar kernel's
 library, its interface declared in _kernel.h and checked at load): the Newton iteration, each

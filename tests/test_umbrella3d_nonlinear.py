@@ -70,8 +70,17 @@ def ribs_params(values: dict) -> UmbrellaRibsParams:
                                           ('energy', 'compiled')])
 def test_identical_ribs_are_each_the_planar_nonlinear_model(lock, kernel):
     """Three ribs, V0 = -1 (the links buckle), either lock, 0.035 s of stage 2; either path."""
-    values = {**NONLINEAR, 'v0': -1.0, 'lock': lock, 'time_step': 1e-4}
-    duration = 0.08
+    assert_ribs_equal_planar_nonlinear({'lock': lock}, kernel)
+
+
+def assert_ribs_equal_planar_nonlinear(extra: dict, kernel: str, duration: float = 0.08):
+    """
+    Assert three ribs at V0 = -1 (and extra) are each the planar flexible-nonlinear model.
+
+    Both solved to TIGHT_NEWTON, through the lock and into stage 2 (module docstring);
+    returns the umbrella's and the planar simulator.
+    """
+    values = {**NONLINEAR, 'v0': -1.0, 'time_step': 1e-4, **extra}
     planar_sim = UmbrellaSimulator(UmbrellaParams(**values))
     planar_sim.engine.integrator.tolerance = TIGHT_NEWTON
     planar = []
@@ -112,6 +121,7 @@ def test_identical_ribs_are_each_the_planar_nonlinear_model(lock, kernel):
             np.testing.assert_allclose(axial + bend_z, bottom, rtol=0, atol=1e-8 * scale)
             # (the energy lock leaves round-off out of the planes: 1e-17 m)
             assert max(np.max(np.abs(bend_y)), np.max(np.abs(shear))) < 1e-12 * scale
+    return sim, planar_sim
 
 
 @pytest.mark.slow      # ~4 s and ~6 s (the numpy reference: ~6 and ~12 ms a step)

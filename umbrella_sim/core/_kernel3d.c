@@ -1153,6 +1153,8 @@ static void iteration_blocks(Ctx3D *x, const double *q, const double *stuck, dou
                     G[a * n + c] = ck * K[a * n + c] + 0.5 * h * G[a * n + c];
         }
         if (m->nl_elements) nl_block(x, r, x->q0 + r * n, q + r * n, 0.5 * h * h, G);
+        if (m->nl_elements && m->damping_beta != 0.0)     /* h/2 C(q_m): the damped ribs' */
+            nl_damping_block(m, r, n, x->qm + r * n, 0.5 * h * m->damping_beta, G);
         G[m->i_a1 * n + m->i_a1] -= 0.5 * h * h * x->fric[R + r];
     }
 }

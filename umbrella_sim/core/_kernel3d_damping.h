@@ -13,7 +13,9 @@
 // limitations under the License.
 
 /* The beams' structural damping of the umbrella's 3D step (umbrella3d/damping3d.py: the planar
- * model's, C = beta K over every rib's elastic coordinates): the damping force -C dq / h in
+ * model's, C = beta K over every rib's elastic coordinates; the co-rotational ribs' C(q_m) =
+ * beta B^T D B at the step's midpoint, _kernel3d_nonlinear.h's nl_damping_force and, in
+ * iteration_blocks, nl_damping_block): the damping force -C dq / h in
  * the step's residual (step, base_step), h/2 C in its iteration matrix (stiffness_weight:
  * M + (h^2/4 + h beta/2) K), and the step's dissipation dq . C dq / h; with a damped mode fit
  * (Fit3D.damp), its share U diag(c_w - c) U^T dq / h (integrators.LockedModeFit.
@@ -32,6 +34,10 @@ static void damping_forces(Ctx3D *x, const Fit3D *fit, double h, double *y) {
     double c = m->damping_beta / h;
     for (int r = 0; r < R; r++) {
         double *yr = y + (size_t)r * n;
+        if (m->nl_elements) {          /* the co-rotational ribs: C(q_m) (_kernel3d_nonlinear.h) */
+            nl_damping_force(m, r, n, x->q0 + (size_t)r * n, x->dq + (size_t)r * n, c, yr);
+            continue;
+        }
         rows_matvec(x, &x->krows, m->stiffness + (size_t)r * n * n, x->dq + (size_t)r * n, yr);
         for (int a = 0; a < n; a++) yr[a] *= c;
     }

@@ -23,7 +23,9 @@
  * (nl_iteration_elastic), the strain energy (nl_energy), and the elastic LU's pattern
  * (Model3D.nl_pattern: the elements' full blocks); in _kernel3d_base.h's step (a moving
  * base) the elastic force and the elastic LU; in _kernel3d_figures.h the stress figures'
- * components (nl_stress_components, at the end).
+ * components (nl_stress_components, at the end); with damping_beta, the structural damping
+ * of the co-rotated strain rates (nl_damping_force in _kernel3d_damping.h's damping_forces,
+ * nl_damping_block in iteration_blocks: its own section below).
  *
  * An element's z = (d_x, d_y, d_z, theta_a, theta_b, w'_a, w'_b, phi_a, phi_b) from its 12
  * coordinates (u, v, theta, w, slope, twist of node a, then b: NL_B, NL_A below), its strains
@@ -299,6 +301,28 @@ static void nl_force(Ctx3D *x, int r, const double *q0, const double *q1, double
     }
 }
 
+/* add c T^T Z T (Z: 9 x 9 in the element e's z) into G (n x n, row-major) at its places */
+static void nl_add_block(const Model3D *m, int e, const double *Z, double c, int n, double *G) {
+    double A[144];
+    memset(A, 0, sizeof(A));              /* T^T Z T: the element's 12 x 12 block */
+    for (int a = 0; a < 9; a++)
+        for (int b = 0; b < 9; b++) {
+            double v = Z[a * 9 + b];
+            if (v == 0.0) continue;
+            int ia[2] = {NL_B[a], NL_A[a]}, ib[2] = {NL_B[b], NL_A[b]};
+            for (int u = 0; u < 2; u++)
+                for (int w = 0; w < 2; w++)
+                    if (ia[u] >= 0 && ib[w] >= 0)
+                        A[ia[u] * 12 + ib[w]] += (u ? -v : v) * (w ? -1.0 : 1.0);
+        }
+    const int *p = m->nl_places + e * 12;
+    for (int i = 0; i < 12; i++) {
+        if (p[i] >= n) continue;
+        for (int j = 0; j < 12; j++)
+            if (p[j] < n) G[p[i] * n + p[j]] += c * A[i * 12 + j];
+    }
+}
+
 /* add c times the Newton matrix's dG/dq1 of rib r (1/2 [B^T D B + sum sigma_k H_k] at the
  * midpoint, sigma = D (s0 + s1) / 2) into G (n x n, row-major) */
 static void nl_block(Ctx3D *x, int r, const double *q0, const double *q1, double c,
@@ -310,7 +334,7 @@ static void nl_block(Ctx3D *x, int r, const double *q0, const double *q1, double
         const NlStart *st = start + e;
         const double *z0 = st->z, *s0 = st->s;
         double z1[9], zm[9], s1[6], sm[6], dbeta, dpsi[2], J[54], H[486];
-        double sig[6], DJ[54], Z[81], A[144];
+        double sig[6], DJ[54], Z[81];
         double le = nl_z(m, r, e, q1, z1);
         nl_step_strains(st, z1, s1, &dbeta, dpsi);
         for (int i = 0; i < 9; i++) zm[i] = 0.5 * (z0[i] + z1[i]);
@@ -329,24 +353,74 @@ static void nl_block(Ctx3D *x, int r, const double *q0, const double *q1, double
                 for (int k = 0; k < 6; k++) v += J[k * 9 + i] * DJ[k * 9 + j] + sig[k] * H[k * 81 + i * 9 + j];
                 Z[i * 9 + j] = 0.5 * v;
             }
-        /* T^T Z T into the element's 12 x 12 block, then to its places */
-        memset(A, 0, sizeof(A));
-        for (int a = 0; a < 9; a++)
-            for (int b = 0; b < 9; b++) {
-                double v = Z[a * 9 + b];
-                if (v == 0.0) continue;
-                int ia[2] = {NL_B[a], NL_A[a]}, ib[2] = {NL_B[b], NL_A[b]};
-                for (int u = 0; u < 2; u++)
-                    for (int w = 0; w < 2; w++)
-                        if (ia[u] >= 0 && ib[w] >= 0)
-                            A[ia[u] * 12 + ib[w]] += (u ? -v : v) * (w ? -1.0 : 1.0);
-            }
-        const int *p = m->nl_places + e * 12;
-        for (int i = 0; i < 12; i++) {
-            if (p[i] >= n) continue;
-            for (int j = 0; j < 12; j++)
-                if (p[j] < n) G[p[i] * n + p[j]] += c * A[i * 12 + j];
+        nl_add_block(m, e, Z, c, n, G);
+    }
+}
+
+/* ------------------------------------------------------------------ structural damping
+ * The Kelvin-Voigt damping of the co-rotated strain rates (umbrella3d/damping3d.py;
+ * corotational3d.RibCorotationalStrain.material_tangent, the numpy reference): C(q_m) =
+ * beta B^T D B, B = ds/dq exact (nl_jacobian) at the step's midpoint q_m, its strains
+ * computed there afresh (nl_starts' arithmetic; not kept: q_m is no step's end).  Hooks,
+ * under nl_elements: _kernel3d_damping.h's damping_forces (the force C dq / h, and so the
+ * step's dissipation) and iteration_blocks (h/2 C(q_m) at the iterate factored at). */
+
+/* ds/dz J (6 x 9) of rib r's element e at coordinates qr, and z, s there; returns l_e */
+static double nl_damping_jacobian(const Model3D *m, int r, int e, const double *qr,
+                                  double *z, double *s, double *J) {
+    double le = nl_z(m, r, e, qr, z), tb[2];
+    double beta = atan2(z[1], z[0]);
+    for (int j = 0; j < 2; j++) tb[j] = nl_wrap(asin(nl_sine(z, j)) - beta);
+    nl_strains_from(z, le, tb, s);
+    nl_jacobian(z, le, s, J, NULL);
+    return le;
+}
+
+/* y (n) = c B^T D B dq of rib r, B at its midpoint q0 + dq / 2 (c: beta / h) */
+static void nl_damping_force(const Model3D *m, int r, int n, const double *q0,
+                             const double *dq, double c, double *y) {
+    double qm[n];
+    for (int a = 0; a < n; a++) qm[a] = q0[a] + 0.5 * dq[a];
+    memset(y, 0, sizeof(double) * n);
+    for (int e = 0; e < m->nl_elements; e++) {
+        double z[9], s[6], J[54], dz[9], ds[6], sig[6], g[9];
+        nl_damping_jacobian(m, r, e, qm, z, s, J);
+        nl_chord_part(m, e, dq, dz);
+        for (int k = 0; k < 6; k++) {
+            double d = 0.0;
+            for (int i = 0; i < 9; i++) d += J[k * 9 + i] * dz[i];
+            ds[k] = d;
         }
+        nl_stress(m, r, e, ds, sig);
+        for (int i = 0; i < 9; i++) {
+            double d = 0.0;
+            for (int k = 0; k < 6; k++) d += J[k * 9 + i] * sig[k];
+            g[i] = d;
+        }
+        nl_scatter(m, e, g, y);
+    }
+    for (int a = 0; a < n; a++) y[a] *= c;
+}
+
+/* add c B^T D B of rib r at its midpoint qm into G (n x n; c: h beta / 2) */
+static void nl_damping_block(const Model3D *m, int r, int n, const double *qm, double c,
+                             double *G) {
+    for (int e = 0; e < m->nl_elements; e++) {
+        double z[9], s[6], J[54], DJ[54], Z[81];
+        nl_damping_jacobian(m, r, e, qm, z, s, J);
+        for (int i = 0; i < 9; i++) {       /* D J, column by column */
+            double col[6], out[6];
+            for (int k = 0; k < 6; k++) col[k] = J[k * 9 + i];
+            nl_stress(m, r, e, col, out);
+            for (int k = 0; k < 6; k++) DJ[k * 9 + i] = out[k];
+        }
+        for (int i = 0; i < 9; i++)
+            for (int j = 0; j < 9; j++) {
+                double v = 0.0;
+                for (int k = 0; k < 6; k++) v += J[k * 9 + i] * DJ[k * 9 + j];
+                Z[i * 9 + j] = v;
+            }
+        nl_add_block(m, e, Z, c, n, G);
     }
 }
 

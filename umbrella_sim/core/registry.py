@@ -298,7 +298,9 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'rigid; the umbrella of N ribs (ribs ≥ 2, model flexible) damps its 3D beams alike '
        '(axial, both bendings and torsion: C = βK with the β of its planar rib, so each '
        "rib's first in-plane mode has ζ, its out-of-plane modes ζω_i/ω1; the `energy` topic's "
-       '`damping_dissipation_J`); its co-rotational ribs (flexible-nonlinear) refuse it',
+       '`damping_dissipation_J`); its co-rotational ribs (flexible-nonlinear) damp their '
+       'co-rotated strain rates with the same β (C(q) = βBᵀDB, as the planar flexible-nonlinear '
+       'model)',
        low=0.0, high=1.0, high_open=True),
     # the node
     _P('publish_rate', float, 100.0, 'Hz',

@@ -147,6 +147,30 @@ def _interrupt(signum, frame):
 _received_at_start = [0]
 
 
+@contextlib.contextmanager
+def waking(wake):
+    """
+    Within the block, a stop signal calls wake(signum) instead of raising KeyboardInterrupt.
+
+    For a wait inside a library that must not be interrupted at an arbitrary instant: the
+    block waits on something wake feeds (a queue.SimpleQueue's put, which may be called from
+    a signal handler) and raises KeyboardInterrupt itself, where that is safe.  distributed
+    is such a library: a KeyboardInterrupt inside its ``sync`` can reach its event loop before
+    the awaited future exists, and its loop logged a NameError traceback after our own
+    'interrupted' line.  Outside the main thread, where handlers cannot be set, the block
+    just runs.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, lambda signum, frame: wake(signum)) for s in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
 def raise_if_stopped() -> None:
     """
     Raise KeyboardInterrupt if a stop signal came since the tool's main began.

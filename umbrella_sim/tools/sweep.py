@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 import os
+import queue
 import signal
 import socket
 import sys
@@ -50,7 +51,7 @@ from .sweep_spec import case_id, case_models, load_spec, SpecError, Sweep
 from .. import __version__
 from ..bag.paths import absolute_path, check_new_output
 from ..core.registry import NODE_PARAMETERS
-from ..ros.signals import deferred
+from ..ros.signals import deferred, name as signal_name, waking
 
 #: the publication rate of a case's --mcap recording: the node's default, as simulate --mcap
 MCAP_PUBLISH_RATE = NODE_PARAMETERS['publish_rate'].default
@@ -323,37 +324,44 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
         _prepare_dir(sweep, store, out_dir, mcap_dir)
         made_dir = True
         if todo:
-            from distributed import as_completed
-
             t1 = time.perf_counter()
             report.setup_s = t1 - t0
             by_key = {}
-            for case in todo:
-                fut = client.submit(run_case, case.task(mcap_dir), pure=False,
-                                    key=f'umbrella-case-{case.case_id}-{os.getpid()}')
-                by_key[fut.key] = case
-                futures.append(fut)
-            progress = case_progress(len(todo), stream)
-            try:
-                for fut in as_completed(futures):
-                    case = by_key[fut.key]
-                    try:
-                        result = fut.result()
-                    except Exception as exc:  # noqa: BLE001 - lost workers, cancelled tasks
-                        result = {'case_id': case.case_id, 'status': STATUS_ERROR,
-                                  'error': f'{type(exc).__name__}: {exc}', 'summary': {},
-                                  'worker': None, 'mcap': None}
-                    store.save(make_record(case, result))
-                    report.ran += 1
-                    report.run_s = time.perf_counter() - t1
-                    report.compute_s += result.get('case_wall_time') or 0.0
-                    failed = result['status'] != STATUS_OK
-                    progress.update(progress.done + 1, failed,
-                                    f'case {case.index}: {case.label(sweep.swept)}'
-                                    + (f": {result['status']}" if failed else ''))
-                    fut.release()
-            finally:
-                progress.close()
+            # finished futures (put by distributed's callback thread) and stop signals (ints,
+            # put by the handler): a Ctrl-C is acted on here, between two results, never
+            # inside distributed's own waits (signals.waking)
+            arrived = queue.SimpleQueue()
+            with waking(arrived.put):
+                for case in todo:
+                    fut = client.submit(run_case, case.task(mcap_dir), pure=False,
+                                        key=f'umbrella-case-{case.case_id}-{os.getpid()}')
+                    by_key[fut.key] = case
+                    futures.append(fut)
+                    fut.add_done_callback(arrived.put)
+                progress = case_progress(len(todo), stream)
+                try:
+                    for _ in futures:
+                        fut = arrived.get()
+                        if isinstance(fut, int):
+                            raise KeyboardInterrupt(signal_name(fut))
+                        case = by_key[fut.key]
+                        try:
+                            result = fut.result()
+                        except Exception as exc:  # noqa: BLE001 - lost workers, cancelled
+                            result = {'case_id': case.case_id, 'status': STATUS_ERROR,
+                                      'error': f'{type(exc).__name__}: {exc}', 'summary': {},
+                                      'worker': None, 'mcap': None}
+                        store.save(make_record(case, result))
+                        report.ran += 1
+                        report.run_s = time.perf_counter() - t1
+                        report.compute_s += result.get('case_wall_time') or 0.0
+                        failed = result['status'] != STATUS_OK
+                        progress.update(progress.done + 1, failed,
+                                        f'case {case.index}: {case.label(sweep.swept)}'
+                                        + (f": {result['status']}" if failed else ''))
+                        fut.release()
+                finally:
+                    progress.close()
             log(f'{report.ran} case(s) in {report.run_s:.1f} s '
                 f'({report.ran / max(report.run_s, 1e-9):.2f} cases/s, '
                 f'{report.compute_s:.1f} s of computing; cluster ready in '
@@ -370,14 +378,16 @@ def run_sweep(sweep: Sweep, out_dir: str, workers: int | None = None,
         log(f'cannot write the results: {exc.strerror}; stopping the sweep')
     finally:
         if client is not None:
-            try:
-                if futures:
-                    client.cancel(futures)
-                client.close(timeout=10)
-                if cluster is not None:
-                    cluster.close(timeout=10)
-            except Exception:  # noqa: BLE001 - closing after an interrupt: best effort
-                pass
+            # a stop signal while closing: after it (not inside distributed's waits)
+            with deferred():
+                try:
+                    if futures:
+                        client.cancel(futures)
+                    client.close(timeout=10)
+                    if cluster is not None:
+                        cluster.close(timeout=10)
+                except Exception:  # noqa: BLE001 - closing after an interrupt: best effort
+                    pass
             if cluster is not None:
                 _forget_cluster(cluster)
         if made_dir:

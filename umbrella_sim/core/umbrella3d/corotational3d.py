@@ -75,6 +75,13 @@ dq . G = U(q1) - U(q0) to round-off; the Newton matrix takes h^2/2 of 1/2 [B^T D
 its co-rotated frame: axial E eps, bending E c kappa (kappa = (-4 t_a - 2 t_b) / l_e and
 (2 t_a + 4 t_b) / l_e of tb or c), torsion G c_t tau / l_e.
 
+Structural damping (damping_ratio zeta; damping3d.py): C(q) = beta B(q)^T D B(q), the
+Kelvin-Voigt damping of the co-rotated strain rates s' = B q' (B = ds/dq, D the elements'
+EA l, EI / l blocks and GJ / l), the planar co-rotational model's (nonlinear.py), with the
+linear ribs' beta; its force -C(q_m) dq / h in the midpoint step
+(RibCorotationalStrain.material_tangent at the step's midpoint).  A rigid motion of an
+element has s' = 0 and is not damped.
+
 Compiled: _kernel3d_nonlinear.h does the same arithmetic element by element in the
 compiled step (hooks in _kernel3d.c and _kernel3d_base.h), which
 tests/test_umbrella3d_nonlinear.py holds equal to this numpy reference through the lock;
@@ -312,6 +319,18 @@ class RibCorotationalStrain:
         jac, hes = self._jacobian(z, s, hessians=True)
         return self._assemble_matrix(self._tangent_blocks(jac, hes, s))
 
+    def material_tangent(self, qr) -> np.ndarray:
+        """
+        Return B^T D B of every rib (R, n_rib, n_rib), B = ds/dq: the material tangent.
+
+        The Kelvin-Voigt damping of the co-rotated strain rates is beta times it
+        (damping3d.py; nonlinear.py's planar CorotationalStrainEnergy.material_tangent).
+        """
+        z = self.chords(qr)
+        jac = self._jacobian(z, self.strains(qr))
+        return self._assemble_matrix(np.einsum('reki,rekl,relj->reij', jac, self.stiffness,
+                                               jac))
+
     def _tangent_blocks(self, jac, hes, s):
         sigma = np.einsum('reij,rej->rei', self.stiffness, s)
         return (np.einsum('reki,rekl,relj->reij', jac, self.stiffness, jac)
@@ -480,6 +499,10 @@ class CorotationalUmbrellaModel3D(UmbrellaModel3D):
 
     def elastic_step_matrix(self, qr0, qr1, h: float) -> np.ndarray:
         return 0.5 * h * h * self.strain.discrete_gradient_jacobian(qr0, qr1)
+
+    def material_tangent(self, qm) -> np.ndarray:
+        """Return B(q_m)^T D B(q_m) (R, n, n): the damping C / beta (damping3d.py)."""
+        return self.strain.material_tangent(qm)
 
     def compiled_law(self) -> dict:
         """Return Model3D's nl_* fields of this law (_kernel3d_nonlinear.h)."""

@@ -29,11 +29,17 @@ rib's first in-plane mode, which carries ~92 % of the stage-2 tip crest, so that
 exactly zeta; the out-of-plane bending and torsion modes, zeta omega_i / omega_1
 (tests/test_umbrella3d_damping.py measures both decays).
 
-In the midpoint step the damping force is -C dq / h (dq the step's increment of a rib's
-coordinates), so the step dissipates exactly dq . C dq / h >= 0 (with the stage-2 mode fit,
+The co-rotational ribs (model flexible-nonlinear, corotational3d.py) damp their co-rotated
+strain rates alike, as the planar co-rotational model (nonlinear.py): C(q) = beta B(q)^T D
+B(q), B = ds/dq of the elements' strains (axial, both bendings, twist), with the same beta:
+its material tangent (model.material_tangent; K for the linear beams, which is its value at
+q = 0, so small motion is the linear ribs' damping).  In the midpoint step the damping
+force is -C(q_m) dq / h (dq the step's increment of a rib's coordinates, q_m its midpoint;
+h/2 C(q_m) in the iteration matrix, at the iterate it is factored at), so the step
+dissipates exactly dq . C(q_m) dq / h >= 0 (with the stage-2 mode fit, linear beams only,
 plus its share, integrators.LockedModeFit.damping_force); the step's energy target takes
-it off and StepWork.damping carries it to Record3D, whose energy balance adds it back.
-Only the linear beams (model flexible): the co-rotational ribs refuse it (params3d.py).
+it off and StepWork.damping carries it to Record3D, whose energy balance adds it back
+(tests/test_umbrella3d_damping.py, tests/test_umbrella3d_corotational_damping.py).
 """
 from __future__ import annotations
 
@@ -51,6 +57,10 @@ def damping_beta(params) -> float:
     return damping_beta_of(planar_model(planar))
 
 
-def damping_force(stiffness: np.ndarray, beta: float, dqr: np.ndarray, h: float) -> np.ndarray:
-    """Return each rib's damping force -beta K dq / h over a step (R, n)."""
-    return -beta / h * np.einsum('rij,rj->ri', stiffness, dqr)
+def damping_force(tangent: np.ndarray, beta: float, dqr: np.ndarray, h: float) -> np.ndarray:
+    """
+    Return each rib's damping force -beta B^T D B dq / h over a step (R, n).
+
+    tangent: each rib's B^T D B at the step's midpoint (R, n, n): K for the linear beams.
+    """
+    return -beta / h * np.einsum('rij,rj->ri', tangent, dqr)

@@ -408,8 +408,10 @@ class MidpointUmbrella:
             applied_r[:, m.i_a1] += torque
             applied_s = np.zeros(ns)
             applied_s[0] = -force
+            tangent = m.material_tangent(qmr) if beta else None
             if beta:
-                applied_r, applied_s = self._damped(applied_r, applied_s, dqr, dqs, h, fit)
+                applied_r, applied_s = self._damped(applied_r, applied_s, tangent, dqr, dqs,
+                                                    h, fit)
             cons_r = np.einsum('rji,rj->ri', jg_rr, lam_r)
             cons_s = np.einsum('rji,rj->i', jm_rs, lam_r) + jm_ss.T @ lam_s
             scheme_pr1, scheme_ps1 = (pr1, ps1) if fit is None else fit.transpose(pr1, ps1)
@@ -420,7 +422,7 @@ class MidpointUmbrella:
                 gyro = m.gyroscopic(kinm, dqr / h)
                 extra = m.elastic_step_matrix(qr0, qr, h) + 0.5 * h * gyro
                 if beta:
-                    extra += 0.5 * h * beta * m.stiffness
+                    extra += 0.5 * h * beta * tangent
                 extra[:, m.i_a1, m.i_a1] -= 0.5 * h * h * slope
                 factored = arrow.factor(*self._blocks(
                     mass1, (jm_rr, jm_rs, jm_ss), j_r[:3], stuck, active, extra))
@@ -470,7 +472,8 @@ class MidpointUmbrella:
         # the damping's dissipation dq . C dq / h (+ the fit's share): the work it took
         w_damp = 0.0
         if beta:
-            fr, fs = self._damped(np.zeros_like(dqr), np.zeros(ns), dqr, dqs, h, fit)
+            tangent = m.material_tangent(qr0 + 0.5 * dqr)
+            fr, fs = self._damped(np.zeros_like(dqr), np.zeros(ns), tangent, dqr, dqs, h, fit)
             w_damp = -(float(np.sum(fr * dqr)) + float(fs @ dqs))
         t_target = (0.5 * (np.sum(vr0 * pr0) + vs0 @ ps0) + m.strain_energy(qr0)
                     - m.strain_energy(qr) + w_force + float(np.sum(w_fric)) + w_drive - w_damp)
@@ -507,9 +510,13 @@ class MidpointUmbrella:
         self._kept = (factored, uses + 1, qr, qs, vr, vs, h, locked, np.isnan(stuck))
         return state, StepWork(w_force, w_fric, w_drive, it, factorisations, w_damp)
 
-    def _damped(self, applied_r, applied_s, dqr, dqs, h, fit):
-        """Return the applied forces with the damping's over the step dq (damping3d.py)."""
-        applied_r = applied_r + damping_force(self.model.stiffness, self.damping_beta, dqr, h)
+    def _damped(self, applied_r, applied_s, tangent, dqr, dqs, h, fit):
+        """
+        Return the applied forces with the damping's over the step dq (damping3d.py).
+
+        tangent: B^T D B at the step's midpoint (model.material_tangent: K, linear beams).
+        """
+        applied_r = applied_r + damping_force(tangent, self.damping_beta, dqr, h)
         if fit is not None:         # (the fit's share: its damped modes' exact decay)
             fr, fs = fit.damping_force(dqr, dqs, h)
             applied_r, applied_s = applied_r - fr, applied_s - fs

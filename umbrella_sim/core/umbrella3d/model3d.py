@@ -459,6 +459,10 @@ class UmbrellaModel3D:
         """Return the Newton matrix's elastic block h^2/2 dG/dq1 (R, n, n): h^2/4 K."""
         return 0.25 * h * h * self.stiffness
 
+    def material_tangent(self, qm) -> np.ndarray:
+        """Return B^T D B at the midpoint qm (R, n, n), C / beta (damping3d.py): K."""
+        return self.stiffness
+
     def compiled_law(self):
         """Return the compiled step's elastic law fields (Model3D.nl_*), None: the linear K."""
         return None

@@ -282,12 +282,6 @@ class UmbrellaRibsParams:
             raise ValueError(f'parameter model={self.planar.model!r}: the umbrella model is '
                              'flexible (3D Euler-Bernoulli beams) or flexible-nonlinear '
                              '(co-rotational beams) only')
-        if self.planar.damping_ratio != 0.0 and self.planar.model != 'flexible':
-            raise ValueError(f'parameter damping_ratio={self.planar.damping_ratio:g} with '
-                             f"model {self.planar.model!r}: the umbrella's co-rotational "
-                             'ribs have no structural damping (its linear 3D beams, model '
-                             "'flexible', and the planar model have it); its hinges take "
-                             'hinge_viscous')
         if self.base == 'free' and self.planar.lock == 'energy':
             raise ValueError("parameter lock='energy' with base 'free': the energy lock keeps "
                              "each rib's kinetic energy and would change the momentum of a "
