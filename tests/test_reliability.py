@@ -381,16 +381,33 @@ def test_a_storm_of_service_calls_is_answered_and_the_run_goes_on(probe, tmp_pat
     assert counts['commands_accepted'] == '100', counts
 
 
+#: sim s (the node runs in real time) after a flood's first command by which each command a
+#: second publisher sent during the flood has been taken: a bound on a failure, as the timeouts
+#: here.  A healthy node takes them within the flood (0.1-0.5 s after its first); one the
+#: transport dropped (the node's shared-memory port overflows while its DDS thread waits for
+#: the CPU) is re-sent at its idle writer's next heartbeat, every 3 s in Fast DDS (received
+#: 2.9-3.05 s after it was sent, measured), a repair lost in turn 3 s after that.  The defect
+#: this guards kept 5 of 6 more than 65 s; a node taking one command a turn of its executor
+#: took the fourth 11.6 s after the flood's first, 18 s with a 100-sample reader as well
+HELD_BACK_S = 10.0
+
+
 @pytest.mark.ros
 @pytest.mark.slow
 def test_a_flood_from_one_publisher_does_not_hold_back_another(probe, tmp_path):
     """
-    A second publisher's commands sent during a flood are taken among the flood's, not after.
+    A second publisher's commands sent during a flood are not held back behind it.
 
     One reliable writer sends 5000 commands as fast as DDS lets it; another sends one after
-    each thousand.  Each of the second's is recorded before the flood's last (a full reader
-    made DDS refuse a sample until the writer's next heartbeat, seconds later: the issue's
-    5 of 6 had not arrived 65 s after).
+    each thousand.  Each of the second's is recorded within HELD_BACK_S of the flood's first
+    (the issue's 5 of 6 had not arrived 65 s after).  Their place among the flood's says
+    nothing of that: Fast DDS hands a reader's samples out in the order of their source
+    timestamps, so a command held back seconds is still recorded among the flood's commands
+    sent after it while a backlog of them waits (so it was with the intake slowed to one a
+    turn and a 100-sample reader); and one the transport dropped is recorded after the
+    flood's last whenever the flood is drained before its writer's next heartbeat (3 s), as
+    a node taking 19 000 a second does in 0.3 s (1 run in 30 failed on that, 3 in 30 with a
+    core kept busy).
     """
     bag = tmp_path / 'flood'
     probe.subscribe('/diagnostics', DiagnosticArray)
@@ -416,11 +433,12 @@ def test_a_flood_from_one_publisher_does_not_hold_back_another(probe, tmp_path):
              lambda: 'not every command was counted: '
                      f"{diag_values(probe.messages('/diagnostics')[-1])}")
         assert node.stop(signal.SIGINT) == 0
-    order = [m.data for _, m in read_log(str(bag)).decoded('/sleeve_force')]
-    assert sorted(order) == sorted(flood + other)       # every one, once
-    last_of_flood = order.index(flood[-1])
-    assert all(order.index(v) < last_of_flood for v in other), \
-        [(v, order.index(v), last_of_flood) for v in other]
+    recorded = read_log(str(bag)).decoded('/sleeve_force')
+    assert sorted(m.data for _, m in recorded) == sorted(flood + other)     # every one, once
+    taken_at = {m.data: t for t, m in recorded}
+    after_start = {v: round(taken_at[v] - taken_at[flood[0]], 3) for v in other}
+    assert max(after_start.values()) <= HELD_BACK_S, \
+        f"second publisher's commands taken (s after the flood's first): {after_start}"
 
 
 class QueuedCommands:

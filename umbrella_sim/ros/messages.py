@@ -87,10 +87,10 @@ ABSOLUTE_TOPIC_NAMES = frozenset(t.name for t in TOPICS.values() if t.name.start
 #: keep all: with a reliable publisher, a burst of commands faster than the node takes them
 #: is held back by DDS flow control instead of being overwritten in the reader's history
 #: (keep-last 10 lost ~4 % of a 5 kHz stream); every received value is counted and recorded.
-#: depth 10 000: the reader's queue before flow control holds the publishers back (Fast DDS
-#: takes it from the depth); once full, a second publisher's command waited for its writer's
-#: next heartbeat, behind a whole flood of another's (a loaded node fell 400-1000 behind a
-#: flood: 3 of 7 runs of the flood test put one after it at depth 100, none of 18 at 10 000)
+#: The depth does not bound a keep-all reader in Fast DDS, its resource limits do (5000
+#: samples by default): a reader that took nothing accepted 4000 commands and not all of 7000,
+#: at depth 100 as at 10 000; past that, DDS refuses a command until its writer's next
+#: heartbeat (every 3 s); the node takes 10 000-19 000 a second (bench/bench_commands.py).
 COMMAND = Topic('sleeve_force', Float64, QoSProfile(
     depth=10000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_ALL,
     durability=DurabilityPolicy.VOLATILE))
