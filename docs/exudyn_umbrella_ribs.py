@@ -41,14 +41,29 @@ constant J = 0.1406 b^4 and G = E / 2(1 + nu), nu = 0.33; shear stiffness G A (5
 shear a slender beam's (b / l = 0.02) bending barely feels; the rotary inertia rho I of the
 sections (the Euler-Bernoulli model has none of bending: ~(b / l)^2 of the mass).
 
+A free-floating bus (--bus): three ribs (azimuths 2 pi k / 3) on a rigid bus (BUS: 10 kg,
+0.5 kg m^2 about X and Z, 0.1 about the hub axis Y; its mass centre at the hub, the origin),
+the leaf hinges O joined to the bus, the sleeve a body (massless, as the umbrella's default)
+sliding on the bus's Y axis and turning with it, each H hinged to it about e_t, the stop the
+sleeve's joint holding its height on the bus.  Rib 1 carries the tip mass (BUS_TIP: 0.1 kg at
+0.05 m along e_t), so the bus tilts (the mass centre moves off the axis) and turns about the
+hub axis (the offset swings about it) in reaction.  At t = 0 the whole system takes the rigid
+velocity that makes its momentum zero (the umbrella's rule for a free bus: the bus's own).
+The momentum is the discrete model's, Exudyn's mass matrix applied to the rigid motions'
+velocities (translations, turns about the origin: every node's w x r and Euler-parameter
+rates); the bus's turn and tilt by outputs3d.bus_attitude, the tips in the bus's frame.
+
 Needs Exudyn (``pip install exudyn``; never a dependency of umbrella_sim).  Writes
-docs/exudyn_umbrella_ribs.json (tests/test_umbrella3d_exudyn.py compares with it); progress
-on stderr.
+docs/exudyn_umbrella_ribs.json (tests/test_umbrella3d_exudyn.py compares with it) or, with
+--bus, docs/exudyn_umbrella_bus.json (tests/test_umbrella3d_exudyn_bus.py); progress on
+stderr.
 
     python docs/exudyn_umbrella_ribs.py [--cases n:h:m:d ...] [--append] [--out FILE]
+    python docs/exudyn_umbrella_ribs.py --bus [--cases n:h[:m:d] ...] [--append] [--out FILE]
 
 The default cases (tip masses 0.01 kg at 0.01 m and 0.1 kg at 0.07 m; n = 4, 8, and 16 for
-the second) take 22, 47, 22, 49 and 307 CPU s on a loaded 2-core machine.
+the second) take 22, 47, 22, 49 and 307 CPU s on a loaded 2-core machine; the bus's (n = 4,
+8, 16, and the tip mass in the plane at 8 and 16) XXX CPU s together (load 2.3).
 """
 import argparse
 import json
@@ -87,8 +102,9 @@ BUS_RIBS = 3
 BUS = (10.0, 0.5, 0.1)
 BUS_TIP = (0.1, 0.05)
 BUS_STAGE2 = 0.02
-#: n:h, elements a segment and step (s)
-BUS_CASES = ('4:2e-5', '8:1e-5', '16:5e-6')
+#: n:h[:m:d], elements a segment, step (s) and rib 1's tip mass and offset (default BUS_TIP);
+#: the tip mass in the rib's plane (d = 0) sets the offset's share of the difference apart
+BUS_CASES = ('4:2e-5', '8:1e-5', '16:5e-6', '8:1e-5:0.1:0', '16:5e-6:0.1:0')
 #: n:h:m:d, elements a segment, step (s), rib 1's tip mass (kg) and its offset along e_t (m)
 DEFAULT_CASES = ('4:2e-5:0.01:0.01', '8:1e-5:0.01:0.01', '4:2e-5:0.1:0.07', '8:1e-5:0.1:0.07',
                  '16:5e-6:0.1:0.07')
@@ -459,12 +475,12 @@ def run(n: int, h: float, tip: tuple) -> dict:
     return out
 
 
-def run_bus(n: int, h: float) -> dict:
+def run_bus(n: int, h: float, tip: tuple = BUS_TIP) -> dict:
     """Run the three ribs on the free bus (BUS): the bus's motion, the momentum, the tips."""
     p = UmbrellaParams(v0=V0)
 
     def build(locked):
-        ribs = Ribs(p, n, locked=locked, tip=BUS_TIP, ribs=BUS_RIBS, bus=BUS)
+        ribs = Ribs(p, n, locked=locked, tip=tip, ribs=BUS_RIBS, bus=BUS)
         if not locked:
             ribs.momentum_zeroed()
         return ribs
@@ -473,7 +489,7 @@ def run_bus(n: int, h: float) -> dict:
     second, third, t_lock, mass = d['second'], d['third'], d['t_lock'], d['mass']
     out = {'case': 'free bus', 'elements_per_segment': n, 'time_step': h, 'v0': V0,
            'ribs': BUS_RIBS, 'bus_mass': BUS[0], 'bus_inertia': BUS[1], 'bus_inertia_y': BUS[2],
-           'sleeve_mass': 0.0, 'tip_mass_rib1': BUS_TIP[0], 'tip_offset_z_rib1': BUS_TIP[1],
+           'sleeve_mass': 0.0, 'tip_mass_rib1': tip[0], 'tip_offset_z_rib1': tip[1],
            'stage2': BUS_STAGE2, 'deploy_time': t_lock,
            'kinetic_energy_before_lock': 0.5 * d['qd'] @ mass @ d['qd'],
            'kinetic_energy_after_lock': 0.5 * d['qd_lock'] @ mass @ d['qd_lock']}
@@ -518,7 +534,7 @@ def main():
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--cases', nargs='+',
                     help='n:h:m:d, elements a segment, step (s), tip mass (kg), offset (m); '
-                    'with --bus n:h (default: %s; --bus: %s)'
+                    'with --bus n:h[:m:d] (default: %s; --bus: %s)'
                     % (' '.join(DEFAULT_CASES), ' '.join(BUS_CASES)))
     ap.add_argument('--bus', action='store_true',
                     help='the free bus case (three ribs) into docs/exudyn_umbrella_bus.json')
@@ -559,10 +575,11 @@ def main_bus(args):
         with open(out, encoding='utf-8') as fh:
             results = json.load(fh)['cases']
     for case in args.cases or BUS_CASES:
-        n, h = case.split(':')
-        print(f'free bus: n = {n}, h = {h}', file=sys.stderr, flush=True)
-        new = run_bus(int(n), float(h))
-        key = ('elements_per_segment', 'time_step')
+        n, h, *tip = case.split(':')
+        tip = tuple(map(float, tip)) if tip else BUS_TIP
+        print(f'free bus: n = {n}, h = {h}, tip {tip}', file=sys.stderr, flush=True)
+        new = run_bus(int(n), float(h), tip)
+        key = ('elements_per_segment', 'time_step', 'tip_mass_rib1', 'tip_offset_z_rib1')
         results = [c for c in results if [c[k] for k in key] != [new[k] for k in key]]
         results.append(new)
         short = {k: v for k, v in new.items() if not k.startswith(('rib', 'bus_s'))}
