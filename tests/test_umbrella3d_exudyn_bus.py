@@ -114,6 +114,7 @@ def umbrella_run(model: str, ref: dict) -> dict:
             'linear_momentum': a['linear_momentum'], 'angular_momentum': a['angular_momentum'],
             'momentum_scale': rib_mass * abs(ref['v0']),
             'leaf_length': sim.params.planar.l1 + sim.params.planar.l2,
+            'lock_energy_loss': float(a['lock_energy_loss'][-1]),
             'max_out_of_plane': getattr(sim.model, 'max_out_of_plane', None)}
 
 
