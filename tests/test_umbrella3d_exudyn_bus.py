@@ -251,3 +251,22 @@ def test_a_tip_mass_in_the_plane_agrees_too(in_plane_run):
     for run in (fine, in_plane_run):
         assert np.abs(run['bus'][:, BUS_COLUMNS['bus.turn']]).max() < 1e-6
         assert np.abs(run['tip'][:, 1, 2]).max() < 1e-6
+
+
+def test_bus_attitude_reads_the_turn_and_the_tilt():
+    """A turn a about Y then a tilt b about X (either order): turn a, tilt |b|."""
+    def rot(axis, angle):
+        c, s = np.cos(angle), np.sin(angle)
+        i, j = [(1, 2), (2, 0), (0, 1)][axis]
+        r = np.eye(3)
+        r[i, i] = r[j, j] = c
+        r[i, j], r[j, i] = -s, s
+        return r
+    for a, b in ((0.3, 0.0), (0.0, -0.2), (-0.7, 0.15), (2.5, 0.4)):
+        for r in (rot(1, a) @ rot(0, b), rot(0, b) @ rot(1, a), rot(1, a) @ rot(2, b)):
+            turn, tilt = bus_attitude(r)
+            assert abs(turn - a) < 1e-12 and abs(tilt - abs(b)) < 1e-12
+    # vectorised, and the umbrella's own attitude R = Ry(psi) Rx(beta) Rz(gamma)
+    frames = np.array([BusFrame.of((0.1 * k, 0.0, 0.0)).rot for k in range(4)])
+    turn, tilt = bus_attitude(frames)
+    assert np.allclose(turn, 0.1 * np.arange(4), atol=1e-12) and np.allclose(tilt, 0.0)
