@@ -567,7 +567,8 @@ recording and tools for N ribs (the ROS side still runs the planar model). The g
 exact option, `model: flexible-nonlinear` (each rib's beams co-rotational: the planar
 element in the rib's plane, out-of-plane bending and torsion small rotations in its
 co-rotated frame; compiled, _kernel3d_nonlinear.h, its stress figures too: 6 x 1 at 59 and
-91 us a step in stage 1 and 2), is docs/umbrella3d_nonlinear.md.
+91 us a step in stage 1 and 2; checked against Exudyn's geometrically exact beams on a fixed
+hub and on a free-floating bus), is docs/umbrella3d_nonlinear.md.
 """
 
 

@@ -553,3 +553,18 @@ def energy_balance3d(rows, initial_energy: float, energy=None) -> np.ndarray:
         energy = rows['kinetic_energy'] + rows['strain_energy']
     return (energy - initial_energy - rows['work'] - np.sum(rows['friction_work'], axis=-1)
             - rows['drive_work'] + rows['lock_energy_loss'] + rows['damping_dissipation'])
+
+
+def bus_attitude(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return the bus's turn about the hub axis and the hub axis's tilt (rad) of rotations R.
+
+    R (..., 3, 3) takes the bus frame to the inertial one.  The turn is the twist of R's
+    swing-twist decomposition about Y, 2 atan2(R_02 - R_20, 1 + tr R) (the quaternion's
+    2 atan2(q_y, q_w)); the tilt is the angle between the bus's Y axis and the inertial Y,
+    acos(R_11).  Neither depends on how the attitude is parametrised.
+    """
+    rot = np.asarray(rot)
+    trace = rot[..., 0, 0] + rot[..., 1, 1] + rot[..., 2, 2]
+    turn = 2.0 * np.arctan2(rot[..., 0, 2] - rot[..., 2, 0], 1.0 + trace)
+    return turn, np.arccos(np.clip(rot[..., 1, 1], -1.0, 1.0))
