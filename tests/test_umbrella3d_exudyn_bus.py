@@ -54,9 +54,12 @@ tip +0.79 %, its history 0.92 %, the bus's turn 0.45 %) where the reference move
 (n = 8) leaves relative differences of the same size (rib 1's tip, its history, the turn:
 0.59, 1.6, 0.62 % against 0.75, 1.06, 0.63 %): a difference that goes with the tip mass's
 offset, in proportion, as in the fixed-hub comparison (+0.92 %, tests/
-test_umbrella3d_exudyn.py).  The likely cause, not verified: the co-rotational ribs carry the
-offset by the section's linear small rotation (beam3d.BeamBody3D.attached_point), without its
-products with the section's in-plane turn at G.  The tolerances above include it.
+test_umbrella3d_exudyn.py).  A share of it, measured (docs/umbrella3d_nonlinear.md): the
+co-rotational ribs carry the offset by the section's linear small rotation (beam3d.BeamBody3D.
+attached_point); the finite one brings rib 1's out-of-plane tip to +0.24 % and the in-plane
+tips within 0.21 %, but leaves ribs 1 and 2's out-of-plane histories, rib 2's tip and the
+bus's turn 0.5-1.1 % off.
+The tolerances above include it.
 
 The momentum: ours stays zero to round-off (linear 2e-13 N s; angular, to the Newton
 tolerance, 1e-7 N m s), the reference's to its integrator's error (1.2e-8 at the lock at n =
