@@ -555,7 +555,9 @@ coordinates, about 70 us of it); CPU s a simulated second in 1 ms blocks with Re
 figures, driven 3.9 / 1.6 deploying and 4.0 / 1.8 in stage 2, free 3.6 / 1.7 and 3.7 / 2.6
 (hub fixed 0.7 and 0.9-1.2). The free system's fit is dense: its cost grows as the square of
 the ribs (12 x 2 at 33 us: 372 modes of 499 coordinates, 1.22 ms a stage-2 step against 0.42
-unfitted; the driven hub's 0.51). The fitted stage 2 at 0.1 ms against the same code
+unfitted; the driven hub's 0.51; ribs x 1 at 0.1 ms, the compiled step alone in stage 2, load
+~3.3: 6 / 12 / 24 ribs 170 / 482 / 1581 us on the free bus, 49 / 97 / 193 us with the hub fixed,
+whose cost a rib stays 8.0 us). The fitted stage 2 at 0.1 ms against the same code
 converged (2.5 us, no fit), tips in and out of plane 0.1 s past a plastic lock at V0 = -0.5
 (3 ribs, a tip mass, a kicked rib; times from each run's lock): free bus (5 kg) 1.27 mm,
 driven 1.17 mm (hub fixed 0.96 mm) of 195 / 140 mm amplitude, where the unfitted 33 us step
