@@ -27,6 +27,19 @@ static double stiffness_weight(const Model3D *m, double h) {
     return 0.25 * h * h + 0.5 * h * m->damping_beta;
 }
 
+/* y (len) += sum_j u_j (damp_j / h) (u_j . dq): the share of a fit's modes (rows u_j over
+ * len coordinates, each mode's damping change damp_j) in the damping force */
+static void modal_damping(const double *u, const double *damp, int modes, int len,
+                          const double *dq, double h, double *y) {
+    for (int j = 0; j < modes; j++) {
+        const double *uj = u + (size_t)j * len;
+        double d = 0.0;
+        for (int a = 0; a < len; a++) d += uj[a] * dq[a];
+        d *= damp[j] / h;
+        for (int a = 0; a < len; a++) y[a] += uj[a] * d;
+    }
+}
+
 /* y (N + ns) = C dq / h + the fit's share, at the iterate's step x->dq */
 static void damping_forces(Ctx3D *x, const Fit3D *fit, double h, double *y) {
     const Model3D *m = x->m;
@@ -44,26 +57,12 @@ static void damping_forces(Ctx3D *x, const Fit3D *fit, double h, double *y) {
     for (int i = N; i < L; i++) y[i] = 0.0;
     if (!fit || !fit->damp) return;
     if (fit->whole) {                  /* the free system's modes: rows over every coordinate */
-        for (int j = 0; j < fit->r; j++) {
-            const double *u = fit->u + (size_t)j * L;
-            double d = 0.0;
-            for (int a = 0; a < L; a++) d += u[a] * x->dq[a];
-            d *= fit->damp[j] / h;
-            for (int a = 0; a < L; a++) y[a] += u[a] * d;
-        }
+        modal_damping(fit->u, fit->damp, fit->r, L, x->dq, h, y);
         return;
     }
-    for (int r = 0; r < R; r++) {      /* each rib's modes */
-        const double *dq = x->dq + (size_t)r * n;
-        double *yr = y + (size_t)r * n;
-        for (int j = 0; j < fit->r; j++) {
-            const double *u = fit->u + ((size_t)r * fit->r + j) * n;
-            double d = 0.0;
-            for (int a = 0; a < n; a++) d += u[a] * dq[a];
-            d *= fit->damp[(size_t)r * fit->r + j] / h;
-            for (int a = 0; a < n; a++) yr[a] += u[a] * d;
-        }
-    }
+    for (int r = 0; r < R; r++)        /* each rib's modes */
+        modal_damping(fit->u + (size_t)r * fit->r * n, fit->damp + (size_t)r * fit->r, fit->r,
+                      n, x->dq + (size_t)r * n, h, y + (size_t)r * n);
 }
 
 /* y (rib r's n) += its damping force's negative (damping_forces' x->damp) */
