@@ -64,10 +64,18 @@ def test_per_rib_values_as_lists_and_overrides():
     assert [r.planar.l2 for r in p.ribs_list()] == [0.6, 0.5, 0.5]
     assert all(r.planar.youngs_modulus == 7e10 for r in p.ribs_list())
     assert p.replace(ribs=3).rib(2).hinge_coulomb == 0.5
+    # rib.<name>, the node's and the command lines' spelling, is the same list everywhere
+    q = UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib.tip_mass': [0.0, 0.1, 0.0],
+                                         'rib2.hinge_coulomb': 0.5, 'rib0.l2': 0.6,
+                                         'youngs_modulus': 7e10})
+    assert q == p
 
 
 @pytest.mark.parametrize('values, culprit', [
     ({'ribs': 3, 'tip_mass': [0.0, 0.1]}, 'tip_mass'),
+    ({'ribs': 3, 'rib.tip_mass': [0.0, 0.1]}, 'rib.tip_mass'),     # as the user spelled it
+    ({'ribs': 2, 'rib.tip_masss': [0.0, 0.1]}, 'rib.tip_masss'),
+    ({'ribs': 2, 'rib.tip_mass': [0.0, 0.1], 'tip_mass': 0.2}, 'tip_mass'),   # twice
     ({'ribs': 2, 'rib5.tip_mass': 0.1}, 'rib5.tip_mass'),
     ({'ribs': 2, 'rib1.stiffness': 1.0}, 'stiffness'),
     ({'ribs': 2, 'rib1.hinge_coulomb': -1.0}, 'rib1.hinge_coulomb'),

@@ -226,13 +226,21 @@ class UmbrellaRibsParams:
         Build from {name: value}: planar names, umbrella names, rib lists and overrides.
 
         A planar name with a list value, or rib<k>.<planar name>, is a per-rib value; a planar
-        name with one value sets it for every rib.  Raises ValueError naming the culprit.
+        name with one value sets it for every rib.  rib.<name> (the node's and the command
+        lines' spelling) is <name>'s list.  Raises ValueError naming the culprit as given.
         """
         planar = planar or UmbrellaParams()
-        base_planar, own, lists, overrides = {}, {}, {}, {}
+        base_planar, own, lists, overrides, spelled = {}, {}, {}, {}, {}
         for name, value in values.items():
             match = _OVERRIDE.match(name)
-            if match:
+            if name.startswith(RIB_LIST_PREFIX):
+                key = name[len(RIB_LIST_PREFIX):]
+                _rib_spec(key, name)
+                if key in lists:
+                    raise ValueError(f'parameter {name}: given twice (as {key} too)')
+                lists[key], spelled[key] = (list(value) if isinstance(value, (list, tuple))
+                                            else value), name
+            elif match:
                 k, key = int(match.group(1)), match.group(2)
                 _rib_spec(key)
                 overrides.setdefault(k, {})[key] = value
@@ -240,8 +248,12 @@ class UmbrellaRibsParams:
                 own[name] = UMBRELLA_SPECS[name].coerce(value)
             elif isinstance(value, (list, tuple)):
                 _rib_spec(name)
+                if name in lists:
+                    raise ValueError(f'parameter {name}: given twice (as {spelled[name]} too)')
                 lists[name] = list(value)
             elif name in RIB_SPECS:
+                if name in lists:
+                    raise ValueError(f'parameter {name}: given twice (as {spelled[name]} too)')
                 lists[name] = value
             else:
                 base_planar[name] = value
@@ -251,7 +263,8 @@ class UmbrellaRibsParams:
         for name, value in lists.items():
             if isinstance(value, list):
                 if len(value) != n:
-                    raise ValueError(f'parameter {name}: a list of {len(value)} values for '
+                    raise ValueError(f'parameter {spelled.get(name, name)}: a list of '
+                                     f'{len(value)} values for '
                                      f'{n} ribs (give one per rib)')
                 for k, v in enumerate(value):
                     per_rib[k][name] = v
@@ -270,8 +283,7 @@ class UmbrellaRibsParams:
     def of_node(cls, umbrella: Mapping[str, Any], planar: UmbrellaParams
                 ) -> 'UmbrellaRibsParams':
         """Build from a node's umbrella parameters (umbrella_values: rib.<name> lists...)."""
-        return cls.from_mapping({name[len(RIB_LIST_PREFIX):] if name.startswith(RIB_LIST_PREFIX)
-                                 else name: value for name, value in umbrella.items()}, planar)
+        return cls.from_mapping(umbrella, planar)
 
     def validated(self) -> 'UmbrellaRibsParams':
         """Return self if every value is in range, else raise ValueError naming it."""
@@ -396,10 +408,12 @@ def rigid_rib_angle(l1: float, l3: float, y: float) -> float:
                   xtol=1e-15)
 
 
-def _rib_spec(name: str) -> None:
+def _rib_spec(name: str, given: str | None = None) -> None:
+    """Refuse a per-rib name no rib takes (given: as the user spelled it, for the error)."""
     if name not in RIB_SPECS and name not in RIB_PLANAR_NAMES:
         known = sorted(RIB_SPECS) + list(RIB_PLANAR_NAMES)
-        raise ValueError(f"unknown per-rib parameter {name!r}; a rib takes {', '.join(known)}")
+        raise ValueError(f'unknown per-rib parameter {given or name!r}; a rib takes '
+                         + ', '.join(known))
 
 
 def node_model(values: Mapping[str, Any]) -> 'UmbrellaParams | UmbrellaRibsParams':
