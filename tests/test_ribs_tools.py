@@ -24,6 +24,7 @@ naming why.
 """
 import json
 import os
+import re
 
 import pytest
 
@@ -177,3 +178,29 @@ def test_a_nodes_parameters_make_the_model_by_one_rule():
     assert isinstance(node_model({'l2': 0.6}), UmbrellaParams)
     with pytest.raises(ValueError, match='rib1.l2'):
         node_model({'rib1.l2': 0.6})
+
+
+def test_replay_info_says_what_a_recording_holds(tmp_path, capsys):
+    """umbrella_replay --info: topics, counts and QoS, and the run (no ros2 CLI needed)."""
+    from umbrella_sim.tools import replay
+
+    bag = tmp_path / 'ribs'
+    assert cli.main([*RUN, '--mcap', str(bag), '--publish-rate', '500']) == 0
+    capsys.readouterr()
+    assert replay.main([str(bag), '--info']) == 0
+    out = capsys.readouterr().out
+    log = read_log(str(bag))
+    for topic in log.topics():
+        kind = log.channels[topic][0]
+        assert f'{topic} ' in out and kind in out
+    stresses = log.count(log.find_topic('rib_peak_stress'))
+    assert stresses == 21
+    assert re.search(r'/rib_peak_stress +std_msgs/msg/Float64MultiArray  21 msgs', out)
+    assert '2 ribs' in out and 'physics step 0.0002 s' in out
+    assert f'messages:      {log.message_count}' in out
+    # republishing's and re-simulation's options: refused, not ignored
+    for extra in (['--rate', '2'], ['--resimulate'], ['--tolerance', '1e-3']):
+        with pytest.raises(SystemExit) as exc:
+            replay.main([str(bag), '--info', *extra])
+        assert exc.value.code == 2
+    assert '--info' in capsys.readouterr().err

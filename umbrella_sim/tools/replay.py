@@ -18,6 +18,7 @@ umbrella_replay LOG: republish a recorded run over ROS 2, or re-simulate and che
     umbrella_replay run1                      # republish with the recorded timing
     umbrella_replay run1 --rate 2 --start-offset 0.1 --loop
     umbrella_replay run1 --resimulate         # re-run the physics from the log and compare
+    umbrella_replay run1 --info               # what it holds (as `ros2 bag info`), no ROS
 
 Republishing sends the recorded serialized bytes (exactly what was recorded) on the
 recorded topics with the recorded QoS, including /clock, spaced by the recorded log times
@@ -35,7 +36,8 @@ import time
 import numpy as np
 
 from .arguments import ArgumentParser
-from ..bag.format import APPLIED_SUFFIX, REFUSED_SUFFIX, TOPICS_RECORD
+from ..bag.format import (APPLIED_SUFFIX, BUILD_RECORD, EVENTS_RECORD, MESH_RECORD,
+                          REFUSED_SUFFIX, SUMMARY_RECORD, TOPICS_RECORD)
 from ..bag.provenance import build_environment
 from ..bag.reader import LogData, LogError, qos_from_yaml, read_log
 from ..core.driver import RunDriver
@@ -476,6 +478,57 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
 
 
 @interruptible('umbrella_replay', 'nothing was written')
+def info_text(log: LogData) -> str:
+    """
+    Return what a recording holds, as `ros2 bag info` says it, and the run it is of.
+
+    The file, its span of log (sim) time and message count, each topic with its type, count
+    and offered QoS, then the run: model, mesh, ribs, physics step, the lock and where the
+    summary figures are (their record).
+    """
+    first, last = log.time_range
+    span = 0.0 if first is None else (last - first) * 1e-9
+    lines = [f'path:          {log.path}',
+             f'span:          {span:.6f} s of log time'
+             + ('' if first is None else f' (from {first * 1e-9:.6f} s)'),
+             f'messages:      {log.message_count}'
+             + (' (truncated: only complete chunks read)' if log.truncated else ''),
+             'topics:']
+    width = max((len(t) for t in log.topics()), default=0)
+    for topic in log.topics():
+        kind, qos_yaml = log.channels[topic]
+        qos = qos_from_yaml(qos_yaml)
+        lines.append(f'  {topic:<{width}}  {kind}  {log.count(topic)} msgs  '
+                     f'({qos.reliability.name.lower()}, {qos.durability.name.lower()}, '
+                     f'{qos.history.name.lower()} {qos.depth})')
+    if log.ended_early:
+        lines.append(f'recording ended early: {log.ended_early}')
+    mesh = log.metadata.get(MESH_RECORD)
+    if mesh:
+        try:
+            step = f", physics step {log.parameters().get('physics_step', 0.0):g} s"
+        except LogError:
+            step = ''
+        ribs = int(mesh.get('ribs', '1'))
+        lines.append(f"run:           model {mesh.get('model')}, "
+                     f"{mesh.get('elements_per_segment')} element(s) a segment, "
+                     + (f'{ribs} ribs, ' if ribs > 1 else '')
+                     + f"lock {mesh.get('lock')}{step}")
+    events = log.metadata.get(EVENTS_RECORD, {})
+    if events.get('locked') == 'true':
+        lines.append(f"locked:        at t = {float(events['lock_time']):.9f} s "
+                     f"({events.get('lock_kind')} lock)")
+    build = log.metadata.get(BUILD_RECORD)
+    if build:
+        lines.append(f"build:         umbrella_sim {build.get('package_version')} "
+                     f"({build.get('git_revision', '?')[:12]}), kernel {build.get('kernel')}, "
+                     f"{build.get('source', '')}".rstrip(', '))
+    if SUMMARY_RECORD in log.metadata:
+        lines.append(f'summary:       the figures of every physics step in the '
+                     f"'{SUMMARY_RECORD}' metadata record (umbrella_compare prints them)")
+    return '\n'.join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     ros_args = []
@@ -497,21 +550,28 @@ def main(argv: list[str] | None = None) -> int:
                     help='also republish the recorded sleeve_force commands')
     ap.add_argument('--resimulate', action='store_true',
                     help='re-run the physics from the log and compare, no ROS traffic')
+    ap.add_argument('--info', action='store_true',
+                    help='print what the recording holds (topics, counts, QoS, the run) '
+                         'and exit, no ROS traffic')
     ap.add_argument('--tolerance', type=float, default=None,
                     help='largest accepted difference for --resimulate, relative to the '
                          "largest recorded magnitude of the signal's quantity (>= 0; "
                          f'{DEFAULT_TOLERANCE:g})')
     args = ap.parse_args(argv)
     # argument values: an argparse usage error (exit 2) before any file is read
-    if args.resimulate:     # what only republishing takes: refused, not ignored
+    if args.info and (args.resimulate or args.tolerance is not None):
+        ap.error('--info prints what the recording holds: it takes no --resimulate or '
+                 '--tolerance')
+    if args.resimulate or args.info:     # what only republishing takes: refused, not ignored
         given = [flag for flag, value in (
             ('--rate', args.rate is not None), ('--start-offset', args.start_offset != 0.0),
             ('--loop', args.loop), ('--topics', args.topics),
             ('--wait-for-subscribers', args.wait_for_subscribers != 0.0),
             ('--with-commands', args.with_commands), ('--ros-args', ros_args)) if value]
         if given:
-            ap.error(f"{', '.join(given)}: options of republishing; --resimulate re-runs the "
-                     'whole log without ROS traffic')
+            ap.error(f"{', '.join(given)}: options of republishing; "
+                     + ('--info reads the log only' if args.info else
+                        '--resimulate re-runs the whole log without ROS traffic'))
     elif args.tolerance is not None:
         ap.error('--tolerance: an option of --resimulate (republishing compares nothing)')
     args.rate = 1.0 if args.rate is None else args.rate
@@ -526,6 +586,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f'--wait-for-subscribers {args.wait_for_subscribers}: must be >= 0')
     try:
         log = read_log(args.log)
+        if args.info:
+            print(info_text(log))
+            return 0
         if args.resimulate:
             res = resimulate(log)
             worst = max(res['relative_diff'].values())
