@@ -161,31 +161,20 @@ def test_a_recording_does_not_depend_on_the_process_that_made_it(tmp_path):
     assert runs[0] == runs[1]
 
 
-def test_foxglove_layout_plots_the_figures_it_names():
+def assert_layout_plots(name: str, messages: dict, expected: dict) -> dict:
     """
-    config/umbrella.foxglove.json: each plot path, resolved on the node's messages, is its label.
+    Resolve every plot path of config/<name> on messages: each the figure its label names.
 
-    The 3D panel shows the markers in their frame; the plots' paths (topic, field, index)
-    give the tip deflection, the peak stresses, alpha1 and y_H of the sample published.
+    Returns the layout's panels; every expected label drawn, every panel placed.
     """
     import json
     import re
 
     root = Path(__file__).resolve().parents[1]
-    layout = json.loads((root / 'config' / 'umbrella.foxglove.json').read_text('utf-8'))
+    layout = json.loads((root / 'config' / name).read_text('utf-8'))
     panels = layout['configById']
     three_d = panels['3D!umbrella']
     assert three_d['followTf'] == ros_io.INERTIAL_FRAME and list(three_d['topics']) == ['/markers']
-    driver = RunDriver(UmbrellaParams(v0=-0.5), 100.0)
-    for _ in range(15):                              # past the lock (0.09 s): all non-zero
-        next_period(driver)
-    s = driver.publication()
-    assert s.stage.name.lower() == 'locked'
-    messages = built(PublicationEncoder(driver), s, '')
-    expected = {'v_G transverse (m)': s.tip_transverse, 'u_G axial (m)': s.tip_axial,
-                'leaf peak |σ| (Pa)': s.peak_stress_leaf,
-                'link peak |σ| (Pa)': s.peak_stress_link,
-                'alpha1 (rad)': s.alpha1, 'y_H (m)': s.sleeve_position}
     drawn = set()
     for key, panel in panels.items():
         if not key.startswith('Plot!'):
@@ -194,8 +183,8 @@ def test_foxglove_layout_plots_the_figures_it_names():
             topic, *fields = re.split(r'\.', path['value'])
             value = messages[topic.lstrip('/')]
             for field in fields:
-                name, _, index = field.partition('[')
-                value = getattr(value, name)
+                field_name, _, index = field.partition('[')
+                value = getattr(value, field_name)
                 if index:
                     value = value[int(index.rstrip(']'))]
             assert value == pytest.approx(expected[path['label']], rel=1e-12, abs=0), path
@@ -211,3 +200,57 @@ def test_foxglove_layout_plots_the_figures_it_names():
         else:
             stack += [node['first'], node['second']]
     assert placed == set(panels)
+    return panels
+
+
+def test_foxglove_layout_plots_the_figures_it_names():
+    """
+    config/umbrella.foxglove.json: each plot path, resolved on the node's messages, is its label.
+
+    The 3D panel shows the markers in their frame; the plots' paths (topic, field, index)
+    give the tip deflection, the peak stresses, alpha1 and y_H of the sample published.
+    """
+    driver = RunDriver(UmbrellaParams(v0=-0.5), 100.0)
+    for _ in range(15):                              # past the lock (0.09 s): all non-zero
+        next_period(driver)
+    s = driver.publication()
+    assert s.stage.name.lower() == 'locked'
+    messages = built(PublicationEncoder(driver), s, '')
+    expected = {'v_G transverse (m)': s.tip_transverse, 'u_G axial (m)': s.tip_axial,
+                'leaf peak |σ| (Pa)': s.peak_stress_leaf,
+                'link peak |σ| (Pa)': s.peak_stress_link,
+                'alpha1 (rad)': s.alpha1, 'y_H (m)': s.sleeve_position}
+    assert_layout_plots('umbrella.foxglove.json', messages, expected)
+
+
+def test_foxglove_layout_of_six_ribs_plots_each_ribs_figures():
+    """
+    config/umbrella_ribs6.foxglove.json (ribs: 6): each rib's tips, von Mises peak, alpha1.
+
+    Every path resolved on the 6-rib node's messages (their CDR bytes, deserialized) is the
+    figure of the rib its label names, in a deployment where the ribs differ (each kicked out
+    of its plane at its own rate, one stiffer, one with a tip mass).
+    """
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+    from umbrella_sim.ros.ribs_messages import RibsPublicationEncoder
+
+    params = UmbrellaRibsParams.from_mapping({
+        'ribs': 6, 'v0': -0.5, 'rib.out_of_plane_rate': [0.1, 0.3, -0.1, -0.2, 0.05, 0.15],
+        'rib4.youngs_modulus': 8e10, 'rib5.tip_mass': 0.02})
+    driver = RunDriver(params, 100.0)
+    for _ in range(5):
+        next_period(driver)
+    s = driver.publication()
+    raw = RibsPublicationEncoder(driver).messages(s)
+    messages = {'joint_states': deserialize_message(raw['joint_states'], JointState),
+                **{key: deserialize_message(raw[key], Float64MultiArray)
+                   for key in ('rib_tip_deflection', 'rib_peak_stress')}}
+    expected = {'y_H (m)': s.sleeve_position}
+    for k in range(6):
+        expected.update({f'rib{k} w_G (m)': s.tip[k, 2], f'rib{k} v_G (m)': s.tip[k, 1],
+                         f'rib{k} peak von Mises (Pa)': s.stress_von_mises[k],
+                         f'rib{k} alpha1 (rad)': s.alpha1[k]})
+    assert len(set(s.alpha1)) > 1                   # (the ribs differ: each path is its own)
+    assert_layout_plots('umbrella_ribs6.foxglove.json', messages, expected)
