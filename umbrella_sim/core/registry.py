@@ -261,12 +261,12 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "`phase_correction`, 0.35 without): with the thesis's frame, at N = 1 / 2 / 4 / 8 "
        'elements a segment, 0.1 ms / 33.3 / 20 / 7.7 µs with the energy lock (the '
        'default), 0.1 ms / 25 / 16.7 / 7.7 µs with the plastic lock. Measured against '
-       'converged runs (docs/validation.md, step convergence): the deploy time, stage-1 and stage-2 peak '
-       'stresses, stage-2 period and amplitude and the stage-2 tip series within 1 mm of '
-       'every studied case (N = 1-8, V0 = -0.2 and -0.5 m/s, both locks). Past a stage-2 '
-       'tip deflection of 7 % of the leaf (V0 = -0.5: 12-16 %) the modes couple and stage 2 '
-       "of flexible (the umbrella of N ribs too: its worst rib's lock) takes the step its "
-       'lock needs, k physics steps a grid step (every mode '
+       'converged runs (docs/validation.md, step convergence): the deploy time, stage-1 '
+       'and stage-2 peak stresses, stage-2 period and amplitude and the stage-2 tip series '
+       'within 1 mm of every studied case (N = 1-8, V0 = -0.2 and -0.5 m/s, both locks). '
+       'Past a stage-2 tip deflection of 7 % of the leaf (V0 = -0.5: 12-16 %) the modes '
+       "couple and stage 2 of flexible (the umbrella of N ribs too: its worst rib's lock) "
+       'takes the step its lock needs, k physics steps a grid step (every mode '
        'carrying stage-2 stress resolved, and at most 0.1 ms (7 % / deflection)^1.5: 25 us '
        'at N = 1, V0 = -0.5); the grid, inputs and outputs stay at the grid step. '
        'flexible-nonlinear: 0 = 0.1 ms at every mesh, its real-time step (its own rule, '

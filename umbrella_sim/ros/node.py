@@ -212,8 +212,8 @@ class UmbrellaNode(Node):
         self.fault = None
         self._phase = 'deploying'
         self.get_logger().info(
-            f'umbrella_sim {__version__}: model {p.model}, N = {p.elements_per_segment}, '
-            + (f'{self.ribs} ribs (3D umbrella), ' if self.ribs > 1 else '') +
+            f'umbrella_sim {__version__}: model {p.model}, {p.elements_per_segment} '
+            f'element(s) a segment, {f"{self.ribs} ribs (3D umbrella), " * (self.ribs > 1)}'
             f'v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s '
             f'({self.driver.period_steps} per publication at '
             f'{self.driver_rate:g} Hz), kernel {self.driver.backend}')
