@@ -143,7 +143,7 @@ class SimulatedAntenna:
     # ------------------------------------------------------------ commands
     def publish_force(self, force: float, timeout: float = 20.0, check: bool = True) -> None:
         """
-        Publish one sleeve_force command (after the node's subscription has matched).
+        Publish one sleeve_force command (once the node's subscription and it matched).
 
         A force the node would refuse (solver.command_force: NaN, below sleeve_force_min,
         above what the link carries) raises ValueError here, with the node's reason;
@@ -161,9 +161,17 @@ class SimulatedAntenna:
         """Return the sleeve_force publisher, made and matched with the node's subscription."""
         if self._command_pub is None:
             from ..ros import messages as ros_io
+            from ..ros.commands import COMMANDER_LINE
+
+            pattern = re.escape(f"{COMMANDER_LINE} matched on {self.topics['sleeve_force']} (")
+            matched = len(re.findall(pattern, self.node.output()))
             self._command_pub = self.probe.publisher(self.topics['sleeve_force'], self._float64,
                                                      ros_io.COMMAND.qos)
             self.probe.wait_for_subscribers(self._command_pub, timeout=timeout)
+            # this side matches the node's subscription first; the node's side matches this
+            # publisher a few ms later, and a command sent in between would reach the node
+            # only with the publisher's next heartbeat (3 s): its log says when it has
+            self.node.wait_for_log(pattern, timeout=timeout, count=matched + 1)
         return self._command_pub
 
     def play_force_profile(self, profile: Iterable[tuple[float, float]],
