@@ -52,6 +52,7 @@ class SimulatedAntenna:
     """
 
     _count = 0          # probe node names stay unique within a process
+    probe: Probe | None = None      # (set by the constructor)
     _live: dict = {}    # (domain, namespace) -> the NodeProcess of the last antenna there
 
     def __init__(self, parameters: dict | None = None, namespace: str = '',
@@ -274,6 +275,9 @@ class SimulatedAntenna:
     # --------------------------------------------------------------- waits
     def sim_time(self) -> float | None:
         """Stamp of the latest joint state of this run received (s); None before the first."""
+        if self.probe is not None and not self._runs:   # (the first run: the latest, at once)
+            latest = self.probe.last(self.topics['joint_states'])
+            return None if latest is None else _stamp(latest[1])
         states = self.messages('joint_states')
         return _stamp(states[-1]) if states else None
 
@@ -299,9 +303,15 @@ class SimulatedAntenna:
             now = self.sim_time()
             return now is not None and now >= t
 
-        poll(reached, timeout,
-             lambda: f'sim time never reached {t:.6f} s within {timeout} s on '
-                     f"{self.topics['joint_states']} ({self._sim_time_text()})")
+        topic = self.topics['joint_states']
+
+        def failure():
+            return (f'sim time never reached {t:.6f} s within {timeout} s on {topic} '
+                    f'({self._sim_time_text()})')
+        if self.probe is None:
+            poll(reached, timeout, failure)
+        else:       # woken by each state that comes
+            self.probe.wait_until(reached, topic, timeout, failure)
 
     def wait_for(self, key: str, predicate, timeout: float = 20.0, what: str = 'the condition'):
         """Return this run's first message on a node topic (``"joint_states"``...) that fits."""
