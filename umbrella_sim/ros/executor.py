@@ -19,9 +19,10 @@ rclpy's MultiThreadedExecutor (Jazzy's rclpy 7.1) yields a ready callback again,
 it to its thread pool again, for as long as no worker has begun it, and each of these turns
 returns at once: the spinning thread loops holding the GIL while the worker that should run
 the callback waits for the GIL (ros2/rclpy#1452, fixed upstream by ros2/rclpy#1547, not in
-Jazzy's wheels).  Measured on the node in lockstep at 1 kHz: ~270 turns of the executor for
-each /sleeve_force command, which the subscription's callback took 20-240 ms (median 43 ms,
-up to 1.4 s) after it was published, the physics thread waiting for it all along.
+Jazzy's wheels).  Measured on the node in lockstep at 1 kHz, a command every ~20 ms: up to
+~260 turns of the executor for each /sleeve_force command, whose callback ran a median
+1.1-46 ms (8 runs) and up to 148 ms after the command was published, the physics thread
+waiting for it all along; here 0.9-1.2 ms, at most 7 ms.
 
 :class:`CallbackPool` is built on rclpy's public Executor API (``wait_for_ready_callbacks``,
 as a custom executor is meant to be): a callback is submitted to the pool once; yielded
@@ -33,6 +34,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 import threading
+import time
 
 from rclpy.executors import (ConditionReachedException, Executor, ExternalShutdownException,
                              ShutdownException, TimeoutException)
@@ -44,8 +46,10 @@ class CallbackPool(Executor):
     def __init__(self, num_threads: int = 2, *, context=None):
         super().__init__(context=context)
         self._pool = ThreadPoolExecutor(num_threads, thread_name_prefix='callbacks')
-        self._begun: dict = {}      # task submitted -> Event set when a worker begins it
-        self.resubmissions = 0      # turns that found their task not yet begun (waited)
+        # task submitted -> (Event set when a worker begins it, Event set when that call returns)
+        self._calls: dict = {}
+        self.submitted = 0          # tasks handed to the pool (a coroutine's resumption too)
+        self.waited = 0             # turns that found their task not yet begun (and waited)
 
     def _spin_once_impl(self, timeout_sec=None, wait_condition=lambda: False) -> None:
         try:
@@ -53,17 +57,20 @@ class CallbackPool(Executor):
         except (ConditionReachedException, ExternalShutdownException, ShutdownException,
                 TimeoutException):
             return
-        begun = self._begun.get(task)
-        if begun is not None and not begun.is_set():
+        begun, returned = self._calls.get(task, (None, None))
+        if begun is None or returned.is_set():      # new, or a coroutine's task to resume
+            self._calls[task] = begun, returned = threading.Event(), threading.Event()
+            self._pool.submit(_call, task, begun, returned)
+            self.submitted += 1
+        elif not begun.is_set():
             # yielded again before a worker took it: let one take it (this wait releases
             # the GIL), instead of submitting it once more
-            self.resubmissions += 1
+            self.waited += 1
             begun.wait(timeout_sec if timeout_sec is not None and timeout_sec >= 0 else None)
-        else:       # a new task, or a coroutine's task to resume
-            begun = self._begun[task] = threading.Event()
-            self._pool.submit(_begin, task, begun)
-        for done in [t for t in self._begun if t.done()]:
-            del self._begun[done]
+        else:       # begun, not yet marked executing by rclpy's Task: give it the GIL
+            time.sleep(0)
+        for done in [t for t in self._calls if t.done()]:
+            del self._calls[done]
             done.result()           # a callback's exception is raised here, as rclpy's
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
@@ -80,6 +87,9 @@ class CallbackPool(Executor):
         return done
 
 
-def _begin(task, begun: threading.Event) -> None:
+def _call(task, begun: threading.Event, returned: threading.Event) -> None:
     begun.set()
-    task()
+    try:
+        task()
+    finally:
+        returned.set()
