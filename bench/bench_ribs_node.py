@@ -30,12 +30,13 @@ What the umbrella of N ribs costs the node: the step through the run driver, and
     core busy; its busiest threads' too, the physics thread first), and CPU seconds a sim
     second: after the lock (stage 2: 6 x 1 locks at 0.23 s) or, with --live-deploying, in a
     slow deployment (stage 1); and in lockstep, a commander answering every joint_states for
-    --periods publications: sim seconds per wall second.
+    --periods publications: sim seconds per wall second, and each period's delay from the
+    command to the state it lets out (median, max; --lockstep-only: this line alone).
 The machine is shared (2 cores): wall figures are noisy; the CPU time is what a step costs.
 
     python bench/bench_ribs_node.py [--ribs 2 3 6] [--duration 0.02] [--after-lock S] [--live]
                                     [--live-ribs 6] [--live-windows 3] [--periods 40]
-                                    [--live-deploying]
+                                    [--live-deploying] [--lockstep-only]
 """
 import argparse
 import math
@@ -216,17 +217,46 @@ def live(ribs: int, periods: int, windows: int, deploying: bool = False) -> None
                   f"{', '.join(f'{c / wall:.3f}' for c in threads[:4])} core); "
                   f'load {os.getloadavg()[0]:.2f}; status '
                   f'{status.status[0].message!r}')
-    with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1000.0,
+    lockstep(ribs, periods)
+
+
+def lockstep(ribs: int, periods: int) -> None:
+    """
+    In lockstep at 1 kHz, a commander answering every joint_states: rate and each period's delay.
+
+    The first command arms the handshake; the node runs the period it acts for, then waits:
+    from the state after it, each command lets exactly one period run.  Printed: sim seconds
+    per wall second over `periods` periods, and each period's delay from the command's
+    publication to the arrival of the state it let out (median, max).
+    """
+    from umbrella_sim.testing import SimulatedAntenna
+    from umbrella_sim.testing.processes import poll
+
+    period = 1e-3
+    with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1 / period,
                            'lockstep': True, 'v0': 0.0}) as antenna:
         antenna.publish_force(5.0)
-        antenna.wait_for_sim_time(0.001)
-        wall, sim = time.monotonic(), antenna.sim_time()
+        applied = poll(antenna.applied_forces, 30, lambda: 'the first command never applied')
+        sim = applied[0][0] + period            # the state it let out: the node waits on it
+        antenna.wait_for_sim_time(sim - 1e-9)
+        topic, delays = antenna.topics['joint_states'], []
+        wall = time.monotonic()
         for i in range(periods):
+            sent = time.monotonic()
             antenna.publish_force(5.0)
-            antenna.wait_for_sim_time(sim + (i + 1) * 0.001 - 1e-9)
+            antenna.wait_for_sim_time(sim + (i + 1) * period - 1e-9)
+            delays.append(next(a for a, m in reversed(antenna.probe.timed(topic))
+                               if abs(stamp(m) - sim - (i + 1) * period) < 1e-9) - sent)
         rate = (antenna.sim_time() - sim) / (time.monotonic() - wall)
+        delays.sort()
         print(f'live ribs {ribs}, lockstep at 1 kHz over {periods} periods: real-time '
-              f'factor {rate:.4f}')
+              f'factor {rate:.4f}; a command to the state it lets out: median '
+              f'{delays[len(delays) // 2] * 1e3:.2f} ms, max {delays[-1] * 1e3:.2f} ms; '
+              f'load {os.getloadavg()[0]:.2f}')
+
+
+def stamp(msg) -> float:
+    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
 
 
 def main() -> None:
@@ -241,7 +271,12 @@ def main() -> None:
                     help='offline: time the steps from S s after the lock (stage 2)')
     ap.add_argument('--live-deploying', action='store_true',
                     help=f'live: a slow deployment ({DEPLOYING}), timed before its lock')
+    ap.add_argument('--lockstep-only', action='store_true',
+                    help='only the live lockstep figures (of --live-ribs, --periods)')
     args = ap.parse_args()
+    if args.lockstep_only:
+        lockstep(args.live_ribs, args.periods)
+        return
     for ribs in args.ribs:
         offline(ribs, args.duration, args.after_lock)
     if args.live:

@@ -43,6 +43,9 @@ APPLIED_INFO_PERIOD = 5.0
 #: hundred commands a second and kept ~/pause waiting behind a flood); the bound gives the
 #: executor back between batches
 COMMAND_BATCH = 256
+#: the log line of a publisher of commands matched by the node (or gone): "<this> matched on
+#: <topic> (N now)"
+COMMANDER_LINE = 'sleeve_force publisher'
 #: at a stop, the commands still queued are taken (checked, counted, recorded) for up to this
 #: long (wall s), then for as long again only counted as dropped: none is lost uncounted
 STOP_DRAIN_S = 1.0
@@ -71,6 +74,7 @@ class CommandIntake:
         self._lock = threading.Lock()
         self._force = 0.0
         self.logger = None                  # the node's
+        self._topic = ''                    # the subscription's (resolved)
         self._echo = {}                     # "applied", "refused" -> the node's publisher
         self._info_at = -float('inf')       # wall time of the last INFO line on an applied one
         self._since_info = 0                # applied since that line
@@ -83,9 +87,30 @@ class CommandIntake:
         """
         from .messages import COMMAND_ECHO_QOS, COMMAND_ECHO_SUFFIXES, own_qos
         self.logger = node.get_logger()
+        self._topic = command_topic
         self._echo = {key: node.create_publisher(self.command_type(), command_topic + suffix,
                                                  own_qos(COMMAND_ECHO_QOS))
                       for key, suffix in COMMAND_ECHO_SUFFIXES.items()}
+
+    def event_callbacks(self):
+        """Return the subscription's event callbacks: matched()."""
+        from rclpy.event_handler import SubscriptionEventCallbacks
+        return SubscriptionEventCallbacks(matched=self.matched)
+
+    def matched(self, status) -> None:
+        """
+        Log each publisher of commands the subscription matches, or loses (its event callback).
+
+        A command published before this side has matched its publisher is lost to the node
+        until the publisher's next heartbeat (Fast DDS: every 3 s), though the publisher's
+        side may already count this subscription (it matches first, measured 3-24 ms
+        before): a publisher that must not lose its first command waits for this line
+        (testing.SimulatedAntenna does).
+        """
+        change = status.current_count_change
+        if change and self.logger is not None:
+            self.logger.info(f"{COMMANDER_LINE} {'matched' if change > 0 else 'gone'} on "
+                             f'{self._topic} ({status.current_count} now)')
 
     @staticmethod
     def command_type():

@@ -141,13 +141,13 @@ class UmbrellaNode(Node):
                 t.type, t.name, ros_io.own_qos(t.qos),
                 qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
                 for key, t in node_topics(self.ribs).items()}
-            # commands and services in their own callback groups, served by a 2-thread
-            # executor: a slow ~/reset never delays a command and a command flood never
-            # delays ~/pause
+            # commands and services in their own callback groups, served by 2 threads
+            # (executor.py): a slow ~/reset never delays a command, a flood never ~/pause
             self.command_sub = self.create_subscription(
                 ros_io.COMMAND.type, ros_io.COMMAND.name, self.commands.on_message,
                 ros_io.own_qos(ros_io.COMMAND.qos),
                 callback_group=MutuallyExclusiveCallbackGroup(),
+                event_callbacks=self.commands.event_callbacks(),
                 qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
         except Exception as exc:  # rclpy's errors name the parameter
             files = f" (params files: {', '.join(params_files)})" if params_files else ''

@@ -28,9 +28,10 @@ import os
 import sys
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 
 from . import messages as ros_io, signals as stop_signals
+from .executor import CallbackPool
 from .node import EXIT_FAULT, EXIT_OK, EXIT_RECORDING, EXIT_USAGE, StartupError, UmbrellaNode
 from .params_file import init_ros
 from .ribs_messages import RIB_TOPICS
@@ -143,7 +144,7 @@ def _run(argv: list[str], running: list) -> int:
     except StartupError as exc:
         node.destroy_node()
         return fail(str(exc))
-    executor = MultiThreadedExecutor(num_threads=2)
+    executor = CallbackPool(num_threads=2)      # (rclpy's MultiThreadedExecutor: executor.py)
     executor.add_node(node)
     ok = True
     try:

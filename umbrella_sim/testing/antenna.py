@@ -52,6 +52,7 @@ class SimulatedAntenna:
     """
 
     _count = 0          # probe node names stay unique within a process
+    probe: Probe | None = None      # (set by the constructor)
     _live: dict = {}    # (domain, namespace) -> the NodeProcess of the last antenna there
 
     def __init__(self, parameters: dict | None = None, namespace: str = '',
@@ -143,7 +144,7 @@ class SimulatedAntenna:
     # ------------------------------------------------------------ commands
     def publish_force(self, force: float, timeout: float = 20.0, check: bool = True) -> None:
         """
-        Publish one sleeve_force command (after the node's subscription has matched).
+        Publish one sleeve_force command (once the node's subscription and it matched).
 
         A force the node would refuse (solver.command_force: NaN, below sleeve_force_min,
         above what the link carries) raises ValueError here, with the node's reason;
@@ -161,9 +162,17 @@ class SimulatedAntenna:
         """Return the sleeve_force publisher, made and matched with the node's subscription."""
         if self._command_pub is None:
             from ..ros import messages as ros_io
+            from ..ros.commands import COMMANDER_LINE
+
+            pattern = re.escape(f"{COMMANDER_LINE} matched on {self.topics['sleeve_force']} (")
+            matched = len(re.findall(pattern, self.node.output()))
             self._command_pub = self.probe.publisher(self.topics['sleeve_force'], self._float64,
                                                      ros_io.COMMAND.qos)
             self.probe.wait_for_subscribers(self._command_pub, timeout=timeout)
+            # this side matches the node's subscription first; the node's side matches this
+            # publisher a few ms later, and a command sent in between would reach the node
+            # only with the publisher's next heartbeat (3 s): its log says when it has
+            self.node.wait_for_log(pattern, timeout=timeout, count=matched + 1)
         return self._command_pub
 
     def play_force_profile(self, profile: Iterable[tuple[float, float]],
@@ -266,6 +275,9 @@ class SimulatedAntenna:
     # --------------------------------------------------------------- waits
     def sim_time(self) -> float | None:
         """Stamp of the latest joint state of this run received (s); None before the first."""
+        if self.probe is not None and not self._runs:   # (the first run: the latest, at once)
+            latest = self.probe.last(self.topics['joint_states'])
+            return None if latest is None else _stamp(latest[1])
         states = self.messages('joint_states')
         return _stamp(states[-1]) if states else None
 
@@ -291,9 +303,15 @@ class SimulatedAntenna:
             now = self.sim_time()
             return now is not None and now >= t
 
-        poll(reached, timeout,
-             lambda: f'sim time never reached {t:.6f} s within {timeout} s on '
-                     f"{self.topics['joint_states']} ({self._sim_time_text()})")
+        topic = self.topics['joint_states']
+
+        def failure():
+            return (f'sim time never reached {t:.6f} s within {timeout} s on {topic} '
+                    f'({self._sim_time_text()})')
+        if self.probe is None:
+            poll(reached, timeout, failure)
+        else:       # woken by each state that comes
+            self.probe.wait_until(reached, topic, timeout, failure)
 
     def wait_for(self, key: str, predicate, timeout: float = 20.0, what: str = 'the condition'):
         """Return this run's first message on a node topic (``"joint_states"``...) that fits."""

@@ -334,6 +334,8 @@ class Probe:
         self.received: dict[str, list] = {}
         self._clients: dict = {}
         self._lock = threading.Lock()
+        self._arrival = threading.Condition()   # notified at each message received
+        self._arrivals: dict[str, int] = {}     # topic -> messages received
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
@@ -370,6 +372,9 @@ class Probe:
         def cb(msg, topic=topic):
             with self._lock:
                 self.received[topic].append((time.monotonic(), msg))
+            with self._arrival:
+                self._arrivals[topic] = self._arrivals.get(topic, 0) + 1
+                self._arrival.notify_all()
         self.node.create_subscription(msg_type, topic, cb, qos)
 
     def messages(self, topic: str) -> list:
@@ -382,6 +387,35 @@ class Probe:
             return list(self.received.get(topic, []))
 
     _poll = staticmethod(poll)
+
+    def last(self, topic: str):
+        """Return the latest (arrival, message) received on topic, or None."""
+        with self._lock:
+            received = self.received.get(topic)
+            return received[-1] if received else None
+
+    def wait_until(self, condition: Callable[[], Any], topic: str, timeout: float,
+                   failure: Callable[[], str], interval: float = 0.02):
+        """
+        condition()'s first truthy value, tried again at each message on topic (as poll()).
+
+        A wait for a message wakes when it comes, not at the next turn of a poll (a lockstep
+        loop at 1 kHz, one state per command, went at the poll's 50 periods a second); at
+        least every `interval` s too (a condition may depend on more than that topic).
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            with self._arrival:
+                seen = self._arrivals.get(topic, 0)
+            result = condition()
+            if result:
+                return result
+            left = deadline - time.monotonic()
+            if left < 0:
+                raise AssertionError(failure())
+            with self._arrival:
+                self._arrival.wait_for(lambda: self._arrivals.get(topic, 0) != seen,
+                                       min(left, interval))
 
     def wait_for(self, topic: str, predicate=lambda m: True, timeout: float = 20.0,
                  what: str = 'the condition'):

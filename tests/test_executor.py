@@ -1,0 +1,79 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The node's executor (ros/executor.py): each ready callback is handed to the pool once.
+
+rclpy's executor yields a callback again at each turn while no worker has begun it; rclpy's
+MultiThreadedExecutor submitted it again each time, looping with the GIL held.  Here the
+pool's one worker is kept busy by one callback while another is ready: the second is
+yielded turn after turn, and submitted once.
+"""
+import threading
+
+import pytest
+
+from umbrella_sim.testing.processes import poll
+
+pytestmark = [pytest.mark.ros]
+
+
+def test_a_callback_waiting_for_a_worker_is_submitted_once(probe):
+    import rclpy
+    from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+    from std_msgs.msg import Float64
+
+    from umbrella_sim.ros.executor import CallbackPool
+
+    node = rclpy.create_node('callback_pool_test', context=probe.context)
+    executor = CallbackPool(num_threads=1, context=probe.context)
+    executor.add_node(node)
+    busy, release, taken = threading.Event(), threading.Event(), []
+
+    def hold_the_worker(msg):
+        busy.set()
+        release.wait(20.0)
+
+    for topic, callback in (('pool_busy', hold_the_worker),
+                            ('pool_waiting', lambda msg: taken.append(msg.data))):
+        node.create_subscription(Float64, topic, callback, 10,
+                                 callback_group=MutuallyExclusiveCallbackGroup())
+    pubs = [probe.publisher(topic, Float64) for topic in ('pool_busy', 'pool_waiting')]
+    for pub in pubs:
+        probe.wait_for_subscribers(pub)
+    stop = threading.Event()
+
+    def spin():
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.01)
+    spinning = threading.Thread(target=spin, daemon=True)
+    spinning.start()
+    try:
+        pubs[0].publish(Float64(data=1.0))
+        assert busy.wait(20.0), 'the first callback never began'
+        pubs[1].publish(Float64(data=2.0))
+        # the second is ready, the only worker busy: the executor yields it turn after turn
+        poll(lambda: executor.waited >= 3, 20.0,
+             lambda: f'the waiting callback was yielded again {executor.waited} time(s)')
+        assert executor.submitted == 2          # each callback once, however often yielded
+        release.set()
+        poll(lambda: taken, 20.0, lambda: 'the waiting callback never ran')
+        assert taken == [2.0]
+        assert executor.submitted == 2
+    finally:
+        release.set()
+        stop.set()
+        spinning.join(timeout=5.0)
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()

@@ -1,0 +1,95 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The node's executor: callbacks run by a pool of threads, each ready callback handed over once.
+
+rclpy's MultiThreadedExecutor (Jazzy's rclpy 7.1) yields a ready callback again, and submits
+it to its thread pool again, for as long as no worker has begun it, and each of these turns
+returns at once: the spinning thread loops holding the GIL while the worker that should run
+the callback waits for the GIL (ros2/rclpy#1452, fixed upstream by ros2/rclpy#1547, not in
+Jazzy's wheels).  Measured on the node in lockstep at 1 kHz, a command every ~20 ms: up to
+~260 turns of the executor for each /sleeve_force command, whose callback ran a median
+1.1-46 ms (8 runs) and up to 148 ms after the command was published, the physics thread
+waiting for it all along; here 0.9-1.2 ms, at most 7 ms.
+
+:class:`CallbackPool` is built on rclpy's public Executor API (``wait_for_ready_callbacks``,
+as a custom executor is meant to be): a callback is submitted to the pool once; yielded
+again before a worker has begun it, the spinning thread waits, GIL released, until one does.
+Callback groups, the services' and the command's, keep their meaning: the executor's base
+class only yields a callback whose group can run it.
+"""
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+import threading
+import time
+
+from rclpy.executors import (ConditionReachedException, Executor, ExternalShutdownException,
+                             ShutdownException, TimeoutException)
+
+
+class CallbackPool(Executor):
+    """Run callbacks in a pool of ``num_threads`` threads, each ready callback submitted once."""
+
+    def __init__(self, num_threads: int = 2, *, context=None):
+        super().__init__(context=context)
+        self._pool = ThreadPoolExecutor(num_threads, thread_name_prefix='callbacks')
+        # task submitted -> (Event set when a worker begins it, Event set when that call returns)
+        self._calls: dict = {}
+        self.submitted = 0          # tasks handed to the pool (a coroutine's resumption too)
+        self.waited = 0             # turns that found their task not yet begun (and waited)
+
+    def _spin_once_impl(self, timeout_sec=None, wait_condition=lambda: False) -> None:
+        try:
+            task, _, _ = self.wait_for_ready_callbacks(timeout_sec, None, wait_condition)
+        except (ConditionReachedException, ExternalShutdownException, ShutdownException,
+                TimeoutException):
+            return
+        begun, returned = self._calls.get(task, (None, None))
+        if begun is None or returned.is_set():      # new, or a coroutine's task to resume
+            self._calls[task] = begun, returned = threading.Event(), threading.Event()
+            self._pool.submit(_call, task, begun, returned)
+            self.submitted += 1
+        elif not begun.is_set():
+            # yielded again before a worker took it: let one take it (this wait releases
+            # the GIL), instead of submitting it once more
+            self.waited += 1
+            begun.wait(timeout_sec if timeout_sec is not None and timeout_sec >= 0 else None)
+        else:       # begun, not yet marked executing by rclpy's Task: give it the GIL
+            time.sleep(0)
+        for done in [t for t in self._calls if t.done()]:
+            del self._calls[done]
+            done.result()           # a callback's exception is raised here, as rclpy's
+
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        self._spin_once_impl(timeout_sec)
+
+    def spin_once_until_future_complete(self, future, timeout_sec: float | None = None) -> None:
+        future.add_done_callback(lambda _: self.wake())
+        self._spin_once_impl(timeout_sec, future.done)
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        """Stop (rclpy's Executor.shutdown: wait for the callbacks running), then the pool."""
+        done = super().shutdown(timeout_sec)
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        return done
+
+
+def _call(task, begun: threading.Event, returned: threading.Event) -> None:
+    begun.set()
+    try:
+        task()
+    finally:
+        returned.set()
