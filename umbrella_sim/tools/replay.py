@@ -477,7 +477,6 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     return 0
 
 
-@interruptible('umbrella_replay', 'nothing was written')
 def info_text(log: LogData) -> str:
     """
     Return what a recording holds, as `ros2 bag info` says it, and the run it is of.
@@ -529,6 +528,7 @@ def info_text(log: LogData) -> str:
     return '\n'.join(lines)
 
 
+@interruptible('umbrella_replay', 'nothing was written')
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     ros_args = []
