@@ -59,9 +59,18 @@ RIB_TOPICS = {
 RIB_LABEL = 'rib'
 
 
+#: the planar rib's own topics, which the umbrella of ribs >= 2 carries per rib in RIB_TOPICS
+PLANAR_ONLY = ('tip_deflection', 'peak_stress')
+
+
 def node_topics(ribs: int) -> dict[str, Topic]:
-    """Return umbrella_node's topics: messages.TOPICS, and with ribs >= 2 RIB_TOPICS."""
-    return {**TOPICS, **(RIB_TOPICS if ribs > 1 else {})}
+    """
+    Return umbrella_node's topics: messages.TOPICS, and with ribs >= 2 RIB_TOPICS instead of
+    the planar rib's tip_deflection and peak_stress (not advertised: nothing would come).
+    """
+    if ribs == 1:
+        return dict(TOPICS)
+    return {**{k: t for k, t in TOPICS.items() if k not in PLANAR_ONLY}, **RIB_TOPICS}
 
 
 TIP_FIELDS = ('axial_m', 'in_plane_m', 'out_of_plane_m')
