@@ -36,8 +36,8 @@ from __future__ import annotations
 import numpy as np
 
 from .corotational3d import out_of_plane_warnings
-from .outputs3d import (BODIES, deployment_spread, energy_balance3d, first_reach,
-                        largest_out_of_plane_tip, STRESS_NAMES)
+from .outputs3d import (any_of, BODIES, deployment_spread, energy_balance3d, first_reach,
+                        largest, largest_out_of_plane_tip, STRESS_NAMES)
 from .params3d import UmbrellaRibsParams
 from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
@@ -105,6 +105,7 @@ class Sample3D:
 
 
 _COMPONENTS = np.arange(len(STRESS_NAMES))[None]
+_VON_MISES = STRESS_NAMES.index('von_mises')
 
 
 class RibPeaks:
@@ -147,7 +148,7 @@ class RibPeaks:
     def merged(self, new: 'RibPeaks') -> 'RibPeaks':
         """Return, rib by rib and component by component, the larger (these held on a tie)."""
         better = new.value > self.value
-        if not better.any():
+        if not any_of(better, axis=None):
             return self
         return RibPeaks(np.where(better, new.value, self.value),
                         np.where(better[..., None], new.at, self.at),
@@ -356,7 +357,7 @@ class Summary3D:
             self._start = deploy_start(0.0, zip([self.final_time, *t[:-1].tolist()],
                                                 rows['sleeve_force'].tolist()))
         t_before, alpha_before = self._last
-        if self._undeployed and (rows['alpha1'] <= m.alpha_deployed).any():
+        if self._undeployed and any_of(rows['alpha1'] <= m.alpha_deployed, axis=None):
             # (first_reach of the ribs whose leaf reached its angle)
             ribs = np.nonzero(np.isnan(self._deployed))[0]
             gap = rows['alpha1'][:, ribs] - m.alpha_deployed[ribs]
@@ -368,13 +369,13 @@ class Summary3D:
             self._undeployed = bool(np.isnan(self._deployed).any())
         self._last = (float(t[-1]), rows['alpha1'][-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
-        self._scale = max(self._scale, float(np.abs(energy).max()))
+        self._scale = max(self._scale, float(largest(np.abs(energy))))
         self._balance = max(self._balance,
-                            float(np.abs(energy_balance3d(rows, self._e0, energy)).max()))
+                            float(largest(np.abs(energy_balance3d(rows, self._e0, energy)))))
         tip = rows['tip']
-        if np.abs(tip[:, :, 2]).max() > self._oop[0]:
+        if largest(np.abs(tip[:, :, 2]), axis=None) > self._oop[0]:
             self._oop = largest_out_of_plane_tip(t, tip)
-        self._in_plane = np.maximum(self._in_plane, np.abs(tip[:, :, 1]).max(0))
+        self._in_plane = np.maximum(self._in_plane, largest(np.abs(tip[:, :, 1])))
         self._peaks = block.merge_peaks(self._peaks)
         self.steps += len(block)
         self.final_time = float(t[-1])
@@ -455,7 +456,8 @@ class Summary3D:
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
         # the warnings depend on the run only through these
-        return self._said.new((self._peaks['von_mises'][0].max(), self._in_plane.max(),
+        return self._said.new((largest(self._peaks.value[:, _VON_MISES]),
+                               largest(self._in_plane),
                                self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
                                *self._geometry()),
                               self.warnings)
