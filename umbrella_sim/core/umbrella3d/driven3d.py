@@ -37,7 +37,7 @@ import numpy as np
 
 from .corotational3d import out_of_plane_warnings
 from .outputs3d import (any_of, BODIES, deployment_spread, energy_balance3d, first_reach,
-                        largest, largest_out_of_plane_tip, STRESS_NAMES)
+                        largest, largest_out_of_plane_tip, STRESS_NAMES, STRESS_ROWS)
 from .params3d import UmbrellaRibsParams
 from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
@@ -90,17 +90,22 @@ class Sample3D:
         return dict(self._values)
 
     @classmethod
-    def of_row(cls, row: dict) -> 'Sample3D':
-        """Return the sample of a Record3D row (its 'locked' flag as the stage)."""
-        values = dict(row)
+    def of_row(cls, row: dict, i: int | None = None) -> 'Sample3D':
+        """
+        Return the sample of a Record3D row (its 'locked' flag as the stage).
+
+        i: the row is the i-th of Record3D rows (steps first) instead.
+        """
+        values = dict(row) if i is None else {name: v[i] for name, v in row.items()}
         values['stage'] = Stage.LOCKED if values.pop('locked') else Stage.DEPLOYING
         return cls(values)
 
     def with_peaks(self, hold: 'RibPeaks') -> 'Sample3D':
         """Return this sample with each rib's stress figures the held ones (merge_peaks)."""
         values = dict(self._values)
-        for j, name in enumerate(STRESS_NAMES):
-            values[f'stress_{name}'], values[f'stress_{name}_at'] = hold.value[:, j], hold.at[:, j]
+        # (a component's values and places: the rows of the held arrays turned)
+        for (name, name_at), value, at in zip(STRESS_ROWS, hold.value.T, hold.at.swapaxes(0, 1)):
+            values[name], values[name_at] = value, at
         return Sample3D(values)
 
 
@@ -217,7 +222,7 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         self._force_per_rib = command_force(self.params.planar.sleeve_force, self.params)
         self._lock_event: LockEvent | None = None      # (lock_event, once it happened)
         # the record's row of t = 0 is the initial sample: the blocks hold the steps' rows
-        self._current = Sample3D.of_row({k: v[-1] for k, v in self.record.take().items()})
+        self._current = Sample3D.of_row(self.record.take(), -1)
 
     # ------------------------------------------------------------------- inputs
     @property
@@ -285,7 +290,7 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         rows = self.record.take()
         peaks = self.record.taken_peaks
         if rows:
-            self._current = Sample3D.of_row({name: v[-1] for name, v in rows.items()})
+            self._current = Sample3D.of_row(rows, -1)
         lock = self.lock_event if self.locked and not locked_before else None
         return StepBlock3D(rows, self._current, lock, error,
                            None if peaks is None else RibPeaks(*peaks)), applied
