@@ -80,7 +80,9 @@ class Record3D:
         #: of the rows the last ``take`` returned (``taken_peaks``)
         self._held = None
         self.taken_peaks = None
-        self._rib_comp = (np.arange(nr)[:, None], np.arange(len(STRESS_NAMES))[None])
+        #: a step's (rib, channel) figures, flattened: their count and indices
+        self._per_step = nr * len(STRESS_NAMES)
+        self._per_step_index = np.arange(self._per_step).reshape(nr, len(STRESS_NAMES))
         self._tip = np.array(model.i_tip)
         #: no hinge ever sticks (none has stick_until or stick_torque): stuck is NaN throughout
         self._never_stuck = all(r.stick_until <= 0.0 and r.stick_torque <= 0.0
@@ -252,9 +254,11 @@ class Record3D:
         # the peaks over these steps, rib by rib: the first of the largest step by step (the
         # leaf before the link: each step's own rule above; a NaN the largest, as argmax)
         first = top.argmax(0)                                   # (rib, 5)
-        ribs, comps = self._rib_comp
-        best = top[first, ribs, comps]
-        held = (best, at[first, ribs, comps], t[first])
+        # (each rib's and channel's row of the flattened steps: takes, not a fancy index)
+        i = first * self._per_step
+        i += self._per_step_index
+        best = top.take(i)
+        held = (best, at.reshape(-1, 2).take(i, 0), t.take(first))
         self._held = held if self._held is None else merged_peaks(self._held, held)
         # the run's: a larger one only (a NaN never)
         better = best > self._peaks
