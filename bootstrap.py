@@ -22,8 +22,11 @@ Set up a local virtualenv (.venv) with every dependency, then run the main job o
                                   # (Ctrl-C stops and finalises it)
     python3 bootstrap.py test     # the test suite and examples/
 
-Arguments after run go to the node, which runs in the runs directory (a relative path in
-them is relative to it): python3 bootstrap.py run -p v0:=-0.5
+Arguments after run go to the node, which runs in the runs directory; a relative path they
+give (--params-file FILE, -p record_path:=DIR) is the working directory's, as a user means it:
+python3 bootstrap.py run -p v0:=-0.5 --params-file my.yaml
+ROS_AUTOMATIC_DISCOVERY_RANGE is LOCALHOST unless the environment sets it (a node on another
+host sees nothing then: export ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET for that).
 Environment: UMBRELLA_VENV (default ./.venv), UMBRELLA_RUNS_DIR (default ./runs).
 
 Needs only python3 (3.11); everything else comes from PyPI.  Idempotent: a venv whose
@@ -84,7 +87,7 @@ def main(argv) -> int:
         # (umbrella[_ns]_YYYY_MM_DD-HH_MM_SS, rosbag2's; never overwriting), so: there
         cwd = runs
         cmd = [PY, '-m', 'umbrella_sim.node', '--ros-args', '--params-file',
-               os.path.join(ROOT, 'config', 'umbrella.yaml')] + argv[1:]
+               os.path.join(ROOT, 'config', 'umbrella.yaml')] + node_paths(argv[1:])
     elif argv[0] == 'test':
         # the test suite and the user-facing actuation examples (they must keep working)
         cwd = ROOT
@@ -100,6 +103,18 @@ def main(argv) -> int:
     else:
         return 0
     return run_child(cmd, cwd, env)
+
+
+def node_paths(args):
+    """Return the node's arguments with their relative paths made the working directory's."""
+    out = list(args)
+    for i, arg in enumerate(out):
+        if i > 0 and out[i - 1] == '--params-file' and not os.path.isabs(arg):
+            out[i] = os.path.abspath(arg)
+        name, sep, value = arg.partition(':=')
+        if sep and name == 'record_path' and value and not os.path.isabs(value):
+            out[i] = f'{name}:={os.path.abspath(value)}'
+    return out
 
 
 #: the suite in two parts: the tests that start no ROS node (CPU-bound physics, formats, tools)

@@ -325,6 +325,45 @@ the ribs only through a few unknowns, so a step costs linearly in the number of 
 thesis's §5.2.2); on a free bus `lock: auto` is plastic (the energy lock would change the
 momentum).
 
+## Using it
+
+On the node, `python3 bootstrap.py run -p ribs:=6` (or `umbrella_node --ros-args -p ribs:=6`):
+joint_states name `rib<k>/leaf_hinge`, `rib<k>/link_hinge` (k from 0) and `sleeve_slider`,
+and `rib_tip_deflection` / `rib_peak_stress` carry each rib's tip and stresses
+(msg_docs/topic_ribs.md). Offline, `umbrella_sim simulate --set ribs=6`; from Python,
+`UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping({'ribs': 6}))`. A rib's own values are
+lists, one value a rib (`-p "rib.tip_mass:=[0.0, 0.1, 0.0, 0.0, 0.0, 0.0]"`), or
+`rib<k>.<name>` overrides in a parameters file or `--set`: msg_docs/umbrella3d_parameters.md.
+examples/test_umbrella_ribs.py tests an asymmetric deployment (a sticking hinge) through the
+test API over DDS. What it costs, and how close to real time it runs: the last section.
+
+## Which model, and how accurate
+
+Every check is against another model: the planar model (itself checked against the thesis's
+simulations: docs/validation.md), an independently assembled frame, MuJoCo, Exudyn. None is
+against hardware.
+
+| what | checked against | agreement | where |
+|---|---|---|---|
+| N identical ribs from a symmetric start | the planar model | 1.8e-11 m at most (1e-10 asserted) | (a) |
+| locked frequencies: out-of-plane bending, torsion | a 3D frame assembled independently; Blevins's cantilever | 4.2e-11; 4.5e-6 | (b) |
+| energy with hinge friction; momentum on a free bus; a driven base | the balances | 2.4e-12 J of 28.6 J; 7.3e-6 J of 80 J driven | (c) |
+| deployment with a stiff hinge on a free bus and on a driven base | MuJoCo, rigid ribs (ours 100 x stiffer) | lock instant 2-4 us, bus motion 1e-4 relative: the kinematics and the bus coupling, not the flexibility | (d) |
+| the mesh | the model itself | order 4 in bending (the twist's settles to 2) | (e) |
+| large out-of-plane motion (a kicked rib, an offset tip mass), fixed hub and free bus | Exudyn's geometrically exact beams | `flexible-nonlinear`: deploy time 0.03 %, tips within 0.9 % (histories 1.3 %), stage-2 amplitudes 2.2 %; `flexible`: out-of-plane tip +36 %, in-plane +45 % | docs/umbrella3d_nonlinear.md |
+
+Which to take: `model: flexible` (the default: linear beams in each body's floating frame)
+is the planar model exactly for identical ribs, and holds while the ribs' out-of-plane
+slopes stay at a few hundredths of a radian. Where a rib's out-of-plane motion couples with
+the deployment (an offset tip mass, a kicked or sticking rib, a jolt or spin of the base: in
+the Exudyn case a 38.7 mm out-of-plane tip on the 1 m leaf, 0.094 rad at the tip, put
+`flexible` 36 % off), take
+`model: flexible-nonlinear`, the co-rotational ribs (docs/umbrella3d_nonlinear.md: each
+rib's beams co-rotational, the planar element in the rib's plane, out-of-plane bending and
+torsion small rotations in its co-rotated frame; compiled too), at about twice the cost.
+
+## The model's details
+
 The umbrella's stage 2 takes the planar model's stage-2 step: where the step is chosen for
 the run (`time_step` 0, or `step_follows_mesh`: step_rule.follows_lock of the planar
 record), a lock whose stage-2 tip deflection passes 7 % of the leaf (the modes' coupling,
@@ -380,6 +419,37 @@ numpy reference within its ulp spread, on every base); the energy balance closes
 T + V with the dissipation (tests/test_umbrella3d_damping.py). The co-rotational ribs
 (`flexible-nonlinear`) damp their co-rotated strain rates with the same β, C(q) = βBᵀDB at
 the step's midpoint, as the planar flexible-nonlinear model (docs/umbrella3d_nonlinear.md).
+
+A moving base now takes the stage-2 mode fit too (umbrella_sim/core/umbrella3d/stage2fit.py,
+tests/test_umbrella3d_base_fit.py), hence the fixed hub's step (0.1 ms at 1 element, 33 us at
+2). A driven hub's ribs are fitted rib by rib in the hub's frame (their locked modes are the
+fixed hub's there; the drive is a base excitation the midpoint rule integrates; with the drive
+zero a run is the fixed hub's to the two steps' difference, 1.5e-8 m at the tips). A free bus
+couples the locked ribs, so its fit is of the whole free system's elastic modes (bus + locked
+ribs, modes3d.free_locked_modes: the six rigid-body modes left out, each elastic mode without
+linear or angular momentum, so the scheme's momentum of the bus's coordinates is the physical
+one), linearised at the bus's attitude at the lock: a free mode alone turns at the
+eigenproblem's frequency (Prony, 1e-7) with its amplitude (1e-6), T + V and the linear momentum
+kept to round-off, the angular momentum to the Newton tolerance; with a 5 kg bus the modes that
+move it are up to 25 % stiffer than a rib's on a fixed hub, which a rib-by-rib fit would leave
+off. Measured (bench/bench_umbrella3d.py --base, ribs 6 x 1, CPU time, load ~5 on the 2 cores;
+before / after): the compiled step alone, driven 94.7 / 106.5 us deploying and 96.9 / 128.1 us in
+stage 2, free 93.0 / 92.4 and 93.5 / 165.9 us (the whole fit's dense maps, 84 modes of 145
+coordinates, about 70 us of it); CPU s a simulated second in 1 ms blocks with Record3D's
+figures, driven 3.9 / 1.6 deploying and 4.0 / 1.8 in stage 2, free 3.6 / 1.7 and 3.7 / 2.6
+(hub fixed 0.7 and 0.9-1.2). The free system's fit is dense: its cost grows as the square of
+the ribs (12 x 2 at 33 us: 372 modes of 499 coordinates, 1.22 ms a stage-2 step against 0.42
+unfitted; the driven hub's 0.51; ribs x 1 at 0.1 ms, the compiled step alone in stage 2, load
+~3.3: 6 / 12 / 24 ribs 170 / 482 / 1581 us on the free bus, 49 / 97 / 193 us with the hub fixed,
+whose cost a rib stays 8.0 us). The fitted stage 2 at 0.1 ms against the same code
+converged (2.5 us, no fit), tips in and out of plane 0.1 s past a plastic lock at V0 = -0.5
+(3 ribs, a tip mass, a kicked rib; times from each run's lock): free bus (5 kg) 1.27 mm,
+driven 1.17 mm (hub fixed 0.96 mm) of 195 / 140 mm amplitude, where the unfitted 33 us step
+the moving bases took before gave 4.07 / 2.46 mm (2.38) and 0.1 ms unfitted 7.4 / 5.2 mm
+(5.22) (tests/test_umbrella3d_base_fit.py, slow).
+"""
+
+COST = """## Cost and real time
 
 The step is compiled (umbrella_sim/core/_kernel3d.c, in the planar kernel's
 library, its interface declared in _kernel.h and checked at load): the Newton iteration, each
@@ -559,42 +629,6 @@ base accelerates or spins up, 2.0 when it does not), free bus 61 / 121 us (numpy
 (driven), 48 / 92 us (free), 15 us a rib (hub fixed, 0.1 ms: 5.1). Those were at the planar
 rule's step without the stage-2 mode fit, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks took
 3.6 (driven) and 3.5 (free) CPU s a simulated second, 0.28-0.29 x real time.
-
-A moving base now takes the stage-2 mode fit too (umbrella_sim/core/umbrella3d/stage2fit.py,
-tests/test_umbrella3d_base_fit.py), hence the fixed hub's step (0.1 ms at 1 element, 33 us at
-2). A driven hub's ribs are fitted rib by rib in the hub's frame (their locked modes are the
-fixed hub's there; the drive is a base excitation the midpoint rule integrates; with the drive
-zero a run is the fixed hub's to the two steps' difference, 1.5e-8 m at the tips). A free bus
-couples the locked ribs, so its fit is of the whole free system's elastic modes (bus + locked
-ribs, modes3d.free_locked_modes: the six rigid-body modes left out, each elastic mode without
-linear or angular momentum, so the scheme's momentum of the bus's coordinates is the physical
-one), linearised at the bus's attitude at the lock: a free mode alone turns at the
-eigenproblem's frequency (Prony, 1e-7) with its amplitude (1e-6), T + V and the linear momentum
-kept to round-off, the angular momentum to the Newton tolerance; with a 5 kg bus the modes that
-move it are up to 25 % stiffer than a rib's on a fixed hub, which a rib-by-rib fit would leave
-off. Measured (bench/bench_umbrella3d.py --base, ribs 6 x 1, CPU time, load ~5 on the 2 cores;
-before / after): the compiled step alone, driven 94.7 / 106.5 us deploying and 96.9 / 128.1 us in
-stage 2, free 93.0 / 92.4 and 93.5 / 165.9 us (the whole fit's dense maps, 84 modes of 145
-coordinates, about 70 us of it); CPU s a simulated second in 1 ms blocks with Record3D's
-figures, driven 3.9 / 1.6 deploying and 4.0 / 1.8 in stage 2, free 3.6 / 1.7 and 3.7 / 2.6
-(hub fixed 0.7 and 0.9-1.2). The free system's fit is dense: its cost grows as the square of
-the ribs (12 x 2 at 33 us: 372 modes of 499 coordinates, 1.22 ms a stage-2 step against 0.42
-unfitted; the driven hub's 0.51; ribs x 1 at 0.1 ms, the compiled step alone in stage 2, load
-~3.3: 6 / 12 / 24 ribs 170 / 482 / 1581 us on the free bus, 49 / 97 / 193 us with the hub fixed,
-whose cost a rib stays 8.0 us). The fitted stage 2 at 0.1 ms against the same code
-converged (2.5 us, no fit), tips in and out of plane 0.1 s past a plastic lock at V0 = -0.5
-(3 ribs, a tip mass, a kicked rib; times from each run's lock): free bus (5 kg) 1.27 mm,
-driven 1.17 mm (hub fixed 0.96 mm) of 195 / 140 mm amplitude, where the unfitted 33 us step
-the moving bases took before gave 4.07 / 2.46 mm (2.38) and 0.1 ms unfitted 7.4 / 5.2 mm
-(5.22) (tests/test_umbrella3d_base_fit.py, slow).
-
-The parameters are in msg_docs/umbrella3d_parameters.md. Not yet done: the node, URDF, markers,
-recording and tools for N ribs (the ROS side still runs the planar model). The geometrically
-exact option, `model: flexible-nonlinear` (each rib's beams co-rotational: the planar
-element in the rib's plane, out-of-plane bending and torsion small rotations in its
-co-rotated frame; compiled, _kernel3d_nonlinear.h, its stress figures too: 6 x 1 at 59 and
-91 us a step in stage 1 and 2; checked against Exudyn's geometrically exact beams on a fixed
-hub and on a free-floating bus), is docs/umbrella3d_nonlinear.md.
 """
 
 
@@ -608,6 +642,7 @@ def main():
     section_c(lines, pyplot)
     section_d(lines, pyplot)
     section_e(lines, pyplot)
+    lines.append(COST)
     with open(os.path.join(HERE, 'umbrella3d.md'), 'w') as f:
         f.write('\n'.join(lines).rstrip() + '\n')
     progress('wrote docs/umbrella3d.md')

@@ -23,7 +23,7 @@ from umbrella_sim.testing import antenna_factory, probe, ros_domain_id  # noqa: 
 HERE = Path(__file__).resolve().parent
 # The suite's markers (setup.cfg): every example here talks to a real umbrella_node over DDS
 # (ros); this one takes more than ~3 s on a quiet machine (slow).  `pytest -m "not ros"` leaves
-# them out; the umbrella of N ribs steps in numpy (~2-3 ms a step).
+# them out; the umbrella of N ribs waits for its lock at real time (0.67 s simulated).
 SLOW = {'test_the_deploy_controller_latches_softly',
         'test_a_sticking_hinge_holds_its_rib_then_the_umbrella_deploys'}
 

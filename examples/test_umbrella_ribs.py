@@ -32,11 +32,15 @@ import math
 RELEASE = 0.04          # s: rib 1's hinge is stuck until then
 STUCK_RIB = 1
 COULOMB = 0.05          # N m: rib 1's hinge friction torque
+#: N a rib, from rest: the lock at 0.67 s, the peak stress 0.68 x yield, the stage-2 tip
+#: deflection within the model's small-deformation range, at the mesh's own step (time_step
+#: 0): the run says no warning (`umbrella_sim simulate` of the same parameters prints them)
+SLEEVE_FORCE = 6.0
 
 
 def test_a_sticking_hinge_holds_its_rib_then_the_umbrella_deploys(antenna_factory):
     antenna = antenna_factory({
-        'ribs': 3, 'v0': 0.0, 'sleeve_force': 40.0, 'time_step': 2e-4, 'publish_rate': 250.0,
+        'ribs': 3, 'v0': 0.0, 'sleeve_force': SLEEVE_FORCE, 'publish_rate': 250.0,
         'rib.stick_until': [0.0, RELEASE, 0.0], 'rib.hinge_coulomb': [0.0, COULOMB, 0.0],
         'start_paused': True})
     antenna.resume()            # (the probe is connected: it sees the run from t = 0)
@@ -90,7 +94,7 @@ def test_a_recording_of_it_gives_each_ribs_figures(antenna_factory, tmp_path):
 
     period = 1.0 / 250.0
     antenna = antenna_factory({
-        'ribs': 3, 'v0': 0.0, 'sleeve_force': 40.0, 'time_step': 2e-4, 'publish_rate': 250.0,
+        'ribs': 3, 'v0': 0.0, 'sleeve_force': SLEEVE_FORCE, 'publish_rate': 250.0,
         'rib.stick_until': [0.0, RELEASE, 0.0], 'rib.hinge_coulomb': [0.0, COULOMB, 0.0],
         'start_paused': True}, record_path=tmp_path / 'ribs')
     antenna.resume()

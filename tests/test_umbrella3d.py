@@ -164,6 +164,31 @@ def test_energy_balance_with_hinge_friction():
     assert s['max_out_of_plane_tip_rib'] == 2
 
 
+def test_the_lock_steps_work_counts_both_parts_of_the_step():
+    """The grid step of the lock: its work is the step to the lock's and the locked rest's."""
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
+        {'ribs': 2, 'time_step': 1e-4, 'v0': -0.5}))
+    rests = []
+    locked_steps = sim._locked_steps
+
+    def noted(s, dt):
+        out = locked_steps(s, dt)
+        rests.append(out[1])
+        return out
+    sim._locked_steps = noted
+    before = None
+    while not sim.locked:
+        before = (sim.record.iterations, sim.record.work, sim.record.damping)
+        sim.run(sim.time + sim.h)
+    hit, rest = sim.lock_state[1], rests[0]
+    assert rest.iterations >= 1 and hit.iterations >= 1
+    # every Newton iteration of both parts counted (the summary's newton_iterations), and
+    # every work
+    assert sim.record.iterations - before[0] == hit.iterations + rest.iterations
+    assert sim.record.work - before[1] == pytest.approx(hit.force + rest.force, rel=1e-15)
+    assert sim.record.summary()['newton_iterations'] == sim.record.iterations
+
+
 def momentum_scales(sim, a):
     """Return the ribs' mass x the largest sleeve speed (N s), and that x the rib's length."""
     p = sim.params.planar

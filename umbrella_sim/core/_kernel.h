@@ -271,6 +271,9 @@ typedef struct {
      * (R x fit_modes) */
     int fit_modes;
     const double *fit_u, *fit_phi, *fit_scale, *fit_shrink;
+    /* the same u and phi rows transposed (a rib's n_rib x fit_modes; the whole fit's
+     * coordinates x fit_modes): the modal sums' projections column by column */
+    const double *fit_ut, *fit_phit;
     /* fit_whole 1: one fit of the whole system's modes (a free bus: stage2fit.WholeFit),
      * fit_modes rows over every coordinate (ribs', then the shared: fit_modes x (n_ribs
      * n_rib + n_shared) each), s and shrink (fit_modes) */

@@ -1050,52 +1050,37 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
 typedef struct {
     int r; const double *u, *phi, *sc, *shrink; int whole;
     const double *damp;                /* each mode's damping change (NULL: undamped) */
+    const double *u_t, *phi_t;         /* u and phi transposed (modal_correction's in_t) */
 } Fit3D;
 
 enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
 
 #include "_kernel3d_damping.h"
 
-/* acc = out^T diag(factor) in v over L coordinates: the mode fit's correction of v for the
- * map `kind` (fit_map), the r modes' rows in (projection) and out (shapes) L apart, their
- * scales sc and Newton shrinks shrink; c: r doubles of scratch.  Each sum in order: four
- * modes' (then four rows') sums at once. */
-static void modal_correction(const double *in, const double *out, const double *sc,
-                             const double *shrink, int r, int L, int kind, const double *v,
-                             double *c, double *acc) {
-    int j = 0;
-    for (; j + 4 <= r; j += 4) {
-        const double *i0 = in + (size_t)j * L, *i1 = i0 + L, *i2 = i1 + L, *i3 = i2 + L;
-        double d0 = 0.0, d1 = 0.0, d2 = 0.0, d3 = 0.0;
-        for (int a = 0; a < L; a++) {
-            d0 += i0[a] * v[a]; d1 += i1[a] * v[a];
-            d2 += i2[a] * v[a]; d3 += i3[a] * v[a];
-        }
-        c[j] = d0; c[j + 1] = d1; c[j + 2] = d2; c[j + 3] = d3;
+/* acc = out^T diag(factor) in^T v over L coordinates: the mode fit's correction of v for the
+ * map `kind` (fit_map), the r modes' projection rows `in` given transposed (in_t: L rows of
+ * r) and their shapes `out` (r rows of L), their scales sc and Newton shrinks shrink; c: r
+ * doubles of scratch.  Each sum in order (c[j] over the coordinates, acc[a] over the modes),
+ * the inner loops along contiguous rows (vectorised, the order kept). */
+static void modal_correction(const double *restrict in_t, const double *restrict out,
+                             const double *sc, const double *shrink, int r, int L, int kind,
+                             const double *restrict v, double *restrict c,
+                             double *restrict acc) {
+    for (int j = 0; j < r; j++) c[j] = 0.0;
+    for (int a = 0; a < L; a++) {
+        const double *row = in_t + (size_t)a * r;
+        double va = v[a];
+        for (int j = 0; j < r; j++) c[j] += row[j] * va;
     }
-    for (; j < r; j++) {
-        double d = 0.0;
-        for (int a = 0; a < L; a++) d += in[(size_t)j * L + a] * v[a];
-        c[j] = d;
-    }
-    for (j = 0; j < r; j++) {
+    for (int j = 0; j < r; j++) {
         double s = sc[j];
         c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -shrink[j] : s - 1.0;
     }
-    int a = 0;
-    for (; a + 4 <= L; a += 4) {
-        double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-        for (j = 0; j < r; j++) {
-            const double *o = out + (size_t)j * L + a;
-            double cj = c[j];
-            s0 += o[0] * cj; s1 += o[1] * cj; s2 += o[2] * cj; s3 += o[3] * cj;
-        }
-        acc[a] = s0; acc[a + 1] = s1; acc[a + 2] = s2; acc[a + 3] = s3;
-    }
-    for (; a < L; a++) {
-        double sa = 0.0;
-        for (j = 0; j < r; j++) sa += out[(size_t)j * L + a] * c[j];
-        acc[a] = sa;
+    for (int a = 0; a < L; a++) acc[a] = 0.0;
+    for (int j = 0; j < r; j++) {
+        const double *o = out + (size_t)j * L;
+        double cj = c[j];
+        for (int a = 0; a < L; a++) acc[a] += o[a] * cj;
     }
 }
 
@@ -1109,7 +1094,7 @@ static void fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *v, int str
     for (int k = 0; k < x->R; k++) {
         double *vk = v + (size_t)k * stride;
         size_t rib = (size_t)k * r;
-        modal_correction((kind == TRANSPOSE ? f->phi : f->u) + rib * n,
+        modal_correction((kind == TRANSPOSE ? f->phi_t : f->u_t) + rib * n,
                          (kind == TRANSPOSE ? f->u : f->phi) + rib * n, f->sc + rib,
                          f->shrink + rib, r, n, kind, vk, c, acc);
         for (int a = 0; a < n; a++) vk[a] += acc[a];
@@ -1433,7 +1418,7 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
     int N = x->R * x->n;
     int steps = a->single ? 1 : a->n_steps;
     Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink, a->fit_whole,
-                 a->fit_damping};
+                 a->fit_damping, a->fit_ut, a->fit_phit};
     if (a->fit_modes > (a->fit_whole ? N + x->ns : x->n) || (a->fit_whole && !x->base))
         return SINGULAR;
     int figures = x->fig && !a->single && a->out;

@@ -594,7 +594,7 @@ static void base_fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *vr, i
     double *g = B->fitv, *acc = B->fita;
     for (int k = 0; k < R; k++) memcpy(g + k * n, vr + (size_t)k * stride, sizeof(double) * n);
     memcpy(g + N, vs, sizeof(double) * x->ns);
-    modal_correction(kind == TRANSPOSE ? f->phi : f->u, kind == TRANSPOSE ? f->u : f->phi,
+    modal_correction(kind == TRANSPOSE ? f->phi_t : f->u_t, kind == TRANSPOSE ? f->u : f->phi,
                      f->sc, f->shrink, f->r, N + x->ns, kind, g, B->fitc, acc);
     for (int k = 0; k < R; k++)
         for (int a = 0; a < n; a++) vr[(size_t)k * stride + a] += acc[k * n + a];

@@ -258,9 +258,10 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'physics step of the integrator; 0 = chosen for the mesh: the largest 0.1 ms / k '
        "(k = 1 .. 64) at which the locked frame's modes that carry all but 1 % of the "
        "stage-2 stress crest of the mesh's lock are resolved (ωh ≤ 1.5 with "
-       '`phase_correction`, 0.35 without): 0.1 ms at N = 1, 25 µs at N = 2, 16.7 µs at '
-       "N = 4, 7.7 µs at N = 8 with the thesis's frame. Measured against converged runs "
-       '(docs/validation.md, step convergence): the deploy time, stage-1 and stage-2 peak '
+       "`phase_correction`, 0.35 without): with the thesis's frame, at N = 1 / 2 / 4 / 8 "
+       'elements a segment, 0.1 ms / 33.3 / 20 / 7.7 µs with the energy lock (the '
+       'default), 0.1 ms / 25 / 16.7 / 7.7 µs with the plastic lock. Measured against '
+       'converged runs (docs/validation.md, step convergence): the deploy time, stage-1 and stage-2 peak '
        'stresses, stage-2 period and amplitude and the stage-2 tip series within 1 mm of '
        'every studied case (N = 1-8, V0 = -0.2 and -0.5 m/s, both locks). Past a stage-2 '
        'tip deflection of 7 % of the leaf (V0 = -0.5: 12-16 %) the modes couple and stage 2 '

@@ -230,7 +230,10 @@ class CompiledStep3D:
                 damping[k, :m] = f.damping_change
             self._fit = (u, phi, scale, shrink, damping)
             c.fit_whole = 0
+        # (u and phi with each rib's or the whole fit's rows transposed: modal_correction's)
+        self._fit_t = tuple(np.ascontiguousarray(np.swapaxes(a, -1, -2)) for a in self._fit[:2])
         c.fit_u, c.fit_phi, c.fit_scale, c.fit_shrink = (_ptr(a) for a in self._fit[:4])
+        c.fit_ut, c.fit_phit = (_ptr(a) for a in self._fit_t)
         # (a damped fit's damping change: the damped beams' only, damping3d.py)
         c.fit_damping = _ptr(self._fit[4]) if self.struct.damping_beta else None
         c.fit_modes = r

@@ -246,10 +246,7 @@ class UmbrellaSimulator3D:
             remaining = t_next - s_locked.t
             if remaining > EVENT_TIME_TOLERANCE:
                 s1, work2 = self._locked_steps(s_locked, remaining)
-                work = replace(work_hit, force=work_hit.force + work2.force,
-                               friction=work_hit.friction + work2.friction,
-                               drive=work_hit.drive + work2.drive,
-                               damping=work_hit.damping + work2.damping)
+                work = work_hit.plus(work2)
             else:
                 s1, work = s_locked, work_hit
         s1 = replace(s1, t=t_next)
