@@ -603,9 +603,11 @@ which costs more than a block's reduction); the compiled call does not copy in a
 state its buffers hold (the run's next call starts from it), a sample of a block's last row
 is one dict. The executor's wait for a stop signal went from 20 ms to 0.1 s: each wait
 rebuilds rclpy's wait set, ~0.5 ms of CPU, 0.026 -> 0.006 core. The live node (bench_ribs_node
---live, 4 s windows at load 1.8-4.5, where it often fell behind: CPU s a simulated second,
-the node's share at real time) 0.94-1.03 -> 0.84-0.94 in stage 2 and 0.74-0.82 -> 0.61-0.71
-deploying. What remains beside the step, measured in the node's own process with the
+--live, 4 s windows, main and this change in turn): at load 1.3-1.8, where both kept real
+time, 0.86-0.93 -> 0.85-0.87 core in stage 2 and 0.69-0.70 -> 0.66-0.70 deploying (the
+executor's thread 0.017-0.022 -> 0.005-0.007 of it; the rest within the runs' spread); at
+load 1.8-4.5, where it fell behind, 0.94-1.03 -> 0.84-0.94 and 0.74-0.82 -> 0.61-0.71 CPU s a
+simulated second. What remains beside the step, measured in the node's own process with the
 compiled call stubbed and paced at real time (stage 2, load ~2.2, CPU a simulated ms): the
 physics thread 227 us (310 before) without a subscriber and 324 us (371) with one in another
 process, the process 276 (361) and 409 (480): a subscriber's DDS writes cost the publishing
