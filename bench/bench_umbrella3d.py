@@ -135,8 +135,8 @@ def real_time(ribs: int, elements: int, block: float, duration: float, after_loc
     published = 0
     while sim.time < start + duration - 1e-12:
         sim.advance(per_block)
-        rows = sim.record.rows          # what a publication reads: the last step's figures
-        published += len(rows['alpha1'][-1][-1]) + len(rows['tip'][-1][-1])
+        rows = sim.record.take()        # what a publication reads: the last step's figures
+        published += len(rows['alpha1'][-1]) + len(rows['tip'][-1])
     assert published > 0
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     return h, (sim.time - start) / wall, cpu / (sim.time - start)

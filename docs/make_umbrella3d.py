@@ -620,6 +620,32 @@ push and the reliable writer's timer notification, each a futex wake), FastDDS's
 the MCAP records, 24 us a publication): about 0.3 core beside the step, not yet the 0.15-0.2
 that the 0.5-core target leaves beside a 0.25-0.3-core step.
 
+Beside the step, a second pass (6 x 1, 1 kHz; the same runs of the previous state and this
+one in turn, load 1.7-2.1): a 1 ms block with the compiled call stubbed (bench_ribs_node's
+outside_kernel, best of 15 x 500 blocks) 109-112 -> 86-87 us deploying and 108-109 -> 84-85
+us in stage 2 (the bench's own best of 9 x 200: 124 / 120 -> 96 / 95), bit for bit the same
+rows, figures and CDR bytes (every chunk's rows, sample, held peaks, summary figures and
+encoded message of three runs: hub fixed, a stuck and rubbing hinge, a free bus): Record3D
+keeps a chunk's rows as one dict that take() hands over, its running sums by the ufuncs'
+accumulate and reduce and its held peaks by ndarray.take; Summary3D's and the peaks'
+maxima by np.maximum.reduce (ndarray.max's and np.sum's arithmetic without their dispatch,
+which costs more than a block's reduction); the compiled call does not copy in again the
+state its buffers hold (the run's next call starts from it), a sample of a block's last row
+is one dict. The executor's wait for a stop signal went from 20 ms to 0.1 s: each wait
+rebuilds rclpy's wait set, ~0.5 ms of CPU, 0.026 -> 0.006 core. The live node (bench_ribs_node
+--live, 4 s windows, main and this change in turn): at load 1.3-1.8, where both kept real
+time, 0.86-0.93 -> 0.85-0.87 core in stage 2 and 0.69-0.70 -> 0.66-0.70 deploying (the
+executor's thread 0.017-0.022 -> 0.005-0.007 of it; the rest within the runs' spread); at
+load 1.8-4.5, where it fell behind, 0.94-1.03 -> 0.84-0.94 and 0.74-0.82 -> 0.61-0.71 CPU s a
+simulated second. What remains beside the step, measured in the node's own process with the
+compiled call stubbed and paced at real time (stage 2, load ~2.2, CPU a simulated ms): the
+physics thread 227 us (310 before) without a subscriber and 324 us (371) with one in another
+process, the process 276 (361) and 409 (480): a subscriber's DDS writes cost the publishing
+thread ~100 us a publication and FastDDS's other threads ~35; the pacing's sleep 25 us a
+publication (a sleep's own CPU on this machine, 15-24 us however short: py-spy's 5-12 % in
+Pacer.sleep_until was mostly a runnable thread's wall time); and the Python of a publication
+costs ~1.4 times its hot figure when the thread wakes from that sleep (cold caches).
+
 A driven hub and a free-floating bus step compiled too (umbrella_sim/core/_kernel3d_base.h: the
 bus's border of M(q) (its elastic columns from invariants), its share of the kinetic energy's
 gradient, the arrow's full border of seven shared coordinates, the drive's rows, the free bus's

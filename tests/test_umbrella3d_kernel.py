@@ -276,6 +276,44 @@ def test_runs_of_steps_equal_steps_one_at_a_time(base):
 
 
 @needs_kernel
+def test_a_call_steps_from_the_state_given_whichever_its_buffers_hold():
+    """
+    A compiled call starts from the state it is given, bit for bit, whatever its buffers hold.
+
+    The buffers keep the state the last call reached, which the next call of a run starts
+    from without copying it in again; a call from another state (a copy of that one, an
+    earlier one: the lock's root find steps from one state again and again) loads it.  Two
+    identical runs, one stepping on from the state its buffers hold, the other from a copy;
+    then both from an earlier state: the same rows and states.
+    """
+    p = UmbrellaRibsParams.from_mapping(ASYMMETRIC)
+    own = UmbrellaSimulator3D(p, kernel='compiled')
+    copied = UmbrellaSimulator3D(p, kernel='compiled')
+    own.advance(30)
+    copied.advance(30)
+    earlier = own.state
+    own.advance(20)
+    copied.advance(20)
+    outcomes = []
+    for sim, start in ((own, own.state), (copied, replace(copied.state, t=copied.state.t)),
+                       (own, earlier), (copied, replace(earlier, t=earlier.t))):
+        status, done, rows, state = sim.integrator.compiled.advance(
+            start, round(start.t / sim.h), sim.h, 10, sim.force, False)
+        outcomes.append((status, done, {k: v.copy() for k, v in rows.items()}, state))
+    for first, second in (outcomes[:2], outcomes[2:]):
+        assert first[:2] == second[:2]
+        for name in first[2]:
+            np.testing.assert_array_equal(first[2][name], second[2][name], err_msg=name)
+        for name in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck', 'pr', 'ps'):
+            np.testing.assert_array_equal(getattr(first[3], name), getattr(second[3], name),
+                                          err_msg=name)
+    # (and from the earlier state, not from where the buffers were: the run's own step 40,
+    # to the Newton tolerance its kept iteration matrix allows)
+    alpha1 = own.record.arrays()['alpha1'][40]
+    np.testing.assert_allclose(outcomes[2][3].qr[:, own.model.i_a1], alpha1, rtol=0, atol=1e-9)
+
+
+@needs_kernel
 @pytest.mark.parametrize('base', BASES)
 def test_compiled_stress_figures_equal_record3d_numpy(base):
     """

@@ -36,8 +36,8 @@ from __future__ import annotations
 import numpy as np
 
 from .corotational3d import out_of_plane_warnings
-from .outputs3d import (BODIES, deployment_spread, energy_balance3d, first_reach,
-                        largest_out_of_plane_tip, STRESS_NAMES)
+from .outputs3d import (any_of, BODIES, deployment_spread, energy_balance3d, first_reach,
+                        largest, largest_out_of_plane_tip, STRESS_NAMES, STRESS_ROWS)
 from .params3d import UmbrellaRibsParams
 from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
@@ -90,21 +90,27 @@ class Sample3D:
         return dict(self._values)
 
     @classmethod
-    def of_row(cls, row: dict) -> 'Sample3D':
-        """Return the sample of a Record3D row (its 'locked' flag as the stage)."""
-        values = dict(row)
+    def of_row(cls, row: dict, i: int | None = None) -> 'Sample3D':
+        """
+        Return the sample of a Record3D row (its 'locked' flag as the stage).
+
+        i: the row is the i-th of Record3D rows (steps first) instead.
+        """
+        values = dict(row) if i is None else {name: v[i] for name, v in row.items()}
         values['stage'] = Stage.LOCKED if values.pop('locked') else Stage.DEPLOYING
         return cls(values)
 
     def with_peaks(self, hold: 'RibPeaks') -> 'Sample3D':
         """Return this sample with each rib's stress figures the held ones (merge_peaks)."""
         values = dict(self._values)
-        for j, name in enumerate(STRESS_NAMES):
-            values[f'stress_{name}'], values[f'stress_{name}_at'] = hold.value[:, j], hold.at[:, j]
+        # (a component's values and places: the rows of the held arrays turned)
+        for (name, name_at), value, at in zip(STRESS_ROWS, hold.value.T, hold.at.swapaxes(0, 1)):
+            values[name], values[name_at] = value, at
         return Sample3D(values)
 
 
 _COMPONENTS = np.arange(len(STRESS_NAMES))[None]
+_VON_MISES = STRESS_NAMES.index('von_mises')
 
 
 class RibPeaks:
@@ -147,7 +153,7 @@ class RibPeaks:
     def merged(self, new: 'RibPeaks') -> 'RibPeaks':
         """Return, rib by rib and component by component, the larger (these held on a tie)."""
         better = new.value > self.value
-        if not better.any():
+        if not any_of(better, axis=None):
             return self
         return RibPeaks(np.where(better, new.value, self.value),
                         np.where(better[..., None], new.at, self.at),
@@ -216,7 +222,7 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         self._force_per_rib = command_force(self.params.planar.sleeve_force, self.params)
         self._lock_event: LockEvent | None = None      # (lock_event, once it happened)
         # the record's row of t = 0 is the initial sample: the blocks hold the steps' rows
-        self._current = Sample3D.of_row({k: v[-1] for k, v in self.record.take().items()})
+        self._current = Sample3D.of_row(self.record.take(), -1)
 
     # ------------------------------------------------------------------- inputs
     @property
@@ -284,7 +290,7 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
         rows = self.record.take()
         peaks = self.record.taken_peaks
         if rows:
-            self._current = Sample3D.of_row({name: v[-1] for name, v in rows.items()})
+            self._current = Sample3D.of_row(rows, -1)
         lock = self.lock_event if self.locked and not locked_before else None
         return StepBlock3D(rows, self._current, lock, error,
                            None if peaks is None else RibPeaks(*peaks)), applied
@@ -356,7 +362,7 @@ class Summary3D:
             self._start = deploy_start(0.0, zip([self.final_time, *t[:-1].tolist()],
                                                 rows['sleeve_force'].tolist()))
         t_before, alpha_before = self._last
-        if self._undeployed and (rows['alpha1'] <= m.alpha_deployed).any():
+        if self._undeployed and any_of(rows['alpha1'] <= m.alpha_deployed, axis=None):
             # (first_reach of the ribs whose leaf reached its angle)
             ribs = np.nonzero(np.isnan(self._deployed))[0]
             gap = rows['alpha1'][:, ribs] - m.alpha_deployed[ribs]
@@ -368,13 +374,13 @@ class Summary3D:
             self._undeployed = bool(np.isnan(self._deployed).any())
         self._last = (float(t[-1]), rows['alpha1'][-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
-        self._scale = max(self._scale, float(np.abs(energy).max()))
+        self._scale = max(self._scale, float(largest(np.abs(energy))))
         self._balance = max(self._balance,
-                            float(np.abs(energy_balance3d(rows, self._e0, energy)).max()))
+                            float(largest(np.abs(energy_balance3d(rows, self._e0, energy)))))
         tip = rows['tip']
-        if np.abs(tip[:, :, 2]).max() > self._oop[0]:
+        if largest(np.abs(tip[:, :, 2]), axis=None) > self._oop[0]:
             self._oop = largest_out_of_plane_tip(t, tip)
-        self._in_plane = np.maximum(self._in_plane, np.abs(tip[:, :, 1]).max(0))
+        self._in_plane = np.maximum(self._in_plane, largest(np.abs(tip[:, :, 1])))
         self._peaks = block.merge_peaks(self._peaks)
         self.steps += len(block)
         self.final_time = float(t[-1])
@@ -455,7 +461,8 @@ class Summary3D:
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
         # the warnings depend on the run only through these
-        return self._said.new((self._peaks['von_mises'][0].max(), self._in_plane.max(),
+        return self._said.new((largest(self._peaks.value[:, _VON_MISES]),
+                               largest(self._in_plane),
                                self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
                                *self._geometry()),
                               self.warnings)

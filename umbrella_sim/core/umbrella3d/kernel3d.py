@@ -137,6 +137,8 @@ class CompiledStep3D:
                     'lam_r': np.zeros((nr, N_RIB_ROWS)), 'lam_s': np.zeros(m.n_shared_rows),
                     'pr': np.zeros((nr, n)), 'ps': np.zeros(m.n_shared),
                     'stuck': np.zeros(nr)}
+        #: the State3D the buffers hold (the last call's, as _state returned it), else None
+        self._in_buffers = None
         self.call = Advance3DCall(max_iter=max_iterations, tol=tolerance,
                                   phi_tol=phi_tolerance,
                                   **{k: _ptr(v) for k, v in self.buf.items()})
@@ -257,18 +259,21 @@ class CompiledStep3D:
 
     def _load(self, s: State3D, force: float, locked: bool, h: float) -> None:
         b = self.buf
-        for k in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck'):
-            b[k][...] = getattr(s, k)
-        have_p = s.pr is not None
-        if have_p:
-            b['pr'][...], b['ps'][...] = s.pr, s.ps
+        if s is not self._in_buffers:     # (the state the last call reached: there already)
+            for k in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck'):
+                b[k][...] = getattr(s, k)
+            if s.pr is not None:
+                b['pr'][...], b['ps'][...] = s.pr, s.ps
+        self._in_buffers = None     # (the call moves the buffers on)
         c = self.call
-        c.have_p, c.t, c.h, c.force, c.locked = int(have_p), s.t, h, force, int(locked)
+        c.have_p, c.t, c.h, c.force, c.locked = int(s.pr is not None), s.t, h, force, int(locked)
 
     def _state(self) -> State3D:
+        """Return the state the buffers hold after a call (copies; a next call starts there)."""
         b = self.buf
-        return State3D(self.call.t, *(b[k].copy() for k in (
+        self._in_buffers = state = State3D(self.call.t, *(b[k].copy() for k in (
             'qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck', 'pr', 'ps')))
+        return state
 
     def rows(self, count: int) -> dict:
         """Return the last call's first count rows by name (views of out: steps first)."""

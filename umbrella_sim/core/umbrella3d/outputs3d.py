@@ -41,6 +41,9 @@ STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 
 BODIES = ('leaf', 'link')
 #: Record3D's row names of each stress channel's value and where, in STRESS_NAMES' order
 STRESS_ROWS = tuple((f'stress_{name}', f'stress_{name}_at') for name in STRESS_NAMES)
+#: ndarray.max's and .any's reductions (over axis 0 unless told; axis=None: all), without
+#: the methods' dispatch, which costs more than the reduction of a block's small arrays
+largest, any_of = np.maximum.reduce, np.logical_or.reduce
 
 
 class Record3D:
@@ -48,7 +51,8 @@ class Record3D:
 
     def __init__(self, model):
         self.model = model
-        self.rows: dict[str, list] = {}     # name -> arrays, each a block of steps (first)
+        #: the blocks of steps added since the last ``take``: name -> array (steps first) each
+        self._blocks: list[dict] = []
         nr = model.n_ribs
         self.work = 0.0
         self.friction = np.zeros(nr)
@@ -76,7 +80,9 @@ class Record3D:
         #: of the rows the last ``take`` returned (``taken_peaks``)
         self._held = None
         self.taken_peaks = None
-        self._rib_comp = (np.arange(nr)[:, None], np.arange(len(STRESS_NAMES))[None])
+        #: a step's (rib, channel) figures, flattened: their count and indices
+        self._per_step = nr * len(STRESS_NAMES)
+        self._per_step_index = np.arange(self._per_step).reshape(nr, len(STRESS_NAMES))
         self._tip = np.array(model.i_tip)
         #: no hinge ever sticks (none has stick_until or stick_torque): stuck is NaN throughout
         self._never_stuck = all(r.stick_until <= 0.0 and r.stick_torque <= 0.0
@@ -99,8 +105,9 @@ class Record3D:
                          for (body, x), when in zip(self._peak_at[:, j], self._peak_when[:, j])]
         return out
 
-    def _put(self, name, value):
-        self.rows.setdefault(name, []).append(np.array(value)[None])
+    def _names(self) -> list:
+        """Return the names of the figures of every step (those of the blocks)."""
+        return list(self._blocks[0]) if self._blocks else []
 
     def add(self, s, locked: bool, force: float, work, lock_loss: float, lock_event=None):
         """Add the figures of state s, reached by a step that did work (None: the start)."""
@@ -122,19 +129,18 @@ class Record3D:
         kinetic = 0.5 * (float(np.sum(pr * s.vr)) + float(ps @ s.vs))
         one = {name: np.asarray(getattr(s, name))[None]
                for name in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck')}
-        self._put_steps(np.array([s.t]), one, np.array([kinetic]),
-                        np.array([m.strain_energy(s.qr)]), np.array([self.work]),
-                        self.friction[None].copy(), np.array([self.drive]),
-                        np.array([self.damping]), locked, force, lock_loss)
+        block = self._put_steps(np.array([s.t]), one, np.array([kinetic]),
+                                np.array([m.strain_energy(s.qr)]), np.array([self.work]),
+                                self.friction[None].copy(), np.array([self.drive]),
+                                np.array([self.damping]), locked, force, lock_loss)
         if m.moving_base:
-            put = self._put
-            put('bus_q', s.qs[1:7].copy())
-            put('bus_v', s.vs[1:7].copy())
+            block['bus_q'] = s.qs[None, 1:7].copy()
+            block['bus_v'] = s.vs[None, 1:7].copy()
             if m.params.base == 'free':
                 kin = kin if kin is not None else m.kinematics(s.qr, s.qs)
                 p, h = m.momentum(kin, s.vr, s.vs)
-                put('linear_momentum', p)
-                put('angular_momentum', h)
+                block['linear_momentum'] = np.array(p)[None]
+                block['angular_momentum'] = np.array(h)[None]
 
     def add_steps(self, rows: dict, locked: bool, force: float, lock_loss: float,
                   substeps: int = 1, times=None):
@@ -152,33 +158,35 @@ class Record3D:
         """
         if substeps > 1:
             rows = self._grid_rows(rows, locked, substeps, times)
-        work = np.cumsum(rows['work_force'])
+        # (the ufuncs' own accumulate and reduce: np.cumsum's and np.sum's arithmetic,
+        # without their dispatch, which costs more than the sums of a block of steps)
+        accumulate = np.add.accumulate
+        work = accumulate(rows['work_force'])
         work += self.work
-        friction = np.cumsum(rows['work_friction'], 0)
+        friction = accumulate(rows['work_friction'])
         friction += self.friction
-        drive = np.cumsum(rows['work_drive'])
+        drive = accumulate(rows['work_drive'])
         drive += self.drive
         self.work, self.friction = float(work[-1]), friction[-1].copy()
         self.drive = float(drive[-1])
         if 'work_damping' in rows:
-            damping = np.cumsum(rows['work_damping'])
+            damping = accumulate(rows['work_damping'])
             damping += self.damping
         else:
             damping = self._constant('damping_dissipation', len(work), self.damping)
         self.damping = float(damping[-1])
-        self.iterations += int(np.sum(rows['iterations']))
+        self.iterations += int(np.add.reduce(rows['iterations']))
         figures = None
         if 'stress_top' in rows:        # (the compiled step's: _crests' rule, computed there)
             figures = rows['stress_top'], rows['stress_at']
-        self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work, friction,
-                        drive, damping, locked, force, lock_loss, figures)
-        if self.model.moving_base:
-            bus = {'bus_q': rows['qs'][:, 1:7], 'bus_v': rows['vs'][:, 1:7]}
+        block = self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work,
+                                friction, drive, damping, locked, force, lock_loss, figures)
+        if self.model.moving_base:      # (copies: the rows' buffers are reused)
+            block['bus_q'] = rows['qs'][:, 1:7].copy()
+            block['bus_v'] = rows['vs'][:, 1:7].copy()
             if self.model.params.base == 'free':
-                bus['linear_momentum'] = rows['linear_momentum']
-                bus['angular_momentum'] = rows['angular_momentum']
-            for name, values in bus.items():     # (copies: the rows' buffers are reused)
-                self.rows.setdefault(name, []).append(np.array(values))
+                block['linear_momentum'] = rows['linear_momentum'].copy()
+                block['angular_momentum'] = rows['angular_momentum'].copy()
 
     def crest_continues(self, locked: bool) -> bool:
         """Say whether the next step's stress crests start from the last step added."""
@@ -197,43 +205,26 @@ class Record3D:
         return rows
 
     def _put_steps(self, t, st, kinetic, strain, work, friction, drive, damping, locked,
-                   force, lock_loss, figures=None):
+                   force, lock_loss, figures=None) -> dict:
         """
-        Append k steps' figures (arrays with the steps first) and update the peaks.
+        Append k steps' figures (arrays with the steps first), update the peaks; return them.
 
         t, st's arrays, kinetic and strain may be views of a buffer reused (copied here);
         work, friction, drive, damping are the caller's own (kept).  figures: (top, at) of the
-        steps' stresses (add_steps), else computed here (_crests).
+        steps' stresses (add_steps), else computed here (_crests).  Returns the block's rows
+        by name (the caller may add its own).
         """
         m = self.model
         k = len(t)
         qr, vr = st['qr'], st['vr']
-        put = self.rows.setdefault
-        put('locked', []).append(self._constant('locked', k, locked))
-        put('sleeve_force', []).append(self._constant('sleeve_force', k, force))
-        put('lock_energy_loss', []).append(self._constant('lock_energy_loss', k, lock_loss))
-        i_a1, i_a2 = m.i_a1, m.i_a2
-        for name, values in (        # (copies: the rows' buffers are reused)
-                ('time', t), ('sleeve_position', st['qs'][:, 0]),
-                ('sleeve_velocity', st['vs'][:, 0]), ('alpha1', qr[:, :, i_a1]),
-                ('alpha2', qr[:, :, i_a2]), ('alpha1_rate', vr[:, :, i_a1]),
-                ('alpha2_rate', vr[:, :, i_a2])):
-            put(name, []).append(values.copy())
-        put('tip', []).append(qr[:, :, self._tip])         # (a new array)
-        put('kinetic_energy', []).append(kinetic.copy())
-        put('strain_energy', []).append(strain.copy())
-        put('work', []).append(work)
-        put('friction_work', []).append(friction)
-        put('drive_work', []).append(drive)
-        put('damping_dissipation', []).append(damping)
+        constant = self._constant
         if self._never_stuck:       # (every hinge free at every step)
-            put('holding_torque', []).append(self._constant('holding_torque', qr.shape[:2], 0.0))
-            put('stuck', []).append(self._constant('stuck', qr.shape[:2], False))
+            holding, stuck = (constant('holding_torque', qr.shape[:2], 0.0),
+                              constant('stuck', qr.shape[:2], False))
         else:
             free = np.isnan(st['stuck'])
-            put('holding_torque', []).append(np.where(free, 0.0, st['lam_r'][:, :, -1]))
-            put('stuck', []).append(~free)
-        put('stop_reaction', []).append(st['lam_s'][:, 0].copy())
+            holding, stuck = np.where(free, 0.0, st['lam_r'][:, :, -1]), ~free
+        i_a1, i_a2 = m.i_a1, m.i_a2
         # stresses: each rib's worst point per step, and where: the first of the largest in
         # the order leaf points, link points (the leaf's on a tie; a NaN the largest, as
         # argmax); every component at once, in STRESS_NAMES' order
@@ -242,23 +233,40 @@ class Record3D:
         else:      # (the next step's crests start from the last state: its channels if asked)
             top, at = figures[0].copy(), figures[1].copy()
             self._last_stress = (float(t[-1]), qr[-1].copy(), vr[-1].copy(), locked, 'state')
+        block = {      # (copies: the rows' buffers are reused)
+            'locked': constant('locked', k, locked),
+            'sleeve_force': constant('sleeve_force', k, force),
+            'lock_energy_loss': constant('lock_energy_loss', k, lock_loss),
+            'time': t.copy(), 'sleeve_position': st['qs'][:, 0].copy(),
+            'sleeve_velocity': st['vs'][:, 0].copy(), 'alpha1': qr[:, :, i_a1].copy(),
+            'alpha2': qr[:, :, i_a2].copy(), 'alpha1_rate': vr[:, :, i_a1].copy(),
+            'alpha2_rate': vr[:, :, i_a2].copy(),
+            'tip': qr[:, :, self._tip],         # (a new array)
+            'kinetic_energy': kinetic.copy(), 'strain_energy': strain.copy(),
+            'work': work, 'friction_work': friction, 'drive_work': drive,
+            'damping_dissipation': damping, 'holding_torque': holding, 'stuck': stuck,
+            'stop_reaction': st['lam_s'][:, 0].copy()}
         for j, (name, name_at) in enumerate(STRESS_ROWS):
-            put(name, []).append(top[:, :, j])
-            put(name_at, []).append(at[:, :, j])
-        put('von_mises', []).append(np.maximum(top[:, :, -1], 0.0))
+            block[name] = top[:, :, j]
+            block[name_at] = at[:, :, j]
+        block['von_mises'] = np.maximum(top[:, :, -1], 0.0)
+        self._blocks.append(block)
         # the peaks over these steps, rib by rib: the first of the largest step by step (the
         # leaf before the link: each step's own rule above; a NaN the largest, as argmax)
         first = top.argmax(0)                                   # (rib, 5)
-        ribs, comps = self._rib_comp
-        best = top[first, ribs, comps]
-        held = (best, at[first, ribs, comps], t[first])
+        # (each rib's and channel's row of the flattened steps: takes, not a fancy index)
+        i = first * self._per_step
+        i += self._per_step_index
+        best = top.take(i)
+        held = (best, at.reshape(-1, 2).take(i, 0), t.take(first))
         self._held = held if self._held is None else merged_peaks(self._held, held)
         # the run's: a larger one only (a NaN never)
         better = best > self._peaks
-        if better.any():
+        if any_of(better, axis=None):
             self._peaks = np.where(better, best, self._peaks)
             self._peak_at = np.where(better[..., None], held[1], self._peak_at)
             self._peak_when = np.where(better, held[2], self._peak_when)
+        return block
 
     def _step_figures(self, t, qr, vr, locked: bool):
         """Return each step's (top, at) of every stress channel: (step, rib, 5), (.., 2)."""
@@ -345,7 +353,8 @@ class Record3D:
 
     def arrays(self) -> dict:
         """Return every per-step figure as an array (steps first, then ribs or components)."""
-        return {name: np.concatenate(values) for name, values in self.rows.items()}
+        blocks = self._blocks
+        return {name: np.concatenate([b[name] for b in blocks]) for name in self._names()}
 
     def take(self) -> dict:
         """
@@ -356,9 +365,8 @@ class Record3D:
         None: no steps), driven3d.RibPeaks.of_rows' of the rows.
         """
         # (one block of steps: its own arrays, which nothing else holds)
-        out = {name: values[0] if len(values) == 1 else np.concatenate(values)
-               for name, values in self.rows.items()}
-        self.rows = {}
+        out = self._blocks[0] if len(self._blocks) == 1 else self.arrays()
+        self._blocks = []
         self.taken_peaks, self._held = self._held, None
         return out
 
@@ -551,7 +559,8 @@ def energy_balance3d(rows, initial_energy: float, energy=None) -> np.ndarray:
     """
     if energy is None:
         energy = rows['kinetic_energy'] + rows['strain_energy']
-    return (energy - initial_energy - rows['work'] - np.sum(rows['friction_work'], axis=-1)
+    friction = np.add.reduce(rows['friction_work'], axis=-1)    # (np.sum's, undispatched)
+    return (energy - initial_energy - rows['work'] - friction
             - rows['drive_work'] + rows['lock_energy_loss'] + rows['damping_dissipation'])
 
 
