@@ -661,6 +661,38 @@ base accelerates or spins up, 2.0 when it does not), free bus 61 / 121 us (numpy
 (driven), 48 / 92 us (free), 15 us a rib (hub fixed, 0.1 ms: 5.1). Those were at the planar
 rule's step without the stage-2 mode fit, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks took
 3.6 (driven) and 3.5 (free) CPU s a simulated second, 0.28-0.29 x real time.
+
+Where real time stands (the issue's targets: ribs 6 x 1 at 1 kHz with recording within 0.5
+core; 12 x 2 in real time at 100 Hz), measured on a quiet machine (load 0.4-1.4) with
+everything above: the compiled step alone 32.0 / 47.6 us at 6 x 1 (0.32 / 0.48 core, stage 1 /
+2) and 108.8 / 169.9 us at 12 x 2 (3.27 / 5.10 cores at its 33 us step; 0.30 x real time in
+10 ms blocks, 3.31 CPU s a simulated second); the live node at 6 x 1, 1 kHz, recording, real
+time held (bench_ribs_node --live, 5 s): 0.822-0.828 core in stage 2, 0.669-0.685 deploying.
+Neither target is met: the step itself is past what 0.5 core allows in stage 2, and 12 x 2
+needs 3-5 cores at the step its stresses need. A step of 0.125 ms (8 a 1 kHz publication:
+`time_step: 1.25e-4`; the rule's unresolved stress share is the same 0.33 / 0.41 % as at
+0.1 ms, every fitted mode within omega h 1.5) takes a fifth fewer steps: the live node 0.732
+core in stage 2 and 0.631-0.638 deploying; against a 25 us run (6 x 1, 0.35 s through the
+lock) its peak von Mises is 1.44 % off where 0.1 ms is 1.04 % off, its stage-2 tips 0.18 %
+(0.12 %), the lock instant 5.2e-7 s (the same): a user's choice, not the default. Two ways to
+spare stage 2's third Newton iteration were measured and not kept (6 x 1, 0.1 ms; error
+against a run at Newton tolerance 1e-12 with a matrix factored every step, 0.6 s through the
+lock): constraint corrections (an iterate converged in q but missing PHI_TOLERANCE moved by the
+kept matrix solved for the joints' residual alone) took 2.82 -> 2.08 iterations and 50.8 ->
+45.5 us a step, but move q without the momentum balance (the velocity 2 dq / h jumps with the
+correction): alpha1 4.7e-6 rad off against 5.5e-8, a prescribed base's energy balance 1.4e-5
+of its scale against 1.7e-7; a constraint tolerance of 1e-9 m instead of 1e-11 took 2.08
+iterations and 42.9 us, alpha1 4.8e-6 rad off (1e-10: 2.34 iterations, 45.5 us, 7.5e-7). The
+mode fit's modal sums now run along contiguous rows (u and phi handed over transposed as well;
+each sum in the same order, so bit for bit the same runs), which the free bus's dense whole
+fit feels: its compiled stage-2 step at 6 / 12 / 24 ribs x 1 is 153 / 420 / 1203 us (25.5 /
+35.0 / 50.1 us a rib; 170 / 482 / 1581 us before, at load ~3.3), still growing as the square
+of the ribs; the hub fixed 48 / 94 / 189 us. Lockstep through the test API (a commander
+answering every joint_states, 1 kHz, 6 ribs) runs at 0.38-0.42 x real time, a command to the
+state it lets out 1.85-2.16 ms (median), 2.6-3.2 ms at most (before: 0.04-0.05 x, and up to
+1.4 s a command: rclpy's MultiThreadedExecutor resubmitting a callback that waits for a
+worker, ros2/rclpy#1452, and a first command lost until a 3 s heartbeat:
+msg_docs/topic_sleeve_force.md).
 """
 
 
