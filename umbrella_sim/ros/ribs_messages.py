@@ -65,8 +65,10 @@ PLANAR_ONLY = ('tip_deflection', 'peak_stress')
 
 def node_topics(ribs: int) -> dict[str, Topic]:
     """
-    Return umbrella_node's topics: messages.TOPICS, and with ribs >= 2 RIB_TOPICS instead of
-    the planar rib's tip_deflection and peak_stress (not advertised: nothing would come).
+    Return umbrella_node's topics: messages.TOPICS, and with ribs >= 2 RIB_TOPICS.
+
+    With ribs >= 2, RIB_TOPICS instead of the planar rib's tip_deflection and peak_stress
+    (not advertised: nothing would come).
     """
     if ribs == 1:
         return dict(TOPICS)
