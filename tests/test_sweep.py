@@ -373,6 +373,29 @@ def test_table_takes_every_summary_key(tmp_path):
     assert '_same' not in columns
 
 
+def test_the_summary_line_says_how_many_finished_cases_warned(tmp_path, monkeypatch):
+    """A case past the model's range (yield...) is said on the console, not only in the table."""
+    from umbrella_sim.tools import sweep as sweep_tool
+
+    spec = sweep.load_spec(write(tmp_path / 's.yaml', 'grid:\n  v0: [-0.5, -1.0, -2.0]\n'))
+    store = sweep.CaseStore(str(tmp_path / 'out'))
+    for case, warnings in zip(spec.cases, ([], ['yield exceeded: 1.2 x'], [])):
+        store.save(sweep.make_record(case, {'case_id': case.case_id, 'status': 'ok',
+                                            'error': None, 'summary': {'warnings': warnings},
+                                            'worker': 'w', 'mcap': None}))
+    monkeypatch.setattr(sweep_tool, 'plot', lambda *args: [])
+    said = []
+    report = sweep_tool.SweepReport(total=3, skipped=0)
+    sweep_tool._write_outputs(spec, store, str(tmp_path / 'out'), report, said.append)
+    assert '3 ok (1 with warnings' in said[-1] and 'warnings column' in said[-1], said
+    store.save(sweep.make_record(spec.cases[1], {'case_id': spec.cases[1].case_id,
+                                                 'status': 'ok', 'error': None,
+                                                 'summary': {'warnings': []}, 'worker': 'w',
+                                                 'mcap': None}))
+    sweep_tool._write_outputs(spec, store, str(tmp_path / 'out'), report, said.append)
+    assert said[-1].endswith(': 3 ok'), said
+
+
 def test_progress_line_counts_failures_and_eta(monkeypatch):
     import io
 

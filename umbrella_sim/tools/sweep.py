@@ -428,7 +428,12 @@ def _write_outputs(sweep, store, out_dir, report, log) -> None:
                 log('results.parquet not written: pyarrow is not installed')
             ok = sum(r['status'] == STATUS_OK for r in rows)
             report.failed = len(rows) - ok
+            # (a finished case past the model's range, yield or small deflections: said here,
+            # as simulate says it on stderr, not only in the table)
+            warned = sum(r['status'] == STATUS_OK and bool(r.get('warnings')) for r in rows)
             log(f'{len(rows)} of {len(sweep.cases)} cases in {report.csv}: {ok} ok'
+                + (f' ({warned} with warnings: yield, large deflection or a coarse step; '
+                   'see the warnings column)' if warned else '')
                 + (f', {report.failed} failed (see the error column)' if report.failed
                    else ''))
         path = out_dir
