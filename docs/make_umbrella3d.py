@@ -346,8 +346,9 @@ def accuracy_table() -> str:
 
 HEADER = """# The whole umbrella in 3D: N flexible ribs on one sleeve
 
-`umbrella_sim.core.umbrella3d` simulates N ribs at azimuths 2πk/N about the hub axis Y, all
-driven by one sleeve, with per-rib asymmetry (section, material, lengths, tip mass, hinge
+`umbrella_sim.core.umbrella3d` simulates N ribs at azimuths 2πk/N about the hub axis Y (N
+counts ribs here, `ribs`; the planar pages' N, docs/validation.md, counts elements a segment,
+here "elements a segment", `elements_per_segment`), all driven by one sleeve, with per-rib asymmetry (section, material, lengths, tip mass, hinge
 friction, a hinge stuck until a time or a torque, initial perturbations) and a hub that is
 fixed, driven (a lateral acceleration pulse, a spin-up) or a free-floating bus. Rib k is the
 planar model of Hu (McGill, 2006) in its own plane, every beam a 3D Euler–Bernoulli body with
