@@ -348,20 +348,20 @@ HEADER = """# The whole umbrella in 3D: N flexible ribs on one sleeve
 
 `umbrella_sim.core.umbrella3d` simulates N ribs at azimuths 2πk/N about the hub axis Y (N
 counts ribs here, `ribs`; the planar pages' N, docs/validation.md, counts elements a segment,
-here "elements a segment", `elements_per_segment`), all driven by one sleeve, with per-rib asymmetry (section, material, lengths, tip mass, hinge
-friction, a hinge stuck until a time or a torque, initial perturbations) and a hub that is
-fixed, driven (a lateral acceleration pulse, a spin-up) or a free-floating bus. Rib k is the
-planar model of Hu (McGill, 2006) in its own plane, every beam a 3D Euler–Bernoulli body with
-St-Venant torsion in the thesis's floating frames (Shabana, *Dynamics of Multibody Systems*,
-3rd ed., ch. 5; element of Przemieniecki, *Theory of Matrix Structural Analysis*, 1968, and
-Cook, Malkus, Plesha & Witt, *Concepts and Applications of FEA*, 2002). The hinges hold the
-roots' out-of-plane displacement, slope and twist; at O'' the two hinge axes stay parallel.
-The step is the planar energy-consistent midpoint scheme (Gonzalez's discrete gradients,
-J. Nonlinear Sci. 6, 1996) on block-arrow linear algebra: one shared sleeve (and bus) couples
-the ribs only through a few unknowns, so a step costs linearly in the number of ribs
-(bench/bench_umbrella3d.py). The lock acts on the sleeve, plastic or energy (rib by rib, the
-thesis's §5.2.2); on a free bus `lock: auto` is plastic (the energy lock would change the
-momentum).
+here "elements a segment", `elements_per_segment`), all driven by one sleeve, with per-rib
+asymmetry (section, material, lengths, tip mass, hinge friction, a hinge stuck until a time or
+a torque, initial perturbations) and a hub that is fixed, driven (a lateral acceleration pulse,
+a spin-up) or a free-floating bus. Rib k is the planar model of Hu (McGill, 2006) in its own
+plane, every beam a 3D Euler–Bernoulli body with St-Venant torsion in the thesis's floating
+frames (Shabana, *Dynamics of Multibody Systems*, 3rd ed., ch. 5; element of Przemieniecki,
+*Theory of Matrix Structural Analysis*, 1968, and Cook, Malkus, Plesha & Witt, *Concepts and
+Applications of FEA*, 2002). The hinges hold the roots' out-of-plane displacement, slope and
+twist; at O'' the two hinge axes stay parallel. The step is the planar energy-consistent
+midpoint scheme (Gonzalez's discrete gradients, J. Nonlinear Sci. 6, 1996) on block-arrow
+linear algebra: one shared sleeve (and bus) couples the ribs only through a few unknowns, so a
+step costs linearly in the number of ribs (bench/bench_umbrella3d.py). The lock acts on the
+sleeve, plastic or energy (rib by rib, the thesis's §5.2.2); on a free bus `lock: auto` is
+plastic (the energy lock would change the momentum).
 
 ## Using it
 
