@@ -500,3 +500,60 @@ def test_a_command_taken_late_is_not_reported_as_refused(capfd):
         rclpy.shutdown()
     err = capfd.readouterr().err
     assert 'first push acting' in err and 'none of our commands' not in err, err
+
+
+def test_a_command_no_state_followed_is_sent_once_more(monkeypatch):
+    """
+    The first command of a new publisher can be dropped by a reader not yet matched to it.
+
+    DDS repairs it only at the next heartbeat (3 s): a node in lockstep, waiting for it,
+    stalled that long.  The controller sends a command that no state followed in RESEND_S
+    once more (in this process, the clock and the publisher made up): once, not again while
+    no state comes (a paused node), and not at all when a state came.
+    """
+    import rclpy
+    from sensor_msgs.msg import JointState
+
+    from umbrella_sim.ros import deploy_controller as dc
+    from umbrella_sim.testing import DOMAIN_ID
+
+    now = [100.0]
+    monkeypatch.setattr(dc.time, 'monotonic', lambda: now[0])
+    rclpy.init(domain_id=DOMAIN_ID)    # (its publisher and subscriptions: no traffic)
+    try:
+        node = dc._make_node_class()()
+        sent = []
+        monkeypatch.setattr(node, 'pub', type('Pub', (), {
+            'publish': lambda self, msg: sent.append(msg.data), 'topic_name': 'x'})())
+        node.phase = 'deploying'
+        msg = JointState(position=[UmbrellaParams().alpha0, 0.0, 0.0],
+                         velocity=[0.0, 0.0, 0.0], effort=[0.0, 0.0, 0.0])
+        node._on_state(msg)                          # t = 0, at rest: the first push
+        assert sent == [node.law.cfg.max_force]
+        now[0] += 0.5 * dc.RESEND_S
+        node._resend_unanswered()
+        assert len(sent) == 1                        # not yet
+        now[0] += dc.RESEND_S
+        node._resend_unanswered()
+        assert sent == [node.law.cfg.max_force] * 2  # once more, the same value
+        now[0] += 10 * dc.RESEND_S
+        node._resend_unanswered()
+        assert len(sent) == 2                        # once only
+        # a state came: it answers the command before it, and the one it brings (the law's
+        # next) is the one sent again if no state follows it
+        msg.header.stamp.nanosec = 10_000_000
+        msg.effort = [0.0, 0.0, node.law.cfg.max_force]
+        node._on_state(msg)
+        assert len(sent) == 3 and node._unanswered == (sent[-1], now[0])
+        now[0] += 0.5 * dc.RESEND_S
+        msg.header.stamp.nanosec = 20_000_000
+        node._on_state(msg)                          # answered within RESEND_S: no resend
+        now[0] += 0.5 * dc.RESEND_S
+        node._resend_unanswered()
+        assert len(sent) == 4
+        now[0] += dc.RESEND_S
+        node._resend_unanswered()
+        assert len(sent) == 5 and sent[-1] == sent[-2]
+        node.destroy_node()
+    finally:
+        rclpy.shutdown()

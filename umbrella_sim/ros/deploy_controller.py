@@ -42,6 +42,13 @@ from ..core.registry import CONTROLLER_PARAMETERS, defaults, parameter_help
 #: at rest for the plan: rate and angle from the start within this fraction of the plan's
 #: cruise rate and of its span
 REST_FRACTION = 0.05
+#: wall time after a command that no new joint_states followed, at which it is sent once
+#: more.  A reliable writer's first sample can reach a reader that has not yet matched it
+#: (its side of the discovery lags the writer's by 3-24 ms, measured): the reader drops it
+#: and DDS repairs it only at the writer's next heartbeat, 3 s later (Fast DDS), a 3 s stall
+#: of a node in lockstep, which waits for the answer.  Sent again, with the same value, it
+#: arrives; a node that got both applies the same force twice.
+RESEND_S = 0.25
 CONTROLLER_PARAMETERS_LISTED = ('deploy_controller --help and in msg_docs/deploy_controller.md '
                                 "(and umbrella_node's, for the model)")
 
@@ -112,6 +119,9 @@ def _make_node_class():
             self._delays: collections.deque = collections.deque(maxlen=15)
             self._not_ours = 0        # consecutive states applying none of our commands
             self._publishers_checked = -math.inf     # wall time of the last check
+            # the last command, its wall time, and whether it was sent again (RESEND_S)
+            self._unanswered: tuple | None = None
+            self.create_timer(RESEND_S / 2, self._resend_unanswered)
             self.get_logger().info(
                 f'target {cfg.target_time:g} s, force in [{cfg.min_force:g}, '
                 f'{cfg.max_force:g}] N, lock rate {self.law.lock_rate:.4g} rad/s, '
@@ -128,6 +138,7 @@ def _make_node_class():
             self._last_effort = 0.0
             self._sent.clear()
             self._not_ours = 0
+            self._unanswered = None
 
         def _on_phase(self, msg) -> None:
             if msg.data == 'deploying' and self.phase in ('locked', 'fault'):
@@ -154,6 +165,7 @@ def _make_node_class():
                 if self.done:               # (sim time going back then means a new run)
                     self._last_stamp = t
                 return
+            self._unanswered = None             # (a state came: the command was taken)
             now = time.monotonic()
             if self._last_wall is not None and self.commanding and now - self._last_wall > 0.05:
                 self.get_logger().warn(
@@ -242,7 +254,16 @@ def _make_node_class():
 
         def _send(self, t: float, force: float) -> None:
             self._sent.append((t, float(force)))
+            self._unanswered = (float(force), time.monotonic())
             self.pub.publish(Float64(data=float(force)))
+
+        def _resend_unanswered(self) -> None:
+            """Send the last command once more if no state followed it in RESEND_S."""
+            last = self._unanswered
+            if last is None or self.done or time.monotonic() - last[1] < RESEND_S:
+                return
+            self._unanswered = None             # (once: a paused node is not flooded)
+            self.pub.publish(Float64(data=last[0]))
 
         def _measure_delay(self, t: float, effort: float) -> None:
             """
