@@ -363,6 +363,38 @@ def test_replay_stopped_by_a_signal_delivers_what_it_sent_and_exits_0(tmp_path, 
 
 
 @pytest.mark.ros
+def test_a_stop_signal_inside_a_decoding_stops_a_looping_replay(tmp_path, monkeypatch, capsys):
+    """
+    A stop signal that lands inside rclpy's message conversion comes back as its own error.
+
+    The replay took it for an undecodable payload, skipped it and looped on for ever (a
+    fresh clone's suite: the signal test's replay outlived its 90 s).  Made here: the
+    decoding of the 5th message receives SIGTERM and fails as rclpy's conversion does.
+    """
+    from umbrella_sim.bag.reader import LogData, LogError
+    from umbrella_sim.ros import signals
+    from umbrella_sim.tools import replay
+
+    bag = tmp_path / 'loop_src'
+    assert run_cli('umbrella_sim', 'simulate', '--v0', '-0.5', '--duration', '0.02',
+                   '--mcap', str(bag)).returncode == 0
+    decode, calls = LogData.decode, [0]
+
+    def interrupted(self, topic, data, *args, **kwargs):
+        calls[0] += 1
+        if calls[0] == 5:
+            signals.received.append(signal.SIGTERM)       # (what _interrupt notes)
+            raise LogError('Unable to convert function return value to a Python type!')
+        return decode(self, topic, data, *args, **kwargs)
+    monkeypatch.setattr(LogData, 'decode', interrupted)
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_env()['ROS_DOMAIN_ID']))
+    code = replay.main([str(bag), '--loop', '--rate', '1000', '--topics', '/joint_states'])
+    out = capsys.readouterr()
+    assert code == 0 and 'skipped' not in out.err, out
+    assert 'replayed 4 messages' in out.out, out
+
+
+@pytest.mark.ros
 def test_replay_stopped_while_waiting_for_subscribers_exits_0(tmp_path):
     """SIGTERM before the first message (no subscriber yet): as a stop while replaying."""
     bag = tmp_path / 'wait_src'

@@ -446,6 +446,9 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
                 try:        # an undecodable payload is skipped and named, as --resimulate
                     log.decode(m.topic, m.data, index=read, log_time=m.log_time)
                 except LogError as exc:
+                    # (a stop signal inside the decoding comes back as rclpy's conversion
+                    # error: an interrupt, not a bad payload, or a --loop never ends)
+                    raise_if_stopped()
                     if not skipped:
                         first_skipped = str(exc)
                         print(f'umbrella_replay: skipped: {exc}', file=sys.stderr, flush=True)
