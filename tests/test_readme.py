@@ -55,3 +55,45 @@ def test_every_local_link_and_image_exists():
     assert 'docs/mechanism.png' in local and 'config/umbrella.foxglove.json' in local
     missing = [link for link in local if not os.path.exists(os.path.join(ROOT, link))]
     assert not missing
+
+
+def test_the_ribs_example_does_what_the_readme_says():
+    """
+    The README's umbrella example (its -p arguments, run offline): the figures it quotes.
+
+    A hinge that sticks until its holding torque reaches a threshold holds the sleeve back:
+    the lock comes later than the same umbrella's without it, and the stuck rib's peak von
+    Mises stress is above the others'; the README's numbers are these, rounded.
+    """
+    import json
+    import shlex
+
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+    from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+
+    text = readme()
+    (line,) = [line for line in code_lines(text) if 'umbrella_node' in line and 'ribs:=' in line]
+    words = shlex.split(line)
+    values = {}
+    for flag, arg in zip(words, words[1:]):
+        if flag == '-p':
+            name, value = arg.split(':=')
+            values[name] = json.loads(value)
+    assert values['ribs'] == 6 and 'rib.stick_torque' in values
+
+    def run(values):
+        sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values))
+        sim.run(0.9)
+        return sim.lock_time, sim.record.summary()['peak_stress']['von_mises'][0]
+
+    lock, peaks = run(values)
+    free_lock, _ = run({'ribs': 6})
+    stuck = values['rib.stick_torque'].index(max(values['rib.stick_torque']))
+    others = max(p for k, p in enumerate(peaks) if k != stuck)
+    assert lock > free_lock and peaks[stuck] > others
+    said = re.search(r'locks at ([0-9.]+) s\s+instead of ([0-9.]+) s and rib (\d)\'s peak von '
+                     r'Mises stress is (\d+) % above', text)
+    assert said, 'the README no longer says what the example does'
+    assert (float(said[1]), float(said[2]), int(said[3])) == (round(lock, 3),
+                                                              round(free_lock, 3), stuck)
+    assert int(said[4]) == round(100 * (peaks[stuck] / others - 1))
