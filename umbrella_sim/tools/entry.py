@@ -24,25 +24,57 @@ library): the nodes note a signal and stop cleanly at their next start-up phase;
 tools end with one line and exit 130.
 """
 import importlib
+import os
 import sys
 import threading
 
 from ..ros import signals
 
+#: what the package needs from PyPI (bootstrap.py installs it into .venv)
+DEPENDENCIES = frozenset({'numpy', 'scipy', 'rclpy', 'mcap', 'yaml', 'std_msgs',
+                          'sensor_msgs', 'rosgraph_msgs', 'geometry_msgs',
+                          'visualization_msgs', 'diagnostic_msgs', 'rcl_interfaces'})
+
+
+def missing_dependency(tool: str, exc: ModuleNotFoundError) -> int | None:
+    """
+    Say which dependency a tool lacks and where it is, exit 2; None if not one of ours.
+
+    A python3 outside the venv bootstrap.py made (its tools in .venv/bin) has none of them:
+    a bare ModuleNotFoundError told a newcomer nothing.
+    """
+    if (exc.name or '').split('.')[0] not in DEPENDENCIES:
+        return None
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    print(f'{tool}: error: no module {exc.name!r} in this Python ({sys.executable}): run it '
+          f'from the venv that `python3 bootstrap.py setup` makes ({root}/.venv/bin/{tool}, '
+          'or after `. .venv/bin/activate`)', file=sys.stderr)
+    return 2
+
 
 def node_main() -> int:
     """Run umbrella_node: the handlers first, then the heavy imports."""
     signals.install()
-    from ..ros.node_main import main
-
+    try:
+        from ..ros.node_main import main
+    except ModuleNotFoundError as exc:
+        code = missing_dependency('umbrella_node', exc)
+        if code is None:
+            raise
+        return code
     return main()
 
 
 def controller_main() -> int:
     """Run deploy_controller: the handlers first, then the heavy imports."""
     signals.install()
-    from ..ros.deploy_controller import main
-
+    try:
+        from ..ros.deploy_controller import main
+    except ModuleNotFoundError as exc:
+        code = missing_dependency('deploy_controller', exc)
+        if code is None:
+            raise
+        return code
     return main()
 
 
@@ -52,6 +84,11 @@ def _offline_tool(module: str, tool: str) -> int:
         signals.interrupt_on_stop_signals()
     try:
         main = importlib.import_module(f'umbrella_sim.tools.{module}').main
+    except ModuleNotFoundError as exc:
+        code = missing_dependency(tool, exc)
+        if code is None:
+            raise
+        return code
     except KeyboardInterrupt as exc:
         print(f"{tool}: interrupted by {str(exc) or 'SIGINT'} while starting; nothing was "
               'done', file=sys.stderr)
