@@ -386,12 +386,15 @@ against hardware.
 Which to take: `model: flexible` (the default: linear beams in each body's floating frame)
 is the planar model exactly for identical ribs, and holds while the ribs' out-of-plane
 slopes stay at a few hundredths of a radian. Where a rib's out-of-plane motion couples with
-the deployment (an offset tip mass, a kicked or sticking rib, a jolt or spin of the base: in
-the Exudyn case a 38.7 mm out-of-plane tip on the 1 m leaf, 0.094 rad at the tip, put
-`flexible` 36 % off), take
-`model: flexible-nonlinear`, the co-rotational ribs (docs/umbrella3d_nonlinear.md: each
-rib's beams co-rotational, the planar element in the rib's plane, out-of-plane bending and
-torsion small rotations in its co-rotated frame; compiled too), at about twice the cost.
+the deployment (an offset tip mass, a kicked rib, a jolt or spin of the base: in the Exudyn
+case a 38.7 mm out-of-plane tip on the 1 m leaf, 0.094 rad at the tip, put `flexible` 36 %
+off; a rib that sticks or rubs in its own plane stays in it), take `model:
+flexible-nonlinear`, the co-rotational ribs (docs/umbrella3d_nonlinear.md: each rib's beams
+co-rotational, the planar element in the rib's plane, out-of-plane bending and torsion
+small rotations in its co-rotated frame; compiled too), at 1.2-1.8 times the cost a step
+(6 ribs x 1 element, 0.1 ms). It has no stage-2 mode fit: at its default 0.1 ms its
+stage-2 peak stresses are not resolved, and its 'coarse step' warning names the step that
+resolves them (`step_follows_mesh` takes it, at a multiple of the cost).
 
 ## The model's details
 

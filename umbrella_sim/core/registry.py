@@ -242,7 +242,7 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "flexible step; docs/validation_nonlinear.md; with `ribs` ≥ 2 every rib's beams "
        "co-rotational in the rib's plane with out-of-plane bending and torsion as small "
        'rotations in the co-rotated frame, warned past 0.1 rad, compiled, '
-       "2.3–3.5× the linear ribs' cost: docs/umbrella3d_nonlinear.md); "
+       "1.2–1.8× the linear ribs' cost a step: docs/umbrella3d_nonlinear.md); "
        'rigid-fe: Case 3 (elastic coordinates constrained); rigid: closed-form two-angle '
        'model', choices=MODELS),
     _P('elements_per_segment', int, 1, '-',
