@@ -85,12 +85,17 @@ def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_pat
     planar = tmp_path / 'planar'
     assert cli.main(['simulate', '--duration', '0.01', '--mcap', str(planar)]) == 0
     assert compare.main([str(bag), str(planar), '--out', str(tmp_path / 'mixed')]) == 2
+    capsys.readouterr()
+    assert compare.main([str(bag), '--thesis', '--out', str(tmp_path / 'thesis')]) == 2
+    assert '(leave --thesis out)' in capsys.readouterr().err
 
 
 @pytest.mark.parametrize('args, culprit', [
     (['simulate', '--set', 'rib.tip_mass=[0.1]', '--duration', '0.01'], 'rib.tip_mass'),
     ([*RUN, '--set', 'rib.tip_mass=0.1'], 'rib.tip_mass'),
-    ([*RUN, '--set', 'rib.tip_mass=[0.1, 0.0, 0.0]'], 'tip_mass'),
+    ([*RUN, '--set', 'rib.tip_mass=[0.1, 0.0, 0.0]'], 'rib.tip_mass'),
+    ([*RUN, '--set', 'rib.tip_mass=[0.0 0.1]'], '--set rib.tip_mass: a list of numbers'),
+    ([*RUN, '--set', 'rib.tip_mas=[0.0, 0.1]'], "(did you mean 'rib.tip_mass'?)"),
     ([*RUN, '--csv', 'out.csv', '--csv-state'], '--csv-state'),
 ])
 def test_simulate_refuses_what_the_umbrella_cannot_take_naming_it(

@@ -293,7 +293,8 @@ def _ribs_logs(args) -> bool:
                              ('--window', args.window)) if on]
     if any(ribs) and given:
         raise LogError(f"{', '.join(given)}: options of the planar comparison; recordings of "
-                       'the umbrella of N ribs are compared over every publication')
+                       'the umbrella of N ribs are compared over every publication (leave '
+                       f"{', '.join(given)} out)")
     return any(ribs)
 
 

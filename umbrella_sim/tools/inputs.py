@@ -209,8 +209,10 @@ def umbrella_value(name: str, value):
             value = yaml.safe_load(value)
         except yaml.YAMLError:
             value = None
-        if not isinstance(value, list):
-            raise ValueError(f'--set {name}: a list, one value per rib ([0.0, 0.1, 0.0])')
+        if not isinstance(value, list) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+            raise ValueError(f'--set {name}: a list of numbers, one per rib, comma-separated '
+                             f'([0.0, 0.1, 0.0]); got {value!r}')
     return value
 
 
@@ -250,7 +252,10 @@ def build_params(args) -> UmbrellaParams:
         if name in NODE_PARAMETERS:
             raise ValueError(f'--set {name}: a parameter of the live umbrella_node only, with '
                              'no meaning offline (see --duration, --mcap, --publish-rate)')
-        check_known_names([name], SPECS, '--set')
+        # (the umbrella's names too: a misspelt rib.<name> is suggested its right spelling)
+        check_known_names([name], set(SPECS) | UMBRELLA_NAMES, '--set',
+                          'umbrella_node --help and in msg_docs/parameters.md (the umbrella '
+                          "of N ribs': msg_docs/umbrella3d_parameters.md)")
         values[name] = value
         if name == 'lock':
             lock_given = f'--set lock={value}'
