@@ -169,6 +169,9 @@ def _alpha_differences(ref: RibsRun, r: RibsRun) -> list[float] | None:
 def print_ribs_table(result: dict, stream=None) -> None:
     w = (stream or sys.stdout).write
     w(f"reference run: {result['reference']} (the umbrella of N ribs)\n")
+    w('lag: how long after the earliest rib the latest one deployed; latest: that rib; max w '
+      'tip: the largest out-of-plane tip of any rib; the differences: of each run against the '
+      'reference run (zero for the reference itself)\n')
     w(f"{'run':<18} {'ribs':>4} {'lock (s)':>11} {'lag (s)':>10} {'latest':>6} "
       f"{'max w tip (mm)':>14} {'energy drift':>12}\n")
     for e in result['runs']:
