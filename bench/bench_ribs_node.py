@@ -221,9 +221,9 @@ def live(ribs: int, periods: int, windows: int, deploying: bool = False) -> None
     lockstep(ribs, periods)
 
 
-def lockstep(ribs: int, periods: int) -> None:
+def lockstep(ribs: int, periods: int, rate_hz: float = 1000.0) -> None:
     """
-    In lockstep at 1 kHz, a commander answering every joint_states: rate and each period's delay.
+    In lockstep at rate_hz, a commander answering every joint_states: rate and each delay.
 
     The first command arms the handshake; the node runs the period it acts for, then waits:
     from the state after it, each command lets exactly one period run.  Printed: sim seconds
@@ -233,7 +233,7 @@ def lockstep(ribs: int, periods: int) -> None:
     from umbrella_sim.testing import SimulatedAntenna
     from umbrella_sim.testing.processes import poll
 
-    period = 1e-3
+    period = 1.0 / rate_hz
     with SimulatedAntenna({'ribs': ribs, 'time_step': STEP, 'publish_rate': 1 / period,
                            'lockstep': True, 'v0': 0.0}) as antenna:
         antenna.publish_force(5.0)
@@ -250,7 +250,7 @@ def lockstep(ribs: int, periods: int) -> None:
                                if abs(stamp(m) - sim - (i + 1) * period) < 1e-9) - sent)
         rate = (antenna.sim_time() - sim) / (time.monotonic() - wall)
         delays.sort()
-        print(f'live ribs {ribs}, lockstep at 1 kHz over {periods} periods: real-time '
+        print(f'live ribs {ribs}, lockstep at {rate_hz:g} Hz over {periods} periods: real-time '
               f'factor {rate:.4f}; a command to the state it lets out: median '
               f'{delays[len(delays) // 2] * 1e3:.2f} ms, max {delays[-1] * 1e3:.2f} ms; '
               f'load {os.getloadavg()[0]:.2f}')
@@ -274,6 +274,9 @@ def main() -> None:
                     help=f'live: a slow deployment ({DEPLOYING}), timed before its lock')
     ap.add_argument('--lockstep-only', action='store_true',
                     help='only the live lockstep figures (of --live-ribs, --periods)')
+    ap.add_argument('--lockstep-rate', type=float, default=1000.0, metavar='HZ',
+                    help='the publication rate of the lockstep line (1000; 100: the default '
+                         'of the node, the tested rate of deploy_controller)')
     ap.add_argument('--step', type=float, default=STEP, metavar='S',
                     help=f'the physics step (time_step, s; {STEP:g}): 1.25e-4 takes 8 a 1 kHz '
                          'publication, at the same unresolved stress share (docs/umbrella3d.md)')
@@ -282,7 +285,7 @@ def main() -> None:
         ap.error(f'--step {args.step:g}: must divide the 1 ms publication period')
     globals()['STEP'] = args.step
     if args.lockstep_only:
-        lockstep(args.live_ribs, args.periods)
+        lockstep(args.live_ribs, args.periods, args.lockstep_rate)
         return
     for ribs in args.ribs:
         offline(ribs, args.duration, args.after_lock)
