@@ -391,7 +391,8 @@ figures follow their in-plane ones: in the Exudyn case (V0 = -1, a 0.1 kg tip ma
 `flexible` is 35 % off out of plane and 46 % in plane, the same at a tip-mass offset of 5,
 10, 20, 35, 50 or 70 mm (0.007 to 0.093 rad of out-of-plane rotation; measured against
 `flexible-nonlinear`, 2 elements a segment, 25 us), and it warns of none of it before the lock
-(its in-plane tip stays at 5.6 % of the leaf, below the 10 % of 'large deflection'). For such
+(its in-plane tip stays at 5.6 % of the leaf, below the 10 % of 'large deflection'; a run
+through the lock warns: 2.5 x yield, a 39 % tip deflection in stage 2). For such
 runs (V0 of about -1 m/s or faster, a heavy tip, a jolt or spin of the base), take `model:
 flexible-nonlinear`, the co-rotational ribs (docs/umbrella3d_nonlinear.md: each rib's beams
 co-rotational, the planar element in the rib's plane, out-of-plane bending and torsion
