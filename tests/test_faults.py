@@ -642,7 +642,7 @@ def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monke
         assert summary.statistics.message_count == 2 * n
         # a seek by time reads from the right chunk on
         t = (n // 2) * 1_000_000
-        first = next(reader.iter_messages(topics=['/x'], start_time=t))
+        first = next(reader.iter_messages(topics=['/x'], starting_at=t))
         assert first[2].log_time == t
     log = read_log(str(tmp_path / 'bag'))
     assert not log.truncated and log.count('/x') == n
