@@ -36,46 +36,42 @@ DEPENDENCIES = frozenset({'numpy', 'scipy', 'rclpy', 'mcap', 'yaml', 'std_msgs',
                           'visualization_msgs', 'diagnostic_msgs', 'rcl_interfaces'})
 
 
-def missing_dependency(tool: str, exc: ModuleNotFoundError) -> int | None:
+#: the exit status of a tool whose dependency is missing (a usage error's, as argparse's)
+EXIT_MISSING = 2
+
+
+def _main_of(module: str, tool: str):
     """
-    Say which dependency a tool lacks and where it is, exit 2; None if not one of ours.
+    Return the module's main (its heavy imports); None if a dependency is missing, said.
 
     A python3 outside the venv bootstrap.py made (its tools in .venv/bin) has none of them:
-    a bare ModuleNotFoundError told a newcomer nothing.
+    a bare ModuleNotFoundError told a newcomer nothing.  A module not among DEPENDENCIES
+    (our own code broken) raises as it is.
     """
-    if (exc.name or '').split('.')[0] not in DEPENDENCIES:
+    try:
+        return importlib.import_module(module).main
+    except ModuleNotFoundError as exc:
+        if (exc.name or '').split('.')[0] not in DEPENDENCIES:
+            raise
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        print(f'{tool}: error: no module {exc.name!r} in this Python ({sys.executable}): run '
+              f'it from the venv that `python3 bootstrap.py setup` makes '
+              f'({root}/.venv/bin/{tool}, or after `. .venv/bin/activate`)', file=sys.stderr)
         return None
-    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    print(f'{tool}: error: no module {exc.name!r} in this Python ({sys.executable}): run it '
-          f'from the venv that `python3 bootstrap.py setup` makes ({root}/.venv/bin/{tool}, '
-          'or after `. .venv/bin/activate`)', file=sys.stderr)
-    return 2
 
 
 def node_main() -> int:
     """Run umbrella_node: the handlers first, then the heavy imports."""
     signals.install()
-    try:
-        from ..ros.node_main import main
-    except ModuleNotFoundError as exc:
-        code = missing_dependency('umbrella_node', exc)
-        if code is None:
-            raise
-        return code
-    return main()
+    main = _main_of('umbrella_sim.ros.node_main', 'umbrella_node')
+    return EXIT_MISSING if main is None else main()
 
 
 def controller_main() -> int:
     """Run deploy_controller: the handlers first, then the heavy imports."""
     signals.install()
-    try:
-        from ..ros.deploy_controller import main
-    except ModuleNotFoundError as exc:
-        code = missing_dependency('deploy_controller', exc)
-        if code is None:
-            raise
-        return code
-    return main()
+    main = _main_of('umbrella_sim.ros.deploy_controller', 'deploy_controller')
+    return EXIT_MISSING if main is None else main()
 
 
 def _offline_tool(module: str, tool: str) -> int:
@@ -83,17 +79,12 @@ def _offline_tool(module: str, tool: str) -> int:
     if threading.current_thread() is threading.main_thread():
         signals.interrupt_on_stop_signals()
     try:
-        main = importlib.import_module(f'umbrella_sim.tools.{module}').main
-    except ModuleNotFoundError as exc:
-        code = missing_dependency(tool, exc)
-        if code is None:
-            raise
-        return code
+        main = _main_of(f'umbrella_sim.tools.{module}', tool)
     except KeyboardInterrupt as exc:
         print(f"{tool}: interrupted by {str(exc) or 'SIGINT'} while starting; nothing was "
               'done', file=sys.stderr)
         return signals.EXIT_INTERRUPTED
-    return main()
+    return EXIT_MISSING if main is None else main()
 
 
 def cli_main() -> int:
