@@ -231,30 +231,27 @@ class UmbrellaRibsParams:
         """
         planar = planar or UmbrellaParams()
         base_planar, own, lists, overrides, spelled = {}, {}, {}, {}, {}
+
+        def every_rib(key: str, value, given: str) -> None:
+            # a value or a list of every rib (given: as the user spelled it, for the errors)
+            _rib_spec(key, given)
+            if key in lists:
+                raise ValueError(f'parameter {given}: given twice (as {spelled[key]} too)')
+            lists[key] = list(value) if isinstance(value, (list, tuple)) else value
+            spelled[key] = given
+
         for name, value in values.items():
             match = _OVERRIDE.match(name)
             if name.startswith(RIB_LIST_PREFIX):
-                key = name[len(RIB_LIST_PREFIX):]
-                _rib_spec(key, name)
-                if key in lists:
-                    raise ValueError(f'parameter {name}: given twice (as {key} too)')
-                lists[key], spelled[key] = (list(value) if isinstance(value, (list, tuple))
-                                            else value), name
+                every_rib(name[len(RIB_LIST_PREFIX):], value, name)
             elif match:
                 k, key = int(match.group(1)), match.group(2)
                 _rib_spec(key)
                 overrides.setdefault(k, {})[key] = value
             elif name in UMBRELLA_SPECS:
                 own[name] = UMBRELLA_SPECS[name].coerce(value)
-            elif isinstance(value, (list, tuple)):
-                _rib_spec(name)
-                if name in lists:
-                    raise ValueError(f'parameter {name}: given twice (as {spelled[name]} too)')
-                lists[name] = list(value)
-            elif name in RIB_SPECS:
-                if name in lists:
-                    raise ValueError(f'parameter {name}: given twice (as {spelled[name]} too)')
-                lists[name] = value
+            elif isinstance(value, (list, tuple)) or name in RIB_SPECS:
+                every_rib(name, value, name)
             else:
                 base_planar[name] = value
         planar = planar.replace(**base_planar) if base_planar else planar
@@ -263,7 +260,7 @@ class UmbrellaRibsParams:
         for name, value in lists.items():
             if isinstance(value, list):
                 if len(value) != n:
-                    raise ValueError(f'parameter {spelled.get(name, name)}: a list of '
+                    raise ValueError(f'parameter {spelled[name]}: a list of '
                                      f'{len(value)} values for '
                                      f'{n} ribs (give one per rib)')
                 for k, v in enumerate(value):
