@@ -119,7 +119,7 @@ def _make_node_class():
             self._delays: collections.deque = collections.deque(maxlen=15)
             self._not_ours = 0        # consecutive states applying none of our commands
             self._publishers_checked = -math.inf     # wall time of the last check
-            # the last command, its wall time, and whether it was sent again (RESEND_S)
+            # the last command and its wall time, until a state answers it or it is resent
             self._unanswered: tuple | None = None
             self.create_timer(RESEND_S / 2, self._resend_unanswered)
             self.get_logger().info(
