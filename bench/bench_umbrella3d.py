@@ -43,7 +43,7 @@ Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x ele
     driven hub's frame, the free system's modes of a free bus), so its step for the mesh is
     the fixed hub's (0.1 ms at 1 element, 33 us at 2; without the fit 33 and 9.1 us).
 The machine is shared (2 cores): CPU time is what the step costs, wall RTF what a user saw.
-Targets (the issue): ribs 6 x 1 real time at 1 kHz within 0.5 core, ribs 12 x 2 real time
+Targets: ribs 6 x 1 real time at 1 kHz within 0.5 core, ribs 12 x 2 real time
 at 100 Hz.  Measured (--no-numpy --ribs 6 --elements 1 2 --kernel-ribs 6 12 --repeat 3, load
 4.8-5.0, best of two runs), the compiled step alone, CPU us a step deploying / in stage 2:
 6 x 1 29.7 / 48.6 (0.30 / 0.49 core), 12 x 2 105.7 / 191.7 (3.2 / 5.8 cores); 2.00 / 2.81

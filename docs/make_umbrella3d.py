@@ -550,7 +550,7 @@ bench's compiled step alone, before -> after, best of two runs in turn at load 4
 a step, deploying / stage 2): 6 x 1 31.9 -> 29.7 / 50.9 -> 48.6, 12 x 1 62.7 -> 58.4 / 99.3 ->
 95.6, 6 x 2 58.6 -> 51.5 / 97.9 -> 91.4, 12 x 2 119.2 -> 105.7 / 204.8 -> 191.7 (interleaved
 best-of-10 runs: 0.95 / 0.955 of before at 6 x 1, 0.87-0.88 / 0.92-0.94 at 12 x 2). Still
-0.30 and 0.49 core for 6 x 1, 3.2 and 5.8 cores for 12 x 2: the issue's ~22 and ~25 us (6 x 1)
+0.30 and 0.49 core for 6 x 1, 3.2 and 5.8 cores for 12 x 2: the targets' ~22 and ~25 us (6 x 1)
 are not reached, and what stands in the way was measured. The projection is 0.35-0.4 of a
 step (the step without it, wrong but timed: 40 -> 24 us at 6 x 1, 150 -> 97 at 12 x 2): a full
 factorisation of [[M(q1), J^T], [J, 0]] every step, already through the constant elastic LU;
@@ -578,7 +578,7 @@ s). With the cheaper step (the same runs as the table): 6 x 1 at 1.41 x real tim
 (1.16-1.24 x before; 0.7 CPU s a simulated second, of which the step 0.31 and Record3D's
 figures about 0.37: a run's Record3D.add_steps in 10-step blocks, 37 us a step at load ~4),
 0.50 core for the step alone in stage 2; 12 x 2 at 0.23 x deploying (0.16-0.17 x before; 4.3
-CPU s, the step alone 3.6), the step alone 6.0 cores in stage 2. The issue's targets
+CPU s, the step alone 3.6), the step alone 6.0 cores in stage 2. The real-time targets
 (6 x 1 within 0.5 core, 12 x 2 in real time) are not reached: they need about 8 us (6 x 1,
 the figures included) and 2.8 us (12 x 2) a rib and step at these steps.
 
@@ -671,7 +671,7 @@ base accelerates or spins up, 2.0 when it does not), free bus 61 / 121 us (numpy
 rule's step without the stage-2 mode fit, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks took
 3.6 (driven) and 3.5 (free) CPU s a simulated second, 0.28-0.29 x real time.
 
-Where real time stands (the issue's targets: ribs 6 x 1 at 1 kHz with recording within 0.5
+Where real time stands (the targets: ribs 6 x 1 at 1 kHz with recording within 0.5
 core; 12 x 2 in real time at 100 Hz), measured on a quiet machine (load 0.4-1.4) with
 everything above: the compiled step alone 32.0 / 47.6 us at 6 x 1 (0.32 / 0.48 core, stage 1 /
 2) and 108.8 / 169.9 us at 12 x 2 (3.27 / 5.10 cores at its 33 us step; 0.30 x real time in

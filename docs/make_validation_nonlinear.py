@@ -21,16 +21,15 @@ Regenerate docs/validation_nonlinear.md (one command; progress on stderr):
 
     .venv/bin/python docs/make_validation_nonlinear.py [--meshes 2 4 8 16]
 
-The geometrically exact model (flexible-nonlinear: co-rotational beam) against an
-independent geometrically exact ANCF model of the same frame (Exudyn, the figures quoted
-with the issue, and those of docs/exudyn_umbrella_frame.py if its JSON is there), a mesh and
-step series of the stage-2 figures, small motion against the linear model, the fibres'
-turn from their body frames, the sensitivity of stage 2, the elastica of a tip-loaded
-cantilever, the spin-up benchmark of Kane, Ryan & Banerjee (1987) against the quasi-static
-stiffened solution, the published rotating-cantilever frequencies (Wright et al. 1982; Yoo &
-Shin 1998), and a damped run.  The text depends on the code only (no wall-clock time, no
-revision): regenerating it with unchanged code changes nothing; wall-clock figures are the
-bench scripts'.
+The geometrically exact model (flexible-nonlinear: co-rotational beam) against an independent
+geometrically exact ANCF model of the same frame (Exudyn, the figures quoted from an earlier
+Exudyn run, and those of docs/exudyn_umbrella_frame.py if its JSON is there), a mesh and step
+series of the stage-2 figures, small motion against the linear model, the fibres' turn from
+their body frames, the sensitivity of stage 2, the elastica of a tip-loaded cantilever, the
+spin-up benchmark of Kane, Ryan & Banerjee (1987) against the quasi-static stiffened solution,
+the published rotating-cantilever frequencies (Wright et al. 1982; Yoo & Shin 1998), and a
+damped run. The text depends on the code only (no wall-clock time, no revision): regenerating
+it with unchanged code changes nothing; wall-clock figures are the bench scripts'.
 """
 import argparse
 import json
@@ -56,7 +55,7 @@ from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
 NL = 'flexible-nonlinear'
 STAGE2 = 0.3          # s of stage 2 simulated after the lock (the summary's window)
 STEP = 1e-4           # s: the default step, at which the model meets its targets
-#: the independent reference quoted with the issue: ANCF cable elements, Exudyn 1.13.6,
+#: the independent reference quoted from an Exudyn run: ANCF cable elements, Exudyn 1.13.6,
 #: trapezoidal rule, h = 5e-6 s (V0 = -1) and 2.5e-6 s (V0 = -2), n elements a segment,
 #: plastic lock: (V0, n) -> figures
 QUOTED = {(-1.0, 8): {'stage2_tip_amplitude': 253.9e-3, 'stage2_tip_period': 48.2e-3},
@@ -65,7 +64,7 @@ QUOTED = {(-1.0, 8): {'stage2_tip_amplitude': 253.9e-3, 'stage2_tip_period': 48.
           (-2.0, 16): {'stage2_tip_amplitude': 361.0e-3, 'stage2_tip_period': 49.86e-3}}
 #: the targets (N = 4): period and amplitude tolerances against the reference's figures
 TARGETS = {-1.0: (48.2e-3, 0.03, 253.9e-3, 0.05), -2.0: (49.9e-3, 0.05, 366e-3, 0.10)}
-#: what the von Karman model gave at N = 4, step 2e-5, plastic lock (measured with the issue)
+#: what the von Karman model gave at N = 4, step 2e-5, plastic lock (measured when it was replaced)
 VON_KARMAN = {-1.0: (50.5e-3, 249.1e-3), -2.0: (55.2e-3, 414e-3)}
 
 
@@ -147,8 +146,8 @@ def reference_section():
             lines.append(f'| −2 | deploy time (s) | 0.0229751 | ± 10⁻⁴ | '
                          f"{s['deploy_time']:.7f} | {s['deploy_time'] / 0.0229751 - 1:+.1e} | "
                          '+3.7e-04 |')
-    lines += ['', 'The von Kármán column is the model this one replaced, as measured with '
-              'the issue (its step, 20 µs; at the default step its V0 = −2 period was '
+    lines += ['', 'The von Kármán column is the model this one replaced, as measured at '
+              'its replacement (its step, 20 µs; at the default step its V0 = −2 period was '
               '59.2 ms and amplitude 467 mm).']
     data = exudyn_results()
     if data:

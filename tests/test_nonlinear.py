@@ -500,7 +500,8 @@ def test_compiled_blocks_and_single_steps_agree_bit_for_bit():
 #: an independent geometrically exact model of the same frame: ANCF cable elements (Exudyn
 #: 1.13.6, ANCFCable2D, trapezoidal rule; h = 5e-6 s at V0 = -1 m/s and 2.5e-6 s at V0 = -2
 #: m/s, 8 elements a segment; plastic lock; stage-2 figures over 0.3 s after the lock), as
-#: quoted with the issue; docs/exudyn_umbrella_frame.py builds it and reproduces them
+#: quoted from an Exudyn run of the same frame; docs/exudyn_umbrella_frame.py builds it and
+#: reproduces them
 ANCF_REFERENCE = {
     -1.0: {'stage2_tip_period': 48.2e-3, 'stage2_tip_amplitude': 253.9e-3},
     -2.0: {'stage2_tip_period': 49.9e-3, 'stage2_tip_amplitude': 366e-3,   # 8 and 16 a segment

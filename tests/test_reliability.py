@@ -400,9 +400,9 @@ def test_a_flood_from_one_publisher_does_not_hold_back_another(probe, tmp_path):
 
     One reliable writer sends 5000 commands as fast as DDS lets it; another sends one after
     each thousand.  Each of the second's is recorded within HELD_BACK_S of the flood's first
-    (the issue's 5 of 6 had not arrived 65 s after).  Their place among the flood's says
-    nothing of that: Fast DDS hands a reader's samples out in the order of their source
-    timestamps, so a command held back seconds is still recorded among the flood's commands
+    (in the defect's report, 5 of 6 had not arrived 65 s after).  Their place among the
+    flood's says nothing of that: Fast DDS hands a reader's samples out in the order of their
+    source timestamps, so a command held back seconds is still recorded among the flood's commands
     sent after it while a backlog of them waits (so it was with the intake slowed to one a
     turn and a 100-sample reader); and one the transport dropped is recorded after the
     flood's last whenever the flood is drained before its writer's next heartbeat (3 s), as

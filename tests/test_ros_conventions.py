@@ -58,7 +58,7 @@ def test_descriptors_come_from_the_registry():
         if p.type is float and p.low is not None and p.high is not None:
             assert (d.floating_point_range[0].from_value,
                     d.floating_point_range[0].to_value) == (p.low, p.high)
-    # the issue that started this: publish_rate changes the physics step, built on reset
+    # what started this check: publish_rate changes the physics step, built on reset
     assert '~/reset' in descriptor('publish_rate').additional_constraints
     assert 'at once' in descriptor('marker_magnification').additional_constraints
 
