@@ -151,3 +151,23 @@ def test_the_tension_taken_is_the_axial_force_of_the_stress_recovery(v0):
     euler = math.pi ** 2 * p.youngs_modulus * p.cross_section_inertia / length ** 2
     figures = simulate(p, 1.0, stop_after_lock=0.0, keep_samples=False).figures
     assert figures['leaf_tension_ratio_max'] == pytest.approx(hinge.max() / euler, rel=1e-9)
+
+
+def test_a_recording_without_its_summary_is_judged_on_its_hinge_rates(tmp_path):
+    """A log without its summary record: the same rule on the recorded rates of stage 1."""
+    from umbrella_sim.ros.recording import record_offline
+    from umbrella_sim.tools import compare
+
+    judged = {}
+    for v0 in (-1.0, -0.2):
+        bag = tmp_path / f'v{v0:g}'
+        figures = record_offline(UmbrellaParams(v0=v0), str(bag), 0.01 - 0.25 / v0).figures
+        run = compare.load_run(str(bag))
+        assert [w.split(':')[0] for w in run.validity()] == [
+            w.split(':')[0] for w in figures['warnings']]
+        run.warnings = None                 # (as a log whose writer was killed)
+        judged[v0] = ([w for w in run.validity() if w.startswith(KEY)], run.leaf_tension(),
+                      figures['leaf_tension_ratio_max'])
+    assert judged[-1.0][0] and not judged[-0.2][0]
+    for _, sampled, every_step in judged.values():     # (the 100 Hz samples include t = 0)
+        assert sampled == pytest.approx(every_step, rel=1e-9)
