@@ -601,10 +601,10 @@ class SummaryAccumulator:
             i = int(deploying.argmax())
             if self._tip1[0] is None or deploying[i] > self._tip1[0]:
                 self._tip1 = (float(deploying[i]), float(t[i]))
-            if self._tension is not None:
-                rate = np.where(stage == 0, rows[_RATE], 0.0)
-                self._tension = max(self._tension,
-                                    self._tension_per_rate * float(np.max(rate * rate)))
+            if self._tension is not None:       # (ufunc reductions: a block's are small)
+                rate = rows[_RATE] if stage[-1] == 0 else rows[_RATE][stage == 0]
+                self._tension = max(self._tension, self._tension_per_rate
+                                    * float(np.maximum.reduce(rate * rate)))
         if self.lock is not None and stage[-1] != 0 and t[0] <= self._stage2_end:
             keep = in_stage2_window(t, self.lock.time)
             t2, v2 = t[keep], v[keep]
