@@ -31,6 +31,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from . import messages as ros_io, signals as stop_signals
+from .dds_profile import use_node_profile
 from .executor import CallbackPool
 from .node import EXIT_FAULT, EXIT_OK, EXIT_RECORDING, EXIT_USAGE, StartupError, UmbrellaNode
 from .params_file import init_ros
@@ -124,6 +125,7 @@ def _run(argv: list[str], running: list) -> int:
         rclpy.try_shutdown()
         return EXIT_USAGE
 
+    use_node_profile()          # (before rclpy.init: Fast DDS reads it with the participant)
     try:
         files = init_ros(argv)
     except ValueError as exc:
