@@ -25,7 +25,10 @@ round-off (a cyclic coordinate whose scheme momentum is the physical one), its a
 momentum to the Newton tolerance (the discrete gradient's, as without the fit:
 tests/test_umbrella3d.py).  The modes are those of the whole system: with a light bus
 (5 kg against 6 ribs of 0.9 kg) the modes that move the bus are 5 to 25 % stiffer than
-a rib's on a fixed hub, which a fit of the ribs' own modes would leave off.
+a rib's on a fixed hub, which a fit of the ribs' own modes would leave off.  The step takes
+that fit as the ribs' own fits with low-rank corrections (stage2fit.BusFit): its maps are the
+whole fit's (WholeFit), and a run from one lock with either is the same to the Newton
+tolerance.
 
 A driven hub: the ribs' locked modes in the hub's frame, as the fixed hub's; with a drive
 that is zero, the run is the fixed hub's, through the lock and stage 2 (to the Newton
@@ -204,7 +207,7 @@ def test_the_free_fit_turned_to_an_attitude_is_the_fit_at_that_attitude():
     ids=['3-light-bus', '12-each-its-tip-mass'])
 def test_the_free_bus_fit_is_the_whole_fit_through_a_low_rank_correction(values):
     """
-    BusFit (the ribs' fits and the bus's corrections) maps as WholeFit, damped, at any ribs.
+    The free bus's fit (BusFit: the ribs' fits, the bus's corrections) maps as WholeFit.
 
     Each map (S^-1, S, S^T, the Newton update, the damping share) of a random vector within
     1e-9 of the largest entry (measured 1e-11: the corrections' singular values are cut at
