@@ -187,11 +187,13 @@ def test_the_fit_gives_each_free_mode_its_exact_period_and_amplitude(kernel, k):
     assert np.max(np.abs(s.vs[1:])) > 1e-3 * speed
 
 
-def test_the_free_fit_turned_to_an_attitude_is_the_fit_at_that_attitude():
-    """WholeFit.at_attitude (the lock's, in the run) against the eigenproblem solved there."""
+@pytest.mark.parametrize('beta', [0.0, 1e-5], ids=['undamped', 'damped'])
+def test_the_free_fit_turned_to_an_attitude_is_the_fit_at_that_attitude(beta):
+    """BusFit.at_attitude (the lock's, in the run) against the eigenproblem solved there."""
     m = UmbrellaModel3D(UmbrellaRibsParams.from_mapping(FREE))
     attitude = np.array([0.7, 0.2, -0.3])
-    turned, solved = stage2_fit(m, H).at_attitude(attitude), stage2_fit(m, H, attitude=attitude)
+    turned = stage2_fit(m, H, beta).at_attitude(attitude)
+    solved = stage2_fit(m, H, beta, attitude=attitude)
     rng = np.random.default_rng(1)
     vr, vs = rng.standard_normal((m.n_ribs, m.n_rib)), rng.standard_normal(m.n_shared)
     for name in ('to_scheme', 'to_physical', 'transpose'):
@@ -199,6 +201,11 @@ def test_the_free_fit_turned_to_an_attitude_is_the_fit_at_that_attitude():
             np.testing.assert_allclose(x, y, rtol=0, atol=1e-9, err_msg=name)
     for x, y in zip(turned.newton_update(vr, vs, H), solved.newton_update(vr, vs, H)):
         np.testing.assert_allclose(x, y, rtol=0, atol=1e-9)
+    if beta:        # (the damping share, of the order of 1 / h: 1e-9 of its largest)
+        pairs = list(zip(turned.damping_force(vr, vs, H), solved.damping_force(vr, vs, H)))
+        scale = max(np.max(np.abs(y)) for _, y in pairs)
+        for x, y in pairs:
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-9 * scale)
 
 
 @pytest.mark.parametrize('values', [

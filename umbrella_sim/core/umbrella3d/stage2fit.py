@@ -147,15 +147,14 @@ class BusFit:
     A free bus's fit at a rib's cost: the ribs' fits composed with the bus's correction.
 
     S = S_ribs S_bus equals the whole free system's S_whole (WholeFit) to BUS_TOLERANCE:
-    S_bus = S_ribs^-1 S_whole = I + Phi_b diag(s_b - 1) U_b^T over every coordinate, of the
-    few directions (the modes the bus takes part in) where the two fits differ (bus_correction).
-    Its maps: S w = S_ribs (S_bus w), S^-1 v = S_bus^-1 (S_ribs^-1 v), S^T p = S_bus^T (S_ribs^T
-    p); the Newton update the ribs' (only how Newton converges, not to what); a damped fit's
-    damping share the ribs' plus the difference to the whole fit's (``damping``: rows y_j over
-    every coordinate, weights e_j: the share Y diag(e) Y^T dq / h).
+    S_bus = S_ribs^-1 S_whole = I + A B^T over every coordinate, of the few directions (the
+    modes the bus takes part in) where the two fits differ (bus_correction).  Its maps: S w =
+    S_ribs (S_bus w), S^-1 v = S_bus^-1 (S_ribs^-1 v), S^T p = S_bus^T (S_ribs^T p); the Newton
+    update the whole fit's, (I + A_n B_n^T) the ribs' (``newton``); a damped fit's damping
+    share the ribs' plus the difference to the whole fit's (``damping``: Y diag(e) Y^T dq / h).
     """
 
-    whole = True            # (the whole free system's modes made exact)
+    whole = True            # (the whole free system's modes made exact, as WholeFit)
 
     def __init__(self, ribs: RibFits, bus: 'LowRankMap', newton: 'LowRankMap',
                  damping: 'LowRankMap | None' = None):
@@ -186,9 +185,14 @@ class BusFit:
         return fr + cr, fs + cs
 
     def at_attitude(self, attitude) -> 'BusFit':
-        """Return this fit for the bus at attitude (WholeFit.at_attitude: S turns to J^-1 S J)."""
+        """
+        Return this fit for the bus at attitude (WholeFit.at_attitude: S turns to J^-1 S J).
+
+        The damping share's difference is zero on the bus's rows and columns (both fits' U
+        are), where alone J differs from I: it stays as it is.
+        """
         return BusFit(self.ribs, self.bus.at_attitude(attitude), self.newton.at_attitude(attitude),
-                      None if self.damping is None else self.damping.at_attitude(attitude))
+                      self.damping)
 
     @classmethod
     def of(cls, ribs: RibFits, whole: WholeFit) -> 'BusFit':
@@ -196,8 +200,8 @@ class BusFit:
         return cls(ribs, *bus_correction(ribs, whole))
 
 
-#: the correction's directions kept: |s_b - 1| above this (S_bus = S_ribs^-1 S_whole near I;
-#: what is left out moves a mode's frequency by less than this, relatively)
+#: the corrections' directions kept: singular values above this (S_bus - I = S_ribs^-1 S_whole
+#: - I is small: what is left out moves a mode's frequency by about this, relatively)
 BUS_TOLERANCE = 1e-10
 
 
@@ -208,7 +212,7 @@ def bus_correction(ribs: RibFits, whole: WholeFit
 
     S_bus = S_ribs^-1 S_whole and N_whole N_ribs^-1 (N: a fit's Newton update, a linear map)
     differ from I by maps of low rank: where the two fits differ, in the modes the bus takes
-    part in (3 to 24 ribs, identical or each with its own tip mass: 17 to 30 singular values
+    part in (3 to 24 ribs, identical or each with its own tip mass: 18 to 34 singular values
     above BUS_TOLERANCE, then a drop to round-off); their singular vectors above
     BUS_TOLERANCE give each as I + A B^T (LowRankMap).  Not as modes: S_bus is not
     self-adjoint in any metric the two share (each rib's fit is in its own block of the
@@ -260,7 +264,7 @@ class LowRankMap:
     S = I + A B^T over every coordinate (rows a^T, b^T: (rank, coordinates)), and its maps.
 
     S^-1 = I - A C^T, C^T = (I + B^T A)^-1 B^T (Woodbury); S^T = I + B A^T.  Used as a
-    damping share, A B^T dq / h (A = Y diag(e), B = Y).
+    damping share too, A B^T dq / h (A = Y diag(e), B = Y).
     """
 
     def __init__(self, a_rows: np.ndarray, b_rows: np.ndarray, n_ribs: int, n_rib: int):
