@@ -515,7 +515,10 @@ whole fit's 151.9 / 417.2 / 1164.1 us (25.3 / 34.8 / 48.5 a rib), the hub fixed 
 the fit takes 4.6 (unfitted stage 2 105 / 209 / 419 us), the rest is the bus's own step (its
 border of M(q), its gradient, the seven shared coordinates: 15 us a rib deploying). At 12 x 2
 (33 us) a stage-2 step takes 0.85 ms against the whole fit's 1.87 and 0.40 unfitted: the fitted
-step's 4.88 Newton iterations a step (either fit; 2.26 unfitted) are what remains there.
+step's 4.88 Newton iterations a step (either fit; 2.26 unfitted) are what remains there, as
+on a driven hub (4.73 fitted, 2.32 unfitted; 0.32 factorisations a step against 0.13), where
+the hub fixed takes 2.17: the fitted step of a moving base converges slower at 2 elements
+(at 1 element 2.79, as the fixed hub's 2.81).
 """.replace('{accuracy}', accuracy_table())
 
 COST = """## Cost and real time
