@@ -386,14 +386,20 @@ against hardware.
 Which to take: `model: flexible` (the default: linear beams in each body's floating frame)
 is the planar model exactly for identical ribs, with the planar model's range: small
 deformations in each body's frame. A fast deployment leaves it as the planar model's does
-(docs/validation_nonlinear.md: from V0 = -1 m/s the links buckle), and the ribs' out-of-plane
-figures follow their in-plane ones: in the Exudyn case (V0 = -1, a 0.1 kg tip mass on rib 1)
-`flexible` is 35 % off out of plane and 46 % in plane, the same at a tip-mass offset of 5,
-10, 20, 35, 50 or 70 mm (0.007 to 0.093 rad of out-of-plane rotation; measured against
-`flexible-nonlinear`, 2 elements a segment, 25 us), and it warns of none of it before the lock
-(its in-plane tip stays at 5.6 % of the leaf, below the 10 % of 'large deflection'; a run
-through the lock warns: 2.5 x yield, a 39 % tip deflection in stage 2). For such
-runs (V0 of about -1 m/s or faster, a heavy tip, a jolt or spin of the base), take `model:
+(docs/validation_nonlinear.md: in stage 1 a leaf's centrifugal tension stiffens it, which
+the linear beams lack; from V0 = -1 m/s the links buckle in stage 2), and the ribs'
+out-of-plane figures follow their in-plane ones: in the Exudyn case (V0 = -1, a 0.1 kg tip
+mass on rib 1) `flexible` is 35 % off out of plane and 46 % in plane, the same at a tip-mass
+offset of 5, 10, 20, 35, 50 or 70 mm (0.007 to 0.093 rad of out-of-plane rotation; measured
+against `flexible-nonlinear`, 2 elements a segment, 25 us). It says so in stage 1:
+'centrifugal stiffening' (the planar model's rule on each rib's leaf) warns once a leaf's
+centrifugal tension at its hinge passes 2.5 % of its Euler load; rib 1's is 41 % from the
+start, said after the first chunk (1.6 ms; the lock at 44.5 ms), where the other warnings
+wait for the lock (its in-plane tip stays at 5.6 % of the leaf, below the 10 % of 'large
+deflection'; 2.5 x yield and a 39 % tip deflection come in stage 2). For such runs (V0 of
+about -0.3 m/s or faster with the thesis's data, a heavy tip, a jolt or spin of the base;
+the calibration: docs/validation_nonlinear.md, "Where the linear model leaves its range"),
+take `model:
 flexible-nonlinear`, the co-rotational ribs (docs/umbrella3d_nonlinear.md: each rib's beams
 co-rotational, the planar element in the rib's plane, out-of-plane bending and torsion
 small rotations in its co-rotated frame; compiled too), at 1.2-1.8 times the cost a step
