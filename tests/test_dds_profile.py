@@ -93,3 +93,13 @@ def test_fast_dds_reads_the_profile_without_an_error(tmp_path):
         said = out.stdout + out.stderr          # (Fast DDS logs to stdout)
         assert out.stdout.strip().endswith('made'), said
         assert ('XMLPARSER' in said) is errors, said
+
+
+@pytest.mark.ros
+def test_the_node_runs_on_its_profile_and_is_heard():
+    """A node started as users start it says which profile it took, and its topics come."""
+    from umbrella_sim.testing import SimulatedAntenna
+
+    with SimulatedAntenna({'ribs': 2, 'publish_rate': 100.0}) as antenna:
+        antenna.wait_for('joint_states', lambda m: True, timeout=30)
+        assert f'Fast DDS profile {package_path(*PROFILE)}' in antenna.node.output()

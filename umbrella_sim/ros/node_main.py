@@ -125,7 +125,7 @@ def _run(argv: list[str], running: list) -> int:
         rclpy.try_shutdown()
         return EXIT_USAGE
 
-    use_node_profile()          # (before rclpy.init: Fast DDS reads it with the participant)
+    profile = use_node_profile()    # (before rclpy.init: Fast DDS reads it then)
     try:
         files = init_ros(argv)
     except ValueError as exc:
@@ -141,6 +141,8 @@ def _run(argv: list[str], running: list) -> int:
     except StartupError as exc:
         return fail(str(exc))
     running.append(node)
+    if profile:
+        node.get_logger().info(f'Fast DDS profile {profile} (msg_docs/README.md, DDS profile)')
     if stop_requested:          # a signal while the model was built: before any output
         node.destroy_node()
         return _stopped_during_start_up()
