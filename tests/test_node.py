@@ -207,6 +207,27 @@ def test_pause_and_reset(probe):
     assert locks[:2] == pytest.approx([offline, offline], abs=1e-9)   # the same run again
 
 
+def test_command_publishers_matched_and_incompatible_are_reported(probe):
+    """
+    The command subscription's events, waited on the commands' own thread, reach the log.
+
+    A best-effort publisher of commands (the subscription is reliable: none would arrive)
+    is reported as rclpy reports it, naming the policy; a reliable one is matched.
+    """
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from umbrella_sim.ros.commands import COMMANDER_LINE
+
+    with NodeProcess('-p', 'v0:=0.0') as node:
+        node.wait_for_log('physics step')
+        probe.publisher('/sleeve_force', Float64,
+                        QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        node.wait_for_log(r"publisher discovered on topic '/?sleeve_force', offering "
+                          r'incompatible QoS\..*RELIABILITY')
+        probe.publisher('/sleeve_force', Float64)
+        node.wait_for_log(re.escape(f'{COMMANDER_LINE} matched on /sleeve_force (1 now)'))
+
+
 def set_double(probe, name, value):
     """Set one double parameter of /umbrella_node (SetParameters, as `ros2 param set`)."""
     v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
