@@ -513,7 +513,10 @@ class UmbrellaNode(Node):
                         self._lockstep_wait()
                     elif not idle:
                         if self.lockstep.go(self.node_cfg['lockstep']):
-                            self._anchor()          # the command came: pace from now
+                            # the command came: its wait counts toward the period it lets
+                            # run (pacing.py)
+                            self.pacer.after_wait(self.sim.time, 1.0 / self.driver_rate,
+                                                  self.node_cfg['real_time_factor'])
                         try:
                             # a chunk of steps, at most to the next publication: the lock
                             # is given up between chunks, for a service or a stop
@@ -580,8 +583,9 @@ class UmbrellaNode(Node):
         """
         Take one idle turn of a lockstep wait (sim lock held).
 
-        The pace restarts from the moment the command comes (the anchor follows the wait),
-        so waiting for a controller is neither lag nor slip.
+        The wait counts toward the period the command lets run, up to all of it (the anchor
+        follows the wait: pacing.Pacer.after_wait), so waiting for a controller is neither
+        lag nor slip, and one that answers within the period costs no wall time.
         """
         waited = self.lockstep.wait_turn()
         if waited >= 5.0:
