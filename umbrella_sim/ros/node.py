@@ -512,11 +512,9 @@ class UmbrellaNode(Node):
                     if waiting:
                         self._lockstep_wait()
                     elif not idle:
-                        if self.lockstep.go(self.node_cfg['lockstep']):
-                            # the command came: its wait counts toward the period it lets
-                            # run (pacing.py)
+                        if self.lockstep.go(self.node_cfg['lockstep']):     # (its wait
                             self.pacer.after_wait(self.sim.time, 1.0 / self.driver_rate,
-                                                  self.node_cfg['real_time_factor'])
+                                                  self.node_cfg['real_time_factor'])  # counts)
                         try:
                             # a chunk of steps, at most to the next publication: the lock
                             # is given up between chunks, for a service or a stop
@@ -583,9 +581,7 @@ class UmbrellaNode(Node):
         """
         Take one idle turn of a lockstep wait (sim lock held).
 
-        The wait counts toward the period the command lets run, up to all of it (the anchor
-        follows the wait: pacing.Pacer.after_wait), so waiting for a controller is neither
-        lag nor slip, and one that answers within the period costs no wall time.
+        Waiting for a controller is neither lag nor slip, nor a cost in time (after_wait).
         """
         waited = self.lockstep.wait_turn()
         if waited >= 5.0:
