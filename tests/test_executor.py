@@ -127,6 +127,15 @@ def test_a_dedicated_group_is_waited_and_run_on_its_own_thread(probe):
         pubs[1].publish(Float64(data=2.0))
         poll(lambda: ran_on, 20.0, lambda: 'the dedicated callback never ran (worker busy)')
         assert not release.is_set() and ran_on[0].name == 'dedicated callbacks'
+        # an entity the group gets while its thread waits is waited from then on
+        node.create_subscription(Float64, 'dedicated_later',
+                                 lambda msg: ran_on.append(threading.current_thread()), 10,
+                                 callback_group=own)
+        later = probe.publisher('dedicated_later', Float64)
+        probe.wait_for_subscribers(later)
+        later.publish(Float64(data=3.0))
+        poll(lambda: len(ran_on) == 2, 20.0, lambda: "the group's later subscription never ran")
+        assert ran_on[1] is ran_on[0]
     finally:
         release.set()
         stop.set()

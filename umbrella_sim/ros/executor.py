@@ -61,13 +61,13 @@ class CallbackPool(Executor):
     """Run callbacks in a pool of ``num_threads`` threads, each ready callback submitted once."""
 
     def __init__(self, num_threads: int = 2, *, context=None):
+        self._dedicated: dict = {}      # callback group -> its _GroupWaiter
         super().__init__(context=context)
         self._pool = ThreadPoolExecutor(num_threads, thread_name_prefix='callbacks')
         # task submitted -> (Event set when a worker begins it, Event set when that call returns)
         self._calls: dict = {}
         self.submitted = 0          # tasks handed to the pool (a coroutine's resumption too)
         self.waited = 0             # turns that found their task not yet begun (and waited)
-        self._dedicated: dict = {}      # callback group -> its _GroupWaiter
         self._stopping = threading.Event()
         self._errors: list[BaseException] = []     # a dedicated thread's callback raised
 
@@ -84,6 +84,12 @@ class CallbackPool(Executor):
             self._dedicated[group] = _GroupWaiter(group, self.get_nodes, self._stopping,
                                                   self._context)
             self.wake()         # the pool's next wait set leaves them out
+
+    def wake(self) -> None:
+        """Wake every wait (a node's new entity, say, may be a dedicated group's)."""
+        super().wake()
+        for waiter in self._dedicated.values():
+            waiter.wake()
 
     def can_execute(self, entity) -> bool:
         """As rclpy's, and not an entity of a dedicated group (its own thread waits for it)."""
