@@ -14,9 +14,10 @@
 
 
 """
-Lockstep's pace (ros/pacing.py, ros/lockstep.py): a wait counts toward the period it answers.
+Lockstep's pace and arming (ros/pacing.py, ros/lockstep.py), without DDS or wall clock.
 
-All of it at most.  Wall times are given, never read: no timing.
+A wait for the controller counts toward the period it answers, all of it at most; the
+handshake is armed where a command acts.  Wall times are given, never read: no timing.
 """
 import threading
 
@@ -65,3 +66,24 @@ def test_unpaced_lockstep_anchors_at_the_answer():
     p.after_wait(0.5, PERIOD, 0.0, now=10.0004)
     assert (p.sim_anchor, p.wall_anchor) == (0.5, 10.0004)
     assert p.target(0.5 + PERIOD, 0.0) is None
+
+
+def test_a_command_between_publications_arms_the_handshake_where_it_acts():
+    """
+    A command that comes in a long period's middle is taken at its end, then answers.
+
+    Armed mid-period, the period's own state cleared the answer of a command not yet taken:
+    the node waited for a second command, the first never applied (a first command of the
+    test API at 100 Hz, now and then).
+    """
+    from umbrella_sim.ros.lockstep import Lockstep
+
+    lockstep = Lockstep()
+    lockstep.command_came()                 # in a period's middle, the handshake not armed
+    assert not lockstep.go(True, at_publication=False) and not lockstep.armed
+    lockstep.published()                    # the period's end: its state goes out
+    assert not lockstep.waiting(True, at_publication=True, deploying=True)
+    lockstep.go(True, at_publication=True)  # the command is taken here: armed from now
+    assert lockstep.armed
+    lockstep.published()                    # the state after the period it acted in
+    assert lockstep.waiting(True, at_publication=True, deploying=True)
