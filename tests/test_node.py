@@ -209,10 +209,11 @@ def test_pause_and_reset(probe):
 
 def test_command_publishers_matched_and_incompatible_are_reported(probe):
     """
-    The command subscription's events, waited on the commands' own thread, reach the log.
+    The node's QoS events reach its log, on either executor thread.
 
     A best-effort publisher of commands (the subscription is reliable: none would arrive)
-    is reported as rclpy reports it, naming the policy; a reliable one is matched.
+    is reported as rclpy reports it, naming the policy (the commands' own thread); a
+    reliable one is matched; a reliable reader of /clock is reported (the services').
     """
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -226,6 +227,12 @@ def test_command_publishers_matched_and_incompatible_are_reported(probe):
                           r'incompatible QoS\..*RELIABILITY')
         probe.publisher('/sleeve_force', Float64)
         node.wait_for_log(re.escape(f'{COMMANDER_LINE} matched on /sleeve_force (1 now)'))
+        # the publishers' events stay in the services' wait set: a reliable reader of the
+        # best-effort /clock is reported there
+        probe.subscribe('/clock', Clock, QoSProfile(depth=10,
+                                                    reliability=ReliabilityPolicy.RELIABLE))
+        node.wait_for_log(r"subscription discovered on topic '/?clock', requesting "
+                          r'incompatible QoS\..*RELIABILITY')
 
 
 def set_double(probe, name, value):
