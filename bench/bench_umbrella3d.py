@@ -40,8 +40,12 @@ Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x ele
   * --base: every figure with the hub fixed (default), driven (prescribed: a half-sine jolt
     in X-Z and a spin-up about Y, BASE_VALUES) or on a free-floating bus (the default bus);
     a moving base takes its stage-2 mode fit (umbrella3d/stage2fit.py: the ribs' modes in the
-    driven hub's frame, the free system's modes of a free bus), so its step for the mesh is
-    the fixed hub's (0.1 ms at 1 element, 33 us at 2; without the fit 33 and 9.1 us).
+    driven hub's frame, the free system's modes of a free bus: the ribs' fits with a
+    low-rank correction, linear in the ribs), so its step for the mesh is the fixed hub's
+    (0.1 ms at 1 element, 33 us at 2; without the fit 33 and 9.1 us).  Measured
+    (--no-numpy --kernel-ribs 6 12 24, load 1.2-2.5), the compiled step alone in stage 2:
+    free bus 131.7 / 263.5 / 530.9 us (22.0 us a rib; 151.9 / 417.2 / 1164.1 with the whole
+    fit's dense maps it took before), hub fixed 47.5 / 95.1 / 190.5 us (7.9 a rib).
 The machine is shared (2 cores): CPU time is what the step costs, wall RTF what a user saw.
 Targets: ribs 6 x 1 real time at 1 kHz within 0.5 core, ribs 12 x 2 real time
 at 100 Hz.  Measured (--no-numpy --ribs 6 --elements 1 2 --kernel-ribs 6 12 --repeat 3, load

@@ -386,14 +386,20 @@ against hardware.
 Which to take: `model: flexible` (the default: linear beams in each body's floating frame)
 is the planar model exactly for identical ribs, with the planar model's range: small
 deformations in each body's frame. A fast deployment leaves it as the planar model's does
-(docs/validation_nonlinear.md: from V0 = -1 m/s the links buckle), and the ribs' out-of-plane
-figures follow their in-plane ones: in the Exudyn case (V0 = -1, a 0.1 kg tip mass on rib 1)
-`flexible` is 35 % off out of plane and 46 % in plane, the same at a tip-mass offset of 5,
-10, 20, 35, 50 or 70 mm (0.007 to 0.093 rad of out-of-plane rotation; measured against
-`flexible-nonlinear`, 2 elements a segment, 25 us), and it warns of none of it before the lock
-(its in-plane tip stays at 5.6 % of the leaf, below the 10 % of 'large deflection'; a run
-through the lock warns: 2.5 x yield, a 39 % tip deflection in stage 2). For such
-runs (V0 of about -1 m/s or faster, a heavy tip, a jolt or spin of the base), take `model:
+(docs/validation_nonlinear.md: in stage 1 a leaf's centrifugal tension stiffens it, which
+the linear beams lack; from V0 = -1 m/s the links buckle in stage 2), and the ribs'
+out-of-plane figures follow their in-plane ones: in the Exudyn case (V0 = -1, a 0.1 kg tip
+mass on rib 1) `flexible` is 35 % off out of plane and 46 % in plane, the same at a tip-mass
+offset of 5, 10, 20, 35, 50 or 70 mm (0.007 to 0.093 rad of out-of-plane rotation; measured
+against `flexible-nonlinear`, 2 elements a segment, 25 us). It says so in stage 1:
+'centrifugal stiffening' (the planar model's rule on each rib's leaf) warns once a leaf's
+centrifugal tension at its hinge passes 2.5 % of its Euler load; rib 1's is 41 % from the
+start, said after the first chunk (1.6 ms; the lock at 44.5 ms), where the other warnings
+wait for the lock (its in-plane tip stays at 5.6 % of the leaf, below the 10 % of 'large
+deflection'; 2.5 x yield and a 39 % tip deflection come in stage 2). For such runs (V0 of
+about -0.3 m/s or faster with the thesis's data, a heavy tip, a jolt or spin of the base;
+the calibration: docs/validation_nonlinear.md, "Where the linear model leaves its range"),
+take `model:
 flexible-nonlinear`, the co-rotational ribs (docs/umbrella3d_nonlinear.md: each rib's beams
 co-rotational, the planar element in the rib's plane, out-of-plane bending and torsion
 small rotations in its co-rotated frame; compiled too), at 1.2-1.8 times the cost a step
@@ -476,16 +482,49 @@ before / after): the compiled step alone, driven 94.7 / 106.5 us deploying and 9
 stage 2, free 93.0 / 92.4 and 93.5 / 165.9 us (the whole fit's dense maps, 84 modes of 145
 coordinates, about 70 us of it); CPU s a simulated second in 1 ms blocks with Record3D's
 figures, driven 3.9 / 1.6 deploying and 4.0 / 1.8 in stage 2, free 3.6 / 1.7 and 3.7 / 2.6
-(hub fixed 0.7 and 0.9-1.2). The free system's fit is dense: its cost grows as the square of
-the ribs (12 x 2 at 33 us: 372 modes of 499 coordinates, 1.22 ms a stage-2 step against 0.42
+(hub fixed 0.7 and 0.9-1.2). The free system's whole fit was dense: its cost grew as the square
+of the ribs (12 x 2 at 33 us: 372 modes of 499 coordinates, 1.22 ms a stage-2 step against 0.42
 unfitted; the driven hub's 0.51; ribs x 1 at 0.1 ms, the compiled step alone in stage 2, load
-~3.3: 6 / 12 / 24 ribs 170 / 482 / 1581 us on the free bus, 49 / 97 / 193 us with the hub fixed,
-whose cost a rib stays 8.0 us). The fitted stage 2 at 0.1 ms against the same code
-converged (2.5 us, no fit), tips in and out of plane 0.1 s past a plastic lock at V0 = -0.5
-(3 ribs, a tip mass, a kicked rib; times from each run's lock): free bus (5 kg) 1.27 mm,
-driven 1.17 mm (hub fixed 0.96 mm) of 195 / 140 mm amplitude, where the unfitted 33 us step
-the moving bases took before gave 4.07 / 2.46 mm (2.38) and 0.1 ms unfitted 7.4 / 5.2 mm
-(5.22) (tests/test_umbrella3d_base_fit.py, slow).
+~3.3: 6 / 12 / 24 ribs 170 / 482 / 1581 us on the free bus, 49 / 97 / 193 us with the hub
+fixed, whose cost a rib stays 8.0 us). The fitted stage 2 at 0.1 ms against the same code
+converged (2.5 us, no fit), tips in and out of plane 0.1 s past a plastic lock at V0 = -0.5 (3
+ribs, a tip mass, a kicked rib; times from each run's lock): free bus (5 kg) 1.27 mm, driven
+1.17 mm (hub fixed 0.96 mm) of 195 / 140 mm amplitude, where the unfitted 33 us step the moving
+bases took before gave 4.07 / 2.46 mm (2.38) and 0.1 ms unfitted 7.4 / 5.2 mm (5.22)
+(tests/test_umbrella3d_base_fit.py, slow).
+
+The free bus's fit is no longer dense: it is each rib's own fit (its clamped modes, as on a
+fixed hub) composed with a correction of low rank, S = S_ribs S_bus with S_bus = S_ribs⁻¹
+S_whole = I + ABᵀ (stage2fit.BusFit; the Newton update and a damped fit's damping share
+corrected the same way): the two fits differ only where the bus takes part, 18 to 34
+singular values above 1e-10 at 3 to 24 ribs, identical or each with its own tip mass, where
+the whole fit has 14 modes a rib. Its maps are the whole fit's to 1e-11 and a run from one
+lock is the same to 1e-12 m at the tips over 0.3 s, with the same Newton iterations
+(tests/test_umbrella3d_base_fit.py), so every figure above holds at any bus. The ribs' fits
+alone, without the correction, keep the momentum (their U has nothing on the bus's rows) and
+T + V, but not the free modes' phase: at the default bus (100 kg, 10 kg m²; ribs of 0.42 kg)
+the free modes' frequencies are off by up to 8.4e-4 (6 ribs: the pair at 10 301 rad/s,
+ωh = 1.03, 1.7 % stiffer than a clamped rib's mode, 4.3 rad over 0.5 s; 1e-5 below
+4 000 rad/s; the unfitted rule 7.7e-2, the whole fit 1e-11), with a 5 kg bus by 1.8e-2. In the
+run (0.3 s past a plastic lock at V0 = -0.5 at 0.1 ms, from one post-lock state, against the
+unfitted scheme at 1.56 us, which the whole fit at 6.25 us meets within 0.07 mm; the largest
+tip error, in or out of plane), ribs' fits alone / whole fit / unfitted: default bus, 6
+identical ribs 1.15 / 1.24 / 8.72 mm of 128 mm amplitude; 6 ribs, a tip mass and a kicked rib
+2.06 / 1.94 / 8.62 mm of 143 mm (the bus's attitude 1e-5 rad off either way); a 5 kg bus
+(0.2 kg m²), 6 ribs 14.5 / 6.31 / 17.1 mm of 183 mm (the bus's rate 3.7 / 1.3 / 5.2 rad/s off,
+of 4.7) and 3 ribs 5.11 / 3.60 / 8.37 mm of 211 mm. The ribs' fits alone would do for a heavy
+bus (ribs a fortieth of its mass), not a light one; with the correction the fit is the whole
+system's at any bus. Its cost is linear in the ribs: the compiled step alone in stage 2, ribs
+x 1 element at 0.1 ms, 6 / 12 / 24 ribs 131.7 / 263.5 / 530.9 us (22.0 us a rib) against the
+whole fit's 151.9 / 417.2 / 1164.1 us (25.3 / 34.8 / 48.5 a rib), the hub fixed 47.5 / 95.1 /
+190.5 us (7.9 a rib) (interleaved, best of 2 x 3, load 1.2-2.5). Of the free bus's 22 us a rib
+the fit takes 4.6 (unfitted stage 2 105 / 209 / 419 us), the rest is the bus's own step (its
+border of M(q), its gradient, the seven shared coordinates: 15 us a rib deploying). At 12 x 2
+(33 us) a stage-2 step takes 0.85 ms against the whole fit's 1.87 and 0.40 unfitted: the fitted
+step's 4.88 Newton iterations a step (either fit; 2.26 unfitted) are what remains there, as
+on a driven hub (4.73 fitted, 2.32 unfitted; 0.32 factorisations a step against 0.13), where
+the hub fixed takes 2.17: the fitted step of a moving base converges slower at 2 elements
+(at 1 element 2.79, as the fixed hub's 2.81).
 """.replace('{accuracy}', accuracy_table())
 
 COST = """## Cost and real time
@@ -691,17 +730,31 @@ kept matrix solved for the joints' residual alone) took 2.82 -> 2.08 iterations 
 45.5 us a step, but move q without the momentum balance (the velocity 2 dq / h jumps with the
 correction): alpha1 4.7e-6 rad off against 5.5e-8, a prescribed base's energy balance 1.4e-5
 of its scale against 1.7e-7; a constraint tolerance of 1e-9 m instead of 1e-11 took 2.08
-iterations and 42.9 us, alpha1 4.8e-6 rad off (1e-10: 2.34 iterations, 45.5 us, 7.5e-7). The
+iterations and 42.9 us, alpha1 4.8e-6 rad off (1e-10: 2.34 iterations, 45.5 us, 7.5e-7).
+The projection's factorisation kept across up to 8 steps like the iteration matrix, and
+corrected by iterative refinement against the exact M(q) and J(q), was measured and not
+kept (6 x 1, quiet machine, us a step deploying / stage 2): 29.8 / 47.5 with today's
+projection, 26.1 / 43.5 with one refinement, 29.5 / 46.6 with two (a refinement's full
+solves cost about what the factorisation does), 23.1 / 47.5 with none, which leaves J v at
+the kept factor's error: at most a tenth of the step, for a projection exact only to the
+refinement's contraction. The
 mode fit's modal sums now run along contiguous rows (u and phi handed over transposed as well;
-each sum in the same order, so bit for bit the same runs), which the free bus's dense whole
-fit feels: its compiled stage-2 step at 6 / 12 / 24 ribs x 1 is 153 / 420 / 1203 us (25.5 /
-35.0 / 50.1 us a rib; 170 / 482 / 1581 us before, at load ~3.3), still growing as the square
-of the ribs; the hub fixed 48 / 94 / 189 us. Lockstep through the test API (a commander
-answering every joint_states, 1 kHz, 6 ribs) runs at 0.38-0.42 x real time, a command to the
-state it lets out 1.85-2.16 ms (median), 2.6-3.2 ms at most (before: 0.04-0.05 x, and up to
-1.4 s a command: rclpy's MultiThreadedExecutor resubmitting a callback that waits for a
-worker, ros2/rclpy#1452, and a first command lost until a 3 s heartbeat:
-msg_docs/topic_sleeve_force.md).
+each sum in the same order, so bit for bit the same runs), which the free bus's dense whole fit
+felt: its compiled stage-2 step at 6 / 12 / 24 ribs x 1 was 153 / 420 / 1203 us (25.5 / 35.0 /
+50.1 us a rib; 170 / 482 / 1581 us before, at load ~3.3), growing as the square of the ribs.
+With the ribs' fits and the bus's low-rank correction (stage 2's mode fit, above) it is 131.7 /
+263.5 / 530.9 us (22.0 us a rib at each count; the whole fit 151.9 / 417.2 / 1164.1 us in the
+same interleaved runs, load 1.2-2.5); the hub fixed 47.5 / 95.1 / 190.5 us. Lockstep through
+the test API (a commander answering every joint_states, 1 kHz, 6 ribs) runs at 0.48-0.61 x real
+time, a command to the state it lets out 1.26-1.52 ms (median), 2.6-6.0 ms at most; at 100 Hz at
+1.00 x (runs interleaved, load 1.3-1.6; 0.33-0.37 x, 2.16-2.43 ms and 0.90-0.92 x with every
+entity of the node in one wait set rebuilt at each turn and each period paced from the command's
+coming: ros/executor.py, ros/pacing.py; 0.38-0.42 x and 1.85-2.16 ms on a quiet machine; before
+that: 0.04-0.05 x, and up to 1.4 s a command: rclpy's MultiThreadedExecutor resubmitting a
+callback that waits for a worker, ros2/rclpy#1452, and a first command lost until a 3 s
+heartbeat: msg_docs/topic_sleeve_force.md). The node's CPU free-running at 1 kHz after the lock
+is unchanged by it: 0.86-1.01 CPU s a sim s against 0.90-0.98 (3 runs each, interleaved, load
+1.8-3.4).
 """
 
 

@@ -24,7 +24,8 @@ Regenerate docs/validation_nonlinear.md (one command; progress on stderr):
 The geometrically exact model (flexible-nonlinear: co-rotational beam) against an independent
 geometrically exact ANCF model of the same frame (Exudyn, the figures quoted from an earlier
 Exudyn run, and those of docs/exudyn_umbrella_frame.py if its JSON is there), a mesh and step
-series of the stage-2 figures, small motion against the linear model, the fibres' turn from
+series of the stage-2 figures, small motion against the linear model, where the linear model
+leaves its range in stage 1 (the calibration of 'centrifugal stiffening'), the fibres' turn from
 their body frames, the sensitivity of stage 2, the elastica of a tip-loaded cantilever, the
 spin-up benchmark of Kane, Ryan & Banerjee (1987) against the quasi-static stiffened solution,
 the published rotating-cantilever frequencies (Wright et al. 1982; Yoo & Shin 1998), and a
@@ -46,6 +47,7 @@ from umbrella_sim.core.beam import BeamBody  # noqa: E402
 from umbrella_sim.core.beam_strain import (  # noqa: E402
     CorotationalStrainEnergy, static_equilibrium)
 from umbrella_sim.core.driver import RunDriver, simulate  # noqa: E402
+from umbrella_sim.core.kernel import STEP_FIELDS  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.core.rotating_beam import (  # noqa: E402
     rotating_cantilever_chordwise, ROTATING_CANTILEVER_FLAPWISE, rotating_cantilever_frequency,
@@ -300,6 +302,166 @@ def small_motion_section():
     return lines
 
 
+#: the planar runs of the linear model's range: (V0, N, other parameters)
+RANGE_RUNS = [(v0, n, {}) for n in (1, 4) for v0 in (-0.2, -0.3, -0.5, -0.7, -1.0, -1.5, -2.0)]
+RANGE_RUNS += [(-0.2, 1, {'sleeve_force': 20.0}), (-0.2, 1, {'sleeve_force': 100.0}),
+               (0.0, 4, {'sleeve_force': 300.0}), (-1.0, 4, {'section_height': 0.02}),
+               (-0.5, 4, {'section_height': 0.006})]
+#: the ribs' runs: the Exudyn case (2 ribs, rib 1 with a tip mass off its plane, plastic
+#: lock, 2 elements a segment, 25 us) at other speeds, and a heavier tip in the rib's plane
+RIB_RANGE_RUNS = [(v0, 0.1, 0.07) for v0 in (-0.2, -0.3, -0.4, -0.5, -0.7, -1.0)]
+RIB_RANGE_RUNS += [(-0.5, 0.3, 0.0)]
+
+
+def planar_stage1(p):
+    """
+    Return flexible's (or flexible-nonlinear's) stage 1 up to the lock, from every step.
+
+    The lock time, the largest |tip deflection| and fibre stress of the steps before the
+    lock, and two candidate indicators: the link's largest compression over its Euler load
+    pi^2 EI / l3^2, from the sleeve's reaction (the multipliers: the axle's force and F_H at
+    H, along the link), and the largest section rotation |v'| of either body (the nodal
+    slopes).
+    """
+    euler = math.pi ** 2 * p.youngs_modulus * p.cross_section_inertia / p.l3 ** 2
+    sim = UmbrellaSimulator(p)
+    block = sim.advance(10 ** 6, states=True, until_lock=True)
+    rows = dict(zip(STEP_FIELDS, block.rows))
+    deploying = rows['stage'] == 0
+    a2 = rows['alpha2'][deploying]
+    tension = (rows['sleeve_reaction_x'][deploying] * np.cos(a2)
+               - rows['sleeve_force'][deploying] * np.sin(a2))
+    m = sim.model
+    slopes = [s.start + body.elastic_index(k, 'theta')
+              for body, s in ((m.leaf, m.s_leaf), (m.link, m.s_link))
+              for k in range(len(body.node_x)) if body.elastic_index(k, 'theta') is not None]
+    return {'lock': sim.lock_event.time,
+            'tip': float(np.abs(rows['tip_transverse'][deploying]).max()),
+            'stress': float(max(rows['peak_stress_leaf'][deploying].max(),
+                                rows['peak_stress_link'][deploying].max())),
+            'link': max(0.0, -float(tension.min())) / euler,
+            'slope': float(np.abs(block.states[slopes][:, deploying]).max()),
+            'rate': float(np.abs(rows['alpha1_rate'][deploying]).max())}
+
+
+def ribs_stage1(params):
+    """Return the umbrella's stage 1: lock time, each rib's largest tips and von Mises."""
+    from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+
+    sim = UmbrellaSimulator3D(params)
+    a = sim.run(2.0, after_lock=0.0).arrays()
+    deploying = a['time'] < sim.lock_time
+    tip = np.abs(a['tip'][deploying])
+    return {'lock': sim.lock_time, 'in_plane': tip[:, :, 1].max(0),
+            'out_of_plane': tip[:, 1, 2].max(), 'von_mises': a['von_mises'][deploying].max(0)}
+
+
+def linear_range_section():
+    from umbrella_sim.core.summary import CENTRIFUGAL_TENSION_LIMIT
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+
+    key = 'centrifugal stiffening'
+    lines = ['', '## Where the linear model leaves its range: stage 1', '',
+             'Stage 1 (to the lock) of `flexible` against `flexible-nonlinear` at the same mesh '
+             "and each model's own step (`time_step` 0), energy lock: the relative error of "
+             "flexible's deploy time, stage-1 tip deflection peak and stage-1 peak stress, beside "
+             "three candidate indicators, each the largest over stage 1: (1) the leaf's "
+             'centrifugal tension at its hinge ω²(ρA L²/2 + m_tip L) (ω its hinge rate, L = '
+             'l1 + l2) over its Euler load π²EI/L², the rule '
+             '(`summary.centrifugal_tension_per_rate`: the figure `leaf_tension_ratio_max`); '
+             "(1') the link's compression over its "
+             "pinned-pinned Euler load π²EI/l3², from the multipliers (the axle's force and F_H "
+             "at H, along the link); (2) the largest section rotation |v'| (the nodal slopes). "
+             f"'warns': the run says '{key}' (limit {100 * CENTRIFUGAL_TENSION_LIMIT:g} %).", '',
+             '| V0 (m/s) | N | other | leaf tension / Euler | link compression / Euler | '
+             "largest \\|v'\\| | deploy time | stage-1 tip | stage-1 peak σ | warns |",
+             '|---|---|---|---|---|---|---|---|---|---|']
+    judged = []          # (largest error of tip and stress, warned)
+    planar = []          # (largest error, tension, link compression, slope) of the planar runs
+    per_ratio = []       # the stage-1 tip error over the ratio (the ribs': the warned rib's)
+    deploy = {}          # V0 -> the largest deploy time difference
+
+    def rule(params):
+        """Return the run's figure and whether it warns (the summary's, to the lock)."""
+        f = simulate(params, 2.0, stop_after_lock=0.0, keep_samples=False).figures
+        return f['leaf_tension_ratio_max'], any(w.startswith(key) for w in f['warnings'])
+
+    for v0, n, other in RANGE_RUNS:
+        p = UmbrellaParams(v0=v0, model='flexible', elements_per_segment=n, time_step=0.0,
+                           **other)
+        a, b = planar_stage1(p), planar_stage1(p.replace(model=NL))
+        tip, peak = a['tip'] / b['tip'] - 1, a['stress'] / b['stress'] - 1
+        ratio, warned = rule(p)
+        judged.append((max(abs(tip), abs(peak)), warned))
+        planar.append((max(abs(tip), abs(peak)), ratio, a['link'], a['slope']))
+        per_ratio.append(tip / ratio)
+        if not other:
+            deploy[v0] = max(deploy.get(v0, 0.0), abs(a['lock'] / b['lock'] - 1))
+        if (v0, n, other) == (-1.0, 1, {}):
+            fast_rate = a['rate']
+        lines.append(f"| {v0:g} | {n} | {', '.join(f'{k} {v:g}' for k, v in other.items())} | "
+                     f"{100 * ratio:.2f} % | {100 * a['link']:.2f} % | "
+                     f"{a['slope']:.4f} | {a['lock'] / b['lock'] - 1:+.1e} | "
+                     f'{100 * tip:+.1f} % | {100 * peak:+.1f} % | {"yes" if warned else "no"} |')
+        progress(f'linear range V0 = {v0:g} N = {n} {other}: done')
+    lines += ['', 'The ribs (`ribs: 2`): the Exudyn case of docs/umbrella3d_nonlinear.md (rib 1 '
+              'carries a tip mass, 70 mm off its plane in the first rows), plastic lock, 2 '
+              "elements a segment, 25 µs; the figure is the largest over the ribs (rib 1's).", '',
+              '| V0 (m/s) | rib 1 tip mass (kg) | leaf tension / Euler | deploy time | in-plane '
+              'tip, rib 0; rib 1 | out-of-plane tip, rib 1 | peak von Mises, rib 0; rib 1 | '
+              'warns |', '|---|---|---|---|---|---|---|---|']
+    for v0, mass, offset in RIB_RANGE_RUNS:
+        params = UmbrellaRibsParams.from_mapping({
+            'ribs': 2, 'model': 'flexible', 'v0': v0, 'lock': 'plastic', 'time_step': 2.5e-5,
+            'elements_per_segment': 2, 'rib1.tip_mass': mass, 'rib1.tip_offset_z': offset})
+        a, b = ribs_stage1(params), ribs_stage1(params.replace(model=NL))
+        tips = a['in_plane'] / b['in_plane'] - 1
+        vm = a['von_mises'] / b['von_mises'] - 1
+        oop = (a['out_of_plane'] / b['out_of_plane'] - 1) if offset else None
+        ratio, warned = rule(params)
+        judged.append((max(np.abs(tips).max(), np.abs(vm).max(), abs(oop or 0.0)), warned))
+        per_ratio.append(tips[1] / ratio)
+        lines.append(f"| {v0:g} | {mass:g}{' (in plane)' if not offset else ''} | "
+                     f"{100 * ratio:.2f} % | {a['lock'] / b['lock'] - 1:+.1e} | "
+                     + '; '.join(f'{100 * e:+.1f} %' for e in tips) + ' | '
+                     + ('–' if oop is None else f'{100 * oop:+.1f} %') + ' | '
+                     + '; '.join(f'{100 * e:+.1f} %' for e in vm)
+                     + f' | {"yes" if warned else "no"} |')
+        progress(f'linear range ribs V0 = {v0:g} tip {mass:g}: done')
+    quiet = [e for e, w in judged if not w]
+    loud = [e for e, w in judged if w]
+    near = [r for r in planar if r[0] <= 0.05]
+    far = [r for r in planar if r[0] > 0.05]
+    spans = '; '.join(f'{name} at most {fmt(max(r[k] for r in near), *scale)} within 5 %, at '
+                      f'least {fmt(min(r[k] for r in far), *scale)} beyond'
+                      for name, k, scale in (('the leaf tension', 1, (100, '.2f')),
+                                             ("the link's compression", 2, (100, '.2f')),
+                                             ("|v'|", 3, (1, '.4f'))))
+    lines += ['', f'Over these {len(judged)} runs, a quiet run is at most '
+              f'{100 * max(quiet):.1f} % off (tip or peak stress), a warned one at least '
+              f'{100 * min(loud):.1f} %; '
+              + ('every run more than 5 % off warns. ' if all(w for e, w in judged if e > 0.05)
+                 else 'a run more than 5 % off is quiet. ')
+              + 'The planar runs against each indicator (the forces in per cent of their Euler '
+              f'loads): {spans}'
+              ": only the leaf's tension separates them. The linear model's error follows it: "
+              f'the stage-1 tip is {min(per_ratio):.2f} to {max(per_ratio):.2f} times the '
+              'ratio too large (a heavy tip the most), whatever the speed, mesh, sleeve force '
+              "or section. It is the rotating beam's stiffening (the published benchmark "
+              f'below): a deploying leaf turns at up to {fast_rate:.1f} rad/s at V0 = −1, and '
+              'its centrifugal tension stiffens its bending, which the linear beams lack: they '
+              "overstate the bending. The link's compression, the physically obvious suspect, "
+              'stays at a few per cent of its Euler load in a free stage 1 (the link buckles '
+              'in stage 2: the sensitivity section) and follows a sleeve force rather than the '
+              "error; the section rotation follows the deflection, not its cause. The leaf's "
+              'tension is largest at the start of a free deployment (the leaf slows as it '
+              'opens), so the warning comes with the first chunk, long before the lock. The '
+              'deploy time moves least (free deployments): at most '
+              + ', '.join(f'{deploy[v]:.1e} at V0 = {v:g}' for v in sorted(deploy, reverse=True)
+                          if v < 0) + '.']
+    return lines
+
+
 def rotation_section():
     lines = ['', '## How far the fibres turn, and the 90° limit of the slope coordinates', '',
              "The section angle is asin of the slope v' in the body frame, so a section cannot "
@@ -541,6 +703,7 @@ def main():
     lines += reference_section()
     lines += mesh_section(args.meshes)
     lines += small_motion_section()
+    lines += linear_range_section()
     lines += rotation_section()
     lines += sensitivity_section()
     lines += elastica_section()

@@ -276,11 +276,13 @@ def test_validity_warnings_at_v0_minus_2(fast_run):
     f = fast_run.summary()
     keys = [w.split(':')[0] for w in f['warnings']]
     # (at 0.25 ms the modes above 6000 rad/s carry 9 % of the link's stage-2 stress crest)
-    assert keys == ['coarse step', 'yield exceeded', 'large deflection']
+    assert keys == ['coarse step', 'yield exceeded', 'large deflection', 'centrifugal stiffening']
     assert 'compare model flexible-nonlinear' in f['warnings'][2]
+    assert 'take model flexible-nonlinear' in f['warnings'][3]
     # the geometrically exact model is not sent to itself: its own limit is named
     nonlinear = simulate(FAST.replace(model='flexible-nonlinear'), 0.1).summary()['warnings']
-    assert not [w for w in nonlinear if w.startswith('large deflection')]
+    assert not [w for w in nonlinear if w.startswith(('large deflection',
+                                                      'centrifugal stiffening'))]
     large = [w for w in nonlinear if w.startswith('large strain')]
     assert large and 'small strains only' in large[0] and 'compare' not in large[0]
     assert f['stress_ratio_max'] > 1.0
@@ -307,8 +309,10 @@ def test_new_warnings_names_each_warning_in_the_block_it_first_holds():
             first[key] = k
         assert set(first) == now               # nothing that holds is left unsaid
         before = now
-    assert set(first) == {'coarse step', 'yield exceeded', 'large deflection'}
+    assert set(first) == {'coarse step', 'yield exceeded', 'large deflection',
+                          'centrifugal stiffening'}
     assert first['yield exceeded'] != first['large deflection']   # the second came later
+    assert first['centrifugal stiffening'] < lock_block     # said in stage 1, before the lock
     assert first['coarse step'] == lock_block          # said with the lock, judged on its state
 
 
@@ -341,7 +345,7 @@ def test_the_default_lock_is_the_one_that_applies_and_rigid_fe_reports_its_zeros
 def test_warnings_in_cli_text_json_and_recording(tmp_path):
     """The CLI's text and JSON, the recording and compare say the same warnings."""
     args = ['--v0', '-2', '--time-step', str(STEP), '--duration', '0.1']
-    keys = ['coarse step', 'yield exceeded', 'large deflection']
+    keys = ['coarse step', 'yield exceeded', 'large deflection', 'centrifugal stiffening']
     text = run_cli(*args)
     assert text.returncode == 0, text.stderr
     for key in keys:
@@ -373,7 +377,7 @@ def test_node_warns_once_and_diagnostics_say_warn(antenna_factory, tmp_path):
         and "outside the model's validity" in m.status[0].message, timeout=60,
         what="a WARN diagnostic on the model's validity")
     values = {kv.key: kv.value for kv in msg.status[0].values}
-    keys = ['coarse step', 'yield exceeded', 'large deflection']
+    keys = ['coarse step', 'yield exceeded', 'large deflection', 'centrifugal stiffening']
     assert values['warning_0'].split(':')[0] in keys
     assert antenna.node.proc.wait(timeout=120) == 0
     log = antenna.node.output()

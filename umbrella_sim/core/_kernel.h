@@ -36,7 +36,7 @@
 
 /* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
  * reordered, a function's arguments changed). */
-#define UMBRELLA_ABI_VERSION 5
+#define UMBRELLA_ABI_VERSION 6
 
 /* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
  * exported. */
@@ -288,6 +288,22 @@ typedef struct {
     /* a damped fit (Model3D.damping_beta): each fitted mode's damping change c_w - c
      * (fit_scale's layout); NULL: undamped */
     const double *fit_damping;
+    /* a free bus's fit at a rib's cost (fit_whole 0: stage2fit.BusFit): the ribs' fits
+     * composed with the bus's correction S_bus = I + A B^T, S = S_ribs S_bus, S_bus^-1 =
+     * I - A C^T, S_bus^T = I + B A^T; bus_rank rows a, b, c over every coordinate (bus_rank
+     * x (n_ribs n_rib + n_shared) each) and the same transposed (coordinates x bus_rank);
+     * 0: none */
+    int bus_rank;
+    const double *bus_a, *bus_b, *bus_c, *bus_at, *bus_bt, *bus_ct;
+    /* its Newton update's: the ribs' composed with I + A_n B_n^T (the whole fit's),
+     * bus_newton_rank rows of A_n (over every coordinate) and B_n transposed (coordinates x
+     * bus_newton_rank) */
+    int bus_newton_rank;
+    const double *bus_newton_a, *bus_newton_bt;
+    /* its damped fit's share less the ribs': A B^T dq / h, bus_damp_rank rows of each over
+     * every coordinate (0: none) */
+    int bus_damp_rank;
+    const double *bus_damp_a, *bus_damp_b;
 } Advance3DCall;
 
 /* Held by Python only as pointers: the stepping contexts (every work buffer, allocated

@@ -1051,6 +1051,10 @@ typedef struct {
     int r; const double *u, *phi, *sc, *shrink; int whole;
     const double *damp;                /* each mode's damping change (NULL: undamped) */
     const double *u_t, *phi_t;         /* u and phi transposed (modal_correction's in_t) */
+    /* a free bus's correction of the ribs' fit (Advance3DCall.bus_*: base_fit_map) */
+    int bus_rank; const double *bus_a, *bus_b, *bus_c, *bus_at, *bus_bt, *bus_ct;
+    int newton_rank; const double *newton_a, *newton_bt;
+    int damp_rank; const double *damp_a, *damp_b;
 } Fit3D;
 
 enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
@@ -1059,8 +1063,8 @@ enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
 
 /* acc = out^T diag(factor) in^T v over L coordinates: the mode fit's correction of v for the
  * map `kind` (fit_map), the r modes' projection rows `in` given transposed (in_t: L rows of
- * r) and their shapes `out` (r rows of L), their scales sc and Newton shrinks shrink; c: r
- * doubles of scratch.  Each sum in order (c[j] over the coordinates, acc[a] over the modes),
+ * r) and their shapes `out` (r rows of L), their scales sc and Newton shrinks shrink (sc
+ * NULL: a low-rank map's, factor -1 to the scheme, else 1); c: r doubles of scratch.  Each sum in order (c[j] over the coordinates, acc[a] over the modes),
  * the inner loops along contiguous rows (vectorised, the order kept). */
 static void modal_correction(const double *restrict in_t, const double *restrict out,
                              const double *sc, const double *shrink, int r, int L, int kind,
@@ -1073,6 +1077,10 @@ static void modal_correction(const double *restrict in_t, const double *restrict
         for (int j = 0; j < r; j++) c[j] += row[j] * va;
     }
     for (int j = 0; j < r; j++) {
+        if (!sc) {
+            if (kind == TO_SCHEME) c[j] = -c[j];
+            continue;
+        }
         double s = sc[j];
         c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -shrink[j] : s - 1.0;
     }
@@ -1418,8 +1426,14 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
     int N = x->R * x->n;
     int steps = a->single ? 1 : a->n_steps;
     Fit3D fit = {a->fit_modes, a->fit_u, a->fit_phi, a->fit_scale, a->fit_shrink, a->fit_whole,
-                 a->fit_damping, a->fit_ut, a->fit_phit};
-    if (a->fit_modes > (a->fit_whole ? N + x->ns : x->n) || (a->fit_whole && !x->base))
+                 a->fit_damping, a->fit_ut, a->fit_phit, a->bus_rank, a->bus_a, a->bus_b,
+                 a->bus_c, a->bus_at, a->bus_bt, a->bus_ct, a->bus_newton_rank,
+                 a->bus_newton_a, a->bus_newton_bt, a->bus_damp_rank, a->bus_damp_a,
+                 a->bus_damp_b};
+    int bus_ranks = a->bus_rank || a->bus_newton_rank || a->bus_damp_rank;
+    if (a->fit_modes > (a->fit_whole ? N + x->ns : x->n) || (a->fit_whole && !x->base)
+        || (bus_ranks && (a->fit_whole || !x->base)) || a->bus_rank > N + x->ns
+        || a->bus_newton_rank > N + x->ns || a->bus_damp_rank > N + x->ns)
         return SINGULAR;
     int figures = x->fig && !a->single && a->out;
     if (figures) figures_start(x, a);

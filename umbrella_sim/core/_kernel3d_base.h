@@ -26,7 +26,7 @@
  * column), the drive's rows.  base_step is integrator3d.MidpointUmbrella._step for a moving
  * base, step for step the same algorithm (its states equal the reference's to round-off),
  * with stage 2's mode fit (base_fit_map: a driven hub's ribs' fits in the hub's frame, or a
- * free bus's one fit of the whole free system's modes; umbrella3d/stage2fit.py).
+ * free bus's: the ribs' fits with the bus's low-rank correction; umbrella3d/stage2fit.py).
  *
  * One file for the base: its functions serve base_step and one another, and leave
  * _kernel3d.c's (the hub fixed's step) as they are.
@@ -52,7 +52,7 @@ struct Base3D {
     double mss[NB * NB];
     double *fmrs[3];             /* the M_rs each factorisation holds (slot 0, 1, pm) */
     const double *drive_q, *drive_v;   /* the step's drive: the bus's place and rates */
-    double *fitv, *fitc, *fita;  /* a whole fit's (base_fit_map): v gathered, the modal
+    double *fitv, *fitc, *fita;  /* a map over every coordinate (every_map): v gathered, the modal
                                   * sums, the change (N + NB each) */
     double work_drive;           /* the last step's drive work */
 };
@@ -580,25 +580,48 @@ static int base_project(Ctx3D *x, const double *q, double *v, const double *stuc
 /* ------------------------------------------------------------------ the mode fit */
 /* Stage 2's mode fit with a moving base (umbrella3d/stage2fit.py), fit_map's maps: a driven
  * hub's, each rib's fit in the hub's frame (fit_map; the shared coordinates as they are); a
- * free bus's (f->whole), one fit of the whole free system's modes, its rows u and phi over
+ * free bus's (BusFit), the ribs' fits composed with the bus's correction S_bus = I + A B^T
+ * over every coordinate (f->bus_rank rows: S = S_ribs S_bus, so S_bus applied first to the
+ * physical velocity, last to the scheme's velocity and to the momentum; the Newton update
+ * the ribs' then I + A_n B_n^T: the whole fit's); or (f->whole) one fit of the whole free system's modes, its rows u and phi over
  * every coordinate (the ribs', then the shared ones: N + ns).  vr: the ribs' blocks at
  * stride apart (n, or mb for the arrow's right-hand sides), vs: the shared coordinates. */
-static void base_fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *vr, int stride,
-                         double *vs) {
-    if (!f->whole) {
-        fit_map(x, f, kind, vr, stride);
-        return;
-    }
+static void every_map(const Ctx3D *x, const double *in_t, const double *out, const double *sc,
+                      const double *shrink, int r, int kind, double *vr, int stride,
+                      double *vs) {
     const Base3D *B = x->base;
     int R = x->R, n = x->n, N = R * n;
     double *g = B->fitv, *acc = B->fita;
     for (int k = 0; k < R; k++) memcpy(g + k * n, vr + (size_t)k * stride, sizeof(double) * n);
     memcpy(g + N, vs, sizeof(double) * x->ns);
-    modal_correction(kind == TRANSPOSE ? f->phi_t : f->u_t, kind == TRANSPOSE ? f->u : f->phi,
-                     f->sc, f->shrink, f->r, N + x->ns, kind, g, B->fitc, acc);
+    modal_correction(in_t, out, sc, shrink, r, N + x->ns, kind, g, B->fitc, acc);
     for (int k = 0; k < R; k++)
         for (int a = 0; a < n; a++) vr[(size_t)k * stride + a] += acc[k * n + a];
     for (int i = 0; i < x->ns; i++) vs[i] += acc[N + i];
+}
+
+static void base_fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *vr, int stride,
+                         double *vs) {
+    if (f->whole) {
+        every_map(x, kind == TRANSPOSE ? f->phi_t : f->u_t, kind == TRANSPOSE ? f->u : f->phi,
+                  f->sc, f->shrink, f->r, kind, vr, stride, vs);
+        return;
+    }
+    if (kind == NEWTON) {
+        fit_map(x, f, kind, vr, stride);
+        if (f->newton_rank > 0)
+            every_map(x, f->newton_bt, f->newton_a, NULL, NULL, f->newton_rank, kind, vr, stride,
+                      vs);
+        return;
+    }
+    int bus = f->bus_rank > 0;
+    if (bus && kind == TO_PHYSICAL)
+        every_map(x, f->bus_bt, f->bus_a, NULL, NULL, f->bus_rank, kind, vr, stride, vs);
+    fit_map(x, f, kind, vr, stride);
+    if (bus && kind == TO_SCHEME)
+        every_map(x, f->bus_ct, f->bus_a, NULL, NULL, f->bus_rank, kind, vr, stride, vs);
+    if (bus && kind == TRANSPOSE)
+        every_map(x, f->bus_at, f->bus_b, NULL, NULL, f->bus_rank, kind, vr, stride, vs);
 }
 
 /* ------------------------------------------------------------------ the step */

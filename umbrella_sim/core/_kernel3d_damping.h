@@ -19,7 +19,8 @@
  * the step's residual (step, base_step), h/2 C in its iteration matrix (stiffness_weight:
  * M + (h^2/4 + h beta/2) K), and the step's dissipation dq . C dq / h; with a damped mode fit
  * (Fit3D.damp), its share U diag(c_w - c) U^T dq / h (integrators.LockedModeFit.
- * damping_force), rib by rib or the whole free system's.  Included by _kernel3d.c after the
+ * damping_force), rib by rib (a free bus's: with its low-rank difference to the whole free
+ * system's) or the whole free system's.  Included by _kernel3d.c after the
  * mode fit's maps. */
 
 /* the weight of K in the iteration matrix's elastic blocks: h^2/4, + h beta / 2 damped */
@@ -27,16 +28,17 @@ static double stiffness_weight(const Model3D *m, double h) {
     return 0.25 * h * h + 0.5 * h * m->damping_beta;
 }
 
-/* y (len) += sum_j u_j (damp_j / h) (u_j . dq): the share of a fit's modes (rows u_j over
- * len coordinates, each mode's damping change damp_j) in the damping force */
-static void modal_damping(const double *u, const double *damp, int modes, int len,
-                          const double *dq, double h, double *y) {
+/* y (len) += sum_j a_j (damp_j / h) (u_j . dq): the share of a fit's modes (rows u_j over
+ * len coordinates, each mode's damping change damp_j; a = u) in the damping force, or of a
+ * low-rank share A B^T dq / h (rows a_j, u = b_j, damp NULL: 1) */
+static void modal_damping(const double *a, const double *u, const double *damp, int modes,
+                          int len, const double *dq, double h, double *y) {
     for (int j = 0; j < modes; j++) {
-        const double *uj = u + (size_t)j * len;
+        const double *uj = u + (size_t)j * len, *aj = a + (size_t)j * len;
         double d = 0.0;
-        for (int a = 0; a < len; a++) d += uj[a] * dq[a];
-        d *= damp[j] / h;
-        for (int a = 0; a < len; a++) y[a] += uj[a] * d;
+        for (int i = 0; i < len; i++) d += uj[i] * dq[i];
+        d *= (damp ? damp[j] : 1.0) / h;
+        for (int i = 0; i < len; i++) y[i] += aj[i] * d;
     }
 }
 
@@ -57,12 +59,16 @@ static void damping_forces(Ctx3D *x, const Fit3D *fit, double h, double *y) {
     for (int i = N; i < L; i++) y[i] = 0.0;
     if (!fit || !fit->damp) return;
     if (fit->whole) {                  /* the free system's modes: rows over every coordinate */
-        modal_damping(fit->u, fit->damp, fit->r, L, x->dq, h, y);
+        modal_damping(fit->u, fit->u, fit->damp, fit->r, L, x->dq, h, y);
         return;
     }
-    for (int r = 0; r < R; r++)        /* each rib's modes */
-        modal_damping(fit->u + (size_t)r * fit->r * n, fit->damp + (size_t)r * fit->r, fit->r,
-                      n, x->dq + (size_t)r * n, h, y + (size_t)r * n);
+    for (int r = 0; r < R; r++) {      /* each rib's modes */
+        const double *u = fit->u + (size_t)r * fit->r * n;
+        modal_damping(u, u, fit->damp + (size_t)r * fit->r, fit->r, n, x->dq + (size_t)r * n, h,
+                      y + (size_t)r * n);
+    }
+    if (fit->damp_rank)                /* a free bus's: the whole fit's share less the ribs' */
+        modal_damping(fit->damp_a, fit->damp_b, NULL, fit->damp_rank, L, x->dq, h, y);
 }
 
 /* y (rib r's n) += its damping force's negative (damping_forces' x->damp) */

@@ -19,6 +19,11 @@ Summary figures of a run, from every physics step: one rule for each figure, use
 offline recorder and the sweep all feed it) and gives the figures: deploy time, stage-1 tip
 deflection, stage-2 amplitude and period over a fixed window after the lock, peak stresses
 and where, the energy balance, and where the run left the model's validity (the warnings).
+
+Why one module: the figures and the validity rules that judge them (validity_warnings, with
+each limit's calibration beside it) are one contract: every consumer (the planar and the
+ribs' accumulators, the node, the CLI, a recording's reader) takes both from here, so that a
+figure and the limit it is held to change together.
 """
 from __future__ import annotations
 
@@ -38,8 +43,8 @@ from .step_rule import (COUPLING_DEFLECTION, lock_amplitudes, MAX_STEP_DIVISOR, 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
 ENERGY_SCALE_FLOOR = 1e-9
-_TIME, _STAGE, _TIP, _FORCE, _RESIDUAL = (STEP_FIELDS.index(f) for f in (
-    'time', 'stage', 'tip_transverse', 'sleeve_force', 'constraint_residual'))
+_TIME, _STAGE, _TIP, _FORCE, _RESIDUAL, _RATE = (STEP_FIELDS.index(f) for f in (
+    'time', 'stage', 'tip_transverse', 'sleeve_force', 'constraint_residual', 'alpha1_rate'))
 
 
 class _StepFieldBasis:
@@ -320,16 +325,33 @@ def mesh_resolution(params: dict, step: float) -> dict | None:
 @cache
 def _mesh_resolution(items: tuple, step: float) -> dict | None:
     from .model import UmbrellaModel
+
+    p = _beams_record(items)
+    if p is None:
+        return None
+    model = UmbrellaModel(p)
+    return resolution_of(model, lock_amplitudes(model), step)
+
+
+def beams_record(params: dict):
+    """Return the UmbrellaParams of a run with beams (flexible models), else None."""
+    from .registry import SPECS
+
+    try:
+        return _beams_record(tuple(sorted((k, v) for k, v in params.items() if k in SPECS)))
+    except TypeError:     # (a value that cannot be a parameter: no model to judge)
+        return None
+
+
+@cache
+def _beams_record(items: tuple):
     from .params import UmbrellaParams
 
     try:
         p = UmbrellaParams.from_mapping(dict(items))
     except ValueError:
         return None
-    if p.model not in ('flexible', 'flexible-nonlinear'):
-        return None
-    model = UmbrellaModel(p)
-    return resolution_of(model, lock_amplitudes(model), step)
+    return p if p.model in ('flexible', 'flexible-nonlinear') else None
 
 
 #: rigid-fe's figures of the elastic field, which its constraints hold at zero: their
@@ -376,6 +398,51 @@ def geometric_validity_warnings(params: dict, peak_stress: float,
     return out
 
 
+#: validity of the linear beams (model flexible) in a turning leaf: the leaf's centrifugal
+#: tension at its hinge, omega^2 (rho A L^2 / 2 + m_tip L) with omega its hinge rate and
+#: L = l1 + l2, may reach this fraction of its Euler load pi^2 E I / L^2 in stage 1 (before
+#: the lock).  The floating-frame beams have no geometric stiffness: a leaf under tension
+#: bends less than they say, by about that fraction (the rotating cantilever's published
+#: stiffening, docs/validation_nonlinear.md).  Calibrated against flexible-nonlinear in stage 1
+#: over 26 runs (docs/validation_nonlinear.md, "Where the linear model leaves its range": V0,
+#: mesh, sleeve force, section, the ribs' tip mass): the stage-1 tip error is 0.53-1.8 times
+#: the ratio; planar V0 = -0.2 (the default) 0.0095 and 0.5-0.7 %, V0 = -0.3 0.021 and
+#: 1.6-1.7 %, V0 = -0.5 0.059 and 5.5-6.5 %, V0 = -1 0.237 and 19-21 %; the ribs' Exudyn case
+#: (V0 = -1, 0.1 kg tip on rib 1) 0.41 and 44 % in plane (35 % out of it), at V0 = -0.3 0.037
+#: and 5.2 %, at -0.2 0.016 and 1.5-2.1 %.  At 0.025 every run more than 5 % off (tip or peak
+#: stress) warns, no quiet run is more than 2.1 % off, the warned ones at least 3.8 %, and the
+#: default runs (0.0095) are quiet: with the thesis's data it warns from V0 = -0.32 m/s.
+#: The link's compression (< 1.5 % of its Euler load in a free stage 1) and the largest
+#: section rotation |v'| do not separate those runs
+CENTRIFUGAL_TENSION_LIMIT = 0.025
+
+
+def centrifugal_tension_per_rate(p, tip_mass: float = 0.0) -> float:
+    """
+    Return the leaf's centrifugal tension over its Euler load, per squared hinge rate (s^2).
+
+    p: the planar record (UmbrellaParams, a rib's own); tip_mass: a point mass at G (kg).  A
+    leaf of length L = l1 + l2 turning at omega about its hinge carries there the tension
+    omega^2 (rho A L^2 / 2 + m_tip L); its Euler load pi^2 E I / L^2.  The ratio times
+    omega^2 is CENTRIFUGAL_TENSION_LIMIT's figure.
+    """
+    length = p.l1 + p.l2
+    tension = p.mass_per_length * length ** 2 / 2.0 + tip_mass * length
+    return tension * length ** 2 / (math.pi ** 2 * p.youngs_modulus * p.cross_section_inertia)
+
+
+def centrifugal_tension_warning(params: dict, ratio: float | None) -> str | None:
+    """Return 'centrifugal stiffening' when flexible's leaf tension passed its limit, else None."""
+    if ratio is None or ratio <= CENTRIFUGAL_TENSION_LIMIT or params.get('model') != 'flexible':
+        return None
+    return (f"centrifugal stiffening: the leaf's centrifugal tension reached {100 * ratio:.3g} % "
+            f'of its Euler load pi^2 E I / (l1 + l2)^2 before the lock (limit '
+            f'{100 * CENTRIFUGAL_TENSION_LIMIT:g} %): the linear beams of model flexible have no '
+            'geometric stiffness and overstate the stage-1 tip and stresses of a leaf under '
+            'that tension by about as much (docs/validation_nonlinear.md); take model '
+            'flexible-nonlinear')
+
+
 #: an energy balance error (energy_drift) past which a run is named: well above round-off
 #: (~1e-13) and the Newton tolerance's share (< 1e-4 in every documented run)
 ENERGY_DRIFT_LIMIT = 1e-3
@@ -385,16 +452,20 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                       tip_deflection: float, locked: bool = False,
                       energy_drift: float | None = None,
                       stage2_resolution: dict | None = None,
-                      section_slope: float | None = None) -> list[str]:
+                      section_slope: float | None = None,
+                      centrifugal_tension: float | None = None) -> list[str]:
     """
     Return where a run left the model's validity: one rule, used everywhere.
 
     Each text starts with a fixed key ('lock not applicable', 'coarse step' once locked,
     'energy not conserved', 'yield exceeded', 'large strain' (below yield; above it too for
-    flexible-nonlinear), 'large deflection' (small-deformation models), 'fibre rotation'
+    flexible-nonlinear), 'large deflection' (small-deformation models), 'centrifugal
+    stiffening' (flexible, from stage 1: centrifugal_tension_warning), 'fibre rotation'
     (flexible-nonlinear: geometric_validity_warnings)) before a colon.  stage2_resolution:
     the lock's (LockEvent), for 'coarse step'; section_slope: the largest |v'| of
-    flexible-nonlinear's fibres (geometric_validity_warnings).
+    flexible-nonlinear's fibres (geometric_validity_warnings); centrifugal_tension: the
+    largest of the leaf's centrifugal tension over its Euler load in stage 1
+    (CENTRIFUGAL_TENSION_LIMIT; None when not known, e.g. a recording's samples).
     """
     out = []
     lw = lock_warning(params, lock_kind)
@@ -426,6 +497,9 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                    f'{100 * tip_deflection / length:.3g} % of the leaf length {length:g} m '
                    f'(limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no '
                    'longer holds (compare model flexible-nonlinear)')
+    tw = centrifugal_tension_warning(params, centrifugal_tension)
+    if tw:
+        out.append(tw)
     out += geometric_validity_warnings(params, peak_stress, section_slope)
     return out
 
@@ -488,6 +562,13 @@ class SummaryAccumulator:
         # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
         self._start = deploy_start(float(self.params.get('v0', 0.0)), ())
         self._said = WarningsSaid()
+        # the leaf's centrifugal tension over its Euler load per squared hinge rate (None:
+        # no beams), and its largest in stage 1 (CENTRIFUGAL_TENSION_LIMIT)
+        beams = beams_record(self.params)
+        self._tension_per_rate = None if beams is None else centrifugal_tension_per_rate(beams)
+        self._tension = None if beams is None else (
+            self._tension_per_rate * float(initial.alpha1_rate) ** 2
+            if initial.stage == 'deploying' else 0.0)
 
     def add(self, block: StepBlock) -> None:
         """Take the steps of one block."""
@@ -520,6 +601,10 @@ class SummaryAccumulator:
             i = int(deploying.argmax())
             if self._tip1[0] is None or deploying[i] > self._tip1[0]:
                 self._tip1 = (float(deploying[i]), float(t[i]))
+            if self._tension is not None:       # (ufunc reductions: a block's are small)
+                rate = rows[_RATE] if stage[-1] == 0 else rows[_RATE][stage == 0]
+                self._tension = max(self._tension, self._tension_per_rate
+                                    * float(np.maximum.reduce(rate * rate)))
         if self.lock is not None and stage[-1] != 0 and t[0] <= self._stage2_end:
             keep = in_stage2_window(t, self.lock.time)
             t2, v2 = t[keep], v[keep]
@@ -565,6 +650,7 @@ class SummaryAccumulator:
         out['stress_ratio_max'] = max(out['peak_stress_leaf'], out['peak_stress_link']) / \
             p['yield_strength']
         out['tip_deflection_ratio_max'] = self._tip_all / (p['l1'] + p['l2'])
+        out['leaf_tension_ratio_max'] = self._tension
         out['energy_drift'] = self._balance / self._scale
         if self.lock:
             out['lock'] = self.lock.kind
@@ -592,7 +678,8 @@ class SummaryAccumulator:
                                  energy_drift=self._balance / self._scale,
                                  stage2_resolution=self.lock.stage2_resolution
                                  if self.lock else None,
-                                 section_slope=self._slope())
+                                 section_slope=self._slope(),
+                                 centrifugal_tension=self._tension)
 
     def _slope(self) -> float | None:
         return self._section_slope() if self._section_slope is not None else None
@@ -602,7 +689,8 @@ class SummaryAccumulator:
         # the warnings depend on the run only through these
         return self._said.new((self._peaks['leaf'][0], self._peaks['link'][0], self._tip_all,
                                self.lock is not None,
-                               self._balance / self._scale > ENERGY_DRIFT_LIMIT, self._slope()),
+                               self._balance / self._scale > ENERGY_DRIFT_LIMIT, self._slope(),
+                               (self._tension or 0.0) > CENTRIFUGAL_TENSION_LIMIT),
                               self.warnings)
 
 

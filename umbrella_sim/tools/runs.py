@@ -34,8 +34,8 @@ import numpy as np
 from ..bag.reader import LogError, read_log
 from ..core.beam import shape_abscissae
 from ..core.params import UmbrellaParams
-from ..core.summary import (deploy_start_of, mesh_resolution, relative_drift, stage2_figures,
-                            validity_warnings)
+from ..core.summary import (beams_record, centrifugal_tension_per_rate, deploy_start_of,
+                            mesh_resolution, relative_drift, stage2_figures, validity_warnings)
 from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_figures,
                             tip_deflection_figures)
 
@@ -234,9 +234,25 @@ class Run:
             return validity_warnings(self.params, self.lock_kind, peak, tip,
                                      locked=self.lock_time is not None,
                                      energy_drift=self.energy_drift,
-                                     stage2_resolution=mesh_resolution(self.params, step))
+                                     stage2_resolution=mesh_resolution(self.params, step),
+                                     centrifugal_tension=self.leaf_tension())
         except (KeyError, TypeError):
             return []
+
+    def leaf_tension(self) -> float | None:
+        """
+        Return the leaf's largest centrifugal tension over its Euler load in stage 1.
+
+        summary.centrifugal_tension_per_rate at the recorded hinge rates before the lock (at
+        the recording's rate: a peak between two samples is missed); None for a model
+        without beams.
+        """
+        beams = beams_record(self.params)
+        if beams is None:
+            return None
+        lock = self.lock_time if self.lock_time is not None else math.inf
+        rate = self.alpha1_rate[self.t < lock]
+        return centrifugal_tension_per_rate(beams) * float(np.max(rate * rate, initial=0.0))
 
 
 def drawn_abscissae(node_x, n_points: int) -> np.ndarray | None:

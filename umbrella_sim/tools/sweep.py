@@ -432,8 +432,8 @@ def _write_outputs(sweep, store, out_dir, report, log) -> None:
             # as simulate says it on stderr, not only in the table)
             warned = sum(r['status'] == STATUS_OK and bool(r.get('warnings')) for r in rows)
             log(f'{len(rows)} of {len(sweep.cases)} cases in {report.csv}: {ok} ok'
-                + (f' ({warned} with warnings: yield, large deflection or a coarse step; '
-                   'see the warnings column)' if warned else '')
+                + (f' ({warned} with warnings: yield, large deflection, centrifugal '
+                   'stiffening or a coarse step; see the warnings column)' if warned else '')
                 + (f', {report.failed} failed (see the error column)' if report.failed
                    else ''))
         path = out_dir

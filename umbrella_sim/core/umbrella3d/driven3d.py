@@ -43,7 +43,8 @@ from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
 from ..model import Stage
 from ..outputs import LockEvent
-from ..summary import (deploy_start, ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR, mesh_resolution,
+from ..summary import (CENTRIFUGAL_TENSION_LIMIT, centrifugal_tension_per_rate, deploy_start,
+                       ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR, mesh_resolution,
                        validity_warnings, WarningsSaid)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
@@ -347,6 +348,13 @@ class Summary3D:
         self._start = deploy_start(float(sim.params.planar.v0), ())
         self._said = WarningsSaid()
         self._planar = sim.params.planar.as_dict()     # (a frozen record)
+        # the square root of each rib's leaf centrifugal tension over its Euler load per
+        # squared hinge rate (its own section, lengths and tip mass: times the rate, one
+        # product a block), and the largest ratio over the ribs in stage 1
+        self._tension_root = np.sqrt([centrifugal_tension_per_rate(r.planar, r.tip_mass)
+                                      for r in sim.params.ribs_list()])
+        self._tension = (float(largest((self._tension_root * initial.alpha1_rate) ** 2))
+                         if initial.stage == Stage.DEPLOYING else 0.0)
 
     def add(self, block: StepBlock3D) -> None:
         """Take the steps of one block."""
@@ -373,6 +381,11 @@ class Summary3D:
                     None if self.lock is None else self.lock.time)
             self._undeployed = bool(np.isnan(self._deployed).any())
         self._last = (float(t[-1]), rows['alpha1'][-1])
+        locked = rows['locked']
+        if not locked[0]:                          # (stage 1 in the block)
+            rate = rows['alpha1_rate'] if not locked[-1] else rows['alpha1_rate'][~locked]
+            scaled = rate * self._tension_root
+            self._tension = max(self._tension, float(largest(scaled * scaled, axis=None)))
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(largest(np.abs(energy))))
         self._balance = max(self._balance,
@@ -405,6 +418,7 @@ class Summary3D:
                'energy_balance_residual': self._balance,
                'energy_scale': self._scale,
                'energy_drift': self.energy_drift,
+               'leaf_tension_ratio_max': self._tension,
                'friction_work': np.asarray(self._final.friction_work).tolist(),
                'drive_work': float(self._final.drive_work),
                'damping_dissipation': float(self._final.damping_dissipation),
@@ -450,7 +464,7 @@ class Summary3D:
                                  float(self._in_plane.max()), locked=locked,
                                  energy_drift=self.energy_drift,
                                  stage2_resolution=self._stage2_resolution() if locked else None,
-                                 section_slope=slope
+                                 section_slope=slope, centrifugal_tension=self._tension
                                  ) + out_of_plane_warnings(self._planar, out_of_plane)
 
     def _stage2_resolution(self) -> dict | None:
@@ -464,5 +478,5 @@ class Summary3D:
         return self._said.new((largest(self._peaks.value[:, _VON_MISES]),
                                largest(self._in_plane),
                                self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
-                               *self._geometry()),
+                               self._tension > CENTRIFUGAL_TENSION_LIMIT, *self._geometry()),
                               self.warnings)

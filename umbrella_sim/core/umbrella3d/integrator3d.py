@@ -47,8 +47,9 @@ integrators.LockedModeFit: each resolved mode exact in phase and amplitude, T + 
 the scheme's velocity w = S^-1 v, momentum S^T M v, each Newton update shrunk mode by mode.
 Which modes, by base (stage2fit.py): the hub fixed or driven, each rib's locked modes in the
 hub's frame, rib by rib (with the sleeve at the stop the ribs are decoupled there); a
-free-floating bus, the elastic modes of the whole free system (bus + locked ribs), one fit
-over every coordinate, which leaves the bus's momenta the physical ones.
+free-floating bus, the elastic modes of the whole free system (bus + locked ribs), which
+leaves the bus's momenta the physical ones: the ribs' fits with a low-rank correction
+(stage2fit.BusFit), at a cost linear in the ribs.
 """
 from __future__ import annotations
 
@@ -63,7 +64,7 @@ from . import arrow
 from .damping3d import damping_beta, damping_force
 from .kernel3d import CompiledStep3D
 from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
-from .stage2fit import RibFits, stage2_fit, WholeFit
+from .stage2fit import BusFit, RibFits, stage2_fit, WholeFit
 from .state3d import ConvergenceError3D, State3D, StepWork
 from ..integrators import newton_converged, newton_tolerance, PHI_TOLERANCE
 from ..kernel import kernel_refusal, LIBRARY, load_kernel
@@ -159,9 +160,9 @@ class MidpointUmbrella:
             self.norm_shared[1:] = True
         self.iterations = 0
         self.factorisations = 0     # of the iteration matrix
-        #: stage 2's mode fit (fit_stage2_modes: stage2fit.RibFits or WholeFit), acting
+        #: stage 2's mode fit (fit_stage2_modes: stage2fit.RibFits or BusFit), acting
         #: from lock_at on
-        self.mode_fit: RibFits | WholeFit | None = None
+        self.mode_fit: RibFits | BusFit | WholeFit | None = None
         self.fit_active = False
         #: the last step's iteration matrix: (factor, uses, end q and v, h, locked, stuck)
         self._kept = None
@@ -215,7 +216,7 @@ class MidpointUmbrella:
         Start stage 2's mode fit (if any): the lock has happened (in state, if given).
 
         A free bus's modes are those at the bus's attitude at the lock (the state's:
-        stage2fit.WholeFit.at_attitude).
+        stage2fit.BusFit.at_attitude).
         """
         if self.mode_fit is not None:
             if state is not None and self.mode_fit.whole and np.any(state.qs[4:7] != 0.0):
@@ -224,7 +225,7 @@ class MidpointUmbrella:
             if self.compiled is not None:
                 self.compiled.set_mode_fit(self.mode_fit)
 
-    def stage2_fits(self, locked: bool) -> RibFits | WholeFit | None:
+    def stage2_fits(self, locked: bool) -> RibFits | BusFit | WholeFit | None:
         """Return the mode fit acting on a step (stage 2, from the lock), else None."""
         return self.mode_fit if self.fit_active and locked else None
 

@@ -205,25 +205,29 @@ class CompiledStep3D:
 
     def set_mode_fit(self, fit) -> None:
         """
-        Fit the locked steps' modes from now on: a stage2fit.RibFits or WholeFit.
+        Fit the locked steps' modes from now on: a stage2fit.RibFits, BusFit or WholeFit.
 
-        The call keeps pointers to the arrays (Advance3DCall.fit_*): each rib's
-        LockedModeFit padded to the most modes a rib has (s = 1, shrink 0: no change), or
-        the whole free system's (fit_whole: rows over every coordinate); a damped fit's
-        damping changes (fit_damping, the damped beams': damping3d.py).
+        The call keeps pointers to the arrays (Advance3DCall.fit_*, bus_*): each rib's
+        LockedModeFit padded to the most modes a rib has (s = 1, shrink 0: no change), with
+        a free bus's correction (BusFit: its rows a, b, c over every coordinate, and its
+        damping share's), or the whole free system's (fit_whole: rows over every
+        coordinate); a damped fit's damping changes (fit_damping, the damped beams':
+        damping3d.py).
         """
         c = self.call
-        if fit.whole:
+        bus = getattr(fit, 'bus', None)
+        if bus is None and fit.whole:
             f = fit.fit
             self._fit = tuple(np.ascontiguousarray(a) for a in (
                 f.modes, f.shapes, f.scale, f.newton_shrink(f.step), f.damping_change))
             c.fit_whole, r = 1, len(f.scale)
         else:
+            ribs = fit if bus is None else fit.ribs
             nr, n = self.model.n_ribs, self.model.n_rib
-            r = max(len(f.scale) for f in fit.fits)
+            r = max(len(f.scale) for f in ribs.fits)
             u, phi = np.zeros((nr, r, n)), np.zeros((nr, r, n))
             scale, shrink, damping = np.ones((nr, r)), np.zeros((nr, r)), np.zeros((nr, r))
-            for k, f in enumerate(fit.fits):
+            for k, f in enumerate(ribs.fits):
                 m = len(f.scale)
                 u[k, :m], phi[k, :m] = f.modes, f.shapes
                 scale[k, :m], shrink[k, :m] = f.scale, f.newton_shrink(f.step)
@@ -237,6 +241,22 @@ class CompiledStep3D:
         # (a damped fit's damping change: the damped beams' only, damping3d.py)
         c.fit_damping = _ptr(self._fit[4]) if self.struct.damping_beta else None
         c.fit_modes = r
+        # (a free bus's correction: rows and their transposes, modal_correction's in_t)
+        self._bus = () if bus is None else tuple(
+            np.ascontiguousarray(a) for a in (bus.a, bus.b, bus.c, bus.a.T, bus.b.T, bus.c.T))
+        c.bus_rank = len(bus.a) if bus is not None else 0
+        if bus is not None:
+            c.bus_a, c.bus_b, c.bus_c, c.bus_at, c.bus_bt, c.bus_ct = (_ptr(a) for a in self._bus)
+        newton = getattr(fit, 'newton', None)
+        self._bus_newton = () if newton is None else (newton.a, np.ascontiguousarray(newton.b.T))
+        c.bus_newton_rank = len(newton.a) if newton is not None else 0
+        if newton is not None:
+            c.bus_newton_a, c.bus_newton_bt = (_ptr(a) for a in self._bus_newton)
+        damp = getattr(fit, 'damping', None)
+        self._bus_damp = () if damp is None else (damp.a, damp.b)
+        c.bus_damp_rank = len(damp.a) if damp is not None else 0
+        if damp is not None:
+            c.bus_damp_a, c.bus_damp_b = (_ptr(a) for a in self._bus_damp)
 
     # ---------------------------------------------------- stage-2 substeps (substeps3d.py)
     def set_tolerance(self, tolerance: float) -> None:

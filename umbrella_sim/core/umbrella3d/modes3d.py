@@ -114,7 +114,7 @@ def free_locked_modes(model: UmbrellaModel3D, attitude=None):
     rigid-body modes out (omega 0: the midpoint rule integrates them exactly) and makes each
     elastic mode carry no linear or angular momentum, U = M phi zero on the bus's rows.
     omega ascending, phi (coordinates, modes) mass-normalised in mass (dense, the whole
-    system's): the modes the stage-2 fit of a free bus makes exact (stage2fit.WholeFit).
+    system's): the modes the stage-2 fit of a free bus makes exact (stage2fit.BusFit).
     """
     from scipy.linalg import eigh, null_space
 
