@@ -760,10 +760,13 @@ Beside the step, a third pass (6 x 1, 1 kHz, recording, watched through the test
 this change in turn, 6 runs each, load 2.3-4.0, where neither always held real time, so in CPU s
 a simulated second, bench_ribs_node --live over 5 s): 0.88-1.04 -> 0.81-0.92 in stage 2 and
 0.67-0.72 -> 0.59-0.64 deploying (two runs of this change that fell to 0.69-0.74 x real time,
-0.78, left out), Fast DDS's event thread 0.030-0.051 -> 0.012-0.018 core. Most of it is Fast DDS:
-a reliable writer restarted its NACK-suppression timer (0 s by default) at every sample sent to
-a subscriber, which woke the event thread five times a publication and had it wait for the
-writer's lock the publishing thread held; the node now sets its own profile
+0.78, left out), Fast DDS's event thread 0.030-0.051 -> 0.012-0.018 core; against main with the
+lockstep changes above (3 runs each, load 2.0-2.8, mostly behind real time: 0.71-1.02 x)
+0.94-1.04 -> 0.85-0.99 and 0.73-0.85 -> 0.69-0.70, the event thread 0.036-0.058 -> 0.018-0.026
+core. Most of it is Fast DDS: a reliable writer restarted its NACK-suppression timer (0 s by
+default) at every sample sent to a subscriber, which woke the event thread five times a
+publication and had it wait for the writer's lock the publishing thread held; the node now sets
+its own profile
 (config/fastdds_node.xml: that duration 5 ms, nothing else; msg_docs/README.md says when it
 applies and what it costs), which took the five topics to a subscriber in another process from
 108-140 to 78-109 us of the process's CPU a publication. The ribs' encoder writes each topic's
