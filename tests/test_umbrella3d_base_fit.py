@@ -409,7 +409,7 @@ FIXED = {k: v for k, v in DRIVEN.items() if not k.startswith('base')}
 
 
 def mean_iterations(values: dict, kernel: str, fit_step: float, steps: int = 200) -> float:
-    """Return the Newton iterations a step of fitted locked steps of H, the fit made for fit_step."""
+    """Return the Newton iterations a locked step of H takes, the fit made for fit_step."""
     m = UmbrellaModel3D(UmbrellaRibsParams.from_mapping(values))
     integ = MidpointUmbrella(m, newton_tolerance(fit_step), kernel=kernel)
     integ.fit_stage2_modes(fit_step)
