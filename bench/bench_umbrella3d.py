@@ -47,7 +47,12 @@ Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x ele
     (0.1 ms at 1 element, 33 us at 2; without the fit 33 and 9.1 us).  Measured
     (--no-numpy --kernel-ribs 6 12 24, load 1.2-2.5), the compiled step alone in stage 2:
     free bus 131.7 / 263.5 / 530.9 us (22.0 us a rib; 151.9 / 417.2 / 1164.1 with the whole
-    fit's dense maps it took before), hub fixed 47.5 / 95.1 / 190.5 us (7.9 a rib).
+    fit's dense maps it took before), hub fixed 47.5 / 95.1 / 190.5 us (7.9 a rib).  At 12 x 2
+    a moving base's lock takes stage 2 in 2 substeps of 16.7 us (--kernel-ribs 6 12, load
+    ~2): driven / free 445.5 / 464.8 us a substep, 2.03 / 2.04 Newton iterations, 0.125
+    factorisations (hub fixed 174.2 us a 33 us step, 2.20); stepped at the grid's 33 us (this
+    bench before) the fit of the substep took 4.74 / 4.88 iterations with the compiled step's
+    Newton shrinks of the fit's own step, 2.33 / 2.29 with the step's (docs/umbrella3d.md).
 The machine is shared (2 cores): CPU time is what the step costs, wall RTF what a user saw.
 Targets: ribs 6 x 1 real time at 1 kHz within 0.5 core, ribs 12 x 2 real time
 at 100 Hz.  Measured (--no-numpy --ribs 6 --elements 1 2 --kernel-ribs 6 12 --repeat 3, load
