@@ -215,7 +215,7 @@ class CompiledStep3D:
         a free bus's correction (BusFit: its rows a, b, c over every coordinate, and its
         damping share's), or the whole free system's (fit_whole: rows over every
         coordinate); a damped fit's damping changes (fit_damping, the damped beams':
-        damping3d.py).
+        damping3d.py).  Each mode's Newton shrink is the step's a call takes (_shrink_at).
         """
         c = self.call
         bus = getattr(fit, 'bus', None)
