@@ -748,7 +748,14 @@ kept matrix solved for the joints' residual alone) took 2.82 -> 2.08 iterations 
 45.5 us a step, but move q without the momentum balance (the velocity 2 dq / h jumps with the
 correction): alpha1 4.7e-6 rad off against 5.5e-8, a prescribed base's energy balance 1.4e-5
 of its scale against 1.7e-7; a constraint tolerance of 1e-9 m instead of 1e-11 took 2.08
-iterations and 42.9 us, alpha1 4.8e-6 rad off (1e-10: 2.34 iterations, 45.5 us, 7.5e-7). The
+iterations and 42.9 us, alpha1 4.8e-6 rad off (1e-10: 2.34 iterations, 45.5 us, 7.5e-7).
+The projection's factorisation kept across up to 8 steps like the iteration matrix, and
+corrected by iterative refinement against the exact M(q) and J(q), was measured and not
+kept (6 x 1, quiet machine, us a step deploying / stage 2): 29.8 / 47.5 with today's
+projection, 26.1 / 43.5 with one refinement, 29.5 / 46.6 with two (a refinement's full
+solves cost about what the factorisation does), 23.1 / 47.5 with none, which leaves J v at
+the kept factor's error: at most a tenth of the step, for a projection exact only to the
+refinement's contraction. The
 mode fit's modal sums now run along contiguous rows (u and phi handed over transposed as well;
 each sum in the same order, so bit for bit the same runs), which the free bus's dense whole fit
 felt: its compiled stage-2 step at 6 / 12 / 24 ribs x 1 was 153 / 420 / 1203 us (25.5 / 35.0 /
