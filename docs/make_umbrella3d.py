@@ -533,8 +533,9 @@ step's Newton shrinks were the fit's own step's: each mode's d / (block + d), bl
 (omega h)^2 / 4, is the step's (the numpy reference's newton_update took it so), and at twice
 the fit's step the second update contracted by 0.12 instead of 0.007 (6 x 1, driven), past
 the refresh rate 0.1 (5.7 iterations, 2.65 factorisations a step against 3.0 and 0.13). The
-compiled step takes the step's shrinks now (at the grid's step 2.33 / 2.29 at 12 x 2; the bench
-steps the run's substep), the runs the same to Newton's tolerance (the lock's part steps are
+compiled steps take the step's shrinks now, the planar one too (a step within 1e-9 of the
+fit's takes the fit's: SAME_STEP; at the grid's step 2.33 / 2.29 at 12 x 2; the bench steps
+the run's substep), the runs the same to Newton's tolerance (the lock's part steps are
 the only ones a run takes at a step other than its fit's; through the lock and 300 steps past
 it, the tips before and after within 1.5e-6 of their amplitude at 6 x 1, each as far from a
 run at Newton tolerance 1e-13, 3.6e-9 at 12 x 2; the energy balance and a free bus's momenta
