@@ -764,11 +764,16 @@ felt: its compiled stage-2 step at 6 / 12 / 24 ribs x 1 was 153 / 420 / 1203 us 
 With the ribs' fits and the bus's low-rank correction (stage 2's mode fit, above) it is 131.7 /
 263.5 / 530.9 us (22.0 us a rib at each count; the whole fit 151.9 / 417.2 / 1164.1 us in the
 same interleaved runs, load 1.2-2.5); the hub fixed 47.5 / 95.1 / 190.5 us. Lockstep through
-the test API (a commander answering every joint_states, 1 kHz, 6 ribs) runs at 0.38-0.42 x real
-time, a command to the state it lets out 1.85-2.16 ms (median), 2.6-3.2 ms at most (before:
-0.04-0.05 x, and up to 1.4 s a command: rclpy's MultiThreadedExecutor resubmitting a callback
-that waits for a worker, ros2/rclpy#1452, and a first command lost until a 3 s heartbeat:
-msg_docs/topic_sleeve_force.md).
+the test API (a commander answering every joint_states, 1 kHz, 6 ribs) runs at 0.48-0.61 x real
+time, a command to the state it lets out 1.26-1.52 ms (median), 2.6-6.0 ms at most; at 100 Hz at
+1.00 x (runs interleaved, load 1.3-1.6; 0.33-0.37 x, 2.16-2.43 ms and 0.90-0.92 x with every
+entity of the node in one wait set rebuilt at each turn and each period paced from the command's
+coming: ros/executor.py, ros/pacing.py; 0.38-0.42 x and 1.85-2.16 ms on a quiet machine; before
+that: 0.04-0.05 x, and up to 1.4 s a command: rclpy's MultiThreadedExecutor resubmitting a
+callback that waits for a worker, ros2/rclpy#1452, and a first command lost until a 3 s
+heartbeat: msg_docs/topic_sleeve_force.md). The node's CPU free-running at 1 kHz after the lock
+is unchanged by it: 0.86-1.01 CPU s a sim s against 0.90-0.98 (3 runs each, interleaved, load
+1.8-3.4).
 """
 
 

@@ -77,3 +77,99 @@ def test_a_callback_waiting_for_a_worker_is_submitted_once(probe):
         spinning.join(timeout=5.0)
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
+
+
+def test_a_dedicated_group_is_waited_and_run_on_its_own_thread(probe):
+    """
+    A dedicated group's callback runs while the pool's only worker is busy, on its own thread.
+
+    Its subscription and that subscription's event handlers are left out of the pool's wait
+    set (can_execute), every other entity stays in it; the thread ends at shutdown.
+    """
+    import rclpy
+    from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+    from std_msgs.msg import Float64
+
+    from umbrella_sim.ros.executor import CallbackPool
+
+    node = rclpy.create_node('dedicated_group_test', context=probe.context)
+    executor = CallbackPool(num_threads=1, context=probe.context)
+    executor.add_node(node)
+    busy, release, ran_on = threading.Event(), threading.Event(), []
+
+    def hold_the_worker(msg):
+        busy.set()
+        release.wait(20.0)
+
+    pooled = node.create_subscription(Float64, 'pool_held', hold_the_worker, 10,
+                                      callback_group=MutuallyExclusiveCallbackGroup())
+    own = MutuallyExclusiveCallbackGroup()
+    dedicated = node.create_subscription(
+        Float64, 'dedicated', lambda msg: ran_on.append(threading.current_thread()), 10,
+        callback_group=own)
+    executor.dedicate(own)
+    assert list(dedicated.event_handlers)               # (rclpy's default QoS events)
+    assert not any(map(executor.can_execute, [dedicated, *dedicated.event_handlers]))
+    assert all(map(executor.can_execute, [pooled, *pooled.event_handlers, *node.services]))
+    pubs = [probe.publisher(topic, Float64) for topic in ('pool_held', 'dedicated')]
+    for pub in pubs:
+        probe.wait_for_subscribers(pub)
+    stop = threading.Event()
+
+    def spin():
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.01)
+    spinning = threading.Thread(target=spin, daemon=True)
+    spinning.start()
+    try:
+        pubs[0].publish(Float64(data=1.0))
+        assert busy.wait(20.0), 'the pooled callback never began'
+        pubs[1].publish(Float64(data=2.0))
+        poll(lambda: ran_on, 20.0, lambda: 'the dedicated callback never ran (worker busy)')
+        assert not release.is_set() and ran_on[0].name == 'dedicated callbacks'
+        # an entity the group gets while its thread waits is waited from then on
+        node.create_subscription(Float64, 'dedicated_later',
+                                 lambda msg: ran_on.append(threading.current_thread()), 10,
+                                 callback_group=own)
+        later = probe.publisher('dedicated_later', Float64)
+        probe.wait_for_subscribers(later)
+        later.publish(Float64(data=3.0))
+        poll(lambda: len(ran_on) == 2, 20.0, lambda: "the group's later subscription never ran")
+        assert ran_on[1] is ran_on[0]
+    finally:
+        release.set()
+        stop.set()
+        spinning.join(timeout=5.0)
+        executor.shutdown(timeout_sec=5.0)
+        node.destroy_node()
+    assert not ran_on[0].is_alive()
+
+
+def test_a_dedicated_callbacks_exception_is_raised_by_spin_once(probe):
+    """As rclpy's executors: a callback's exception comes out of the spin (here, the next)."""
+    import rclpy
+    from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+    from std_msgs.msg import Float64
+
+    from umbrella_sim.ros.executor import CallbackPool
+
+    node = rclpy.create_node('dedicated_raise_test', context=probe.context)
+    executor = CallbackPool(num_threads=1, context=probe.context)
+    executor.add_node(node)
+    own = MutuallyExclusiveCallbackGroup()
+
+    def fails(msg):
+        raise RuntimeError(f'command {msg.data} failed')
+
+    node.create_subscription(Float64, 'dedicated_raise', fails, 10, callback_group=own)
+    executor.dedicate(own)
+    pub = probe.publisher('dedicated_raise', Float64)
+    probe.wait_for_subscribers(pub)
+    try:
+        pub.publish(Float64(data=3.0))
+        with pytest.raises(RuntimeError, match='command 3.0 failed'):
+            poll(lambda: executor.spin_once(timeout_sec=0.01), 20.0,
+                 lambda: "the dedicated callback's exception never came out of spin_once")
+    finally:
+        executor.shutdown(timeout_sec=5.0)
+        node.destroy_node()

@@ -207,6 +207,34 @@ def test_pause_and_reset(probe):
     assert locks[:2] == pytest.approx([offline, offline], abs=1e-9)   # the same run again
 
 
+def test_command_publishers_matched_and_incompatible_are_reported(probe):
+    """
+    The node's QoS events reach its log, on either executor thread.
+
+    A best-effort publisher of commands (the subscription is reliable: none would arrive)
+    is reported as rclpy reports it, naming the policy (the commands' own thread); a
+    reliable one is matched; a reliable reader of /clock is reported (the services').
+    """
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from umbrella_sim.ros.commands import COMMANDER_LINE
+
+    with NodeProcess('-p', 'v0:=0.0') as node:
+        node.wait_for_log('physics step')
+        probe.publisher('/sleeve_force', Float64,
+                        QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        node.wait_for_log(r"publisher discovered on topic '/?sleeve_force', offering "
+                          r'incompatible QoS\..*RELIABILITY')
+        probe.publisher('/sleeve_force', Float64)
+        node.wait_for_log(re.escape(f'{COMMANDER_LINE} matched on /sleeve_force (1 now)'))
+        # the publishers' events stay in the services' wait set: a reliable reader of the
+        # best-effort /clock is reported there
+        probe.subscribe('/clock', Clock, QoSProfile(depth=10,
+                                                    reliability=ReliabilityPolicy.RELIABLE))
+        node.wait_for_log(r"subscription discovered on topic '/?clock', requesting "
+                          r'incompatible QoS\..*RELIABILITY')
+
+
 def set_double(probe, name, value):
     """Set one double parameter of /umbrella_node (SetParameters, as `ros2 param set`)."""
     v = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)

@@ -461,3 +461,24 @@ def test_a_force_profile_is_played_row_by_row(antenna_factory):
     (t1, f1), (t2, f2), (t3, f3) = antenna.applied_forces()[:3]
     assert (f1, f2, f3) == (5.0, 0.0, 5.0)
     assert t2 - t1 == pytest.approx(0.2, abs=0.05) and 0.0 < t3 - t2 <= 0.1
+
+
+@pytest.mark.ros
+def test_a_probe_reports_a_publisher_of_incompatible_qos(probe, capfd):
+    """A probe's reader logs a publisher it cannot match, naming the policy (as rclpy's)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Float64
+
+    from umbrella_sim.testing import Probe
+
+    with Probe('qos_reader_probe', domain_id=probe.domain_id) as reader:
+        reader.subscribe('/qos_mismatch', Float64,
+                         QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        probe.publisher('/qos_mismatch', Float64,
+                        QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        err = []
+        line = ("[qos_reader_probe]: New publisher discovered on topic '/qos_mismatch', "
+                'offering incompatible QoS. No messages will be received from it. Last '
+                'incompatible policy: RELIABILITY')
+        poll(lambda: err.append(capfd.readouterr().err) or line in ''.join(err), 20.0,
+             lambda: f'no {line!r} within 20 s; stderr:\n{"".join(err)}')

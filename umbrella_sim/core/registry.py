@@ -321,7 +321,9 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'command on, while deploying, each publication period starts only once a command '
        '(accepted or refused) has arrived since the previous joint_states, and acts from '
        "that period's first step; a closed loop's result then does not depend on process "
-       'scheduling, and `real_time_factor` is the fastest pace. Locked or faulted (the '
+       'scheduling, and `real_time_factor` is the fastest pace (the wait for a command '
+       'counts toward the period it lets run: a controller that answers within the period '
+       'costs no wall time). Locked or faulted (the '
        'sleeve force no longer moves the frame) and after ~/reset until a command, the '
        'node runs on its own. false = real time, a command acts from the next period '
        'boundary after it arrives', applies=NOW, group=NODE),

@@ -61,10 +61,16 @@ class Lockstep:
             self.waits += 1
         return time.monotonic() - self.waiting_since
 
-    def go(self, on: bool) -> bool:
-        """Note that the period steps: arm the handshake; True if a wait ended (pace from now)."""
+    def go(self, on: bool, at_publication: bool) -> bool:
+        """
+        Note that the run steps on: arm the handshake; True if a wait ended (pace on from it).
+
+        Armed at a publication instant only, where the command starts acting: armed between
+        two (a chunk of a long period), the period's end cleared the answer of a command not
+        yet taken and the node waited for another, the first never applied.
+        """
         ended = bool(self.waiting_since)
         self.waiting_since = 0.0
-        if on and self.answered.is_set():
+        if on and at_publication and self.answered.is_set():
             self.armed = True           # the handshake starts (or goes on)
         return ended

@@ -512,8 +512,10 @@ class UmbrellaNode(Node):
                     if waiting:
                         self._lockstep_wait()
                     elif not idle:
-                        if self.lockstep.go(self.node_cfg['lockstep']):
-                            self._anchor()          # the command came: pace from now
+                        on, at = self.node_cfg['lockstep'], self.driver.at_publication
+                        if self.lockstep.go(on, at):        # (the wait counts: pacing.py)
+                            self.pacer.after_wait(self.sim.time, 1.0 / self.driver_rate,
+                                                  self.node_cfg['real_time_factor'])
                         try:
                             # a chunk of steps, at most to the next publication: the lock
                             # is given up between chunks, for a service or a stop
@@ -577,12 +579,7 @@ class UmbrellaNode(Node):
                 self.finished.set_result(self.fault is None)
 
     def _lockstep_wait(self) -> None:
-        """
-        Take one idle turn of a lockstep wait (sim lock held).
-
-        The pace restarts from the moment the command comes (the anchor follows the wait),
-        so waiting for a controller is neither lag nor slip.
-        """
+        """Take one idle turn of a lockstep wait (sim lock held; no lag: Pacer.after_wait)."""
         waited = self.lockstep.wait_turn()
         if waited >= 5.0:
             self._warn_throttled('lockstep', 5.0, lambda: (

@@ -149,6 +149,9 @@ def _run(argv: list[str], running: list) -> int:
         return fail(str(exc))
     executor = CallbackPool(num_threads=2)      # (rclpy's MultiThreadedExecutor: executor.py)
     executor.add_node(node)
+    # the commands' subscription in a wait set of its own, on a thread of its own: in
+    # lockstep each command wakes it alone, not the services and events (executor.py)
+    executor.dedicate(node.command_sub.callback_group)
     ok = True
     try:
         # the timeout lets a signal's Python handler run while the executor waits (it runs
@@ -161,9 +164,9 @@ def _run(argv: list[str], running: list) -> int:
         pass
     finally:
         node.stop()
+        executor.shutdown(timeout_sec=1.0)      # (its threads too: none takes a command now)
         node.drain_commands()       # those still queued: taken or counted, never lost
         node.close_recording()
-        executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
         rclpy.try_shutdown()
     if not ok:

@@ -89,6 +89,20 @@ class Pacer:
         self.max_lag = max(self.max_lag, lag)
         return lag
 
+    def after_wait(self, sim_t: float, period: float, real_time_factor: float,
+                   now: float | None = None) -> None:
+        """
+        Pace on from a lockstep wait for a command answering the state of sim_t, now ended.
+
+        The wait counts toward the period (sim s) the command lets run, all of it at most:
+        the next state stays due a period after sim_t was due (the cadence of a run without
+        lockstep) while the controller answers within the period; a later answer makes the
+        period due at once (the wait is not lag).  Not paced (real_time_factor 0): from now.
+        """
+        now = time.monotonic() if now is None else now
+        due = self.target(sim_t, real_time_factor)
+        self.anchor(sim_t, now if due is None else max(due, now - period / real_time_factor))
+
     def re_anchor(self, now: float, sim_t: float, lag: float) -> None:
         """Apply the overload policy: pace from now, the lag counted as slip."""
         self.anchor(sim_t, now)

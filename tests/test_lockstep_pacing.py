@@ -1,0 +1,89 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""
+Lockstep's pace and arming (ros/pacing.py, ros/lockstep.py), without DDS or wall clock.
+
+A wait for the controller counts toward the period it answers, all of it at most; the
+handshake is armed where a command acts.  Wall times are given, never read: no timing.
+"""
+import threading
+
+import pytest
+
+from umbrella_sim.ros.pacing import Pacer
+
+PERIOD = 1e-3           # sim s, 1 kHz
+
+
+def pacer(rtf: float = 1.0) -> Pacer:
+    """Return a pacer by which the state of t = 0.5 s was due at wall 10.0 (at rtf)."""
+    p = Pacer(threading.Event(), threading.Event())
+    p.anchor(0.0, 10.0 - 0.5 / rtf if rtf > 0 else 9.5)
+    return p
+
+
+def test_an_answer_within_the_period_costs_no_wall_time():
+    """The state of t was due at 10.0, its answer came 0.4 ms later: t + P is due at 10.001."""
+    p = pacer()
+    p.after_wait(0.5, PERIOD, 1.0, now=10.0004)
+    assert p.target(0.5 + PERIOD, 1.0) == pytest.approx(10.0 + PERIOD, abs=1e-12)
+    p = pacer(0.5)
+    p.after_wait(0.5, PERIOD, 0.5, now=10.0004)
+    # (the period at half pace: 2 ms of wall time)
+    assert p.target(0.5 + PERIOD, 0.5) == pytest.approx(10.0 + 2 * PERIOD, abs=1e-12)
+
+
+def test_a_late_answer_makes_the_period_due_at_once_never_behind():
+    """An answer 5 s late: the period is due when it comes, not 5 s in the past (no lag)."""
+    p = pacer()
+    p.after_wait(0.5, PERIOD, 1.0, now=15.0)
+    assert p.target(0.5 + PERIOD, 1.0) == 15.0
+    assert p.lag(p.target(0.5 + PERIOD, 1.0), now=15.0) == 0.0
+
+
+def test_a_state_published_late_is_caught_up_by_one_period_at_most():
+    """Out 30 ms late, answered at once: the next is due at once, the lag is not carried on."""
+    p = pacer()
+    p.after_wait(0.5, PERIOD, 1.0, now=10.0302)
+    assert p.target(0.5 + PERIOD, 1.0) == 10.0302
+
+
+def test_unpaced_lockstep_anchors_at_the_answer():
+    p = pacer(0.0)
+    p.after_wait(0.5, PERIOD, 0.0, now=10.0004)
+    assert (p.sim_anchor, p.wall_anchor) == (0.5, 10.0004)
+    assert p.target(0.5 + PERIOD, 0.0) is None
+
+
+def test_a_command_between_publications_arms_the_handshake_where_it_acts():
+    """
+    A command that comes in a long period's middle is taken at its end, then answers.
+
+    Armed mid-period, the period's own state cleared the answer of a command not yet taken:
+    the node waited for a second command, the first never applied (a first command of the
+    test API at 100 Hz, now and then).
+    """
+    from umbrella_sim.ros.lockstep import Lockstep
+
+    lockstep = Lockstep()
+    lockstep.command_came()                 # in a period's middle, the handshake not armed
+    assert not lockstep.go(True, at_publication=False) and not lockstep.armed
+    lockstep.published()                    # the period's end: its state goes out
+    assert not lockstep.waiting(True, at_publication=True, deploying=True)
+    lockstep.go(True, at_publication=True)  # the command is taken here: armed from now
+    assert lockstep.armed
+    lockstep.published()                    # the state after the period it acted in
+    assert lockstep.waiting(True, at_publication=True, deploying=True)
