@@ -28,7 +28,9 @@ Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x ele
     in one call, with the rows' stress figures it computes, no Record3D), best of
     --repeat, at the step chosen for the mesh (as the real-time factors below), in stage 1
     (from t = 0) and in stage 2 (from the lock on, the mode fit acting), with the Newton
-    iterations and factorisations a step;
+    iterations and factorisations a step; stage 2 at the physics step the run takes there
+    (the grid's step over the substeps a lock may need: the step column; at 12 ribs x 2 a
+    moving base's lock takes 2), with the fit and Newton tolerance the run set for it;
   * real-time factors: simulated seconds per wall second, and CPU seconds per simulated
     second, of the runs the node would make: ribs 6 x 1 element in blocks of 1 ms (a 1 kHz
     publication), ribs 12 x 2 elements in blocks of 10 ms (100 Hz), each at the step chosen
@@ -45,7 +47,12 @@ Cost of the whole umbrella's step (core.umbrella3d): per-step cost vs ribs x ele
     (0.1 ms at 1 element, 33 us at 2; without the fit 33 and 9.1 us).  Measured
     (--no-numpy --kernel-ribs 6 12 24, load 1.2-2.5), the compiled step alone in stage 2:
     free bus 131.7 / 263.5 / 530.9 us (22.0 us a rib; 151.9 / 417.2 / 1164.1 with the whole
-    fit's dense maps it took before), hub fixed 47.5 / 95.1 / 190.5 us (7.9 a rib).
+    fit's dense maps it took before), hub fixed 47.5 / 95.1 / 190.5 us (7.9 a rib).  At 12 x 2
+    a moving base's lock takes stage 2 in 2 substeps of 16.7 us (--kernel-ribs 6 12, load
+    ~2): driven / free 445.5 / 464.8 us a substep, 2.03 / 2.04 Newton iterations, 0.125
+    factorisations (hub fixed 174.2 us a 33 us step, 2.20); stepped at the grid's 33 us (this
+    bench before) the fit of the substep took 4.74 / 4.88 iterations with the compiled step's
+    Newton shrinks of the fit's own step, 2.33 / 2.29 with the step's (docs/umbrella3d.md).
 The machine is shared (2 cores): CPU time is what the step costs, wall RTF what a user saw.
 Targets: ribs 6 x 1 real time at 1 kHz within 0.5 core, ribs 12 x 2 real time
 at 100 Hz.  Measured (--no-numpy --ribs 6 --elements 1 2 --kernel-ribs 6 12 --repeat 3, load
@@ -83,27 +90,34 @@ BASE = BASE_VALUES['fixed']
 
 
 def kernel_cost(sim: UmbrellaSimulator3D, steps: int, repeat: int):
-    """Return (CPU s, iterations, factorisations) a step of the compiled step alone from now."""
+    """
+    Return (physics step, CPU s, iterations, factorisations) a step of the compiled step alone.
+
+    From now, at the physics step the simulator takes (stage 2: h / stage2_substeps, with
+    the fit and Newton tolerance it set for it; the grid's step there would step a fit made
+    for another step).
+    """
     compiled, best = sim.integrator.compiled, float('inf')
+    sub = sim.stage2_substeps if sim.locked else 1
     for _ in range(repeat):
         t0 = time.thread_time()
-        _, done, rows, _ = compiled.advance(sim.state, sim.k, sim.h, steps, sim.force,
-                                            sim.locked)
+        _, done, rows, _ = compiled.advance(sim.state, sim.k * sub, sim.h / sub, steps,
+                                            sim.force, sim.locked)
         best = min(best, (time.thread_time() - t0) / done)
-    return best, rows['iterations'].mean(), rows['factorisations'].mean()
+    return sim.h / sub, best, rows['iterations'].mean(), rows['factorisations'].mean()
 
 
 def kernel_stages(ribs: int, elements: int, steps: int, repeat: int, stage2: bool):
-    """Return (step h, kernel_cost in stage 1 from t = 0, in stage 2 from the lock or None)."""
+    """Return (kernel_cost in stage 1 from t = 0, in stage 2 from the lock or None)."""
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
         {'ribs': ribs, 'elements_per_segment': elements, **BASE}), kernel='compiled')
     sim.advance(2)                        # (the first factorisation, at the grid's step)
     deploying = kernel_cost(sim, steps, repeat)
     if not stage2:
-        return sim.h, deploying, None
+        return deploying, None
     sim.run(1.0, after_lock=0.0)
     sim.advance(2)
-    return sim.h, deploying, kernel_cost(sim, steps, repeat)
+    return deploying, kernel_cost(sim, steps, repeat)
 
 
 def step_cost(ribs: int, elements: int, steps: int, repeat: int, kernel: str):
@@ -188,19 +202,19 @@ def main(argv=None):
                       f'a quadratic term would carry {100 * quad:+.0f} % at {max(args.ribs)} '
                       'ribs)')
     if args.kernel_ribs:
-        print('\nthe compiled step alone (its stress figures, no Record3D; step chosen for the '
-              'mesh; CPU of this thread)')
+        print('\nthe compiled step alone (its stress figures, no Record3D; the physics step the '
+              "run takes: the mesh's, over stage 2's substeps; CPU of this thread)")
         print(f"{'ribs':>5} {'elements':>9} {'step (us)':>10} {'stage':>6} {'us/step':>9} "
               f"{'us/step/rib':>12} {'Newton it':>10} {'factorisations':>15} {'core':>6}")
     for elements in args.elements if args.kernel_ribs else ():
         by_stage = {1: [], 2: []}
         for ribs in args.kernel_ribs:
-            h, *stages = kernel_stages(ribs, elements, args.kernel_steps, args.repeat,
-                                       not args.no_stage2)
+            stages = kernel_stages(ribs, elements, args.kernel_steps, args.repeat,
+                                   not args.no_stage2)
             for stage, figures in enumerate(stages, 1):
                 if figures is None:
                     continue
-                cost, its, facts = figures
+                h, cost, its, facts = figures
                 by_stage[stage].append(cost)
                 print(f'{ribs:5d} {elements:9d} {1e6 * h:10.2f} {stage:6d} {1e6 * cost:9.1f} '
                       f'{1e6 * cost / ribs:12.2f} {its:10.2f} {facts:15.3f} {cost / h:6.2f}',

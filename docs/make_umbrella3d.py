@@ -519,12 +519,31 @@ x 1 element at 0.1 ms, 6 / 12 / 24 ribs 131.7 / 263.5 / 530.9 us (22.0 us a rib)
 whole fit's 151.9 / 417.2 / 1164.1 us (25.3 / 34.8 / 48.5 a rib), the hub fixed 47.5 / 95.1 /
 190.5 us (7.9 a rib) (interleaved, best of 2 x 3, load 1.2-2.5). Of the free bus's 22 us a rib
 the fit takes 4.6 (unfitted stage 2 105 / 209 / 419 us), the rest is the bus's own step (its
-border of M(q), its gradient, the seven shared coordinates: 15 us a rib deploying). At 12 x 2
-(33 us) a stage-2 step takes 0.85 ms against the whole fit's 1.87 and 0.40 unfitted: the fitted
-step's 4.88 Newton iterations a step (either fit; 2.26 unfitted) are what remains there, as
-on a driven hub (4.73 fitted, 2.32 unfitted; 0.32 factorisations a step against 0.13), where
-the hub fixed takes 2.17: the fitted step of a moving base converges slower at 2 elements
-(at 1 element 2.79, as the fixed hub's 2.81).
+border of M(q), its gradient, the seven shared coordinates: 15 us a rib deploying). A moving
+base's fitted stage 2 converges as the fixed hub's: at 12 x 2 its lock takes stage 2 in two
+substeps of 16.7 us (the grid's 33 us; substeps3d.py), each 2.03 Newton iterations (driven) /
+2.04 (free) and 0.125 factorisations, the hub fixed 2.20 at 33 us; at 6 x 1 driven 2.85 (two
+substeps of 50 us), free 2.79, fixed 2.81. The compiled step alone there: 446 / 460 us a
+substep (26.7 / 27.6 CPU s a simulated second), the hub fixed 171 us a step (5.1) (interleaved,
+best of 3 x 1000 steps, load 1.1-2.2): what remains is a moving base's own step, 2.6 times
+the fixed hub's at the same iterations. The 4.7-4.9 iterations and 0.31-0.32 factorisations a
+step measured before (and 0.85 ms a step) were bench/bench_umbrella3d.py stepping stage 2 at
+the grid's 33 us with the fit and Newton tolerance made for the substep, where the compiled
+step's Newton shrinks were the fit's own step's: each mode's d / (block + d), block 1 +
+(omega h)^2 / 4, is the step's (the numpy reference's newton_update took it so), and at twice
+the fit's step the second update contracted by 0.12 instead of 0.007 (6 x 1, driven), past
+the refresh rate 0.1 (5.7 iterations, 2.65 factorisations a step against 3.0 and 0.13). The
+compiled steps take the step's shrinks now, the planar one too (a step within 1e-9 of the
+fit's takes the fit's: SAME_STEP; at the grid's step 2.33 / 2.29 at 12 x 2; the bench steps
+the run's substep), the runs the same to Newton's tolerance (the lock's part steps are
+the only ones a run takes at a step other than its fit's; through the lock and 300 steps past
+it, the tips before and after within 1.5e-6 of their amplitude at 6 x 1, each as far from a
+run at Newton tolerance 1e-13, 3.6e-9 at 12 x 2; the energy balance and a free bus's momenta
+as before). Not the cause: the iteration matrix's rib-bus blocks without the fit (M_rs where
+the fitted tangent has S^T M_rs, M_sr for M_sr S): put in with the shrinks (U diag(s - 1)
+Phi^T M_rs and M_sr Phi diag(s - 1 - s shrink) U^T added; the numpy step, driven hub, 6 x 1),
+every one of 200 steps took the same iterations (the drive holds the bus; the shared rows feed
+only its multipliers), and a free bus at its fit's step converges as the fixed hub already.
 """.replace('{accuracy}', accuracy_table())
 
 COST = """## Cost and real time

@@ -124,6 +124,36 @@ def test_compiled_fitted_stage2_steps_match_to_roundoff(zeta):
     assert a.dissipation == pytest.approx(b.dissipation, rel=1e-9, abs=1e-15)
 
 
+@needs_kernel
+@pytest.mark.parametrize('zeta', [0.0, 0.02])
+def test_compiled_fitted_steps_of_another_length_take_the_numpy_iterations(zeta):
+    """
+    A fit made for half the step, 20 steps: both paths shrink each mode as the step's.
+
+    LockedModeFit.newton_shrink(h) (the step's block and damping share, as a lock's part
+    steps need): the same Newton iterations step by step at the default tolerance, and the
+    same states to the tolerance's spread.
+    """
+    p = UmbrellaParams(v0=-1.0, elements_per_segment=2, time_step=1e-4, damping_ratio=zeta)
+    sim = UmbrellaSimulator(p)
+    sim.advance_to(0.06, record=False)
+    cs = ConstraintSet(locked=True, rigid=False)
+    out = {}
+    for kernel in ('numpy', 'compiled'):
+        integ = (ElasticMidpointDAE if zeta else MidpointDAE)(sim.model, kernel=kernel)
+        integ.fit_stage2_modes(0.5e-4)
+        integ.lock_at()
+        s, its = sim.state, []
+        for _ in range(20):
+            before = integ.iterations
+            s = integ.step(s, 1e-4, 0.0, cs)
+            its.append(integ.iterations - before)
+        out[kernel] = s, its
+    (a, its_a), (b, its_b) = out['numpy'], out['compiled']
+    assert its_a == its_b
+    assert np.abs(a.q - b.q).max() < 1e-9
+
+
 #: what a row holds as a Sample does, but over the step: the peak stresses and where they are
 STEP_PEAK_FIELDS = ('peak_stress_leaf', 'peak_stress_leaf_x', 'peak_stress_link',
                     'peak_stress_link_x')

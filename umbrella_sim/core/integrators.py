@@ -102,6 +102,10 @@ INTEGRATOR_REVISION = ('midpoint-dae, stage-2 locked-mode fit (on a moving base 
 #: modes carry.
 PHASE_CORRECTION_LIMIT = 1.5
 
+#: a step this near the mode fit's own (relative) is it, for the Newton shrinks
+#: (LockedModeFit.newton_shrink): the round-off of a grid step's length t_next - t
+SAME_STEP = 1e-9
+
 
 class LockedModeFit:
     """
@@ -210,7 +214,17 @@ class LockedModeFit:
         return dq - self.shapes.T @ (self.newton_shrink(h) * (self.modes @ dq))
 
     def newton_shrink(self, h: float) -> np.ndarray:
-        """Return each mode's Newton shrink d / (block + d) (newton_update)."""
+        """
+        Return each mode's Newton shrink d / (block + d) for a step h (newton_update).
+
+        The step's (block and the damping's share are h's), not the fit's own: a step of
+        another length (a lock's part step; a fit of substeps at the grid's step) shrunk as
+        the fit's step took up to twice the iterations.  A step within SAME_STEP of the
+        fit's (a grid step's length as t_next - t) takes the fit's step's shrinks, whichever
+        way a run counts its steps (the compiled kernels' ``_shrink_at`` the same).
+        """
+        if abs(h - self.step) <= SAME_STEP * self.step:
+            h = self.step
         d = self.mass_change + 0.5 * h * self.damping_change
         block = 1.0 + 0.25 * (h * self.omega) ** 2 + h * self.damping_ratio * self.omega
         return d / (block + d)

@@ -477,6 +477,8 @@ class CompiledKernel:
                                  final=_dptr(self._final))
         self._call_ref = ctypes.byref(self._call)
         self._setting = None     # what _call holds besides the state and k0, n_steps
+        #: stage 2's mode fit (set_mode_fit; None: none) and the step its shrinks are of
+        self._fit, self._shrink_step = None, None
         self._set_capacity(capacity)
         self._made = None        # the DynamicState the buffers hold (see load)
         self._sample_buf = None
@@ -498,12 +500,24 @@ class CompiledKernel:
                   (fit.modes, fit.shapes, fit.scale, fit.newton_shrink(fit.step),
                    fit.damping_change)]
         self._mode_fit = arrays
+        self._fit, self._shrink_step = fit, fit.step
         ptrs = [_dptr(a) for a in arrays]
         if not damped:
             ptrs[4] = None
         if self.lib.umbrella_set_mode_fit(self._ctx, len(fit.scale), *ptrs):
             raise MemoryError("the compiled kernel could not allocate the stage-2 mode fit's "
                               'buffers')
+
+    def _shrink_at(self, h: float) -> None:
+        """
+        Set the fit's Newton shrinks (the array the kernel points at) to a step h's.
+
+        LockedModeFit.newton_shrink(h), as the numpy step's newton_update takes them (the
+        step's, not the fit's own step's: a lock's part steps differ from it).
+        """
+        if self._fit is not None and h != self._shrink_step:
+            self._mode_fit[3][...] = self._fit.newton_shrink(h)
+            self._shrink_step = h
 
     def last_dissipation(self) -> float:
         """Return the damping dissipation of the last step taken (J; with the mode fit's)."""
@@ -566,6 +580,7 @@ class CompiledKernel:
             self._want_states(states)
         call = self._call
         call.k0, call.n_steps = k0, n_steps
+        self._shrink_at(h)
         setting = (cs.locked, cs.rigid, h, force, tol, max_iter, div_tol)
         if setting != self._setting:    # usually the same as last time: no ctypes setattr
             self._setting = setting
@@ -664,6 +679,7 @@ class CompiledKernel:
         v0 = np.ascontiguousarray(s.qd, dtype=float)
         lam0 = np.ascontiguousarray(s.multipliers, dtype=float)
         p0 = None if s.momentum is None else np.ascontiguousarray(s.momentum, dtype=float)
+        self._shrink_at(h)
         status = self.lib.umbrella_step(
             self._ctx, int(cs.locked), int(cs.rigid), _dptr(q0), _dptr(v0),
             _dptr(lam0), None if p0 is None else _dptr(p0), h, force, tol, self.phi_tol,

@@ -144,6 +144,9 @@ class CompiledStep3D:
                                   **{k: _ptr(v) for k, v in self.buf.items()})
         self._call_ref = ctypes.byref(self.call)
         self._drive = (np.zeros((1, 6)), np.zeros((1, 6)))
+        #: the mode fit's arrays (set_mode_fit; None: no fit), and the step its Newton
+        #: shrinks are those of (_shrink_at)
+        self._fit, self._shrink_step = None, None
         self.set_figures(figures)
 
     def __del__(self):
@@ -212,7 +215,7 @@ class CompiledStep3D:
         a free bus's correction (BusFit: its rows a, b, c over every coordinate, and its
         damping share's), or the whole free system's (fit_whole: rows over every
         coordinate); a damped fit's damping changes (fit_damping, the damped beams':
-        damping3d.py).
+        damping3d.py).  Each mode's Newton shrink is the step's a call takes (_shrink_at).
         """
         c = self.call
         bus = getattr(fit, 'bus', None)
@@ -221,6 +224,7 @@ class CompiledStep3D:
             self._fit = tuple(np.ascontiguousarray(a) for a in (
                 f.modes, f.shapes, f.scale, f.newton_shrink(f.step), f.damping_change))
             c.fit_whole, r = 1, len(f.scale)
+            self._shrink_fits = [f]
         else:
             ribs = fit if bus is None else fit.ribs
             nr, n = self.model.n_ribs, self.model.n_rib
@@ -234,6 +238,8 @@ class CompiledStep3D:
                 damping[k, :m] = f.damping_change
             self._fit = (u, phi, scale, shrink, damping)
             c.fit_whole = 0
+            self._shrink_fits = ribs.fits
+        self._shrink_step = self._shrink_fits[0].step
         # (u and phi with each rib's or the whole fit's rows transposed: modal_correction's)
         self._fit_t = tuple(np.ascontiguousarray(np.swapaxes(a, -1, -2)) for a in self._fit[:2])
         c.fit_u, c.fit_phi, c.fit_scale, c.fit_shrink = (_ptr(a) for a in self._fit[:4])
@@ -257,6 +263,25 @@ class CompiledStep3D:
         c.bus_damp_rank = len(damp.a) if damp is not None else 0
         if damp is not None:
             c.bus_damp_a, c.bus_damp_b = (_ptr(a) for a in self._bus_damp)
+
+    def _shrink_at(self, h: float) -> None:
+        """
+        Set the fit's Newton shrinks (the array the call points at) to those of a step h.
+
+        LockedModeFit.newton_shrink(h), as the numpy step's newton_update takes them: each
+        mode's d / (block + d) for the step taken (its block 1 + (omega h)^2 / 4 and the
+        damping's share h (c_w - c) / 2 are the step's), not the fit's own step, which a
+        step differs from where the run takes a part of one (the lock's) or a caller another
+        (a stage-2 fit of substeps stepped at the grid's step: there the fit's step's
+        shrinks took 4.7 to 5.7 Newton iterations a step against 2.2 to 3.0).
+        """
+        shrink = self._fit[3]
+        if shrink.ndim == 1:
+            shrink[...] = self._shrink_fits[0].newton_shrink(h)
+        else:
+            for k, f in enumerate(self._shrink_fits):
+                shrink[k, :len(f.scale)] = f.newton_shrink(h)
+        self._shrink_step = h
 
     # ---------------------------------------------------- stage-2 substeps (substeps3d.py)
     def set_tolerance(self, tolerance: float) -> None:
@@ -285,6 +310,8 @@ class CompiledStep3D:
             if s.pr is not None:
                 b['pr'][...], b['ps'][...] = s.pr, s.ps
         self._in_buffers = None     # (the call moves the buffers on)
+        if self._fit is not None and h != self._shrink_step:
+            self._shrink_at(h)
         c = self.call
         c.have_p, c.t, c.h, c.force, c.locked = int(s.pr is not None), s.t, h, force, int(locked)
 
