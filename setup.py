@@ -73,7 +73,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')
+         + glob('config/*.xml')),
         ('share/' + package_name + '/config/sweeps', glob('config/sweeps/*.yaml')),
         ('share/' + package_name + '/msg_docs', glob('msg_docs/*.md')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),

@@ -31,10 +31,11 @@ What the umbrella of N ribs costs the node: the step through the run driver, and
     second: after the lock (stage 2: 6 x 1 locks at 0.23 s) or, with --live-deploying, in a
     slow deployment (stage 1); and in lockstep, a commander answering every joint_states for
     --periods publications: sim seconds per wall second, and each period's delay from the
-    command to the state it lets out (median, max; --lockstep-only: this line alone).
+    command to the state it lets out (median, max; --lockstep-only: this line alone;
+    --periods 0: none).
 The machine is shared (2 cores): wall figures are noisy; the CPU time is what a step costs.
 
-    python bench/bench_ribs_node.py [--ribs 2 3 6] [--duration 0.02] [--after-lock S] [--live]
+    python bench/bench_ribs_node.py [--ribs [2 3 6]] [--duration 0.02] [--after-lock S] [--live]
                                     [--step 1.25e-4]
                                     [--live-ribs 6] [--live-windows 3] [--periods 40]
                                     [--live-deploying] [--lockstep-only]
@@ -184,6 +185,31 @@ def thread_cpu_seconds(pid: int) -> dict:
     return out
 
 
+def thread_names(pid: int) -> dict:
+    """Return {thread id: its name} (Fast DDS names its own: dds.ev.*, dds.shm.*...)."""
+    out = {}
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        try:
+            with open(f'/proc/{pid}/task/{tid}/comm') as fh:
+                out[tid] = fh.read().strip()
+        except FileNotFoundError:
+            pass
+    return out
+
+
+def thread_split(before: dict, after: dict, names: dict, wall: float) -> str:
+    """
+    Say each busy thread's share (core) over wall seconds, busiest first, by name.
+
+    Python's threads are all 'python' (the busiest is the physics thread, which makes the
+    DDS writes too; the recorder's writer thread next; the executor's); Fast DDS's are named
+    (dds.ev: its event thread, dds.shm / dds.udp: its receive threads).
+    """
+    shares = sorted(((v - before.get(k, 0.0)) / wall, names.get(k, '?'))
+                    for k, v in after.items())
+    return ', '.join(f'{name} {share:.3f}' for share, name in reversed(shares) if share >= 0.002)
+
+
 #: a slow deployment for --live-deploying: from rest at 0.05 N a rib (6 x 1: the lock at 6.7 s)
 DEPLOYING = {'v0': 0.0, 'sleeve_force': 0.05}
 
@@ -208,17 +234,17 @@ def live(ribs: int, periods: int, windows: int, deploying: bool = False) -> None
                 values = {kv.key: kv.value for kv in status.status[0].values}
                 rates.append(values['measured_real_time_factor'])
             cpu = cpu_seconds(f'/proc/{pid}/stat') - cpu
-            threads = sorted((v - threads.get(k, 0.0) for k, v in thread_cpu_seconds(pid).items()),
-                             reverse=True)
+            after, names = thread_cpu_seconds(pid), thread_names(pid)
             wall, sim = time.monotonic() - wall, antenna.sim_time() - sim
             print(f'live ribs {ribs}, real_time_factor 1, recording: measured '
                   f"{', '.join(rates)} (a second each; {sim / wall:.3f} over {wall:.1f} s), "
                   f"lag {values['lag_s']} s; node CPU share {cpu / wall:.3f} core, "
-                  f'{cpu / sim:.3f} CPU s a sim s (its busiest threads: '
-                  f"{', '.join(f'{c / wall:.3f}' for c in threads[:4])} core); "
+                  f'{cpu / sim:.3f} CPU s a sim s (its threads: '
+                  f'{thread_split(threads, after, names, wall)} core); '
                   f'load {os.getloadavg()[0]:.2f}; status '
                   f'{status.status[0].message!r}')
-    lockstep(ribs, periods)
+    if periods:
+        lockstep(ribs, periods)
 
 
 def lockstep(ribs: int, periods: int, rate_hz: float = 1000.0) -> None:
@@ -262,7 +288,8 @@ def stamp(msg) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--ribs', type=int, nargs='+', default=[2, 3, 6])
+    ap.add_argument('--ribs', type=int, nargs='*', default=[2, 3, 6],
+                    help='offline figures of these (none: --ribs alone)')
     ap.add_argument('--duration', type=float, default=0.02)
     ap.add_argument('--live', action='store_true')
     ap.add_argument('--live-ribs', type=int, default=6)

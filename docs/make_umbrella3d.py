@@ -774,6 +774,41 @@ callback that waits for a worker, ros2/rclpy#1452, and a first command lost unti
 heartbeat: msg_docs/topic_sleeve_force.md). The node's CPU free-running at 1 kHz after the lock
 is unchanged by it: 0.86-1.01 CPU s a sim s against 0.90-0.98 (3 runs each, interleaved, load
 1.8-3.4).
+
+Beside the step, a third pass (6 x 1, 1 kHz, recording, watched through the test API; main and
+this change in turn, 6 runs each, load 2.3-4.0, where neither always held real time, so in CPU s
+a simulated second, bench_ribs_node --live over 5 s): 0.88-1.04 -> 0.81-0.92 in stage 2 and
+0.67-0.72 -> 0.59-0.64 deploying (two runs of this change that fell to 0.69-0.74 x real time,
+0.78, left out), Fast DDS's event thread 0.030-0.051 -> 0.012-0.018 core; against main with the
+lockstep changes above (3 runs each, load 2.0-2.8, mostly behind real time: 0.71-1.02 x)
+0.94-1.04 -> 0.85-0.99 and 0.73-0.85 -> 0.69-0.70, the event thread 0.036-0.058 -> 0.018-0.026
+core. Most of it is Fast DDS: a reliable writer restarted its NACK-suppression timer (0 s by
+default) at every sample sent to a subscriber, which woke the event thread five times a
+publication and had it wait for the writer's lock the publishing thread held; the node now sets
+its own profile
+(config/fastdds_node.xml: that duration 5 ms, nothing else; msg_docs/README.md says when it
+applies and what it costs), which took the five topics to a subscriber in another process from
+108-140 to 78-109 us of the process's CPU a publication. The ribs' encoder writes each topic's
+doubles in place into a copy of its template through numpy views (29-31 us a publication
+instead of 31-33, bench_ribs_node's outside_kernel 100-102 -> 96-98 us deploying, 94-96 -> 92-93
+in stage 2), every recorded message and summary figure bit for bit the same (record_offline of
+6 ribs, a stuck and rubbing rib, a free bus). Already so before: each message is serialized
+once (the encoders' CDR bytes go to rclpy's publish and to the recorder alike). What remains,
+measured in the node's own process at real time, deploying, a subscriber in another process,
+load 2.5 (CPU a simulated ms): the process 699 us, of which the compiled step 287; beside it the
+run driver's Python 136 (Record3D's rows 62, the summary 32, the compiled call's Python side
+and the rest 42), the warnings' check 8, the publication's sample 11 and its encoding 38, the
+DDS writes of the five topics 86 (28 without a subscriber), the recorder's queue 18, the pacing
+sleep 14 (a sleep costs ~15 us of CPU on this machine however it is made: time.sleep, select,
+an Event, nanosleep), the loop and the command's check ~40, the other threads 61 (the recorder
+22, Fast DDS's ~15, the executor 6): ~0.41 core beside the step where 0.5 core leaves
+0.18-0.21. Measured and not kept: Fast DDS without heartbeat piggybacks, with UDP alone (no
+shared memory), both no cheaper; calling rclpy's publish_raw directly (0.35-0.8 us a topic).
+One thing measured that a change of the loop could take: a 1 ms block woken from a 0.7 ms sleep
+costs 80-90 us more than the same block run back to back (the sleep itself ~15, the rest cold
+caches), so computing two periods before sleeping would save ~0.03-0.04 core; it would make a
+command act one period later than msg_docs/topic_sleeve_force.md promises (from the next
+period) and publish sleeve_force/applied before the joint_states it follows, so it was not done.
 """
 
 

@@ -74,6 +74,9 @@ exec "$prefix/lib/umbrella_sim/umbrella_node" --ros-args \
     offline = simulate(params.replace(v0=-0.5), 0.2, stop_after_lock=0.0).lock.time
     assert f'locked at t = {offline:.9f} s' in out and 'duration 0.2 s reached' in out
     assert 'kernel compiled' in out                   # colcon built the C step too
+    # its own Fast DDS profile, the installed one (msg_docs/README.md)
+    assert (f'Fast DDS profile {tmp_path}/install/umbrella_sim/share/umbrella_sim/config/'
+            'fastdds_node.xml' in out), out
     for name in ('package.xml', 'config/umbrella.yaml', 'msg_docs/parameters.md',
                  'launch/umbrella.launch.py', 'launch/multi_antenna.launch.py',
                  'urdf/umbrella.urdf', 'rviz/umbrella.rviz'):

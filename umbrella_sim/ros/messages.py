@@ -353,16 +353,12 @@ def template_layout(template: bytes, groups: tuple, stamped: bool) -> tuple:
     header), the stamp if any, then before each group the constant bytes up to it (``Ns``
     fields: the template's own bytes) and its doubles.
     """
-    starts, end = [], len(template)
-    for k in reversed(groups):
-        starts.append(end - 8 * k)
-        end = starts[-1] - 8
     fields, consts, pos = ['<'], [], 0
     if stamped:
         fields += ['4s', _STAMP.format.lstrip('<')]
-        consts.append(template[:4])
-        pos = 4 + _STAMP.size
-    for start, k in zip(reversed(starts), groups):
+        consts.append(template[:STAMP_OFFSET])
+        pos = STAMP_OFFSET + _STAMP.size
+    for start, k in zip(group_starts(len(template), groups), groups):
         fields += [f'{start - pos}s', f'{k}d']
         consts.append(template[pos:start])
         pos = start + 8 * k
@@ -373,6 +369,29 @@ def template_layout(template: bytes, groups: tuple, stamped: bool) -> tuple:
     if layout.size != len(template):
         raise ValueError(f'a {len(template)}-byte template, a {layout.size}-byte layout')
     return layout, tuple(consts)
+
+
+def group_starts(size: int, groups: tuple) -> list[int]:
+    """
+    Return where each group of doubles starts in a message of size bytes (template_layout).
+
+    The groups (their counts of doubles, in order) end the message; before each later one
+    sit its sequence's 4-byte count and 4 pad bytes (CDR, XCDR1: 8-aligned doubles).
+    """
+    starts, end = [], size
+    for k in reversed(groups):
+        starts.append(end - 8 * k)
+        end = starts[-1] - 8
+    return starts[::-1]
+
+
+#: where a stamp (header.stamp, Clock.clock) sits: right after the 4-byte CDR header
+STAMP_OFFSET = 4
+
+
+def pack_stamp(buffer: bytearray, sec: int, nsec: int) -> None:
+    """Write a stamp into a stamped message's CDR bytes (at STAMP_OFFSET)."""
+    _STAMP.pack_into(buffer, STAMP_OFFSET, sec, nsec)
 
 
 def template_layouts(messages: dict, groups: dict, stamped) -> dict:

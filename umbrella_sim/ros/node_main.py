@@ -31,6 +31,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from . import messages as ros_io, signals as stop_signals
+from .dds_profile import use_node_profile
 from .executor import CallbackPool
 from .node import EXIT_FAULT, EXIT_OK, EXIT_RECORDING, EXIT_USAGE, StartupError, UmbrellaNode
 from .params_file import init_ros
@@ -124,6 +125,7 @@ def _run(argv: list[str], running: list) -> int:
         rclpy.try_shutdown()
         return EXIT_USAGE
 
+    profile = use_node_profile()    # (before rclpy.init: Fast DDS reads it then)
     try:
         files = init_ros(argv)
     except ValueError as exc:
@@ -139,6 +141,8 @@ def _run(argv: list[str], running: list) -> int:
     except StartupError as exc:
         return fail(str(exc))
     running.append(node)
+    if profile:
+        node.get_logger().info(f'Fast DDS profile {profile} (msg_docs/README.md, DDS profile)')
     if stop_requested:          # a signal while the model was built: before any output
         node.destroy_node()
         return _stopped_during_start_up()

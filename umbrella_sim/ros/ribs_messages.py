@@ -45,8 +45,8 @@ import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from .messages import (clock_msg, INERTIAL_FRAME, marker_every, RELIABLE, stamp,
-                       stamp_parts, template_layouts, Topic, TOPICS)
+from .messages import (clock_msg, group_starts, INERTIAL_FRAME, marker_every, pack_stamp,
+                       RELIABLE, stamp, stamp_parts, Topic, TOPICS)
 from .robot_description import joint_names
 from ..core.registry import NODE_PARAMETERS
 from ..core.umbrella3d.outputs3d import energy_balance3d, STRESS_NAMES, STRESS_ROWS
@@ -154,10 +154,12 @@ class RibsSampleEncoder:
     """
     The per-publication topics of a Sample3D straight to CDR bytes (SampleEncoder's rule).
 
-    The bytes of ``rib_messages``'s messages, serialized as ``cdr_bytes`` does: a template
-    of each, serialized once, holds the constant part (the joint names, layouts, labels,
-    frame id) and each publication packs the stamp and the doubles between its constant
-    bytes (messages.template_layout), one ``struct`` call a topic.
+    The bytes of ``rib_messages``'s messages, serialized as ``cdr_bytes`` does: a copy of
+    each, serialized once (a template), holds the constant part (the joint names, layouts,
+    labels, frame id) and each publication writes the stamp and the doubles in place, through
+    numpy views of the copy's groups of doubles (messages.group_starts), then takes its bytes.
+    The values are those of ``rib_joint_values``, ``rib_energy_values`` and
+    ``rib_stress_values``, written as float64: the same bits as the builders' messages.
     """
 
     @staticmethod
@@ -174,33 +176,43 @@ class RibsSampleEncoder:
 
     def __init__(self, first, yield_strength: float, initial_energy: float,
                  frame_prefix: str = ''):
+        from ..bag.cdr import cdr_bytes  # the exact-size rule, one place
         self.yield_strength, self.initial_energy = yield_strength, initial_energy
-        self._layouts = template_layouts(
-            rib_messages(first, yield_strength, initial_energy, frame_prefix),
-            self.groups(len(first.alpha1)), self.STAMPED)
-        self._stress = np.empty((len(first.alpha1), len(STRESS_FIELDS)))   # (reused)
+        ribs = len(first.alpha1)
+        templates = rib_messages(first, yield_strength, initial_energy, frame_prefix)
+        self._buffers, views = {}, {}
+        for key, groups in self.groups(ribs).items():
+            buffer = self._buffers[key] = bytearray(cdr_bytes(templates[key]))
+            views[key] = [np.frombuffer(buffer, '<f8', k, start)
+                          for start, k in zip(group_starts(len(buffer), groups), groups)]
+        self._position, self._velocity, self._effort = views['joint_states']
+        (self._energy,) = views['energy']
+        self._tip = views['rib_tip_deflection'][0].reshape(ribs, len(TIP_FIELDS))
+        self._stress = views['rib_peak_stress'][0].reshape(ribs, len(STRESS_FIELDS))
+        # rib_joint_values' order: per rib alpha1 and the link's angle, then the sleeve's
+        self._leaf, self._link = slice(0, 2 * ribs, 2), slice(1, 2 * ribs, 2)
 
     def encode(self, s) -> dict[str, bytes]:
         """Return the CDR bytes of every per-publication topic of s, keyed as the node's."""
         sec, nsec = stamp_parts(s.time)
-        layouts = self._layouts
-        clock, clock_c = layouts['clock']
-        joints, joints_c = layouts['joint_states']
-        energy, energy_c = layouts['energy']
-        tip, tip_c = layouts['rib_tip_deflection']
-        stress, stress_c = layouts['rib_peak_stress']
-        position, velocity, effort = rib_joint_values(s)
-        # in template_layout's order: the header and stamp if stamped, then each group's
-        # constant bytes and its doubles
-        return {
-            'clock': clock.pack(clock_c[0], sec, nsec),
-            'joint_states': joints.pack(joints_c[0], sec, nsec, joints_c[1], *position,
-                                        joints_c[2], *velocity, joints_c[3], *effort),
-            'energy': energy.pack(energy_c[0], *rib_energy_values(s, self.initial_energy)),
-            'rib_tip_deflection': tip.pack(tip_c[0], *s.tip.ravel().tolist()),
-            'rib_peak_stress': stress.pack(stress_c[0], *rib_stress_values(
-                s, self.yield_strength, self._stress).ravel().tolist()),
-        }
+        b = self._buffers
+        pack_stamp(b['clock'], sec, nsec)
+        pack_stamp(b['joint_states'], sec, nsec)
+        v = s.fields()
+        leaf, link = self._leaf, self._link
+        position, velocity = self._position, self._velocity
+        alpha1, rate1 = v['alpha1'], v['alpha1_rate']
+        position[leaf] = alpha1
+        np.subtract(v['alpha2'], alpha1, out=position[link])
+        position[-1] = v['sleeve_position']
+        velocity[leaf] = rate1
+        np.subtract(v['alpha2_rate'], rate1, out=velocity[link])
+        velocity[-1] = v['sleeve_velocity']
+        self._effort[-1] = v['sleeve_force']          # (the ribs' efforts: the template's 0)
+        self._energy[:] = rib_energy_values(s, self.initial_energy)
+        self._tip[...] = v['tip']
+        rib_stress_values(s, self.yield_strength, self._stress)
+        return {key: bytes(buffer) for key, buffer in b.items()}
 
 
 class RibsPublicationEncoder:
