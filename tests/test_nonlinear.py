@@ -55,6 +55,7 @@ Tolerances and why:
     equals rho W^2 L^3 / (3 E) (exact for the spinning bar) within 1 %.
 """
 import math
+import re
 
 import numpy as np
 import pytest
@@ -836,8 +837,9 @@ def test_compare_reads_recordings_of_both_models_and_names_where_each_leaves_val
 
     Both load and plot; each run's recorded warnings come through: the linear model is sent
     to flexible-nonlinear for its large deflection, the geometrically exact one names its own
-    limit (small strains) and how to resolve its stage 2 (step_follows_mesh).
+    limit (small strains) and the step that resolves its stage 2.
     """
+    from umbrella_sim.core.step_rule import physics_step_of
     from umbrella_sim.ros.recording import record_offline
     from umbrella_sim.tools import compare
 
@@ -852,6 +854,11 @@ def test_compare_reads_recordings_of_both_models_and_names_where_each_leaves_val
     linear, exact = figures[:figures.index('\nexact ')], figures[figures.index('\nexact '):]
     assert 'compare model flexible-nonlinear' in linear
     assert 'large deflection' not in exact and 'small strains only' in exact
-    assert 'step_follows_mesh takes it' in exact
+    # its 'coarse step' names the step stage 2 needs, and step_follows_mesh only if the
+    # mesh's step (which it takes, with no stage-2 substeps) is that fine
+    needed = float(re.search(r'time_step <= ([0-9.e+-]+) s resolves them', exact).group(1))
+    meshed = physics_step_of(UmbrellaParams(v0=-1.0, model=NL, lock='plastic',
+                                            step_follows_mesh=True))
+    assert ('step_follows_mesh takes it' in exact) == (meshed <= needed * (1.0 + 1e-9))
     assert {p.name for p in out.iterdir()} >= {'compare.json', 'tip_deflection.png',
                                                'stress.png', 'shapes.png'}

@@ -431,3 +431,31 @@ def test_a_run_publishing_at_1_khz_takes_the_same_stage2_steps():
         assert driver.sim.stage2_substeps == 4
         rows.append(np.concatenate([b.rows for b in parts], axis=1))
     assert np.array_equal(rows[0], rows[1])
+
+
+@pytest.mark.parametrize('given', [
+    {'time_step': 0.0, 'step_follows_mesh': False},
+    # the node's and replay's parameters: the step made the grid's, step_follows_mesh off
+    # (follows_lock is for the linear model only)
+    'grid'])
+def test_the_nonlinear_coarse_step_hint_names_step_follows_mesh_only_where_it_resolves(given):
+    """
+    flexible-nonlinear's 'coarse step' names step_follows_mesh only where its step is enough.
+
+    step_follows_mesh takes the mesh's step and no stage-2 substeps: a run whose stage 2
+    needs a finer step (its modes coupled) gets the time_step alone; one that needs the
+    mesh's step or a coarser one is told step_follows_mesh takes it.
+    """
+    from umbrella_sim.core.step_rule import follows_lock, physics_step_of, resolving_step_hint
+
+    p = UmbrellaParams(model='flexible-nonlinear')
+    meshed = physics_step_of(p.replace(step_follows_mesh=True))
+    if given == 'grid':
+        values = p.with_physics_step(meshed, follows_lock(p)).as_dict()
+    else:
+        values = p.replace(**given).as_dict()
+    assert resolving_step_hint(values, meshed / 3.0) == ''
+    assert resolving_step_hint(values, meshed) == 'step_follows_mesh takes it'
+    assert resolving_step_hint(values, None) == 'step_follows_mesh takes it'
+    on = p.replace(step_follows_mesh=True).as_dict()
+    assert resolving_step_hint(on, meshed) == ''              # (it already does)

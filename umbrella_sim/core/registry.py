@@ -278,8 +278,9 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
     _P('step_follows_mesh', bool, False, '-',
        "with a `time_step` > 0 (or flexible-nonlinear's 0, which stands for 0.1 ms): true = "
        'the physics step is the largest `time_step` / k '
-       "the mesh's stage-2 stresses need, and stage 2 the step its lock needs (the rule of "
-       '`time_step` 0, below this ceiling); '
+       "the mesh's stage-2 stresses need, and (flexible) stage 2 the step its lock needs "
+       "(the rule of `time_step` 0, below this ceiling; flexible-nonlinear keeps the mesh's "
+       "step in stage 2, and a lock that needs a finer one says so: 'coarse step'); "
        'false = `time_step` as it is (a run whose step leaves more than 1 % of its '
        "stage-2 stress crest to unresolved modes says so: 'coarse step'). The node still "
        'takes the largest step ≤ it that divides 1/`publish_rate`'),

@@ -225,14 +225,36 @@ def _mesh_divisor(items: tuple) -> int:
     return k or min(MAX_STEP_DIVISOR, int(p.time_step / MIN_PHYSICS_STEP))
 
 
-def resolving_step_hint(params: dict) -> str:
-    """Return how a run of these parameters gets the step that resolves its stage 2, or ''."""
+def resolving_step_hint(params: dict, needed: float | None = None) -> str:
+    """
+    Return how a run of these parameters gets the step that resolves its stage 2, or ''.
+
+    needed: the step its stage 2 needs (stage2_step_needed), None if not known.
+    flexible-nonlinear's step_follows_mesh takes the mesh's step and no stage-2 substeps: it
+    is named only where that step is as fine as needed (a run whose modes couple, past
+    COUPLING_DEFLECTION, needs a finer one: time_step alone gives it).
+    """
     if params.get('model') == NONLINEAR_AUTO_STEP:
-        return '' if params.get('step_follows_mesh') else 'step_follows_mesh takes it'
+        if params.get('step_follows_mesh') or not _mesh_step_meets(params, needed):
+            return ''
+        return 'step_follows_mesh takes it'
     if params.get('time_step') == 0.0 or params.get('step_follows_mesh'):
         return ''
     return ('time_step 0 takes the step chosen for the mesh, and in stage 2 the step its '
             'lock needs')
+
+
+def _mesh_step_meets(params: dict, needed: float | None) -> bool:
+    """Tell whether the step step_follows_mesh takes for these parameters is needed or finer."""
+    from .registry import SPECS
+
+    if needed is None:
+        return True
+    try:
+        p = UmbrellaParams.from_mapping({k: v for k, v in params.items() if k in SPECS})
+    except ValueError:      # (no model to judge: the hint as before)
+        return True
+    return physics_step_of(p.replace(step_follows_mesh=True)) <= needed * (1.0 + 1e-9)
 
 
 def stage2_resolution(model: UmbrellaModel, q: np.ndarray, qd: np.ndarray, h: float) -> dict:

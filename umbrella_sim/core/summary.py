@@ -257,7 +257,7 @@ def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     return None
 
 
-def coarse_step_warning(resolution: dict | None, hint: str = '',
+def coarse_step_warning(resolution: dict | None, hint: str | Callable[[float], str] = '',
                         deflection: float = 0.0) -> str | None:
     """
     Return a warning when the step leaves the modes carrying the stage-2 stresses unresolved.
@@ -268,7 +268,8 @@ def coarse_step_warning(resolution: dict | None, hint: str = '',
     Coarser, the stage-2 peaks (and the tip series past step_rule.COUPLING_DEFLECTION,
     where the modes couple) are not those of the model (docs/validation.md).  The text names
     the shares and that step; hint: how the run's parameters get it
-    (step_rule.resolving_step_hint), '' if they already do.
+    (step_rule.resolving_step_hint), '' if they already do, or a function of that step
+    giving it.
     """
     if not resolution:
         return None
@@ -281,6 +282,7 @@ def coarse_step_warning(resolution: dict | None, hint: str = '',
         fix = (f'no step down to {h / MAX_STEP_DIVISOR:.3g} s (1/{MAX_STEP_DIVISOR} of this '
                'one) resolves them: give a smaller time_step')
     else:
+        hint = hint(enough) if callable(hint) else hint
         fix = f'time_step <= {_rounded_down(enough):.3g} s resolves them' + (
             f' ({hint})' if hint else '')
     crest = (f"{100 * resolution['leaf']:.3g} % of the leaf's and "
@@ -472,7 +474,8 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     if lw:
         out.append(lw)
     length = params['l1'] + params['l2']
-    cw = (coarse_step_warning(stage2_resolution, resolving_step_hint(params),
+    cw = (coarse_step_warning(stage2_resolution,
+                              lambda needed: resolving_step_hint(params, needed),
                               tip_deflection / length) if locked else None)
     if cw:
         out.append(cw)
