@@ -142,7 +142,10 @@ def _run(argv: list[str], running: list) -> int:
         return fail(str(exc))
     running.append(node)
     if profile:
-        node.get_logger().info(f'Fast DDS profile {profile} (msg_docs/README.md, DDS profile)')
+        node.get_logger().info(
+            f"Fast DDS profile {profile}: the node's own, none being given (its writers' NACK "
+            'suppression 5 ms; FASTRTPS_DEFAULT_PROFILES_FILE takes yours instead: '
+            'msg_docs/README.md, DDS profile)')
     if stop_requested:          # a signal while the model was built: before any output
         node.destroy_node()
         return _stopped_during_start_up()
