@@ -327,10 +327,15 @@ def _node(*args, timeout=60):
      "parameter use_sim_time='abc': must be of type bool, got string"),
     (None, ['-p', 'qos_overrides./clock.publisher.depth:=deep'],
      "parameter qos_overrides./clock.publisher.depth='deep': must be of type integer"),
+    # a -p value of another type than a params file's: rcl keeps the file's without a word
+    ('/**:\n  ros__parameters:\n    v0: -0.2\n', ['-p', 'v0:=abc'],
+     "parameter v0='abc' (-p): not taken: rcl keeps v0's value -0.2 (a double"),
+    ('/**:\n  ros__parameters:\n    damping_ratio: 0.0\n', ['-p', 'damping_ratio:=[0.02]'],
+     'give damping_ratio a double'),
 ], ids=['typo', 'unknown', 'other-node', 'unknown-key', 'nested', 'malformed', 'list',
         'no-ros-parameters', 'binary', 'missing', 'no-assign', 'bogus-flag', 'no-model',
         'empty-value', 'qos-typo', 'qos-type', 'twice', 'tiny-step', 'ros-param-type',
-        'qos-type-argument'])
+        'qos-type-argument', 'argument-type-beside-file', 'argument-list-beside-file'])
 @pytest.mark.ros
 def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):
     if content is not None:

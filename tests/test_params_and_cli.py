@@ -352,3 +352,42 @@ def test_a_params_file_is_parsed_once_per_text(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match='no value for v0'):
         params_file.read_params_file(str(path))
     assert len(parses) == 3
+
+
+@pytest.mark.ros
+def test_a_dropped_argument_value_is_refused_where_rcl_drops_it(tmp_path):
+    """
+    check_param_rules refuses exactly the -p values rcl drops beside a params file.
+
+    rcl itself is the reference: each rule beside a file giving v0 -0.2, parsed by rclpy in
+    a context of its own; a value rcl took (a double, an integer, a bool) passes, one it
+    dropped for the file's (a string, a list) is refused naming the parameter.
+    """
+    import rclpy
+
+    from umbrella_sim.ros.params_file import check_param_rules, param_rules_in
+
+    path = tmp_path / 'p.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    v0: -0.2\n')
+    outcomes = set()
+    for text in ('-0.5', '-1', 'true', 'abc', '[1.0]', '"-0.5"'):
+        argv = ['node', '--ros-args', '--params-file', str(path), '-p', f'v0:={text}']
+        context = rclpy.Context()
+        rclpy.init(args=argv, context=context)
+        try:
+            node = rclpy.create_node('umbrella_node', context=context)
+            kept = node._parameter_overrides['v0'].value
+            node.destroy_node()
+        finally:
+            rclpy.shutdown(context=context)
+        dropped = kept == -0.2
+        try:
+            check_param_rules(param_rules_in(argv), {'v0': rclpy.parameter.Parameter(
+                'v0', value=kept)})
+            refused = False
+        except ValueError as exc:
+            refused = True
+            assert f'parameter v0={text!r} (-p): not taken' in str(exc)
+        assert refused == dropped, (text, kept)
+        outcomes.add(dropped)
+    assert outcomes == {True, False}        # (both kinds seen: rcl took some, dropped some)

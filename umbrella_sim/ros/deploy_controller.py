@@ -33,7 +33,8 @@ import time
 
 from . import signals as stop_signals
 from .parameters import declare_from_registry, wrong_type_text
-from .params_file import check_parameter_sources, check_qos_override_sources, init_ros
+from .params_file import (check_param_rules, check_parameter_sources,
+                          check_qos_override_sources, init_ros, param_rules_in)
 from ..core.control import DeployLaw
 from ..core.params import ControllerConfig, UmbrellaParams
 from ..core.registry import CONTROLLER_PARAMETERS, defaults, parameter_help
@@ -66,13 +67,14 @@ def _make_node_class():
     class DeployControllerNode(Node):
         """joint_states + deployment_phase -> sleeve_force, one command per joint state."""
 
-        def __init__(self, params_files: tuple = ()):
+        def __init__(self, params_files: tuple = (), param_rules: dict | None = None):
             super().__init__('deploy_controller')
             # a misspelt name is an error, never a silent default; the node's own names are
             # taken (and not used: the numerics), so one params file can serve both nodes
             known = set(CONTROLLER_PARAMETERS) | set(defaults())
             fqn = self.get_fully_qualified_name()
             try:
+                check_param_rules(param_rules or {}, self._parameter_overrides, params_files)
                 found = check_parameter_sources(fqn, params_files, list(
                     self._parameter_overrides), known, CONTROLLER_PARAMETERS_LISTED)
                 warnings = found.warnings + check_qos_override_sources(
@@ -320,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         return fail(str(exc))
     try:
-        node = _make_node_class()(tuple(files))
+        node = _make_node_class()(tuple(files), param_rules_in(argv))
     except StartupError as exc:
         return fail(str(exc))
     except InvalidParameterTypeException as exc:    # ROS's own (-p use_sim_time:=abc)

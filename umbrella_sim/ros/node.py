@@ -57,8 +57,9 @@ from .pacing import behind_text, lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, declare_umbrella,
                          known_parameter_names, parameter_defaults, set_refusal,
                          wrong_type_text)
-from .params_file import (check_parameter_sources, check_qos_override_sources,
-                          ParameterSources, QOS_OVERRIDES, USE_SIM_TIME)
+from .params_file import (check_param_rules, check_parameter_sources,
+                          check_qos_override_sources, ParameterSources, QOS_OVERRIDES,
+                          USE_SIM_TIME)
 from .publication import PublicationEncoder, run_driver
 from .recording import RunRecording
 from .ribs_messages import node_topics, ribs_diagnostics
@@ -87,12 +88,12 @@ class StartupError(RuntimeError):
 
 class UmbrellaNode(Node):
 
-    def __init__(self, params_files: tuple = (), **kwargs):
+    def __init__(self, params_files: tuple = (), param_rules: dict | None = None, **kwargs):
         try:
             super().__init__('umbrella_node', **kwargs)
         except InvalidParameterTypeException as exc:    # -p use_sim_time:=abc: ROS's own
             raise StartupError(wrong_type_text(self, exc)) from None
-        qos_given = self._check_parameter_sources(params_files, known_parameter_names())
+        qos_given = self._check_parameter_sources(params_files, param_rules or {})
         if self.get_parameter(USE_SIM_TIME).value:
             # a params file for every node ('/**') may set it: this node drives /clock and
             # paces it by the system clock; following its own /clock would only cost a
@@ -174,12 +175,13 @@ class UmbrellaNode(Node):
         self._thread = threading.Thread(target=self._physics_loop, name='physics', daemon=True)
 
     # ------------------------------------------------------------------ config
-    def _check_parameter_sources(self, params_files, known: set) -> ParameterSources:
-        """Check the params files and names given for this node (StartupError: which)."""
+    def _check_parameter_sources(self, params_files, param_rules: dict) -> ParameterSources:
+        """Check the files, names and -p values given (param_rules_in's) (StartupError)."""
         try:
+            check_param_rules(param_rules, self._parameter_overrides, params_files)
             found = check_parameter_sources(
                 self.get_fully_qualified_name(), params_files,
-                list(self._parameter_overrides), known,
+                list(self._parameter_overrides), known_parameter_names(),
                 shared=CONTROLLER_PARAMETERS)   # a '/**' file may serve both nodes
         except ValueError as exc:
             raise StartupError(str(exc)) from None

@@ -34,7 +34,7 @@ from . import messages as ros_io, signals as stop_signals
 from .dds_profile import use_node_profile
 from .executor import CallbackPool
 from .node import EXIT_FAULT, EXIT_OK, EXIT_RECORDING, EXIT_USAGE, StartupError, UmbrellaNode
-from .params_file import init_ros
+from .params_file import init_ros, param_rules_in
 from .ribs_messages import RIB_TOPICS
 from .share import package_path
 from ..core.registry import NODE_PARAMETERS, parameter_help, SPECS, START
@@ -137,7 +137,7 @@ def _run(argv: list[str], running: list) -> int:
         return fail(f'unexpected arguments {leftover}; parameters go after --ros-args as '
                     '-p name:=value or --params-file FILE')
     try:
-        node = UmbrellaNode(params_files=tuple(files))
+        node = UmbrellaNode(params_files=tuple(files), param_rules=param_rules_in(argv))
     except StartupError as exc:
         return fail(str(exc))
     running.append(node)

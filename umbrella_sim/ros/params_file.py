@@ -187,6 +187,72 @@ def params_files_in(ros_args: list[str]) -> list[str]:
     return files
 
 
+def param_rules_in(ros_args: list[str]) -> dict[str, str]:
+    """
+    Return the ``-p name:=value`` rules of a command line: name -> value text, the last one.
+
+    Only those inside a ``--ros-args`` section (up to ``--``), as rcl reads them; a rule
+    with a node's name before the parameter's (``node:name:=value``) is left out.
+    """
+    rules, inside = {}, False
+    for i, arg in enumerate(ros_args):
+        if arg in ('--ros-args', '--'):
+            inside = arg == '--ros-args'
+        elif inside and arg in ('-p', '--param') and i + 1 < len(ros_args):
+            name, assign, value = ros_args[i + 1].partition(':=')
+            if assign and ':' not in name:
+                rules[name] = value
+    return rules
+
+
+def _kind(value) -> str:
+    """Return a parameter value's ROS type, in words (bool, integer, double, string, list)."""
+    for kind, types in (('bool', bool), ('integer', int), ('double', float), ('string', str)):
+        if isinstance(value, types):
+            return kind
+    return 'list'
+
+
+def _same_value(given, kept) -> bool:
+    """Tell whether a rule's value is the one a node was given (numbers by value, NaN too)."""
+    kinds = {_kind(given), _kind(kept)}
+    if 'list' in kinds:
+        return (kinds == {'list'} and len(given) == len(kept)
+                and all(map(_same_value, given, kept)))
+    if kinds <= {'integer', 'double'}:
+        return given == kept or (given != given and kept != kept)
+    return len(kinds) == 1 and given == kept
+
+
+def check_param_rules(rules: dict, overrides: dict, params_files=()) -> None:
+    """
+    Refuse a ``-p`` value rcl dropped: ValueError naming the parameter and the value.
+
+    Where a params file gives a parameter and a ``-p`` rule gives it a value of another type
+    (a string or a list for a double: ``-p v0:=abc``), rcl keeps the file's value without a
+    word, and the node would run on it.  rules: param_rules_in's; overrides: the node's
+    (rclpy's _parameter_overrides, before any is coerced); params_files: the command line's,
+    named in the refusal.  A rule whose value, typed as rcl types it (load_yaml_as_ros), is
+    not the one the node was given is refused.
+    """
+    import yaml
+
+    for name, text in rules.items():
+        given = overrides.get(name)
+        try:
+            value = load_yaml_as_ros(text)
+        except yaml.YAMLError:      # (rcl refused the arguments: init_ros said so)
+            continue
+        if given is None or _same_value(value, given.value):
+            continue
+        kept = given.value
+        files = ''.join(f'params file {path} or ' for path in params_files)
+        raise ValueError(
+            f"parameter {name}={text!r} (-p): not taken: rcl keeps {name}'s value {kept!r} (a "
+            f'{_kind(kept)}, from {files}an earlier -p) without a word where -p gives one of '
+            f'another type (a {_kind(value)}); give {name} a {_kind(kept)}')
+
+
 def names_the_node(pattern: str) -> bool:
     """
     Tell whether a params-file section addresses a node by its name.
