@@ -544,6 +544,37 @@ the fitted tangent has S^T M_rs, M_sr for M_sr S): put in with the shrinks (U di
 Phi^T M_rs and M_sr Phi diag(s - 1 - s shrink) U^T added; the numpy step, driven hub, 6 x 1),
 every one of 200 steps took the same iterations (the drive holds the bus; the shared rows feed
 only its multipliers), and a free bus at its fit's step converges as the fixed hub already.
+
+Where a moving base's 2.6 x went (perf record -g of the compiled step alone in stage 2, at
+the step the run takes, the kernel built without inlining so each function keeps its
+samples; shares of the samples and us a step). Both steps make the same calls: per Newton
+iteration (2.03 driven / 2.04 free at 16.7 us, 2.20 fixed at 33 us at 12 x 2) one M(q), one
+kinetic gradient, one arrow solve, two M v and three of the fit's maps; per step one more
+M(q), the projection's factorisation and solve, 0.125 fresh Newton factorisations. Each is
+dearer with the base. 12 x 2, free bus 565 us / hub fixed 208 us: the base's point loops
+(base_mass_matrix, 3.0 a step, and base_kinetic_gradient, 2.0, with their cross products:
+every Gauss point of both bodies of every rib, 31 a rib at 2 elements) 37 % / 210 us, where
+the fixed hub's M(q) and gradient come from the inertia invariants (7.5 % / 16 us): 54 % of
+the difference; the arrow algebra 28 % / 156 us against 28 % / 59 us, 27 % of the difference
+(each factorisation, 1.125 a step, solves every rib's block for the six bus columns of M_rs
+where the fixed hub's one column, J_rs = -1, needs the joints' rows only, and subtracts a 7 x
+7 Schur block a rib: ef_solve 70 against 28 us); the fit's maps 74 against 58 us (the bus's
+low-rank correction); M v with the border 34 against 14 us. Driven hub alike (point loops 38
+%, arrow 29 %); at 6 x 1 free 169 / fixed 58 us: point loops 31 % (16 points a rib), arrow 28
+% / 47 us against 30 % / 17 us. Two removals, states and Newton iterations bit for bit the
+same (6 x 1 and 12 x 2, every base, to the lock and 300 steps past it): the point loops sum
+y = x + S e, S a, S b and S^T U over each point's span of nonzero shape columns (one element's,
+6-10 of a body's 24 at 2 elements; Base3D.span) instead of all of them, and the projection's
+arrow solve skips the bodies' solves of its zero top as the fixed hub's does. The compiled
+step alone in stage 2 (interleaved with the build before, best of 3 x 3 x 1000 steps, load
+1.2-1.6): 12 x 2 free 458.7 -> 415.9 us a substep, driven 430.7 -> 389.3 (2.44 / 2.28 times
+the fixed hub's 170.4, unchanged); 6 x 1 free 131.7 -> 127.3, driven 122.0 -> 117.0 (fixed
+47.2). Solving the six bus columns as one six-column solve moved them 3-5 %, as much as the
+fixed hub's step moved, whose arithmetic it leaves alone (load 3): not kept. What is left is
+the point loops' own arithmetic (sum w s s^T and the angle's column of M_rs, the gradient's
+point sums): taken from inertia invariants, as the fixed hub's M(q) and gradient are (16 us
+a step at 12 x 2), a reformulation whose round-off differs from the numpy reference's point
+sums (not measured here), and the six bus columns' solves, which the border needs.
 """.replace('{accuracy}', accuracy_table())
 
 COST = """## Cost and real time

@@ -48,6 +48,9 @@ struct Base3D {
     double *xs[2], *ss[2];       /* per body, every rib's sum_p w x_p x S_pe (R x ne x 3) and
                                   * sum_p w S_pk x S_pe (R x ne x ne x 3, [k][e]): the
                                   * elastic columns of M_rs without a point loop */
+    int *span[2];                /* per body and point (R x np x 2): the first and one past the
+                                  * last elastic column its shape S_p touches (an element's
+                                  * nodes): the point loops' sums over e skip S_p's zeros */
     double *mrs;                 /* R x n x NB: M_rs at the last base_mass_matrix */
     double mss[NB * NB];
     double *fmrs[3];             /* the M_rs each factorisation holds (slot 0, 1, pm) */
@@ -123,7 +126,7 @@ static void dbasis_rates(const BusFrame3 *f, const double *t, double *out) {
 /* ------------------------------------------------------------------ context */
 static void base_free(Base3D *B) {
     if (!B) return;
-    for (int j = 0; j < 2; j++) { free(B->xs[j]); free(B->ss[j]); }
+    for (int j = 0; j < 2; j++) { free(B->xs[j]); free(B->ss[j]); free(B->span[j]); }
     free(B->mrs);
     free(B->fitv);
     free(B->fitc);
@@ -146,7 +149,19 @@ static Base3D *base_new(Ctx3D *x) {
         int ne = b->ne;
         B->xs[j] = calloc((size_t)x->R * ne * 3 + 1, sizeof(double));
         B->ss[j] = calloc((size_t)x->R * ne * ne * 3 + 1, sizeof(double));
-        if (!B->xs[j] || !B->ss[j]) { ok = 0; continue; }
+        B->span[j] = calloc((size_t)x->R * b->np * 2 + 1, sizeof(int));
+        if (!B->xs[j] || !B->ss[j] || !B->span[j]) { ok = 0; continue; }
+        for (int rp = 0; rp < x->R * b->np; rp++) {
+            const double *S = b->shape + (size_t)rp * 3 * ne;
+            int lo = ne, hi = 0;
+            for (int e = 0; e < ne; e++)
+                if (S[e] != 0.0 || S[ne + e] != 0.0 || S[2 * ne + e] != 0.0) {
+                    if (e < lo) lo = e;
+                    hi = e + 1;
+                }
+            B->span[j][2 * rp] = lo < hi ? lo : 0;
+            B->span[j][2 * rp + 1] = hi;
+        }
         for (int r = 0; r < x->R; r++)
             for (int pt = 0; pt < b->np; pt++) {
                 int rp = r * b->np + pt;
@@ -210,9 +225,10 @@ static void base_mass_matrix(Ctx3D *x, const double *q) {
                 int rp = r * b->np + pt;
                 double w = b->w[rp], y[3], sp[3], jt[3], c[3];
                 const double *xp = b->x + rp * 3, *S = b->shape + (size_t)rp * 3 * ne;
+                const int lo = B->span[j][2 * rp], hi = B->span[j][2 * rp + 1];
                 for (int i = 0; i < 3; i++) {
                     double acc = xp[i];
-                    for (int a = 0; a < ne; a++) acc += S[i * ne + a] * e[a];
+                    for (int a = lo; a < hi; a++) acc += S[i * ne + a] * e[a];
                     y[i] = acc;
                 }
                 jt[0] = -(sn * y[0] + cs * y[1]);             /* e_z x R y */
@@ -346,6 +362,7 @@ static void base_kinetic_gradient(Ctx3D *x, const double *q, const double *a,
     double A[3] = {0, 0, 0}, sva[3] = {0, 0, 0}, svb[3] = {0, 0, 0};
     for (int j = 0; j < 2; j++) {
         const Body *b = &x->b[j];
+        const int *span = x->base->span[j];
         int ne = b->ne, t = b->t;
         for (int r = 0; r < R; r++) {
             const double *ps = m->rib_frames + 9 * r, *qb = q + r * n + b->off;
@@ -364,11 +381,12 @@ static void base_kinetic_gradient(Ctx3D *x, const double *q, const double *a,
                 int rp = r * b->np + pt;
                 double w = b->w[rp];
                 const double *xp = b->x + rp * 3, *S = b->shape + (size_t)rp * 3 * ne;
+                const int lo = span[2 * rp], hi = span[2 * rp + 1];
                 double y[3], Sa[3], Sb[3];
                 for (int i = 0; i < 3; i++) {
                     const double *Si = S + i * ne;
                     double yi = xp[i], sai = 0.0, sbi = 0.0;
-                    for (int k = 0; k < ne; k++) {
+                    for (int k = lo; k < hi; k++) {
                         yi += Si[k] * e[k];
                         sai += Si[k] * ae[k];
                         sbi += Si[k] * be[k];
@@ -411,7 +429,7 @@ static void base_kinetic_gradient(Ctx3D *x, const double *q, const double *a,
                 double Q = -(ab[t] * ext_b[0] + bb[t] * ext_a[0]);
                 double u0 = P + c[0], u1 = Q + c[1];
                 double U[3] = {hw * (cs * u0 + sn * u1), hw * (-sn * u0 + cs * u1), hw * c[2]};
-                for (int k = 0; k < ne; k++)
+                for (int k = lo; k < hi; k++)
                     oe[k] += S[k] * U[0] + S[ne + k] * U[1] + S[2 * ne + k] * U[2];
                 /* the angles' share (_theta_gradient) */
                 double u_a[3], u_b[3];
@@ -521,7 +539,9 @@ static int base_arrow_factor(Ctx3D *x, Fact *f, const double *extra, const doubl
     return lu_factor(s, S, f->spiv) == OK ? OK : SINGULAR;
 }
 
-static void base_arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double sign) {
+/* (top_zero: every rib's first n right-hand sides are 0, rib_solve's: the projection's) */
+static void base_arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double sign,
+                             int top_zero) {
     int R = x->R, n = x->n, mb = x->mb, s = x->s, ns = x->ns;
     const double *fm = base_fact_mrs(x, f);
     double z[MAXS];
@@ -529,7 +549,7 @@ static void base_arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, do
     for (int r = 0; r < R; r++) {
         double *v = rr + r * mb;
         const double *Mr = fm + (size_t)r * n * NB;
-        rib_solve(x, f, r, v, 0);
+        rib_solve(x, f, r, v, top_zero);
         z[0] += sign * v[n + 7];
         for (int a = 0; a < n; a++)
             for (int i = 0; i < ns; i++) z[i] -= Mr[a * NB + i] * v[a];
@@ -569,7 +589,7 @@ static int base_project(Ctx3D *x, const double *q, double *v, const double *stuc
     rs[ns] = locked ? -v[N] : 0.0;
     if (target)
         for (int j = 0; j < 6; j++) rs[ns + 1 + j] = target[j] - v[N + 1 + j];
-    base_arrow_solve(x, &x->pm, x->rr, rs, 1.0);
+    base_arrow_solve(x, &x->pm, x->rr, rs, 1.0, 1);   /* (M dv = -J^T mu: no top) */
     for (int r = 0; r < R; r++)
         for (int a = 0; a < n; a++) v[r * n + a] += x->rr[r * mb + a];
     for (int i = 0; i < ns; i++) v[N + i] += rs[i];
@@ -742,7 +762,7 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         for (int i = 0; i < ns; i++) rs[i] = -0.5 * h * x->res[N + i];
         for (int i = 0; i < cs; i++) rs[ns + i] = -x->phi[R * ROWS + i];
         if (!locked) rs[ns] = 0.0;
-        base_arrow_solve(x, ff, x->rr, rs, -1.0);
+        base_arrow_solve(x, ff, x->rr, rs, -1.0, 0);
         if (fit) base_fit_map(x, fit, NEWTON, x->rr, mb, rs);
         int finite = 1;
         double norm = rib_update(x, q, mb, half_h2, &finite);
