@@ -246,15 +246,34 @@ def resolving_step_hint(params: dict, needed: float | None = None) -> str:
 
 def _mesh_step_meets(params: dict, needed: float | None) -> bool:
     """Tell whether the step step_follows_mesh takes for these parameters is needed or finer."""
-    from .registry import SPECS
-
-    if needed is None:
-        return True
-    try:
-        p = UmbrellaParams.from_mapping({k: v for k, v in params.items() if k in SPECS})
-    except ValueError:      # (no model to judge: the hint as before)
+    p = beams_record(params)
+    if needed is None or p is None:       # (no model to judge: the hint as before)
         return True
     return physics_step_of(p.replace(step_follows_mesh=True)) <= needed * (1.0 + 1e-9)
+
+
+def beams_record(params: dict) -> UmbrellaParams | None:
+    """
+    Return the UmbrellaParams of a run's parameter record with beams (flexible models).
+
+    The record's registry names only (a summary's or a recording's carry others); None for
+    a rigid model or values that make no parameters.
+    """
+    from .registry import SPECS
+
+    try:
+        return _beams_record(tuple(sorted((k, v) for k, v in params.items() if k in SPECS)))
+    except TypeError:     # (a value that cannot be a parameter: no model to judge)
+        return None
+
+
+@lru_cache(maxsize=32)
+def _beams_record(items: tuple) -> UmbrellaParams | None:
+    try:
+        p = UmbrellaParams.from_mapping(dict(items))
+    except ValueError:
+        return None
+    return p if p.model in ('flexible', 'flexible-nonlinear') else None
 
 
 def stage2_resolution(model: UmbrellaModel, q: np.ndarray, qd: np.ndarray, h: float) -> dict:

@@ -37,8 +37,9 @@ import numpy as np
 from .forcing import TIME_RESOLUTION
 from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP_FIELDS, step_row,
                       StepBlock)
-from .step_rule import (COUPLING_DEFLECTION, lock_amplitudes, MAX_STEP_DIVISOR, resolution_of,
-                        resolving_step_hint, stage2_step_needed, STRESS_SHARE_LIMIT)
+from .step_rule import (beams_record, COUPLING_DEFLECTION, lock_amplitudes, MAX_STEP_DIVISOR,
+                        resolution_of, resolving_step_hint, stage2_step_needed,
+                        STRESS_SHARE_LIMIT)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
@@ -315,45 +316,19 @@ def mesh_resolution(params: dict, step: float) -> dict | None:
     For a recording without the lock's own figures: the mesh's lock (step_rule.lock_amplitudes)
     stands for the run's.  None for a rigid model or parameters that do not make one.
     """
-    from .registry import SPECS
-
+    p = beams_record(params)
     try:
-        return _mesh_resolution(tuple(sorted((k, v) for k, v in params.items() if k in SPECS)),
-                                float(step))
-    except (TypeError, ValueError):   # (a value that cannot be a parameter: no model to judge)
+        return None if p is None else _mesh_resolution(p, float(step))
+    except ValueError:      # (parameters that make no model: no model to judge)
         return None
 
 
 @cache
-def _mesh_resolution(items: tuple, step: float) -> dict | None:
+def _mesh_resolution(p, step: float) -> dict:
     from .model import UmbrellaModel
 
-    p = _beams_record(items)
-    if p is None:
-        return None
     model = UmbrellaModel(p)
     return resolution_of(model, lock_amplitudes(model), step)
-
-
-def beams_record(params: dict):
-    """Return the UmbrellaParams of a run with beams (flexible models), else None."""
-    from .registry import SPECS
-
-    try:
-        return _beams_record(tuple(sorted((k, v) for k, v in params.items() if k in SPECS)))
-    except TypeError:     # (a value that cannot be a parameter: no model to judge)
-        return None
-
-
-@cache
-def _beams_record(items: tuple):
-    from .params import UmbrellaParams
-
-    try:
-        p = UmbrellaParams.from_mapping(dict(items))
-    except ValueError:
-        return None
-    return p if p.model in ('flexible', 'flexible-nonlinear') else None
 
 
 #: rigid-fe's figures of the elastic field, which its constraints hold at zero: their

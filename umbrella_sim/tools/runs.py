@@ -34,8 +34,9 @@ import numpy as np
 from ..bag.reader import LogError, read_log
 from ..core.beam import shape_abscissae
 from ..core.params import UmbrellaParams
-from ..core.summary import (beams_record, centrifugal_tension_per_rate, deploy_start_of,
-                            mesh_resolution, relative_drift, stage2_figures, validity_warnings)
+from ..core.step_rule import beams_record
+from ..core.summary import (centrifugal_tension_per_rate, deploy_start_of, mesh_resolution,
+                            relative_drift, stage2_figures, validity_warnings)
 from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_figures,
                             tip_deflection_figures)
 
