@@ -33,8 +33,8 @@ import time
 
 from . import signals as stop_signals
 from .parameters import declare_from_registry, wrong_type_text
-from .params_file import (check_param_rules, check_parameter_sources,
-                          check_qos_override_sources, init_ros, param_rules_in)
+from .params_file import (check_parameter_sources, check_qos_override_sources, init_ros,
+                          param_rules_in)
 from ..core.control import DeployLaw
 from ..core.params import ControllerConfig, UmbrellaParams
 from ..core.registry import CONTROLLER_PARAMETERS, defaults, parameter_help
@@ -74,9 +74,9 @@ def _make_node_class():
             known = set(CONTROLLER_PARAMETERS) | set(defaults())
             fqn = self.get_fully_qualified_name()
             try:
-                check_param_rules(param_rules or {}, self._parameter_overrides, params_files)
-                found = check_parameter_sources(fqn, params_files, list(
-                    self._parameter_overrides), known, CONTROLLER_PARAMETERS_LISTED)
+                found = check_parameter_sources(fqn, params_files, self._parameter_overrides,
+                                                known, CONTROLLER_PARAMETERS_LISTED,
+                                                rules=param_rules)
                 warnings = found.warnings + check_qos_override_sources(
                     fqn, found, (), CONTROLLER_PARAMETERS_LISTED, ' (its topics take none)')
             except ValueError as exc:

@@ -57,9 +57,8 @@ from .pacing import behind_text, lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, declare_umbrella,
                          known_parameter_names, parameter_defaults, set_refusal,
                          wrong_type_text)
-from .params_file import (check_param_rules, check_parameter_sources,
-                          check_qos_override_sources, ParameterSources, QOS_OVERRIDES,
-                          USE_SIM_TIME)
+from .params_file import (check_parameter_sources, check_qos_override_sources,
+                          ParameterSources, QOS_OVERRIDES, USE_SIM_TIME)
 from .publication import PublicationEncoder, run_driver
 from .recording import RunRecording
 from .ribs_messages import node_topics, ribs_diagnostics
@@ -178,10 +177,9 @@ class UmbrellaNode(Node):
     def _check_parameter_sources(self, params_files, param_rules: dict) -> ParameterSources:
         """Check the files, names and -p values given (param_rules_in's) (StartupError)."""
         try:
-            check_param_rules(param_rules, self._parameter_overrides, params_files)
             found = check_parameter_sources(
-                self.get_fully_qualified_name(), params_files,
-                list(self._parameter_overrides), known_parameter_names(),
+                self.get_fully_qualified_name(), params_files, self._parameter_overrides,
+                known_parameter_names(), rules=param_rules,
                 shared=CONTROLLER_PARAMETERS)   # a '/**' file may serve both nodes
         except ValueError as exc:
             raise StartupError(str(exc)) from None

@@ -285,7 +285,7 @@ class ParameterSources:
 
 def check_parameter_sources(node_fqn: str, params_files, given, known,
                             listed: str = NODE_PARAMETERS_LISTED,
-                            shared=()) -> ParameterSources:
+                            shared=(), rules=None) -> ParameterSources:
     """
     Check the params files and parameter names a ROS node was started with.
 
@@ -296,9 +296,13 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
     ...) serves every node of a launch (robot_state_publisher's ``publish_frequency``
     there is not a mistake): a name the node does not know there is a warning naming it,
     with a "did you mean", and rclpy ignores it; the sibling umbrella_sim node's
-    parameters (``shared``) are taken there silently.  Returns the ``qos_overrides.*``
-    names given, for the node to check against the QoS its topics declare.
+    parameters (``shared``) are taken there silently.  rules: the command line's ``-p``
+    rules (param_rules_in), each held against the value the node was given (``given``, the
+    node's overrides by name: check_param_rules).  Returns the ``qos_overrides.*`` names
+    given, for the node to check against the QoS its topics declare.
     """
+    if rules:
+        check_param_rules(rules, given, params_files)
     known = set(known) | ROS_OWN_PARAMETERS
     found = ParameterSources()
     in_files = set()
