@@ -1316,6 +1316,16 @@ static int step(Ctx *x, int locked, int rigid, const double *q0, const double *v
         if (step_norm < tol || (rate < 0.5 && rate / (1.0 - rate) * step_norm < tol)) {
             constraints(x, q, locked, rigid, phi);
             if (max_abs(nc, phi) < phi_tol) { converged = 1; break; }
+            /* converged in q, not in the joints: one correction of the joints alone, the
+             * momentum rows' right-hand side 0 (integrators.newton_converged) */
+            for (int i = 0; i < n; i++) rhs[i] = 0.0;
+            for (int r = 0; r < nc; r++) rhs[n + r] = -phi[r];
+            arrow_solve_q(x, x->it, nc, rhs, 0);
+            if (pc) mode_fit_update(x, rhs);
+            for (int i = 0; i < n; i++) q[i] += rhs[i];
+            for (int r = 0; r < nc; r++) lam[r] += rhs[n + r] / half_h2;
+            constraints(x, q, locked, rigid, phi);
+            if (max_abs(nc, phi) < phi_tol) { converged = 1; break; }
         }
         last_norm = step_norm;
     }

@@ -1171,6 +1171,16 @@ static double rib_update(Ctx3D *x, double *q, int mb, double half_h2, int *finit
     return norm;
 }
 
+/* The ribs' right-hand sides of a correction of the joints alone (after an iterate that
+ * converged in q but not in the joints): the momentum rows 0, the joint rows -phi */
+static void joint_correction_rhs(Ctx3D *x) {
+    int n = x->n, mb = x->mb;
+    for (int r = 0; r < x->R; r++) {
+        memset(x->rr + r * mb, 0, sizeof(double) * n);
+        for (int i = 0; i < ROWS; i++) x->rr[r * mb + n + i] = -x->phi[r * ROWS + i];
+    }
+}
+
 /* Each hinge's friction work over the step taken (x->dq) into x->work_fric; their sum */
 static double friction_works(Ctx3D *x, double h) {
     const Model3D *m = x->m;
@@ -1301,6 +1311,20 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         if (!finite) return NON_FINITE;
         double rate = it > 1 ? norm / last : 1.0;
         if (norm < tol || (rate < 0.5 && rate / (1.0 - rate) * norm < tol)) {
+            constraints(x, q, stuck, locked, x->phi);
+            if (max_abs(R * ROWS + cs, x->phi) < phi_tol) break;
+            /* converged in q, not in the joints: one correction of the joints alone (the
+             * momentum rows' right-hand side 0: integrators.newton_converged; the hub fixed
+             * only, base_step takes whole iterations) */
+            joint_correction_rhs(x);
+            rs[0] = 0.0;
+            rs[ns] = locked ? -x->phi[R * ROWS] : 0.0;
+            arrow_solve(x, ff, x->rr, rs, -1.0, 1);
+            if (fit) fit_map(x, fit, NEWTON, x->rr, mb);
+            rib_update(x, q, mb, half_h2, &finite);
+            q[N] += rs[0];
+            x->lam[R * ROWS] += rs[ns] / half_h2;
+            if (!finite) return NON_FINITE;
             constraints(x, q, stuck, locked, x->phi);
             if (max_abs(R * ROWS + cs, x->phi) < phi_tol) break;
         }

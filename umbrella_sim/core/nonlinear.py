@@ -470,8 +470,17 @@ class ElasticMidpointDAE(MidpointDAE):
             rate = step_norm / last_norm if it > 1 else 1.0
             refresh = self.strain_nonlinear and (
                 (it == 1 and lagged and not lag_whole) or (it > 1 and rate > REFRESH_RATE))
+
+            def correct_joints():
+                nonlocal q, lam
+                dx = dgetrs(lu, piv, np.concatenate([np.zeros(n),
+                                                     -m.constraint_residual(q, cs)]))[0]
+                dx[:n] = start.newton_update(dx[:n], h)
+                q = q + dx[:n]
+                lam = lam + dx[n:] / lam_scale
             if newton_converged(step_norm, rate, self.tolerance,
-                                lambda: np.max(np.abs(m.constraint_residual(q, cs)))):
+                                lambda: np.max(np.abs(m.constraint_residual(q, cs))),
+                                correct_joints):
                 break
             last_norm = step_norm
         else:

@@ -84,6 +84,11 @@ REFRESH_RATE = 0.1
 _SAID: set = set()
 
 
+def _largest(phi_r: np.ndarray, phi_s: np.ndarray) -> float:
+    """Return the largest joint residual (the ribs' and the shared ones)."""
+    return max(float(np.max(np.abs(phi_r))), float(np.max(np.abs(phi_s), initial=0.0)))
+
+
 class BaseDrive:
     """
     A prescribed bus motion: a half-sine acceleration pulse in X-Z and a spin-up about Y.
@@ -160,6 +165,8 @@ class MidpointUmbrella:
             self.norm_shared[1:] = True
         self.iterations = 0
         self.factorisations = 0     # of the iteration matrix
+        #: the numpy step's corrections of the joints alone (newton_converged; the hub fixed)
+        self.joint_corrections = 0
         #: stage 2's mode fit (fit_stage2_modes: stage2fit.RibFits or BusFit), acting
         #: from lock_at on
         self.mode_fit: RibFits | BusFit | WholeFit | None = None
@@ -429,28 +436,34 @@ class MidpointUmbrella:
                     mass1, (jm_rr, jm_rs, jm_ss), j_r[:3], stuck, active, extra))
                 uses = 0
                 factorisations += 1
-            rhs_r = np.concatenate([-0.5 * h * res_r, -phi_r], 1)
-            rhs_s = np.concatenate([-0.5 * h * res_s, -phi_s])
-            rhs_s[ns:][~active] = 0.0
-            x_r, x_s = factored.solve(rhs_r, rhs_s)
-            if fit is not None:
-                x_r[:, :n], x_s[:ns] = fit.newton_update(x_r[:, :n], x_s[:ns], h)
-            qr = qr + x_r[:, :n]
-            qs = qs + x_s[:ns]
-            lam_r = lam_r + x_r[:, n:] / half_h2
-            lam_s = lam_s + x_s[ns:] / half_h2
-            norm = max(float(np.max(np.abs(x_r[:, :n]))),
-                       float(np.max(np.abs(x_s[:ns][self.norm_shared]), initial=0.0)))
+
+            def update(res_r, res_s, phi_r, phi_s):
+                """Return q, lambda and |dq| after the Newton update of these residuals."""
+                rhs_r = np.concatenate([-0.5 * h * res_r, -phi_r], 1)
+                rhs_s = np.concatenate([-0.5 * h * res_s, -phi_s])
+                rhs_s[ns:][~active] = 0.0
+                x_r, x_s = factored.solve(rhs_r, rhs_s)
+                if fit is not None:
+                    x_r[:, :n], x_s[:ns] = fit.newton_update(x_r[:, :n], x_s[:ns], h)
+                return (qr + x_r[:, :n], qs + x_s[:ns], lam_r + x_r[:, n:] / half_h2,
+                        lam_s + x_s[ns:] / half_h2,
+                        max(float(np.max(np.abs(x_r[:, :n]))),
+                            float(np.max(np.abs(x_s[:ns][self.norm_shared]), initial=0.0))))
+
+            def joints():
+                return m.constraints(qr, qs, stuck, locked, None if drive is None else drive[0])
+
+            def correct_joints():
+                nonlocal qr, qs, lam_r, lam_s
+                qr, qs, lam_r, lam_s, _ = update(0.0 * res_r, 0.0 * res_s, *joints())
+                self.joint_corrections += 1
+            qr, qs, lam_r, lam_s, norm = update(res_r, res_s, phi_r, phi_s)
             if not math.isfinite(norm):
                 raise ConvergenceError3D(f'Newton iterate became non-finite at t = '
                                          f'{s.t + h:.9g} s')
             rate = norm / last if it > 1 else 1.0
-
-            def residual():
-                pr_, ps_ = m.constraints(qr, qs, stuck, locked,
-                                         None if drive is None else drive[0])
-                return max(np.max(np.abs(pr_)), np.max(np.abs(ps_), initial=0.0))
-            if newton_converged(norm, rate, self.tolerance, residual):
+            if newton_converged(norm, rate, self.tolerance, lambda: _largest(*joints()),
+                                None if m.moving_base else correct_joints):
                 break
             if it > 1 and rate > REFRESH_RATE:
                 factored = None
