@@ -479,7 +479,7 @@ def linear_range_section():
               'deploy time moves least (free deployments): at most '
               + ', '.join(f'{deploy[v]:.1e} at V0 = {v:g}' for v in sorted(deploy, reverse=True)
                           if v < 0) + '.']
-    return lines
+    return lines + spin_range_lines(rule)
 
 
 def spin_range_lines(rule):
