@@ -59,7 +59,11 @@ at 100 Hz.  Measured (--no-numpy --ribs 6 --elements 1 2 --kernel-ribs 6 12 --re
 4.8-5.0, best of two runs), the compiled step alone, CPU us a step deploying / in stage 2:
 6 x 1 29.7 / 48.6 (0.30 / 0.49 core), 12 x 2 105.7 / 191.7 (3.2 / 5.8 cores); 2.00 / 2.81
 and 2.00 / 2.20 Newton iterations, 0.125 factorisations a step (docs/umbrella3d.md: what the
-rest of a step is).
+rest of a step is).  Since, a stage-2 step whose joints do not hold after the update that
+converges in q takes a correction of the joints alone (integrators.newton_converged):
+(--no-numpy --ribs 1 --elements 1 2 --kernel-ribs 6 12 --repeat 3, interleaved, load 0.5-1.3)
+stage 2 at 1 element 6 x 1 47.5-47.9 -> 41.4-41.5 us (2.81 -> 2.09 iterations), 12 x 1
+93.5-93.8 -> 82.1-82.3; at 2 elements and in stage 1 unchanged.
 
     python bench/bench_umbrella3d.py [--ribs 1 2 4 8 16] [--elements 1 2] [--steps 40]
                                      [--repeat 2] [--duration 0.05] [--no-numpy]
