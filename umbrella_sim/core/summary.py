@@ -458,7 +458,10 @@ def leaf_tension_ratio(per_rate, rate, spin=None, alpha1=None, per_hub=None):
              = (omega^2 + Omega^2 c^2) (rho A L^2 / 2 + m L) + Omega^2 c a (rho A L + m),
 
     c = cos alpha1: over the Euler load, (omega^2 + (Omega c)^2) per_rate + Omega^2 c per_hub.
-    The leaf's own bending and the tip mass's offset are left out (as on a fixed hub).
+    The leaf's own bending and the tip mass's offset are left out (as on a fixed hub), and so
+    is the Coriolis force of the out-of-plane bending's rate w' in the spin, -2 Omega w' e_r,
+    whose share along the leaf lowers the tension while a spin-up swings the tip out of
+    plane: the rule then overstates the tension (tests/test_linear_range.py).
     """
     out = rate * rate
     if spin is None:
