@@ -52,7 +52,8 @@ from umbrella_sim.core.umbrella3d.modes3d import (deployed_configuration, free_l
                                                   rib_locked_modes)
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
-from umbrella_sim.core.umbrella3d.stage2fit import BusFit, stage2_fit, whole_fit
+from umbrella_sim.core.umbrella3d.stage2fit import (_low_rank, BUS_TOLERANCE, BusFit, RANGE_START,
+                                                    stage2_fit, whole_fit)
 from umbrella_sim.core.umbrella3d.state3d import State3D
 
 H = 1e-4
@@ -495,3 +496,27 @@ def test_the_fitted_stage2_at_the_fixed_hubs_step_is_nearer_the_converged_run(ba
     assert fitted < 0.01 * amplitude and fitted < plain
     substeps, _ = tip_series_error(values, reference)
     assert substeps < fitted
+
+
+@pytest.mark.parametrize('rank', [3, RANGE_START - 4, RANGE_START + 10, 200])
+def test_a_corrections_low_rank_form_keeps_the_full_svds_directions(rank):
+    """
+    _low_rank's randomised range against the full SVD, on maps of known rank (size 300).
+
+    Singular values 1e-9 to 1 (all above BUS_TOLERANCE) and round-off noise below it: the
+    rank found is the map's, I + A B^T is I + x to the noise, and the singular values are
+    the full SVD's; a rank past RANGE_START takes more test vectors, one past half the size
+    the full SVD itself.
+    """
+    rng = np.random.default_rng(rank)
+    size = 300
+    u = np.linalg.qr(rng.standard_normal((size, rank)))[0]
+    v = np.linalg.qr(rng.standard_normal((size, rank)))[0]
+    sv = np.logspace(0.0, -9.0, rank)
+    x = (u * sv) @ v.T + 1e-15 * rng.standard_normal((size, size))
+    low = _low_rank(x, 1, size)
+    assert len(low.a) == rank
+    assert np.max(np.abs(low.a.T @ low.b - x)) < 1e-13
+    full = np.linalg.svd(x, compute_uv=False)
+    found = np.linalg.norm(low.a, axis=1)           # (A's rows: the singular values)
+    np.testing.assert_allclose(found, full[full > BUS_TOLERANCE], rtol=1e-9, atol=1e-14)

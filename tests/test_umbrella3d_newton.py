@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-The umbrella's Newton iteration in stage 2: a correction of the joints alone, not a whole iteration.
+The umbrella's stage-2 Newton iteration: a correction of the joints alone, not a whole iteration.
 
 A locked step's update converges in q (integrators.update_converged) an iteration before the
 joints hold to PHI_TOLERANCE: the kept iteration matrix's joint rows (up to CARRY_STEPS

@@ -90,9 +90,13 @@ def newton_tolerance(h: float) -> float:
 #: what integrates a run, for its recording: a re-simulation by an integrator of another
 #: revision differs in the physics (here: stage 2, whose modified modal masses of earlier
 #: revisions became the mode fit; the umbrella's moving bases, which took no fit and the
-#: unfitted step before), not in round-off
+#: unfitted step before; a step whose joints did not hold after the update that converged in
+#: q, which took a whole iteration more before the joints' correction: within the Newton
+#: tolerance, above --resimulate's), not in round-off
 INTEGRATOR_REVISION = ('midpoint-dae, stage-2 locked-mode fit (on a moving base too), stage-2 '
-                       'substeps past the coupling deflection (the umbrella of N ribs too)')
+                       'substeps past the coupling deflection (the umbrella of N ribs too), '
+                       "a correction of the joints alone after Newton's convergence in q (the "
+                       'hub fixed)')
 
 #: modes the stage-2 fit makes exact: omega h at most this, i.e. modes the step samples at
 #: least ~4 times a period (pi / 2 = 1.57).  Beyond, the scheme's modal mass s^2 that makes

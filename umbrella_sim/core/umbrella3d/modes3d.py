@@ -24,6 +24,8 @@ the twist, the rest in-plane.
 """
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from .model3d import UmbrellaModel3D
@@ -77,6 +79,24 @@ def locked_modes(model: UmbrellaModel3D):
     return np.sqrt(np.maximum(w2, 0.0)), shapes, labels
 
 
+#: each model's mode analyses, which no step length changes: computed once a model (read-only
+#: arrays).  A lock's stage-2 substeps fit the modes again at their step (stage2fit.py): at 24
+#: ribs on a free bus the analyses were 0.13 of that refit's 0.31 CPU s (profiled)
+_ANALYSES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _once(model: UmbrellaModel3D, key, compute):
+    """Return compute()'s arrays for this model and key, computed at the first call only."""
+    done = _ANALYSES.setdefault(model, {})
+    if key not in done:
+        out = compute()
+        for a in (out if isinstance(out, list) else [out]):
+            for x in a:
+                x.flags.writeable = False
+        done[key] = out
+    return done[key]
+
+
 def rib_locked_modes(model: UmbrellaModel3D) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """
     Return each rib's (omega, phi, mass) of the locked umbrella, the sleeve at the stop.
@@ -85,7 +105,12 @@ def rib_locked_modes(model: UmbrellaModel3D) -> list[tuple[np.ndarray, np.ndarra
     K_k x = omega^2 M_k x on the null space of its joints (a stuck hinge's row left out) at
     its undeformed deployed configuration, omega ascending, phi (n_rib, modes) mass-
     normalised in M_k = mass: the planar ``UmbrellaModel.locked_modes`` of one rib.
+    Computed once a model (read-only arrays).
     """
+    return _once(model, 'ribs', lambda: _rib_locked_modes(model))
+
+
+def _rib_locked_modes(model: UmbrellaModel3D) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     from scipy.linalg import eigh, null_space
 
     m = model
@@ -115,7 +140,13 @@ def free_locked_modes(model: UmbrellaModel3D, attitude=None):
     elastic mode carry no linear or angular momentum, U = M phi zero on the bus's rows.
     omega ascending, phi (coordinates, modes) mass-normalised in mass (dense, the whole
     system's): the modes the stage-2 fit of a free bus makes exact (stage2fit.BusFit).
+    Computed once a model and attitude (read-only arrays).
     """
+    key = ('free', None if attitude is None else tuple(float(a) for a in attitude))
+    return _once(model, key, lambda: _free_locked_modes(model, attitude))
+
+
+def _free_locked_modes(model: UmbrellaModel3D, attitude):
     from scipy.linalg import eigh, null_space
 
     m = model

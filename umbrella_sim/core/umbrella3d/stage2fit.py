@@ -248,10 +248,36 @@ def bus_correction(ribs: RibFits, whole: WholeFit
     return bus, newton, LowRankMap(y[:, keep].T * e[keep, None], y[:, keep].T, nr, n)
 
 
+#: the directions a randomised range of a correction starts with (its rank: 18 to 34 at 3 to 24
+#: ribs), and the seed of its test vectors (the same maps every run)
+RANGE_START, RANGE_SEED = 64, 20061
+
+
 def _low_rank(x: np.ndarray, n_ribs: int, n_rib: int, zero_from: int | None = None
               ) -> 'LowRankMap':
-    """Return I + x as I + A B^T, x's singular vectors above BUS_TOLERANCE (B 0 from zero_from)."""
-    left, sv, right = np.linalg.svd(x)
+    """
+    Return I + x as I + A B^T, x's singular vectors above BUS_TOLERANCE (B 0 from zero_from).
+
+    The singular vectors of x's range, found by random test vectors (Halko, Martinsson &
+    Tropp, SIAM Review 53, 2011: x Omega's orthonormal basis Q, then the SVD of Q^T x),
+    taken where x - Q Q^T x leaves less than BUS_TOLERANCE / 100 (Frobenius), with twice the
+    vectors until it does, and x's full SVD where they would be half its size: the same
+    singular values above BUS_TOLERANCE as the full SVD (24 ribs: the two corrections 16 ms
+    against 109 ms, profiled).
+    """
+    size = x.shape[1]
+    rng = np.random.default_rng(RANGE_SEED)
+    k = RANGE_START
+    while 2 * k <= size:
+        q = np.linalg.qr(x @ rng.standard_normal((size, k)))[0]
+        small = q.T @ x
+        if np.linalg.norm(x - q @ small) < 0.01 * BUS_TOLERANCE:
+            left, sv, right = np.linalg.svd(small, full_matrices=False)
+            left = q @ left
+            break
+        k *= 2
+    else:
+        left, sv, right = np.linalg.svd(x)
     keep = sv > BUS_TOLERANCE
     b = right[keep].copy()
     if zero_from is not None:
