@@ -22,7 +22,8 @@ What the umbrella of N ribs costs the node: the step through the run driver, and
     compiled steps (with their stress figures), Record3D's rows, the summary, the
     publication's sample, the encoding; and what a block costs beside the kernel (the
     compiled call stubbed: outside_kernel); from the start (deploying) or, with
-    --after-lock S, from S s after the lock (stage 2);
+    --after-lock S, from S s after the lock (stage 2); the hub fixed or, with --base, a
+    base spun up about Y (prescribed, to --spin rad/s) or a free bus;
   * live (--live): umbrella_node with ribs --live-ribs at 1 kHz: the measured real-time
     factor its diagnostics report at real_time_factor 1 (with recording), whether it says
     it is behind, and the node process's CPU share (its CPU time, every thread, over the
@@ -36,7 +37,7 @@ What the umbrella of N ribs costs the node: the step through the run driver, and
 The machine is shared (2 cores): wall figures are noisy; the CPU time is what a step costs.
 
     python bench/bench_ribs_node.py [--ribs [2 3 6]] [--duration 0.02] [--after-lock S] [--live]
-                                    [--step 1.25e-4]
+                                    [--step 1.25e-4] [--base fixed|prescribed|free] [--spin 10]
                                     [--live-ribs 6] [--live-windows 3] [--periods 40]
                                     [--live-deploying] [--lockstep-only]
 """
@@ -57,10 +58,12 @@ from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D  # noqa
 STEP = 1e-4          # s: 10 steps a 1 kHz publication (--step: e.g. 1.25e-4, 8 of them)
 
 
-def offline(ribs: int, duration: float, after_lock: float | None = None) -> None:
+def offline(ribs: int, duration: float, after_lock: float | None = None,
+            base: dict | None = None) -> None:
+    """Print the offline figures; base: the base's values (--base, --spin; None: fixed)."""
     from umbrella_sim.ros.ribs_messages import RibsPublicationEncoder
 
-    params = UmbrellaRibsParams.from_mapping({'ribs': ribs, 'time_step': STEP})
+    params = UmbrellaRibsParams.from_mapping({'ribs': ribs, 'time_step': STEP, **(base or {})})
     sim = UmbrellaSimulator3D(params)
     if after_lock is not None:
         sim.run(10.0, after_lock=after_lock)
@@ -87,6 +90,8 @@ def offline(ribs: int, duration: float, after_lock: float | None = None) -> None
     per_publication = encoding[0] / max(steps * STEP / 1e-3 - 1, 1)
     stage = ('' if after_lock is None
              else f', {after_lock:g} s after the lock at {driver.sim.lock_time:.4f} s')
+    if base:
+        stage += ', ' + ', '.join(f'{k} {v}' for k, v in base.items())
     print(f'ribs {ribs:2d}{stage}: own loop {own * 1e3:.3f} ms/step ({own / ribs * 1e3:.3f} per '
           f'rib); run driver + 1 kHz publications {driven * 1e3:.3f} ms/step '
           f'({driven / ribs * 1e3:.3f} per rib); encoding {per_publication * 1e3:.3f} ms a '
@@ -304,6 +309,10 @@ def main() -> None:
     ap.add_argument('--lockstep-rate', type=float, default=1000.0, metavar='HZ',
                     help='the publication rate of the lockstep line (1000; 100: the default '
                          'of the node, the tested rate of deploy_controller)')
+    ap.add_argument('--base', choices=('fixed', 'prescribed', 'free'), default='fixed',
+                    help='offline: the base (prescribed: spun up about Y to --spin)')
+    ap.add_argument('--spin', type=float, default=10.0, metavar='RAD/S',
+                    help='offline, --base prescribed: base_spin_rate (10)')
     ap.add_argument('--step', type=float, default=STEP, metavar='S',
                     help=f'the physics step (time_step, s; {STEP:g}): 1.25e-4 takes 8 a 1 kHz '
                          'publication, at the same unresolved stress share (docs/umbrella3d.md)')
@@ -314,8 +323,10 @@ def main() -> None:
     if args.lockstep_only:
         lockstep(args.live_ribs, args.periods, args.lockstep_rate)
         return
+    base = ({} if args.base == 'fixed' else {'base': args.base} if args.base == 'free'
+            else {'base': 'prescribed', 'base_spin_rate': args.spin})
     for ribs in args.ribs:
-        offline(ribs, args.duration, args.after_lock)
+        offline(ribs, args.duration, args.after_lock, base)
     if args.live:
         live(args.live_ribs, args.periods, args.live_windows, args.live_deploying)
 

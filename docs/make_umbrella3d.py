@@ -397,7 +397,9 @@ mass on rib 1) `flexible` is 35 % off out of plane and 46 % in plane, the same a
 offset of 5, 10, 20, 35, 50 or 70 mm (0.007 to 0.093 rad of out-of-plane rotation; measured
 against `flexible-nonlinear`, 2 elements a segment, 25 us). It says so in stage 1:
 'centrifugal stiffening' (the planar model's rule on each rib's leaf) warns once a leaf's
-centrifugal tension at its hinge passes 2.5 % of its Euler load; rib 1's is 41 % from the
+centrifugal tension at its hinge passes 2.5 % of its Euler load (on a spinning base, its hinge
+rate's and the spin's: summary.leaf_tension_ratio; at V0 = -0.2 a base spun up over 0.05 s
+warns from about 7.5 rad/s); rib 1's is 41 % from the
 start, said after the first chunk (1.6 ms; the lock at 44.5 ms), where the other warnings
 wait for the lock (its in-plane tip stays at 5.6 % of the leaf, below the 10 % of 'large
 deflection'; 2.5 x yield and a 39 % tip deflection come in stage 2). For such runs (V0 of

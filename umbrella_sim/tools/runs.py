@@ -35,8 +35,8 @@ from ..bag.reader import LogError, read_log
 from ..core.beam import shape_abscissae
 from ..core.params import UmbrellaParams
 from ..core.step_rule import beams_record
-from ..core.summary import (centrifugal_tension_per_rate, deploy_start_of, mesh_resolution,
-                            relative_drift, stage2_figures, validity_warnings)
+from ..core.summary import (centrifugal_tension_per_rate, deploy_start_of, leaf_tension_ratio,
+                            mesh_resolution, relative_drift, stage2_figures, validity_warnings)
 from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_figures,
                             tip_deflection_figures)
 
@@ -244,16 +244,19 @@ class Run:
         """
         Return the leaf's largest centrifugal tension over its Euler load in stage 1.
 
-        summary.centrifugal_tension_per_rate at the recorded hinge rates before the lock (at
-        the recording's rate: a peak between two samples is missed); None for a model
-        without beams.
+        summary.leaf_tension_ratio at the recorded hinge rates before the lock (at the
+        recording's rate: a peak between two samples is missed); None for a model without
+        beams.  A recording load_run reads is the planar model's (ribs 1), whose hub is fixed:
+        it has no base rate, and the hinge rate's tension is the whole of it (a moving base
+        needs ribs 2 or more, read by compare_ribs, whose sampled figures judge no validity).
         """
         beams = beams_record(self.params)
         if beams is None:
             return None
         lock = self.lock_time if self.lock_time is not None else math.inf
         rate = self.alpha1_rate[self.t < lock]
-        return centrifugal_tension_per_rate(beams) * float(np.max(rate * rate, initial=0.0))
+        return float(np.max(leaf_tension_ratio(centrifugal_tension_per_rate(beams), rate),
+                            initial=0.0))
 
 
 def drawn_abscissae(node_x, n_points: int) -> np.ndarray | None:

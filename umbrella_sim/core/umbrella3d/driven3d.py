@@ -37,15 +37,16 @@ import numpy as np
 
 from .corotational3d import out_of_plane_warnings
 from .outputs3d import (any_of, BODIES, deployment_spread, energy_balance3d, first_reach,
-                        largest, largest_out_of_plane_tip, STRESS_NAMES, STRESS_ROWS)
+                        hub_spin_rate, largest, largest_out_of_plane_tip, STRESS_NAMES,
+                        STRESS_ROWS)
 from .params3d import UmbrellaRibsParams
 from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
 from ..model import Stage
 from ..outputs import LockEvent
 from ..summary import (CENTRIFUGAL_TENSION_LIMIT, centrifugal_tension_per_rate, deploy_start,
-                       ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR, mesh_resolution,
-                       validity_warnings, WarningsSaid)
+                       ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR, hub_spin_tension_per_rate,
+                       leaf_tension_ratio, mesh_resolution, validity_warnings, WarningsSaid)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
 #: a segment; 6 to 9 ms with a moving base), so a chunk stays near the planar rule's ~10 ms
@@ -348,13 +349,32 @@ class Summary3D:
         self._start = deploy_start(float(sim.params.planar.v0), ())
         self._said = WarningsSaid()
         self._planar = sim.params.planar.as_dict()     # (a frozen record)
-        # the square root of each rib's leaf centrifugal tension over its Euler load per
-        # squared hinge rate (its own section, lengths and tip mass: times the rate, one
-        # product a block), and the largest ratio over the ribs in stage 1
-        self._tension_root = np.sqrt([centrifugal_tension_per_rate(r.planar, r.tip_mass)
-                                      for r in sim.params.ribs_list()])
-        self._tension = (float(largest((self._tension_root * initial.alpha1_rate) ** 2))
+        # each rib's leaf tension at its hinge over its Euler load (summary.leaf_tension_ratio:
+        # its own section, lengths and tip mass), per squared hinge rate and, with a moving
+        # base, the hub circle's share per squared spin; the largest ratio over the ribs in
+        # stage 1
+        ribs = sim.params.ribs_list()
+        self._per_rate = np.array([centrifugal_tension_per_rate(r.planar, r.tip_mass)
+                                   for r in ribs])
+        self._spins = m.moving_base
+        # (a prescribed base turns about Y alone: untilted, its spin is psi')
+        self._tilts = sim.params.base == 'free'
+        self._per_hub = (np.array([hub_spin_tension_per_rate(r.planar, r.tip_mass,
+                                                             sim.params.hub_radius)
+                                   for r in ribs])
+                         if self._spins and sim.params.hub_radius > 0.0 else None)
+        self._tension = (float(largest(self._tension_ratio(
+            initial.alpha1_rate, initial.alpha1, getattr(initial, 'bus_q', None),
+            getattr(initial, 'bus_v', None))))
                          if initial.stage == Stage.DEPLOYING else 0.0)
+
+    def _tension_ratio(self, rate, alpha1, bus_q, bus_v) -> np.ndarray:
+        """Return each rib's leaf tension over its Euler load at rows of (steps, ribs)."""
+        if not self._spins:             # (a fixed hub: the hinge rate's alone)
+            return leaf_tension_ratio(self._per_rate, rate)
+        spin = hub_spin_rate(bus_q, bus_v) if self._tilts else bus_v[..., 3]
+        return leaf_tension_ratio(self._per_rate, rate, spin[..., None], alpha1,
+                                  self._per_hub)
 
     def add(self, block: StepBlock3D) -> None:
         """Take the steps of one block."""
@@ -383,9 +403,10 @@ class Summary3D:
         self._last = (float(t[-1]), rows['alpha1'][-1])
         locked = rows['locked']
         if not locked[0]:                          # (stage 1 in the block)
-            rate = rows['alpha1_rate'] if not locked[-1] else rows['alpha1_rate'][~locked]
-            scaled = rate * self._tension_root
-            self._tension = max(self._tension, float(largest(scaled * scaled, axis=None)))
+            ratio = self._tension_ratio(rows['alpha1_rate'], rows['alpha1'],
+                                        rows.get('bus_q'), rows.get('bus_v'))
+            self._tension = max(self._tension, float(largest(
+                ratio if not locked[-1] else ratio[~locked], axis=None)))
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(largest(np.abs(energy))))
         self._balance = max(self._balance,

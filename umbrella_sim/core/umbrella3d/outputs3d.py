@@ -577,3 +577,20 @@ def bus_attitude(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     trace = rot[..., 0, 0] + rot[..., 1, 1] + rot[..., 2, 2]
     turn = 2.0 * np.arctan2(rot[..., 0, 2] - rot[..., 2, 0], 1.0 + trace)
     return turn, np.arccos(np.clip(rot[..., 1, 1], -1.0, 1.0))
+
+
+def hub_spin_rate(bus_q, bus_v):
+    """
+    Return the bus's angular rate about its own hub axis Y (rad/s) of bus states (..., 6).
+
+    bus_q = [X, Y, Z, psi, beta, gamma] (R = Ry(psi) Rx(beta) Rz(gamma)), bus_v their rates:
+    the body-frame angular velocity is B theta' (model3d.BusFrame), whose Y component is
+    cos(beta) cos(gamma) psi' - sin(gamma) beta' (a prescribed base's spin: psi').
+    """
+    bus_q, bus_v = np.asarray(bus_q), np.asarray(bus_v)
+    gamma = bus_q[..., 5]
+    out = np.cos(bus_q[..., 4])
+    out *= np.cos(gamma)
+    out *= bus_v[..., 3]
+    out -= np.sin(gamma) * bus_v[..., 4]
+    return out
