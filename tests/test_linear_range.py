@@ -67,6 +67,18 @@ def said_at(params, publish_rate: float = 100.0, after_lock: float = 0.3) -> tup
     return said, driver.summary.lock.time, driver.summary.figures()
 
 
+def stage1_history(sim):
+    """Step sim to its lock; return each stage-1 step's qr, leaf hinge rates and shared rates."""
+    q, rate, shared = [], [], []
+    while True:
+        sim.step()
+        if sim.locked:
+            return np.array(q), np.array(rate), np.array(shared)
+        q.append(sim.state.qr.copy())
+        rate.append(sim.state.vr[:, sim.model.i_a1].copy())
+        shared.append(sim.state.vs.copy())
+
+
 @pytest.mark.parametrize('params', [
     UmbrellaParams(v0=-1.0),
     UmbrellaRibsParams.from_mapping(EXUDYN_CASE)], ids=['planar', 'ribs'])
@@ -196,15 +208,8 @@ def test_the_ribs_tension_takes_the_tip_mass_as_their_stress_recovery_does():
                                          'rib1.tip_mass': 0.3})
     sim = UmbrellaSimulator3D(p)
     m = sim.model
-    q, rate = [], []
-    while True:
-        sim.step()
-        if sim.locked:
-            break
-        q.append(sim.state.qr.copy())
-        rate.append(sim.state.vr[:, m.i_a1].copy())
-    axial = m.stress_components(np.array(q))[0][0]        # the leaf's, (step, rib, point)
-    rate = np.array(rate)
+    q, rate, _ = stage1_history(sim)
+    axial = m.stress_components(q)[0][0]        # the leaf's, (step, rib, point)
     settled = slice(len(rate) // 10, None)
     for k in range(2):
         rib = p.rib(k)
@@ -330,15 +335,8 @@ def test_the_spins_tension_is_the_axial_force_of_the_stress_recovery():
         'hub_radius': 0.1, 'time_step': 1e-4})
     sim = UmbrellaSimulator3D(p)
     m = sim.model
-    q, rate, spin = [], [], []
-    while True:
-        sim.step()
-        if sim.locked:
-            break
-        q.append(sim.state.qr.copy())
-        rate.append(sim.state.vr[:, m.i_a1].copy())
-        spin.append(sim.state.vs[4])
-    q, rate, spin = np.array(q), np.array(rate), np.array(spin)
+    q, rate, shared = stage1_history(sim)
+    spin = shared[:, 4]
     axial = m.stress_components(q)[0][0]        # the leaf's, (step, rib, point)
     settled = slice(len(rate) // 10, None)
     a = p.hub_radius
