@@ -79,7 +79,8 @@ def absolute_path(path: str, what: str) -> str:
 OVERWRITABLE = ('file', 'recording')
 
 
-def check_new_output(path: str, what: str, overwrite: str | None = None) -> str:
+def check_new_output(path: str, what: str, overwrite: str | None = None,
+                     overwrite_option: str | None = '--overwrite') -> str:
     """
     Return the absolute path of an output to be created.
 
@@ -88,13 +89,15 @@ def check_new_output(path: str, what: str, overwrite: str | None = None) -> str:
     a "file" or a "recording", and it is one; no parent directory; parent not writable).
     Nothing is created or removed (remove_recording does, when the run starts).  A leading
     ``~`` is the home directory, as in a shell (which does not expand it in
-    ``-p record_path:=~/bags/run``).
+    ``-p record_path:=~/bags/run``).  overwrite_option: the caller's option that lets it
+    replace one, named in the error (None: it has none, e.g. a node's record_path).
     """
     path = absolute_path(path, what)        # (normalised: no trailing slash)
     if os.path.lexists(path):
         if overwrite is None:
-            raise ValueError(f'{what} {path}: already exists, not overwriting (--overwrite '
-                             'replaces it)')
+            remedy = (f'{overwrite_option} replaces it' if overwrite_option else
+                      'give a new path, or move or remove it')
+            raise ValueError(f'{what} {path}: already exists, not overwriting ({remedy})')
         _check_replaceable(path, what, overwrite)
     parent = os.path.dirname(path)
     if not os.path.isdir(parent):

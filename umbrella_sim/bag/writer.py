@@ -87,7 +87,7 @@ def check_record_path(bag_dir: str, what: str = 'record_path') -> str:
     """
     if not bag_dir:
         return absolute_path('.', f"{what} '' (a new bag in the working directory)")
-    return check_new_output(bag_dir, what)
+    return check_new_output(bag_dir, what, overwrite_option=None)
 
 
 class BagRecorder:
@@ -119,7 +119,8 @@ class BagRecorder:
 
     def __init__(self, bag_dir: str, metadata: dict[str, dict[str, str]], on_error=None,
                  background: bool = False, what: str = 'record_path'):
-        bag_dir = check_new_output(bag_dir, what)       # what: the option that named it
+        # (what: the option that named it, which has no overwrite)
+        bag_dir = check_new_output(bag_dir, what, overwrite_option=None)
         try:
             os.mkdir(bag_dir)
         except OSError as exc:

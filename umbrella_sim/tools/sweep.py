@@ -452,7 +452,7 @@ def check_out_dir(path: str) -> str:
     try:
         path = absolute_path(path, '--out')
         if not os.path.lexists(path):
-            return check_new_output(path, '--out')
+            return check_new_output(path, '--out', overwrite_option=None)
     except ValueError as exc:
         raise SpecError(str(exc)) from None
     if not os.path.isdir(path):
