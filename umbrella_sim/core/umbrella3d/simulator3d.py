@@ -382,7 +382,8 @@ class UmbrellaSimulator3D:
             f'step after t = {self.state.t:.9g} s failed: rib {rib}: the leaf reached the axle '
             f'(alpha1 = pi/2 = {ALPHA1_AXLE:.6g} rad) before the lock: the rib folded back past '
             'its start, where the model has no stop (a stuck or slowed rib can hold the sleeve '
-            'while the others swing there; the planar model: a fault too)')
+            'while the others swing there: start such a run from rest, v0 0, and push the '
+            'sleeve with a sleeve_force; the planar model: a fault too)')
 
     def _release(self, s: State3D) -> State3D:
         stuck = s.stuck
