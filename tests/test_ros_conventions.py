@@ -222,6 +222,44 @@ def test_the_documented_qos_overrides_are_the_declared_policies():
     assert 'durability' in declared     # the docs' example of a late joiner's /clock
 
 
+@pytest.mark.parametrize('section', ['    rib1.tipmass: 0.1\n', '    rib1:\n      tipmass: 0.1\n',
+                                     '    rib.tipmass: [0.0, 0.1, 0.0]\n'])
+def test_a_per_rib_typo_in_a_wildcard_section_is_the_nodes_error(tmp_path, section):
+    """
+    A per-rib name (rib<k>.<name>, rib.<name>) is the umbrella's alone, in a '/**' section too.
+
+    The node reads every section's per-rib values: a typo there was said to be "ignored
+    here", then refused by another check; now both umbrella_node's check and the offline
+    tools' refuse it at once, naming it with a "did you mean"; a correct one is taken
+    silently.
+    """
+    from umbrella_sim.core.umbrella3d.params3d import names_a_rib
+    from umbrella_sim.ros.params_file import check_parameter_sources
+    from umbrella_sim.ros.parameters import known_parameter_names
+    from umbrella_sim.tools.inputs import params_file_warnings
+
+    path = tmp_path / 'ribs.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    ribs: 3\n' + section)
+    name = 'rib.tipmass' if section.startswith('    rib.') else 'rib1.tipmass'
+    with pytest.raises(ValueError, match=re.escape(f"'{name}' (did you mean")):
+        check_parameter_sources('/umbrella_node', [str(path)], [], known_parameter_names(),
+                                shared=CONTROLLER_PARAMETERS, own=names_a_rib)
+    with pytest.raises(ValueError, match=re.escape(f"'{name}' (did you mean")):
+        params_file_warnings(str(path))
+    path.write_text(path.read_text().replace('tipmass', 'tip_mass'))
+    assert params_file_warnings(str(path)) == []
+
+
+def test_a_nodes_existing_record_path_names_no_option_it_lacks(tmp_path):
+    """umbrella_node has no --overwrite: its record_path error says what to do instead."""
+    from umbrella_sim.bag.writer import check_record_path
+
+    with pytest.raises(ValueError, match='not overwriting') as refused:
+        check_record_path(str(tmp_path))
+    assert '--overwrite' not in str(refused.value)
+    assert 'give a new path, or move or remove it' in str(refused.value)
+
+
 def test_a_wildcard_section_may_hold_other_nodes_parameters(tmp_path):
     """
     A '/**' params file is shared by every node of a launch: a name this node does not know.

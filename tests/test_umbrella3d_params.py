@@ -28,7 +28,8 @@ import pytest
 
 from umbrella_sim.core.umbrella3d.model3d import UmbrellaModel3D
 from umbrella_sim.core.umbrella3d.params3d import (RIB_PLANAR_NAMES, rib_reach, RIB_SPECS,
-                                                   UMBRELLA_SPECS, UmbrellaRibsParams)
+                                                   umbrella_model, UMBRELLA_SPECS,
+                                                   umbrella_values, UmbrellaRibsParams)
 
 PAGE = os.path.join(os.path.dirname(__file__), '..', 'msg_docs', 'umbrella3d_parameters.md')
 _BLOCK = re.compile(r'(<!-- BEGIN GENERATED: (\w+) -->\n).*?(<!-- END GENERATED: \2 -->)', re.S)
@@ -81,6 +82,10 @@ def test_per_rib_values_as_lists_and_overrides():
     ({'ribs': 2, 'rib1.hinge_coulomb': -1.0}, 'rib1.hinge_coulomb'),
     ({'ribs': 0}, 'ribs'),
     ({'base': 'free', 'lock': 'energy'}, 'lock'),
+    # a base's motion with the hub fixed would move nothing: a spin-up without base prescribed
+    ({'ribs': 6, 'base_spin_rate': 20.0}, 'base_spin_rate'),
+    ({'ribs': 6, 'base': 'free', 'base_accel_x': 5.0}, 'base_accel_x'),
+    ({'ribs': 6, 'bus_mass': 5.0}, 'bus_mass'),
     ({'model': 'rigid'}, 'model'),
     ({'ribs': 3, 'damping_ratio': 1.0, 'model': 'flexible-nonlinear'},
      'damping_ratio'),                             # the co-rotational ribs: [0, 1) too
@@ -88,6 +93,26 @@ def test_per_rib_values_as_lists_and_overrides():
 def test_bad_values_name_the_culprit(values, culprit):
     with pytest.raises(ValueError, match=re.escape(culprit)):
         UmbrellaRibsParams.from_mapping(values)
+
+
+def test_a_moving_bases_own_values_are_taken_on_it():
+    """The bus's mass and inertia act on a driven base too (its drive's work moves them)."""
+    p = UmbrellaRibsParams.from_mapping({'ribs': 3, 'base': 'prescribed', 'bus_mass': 5.0,
+                                         'base_spin_rate': 3.0})
+    assert UmbrellaModel3D(p).bus_mass == 5.0
+
+
+@pytest.mark.parametrize('values, message', [
+    ({'ribs': 0}, 'parameter ribs=0: must be between 1 and 64'),    # (was the planar model)
+    ({'ribs': -2, 'rib.tip_mass': [0.0, 0.1]}, 'parameter ribs=-2'),
+    ({'ribs': 6, 'rib1.tip_mass': 'abc'}, "parameter rib1.tip_mass='abc'"),
+    ({'ribs': 3, 'rib.tip_mass': [0.0, 'abc', 0.0]}, "parameter rib.tip_mass='abc'"),
+    ({'ribs': 6, 'rib1.tipmass': 0.1}, "'rib1.tipmass'"),
+])
+def test_a_nodes_umbrella_values_name_the_culprit(values, message):
+    """A node's or a command line's values (umbrella_values): every one checked, by its name."""
+    with pytest.raises(ValueError, match=re.escape(message)):
+        umbrella_model(None, umbrella_values(values))
 
 
 @pytest.mark.parametrize('values, height', [

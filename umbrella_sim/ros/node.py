@@ -73,6 +73,7 @@ from ..core.params import shortened_step_note, UmbrellaParams
 from ..core.registry import (check_node_parameters, CONTROLLER_PARAMETERS, NODE_PARAMETERS,
                              REGISTRY, RESET, SPECS)
 from ..core.step_rule import physics_step_of
+from ..core.umbrella3d.params3d import names_a_rib
 
 SIM_TIME_REASON = ('umbrella_node publishes /clock (the sim time every message carries) and '
                    'paces it by the system clock; a node does not follow the clock it drives '
@@ -179,7 +180,7 @@ class UmbrellaNode(Node):
         try:
             found = check_parameter_sources(
                 self.get_fully_qualified_name(), params_files, self._parameter_overrides,
-                known_parameter_names(), rules=param_rules,
+                known_parameter_names(), rules=param_rules, own=names_a_rib,
                 shared=CONTROLLER_PARAMETERS)   # a '/**' file may serve both nodes
         except ValueError as exc:
             raise StartupError(str(exc)) from None

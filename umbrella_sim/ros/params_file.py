@@ -285,7 +285,7 @@ class ParameterSources:
 
 def check_parameter_sources(node_fqn: str, params_files, given, known,
                             listed: str = NODE_PARAMETERS_LISTED,
-                            shared=(), rules=None) -> ParameterSources:
+                            shared=(), rules=None, own=None) -> ParameterSources:
     """
     Check the params files and parameter names a ROS node was started with.
 
@@ -298,8 +298,11 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
     with a "did you mean", and rclpy ignores it; the sibling umbrella_sim node's
     parameters (``shared``) are taken there silently.  rules: the command line's ``-p``
     rules (param_rules_in), each held against the value the node was given (``given``, the
-    node's overrides by name: check_param_rules).  Returns the ``qos_overrides.*`` names
-    given, for the node to check against the QoS its topics declare.
+    node's overrides by name: check_param_rules).  own(name): names no other node would
+    give, checked as the node's in a wildcard section too (the umbrella's per-rib names,
+    which the node reads from every section: a typo there was said to be ignored, then
+    refused).  Returns the ``qos_overrides.*`` names given, for the node to check against
+    the QoS its topics declare.
     """
     if rules:
         check_param_rules(rules, given, params_files)
@@ -322,7 +325,10 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
                                   listed)
                 found.qos_overrides |= qos
             else:
-                problems = unknown_names(names - set(shared), known)
+                mine = {n for n in names if own is not None and own(n)}
+                check_known_names(mine, known, f'params file {path} (section {key!r}, for '
+                                  f'{node_fqn})', listed)
+                problems = unknown_names(names - set(shared) - mine, known)
                 if problems:
                     found.warnings.append(shared_section_warning(path, key, node_fqn,
                                                                  problems))

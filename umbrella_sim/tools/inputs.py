@@ -32,8 +32,8 @@ from ..core.forcing import command_force
 from ..core.params import check_values, UmbrellaParams
 from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
-from ..core.umbrella3d.params3d import (RIB_LIST_PREFIX, umbrella_parameter_names,
-                                        umbrella_values)
+from ..core.umbrella3d.params3d import (names_a_rib, RIB_LIST_PREFIX,
+                                        umbrella_parameter_names, umbrella_values)
 from ..ros.params_file import check_parameter_sources, load_params_file
 from ..ros.share import package_path
 
@@ -180,10 +180,11 @@ def params_file_warnings(params_file: str) -> list[str]:
     Check a params file's names as umbrella_node does; return the warnings to print.
 
     An unknown name in a section naming umbrella_node is a ValueError (did you mean); in a
-    '/**' section it is another node's: a warning naming it.
+    '/**' section it is another node's: a warning naming it, unless it is a per-rib name
+    (params3d.names_a_rib: the node's alone, a ValueError there too).
     """
     return check_parameter_sources('/umbrella_node', [params_file], (), _KNOWN_IN_FILES,
-                                   shared=SHARED_NAMES).warnings
+                                   shared=SHARED_NAMES, own=names_a_rib).warnings
 
 
 #: simulate's options that give a parameter: (argparse dest, parameter)

@@ -74,6 +74,14 @@ UMBRELLA_SPECS: dict[str, Param] = {p.name: p for p in (
        low=0.0, low_open=True, high=1e6),
 )}
 
+#: the bases each base parameter acts on: set off its default with another base, it would
+#: change nothing (a spin-up forgotten without base prescribed), and is refused
+BASE_PARAMETERS = {
+    **{name: ('prescribed',) for name in ('base_accel_x', 'base_accel_z', 'base_accel_start',
+                                          'base_accel_duration', 'base_spin_rate',
+                                          'base_spin_ramp')},
+    **{name: ('free', 'prescribed') for name in ('bus_mass', 'bus_inertia', 'bus_inertia_y')}}
+
 #: a rib's own values (a list, or rib<k>.<name>), besides the names of the planar record
 RIB_SPECS: dict[str, Param] = {p.name: p for p in (
     _P('tip_mass', float, 0.0, 'kg', 'point mass at the leaf tip G', low=0.0, high=1e6),
@@ -128,12 +136,17 @@ def umbrella_parameter_names() -> frozenset:
             | {f'rib{k}.{n}' for k in range(UMBRELLA_SPECS['ribs'].high) for n in names})
 
 
+def names_a_rib(name: str) -> bool:
+    """Tell whether a parameter name is the umbrella's per-rib form (rib.<name>, rib<k>.<name>)."""
+    return name.startswith(RIB_LIST_PREFIX) or _OVERRIDE.match(name) is not None
+
+
 def rib_override_spec(name: str) -> Param | None:
     """Return the spec of a rib<k>.<name> override (None: not one; ValueError: no such name)."""
     match = _OVERRIDE.match(name)
     if match is None:
         return None
-    _rib_spec(match.group(2))
+    _rib_spec(match.group(2), name)
     return rib_list_specs()[match.group(2)]
 
 
@@ -150,11 +163,15 @@ def umbrella_values(values: Mapping[str, Any]) -> dict:
     for name, value in values.items():
         if name.startswith(RIB_LIST_PREFIX):
             if value is not None and len(value):
-                out[name] = [float(v) for v in value]
+                spec = dataclasses.replace(rib_list_specs()[name[len(RIB_LIST_PREFIX):]],
+                                           name=name)
+                out[name] = [float(spec.coerce(v)) for v in value]
         elif name in UMBRELLA_SPECS:
             out[name] = UMBRELLA_SPECS[name].coerce(value)
+            UMBRELLA_SPECS[name].check(out[name])      # (ribs 0 is no planar model)
         else:                                   # rib<k>.<name>: one rib's value
-            out[name] = rib_override_spec(name).coerce(value)
+            spec = dataclasses.replace(rib_override_spec(name), name=name)
+            out[name] = spec.coerce(value)
     if out.get('ribs', 1) == 1:
         given = sorted(n for n, v in out.items()
                        if n != 'ribs' and (n not in UMBRELLA_SPECS
@@ -291,6 +308,13 @@ class UmbrellaRibsParams:
             raise ValueError(f'parameter model={self.planar.model!r}: the umbrella model is '
                              'flexible (3D Euler-Bernoulli beams) or flexible-nonlinear '
                              '(co-rotational beams) only')
+        for name, bases in BASE_PARAMETERS.items():
+            value = self.values.get(name, UMBRELLA_SPECS[name].default)
+            if self.base not in bases and value != UMBRELLA_SPECS[name].default:
+                raise ValueError(
+                    f"parameter {name}={value:g}: acts on base {' or '.join(bases)} only, and "
+                    f'base is {self.base!r}: it would move nothing; set base '
+                    f'{bases[0]} or leave {name} at {UMBRELLA_SPECS[name].default:g}')
         if self.base == 'free' and self.planar.lock == 'energy':
             raise ValueError("parameter lock='energy' with base 'free': the energy lock keeps "
                              "each rib's kinetic energy and would change the momentum of a "
