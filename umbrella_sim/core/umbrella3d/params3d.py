@@ -52,9 +52,10 @@ UMBRELLA_SPECS: dict[str, Param] = {p.name: p for p in (
        "rate below which a hinge's Coulomb torque is smoothed (τ_c tanh(ω / this))",
        low=0.0, low_open=True, high=10.0),
     _P('base', str, 'fixed', '-', 'fixed hub; prescribed bus motion (base_accel, '
-       'base_spin_rate); free-floating bus (bus_mass, bus_inertia)', choices=BASE_MODES),
-    _P('bus_mass', float, 100.0, 'kg', 'free-floating bus mass', low=0.0, low_open=True,
-       high=1e9),
+       'base_spin_rate); free-floating bus (bus_mass, bus_inertia); a base value set off its '
+       'default with a base it does not act on is refused', choices=BASE_MODES),
+    _P('bus_mass', float, 100.0, 'kg', 'bus mass: a free-floating bus, or a prescribed one '
+       '(its drive moves it)', low=0.0, low_open=True, high=1e9),
     _P('bus_inertia', float, 10.0, 'kg m²', 'free-floating bus principal moment of inertia '
        '(the same about its three axes unless bus_inertia_y is given)', low=0.0,
        low_open=True, high=1e12),
