@@ -23,7 +23,6 @@ stop during start-up: exit 0, nothing started or left behind.
 """
 from __future__ import annotations
 
-from dataclasses import replace
 import os
 import sys
 
@@ -37,8 +36,8 @@ from .node import EXIT_FAULT, EXIT_OK, EXIT_RECORDING, EXIT_USAGE, StartupError,
 from .params_file import init_ros, param_rules_in
 from .ribs_messages import RIB_TOPICS
 from .share import package_path
-from ..core.registry import NODE_PARAMETERS, parameter_help, SPECS, START
-from ..core.umbrella3d.params3d import rib_list_specs, UMBRELLA_SPECS
+from ..core.registry import NODE_PARAMETERS, parameter_help, SPECS
+from ..core.umbrella3d.params3d import umbrella_parameter_help
 
 #: the main thread's executor wait (s): a stop signal is seen when it returns.  Each wait
 #: rebuilds rclpy's wait set of the node's entities (~0.5 ms of CPU with its services and
@@ -55,10 +54,7 @@ def usage() -> str:
     lines += parameter_help(SPECS.values())
     lines.append('node parameters:')
     lines += parameter_help(NODE_PARAMETERS.values())
-    lines.append('the umbrella of N ribs (read-only, ribs >= 2; umbrella3d_parameters.md):')
-    lines += parameter_help(replace(p, applies=START) for p in UMBRELLA_SPECS.values())
-    lines.append('  rib.<name>             double[], one value per rib (rib 0 first), for '
-                 f"{', '.join(rib_list_specs())}")
+    lines += umbrella_parameter_help()
     lines += ['', 'topics: ' + ', '.join(t.name for t in ros_io.TOPICS.values())
               + ' (with ribs >= 2: ' + ', '.join(RIB_TOPICS) + ' too)'
               + f'; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= '

@@ -31,7 +31,7 @@ from ..bag.paths import check_new_output, remove_recording
 from ..core.driver import RunDriver, simulate, simulator_class
 from ..core.params import shortened_step_note
 from ..core.registry import parameter_help, SPECS
-from ..core.umbrella3d.params3d import umbrella_model
+from ..core.umbrella3d.params3d import umbrella_model, umbrella_parameter_help
 from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
 
 
@@ -54,7 +54,8 @@ def make_parser() -> argparse.ArgumentParser:
                                     'Units SI (m, s, N, Pa, rad).',
                         formatter_class=argparse.RawDescriptionHelpFormatter,
                         epilog='parameters (--set NAME=VALUE, or a --params file):\n'
-                               + '\n'.join(parameter_help(SPECS.values())))
+                               + '\n'.join(parameter_help(SPECS.values())
+                                           + umbrella_parameter_help()))
     sp.add_argument('--params', metavar='FILE',
                     help='ROS 2 params YAML (default: config/umbrella.yaml)')
     sp.add_argument('--set', action='append', metavar='NAME=VALUE',

@@ -33,7 +33,7 @@ import re
 from typing import Any, Mapping
 
 from ..params import UmbrellaParams
-from ..registry import Param
+from ..registry import Param, parameter_help, START
 
 BASE_MODES = ('fixed', 'prescribed', 'free')
 
@@ -135,6 +135,16 @@ def umbrella_parameter_names() -> frozenset:
     names = rib_list_specs()
     return (frozenset(UMBRELLA_SPECS) | {RIB_LIST_PREFIX + n for n in names}
             | {f'rib{k}.{n}' for k in range(UMBRELLA_SPECS['ribs'].high) for n in names})
+
+
+def umbrella_parameter_help() -> list[str]:
+    """Return the --help lines of the umbrella's parameters (umbrella_node's and simulate's)."""
+    return (['the umbrella of N ribs (read-only on a node, ribs >= 2; '
+             'umbrella3d_parameters.md):']
+            + parameter_help(dataclasses.replace(p, applies=START)
+                             for p in UMBRELLA_SPECS.values())
+            + ['  rib.<name>             double[], one value per rib (rib 0 first), for '
+               f"{', '.join(rib_list_specs())}; rib<k>.<name>: rib k's alone"])
 
 
 def names_a_rib(name: str) -> bool:
