@@ -371,3 +371,23 @@ def test_the_spins_tension_is_the_axial_force_of_the_stress_recovery():
     figures = simulate(p, 1.0, stop_after_lock=0.0, keep_samples=False).figures
     assert figures['leaf_tension_ratio_max'] == pytest.approx(
         max(float(np.max(hinge)), float(first.max())), rel=1e-9)
+
+
+def test_the_umbrellas_warnings_name_the_rib_they_are_of():
+    """
+    Six ribs, rib 1 with a 1 kg tip: its leaf alone passes the tension limit (7.9 %).
+
+    The warning names it after its key ('centrifugal stiffening: rib 1, ...'), as do the
+    yield and deflection warnings of the same rib's figures: an engineer knows which rib.
+    """
+    driver = RunDriver(UmbrellaRibsParams.from_mapping({'ribs': 6, 'rib1.tip_mass': 1.0}),
+                       publish_rate=100.0)
+    said = []
+    while driver.summary.lock is None:
+        driver.advance()
+        said += driver.summary.new_warnings()
+        assert driver.time < 1.0, 'no lock'
+    tension = [w for w in said if w.startswith(KEY + ':')]
+    assert tension and tension[0].startswith(f'{KEY}: rib 1, the leaf'), said
+    assert all(': rib 1, ' in w for w in said
+               if w.split(':')[0] in ('yield exceeded', 'large deflection')), said

@@ -504,7 +504,8 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                       energy_drift: float | None = None,
                       stage2_resolution: dict | None = None,
                       section_slope: float | None = None,
-                      centrifugal_tension: float | None = None) -> list[str]:
+                      centrifugal_tension: float | None = None,
+                      ribs: dict | None = None) -> list[str]:
     """
     Return where a run left the model's validity: one rule, used everywhere.
 
@@ -516,7 +517,9 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     the lock's (LockEvent), for 'coarse step'; section_slope: the largest |v'| of
     flexible-nonlinear's fibres (geometric_validity_warnings); centrifugal_tension: the
     largest of the leaf's centrifugal tension over its Euler load in stage 1
-    (CENTRIFUGAL_TENSION_LIMIT; None when not known, e.g. a recording's samples).
+    (CENTRIFUGAL_TENSION_LIMIT; None when not known, e.g. a recording's samples).  ribs:
+    the umbrella's, the rib a figure is of, by the warning's key ('yield exceeded': k, ...):
+    'rib k, ' after the key, so that an engineer knows which rib to look at.
     """
     out = []
     lw = lock_warning(params, lock_kind)
@@ -553,6 +556,9 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     if tw:
         out.append(tw)
     out += geometric_validity_warnings(params, peak_stress, section_slope)
+    if ribs:
+        out = [(f'{key}: rib {ribs[key]}, {text.lstrip()}' if key in ribs else f'{key}:{text}')
+               for key, text in (w.split(':', 1) for w in out)]
     return out
 
 

@@ -363,10 +363,18 @@ class Summary3D:
                                                              sim.params.hub_radius)
                                    for r in ribs])
                          if self._spins and sim.params.hub_radius > 0.0 else None)
-        self._tension = (float(largest(self._tension_ratio(
-            initial.alpha1_rate, initial.alpha1, getattr(initial, 'bus_q', None),
-            getattr(initial, 'bus_v', None))))
-                         if initial.stage == Stage.DEPLOYING else 0.0)
+        self._tension, self._tension_rib = 0.0, 0       # (the largest, and its rib)
+        if initial.stage == Stage.DEPLOYING:
+            self._hold_tension(self._tension_ratio(
+                initial.alpha1_rate, initial.alpha1, getattr(initial, 'bus_q', None),
+                getattr(initial, 'bus_v', None)))
+
+    def _hold_tension(self, ratio: np.ndarray) -> None:
+        """Keep the largest of the ratios (rows of (..., ribs)) and its rib, if larger."""
+        top = float(largest(ratio, axis=None))
+        if top > self._tension:
+            self._tension = top
+            self._tension_rib = int(np.unravel_index(np.argmax(ratio), ratio.shape)[-1])
 
     def _tension_ratio(self, rate, alpha1, bus_q, bus_v) -> np.ndarray:
         """Return each rib's leaf tension over its Euler load at rows of (steps, ribs)."""
@@ -405,8 +413,7 @@ class Summary3D:
         if not locked[0]:                          # (stage 1 in the block)
             ratio = self._tension_ratio(rows['alpha1_rate'], rows['alpha1'],
                                         rows.get('bus_q'), rows.get('bus_v'))
-            self._tension = max(self._tension, float(largest(
-                ratio if not locked[-1] else ratio[~locked], axis=None)))
+            self._hold_tension(ratio if not locked[-1] else ratio[~locked])
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(largest(np.abs(energy))))
         self._balance = max(self._balance,
@@ -470,6 +477,9 @@ class Summary3D:
         """
         Return the validity warnings: summary's one rule, on the worst rib's figures.
 
+        The yield, strain, deflection and centrifugal texts name that rib ('rib k, ' after
+        the key: validity_warnings' ribs).
+
         'coarse step' judges the lock's worst rib at the step stage 2 takes
         (UmbrellaSimulator3D.stage2_resolution: substeps3d.py; silent where stage 2 takes
         the substeps its lock needs); the co-rotational ribs, which take no substeps, the
@@ -480,13 +490,16 @@ class Summary3D:
         """
         locked = self.lock is not None
         slope, out_of_plane = self._geometry()
-        return validity_warnings(self._planar, self.lock_kind,
-                                 float(self._peaks['von_mises'][0].max()),
+        von_mises = self._peaks['von_mises'][0]
+        ribs = {'yield exceeded': int(np.argmax(von_mises)), 'large strain':
+                int(np.argmax(von_mises)), 'large deflection': int(np.argmax(self._in_plane)),
+                'centrifugal stiffening': self._tension_rib}
+        return validity_warnings(self._planar, self.lock_kind, float(von_mises.max()),
                                  float(self._in_plane.max()), locked=locked,
                                  energy_drift=self.energy_drift,
                                  stage2_resolution=self._stage2_resolution() if locked else None,
-                                 section_slope=slope, centrifugal_tension=self._tension
-                                 ) + out_of_plane_warnings(self._planar, out_of_plane)
+                                 section_slope=slope, centrifugal_tension=self._tension,
+                                 ribs=ribs) + out_of_plane_warnings(self._planar, out_of_plane)
 
     def _stage2_resolution(self) -> dict | None:
         """Return the lock's stage-2 resolution (the worst rib's), else the mesh's."""
