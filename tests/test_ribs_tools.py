@@ -185,6 +185,19 @@ def test_a_nodes_parameters_make_the_model_by_one_rule():
         node_model({'rib1.l2': 0.6})
 
 
+def test_replay_info_says_the_fault_that_ended_a_recording(tmp_path, capsys):
+    """A stuck rib held from the default V0: the run ends in a fault, which --info names."""
+    from umbrella_sim.tools import replay
+
+    bag = tmp_path / 'fault'
+    assert cli.main(['simulate', '--set', 'ribs=3', '--set', 'rib.stick_until=[0, 0.05, 0]',
+                     '--duration', '0.3', '--mcap', str(bag)]) == 3
+    capsys.readouterr()
+    assert replay.main([str(bag), '--info']) == 0
+    (line,) = [t for t in capsys.readouterr().out.splitlines() if t.startswith('fault:')]
+    assert 'at t = 0.0322' in line and 'the leaf reached the axle' in line, line
+
+
 def test_replay_info_says_what_a_recording_holds(tmp_path, capsys):
     """umbrella_replay --info: topics, counts and QoS, and the run (no ros2 CLI needed)."""
     from umbrella_sim.tools import replay

@@ -485,8 +485,8 @@ def info_text(log: LogData) -> str:
     Return what a recording holds, as `ros2 bag info` says it, and the run it is of.
 
     The file, its span of log (sim) time and message count, each topic with its type, count
-    and offered QoS, then the run: model, mesh, ribs, physics step, the lock and where the
-    summary figures are (their record).
+    and offered QoS, then the run: model, mesh, ribs, physics step, the lock, the fault
+    that ended it (if one did) and where the summary figures are (their record).
     """
     first, last = log.time_range
     span = 0.0 if first is None else (last - first) * 1e-9
@@ -520,6 +520,9 @@ def info_text(log: LogData) -> str:
     if events.get('locked') == 'true':
         lines.append(f"locked:        at t = {float(events['lock_time']):.9f} s "
                      f"({events.get('lock_kind')} lock)")
+    if 'fault' in events:
+        lines.append(f"fault:         at t = {float(events['fault_time']):.9f} s: "
+                     f"{events['fault']}")
     build = log.metadata.get(BUILD_RECORD)
     if build:
         lines.append(f"build:         umbrella_sim {build.get('package_version')} "
