@@ -183,3 +183,20 @@ def test_compare_takes_a_torn_recordings_figures_from_its_samples(every_step, tm
 def run_tip_end(path) -> float:
     log = read_log(str(path))
     return log.decoded(log.find_topic('rib_tip_deflection'))[-1][0]
+
+
+def test_the_sleeve_work_is_the_energy_a_run_from_rest_took_in(capsys):
+    """
+    From rest (V0 0, no friction, no damping) T + V at the end is the sleeve force's work.
+
+    A free bus: its state and momenta end the text summary, each component with its unit.
+    """
+    assert cli.main(['simulate', '--set', 'ribs=3', '--set', 'base=free', '--set',
+                     'lock=plastic', '--set', 'sleeve_force=6', '--set', 'v0=0',
+                     '--duration', '0.05', '--json']) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert figures['sleeve_work'] > 0.0
+    assert figures['sleeve_work'] == pytest.approx(figures['energy_scale'], rel=1e-9)
+    text = cli.format_summary(figures)
+    assert 'bus_q                        X ' in text and ' rad, beta ' in text
+    assert 'linear_momentum              X ' in text and ' kg m/s' in text

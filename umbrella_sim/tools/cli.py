@@ -149,6 +149,7 @@ TEXT_FIELDS = {
     'max_out_of_plane_tip_time': ('s', 1.0, '.4f'),
     'max_in_plane_tip': ('mm', 1e3, '.4g'),
     'peak_stress': ('MPa', 1e-6, '.4g'),
+    'sleeve_work': ('J', 1.0, '.4g'),
     'friction_work': ('J', 1.0, '.4g'),
     'drive_work': ('J', 1.0, '.4g'),
     'damping_dissipation': ('J', 1.0, '.4g'),
@@ -158,6 +159,12 @@ TEXT_FIELDS = {
 }
 #: the summary's lists that are per rib (the others with a unit: a range, 'from to')
 PER_RIB = ('rib_deploy_time', 'max_in_plane_tip', 'friction_work')
+#: the umbrella's vectors at the end of the run (a moving base's): each component, its unit
+_BUS = (('X', 'm'), ('Y', 'm'), ('Z', 'm'), ('psi', 'rad'), ('beta', 'rad'), ('gamma', 'rad'))
+VECTORS = {'bus_q': _BUS,
+           'bus_v': tuple((f"{c}'", u + '/s') for c, u in _BUS),
+           'linear_momentum': tuple((c, 'kg m/s') for c in 'XYZ'),
+           'angular_momentum': tuple((c, 'kg m²/s') for c in 'XYZ')}
 
 
 def format_summary(summary: dict) -> str:
@@ -174,6 +181,10 @@ def format_summary(summary: dict) -> str:
         unit, scale, spec = TEXT_FIELDS.get(key, ('', None, ''))
         if key == 'peak_stress' and isinstance(value, dict):    # the umbrella's, per rib
             lines += _rib_peaks(value, unit, scale, spec)
+            continue
+        if key in VECTORS and isinstance(value, list):
+            text = ', '.join(f'{c} {v:.4g} {u}' for (c, u), v in zip(VECTORS[key], value))
+            lines.append(f'{key:28s} {text}')
             continue
         if key in PER_RIB and isinstance(value, list):
             text = ', '.join('-' if v is None else format(v * scale, spec) for v in value)

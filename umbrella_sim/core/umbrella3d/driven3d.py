@@ -447,6 +447,7 @@ class Summary3D:
                'energy_scale': self._scale,
                'energy_drift': self.energy_drift,
                'leaf_tension_ratio_max': self._tension,
+               'sleeve_work': float(self._final.work),
                'friction_work': np.asarray(self._final.friction_work).tolist(),
                'drive_work': float(self._final.drive_work),
                'damping_dissipation': float(self._final.damping_dissipation),
