@@ -332,10 +332,14 @@ def _node(*args, timeout=60):
      "parameter v0='abc' (-p): not taken: rcl keeps v0's value -0.2 (a double"),
     ('/**:\n  ros__parameters:\n    damping_ratio: 0.0\n', ['-p', 'damping_ratio:=[0.02]'],
      'give damping_ratio a double'),
+    # a per-rib list of an int and doubles: rcl's own parse error, with what to write
+    (None, ['-p', 'ribs:=3', '-p', 'rib.tip_mass:=[0,0.1,0]'],
+     'a list of doubles needs every value written as a double, [0.0, 0.1] not [0, 0.1]'),
 ], ids=['typo', 'unknown', 'other-node', 'unknown-key', 'nested', 'malformed', 'list',
         'no-ros-parameters', 'binary', 'missing', 'no-assign', 'bogus-flag', 'no-model',
         'empty-value', 'qos-typo', 'qos-type', 'twice', 'tiny-step', 'ros-param-type',
-        'qos-type-argument', 'argument-type-beside-file', 'argument-list-beside-file'])
+        'qos-type-argument', 'argument-type-beside-file', 'argument-list-beside-file',
+        'mixed-list'])
 @pytest.mark.ros
 def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):
     if content is not None:

@@ -380,5 +380,8 @@ def init_ros(argv: list[str]) -> list[str]:
         reason = ' '.join(str(exc).split())
         if type(exc).__name__ == 'UnknownROSArgsError':
             reason = f'unknown ROS arguments {reason}'
+        if 'Sequence should be of same type' in reason:     # ([0, 0.1]: an int and a double)
+            reason += ('; a list of doubles needs every value written as a double, '
+                       '[0.0, 0.1] not [0, 0.1]')
         raise ValueError(f'invalid ROS arguments: {reason} (see --help)') from None
     return files
