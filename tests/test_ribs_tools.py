@@ -196,6 +196,11 @@ def test_replay_info_says_the_fault_that_ended_a_recording(tmp_path, capsys):
     assert replay.main([str(bag), '--info']) == 0
     (line,) = [t for t in capsys.readouterr().out.splitlines() if t.startswith('fault:')]
     assert 'at t = 0.0322' in line and 'the leaf reached the axle' in line, line
+    # and umbrella_compare's table says so, beside the per-rib friction work
+    assert compare.main([str(bag), str(bag), '--out', str(tmp_path / 'cmp')]) == 0
+    out = capsys.readouterr().out
+    assert f'{bag.name}: ended in a fault: step after t = 0.0322 s failed' in out
+    assert 'peak von Mises (MPa), friction work (J)' in out
 
 
 def test_replay_info_says_what_a_recording_holds(tmp_path, capsys):

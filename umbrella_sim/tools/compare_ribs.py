@@ -148,6 +148,8 @@ def compare_ribs(runs: list[RibsRun]) -> dict:
                  'units': 'SI (s, m, Pa, J, rad)'}
         if f.get('figures_from'):
             entry['figures_from'] = f['figures_from']
+        if f.get('error'):
+            entry['fault'] = f['error']
         if r.ribs == ref.ribs:
             mine, theirs = entry['rib_deploy_time'] or [], ref.figures.get('rib_deploy_time') or []
             entry['rib_deploy_time_difference'] = [
@@ -184,19 +186,23 @@ def print_ribs_table(result: dict, stream=None) -> None:
     for e in result['runs']:
         if e.get('figures_from'):
             w(f"{e['label']}: figures from {e['figures_from']}\n")
+        if e.get('fault'):
+            w(f"{e['label']}: ended in a fault: {e['fault']}\n")
     w('\nper rib: deployment instant (s), its difference to the reference (s), max |d alpha1| '
-      '(rad), peak von Mises (MPa)\n')
+      '(rad), peak von Mises (MPa), friction work (J)\n')
     for e in result['runs']:
         deploy = e['rib_deploy_time'] or []
         for k in range(e['ribs']):
             d = (e.get('rib_deploy_time_difference') or [None] * e['ribs'])[k]
             a = (e.get('alpha1_max_difference') or [None] * e['ribs'])[k]
             vm = (e['peak_von_mises'] or [None] * e['ribs'])[k]
+            fw = (e['friction_work'] or [None] * e['ribs'])[k]
             t = deploy[k] if k < len(deploy) else None
             w(f"{e['label']:<18} rib{k:<3} {'-' if t is None else format(t, '.7f'):>11} "
               f"{'-' if d is None else format(d, '+.3e'):>11} "
               f"{'-' if a is None else format(a, '.3e'):>10} "
-              f"{'-' if vm is None else format(vm * 1e-6, '.4g'):>9}\n")
+              f"{'-' if vm is None else format(vm * 1e-6, '.4g'):>9} "
+              f"{'-' if fw is None else format(fw, '.4g'):>9}\n")
 
 
 def plot_ribs(runs: list[RibsRun], out_dir: str) -> list[str]:
