@@ -335,11 +335,15 @@ def _node(*args, timeout=60):
     # a per-rib list of an int and doubles: rcl's own parse error, with what to write
     (None, ['-p', 'ribs:=3', '-p', 'rib.tip_mass:=[0,0.1,0]'],
      'a list of doubles needs every value written as a double, [0.0, 0.1] not [0, 0.1]'),
+    # the umbrella's values are named before an existing record_path (/tmp): every
+    # parameter's error first, not one after the other
+    (None, ['-p', 'ribs:=6', '-p', 'rib9.tip_mass:=0.1', '-p', 'record_path:=/tmp'],
+     'parameter rib9.tip_mass: there are ribs 0 .. 5'),
 ], ids=['typo', 'unknown', 'other-node', 'unknown-key', 'nested', 'malformed', 'list',
         'no-ros-parameters', 'binary', 'missing', 'no-assign', 'bogus-flag', 'no-model',
         'empty-value', 'qos-typo', 'qos-type', 'twice', 'tiny-step', 'ros-param-type',
         'qos-type-argument', 'argument-type-beside-file', 'argument-list-beside-file',
-        'mixed-list'])
+        'mixed-list', 'rib-before-record-path'])
 @pytest.mark.ros
 def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):
     if content is not None:

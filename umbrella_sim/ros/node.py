@@ -73,7 +73,7 @@ from ..core.params import shortened_step_note, UmbrellaParams
 from ..core.registry import (check_node_parameters, CONTROLLER_PARAMETERS, NODE_PARAMETERS,
                              REGISTRY, RESET, SPECS)
 from ..core.step_rule import physics_step_of
-from ..core.umbrella3d.params3d import names_a_rib
+from ..core.umbrella3d.params3d import names_a_rib, umbrella_model
 
 SIM_TIME_REASON = ('umbrella_node publishes /clock (the sim time every message carries) and '
                    'paces it by the system clock; a node does not follow the clock it drives '
@@ -109,6 +109,8 @@ class UmbrellaNode(Node):
         try:
             self.model_params = UmbrellaParams.from_mapping(
                 {k: v for k, v in values.items() if k in SPECS}).validated()
+            # the umbrella's values too, before the record path: every parameter's error first
+            umbrella_model(self.model_params, self.umbrella)
             self.node_cfg = check_node_parameters(
                 {k: v for k, v in values.items() if k in NODE_PARAMETERS})
             if self.node_cfg['record']:         # before any work ('': the working directory)
