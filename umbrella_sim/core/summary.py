@@ -417,8 +417,12 @@ def centrifugal_tension_per_rate(p, tip_mass: float = 0.0) -> float:
     omega^2 is CENTRIFUGAL_TENSION_LIMIT's figure on a fixed hub (leaf_tension_ratio).
     """
     length = p.l1 + p.l2
-    tension = p.mass_per_length * length ** 2 / 2.0 + tip_mass * length
-    return tension * length ** 2 / (math.pi ** 2 * p.youngs_modulus * p.cross_section_inertia)
+    return (p.mass_per_length * length ** 2 / 2.0 + tip_mass * length) / _euler_load(p)
+
+
+def _euler_load(p) -> float:
+    """Return the leaf's Euler load pi^2 E I / L^2 (N), L = l1 + l2 (the planar record p)."""
+    return math.pi ** 2 * p.youngs_modulus * p.cross_section_inertia / (p.l1 + p.l2) ** 2
 
 
 def hub_spin_tension_per_rate(p, tip_mass: float = 0.0, hub_radius: float = 0.0) -> float:
@@ -428,10 +432,7 @@ def hub_spin_tension_per_rate(p, tip_mass: float = 0.0, hub_radius: float = 0.0)
     a (rho A L + m_tip) / (pi^2 E I / L^2): the leaf's mass at the hub radius a
     (leaf_tension_ratio's per_hub).  p, tip_mass as centrifugal_tension_per_rate's.
     """
-    length = p.l1 + p.l2
-    mass = p.mass_per_length * length + tip_mass
-    return hub_radius * mass * length ** 2 / (
-        math.pi ** 2 * p.youngs_modulus * p.cross_section_inertia)
+    return hub_radius * (p.mass_per_length * (p.l1 + p.l2) + tip_mass) / _euler_load(p)
 
 
 def leaf_tension_ratio(per_rate, rate, spin=None, alpha1=None, per_hub=None):

@@ -492,8 +492,9 @@ class Summary3D:
         locked = self.lock is not None
         slope, out_of_plane = self._geometry()
         von_mises = self._peaks['von_mises'][0]
-        ribs = {'yield exceeded': int(np.argmax(von_mises)), 'large strain':
-                int(np.argmax(von_mises)), 'large deflection': int(np.argmax(self._in_plane)),
+        stressed = int(np.argmax(von_mises))
+        ribs = {'yield exceeded': stressed, 'large strain': stressed,
+                'large deflection': int(np.argmax(self._in_plane)),
                 'centrifugal stiffening': self._tension_rib}
         return validity_warnings(self._planar, self.lock_kind, float(von_mises.max()),
                                  float(self._in_plane.max()), locked=locked,

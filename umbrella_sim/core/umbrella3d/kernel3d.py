@@ -268,6 +268,8 @@ class CompiledStep3D:
         """
         Set the fit's Newton shrinks (the array the call points at) to those of a step h.
 
+        (Nothing to do without a fit, or where they are already h's.)
+
         LockedModeFit.newton_shrink(h), as the numpy step's newton_update takes them: each
         mode's d / (block + d) for the step taken (its block 1 + (omega h)^2 / 4 and the
         damping's share h (c_w - c) / 2 are the step's), not the fit's own step, which a
@@ -275,6 +277,8 @@ class CompiledStep3D:
         (a stage-2 fit of substeps stepped at the grid's step: there the fit's step's
         shrinks took 4.7 to 5.7 Newton iterations a step against 2.2 to 3.0).
         """
+        if self._fit is None or h == self._shrink_step:
+            return
         shrink = self._fit[3]
         if shrink.ndim == 1:
             shrink[...] = self._shrink_fits[0].newton_shrink(h)
@@ -310,8 +314,7 @@ class CompiledStep3D:
             if s.pr is not None:
                 b['pr'][...], b['ps'][...] = s.pr, s.ps
         self._in_buffers = None     # (the call moves the buffers on)
-        if self._fit is not None and h != self._shrink_step:
-            self._shrink_at(h)
+        self._shrink_at(h)
         c = self.call
         c.have_p, c.t, c.h, c.force, c.locked = int(s.pr is not None), s.t, h, force, int(locked)
 
