@@ -37,7 +37,7 @@ What the umbrella of N ribs costs the node: the step through the run driver, and
 The machine is shared (2 cores): wall figures are noisy; the CPU time is what a step costs.
 
     python bench/bench_ribs_node.py [--ribs [2 3 6]] [--duration 0.02] [--after-lock S] [--live]
-                                    [--step 1.25e-4] [--base fixed|prescribed|free] [--spin 10]
+                                    [--step 0] [--base fixed|prescribed|free] [--spin 10]
                                     [--live-ribs 6] [--live-windows 3] [--periods 40]
                                     [--live-deploying] [--lockstep-only]
 """
@@ -55,7 +55,9 @@ from umbrella_sim.core.driver import RunDriver  # noqa: E402
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams  # noqa: E402
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D  # noqa: E402
 
-STEP = 1e-4          # s: 10 steps a 1 kHz publication (--step: e.g. 1.25e-4, 8 of them)
+#: s: time_step 0, the run's own steps (stage 1 0.2 ms, stage 2 the mesh's: 0.1 ms at 1
+#: element); --step: e.g. 1e-4, 10 a 1 kHz publication in both stages
+STEP = 0.0
 
 
 def offline(ribs: int, duration: float, after_lock: float | None = None,
@@ -87,7 +89,8 @@ def offline(ribs: int, duration: float, after_lock: float | None = None,
     driver.run(driver.time + duration, on_publication=published)
     steps = driver.sim.steps - k0
     driven = (time.thread_time() - t0) / steps
-    per_publication = encoding[0] / max(steps * STEP / 1e-3 - 1, 1)
+    grid = driver.step
+    per_publication = encoding[0] / max(steps * grid / 1e-3 - 1, 1)
     stage = ('' if after_lock is None
              else f', {after_lock:g} s after the lock at {driver.sim.lock_time:.4f} s')
     if base:
@@ -95,13 +98,13 @@ def offline(ribs: int, duration: float, after_lock: float | None = None,
     print(f'ribs {ribs:2d}{stage}: own loop {own * 1e3:.3f} ms/step ({own / ribs * 1e3:.3f} per '
           f'rib); run driver + 1 kHz publications {driven * 1e3:.3f} ms/step '
           f'({driven / ribs * 1e3:.3f} per rib); encoding {per_publication * 1e3:.3f} ms a '
-          f'publication; real-time factor at {STEP * 1e6:.0f} us steps '
-          f'{STEP / driven:.3f}')
-    blocks = steps * STEP / 1e-3
-    print(f'          a 1 ms block ({round(1e-3 / STEP)} steps) of the run driver: '
+          f'publication; real-time factor at {grid * 1e6:.0f} us grid steps '
+          f'{grid / driven:.3f}')
+    blocks = steps * grid / 1e-3
+    print(f'          a 1 ms block ({round(1e-3 / grid)} grid steps) of the run driver: '
           + ', '.join(f'{name} {cpu / blocks * 1e6:.0f} us' for name, cpu in parts.items())
           + f', encoding {encoding[0] / blocks * 1e6:.0f} us (of '
-          f'{driven * round(1e-3 / STEP) * 1e6:.0f} us; CPU of this thread)')
+          f'{driven * round(1e-3 / grid) * 1e6:.0f} us; CPU of this thread)')
     print(f'          without the compiled call: {outside_kernel(driver, encoder):.0f} us a 1 ms '
           'block (best of 9)')
 
@@ -314,10 +317,12 @@ def main() -> None:
     ap.add_argument('--spin', type=float, default=10.0, metavar='RAD/S',
                     help='offline, --base prescribed: base_spin_rate (10)')
     ap.add_argument('--step', type=float, default=STEP, metavar='S',
-                    help=f'the physics step (time_step, s; {STEP:g}): 1.25e-4 takes 8 a 1 kHz '
-                         'publication, at the same unresolved stress share (docs/umbrella3d.md)')
+                    help="time_step (s; 0, the default: the run's own, stage 1 at 0.2 ms and "
+                         "stage 2 at the mesh's step); 1e-4: 10 a 1 kHz publication in both "
+                         'stages')
     args = ap.parse_args()
-    if not 0 < args.step <= 1e-3 or abs(1e-3 / args.step - round(1e-3 / args.step)) > 1e-9:
+    if args.step and (not 0 < args.step <= 1e-3
+                      or abs(1e-3 / args.step - round(1e-3 / args.step)) > 1e-9):
         ap.error(f'--step {args.step:g}: must divide the 1 ms publication period')
     globals()['STEP'] = args.step
     if args.lockstep_only:

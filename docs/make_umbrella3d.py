@@ -415,25 +415,29 @@ resolves them (`step_follows_mesh` takes it, at a multiple of the cost).
 
 ## The model's details
 
-The umbrella's stage 2 takes the planar model's stage-2 step: where the step is chosen for
-the run (`time_step` 0, or `step_follows_mesh`: step_rule.follows_lock of the planar
-record), a lock whose stage-2 tip deflection passes 7 % of the leaf (the modes' coupling,
-docs/validation.md, amplitude) makes every stage-2 grid step k physics steps
-(step_rule.stage2_step_needed and substeps_for, the planar engine's rule). The umbrella
+The umbrella's stages take the planar model's steps: where the step is chosen for the run
+(`time_step` 0, or `step_follows_mesh`: step_rule.follows_lock of the planar record),
+stage 1 (the deployment) steps on a 0.2 ms grid (step_rule.STAGE1_STEP_CEILING: its
+figures do not need the stage-2 step; a driven base that moves keeps the mesh's step, its
+drive setting the modes vibrating before the lock) and stage 2 takes the mesh's step as
+substeps of it (step_rule.stage2_step_of: 2 of 0.1 ms at 1 element, 6 of 33 us at 2); a
+lock whose stage-2 tip deflection passes 7 % of the leaf (the modes' coupling,
+docs/validation.md, amplitude) divides the mesh's step further
+(step_rule.stage2_step_needed and stage2_substeps_for, the planar engine's rule). The umbrella
 judges it at the lock on each rib's in-plane state, mapped onto the planar model of the
 rib's own planar record (umbrella_sim/core/umbrella3d/substeps3d.py: its locked modes'
 amplitudes, the tip crest they add up to, the stress shares the step leaves), and takes the
 worst rib's (the smallest step needed; on a tie the rib deflected most): N identical ribs
 take the planar model's substeps and stay each the planar model at `time_step` 0
-(tests/test_umbrella3d_substeps.py: 3 ribs at 10 N a rib, 3 physics steps a 0.1 ms grid
+(tests/test_umbrella3d_substeps.py: 3 ribs at 10 N a rib, 6 physics steps a 0.2 ms grid
 step, within the identity's 1e-10). The rule reads the in-plane modes only; the ribs'
 out-of-plane and torsion modes take the mode fit at the step the in-plane ones need. The
 numpy step takes a grid step's physics steps one by one (`UmbrellaSimulator3D.step`), the
 compiled advance k of them per grid step in one call; either way Record3D keeps one row a
 grid step, its last physics step's figures with each stress channel's largest over its
 physics steps (each physics step's Hermite crest; outputs3d.fold_substeps3d, the planar
-outputs.fold_substeps' rule). From one locked state (4 asymmetric ribs, V0 = -0.5, 5 physics
-steps a grid step) the two paths' 40 grid rows agree within the numpy reference's own ulp
+outputs.fold_substeps' rule). From one locked state (4 asymmetric ribs, V0 = -0.5, 10
+physics steps a grid step) the two paths' 40 grid rows agree within the numpy reference's own ulp
 spread on every base, with the same Newton iterations (tests/test_umbrella3d_substeps.py).
 With a `time_step` given, stage 2 stays on it and its summary's 'coarse step' (the lock's
 worst rib, judged at the step stage 2 takes) names the `time_step` that resolves it; the
@@ -441,7 +445,8 @@ node, the driver and replay pin the physics step by the planar model's rule
 (`with_physics_step(step, follows_lock)`), so a recording made at `time_step` 0 is
 re-simulated with its substeps. The co-rotational ribs (`flexible-nonlinear`) take none, as
 the planar model. Stage 2 then costs about k times as much: ribs 6 x 1 at 10 N a rib (3
-substeps) 1.74 CPU s a simulated second of stage 2 against 0.61 on the 0.1 ms grid step alone,
+substeps of the 0.1 ms grid stage 1 then took too) 1.74 CPU s a simulated second of stage
+2 against 0.61 on the 0.1 ms grid step alone,
 12 x 2 (2 substeps of 33 us) 14.3 against 7.7 (compiled, Record3D's figures included, best of
 two 20 ms runs at load ~5.4 on the 2 cores); the fit's modes refitted at the lock took 2-5 ms
 (56 ms for a free bus at 12 x 2).

@@ -60,7 +60,7 @@ def test_a_sticking_hinge_holds_its_rib_then_the_umbrella_deploys(antenna_factor
     assert min(s['alpha1'][STUCK_RIB] for s in states) < start - 1.0  # it did swing down
     # the spread between ribs: the lag of the latest rib's deployment after the earliest.
     # One sleeve drives them all: held by rib 1 until its release, they reach their deployed
-    # angles together, at this step (0.1 ms) in the step the sleeve reaches the stop, so each
+    # angles together, at this step (0.2 ms) in the step the sleeve reaches the stop, so each
     # rib deploys at the lock's own instant (the node's log gives it to 1e-6 s) and the lag is
     # 0 (a finer step can resolve the ribs' elastic differences: their instants then part)
     assert figures['ribs'] == 3

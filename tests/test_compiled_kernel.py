@@ -202,22 +202,23 @@ def test_stage2_substeps_give_the_same_grid_rows_on_both_paths():
     """
     Compare the grid rows of a stage 2 taken in substeps (its lock past the modes' coupling).
 
-    N = 1, V0 = -0.5, time_step 0: the grid stays at 0.1 ms and stage 2 takes 4 physics steps
-    a grid step (step_rule.stage2_step_needed).  The compiled loop runs the physics steps and
-    folds their rows (outputs.fold_substeps); the reference steps them one by one with the
-    peak stresses over them (UmbrellaSimulator._physics_steps): the same rows, to round-off.
+    N = 1, V0 = -0.5, time_step 0: the grid stays at stage 1's 0.2 ms and stage 2 takes 8
+    physics steps a grid step (step_rule.stage2_step_needed, judged at 0.1 ms).  The
+    compiled loop runs the physics steps and folds their rows (outputs.fold_substeps); the
+    reference steps them one by one with the peak stresses over them
+    (UmbrellaSimulator._physics_steps): the same rows, to round-off.
     """
     p = UmbrellaParams(v0=-0.5)
-    sizes = [500, 400, 3, 40, 1, 56]     # the lock in the second block; stage 2 after it
+    sizes = [250, 200, 3, 20, 1, 28]     # the lock in the second block; stage 2 after it
     ref_sim, fast_sim = simulator('numpy', p), simulator('compiled', p)
     ref, ref_blocks = blocks(ref_sim, sizes)
     fast, fast_blocks = blocks(fast_sim, sizes)
-    assert ref_sim.h == fast_sim.h == 1e-4
-    assert ref_sim.stage2_substeps == fast_sim.stage2_substeps == 4
+    assert ref_sim.h == fast_sim.h == 2e-4
+    assert ref_sim.stage2_substeps == fast_sim.stage2_substeps == 8
     assert fast_sim.lock_event.stage2_resolution['step'] == pytest.approx(2.5e-5)
     time = fast[STEP_FIELDS.index('time')]
-    assert np.allclose(np.diff(time), 1e-4, rtol=1e-9, atol=0)     # one row a grid step
-    assert_same_rows(ref, fast, ref_blocks, p.time_step or 1e-4)
+    assert np.allclose(np.diff(time), 2e-4, rtol=1e-9, atol=0)     # one row a grid step
+    assert_same_rows(ref, fast, ref_blocks, ref_sim.h)
     last_ref, last_fast = ref_blocks[-1].last, fast_blocks[-1].last
     assert np.abs(last_ref.q - last_fast.q).max() < 1e-10
 

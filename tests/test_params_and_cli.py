@@ -209,7 +209,7 @@ def test_cli_force_profile(tmp_path):
     (['--force', 'nan'], 'sleeve_force'),
     (['--elements-per-segment', '0'], 'elements_per_segment'),
     (['--params', '/nonexistent.yaml'], '/nonexistent.yaml'),
-    (['--duration', '5e-5'], 'shorter than one physics step (0.0001 s)'),   # ran 0 steps
+    (['--duration', '5e-5'], 'shorter than one physics step (0.0002 s)'),   # ran 0 steps
     # one parameter given twice: the dedicated option used to win over --set silently
     (['--force', '5', '--set', 'sleeve_force=10'], '--force 5.0'),
     (['--model', 'rigid', '--set', 'model=flexible'], 'already given by --model rigid'),

@@ -181,10 +181,10 @@ def cli(*args, cwd, timeout=120):
 
 
 def test_a_run_of_years_needs_consent(tmp_path):
-    """``--duration 1e9`` (10^13 steps) is refused before any step; --long-run consents."""
+    """``--duration 1e9`` (5 x 10^12 steps) is refused before any step; --long-run consents."""
     r = cli('simulate', '--duration', '1e9', '--csv', 'run.csv', cwd=tmp_path)
     assert r.returncode == 2, r.stderr
-    assert '--duration 1e+09: 1e+13 physics steps' in r.stderr and '--long-run' in r.stderr
+    assert '--duration 1e+09: 5e+12 physics steps' in r.stderr and '--long-run' in r.stderr
     assert not os.listdir(tmp_path)                 # nothing written
     r = cli('simulate', '--duration', '0.01', '--long-run', cwd=tmp_path)
     assert r.returncode == 0, r.stderr              # (a short run needs no consent)

@@ -25,6 +25,7 @@ import pytest
 
 from umbrella_sim.core.outputs import mechanical_energy
 from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.step_rule import STAGE1_STEP_CEILING
 from umbrella_sim.core.step_study import (locked_mode_flow, mesh_step, observed_order, run_steps,
                                           sampled_peak_shortfall, step_errors, TARGETS,
                                           within_targets)
@@ -48,15 +49,18 @@ def test_default_step_against_a_fine_step_run(n_el, lock):
     """
     Check the default step against a fine-step run of the same code.
 
-    V0 = -0.2 through the lock and 0.15 s of stage 2, default step vs 5 us: deploy time
-    within 1e-5, stage-2 period within 0.05 %, stage-1 peak stresses within 3 %.
+    V0 = -0.2 through the lock and 0.15 s of stage 2, default step (stage 1's 0.2 ms, stage
+    2's the mesh's) vs 5 us: deploy time within 1e-5, stage-2 period within 0.05 %, stage-1
+    peak stresses within 3 %.
     """
     p = UmbrellaParams(v0=-0.2, elements_per_segment=n_el, lock=lock)
     window = 0.15
     fine = run_steps(p.replace(time_step=5e-6), window)
     default = run_steps(p, window)
-    assert default.h == mesh_step(p)
-    assert (default.h == 1e-4) == (n_el == 1)         # finer on the finer mesh
+    # stage 1 at its 0.2 ms, stage 2 at the mesh's step (its substeps)
+    assert default.h == pytest.approx(STAGE1_STEP_CEILING, rel=1e-12)
+    assert default.stage2_step == pytest.approx(mesh_step(p), rel=1e-12)
+    assert (default.stage2_step == 1e-4) == (n_el == 1)     # finer on the finer mesh
     err = step_errors(default, fine, window)
     assert err['deploy_time'] < TARGETS['deploy_time']
     assert err['stage2_period'] < TARGETS['stage2_period']
@@ -111,7 +115,8 @@ def test_step_the_stage2_peak_stresses_need():
         assert max(err['stage2_peak_leaf'], err['stage2_peak_link']) > TARGETS['peak_stress']
         assert _warnings(fixed, 'coarse step')
         chosen = run_steps(p, window)
-        assert chosen.h == mesh_step(p) < 1e-4
+        assert chosen.stage2_step == pytest.approx(mesh_step(p), rel=1e-12) and \
+            mesh_step(p) < 1e-4
         err = step_errors(chosen, fine, window)
         assert err['stage2_peak_leaf'] < TARGETS['peak_stress']
         assert err['stage2_peak_link'] < TARGETS['peak_stress']
@@ -129,8 +134,8 @@ def test_past_the_coupling_deflection_stage2_takes_the_step_its_lock_needs():
     and the tip series' 1 mm against a 1.25 us run, and 'coarse step' says so, naming the
     step stage 2 needs (stage2_step_needed: 0.1 ms (7 % / 15.8 %)^1.5 -> 25 us; the 50 us
     that resolves every mode still misses the tip series).  The default (time_step 0) keeps
-    the 0.1 ms grid and takes that step in stage 2 by itself: every target met, nothing said.
-    At V0 = -0.2 (6.3 %) its stage 2 keeps 0.1 ms.
+    stage 1's 0.2 ms grid and takes that step in stage 2 by itself: every target met,
+    nothing said.  At V0 = -0.2 (6.3 %) its stage 2 takes the mesh's 0.1 ms.
     """
     window = 0.5
     p = UmbrellaParams(v0=-0.5, elements_per_segment=1)
@@ -146,7 +151,7 @@ def test_past_the_coupling_deflection_stage2_takes_the_step_its_lock_needs():
     coupled = step_errors(run_steps(p.replace(time_step=5e-5), window), fine, window)
     assert coupled['stage2_tip_series_m'] > TARGETS['stage2_tip_series_m']
     run = run_steps(p, window)
-    assert run.h == 1e-4 and run.stage2_step == pytest.approx(enough)
+    assert run.h == 2e-4 and run.stage2_step == pytest.approx(enough)
     err = step_errors(run, fine, window)
     assert within_targets(err), err
     assert not _warnings(p, 'coarse step')
@@ -170,9 +175,10 @@ def test_the_mesh_step_meets_every_target_where_the_fixed_step_misses_one(n_el, 
 
     0.5 s of stage 2 against a 1.25 us reference: at 0.1 ms the stage-2 peak stresses are
     more than 3 % off in these cases (docs/validation.md); the step chosen for the mesh
-    (time_step 0; at N = 4, V0 = -0.5 with stage 2 in the step its lock needs, 10 us, where
-    the mesh's 20 us left the link's peak 9 % off) meets the deploy time, the stage-2 period
-    and amplitude, both stages' peak stresses and the tip series.
+    (time_step 0: stage 1 at 0.2 ms, stage 2 at the mesh's step; at N = 4, V0 = -0.5 in the
+    step its lock needs, 10 us, where the mesh's 20 us left the link's peak 9 % off) meets
+    the deploy time, the stage-2 period and amplitude, both stages' peak stresses and the
+    tip series.
     """
     p = UmbrellaParams(v0=v0, elements_per_segment=n_el, lock=lock)
     window = 0.5
@@ -180,7 +186,7 @@ def test_the_mesh_step_meets_every_target_where_the_fixed_step_misses_one(n_el, 
     fixed = step_errors(run_steps(p.replace(time_step=1e-4), window), fine, window)
     assert max(fixed['stage2_peak_leaf'], fixed['stage2_peak_link']) > TARGETS['peak_stress']
     run = run_steps(p, window)
-    assert run.h == mesh_step(p)
+    assert run.h == 2e-4 and run.stage2_step <= mesh_step(p) * (1 + 1e-12)
     err = step_errors(run, fine, window)
     assert within_targets(err), err
 
@@ -355,11 +361,12 @@ def test_sampled_peak_shortfall_of_a_narrow_crest():
 
 def test_the_step_chosen_for_the_mesh_is_the_step_of_every_run(tmp_path):
     """
-    Check that time_step 0 (the default) takes the step chosen for the mesh everywhere.
+    Check that time_step 0 (the default) takes the steps chosen for the mesh everywhere.
 
-    The simulator, the node's publication driver (the largest step <= it dividing the
+    Stage 2 the mesh's step, stage 1 (the grid) its largest multiple up to 0.2 ms: the
+    simulator, the node's publication driver (the largest step <= it dividing the
     publication period), an offline recording, and the re-simulation of that recording;
-    step_follows_mesh applies the same rule below a time_step given.
+    step_follows_mesh applies the same rule below a time_step given (stage 1 at it).
     """
     from umbrella_sim.bag.reader import read_log
     from umbrella_sim.core.driver import RunDriver
@@ -371,21 +378,29 @@ def test_the_step_chosen_for_the_mesh_is_the_step_of_every_run(tmp_path):
     p = UmbrellaParams(v0=-0.5, elements_per_segment=3)
     assert p.time_step == 0.0
     h = mesh_step(p)
-    assert h == physics_step_of(p) < 1e-4 and (1e-4 / h) == pytest.approx(round(1e-4 / h))
-    assert UmbrellaSimulator(p).h == h
+    grid = physics_step_of(p)          # stage 1's 0.2 ms, stage 2's h = 0.2 ms / k
+    assert grid == 2e-4 and h < 1e-4 and grid / h == pytest.approx(round(grid / h))
+    sim = UmbrellaSimulator(p)
+    assert sim.h == grid
+    sim.advance(2000, until_lock=True)
+    assert sim.h / sim.stage2_substeps <= h * (1 + 1e-12)       # stage 2: the mesh's or finer
     assert UmbrellaSimulator(p.replace(time_step=1e-4)).h == 1e-4          # given: as it is
-    assert UmbrellaSimulator(p.replace(time_step=1e-4, step_follows_mesh=True)).h == h
-    assert UmbrellaSimulator(UmbrellaParams()).h == 1e-4                    # N = 1: 0.1 ms
+    follows = UmbrellaSimulator(p.replace(time_step=1e-4, step_follows_mesh=True))
+    assert follows.h == 1e-4                                    # stage 1 at it, stage 2 ...
+    follows.advance(2000, until_lock=True)
+    assert follows.h / follows.stage2_substeps <= h * (1 + 1e-12)   # ... the mesh's or finer
+    assert UmbrellaSimulator(UmbrellaParams()).h == 2e-4          # N = 1: 0.2 ms, 0.1 ms
     driver = RunDriver(p, 1000.0)
     assert driver.sim.h == driver.step == pytest.approx(1e-3 / driver.period_steps)
-    assert driver.step <= h and driver.step == pytest.approx(h, rel=1e-12)
+    assert driver.step <= grid and driver.step == pytest.approx(grid, rel=1e-12)
 
     bag = tmp_path / 'mesh'
     q = p.replace(elements_per_segment=2)
     record_offline(q, str(bag), 0.05, publish_rate=1000.0)
     log = read_log(str(bag))
     assert log.parameters()['time_step'] == 0.0
-    assert float(log.parameters()['physics_step']) == pytest.approx(mesh_step(q), rel=1e-12)
+    assert float(log.parameters()['physics_step']) == pytest.approx(physics_step_of(q),
+                                                                    rel=1e-12)
     res = resimulate(log)
     assert res['compared'] > 40
     assert max(res['max_abs_diff'].values()) < 1e-12
@@ -393,7 +408,9 @@ def test_the_step_chosen_for_the_mesh_is_the_step_of_every_run(tmp_path):
 
 def test_stage2_in_substeps_conserves_energy_and_keeps_the_constraints():
     """
-    V0 = -0.5, N = 1, time_step 0: stage 2 in 4 physics steps a grid step (its lock's need).
+    V0 = -0.5, N = 1, time_step 0: stage 2 in 8 physics steps a 0.2 ms grid step.
+
+    (Its lock's need, judged at the mesh's 0.1 ms: 4 of them, past the modes' coupling.)
 
     With F_H = 0 the physical energy T + V of every stage-2 grid step equals the energy after
     the lock to round-off (the fitted midpoint step conserves it for any step length), and
@@ -403,9 +420,9 @@ def test_stage2_in_substeps_conserves_energy_and_keeps_the_constraints():
 
     sim = UmbrellaSimulator(UmbrellaParams(v0=-0.5))
     while sim.lock_event is None:
-        sim.advance(500, until_lock=True)
-    assert sim.stage2_substeps == 4
-    block = sim.advance(500)
+        sim.advance(250, until_lock=True)
+    assert sim.stage2_substeps == 8
+    block = sim.advance(250)
     energy = block.kinetic_energy + block.strain_energy
     lock = sim.lock_event
     assert abs(lock.energy_after - lock.energy_before) < 1e-12 * lock.energy_before
@@ -428,7 +445,7 @@ def test_a_run_publishing_at_1_khz_takes_the_same_stage2_steps():
     for driver in (RunDriver(p), RunDriver(p, 1000.0)):
         parts = []
         assert driver.run(0.12, on_chunk=lambda c: parts.append(c.block)) is None
-        assert driver.sim.stage2_substeps == 4
+        assert driver.sim.stage2_substeps == 8
         rows.append(np.concatenate([b.rows for b in parts], axis=1))
     assert np.array_equal(rows[0], rows[1])
 

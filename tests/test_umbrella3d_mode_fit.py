@@ -108,7 +108,7 @@ def test_an_asymmetric_stage2_with_the_fit_conserves_energy_and_holds_the_joints
     """A kicked rib, a tip mass: through the lock, then 30 ms locked with F = 0 on the ribs."""
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
         {'ribs': 3, 'rib1.out_of_plane_rate': 0.3, 'rib2.tip_mass': 0.02, 'lock': 'plastic'}))
-    assert sim.mode_fit and sim.h == 1e-4
+    assert sim.mode_fit and sim.h == 2e-4      # (stage 1's; stage 2 its substeps)
     sim.run(1.0, after_lock=0.03)
     assert sim.locked and sim.integrator.fit_active
     a = sim.record.arrays()

@@ -37,7 +37,8 @@ from .model import ConstraintSet, DEFORMING, LOCKED, Stage, UmbrellaModel
 from .outputs import LockEvent, STEP_FIELDS, step_peaks
 from .params import UmbrellaParams
 from .rigid import RigidMechanism
-from .step_rule import follows_lock, physics_step_of, stage2_resolution, substeps_for
+from .step_rule import (follows_lock, physics_step_of, stage2_resolution, stage2_step_of,
+                        stage2_substeps_for)
 
 #: the row of each STEP_FIELDS name
 _STEP_ROW = {name: row for row, name in enumerate(STEP_FIELDS)}
@@ -168,10 +169,13 @@ class FiniteElementEngine(Engine):
         self.integrator = self._integrator(model)
         self.h = physics_step_of(params)
         self.integrator.tolerance = newton_tolerance(self.h)
-        if params.phase_correction and self.phase_correctable:   # LockedModeFit
-            self.integrator.fit_stage2_modes(self.h)
         self.stage2_substeps = 1       # (until the lock: step_rule.follows_lock)
         self._follows_lock = follows_lock(params)
+        #: the step the lock is judged at: the grid's, or where stage 2 follows its lock the
+        #: grid's largest divisor no coarser than the mesh's (step_rule.stage2_step_of)
+        self.stage2_base = stage2_step_of(params, self.h)
+        if params.phase_correction and self.phase_correctable:   # LockedModeFit
+            self.integrator.fit_stage2_modes(self.stage2_base)
         self._cs = {stage: ConstraintSet(locked=stage == LOCKED, rigid=self.rigid)
                     for stage in Stage}
 
@@ -287,7 +291,7 @@ class FiniteElementEngine(Engine):
             qd = self.integrator.project_velocity(s.q, s.qd, cs)
         s = self.integrator.with_constraints(replace(s, qd=qd), force, cs)
         after = m.kinetic_energy(s.q, s.qd) + m.strain_energy(s.q)
-        resolution = None if self.rigid else stage2_resolution(m, s.q, s.qd, self.h)
+        resolution = None if self.rigid else stage2_resolution(m, s.q, s.qd, self.stage2_base)
         if resolution is not None and self._follows_lock:
             self._follow(resolution['needed_step'])
             if self.stage2_substeps > 1:       # (judged again at the step stage 2 takes)
@@ -297,13 +301,13 @@ class FiniteElementEngine(Engine):
 
     def _follow(self, needed: float | None) -> None:
         """Take stage 2 in the substeps its lock needs (None: the finest the rule allows)."""
-        k = substeps_for(self.h, needed)
+        k = stage2_substeps_for(self.h, self.stage2_base, needed)
         if k <= 1:
             return
         self.stage2_substeps = k
         integ = self.integrator
         integ.tolerance = newton_tolerance(self.h / k)
-        if integ.mode_fit is not None:
+        if integ.mode_fit is not None and self.h / k != self.stage2_base:
             integ.fit_stage2_modes(self.h / k)
 
 

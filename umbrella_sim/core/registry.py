@@ -255,19 +255,23 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        '(a rigid mechanism stopped at a point keeps no energy to redistribute)',
        choices=LOCKS),
     _P('time_step', float, 0.0, 's',
-       'physics step of the integrator; 0 = chosen for the mesh: the largest 0.1 ms / k '
+       'physics step of the integrator; 0 = chosen for the run. Stage 2 (flexible) '
+       "takes the mesh's step: the largest 0.1 ms / k "
        "(k = 1 .. 64) at which the locked frame's modes that carry all but 1 % of the "
        "stage-2 stress crest of the mesh's lock are resolved (ωh ≤ 1.5 with "
        "`phase_correction`, 0.35 without): with the thesis's frame, at N = 1 / 2 / 4 / 8 "
        'elements a segment, 0.1 ms / 33.3 / 20 / 7.7 µs with the energy lock (the '
-       'default), 0.1 ms / 25 / 16.7 / 7.7 µs with the plastic lock. Measured against '
+       'default), 0.1 ms / 25 / 16.7 / 7.7 µs with the plastic lock. Stage 1 (the '
+       "deployment), whose figures do not need the stage-2 step, takes 0.2 ms, the grid's "
+       'step (inputs and outputs), stage 2 then k physics steps a grid step. '
+       'Measured against '
        'converged runs (docs/validation.md, step convergence): the deploy time, stage-1 '
        'and stage-2 peak stresses, stage-2 period and amplitude and the stage-2 tip series '
        'within 1 mm of every studied case (N = 1-8, V0 = -0.2 and -0.5 m/s, both locks). '
        'Past a stage-2 tip deflection of 7 % of the leaf (V0 = -0.5: 12-16 %) the modes '
        "couple and stage 2 of flexible (the umbrella of N ribs too: its worst rib's lock) "
        'takes the step its lock needs, k physics steps a grid step (every mode '
-       'carrying stage-2 stress resolved, and at most 0.1 ms (7 % / deflection)^1.5: 25 us '
+       'carrying stage-2 stress resolved, and at most 0.1 ms (7 % / deflection)^1.5: 25 µs '
        'at N = 1, V0 = -0.5); the grid, inputs and outputs stay at the grid step. '
        'flexible-nonlinear: 0 = 0.1 ms at every mesh, its real-time step (its own rule, '
        'ωh ≤ 0.35, would take 4 µs at N = 4: `step_follows_mesh` takes it), at which its '
@@ -277,10 +281,11 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        low=0.0, high=0.01, rule=f'0, or >= {MIN_PHYSICS_STEP:g} s'),
     _P('step_follows_mesh', bool, False, '-',
        "with a `time_step` > 0 (or flexible-nonlinear's 0, which stands for 0.1 ms): true = "
-       'the physics step is the largest `time_step` / k '
-       "the mesh's stage-2 stresses need, and (flexible) stage 2 the step its lock needs "
-       "(the rule of `time_step` 0, below this ceiling; flexible-nonlinear keeps the mesh's "
-       "step in stage 2, and a lock that needs a finer one says so: 'coarse step'); "
+       'flexible: stage 1 at `time_step` (the grid) and stage 2 in the substeps its lock '
+       "needs, the largest `time_step` / k the mesh's stage-2 stresses need or finer (the "
+       'rule of `time_step` 0, below this ceiling); flexible-nonlinear: the physics step '
+       "is the largest `time_step` / k the mesh's stage-2 stresses need, in both stages "
+       "(a lock that needs a finer one says so: 'coarse step'); "
        'false = `time_step` as it is (a run whose step leaves more than 1 % of its '
        "stage-2 stress crest to unresolved modes says so: 'coarse step'). The node still "
        'takes the largest step ≤ it that divides 1/`publish_rate`'),

@@ -95,6 +95,21 @@ MAX_STEP_DIVISOR = 64
 #: the ceiling of the automatic step (time_step 0): the one-element mesh's step, chosen by
 #: its accuracy against converged runs (docs/validation.md) and what keeps it ~15x real time
 AUTO_STEP_CEILING = 1e-4
+#: stage 1's step where the step is chosen for the run (time_step 0, the flexible model),
+#: the grid's: stage 1 is a deployment whose own figures (the lock instant, each rib's
+#: deployment, the stage-1 peaks, the state the lock starts stage 2 from) do not need the
+#: stage-2 step, which resolves the modes the lock sets vibrating; stage 2 takes the mesh's
+#: step as substeps (stage2_step_of).  Measured against runs at a quarter of the mesh's
+#: step, stage 2 at the mesh's step in both (tests/test_time_step.py, docs/validation.md):
+#: the thesis's deployment (V0 = -0.2) at 1 / 2 / 4 elements moved the lock by 3.1e-7 /
+#: 3.1e-7 / 5.3e-7 s (0.1 ms and the mesh's own step: 5.2e-7 / 3.0e-8 / 4.3e-7) and the
+#: stage-2 tips by 0.13 / 0.05 / 0.05 % of their amplitude (0.11 / 0.03 / 0.03 %); three
+#: ribs, one stuck until 0.1 s, one with a tip mass, 1 / 2 elements: the lock by 5.3e-6 /
+#: 4.4e-6 s (2.1e-5 / 1.8e-5) and the tips 0.54 / 0.11 % (0.67 / 0.35 %).  A driven base
+#: that moves keeps the mesh's step in stage 1 (umbrella3d/simulator3d.py, grid_step):
+#: its drive sets the modes vibrating before the lock (a jolt and a spin-up: the stage-2
+#: tips 1.98 mm off of 140 mm at 0.2 ms against 0.89 mm at the mesh's step)
+STAGE1_STEP_CEILING = 2e-4
 #: omega h of a 1 % period error of the plain midpoint rule ((omega h)^2 / 12): the limit of a
 #: resolved mode without the mode fit
 UNFITTED_OMEGA_H = math.sqrt(12 * 0.01)
@@ -181,20 +196,75 @@ def resolving_divisor(model: UmbrellaModel, time_step: float, limit: float,
 
 def physics_step_of(params: UmbrellaParams) -> float:
     """
-    Return the integrator's step (s) of these parameters.
+    Return the integrator's step (s) of these parameters: the grid's, stage 1's.
 
-    ``time_step`` if it is given (> 0) and ``step_follows_mesh`` is off; else, for the
-    flexible models, the largest ceiling / k (k = 1 .. MAX_STEP_DIVISOR; the ceiling is
-    time_step, or AUTO_STEP_CEILING for time_step 0) whose unresolved modes carry at most
-    STRESS_SHARE_LIMIT of the stage-2 stress crest of the mesh's lock (``lock_amplitudes``),
-    or ceiling / MAX_STEP_DIVISOR if none does (the run then says so: 'coarse step').  The
-    rigid models, and flexible-nonlinear without step_follows_mesh: the ceiling.
+    ``time_step`` if it is given (> 0) and ``step_follows_mesh`` is off.  Where stage 2
+    takes the step its own lock needs (``follows_lock``: the flexible model with time_step
+    0 or step_follows_mesh), stage 1's step (``stage1_step_of``), stage 2 then taking that
+    lock's substeps.  flexible-nonlinear with step_follows_mesh: the mesh's step
+    (``mesh_step_of``).  The rigid models, and flexible-nonlinear without
+    step_follows_mesh: the ceiling (time_step, or AUTO_STEP_CEILING for time_step 0).
+    """
+    ceiling, fixed = _ceiling(params)
+    if fixed:
+        return ceiling
+    if follows_lock(params):
+        return stage1_step_of(params)
+    return mesh_step_of(params)
+
+
+def mesh_step_of(params: UmbrellaParams) -> float:
+    """
+    Return the step the mesh's stage 2 needs (s): the step its lock needs.
+
+    For the flexible models the largest ceiling / k (k = 1 .. MAX_STEP_DIVISOR; the
+    ceiling is time_step, or AUTO_STEP_CEILING for time_step 0) whose unresolved modes
+    carry at most STRESS_SHARE_LIMIT of the stage-2 stress crest of the mesh's lock
+    (``lock_amplitudes``), or ceiling / MAX_STEP_DIVISOR if none does (the run then says
+    so: 'coarse step'); the rigid models, and flexible-nonlinear without step_follows_mesh:
+    the ceiling.
     """
     ceiling, fixed = _ceiling(params)
     if fixed:
         return ceiling
     return ceiling / _mesh_divisor(tuple(sorted(params.replace(time_step=ceiling)
                                                 .as_dict().items())))
+
+
+def stage1_step_of(params: UmbrellaParams) -> float:
+    """
+    Return stage 1's step where stage 2 takes the step its lock needs (``follows_lock``).
+
+    time_step if given (step_follows_mesh), else STAGE1_STEP_CEILING: the grid's step,
+    stage 2 taking it in substeps (``stage2_step_of``, ``substeps_for``).
+    """
+    return params.time_step if params.time_step > 0.0 else STAGE1_STEP_CEILING
+
+
+def stage2_step_of(params: UmbrellaParams, grid: float | None = None) -> float:
+    """
+    Return the step stage 2 takes on this grid short of its own lock's needs (s).
+
+    Where it follows its lock (``follows_lock``): the largest grid step / k (grid: the run's,
+    ``physics_step_of``) no coarser than the mesh's step (``mesh_step_of`` below 0.1 ms, or
+    below time_step if finer): the step the rule was measured at (docs/validation.md), at
+    which the lock is judged and which it divides further where the modes couple
+    (``substeps_for``); else the grid's step.
+    """
+    grid = physics_step_of(params) if grid is None else grid
+    if not follows_lock(params):
+        return grid
+    ceiling = min(params.time_step or AUTO_STEP_CEILING, AUTO_STEP_CEILING)
+    mesh = mesh_step_of(params.replace(time_step=ceiling, step_follows_mesh=True))
+    return grid / math.ceil(grid / mesh * (1.0 - 1e-9))
+
+
+def stage2_step_text(params: UmbrellaParams) -> str:
+    """Return what a run's step says of stage 2 where it takes its own step (else '')."""
+    if not follows_lock(params):
+        return ''
+    return (f' in stage 1, {stage2_step_of(params):.3g} s in stage 2 (finer if its lock '
+            'needs it)')
 
 
 def smallest_step_of(params: UmbrellaParams) -> float:
@@ -337,6 +407,16 @@ def follows_lock(params: UmbrellaParams) -> bool:
     params = getattr(params, 'planar', params)     # (the umbrella's: its planar record's)
     return (isinstance(params, UmbrellaParams) and params.model == 'flexible'
             and not _ceiling(params)[1])
+
+
+def stage2_substeps_for(grid: float, base: float, needed: float | None) -> int:
+    """
+    Return the physics steps a stage-2 grid step takes: its base's (``stage2_step_of``) ...
+
+    ... times those the base step takes for the step its lock needs (``substeps_for``:
+    needed, judged at the base step).
+    """
+    return round(grid / base) * substeps_for(base, needed)
 
 
 def substeps_for(h: float, needed: float | None) -> int:

@@ -33,7 +33,7 @@ import numpy as np
 
 from .driver import RunDriver
 from .params import UmbrellaParams
-from .step_rule import physics_step_of
+from .step_rule import stage2_step_of
 from .summary import oscillation_period
 
 #: issue-level accuracy targets for the default step (relative unless stated)
@@ -43,14 +43,14 @@ TARGETS = {'deploy_time': 1e-5, 'stage2_period': 5e-4, 'stage2_amplitude': 5e-3,
 
 def mesh_step(params: UmbrellaParams) -> float:
     """
-    Return the step chosen for the mesh (time_step 0, the default).
+    Return the stage-2 step chosen for the mesh (time_step 0, the default).
 
-    step_rule.physics_step_of: the largest 0.1 ms / k whose unresolved modes carry at most
-    1 % of the stage-2 stress crest of the mesh's lock.  docs/validation.md (step
-    convergence) measures it against converged runs, and tests/test_time_step.py checks it
-    where the fixed 0.1 ms misses a target.
+    step_rule.stage2_step_of: the largest 0.1 ms / k whose unresolved modes carry at most
+    1 % of the stage-2 stress crest of the mesh's lock (stage 1's 0.2 ms over 2k).
+    docs/validation.md (step convergence) measures it against converged runs, and
+    tests/test_time_step.py checks it where the fixed 0.1 ms misses a target.
     """
-    return physics_step_of(params.replace(time_step=0.0))
+    return stage2_step_of(params.replace(time_step=0.0))
 
 
 #: the period of the dominant mode of x(t): the summary's estimator (outputs.py)

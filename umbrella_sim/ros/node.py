@@ -72,7 +72,7 @@ from ..core.engines import SimulationDiverged
 from ..core.params import shortened_step_note, UmbrellaParams
 from ..core.registry import (check_node_parameters, CONTROLLER_PARAMETERS, NODE_PARAMETERS,
                              REGISTRY, RESET, SPECS)
-from ..core.step_rule import physics_step_of
+from ..core.step_rule import physics_step_of, stage2_step_text
 from ..core.umbrella3d.params3d import names_a_rib, umbrella_model
 
 SIM_TIME_REASON = ('umbrella_node publishes /clock (the sim time every message carries) and '
@@ -217,7 +217,7 @@ class UmbrellaNode(Node):
         self.get_logger().info(
             f'umbrella_sim {__version__}: model {p.model}, {p.elements_per_segment} '
             f'element(s) a segment, {f"{self.ribs} ribs (3D umbrella), " * (self.ribs > 1)}'
-            f'v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s '
+            f'v0 = {p.v0:g} m/s, physics step {self.driver.step:.9g} s{stage2_step_text(p)} '
             f'({self.driver.period_steps} per publication at '
             f'{self.driver_rate:g} Hz), kernel {self.driver.backend}')
         note = shortened_step_note(physics_step_of(p), self.driver_rate)

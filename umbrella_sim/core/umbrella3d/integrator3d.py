@@ -203,6 +203,7 @@ class MidpointUmbrella:
     def fit_stage2_modes(self, h: float) -> None:
         """Fit the base's locked modes (stage2fit.stage2_fit) for grid step h, from lock_at on."""
         self.mode_fit = stage2_fit(self.model, h, self.damping_beta)
+        self.fitted_step = h
 
     def take_substeps(self, h: float, tolerance: float | None = None) -> None:
         """
@@ -210,12 +211,12 @@ class MidpointUmbrella:
 
         The planar engine's rule at its substeps (engines.FiniteElementEngine._follow):
         the Newton tolerance (tolerance: given; None: the step h's, newton_tolerance), the
-        modes fitted for h.  Before ``lock_at``.
+        modes fitted for h (kept if they are h's already).  Before ``lock_at``.
         """
         self.tolerance = newton_tolerance(h) if tolerance is None else tolerance
         if self.compiled is not None:
             self.compiled.set_tolerance(self.tolerance)
-        if self.mode_fit is not None:
+        if self.mode_fit is not None and h != self.fitted_step:
             self.fit_stage2_modes(h)
 
     def lock_at(self, state: State3D | None = None) -> None:

@@ -60,7 +60,8 @@ from ..engines import event_root, EVENT_TIME_TOLERANCE
 from ..integrators import newton_tolerance
 from ..kernel import ALPHA1_AXLE, kernel_error, STATUS
 from ..lock import locked_velocity_base, LockImpossible, velocity_keeping_energy
-from ..step_rule import follows_lock, physics_step_of, stage2_physics_steps, substeps_for
+from ..step_rule import (follows_lock, physics_step_of, stage2_physics_steps, stage2_step_of,
+                         stage2_substeps_for)
 
 
 #: physics steps a compiled call takes at most (its output rows: ~0.3 MB at 12 ribs x 2
@@ -86,14 +87,18 @@ class UmbrellaSimulator3D:
         self.integrator = MidpointUmbrella(
             m, newton_tolerance(self.h) if tolerance is None else tolerance, kernel=kernel,
             **({} if carry_steps is None else {'carry_steps': carry_steps}))
-        if self.mode_fit:
-            self.integrator.fit_stage2_modes(self.h)
+        self._follows_lock = step is None and follows_lock(self.params)
+        #: the step the lock is judged at: the grid's, or where stage 2 follows its lock the
+        #: grid's largest divisor no coarser than the mesh's (step_rule.stage2_step_of)
+        self.stage2_base = (self.stage2_step(self.params, self.h) if self._follows_lock
+                            else self.h)
+        if self.mode_fit:       # (at the step stage 2 takes short of its lock's needs)
+            self.integrator.fit_stage2_modes(self.stage2_base)
         #: the physics steps a stage-2 grid step takes (1 until a lock needs more:
         #: ``_judge_stage2``), and how well the stage-2 step resolves the lock's modes (the
         #: worst rib's step_rule.stage2_resolution; None before the lock, co-rotational ribs)
         self.stage2_substeps = 1
         self.stage2_resolution: dict | None = None
-        self._follows_lock = step is None and follows_lock(self.params)
         #: a Newton tolerance given: kept at the substeps (else theirs, newton_tolerance)
         self._tolerance = tolerance
         self.force = self.params.planar.sleeve_force * m.n_ribs
@@ -127,10 +132,28 @@ class UmbrellaSimulator3D:
 
     @classmethod
     def grid_step(cls, params: UmbrellaRibsParams) -> float:
-        """Return the physics step of these parameters (the planar rule, its mode fit's)."""
+        """
+        Return the grid's step of these parameters (the planar rule, its mode fit's).
+
+        A driven base that moves, with time_step 0, keeps stage 2's step in stage 1 too: its
+        drive sets the modes vibrating before the lock, which stage 1's step does not
+        resolve (step_rule.STAGE1_STEP_CEILING says what was measured).
+        """
+        rule = cls._planar_rule(params)
+        drive = (params.base_accel_x, params.base_accel_z, params.base_spin_rate)
+        if params.base == 'prescribed' and any(drive) and rule.time_step == 0.0:
+            return stage2_step_of(rule)
+        return physics_step_of(rule)
+
+    @classmethod
+    def stage2_step(cls, params: UmbrellaRibsParams, grid: float | None = None) -> float:
+        """Return stage 2's step short of its lock's needs on the grid (the planar rule)."""
+        return stage2_step_of(cls._planar_rule(params), grid)
+
+    @classmethod
+    def _planar_rule(cls, params: UmbrellaRibsParams):
         planar = params.planar
-        return physics_step_of(planar if cls.fits_modes(params)
-                               else planar.replace(phase_correction=False))
+        return planar if cls.fits_modes(params) else planar.replace(phase_correction=False)
 
     # ------------------------------------------------------------ start
     def initial_state(self) -> State3D:
@@ -309,12 +332,12 @@ class UmbrellaSimulator3D:
         """
         if self.params.planar.model != 'flexible':
             return
-        resolution = stage2_resolution(self.model, s.qr, s.vr, self.h)
+        resolution = stage2_resolution(self.model, s.qr, s.vr, self.stage2_base)
         if self._follows_lock:
-            k = substeps_for(self.h, resolution['needed_step'])
+            k = stage2_substeps_for(self.h, self.stage2_base, resolution['needed_step'])
+            self.integrator.take_substeps(self.h / k, self._tolerance)
             if k > 1:
                 self.stage2_substeps = k
-                self.integrator.take_substeps(self.h / k, self._tolerance)
                 # (judged again at the step stage 2 takes, as the planar engine)
                 resolution = stage2_resolution(self.model, s.qr, s.vr, self.h / k)
         self.stage2_resolution = resolution
