@@ -32,7 +32,7 @@ from std_srvs.srv import SetBool, Trigger
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.solver import UmbrellaSimulator
-from umbrella_sim.core.step_rule import physics_step_of
+from umbrella_sim.core.step_rule import physics_step_of, stage2_step_of
 from umbrella_sim.ros.messages import CLOCK_READER_QOS, LATCHED
 from umbrella_sim.testing import NodeProcess, poll, ros_env
 
@@ -369,20 +369,24 @@ def test_node_says_when_physics_cannot_keep_up(probe):
 
 def test_the_step_chosen_for_the_mesh_on_the_node():
     """
-    Check the node's step at N = 2: the one chosen for the mesh, and the offline core's lock.
+    Check the node's steps at N = 2: the ones chosen for the run, and the offline core's lock.
 
-    N = 2 at 1 kHz: 33.3 us (time_step 0: 0.1 ms / 3 leaves 1 % of the stage-2 stress crest
-    to unresolved modes, and divides the period); the lock instant equals the offline
-    simulator's with the same parameters (same grid, same code: 1e-9 s).
+    N = 2 at 1 kHz: stage 1 on its 0.2 ms grid, stage 2 at 33.3 us (time_step 0: 0.1 ms / 3
+    leaves 1 % of the stage-2 stress crest to unresolved modes), which the start-up line
+    says; both divide the period; the lock instant equals the offline simulator's with the
+    same parameters (same grid, same code: 1e-9 s).
     """
     with NodeProcess('-p', 'elements_per_segment:=2',
                      '-p', 'publish_rate:=1000.0', '-p', 'record:=false',
                      '-p', 'real_time_factor:=0.0', '-p', 'duration:=0.3') as node:
-        step = float(node.wait_for_log(r'physics step ([0-9.e-]+) s').group(1))
+        said = node.wait_for_log(r'physics step ([0-9.e-]+) s in stage 1, ([0-9.e-]+) s in '
+                                 r'stage 2')
+        step, stage2 = float(said.group(1)), float(said.group(2))
         lock_t = float(node.wait_for_log(r'locked at t = ([0-9.]+) s', timeout=120).group(1))
         assert node.proc.wait(timeout=120) == 0
     p = UmbrellaParams(elements_per_segment=2)
-    assert step == pytest.approx(physics_step_of(p), rel=1e-8) and step < 1e-4
+    assert step == pytest.approx(physics_step_of(p), rel=1e-8) and step == 2e-4
+    assert stage2 == pytest.approx(stage2_step_of(p), rel=1e-3) and stage2 < 1e-4
     sim = UmbrellaSimulator(p)
     while sim.lock_event is None:
         sim.advance(100)

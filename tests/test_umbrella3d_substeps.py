@@ -134,3 +134,43 @@ def test_a_recording_at_time_step_0_keeps_the_substeps_and_resimulates_exactly(
     res = resimulate(log)
     assert res['compared'] > 90 and not res['problems']
     assert max(res['max_abs_diff'].values()) == 0.0     # the same run, on the same build
+
+
+@needs_kernel
+@pytest.mark.slow       # (a 2.5 us reference through a 0.75 s deployment, ~9 s)
+def test_stage1_on_its_grid_leaves_the_lock_and_stage2_where_the_meshs_step_does():
+    """
+    Three ribs deploying from rest at 6 N a rib, one stuck until 0.1 s, one with a tip mass.
+
+    time_step 0 (stage 1 on its 0.2 ms grid, stage 2 in the substeps its lock needs) against
+    the run whose stage 1 takes 0.1 ms (step_follows_mesh: the same stage-2 step) and a
+    2.5 us reference: the lock instant within 2e-5 s and the in-plane tips of 0.1 s of stage
+    2 (on a 1 ms grid every run steps on) within 1 % of their amplitude, as 0.1 ms leaves
+    them (measured: 1.1e-5 s and 0.24 % on the grid, 1.5e-5 s and 0.30 % at 0.1 ms).  The
+    jump of the stuck hinge's release is in stage 1, which the grid takes.
+    """
+    values = {'ribs': 3, 'v0': 0.0, 'sleeve_force': 6.0, 'rib1.stick_until': 0.1,
+              'rib2.tip_mass': 0.05}
+
+    def run(time_step, follows=False):
+        sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
+            dict(values, time_step=time_step, step_follows_mesh=follows)), kernel='compiled')
+        sim.run(5.0, after_lock=0.1)
+        a = sim.record.arrays()
+        grid = (np.ceil(sim.lock_time / 1e-3) + np.arange(1, 99)) * 1e-3
+        rows = np.searchsorted(a['time'], grid - 1e-9)
+        assert np.abs(a['time'][rows] - grid).max() < 1e-9
+        return sim, a['tip'][rows, :, 1]
+
+    default, tips = run(0.0)
+    finer, finer_tips = run(1e-4, follows=True)
+    assert default.h == 2e-4 and finer.h == 1e-4
+    assert default.stage2_substeps == 2 * finer.stage2_substeps      # the same stage-2 step
+    ref, ref_tips = run(2.5e-6)
+    amplitude = np.abs(ref_tips).max()
+    errors = {}
+    for name, sim, series in (('grid', default, tips), ('0.1 ms', finer, finer_tips)):
+        errors[name] = (abs(sim.lock_time - ref.lock_time),
+                        np.abs(series - ref_tips).max() / amplitude)
+    for lock, tip in errors.values():
+        assert lock < 2e-5 and tip < 0.01
