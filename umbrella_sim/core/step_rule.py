@@ -110,6 +110,11 @@ AUTO_STEP_CEILING = 1e-4
 #: its drive sets the modes vibrating before the lock (a jolt and a spin-up: the stage-2
 #: tips 1.98 mm off of 140 mm at 0.2 ms against 0.89 mm at the mesh's step)
 STAGE1_STEP_CEILING = 2e-4
+#: stage 1's step at N elements a segment is at most this / N: an element's own modes rise
+#: with the mesh, and some carry the link's stage-1 peak stress.  At 0.2 ms the stage-1
+#: peaks of N = 4 and 8 came out up to 3.1 % and 2.3 % off (V0 = -0.3 and -0.5; target
+#: 3 %), at 0.1 ms and 50 us 0.53 % and 0.50 % (N = 1 and 2 at 0.2 ms: 1.9 % and 0.9 %)
+STAGE1_MESH_STEP = 4e-4
 #: omega h of a 1 % period error of the plain midpoint rule ((omega h)^2 / 12): the limit of a
 #: resolved mode without the mode fit
 UNFITTED_OMEGA_H = math.sqrt(12 * 0.01)
@@ -235,10 +240,13 @@ def stage1_step_of(params: UmbrellaParams) -> float:
     """
     Return stage 1's step where stage 2 takes the step its lock needs (``follows_lock``).
 
-    time_step if given (step_follows_mesh), else STAGE1_STEP_CEILING: the grid's step,
-    stage 2 taking it in substeps (``stage2_step_of``, ``substeps_for``).
+    time_step if given (step_follows_mesh), else STAGE1_STEP_CEILING, or STAGE1_MESH_STEP /
+    N where that is finer (N elements a segment): the grid's step, stage 2 taking it in
+    substeps (``stage2_step_of``, ``substeps_for``).
     """
-    return params.time_step if params.time_step > 0.0 else STAGE1_STEP_CEILING
+    if params.time_step > 0.0:
+        return params.time_step
+    return min(STAGE1_STEP_CEILING, STAGE1_MESH_STEP / params.elements_per_segment)
 
 
 def stage2_step_of(params: UmbrellaParams, grid: float | None = None) -> float:
