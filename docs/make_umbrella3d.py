@@ -417,9 +417,10 @@ resolves them (`step_follows_mesh` takes it, at a multiple of the cost).
 
 The umbrella's stages take the planar model's steps: where the step is chosen for the run
 (`time_step` 0, or `step_follows_mesh`: step_rule.follows_lock of the planar record),
-stage 1 (the deployment) steps on a 0.2 ms grid (step_rule.STAGE1_STEP_CEILING: its
-figures do not need the stage-2 step; a driven base that moves keeps the mesh's step, its
-drive setting the modes vibrating before the lock) and stage 2 takes the mesh's step as
+stage 1 (the deployment) steps on a 0.2 ms grid at 1 and 2 elements a segment
+(step_rule.STAGE1_STEP_CEILING, STAGE1_FINEST_MESH: its figures do not need the stage-2
+step; finer meshes, and a driven base that moves, keep the mesh's step, a drive setting
+the modes vibrating before the lock) and stage 2 takes the mesh's step as
 substeps of it (step_rule.stage2_step_of: 2 of 0.1 ms at 1 element, 6 of 33 us at 2); a
 lock whose stage-2 tip deflection passes 7 % of the leaf (the modes' coupling,
 docs/validation.md, amplitude) divides the mesh's step further

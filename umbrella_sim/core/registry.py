@@ -262,9 +262,9 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        "`phase_correction`, 0.35 without): with the thesis's frame, at N = 1 / 2 / 4 / 8 "
        'elements a segment, 0.1 ms / 33.3 / 20 / 7.7 µs with the energy lock (the '
        'default), 0.1 ms / 25 / 16.7 / 7.7 µs with the plastic lock. Stage 1 (the '
-       "deployment), whose figures do not need the stage-2 step, takes 0.2 ms (0.4 ms / N "
-       "where finer), the grid's step (inputs and outputs), stage 2 then k physics steps a "
-       'grid step. '
+       'deployment), whose figures do not need the stage-2 step, takes 0.2 ms at N = 1 and '
+       "2 (finer meshes: the mesh's step), the grid's step (inputs and outputs), stage 2 then "
+       'k physics steps a grid step. '
        'Measured against '
        'converged runs (docs/validation.md, step convergence): the deploy time, stage-1 '
        'and stage-2 peak stresses, stage-2 period and amplitude and the stage-2 tip series '

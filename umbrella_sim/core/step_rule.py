@@ -110,11 +110,13 @@ AUTO_STEP_CEILING = 1e-4
 #: its drive sets the modes vibrating before the lock (a jolt and a spin-up: the stage-2
 #: tips 1.98 mm off of 140 mm at 0.2 ms against 0.89 mm at the mesh's step)
 STAGE1_STEP_CEILING = 2e-4
-#: stage 1's step at N elements a segment is at most this / N: an element's own modes rise
-#: with the mesh, and some carry the link's stage-1 peak stress.  At 0.2 ms the stage-1
-#: peaks of N = 4 and 8 came out up to 3.1 % and 2.3 % off (V0 = -0.3 and -0.5; target
-#: 3 %), at 0.1 ms and 50 us 0.53 % and 0.50 % (N = 1 and 2 at 0.2 ms: 1.9 % and 0.9 %)
-STAGE1_MESH_STEP = 4e-4
+#: the finest mesh (elements a segment) whose stage 1 takes STAGE1_STEP_CEILING; a finer one
+#: keeps the mesh's step in stage 1 too.  Its elements' own modes carry the link's stage-1
+#: peak stress (at 0.2 ms N = 4 and 8 came out up to 3.1 % and 2.3 % off, target 3 %; N = 1
+#: and 2: 1.9 % and 0.9 %), and its stage-2 peaks, at the edge of their 3 % at N = 4,
+#: V0 = -0.5, move by half a per cent with the state the lock starts from (2.6 % with stage
+#: 1 at the mesh's 20 us or at 0.2 ms, 3.1 % at 40 us or 0.1 ms)
+STAGE1_FINEST_MESH = 2
 #: omega h of a 1 % period error of the plain midpoint rule ((omega h)^2 / 12): the limit of a
 #: resolved mode without the mode fit
 UNFITTED_OMEGA_H = math.sqrt(12 * 0.01)
@@ -240,13 +242,15 @@ def stage1_step_of(params: UmbrellaParams) -> float:
     """
     Return stage 1's step where stage 2 takes the step its lock needs (``follows_lock``).
 
-    time_step if given (step_follows_mesh), else STAGE1_STEP_CEILING, or STAGE1_MESH_STEP /
-    N where that is finer (N elements a segment): the grid's step, stage 2 taking it in
-    substeps (``stage2_step_of``, ``substeps_for``).
+    time_step if given (step_follows_mesh), else STAGE1_STEP_CEILING up to
+    STAGE1_FINEST_MESH elements a segment and the mesh's step above: the grid's step, stage 2
+    taking it in substeps (``stage2_step_of``, ``substeps_for``).
     """
     if params.time_step > 0.0:
         return params.time_step
-    return min(STAGE1_STEP_CEILING, STAGE1_MESH_STEP / params.elements_per_segment)
+    if params.elements_per_segment > STAGE1_FINEST_MESH:
+        return mesh_step_of(params)
+    return STAGE1_STEP_CEILING
 
 
 def stage2_step_of(params: UmbrellaParams, grid: float | None = None) -> float:
