@@ -389,7 +389,7 @@ def geometric_validity_warnings(params: dict, peak_stress: float,
 #: Exudyn case (V0 = -1, 0.1 kg tip on rib 1) 0.41 and 44 % in plane (35 % out of it), at
 #: V0 = -0.3 0.037 and 5.2 %, at -0.2 0.016 and 1.5-2.1 %.  At 0.025 every run more than 5 %
 #: off (tip or peak stress) warns, no quiet run is more than 2.1 % off, the warned ones at
-#: least 3.8 %, and the default runs (0.0095) are quiet: with the thesis's data it warns from
+#: least 3.6 %, and the default runs (0.0095) are quiet: with the thesis's data it warns from
 #: V0 = -0.32 m/s.  The link's compression (< 1.5 % of its Euler load in a free stage 1) and
 #: the largest section rotation |v'| do not separate those runs.
 #: A base spinning about the hub axis at Omega (base prescribed or free, ribs >= 2) adds the
