@@ -411,7 +411,9 @@ def first_largest_of_substeps(values: np.ndarray, m: int) -> np.ndarray:
     """
     steps = len(values)
     groups = -(-steps // m)
-    padded = np.full((groups * m,) + values.shape[1:], -np.inf)
-    padded[:steps] = values
+    padded = values
+    if steps % m:                   # (the shorter last group padded)
+        padded = np.full((groups * m,) + values.shape[1:], -np.inf)
+        padded[:steps] = values
     first = (m * np.arange(groups)).reshape((groups,) + (1,) * (values.ndim - 1))
     return padded.reshape((groups, m) + values.shape[1:]).argmax(1) + first
