@@ -437,9 +437,10 @@ numpy step takes a grid step's physics steps one by one (`UmbrellaSimulator3D.st
 compiled advance k of them per grid step in one call; either way Record3D keeps one row a
 grid step, its last physics step's figures with each stress channel's largest over its
 physics steps (each physics step's Hermite crest; outputs3d.fold_substeps3d, the planar
-outputs.fold_substeps' rule). From one locked state (4 asymmetric ribs, V0 = -0.5, 10
-physics steps a grid step) the two paths' 40 grid rows agree within the numpy reference's own ulp
-spread on every base, with the same Newton iterations (tests/test_umbrella3d_substeps.py).
+outputs.fold_substeps' rule, which the compiled advance applies itself: Advance3DCall.fold).
+From one locked state (4 asymmetric ribs, V0 = -0.5, 10 physics steps a grid step) the two
+paths' 40 grid rows agree within the numpy reference's own ulp spread on every base, with
+the same Newton iterations (tests/test_umbrella3d_substeps.py).
 With a `time_step` given, stage 2 stays on it and its summary's 'coarse step' (the lock's
 worst rib, judged at the step stage 2 takes) names the `time_step` that resolves it; the
 node, the driver and replay pin the physics step by the planar model's rule

@@ -36,7 +36,7 @@
 
 /* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
  * reordered, a function's arguments changed). */
-#define UMBRELLA_ABI_VERSION 6
+#define UMBRELLA_ABI_VERSION 7
 
 /* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
  * exported. */
@@ -304,6 +304,11 @@ typedef struct {
      * every coordinate (0: none) */
     int bus_damp_rank;
     const double *bus_damp_a, *bus_damp_b;
+    /* not single: the rows of each run of fold steps (a grid step's stage-2 substeps) as one
+     * row, outputs3d.fold_substeps3d's: the last step's figures, the works and counts summed
+     * over the run, each stress figure the first of the largest (a NaN the largest); a last
+     * shorter run (the steps before a failure) its own row.  0 or 1: a row a step */
+    int fold;
 } Advance3DCall;
 
 /* Held by Python only as pointers: the stepping contexts (every work buffer, allocated

@@ -1444,6 +1444,26 @@ static void release(Ctx3D *x, Advance3DCall *a) {
     }
 }
 
+/* the offset in a row of the works and counts a folded row sums (kernel3d.row_layout:
+ * work_force, work_friction (R), iterations, factorisations, work_damping, work_drive) */
+static int summed_offset(const Ctx3D *x) {
+    int R = x->R, N = R * x->n;
+    return 1 + 2 * N + 2 * x->ns + R * ROWS + x->cs + R + 2;
+}
+
+/* merge a step's stress figures f into its run's folded ones o: each the first of the
+ * largest, a NaN the largest (np.argmax's over the steps: outputs.first_largest_of_substeps) */
+static void merge_figures(int R, const double *f, double *o) {
+    const double *f_at = f + R * FIG_CHANNELS;
+    double *o_at = o + R * FIG_CHANNELS;
+    for (int i = 0; i < R * FIG_CHANNELS; i++)
+        if (!isnan(o[i]) && (isnan(f[i]) || f[i] > o[i])) {
+            o[i] = f[i];
+            o_at[2 * i] = f_at[2 * i];
+            o_at[2 * i + 1] = f_at[2 * i + 1];
+        }
+}
+
 int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
     a->n_done = 0;
     a->iterations = 0;
@@ -1461,6 +1481,9 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
         return SINGULAR;
     int figures = x->fig && !a->single && a->out;
     if (figures) figures_start(x, a);
+    int fold = a->single || a->fold < 1 ? 1 : a->fold;
+    int sum_at = summed_offset(x), n_sum = x->R + 5, n_fig = FIG_CHANNELS * 3 * x->R;
+    double sums[x->R + 5], fig[FIG_CHANNELS * 3 * x->R];     /* (C99 arrays of the ribs) */
     for (int k = 0; k < steps; k++) {
         load(x, a);
         double t_next = a->single ? a->t + a->h : (double)(a->k0 + k + 1) * a->h;
@@ -1490,10 +1513,21 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
         a->t = t_next;
         commit(x, a);
         if (!a->single) release(x, a);
-        if (a->out) write_row(x, a, a->out + (size_t)k * a->row_len);
-        if (figures)
-            figure_row(x, a, t_next - t_before,
-                       a->out + (size_t)(k + 1) * a->row_len - FIG_CHANNELS * 3 * x->R);
+        double *row = a->out ? a->out + (size_t)(k / fold) * a->row_len : NULL;
+        int first = k % fold == 0;
+        if (row) {
+            write_row(x, a, row);
+            if (fold > 1) {             /* the run's sums so far, into its row */
+                for (int i = 0; i < n_sum; i++)
+                    sums[i] = first ? row[sum_at + i] : sums[i] + row[sum_at + i];
+                memcpy(row + sum_at, sums, sizeof(double) * n_sum);
+            }
+        }
+        if (figures) {
+            double *o = row + a->row_len - n_fig;
+            figure_row(x, a, t_next - t_before, first ? o : fig);
+            if (!first) merge_figures(x->R, fig, o);
+        }
         a->n_done++;
     }
     return OK;

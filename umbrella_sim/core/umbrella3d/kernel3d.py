@@ -352,12 +352,14 @@ class CompiledStep3D:
         return self._state(), work
 
     def advance(self, s: State3D, k0: int, h: float, n_steps: int, force: float,
-                locked: bool, crest_from_state: bool = False):
+                locked: bool, crest_from_state: bool = False, fold: int = 1):
         """
         Take up to n_steps grid steps t_k -> (k + 1) h from s at t_k0.
 
         crest_from_state: the first step's stress figures take their crests from s (the
         record continues in the same stage: Record3D.crest_continues), else its own values.
+        fold: the rows of each run of fold steps folded into one (Advance3DCall.fold:
+        outputs3d.fold_substeps3d's rule, in the kernel), a last shorter run its own.
 
         Return (status, steps done, rows (dict of the steps' figures), the state reached).
         Status 'ok', 'crossing' (the next step reaches the stop unlocked: not taken), or a
@@ -370,10 +372,10 @@ class CompiledStep3D:
             self._set_drive(np.arange(k0 + 1, k0 + n_steps + 1) * h)
         c = self.call
         c.single, c.k0, c.n_steps = 0, k0, n_steps
-        c.crest_from_state = int(crest_from_state)
+        c.crest_from_state, c.fold = int(crest_from_state), fold
         status = self.lib.umbrella3d_advance(self._ctx, self._call_ref)
         done = c.n_done
-        return status, done, self.rows(done), (self._state() if done else s)
+        return status, done, self.rows(-(-done // fold)), (self._state() if done else s)
 
 
 def status_error(status: int, t: float) -> ArithmeticError:

@@ -155,10 +155,12 @@ class Record3D:
         computed by the compiled step with ``_crests``' rule (kernel3d.row_layout; their
         first step's crest from the last step added if ``crest_continues``), else computed
         here.  substeps: the rows are physics steps taken that many a grid step (stage 2's
-        substeps), kept as grid rows (fold_substeps3d) at times (the grid's).
+        substeps), kept as grid rows (fold_substeps3d); times: the rows' (the grid's) times.
         """
         if substeps > 1:
             rows = self._grid_rows(rows, locked, substeps, times)
+        elif times is not None:         # (rows the kernel folded: at the grid's times)
+            rows = dict(rows, t=np.asarray(times, dtype=float))
         # (the ufuncs' own accumulate and reduce: np.cumsum's and np.sum's arithmetic,
         # without their dispatch, which costs more than the sums of a block of steps)
         accumulate = np.add.accumulate

@@ -294,21 +294,24 @@ class UmbrellaSimulator3D:
                 continue
             sub = self.stage2_substeps if self.locked else 1
             grid = min(target - self.k, max(1, ADVANCE_BLOCK // sub))   # (physics steps a call)
+            # (the kernel folds the substeps' rows where it gives their stress figures)
+            fold = sub if compiled.figures else 1
             status, done, rows, state = compiled.advance(
                 self.state, self.k * sub, self.h / sub, grid * sub, self.force, self.locked,
-                self.record.crest_continues(self.locked))
+                self.record.crest_continues(self.locked), fold=fold)
             if done:
                 total = np.add.reduce       # (np.sum's, without its dispatch)
                 self.integrator.iterations += int(total(rows['iterations']))
                 self.integrator.factorisations += int(total(rows['factorisations']))
                 self.model.note_state(rows['qr'])
                 times = None
-                if sub > 1:     # (grid rows, the peaks over their physics steps)
+                if sub > 1:     # (grid rows the kernel folded, at the grid's times)
                     times = (self.k + 1 + np.arange(-(-done // sub))) * self.h
                     if done % sub:          # (a fault's last grid step: its own time)
                         times[-1] = state.t
                     state = replace(state, t=float(times[-1]))
-                self.record.add_steps(rows, self.locked, self.force, self.lock_loss, sub, times)
+                self.record.add_steps(rows, self.locked, self.force, self.lock_loss,
+                                      sub // fold, times)
                 self.state = state
                 self.k += done // sub
             if status == STATUS['crossing']:
