@@ -789,7 +789,22 @@ base accelerates or spins up, 2.0 when it does not), free bus 61 / 121 us (numpy
 rule's step without the stage-2 mode fit, 33 us at 1 element: ribs 6 x 1 in 1 ms blocks took
 3.6 (driven) and 3.5 (free) CPU s a simulated second, 0.28-0.29 x real time.
 
-Where real time stands (the targets: ribs 6 x 1 at 1 kHz with recording within 0.5
+Stage 1 on its own grid (step_rule.STAGE1_STEP_CEILING: 0.2 ms at 1 and 2 elements a
+segment, stage 2 the mesh's step as substeps, folded into the grid's rows by the compiled
+advance itself) halves the steps of a deployment: on a slower day of the shared machine
+(load 1.1-1.5 from other users; the previous code's compiled stage-2 step 78 us at 6 x 1
+where it was 42 us below), best of interleaved runs, the run driver with 1 kHz
+publications and their encoding (ribs 6 x 1, a slow deployment from rest) 287-290 us a
+simulated ms against 398-416, stage 2 655-689 against 641-725 (the same physics steps);
+the compiled step alone 0.26-0.28 core deploying against 0.43 (52.9-56.1 us a 0.2 ms
+step, 2.02 Newton iterations), 0.73-0.78 in stage 2 against 0.78; ribs 12 x 2 deploy at
+0.88 core (176 us a 0.2 ms step, 2.02 iterations) against 3.5 at 33 us, and in 10 ms
+blocks 1.25 x real time (0.80 CPU s a simulated second) against 0.27 x (3.68); the live
+node (6 x 1, 1 kHz, recording, a subscriber, 4 s) 0.915-0.938 core deploying against
+0.962-0.991, and in stage 2 neither kept real time that day (1.24 and 1.17 CPU s a
+simulated second). Stage 2 is where both targets stay missed: its step is the mesh's.
+
+Where real time stood before that (the targets: ribs 6 x 1 at 1 kHz with recording within 0.5
 core; 12 x 2 in real time at 100 Hz), measured on a quiet machine (load 0.4-1.4) with
 everything above: the compiled step alone 32.0 / 47.6 us at 6 x 1 (0.32 / 0.48 core, stage 1 /
 2) and 108.8 / 169.9 us at 12 x 2 (3.27 / 5.10 cores at its 33 us step; 0.30 x real time in
