@@ -307,7 +307,7 @@ class FiniteElementEngine(Engine):
         self.stage2_substeps = k
         integ = self.integrator
         integ.tolerance = newton_tolerance(self.h / k)
-        if integ.mode_fit is not None and self.h / k != self.stage2_base:
+        if integ.mode_fit is not None and integ.mode_fit.step != self.h / k:
             integ.fit_stage2_modes(self.h / k)
 
 

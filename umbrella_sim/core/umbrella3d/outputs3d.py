@@ -30,7 +30,6 @@ component over both bodies (``stress_<name>``) and where (``stress_<name>_at``: 
 """
 from __future__ import annotations
 
-from functools import lru_cache
 import math
 
 import numpy as np
@@ -444,33 +443,20 @@ def fold_substeps3d(rows: dict, m: int) -> dict:
     largest; outputs.fold_substeps' rule for the planar model).
     """
     steps = len(rows['t'])
-    if steps % m:       # (a fault's shorter last group)
-        ends, starts = substep_ends(steps, m), np.arange(0, steps, m)
-        out = {name: (np.add.reduceat(np.asarray(values), starts, axis=0)
-                      if name in _SUMMED_ROWS else np.array(values[ends]))
-               for name, values in rows.items() if name not in ('stress_top', 'stress_at')}
-    else:               # (whole grid steps: each field's groups a reshape, no index arrays)
-        groups, last = steps // m, slice(m - 1, None, m)
-        out = {}
-        for name, values in rows.items():
-            if name in _SUMMED_ROWS:
-                values = np.asarray(values)
-                out[name] = np.add.reduce(values.reshape((groups, m) + values.shape[1:]), 1)
-            elif name not in ('stress_top', 'stress_at'):
-                out[name] = np.array(values[last])
+    ends = substep_ends(steps, m)
+    starts = np.arange(0, steps, m)
+    out = {}
+    for name, values in rows.items():
+        if name in _SUMMED_ROWS:
+            out[name] = np.add.reduceat(np.asarray(values), starts, axis=0)
+        elif name not in ('stress_top', 'stress_at'):
+            out[name] = np.array(values[ends])
     top = np.asarray(rows['stress_top'])                    # (step, rib, 5)
     pick = first_largest_of_substeps(np.where(np.isnan(top), np.inf, top), m)   # (NaN: largest)
-    ribs, comps = _rib_channel_index(top.shape[1:])
-    out['stress_top'] = top[pick, ribs, comps]
-    out['stress_at'] = np.asarray(rows['stress_at'])[pick, ribs, comps]
+    ribs, comps = np.indices(top.shape[1:])
+    out['stress_top'] = top[pick, ribs[None], comps[None]]
+    out['stress_at'] = np.asarray(rows['stress_at'])[pick, ribs[None], comps[None]]
     return out
-
-
-@lru_cache(maxsize=8)
-def _rib_channel_index(shape: tuple) -> tuple:
-    """Return the (1, ribs, channels) rib and channel indices of a figure of that shape."""
-    ribs, comps = np.indices(shape)
-    return ribs[None], comps[None]
 
 
 def _channels(stress, rate):
