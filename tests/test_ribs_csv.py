@@ -157,15 +157,22 @@ def test_a_moving_base_adds_the_bus_and_its_momentum(tmp_path):
 
 
 def test_a_write_error_stops_the_file_not_the_run(tmp_path, monkeypatch, capsys):
-    """A full disk: the file is removed, the summary of every step printed, exit 4."""
+    """
+    A full disk: the file keeps its whole rows, the summary of every step printed, exit 4.
+
+    The disk fills while the third write goes out, leaving half a row: the file keeps the
+    header, the t = 0 row and the first chunk's rows, each whole, and the error says how
+    many and up to when.
+    """
     out = tmp_path / 'full.csv'
     real = csv_output.StepCsv._write_columns
     written = []
 
     def full_disk(self, columns):
-        if written:
+        if len(written) == 2:
+            self._fh.write(b'0.0123,deploying,0.4')        # (a row the disk cut)
             raise OSError(errno.ENOSPC, 'No space left on device')
-        written.append(len(columns[0]))
+        written.append((len(columns[0]), float(columns[0][-1])))
         real(self, columns)
 
     monkeypatch.setattr(csv_output.StepCsv, '_write_columns', full_disk)
@@ -173,8 +180,40 @@ def test_a_write_error_stops_the_file_not_the_run(tmp_path, monkeypatch, capsys)
     captured = capsys.readouterr()
     figures = json.loads(captured.out)
     assert figures['ribs'] == 3 and figures['steps'] == 1500        # the whole run
-    assert f'--csv {out}: No space left on device' in captured.err
+    rows = sum(n for n, _ in written)
+    last = written[-1][1]
+    assert rows > 2 and written[0] == (1, 0.0)
+    assert (f'--csv {out}: No space left on device (the file keeps its first {rows} rows '
+            f'whole, to t = {last:g} s)') in captured.err
     assert 'the summary above is complete' in captured.err
+    cols, _ = read_csv(out)
+    assert len(cols['time']) == rows and cols['time'][-1] == last
+    assert out.read_bytes().endswith(b'\n')
+
+
+def test_both_outputs_failing_are_each_named(tmp_path, monkeypatch, capsys):
+    """--mcap and --csv both stopped by the disk: each named, exit 4, the summary whole."""
+    from umbrella_sim.ros import recording
+
+    out, bag = tmp_path / 'full.csv', tmp_path / 'bag'
+    real_record = recording.record_offline
+
+    def recording_that_fails(*args, **kwargs):
+        result = real_record(*args, **kwargs)
+        result.recording_error = f'--mcap {bag}: No space left on device'
+        return result
+
+    def full_disk(self, columns):
+        raise OSError(errno.ENOSPC, 'No space left on device')
+
+    monkeypatch.setattr(recording, 'record_offline', recording_that_fails)
+    monkeypatch.setattr(csv_output.StepCsv, '_write_columns', full_disk)
+    assert cli.main([*RUN, '--duration', '0.01', '--csv', str(out), '--mcap', str(bag),
+                     '--json']) == 4
+    err = capsys.readouterr().err
+    assert f'output incomplete: --mcap {bag}: No space left on device' in err
+    assert (f'output incomplete: --csv {out}: No space left on device (removed: it held no '
+            'whole row)') in err
     assert not out.exists()
 
 

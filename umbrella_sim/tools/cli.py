@@ -218,7 +218,12 @@ def _rib_peaks(peaks: dict, unit: str, scale: float, spec: str) -> list[str]:
 
 
 class CsvStream:
-    """--csv FILE while the run goes: a write error stops the file (removed), not the run."""
+    """
+    --csv FILE while the run goes: a write error stops the file, not the run.
+
+    The file keeps the rows it holds whole (a row cut by the error is cut off; a file
+    without one whole row is removed), and ``error`` says how many.
+    """
 
     def __init__(self, path: str, initial, state_model=None, umbrella: bool = False):
         """Stream to path; umbrella: the umbrella of N ribs' columns (initial a Sample3D)."""
@@ -242,10 +247,16 @@ class CsvStream:
         except OSError as exc:
             self.error = f'--csv {self.path}: {exc.strerror or exc}'
             self.close()
-            try:
-                os.unlink(self.path)
-            except OSError:
-                pass
+            self.rows = keep_whole_rows(self.path)
+            self.error += (f' (the file keeps its first {self.rows} rows whole, to '
+                           f't = {self.last_time():g} s)' if self.rows
+                           else ' (removed: it held no whole row)')
+
+    def last_time(self) -> float:
+        """Return the time of the last row the file keeps (its first column)."""
+        with open(self.path, 'rb') as fh:
+            fh.seek(max(0, os.path.getsize(self.path) - 65536))
+            return float(fh.read().rstrip(b'\n').rsplit(b'\n', 1)[-1].split(b',', 1)[0])
 
     def close(self) -> None:
         if self._out is not None:
@@ -254,6 +265,28 @@ class CsvStream:
             except OSError as exc:
                 self.error = self.error or f'--csv {self.path}: {exc.strerror or exc}'
             self._out = None
+
+
+def keep_whole_rows(path: str) -> int:
+    """
+    Cut a text file after its last whole line; return its rows after the header line.
+
+    What a write error left: the row it cut is cut off.  A file without one whole row is
+    removed (0); one that cannot be reached counts 0.
+    """
+    try:
+        with open(path, 'r+b') as fh:
+            lines, end, chunk = 0, 0, 1 << 20
+            while block := fh.read(chunk):
+                lines += block.count(b'\n')
+                if b'\n' in block:
+                    end = fh.tell() - len(block) + block.rindex(b'\n') + 1
+            fh.truncate(end)
+        if lines < 2:           # (not one whole row: nothing worth keeping)
+            os.unlink(path)
+        return max(0, lines - 1)
+    except OSError:
+        return 0
 
 
 def write_stdout(text: str) -> bool:
@@ -344,8 +377,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f'umbrella_sim: warning: {text}', file=sys.stderr)
     reader_there = write_stdout(json.dumps(summary, indent=2, sort_keys=True) if args.json
                                 else format_summary(summary))
-    output_error = getattr(result, 'recording_error', None) or (csv.error if csv else None)
-    if output_error:
+    output_errors = [e for e in (getattr(result, 'recording_error', None),
+                                 csv.error if csv else None) if e]
+    for output_error in output_errors:      # (each output that failed, named)
         print(f'umbrella_sim: error: output incomplete: {output_error} (the summary above '
               'is complete)', file=sys.stderr)
     if result.error:
@@ -353,7 +387,7 @@ def main(argv: list[str] | None = None) -> int:
                 if csv is not None and not csv.error else '')
         print(f'umbrella_sim: error: {result.error}{kept}', file=sys.stderr)
         return 3
-    if output_error:
+    if output_errors:
         return 4
     return 0 if reader_there else EXIT_READER_GONE
 
