@@ -47,6 +47,7 @@ pytestmark = pytest.mark.ros
     (['-p', 'ribs:=3', '-p', 'rib5.l2:=0.6'], 'rib5.l2'),           # ribs 0 .. 2
     (['-p', 'ribs:=3', '-p', 'rib1.lx:=0.6'], 'rib1.lx'),
     (['-p', 'ribs:=3', '-p', 'rib1.l2:=-0.6'], 'l2'),
+    (['-p', 'ribs:=3', '-p', 'rib.tip_mass:=[]'], 'rib.tip_mass: an empty list'),
 ])
 def test_invalid_umbrella_parameters_exit_2_naming_them(args, culprit):
     r = subprocess.run([sys.executable, '-m', 'umbrella_sim.node', '--ros-args', *args],

@@ -107,6 +107,36 @@ def test_simulate_refuses_what_the_umbrella_cannot_take_naming_it(
     assert culprit in capsys.readouterr().err
 
 
+@pytest.mark.parametrize('rib, said', [
+    ('{tip_mass: 0.2}', 'parameter rib.tip_mass=0.2: a list of one value per rib'),
+    ('{tip_mass: []}', 'parameter rib.tip_mass: an empty list: give one value per rib'),
+    ('{tip_mass: null}', "section 'umbrella_node': no value for rib.tip_mass"),
+])
+def test_a_params_files_rib_list_that_is_none_is_refused_naming_the_file(
+        rib, said, tmp_path, capsys):
+    """A number, [] or null for rib.<name> in a params file: exit 2 naming file and value."""
+    path = tmp_path / 'ribs.yaml'
+    path.write_text(f'umbrella_node:\n  ros__parameters:\n    ribs: 4\n    rib: {rib}\n')
+    with pytest.raises(SystemExit) as exc:
+        cli.main(['simulate', '--params', str(path), '--duration', '0.01'])
+    assert exc.value.code == 2
+    assert f'params file {path}: {said}' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('spec, said', [
+    ('base: {ribs: 3, rib.tip_mass: 0.2}\ncases:\n  - {v0: -0.2}\n',
+     'parameter rib.tip_mass=0.2: a list'),
+    ('base: {ribs: 3}\ncases:\n  - {rib.tip_mass: null}\n', 'parameter rib.tip_mass: null'),
+    ('base: {ribs: 3}\ncases:\n  - {rib.tip_mass: []}\n', 'rib.tip_mass: an empty list'),
+])
+def test_a_sweeps_rib_list_that_is_none_is_refused_naming_the_case(spec, said, tmp_path):
+    path = tmp_path / 'spec.yaml'
+    path.write_text(spec + 'duration: 0.1\n')
+    with pytest.raises(SpecError, match=re.escape(said)) as exc:
+        load_spec(str(path))
+    assert f'sweep spec {path}: case 1' in str(exc.value)
+
+
 def test_a_sweep_over_rib_parameters(tmp_path, monkeypatch):
     """
     A grid over a rib's stick time: every case runs the umbrella; the stuck one locks later.

@@ -27,9 +27,10 @@ import sys
 import pytest
 
 from umbrella_sim.core.umbrella3d.model3d import UmbrellaModel3D
-from umbrella_sim.core.umbrella3d.params3d import (RIB_PLANAR_NAMES, rib_reach, RIB_SPECS,
-                                                   umbrella_model, UMBRELLA_SPECS,
-                                                   umbrella_values, UmbrellaRibsParams)
+from umbrella_sim.core.umbrella3d.params3d import (refuse_empty_rib_lists, RIB_PLANAR_NAMES,
+                                                   rib_reach, RIB_SPECS, umbrella_model,
+                                                   UMBRELLA_SPECS, umbrella_values,
+                                                   UmbrellaRibsParams)
 
 PAGE = os.path.join(os.path.dirname(__file__), '..', 'msg_docs', 'umbrella3d_parameters.md')
 _BLOCK = re.compile(r'(<!-- BEGIN GENERATED: (\w+) -->\n).*?(<!-- END GENERATED: \2 -->)', re.S)
@@ -108,6 +109,12 @@ def test_a_moving_bases_own_values_are_taken_on_it():
     ({'ribs': 6, 'rib1.tip_mass': 'abc'}, "parameter rib1.tip_mass='abc'"),
     ({'ribs': 3, 'rib.tip_mass': [0.0, 'abc', 0.0]}, "parameter rib.tip_mass='abc'"),
     ({'ribs': 6, 'rib1.tipmass': 0.1}, "'rib1.tipmass'"),
+    # one number where a list of every rib's is meant, a list where one rib's value is
+    ({'ribs': 4, 'rib.tip_mass': 0.2}, 'parameter rib.tip_mass=0.2: a list of one value per '
+                                       'rib'),
+    ({'ribs': 4, 'rib.tip_mass': 'abc'}, "parameter rib.tip_mass='abc': a list"),
+    ({'ribs': 3, 'rib1.tip_mass': [0.1]}, "parameter rib1.tip_mass=[0.1]: one value, rib 1's "
+                                          'own'),
 ])
 def test_a_nodes_umbrella_values_name_the_culprit(values, message):
     """A node's or a command line's values (umbrella_values): every one checked, by its name."""
@@ -157,3 +164,35 @@ if __name__ == '__main__':
     with open(PAGE, 'w', encoding='utf-8') as fh:
         fh.write(generated(page))
     sys.exit(0)
+
+
+@pytest.mark.parametrize('value, said', [([], 'an empty list'), (None, 'null')])
+def test_an_empty_rib_list_given_is_refused_where_it_is_given(value, said):
+    """A params file's or a sweep's rib.<name>: null or []: refused, naming the source."""
+    with pytest.raises(ValueError, match=re.escape(
+            f'params file f.yaml: parameter rib.tip_mass: {said}: give one value per rib')):
+        refuse_empty_rib_lists({'ribs': 3, 'rib.tip_mass': value}, 'params file f.yaml: ')
+    refuse_empty_rib_lists({'ribs': 3, 'rib.tip_mass': [0.0, 0.1, 0.0], 'tip_mass': None})
+
+
+@pytest.mark.parametrize('alpha0, offset, side', [
+    (0.49 * math.pi, 0.04, 'past pi/2 - 0.001'),
+    (0.5, -0.3, 'at or below its deployed angle')])
+def test_a_start_angle_offset_past_the_ribs_range_is_named_before_any_step(alpha0, offset, side):
+    """
+    rib<k>.alpha0_offset within its spec's range, yet the leaf's start out of the rib's.
+
+    alpha0 = 0.49 pi leaves 0.0304 rad to pi/2 - 0.001, where the sleeve has no lever on
+    the leaf (the run faulted at t = 0: 'the leaf reached the axle'); below, the deployed
+    angle.  Refused at validation, naming the rib's value and the offsets it may take.
+    """
+    planar = UmbrellaRibsParams.from_mapping({'alpha0': alpha0}).planar
+    room = (math.pi / 2 - 1e-3 - planar.alpha0, planar.alpha_deployed - planar.alpha0)
+    with pytest.raises(ValueError, match=re.escape(f'parameter rib1.alpha0_offset={offset:g}: '
+                                                   'rib 1 would start at leaf angle')) as err:
+        UmbrellaRibsParams.from_mapping({'ribs': 3, 'alpha0': alpha0,
+                                         'rib1.alpha0_offset': offset})
+    assert side in str(err.value)
+    assert f'({room[1]:.4g}, {room[0]:.4g}] rad' in str(err.value)
+    UmbrellaRibsParams.from_mapping({'ribs': 3, 'alpha0': alpha0,
+                                     'rib1.alpha0_offset': 0.03 if offset > 0 else -0.2})

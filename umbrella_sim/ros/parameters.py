@@ -153,9 +153,9 @@ def declare_umbrella(node) -> dict:
     from rclpy.exceptions import InvalidParameterTypeException
     from rclpy.parameter import Parameter
 
-    from ..core.umbrella3d.params3d import (RIB_LIST_PREFIX, rib_list_specs,
-                                            rib_override_spec, UMBRELLA_SPECS,
-                                            umbrella_values)
+    from ..core.umbrella3d.params3d import (refuse_empty_rib_lists, RIB_LIST_PREFIX,
+                                            rib_list_specs, rib_override_spec,
+                                            UMBRELLA_SPECS, umbrella_values)
 
     overrides = node._parameter_overrides
     values = {}
@@ -172,6 +172,8 @@ def declare_umbrella(node) -> dict:
             additional_constraints=f'each {spec.range_text()}; not given: every rib takes '
                                    f'{name} (its default or the planar value)')
         given = overrides.get(ros_name)
+        if given is not None:       # (given, not left out: [] is no rib's value)
+            refuse_empty_rib_lists({ros_name: given.value or []})
         if given is not None and given.type_ == Parameter.Type.INTEGER_ARRAY:
             overrides[ros_name] = Parameter(ros_name, Parameter.Type.DOUBLE_ARRAY,
                                             [float(v) for v in given.value])

@@ -215,6 +215,8 @@ def _kind(value) -> str:
 
 def _same_value(given, kept) -> bool:
     """Tell whether a rule's value is the one a node was given (numbers by value, NaN too)."""
+    if kept is None:        # (rcl gives an empty list no type: not set)
+        return given == [] or given is None
     kinds = {_kind(given), _kind(kept)}
     if 'list' in kinds:
         return (kinds == {'list'} and len(given) == len(kept)

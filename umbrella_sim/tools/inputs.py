@@ -32,8 +32,9 @@ from ..core.forcing import command_force
 from ..core.params import check_values, UmbrellaParams
 from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
-from ..core.umbrella3d.params3d import (names_a_rib, RIB_LIST_PREFIX,
-                                        umbrella_parameter_names, umbrella_values)
+from ..core.umbrella3d.params3d import (names_a_rib, refuse_empty_rib_lists,
+                                        RIB_LIST_PREFIX, umbrella_parameter_names,
+                                        umbrella_values)
 from ..ros.params_file import check_parameter_sources, load_params_file
 from ..ros.share import package_path
 
@@ -269,7 +270,12 @@ def build_params(args) -> UmbrellaParams:
     for text in params_file_warnings(params_file) if params_file else ():
         print(f'umbrella_sim: warning: {text}', file=sys.stderr)
     check_lock_given(params, lock_given)
-    for name in UMBRELLA_NAMES & set(from_file):
+    refuse_empty_rib_lists(from_file, f'params file {params_file}: ')
+    for name in sorted(UMBRELLA_NAMES & set(from_file)):
+        try:            # (each value's type and range, naming the file that gave it)
+            umbrella_values({'ribs': 2, name: from_file[name]})
+        except ValueError as exc:
+            raise ValueError(f'params file {params_file}: {exc}') from None
         umbrella.setdefault(name, from_file[name])
     args.umbrella = umbrella_values(umbrella)
     # what shapes a --mcap recording: --publish-rate / --set, else the params file's (a file

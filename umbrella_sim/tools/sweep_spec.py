@@ -138,7 +138,8 @@ def load_spec(path: str, progress=None) -> Sweep:
     """
     from ..core.forcing import command_force
     from ..core.registry import check_types
-    from ..core.umbrella3d.params3d import umbrella_model, umbrella_values
+    from ..core.umbrella3d.params3d import (refuse_empty_rib_lists, umbrella_model,
+                                            umbrella_values)
     from ..core.step_rule import physics_step_of, smallest_step_of
     from ..ros.params_file import load_params_file, load_yaml_as_ros
 
@@ -241,8 +242,10 @@ def load_spec(path: str, progress=None) -> Sweep:
                 check_run_length(duration, physics_step_of(resolved), long_run,
                                  'long_run: true', 'duration')
             # the umbrella of N ribs (ribs, hub..., rib.<name> lists), checked with its model
-            umbrella = umbrella_values({k: v for k, v in {**(from_file or {}), **overrides}
-                                        .items() if k in UMBRELLA_NAMES})
+            given = {k: v for k, v in {**(from_file or {}), **overrides}.items()
+                     if k in UMBRELLA_NAMES}
+            refuse_empty_rib_lists(given)
+            umbrella = umbrella_values(given)
             umbrella_model(resolved, umbrella)
             params = {**resolved.as_dict(), **umbrella}
         except ValueError as exc:

@@ -33,7 +33,7 @@ import re
 from typing import Any, Mapping
 
 from ..params import UmbrellaParams
-from ..registry import Param, parameter_help, START
+from ..registry import Param, parameter_help, REGISTRY, START
 
 BASE_MODES = ('fixed', 'prescribed', 'free')
 
@@ -96,12 +96,14 @@ RIB_SPECS: dict[str, Param] = {p.name: p for p in (
        low=0.0, high=1e6),
     _P('hinge_viscous', float, 0.0, 'N m s', 'viscous friction coefficient at O_k', low=0.0,
        high=1e6),
-    _P('stick_until', float, 0.0, 's', 'the leaf hinge is stuck until this time (0 = free)',
-       low=0.0, high=1e6),
-    _P('stick_torque', float, 0.0, 'N m', 'a stuck hinge breaks free when its holding torque '
-       'exceeds this (0 = only stick_until releases it)', low=0.0, high=1e9),
+    _P('stick_until', float, 0.0, 's', 'the leaf hinge is stuck from t = 0 until this time '
+       '(0 = never released by time: free, unless stick_torque > 0)', low=0.0, high=1e6),
+    _P('stick_torque', float, 0.0, 'N m', 'the leaf hinge is stuck from t = 0 until its '
+       'holding torque exceeds this or stick_until comes, whichever first (0 = only '
+       'stick_until releases it)', low=0.0, high=1e9),
     _P('alpha0_offset', float, 0.0, 'rad', 'initial leaf angle perturbation (taken up '
-       'elastically: the ribs share the sleeve)', low=-0.5, high=0.5),
+       'elastically: the ribs share the sleeve); the rib starts at its start angle plus it, '
+       'above its deployed angle and at most pi/2 - 0.001', low=-0.5, high=0.5),
     _P('rate_offset', float, 0.0, 'rad/s', 'initial leaf rate perturbation', low=-1e3,
        high=1e3),
     _P('out_of_plane_rate', float, 0.0, 'm/s', 'initial out-of-plane velocity of the leaf '
@@ -161,6 +163,27 @@ def rib_override_spec(name: str) -> Param | None:
     return rib_list_specs()[match.group(2)]
 
 
+def spec_key(override: str) -> str:
+    """Return the parameter a rib<k>.<name> override sets (<name>)."""
+    return override[override.index('.') + 1:]
+
+
+def refuse_empty_rib_lists(values: Mapping[str, Any], where: str = '') -> None:
+    """
+    Refuse a rib.<name> given as null or [] (where: what gave it, prefixed to the error).
+
+    Where a value is given (a params file, a sweep spec, a node's override), a rib list
+    holds one value per rib: leaving it out, not an empty one, leaves every rib its value.
+    """
+    for name, value in values.items():
+        if name.startswith(RIB_LIST_PREFIX) and (
+                value is None or isinstance(value, (list, tuple)) and not len(value)):
+            raise ValueError(f'{where}parameter {name}: '
+                             f"{'null' if value is None else 'an empty list'}: give one "
+                             f'value per rib (rib 0 first), or leave {name} out (every rib '
+                             f'then takes {name[len(RIB_LIST_PREFIX):]})')
+
+
 def umbrella_values(values: Mapping[str, Any]) -> dict:
     """
     Return a node's umbrella parameters typed (rib lists not given dropped), by their names.
@@ -173,15 +196,23 @@ def umbrella_values(values: Mapping[str, Any]) -> dict:
     out = {}
     for name, value in values.items():
         if name.startswith(RIB_LIST_PREFIX):
+            key = name[len(RIB_LIST_PREFIX):]
+            if value is not None and not isinstance(value, (list, tuple)):
+                raise ValueError(f'parameter {name}={value!r}: a list of one value per rib '
+                                 f'(rib 0 first: [0.0, 0.1, 0.0]); rib<k>.{key} sets rib '
+                                 "k's alone")
             if value is not None and len(value):
-                spec = dataclasses.replace(rib_list_specs()[name[len(RIB_LIST_PREFIX):]],
-                                           name=name)
+                spec = dataclasses.replace(rib_list_specs()[key], name=name)
                 out[name] = [float(spec.coerce(v)) for v in value]
         elif name in UMBRELLA_SPECS:
             out[name] = UMBRELLA_SPECS[name].coerce(value)
             UMBRELLA_SPECS[name].check(out[name])      # (ribs 0 is no planar model)
         else:                                   # rib<k>.<name>: one rib's value
             spec = dataclasses.replace(rib_override_spec(name), name=name)
+            if isinstance(value, (list, tuple)):
+                raise ValueError(f'parameter {name}={value!r}: one value, rib '
+                                 f"{name[3:name.index('.')]}'s own (rib.{spec_key(name)} "
+                                 'takes a list of every rib)')
             out[name] = spec.coerce(value)
     if out.get('ribs', 1) == 1:
         given = sorted(n for n, v in out.items()
@@ -331,8 +362,30 @@ class UmbrellaRibsParams:
                              "each rib's kinetic energy and would change the momentum of a "
                              "free-floating bus; use lock 'plastic'")
         for k in range(self.ribs):
-            self._check_reach(self.rib(k))
+            rib = self.rib(k)
+            self._check_reach(rib)
+            self._check_start_angle(rib)
         return self
+
+    def _check_start_angle(self, rib: 'RibProperties') -> None:
+        """Raise ValueError naming rib<k>.alpha0_offset if it starts the leaf out of range."""
+        offset = rib.alpha0_offset
+        if offset == 0.0:
+            return
+        base = self.planar
+        start = (base.alpha0 if (rib.planar.l1, rib.planar.l3) == (base.l1, base.l3)
+                 else rigid_rib_angle(rib.planar.l1, rib.planar.l3, base.sleeve_start_height))
+        deployed = rigid_rib_angle(rib.planar.l1, rib.planar.l3, base.sleeve_stop_height)
+        highest = REGISTRY['alpha0'].high       # (the toggle: no lever on the leaf)
+        angle = start + offset
+        if not deployed < angle <= highest:
+            side = (f'past pi/2 - 0.001 = {highest:.7g} rad, where the sleeve has no lever '
+                    f'on the leaf' if angle > highest else
+                    f'at or below its deployed angle {deployed:.7g} rad')
+            raise ValueError(
+                f'parameter rib{rib.index}.alpha0_offset={offset:g}: rib {rib.index} would '
+                f'start at leaf angle {angle:.7g} rad ({start:.7g} + the offset), {side}; '
+                f'its offset must lie in ({deployed - start:.4g}, {highest - start:.4g}] rad')
 
     def _check_reach(self, rib: 'RibProperties') -> None:
         """Raise ValueError naming the rib if its lengths cannot put the sleeve where it runs."""
