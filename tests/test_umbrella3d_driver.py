@@ -32,7 +32,7 @@ import pytest
 
 from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.umbrella3d.driven3d import DrivenSimulator3D, RibPeaks
-from umbrella_sim.core.umbrella3d.outputs3d import first_reach, STRESS_NAMES
+from umbrella_sim.core.umbrella3d.outputs3d import deployment_spread, first_reach, STRESS_NAMES
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
 
@@ -245,6 +245,39 @@ def test_run_driver_summary_of_the_umbrella_through_the_lock():
     # every rib deployed, in the lock's step: at the lock (outputs3d.first_reach)
     assert figures['rib_deploy_time'] == [ref.lock_time] * ref.model.n_ribs
     assert not math.isnan(figures['deployment_lag'])
+
+
+@pytest.mark.parametrize('deployed, lag, latest', [
+    ([0.2, 0.21, 0.205], 0.01, 1),              # every rib deployed: the last one's lag
+    ([0.2, math.nan, 0.21], None, 1),           # rib 1 still to deploy: it lags the most
+    ([math.nan, math.nan, 0.2], None, 0),
+    ([math.nan] * 3, None, None),
+])
+def test_the_lag_waits_for_every_rib_and_the_latest_is_one_still_to_deploy(
+        deployed, lag, latest):
+    spread = deployment_spread(deployed)
+    assert spread['latest_rib'] == latest
+    assert spread['deployment_lag'] == (None if lag is None else pytest.approx(lag))
+    assert spread['rib_deploy_time'] == [None if math.isnan(t) else t for t in deployed]
+
+
+def test_a_rib_that_never_deploys_leaves_the_lag_open_and_is_the_latest():
+    """
+    A rib too soft to reach its angle (E = 1e5 Pa): the sleeve locks, the rib does not.
+
+    Both summaries (the driver's, fed a chunk at a time, and Record3D's of every step) say
+    that rib 1 has no deployment instant, leave the lag open and name rib 1 the latest.
+    """
+    params = UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib1.youngs_modulus': 1e5})
+    driver, _, _ = driven(params, 0.26)
+    figures = driver.summary.figures()
+    lock = figures['lock_time']
+    assert lock is not None and figures['rib_deploy_time'] == [lock, None, lock]
+    assert figures['deployment_lag'] is None and figures['latest_rib'] == 1
+    ref, _ = reference(params, 0.26)
+    summary = ref.record.summary()
+    assert math.isnan(summary['deployment_lag'])
+    assert math.isnan(summary['rib_deploy_time'][1])
 
 
 def test_ribs_that_deploy_at_the_lock_deploy_at_its_instant():

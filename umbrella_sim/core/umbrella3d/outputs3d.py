@@ -528,15 +528,22 @@ def deployment_spread(deployed) -> dict:
     Return the spread of the ribs' deployment instants (first_reach each; NaN: not reached).
 
     rib_deploy_time (a list, None where not reached), deployment_lag (the latest rib's
-    deployment after the earliest's, of the ribs that deployed; None if none did) and
-    latest_rib (the first of the latest; None if none did).
+    deployment after the earliest's; None until every rib deployed: a rib still to deploy
+    lags by more than any figure yet) and latest_rib (the first rib still to deploy once
+    one has, else the first of the latest; None if none did).
     """
     deployed = np.asarray(deployed, dtype=float)
     reached = np.isfinite(deployed)
+    if not reached.any():
+        latest = None
+    elif reached.all():
+        latest = int(np.argmax(deployed))
+    else:
+        latest = int(np.argmin(reached))
     return {'rib_deploy_time': [float(v) if ok else None for v, ok in zip(deployed, reached)],
-            'deployment_lag': float(np.nanmax(deployed) - np.nanmin(deployed))
-            if reached.any() else None,
-            'latest_rib': int(np.nanargmax(deployed)) if reached.any() else None}
+            'deployment_lag': float(deployed.max() - deployed.min()) if reached.all()
+            else None,
+            'latest_rib': latest}
 
 
 def largest_out_of_plane_tip(t: np.ndarray, tip: np.ndarray) -> tuple[float, int, float]:
