@@ -20,6 +20,7 @@ that record what they are given, and the planning module they wrap is tested dir
 """
 import importlib.util
 import math
+import re
 import os
 import sys
 import types
@@ -31,6 +32,7 @@ import pytest
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.registry import NODE_PARAMETERS, SPECS
 from umbrella_sim.core.solver import UmbrellaSimulator
+from umbrella_sim.core.umbrella3d.params3d import names_a_rib
 from umbrella_sim.ros import launch_description as ld, robot_description as rd
 from umbrella_sim.ros.messages import JOINT_NAMES, joint_state_msg
 from umbrella_sim.ros.share import share_dir
@@ -148,11 +150,17 @@ def _load(name: str):
 
 
 def _run(description, given: dict):
-    """Evaluate a description as ros2 launch would: arguments, then the OpaqueFunctions."""
+    """
+    Evaluate a description as ros2 launch would: arguments, then the OpaqueFunctions.
+
+    ros2 launch sets every argument given as a launch configuration, declared or not
+    (launch's IncludeLaunchDescription); here an undeclared one must be a rib's own value
+    (rib<k>.<name>), the one kind the launch files read without declaring it.
+    """
     actions = description.args[0]
     declared = {a.args[0]: a.kwargs['default_value'] for a in actions
                 if type(a).__name__ == 'DeclareLaunchArgument'}
-    unknown = set(given) - set(declared)
+    unknown = {name for name in set(given) - set(declared) if not names_a_rib(name)}
     assert not unknown, f'not launch arguments: {unknown}'
     context = types.SimpleNamespace(launch_configurations={**declared, **given})
     out = []
@@ -184,6 +192,42 @@ def test_umbrella_launch_declares_the_arguments_and_starts_the_node(launch_stubs
         logs = [a.kwargs.get('msg', a.args[0] if a.args else '') for a in actions
                 if type(a).__name__ == 'LogInfo']
         assert any('robot_state_publisher is not installed' in m for m in logs)
+
+
+def test_the_umbrella_of_n_ribs_is_launched_with_its_values_and_urdf(launch_stubs):
+    """
+    ribs, hub_radius, a rib list and one rib's own value, as launch arguments.
+
+    The node takes them typed (its params file's types), robot_state_publisher the N-rib
+    URDF; a value the umbrella cannot take is refused before anything starts.
+    """
+    module = _load('umbrella.launch.py')
+    given = {'ribs': '3', 'hub_radius': '0.1', 'rib.tip_mass': '[0.0, 0.1, 0.0]',
+             'rib1.l2': '0.6', 'record': 'false'}
+    declared, actions = _run(module.generate_launch_description(), given)
+    for name in ('ribs', 'hub_radius', 'base', 'rib.tip_mass', 'rib.stick_until'):
+        assert name in declared
+    umbrella = next(a for a in actions if type(a).__name__ == 'Node'
+                    and a.kwargs['executable'] == 'umbrella_node')
+    overrides = umbrella.kwargs['parameters'][1]
+    assert overrides == {'ribs': 3, 'hub_radius': 0.1, 'rib.tip_mass': [0.0, 0.1, 0.0],
+                         'rib1.l2': 0.6, 'record': False, 'frame_prefix': ''}
+    values = {a.name: a.default for a in ld.arguments()}
+    actions = ld.plan(dict(values, **given), installed=lambda pkg: f'/opt/share/{pkg}')
+    rsp = next(a for a in actions if isinstance(a, ld.NodeAction)
+               and a.package == 'robot_state_publisher')
+    robot = ET.fromstring(rsp.parameters[0]['robot_description'])
+    joints = {j.get('name'): j for j in robot.iter('joint')}
+    assert {f'rib{k}/leaf_hinge' for k in range(3)} <= set(joints)
+    tip = joints['rib1/leaf_tip'].find('origin').get('xyz').split()[0]
+    assert float(tip) == pytest.approx(1.1)                 # rib 1's l1 + l2
+    for bad, words in (({'rib9.l2': '0.6'}, 'rib9.l2: there are ribs 0 .. 2'),
+                       ({'rib1.l2': '-0.6'}, 'l2=-0.6'),
+                       ({'rib.tip_mass': '0.2'}, 'rib.tip_mass=0.2: a list'),
+                       ({'rib1.lx': '1'}, "'rib1.lx'"),
+                       ({'ribs': '1'}, 'set with ribs 1')):
+        with pytest.raises(ValueError, match=re.escape(words)):
+            ld.plan({**values, **given, **bad}, installed=lambda pkg: None)
 
 
 def test_plan_starts_robot_state_publisher_with_the_urdf_when_installed():

@@ -25,11 +25,16 @@ from dataclasses import dataclass, field
 import os
 import re
 
+import yaml
+
+from .params_file import load_yaml_as_ros
 from .share import PACKAGE, package_path, share_dir
 from ..core.params import UmbrellaParams
 from ..core.registry import REGISTRY, SPECS
-# params3d's rule of a rib's override name rib<k>.<name> (kept there, read here)
-from ..core.umbrella3d.params3d import node_model, UmbrellaRibsParams
+from ..core.umbrella3d.params3d import (checked_umbrella_value, names_a_rib, node_model,
+                                        RIB_LIST_PREFIX, rib_list_specs,
+                                        umbrella_parameter_names, UMBRELLA_SPECS,
+                                        UmbrellaRibsParams)
 
 
 @dataclass(frozen=True)
@@ -80,6 +85,16 @@ def arguments() -> list[Argument]:
             continue
         out.append(Argument(name, '', f'override {name} ({p.unit}, default from params_file): '
                                       f'{p.doc}'))
+    # the umbrella of N ribs: its own values, and each rib's as a list (rib<k>.<name>:=value
+    # sets rib k's alone: not declared, one per rib and name, but taken: launch_values)
+    for name, p in UMBRELLA_SPECS.items():
+        out.append(Argument(name, '', f'override {name} ({p.unit}, default from params_file): '
+                                      f'{p.doc}'))
+    for name, p in rib_list_specs().items():
+        out.append(Argument(RIB_LIST_PREFIX + name, '',
+                            f'per rib, a list of one value each, rib 0 first ({p.unit}; e.g. '
+                            f"'[0.0, 0.1, 0.0]'): {p.doc}; rib<k>.{name}:=value sets rib "
+                            "k's alone"))
     return out
 
 
@@ -99,11 +114,20 @@ def overrides(values: dict[str, str]) -> dict:
     a whole, on top of the params file's, by described_model (as the node will take them).
     """
     out = {}
+    umbrella = umbrella_parameter_names()
     for name, text in values.items():
-        if name in REGISTRY and text not in ('', None):
+        if text in ('', None):
+            continue
+        if name in REGISTRY:
             out[name] = REGISTRY[name].coerce(text)
             if name not in SPECS:           # a node parameter: its range, as the node's
                 REGISTRY[name].check(out[name])
+        elif name in umbrella or names_a_rib(name):
+            try:                            # (typed as a params file types it: a list too)
+                value = load_yaml_as_ros(text)
+            except yaml.YAMLError:
+                value = text
+            out[name] = checked_umbrella_value(name, value)
     return out
 
 
@@ -213,5 +237,14 @@ def to_launch_actions(planned: list) -> list:
 
 
 def launch_values(context) -> dict[str, str]:
-    """Return every argument's value from a launch context (its default when not given)."""
-    return {a.name: context.launch_configurations.get(a.name, a.default) for a in arguments()}
+    """
+    Return every argument's value from a launch context (its default when not given).
+
+    With the rib<k>.<name> values given (ros2 launch takes an argument it does not declare
+    as a launch configuration too): one rib's own, too many to declare.
+    """
+    given = context.launch_configurations
+    out = {a.name: given.get(a.name, a.default) for a in arguments()}
+    out.update({name: text for name, text in given.items()
+                if name not in out and names_a_rib(name)})
+    return out

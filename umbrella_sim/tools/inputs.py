@@ -32,9 +32,9 @@ from ..core.forcing import command_force
 from ..core.params import check_values, UmbrellaParams
 from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
-from ..core.umbrella3d.params3d import (names_a_rib, refuse_empty_rib_lists,
-                                        RIB_LIST_PREFIX, umbrella_parameter_names,
-                                        umbrella_values)
+from ..core.umbrella3d.params3d import (checked_umbrella_value, names_a_rib,
+                                        refuse_empty_rib_lists, RIB_LIST_PREFIX,
+                                        umbrella_parameter_names, umbrella_values)
 from ..ros.params_file import check_parameter_sources, load_params_file
 from ..ros.share import package_path
 
@@ -273,7 +273,7 @@ def build_params(args) -> UmbrellaParams:
     refuse_empty_rib_lists(from_file, f'params file {params_file}: ')
     for name in sorted(UMBRELLA_NAMES & set(from_file)):
         try:            # (each value's type and range, naming the file that gave it)
-            umbrella_values({'ribs': 2, name: from_file[name]})
+            checked_umbrella_value(name, from_file[name])
         except ValueError as exc:
             raise ValueError(f'params file {params_file}: {exc}') from None
         umbrella.setdefault(name, from_file[name])

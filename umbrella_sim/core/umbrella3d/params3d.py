@@ -184,6 +184,19 @@ def refuse_empty_rib_lists(values: Mapping[str, Any], where: str = '') -> None:
                              f'then takes {name[len(RIB_LIST_PREFIX):]})')
 
 
+def checked_umbrella_value(name: str, value):
+    """
+    Return one umbrella value typed and checked on its own (None: a rib list not given).
+
+    umbrella_values' rules but the one that needs the others (ribs 1 takes no umbrella
+    value): for a value that another source joins (a params file's, a launch argument's).
+    ValueError naming it.
+    """
+    if name == 'ribs':
+        return umbrella_values({name: value})[name]
+    return umbrella_values({'ribs': 2, name: value}).get(name)
+
+
 def umbrella_values(values: Mapping[str, Any]) -> dict:
     """
     Return a node's umbrella parameters typed (rib lists not given dropped), by their names.
