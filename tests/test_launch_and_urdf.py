@@ -20,8 +20,8 @@ that record what they are given, and the planning module they wrap is tested dir
 """
 import importlib.util
 import math
-import re
 import os
+import re
 import sys
 import types
 import xml.etree.ElementTree as ET
