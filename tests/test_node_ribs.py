@@ -140,7 +140,8 @@ def test_a_reset_restarts_the_umbrella_with_the_planar_parameters_set():
 
     sleeve_force 30 N per rib, set while the umbrella runs at 10 N: after ~/reset the new
     run starts at t = 0 with the same 2N + 1 joints and the sleeve pushed with 2 x 30 N; a
-    set of ribs is refused (read-only: it sets the topics and joint names).
+    set of ribs is refused (read-only: it sets the topics and joint names), and so is one of
+    a rib's own value (rib<k>.<name>, declared only where given at start).
     """
     with SimulatedAntenna({'ribs': 2, 'v0': 0.0, 'time_step': 2e-4, 'publish_rate': 500.0,
                            'sleeve_force': 10.0, 'start_paused': True}) as antenna:
@@ -148,6 +149,11 @@ def test_a_reset_restarts_the_umbrella_with_the_planar_parameters_set():
         antenna.wait_for_sim_time(0.01)
         with pytest.raises(AssertionError, match='ribs is read-only'):
             antenna.set_parameters(ribs=3)
+        # a rib's own value, not given at start: read-only too, not unknown
+        with pytest.raises(AssertionError, match="rib1.tip_mass is read-only: a rib's own"):
+            antenna.set_parameters(**{'rib1.tip_mass': 0.2})
+        with pytest.raises(AssertionError, match=r'rib5.tip_mass: there are ribs 0 \.\. 1'):
+            antenna.set_parameters(**{'rib5.tip_mass': 0.2})
         antenna.set_parameters(sleeve_force=30.0)
         antenna.reset()
         first = antenna.messages('joint_states')[0]

@@ -196,3 +196,18 @@ def test_a_start_angle_offset_past_the_ribs_range_is_named_before_any_step(alpha
     assert f'({room[1]:.4g}, {room[0]:.4g}] rad' in str(err.value)
     UmbrellaRibsParams.from_mapping({'ribs': 3, 'alpha0': alpha0,
                                      'rib1.alpha0_offset': 0.03 if offset > 0 else -0.2})
+
+
+@pytest.mark.parametrize('name, ribs, said', [
+    ('rib1.tip_mass', 3, "parameter rib1.tip_mass is read-only: a rib's own value is fixed"),
+    ('rib5.tip_mass', 3, 'parameter rib5.tip_mass: there are ribs 0 .. 2'),
+    ('rib1.tip_mass', 1, 'parameter rib1.tip_mass: the node runs the planar model (ribs 1)'),
+    ('rib1.tipmass', 3, None),              # (not a rib's value: the unknown name's refusal)
+    ('v0', 3, None),
+])
+def test_a_runtime_set_of_a_ribs_own_value_is_refused_as_read_only(name, ribs, said):
+    """A node's rib<k>.<name> not given at start: read-only, not 'unknown parameter'."""
+    from umbrella_sim.ros.parameters import rib_override_refusal
+
+    text = rib_override_refusal(name, ribs)
+    assert text == said if said is None else text.startswith(said)

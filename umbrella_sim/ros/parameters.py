@@ -227,6 +227,30 @@ def wrong_type_text(node, exc) -> str:
 _READ_ONLY_WHY = 'it is fixed when the node starts; restart the node with -p {name}:=VALUE'
 
 
+def rib_override_refusal(name: str, ribs: int) -> str | None:
+    """
+    Return why a runtime set of a rib<k>.<name> not given at start is refused (None: no such).
+
+    A rib's own value is declared only where given at start, but any rib's is a parameter the
+    node knows: read-only, as every umbrella value (or no rib k of the node's ribs).
+    """
+    from ..core.umbrella3d.params3d import rib_override_spec
+
+    try:
+        if rib_override_spec(name) is None:
+            return None
+    except ValueError:          # (rib<k>.<unknown>: the unknown name's refusal)
+        return None
+    k = int(name[3:name.index('.')])
+    if ribs < 2:
+        return (f'parameter {name}: the node runs the planar model (ribs 1), which has no '
+                f'per-rib values; restart the node with -p ribs:=N -p {name}:=VALUE')
+    if k >= ribs:
+        return f'parameter {name}: there are ribs 0 .. {ribs - 1}'
+    return (f"parameter {name} is read-only: a rib's own value is fixed when the node starts; "
+            f'restart the node with -p {name}:=VALUE')
+
+
 def set_refusal(node, param) -> str | None:
     """
     Return why node refuses a runtime set of param, naming it; None if rclpy's checks pass.
@@ -240,6 +264,9 @@ def set_refusal(node, param) -> str | None:
 
     name = param.name
     if not node.has_parameter(name):
+        ribs = rib_override_refusal(name, getattr(node, 'ribs', 1))
+        if ribs is not None:
+            return ribs
         try:
             check_known_names([name], node.get_parameters_by_prefix('').keys(),
                               f'set on {node.get_fully_qualified_name()}')
