@@ -354,3 +354,26 @@ def test_an_umbrella_past_the_coupling_deflection_takes_the_step_its_stage2_need
     assert enough < 1e-4
     assert not coarse({'ribs': 3, 'sleeve_force': 10.0, 'time_step': enough}, 0.25)[2]
     assert not coarse({'ribs': 3}, 0.6)[2]
+
+
+@pytest.mark.parametrize('kick, warned', [(10.0, False), (20.0, True)])
+def test_a_large_out_of_plane_tip_is_named_as_the_in_plane_one(kick, warned):
+    """
+    A rib kicked out of its plane: past 10 % of the leaf its out-of-plane tip is named.
+
+    The in-plane tip stays under 1 % of the leaf; the out-of-plane one reaches 6.7 % (10 m/s,
+    quiet) or 13 % (20 m/s): 'large out-of-plane deflection', with its rib, as the in-plane
+    tip's 'large deflection' (small-deformation beams, model flexible).
+    """
+    driver = RunDriver(UmbrellaRibsParams.from_mapping({'ribs': 3,
+                                                        'rib1.out_of_plane_rate': kick}))
+    assert driver.run(0.03) is None
+    figures = driver.summary.figures()
+    assert max(figures['max_in_plane_tip']) < 0.01 and figures['max_out_of_plane_tip_rib'] == 1
+    said = [w for w in figures['warnings'] if w.startswith('large')]
+    w = abs(figures['max_out_of_plane_tip'])
+    assert (w > 0.1) == warned
+    assert said == ([f'large out-of-plane deflection: rib 1, |w_G| reached {w * 1e3:.4g} mm = '
+                     f'{100 * w:.3g} % of the leaf length 1 m (limit 10 %): small-deformation '
+                     'theory no longer holds (compare model flexible-nonlinear)'] if warned
+                    else [])

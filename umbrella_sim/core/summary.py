@@ -506,7 +506,8 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                       stage2_resolution: dict | None = None,
                       section_slope: float | None = None,
                       centrifugal_tension: float | None = None,
-                      ribs: dict | None = None) -> list[str]:
+                      ribs: dict | None = None,
+                      out_of_plane_tip: float | None = None) -> list[str]:
     """
     Return where a run left the model's validity: one rule, used everywhere.
 
@@ -521,6 +522,8 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     (CENTRIFUGAL_TENSION_LIMIT; None when not known, e.g. a recording's samples).  ribs:
     the umbrella's, the rib a figure is of, by the warning's key ('yield exceeded': k, ...):
     'rib k, ' after the key, so that an engineer knows which rib to look at.
+    out_of_plane_tip: the umbrella's largest |w_G| (its ribs bend out of their planes too):
+    'large out-of-plane deflection' past the same limit as the in-plane tip's.
     """
     out = []
     lw = lock_warning(params, lock_kind)
@@ -552,6 +555,12 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
         out.append(f'large deflection: |v_G| reached {tip_deflection * 1e3:.4g} mm = '
                    f'{100 * tip_deflection / length:.3g} % of the leaf length {length:g} m '
                    f'(limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no '
+                   'longer holds (compare model flexible-nonlinear)')
+    if (out_of_plane_tip is not None and out_of_plane_tip > TIP_DEFLECTION_LIMIT * length
+            and params.get('model') != 'flexible-nonlinear'):
+        out.append(f'large out-of-plane deflection: |w_G| reached {out_of_plane_tip * 1e3:.4g} '
+                   f'mm = {100 * out_of_plane_tip / length:.3g} % of the leaf length {length:g} '
+                   f'm (limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no '
                    'longer holds (compare model flexible-nonlinear)')
     tw = centrifugal_tension_warning(params, centrifugal_tension)
     if tw:

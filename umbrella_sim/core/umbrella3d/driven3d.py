@@ -495,13 +495,15 @@ class Summary3D:
         stressed = int(np.argmax(von_mises))
         ribs = {'yield exceeded': stressed, 'large strain': stressed,
                 'large deflection': int(np.argmax(self._in_plane)),
+                'large out-of-plane deflection': self._oop[1],
                 'centrifugal stiffening': self._tension_rib}
         return validity_warnings(self._planar, self.lock_kind, float(von_mises.max()),
                                  float(self._in_plane.max()), locked=locked,
                                  energy_drift=self.energy_drift,
                                  stage2_resolution=self._stage2_resolution() if locked else None,
                                  section_slope=slope, centrifugal_tension=self._tension,
-                                 ribs=ribs) + out_of_plane_warnings(self._planar, out_of_plane)
+                                 ribs=ribs, out_of_plane_tip=abs(self._oop[0])
+                                 ) + out_of_plane_warnings(self._planar, out_of_plane)
 
     def _stage2_resolution(self) -> dict | None:
         """Return the lock's stage-2 resolution (the worst rib's), else the mesh's."""
@@ -512,7 +514,7 @@ class Summary3D:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
         # the warnings depend on the run only through these
         return self._said.new((largest(self._peaks.value[:, _VON_MISES]),
-                               largest(self._in_plane),
+                               largest(self._in_plane), self._oop[0],
                                self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
                                self._tension > CENTRIFUGAL_TENSION_LIMIT, *self._geometry()),
                               self.warnings)
