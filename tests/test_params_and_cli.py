@@ -37,6 +37,7 @@ CONFIG = os.path.join(ROOT, 'config', 'umbrella.yaml')
     ({'section_height': 0.0}, 'section_height', '> 0'),
     ({'area': 1e-4}, 'area', 'both or neither'),
     ({'l3': 0.01}, 'parameter l3=0.01', 'cannot close'),
+    ({'l1': 0.6}, 'parameter l3=0.5 with l1=0.6', 'lengthen l3 or shorten l1'),
     ({'alpha0': 0.2}, 'alpha0', 'above alpha_deployed'),
     ({'alpha0': 1.5707963}, 'alpha0', '<= 1.5697963'),    # the toggle: no lever, v0 -> inf
     ({'alpha0': 1.5698}, 'alpha0', '<= 1.5697963'),       # (the bound read 1.5698)

@@ -226,10 +226,11 @@ def validate(p: UmbrellaParams, pairs: bool = True) -> None:
                          f'{p.alpha_deployed} and below pi/2')
     for name in ('alpha0', 'alpha_deployed'):
         reach = p.l1 * abs(math.cos(getattr(p, name)))
-        if reach >= p.l3:     # the link is what the user usually shortened: named first
-            raise ValueError(f'parameter l3={p.l3}: the link is too short, geometry cannot '
-                             f'close: l1*|cos({name})| = {reach:.6g} m must be < l3 '
-                             f'(l1={p.l1}, {name}={getattr(p, name):.6g})')
+        if reach >= p.l3:     # (the link named first, the leaf with it: either was set)
+            raise ValueError(f'parameter l3={p.l3} with l1={p.l1}: the link is too short for '
+                             f'the leaf, geometry cannot close: l1*|cos({name})| = '
+                             f'{reach:.6g} m must be < l3 ({name}={getattr(p, name):.6g}); '
+                             'lengthen l3 or shorten l1')
     if 0.0 < p.time_step < MIN_PHYSICS_STEP:
         raise ValueError(f'parameter time_step={p.time_step}: must be 0 (the step chosen for '
                          f'the mesh) or >= {MIN_PHYSICS_STEP:g} s')

@@ -473,7 +473,9 @@ class UmbrellaSimulator3D:
             except LockImpossible:
                 raise SimulationFailed(
                     f'energy lock impossible for rib {k}: its kinetic energy is below the '
-                    'least the locked joints allow') from None
+                    'least the locked joints allow (lock plastic takes such a lock: it '
+                    'stops what the locked joints do not allow and loses its energy)'
+                ) from None
         return vr, vs
 
     # ------------------------------------------------------------ figures
