@@ -128,6 +128,10 @@ def test_a_params_files_rib_list_that_is_none_is_refused_naming_the_file(
      'parameter rib.tip_mass=0.2: a list'),
     ('base: {ribs: 3}\ncases:\n  - {rib.tip_mass: null}\n', 'parameter rib.tip_mass: null'),
     ('base: {ribs: 3}\ncases:\n  - {rib.tip_mass: []}\n', 'rib.tip_mass: an empty list'),
+    # a grid axis that the base sets too: the case's own value is named with the other
+    ('base: {ribs: 3}\ngrid: {ribs: [2, 3], rib.tip_mass: [[0, 0.1, 0]]}\n',
+     '(grid: ribs=2, rib.tip_mass=[0, 0.1, 0]): parameter rib.tip_mass: a list of 3 values '
+     'for 2 ribs'),
 ])
 def test_a_sweeps_rib_list_that_is_none_is_refused_naming_the_case(spec, said, tmp_path):
     path = tmp_path / 'spec.yaml'

@@ -249,8 +249,8 @@ def load_spec(path: str, progress=None) -> Sweep:
             umbrella_model(resolved, umbrella)
             params = {**resolved.as_dict(), **umbrella}
         except ValueError as exc:
-            shown = ', '.join(f'{k}={v!r}' for k, v in overrides.items() if k not in base
-                              or source == 'cases')
+            shown = ', '.join(f'{k}={v!r}' for k, v in overrides.items()
+                              if source == 'cases' or k not in base or base[k] != v)
             raise SpecError(f'sweep spec {path}: case {index} ({source}: {shown}): '
                             f'{exc}') from None
         for t, f in profile or []:
