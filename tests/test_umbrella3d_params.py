@@ -81,6 +81,8 @@ def test_per_rib_values_as_lists_and_overrides():
     ({'ribs': 2, 'rib5.tip_mass': 0.1}, 'rib5.tip_mass'),
     ({'ribs': 2, 'rib1.stiffness': 1.0}, 'stiffness'),
     ({'ribs': 2, 'rib1.hinge_coulomb': -1.0}, 'rib1.hinge_coulomb'),
+    ({'ribs': 3, 'rib1.l2': 0.0}, 'parameter rib1.l2=0.0: must be > 0'),   # a rib's planar
+    ({'ribs': 3, 'rib.l2': [0.5, -0.6, 0.5]}, 'parameter rib1.l2=-0.6'),  # value: as a rib's
     ({'ribs': 0}, 'ribs'),
     ({'base': 'free', 'lock': 'energy'}, 'lock'),
     # a base's motion with the hub fixed would move nothing: a spin-up without base prescribed

@@ -419,7 +419,11 @@ class UmbrellaRibsParams:
         try:
             planar = self.planar.replace(**planar_changes).validated()
         except ValueError as exc:
-            raise ValueError(f'rib {k}: {exc}') from None
+            text = str(exc)
+            own = next((n for n in planar_changes if text.startswith(f'parameter {n}=')), None)
+            if own is not None:     # (the rib's own value: named as a rib's, rib<k>.<name>)
+                raise ValueError(f'parameter rib{k}.{text[len("parameter "):]}') from None
+            raise ValueError(f'rib {k}: {text}') from None
         own = {name: spec.default for name, spec in RIB_SPECS.items()}
         for name, value in vals.items():
             spec = RIB_SPECS[name]
