@@ -884,6 +884,32 @@ costs 80-90 us more than the same block run back to back (the sleep itself ~15, 
 caches), so computing two periods before sleeping would save ~0.03-0.04 core; it would make a
 command act one period later than msg_docs/topic_sleeve_force.md promises (from the next
 period) and publish sleeve_force/applied before the joint_states it follows, so it was not done.
+
+What a cheaper stage 2 would take. Stage 2 costs what its step count costs (6 x 1: ten 0.1 ms
+steps a simulated ms, 0.6-0.7 core of the step alone this day; the live node at 1 kHz with
+recording 1.12 CPU s a simulated second, 0.92 x real time, deploying 0.93 core and real time),
+and each way of taking fewer steps measured so far fails a target (the thesis's frame, 0.5 s of
+stage 2 against a 2.5 us run; the step study's targets):
+- the mode fit up to omega h 2.5 instead of 1.5 (the step's Hermite crest sees a lone mode's
+  crest as well up to 2.5: at least 0.73 of it over a period, 0.78 up to 1.5) lets the rule take
+  50 us at N = 2 (25-33 us) and 12 x 2's stage 2 fall from 9.1 to 5.1-5.6 CPU s a simulated
+  second, within every target; but the newly fitted modes (modal masses down to 0.17) slow the
+  kept-matrix Newton iteration (6 x 1 at 0.1 ms: 2.20 -> 2.81 iterations a step, a free bus 2.04
+  -> 3.46) and one free-bus lock's part step did not converge;
+- stage 2 at 0.2 ms at N = 1: the stage-2 peaks 3.2-3.9 % off at V0 = -0.22 to -0.25 (plastic
+  lock) and -0.2 (energy lock, with the lock's higher modes 10 250 and 26 600 rad/s taken out
+  of the step and added back as exact free vibration), where 0.1 ms is within 1.5 %: what is
+  off is the low modes' coupling (its phase error grows like the deflection squared times the
+  step squared), not the modes above the step's reach;
+- the lock's modes as exact linear free vibration (no step at all): the tip 2.7 % of its
+  amplitude off by 0.5 s and the link's peak 7 % low: the floating frames' coupling is not
+  small at the thesis's deflections;
+- a correction of the joints alone on a moving base (as with the hub fixed): 25-30 % fewer
+  iterations on a free bus, but its angular momentum drifted 2.0-2.5e-6 of m v L (the tests'
+  bound 1e-6; 0.8-2.9e-7 with whole iterations), and a driven base's energy balance 10 times
+  further from round-off.
+A stage 2 several times cheaper needs an integration of the coupled modes of higher order than
+the midpoint rule's, not only the higher modes made exact.
 """
 
 
