@@ -391,3 +391,22 @@ def test_the_umbrellas_warnings_name_the_rib_they_are_of():
     assert tension and tension[0].startswith(f'{KEY}: rib 1, the leaf'), said
     assert all(': rib 1, ' in w for w in said
                if w.split(':')[0] in ('yield exceeded', 'large deflection')), said
+
+
+def test_a_recording_without_its_summary_judges_stage2_at_the_step_it_took(tmp_path):
+    """
+    The default run's recording without its summary: no 'coarse step' where stage 2 took
+    the step its lock needs (the grid's 0.2 ms, recorded as physics_step, is stage 1's),
+    as its own summary says; a step given (0.2 ms in both stages) is judged at that step.
+    """
+    from umbrella_sim.ros.recording import record_offline
+    from umbrella_sim.tools import compare
+
+    for p, coarse in ((UmbrellaParams(), False), (UmbrellaParams(time_step=2e-4), True)):
+        bag = tmp_path / f'{p.time_step:g}'
+        figures = record_offline(p, str(bag), 0.3).figures
+        run = compare.load_run(str(bag))
+        run.warnings = None                 # (as a log whose writer was killed)
+        keys = [w.split(':')[0] for w in run.validity()]
+        assert keys == [w.split(':')[0] for w in figures['warnings']]
+        assert ('coarse step' in keys) == coarse

@@ -34,7 +34,7 @@ import numpy as np
 from ..bag.reader import LogError, read_log
 from ..core.beam import shape_abscissae
 from ..core.params import UmbrellaParams
-from ..core.step_rule import beams_record
+from ..core.step_rule import beams_record, follows_lock
 from ..core.summary import (centrifugal_tension_per_rate, deploy_start_of, leaf_tension_ratio,
                             mesh_resolution, relative_drift, stage2_figures, validity_warnings)
 from ..ros.messages import (energy_figures, joint_state_figures, peak_stress_figures,
@@ -232,10 +232,15 @@ class Run:
         peak = float(max(self.peak_leaf.max(), self.peak_link.max()))
         step = self.params.get('physics_step', self.params.get('time_step'))
         try:
+            beams = beams_record(self.params)
+            # stage 2 took the step its lock needs where the step was chosen for the run
+            # (the live summary is silent there too); else it stepped on the grid
+            resolution = (None if beams is not None and follows_lock(beams)
+                          else mesh_resolution(self.params, step))
             return validity_warnings(self.params, self.lock_kind, peak, tip,
                                      locked=self.lock_time is not None,
                                      energy_drift=self.energy_drift,
-                                     stage2_resolution=mesh_resolution(self.params, step),
+                                     stage2_resolution=resolution,
                                      centrifugal_tension=self.leaf_tension())
         except (KeyError, TypeError):
             return []
