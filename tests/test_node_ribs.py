@@ -161,3 +161,6 @@ def test_a_reset_restarts_the_umbrella_with_the_planar_parameters_set():
         assert list(first.name) == joint_names(2)
         state = antenna.wait_for('joint_states', lambda m: m.header.stamp.nanosec > 0)
         assert state.effort[-1] == 2 * 30.0
+        # the new run's starting force is on sleeve_force/applied (at t = 0), not a command
+        antenna.wait_for('sleeve_force_applied', lambda m: m.data == 30.0)
+        assert antenna.applied_forces() == []

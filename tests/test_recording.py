@@ -585,3 +585,27 @@ def test_a_recording_from_before_the_phase_correction_re_runs_without_it():
     assert _segment_inputs(log, seg)[0].params.phase_correction is False
     seg.params['phase_correction'] = True              # what a recording of today holds
     assert _segment_inputs(log, seg)[0].params.phase_correction is True
+
+
+@pytest.mark.ros
+def test_the_starting_force_is_on_the_applied_history(tmp_path):
+    """
+    A run started with sleeve_force 3 N: the applied history holds it at t = 0.
+
+    sleeve_force/applied is the whole force history (msg_docs/topic_sleeve_force.md): the
+    starting force acts from t = 0 and is recorded there (it was left off, so a force profile
+    made from the applied values missed it), and the recording re-simulates to zero
+    difference.
+    """
+    from umbrella_sim.tools.replay import resimulate
+
+    bag = tmp_path / 'pushed'
+    with NodeProcess('-p', 'v0:=0.0', '-p', 'sleeve_force:=3.0', '-p', 'duration:=0.05',
+                     '-p', 'real_time_factor:=0.0', '-p', f'record_path:={bag}') as node:
+        assert node.proc.wait(timeout=120) == 0
+        assert 'sleeve force 3 N applied from t = 0.000000000 s' in node.output()
+    log = read_log(str(bag))
+    applied = [(t, m.data) for t, m in log.decoded('/sleeve_force/applied')]
+    assert [f for _, f in applied] == [3.0] and applied[0][0] == pytest.approx(0.0, abs=1e-9)
+    res = resimulate(log)
+    assert not res['problems'] and max(res['max_abs_diff'].values()) == 0.0

@@ -73,6 +73,7 @@ class CommandIntake:
         self._intake = threading.Lock()     # the callback's batches and the stop's drain
         self._lock = threading.Lock()
         self._force = 0.0
+        self._last_applied = 0.0            # the last value on sleeve_force/applied
         self.logger = None                  # the node's
         self._topic = ''                    # the subscription's (resolved)
         self._echo = {}                     # "applied", "refused" -> the node's publisher
@@ -140,6 +141,19 @@ class CommandIntake:
             rec.applied(force, t)
         if 'applied' in self._echo:
             self._echo['applied'].publish(self.command_type()(data=float(force)))
+        self._last_applied = force
+
+    def start_run(self, force: float) -> None:
+        """
+        Hold a new run's starting force (its sleeve_force) and apply it at t = 0 if it is news.
+
+        The applied history is the whole force history: the starting force goes on it, at
+        start and after each ~/reset, where it differs from the last value applied (0 before
+        any: a run starting from rest with no force says nothing).
+        """
+        self.hold(force)
+        if force != self._last_applied:
+            self.applied(force, 0.0, False)
 
     @property
     def force(self) -> float:

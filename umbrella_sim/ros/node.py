@@ -341,8 +341,10 @@ class UmbrellaNode(Node):
                                        f'{rec.recorder.offset_ns * 1e-9:.9f} s)')
             self._publish_phase('deploying')
             # the new run's t = 0 state, as at start (paused or not): every run, and every
-            # recording segment, begins with its initial state
+            # recording segment, begins with its initial state; then its starting force, if
+            # news, on the applied history (before the solver's first step)
             self._publish_sample(self._sample_messages())
+            self.commands.start_run(self.model_params.sleeve_force)
         self._wake.set()
         response.success = True
         response.message = 'reset to t = 0'
@@ -422,6 +424,7 @@ class UmbrellaNode(Node):
         if self.node_cfg['record']:     # not before: a stop during start-up creates nothing
             self._open_recording(self.node_cfg['record_path'])
         self._publish_phase('deploying')
+        self.commands.start_run(self.model_params.sleeve_force)
         self._anchor()
         self._thread.start()
 

@@ -467,10 +467,14 @@ class SimulatedAntenna:
         one whose effort (F_H over the step that ends at its stamp) it is.  A value is
         listed once that joint state has arrived, one publication after the applied
         message.  Exact (stamps to the nanosecond); the ``sleeve_force`` parameter's value,
-        which acts from t = 0, is not a command and is not listed.
+        which acts from t = 0 (the node applies it there, where it is not 0), is not a command
+        and is not listed.
         """
         values = [m.data for m in self.messages('sleeve_force_applied')]
         states = self.messages('joint_states')
+        if values and states and _stamp(states[0]) == 0.0 \
+                and states[0].effort[-1] == values[0] * self.ribs:
+            values = values[1:]         # (the starting force, applied at t = 0: no command)
         out = []
         # the sleeve_slider's effort (the last joint): F, or N F on the sleeve of N ribs
         for before, after in zip(states, states[1:]):
