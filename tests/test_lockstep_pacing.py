@@ -23,7 +23,7 @@ import threading
 
 import pytest
 
-from umbrella_sim.ros.pacing import Pacer
+from umbrella_sim.ros.pacing import lag_advice, Pacer
 
 PERIOD = 1e-3           # sim s, 1 kHz
 
@@ -87,3 +87,11 @@ def test_a_command_between_publications_arms_the_handshake_where_it_acts():
     assert lockstep.armed
     lockstep.published()                    # the state after the period it acted in
     assert lockstep.waiting(True, at_publication=True, deploying=True)
+
+
+@pytest.mark.parametrize('measured, quoted', [(0.24, ' (measured 0.24x)'), (1.0, ''),
+                                              (None, '')])
+def test_the_lag_advice_quotes_the_measured_factor_only_where_it_falls_short(measured, quoted):
+    """A lag that began within the second follows one that kept up: its 1.00x says nothing."""
+    text = lag_advice(1.0, measured)
+    assert text.startswith(f'this machine cannot step this model at 1x real time{quoted}: ')

@@ -54,8 +54,15 @@ LAG_WARN_PERIOD = 60.0
 
 
 def lag_advice(real_time_factor: float, measured: float | None) -> str:
-    """Say what makes a node that cannot keep up with real_time_factor keep up."""
-    can = f' (measured {measured:.2f}x)' if measured else ''
+    """
+    Say what makes a node that cannot keep up with real_time_factor keep up.
+
+    measured: the last second's factor (diagnostics'), quoted where it shows the shortfall:
+    a lag that began within the second follows a second that kept up, whose factor said
+    nothing of it (and read 'cannot ... at 1x (measured 1.00x)').
+    """
+    can = (f' (measured {measured:.2f}x)' if measured and measured < real_time_factor
+           else '')
     return (f'this machine cannot step this model at {real_time_factor:g}x real time{can}: '
             'give a lower real_time_factor, real_time_factor:=0 (as fast as it can; '
             'sim time is still exact), or, for a closed-loop controller, lockstep:=true '
