@@ -392,3 +392,21 @@ def test_a_dropped_argument_value_is_refused_where_rcl_drops_it(tmp_path):
         assert refused == dropped, (text, kept)
         outcomes.add(dropped)
     assert outcomes == {True, False}        # (both kinds seen: rcl took some, dropped some)
+
+
+@pytest.mark.parametrize('extra', [[], ['--set', 'damping_ratio=0.02']])
+def test_a_section_too_slender_for_the_solver_is_refused_naming_it(extra, capsys):
+    """
+    A 1 nm section: E I (6e-27 N m^2) is lost in the mass's round-off, two locked modes at 0.
+
+    It ran with numpy's 'invalid value in divide' from the stage-2 mode fit (and failed
+    with a ZeroDivisionError's text with damping); now refused before any step, naming it.
+    """
+    from umbrella_sim.tools import cli
+
+    with pytest.raises(SystemExit) as exc:
+        cli.main(['simulate', '--set', 'section_height=1e-9', '--duration', '0.01', *extra])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and 'RuntimeWarning' not in err
+    assert 'the locked frame has 2 mode(s) without stiffness' in err
+    assert 'section_height=1e-09' in err

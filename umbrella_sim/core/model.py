@@ -424,7 +424,15 @@ class UmbrellaModel:
         z = null_space(self.constraint_jacobian(q, ConstraintSet(locked=True, rigid=False)))
         mass = self.mass_matrix(q)
         w2, psi = eigh(z.T @ self.stiffness @ z, z.T @ mass @ z)
-        return np.sqrt(np.maximum(w2, 0.0)), z @ psi, mass
+        omega = np.sqrt(np.maximum(w2, 0.0))
+        if not omega[0] > 0.0:         # (a section too slender for double precision)
+            p = self.params
+            raise ValueError(
+                f'the locked frame has {int(np.sum(omega <= 0.0))} mode(s) without stiffness: '
+                f'its bending stiffness E I = {p.youngs_modulus * p.cross_section_inertia:.3g} '
+                'N m^2 is lost in the round-off of its mass; give a larger section '
+                f'(section_height={p.section_height:g} m, second_moment_of_area)')
+        return omega, z @ psi, mass
 
     def rigid_velocity(self, q: np.ndarray, alpha1_rate: float) -> np.ndarray:
         p = self.params
