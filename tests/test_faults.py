@@ -21,6 +21,7 @@ bad params files and ROS arguments, foreign and damaged logs, overload, resets.
 import errno
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -827,6 +828,12 @@ def test_reset_with_new_parameters_is_a_new_segment(tmp_path, probe):
     assert times == sorted(times)                   # log time never goes backwards
     r = run('umbrella_sim.tools.replay', str(bag), '--resimulate')
     assert r.returncode == 0 and '2 segments' in r.stdout, r.stdout + r.stderr
+    # --info: each segment's run, and the lock is the last segment's (the events record's)
+    info = run('umbrella_sim.tools.replay', str(bag), '--info').stdout
+    assert 'segment 0:     model flexible' in info
+    assert re.search(r'segment 1:     from log time [0-9.]+ s \(~/reset\): model flexible, '
+                     r'1 element\(s\) a segment, v0 -1.0 m/s', info), info
+    assert f'locked:        at t = {lock:.9f} s (energy lock) (segment 1, the last)' in info
     deploy = {}
     for k in (0, 1):
         out_dir = tmp_path / f'cmp{k}'

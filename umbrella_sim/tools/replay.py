@@ -516,13 +516,30 @@ def info_text(log: LogData) -> str:
                      f"{mesh.get('elements_per_segment')} element(s) a segment, "
                      + (f'{ribs} ribs, ' if ribs > 1 else '')
                      + f"lock {mesh.get('lock')}{step}")
+    try:
+        segments = log.segments()
+    except LogError:
+        segments = []
+    last = ''
+    if len(segments) > 1:       # (~/reset: a run a segment; the events are the last's)
+        if mesh:
+            lines[-1] = lines[-1].replace('run:          ', 'segment 0:    ', 1)
+        for seg in segments[1:]:
+            p = seg.params
+            ribs = int(p.get('ribs', 1) or 1)
+            lines.append(f'segment {seg.index}:{" " * max(1, 6 - len(str(seg.index)))}from '
+                         f'log time {seg.offset_ns * 1e-9:.6f} s (~/reset): model '
+                         f"{p.get('model')}, {p.get('elements_per_segment')} element(s) a "
+                         'segment, ' + (f'{ribs} ribs, ' if ribs > 1 else '')
+                         + f"v0 {p.get('v0')} m/s")
+        last = f' (segment {segments[-1].index}, the last)'
     events = log.metadata.get(EVENTS_RECORD, {})
     if events.get('locked') == 'true':
         lines.append(f"locked:        at t = {float(events['lock_time']):.9f} s "
-                     f"({events.get('lock_kind')} lock)")
+                     f"({events.get('lock_kind')} lock){last}")
     if 'fault' in events:
         lines.append(f"fault:         at t = {float(events['fault_time']):.9f} s: "
-                     f"{events['fault']}")
+                     f"{events['fault']}{last}")
     build = log.metadata.get(BUILD_RECORD)
     if build:
         lines.append(f"build:         umbrella_sim {build.get('package_version')} "
