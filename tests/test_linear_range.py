@@ -395,9 +395,11 @@ def test_the_umbrellas_warnings_name_the_rib_they_are_of():
 
 def test_a_recording_without_its_summary_judges_stage2_at_the_step_it_took(tmp_path):
     """
-    The default run's recording without its summary: no 'coarse step' where stage 2 took
-    the step its lock needs (the grid's 0.2 ms, recorded as physics_step, is stage 1's),
-    as its own summary says; a step given (0.2 ms in both stages) is judged at that step.
+    A recording without its summary judges stage 2 at the step it took.
+
+    The default run: no 'coarse step' where stage 2 took the step its lock needs (the
+    grid's 0.2 ms, recorded as physics_step, is stage 1's), as its own summary says; a step
+    given (0.2 ms in both stages) is judged at that step.
     """
     from umbrella_sim.ros.recording import record_offline
     from umbrella_sim.tools import compare
