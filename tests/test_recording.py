@@ -595,7 +595,7 @@ def test_the_starting_force_is_on_the_applied_history(tmp_path):
     sleeve_force/applied is the whole force history (msg_docs/topic_sleeve_force.md): the
     starting force acts from t = 0 and is recorded there (it was left off, so a force profile
     made from the applied values missed it), and the recording re-simulates to zero
-    difference.
+    difference.  The run (0.05 s) ends before the first 1 Hz status: it publishes its last.
     """
     from umbrella_sim.tools.replay import resimulate
 
@@ -609,3 +609,7 @@ def test_the_starting_force_is_on_the_applied_history(tmp_path):
     assert [f for _, f in applied] == [3.0] and applied[0][0] == pytest.approx(0.0, abs=1e-9)
     res = resimulate(log)
     assert not res['problems'] and max(res['max_abs_diff'].values()) == 0.0
+    # a run shorter than a second: its last status, at its duration, is its one /diagnostics
+    (_, status), = log.decoded('/diagnostics')
+    values = {kv.key: kv.value for kv in status.status[0].values}
+    assert values['sim_time_s'] == '0.050000' and values['accepted_commands'] == '0'

@@ -569,6 +569,9 @@ class UmbrellaNode(Node):
                     break
                 if duration > 0 and sample is not None and sim_t >= duration - 1e-12:
                     log.info(f'duration {duration:g} s reached at t = {sim_t:.9f} s')
+                    if now > diag_wall:     # (the run's last status: a short run's only one)
+                        self._publish_diagnostics(
+                            sim_t, (sim_t - diag_sim) / (now - diag_wall), lag)
                     break
                 if waiting:
                     self.lockstep.answered.wait(0.05)
