@@ -620,6 +620,12 @@ def test_compare_with_a_run_that_faulted_at_once_names_both_logs(tmp_path):
             '--out', str(tmp_path / 'cmp'), '--no-plots')
     assert r.returncode == 2 and 'do not overlap in time' in r.stderr, r.stderr
     assert 'fault_0.mcap (1 samples' in r.stderr and 'good_0.mcap' in r.stderr, r.stderr
+    # alone, the run that faulted at once is shown (its figures): no other run
+    # to compare (it was refused as not overlapping itself), no plot warning of an empty span
+    r = run('umbrella_sim.tools.compare', str(tmp_path / 'fault'), '--out',
+            str(tmp_path / 'alone'))
+    assert r.returncode == 0 and 'UserWarning' not in r.stderr, r.stderr
+    assert 'reference run: fault' in r.stdout, r.stdout
 
 
 def test_chunk_index_is_kept_on_disk_and_the_file_stays_seekable(tmp_path, monkeypatch):

@@ -120,6 +120,9 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
                                             is None else r.deploy_time - ref.deploy_time),
                  'energy_drift': r.energy_drift, 'differences': {}}
         for name, unit, get, peak_hold in SIGNALS:
+            if r is ref:            # (the reference against itself: nothing to align)
+                entry['differences'][name] = {'max': 0.0, 'rms': 0.0, 'unit': unit}
+                continue
             rt, ry = get(ref)
             t, y = get(r)
             try:

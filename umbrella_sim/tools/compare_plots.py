@@ -123,8 +123,9 @@ def _tip_figure(plt, runs, window, colours):
     _thesis_tip(axes, runs)
     locks = [r.lock_time for r in runs if r.lock_time is not None]
     end = max(locks) if len(locks) == len(runs) else window[1]
-    axes[0].set_xlim(window[0], min(window[1], end) if end > window[0] else window[1])
-    axes[1].set_xlim(*window)
+    if window[1] > window[0]:       # (a run that ended at once has no span to draw)
+        axes[0].set_xlim(window[0], min(window[1], end) if end > window[0] else window[1])
+        axes[1].set_xlim(*window)
     axes[0].set_title('transverse deflection of the tip G, stage 1 (thesis Fig. 6.2, 6.10)')
     axes[1].set_title("across the lock (dotted: each run's lock; thesis Fig. 6.4)")
     for ax in axes:
