@@ -40,7 +40,6 @@ import sys
 import threading
 import time
 
-from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.exceptions import InvalidParameterTypeException
@@ -53,7 +52,7 @@ from std_srvs.srv import SetBool, Trigger
 from . import messages as ros_io
 from .commands import CommandIntake
 from .lockstep import Lockstep
-from .pacing import behind_text, lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer
+from .pacing import lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, declare_umbrella,
                          known_parameter_names, parameter_defaults, set_refusal,
                          wrong_type_text)
@@ -61,7 +60,8 @@ from .params_file import (check_parameter_sources, check_qos_override_sources,
                           ParameterSources, QOS_OVERRIDES, USE_SIM_TIME)
 from .publication import PublicationEncoder, run_driver
 from .recording import RunRecording
-from .ribs_messages import node_topics, ribs_diagnostics
+from .ribs_messages import node_topics
+from .status import node_status
 from .throttled_log import ThrottledWarnings
 from .. import __version__
 from ..bag.cdr import cdr_bytes
@@ -631,39 +631,7 @@ class UmbrellaNode(Node):
         self._peers_warned = text
 
     def _publish_diagnostics(self, sim_t: float, measured: float, lag: float) -> None:
-        rtf = self.node_cfg['real_time_factor']
-        if self.fault:
-            level, message = DiagnosticStatus.ERROR, f'fault: {self.fault}'
-        elif self.recording_error:
-            level, message = DiagnosticStatus.ERROR, f'recording stopped: {self.recording_error}'
-        elif self._peers_warned:
-            level, message = DiagnosticStatus.WARN, self._peers_warned
-        elif rtf > 0 and lag > max(0.05, 2.0 / self.driver_rate):
-            level, message = DiagnosticStatus.WARN, behind_text(lag, measured, rtf)
-        elif self.driver.summary.warnings():
-            level, message = DiagnosticStatus.WARN, "outside the model's validity: " + '; '.join(
-                w.split(':')[0] for w in self.driver.summary.warnings())
-        else:
-            level, message = DiagnosticStatus.OK, self._phase
-        values = {'sim_time_s': f'{sim_t:.6f}', 'measured_real_time_factor': f'{measured:.4f}',
-                  'requested_real_time_factor': rtf, 'lag_s': f'{max(lag, 0.0):.6f}',
-                  'max_lag_s': f'{max(self.pacer.max_lag, 0.0):.6f}',
-                  'phase': self._phase, 'paused': self.paused,
-                  'accepted_commands': self.commands.accepted,
-                  'refused_commands': self.commands.refused, 'steps': self.sim.steps,
-                  'lockstep': self.node_cfg['lockstep'],
-                  'waiting_for_command': bool(self.lockstep.waiting_since),
-                  'lockstep_waits': self.lockstep.waits,
-                  'physics_step_s': self.sim.h, 'slip_s': f'{self.pacer.slip:.6f}',
-                  're_anchors': self.pacer.re_anchors,
-                  'refused_not_recorded': self.commands.refused_not_recorded,
-                  'clock_publishers': getattr(self, 'clock_publishers', 1),
-                  'recording': ('off' if self.recording is None else
-                                f'stopped: {self.recording_error}' if self.recording_error
-                                else 'ok')}
-        for i, text in enumerate(self.driver.summary.warnings()):
-            values[f'warning_{i}'] = text
-        values.update(ribs_diagnostics(self.driver.summary.figures()) if self.ribs > 1 else {})
+        level, message, values = node_status(self, sim_t, measured, lag)
         # the status name carries the namespace: every antenna publishes on /diagnostics
         self._publish({'diagnostics': ros_io.diagnostics_msg(
             sim_t, ros_io.diagnostic_name(self.get_fully_qualified_name()), level, message,
