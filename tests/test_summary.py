@@ -723,3 +723,16 @@ def test_summary_figures_are_the_same_bits_whatever_the_chunking():
         if key in ('wall_time', 'real_time_factor'):
             continue
         assert chunked[key] == value, key
+
+
+def test_a_rigid_fe_recordings_stage2_figures_are_the_zero_its_constraints_hold(tmp_path):
+    """The test API's summary of a rigid-fe recording: 0, as the core's (RIGID_FE_ZEROS)."""
+    from umbrella_sim.testing import summary_from_recording
+
+    bag = tmp_path / 'rigid_fe'
+    core = record_offline(UmbrellaParams(model='rigid-fe'), str(bag), 0.3).summary()
+    assert core['stage2_tip_amplitude'] == core['peak_stress_leaf'] == 0.0
+    s = summary_from_recording(str(bag), after_lock=None)
+    assert s.stage2_samples > 0           # (the tip messages carry the round-off, ~1e-320)
+    assert s.stage2_tip_amplitude == 0.0 and s.stage2_peak_stress == 0.0
+    assert s.lock_time == core['lock_time']

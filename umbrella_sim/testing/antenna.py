@@ -546,7 +546,7 @@ class SimulatedAntenna:
 
         applied = self.applied_forces()
         out = summarize_run(applied, lock, deploy_start_of(self.parameters, applied) == 0.0,
-                            tip, stress, after_lock)
+                            tip, stress, after_lock, self.parameters.get('model'))
         window = f'({lock:.6f}, {end:.6f}] s of sim time'
         if out.stage2_samples == 0:
             first = min((t for t, _ in tip), default=math.inf)

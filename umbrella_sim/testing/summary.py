@@ -76,7 +76,7 @@ def peak_stress(msg) -> float:
 def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
                   started_moving: bool, tip: list[tuple[float, float]],
                   stress: list[tuple[float, float]],
-                  after_lock: float | None = None) -> RunSummary:
+                  after_lock: float | None = None, model: str | None = None) -> RunSummary:
     """
     Return the run summary: the one place these figures are defined.
 
@@ -84,7 +84,8 @@ def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
     t = 0 (v0 != 0 or an initial force), tip [(t, transverse deflection)] and stress
     [(t, max(peak leaf, peak link))].  Stage 2 is core.summary.in_stage2_window with
     after_lock as the window (None: every sample after the lock); the deploy time starts at
-    core.summary.deploy_start.
+    core.summary.deploy_start.  model 'rigid-fe': its stage-2 tip and stresses are the zero
+    its constraints hold (the messages carry their round-off, ~1e-320), as the core's.
     """
     first_push = 0.0 if started_moving else deploy_start(0.0, applied)
     deploy = (lock_time - first_push if lock_time is not None and first_push is not None
@@ -100,6 +101,8 @@ def summarize_run(applied: list[tuple[float, float]], lock_time: float | None,
 
     t2, tip2 = stage2(tip)
     stress2 = stage2(stress)[1]
+    if model == 'rigid-fe':     # (its elastic field, held at zero: core.summary.RIGID_FE_ZEROS)
+        tip2, stress2 = np.zeros_like(tip2), np.zeros_like(stress2)
     return RunSummary(
         first_push_time=first_push, lock_time=lock_time, deploy_time=deploy,
         stage2_peak_stress=float(stress2.max()) if len(stress2) else math.nan,
@@ -137,7 +140,8 @@ def summary_from_recording(path: str, after_lock: float | None = SUMMARY_AFTER_L
     tip = [(t, tip_deflection_figures(m)['tip_transverse'])
            for t, m in log.decoded(log.find_topic('tip_deflection'), seg)]
     stress = [(t, peak_stress(m)) for t, m in log.decoded(log.find_topic('peak_stress'), seg)]
-    return summarize_run(applied, lock_time, started_moving, tip, stress, after_lock)
+    return summarize_run(applied, lock_time, started_moving, tip, stress, after_lock,
+                         params.get('model'))
 
 
 # ------------------------------------------------------------ the umbrella of N ribs
