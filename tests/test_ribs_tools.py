@@ -123,6 +123,18 @@ def test_a_params_files_rib_list_that_is_none_is_refused_naming_the_file(
     assert f'params file {path}: {said}' in capsys.readouterr().err
 
 
+def test_a_params_files_rib_beyond_its_ribs_is_refused_naming_the_file(tmp_path, capsys):
+    """rib7.<name> in a file of ribs 4: exit 2 naming the file, the value and the ribs."""
+    path = tmp_path / 'ribs.yaml'
+    path.write_text('umbrella_node:\n  ros__parameters:\n    ribs: 4\n'
+                    '    rib7:\n      hinge_viscous: 0.1\n')
+    with pytest.raises(SystemExit) as exc:
+        cli.main(['simulate', '--params', str(path), '--duration', '0.01'])
+    assert exc.value.code == 2
+    assert (f'params file {path}: parameter rib7.hinge_viscous: there are ribs 0 .. 3'
+            in capsys.readouterr().err)
+
+
 @pytest.mark.parametrize('spec, said', [
     ('base: {ribs: 3, rib.tip_mass: 0.2}\ncases:\n  - {v0: -0.2}\n',
      'parameter rib.tip_mass=0.2: a list'),

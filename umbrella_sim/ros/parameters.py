@@ -234,14 +234,14 @@ def rib_override_refusal(name: str, ribs: int) -> str | None:
     A rib's own value is declared only where given at start, but any rib's is a parameter the
     node knows: read-only, as every umbrella value (or no rib k of the node's ribs).
     """
-    from ..core.umbrella3d.params3d import rib_override_spec
+    from ..core.umbrella3d.params3d import rib_override_index, rib_override_spec
 
     try:
         if rib_override_spec(name) is None:
             return None
     except ValueError:          # (rib<k>.<unknown>: the unknown name's refusal)
         return None
-    k = int(name[3:name.index('.')])
+    k = rib_override_index(name)
     if ribs < 2:
         return (f'parameter {name}: the node runs the planar model (ribs 1), which has no '
                 f'per-rib values; restart the node with -p ribs:=N -p {name}:=VALUE')

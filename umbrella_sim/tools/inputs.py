@@ -34,7 +34,8 @@ from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETE
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
 from ..core.umbrella3d.params3d import (checked_umbrella_value, names_a_rib,
                                         refuse_empty_rib_lists, RIB_LIST_PREFIX,
-                                        umbrella_parameter_names, umbrella_values)
+                                        rib_override_index, umbrella_parameter_names,
+                                        umbrella_values)
 from ..ros.params_file import check_parameter_sources, load_params_file
 from ..ros.share import package_path
 
@@ -278,6 +279,12 @@ def build_params(args) -> UmbrellaParams:
             raise ValueError(f'params file {params_file}: {exc}') from None
         umbrella.setdefault(name, from_file[name])
     args.umbrella = umbrella_values(umbrella)
+    ribs = args.umbrella.get('ribs', 1)
+    for name in sorted(set(from_file) - set(given)):      # (a file's rib beyond the ribs)
+        k = rib_override_index(name)
+        if k is not None and ribs > 1 and k >= ribs:
+            raise ValueError(f'params file {params_file}: parameter {name}: there are ribs '
+                             f'0 .. {ribs - 1}')
     # what shapes a --mcap recording: --publish-rate / --set, else the params file's (a file
     # shared with the node), else the node's default
     for name in RECORDING_PARAMS:

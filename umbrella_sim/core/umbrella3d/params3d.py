@@ -154,6 +154,12 @@ def names_a_rib(name: str) -> bool:
     return name.startswith(RIB_LIST_PREFIX) or _OVERRIDE.match(name) is not None
 
 
+def rib_override_index(name: str) -> int | None:
+    """Return k of a rib<k>.<name> override (None: not one)."""
+    match = _OVERRIDE.match(name)
+    return None if match is None else int(match.group(1))
+
+
 def rib_override_spec(name: str) -> Param | None:
     """Return the spec of a rib<k>.<name> override (None: not one; ValueError: no such name)."""
     match = _OVERRIDE.match(name)
