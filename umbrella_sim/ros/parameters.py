@@ -154,8 +154,9 @@ def declare_umbrella(node) -> dict:
     from rclpy.parameter import Parameter
 
     from ..core.umbrella3d.params3d import (refuse_empty_rib_lists, RIB_LIST_PREFIX,
-                                            rib_list_specs, rib_override_spec,
-                                            UMBRELLA_SPECS, umbrella_values)
+                                            rib_list_specs, rib_override_index,
+                                            rib_override_spec, UMBRELLA_SPECS,
+                                            umbrella_values)
 
     overrides = node._parameter_overrides
     values = {}
@@ -188,7 +189,7 @@ def declare_umbrella(node) -> dict:
             continue
         overrides[name] = coerce_parameter(overrides[name], spec)
         d = descriptor(name, replace(spec, name=name, applies=START,
-                                     doc=f"rib {name[3:name.index('.')]}'s own: {spec.doc}"))
+                                     doc=f"rib {rib_override_index(name)}'s own: {spec.doc}"))
         values[name] = _declared(node, spec, d, name)
     return umbrella_values(values)
 

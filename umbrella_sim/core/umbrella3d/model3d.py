@@ -53,7 +53,8 @@ import math
 import numpy as np
 
 from .beam3d import BeamBody3D
-from .params3d import rigid_rib_angle, UmbrellaRibsParams
+from .params3d import (rib_deployed_angle, rib_start_angle, rigid_rib_angle,
+                       UmbrellaRibsParams)
 
 N_RIB_ROWS = 9
 ROW_STICK = 8
@@ -271,7 +272,7 @@ class UmbrellaModel3D:
         self.i_tip = tuple(1 + lf.index(tip, d) for d in ('u', 'v', 'w'))
         self.l1 = np.array([r.planar.l1 for r in ribs])
         self.l3 = np.array([r.planar.l3 for r in ribs])
-        self.alpha_deployed = np.array([_deployed_angle(r.planar, p.planar) for r in ribs])
+        self.alpha_deployed = np.array([rib_deployed_angle(r.planar, p.planar) for r in ribs])
         self.y_stop = p.planar.sleeve_stop_height
         self.y_start = p.planar.sleeve_start_height
         self.azimuth = np.array([r.azimuth for r in ribs])
@@ -603,9 +604,8 @@ class UmbrellaModel3D:
     def rib_angle_at_height(self, k: int, y: float) -> float:
         """Return the leaf angle at which rib k's rigid link puts H at height y."""
         rib = self.ribs[k].planar
-        base = self.params.planar
-        if (rib.l1, rib.l3) == (base.l1, base.l3) and y == self.y_start:
-            return base.alpha0
+        if y == self.y_start:
+            return rib_start_angle(rib, self.params.planar)
         return rigid_rib_angle(rib.l1, rib.l3, y)
 
     # -------------------------------------------------------------- figures
@@ -653,10 +653,3 @@ class UmbrellaModel3D:
             stress = np.einsum('rpe,...re->...rp', rows, qr[..., s_e])
             out.append(stress.reshape(stress.shape[:-1] + (4, -1)))
         return out
-
-
-def _deployed_angle(rib, base) -> float:
-    """Return the leaf angle at which a rib's rigid geometry puts H at the common stop."""
-    if (rib.l1, rib.l3) == (base.l1, base.l3):
-        return base.alpha_deployed
-    return rigid_rib_angle(rib.l1, rib.l3, base.sleeve_stop_height)

@@ -169,11 +169,6 @@ def rib_override_spec(name: str) -> Param | None:
     return rib_list_specs()[match.group(2)]
 
 
-def spec_key(override: str) -> str:
-    """Return the parameter a rib<k>.<name> override sets (<name>)."""
-    return override[override.index('.') + 1:]
-
-
 def refuse_empty_rib_lists(values: Mapping[str, Any], where: str = '') -> None:
     """
     Refuse a rib.<name> given as null or [] (where: what gave it, prefixed to the error).
@@ -229,9 +224,9 @@ def umbrella_values(values: Mapping[str, Any]) -> dict:
         else:                                   # rib<k>.<name>: one rib's value
             spec = dataclasses.replace(rib_override_spec(name), name=name)
             if isinstance(value, (list, tuple)):
-                raise ValueError(f'parameter {name}={value!r}: one value, rib '
-                                 f"{name[3:name.index('.')]}'s own (rib.{spec_key(name)} "
-                                 'takes a list of every rib)')
+                k, key = _OVERRIDE.match(name).groups()
+                raise ValueError(f"parameter {name}={value!r}: one value, rib {k}'s own "
+                                 f'(rib.{key} takes a list of every rib)')
             out[name] = spec.coerce(value)
     if out.get('ribs', 1) == 1:
         given = sorted(n for n, v in out.items()
@@ -391,10 +386,8 @@ class UmbrellaRibsParams:
         offset = rib.alpha0_offset
         if offset == 0.0:
             return
-        base = self.planar
-        start = (base.alpha0 if (rib.planar.l1, rib.planar.l3) == (base.l1, base.l3)
-                 else rigid_rib_angle(rib.planar.l1, rib.planar.l3, base.sleeve_start_height))
-        deployed = rigid_rib_angle(rib.planar.l1, rib.planar.l3, base.sleeve_stop_height)
+        start = rib_start_angle(rib.planar, self.planar)
+        deployed = rib_deployed_angle(rib.planar, self.planar)
         highest = REGISTRY['alpha0'].high       # (the toggle: no lever on the leaf)
         angle = start + offset
         if not deployed < angle <= highest:
@@ -505,6 +498,20 @@ def rib_reach(l1: float, l3: float) -> tuple[float, float, float]:
 
 def _rigid_height(l1: float, l3: float, a: float) -> float:
     return l1 * math.sin(a) + math.sqrt(max(l3 ** 2 - (l1 * math.cos(a)) ** 2, 0.0))
+
+
+def rib_start_angle(rib: UmbrellaParams, base: UmbrellaParams) -> float:
+    """Return the leaf angle at which a rib's rigid geometry puts H at the sleeve's start."""
+    if (rib.l1, rib.l3) == (base.l1, base.l3):
+        return base.alpha0
+    return rigid_rib_angle(rib.l1, rib.l3, base.sleeve_start_height)
+
+
+def rib_deployed_angle(rib: UmbrellaParams, base: UmbrellaParams) -> float:
+    """Return the leaf angle at which a rib's rigid geometry puts H at the common stop."""
+    if (rib.l1, rib.l3) == (base.l1, base.l3):
+        return base.alpha_deployed
+    return rigid_rib_angle(rib.l1, rib.l3, base.sleeve_stop_height)
 
 
 def rigid_rib_angle(l1: float, l3: float, y: float) -> float:
