@@ -31,7 +31,7 @@ from ..bag.paths import check_new_output, remove_recording
 from ..core.driver import RunDriver, simulate, simulator_class
 from ..core.params import shortened_step_note
 from ..core.registry import parameter_help, SPECS
-from ..core.umbrella3d.params3d import umbrella_model, umbrella_parameter_help
+from ..core.umbrella3d.params3d import umbrella_parameter_help
 from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
 
 
@@ -247,16 +247,10 @@ class CsvStream:
         except OSError as exc:
             self.error = f'--csv {self.path}: {exc.strerror or exc}'
             self.close()
-            self.rows = keep_whole_rows(self.path)
+            self.rows, last = keep_whole_rows(self.path)
             self.error += (f' (the file keeps its first {self.rows} rows whole, to '
-                           f't = {self.last_time():g} s)' if self.rows
+                           f"t = {float(last.split(b',', 1)[0]):g} s)" if self.rows
                            else ' (removed: it held no whole row)')
-
-    def last_time(self) -> float:
-        """Return the time of the last row the file keeps (its first column)."""
-        with open(self.path, 'rb') as fh:
-            fh.seek(max(0, os.path.getsize(self.path) - 65536))
-            return float(fh.read().rstrip(b'\n').rsplit(b'\n', 1)[-1].split(b',', 1)[0])
 
     def close(self) -> None:
         if self._out is not None:
@@ -267,12 +261,12 @@ class CsvStream:
             self._out = None
 
 
-def keep_whole_rows(path: str) -> int:
+def keep_whole_rows(path: str) -> tuple[int, bytes]:
     """
-    Cut a text file after its last whole line; return its rows after the header line.
+    Cut a text file after its last whole line; return its rows after the header, and the last.
 
     What a write error left: the row it cut is cut off.  A file without one whole row is
-    removed (0); one that cannot be reached counts 0.
+    removed (0, b''); one that cannot be reached counts 0.
     """
     try:
         with open(path, 'r+b') as fh:
@@ -282,11 +276,14 @@ def keep_whole_rows(path: str) -> int:
                 if b'\n' in block:
                     end = fh.tell() - len(block) + block.rindex(b'\n') + 1
             fh.truncate(end)
+            fh.seek(max(0, end - chunk))
+            last = fh.read().rstrip(b'\n').rsplit(b'\n', 1)[-1]
         if lines < 2:           # (not one whole row: nothing worth keeping)
             os.unlink(path)
-        return max(0, lines - 1)
+            return 0, b''
+        return lines - 1, last
     except OSError:
-        return 0
+        return 0, b''
 
 
 def write_stdout(text: str) -> bool:
@@ -308,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f'--duration {args.duration}: must be > 0')
         # the planar model, or with ribs >= 2 the umbrella of N ribs
-        run = umbrella_model(params, args.umbrella)
+        run = args.model
         step = simulator_class(run).grid_step(run)
         if args.duration < step * (1.0 - 1e-9):   # (it ran no step)
             raise ValueError(f'--duration {args.duration}: shorter than one physics step '

@@ -25,6 +25,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import re
 import sys
 
 from ..bag.paths import read_text_input
@@ -32,10 +33,9 @@ from ..core.forcing import command_force
 from ..core.params import check_values, UmbrellaParams
 from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
-from ..core.umbrella3d.params3d import (checked_umbrella_value, names_a_rib,
-                                        refuse_empty_rib_lists, RIB_LIST_PREFIX,
-                                        rib_override_index, umbrella_parameter_names,
-                                        umbrella_values)
+from ..core.umbrella3d.params3d import (names_a_rib, refuse_empty_rib_lists,
+                                        RIB_LIST_PREFIX, umbrella_model,
+                                        umbrella_parameter_names, umbrella_values)
 from ..ros.params_file import check_parameter_sources, load_params_file
 from ..ros.share import package_path
 
@@ -224,7 +224,8 @@ def build_params(args) -> UmbrellaParams:
     Return the planar record of the options, --set and the params file (validated).
 
     The umbrella's values (UMBRELLA_NAMES) go to args.umbrella (params3d.umbrella_values:
-    {} for the planar model).
+    {} for the planar model), the run's model to args.model (params3d.umbrella_model: the
+    planar record, or the umbrella of N ribs).
     """
     values: dict = {}
     umbrella: dict = {}
@@ -272,19 +273,16 @@ def build_params(args) -> UmbrellaParams:
         print(f'umbrella_sim: warning: {text}', file=sys.stderr)
     check_lock_given(params, lock_given)
     refuse_empty_rib_lists(from_file, f'params file {params_file}: ')
-    for name in sorted(UMBRELLA_NAMES & set(from_file)):
-        try:            # (each value's type and range, naming the file that gave it)
-            checked_umbrella_value(name, from_file[name])
-        except ValueError as exc:
-            raise ValueError(f'params file {params_file}: {exc}') from None
+    for name in UMBRELLA_NAMES & set(from_file):
         umbrella.setdefault(name, from_file[name])
-    args.umbrella = umbrella_values(umbrella)
-    ribs = args.umbrella.get('ribs', 1)
-    for name in sorted(set(from_file) - set(given)):      # (a file's rib beyond the ribs)
-        k = rib_override_index(name)
-        if k is not None and ribs > 1 and k >= ribs:
-            raise ValueError(f'params file {params_file}: parameter {name}: there are ribs '
-                             f'0 .. {ribs - 1}')
+    try:        # (the core's rules; a value the file gave is named with the file)
+        args.umbrella = umbrella_values(umbrella)
+        args.model = umbrella_model(params, args.umbrella)
+    except ValueError as exc:
+        culprit = re.match(r'parameter ([\w.]+)[=:]', str(exc))
+        if culprit and culprit.group(1) in (set(from_file) - set(given)) & UMBRELLA_NAMES:
+            raise ValueError(f'params file {params_file}: {exc}') from None
+        raise
     # what shapes a --mcap recording: --publish-rate / --set, else the params file's (a file
     # shared with the node), else the node's default
     for name in RECORDING_PARAMS:
