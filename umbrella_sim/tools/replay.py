@@ -505,6 +505,12 @@ def info_text(log: LogData) -> str:
                      f'{qos.history.name.lower()} {qos.depth})')
     if log.ended_early:
         lines.append(f'recording ended early: {log.ended_early}')
+    try:
+        segments = log.segments()
+    except LogError:
+        segments = []
+    # (~/reset: a run a segment, each labelled; the events are the last segment's)
+    label = ('segment 0:' if len(segments) > 1 else 'run:').ljust(15)
     mesh = log.metadata.get(MESH_RECORD)
     if mesh:
         try:
@@ -512,27 +518,19 @@ def info_text(log: LogData) -> str:
         except LogError:
             step = ''
         ribs = int(mesh.get('ribs', '1'))
-        lines.append(f"run:           model {mesh.get('model')}, "
+        lines.append(f"{label}model {mesh.get('model')}, "
                      f"{mesh.get('elements_per_segment')} element(s) a segment, "
                      + (f'{ribs} ribs, ' if ribs > 1 else '')
                      + f"lock {mesh.get('lock')}{step}")
-    try:
-        segments = log.segments()
-    except LogError:
-        segments = []
-    last = ''
-    if len(segments) > 1:       # (~/reset: a run a segment; the events are the last's)
-        if mesh:
-            lines[-1] = lines[-1].replace('run:          ', 'segment 0:    ', 1)
-        for seg in segments[1:]:
-            p = seg.params
-            ribs = int(p.get('ribs', 1) or 1)
-            lines.append(f'segment {seg.index}:{" " * max(1, 6 - len(str(seg.index)))}from '
-                         f'log time {seg.offset_ns * 1e-9:.6f} s (~/reset): model '
-                         f"{p.get('model')}, {p.get('elements_per_segment')} element(s) a "
-                         'segment, ' + (f'{ribs} ribs, ' if ribs > 1 else '')
-                         + f"v0 {p.get('v0')} m/s")
-        last = f' (segment {segments[-1].index}, the last)'
+    for seg in segments[1:]:
+        p = seg.params
+        ribs = int(p.get('ribs', 1) or 1)
+        lines.append(f'segment {seg.index}:'.ljust(15)
+                     + f'from log time {seg.offset_ns * 1e-9:.6f} s (~/reset): model '
+                     f"{p.get('model')}, {p.get('elements_per_segment')} element(s) a "
+                     'segment, ' + (f'{ribs} ribs, ' if ribs > 1 else '')
+                     + f"v0 {p.get('v0')} m/s")
+    last = f' (segment {segments[-1].index}, the last)' if len(segments) > 1 else ''
     events = log.metadata.get(EVENTS_RECORD, {})
     if events.get('locked') == 'true':
         lines.append(f"locked:        at t = {float(events['lock_time']):.9f} s "
