@@ -145,13 +145,13 @@ class CommandIntake:
 
     def start_run(self, force: float) -> None:
         """
-        Hold a new run's starting force (its sleeve_force) and apply it at t = 0 if it is news.
+        Apply a new run's starting force (its sleeve_force, held already) at t = 0 if news.
 
         The applied history is the whole force history: the starting force goes on it, at
         start and after each ~/reset, where it differs from the last value applied (0 before
-        any: a run starting from rest with no force says nothing).
+        any: a run starting from rest with no force says nothing).  Not held here: a command
+        taken since the new run's driver was installed (hold) stays the latest.
         """
-        self.hold(force)
         if force != self._last_applied:
             self.applied(force, 0.0, False)
 
