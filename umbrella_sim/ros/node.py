@@ -18,8 +18,7 @@ umbrella_node: the ROS 2 face of the simulator, a thin adapter around the run dr
 Threads, chosen deliberately:
   * the physics thread steps the run driver (core/driver.py) a chunk at a time, giving up
     the sim lock between chunks, and publishes at each publication instant, paced against
-    the wall clock (pacing.py: this node is the /clock source), through the publisher
-    thread (outbox.py), which sends and records it while the physics goes on;
+    the wall clock (pacing.py: this node is the /clock source);
   * a two-thread executor serves the sleeve_force subscription (its own callback group)
     and, independently, the ~/reset and ~/pause services and parameter sets.  The compiled
     step is a ctypes call, which releases the GIL, so commands are taken while physics
@@ -53,7 +52,6 @@ from std_srvs.srv import SetBool, Trigger
 from . import messages as ros_io
 from .commands import CommandIntake
 from .lockstep import Lockstep
-from .outbox import Outbox
 from .pacing import lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer
 from .parameters import (coerce_parameter, declare_from_registry, declare_umbrella,
                          known_parameter_names, parameter_defaults, set_refusal,
@@ -63,7 +61,7 @@ from .params_file import (check_parameter_sources, check_qos_override_sources,
 from .publication import PublicationEncoder, run_driver
 from .recording import RunRecording
 from .ribs_messages import node_topics
-from .status import diagnostics_message, namespace_peers
+from .status import node_status
 from .throttled_log import ThrottledWarnings
 from .. import __version__
 from ..bag.cdr import cdr_bytes
@@ -122,8 +120,6 @@ class UmbrellaNode(Node):
         self.pending_params = self.model_params
         self._sim_lock = threading.RLock()
         self._epoch = 0                     # counts resets; samples of an older epoch are dropped
-        self._pub_lock = threading.Lock()   # a sample's epoch check and sending; a reset's bump
-        self._outbox = Outbox(self._send_sample, name='publisher')
         self.lockstep = Lockstep()            # the handshake of lockstep:=true
         self._warn_throttled = ThrottledWarnings(self.get_logger()).warn
         self.commands = CommandIntake(lambda: self.sim, self._recording_on, self._warn_throttled,
@@ -275,7 +271,6 @@ class UmbrellaNode(Node):
         rec = self.recording
         if rec is None:
             return
-        self._outbox.flush(timeout=5.0)       # the publications handed over: recorded
         had_error = rec.error is not None
         # the events and the summary of one state: not while the physics thread is in a
         # chunk of steps
@@ -336,8 +331,7 @@ class UmbrellaNode(Node):
         with self._locked():
             ended, fault = self.sim, self.fault
             self._install_driver(driver)
-            with self._pub_lock:            # the samples still queued are the ended run's
-                self._epoch += 1
+            self._epoch += 1
             self._anchor()
             self.lockstep.restart()
             rec = self._recording_on()
@@ -444,14 +438,12 @@ class UmbrellaNode(Node):
         self.request_stop()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
-        self._outbox.close()
 
     def _anchor(self) -> None:
         self.pacer.anchor(self.sim.time)
 
     def _publish_phase(self, phase: str) -> None:
         self._phase = phase
-        self._outbox.flush()
         self._publish({'deployment_phase': ros_io.phase_msg(phase)}, self.sim.time)
 
     def _sample_messages(self) -> tuple[int, float, dict]:
@@ -462,13 +454,8 @@ class UmbrellaNode(Node):
             cfg['frame_prefix'])
 
     def _publish_sample(self, sample: tuple[int, float, dict]) -> None:
-        """Publish a sample by the outbox; now in lockstep (its handshake) or from a service."""
-        self._outbox.submit(sample, now=self.node_cfg['lockstep']
-                            or threading.current_thread() is not self._thread)
-
-    def _send_sample(self, sample: tuple[int, float, dict]) -> None:
         epoch, t, msgs = sample
-        with self._pub_lock:
+        with self._sim_lock:
             if epoch != self._epoch:          # a reset came in meanwhile: the sample is stale
                 return
             if 'joint_states' in msgs:
@@ -487,8 +474,7 @@ class UmbrellaNode(Node):
         if t is None:
             return
         # logged, recorded and published BEFORE the solver sees it: a fault it causes is in
-        # the log and --resimulate reproduces it (and after the publications before it)
-        self._outbox.flush()
+        # the log and --resimulate reproduces it
         self.commands.applied(force, t, self.sim.stage == 'locked')
 
     def _advance_chunk(self) -> bool:
@@ -569,8 +555,6 @@ class UmbrellaNode(Node):
                     lag = max(lag, self.pacer.lag(target, now))
                 if idle:
                     lag = 0.0                 # paused or waiting: not behind (anchored anew)
-                if self._outbox.error is not None:
-                    raise self._outbox.error
                 if sample is not None:
                     self._publish_sample(sample)
                 if epoch != diag_epoch:     # a reset: sim time restarted, measure from here
@@ -592,7 +576,6 @@ class UmbrellaNode(Node):
                 if waiting:
                     self.lockstep.answered.wait(0.05)
                 elif idle:
-                    self._outbox.flush()
                     if self.paused and self.fault is None:   # as Gazebo: the time, unchanged
                         self.pub['clock'].publish(ros_io.clock_msg(sim_t))   # (not recorded)
                     self._wake.wait(0.05)
@@ -601,10 +584,6 @@ class UmbrellaNode(Node):
             log.error(f'physics thread stopped: {exc!r}')
             self.fault = repr(exc)
         finally:
-            self._outbox.flush(timeout=5.0)       # (what was published: recorded before the end)
-            if self._outbox.error is not None and self.fault is None:
-                log.error(f'physics thread stopped: {self._outbox.error!r}')
-                self.fault = repr(self._outbox.error)
             if not self.finished.done():
                 self.finished.set_result(self.fault is None)
 
@@ -633,15 +612,27 @@ class UmbrellaNode(Node):
 
     def _check_namespace_peers(self) -> None:
         """Two simulators in one namespace mix their /clock, commands and resets: warn."""
-        found = namespace_peers(self)
-        if found is None:             # the graph is gone (shutting down)
+        try:
+            clocks = self.count_publishers(self.pub['clock'].topic_name)
+            same = sum(1 for n, ns in self.get_node_names_and_namespaces()
+                       if (n, ns) == (self.get_name(), self.get_namespace()))
+        except Exception:             # the graph is gone (shutting down)
             return
-        self.clock_publishers, text = found
+        self.clock_publishers = clocks
+        text = ''
+        if same > 1:
+            text = (f'{same} nodes named {self.get_fully_qualified_name()}: their topics, '
+                    'commands and ~/reset mix; give each its own namespace (-r __ns:=/NAME)')
+        elif clocks > 1:
+            text = (f"{clocks} publishers on {self.pub['clock'].topic_name}: another simulator "
+                    'or a replay in this namespace; sim time will jump')
         if text and text != self._peers_warned:
             self.get_logger().warning(text)
         self._peers_warned = text
 
     def _publish_diagnostics(self, sim_t: float, measured: float, lag: float) -> None:
-        msg = diagnostics_message(self, sim_t, measured, lag)
-        self._outbox.flush()
-        self._publish({'diagnostics': msg}, sim_t)
+        level, message, values = node_status(self, sim_t, measured, lag)
+        # the status name carries the namespace: every antenna publishes on /diagnostics
+        self._publish({'diagnostics': ros_io.diagnostics_msg(
+            sim_t, ros_io.diagnostic_name(self.get_fully_qualified_name()), level, message,
+            values)}, sim_t)

@@ -15,8 +15,6 @@
 """
 umbrella_node's status on /diagnostics: its level, its message and its values (node_status).
 
-And what its namespace's peers say of it (namespace_peers): a second simulator there.
-
 What msg_docs/topic_diagnostics.md documents, read off the node: a fault or a stopped
 recording (ERROR), a second simulator in the namespace, a lag past max(50 ms, two
 publication periods), the run outside the model's validity (WARN), else its phase (OK).
@@ -25,32 +23,8 @@ from __future__ import annotations
 
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from . import messages as ros_io
 from .pacing import behind_text
 from .ribs_messages import ribs_diagnostics
-
-
-def namespace_peers(node) -> tuple[int, str] | None:
-    """
-    Return (publishers of node's /clock, a warning or '') of its namespace's peers.
-
-    Two simulators in one namespace mix their /clock, commands and resets.  None if the
-    graph cannot be read (shutting down).
-    """
-    try:
-        clocks = node.count_publishers(node.pub['clock'].topic_name)
-        same = sum(1 for n, ns in node.get_node_names_and_namespaces()
-                   if (n, ns) == (node.get_name(), node.get_namespace()))
-    except Exception:
-        return None
-    text = ''
-    if same > 1:
-        text = (f'{same} nodes named {node.get_fully_qualified_name()}: their topics, '
-                'commands and ~/reset mix; give each its own namespace (-r __ns:=/NAME)')
-    elif clocks > 1:
-        text = (f"{clocks} publishers on {node.pub['clock'].topic_name}: another simulator "
-                'or a replay in this namespace; sim time will jump')
-    return clocks, text
 
 
 def node_status(node, sim_t: float, measured: float, lag: float) -> tuple[int, str, dict]:
@@ -90,11 +64,3 @@ def node_status(node, sim_t: float, measured: float, lag: float) -> tuple[int, s
         values[f'warning_{i}'] = text
     values.update(ribs_diagnostics(node.driver.summary.figures()) if node.ribs > 1 else {})
     return level, message, values
-
-
-def diagnostics_message(node, sim_t: float, measured: float, lag: float):
-    """Return node's /diagnostics message at sim time sim_t (node_status's)."""
-    level, message, values = node_status(node, sim_t, measured, lag)
-    # the status name carries the namespace: every antenna publishes on /diagnostics
-    return ros_io.diagnostics_msg(
-        sim_t, ros_io.diagnostic_name(node.get_fully_qualified_name()), level, message, values)
