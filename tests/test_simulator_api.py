@@ -173,3 +173,17 @@ def test_a_negative_block_or_a_time_already_past_is_refused_and_changes_nothing(
         with pytest.raises(ValueError, match="n_steps=|before the simulator's time"):
             call()
     assert sim.time == t and len(sim.advance(0)) == 0 and sim.advance_to(t) == []
+
+
+def test_every_public_name_of_the_core_imports_from_it():
+    # what the docs tell a script to import (the umbrella's names among them) is there, and
+    # is the class itself, not a copy
+    import umbrella_sim.core as core
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+    from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+    for name in core.__all__:
+        assert getattr(core, name) is not None, name
+    assert core.UmbrellaRibsParams is UmbrellaRibsParams
+    assert core.UmbrellaSimulator3D is UmbrellaSimulator3D
+    with pytest.raises(AttributeError, match='no attribute'):
+        core.UmbrellaSimulator4D

@@ -26,6 +26,8 @@ it so).  The parts, in the order data flows through them:
     solver             UmbrellaSimulator: the time grid, the force, the lock
     driver             RunDriver: one run in chunks of compiled steps, its force schedule,
                        summary and publications; simulate() the whole run
+    umbrella3d         N flexible ribs in 3D around one sleeve (UmbrellaRibsParams,
+                       UmbrellaSimulator3D); the planar model is its one-rib case
     outputs, summary   per-step rows, Samples, and the summary figures of every step
 
 The names a script needs are importable from here::
@@ -42,7 +44,8 @@ _PUBLIC = {'UmbrellaParams': 'params', 'ControllerConfig': 'params', 'REGISTRY':
            'UmbrellaModel': 'model', 'UmbrellaSimulator': 'solver', 'RunDriver': 'driver',
            'Chunk': 'driver', 'simulate': 'driver', 'Sample': 'outputs',
            'StepBlock': 'outputs', 'RunResult': 'summary', 'SummaryAccumulator': 'summary',
-           'ForceSchedule': 'forcing'}
+           'ForceSchedule': 'forcing', 'UmbrellaRibsParams': 'umbrella3d.params3d',
+           'UmbrellaSimulator3D': 'umbrella3d.simulator3d'}
 __all__ = sorted(_PUBLIC)
 
 

@@ -46,6 +46,18 @@ def _field_count(cls) -> int:
 
 @dataclass(frozen=True)
 class Sample:
+    """
+    The state of the planar frame at one instant, and what is recovered from it (SI units).
+
+    time in s from the start; stage 'deploying' (stage 1) or 'locked' (stage 2); q, q' the
+    generalized coordinates (RunResult.q_labels names them) and their rates; angles in rad
+    from +X (alpha1 the leaf's, alpha2 the link's), the sleeve's height y_H in m; the tip
+    G's deflection in m in the leaf's floating frame; fibre stresses in Pa, tension
+    positive, at the stress points RunResult.leaf_stress_x / link_stress_x (m from O along
+    the leaf, from O'' along the link), the peak |sigma| and where it is; energies in J.
+    The comment beside each field says more.
+    """
+
     time: float
     stage: str                     # "deploying" | "locked"
     q: np.ndarray

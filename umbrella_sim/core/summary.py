@@ -88,6 +88,14 @@ def _linear_figures(rows: np.ndarray) -> np.ndarray:
 
 @dataclass
 class RunResult:
+    """
+    What driver.simulate returns: a run's parameters, kept Samples, lock and summary figures.
+
+    samples: the Sample kept every output_every steps (a run of N ribs keeps the umbrella's
+    own samples); column(name) one field of them as an array; summary() the figures;
+    error: why the run stopped early (what was computed before it is kept).
+    """
+
     params: dict
     samples: list = field(default_factory=list)
     lock: LockEvent | None = None
@@ -101,9 +109,11 @@ class RunResult:
     figures: dict | None = None     # SummaryAccumulator.figures() of every physics step
 
     def column(self, name: str) -> np.ndarray:
+        """Return a Sample field of every kept sample as an array (its unit: Sample's)."""
         return np.array([getattr(s, name) for s in self.samples], dtype=float)
 
     def summary(self) -> dict:
+        """Return the run's summary figures (deploy_time, tip maxima, peaks: SI units)."""
         return summarize(self)
 
 
