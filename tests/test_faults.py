@@ -333,6 +333,8 @@ def _node(*args, timeout=60):
      "parameter v0='abc' (-p): not taken: rcl keeps v0's value -0.2 (a double"),
     ('/**:\n  ros__parameters:\n    damping_ratio: 0.0\n', ['-p', 'damping_ratio:=[0.02]'],
      'give damping_ratio a double'),
+    # 'NaN' is rcl's double NaN (YAML's string): the value's own refusal, not a type's
+    (None, ['-p', 'v0:=NaN'], 'parameter v0=nan: must be a finite number'),
     # a per-rib list of an int and doubles: rcl's own parse error, with what to write
     (None, ['-p', 'ribs:=3', '-p', 'rib.tip_mass:=[0,0.1,0]'],
      'a list of doubles needs every value written as a double, [0.0, 0.1] not [0, 0.1]'),
@@ -344,7 +346,7 @@ def _node(*args, timeout=60):
         'no-ros-parameters', 'binary', 'missing', 'no-assign', 'bogus-flag', 'no-model',
         'empty-value', 'qos-typo', 'qos-type', 'twice', 'tiny-step', 'ros-param-type',
         'qos-type-argument', 'argument-type-beside-file', 'argument-list-beside-file',
-        'mixed-list', 'rib-before-record-path'])
+        'nan-word', 'mixed-list', 'rib-before-record-path'])
 @pytest.mark.ros
 def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):
     if content is not None:
@@ -357,6 +359,17 @@ def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words
     assert words in r.stderr and 'Traceback' not in r.stderr, r.stderr
     if content is not None:
         assert 'p.yaml' in r.stderr
+
+
+@pytest.mark.ros
+def test_a_whole_double_beside_a_files_integer_is_the_integer(tmp_path):
+    # msg_docs/node_parameters.md: -p elements_per_segment:=4.0 is 4, with a file or without
+    path = tmp_path / 'p.yaml'
+    path.write_text('/**:\n  ros__parameters:\n    elements_per_segment: 1\n')
+    r = _node('--params-file', str(path), '-p', 'elements_per_segment:=4.0', '-p',
+              'record:=false')
+    assert r.returncode == 0, r.stderr
+    assert '4 element(s) a segment' in r.stderr + r.stdout
 
 
 @pytest.mark.ros

@@ -394,6 +394,34 @@ def test_a_dropped_argument_value_is_refused_where_rcl_drops_it(tmp_path):
     assert outcomes == {True, False}        # (both kinds seen: rcl took some, dropped some)
 
 
+def test_a_whole_double_for_a_files_integer_is_taken_and_nan_is_rcls_double():
+    """
+    -p elements_per_segment:=4.0 beside a file's integer: the node takes 4 (as without a file).
+
+    rcl keeps the file's integer; a whole double is that integer to the node, which takes it
+    (check_param_rules returns it); 2.5 is not one and is refused.  'NaN' (strtod's word) is a
+    double to rcl and a string to YAML: the rule is the value the node was given, which its
+    own check then refuses as not finite.
+    """
+    from rclpy.parameter import Parameter
+
+    from umbrella_sim.ros.params_file import check_param_rules
+
+    def given(name, value):
+        return {name: Parameter(name, value=value)}
+
+    assert check_param_rules({'elements_per_segment': '4.0'},
+                             given('elements_per_segment', 1)) == {'elements_per_segment': 4}
+    with pytest.raises(ValueError, match='an integer, from an earlier -p.*give '
+                                         'elements_per_segment an integer'):
+        check_param_rules({'elements_per_segment': '2.5'}, given('elements_per_segment', 1))
+    assert check_param_rules({'v0': 'NaN'}, given('v0', math.nan)) == {}
+    assert check_param_rules({'rib.hinge_coulomb': '[0.0, NaN]'},
+                             given('rib.hinge_coulomb', [0.0, math.nan])) == {}
+    with pytest.raises(ValueError, match="v0='abc'.*a string"):
+        check_param_rules({'v0': 'abc'}, given('v0', -0.2))
+
+
 @pytest.mark.parametrize('extra', [[], ['--set', 'damping_ratio=0.02']])
 def test_a_section_too_slender_for_the_solver_is_refused_naming_it(extra, capsys):
     """

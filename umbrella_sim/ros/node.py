@@ -188,6 +188,8 @@ class UmbrellaNode(Node):
             raise StartupError(str(exc)) from None
         for text in found.warnings:       # another node's, in a '/**' section
             self.get_logger().warning(text)
+        for name, value in found.taken.items():     # (a -p value rcl set aside: the user's)
+            self._parameter_overrides[name] = Parameter(name, value=value)
         return found
 
     def _check_qos_overrides(self, given: ParameterSources) -> None:

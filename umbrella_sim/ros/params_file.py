@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import functools
+import math
 import re
 
 from ..bag.paths import read_text_input
@@ -213,6 +214,28 @@ def _kind(value) -> str:
     return 'list'
 
 
+def _a(kind: str) -> str:
+    """Return 'a kind' or 'an kind' (an integer)."""
+    return f"{'an' if kind[0] in 'aeiou' else 'a'} {kind}"
+
+
+def _as_rcl_typed(value, kept):
+    """
+    Return a rule's value as rcl types it where YAML and rcl differ: a number's text.
+
+    rcl reads 'NaN', 'nan', 'inf' (strtod's words) as doubles where YAML has strings (its
+    NaN is '.nan'); a list element alike.
+    """
+    if isinstance(value, str) and isinstance(kept, float):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    if isinstance(value, list) and isinstance(kept, (list, tuple)) and len(value) == len(kept):
+        return [_as_rcl_typed(v, k) for v, k in zip(value, kept)]
+    return value
+
+
 def _same_value(given, kept) -> bool:
     """Tell whether a rule's value is the one a node was given (numbers by value, NaN too)."""
     if kept is None:        # (rcl gives an empty list no type: not set)
@@ -226,7 +249,7 @@ def _same_value(given, kept) -> bool:
     return len(kinds) == 1 and given == kept
 
 
-def check_param_rules(rules: dict, overrides: dict, params_files=()) -> None:
+def check_param_rules(rules: dict, overrides: dict, params_files=()) -> dict:
     """
     Refuse a ``-p`` value rcl dropped: ValueError naming the parameter and the value.
 
@@ -234,25 +257,37 @@ def check_param_rules(rules: dict, overrides: dict, params_files=()) -> None:
     (a string or a list for a double: ``-p v0:=abc``), rcl keeps the file's value without a
     word, and the node would run on it.  rules: param_rules_in's; overrides: the node's
     (rclpy's _parameter_overrides, before any is coerced); params_files: the command line's,
-    named in the refusal.  A rule whose value, typed as rcl types it (load_yaml_as_ros), is
-    not the one the node was given is refused.
+    named in the refusal.  A rule whose value, typed as rcl types it (load_yaml_as_ros,
+    _as_rcl_typed), is not the one the node was given is refused, but for a whole double
+    where the file gives an integer (``-p elements_per_segment:=4.0``), which the node takes
+    as that integer, as it does without a file: returned, name -> the integer, for the node
+    to take in place of the file's.
     """
     import yaml
 
+    taken = {}
     for name, text in rules.items():
         given = overrides.get(name)
         try:
             value = load_yaml_as_ros(text)
         except yaml.YAMLError:      # (rcl refused the arguments: init_ros said so)
             continue
-        if given is None or _same_value(value, given.value):
+        if given is None:
             continue
         kept = given.value
+        value = _as_rcl_typed(value, kept)
+        if _same_value(value, kept):
+            continue
+        if (_kind(kept) == 'integer' and _kind(value) == 'double' and math.isfinite(value)
+                and value == int(value)):
+            taken[name] = int(value)
+            continue
         files = ''.join(f'params file {path} or ' for path in params_files)
         raise ValueError(
-            f"parameter {name}={text!r} (-p): not taken: rcl keeps {name}'s value {kept!r} (a "
-            f'{_kind(kept)}, from {files}an earlier -p) without a word where -p gives one of '
-            f'another type (a {_kind(value)}); give {name} a {_kind(kept)}')
+            f"parameter {name}={text!r} (-p): not taken: rcl keeps {name}'s value {kept!r} "
+            f'({_a(_kind(kept))}, from {files}an earlier -p) without a word where -p gives one '
+            f'of another type ({_a(_kind(value))}); give {name} {_a(_kind(kept))}')
+    return taken
 
 
 def names_the_node(pattern: str) -> bool:
@@ -283,6 +318,8 @@ class ParameterSources:
     shared_qos_overrides: dict = field(default_factory=dict)   # name -> (file, section)
     #: a wildcard section's names the node does not know, each with a "did you mean"
     warnings: list = field(default_factory=list)
+    #: -p values the node takes in place of a file's that rcl kept (check_param_rules)
+    taken: dict = field(default_factory=dict)
 
 
 def check_parameter_sources(node_fqn: str, params_files, given, known,
@@ -306,10 +343,9 @@ def check_parameter_sources(node_fqn: str, params_files, given, known,
     refused).  Returns the ``qos_overrides.*`` names given, for the node to check against
     the QoS its topics declare.
     """
-    if rules:
-        check_param_rules(rules, given, params_files)
+    taken = check_param_rules(rules, given, params_files) if rules else {}
     known = set(known) | ROS_OWN_PARAMETERS
-    found = ParameterSources()
+    found = ParameterSources(taken=taken)
     in_files = set()
     for path in params_files:
         sections = read_params_file(path)
