@@ -478,3 +478,20 @@ def test_the_nonlinear_coarse_step_hint_names_step_follows_mesh_only_where_it_re
     assert resolving_step_hint(values, None) == 'step_follows_mesh takes it'
     on = p.replace(step_follows_mesh=True).as_dict()
     assert resolving_step_hint(on, meshed) == ''              # (it already does)
+
+
+@pytest.mark.parametrize('ribs', [1, 3])
+def test_the_step_taken_now_is_the_grid_step_then_stage_2s_substep(ribs):
+    # what /diagnostics' physics_step_s says: the default run deploys on the 0.2 ms grid and
+    # takes its lock's stage-2 substeps, 0.1 ms at 1 element a segment
+    from umbrella_sim.core.driver import RunDriver
+    from umbrella_sim.core.step_rule import step_taken_now
+    from umbrella_sim.core.umbrella3d.params3d import node_model
+
+    driver = RunDriver(node_model({'ribs': ribs}), publish_rate=100.0)
+    sim = driver.sim
+    assert step_taken_now(sim) == sim.h == pytest.approx(2e-4)
+    while driver.summary.lock is None:
+        driver.advance()
+    assert sim.stage2_substeps == 2
+    assert step_taken_now(sim) == pytest.approx(1e-4)

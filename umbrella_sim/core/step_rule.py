@@ -220,6 +220,16 @@ def physics_step_of(params: UmbrellaParams) -> float:
     return mesh_step_of(params)
 
 
+def step_taken_now(sim) -> float:
+    """
+    Return the physics step (s) a simulator takes now: its grid step, over stage 2's substeps.
+
+    sim: UmbrellaSimulator or the umbrella's (``h`` the grid step, ``stage``,
+    ``stage2_substeps``, the physics steps a stage-2 grid step takes).
+    """
+    return sim.h / (sim.stage2_substeps if sim.stage == 'locked' else 1)
+
+
 def mesh_step_of(params: UmbrellaParams) -> float:
     """
     Return the step the mesh's stage 2 needs (s): the step its lock needs.

@@ -40,6 +40,7 @@ from ..bag.provenance import events_metadata, run_metadata, summary_metadata
 from ..bag.writer import BagRecorder
 from ..core.driver import Chunk, RunDriver
 from ..core.registry import node_defaults
+from ..core.step_rule import step_taken_now
 from ..core.summary import RunResult
 
 #: every topic a run may record: the planar model's, and the umbrella's per-rib ones
@@ -191,7 +192,7 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
                 t, 'umbrella_sim offline: physics', DiagnosticStatus.OK, 'offline',
                 {'sim_time_s': f'{t:.6f}', 'measured_real_time_factor':
                  f'{t / wall:.4f}' if wall > 0 else 'inf', 'steps': sim.steps,
-                 'physics_step_s': sim.h}), t)
+                 'physics_step_s': step_taken_now(sim), 'grid_step_s': sim.h}), t)
             state['next_diag'] += 1.0
 
     def chunk_done(chunk: Chunk):

@@ -25,6 +25,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 
 from .pacing import behind_text
 from .ribs_messages import ribs_diagnostics
+from ..core.step_rule import step_taken_now
 
 
 def node_status(node, sim_t: float, measured: float, lag: float) -> tuple[int, str, dict]:
@@ -53,7 +54,8 @@ def node_status(node, sim_t: float, measured: float, lag: float) -> tuple[int, s
               'lockstep': node.node_cfg['lockstep'],
               'waiting_for_command': bool(node.lockstep.waiting_since),
               'lockstep_waits': node.lockstep.waits,
-              'physics_step_s': node.sim.h, 'slip_s': f'{node.pacer.slip:.6f}',
+              'physics_step_s': step_taken_now(node.sim),
+              'grid_step_s': node.sim.h, 'slip_s': f'{node.pacer.slip:.6f}',
               're_anchors': node.pacer.re_anchors,
               'refused_not_recorded': node.commands.refused_not_recorded,
               'clock_publishers': getattr(node, 'clock_publishers', 1),
