@@ -89,13 +89,18 @@ def test_a_fast_deployment_of_the_linear_model_warns_before_the_lock(params):
     assert all(t >= lock for key, t in said.items() if key != KEY), said
 
 
-def test_the_default_configuration_and_slow_runs_are_quiet():
-    """config/umbrella.yaml (the README's and the thesis's run), as planar and as 6 ribs."""
+def test_the_default_configuration_and_slow_runs_are_quiet_in_stage_1():
+    """
+    config/umbrella.yaml (the README's and the thesis's run), as planar and as 6 ribs.
+
+    Quiet while deploying; once locked, its vibration loads the link past its Euler load
+    (test_axial_load.py): 'axial load', at the lock's chunk or after it, is all it says.
+    """
     config = load_params_file(os.path.join(ROOT, 'config', 'umbrella.yaml'))
-    said, _, planar = said_at(node_model(config))
-    assert said == {}
-    said, _, ribs = said_at(node_model({**config, 'ribs': 6}), after_lock=0.05)
-    assert said == {}
+    said, lock, planar = said_at(node_model(config))
+    assert set(said) == {'axial load'} and said['axial load'] >= lock, (said, lock)
+    said, lock, ribs = said_at(node_model({**config, 'ribs': 6}), after_lock=0.05)
+    assert set(said) == {'axial load'} and said['axial load'] >= lock, (said, lock)
     # six identical ribs are the planar model: the same leaf, the same tension
     assert ribs['leaf_tension_ratio_max'] == pytest.approx(planar['leaf_tension_ratio_max'],
                                                            rel=1e-9)
@@ -410,5 +415,8 @@ def test_a_recording_without_its_summary_judges_stage2_at_the_step_it_took(tmp_p
         run = compare.load_run(str(bag))
         run.warnings = None                 # (as a log whose writer was killed)
         keys = [w.split(':')[0] for w in run.validity()]
-        assert keys == [w.split(':')[0] for w in figures['warnings']]
+        # 'axial load' takes the stop's and the axle's reactions, which no topic carries: a
+        # log without its summary cannot say it (msg_docs/recording.md), and does not
+        assert keys == [w.split(':')[0] for w in figures['warnings'] if
+                        not w.startswith('axial load')]
         assert ('coarse step' in keys) == coarse

@@ -36,8 +36,8 @@ from umbrella_sim.core.nonlinear import locked_first_frequency
 from umbrella_sim.core.outputs import STEP_FIELDS, step_peaks
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.solver import UmbrellaSimulator
-from umbrella_sim.core.summary import (energy_drift, oscillation_period, STAGE2_WINDOW,
-                                       TIP_DEFLECTION_LIMIT)
+from umbrella_sim.core.summary import (energy_drift, oscillation_period, section_warnings,
+                                       STAGE2_WINDOW, TIP_DEFLECTION_LIMIT)
 from umbrella_sim.ros.recording import record_offline
 from umbrella_sim.tools import compare, compare_plots
 
@@ -276,7 +276,8 @@ def test_validity_warnings_at_v0_minus_2(fast_run):
     f = fast_run.summary()
     keys = [w.split(':')[0] for w in f['warnings']]
     # (at 0.25 ms the modes above 6000 rad/s carry 9 % of the link's stage-2 stress crest)
-    assert keys == ['coarse step', 'yield exceeded', 'large deflection', 'centrifugal stiffening']
+    assert keys == ['coarse step', 'yield exceeded', 'large deflection', 'centrifugal stiffening',
+                    'axial load']
     assert 'compare model flexible-nonlinear' in f['warnings'][2]
     assert 'take model flexible-nonlinear' in f['warnings'][3]
     # the geometrically exact model is not sent to itself: its own limit is named
@@ -310,10 +311,11 @@ def test_new_warnings_names_each_warning_in_the_block_it_first_holds():
         assert set(first) == now               # nothing that holds is left unsaid
         before = now
     assert set(first) == {'coarse step', 'yield exceeded', 'large deflection',
-                          'centrifugal stiffening'}
+                          'centrifugal stiffening', 'axial load'}
     assert first['yield exceeded'] != first['large deflection']   # the second came later
     assert first['centrifugal stiffening'] < lock_block     # said in stage 1, before the lock
     assert first['coarse step'] == lock_block          # said with the lock, judged on its state
+    assert first['axial load'] >= lock_block           # stage 2's
 
 
 def test_lock_that_does_not_apply_is_named():
@@ -345,7 +347,8 @@ def test_the_default_lock_is_the_one_that_applies_and_rigid_fe_reports_its_zeros
 def test_warnings_in_cli_text_json_and_recording(tmp_path):
     """The CLI's text and JSON, the recording and compare say the same warnings."""
     args = ['--v0', '-2', '--time-step', str(STEP), '--duration', '0.1']
-    keys = ['coarse step', 'yield exceeded', 'large deflection', 'centrifugal stiffening']
+    keys = ['coarse step', 'yield exceeded', 'large deflection', 'centrifugal stiffening',
+            'axial load']
     text = run_cli(*args)
     assert text.returncode == 0, text.stderr
     for key in keys:
@@ -377,7 +380,8 @@ def test_node_warns_once_and_diagnostics_say_warn(antenna_factory, tmp_path):
         and "outside the model's validity" in m.status[0].message, timeout=60,
         what="a WARN diagnostic on the model's validity")
     values = {kv.key: kv.value for kv in msg.status[0].values}
-    keys = ['coarse step', 'yield exceeded', 'large deflection', 'centrifugal stiffening']
+    keys = ['coarse step', 'yield exceeded', 'large deflection', 'centrifugal stiffening',
+            'axial load']
     assert values['warning_0'].split(':')[0] in keys
     assert antenna.node.proc.wait(timeout=120) == 0
     log = antenna.node.output()
@@ -736,3 +740,42 @@ def test_a_rigid_fe_recordings_stage2_figures_are_the_zero_its_constraints_hold(
     assert s.stage2_samples > 0           # (the tip messages carry the round-off, ~1e-320)
     assert s.stage2_tip_amplitude == 0.0 and s.stage2_peak_stress == 0.0
     assert s.lock_time == core['lock_time']
+
+
+# ------------------------------------------------------------------ the section's warnings
+def test_a_round_bars_area_and_inertia_beside_the_default_height_warn_outer_fibre():
+    # a solid round bar of the 10 mm square's area, d = 11.28 mm: its outer fibre is at
+    # d/2 = 5.64 mm, where the default section_height would put it at 5 mm (10 % low)
+    d = math.sqrt(4e-4 / math.pi)
+    bar = {'area': 1e-4, 'second_moment_of_area': math.pi * d ** 4 / 64}
+    said = section_warnings(UmbrellaParams(**bar).as_dict())
+    assert [w.split(':')[0] for w in said] == ['outer fibre']
+    assert 'b/2 = 5 mm' in said[0] and 'its diameter' in said[0]
+    for height in (d, 0.0):         # its own depth, or the rectangle's rule: nothing to say
+        assert section_warnings(
+            UmbrellaParams(**bar, section_height=height).as_dict()) == []
+    square = UmbrellaParams(area=1e-4, second_moment_of_area=1e-8 / 12)
+    assert section_warnings(square.as_dict()) == []         # (the default's own square)
+    # and the fibre it names is the one the stresses take: 10 % more stress at d/2
+    peaks = [simulate(UmbrellaParams(**bar, **extra), 0.3).summary()['peak_stress_leaf']
+             for extra in ({}, {'section_height': d})]
+    assert peaks[1] / peaks[0] == pytest.approx(d / 2 / 0.005, rel=0.02)
+
+
+def test_a_member_shorter_than_ten_depths_warns_thick_beam_with_timoshenkos_figures():
+    def said(height):
+        return [w for w in section_warnings(
+            UmbrellaParams(section_height=height).as_dict()) if w.startswith('thick beam')]
+
+    assert said(0.04) == []                                  # 12.5 depths
+    text = said(0.06)[0]                                     # 8.3 depths
+    assert 'l1 = 0.5 m is 8.33 section depths' in text
+    # the figures quoted: Timoshenko's pinned beam, 1 / sqrt(1 + (pi r / L)^2 (1 + E/(k G)))
+    assert '1.7 % at 10 depths, 6.3 % at 5, 27 % at 2' in text
+    for depths, quoted in ((10, '1.7'), (5, '6.3'), (2, '27')):
+        lower = 1.0 - 1.0 / math.sqrt(1.0 + math.pi ** 2 / (12.0 * depths ** 2)
+                                      * (1.0 + 2.0 * 1.33 / (5.0 / 6.0)))
+        digits = len(quoted.partition('.')[2])        # (the figure as rounded there)
+        assert 100 * lower == pytest.approx(float(quoted), abs=0.5 * 10.0 ** -digits)
+    rigid = UmbrellaParams(section_height=0.06, model='rigid')
+    assert section_warnings(rigid.as_dict()) == []

@@ -108,6 +108,17 @@ class Sample:
             'peak_stress_link_x': hold['link'][1]})
 
 
+def link_axial_force(alpha2, reaction_x, reaction_y, sleeve_force):
+    """
+    Return the link's axial force at the sleeve H (N, tension positive; arrays or floats).
+
+    The sleeve (massless, or at rest at the stop) is held by the link's end force, the
+    axle's and the stop's (sleeve_reaction) and F_H along -Y: the link's force on it,
+    -N (cos alpha2, sin alpha2), balances them, N = R_x cos alpha2 + (R_y - F_H) sin alpha2.
+    """
+    return reaction_x * np.cos(alpha2) + (reaction_y - sleeve_force) * np.sin(alpha2)
+
+
 def mechanical_energy(s):
     """
     Return T + V (J): the energy of the balance, one rule.

@@ -98,8 +98,12 @@ class _DerivedQuantities:
         larger F_H buckles or crushes the link in every configuration, which this
         (geometrically linear, elastic) model cannot represent.
         """
-        euler = math.pi ** 2 * self.youngs_modulus * self.cross_section_inertia / self.l3 ** 2
-        return min(euler, self.sleeve_force_tension_limit)     # (the same squash load)
+        return min(self.link_euler_load, self.sleeve_force_tension_limit)   # (squash load)
+
+    @property
+    def link_euler_load(self) -> float:
+        """Return the link O''-H's Euler load, a pinned-pinned column: pi^2 E I / l3^2 (N)."""
+        return math.pi ** 2 * self.youngs_modulus * self.cross_section_inertia / self.l3 ** 2
 
     @property
     def sleeve_force_tension_limit(self) -> float:

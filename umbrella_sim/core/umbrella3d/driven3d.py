@@ -44,7 +44,8 @@ from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
 from ..model import Stage
 from ..outputs import LockEvent
-from ..summary import (CENTRIFUGAL_TENSION_LIMIT, centrifugal_tension_per_rate, deploy_start,
+from ..summary import (AXIAL_LOAD_LIMIT, CENTRIFUGAL_TENSION_LIMIT,
+                       centrifugal_tension_per_rate, deploy_start,
                        ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR, hub_spin_tension_per_rate,
                        leaf_tension_ratio, mesh_resolution, validity_warnings, WarningsSaid)
 
@@ -364,6 +365,11 @@ class Summary3D:
                                    for r in ribs])
                          if self._spins and sim.params.hub_radius > 0.0 else None)
         self._tension, self._tension_rib = 0.0, 0       # (the largest, and its rib)
+        # each rib's largest axial force in stage 2 over its link's Euler load (summary's
+        # AXIAL_LOAD_LIMIT): its axial stress peak (leaf or link) times its section's area
+        self._axial_per_stress = np.array([r.planar.cross_section_area
+                                           / r.planar.link_euler_load for r in ribs])
+        self._axial, self._axial_rib = 0.0, 0
         if initial.stage == Stage.DEPLOYING:
             self._hold_tension(self._tension_ratio(
                 initial.alpha1_rate, initial.alpha1, getattr(initial, 'bus_q', None),
@@ -414,6 +420,13 @@ class Summary3D:
             ratio = self._tension_ratio(rows['alpha1_rate'], rows['alpha1'],
                                         rows.get('bus_q'), rows.get('bus_v'))
             self._hold_tension(ratio if not locked[-1] else ratio[~locked])
+        if locked[-1]:                             # (stage 2 in the block)
+            ratio = (rows['stress_axial'] if locked[0] else rows['stress_axial'][locked]) \
+                * self._axial_per_stress
+            top = float(largest(ratio, axis=None))
+            if top > self._axial:
+                self._axial = top
+                self._axial_rib = int(np.unravel_index(np.argmax(ratio), ratio.shape)[-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
         self._scale = max(self._scale, float(largest(np.abs(energy))))
         self._balance = max(self._balance,
@@ -447,6 +460,7 @@ class Summary3D:
                'energy_scale': self._scale,
                'energy_drift': self.energy_drift,
                'leaf_tension_ratio_max': self._tension,
+               'axial_load_ratio_max': self._axial,
                'sleeve_work': float(self._final.work),
                'friction_work': np.asarray(self._final.friction_work).tolist(),
                'drive_work': float(self._final.drive_work),
@@ -496,12 +510,13 @@ class Summary3D:
         ribs = {'yield exceeded': stressed, 'large strain': stressed,
                 'large deflection': int(np.argmax(self._in_plane)),
                 'large out-of-plane deflection': self._oop[1],
-                'centrifugal stiffening': self._tension_rib}
+                'centrifugal stiffening': self._tension_rib, 'axial load': self._axial_rib}
         return validity_warnings(self._planar, self.lock_kind, float(von_mises.max()),
                                  float(self._in_plane.max()), locked=locked,
                                  energy_drift=self.energy_drift,
                                  stage2_resolution=self._stage2_resolution() if locked else None,
                                  section_slope=slope, centrifugal_tension=self._tension,
+                                 link_axial_load=self._axial,
                                  ribs=ribs, out_of_plane_tip=abs(self._oop[0])
                                  ) + out_of_plane_warnings(self._planar, out_of_plane)
 
@@ -516,5 +531,6 @@ class Summary3D:
         return self._said.new((largest(self._peaks.value[:, _VON_MISES]),
                                largest(self._in_plane), self._oop[0],
                                self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
-                               self._tension > CENTRIFUGAL_TENSION_LIMIT, *self._geometry()),
+                               self._tension > CENTRIFUGAL_TENSION_LIMIT,
+                               self._axial > AXIAL_LOAD_LIMIT, *self._geometry()),
                               self.warnings)
