@@ -13,11 +13,13 @@
 # limitations under the License.
 
 """
-The command lines of the README and msg_docs, as a ROS user types them.
+The command lines of the README and msg_docs, as a ROS user types them, and the code they name.
 
 They run from a colcon workspace root, where the source tree's relative paths do not
 exist: every file they hand to the node is the installed one, found through the ament
 index (``$(ros2 pkg prefix --share umbrella_sim)/...``), and setup.py installs it there.
+Every module, function or class (``umbrella_sim.bag.reader.read_log``) and every source file
+(``umbrella_sim/core/forcing.py``) the README, msg_docs and docs name exists.
 """
 import glob
 import os
@@ -89,3 +91,54 @@ def test_every_documented_params_file_is_the_installed_one():
             f"'{SHARE}...' so the command works from a workspace root")
         assert path[len(prefix):] in installed, (where, path, sorted(installed))
         assert os.path.exists(os.path.join(ROOT, path[len(prefix):])), (where, path)
+
+
+def _markdown_pages() -> list[str]:
+    """Return the README and every page of msg_docs/ and docs/ (paths from the root)."""
+    return ['README.md'] + [os.path.relpath(p, ROOT) for folder in ('msg_docs', 'docs')
+                            for p in sorted(glob.glob(os.path.join(ROOT, folder, '*.md')))]
+
+
+def _resolves(dotted: str) -> bool:
+    """Return whether a dotted name is a module of the package or an attribute of one."""
+    import importlib
+
+    parts = dotted.split('.')
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module('.'.join(parts[:i]))
+        except ImportError:
+            continue
+        for part in parts[i:]:
+            if not hasattr(obj, part):
+                return False
+            obj = getattr(obj, part)
+        return True
+    return False
+
+
+def test_every_module_and_source_file_the_docs_name_exists():
+    """
+    Each umbrella_sim.x.y name of the markdown imports, each umbrella_sim/... path exists.
+
+    A recording's metadata records are named like modules (umbrella_sim.summary,
+    umbrella_sim.segment.K): those the bag format defines are not modules.  A path under an
+    install prefix (share/umbrella_sim/launch) is not the source tree's.
+    """
+    import re
+
+    from umbrella_sim.bag import format as bag_format
+
+    records = {value for name, value in vars(bag_format).items()
+               if name.endswith('_RECORD') and isinstance(value, str)}
+    missing = []
+    for page in _markdown_pages():
+        with open(os.path.join(ROOT, page), encoding='utf-8') as fh:
+            text = fh.read()
+        for name in set(re.findall(r'(?<![\w./])umbrella_sim(?:\.\w+)+', text)):
+            if re.sub(r'\.(K|\d+)$', '', name) not in records and not _resolves(name):
+                missing.append((page, name))
+        for path in set(re.findall(r'(?<![\w./-])umbrella_sim/[\w./]*\w', text)):
+            if not os.path.exists(os.path.join(ROOT, path)):
+                missing.append((page, path))
+    assert not missing, f'named in the docs, not in the package: {sorted(missing)}'
