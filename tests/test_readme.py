@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The README a new user reads: two commands, a sketch before the symbols, links that exist."""
+"""The README a new user reads: two commands, a sketch before the symbols, links, --csv columns."""
 import os
 import re
 
@@ -97,3 +97,14 @@ def test_the_ribs_example_does_what_the_readme_says():
     assert said, 'the README no longer says what the example does'
     assert int(said[1]) == rubbing and float(said[2]) == round(-work[rubbing], 2)
     assert (float(said[3]), float(said[4])) == (round(lock, 3), round(free_lock, 3))
+
+
+def test_every_planar_csv_column_is_documented():
+    """Each column of the planar model's ``simulate --csv`` has its row in the README's table."""
+    from umbrella_sim.tools.csv_output import CSV_COLUMNS
+
+    text = readme()
+    table = text[text.index("**The planar model's `--csv`**"):text.index('## Parameter sweeps')]
+    rows = [line for line in table.splitlines() if line.startswith('| `')]
+    named = {name for line in rows for name in re.findall(r'`(\w+)`', line.split(' | ')[0])}
+    assert set(CSV_COLUMNS) <= named, sorted(set(CSV_COLUMNS) - named)
