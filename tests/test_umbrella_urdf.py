@@ -21,6 +21,7 @@ prismatic joint's translation), independently of the generator; the model's geom
 that of core.umbrella3d (its rigid-rib configurations, its body points' kinematics).
 """
 import math
+import os
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -339,3 +340,19 @@ def test_launch_passes_the_whole_umbrellas_urdf_to_robot_state_publisher(tmp_pat
     for installed in (None, '/opt/share'):
         with pytest.raises(ValueError, match='tip_mass: a list of 4 values for 3 ribs'):
             ld.plan(values, installed=lambda pkg: installed)
+
+
+def test_the_command_line_prints_the_urdf_of_the_values_given(capsys):
+    # without launch (a PyPI-only install) the N-rib URDF still comes from the same values
+    assert rd.main([]) == 0
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    with open(os.path.join(root, 'urdf', 'umbrella.urdf'), encoding='utf-8') as fh:
+        assert capsys.readouterr().out == fh.read()           # (the shipped file is it)
+    assert rd.main(['ribs=3', 'rib1.tip_mass=0.1']) == 0
+    assert capsys.readouterr().out == rd.urdf(UmbrellaRibsParams.from_mapping(
+        {'ribs': 3, 'rib1.tip_mass': 0.1}))
+    for bad, words in ((['ribs'], "'ribs': give name=value pairs"),
+                       (['l1=-1'], 'l1=-1.0: must be > 0'),
+                       (['youngs_modulous=7e10'], "did you mean 'youngs_modulus'")):
+        assert rd.main(bad) == 2
+        assert words in capsys.readouterr().err
