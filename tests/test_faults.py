@@ -226,6 +226,12 @@ def test_overwrite_replaces_an_earlier_output_and_nothing_else(tmp_path):
     r = run('umbrella_sim', 'simulate', '--duration', '0.05', '--csv', str(tmp_path),
             '--overwrite')
     assert r.returncode == 2 and 'not a regular file' in r.stderr
+    # --out at a file: refused, with or without --overwrite, and the hint is not --overwrite
+    for extra in ((), ('--overwrite',)):
+        r = run('umbrella_sim.tools.compare', str(bag), '--out', str(csv), '--no-plots',
+                *extra)
+        assert r.returncode == 2 and 'is not a directory' in r.stderr, r.stderr
+        assert 'replaces it' not in r.stderr and csv.read_text().startswith('t')
 
 
 # ------------------------------------------------------------------ solver faults
