@@ -36,7 +36,7 @@ from umbrella_sim.core.nonlinear import locked_first_frequency
 from umbrella_sim.core.outputs import STEP_FIELDS, step_peaks
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.solver import UmbrellaSimulator
-from umbrella_sim.core.summary import (energy_drift, oscillation_period, section_warnings,
+from umbrella_sim.core.summary import (energy_drift, oscillation_period, parameter_warnings,
                                        STAGE2_WINDOW, TIP_DEFLECTION_LIMIT)
 from umbrella_sim.ros.recording import record_offline
 from umbrella_sim.tools import compare, compare_plots
@@ -748,14 +748,14 @@ def test_a_round_bars_area_and_inertia_beside_the_default_height_warn_outer_fibr
     # d/2 = 5.64 mm, where the default section_height would put it at 5 mm (10 % low)
     d = math.sqrt(4e-4 / math.pi)
     bar = {'area': 1e-4, 'second_moment_of_area': math.pi * d ** 4 / 64}
-    said = section_warnings(UmbrellaParams(**bar).as_dict())
+    said = parameter_warnings(UmbrellaParams(**bar).as_dict())
     assert [w.split(':')[0] for w in said] == ['outer fibre']
     assert 'b/2 = 5 mm' in said[0] and 'its diameter' in said[0]
     for height in (d, 0.0):         # its own depth, or the rectangle's rule: nothing to say
-        assert section_warnings(
+        assert parameter_warnings(
             UmbrellaParams(**bar, section_height=height).as_dict()) == []
     square = UmbrellaParams(area=1e-4, second_moment_of_area=1e-8 / 12)
-    assert section_warnings(square.as_dict()) == []         # (the default's own square)
+    assert parameter_warnings(square.as_dict()) == []         # (the default's own square)
     # and the fibre it names is the one the stresses take: 10 % more stress at d/2
     peaks = [simulate(UmbrellaParams(**bar, **extra), 0.3).summary()['peak_stress_leaf']
              for extra in ({}, {'section_height': d})]
@@ -764,7 +764,7 @@ def test_a_round_bars_area_and_inertia_beside_the_default_height_warn_outer_fibr
 
 def test_a_member_shorter_than_ten_depths_warns_thick_beam_with_timoshenkos_figures():
     def said(height):
-        return [w for w in section_warnings(
+        return [w for w in parameter_warnings(
             UmbrellaParams(section_height=height).as_dict()) if w.startswith('thick beam')]
 
     assert said(0.04) == []                                  # 12.5 depths
@@ -778,4 +778,15 @@ def test_a_member_shorter_than_ten_depths_warns_thick_beam_with_timoshenkos_figu
         digits = len(quoted.partition('.')[2])        # (the figure as rounded there)
         assert 100 * lower == pytest.approx(float(quoted), abs=0.5 * 10.0 ** -digits)
     rigid = UmbrellaParams(section_height=0.06, model='rigid')
-    assert section_warnings(rigid.as_dict()) == []
+    assert parameter_warnings(rigid.as_dict()) == []
+
+
+@pytest.mark.parametrize('model', ['rigid', 'rigid-fe'])
+def test_damping_given_to_a_model_without_beams_says_it_takes_no_effect(model):
+    damped = simulate(UmbrellaParams(model=model, damping_ratio=0.05), 0.3)
+    undamped = simulate(UmbrellaParams(model=model), 0.3)
+    assert [w.split(':')[0] for w in damped.summary()['warnings']] == ['damping not applicable']
+    assert undamped.summary()['warnings'] == []
+    # what it says: the run is the undamped one
+    for name in ('alpha1', 'sleeve_position', 'kinetic_energy'):
+        np.testing.assert_array_equal(damped.column(name), undamped.column(name))

@@ -358,18 +358,23 @@ RIGID_FE_ZEROS = ('tip_deflection_max', 'stage2_tip_amplitude', 'peak_stress_lea
 SLENDERNESS_LIMIT = 10.0
 
 
-def section_warnings(params: dict) -> list[str]:
+def parameter_warnings(params: dict) -> list[str]:
     """
-    Return where the section's parameters leave the beams' assumptions (static warnings).
+    Return where the parameters leave the model's assumptions (static warnings).
 
-    From the parameters alone, for the beams' models: 'outer fibre', area and
-    second_moment_of_area given beside section_height at its default (the thesis's 10 mm
-    square) whose square they are not (a round bar's A and I, say): the stresses take the
-    outer fibre at b/2 all the same (params.fibre_distance); 'thick beam', a member (l1,
-    l2, l3) shorter than SLENDERNESS_LIMIT section depths.
+    From the parameters alone: 'damping not applicable', a damping_ratio given to a model
+    without an elastic field (rigid, rigid-fe), which takes no effect; for the beams'
+    models, 'outer fibre', area and second_moment_of_area given beside section_height at
+    its default (the thesis's 10 mm square) whose square they are not (a round bar's A and
+    I, say): the stresses take the outer fibre at b/2 all the same (params.fibre_distance);
+    'thick beam', a member (l1, l2, l3) shorter than SLENDERNESS_LIMIT section depths.
     """
-    if params.get('model') not in ('flexible', 'flexible-nonlinear'):
-        return []
+    model = params.get('model')
+    if model not in ('flexible', 'flexible-nonlinear'):
+        damping = params.get('damping_ratio', 0.0)
+        return [f"damping not applicable: damping_ratio {damping:g} is the beams' structural "
+                f'damping; model {model} has no elastic field to damp and takes no effect of '
+                'it'] if damping > 0.0 else []
     out = []
     area, inertia = params.get('area', 0.0), params.get('second_moment_of_area', 0.0)
     height = params.get('section_height', 0.0)
@@ -668,7 +673,7 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     if aw:
         out.append(aw)
     out += geometric_validity_warnings(params, peak_stress, section_slope)
-    out += section_warnings(params)
+    out += parameter_warnings(params)
     if ribs:
         out = [(f'{key}: rib {ribs[key]}, {text.lstrip()}' if key in ribs else f'{key}:{text}')
                for key, text in (w.split(':', 1) for w in out)]
