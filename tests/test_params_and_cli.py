@@ -438,3 +438,13 @@ def test_a_section_too_slender_for_the_solver_is_refused_naming_it(extra, capsys
     assert exc.value.code == 2 and 'RuntimeWarning' not in err
     assert 'the locked frame has 2 mode(s) without stiffness' in err
     assert 'section_height=1e-09' in err
+
+
+def test_a_duration_that_is_not_a_whole_number_of_steps_says_where_the_run_ends(capsys):
+    from umbrella_sim.tools import cli
+
+    assert cli.main(['simulate', '--duration', '0.0301', '--time-step', '0.0003']) == 0
+    err = capsys.readouterr().err
+    assert 'note: the run ends at t = 0.03 s' in err and '--duration 0.0301 s' in err
+    assert cli.main(['simulate', '--duration', '0.03', '--time-step', '0.0003']) == 0
+    assert 'note' not in capsys.readouterr().err

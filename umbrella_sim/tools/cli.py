@@ -370,6 +370,11 @@ def main(argv: list[str] | None = None) -> int:
     if progress:
         progress.close()
     summary = result.summary()
+    end = summary.get('final_time')
+    if not result.error and end is not None and end < args.duration * (1.0 - 1e-9):
+        print(f'umbrella_sim: note: the run ends at t = {end:.9g} s, its last step that ends '
+              f'by --duration {args.duration:g} s (not a whole number of steps)',
+              file=sys.stderr)
     for text in summary.get('warnings', []):
         print(f'umbrella_sim: warning: {text}', file=sys.stderr)
     reader_there = write_stdout(json.dumps(summary, indent=2, sort_keys=True) if args.json
