@@ -331,7 +331,8 @@ def test_throttled_warnings_say_how_many_were_held_back(monkeypatch):
     now[0] += 40.0
     warn('behind', 60.0, lambda: 'physics cannot keep up')
     assert log.lines == [('WARN', 'physics cannot keep up'), ('WARN', 'another kind'),
-                         ('WARN', 'physics cannot keep up (2 more since the last such warning)')]
+                         ('WARN', 'physics cannot keep up (the same said 2 more time(s) in the 70 '
+                                  's since it was last logged, not logged)')]
 
 
 def test_applied_commands_log_at_debug_with_an_info_summary(monkeypatch):

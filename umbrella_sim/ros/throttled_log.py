@@ -35,10 +35,12 @@ class ThrottledWarnings:
 
     def warn(self, key: str, period: float, text) -> None:
         now = time.monotonic()
-        if now - self._at.get(key, -math.inf) >= period:
+        last = self._at.get(key, -math.inf)
+        if now - last >= period:
             more = self._more.pop(key, 0)
             self._at[key] = now
-            self.logger.warning(text() + (f' ({more} more since the last such warning)'
-                                          if more else ''))
+            self.logger.warning(text() + (f' (the same said {more} more time(s) in the '
+                                          f'{now - last:.0f} s since it was last logged, '
+                                          'not logged)' if more else ''))
         else:
             self._more[key] = self._more.get(key, 0) + 1
