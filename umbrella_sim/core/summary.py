@@ -548,16 +548,34 @@ def leaf_tension_ratio(per_rate, rate, spin=None, alpha1=None, per_hub=None):
     return out
 
 
+def _geometric_stiffness_warning(params: dict, ratio: float | None, limit: float,
+                                 reached: str, effect: str, advice: str) -> str | None:
+    """
+    Return a warning of the linear beams' missing geometric stiffness, or None.
+
+    Model flexible only, once an axial force's ratio to its Euler load passed limit:
+    reached (the key and the figure, 'ratio' formatted in), effect (what the missing
+    stiffness does), advice (which model to take).
+    """
+    if ratio is None or ratio <= limit or params.get('model') != 'flexible':
+        return None
+    return (f'{reached.format(ratio=f"{100 * ratio:.3g}")} (limit {100 * limit:g} %): the '
+            f'linear beams of model flexible have no geometric stiffness {effect} '
+            f'(docs/validation_nonlinear.md); {advice} model flexible-nonlinear')
+
+
+#: _geometric_stiffness_warning's texts of 'centrifugal stiffening'
+_CENTRIFUGAL_TEXTS = (
+    "centrifugal stiffening: the leaf's centrifugal tension reached {ratio} % of its Euler "
+    'load pi^2 E I / (l1 + l2)^2 before the lock',
+    'and overstate the stage-1 tip and stresses of a leaf under that tension by about as much',
+    'take')
+
+
 def centrifugal_tension_warning(params: dict, ratio: float | None) -> str | None:
     """Return 'centrifugal stiffening' when flexible's leaf tension passed its limit, else None."""
-    if ratio is None or ratio <= CENTRIFUGAL_TENSION_LIMIT or params.get('model') != 'flexible':
-        return None
-    return (f"centrifugal stiffening: the leaf's centrifugal tension reached {100 * ratio:.3g} % "
-            f'of its Euler load pi^2 E I / (l1 + l2)^2 before the lock (limit '
-            f'{100 * CENTRIFUGAL_TENSION_LIMIT:g} %): the linear beams of model flexible have no '
-            'geometric stiffness and overstate the stage-1 tip and stresses of a leaf under '
-            'that tension by about as much (docs/validation_nonlinear.md); take model '
-            'flexible-nonlinear')
+    return _geometric_stiffness_warning(params, ratio, CENTRIFUGAL_TENSION_LIMIT,
+                                        *_CENTRIFUGAL_TEXTS)
 
 
 #: validity of the linear beams (model flexible) in stage 2: the axial force in the frame's
@@ -584,16 +602,17 @@ def centrifugal_tension_warning(params: dict, ratio: float | None) -> str | None
 AXIAL_LOAD_LIMIT = 0.25
 
 
+#: _geometric_stiffness_warning's texts of 'axial load'
+_AXIAL_LOAD_TEXTS = (
+    "axial load: the axial force in the frame's members reached {ratio} % of the link's Euler "
+    'load pi^2 E I / l3^2 in stage 2',
+    "to it: the stage-2 bending and stresses change, the link's peak by 8-20 % from 43 % of "
+    "the Euler load in the thesis's frame", 'compare')
+
+
 def axial_load_warning(params: dict, ratio: float | None) -> str | None:
     """Return 'axial load' when flexible's members' axial force passed its limit, else None."""
-    if ratio is None or ratio <= AXIAL_LOAD_LIMIT or params.get('model') != 'flexible':
-        return None
-    return (f"axial load: the axial force in the frame's members reached {100 * ratio:.3g} % of "
-            f"the link's Euler load pi^2 E I / l3^2 in stage 2 (limit "
-            f'{100 * AXIAL_LOAD_LIMIT:g} %): the linear beams of model flexible have no '
-            "geometric stiffness, which changes the stage-2 bending and stresses (the link's "
-            "peak by 8-20 % from 43 % of the Euler load in the thesis's frame, "
-            'docs/validation_nonlinear.md); compare model flexible-nonlinear')
+    return _geometric_stiffness_warning(params, ratio, AXIAL_LOAD_LIMIT, *_AXIAL_LOAD_TEXTS)
 
 
 #: an energy balance error (energy_drift) past which a run is named: well above round-off
