@@ -327,9 +327,9 @@ def _check_out_dir(path: str, overwrite: bool = False) -> str:
             raise LogError(f'--out {path}: directory is not writable')
         return path
     if os.path.lexists(path):       # a file (or a link): --out is a directory of outputs
-        raise LogError(f'--out {path}: is not a directory (--out takes a directory for '
-                       'compare.json and the plots; --overwrite replaces only an earlier '
-                       "comparison's directory): give a new path")
+        raise LogError(f'--out {path}: exists and is not a directory, not overwriting it '
+                       '(--out takes a directory for compare.json and the plots; --overwrite '
+                       "replaces only an earlier comparison's directory): give a new path")
     try:
         return check_new_output(path, '--out')
     except ValueError as exc:
