@@ -36,8 +36,8 @@ import time
 import numpy as np
 
 from .arguments import ArgumentParser
-from ..bag.format import (APPLIED_SUFFIX, BUILD_RECORD, EVENTS_RECORD, MESH_RECORD,
-                          REFUSED_SUFFIX, SUMMARY_RECORD, TOPICS_RECORD)
+from .replay_info import info_text
+from ..bag.format import APPLIED_SUFFIX, REFUSED_SUFFIX, TOPICS_RECORD
 from ..bag.provenance import build_environment
 from ..bag.reader import LogData, LogError, qos_from_yaml, read_log
 from ..core.driver import RunDriver
@@ -478,75 +478,6 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
         raise LogError(f'{skipped} message(s) skipped: their payload does not decode (the '
                        f'first: {first_skipped})')
     return 0
-
-
-def info_text(log: LogData) -> str:
-    """
-    Return what a recording holds, as `ros2 bag info` says it, and the run it is of.
-
-    The file, its span of log (sim) time and message count, each topic with its type, count
-    and offered QoS, then the run: model, mesh, ribs, physics step, the lock, the fault
-    that ended it (if one did) and where the summary figures are (their record).
-    """
-    first, last = log.time_range
-    span = 0.0 if first is None else (last - first) * 1e-9
-    lines = [f'path:          {log.path}',
-             f'span:          {span:.6f} s of log time'
-             + ('' if first is None else f' (from {first * 1e-9:.6f} s)'),
-             f'messages:      {log.message_count}'
-             + (' (truncated: only complete chunks read)' if log.truncated else ''),
-             'topics:']
-    width = max((len(t) for t in log.topics()), default=0)
-    for topic in log.topics():
-        kind, qos_yaml = log.channels[topic]
-        qos = qos_from_yaml(qos_yaml)
-        lines.append(f'  {topic:<{width}}  {kind}  {log.count(topic)} msgs  '
-                     f'({qos.reliability.name.lower()}, {qos.durability.name.lower()}, '
-                     f'{qos.history.name.lower()} {qos.depth})')
-    if log.ended_early:
-        lines.append(f'recording ended early: {log.ended_early}')
-    try:
-        segments = log.segments()
-    except LogError:
-        segments = []
-    # (~/reset: a run a segment, each labelled; the events are the last segment's)
-    label = ('segment 0:' if len(segments) > 1 else 'run:').ljust(15)
-    mesh = log.metadata.get(MESH_RECORD)
-    if mesh:
-        try:
-            step = f", physics step {log.parameters().get('physics_step', 0.0):g} s"
-        except LogError:
-            step = ''
-        ribs = int(mesh.get('ribs', '1'))
-        lines.append(f"{label}model {mesh.get('model')}, "
-                     f"{mesh.get('elements_per_segment')} element(s) a segment, "
-                     + (f'{ribs} ribs, ' if ribs > 1 else '')
-                     + f"lock {mesh.get('lock')}{step}")
-    for seg in segments[1:]:
-        p = seg.params
-        ribs = int(p.get('ribs', 1) or 1)
-        lines.append(f'segment {seg.index}:'.ljust(15)
-                     + f'from log time {seg.offset_ns * 1e-9:.6f} s (~/reset): model '
-                     f"{p.get('model')}, {p.get('elements_per_segment')} element(s) a "
-                     'segment, ' + (f'{ribs} ribs, ' if ribs > 1 else '')
-                     + f"v0 {p.get('v0')} m/s")
-    last = f' (segment {segments[-1].index}, the last)' if len(segments) > 1 else ''
-    events = log.metadata.get(EVENTS_RECORD, {})
-    if events.get('locked') == 'true':
-        lines.append(f"locked:        at t = {float(events['lock_time']):.9f} s "
-                     f"({events.get('lock_kind')} lock){last}")
-    if 'fault' in events:
-        lines.append(f"fault:         at t = {float(events['fault_time']):.9f} s: "
-                     f"{events['fault']}{last}")
-    build = log.metadata.get(BUILD_RECORD)
-    if build:
-        lines.append(f"build:         umbrella_sim {build.get('package_version')} "
-                     f"({build.get('git_revision', '?')[:12]}), kernel {build.get('kernel')}, "
-                     f"{build.get('source', '')}".rstrip(', '))
-    if SUMMARY_RECORD in log.metadata:
-        lines.append(f'summary:       the figures of every physics step in the '
-                     f"'{SUMMARY_RECORD}' metadata record (umbrella_compare prints them)")
-    return '\n'.join(lines)
 
 
 @interruptible('umbrella_replay', 'nothing was written')

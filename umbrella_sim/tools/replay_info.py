@@ -1,0 +1,93 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+umbrella_replay --info: what a recording holds and the run it is of.
+
+Its topics as `ros2 bag info` says them, then each segment's model, the lock, the fault, the
+build and the summary records; no ROS traffic, the log's records only.
+"""
+from __future__ import annotations
+
+from ..bag.format import BUILD_RECORD, EVENTS_RECORD, MESH_RECORD, SUMMARY_RECORD
+from ..bag.reader import LogData, LogError, qos_from_yaml
+
+
+def info_text(log: LogData) -> str:
+    """
+    Return what a recording holds, as `ros2 bag info` says it, and the run it is of.
+
+    The file, its span of log (sim) time and message count, each topic with its type, count
+    and offered QoS, then the run: model, mesh, ribs, physics step, the lock, the fault
+    that ended it (if one did) and where the summary figures are (their record).
+    """
+    first, last = log.time_range
+    span = 0.0 if first is None else (last - first) * 1e-9
+    lines = [f'path:          {log.path}',
+             f'span:          {span:.6f} s of log time'
+             + ('' if first is None else f' (from {first * 1e-9:.6f} s)'),
+             f'messages:      {log.message_count}'
+             + (' (truncated: only complete chunks read)' if log.truncated else ''),
+             'topics:']
+    width = max((len(t) for t in log.topics()), default=0)
+    for topic in log.topics():
+        kind, qos_yaml = log.channels[topic]
+        qos = qos_from_yaml(qos_yaml)
+        lines.append(f'  {topic:<{width}}  {kind}  {log.count(topic)} msgs  '
+                     f'({qos.reliability.name.lower()}, {qos.durability.name.lower()}, '
+                     f'{qos.history.name.lower()} {qos.depth})')
+    if log.ended_early:
+        lines.append(f'recording ended early: {log.ended_early}')
+    try:
+        segments = log.segments()
+    except LogError:
+        segments = []
+    # (~/reset: a run a segment, each labelled; the events are the last segment's)
+    label = ('segment 0:' if len(segments) > 1 else 'run:').ljust(15)
+    mesh = log.metadata.get(MESH_RECORD)
+    if mesh:
+        try:
+            step = f", physics step {log.parameters().get('physics_step', 0.0):g} s"
+        except LogError:
+            step = ''
+        ribs = int(mesh.get('ribs', '1'))
+        lines.append(f"{label}model {mesh.get('model')}, "
+                     f"{mesh.get('elements_per_segment')} element(s) a segment, "
+                     + (f'{ribs} ribs, ' if ribs > 1 else '')
+                     + f"lock {mesh.get('lock')}{step}")
+    for seg in segments[1:]:
+        p = seg.params
+        ribs = int(p.get('ribs', 1) or 1)
+        lines.append(f'segment {seg.index}:'.ljust(15)
+                     + f'from log time {seg.offset_ns * 1e-9:.6f} s (~/reset): model '
+                     f"{p.get('model')}, {p.get('elements_per_segment')} element(s) a "
+                     'segment, ' + (f'{ribs} ribs, ' if ribs > 1 else '')
+                     + f"v0 {p.get('v0')} m/s")
+    last = f' (segment {segments[-1].index}, the last)' if len(segments) > 1 else ''
+    events = log.metadata.get(EVENTS_RECORD, {})
+    if events.get('locked') == 'true':
+        lines.append(f"locked:        at t = {float(events['lock_time']):.9f} s "
+                     f"({events.get('lock_kind')} lock){last}")
+    if 'fault' in events:
+        lines.append(f"fault:         at t = {float(events['fault_time']):.9f} s: "
+                     f"{events['fault']}{last}")
+    build = log.metadata.get(BUILD_RECORD)
+    if build:
+        lines.append(f"build:         umbrella_sim {build.get('package_version')} "
+                     f"({build.get('git_revision', '?')[:12]}), kernel {build.get('kernel')}, "
+                     f"{build.get('source', '')}".rstrip(', '))
+    if SUMMARY_RECORD in log.metadata:
+        lines.append(f'summary:       the figures of every physics step in the '
+                     f"'{SUMMARY_RECORD}' metadata record (umbrella_compare prints them)")
+    return '\n'.join(lines)
