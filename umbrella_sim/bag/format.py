@@ -36,7 +36,8 @@ SEGMENT_RECORD = 'umbrella_sim.segment'
 EVENTS_RECORD = 'umbrella_sim.events'
 #: messages published and recorded per topic, commands accepted and refused
 COUNTS_RECORD = 'umbrella_sim.counts'
-#: the run's summary figures of every physics step and its warnings
+#: the run's summary figures of every physics step and its warnings, of the (last)
+#: segment; + ".K" for an earlier one
 SUMMARY_RECORD = 'umbrella_sim.summary'
 #: the node's own topic name (joint_states, sleeve_force/applied...) -> the name recorded,
 #: which a remapping (-r joint_states:=js, a namespace) may have changed
@@ -46,3 +47,13 @@ ENDED_EARLY_RECORD = 'umbrella_sim.recording_error'
 #: the command topic's records beside it: each value as applied, and refused commands
 APPLIED_SUFFIX = '/applied'
 REFUSED_SUFFIX = '/refused'
+
+
+def segment_record(name: str, index: int | None) -> str:
+    """
+    Return the name of a run record (EVENTS_RECORD, SUMMARY_RECORD) of one segment.
+
+    index None: the last segment's, written at close under the record's own name; a segment
+    a ~/reset ended (index K): ``name.K``, written at that reset.
+    """
+    return name if index is None else f'{name}.{index}'

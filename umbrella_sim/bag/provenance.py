@@ -127,3 +127,24 @@ def summary_metadata(figures: dict) -> dict[str, dict[str, str]]:
         'figures': json.dumps({k: v for k, v in figures.items() if k != 'warnings'}),
         'warnings': json.dumps(figures.get('warnings', [])),
         'source': 'every physics step'}}
+
+
+def summary_of(record: dict[str, str]) -> tuple[dict, list] | None:
+    """
+    Return what a summary record (summary_metadata's) holds: (figures, warnings).
+
+    None for a record without figures; ValueError if they are not JSON.
+    """
+    if 'figures' not in record:
+        return None
+    return json.loads(record['figures']), json.loads(record.get('warnings', '[]'))
+
+
+def run_records(sim, figures: dict, fault: str | None = None) -> dict[str, dict[str, str]]:
+    """
+    Return the records of a run that ended: its events and its summary.
+
+    Of the last segment at close, and of a segment a ~/reset ended (BagRecorder.start_segment
+    names them for it): the same records either way.
+    """
+    return {**events_metadata(sim, fault), **summary_metadata(figures)}

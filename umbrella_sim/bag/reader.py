@@ -26,7 +26,8 @@ record from the start: every complete chunk is recovered and the torn tail is dr
 Segments: a ~/reset restarts sim time at 0; the recorder then offsets log times so they never
 go backwards and writes an ``umbrella_sim.segment.K`` record with the offset and the new
 parameters.  ``LogData.segments()`` lists them; ``decoded(topic, segment=K)`` gives that
-segment's messages in its own sim time.
+segment's messages in its own sim time; ``run_record`` and ``summary`` its run records (its
+events and summary figures, written when it ended).
 
 Everything that makes a file unusable raises LogError naming the file and the reason: not a
 regular file, not MCAP, not an umbrella_sim recording, unknown message types, payloads that
@@ -51,7 +52,8 @@ import yaml
 from zstandard import ZstdError
 
 from .format import (ENDED_EARLY_RECORD, MCAP_MAGIC, PARAMETERS_RECORD, SEGMENT_RECORD,
-                     TOPICS_RECORD)
+                     segment_record, SUMMARY_RECORD, TOPICS_RECORD)
+from .provenance import summary_of
 
 
 class LogError(ValueError):
@@ -238,6 +240,31 @@ class LogData:
         if not 0 <= index < len(segs):
             raise LogError(f'{self.path}: no segment {index} (the log has {len(segs)})')
         return segs[index]
+
+    def run_record(self, name: str, index: int) -> dict:
+        """
+        Return a run record (EVENTS_RECORD, SUMMARY_RECORD) of segment index, {} if none.
+
+        The last segment's is written at close, an earlier one's at the ~/reset that ended
+        it (format.segment_record; a recording made before resets wrote the summary has
+        only their events).
+        """
+        last = index == len(self.segments()) - 1
+        return self.metadata.get(segment_record(name, None if last else index), {})
+
+    def summary(self, index: int) -> tuple[dict, list] | None:
+        """
+        Return segment index's summary record: (figures of every physics step, warnings).
+
+        None where the log has none (killed or ended early before it, or an earlier
+        segment of an older recording); LogError if it is not JSON.
+        """
+        last = index == len(self.segments()) - 1
+        try:
+            return summary_of(self.run_record(SUMMARY_RECORD, index))
+        except ValueError:
+            name = segment_record(SUMMARY_RECORD, None if last else index)
+            raise LogError(f'{self.path}: metadata {name} is not valid JSON') from None
 
 
 def import_type(type_name: str):

@@ -35,7 +35,7 @@ import yaml
 
 from .cdr import (BAG_FORMAT_VERSION, cdr_bytes, message_definition, qos_profiles, qos_yaml,
                   type_description_hash, type_name)
-from .format import CHUNK_SIZE, EVENTS_RECORD, SEGMENT_RECORD
+from .format import CHUNK_SIZE, SEGMENT_RECORD, segment_record
 from .mcap_stream import (CommittedFile, ended_early_tail, keep_definitions_out_of_chunks,
                           MessageAppender, SpilledChunkIndex, write_all)
 from .paths import absolute_path, check_new_output
@@ -312,7 +312,7 @@ class BagRecorder:
         return dict(self.counts)
 
     def start_segment(self, parameters: dict[str, str], gap_ns: int,
-                      ended_events: dict[str, str] | None = None) -> int:
+                      ended: dict[str, dict[str, str]] | None = None) -> int:
         """
         Start a new segment (after a reset, maybe with new parameters).
 
@@ -321,15 +321,16 @@ class BagRecorder:
         gap_ns (log time never goes backwards; header stamps stay sim time).  A metadata
         record ``umbrella_sim.segment.K`` holds the offset and the segment's parameters.
         Returns K (the first segment, 0, is described by ``umbrella_sim.parameters``).
-        ended_events: the events of the segment that ends (``umbrella_sim.events.K-1``; the
-        last segment's are ``umbrella_sim.events``, written at close).
+        ended: the run records of the segment that ends, by name (its events and summary,
+        each written as ``name.K-1``: format.segment_record; the last segment's are written
+        at close under their own names).
         """
         self._drain()
         with self._lock:
             if self._closed:
                 return self.segment
-            if ended_events is not None:
-                self._writer.add_metadata(f'{EVENTS_RECORD}.{self.segment}', ended_events)
+            for name, values in (ended or {}).items():
+                self._writer.add_metadata(segment_record(name, self.segment), values)
             self.segment += 1
             self.offset_ns = (self._last if self._last is not None else self.offset_ns) + gap_ns
             self._writer.add_metadata(f'{SEGMENT_RECORD}.{self.segment}', {

@@ -331,14 +331,15 @@ class UmbrellaNode(Node):
             self.get_logger().error(response.message)
             return response
         with self._locked():
-            ended, fault = self.sim, self.fault
+            ended, fault = self.driver, self.fault
             self._install_driver(driver)
             self._epoch += 1
             self._anchor()
             self.lockstep.restart()
             rec = self._recording_on()
             if rec is not None:
-                k = rec.start_segment(self._metadata('~/reset'), self.driver, ended, fault)
+                k = rec.start_segment(self._metadata('~/reset'), self.driver, ended.sim,
+                                      ended.summary.figures(), fault)
                 self.get_logger().info(f'recording segment {k} (reset; log time offset '
                                        f'{rec.recorder.offset_ns * 1e-9:.9f} s)')
             self._publish_phase('deploying')

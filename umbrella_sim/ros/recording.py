@@ -18,7 +18,8 @@ Recording a run: the node's topics, commands and run records into a bag (bag/wri
 ``RunRecording`` adds an umbrella_sim run's channels to a ``BagRecorder`` (every published
 topic with its QoS, the command topic with its ``/refused`` and ``/applied`` records, and the
 record of which name each topic was recorded under) and writes the run's records: the
-segments of ~/reset, the counts, the events and the summary at close.  The live node and
+segments of ~/reset (with the events and the summary of the run each ended), the counts,
+the events and the summary at close.  The live node and
 ``record_offline`` (``umbrella_sim simulate --mcap``, the sweep's recordings) write through
 it, so both produce the same topics, layout and metadata.
 """
@@ -36,7 +37,7 @@ from .ribs_messages import node_topics, RIB_TOPICS
 from .signals import deferred
 from ..bag.format import (APPLIED_SUFFIX, COUNTS_RECORD, PARAMETERS_RECORD, REFUSED_SUFFIX,
                           TOPICS_RECORD)
-from ..bag.provenance import events_metadata, run_metadata, summary_metadata
+from ..bag.provenance import run_metadata, run_records
 from ..bag.writer import BagRecorder
 from ..core.driver import Chunk, RunDriver
 from ..core.registry import node_defaults
@@ -112,12 +113,17 @@ class RunRecording:
         self.recorder.write(self.command_topic + APPLIED_SUFFIX, Float64(data=float(force)),
                             messages.stamp_ns(t))
 
-    def start_segment(self, metadata: dict, driver: RunDriver, ended_sim,
+    def start_segment(self, metadata: dict, driver: RunDriver, ended_sim, figures: dict,
                       fault: str | None) -> int:
-        """Start a new segment (a ~/reset) with these run records; keep the ended one's events."""
+        """
+        Start a new segment (a ~/reset) with these run records; keep the ended one's records.
+
+        The ended run's events and summary (figures: its SummaryAccumulator.figures()), as
+        close writes the last one's, named for its segment.
+        """
         return self.recorder.start_segment(
             metadata[PARAMETERS_RECORD], gap_ns=messages.stamp_ns(driver.step),
-            ended_events=events_metadata(ended_sim, fault)['umbrella_sim.events'])
+            ended=run_records(ended_sim, figures, fault))
 
     def close(self, sim, accepted: int, refused: int, figures: dict,
               fault: str | None = None, extra: dict | None = None) -> None:
@@ -133,7 +139,7 @@ class RunRecording:
                             'commands_accepted': str(accepted),
                             'commands_refused': str(refused), 'recorded': json.dumps(recorded),
                             **(extra or {})},
-            **events_metadata(sim, fault), **summary_metadata(figures)})
+            **run_records(sim, figures, fault)})
 
 
 def record_offline(params, bag_dir: str, duration: float, force_profile=None,
