@@ -28,7 +28,6 @@ a top view of the tips (X-Z plane) at the end of each run.
 from __future__ import annotations
 
 from dataclasses import dataclass
-import json
 import math
 import os
 import sys
@@ -36,7 +35,6 @@ import sys
 import numpy as np
 
 from .runs import recorded_lock
-from ..bag.format import SUMMARY_RECORD
 from ..bag.reader import LogError, read_log
 from ..core.umbrella3d.outputs3d import STRESS_NAMES
 from ..core.umbrella3d.sampled3d import sampled_figures
@@ -91,15 +89,11 @@ def load_ribs_run(path: str, label: str, segment: int = 0) -> RibsRun:
     stress_t, stress = series('rib_peak_stress', lambda m: [
         [r[f] for f in STRESS_FIELDS] for r in rib_array_figures(m)])
     last = segment == len(log.segments()) - 1
-    record = log.metadata.get(SUMMARY_RECORD, {}) if last else {}
-    try:
-        figures = json.loads(record['figures']) if 'figures' in record else None
-    except ValueError:
-        raise LogError(f'{log.path}: metadata {SUMMARY_RECORD} is not valid JSON') from None
+    figures = (log.summary(segment) or (None,))[0]
     if figures is None:
         figures = _sampled(log, seg, t, alpha1, tip_t, tip, stress_t, stress)
-        why = (f"the summary record is of the log's last run, not of segment {segment}"
-               if not last else
+        why = (f'the log has no summary record of segment {segment} (a recording made '
+               "before a ~/reset wrote the ended run's)" if not last else
                f'the recording ended early ({log.ended_early}) before its summary record'
                if log.ended_early else
                'the log has no summary record (its writer was killed)')

@@ -87,7 +87,20 @@ def info_text(log: LogData) -> str:
         lines.append(f"build:         umbrella_sim {build.get('package_version')} "
                      f"({build.get('git_revision', '?')[:12]}), kernel {build.get('kernel')}, "
                      f"{build.get('source', '')}".rstrip(', '))
-    if SUMMARY_RECORD in log.metadata:
-        lines.append(f'summary:       the figures of every physics step in the '
-                     f"'{SUMMARY_RECORD}' metadata record (umbrella_compare prints them)")
+    if len(segments) < 2:
+        if SUMMARY_RECORD in log.metadata:
+            lines.append(f'summary:       the figures of every physics step in the '
+                         f"'{SUMMARY_RECORD}' metadata record (umbrella_compare prints them)")
+        return '\n'.join(lines)
+    # (~/reset: each segment's run has its own, the last one's written at close)
+    have = [s.index for s in segments if 'figures' in log.run_record(SUMMARY_RECORD, s.index)]
+    none = ', '.join(str(s.index) for s in segments if s.index not in have)
+    none = none and f'none of segment(s) {none}'
+    if have:
+        lines.append(f'summary:       the figures of every physics step of segment(s) '
+                     f"{', '.join(map(str, have))} in the '{SUMMARY_RECORD}[.K]' metadata "
+                     'records (umbrella_compare --segment K prints them)'
+                     + (f'; {none}' if none else ''))
+    elif none:
+        lines.append(f'summary:       {none}')
     return '\n'.join(lines)

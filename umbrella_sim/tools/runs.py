@@ -31,6 +31,7 @@ import os
 
 import numpy as np
 
+from ..bag.format import EVENTS_RECORD
 from ..bag.reader import LogError, read_log
 from ..core.beam import shape_abscissae
 from ..core.params import UmbrellaParams
@@ -194,8 +195,8 @@ class Run:
         """
         Return the summary figures, saying where they come from (figures_from).
 
-        From the recording's metadata (every physics step) when the log has it, else from
-        the recorded samples (older or killed recordings), which depend on the rate.
+        From the segment's summary record (every physics step) when the log has it, else
+        from the recorded samples (older or killed recordings), which depend on the rate.
         """
         if self.summary is not None:
             out = {k: self.summary.get(k) for k in FIGURE_KEYS}
@@ -215,8 +216,8 @@ class Run:
             out[f'peak_stress_{body}'] = float(peaks[i])
             out[f'peak_stress_{body}_time'] = float(self.stress_t[i])
         rate = self.params.get('publish_rate')
-        why = (f"the summary record is of the log's last run, not of segment {self.segment}"
-               if self.segment is not None else
+        why = (f'the log has no summary record of segment {self.segment} (a recording made '
+               "before a ~/reset wrote the ended run's)" if self.segment is not None else
                f'the recording ended early ({self.ended_early}) before its summary record'
                if self.ended_early else
                'the log has no summary record (an older recording, or its writer was killed)')
@@ -351,9 +352,7 @@ def recorded_lock(log, segment: int) -> tuple[dict, float | None, bool]:
     umbrella_sim.events: the last one), else the first 'locked' phase message's time (not
     exact: the publication after the lock).
     """
-    last = len(log.segments()) - 1
-    events = log.metadata.get('umbrella_sim.events' if segment == last
-                              else f'umbrella_sim.events.{segment}', {})
+    events = log.run_record(EVENTS_RECORD, segment)
     if events.get('locked') == 'true':
         return events, float(events['lock_time']), True
     phase = log.find_topic('deployment_phase', required=False)
@@ -413,15 +412,7 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     link_x = np.array(json.loads(mesh['link_node_x'])) if 'link_node_x' in mesh else None
     if segment and leaf_x is not None:      # a later segment: its own mesh (a reset may change N)
         leaf_x, link_x = _segment_mesh(log, params)
-    summary = warnings = None
-    record = log.metadata.get('umbrella_sim.summary') if segment == last else None
-    if record and 'figures' in record:
-        try:
-            summary = json.loads(record['figures'])
-            warnings = json.loads(record.get('warnings', '[]'))
-        except ValueError:
-            raise LogError(f'{log.path}: metadata umbrella_sim.summary is not valid JSON') \
-                from None
+    summary, warnings = log.summary(segment) or (None, None)
     applied_topic = log.find_topic('sleeve_force/applied', required=False)
     applied = ([(tm, m.data) for tm, m in log.iter_decoded(applied_topic, seg)]
                if applied_topic else [])
