@@ -42,8 +42,8 @@ import numpy as np
 
 from .arguments import ArgumentParser
 from .compare_plots import plot
-from .runs import (default_label, default_window, load_run, physics_run, Run,
-                   thesis_figures, THESIS_TABLE_6_1, THESIS_V02)
+from .runs import (default_label, default_window, load_run, physics_figures, physics_run,
+                   Run, thesis_figures, THESIS_TABLE_6_1, THESIS_V02)
 from ..bag.reader import LogError, read_log
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader, raise_if_stopped
 
@@ -103,6 +103,8 @@ SIGNALS = [('alpha1', 'rad', lambda r: (r.t, r.alpha1), False),
            ('tip_deflection', 'm', lambda r: (r.tip_t, r.tip_v), False),
            ('peak_stress_leaf', 'Pa', lambda r: (r.stress_t, r.peak_leaf), True),
            ('peak_stress_link', 'Pa', lambda r: (r.stress_t, r.peak_link), True)]
+#: the thesis's figures that are deployment times (of the lock, not of the samples)
+THESIS_DEPLOY_TIMES = {'deploy_time', 'deploy_time_deformable_fea', 'deploy_time_rigid_fea'}
 #: the text's unit of each SI unit of compare.json (one system: s, mm, MPa, rad)
 TEXT_UNITS = {'m': ('mm', 1e3), 'Pa': ('MPa', 1e-6), 'rad': ('rad', 1.0),
               'rad/s': ('rad/s', 1.0), 's': ('s', 1.0)}
@@ -136,6 +138,14 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
         entry['warnings'] = r.validity()
         if thesis:
             entry['thesis'] = thesis_figures(r.params)
+            # figures of the samples (figures_from says why) beside the thesis's: a
+            # deployment time alone is the exact lock's where the events record has it
+            if r.summary is None and entry['thesis'] and (
+                    not r.lock_time_exact or set(entry['thesis']) - THESIS_DEPLOY_TIMES):
+                entry['thesis_note'] = (
+                    "not comparable with the thesis's as they stand: this run's figures are "
+                    f"of its recorded samples at {r.params.get('publish_rate')} Hz, not of "
+                    'every physics step (--physics-rate re-runs the segment for those)')
         out['runs'].append(entry)
     return out
 
@@ -194,6 +204,8 @@ def print_table(result: dict, stream=None) -> None:
               f"{fmt('tip_deflection_max_time', 1, '.3f', th)} s, stage 2 "
               f"~{fmt('stage2_tip_amplitude', 1e3, '.0f', th)} mm / "
               f"~{fmt('stage2_tip_period', 1, '.2f', th)} s (ch. 6, read off its plots)\n")
+        if 'thesis_note' in e:
+            w(f"{'':<18} caveat: {e['thesis_note']}\n")
 
 
 @interruptible('umbrella_compare', '--out may hold part of the outputs')
@@ -215,7 +227,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="re-run each log's recorded commands (as umbrella_replay "
                          '--resimulate does) and draw the leaf angle, rate, acceleration, tip '
                          'deflection and peak stresses from every physics step instead of the '
-                         'recorded samples')
+                         'recorded samples; a segment the log has no summary record of takes '
+                         'its figures from the re-run too')
     ap.add_argument('--magnification', type=float, nargs=2, default=(200.0, 5.0),
                     metavar=('STAGE1', 'STAGE2'),
                     help='deformation magnification of the shapes plot, at most (default '
@@ -252,13 +265,12 @@ def main(argv: list[str] | None = None) -> int:
             table, draw, span = print_ribs_table, lambda: plot_ribs(runs, out), ''
         else:
             runs = [load_run(p, name, args.segment) for p, name in zip(args.logs, names)]
-            result = compare(runs, thesis=args.thesis)
             window = tuple(args.window) if args.window else default_window(runs)
+            if args.physics_rate:
+                physics_runs(runs, args.segment, None if args.no_plots else window[1])
+            result = compare(runs, thesis=args.thesis)
             if not args.no_plots:
                 result['plot_window'] = list(window)
-            if args.physics_rate and not args.no_plots:
-                for r in runs:
-                    r.physics = physics_run(r.path, args.segment, until=window[1])
             table, span = print_table, f' of t = {window[0]:.4g} .. {window[1]:.4g} s (--window)'
 
             def draw():
@@ -284,6 +296,26 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nwrote {os.path.join(out, 'compare.json')}"
           + (f" and {len(result['plots'])} plots{span}" if 'plots' in result else ''))
     return 0 if reader_there else EXIT_READER_GONE
+
+
+def physics_runs(runs: list[Run], segment: int, until: float | None) -> None:
+    """
+    --physics-rate: re-run each log's segment (its recorded parameters and commands).
+
+    The signals at every physics step up to until for the plots (None: no plots); a run
+    whose log has no summary record of the segment (an older recording's earlier segment,
+    a killed recording) is re-run to the segment's end for its summary figures, so that
+    they are of every physics step too.
+    """
+    for r in runs:
+        if until is None and r.summary is not None:
+            continue                # (its figures are the record's: nothing to re-run)
+        rerun = physics_run(r.path, segment, 0.0 if until is None else until,
+                            figures=r.summary is None)
+        if until is not None:
+            r.physics = rerun
+        if r.summary is None:
+            physics_figures(r, rerun['figures'])
 
 
 def _ribs_logs(args) -> bool:

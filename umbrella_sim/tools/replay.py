@@ -215,13 +215,15 @@ def _in_segment(seg, m) -> bool:
     return m.log_time >= seg.offset_ns and (seg.end_ns is None or m.log_time < seg.end_ns)
 
 
-def physics_series(log: LogData, seg, until: float | None = None) -> dict:
+def physics_series(log: LogData, seg, until: float | None = None,
+                   figures: bool = False) -> dict:
     """
     Re-run one segment and return its signals at every physics step (arrays by name).
 
     Names: time, alpha1, alpha1_rate, tip_transverse, peak_stress_leaf, peak_stress_link
     (the StepBlock fields); the run stops at the segment's last publication or its fault,
-    or at until (sim time) if that comes first.
+    or at until (sim time) if that comes first.  figures: it goes on to the segment's end,
+    and "figures" holds its summary figures of every physics step (as the recorded run's).
     """
     driver, t_last, t_fault = _segment_inputs(log, seg)
     names = ('time', 'alpha1', 'alpha1_rate', 'tip_transverse', 'peak_stress_leaf',
@@ -233,8 +235,13 @@ def physics_series(log: LogData, seg, until: float | None = None) -> dict:
             parts[n].append(getattr(chunk.block, n))
 
     t_end = t_last if t_fault is None else max(t_last, t_fault)
-    driver.run(t_end if until is None else min(t_end, until), on_chunk=on_chunk)
-    return {n: np.concatenate(v) if v else np.zeros(0) for n, v in parts.items()}
+    error = driver.run(t_end if until is None else min(t_end, until), on_chunk=on_chunk)
+    out = {n: np.concatenate(v) if v else np.zeros(0) for n, v in parts.items()}
+    if figures:     # on to the segment's end (the series stop at until, the figures not)
+        if error is None:
+            driver.run(t_end)
+        out['figures'] = driver.summary.figures()
+    return out
 
 
 def _resimulate_segment(log: LogData, seg, diffs: dict, scales: dict) -> dict:

@@ -95,7 +95,8 @@ def info_text(log: LogData) -> str:
     # (~/reset: each segment's run has its own, the last one's written at close)
     have = [s.index for s in segments if 'figures' in log.run_record(SUMMARY_RECORD, s.index)]
     none = ', '.join(str(s.index) for s in segments if s.index not in have)
-    none = none and f'none of segment(s) {none}'
+    none = none and (f'none of segment(s) {none} (umbrella_compare --physics-rate re-runs a '
+                     'segment for its figures)')
     if have:
         lines.append(f'summary:       the figures of every physics step of segment(s) '
                      f"{', '.join(map(str, have))} in the '{SUMMARY_RECORD}[.K]' metadata "

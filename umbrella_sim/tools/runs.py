@@ -31,7 +31,8 @@ import os
 
 import numpy as np
 
-from ..bag.format import EVENTS_RECORD
+from ..bag.format import EVENTS_RECORD, SUMMARY_RECORD
+from ..bag.provenance import summary_metadata, summary_of
 from ..bag.reader import LogError, read_log
 from ..core.beam import shape_abscissae
 from ..core.params import UmbrellaParams
@@ -133,6 +134,8 @@ class Run:
     lock_time_exact: bool = True
     deploy_start: float | None = 0.0     # outputs.deploy_start of the recorded run
     segment: int | None = None           # a segment before the log's last (its own record)
+    # where summary is from: the recording's record, or a re-run (physics_figures)
+    summary_from: str = 'recording metadata'
     ended_early: str | None = None       # the recording's write error, if it stopped on one
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -195,12 +198,13 @@ class Run:
         """
         Return the summary figures, saying where they come from (figures_from).
 
-        From the segment's summary record (every physics step) when the log has it, else
-        from the recorded samples (older or killed recordings), which depend on the rate.
+        From the segment's summary record (every physics step) when the log has it, or
+        from a re-run of the segment (--physics-rate: physics_figures), else from the
+        recorded samples (older or killed recordings), which depend on the rate.
         """
         if self.summary is not None:
             out = {k: self.summary.get(k) for k in FIGURE_KEYS}
-            out['figures_from'] = 'every physics step (recording metadata)'
+            out['figures_from'] = f'every physics step ({self.summary_from})'
             return out
         out = {'deploy_time': self.deploy_time, 'deploy_start': self.deploy_start,
                'lock_time': self.lock_time}
@@ -222,7 +226,8 @@ class Run:
                if self.ended_early else
                'the log has no summary record (an older recording, or its writer was killed)')
         out['figures_from'] = (f'recorded samples at {rate} Hz: {why}, so these figures '
-                               'depend on the recording rate')
+                               'depend on the recording rate (--physics-rate re-runs the '
+                               'segment for the figures of every physics step)')
         return out
 
     def validity(self) -> list:
@@ -437,9 +442,28 @@ def _segment_mesh(log, params: dict):
     return np.array(model.leaf.node_x), np.array(model.link.node_x)
 
 
-def physics_run(path: str, segment: int = 0, until: float | None = None) -> dict:
-    """Return the signals of one log's segment at every physics step (a re-run of it)."""
+def physics_run(path: str, segment: int = 0, until: float | None = None,
+                figures: bool = False) -> dict:
+    """
+    Return the signals of one log's segment at every physics step (a re-run of it).
+
+    figures: the re-run goes on to the segment's end for its summary figures (replay.
+    physics_series); physics_figures gives them to a Run.
+    """
     from .replay import physics_series
 
     log = read_log(path)
-    return physics_series(log, log.segment(segment), until)
+    return physics_series(log, log.segment(segment), until, figures)
+
+
+def physics_figures(run: Run, figures: dict) -> None:
+    """
+    Give a run the summary figures of a re-run of its segment (every physics step).
+
+    In the summary record's form (provenance.summary_metadata, read back by summary_of:
+    the figures and the warnings apart, as JSON holds them), so that they read as a
+    recorded summary does.
+    """
+    run.summary, run.warnings = summary_of(summary_metadata(figures)[SUMMARY_RECORD])
+    run.summary_from = ('--physics-rate: a re-run of the segment from its recorded '
+                        'parameters and commands')
