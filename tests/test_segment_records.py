@@ -23,6 +23,7 @@ thesis's; ``--physics-rate`` re-runs such a segment for its figures of every phy
 The figures are checked against an offline run of the segment's parameters at its step.
 """
 import json
+import re
 
 import pytest
 
@@ -227,6 +228,8 @@ def test_replay_info_names_each_segment_s_summary(bags, capsys):
     info = capsys.readouterr().out
     assert ('summary:       the figures of every physics step of segment(s) 0, 1, 2 in the '
             "'umbrella_sim.summary[.K]' metadata records") in info, info
+    # the build record is written at the start: its kernel is segment 0's
+    assert re.search(r'^build: .*, kernel \S+ \(segment 0\)', info, re.M), info
     assert replay.main([bags['older'], '--info']) == 0
     info = capsys.readouterr().out
     assert 'of segment(s) 2 in the' in info and 'none of segment(s) 0, 1 (' in info, info

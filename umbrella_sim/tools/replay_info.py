@@ -84,9 +84,12 @@ def info_text(log: LogData) -> str:
                      f"{events['fault']}{last}")
     build = log.metadata.get(BUILD_RECORD)
     if build:
+        # (written at the start: segment 0's kernel; a later segment's model may step on
+        # another, e.g. a rigid model's closed form)
+        first = ' (segment 0)' if len(segments) > 1 else ''
         lines.append(f"build:         umbrella_sim {build.get('package_version')} "
-                     f"({build.get('git_revision', '?')[:12]}), kernel {build.get('kernel')}, "
-                     f"{build.get('source', '')}".rstrip(', '))
+                     f"({build.get('git_revision', '?')[:12]}), kernel {build.get('kernel')}"
+                     f"{first}, {build.get('source', '')}".rstrip(', '))
     if len(segments) < 2:
         if SUMMARY_RECORD in log.metadata:
             lines.append(f'summary:       the figures of every physics step in the '
