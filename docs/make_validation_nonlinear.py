@@ -578,10 +578,10 @@ def axial_load_section():
              "step' of the linear model), 0.3 s past the lock, the thesis's frame unless a "
              "column says otherwise. The locked frame's vibration loads the link along its "
              'axis, in compression and in tension each period; the figure is the largest '
-             "over stage 2's steps of the link's axial force at H (from the stop's and the "
-             "axle's reactions: `outputs.link_axial_force`) over its pinned-pinned Euler load "
-             "π²EI/l3² (`axial_load_ratio_max`; the ribs take each rib's largest axial "
-             "stress times its area). The errors are flexible's relative to flexible-nonlinear: "
+             "over stage 2's steps of the members' elastic axial force (the largest axial "
+             "stress of the beams' stress recovery, |σ_top + σ_bottom|/2, times the area; each "
+             "rib's for the umbrella) over the link's pinned-pinned Euler load π²EI/l3² "
+             "(`axial_load_ratio_max`). The errors are flexible's relative to flexible-nonlinear: "
              "the peak stresses of the whole run (stage 2's), the stage-2 tip amplitude and "
              'period, and the largest difference of the two stage-2 tip series over the '
              "amplitude. 'warns': the run says "

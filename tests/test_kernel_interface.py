@@ -52,7 +52,7 @@ STEP_ROW = ('time', 'stage', 'alpha1', 'alpha1_rate', 'sleeve_position', 'sleeve
             'strain_energy', 'work', 'lock_energy_loss', 'alpha2', 'alpha2_rate',
             'alpha1_accel', 'stress_leaf_joint', 'stress_link_mid',
             'sleeve_reaction_x', 'sleeve_reaction_y', 'constraint_residual',
-            'damping_dissipation')
+            'damping_dissipation', 'axial_stress')
 
 
 def test_the_step_row_is_the_headers_list():

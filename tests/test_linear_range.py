@@ -415,8 +415,9 @@ def test_a_recording_without_its_summary_judges_stage2_at_the_step_it_took(tmp_p
         run = compare.load_run(str(bag))
         run.warnings = None                 # (as a log whose writer was killed)
         keys = [w.split(':')[0] for w in run.validity()]
-        # 'axial load' takes the stop's and the axle's reactions, which no topic carries: a
-        # log without its summary cannot say it (msg_docs/recording.md), and does not
+        # 'axial load' takes the members' axial stress at every step, which no topic
+        # carries: a log without its summary cannot say it (msg_docs/recording.md), and
+        # does not (compare says it was not judged)
         assert keys == [w.split(':')[0] for w in figures['warnings'] if
                         not w.startswith('axial load')]
         assert ('coarse step' in keys) == coarse

@@ -448,3 +448,25 @@ def test_a_duration_that_is_not_a_whole_number_of_steps_says_where_the_run_ends(
     assert 'note: the run ends at t = 0.03 s' in err and '--duration 0.0301 s' in err
     assert cli.main(['simulate', '--duration', '0.03', '--time-step', '0.0003']) == 0
     assert 'note' not in capsys.readouterr().err
+
+
+def test_a_rib_list_takes_numbers_as_yaml_1_1_reads_them_as_text(capsys):
+    # YAML 1.1 (PyYAML) reads 1e-4 as text; a list of them is numbers all the same
+    from umbrella_sim.tools import cli
+
+    assert cli.main(['simulate', '--duration', '0.002', '--set', 'ribs=3', '--set',
+                     'rib.tip_mass=[1e-1, 0, 0]', '--json']) == 0
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        cli.main(['simulate', '--duration', '0.002', '--set', 'ribs=3', '--set',
+                  'rib.tip_mass=[1e-1, abc, 0]'])
+    assert exc.value.code == 2
+    assert "--set rib.tip_mass: a list of numbers" in capsys.readouterr().err
+
+
+def test_the_text_summary_gives_the_axial_load_in_per_cent_of_the_euler_load(capsys):
+    from umbrella_sim.tools import cli
+
+    assert cli.main(['simulate', '--duration', '0.3']) == 0
+    lines = dict(line.split(None, 1) for line in capsys.readouterr().out.splitlines())
+    assert lines['axial_load_ratio_max'].endswith("% of the link's Euler load")

@@ -754,8 +754,9 @@ def test_a_round_bars_area_and_inertia_beside_the_default_height_warn_outer_fibr
     for height in (d, 0.0):         # its own depth, or the rectangle's rule: nothing to say
         assert parameter_warnings(
             UmbrellaParams(**bar, section_height=height).as_dict()) == []
-    square = UmbrellaParams(area=1e-4, second_moment_of_area=1e-8 / 12)
-    assert parameter_warnings(square.as_dict()) == []         # (the default's own square)
+    for inertia in (1e-8 / 12, 8.3333e-10):          # the default's own square, rounded too
+        square = UmbrellaParams(area=1e-4, second_moment_of_area=inertia)
+        assert parameter_warnings(square.as_dict()) == []
     # and the fibre it names is the one the stresses take: 10 % more stress at d/2
     peaks = [simulate(UmbrellaParams(**bar, **extra), 0.3).summary()['peak_stress_leaf']
              for extra in ({}, {'section_height': d})]
@@ -790,3 +791,17 @@ def test_damping_given_to_a_model_without_beams_says_it_takes_no_effect(model):
     # what it says: the run is the undamped one
     for name in ('alpha1', 'sleeve_position', 'kinetic_energy'):
         np.testing.assert_array_equal(damped.column(name), undamped.column(name))
+
+
+def test_a_ribs_own_section_is_judged_and_named_by_its_rib():
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+
+    def keys(mapping):
+        f = simulate(UmbrellaRibsParams.from_mapping(mapping), 0.004, keep_samples=False)
+        return [w.split(',')[0] for w in f.figures['warnings']]
+
+    assert keys({'ribs': 3, 'rib1.section_height': 0.06}) == ['thick beam: rib 1']
+    assert keys({'ribs': 3, 'rib.area': [1e-4, 2e-4, 1e-4],
+                 'rib.second_moment_of_area': [1e-8 / 12, 1e-9, 1e-8 / 12]}) == [
+        'outer fibre: rib 1']
+    assert keys({'ribs': 3}) == []

@@ -1564,6 +1564,14 @@ static void output_row(Ctx *x, const double *q, const double *v, const double *p
         SET(F_PEAK_LINK, peaks[2]);
         SET(F_PEAK_LINK_X, peaks[3]);
     }
+    {   /* the largest axial stress |top + bottom| / 2 of the state (outputs.axial_stress_of) */
+        double axial = 0.0;
+        for (int k2 = 0; k2 < npts; k2++) {
+            double a = fabs(0.5 * (sig[k2] + sig[npts + k2]));
+            if (a > axial) axial = a;
+        }
+        SET(F_AXIAL_STRESS, axial);
+    }
     const double *link_top = sig + m->n_stress_leaf;    /* (this state's fibre stresses) */
     int j = m->ref_link_element;
     SET(F_STRESS_LEAF_JOINT, sig[m->ref_leaf_point]);

@@ -36,7 +36,7 @@
 
 /* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
  * reordered, a function's arguments changed). */
-#define UMBRELLA_ABI_VERSION 7
+#define UMBRELLA_ABI_VERSION 8
 
 /* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
  * exported. */
@@ -92,7 +92,8 @@ enum { UMBRELLA_STATUS_CODES(UMBRELLA_STATUS_ENTRY) N_STATUS };
     X(REACTION_X, sleeve_reaction_x) \
     X(REACTION_Y, sleeve_reaction_y) \
     X(RESIDUAL, constraint_residual) \
-    X(DISSIPATION, damping_dissipation)
+    X(DISSIPATION, damping_dissipation) \
+    X(AXIAL_STRESS, axial_stress)
 #define UMBRELLA_STEP_ENTRY(name, py) F_##name,
 enum { UMBRELLA_STEP_FIELDS(UMBRELLA_STEP_ENTRY) N_FIELDS };
 

@@ -436,7 +436,7 @@ class RigidEngine(Engine):
             values = (*peaks, *m.reference_stresses(zero[0][0], zero[1][0]))
             self._zeros = dict(zip(names, (float(v) for v in values)),
                                tip_axial=0.0, tip_transverse=0.0, strain_energy=0.0,
-                               damping_dissipation=0.0)
+                               damping_dissipation=0.0, axial_stress=0.0)
         return self._zeros
 
     def _check(self, y, res: float) -> str | None:

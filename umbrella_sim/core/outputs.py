@@ -88,6 +88,7 @@ class Sample:
     lock_energy_loss: float        # energy removed by the lock so far (J)
     constraint_residual: float     # max(|Phi|, |J q'|)
     damping_dissipation: float = 0.0   # energy removed by structural damping so far (J)
+    axial_stress: float = 0.0      # largest |axial stress| of leaf and link (Pa; axial_stress_of)
 
     @property
     def sleeve_reaction_x(self) -> float:
@@ -108,15 +109,16 @@ class Sample:
             'peak_stress_link_x': hold['link'][1]})
 
 
-def link_axial_force(alpha2, reaction_x, reaction_y, sleeve_force):
+def axial_stress_of(leaf_stress, link_stress) -> float:
     """
-    Return the link's axial force at the sleeve H (N, tension positive; arrays or floats).
+    Return the largest axial stress |sigma_top + sigma_bottom| / 2 of leaf and link (Pa).
 
-    The sleeve (massless, or at rest at the stop) is held by the link's end force, the
-    axle's and the stop's (sleeve_reaction) and F_H along -Y: the link's force on it,
-    -N (cos alpha2, sin alpha2), balances them, N = R_x cos alpha2 + (R_y - F_H) sin alpha2.
+    leaf_stress, link_stress: (2, points), top and bottom fibre (a Sample's): the elastic
+    axial stress the beams' strain gives (the compiled step's axial_stress row, the same
+    arithmetic).
     """
-    return reaction_x * np.cos(alpha2) + (reaction_y - sleeve_force) * np.sin(alpha2)
+    return float(max(np.abs(0.5 * (leaf_stress[0] + leaf_stress[1])).max(initial=0.0),
+                     np.abs(0.5 * (link_stress[0] + link_stress[1])).max(initial=0.0)))
 
 
 def mechanical_energy(s):
@@ -148,16 +150,20 @@ def energy_balance(s, initial_energy: float):
 # steps is not lost.
 
 
-def step_row(s: Sample, peaks: tuple | None = None) -> list[float]:
+def step_row(s: Sample, peaks: tuple | None = None,
+             axial_stress: float | None = None) -> list[float]:
     """
     Return the STEP_FIELDS of one sample (the reference the compiled outputs are tested on).
 
     peaks: the step's (peak_stress_leaf, its x, peak_stress_link, its x) (``step_peaks``)
-    in place of the sample's own, which are those of its instant.
+    in place of the sample's own, which are those of its instant; axial_stress: the largest
+    of the step's substeps' (fold_substeps) in place of the sample's.
     """
     row = [float(s.stage.code) if f == 'stage' else float(getattr(s, f)) for f in STEP_FIELDS]
     if peaks is not None:
         row[_STEP_PEAKS] = [float(v) for v in peaks]
+    if axial_stress is not None:
+        row[_AXIAL_STRESS] = float(axial_stress)
     return row
 
 
@@ -396,6 +402,8 @@ del _row, _name
 #: the rows of a step's peak stresses and where (step_peaks)
 _STEP_PEAKS = slice(STEP_FIELDS.index('peak_stress_leaf'),
                     STEP_FIELDS.index('peak_stress_link_x') + 1)
+#: the row of a step's largest axial stress (the largest of its substeps': fold_substeps)
+_AXIAL_STRESS = STEP_FIELDS.index('axial_stress')
 #: rows StepBlock.peaks and SummaryAccumulator.add read together
 _PEAK_ROWS = np.array([STEP_FIELDS.index(f) for f in (
     'time', 'peak_stress_leaf', 'peak_stress_leaf_x', 'peak_stress_link', 'peak_stress_link_x')])
@@ -409,13 +417,15 @@ def fold_substeps(rows: np.ndarray, states: np.ndarray | None, m: int
     rows: (len(STEP_FIELDS), steps) of consecutive physics steps, the first starting a grid
     step; each group of m ends a grid step (a last, shorter group: the steps a fault left).
     A grid step's row is its last physics step's, with the step's peak stresses the largest
-    of its physics steps' (and where); its state row, its last one's.
+    of its physics steps' (and where), and its axial stress the largest of theirs; its state
+    row, its last one's.
     """
     ends = substep_ends(rows.shape[1], m)
     out = rows[:, ends]
     for peak in (_STEP_PEAKS.start, _STEP_PEAKS.start + 2):       # leaf, link: value, x
         at = first_largest_of_substeps(rows[peak], m)
         out[peak], out[peak + 1] = rows[peak, at], rows[peak + 1, at]
+    out[_AXIAL_STRESS] = rows[_AXIAL_STRESS, first_largest_of_substeps(rows[_AXIAL_STRESS], m)]
     return out, None if states is None else states[:, ends]
 
 

@@ -40,8 +40,8 @@ from .engines import (DIVERGENCE_RESIDUAL, event_root, EVENT_TIME_TOLERANCE, fau
 from .forcing import command_force, ForceSchedule
 from .kernel import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicState, SAMPLE_VECTOR
 from .model import DEFORMING, LOCKED, Stage, UmbrellaModel
-from .outputs import (build_frozen, fold_substeps, LockEvent, Sample, state_row, STEP_FIELDS,
-                      step_peaks, step_row, StepBlock)
+from .outputs import (axial_stress_of, build_frozen, fold_substeps, LockEvent, Sample,
+                      state_row, STEP_FIELDS, step_peaks, step_row, StepBlock)
 from .params import UmbrellaParams
 from .registry import SPECS
 from .step_rule import physics_step_of, stage2_physics_steps
@@ -184,22 +184,24 @@ class UmbrellaSimulator:
         Return the state dt after s0: one physics step, or stage 2's substeps.
 
         With substeps, also the largest fibre stress over them and where (step_peaks: leaf,
-        x, link, x), else None.
+        x, link, x) and the largest axial stress of their states (outputs.fold_substeps'
+        rule), else None.
         """
         eng, m = self.engine, self._substeps(stage)
         if m == 1:
             return self._checked(lambda: eng.step(s0, dt, force, stage), stage), None
         n = stage2_physics_steps(dt, self.h, m)
         xs = (self.model.leaf.stress_x, self.model.link.stress_x)
-        s, start, peaks = s0, self._fibre_stress_of(s0), None
+        s, start, peaks, axial = s0, self._fibre_stress_of(s0), None, 0.0
         for _ in range(n):
             s = self._checked(lambda s=s: eng.step(s, dt / n, force, stage), stage)
             end = self._fibre_stress_of(s)
             step = step_peaks(start, end, dt / n, xs)
             peaks = step if peaks is None else tuple(
                 v for body in (0, 2) for v in max(peaks[body:body + 2], step[body:body + 2]))
+            axial = max(axial, axial_stress_of(*end[0]))
             start = end
-        return s, peaks
+        return s, (peaks, axial)
 
     def _commit(self, s1, stage, force, work, lock_loss, lock_event, steps) -> None:
         """Only after everything succeeded: a failure leaves the last good state."""
@@ -263,9 +265,10 @@ class UmbrellaSimulator:
                 error = str(exc)
                 break
             m, sample = self.model, self.sample()
-            row = step_row(sample, self._substep_peaks or step_peaks(
+            peaks, axial = self._substep_peaks or (None, None)
+            row = step_row(sample, peaks or step_peaks(
                 start, self._fibre_stress(), self.time - t_start,
-                (m.leaf.stress_x, m.link.stress_x)))
+                (m.leaf.stress_x, m.link.stress_x)), axial)
             parts.append((np.array(row)[:, None], state_row(sample)[:, None] if states else None))
             done += 1
             if until_lock and self.lock_event is not lock_before:
@@ -398,6 +401,8 @@ class UmbrellaSimulator:
             stress = vector[n:].reshape(2, -1)
             n_leaf = m.leaf.n_stress_points
             values['leaf_stress'], values['link_stress'] = stress[:, :n_leaf], stress[:, n_leaf:]
+            values['axial_stress'] = axial_stress_of(values['leaf_stress'],
+                                                     values['link_stress'])
             values.update(common)
             return build_frozen(Sample, values)
         (lt, lb), (kt, kb) = m.stresses(q)
@@ -417,6 +422,7 @@ class UmbrellaSimulator:
             'sleeve_velocity': float(m.sleeve_height_gradient(q) @ qd),
             'tip_axial': tip_axial, 'tip_transverse': tip_transverse,
             'leaf_stress': _frozen((lt, lb)), 'link_stress': _frozen((kt, kb)),
+            'axial_stress': axial_stress_of((lt, lb), (kt, kb)),
             'peak_stress_leaf': float(leaf_abs[il]),
             'peak_stress_leaf_x': float(m.leaf.stress_x[il]),
             'peak_stress_link': float(link_abs[ik]),

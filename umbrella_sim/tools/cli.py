@@ -128,6 +128,7 @@ TEXT_FIELDS = {
     'stress_ratio_max': ('-', 1.0, '.3g'),
     'tip_deflection_ratio_max': ('% of l1+l2', 100.0, '.3g'),
     'leaf_tension_ratio_max': ('% of the Euler load', 100.0, '.3g'),
+    'axial_load_ratio_max': ("% of the link's Euler load", 100.0, '.3g'),
     'lock': ('', None, ''),
     'lock_energy_before': ('J', 1.0, '.6g'),
     'lock_energy_after': ('J', 1.0, '.6g'),

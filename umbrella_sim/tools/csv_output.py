@@ -44,7 +44,7 @@ CSV_COLUMNS = ['time', 'stage', 'alpha1', 'alpha2', 'alpha1_rate', 'alpha2_rate'
                'peak_stress_link_x', 'stress_leaf_joint', 'stress_link_mid',
                'sleeve_reaction_x', 'sleeve_reaction_y',
                'kinetic_energy', 'strain_energy', 'work', 'lock_energy_loss',
-               'constraint_residual', 'damping_dissipation']
+               'constraint_residual', 'damping_dissipation', 'axial_stress']
 #: each column's unit, written in the header as 'name (unit)' (constraint_residual:
 #: max(|Phi|, |J q'|), a position's and a velocity's constraints)
 CSV_UNITS = {'time': 's', 'stage': '', 'alpha1': 'rad', 'alpha2': 'rad', 'alpha1_rate': 'rad/s',
@@ -54,7 +54,8 @@ CSV_UNITS = {'time': 's', 'stage': '', 'alpha1': 'rad', 'alpha2': 'rad', 'alpha1
              'peak_stress_link': 'Pa', 'peak_stress_link_x': 'm', 'stress_leaf_joint': 'Pa',
              'stress_link_mid': 'Pa', 'sleeve_reaction_x': 'N', 'sleeve_reaction_y': 'N',
              'kinetic_energy': 'J', 'strain_energy': 'J', 'work': 'J', 'lock_energy_loss': 'J',
-             'constraint_residual': 'm or m/s', 'damping_dissipation': 'J'}
+             'constraint_residual': 'm or m/s', 'damping_dissipation': 'J',
+             'axial_stress': 'Pa'}
 _ROWS = [STEP_FIELDS.index(c) for c in CSV_COLUMNS if c != 'stage']
 _STAGE_ROW = STEP_FIELDS.index('stage')
 _STAGES = [str(s) for s in sorted(Stage, key=lambda s: s.code)]

@@ -48,7 +48,8 @@ FIGURE_KEYS = ('deploy_time', 'deploy_start', 'lock_time', 'tip_deflection_max',
                'stage2_window',
                'peak_stress_leaf', 'peak_stress_leaf_x', 'peak_stress_leaf_time',
                'peak_stress_link', 'peak_stress_link_x', 'peak_stress_link_time',
-               'stress_ratio_max', 'tip_deflection_ratio_max')
+               'stress_ratio_max', 'tip_deflection_ratio_max', 'leaf_tension_ratio_max',
+               'axial_load_ratio_max')
 
 
 RIGID_MODELS = ('rigid', 'rigid-fe')

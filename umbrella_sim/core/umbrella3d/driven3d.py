@@ -45,9 +45,9 @@ from ..forcing import command_force
 from ..model import Stage
 from ..outputs import LockEvent
 from ..summary import (AXIAL_LOAD_LIMIT, CENTRIFUGAL_TENSION_LIMIT,
-                       centrifugal_tension_per_rate, deploy_start,
-                       ENERGY_DRIFT_LIMIT, ENERGY_SCALE_FLOOR, hub_spin_tension_per_rate,
-                       leaf_tension_ratio, mesh_resolution, validity_warnings, WarningsSaid)
+                       centrifugal_tension_per_rate, deploy_start, ENERGY_DRIFT_LIMIT,
+                       ENERGY_SCALE_FLOOR, hub_spin_tension_per_rate, leaf_tension_ratio,
+                       mesh_resolution, parameter_warnings, validity_warnings, WarningsSaid)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
 #: a segment; 6 to 9 ms with a moving base), so a chunk stays near the planar rule's ~10 ms
@@ -355,6 +355,12 @@ class Summary3D:
         # base, the hub circle's share per squared spin; the largest ratio over the ribs in
         # stage 1
         ribs = sim.params.ribs_list()
+        # each rib's own section and lengths, judged as the planar record's are
+        # (summary.parameter_warnings), where a rib's differ from it: by the rib
+        self._rib_parameter_warnings = [
+            f"{w.split(':')[0]}: rib {k},{w.split(':', 1)[1]}"
+            for k, r in enumerate(ribs) if r.planar != sim.params.planar
+            for w in parameter_warnings(r.planar.as_dict())]
         self._per_rate = np.array([centrifugal_tension_per_rate(r.planar, r.tip_mass)
                                    for r in ribs])
         self._spins = m.moving_base
@@ -369,7 +375,7 @@ class Summary3D:
         # AXIAL_LOAD_LIMIT): its axial stress peak (leaf or link) times its section's area
         self._axial_per_stress = np.array([r.planar.cross_section_area
                                            / r.planar.link_euler_load for r in ribs])
-        self._axial, self._axial_rib = 0.0, 0
+        self._axial, self._axial_rib = None, 0          # (None: no stage 2 yet)
         if initial.stage == Stage.DEPLOYING:
             self._hold_tension(self._tension_ratio(
                 initial.alpha1_rate, initial.alpha1, getattr(initial, 'bus_q', None),
@@ -424,7 +430,7 @@ class Summary3D:
             ratio = (rows['stress_axial'] if locked[0] else rows['stress_axial'][locked]) \
                 * self._axial_per_stress
             top = float(largest(ratio, axis=None))
-            if top > self._axial:
+            if self._axial is None or top > self._axial:
                 self._axial = top
                 self._axial_rib = int(np.unravel_index(np.argmax(ratio), ratio.shape)[-1])
         energy = rows['kinetic_energy'] + rows['strain_energy']
@@ -518,7 +524,8 @@ class Summary3D:
                                  section_slope=slope, centrifugal_tension=self._tension,
                                  link_axial_load=self._axial,
                                  ribs=ribs, out_of_plane_tip=abs(self._oop[0])
-                                 ) + out_of_plane_warnings(self._planar, out_of_plane)
+                                 ) + out_of_plane_warnings(self._planar, out_of_plane) + list(
+            self._rib_parameter_warnings)
 
     def _stage2_resolution(self) -> dict | None:
         """Return the lock's stage-2 resolution (the worst rib's), else the mesh's."""
@@ -532,5 +539,5 @@ class Summary3D:
                                largest(self._in_plane), self._oop[0],
                                self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
                                self._tension > CENTRIFUGAL_TENSION_LIMIT,
-                               self._axial > AXIAL_LOAD_LIMIT, *self._geometry()),
+                               (self._axial or 0.0) > AXIAL_LOAD_LIMIT, *self._geometry()),
                               self.warnings)
