@@ -167,7 +167,7 @@ def test_compare_reports_an_earlier_segment_s_figures_of_every_physics_step(
     assert_figures(figures, expected)
     amplitude, period = expected['stage2_tip_amplitude'], expected['stage2_tip_period']
     assert f'stage 2 {amplitude * 1e3:.4g} mm / {period:.4f} s' in text, text
-    assert 'thesis_note' not in run and 'caveat' not in text
+    assert 'thesis_note' not in run and 'caveat' not in text and 'not_judged' not in run
     # the samples at 37 Hz fall beside the crests: what the segment printed before
     samples = compare.load_run(bags['now'], segment=1)
     samples.summary = None
@@ -188,6 +188,9 @@ def test_an_older_recording_s_earlier_segment_falls_back_with_its_caveat(
     thesis_line = next(i for i, line in enumerate(text.splitlines())
                        if line.strip().startswith('thesis:'))
     assert text.splitlines()[thesis_line + 1].strip().startswith('caveat: not comparable')
+    # what the samples cannot judge is said, not left as if judged quiet
+    assert run['not_judged'] == [compare.NOT_JUDGED_FROM_SAMPLES]
+    assert "not judged: 'axial load'" in text
     # a deployment time alone (Table 6.1's V0) is the exact lock's: no caveat
     r = compare.load_run(bags['older'], segment=1)
     assert r.summary is None and r.lock_time_exact

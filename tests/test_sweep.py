@@ -388,6 +388,7 @@ def test_the_summary_line_says_how_many_finished_cases_warned(tmp_path, monkeypa
     report = sweep_tool.SweepReport(total=3, skipped=0)
     sweep_tool._write_outputs(spec, store, str(tmp_path / 'out'), report, said.append)
     assert '3 ok (1 with warnings' in said[-1] and 'warnings column' in said[-1], said
+    assert 'with warnings: yield exceeded;' in said[-1], said     # (the keys the cases said)
     store.save(sweep.make_record(spec.cases[1], {'case_id': spec.cases[1].case_id,
                                                  'status': 'ok', 'error': None,
                                                  'summary': {'warnings': []}, 'worker': 'w',

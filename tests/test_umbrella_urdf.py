@@ -353,6 +353,8 @@ def test_the_command_line_prints_the_urdf_of_the_values_given(capsys):
         {'ribs': 3, 'rib1.tip_mass': 0.1}))
     for bad, words in ((['ribs'], "'ribs': give name=value pairs"),
                        (['l1=-1'], 'l1=-1.0: must be > 0'),
-                       (['youngs_modulous=7e10'], "did you mean 'youngs_modulus'")):
+                       (['youngs_modulous=7e10'], "did you mean 'youngs_modulus'"),
+                       (['ribs=3', 'rib.l2=[0.5,0.6'], "'rib.l2=[0.5,0.6': not a value"),
+                       (['l1=0.5', 'l1=0.6'], 'l1 given twice')):
         assert rd.main(bad) == 2
         assert words in capsys.readouterr().err

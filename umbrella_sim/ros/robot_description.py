@@ -291,17 +291,26 @@ def main(argv: list[str] | None = None) -> int:
     from ..core.registry import check_known_names, REGISTRY
     from ..core.umbrella3d.params3d import names_a_rib, node_model, umbrella_parameter_names
 
+    import yaml
+
     values = {}
+    usage = ("give name=value pairs (ribs=6 section_height=0.012), the node's parameter "
+             'names; none: the default parameters')
     for pair in sys.argv[1:] if argv is None else argv:
+        if pair in ('-h', '--help'):
+            print(f'python -m umbrella_sim.ros.robot_description [name=value ...]: the URDF; '
+                  f'{usage}')
+            return 0
         name, assign, text = pair.partition('=')
-        if not assign or not name:
-            print(f'robot_description: {pair!r}: give name=value pairs (ribs=6 '
-                  "section_height=0.012), the node's parameter names", file=sys.stderr)
-            return 2
-        try:
-            values[name] = load_yaml_as_ros(text)
-        except ValueError as exc:
-            print(f'robot_description: {pair!r}: {exc}', file=sys.stderr)
+        why = (usage if not assign or not name else
+               f'{name} given twice (give each once)' if name in values else None)
+        if why is None:
+            try:
+                values[name] = load_yaml_as_ros(text)
+            except (ValueError, yaml.YAMLError) as exc:
+                why = f'not a value: {" ".join(str(exc).split())}'
+        if why is not None:
+            print(f'robot_description: {pair!r}: {why}', file=sys.stderr)
             return 2
     try:
         check_known_names([n for n in values if not names_a_rib(n)],

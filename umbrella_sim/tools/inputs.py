@@ -208,14 +208,27 @@ def umbrella_value(name: str, value):
     if name.startswith(RIB_LIST_PREFIX) and isinstance(value, str):
         import yaml
 
+        text = value
         try:
             value = yaml.safe_load(value)
         except yaml.YAMLError:
             value = None
+        if isinstance(value, list):     # (YAML 1.1 reads 1e-4 as text: a number all the same)
+            value = [_number_text(v) for v in value]
         if not isinstance(value, list) or not all(
                 isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
             raise ValueError(f'--set {name}: a list of numbers, one per rib, comma-separated '
-                             f'([0.0, 0.1, 0.0]); got {value!r}')
+                             f'([0.0, 0.1, 0.0]); got {text!r}')
+    return value
+
+
+def _number_text(value):
+    """Return a list element: a str that is a number (1e-4) as that float, else itself."""
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            pass
     return value
 
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass, field
+import json
 import os
 import queue
 import signal
@@ -431,9 +432,11 @@ def _write_outputs(sweep, store, out_dir, report, log) -> None:
             # (a finished case past the model's range, yield or small deflections: said here,
             # as simulate says it on stderr, not only in the table)
             warned = sum(r['status'] == STATUS_OK and bool(r.get('warnings')) for r in rows)
+            keys = sorted({w.split(':')[0] for r in rows if r['status'] == STATUS_OK
+                           for w in _warning_list(r.get('warnings'))})
             log(f'{len(rows)} of {len(sweep.cases)} cases in {report.csv}: {ok} ok'
-                + (f' ({warned} with warnings: yield, large deflection, centrifugal '
-                   'stiffening or a coarse step; see the warnings column)' if warned else '')
+                + (f" ({warned} with warnings: {', '.join(keys)}; see the warnings column)"
+                   if warned else '')
                 + (f', {report.failed} failed (see the error column)' if report.failed
                    else ''))
         path = out_dir
@@ -533,3 +536,10 @@ def main(args, ap: argparse.ArgumentParser) -> int:
     if report.interrupted:
         return 130
     return 3 if report.failed else 0
+
+
+def _warning_list(value) -> list[str]:
+    """Return a result row's validity warnings: its list, or the JSON text the CSV holds."""
+    if isinstance(value, str):
+        return json.loads(value) if value else []
+    return list(value or [])
