@@ -461,7 +461,7 @@ def test_a_rib_list_takes_numbers_as_yaml_1_1_reads_them_as_text(capsys):
         cli.main(['simulate', '--duration', '0.002', '--set', 'ribs=3', '--set',
                   'rib.tip_mass=[1e-1, abc, 0]'])
     assert exc.value.code == 2
-    assert "--set rib.tip_mass: a list of numbers" in capsys.readouterr().err
+    assert '--set rib.tip_mass: a list of numbers' in capsys.readouterr().err
 
 
 def test_the_text_summary_gives_the_axial_load_in_per_cent_of_the_euler_load(capsys):
