@@ -231,6 +231,13 @@ def test_replay_info_names_each_segment_s_summary(bags, capsys):
     info = capsys.readouterr().out
     assert ('summary:       the figures of every physics step of segment(s) 0, 1, 2 in the '
             "'umbrella_sim.summary[.K]' metadata records") in info, info
+    # each segment's run alike, and its own lock (its events record): segment 1's alone
+    # locked (0 and 2 end before theirs)
+    for k in (0, 1, 2):
+        assert re.search(rf'^segment {k}: .*model flexible, 1 element\(s\) a segment, '
+                         r'v0 -0.2 m/s, lock auto, physics step [0-9.e-]+ s$', info, re.M), info
+    locked = re.findall(r'^locked: +at t = [0-9.]+ s \(energy lock\) \((.*)\)$', info, re.M)
+    assert locked == ['segment 1'], info
     # the build record is written at the start: its kernel is segment 0's
     assert re.search(r'^build: .*, kernel \S+ \(segment 0\)', info, re.M), info
     assert replay.main([bags['older'], '--info']) == 0

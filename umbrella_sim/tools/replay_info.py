@@ -29,8 +29,9 @@ def info_text(log: LogData) -> str:
     Return what a recording holds, as `ros2 bag info` says it, and the run it is of.
 
     The file, its span of log (sim) time and message count, each topic with its type, count
-    and offered QoS, then the run: model, mesh, ribs, physics step, the lock, the fault
-    that ended it (if one did) and where the summary figures are (their record).
+    and offered QoS, then each run (a ~/reset's segments alike): model, mesh, ribs, v0, lock
+    and grid step, its lock instant and the fault that ended it (if one did, from its events
+    record), and where the summary figures are (their records).
     """
     first, last = log.time_range
     span = 0.0 if first is None else (last - first) * 1e-9
@@ -53,35 +54,29 @@ def info_text(log: LogData) -> str:
         segments = log.segments()
     except LogError:
         segments = []
-    # (~/reset: a run a segment, each labelled; the events are the last segment's)
+    # (~/reset: a run a segment, each labelled alike, each with its own events)
     label = ('segment 0:' if len(segments) > 1 else 'run:').ljust(15)
     mesh = log.metadata.get(MESH_RECORD)
     if mesh:
         try:
-            step = f", physics step {log.parameters().get('physics_step', 0.0):g} s"
-        except LogError:
-            step = ''
-        ribs = int(mesh.get('ribs', '1'))
-        lines.append(f"{label}model {mesh.get('model')}, "
-                     f"{mesh.get('elements_per_segment')} element(s) a segment, "
-                     + (f'{ribs} ribs, ' if ribs > 1 else '')
-                     + f"lock {mesh.get('lock')}{step}")
+            start = log.parameters()
+        except LogError:            # (the mesh record alone: what it says)
+            start = {}
+        lines.append(label + _run_text({**mesh, **start}))
     for seg in segments[1:]:
-        p = seg.params
-        ribs = int(p.get('ribs', 1) or 1)
-        lines.append(f'segment {seg.index}:'.ljust(15)
-                     + f'from log time {seg.offset_ns * 1e-9:.6f} s (~/reset): model '
-                     f"{p.get('model')}, {p.get('elements_per_segment')} element(s) a "
-                     'segment, ' + (f'{ribs} ribs, ' if ribs > 1 else '')
-                     + f"v0 {p.get('v0')} m/s")
-    last = f' (segment {segments[-1].index}, the last)' if len(segments) > 1 else ''
-    events = log.metadata.get(EVENTS_RECORD, {})
-    if events.get('locked') == 'true':
-        lines.append(f"locked:        at t = {float(events['lock_time']):.9f} s "
-                     f"({events.get('lock_kind')} lock){last}")
-    if 'fault' in events:
-        lines.append(f"fault:         at t = {float(events['fault_time']):.9f} s: "
-                     f"{events['fault']}{last}")
+        lines.append(f'segment {seg.index}:'.ljust(15) + f'from log time '
+                     f'{seg.offset_ns * 1e-9:.6f} s (~/reset): ' + _run_text(seg.params))
+    for k in range(len(segments) or 1):
+        events = (log.run_record(EVENTS_RECORD, k) if len(segments) > 1
+                  else log.metadata.get(EVENTS_RECORD, {}))
+        which = ('' if len(segments) < 2 else
+                 f' (segment {k}, the last)' if k == len(segments) - 1 else f' (segment {k})')
+        if events.get('locked') == 'true':
+            lines.append(f"locked:        at t = {float(events['lock_time']):.9f} s "
+                         f"({events.get('lock_kind')} lock){which}")
+        if 'fault' in events:
+            lines.append(f"fault:         at t = {float(events['fault_time']):.9f} s: "
+                         f"{events['fault']}{which}")
     build = log.metadata.get(BUILD_RECORD)
     if build:
         # (written at the start: segment 0's kernel; a later segment's model may step on
@@ -108,3 +103,14 @@ def info_text(log: LogData) -> str:
     elif none:
         lines.append(f'summary:       {none}')
     return '\n'.join(lines)
+
+
+def _run_text(p: dict) -> str:
+    """Return a run's line: its model, mesh, ribs, v0, lock and physics (grid) step."""
+    ribs = int(p.get('ribs', 1) or 1)
+    step = p.get('physics_step')
+    return (f"model {p.get('model')}, {p.get('elements_per_segment')} element(s) a segment, "
+            + (f'{ribs} ribs, ' if ribs > 1 else '')
+            + (f"v0 {p['v0']} m/s, " if 'v0' in p else '')
+            + f"lock {p.get('lock')}"
+            + (f', physics step {float(step):g} s' if step is not None else ''))
