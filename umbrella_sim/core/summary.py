@@ -607,7 +607,7 @@ AXIAL_LOAD_LIMIT = 0.25
 #: _geometric_stiffness_warning's texts of 'axial load'
 _AXIAL_LOAD_TEXTS = (
     "axial load: the axial force in the frame's members reached {ratio} % of the link's Euler "
-    'load pi^2 E I / l3^2 in stage 2',
+    'load pi^2 E I / l3^2 in stage 2 so far',
     "to it: the stage-2 bending and stresses change (the thesis's frame at 2 elements a "
     "segment: the link's peak 8-20 % off flexible-nonlinear's from 39 % of the Euler load on; "
     'at 1 element 4-7 %)', 'compare')

@@ -486,15 +486,15 @@ class UmbrellaNode(Node):
             self._take_command()
         try:
             chunk = self.driver.advance()
+            ev = chunk.lock
+            if ev is not None:          # (before the warnings the lock's chunk brings)
+                self.get_logger().info(
+                    f'locked at t = {ev.time:.9f} s (energy {ev.energy_before:.6g} J -> '
+                    f'{ev.energy_after:.6g} J, {ev.kind} lock)')
+                self._publish_phase('locked')
         finally:
             for text in self.driver.summary.new_warnings():   # each logged once
                 self.get_logger().warning(f't = {self.sim.time:.6f} s: {text}')
-        ev = chunk.lock
-        if ev is not None:
-            self.get_logger().info(
-                f'locked at t = {ev.time:.9f} s (energy {ev.energy_before:.6g} J -> '
-                f'{ev.energy_after:.6g} J, {ev.kind} lock)')
-            self._publish_phase('locked')
         if chunk.error is not None:
             raise SimulationDiverged(chunk.error)
         return chunk.at_publication
