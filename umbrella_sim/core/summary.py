@@ -368,18 +368,19 @@ def parameter_warnings(params: dict) -> list[str]:
     I, say): the stresses take the outer fibre at b/2 all the same (params.fibre_distance);
     'thick beam', a member (l1, l2, l3) shorter than SLENDERNESS_LIMIT section depths.
     """
-    model = params.get('model')
-    if model not in ('flexible', 'flexible-nonlinear'):
-        damping = params.get('damping_ratio', 0.0)
+    beams = beams_record(params)
+    if beams is None:
+        model, damping = params.get('model'), params.get('damping_ratio', 0.0)
         return [f"damping not applicable: damping_ratio {damping:g} is the beams' structural "
                 f'damping; model {model} has no elastic field to damp and takes no effect of '
-                'it'] if damping > 0.0 else []
+                'it'] if damping > 0.0 and model in ('rigid', 'rigid-fe') else []
     out = []
-    area, inertia = params.get('area', 0.0), params.get('second_moment_of_area', 0.0)
-    height = params.get('section_height', 0.0)
+    area, inertia = beams.area, beams.second_moment_of_area
+    height = beams.section_height
     if area > 0.0 and inertia > 0.0 and height == SPECS['section_height'].default and not (
             math.isclose(area, height ** 2, rel_tol=1e-3)       # (a rounded square's too)
             and math.isclose(inertia, height ** 4 / 12.0, rel_tol=1e-3)):
+        rectangle = beams.replace(section_height=0.0).fibre_distance    # (params' rule)
         out.append(f'outer fibre: area {area:.6g} m² and second_moment_of_area {inertia:.6g} '
                    'm⁴ are given beside section_height at its default b = '
                    f"{1e3 * height:.6g} mm, and they are not that square's (A = "
@@ -387,18 +388,18 @@ def parameter_warnings(params: dict) -> list[str]:
                    f'the outer fibre at b/2 = {500 * height:.6g} mm; if that is not your '
                    "section's, give section_height twice its outer fibre distance (a round "
                    "bar: its diameter), or 0 for a rectangle's √(3I/A) = "
-                   f'{1e3 * math.sqrt(3.0 * inertia / area):.4g} mm')
-    depth = height if height > 0.0 else (
-        2.0 * math.sqrt(3.0 * inertia / area) if area > 0.0 and inertia > 0.0 else 0.0)
-    if depth > 0.0:
-        name, length = min((('l1', params['l1']), ('l2', params['l2']), ('l3', params['l3'])),
-                           key=lambda nl: nl[1])
-        if length < SLENDERNESS_LIMIT * depth:
-            out.append(f'thick beam: {name} = {length:.6g} m is {length / depth:.3g} section '
-                       f'depths ({1e3 * depth:.6g} mm; limit {SLENDERNESS_LIMIT:g}): '
-                       'Euler-Bernoulli beams leave out shear deformation and rotary inertia, '
-                       "which lower a pinned member's first bending frequency by 1.7 % at 10 "
-                       'depths, 6.3 % at 5, 27 % at 2 (Timoshenko)')
+                   f'{1e3 * rectangle:.4g} mm')
+    if height <= 0.0 and not (area > 0.0 and inertia > 0.0):
+        return out                  # (no section to judge: refused by validation)
+    depth = 2.0 * beams.fibre_distance          # (the section's depth: b, or the rectangle's)
+    name, length = min((('l1', beams.l1), ('l2', beams.l2), ('l3', beams.l3)),
+                       key=lambda nl: nl[1])
+    if length < SLENDERNESS_LIMIT * depth:
+        out.append(f'thick beam: {name} = {length:.6g} m is {length / depth:.3g} section '
+                   f'depths ({1e3 * depth:.6g} mm; limit {SLENDERNESS_LIMIT:g}): '
+                   'Euler-Bernoulli beams leave out shear deformation and rotary inertia, '
+                   "which lower a pinned member's first bending frequency by 1.7 % at 10 "
+                   'depths, 6.3 % at 5, 27 % at 2 (Timoshenko)')
     return out
 
 
