@@ -105,7 +105,7 @@ class UmbrellaSimulator:
         self._lock_loss = 0.0
         self.lock_event: LockEvent | None = None
         self._locked_at = None
-        self._substep_peaks = None
+        self._substep_figures = None     # (stage 2's substeps: peaks, axial stress)
         self.steps = 0
 
     # -- inputs
@@ -150,7 +150,7 @@ class UmbrellaSimulator:
         t_next = (self._k + 1) * self.h
         out: list[Sample] = []
         stage = self._stage
-        s1, self._substep_peaks = self._physics_steps(s0, t_next - s0.t, force, stage)
+        s1, self._substep_figures = self._physics_steps(s0, t_next - s0.t, force, stage)
         work = force * (eng.sleeve_height(s0) - eng.sleeve_height(s1))
         lock_loss = 0.0
         lock_event = None
@@ -265,7 +265,7 @@ class UmbrellaSimulator:
                 error = str(exc)
                 break
             m, sample = self.model, self.sample()
-            peaks, axial = self._substep_peaks or (None, None)
+            peaks, axial = self._substep_figures or (None, None)
             row = step_row(sample, peaks or step_peaks(
                 start, self._fibre_stress(), self.time - t_start,
                 (m.leaf.stress_x, m.link.stress_x)), axial)
