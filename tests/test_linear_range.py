@@ -421,3 +421,18 @@ def test_a_recording_without_its_summary_judges_stage2_at_the_step_it_took(tmp_p
         assert keys == [w.split(':')[0] for w in figures['warnings'] if
                         not w.startswith('axial load')]
         assert ('coarse step' in keys) == coarse
+
+
+def test_a_recording_without_its_summary_says_what_it_cannot_judge(tmp_path):
+    """'axial load' (model flexible's, in stage 2) needs the summary record; others do not."""
+    from umbrella_sim.ros.recording import record_offline
+    from umbrella_sim.tools import compare
+    from umbrella_sim.tools.runs import NOT_JUDGED_FROM_SAMPLES
+
+    for model, said in (('flexible', [NOT_JUDGED_FROM_SAMPLES]), ('rigid', [])):
+        bag = tmp_path / model
+        record_offline(UmbrellaParams(model=model), str(bag), 0.3)
+        run = compare.load_run(str(bag))
+        assert run.not_judged() == []                 # (its record judged everything)
+        run.warnings = None                           # (as a log whose writer was killed)
+        assert run.not_judged() == said, model

@@ -40,6 +40,7 @@ from umbrella_sim.ros.recording import RunRecording
 from umbrella_sim.ros.ribs_messages import node_topics
 from umbrella_sim.tools import compare, replay
 from umbrella_sim.tools.replay import DEFAULT_TOLERANCE, resimulate
+from umbrella_sim.tools.runs import NOT_JUDGED_FROM_SAMPLES
 
 #: the user's session: a short run at the default 100 Hz, publish_rate set to 37 Hz and
 #: ~/reset, a run past its lock and stage-2 window (the thesis's data: lock at ~0.226 s, the
@@ -189,7 +190,7 @@ def test_an_older_recording_s_earlier_segment_falls_back_with_its_caveat(
                        if line.strip().startswith('thesis:'))
     assert text.splitlines()[thesis_line + 1].strip().startswith('caveat: not comparable')
     # what the samples cannot judge is said, not left as if judged quiet
-    assert run['not_judged'] == [compare.NOT_JUDGED_FROM_SAMPLES]
+    assert run['not_judged'] == [NOT_JUDGED_FROM_SAMPLES]
     assert "not judged: 'axial load'" in text
     # a deployment time alone (Table 6.1's V0) is the exact lock's: no caveat
     r = compare.load_run(bags['older'], segment=1)

@@ -103,10 +103,6 @@ SIGNALS = [('alpha1', 'rad', lambda r: (r.t, r.alpha1), False),
            ('tip_deflection', 'm', lambda r: (r.tip_t, r.tip_v), False),
            ('peak_stress_leaf', 'Pa', lambda r: (r.stress_t, r.peak_leaf), True),
            ('peak_stress_link', 'Pa', lambda r: (r.stress_t, r.peak_link), True)]
-#: what the validity rule cannot judge on recorded samples (runs.Run.validity)
-NOT_JUDGED_FROM_SAMPLES = ("'axial load' (its figure, the members' axial stress at every step, "
-                           'is in the summary record, not in a topic): --physics-rate re-runs '
-                           'the segment for it')
 #: the thesis's figures that are deployment times (of the lock, not of the samples)
 THESIS_DEPLOY_TIMES = {'deploy_time', 'deploy_time_deformable_fea', 'deploy_time_rigid_fea'}
 #: the text's unit of each SI unit of compare.json (one system: s, mm, MPa, rad)
@@ -140,8 +136,8 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
             entry['differences'][name] = {'max': mx, 'rms': rms, 'unit': unit}
         entry['figures'] = r.figures()
         entry['warnings'] = r.validity()
-        if r.summary is None and r.lock_time is not None:     # (the samples' rule)
-            entry['not_judged'] = [NOT_JUDGED_FROM_SAMPLES]
+        if r.not_judged():
+            entry['not_judged'] = r.not_judged()
         if thesis:
             entry['thesis'] = thesis_figures(r.params)
             # figures of the samples (figures_from says why) beside the thesis's: a

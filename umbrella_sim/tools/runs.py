@@ -53,6 +53,10 @@ FIGURE_KEYS = ('deploy_time', 'deploy_start', 'lock_time', 'tip_deflection_max',
 
 
 RIGID_MODELS = ('rigid', 'rigid-fe')
+#: what the validity rule cannot judge on recorded samples (Run.not_judged)
+NOT_JUDGED_FROM_SAMPLES = ("'axial load' (its figure, the members' axial stress at every step, "
+                           'is in the summary record, not in a topic): --physics-rate re-runs '
+                           'the segment for it')
 
 
 #: the shapes plot draws the largest elastic displacement of a stage at most this fraction
@@ -230,6 +234,18 @@ class Run:
                                'depend on the recording rate (--physics-rate re-runs the '
                                'segment for the figures of every physics step)')
         return out
+
+    def not_judged(self) -> list[str]:
+        """
+        Return what validity() cannot judge: on the samples, 'axial load' of a locked run.
+
+        Its figure (the members' axial stress at every step, model flexible) is the summary
+        record's, in no topic.
+        """
+        if (self.warnings is None and self.lock_time is not None
+                and self.params.get('model') == 'flexible'):
+            return [NOT_JUDGED_FROM_SAMPLES]
+        return []
 
     def validity(self) -> list:
         """Return the recorded validity warnings, or the same rule applied to the samples."""
