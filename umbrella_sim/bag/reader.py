@@ -259,10 +259,10 @@ class LogData:
         None where the log has none (killed or ended early before it, or an earlier
         segment of an older recording); LogError if it is not JSON.
         """
-        last = index == len(self.segments()) - 1
         try:
             return summary_of(self.run_record(SUMMARY_RECORD, index))
         except ValueError:
+            last = index == len(self.segments()) - 1
             name = segment_record(SUMMARY_RECORD, None if last else index)
             raise LogError(f'{self.path}: metadata {name} is not valid JSON') from None
 
