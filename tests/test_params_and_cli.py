@@ -170,6 +170,31 @@ def test_cli_takes_negative_numbers_in_exponent_form():
     assert summaries[0] == summaries[1] == summaries[2]
 
 
+@pytest.mark.parametrize('argv, message', [
+    (['--v0', '-0.3'], 'the command comes first: umbrella_sim simulate --v0 -0.3 '
+                       '(--v0 is an option of simulate)'),
+    (['--duration=0.5'], 'the command comes first: umbrella_sim simulate --duration=0.5'),
+    (['simulat', '--v0', '-0.3'], "'simulat' is not a command (commands: simulate, sweep): "
+                                  "did you mean 'simulate'?"),
+    (['-0.3'], "'-0.3' is not a command (commands: simulate, sweep)"),
+    (['--bogus', '1'], '--bogus: not an option of umbrella_sim; the command comes first'),
+])
+def test_cli_names_a_missing_or_misspelt_command(argv, message, capsys):
+    """An option before its command is named as that, not as an invalid command '-0.3'."""
+    from umbrella_sim.tools.cli import make_parser
+    with pytest.raises(SystemExit) as exc:
+        make_parser().parse_args(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and 'invalid choice' not in err, err
+
+
+def test_cli_command_first_still_parses():
+    from umbrella_sim.tools.cli import make_parser
+    args = make_parser().parse_args(['simulate', '--v0', '-0.3'])
+    assert (args.command, args.v0) == ('simulate', -0.3)
+
+
 def test_cli_models_and_csv(tmp_path):
     out = tmp_path / 'run.csv'
     r = cli('simulate', '--model', 'rigid', '--v0', '-2', '--duration', '0.03',

@@ -19,11 +19,18 @@ argparse takes an argument that starts with ``-`` for an option unless it looks 
 negative number, and its test for one knows no exponent: ``--v0 -5e-1`` failed with
 "expected one argument".  This parser takes every float literal Python reads (``-5e-1``,
 ``-1E+3``, ``-.5``, ``-inf`` stays an option: no tool takes it) as a value.
+
+A tool of commands (``umbrella_sim simulate``, ``umbrella_sim sweep``) wants its command
+first; argparse, given ``umbrella_sim --v0 -0.3``, named ``-0.3`` an invalid command.  This
+parser names what is wrong: the option before its command (and the command that takes it), or
+a command misspelt (with the one meant).
 """
 from __future__ import annotations
 
 import argparse
+import difflib
 import re
+import sys
 
 #: a negative decimal number, with an optional exponent
 NEGATIVE_NUMBER = re.compile(r'^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$')
@@ -35,3 +42,36 @@ class ArgumentParser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = NEGATIVE_NUMBER
+
+    def parse_known_args(self, args=None, namespace=None):
+        args = sys.argv[1:] if args is None else list(args)
+        commands = self._commands()
+        if commands and args and args[0] not in commands:
+            self._command_expected(args, commands)
+        return super().parse_known_args(args, namespace)
+
+    def _commands(self) -> dict:
+        """Return this parser's commands (name -> its parser), {} for a tool of none."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                return dict(action.choices)
+        return {}
+
+    def _command_expected(self, args: list, commands: dict) -> None:
+        """Refuse a first argument that is neither a command nor this parser's option."""
+        first = args[0]
+        names = ', '.join(commands)
+        if not first.startswith('-') or NEGATIVE_NUMBER.match(first):
+            meant = difflib.get_close_matches(first, list(commands), n=1)
+            hint = f": did you mean '{meant[0]}'?" if meant else ''
+            self.error(f"'{first}' is not a command (commands: {names}){hint}")
+        option = first.split('=', 1)[0]
+        if option in self._option_string_actions:
+            return
+        takers = [name for name, parser in commands.items()
+                  if option in parser._option_string_actions]
+        if takers:
+            self.error(f'the command comes first: {self.prog} {takers[0]} {" ".join(args)} '
+                       f'({option} is an option of {" and ".join(takers)})')
+        self.error(f'{option}: not an option of {self.prog}; the command comes first '
+                   f'(commands: {names}; {self.prog} COMMAND --help lists its options)')
