@@ -495,3 +495,14 @@ def test_the_text_summary_gives_the_axial_load_in_per_cent_of_the_euler_load(cap
     assert cli.main(['simulate', '--duration', '0.3']) == 0
     lines = dict(line.split(None, 1) for line in capsys.readouterr().out.splitlines())
     assert lines['axial_load_ratio_max'].endswith("% of the link's Euler load")
+
+
+def test_text_summary_gives_stage2_resolution_in_ms_and_percent():
+    """The stage-2 step figures read as steps and shares, not as a Python dict."""
+    from umbrella_sim.tools.cli import format_summary
+    text = format_summary({'stage2_resolution': {
+        'step': 1e-4, 'leaf': 0.0033, 'link': 0.004, 'resolving_step': 1e-4,
+        'coupled_step': None, 'deflection': 0.063, 'needed_step': 5e-5}})
+    assert text == ('stage2_resolution            step 0.1 ms (needed 0.05 ms: resolving '
+                    '0.1 ms, coupled -); stress crest unresolved: leaf 0.33 %, link 0.4 %; '
+                    "the lock's tip crest 6.3 % of l1+l2")

@@ -183,6 +183,9 @@ def format_summary(summary: dict) -> str:
         if key == 'peak_stress' and isinstance(value, dict):    # the umbrella's, per rib
             lines += _rib_peaks(value, unit, scale, spec)
             continue
+        if key == 'stage2_resolution' and isinstance(value, dict):
+            lines.append(f'{key:28s} {_resolution_text(value)}')
+            continue
         if key in VECTORS and isinstance(value, list):
             text = ', '.join(f'{c} {v:.4g} {u}' for (c, u), v in zip(VECTORS[key], value))
             lines.append(f'{key:28s} {text}')
@@ -203,6 +206,23 @@ def format_summary(summary: dict) -> str:
             text = f'{format(value * scale, spec)} {unit}'.rstrip()
         lines.append(f'{key:28s} {text}')
     return '\n'.join(lines)
+
+
+def _resolution_text(resolution: dict) -> str:
+    """Return step_rule.stage2_resolution as text: the steps in ms, the shares in per cent."""
+    def ms(key):
+        h = resolution.get(key)
+        return '-' if h is None else f'{h * 1e3:.4g} ms'
+
+    def percent(key):
+        share = resolution.get(key)
+        return '-' if share is None else f'{share * 100:.2g} %'
+    text = (f"step {ms('step')} (needed {ms('needed_step')}: resolving {ms('resolving_step')}, "
+            f"coupled {ms('coupled_step')}); stress crest unresolved: leaf {percent('leaf')}, "
+            f"link {percent('link')}")
+    if resolution.get('deflection') is not None:
+        text += f"; the lock's tip crest {percent('deflection')} of l1+l2"
+    return text
 
 
 def _rib_peaks(peaks: dict, unit: str, scale: float, spec: str) -> list[str]:
