@@ -72,6 +72,13 @@ def test_main_command_records_and_forwards_signals(tmp_path, sig):
     assert re.fullmatch(r'umbrella_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d(_\d+)?', run.name), run.name
     log = read_log(str(run))
     assert not log.truncated
+    # the closing line says how to read the run's figures, and that command works
+    hint = re.search(r'its figures: umbrella_compare (\S+) --out (\S+)\)', text)
+    assert hint and os.path.samefile(hint.group(1), run), text
+    compare = subprocess.run([os.path.join(sys.prefix, 'bin', 'umbrella_compare'),
+                              hint.group(1), '--out', hint.group(2), '--no-plots'],
+                             capture_output=True, text=True, timeout=120)
+    assert compare.returncode == 0 and 'deploy' in compare.stdout, compare.stderr
     # every joint_states publication of the run is in the file: the default 100 Hz over the
     # simulated time recorded (the node may run behind real time on a busy machine)
     stamps = [t for t, _ in log.decoded('/joint_states')]

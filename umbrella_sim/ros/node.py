@@ -36,6 +36,8 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import os
+import shlex
 import sys
 import threading
 import time
@@ -286,8 +288,11 @@ class UmbrellaNode(Node):
             if held:
                 self._sim_lock.release()
         if not had_error and rec.error is None:
+            bag = os.path.dirname(rec.path)
             self._log('info', f'recording finalised: {rec.path} '
-                              f'({sum(rec.recorder.counts.values())} messages)')
+                              f'({sum(rec.recorder.counts.values())} messages; its figures: '
+                              f'umbrella_compare {shlex.quote(bag)} '
+                              f'--out {shlex.quote(bag + "_compare")})')
 
     def _recording_on(self) -> RunRecording | None:
         """Return the recording if it is being written (not off, not stopped by an error)."""
