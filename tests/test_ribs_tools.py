@@ -279,3 +279,21 @@ def test_replay_info_says_what_a_recording_holds(tmp_path, capsys):
             replay.main([str(bag), '--info', *extra])
         assert exc.value.code == 2
     assert '--info' in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('ribs', [1, 2])
+def test_compare_tables_keep_their_columns_for_long_run_names(ribs, tmp_path, capsys):
+    """The default run names (umbrella_YYYY_MM_DD-HH_MM_SS, 28 characters) pushed rows out."""
+    bag = tmp_path / 'run'
+    assert cli.main(['simulate', '--set', f'ribs={ribs}', '--duration', '0.02',
+                     '--mcap', str(bag)]) == 0
+    long_name = 'umbrella_2026_11_28-15_02_18_1'
+    assert compare.main([str(bag), str(bag), '--names', 'a', long_name, '--no-plots',
+                         '--out', str(tmp_path / 'cmp')]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    header = next(i for i, t in enumerate(lines) if t.startswith('run '))
+    table = lines[header:header + 3]
+    assert table[2].startswith(long_name + ' ') and table[1].startswith('a '), table
+    assert len({len(t) for t in table}) == 1, table      # every row as wide as the header
+    first_column = {t.index(' ', len(long_name)) for t in table}
+    assert len(first_column) == 1, table

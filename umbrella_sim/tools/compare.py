@@ -42,8 +42,8 @@ import numpy as np
 
 from .arguments import ArgumentParser
 from .compare_plots import plot
-from .runs import (default_label, default_window, load_run, physics_figures, physics_run,
-                   Run, thesis_figures, THESIS_TABLE_6_1, THESIS_V02)
+from .runs import (default_label, default_window, label_width, load_run, physics_figures,
+                   physics_run, Run, thesis_figures, THESIS_TABLE_6_1, THESIS_V02)
 from ..bag.reader import LogError, read_log
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader, raise_if_stopped
 
@@ -153,20 +153,21 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
 
 
 def print_table(result: dict, stream=None) -> None:
-    w = (stream or sys.stdout).write       # (standard output when called, not when imported)
+    w = (stream or sys.stdout).write
+    L = label_width(result['runs'])       # (standard output when called, not when imported)
     w(f"reference run: {result['reference']}\n")
-    w(f"{'run':<18} {'model':<9} {'N':>2} {'V0':>6} {'deploy (s)':>11} {'d deploy (s)':>13} "
+    w(f"{'run':<{L}} {'model':<9} {'N':>2} {'V0':>6} {'deploy (s)':>11} {'d deploy (s)':>13} "
       f"{'energy drift':>12}\n")
     for e in result['runs']:
         dt = e['deploy_time']
         dd = e['deploy_time_difference']
-        w(f"{e['label']:<18} {str(e['model']):<9} {str(e['elements_per_segment']):>2} "
+        w(f"{e['label']:<{L}} {str(e['model']):<9} {str(e['elements_per_segment']):>2} "
           f"{e['v0']:>6g} {('%.7f' % dt) if dt is not None else '-':>11} "
           f"{('%+.3e' % dd) if dd is not None else '-':>13} "
           f"{('%.2e' % e['energy_drift']) if e['energy_drift'] is not None else '-':>12}\n")
     w('\neach run against the reference run over the window, the largest and the rms '
       'difference (zero for the reference itself):\n')
-    w(f"{'run':<18} " + ' '.join(f"{n + ' max/rms':>27}" for n, *_ in SIGNALS) + '\n')
+    w(f"{'run':<{L}} " + ' '.join(f"{n + ' max/rms':>27}" for n, *_ in SIGNALS) + '\n')
     for e in result['runs']:
         cells = []
         for n, unit, *_ in SIGNALS:
@@ -174,7 +175,7 @@ def print_table(result: dict, stream=None) -> None:
             unit, scale = TEXT_UNITS[unit]
             cells.append(f"{d['max'] * scale:>11.3e}/{d['rms'] * scale:.3e} {unit:<5}"[:27]
                          .rjust(27))
-        w(f"{e['label']:<18} " + ' '.join(cells) + '\n')
+        w(f"{e['label']:<{L}} " + ' '.join(cells) + '\n')
     w('\nfigures (stage-1 max tip deflection and time, stage-2 amplitude and period):\n')
     for e in result['runs']:
         f = e['figures']
@@ -182,34 +183,34 @@ def print_table(result: dict, stream=None) -> None:
         def fmt(key, scale=1.0, spec='.4g', figures=f):
             v = figures.get(key)
             return '-' if v is None else format(v * scale, spec)
-        line = (f"{e['label']:<18} deploy {fmt('deploy_time', 1, '.5f')} s, tip max "
+        line = (f"{e['label']:<{L}} deploy {fmt('deploy_time', 1, '.5f')} s, tip max "
                 f"{fmt('tip_deflection_max', 1e3)} mm at "
                 f"{fmt('tip_deflection_max_time', 1, '.3f')} s, "
                 f"stage 2 {fmt('stage2_tip_amplitude', 1e3)} mm / "
                 f"{fmt('stage2_tip_period', 1, '.4f')} s")
         w(line + '\n')
-        w(f"{'':<18} peak |sigma| leaf {fmt('peak_stress_leaf', 1e-6)} MPa at "
+        w(f"{'':<{L}} peak |sigma| leaf {fmt('peak_stress_leaf', 1e-6)} MPa at "
           f"{fmt('peak_stress_leaf_time', 1, '.3f')} s, link {fmt('peak_stress_link', 1e-6)} "
           f"MPa at {fmt('peak_stress_link_time', 1, '.3f')} s; from {f.get('figures_from')}\n")
         for text in e.get('warnings', []):
-            w(f"{'':<18} warning: {text}\n")
+            w(f"{'':<{L}} warning: {text}\n")
         for text in e.get('not_judged', []):
-            w(f"{'':<18} not judged: {text}\n")
+            w(f"{'':<{L}} not judged: {text}\n")
         th = e.get('thesis') or {}
         if 'deploy_time_deformable_fea' in th:
-            w(f"{'':<18} thesis: deploy {th['deploy_time_deformable_fea']:.5f} s (deformable "
+            w(f"{'':<{L}} thesis: deploy {th['deploy_time_deformable_fea']:.5f} s (deformable "
               f"FEA), {th['deploy_time_rigid_fea']:.5f} s (rigid FEA) (Table 6.1)\n")
         elif list(th) == ['deploy_time']:
-            w(f"{'':<18} thesis: deploy {th['deploy_time']:.4f} s (ch. 6, its flexible "
+            w(f"{'':<{L}} thesis: deploy {th['deploy_time']:.4f} s (ch. 6, its flexible "
               'model)\n')
         elif th:
-            w(f"{'':<18} thesis: deploy {fmt('deploy_time', 1, '.4f', th)} s, tip max "
+            w(f"{'':<{L}} thesis: deploy {fmt('deploy_time', 1, '.4f', th)} s, tip max "
               f"{fmt('tip_deflection_max', 1e3, '.3f', th)} mm at "
               f"{fmt('tip_deflection_max_time', 1, '.3f', th)} s, stage 2 "
               f"~{fmt('stage2_tip_amplitude', 1e3, '.0f', th)} mm / "
               f"~{fmt('stage2_tip_period', 1, '.2f', th)} s (ch. 6, read off its plots)\n")
         if 'thesis_note' in e:
-            w(f"{'':<18} caveat: {e['thesis_note']}\n")
+            w(f"{'':<{L}} caveat: {e['thesis_note']}\n")
 
 
 @interruptible('umbrella_compare', '--out may hold part of the outputs')

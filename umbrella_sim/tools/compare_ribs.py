@@ -34,7 +34,7 @@ import sys
 
 import numpy as np
 
-from .runs import recorded_lock
+from .runs import label_width, recorded_lock
 from ..bag.reader import LogError, read_log
 from ..core.umbrella3d.outputs3d import STRESS_NAMES
 from ..core.umbrella3d.sampled3d import sampled_figures
@@ -164,16 +164,17 @@ def _alpha_differences(ref: RibsRun, r: RibsRun) -> list[float] | None:
 
 def print_ribs_table(result: dict, stream=None) -> None:
     w = (stream or sys.stdout).write
+    L = label_width(result['runs'])
     w(f"reference run: {result['reference']} (the umbrella of N ribs)\n")
     w('lag: how long after the earliest rib the latest one deployed; latest: that rib; max w '
       'tip: the largest out-of-plane tip of any rib; the differences: of each run against the '
       'reference run (zero for the reference itself)\n')
-    w(f"{'run':<18} {'ribs':>4} {'lock (s)':>11} {'lag (s)':>10} {'latest':>6} "
+    w(f"{'run':<{L}} {'ribs':>4} {'lock (s)':>11} {'lag (s)':>10} {'latest':>6} "
       f"{'max w tip (mm)':>14} {'energy drift':>12}\n")
     for e in result['runs']:
         def num(v, spec):
             return '-' if v is None else format(v, spec)
-        w(f"{e['label']:<18} {e['ribs']:>4} {num(e['lock_time'], '.7f'):>11} "
+        w(f"{e['label']:<{L}} {e['ribs']:>4} {num(e['lock_time'], '.7f'):>11} "
           f"{num(e['deployment_lag'], '.3e'):>10} {num(e['latest_rib'], 'd'):>6} "
           f"{num(e['max_out_of_plane_tip'] and e['max_out_of_plane_tip'] * 1e3, '.4g'):>14} "
           f"{num(e['energy_drift'], '.2e'):>12}\n")
@@ -192,7 +193,7 @@ def print_ribs_table(result: dict, stream=None) -> None:
             vm = (e['peak_von_mises'] or [None] * e['ribs'])[k]
             fw = (e['friction_work'] or [None] * e['ribs'])[k]
             t = deploy[k] if k < len(deploy) else None
-            w(f"{e['label']:<18} rib{k:<3} {'-' if t is None else format(t, '.7f'):>11} "
+            w(f"{e['label']:<{L}} rib{k:<3} {'-' if t is None else format(t, '.7f'):>11} "
               f"{'-' if d is None else format(d, '+.3e'):>11} "
               f"{'-' if a is None else format(a, '.3e'):>10} "
               f"{'-' if vm is None else format(vm * 1e-6, '.4g'):>9} "

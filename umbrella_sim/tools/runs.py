@@ -353,6 +353,11 @@ def default_label(path: str) -> str:
     return name[:-len('.mcap')] if name.endswith('.mcap') and len(name) > 5 else name
 
 
+def label_width(entries: list) -> int:
+    """Return the width of a text table's run column: its longest label, at least 18."""
+    return max([18] + [len(e['label']) for e in entries])
+
+
 #: the stress figures of a Run, in the order of its fields
 STRESS_FIGURES = ('peak_stress_leaf', 'peak_stress_link', 'stress_leaf_joint', 'stress_link_mid')
 
