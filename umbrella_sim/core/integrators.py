@@ -415,6 +415,18 @@ def newton_converged(step_norm: float, rate: float, tolerance: float,
     return bool(constraint_residual() < PHI_TOLERANCE)
 
 
+def joint_correction(lu, piv, n: int, phi: np.ndarray, start, h: float):
+    """
+    Return newton_converged's correction of the joints alone: (the q update, the rows' rest).
+
+    The factored iteration matrix (lu, piv) solved for the joint rows' -phi with the momentum
+    rows' (the first n) right-hand side 0; start.newton_update maps the q rows as an update.
+    """
+    from scipy.linalg.lapack import dgetrs     # (as MidpointDAE._step)
+    dx = dgetrs(lu, piv, np.concatenate([np.zeros(n), -phi]))[0]
+    return start.newton_update(dx[:n], h), dx[n:]
+
+
 def update_converged(step_norm: float, rate: float, tolerance: float) -> bool:
     """
     Return whether a Newton iterate has converged in q (newton_converged's first half).
@@ -584,12 +596,9 @@ class MidpointDAE:
 
             def correct_joints():
                 nonlocal q, lam
-                rhs[:n] = 0.0
-                rhs[n:] = -m.constraint_residual(q, cs)
-                dx = dgetrs(lu, piv, rhs)[0]
-                dx[:n] = start.newton_update(dx[:n], h)
-                q = q + dx[:n]
-                lam = lam + dx[n:] / half_h2
+                dq, dlam = joint_correction(lu, piv, n, m.constraint_residual(q, cs), start, h)
+                q = q + dq
+                lam = lam + dlam / half_h2
             if newton_converged(step_norm, rate, self.tolerance,
                                 lambda: np.max(np.abs(m.constraint_residual(q, cs))),
                                 correct_joints):

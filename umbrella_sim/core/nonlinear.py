@@ -102,8 +102,8 @@ import numpy as np
 
 from .beam_strain import CorotationalStrainEnergy, LinearStrainEnergy
 from .engines import FiniteElementEngine
-from .integrators import (iteration_blocks, midpoint_iterate, MidpointDAE, newton_converged,
-                          NEWTON_TOLERANCE, project_keeping_energy)
+from .integrators import (iteration_blocks, joint_correction, midpoint_iterate, MidpointDAE,
+                          newton_converged, NEWTON_TOLERANCE, project_keeping_energy)
 from .kernel import ConvergenceError, DynamicState, ElasticData
 from .model import band_form, ConstraintSet, UmbrellaModel
 from .params import UmbrellaParams
@@ -473,11 +473,9 @@ class ElasticMidpointDAE(MidpointDAE):
 
             def correct_joints():
                 nonlocal q, lam
-                dx = dgetrs(lu, piv, np.concatenate([np.zeros(n),
-                                                     -m.constraint_residual(q, cs)]))[0]
-                dx[:n] = start.newton_update(dx[:n], h)
-                q = q + dx[:n]
-                lam = lam + dx[n:] / lam_scale
+                dq, dlam = joint_correction(lu, piv, n, m.constraint_residual(q, cs), start, h)
+                q = q + dq
+                lam = lam + dlam / lam_scale
             if newton_converged(step_norm, rate, self.tolerance,
                                 lambda: np.max(np.abs(m.constraint_residual(q, cs))),
                                 correct_joints):
