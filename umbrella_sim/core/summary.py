@@ -411,7 +411,8 @@ SECTION_SLOPE_LIMIT = math.sin(math.radians(80.0))
 
 
 def geometric_validity_warnings(params: dict, peak_stress: float,
-                                section_slope: float | None = None) -> list[str]:
+                                section_slope: float | None = None,
+                                strain: tuple | None = None) -> list[str]:
     """
     Return where a run of the geometrically exact model left that model's validity.
 
@@ -420,14 +421,15 @@ def geometric_validity_warnings(params: dict, peak_stress: float,
     membrane strain |eps| too) passes STRAIN_LIMIT (above yield too, where validity_warnings'
     own large-strain warning gives way to the yield warning); 'fibre rotation' when a section
     turned past SECTION_SLOPE_LIMIT from its body frame (section_slope: the largest |v'| over
-    every step, from the engine; None when not known, e.g. a recording's figures).  Other
-    models: none.
+    every step, from the engine; None when not known, e.g. a recording's figures).  strain:
+    (|sigma| / E, |sigma|) of the fibre strained most where E is not params' alone (the
+    umbrella's ribs, each of its own E: validity_warnings).  Other models: none.
     """
     if params.get('model') != 'flexible-nonlinear':
         return []
     out = []
-    strain = peak_stress / params['youngs_modulus']
-    if strain > STRAIN_LIMIT and peak_stress > params['yield_strength']:
+    strain, strained = strain or (peak_stress / params['youngs_modulus'], peak_stress)
+    if strain > STRAIN_LIMIT and strained > params['yield_strength']:
         out.append(f'large strain: peak |sigma| / youngs_modulus = {100 * strain:.3g} % '
                    f'(limit {100 * STRAIN_LIMIT:g} %): the co-rotational beam of '
                    'flexible-nonlinear is exact for large rotations but small strains only')
@@ -632,7 +634,9 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                       centrifugal_tension: float | None = None,
                       link_axial_load: float | None = None,
                       ribs: dict | None = None,
-                      out_of_plane_tip: float | None = None) -> list[str]:
+                      out_of_plane_tip: float | None = None,
+                      strain: tuple | None = None,
+                      leaf_lengths: tuple | None = None) -> list[str]:
     """
     Return where a run left the model's validity: one rule, used everywhere.
 
@@ -650,13 +654,17 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     the umbrella's, the rib a figure is of, by the warning's key ('yield exceeded': k, ...):
     'rib k, ' after the key, so that an engineer knows which rib to look at.
     out_of_plane_tip: the umbrella's largest |w_G| (its ribs bend out of their planes too):
-    'large out-of-plane deflection' past the same limit as the in-plane tip's.
+    'large out-of-plane deflection' past the same limit as the in-plane tip's.  The
+    umbrella's ribs may each have their own E and lengths: strain, (|sigma| / E, |sigma|) of
+    the rib strained most, each rib's peak over its own E (default: peak_stress over params'
+    E); leaf_lengths, the l1 + l2 of the ribs whose tip_deflection and out_of_plane_tip these
+    are (each rib's deflection over its own leaf; default: params').
     """
     out = []
     lw = lock_warning(params, lock_kind)
     if lw:
         out.append(lw)
-    length = params['l1'] + params['l2']
+    length, oop_length = leaf_lengths or (params['l1'] + params['l2'],) * 2
     cw = (coarse_step_warning(stage2_resolution,
                               lambda needed: resolving_step_hint(params, needed),
                               tip_deflection / length) if locked else None)
@@ -672,9 +680,9 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
         out.append(f'yield exceeded: peak |sigma| {peak_stress / 1e6:.4g} MPa is '
                    f'{peak_stress / ys:.3g} x yield_strength {ys / 1e6:.4g} MPa; the linear '
                    'elastic material law no longer holds')
-    strain = peak_stress / params['youngs_modulus']
-    if strain > STRAIN_LIMIT and peak_stress <= ys:      # (past yield: the warning above)
-        out.append(f'large strain: peak |sigma| / youngs_modulus = {100 * strain:.3g} % '
+    fibre, strained = strain or (peak_stress / params['youngs_modulus'], peak_stress)
+    if fibre > STRAIN_LIMIT and strained <= ys:      # (past yield: the warning above)
+        out.append(f'large strain: peak |sigma| / youngs_modulus = {100 * fibre:.3g} % '
                    f'(limit {100 * STRAIN_LIMIT:g} %): the small-strain measures and '
                    "Hooke's law of the beam elements no longer hold")
     if (tip_deflection > TIP_DEFLECTION_LIMIT * length
@@ -683,10 +691,11 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
                    f'{100 * tip_deflection / length:.3g} % of the leaf length {length:g} m '
                    f'(limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no '
                    'longer holds (compare model flexible-nonlinear)')
-    if (out_of_plane_tip is not None and out_of_plane_tip > TIP_DEFLECTION_LIMIT * length
+    if (out_of_plane_tip is not None and out_of_plane_tip > TIP_DEFLECTION_LIMIT * oop_length
             and params.get('model') != 'flexible-nonlinear'):
         out.append(f'large out-of-plane deflection: |w_G| reached {out_of_plane_tip * 1e3:.4g} '
-                   f'mm = {100 * out_of_plane_tip / length:.3g} % of the leaf length {length:g} '
+                   f'mm = {100 * out_of_plane_tip / oop_length:.3g} % of the leaf length '
+                   f'{oop_length:g} '
                    f'm (limit {100 * TIP_DEFLECTION_LIMIT:g} %): small-deformation theory no '
                    'longer holds (compare model flexible-nonlinear)')
     tw = centrifugal_tension_warning(params, centrifugal_tension)
@@ -695,7 +704,7 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     aw = axial_load_warning(params, link_axial_load)
     if aw:
         out.append(aw)
-    out += geometric_validity_warnings(params, peak_stress, section_slope)
+    out += geometric_validity_warnings(params, peak_stress, section_slope, strain)
     out += parameter_warnings(params)
     if ribs:
         out = [(f'{key}: rib {ribs[key]}, {text.lstrip()}' if key in ribs else f'{key}:{text}')

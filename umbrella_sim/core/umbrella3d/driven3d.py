@@ -376,6 +376,9 @@ class Summary3D:
         self._axial_per_stress = np.array([r.planar.cross_section_area
                                            / r.planar.link_euler_load for r in ribs])
         self._axial, self._axial_rib = None, 0          # (None: no stage 2 yet)
+        # each rib's own E and leaf (l1 + l2): its strain and tip judged against its own
+        self._youngs = np.array([r.planar.youngs_modulus for r in ribs])
+        self._leaf = np.array([r.planar.l1 + r.planar.l2 for r in ribs])
         if initial.stage == Stage.DEPLOYING:
             self._hold_tension(self._tension_ratio(
                 initial.alpha1_rate, initial.alpha1, getattr(initial, 'bus_q', None),
@@ -513,12 +516,18 @@ class Summary3D:
         slope, out_of_plane = self._geometry()
         von_mises = self._peaks['von_mises'][0]
         stressed = int(np.argmax(von_mises))
-        ribs = {'yield exceeded': stressed, 'large strain': stressed,
-                'large deflection': int(np.argmax(self._in_plane)),
+        strained = int(np.argmax(von_mises / self._youngs))
+        bent = int(np.argmax(self._in_plane / self._leaf))
+        ribs = {'yield exceeded': stressed, 'large strain': strained,
+                'large deflection': bent,
                 'large out-of-plane deflection': self._oop[1],
                 'centrifugal stiffening': self._tension_rib, 'axial load': self._axial_rib}
         return validity_warnings(self._planar, self.lock_kind, float(von_mises.max()),
-                                 float(self._in_plane.max()), locked=locked,
+                                 float(self._in_plane[bent]), locked=locked,
+                                 strain=(float(von_mises[strained] / self._youngs[strained]),
+                                         float(von_mises[strained])),
+                                 leaf_lengths=(float(self._leaf[bent]),
+                                               float(self._leaf[self._oop[1]])),
                                  energy_drift=self.energy_drift,
                                  stage2_resolution=self._stage2_resolution() if locked else None,
                                  section_slope=slope, centrifugal_tension=self._tension,
@@ -535,8 +544,9 @@ class Summary3D:
     def new_warnings(self) -> list[str]:
         """Return the warnings not returned by an earlier call (a log line each, once)."""
         # the warnings depend on the run only through these
-        return self._said.new((largest(self._peaks.value[:, _VON_MISES]),
-                               largest(self._in_plane), self._oop[0],
+        vm = self._peaks.value[:, _VON_MISES]
+        return self._said.new((largest(vm), largest(vm / self._youngs),
+                               largest(self._in_plane / self._leaf), self._oop[0],
                                self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
                                self._tension > CENTRIFUGAL_TENSION_LIMIT,
                                (self._axial or 0.0) > AXIAL_LOAD_LIMIT, *self._geometry()),
