@@ -25,11 +25,13 @@ import csv
 import errno
 import json
 import math
+import pathlib
 
 import numpy as np
 import pytest
 
-from umbrella_sim.core.umbrella3d.outputs3d import first_reach, STRESS_NAMES
+from umbrella_sim.core import UmbrellaRibsParams, UmbrellaSimulator3D
+from umbrella_sim.core.umbrella3d.outputs3d import _channels, first_reach, STRESS_NAMES
 from umbrella_sim.tools import cli, csv_output
 
 RELEASE = 0.02
@@ -254,3 +256,28 @@ def test_the_csv_is_every_step_with_or_without_a_recording(model, tmp_path, caps
     assert len(plain.read_text().splitlines()) == figures['steps'] + 3   # header, t = 0, lock
     for key in ('deploy_time', 'energy_drift', 'constraint_residual_max', 'peak_stress'):
         assert again.get(key) == figures.get(key)
+
+
+def test_a_rows_stresses_are_the_largest_over_its_step_as_the_docs_say(tmp_path):
+    # the row's stress columns hold each step's crest (rib_peak_stress's rule), not the
+    # stress at the step's end: in stage 2 at V0 = -0.5 m/s the last row's crest lies
+    # inside its step, above the end state's stresses, which bound it from below
+    duration = 0.12
+    path = tmp_path / 'r.csv'
+    assert cli.main(['simulate', '--set', 'ribs=2', '--v0', '-0.5', '--duration',
+                     str(duration), '--csv', str(path)]) == 0
+    cols, _ = read_csv(path)
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping({'ribs': 2, 'v0': -0.5}))
+    sim.run(duration)
+    assert cols['time'][-1] == pytest.approx(sim.time, abs=1e-12)
+    m, s = sim.model, sim.state
+    values, _ = _channels(np.concatenate(m.stress_blocks(s.qr[None]), -1),
+                          np.concatenate(m.stress_rate_blocks(s.qr[None], s.vr[None]), -1))
+    at_end = np.abs(values[0]).max(-1)                     # (rib, channel)
+    for j, name in enumerate(STRESS_NAMES):
+        for k in range(2):
+            assert cols[f'rib{k}_stress_{name}'][-1] >= at_end[k, j] * (1 - 1e-12)
+    assert cols['rib0_stress_von_mises'][-1] > 1.01 * at_end[0, -1]
+    doc = (pathlib.Path(__file__).parents[1] / 'msg_docs' / 'topic_ribs.md').read_text()
+    row = next(line for line in doc.splitlines() if line.startswith('| `rib<k>_stress_axial`'))
+    assert 'over the step' in row and "at the step's end |" not in row

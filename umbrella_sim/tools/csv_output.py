@@ -179,7 +179,8 @@ class StepCsv:
 #: components writes one column each, its name with the component's ('bus_x'); each rib's
 #: a column a rib, 'rib<k>_' before the name ('rib0_tip_u').  The tip is G in the rib's leaf
 #: frame (axial u, in-plane v, out-of-plane w); a stress component the rib's largest |value|
-#: over its stress points at the step's end, and von Mises's place its body (0 leaf, 1 link)
+#: over its stress points and over the step (each physics step's Hermite crest, Record3D's
+#: rule), and von Mises's place its body (0 leaf, 1 link)
 #: and x along it; stuck is 1 while the rib's hinge is held, holding_torque the multiplier
 #: of that hold (N m), stop_reaction the multiplier of the stop's constraint y_H = y_stop
 #: (N).  A moving base adds the bus (X, Y, Z, psi, beta, gamma and their rates), a free one
