@@ -15,6 +15,7 @@
 """The public test API (umbrella_sim.testing): waits, failure messages, cleanup, summaries."""
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -461,6 +462,33 @@ def test_a_force_profile_is_played_row_by_row(antenna_factory):
     (t1, f1), (t2, f2), (t3, f3) = antenna.applied_forces()[:3]
     assert (f1, f2, f3) == (5.0, 0.0, 5.0)
     assert t2 - t1 == pytest.approx(0.2, abs=0.05) and 0.0 < t3 - t2 <= 0.1
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('profile, words', [
+    ([(0.0, 1.0), (0.05, float('nan')), (0.1, 2.0)], 'row 1 (0.05, nan): sleeve force'),
+    ([(0.0, 1.0), (0.3, 0.0), (0.2, 2.0)], 'row 2 (0.2, 2.0): time 0.2 goes backwards'),
+    ([(0.0, 1.0), (0.0, 2.0)], 'row 1 (0.0, 2.0): time 0.0 given twice'),
+    ([(0.0, 1.0), (float('nan'), 2.0)], 'row 1 (nan, 2.0): time nan must be finite'),
+    ([(0.0, 1.0), (0.1, 2.0, 3.0)], 'row 1 (0.1, 2.0, 3.0): expected a pair (t, F)'),
+    ([1.0, 2.0], 'row 0 1.0: expected a pair (t, F)'),
+])
+def test_a_bad_force_profile_is_refused_before_any_command(antenna_factory, profile, words):
+    """
+    A profile is checked whole, by the offline --force-profile's rule, naming the bad row.
+
+    A bad row used to raise only when its time came, the rows before it already acting (the
+    node left pushing); rows out of order were sorted without a word (offline: refused), and
+    a NaN time waited out the whole timeout.
+    """
+    antenna = antenna_factory({'v0': 0.0})
+    with pytest.raises(ValueError, match=re.escape(words)):
+        antenna.play_force_profile(profile, timeout=5)
+    # nothing was sent: a command taken would show in the node's diagnostics
+    antenna.wait_for('diagnostics', lambda m: True, 10, 'a status')
+    assert antenna.diagnostics()['accepted_commands'] == '0'
+    assert antenna.diagnostics()['refused_commands'] == '0'
+    assert antenna.applied_forces() == []
 
 
 @pytest.mark.ros

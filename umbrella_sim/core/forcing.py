@@ -127,3 +127,26 @@ def validate_force(force: float, limit: float | None = None, minimum: float = 0.
 def command_force(force: float, params: UmbrellaParams) -> float:
     """Return a force command as a float if the model accepts it, else raise ValueError."""
     return validate_force(force, params.sleeve_force_limit, params.sleeve_force_min)
+
+
+def check_profile_row(t: float, force: float, previous: float | None,
+                      params: UmbrellaParams) -> tuple[float, float]:
+    """
+    Return a force profile's row (t, F) as floats, or raise ValueError saying what is wrong.
+
+    The rule of every (t, F) profile (a CSV's ``--force-profile``, a test's
+    ``play_force_profile``): t finite, >= 0 and after the row before (``previous``, None for
+    the first; one force per instant), F a command the model accepts (command_force).
+    """
+    try:
+        t = float(t)
+    except (TypeError, ValueError):
+        raise ValueError(f'time {t!r}: not a number') from None
+    if not math.isfinite(t) or t < 0.0:
+        raise ValueError(f'time {t} must be finite and >= 0')
+    if previous is not None and t < previous:
+        raise ValueError(f'time {t} goes backwards (the row before has {previous})')
+    if previous is not None and t == previous:     # which one acts? one force per instant
+        raise ValueError(f'time {t} given twice (the row before has it too): one force per '
+                         'instant')
+    return t, command_force(force, params)

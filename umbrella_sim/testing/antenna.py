@@ -152,11 +152,15 @@ class SimulatedAntenna:
         """
         if check:
             from ..core.forcing import command_force
-            from ..core.params import UmbrellaParams
-            from ..core.registry import SPECS
-            command_force(force, UmbrellaParams.from_mapping(
-                {k: v for k, v in self.parameters.items() if k in SPECS}))
+            command_force(force, self._model_params())
         self._command_publisher(timeout).publish(self._float64(data=float(force)))
+
+    def _model_params(self):
+        """Return the UmbrellaParams of this antenna's run (its model parameters)."""
+        from ..core.params import UmbrellaParams
+        from ..core.registry import SPECS
+        return UmbrellaParams.from_mapping(
+            {k: v for k, v in self.parameters.items() if k in SPECS})
 
     def _command_publisher(self, timeout: float):
         """Return the sleeve_force publisher, made and matched with the node's subscription."""
@@ -185,14 +189,38 @@ class SimulatedAntenna:
         Commands act from the next publication after they arrive, so each lands on the
         publication grid a little after its t; a profile exact in sim time is
         ``umbrella_sim simulate --force-profile`` (offline, the same physics).
+
+        The whole profile is checked before its first command goes, by the offline
+        profile's rule (forcing.check_profile_row: times finite, >= 0 and increasing, each
+        force one the node accepts): ValueError naming the row, and nothing is sent.
         """
-        rows = sorted(profile, key=lambda tf: tf[0])
+        rows = self._checked_profile(profile)
         self.wait_for('joint_states', lambda m: True, timeout, 'a first joint state')
         self._command_publisher(timeout)    # matched first: its ~0.4 s not inside the profile
         t0 = self.sim_time()
         for t_rel, force in rows:
             self.wait_for_sim_time(t0 + t_rel, timeout=timeout)
             self.publish_force(force)
+
+    def _checked_profile(self, profile) -> list[tuple[float, float]]:
+        """Return a (t, F) profile as floats, or ValueError naming its first bad row."""
+        from ..core.forcing import check_profile_row
+
+        rows: list[tuple[float, float]] = []
+        params = self._model_params()
+        for i, row in enumerate(profile):
+            try:
+                t, force = row
+            except (TypeError, ValueError):
+                raise ValueError(f'force profile row {i} {row!r}: expected a pair (t, F)') \
+                    from None
+            try:
+                rows.append(check_profile_row(t, force, rows[-1][0] if rows else None, params))
+            except ValueError as exc:
+                raise ValueError(f'force profile row {i} {row!r}: {exc}') from None
+        if not rows:
+            raise ValueError('force profile: no (t, F) rows')
+        return rows
 
     def set_parameters(self, timeout: float = 20.0, **values) -> None:
         """

@@ -24,12 +24,11 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 import re
 import sys
 
 from ..bag.paths import read_text_input
-from ..core.forcing import command_force
+from ..core.forcing import check_profile_row
 from ..core.params import check_values, UmbrellaParams
 from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
@@ -94,18 +93,11 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
             t, f = _number(row[0]), _number(row[1])
         except ValueError:
             raise ValueError(f'force profile {path}:{lineno}: not numbers: {row[:2]}') from None
-        if not math.isfinite(t) or t < 0.0:
-            raise ValueError(f'force profile {path}:{lineno}: time {t} must be finite and >= 0')
-        if rows and t < rows[-1][0]:
-            raise ValueError(f'force profile {path}:{lineno}: time {t} goes backwards')
-        if rows and t == rows[-1][0]:     # which one acts? one force per instant
-            raise ValueError(f'force profile {path}:{lineno}: time {t} given twice (the row '
-                             'before has it too): one force per instant')
         try:
-            command_force(f, params or UmbrellaParams())
+            rows.append(check_profile_row(t, f, rows[-1][0] if rows else None,
+                                          params or UmbrellaParams()))
         except ValueError as exc:
             raise ValueError(f'force profile {path}:{lineno}: {exc}') from None
-        rows.append((t, f))
     if not rows:
         raise ValueError(f'force profile {path}: no (t, F) rows')
     return rows
