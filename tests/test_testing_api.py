@@ -510,3 +510,22 @@ def test_a_probe_reports_a_publisher_of_incompatible_qos(probe, capfd):
                 'incompatible policy: RELIABILITY')
         poll(lambda: err.append(capfd.readouterr().err) or line in ''.join(err), 20.0,
              lambda: f'no {line!r} within 20 s; stderr:\n{"".join(err)}')
+
+
+@pytest.mark.ros
+def test_node_parameters_keep_their_python_types(antenna_factory):
+    """
+    A string stays a string, a list of numbers with a float is a double[], numpy is Python.
+
+    They went to the node as bare YAML: frame_prefix '7' came as an integer (refused: must be
+    a string), [0, 0.1] as a mixed sequence rcl refuses, a numpy array as a string.
+    """
+    import numpy
+
+    antenna = antenna_factory({'ribs': 2, 'v0': 0.0, 'frame_prefix': '7',
+                               'rib.hinge_coulomb': [0, 0.1],
+                               'rib.stick_until': numpy.array([0.0, 0.05])})
+    state = antenna.messages('joint_states')[0]
+    assert state.header.frame_id == '7umbrella_base'
+    assert state.name[:2] == ['rib0/leaf_hinge', 'rib0/link_hinge']
+

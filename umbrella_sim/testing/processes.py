@@ -23,6 +23,7 @@ rclpy node; :func:`poll` waits for a condition and fails saying what it awaited 
 """
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -297,12 +298,26 @@ class NodeProcess:
 
 
 def _ros_literal(value) -> str:
+    """
+    Return a Python value as the YAML of ``-p name:=value``, of the type Python gives it.
+
+    A string stays a string ('1', 'true', 'a: b' are not read as a number, a bool or a
+    mapping); a list of numbers with a float in it is a double[] ([0, 0.05, 0], which rcl
+    refuses as a mixed sequence); numpy scalars and arrays are their Python values.
+    """
+    if hasattr(value, 'tolist') and not isinstance(value, str):    # numpy
+        value = value.tolist()
     if isinstance(value, (list, tuple)):        # a ROS array: rib.<name> per-rib values
+        if any(isinstance(v, float) for v in value) and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+            value = [float(v) for v in value]
         return '[' + ', '.join(_ros_literal(v) for v in value) + ']'
     if isinstance(value, bool):
         return 'true' if value else 'false'
     if isinstance(value, float):
         return repr(value)
+    if isinstance(value, str):                  # a double-quoted YAML scalar: a string
+        return json.dumps(value)
     return str(value)
 
 
