@@ -529,3 +529,18 @@ def test_node_parameters_keep_their_python_types(antenna_factory):
     assert state.header.frame_id == '7umbrella_base'
     assert state.name[:2] == ['rib0/leaf_hinge', 'rib0/link_hinge']
 
+
+@pytest.mark.ros
+def test_a_run_that_faulted_before_the_probe_matched_says_so(antenna_factory):
+    """
+    A fault in the run's first ms: the antenna starts, and a wait for 'locked' fails at once.
+
+    The node publishes no state after a fault: the antenna waited its whole start-up timeout
+    for a first joint state ('node running'), and a wait for another phase its whole timeout.
+    """
+    # moving at the default V0 while rib 1 is stuck: rib 0 folds back to the axle (~0.03 s)
+    antenna = antenna_factory({'ribs': 3, 'rib.stick_until': [0.0, 0.05, 0.0]})
+    with pytest.raises(AssertionError, match="became 'fault', not 'locked'.*leaf reached "
+                                             'the axle'):
+        antenna.wait_for_phase('locked', timeout=60)
+    antenna.wait_for_phase('fault', timeout=1)      # (it has: no wait)

@@ -127,13 +127,16 @@ class SimulatedAntenna:
             # (a node started paused published its t = 0 state before this probe matched:
             # the latched phase arrives late, a joint state would not)
             first = 'deployment_phase' if self.parameters.get('start_paused') else 'joint_states'
-            poll(lambda: self.probe.messages(self.topics[first]) or not self.node.running,
+            # (a run that faulted before this probe matched publishes no more states: its
+            # latched 'fault' phase says so, and the antenna is there to look at it)
+            poll(lambda: self.probe.messages(self.topics[first]) or 'fault' in self.phases()
+                 or not self.node.running,
                  startup_timeout,
                  lambda: f'no message on {self.topics[first]} within '
                          f"{startup_timeout} s of the node's start (node "
                          f"{'running' if self.node.running else 'exited'}); node output:\n"
                          f'{self.node.output()[-2000:]}')
-            if not self.probe.messages(self.topics[first]):
+            if not self.probe.messages(self.topics[first]) and 'fault' not in self.phases():
                 raise AssertionError(f'the node exited (code {self.node.proc.returncode}) '
                                      f'before its first message on {self.topics[first]}; '
                                      f'node output:\n{self.node.output()[-2000:]}')
@@ -318,13 +321,20 @@ class SimulatedAntenna:
         return [m.data for _, m in self._timed_run('deployment_phase')]
 
     def wait_for_phase(self, phase: str, timeout: float = 20.0) -> None:
+        """Wait for this run's ``phase``; a run that faulted fails it at once, saying why."""
         if phase not in PHASES:
             raise ValueError(f"phase {phase!r}: must be one of {', '.join(PHASES)}")
-        poll(lambda: phase in self.phases(), timeout,
+        poll(lambda: phase in self.phases() or 'fault' in self.phases(), timeout,
              lambda: f'deployment_phase never became {phase!r} within {timeout} s on '
                      f"{self.topics['deployment_phase']} (saw {self.phases() or 'nothing'}; "
                      f'{self._sim_time_text()}; node '
                      f"{'running' if self.node.running else 'exited'})")
+        if phase not in self.phases():
+            why = re.findall(r'simulation fault: .*', self._run_output())
+            raise AssertionError(
+                f"deployment_phase became 'fault', not {phase!r}, on "
+                f"{self.topics['deployment_phase']} (saw {self.phases()}; "
+                f"{self._sim_time_text()}): {why[-1] if why else 'see the node log'}")
 
     def wait_for_sim_time(self, t: float, timeout: float = 20.0) -> None:
         def reached():
