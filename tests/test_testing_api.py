@@ -544,3 +544,18 @@ def test_a_run_that_faulted_before_the_probe_matched_says_so(antenna_factory):
                                              'the axle'):
         antenna.wait_for_phase('locked', timeout=60)
     antenna.wait_for_phase('fault', timeout=1)      # (it has: no wait)
+
+
+@pytest.mark.ros
+def test_set_parameters_takes_numpy_values_and_names_a_bad_one(antenna_factory):
+    """Numpy's float32 and int64 are set as the double and the integer they are."""
+    import numpy
+
+    antenna = antenna_factory({'v0': 0.0, 'start_paused': True})
+    with pytest.raises(ValueError, match=r'parameter v0=\(1\+2j\): not a ROS parameter value'):
+        antenna.set_parameters(v0=1 + 2j)            # (rclpy's TypeError named no parameter)
+    antenna.set_parameters(v0=numpy.float32(-0.5), elements_per_segment=numpy.int64(2))
+    antenna.reset()
+    assert antenna.parameters['v0'] == float(numpy.float32(-0.5))
+    assert antenna.messages('joint_states')[0].velocity[2] == pytest.approx(-0.5, rel=1e-6)
+    assert antenna.parameters['elements_per_segment'] == 2      # (the node took it)

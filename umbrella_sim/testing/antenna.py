@@ -26,7 +26,7 @@ import re
 from typing import Iterable
 import weakref
 
-from .processes import _brief, DOMAIN_ID, NodeProcess, poll, Probe
+from .processes import _brief, DOMAIN_ID, NodeProcess, poll, Probe, python_value
 from .summary import peak_stress, RunSummary, summarize_run, SUMMARY_AFTER_LOCK
 from ..ros.messages import PHASES, tip_deflection_figures
 
@@ -241,8 +241,14 @@ class SimulatedAntenna:
 
         from ..core.registry import REGISTRY, RESET
 
-        request = SetParameters.Request(parameters=[
-            Parameter(name, value=value).to_parameter_msg() for name, value in values.items()])
+        values, messages = {n: python_value(v) for n, v in values.items()}, []
+        for name, value in values.items():
+            try:
+                messages.append(Parameter(name, value=value).to_parameter_msg())
+            except TypeError:
+                raise ValueError(f'parameter {name}={value!r}: not a ROS parameter value (a '
+                                 'bool, int, float, str or a list of one of them)') from None
+        request = SetParameters.Request(parameters=messages)
         results = self.probe.call(SetParameters, self._service('set_parameters'), request,
                                   timeout).results
         for (name, value), r in zip(values.items(), results):

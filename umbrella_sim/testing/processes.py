@@ -297,6 +297,21 @@ class NodeProcess:
         self.close()
 
 
+def python_value(value):
+    """
+    Return a parameter value as the Python value of its ROS type.
+
+    numpy scalars and arrays become Python's (a float32 is no ROS type); a list of numbers
+    with a float in it becomes a list of floats (a double[]: [0, 0.05, 0]).
+    """
+    if hasattr(value, 'tolist') and not isinstance(value, str):    # numpy
+        value = value.tolist()
+    if isinstance(value, (list, tuple)) and any(isinstance(v, float) for v in value) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        value = [float(v) for v in value]
+    return value
+
+
 def _ros_literal(value) -> str:
     """
     Return a Python value as the YAML of ``-p name:=value``, of the type Python gives it.
@@ -305,12 +320,8 @@ def _ros_literal(value) -> str:
     mapping); a list of numbers with a float in it is a double[] ([0, 0.05, 0], which rcl
     refuses as a mixed sequence); numpy scalars and arrays are their Python values.
     """
-    if hasattr(value, 'tolist') and not isinstance(value, str):    # numpy
-        value = value.tolist()
+    value = python_value(value)
     if isinstance(value, (list, tuple)):        # a ROS array: rib.<name> per-rib values
-        if any(isinstance(v, float) for v in value) and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-            value = [float(v) for v in value]
         return '[' + ', '.join(_ros_literal(v) for v in value) + ']'
     if isinstance(value, bool):
         return 'true' if value else 'false'
