@@ -23,6 +23,7 @@ metadata.
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 
@@ -740,6 +741,18 @@ def test_a_rigid_fe_recordings_stage2_figures_are_the_zero_its_constraints_hold(
     assert s.stage2_samples > 0           # (the tip messages carry the round-off, ~1e-320)
     assert s.stage2_tip_amplitude == 0.0 and s.stage2_peak_stress == 0.0
     assert s.lock_time == core['lock_time']
+
+
+@pytest.mark.parametrize('after_lock', [-1.0, 0.0, math.nan, '0.2', True])
+def test_a_recordings_summary_refuses_a_window_that_is_no_span(bags, after_lock):
+    """after_lock as the live summary() takes it: a span > 0 (or None, the whole of stage 2)."""
+    from umbrella_sim.testing import summary_from_recording
+
+    # (a negative or NaN window gave NaN figures of 0 samples without a word, a string a
+    # TypeError naming nothing)
+    with pytest.raises(ValueError, match=re.escape(f'after_lock={after_lock!r}: seconds')):
+        summary_from_recording(str(bags[100.0]), after_lock=after_lock)
+    assert summary_from_recording(str(bags[100.0]), after_lock=0.1).stage2_samples == 10
 
 
 # ------------------------------------------------------------------ the section's warnings

@@ -117,10 +117,16 @@ def summary_from_recording(path: str, after_lock: float | None = SUMMARY_AFTER_L
 
     Of its last run (a ~/reset starts a new segment); every figure is on that run's sim
     time, stage 2 over ``after_lock`` s after the lock as :meth:`SimulatedAntenna.summary`
-    (None: to the end of the recording), so neither depends on when the node was stopped.
+    (None: to the end of the recording), so neither depends on when the node was stopped;
+    ValueError for another after_lock than None or a number > 0.
     A RunSummary; of a recording of the umbrella of N ribs (``ribs`` >= 2), a
     RibsRunSummary (each rib's figures, from its rib topics: summarize_ribs).
     """
+    if after_lock is not None and not (isinstance(after_lock, (int, float))
+                                       and not isinstance(after_lock, bool)
+                                       and math.isfinite(after_lock) and after_lock > 0):
+        raise ValueError(f'after_lock={after_lock!r}: seconds of sim time after the lock '
+                         '(a number > 0), or None for the whole of stage 2 recorded')
     log = read_log(path)
     seg = log.segments()[-1]
     params = seg.params
