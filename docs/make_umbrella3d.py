@@ -388,7 +388,9 @@ plane, every beam a 3D Euler–Bernoulli body with St-Venant torsion in the thes
 frames (Shabana, *Dynamics of Multibody Systems*, 3rd ed., ch. 5; element of Przemieniecki,
 *Theory of Matrix Structural Analysis*, 1968, and Cook, Malkus, Plesha & Witt, *Concepts and
 Applications of FEA*, 2002). The hinges hold the roots' out-of-plane displacement, slope and
-twist; at O'' the two hinge axes stay parallel. The step is the planar energy-consistent
+twist; a stuck one clamps its root (alpha1 and the root's slope: its holding torque is the
+root's moment), and a hinge's friction acts on the leaf's chord angle alpha1; at O'' the two
+hinge axes stay parallel. The step is the planar energy-consistent
 midpoint scheme (Gonzalez's discrete gradients, J. Nonlinear Sci. 6, 1996) on block-arrow
 linear algebra: one shared sleeve (and bus) couples the ribs only through a few unknowns, so a
 step costs linearly in the number of ribs (bench/bench_umbrella3d.py). The lock acts on the

@@ -32,7 +32,7 @@ import math
 RELEASE = 0.04          # s: rib 1's hinge is stuck until then
 STUCK_RIB = 1
 COULOMB = 0.05          # N m: rib 1's hinge friction torque
-#: N a rib, from rest: the lock at 0.67 s, the peak stress 0.68 x yield, the stage-2 tip
+#: N a rib, from rest: the lock at 0.64 s, the peak stress 0.68 x yield, the stage-2 tip
 #: deflection within the model's small-deformation range, at the mesh's own step (time_step
 #: 0): the run says no warning (`umbrella_sim simulate` of the same parameters prints them)
 SLEEVE_FORCE = 6.0
@@ -51,9 +51,12 @@ def test_a_sticking_hinge_holds_its_rib_then_the_umbrella_deploys(antenna_factor
         timeout=60)
     states = antenna.rib_states()
     start = states[0]['alpha1'][STUCK_RIB]
-    # stuck: rib 1's leaf angle stays at its initial value until the release ...
-    held = [s['alpha1'][STUCK_RIB] for s in states if s['time'] < RELEASE - 1e-9]
-    assert len(held) >= 5 and max(abs(a - start) for a in held) < 1e-9
+    # stuck: rib 1's hinge clamps its leaf's root until the release, and holds the sleeve and
+    # so every rib: their leaf angles alpha1 (the leaves' chords) turn only by the clamped
+    # leaf's bending, M l1 / (3 E I) = 1.2e-3 rad under its hold of ~0.4 N m ...
+    held = [s['alpha1'] for s in states if s['time'] < RELEASE - 1e-9]
+    assert len(held) >= 5
+    assert max(abs(a - b) for s in held for a, b in zip(s, states[0]['alpha1'])) < 3e-3
     # ... then it deploys with the others: every leaf at the deployed angle at the end
     final = states[-1]['alpha1']
     assert all(abs(a - math.pi / 12) < 5e-3 for a in final)          # rad

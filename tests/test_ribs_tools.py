@@ -236,7 +236,7 @@ def test_replay_info_says_the_fault_that_ended_a_recording(tmp_path, capsys):
     from umbrella_sim.tools import replay
 
     bag = tmp_path / 'fault'
-    assert cli.main(['simulate', '--set', 'ribs=3', '--set', 'rib.stick_until=[0, 0.05, 0]',
+    assert cli.main(['simulate', '--set', 'ribs=3', '--set', 'rib.stick_until=[0, 0.2, 0]',
                      '--duration', '0.3', '--mcap', str(bag)]) == 3
     capsys.readouterr()
     assert replay.main([str(bag), '--info']) == 0

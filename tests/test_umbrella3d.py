@@ -41,6 +41,7 @@ import pytest
 
 from umbrella_sim.core import UmbrellaParams, UmbrellaSimulator
 from umbrella_sim.core.driver import simulate
+from umbrella_sim.core.integrators import PHI_TOLERANCE
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
 
@@ -283,36 +284,48 @@ def test_a_stuck_hinge_holds_the_sleeve_force_until_its_release_time():
     """
     From rest, rib 1 stuck for 50 ms: the sleeve force is a suddenly applied load.
 
-    The hinge holds its angle exactly; its holding torque (the joint's multiplier) oscillates
-    about the static torque of virtual work (its mean within 3 %) with a peak below twice it
-    (a suddenly applied load on an undamped linear frame: at most twice the static response);
-    it is released at the first grid step that reaches 50 ms, and the energy balance holds.
+    The hinge clamps its leaf's root: the root's turn alpha1 + theta(O) held to the joints'
+    tolerance at every step, while the chord alpha1 turns by the clamped leaf's bending, at
+    its largest the statics of the hold M (the leaf's moment falls linearly from M at O to
+    0 at O'': M l1 / (3 E I), within 3 %: the leaf's own modes are fast beside the frame's).
+    The holding torque (the joint's multiplier) rises towards the static torque of virtual
+    work and stays below twice it (a suddenly applied load on an undamped linear frame: at
+    most twice the static response); it is released at the first grid step that reaches
+    50 ms, and the energy balance holds.
     """
     values = {'ribs': 3, 'sleeve_force': 10.0, 'time_step': 1e-4, 'v0': 0.0,
               'rib1.stick_until': 0.05}
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values))
-    rec = sim.run(0.06)
-    a = rec.arrays()
+    held = sim.state.stuck[1]
+    turns = []
+    while sim.state.t < 0.06 - 1e-9:
+        sim.step()
+        if not np.isnan(sim.state.stuck[1]):
+            turns.append(sim.model.hinge_angle(sim.state.qr)[1])
+    assert np.max(np.abs(np.array(turns) - held)) < PHI_TOLERANCE
+    a = sim.record.arrays()
     stuck = a['stuck'][:, 1]
     assert not np.any(a['stuck'][:, [0, 2]])
     last = np.nonzero(stuck)[0].max()
+    assert len(turns) == last
     assert a['time'][last] < 0.05 <= a['time'][last + 1] and not np.any(stuck[last + 1:])
-    assert np.ptp(a['alpha1'][:last + 1, 1]) < 1e-11
-    static = static_holding_torque(sim.params.planar, 3)
     torque = a['holding_torque'][1:last + 1, 1]
-    assert np.mean(torque) == pytest.approx(static, rel=0.03)
-    assert 1.5 * static < np.max(np.abs(torque)) < 2.0 * static
-    s = rec.summary()
+    p = sim.params.planar
+    bent = np.max(np.abs(torque)) * p.l1 / (3.0 * p.youngs_modulus * p.cross_section_inertia)
+    assert np.ptp(a['alpha1'][:last + 1, 1]) == pytest.approx(bent, rel=0.03)
+    static = static_holding_torque(p, 3)
+    assert 0.5 * static < np.max(np.abs(torque)) < 2.0 * static
+    s = sim.record.summary()
     assert s['energy_balance_residual'] < BALANCE_TOLERANCE * s['energy_scale']
 
 
 def test_a_stuck_hinge_breaks_free_at_its_torque_threshold():
-    """stick_torque 1.5 x the static torque: released once the oscillating torque reaches it."""
+    """stick_torque 0.75 x the static torque: released once the rising torque reaches it."""
     p = UmbrellaParams(v0=0.0, sleeve_force=10.0)
-    threshold = 1.5 * static_holding_torque(p, 3)
+    threshold = 0.75 * static_holding_torque(p, 3)
     values = {'ribs': 3, 'sleeve_force': 10.0, 'time_step': 1e-4, 'v0': 0.0,
               'rib1.stick_torque': threshold}
-    a = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values)).run(0.03).arrays()
+    a = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(values)).run(0.05).arrays()
     stuck = a['stuck'][:, 1]
     assert stuck[0] and not stuck[-1]
     last = np.nonzero(stuck)[0].max()

@@ -36,7 +36,7 @@
 
 /* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
  * reordered, a function's arguments changed). */
-#define UMBRELLA_ABI_VERSION 8
+#define UMBRELLA_ABI_VERSION 9
 
 /* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
  * exported. */
@@ -219,6 +219,8 @@ typedef struct {
 typedef struct {
     int n_ribs, n_rib, n_shared, n_shared_rows;
     int i_a1, i_rx, i_ry, i_rz, i_a2, i_u1, i_w1, i_s1, i_p1, i_s2, i_p2, i_uh, i_wh;
+    int i_t0;                                        /* the leaf root's slope (a stuck
+                                                      * hinge holds alpha1 + it) */
     int leaf_points, leaf_elastic, link_points, link_elastic, link_offset;
     double sleeve_mass, y_stop, regularisation;
     int carry_steps;                                 /* steps an iteration matrix serves at

@@ -748,7 +748,7 @@ static void constraints(const Ctx3D *x, const double *q, const double *stuck, in
         f[5] = qr[m->i_rx] + r3 * c2;
         f[6] = qr[m->i_rz] + qr[m->i_wh];
         f[7] = qr[m->i_ry] + r3 * s2 - q[x->R * n];
-        f[8] = isnan(stuck[r]) ? 0.0 : a1 - stuck[r];
+        f[8] = isnan(stuck[r]) ? 0.0 : a1 + qr[m->i_t0] - stuck[r];   /* the root's turn */
         if (m->nl_elements) nl_hinge_rows(m, qr, f, NULL, n);
     }
     phi[x->R * ROWS] = locked ? q[x->R * n] - m->y_stop : 0.0;
@@ -781,7 +781,7 @@ static void jacobian(const Ctx3D *x, const double *q, const double *stuck, doubl
         JS(5, m->i_rx, 1.0); JS(5, m->i_a2, -r3 * s2); JS(5, m->i_uh, c2);
         JS(6, m->i_rz, 1.0); JS(6, m->i_wh, 1.0);
         JS(7, m->i_ry, 1.0); JS(7, m->i_a2, r3 * c2); JS(7, m->i_uh, s2);
-        JS(8, m->i_a1, stuck_on(stuck[r]));
+        JS(8, m->i_a1, stuck_on(stuck[r])); JS(8, m->i_t0, stuck_on(stuck[r]));
 #undef JS
         if (m->nl_elements) nl_hinge_rows(m, qr, NULL, j, n);
     }

@@ -110,7 +110,8 @@ class CompiledStep3D:
         self.struct = Model3DStruct(
             n_ribs=nr, n_rib=n, n_shared=m.n_shared, n_shared_rows=m.n_shared_rows,
             **{f'i_{k}': getattr(m, f'i_{k}') for k in (
-                'a1', 'rx', 'ry', 'rz', 'a2', 'u1', 'w1', 's1', 'p1', 's2', 'p2', 'uh', 'wh')},
+                'a1', 'rx', 'ry', 'rz', 'a2', 'u1', 'w1', 's1', 'p1', 's2', 'p2', 'uh', 'wh',
+                't0')},
             leaf_points=leaf.x.shape[1], leaf_elastic=leaf.shape.shape[-1],
             link_points=link.x.shape[1], link_elastic=link.shape.shape[-1],
             link_offset=link.offset, sleeve_mass=m.sleeve_mass, y_stop=m.y_stop,

@@ -265,6 +265,7 @@ class UmbrellaModel3D:
         self.i_a1, self.i_rx, self.i_ry, self.i_rz, self.i_a2 = 0, 1 + nl, 2 + nl, 3 + nl, 4 + nl
         self.s_leaf_e, self.s_link_e = slice(1, 1 + nl), slice(5 + nl, 5 + nl + nk)
         self.i_u1, self.i_w1 = 1 + lf.index(n, 'u'), 1 + lf.index(n, 'w')
+        self.i_t0 = 1 + lf.index(0, 'theta')      # the leaf root's slope at O
         self.i_s1, self.i_p1 = 1 + lf.index(n, 'slope'), 1 + lf.index(n, 'twist')
         self.i_s2, self.i_p2 = 5 + nl + lk.index(0, 'slope'), 5 + nl + lk.index(0, 'twist')
         self.i_uh, self.i_wh = 5 + nl + lk.index(n, 'u'), 5 + nl + lk.index(n, 'w')
@@ -476,11 +477,16 @@ class UmbrellaModel3D:
         """Return y_H of every rib's link end (R,)."""
         return qr[:, self.i_ry] + (self.l3 + qr[:, self.i_uh]) * np.sin(qr[:, self.i_a2])
 
+    def hinge_angle(self, qr) -> np.ndarray:
+        """Return alpha1 + theta(O) (R,): each leaf root's turn, what a stuck hinge clamps."""
+        return qr[..., self.i_a1] + qr[..., self.i_t0]
+
     def constraints(self, qr, qs, stuck, locked: bool, drive=None):
         """
         Return (Phi_r (R, 9), Phi_s) at (qr, qs).
 
-        stuck: (R,) the angle a stuck hinge holds, NaN where free (its row is then 0);
+        stuck: (R,) the hinge_angle a stuck hinge holds (the co-rotational ribs: theta(O) that
+        turn's sine), NaN where free (its row is then 0; its multiplier: the root's moment);
         drive: the bus coordinates the prescribed base imposes (prescribed base only).
         """
         a1, a2 = qr[:, self.i_a1], qr[:, self.i_a2]
@@ -495,7 +501,7 @@ class UmbrellaModel3D:
             s1 * sl1 + c1 * tw1 - s2 * sl2 - c2 * tw2,
             qr[:, self.i_rx] + r3 * c2, qr[:, self.i_rz] + qr[:, self.i_wh],
             qr[:, self.i_ry] + r3 * s2 - qs[0],
-            np.where(np.isnan(stuck), 0.0, a1 - np.nan_to_num(stuck))], -1)
+            np.where(np.isnan(stuck), 0.0, self.hinge_angle(qr) - np.nan_to_num(stuck))], -1)
         shared = [qs[0] - self.y_stop if locked else 0.0]
         if self.n_shared_rows > 1:
             shared += list(qs[1:7] - drive)
@@ -524,7 +530,7 @@ class UmbrellaModel3D:
         j[:, 5, self.i_rx], j[:, 5, self.i_a2], j[:, 5, self.i_uh] = 1.0, -r3 * s2, c2
         j[:, 6, self.i_rz], j[:, 6, self.i_wh] = 1.0, 1.0
         j[:, 7, self.i_ry], j[:, 7, self.i_a2], j[:, 7, self.i_uh] = 1.0, r3 * c2, s2
-        j[:, 8, self.i_a1] = np.where(np.isnan(stuck), 0.0, 1.0)
+        j[:, 8, self.i_a1] = j[:, 8, self.i_t0] = np.where(np.isnan(stuck), 0.0, 1.0)
         j_rs = np.zeros((nr, N_RIB_ROWS, self.n_shared))
         j_rs[:, 7, 0] = -1.0
         j_ss = np.zeros((self.n_shared_rows, self.n_shared))

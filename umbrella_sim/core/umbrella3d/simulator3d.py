@@ -163,7 +163,7 @@ class UmbrellaSimulator3D:
         Its sleeve moves at v0; per-rib angle, rate and out-of-plane perturbations are applied
         and projected onto the joints (positions by Newton in the mass metric, velocities by
         the mass-metric projection); a free bus takes the velocity that makes the momentum
-        zero; a stuck hinge holds its initial angle (its velocity projected to 0).
+        zero; a stuck hinge holds its root's initial turn (its velocity projected to 0).
         """
         m, p = self.model, self.params
         nr, n = m.n_ribs, m.n_rib
@@ -184,7 +184,7 @@ class UmbrellaSimulator3D:
         rates = np.array([r.rate_offset for r in m.ribs])
         kicks = np.array([r.out_of_plane_rate for r in m.ribs])
         stuck = np.where((self.stick_until > 0.0) | (self.stick_torque > 0.0),
-                         qr[:, m.i_a1] + offsets, np.nan)
+                         m.hinge_angle(qr) + offsets, np.nan)
         if np.any(offsets != 0.0):
             qr[:, m.i_a1] += offsets
             qr, qs = self._settle_positions(qr, qs, stuck)
@@ -249,9 +249,8 @@ class UmbrellaSimulator3D:
             return
         s1, work = self._step(s0, t_next - s0.t, self.locked)
         if not self.locked and s1.qs[0] - m.y_stop > 0.0:
-            at_axle = np.nonzero(s1.qr[:, m.i_a1] >= ALPHA1_AXLE)[0]
-            if len(at_axle):
-                raise self._at_axle(int(at_axle[0]))
+            if np.any(s1.qr[:, m.i_a1] >= ALPHA1_AXLE):
+                raise self._at_axle()
         lock_event = None
         if not self.locked and s1.qs[0] - m.y_stop <= 0.0:
             s_hit, work_hit = self._find_lock(s0, t_next - s0.t)
@@ -319,7 +318,7 @@ class UmbrellaSimulator3D:
                 if stop_at_lock:
                     return
             elif status == STATUS['axle']:      # (the state: the last step before it)
-                raise self._at_axle(int(np.argmax(self.state.qr[:, self.model.i_a1])))
+                raise self._at_axle()
             elif status != STATUS['ok']:
                 raise SimulationFailed(f'step after t = {self.state.t:.9g} s failed: '
                                        f'{kernel_error(status, self.state.t + self.h)}')
@@ -402,8 +401,14 @@ class UmbrellaSimulator3D:
                 break
         return self.record
 
-    def _at_axle(self, rib: int) -> SimulationFailed:
-        """Return the fault of a step that took a leaf to the axle before the lock."""
+    def _at_axle(self) -> SimulationFailed:
+        """
+        Return the fault of a step that took a leaf to the axle before the lock.
+
+        It names the rib whose leaf was nearest the axle at the last good step (self.state,
+        which either path keeps: the compiled step does not hand over the failed one).
+        """
+        rib = int(np.argmax(self.state.qr[:, self.model.i_a1]))
         return SimulationFailed(
             f'step after t = {self.state.t:.9g} s failed: rib {rib}: the leaf reached the axle '
             f'(alpha1 = pi/2 = {ALPHA1_AXLE:.6g} rad) before the lock: the rib folded back past '

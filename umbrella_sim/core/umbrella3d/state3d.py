@@ -35,7 +35,7 @@ class State3D:
     vs: np.ndarray
     lam_r: np.ndarray
     lam_s: np.ndarray
-    stuck: np.ndarray          # (R,) angle a stuck hinge holds, NaN where free
+    stuck: np.ndarray          # (R,) the hinge_angle a stuck hinge holds, NaN where free
     pr: np.ndarray | None = None
     ps: np.ndarray | None = None
 
