@@ -24,6 +24,7 @@ import os
 import re
 import sys
 
+import numpy as np
 import pytest
 
 from umbrella_sim.core.umbrella3d.model3d import UmbrellaModel3D
@@ -213,3 +214,28 @@ def test_a_runtime_set_of_a_ribs_own_value_is_refused_as_read_only(name, ribs, s
 
     text = rib_override_refusal(name, ribs)
     assert text == said if said is None else text.startswith(said)
+
+
+def test_a_ribs_torsion_fibre_distance_sets_its_torsional_stress_alone():
+    """
+    The torsional stress is T c_t / J: a round bar's c_t is its radius, not 0.676 b.
+
+    Rib 1 kicked out of its plane (it twists): the same run with rib 1's c_t given moves its
+    torsional stress by c_t / (0.676 b) and nothing else (c_t enters no dynamics).
+    """
+    from umbrella_sim.core import UmbrellaSimulator3D
+
+    base = {'ribs': 3, 'rib1.out_of_plane_rate': 0.3, 'v0': 0.0, 'sleeve_force': 10.0}
+    radius = 0.0056        # the round bar of the default 10 mm square's area
+    runs = [UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(v)).run(0.02).arrays()
+            for v in (base, dict(base, **{'rib1.torsion_fibre_distance': radius}))]
+    square = 0.1406 / 0.208 * 0.01
+    assert np.max(runs[0]['stress_torsion'][:, 1]) > 1e5           # it twists: > 0.1 MPa
+    np.testing.assert_allclose(runs[1]['stress_torsion'][:, 1],
+                               runs[0]['stress_torsion'][:, 1] * radius / square, rtol=1e-12)
+    for name in runs[0]:
+        if name != 'stress_torsion' and not name.startswith('stress_von_mises') \
+                and name != 'von_mises':
+            np.testing.assert_array_equal(runs[1][name], runs[0][name], err_msg=name)
+    np.testing.assert_array_equal(runs[1]['stress_torsion'][:, [0, 2]],
+                                  runs[0]['stress_torsion'][:, [0, 2]])

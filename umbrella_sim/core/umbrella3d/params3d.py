@@ -108,8 +108,12 @@ RIB_SPECS: dict[str, Param] = {p.name: p for p in (
        high=1e3),
     _P('out_of_plane_rate', float, 0.0, 'm/s', 'initial out-of-plane velocity of the leaf '
        'tip (a lateral kick; projected onto the joints)', low=-1e3, high=1e3),
-    _P('torsion_constant', float, 0.0, 'm⁴', 'St-Venant torsion constant J; 0 = that of the '
-       'square of the section (0.1406 b⁴ = 0.8436 I_p)', low=0.0, high=100.0),
+    _P('torsion_constant', float, 0.0, 'm⁴', 'St-Venant torsion constant J; 0 = 0.8436 I_p '
+       '(I_p = 2 I; the square section b x b: 0.1406 b⁴); with your own J give '
+       'torsion_fibre_distance too', low=0.0, high=100.0),
+    _P('torsion_fibre_distance', float, 0.0, 'm', 'c_t of the torsional shear stress tau = T '
+       'c_t / J (a round bar: its radius; a thin tube: its outer radius); 0 = the square '
+       "section's, 0.676 b (b = twice the bending fibre distance)", low=0.0, high=10.0),
 )}
 
 #: names of the planar record a rib may take its own value of
@@ -269,11 +273,14 @@ class RibProperties:
     @property
     def torsion_fibre(self) -> float:
         """
-        Return c_t with tau_max = G phi' c_t (m).
+        Return c_t with tau_max = G phi' c_t = T c_t / J (m): torsion_fibre_distance if given.
 
-        For the square section tau_max = T / (0.208 b^3) and T = G J phi' with
+        Else the square section's: tau_max = T / (0.208 b^3) and T = G J phi' with
         J = 0.1406 b^4, so c_t = 0.676 b; b is twice the bending fibre distance.
         """
+        c_t = self.own['torsion_fibre_distance']
+        if c_t > 0.0:
+            return c_t
         return 0.1406 / 0.208 * 2.0 * self.planar.fibre_distance
 
 
