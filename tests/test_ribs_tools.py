@@ -297,3 +297,24 @@ def test_compare_tables_keep_their_columns_for_long_run_names(ribs, tmp_path, ca
     assert len({len(t) for t in table}) == 1, table      # every row as wide as the header
     first_column = {t.index(' ', len(long_name)) for t in table}
     assert len(first_column) == 1, table
+
+
+def test_a_sweeps_table_holds_every_umbrella_parameter_given_or_not(tmp_path):
+    """results.csv: 'every other parameter', the umbrella's too (hub_radius, base, ...)."""
+    from umbrella_sim.core.umbrella3d.params3d import UMBRELLA_SPECS
+
+    spec = tmp_path / 'spec.yaml'
+    spec.write_text('base: {ribs: 2, hub_radius: 0.05}\n'
+                    'grid: {rib.stick_until: [[0.0, 0.0], [0.0, 0.01]]}\nduration: 0.1\n')
+    sweep = load_spec(str(spec))
+
+    class Store:
+
+        def load(self, case_id):
+            return {'status': 'ok', 'summary': {'ribs': 2, 'lock_time': 0.2}}
+    columns, rows = sweep_results.table_rows(sweep, Store())
+    for name, umbrella_spec in UMBRELLA_SPECS.items():
+        assert name in columns, name
+        want = 0.05 if name == 'hub_radius' else 2 if name == 'ribs' else umbrella_spec.default
+        assert [row[name] for row in rows] == [want, want], name
+    assert columns.index('rib.stick_until') == 3          # the swept one first

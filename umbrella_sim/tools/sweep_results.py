@@ -31,6 +31,7 @@ import os
 
 from .sweep_spec import Case, Sweep
 from ..core.registry import REGISTRY
+from ..core.umbrella3d.params3d import UMBRELLA_SPECS
 
 #: a case's status in the table
 STATUS_OK, STATUS_DIVERGED, STATUS_ERROR = 'ok', 'diverged', 'error'
@@ -107,6 +108,9 @@ def make_record(case: Case, result: dict) -> dict:
 def table_rows(sweep: Sweep, store: CaseStore) -> tuple[list[str], list[dict]]:
     """One row per case of the SPEC that has a result: case, status, parameters, summary."""
     rows, summary_keys = [], []
+    # a sweep of the umbrella of N ribs: each case's umbrella parameters, given or default
+    umbrella = ({name: spec.default for name, spec in UMBRELLA_SPECS.items()}
+                if any(case.params.get('ribs', 1) > 1 for case in sweep.cases) else {})
     for case in sweep.cases:
         rec = store.load(case.case_id)
         if rec is None:
@@ -114,6 +118,7 @@ def table_rows(sweep: Sweep, store: CaseStore) -> tuple[list[str], list[dict]]:
         row = {'case': case.index, 'case_id': case.case_id, 'status': rec.get('status'),
                'error': rec.get('error')}
         row.update({name: case.params.get(name, case.overrides.get(name)) for name in sweep.swept})
+        row.update(umbrella)
         row.update(case.params)
         for name, value in row.items():     # a rib.<name> list: one value, for the plots
             if isinstance(value, list):
