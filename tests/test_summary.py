@@ -806,6 +806,23 @@ def test_damping_given_to_a_model_without_beams_says_it_takes_no_effect(model):
         np.testing.assert_array_equal(damped.column(name), undamped.column(name))
 
 
+@pytest.mark.parametrize('model', ['flexible', 'rigid'])
+def test_a_density_in_g_per_cm3_warns_density_for_every_model(model):
+    """2.77 for aluminium's 2770 kg/m³ ran a frame a thousand times too light, unsaid."""
+    def said(density):
+        return [w for w in parameter_warnings(UmbrellaParams(
+            density=density, model=model).as_dict()) if w.startswith('density')]
+
+    assert said(2770.0) == [] and said(150.0) == []          # aluminium, balsa
+    (text,) = said(2.77)
+    assert text.startswith('density: 2.77 kg/m³ is below') and 'g/cm³' in text
+    # the run says it, and its rib by name
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+    f = simulate(UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib1.density': 2.77}), 0.004,
+                 keep_samples=False)
+    assert [w.split(',')[0] for w in f.figures['warnings']] == ['density: rib 1']
+
+
 def test_a_ribs_own_section_is_judged_and_named_by_its_rib():
     from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 

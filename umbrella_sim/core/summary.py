@@ -355,6 +355,10 @@ RIGID_FE_ZEROS = ('tip_deflection_max', 'stage2_tip_amplitude', 'peak_stress_lea
 #: the radius of gyration, kappa 5/6 for a rectangle, nu 0.33): 1.7 % lower at L / b = 10,
 #: 6.3 % at 5, 27 % at 2 (Timoshenko, Philosophical Magazine 41, 1921)
 SLENDERNESS_LIMIT = 10.0
+#: kg/m³: below every solid a rib is made of (balsa ~150, CFRP ~1600, aluminium ~2700): a
+#: density given in g/cm³ (2.77 for 2770) runs a frame a thousand times too light, whose
+#: figures no other warning questions
+DENSITY_LOW = 100.0
 
 
 def parameter_warnings(params: dict) -> list[str]:
@@ -366,15 +370,20 @@ def parameter_warnings(params: dict) -> list[str]:
     models, 'outer fibre', area and second_moment_of_area given beside section_height at
     its default (the thesis's 10 mm square) whose square they are not (a round bar's A and
     I, say): the stresses take the outer fibre at b/2 all the same (params.fibre_distance);
-    'thick beam', a member (l1, l2, l3) shorter than SLENDERNESS_LIMIT section depths.
+    'thick beam', a member (l1, l2, l3) shorter than SLENDERNESS_LIMIT section depths; for
+    every model 'density', a density below DENSITY_LOW (kg/m³ given as g/cm³, say).
     """
+    density = params.get('density', SPECS['density'].default)
+    out = [f'density: {density:g} kg/m³ is below any solid a rib is made of (balsa ~150, '
+           'CFRP ~1600, aluminium ~2700 kg/m³): its unit is kg/m³ (a density in g/cm³ times '
+           '1000)'] if density < DENSITY_LOW else []
     beams = beams_record(params)
     if beams is None:
         model, damping = params.get('model'), params.get('damping_ratio', 0.0)
-        return [f"damping not applicable: damping_ratio {damping:g} is the beams' structural "
-                f'damping; model {model} has no elastic field to damp and takes no effect of '
-                'it'] if damping > 0.0 and model in ('rigid', 'rigid-fe') else []
-    out = []
+        return out + ([f"damping not applicable: damping_ratio {damping:g} is the beams' "
+                       f'structural damping; model {model} has no elastic field to damp and '
+                       'takes no effect of it'] if damping > 0.0 and model in (
+                           'rigid', 'rigid-fe') else [])
     area, inertia = beams.area, beams.second_moment_of_area
     height = beams.section_height
     if area > 0.0 and inertia > 0.0 and height == SPECS['section_height'].default and not (
