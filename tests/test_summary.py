@@ -755,6 +755,23 @@ def test_a_recordings_summary_refuses_a_window_that_is_no_span(bags, after_lock)
     assert summary_from_recording(str(bags[100.0]), after_lock=0.1).stage2_samples == 10
 
 
+def test_a_recordings_summary_says_when_it_holds_less_of_stage_2_than_asked(bags):
+    """A window past the recording's end: the figures of what it holds, and a warning."""
+    import warnings
+    from umbrella_sim.testing import summary_from_recording
+
+    bag = str(bags[100.0])
+    whole = summary_from_recording(bag, after_lock=None)
+    with pytest.warns(UserWarning, match=re.escape(
+            f'after_lock=10 s, but the recording holds {whole.stage2_span:.6g} s of stage 2')):
+        longer = summary_from_recording(bag, after_lock=10.0)
+    assert longer == whole
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')             # the window it holds: no word
+        summary_from_recording(bag, after_lock=0.1)
+        summary_from_recording(bag, after_lock=whole.stage2_span)
+
+
 # ------------------------------------------------------------------ the section's warnings
 def test_a_round_bars_area_and_inertia_beside_the_default_height_warn_outer_fibre():
     # a solid round bar of the 10 mm square's area, d = 11.28 mm: its outer fibre is at

@@ -484,6 +484,10 @@ def test_a_bad_force_profile_is_refused_before_any_command(antenna_factory, prof
     antenna = antenna_factory({'v0': 0.0})
     with pytest.raises(ValueError, match=re.escape(words)):
         antenna.play_force_profile(profile, timeout=5)
+    # nor a force that is no number ('5' went out as 5 N), checked or not
+    for force, check in (('5', True), (True, False)):
+        with pytest.raises(TypeError, match=re.escape(f'force={force!r} is not a number')):
+            antenna.publish_force(force, check=check)
     # nothing was sent: a command taken would show in the node's diagnostics
     antenna.wait_for('diagnostics', lambda m: True, 10, 'a status')
     assert antenna.diagnostics()['accepted_commands'] == '0'

@@ -21,6 +21,7 @@ follows.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import re
 from typing import Iterable
@@ -151,8 +152,11 @@ class SimulatedAntenna:
 
         A force the node would refuse (solver.command_force: NaN, below sleeve_force_min,
         above what the link carries) raises ValueError here, with the node's reason;
-        check=False sends it anyway (a test of the node's refusal).
+        check=False sends it anyway (a test of the node's refusal).  A force that is no
+        real number (a string, a bool) raises TypeError, check or not: '5' is no newton.
         """
+        if isinstance(force, bool) or not isinstance(force, numbers.Real):
+            raise TypeError(f'publish_force: force={force!r} is not a number (N)')
         if check:
             from ..core.forcing import command_force
             command_force(force, self._model_params())

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import warnings
 
 import numpy as np
 
@@ -118,7 +119,8 @@ def summary_from_recording(path: str, after_lock: float | None = SUMMARY_AFTER_L
     Of its last run (a ~/reset starts a new segment); every figure is on that run's sim
     time, stage 2 over ``after_lock`` s after the lock as :meth:`SimulatedAntenna.summary`
     (None: to the end of the recording), so neither depends on when the node was stopped;
-    ValueError for another after_lock than None or a number > 0.
+    ValueError for another after_lock than None or a number > 0; a UserWarning where the
+    recording holds less of stage 2 than after_lock (the figures are of what it holds).
     A RunSummary; of a recording of the umbrella of N ribs (``ribs`` >= 2), a
     RibsRunSummary (each rib's figures, from its rib topics: summarize_ribs).
     """
@@ -142,12 +144,22 @@ def summary_from_recording(path: str, after_lock: float | None = SUMMARY_AFTER_L
     started_moving = deploy_start_of(params, applied) == 0.0
     ribs = params.get('ribs', 1)
     if isinstance(ribs, int) and ribs > 1:
-        return ribs_summary_of_log(log, seg, applied, lock_time, started_moving, after_lock)
-    tip = [(t, tip_deflection_figures(m)['tip_transverse'])
-           for t, m in log.decoded(log.find_topic('tip_deflection'), seg)]
-    stress = [(t, peak_stress(m)) for t, m in log.decoded(log.find_topic('peak_stress'), seg)]
-    return summarize_run(applied, lock_time, started_moving, tip, stress, after_lock,
-                         params.get('model'))
+        summary = ribs_summary_of_log(log, seg, applied, lock_time, started_moving, after_lock)
+        span = min((s.stage2_span for s in summary.stage2), default=0.0)
+    else:
+        tip = [(t, tip_deflection_figures(m)['tip_transverse'])
+               for t, m in log.decoded(log.find_topic('tip_deflection'), seg)]
+        stress = [(t, peak_stress(m))
+                  for t, m in log.decoded(log.find_topic('peak_stress'), seg)]
+        summary = summarize_run(applied, lock_time, started_moving, tip, stress, after_lock,
+                                params.get('model'))
+        span = summary.stage2_span
+    period = 1.0 / float(params.get('publish_rate') or math.inf)
+    if after_lock is not None and lock_time is not None and span < after_lock - 1.5 * period:
+        warnings.warn(f'{path}: after_lock={after_lock:g} s, but the recording holds '
+                      f'{span:.6g} s of stage 2 after the lock: the stage-2 figures are of '
+                      'those (a shorter after_lock, or a longer recording)', stacklevel=2)
+    return summary
 
 
 # ------------------------------------------------------------ the umbrella of N ribs
