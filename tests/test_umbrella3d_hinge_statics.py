@@ -63,6 +63,9 @@ def test_the_holding_torques_are_the_statics_of_the_sleeve_force(stuck):
         params.ribs * FORCE, rel=1e-3)
     # the stiffer rib takes more of the sleeve: its clamped leaf bends less
     assert held[1] > 1.5 * held[0] and held[0] == pytest.approx(held[2], rel=1e-9)
+    # the sign the docs give: the hinge holds the deploying push toward folding, positive
+    doc = (pathlib.Path(__file__).parents[1] / 'msg_docs' / 'topic_ribs.md').read_text()
+    assert 'positive turning it toward folding' in doc and np.all(end['holding_torque'] > 0.0)
 
 
 def test_a_stuck_hinge_clamps_the_root_and_its_hold_is_the_roots_moment(stuck):
