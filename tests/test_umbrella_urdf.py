@@ -358,3 +358,31 @@ def test_the_command_line_prints_the_urdf_of_the_values_given(capsys):
                        (['l1=0.5', 'l1=0.6'], 'l1 given twice')):
         assert rd.main(bad) == 2
         assert words in capsys.readouterr().err
+
+
+def test_a_misspelt_per_rib_name_is_refused_not_left_out_of_the_urdf(tmp_path, capsys):
+    """
+    rib1.tip_mas, rib.tip_mas, rib99.tip_mass: the URDF tools refuse them, as the node does.
+
+    Left out, the URDF was printed (exit 0) without the tip mass the user meant to give,
+    and the launch file would have passed robot_state_publisher that URDF.
+    """
+    from umbrella_sim.ros import launch_description as ld
+
+    for bad, words in ((['ribs=6', 'rib1.tip_mas=0.1'], "per-rib parameter 'rib1.tip_mas'"),
+                       (['ribs=6', 'rib.tip_mas=[0, 0, 0, 0, 0, 0.1]'],
+                        "per-rib parameter 'rib.tip_mas'"),
+                       (['ribs=6', 'rib99.tip_mass=0.1'], 'rib99.tip_mass: there are ribs')):
+        assert rd.main(bad) == 2
+        captured = capsys.readouterr()
+        assert captured.out == '' and words in captured.err
+    # the launch file: a params file's misspelt rib value, and a launch argument's
+    params_file = tmp_path / 'ribs.yaml'
+    params_file.write_text('/**:\n  ros__parameters:\n    ribs: 3\n'
+                           '    rib1:\n      tip_mas: 0.1\n')
+    values = {a.name: a.default for a in ld.arguments()}
+    values.update(params_file=str(params_file))
+    with pytest.raises(ValueError, match="per-rib parameter 'rib1.tip_mas'"):
+        ld.plan(values, installed=lambda pkg: '/opt/share')
+    with pytest.raises(ValueError, match="per-rib parameter 'rib.tip_mas'"):
+        ld.overrides({'rib.tip_mas': '[0.0, 0.1, 0.0]'})

@@ -219,6 +219,7 @@ def umbrella_values(values: Mapping[str, Any]) -> dict:
                 raise ValueError(f'parameter {name}={value!r}: a list of one value per rib '
                                  f'(rib 0 first: [0.0, 0.1, 0.0]); rib<k>.{key} sets rib '
                                  "k's alone")
+            _rib_spec(key, name)
             if value is not None and len(value):
                 spec = dataclasses.replace(rib_list_specs()[key], name=name)
                 out[name] = [float(spec.coerce(v)) for v in value]
@@ -542,9 +543,10 @@ def node_model(values: Mapping[str, Any]) -> 'UmbrellaParams | UmbrellaRibsParam
     """
     Return the model a node's parameters make (name -> value, as a params file flattens them).
 
-    The planar record's names and the umbrella's (umbrella_parameter_names); the others are
-    not the model's and are left out.  ribs >= 2: the umbrella of N ribs, else the planar
-    model.  ValueError naming a bad value.
+    The planar record's names and the umbrella's (umbrella_parameter_names, and every name
+    of the per-rib forms rib.<name> and rib<k>.<name>: a misspelt one is refused, not left
+    out); the others are not the model's and are left out.  ribs >= 2: the umbrella of N
+    ribs, else the planar model.  ValueError naming a bad value.
     """
     from ..registry import SPECS
 
@@ -552,7 +554,7 @@ def node_model(values: Mapping[str, Any]) -> 'UmbrellaParams | UmbrellaRibsParam
                                           if k in SPECS}).validated()
     names = umbrella_parameter_names()
     return umbrella_model(planar, umbrella_values({k: v for k, v in values.items()
-                                                   if k in names}))
+                                                   if k in names or names_a_rib(k)}))
 
 
 def umbrella_model(planar: UmbrellaParams, umbrella: Mapping[str, Any]
