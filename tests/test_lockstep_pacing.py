@@ -23,7 +23,7 @@ import threading
 
 import pytest
 
-from umbrella_sim.ros.pacing import lag_advice, Pacer
+from umbrella_sim.ros.pacing import lag_advice, Pacer, RateWindow
 
 PERIOD = 1e-3           # sim s, 1 kHz
 
@@ -95,3 +95,25 @@ def test_the_lag_advice_quotes_the_measured_factor_only_where_it_falls_short(mea
     """A lag that began within the second follows one that kept up: its 1.00x says nothing."""
     text = lag_advice(1.0, measured)
     assert text.startswith(f'this machine cannot step this model at 1x real time{quoted}: ')
+
+
+def test_the_measured_factor_leaves_a_pause_out():
+    """
+    A second of diagnostics: 0.1 s run at 1x, paused 0.85 s, 0.05 s run at 1x: 1x measured.
+
+    Counting the pause it read 0.15x, and 'cannot keep up' after a ~/pause quoted that as
+    the machine's pace.  Paused all the window long: 0 (sim time did not move).
+    """
+    w = RateWindow(10.0, 2.0)
+    w.pause(10.1, True)                       # sim t = 2.1 then, and still at 10.95
+    w.pause(10.95, False)
+    assert not w.due(10.99)
+    assert w.due(11.0) and w.factor(11.0, 2.15) == pytest.approx(1.0, abs=1e-12)
+    w.restart(11.0, 2.15)
+    w.pause(11.2, True)                       # paused at 2.35, over the window's end
+    assert w.factor(12.0, 2.35) == pytest.approx(1.0, abs=1e-12)
+    w.restart(12.0, 2.35)                     # a window that starts paused, stays so
+    assert w.factor(13.0, 2.35) == 0.0
+    w.pause(13.5, False)                      # resumed at 13.5; a half-speed half second
+    assert w.factor(14.0, 2.6) == pytest.approx(0.5, abs=1e-12)
+    assert RateWindow(0.0, 0.0, paused=True).factor(1.0, 0.0) == 0.0

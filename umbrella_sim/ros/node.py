@@ -54,7 +54,7 @@ from std_srvs.srv import SetBool, Trigger
 from . import messages as ros_io
 from .commands import CommandIntake
 from .lockstep import Lockstep
-from .pacing import lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer
+from .pacing import lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer, RateWindow
 from .parameters import (coerce_parameter, declare_from_registry, declare_umbrella,
                          known_parameter_names, parameter_defaults, set_refusal,
                          wrong_type_text)
@@ -510,7 +510,7 @@ class UmbrellaNode(Node):
         # ~20 ms now and then (measured with bench/bench_node.py)
         gc.freeze()
         log = self.get_logger()
-        diag_wall, diag_sim, diag_epoch = time.monotonic(), self.sim.time, self._epoch
+        rate, diag_epoch = RateWindow(time.monotonic(), self.sim.time, self.paused), self._epoch
         lag = 0.0
         try:
             with self._sim_lock:
@@ -565,21 +565,22 @@ class UmbrellaNode(Node):
                     lag = 0.0                 # paused or waiting: not behind (anchored anew)
                 if sample is not None:
                     self._publish_sample(sample)
+                rate.pause(now, self.paused)      # (a pause's wall time is not measured)
                 if epoch != diag_epoch:     # a reset: sim time restarted, measure from here
-                    diag_wall, diag_sim, diag_epoch = now, sim_t, epoch
-                if now - diag_wall >= 1.0:
-                    measured = self._measured_rtf = (sim_t - diag_sim) / (now - diag_wall)
+                    rate.restart(now, sim_t)
+                    diag_epoch = epoch
+                if rate.due(now):
+                    measured = self._measured_rtf = rate.factor(now, sim_t)
                     self._check_namespace_peers()
                     self._publish_diagnostics(sim_t, measured, lag)
-                    diag_wall, diag_sim = now, sim_t
+                    rate.restart(now, sim_t)
                     self.pacer.max_lag = 0.0
                 if duration > 0 and self.fault is not None:
                     break
                 if duration > 0 and sample is not None and sim_t >= duration - 1e-12:
                     log.info(f'duration {duration:g} s reached at t = {sim_t:.9f} s')
-                    if now > diag_wall:     # (the run's last status: a short run's only one)
-                        self._publish_diagnostics(
-                            sim_t, (sim_t - diag_sim) / (now - diag_wall), lag)
+                    if now > rate.wall:     # (the run's last status: a short run's only one)
+                        self._publish_diagnostics(sim_t, rate.factor(now, sim_t), lag)
                     break
                 if waiting:
                     self.lockstep.answered.wait(0.05)

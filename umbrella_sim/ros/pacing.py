@@ -134,3 +134,42 @@ class Pacer:
                 return
             self._wake.wait(remaining - PLAIN_SLEEP_S)
             self._wake.clear()
+
+
+class RateWindow:
+    """
+    The measured real-time factor of diagnostics: sim s per wall s the physics ran.
+
+    The wall time of a pause (~/pause) is left out: a window that spans a pause and a run
+    measured the run's pace diluted by the pause (0.06x for a run at 1x after a pause of
+    most of the second), which the 'cannot keep up' warning then quoted as the machine's.
+    A window that was paused all along measures 0 (sim time did not move).
+    """
+
+    def __init__(self, now: float, sim_t: float, paused: bool = False):
+        self.restart(now, sim_t, paused)
+
+    def restart(self, now: float, sim_t: float, paused: bool | None = None) -> None:
+        """Start a window at now (paused: whether the run is paused; None: as it was)."""
+        if paused is None:
+            paused = self._since is not None
+        self.wall, self.sim, self.paused_wall = now, sim_t, 0.0
+        self._since = now if paused else None
+
+    def pause(self, now: float, paused: bool) -> None:
+        """Note whether the run is paused at now (a pause starting or ending then)."""
+        if paused and self._since is None:
+            self._since = now
+        elif not paused and self._since is not None:
+            self.paused_wall += now - self._since
+            self._since = None
+
+    def due(self, now: float, period: float = 1.0) -> bool:
+        """Tell whether the window has lasted period (wall s)."""
+        return now - self.wall >= period
+
+    def factor(self, now: float, sim_t: float) -> float:
+        """Return sim s per wall s of running since the window started (0: none ran)."""
+        paused = self.paused_wall + (0.0 if self._since is None else now - self._since)
+        running = now - self.wall - paused
+        return (sim_t - self.sim) / running if running > 0 else 0.0
