@@ -207,33 +207,6 @@ def test_pause_and_reset(probe):
     assert locks[:2] == pytest.approx([offline, offline], abs=1e-9)   # the same run again
 
 
-def test_the_measured_factor_after_a_pause_is_the_runs(probe):
-    """
-    The status whose second spans a ~/pause and the run after it: the run's pace measured.
-
-    Half that second or more paused (ten of the paused node's /clock ticks, one each 50 ms
-    at most, after the last status), then resumed: the paced run keeps 1x, which the
-    status says; the paused wall time counted, it said 0.5x or less.
-    """
-    probe.subscribe('/clock', Clock, CLOCK_READER_QOS)
-    probe.subscribe('/diagnostics', DiagnosticArray)
-    with NodeProcess('-p', 'start_paused:=true', '-p', 'v0:=0.0') as node:
-        node.wait_for_log('physics step')
-        probe.wait_for('/diagnostics', lambda m: diag_values(m)['paused'] == 'True')
-
-        def paused_since_last_status():
-            """Ten ticks after the latest status, with no status since (else: wait on)."""
-            statuses = len(probe.messages('/diagnostics'))
-            ticks = len(probe.messages('/clock'))
-            probe.wait_for_count('/clock', ticks + 10)
-            return len(probe.messages('/diagnostics')) == statuses
-        poll(paused_since_last_status, 30, lambda: 'no half second without a status')
-        assert probe.call(SetBool, '/umbrella_node/pause', SetBool.Request(data=False)).success
-        running = probe.wait_for('/diagnostics',
-                                 lambda m: diag_values(m)['paused'] == 'False')
-    assert float(diag_values(running)['measured_real_time_factor']) > 0.75
-
-
 def test_command_publishers_matched_and_incompatible_are_reported(probe):
     """
     The node's QoS events reach its log, on either executor thread.
