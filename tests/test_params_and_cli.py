@@ -57,6 +57,26 @@ def test_bad_parameters_name_culprit_and_rule(changes, culprit, rule):
     assert culprit in str(exc.value) and rule in str(exc.value)
 
 
+def test_yield_strength_in_mpa_is_refused_and_soft_metals_are_not():
+    """
+    A yield strength typed in MPa (500 for Al 7075-T6) is refused, naming the unit.
+
+    It was taken as 500 Pa: the run's stress ratio came out 4.4e5 and any sleeve force above
+    A * 500 Pa = 0.05 N was refused as more than 'the load the link can carry', naming
+    sleeve_force.  Yield strains sigma_y / E of real metals stay accepted: lead (5 MPa /
+    16 GPa, 3e-4) and annealed pure aluminium (10 MPa / 69 GPa, 1.4e-4).
+    """
+    with pytest.raises(ValueError) as exc:
+        UmbrellaParams(yield_strength=500.0).validated()
+    assert 'yield_strength=500' in str(exc.value) and 'not MPa' in str(exc.value)
+    for modulus, strength in ((16e9, 5e6), (69e9, 10e6), (72e9, 500e6)):
+        UmbrellaParams(youngs_modulus=modulus, yield_strength=strength).validated()
+    run = subprocess.run([sys.executable, '-m', 'umbrella_sim', 'simulate', '--duration',
+                          '0.01', '--force', '5', '--set', 'yield_strength=500'],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert run.returncode == 2 and 'yield_strength=500' in run.stderr, run.stderr
+
+
 def test_integers_for_doubles_are_the_doubles():
     """UmbrellaParams(v0=-1) as -p v0:=-1 and --set v0=-1: the double, and validated."""
     p = UmbrellaParams(v0=-1, sleeve_force_min=-8).validated()

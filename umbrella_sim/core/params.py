@@ -29,7 +29,7 @@ import math
 from typing import Any, Mapping
 
 from .registry import (check_known_names, check_types, coerce, CONTROLLER_PARAMETERS,
-                       MIN_PHYSICS_STEP, Param, SPECS)
+                       MIN_PHYSICS_STEP, MIN_YIELD_STRAIN, Param, SPECS)
 
 
 #: parameters added after recordings were made, with the value an older recording (which
@@ -225,6 +225,13 @@ def validate(p: UmbrellaParams, pairs: bool = True) -> None:
                 f'height section_height={p.section_height} m has (its outer fibre, where '
                 "the stress is recovered, is at section_height / 2): give the section's "
                 'height, or section_height 0 for the rectangle of that area and I')
+    if p.yield_strength < MIN_YIELD_STRAIN * p.youngs_modulus:
+        raise ValueError(
+            f'parameter yield_strength={p.yield_strength:g}: a yield strain of '
+            f'{p.yield_strength / p.youngs_modulus:.3g} of youngs_modulus='
+            f'{p.youngs_modulus:g} Pa, below {MIN_YIELD_STRAIN:g}, which no structural '
+            'material has (the softest metals yield at ~1e-4): both are in Pa, not MPa '
+            f'({p.yield_strength:g} MPa = {p.yield_strength * 1e6:g} Pa)')
     if not p.alpha_deployed < p.alpha0:
         raise ValueError(f'parameter alpha0={p.alpha0}: must be above alpha_deployed='
                          f'{p.alpha_deployed} and below pi/2')

@@ -35,6 +35,10 @@ MODELS = ('flexible', 'flexible-nonlinear', 'rigid-fe', 'rigid')
 #: smallest physics step (s): the finest step of the convergence studies is 3.125e-7 s; at
 #: 1e-9 s a 1 kHz publication period took 10^6 steps and their outputs' memory
 MIN_PHYSICS_STEP = 1e-7
+#: smallest yield strain yield_strength / youngs_modulus accepted: the softest metals yield at
+#: ~1.4e-4 (annealed pure aluminium, 10 MPa / 69 GPa) to 3e-4 (lead); a yield strength typed
+#: in MPa (500 for Al 7075-T6) is 7e-9 of the modulus in Pa
+MIN_YIELD_STRAIN = 1e-5
 LOCKS = ('auto', 'energy', 'plastic')
 
 # when a change made at runtime (ros2 param set) takes effect
@@ -207,7 +211,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        low=0.0, low_open=True, high=1e6),
     _P('yield_strength', float, 500.0e6, 'Pa',
        'yield strength, for the stress ratio peak |σ| / yield',
-       low=0.0, low_open=True, high=1e15),
+       low=0.0, low_open=True, high=1e15,
+       rule='≥ 10⁻⁵·`youngs_modulus` (a yield strain of at least 10⁻⁵: in Pa, not MPa)'),
     # configuration
     # at α1 = π/2 the sleeve has no lever on the leaf (dy_H/dα1 = 0, the toggle): a v0 there
     # is an unbounded leaf rate (infinite energies within 1e-7 rad of it) and a force no torque
