@@ -49,6 +49,28 @@ def test_step_advance_to_and_simulate_agree():
     assert np.array_equal(trajectory(by_run), trajectory(by_chunks))
 
 
+@pytest.mark.parametrize('ribs', [1, 2])
+def test_a_duration_between_grid_steps_ends_at_the_last_step_before_it(ribs):
+    """
+    simulate(p, 0.05) at a 0.3 ms step ends at 0.0498 s, as advance_to(0.05) does.
+
+    The run takes every step that ends by its duration (the CLI's words, RunDriver.run's):
+    it rounded 166.7 steps to 167 and ended at 0.0501 s, past the duration it was given.
+    """
+    step, duration = 3e-4, 0.05
+    p = UmbrellaParams(time_step=step)
+    if ribs == 1:
+        end = simulate(p, duration).samples[-1].time
+        sim = UmbrellaSimulator(p)
+        sim.advance_to(duration)
+        assert end == pytest.approx(sim.time, abs=1e-12)
+    else:
+        from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+        end = simulate(UmbrellaRibsParams.from_mapping({'ribs': 2, 'time_step': step}),
+                       duration).summary()['final_time']
+    assert duration - step < end <= duration
+
+
 def test_force_profile_is_a_zero_order_hold_from_the_next_step():
     p = UmbrellaParams(v0=0.0, time_step=API_STEP)
     profile = [(0.0, 0.0), (0.0101, 4.0), (0.05, 1.0)]

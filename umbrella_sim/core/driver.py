@@ -263,7 +263,7 @@ class RunDriver:
         instant reached (t = 0's is the caller's); should_stop() is asked after each chunk.
         Returns the fault that ended the run, or None.
         """
-        k_end = int(round(duration / self.step))
+        k_end = math.floor(duration / self.step + 1e-9)     # (round() took one step past)
         sim = self.sim
         while sim.step_index < k_end:
             chunk = self.advance(self._steps_left(k_end, stop_after_lock))
