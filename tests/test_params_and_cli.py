@@ -320,6 +320,8 @@ def test_braking_limit_admits_negative_force_down_to_it_and_no_further():
     ('Time (s),Force (N)\n0,5\n', [(0.0, 5.0)]),
     ('t,sleeve_force\n0,5\n', [(0.0, 5.0)]),       # the topic's name
     ('\ufefft,F\n0,5\n', [(0.0, 5.0)]),             # a spreadsheet's UTF-8 byte-order mark
+    ('t_s,F_H (N)\n0,5\n', [(0.0, 5.0)]),           # SI units, the force's own name
+    ('tiem,froce\n0,5\n', [(0.0, 5.0)]),             # a typo: the columns by position
 ])
 def test_force_profile_rows_and_header(tmp_path, text, rows):
     from umbrella_sim.tools.inputs import read_force_profile
@@ -338,6 +340,10 @@ def test_force_profile_rows_and_header(tmp_path, text, rows):
     ('F,t\n0,0\n5,0.1\n', 'f.csv:1', 'time then force'),   # (was read as t,F)
     ('force,time\n0,0\n', 'f.csv:1', "['force', 'time']"),
     ('t,F\n0,1_0\n', 'f.csv:2', 'not numbers'),             # (was 10 N)
+    ('sleeve_force,time\n0,0\n', 'f.csv:1', 'time then force'),   # (was read as t,F)
+    ('t (ms),F (N)\n0,0\n50,5\n', 'f.csv:1', 'time in ms'),      # (50 ms was 50 s)
+    ('t [s],F [kN]\n0,0.5\n', 'f.csv:1', 'force in kN'),        # (0.5 kN was 0.5 N)
+    ('time_ms,F\n0,0\n', 'f.csv:1', 'time in ms'),
 ])
 def test_force_profile_bad_rows_are_named(tmp_path, text, where, words):
     from umbrella_sim.tools.inputs import read_force_profile

@@ -70,7 +70,8 @@ def make_parser() -> argparse.ArgumentParser:
     force.add_argument('--force', type=float, action=_Once,
                        help='constant sleeve force F_H >= 0 (N)')
     force.add_argument('--force-profile', metavar='CSV',
-                       help='CSV of t,F rows: F_H held from each t until the next')
+                       help='CSV of t,F rows (s, N): F_H held from each t until the next; '
+                            'an optional header naming other units, t (ms), is refused')
     sp.add_argument('--lock', choices=SPECS['lock'].choices, action=_Once)
     sp.add_argument('--time-step', type=float, dest='time_step', action=_Once,
                     help='physics step (s)')

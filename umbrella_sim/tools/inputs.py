@@ -59,13 +59,39 @@ def _is_number(text: str) -> bool:
     return True
 
 
+#: a unit a header names: in brackets, 't (s)', 'F [N]', or as a suffix, 't_ms', 'F_kN'
+_UNIT = re.compile(r'[(\[]\s*([^)\]]*?)\s*[)\]]|_(ms|us|µs|min|kn|mn|lbf|lb)$', re.I)
+
+
+def _header_problem(names: list[str]) -> str | None:
+    """
+    Say what a header's names tell against the columns t (s), F (N), or None.
+
+    The columns are read by position; a header is free text, but one naming force first and
+    time second, or another unit than s and N (t (ms), F (kN)), describes numbers that
+    position would misread.
+    """
+    low = [name.lower() for name in names]
+    if ((low[0].startswith('f') or 'force' in low[0])
+            and (low[1].startswith('t') or 'time' in low[1])):
+        return 'the columns are time then force (t,F), not force then time'
+    for name, unit, what in zip(names, ('s', 'N'), ('time', 'force')):
+        found = _UNIT.search(name)
+        given = found and (found.group(1) if found.group(1) is not None else found.group(2))
+        if given and given.lower() != unit.lower():
+            return (f'{what} in {given}: the columns are time in s and force in N (SI); '
+                    f'convert the column, or name it in {unit}')
+    return None
+
+
 def read_force_profile(path: str, params: UmbrellaParams | None = None
                        ) -> list[tuple[float, float]]:
     """
     Read a CSV of (t, F) rows, an optional header line.
 
     Blank lines and lines starting with # are skipped; the first other line may be a header
-    (neither of its two fields a number; one naming force then time, F,t, is refused).
+    (neither of its two fields a number; one naming force then time, F,t, or another unit
+    than s and N, t (ms), is refused).
     Times are non-decreasing; each F is a command the
     model (params) accepts.
     """
@@ -84,10 +110,9 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
                              f'got {row}')
         header, first = first and not any(map(_is_number, row[:2])), False
         if header:
-            names = [field.strip().lower() for field in row[:2]]
-            if names[0].startswith('f') and names[1].startswith('t'):   # (any other names)
-                raise ValueError(f'force profile {path}:{lineno}: header {row[:2]}: the '
-                                 'columns are time then force (t,F), not force then time')
+            problem = _header_problem([field.strip() for field in row[:2]])
+            if problem:
+                raise ValueError(f'force profile {path}:{lineno}: header {row[:2]}: {problem}')
             continue
         try:
             t, f = _number(row[0]), _number(row[1])
