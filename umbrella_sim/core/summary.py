@@ -621,8 +621,8 @@ _AXIAL_LOAD_TEXTS = (
     "axial load: the axial force in the frame's members reached {ratio} % of the link's Euler "
     'load pi^2 E I / l3^2 in stage 2 so far',
     "to it: the stage-2 bending and stresses change (the thesis's frame at 2 elements a "
-    "segment: the link's peak 8-20 % off flexible-nonlinear's from 39 % of the Euler load on; "
-    'at 1 element 4-7 %)', 'compare')
+    "segment: the larger stage-2 peak stress, the leaf's or the link's, 8-20 % off "
+    "flexible-nonlinear's from 39 % of the Euler load on; at 1 element 4-7 %)", 'compare')
 
 
 def axial_load_warning(params: dict, ratio: float | None) -> str | None:
