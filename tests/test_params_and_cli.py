@@ -77,6 +77,19 @@ def test_yield_strength_in_mpa_is_refused_and_soft_metals_are_not():
     assert run.returncode == 2 and 'yield_strength=500' in run.stderr, run.stderr
 
 
+@pytest.mark.parametrize('name, degrees', [('alpha_deployed', 15.0), ('alpha0', 88.2)])
+def test_an_angle_in_degrees_is_refused_naming_the_radians(name, degrees):
+    """alpha_deployed 15 (pi/12 in degrees) was refused as 'must be < π/2', no unit said."""
+    with pytest.raises(ValueError) as exc:
+        UmbrellaParams().replace(**{name: degrees}).validated()
+    radians = math.radians(degrees)
+    assert f'{name}={degrees}' in str(exc.value) and f'{radians:.7g} rad' in str(exc.value)
+    UmbrellaParams().replace(**{name: radians}).validated()      # the same angle in rad runs
+    with pytest.raises(ValueError) as exc:
+        UmbrellaParams(alpha0=200.0).validated()                # no angle in range: no hint
+    assert 'degrees' not in str(exc.value)
+
+
 def test_integers_for_doubles_are_the_doubles():
     """UmbrellaParams(v0=-1) as -p v0:=-1 and --set v0=-1: the double, and validated."""
     p = UmbrellaParams(v0=-1, sleeve_force_min=-8).validated()

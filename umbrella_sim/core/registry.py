@@ -126,9 +126,19 @@ class Param:
             raise ValueError(f'{what}={value}: must be between {_num(lo)} and {_num(hi)}')
         if below:
             raise ValueError(f"{what}={value}: must be {'>' if self.low_open else '>='} "
-                             f'{_num(lo)}')
+                             f'{_num(lo)}{self._degrees_hint(value)}')
         raise ValueError(f"{what}={value}: must be {'<' if self.high_open else '<='} "
-                         f'{_num(hi)}')
+                         f'{_num(hi)}{self._degrees_hint(value)}')
+
+    def _degrees_hint(self, value: float) -> str:
+        """Say an angle is in rad when the value, read as degrees, is in range (else '')."""
+        if self.unit != 'rad' or value == 0.0:
+            return ''
+        try:
+            self.check(math.radians(value))
+        except ValueError:
+            return ''
+        return f' (an angle in rad: {value:g} degrees is {math.radians(value):.7g} rad)'
 
     def exact(self, value: Any) -> Any:
         """
