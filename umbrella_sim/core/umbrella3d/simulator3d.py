@@ -390,12 +390,18 @@ class UmbrellaSimulator3D:
         return n
 
     def run(self, duration: float, after_lock: float | None = None) -> 'Record3D':
-        """Step to t = duration (or to after_lock s past the lock); return the record."""
-        while self.time < duration - 1e-12:
-            t_end = duration
+        """
+        Take every grid step that ends by t = duration (or to after_lock s past the lock).
+
+        The planar simulator's rule (UmbrellaSimulator.advance_to, the run driver's): a
+        duration between grid steps ends at the step before it.  Returns the record.
+        """
+        k_end = math.floor(duration / self.h + 1e-9)
+        while self.k < k_end:
+            n = k_end - self.k
             if after_lock is not None and self.locked:
-                t_end = min(t_end, self.lock_time + after_lock)
-            self.advance(self._steps_to(t_end) if self.integrator.compiled else 1,
+                n = min(n, self._steps_to(self.lock_time + after_lock))
+            self.advance(n if self.integrator.compiled else 1,
                          stop_at_lock=after_lock is not None and not self.locked)
             if after_lock is not None and self.locked and self.time >= self.lock_time + after_lock:
                 break
