@@ -101,3 +101,15 @@ def test_help_texts_come_from_the_registry():
         assert f'  {name} ' not in text
     model = next(a for a in sim._actions if a.dest == 'model')
     assert tuple(model.choices) == SPECS['model'].choices
+
+
+@pytest.mark.parametrize('given, meant', [
+    ('youngs_modulous', 'youngs_modulus'), ('v_0', 'v0'), ('durration', 'duration'),
+    ('yield', 'yield_strength'), ('elements', 'elements_per_segment'),   # shortened
+    ('lenght', None), ('length', None),            # (was 'yield_strength', which no one meant)
+])
+def test_an_unknown_name_is_answered_with_the_name_meant_or_none(given, meant):
+    from umbrella_sim.core.registry import closest_name, REGISTRY, unknown_names
+    assert closest_name(given, REGISTRY) == meant
+    said = unknown_names([given], REGISTRY)[0]
+    assert said == (f'{given!r} (did you mean {meant!r}?)' if meant else repr(given))

@@ -482,15 +482,32 @@ def check_node_parameters(values: Mapping[str, Any]) -> dict:
 NODE_PARAMETERS_LISTED = 'umbrella_node --help and in msg_docs/parameters.md'
 
 
-def unknown_names(names, known) -> list[str]:
-    """Return "'name' (did you mean 'closest'?)" for each of names not in known, sorted."""
+def closest_name(name: str, known) -> str | None:
+    """
+    Return the known name a misspelt or shortened one most likely means, else None.
+
+    A name the given one begins (the shortest: 'yield' is yield_strength), else the closest
+    by difflib's ratio (at least 0.6) among names of the same first letter: a loose match
+    across letters named what no one meant ('lenght' is not yield_strength).
+    """
     import difflib
 
+    known = sorted(known)
+    longer = [k for k in known if k.startswith(name) and name]
+    if longer:
+        return min(longer, key=len)
+    close = difflib.get_close_matches(name, [k for k in known if k[:1] == name[:1]], n=1,
+                                      cutoff=0.6)
+    return close[0] if close else None
+
+
+def unknown_names(names, known) -> list[str]:
+    """Return "'name' (did you mean 'closest'?)" for each of names not in known, sorted."""
     known = set(known)
     out = []
     for name in sorted(set(names) - known):
-        close = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.5)
-        out.append(f'{name!r}' + (f' (did you mean {close[0]!r}?)' if close else ''))
+        close = closest_name(name, known)
+        out.append(f'{name!r}' + (f' (did you mean {close!r}?)' if close else ''))
     return out
 
 
