@@ -66,8 +66,12 @@ def test_a_duration_between_grid_steps_ends_at_the_last_step_before_it(ribs):
         assert end == pytest.approx(sim.time, abs=1e-12)
     else:
         from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
-        end = simulate(UmbrellaRibsParams.from_mapping({'ribs': 2, 'time_step': step}),
-                       duration).summary()['final_time']
+        from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+        ribs = UmbrellaRibsParams.from_mapping({'ribs': 2, 'time_step': step})
+        end = simulate(ribs, duration).summary()['final_time']
+        sim = UmbrellaSimulator3D(ribs)          # its own run(), by the same rule
+        sim.run(duration)
+        assert end == pytest.approx(sim.time, abs=1e-12)
     assert duration - step < end <= duration
 
 
