@@ -92,8 +92,8 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
     Blank lines and lines starting with # are skipped; the first other line may be a header
     (neither of its two fields a number; one naming force then time, F,t, or another unit
     than s and N, t (ms), is refused).
-    Times are non-decreasing; each F is a command the
-    model (params) accepts.
+    Every row by core.forcing.check_profile_row: times finite, >= 0 and increasing (one
+    force per instant), each F a command the model (params) accepts.
     """
     rows: list[tuple[float, float]] = []
     text = read_text_input(path, 'force profile').removeprefix('\ufeff')   # (Excel's BOM)
