@@ -487,8 +487,8 @@ def closest_name(name: str, known) -> str | None:
     Return the known name a misspelt or shortened one most likely means, else None.
 
     A name the given one begins (the shortest: 'yield' is yield_strength), else the closest
-    by difflib's ratio (at least 0.6) among names of the same first letter: a loose match
-    across letters named what no one meant ('lenght' is not yield_strength).
+    by difflib's ratio (at least 0.5: 'l4' is l3) among names of the same first letter: a
+    match across letters named what no one meant ('lenght' is not yield_strength).
     """
     import difflib
 
@@ -497,7 +497,7 @@ def closest_name(name: str, known) -> str | None:
     if longer:
         return min(longer, key=len)
     close = difflib.get_close_matches(name, [k for k in known if k[:1] == name[:1]], n=1,
-                                      cutoff=0.6)
+                                      cutoff=0.5)
     return close[0] if close else None
 
 
