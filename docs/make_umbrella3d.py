@@ -954,14 +954,14 @@ runs of each in turn at load 1.2-1.6): 0.78 / 0.78 / 0.94 x real time with it ag
 against 0.93-1.17) and the new thread took 0.125-0.143 core more: what left the physics
 thread came back to it, most likely as waits for the GIL the publishing thread held (rclpy's
 publish and publish_raw call rcl_publish without releasing it).
-Where it stands, on a quiet machine (load 0.04-0.6; bench/bench_umbrella3d.py, the compiled
-step alone at the step the run takes, CPU us a step, stage 1 / stage 2): 6 x 1 37.1 / 51.6
-(0.19 / 0.52 core), 12 x 1 70.1 / 101.8, 6 x 2 61.7 / 103.9, 12 x 2 121.3 / 211.3 (0.61 /
-6.34 cores at stage 2's 33 us); linear in the ribs, 5.79 / 8.41 us a rib at 1 element, 10.04 /
-17.53 at 2. The live node (bench_ribs_node --live, 6 x 1, 1 kHz, recording, a subscriber):
-deploying 1.000 x real time at 0.813 core; in stage 2 1.000 x at 0.991 core and 0.942 x at
-1.018 core (two runs). Neither target is met: 6 x 1 needs half that core, 12 x 2 six times
-fewer stage-2 steps or cheaper ones.
+Where it stands, on a quiet machine (load 0.16-0.36; bench/bench_umbrella3d.py, the compiled
+step alone at the step the run takes, CPU us a step, stage 1 / stage 2, the better of two
+runs): 6 x 1 35.5 / 51.7 (0.18 / 0.52 core), 12 x 1 72.9 / 102.9, 6 x 2 63.7 / 108.3, 12 x 2
+122.4 / 217.1 (0.61 / 6.51 cores at stage 2's 33 us); linear in the ribs, 6.06 / 8.66 us a
+rib at 1 element, 10.61 / 18.08 at 2. The live node (bench_ribs_node --live, 6 x 1, 1 kHz,
+recording, a subscriber, load 0.35-0.72): deploying 1.000 x real time at 0.779 core; in
+stage 2 0.950 x at 0.986 core and 1.015 x at 1.024 core (two runs). Neither target is met:
+6 x 1 needs half that core, 12 x 2 six times fewer stage-2 steps or cheaper ones.
 """
 
 
