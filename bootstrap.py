@@ -94,7 +94,7 @@ def main(argv) -> int:
         paths = [os.path.join(ROOT, 'tests'), os.path.join(ROOT, 'examples')]
         if argv[1:]:
             return run_tests([[PY, '-m', 'pytest', '-q'] + paths + argv[1:]], cwd, env)
-        print('the whole suite: ~8 min on a quiet 2-core machine, in two parts: what starts no '
+        print('the whole suite: ~10 min on a quiet 2-core machine, in two parts: what starts no '
               'ROS node, on two processes (pytest-xdist, each file on one), then what talks '
               'over DDS, one test at a time; the fast subset (no ROS node, nothing slow): '
               'python3 bootstrap.py test -m "not ros and not slow" -n 2', flush=True)

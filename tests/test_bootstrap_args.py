@@ -13,7 +13,7 @@
 # limitations under the License.
 
 
-"""The node's arguments after `bootstrap.py run`: relative paths are the caller's."""
+"""`bootstrap.py`: the node's relative paths are the caller's; its note on the test suite."""
 import os
 
 from bootstrap import node_paths
@@ -31,3 +31,24 @@ def test_relative_paths_are_the_working_directorys(tmp_path, monkeypatch):
     # no path, nothing changed (record_path:= empty: the node's own naming)
     assert node_paths(['-p', 'record_path:=', '-p', 'duration:=2.0']) == [
         '-p', 'record_path:=', '-p', 'duration:=2.0']
+
+
+def test_the_suite_note_says_what_the_readme_says(monkeypatch, capsys):
+    """`bootstrap.py test` announces the README's duration of the whole suite and fast subset."""
+    import re
+
+    import bootstrap
+
+    ran = []
+    monkeypatch.setattr(bootstrap, 'setup', lambda: None)
+    monkeypatch.setattr(bootstrap, 'run_tests', lambda commands, cwd, env: ran.append(commands))
+    bootstrap.main(['test'])
+    assert len(ran) == 1
+    note = capsys.readouterr().out
+    with open(os.path.join(os.path.dirname(bootstrap.__file__), 'README.md'),
+              encoding='utf-8') as fh:
+        readme = ' '.join(fh.read().split())
+    quiet = r'~(\d+) min on a quiet 2-core machine'
+    assert re.search(quiet, note)[1] == re.search(quiet, readme)[1], (note, readme)
+    fast = re.search(r'python3 bootstrap\.py test -m "[^"]+" -n \d', note)[0]
+    assert f'`{fast}`' in readme, fast
