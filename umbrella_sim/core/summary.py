@@ -716,9 +716,16 @@ def validity_warnings(params: dict, lock_kind: str | None, peak_stress: float,
     out += geometric_validity_warnings(params, peak_stress, section_slope, strain)
     out += parameter_warnings(params)
     if ribs:
-        out = [(f'{key}: rib {ribs[key]}, {text.lstrip()}' if key in ribs else f'{key}:{text}')
-               for key, text in (w.split(':', 1) for w in out)]
+        out = [naming_rib(w, ribs.get(w.split(':', 1)[0])) for w in out]
     return out
+
+
+def naming_rib(warning: str, rib: int | None) -> str:
+    """Return a warning with its rib after its key, 'key: rib k, text' (None: as it is)."""
+    if rib is None:
+        return warning
+    key, text = warning.split(':', 1)
+    return f'{key}: rib {rib}, {text.lstrip()}'
 
 
 class WarningsSaid:

@@ -47,7 +47,8 @@ from ..outputs import LockEvent
 from ..summary import (AXIAL_LOAD_LIMIT, CENTRIFUGAL_TENSION_LIMIT,
                        centrifugal_tension_per_rate, deploy_start, ENERGY_DRIFT_LIMIT,
                        ENERGY_SCALE_FLOOR, hub_spin_tension_per_rate, leaf_tension_ratio,
-                       mesh_resolution, parameter_warnings, validity_warnings, WarningsSaid)
+                       mesh_resolution, naming_rib, parameter_warnings, validity_warnings,
+                       WarningsSaid)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
 #: a segment; 6 to 9 ms with a moving base), so a chunk stays near the planar rule's ~10 ms
@@ -358,8 +359,7 @@ class Summary3D:
         # each rib's own section and lengths, judged as the planar record's are
         # (summary.parameter_warnings), where a rib's differ from it: by the rib
         self._rib_parameter_warnings = [
-            f"{w.split(':')[0]}: rib {k},{w.split(':', 1)[1]}"
-            for k, r in enumerate(ribs) if r.planar != sim.params.planar
+            naming_rib(w, k) for k, r in enumerate(ribs) if r.planar != sim.params.planar
             for w in parameter_warnings(r.planar.as_dict())]
         self._per_rate = np.array([centrifugal_tension_per_rate(r.planar, r.tip_mass)
                                    for r in ribs])
