@@ -23,14 +23,15 @@ negative number, and its test for one knows no exponent: ``--v0 -5e-1`` failed w
 A tool of commands (``umbrella_sim simulate``, ``umbrella_sim sweep``) wants its command
 first; argparse, given ``umbrella_sim --v0 -0.3``, named ``-0.3`` an invalid command.  This
 parser names what is wrong: the option before its command (and the command that takes it), or
-a command misspelt (with the one meant).
+a command misspelt (with the one meant: registry.closest_name, the parameters' rule).
 """
 from __future__ import annotations
 
 import argparse
-import difflib
 import re
 import sys
+
+from ..core.registry import closest_name
 
 #: a negative decimal number, with an optional exponent
 NEGATIVE_NUMBER = re.compile(r'^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$')
@@ -62,8 +63,8 @@ class ArgumentParser(argparse.ArgumentParser):
         first = args[0]
         names = ', '.join(commands)
         if not first.startswith('-') or NEGATIVE_NUMBER.match(first):
-            meant = difflib.get_close_matches(first, list(commands), n=1)
-            hint = f": did you mean '{meant[0]}'?" if meant else ''
+            meant = closest_name(first, commands)
+            hint = f": did you mean '{meant}'?" if meant else ''
             self.error(f"'{first}' is not a command (commands: {names}){hint}")
         option = first.split('=', 1)[0]
         if option in self._option_string_actions:
