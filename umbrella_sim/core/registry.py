@@ -297,7 +297,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        low=0.0, high=0.01, rule=f'0, or >= {MIN_PHYSICS_STEP:g} s'),
     _P('step_follows_mesh', bool, False, '-',
        "with a `time_step` > 0 (or flexible-nonlinear's 0, which stands for 0.1 ms): true = "
-       'flexible: stage 1 at `time_step` (the grid) and stage 2 in the substeps its lock '
+       "flexible: stage 1 at `time_step` (the grid; coarser than 0.25 ms: 'coarse stage-1 "
+       "step') and stage 2 in the substeps its lock "
        "needs, the largest `time_step` / k the mesh's stage-2 stresses need or finer (the "
        'rule of `time_step` 0, below this ceiling); flexible-nonlinear: the physics step '
        "is the largest `time_step` / k the mesh's stage-2 stresses need, in both stages "

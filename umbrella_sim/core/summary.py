@@ -39,8 +39,8 @@ from .outputs import (energy_balance, LockEvent, mechanical_energy, Sample, STEP
                       step_row, StepBlock)
 from .registry import SPECS
 from .step_rule import (beams_record, COUPLING_DEFLECTION, lock_amplitudes, MAX_STEP_DIVISOR,
-                        resolution_of, resolving_step_hint, stage2_step_needed,
-                        STRESS_SHARE_LIMIT)
+                        physics_step_of, resolution_of, resolving_step_hint,
+                        STAGE1_STEP_LIMIT, stage2_step_needed, STRESS_SHARE_LIMIT)
 
 #: the smallest energy scale of energy_drift (J): a run that never moves (V0 = 0, no force)
 #: has round-off of ~1e-20 J on energies of ~1e-20 J, which is no drift of 100 %
@@ -370,7 +370,8 @@ def parameter_warnings(params: dict) -> list[str]:
     models, 'outer fibre', area and second_moment_of_area given beside section_height at
     its default (the thesis's 10 mm square) whose square they are not (a round bar's A and
     I, say): the stresses take the outer fibre at b/2 all the same (params.fibre_distance);
-    'thick beam', a member (l1, l2, l3) shorter than SLENDERNESS_LIMIT section depths; for
+    'thick beam', a member (l1, l2, l3) shorter than SLENDERNESS_LIMIT section depths, and
+    'coarse stage-1 step', a stage-1 step coarser than step_rule.STAGE1_STEP_LIMIT; for
     every model 'density', a density below DENSITY_LOW (kg/m³ given as g/cm³, say).
     """
     density = params.get('density', SPECS['density'].default)
@@ -384,6 +385,15 @@ def parameter_warnings(params: dict) -> list[str]:
                        f'structural damping; model {model} has no elastic field to damp and '
                        'takes no effect of it'] if damping > 0.0 and model in (
                            'rigid', 'rigid-fe') else [])
+    stage1, measured = physics_step_of(beams), STAGE1_STEP_LIMIT
+    if stage1 > measured * (1.0 + 1e-9):
+        out.append(f'coarse stage-1 step: stage 1 (the deployment) takes the physics step '
+                   f'{stage1:g} s, coarser than the {measured:g} s up to which its peak '
+                   "stresses were measured within 3 %: the elements' modes that carry them, "
+                   'and the state the lock starts stage 2 from, are not resolved (the '
+                   "thesis's frame, 1-8 elements a segment, against 5-10 us: up to 3.0-4.4 % "
+                   f'off at 0.4-0.5 ms, 4.1-15 % at 1 ms); time_step <= {measured:g} s '
+                   'resolves them (time_step 0 takes 0.2 ms or finer)')
     area, inertia = beams.area, beams.second_moment_of_area
     height = beams.section_height
     if area > 0.0 and inertia > 0.0 and height == SPECS['section_height'].default and not (
