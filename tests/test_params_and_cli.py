@@ -207,9 +207,9 @@ def test_cli_takes_negative_numbers_in_exponent_form():
     (['--v0', '-0.3'], 'the command comes first: umbrella_sim simulate --v0 -0.3 '
                        '(--v0 is an option of simulate)'),
     (['--duration=0.5'], 'the command comes first: umbrella_sim simulate --duration=0.5'),
-    (['simulat', '--v0', '-0.3'], "'simulat' is not a command (commands: simulate, sweep): "
+    (['simulat', '--v0', '-0.3'], "'simulat' is not a command (commands: simulate, sweep, modes): "
                                   "did you mean 'simulate'?"),
-    (['-0.3'], "'-0.3' is not a command (commands: simulate, sweep)"),
+    (['-0.3'], "'-0.3' is not a command (commands: simulate, sweep, modes)"),
     (['--bogus', '1'], '--bogus: not an option of umbrella_sim; the command comes first'),
 ])
 def test_cli_names_a_missing_or_misspelt_command(argv, message, capsys):

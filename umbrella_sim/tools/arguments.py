@@ -31,7 +31,7 @@ import argparse
 import re
 import sys
 
-from ..core.registry import closest_name
+from ..core.registry import closest_name, SPECS
 
 #: a negative decimal number, with an optional exponent
 NEGATIVE_NUMBER = re.compile(r'^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$')
@@ -76,3 +76,24 @@ class ArgumentParser(argparse.ArgumentParser):
                        f'({option} is an option of {" and ".join(takers)})')
         self.error(f'{option}: not an option of {self.prog}; the command comes first '
                    f'(commands: {names}; {self.prog} COMMAND --help lists its options)')
+
+
+class GivenOnce(argparse.Action):
+    """An option that gives a parameter: given twice is an error, not the last one winning."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if getattr(namespace, self.dest) is not None:
+            parser.error(f'{option_string} given twice (give each parameter once)')
+        setattr(namespace, self.dest, values)
+
+
+def add_parameter_options(sp: argparse.ArgumentParser) -> None:
+    """Add the options that give the model's parameters (inputs.build_params reads them)."""
+    sp.add_argument('--params', metavar='FILE',
+                    help='ROS 2 params YAML (default: config/umbrella.yaml)')
+    sp.add_argument('--set', action='append', metavar='NAME=VALUE',
+                    help='override one parameter (repeatable; each parameter once, here or '
+                         'by its own option)')
+    sp.add_argument('--model', choices=SPECS['model'].choices, action=GivenOnce)
+    sp.add_argument('--elements-per-segment', type=int, dest='elements_per_segment',
+                    action=GivenOnce)

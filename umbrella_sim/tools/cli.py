@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Offline command line: ``umbrella_sim simulate`` (also ``python -m umbrella_sim``)."""
+"""Offline command line: ``umbrella_sim simulate``, ``sweep`` and ``modes``."""
 from __future__ import annotations
 
 import argparse
@@ -21,8 +21,8 @@ import math
 import os
 import sys
 
-from . import sweep
-from .arguments import ArgumentParser
+from . import modes, sweep
+from .arguments import add_parameter_options, ArgumentParser, GivenOnce
 from .csv_output import StepCsv, UmbrellaStepCsv
 from .inputs import build_params, check_run_length, LONG_RUN_STEPS, read_force_profile
 from .progress import Progress
@@ -33,15 +33,6 @@ from ..core.params import shortened_step_note
 from ..core.registry import parameter_help, SPECS
 from ..core.umbrella3d.params3d import umbrella_parameter_help
 from ..ros.signals import deferred, EXIT_READER_GONE, interruptible, print_for_reader
-
-
-class _Once(argparse.Action):
-    """An option that gives a parameter: given twice is an error, not the last one winning."""
-
-    def __call__(self, parser, namespace, values, option_string=None):
-        if getattr(namespace, self.dest) is not None:
-            parser.error(f'{option_string} given twice (give each parameter once)')
-        setattr(namespace, self.dest, values)
 
 
 def make_parser() -> argparse.ArgumentParser:
@@ -56,24 +47,17 @@ def make_parser() -> argparse.ArgumentParser:
                         epilog='parameters (--set NAME=VALUE, or a --params file):\n'
                                + '\n'.join(parameter_help(SPECS.values())
                                            + umbrella_parameter_help()))
-    sp.add_argument('--params', metavar='FILE',
-                    help='ROS 2 params YAML (default: config/umbrella.yaml)')
-    sp.add_argument('--set', action='append', metavar='NAME=VALUE',
-                    help='override one parameter (repeatable; each parameter once, here or '
-                         'by its own option)')
-    sp.add_argument('--model', choices=SPECS['model'].choices, action=_Once)
-    sp.add_argument('--elements-per-segment', type=int, dest='elements_per_segment',
-                    action=_Once)
-    sp.add_argument('--v0', type=float, action=_Once,
+    add_parameter_options(sp)
+    sp.add_argument('--v0', type=float, action=GivenOnce,
                     help='initial sleeve velocity along Y (m/s)')
     force = sp.add_mutually_exclusive_group()
-    force.add_argument('--force', type=float, action=_Once,
+    force.add_argument('--force', type=float, action=GivenOnce,
                        help='constant sleeve force F_H >= 0 (N)')
     force.add_argument('--force-profile', metavar='CSV',
                        help='CSV of t,F rows (s, N): F_H held from each t until the next; '
                             'an optional header naming other units, t (ms), is refused')
-    sp.add_argument('--lock', choices=SPECS['lock'].choices, action=_Once)
-    sp.add_argument('--time-step', type=float, dest='time_step', action=_Once,
+    sp.add_argument('--lock', choices=SPECS['lock'].choices, action=GivenOnce)
+    sp.add_argument('--time-step', type=float, dest='time_step', action=GivenOnce,
                     help='physics step (s)')
     sp.add_argument('--duration', type=float, default=1.0, help='simulated time (s)')
     sp.add_argument('--long-run', action='store_true',
@@ -100,12 +84,13 @@ def make_parser() -> argparse.ArgumentParser:
                          'of .mcap files and metadata.yaml, nothing else) when the run '
                          'starts; without it an existing output is an error')
     sp.add_argument('--publish-rate', type=float, default=None, dest='publish_rate',
-                    action=_Once,
+                    action=GivenOnce,
                     help='publication rate of the --mcap recording (Hz, sim time; also '
                          "--set publish_rate=... or the params file's; default 100); the "
                          'summary is the same at any rate whose period the step divides')
     sp.set_defaults(marker_magnification=None)
     sweep.add_parser(sub)
+    modes.add_parser(sub)
     return ap
 
 
@@ -320,6 +305,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.command == 'sweep':
         return sweep.main(args, ap)
+    if args.command == 'modes':
+        return modes.main(args, ap)
     try:
         params = build_params(args)
         profile = (read_force_profile(args.force_profile, params)

@@ -75,8 +75,25 @@ def locked_modes(model: UmbrellaModel3D):
     z = null_space(np.vstack(rows + [fixed]))
     w2, psi = eigh(z.T @ stiff @ z, z.T @ mass @ z)
     shapes = z @ psi
-    labels = [_shares(m, stiff, shapes[:, i]) for i in range(shapes.shape[1])]
-    return np.sqrt(np.maximum(w2, 0.0)), shapes, labels
+    return np.sqrt(np.maximum(w2, 0.0)), shapes, mode_shares(m, shapes, stiff)
+
+
+def mode_shares(model: UmbrellaModel3D, shapes: np.ndarray, stiff=None) -> list[tuple]:
+    """
+    Return each mode's (in-plane, out-of-plane bending, twist) shares of its strain energy.
+
+    shapes: (coordinates, modes) over every coordinate (the ribs', rib-major, then the
+    shared ones); stiff: the dense stiffness (None: assembled here).
+    """
+    stiff = dense(model, model.stiffness) if stiff is None else stiff
+    return [_shares(model, stiff, shapes[:, i]) for i in range(shapes.shape[1])]
+
+
+def rib_energies(model: UmbrellaModel3D, x: np.ndarray) -> np.ndarray:
+    """Return each rib's strain energy x_k^T K_k x_k / 2 in a shape x over every coordinate."""
+    n = model.n_rib
+    return np.array([0.5 * x[k * n:(k + 1) * n] @ model.stiffness[k] @ x[k * n:(k + 1) * n]
+                     for k in range(model.n_ribs)])
 
 
 #: each model's mode analyses, which no step length changes: computed once a model (read-only

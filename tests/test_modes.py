@@ -1,0 +1,130 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The deployed frame's natural frequencies (``umbrella_sim modes``, core/modal.py).
+
+Checked against the physics they speak for: the simulated stage-2 period, the identity of N
+identical ribs with the planar rib, the square-root law of a stiffer rib, the interlacing
+of a free-floating bus with the held hub, the modal damping of C = beta K.
+"""
+import json
+import math
+
+import pytest
+
+from umbrella_sim.core.driver import simulate
+from umbrella_sim.core.modal import deployed_modes
+from umbrella_sim.core.params import UmbrellaParams
+from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+from umbrella_sim.tools.cli import main
+
+
+def cli_rows(capsys, *args) -> list[dict]:
+    """Return the rows of ``umbrella_sim modes ... --json``."""
+    assert main(['modes', *args, '--json']) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_the_first_period_is_the_simulated_stage2_period(capsys):
+    """The table's first mode is the one the locked frame vibrates in: its period to 0.5 %."""
+    rows = cli_rows(capsys, '--count', '3')
+    assert [r['multiplicity'] for r in rows] == [1, 1, 1]
+    assert rows[0]['frequency_hz'] < rows[1]['frequency_hz'] < rows[2]['frequency_hz']
+    run = simulate(UmbrellaParams(v0=-0.5), 0.6, keep_samples=False).figures
+    assert rows[0]['period_s'] == pytest.approx(run['stage2_tip_period'], rel=5e-3)
+
+
+def test_identical_ribs_repeat_the_planar_ribs_in_plane_modes(capsys):
+    """
+    N identical ribs on the stopped sleeve are N planar ribs: each in-plane frequency N times.
+
+    The planar rib's frequencies appear among the umbrella's with multiplicity 3, all their
+    strain energy in-plane, to 1e-9; the out-of-plane modes between them are the umbrella's own.
+    """
+    planar = [r['omega'] for r in cli_rows(capsys, '--count', '4')]
+    rows = cli_rows(capsys, '--set', 'ribs=3', '--count', '30')
+    in_plane = [r for r in rows if r['in_plane'] > 0.5]
+    assert [r['omega'] for r in in_plane[:4]] == pytest.approx(planar, rel=1e-9)
+    for r in in_plane[:4]:
+        assert r['multiplicity'] == 3 and r['in_plane'] == pytest.approx(1.0, abs=1e-9)
+        assert r['rib_share'] == pytest.approx(1 / 3, rel=1e-6)     # (one copy a rib)
+    out = [r for r in rows if r['out_of_plane'] > 0.5]
+    assert out and out[0]['omega'] < planar[0] and out[0]['multiplicity'] == 3
+
+
+def test_a_stiffer_rib_has_its_own_modes_at_root_two(capsys):
+    """Rib 1 at twice Young's modulus, the same mass: its modes sqrt(2) x the others', its own."""
+    e = UmbrellaParams().youngs_modulus
+    rows = cli_rows(capsys, '--set', 'ribs=3', '--set', f'rib1.youngs_modulus={2 * e!r}',
+                    '--count', '8')
+    others = [r for r in rows if r['multiplicity'] == 2]
+    own = [r for r in rows if r['multiplicity'] == 1]
+    assert len(own) >= 3
+    for r in own[:3]:
+        assert r['rib'] == 1 and r['rib_share'] > 0.999
+        twin = min(others, key=lambda o: abs(o['omega'] * math.sqrt(2) - r['omega']))
+        assert r['omega'] == pytest.approx(math.sqrt(2) * twin['omega'], rel=1e-9)
+        assert r['out_of_plane'] == pytest.approx(twin['out_of_plane'], abs=1e-9)
+
+
+def test_a_free_bus_raises_each_elastic_frequency_and_a_heavy_one_holds_the_hub():
+    """
+    The free-floating bus's elastic modes interlace above the held hub's (Rayleigh).
+
+    Holding the bus adds constraints: the k-th frequency of the held umbrella is at most the
+    k-th elastic one of the free umbrella; a bus of 1e9 kg (and inertia) is held, to 1e-6.
+    """
+    ribs = {'ribs': 3}
+    held = deployed_modes(UmbrellaRibsParams.from_mapping(ribs))
+    free = deployed_modes(UmbrellaRibsParams.from_mapping({**ribs, 'base': 'free'}))
+
+    def each(rows):
+        return [r.omega for r in rows for _ in range(r.multiplicity)]
+    for h, f in zip(each(held)[:12], each(free)[:12]):
+        assert f >= h * (1 - 1e-9)
+    assert each(free)[0] > each(held)[0] * (1 + 1e-4)           # (a light bus moves)
+    heavy = deployed_modes(UmbrellaRibsParams.from_mapping(
+        {**ribs, 'base': 'free', 'bus_mass': 1e9, 'bus_inertia': 1e9}))
+    assert each(heavy)[:12] == pytest.approx(each(held)[:12], rel=1e-6)
+
+
+def test_each_mode_is_damped_as_the_beams_c_beta_k():
+    """damping_ratio is the first mode's; mode i's is zeta omega_i / omega_1 (C = beta K)."""
+    rows = deployed_modes(UmbrellaParams(damping_ratio=0.02), 5)
+    assert rows[0].damping_ratio == pytest.approx(0.02, rel=1e-12)
+    for r in rows:
+        assert r.damping_ratio == pytest.approx(0.02 * r.omega / rows[0].omega, rel=1e-12)
+    assert all(r.damping_ratio == 0.0 for r in deployed_modes(UmbrellaParams(), 5))
+
+
+@pytest.mark.parametrize('args, culprit', [
+    (['--count', '0'], '--count 0'),
+    (['--model', 'rigid'], 'model rigid'),
+    (['--set', 'rib1.youngs_modulus=1e11'], 'rib1'),
+])
+def test_bad_input_is_refused_naming_the_culprit(capsys, args, culprit):
+    with pytest.raises(SystemExit) as exit_:
+        main(['modes', *args])
+    assert exit_.value.code == 2
+    assert culprit in capsys.readouterr().err
+
+
+def test_the_text_table_counts_repeated_modes(capsys):
+    """The text numbers modes as they come: a row of 3 repeated ones is modes k .. k+2."""
+    assert main(['modes', '--set', 'ribs=3', '--count', '2']) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert 'locked at full deployment' in lines[0] and 'the hub held' in lines[0]
+    assert [line.split()[0] for line in lines[2:]] == ['1', '4']
+    assert 'spread, <= 33 % a rib' in lines[2]

@@ -1,0 +1,135 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""
+The deployed antenna's natural frequencies: the modal table a structural engineer reads first.
+
+The locked frame linearised at full deployment (the undeformed frame at its deployed angle,
+the sleeve at the stop, K x = omega^2 M x on the null space of the locked joints): the
+planar rib's ``UmbrellaModel.locked_modes``; the umbrella of N ribs' ``modes3d.locked_modes``
+(the bus held; on a free-floating bus, ``modes3d.free_locked_modes``: the elastic modes,
+the six rigid-body ones left out).  These are the modes stage 2 vibrates in (its tip
+period is the first's, tests/test_summary.py) and the ones the stage-2 mode fit makes exact.
+flexible-nonlinear linearises to the same beams.  Equal frequencies (the N identical ribs'
+modes, decoupled by the stopped sleeve) are one row with their multiplicity.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import math
+
+import numpy as np
+
+from .model import UmbrellaModel
+from .params import UmbrellaParams
+
+#: frequencies within this relative distance are one repeated frequency (the identical
+#: ribs' copies of a mode differ by round-off, ~1e-12)
+REPEATED = 1e-7
+
+
+@dataclass(frozen=True)
+class ModeRow:
+    """A natural frequency of the locked frame, and where its mode's strain energy is."""
+
+    #: omega (rad/s)
+    omega: float
+    #: how many modes have it (N identical ribs: N)
+    multiplicity: int
+    #: shares of the modes' strain energy in in-plane bending and stretching, in
+    #: out-of-plane bending and in twist (the planar rib: 1, 0, 0)
+    in_plane: float
+    out_of_plane: float
+    twist: float
+    #: the rib holding the largest share of the modes' strain energy, and that share
+    rib: int
+    rib_share: float
+    #: the modal damping ratio of the beams' C = beta K (beta omega / 2; 0 undamped)
+    damping_ratio: float
+
+    @property
+    def frequency(self) -> float:
+        """Return f = omega / 2 pi (Hz)."""
+        return self.omega / (2.0 * math.pi)
+
+    @property
+    def period(self) -> float:
+        """Return T = 2 pi / omega (s)."""
+        return 2.0 * math.pi / self.omega
+
+    def as_dict(self) -> dict:
+        """Return the row as plain numbers (JSON)."""
+        return {'frequency_hz': self.frequency, 'period_s': self.period, 'omega': self.omega,
+                'multiplicity': self.multiplicity, 'in_plane': self.in_plane,
+                'out_of_plane': self.out_of_plane, 'twist': self.twist, 'rib': self.rib,
+                'rib_share': self.rib_share, 'damping_ratio': self.damping_ratio}
+
+
+def deployed_modes(params, count: int | None = None) -> list[ModeRow]:
+    """
+    Return the locked frame's natural frequencies, ascending, repeated ones as one row.
+
+    params: the planar record (UmbrellaParams) or the umbrella's (UmbrellaRibsParams), of a
+    model with beams (flexible, flexible-nonlinear); count: the first rows only (None: all).
+    ValueError for a rigid model, which has no elastic modes.
+    """
+    planar = params if isinstance(params, UmbrellaParams) else params.planar
+    if planar.model not in ('flexible', 'flexible-nonlinear'):
+        raise ValueError(f'model {planar.model}: a rigid frame has no elastic modes; give '
+                         'model flexible (or flexible-nonlinear: the same linearised beams)')
+    # beta of C = beta K: the planar rib's (umbrella3d/damping3d.py takes its planar record's)
+    first = UmbrellaModel(planar.replace(model='flexible')).locked_modes[0][0]
+    beta = 2.0 * planar.damping_ratio / first
+    if isinstance(params, UmbrellaParams):
+        omega = UmbrellaModel(params.replace(model='flexible')).locked_modes[0]
+        rows = [(w, (1.0, 0.0, 0.0), np.ones(1)) for w in omega]
+    else:
+        rows = _umbrella_rows(params)
+    out = []
+    for group in _repeated_groups([w for w, _, _ in rows]):
+        shares = np.mean([rows[i][1] for i in group], axis=0)
+        by_rib = np.sum([rows[i][2] for i in group], axis=0)
+        rib = int(np.argmax(by_rib))
+        omega = float(np.mean([rows[i][0] for i in group]))
+        out.append(ModeRow(omega, len(group), *(max(0.0, float(s)) for s in shares), rib,
+                           float(by_rib[rib] / by_rib.sum()), float(beta * omega / 2.0)))
+        if count is not None and len(out) == count:
+            break
+    return out
+
+
+def _umbrella_rows(params) -> list[tuple]:
+    """Return (omega, (in-plane, out-of-plane, twist), strain energy by rib) of every mode."""
+    from .umbrella3d.model3d import UmbrellaModel3D
+    from .umbrella3d.modes3d import free_locked_modes, locked_modes, mode_shares, rib_energies
+
+    model = UmbrellaModel3D(replace(params, planar=params.planar.replace(model='flexible')))
+    if model.params.base == 'free':
+        omega, shapes, _ = free_locked_modes(model)
+        shares = mode_shares(model, shapes)
+    else:
+        omega, shapes, shares = locked_modes(model)
+    return [(w, s, rib_energies(model, shapes[:, i]))
+            for i, (w, s) in enumerate(zip(omega, shares)) if w > 0.0]
+
+
+def _repeated_groups(omega: list[float]) -> list[list[int]]:
+    """Return the indices of ascending omega grouped where they repeat (REPEATED)."""
+    groups: list[list[int]] = []
+    for i, w in enumerate(omega):
+        if groups and w - omega[groups[-1][0]] <= REPEATED * w:
+            groups[-1].append(i)
+        else:
+            groups.append([i])
+    return groups

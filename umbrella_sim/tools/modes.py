@@ -1,0 +1,83 @@
+# Copyright 2026 umbrella_sim developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""``umbrella_sim modes``: the deployed antenna's natural frequencies (core/modal.py), no run."""
+from __future__ import annotations
+
+import argparse
+import json
+
+from .arguments import add_parameter_options
+from .inputs import build_params
+from ..core.modal import deployed_modes
+
+#: rows printed by default
+DEFAULT_COUNT = 12
+#: a rib named as a mode's own when it holds at least this share of the mode's strain energy
+OWN_RIB_SHARE = 0.9
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    sp = sub.add_parser(
+        'modes', help="the deployed frame's natural frequencies (no run)",
+        description='Print the natural frequencies of the frame locked at full deployment '
+                    '(the sleeve at the stop; linearised about the undeformed deployed '
+                    'frame): the modes stage 2 vibrates in. Repeated frequencies (N '
+                    'identical ribs) are one row, with their count; the umbrella of N ribs '
+                    "says where each mode's strain energy is (in-plane, out-of-plane "
+                    'bending, twist) and which rib holds it. Parameters as for simulate.')
+    add_parameter_options(sp)
+    sp.add_argument('--count', type=int, default=DEFAULT_COUNT,
+                    help=f'rows to print (default {DEFAULT_COUNT}; repeated frequencies '
+                         'are one row)')
+    sp.add_argument('--json', action='store_true', help='print the rows as JSON')
+    sp.set_defaults(v0=None, force=None, lock=None, time_step=None, publish_rate=None,
+                    mcap=None, marker_magnification=None)
+    return sp
+
+
+def main(args, ap: argparse.ArgumentParser) -> int:
+    try:
+        if args.count < 1:
+            raise ValueError(f'--count {args.count}: must be >= 1')
+        build_params(args)
+        rows = deployed_modes(args.model, args.count)
+    except ValueError as exc:
+        ap.exit(2, f'umbrella_sim: error: {exc}\n')
+    if args.json:
+        print(json.dumps([r.as_dict() for r in rows], indent=2))
+        return 0
+    umbrella = args.model is not getattr(args.model, 'planar', args.model)
+    base = getattr(args.model, 'base', 'fixed')
+    print('natural frequencies of the frame locked at full deployment (the sleeve at the stop), '
+          'linearised about the undeformed frame' + (
+              '; on the free-floating bus (its six rigid-body modes left out)' if base == 'free'
+              else '; the hub held' if umbrella else ''))
+    damped = any(r.damping_ratio > 0.0 for r in rows)
+    head = f"{'mode':>4}  {'f (Hz)':>10}  {'period (ms)':>11}  {'omega (rad/s)':>13}"
+    if umbrella:
+        head += f"  {'count':>5}  {'in-plane':>8}  {'out-of-plane':>12}  {'twist':>6}  rib"
+    print(head + ('  damping ratio' if damped else ''))
+    number = 1
+    for r in rows:
+        line = (f'{number:>4}  {r.frequency:>10.4f}  {1e3 * r.period:>11.4f}  '
+                f'{r.omega:>13.2f}')
+        if umbrella:
+            rib = (f'rib {r.rib}' if r.rib_share >= OWN_RIB_SHARE else
+                   f'spread, <= {100 * r.rib_share:.0f} % a rib')
+            line += (f'  {r.multiplicity:>5}  {100 * r.in_plane:>7.1f}%  '
+                     f'{100 * r.out_of_plane:>11.1f}%  {100 * r.twist:>5.1f}%  {rib}')
+        print(line + (f'  {r.damping_ratio:.4g}' if damped else ''))
+        number += r.multiplicity
+    return 0
