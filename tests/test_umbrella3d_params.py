@@ -99,6 +99,22 @@ def test_bad_values_name_the_culprit(values, culprit):
         UmbrellaRibsParams.from_mapping(values)
 
 
+@pytest.mark.parametrize('values, said', [
+    ({'ribs': 3, 'rib1.tip_mas': 0.1},
+     "unknown per-rib parameter 'rib1.tip_mas' (did you mean 'rib1.tip_mass'?)"),
+    ({'ribs': 3, 'rib.tip_mas': [0.0, 0.1, 0.0]},
+     "unknown per-rib parameter 'rib.tip_mas' (did you mean 'rib.tip_mass'?)"),
+    ({'ribs': 3, 'tip_mas': [0.0, 0.1, 0.0]},
+     "unknown per-rib parameter 'tip_mas' (did you mean 'tip_mass'?)"),
+    ({'ribs': 3, 'rib2.hinge_colomb': 0.5},
+     "unknown per-rib parameter 'rib2.hinge_colomb' (did you mean 'rib2.hinge_coulomb'?)"),
+])
+def test_a_misspelt_ribs_name_is_named_as_given_with_the_one_meant(values, said):
+    """From Python as on the command lines: the name as spelled, and the likely right one."""
+    with pytest.raises(ValueError, match=re.escape(said)):
+        UmbrellaRibsParams.from_mapping(values)
+
+
 def test_a_moving_bases_own_values_are_taken_on_it():
     """The bus's mass and inertia act on a driven base too (its drive's work moves them)."""
     p = UmbrellaRibsParams.from_mapping({'ribs': 3, 'base': 'prescribed', 'bus_mass': 5.0,

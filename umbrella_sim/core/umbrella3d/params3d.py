@@ -33,7 +33,7 @@ import re
 from typing import Any, Mapping
 
 from ..params import UmbrellaParams
-from ..registry import Param, parameter_help, REGISTRY, START
+from ..registry import closest_name, Param, parameter_help, REGISTRY, START
 
 BASE_MODES = ('fixed', 'prescribed', 'free')
 
@@ -327,7 +327,7 @@ class UmbrellaRibsParams:
                 every_rib(name[len(RIB_LIST_PREFIX):], value, name)
             elif match:
                 k, key = int(match.group(1)), match.group(2)
-                _rib_spec(key)
+                _rib_spec(key, name)
                 overrides.setdefault(k, {})[key] = value
             elif name in UMBRELLA_SPECS:
                 own[name] = UMBRELLA_SPECS[name].coerce(value)
@@ -532,10 +532,19 @@ def rigid_rib_angle(l1: float, l3: float, y: float) -> float:
 
 
 def _rib_spec(name: str, given: str | None = None) -> None:
-    """Refuse a per-rib name no rib takes (given: as the user spelled it, for the error)."""
+    """
+    Refuse a per-rib name no rib takes (given: as the user spelled it, for the error).
+
+    The error names it as given and, where one is close (registry.closest_name, the
+    parameters' rule), the name meant in the same spelling: 'rib1.tip_mas' is rib1.tip_mass.
+    """
     if name not in RIB_SPECS and name not in RIB_PLANAR_NAMES:
         known = sorted(RIB_SPECS) + list(RIB_PLANAR_NAMES)
-        raise ValueError(f'unknown per-rib parameter {given or name!r}; a rib takes '
+        given = given or name
+        meant = closest_name(name, known)
+        hint = (f' (did you mean {given[:len(given) - len(name)] + meant!r}?)'
+                if meant and given.endswith(name) else '')
+        raise ValueError(f'unknown per-rib parameter {given!r}{hint}; a rib takes '
                          + ', '.join(known))
 
 
