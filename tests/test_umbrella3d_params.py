@@ -115,6 +115,19 @@ def test_a_misspelt_ribs_name_is_named_as_given_with_the_one_meant(values, said)
         UmbrellaRibsParams.from_mapping(values)
 
 
+@pytest.mark.parametrize('values, said', [
+    ({'ribs': 3, 'rib1.tip_mass': True}, 'parameter rib1.tip_mass=True: must be a number'),
+    ({'ribs': 3, 'rib2.hinge_coulomb': 'abc'}, "parameter rib2.hinge_coulomb='abc'"),
+    ({'ribs': 3, 'rib1.tip_offset_z': None}, 'parameter rib1.tip_offset_z=None'),
+    ({'ribs': 3, 'tip_mass': [0.0, 'x', 0.0]}, "parameter rib1.tip_mass='x'"),
+    ({'ribs': 3, 'rib.stick_until': [0.0, 0.0, False]}, 'parameter rib2.stick_until=False'),
+])
+def test_a_ribs_own_value_of_a_wrong_type_is_named_as_the_ribs(values, said):
+    """As its out-of-range value and a rib's planar value: rib<k>.<name>, not the bare name."""
+    with pytest.raises(ValueError, match=re.escape(said)):
+        UmbrellaRibsParams.from_mapping(values)
+
+
 def test_a_moving_bases_own_values_are_taken_on_it():
     """The bus's mass and inertia act on a driven base too (its drive's work moves them)."""
     p = UmbrellaRibsParams.from_mapping({'ribs': 3, 'base': 'prescribed', 'bus_mass': 5.0,

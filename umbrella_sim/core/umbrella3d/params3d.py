@@ -434,7 +434,10 @@ class UmbrellaRibsParams:
         own = {name: spec.default for name, spec in RIB_SPECS.items()}
         for name, value in vals.items():
             spec = RIB_SPECS[name]
-            own[name] = spec.coerce(value)
+            try:
+                own[name] = spec.coerce(value)
+            except ValueError as exc:   # (named as the rib's, as its range and planar values)
+                raise ValueError(f'parameter rib{k}.{str(exc)[len("parameter "):]}') from None
             spec.check(own[name], f'parameter rib{k}.{name}')
         own['_shear_factor'] = 1.0 / (2.0 * (1.0 + self.poisson_ratio))
         return RibProperties(k, 2.0 * math.pi * k / self.ribs, planar, own)
