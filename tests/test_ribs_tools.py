@@ -123,6 +123,40 @@ def test_a_params_files_rib_list_that_is_none_is_refused_naming_the_file(
     assert f'params file {path}: {said}' in capsys.readouterr().err
 
 
+@pytest.mark.parametrize('lines, said', [
+    ('    base: free\n    bus_mass: "5"\n',
+     "parameter bus_mass='5': must be of type double, got string"),
+    ('    rib2:\n      tip_mass: "0.1"\n',
+     "parameter rib2.tip_mass='0.1': must be of type double, got string"),
+    ('    rib1:\n      l2: "0.6"\n', "parameter rib1.l2='0.6': must be of type double"),
+    ("    rib:\n      tip_mass: ['0', '0.1', '0', '0']\n",
+     "parameter rib.tip_mass=['0', '0.1', '0', '0']: must be of type double[], got the "
+     "string '0' in it"),
+    ('    rib:\n      tip_mass: [0, 0.1, 0, 0]\n',
+     'parameter rib.tip_mass=[0, 0.1, 0, 0]: a list of doubles needs every value written as '
+     'a double'),
+])
+def test_a_params_files_umbrella_value_the_node_refuses_is_refused_offline(
+        lines, said, tmp_path, capsys):
+    """
+    A params file shared with the node: what the node refuses by its type, simulate too.
+
+    A quoted number is a string to the node (as v0: "-0.5" is to both), and rcl refuses a
+    list mixing integers and doubles; simulate took them as numbers, so the file that ran
+    offline failed on the node.
+    """
+    path = tmp_path / 'ribs.yaml'
+    path.write_text('umbrella_node:\n  ros__parameters:\n    ribs: 4\n' + lines)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(['simulate', '--params', str(path), '--duration', '0.01'])
+    assert exc.value.code == 2
+    assert f'params file {path}: {said}' in capsys.readouterr().err
+    # the same values typed as the node reads them run
+    typed = lines.replace('"', '').replace("'", '').replace('0, 0.1, 0, 0', '0.0, 0.1, 0.0, 0.0')
+    path.write_text('umbrella_node:\n  ros__parameters:\n    ribs: 4\n' + typed)
+    assert cli.main(['simulate', '--params', str(path), '--duration', '0.002']) == 0
+
+
 def test_a_params_files_rib_beyond_its_ribs_is_refused_naming_the_file(tmp_path, capsys):
     """rib7.<name> in a file of ribs 4: exit 2 naming the file, the value and the ribs."""
     path = tmp_path / 'ribs.yaml'
@@ -151,6 +185,24 @@ def test_a_sweeps_rib_list_that_is_none_is_refused_naming_the_case(spec, said, t
     with pytest.raises(SpecError, match=re.escape(said)) as exc:
         load_spec(str(path))
     assert f'sweep spec {path}: case 1' in str(exc.value)
+
+
+def test_a_sweeps_umbrella_value_of_the_wrong_type_is_refused(tmp_path):
+    """A SPEC is typed YAML as a params file: a quoted number is a string, as for v0."""
+    path = tmp_path / 'spec.yaml'
+    path.write_text('base: {ribs: 3, base: free}\ncases:\n  - {bus_mass: "5"}\n'
+                    'duration: 0.1\n')
+    with pytest.raises(SpecError, match=re.escape(
+            "parameter bus_mass='5': must be of type double, got string")):
+        load_spec(str(path))
+    params = tmp_path / 'ribs.yaml'
+    params.write_text('umbrella_node:\n  ros__parameters:\n    rib1:\n      tip_mass: "0.1"\n')
+    path.write_text(f'params: {params}\nbase: {{ribs: 3}}\ncases:\n  - {{v0: -0.2}}\n'
+                    'duration: 0.1\n')
+    with pytest.raises(SpecError, match=re.escape(
+            f"sweep spec {path}: params: parameter rib1.tip_mass='0.1': must be of type "
+            'double, got string')):
+        load_spec(str(path))
 
 
 def test_a_sweep_over_rib_parameters(tmp_path, monkeypatch):

@@ -447,17 +447,19 @@ def coerce(name: str, value: Any) -> Any:
     return REGISTRY[name].coerce(value)
 
 
-def check_types(values: Mapping[str, Any]) -> None:
+def check_types(values: Mapping[str, Any], spec: 'Param | None' = None) -> None:
     """
     Refuse a typed value (YAML: a params file, a sweep SPEC) of another type than the node's.
 
     As the node takes a params file: a double takes a number (an int is that double), an
     integer a whole number (2.0 is 2, as the node takes it), a bool true/false, a string a
     string; "-0.5" in quotes is a string.  (Text from a command line, -p or --set, is
-    parsed instead: Param.coerce.)
+    parsed instead: Param.coerce.)  spec: every value's specification (else the registry's
+    of its name; the umbrella's: params3d.check_umbrella_types).
     """
+    given = spec
     for name, value in values.items():
-        spec = REGISTRY.get(name)           # model and node parameters alike
+        spec = given or REGISTRY.get(name)  # model and node parameters alike
         if spec is None:
             continue
         if type(spec.exact(value)) is not spec.type:

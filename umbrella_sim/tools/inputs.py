@@ -32,7 +32,8 @@ from ..core.forcing import check_profile_row
 from ..core.params import check_values, UmbrellaParams
 from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
-from ..core.umbrella3d.params3d import (names_a_rib, refuse_empty_rib_lists,
+from ..core.umbrella3d.params3d import (check_umbrella_types, names_a_rib,
+                                        refuse_empty_rib_lists,
                                         RIB_LIST_PREFIX, umbrella_model,
                                         umbrella_parameter_names, umbrella_values)
 from ..ros.params_file import check_parameter_sources, load_params_file
@@ -303,6 +304,11 @@ def build_params(args) -> UmbrellaParams:
         print(f'umbrella_sim: warning: {text}', file=sys.stderr)
     check_lock_given(params, lock_given)
     refuse_empty_rib_lists(from_file, f'params file {params_file}: ')
+    try:        # typed as the node reads the file: "5" is a string, [0, 0.1] refused
+        check_umbrella_types({name: from_file[name] for name in UMBRELLA_NAMES & set(from_file)
+                              if name not in umbrella})
+    except ValueError as exc:
+        raise ValueError(f'params file {params_file}: {exc}') from None
     for name in UMBRELLA_NAMES & set(from_file):
         umbrella.setdefault(name, from_file[name])
     try:        # (the core's rules; a value the file gave is named with the file)

@@ -138,8 +138,8 @@ def load_spec(path: str, progress=None) -> Sweep:
     """
     from ..core.forcing import command_force
     from ..core.registry import check_types
-    from ..core.umbrella3d.params3d import (refuse_empty_rib_lists, umbrella_model,
-                                            umbrella_values)
+    from ..core.umbrella3d.params3d import (check_umbrella_types, refuse_empty_rib_lists,
+                                            umbrella_model, umbrella_values)
     from ..core.step_rule import physics_step_of, smallest_step_of
     from ..ros.params_file import load_params_file, load_yaml_as_ros
 
@@ -215,6 +215,7 @@ def load_spec(path: str, progress=None) -> Sweep:
     params_file = params_file or default_params_file()
     try:        # read once for every case (each read it anew: ~14 ms a case, 4 h for 10^6)
         from_file = load_params_file(params_file) if params_file else None
+        check_umbrella_types(from_file or {})       # typed as the node reads the file
     except ValueError as exc:
         raise SpecError(f'sweep spec {path}: params: {exc}') from None
 
@@ -235,6 +236,7 @@ def load_spec(path: str, progress=None) -> Sweep:
         source = 'grid' if index <= len(overrides_list) - len(explicit) else 'cases'
         try:
             check_types(overrides)          # typed YAML, as a params file (the node's rule)
+            check_umbrella_types(overrides, params_file=False)
             resolved = resolve_params(overrides, params_file, from_file)
             check_lock_given(resolved, f"lock={overrides['lock']}" if 'lock' in overrides
                              else None)

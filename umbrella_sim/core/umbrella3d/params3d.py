@@ -33,7 +33,8 @@ import re
 from typing import Any, Mapping
 
 from ..params import UmbrellaParams
-from ..registry import closest_name, Param, parameter_help, REGISTRY, START
+from ..registry import (check_types, closest_name, Param, parameter_help, REGISTRY,
+                        START)
 
 BASE_MODES = ('fixed', 'prescribed', 'free')
 
@@ -200,6 +201,35 @@ def checked_umbrella_value(name: str, value):
     if name == 'ribs':
         return umbrella_values({name: value})[name]
     return umbrella_values({'ribs': 2, name: value}).get(name)
+
+
+def check_umbrella_types(values: Mapping[str, Any], params_file: bool = True) -> None:
+    """
+    Refuse a typed umbrella value (YAML: a params file, a sweep SPEC) the node would refuse.
+
+    registry.check_types' rule for the umbrella's own values and a rib's rib<k>.<name>, a
+    double ("5" in quotes is a string), and the node's for a rib.<name> list, a double[] of
+    numbers; in a params file (params_file) every one an integer or every one a double, as
+    rcl reads the file ([0, 0.1] refused).  Names not the umbrella's are left to the
+    registry's check.
+    """
+    for name, value in values.items():
+        override = _OVERRIDE.match(name)
+        if name.startswith(RIB_LIST_PREFIX) and isinstance(value, (list, tuple)):
+            kinds = {type(v) for v in value}
+            if not kinds <= {int, float}:
+                bad = next(v for v in value if type(v) not in (int, float))
+                kind = {str: 'string', bool: 'bool'}.get(type(bad), type(bad).__name__)
+                raise ValueError(f'parameter {name}={list(value)!r}: must be of type '
+                                 f'double[], got the {kind} {bad!r} in it')
+            if params_file and len(kinds) > 1:
+                raise ValueError(f'parameter {name}={list(value)!r}: a list of doubles needs '
+                                 'every value written as a double, [0.0, 0.1] not [0, 0.1] '
+                                 '(the node refuses it)')
+        elif name in UMBRELLA_SPECS:
+            check_types({name: value}, UMBRELLA_SPECS[name])
+        elif override and override.group(2) in rib_list_specs():
+            check_types({name: value}, rib_list_specs()[override.group(2)])
 
 
 def umbrella_values(values: Mapping[str, Any]) -> dict:
