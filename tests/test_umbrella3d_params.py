@@ -135,6 +135,34 @@ def test_a_moving_bases_own_values_are_taken_on_it():
     assert UmbrellaModel3D(p).bus_mass == 5.0
 
 
+def test_a_prescribed_bus_takes_its_mass_and_inertia_into_the_drives_work():
+    """
+    A driven bus's own kinetic energy is the drive's work too, which the docs say.
+
+    The drive moves the bus as prescribed whatever its mass and inertia (the ribs' motion is
+    the same), so between two buses the drive's work differs by their kinetic energies'
+    difference: 1/2 dI_y Omega^2 + 1/2 dm v^2 (v the pulse's end speed 2 A T / pi).
+    """
+    from umbrella_sim.core import UmbrellaSimulator3D
+
+    drive = {'ribs': 2, 'base': 'prescribed', 'base_accel_x': 20.0, 'base_accel_start': 0.0,
+             'base_accel_duration': 0.02, 'base_spin_rate': 3.0, 'base_spin_ramp': 0.02}
+    runs = [UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(dict(drive, **bus))).run(0.03)
+            .arrays() for bus in ({}, {'bus_mass': 10.0, 'bus_inertia': 1.0,
+                                       'bus_inertia_y': 2.0})]
+    np.testing.assert_allclose(runs[1]['alpha1'], runs[0]['alpha1'], rtol=0, atol=1e-9)
+    speed = 2 * 20.0 * 0.02 / math.pi
+    bus_energy = 0.5 * (10.0 - 2.0) * 3.0 ** 2 + 0.5 * (100.0 - 10.0) * speed ** 2
+    for name in ('drive_work', 'kinetic_energy'):
+        assert runs[0][name][-1] - runs[1][name][-1] == pytest.approx(bus_energy, rel=1e-6)
+    text = open(PAGE, encoding='utf-8').read()
+    for name in ('bus_inertia', 'bus_inertia_y'):
+        assert 'a prescribed one' in UMBRELLA_SPECS[name].doc
+    doc = open(os.path.join(os.path.dirname(PAGE), 'topic_ribs.md'), encoding='utf-8').read()
+    assert "the bus's own kinetic energy" in ' '.join(doc.split())
+    assert 'a prescribed one' in text
+
+
 @pytest.mark.parametrize('values, message', [
     ({'ribs': 0}, 'parameter ribs=0: must be between 1 and 64'),    # (was the planar model)
     ({'ribs': -2, 'rib.tip_mass': [0.0, 0.1]}, 'parameter ribs=-2'),

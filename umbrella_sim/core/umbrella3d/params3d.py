@@ -57,11 +57,11 @@ UMBRELLA_SPECS: dict[str, Param] = {p.name: p for p in (
        'default with a base it does not act on is refused', choices=BASE_MODES),
     _P('bus_mass', float, 100.0, 'kg', 'bus mass: a free-floating bus, or a prescribed one '
        '(its drive moves it)', low=0.0, low_open=True, high=1e9),
-    _P('bus_inertia', float, 10.0, 'kg m²', 'free-floating bus principal moment of inertia '
-       '(the same about its three axes unless bus_inertia_y is given)', low=0.0,
-       low_open=True, high=1e12),
-    _P('bus_inertia_y', float, 0.0, 'kg m²', 'bus moment about the hub axis Y; 0 = bus_inertia',
-       low=0.0, high=1e12),
+    _P('bus_inertia', float, 10.0, 'kg m²', 'bus principal moment of inertia (the same about '
+       'its three axes unless bus_inertia_y is given): a free-floating bus, or a prescribed '
+       "one (its drive spins it: the drive's work)", low=0.0, low_open=True, high=1e12),
+    _P('bus_inertia_y', float, 0.0, 'kg m²', 'bus moment about the hub axis Y: a free-floating '
+       'bus, or a prescribed one; 0 = bus_inertia', low=0.0, high=1e12),
     _P('base_accel_x', float, 0.0, 'm/s²', 'prescribed base: peak of a half-sine acceleration '
        'pulse along X', low=-1e6, high=1e6),
     _P('base_accel_z', float, 0.0, 'm/s²', 'prescribed base: the same along Z', low=-1e6,
