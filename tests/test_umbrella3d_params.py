@@ -163,6 +163,28 @@ def test_a_prescribed_bus_takes_its_mass_and_inertia_into_the_drives_work():
     assert 'a prescribed one' in text
 
 
+def test_a_free_bus_starts_with_the_momentum_zero_as_the_docs_say():
+    """
+    A free bus takes at t = 0 the rates that cancel the ribs' momentum.
+
+    v0 and a rib's rates are relative to the bus: the whole system's centre of mass stays
+    put from t = 0.
+    """
+    from umbrella_sim.core import UmbrellaSimulator3D
+
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
+        {'ribs': 3, 'base': 'free', 'bus_mass': 5.0, 'bus_inertia': 0.2,
+         'rib.tip_mass': [0.05, 0.0, 0.0]}))
+    s = sim.state
+    p, h = sim.model.momentum(sim.model.kinematics(s.qr, s.qs), s.vr, s.vs)
+    assert np.max(np.abs(p)) < 1e-14 and np.max(np.abs(h)) < 1e-14
+    assert s.vs[0] == -0.2                                   # v0: the sleeve on the bus
+    assert s.vs[6] == pytest.approx(0.41, abs=0.01)          # the bus turns about Z,
+    assert s.vs[2] == pytest.approx(0.025, abs=0.001)        # and moves up, from t = 0
+    text = ' '.join(open(PAGE, encoding='utf-8').read().split())
+    assert 'A free bus starts with the whole momentum zero' in text
+
+
 @pytest.mark.parametrize('values, message', [
     ({'ribs': 0}, 'parameter ribs=0: must be between 1 and 64'),    # (was the planar model)
     ({'ribs': -2, 'rib.tip_mass': [0.0, 0.1]}, 'parameter ribs=-2'),
