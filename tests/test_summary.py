@@ -840,6 +840,25 @@ def test_a_density_in_g_per_cm3_warns_density_for_every_model(model):
     assert [w.split(',')[0] for w in f.figures['warnings']] == ['density: rib 1']
 
 
+@pytest.mark.parametrize('model', ['flexible', 'flexible-nonlinear'])
+def test_a_youngs_modulus_in_gpa_warns_youngs_modulus_for_the_beams(model):
+    """72 for aluminium's 72e9 Pa (GPa, or 72000: MPa) ran beams of jelly, unsaid as such."""
+    def said(modulus, model=model):
+        return [w for w in parameter_warnings(UmbrellaParams(
+            youngs_modulus=modulus, model=model).as_dict()) if w.startswith('youngs_modulus')]
+
+    assert said(72.0, 'rigid') == []                   # (no elastic field: E takes no part)
+    assert said(72e9) == [] and said(2e9) == [] and said(5e6) == []   # Al, nylon, rubber
+    (text,) = said(72.0)
+    assert text.startswith('youngs_modulus: 72 Pa is below') and 'GPa' in text
+    assert said(7.2e4)                                                 # given in MPa
+    # the run says it, and its rib by name
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+    f = simulate(UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib1.youngs_modulus': 72.0}),
+                 0.004, keep_samples=False)
+    assert 'youngs_modulus: rib 1' in [w.split(',')[0] for w in f.figures['warnings']]
+
+
 def test_a_ribs_own_section_is_judged_and_named_by_its_rib():
     from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 

@@ -359,6 +359,10 @@ SLENDERNESS_LIMIT = 10.0
 #: density given in g/cm³ (2.77 for 2770) runs a frame a thousand times too light, whose
 #: figures no other warning questions
 DENSITY_LOW = 100.0
+#: Pa: below every solid a rib is made of (soft rubber ~1e6, polymers 1e9-3e9, aluminium
+#: 7.2e10): a modulus given in GPa (72 for 72e9) or MPa (72000) runs beams millions of times
+#: too soft, which the strain and deflection warnings question only as their figures
+YOUNGS_MODULUS_LOW = 1e6
 
 
 def parameter_warnings(params: dict) -> list[str]:
@@ -372,13 +376,18 @@ def parameter_warnings(params: dict) -> list[str]:
     I, say): the stresses take the outer fibre at b/2 all the same (params.fibre_distance);
     'thick beam', a member (l1, l2, l3) shorter than SLENDERNESS_LIMIT section depths, and
     'coarse stage-1 step', a stage-1 step coarser than step_rule.STAGE1_STEP_LIMIT; for
-    every model 'density', a density below DENSITY_LOW (kg/m³ given as g/cm³, say).
+    every model 'density', a density below DENSITY_LOW (kg/m³ given as g/cm³, say); for the
+    beams' models 'youngs_modulus', a modulus below YOUNGS_MODULUS_LOW (GPa or MPa, say).
     """
     density = params.get('density', SPECS['density'].default)
     out = [f'density: {density:g} kg/m³ is below any solid a rib is made of (balsa ~150, '
            'CFRP ~1600, aluminium ~2700 kg/m³): its unit is kg/m³ (a density in g/cm³ times '
            '1000)'] if density < DENSITY_LOW else []
     beams = beams_record(params)
+    if beams is not None and beams.youngs_modulus < YOUNGS_MODULUS_LOW:
+        out.append(f'youngs_modulus: {beams.youngs_modulus:g} Pa is below any solid a rib is '
+                   'made of (soft rubber ~1e6, polymers ~1e9 to 3e9, aluminium ~7.2e10 Pa): '
+                   'its unit is Pa (a modulus in GPa times 1e9, in MPa times 1e6)')
     if beams is None:
         model, damping = params.get('model'), params.get('damping_ratio', 0.0)
         return out + ([f"damping not applicable: damping_ratio {damping:g} is the beams' "
