@@ -96,6 +96,9 @@ def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_pat
     ([*RUN, '--set', 'rib.tip_mass=[0.1, 0.0, 0.0]'], 'rib.tip_mass'),
     ([*RUN, '--set', 'rib.tip_mass=[0.0 0.1]'], '--set rib.tip_mass: a list of numbers'),
     ([*RUN, '--set', 'rib.tip_mas=[0.0, 0.1]'], "(did you mean 'rib.tip_mass'?)"),
+    # [] given is no rib's value (the node and a params file refuse it): not left out unsaid
+    ([*RUN, '--set', 'rib.tip_mass=[]'], 'parameter rib.tip_mass: an empty list: give one '
+                                         'value per rib'),
     ([*RUN, '--csv', 'out.csv', '--csv-state'], '--csv-state'),
 ])
 def test_simulate_refuses_what_the_umbrella_cannot_take_naming_it(

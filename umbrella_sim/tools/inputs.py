@@ -237,6 +237,7 @@ def umbrella_value(name: str, value):
                 isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
             raise ValueError(f'--set {name}: a list of numbers, one per rib, comma-separated '
                              f'([0.0, 0.1, 0.0]); got {text!r}')
+        refuse_empty_rib_lists({name: value})      # ([]: no rib's value, as on the node)
     return value
 
 
