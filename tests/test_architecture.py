@@ -42,7 +42,8 @@ ALLOWED = {'core': set(), 'bag': {'core'}, 'ros': {'bag', 'core'},
 #: third-party and standard-library modules a layer must not import (the top name)
 FORBIDDEN = {
     'core': {'rclpy', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'sensor_msgs',
-             'geometry_msgs', 'visualization_msgs', 'rosgraph_msgs', 'diagnostic_msgs',
+             'geometry_msgs', 'nav_msgs', 'visualization_msgs', 'rosgraph_msgs',
+             'diagnostic_msgs',
              'std_srvs', 'mcap', 'yaml', 'argparse', 'signal', 'launch', 'launch_ros',
              'dask', 'distributed', 'matplotlib', 'csv'},
     'bag': {'argparse', 'signal', 'launch', 'launch_ros', 'dask', 'distributed',

@@ -164,3 +164,41 @@ def test_a_reset_restarts_the_umbrella_with_the_planar_parameters_set():
         # the new run's starting force is on sleeve_force/applied (at t = 0), not a command
         antenna.wait_for('sleeve_force_applied', lambda m: m.data == 30.0)
         assert antenna.applied_forces() == []
+
+
+def test_a_free_bus_publishes_its_state_as_the_offline_run_computes_it():
+    """
+    A free-floating bus: bus_state over DDS, each message the offline run's bus at its stamp.
+
+    Two ribs, rib 1 kicked out of its plane: the bus moves and turns in reaction.  Every
+    received bus_state (nav_msgs/Odometry, world -> umbrella_base) holds the position and
+    attitude the run driver computes offline at its stamp, to 1e-12.
+    """
+    import numpy as np
+
+    from umbrella_sim.core.driver import RunDriver
+    from umbrella_sim.core.umbrella3d.outputs3d import bus_odometry
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+
+    values = {'ribs': 2, 'base': 'free', 'bus_mass': 5.0, 'bus_inertia': 0.2,
+              'rib.out_of_plane_rate': [0.0, 0.5], 'time_step': 2e-4}
+    with SimulatedAntenna({**values, 'real_time_factor': 0.0, 'duration': 0.05}) as antenna:
+        antenna.wait_for_sim_time(0.05)
+        antenna.wait_for('bus_state', lambda m: m.header.stamp.nanosec >= 49_000_000,
+                         what='the bus state at t = 0.05 s')
+        states = antenna.bus_states()
+    assert len(states) >= 2 and states[-1]['time'] == pytest.approx(0.05, abs=1e-9)
+    driver = RunDriver(UmbrellaRibsParams.from_mapping(values), 100.0)
+    s = driver.publication()
+    offline = {0.0: bus_odometry(s.bus_q, s.bus_v)}
+    while s.time < 0.05 - 1e-9:
+        assert driver.advance_period()[-1].error is None
+        s = driver.publication()
+        offline[round(s.time, 6)] = bus_odometry(s.bus_q, s.bus_v)
+    moved = 0.0
+    for state in states:
+        want = offline[round(state['time'], 6)]
+        got = state['position'] + state['orientation'] + state['linear'] + state['angular']
+        assert got == pytest.approx(want.tolist(), rel=1e-12, abs=1e-15), state['time']
+        moved = max(moved, float(np.linalg.norm(state['position'])))
+    assert moved > 1e-5

@@ -88,3 +88,97 @@ def read_back(msgs, s, encoder):
     energy = rib_energy_figures(deserialize_message(msgs['energy'], Float64MultiArray))
     assert energy['balance_error_J'] == energy_balance3d(s, encoder.initial_energy)
     assert energy['friction_work_J'] == sum(s.friction_work.tolist())     # every hinge's
+
+
+#: a free bus, rib 1 kicked out of its plane: the bus moves and turns in reaction
+FREE_BUS = {'ribs': 3, 'base': 'free', 'bus_mass': 5.0, 'bus_inertia': 0.2, 'v0': -0.2,
+            'time_step': 2e-4, 'rib1.out_of_plane_rate': 0.5}
+#: a prescribed base: a jolt along X and a spin-up about Y
+DRIVEN = {'ribs': 3, 'base': 'prescribed', 'base_accel_x': 20.0, 'base_spin_rate': 3.0,
+          'v0': -0.2, 'time_step': 2e-4}
+
+
+@pytest.mark.parametrize('values', [FREE_BUS, DRIVEN], ids=['free', 'prescribed'])
+def test_bus_state_bytes_are_the_built_odometry_of_the_bus(values):
+    """
+    A moving base's bus_state: cdr_bytes of the built Odometry, and the bus's own motion.
+
+    The pose is the sample's bus position and attitude (the quaternion's rotation is R =
+    Ry(psi) Rx(beta) Rz(gamma) to 1e-15), the twist the bus's velocity and angular velocity in
+    its own frame: R^T X' and the omega of R' = R [omega]x, R' the derivative of R along the
+    attitude's rates (a central difference of 1e-6 s: to 1e-8 of omega).
+    """
+    from nav_msgs.msg import Odometry
+
+    from umbrella_sim.core.umbrella3d.model3d import BusFrame
+
+    driver = RunDriver(UmbrellaRibsParams.from_mapping(values), 1000.0)
+    encoder = RibsPublicationEncoder(driver)
+    moved, turned = 0.0, 0.0
+    s = driver.publication()
+    for _ in range(30):
+        msgs = encoder.messages(s, 'umbrella', 1.0, 'a/')
+        ref = rib_messages(s, encoder.yield_strength, encoder.initial_energy, 'a/')['bus_state']
+        assert msgs['bus_state'] == cdr_bytes(ref)
+        odo = deserialize_message(msgs['bus_state'], Odometry)
+        assert (odo.header.frame_id, odo.child_frame_id) == ('a/world', 'a/umbrella_base')
+        p, o = odo.pose.pose.position, odo.pose.pose.orientation
+        assert [p.x, p.y, p.z] == s.bus_q[:3].tolist()
+        x, y, z, w = o.x, o.y, o.z, o.w
+        rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        frame = BusFrame.of(s.bus_q[3:6])
+        assert np.abs(rot - frame.rot).max() < 1e-15 and w >= 0.0
+        lin, ang = odo.twist.twist.linear, odo.twist.twist.angular
+        assert [lin.x, lin.y, lin.z] == pytest.approx(frame.rot.T @ s.bus_v[:3], abs=1e-15)
+        dt, rates = 1e-6, s.bus_v[3:6]
+        skew = frame.rot.T @ (BusFrame.of(s.bus_q[3:6] + dt * rates).rot
+                              - BusFrame.of(s.bus_q[3:6] - dt * rates).rot) / (2 * dt)
+        omega = np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
+        assert np.linalg.norm(omega - [ang.x, ang.y, ang.z]) <= 1e-8 * np.linalg.norm(omega)
+        moved = max(moved, float(np.linalg.norm(s.bus_q[:3])))
+        turned = max(turned, float(np.linalg.norm(omega)))
+        assert driver.advance_period()[-1].error is None
+        s = driver.publication()
+    assert moved > 1e-5 and turned > 1e-3          # (a bus that moves and turns)
+
+
+def test_a_fixed_hub_advertises_no_bus_state():
+    """bus_state is the moving base's: a fixed hub has no bus (and the planar rib none)."""
+    from umbrella_sim.ros.ribs_messages import node_topics
+
+    assert 'bus_state' not in node_topics(3) and 'bus_state' not in node_topics(1, 'free')
+    assert node_topics(3, 'free')['bus_state'].name == 'bus_state'
+    driver = RunDriver(UmbrellaRibsParams.from_mapping({'ribs': 3}), 100.0)
+    assert 'bus_state' not in RibsPublicationEncoder(driver).messages(driver.publication())
+
+
+def test_a_recording_of_a_free_bus_holds_its_bus_state(tmp_path, capsys):
+    """
+    A --mcap recording holds bus_state as the node publishes it: its last pose the end's.
+
+    The summary's bus_q at the run's end is the last recorded message's position, and the
+    bus moved (the rib kicked out of its plane turns it); a fixed hub records no bus_state.
+    """
+    import json
+
+    from nav_msgs.msg import Odometry
+
+    from umbrella_sim.bag.reader import read_log
+    from umbrella_sim.tools.cli import main
+
+    args = [f'--set={k}={v}' for k, v in FREE_BUS.items()]
+    assert main(['simulate', *args, '--duration', '0.02', '--json',
+                 '--mcap', str(tmp_path / 'free')]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    log = read_log(str(tmp_path / 'free'))
+    (topic,) = [t for t in log.topics() if t.endswith('bus_state')]
+    assert log.channels[topic][0] == 'nav_msgs/msg/Odometry'
+    t, last = log.decoded(topic)[-1]
+    assert isinstance(last, Odometry) and t == pytest.approx(0.02, abs=1e-12)
+    p = last.pose.pose.position
+    assert [p.x, p.y, p.z] == summary['bus_q'][:3] and np.linalg.norm(summary['bus_q'][:3]) > 0
+    assert main(['simulate', '--set=ribs=3', '--duration', '0.01', '--json',
+                 '--mcap', str(tmp_path / 'fixed')]) == 0
+    assert not [t for t in read_log(str(tmp_path / 'fixed')).topics() if 'bus' in t]

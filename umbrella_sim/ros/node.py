@@ -142,10 +142,11 @@ class UmbrellaNode(Node):
         # (ros_io.QOS_OVERRIDE_POLICIES: the ROS 2 convention; read-only)
         try:
             # (own copies: topics share ros_io's profiles)
+            topics = node_topics(self.ribs, self.umbrella.get('base', 'fixed'))
             self.pub = {key: self.create_publisher(
                 t.type, t.name, ros_io.own_qos(t.qos),
                 qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
-                for key, t in node_topics(self.ribs).items()}
+                for key, t in topics.items()}
             # commands and services in their own callback groups, served by 2 threads
             # (executor.py): a slow ~/reset never delays a command, a flood never ~/pause
             self.command_sub = self.create_subscription(

@@ -34,7 +34,7 @@ from .dds_profile import use_node_profile
 from .executor import CallbackPool
 from .node import EXIT_FAULT, EXIT_OK, EXIT_RECORDING, EXIT_USAGE, StartupError, UmbrellaNode
 from .params_file import init_ros, param_rules_in
-from .ribs_messages import RIB_TOPICS
+from .ribs_messages import BUS_TOPIC, RIB_TOPICS
 from .share import package_path
 from ..core.registry import NODE_PARAMETERS, parameter_help, SPECS
 from ..core.umbrella3d.params3d import umbrella_parameter_help
@@ -56,7 +56,8 @@ def usage() -> str:
     lines += parameter_help(NODE_PARAMETERS.values())
     lines += umbrella_parameter_help()
     lines += ['', 'topics: ' + ', '.join(t.name for t in ros_io.TOPICS.values())
-              + ' (with ribs >= 2: ' + ', '.join(RIB_TOPICS) + ' too)'
+              + ' (with ribs >= 2: ' + ', '.join(RIB_TOPICS) + ' too; with a moving base: '
+              + BUS_TOPIC.name + ')'
               + f'; subscribes {ros_io.COMMAND.name} (std_msgs/Float64, N >= '
               'sleeve_force_min, 0 by default)',
               'services: ~/reset (std_srvs/Trigger), ~/pause (std_srvs/SetBool)',

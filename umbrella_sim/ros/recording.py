@@ -33,7 +33,7 @@ from std_msgs.msg import Float64
 
 from . import messages
 from .publication import run_driver
-from .ribs_messages import node_topics, RIB_TOPICS
+from .ribs_messages import BUS_TOPIC, node_topics, RIB_TOPICS
 from .signals import deferred
 from ..bag.format import (APPLIED_SUFFIX, COUNTS_RECORD, PARAMETERS_RECORD, REFUSED_SUFFIX,
                           TOPICS_RECORD)
@@ -45,7 +45,7 @@ from ..core.step_rule import step_taken_now
 from ..core.summary import RunResult
 
 #: every topic a run may record: the planar model's, and the umbrella's per-rib ones
-TOPICS = {**messages.TOPICS, **RIB_TOPICS}
+TOPICS = {**messages.TOPICS, **RIB_TOPICS, 'bus_state': BUS_TOPIC}
 
 
 class RunRecording:
@@ -173,8 +173,8 @@ def record_offline(params, bag_dir: str, duration: float, force_profile=None,
     recorder = BagRecorder(bag_dir, run_metadata(params, node_cfg, driver.step, sim.model,
                                                  driver.backend, source='umbrella_sim simulate'),
                            what=what)
-    rec = RunRecording(recorder, {key: '/' + t.name.lstrip('/')
-                                  for key, t in node_topics(umbrella.get('ribs', 1)).items()},
+    topics = node_topics(umbrella.get('ribs', 1), umbrella.get('base', 'fixed'))
+    rec = RunRecording(recorder, {key: '/' + t.name.lstrip('/') for key, t in topics.items()},
                        '/' + messages.COMMAND.name)
     state = {'next_diag': 1.0, 'i_cmd': 0}
     wall0 = _time.perf_counter()

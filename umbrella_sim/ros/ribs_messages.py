@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import json
 
+from nav_msgs.msg import Odometry
 import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
@@ -49,7 +50,8 @@ from .messages import (clock_msg, group_starts, INERTIAL_FRAME, marker_every, pa
                        RELIABLE, stamp, stamp_parts, Topic, TOPICS)
 from .robot_description import joint_names
 from ..core.registry import NODE_PARAMETERS
-from ..core.umbrella3d.outputs3d import energy_balance3d, STRESS_NAMES, STRESS_ROWS
+from ..core.umbrella3d.outputs3d import (bus_odometry, energy_balance3d, STRESS_NAMES,
+                                         STRESS_ROWS)
 
 #: the topics of the umbrella's ribs (besides messages.TOPICS' joint_states, energy, clock)
 RIB_TOPICS = {
@@ -57,22 +59,32 @@ RIB_TOPICS = {
     'rib_peak_stress': Topic('rib_peak_stress', Float64MultiArray, RELIABLE),
 }
 RIB_LABEL = 'rib'
+#: a moving base's (base prescribed or free): the bus's pose and twist
+BUS_TOPIC = Topic('bus_state', Odometry, RELIABLE)
+#: the frame the bus moves in (bus_state's header.frame_id; with frame_prefix); the bus's
+#: own is INERTIAL_FRAME, umbrella_base, which moves with it
+WORLD_FRAME = 'world'
+#: bus_state's doubles: pose (position 3, orientation 4, covariance 36), twist (linear 3,
+#: angular 3, covariance 36), the message's last 85, contiguous
+_POSE, _TWIST = slice(0, 7), slice(43, 49)
 
 
 #: the planar rib's own topics, which the umbrella of ribs >= 2 carries per rib in RIB_TOPICS
 PLANAR_ONLY = ('tip_deflection', 'peak_stress')
 
 
-def node_topics(ribs: int) -> dict[str, Topic]:
+def node_topics(ribs: int, base: str = 'fixed') -> dict[str, Topic]:
     """
     Return umbrella_node's topics: messages.TOPICS, and with ribs >= 2 RIB_TOPICS.
 
     With ribs >= 2, RIB_TOPICS instead of the planar rib's tip_deflection and peak_stress
-    (not advertised: nothing would come).
+    (not advertised: nothing would come), and with a moving base (base prescribed or free)
+    BUS_TOPIC.
     """
     if ribs == 1:
         return dict(TOPICS)
-    return {**{k: t for k, t in TOPICS.items() if k not in PLANAR_ONLY}, **RIB_TOPICS}
+    bus = {'bus_state': BUS_TOPIC} if base != 'fixed' else {}
+    return {**{k: t for k, t in TOPICS.items() if k not in PLANAR_ONLY}, **RIB_TOPICS, **bus}
 
 
 TIP_FIELDS = ('axial_m', 'in_plane_m', 'out_of_plane_m')
@@ -145,9 +157,34 @@ def rib_messages(s, yield_strength: float, initial_energy: float,
     energy.layout.dim = [MultiArrayDimension(label='field: ' + ','.join(ENERGY_FIELDS),
                                              size=len(ENERGY_FIELDS), stride=len(ENERGY_FIELDS))]
     energy.data = rib_energy_values(s, initial_energy)
-    return {'clock': clock_msg(s.time), 'joint_states': joints, 'energy': energy,
-            'rib_tip_deflection': _array(np.asarray(s.tip, dtype=float), TIP_FIELDS),
-            'rib_peak_stress': _array(rib_stress_values(s, yield_strength), STRESS_FIELDS)}
+    out = {'clock': clock_msg(s.time), 'joint_states': joints, 'energy': energy,
+           'rib_tip_deflection': _array(np.asarray(s.tip, dtype=float), TIP_FIELDS),
+           'rib_peak_stress': _array(rib_stress_values(s, yield_strength), STRESS_FIELDS)}
+    if 'bus_q' in s.fields():
+        out['bus_state'] = bus_message(s, frame_prefix)
+    return out
+
+
+def bus_message(s, frame_prefix: str = '') -> Odometry:
+    """
+    Return bus_state of a Sample3D of a moving base: the bus's pose and twist.
+
+    header.frame_id the inertial WORLD_FRAME, child_frame_id the bus's umbrella_base (both
+    with frame_prefix); the pose in the first, the twist in the second (outputs3d.bus_odometry);
+    no covariance (all 0: a simulation's state is exact).
+    """
+    x = bus_odometry(s.bus_q, s.bus_v).tolist()
+    msg = Odometry()
+    msg.header.stamp = stamp(s.time)
+    msg.header.frame_id = frame_prefix + WORLD_FRAME
+    msg.child_frame_id = frame_prefix + INERTIAL_FRAME
+    pose, twist = msg.pose.pose, msg.twist.twist
+    pose.position.x, pose.position.y, pose.position.z = x[0:3]
+    o = pose.orientation
+    o.x, o.y, o.z, o.w = x[3:7]
+    twist.linear.x, twist.linear.y, twist.linear.z = x[7:10]
+    twist.angular.x, twist.angular.y, twist.angular.z = x[10:13]
+    return msg
 
 
 class RibsSampleEncoder:
@@ -163,16 +200,21 @@ class RibsSampleEncoder:
     """
 
     @staticmethod
-    def groups(ribs: int) -> dict:
-        """Return topic key -> the groups of doubles of its message for ribs (template_layout)."""
+    def groups(ribs: int, bus: bool = False) -> dict:
+        """
+        Return topic key -> the groups of doubles of its message for ribs (template_layout).
+
+        bus: a moving base's bus_state too.
+        """
         joints = 2 * ribs + 1
         return {'clock': (), 'joint_states': (joints, joints, joints),
                 'energy': (len(ENERGY_FIELDS),),
                 'rib_tip_deflection': (ribs * len(TIP_FIELDS),),
-                'rib_peak_stress': (ribs * len(STRESS_FIELDS),)}
+                'rib_peak_stress': (ribs * len(STRESS_FIELDS),),
+                **({'bus_state': (85,)} if bus else {})}
 
     #: topics with a stamp right after the 4-byte CDR header
-    STAMPED = ('clock', 'joint_states')
+    STAMPED = ('clock', 'joint_states', 'bus_state')
 
     def __init__(self, first, yield_strength: float, initial_energy: float,
                  frame_prefix: str = ''):
@@ -181,7 +223,8 @@ class RibsSampleEncoder:
         ribs = len(first.alpha1)
         templates = rib_messages(first, yield_strength, initial_energy, frame_prefix)
         self._buffers, views = {}, {}
-        for key, groups in self.groups(ribs).items():
+        self._bus = 'bus_state' in templates
+        for key, groups in self.groups(ribs, self._bus).items():
             buffer = self._buffers[key] = bytearray(cdr_bytes(templates[key]))
             views[key] = [np.frombuffer(buffer, '<f8', k, start)
                           for start, k in zip(group_starts(len(buffer), groups), groups)]
@@ -191,6 +234,8 @@ class RibsSampleEncoder:
         self._stress = views['rib_peak_stress'][0].reshape(ribs, len(STRESS_FIELDS))
         # rib_joint_values' order: per rib alpha1 and the link's angle, then the sleeve's
         self._leaf, self._link = slice(0, 2 * ribs, 2), slice(1, 2 * ribs, 2)
+        if self._bus:
+            (self._odometry,) = views['bus_state']
 
     def encode(self, s) -> dict[str, bytes]:
         """Return the CDR bytes of every per-publication topic of s, keyed as the node's."""
@@ -212,6 +257,11 @@ class RibsSampleEncoder:
         self._energy[:] = rib_energy_values(s, self.initial_energy)
         self._tip[...] = v['tip']
         rib_stress_values(s, self.yield_strength, self._stress)
+        if self._bus:
+            pack_stamp(b['bus_state'], sec, nsec)
+            odometry = bus_odometry(v['bus_q'], v['bus_v'])
+            self._odometry[_POSE] = odometry[:7]
+            self._odometry[_TWIST] = odometry[7:]
         return {key: bytes(buffer) for key, buffer in b.items()}
 
 
@@ -312,3 +362,17 @@ def rib_joint_figures(msg) -> dict:
 def rib_energy_figures(msg) -> dict:
     """Return the umbrella's energy message by field name (J)."""
     return dict(zip(ENERGY_FIELDS, msg.data))
+
+
+def bus_figures(msg) -> dict:
+    """
+    Return a bus_state message's figures: time (s), position, orientation, linear, angular.
+
+    position (m, in world), orientation (the quaternion x, y, z, w), linear (m/s) and
+    angular (rad/s) velocity in the bus frame, each a list (msg_docs/topic_ribs.md).
+    """
+    p, o = msg.pose.pose.position, msg.pose.pose.orientation
+    lin, ang = msg.twist.twist.linear, msg.twist.twist.angular
+    return {'time': msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec,
+            'position': [p.x, p.y, p.z], 'orientation': [o.x, o.y, o.z, o.w],
+            'linear': [lin.x, lin.y, lin.z], 'angular': [ang.x, ang.y, ang.z]}

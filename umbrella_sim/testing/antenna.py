@@ -108,6 +108,11 @@ class SimulatedAntenna:
             for key, t in {**RIB_TOPICS, 'energy': ros_io.TOPICS['energy']}.items():
                 self.topics[key] = prefix + t.name
                 self.probe.subscribe(self.topics[key], Float64MultiArray, t.qos)
+            if self.parameters.get('base', 'fixed') != 'fixed':     # a moving base's bus
+                from ..ros.ribs_messages import BUS_TOPIC
+
+                self.topics['bus_state'] = prefix + BUS_TOPIC.name
+                self.probe.subscribe(self.topics['bus_state'], BUS_TOPIC.type, BUS_TOPIC.qos)
         for key in ros_io.COMMAND_ECHO_SUFFIXES:
             self.probe.subscribe(self.topics[f'sleeve_force_{key}'], Float64,
                                  ros_io.COMMAND_ECHO_QOS)
@@ -460,6 +465,15 @@ class SimulatedAntenna:
 
         self._need_ribs()
         return [rib_array_figures(m) for m in self.messages(key)]
+
+    def bus_states(self) -> list[dict]:
+        """Return this run's bus_state messages of a moving base (ribs_messages.bus_figures)."""
+        from ..ros.ribs_messages import bus_figures
+
+        if 'bus_state' not in self.topics:
+            raise ValueError("bus_states: no bus: the node's base is fixed (ribs >= 2 and "
+                             'base prescribed or free have one)')
+        return [bus_figures(m) for m in self.messages('bus_state')]
 
     def energy_balance(self) -> list[dict]:
         """Return this run's energy messages of the umbrella by field name (J)."""

@@ -32,7 +32,7 @@ from ..ros import signals
 
 #: what the package needs from PyPI (bootstrap.py installs it into .venv)
 DEPENDENCIES = frozenset({'numpy', 'scipy', 'rclpy', 'mcap', 'yaml', 'std_msgs',
-                          'sensor_msgs', 'rosgraph_msgs', 'geometry_msgs',
+                          'sensor_msgs', 'rosgraph_msgs', 'geometry_msgs', 'nav_msgs',
                           'visualization_msgs', 'diagnostic_msgs', 'rcl_interfaces'})
 
 

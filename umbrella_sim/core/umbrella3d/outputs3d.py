@@ -603,3 +603,39 @@ def hub_spin_rate(bus_q, bus_v):
     out *= bus_v[..., 3]
     out -= np.sin(gamma) * bus_v[..., 4]
     return out
+
+
+def bus_odometry(bus_q, bus_v) -> np.ndarray:
+    """
+    Return the bus's pose and twist of a bus state: (13,) in nav_msgs/Odometry's order.
+
+    bus_q = [X, Y, Z, psi, beta, gamma] (R = Ry(psi) Rx(beta) Rz(gamma), bus to inertial),
+    bus_v their rates.  Out: the position X, Y, Z (inertial, m); R's unit quaternion x, y,
+    z, w (qy(psi) qx(beta) qz(gamma), w >= 0); the linear velocity R^T X' and the angular
+    velocity B theta' (model3d.BusFrame) in the bus frame (m/s, rad/s): the pose in the
+    inertial frame, the twist in the body's (REP 105).
+    """
+    x, v = np.asarray(bus_q, dtype=float), np.asarray(bus_v, dtype=float)
+    (cp, sp), (cb, sb), (cg, sg) = ((math.cos(a / 2.0), math.sin(a / 2.0)) for a in x[3:6])
+    # qy(psi) qx(beta) = (cp sb, sp cb, -sp sb, cp cb), then times qz(gamma)
+    qx, qy, qz, qw = cp * sb, sp * cb, -sp * sb, cp * cb
+    quat = np.array([qx * cg + qy * sg, qy * cg - qx * sg, qz * cg + qw * sg, qw * cg - qz * sg])
+    if quat[3] < 0.0:
+        quat = -quat
+    rot = _bus_rotation(x[3], x[4], x[5])
+    c_beta, s_beta = math.cos(x[4]), math.sin(x[4])
+    c_gamma, s_gamma = math.cos(x[5]), math.sin(x[5])
+    # B's columns: Rz^T Rx^T e_y, Rz^T e_x, e_z
+    basis = np.array([[s_gamma * c_beta, c_gamma, 0.0],
+                      [c_gamma * c_beta, -s_gamma, 0.0],
+                      [-s_beta, 0.0, 1.0]])
+    return np.concatenate([x[:3], quat, rot.T @ v[:3], basis @ v[3:6]])
+
+
+def _bus_rotation(psi: float, beta: float, gamma: float) -> np.ndarray:
+    """Return R = Ry(psi) Rx(beta) Rz(gamma)."""
+    cp, sp, cb, sb, cg, sg = (f(a) for a in (psi, beta, gamma) for f in (math.cos, math.sin))
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cb, -sb], [0.0, sb, cb]])
+    rz = np.array([[cg, -sg, 0.0], [sg, cg, 0.0], [0.0, 0.0, 1.0]])
+    return ry @ rx @ rz
