@@ -859,6 +859,24 @@ def test_a_youngs_modulus_in_gpa_warns_youngs_modulus_for_the_beams(model):
     assert 'youngs_modulus: rib 1' in [w.split(',')[0] for w in f.figures['warnings']]
 
 
+@pytest.mark.parametrize('model', ['flexible', 'rigid'])
+def test_a_length_in_mm_warns_length_naming_the_member(model):
+    """l2 = 600 for 0.6 m ran a frame a thousand times too large: it failed unnamed."""
+    def said(**lengths):
+        return [w for w in parameter_warnings(UmbrellaParams(model=model, **lengths).as_dict())
+                if w.startswith('length')]
+
+    assert said() == [] and said(l1=20.0, l2=20.0, l3=20.0) == []      # a large reflector
+    (text,) = said(l2=600.0)
+    assert text.startswith('length: l2 = 600 m: longer than') and 'in mm' in text
+    assert said(l1=500.0, l3=500.0)[0].startswith('length: l1 = 500 m, l3 = 500 m')
+    # the run says it, and its rib by name, though its first step fails
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+    f = simulate(UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib1.l2': 600.0}), 0.004,
+                 keep_samples=False)
+    assert 'length: rib 1' in [w.split(',')[0] for w in f.figures['warnings']]
+
+
 def test_a_ribs_own_section_is_judged_and_named_by_its_rib():
     from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 

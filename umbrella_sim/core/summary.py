@@ -363,6 +363,10 @@ DENSITY_LOW = 100.0
 #: 7.2e10): a modulus given in GPa (72 for 72e9) or MPa (72000) runs beams millions of times
 #: too soft, which the strain and deflection warnings question only as their figures
 YOUNGS_MODULUS_LOW = 1e6
+#: m: longer than the ribs of any deployable antenna (tens of m at most): a length given in mm
+#: (600 for 0.6 m) runs a frame a thousand times too large, whose first steps fail ('Newton
+#: did not converge') without naming the length
+LENGTH_HIGH = 100.0
 
 
 def parameter_warnings(params: dict) -> list[str]:
@@ -377,12 +381,19 @@ def parameter_warnings(params: dict) -> list[str]:
     'thick beam', a member (l1, l2, l3) shorter than SLENDERNESS_LIMIT section depths, and
     'coarse stage-1 step', a stage-1 step coarser than step_rule.STAGE1_STEP_LIMIT; for
     every model 'density', a density below DENSITY_LOW (kg/m³ given as g/cm³, say); for the
-    beams' models 'youngs_modulus', a modulus below YOUNGS_MODULUS_LOW (GPa or MPa, say).
+    beams' models 'youngs_modulus', a modulus below YOUNGS_MODULUS_LOW (GPa or MPa, say);
+    for every model 'length', a member (l1, l2, l3) longer than LENGTH_HIGH (mm, say).
     """
     density = params.get('density', SPECS['density'].default)
     out = [f'density: {density:g} kg/m³ is below any solid a rib is made of (balsa ~150, '
            'CFRP ~1600, aluminium ~2700 kg/m³): its unit is kg/m³ (a density in g/cm³ times '
            '1000)'] if density < DENSITY_LOW else []
+    long = [f'{n} = {params.get(n, SPECS[n].default):g} m' for n in ('l1', 'l2', 'l3')
+            if params.get(n, SPECS[n].default) > LENGTH_HIGH]
+    if long:
+        out.append(f"length: {', '.join(long)}: longer than the ribs of any deployable "
+                   f'antenna (tens of m at most; limit {LENGTH_HIGH:g} m): its unit is m (a '
+                   'length in mm times 1e-3)')
     beams = beams_record(params)
     if beams is not None and beams.youngs_modulus < YOUNGS_MODULUS_LOW:
         out.append(f'youngs_modulus: {beams.youngs_modulus:g} Pa is below any solid a rib is '
