@@ -182,3 +182,26 @@ def test_a_recording_of_a_free_bus_holds_its_bus_state(tmp_path, capsys):
     assert main(['simulate', '--set=ribs=3', '--duration', '0.01', '--json',
                  '--mcap', str(tmp_path / 'fixed')]) == 0
     assert not [t for t in read_log(str(tmp_path / 'fixed')).topics() if 'bus' in t]
+
+
+def test_diagnostics_carry_a_free_buss_momentum_and_a_fixed_hub_none():
+    """
+    A free bus's diagnostics: the system's momentum at the latest step, zero as it started.
+
+    The whole umbrella on a free bus starts with no momentum and no external force acts: the
+    linear momentum the diagnostics carry stays 0 (to 1e-12 kg m/s) while the 5 kg bus moves
+    at more than 1 mm/s in reaction to the ribs; a fixed hub's diagnostics have no such keys.
+    """
+    import json
+
+    from umbrella_sim.core.driver import simulate
+    from umbrella_sim.ros.ribs_messages import ribs_diagnostics
+
+    run = simulate(UmbrellaRibsParams.from_mapping(FREE_BUS), 0.02, keep_samples=False)
+    values = ribs_diagnostics(run.figures)
+    linear = json.loads(values['linear_momentum_kg_m_s'])
+    assert linear == run.figures['linear_momentum'] and len(linear) == 3
+    assert np.linalg.norm(linear) < 1e-12 and np.linalg.norm(run.figures['bus_v'][:3]) > 1e-3
+    assert json.loads(values['angular_momentum_kg_m2_s']) == run.figures['angular_momentum']
+    fixed = simulate(UmbrellaRibsParams.from_mapping({'ribs': 3}), 0.004, keep_samples=False)
+    assert not [k for k in ribs_diagnostics(fixed.figures) if 'momentum' in k]

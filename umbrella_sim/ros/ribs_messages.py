@@ -316,6 +316,9 @@ DIAGNOSTIC_FIGURES = {'ribs': 'ribs', 'rib_deploy_time_s': 'rib_deploy_time',
                       'energy_balance_residual_J': 'energy_balance_residual',
                       'energy_scale_J': 'energy_scale', 'friction_work_J': 'friction_work',
                       'peak_von_mises_Pa': None}
+#: a free bus's figures diagnostics carry too (the system's momentum at the latest step)
+BUS_DIAGNOSTIC_FIGURES = {'linear_momentum_kg_m_s': 'linear_momentum',
+                          'angular_momentum_kg_m2_s': 'angular_momentum'}
 
 
 def ribs_diagnostics(figures: dict) -> dict[str, str]:
@@ -324,13 +327,18 @@ def ribs_diagnostics(figures: dict) -> dict[str, str]:
 
     Every physics step's (Summary3D): each rib's deployment instant (null: not yet), the lag
     of the latest rib after the earliest, the largest out-of-plane tip and its rib, the energy
-    balance's largest residual and scale, each rib's friction work and von Mises peak.
+    balance's largest residual and scale, each rib's friction work and von Mises peak; a
+    free bus's linear and angular momentum at the latest step (X, Y, Z; inertial, about the
+    origin).
     """
     out = {}
     for key, name in DIAGNOSTIC_FIGURES.items():
         value = (figures['peak_stress']['von_mises']['value'] if name is None
                  else figures.get(name))
         out[key] = json.dumps(value)
+    for key, name in BUS_DIAGNOSTIC_FIGURES.items():
+        if name in figures:
+            out[key] = json.dumps(figures[name])
     return out
 
 
