@@ -32,6 +32,7 @@ import math
 import numpy as np
 
 from .model import UmbrellaModel
+from .nonlinear import damping_beta_of
 from .params import UmbrellaParams
 
 #: frequencies within this relative distance are one repeated frequency (the identical
@@ -88,12 +89,11 @@ def deployed_modes(params, count: int | None = None) -> list[ModeRow]:
     if planar.model not in ('flexible', 'flexible-nonlinear'):
         raise ValueError(f'model {planar.model}: a rigid frame has no elastic modes; give '
                          'model flexible (or flexible-nonlinear: the same linearised beams)')
+    model = UmbrellaModel(planar.replace(model='flexible'))
     # beta of C = beta K: the planar rib's (umbrella3d/damping3d.py takes its planar record's)
-    first = UmbrellaModel(planar.replace(model='flexible')).locked_modes[0][0]
-    beta = 2.0 * planar.damping_ratio / first
+    beta = damping_beta_of(model)
     if isinstance(params, UmbrellaParams):
-        omega = UmbrellaModel(params.replace(model='flexible')).locked_modes[0]
-        rows = [(w, (1.0, 0.0, 0.0), np.ones(1)) for w in omega]
+        rows = [(w, (1.0, 0.0, 0.0), np.ones(1)) for w in model.locked_modes[0]]
     else:
         rows = _umbrella_rows(params)
     out = []
