@@ -34,6 +34,7 @@ import math
 
 import numpy as np
 
+from .model3d import BusFrame
 from ..outputs import first_largest_of_substeps, hermite_crests, substep_ends
 
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
@@ -622,20 +623,5 @@ def bus_odometry(bus_q, bus_v) -> np.ndarray:
     quat = np.array([qx * cg + qy * sg, qy * cg - qx * sg, qz * cg + qw * sg, qw * cg - qz * sg])
     if quat[3] < 0.0:
         quat = -quat
-    rot = _bus_rotation(x[3], x[4], x[5])
-    c_beta, s_beta = math.cos(x[4]), math.sin(x[4])
-    c_gamma, s_gamma = math.cos(x[5]), math.sin(x[5])
-    # B's columns: Rz^T Rx^T e_y, Rz^T e_x, e_z
-    basis = np.array([[s_gamma * c_beta, c_gamma, 0.0],
-                      [c_gamma * c_beta, -s_gamma, 0.0],
-                      [-s_beta, 0.0, 1.0]])
-    return np.concatenate([x[:3], quat, rot.T @ v[:3], basis @ v[3:6]])
-
-
-def _bus_rotation(psi: float, beta: float, gamma: float) -> np.ndarray:
-    """Return R = Ry(psi) Rx(beta) Rz(gamma)."""
-    cp, sp, cb, sb, cg, sg = (f(a) for a in (psi, beta, gamma) for f in (math.cos, math.sin))
-    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cb, -sb], [0.0, sb, cb]])
-    rz = np.array([[cg, -sg, 0.0], [sg, cg, 0.0], [0.0, 0.0, 1.0]])
-    return ry @ rx @ rz
+    frame = BusFrame.of(x[3:6])
+    return np.concatenate([x[:3], quat, frame.rot.T @ v[:3], frame.basis @ v[3:6]])
