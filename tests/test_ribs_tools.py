@@ -90,6 +90,28 @@ def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_pat
     assert '(leave --thesis out)' in capsys.readouterr().err
 
 
+def test_compare_of_one_umbrella_recorded_at_two_rates_finds_no_leaf_angle_difference(
+        tmp_path, capsys):
+    """
+    The same run at 100 Hz, 40 Hz and 1 kHz: each rib's alpha1 difference is zero, any order.
+
+    As the planar runs' (alignment.difference): on the coarser run's publications, or
+    the instants both published at; interpolating one run's samples at the other's instants
+    made 0.012 rad of a locked frame's vibration.
+    """
+    bags = {}
+    for rate in ('100', '40', '1000'):
+        bags[rate] = tmp_path / f'r{rate}'
+        assert cli.main(['simulate', '--set', 'ribs=2', '--duration', '0.3', '--mcap',
+                         str(bags[rate]), '--publish-rate', rate]) == 0
+    for a, b in (('100', '40'), ('40', '100'), ('100', '1000'), ('1000', '100')):
+        out = tmp_path / f'cmp_{a}_{b}'
+        assert compare.main([str(bags[a]), str(bags[b]), '--out', str(out), '--no-plots']) == 0
+        other = json.loads((out / 'compare.json').read_text())['runs'][1]
+        assert other['alpha1_max_difference'] == [0.0, 0.0], (a, b)
+    capsys.readouterr()
+
+
 @pytest.mark.parametrize('args, culprit', [
     (['simulate', '--set', 'rib.tip_mass=[0.1]', '--duration', '0.01'], 'rib.tip_mass'),
     ([*RUN, '--set', 'rib.tip_mass=0.1'], 'rib.tip_mass'),

@@ -39,8 +39,7 @@ import math
 import os
 import sys
 
-import numpy as np
-
+from .alignment import difference as _diff
 from .arguments import ArgumentParser
 from .compare_plots import plot
 from .runs import (default_label, default_window, label_width, load_run, physics_figures,
@@ -51,70 +50,6 @@ from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader, rai
 
 __all__ = ['compare', 'main', 'plot', 'print_table', 'load_run', 'THESIS_TABLE_6_1',
            'THESIS_V02']
-
-
-def _spacing(t) -> float:
-    return float(np.median(np.diff(t))) if len(t) > 1 else math.inf
-
-
-def _on_grid(t, y, grid, peak_hold: bool):
-    """
-    Return series (t, y) on the instants grid, a coarser one.
-
-    A value (linear interpolation), or for a peak-hold the largest of y over each grid
-    period (grid[k-1], grid[k]], as the coarser run's own peak-hold holds.
-    """
-    if not peak_hold:
-        return np.interp(grid, t, y)
-    tol = 1e-9                      # stamps are exact to the recording's 1 ns
-    period = grid[1] - grid[0] if len(grid) > 1 else 0.0     # (the first: one period too)
-    hi = np.searchsorted(t, grid + tol, side='right')
-    lo = np.searchsorted(t, np.concatenate(([grid[0] - period], grid[:-1])) + tol,
-                         side='right')
-    out = np.interp(grid, t, y)     # (a period with no sample of the finer run)
-    for k in np.nonzero(hi > lo)[0]:
-        out[k] = y[lo[k]:hi[k]].max()
-    return out
-
-
-def _published_at(t, instants):
-    """Return the mask of instants that are samples of t (to the recordings' 1 ns)."""
-    tol = 1e-9
-    i = np.minimum(np.searchsorted(t, instants - tol), len(t) - 1)
-    return np.abs(t[i] - instants) <= tol
-
-
-def _diff(ref_t, ref_y, t, y, peak_hold: bool = False):
-    """
-    Return (max, rms) of y - ref_y over the span both runs cover.
-
-    On the instants of the coarser run (its publications), the other one brought to them,
-    so that runs recorded at two rates compare as they would at the coarser one, whichever
-    is the reference: a value taken at them, a peak-hold re-held over their periods.  That
-    needs the finer run's samples to include them, as when one rate is a multiple of the
-    other; else (100 and 40 Hz) only the instants both runs published at compare (every
-    0.05 s), each run's peak-hold re-held over the periods between two of them, which both
-    runs' periods tile: a value interpolated between two samples differs from the run by up
-    to (omega h)^2 / 8 of a vibration's amplitude (22 % for 47 ms at 100 Hz), and a
-    peak-hold over a period that is not a union of the finer run's holds other instants.
-    Where fewer than two instants are shared, the finer run is interpolated.
-    """
-    lo, hi = max(ref_t[0], t[0]), min(ref_t[-1], t[-1])
-    if _spacing(t) > _spacing(ref_t) * (1 + 1e-6):      # the other run is the coarser
-        ref_t, ref_y, t, y, sign = t, y, ref_t, ref_y, -1.0
-    else:
-        sign = 1.0
-    keep = (ref_t >= lo - 1e-9) & (ref_t <= hi + 1e-9)
-    if keep.sum() < 2:
-        raise LogError('runs do not overlap in time')
-    grid, ref_on_grid = ref_t[keep], ref_y[keep]
-    shared = _published_at(t, grid)
-    if not shared.all() and shared.sum() >= 2:      # (the runs' instants differ)
-        grid = grid[shared]
-        ref_on_grid = (_on_grid(ref_t, ref_y, grid, True) if peak_hold
-                       else ref_on_grid[shared])
-    d = sign * (_on_grid(t, y, grid, peak_hold) - ref_on_grid)
-    return float(np.abs(d).max()), float(np.sqrt(np.mean(d * d)))
 
 
 #: (name, unit, (t, y) of a run, y is a peak-hold over each publication period)

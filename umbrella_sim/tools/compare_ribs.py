@@ -34,6 +34,7 @@ import sys
 
 import numpy as np
 
+from .alignment import difference
 from .runs import label_width, recorded_lock
 from ..bag.reader import LogError, read_log
 from ..core.umbrella3d.outputs3d import STRESS_NAMES
@@ -154,12 +155,20 @@ def compare_ribs(runs: list[RibsRun]) -> dict:
 
 
 def _alpha_differences(ref: RibsRun, r: RibsRun) -> list[float] | None:
-    """Return each rib's largest |alpha1 - alpha1_ref| on the reference's times both cover."""
-    keep = (ref.t >= r.t[0] - 1e-12) & (ref.t <= r.t[-1] + 1e-12)
-    if len(r.t) < 2 or not keep.any():
+    """
+    Return each rib's largest |alpha1 - alpha1_ref| over the times both runs cover.
+
+    Taken as the planar runs' differences are (alignment.difference): on the coarser run's
+    publications, or where the rates are not multiples of each other on the instants both
+    runs published at, never interpolated between two samples of a vibrating frame.
+    """
+    if len(r.t) < 2 or len(ref.t) < 2:
         return None
-    return [float(np.max(np.abs(np.interp(ref.t[keep], r.t, r.alpha1[:, k])
-                                - ref.alpha1[keep, k]))) for k in range(r.ribs)]
+    try:
+        return [difference(ref.t, ref.alpha1[:, k], r.t, r.alpha1[:, k])[0]
+                for k in range(r.ribs)]
+    except LogError:                # (the runs do not overlap in time)
+        return None
 
 
 def print_ribs_table(result: dict, stream=None) -> None:
