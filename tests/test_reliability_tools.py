@@ -43,7 +43,7 @@ from sensor_msgs.msg import JointState
 
 from tests.ros_helpers import ros_env
 from umbrella_sim.bag import cdr
-from umbrella_sim.bag.reader import read_log
+from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.ros import params_file
 from umbrella_sim.ros.pacing import behind_text
@@ -172,6 +172,23 @@ def test_replay_skips_and_names_payloads_that_do_not_decode(tmp_path, small_bag)
             '10000000 ns): payload does not decode as sensor_msgs/msg/JointState') in r.stderr
     assert 'umbrella_replay: error: 2 message(s) skipped' in r.stderr, r.stderr
     assert 'Traceback' not in r.stderr
+
+
+def test_a_recording_cut_before_its_channels_says_it_is_truncated(tmp_path, small_bag):
+    """Its first records (the parameters) are whole, the next one torn: not 'empty'."""
+    log = read_log(str(small_bag))
+    cut = tmp_path / 'cut.mcap'
+    with open(log.path, 'rb') as fh:
+        cut.write_bytes(fh.read(2000))      # (the parameters whole, the first schema not)
+    with pytest.raises(LogError) as err:
+        read_log(str(cut))
+    assert str(err.value) == (f'{cut}: no channels (the file is truncated: it ends after 2000 '
+                              'bytes, before its first channel record)')
+    magic = tmp_path / 'magic.mcap'
+    with open(log.path, 'rb') as fh:
+        magic.write_bytes(fh.read(8))
+    with pytest.raises(LogError, match='ends after 8 bytes'):
+        read_log(str(magic))
 
 
 # ------------------------------------------------------------------ careless settings

@@ -352,7 +352,10 @@ def read_log(path: str, umbrella: bool = True) -> LogData:
         log.counts.clear()
         _open_recovering(log)
     if not log.channels:
-        raise LogError(f'{mcap_path}: no channels (empty or unreadable MCAP)')
+        why = (f'the file is truncated: it ends after {os.path.getsize(mcap_path)} bytes, '
+               'before its first channel record' if log.truncated
+               else 'empty or unreadable MCAP')
+        raise LogError(f'{mcap_path}: no channels ({why})')
     if umbrella:
         if PARAMETERS_RECORD not in log.metadata:
             raise LogError(f'{mcap_path}: not an umbrella_sim recording (no '
