@@ -524,6 +524,26 @@ def test_compare_of_one_run_recorded_at_100_and_40_hz_finds_no_difference(tmp_pa
         assert all(d['max'] == 0.0 for d in diffs.values()), (order[0].name, diffs)
 
 
+@pytest.mark.slow      # ~2 s
+def test_the_difference_table_says_it_spans_the_runs_not_the_plot_window(tmp_path):
+    """--window is the plots' span: the differences are the same with it, and say so."""
+    bags = [tmp_path / 'undamped', tmp_path / 'damped']
+    for bag, zeta in zip(bags, ('0.0', '0.02')):
+        assert run_cli('umbrella_sim', 'simulate', '--duration', '0.35', '--mcap', str(bag),
+                       '--set', f'damping_ratio={zeta}').returncode == 0
+    tables = []
+    for window in ([], ['--window', '0', '0.2']):
+        out = tmp_path / f'cmp{len(window)}'
+        r = run_cli('umbrella_sim.tools.compare', *map(str, bags), '--out', str(out),
+                    '--no-plots', *window)
+        assert r.returncode == 0, r.stderr
+        assert ('each run against the reference run over the time both cover (the plots: '
+                '--window)') in r.stdout, r.stdout
+        assert 'over the window' not in r.stdout
+        tables.append(json.loads((out / 'compare.json').read_text())['runs'][1]['differences'])
+    assert tables[0] == tables[1]
+
+
 def test_runs_at_rates_whose_instants_differ_compare_where_both_published():
     """
     The same signal at 100 Hz and at 40 Hz: no difference, in either order.

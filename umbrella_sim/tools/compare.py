@@ -120,8 +120,8 @@ def print_table(result: dict, stream=None) -> None:
           f"{e['v0']:>6g} {('%.7f' % dt) if dt is not None else '-':>11} "
           f"{('%+.3e' % dd) if dd is not None else '-':>13} "
           f"{('%.2e' % e['energy_drift']) if e['energy_drift'] is not None else '-':>12}\n")
-    w('\neach run against the reference run over the window, the largest and the rms '
-      'difference (zero for the reference itself):\n')
+    w('\neach run against the reference run over the time both cover (the plots: --window), '
+      'the largest and the rms difference (zero for the reference itself):\n')
     w(f"{'run':<{L}} " + ' '.join(f"{n + ' max/rms':>27}" for n, *_ in SIGNALS) + '\n')
     for e in result['runs']:
         cells = []
