@@ -191,6 +191,40 @@ def test_a_recording_cut_before_its_channels_says_it_is_truncated(tmp_path, smal
         read_log(str(magic))
 
 
+def _damaged_copy(bag, to, which: int):
+    """Copy bag's .mcap to `to`, a metadata record's map length overwritten (which: 0, -1)."""
+    data = bytearray(open(read_log(str(bag)).path, 'rb').read())
+    at, metadata = 8, []
+    while data[at] != 0x0f:                     # the records up to DataEnd
+        if data[at] == 0x0c:
+            metadata.append(at)
+        at += 9 + int.from_bytes(data[at + 1:at + 9], 'little')
+    at = metadata[which]
+    name_length = int.from_bytes(data[at + 9:at + 13], 'little')
+    data[at + 13 + name_length:at + 17 + name_length] = b'\xff' * 4
+    to.write_bytes(bytes(data))
+    return to
+
+
+def test_a_finished_recording_damaged_in_its_middle_says_so(tmp_path, small_bag):
+    """Its footer and end magic are there: the reader stops at the bad record, and says why."""
+    from umbrella_sim.tools.replay_info import info_text
+
+    log = read_log(str(_damaged_copy(small_bag, tmp_path / 'late.mcap', -1)))
+    assert log.truncated and log.damaged
+    text = info_text(log)
+    assert '(damaged: only the records before one that does not parse read)' in text, text
+    assert 'truncated' not in text
+    assert 'damaged' in log.truncation_note() and log.cut_short == 'damaged log'
+    first_channel = 'the file is damaged: a record before its first channel does not parse'
+    with pytest.raises(LogError, match=first_channel):
+        read_log(str(_damaged_copy(small_bag, tmp_path / 'early.mcap', 0)))
+    cut = tmp_path / 'cut.mcap'                 # a cut file is truncated, not damaged
+    cut.write_bytes(open(log.path, 'rb').read()[:-100])
+    cut_log = read_log(str(cut))
+    assert cut_log.truncated and not cut_log.damaged and cut_log.cut_short == 'truncated log'
+
+
 # ------------------------------------------------------------------ careless settings
 def cli(*args, cwd, timeout=120):
     return subprocess.run([sys.executable, '-m', 'umbrella_sim', *args], capture_output=True,

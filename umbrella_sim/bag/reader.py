@@ -88,6 +88,7 @@ class LogData:
     metadata: dict = field(default_factory=dict)      # record name -> {key: value}
     counts: dict = field(default_factory=dict)        # topic -> messages in the file
     truncated: bool = False
+    damaged: bool = False               # truncated where the file goes on to its end magic
     indexed: bool = False
     time_range: tuple = (None, None)                  # first, last log time (ns)
     _types: dict = field(default_factory=dict)
@@ -128,8 +129,16 @@ class LogData:
 
     def truncation_note(self) -> str:
         """Return ' (...)' saying the file is truncated, for errors about missing messages."""
+        if self.damaged:
+            return (' (the file is damaged: a record in it does not parse, and only the records '
+                    'before that one could be read)')
         return (' (the file is truncated: only its complete chunks could be read; a killed '
                 'recorder loses the chunk it was filling)') if self.truncated else ''
+
+    @property
+    def cut_short(self) -> str:
+        """Return 'damaged log', 'truncated log' or '' (what the tools' notes say)."""
+        return 'damaged log' if self.damaged else 'truncated log' if self.truncated else ''
 
     def count(self, topic: str) -> int:
         return self.counts.get(topic, 0)
@@ -352,7 +361,9 @@ def read_log(path: str, umbrella: bool = True) -> LogData:
         log.counts.clear()
         _open_recovering(log)
     if not log.channels:
-        why = (f'the file is truncated: it ends after {os.path.getsize(mcap_path)} bytes, '
+        why = ('the file is damaged: a record before its first channel does not parse'
+               if log.damaged else
+               f'the file is truncated: it ends after {os.path.getsize(mcap_path)} bytes, '
                'before its first channel record' if log.truncated
                else 'empty or unreadable MCAP')
         raise LogError(f'{mcap_path}: no channels ({why})')
@@ -439,3 +450,17 @@ def _open_recovering(log: LogData) -> None:
         elif isinstance(record, Metadata):
             log.metadata[record.name] = dict(record.metadata)
     log.truncated = state['truncated']
+    log.damaged = log.truncated and _ends_in_magic(log.path)
+
+
+def _ends_in_magic(path: str) -> bool:
+    """Say whether the file ends as a finished MCAP does (its footer, then the magic)."""
+    try:
+        with open(path, 'rb') as fh:
+            fh.seek(0, os.SEEK_END)
+            if fh.tell() < 2 * len(MCAP_MAGIC):
+                return False
+            fh.seek(-len(MCAP_MAGIC), os.SEEK_END)
+            return fh.read() == MCAP_MAGIC
+    except OSError:
+        return False

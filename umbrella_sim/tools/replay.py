@@ -426,7 +426,7 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     pubs = {t: node.create_publisher(log.msg_type(t), names[t],
                                      qos_from_yaml(log.channels[t][1])) for t in chosen}
     print(f'replaying up to {total} messages on {len(pubs)} topics from {log.path} at '
-          f"{rate:g}x{' (truncated log)' if log.truncated else ''}{moved}", flush=True)
+          f"{rate:g}x{f' ({log.cut_short})' if log.cut_short else ''}{moved}", flush=True)
     sent = read = skipped = 0       # skipped: payloads that do not decode
     first_skipped = ''
     try:        # a stop while waiting for subscribers ends like one while replaying
@@ -551,7 +551,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.resimulate:
             res = resimulate(log)
             worst = max(res['relative_diff'].values())
-            notes = [n for n in ('truncated log' if log.truncated else '',
+            notes = [n for n in (log.cut_short,
                                  f'recording ended early: {log.ended_early}'
                                  if log.ended_early else '',
                                  f"{len(res['segments'])} segments (resets)"

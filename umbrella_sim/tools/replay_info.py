@@ -39,7 +39,9 @@ def info_text(log: LogData) -> str:
              f'span:          {span:.6f} s of log time'
              + ('' if first is None else f' (from {first * 1e-9:.6f} s)'),
              f'messages:      {log.message_count}'
-             + (' (truncated: only complete chunks read)' if log.truncated else ''),
+             + (' (damaged: only the records before one that does not parse read)'
+                if log.damaged else
+                ' (truncated: only complete chunks read)' if log.truncated else ''),
              'topics:']
     width = max((len(t) for t in log.topics()), default=0)
     for topic in log.topics():
