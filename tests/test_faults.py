@@ -247,6 +247,27 @@ def test_offline_fault_recorded_and_reproduced(tmp_path):
     assert r.returncode == 0 and 'fault reproduced at t = ' in r.stdout, r.stdout + r.stderr
 
 
+def test_compare_says_a_run_ended_in_a_fault(tmp_path):
+    """
+    Its figures are of the time before the fault: umbrella_compare says so, as --info does.
+
+    flexible-nonlinear from the default V0 with 300 N: the solver fails at t = 0.0705 s,
+    15 ms into stage 2, whose 'amplitude' is then of those 15 ms.
+    """
+    bag = tmp_path / 'fault'
+    r = run('umbrella_sim', 'simulate', '--model', 'flexible-nonlinear', '--force', '300',
+            '--duration', '0.2', '--mcap', str(bag))
+    assert r.returncode == 3, r.stderr
+    out = tmp_path / 'cmp'
+    r = run('umbrella_sim.tools.compare', str(bag), '--out', str(out), '--no-plots')
+    assert r.returncode == 0, r.stderr
+    assert re.search(r'fault: the run ended in a solver fault at t = 0\.0705 s \(its figures '
+                     r'are of the time before it\): solver failed in the step after', r.stdout), \
+        r.stdout
+    fault = json.loads((out / 'compare.json').read_text())['runs'][0]['fault']
+    assert fault['time'] == pytest.approx(0.0705) and 'singular' in fault['reason']
+
+
 @pytest.mark.ros
 @pytest.mark.slow
 def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, probe):

@@ -90,6 +90,8 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
                                f'{t[0]:g} .. {t[-1]:g} s)') from None
             entry['differences'][name] = {'max': mx, 'rms': rms, 'unit': unit}
         entry['figures'] = r.figures()
+        if r.fault:
+            entry['fault'] = {'time': r.fault[0], 'reason': r.fault[1]}
         entry['warnings'] = r.validity()
         if r.not_judged():
             entry['not_judged'] = r.not_judged()
@@ -147,6 +149,10 @@ def print_table(result: dict, stream=None) -> None:
         w(f"{'':<{L}} peak |sigma| leaf {fmt('peak_stress_leaf', 1e-6)} MPa at "
           f"{fmt('peak_stress_leaf_time', 1, '.3f')} s, link {fmt('peak_stress_link', 1e-6)} "
           f"MPa at {fmt('peak_stress_link_time', 1, '.3f')} s; from {f.get('figures_from')}\n")
+        if 'fault' in e:
+            w(f"{'':<{L}} fault: the run ended in a solver fault at t = "
+              f"{e['fault']['time']:.4f} s (its figures are of the time before it): "
+              f"{e['fault']['reason']}\n")
         for text in e.get('warnings', []):
             w(f"{'':<{L}} warning: {text}\n")
         for text in e.get('not_judged', []):

@@ -142,6 +142,8 @@ class Run:
     # where summary is from: the recording's record, or a re-run (physics_figures)
     summary_from: str = 'recording metadata'
     ended_early: str | None = None       # the recording's write error, if it stopped on one
+    # the solver fault that ended the segment: (sim time of its last good state, the reason)
+    fault: tuple | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -388,6 +390,22 @@ def recorded_lock(log, segment: int) -> tuple[dict, float | None, bool]:
     return events, (min(locked) if locked else None), not locked
 
 
+def recorded_fault(log, segment: int, events: dict) -> tuple | None:
+    """
+    Return the solver fault that ended a segment: (its last good state's time, the reason).
+
+    The events record's, else the first 'fault' phase message's time (a log killed before
+    its events record: the reason is only in the node's log); None if it did not fault.
+    """
+    if 'fault' in events:
+        return float(events['fault_time']), events['fault']
+    phase = log.find_topic('deployment_phase', required=False)
+    faulted = ([tm for tm, m in log.iter_decoded(phase, log.segment(segment))
+                if m.data == 'fault'] if phase else [])
+    return (min(faulted), "deployment_phase 'fault' (the log has no events record: the "
+            "reason is in the node's log)") if faulted else None
+
+
 def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
     log = read_log(path)
     seg = log.segment(segment)
@@ -449,7 +467,8 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
                float(params.get('marker_magnification', 1.0)), a[:, 2], leaf_x, link_x,
                summary, warnings, events.get('lock_kind'), lock_time_exact=exact,
                deploy_start=start, segment=segment if segment != last else None,
-               ended_early=log.ended_early or None)
+               ended_early=log.ended_early or None,
+               fault=recorded_fault(log, segment, events))
 
 
 def _segment_mesh(log, params: dict):
