@@ -268,6 +268,22 @@ def test_compare_says_a_run_ended_in_a_fault(tmp_path):
     assert fault['time'] == pytest.approx(0.0705) and 'singular' in fault['reason']
 
 
+def test_summary_from_recording_names_the_fault_that_cut_stage_2_short(tmp_path):
+    """Its warning of a short stage 2 names the fault, not a longer recording to make."""
+    from umbrella_sim.testing import summary_from_recording
+
+    bag = tmp_path / 'fault'
+    r = run('umbrella_sim', 'simulate', '--model', 'flexible-nonlinear', '--force', '300',
+            '--duration', '0.2', '--mcap', str(bag))
+    assert r.returncode == 3, r.stderr
+    with pytest.warns(UserWarning) as caught:
+        summary_from_recording(str(bag))
+    text = ' '.join(str(w.message) for w in caught if w.category is UserWarning)
+    assert 'holds 0.0143167 s of stage 2 after the lock' in text, text
+    assert 'the run ended in a solver fault at t = 0.0705 s' in text, text
+    assert 'a longer recording' not in text, text
+
+
 @pytest.mark.ros
 @pytest.mark.slow
 def test_commanded_fault_is_recorded_reproduced_and_ends_a_timed_run(tmp_path, probe):

@@ -156,9 +156,12 @@ def summary_from_recording(path: str, after_lock: float | None = SUMMARY_AFTER_L
         span = summary.stage2_span
     period = 1.0 / float(params.get('publish_rate') or math.inf)
     if after_lock is not None and lock_time is not None and span < after_lock - 1.5 * period:
+        why = (f"the run ended in a solver fault at t = {float(events['fault_time']):g} s: "
+               f"{events['fault']}" if 'fault' in events
+               else 'a shorter after_lock, or a longer recording')
         warnings.warn(f'{path}: after_lock={after_lock:g} s, but the recording holds '
                       f'{span:.6g} s of stage 2 after the lock: the stage-2 figures are of '
-                      'those (a shorter after_lock, or a longer recording)', stacklevel=2)
+                      f'those ({why})', stacklevel=2)
     return summary
 
 
