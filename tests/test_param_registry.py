@@ -89,6 +89,16 @@ def test_coercion_names_the_parameter_and_keeps_types():
             coerce(name, value)
 
 
+@pytest.mark.parametrize('name, value', [('v0', 'fast'), ('v0', '-0.2x'),
+                                         ('elements_per_segment', 'two'),
+                                         ('v0', None), ('elements_per_segment', None)])
+def test_a_value_that_is_no_number_is_told_so_in_the_parameters_words(name, value):
+    """--set v0=fast, robot_description v0=fast: the node's words, not float()'s."""
+    with pytest.raises(ValueError) as err:
+        coerce(name, value)
+    assert str(err.value) == f'parameter {name}={value!r}: must be a number'
+
+
 def test_help_texts_come_from_the_registry():
     node_help = '\n'.join(parameter_help(REGISTRY.values()))
     for p in REGISTRY.values():

@@ -176,12 +176,17 @@ class Param:
                 raise ValueError('must be true or false')
             if isinstance(value, bool):
                 raise ValueError('must be a number')
+            try:
+                number = float(value) if isinstance(value, str) or self.type is float else value
+            except (TypeError, ValueError):     # (float()'s words name no parameter type)
+                raise ValueError('must be a number') from None
+            if not isinstance(number, (int, float)):
+                raise ValueError('must be a number')
             if self.type is int:
-                number = float(value) if isinstance(value, str) else value
                 if isinstance(number, float) and not number.is_integer():
                     raise ValueError('must be a whole number')
                 return int(number)
-            return float(value)
+            return number
         except (TypeError, ValueError, OverflowError) as exc:
             raise ValueError(f'parameter {self.name}={value!r}: {exc}') from None
 
