@@ -447,6 +447,35 @@ def test_replay_under_a_namespace_moves_the_node_topics(tmp_path, live_bag):
         probe.close()
 
 
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_marker_magnification_set_at_runtime_is_undone_in_the_compared_shapes(
+        antenna_factory, tmp_path):
+    """
+    marker_magnification applies at once: the markers after the set are drawn at 200.
+
+    The recording says from when (umbrella_sim.marker_magnification.N), and the shapes
+    umbrella_compare draws undo each marker's own magnification: they took the start's 1,
+    and drew the tip 9 m off its 46 mm.
+    """
+    from umbrella_sim.tools.runs import load_run
+
+    bag = tmp_path / 'mag'
+    antenna = antenna_factory(record_path=str(bag))
+    antenna.wait_for_sim_time(0.3, timeout=60)
+    antenna.set_parameters(marker_magnification=200.0)
+    antenna.wait_for_sim_time(antenna.sim_time() + 0.3, timeout=60)
+    assert antenna.stop() == 0
+    run = load_run(str(bag))
+    for tm, _, _ in run.shapes:     # the tip's transverse deflection, as drawn at 1
+        t, leaf, _ = run.shape(tm, 1.0)
+        a1 = np.interp(t, run.t, run.alpha1)
+        drawn = float(leaf[-1] @ [-math.sin(a1), math.cos(a1)])
+        assert drawn == pytest.approx(np.interp(t, run.tip_t, run.tip_v), abs=1e-12), t
+    (since, value), = run.magnifications
+    assert value == 200.0 and 0.3 <= since < run.shapes[-1][0]
+
+
 @pytest.mark.slow
 def test_compare_known_runs(tmp_path):
     a, b = tmp_path / 'v05', tmp_path / 'v10'

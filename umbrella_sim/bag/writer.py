@@ -35,7 +35,7 @@ import yaml
 
 from .cdr import (BAG_FORMAT_VERSION, cdr_bytes, message_definition, qos_profiles, qos_yaml,
                   type_description_hash, type_name)
-from .format import CHUNK_SIZE, SEGMENT_RECORD, segment_record
+from .format import CHUNK_SIZE, MAGNIFICATION_RECORD, SEGMENT_RECORD, segment_record
 from .mcap_stream import (CommittedFile, ended_early_tail, keep_definitions_out_of_chunks,
                           MessageAppender, SpilledChunkIndex, write_all)
 from .paths import absolute_path, check_new_output
@@ -166,6 +166,7 @@ class BagRecorder:
         self._closed = False
         self.segment = 0
         self.offset_ns = 0
+        self._magnifications = 0
         self._queue = None
         if background:
             self._queue = collections.deque()        # append/popleft are thread-safe
@@ -305,6 +306,12 @@ class BagRecorder:
                 self._fh.commit()
             except OSError as exc:
                 self._fail(exc, f'writing {name}', None)
+
+    def marker_magnification(self, value: float, t_ns: int) -> None:
+        """Record a runtime marker_magnification: the markers after sim time t_ns carry it."""
+        self._magnifications += 1
+        self.add_metadata(f'{MAGNIFICATION_RECORD}.{self._magnifications}', {
+            'log_time_ns': str(t_ns + self.offset_ns), 'value': json.dumps(float(value))})
 
     def drained_counts(self) -> dict[str, int]:
         """Return the messages recorded per topic, once every queued message is written."""

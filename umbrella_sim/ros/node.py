@@ -419,9 +419,15 @@ class UmbrellaNode(Node):
         core, node, candidate, cfg = self._parameter_candidate(params)
         self.pending_params = candidate
         with self._locked():
+            changed = cfg['marker_magnification'] != self.node_cfg['marker_magnification']
             self.node_cfg = cfg
             if 'real_time_factor' in node:
                 self._anchor()
+            # the markers built from now on (after this sim time) carry the new value: the
+            # recording says so, for the tools that undo it (umbrella_compare's shapes)
+            since = self.sim.time
+        if changed and self.recording is not None:
+            self.recording.marker_magnification(cfg['marker_magnification'], since)
         on_reset = sorted(n for n in {**core, **node} if REGISTRY[n].applies == RESET)
         if on_reset:
             self.get_logger().info(f"parameters {', '.join(on_reset)} set; they apply on "

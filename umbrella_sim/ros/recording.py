@@ -113,6 +113,10 @@ class RunRecording:
         self.recorder.write(self.command_topic + APPLIED_SUFFIX, Float64(data=float(force)),
                             messages.stamp_ns(t))
 
+    def marker_magnification(self, value: float, t: float) -> None:
+        """Record a runtime marker_magnification, which the markers after sim time t carry."""
+        self.recorder.marker_magnification(value, messages.stamp_ns(t))
+
     def start_segment(self, metadata: dict, driver: RunDriver, ended_sim, figures: dict,
                       fault: str | None) -> int:
         """

@@ -31,7 +31,7 @@ import os
 
 import numpy as np
 
-from ..bag.format import EVENTS_RECORD, SUMMARY_RECORD
+from ..bag.format import EVENTS_RECORD, MAGNIFICATION_RECORD, SUMMARY_RECORD
 from ..bag.provenance import summary_metadata, summary_of
 from ..bag.reader import LogError, read_log
 from ..core.beam import shape_abscissae
@@ -144,6 +144,9 @@ class Run:
     ended_early: str | None = None       # the recording's write error, if it stopped on one
     # the solver fault that ended the segment: (sim time of its last good state, the reason)
     fault: tuple | None = None
+    # runtime sets of marker_magnification: [(sim time, value)], the markers after each time
+    # drawn at its value (before the first: magnification, the segment's parameter)
+    magnifications: list = field(default_factory=list)
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -170,14 +173,23 @@ class Run:
         tm, leaf, link = min(self.shapes, key=lambda s: abs(s[0] - t))
         leaf_x = drawn_abscissae(self.leaf_node_x, len(leaf))
         link_x = drawn_abscissae(self.link_node_x, len(link))
-        if leaf_x is None or link_x is None or self.magnification <= 0:
+        drawn_at = self.magnification_at(tm)
+        if leaf_x is None or link_x is None or drawn_at <= 0:
             return tm, leaf, link
         a1 = np.interp(tm, self.t, self.alpha1)
         a2 = np.interp(tm, self.t, self.alpha2)
         leaf_u = np.outer(leaf_x, [math.cos(a1), math.sin(a1)])
         link_u = link[0] + np.outer(link_x, [math.cos(a2), math.sin(a2)])
-        scale = magnification / self.magnification
+        scale = magnification / drawn_at
         return tm, leaf_u + scale * (leaf - leaf_u), link_u + scale * (link - link_u)
+
+    def magnification_at(self, t: float) -> float:
+        """Return the magnification the markers of sim time t were drawn at."""
+        drawn_at = self.magnification
+        for since, value in self.magnifications:
+            if t > since + 0.5e-9:      # (the recording's times are whole ns)
+                drawn_at = value
+        return drawn_at
 
     def nodes(self, points: np.ndarray, body: str) -> np.ndarray:
         """Return the nodes among a body's drawn points (all of them if not known)."""
@@ -390,6 +402,22 @@ def recorded_lock(log, segment: int) -> tuple[dict, float | None, bool]:
     return events, (min(locked) if locked else None), not locked
 
 
+def recorded_magnifications(log, seg) -> list[tuple[float, float]]:
+    """Return a segment's runtime marker_magnification sets: [(sim time, value)], in order."""
+    out = []
+    for name, rec in log.metadata.items():
+        if not name.startswith(MAGNIFICATION_RECORD + '.'):
+            continue
+        try:
+            n, log_ns = int(name.rsplit('.', 1)[1]), int(rec['log_time_ns'])
+            value = float(json.loads(rec['value']))
+        except (KeyError, TypeError, ValueError):
+            raise LogError(f'{log.path}: metadata record {name} is malformed') from None
+        if log_ns >= seg.offset_ns and (seg.end_ns is None or log_ns < seg.end_ns):
+            out.append((n, (log_ns - seg.offset_ns) * 1e-9, value))
+    return [(t, value) for _, t, value in sorted(out)]      # (in the order they were set)
+
+
 def recorded_fault(log, segment: int, events: dict) -> tuple | None:
     """
     Return the solver fault that ended a segment: (its last good state's time, the reason).
@@ -468,7 +496,8 @@ def load_run(path: str, label: str | None = None, segment: int = 0) -> Run:
                summary, warnings, events.get('lock_kind'), lock_time_exact=exact,
                deploy_start=start, segment=segment if segment != last else None,
                ended_early=log.ended_early or None,
-               fault=recorded_fault(log, segment, events))
+               fault=recorded_fault(log, segment, events),
+               magnifications=recorded_magnifications(log, seg))
 
 
 def _segment_mesh(log, params: dict):
