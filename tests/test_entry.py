@@ -14,9 +14,15 @@
 
 
 """The console scripts' start: a Python without the dependencies says where they are."""
+import os
+import subprocess
+import sys
+
 import pytest
 
 from umbrella_sim.tools import entry
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 @pytest.mark.parametrize('tool, module', [('umbrella_sim', 'cli'),
@@ -39,3 +45,22 @@ def test_a_missing_module_of_our_own_is_not_hidden(monkeypatch):
     monkeypatch.setattr(entry.importlib, 'import_module', broken)
     with pytest.raises(ModuleNotFoundError):
         entry._offline_tool('gone', 'umbrella_sim')
+
+
+@pytest.mark.parametrize('tool, main', [('umbrella_node', 'node_main'),
+                                        ('deploy_controller', 'controller_main')])
+def test_once_a_node_s_main_has_returned_a_stop_signal_cannot_kill_its_exit(tool, main):
+    """
+    A second Ctrl-C, or a supervisor's SIGTERM after its SIGINT, during the teardown.
+
+    CPython's teardown puts the default handlers back, and the node, its recording
+    finalised, died of the signal there (exit 130 / 143 for a clean stop, 0.2 s after the
+    first signal): once its main has returned the stop signals are ignored.
+    """
+    code = ('import signal, sys; from umbrella_sim.tools import entry; '
+            f"sys.argv = ['{tool}', '--help']; status = entry.{main}(); "
+            'print(status, [signal.getsignal(s) == signal.SIG_IGN '
+            'for s in (signal.SIGINT, signal.SIGTERM)])')
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=ROOT,
+                       env=dict(os.environ, PYTHONPATH=ROOT), timeout=120)
+    assert r.stdout.splitlines()[-1] == '0 [True, True]', (r.stdout[-300:], r.stderr)

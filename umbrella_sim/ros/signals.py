@@ -54,6 +54,20 @@ def install() -> None:
         signal.signal(signum, _on_signal)
 
 
+def ignore_from_now() -> None:
+    """
+    Ignore SIGINT and SIGTERM from now on: the node's run is over, the process only exits.
+
+    CPython's teardown puts the default handlers back (those it set), and a second stop
+    signal then (a second Ctrl-C, a supervisor's SIGTERM after its SIGINT) killed a node
+    whose recording was already finalised: exit 130 or 143 for a clean stop.  An ignored
+    signal stays ignored through the teardown.  Outside the main thread: nothing to do.
+    """
+    if threading.current_thread() is threading.main_thread():
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
+
+
 def add_listener(listener) -> None:
     """Call listener(signum) on every later stop signal (from the main thread)."""
     _listeners.append(listener)

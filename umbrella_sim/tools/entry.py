@@ -60,18 +60,24 @@ def _main_of(module: str, tool: str):
         return None
 
 
+def _node(module: str, tool: str) -> int:
+    """Run a node: the handlers first, then the heavy imports; ignore stop signals after."""
+    signals.install()
+    try:
+        main = _main_of(module, tool)
+        return EXIT_MISSING if main is None else main()
+    finally:        # (stopped and finalised: a second signal must not kill the exit)
+        signals.ignore_from_now()
+
+
 def node_main() -> int:
     """Run umbrella_node: the handlers first, then the heavy imports."""
-    signals.install()
-    main = _main_of('umbrella_sim.ros.node_main', 'umbrella_node')
-    return EXIT_MISSING if main is None else main()
+    return _node('umbrella_sim.ros.node_main', 'umbrella_node')
 
 
 def controller_main() -> int:
     """Run deploy_controller: the handlers first, then the heavy imports."""
-    signals.install()
-    main = _main_of('umbrella_sim.ros.deploy_controller', 'deploy_controller')
-    return EXIT_MISSING if main is None else main()
+    return _node('umbrella_sim.ros.deploy_controller', 'deploy_controller')
 
 
 def _offline_tool(module: str, tool: str) -> int:
