@@ -545,3 +545,22 @@ def test_text_summary_gives_stage2_resolution_in_ms_and_percent():
     assert text == ('stage2_resolution            step 0.1 ms (needed 0.05 ms: resolving '
                     '0.1 ms, coupled -); stress crest unresolved: leaf 0.33 %, link 0.4 %; '
                     "the lock's tip crest 6.3 % of l1+l2")
+
+
+def test_a_params_files_node_duration_is_named_where_simulate_runs_another(tmp_path, capsys):
+    """
+    A params file's duration is umbrella_node's: simulate runs --duration, and says so.
+
+    A file with duration 0.05 ran 1 s offline (--duration's default) without a word; the
+    run now warns, naming the file and both durations, and says nothing where they agree.
+    """
+    from umbrella_sim.tools.cli import main
+
+    path = tmp_path / 'node.yaml'
+    path.write_text('umbrella_node:\n  ros__parameters:\n    duration: 0.05\n')
+    assert main(['simulate', '--params', str(path), '--duration', '0.01', '--json']) == 0
+    err = capsys.readouterr().err
+    assert f'params file {path}: duration 0.05 is umbrella_node' in err
+    assert 'offline the run takes --duration (0.01 s)' in err
+    assert main(['simulate', '--params', str(path), '--duration', '0.05', '--json']) == 0
+    assert 'duration' not in capsys.readouterr().err

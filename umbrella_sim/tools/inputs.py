@@ -303,6 +303,11 @@ def build_params(args) -> UmbrellaParams:
     params = resolve_params(values, params_file, from_file)
     for text in params_file_warnings(params_file) if params_file else ():
         print(f'umbrella_sim: warning: {text}', file=sys.stderr)
+    node_duration = from_file.get('duration') if args.params else None
+    if node_duration and getattr(args, 'duration', None) not in (None, node_duration):
+        print(f'umbrella_sim: warning: params file {params_file}: duration {node_duration} is '
+              "umbrella_node's (where it exits); offline the run takes --duration "
+              f'({args.duration:g} s)', file=sys.stderr)
     check_lock_given(params, lock_given)
     refuse_empty_rib_lists(from_file, f'params file {params_file}: ')
     try:        # typed as the node reads the file: "5" is a string, [0, 0.1] refused
