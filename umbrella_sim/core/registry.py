@@ -356,7 +356,8 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        'node runs on its own. false = real time, a command acts from the next period '
        'boundary after it arrives', applies=NOW, group=NODE),
     _P('duration', float, 0.0, 's',
-       'sim time at which the node exits (code 0); 0 = run until stopped',
+       'sim time at which the node exits (code 0): at the first publication at or after it '
+       '(0.255 s at publish_rate 100 Hz: 0.26 s); 0 = run until stopped',
        low=0.0, high=1e9, applies=NOW, group=NODE),
     _P('record', bool, True, '-',
        'record every topic, command and the parameters to an MCAP bag (see recording.md); '
