@@ -128,3 +128,21 @@ def test_the_text_table_counts_repeated_modes(capsys):
     assert 'locked at full deployment' in lines[0] and 'the hub held' in lines[0]
     assert [line.split()[0] for line in lines[2:]] == ['1', '4']
     assert 'spread, <= 33 % a rib' in lines[2]
+
+
+def test_the_json_names_a_rib_only_where_the_text_does(capsys):
+    """
+    --json's 'rib' is the text's: a rib number where one rib holds the mode, else null.
+
+    Three identical ribs share each repeated mode equally (a third a rib): no rib holds it and
+    the text says so; the JSON's rib then is null, not whichever third round-off made largest.
+    Rib 1 made stiffer holds its own modes: the text's 'rib 1', the JSON's 1.
+    """
+    for r in cli_rows(capsys, '--set', 'ribs=3', '--count', '3'):
+        assert r['rib_share'] == pytest.approx(1 / 3, rel=1e-6) and r['rib'] is None
+    e = UmbrellaParams().youngs_modulus
+    own = [r for r in cli_rows(capsys, '--set', 'ribs=3', '--set',
+                               f'rib1.youngs_modulus={2 * e!r}', '--count', '6')
+           if r['multiplicity'] == 1]
+    assert own and all(r['rib'] == 1 for r in own)
+    assert [r['rib'] for r in cli_rows(capsys, '--count', '2')] == [0, 0]   # (the planar rib)

@@ -47,6 +47,14 @@ def add_parser(sub) -> argparse.ArgumentParser:
     return sp
 
 
+def _json_row(row) -> dict:
+    """Return a row for --json: its rib the text's, None where no rib holds OWN_RIB_SHARE."""
+    out = row.as_dict()
+    if row.rib_share < OWN_RIB_SHARE:
+        out['rib'] = None
+    return out
+
+
 def main(args, ap: argparse.ArgumentParser) -> int:
     try:
         if args.count < 1:
@@ -56,7 +64,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
     except ValueError as exc:
         ap.exit(2, f'umbrella_sim: error: {exc}\n')
     if args.json:
-        print(json.dumps([r.as_dict() for r in rows], indent=2))
+        print(json.dumps([_json_row(r) for r in rows], indent=2))
         return 0
     umbrella = args.model is not getattr(args.model, 'planar', args.model)
     base = getattr(args.model, 'base', 'fixed')
