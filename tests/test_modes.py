@@ -127,7 +127,7 @@ def test_the_text_table_counts_repeated_modes(capsys):
     lines = capsys.readouterr().out.splitlines()
     assert 'locked at full deployment' in lines[0] and 'the hub held' in lines[0]
     assert [line.split()[0] for line in lines[2:]] == ['1', '4']
-    assert 'spread, <= 33 % a rib' in lines[2]
+    assert 'one in each of 3 ribs' in lines[2]
 
 
 def test_the_json_names_a_rib_only_where_the_text_does(capsys):
@@ -146,3 +146,24 @@ def test_the_json_names_a_rib_only_where_the_text_does(capsys):
            if r['multiplicity'] == 1]
     assert own and all(r['rib'] == 1 for r in own)
     assert [r['rib'] for r in cli_rows(capsys, '--count', '2')] == [0, 0]   # (the planar rib)
+
+
+def test_a_held_hubs_repeated_mode_is_one_a_rib_a_free_buss_spread(capsys):
+    """
+    The held hub decouples the ribs: a mode repeated over N identical ribs is one copy a rib.
+
+    Its row says so (and the JSON's one_a_rib), not 'spread', which would read as a mode
+    every rib moves in; with rib 1 of its own, the other two ribs' copies are one a rib too.
+    On a free bus the ribs move together through the bus: its modes are spread.
+    """
+    assert main(['modes', '--set', 'ribs=3', '--count', '2']) == 0
+    lines = capsys.readouterr().out.splitlines()[2:]
+    assert all('one in each of 3 ribs' in line and 'spread' not in line for line in lines)
+    e = UmbrellaParams().youngs_modulus
+    rows = cli_rows(capsys, '--set', 'ribs=3', '--set', f'rib1.youngs_modulus={2 * e!r}',
+                    '--count', '6')
+    assert {(r['multiplicity'], r['one_a_rib']) for r in rows} == {(2, True), (1, False)}
+    free = cli_rows(capsys, '--set', 'ribs=3', '--set', 'base=free', '--count', '4')
+    assert not any(r['one_a_rib'] for r in free)
+    assert main(['modes', '--set', 'ribs=3', '--set', 'base=free', '--count', '1']) == 0
+    assert 'spread, <= 33 % a rib' in capsys.readouterr().out.splitlines()[2]

@@ -38,6 +38,9 @@ from .params import UmbrellaParams
 #: frequencies within this relative distance are one repeated frequency (the identical
 #: ribs' copies of a mode differ by round-off, ~1e-12)
 REPEATED = 1e-7
+#: a rib holds part of a mode when it has more than this share of the mode's strain energy
+#: (a rib outside a held hub's rib-local mode: round-off, ~1e-30)
+HOLDS = 1e-6
 
 
 @dataclass(frozen=True)
@@ -58,6 +61,9 @@ class ModeRow:
     rib_share: float
     #: the modal damping ratio of the beams' C = beta K (beta omega / 2; 0 undamped)
     damping_ratio: float
+    #: the modes are one copy a rib, each in a rib of its own: a repeated mode of identical
+    #: ribs on the held hub (which decouples the ribs), not one the ribs move in together
+    one_a_rib: bool = False
 
     @property
     def frequency(self) -> float:
@@ -74,7 +80,8 @@ class ModeRow:
         return {'frequency_hz': self.frequency, 'period_s': self.period, 'omega': self.omega,
                 'multiplicity': self.multiplicity, 'in_plane': self.in_plane,
                 'out_of_plane': self.out_of_plane, 'twist': self.twist, 'rib': self.rib,
-                'rib_share': self.rib_share, 'damping_ratio': self.damping_ratio}
+                'rib_share': self.rib_share, 'damping_ratio': self.damping_ratio,
+                'one_a_rib': self.one_a_rib}
 
 
 def deployed_modes(params, count: int | None = None) -> list[ModeRow]:
@@ -94,16 +101,22 @@ def deployed_modes(params, count: int | None = None) -> list[ModeRow]:
     beta = damping_beta_of(model)
     if isinstance(params, UmbrellaParams):
         rows = [(w, (1.0, 0.0, 0.0), np.ones(1)) for w in model.locked_modes[0]]
+        held = False
     else:
         rows = _umbrella_rows(params)
+        held = params.base != 'free'
     out = []
     for group in _repeated_groups([w for w, _, _ in rows]):
         shares = np.mean([rows[i][1] for i in group], axis=0)
         by_rib = np.sum([rows[i][2] for i in group], axis=0)
         rib = int(np.argmax(by_rib))
         omega = float(np.mean([rows[i][0] for i in group]))
+        # the held hub decouples the ribs: the group is a sum of each rib's own modes, so as
+        # many ribs holding its energy as it has modes means one a rib
+        holding = int(np.count_nonzero(by_rib > HOLDS * by_rib.sum()))
         out.append(ModeRow(omega, len(group), *(max(0.0, float(s)) for s in shares), rib,
-                           float(by_rib[rib] / by_rib.sum()), float(beta * omega / 2.0)))
+                           float(by_rib[rib] / by_rib.sum()), float(beta * omega / 2.0),
+                           held and len(group) > 1 and holding == len(group)))
         if count is not None and len(out) == count:
             break
     return out

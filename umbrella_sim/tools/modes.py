@@ -83,6 +83,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
                 f'{r.omega:>13.2f}')
         if umbrella:
             rib = (f'rib {r.rib}' if r.rib_share >= OWN_RIB_SHARE else
+                   f'one in each of {r.multiplicity} ribs' if r.one_a_rib else
                    f'spread, <= {100 * r.rib_share:.0f} % a rib')
             line += (f'  {r.multiplicity:>5}  {100 * r.in_plane:>7.1f}%  '
                      f'{100 * r.out_of_plane:>11.1f}%  {100 * r.twist:>5.1f}%  {rib}')
