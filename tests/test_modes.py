@@ -167,3 +167,21 @@ def test_a_held_hubs_repeated_mode_is_one_a_rib_a_free_buss_spread(capsys):
     assert not any(r['one_a_rib'] for r in free)
     assert main(['modes', '--set', 'ribs=3', '--set', 'base=free', '--count', '1']) == 0
     assert 'spread, <= 33 % a rib' in capsys.readouterr().out.splitlines()[2]
+
+
+def test_an_overdamped_mode_is_said_to_be_one(capsys):
+    """
+    C = beta K damps mode i at zeta omega_i / omega_1: past 1 the mode does not oscillate.
+
+    With damping_ratio 0.02 the thesis frame's modes 8 and 9 (1631 and 4239 Hz) have 1.53 and
+    3.98: the table says they are overdamped, and that its frequencies are the undamped ones.
+    """
+    assert main(['modes', '--set', 'damping_ratio=0.02', '--count', '9']) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert 'undamped' in lines[0]
+    rows = deployed_modes(UmbrellaParams(damping_ratio=0.02), 9)
+    assert [r.damping_ratio >= 1.0 for r in rows] == [False] * 7 + [True] * 2
+    for r, line in zip(rows, lines[2:]):
+        assert ('overdamped' in line) == (r.damping_ratio >= 1.0)
+    assert main(['modes', '--count', '2']) == 0
+    assert 'undamped' not in capsys.readouterr().out

@@ -68,11 +68,13 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         return 0
     umbrella = args.model is not getattr(args.model, 'planar', args.model)
     base = getattr(args.model, 'base', 'fixed')
+    damped = any(r.damping_ratio > 0.0 for r in rows)
     print('natural frequencies of the frame locked at full deployment (the sleeve at the stop), '
           'linearised about the undeformed frame' + (
               '; on the free-floating bus (its six rigid-body modes left out)' if base == 'free'
-              else '; the hub held' if umbrella else ''))
-    damped = any(r.damping_ratio > 0.0 for r in rows)
+              else '; the hub held' if umbrella else '') + (
+              '; f, period and omega undamped (a damped mode rings at f sqrt(1 - ratio^2); '
+              'one of ratio >= 1 does not oscillate)' if damped else ''))
     head = f"{'mode':>4}  {'f (Hz)':>10}  {'period (ms)':>11}  {'omega (rad/s)':>13}"
     if umbrella:
         head += f"  {'count':>5}  {'in-plane':>8}  {'out-of-plane':>12}  {'twist':>6}  rib"
@@ -87,6 +89,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
                    f'spread, <= {100 * r.rib_share:.0f} % a rib')
             line += (f'  {r.multiplicity:>5}  {100 * r.in_plane:>7.1f}%  '
                      f'{100 * r.out_of_plane:>11.1f}%  {100 * r.twist:>5.1f}%  {rib}')
-        print(line + (f'  {r.damping_ratio:.4g}' if damped else ''))
+        print(line + (f'  {r.damping_ratio:.4g}' if damped else '')
+              + (' (overdamped)' if r.damping_ratio >= 1.0 else ''))
         number += r.multiplicity
     return 0
