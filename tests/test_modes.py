@@ -185,3 +185,12 @@ def test_an_overdamped_mode_is_said_to_be_one(capsys):
         assert ('overdamped' in line) == (r.damping_ratio >= 1.0)
     assert main(['modes', '--count', '2']) == 0
     assert 'undamped' not in capsys.readouterr().out
+
+
+def test_the_json_numbers_its_rows_as_the_text(capsys):
+    """--json's 'mode' is the text's first column: the row's first mode, repeated ones counted."""
+    args = ['--set', 'ribs=3', '--set', 'rib1.l2=0.6', '--count', '5']
+    assert main(['modes', *args]) == 0
+    text = [int(line.split()[0]) for line in capsys.readouterr().out.splitlines()[2:]]
+    rows = cli_rows(capsys, *args)
+    assert [r['mode'] for r in rows] == text == [1, 2, 4, 5, 7]

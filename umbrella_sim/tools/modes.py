@@ -47,9 +47,17 @@ def add_parser(sub) -> argparse.ArgumentParser:
     return sp
 
 
-def _json_row(row) -> dict:
+def _first_modes(rows) -> list[int]:
+    """Return each row's first mode number (the text's 'mode': repeated modes counted)."""
+    first = [1]
+    for r in rows[:-1]:
+        first.append(first[-1] + r.multiplicity)
+    return first
+
+
+def _json_row(row, mode: int) -> dict:
     """Return a row for --json: its rib the text's, None where no rib holds OWN_RIB_SHARE."""
-    out = row.as_dict()
+    out = {'mode': mode, **row.as_dict()}
     if row.rib_share < OWN_RIB_SHARE:
         out['rib'] = None
     return out
@@ -64,7 +72,8 @@ def main(args, ap: argparse.ArgumentParser) -> int:
     except ValueError as exc:
         ap.exit(2, f'umbrella_sim: error: {exc}\n')
     if args.json:
-        print(json.dumps([_json_row(r) for r in rows], indent=2))
+        print(json.dumps([_json_row(r, m) for m, r in zip(_first_modes(rows), rows)],
+                         indent=2))
         return 0
     umbrella = args.model is not getattr(args.model, 'planar', args.model)
     base = getattr(args.model, 'base', 'fixed')
@@ -79,8 +88,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
     if umbrella:
         head += f"  {'count':>5}  {'in-plane':>8}  {'out-of-plane':>12}  {'twist':>6}  rib"
     print(head + ('  damping ratio' if damped else ''))
-    number = 1
-    for r in rows:
+    for number, r in zip(_first_modes(rows), rows):
         line = (f'{number:>4}  {r.frequency:>10.4f}  {1e3 * r.period:>11.4f}  '
                 f'{r.omega:>13.2f}')
         if umbrella:
@@ -91,5 +99,4 @@ def main(args, ap: argparse.ArgumentParser) -> int:
                      f'{100 * r.out_of_plane:>11.1f}%  {100 * r.twist:>5.1f}%  {rib}')
         print(line + (f'  {r.damping_ratio:.4g}' if damped else '')
               + (' (overdamped)' if r.damping_ratio >= 1.0 else ''))
-        number += r.multiplicity
     return 0
