@@ -194,3 +194,21 @@ def test_the_json_numbers_its_rows_as_the_text(capsys):
     text = [int(line.split()[0]) for line in capsys.readouterr().out.splitlines()[2:]]
     rows = cli_rows(capsys, *args)
     assert [r['mode'] for r in rows] == text == [1, 2, 4, 5, 7]
+
+
+def test_a_spinning_base_is_said_to_be_left_out(capsys):
+    """
+    A prescribed base spinning at the lock: the table is the hub held still, and says so.
+
+    The modes are linearised about the still frame (no centrifugal stiffening, no Coriolis
+    coupling): the heading names the spin left out, the JSON's stderr too; unspun, no note.
+    """
+    spun = ['--set', 'ribs=3', '--set', 'base=prescribed', '--set', 'base_spin_rate=20',
+            '--count', '1']
+    assert main(['modes', *spun]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert 'base_spin_rate 20 rad/s' in head and 'left out' in head
+    assert main(['modes', *spun, '--json']) == 0
+    assert 'base_spin_rate 20 rad/s' in capsys.readouterr().err
+    assert main(['modes', '--set', 'ribs=3', '--set', 'base=prescribed', '--count', '1']) == 0
+    assert 'spin' not in capsys.readouterr().out

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from .arguments import add_parameter_options
 from .inputs import build_params
@@ -71,7 +72,13 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         rows = deployed_modes(args.model, args.count)
     except ValueError as exc:
         ap.exit(2, f'umbrella_sim: error: {exc}\n')
+    spin = getattr(args.model, 'base_spin_rate', 0.0) if getattr(
+        args.model, 'base', 'fixed') == 'prescribed' else 0.0
+    spun = (f", not spinning: the base's spin (base_spin_rate {spin:g} rad/s) left out "
+            '(no centrifugal stiffening, no Coriolis coupling)' if spin else '')
     if args.json:
+        if spun:
+            print(f'umbrella_sim: note: {spun[2:]}', file=sys.stderr)
         print(json.dumps([_json_row(r, m) for m, r in zip(_first_modes(rows), rows)],
                          indent=2))
         return 0
@@ -81,7 +88,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
     print('natural frequencies of the frame locked at full deployment (the sleeve at the stop), '
           'linearised about the undeformed frame' + (
               '; on the free-floating bus (its six rigid-body modes left out)' if base == 'free'
-              else '; the hub held' if umbrella else '') + (
+              else '; the hub held' if umbrella else '') + spun + (
               '; f, period and omega undamped (a damped mode rings at f sqrt(1 - ratio^2); '
               'one of ratio >= 1 does not oscillate)' if damped else ''))
     head = f"{'mode':>4}  {'f (Hz)':>10}  {'period (ms)':>11}  {'omega (rad/s)':>13}"
