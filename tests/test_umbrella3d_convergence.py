@@ -25,6 +25,8 @@ their plane; the out-of-plane tip deflection at a fixed time converges (successi
 differences halve at least) and two elements a segment are within 0.5 % of four.
 """
 import math
+import pathlib
+import re
 
 import numpy as np
 import pytest
@@ -80,3 +82,22 @@ def test_a_lateral_jolt_converges_with_the_mesh():
     assert abs(w4) > 1e-3                    # a deflection, not a rounding
     assert abs(w2 - w4) < 0.5 * abs(w1 - w2)
     assert abs(w2 - w4) < 5e-3 * abs(w4)
+
+
+def test_the_twist_converges_from_above_to_just_below_the_shaft():
+    """
+    The lowest twist mode: above the clamped-clamped shaft on 32 elements, below it in the limit.
+
+    A consistent-mass displacement model converges from above; the segment's end at O'' is
+    held in twist only elastically, so the limit (extrapolated at the element's order 2) is
+    just below the shaft. docs/umbrella3d.md (e) states both ratios: they are these.
+    """
+    f16, f32 = (modes_by_kind(n)[1][0] for n in (16, 32))
+    p = UmbrellaRibsParams().planar
+    shaft = math.pi / p.l3 * math.sqrt(p.youngs_modulus / (2 * 1.33) * 0.8436 / p.density)
+    limit = f32 - (f16 - f32) / 3.0
+    assert f32 < f16 and limit < shaft < f32
+    doc = open(pathlib.Path(__file__).parents[1] / 'docs' / 'umbrella3d.md').read()
+    stated = re.search(r'is (\S+) times the clamped-clamped shaft.*?, (\S+) times it', doc)
+    assert float(stated.group(1)) == pytest.approx(f32 / shaft, abs=1e-5)
+    assert float(stated.group(2)) == pytest.approx(limit / shaft, abs=1e-4)
