@@ -212,3 +212,28 @@ def test_a_spinning_base_is_said_to_be_left_out(capsys):
     assert 'base_spin_rate 20 rad/s' in capsys.readouterr().err
     assert main(['modes', '--set', 'ribs=3', '--set', 'base=prescribed', '--count', '1']) == 0
     assert 'spin' not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize('args, warned', [
+    (['--set', 'youngs_modulus=72'], 'youngs_modulus: 72 Pa'),             # (GPa typed)
+    (['--set', 'density=2.77'], 'density: 2.77 kg/m³'),                    # (g/cm³ typed)
+    (['--set', 'l2=0.05'], 'thick beam: l2'),                   # (Euler-Bernoulli too stiff)
+    (['--set', 'ribs=3', '--set', 'rib1.youngs_modulus=72'], 'youngs_modulus: rib 1, 72 Pa'),
+])
+def test_the_parameter_warnings_of_a_run_are_given_with_the_frequencies(capsys, args, warned):
+    """
+    A modulus in GPa, a density in g/cm³ or a stubby member: simulate warns, and so does modes.
+
+    The table is printed all the same, its frequencies then 3e4 times too low, 32 times too
+    high, or above the Timoshenko beam's; the warning names the parameter (and the rib).
+    """
+    assert main(['modes', *args, '--count', '1']) == 0
+    out = capsys.readouterr()
+    assert f'umbrella_sim: warning: {warned}' in out.err and 'f (Hz)' in out.out
+
+
+def test_the_defaults_and_a_run_s_step_raise_no_warning(capsys):
+    """The thesis frame warns of nothing; a coarse time_step is the run's, not the modes'."""
+    for args in ([], ['--set', 'ribs=3'], ['--set', 'time_step=0.001']):
+        assert main(['modes', *args, '--count', '1']) == 0
+        assert capsys.readouterr().err == ''

@@ -22,6 +22,7 @@ import sys
 from .arguments import add_parameter_options
 from .inputs import build_params
 from ..core.modal import deployed_modes
+from ..core.summary import naming_rib, parameter_warnings
 
 #: rows printed by default
 DEFAULT_COUNT = 12
@@ -64,6 +65,22 @@ def _json_row(row, mode: int) -> dict:
     return out
 
 
+def _warnings(params) -> list[str]:
+    """
+    Return the static parameter warnings a run gives (summary.parameter_warnings).
+
+    A modulus in GPa, a density in g/cm³, a member too stubby for Euler-Bernoulli beams: the
+    frequencies they spoil; each rib's own where its values differ, naming it; not the run's
+    'coarse stage-1 step', which has no bearing on the modes.
+    """
+    planar = getattr(params, 'planar', params)
+    out = parameter_warnings(planar.as_dict())
+    if planar is not params:
+        out += [naming_rib(w, k) for k, r in enumerate(params.ribs_list())
+                if r.planar != planar for w in parameter_warnings(r.planar.as_dict())]
+    return [w for w in out if not w.startswith('coarse stage-1 step')]
+
+
 def main(args, ap: argparse.ArgumentParser) -> int:
     try:
         if args.count < 1:
@@ -72,6 +89,8 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         rows = deployed_modes(args.model, args.count)
     except ValueError as exc:
         ap.exit(2, f'umbrella_sim: error: {exc}\n')
+    for text in _warnings(args.model):
+        print(f'umbrella_sim: warning: {text}', file=sys.stderr)
     spin = getattr(args.model, 'base_spin_rate', 0.0) if getattr(
         args.model, 'base', 'fixed') == 'prescribed' else 0.0
     spun = (f", not spinning: the base's spin (base_spin_rate {spin:g} rad/s) left out "
