@@ -237,3 +237,20 @@ def test_the_defaults_and_a_run_s_step_raise_no_warning(capsys):
     for args in ([], ['--set', 'ribs=3'], ['--set', 'time_step=0.001']):
         assert main(['modes', *args, '--count', '1']) == 0
         assert capsys.readouterr().err == ''
+
+
+def test_the_planar_table_says_it_holds_the_in_plane_modes_only(capsys):
+    """
+    The planar model has no out-of-plane coordinates: its table is the in-plane modes only.
+
+    The same rib out of its plane (ribs >= 2) has a lower first mode (11.23 Hz against the
+    planar table's first, 21.28 Hz): the planar heading says what it leaves out and where to
+    find it; the umbrella's does not.
+    """
+    assert main(['modes', '--count', '1']) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert 'in-plane modes only' in head and 'ribs' in head
+    first = deployed_modes(UmbrellaRibsParams.from_mapping({'ribs': 2}), 1)[0]
+    assert first.out_of_plane > 0.9 and first.omega < deployed_modes(UmbrellaParams(), 1)[0].omega
+    assert main(['modes', '--set', 'ribs=2', '--count', '1']) == 0
+    assert 'in-plane modes only' not in capsys.readouterr().out

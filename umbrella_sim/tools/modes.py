@@ -107,7 +107,9 @@ def main(args, ap: argparse.ArgumentParser) -> int:
     print('natural frequencies of the frame locked at full deployment (the sleeve at the stop), '
           'linearised about the undeformed frame' + (
               '; on the free-floating bus (its six rigid-body modes left out)' if base == 'free'
-              else '; the hub held' if umbrella else '') + spun + (
+              else '; the hub held' if umbrella else
+              '; the planar frame: its in-plane modes only (out of its plane, bending and '
+              'twist: --set ribs=2 or more)') + spun + (
               '; f, period and omega undamped (a damped mode rings at f sqrt(1 - ratio^2); '
               'one of ratio >= 1 does not oscillate)' if damped else ''))
     head = f"{'mode':>4}  {'f (Hz)':>10}  {'period (ms)':>11}  {'omega (rad/s)':>13}"
