@@ -22,7 +22,8 @@ import sys
 from .arguments import add_parameter_options
 from .inputs import build_params
 from ..core.modal import deployed_modes
-from ..core.summary import naming_rib, parameter_warnings
+from ..core.summary import parameter_warnings
+from ..core.umbrella3d.driven3d import rib_parameter_warnings
 
 #: rows printed by default
 DEFAULT_COUNT = 12
@@ -99,8 +100,7 @@ def _warnings(params) -> list[str]:
     planar = getattr(params, 'planar', params)
     out = parameter_warnings(planar.as_dict())
     if planar is not params:
-        out += [naming_rib(w, k) for k, r in enumerate(params.ribs_list())
-                if r.planar != planar for w in parameter_warnings(r.planar.as_dict())]
+        out += rib_parameter_warnings(params)
     return [w for w in out if not w.startswith('coarse stage-1 step')]
 
 

@@ -58,6 +58,18 @@ CHUNK_STEPS = 4
 COMPILED_CHUNK_STEPS = 64
 
 
+def rib_parameter_warnings(params) -> list[str]:
+    """
+    Return each rib's own parameter warnings, 'key: rib k, text' (summary.naming_rib).
+
+    Each rib's own section, lengths and material judged as the planar record's are
+    (summary.parameter_warnings), where a rib's differ from the record's (whose own warnings
+    the umbrella's validity_warnings give, unnamed).
+    """
+    return [naming_rib(w, k) for k, r in enumerate(params.ribs_list())
+            if r.planar != params.planar for w in parameter_warnings(r.planar.as_dict())]
+
+
 class Sample3D:
     """
     The umbrella's figures at one instant (read-only): Record3D's row names as attributes.
@@ -356,11 +368,7 @@ class Summary3D:
         # base, the hub circle's share per squared spin; the largest ratio over the ribs in
         # stage 1
         ribs = sim.params.ribs_list()
-        # each rib's own section and lengths, judged as the planar record's are
-        # (summary.parameter_warnings), where a rib's differ from it: by the rib
-        self._rib_parameter_warnings = [
-            naming_rib(w, k) for k, r in enumerate(ribs) if r.planar != sim.params.planar
-            for w in parameter_warnings(r.planar.as_dict())]
+        self._rib_parameter_warnings = rib_parameter_warnings(sim.params)
         self._per_rate = np.array([centrifugal_tension_per_rate(r.planar, r.tip_mass)
                                    for r in ribs])
         self._spins = m.moving_base
