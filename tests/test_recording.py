@@ -454,7 +454,7 @@ def test_a_marker_magnification_set_at_runtime_is_undone_in_the_compared_shapes(
     """
     marker_magnification applies at once: the markers after the set are drawn at 200.
 
-    The recording says from when (umbrella_sim.marker_magnification.N), and the shapes
+    The recording says from when (umbrella_sim.marker_magnification.K), and the shapes
     umbrella_compare draws undo each marker's own magnification: they took the start's 1,
     and drew the tip 9 m off its 46 mm.
     """

@@ -44,7 +44,7 @@ SUMMARY_RECORD = 'umbrella_sim.summary'
 TOPICS_RECORD = 'umbrella_sim.topics'
 #: a recording stopped by a write error says so in this record
 ENDED_EARLY_RECORD = 'umbrella_sim.recording_error'
-#: + ".N" (N from 1): a runtime set of marker_magnification; the markers recorded after its
+#: + ".K" (K from 1): a runtime set of marker_magnification; the markers recorded after its
 #: log_time_ns are drawn at its value (before it: the segment's parameter)
 MAGNIFICATION_RECORD = 'umbrella_sim.marker_magnification'
 #: the command topic's records beside it: each value as applied, and refused commands
