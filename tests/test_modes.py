@@ -111,7 +111,8 @@ def test_each_mode_is_damped_as_the_beams_c_beta_k():
 
 @pytest.mark.parametrize('args, culprit', [
     (['--count', '0'], '--count 0'),
-    (['--model', 'rigid'], 'model rigid'),
+    (['--model', 'rigid'], "--model: invalid choice: 'rigid'"),    # (beams' models only)
+    (['--set', 'model=rigid'], 'model rigid: a rigid frame has no elastic modes'),
     (['--set', 'rib1.youngs_modulus=1e11'], 'rib1'),
 ])
 def test_bad_input_is_refused_naming_the_culprit(capsys, args, culprit):

@@ -35,6 +35,8 @@ from .model import UmbrellaModel
 from .nonlinear import damping_beta_of
 from .params import UmbrellaParams
 
+#: the models with elastic modes (beams)
+BEAM_MODELS = ('flexible', 'flexible-nonlinear')
 #: frequencies within this relative distance are one repeated frequency (the identical
 #: ribs' copies of a mode differ by round-off, ~1e-12)
 REPEATED = 1e-7
@@ -93,7 +95,7 @@ def deployed_modes(params, count: int | None = None) -> list[ModeRow]:
     ValueError for a rigid model, which has no elastic modes.
     """
     planar = params if isinstance(params, UmbrellaParams) else params.planar
-    if planar.model not in ('flexible', 'flexible-nonlinear'):
+    if planar.model not in BEAM_MODELS:
         raise ValueError(f'model {planar.model}: a rigid frame has no elastic modes; give '
                          'model flexible (or flexible-nonlinear: the same linearised beams)')
     model = UmbrellaModel(planar.replace(model='flexible'))

@@ -87,13 +87,17 @@ class GivenOnce(argparse.Action):
         setattr(namespace, self.dest, values)
 
 
-def add_parameter_options(sp: argparse.ArgumentParser) -> None:
-    """Add the options that give the model's parameters (inputs.build_params reads them)."""
+def add_parameter_options(sp: argparse.ArgumentParser, models=None) -> None:
+    """
+    Add the options that give the model's parameters (inputs.build_params reads them).
+
+    models: the models --model offers (default: every one).
+    """
     sp.add_argument('--params', metavar='FILE',
                     help='ROS 2 params YAML (default: config/umbrella.yaml)')
     sp.add_argument('--set', action='append', metavar='NAME=VALUE',
                     help='override one parameter (repeatable; each parameter once, here or '
                          'by its own option)')
-    sp.add_argument('--model', choices=SPECS['model'].choices, action=GivenOnce)
+    sp.add_argument('--model', choices=models or SPECS['model'].choices, action=GivenOnce)
     sp.add_argument('--elements-per-segment', type=int, dest='elements_per_segment',
                     action=GivenOnce)

@@ -21,7 +21,7 @@ import sys
 
 from .arguments import add_parameter_options
 from .inputs import build_params
-from ..core.modal import deployed_modes
+from ..core.modal import BEAM_MODELS, deployed_modes
 from ..core.summary import parameter_warnings
 from ..core.umbrella3d.driven3d import rib_parameter_warnings
 
@@ -43,7 +43,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
                     'identical ribs) are one row, with their count; the umbrella of N ribs '
                     "says where each mode's strain energy is (in-plane, out-of-plane "
                     'bending, twist) and which rib holds it. Parameters as for simulate.')
-    add_parameter_options(sp)
+    add_parameter_options(sp, BEAM_MODELS)    # (a rigid frame has no elastic modes)
     sp.add_argument('--count', type=int, default=DEFAULT_COUNT,
                     help=f'rows to print (default {DEFAULT_COUNT}; repeated frequencies '
                          'are one row)')
