@@ -508,20 +508,32 @@ def test_compare_of_one_run_recorded_at_two_rates_finds_no_difference(tmp_path):
     them, and its peak-holds re-held over the coarser periods are the coarser run's own
     (interpolating 100 Hz samples at 1 kHz made 17 mm of tip and 146 MPa of peak stress).
     """
-    bags = [tmp_path / 'r100', tmp_path / 'r1000']
-    for bag, rate in zip(bags, ('100', '1000')):
+    scale = {'alpha1': 1.0, 'alpha1_rate': 1.0, 'tip_deflection': 0.06,
+             'peak_stress_leaf': 2e8, 'peak_stress_link': 1e8}
+    for first, diffs in compare_at_two_rates(tmp_path, '100', '1000'):
+        for name, d in diffs.items():
+            assert d['max'] <= 1e-9 * scale[name], (first, name, d)
+
+
+def compare_at_two_rates(tmp_path, *rates) -> list[tuple[str, dict]]:
+    """
+    Record one run (0.35 s) at two publication rates; compare them in either order.
+
+    Return (the reference run's name, umbrella_compare's differences of the other), in each order.
+    """
+    bags = [tmp_path / f'r{rate}' for rate in rates]
+    for bag, rate in zip(bags, rates):
         assert run_cli('umbrella_sim', 'simulate', '--duration', '0.35', '--mcap', str(bag),
                        '--publish-rate', rate).returncode == 0
+    out = []
     for order in (bags, bags[::-1]):
-        out = tmp_path / f'cmp_{order[0].name}'
-        r = run_cli('umbrella_sim.tools.compare', *map(str, order), '--out', str(out),
+        cmp_dir = tmp_path / f'cmp_{order[0].name}'
+        r = run_cli('umbrella_sim.tools.compare', *map(str, order), '--out', str(cmp_dir),
                     '--no-plots')
         assert r.returncode == 0, r.stderr
-        diffs = json.loads((out / 'compare.json').read_text())['runs'][1]['differences']
-        scale = {'alpha1': 1.0, 'alpha1_rate': 1.0, 'tip_deflection': 0.06,
-                 'peak_stress_leaf': 2e8, 'peak_stress_link': 1e8}
-        for name, d in diffs.items():
-            assert d['max'] <= 1e-9 * scale[name], (order[0].name, name, d)
+        out.append((order[0].name, json.loads((cmp_dir / 'compare.json').read_text())
+                    ['runs'][1]['differences']))
+    return out
 
 
 def test_peak_holds_compare_on_the_coarser_grid_when_the_runs_start_apart():
@@ -540,17 +552,8 @@ def test_peak_holds_compare_on_the_coarser_grid_when_the_runs_start_apart():
 @pytest.mark.slow      # ~2.5 s
 def test_compare_of_one_run_recorded_at_100_and_40_hz_finds_no_difference(tmp_path):
     """The 40 Hz instants fall between 100 Hz samples (interpolating there made 14 mm of tip)."""
-    bags = [tmp_path / 'r100', tmp_path / 'r40']
-    for bag, rate in zip(bags, ('100', '40')):
-        assert run_cli('umbrella_sim', 'simulate', '--duration', '0.35', '--mcap', str(bag),
-                       '--publish-rate', rate).returncode == 0
-    for order in (bags, bags[::-1]):
-        out = tmp_path / f'cmp_{order[0].name}'
-        r = run_cli('umbrella_sim.tools.compare', *map(str, order), '--out', str(out),
-                    '--no-plots')
-        assert r.returncode == 0, r.stderr
-        diffs = json.loads((out / 'compare.json').read_text())['runs'][1]['differences']
-        assert all(d['max'] == 0.0 for d in diffs.values()), (order[0].name, diffs)
+    for first, diffs in compare_at_two_rates(tmp_path, '100', '40'):
+        assert all(d['max'] == 0.0 for d in diffs.values()), (first, diffs)
 
 
 @pytest.mark.slow      # ~2 s
