@@ -121,7 +121,7 @@ STAGE1_FINEST_MESH = 2
 #: (docs/validation.md); a coarser stage 1 (a time_step given, or step_follows_mesh's grid)
 #: says 'coarse stage-1 step' (summary.parameter_warnings).  Measured (flexible, the thesis's
 #: frame, the largest of leaf and link against a 5-10 us run, N = 1 / 2 / 4 / 8 elements a
-#: segment, V0 = -0.2 and -0.5): at most 1.7 / 1.4 / 1.7 / 2.4 % at 0.25 ms, 1.5 / 3.2 / 3.0 /
+#: segment, V0 = -0.2 and -0.5): at most 0.9 / 1.4 / 1.7 / 2.4 % at 0.25 ms, 1.5 / 3.2 / 3.0 /
 #: 4.1 % at 0.4 ms, 1.6 / 4.4 / 3.8 / 4.1 % at 0.5 ms, 4.1 / 9.1 / 13.0 / 15.4 % at 1 ms
 #: (flexible-nonlinear at N = 1, V0 = -0.2: 4.1 % at 1 ms, 0.2 % at 0.2 ms)
 STAGE1_STEP_LIMIT = 2.5e-4

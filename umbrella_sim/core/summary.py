@@ -411,8 +411,8 @@ def parameter_warnings(params: dict) -> list[str]:
                    f'{stage1:g} s, coarser than the {measured:g} s up to which its peak '
                    "stresses were measured within 3 %: the elements' modes that carry them, "
                    'and the state the lock starts stage 2 from, are not resolved (the '
-                   "thesis's frame, 1-8 elements a segment, against 5-10 us: up to 3.0-4.4 % "
-                   f'off at 0.4-0.5 ms, 4.1-15 % at 1 ms); time_step <= {measured:g} s '
+                   "thesis's frame, 1-8 elements a segment, against 5-10 us: up to 4.4 % off "
+                   f'at 0.4-0.5 ms, up to 15 % at 1 ms); time_step <= {measured:g} s '
                    'resolves them (time_step 0 takes 0.2 ms or finer)')
     area, inertia = beams.area, beams.second_moment_of_area
     height = beams.section_height
