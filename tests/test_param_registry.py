@@ -124,3 +124,16 @@ def test_an_unknown_name_is_answered_with_the_name_meant_or_none(given, meant):
     assert closest_name(given, REGISTRY) == meant
     said = unknown_names([given], REGISTRY)[0]
     assert said == (f'{given!r} (did you mean {meant!r}?)' if meant else repr(given))
+
+
+def test_numpy_numbers_are_numbers():
+    """A sweep's or a script's numpy values: np.int64(2) is the integer 2, np.float64 a double."""
+    import numpy as np
+
+    assert coerce('elements_per_segment', np.int64(2)) == 2
+    assert type(coerce('elements_per_segment', np.int64(2))) is int
+    assert coerce('v0', np.float64(-0.2)) == -0.2 and coerce('v0', np.int32(0)) == 0.0
+    with pytest.raises(ValueError, match='must be a whole number'):
+        coerce('elements_per_segment', np.float64(2.5))
+    with pytest.raises(ValueError, match='must be a number'):
+        coerce('v0', np.bool_(True).tolist())

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import numbers
 import re
 from typing import Any, Mapping
 
@@ -180,7 +181,7 @@ class Param:
                 number = float(value) if isinstance(value, str) or self.type is float else value
             except (TypeError, ValueError):     # (float()'s words name no parameter type)
                 raise ValueError('must be a number') from None
-            if not isinstance(number, (int, float)):
+            if not isinstance(number, numbers.Real):    # (numpy's integers are, as int)
                 raise ValueError('must be a number')
             if self.type is int:
                 if isinstance(number, float) and not number.is_integer():
