@@ -132,6 +132,7 @@ def test_bus_state_bytes_are_the_built_odometry_of_the_bus(values):
         assert np.abs(rot - frame.rot).max() < 1e-15 and w >= 0.0
         lin, ang = odo.twist.twist.linear, odo.twist.twist.angular
         assert [lin.x, lin.y, lin.z] == pytest.approx(frame.rot.T @ s.bus_v[:3], abs=1e-15)
+        assert [ang.x, ang.y, ang.z] == pytest.approx(frame.basis @ s.bus_v[3:6], abs=1e-15)
         dt, rates = 1e-6, s.bus_v[3:6]
         skew = frame.rot.T @ (BusFrame.of(s.bus_q[3:6] + dt * rates).rot
                               - BusFrame.of(s.bus_q[3:6] - dt * rates).rot) / (2 * dt)

@@ -34,7 +34,6 @@ import math
 
 import numpy as np
 
-from .model3d import BusFrame
 from ..outputs import first_largest_of_substeps, hermite_crests, substep_ends
 
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
@@ -613,15 +612,31 @@ def bus_odometry(bus_q, bus_v) -> np.ndarray:
     bus_q = [X, Y, Z, psi, beta, gamma] (R = Ry(psi) Rx(beta) Rz(gamma), bus to inertial),
     bus_v their rates.  Out: the position X, Y, Z (inertial, m); R's unit quaternion x, y,
     z, w (qy(psi) qx(beta) qz(gamma), w >= 0); the linear velocity R^T X' and the angular
-    velocity B theta' (model3d.BusFrame) in the bus frame (m/s, rad/s): the pose in the
-    inertial frame, the twist in the body's (REP 105).
+    velocity B theta' (model3d.BusFrame's basis B, whose Y row is hub_spin_rate's) in the
+    bus frame (m/s, rad/s): the pose in the inertial frame, the twist in the body's (REP
+    105).  Scalar arithmetic, once a publication: BusFrame.of builds its matrices and their
+    derivatives, about ten times the cost (tests/test_ribs_publication.py ties the two).
     """
-    x, v = np.asarray(bus_q, dtype=float), np.asarray(bus_v, dtype=float)
-    (cp, sp), (cb, sb), (cg, sg) = ((math.cos(a / 2.0), math.sin(a / 2.0)) for a in x[3:6])
+    x, y, z, psi, beta, gamma = (float(a) for a in bus_q)
+    xd, yd, zd, psi_d, beta_d, gamma_d = (float(a) for a in bus_v)
+    (cp, sp), (cb, sb), (cg, sg) = ((math.cos(a / 2.0), math.sin(a / 2.0))
+                                    for a in (psi, beta, gamma))
     # qy(psi) qx(beta) = (cp sb, sp cb, -sp sb, cp cb), then times qz(gamma)
     qx, qy, qz, qw = cp * sb, sp * cb, -sp * sb, cp * cb
-    quat = np.array([qx * cg + qy * sg, qy * cg - qx * sg, qz * cg + qw * sg, qw * cg - qz * sg])
-    if quat[3] < 0.0:
-        quat = -quat
-    frame = BusFrame.of(x[3:6])
-    return np.concatenate([x[:3], quat, frame.rot.T @ v[:3], frame.basis @ v[3:6]])
+    a, b, c, w = qx * cg + qy * sg, qy * cg - qx * sg, qz * cg + qw * sg, qw * cg - qz * sg
+    if w < 0.0:
+        a, b, c, w = -a, -b, -c, -w
+    # R^T X', R the quaternion's rotation
+    linear = ((1.0 - 2.0 * (b * b + c * c)) * xd + 2.0 * (a * b + c * w) * yd
+              + 2.0 * (a * c - b * w) * zd,
+              2.0 * (a * b - c * w) * xd + (1.0 - 2.0 * (a * a + c * c)) * yd
+              + 2.0 * (b * c + a * w) * zd,
+              2.0 * (a * c + b * w) * xd + 2.0 * (b * c - a * w) * yd
+              + (1.0 - 2.0 * (a * a + b * b)) * zd)
+    # B theta', B's columns Rz^T Rx^T e_y, Rz^T e_x, e_z
+    c_beta, s_beta, c_gamma, s_gamma = (math.cos(beta), math.sin(beta), math.cos(gamma),
+                                        math.sin(gamma))
+    angular = (s_gamma * c_beta * psi_d + c_gamma * beta_d,
+               c_beta * c_gamma * psi_d - s_gamma * beta_d,
+               -s_beta * psi_d + gamma_d)
+    return np.array([x, y, z, a, b, c, w, *linear, *angular])
