@@ -464,13 +464,12 @@ def check_types(values: Mapping[str, Any], spec: 'Param | None' = None) -> None:
     parsed instead: Param.coerce.)  spec: every value's specification (else the registry's
     of its name; the umbrella's: params3d.check_umbrella_types).
     """
-    given = spec
     for name, value in values.items():
-        spec = given or REGISTRY.get(name)  # model and node parameters alike
-        if spec is None:
+        p = spec or REGISTRY.get(name)      # model and node parameters alike
+        if p is None:
             continue
-        if type(spec.exact(value)) is not spec.type:
-            raise ValueError(f'parameter {name}={value!r}: must be of type {spec.type_name}, '
+        if type(p.exact(value)) is not p.type:
+            raise ValueError(f'parameter {name}={value!r}: must be of type {p.type_name}, '
                              f'got {_yaml_type(value)}')
 
 
