@@ -206,3 +206,76 @@ def test_diagnostics_carry_a_free_buss_momentum_and_a_fixed_hub_none():
     assert json.loads(values['angular_momentum_kg_m2_s']) == run.figures['angular_momentum']
     fixed = simulate(UmbrellaRibsParams.from_mapping({'ribs': 3}), 0.004, keep_samples=False)
     assert not [k for k in ribs_diagnostics(fixed.figures) if 'momentum' in k]
+
+
+@pytest.mark.parametrize('values', [FREE_BUS, DRIVEN], ids=['free', 'prescribed'])
+def test_the_bus_transform_on_tf_is_bus_states_pose(values):
+    """
+    A moving bus's /tf transform world -> umbrella_base: bus_state's pose, at its stamp.
+
+    bus_tf.bus_transform of each publication's sample carries bus_state's position and
+    quaternion exactly, with its stamp and frames (frame_prefix on both); the broadcaster
+    publishes one TFMessage a publication on /tf, reliable, volatile, depth 100 (tf2_ros's
+    broadcasters'), through a stand-in node and message type where tf2_msgs is missing.
+    """
+    from nav_msgs.msg import Odometry
+    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+    from umbrella_sim.ros.bus_tf import bus_transform, BusTransformBroadcaster
+
+    class Stand:                           # (TFMessage's shape; a node's create_publisher)
+
+        def __init__(self, transforms=None):
+            self.transforms, self.sent = transforms, []
+
+        def create_publisher(self, msg_type, topic, qos):
+            self.created = (msg_type, topic, qos)
+            return self
+
+        def publish(self, msg):
+            self.sent.append(msg)
+
+    node = Stand()
+    broadcaster = BusTransformBroadcaster(node, 'a/', Stand)
+    msg_type, topic, qos = node.created
+    assert (msg_type, topic, qos.depth) == (Stand, '/tf', 100) and broadcaster.available
+    assert (qos.reliability, qos.durability) == (ReliabilityPolicy.RELIABLE,
+                                                 DurabilityPolicy.VOLATILE)
+    driver = RunDriver(UmbrellaRibsParams.from_mapping(values), 1000.0)
+    encoder = RibsPublicationEncoder(driver)
+    moved = 0.0
+    for _ in range(10):
+        assert driver.advance_period()[-1].error is None
+        s = driver.publication()
+        odo = deserialize_message(encoder.messages(s, 'umbrella', 1.0, 'a/')['bus_state'],
+                                  Odometry)
+        broadcaster.publish(broadcaster.message(s))
+        (tf,) = node.sent[-1].transforms
+        assert tf == bus_transform(s, 'a/')
+        assert (tf.header, tf.child_frame_id) == (odo.header, odo.child_frame_id)
+        p, r = tf.transform.translation, tf.transform.rotation
+        pose = odo.pose.pose
+        assert [p.x, p.y, p.z, r.x, r.y, r.z, r.w] == [
+            pose.position.x, pose.position.y, pose.position.z, pose.orientation.x,
+            pose.orientation.y, pose.orientation.z, pose.orientation.w]
+        moved = max(moved, float(np.linalg.norm(s.bus_q[:3])))
+    assert len(node.sent) == 10 and moved > 1e-6
+
+
+def test_without_tf2_msgs_the_bus_broadcasts_nothing():
+    """Where tf2_msgs is missing (PyPI) the broadcaster is off: no publisher, no message."""
+    import importlib.util
+
+    from umbrella_sim.ros.bus_tf import BusTransformBroadcaster, tf_message_type
+
+    assert (tf_message_type() is None) == (importlib.util.find_spec('tf2_msgs') is None)
+
+    class Node:
+
+        def create_publisher(self, *args):
+            raise AssertionError('no publisher without tf2_msgs')
+
+    off = BusTransformBroadcaster(Node(), '', None)
+    driver = RunDriver(UmbrellaRibsParams.from_mapping(FREE_BUS), 1000.0)
+    assert not off.available and off.message(driver.publication()) is None
+    off.publish(None)

@@ -52,6 +52,7 @@ from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
 from . import messages as ros_io
+from .bus_tf import BusTransformBroadcaster, NO_TF, tf_message_type
 from .commands import CommandIntake
 from .lockstep import Lockstep
 from .pacing import lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer, RateWindow
@@ -161,6 +162,12 @@ class UmbrellaNode(Node):
                     else f"qos_overrides: {' '.join(str(exc).split())}")
             raise StartupError(text + files) from None
         self._check_qos_overrides(qos_given)
+        self.bus_tf = None          # a moving bus: world -> umbrella_base on /tf (bus_tf.py)
+        if 'bus_state' in self.pub:
+            self.bus_tf = BusTransformBroadcaster(self, self.node_cfg['frame_prefix'],
+                                                  tf_message_type())
+            if not self.bus_tf.available:
+                self.get_logger().info(NO_TF)
         self._topic_name = {key: pub.topic_name for key, pub in self.pub.items()}
         self.command_topic = self.command_sub.topic_name
         self.commands.subscription = self.command_sub
@@ -461,21 +468,23 @@ class UmbrellaNode(Node):
         self._phase = phase
         self._publish({'deployment_phase': ros_io.phase_msg(phase)}, self.sim.time)
 
-    def _sample_messages(self) -> tuple[int, float, dict]:
+    def _sample_messages(self) -> tuple:
         """Build the publication's messages under the sim lock, to be published later."""
-        cfg = self.node_cfg
+        cfg, s = self.node_cfg, self.driver.publication()
         return self._epoch, self.sim.time, self.encoder.messages(
-            self.driver.publication(), self._marker_ns, cfg['marker_magnification'],
-            cfg['frame_prefix'])
+            s, self._marker_ns, cfg['marker_magnification'],
+            cfg['frame_prefix']), self.bus_tf.message(s) if self.bus_tf else None
 
-    def _publish_sample(self, sample: tuple[int, float, dict]) -> None:
-        epoch, t, msgs = sample
+    def _publish_sample(self, sample: tuple) -> None:
+        epoch, t, msgs, tf = sample
         with self._sim_lock:
             if epoch != self._epoch:          # a reset came in meanwhile: the sample is stale
                 return
             if 'joint_states' in msgs:
                 self.lockstep.published()
             self._publish(msgs, t)
+            if tf is not None:                # (not recorded: bus_state holds the pose)
+                self.bus_tf.publish(tf)
 
     def _waiting_for_command(self) -> bool:
         """Lockstep: no command has answered the last joint_states yet (sim lock held)."""
