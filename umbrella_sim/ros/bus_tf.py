@@ -23,7 +23,8 @@ TransformBroadcaster: reliable, volatile, depth 100), stamped with the sim time,
 pose as ``bus_state``'s (outputs3d.bus_odometry), so that RViz with fixed frame ``world``
 shows the umbrella moving with its bus.  PyPI has no tf2_msgs: there the node says once
 that it broadcasts no /tf and runs on; ``bus_state`` carries the same pose.  /tf is not
-recorded (a recording's bus_state holds it).
+recorded (a recording's bus_state holds it): umbrella_replay broadcasts it again from each
+bus_state it replays.
 """
 from __future__ import annotations
 
@@ -60,14 +61,24 @@ def bus_transform(s, frame_prefix: str = '') -> TransformStamped:
     The bus origin's position and R's quaternion in ``world`` (bus_state's pose), stamped
     with the sample's sim time; frames with frame_prefix.
     """
-    x = bus_odometry(s.bus_q, s.bus_v).tolist()
+    return _transform(stamp(s.time), frame_prefix + WORLD_FRAME,
+                      frame_prefix + INERTIAL_FRAME, bus_odometry(s.bus_q, s.bus_v)[:7].tolist())
+
+
+def odometry_transform(odometry) -> TransformStamped:
+    """Return the transform of a bus_state message (a replay's): its pose, stamp and frames."""
+    p, o = odometry.pose.pose.position, odometry.pose.pose.orientation
+    return _transform(odometry.header.stamp, odometry.header.frame_id, odometry.child_frame_id,
+                      [p.x, p.y, p.z, o.x, o.y, o.z, o.w])
+
+
+def _transform(when, frame_id: str, child: str, pose: list) -> TransformStamped:
+    """Return a TransformStamped: pose = translation x, y, z, then quaternion x, y, z, w."""
     out = TransformStamped()
-    out.header.stamp = stamp(s.time)
-    out.header.frame_id = frame_prefix + WORLD_FRAME
-    out.child_frame_id = frame_prefix + INERTIAL_FRAME
+    out.header.stamp = when
+    out.header.frame_id, out.child_frame_id = frame_id, child
     t, r = out.transform.translation, out.transform.rotation
-    t.x, t.y, t.z = x[0:3]
-    r.x, r.y, r.z, r.w = x[3:7]
+    t.x, t.y, t.z, r.x, r.y, r.z, r.w = pose
     return out
 
 
@@ -94,6 +105,12 @@ class BusTransformBroadcaster:
         if self.message_type is None:
             return None
         return self.message_type(transforms=[bus_transform(s, self.frame_prefix)])
+
+    def replayed(self, odometry):
+        """Return the TFMessage of a replayed bus_state, or None without tf2_msgs."""
+        if self.message_type is None:
+            return None
+        return self.message_type(transforms=[odometry_transform(odometry)])
 
     def publish(self, msg) -> None:
         """Publish a message ``message`` made (None: nothing)."""

@@ -382,6 +382,26 @@ class RosArgumentsError(ValueError):
     """The ROS arguments (after --ros-args) that rclpy refused, said in one line."""
 
 
+def _bus_broadcaster(node, topics: list[str]) -> tuple[dict, str]:
+    """
+    Return {bus_state topic: its /tf broadcaster} of the topics replayed, and what to say.
+
+    A moving bus's bus_state is broadcast again on /tf, world -> umbrella_base, as the node
+    did (bus_tf.py), where tf2_msgs is installed; else nothing, said once.
+    """
+    from ..ros.bus_tf import BusTransformBroadcaster, NO_TF, tf_message_type
+    from ..ros.ribs_messages import BUS_TOPIC
+
+    states = [t for t in topics if t.rsplit('/', 1)[-1] == BUS_TOPIC.name]
+    if not states:
+        return {}, ''
+    message_type = tf_message_type()
+    if message_type is None:
+        return {}, f'; {NO_TF}'
+    broadcaster = BusTransformBroadcaster(node, message_type=message_type)
+    return {t: broadcaster for t in states}, '; the bus on /tf (world -> umbrella_base)'
+
+
 def republish(log: LogData, rate: float, start_offset: float, loop: bool,
               with_commands: bool, topics: list[str] | None, ros_args: list[str],
               wait_for_subscribers: float = 0.0) -> int:
@@ -425,8 +445,9 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
     names, moved = moved_topics(log, chosen, node.get_namespace())
     pubs = {t: node.create_publisher(log.msg_type(t), names[t],
                                      qos_from_yaml(log.channels[t][1])) for t in chosen}
+    bus, tf = _bus_broadcaster(node, chosen)
     print(f'replaying up to {total} messages on {len(pubs)} topics from {log.path} at '
-          f"{rate:g}x{f' ({log.cut_short})' if log.cut_short else ''}{moved}", flush=True)
+          f"{rate:g}x{f' ({log.cut_short})' if log.cut_short else ''}{moved}{tf}", flush=True)
     sent = read = skipped = 0       # skipped: payloads that do not decode
     first_skipped = ''
     try:        # a stop while waiting for subscribers ends like one while replaying
@@ -451,7 +472,7 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
                 if delay > 0:
                     time.sleep(delay)
                 try:        # an undecodable payload is skipped and named, as --resimulate
-                    log.decode(m.topic, m.data, index=read, log_time=m.log_time)
+                    msg = log.decode(m.topic, m.data, index=read, log_time=m.log_time)
                 except LogError as exc:
                     # (a stop signal inside the decoding comes back as rclpy's conversion
                     # error: an interrupt, not a bad payload, or a --loop never ends)
@@ -465,6 +486,8 @@ def republish(log: LogData, rate: float, start_offset: float, loop: bool,
                     read += 1
                 pubs[m.topic].publish(m.data)
                 sent += 1
+                if m.topic in bus:
+                    bus[m.topic].publish(bus[m.topic].replayed(msg))
             if not loop:
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
