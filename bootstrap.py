@@ -23,7 +23,8 @@ Set up a local virtualenv (.venv) with every dependency, then run the main job o
     python3 bootstrap.py test     # the test suite and examples/
 
 Arguments after run go to the node, which runs in the runs directory; a relative path they
-give (--params-file FILE, -p record_path:=DIR) is the working directory's, as a user means it:
+give (--params-file FILE, -p record_path:=DIR; a leading ~ the home directory) is the
+working directory's, as a user means it:
 python3 bootstrap.py run -p v0:=-0.5 --params-file my.yaml
 ROS_AUTOMATIC_DISCOVERY_RANGE is LOCALHOST unless the environment sets it (a node on another
 host sees nothing then: export ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET for that).
@@ -106,14 +107,24 @@ def main(argv) -> int:
 
 
 def node_paths(args):
-    """Return the node's arguments with their relative paths made the working directory's."""
+    """
+    Return the node's arguments with their relative paths made the working directory's.
+
+    A leading ~ is the home directory first, as the node takes it (a shell leaves the ~ of
+    record_path:=~/bags as it is): the node, run elsewhere, would otherwise get a path under
+    a directory named '~' of this one.
+    """
+    def callers(path):
+        path = os.path.expanduser(path)
+        return path if os.path.isabs(path) else os.path.abspath(path)
+
     out = list(args)
     for i, arg in enumerate(out):
-        if i > 0 and out[i - 1] == '--params-file' and not os.path.isabs(arg):
-            out[i] = os.path.abspath(arg)
+        if i > 0 and out[i - 1] == '--params-file':
+            out[i] = callers(arg)
         name, sep, value = arg.partition(':=')
-        if sep and name == 'record_path' and value and not os.path.isabs(value):
-            out[i] = f'{name}:={os.path.abspath(value)}'
+        if sep and name == 'record_path' and value:
+            out[i] = f'{name}:={callers(value)}'
     return out
 
 

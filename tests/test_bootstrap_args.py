@@ -33,6 +33,20 @@ def test_relative_paths_are_the_working_directorys(tmp_path, monkeypatch):
         '-p', 'record_path:=', '-p', 'duration:=2.0']
 
 
+def test_a_leading_tilde_is_the_home_directory(tmp_path, monkeypatch):
+    """
+    record_path:=~/bags records under the home directory, as the node takes it.
+
+    A shell leaves that ~ as it is (it follows ':='); made the working directory's, the node
+    recorded into a directory named '~' there.
+    """
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv('HOME', str(tmp_path / 'home'))
+    home = str(tmp_path / 'home')
+    assert node_paths(['-p', 'record_path:=~/bags/a', '--params-file', '~/six.yaml']) == [
+        '-p', f'record_path:={home}/bags/a', '--params-file', f'{home}/six.yaml']
+
+
 def test_the_suite_note_says_what_the_readme_says(monkeypatch, capsys):
     """`bootstrap.py test` announces the README's duration of the whole suite and fast subset."""
     import re
