@@ -108,3 +108,26 @@ def test_every_planar_csv_column_is_documented():
     rows = [line for line in table.splitlines() if line.startswith('| `')]
     named = {name for line in rows for name in re.findall(r'`(\w+)`', line.split(' | ')[0])}
     assert set(CSV_COLUMNS) <= named, sorted(set(CSV_COLUMNS) - named)
+
+
+def test_the_csv_state_columns_it_names_are_columns():
+    """
+    The ``--csv-state`` names the README gives are columns of the default run's CSV.
+
+    It named ``sigma_top[leaf@0.25]``, which no mesh has: a node inside the leaf is two
+    elements', ``leaf@0.25-`` and ``leaf@0.25+``.
+    """
+    from umbrella_sim.core.model import UmbrellaModel
+    from umbrella_sim.core.params import UmbrellaParams
+    from umbrella_sim.tools.csv_output import state_columns
+
+    text = readme()
+    start = text.index('`--csv-state` adds')
+    paragraph = text[start:text.index('\n\n', start)]
+    columns = state_columns(UmbrellaModel(UmbrellaParams()))
+    named = [n for n in re.findall(r'`(\w+\[[^\]`]+\])`', paragraph)
+             if '<' not in n and '...' not in n]
+    points = re.findall(r'`(leaf@[0-9.]+[-+]?)`', paragraph)
+    assert named and points, paragraph
+    assert [n for n in named if n not in columns] == []
+    assert [p for p in points if f'sigma_top[{p}]' not in columns] == []

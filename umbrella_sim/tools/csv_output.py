@@ -80,7 +80,7 @@ def state_columns(model) -> list[str]:
     """
     Return the --csv-state columns: q, q' by coordinate, then the fibre stresses.
 
-    'sigma_top[leaf@0.25]' = top-fibre stress at 0.25 m from O (Pa); at a node between two
+    'sigma_top[leaf@0]' = top-fibre stress at O, 0 m from it (Pa); at a node between two
     elements, each element's own ('leaf@0.5-', 'leaf@0.5+'); top of every point, then bottom,
     as StepBlock.states holds them.  Names without units (header_names adds them).
     """
