@@ -57,8 +57,8 @@ class RunSummary:
     stage2_peak_stress: float       # max over leaf and link of peak |sigma| after the lock (Pa)
     stage2_tip_amplitude: float     # half peak-to-peak transverse tip deflection after it (m),
     #                                 of the samples at publish_rate: a crest between two is
-    #                                 missed (100 Hz: 6.4 % low at V0 = -0.2, 7.2 % after a 10 N
-    #                                 push from rest; 1 kHz: < 0.9 %;
+    #                                 missed (100 Hz: 0.3 % low at V0 = -0.2, 7.3 % after a 10 N
+    #                                 push from rest; 1 kHz: < 0.5 %;
     #                                 the offline summary takes every physics step)
     stage2_samples: int             # samples the stage-2 figures come from
     stage2_span: float              # sim time those samples cover (s)
