@@ -234,3 +234,30 @@ def test_old_recordings_still_read(tmp_path):
         DurabilityPolicy.TRANSIENT_LOCAL)
     assert [m.data for _, m in log.decoded('/x')] == [1.5]
     assert os.path.isdir(bag)
+
+
+def test_a_directory_of_runs_names_the_bags_it_holds(tmp_path, offline_bag):
+    """
+    A directory of bag directories (runs/) given for a bag: the error names some of them.
+
+    'needs metadata.yaml or exactly one .mcap (found 0)' alone left the user to guess that a
+    run inside was meant; the latest three are named (sorted: the runs' names are their start
+    times), and how many more there are.  A directory of neither says nothing more.
+    """
+    import shutil
+
+    from umbrella_sim.bag.reader import LogError
+
+    runs = tmp_path / 'runs'
+    for k in range(5):
+        shutil.copytree(offline_bag, runs / f'umbrella_2026_11_28-12_0{k}_00')
+    (runs / 'notes').mkdir()
+    with pytest.raises(LogError) as info:
+        resolve_path(str(runs))
+    said = str(info.value)
+    assert 'found 0' in said and 'and 2 more' in said and 'notes' not in said
+    assert [k for k in range(5) if f'umbrella_2026_11_28-12_0{k}_00' in said] == [2, 3, 4]
+    assert resolve_path(str(runs / 'umbrella_2026_11_28-12_04_00')).endswith('.mcap')
+    with pytest.raises(LogError) as info:
+        resolve_path(str(runs / 'notes'))
+    assert str(info.value).endswith('(found 0)')

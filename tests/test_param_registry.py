@@ -137,3 +137,14 @@ def test_numpy_numbers_are_numbers():
         coerce('elements_per_segment', np.float64(2.5))
     with pytest.raises(ValueError, match='must be a number'):
         coerce('v0', np.bool_(True).tolist())
+
+
+def test_regenerating_up_to_date_pages_says_so(capsys, tmp_path):
+    """param_docs on pages already up to date says so, instead of printing nothing."""
+    import shutil
+
+    pages = tmp_path / 'msg_docs'
+    shutil.copytree(param_docs.msg_docs_dir(), pages)
+    assert param_docs.main(['--dir', str(pages)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith('up to date: ') and all(p in out for p in param_docs.PAGES)

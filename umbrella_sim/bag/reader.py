@@ -329,11 +329,23 @@ def resolve_path(path: str) -> str:
         found = [f for f in sorted(os.listdir(path)) if f.endswith('.mcap')]
         if len(found) != 1:
             raise LogError(f'{path}: a bag directory needs metadata.yaml or exactly one .mcap '
-                           f'(found {len(found)})')
+                           f'(found {len(found)}){_bags_inside(path) if not found else ""}')
         return os.path.join(path, found[0])
     if not os.path.lexists(path):
         raise LogError(f'{path}: no such file or directory')
     return path
+
+
+def _bags_inside(path: str, shown: int = 3) -> str:
+    """Say which bag directories a directory of them holds (runs/: its runs), the latest last."""
+    bags = sorted(d for d in os.listdir(path) if os.path.isdir(os.path.join(path, d))
+                  and any(f.endswith('.mcap') or f == 'metadata.yaml'
+                          for f in os.listdir(os.path.join(path, d))))
+    if not bags:
+        return ''
+    more = f' and {len(bags) - shown} more' if len(bags) > shown else ''
+    return ('; it holds bag directories: give one of them, ' + ', '.join(
+        os.path.join(path, d) for d in bags[-shown:]) + more)
 
 
 def read_log(path: str, umbrella: bool = True) -> LogData:

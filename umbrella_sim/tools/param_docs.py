@@ -82,6 +82,8 @@ def main(argv: list[str] | None = None) -> int:
                     fh.write(new)
     for path in stale:
         print(('out of date: ' if args.check else 'rewrote ') + path)
+    if not stale:
+        print(f"up to date: {', '.join(os.path.join(args.dir, p) for p in PAGES)}")
     return 1 if stale and args.check else 0
 
 
