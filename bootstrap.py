@@ -24,7 +24,8 @@ Set up a local virtualenv (.venv) with every dependency, then run the main job o
 
 Arguments after run go to the node, which runs in the runs directory; a relative path they
 give (--params-file FILE, -p record_path:=DIR; a leading ~ the home directory) is the
-working directory's, as a user means it:
+working directory's, as a user means it (a record_path written inside a params file is the
+node's own: relative, it is under the runs directory):
 python3 bootstrap.py run -p v0:=-0.5 --params-file my.yaml
 ROS_AUTOMATIC_DISCOVERY_RANGE is LOCALHOST unless the environment sets it (a node on another
 host sees nothing then: export ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET for that).
