@@ -165,6 +165,35 @@ def test_energy_balance_with_hinge_friction():
     assert s['max_out_of_plane_tip_rib'] == 2
 
 
+#: a hinge rubbing hard: rib 1's 3 N m slows the deployment to a lock at 0.28 s, then stage
+#: 2's vibration reverses its leaf every ~0.4 ms, its rate crossing the Coulomb torque's
+#: ramp (tanh over hinge_regularisation, 1e-3 rad/s)
+HARD_RUB = {'ribs': 3, 'rib1.hinge_coulomb': 3.0}
+
+
+@pytest.mark.parametrize('kernel', ['compiled', 'numpy'])
+def test_a_hinge_rubbing_hard_converges_where_its_leaf_reverses(kernel):
+    """Newton converges as the rubbing leaf's rate crosses 0, on either path (it failed)."""
+    p = UmbrellaRibsParams.from_mapping(HARD_RUB)
+    sim = UmbrellaSimulator3D(p)
+    sim.run(0.285)      # (the run takes the compiled step where it is built)
+    assert sim.locked
+    if kernel == 'numpy':
+        sim.integrator.compiled = None      # its numpy reference from there on
+    rec = sim.run(0.3)
+    assert sim.time == pytest.approx(0.3)
+    a = rec.arrays()
+    late = a['time'] >= 0.285
+    rate = a['alpha1_rate'][late, 1]
+    assert np.count_nonzero(np.diff(np.sign(rate))) >= 10      # the leaf reversed, often
+    s = rec.summary()
+    assert s['energy_balance_residual'] < BALANCE_TOLERANCE * s['energy_scale']
+    # the hinge rubbed the whole deployment: at least its torque over the leaf's travel
+    travel = p.planar.alpha0 - p.planar.alpha_deployed
+    assert -s['friction_work'][1] > 3.0 * travel
+    assert s['friction_work'][0] == s['friction_work'][2] == 0.0
+
+
 def test_the_lock_steps_work_counts_both_parts_of_the_step():
     """The grid step of the lock: its work is the step to the lock's and the locked rest's."""
     sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(

@@ -1011,12 +1011,20 @@ static double strain_energy(Ctx3D *x, const double *q) {
     return 0.5 * e;
 }
 
+/* below this |rate| / hinge_regularisation the Coulomb torque's secant is its tangent, 1 */
+#define FRICTION_AT_REST 1e-6
+
 static void friction(const Ctx3D *x, int r, double dq_a1, double h, double *torque,
                      double *slope) {
     const Model3D *m = x->m;
     double w = dq_a1 / h, eps = m->regularisation, th = tanh(w / eps);
     *torque = -(m->viscous[r] * w + m->coulomb[r] * th);
-    if (slope) *slope = -(m->viscous[r] + m->coulomb[r] * (1.0 - th * th) / eps) / h;
+    /* the slope the iteration matrix takes: the Coulomb torque's secant from rest, tanh(s) / s
+     * (its tangent at rest), not its tangent sech^2(s), which is 0 away from rest: a rate
+     * crossing 0 then overshot the tanh's narrow ramp back and forth, and Newton never
+     * converged (integrator3d.MidpointUmbrella.friction, the same rule) */
+    double s = w / eps, secant = fabs(s) < FRICTION_AT_REST ? 1.0 : th / s;
+    if (slope) *slope = -(m->viscous[r] + m->coulomb[r] * secant / eps) / h;
 }
 
 /* v projected onto J v = 0 in the mass metric (M = x->mass at q) */

@@ -78,6 +78,9 @@ from ..kernel import kernel_refusal, LIBRARY, load_kernel
 #: 52.2/50.3/50.2/50.5 (2.07-3.04 iterations a step), ribs 12 x 2 314/255/234/214/214/223.
 CARRY_STEPS = 8
 REFRESH_RATE = 0.1
+#: below this |rate| / hinge_regularisation a hinge's Coulomb secant is its tangent, 1
+#: (_kernel3d.c's FRICTION_AT_REST)
+FRICTION_AT_REST = 1e-6
 
 #: why a run steps on the numpy path although the compiled step was asked for ('auto'),
 #: said once a process on stderr
@@ -244,12 +247,23 @@ class MidpointUmbrella:
 
     # ------------------------------------------------------------ pieces
     def friction(self, dq_a1: np.ndarray, h: float):
-        """Return (torque at the step's mean rate (R,), its derivative in d alpha1)."""
+        """
+        Return (torque at the step's mean rate (R,), the slope the iteration matrix takes).
+
+        The slope in d alpha1 is the Coulomb torque's secant from rest, tanh(s) / s (s the
+        rate over hinge_regularisation; its tangent, 1, at rest), not its tangent sech^2(s),
+        which is 0 away from rest: with it a rate crossing 0 overshot the tanh's narrow ramp
+        back and forth and Newton never converged (a 2 N m hinge in stage 2).  Newton's
+        residual keeps the exact torque: the same solution.
+        """
         w = dq_a1 / h
         eps = self.regularisation
-        th = np.tanh(w / eps)
+        s = w / eps
+        th = np.tanh(s)
         torque = -(self.viscous * w + self.coulomb * th)
-        slope = -(self.viscous + self.coulomb * (1.0 - th * th) / eps) / h
+        rest = np.abs(s) < FRICTION_AT_REST
+        secant = np.where(rest, 1.0, th / np.where(rest, 1.0, s))
+        slope = -(self.viscous + self.coulomb * secant / eps) / h
         return torque, slope
 
     def _blocks(self, mass, jac_c, jac_r, stuck, shared_active, extra_rr=None, sign=-1.0):
