@@ -200,6 +200,11 @@ def own_dask_cluster(procs, tmp_path):
 # ------------------------------------------------------------------ SPEC checks
 @pytest.mark.parametrize('spec, culprits', [
     ('grid:\n  v0: [-1.0, -2.0]\n  speed: [1, 2]\n', ['case 1', 'speed', 'unknown parameter']),
+    ('base: {ribs: 3}\ngrid:\n  rib1.hinge_colomb: [0.1]\n',         # (as simulate --set's)
+     ['case 1', "'rib1.hinge_colomb' (did you mean 'rib1.hinge_coulomb'?)",
+      'umbrella3d_parameters.md']),
+    ('base: {ribs: 3}\ngrid:\n  rib.tip_mas: [[0, 0.1, 0]]\n',
+     ['case 1', "'rib.tip_mas' (did you mean 'rib.tip_mass'?)"]),
     ('grid:\n  v0: [-1.0, fast]\n', ['case 2', 'v0', 'fast']),
     ('grid:\n  v0: [-1.0]\ncases:\n  - {model: flexible}\n  - {model: elastic}\n',
      ['case 3', 'model', 'elastic', 'one of']),

@@ -191,8 +191,23 @@ def resolve_params(overrides: dict, params_file: str | None = None,
 SHARED_NAMES = tuple(CONTROLLER_PARAMETERS)
 #: the umbrella of N ribs' parameters (umbrella3d_parameters.md): its own, rib.<name> lists
 UMBRELLA_NAMES = umbrella_parameter_names()
+#: an offline run's parameter names: the planar model's and the umbrella's
+_OFFLINE_NAMES = frozenset(SPECS) | UMBRELLA_NAMES
 _KNOWN_IN_FILES = (frozenset(SPECS) | frozenset(NODE_ONLY_PARAMS) | frozenset(SHARED_NAMES)
                    | UMBRELLA_NAMES)
+
+
+def check_offline_names(names, source: str) -> None:
+    """
+    Refuse a name that is no offline run's parameter, with the name meant (ValueError).
+
+    simulate's --set and a sweep's cases alike: the umbrella's names are known too, so a
+    misspelt rib.<name> or rib<k>.<name> is suggested its right spelling.
+    """
+    if not _OFFLINE_NAMES.issuperset(names):        # (a sweep checks every case's)
+        check_known_names(names, _OFFLINE_NAMES, source,
+                          'umbrella_node --help and in msg_docs/parameters.md (the umbrella '
+                          "of N ribs': msg_docs/umbrella3d_parameters.md)")
 
 
 def params_file_warnings(params_file: str) -> list[str]:
@@ -288,10 +303,7 @@ def build_params(args) -> UmbrellaParams:
         if name in NODE_PARAMETERS:
             raise ValueError(f'--set {name}: a parameter of the live umbrella_node only, with '
                              'no meaning offline (see --duration, --mcap, --publish-rate)')
-        # (the umbrella's names too: a misspelt rib.<name> is suggested its right spelling)
-        check_known_names([name], set(SPECS) | UMBRELLA_NAMES, '--set',
-                          'umbrella_node --help and in msg_docs/parameters.md (the umbrella '
-                          "of N ribs': msg_docs/umbrella3d_parameters.md)")
+        check_offline_names([name], '--set')
         values[name] = value
         if name == 'lock':
             lock_given = f'--set lock={value}'

@@ -43,8 +43,9 @@ from typing import Any
 
 import yaml
 
-from .inputs import (check_lock_given, check_run_length, default_params_file,
-                     LONG_RUN_STEPS, read_force_profile, resolve_params, UMBRELLA_NAMES)
+from .inputs import (check_lock_given, check_offline_names, check_run_length,
+                     default_params_file, LONG_RUN_STEPS, read_force_profile, resolve_params,
+                     UMBRELLA_NAMES)
 from .. import __version__
 from ..bag.paths import read_text_input
 
@@ -235,6 +236,7 @@ def load_spec(path: str, progress=None) -> Sweep:
             progress(index, total)
         source = 'grid' if index <= len(overrides_list) - len(explicit) else 'cases'
         try:
+            check_offline_names(overrides, 'parameters')      # (as simulate's --set)
             check_types(overrides)          # typed YAML, as a params file (the node's rule)
             check_umbrella_types(overrides, params_file=False)
             resolved = resolve_params(overrides, params_file, from_file)
