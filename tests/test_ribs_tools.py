@@ -118,6 +118,10 @@ def test_compare_of_one_umbrella_recorded_at_two_rates_finds_no_leaf_angle_diffe
     ([*RUN, '--set', 'rib.tip_mass=[0.1, 0.0, 0.0]'], 'rib.tip_mass'),
     ([*RUN, '--set', 'rib.tip_mass=[0.0 0.1]'], '--set rib.tip_mass: a list of numbers'),
     ([*RUN, '--set', 'rib.tip_mas=[0.0, 0.1]'], "(did you mean 'rib.tip_mass'?)"),
+    # a rib's own value without its prefix (was 'hinge_regularisation', and nothing)
+    ([*RUN, '--set', 'hinge_viscous=0.5'], "'hinge_viscous' (did you mean 'rib.hinge_viscous'?)"),
+    ([*RUN, '--set', 'tip_mass=0.1'], "'tip_mass' (did you mean 'rib.tip_mass'?)"),
+    ([*RUN, '--set', 'hinge_colomb=0.5'], "(did you mean 'rib.hinge_coulomb'?)"),
     # [] given is no rib's value (the node and a params file refuse it): not left out unsaid
     ([*RUN, '--set', 'rib.tip_mass=[]'], 'parameter rib.tip_mass: an empty list: give one '
                                          'value per rib'),

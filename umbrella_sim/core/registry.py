@@ -497,7 +497,10 @@ def closest_name(name: str, known) -> str | None:
 
     A name the given one begins (the shortest: 'yield' is yield_strength), else the closest
     by difflib's ratio (at least 0.5: 'l4' is l3) among names of the same first letter: a
-    match across letters named what no one meant ('lenght' is not yield_strength).
+    match across letters named what no one meant ('lenght' is not yield_strength).  A known
+    name with a prefix (rib.tip_mass, rib1.tip_mass) is also matched by what follows its
+    first dot, and the shortest name of that ending answers: a rib's own value given
+    without its prefix, 'tip_mass' or 'hinge_colomb', means rib.tip_mass, rib.hinge_coulomb.
     """
     import difflib
 
@@ -505,9 +508,20 @@ def closest_name(name: str, known) -> str | None:
     longer = [k for k in known if k.startswith(name) and name]
     if longer:
         return min(longer, key=len)
-    close = difflib.get_close_matches(name, [k for k in known if k[:1] == name[:1]], n=1,
-                                      cutoff=0.5)
-    return close[0] if close else None
+    ending: dict = {}           # what follows a prefixed name's first dot -> its shortest name
+    for k in known:
+        tail = k.partition('.')[2]
+        if tail and (tail not in ending or len(k) < len(ending[tail])):
+            ending[tail] = k
+    if name in ending:
+        return ending[name]
+    plain = [k for k in known if k[:1] == name[:1]]
+    close = difflib.get_close_matches(
+        name, plain + [t for t in ending if t[:1] == name[:1] and t not in plain], n=1,
+        cutoff=0.5)
+    if not close:
+        return None
+    return close[0] if close[0] in plain else ending[close[0]]
 
 
 def unknown_names(names, known) -> list[str]:
