@@ -317,6 +317,18 @@ def test_spec_cases_ids_and_force_profile(tmp_path):
     assert other.cases[0].case_id != case.case_id
 
 
+def test_an_umbrella_spelled_two_ways_is_one_case(tmp_path):
+    """A rib's value as rib<k>.<name> or in a rib.<name> list, or its default given: one case."""
+    spec = sweep.load_spec(write(tmp_path / 's.yaml', (
+        'base: {ribs: 3}\n'
+        'cases:\n  - {rib1.hinge_coulomb: 0.5}\n  - {rib.hinge_coulomb: [0, 0.5, 0]}\n'
+        '  - {rib1.hinge_coulomb: 0.5, rib0.hinge_coulomb: 0.0}\n'
+        '  - {rib1.hinge_coulomb: 0.0}\n  - {hub_radius: 0.0}\n  - {rib.l1: [0.5, 0.5, 0.5]}\n'
+        '  - {ribs: 3}\n  - {rib.hinge_coulomb: [0, 0, 0.5]}\nduration: 0.01\n')))
+    assert spec.duplicates == [(2, 1), (3, 1), (5, 4), (6, 4), (7, 4)]
+    assert [c.index for c in spec.cases] == [1, 4, 8]       # rib 2's is another umbrella
+
+
 def test_table_takes_every_summary_key(tmp_path):
     """
     Check that the table follows the summary: a key the sweep has never heard of is a column.

@@ -48,7 +48,7 @@ from .progress import Progress
 from .sweep_results import (CaseStore, is_finished, make_record, OutputError, plot,
                             STATUS_DIVERGED, STATUS_ERROR, STATUS_OK, table_rows, write_csv,
                             write_parquet)
-from .sweep_spec import case_id, case_models, load_spec, SpecError, Sweep
+from .sweep_spec import case_id, case_key, case_models, load_spec, SpecError, Sweep
 from .. import __version__
 from ..bag.paths import absolute_path, check_new_output
 from ..core.registry import NODE_PARAMETERS
@@ -284,7 +284,7 @@ def _mcap_step_cases(sweep: Sweep, log) -> None:
         step = simulator_class(run).grid_step(run)
         note = shortened_step_note(step, rate)
         if note:
-            case.case_id = case_id(dict(case.params, mcap_publish_rate=rate), case.duration,
+            case.case_id = case_id(dict(case_key(run), mcap_publish_rate=rate), case.duration,
                                    case.stop_after_lock, case.force_profile)
             log(f'case {case.index}: the --mcap recording takes a {note}')
 

@@ -109,6 +109,30 @@ def case_id(params: dict, duration: float, stop_after_lock, force_profile) -> st
     return hashlib.sha256(blob.encode('utf-8')).hexdigest()[:16]
 
 
+def case_key(run) -> dict:
+    """
+    Return the parameters a case is stored by: every value of its run, as it resolves.
+
+    run: the planar record or UmbrellaRibsParams (case_models' third).  Its as_dict, less a
+    rib's own value that every rib takes without it: an umbrella however it is spelled
+    (rib1.hinge_coulomb: 0.5 or rib.hinge_coulomb: [0, 0.5, 0]; rib1.hinge_coulomb: 0 or
+    nothing; hub_radius: 0 or nothing) is one case.
+    """
+    from ..core.umbrella3d.params3d import RIB_SPECS
+
+    out = run.as_dict()
+    planar = getattr(run, 'planar', None)
+    for name, values in list(out.items()):
+        if planar is None or not isinstance(values, list):
+            continue
+        alone = RIB_SPECS[name].default if name in RIB_SPECS else getattr(planar, name)
+        if all(v == alone for v in values):
+            out[name] = alone
+            if name in RIB_SPECS:
+                del out[name]
+    return out
+
+
 def case_models(params: dict) -> tuple:
     """
     Return (the planar record, the umbrella's values, the run's parameters) of a case.
@@ -250,7 +274,7 @@ def load_spec(path: str, progress=None) -> Sweep:
                      if k in UMBRELLA_NAMES}
             refuse_empty_rib_lists(given)
             umbrella = umbrella_values(given)
-            umbrella_model(resolved, umbrella)
+            run = umbrella_model(resolved, umbrella)
             params = {**resolved.as_dict(), **umbrella}
         except ValueError as exc:
             shown = ', '.join(f'{k}={v!r}' for k, v in overrides.items()
@@ -266,7 +290,7 @@ def load_spec(path: str, progress=None) -> Sweep:
         case = Case(index=index, overrides=overrides, params=params, duration=duration,
                     stop_after_lock=stop_after_lock, force_profile=profile,
                     force_profile_path=profile_path)
-        case.case_id = case_id(params, duration, stop_after_lock, profile)
+        case.case_id = case_id(case_key(run), duration, stop_after_lock, profile)
         if case.case_id in seen:
             sweep.duplicates.append((index, seen[case.case_id]))
             continue
