@@ -207,6 +207,13 @@ def test_a_params_files_rib_beyond_its_ribs_is_refused_naming_the_file(tmp_path,
     ('base: {ribs: 3}\ngrid: {ribs: [2, 3], rib.tip_mass: [[0, 0.1, 0]]}\n',
      '(grid: ribs=2, rib.tip_mass=[0, 0.1, 0]): parameter rib.tip_mass: a list of 3 values '
      'for 2 ribs'),
+    # a misspelt rib name: the name meant and where they are listed, as simulate --set says
+    ('base: {ribs: 3}\ngrid:\n  rib1.hinge_colomb: [0.1]\n',
+     "'rib1.hinge_colomb' (did you mean 'rib1.hinge_coulomb'?); known parameters are listed "
+     "by umbrella_node --help and in msg_docs/parameters.md (the umbrella of N ribs': "
+     'msg_docs/umbrella3d_parameters.md)'),
+    ('base: {ribs: 3}\ngrid:\n  rib.tip_mas: [[0, 0.1, 0]]\n',
+     "'rib.tip_mas' (did you mean 'rib.tip_mass'?)"),
 ])
 def test_a_sweeps_rib_list_that_is_none_is_refused_naming_the_case(spec, said, tmp_path):
     path = tmp_path / 'spec.yaml'
@@ -214,6 +221,20 @@ def test_a_sweeps_rib_list_that_is_none_is_refused_naming_the_case(spec, said, t
     with pytest.raises(SpecError, match=re.escape(said)) as exc:
         load_spec(str(path))
     assert f'sweep spec {path}: case 1' in str(exc.value)
+
+
+def test_an_umbrella_spelled_two_ways_is_one_case(tmp_path):
+    """A rib's value as rib<k>.<name> or in a rib.<name> list, or its default given: one case."""
+    path = tmp_path / 'spec.yaml'
+    path.write_text(
+        'base: {ribs: 3}\n'
+        'cases:\n  - {rib1.hinge_coulomb: 0.5}\n  - {rib.hinge_coulomb: [0, 0.5, 0]}\n'
+        '  - {rib1.hinge_coulomb: 0.5, rib0.hinge_coulomb: 0.0}\n'
+        '  - {rib1.hinge_coulomb: 0.0}\n  - {hub_radius: 0.0}\n  - {rib.l1: [0.5, 0.5, 0.5]}\n'
+        '  - {ribs: 3}\n  - {rib.hinge_coulomb: [0, 0, 0.5]}\nduration: 0.01\n')
+    spec = load_spec(str(path))
+    assert spec.duplicates == [(2, 1), (3, 1), (5, 4), (6, 4), (7, 4)]
+    assert [c.index for c in spec.cases] == [1, 4, 8]       # rib 2's is another umbrella
 
 
 def test_a_sweeps_umbrella_value_of_the_wrong_type_is_refused(tmp_path):

@@ -200,11 +200,6 @@ def own_dask_cluster(procs, tmp_path):
 # ------------------------------------------------------------------ SPEC checks
 @pytest.mark.parametrize('spec, culprits', [
     ('grid:\n  v0: [-1.0, -2.0]\n  speed: [1, 2]\n', ['case 1', 'speed', 'unknown parameter']),
-    ('base: {ribs: 3}\ngrid:\n  rib1.hinge_colomb: [0.1]\n',         # (as simulate --set's)
-     ['case 1', "'rib1.hinge_colomb' (did you mean 'rib1.hinge_coulomb'?)",
-      'umbrella3d_parameters.md']),
-    ('base: {ribs: 3}\ngrid:\n  rib.tip_mas: [[0, 0.1, 0]]\n',
-     ['case 1', "'rib.tip_mas' (did you mean 'rib.tip_mass'?)"]),
     ('grid:\n  v0: [-1.0, fast]\n', ['case 2', 'v0', 'fast']),
     ('grid:\n  v0: [-1.0]\ncases:\n  - {model: flexible}\n  - {model: elastic}\n',
      ['case 3', 'model', 'elastic', 'one of']),
@@ -315,18 +310,6 @@ def test_spec_cases_ids_and_force_profile(tmp_path):
         'base: {elements_per_segment: 1}\ngrid:\n  v0: [-0.5]\n  model: [flexible]\n'
         'force_profile: push.csv\nduration: 0.12\n')))
     assert other.cases[0].case_id != case.case_id
-
-
-def test_an_umbrella_spelled_two_ways_is_one_case(tmp_path):
-    """A rib's value as rib<k>.<name> or in a rib.<name> list, or its default given: one case."""
-    spec = sweep.load_spec(write(tmp_path / 's.yaml', (
-        'base: {ribs: 3}\n'
-        'cases:\n  - {rib1.hinge_coulomb: 0.5}\n  - {rib.hinge_coulomb: [0, 0.5, 0]}\n'
-        '  - {rib1.hinge_coulomb: 0.5, rib0.hinge_coulomb: 0.0}\n'
-        '  - {rib1.hinge_coulomb: 0.0}\n  - {hub_radius: 0.0}\n  - {rib.l1: [0.5, 0.5, 0.5]}\n'
-        '  - {ribs: 3}\n  - {rib.hinge_coulomb: [0, 0, 0.5]}\nduration: 0.01\n')))
-    assert spec.duplicates == [(2, 1), (3, 1), (5, 4), (6, 4), (7, 4)]
-    assert [c.index for c in spec.cases] == [1, 4, 8]       # rib 2's is another umbrella
 
 
 def test_table_takes_every_summary_key(tmp_path):
