@@ -71,6 +71,9 @@ def test_with_a_publication_every_step_the_figures_are_the_summarys(every_step):
     assert figures['rib_deploy_time'] == [figures['lock_time']] * 3
     assert figures['deployment_lag'] == 0.0
     assert s.latest_rib == figures['latest_rib']
+    assert s.max_leaf_angle_spread == figures['max_leaf_angle_spread'] > 0.0
+    assert s.max_leaf_angle_spread_time == pytest.approx(
+        figures['max_leaf_angle_spread_time'], abs=1e-9)
     for name in STRESS_NAMES:
         peak = figures['peak_stress'][name]
         assert list(s.peak_stress[name]) == peak['value']

@@ -165,6 +165,32 @@ def test_energy_balance_with_hinge_friction():
     assert s['max_out_of_plane_tip_rib'] == 2
 
 
+def test_one_sleeve_keeps_the_ribs_together_apart_by_an_elastic_lag():
+    """
+    One sleeve ties every leaf to it: a rubbing hinge puts its rib behind only elastically.
+
+    Rib 1's hinge rubs (Coulomb torque c): the ribs still reach full deployment together, at
+    the lock (deployment_lag 0), the lock comes later, and on the way rib 1's leaf angle is
+    the furthest behind (the largest alpha1: the leaves close from alpha0 down), by a spread
+    proportional to c (the frame's elastic compliance to the torque: 1 and 0.5 N m within
+    2 % of twice each other), small against the leaf's travel; identical ribs: none.
+    """
+    spread, locks = {}, {}
+    for c in (0.0, 0.5, 1.0):
+        rec = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
+            {'ribs': 3, 'rib1.hinge_coulomb': c})).run(0.3)
+        s, a = rec.summary(), rec.arrays()
+        assert s['deployment_lag'] == 0.0
+        spread[c], locks[c] = s['max_leaf_angle_spread'], s['lock_time']
+        if c:
+            i = int(np.argmin(np.abs(a['time'] - s['max_leaf_angle_spread_time'])))
+            assert int(np.argmax(a['alpha1'][i])) == 1
+    assert spread[0.0] == 0.0 and locks[0.0] < locks[0.5] < locks[1.0]
+    assert spread[1.0] == pytest.approx(2.0 * spread[0.5], rel=0.02)
+    travel = UmbrellaRibsParams.from_mapping({'ribs': 3}).planar
+    assert 0.0 < spread[1.0] < 1e-3 * (travel.alpha0 - travel.alpha_deployed)
+
+
 #: a hinge rubbing hard: rib 1's 3 N m slows the deployment to a lock at 0.28 s, then stage
 #: 2's vibration reverses its leaf every ~0.4 ms, its rate crossing the Coulomb torque's
 #: ramp (tanh over hinge_regularisation, 1e-3 rad/s)

@@ -237,6 +237,8 @@ def test_run_driver_summary_of_the_umbrella_through_the_lock():
     assert figures['deployment_lag'] == summary['deployment_lag']
     assert figures['latest_rib'] == int(np.argmax(summary['rib_deploy_time']))
     assert figures['max_out_of_plane_tip'] == summary['max_out_of_plane_tip']
+    assert figures['max_leaf_angle_spread'] == summary['max_leaf_angle_spread'] > 0.0
+    assert figures['max_leaf_angle_spread_time'] == summary['max_leaf_angle_spread_time']
     # (the residual is round-off of the running sums of work: ACCUMULATED)
     assert figures['energy_balance_residual'] == pytest.approx(
         summary['energy_balance_residual'], rel=0, abs=1e-13 * summary['energy_scale'])

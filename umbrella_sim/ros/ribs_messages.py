@@ -311,6 +311,7 @@ class RibsPublicationEncoder:
 #: the umbrella's summary figures (Summary3D.figures) diagnostics carry: key -> figure
 DIAGNOSTIC_FIGURES = {'ribs': 'ribs', 'rib_deploy_time_s': 'rib_deploy_time',
                       'deployment_lag_s': 'deployment_lag', 'latest_rib': 'latest_rib',
+                      'max_leaf_angle_spread_rad': 'max_leaf_angle_spread',
                       'max_out_of_plane_tip_m': 'max_out_of_plane_tip',
                       'max_out_of_plane_tip_rib': 'max_out_of_plane_tip_rib',
                       'energy_balance_residual_J': 'energy_balance_residual',

@@ -178,6 +178,9 @@ class RibsRunSummary:
     rib_deploy_time: tuple              # each rib's deployment instant (None: not reached)
     deployment_lag: float | None        # the latest rib's after the earliest's
     latest_rib: int | None
+    max_leaf_angle_spread: float        # largest difference of two ribs' alpha1 published
+    #                                     before the lock (rad), and when
+    max_leaf_angle_spread_time: float | None
     peak_stress: dict                   # component -> each rib's peak |stress| (Pa): axial,
     #                                     bending_in_plane, bending_out_of_plane, torsion,
     #                                     von_mises (outputs3d.STRESS_NAMES)
@@ -239,6 +242,8 @@ def summarize_ribs(alpha_deployed, applied: list, lock_time: float | None,
         ribs=ribs, first_push_time=sleeve.first_push_time, lock_time=lock_time,
         deploy_time=sleeve.deploy_time, rib_deploy_time=tuple(f['rib_deploy_time']),
         deployment_lag=f['deployment_lag'], latest_rib=f['latest_rib'],
+        max_leaf_angle_spread=f['max_leaf_angle_spread'],
+        max_leaf_angle_spread_time=f['max_leaf_angle_spread_time'],
         peak_stress={name: tuple(p['value']) for name, p in peaks.items()},
         peak_stress_time={name: tuple(p['time']) for name, p in peaks.items()},
         peak_von_mises_at=tuple(zip(peaks['von_mises']['body'], peaks['von_mises']['x'])),

@@ -131,6 +131,8 @@ TEXT_FIELDS = {
     'rib_deploy_time': ('s', 1.0, '.6f'),
     'deployment_lag': ('s', 1.0, '.3e'),
     'latest_rib': ('', None, ''),
+    'max_leaf_angle_spread': ('rad', 1.0, '.3e'),
+    'max_leaf_angle_spread_time': ('s', 1.0, '.4f'),
     'max_out_of_plane_tip': ('mm', 1e3, '.4g'),
     'max_out_of_plane_tip_rib': ('', None, ''),
     'max_out_of_plane_tip_time': ('s', 1.0, '.4f'),

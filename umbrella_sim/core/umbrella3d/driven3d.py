@@ -37,8 +37,8 @@ import numpy as np
 
 from .corotational3d import out_of_plane_warnings
 from .outputs3d import (any_of, BODIES, deployment_spread, energy_balance3d, first_reach,
-                        hub_spin_rate, largest, largest_out_of_plane_tip, STRESS_NAMES,
-                        STRESS_ROWS)
+                        hub_spin_rate, largest, largest_leaf_angle_spread,
+                        largest_out_of_plane_tip, STRESS_NAMES, STRESS_ROWS)
 from .params3d import UmbrellaRibsParams
 from .simulator3d import SimulationFailed, UmbrellaSimulator3D
 from ..forcing import command_force
@@ -355,6 +355,8 @@ class Summary3D:
                                    for k in range(m.n_ribs)])
         self._undeployed = bool(np.isnan(self._deployed).any())
         self._oop = largest_out_of_plane_tip(np.array([initial.time]), initial.tip[None])
+        self._angles = largest_leaf_angle_spread(np.array([initial.time]),
+                                                 np.asarray(initial.alpha1)[None])
         self._in_plane = np.abs(initial.tip[:, 1])
         self._peaks = RibPeaks.of_rows(
             {name: np.asarray(v)[None] for name, v in initial.fields().items()
@@ -437,6 +439,10 @@ class Summary3D:
             ratio = self._tension_ratio(rows['alpha1_rate'], rows['alpha1'],
                                         rows.get('bus_q'), rows.get('bus_v'))
             self._hold_tension(ratio if not locked[-1] else ratio[~locked])
+            deploying = slice(None) if not locked[-1] else ~locked
+            angles = largest_leaf_angle_spread(t[deploying], rows['alpha1'][deploying])
+            if angles[0] > self._angles[0]:
+                self._angles = angles
         if locked[-1]:                             # (stage 2 in the block)
             ratio = (rows['stress_axial'] if locked[0] else rows['stress_axial'][locked]) \
                 * self._axial_per_stress
@@ -469,6 +475,8 @@ class Summary3D:
                'deploy_time': self.lock.time - start if self.lock else None,
                'deploy_start': self._start,
                **deployment_spread(self._deployed),
+               'max_leaf_angle_spread': self._angles[0],
+               'max_leaf_angle_spread_time': self._angles[1],
                'max_out_of_plane_tip': self._oop[0],
                'max_out_of_plane_tip_rib': self._oop[1],
                'max_out_of_plane_tip_time': self._oop[2],

@@ -407,11 +407,15 @@ class Record3D:
         balance = energy_balance3d(a, energy[0])
         spread = deployment_spread(deployed)
         w, rib, when = largest_out_of_plane_tip(t, a['tip'])
+        deploying = ~a['locked']
+        angles, angles_when = largest_leaf_angle_spread(t[deploying], alpha[deploying])
         out = {
             'lock_time': self.lock_events[0][0] if self.lock_events else None,
             'rib_deploy_time': deployed,
             'deployment_lag': (np.nan if spread['deployment_lag'] is None
                                else spread['deployment_lag']),
+            'max_leaf_angle_spread': angles,
+            'max_leaf_angle_spread_time': angles_when,
             'max_out_of_plane_tip': w,
             'max_out_of_plane_tip_rib': rib,
             'max_out_of_plane_tip_time': when,
@@ -555,6 +559,23 @@ def largest_out_of_plane_tip(t: np.ndarray, tip: np.ndarray) -> tuple[float, int
     w = np.abs(np.asarray(tip)[:, :, 2])
     i, k = np.unravel_index(np.argmax(w), w.shape)
     return float(w[i, k]), int(k), float(t[i])
+
+
+def largest_leaf_angle_spread(t: np.ndarray, alpha1: np.ndarray) -> tuple[float, float | None]:
+    """
+    Return the largest spread of the ribs' leaf angles over rows of them, and when (the first).
+
+    t: (T,) s; alpha1: (T, ribs) rad, the rows of the deployment (before the lock).  The
+    spread of a row is its largest alpha1 less its smallest: how far the ribs are apart.
+    One sleeve ties every leaf to it through its link, so the ribs reach full deployment
+    together, at the lock; what asymmetry (friction, a stiffer rib) makes is this spread on
+    the way and a later lock.  (0.0, None) without rows.
+    """
+    if not len(t):
+        return 0.0, None
+    spread = np.asarray(alpha1).max(1) - np.asarray(alpha1).min(1)
+    i = int(np.argmax(spread))
+    return float(spread[i]), float(t[i])
 
 
 def energy_balance3d(rows, initial_energy: float, energy=None) -> np.ndarray:

@@ -32,8 +32,8 @@ from __future__ import annotations
 import numpy as np
 
 from .driven3d import StepBlock3D
-from .outputs3d import (BODIES, deployment_spread, first_reach, largest_out_of_plane_tip,
-                        STRESS_NAMES)
+from .outputs3d import (BODIES, deployment_spread, first_reach, largest_leaf_angle_spread,
+                        largest_out_of_plane_tip, STRESS_NAMES)
 
 
 def sampled_figures(alpha_deployed, t: np.ndarray, alpha1: np.ndarray, tip_t: np.ndarray,
@@ -48,7 +48,8 @@ def sampled_figures(alpha_deployed, t: np.ndarray, alpha1: np.ndarray, tip_t: np
     {component: (T'', ribs)}: each rib's held peak of every component (outputs3d.
     STRESS_NAMES), von_mises_at (T'', ribs, 2) where (body code, x) if known, lock_time
     the lock's instant (None: the run did not lock, or it is not known).  Returns
-    rib_deploy_time, deployment_lag, latest_rib, max_out_of_plane_tip (_rib, _time),
+    rib_deploy_time, deployment_lag, latest_rib, max_leaf_angle_spread (_time: of the
+    samples before lock_time, all without it), max_out_of_plane_tip (_rib, _time),
     max_in_plane_tip and peak_stress {component: {value, body, x, time}} (body and x None
     where the samples do not say).
     """
@@ -75,6 +76,9 @@ def sampled_figures(alpha_deployed, t: np.ndarray, alpha1: np.ndarray, tip_t: np
                        'body': [BODIES[int(b)] if ok else None for b, ok in zip(at[:, 0], known)],
                        'x': [float(x) if ok else None for x, ok in zip(at[:, 1], known)],
                        'time': when.tolist()}
-    return {**deployment_spread(deployed), 'max_out_of_plane_tip': w,
+    deploying = np.asarray(t) < (np.inf if lock_time is None else lock_time)
+    angles, angles_when = largest_leaf_angle_spread(np.asarray(t)[deploying], alpha1[deploying])
+    return {**deployment_spread(deployed), 'max_leaf_angle_spread': angles,
+            'max_leaf_angle_spread_time': angles_when, 'max_out_of_plane_tip': w,
             'max_out_of_plane_tip_rib': w_rib, 'max_out_of_plane_tip_time': w_time,
             'max_in_plane_tip': np.abs(tip[:, :, 1]).max(0).tolist(), 'peak_stress': peaks}
