@@ -38,6 +38,7 @@
  * Model flexible-nonlinear (the co-rotational ribs): _kernel3d_nonlinear.h, whose hooks
  * here act under Model3D.nl_elements only.
  */
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -53,6 +54,15 @@
  * it serves at most Model3D.carry_steps steps, and is factored anew at the iterate after an
  * iteration that contracted the update by less than REFRESH_RATE */
 #define REFRESH_RATE 0.1
+/* Gonzalez's discrepancies within this many ulps of their terms' scale are their round-off:
+ * no correction (integrator3d.GONZALEZ_NOISE, gonzalez_discrepancy, says why) */
+#define GONZALEZ_NOISE 32.0
+
+/* Gonzalez's discrepancy, 0 where it is within GONZALEZ_NOISE ulps of scale (the sum of the
+ * magnitudes of its terms) */
+static double gonzalez_discrepancy(double discrepancy, double scale) {
+    return fabs(discrepancy) > GONZALEZ_NOISE * DBL_EPSILON * scale ? discrepancy : 0.0;
+}
 
 /* the nonzeros of a matrix, row by row (columns ascending): rows_of, sparse_of */
 typedef struct { int *ptr, *col; } Rows;
@@ -1248,15 +1258,18 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         }
         kinetic_gradient(x, x->qm, v0, x->v1, x->gt);
         /* Gonzalez along the rib coordinates: dq . G_T = f(q1) - f(q0) */
-        double delta = 0.0, dd = 0.0, gdq = 0.0;
-        for (int i = 0; i < N + ns; i++) delta += (x->tmp[i] - p0[i]) * x->v1[i];
+        double delta = 0.0, dd = 0.0, gdq = 0.0, scale = 0.0;
+        for (int i = 0; i < N + ns; i++) {
+            delta += (x->tmp[i] - p0[i]) * x->v1[i];
+            scale += 0.5 * (fabs(x->tmp[i] * x->v1[i]) + fabs(p0[i] * x->v1[i]));
+        }
         delta *= 0.5;
         for (int i = 0; i < N; i++) { dd += x->dq[i] * x->dq[i]; gdq += x->gt[i] * x->dq[i]; }
         gdq += x->gt[N] * x->dq[N];
-        if (dd > 0.0) {
-            double corr = (delta - gdq) / dd;
-            for (int i = 0; i < N; i++) x->gt[i] += corr * x->dq[i];
-        }
+        for (int i = 0; i <= N; i++) scale += fabs(x->gt[i] * x->dq[i]);
+        double corr = gonzalez_discrepancy(delta - gdq, scale);
+        if (dd > 0.0 && corr != 0.0)
+            for (int i = 0; i < N; i++) x->gt[i] += corr / dd * x->dq[i];
         constraints(x, q, stuck, locked, x->phi);
         jacobian(x, x->qm, stuck, x->jm);
         if (damped) damping_forces(x, fit, h, x->damp);
@@ -1265,20 +1278,22 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         for (int r = 0; r < R; r++) {
             /* the joints' Gonzalez Jacobian G = J(q_m) + f dq^T (f: each row's correction),
              * in the residual as G^T lam = J^T lam + dq (f . lam), J over its nonzeros */
-            const double *dq = x->dq + r * n, *J = x->jm + r * ROWS * n;
+            const double *dq = x->dq + r * n, *J = x->jm + r * ROWS * n, *qm = x->qm + r * n;
             const double *lam = x->lam + r * ROWS;
             double ddr = 0.0, flam = 0.0, jl[n];
             for (int a = 0; a < n; a++) { ddr += dq[a] * dq[a]; jl[a] = 0.0; }
             for (int i = 0; i < ROWS; i++) {
-                double lin = 0.0;
+                double lin = 0.0, size = 0.0;
                 for (int k = jp->ptr[i]; k < jp->ptr[i + 1]; k++) {
                     int a = jp->col[k];
                     lin += J[i * n + a] * dq[a];
+                    size += fabs(J[i * n + a] * qm[a]);
                     jl[a] += J[i * n + a] * lam[i];
                 }
-                if (i == 7) lin -= x->dq[N];
-                if (ddr > 0.0)
-                    flam += (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr * lam[i];
+                if (i == 7) { lin -= x->dq[N]; size += fabs(x->qm[N]); }
+                double phi = x->phi[r * ROWS + i], phi0 = x->phi0[r * ROWS + i];
+                size += fabs(phi) + fabs(phi0);
+                if (ddr > 0.0) flam += gonzalez_discrepancy(phi - phi0 - lin, size) / ddr * lam[i];
             }
             friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
             if (m->nl_elements) nl_force(x, r, q0 + r * n, q + r * n, x->ycol);

@@ -694,16 +694,20 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         base_kinetic_gradient(x, x->qm, v0, x->v1, x->gt);
         /* Gonzalez over the whole dq, the correction along the ribs' and the sleeve's */
         base_matvec(x, v0, x->tmp);
-        double delta = 0.0, dd = 0.0, gdq = 0.0;
-        for (int i = 0; i < N + ns; i++) delta += (x->tmp[i] - p0[i]) * x->v1[i];
+        double delta = 0.0, dd = 0.0, gdq = 0.0, scale = 0.0;
+        for (int i = 0; i < N + ns; i++) {
+            delta += (x->tmp[i] - p0[i]) * x->v1[i];
+            scale += 0.5 * (fabs(x->tmp[i] * x->v1[i]) + fabs(p0[i] * x->v1[i]))
+                + fabs(x->gt[i] * x->dq[i]);
+        }
         delta *= 0.5;
         for (int i = 0; i < N; i++) { dd += x->dq[i] * x->dq[i]; gdq += x->gt[i] * x->dq[i]; }
         for (int i = N; i < N + ns; i++) gdq += x->gt[i] * x->dq[i];
         dd += x->dq[N] * x->dq[N];
-        if (dd > 0.0) {
-            double corr = (delta - gdq) / dd;
-            for (int i = 0; i <= N; i++) x->gt[i] += corr * x->dq[i];
-        }
+        /* (a spinning base: the bus's momentum in the scale; integrator3d.GONZALEZ_NOISE) */
+        double corr = gonzalez_discrepancy(delta - gdq, scale);
+        if (dd > 0.0 && corr != 0.0)
+            for (int i = 0; i <= N; i++) x->gt[i] += corr / dd * x->dq[i];
         base_constraints(x, q, stuck, locked, x->phi);
         jacobian(x, x->qm, stuck, x->jm);
         if (damped) damping_forces(x, fit, h, x->damp);
@@ -714,19 +718,21 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         for (int r = 0; r < R; r++) {
             /* the joints' Gonzalez Jacobian G = J(q_m) + f dq^T (f: each row's correction),
              * in the residual as G^T lam = J^T lam + dq (f . lam) */
-            const double *dq = x->dq + r * n, *J = x->jm + r * ROWS * n;
+            const double *dq = x->dq + r * n, *J = x->jm + r * ROWS * n, *qm = x->qm + r * n;
             const double *lam = x->lam + r * ROWS;
             double ddr = 0.0, flam = 0.0, jl[n];
             for (int a = 0; a < n; a++) { ddr += dq[a] * dq[a]; jl[a] = 0.0; }
             for (int i = 0; i < ROWS; i++) {
-                double lin = 0.0;
+                double lin = 0.0, size = 0.0;
                 for (int a = 0; a < n; a++) {
                     lin += J[i * n + a] * dq[a];
+                    size += fabs(J[i * n + a] * qm[a]);
                     jl[a] += J[i * n + a] * lam[i];
                 }
-                if (i == 7) lin -= x->dq[N];
-                if (ddr > 0.0)
-                    flam += (x->phi[r * ROWS + i] - x->phi0[r * ROWS + i] - lin) / ddr * lam[i];
+                if (i == 7) { lin -= x->dq[N]; size += fabs(x->qm[N]); }
+                double phi = x->phi[r * ROWS + i], phi0 = x->phi0[r * ROWS + i];
+                size += fabs(phi) + fabs(phi0);
+                if (ddr > 0.0) flam += gonzalez_discrepancy(phi - phi0 - lin, size) / ddr * lam[i];
             }
             friction(x, r, dq[m->i_a1], h, &x->fric[r], &x->fric[R + r]);
             if (m->nl_elements) nl_force(x, r, q0 + r * n, q + r * n, x->ycol);
