@@ -46,6 +46,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 import math
 import multiprocessing
+import re
 
 import numpy as np
 import pytest
@@ -419,6 +420,28 @@ def test_a_failed_compiled_step_is_a_clear_error_that_keeps_the_steps_done():
         sim.advance(5)
     assert sim.k == 3 and len(sim.record.arrays()['time']) == 4
     assert sim.state.t == pytest.approx(3e-4, abs=1e-15)
+
+
+@needs_kernel
+def test_a_failed_stage2_substep_is_named_at_its_own_end():
+    """
+    Stage 2 in substeps (0.2 ms grid, 0.1 ms physics steps): the failed step's end is named.
+
+    Not the grid step's end: the step that failed is a physics step of h / substeps.
+    """
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping({'ribs': 2}))
+    sim.run(1.0, after_lock=0.01)
+    sub = sim.stage2_substeps
+    assert sub == 2 and sim.h == pytest.approx(2e-4)
+    sim.integrator.compiled.call.max_iter = 1
+    t = sim.state.t
+    with pytest.raises(SimulationFailed) as info:
+        sim.advance(3)
+    said = re.search(r'after t = ([0-9.]+) s failed: Newton did not converge at t = '
+                     r'([0-9.]+) s', str(info.value))
+    assert said and float(said[1]) == pytest.approx(sim.state.t, abs=1e-9)
+    assert float(said[2]) == pytest.approx(sim.state.t + sim.h / sub, abs=1e-9)
+    assert sim.state.t == pytest.approx(t, abs=1e-12)
 
 
 @needs_kernel

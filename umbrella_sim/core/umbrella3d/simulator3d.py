@@ -321,7 +321,7 @@ class UmbrellaSimulator3D:
                 raise self._at_axle()
             elif status != STATUS['ok']:
                 raise SimulationFailed(f'step after t = {self.state.t:.9g} s failed: '
-                                       f'{kernel_error(status, self.state.t + self.h)}')
+                                       f'{kernel_error(status, self.state.t + self.h / sub)}')
 
     # ------------------------------------------------------------ stage-2 substeps
     def _judge_stage2(self, s: State3D) -> None:
