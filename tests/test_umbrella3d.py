@@ -36,11 +36,13 @@ discrete balance the step keeps (relative 1e-9 asserted); momentum of a free-flo
 A moving base's balances are asserted on both paths, the compiled step (_kernel3d_base.h)
 and its numpy reference (slow).
 """
+import re
+
 import numpy as np
 import pytest
 
 from umbrella_sim.core import UmbrellaParams, UmbrellaSimulator
-from umbrella_sim.core.driver import simulate
+from umbrella_sim.core.driver import RunDriver, simulate
 from umbrella_sim.core.integrators import PHI_TOLERANCE
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
@@ -189,6 +191,32 @@ def test_one_sleeve_keeps_the_ribs_together_apart_by_an_elastic_lag():
     assert spread[1.0] == pytest.approx(2.0 * spread[0.5], rel=0.02)
     travel = UmbrellaRibsParams.from_mapping({'ribs': 3}).planar
     assert 0.0 < spread[1.0] < 1e-3 * (travel.alpha0 - travel.alpha_deployed)
+
+
+def test_a_hinge_that_takes_more_than_the_frames_energy_stalls_the_deployment():
+    """
+    Friction that the frame's kinetic energy cannot pay over the travel stops it: 'stalled'.
+
+    From V0 with no sleeve force, rib 1's hinge rubbing at c: over the leaf's travel its
+    friction takes c (alpha0 - alpha_deployed) at least.  At 1.3 times the c that takes the
+    whole initial kinetic energy T0 the frame comes to rest on its way, never locks, and the
+    summary says 'stalled', short of the stop; at 0.7 times it deploys and says nothing.
+    """
+    base = UmbrellaRibsParams.from_mapping({'ribs': 3})
+    travel = base.planar.alpha0 - base.planar.alpha_deployed
+    sim = UmbrellaSimulator3D(base)
+    t0 = float(sim.record.arrays()['kinetic_energy'][0])
+    for share, stalls in ((1.3, True), (0.7, False)):
+        params = UmbrellaRibsParams.from_mapping(
+            {'ribs': 3, 'rib1.hinge_coulomb': share * t0 / travel})
+        driver = RunDriver(params, 100.0)
+        driver.run(0.6)
+        figures = driver.summary.figures()
+        said = [w for w in figures['warnings'] if w.startswith('stalled')]
+        assert (figures['lock_time'] is None) == stalls and bool(said) == stalls, share
+        if stalls:
+            short = float(re.search(r'short of the stop by ([0-9.]+) %', said[0])[1])
+            assert 0.0 < short < 100.0 and "the hinges' friction" in said[0]
 
 
 #: a hinge rubbing hard: rib 1's 3 N m slows the deployment to a lock at 0.28 s, then stage

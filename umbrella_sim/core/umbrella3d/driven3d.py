@@ -56,6 +56,55 @@ from ..summary import (AXIAL_LOAD_LIMIT, CENTRIFUGAL_TENSION_LIMIT,
 #: a moving base): COMPILED_CHUNK_STEPS
 CHUNK_STEPS = 4
 COMPILED_CHUNK_STEPS = 64
+#: a stalled deployment ('stalled'): the sleeve short of the stop, slower than this share of
+#: its largest speed so far, for STALL_TIME of sim time (a rubbing hinge's regularised
+#: Coulomb torque lets a held frame creep at ~1e-3 of a deployment's speed: not a motion)
+STALL_SPEED_SHARE = 0.01
+STALL_TIME = 0.05
+
+
+class StallWatch:
+    """
+    Whether the deployment stalled: the sleeve at rest short of the stop, held back.
+
+    With hinge friction more than the frame's kinetic energy can pay over the rest of the
+    travel (or a sleeve force that holds it back), the frame stops on its way: no lock,
+    ever, however long the run.  ``stall`` is (t, y_H) where it came to rest, until it
+    moves again or locks.
+    """
+
+    def __init__(self, y0: float, y_stop: float, speed: float):
+        self.y0, self.y_stop = y0, y_stop
+        self.peak, self.slow_since = abs(speed), None
+        self.stall: tuple[float, float] | None = None
+
+    def add(self, t: np.ndarray, y: np.ndarray, v: np.ndarray, locked: bool) -> None:
+        """Take the deployment's rows (t, sleeve height and velocity) of a block."""
+        if locked:
+            self.slow_since = self.stall = None
+            return
+        if not len(t):
+            return
+        self.peak = max(self.peak, float(np.abs(v).max()))
+        if self.peak == 0.0 or abs(float(v[-1])) >= STALL_SPEED_SHARE * self.peak:
+            self.slow_since = self.stall = None
+            return
+        if self.slow_since is None:
+            self.slow_since = float(t[-1])
+        if self.stall is None and float(t[-1]) - self.slow_since >= STALL_TIME:
+            self.stall = (float(t[-1]), float(y[-1]))
+
+    def warnings(self, friction: bool) -> list[str]:
+        """Return the 'stalled' text while the deployment is stalled (friction: hinges rub)."""
+        if self.stall is None:
+            return []
+        t, y = self.stall
+        short = (y - self.y_stop) / (self.y0 - self.y_stop) if self.y0 != self.y_stop else 0.0
+        why = ("the hinges' friction takes more than the frame's kinetic energy can pay over "
+               'the rest of the travel' if friction else 'the sleeve force holds it back')
+        return [f'stalled: the sleeve came to rest short of the stop by {100 * short:.1f} % '
+                f'of its travel (y_H = {y:.4f} m at t = {t:.4f} s): {why}; it will not lock '
+                '(a larger v0 or sleeve_force deploys it)']
 
 
 def rib_parameter_warnings(params) -> list[str]:
@@ -363,6 +412,10 @@ class Summary3D:
              if name.startswith('stress_') or name == 'time'}, 0)
         self._final = initial
         self._start = deploy_start(float(sim.params.planar.v0), ())
+        self._stall = StallWatch(float(initial.sleeve_position), m.y_stop,
+                                 float(initial.sleeve_velocity))
+        self._rubs = any(r.hinge_coulomb > 0.0 or r.hinge_viscous > 0.0
+                         for r in sim.params.ribs_list())
         self._said = WarningsSaid()
         self._planar = sim.params.planar.as_dict()     # (a frozen record)
         # each rib's leaf tension at its hinge over its Euler load (summary.leaf_tension_ratio:
@@ -443,6 +496,7 @@ class Summary3D:
             angles = largest_leaf_angle_spread(t[deploying], rows['alpha1'][deploying])
             if angles[0] > self._angles[0]:
                 self._angles = angles
+        self._stall.add(t, rows['sleeve_position'], rows['sleeve_velocity'], bool(locked[-1]))
         if locked[-1]:                             # (stage 2 in the block)
             ratio = (rows['stress_axial'] if locked[0] else rows['stress_axial'][locked]) \
                 * self._axial_per_stress
@@ -550,7 +604,7 @@ class Summary3D:
                                  link_axial_load=self._axial,
                                  ribs=ribs, out_of_plane_tip=abs(self._oop[0])
                                  ) + out_of_plane_warnings(self._planar, out_of_plane) + list(
-            self._rib_parameter_warnings)
+            self._rib_parameter_warnings) + self._stall.warnings(self._rubs)
 
     def _stage2_resolution(self) -> dict | None:
         """Return the lock's stage-2 resolution (the worst rib's), else the mesh's."""
@@ -565,5 +619,6 @@ class Summary3D:
                                largest(self._in_plane / self._leaf), self._oop[0],
                                self.lock is not None, self.energy_drift > ENERGY_DRIFT_LIMIT,
                                self._tension > CENTRIFUGAL_TENSION_LIMIT,
-                               (self._axial or 0.0) > AXIAL_LOAD_LIMIT, *self._geometry()),
+                               (self._axial or 0.0) > AXIAL_LOAD_LIMIT, *self._geometry(),
+                               self._stall.stall),
                               self.warnings)
