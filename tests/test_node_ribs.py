@@ -184,7 +184,11 @@ def test_a_free_bus_publishes_its_state_as_the_offline_run_computes_it():
 
     values = {'ribs': 2, 'base': 'free', 'bus_mass': 5.0, 'bus_inertia': 0.2,
               'rib.out_of_plane_rate': [0.0, 0.5], 'time_step': 2e-4}
-    with SimulatedAntenna({**values, 'real_time_factor': 0.0, 'duration': 0.05}) as antenna:
+    # (held at t = 0 until the probe hears it: at real_time_factor 0 the node could run its
+    # 0.05 s and exit before a loaded machine's discovery matched the probe)
+    with SimulatedAntenna({**values, 'real_time_factor': 0.0, 'duration': 0.05,
+                           'start_paused': True}) as antenna:
+        antenna.resume()
         antenna.wait_for_sim_time(0.05)
         antenna.wait_for('bus_state', lambda m: m.header.stamp.nanosec >= 49_000_000,
                          what='the bus state at t = 0.05 s')
