@@ -508,7 +508,8 @@ umbrella's own first locked mode is out of plane (rib 0 of the default: 70.6 rad
 in-plane ω1 = 133.7 rad/s): taking it would damp the deployment's dominant in-plane mode at
 1.9ζ. Each rib's first in-plane mode then decays with exactly ζ (measured by the logarithmic
 decrement over six periods: 0.0500000003 for ζ = 0.05 with the mode fit, 0.0499985 without,
-whose midpoint rule scales a ratio by sinc(ωh/2)²), its out-of-plane ones with ζω_i/ω1
+whose midpoint rule scales a ratio by sin(Ωh)/(Ωh), Ωh = 2 arctan(ωh/2) its turn a step:
+1 − 3·10⁻⁵ here), its out-of-plane ones with ζω_i/ω1
 (0.0263863 measured, 0.0263863 expected). Stage 2's mode fit takes each mode's damping
 φᵀCφ (integrators.LockedModeFit: exact decay a step), rib by rib or the free bus's whole
 system. Compiled in _kernel3d_damping.h (the step and the moving base's step; equal to the

@@ -35,10 +35,11 @@ Each step solves the nonlinear residual with Newton's method; the iteration matr
 M + h^2/4 K + h/2 G (G the gyroscopic tangent) is factored once per step.
 
 In stage 2 the midpoint rule's one systematic error, the period of every mode lengthened by
-~(omega h)^2 / 12 (and its damping ratio scaled by sinc(omega h / 2)^2), is removed from the
-locked frame's resolved modes (``LockedModeFit``: each mode exact in phase, amplitude and
-damping, the physical energy still conserved): over 0.5 s of stage 2 the modes at
-1-5e3 rad/s (a few mm at the tip) otherwise drift out of phase at any real-time step.
+~(omega h)^2 / 12 (and its damping ratio scaled by sin(Omega h) / (Omega h), Omega h =
+2 arctan(omega h / 2) its turn a step), is removed from the locked frame's resolved modes
+(``LockedModeFit``: each mode exact in phase, amplitude and damping, the physical energy
+still conserved): over 0.5 s of stage 2 the modes at 1-5e3 rad/s (a few mm at the tip)
+otherwise drift out of phase at any real-time step.
 
 The product path is the compiled kernel (``_kernel.c``, bound by kernel.py; installation
 requires a C compiler): ``CompiledKernel.advance`` runs many steps and their outputs per call,
@@ -138,7 +139,8 @@ class LockedModeFit:
     bilinear transform (Tustin), here put into the modal mass, with the velocity mapped back
     so that the mode's energy, hence its amplitude, is the physical one.  Damped: the decay
     per step is exactly exp(-zeta omega h) too (the plain midpoint rule scales a damping
-    ratio by sinc(omega h / 2)^2, -8 % at omega h = 1).  The state the step hands on is
+    ratio by sin(Omega h) / (Omega h) to first order in zeta, Omega h = 2 arctan(omega h / 2)
+    its turn a step: -14 % at omega h = 1).  The state the step hands on is
     physical (q, v = S w, M(q) v): the lock, the outputs and every consumer see physical
     velocities; w lives inside a step.
 
