@@ -249,6 +249,29 @@ def test_cli_models_and_csv(tmp_path):
     assert again.returncode == 2 and 'exists' in again.stderr
 
 
+def test_csv_rows_are_the_grid_steps_with_stage_2_substeps_folded(tmp_path):
+    """
+    The --csv rows are the grid's, as --help says: stage 2's substeps fold into their grid step.
+
+    At time_step 0 the thesis's frame deploys on a grid step of twice its stage-2 physics step
+    (the summary's stage2_resolution step, 0.1 ms at 1 element a segment): the stage-2 rows
+    come a grid step apart, not a physics step.
+    """
+    out = tmp_path / 'run.csv'
+    r = cli('simulate', '--duration', '0.24', '--csv', str(out), '--json')
+    assert r.returncode == 0, r.stderr
+    figures = json.loads(r.stdout)
+    grid = figures['final_time'] / figures['steps']
+    assert figures['stage2_resolution']['step'] == pytest.approx(grid / 2)
+    rows = [row.split(',') for row in out.read_text().splitlines()[1:]]
+    locked = [float(row[0]) for row in rows if row[1] == 'locked'][1:]   # (the lock's own row)
+    assert len(locked) > 10
+    assert all(b - a == pytest.approx(grid) for a, b in zip(locked, locked[1:]))
+    usage = ' '.join(cli('simulate', '--help').stdout.split())
+    assert '--csv FILE write the time series of every grid step' in usage
+    assert 'physics step' not in usage.split('--csv FILE')[1].split('--csv-state')[0]
+
+
 def test_cli_force_profile(tmp_path):
     prof = tmp_path / 'force.csv'
     prof.write_text('t,F\n0.0,0.0\n0.01,20.0\n')

@@ -64,9 +64,10 @@ def make_parser() -> argparse.ArgumentParser:
                     help=f'run more than {LONG_RUN_STEPS:.0e} physics steps (refused without '
                          'it: hours of computing or more)')
     sp.add_argument('--csv', metavar='FILE',
-                    help='write the time series of every physics step (its state at the '
-                         "step's end; peak stresses: the largest over the step), streamed "
-                         'as the run goes; the umbrella of N ribs: the sleeve, the energies '
+                    help='write the time series of every grid step (its state at the '
+                         "step's end; peak stresses: the largest over the step, stage 2's "
+                         'substeps folded into their grid step), streamed as the run goes; '
+                         'the umbrella of N ribs: the sleeve, the energies '
                          "and each rib's figures, named by the rib (rib0_alpha1, rib0_tip_w, "
                          'rib0_stress_von_mises, ...)')
     sp.add_argument('--csv-state', action='store_true',
@@ -75,7 +76,7 @@ def make_parser() -> argparse.ArgumentParser:
     sp.add_argument('--mcap', metavar='BAG_DIR',
                     help="record the node's topics to a new bag directory (BAG_DIR/"
                          'BAG_DIR_0.mcap + metadata.yaml), as umbrella_node would; the same '
-                         'states, summary and --csv rows (every physics step) as without it '
+                         'states, summary and --csv rows (every grid step) as without it '
                          "when the physics step divides the publication period (the default's "
                          'does; else the recording takes the largest step that does, as the '
                          'node, and says so)')

@@ -13,10 +13,14 @@
 # limitations under the License.
 
 """
-``umbrella_sim simulate --csv``: the time series of every physics step, streamed to a file.
+``umbrella_sim simulate --csv``: the time series of every grid step, streamed to a file.
 
-Rows: the state at t = 0, the end of every physics step, and the instant of the lock (the
-state right after it, at the exact lock time between two steps).  The header names each
+Rows: the state at t = 0, the end of every grid step, and the instant of the lock (the state
+right after it, at the exact lock time between two steps).  Where stage 2 takes k physics
+steps a grid step (its substeps: solver.UmbrellaSimulator.stage2_substeps) a row is its grid
+step's last physics step's state with the peaks the largest of its physics steps' (the
+compiled advance's fold, outputs.fold_substeps' rule); elsewhere a grid step is one physics
+step.  The header names each
 column with its SI unit: ``time (s)``, ``alpha1 (rad)``, ``q[leaf.u2] (m)``, ``stage``.
 The rows come from the run driver's chunks (the compiled loop's per-step rows, and with
 ``--csv-state`` its per-step state rows), written as each chunk ends: memory does not grow
@@ -109,7 +113,7 @@ def header_names(columns) -> list[str]:
 
 
 class StepCsv:
-    """A CSV file of every physics step; ``write`` each chunk's block as it comes."""
+    """A CSV file of every grid step; ``write`` each chunk's block as it comes."""
 
     def __init__(self, path: str, model=None):
         """Create the file (path checked by the caller) and write the header; model: states."""
@@ -241,7 +245,7 @@ def umbrella_columns(sample) -> list[tuple[str, str, str, tuple]]:
 
 
 class UmbrellaStepCsv(StepCsv):
-    """The CSV of every physics step of the umbrella of N ribs (StepBlock3D, Sample3D)."""
+    """The CSV of every grid step of the umbrella of N ribs (StepBlock3D, Sample3D)."""
 
     def __init__(self, path: str, initial):
         """Create the file (path checked by the caller) and write the header; initial: t = 0."""
