@@ -87,7 +87,7 @@ class StepRun:
 
 
 def run_steps(params: UmbrellaParams, window: float) -> StepRun:
-    """Deploy, then `window` seconds of stage 2, keeping every step's outputs."""
+    """Deploy, then `window` seconds of stage 2, keeping every grid step's outputs."""
     driver = RunDriver(params)
     parts = []
     error = driver.run(10.0, stop_after_lock=window,

@@ -127,7 +127,8 @@ STAGE2_WINDOW = 0.3
 #: STAGE2_SAMPLES (4.6 us) of the window, i.e. every step at any step above that (the
 #: default 0.1 ms included); a 0.1 us step keeps 65 536 of its 3e6 (1 MB and ~0.1 s to
 #: analyse, where all of them held 48 MB and took ~4 s at a node's stop); the amplitude and
-#: the window's end stay those of every step
+#: the window's end stay those of every step (every grid step's row: with stage 2's substeps,
+#: its last substep's tip)
 STAGE2_SAMPLES = 1 << 16
 #: validity of the small-deformation (linear elastic field) model: the tip deflection |v_G|
 #: may reach this fraction of the leaf length l1 + l2.  Beyond it the slope of the bent
