@@ -54,6 +54,7 @@ from umbrella_sim.core.rotating_beam import (  # noqa: E402
     rotating_cantilever_chordwise, ROTATING_CANTILEVER_FLAPWISE, rotating_cantilever_frequency,
     spin_up, spin_up_quasi_static_tip)
 from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
+from umbrella_sim.core.summary import STAGE2_WINDOW  # noqa: E402
 from umbrella_sim.core.umbrella3d.outputs3d import hub_spin_rate  # noqa: E402
 
 NL = 'flexible-nonlinear'
@@ -841,7 +842,8 @@ def damping_section():
                      stop_after_lock=1.0)
         s = r.summary()
         last = r.samples[-1]
-        lines.append(f'- {model}, V0 = −1, ζ = 0.02: stage-2 amplitude over 1 s '
+        lines.append(f'- {model}, V0 = −1, ζ = 0.02, 1 s of stage 2: amplitude over its '
+                     f'first {STAGE2_WINDOW:g} s '
                      f"{fmt(s['stage2_tip_amplitude'], 1e3, '.1f')} mm, dissipated "
                      f'{last.damping_dissipation:.3f} J of the {r.lock.energy_after:.3f} J left '
                      f"after the lock, energy balance error {s['energy_drift']:.1e}.")
