@@ -283,6 +283,27 @@ def test_out_of_plane_warning_past_its_limit():
     assert len(said) == 1 and said[0].startswith('out-of-plane rotation:')
 
 
+def test_out_of_plane_rotation_is_the_angle_a_section_turned(model):
+    """
+    A node's w' is the sine of its turn out of the plane: the measure is asin |w'| (or |phi|).
+
+    The unit tangent (cos psi cos e, sin psi cos e, sin e) of a section tilted by e out of
+    its rib's plane has w' = sin e; the warning's degrees are e's.
+    """
+    law = model.strain
+    qr = np.zeros((model.n_ribs, model.n_rib))
+    tilt_at_g = law.node_places[law.n_leaf - 1, 3]      # w' at the leaf's tip G
+    twist_at_g = law.node_places[law.n_leaf - 1, 5]     # phi there
+    tilt = math.asin(0.95)
+    qr[1, tilt_at_g] = math.sin(tilt)
+    qr[2, twist_at_g] = 0.5 * tilt
+    assert law.out_of_plane_rotation(qr) == pytest.approx(tilt, rel=1e-14)
+    qr[2, twist_at_g] = 1.2 * tilt                      # a larger twist is the measure
+    assert law.out_of_plane_rotation(qr) == pytest.approx(1.2 * tilt, rel=1e-14)
+    said = out_of_plane_warnings({'model': 'flexible-nonlinear'}, tilt)
+    assert f'turned {math.degrees(tilt):.1f} deg out of' in said[0]
+
+
 def test_a_run_says_when_its_ribs_leave_the_out_of_plane_limit():
     """Through the run driver: a rib kicked hard out of its plane is named, a nudge is not."""
     for kick, said in ((0.5, False), (20.0, True)):

@@ -58,8 +58,9 @@ small by the co-rotational split) are dropped, as Crisfield's local element drop
 the plane; the kinetic field is the body's (the
 twist's rotary inertia about the body's x axis, the tip mass's offset by the linear small
 rotation, beam3d.BeamBody3D.attached_point).  Past OUT_OF_PLANE_LIMIT (0.1 rad) of any node's
-|w'| or |phi| the run's summary warns (out_of_plane_warnings, with the planar model's
-geometric validity warnings of summary.py).  The joints follow the
+turn out of the plane, asin |w'|, or twist |phi| the run's summary warns
+(out_of_plane_warnings, with the planar model's geometric validity warnings of summary.py).
+The joints follow the
 material twist: the O'' hinge keeps the two sections' hinge axes parallel, each section's
 small rotation turned by its body's angle plus the section's own angle asin(theta) (the
 linear model's rows with alpha + psi for alpha; the same rows when theta = 0; w'^2 left out
@@ -102,7 +103,7 @@ from ..beam_strain import (angle_gradient, angle_hessian, angle_increment, gonza
 
 NONLINEAR_MODEL = 'flexible-nonlinear'
 #: the ribs take out-of-plane bending and torsion as small rotations in each element's
-#: co-rotated frame: the largest out-of-plane slope |w'| or twist |phi| (rad) of any node
+#: co-rotated frame: the largest out-of-plane turn asin |w'| or twist |phi| (rad) of any node
 #: they are held valid for (their squares are dropped: ~angle^2 / 6 relative in the sines,
 #: 0.2 % here, and products with the elements' local in-plane rotations of the same order)
 OUT_OF_PLANE_LIMIT = 0.1
@@ -403,8 +404,15 @@ class RibCorotationalStrain:
         return np.concatenate([qr, np.zeros(qr.shape[:-1] + (1,))], -1)[..., self.node_places]
 
     def out_of_plane_rotation(self, qr) -> float:
-        """Return the largest |w'| or |phi| of any node (rad): OUT_OF_PLANE_LIMIT's measure."""
-        return float(np.max(np.abs(self._nodal(qr)[..., 2:6]), initial=0.0))
+        """
+        Return the largest out-of-plane angle of any node (rad): OUT_OF_PLANE_LIMIT's measure.
+
+        A node's turn out of its rib's plane, asin |w'| (w' the unit tangent's out-of-plane
+        part: a sine), or its twist |phi|, whichever is larger.
+        """
+        nodal = np.abs(self._nodal(qr))
+        tilt = math.asin(min(float(np.max(nodal[..., 2:4], initial=0.0)), 1.0))
+        return max(tilt, float(np.max(nodal[..., 4:6], initial=0.0)))
 
     def section_slope(self, qr) -> float:
         """Return the largest |sin psi| of any section's turn in its rib's plane (planar's)."""
@@ -593,15 +601,15 @@ def out_of_plane_warnings(params: dict, rotation: float | None) -> list[str]:
     """
     Return the warning of an umbrella run whose out-of-plane rotations left its model.
 
-    rotation: the largest |w'| or |phi| of any node over every step (None: not known, or a
-    model without the limit); flexible-nonlinear only (the linear beams' limit is the
-    'large deflection' one).
+    rotation: the largest out-of-plane turn asin |w'| or twist |phi| of any node over every
+    step (rad; None: not known, or a model without the limit); flexible-nonlinear only (the
+    linear beams' limit is the 'large deflection' one).
     """
     if (params.get('model') != 'flexible-nonlinear' or rotation is None
             or rotation <= OUT_OF_PLANE_LIMIT):
         return []
     return [f'out-of-plane rotation: a section turned {math.degrees(rotation):.1f} deg out of '
-            f"its rib's plane or twisted (|w'| or |phi| = {rotation:.3g} rad; limit "
+            f"its rib's plane or twisted (asin |w'| or |phi| = {rotation:.3g} rad; limit "
             f"{math.degrees(OUT_OF_PLANE_LIMIT):.1f} deg): the umbrella's flexible-nonlinear "
             'ribs take out-of-plane bending and torsion as small rotations in each '
             "element's co-rotated frame (docs/umbrella3d_nonlinear.md)"]
