@@ -51,7 +51,7 @@ from umbrella_sim.core.umbrella3d.corotational3d import (CorotationalUmbrellaMod
                                                          OUT_OF_PLANE_LIMIT,
                                                          out_of_plane_warnings, umbrella_model)
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
-from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+from umbrella_sim.core.umbrella3d.simulator3d import SimulationFailed, UmbrellaSimulator3D
 
 IDENTITY_TOLERANCE = 1e-10
 #: the Newton tolerance both codes are solved to in the identity (module docstring)
@@ -302,6 +302,24 @@ def test_out_of_plane_rotation_is_the_angle_a_section_turned(model):
     assert law.out_of_plane_rotation(qr) == pytest.approx(1.2 * tilt, rel=1e-14)
     said = out_of_plane_warnings({'model': 'flexible-nonlinear'}, tilt)
     assert f'turned {math.degrees(tilt):.1f} deg out of' in said[0]
+
+
+@pytest.mark.parametrize('kernel', ['compiled', 'numpy'])
+def test_a_step_that_fails_past_the_out_of_plane_range_says_so(kernel):
+    """
+    A rib kicked far out of its plane (1 km/s at its tip) fails within 1 ms.
+
+    Both paths fail alike, the numpy step's non-finite residual a failure of the step (not
+    scipy's ValueError).
+    """
+    sim = UmbrellaSimulator3D(ribs_params({'ribs': 2, 'time_step': 1e-4,
+                                           'rib1.out_of_plane_rate': 1000.0}), kernel=kernel)
+    with pytest.raises(SimulationFailed) as failed:
+        sim.run(0.01)
+    rotation = sim.model.strain.out_of_plane_rotation(sim.state.qr)
+    assert rotation > 10 * OUT_OF_PLANE_LIMIT
+    text = str(failed.value)
+    assert 'Newton iterate became non-finite' in text
 
 
 def test_a_run_says_when_its_ribs_leave_the_out_of_plane_limit():

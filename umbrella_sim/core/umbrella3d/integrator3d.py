@@ -67,7 +67,7 @@ from .model3d import N_RIB_ROWS, ROW_STICK, UmbrellaModel3D
 from .stage2fit import BusFit, RibFits, stage2_fit, WholeFit
 from .state3d import ConvergenceError3D, State3D, StepWork
 from ..integrators import newton_converged, newton_tolerance, PHI_TOLERANCE
-from ..kernel import kernel_refusal, LIBRARY, load_kernel
+from ..kernel import kernel_error, kernel_refusal, LIBRARY, load_kernel, STATUS
 
 #: steps an iteration matrix serves at most (the first included), and the contraction of a
 #: Newton update above which the matrix is factored anew at the iterate (_kernel3d.c's
@@ -113,6 +113,11 @@ _SAID: set = set()
 def _largest(phi_r: np.ndarray, phi_s: np.ndarray) -> float:
     """Return the largest joint residual (the ribs' and the shared ones)."""
     return max(float(np.max(np.abs(phi_r))), float(np.max(np.abs(phi_s), initial=0.0)))
+
+
+def _non_finite(t: float) -> ConvergenceError3D:
+    """Return the failure of a step whose Newton iterate became non-finite (the kernel's)."""
+    return ConvergenceError3D(kernel_error(STATUS['non_finite'], t))
 
 
 class BaseDrive:
@@ -470,6 +475,8 @@ class MidpointUmbrella:
             scheme_pr1, scheme_ps1 = (pr1, ps1) if fit is None else fit.transpose(pr1, ps1)
             res_r = scheme_pr1 - spr0 - h * (gtr + applied_r + cons_r)
             res_s = scheme_ps1 - sps0 - h * (gts + applied_s + cons_s)
+            if not (np.isfinite(res_r).all() and np.isfinite(res_s).all()):
+                raise _non_finite(s.t + h)      # (the iterate left the law's domain)
             if factored is None:
                 j_r = m.constraint_jacobian(qr, stuck, locked)
                 gyro = m.gyroscopic(kinm, dqr / h)
@@ -504,8 +511,7 @@ class MidpointUmbrella:
                 self.joint_corrections += 1
             qr, qs, lam_r, lam_s, norm = update(res_r, res_s, phi_r, phi_s)
             if not math.isfinite(norm):
-                raise ConvergenceError3D(f'Newton iterate became non-finite at t = '
-                                         f'{s.t + h:.9g} s')
+                raise _non_finite(s.t + h)
             rate = norm / last if it > 1 else 1.0
             if newton_converged(norm, rate, self.tolerance, lambda: _largest(*joints()),
                                 None if m.moving_base else correct_joints):
