@@ -27,7 +27,27 @@ the tests differentiate (the fibre stresses).  Nothing here imports rclpy.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+#: a step that fails from a state whose largest section slope |v'| = |sin psi| is this or
+#: more has met the slope coordinates' end at 90 deg (slope_end_reason)
+SLOPE_COORDINATE_END = 0.99
+
+
+def slope_end_reason(slope: float) -> str | None:
+    """
+    Return why a step failed from a state of this largest section slope, if it is the 90 deg end.
+
+    The slope coordinates theta = sin psi cannot turn a section through 90 deg from its body
+    frame; None below SLOPE_COORDINATE_END.
+    """
+    if slope < SLOPE_COORDINATE_END:
+        return None
+    return (f'a fibre has turned {math.degrees(math.asin(min(slope, 1.0))):.1f} deg from its '
+            f"body frame (slope |v'| = {slope:.4f}); flexible-nonlinear's slope coordinates end "
+            'at 90 deg (docs/validation_nonlinear.md)')
 
 
 # ------------------------------------------------------------------ linear strain

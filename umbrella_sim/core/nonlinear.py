@@ -96,11 +96,10 @@ keeps the plain linear kernel.  Nothing here imports rclpy.
 from __future__ import annotations
 
 import ctypes
-import math
 
 import numpy as np
 
-from .beam_strain import CorotationalStrainEnergy, LinearStrainEnergy
+from .beam_strain import CorotationalStrainEnergy, LinearStrainEnergy, slope_end_reason
 from .engines import FiniteElementEngine
 from .integrators import (iteration_blocks, joint_correction, midpoint_iterate, MidpointDAE,
                           newton_converged, NEWTON_TOLERANCE, project_keeping_energy)
@@ -361,13 +360,8 @@ class ElasticMidpointDAE(MidpointDAE):
         """
         if not self.strain_nonlinear:
             return exc
-        slope = float(np.max(np.abs(self.model.strain.section_slopes(s.q))))
-        if slope < 0.99:
-            return exc
-        return ConvergenceError(
-            f'{exc}: a fibre has turned {math.degrees(math.asin(min(slope, 1.0))):.1f} deg '
-            f"from its body frame (slope |v'| = {slope:.4f}); flexible-nonlinear's slope "
-            'coordinates end at 90 deg (docs/validation_nonlinear.md)')
+        reason = slope_end_reason(float(np.max(np.abs(self.model.strain.section_slopes(s.q)))))
+        return exc if reason is None else ConvergenceError(f'{exc}: {reason}')
 
     def _step(self, s, h, force, cs):
         """Take one step: compiled (_kernel_nonlinear.c hooks) or the numpy reference."""

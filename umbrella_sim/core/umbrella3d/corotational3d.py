@@ -99,7 +99,7 @@ import numpy as np
 
 from .model3d import UmbrellaModel3D
 from ..beam_strain import (angle_gradient, angle_hessian, angle_increment, gonzalez,
-                           section_angle_increment, wrap_angle)
+                           section_angle_increment, slope_end_reason, wrap_angle)
 
 NONLINEAR_MODEL = 'flexible-nonlinear'
 #: the ribs take out-of-plane bending and torsion as small rotations in each element's
@@ -107,6 +107,10 @@ NONLINEAR_MODEL = 'flexible-nonlinear'
 #: they are held valid for (their squares are dropped: ~angle^2 / 6 relative in the sines,
 #: 0.2 % here, and products with the elements' local in-plane rotations of the same order)
 OUT_OF_PLANE_LIMIT = 0.1
+#: what the ribs' out-of-plane model is, said where a run leaves OUT_OF_PLANE_LIMIT
+_SMALL_ROTATIONS = ("the umbrella's flexible-nonlinear ribs take out-of-plane bending and "
+                    "torsion as small rotations in each element's co-rotated frame "
+                    '(docs/umbrella3d_nonlinear.md)')
 _Q = np.array([[4.0, -1.0], [-1.0, 4.0]])          # Hessian of Q(a, b)
 # the element's z = (d_x, d_y, d_z, theta_a, theta_b, w'_a, w'_b, phi_a, phi_b) from its
 # 12 coordinates (u, v, theta, w, slope, twist of node a, then of node b)
@@ -530,6 +534,22 @@ class CorotationalUmbrellaModel3D(UmbrellaModel3D):
                                     self.strain.out_of_plane_rotation(qr))
         self.max_section_slope = max(self.max_section_slope, self.strain.section_slope(qr))
 
+    def failure_reason(self, qr) -> str | None:
+        """
+        Return why a step from the state qr failed where the ribs had left their range.
+
+        The in-plane slope coordinates' end at 90 deg (the planar model's reason,
+        beam_strain.slope_end_reason), else an out-of-plane turn or twist past
+        OUT_OF_PLANE_LIMIT (the out-of-plane slopes w' end at 90 deg too); None inside both.
+        """
+        reason = slope_end_reason(self.strain.section_slope(qr))
+        rotation = self.strain.out_of_plane_rotation(qr)
+        if reason is not None or rotation <= OUT_OF_PLANE_LIMIT:
+            return reason
+        return (f"a section had turned {math.degrees(rotation):.1f} deg out of its rib's "
+                f'plane or twisted (limit {math.degrees(OUT_OF_PLANE_LIMIT):.1f} deg): '
+                + _SMALL_ROTATIONS)
+
     # ------------------------------------------------------------ stresses
     def stress_blocks(self, qr):
         return self.strain.stress_blocks(qr)[0]
@@ -610,9 +630,7 @@ def out_of_plane_warnings(params: dict, rotation: float | None) -> list[str]:
         return []
     return [f'out-of-plane rotation: a section turned {math.degrees(rotation):.1f} deg out of '
             f"its rib's plane or twisted (asin |w'| or |phi| = {rotation:.3g} rad; limit "
-            f"{math.degrees(OUT_OF_PLANE_LIMIT):.1f} deg): the umbrella's flexible-nonlinear "
-            'ribs take out-of-plane bending and torsion as small rotations in each '
-            "element's co-rotated frame (docs/umbrella3d_nonlinear.md)"]
+            f'{math.degrees(OUT_OF_PLANE_LIMIT):.1f} deg): ' + _SMALL_ROTATIONS]
 
 
 def umbrella_model(params) -> UmbrellaModel3D:

@@ -238,7 +238,13 @@ class UmbrellaSimulator3D:
             self.model.note_state(out[0].qr)
             return out
         except (ConvergenceError3D, np.linalg.LinAlgError) as exc:
-            raise SimulationFailed(f'step after t = {s.t:.9g} s failed: {exc}') from None
+            raise self._failed(s.qr, f'step after t = {s.t:.9g} s failed: {exc}') from None
+
+    def _failed(self, qr, text: str) -> SimulationFailed:
+        """Return the failure of a step from the state qr: text, and why where the model knows."""
+        explain = getattr(self.model, 'failure_reason', None)     # (the co-rotational ribs)
+        reason = explain(qr) if explain is not None else None
+        return SimulationFailed(text if reason is None else f'{text}: {reason}')
 
     def step(self) -> None:
         """Advance by one grid step, with the lock if the sleeve reaches the stop in it."""
@@ -320,8 +326,8 @@ class UmbrellaSimulator3D:
             elif status == STATUS['axle']:      # (the state: the last step before it)
                 raise self._at_axle()
             elif status != STATUS['ok']:
-                raise SimulationFailed(f'step after t = {self.state.t:.9g} s failed: '
-                                       f'{kernel_error(status, self.state.t + self.h / sub)}')
+                raise self._failed(self.state.qr, f'step after t = {self.state.t:.9g} s failed: '
+                                   f'{kernel_error(status, self.state.t + self.h / sub)}')
 
     # ------------------------------------------------------------ stage-2 substeps
     def _judge_stage2(self, s: State3D) -> None:
