@@ -86,6 +86,9 @@ def test_with_a_publication_every_step_the_figures_are_the_summarys(every_step):
     assert s.friction_work == pytest.approx(sum(figures['friction_work']), rel=1e-15)
     assert s.friction_work < 0.0
     assert s.energy_balance_residual == figures['energy_balance_residual']
+    # each rib's stage 2, by the planar summary's rule on the same rows
+    assert [r.stage2_tip_amplitude for r in s.stage2] == pytest.approx(
+        figures['stage2_tip_amplitude'], rel=1e-12)
 
 
 def test_at_a_coarser_rate_the_peaks_stay_exact_and_the_rest_within_a_period(tmp_path):

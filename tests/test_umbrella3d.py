@@ -36,6 +36,7 @@ discrete balance the step keeps (relative 1e-9 asserted); momentum of a free-flo
 A moving base's balances are asserted on both paths, the compiled step (_kernel3d_base.h)
 and its numpy reference (slow).
 """
+import math
 import re
 
 import numpy as np
@@ -217,6 +218,42 @@ def test_a_hinge_that_takes_more_than_the_frames_energy_stalls_the_deployment():
         if stalls:
             short = float(re.search(r'short of the stop by ([0-9.]+) %', said[0])[1])
             assert 0.0 < short < 100.0 and "the hinges' friction" in said[0]
+
+
+def test_each_ribs_stage2_vibration_is_timed_as_the_planar_frames():
+    """
+    Each rib's stage-2 tip amplitude and period, in its plane and out of it (the summary).
+
+    N identical ribs: each rib's in-plane figures are the planar frame's (the planar rule on
+    the same motion: with the iteration matrix kept over steps, each step's solution is the
+    planar one's to Newton's tolerance, which moves the lock by 3e-10 s and the amplitude by
+    2e-5 of it after 0.3 s; with a fresh matrix every step 1e-11, assert_ribs_equal_planar);
+    a rib of Young's modulus E1 rings at sqrt(E0 / E1) times
+    the others' period (the locked rib's modes scale with sqrt(E): 0.1 %); a rib kicked out
+    of its plane rings at the period of the locked rib's first out-of-plane mode (modes:
+    0.5 %), where an unkicked rib has no out-of-plane vibration to time.
+    """
+    from umbrella_sim.core.modal import deployed_modes
+
+    planar = simulate(UmbrellaParams(), 0.6, keep_samples=False).figures
+    same = RunDriver(UmbrellaRibsParams.from_mapping({'ribs': 3}), 100.0)
+    same.run(0.6)
+    f = same.summary.figures()
+    assert f['stage2_tip_amplitude'] == pytest.approx(
+        [planar['stage2_tip_amplitude']] * 3, rel=1e-4)
+    assert f['stage2_tip_period'] == pytest.approx([planar['stage2_tip_period']] * 3, rel=2e-6)
+    assert len(set(f['stage2_tip_amplitude'])) == 1      # (three ribs, one motion)
+    values = {'ribs': 3, 'rib1.youngs_modulus': 5e10, 'rib2.out_of_plane_rate': 0.05}
+    odd = RunDriver(UmbrellaRibsParams.from_mapping(values), 100.0)
+    odd.run(0.6)
+    g = odd.summary.figures()
+    period = g['stage2_tip_period']
+    assert period[1] / period[0] == pytest.approx(math.sqrt(7.2e10 / 5e10), rel=1e-3)
+    first_out = next(r for r in deployed_modes(UmbrellaRibsParams.from_mapping({'ribs': 3}))
+                     if r.out_of_plane > 0.5)
+    assert g['stage2_tip_w_period'][2] == pytest.approx(first_out.period, rel=5e-3)
+    assert g['stage2_tip_w_period'][:2] == [None, None]
+    assert g['stage2_tip_w_amplitude'][2] > 1e-4 > 1e-12 > max(g['stage2_tip_w_amplitude'][:2])
 
 
 #: a hinge rubbing hard: rib 1's 3 N m slows the deployment to a lock at 0.28 s, then stage

@@ -260,6 +260,57 @@ def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dic
     return out
 
 
+class Stage2Series:
+    """
+    The tip deflections of stage 2's window, a block of rows at a time: what its figures need.
+
+    Columns of tip deflection (the planar tip's v: one; the umbrella's: each rib's in-plane v
+    and out-of-plane w) over (lock, lock + STAGE2_WINDOW]: each column's extremes and the
+    window's end of every row, and for the periods the first row in each of STAGE2_SAMPLES
+    bins of the window.  figures() gives stage2_figures' of each column, its amplitude of
+    every row.
+    """
+
+    def __init__(self, columns: int = 1):
+        self._t: list = []
+        self._v: list = []
+        self._bin, self._end = -1.0, 0.0
+        self._lo, self._hi = np.full(columns, math.inf), np.full(columns, -math.inf)
+
+    def end(self, lock_time: float) -> float:
+        """Return the window's end: rows after it are not taken."""
+        return lock_time + STAGE2_WINDOW + TIME_RESOLUTION
+
+    def add(self, t: np.ndarray, v: np.ndarray, lock_time: float) -> None:
+        """Take rows at times t (stage 2 or not), v (rows, columns), the lock at lock_time."""
+        keep = in_stage2_window(t, lock_time)
+        t2, v2 = t[keep], v[keep]
+        if not len(t2):
+            return
+        np.minimum(self._lo, v2.min(0), out=self._lo)
+        np.maximum(self._hi, v2.max(0), out=self._hi)
+        self._end = float(t2[-1])
+        bins = np.floor((t2 - lock_time) * (STAGE2_SAMPLES / STAGE2_WINDOW))
+        first = np.diff(bins, prepend=self._bin) != 0      # (STAGE2_SAMPLES)
+        self._bin = float(bins[-1])
+        self._t.append(t2[first])
+        self._v.append(v2[first])
+
+    def figures(self, lock_time: float | None) -> list[dict]:
+        """Return each column's stage-2 figures by stage2_figures' rule (None: no window)."""
+        if not self._t:
+            return [stage2_figures(np.zeros(0), np.zeros(0), None) for _ in self._lo]
+        t, v = np.concatenate(self._t), np.concatenate(self._v)
+        out = []
+        for j in range(v.shape[1]):
+            f = stage2_figures(t, v[:, j], lock_time)
+            if f['stage2_tip_amplitude'] is not None:     # of every row, not those kept
+                f['stage2_tip_amplitude'] = 0.5 * float(self._hi[j] - self._lo[j])
+                f['stage2_window'][1] = self._end
+            out.append(f)
+        return out
+
+
 def lock_warning(params: dict, lock_kind: str | None) -> str | None:
     """Return a warning if the lock asked for does not apply to the model (else None)."""
     asked = params.get('lock')
@@ -811,9 +862,7 @@ class SummaryAccumulator:
         self._peaks = {b: (getattr(initial, f'peak_stress_{b}'),
                            getattr(initial, f'peak_stress_{b}_x'), float(initial.time))
                        for b in ('leaf', 'link')}
-        self._s2_t: list = []
-        self._s2_v: list = []
-        self._s2_bin, self._s2_all = -1.0, (math.inf, -math.inf, 0.0)   # (min, max, end)
+        self._stage2 = Stage2Series()
         # deploy_start: t = 0 if the frame moves at t = 0, else found in the steps' forces
         self._start = deploy_start(float(self.params.get('v0', 0.0)), ())
         self._said = WarningsSaid()
@@ -870,24 +919,12 @@ class SummaryAccumulator:
             axial = rows[_AXIAL] if stage[0] != 0 else rows[_AXIAL][stage != 0]
             self._link_load = max(self._link_load or 0.0,
                                   float(np.maximum.reduce(axial)) * self._axial_per_stress)
-        if self.lock is not None and stage[-1] != 0 and t[0] <= self._stage2_end:
-            keep = in_stage2_window(t, self.lock.time)
-            t2, v2 = t[keep], v[keep]
-            if len(t2):
-                lo, hi, _ = self._s2_all
-                self._s2_all = (min(lo, float(v2.min())), max(hi, float(v2.max())), float(t2[-1]))
-                bins = np.floor((t2 - self.lock.time) * (STAGE2_SAMPLES / STAGE2_WINDOW))
-                first = np.diff(bins, prepend=self._s2_bin) != 0      # (STAGE2_SAMPLES)
-                self._s2_bin = float(bins[-1])
-                self._s2_t.append(t2[first])
-                self._s2_v.append(v2[first])
+        if (self.lock is not None and stage[-1] != 0
+                and t[0] <= self._stage2.end(self.lock.time)):
+            self._stage2.add(t, v[:, None], self.lock.time)
         for body, (peak, x, ti) in block.peaks.items():
             if peak > self._peaks[body][0]:
                 self._peaks[body] = (peak, x, ti)
-
-    @property
-    def _stage2_end(self) -> float:
-        return self.lock.time + STAGE2_WINDOW + TIME_RESOLUTION
 
     def figures(self) -> dict:
         """Return the physics figures of the run so far (no wall-clock ones), JSON-ready."""
@@ -898,14 +935,7 @@ class SummaryAccumulator:
                      'lock_time': self.lock.time if self.lock else None,
                      'tip_deflection_max': self._tip1[0],
                      'tip_deflection_max_time': self._tip1[1]}
-        if self._s2_t:
-            out.update(stage2_figures(np.concatenate(self._s2_t), np.concatenate(self._s2_v),
-                                      self.lock.time))
-            if out['stage2_tip_amplitude'] is not None:     # of every step, not those kept
-                lo, hi, end = self._s2_all
-                out['stage2_tip_amplitude'], out['stage2_window'][1] = 0.5 * (hi - lo), end
-        else:
-            out.update(stage2_figures(np.zeros(0), np.zeros(0), None))
+        out.update(self._stage2.figures(self.lock.time if self.lock else None)[0])
         for body in ('leaf', 'link'):
             peak, x, t = self._peaks[body]
             out[f'peak_stress_{body}'] = peak

@@ -105,6 +105,8 @@ TEXT_FIELDS = {
     'stage2_tip_amplitude': ('mm', 1e3, '.4g'),
     'stage2_tip_period': ('s', 1.0, '.5f'),
     'stage2_window': ('s', 1.0, '.4f'),
+    'stage2_tip_w_amplitude': ('mm', 1e3, '.4g'),
+    'stage2_tip_w_period': ('s', 1.0, '.5f'),
     'peak_stress_leaf': ('MPa', 1e-6, '.4g'),
     'peak_stress_leaf_x': ('m', 1.0, '.4g'),
     'peak_stress_leaf_time': ('s', 1.0, '.4f'),
@@ -148,7 +150,8 @@ TEXT_FIELDS = {
     'energy_scale': ('J', 1.0, '.6g'),
 }
 #: the summary's lists that are per rib (the others with a unit: a range, 'from to')
-PER_RIB = ('rib_deploy_time', 'max_in_plane_tip', 'friction_work')
+PER_RIB = ('rib_deploy_time', 'max_in_plane_tip', 'friction_work', 'stage2_tip_amplitude',
+           'stage2_tip_period', 'stage2_tip_w_amplitude', 'stage2_tip_w_period')
 #: the umbrella's vectors at the end of the run (a moving base's): each component, its unit
 _BUS = (('X', 'm'), ('Y', 'm'), ('Z', 'm'), ('psi', 'rad'), ('beta', 'rad'), ('gamma', 'rad'))
 VECTORS = {'bus_q': _BUS,

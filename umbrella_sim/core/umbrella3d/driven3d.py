@@ -47,8 +47,8 @@ from ..outputs import LockEvent
 from ..summary import (AXIAL_LOAD_LIMIT, CENTRIFUGAL_TENSION_LIMIT,
                        centrifugal_tension_per_rate, deploy_start, ENERGY_DRIFT_LIMIT,
                        ENERGY_SCALE_FLOOR, hub_spin_tension_per_rate, leaf_tension_ratio,
-                       mesh_resolution, naming_rib, parameter_warnings, validity_warnings,
-                       WarningsSaid)
+                       mesh_resolution, naming_rib, parameter_warnings, Stage2Series,
+                       validity_warnings, WarningsSaid)
 
 #: steps of a chunk: a numpy step of the umbrella costs 2 to 3 ms at 3 to 6 ribs (one element
 #: a segment; 6 to 9 ms with a moving base), so a chunk stays near the planar rule's ~10 ms
@@ -61,6 +61,9 @@ COMPILED_CHUNK_STEPS = 64
 #: Coulomb torque lets a held frame creep at ~1e-3 of a deployment's speed: not a motion)
 STALL_SPEED_SHARE = 0.01
 STALL_TIME = 0.05
+#: a rib's out-of-plane tip amplitude below this (m) has no vibration to time: its period is
+#: not given (an unkicked rib's w is round-off, whose crossings are noise)
+OUT_OF_PLANE_TIMED = 1e-9
 
 
 class StallWatch:
@@ -414,6 +417,7 @@ class Summary3D:
         self._start = deploy_start(float(sim.params.planar.v0), ())
         self._stall = StallWatch(float(initial.sleeve_position), m.y_stop,
                                  float(initial.sleeve_velocity))
+        self._stage2 = Stage2Series(2 * m.n_ribs)      # (each rib's v, then each rib's w)
         self._rubs = any(r.hinge_coulomb > 0.0 or r.hinge_viscous > 0.0
                          for r in sim.params.ribs_list())
         self._said = WarningsSaid()
@@ -497,6 +501,10 @@ class Summary3D:
             if angles[0] > self._angles[0]:
                 self._angles = angles
         self._stall.add(t, rows['sleeve_position'], rows['sleeve_velocity'], bool(locked[-1]))
+        if self.lock is not None and locked[-1] and t[0] <= self._stage2.end(self.lock.time):
+            tip = rows['tip']
+            self._stage2.add(t, np.concatenate((tip[:, :, 1], tip[:, :, 2]), axis=1),
+                             self.lock.time)
         if locked[-1]:                             # (stage 2 in the block)
             ratio = (rows['stress_axial'] if locked[0] else rows['stress_axial'][locked]) \
                 * self._axial_per_stress
@@ -535,6 +543,7 @@ class Summary3D:
                'max_out_of_plane_tip_rib': self._oop[1],
                'max_out_of_plane_tip_time': self._oop[2],
                'max_in_plane_tip': self._in_plane.tolist(),
+               **self._stage2_figures(),
                'energy_balance_residual': self._balance,
                'energy_scale': self._scale,
                'energy_drift': self.energy_drift,
@@ -561,6 +570,25 @@ class Summary3D:
         if self.error:
             out['error'] = self.error
         return out
+
+    def _stage2_figures(self) -> dict:
+        """
+        Return each rib's stage-2 tip amplitude and period, in-plane and out of its plane.
+
+        The planar summary's rule (summary.stage2_figures, over its window after the lock),
+        on each rib's v and w: lists per rib (None before the window, or for a w too small
+        to time: OUT_OF_PLANE_TIMED), and the window.
+        """
+        n = self.sim.model.n_ribs
+        f = self._stage2.figures(self.lock.time if self.lock else None)
+        out_of_plane = [g['stage2_tip_amplitude'] for g in f[n:]]
+        return {'stage2_window': f[0]['stage2_window'],
+                'stage2_tip_amplitude': [g['stage2_tip_amplitude'] for g in f[:n]],
+                'stage2_tip_period': [g['stage2_tip_period'] for g in f[:n]],
+                'stage2_tip_w_amplitude': out_of_plane,
+                'stage2_tip_w_period': [
+                    g['stage2_tip_period'] if a is not None and a >= OUT_OF_PLANE_TIMED
+                    else None for g, a in zip(f[n:], out_of_plane)]}
 
     def _geometry(self):
         """Return the co-rotational ribs' largest section slope and out-of-plane rotation."""
