@@ -28,7 +28,8 @@ import re
 
 import pytest
 
-from umbrella_sim.bag.format import EVENTS_RECORD, MESH_RECORD, PARAMETERS_RECORD
+from umbrella_sim.bag.format import (EVENTS_RECORD, MESH_RECORD, PARAMETERS_RECORD,
+                                     SUMMARY_RECORD)
 from umbrella_sim.bag.reader import LogError, read_log
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.umbrella3d.params3d import node_model
@@ -80,6 +81,11 @@ def test_simulate_records_the_umbrella_and_replay_resimulates_it_exactly(tmp_pat
     ref, other = result['runs']
     assert ref['alpha1_max_difference'] == [0.0, 0.0] and ref['ribs'] == 2
     assert min(other['alpha1_max_difference']) > 0.0
+    # the summary's figures of each run (the ribs apart before the lock: the stuck rib's)
+    assert ref['max_leaf_angle_spread'] == figures['max_leaf_angle_spread'] > 0.0
+    assert other['stage2_tip_amplitude'] == json.loads(
+        read_log(str(free)).metadata[SUMMARY_RECORD]['figures'])['stage2_tip_amplitude']
+    assert None not in other['stage2_tip_amplitude']
     assert sorted(p.rsplit('/', 1)[1] for p in result['plots']) == [
         'ribs_alpha1.png', 'ribs_tip_out_of_plane.png', 'ribs_top_view.png']
     planar = tmp_path / 'planar'

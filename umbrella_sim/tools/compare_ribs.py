@@ -136,6 +136,9 @@ def compare_ribs(runs: list[RibsRun]) -> dict:
         entry = {'label': r.label, 'path': r.path, 'ribs': r.ribs,
                  'lock_time': f.get('lock_time'), 'rib_deploy_time': f.get('rib_deploy_time'),
                  'deployment_lag': f.get('deployment_lag'), 'latest_rib': f.get('latest_rib'),
+                 'max_leaf_angle_spread': f.get('max_leaf_angle_spread'),
+                 'stage2_tip_amplitude': f.get('stage2_tip_amplitude'),
+                 'stage2_tip_period': f.get('stage2_tip_period'),
                  'max_out_of_plane_tip': f.get('max_out_of_plane_tip'),
                  'max_out_of_plane_tip_rib': f.get('max_out_of_plane_tip_rib'),
                  'peak_von_mises': (f.get('peak_stress') or {}).get('von_mises', {}).get('value'),
@@ -175,38 +178,47 @@ def print_ribs_table(result: dict, stream=None) -> None:
     w = (stream or sys.stdout).write
     L = label_width(result['runs'])
     w(f"reference run: {result['reference']} (the umbrella of N ribs)\n")
-    w('lag: how long after the earliest rib the latest one deployed; latest: that rib; max w '
-      'tip: the largest out-of-plane tip of any rib; the differences: of each run against the '
-      'reference run (zero for the reference itself)\n')
+    w('lag: how long after the earliest rib the latest one deployed (one sleeve deploys them '
+      'together: 0 but for a rib that never reaches its angle); latest: that rib; spread: how '
+      "far apart the ribs' leaf angles got before the lock; max w tip: the largest "
+      'out-of-plane tip of any rib; the differences: of each run against the reference run '
+      '(zero for the reference itself)\n')
     w(f"{'run':<{L}} {'ribs':>4} {'lock (s)':>11} {'lag (s)':>10} {'latest':>6} "
-      f"{'max w tip (mm)':>14} {'energy drift':>12}\n")
+      f"{'spread (rad)':>12} {'max w tip (mm)':>14} {'energy drift':>12}\n")
     for e in result['runs']:
-        def num(v, spec):
-            return '-' if v is None else format(v, spec)
-        w(f"{e['label']:<{L}} {e['ribs']:>4} {num(e['lock_time'], '.7f'):>11} "
-          f"{num(e['deployment_lag'], '.3e'):>10} {num(e['latest_rib'], 'd'):>6} "
-          f"{num(e['max_out_of_plane_tip'] and e['max_out_of_plane_tip'] * 1e3, '.4g'):>14} "
-          f"{num(e['energy_drift'], '.2e'):>12}\n")
+        w(f"{e['label']:<{L}} {e['ribs']:>4} {_num(e['lock_time'], '.7f'):>11} "
+          f"{_num(e['deployment_lag'], '.3e'):>10} {_num(e['latest_rib'], 'd'):>6} "
+          f"{_num(e.get('max_leaf_angle_spread'), '.3e'):>12} "
+          f"{_num(e['max_out_of_plane_tip'] and e['max_out_of_plane_tip'] * 1e3, '.4g'):>14} "
+          f"{_num(e['energy_drift'], '.2e'):>12}\n")
     for e in result['runs']:
         if e.get('figures_from'):
             w(f"{e['label']}: figures from {e['figures_from']}\n")
         if e.get('fault'):
             w(f"{e['label']}: ended in a fault: {e['fault']}\n")
     w('\nper rib: deployment instant (s), its difference to the reference (s), max |d alpha1| '
-      '(rad), peak von Mises (MPa), friction work (J)\n')
+      '(rad), peak von Mises (MPa), friction work (J), stage-2 in-plane tip amplitude (mm) and '
+      'period (ms) (- where the figures do not hold them)\n')
     for e in result['runs']:
+        def rib(key):
+            return (e.get(key) or [None] * e['ribs'])[k]
+
         deploy = e['rib_deploy_time'] or []
         for k in range(e['ribs']):
-            d = (e.get('rib_deploy_time_difference') or [None] * e['ribs'])[k]
-            a = (e.get('alpha1_max_difference') or [None] * e['ribs'])[k]
-            vm = (e['peak_von_mises'] or [None] * e['ribs'])[k]
-            fw = (e['friction_work'] or [None] * e['ribs'])[k]
+            vm, amplitude, period = (rib(key) for key in (
+                'peak_von_mises', 'stage2_tip_amplitude', 'stage2_tip_period'))
             t = deploy[k] if k < len(deploy) else None
-            w(f"{e['label']:<{L}} rib{k:<3} {'-' if t is None else format(t, '.7f'):>11} "
-              f"{'-' if d is None else format(d, '+.3e'):>11} "
-              f"{'-' if a is None else format(a, '.3e'):>10} "
-              f"{'-' if vm is None else format(vm * 1e-6, '.4g'):>9} "
-              f"{'-' if fw is None else format(fw, '.4g'):>9}\n")
+            w(f"{e['label']:<{L}} rib{k:<3} {_num(t, '.7f'):>11} "
+              f"{_num(rib('rib_deploy_time_difference'), '+.3e'):>11} "
+              f"{_num(rib('alpha1_max_difference'), '.3e'):>10} "
+              f"{_num(vm and vm * 1e-6, '.4g'):>9} {_num(rib('friction_work'), '.4g'):>9} "
+              f"{_num(amplitude and amplitude * 1e3, '.4g'):>9} "
+              f"{_num(period and period * 1e3, '.4f'):>9}\n")
+
+
+def _num(value, spec: str) -> str:
+    """Return a table's figure: '-' for None."""
+    return '-' if value is None else format(value, spec)
 
 
 def plot_ribs(runs: list[RibsRun], out_dir: str) -> list[str]:
