@@ -889,3 +889,36 @@ def test_a_ribs_own_section_is_judged_and_named_by_its_rib():
                  'rib.second_moment_of_area': [1e-8 / 12, 1e-9, 1e-8 / 12]}) == [
         'outer fibre: rib 1']
     assert keys({'ribs': 3}) == []
+
+
+def test_the_stage2_series_times_each_column_and_answers_again_from_what_it_made():
+    """
+    Stage2Series: each column's amplitude and period of a sampled sine, over the window only.
+
+    Two sines of 47 and 89 ms and amplitudes 62 and 0.4 mm from the lock, in blocks of rows
+    that run past the window's end: their figures to the sampling's and the window's
+    resolution; asked again
+    with no new rows the same figures (made once), a caller's change to its window list not
+    kept; a row in the window made them again.
+    """
+    from umbrella_sim.core.summary import Stage2Series
+
+    lock, h = 0.2259, 2e-4
+    series = Stage2Series(2)
+    t = lock + h * np.arange(1, int(0.4 / h))
+    v = np.stack([0.062 * np.sin(2 * np.pi * (t - lock) / 0.047),
+                  4e-4 * np.cos(2 * np.pi * (t - lock) / 0.089)], axis=1)
+    for block in range(0, len(t) - 100, 64):      # (the last rows never come)
+        series.add(t[block:block + 64], v[block:block + 64], lock)
+    first = series.figures(lock)
+    assert [f['stage2_tip_amplitude'] for f in first] == pytest.approx([0.062, 4e-4], rel=1e-3)
+    # (the window holds 6.4 and 3.4 of their periods: the period's search sees the second
+    # to 0.2 %)
+    assert first[0]['stage2_tip_period'] == pytest.approx(0.047, rel=1e-4)
+    assert first[1]['stage2_tip_period'] == pytest.approx(0.089, rel=2e-3)
+    assert first[0]['stage2_window'] == [lock, pytest.approx(lock + STAGE2_WINDOW, abs=h)]
+    first[0]['stage2_window'][1] = -1.0
+    again = series.figures(lock)
+    assert again[0]['stage2_window'][1] > lock and again[1] == first[1]
+    series.add(np.array([lock + 0.1]), np.array([[0.07, 0.0]]), lock)
+    assert series.figures(lock)[0]['stage2_tip_amplitude'] > first[0]['stage2_tip_amplitude']

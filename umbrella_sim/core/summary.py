@@ -276,6 +276,7 @@ class Stage2Series:
         self._v: list = []
         self._bin, self._end = -1.0, 0.0
         self._lo, self._hi = np.full(columns, math.inf), np.full(columns, -math.inf)
+        self._said: tuple | None = None      # (the rows and lock it was of, figures())
 
     def end(self, lock_time: float) -> float:
         """Return the window's end: rows after it are not taken."""
@@ -300,6 +301,15 @@ class Stage2Series:
         """Return each column's stage-2 figures by stage2_figures' rule (None: no window)."""
         if not self._t:
             return [stage2_figures(np.zeros(0), np.zeros(0), None) for _ in self._lo]
+        # (a period's search costs ~1 ms a column, and a node asks every second: made again
+        # only when rows came, or for another lock)
+        key = (len(self._t), self._end, lock_time)
+        if self._said is None or self._said[0] != key:
+            self._said = (key, self._figures(lock_time))
+        return [dict(f, stage2_window=f['stage2_window'] and list(f['stage2_window']))
+                for f in self._said[1]]
+
+    def _figures(self, lock_time: float) -> list[dict]:
         t, v = np.concatenate(self._t), np.concatenate(self._v)
         out = []
         for j in range(v.shape[1]):

@@ -64,5 +64,6 @@ def node_status(node, sim_t: float, measured: float, lag: float) -> tuple[int, s
                             else 'ok')}
     for i, text in enumerate(node.driver.summary.warnings()):
         values[f'warning_{i}'] = text
-    values.update(ribs_diagnostics(node.driver.summary.figures()) if node.ribs > 1 else {})
+    values.update(ribs_diagnostics(node.driver.summary.figures(stage2=False))
+                  if node.ribs > 1 else {})
     return level, message, values

@@ -529,8 +529,14 @@ class Summary3D:
     def energy_drift(self) -> float:
         return self._balance / self._scale
 
-    def figures(self) -> dict:
-        """Return the run's figures so far, JSON-ready (lists per rib, ribs numbered from 0)."""
+    def figures(self, stage2: bool = True) -> dict:
+        """
+        Return the run's figures so far, JSON-ready (lists per rib, ribs numbered from 0).
+
+        stage2: with each rib's stage-2 amplitudes and periods (_stage2_figures: a period's
+        search, ~1 ms a rib and direction, made again while the window takes rows), which a
+        node's diagnostics every second leave out.
+        """
         start = self._start if self._start is not None else 0.0
         out = {'ribs': self.sim.model.n_ribs,
                'lock_time': self.lock.time if self.lock else None,
@@ -543,7 +549,7 @@ class Summary3D:
                'max_out_of_plane_tip_rib': self._oop[1],
                'max_out_of_plane_tip_time': self._oop[2],
                'max_in_plane_tip': self._in_plane.tolist(),
-               **self._stage2_figures(),
+               **(self._stage2_figures() if stage2 else {}),
                'energy_balance_residual': self._balance,
                'energy_scale': self._scale,
                'energy_drift': self.energy_drift,
