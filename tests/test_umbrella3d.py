@@ -243,6 +243,10 @@ def test_each_ribs_stage2_vibration_is_timed_as_the_planar_frames():
         [planar['stage2_tip_amplitude']] * 3, rel=1e-4)
     assert f['stage2_tip_period'] == pytest.approx([planar['stage2_tip_period']] * 3, rel=2e-6)
     assert len(set(f['stage2_tip_amplitude'])) == 1      # (three ribs, one motion)
+    # the step stage 2 took, judged at the lock as the planar frame's (its worst rib's)
+    resolution = f['stage2_resolution']
+    assert {k: resolution[k] for k in planar['stage2_resolution']} == pytest.approx(
+        planar['stage2_resolution'], rel=1e-4)
     values = {'ribs': 3, 'rib1.youngs_modulus': 5e10, 'rib2.out_of_plane_rate': 0.05}
     odd = RunDriver(UmbrellaRibsParams.from_mapping(values), 100.0)
     odd.run(0.6)

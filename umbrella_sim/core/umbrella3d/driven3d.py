@@ -550,6 +550,8 @@ class Summary3D:
                'max_out_of_plane_tip_time': self._oop[2],
                'max_in_plane_tip': self._in_plane.tolist(),
                **(self._stage2_figures() if stage2 else {}),
+               # (the lock's worst rib's, as the planar summary's: the step stage 2 takes)
+               'stage2_resolution': self._stage2_resolution() if self.lock else None,
                'energy_balance_residual': self._balance,
                'energy_scale': self._scale,
                'energy_drift': self.energy_drift,
