@@ -371,6 +371,15 @@ def _node(*args, timeout=60):
      "parameter use_sim_time='abc': must be of type bool, got string"),
     (None, ['-p', 'qos_overrides./clock.publisher.depth:=deep'],
      "parameter qos_overrides./clock.publisher.depth='deep': must be of type integer"),
+    # a value of the right type that no QoS takes: rclpy's own errors named neither the
+    # parameter nor the topic ('invalid allocator', 'Unexpected QoS override')
+    (None, ['-p', 'qos_overrides./clock.publisher.depth:=-3'],
+     'parameter qos_overrides./clock.publisher.depth=-3: must be >= 0'),
+    (None, ['-p', 'qos_overrides./sleeve_force.subscription.depth:=3000000000'],
+     'parameter qos_overrides./sleeve_force.subscription.depth=3000000000: must be <= '),
+    ('/**:\n  ros__parameters:\n    qos_overrides:\n      /joint_states:\n'
+     '        publisher:\n          reliability: bogus\n', [],
+     "parameter qos_overrides./joint_states.publisher.reliability='bogus': must be one of "),
     # a -p value of another type than a params file's: rcl keeps the file's without a word
     ('/**:\n  ros__parameters:\n    v0: -0.2\n', ['-p', 'v0:=abc'],
      "parameter v0='abc' (-p): not taken: rcl keeps v0's value -0.2 (a double"),
@@ -388,7 +397,8 @@ def _node(*args, timeout=60):
 ], ids=['typo', 'unknown', 'other-node', 'unknown-key', 'nested', 'malformed', 'list',
         'no-ros-parameters', 'binary', 'missing', 'no-assign', 'bogus-flag', 'no-model',
         'empty-value', 'qos-typo', 'qos-type', 'twice', 'tiny-step', 'ros-param-type',
-        'qos-type-argument', 'argument-type-beside-file', 'argument-list-beside-file',
+        'qos-type-argument', 'qos-negative-depth', 'qos-huge-depth', 'qos-bad-policy',
+        'argument-type-beside-file', 'argument-list-beside-file',
         'nan-word', 'mixed-list', 'rib-before-record-path'])
 @pytest.mark.ros
 def test_bad_configuration_exits_2_naming_culprit(tmp_path, content, args, words):

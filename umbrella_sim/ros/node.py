@@ -60,7 +60,8 @@ from .parameters import (coerce_parameter, declare_from_registry, declare_umbrel
                          known_parameter_names, parameter_defaults, set_refusal,
                          wrong_type_text)
 from .params_file import (check_parameter_sources, check_qos_override_sources,
-                          ParameterSources, QOS_OVERRIDES, USE_SIM_TIME)
+                          check_qos_override_values, ParameterSources, QOS_OVERRIDES,
+                          QoSOverrideValueError, USE_SIM_TIME)
 from .publication import PublicationEncoder, run_driver
 from .recording import RunRecording
 from .ribs_messages import node_topics
@@ -98,9 +99,8 @@ class UmbrellaNode(Node):
             raise StartupError(wrong_type_text(self, exc)) from None
         qos_given = self._check_parameter_sources(params_files, param_rules or {})
         if self.get_parameter(USE_SIM_TIME).value:
-            # a params file for every node ('/**') may set it: this node drives /clock and
-            # paces it by the system clock; following its own /clock would only cost a
-            # callback a publication (rclpy's time source), which slowed it several fold
+            # a '/**' params file may set it: this node drives /clock by the system clock;
+            # following it would cost a callback a publication (several fold slower)
             self.set_parameters([Parameter(USE_SIM_TIME, Parameter.Type.BOOL, False)])
             self.get_logger().info(f'{USE_SIM_TIME}:=true not taken: {SIM_TIME_REASON}')
         try:
@@ -139,11 +139,12 @@ class UmbrellaNode(Node):
         self._peers_warned = ''
         self._measured_rtf: float | None = None     # of the last diagnostics
 
-        # QoS as documented, or as qos_overrides.<topic>.publisher.<policy> parameters set
-        # (ros_io.QOS_OVERRIDE_POLICIES: the ROS 2 convention; read-only)
+        # QoS as documented, or as qos_overrides.<topic>.<side>.<policy> set (the ROS 2
+        # convention; read-only), each its own copy (topics share ros_io's profiles)
         try:
-            # (own copies: topics share ros_io's profiles)
             topics = node_topics(self.ribs, self.umbrella.get('base', 'fixed'))
+            check_qos_override_values(self._parameter_overrides, self.resolve_topic_name(
+                ros_io.COMMAND.name), [self.resolve_topic_name(t.name) for t in topics.values()])
             self.pub = {key: self.create_publisher(
                 t.type, t.name, ros_io.own_qos(t.qos),
                 qos_overriding_options=QoSOverridingOptions(ros_io.QOS_OVERRIDE_POLICIES))
@@ -159,6 +160,7 @@ class UmbrellaNode(Node):
         except Exception as exc:  # rclpy's errors name the parameter
             files = f" (params files: {', '.join(params_files)})" if params_files else ''
             text = (wrong_type_text(self, exc) if isinstance(exc, InvalidParameterTypeException)
+                    else str(exc) if isinstance(exc, QoSOverrideValueError)
                     else f"qos_overrides: {' '.join(str(exc).split())}")
             raise StartupError(text + files) from None
         self._check_qos_overrides(qos_given)
@@ -284,8 +286,7 @@ class UmbrellaNode(Node):
         if rec is None:
             return
         had_error = rec.error is not None
-        # the events and the summary of one state: not while the physics thread is in a
-        # chunk of steps
+        # the events and the summary of one state: not while the physics is in a chunk
         held = self._sim_lock.acquire(timeout=60.0)
         try:
             rec.close(self.sim, self.commands.accepted, self.commands.refused,

@@ -399,6 +399,43 @@ def check_qos_override_sources(node_fqn: str, found: ParameterSources, declared,
             for problems in [unknown_names(names, declared)] if problems]
 
 
+class QoSOverrideValueError(ValueError):
+    """A qos_overrides.* value no QoS takes (check_qos_override_values)."""
+
+
+#: the largest history depth a DDS writer or reader takes (a 32-bit integer)
+MAX_QOS_DEPTH = 2**31 - 1
+
+
+def check_qos_override_values(given: dict, command: str, topics) -> None:
+    """
+    Refuse a qos_overrides value for one of a node's topics that no QoS takes, naming it.
+
+    given: the node's parameter overrides (name -> rclpy Parameter); command: the resolved
+    name of its subscription, topics: those of its publishers.  rclpy's own errors for
+    such a value name neither the parameter nor its topic ('invalid allocator' for a
+    negative depth, 'Unexpected QoS override for policy `reliability`'); a value of the
+    wrong type is left to rclpy's type check.  QoSOverrideValueError.
+    """
+    from rclpy import qos
+
+    enums = {'history': qos.HistoryPolicy, 'reliability': qos.ReliabilityPolicy,
+             'durability': qos.DurabilityPolicy}
+    prefixes = [f'{QOS_OVERRIDES}{command}.subscription.',
+                *(f'{QOS_OVERRIDES}{topic}.publisher.' for topic in topics)]
+    for name, parameter in sorted(given.items()):
+        if not any(name.startswith(prefix) for prefix in prefixes):
+            continue
+        policy, value = name.rpartition('.')[2], parameter.value
+        if policy == 'depth' and isinstance(value, int) and not 0 <= value <= MAX_QOS_DEPTH:
+            rule = 'must be >= 0' if value < 0 else f'must be <= {MAX_QOS_DEPTH}'
+            raise QoSOverrideValueError(f'parameter {name}={value}: {rule}')
+        allowed = [m.name.lower() for m in enums.get(policy, ()) if m.name != 'UNKNOWN']
+        if allowed and isinstance(value, str) and value.lower() not in allowed:
+            raise QoSOverrideValueError(f'parameter {name}={value!r}: must be one of '
+                                        f"{', '.join(allowed)}")
+
+
 def init_ros(argv: list[str]) -> list[str]:
     """
     Check a process's params files, then initialise rclpy with its arguments.
