@@ -25,7 +25,9 @@ import threading
 import time
 
 import pytest
+from rcl_interfaces.msg import ParameterType
 
+from tests.ros_helpers import parameter_calls
 from umbrella_sim.core.control import constant_force_for, DeployLaw, simulate_closed_loop
 from umbrella_sim.core.driver import simulate
 from umbrella_sim.core.params import ControllerConfig, physics_step, UmbrellaParams
@@ -171,6 +173,29 @@ def test_controller_refuses_bad_parameters_with_exit_2(args, culprit):
                         *args], capture_output=True, text=True, env=ros_env(), timeout=60)
     assert r.returncode == 2, r.stderr
     assert culprit in r.stderr and 'Traceback' not in r.stderr
+
+
+@pytest.mark.ros
+def test_controller_refuses_a_runtime_set_naming_the_parameter(probe, ros_domain_id):
+    """
+    ``ros2 param set`` on the controller: refused as umbrella_node refuses it, named.
+
+    rclpy's own reasons said 'Invalid access to undeclared parameter(s): []' for a
+    misspelt name and did not say why a parameter is read-only.
+    """
+    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id) as c:
+        c.wait_for_log('waiting for joint_states', timeout=60)
+        set_param, get = parameter_calls(probe, '/deploy_controller')
+        d = ParameterType.PARAMETER_DOUBLE
+        r = set_param('targt_time', d, 2.0)
+        assert not r.successful
+        assert "'targt_time' (did you mean 'target_time'?)" in r.reason, r.reason
+        r = set_param('target_time', d, 2.0)
+        assert not r.successful
+        assert 'target_time is read-only' in r.reason, r.reason
+        assert '-p target_time:=' in r.reason, r.reason
+        assert get('target_time').double_value == 1.0
+        assert 'Traceback' not in c.output()
 
 
 @pytest.mark.ros

@@ -32,7 +32,7 @@ import time
 
 
 from . import signals as stop_signals
-from .parameters import declare_from_registry, wrong_type_text
+from .parameters import declare_from_registry, NamedRefusals, wrong_type_text
 from .params_file import (check_parameter_sources, check_qos_override_sources, init_ros,
                           param_rules_in)
 from ..core.control import DeployLaw
@@ -64,7 +64,7 @@ def _make_node_class():
 
     from . import messages as ros_io
 
-    class DeployControllerNode(Node):
+    class DeployControllerNode(NamedRefusals, Node):
         """joint_states + deployment_phase -> sleeve_force, one command per joint state."""
 
         def __init__(self, params_files: tuple = (), param_rules: dict | None = None):

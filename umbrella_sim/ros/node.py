@@ -57,7 +57,7 @@ from .commands import CommandIntake
 from .lockstep import Lockstep
 from .pacing import lag_advice, LAG_WARN_PERIOD, MAX_LAG_S, Pacer, RateWindow
 from .parameters import (coerce_parameter, declare_from_registry, declare_umbrella,
-                         known_parameter_names, parameter_defaults, set_refusal,
+                         known_parameter_names, NamedRefusals, parameter_defaults,
                          wrong_type_text)
 from .params_file import (check_parameter_sources, check_qos_override_sources,
                           check_qos_override_values, ParameterSources, QOS_OVERRIDES,
@@ -90,7 +90,7 @@ class StartupError(RuntimeError):
     pass
 
 
-class UmbrellaNode(Node):
+class UmbrellaNode(NamedRefusals, Node):
 
     def __init__(self, params_files: tuple = (), param_rules: dict | None = None, **kwargs):
         try:
@@ -377,25 +377,6 @@ class UmbrellaNode(Node):
         response.message = 'paused' if self.paused else 'running'
         self.get_logger().info(f'{response.message} at t = {self.sim.time:.9f} s')
         return response
-
-    def set_parameters_atomically(self, parameter_list) -> SetParametersResult:
-        """
-        Set parameters (rclpy's SetParameters services call this), refusing with our reasons.
-
-        Every refusal names the parameter and says why (ros.parameters.set_refusal): rclpy's
-        descriptor checks, which run before the on-set callback, would answer first with
-        reasons that do not; an unknown name raises ParameterNotDeclaredException (as rclpy
-        does) whose text names it and suggests the closest declared one.
-        """
-        for param in parameter_list:
-            reason = set_refusal(self, param)
-            if reason is not None:
-                return SetParametersResult(successful=False, reason=reason)
-        return super().set_parameters_atomically(parameter_list)
-
-    def set_parameters(self, parameter_list) -> list[SetParametersResult]:
-        """Set parameters one at a time (rclpy's semantics), each as set_parameters_atomically."""
-        return [self.set_parameters_atomically([param]) for param in parameter_list]
 
     @staticmethod
     def _coerce_parameters(params: list) -> list:

@@ -32,7 +32,7 @@ from dataclasses import replace
 import re
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                ParameterType)
+                                ParameterType, SetParametersResult)
 from rclpy.exceptions import ParameterNotDeclaredException
 
 from ..core.registry import check_known_names, defaults, NOW, REGISTRY, RESET, START
@@ -265,7 +265,8 @@ def set_refusal(node, param) -> str | None:
 
     name = param.name
     if not node.has_parameter(name):
-        ribs = rib_override_refusal(name, getattr(node, 'ribs', 1))
+        # (the umbrella's per-rib names: umbrella_node's, which has ribs)
+        ribs = (rib_override_refusal(name, node.ribs) if hasattr(node, 'ribs') else None)
         if ribs is not None:
             return ribs
         try:
@@ -305,3 +306,30 @@ class UnknownParameter(ParameterNotDeclaredException):
 
     def __str__(self) -> str:
         return self.message
+
+
+class NamedRefusals:
+    """
+    A mixin before rclpy's Node: every runtime set refused with a reason naming the parameter.
+
+    umbrella_node's and deploy_controller's: rclpy's descriptor checks, which run before
+    any on-set callback, would answer first with reasons that do not (set_refusal).
+    """
+
+    def set_parameters_atomically(self, parameter_list) -> SetParametersResult:
+        """
+        Set parameters (rclpy's SetParameters services call this), refusing with our reasons.
+
+        Every refusal names the parameter and says why (set_refusal); an unknown name raises
+        ParameterNotDeclaredException (as rclpy does) whose text names it and suggests the
+        closest declared one.
+        """
+        for param in parameter_list:
+            reason = set_refusal(self, param)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        return super().set_parameters_atomically(parameter_list)
+
+    def set_parameters(self, parameter_list) -> list[SetParametersResult]:
+        """Set parameters one at a time (rclpy's semantics), each as set_parameters_atomically."""
+        return [self.set_parameters_atomically([param]) for param in parameter_list]
