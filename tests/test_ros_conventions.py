@@ -27,7 +27,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import pytest
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import DescribeParameters
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from tests.ros_helpers import NodeProcess, parameter_calls, poll, Probe, ros_env
@@ -120,8 +120,9 @@ def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
     """
     The ROS 2 convention: qos_overrides.<topic>.publisher.<policy> set the QoS.
 
-    Here /clock made reliable (ClockQoS is best effort) and joint_states' depth 7: the
-    publisher offers them, and the recording's offered_qos_profiles say so.
+    Here /clock made reliable (ClockQoS is best effort), joint_states' depth 7 and the
+    command's subscription keep last 20: the publisher offers them, and the recording's
+    offered_qos_profiles say so.
     """
     from rcl_interfaces.srv import ListParameters
     from rclpy.qos import DurabilityPolicy
@@ -131,6 +132,8 @@ def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
     with NodeProcess('-p', 'qos_overrides./clock.publisher.reliability:=reliable',
                      '-p', 'qos_overrides./clock.publisher.durability:=transient_local',
                      '-p', 'qos_overrides./joint_states.publisher.depth:=7',
+                     '-p', 'qos_overrides./sleeve_force.subscription.history:=keep_last',
+                     '-p', 'qos_overrides./sleeve_force.subscription.depth:=20',
                      '-p', 'v0:=-0.5', '-p', f'record_path:={bag}') as node:
         node.wait_for_log('recording to')
 
@@ -151,6 +154,9 @@ def test_qos_overrides_apply_and_are_recorded(probe, tmp_path):
     assert qos_from_yaml(log.channels['/joint_states'][1]).depth == 7
     assert qos_from_yaml(log.channels['/tip_deflection'][1]).depth == \
         ros_io.TOPICS['tip_deflection'].qos.depth
+    # the command's channel: the subscription's QoS as overridden, not the default keep all
+    command = qos_from_yaml(log.channels['/sleeve_force'][1])
+    assert (command.history, command.depth) == (HistoryPolicy.KEEP_LAST, 20)
 
 
 @pytest.mark.ros

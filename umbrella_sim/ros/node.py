@@ -259,7 +259,8 @@ class UmbrellaNode(NamedRefusals, Node):
             raise StartupError(str(exc)) from None
         self.recording = RunRecording(
             recorder, {key: pub.topic_name for key, pub in self.pub.items()},
-            self.command_topic, {key: pub.qos_profile for key, pub in self.pub.items()})
+            self.command_topic, {key: pub.qos_profile for key, pub in self.pub.items()},
+            self.command_sub.qos_profile)
         self.get_logger().info(f'recording to {self.recording.path}')
 
     def _on_recording_error(self, reason: str) -> None:

@@ -29,6 +29,7 @@ import json
 import time as _time
 
 from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.qos import QoSProfile
 from std_msgs.msg import Float64
 
 from . import messages
@@ -54,11 +55,12 @@ class RunRecording:
 
     topics: topic key (messages.TOPICS) -> the name it is published under (resolved);
     command_topic: the command's resolved name; qos: topic key -> the profile each is
-    published with (the node's after qos_overrides), else messages.TOPICS's.
+    published with (the node's after qos_overrides), else messages.TOPICS's; command_qos:
+    the command subscription's (after qos_overrides), else messages.COMMAND's.
     """
 
     def __init__(self, recorder: BagRecorder, topics: dict[str, str], command_topic: str,
-                 qos: dict | None = None):
+                 qos: dict | None = None, command_qos: QoSProfile | None = None):
         self.recorder = recorder
         self.topics = dict(topics)
         self.command_topic = command_topic
@@ -70,7 +72,8 @@ class RunRecording:
             resolved[topic.name.lstrip('/')] = name
         for suffix in ('', REFUSED_SUFFIX, APPLIED_SUFFIX):   # (the last two as published)
             recorder.add_channel(command_topic + suffix, Float64,
-                                 messages.COMMAND_ECHO_QOS if suffix else messages.COMMAND.qos)
+                                 messages.COMMAND_ECHO_QOS if suffix
+                                 else command_qos or messages.COMMAND.qos)
             resolved[messages.COMMAND.name.lstrip('/') + suffix] = command_topic + suffix
         # so that the tools find each topic however it was remapped
         recorder.add_metadata(TOPICS_RECORD, resolved)
