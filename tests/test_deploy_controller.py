@@ -414,6 +414,49 @@ def test_controller_deploys_each_new_run_after_a_reset(antenna_factory, ros_doma
 
 @pytest.mark.ros
 @pytest.mark.slow
+def test_controller_deploys_the_umbrella_of_three_ribs_as_the_planar_frame(
+        constant, antenna_factory, ros_domain_id, tmp_path):
+    """
+    The umbrella of 3 identical ribs (one sleeve, F a rib): the loop of the planar frame.
+
+    Its joint_states have 2 N + 1 joints, the sleeve last with the whole sleeve's effort
+    N F: the controller reads the ribs' leaf angle and commands F a rib.  N identical ribs
+    each follow the planar frame, so in lockstep the run is the offline planar loop at zero
+    delay (the controller once read rib 1's leaf hinge as the sleeve, never saw its push,
+    and held max_force to a hard lock in half the target time).
+    """
+    from std_msgs.msg import Float64
+
+    _, ref = constant
+    bag = str(tmp_path / 'ribs')
+    ctl = antenna_factory({'ribs': 3, 'v0': 0.0, 'sleeve_force_min': -LIMIT,
+                           'publish_rate': RATE, 'time_step': STEP, 'lockstep': True,
+                           'real_time_factor': 0.0, 'start_paused': True}, record_path=bag)
+    commands = ctl.topics['sleeve_force']
+    ctl.probe.subscribe(commands, Float64)
+    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
+                     parameters={'target_time': TARGET, 'max_force': LIMIT,
+                                 'min_force': -LIMIT}) as controller:
+        wait_for_controller(ctl, controller)
+        start_answered(ctl, commands)
+        ctl.wait_for_phase('locked', timeout=60)
+        ctl.wait_for_sim_time(ctl.lock_time() + AFTER, timeout=30)
+        controller.wait_for_log('deployment over')
+        log = controller.output()
+        assert controller.stop() == 0, log
+    assert ctl.stop() == 0
+    assert 'first push acting' in log and 'it refuses them' not in log, log
+    s = summary_from_recording(bag, after_lock=AFTER)
+    cfg = ControllerConfig(target_time=TARGET, max_force=LIMIT, min_force=-LIMIT)
+    offline = run_summary(*simulate_closed_loop(MODEL, cfg, RATE, 0, after_lock=AFTER))
+    assert s.ribs == 3 and s.deploy_time == pytest.approx(offline.deploy_time, rel=1e-4)
+    for rib in s.stage2:
+        assert rib.stage2_tip_amplitude == pytest.approx(offline.stage2_tip_amplitude, rel=1e-2)
+        assert rib.stage2_peak_stress * 5 <= ref.stage2_peak_stress   # the soft latch
+
+
+@pytest.mark.ros
+@pytest.mark.slow
 def test_controller_leaves_a_frame_that_is_not_at_rest_alone(antenna_factory, ros_domain_id):
     """
     The plan deploys from rest: a node started with v0 != 0 gets no command, and an error.

@@ -18,7 +18,9 @@ deploy_controller: closed-loop deployment of the umbrella frame over ROS topics.
 Subscribes ``joint_states`` and ``deployment_phase`` of an ``umbrella_node`` and publishes
 ``sleeve_force``, one command per joint state, from the law of ``core.control.DeployLaw``
 (planned on the rigid two-angle model of the same frame; see that module for the law and
-msg_docs/deploy_controller.md for the node).  Its parameters are the registry's
+msg_docs/deploy_controller.md for the node).  Of the umbrella of N ribs it reads the ribs'
+mean leaf angle and the sleeve's effort, N F, and commands F, the node's force per rib
+(:func:`drive_state`).  Its parameters are the registry's
 (``core.params.CONTROLLER_PARAMETERS``: typed, ranged, read-only) and the model's geometry,
 which a params file shared with umbrella_node gives.
 """
@@ -55,6 +57,31 @@ CONTROLLER_PARAMETERS_LISTED = ('deploy_controller --help and in msg_docs/deploy
 
 
 # ======================================================================= ROS node
+def drive_state(msg) -> dict:
+    """
+    Return what the law reads of a joint state: alpha1, its rate, ribs and sleeve_force.
+
+    The planar frame's (ros_io.joint_state_figures), or of the umbrella of N ribs (2 N + 1
+    joints, ribs_messages.rib_joint_figures) the ribs' mean leaf angle and rate: N identical
+    ribs each follow the planar frame, whose rigid model the law plans on.  ``sleeve_force``
+    is the sleeve's effort as published: F on the planar frame, the whole sleeve's N F on
+    the umbrella, whose command F is per rib.
+    """
+    from . import messages as ros_io
+
+    if len(msg.position) <= 3:
+        state = ros_io.joint_state_figures(msg)
+        return {'alpha1': state['alpha1'], 'alpha1_rate': state['alpha1_rate'], 'ribs': 1,
+                'sleeve_force': state['sleeve_force']}
+    from .ribs_messages import rib_joint_figures
+
+    state = rib_joint_figures(msg)
+    n = len(state['alpha1'])
+    return {'alpha1': math.fsum(state['alpha1']) / n,
+            'alpha1_rate': math.fsum(state['alpha1_rate']) / n, 'ribs': n,
+            'sleeve_force': state['sleeve_force']}
+
+
 def _make_node_class():
     from rcl_interfaces.msg import ParameterDescriptor
     from rclpy.node import Node
@@ -116,6 +143,7 @@ def _make_node_class():
             self._last_stamp: float | None = None
             self._period: float | None = None
             self._last_effort = 0.0
+            self._ribs = 1            # the node's ribs (its joint states say): effort N F
             self._last_wall: float | None = None
             self._sent: collections.deque = collections.deque(maxlen=400)  # (stamp, F)
             self._delays: collections.deque = collections.deque(maxlen=15)
@@ -178,8 +206,8 @@ def _make_node_class():
                 # the publication period: the smallest spacing seen (states may be skipped)
                 self._period = min(self._period or math.inf, t - self._last_stamp)
             self._last_stamp = t
-            state = ros_io.joint_state_figures(msg)
-            effort = state['sleeve_force']
+            state = drive_state(msg)
+            self._ribs, effort = state['ribs'], state['sleeve_force']
             if effort != self._last_effort and self._period:
                 self._measure_delay(t, effort)
             self._last_effort = effort
@@ -245,14 +273,16 @@ def _make_node_class():
                         'fights this one; stop it', throttle_duration_sec=5.0)
             period = self._period or 0.0
             window = (self._delays[-1] if self._delays else period) + 3 * period
-            ours = {f for ts, f in self._sent if ts >= t - window - 1e-9}
+            ours = {self._echo(f) for ts, f in self._sent if ts >= t - window - 1e-9}
             self._not_ours = 0 if effort in ours else self._not_ours + 1
             if self._not_ours >= 3:
+                rib = ' a rib' if self._ribs > 1 else ''
                 self.get_logger().warn(
-                    f'the node applies {effort:.6g} N at t = {t:.6f} s, none of our commands '
-                    f'of the last {window:g} s (latest {self._sent[-1][1]:.6g} N): it refuses '
-                    'them (its sleeve_force_min / sleeve_force_limit; see its log) or another '
-                    'node commands it', throttle_duration_sec=2.0)
+                    f'the node applies {effort / self._ribs:.6g} N{rib} at t = {t:.6f} s, none '
+                    f'of our commands of the last {window:g} s (latest '
+                    f'{self._sent[-1][1]:.6g} N{rib}): it refuses them (its sleeve_force_min / '
+                    'sleeve_force_limit; see its log) or another node commands it',
+                    throttle_duration_sec=2.0)
 
         def _send(self, t: float, force: float) -> None:
             self._sent.append((t, float(force)))
@@ -276,11 +306,16 @@ def _make_node_class():
             """
             sent = list(self._sent)
             for i in range(len(sent) - 1, -1, -1):
-                if sent[i][1] == effort and (i == 0 or sent[i - 1][1] != effort):
+                if self._echo(sent[i][1]) == effort and \
+                        (i == 0 or self._echo(sent[i - 1][1]) != effort):
                     delay = (t - self._period) - sent[i][0]
                     if delay >= -1e-9:
                         self._delays.append(delay)
                     return
+
+        def _echo(self, force: float) -> float:
+            """Return the sleeve's effort the node echoes for our command (N F of N ribs)."""
+            return force * self._ribs
 
         def lead(self) -> float:
             """How long after a state its command acts, on average over its hold."""
