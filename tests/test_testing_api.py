@@ -97,6 +97,24 @@ def test_waits_fail_saying_what_was_awaited_and_what_was_seen(antenna_factory):
 
 
 @pytest.mark.ros
+def test_a_wait_on_a_lockstep_node_says_it_waits_for_a_command(antenna_factory):
+    """
+    In lockstep, after a first command, the node waits for one after each joint state.
+
+    A wait for sim time that no command drives then times out: its error says why (it said
+    only the latest stamp, as if the node had stalled).
+    """
+    antenna = antenna_factory({'ribs': 3, 'v0': 0.0, 'lockstep': True, 'start_paused': True})
+    antenna.publish_force(5.0)
+    antenna.resume()
+    antenna.wait_for('diagnostics', lambda m: any(
+        kv.key == 'waiting_for_command' and kv.value == 'True' for kv in m.status[0].values),
+        timeout=30, what='waiting_for_command True')
+    with pytest.raises(AssertionError, match='waits for a sleeve_force command .lockstep'):
+        antenna.wait_for_sim_time(1000.0, timeout=0.5)
+
+
+@pytest.mark.ros
 def test_startup_failure_reports_the_node_output():
     node = NodeProcess(parameters={'l1': -1.0})
     with pytest.raises(AssertionError) as exc:

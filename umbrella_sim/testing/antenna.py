@@ -240,10 +240,10 @@ class SimulatedAntenna:
 
         ``antenna.set_parameters(v0=-0.5, sleeve_force_min=-5.0)``: one request, each value
         checked and set on its own (AssertionError naming those refused, with the node's
-        reasons; the others are set).  Model
-        parameters apply on the next :meth:`reset`, as on the node, and from then on this
-        antenna's figures and force checks (:meth:`publish_force`) use them; the node's own
-        (``real_time_factor``, ``marker_magnification``...) apply at once.
+        reasons; the others are set).  Model parameters apply on the next :meth:`reset`, as
+        on the node, and from then on this antenna's figures and force checks
+        (:meth:`publish_force`) use them; the node's own (``real_time_factor``,
+        ``marker_magnification``...) apply at once.
         """
         from rcl_interfaces.srv import SetParameters
         from rclpy.parameter import Parameter
@@ -285,11 +285,10 @@ class SimulatedAntenna:
         Restart the run at t = 0 (``~/reset``, with the parameters set since the start).
 
         Returns once the node has restarted (its log, the new run's "deploying" phase and
-        its t = 0 joint state);
-        from then on every wait, message list and figure (phases, sim_time, messages,
-        applied_forces, lock_time, summary) is of the new run only, which begins with its
-        t = 0 state (published at the reset, paused or not).  AssertionError with the
-        node's reason if it refuses.
+        its t = 0 joint state); from then on every wait, message list and figure (phases,
+        sim_time, messages, applied_forces, lock_time, summary) is of the new run only, which
+        begins with its t = 0 state (published at the reset, paused or not).  AssertionError
+        with the node's reason if it refuses.
         """
         from std_srvs.srv import Trigger
         resets = self.node.output().count(RESET_LINE)
@@ -329,7 +328,10 @@ class SimulatedAntenna:
 
     def _sim_time_text(self) -> str:
         t = self.sim_time()
-        return 'no joint state yet' if t is None else f'latest stamp {t:.6f} s'
+        text = 'no joint state yet' if t is None else f'latest stamp {t:.6f} s'
+        if self.diagnostics().get('waiting_for_command') == 'True':     # (lockstep)
+            text += ': the node waits for a sleeve_force command (lockstep: one a joint state)'
+        return text
 
     def phases(self) -> list[str]:
         """Return the deployment phases of this run, in order ("deploying" first)."""
@@ -567,10 +569,9 @@ class SimulatedAntenna:
         is of those samples, so it reads a few per cent low at 100 Hz (RunSummary).  The
         stress figure is a peak-hold over each period.  AssertionError if none of the window's
         messages were received (a probe that subscribed after it).  The stress message has no
-        stamp: stage-2
-        stress samples are those received after the 'locked' phase message and before the
-        first tip message past the window, so a publication at either end may be left out
-        or taken in; a recording gives the exact figures (:func:`summary_from_recording`).
+        stamp: stage-2 stress samples are those received after the 'locked' phase message
+        and before the first tip message past the window, so a publication at either end may
+        be left out or taken in; :func:`summary_from_recording` gives the exact figures.
         """
         if self.ribs > 1:
             raise ValueError("summary() reads the planar rib's topics; an umbrella of "
