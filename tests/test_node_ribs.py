@@ -210,3 +210,26 @@ def test_a_free_bus_publishes_its_state_as_the_offline_run_computes_it():
         assert got == pytest.approx(want.tolist(), rel=1e-12, abs=1e-15), state['time']
         moved = max(moved, float(np.linalg.norm(state['position'])))
     assert moved > 1e-5
+
+
+def test_a_command_above_what_a_weaker_ribs_link_carries_is_refused():
+    """
+    Rib 1 of its own 4 mm section buckles its link at ~61 N: the node refuses more, a rib.
+
+    As it refuses that sleeve_force at start (rib 1's planar record); the test API's check
+    says so before sending.  The node once applied such a command (the planar record's
+    2369 N bound), and the antenna's check let it through.
+    """
+    from umbrella_sim.core.params import UmbrellaParams
+
+    weak = UmbrellaParams(section_height=0.004).sleeve_force_limit
+    with SimulatedAntenna({'ribs': 3, 'v0': 0.0, 'rib.section_height': [0.01, 0.004, 0.01],
+                           'start_paused': True}) as antenna:
+        with pytest.raises(ValueError, match='link can carry'):
+            antenna.publish_force(2 * weak)
+        antenna.publish_force(2 * weak, check=False)
+        antenna.publish_force(0.5 * weak)
+        antenna.resume()
+        antenna.wait_for('sleeve_force_refused', lambda m: m.data == 2 * weak)
+        antenna.wait_for('sleeve_force_applied', lambda m: m.data == 0.5 * weak)
+        assert all(m.data <= weak for m in antenna.messages('sleeve_force_applied'))

@@ -74,6 +74,29 @@ def test_per_rib_values_as_lists_and_overrides():
     assert q == p
 
 
+def test_a_command_is_held_to_what_the_weakest_ribs_link_carries():
+    """
+    A rib of its own section or length carries its own load: every command F a rib too.
+
+    Its planar record refuses a larger sleeve_force at start; a command (the node's, a
+    --force-profile's, the test API's check: command_force) was held only to the planar
+    record's bound, 39x that of rib 1's 4 mm section here.
+    """
+    from umbrella_sim.core.forcing import command_force
+    from umbrella_sim.core.params import UmbrellaParams
+
+    weak = UmbrellaParams(section_height=0.004).sleeve_force_limit
+    p = UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib.section_height': [0.01, 0.004, 0.01]})
+    assert p.sleeve_force_limit == weak < p.planar.sleeve_force_limit
+    assert command_force(weak, p) == weak
+    with pytest.raises(ValueError, match='link can carry'):
+        command_force(1.01 * weak, p)
+    with pytest.raises(ValueError, match=r'rib 1: parameter sleeve_force=.*link can carry'):
+        p.replace(sleeve_force=1.01 * weak)
+    assert UmbrellaRibsParams.from_mapping({'ribs': 3}).sleeve_force_limit == \
+        UmbrellaParams().sleeve_force_limit                   # identical ribs: the planar's
+
+
 @pytest.mark.parametrize('values, culprit', [
     ({'ribs': 3, 'tip_mass': [0.0, 0.1]}, 'tip_mass'),
     ({'ribs': 3, 'rib.tip_mass': [0.0, 0.1]}, 'rib.tip_mass'),     # as the user spelled it

@@ -168,11 +168,9 @@ class SimulatedAntenna:
         self._command_publisher(timeout).publish(self._float64(data=float(force)))
 
     def _model_params(self):
-        """Return the UmbrellaParams of this antenna's run (its model parameters)."""
-        from ..core.params import UmbrellaParams
-        from ..core.registry import SPECS
-        return UmbrellaParams.from_mapping(
-            {k: v for k, v in self.parameters.items() if k in SPECS})
+        """Return this antenna's model (UmbrellaParams; of ribs >= 2 UmbrellaRibsParams)."""
+        from ..core.umbrella3d.params3d import node_model
+        return node_model(self.parameters)
 
     def _command_publisher(self, timeout: float):
         """Return the sleeve_force publisher, made and matched with the node's subscription."""

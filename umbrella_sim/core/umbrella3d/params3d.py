@@ -28,6 +28,7 @@ so the later integration can list them with the node's parameters.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 from typing import Any, Mapping
@@ -497,10 +498,15 @@ class UmbrellaRibsParams:
         """Return F per rib at t = 0 (the planar record's; the sleeve takes N F)."""
         return self.planar.sleeve_force
 
-    @property
+    @functools.cached_property
     def sleeve_force_limit(self) -> float:
-        """Return the largest F per rib (the planar record's: each link carries F)."""
-        return self.planar.sleeve_force_limit
+        """
+        Return the largest F per rib: the least a rib's link carries (each carries ~F).
+
+        A rib of its own section or length has its own limit (its planar record's, which
+        refuses a larger ``sleeve_force`` at start): a command is held to the same bound.
+        """
+        return min(rib.planar.sleeve_force_limit for rib in self.ribs_list())
 
     @property
     def sleeve_force_min(self) -> float:
