@@ -325,11 +325,12 @@ class SimulatedAntenna:
         return _stamp(states[-1]) if states else None
 
     def _sim_time_text(self) -> str:
-        t = self.sim_time()
-        text = 'no joint state yet' if t is None else f'latest stamp {t:.6f} s'
-        if self.diagnostics().get('waiting_for_command') == 'True':     # (lockstep)
-            text += ': the node waits for a sleeve_force command (lockstep: one a joint state)'
-        return text
+        t, d = self.sim_time(), self.diagnostics()
+        if t is None:
+            return 'no joint state yet'
+        waits = d.get('waiting_for_command') == 'True' and float(d['sim_time_s']) >= t - 1e-6
+        return f'latest stamp {t:.6f} s' + (': the node waits for a sleeve_force command '
+                                            '(lockstep: one a joint state)' if waits else '')
 
     def phases(self) -> list[str]:
         """Return the deployment phases of this run, in order ("deploying" first)."""
