@@ -56,58 +56,80 @@ from ..summary import (AXIAL_LOAD_LIMIT, CENTRIFUGAL_TENSION_LIMIT,
 #: a moving base): COMPILED_CHUNK_STEPS
 CHUNK_STEPS = 4
 COMPILED_CHUNK_STEPS = 64
-#: a stalled deployment ('stalled'): the sleeve short of the stop, slower than this share of
-#: its largest speed so far, for STALL_TIME of sim time (a rubbing hinge's regularised
-#: Coulomb torque lets a held frame creep at ~1e-3 of a deployment's speed: not a motion)
+#: a stalled deployment ('stalled'), once it started: the sleeve short of the stop and at
+#: rest, slower than STALL_SPEED_SHARE of its largest speed so far for STALL_TIME of sim time
+#: (a rubbing hinge's regularised Coulomb torque lets a held frame creep at ~1e-3 of a
+#: deployment's speed: not a motion), or a hinge stuck with no release time to come (only
+#: its stick_torque releases it) for STUCK_TIME (the undamped frame it holds rings in place;
+#: its holding torque peaks in the first cycles of the locked-hinge frame, ~20 Hz)
 STALL_SPEED_SHARE = 0.01
 STALL_TIME = 0.05
-#: a rib's out-of-plane tip amplitude below this (m) has no vibration to time: its period is
-#: not given (an unkicked rib's w is round-off, whose crossings are noise)
-OUT_OF_PLANE_TIMED = 1e-9
+STUCK_TIME = 0.2
 
 
 class StallWatch:
     """
-    Whether the deployment stalled: the sleeve at rest short of the stop, held back.
+    Whether the deployment stalled: the sleeve short of the stop, held back.
 
-    With hinge friction more than the frame's kinetic energy can pay over the rest of the
-    travel (or a sleeve force that holds it back), the frame stops on its way: no lock,
-    ever, however long the run.  ``stall`` is (t, y_H) where it came to rest, until it
-    moves again or locks.
+    A stuck hinge that the sleeve force does not release, hinge friction more than the
+    frame's kinetic energy can pay over the rest of the travel, or a sleeve force that
+    holds it back: the frame stops (or rings in place) on its way, and will not lock while
+    that lasts.  ``stall`` is (t, y_H, the ribs stuck then) from when it is so, until it
+    moves on or locks.  stick_until: each rib's release time (0: none).
     """
 
-    def __init__(self, y0: float, y_stop: float, speed: float):
+    def __init__(self, y0: float, y_stop: float, speed: float, stick_until):
         self.y0, self.y_stop = y0, y_stop
-        self.peak, self.slow_since = abs(speed), None
-        self.stall: tuple[float, float] | None = None
+        self.until = np.asarray(stick_until, dtype=float)
+        self.peak, self.slow_since, self.stuck_since = abs(speed), None, None
+        self.stall: tuple | None = None
 
-    def add(self, t: np.ndarray, y: np.ndarray, v: np.ndarray, locked: bool) -> None:
-        """Take the deployment's rows (t, sleeve height and velocity) of a block."""
-        if locked:
-            self.slow_since = self.stall = None
+    def add(self, t: np.ndarray, y: np.ndarray, v: np.ndarray, locked: bool,
+            stuck: np.ndarray) -> None:
+        """Take the rows of a block of the started deployment (t, sleeve height and rate)."""
+        if locked or not len(t):
+            self.slow_since = self.stuck_since = self.stall = None
             return
-        if not len(t):
-            return
+        now = float(t[-1])
         self.peak = max(self.peak, float(np.abs(v).max()))
         if self.peak == 0.0 or abs(float(v[-1])) >= STALL_SPEED_SHARE * self.peak:
-            self.slow_since = self.stall = None
-            return
-        if self.slow_since is None:
-            self.slow_since = float(t[-1])
-        if self.stall is None and float(t[-1]) - self.slow_since >= STALL_TIME:
-            self.stall = (float(t[-1]), float(y[-1]))
+            self.slow_since = None
+        elif self.slow_since is None:
+            self.slow_since = now
+        held_by = [int(k) for k in np.flatnonzero(stuck) if not self.until[k] > now]
+        if not held_by:
+            self.stuck_since = None
+        elif self.stuck_since is None:
+            self.stuck_since = now
+        held = any(since is not None and now - since >= wait for since, wait in (
+            (self.slow_since, STALL_TIME), (self.stuck_since, STUCK_TIME)))
+        if not held:
+            self.stall = None
+        elif self.stall is None:
+            self.stall = (now, float(y[-1]), held_by)
 
     def warnings(self, friction: bool) -> list[str]:
         """Return the 'stalled' text while the deployment is stalled (friction: hinges rub)."""
         if self.stall is None:
             return []
-        t, y = self.stall
+        t, y, stuck = self.stall
         short = (y - self.y_stop) / (self.y0 - self.y_stop) if self.y0 != self.y_stop else 0.0
-        why = ("the hinges' friction takes more than the frame's kinetic energy can pay over "
-               'the rest of the travel' if friction else 'the sleeve force holds it back')
+        if stuck:
+            why = (f"rib {', '.join(map(str, stuck))}'s hinge is stuck and holds the frame "
+                   '(its stick_torque not reached)')
+        elif friction:
+            why = ("the hinges' friction takes more than the frame's kinetic energy can pay "
+                   'over the rest of the travel')
+        else:
+            why = 'the sleeve force holds it back'
         return [f'stalled: the sleeve came to rest short of the stop by {100 * short:.1f} % '
                 f'of its travel (y_H = {y:.4f} m at t = {t:.4f} s): {why}; it will not lock '
-                '(a larger v0 or sleeve_force deploys it)']
+                'while that lasts (a larger v0 or sleeve_force deploys it)']
+
+
+#: a rib's out-of-plane tip amplitude below this (m) has no vibration to time: its period is
+#: not given (an unkicked rib's w is round-off, whose crossings are noise)
+OUT_OF_PLANE_TIMED = 1e-9
 
 
 def rib_parameter_warnings(params) -> list[str]:
@@ -416,7 +438,8 @@ class Summary3D:
         self._final = initial
         self._start = deploy_start(float(sim.params.planar.v0), ())
         self._stall = StallWatch(float(initial.sleeve_position), m.y_stop,
-                                 float(initial.sleeve_velocity))
+                                 float(initial.sleeve_velocity),
+                                 [r.stick_until for r in sim.params.ribs_list()])
         self._stage2 = Stage2Series(2 * m.n_ribs)      # (each rib's v, then each rib's w)
         self._rubs = any(r.hinge_coulomb > 0.0 or r.hinge_viscous > 0.0
                          for r in sim.params.ribs_list())
@@ -500,7 +523,9 @@ class Summary3D:
             angles = largest_leaf_angle_spread(t[deploying], rows['alpha1'][deploying])
             if angles[0] > self._angles[0]:
                 self._angles = angles
-        self._stall.add(t, rows['sleeve_position'], rows['sleeve_velocity'], bool(locked[-1]))
+        if self._start is not None:         # (a frame not pushed yet has not stalled)
+            self._stall.add(t, rows['sleeve_position'], rows['sleeve_velocity'],
+                            bool(locked[-1]), rows['stuck'][-1])
         if self.lock is not None and locked[-1] and t[0] <= self._stage2.end(self.lock.time):
             tip = rows['tip']
             self._stage2.add(t, np.concatenate((tip[:, :, 1], tip[:, :, 2]), axis=1),
