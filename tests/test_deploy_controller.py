@@ -18,6 +18,7 @@ deploy_controller: the law against the physics core offline, then over DDS in re
 Every figure is compared with the constant sleeve force that deploys in the same time on the
 same model, found or run in the same test (no stored numbers).
 """
+import contextlib
 import signal
 import subprocess
 import sys
@@ -54,6 +55,37 @@ def command_gap(bag: str, start: float, end: float) -> float:
     times = [start] + [t for t, _ in log.decoded(log.find_topic('sleeve_force'))
                        if start < t < end] + [end]
     return max(b - a for a, b in zip(times, times[1:]))
+
+
+@contextlib.contextmanager
+def controller_on(ctl, ros_domain_id: int):
+    """Yield (deploy_controller at TARGET and +-LIMIT on ctl, matched; ctl's command topic)."""
+    from std_msgs.msg import Float64
+
+    commands = ctl.topics['sleeve_force']
+    ctl.probe.subscribe(commands, Float64)
+    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
+                     parameters={'target_time': TARGET, 'max_force': LIMIT,
+                                 'min_force': -LIMIT}) as controller:
+        wait_for_controller(ctl, controller)
+        yield controller, commands
+
+
+def run_controlled(ctl, ros_domain_id: int) -> str:
+    """
+    Run deploy_controller (TARGET, +-LIMIT) on ctl, a paused lockstep node; return its log.
+
+    To AFTER past the lock and the controller's 'deployment over'; both stopped (code 0).
+    """
+    with controller_on(ctl, ros_domain_id) as (controller, commands):
+        start_answered(ctl, commands)
+        ctl.wait_for_phase('locked', timeout=60)
+        ctl.wait_for_sim_time(ctl.lock_time() + AFTER, timeout=30)
+        controller.wait_for_log('deployment over')
+        log = controller.output()
+        assert controller.stop() == 0, log
+    assert ctl.stop() == 0
+    return log
 
 
 def wait_for_controller(antenna, controller, publishers: int = 1,
@@ -275,23 +307,9 @@ def test_controller_over_dds_locks_five_times_softer_than_constant_force(
     assert cf.stop() == 0
     ref = summary_from_recording(str(tmp_path / 'constant'), after_lock=AFTER)
 
-    from std_msgs.msg import Float64
-
     bag = str(tmp_path / 'controlled')
     ctl = antenna_factory(dict(node_params, lockstep=True, start_paused=True), record_path=bag)
-    commands = ctl.topics['sleeve_force']
-    ctl.probe.subscribe(commands, Float64)
-    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
-                     parameters={'target_time': TARGET, 'max_force': LIMIT,
-                                 'min_force': -LIMIT}) as controller:
-        wait_for_controller(ctl, controller)
-        start_answered(ctl, commands)
-        ctl.wait_for_phase('locked', timeout=60)
-        ctl.wait_for_sim_time(ctl.lock_time() + AFTER, timeout=30)
-        controller.wait_for_log('deployment over')
-        log = controller.output()
-        assert controller.stop() == 0, controller.output()
-    assert ctl.stop() == 0
+    log = run_controlled(ctl, ros_domain_id)
     s = summary_from_recording(bag, after_lock=AFTER)
     # the loop ran: a command every period from the first push to the lock
     assert command_gap(bag, s.first_push_time, s.lock_time) <= 1.0 / RATE + 1e-9
@@ -387,16 +405,9 @@ def test_controller_deploys_each_new_run_after_a_reset(antenna_factory, ros_doma
     no state is skipped (a free-running start let the depth-1 subscription skip the first
     state showing the push, and put the plan a period off now and then).
     """
-    from std_msgs.msg import Float64
-
     ctl = antenna_factory({'v0': 0.0, 'sleeve_force_min': -LIMIT, 'publish_rate': RATE,
                            'time_step': STEP, 'lockstep': True, 'start_paused': True})
-    commands = ctl.topics['sleeve_force']
-    ctl.probe.subscribe(commands, Float64)
-    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
-                     parameters={'target_time': TARGET, 'max_force': LIMIT,
-                                 'min_force': -LIMIT}) as controller:
-        wait_for_controller(ctl, controller)
+    with controller_on(ctl, ros_domain_id) as (controller, commands):
         deploy = []
         for run in range(2):
             start_answered(ctl, commands)
@@ -425,26 +436,12 @@ def test_controller_deploys_the_umbrella_of_three_ribs_as_the_planar_frame(
     delay (the controller once read rib 1's leaf hinge as the sleeve, never saw its push,
     and held max_force to a hard lock in half the target time).
     """
-    from std_msgs.msg import Float64
-
     _, ref = constant
     bag = str(tmp_path / 'ribs')
     ctl = antenna_factory({'ribs': 3, 'v0': 0.0, 'sleeve_force_min': -LIMIT,
                            'publish_rate': RATE, 'time_step': STEP, 'lockstep': True,
                            'real_time_factor': 0.0, 'start_paused': True}, record_path=bag)
-    commands = ctl.topics['sleeve_force']
-    ctl.probe.subscribe(commands, Float64)
-    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id,
-                     parameters={'target_time': TARGET, 'max_force': LIMIT,
-                                 'min_force': -LIMIT}) as controller:
-        wait_for_controller(ctl, controller)
-        start_answered(ctl, commands)
-        ctl.wait_for_phase('locked', timeout=60)
-        ctl.wait_for_sim_time(ctl.lock_time() + AFTER, timeout=30)
-        controller.wait_for_log('deployment over')
-        log = controller.output()
-        assert controller.stop() == 0, log
-    assert ctl.stop() == 0
+    log = run_controlled(ctl, ros_domain_id)
     assert 'first push acting' in log and 'it refuses them' not in log, log
     s = summary_from_recording(bag, after_lock=AFTER)
     cfg = ControllerConfig(target_time=TARGET, max_force=LIMIT, min_force=-LIMIT)
