@@ -278,6 +278,11 @@ class Stage2Series:
         self._lo, self._hi = np.full(columns, math.inf), np.full(columns, -math.inf)
         self._said: tuple | None = None      # (the rows and lock it was of, figures())
 
+    @property
+    def kept(self) -> int:
+        """Return how many rows are kept for the periods (at most STAGE2_SAMPLES + 1)."""
+        return sum(len(t) for t in self._t)
+
     def end(self, lock_time: float) -> float:
         """Return the window's end: rows after it are not taken."""
         return lock_time + STAGE2_WINDOW + TIME_RESOLUTION
