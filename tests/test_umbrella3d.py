@@ -279,7 +279,7 @@ def test_a_stuck_hinge_the_force_cannot_release_stalls_the_deployment(force, sta
         if len(chunk.block):
             held[0] = max(held[0], float(np.abs(rows['holding_torque'][:, 1]).max()))
 
-    driver.run(0.6, on_chunk=on_chunk)
+    driver.run(0.6, stop_after_lock=0.01, on_chunk=on_chunk)
     f = driver.summary.figures()
     said = [w for w in f['warnings'] if w.startswith('stalled')]
     assert (f['lock_time'] is None) == stalls and bool(said) == stalls

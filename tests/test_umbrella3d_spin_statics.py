@@ -27,6 +27,7 @@ such a run failed there: Newton did not converge).
 import math
 
 import numpy as np
+import pytest
 
 from umbrella_sim.core import UmbrellaRibsParams, UmbrellaSimulator3D
 
@@ -46,6 +47,7 @@ def overhang_root_stress(p) -> float:
     return moment * q.fibre_distance / q.cross_section_inertia
 
 
+@pytest.mark.slow
 def test_a_damped_umbrella_spun_steadily_settles_to_the_overhang_statics():
     p = UmbrellaRibsParams.from_mapping({
         'ribs': 2, 'base': 'prescribed', 'base_spin_rate': SPIN, 'base_spin_ramp': 0.05,
