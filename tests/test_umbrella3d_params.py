@@ -89,12 +89,14 @@ def test_a_command_is_held_to_what_the_weakest_ribs_link_carries():
     p = UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib.section_height': [0.01, 0.004, 0.01]})
     assert p.sleeve_force_limit == weak < p.planar.sleeve_force_limit
     assert command_force(weak, p) == weak
-    with pytest.raises(ValueError, match='link can carry'):
+    with pytest.raises(ValueError, match="the axial load rib 1's link can carry"):
         command_force(1.01 * weak, p)
     with pytest.raises(ValueError, match=r'rib 1: parameter sleeve_force=.*link can carry'):
         p.replace(sleeve_force=1.01 * weak)
-    assert UmbrellaRibsParams.from_mapping({'ribs': 3}).sleeve_force_limit == \
-        UmbrellaParams().sleeve_force_limit                   # identical ribs: the planar's
+    same = UmbrellaRibsParams.from_mapping({'ribs': 3})
+    assert same.sleeve_force_limit == UmbrellaParams().sleeve_force_limit   # the planar's
+    with pytest.raises(ValueError, match='the axial load the link can carry'):
+        command_force(1.01 * same.sleeve_force_limit, same)
 
 
 @pytest.mark.parametrize('values, culprit', [

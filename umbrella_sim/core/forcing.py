@@ -100,14 +100,16 @@ class ForceSchedule:
         return [(k * self.step, f) for k, f in zip(self._k, self._f)]
 
 
-def validate_force(force: float, limit: float | None = None, minimum: float = 0.0) -> float:
+def validate_force(force: float, limit: float | None = None, minimum: float = 0.0,
+                   link: str = 'the link') -> float:
     """
     Return F_H as a float, or raise ValueError naming the rule it breaks.
 
     F_H must be finite, >= minimum (the model's ``sleeve_force_min``: 0 for the thesis's
     push-only sleeve, < 0 for a drive that can hold the sleeve back) and, given the model's
-    UmbrellaParams.sleeve_force_limit, at most that (N).  Every command is checked with
-    ``command_force`` below, which takes both bounds from the model.
+    UmbrellaParams.sleeve_force_limit, at most that (N), the load of ``link`` (the umbrella's
+    weakest: UmbrellaRibsParams.weakest_link).  Every command is checked with
+    ``command_force`` below, which takes the bounds from the model.
     """
     try:
         f = float(force)
@@ -119,14 +121,15 @@ def validate_force(force: float, limit: float | None = None, minimum: float = 0.
         raise ValueError(f'sleeve force F_H={f}: must be >= {minimum:g} (sleeve_force_min; '
                          'below 0 only for a drive that can hold the sleeve back)')
     if limit is not None and f > limit:
-        raise ValueError(f'sleeve force {f:g} N: above {limit:.6g} N, the axial load the link '
+        raise ValueError(f'sleeve force {f:g} N: above {limit:.6g} N, the axial load {link} '
                          'can carry (Euler buckling / squash load)')
     return f
 
 
 def command_force(force: float, params: UmbrellaParams) -> float:
     """Return a force command as a float if the model accepts it, else raise ValueError."""
-    return validate_force(force, params.sleeve_force_limit, params.sleeve_force_min)
+    return validate_force(force, params.sleeve_force_limit, params.sleeve_force_min,
+                          getattr(params, 'weakest_link', 'the link'))
 
 
 def check_profile_row(t: float, force: float, previous: float | None,

@@ -509,6 +509,14 @@ class UmbrellaRibsParams:
         return min(rib.planar.sleeve_force_limit for rib in self.ribs_list())
 
     @property
+    def weakest_link(self) -> str:
+        """Say whose link sets sleeve_force_limit: 'rib k's link' where the ribs' differ."""
+        limits = [rib.planar.sleeve_force_limit for rib in self.ribs_list()]
+        if min(limits) == max(limits):
+            return 'the link'
+        return f"rib {limits.index(min(limits))}'s link"
+
+    @property
     def sleeve_force_min(self) -> float:
         """Return the smallest F per rib (the planar record's)."""
         return self.planar.sleeve_force_min
