@@ -367,19 +367,16 @@ class Summary3D:
              if name.startswith('stress_') or name == 'time'}, 0)
         self._final = initial
         self._start = deploy_start(float(sim.params.planar.v0), ())
+        ribs = sim.params.ribs_list()
         self._stall = StallWatch(float(initial.sleeve_position), m.y_stop,
-                                 float(initial.sleeve_velocity),
-                                 [r.stick_until for r in sim.params.ribs_list()])
+                                 float(initial.sleeve_velocity), ribs)
         self._stage2 = Stage2Series(2 * m.n_ribs)      # (each rib's v, then each rib's w)
-        self._rubs = any(r.hinge_coulomb > 0.0 or r.hinge_viscous > 0.0
-                         for r in sim.params.ribs_list())
         self._said = WarningsSaid()
         self._planar = sim.params.planar.as_dict()     # (a frozen record)
         # each rib's leaf tension at its hinge over its Euler load (summary.leaf_tension_ratio:
         # its own section, lengths and tip mass), per squared hinge rate and, with a moving
         # base, the hub circle's share per squared spin; the largest ratio over the ribs in
         # stage 1
-        ribs = sim.params.ribs_list()
         self._rib_parameter_warnings = rib_parameter_warnings(sim.params)
         self._per_rate = np.array([centrifugal_tension_per_rate(r.planar, r.tip_mass)
                                    for r in ribs])
@@ -595,7 +592,7 @@ class Summary3D:
                                  link_axial_load=self._axial,
                                  ribs=ribs, out_of_plane_tip=abs(self._oop[0])
                                  ) + out_of_plane_warnings(self._planar, out_of_plane) + list(
-            self._rib_parameter_warnings) + self._stall.warnings(self._rubs)
+            self._rib_parameter_warnings) + self._stall.warnings()
 
     def _stage2_resolution(self) -> dict | None:
         """Return the lock's stage-2 resolution (the worst rib's), else the mesh's."""

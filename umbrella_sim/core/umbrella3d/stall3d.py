@@ -40,12 +40,14 @@ class StallWatch:
     frame's kinetic energy can pay over the rest of the travel, or a sleeve force that
     holds it back: the frame stops (or rings in place) on its way, and will not lock while
     that lasts.  ``stall`` is (t, y_H, the ribs stuck then) from when it is so, until it
-    moves on or locks.  stick_until: each rib's release time (0: none).
+    moves on or locks.  ribs: the run's (params3d.RibProperties): each one's release time
+    (stick_until, 0: none) and whether its hinge rubs.
     """
 
-    def __init__(self, y0: float, y_stop: float, speed: float, stick_until):
+    def __init__(self, y0: float, y_stop: float, speed: float, ribs):
         self.y0, self.y_stop = y0, y_stop
-        self.until = np.asarray(stick_until, dtype=float)
+        self.until = np.array([r.stick_until for r in ribs], dtype=float)
+        self.friction = any(r.hinge_coulomb > 0.0 or r.hinge_viscous > 0.0 for r in ribs)
         self.peak, self.slow_since, self.stuck_since = abs(speed), None, None
         self.stall: tuple | None = None
 
@@ -73,8 +75,8 @@ class StallWatch:
         elif self.stall is None:
             self.stall = (now, float(y[-1]), held_by)
 
-    def warnings(self, friction: bool) -> list[str]:
-        """Return the 'stalled' text while the deployment is stalled (friction: hinges rub)."""
+    def warnings(self) -> list[str]:
+        """Return the 'stalled' text while the deployment is stalled."""
         if self.stall is None:
             return []
         t, y, stuck = self.stall
@@ -82,7 +84,7 @@ class StallWatch:
         if stuck:
             why = (f"rib {', '.join(map(str, stuck))}'s hinge is stuck and holds the frame "
                    '(its stick_torque not reached)')
-        elif friction:
+        elif self.friction:
             why = ("the hinges' friction takes more than the frame's kinetic energy can pay "
                    'over the rest of the travel')
         else:
