@@ -197,20 +197,30 @@ def test_the_json_numbers_its_rows_as_the_text(capsys):
     assert [r['mode'] for r in rows] == text == [1, 2, 4, 5, 7]
 
 
-def test_a_spinning_base_is_said_to_be_left_out(capsys):
+def test_a_spinning_base_gives_the_spinning_frames_modes(capsys):
     """
-    A prescribed base spinning at the lock: the table is the hub held still, and says so.
+    A prescribed base spinning: the table is the spinning antenna's, and says what it is.
 
-    The modes are linearised about the still frame (no centrifugal stiffening, no Coriolis
-    coupling): the heading names the spin left out, the JSON's stderr too; unspun, no note.
+    The heading names the spin, the rotating frame and the spun equilibrium (no 'left out'
+    note, on stdout or stderr); each row has its whirl, forward or backward, the JSON's
+    'whirl' the same; the spin raises the first rows (centrifugal stiffening) and leaves
+    their multiplicity (the held hub decouples the ribs); unspun, no spin in the heading.
     """
     spun = ['--set', 'ribs=3', '--set', 'base=prescribed', '--set', 'base_spin_rate=20',
-            '--count', '1']
+            '--count', '2']
     assert main(['modes', *spun]) == 0
-    head = capsys.readouterr().out.splitlines()[0]
-    assert 'base_spin_rate 20 rad/s' in head and 'left out' in head
-    assert main(['modes', *spun, '--json']) == 0
-    assert 'base_spin_rate 20 rad/s' in capsys.readouterr().err
+    out = capsys.readouterr()
+    head, rows = out.out.splitlines()[0], out.out.splitlines()[2:]
+    assert 'spinning at 20 rad/s' in head and out.err == ''
+    assert 'turning with the hub' in head and 'spun equilibrium' in head
+    assert 'left out' not in out.out + out.err
+    assert rows[0].endswith('forward') and rows[1].endswith('backward')
+    json_rows = cli_rows(capsys, *spun)
+    assert json_rows[0]['whirl'] > 0.0 > json_rows[1]['whirl']
+    still = cli_rows(capsys, '--set', 'ribs=3', '--count', '2')
+    for r, s in zip(json_rows, still):
+        assert r['omega'] > s['omega'] and r['multiplicity'] == s['multiplicity'] == 3
+        assert s['whirl'] == 0.0
     assert main(['modes', '--set', 'ribs=3', '--set', 'base=prescribed', '--count', '1']) == 0
     assert 'spin' not in capsys.readouterr().out
 

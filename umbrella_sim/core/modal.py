@@ -23,6 +23,11 @@ the six rigid-body ones left out).  These are the modes stage 2 vibrates in (its
 period is the first's, tests/test_summary.py) and the ones the stage-2 mode fit makes exact.
 flexible-nonlinear linearises to the same beams.  Equal frequencies (the N identical ribs'
 modes, decoupled by the stopped sleeve) are one row with their multiplicity.
+
+On a prescribed base spinning at base_spin_rate the modes are the spinning antenna's
+(``spun_modes3d.spun_locked_modes``): in the frame turning with the hub, about the ribs'
+spun equilibrium, with the centrifugal stiffening of the co-rotational beams, the spin
+softening and the Coriolis coupling, each mode's whirl (forward, backward) with them.
 """
 from __future__ import annotations
 
@@ -66,6 +71,9 @@ class ModeRow:
     #: the modes are one copy a rib, each in a rib of its own: a repeated mode of identical
     #: ribs on the held hub (which decouples the ribs), not one the ribs move in together
     one_a_rib: bool = False
+    #: on a spinning base, the modes' whirl about the spin axis (spun_modes3d): > 0 forward
+    #: (with the spin), < 0 backward, 0 along a line (and without a spin)
+    whirl: float = 0.0
 
     @property
     def frequency(self) -> float:
@@ -83,7 +91,14 @@ class ModeRow:
                 'multiplicity': self.multiplicity, 'in_plane': self.in_plane,
                 'out_of_plane': self.out_of_plane, 'twist': self.twist, 'rib': self.rib,
                 'rib_share': self.rib_share, 'damping_ratio': self.damping_ratio,
-                'one_a_rib': self.one_a_rib}
+                'one_a_rib': self.one_a_rib, 'whirl': self.whirl}
+
+
+def base_spin(params) -> float:
+    """Return the steady spin of a prescribed base (rad/s): base_spin_rate; else 0."""
+    if getattr(params, 'base', 'fixed') != 'prescribed':
+        return 0.0
+    return float(params.base_spin_rate)
 
 
 def deployed_modes(params, count: int | None = None) -> list[ModeRow]:
@@ -92,7 +107,9 @@ def deployed_modes(params, count: int | None = None) -> list[ModeRow]:
 
     params: the planar record (UmbrellaParams) or the umbrella's (UmbrellaRibsParams), of a
     model with beams (flexible, flexible-nonlinear); count: the first rows only (None: all).
-    ValueError for a rigid model, which has no elastic modes.
+    A prescribed base spinning (base_spin_rate): the spinning antenna's modes in the hub's
+    frame about its spun equilibrium (module docstring).  ValueError for a rigid model,
+    which has no elastic modes, or a spin the ribs do not survive.
     """
     planar = params if isinstance(params, UmbrellaParams) else params.planar
     if planar.model not in BEAM_MODELS:
@@ -108,9 +125,10 @@ def deployed_modes(params, count: int | None = None) -> list[ModeRow]:
         rows = _umbrella_rows(params)
         held = params.base != 'free'
     out = []
-    for group in _repeated_groups([w for w, _, _ in rows]):
+    for group in _repeated_groups([r[0] for r in rows]):
         shares = np.mean([rows[i][1] for i in group], axis=0)
         by_rib = np.sum([rows[i][2] for i in group], axis=0)
+        whirl = float(np.mean([rows[i][3] if len(rows[i]) > 3 else 0.0 for i in group]))
         rib = int(np.argmax(by_rib))
         omega = float(np.mean([rows[i][0] for i in group]))
         # the held hub decouples the ribs: the group is a sum of each rib's own modes, so as
@@ -118,17 +136,25 @@ def deployed_modes(params, count: int | None = None) -> list[ModeRow]:
         holding = int(np.count_nonzero(by_rib > HOLDS * by_rib.sum()))
         out.append(ModeRow(omega, len(group), *(max(0.0, float(s)) for s in shares), rib,
                            float(by_rib[rib] / by_rib.sum()), float(beta * omega / 2.0),
-                           held and len(group) > 1 and holding == len(group)))
+                           held and len(group) > 1 and holding == len(group), whirl))
         if count is not None and len(out) == count:
             break
     return out
 
 
 def _umbrella_rows(params) -> list[tuple]:
-    """Return (omega, (in-plane, out-of-plane, twist), strain energy by rib) of every mode."""
+    """
+    Return (omega, (in-plane, out-of-plane, twist), strain energy by rib[, whirl]) of each mode.
+
+    The whirl only where the base spins.
+    """
     from .umbrella3d.model3d import UmbrellaModel3D
     from .umbrella3d.modes3d import free_locked_modes, locked_modes, mode_shares, rib_energies
+    from .umbrella3d.spun_modes3d import spun_locked_modes
 
+    if base_spin(params):
+        spun = spun_locked_modes(params)
+        return list(zip(spun.omega, spun.shares, spun.rib_energy, spun.whirl))
     model = UmbrellaModel3D(replace(params, planar=params.planar.replace(model='flexible')))
     if model.params.base == 'free':
         omega, shapes, _ = free_locked_modes(model)

@@ -12,7 +12,12 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""``umbrella_sim modes``: the deployed antenna's natural frequencies (core/modal.py), no run."""
+"""
+``umbrella_sim modes``: the deployed antenna's natural frequencies (core/modal.py), no run.
+
+On a prescribed base spinning at base_spin_rate, the spinning antenna's: in the frame turning
+with the hub, about its spun equilibrium (core/umbrella3d/spun_modes3d.py), each row's whirl.
+"""
 from __future__ import annotations
 
 import argparse
@@ -21,7 +26,7 @@ import sys
 
 from .arguments import add_parameter_options
 from .inputs import build_params
-from ..core.modal import BEAM_MODELS, deployed_modes
+from ..core.modal import base_spin, BEAM_MODELS, deployed_modes
 from ..core.summary import parameter_warnings
 from ..core.umbrella3d.driven3d import rib_parameter_warnings
 
@@ -42,7 +47,11 @@ def add_parser(sub) -> argparse.ArgumentParser:
                     'frame): the modes stage 2 vibrates in. Repeated frequencies (N '
                     'identical ribs) are one row, with their count; the umbrella of N ribs '
                     "says where each mode's strain energy is (in-plane, out-of-plane "
-                    'bending, twist) and which rib holds it. Parameters as for simulate.')
+                    'bending, twist) and which rib holds it. On a prescribed base spinning '
+                    '(base_spin_rate), the modes of the spinning antenna in the frame turning '
+                    'with the hub, about its spun equilibrium (centrifugal stiffening, spin '
+                    "softening, Coriolis coupling), with each mode's whirl. Parameters as for "
+                    'simulate.')
     add_parameter_options(sp, BEAM_MODELS)    # (a rigid frame has no elastic modes)
     sp.add_argument('--count', type=int, default=DEFAULT_COUNT,
                     help=f'rows to print (default {DEFAULT_COUNT}; repeated frequencies '
@@ -104,6 +113,28 @@ def _warnings(params) -> list[str]:
     return [w for w in out if not w.startswith('coarse stage-1 step')]
 
 
+def _spun_heading(spin: float, params) -> str:
+    """Return the heading's account of the spin: the frame, the equilibrium, what counts."""
+    nonlinear = params.planar.model == 'flexible-nonlinear'
+    return (f'on the base spinning at {spin:g} rad/s about Y (base_spin_rate): in the frame '
+            'turning with the hub, linearised about the spun equilibrium (the ribs deflected '
+            "by the centrifugal load); the co-rotational beams' centrifugal stiffening, the "
+            'spin softening and the Coriolis coupling counted'
+            + ('' if nonlinear else " (model flexible's linear beams lack the stiffening: "
+               "its runs ring lower, flexible-nonlinear's at these)")
+            + '; whirl: the orbit about the spin axis against a circular one, + forward (with '
+            'the spin), - backward (Coriolis splits a pair of equal frequencies into one of '
+            'each)')
+
+
+def _whirl(whirl: float) -> str:
+    """Return a row's whirl as the text prints it: signed, and its sense where it has one."""
+    text = f'{whirl:+.4f}'
+    if float(text) == 0.0:
+        return f'{abs(whirl):.4f}'
+    return text + (' forward' if whirl > 0 else ' backward')
+
+
 def main(args, ap: argparse.ArgumentParser) -> int:
     try:
         if args.count < 1:
@@ -116,13 +147,8 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         ap.exit(2, f'umbrella_sim: error: {exc}\n')
     for text in _warnings(args.model):
         print(f'umbrella_sim: warning: {text}', file=sys.stderr)
-    spin = getattr(args.model, 'base_spin_rate', 0.0) if getattr(
-        args.model, 'base', 'fixed') == 'prescribed' else 0.0
-    spun = (f", not spinning: the base's spin (base_spin_rate {spin:g} rad/s) left out "
-            '(no centrifugal stiffening, no Coriolis coupling)' if spin else '')
+    spin = base_spin(args.model)
     if args.json:
-        if spun:
-            print(f'umbrella_sim: note: {spun[2:]}', file=sys.stderr)
         print(json.dumps([_json_row(r, m, c) for m, r, c in
                           zip(_first_modes(rows), rows, changes)], indent=2))
         return 0
@@ -134,11 +160,12 @@ def main(args, ap: argparse.ArgumentParser) -> int:
               'from converged, from above (--mesh-check: their change on twice the elements)'
               if n <= COARSE_MESH and not args.mesh_check else '')
     print('natural frequencies of the frame locked at full deployment (the sleeve at the stop), '
-          'linearised about the undeformed frame' + (
+          + (_spun_heading(spin, args.model) if spin else
+             'linearised about the undeformed frame') + (
               '; on the free-floating bus (its six rigid-body modes left out)' if base == 'free'
               else '; the hub held' if umbrella else
               '; the planar frame: its in-plane modes only (out of its plane, bending and '
-              'twist: --set ribs=2 or more)') + spun + (
+              'twist: --set ribs=2 or more)') + (
               '; f, period and omega undamped (a damped mode rings at f sqrt(1 - ratio^2); '
               'one of ratio >= 1 does not oscillate)' if damped else '') + coarse)
     head = f"{'mode':>4}  {'f (Hz)':>10}  {'period (ms)':>11}  {'omega (rad/s)':>13}"
@@ -146,7 +173,7 @@ def main(args, ap: argparse.ArgumentParser) -> int:
         head += f"  {'2N change':>9}"
     if umbrella:
         head += f"  {'count':>5}  {'in-plane':>8}  {'out-of-plane':>12}  {'twist':>6}  rib"
-    print(head + ('  damping ratio' if damped else ''))
+    print(head + ('  damping ratio' if damped else '') + ('  whirl' if spin else ''))
     for number, r, change in zip(_first_modes(rows), rows, changes):
         line = (f'{number:>4}  {r.frequency:>10.4f}  {1e3 * r.period:>11.4f}  '
                 f'{r.omega:>13.2f}')
@@ -159,5 +186,6 @@ def main(args, ap: argparse.ArgumentParser) -> int:
             line += (f'  {r.multiplicity:>5}  {100 * r.in_plane:>7.1f}%  '
                      f'{100 * r.out_of_plane:>11.1f}%  {100 * r.twist:>5.1f}%  {rib}')
         print(line + (f'  {r.damping_ratio:.4g}' if damped else '')
-              + (' (overdamped)' if r.damping_ratio >= 1.0 else ''))
+              + (' (overdamped)' if r.damping_ratio >= 1.0 else '')
+              + (f'  {_whirl(r.whirl)}' if spin else ''))
     return 0
