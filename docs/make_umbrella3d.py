@@ -405,7 +405,9 @@ On the node, `python3 bootstrap.py run -p ribs:=6` (or `umbrella_node --ros-args
 joint_states name `rib<k>/leaf_hinge`, `rib<k>/link_hinge` (k from 0) and `sleeve_slider`,
 and `rib_tip_deflection` / `rib_peak_stress` carry each rib's tip and stresses
 (msg_docs/topic_ribs.md). Offline, `umbrella_sim simulate --set ribs=6` (its deployed
-frequencies, without a run: `umbrella_sim modes --set ribs=6`); from Python,
+frequencies, without a run: `umbrella_sim modes --set ribs=6`; spinning, with `--set
+base=prescribed --set base_spin_rate=10`: the rotating frame's about the spun equilibrium,
+umbrella_sim/core/umbrella3d/spun_modes3d.py); from Python,
 `from umbrella_sim.core import UmbrellaRibsParams, UmbrellaSimulator3D, simulate`, then
 `simulate(UmbrellaRibsParams.from_mapping({'ribs': 6}), 0.5)` for a whole run or
 `UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping({'ribs': 6}))` to step it. A rib's own

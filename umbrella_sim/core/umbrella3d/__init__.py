@@ -32,6 +32,8 @@ The whole umbrella in 3D: N flexible ribs around one sleeve (the planar model's 
     simulator3d   UmbrellaSimulator3D: the grid, the lock, stuck hinges
     outputs3d     Record3D: every step's figures per rib, peaks, spread, energy balance
     modes3d       the locked umbrella's vibration modes (validation and figures)
+    spun_modes3d  its modes on a base spinning steadily: the spun equilibrium, centrifugal
+                  stiffening, spin softening, Coriolis (``umbrella_sim modes``)
 
 No ROS, no file format, no command line (the core layer's rules).  docs/umbrella3d.md
 gives the formulation and its validation.
