@@ -284,6 +284,26 @@ def test_cli_force_profile(tmp_path):
     assert bad.returncode == 2 and 'force.csv:3' in bad.stderr and '>= 0' in bad.stderr
 
 
+def test_cli_force_profile_above_a_ribs_link_names_the_row(tmp_path):
+    """
+    A profile's force above the umbrella's bound (its weakest link's) names file and line.
+
+    The profile was checked against the planar record, whose link carries 39x rib 1's 4 mm
+    section here: the run's own check then refused the force without the file or its row.
+    """
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+
+    weak = UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib1.section_height': 0.004})
+    assert weak.sleeve_force_limit < weak.planar.sleeve_force_limit
+    prof = tmp_path / 'force.csv'
+    prof.write_text(f't,F\n# a comment\n0.0,1.0\n0.1,{1.01 * weak.sleeve_force_limit:.6f}\n')
+    r = cli('simulate', '--set', 'ribs=3', '--set', 'rib1.section_height=0.004',
+            '--force-profile', str(prof), '--duration', '0.01')
+    assert r.returncode == 2, r.stderr
+    assert f'force profile {prof}:4: sleeve force' in r.stderr, r.stderr
+    assert "rib 1's link can carry" in r.stderr, r.stderr
+
+
 @pytest.mark.parametrize('args, words', [
     (['--set', 'l1=-1'], 'l1'),
     (['--set', 'alpha0=0.1'], 'alpha0'),

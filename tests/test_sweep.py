@@ -312,6 +312,39 @@ def test_spec_cases_ids_and_force_profile(tmp_path):
     assert other.cases[0].case_id != case.case_id
 
 
+def test_spec_force_profile_is_judged_by_each_cases_model_naming_its_row(tmp_path):
+    """
+    A SPEC's profile is read once and checked against each case's model, naming file:line.
+
+    Above a case's bound (the umbrella's weakest link: rib 1's 4 mm section) the refusal
+    names the case, the file and the line of the row (it said 'at t = 0.1 s', no file, and
+    held the force to the planar record's link, 39x rib 1's); a braking row is the case's
+    to take (its sleeve_force_min), not refused by the defaults' push-only bound.
+    """
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+
+    weak = UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib1.section_height': 0.004})
+    write(tmp_path / 'push.csv', f't,F\n0.0,1.0\n\n0.1,{1.01 * weak.sleeve_force_limit:.6f}\n')
+    spec = write(tmp_path / 's.yaml', (
+        'base: {elements_per_segment: 1}\n'
+        'cases:\n  - {v0: -0.5}\n  - {ribs: 3, rib1.section_height: 0.004}\n'
+        'force_profile: push.csv\nduration: 0.05\n'))
+    with pytest.raises(sweep.SpecError) as exc:
+        sweep.load_spec(spec)
+    text = str(exc.value)
+    assert 'case 2' in text and f"force profile {tmp_path / 'push.csv'}:4" in text, text
+    assert "rib 1's link can carry" in text, text
+    write(tmp_path / 'brake.csv', 't,F\n0.0,1.0\n0.05,-2.0\n')
+    spec = write(tmp_path / 'b.yaml', (
+        'base: {elements_per_segment: 1}\ngrid:\n  sleeve_force_min: [-5.0, 0.0]\n'
+        'force_profile: brake.csv\nduration: 0.05\n'))
+    with pytest.raises(sweep.SpecError) as exc:
+        sweep.load_spec(spec)
+    text = str(exc.value)
+    assert 'case 2' in text and f"force profile {tmp_path / 'brake.csv'}:3" in text, text
+    assert 'sleeve_force_min' in text, text
+
+
 def test_table_takes_every_summary_key(tmp_path):
     """
     Check that the table follows the summary: a key the sweep has never heard of is a column.

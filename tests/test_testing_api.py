@@ -514,6 +514,24 @@ def test_a_bad_force_profile_is_refused_before_any_command(antenna_factory, prof
 
 
 @pytest.mark.ros
+def test_a_profile_above_a_ribs_link_is_refused_naming_the_row(antenna_factory):
+    """
+    The umbrella's bound is its weakest link's: a row above it is refused, named by its row.
+
+    The offline --force-profile's rule (forcing.checked_profile), on the antenna's model.
+    """
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+
+    weak = UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib1.section_height': 0.004})
+    force = round(1.01 * weak.sleeve_force_limit, 3)
+    antenna = antenna_factory({'v0': 0.0, 'ribs': 3, 'rib1.section_height': 0.004})
+    with pytest.raises(ValueError, match=re.escape(f'row 1 (0.1, {force!r}): sleeve force')) \
+            as exc:
+        antenna.play_force_profile([(0.0, 1.0), (0.1, force)], timeout=5)
+    assert "rib 1's link can carry" in str(exc.value)
+
+
+@pytest.mark.ros
 def test_a_probe_reports_a_publisher_of_incompatible_qos(probe, capfd):
     """A probe's reader logs a publisher it cannot match, naming the policy (as rclpy's)."""
     from rclpy.qos import QoSProfile, ReliabilityPolicy

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
 from .params import UmbrellaParams
 from .registry import SPECS
@@ -153,3 +153,27 @@ def check_profile_row(t: float, force: float, previous: float | None,
         raise ValueError(f'time {t} given twice (the row before has it too): one force per '
                          'instant')
     return t, command_force(force, params)
+
+
+def checked_profile(rows: Iterable[Any], params: UmbrellaParams,
+                    row_name: Callable[[int], str]) -> list[tuple[float, float]]:
+    """
+    Return a (t, F) profile's rows as floats, or raise ValueError naming its first bad row.
+
+    The one place a whole profile is judged, whoever read it: each row by check_profile_row
+    against the model (params: the planar record, or the umbrella of N ribs, whose bound is
+    its weakest link's), its refusal prefixed with ``row_name(i)`` of the row (i from 0):
+    where the row came from, a CSV's 'force profile f.csv:12' (its line) or a list's
+    'force profile row 3 (0.1, 80.0)'.  No rows is refused too.
+    """
+    out: list[tuple[float, float]] = []
+    for i, row in enumerate(rows):
+        try:
+            t, force = row
+        except (TypeError, ValueError):
+            raise ValueError(f'{row_name(i)}: expected a pair (t, F)') from None
+        try:
+            out.append(check_profile_row(t, force, out[-1][0] if out else None, params))
+        except ValueError as exc:
+            raise ValueError(f'{row_name(i)}: {exc}') from None
+    return out

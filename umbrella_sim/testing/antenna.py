@@ -214,23 +214,13 @@ class SimulatedAntenna:
 
     def _checked_profile(self, profile) -> list[tuple[float, float]]:
         """Return a (t, F) profile as floats, or ValueError naming its first bad row."""
-        from ..core.forcing import check_profile_row
+        from ..core.forcing import checked_profile
 
-        rows: list[tuple[float, float]] = []
-        params = self._model_params()
-        for i, row in enumerate(profile):
-            try:
-                t, force = row
-            except (TypeError, ValueError):
-                raise ValueError(f'force profile row {i} {row!r}: expected a pair (t, F)') \
-                    from None
-            try:
-                rows.append(check_profile_row(t, force, rows[-1][0] if rows else None, params))
-            except ValueError as exc:
-                raise ValueError(f'force profile row {i} {row!r}: {exc}') from None
-        if not rows:
+        profile = list(profile)
+        if not profile:
             raise ValueError('force profile: no (t, F) rows')
-        return rows
+        return checked_profile(profile, self._model_params(),
+                               lambda i: f'force profile row {i} {profile[i]!r}')
 
     def set_parameters(self, timeout: float = 20.0, **values) -> None:
         """

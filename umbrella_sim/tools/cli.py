@@ -315,7 +315,8 @@ def main(argv: list[str] | None = None) -> int:
         return modes.main(args, ap)
     try:
         params = build_params(args)
-        profile = (read_force_profile(args.force_profile, params)
+        # checked against the run's model: the umbrella's bound is its weakest link's
+        profile = (read_force_profile(args.force_profile, args.model)
                    if args.force_profile else None)
         if not (math.isfinite(args.duration) and args.duration > 0):
             raise ValueError(f'--duration {args.duration}: must be > 0')

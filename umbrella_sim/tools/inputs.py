@@ -23,12 +23,13 @@ refusal names the file, the line or the option, and why.
 from __future__ import annotations
 
 import csv
+from dataclasses import dataclass
 import io
 import re
 import sys
 
 from ..bag.paths import read_text_input
-from ..core.forcing import check_profile_row
+from ..core.forcing import checked_profile
 from ..core.params import check_values, UmbrellaParams
 from ..core.registry import (check_known_names, check_types, CONTROLLER_PARAMETERS,
                              NODE_ONLY_PARAMS, NODE_PARAMETERS, SPECS)
@@ -85,18 +86,37 @@ def _header_problem(names: list[str]) -> str | None:
     return None
 
 
-def read_force_profile(path: str, params: UmbrellaParams | None = None
-                       ) -> list[tuple[float, float]]:
+@dataclass(frozen=True)
+class ForceProfileFile:
     """
-    Read a CSV of (t, F) rows, an optional header line.
+    A force profile CSV as read: its (t, F) rows and the line each came from.
+
+    ``checked(model)`` judges the rows against a model (forcing.checked_profile: times
+    finite, >= 0 and increasing, each F a command the model accepts, up to the bound of the
+    umbrella's weakest link), a refusal naming the file and the line of the bad row.  A
+    sweep reads its SPEC's profile once and checks it against each case's model.
+    """
+
+    path: str
+    rows: tuple             # ((t, F), ...) as numbers, unchecked
+    lines: tuple            # the line number of each row
+
+    def checked(self, params=None) -> list[tuple[float, float]]:
+        """Return the rows as (t, F) floats if the model takes them (default: planar defaults)."""
+        return checked_profile(self.rows, params or UmbrellaParams(),
+                               lambda i: f'force profile {self.path}:{self.lines[i]}')
+
+
+def parse_force_profile(path: str) -> ForceProfileFile:
+    """
+    Read a CSV of (t, F) rows, an optional header line; what is not such a row is refused.
 
     Blank lines and lines starting with # are skipped; the first other line may be a header
     (neither of its two fields a number; one naming force then time, F,t, or another unit
-    than s and N, t (ms), is refused).
-    Every row by core.forcing.check_profile_row: times finite, >= 0 and increasing (one
-    force per instant), each F a command the model (params) accepts.
+    than s and N, t (ms), is refused), and a file of no rows.  ValueError naming the file
+    and the line.  The rows are not judged against a model: ForceProfileFile.checked does.
     """
-    rows: list[tuple[float, float]] = []
+    rows, lines = [], []
     text = read_text_input(path, 'force profile').removeprefix('\ufeff')   # (Excel's BOM)
     try:
         parsed = list(csv.reader(io.StringIO(text, newline='')))
@@ -116,17 +136,24 @@ def read_force_profile(path: str, params: UmbrellaParams | None = None
                 raise ValueError(f'force profile {path}:{lineno}: header {row[:2]}: {problem}')
             continue
         try:
-            t, f = _number(row[0]), _number(row[1])
+            rows.append((_number(row[0]), _number(row[1])))
         except ValueError:
             raise ValueError(f'force profile {path}:{lineno}: not numbers: {row[:2]}') from None
-        try:
-            rows.append(check_profile_row(t, f, rows[-1][0] if rows else None,
-                                          params or UmbrellaParams()))
-        except ValueError as exc:
-            raise ValueError(f'force profile {path}:{lineno}: {exc}') from None
+        lines.append(lineno)
     if not rows:
         raise ValueError(f'force profile {path}: no (t, F) rows')
-    return rows
+    return ForceProfileFile(path, tuple(rows), tuple(lines))
+
+
+def read_force_profile(path: str, params=None) -> list[tuple[float, float]]:
+    """
+    Read a force profile CSV (parse_force_profile) and check it against the run's model.
+
+    params: the model the profile drives (UmbrellaParams, or the umbrella of N ribs,
+    UmbrellaRibsParams: its weakest link's bound); default the planar defaults.  Every
+    refusal names the file and the line of the row (ForceProfileFile.checked).
+    """
+    return parse_force_profile(path).checked(params)
 
 
 #: node parameters that ``--set`` may give offline: they shape the --mcap recording

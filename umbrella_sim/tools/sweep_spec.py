@@ -44,7 +44,7 @@ from typing import Any
 import yaml
 
 from .inputs import (check_lock_given, check_offline_names, check_run_length,
-                     default_params_file, LONG_RUN_STEPS, read_force_profile, resolve_params,
+                     default_params_file, LONG_RUN_STEPS, parse_force_profile, resolve_params,
                      UMBRELLA_NAMES)
 from .. import __version__
 from ..bag.paths import read_text_input
@@ -161,7 +161,6 @@ def load_spec(path: str, progress=None) -> Sweep:
     progress(done, total): called every 1 % of the cases (at least 1000) while they are
     checked, when there are CHECK_PROGRESS_CASES or more (10^6 cases take minutes).
     """
-    from ..core.forcing import command_force
     from ..core.registry import check_types
     from ..core.umbrella3d.params3d import (check_umbrella_types, refuse_empty_rib_lists,
                                             umbrella_model, umbrella_values)
@@ -231,8 +230,8 @@ def load_spec(path: str, progress=None) -> Sweep:
         if not isinstance(doc['force_profile'], str):
             raise SpecError(f'sweep spec {path}: force_profile: expected a CSV file name')
         profile_path = rel(doc['force_profile'])
-        try:
-            profile = [list(row) for row in read_force_profile(profile_path)]
+        try:        # its rows once; each case's model judges them (below)
+            profile_file = parse_force_profile(profile_path)
         except ValueError as exc:
             raise SpecError(f'sweep spec {path}: force_profile: {exc}') from None
     if params_file is not None:
@@ -281,12 +280,11 @@ def load_spec(path: str, progress=None) -> Sweep:
                               if source == 'cases' or k not in base or base[k] != v)
             raise SpecError(f'sweep spec {path}: case {index} ({source}: {shown}): '
                             f'{exc}') from None
-        for t, f in profile or []:
-            try:
-                command_force(f, resolved)
+        if profile_path is not None:
+            try:    # against the case's model (the umbrella: its weakest link), named by line
+                profile = [list(row) for row in profile_file.checked(run)]
             except ValueError as exc:
-                raise SpecError(f'sweep spec {path}: case {index}: force_profile at t = {t:g} s: '
-                                f'{exc}') from None
+                raise SpecError(f'sweep spec {path}: case {index}: {exc}') from None
         case = Case(index=index, overrides=overrides, params=params, duration=duration,
                     stop_after_lock=stop_after_lock, force_profile=profile,
                     force_profile_path=profile_path)
