@@ -105,3 +105,43 @@ def test_closed_form_fast_path_steps_as_the_generic_path(monkeypatch, v0, force)
             assert abs(b.rows[i] - g.rows[i]).max() <= tol, field
     assert step_row(fast.sample()) == step_row(slow.sample())
     assert fast.state.t == slow.state.t and (fast.state.q == slow.state.q).all()
+
+
+def test_the_rigid_umbrella_sums_its_ribs_through_the_sleeve():
+    """
+    RigidUmbrella: N rigid ribs on one sleeve, in the ribs' mean leaf angle q.
+
+    Identical ribs are N planar frames (M and the lever N times the planar ones); a tip
+    mass at G adds its moment m (l1 + l2)^2 to its rib; a rib of its own lengths stands at
+    its own angle, every rib at the one sleeve height, their mean q, and dy/dq is the
+    sleeve's own slope.
+    """
+    from umbrella_sim.core.rigid import RigidUmbrella
+    from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+
+    planar = UmbrellaParams()
+    frame = RigidMechanism(planar)
+    one = RigidUmbrella(planar)
+    three = RigidUmbrella(UmbrellaRibsParams.from_mapping({'ribs': 3}))
+    for q in (0.4, 1.0, 1.5):
+        assert one.inertia(q) == frame.generalized_mass(q)
+        assert one.lever(q) == frame.sleeve_lever(q)
+        assert three.inertia(q) == pytest.approx(3 * frame.generalized_mass(q), rel=1e-14)
+        assert three.lever(q) == pytest.approx(3 * frame.sleeve_lever(q), rel=1e-14)
+    assert (three.alpha0, three.alpha_deployed) == (planar.alpha0, planar.alpha_deployed)
+    tip = RigidUmbrella(UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib2.tip_mass': 0.05}))
+    added = 0.05 * (planar.l1 + planar.l2) ** 2
+    assert tip.inertia(1.0) - three.inertia(1.0) == pytest.approx(added, rel=1e-12)
+    own = RigidUmbrella(UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib0.l3': 0.55}))
+    for q in (own.alpha_deployed, 1.0, own.alpha0):
+        y, angles = own.sleeve_and_angles(q)
+        assert angles[0] < angles[1] == angles[2]   # the longer link: a lower leaf
+        assert math.fsum(angles) / 3 == pytest.approx(q, abs=1e-14)
+        for mech, a in zip(own.mechs, angles):
+            assert mech.sleeve_height(a, mech.alpha2(a)) == pytest.approx(y, abs=1e-14)
+        h = 1e-6
+        slope = (own.sleeve_height(q + h) - own.sleeve_height(q - h)) / (2 * h)
+        assert own.lever(q) == pytest.approx(3 * slope, rel=1e-7)
+    for q, y in ((own.alpha0, planar.sleeve_start_height),
+                 (own.alpha_deployed, planar.sleeve_stop_height)):
+        assert own.sleeve_height(q) == pytest.approx(y, abs=1e-14)

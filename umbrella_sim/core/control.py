@@ -33,10 +33,13 @@ The law, in the leaf angle alpha1 (the natural coordinate: the sleeve's lever dy
 vanishes near the folded state, so a sleeve-position loop would be badly scaled):
 
 * at the first push a reference alpha1_ref(t) is planned on the rigid two-angle model
-  (rigid.py: same geometry and masses): full push from rest, cruise, a constant
+  (rigid.py: same geometry and masses; of the umbrella of N ribs, rigid.RigidUmbrella: the N
+  rigid ribs on the one sleeve, each its own inertia, lengths, tip mass and hinge friction,
+  in the ribs' mean leaf angle): full push from rest, cruise, a constant
   deceleration down to ``lock_rate`` at the stop (optionally a last ``creep_angle`` at
   ``lock_rate``); the cruise rate is solved so that the whole plan takes ``target_time``;
-* the force is the plan's inverse dynamics, m(a) a'' + 1/2 m'(a) a'^2 = -F_H y_H'(a), at the
+* the force is the plan's inverse dynamics, m(a) a'' + 1/2 m'(a) a'^2 = -F_H y_H'(a) (the
+  umbrella's: N y_H' and the hinges' friction), at the
   commanded acceleration a''_ref + kv (a'_ref - a') + kp (a_ref - a), clipped to the limits.
   The feed-forward carries the motion, so the gains stay low: the frame's bending modes
   (20-35 Hz, undamped in the model) sit inside the loop with a DDS round trip of 5-100 ms,
@@ -54,8 +57,9 @@ import numpy as np
 
 from .driver import RunDriver, simulate
 from .params import ControllerConfig, UmbrellaParams
-from .rigid import deployment_time_by_quadrature, RigidMechanism
+from .rigid import deployment_time_by_quadrature, mean_leaf_angle, RigidUmbrella
 from .summary import RunResult
+from .umbrella3d.params3d import UmbrellaRibsParams
 
 
 class DeployLaw:
@@ -68,17 +72,19 @@ class DeployLaw:
 
     GRID = 4000        # plan resolution in alpha1
 
-    def __init__(self, params: UmbrellaParams, cfg: ControllerConfig):
+    def __init__(self, params: UmbrellaParams | UmbrellaRibsParams, cfg: ControllerConfig):
         self.params = params.validated()
         self.cfg = cfg.validated()
-        self.mech = RigidMechanism(self.params)
-        p, c = self.params, self.cfg
-        self.span = p.alpha0 - p.alpha_deployed
+        self.mech = RigidUmbrella(self.params)
+        c = self.cfg
+        # the ribs' mean leaf angle from the start to the stop (the planar frame's alpha1)
+        self.alpha0, self.alpha_deployed = self.mech.alpha0, self.mech.alpha_deployed
+        self.span = self.alpha0 - self.alpha_deployed
         if c.creep_angle >= self.span:
             raise ValueError(f'parameter creep_angle={c.creep_angle}: must be below '
                              f'alpha0 - alpha_deployed = {self.span:.6g} rad')
         self.lock_rate = c.lock_rate if c.lock_rate > 0 else 0.25 * self.span / c.target_time
-        near_stop = p.alpha_deployed + self.span * np.linspace(0.0, 0.5, 21)
+        near_stop = self.alpha_deployed + self.span * np.linspace(0.0, 0.5, 21)
         self.braking_authority = min(-c.min_force * self.lever(a) / self.inertia(a)
                                      for a in near_stop)
         if c.min_force < 0:
@@ -91,20 +97,18 @@ class DeployLaw:
 
     # ------------------------------------------------------------ rigid model
     def inertia(self, a1: float) -> float:
-        """Generalised mass m(alpha1): T = 1/2 m alpha1'^2 on the constraint (4.120)."""
-        a2 = self.mech.alpha2(a1)
-        return 2.0 * self.mech.kinetic_energy(a1, a2, 1.0, self.mech.alpha2_rate_ratio(a1, a2))
+        """Generalised mass M(alpha1) of the whole umbrella: T = 1/2 M alpha1'^2."""
+        return self.mech.inertia(a1)
 
     def lever(self, a1: float) -> float:
-        """dy_H / d alpha1 (m/rad): F_H's generalised force on alpha1 is -F_H times this."""
-        p = self.params
-        a2 = self.mech.alpha2(a1)
-        return p.l1 * math.cos(a1) + p.l3 * math.cos(a2) * self.mech.alpha2_rate_ratio(a1, a2)
+        """N dy_H / d alpha1 (m/rad): F_H a rib's generalised force on alpha1 is -F_H times it."""
+        return self.mech.lever(a1)
 
     def _inverse_dynamics(self, a1: float, rate: float, accel: float) -> float:
         h = 1e-6
         dm = (self.inertia(a1 + h) - self.inertia(a1 - h)) / (2 * h)
-        return -(self.inertia(a1) * accel + 0.5 * dm * rate * rate) / self.lever(a1)
+        return -(self.inertia(a1) * accel + 0.5 * dm * rate * rate
+                 + self.mech.friction(a1, rate)) / self.lever(a1)
 
     # ------------------------------------------------------------------- plan
     def _plan(self) -> None:
@@ -114,12 +118,12 @@ class DeployLaw:
         s(d) = min(full push from rest, cruise, braking curve, creep) over the remaining
         angle d, the cruise rate bisected to take target_time.
         """
-        p, c = self.params, self.cfg
+        c = self.cfg
         d = np.linspace(self.span, 0.0, self.GRID + 1)          # remaining angle, decreasing
-        alpha = p.alpha_deployed + d
-        y = np.array([self.mech.sleeve_height(a, self.mech.alpha2(a)) for a in alpha])
+        alpha = self.alpha_deployed + d
+        y = np.array([self.mech.sleeve_height(a) for a in alpha])
         m = np.array([self.inertia(a) for a in alpha])
-        push = np.sqrt(np.maximum(2.0 * c.max_force * (y[0] - y) / m, 0.0))  # 1/2 m s^2 = W
+        push = self._full_push(alpha, y, m)
         s_e, d_c, dec = self.lock_rate, c.creep_angle, self.deceleration
         if dec > 0:
             brake = np.where(d > d_c, np.sqrt(s_e ** 2 + 2 * dec * np.maximum(d - d_c, 0.0)),
@@ -159,6 +163,26 @@ class DeployLaw:
         self.plan_force = np.array([self._inverse_dynamics(a, r, acc)
                                     for a, r, acc in zip(alpha, rate, accel)])
 
+    def _full_push(self, alpha: np.ndarray, y: np.ndarray, m: np.ndarray) -> np.ndarray:
+        """
+        Return |alpha1'| of the full push from rest along the plan's grid: 1/2 M s^2 = W.
+
+        W, the work of N max_force on the sleeve, less the hinges' friction: the Coulomb
+        torques' at speed, and the viscous ones' along the push itself (step by step).
+        """
+        mech = self.mech
+        work = self.cfg.max_force * mech.ribs * (y[0] - y)
+        if mech.rubs:
+            work = work - np.array([mech.friction_work(a) for a in alpha])
+        if not any(mech.viscous):
+            return np.sqrt(np.maximum(2.0 * work / m, 0.0))
+        energy = np.zeros_like(work)
+        for i in range(1, len(alpha)):
+            speed = math.sqrt(max(2.0 * energy[i - 1] / m[i - 1], 0.0))
+            loss = mech.viscous_coefficient(alpha[i - 1]) * speed * (alpha[i - 1] - alpha[i])
+            energy[i] = max(energy[i - 1] + work[i] - work[i - 1] - loss, 0.0)
+        return np.sqrt(2.0 * energy / m)
+
     def reference(self, t: float) -> tuple[float, float, float]:
         """
         Return (alpha1_ref, alpha1'_ref, alpha1''_ref) at sim time t.
@@ -169,12 +193,26 @@ class DeployLaw:
         tau = t - self.t_start
         end = self.plan_t[-1]
         if tau >= end:
-            return self.params.alpha_deployed + self.plan_rate[-1] * (tau - end), \
+            return self.alpha_deployed + self.plan_rate[-1] * (tau - end), \
                 self.plan_rate[-1], 0.0
         tau = max(tau, 0.0)
         return (float(np.interp(tau, self.plan_t, self.plan_alpha)),
                 float(np.interp(tau, self.plan_t, self.plan_rate)),
                 float(np.interp(tau, self.plan_t, self.plan_accel)))
+
+    def open_loop_profile(self, step: float) -> list[tuple[float, float]]:
+        """
+        Return the plan's force alone as a (t, F) profile on a grid of ``step`` seconds.
+
+        Each step's value is the plan's force at its middle, within the limits, from the
+        plan's t = 0 (the first push) to its end; then 0.  No feedback: what the plan alone
+        does to a frame (RunDriver's force_profile, a --force-profile CSV).
+        """
+        times = np.arange(int(math.ceil(self.plan_t[-1] / step))) * step
+        forces = np.clip(np.interp(times + 0.5 * step, self.plan_t, self.plan_force),
+                         self.cfg.min_force, self.cfg.max_force)
+        return [(float(t), float(f)) for t, f in zip(times, forces)] + \
+            [(float(len(times) * step), 0.0)]
 
     # -------------------------------------------------------------------- law
     def start(self, t: float) -> None:
@@ -219,18 +257,33 @@ def constant_force_for(params: UmbrellaParams, target_time: float, rtol: float =
     raise ValueError(f'no constant force found deploying in {target_time:g} s')
 
 
-def simulate_closed_loop(params: UmbrellaParams, cfg: ControllerConfig,
-                         publish_rate: float = 200.0, delay: int = 1, after_lock: float = 0.5):
+def leaf_state(sample) -> tuple[float, float]:
+    """
+    Return what the law reads of a publication: (alpha1, alpha1').
+
+    The planar frame's; of the umbrella of N ribs (a Sample3D, per-rib arrays) the ribs'
+    mean leaf angle and rate (rigid.mean_leaf_angle), as the node reads its joint states.
+    """
+    return (mean_leaf_angle(np.atleast_1d(sample.alpha1)),
+            mean_leaf_angle(np.atleast_1d(sample.alpha1_rate)))
+
+
+def simulate_closed_loop(params: UmbrellaParams | UmbrellaRibsParams, cfg: ControllerConfig,
+                         publish_rate: float = 200.0, delay: int = 1, after_lock: float = 0.5,
+                         plan_on: UmbrellaParams | UmbrellaRibsParams | None = None):
     """
     Run the law against the physics core as the node runs it.
 
     States are published at publish_rate (the node's publication Samples: peak stresses held
     over each period), each command acts ``delay`` publications later (the DDS round trip).
-    Returns (RunResult of the publications, first push time).
+    params: the planar frame, or the umbrella of N ribs (the law plans on the whole of it
+    and reads the ribs' mean leaf angle); plan_on: the model the law plans on, if not
+    params (what planning on other values costs).  Returns (RunResult of the publications,
+    first push time).
     """
     driver = RunDriver(params.replace(v0=0.0), publish_rate)
     sim = driver.sim
-    law = DeployLaw(params, cfg)
+    law = DeployLaw(params if plan_on is None else plan_on, cfg)
     period = 1.0 / publish_rate
     result = RunResult(params=driver.params.as_dict())
     s = driver.publication()
@@ -239,7 +292,7 @@ def simulate_closed_loop(params: UmbrellaParams, cfg: ControllerConfig,
     law.start(delay * period)
     while sim.lock_event is None or sim.time < sim.lock_event.time + after_lock - 1e-12:
         pending.append(0.0 if sim.lock_event else
-                       law.force(s.time, s.alpha1, s.alpha1_rate, (delay + 0.5) * period))
+                       law.force(s.time, *leaf_state(s), (delay + 0.5) * period))
         driver.command(pending.pop(0))
         result.error = driver.advance_period()[-1].error
         if result.error is not None:

@@ -16,7 +16,9 @@
 Closed-form rigid two-angle model and a work-energy quadrature.
 
 The model of thesis 4.6 (Eq. 4.120-4.125, re-derived) and the
-independent work-energy quadrature of its deployment time.
+independent work-energy quadrature of its deployment time; ``RigidUmbrella``, the umbrella
+of N such rigid ribs on one sleeve (each rib's own record, tip mass and hinge friction),
+which the deployment law plans on.
 
 Leaf: uniform bar O-G of length l1 + l2 hinged at O; link: uniform bar O''-H of length l3.
 Coordinates (alpha1, alpha2), one constraint Phi = l1 cos(alpha1) + l3 cos(alpha2) = 0 (4.123).
@@ -28,6 +30,7 @@ with I1' = rho A (l1+l2)^3 / 3, I2' = m2 l3^2 / 3 (so the printed (3/2)(l1/l3) I
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -58,6 +61,28 @@ class RigidMechanism:
     def sleeve_height(self, alpha1: float, alpha2: float) -> float:
         p = self.params
         return p.l1 * math.sin(alpha1) + p.l3 * math.sin(alpha2)
+
+    def sleeve_lever(self, alpha1: float) -> float:
+        """Return dy_H / d alpha1 (m/rad): F_H's generalised force on alpha1 is -F_H times it."""
+        p = self.params
+        a2 = self.alpha2(alpha1)
+        return p.l1 * math.cos(alpha1) + p.l3 * math.cos(a2) * self.alpha2_rate_ratio(alpha1, a2)
+
+    def generalized_mass(self, alpha1: float) -> float:
+        """Return m(alpha1), T = 1/2 m alpha1'^2 on the constraint (4.120 with 4.124)."""
+        a2 = self.alpha2(alpha1)
+        return 2.0 * self.kinetic_energy(alpha1, a2, 1.0, self.alpha2_rate_ratio(alpha1, a2))
+
+    def alpha1_at(self, sleeve_height: float) -> float:
+        """
+        Return the leaf angle that puts the sleeve at this height.
+
+        The triangle O, H and the link's hinge on the leaf: l3^2 = l1^2 + y^2 - 2 l1 y sin a,
+        for a height within the rib's reach (params3d.rib_reach; at its top, l1 + l3, the
+        sine is 1 but for round-off).
+        """
+        p, y = self.params, sleeve_height
+        return math.asin(min((y * y + p.l1 ** 2 - p.l3 ** 2) / (2.0 * p.l1 * y), 1.0))
 
     def mass_matrix(self, alpha1: float, alpha2: float) -> np.ndarray:
         m12 = self.coupling * math.cos(alpha1 - alpha2)
@@ -98,8 +123,7 @@ class RigidMechanism:
         a1 = p.alpha0
         a2 = self.alpha2(a1)
         ratio = self.alpha2_rate_ratio(a1, a2)
-        dy = p.l1 * math.cos(a1) + p.l3 * math.cos(a2) * ratio
-        w1 = v0 / dy
+        w1 = v0 / self.sleeve_lever(a1)
         return np.array([a1, a2, w1, ratio * w1])
 
     def project(self, y) -> tuple[float, float, float, float]:
@@ -121,6 +145,156 @@ class RigidMechanism:
         k4 = f(*(yi + h * ki for yi, ki in zip(y, k3)))
         return self.project([yi + h / 6.0 * (a + 2 * b + 2 * c + d)
                              for yi, a, b, c, d in zip(y, k1, k2, k3, k4)])
+
+
+def mean_leaf_angle(angles) -> float:
+    """
+    Return the ribs' mean leaf angle (or rate), the coordinate the deployment law reads.
+
+    One rib: its own angle (the planar frame's alpha1).
+    """
+    angles = list(angles)
+    return math.fsum(angles) / len(angles)
+
+
+class RigidUmbrella:
+    """
+    The umbrella of N rigid ribs on the one sleeve, in the ribs' mean leaf angle q.
+
+    Each rib is the rigid two-angle model of its own record (RigidMechanism: its lengths,
+    section and density), with its tip mass at G (a point at l1 + l2 + tip_offset_x along
+    the leaf and tip_offset_y across it: its moment about the hinge axis), and the friction
+    of its leaf hinge (hinge_coulomb tanh(rate / hinge_regularisation) + hinge_viscous rate,
+    as the simulator's); the sleeve (sleeve_mass) carries the N links.  Rigid, every rib's
+    leaf angle a_k is a function of the sleeve's height y (RigidMechanism.alpha1_at) and q
+    is their mean (mean_leaf_angle, what the controller reads of the joint states):
+
+        T = 1/2 M(q) q'^2,   M = sum_k m_k(a_k) (da_k/dq)^2 + m_s (dy/dq)^2,
+
+    the sleeve's N F doing the work -N F dy and each hinge's friction torque tau_k the work
+    -tau_k da_k.  So M q'' + 1/2 M'(q) q'^2 = -F lever(q) - friction(q, q'), lever = N dy/dq.
+    The planar record (UmbrellaParams) is one rib, with no tip mass and no friction: q is
+    its alpha1 and M its m(alpha1); N identical ribs give N times its M and its lever.
+    """
+
+    def __init__(self, params):
+        from .umbrella3d.params3d import rib_reach, UmbrellaRibsParams
+
+        if isinstance(params, UmbrellaRibsParams):
+            planar, ribs = params.planar, params.ribs_list()
+            self.sleeve_mass = params.sleeve_mass
+            self.regularisation = params.hinge_regularisation
+            records = [rib.planar for rib in ribs]
+            self.tip_inertia = [rib.tip_mass * ((rib.planar.l1 + rib.planar.l2
+                                                 + rib.tip_offset_x) ** 2 + rib.tip_offset_y ** 2)
+                                for rib in ribs]
+            self.coulomb = [rib.hinge_coulomb for rib in ribs]
+            self.viscous = [rib.hinge_viscous for rib in ribs]
+        else:
+            planar, records = params, [params]
+            self.sleeve_mass, self.regularisation = 0.0, 1.0
+            self.tip_inertia, self.coulomb, self.viscous = [0.0], [0.0], [0.0]
+        self.planar = planar
+        self.ribs = len(records)
+        self.mechs = [RigidMechanism(r) for r in records]
+        self.rubs = any(self.coulomb) or any(self.viscous)
+        # every rib of the planar record's lengths has its leaf angle: q is it, y its height
+        self.shared_lengths = all((r.l1, r.l3) == (planar.l1, planar.l3) for r in records)
+        self._planar = RigidMechanism(planar)
+        reach = [rib_reach(r.l1, r.l3) for r in records]
+        self._last_height: float | None = None
+        # (the plan asks each point's geometry several times: once solved, kept)
+        self._geometry = functools.lru_cache(maxsize=1 << 15)(self._solve_geometry)
+        self._reach = (max(r[1] for r in reach), min(r[2] for r in reach))
+        self.alpha0 = self._coordinate_at(planar.sleeve_start_height, planar.alpha0)
+        self.alpha_deployed = self._coordinate_at(planar.sleeve_stop_height,
+                                                  planar.alpha_deployed)
+        self._start_angles = self.sleeve_and_angles(self.alpha0)[1]
+
+    def _coordinate_at(self, y: float, planar_angle: float) -> float:
+        """Return q where the sleeve stands at y (planar_angle: the record's angle there)."""
+        if self.shared_lengths:
+            return planar_angle
+        return mean_leaf_angle(m.alpha1_at(y) for m in self.mechs)
+
+    def sleeve_and_angles(self, q: float) -> tuple[float, list[float]]:
+        """Return the sleeve's height y and every rib's leaf angle a_k at the coordinate q."""
+        if self.shared_lengths:         # every rib's angle is q
+            mech = self._planar
+            return mech.sleeve_height(q, mech.alpha2(q)), [q] * self.ribs
+        return self._geometry(q)[:2]
+
+    def sleeve_height(self, q: float) -> float:
+        """Return the sleeve's height y (m) at the coordinate q."""
+        return self.sleeve_and_angles(q)[0]
+
+    def _jacobians(self, q: float) -> tuple[list[float], list[float], float]:
+        """Return (a_k, da_k/dq, dy/dq) at q."""
+        if self.shared_lengths:
+            return [q] * self.ribs, [1.0] * self.ribs, self._planar.sleeve_lever(q)
+        return self._geometry(q)[1:]
+
+    def _solve_geometry(self, q: float) -> tuple[float, list[float], list[float], float]:
+        """
+        Return (y, a_k, da_k/dq, dy/dq) at q, of ribs of their own lengths.
+
+        Newton on mean_k a_k(y) = q (each a_k rises with y, da_k/dy = 1 / the rib's lever),
+        from the last answer (the plan walks its grid: three steps) or the record's height,
+        kept within the heights every rib reaches (a step out of them bisects instead).
+        """
+        mech = self._planar
+        lo, hi = self._reach
+        y = min(max(self._last_height or mech.sleeve_height(q, mech.alpha2(q)), lo), hi)
+        for _ in range(100):
+            angles = [m.alpha1_at(y) for m in self.mechs]
+            rates = [1.0 / m.sleeve_lever(a) for m, a in zip(self.mechs, angles)]
+            error = mean_leaf_angle(angles) - q
+            if error > 0.0:
+                hi = y
+            elif error < 0.0:
+                lo = y
+            slope = mean_leaf_angle(rates)
+            y_next = y - error / slope
+            if abs(y_next - y) <= 1e-15 * y:
+                break
+            y = y_next if lo <= y_next <= hi else 0.5 * (lo + hi)
+        self._last_height = y
+        return y, angles, [r / slope for r in rates], 1.0 / slope
+
+    def inertia(self, q: float) -> float:
+        """Return the generalised mass M(q): T = 1/2 M q'^2 (kg m^2)."""
+        angles, jac, dy = self._jacobians(q)
+        ribs = math.fsum((m.generalized_mass(a) + tip) * j * j for m, a, tip, j
+                         in zip(self.mechs, angles, self.tip_inertia, jac))
+        return ribs + self.sleeve_mass * dy * dy
+
+    def lever(self, q: float) -> float:
+        """Return N dy/dq (m/rad): F a rib's generalised force on q is -F times this."""
+        return self.ribs * self._jacobians(q)[2]
+
+    def friction(self, q: float, rate: float) -> float:
+        """Return the hinges' friction on q at the rate q' as a resistance (its force is -this)."""
+        if not self.rubs:
+            return 0.0
+        _, jac, _ = self._jacobians(q)
+        eps = self.regularisation
+        return math.fsum(j * (c * j * rate + tau * math.tanh(j * rate / eps))
+                         for j, c, tau in zip(jac, self.viscous, self.coulomb))
+
+    def friction_work(self, q: float) -> float:
+        """Return the Coulomb friction's work from alpha0 to q, at speed (J, >= 0)."""
+        if not any(self.coulomb):
+            return 0.0
+        _, angles = self.sleeve_and_angles(q)
+        start = self._start_angles
+        return math.fsum(tau * abs(a0 - a) for tau, a0, a in zip(self.coulomb, start, angles))
+
+    def viscous_coefficient(self, q: float) -> float:
+        """Return sum_k c_k (da_k/dq)^2: the viscous hinges' resistance is this times q'."""
+        if not any(self.viscous):
+            return 0.0
+        _, jac, _ = self._jacobians(q)
+        return math.fsum(c * j * j for c, j in zip(self.viscous, jac))
 
 
 def deployment_time_by_quadrature(params: UmbrellaParams, v0: float | None = None,
@@ -145,10 +319,7 @@ def deployment_time_by_quadrature(params: UmbrellaParams, v0: float | None = Non
     t0 = mech.kinetic_energy(*y0)
     h0 = mech.sleeve_height(a0, mech.alpha2(a0))
 
-    def generalized_mass(a1):
-        a2 = mech.alpha2(a1)
-        r = mech.alpha2_rate_ratio(a1, a2)
-        return 2.0 * mech.kinetic_energy(a1, a2, 1.0, r)
+    generalized_mass = mech.generalized_mass
 
     def energy(a1):
         return t0 + force * (h0 - mech.sleeve_height(a1, mech.alpha2(a1)))
@@ -160,8 +331,7 @@ def deployment_time_by_quadrature(params: UmbrellaParams, v0: float | None = Non
     if force <= 0.0:
         return math.inf
     # energy ~ F dy_H/da (a0 - a) near the start: integrate g(a) (a0 - a)^(-1/2), alg weight
-    a20 = mech.alpha2(a0)
-    dy0 = p.l1 * math.cos(a0) + p.l3 * math.cos(a20) * mech.alpha2_rate_ratio(a0, a20)
+    dy0 = mech.sleeve_lever(a0)
 
     def g(a):
         if a0 - a < 1e-12:

@@ -17,12 +17,13 @@ deploy_controller: closed-loop deployment of the umbrella frame over ROS topics.
 
 Subscribes ``joint_states`` and ``deployment_phase`` of an ``umbrella_node`` and publishes
 ``sleeve_force``, one command per joint state, from the law of ``core.control.DeployLaw``
-(planned on the rigid two-angle model of the same frame; see that module for the law and
-msg_docs/deploy_controller.md for the node).  Of the umbrella of N ribs it reads the ribs'
-mean leaf angle and the sleeve's effort, N F, and commands F, the node's force per rib
-(:func:`drive_state`).  Its parameters are the registry's
-(``core.params.CONTROLLER_PARAMETERS``: typed, ranged, read-only) and the model's geometry,
-which a params file shared with umbrella_node gives.
+(planned on the rigid model of the same frame, or of the whole umbrella of N ribs: see that
+module for the law and msg_docs/deploy_controller.md for the node).  Of the umbrella of N
+ribs it reads the ribs' mean leaf angle and the sleeve's effort, N F, and commands F, the
+node's force per rib (:func:`drive_state`).  Its parameters are the registry's
+(``core.params.CONTROLLER_PARAMETERS``: typed, ranged, read-only) and the model's, the
+umbrella's (ribs, rib.<name>, rib<k>.<name>) included, which a params file shared with
+umbrella_node gives.
 """
 from __future__ import annotations
 
@@ -34,12 +35,15 @@ import time
 
 
 from . import signals as stop_signals
-from .parameters import declare_from_registry, NamedRefusals, wrong_type_text
+from .parameters import declare_from_registry, declare_umbrella, NamedRefusals, wrong_type_text
 from .params_file import (check_parameter_sources, check_qos_override_sources, init_ros,
                           param_rules_in)
 from ..core.control import DeployLaw
 from ..core.params import ControllerConfig, UmbrellaParams
 from ..core.registry import CONTROLLER_PARAMETERS, defaults, parameter_help
+from ..core.rigid import mean_leaf_angle
+from ..core.umbrella3d.params3d import (names_a_rib, umbrella_model, umbrella_parameter_help,
+                                        umbrella_parameter_names)
 
 
 #: at rest for the plan: rate and angle from the start within this fraction of the plan's
@@ -53,7 +57,7 @@ REST_FRACTION = 0.05
 #: arrives; a node that got both applies the same force twice.
 RESEND_S = 0.25
 CONTROLLER_PARAMETERS_LISTED = ('deploy_controller --help and in msg_docs/deploy_controller.md '
-                                "(and umbrella_node's, for the model)")
+                                "(and umbrella_node's, for the model and the umbrella)")
 
 
 # ======================================================================= ROS node
@@ -62,10 +66,11 @@ def drive_state(msg) -> dict:
     Return what the law reads of a joint state: alpha1, its rate, ribs and sleeve_force.
 
     The planar frame's (ros_io.joint_state_figures), or of the umbrella of N ribs (2 N + 1
-    joints, ribs_messages.rib_joint_figures) the ribs' mean leaf angle and rate: N identical
-    ribs each follow the planar frame, whose rigid model the law plans on.  ``sleeve_force``
-    is the sleeve's effort as published: F on the planar frame, the whole sleeve's N F on
-    the umbrella, whose command F is per rib.
+    joints, ribs_messages.rib_joint_figures) the ribs' mean leaf angle and rate
+    (rigid.mean_leaf_angle: the coordinate the law plans the whole umbrella in; N identical
+    ribs each follow the planar frame).  ``sleeve_force`` is the sleeve's effort as
+    published: F on the planar frame, the whole sleeve's N F on the umbrella, whose command
+    F is per rib.
     """
     from . import messages as ros_io
 
@@ -76,9 +81,8 @@ def drive_state(msg) -> dict:
     from .ribs_messages import rib_joint_figures
 
     state = rib_joint_figures(msg)
-    n = len(state['alpha1'])
-    return {'alpha1': math.fsum(state['alpha1']) / n,
-            'alpha1_rate': math.fsum(state['alpha1_rate']) / n, 'ribs': n,
+    return {'alpha1': mean_leaf_angle(state['alpha1']),
+            'alpha1_rate': mean_leaf_angle(state['alpha1_rate']), 'ribs': len(state['alpha1']),
             'sleeve_force': state['sleeve_force']}
 
 
@@ -98,12 +102,13 @@ def _make_node_class():
             super().__init__('deploy_controller')
             # a misspelt name is an error, never a silent default; the node's own names are
             # taken (and not used: the numerics), so one params file can serve both nodes
-            known = set(CONTROLLER_PARAMETERS) | set(defaults())
+            known = (set(CONTROLLER_PARAMETERS) | set(defaults())
+                     | umbrella_parameter_names())
             fqn = self.get_fully_qualified_name()
             try:
                 found = check_parameter_sources(fqn, params_files, self._parameter_overrides,
                                                 known, CONTROLLER_PARAMETERS_LISTED,
-                                                rules=param_rules)
+                                                rules=param_rules, own=names_a_rib)
                 warnings = found.warnings + check_qos_override_sources(
                     fqn, found, (), CONTROLLER_PARAMETERS_LISTED, ' (its topics take none)')
             except ValueError as exc:
@@ -124,8 +129,12 @@ def _make_node_class():
                     name=name, read_only=True, dynamic_typing=True,
                     description='model parameter: give the value umbrella_node has')).value
             try:
+                # the umbrella of N ribs (ribs >= 2, each rib's own values): planned whole
+                umbrella = declare_umbrella(self)
+                self.ribs = umbrella.get('ribs', 1)
                 cfg = ControllerConfig(**values).validated()
-                self.law = DeployLaw(UmbrellaParams.from_mapping(model), cfg)
+                self.law = DeployLaw(umbrella_model(
+                    UmbrellaParams.from_mapping(model).validated(), umbrella), cfg)
             except ValueError as exc:
                 raise StartupError(str(exc)) from None
             self.pub = self.create_publisher(Float64, ros_io.COMMAND.name, ros_io.COMMAND.qos)
@@ -152,10 +161,13 @@ def _make_node_class():
             # the last command and its wall time, until a state answers it or it is resent
             self._unanswered: tuple | None = None
             self.create_timer(RESEND_S / 2, self._resend_unanswered)
+            planned = (f'planned on the umbrella of {self.ribs} ribs, each its own'
+                       if self.ribs > 1 else 'planned on one rib (N identical ribs alike)')
             self.get_logger().info(
                 f'target {cfg.target_time:g} s, force in [{cfg.min_force:g}, '
-                f'{cfg.max_force:g}] N, lock rate {self.law.lock_rate:.4g} rad/s, '
-                f'deceleration {self.law.deceleration:.4g} rad/s^2; waiting for joint_states')
+                f'{cfg.max_force:g}] N a rib, lock rate {self.law.lock_rate:.4g} rad/s, '
+                f'deceleration {self.law.deceleration:.4g} rad/s^2, {planned}; waiting for '
+                'joint_states')
 
         def _restart(self, why: str) -> None:
             """Deploy a new run of the simulation (~/reset, a restarted node) afresh."""
@@ -217,7 +229,8 @@ def _make_node_class():
                     self.law.start(t - self._period)
                     self.get_logger().info(f'first push acting from t = '
                                            f'{self.law.t_start:.6f} s')
-                elif not self.commanding and not self._at_rest(t, state):
+                elif not self.commanding and not (self._ribs_match(t, state['ribs'])
+                                                  and self._at_rest(t, state)):
                     self.done = True        # idle until a new run
                     return
                 else:
@@ -227,6 +240,23 @@ def _make_node_class():
             self._check_commands_applied(t, effort)
             self._send(t, self.law.force(t, state['alpha1'], state['alpha1_rate'], self.lead()))
 
+        def _ribs_match(self, t: float, ribs: int) -> bool:
+            """
+            Tell whether the node runs the ribs the plan is for; else log why not.
+
+            Given ribs (>= 2), the plan is that umbrella's, each rib its own values: another
+            number of ribs is another umbrella.  Not given, it is one rib's, which N identical
+            ribs each follow.
+            """
+            if self.ribs < 2 or ribs == self.ribs:
+                return True
+            self.get_logger().error(
+                f'the node runs {ribs} rib{"s" if ribs > 1 else ""} (its joint_states at '
+                f't = {t:.6f} s) and the plan is for the umbrella of ribs:={self.ribs}: give '
+                'both nodes the same ribs and rib values (one params file); not commanding '
+                'this run')
+            return False
+
         def _at_rest(self, t: float, state: dict) -> bool:
             """
             Tell whether the frame is folded and at rest, where the plan starts.
@@ -235,14 +265,14 @@ def _make_node_class():
             for this run: pushing a frame already deploying faster than the plan only makes
             its lock harder.
             """
-            p, law = self.law.params, self.law
+            law = self.law
             rate, angle = state['alpha1_rate'], state['alpha1']
             if abs(rate) <= REST_FRACTION * law.cruise and \
-                    abs(angle - p.alpha0) <= REST_FRACTION * law.span:
+                    abs(angle - law.alpha0) <= REST_FRACTION * law.span:
                 return True
             self.get_logger().error(
                 f'the frame is not folded at rest at t = {t:.6f} s (alpha1 = {angle:.6g} rad, '
-                f"alpha1' = {rate:.6g} rad/s; the plan starts at alpha0 = {p.alpha0:.6g} rad "
+                f"alpha1' = {rate:.6g} rad/s; the plan starts at alpha0 = {law.alpha0:.6g} rad "
                 f'at rest and cruises at {law.cruise:.4g} rad/s): give umbrella_node v0:=0.0 '
                 '(and no other sleeve_force command); not commanding this run (a ~/reset '
                 'starts a new one)')
@@ -383,4 +413,7 @@ def usage() -> str:
     lines += parameter_help(CONTROLLER_PARAMETERS.values())
     lines.append("model parameters: the same names and values as umbrella_node's "
                  '(l1, alpha0, ...)')
+    lines += umbrella_parameter_help()
+    lines.append("  given ribs >= 2, the plan is the whole umbrella's (each rib its own "
+                 "inertia, lengths, tip mass, hinge friction); not given, one rib's")
     return '\n'.join(lines)
