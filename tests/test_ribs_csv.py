@@ -246,8 +246,12 @@ def test_the_text_summary_gives_each_ribs_figures_with_units(capsys):
     assert not any('{' in text for text in lines.values())     # no Python dict written out
 
 
-@pytest.mark.parametrize('model', [[], ['--set', 'ribs=3', '--set', 'rib.tip_mass=[0, 0, 0.01]']],
-                         ids=['planar', 'ribs'])
+@pytest.mark.parametrize('model', [
+    [], ['--set', 'ribs=3', '--set', 'rib.tip_mass=[0, 0, 0.01]'],
+    # works that add up (the sleeve force's, a rubbing hinge's, the damping's): the running
+    # totals summed alike whatever blocks the run is stepped in
+    ['--set', 'ribs=3', '--set', 'rib.hinge_coulomb=[0, 0.5, 0]', '--v0', '0', '--force', '40',
+     '--set', 'damping_ratio=0.02']], ids=['planar', 'ribs', 'ribs-with-works'])
 def test_the_csv_is_every_step_with_or_without_a_recording(model, tmp_path, capsys):
     """--mcap steps the same run on the publication grid: the same summary, the same rows."""
     run = ['simulate', *model, '--time-step', '2e-4', '--duration', '0.3', '--json']
@@ -259,7 +263,8 @@ def test_the_csv_is_every_step_with_or_without_a_recording(model, tmp_path, caps
     again = json.loads(capsys.readouterr().out)
     assert recorded.read_bytes() == plain.read_bytes()
     assert len(plain.read_text().splitlines()) == figures['steps'] + 3   # header, t = 0, lock
-    for key in ('deploy_time', 'energy_drift', 'constraint_residual_max', 'peak_stress'):
+    for key in ('deploy_time', 'energy_drift', 'constraint_residual_max', 'peak_stress',
+                'sleeve_work', 'friction_work', 'damping_dissipation'):
         assert again.get(key) == figures.get(key)
 
 

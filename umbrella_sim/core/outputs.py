@@ -429,6 +429,19 @@ def fold_substeps(rows: np.ndarray, states: np.ndarray | None, m: int
     return out, None if states is None else states[:, ends]
 
 
+def running_total(total, steps) -> np.ndarray:
+    """
+    Return a running figure after each of steps, summed on from its total before them.
+
+    total: the figure so far (a work, a dissipation; a scalar or one value per rib); steps:
+    what each step adds, steps first.  Each row is the row before plus its step, as one step
+    at a time adds it, so the figure has the same bits however the run is chunked into
+    blocks (np.cumsum(steps) + total rounds a block's partial sums apart from the total).
+    """
+    start = np.asarray(total, dtype=float)[None]
+    return np.add.accumulate(np.concatenate((start, np.asarray(steps, dtype=float))))[1:]
+
+
 def substep_ends(steps: int, m: int) -> np.ndarray:
     """Return each grid step's last physics step of `steps` taken m a grid step (fold)."""
     return np.minimum(np.arange(m - 1, steps + m - 1, m), steps - 1)

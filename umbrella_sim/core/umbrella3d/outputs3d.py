@@ -34,7 +34,8 @@ import math
 
 import numpy as np
 
-from ..outputs import first_largest_of_substeps, hermite_crests, substep_ends
+from ..outputs import (first_largest_of_substeps, hermite_crests, running_total,
+                       substep_ends)
 
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
 #: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
@@ -160,20 +161,15 @@ class Record3D:
             rows = self._grid_rows(rows, locked, substeps, times)
         elif times is not None:         # (rows the kernel folded: at the grid's times)
             rows = dict(rows, t=np.asarray(times, dtype=float))
-        # (the ufuncs' own accumulate and reduce: np.cumsum's and np.sum's arithmetic,
-        # without their dispatch, which costs more than the sums of a block of steps)
-        accumulate = np.add.accumulate
-        work = accumulate(rows['work_force'])
-        work += self.work
-        friction = accumulate(rows['work_friction'])
-        friction += self.friction
-        drive = accumulate(rows['work_drive'])
-        drive += self.drive
+        # (each work summed on from its total so far, step by step, as add sums it: the
+        # same bits however the run is chunked into blocks)
+        work = running_total(self.work, rows['work_force'])
+        friction = running_total(self.friction, rows['work_friction'])
+        drive = running_total(self.drive, rows['work_drive'])
         self.work, self.friction = float(work[-1]), friction[-1].copy()
         self.drive = float(drive[-1])
         if 'work_damping' in rows:
-            damping = accumulate(rows['work_damping'])
-            damping += self.damping
+            damping = running_total(self.damping, rows['work_damping'])
         else:
             damping = self._constant('damping_dissipation', len(work), self.damping)
         self.damping = float(damping[-1])
