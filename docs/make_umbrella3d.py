@@ -975,6 +975,11 @@ stage 2 0.950 x at 0.986 core and 1.015 x at 1.024 core (two runs). Neither targ
 """
 
 
+#: rib 1 of 3 heavier, stiffer; a deployment from rest by the sleeve force (N a rib)
+HEAVIER, STIFFER = {'rib1.tip_mass': 0.1}, {'rib1.youngs_modulus': 1.44e11}
+FROM_REST = {'v0': 0.0, 'sleeve_force': 10.0}
+
+
 def asymmetry_paragraph() -> str:
     """Return what an asymmetry does to the deployment: the ribs' spread, the stall."""
     spread = []
@@ -985,21 +990,37 @@ def asymmetry_paragraph() -> str:
     base = UmbrellaRibsParams.from_mapping({'ribs': 3})
     kinetic = float(UmbrellaSimulator3D(base).record.arrays()['kinetic_energy'][0])
     stall = kinetic / (base.planar.alpha0 - base.planar.alpha_deployed)
-    progress('asymmetry: spreads and the stall torque')
+    # the lock with rib 1 heavier or stiffer, from the default V0 without a sleeve force
+    # and from rest under one
+    ribs = {'alike': {}, 'heavier': HEAVIER, 'stiffer': STIFFER}
+    drives = {'v0': {}, 'rest': FROM_REST}
+    lock = {(r, d): UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(
+        {'ribs': 3, **ribs[r], **drives[d]})).run(0.6).summary()['lock_time']
+        for r in ribs for d in drives}
+    heavier = {d: f"{lock['heavier', d]:.4f} s against {lock['alike', d]:.4f} s" for d in drives}
+    stiffer = {d: f"{1e6 * (lock['stiffer', d] - lock['alike', d]):+.0f}".replace('-', '−')
+               for d in drives}
+    progress('asymmetry: spreads, locks and the stall torque')
     return (
         'What an asymmetry does to the deployment. One sleeve drives every rib through its '
         "link, so\neach leaf's angle follows the sleeve's height but for the frame's elastic "
         'deformation: the\nribs reach full deployment together, at the lock (`deployment_lag` '
-        '0). A rubbing or sticking\nhinge, a stiffer or heavier rib shows as a later lock '
-        '(`deploy_time`), as the ribs apart on\nthe way (`max_leaf_angle_spread`: rib 1 of 3 '
-        f"rubbing at 0.5 / 1 / 2 N m holds its leaf\n{' / '.join(spread)} rad behind, "
-        "proportional to the torque) and in each rib's stage 2\n(`stage2_tip_amplitude` and "
-        '`_period` in its plane, `stage2_tip_w_amplitude` and `_period`\nout of it: a rib of '
-        "Young's modulus E1 rings at sqrt(E0/E1) times the others' period). A\nhinge that "
-        "takes more than the frame's kinetic energy can pay over the travel (rib 1 of the\n"
+        '0). An asymmetry moves the\nlock (`deploy_time`): a rubbing or sticking hinge '
+        'later; a heavier rib later where the\nsleeve force drives the deployment, earlier '
+        "where the start's velocity V0 does (rib 1 of\n3 with a "
+        f"{HEAVIER['rib1.tip_mass']:g} kg tip mass: {heavier['rest']} from rest under "
+        f"{FROM_REST['sleeve_force']:g} N a\nrib, {heavier['v0']} from V0 = −0.2 without "
+        'force); a stiffer rib hardly at all\n(twice the modulus: '
+        f"{stiffer['v0']} µs from V0 = −0.2, {stiffer['rest']} µs from rest). It shows as "
+        'the ribs\napart on the way (`max_leaf_angle_spread`: rib 1 of 3 rubbing at 0.5 / 1 / '
+        f"2 N m holds\nits leaf {' / '.join(spread)} rad behind, proportional to the "
+        "torque) and in each rib's\nstage 2 (`stage2_tip_amplitude` and `_period` in its "
+        'plane, `stage2_tip_w_amplitude` and\n`_period` out of it: a rib of '
+        "Young's modulus E1 rings at sqrt(E0/E1) times the others'\nperiod). A hinge that "
+        "takes more than the frame's kinetic energy can pay over the travel (rib\n1 of the "
         f"thesis's three from V0 = −0.2, no sleeve force: from {stall:.2f} N m) stops the "
-        "deployment: the run\nsays 'stalled' (where and when), and never locks. "
-        "umbrella_compare's table of the umbrella\nshows these figures run against run.")
+        "deployment:\nthe run says 'stalled' (where and when), and never locks. "
+        "umbrella_compare's table of the\numbrella shows these figures run against run.")
 
 
 def main():
