@@ -105,6 +105,21 @@ def test_the_rows_keep_the_energy_balance_with_the_friction_work(run):
     assert np.all(cols['sleeve_force'] == 3 * 40.0)
 
 
+def test_the_stop_reaction_is_the_stops_push_on_the_sleeve_along_plus_y(tmp_path):
+    """Settled on the stop under N F along -Y (damped), the stop pushes the sleeve up: +N F."""
+    path = tmp_path / 'settled.csv'
+    assert cli.main(['simulate', '--set', 'ribs=3', '--v0', '0', '--force', '40', '--set',
+                     'damping_ratio=0.5', '--duration', '0.4', '--csv', str(path)]) == 0
+    cols, units = read_csv(path)
+    locked = np.array(cols['stage']) == 'locked'
+    assert units['stop_reaction'] == 'N' and locked[-1]
+    assert not cols['stop_reaction'][~locked].any()                # no stop before the lock
+    assert cols['stop_reaction'][-1] == pytest.approx(3 * 40.0, rel=2e-3)
+    doc = (pathlib.Path(__file__).parents[1] / 'msg_docs' / 'topic_ribs.md').read_text()
+    row = next(line for line in doc.splitlines() if line.startswith('| `stop_reaction`'))
+    assert 'along +Y' in row and '+ pushes up' in row
+
+
 def test_the_stuck_hinge_holds_its_rib_and_mirror_ribs_agree(run):
     (cols, _), _ = run
     t = cols['time']
