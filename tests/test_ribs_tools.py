@@ -361,6 +361,24 @@ def test_replay_info_says_the_fault_that_ended_a_recording(tmp_path, capsys):
     assert 'peak von Mises (MPa), friction work (J)' in out
 
 
+def test_replay_info_gives_the_grid_step_and_stage_2_s_physics_step(tmp_path, capsys):
+    """--info's step is the grid step; stage 2's substeps of it, as the node's diagnostics."""
+    from umbrella_sim.tools import replay
+
+    bag = tmp_path / 'locked'
+    assert cli.main(['simulate', '--set', 'ribs=2', '--duration', '0.3', '--mcap',
+                     str(bag)]) == 0
+    capsys.readouterr()
+    log = read_log(str(bag))
+    grid = log.parameters()['physics_step']
+    stage2 = log.summary(0)[0]['stage2_resolution']['step']
+    assert stage2 < grid            # (the default: stage 2 in substeps of the grid step)
+    assert replay.main([str(bag), '--info']) == 0
+    out = capsys.readouterr().out
+    assert f"lock auto, grid step {grid:g} s (stage 2's physics step {stage2:.3g} s)" in out
+    assert ', physics step' not in out
+
+
 def test_replay_info_says_what_a_recording_holds(tmp_path, capsys):
     """umbrella_replay --info: topics, counts and QoS, and the run (no ros2 CLI needed)."""
     from umbrella_sim.tools import replay
@@ -377,7 +395,8 @@ def test_replay_info_says_what_a_recording_holds(tmp_path, capsys):
     stresses = log.count(log.find_topic('rib_peak_stress'))
     assert stresses == 21
     assert re.search(r'/rib_peak_stress +std_msgs/msg/Float64MultiArray  21 msgs', out)
-    assert '2 ribs' in out and 'physics step 0.0002 s' in out
+    assert '2 ribs' in out and 'grid step 0.0002 s' in out
+    assert "stage 2's physics step" not in out              # (it never locked)
     # the planar rib's own topics are not there (a node of ribs does not advertise them)
     assert not {'/tip_deflection', '/peak_stress'} & set(log.topics())
     assert f'messages:      {log.message_count}' in out

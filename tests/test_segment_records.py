@@ -236,7 +236,8 @@ def test_replay_info_names_each_segment_s_summary(bags, capsys):
     # locked (0 and 2 end before theirs)
     for k in (0, 1, 2):
         assert re.search(rf'^segment {k}: .*model flexible, 1 element\(s\) a segment, '
-                         r'v0 -0.2 m/s, lock auto, physics step [0-9.e-]+ s$', info, re.M), info
+                         r'v0 -0.2 m/s, lock auto, grid step [0-9.e-]+ s'
+                         r"( \(stage 2's physics step [0-9.e-]+ s\))?$", info, re.M), info
     locked = re.findall(r'^locked: +at t = [0-9.]+ s \(energy lock\) \((.*)\)$', info, re.M)
     assert locked == ['segment 1'], info
     # the build record is written at the start: its kernel is segment 0's

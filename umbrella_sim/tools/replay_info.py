@@ -20,6 +20,8 @@ build and the summary records; no ROS traffic, the log's records only.
 """
 from __future__ import annotations
 
+import math
+
 from ..bag.format import BUILD_RECORD, EVENTS_RECORD, MESH_RECORD, SUMMARY_RECORD
 from ..bag.reader import LogData, LogError, qos_from_yaml
 
@@ -64,10 +66,11 @@ def info_text(log: LogData) -> str:
             start = log.parameters()
         except LogError:            # (the mesh record alone: what it says)
             start = {}
-        lines.append(label + _run_text({**mesh, **start}))
+        lines.append(label + _run_text({**mesh, **start}, _stage2_step(log, 0)))
     for seg in segments[1:]:
         lines.append(f'segment {seg.index}:'.ljust(15) + f'from log time '
-                     f'{seg.offset_ns * 1e-9:.6f} s (~/reset): ' + _run_text(seg.params))
+                     f'{seg.offset_ns * 1e-9:.6f} s (~/reset): '
+                     + _run_text(seg.params, _stage2_step(log, seg.index)))
     for k in range(len(segments) or 1):
         events = (log.run_record(EVENTS_RECORD, k) if len(segments) > 1
                   else log.metadata.get(EVENTS_RECORD, {}))
@@ -107,12 +110,31 @@ def info_text(log: LogData) -> str:
     return '\n'.join(lines)
 
 
-def _run_text(p: dict) -> str:
-    """Return a run's line: its model, mesh, ribs, v0, lock and physics (grid) step."""
+def _stage2_step(log: LogData, index: int) -> float | None:
+    """Return the physics step stage 2 took in segment index (its summary's), or None."""
+    try:
+        summary = log.summary(index)
+    except LogError:
+        return None
+    resolution = summary[0].get('stage2_resolution') if summary else None
+    return resolution.get('step') if isinstance(resolution, dict) else None
+
+
+def _run_text(p: dict, stage2_step: float | None = None) -> str:
+    """
+    Return a run's line: its model, mesh, ribs, v0, lock and grid step.
+
+    The grid step (the parameters record's physics_step: the inputs' and outputs' step,
+    stage 1's physics step), and stage 2's physics step where it took substeps of it (as the
+    node's start line and its diagnostics' physics_step_s and grid_step_s say them).
+    """
     ribs = int(p.get('ribs', 1) or 1)
     step = p.get('physics_step')
+    substeps = (stage2_step is not None and step is not None
+                and not math.isclose(stage2_step, float(step), rel_tol=1e-9))
     return (f"model {p.get('model')}, {p.get('elements_per_segment')} element(s) a segment, "
             + (f'{ribs} ribs, ' if ribs > 1 else '')
             + (f"v0 {p['v0']} m/s, " if 'v0' in p else '')
             + f"lock {p.get('lock')}"
-            + (f', physics step {float(step):g} s' if step is not None else ''))
+            + (f', grid step {float(step):g} s' if step is not None else '')
+            + (f" (stage 2's physics step {stage2_step:.3g} s)" if substeps else ''))
