@@ -20,6 +20,7 @@ import sys
 
 import pytest
 
+from umbrella_sim.ros import signals
 from umbrella_sim.tools import entry
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -64,3 +65,50 @@ def test_once_a_node_s_main_has_returned_a_stop_signal_cannot_kill_its_exit(tool
     r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=ROOT,
                        env=dict(os.environ, PYTHONPATH=ROOT), timeout=120)
     assert r.stdout.splitlines()[-1] == '0 [True, True]', (r.stdout[-300:], r.stderr)
+
+
+WATCHER = """
+import sys, threading
+from umbrella_sim.ros import signals
+signals.install()
+stopped = threading.Event()
+signals.add_listener(lambda signum: stopped.set())
+signals.stop_with(sys.argv[1])
+print('watching', flush=True)
+print(signals.name(signals.received[0]) if stopped.wait(60) else 'no stop', flush=True)
+"""
+
+
+def test_a_node_takes_the_end_of_the_process_that_started_it_as_a_stop():
+    """
+    A test runner killed with no cleanup (a CI timeout) must not leave its nodes running.
+
+    The watched process ends, and is not reaped yet (a zombie, as a killed runner stays
+    until its own parent waits for it): the watcher sends itself SIGTERM, the stop request
+    the node acts on.
+    """
+    holder = subprocess.Popen([sys.executable, '-c', 'import sys; sys.stdin.read()'],
+                              stdin=subprocess.PIPE)
+    watcher = subprocess.Popen([sys.executable, '-c', WATCHER, str(holder.pid)],
+                               stdout=subprocess.PIPE, text=True, cwd=ROOT,
+                               env=dict(os.environ, PYTHONPATH=ROOT))
+    try:
+        assert watcher.stdout.readline() == 'watching\n'
+        assert signals.process_alive(holder.pid)
+        holder.stdin.close()                # the holder ends; not reaped: a zombie
+        out, _ = watcher.communicate(timeout=60)
+        assert not signals.process_alive(holder.pid)
+        assert out.split() == ['SIGTERM'], out
+    finally:
+        holder.wait()
+        if watcher.poll() is None:
+            watcher.kill()
+            watcher.wait()
+
+
+def test_a_bad_stop_with_variable_names_itself(monkeypatch, capsys):
+    monkeypatch.setenv(signals.STOP_WITH_ENV, 'parent')
+    monkeypatch.setattr(signals, 'install', lambda: None)   # (this process's handlers kept)
+    monkeypatch.setattr(signals, 'ignore_from_now', lambda: None)
+    assert entry.node_main() == 2
+    assert f"{signals.STOP_WITH_ENV}='parent'" in capsys.readouterr().err

@@ -23,6 +23,7 @@ import sys
 import pytest
 
 from tests.ros_helpers import keep_every_message
+from umbrella_sim.ros.signals import process_alive
 from umbrella_sim.testing import (default_domain_id, DOMAIN_ID_ENV, NodeProcess, poll, ros_env,
                                   summarize_run, summary_from_recording)
 from umbrella_sim.testing.processes import _shm_segments
@@ -214,6 +215,36 @@ def test_a_forgotten_close_or_a_ctrl_c_still_stops_the_node(tmp_path, how):
     pid = int(r.stdout.split()[1])
     assert process_gone(pid)
     assert ('interrupted' in r.stdout) == (how == 'interrupt')
+
+
+KILLED_RUNNER = """
+import sys
+from umbrella_sim.testing import SimulatedAntenna
+antenna = SimulatedAntenna({"v0": 0.0})
+print(antenna.node.pid, flush=True)
+sys.stdin.read()                                # until the test kills this runner
+"""
+
+
+@pytest.mark.ros
+def test_a_node_stops_when_its_test_runner_is_killed(tmp_path):
+    """A runner killed with no cleanup (a CI timeout's SIGKILL) leaves no node running."""
+    script = tmp_path / 'killed_runner.py'
+    script.write_text(KILLED_RUNNER)
+    runner = subprocess.Popen([sys.executable, str(script)], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True, env=ros_env())
+    try:
+        pid = int(runner.stdout.readline())
+        assert process_alive(pid)
+        runner.kill()
+        runner.wait()
+        # the orphan sees its runner gone and stops itself (SIGTERM, SIGKILL 10 s later)
+        poll(lambda: not process_alive(pid), 30,
+             lambda: f'node {pid} still runs 30 s after its test runner was killed')
+    finally:
+        if runner.poll() is None:
+            runner.kill()
+            runner.wait()
 
 
 @pytest.mark.ros

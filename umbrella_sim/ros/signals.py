@@ -34,6 +34,7 @@ import os
 import signal
 import sys
 import threading
+import time
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -66,6 +67,59 @@ def ignore_from_now() -> None:
     if threading.current_thread() is threading.main_thread():
         for signum in STOP_SIGNALS:
             signal.signal(signum, signal.SIG_IGN)
+
+
+#: environment variable naming a process (its pid) whose end is a stop request to a node:
+#: the test API (umbrella_sim.testing) sets it to the test process for every node it starts
+STOP_WITH_ENV = 'UMBRELLA_STOP_WITH_PID'
+#: s between two looks at that process; s a stop may take before the node is killed
+WATCH_PERIOD = 0.2
+STOP_GRACE = 10.0
+
+
+def process_alive(pid: int) -> bool:
+    """Return whether process pid runs (a zombie, ended but not yet reaped, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:         # another user's: it exists
+        return True
+    try:
+        with open(f'/proc/{pid}/stat', encoding='ascii', errors='replace') as fh:
+            return fh.read().rpartition(')')[2].split()[0] != 'Z'
+    except (OSError, IndexError):   # no /proc (macOS): kill(pid, 0) said it exists
+        return True
+
+
+def stop_with(pid: int | str | None) -> threading.Thread | None:
+    """
+    Take the end of process pid as a stop request (SIGTERM to this process), from now on.
+
+    A test runner killed by a CI timeout or ``timeout`` (SIGTERM, SIGKILL) runs no cleanup,
+    and a node it started in a session of its own (testing.NodeProcess) ran on for ever,
+    reparented to init.  A daemon thread looks every WATCH_PERIOD s; once pid has gone it
+    sends this process SIGTERM (the node stops and finalises its recording as on any
+    SIGTERM) and, if the process still runs STOP_GRACE s later, SIGKILL.  None or '' (the
+    variable unset): nothing to watch.
+    """
+    if pid in (None, ''):
+        return None
+    try:
+        pid = int(pid)
+    except ValueError:
+        raise ValueError(f'{STOP_WITH_ENV}={pid!r}: must be a process id (an integer)') \
+            from None
+
+    def watch():
+        while process_alive(pid):
+            time.sleep(WATCH_PERIOD)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(STOP_GRACE)
+        os.kill(os.getpid(), signal.SIGKILL)
+    thread = threading.Thread(target=watch, name=f'stop-with-{pid}', daemon=True)
+    thread.start()
+    return thread
 
 
 def add_listener(listener) -> None:

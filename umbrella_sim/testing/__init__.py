@@ -42,7 +42,10 @@ Everything here talks over real DDS, so:
 * **Cleanup.**  ``stop()`` (also on leaving a ``with`` block) sends SIGTERM, waits, then
   SIGKILLs the process group; Fast DDS shared-memory segments (``/dev/shm/fastrtps_*``) that
   the process had open and no live process still uses are removed, so even a killed node
-  leaves nothing behind.  Its log file is deleted.
+  leaves nothing behind.  Its log file is deleted.  A test process killed with no cleanup
+  of its own (a CI timeout's SIGTERM or SIGKILL) leaves no node running either: each node
+  it started stops by itself within ~0.2 s of its end (``UMBRELLA_STOP_WITH_PID``,
+  ros.signals.stop_with; its temporary log file stays).
 * **Summaries.**  :meth:`SimulatedAntenna.summary` computes the deploy time, the stage-2 peak
   stress and tip amplitude from the node's topics and log; :func:`summary_from_recording`
   computes the same figures, exactly on sim time, from an MCAP recording (``record_path``).

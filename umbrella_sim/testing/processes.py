@@ -35,6 +35,8 @@ import threading
 import time
 from typing import Any, Callable, Iterable
 
+from ..ros.signals import STOP_WITH_ENV
+
 #: environment variable that sets the default ROS domain of tests
 DOMAIN_ID_ENV = 'UMBRELLA_TEST_DOMAIN_ID'
 
@@ -108,8 +110,9 @@ def ros_env(domain_id: int | None = None) -> dict:
     domain = str(DOMAIN_ID if domain_id is None else domain_id)
     env = dict(os.environ)
     # the domain goes in DOMAIN_ID_ENV too: a child that imports this module (a test helper,
-    # a user's wrapper around the node) then has the same DOMAIN_ID instead of one from its pid
-    env.update({DOMAIN_ID_ENV: domain}, ROS_DOMAIN_ID=domain,
+    # a user's wrapper around the node) then has the same DOMAIN_ID instead of one from its pid;
+    # STOP_WITH_ENV: a node stops when this process has gone, even killed with no cleanup
+    env.update({DOMAIN_ID_ENV: domain, STOP_WITH_ENV: str(os.getpid())}, ROS_DOMAIN_ID=domain,
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                RMW_IMPLEMENTATION='rmw_fastrtps_cpp', PYTHONUNBUFFERED='1',
                RCUTILS_LOGGING_BUFFERED_STREAM='0')

@@ -61,8 +61,18 @@ def _main_of(module: str, tool: str):
 
 
 def _node(module: str, tool: str) -> int:
-    """Run a node: the handlers first, then the heavy imports; ignore stop signals after."""
+    """
+    Run a node: the handlers first, then the heavy imports; ignore stop signals after.
+
+    A process named by STOP_WITH_ENV (the test process that started the node) ending is a
+    stop request too (signals.stop_with).
+    """
     signals.install()
+    try:
+        signals.stop_with(os.environ.get(signals.STOP_WITH_ENV))
+    except ValueError as exc:
+        print(f'{tool}: error: {exc}', file=sys.stderr)
+        return EXIT_MISSING
     try:
         main = _main_of(module, tool)
         return EXIT_MISSING if main is None else main()
