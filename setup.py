@@ -102,7 +102,11 @@ setup(
     # every import (tests/test_package_metadata.py); the ROS packages are package.xml's
     install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML', 'mcap', 'zstandard',
                       'matplotlib', 'dask', 'distributed', 'pyarrow'],
-    extras_require={'test': ['pytest']},     # (tests_require: gone from setuptools)
+    # the ROS 2 packages are package.xml's (a ROS 2 install has them); in a plain venv from
+    # PyPI: pip install 'umbrella_sim[ros]' (the wheels requirements.txt names)
+    extras_require={'test': ['pytest'],     # (tests_require: gone from setuptools)
+                    'ros': ['ros-jazzy-rclpy', 'ros-jazzy-common-interfaces',
+                            'ros-jazzy-rmw-fastrtps-cpp']},
     zip_safe=False,      # a shared library, loaded from its file
     maintainer='umbrella_sim developers',
     maintainer_email='dev@umbrella-sim.invalid',

@@ -112,3 +112,26 @@ def test_a_bad_stop_with_variable_names_itself(monkeypatch, capsys):
     monkeypatch.setattr(signals, 'ignore_from_now', lambda: None)
     assert entry.node_main() == 2
     assert f"{signals.STOP_WITH_ENV}='parent'" in capsys.readouterr().err
+
+
+def test_a_missing_ros_package_outside_a_checkout_names_the_ros_extra(monkeypatch, capsys):
+    """A pip install of the package into a user's venv brings no ROS 2 package: say how."""
+    def no_rclpy(name):
+        raise ModuleNotFoundError("No module named 'rclpy'", name='rclpy')
+    monkeypatch.setattr(entry.importlib, 'import_module', no_rclpy)
+    monkeypatch.setattr(entry, 'checkout', lambda: None)     # installed, no bootstrap.py
+    assert entry.node_main() == 2
+    err = capsys.readouterr().err
+    assert "umbrella_node: error: no module 'rclpy'" in err, err
+    assert "pip install 'umbrella_sim[ros]'" in err and 'bootstrap.py' not in err, err
+
+
+def test_the_test_api_without_rclpy_says_how_to_install_it():
+    """Importing umbrella_sim.testing where rclpy is missing: the error says what to install."""
+    code = "import sys; sys.modules['rclpy'] = None; import umbrella_sim.testing"
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=ROOT,
+                       env=dict(os.environ, PYTHONPATH=ROOT), timeout=120)
+    assert r.returncode == 1
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("ModuleNotFoundError: umbrella_sim.testing: no module 'rclpy'"), last
+    assert "pip install 'umbrella_sim[ros]'" in last, last

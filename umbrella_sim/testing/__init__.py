@@ -63,11 +63,22 @@ Everything here talks over real DDS, so:
 
 Pytest fixtures (import them into your ``conftest.py``): ``ros_domain_id``, ``probe`` and
 ``antenna_factory`` (starts :class:`SimulatedAntenna` objects and stops them at teardown).
-rclpy is imported only when a probe or an antenna is created.
+Importing this module imports rclpy (the recordings' reader needs it), with an error saying
+how to install it where it is missing: pip's install of umbrella_sim brings no ROS 2 package
+(``pip install 'umbrella_sim[ros]'`` does, or a sourced ROS 2 install); the message packages
+are imported when a probe or an antenna is created.
 """
 from __future__ import annotations
 
-from .antenna import SimulatedAntenna
+# (first: a missing rclpy, which the API's own imports need, is said with how to install it)
+from ..tools.entry import missing_dependency
+
+try:
+    import rclpy  # noqa: F401  (the bag reader's, the probe's)
+except ModuleNotFoundError as _exc:
+    raise ModuleNotFoundError(f'umbrella_sim.testing: {missing_dependency(_exc.name)}',
+                              name=_exc.name) from None
+from .antenna import SimulatedAntenna  # noqa: I100
 from .processes import (default_domain_id, DOMAIN_ID, DOMAIN_ID_ENV, NodeProcess, poll, Probe,
                         remove_stale_shm, reserve_domain, ros_env)
 from .summary import (RibsRunSummary, RunSummary, summarize_ribs, summarize_run,

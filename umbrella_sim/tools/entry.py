@@ -31,9 +31,11 @@ import threading
 from ..ros import signals
 
 #: what the package needs from PyPI (bootstrap.py installs it into .venv)
-DEPENDENCIES = frozenset({'numpy', 'scipy', 'rclpy', 'mcap', 'yaml', 'std_msgs',
-                          'sensor_msgs', 'rosgraph_msgs', 'geometry_msgs', 'nav_msgs',
-                          'visualization_msgs', 'diagnostic_msgs', 'rcl_interfaces'})
+#: the ROS 2 Python packages the tools and the test API import (PyPI: the 'ros' extra)
+ROS_DEPENDENCIES = frozenset({'rclpy', 'std_msgs', 'std_srvs', 'sensor_msgs', 'rosgraph_msgs',
+                              'geometry_msgs', 'nav_msgs', 'visualization_msgs',
+                              'diagnostic_msgs', 'rcl_interfaces', 'builtin_interfaces'})
+DEPENDENCIES = ROS_DEPENDENCIES | {'numpy', 'scipy', 'mcap', 'yaml'}
 
 
 #: the exit status of a tool whose dependency is missing (a usage error's, as argparse's)
@@ -53,11 +55,36 @@ def _main_of(module: str, tool: str):
     except ModuleNotFoundError as exc:
         if (exc.name or '').split('.')[0] not in DEPENDENCIES:
             raise
-        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-        print(f'{tool}: error: no module {exc.name!r} in this Python ({sys.executable}): run '
-              f'it from the venv that `python3 bootstrap.py setup` makes '
-              f'({root}/.venv/bin/{tool}, or after `. .venv/bin/activate`)', file=sys.stderr)
+        print(f'{tool}: error: {missing_dependency(exc.name, tool)}', file=sys.stderr)
         return None
+
+
+def checkout() -> str | None:
+    """Return the source checkout the package runs from (bootstrap.py beside it), else None."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    return root if os.path.exists(os.path.join(root, 'bootstrap.py')) else None
+
+
+def missing_dependency(module: str, tool: str | None = None) -> str:
+    """
+    Say which dependency this Python lacks and how to get it (a tool's, or the test API's).
+
+    From a source checkout (bootstrap.py beside the package): the venv bootstrap.py makes,
+    where the tool is.  Installed elsewhere (pip install of the package into a user's own
+    venv, which brings no ROS 2 package: they are no setup.py requirement, so that a ROS 2
+    install's own are used): a ROS 2 module from the 'ros' extra or a sourced ROS 2 install,
+    any other by installing the package again.
+    """
+    where = f'no module {module!r} in this Python ({sys.executable})'
+    root = checkout()
+    venv = (f'run it from the venv that `python3 bootstrap.py setup` makes ({root}/.venv/bin/'
+            f'{tool or "python"}, or after `. .venv/bin/activate`), or ' if root else '')
+    if module.split('.')[0] in ROS_DEPENDENCIES:
+        return (f'{where}: {venv}install the ROS 2 Jazzy Python packages into this '
+                "environment: pip install 'umbrella_sim[ros]' (their PyPI wheels; from a "
+                "checkout: pip install '/path/to/umbrella_sim[ros]'), or source a ROS 2 Jazzy "
+                'install (source /opt/ros/jazzy/setup.bash) before running it')
+    return f'{where}: {venv}install umbrella_sim into this environment with pip, which brings it'
 
 
 def _node(module: str, tool: str) -> int:
