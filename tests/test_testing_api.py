@@ -116,6 +116,35 @@ def test_a_wait_on_a_lockstep_node_says_it_waits_for_a_command(antenna_factory):
 
 
 @pytest.mark.ros
+def test_a_wait_names_a_controller_that_died(antenna_factory, ros_domain_id):
+    """
+    A controller that exited by itself (a misspelt module) is named by the wait that fails.
+
+    The wait is on the antenna's topics: it said only 'node running', and the test author
+    looked for a fault in the simulator while the controller had never started.
+    """
+    antenna = antenna_factory({'v0': 0.0})
+    with NodeProcess(module='umbrella_sim.deploy_controler', domain_id=ros_domain_id) as ctl:
+        poll(lambda: not ctl.running, 30, lambda: 'the misspelt controller still runs')
+        with pytest.raises(AssertionError) as exc:
+            antenna.wait_for_phase('locked', timeout=0.5)
+        text = str(exc.value)
+        assert 'node running' in text
+        assert f'umbrella_sim.deploy_controler (pid {ctl.pid}) exited (code 1)' in text, text
+        assert 'No module named umbrella_sim.deploy_controler' in text, text
+        for wait in (lambda: antenna.wait_for_sim_time(1000.0, timeout=0.5),
+                     lambda: antenna.wait_for('joint_states', lambda m: False, timeout=0.5)):
+            with pytest.raises(AssertionError, match='deploy_controler .pid'):
+                wait()
+    # a process the test stopped itself is no culprit
+    with NodeProcess(module='umbrella_sim.deploy_controller', domain_id=ros_domain_id) as ctl:
+        ctl.stop()
+        with pytest.raises(AssertionError) as exc:
+            antenna.wait_for_phase('locked', timeout=0.5)
+        assert 'deploy_controller' not in str(exc.value)
+
+
+@pytest.mark.ros
 def test_startup_failure_reports_the_node_output():
     node = NodeProcess(parameters={'l1': -1.0})
     with pytest.raises(AssertionError) as exc:

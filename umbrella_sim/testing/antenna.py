@@ -27,7 +27,8 @@ import re
 from typing import Iterable
 import weakref
 
-from .processes import _brief, DOMAIN_ID, NodeProcess, poll, Probe, python_value
+from .processes import (_brief, DOMAIN_ID, NodeProcess, poll, Probe, processes_text,
+                        python_value)
 from .summary import peak_stress, RunSummary, summarize_run, SUMMARY_AFTER_LOCK
 from ..ros.messages import PHASES, tip_deflection_figures
 
@@ -54,6 +55,7 @@ class SimulatedAntenna:
 
     _count = 0          # probe node names stay unique within a process
     probe: Probe | None = None      # (set by the constructor)
+    node: NodeProcess | None = None     # (set by the constructor)
     _live: dict = {}    # (domain, namespace) -> the NodeProcess of the last antenna there
 
     def __init__(self, parameters: dict | None = None, namespace: str = '',
@@ -333,8 +335,7 @@ class SimulatedAntenna:
         poll(lambda: phase in self.phases() or 'fault' in self.phases(), timeout,
              lambda: f'deployment_phase never became {phase!r} within {timeout} s on '
                      f"{self.topics['deployment_phase']} (saw {self.phases() or 'nothing'}; "
-                     f'{self._sim_time_text()}; node '
-                     f"{'running' if self.node.running else 'exited'})")
+                     f'{self._sim_time_text()}; {processes_text(self.node)})')
         if phase not in self.phases():
             why = re.findall(r'simulation fault: .*', self._run_output())
             raise AssertionError(
@@ -351,7 +352,7 @@ class SimulatedAntenna:
 
         def failure():
             return (f'sim time never reached {t:.6f} s within {timeout} s on {topic} '
-                    f'({self._sim_time_text()})')
+                    f'({self._sim_time_text()}; {processes_text(self.node)})')
         if self.probe is None:
             poll(reached, timeout, failure)
         else:       # woken by each state that comes
@@ -365,7 +366,7 @@ class SimulatedAntenna:
             msgs = self.messages(key)
             last = f'; last: {_brief(msgs[-1])}' if msgs else ''
             return (f'no message on {topic} satisfying {what} within {timeout} s '
-                    f'(got {len(msgs)}{last})')
+                    f'(got {len(msgs)}{last}; {processes_text(self.node)})')
         return poll(lambda: [m for m in self.messages(key) if predicate(m)][:1], timeout,
                     failure)[0]
 

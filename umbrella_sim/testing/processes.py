@@ -34,6 +34,7 @@ import tempfile
 import threading
 import time
 from typing import Any, Callable, Iterable
+import weakref
 
 from ..ros.signals import STOP_WITH_ENV
 
@@ -47,6 +48,8 @@ FREE_DOMAINS = range(10, 100)
 
 _DOMAIN_LOCKS = os.path.join(tempfile.gettempdir(), 'umbrella_sim_ros_domains')
 
+
+_started: weakref.WeakSet = weakref.WeakSet()     # NodeProcess objects not closed
 
 _held_domain_locks: list = []      # open lock files: a domain is held while its process lives
 
@@ -204,6 +207,22 @@ def remove_stale_shm(paths: Iterable[str]) -> list[str]:
 
 
 # -------------------------------------------------------------- child process
+def processes_text(node: NodeProcess | None) -> str:
+    """
+    Say whether a node runs, and which other NodeProcess of its domain ended by itself.
+
+    For the failure of a wait on the node's topics: a deploy_controller that died leaves the
+    node waiting for commands, and the message names the dead controller (exit_text), not
+    only the node it watched.
+    """
+    if node is None:
+        return 'no node started'
+    state = ('node running' if node.running else f'node exited (code {node.proc.returncode})')
+    return '; '.join([state, *(text for p in list(_started) if p is not node
+                               and p.domain_id == node.domain_id
+                               for text in [p.exit_text()] if text)])
+
+
 class NodeProcess:
     """
     A ROS node in a child process (its own session); output goes to a log file.
@@ -234,6 +253,23 @@ class NodeProcess:
                                      env=ros_env(self.domain_id), start_new_session=True,
                                      cwd=self.cwd)
         self.shm: set[str] = set()
+        self.name = os.path.basename(executable[0]) if executable else module
+        self._stopped = False               # stop() called: an exit the test asked for
+        _started.add(self)
+
+    def exit_text(self) -> str | None:
+        """
+        Say how this process ended by itself (its exit code, its last line); None if not.
+
+        None while it runs or once stop() ended it: an exit the test did not ask for, as a
+        controller that died of a bad parameter or a misspelt module, is what a wait on
+        another process's topics should name.
+        """
+        if self._stopped or self.running:
+            return None
+        lines = [line for line in self.output().splitlines() if line.strip()]
+        return (f'{self.name} (pid {self.pid}) exited (code {self.proc.returncode})'
+                + (f': {lines[-1].strip()}' if lines else ', printing nothing'))
 
     @property
     def pid(self) -> int:
@@ -268,6 +304,7 @@ class NodeProcess:
 
         Returns the exit code (negative: killed by that signal).
         """
+        self._stopped = True
         if self.running:
             self.shm |= _shm_segments(self.pid)
             self.proc.send_signal(sig)
@@ -285,6 +322,7 @@ class NodeProcess:
 
     def close(self) -> None:
         self.stop()
+        _started.discard(self)
         self.log.close()
         try:
             os.unlink(self.log_path)
