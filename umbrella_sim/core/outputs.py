@@ -296,24 +296,35 @@ class StepBlock:
         link_stress[1]),
 
     i.e. ``state_row`` of each step's Sample.
+
+    ``physics_tips``: None where the rows are the block's physics steps; where stage 2 took
+    its grid steps in substeps (a row folds them: fold_substeps), the time and tip deflection
+    (tip_transverse) at the end of every physics step of the block, (2, physics steps) in
+    order, what the summary's stage-2 figures take (summary.Stage2Series): those of the
+    physics, not of the grid.
     """
 
-    __slots__ = ('rows', 'make_last', 'lock', 'error', 'states', '_last', '_peaks')
+    __slots__ = ('rows', 'make_last', 'lock', 'error', 'states', 'physics_tips', '_last',
+                 '_peaks')
 
     def __init__(self, rows: np.ndarray, make_last: Callable[[], Sample],
                  lock: LockEvent | None = None, error: str | None = None,
-                 states: np.ndarray | None = None):
+                 states: np.ndarray | None = None, physics_tips: np.ndarray | None = None):
         if len(rows) != len(STEP_FIELDS):
             raise ValueError(f'a block has {len(STEP_FIELDS)} rows, not {len(rows)}')
         if states is not None and states.shape[1] != rows.shape[1]:
             raise ValueError(f'a block of {rows.shape[1]} steps with state rows of '
                              f'{states.shape[1]}')
+        if physics_tips is not None and physics_tips.shape[1] < rows.shape[1]:
+            raise ValueError(f'a block of {rows.shape[1]} steps with the tips of '
+                             f'{physics_tips.shape[1]} physics steps')
         _set = object.__setattr__        # (read-only: __setattr__ refuses)
         _set(self, 'rows', rows)
         _set(self, 'make_last', make_last)
         _set(self, 'lock', lock)
         _set(self, 'error', error)
         _set(self, 'states', states)
+        _set(self, 'physics_tips', physics_tips)
         _set(self, '_last', None)
         _set(self, '_peaks', None)
 
@@ -328,15 +339,17 @@ class StepBlock:
 
     @classmethod
     def from_rows(cls, rows: np.ndarray, make_last: Callable[[], Sample], lock=None,
-                  error=None, states: np.ndarray | None = None) -> 'StepBlock':
+                  error=None, states: np.ndarray | None = None,
+                  physics_tips: np.ndarray | None = None) -> 'StepBlock':
         """
         Build a block from its rows (len(STEP_FIELDS), steps).
 
         rows: (len(STEP_FIELDS), steps), owned by the block; make_last builds the Sample
         of the final state (a closure over that immutable state); states: the state rows
-        (owned by the block too), or None.
+        (owned by the block too), or None; physics_tips: the tips of its physics steps
+        where its rows fold stage 2's substeps (``physics_tips``), else None.
         """
-        return cls(rows, make_last, lock, error, states)
+        return cls(rows, make_last, lock, error, states, physics_tips)
 
     def __len__(self) -> int:
         return self.rows.shape[1]
@@ -355,7 +368,8 @@ class StepBlock:
         error = next((b.error for b in blocks if b.error is not None), None)
         states = (np.concatenate([b.states for b in blocks], axis=1)
                   if all(b.states is not None for b in blocks) else None)
-        return cls.from_rows(rows, blocks[-1].make_last, lock, error, states)
+        return cls.from_rows(rows, blocks[-1].make_last, lock, error, states,
+                             physics_tips_of([(b.rows, b.physics_tips) for b in blocks]))
 
     @property
     def peaks(self) -> dict[str, tuple[float, float, float]]:
@@ -440,6 +454,22 @@ def running_total(total, steps) -> np.ndarray:
     """
     start = np.asarray(total, dtype=float)[None]
     return np.add.accumulate(np.concatenate((start, np.asarray(steps, dtype=float))))[1:]
+
+
+#: the rows of a physics step's time and tip deflection (StepBlock.physics_tips)
+TIP_ROWS = np.array([STEP_FIELDS.index('time'), STEP_FIELDS.index('tip_transverse')])
+
+
+def physics_tips_of(parts: list) -> np.ndarray | None:
+    """
+    Return the physics_tips of consecutive parts of a block: [(rows, physics_tips or None)].
+
+    None if no part folds substeps (its rows are then its physics steps); else every
+    part's tips, a part whose rows are its physics steps giving their time and tip.
+    """
+    if all(tips is None for _, tips in parts):
+        return None
+    return np.hstack([rows[TIP_ROWS] if tips is None else tips for rows, tips in parts])
 
 
 def substep_ends(steps: int, m: int) -> np.ndarray:

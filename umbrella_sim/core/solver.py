@@ -40,11 +40,16 @@ from .engines import (DIVERGENCE_RESIDUAL, event_root, EVENT_TIME_TOLERANCE, fau
 from .forcing import command_force, ForceSchedule
 from .kernel import ALPHA1_AXLE, AXLE_REASON, ConvergenceError, DynamicState, SAMPLE_VECTOR
 from .model import DEFORMING, LOCKED, Stage, UmbrellaModel
-from .outputs import (axial_stress_of, build_frozen, fold_substeps, LockEvent, Sample,
-                      state_row, STEP_FIELDS, step_peaks, step_row, StepBlock)
+from .outputs import (axial_stress_of, build_frozen, fold_substeps, LockEvent,
+                      physics_tips_of, Sample, state_row, STEP_FIELDS, step_peaks, step_row,
+                      StepBlock, TIP_ROWS)
 from .params import UmbrellaParams
 from .registry import SPECS
 from .step_rule import physics_step_of, stage2_physics_steps
+
+
+#: the row of a step's time (StepBlock.rows)
+_TIME = STEP_FIELDS.index('time')
 
 
 def nonlinear_model_needed(p: UmbrellaParams) -> bool:
@@ -105,7 +110,10 @@ class UmbrellaSimulator:
         self._lock_loss = 0.0
         self.lock_event: LockEvent | None = None
         self._locked_at = None
-        self._substep_figures = None     # (stage 2's substeps: peaks, axial stress)
+        self._substep_figures = None     # (stage 2's substeps: peaks, axial stress, tips)
+        #: the last grid step's physics steps' (time, tip) where it took them in substeps
+        #: (StepBlock.physics_tips), else None
+        self._substep_tips = None
         self.steps = 0
 
     # -- inputs
@@ -151,6 +159,7 @@ class UmbrellaSimulator:
         out: list[Sample] = []
         stage = self._stage
         s1, self._substep_figures = self._physics_steps(s0, t_next - s0.t, force, stage)
+        tips = self._substep_figures and self._substep_figures[2]
         work = force * (eng.sleeve_height(s0) - eng.sleeve_height(s1))
         lock_loss = 0.0
         lock_event = None
@@ -165,12 +174,16 @@ class UmbrellaSimulator:
                 out.append(self._sample(*locked_at))
             remaining = t_next - s_locked.t
             if remaining > EVENT_TIME_TOLERANCE:
-                s1 = self._physics_steps(s_locked, remaining, force, LOCKED)[0]
+                s1, after = self._physics_steps(s_locked, remaining, force, LOCKED)
+                tips = after and after[2]        # (stage 2's substeps of the step's rest)
                 work += force * (eng.sleeve_height(s_locked) - eng.sleeve_height(s1))
             else:
                 s1 = s_locked
         # the grid time exactly, whatever the rounding of t0 + h
         s1 = replace(s1, t=t_next)
+        if tips is not None:
+            tips[0, -1] = t_next
+        self._substep_tips = tips
         self._commit(s1, stage, force, work, lock_loss, lock_event, 1)
         if lock_event is not None:
             self._locked_at = locked_at
@@ -184,24 +197,27 @@ class UmbrellaSimulator:
         Return the state dt after s0: one physics step, or stage 2's substeps.
 
         With substeps, also the largest fibre stress over them and where (step_peaks: leaf,
-        x, link, x) and the largest axial stress of their states (outputs.fold_substeps'
-        rule), else None.
+        x, link, x), the largest axial stress of their states (outputs.fold_substeps' rule)
+        and each one's time and tip deflection (StepBlock.physics_tips' rows), else None.
         """
         eng, m = self.engine, self._substeps(stage)
         if m == 1:
             return self._checked(lambda: eng.step(s0, dt, force, stage), stage), None
         n = stage2_physics_steps(dt, self.h, m)
-        xs = (self.model.leaf.stress_x, self.model.link.stress_x)
+        model = self.model
+        xs = (model.leaf.stress_x, model.link.stress_x)
         s, start, peaks, axial = s0, self._fibre_stress_of(s0), None, 0.0
-        for _ in range(n):
+        tips = np.empty((2, n))
+        for i in range(n):
             s = self._checked(lambda s=s: eng.step(s, dt / n, force, stage), stage)
             end = self._fibre_stress_of(s)
             step = step_peaks(start, end, dt / n, xs)
             peaks = step if peaks is None else tuple(
                 v for body in (0, 2) for v in max(peaks[body:body + 2], step[body:body + 2]))
             axial = max(axial, axial_stress_of(*end[0]))
+            tips[:, i] = s.t, model.tip_displacement(eng.fe_state(s)[0])[1]
             start = end
-        return s, (peaks, axial)
+        return s, (peaks, axial, tips)
 
     def _commit(self, s1, stage, force, work, lock_loss, lock_event, steps) -> None:
         """Only after everything succeeded: a failure leaves the last good state."""
@@ -230,7 +246,7 @@ class UmbrellaSimulator:
         whole number >= 0 (ValueError otherwise).
         """
         _check_steps(n_steps)
-        parts = []            # (rows, state rows or None) of the steps taken, in order
+        parts = []      # (rows, state rows or None, physics_tips or None) of the steps taken
         done = 0
         error = None
         lock_before = self.lock_event
@@ -242,15 +258,18 @@ class UmbrellaSimulator:
                                        self._lock_loss, states)
             if fast is not None:
                 state, block, work, stop, block_states = fast
+                tips = None
                 if m > 1 and block.shape[1]:     # (copies: the engine's buffers are kept)
                     whole = block.shape[1] // m          # (a fault may end one early)
+                    tips = block[TIP_ROWS]               # (every physics step's)
                     block, block_states = fold_substeps(block, block_states, m)
-                    block[STEP_FIELDS.index('time'), :whole] = (
+                    block[_TIME, :whole] = tips[0, m - 1::m][:whole] = (
                         self._k + 1 + np.arange(whole)) * self.h
                 k = block.shape[1]
                 if k:      # (the engine's buffers: copied before its next call)
                     parts.append((block.copy() if m == 1 else block,
-                                  block_states.copy() if states and m == 1 else block_states))
+                                  block_states.copy() if states and m == 1 else block_states,
+                                  tips))
                     self._commit(state, self._stage, force, work - self._work, 0.0, None, k)
                     done += k
                 if stop is None:
@@ -265,27 +284,29 @@ class UmbrellaSimulator:
                 error = str(exc)
                 break
             m, sample = self.model, self.sample()
-            peaks, axial = self._substep_figures or (None, None)
+            peaks, axial, _ = self._substep_figures or (None, None, None)
             row = step_row(sample, peaks or step_peaks(
                 start, self._fibre_stress(), self.time - t_start,
                 (m.leaf.stress_x, m.link.stress_x)), axial)
-            parts.append((np.array(row)[:, None], state_row(sample)[:, None] if states else None))
+            parts.append((np.array(row)[:, None], state_row(sample)[:, None] if states else None,
+                          self._substep_tips))
             done += 1
             if until_lock and self.lock_event is not lock_before:
                 break
         lock = self.lock_event if self.lock_event is not lock_before else None
         final = (self._state, self._stage, self._applied_force, self._work, self._lock_loss)
+        tips = physics_tips_of([(r, t) for r, _, t in parts])
         if len(parts) == 1:               # (the usual block: one compiled call)
-            rows, kept = parts[0]
+            rows, kept, _ = parts[0]
         elif parts:
-            rows = np.hstack([r for r, _ in parts])
-            kept = np.hstack([k for _, k in parts]) if states else None
+            rows = np.hstack([r for r, _, _ in parts])
+            kept = np.hstack([k for _, k, _ in parts]) if states else None
         else:
             m = self.model
             rows = np.empty((len(STEP_FIELDS), 0))
             kept = np.empty((2 * m.n + 2 * (m.leaf.n_stress_points + m.link.n_stress_points),
                              0)) if states else None
-        return StepBlock.from_rows(rows, lambda: self._sample(*final), lock, error, kept)
+        return StepBlock.from_rows(rows, lambda: self._sample(*final), lock, error, kept, tips)
 
     def advance_schedule(self, schedule: ForceSchedule, n_steps: int, states: bool = False,
                          until_lock: bool = False

@@ -123,12 +123,15 @@ class RunResult:
 #: periods of the thesis frame's first locked mode (~0.05 s), the same for a 1 s offline run
 #: and a 10 min live one, so that runs of different lengths compare
 STAGE2_WINDOW = 0.3
-#: the stage-2 tip series kept for its period: the first step in each STAGE2_WINDOW /
+#: the stage-2 tip series kept for its period: the first physics step in each STAGE2_WINDOW /
 #: STAGE2_SAMPLES (4.6 us) of the window, i.e. every step at any step above that (the
 #: default 0.1 ms included); a 0.1 us step keeps 65 536 of its 3e6 (1 MB and ~0.1 s to
 #: analyse, where all of them held 48 MB and took ~4 s at a node's stop); the amplitude and
-#: the window's end stay those of every step (every grid step's row: with stage 2's substeps,
-#: its last substep's tip)
+#: the window's end stay those of every step.  With stage 2's substeps every physics step's
+#: tip counts, not only the grid rows' (the blocks' physics_tips): on a 5 ms grid
+#: (step_follows_mesh, 0.1 ms substeps, V0 = -0.2) the grid rows' period came out 4.2e-4
+#: low and their amplitude 0.41 % low against the physics steps' (-0.05: 2.0e-4 and 0.87 %),
+#: at the default run's 0.2 ms grid in two substeps the amplitude 0.12 % low
 STAGE2_SAMPLES = 1 << 16
 #: validity of the small-deformation (linear elastic field) model: the tip deflection |v_G|
 #: may reach this fraction of the leaf length l1 + l2.  Beyond it the slope of the bent
@@ -262,13 +265,14 @@ def stage2_figures(t: np.ndarray, v: np.ndarray, lock_time: float | None) -> dic
 
 class Stage2Series:
     """
-    The tip deflections of stage 2's window, a block of rows at a time: what its figures need.
+    The tip deflections of stage 2's window, a block of steps at a time: what its figures need.
 
     Columns of tip deflection (the planar tip's v: one; the umbrella's: each rib's in-plane v
-    and out-of-plane w) over (lock, lock + STAGE2_WINDOW]: each column's extremes and the
-    window's end of every row, and for the periods the first row in each of STAGE2_SAMPLES
-    bins of the window.  figures() gives stage2_figures' of each column, its amplitude of
-    every row.
+    and out-of-plane w) over (lock, lock + STAGE2_WINDOW] at every physics step (where
+    stage 2 takes substeps, each substep's: the blocks' physics_tips, not only their grid
+    rows): each column's extremes and the window's end of every step, and for the periods
+    the first step in each of STAGE2_SAMPLES bins of the window.  figures() gives
+    stage2_figures' of each column, its amplitude of every step.
     """
 
     def __init__(self, columns: int = 1):
@@ -280,15 +284,15 @@ class Stage2Series:
 
     @property
     def kept(self) -> int:
-        """Return how many rows are kept for the periods (at most STAGE2_SAMPLES + 1)."""
+        """Return how many steps are kept for the periods (at most STAGE2_SAMPLES + 1)."""
         return sum(len(t) for t in self._t)
 
     def end(self, lock_time: float) -> float:
-        """Return the window's end: rows after it are not taken."""
+        """Return the window's end: steps after it are not taken."""
         return lock_time + STAGE2_WINDOW + TIME_RESOLUTION
 
     def add(self, t: np.ndarray, v: np.ndarray, lock_time: float) -> None:
-        """Take rows at times t (stage 2 or not), v (rows, columns), the lock at lock_time."""
+        """Take steps at times t (stage 2 or not), v (steps, columns), the lock at lock_time."""
         keep = in_stage2_window(t, lock_time)
         t2, v2 = t[keep], v[keep]
         if not len(t2):
@@ -319,7 +323,7 @@ class Stage2Series:
         out = []
         for j in range(v.shape[1]):
             f = stage2_figures(t, v[:, j], lock_time)
-            if f['stage2_tip_amplitude'] is not None:     # of every row, not those kept
+            if f['stage2_tip_amplitude'] is not None:     # of every step, not those kept
                 f['stage2_tip_amplitude'] = 0.5 * float(self._hi[j] - self._lo[j])
                 f['stage2_window'][1] = self._end
             out.append(f)
@@ -934,9 +938,11 @@ class SummaryAccumulator:
             axial = rows[_AXIAL] if stage[0] != 0 else rows[_AXIAL][stage != 0]
             self._link_load = max(self._link_load or 0.0,
                                   float(np.maximum.reduce(axial)) * self._axial_per_stress)
-        if (self.lock is not None and stage[-1] != 0
-                and t[0] <= self._stage2.end(self.lock.time)):
-            self._stage2.add(t, v[:, None], self.lock.time)
+        if self.lock is not None and stage[-1] != 0:
+            tips = block.physics_tips       # (stage 2's substeps: each one's tip)
+            t2, v2 = (t, v[:, None]) if tips is None else (tips[0], tips[1:].T)
+            if t2[0] <= self._stage2.end(self.lock.time):
+                self._stage2.add(t2, v2, self.lock.time)
         for body, (peak, x, ti) in block.peaks.items():
             if peak > self._peaks[body][0]:
                 self._peaks[body] = (peak, x, ti)
