@@ -35,6 +35,8 @@ from tests.test_compiled_kernel import needs_kernel
 from umbrella_sim.core import simulate, UmbrellaModel, UmbrellaParams
 from umbrella_sim.core.driver import RunDriver
 from umbrella_sim.core.summary import stage2_figures, STAGE2_WINDOW
+from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
+from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
 
 #: the run: a small deployment whose stage 2 vibrates linearly, on a coarse grid whose
 #: stage 2 takes the mesh's step in substeps, and the run at that step throughout
@@ -119,3 +121,53 @@ def test_the_planar_paths_take_the_same_substeps(monkeypatch):
     assert figures['compiled']['stage2_window'][1] == figures['numpy']['stage2_window'][1]
     for name in ('stage2_tip_amplitude', 'stage2_tip_period'):
         assert figures['compiled'][name] == pytest.approx(figures['numpy'][name], rel=1e-8)
+
+
+@needs_kernel
+def test_each_ribs_stage2_figures_are_those_of_every_substep():
+    """
+    Three ribs at V0 = -0.05 (each the planar frame): the 5 ms grid against 0.1 ms.
+
+    Each rib's in-plane amplitude and period as the planar frame's (the same measures).
+    """
+    ribs = {'ribs': 3}
+    coarse = run(UmbrellaRibsParams.from_mapping({**ribs, **COARSE}))
+    fine = run(UmbrellaRibsParams.from_mapping({**ribs, **FINE}), keep_samples=False)
+    grid_rows = grid_row_figures(coarse, lambda s: s.tip[:, 1])
+    period = first_mode_period()
+    for k in range(3):
+        assert_figures_of_the_physics(
+            *({name: f[name][k] for name in ('stage2_tip_amplitude', 'stage2_tip_period')}
+              for f in (coarse.figures, fine.figures)), grid_rows[k], period)
+
+
+@needs_kernel
+def test_the_umbrellas_kernel_keeps_the_tips_its_fold_drops():
+    """
+    The compiled advance's fold (Advance3DCall.tips) against its rows folded in Python.
+
+    Three ribs, rib 2 kicked out of its plane, on the 5 ms grid: the physics steps' tips
+    (Record3D.taken_tips: in-plane v and out-of-plane w) are the same with the kernel folding
+    the substeps as with Record3D folding the kernel's every row (its stress figures off),
+    the same steps; every grid step's last is its row's.
+    """
+    params = UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib2.out_of_plane_rate': 0.05,
+                                              **COARSE})
+    runs = [UmbrellaSimulator3D(params, kernel='compiled') for _ in range(2)]
+    runs[1].integrator.compiled.set_figures(False)
+    tips = []
+    for sim in runs:
+        sim.run(5.0, after_lock=0.05)
+        rows = sim.record.take()
+        tips.append(sim.record.taken_tips)
+    assert runs[0].integrator.compiled.figures and runs[0].stage2_substeps == 50
+    (t, v), (t_python, v_python) = tips
+    np.testing.assert_array_equal(t, t_python)
+    np.testing.assert_array_equal(v, v_python)
+    assert np.abs(v[:, 2, 1]).max() > 1e-4             # (the kick's out-of-plane vibration)
+    ends = np.searchsorted(t, rows['time'])
+    np.testing.assert_array_equal(t[ends], rows['time'])
+    np.testing.assert_array_equal(v[ends], rows['tip'][:, :, 1:])
+    lock = runs[0].lock_time            # (stage 1: the grid's steps; stage 2: its substeps)
+    assert np.sum(t < lock) == np.sum(rows['time'] < lock)
+    assert np.diff(t[t > lock]).max() <= COARSE['time_step'] / 50 * (1 + 1e-9)

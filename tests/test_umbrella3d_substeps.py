@@ -113,6 +113,21 @@ def test_compiled_substeps_equal_numpy_from_one_locked_state(base):
     m = start.model
     end = np.abs(np.concatenate(m.stress_blocks(runs[1].state.qr[None]), -1)).max(-1)[0]
     assert np.all(b['stress_axial'][-1] >= end[:, 0] * (1 - 1e-12))
+    # every physics step's tips (the summary's stage-2 series, Record3D.taken_tips): the
+    # compiled fold's, kept apart from its rows, are the numpy steps'; a grid step's last
+    # is its row's (the start's row first: its own)
+    tips = []
+    for sim in runs:
+        sim.record.take()
+        tips.append(sim.record.taken_tips)
+    (t, v), (t_numpy, v_numpy), (_, v_spread) = tips
+    sub = start.stage2_substeps
+    assert v.shape == (1 + 40 * sub, 4, 2)
+    np.testing.assert_allclose(t, t_numpy, rtol=0, atol=1e-15)
+    assert np.max(np.abs(v - v_numpy)) <= (10.0 * np.max(np.abs(v_spread - v_numpy))
+                                           + 1e-12 * np.max(np.abs(v_numpy)))
+    np.testing.assert_array_equal(t[sub::sub], a['time'][1:])
+    np.testing.assert_array_equal(v[sub::sub], a['tip'][1:, :, 1:])
 
 
 def test_a_recording_at_time_step_0_keeps_the_substeps_and_resimulates_exactly(

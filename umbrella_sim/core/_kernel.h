@@ -36,7 +36,7 @@
 
 /* Raised when the meaning of the interface changes while its sizes stay (a field renamed or
  * reordered, a function's arguments changed). */
-#define UMBRELLA_ABI_VERSION 9
+#define UMBRELLA_ABI_VERSION 10
 
 /* The API functions: the library is compiled with -fvisibility=hidden, so these alone are
  * exported. */
@@ -221,6 +221,9 @@ typedef struct {
     int i_a1, i_rx, i_ry, i_rz, i_a2, i_u1, i_w1, i_s1, i_p1, i_s2, i_p2, i_uh, i_wh;
     int i_t0;                                        /* the leaf root's slope (a stuck
                                                       * hinge holds alpha1 + it) */
+    int i_tip_v, i_tip_w;                            /* the leaf tip's in-plane and
+                                                      * out-of-plane deflection
+                                                      * (Advance3DCall.tips) */
     int leaf_points, leaf_elastic, link_points, link_elastic, link_offset;
     double sleeve_mass, y_stop, regularisation;
     int carry_steps;                                 /* steps an iteration matrix serves at
@@ -308,10 +311,14 @@ typedef struct {
     int bus_damp_rank;
     const double *bus_damp_a, *bus_damp_b;
     /* not single: the rows of each run of fold steps (a grid step's stage-2 substeps) as one
-     * row, outputs3d.fold_substeps3d's: the last step's figures, the works and counts summed
+     * row, substeps3d.fold_substeps3d's: the last step's figures, the works and counts summed
      * over the run, each stress figure the first of the largest (a NaN the largest); a last
      * shorter run (the steps before a failure) its own row.  0 or 1: a row a step */
     int fold;
+    /* not single: NULL, or each committed physics step's tip deflections (n_steps x n_ribs
+     * x 2, step-major: each rib's q[i_tip_v], q[i_tip_w]), which a folded row does not keep:
+     * the summary's stage-2 figures are those of every physics step (summary.Stage2Series) */
+    double *tips;
 } Advance3DCall;
 
 /* Held by Python only as pointers: the stepping contexts (every work buffer, allocated

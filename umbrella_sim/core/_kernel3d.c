@@ -1551,6 +1551,13 @@ int umbrella3d_advance(Ctx3D *x, Advance3DCall *a) {
             figure_row(x, a, t_next - t_before, first ? o : fig);
             if (!first) merge_figures(x->R, fig, o);
         }
+        if (a->tips && !a->single) {    /* every physics step's tips, which a fold drops */
+            double *o = a->tips + (size_t)k * 2 * x->R;
+            for (int r = 0; r < x->R; r++) {
+                o[2 * r] = a->qr[r * x->n + x->m->i_tip_v];
+                o[2 * r + 1] = a->qr[r * x->n + x->m->i_tip_w];
+            }
+        }
         a->n_done++;
     }
     return OK;

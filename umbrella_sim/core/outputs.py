@@ -483,7 +483,7 @@ def first_largest_of_substeps(values: np.ndarray, m: int) -> np.ndarray:
 
     Groups of m consecutive steps along the first axis, the last one possibly shorter; the
     first of the largest (argmax's: a NaN the largest).  The one rule of a grid step's peak
-    over its substeps, for fold_substeps and the umbrella's (outputs3d.fold_substeps3d).
+    over its substeps, for fold_substeps and the umbrella's (substeps3d.fold_substeps3d).
     """
     steps = len(values)
     groups = -(-steps // m)

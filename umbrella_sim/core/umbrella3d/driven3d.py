@@ -187,16 +187,20 @@ class StepBlock3D:
     ``last`` is the Sample3D of the final state, ``lock`` the LockEvent if the lock happened
     in these steps, ``error`` the fault that ended them early; ``states`` is None (the
     umbrella's state rows are not offered).  peaks: the rows' RibPeaks if known (Record3D's
-    taken_peaks), else made from the rows when first asked.
+    taken_peaks), else made from the rows when first asked.  physics_tips: None where the
+    rows are the physics steps, else every physics step's time and each rib's tip v and w
+    (Record3D's taken_tips: substeps3d.physics_tips3d), the planar StepBlock's.
     """
 
     states = None
 
     def __init__(self, rows: dict, last: Sample3D, lock: LockEvent | None = None,
-                 error: str | None = None, peaks: 'RibPeaks | None' = None):
+                 error: str | None = None, peaks: 'RibPeaks | None' = None,
+                 physics_tips: tuple | None = None):
         self.rows, self.lock, self.error = rows, lock, error
         self._last = last
         self._peaks = peaks
+        self.physics_tips = physics_tips
 
     def __len__(self) -> int:
         return len(self.rows['time']) if self.rows else 0
@@ -313,7 +317,8 @@ class DrivenSimulator3D(UmbrellaSimulator3D):
             self._current = Sample3D.of_row(rows, -1)
         lock = self.lock_event if self.locked and not locked_before else None
         return StepBlock3D(rows, self._current, lock, error,
-                           None if peaks is None else RibPeaks(*peaks)), applied
+                           None if peaks is None else RibPeaks(*peaks),
+                           self.record.taken_tips), applied
 
     # ------------------------------------------------------------------- outputs
     def sample(self) -> Sample3D:
@@ -453,9 +458,11 @@ class Summary3D:
         if self._start is not None:         # (a frame not pushed yet has not stalled)
             self._stall.add(t, rows['sleeve_position'], rows['sleeve_velocity'],
                             bool(locked[-1]), rows['stuck'][-1])
-        if self.lock is not None and locked[-1] and t[0] <= self._stage2.end(self.lock.time):
-            tip = rows['tip']
-            self._stage2.add(t, np.concatenate((tip[:, :, 1], tip[:, :, 2]), axis=1),
+        # (each physics step's tips where stage 2 took substeps: the physics' figures)
+        t2, tip = (t, None) if block.physics_tips is None else block.physics_tips
+        if self.lock is not None and locked[-1] and t2[0] <= self._stage2.end(self.lock.time):
+            tip = rows['tip'][:, :, 1:] if tip is None else tip
+            self._stage2.add(t2, np.concatenate((tip[:, :, 0], tip[:, :, 1]), axis=1),
                              self.lock.time)
         if locked[-1]:                             # (stage 2 in the block)
             ratio = (rows['stress_axial'] if locked[0] else rows['stress_axial'][locked]) \

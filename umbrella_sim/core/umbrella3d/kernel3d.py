@@ -112,6 +112,7 @@ class CompiledStep3D:
             **{f'i_{k}': getattr(m, f'i_{k}') for k in (
                 'a1', 'rx', 'ry', 'rz', 'a2', 'u1', 'w1', 's1', 'p1', 's2', 'p2', 'uh', 'wh',
                 't0')},
+            i_tip_v=m.i_tip[1], i_tip_w=m.i_tip[2],
             leaf_points=leaf.x.shape[1], leaf_elastic=leaf.shape.shape[-1],
             link_points=link.x.shape[1], link_elastic=link.shape.shape[-1],
             link_offset=link.offset, sleeve_mass=m.sleeve_mass, y_stop=m.y_stop,
@@ -296,6 +297,9 @@ class CompiledStep3D:
     def _set_capacity(self, cap: int) -> None:
         self.out = np.zeros((cap, self.row_len))
         self.call.out = _ptr(self.out)
+        #: every physics step's tips of a folded call (Advance3DCall.tips: physics_tips)
+        self.tips_out = np.zeros((cap, self.model.n_ribs, 2))
+        self._tips_ptr = _ptr(self.tips_out)
         self.capacity = cap
         self._views: dict = {}          # rows' views of out, by count
 
@@ -360,7 +364,8 @@ class CompiledStep3D:
         crest_from_state: the first step's stress figures take their crests from s (the
         record continues in the same stage: Record3D.crest_continues), else its own values.
         fold: the rows of each run of fold steps folded into one (Advance3DCall.fold:
-        outputs3d.fold_substeps3d's rule, in the kernel), a last shorter run its own.
+        substeps3d.fold_substeps3d's rule, in the kernel), a last shorter run its own; every
+        step's tips then kept apart (``physics_tips``).
 
         Return (status, steps done, rows (dict of the steps' figures), the state reached).
         Status 'ok', 'crossing' (the next step reaches the stop unlocked: not taken), or a
@@ -374,9 +379,20 @@ class CompiledStep3D:
         c = self.call
         c.single, c.k0, c.n_steps = 0, k0, n_steps
         c.crest_from_state, c.fold = int(crest_from_state), fold
+        c.tips = self._tips_ptr if fold > 1 else None
         status = self.lib.umbrella3d_advance(self._ctx, self._call_ref)
         done = c.n_done
         return status, done, self.rows(-(-done // fold)), (self._state() if done else s)
+
+    def physics_tips(self, count: int) -> np.ndarray:
+        """
+        Return the last folded call's first count physics steps' tips (a view of tips_out).
+
+        (steps, ribs, 2): each rib's in-plane v and out-of-plane w of its leaf tip (the
+        rows' qr[..., i_tip[1:]]) at the end of every step, which the folded rows keep of
+        their grid steps' last only.
+        """
+        return self.tips_out[:count]
 
 
 def status_error(status: int, t: float) -> ArithmeticError:

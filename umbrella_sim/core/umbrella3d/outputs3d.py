@@ -34,8 +34,8 @@ import math
 
 import numpy as np
 
-from ..outputs import (first_largest_of_substeps, hermite_crests, running_total,
-                       substep_ends)
+from .substeps3d import fold_substeps3d, physics_tips3d
+from ..outputs import hermite_crests, running_total, substep_ends
 
 STRESS_NAMES = ('axial', 'bending_in_plane', 'bending_out_of_plane', 'torsion', 'von_mises')
 #: the bodies of a rib, by the code a stress's place carries (stress_<name>_at)
@@ -54,6 +54,10 @@ class Record3D:
         self.model = model
         #: the blocks of steps added since the last ``take``: name -> array (steps first) each
         self._blocks: list[dict] = []
+        #: each block's physics steps' tips where its rows fold substeps (physics_tips3d),
+        #: and those of the rows the last ``take`` returned (``taken_tips``)
+        self._tips: list = []
+        self.taken_tips = None
         nr = model.n_ribs
         self.work = 0.0
         self.friction = np.zeros(nr)
@@ -110,8 +114,13 @@ class Record3D:
         """Return the names of the figures of every step (those of the blocks)."""
         return list(self._blocks[0]) if self._blocks else []
 
-    def add(self, s, locked: bool, force: float, work, lock_loss: float, lock_event=None):
-        """Add the figures of state s, reached by a step that did work (None: the start)."""
+    def add(self, s, locked: bool, force: float, work, lock_loss: float, lock_event=None,
+            tips=None):
+        """
+        Add the figures of state s, reached by a step that did work (None: the start).
+
+        tips: the physics steps' tips (physics_tips3d) if the step took stage 2's substeps.
+        """
         m = self.model
         if work is not None:
             self.work += work.force
@@ -133,7 +142,8 @@ class Record3D:
         block = self._put_steps(np.array([s.t]), one, np.array([kinetic]),
                                 np.array([m.strain_energy(s.qr)]), np.array([self.work]),
                                 self.friction[None].copy(), np.array([self.drive]),
-                                np.array([self.damping]), locked, force, lock_loss)
+                                np.array([self.damping]), locked, force, lock_loss,
+                                tips=tips)
         if m.moving_base:
             block['bus_q'] = s.qs[None, 1:7].copy()
             block['bus_v'] = s.vs[None, 1:7].copy()
@@ -144,7 +154,7 @@ class Record3D:
                 block['angular_momentum'] = np.array(h)[None]
 
     def add_steps(self, rows: dict, locked: bool, force: float, lock_loss: float,
-                  substeps: int = 1, times=None):
+                  substeps: int = 1, times=None, tips=None):
         """
         Add the figures of a run of steps (the compiled step's rows, kernel3d.row_layout).
 
@@ -155,9 +165,14 @@ class Record3D:
         computed by the compiled step with ``_crests``' rule (kernel3d.row_layout; their
         first step's crest from the last step added if ``crest_continues``), else computed
         here.  substeps: the rows are physics steps taken that many a grid step (stage 2's
-        substeps), kept as grid rows (fold_substeps3d); times: the rows' (the grid's) times.
+        substeps), kept as grid rows (fold_substeps3d); times: the rows' (the grid's) times;
+        tips: the physics steps' tips of rows the kernel folded (physics_tips3d), those of
+        rows folded here taken from them.
         """
         if substeps > 1:
+            tips = (rows['t'].copy(), rows['qr'][:, :, self._tip[1:]])
+            if times is not None:           # (a grid step's last at its row's time)
+                tips[0][substep_ends(len(tips[0]), substeps)] = times
             rows = self._grid_rows(rows, locked, substeps, times)
         elif times is not None:         # (rows the kernel folded: at the grid's times)
             rows = dict(rows, t=np.asarray(times, dtype=float))
@@ -178,7 +193,8 @@ class Record3D:
         if 'stress_top' in rows:        # (the compiled step's: _crests' rule, computed there)
             figures = rows['stress_top'], rows['stress_at']
         block = self._put_steps(rows['t'], rows, rows['kinetic'], rows['strain'], work,
-                                friction, drive, damping, locked, force, lock_loss, figures)
+                                friction, drive, damping, locked, force, lock_loss, figures,
+                                tips)
         if self.model.moving_base:      # (copies: the rows' buffers are reused)
             block['bus_q'] = rows['qs'][:, 1:7].copy()
             block['bus_v'] = rows['vs'][:, 1:7].copy()
@@ -203,14 +219,15 @@ class Record3D:
         return rows
 
     def _put_steps(self, t, st, kinetic, strain, work, friction, drive, damping, locked,
-                   force, lock_loss, figures=None) -> dict:
+                   force, lock_loss, figures=None, tips=None) -> dict:
         """
         Append k steps' figures (arrays with the steps first), update the peaks; return them.
 
         t, st's arrays, kinetic and strain may be views of a buffer reused (copied here);
         work, friction, drive, damping are the caller's own (kept).  figures: (top, at) of the
-        steps' stresses (add_steps), else computed here (_crests).  Returns the block's rows
-        by name (the caller may add its own).
+        steps' stresses (add_steps), else computed here (_crests); tips: the physics steps'
+        the rows fold (physics_tips3d), or None.  Returns the block's rows by name (the
+        caller may add its own).
         """
         m = self.model
         k = len(t)
@@ -249,6 +266,7 @@ class Record3D:
             block[name_at] = at[:, :, j]
         block['von_mises'] = np.maximum(top[:, :, -1], 0.0)
         self._blocks.append(block)
+        self._tips.append(tips)
         # the peaks over these steps, rib by rib: the first of the largest step by step (the
         # leaf before the link: each step's own rule above; a NaN the largest, as argmax)
         first = top.argmax(0)                                   # (rib, 5)
@@ -360,11 +378,13 @@ class Record3D:
 
         ``taken_peaks`` is then their peaks: each rib's largest of every stress channel, the
         first step holding it (value and where, (ribs, 5) and (ribs, 5, 2), and when, s;
-        None: no steps), driven3d.RibPeaks.of_rows' of the rows.
+        None: no steps), driven3d.RibPeaks.of_rows' of the rows; ``taken_tips`` their
+        physics steps' tips where they fold substeps (physics_tips3d), else None.
         """
         # (one block of steps: its own arrays, which nothing else holds)
         out = self._blocks[0] if len(self._blocks) == 1 else self.arrays()
-        self._blocks = []
+        self.taken_tips = physics_tips3d(self._blocks, self._tips)
+        self._blocks, self._tips = [], []
         self.taken_peaks, self._held = self._held, None
         return out
 
@@ -425,38 +445,6 @@ class Record3D:
                             for name in STRESS_NAMES},
         }
         return out
-
-
-#: the rows of a run of steps that add up over a grid step's physics steps (the rest: its last)
-_SUMMED_ROWS = ('work_force', 'work_friction', 'work_drive', 'work_damping', 'iterations',
-                'factorisations')
-
-
-def fold_substeps3d(rows: dict, m: int) -> dict:
-    """
-    Return the grid steps' rows of physics steps taken m to a grid step (kernel3d.row_layout).
-
-    rows: consecutive physics steps, steps first, the first starting a grid step; each group
-    of m ends a grid step (a last, shorter group: the steps a fault left).  A grid step's
-    row is its last physics step's, with the works and counts summed over its steps and each
-    stress channel's largest over them, with where (stress_top, stress_at: the first of the
-    largest; outputs.fold_substeps' rule for the planar model).
-    """
-    steps = len(rows['t'])
-    ends = substep_ends(steps, m)
-    starts = np.arange(0, steps, m)
-    out = {}
-    for name, values in rows.items():
-        if name in _SUMMED_ROWS:
-            out[name] = np.add.reduceat(np.asarray(values), starts, axis=0)
-        elif name not in ('stress_top', 'stress_at'):
-            out[name] = np.array(values[ends])
-    top = np.asarray(rows['stress_top'])                    # (step, rib, 5)
-    pick = first_largest_of_substeps(np.where(np.isnan(top), np.inf, top), m)   # (NaN: largest)
-    ribs, comps = np.indices(top.shape[1:])
-    out['stress_top'] = top[pick, ribs[None], comps[None]]
-    out['stress_at'] = np.asarray(rows['stress_at'])[pick, ribs[None], comps[None]]
-    return out
 
 
 def _channels(stress, rate):

@@ -60,6 +60,7 @@ from ..engines import event_root, EVENT_TIME_TOLERANCE
 from ..integrators import newton_tolerance
 from ..kernel import ALPHA1_AXLE, kernel_error, STATUS
 from ..lock import locked_velocity_base, LockImpossible, velocity_keeping_energy
+from ..outputs import substep_ends
 from ..step_rule import (follows_lock, physics_step_of, stage2_physics_steps, stage2_step_of,
                          stage2_substeps_for)
 
@@ -257,7 +258,7 @@ class UmbrellaSimulator3D:
         if not self.locked and s1.qs[0] - m.y_stop > 0.0:
             if np.any(s1.qr[:, m.i_a1] >= ALPHA1_AXLE):
                 raise self._at_axle()
-        lock_event = None
+        lock_event = tips = None      # (tips: the lock's rest's, if in substeps)
         if not self.locked and s1.qs[0] - m.y_stop <= 0.0:
             s_hit, work_hit = self._find_lock(s0, t_next - s0.t)
             before = self.energy(s_hit)
@@ -273,7 +274,7 @@ class UmbrellaSimulator3D:
             lock_event = (s_locked.t, before, after)
             remaining = t_next - s_locked.t
             if remaining > EVENT_TIME_TOLERANCE:
-                s1, work2 = self._locked_steps(s_locked, remaining)
+                s1, work2, tips = self._locked_steps(s_locked, remaining)
                 work = work_hit.plus(work2)
             else:
                 s1, work = s_locked, work_hit
@@ -281,7 +282,10 @@ class UmbrellaSimulator3D:
         s1 = self._release(s1)
         self.state = s1
         self.k += 1
-        self.record.add(s1, self.locked, self.force, work, self.lock_loss, lock_event)
+        if tips is not None:        # (the last at the row's time)
+            tips[0][-1] = t_next
+        self.record.add(s1, self.locked, self.force, work, self.lock_loss, lock_event,
+                        tips=tips)
 
     def advance(self, steps: int, stop_at_lock: bool = False) -> None:
         """
@@ -315,8 +319,13 @@ class UmbrellaSimulator3D:
                     if done % sub:          # (a fault's last grid step: its own time)
                         times[-1] = state.t
                     state = replace(state, t=float(times[-1]))
+                tips = None        # (every physics step's, where the kernel folded them)
+                if fold > 1:       # (a grid step's last at its row's time)
+                    tips = ((self.k * sub + 1 + np.arange(done)) * (self.h / sub),
+                            compiled.physics_tips(done).copy())
+                    tips[0][substep_ends(done, sub)] = times
                 self.record.add_steps(rows, self.locked, self.force, self.lock_loss,
-                                      sub // fold, times)
+                                      sub // fold, times, tips)
                 self.state = state
                 self.k += done // sub
             if status == STATUS['crossing']:
@@ -352,17 +361,22 @@ class UmbrellaSimulator3D:
 
     def _locked_steps(self, s: State3D, dt: float):
         """
-        Return the state dt after s in stage 2 and the work: its physics steps (n of dt / n).
+        Return the state dt after s in stage 2, the work, and its physics steps' tips.
 
-        n: the fewest steps no longer than the stage-2 step h / stage2_substeps (the planar
-        simulator's _physics_steps).
+        Its physics steps: n of dt / n, the fewest no longer than the stage-2 step h /
+        stage2_substeps (the planar simulator's _physics_steps); their tips: the time and
+        each rib's tip v and w (Record3D's physics_tips3d) if n > 1, else None.
         """
         n = stage2_physics_steps(dt, self.h, self.stage2_substeps)
         s, work = self._step(s, dt / n, True)
+        states = [s]
         for _ in range(n - 1):
             s, w = self._step(s, dt / n, True)
             work = work.plus(w)
-        return s, work
+            states.append(s)
+        tips = None if n == 1 else (np.array([x.t for x in states]), np.array(
+            [x.qr[:, self.model.i_tip[1:]] for x in states]))
+        return s, work, tips
 
     def _substep_grid(self, s0: State3D, t_next: float) -> None:
         """

@@ -27,6 +27,10 @@ step_rule.substeps_for) where the step is chosen for the run (step_rule.follows_
 the planar record).  The rule reads the in-plane modes: a rib's out-of-plane and torsion
 modes (the in-plane rule's 'coarse step' does not see them) are resolved by the mode fit
 at the step the in-plane ones need (their frequencies: docs/umbrella3d.md).
+
+A stage-2 grid step taken in substeps keeps one row (``fold_substeps3d``: Record3D's, and the
+compiled advance's fold) and, apart, every substep's tip deflections (``physics_tips3d``),
+from which the summary's stage-2 figures come (summary.Stage2Series).
 """
 from __future__ import annotations
 
@@ -36,6 +40,7 @@ import numpy as np
 
 from .model3d import UmbrellaModel3D
 from ..model import UmbrellaModel
+from ..outputs import first_largest_of_substeps, substep_ends
 from ..params import UmbrellaParams
 from ..step_rule import stage2_resolution as planar_resolution
 
@@ -99,3 +104,50 @@ def stage2_resolution(model: UmbrellaModel3D, qr: np.ndarray, vr: np.ndarray,
         if key is None or rank < key:
             worst, key = dict(out, rib=k), rank
     return worst
+
+
+#: the rows of a run of steps that add up over a grid step's physics steps (the rest: its last)
+_SUMMED_ROWS = ('work_force', 'work_friction', 'work_drive', 'work_damping', 'iterations',
+                'factorisations')
+
+
+def fold_substeps3d(rows: dict, m: int) -> dict:
+    """
+    Return the grid steps' rows of physics steps taken m to a grid step (kernel3d.row_layout).
+
+    rows: consecutive physics steps, steps first, the first starting a grid step; each group
+    of m ends a grid step (a last, shorter group: the steps a fault left).  A grid step's
+    row is its last physics step's, with the works and counts summed over its steps and each
+    stress channel's largest over them, with where (stress_top, stress_at: the first of the
+    largest; outputs.fold_substeps' rule for the planar model).
+    """
+    steps = len(rows['t'])
+    ends = substep_ends(steps, m)
+    starts = np.arange(0, steps, m)
+    out = {}
+    for name, values in rows.items():
+        if name in _SUMMED_ROWS:
+            out[name] = np.add.reduceat(np.asarray(values), starts, axis=0)
+        elif name not in ('stress_top', 'stress_at'):
+            out[name] = np.array(values[ends])
+    top = np.asarray(rows['stress_top'])                    # (step, rib, 5)
+    pick = first_largest_of_substeps(np.where(np.isnan(top), np.inf, top), m)   # (NaN: largest)
+    ribs, comps = np.indices(top.shape[1:])
+    out['stress_top'] = top[pick, ribs[None], comps[None]]
+    out['stress_at'] = np.asarray(rows['stress_at'])[pick, ribs[None], comps[None]]
+    return out
+
+
+def physics_tips3d(blocks: list[dict], tips: list) -> tuple | None:
+    """
+    Return the physics steps' tips of Record3D's blocks (StepBlock3D.physics_tips).
+
+    tips: each block's, None where its rows are its physics steps, else (t, tips): the time
+    and each rib's in-plane v and out-of-plane w of the leaf tip ((steps,), (steps, ribs,
+    2)) at the end of every physics step its rows fold.  None if no block folds substeps;
+    else (t, tips) of every block's physics steps, in order.
+    """
+    if all(t is None for t in tips):
+        return None
+    parts = [(b['time'], b['tip'][:, :, 1:]) if t is None else t for b, t in zip(blocks, tips)]
+    return (np.concatenate([t for t, _ in parts]), np.concatenate([v for _, v in parts]))
