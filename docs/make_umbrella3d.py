@@ -479,11 +479,17 @@ out-of-plane and torsion modes take the mode fit at the step the in-plane ones n
 numpy step takes a grid step's physics steps one by one (`UmbrellaSimulator3D.step`), the
 compiled advance k of them per grid step in one call; either way Record3D keeps one row a
 grid step, its last physics step's figures with each stress channel's largest over its
-physics steps (each physics step's Hermite crest; outputs3d.fold_substeps3d, the planar
+physics steps (each physics step's Hermite crest; substeps3d.fold_substeps3d, the planar
 outputs.fold_substeps' rule, which the compiled advance applies itself: Advance3DCall.fold).
 From one locked state (4 asymmetric ribs, V0 = -0.5, 10 physics steps a grid step) the two
 paths' 40 grid rows agree within the numpy reference's own ulp spread on every base, with
-the same Newton iterations (tests/test_umbrella3d_substeps.py).
+the same Newton iterations (tests/test_umbrella3d_substeps.py). Every physics step's tip
+deflections are kept apart from the rows (Advance3DCall.tips; Record3D.taken_tips, on both
+paths, alike to the same spread), and each rib's stage-2 amplitude and period in the summary
+are of them, not of the grid rows: on a 5 ms grid (step_follows_mesh, 50 substeps, three ribs
+at V0 = -0.05) they are the 0.1 ms grid's to 1.5e-4 and 1e-7, the period 2.5e-5 from the
+locked frame's first mode's, where the grid rows' amplitude was 0.9 % low and their period
+2e-4 off (tests/test_stage2_substep_figures.py).
 With a `time_step` given, stage 2 stays on it and its summary's 'coarse step' (the lock's
 worst rib, judged at the step stage 2 takes) names the `time_step` that resolves it; the
 node, the driver and replay pin the physics step by the planar model's rule

@@ -118,9 +118,10 @@ def step_convergence_section() -> list[str]:
     lines = ['## Time-step convergence', '',
              "Every figure from every grid step's row (the run driver's; where stage 2 takes "
              "substeps, `time_step` 0 below, a row is its grid step's last substep, its peaks "
-             "the largest of them: that sampling alone puts the summary's stage-2 amplitude "
+             "the largest of them: that sampling alone puts this study's stage-2 amplitude "
              "of N = 1, V0 = −0.2, energy lock 0.12 % below every 0.1 ms substep's, 62.19 against "
-             '62.27 mm), against a run of the same model, mesh and lock with a '
+             "62.27 mm; the run's summary takes every substep's tip), against a run of the same "
+             'model, mesh and lock with a '
              f'{STUDY_REFERENCE:g} s step '
              f"({FINE_MESH_REFERENCE:g} s at N = 8; it resolves the link's axial modes, "
              f'~3·10⁵ rad/s at N = 1); {STUDY_WINDOW:g} s of stage 2. Errors relative, except '
@@ -600,8 +601,8 @@ def main():
     late = [1e3 * (f['tip_deflection_max_time'] - THESIS_V02['tip_deflection_max_time'])
             for f in (f1, f2)]
     lines += ['',
-              "Recorded at 1 kHz (the figures are the recording's summary of every grid step, "
-              "stage 2's substeps folded into theirs, stage 2 over the 0.3 s after the lock). "
+              "Recorded at 1 kHz (the figures are the recording's summary of every physics "
+              "step, stage 2's substeps included, stage 2 over the 0.3 s after the lock). "
               'The stage-1 maximum differs by '
               f"{span(rel('tip_deflection_max'), '+.1f')} % from the thesis's and comes "
               f"{span(late, '.0f')} ms "
