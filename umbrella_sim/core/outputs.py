@@ -452,8 +452,11 @@ def running_total(total, steps) -> np.ndarray:
     at a time adds it, so the figure has the same bits however the run is chunked into
     blocks (np.cumsum(steps) + total rounds a block's partial sums apart from the total).
     """
-    start = np.asarray(total, dtype=float)[None]
-    return np.add.accumulate(np.concatenate((start, np.asarray(steps, dtype=float))))[1:]
+    out = np.array(steps, dtype=float)      # (a copy: steps may be a reused buffer's view)
+    if len(out):
+        out[0] += total                     # (total + the first step: the sum one step makes)
+        np.add.accumulate(out, axis=0, out=out)
+    return out
 
 
 #: the rows of a physics step's time and tip deflection (StepBlock.physics_tips)
