@@ -37,6 +37,7 @@ from umbrella_sim.core.nonlinear import locked_first_frequency
 from umbrella_sim.core.outputs import STEP_FIELDS, step_peaks
 from umbrella_sim.core.params import UmbrellaParams
 from umbrella_sim.core.solver import UmbrellaSimulator
+from umbrella_sim.core.step_study import TARGETS
 from umbrella_sim.core.summary import (energy_drift, oscillation_period, parameter_warnings,
                                        STAGE2_WINDOW, TIP_DEFLECTION_LIMIT)
 from umbrella_sim.ros.recording import record_offline
@@ -922,3 +923,19 @@ def test_the_stage2_series_times_each_column_and_answers_again_from_what_it_made
     assert again[0]['stage2_window'][1] > lock and again[1] == first[1]
     series.add(np.array([lock + 0.1]), np.array([[0.07, 0.0]]), lock)
     assert series.figures(lock)[0]['stage2_tip_amplitude'] > first[0]['stage2_tip_amplitude']
+
+
+def test_a_run_without_step_figures_is_summarised_from_its_samples(offline):
+    """A RunResult that kept samples but no step figures gives its figures from them."""
+    from dataclasses import replace
+    bare = replace(offline, figures=None)
+    got = bare.summary()
+    assert got['figures_from'] == 'samples'
+    every = offline.summary()
+    # a sample every physics step: the same steps, so the same lock; the step figures' peaks
+    # add each step's crest between its ends (hermite_crests), so the samples' are at most
+    # those, and within the step study's peak-stress target (a crest between samples
+    # missed by up to 1 - cos(omega h / 2))
+    assert got['deploy_time'] == pytest.approx(every['deploy_time'], rel=1e-12)
+    for key in ('peak_stress_leaf', 'peak_stress_link', 'tip_deflection_max'):
+        assert (1 - TARGETS['peak_stress']) * every[key] < got[key] <= every[key] * (1 + 1e-12)

@@ -27,7 +27,7 @@ figure and the limit it is held to change together.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cache
 import math
 from typing import Callable
@@ -1013,11 +1013,11 @@ class SummaryAccumulator:
                               self.warnings)
 
 
-def blocks_from_samples(samples: list) -> StepBlock:
-    """Return a StepBlock of samples (each taken as one step's end)."""
+def blocks_from_samples(samples: list, lock=None, error: str | None = None) -> StepBlock:
+    """Return a StepBlock of samples (each taken as one step's end), with its lock and fault."""
     rows = np.array([step_row(s) for s in samples], dtype=float).reshape(-1, len(STEP_FIELDS))
     last = samples[-1]
-    return StepBlock.from_rows(rows.T.copy(), lambda: last)
+    return StepBlock.from_rows(rows.T.copy(), lambda: last, lock, error)
 
 
 def summarize(r: RunResult) -> dict:
@@ -1035,8 +1035,7 @@ def summarize(r: RunResult) -> dict:
     else:
         acc = SummaryAccumulator(r.params, r.samples[0], r.lock.kind if r.lock else None)
         if len(r.samples) > 1:
-            block = blocks_from_samples(r.samples[1:])
-            acc.add(replace(block, lock=r.lock, error=r.error))
+            acc.add(blocks_from_samples(r.samples[1:], r.lock, r.error))
         out = acc.figures()
         out['figures_from'] = 'samples'
     out['steps'] = r.steps
