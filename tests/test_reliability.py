@@ -79,7 +79,11 @@ def diag_values(msg: DiagnosticArray) -> dict:
 
 # --------------------------------------------------------------- the run's summary
 def run_through_stage2(params: UmbrellaParams, chunk_steps: int | None = None):
-    """Run to the end of the stage-2 window; return the driver and every step's (t, tip)."""
+    """
+    Run to the end of the stage-2 window; return the driver and every physics step's (t, tip).
+
+    (a block whose rows fold stage 2's substeps carries every physics step's in physics_tips)
+    """
     driver = RunDriver(params, chunk_steps=chunk_steps)
     t, v = [], []
     k_end = None                    # the first step past the window's end
@@ -88,8 +92,9 @@ def run_through_stage2(params: UmbrellaParams, chunk_steps: int | None = None):
         assert chunk.error is None, chunk.error
         if chunk.lock is not None:
             k_end = int((chunk.lock.time + STAGE2_WINDOW) / driver.step) + 2
-        t.append(chunk.block.time.copy())
-        v.append(chunk.block.tip_transverse.copy())
+        tips = chunk.block.physics_tips
+        t.append((chunk.block.time if tips is None else tips[0]).copy())
+        v.append((chunk.block.tip_transverse if tips is None else tips[1]).copy())
     return driver, np.concatenate(t), np.concatenate(v)
 
 
@@ -100,7 +105,9 @@ def test_the_stage2_series_a_summary_keeps_is_bounded():
     At 2 us the 0.3 s window has 150 000 steps; the summary keeps at most STAGE2_SAMPLES of
     them (at 0.1 us all 3e6 took 48 MB and ~4 s to analyse at a node's stop), whatever the
     chunks; the amplitude and the window's end are those of every step and the period is
-    that of every step to 1e-6.  At the default step every step is kept.
+    that of every step to 1e-6.  At the default step every physics step is kept (V0 = -0.5:
+    stage 2 in 25 us substeps, 12 000 in the window; at V0 = -2 its substeps of a few us
+    are themselves past STAGE2_SAMPLES).
     """
     fine = UmbrellaParams(v0=-2.0, time_step=2e-6)
     driver, t, v = run_through_stage2(fine)
@@ -114,8 +121,13 @@ def test_the_stage2_series_a_summary_keeps_is_bounded():
     assert figures['stage2_tip_period'] == pytest.approx(exact['stage2_tip_period'], rel=1e-6)
     other, _, _ = run_through_stage2(fine, chunk_steps=997)
     assert other.summary.figures() == figures                   # whatever the chunks
+    # the same bound where the fine steps are stage 2's substeps (V0 = -2 at the mesh's step)
+    driver, t, v = run_through_stage2(UmbrellaParams(v0=-2.0))
+    assert driver.summary._stage2.kept <= STAGE2_SAMPLES + 1 < len(t)
+    exact = stage2_figures(t, v, driver.sim.lock_event.time)
+    assert driver.summary.figures()['stage2_tip_amplitude'] == exact['stage2_tip_amplitude']
 
-    default = UmbrellaParams(v0=-2.0)
+    default = UmbrellaParams(v0=-0.5)
     driver, t, v = run_through_stage2(default)
     in_window = (t > driver.sim.lock_event.time) & \
         (t <= driver.sim.lock_event.time + STAGE2_WINDOW + 1e-9)

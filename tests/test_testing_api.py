@@ -668,7 +668,7 @@ def test_the_sampled_stage2_amplitude_falls_short_as_the_docs_say(tmp_path):
 
     A summary takes the tip at publish_rate and misses a crest between two samples; the page
     gives the shortfall at 100 Hz for the default run and a 10 N push from rest (it said
-    6.4 % for the default run, whose samples fall within 0.3 % of its crests) and a bound at
+    6.4 % for the default run, whose samples fall within 0.4 % of its crests) and a bound at
     1 kHz, each of these recordings' summary against its every-step figure.
     """
     from umbrella_sim.core.params import UmbrellaParams
