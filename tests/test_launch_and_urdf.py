@@ -119,6 +119,42 @@ def test_urdf_with_published_joint_states_closes_the_loop(model):
     assert checked > 10 and sim.lock_event is not None     # through the lock
 
 
+def test_tip_deflection_is_the_deformed_tip_in_its_header_frame():
+    """
+    A viewer draws tip_deflection's point where the deformed tip G is.
+
+    RViz and Foxglove place a PointStamped at its point in its header's frame, which
+    robot_state_publisher's TF puts where the URDF's forward kinematics from joint_states
+    does: that must be the deformed mesh's G (a point (u_G, v_G) in the leaf frame, origin
+    O, would be drawn near the hinge, a leaf length away).  Every header frame of the
+    sample's messages is a link of the URDF, with robot_state_publisher's frame_prefix.
+    """
+    from umbrella_sim.ros.messages import sample_messages, tip_deflection_msg
+
+    p = UmbrellaParams(v0=-0.5)
+    robot = ET.fromstring(rd.urdf(p))
+    links = {link.get('name') for link in robot.iter('link')}
+    sim = UmbrellaSimulator(p)
+    largest = 0.0
+    while sim.time < 0.3:
+        s = sim.sample()
+        joints = joint_state_msg(s)
+        frames = _forward_kinematics(robot, dict(zip(joints.name, joints.position)))
+        tip = tip_deflection_msg(s)
+        assert tip.point.z == 0.0
+        drawn = (frames[tip.header.frame_id] @ np.array([tip.point.x, tip.point.y, 1.0]))[:2]
+        leaf, _ = sim.model.node_positions(s.q, 1.0)        # deformed, G its last node
+        assert np.abs(drawn - leaf[-1]).max() < 1e-12, (sim.time, drawn, leaf[-1])
+        largest = max(largest, math.hypot(tip.point.x, tip.point.y))
+        for _ in range(10):
+            sim.step(record=False)
+    assert sim.lock_event is not None and largest > 1e-3   # stage 2's vibration included
+    messages = sample_messages(s, p, [leaf], 'a1', 0.0, 'a1/')
+    headers = [m.header for m in messages.values() if hasattr(m, 'header')]
+    headers += [m.header for m in messages['markers'].markers]
+    assert {h.frame_id for h in headers} <= {f'a1/{link}' for link in links}
+
+
 # ------------------------------------------------------------------------------ launch
 class _Recorder:
 

@@ -379,7 +379,7 @@ REGISTRY: dict[str, Param] = {p.name: p for p in (
        low=0.1, high=5000.0, group=NODE),
     _P('frame_prefix', str, '', '-',
        'prefix of the frame ids of joint_states, tip_deflection and markers (umbrella_base, '
-       "leaf); 'a1/' matches robot_state_publisher's frame_prefix when several antennas "
+       "tip); 'a1/' matches robot_state_publisher's frame_prefix when several antennas "
        'share one TF tree', applies=START, group=NODE, default_text='""'),
     # deploy_controller (msg_docs/deploy_controller.md): read once, at start
     _P('target_time', float, 1.0, 's',

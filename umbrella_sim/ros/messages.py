@@ -36,12 +36,16 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Float64, Float64MultiArray, MultiArrayDimension, String
 from visualization_msgs.msg import Marker, MarkerArray
 
+from .robot_description import TIP
 from ..bag.format import APPLIED_SUFFIX, REFUSED_SUFFIX
 from ..core.outputs import energy_balance, Sample
 from ..core.params import UmbrellaParams
 
 INERTIAL_FRAME = 'umbrella_base'   # X toward the leaf, Y up the axle, origin at the hinge O
-LEAF_FRAME = 'leaf'                # origin O, x' through O''
+#: tip_deflection's frame: the URDF's undeformed tip G, the leaf frame's axes (origin O, x'
+#: through O'') moved to x' = l1 + l2, so that the point (u_G, v_G, 0), G's elastic
+#: displacement, is where the deformed tip is (a viewer draws it at the tip, not near O)
+TIP_FRAME = TIP
 JOINT_NAMES = ['leaf_hinge', 'link_hinge', 'sleeve_slider']
 PHASES = ('deploying', 'locked', 'fault')
 
@@ -166,14 +170,14 @@ def joint_state_msg(s: Sample, frame_prefix: str = '') -> JointState:
 
 
 def tip_deflection_values(s: Sample) -> tuple:
-    """Return the tip G in the leaf frame: axial u, transverse v, 0 (m)."""
+    """Return G's elastic displacement along the leaf's axes: axial u, transverse v, 0 (m)."""
     return (s.tip_axial, s.tip_transverse, 0.0)
 
 
 def tip_deflection_msg(s: Sample, frame_prefix: str = '') -> PointStamped:
     msg = PointStamped()
     msg.header.stamp = stamp(s.time)
-    msg.header.frame_id = frame_prefix + LEAF_FRAME
+    msg.header.frame_id = frame_prefix + TIP_FRAME
     x, y, z = tip_deflection_values(s)
     msg.point = Point(x=x, y=y, z=z)
     return msg
