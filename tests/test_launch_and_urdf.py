@@ -281,6 +281,45 @@ def test_plan_starts_robot_state_publisher_with_the_urdf_when_installed():
     assert not any(isinstance(a, ld.LogAction) for a in actions)
 
 
+@pytest.mark.parametrize('ns', ['', 'a1', 'a1/b_2'])
+def test_rviz_shows_the_antennas_own_topics_and_frames(ns, tmp_path, monkeypatch):
+    """
+    RViz, started with an antenna, looks where that antenna's node and TF are.
+
+    Its fixed frame is the node's header frame (frame_prefix + umbrella_base), the frame
+    robot_state_publisher roots its TF at; its marker and robot-description topics are the
+    ones published in the namespace; its robot model finds each URDF link under the prefix
+    robot_state_publisher gives the TF frames (RViz joins TF Prefix and link with a '/').
+    """
+    import yaml
+
+    from umbrella_sim.ros.messages import INERTIAL_FRAME, TOPICS
+
+    monkeypatch.setattr('tempfile.tempdir', str(tmp_path))
+    values = {a.name: a.default for a in ld.arguments()}
+    actions = ld.plan(dict(values, namespace=ns, rviz='true'),
+                      installed=lambda pkg: ROOT if pkg == 'umbrella_sim' else f'/opt/{pkg}')
+    node, rsp, rviz = (next(a for a in actions if a.package == pkg)
+                       for pkg in ('umbrella_sim', 'robot_state_publisher', 'rviz2'))
+    prefix = node.parameters[1]['frame_prefix']
+    assert rsp.parameters[0]['frame_prefix'] == prefix
+    flag, path = rviz.arguments
+    assert flag == '-d' and (ns or path == os.path.join(ROOT, 'rviz', 'umbrella.rviz'))
+    with open(path, encoding='utf-8') as fh:
+        manager = yaml.safe_load(fh)['Visualization Manager']
+    assert manager['Global Options']['Fixed Frame'] == prefix + INERTIAL_FRAME
+    displays = {d['Class'].split('/')[-1]: d for d in manager['Displays']}
+    rel = f'/{ns}' if ns else ''
+    assert displays['MarkerArray']['Topic']['Value'] == f'{rel}/{TOPICS["markers"].name}'
+    model = displays['RobotModel']
+    assert model['Description Topic']['Value'] == f'{rel}/robot_description'
+    tf_prefix = model.get('TF Prefix', '')
+    links = [link.get('name') for link in ET.fromstring(rsp.parameters[0]['robot_description'])
+             .iter('link')]
+    assert [f'{tf_prefix}/{link}' if tf_prefix else link for link in links] == \
+        [prefix + link for link in links]
+
+
 def test_plan_refuses_bad_overrides_before_starting_anything():
     values = {a.name: a.default for a in ld.arguments()}
     with pytest.raises(ValueError, match="parameter v0='fast'"):

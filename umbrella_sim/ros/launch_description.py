@@ -24,10 +24,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import os
 import re
+import tempfile
 
 import yaml
 
 from .params_file import load_yaml_as_ros
+from .robot_description import BASE
 from .share import PACKAGE, package_path, share_dir
 from ..core.params import UmbrellaParams
 from ..core.registry import REGISTRY, SPECS
@@ -159,6 +161,49 @@ def described_model(params_file: str,
     return node_model({**load_params_file(params_file), **node_params})
 
 
+def rviz_config(config: dict, ns: str) -> dict:
+    """
+    Return RViz's config (rviz/umbrella.rviz, loaded) for the antenna in namespace ns.
+
+    The installed config is the root namespace's: topics /markers and /robot_description,
+    fixed frame umbrella_base.  In a namespace the node publishes /<ns>/markers,
+    robot_state_publisher /<ns>/robot_description and the TF frames <ns>/<link> (its
+    frame_prefix, as the node's headers): each display's absolute topic goes under /<ns>,
+    the fixed frame is <ns>/umbrella_base and the robot model's TF Prefix ns (RViz joins it
+    to a link name with a '/').  Unchanged, RViz showed nothing there ('Fixed Frame
+    [umbrella_base] does not exist', no markers, no robot model).
+    """
+    ns = ns.strip('/')
+    if not ns:
+        return config
+    out = yaml.safe_load(yaml.safe_dump(config))            # a deep copy
+    manager = out['Visualization Manager']
+    manager['Global Options']['Fixed Frame'] = f'{ns}/{BASE}'
+    for display in manager['Displays']:
+        for key in ('Topic', 'Description Topic'):
+            topic = display.get(key, {}).get('Value', '')
+            if topic.startswith('/'):
+                display[key]['Value'] = f'/{ns}{topic}'
+        if display.get('Class') == 'rviz_default_plugins/RobotModel':
+            display['TF Prefix'] = ns
+    return out
+
+
+def _rviz_config_file(share: str, ns: str) -> str:
+    """Return the RViz config file for namespace ns: the installed one, or a namespaced copy."""
+    installed = os.path.join(share, 'rviz', 'umbrella.rviz')
+    if not ns:
+        return installed
+    with open(installed, encoding='utf-8') as fh:
+        config = rviz_config(yaml.safe_load(fh), ns)
+    fd, path = tempfile.mkstemp(prefix=f"umbrella_{ns.replace('/', '_')}_", suffix='.rviz')
+    with os.fdopen(fd, 'w', encoding='utf-8') as fh:
+        fh.write(f'# rviz/umbrella.rviz for the antenna in namespace /{ns} '
+                 '(umbrella_sim.ros.launch_description.rviz_config)\n')
+        yaml.safe_dump(config, fh, sort_keys=False)
+    return path
+
+
 def plan(values: dict[str, str], installed=share_dir) -> list:
     """
     Return the actions for one antenna, given the launch arguments' string values.
@@ -203,7 +248,7 @@ def plan(values: dict[str, str], installed=share_dir) -> list:
         if installed('rviz2') and share:
             actions.append(NodeAction('rviz2', 'rviz2', 'rviz2', ns,
                                       [{'use_sim_time': sim_time}], clock,
-                                      ['-d', os.path.join(share, 'rviz', 'umbrella.rviz')]))
+                                      ['-d', _rviz_config_file(share, ns)]))
         else:
             actions.append(LogAction('rviz2 is not installed: not starting RViz'))
     return actions
