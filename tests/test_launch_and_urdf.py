@@ -320,6 +320,44 @@ def test_rviz_shows_the_antennas_own_topics_and_frames(ns, tmp_path, monkeypatch
         [prefix + link for link in links]
 
 
+def test_rviz_view_faces_the_plane_the_frame_moves_in():
+    """
+    The saved RViz view shows the planar frame face-on, the axle up, the frame in view.
+
+    RViz's Orbit view (rviz_default_plugins' OrbitViewController.updateCamera) puts the
+    camera at focal + d (cos yaw cos pitch, sin yaw cos pitch, sin pitch) looking at the
+    focal point, its screen's up the part of +Z normal to the view.  The markers of the
+    planar frame lie in z = 0: the view must look along Z (at pitch 0 it looked along Y and
+    the frame was a line), with +Y, up the axle, up on the screen and +X to the right.
+    """
+    import yaml
+
+    with open(os.path.join(ROOT, 'rviz', 'umbrella.rviz'), encoding='utf-8') as fh:
+        view = yaml.safe_load(fh)['Visualization Manager']['Views']['Current']
+    assert view['Class'] == 'rviz_default_plugins/Orbit'
+    assert view['Target Frame'] == '<Fixed Frame>'
+    yaw, pitch, distance = float(view['Yaw']), float(view['Pitch']), float(view['Distance'])
+    assert abs(pitch) <= math.pi / 2 - 0.001                 # RViz's own clamp
+    focal = np.array([float(view['Focal Point'][k]) for k in 'XYZ'])
+    camera = focal + distance * np.array([math.cos(yaw) * math.cos(pitch),
+                                          math.sin(yaw) * math.cos(pitch), math.sin(pitch)])
+    forward = (focal - camera) / np.linalg.norm(focal - camera)
+    up = np.array([0.0, 0.0, 1.0]) - forward[2] * forward
+    up /= np.linalg.norm(up)
+    right = np.cross(forward, up)
+    assert forward @ np.array([0.0, 0.0, -1.0]) > 0.999            # face-on, from +Z
+    assert up @ np.array([0.0, 1.0, 0.0]) > 0.999                  # the axle up
+    assert right @ np.array([1.0, 0.0, 0.0]) > 0.999               # the leaf to the right
+    # the folded and the deployed frame (O, O'', G, the axle's top) within a 45° view
+    p = UmbrellaParams()
+    corners = [(0.0, 0.0), (0.0, p.l1 + p.l3)] + [
+        ((p.l1 + p.l2) * math.cos(a), (p.l1 + p.l2) * math.sin(a))
+        for a in (p.alpha0, p.alpha_deployed)]
+    for x, y in corners:
+        ray = np.array([x, y, 0.0]) - camera
+        assert math.degrees(math.acos(ray @ forward / np.linalg.norm(ray))) < 22.5, (x, y)
+
+
 def test_plan_refuses_bad_overrides_before_starting_anything():
     values = {a.name: a.default for a in ld.arguments()}
     with pytest.raises(ValueError, match="parameter v0='fast'"):
