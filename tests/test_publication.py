@@ -180,6 +180,12 @@ def assert_layout_plots(name: str, messages: dict, expected: dict) -> dict:
         if not key.startswith('Plot!'):
             continue
         for path in panel['paths']:
+            # one time axis for the synced plots, which every topic has: the receive time
+            # (a recording's log time, sim time; live, the bridge's clock).  headerStamp:
+            # the Float64MultiArray topics have none, and live it is sim time against the
+            # others' wall-clock receive times (foxglove_bridge without use_sim_time), so
+            # its plots were drawn ~1.8e9 s out of view
+            assert path['timestampMethod'] == 'receiveTime', path
             topic, *fields = re.split(r'\.', path['value'])
             value = messages[topic.lstrip('/')]
             for field in fields:
