@@ -19,7 +19,10 @@ Cost of the physics core: per-step cost vs mesh, and whole-run real-time factors
 
 For each mesh N (flexible model, V0 = -0.2 m/s unless --v0, energy lock, t = 0 -> 1.0 s through
 the lock, at the default time step unless --time-step; --mesh-step: time_step 0, the step chosen
-for the mesh, and in stage 2 the one its lock needs):
+for the run: stage 1 on its grid, 0.2 ms up to 2 elements a segment and the mesh's step above,
+stage 2 in substeps of it, the mesh's step or the finer one its lock needs; h1 / h2 are the
+steps stage 1 and stage 2 took; a step is a physics step, each of stage 2's substeps one,
+bench/step_figures.py):
   * us/step (kernel): the whole run in one UmbrellaSimulator.advance call (the compiled loop
     with every step's outputs, the lock's root find; Python enters three times), CPU time of
     this thread, best of --repeat;
@@ -57,10 +60,11 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
+from bench.step_figures import physics_steps  # noqa: E402
 from umbrella_sim.core.driver import RunDriver, simulate  # noqa: E402
 from umbrella_sim.core.params import physics_step, UmbrellaParams  # noqa: E402
 from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
-from umbrella_sim.core.step_rule import AUTO_STEP_CEILING  # noqa: E402
+from umbrella_sim.core.step_rule import AUTO_STEP_CEILING, step_taken_now  # noqa: E402
 from umbrella_sim.tools.csv_output import StepCsv  # noqa: E402
 
 #: model -> {N: target}
@@ -141,12 +145,12 @@ def cli_start_cpu() -> float:
 
 
 def kernel_run(params):
-    """Return the CPU s per step of the whole run in one advance call."""
+    """Return the CPU s per physics step of the whole run in one advance call."""
     sim = UmbrellaSimulator(params)
     n = round(DURATION / sim.h)
     c0 = time.thread_time()
     sim.advance(n)
-    return (time.thread_time() - c0) / n
+    return (time.thread_time() - c0) / physics_steps(sim)
 
 
 def main():
@@ -177,25 +181,27 @@ def main():
           f'{steps}, a Sample every '
           f'{SAMPLE_PERIOD * 1e3:g} ms; '
           f'best of {args.repeat}; loadavg {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs')
-    print(f"{'N':>3} {'h':>5} {'coords':>6} {'newton':>6} {'us/step':>8} {'us/step':>8} "
+    print(f"{'N':>3} {'h1 / h2':>11} {'coords':>6} {'newton':>6} {'us/step':>8} {'us/step':>8} "
           f"{'ns/step/coord':>13}"
           f" {'RTF':>7} {'targets (us, RTF)':>18} {'us/1 ms block':>15} {'RTF':>7}")
-    print(f"{'':>3} {'us':>5} {'':>6} {'/step':>6} {'kernel':>8} {'1 ms':>8} {'kernel':>13} "
+    print(f"{'':>3} {'us':>11} {'':>6} {'/step':>6} {'kernel':>8} {'1 ms':>8} {'kernel':>13} "
           f"{'wall':>7}"
           f" {'':>18} {'kernel':>7} {'rest':>7} {'kernel':>7}")
     for n in args.meshes:
         p = UmbrellaParams(v0=args.v0, elements_per_segment=n, time_step=h, model=args.model,
                            damping_ratio=args.damping_ratio)
-        if args.mesh_step:      # (time_step 0: 0.1 ms / k divides the 1 ms blocks)
+        if args.mesh_step:      # (time_step 0: its grid, 0.2 ms or 0.1 ms / k, divides 1 ms)
             p = p.replace(time_step=0.0)
         cpus, walls = [], []
         for _ in range(args.repeat):
             cpu, wall, sim, _ = block_run(p)
             cpus.append(cpu)
             walls.append(wall)
-        us = 1e6 * min(cpus) / sim.steps
+        steps = physics_steps(sim)
+        us = 1e6 * min(cpus) / steps
         kernel = 1e6 * min(kernel_run(p) for _ in range(args.repeat))
-        newton = sim.engine.newton_iterations() / sim.steps
+        newton = sim.engine.newton_iterations() / steps
+        h12 = f'{1e6 * sim.h:.3g} / {1e6 * step_taken_now(sim):.3g}'
         rtf = DURATION / min(walls)
         tgt = ''
         if n in rtf_targets and args.v0 == -0.2:     # (the targets' case)
@@ -208,7 +214,7 @@ def main():
         else:
             compiled, total = 1e6 * compiled / BLOCKS, 1e6 * total / BLOCKS
             tail = f'{compiled:>7.1f} {total - compiled:>7.1f} {1e3 / compiled:>6.1f}x'
-        print(f'{n:>3} {1e6 * sim.h:>5.1f} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} '
+        print(f'{n:>3} {h12:>11} {sim.model.n:>6} {newton:>6.2f} {kernel:>8.2f} '
               f'{us:>8.2f} '
               f'{1e3 * kernel / sim.model.n:>13.1f} {rtf:>6.1f}x {tgt:>18} {tail}', flush=True)
     print(f"\nCPU s per simulated s, best of {args.repeat}: the node's path (1 kHz) and "

@@ -21,16 +21,18 @@ Real-time factor of the geometrically exact model (flexible-nonlinear: co-rotati
 and of the damped linear one, beside the linear flexible model (simulated seconds per wall
 second, one process).
 
-V0 = -0.2, through the lock to t = 1.0 s, at the default (accuracy-chosen) time step, in
-blocks of 1 ms of simulated time through UmbrellaSimulator.advance (the compiled loop with
-every step's outputs, what the node pays), best of --repeat runs; us/step and the CPU
-real-time factor from process time, beside the wall-clock one; each block builds the
-Sample of its last step, as a publication does.  Target: >= 5x at N = 4 for
-flexible-nonlinear (at V0 = -0.2; --v0 -1 -2 prints the large-motion cost beside it: more
-Newton iterations a step where the frame swings and buckles).  All four cases run on the
-compiled kernel (the nonlinear and damped ones with the elastic law of _kernel_nonlinear.c
-attached); UMBRELLA_SIM_KERNEL=numpy gives the numpy reference.  The machine is shared, so
-figures are noisy.
+V0 = -0.2, through the lock to t = 1.0 s, at the default (accuracy-chosen) time step (h1 / h2:
+the steps stage 1 and stage 2 take; flexible up to 2 elements a segment: stage 1 on a 0.2 ms
+grid, stage 2 in substeps of it; a step, and its Newton iterations, is a physics step, each
+substep one: bench/step_figures.py), in blocks of 1 ms of simulated time through
+UmbrellaSimulator.advance (the compiled loop with every step's outputs, what the node pays),
+best of --repeat runs; us/step and the CPU real-time factor from process time, beside the
+wall-clock one; each block builds the Sample of its last step, as a publication does.
+Target: >= 5x at N = 4 for flexible-nonlinear (at V0 = -0.2; --v0 -1 -2 prints the
+large-motion cost beside it: more Newton iterations a step where the frame swings and
+buckles).  All four cases run on the compiled kernel (the nonlinear and damped ones with the
+elastic law of _kernel_nonlinear.c attached); UMBRELLA_SIM_KERNEL=numpy gives the numpy
+reference.  The machine is shared, so figures are noisy.
 
     python bench/bench_nonlinear.py [--meshes 1 2 4 8] [--repeat 2] [--duration 1.0]
                                     [--v0 -0.2 -1 -2]
@@ -42,9 +44,11 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
+from bench.step_figures import physics_steps  # noqa: E402
 from umbrella_sim.core.model import Stage  # noqa: E402
 from umbrella_sim.core.params import UmbrellaParams  # noqa: E402
 from umbrella_sim.core.solver import UmbrellaSimulator  # noqa: E402
+from umbrella_sim.core.step_rule import step_taken_now  # noqa: E402
 
 TARGETS = {('flexible-nonlinear', 4): 5.0}
 CASES = (('flexible', 0.0), ('flexible', 0.02), ('flexible-nonlinear', 0.0),
@@ -59,8 +63,8 @@ def one_run(params, duration):
     """
     Whole run in 1 ms blocks of simulated time (what the node pays).
 
-    Returns wall and CPU seconds, the simulator, and the Newton iterations per step in stage 1
-    and in stage 2 (counted at the first block boundary after the lock).
+    Returns wall and CPU seconds, the simulator, and the Newton iterations per physics step in
+    stage 1 and in stage 2 (counted at the first block boundary after the lock).
     """
     sim = UmbrellaSimulator(params)
     integ = sim.engine.integrator
@@ -77,9 +81,10 @@ def one_run(params, duration):
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     its1 = its2 = float('nan')
     if at_lock is not None:
-        its1 = at_lock[0] / at_lock[1]
+        before = physics_steps(sim, at_lock[1])
+        its1 = at_lock[0] / before
         if sim.steps > at_lock[1]:
-            its2 = (integ.iterations - at_lock[0]) / (sim.steps - at_lock[1])
+            its2 = (integ.iterations - at_lock[0]) / (physics_steps(sim) - before)
     return wall, cpu, sim, its1, its2
 
 
@@ -103,7 +108,7 @@ def main():
     print('RTF = simulated s per second (CPU: process time, what the step costs; wall: what a '
           'loaded machine gave)')
     print(f"{'model':>19} {'zeta':>5} {'V0':>5} {'N':>3} {'dofs':>5} {'backend':>8} "
-          f"{'h (us)':>6} {'newton/step 1|2':>15} {'us/step':>8} {'RTF cpu':>8} "
+          f"{'h1 / h2 us':>11} {'newton/step 1|2':>15} {'us/step':>8} {'RTF cpu':>8} "
           f"{'RTF wall':>9} {'target':>9}")
     for v0 in args.v0:
         for n in args.meshes:
@@ -125,14 +130,15 @@ def bench_case(args, v0, n, model, zeta):
         walls.append(wall)
         cpus.append(cpu)
     integ = sim.engine.integrator
-    us_step = 1e6 * min(cpus) / sim.steps
+    us_step = 1e6 * min(cpus) / physics_steps(sim)
+    h12 = f'{1e6 * sim.h:.3g} / {1e6 * step_taken_now(sim):.3g}'
     rtf = args.duration / min(cpus)
     rtf_wall = args.duration / min(walls)
     target = TARGETS.get((model, n)) if v0 == -0.2 else None
     verdict = ('' if target is None
                else f"{target:>4.0f}x {'ok' if rtf >= target else 'MISS'}")
     print(f'{model:>19} {zeta:>5g} {v0:>5g} {n:>3} {sim.model.n:>5} {integ.backend:>8} '
-          f'{sim.h * 1e6:>6.3g} {its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x '
+          f'{h12:>11} {its1:>7.2f} {its2:>7.2f} {us_step:>8.1f} {rtf:>7.2f}x '
           f'{rtf_wall:>8.2f}x {verdict:>9}')
 
 
