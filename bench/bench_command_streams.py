@@ -33,8 +33,9 @@ Then reads the recording and prints, with the load average:
     second publisher, and the stream's last command (the backlog when the stream ended);
   * when the diagnostics had counted every command of the stream after its last was sent;
   * the stop: SIGINT -> exit, commands sent, counted (accepted + refused), taken at the
-    stop, dropped at the stop, and sent before the node exited but never counted (in flight
-    in the writer's history: DDS had not delivered them to the node).
+    stop, dropped at the stop (delivered after the stop's first second: counted apart, in
+    commands_dropped_at_stop), and sent before the node exited but neither counted nor
+    dropped (in flight in the writer's history: DDS had not delivered them to the node).
 
 ``--node-root DIR`` runs the node from another checkout (PYTHONPATH=DIR), for a before/after.
 
@@ -198,19 +199,22 @@ def main() -> int:
           'sent (1 Hz diagnostics)')
     taken = counts.get('commands_taken_at_stop', 'n/a')
     dropped = counts.get('commands_dropped_at_stop', 'n/a')
+    dropped_n = int(dropped) if str(dropped).isdigit() else 0     # ('n/a': an older node)
+    undelivered = sent - accepted - refused - dropped_n
     before_sigint = n + len(sent_b) + sent_before_sigint
     print(f'stop in a flood: SIGINT -> exit {t_exit:.2f} s (exit {code}); sent {before_sigint} '
           f'before SIGINT and {sent} before the exit; counted {accepted + refused}, of which '
           f'taken at the stop {taken}; dropped at the stop {dropped}; sent before SIGINT but '
           f'not counted {max(0, before_sigint - accepted - refused)}; sent before the exit but '
-          f'not counted {sent - accepted - refused} (in the writer, never delivered)')
+          f'neither counted nor dropped {undelivered} (in the writer, never delivered)')
     print(json.dumps({'stream_per_s': n / (t_end - t0),
                       'stream_delay_p50_ms': pct(da.values(), 0.5) * 1e3,
                       'stream_last_delay_ms': da.get(n - 1, float('nan')) * 1e3,
                       'second_delay_max_ms': max(db) * 1e3, 'counted_after_s': t_counted,
                       'sigint_exit_s': t_exit,
                       'sent_before_sigint_not_counted': max(0, before_sigint - accepted - refused),
-                      'sent_before_exit_not_counted': sent - accepted - refused}))
+                      'dropped_at_stop': dropped_n,
+                      'sent_before_exit_undelivered': undelivered}))
     print(f'files: {tmp}')
     return 0
 
