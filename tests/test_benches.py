@@ -48,6 +48,7 @@ def run_bench(name: str, *args: str, timeout: float = 120.0) -> str:
     return done.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('name', BENCHES)
 def test_every_bench_imports_what_it_measures_and_parses_its_options(name):
     assert 'usage:' in run_bench(name, '--help')
@@ -65,8 +66,8 @@ def test_physics_steps_of_a_run_with_stage2_substeps_cover_its_time():
     assert physics_steps(sim, before) == before           # (stage 1: one a grid step)
 
 
-#: each offline bench's smallest case, its options as its docstring names them (a case over
-#: ~3 s is a slow test)
+#: each offline bench's smallest case, its options as its docstring names them (slow tests, as
+#: the --help runs: benches are not the fast subset's physics, formats and tools)
 SMALLEST_CASES = [
     ('bench_nonlinear.py', '--meshes', '1', '--repeat', '1', '--duration', '0.3'),
     ('bench_recording.py', '--seconds', '0.2'),
@@ -79,11 +80,11 @@ SMALLEST_CASES = [
      '--paths', 'compiled'),
     ('bench_ribs_node.py', '--ribs', '2', '--duration', '0.002'),
     ('bench_core.py', '--meshes', '1', '--repeat', '1'),
-    pytest.param(('bench_sweep.py', '--cases', '2', '--duration', '0.01', '--workers', '1'),
-                 marks=pytest.mark.slow),
+    ('bench_sweep.py', '--cases', '2', '--duration', '0.01', '--workers', '1'),
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('case', SMALLEST_CASES, ids=lambda case: case[0])
 def test_each_offline_bench_runs_its_smallest_case(case):
     run_bench(*case)
