@@ -24,7 +24,9 @@ from __future__ import annotations
 
 import csv
 from dataclasses import dataclass
+import functools
 import io
+import os
 import re
 import sys
 
@@ -208,8 +210,7 @@ def resolve_params(overrides: dict, params_file: str | None = None,
             raise ValueError(f'params file {params_file}: {exc}') from None
         values.update(from_file)
     # a file shared with the nodes: theirs; the umbrella's: build_params's
-    for name in (*NODE_ONLY_PARAMS, *SHARED_NAMES, *UMBRELLA_NAMES):
-        values.pop(name, None)
+    values = {k: v for k, v in values.items() if k not in _NOT_PLANAR_NAMES}
     values.update({k: v for k, v in overrides.items() if k not in UMBRELLA_NAMES})
     return UmbrellaParams.from_mapping(values).validated()
 
@@ -222,6 +223,8 @@ UMBRELLA_NAMES = umbrella_parameter_names()
 _OFFLINE_NAMES = frozenset(SPECS) | UMBRELLA_NAMES
 _KNOWN_IN_FILES = (frozenset(SPECS) | frozenset(NODE_ONLY_PARAMS) | frozenset(SHARED_NAMES)
                    | UMBRELLA_NAMES)
+#: a params file's names that are not the planar record's (the nodes' and the umbrella's)
+_NOT_PLANAR_NAMES = frozenset(NODE_ONLY_PARAMS) | frozenset(SHARED_NAMES) | UMBRELLA_NAMES
 
 
 def check_offline_names(names, source: str) -> None:
@@ -243,10 +246,22 @@ def params_file_warnings(params_file: str) -> list[str]:
 
     An unknown name in a section naming umbrella_node is a ValueError (did you mean); in a
     '/**' section it is another node's: a warning naming it, unless it is a per-rib name
-    (params3d.names_a_rib: the node's alone, a ValueError there too).
+    (params3d.names_a_rib: the node's alone, a ValueError there too).  A file checked before
+    and not changed since (its size and modification time) is not checked again: a sweep
+    resolves every case's parameters on the same file.
     """
-    return check_parameter_sources('/umbrella_node', [params_file], (), _KNOWN_IN_FILES,
-                                   shared=SHARED_NAMES, own=names_a_rib).warnings
+    try:
+        stat = os.stat(params_file)
+    except OSError:         # (check_parameter_sources names the file it cannot read)
+        return list(_file_warnings.__wrapped__(params_file, None))
+    return list(_file_warnings(params_file, (stat.st_size, stat.st_mtime_ns)))
+
+
+@functools.lru_cache(maxsize=16)
+def _file_warnings(params_file: str, version) -> tuple:
+    """Return params_file_warnings of a file at its version (size, modification time)."""
+    return tuple(check_parameter_sources('/umbrella_node', [params_file], (), _KNOWN_IN_FILES,
+                                         shared=SHARED_NAMES, own=names_a_rib).warnings)
 
 
 #: simulate's options that give a parameter: (argparse dest, parameter)
