@@ -43,6 +43,7 @@ def process_gone(pid: int) -> bool:
 
 
 def test_domain_id_from_the_environment(monkeypatch):
+    monkeypatch.delenv('PYTEST_XDIST_WORKER', raising=False)    # (not a worker of -n)
     monkeypatch.setenv(DOMAIN_ID_ENV, '42')
     assert default_domain_id() == 42
     monkeypatch.setenv(DOMAIN_ID_ENV, 'many')
@@ -50,6 +51,22 @@ def test_domain_id_from_the_environment(monkeypatch):
         default_domain_id()
     monkeypatch.delenv(DOMAIN_ID_ENV)
     assert 10 <= default_domain_id() <= 99
+
+
+def test_each_xdist_worker_takes_its_own_domain_and_hands_it_on(monkeypatch):
+    """Under pytest -n, worker k takes the set domain plus k; its children take that one."""
+    monkeypatch.setenv(DOMAIN_ID_ENV, '42')
+    domains = []
+    for worker in ('gw0', 'gw1', 'gw3'):
+        monkeypatch.setenv('PYTEST_XDIST_WORKER', worker)
+        domains.append(default_domain_id())
+    assert domains == [42, 43, 45]
+    env = ros_env(45)           # (a child importing the test API: the domain it is given)
+    assert 'PYTEST_XDIST_WORKER' not in env
+    assert env[DOMAIN_ID_ENV] == env['ROS_DOMAIN_ID'] == '45'
+    monkeypatch.setenv(DOMAIN_ID_ENV, '231')
+    with pytest.raises(ValueError, match='worker index'):     # 231 + 3 is no domain
+        default_domain_id()
 
 
 def test_summary_figures_are_taken_on_either_side_of_the_lock():

@@ -32,7 +32,8 @@ Everything here talks over real DDS, so:
 
 * **Isolation.**  Each process runs with ``ROS_DOMAIN_ID`` = :func:`default_domain_id` (the
   ``UMBRELLA_TEST_DOMAIN_ID`` environment variable, else a domain of 10..99 that no other
-  test session on the machine holds) and
+  test session on the machine holds; under pytest-xdist's ``-n``, worker k takes the set
+  domain plus k, or a free one of its own) and
   ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; pass ``domain_id=`` to choose another.
   :class:`Probe` (the test's own rclpy node) sets the same two variables in this process.
 * **Waiting.**  Every wait polls what has been received, up to a timeout, and fails with an

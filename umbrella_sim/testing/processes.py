@@ -86,12 +86,18 @@ def reserve_domain(first: int) -> int:
     return first
 
 
+#: the environment variable naming a pytest-xdist worker (gw0, gw1, ...) in its process
+XDIST_WORKER_ENV = 'PYTEST_XDIST_WORKER'
+
+
 def default_domain_id() -> int:
     """
     ``$UMBRELLA_TEST_DOMAIN_ID`` if set, else a free domain of 10..99 (one per test session).
 
     The free domain is reserved for this process (:func:`reserve_domain`), from one derived
-    from the pid; its child processes get it through the environment (:func:`ros_env`).
+    from the pid; its child processes get it through the environment (:func:`ros_env`).  In
+    pytest-xdist's worker k (``-n``), the set domain is that plus k: each worker's nodes and
+    probes are a session of their own, as the free domains of different processes are.
     """
     value = os.environ.get(DOMAIN_ID_ENV)
     if value is None:
@@ -100,9 +106,12 @@ def default_domain_id() -> int:
         domain = int(value)
     except ValueError:
         raise ValueError(f'{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232') from None
-    if not 0 <= domain <= 232:
-        raise ValueError(f'{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232')
-    return domain
+    worker = os.environ.get(XDIST_WORKER_ENV, '')
+    offset = int(worker[2:]) if worker.startswith('gw') and worker[2:].isdigit() else 0
+    if not 0 <= domain <= 232 - offset:
+        raise ValueError(f'{DOMAIN_ID_ENV}={value!r}: must be an integer 0..232'
+                         + (f' less the worker index ({worker}: {offset})' if offset else ''))
+    return domain + offset
 
 
 DOMAIN_ID = default_domain_id()
@@ -115,6 +124,7 @@ def ros_env(domain_id: int | None = None) -> dict:
     # the domain goes in DOMAIN_ID_ENV too: a child that imports this module (a test helper,
     # a user's wrapper around the node) then has the same DOMAIN_ID instead of one from its pid;
     # STOP_WITH_ENV: a node stops when this process has gone, even killed with no cleanup
+    env.pop(XDIST_WORKER_ENV, None)     # (the domain given is this worker's already)
     env.update({DOMAIN_ID_ENV: domain, STOP_WITH_ENV: str(os.getpid())}, ROS_DOMAIN_ID=domain,
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                RMW_IMPLEMENTATION='rmw_fastrtps_cpp', PYTHONUNBUFFERED='1',
