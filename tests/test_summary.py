@@ -496,6 +496,34 @@ def test_shapes_stay_on_screen_with_stage_magnification_and_times(tmp_path,
         assert np.abs(line.get_xydata()).max() < 2.0
 
 
+def test_compare_thesis_says_why_a_run_has_no_thesis_figures(tmp_path, capfd):
+    """
+    --thesis on a run the thesis has no figures for says so, and why, instead of nothing.
+
+    Its figures are of its own frame at V0 = -0.2 m/s (ch. 6) and -0.5, -1, -2 (Table 6.1):
+    a run at another speed, or of another section, gets a line naming the speed or the
+    parameter; a run at a thesis speed keeps its figures and no such line.
+    """
+    runs = {'v03': UmbrellaParams(v0=-0.3, time_step=STEP),
+            'thick': UmbrellaParams(v0=-0.5, section_height=0.012, time_step=STEP),
+            'v05': UmbrellaParams(v0=-0.5, time_step=STEP)}
+    for name, params in runs.items():
+        record_offline(params, str(tmp_path / name), 0.12)
+    out = tmp_path / 'out'
+    assert compare.main([*(str(tmp_path / n) for n in runs), '--thesis', '--out',
+                         str(out)]) == 0
+    text = capfd.readouterr().out
+    lines = [ln.strip() for ln in text.splitlines() if 'thesis:' in ln]
+    assert len(lines) == 3, text
+    v03, thick, v05 = lines
+    assert v03.startswith('thesis: no figures for this run') and 'V0 = -0.3 m/s' in v03
+    assert thick.startswith('thesis: no figures for this run') and 'section_height' in thick
+    assert v05.startswith('thesis: deploy 0.09040 s'), v05
+    result = json.loads((out / 'compare.json').read_text())
+    assert [bool(e['thesis']) for e in result['runs']] == [False, False, True]
+    assert ['thesis_none' in e for e in result['runs']] == [True, True, False]
+
+
 def test_stress_plot_has_yield_line_and_no_zero_rigid_stress(tmp_path, captured_figures):
     flex, rigid = tmp_path / 'flex', tmp_path / 'rigid'
     record_offline(UmbrellaParams(v0=-0.5, time_step=STEP), str(flex), 0.15)

@@ -24,7 +24,8 @@ acceleration, tip deflection in stage 1 and across the lock, stress at O'' on th
 mid-link, deformed shapes) over a window of time (--window; by default the deployment and
 eight periods of the locked frame's vibration), with the thesis's values drawn where it
 has them (its data at V0 = -0.2, -0.5, -1, -2 m/s).  --thesis adds them to the text and
-JSON.  The text is in s, mm, MPa and rad; compare.json in SI units, as each entry says.
+JSON (a run they do not cover: a line saying why).  The text is in s, mm, MPa and rad;
+compare.json in SI units, as each entry says.
 Recordings of the umbrella of N ribs (ribs >= 2) are compared rib by rib: each run's lock,
 each rib's deployment instant and its difference to the first run's, the lag of the latest
 rib, each rib's largest leaf-angle difference and von Mises peak; plots of every rib's alpha1
@@ -42,8 +43,9 @@ import sys
 from .alignment import difference as _diff
 from .arguments import ArgumentParser
 from .compare_plots import plot
-from .runs import (default_label, default_window, label_width, load_run, physics_figures,
-                   physics_run, Run, thesis_figures, THESIS_TABLE_6_1, THESIS_V02)
+from .runs import (default_label, default_window, label_width, load_run, no_thesis_figures,
+                   physics_figures, physics_run, Run, thesis_figures, THESIS_TABLE_6_1,
+                   THESIS_V02)
 from ..bag.reader import LogError, read_log
 from ..ros.signals import EXIT_READER_GONE, interruptible, print_for_reader, raise_if_stopped
 
@@ -97,6 +99,8 @@ def compare(runs: list[Run], thesis: bool = False) -> dict:
             entry['not_judged'] = r.not_judged()
         if thesis:
             entry['thesis'] = thesis_figures(r.params)
+            if not entry['thesis']:
+                entry['thesis_none'] = no_thesis_figures(r.params)
             # figures of the samples (figures_from says why) beside the thesis's: a
             # deployment time alone is the exact lock's where the events record has it
             if r.summary is None and entry['thesis'] and (
@@ -170,6 +174,8 @@ def print_table(result: dict, stream=None) -> None:
               f"{fmt('tip_deflection_max_time', 1, '.3f', th)} s, stage 2 "
               f"~{fmt('stage2_tip_amplitude', 1e3, '.0f', th)} mm / "
               f"~{fmt('stage2_tip_period', 1, '.2f', th)} s (ch. 6, read off its plots)\n")
+        elif 'thesis_none' in e:
+            w(f"{'':<{L}} thesis: no figures for this run: {e['thesis_none']}\n")
         if 'thesis_note' in e:
             w(f"{'':<{L}} caveat: {e['thesis_note']}\n")
 

@@ -87,14 +87,8 @@ def thesis_figures(params: dict) -> dict:
     rigid model gets the deployment time only), for a run of the thesis's data (THESIS_DATA
     as the defaults; any model, mesh and step).
     """
-    thesis = UmbrellaParams()
-    for name in THESIS_DATA:
-        try:
-            if not math.isclose(float(params[name]), float(getattr(thesis, name)),
-                                rel_tol=1e-9, abs_tol=1e-12):
-                return {}
-        except (KeyError, TypeError, ValueError):
-            return {}
+    if _not_thesis_data(params):
+        return {}
     v0 = params.get('v0')
     if v0 in THESIS_TABLE_6_1:
         deformable, rigid = THESIS_TABLE_6_1[v0]
@@ -104,6 +98,31 @@ def thesis_figures(params: dict) -> dict:
     if params.get('model') in RIGID_MODELS:       # (its tip and stresses are not elastic)
         return {'deploy_time': THESIS_V02['deploy_time']}
     return dict(THESIS_V02)
+
+
+def _not_thesis_data(params: dict) -> list[str]:
+    """Return the names of THESIS_DATA whose value in params is not the thesis's."""
+    thesis = UmbrellaParams()
+    out = []
+    for name in THESIS_DATA:
+        try:
+            if not math.isclose(float(params[name]), float(getattr(thesis, name)),
+                                rel_tol=1e-9, abs_tol=1e-12):
+                out.append(name)
+        except (KeyError, TypeError, ValueError):
+            out.append(name)
+    return out
+
+
+def no_thesis_figures(params: dict) -> str:
+    """Say why the thesis has no figures for a run of these parameters (thesis_figures: {})."""
+    changed = _not_thesis_data(params)
+    if changed:
+        return (f"its {', '.join(changed)} {'differs' if len(changed) == 1 else 'differ'} "
+                "from the thesis frame's (config/umbrella.yaml)")
+    speeds = ', '.join(f'{v:g}' for v in sorted(THESIS_TABLE_6_1, reverse=True))
+    return (f'the thesis has figures at V0 = -0.2 m/s (ch. 6) and {speeds} m/s (Table 6.1), '
+            f"not at V0 = {params.get('v0')} m/s")
 
 
 @dataclass
