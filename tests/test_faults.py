@@ -347,6 +347,11 @@ def _node(*args, timeout=60):
 @pytest.mark.parametrize('content, args, words', [
     (None, ['-p', 'youngs_modulous:=1.0'], "did you mean 'youngs_modulus'"),
     (None, ['-p', 'foo:=1.0'], "unknown parameter 'foo'"),
+    # an umbrella name misspelt: the node knows it, and says where the umbrella's are listed
+    (None, ['-p', 'ribs:=3', '-p', 'hub_radious:=0.1'],
+     "'hub_radious' (did you mean 'hub_radius'?); known parameters are listed by umbrella_node "
+     "--help and in msg_docs/parameters.md (the umbrella of N ribs': "
+     'msg_docs/umbrella3d_parameters.md)'),
     ('other_node:\n  ros__parameters:\n    l1: -5.0\n', [], 'no section for node /umbrella_node'),
     # (in a section naming the node: in a '/**' one they are another node's, a warning)
     ('umbrella_node:\n  ros__parameters:\n    l4: 1.0\n', [], "'l4' (did you mean 'l"),
@@ -394,8 +399,8 @@ def _node(*args, timeout=60):
     # parameter's error first, not one after the other
     (None, ['-p', 'ribs:=6', '-p', 'rib9.tip_mass:=0.1', '-p', 'record_path:=/tmp'],
      'parameter rib9.tip_mass: there are ribs 0 .. 5'),
-], ids=['typo', 'unknown', 'other-node', 'unknown-key', 'nested', 'malformed', 'list',
-        'no-ros-parameters', 'binary', 'missing', 'no-assign', 'bogus-flag', 'no-model',
+], ids=['typo', 'unknown', 'umbrella-typo', 'other-node', 'unknown-key', 'nested', 'malformed',
+        'list', 'no-ros-parameters', 'binary', 'missing', 'no-assign', 'bogus-flag', 'no-model',
         'empty-value', 'qos-typo', 'qos-type', 'twice', 'tiny-step', 'ros-param-type',
         'qos-type-argument', 'qos-negative-depth', 'qos-huge-depth', 'qos-bad-policy',
         'argument-type-beside-file', 'argument-list-beside-file',

@@ -488,7 +488,10 @@ def check_node_parameters(values: Mapping[str, Any]) -> dict:
     return out
 
 
-NODE_PARAMETERS_LISTED = 'umbrella_node --help and in msg_docs/parameters.md'
+#: where the node's parameters are listed, the umbrella of N ribs' too (an unknown name's
+#: error says it: the node, simulate --set, a sweep and a params file alike)
+NODE_PARAMETERS_LISTED = ('umbrella_node --help and in msg_docs/parameters.md (the umbrella '
+                          "of N ribs': msg_docs/umbrella3d_parameters.md)")
 
 
 def closest_name(name: str, known) -> str | None:

@@ -235,9 +235,7 @@ def check_offline_names(names, source: str) -> None:
     misspelt rib.<name> or rib<k>.<name> is suggested its right spelling.
     """
     if not _OFFLINE_NAMES.issuperset(names):        # (a sweep checks every case's)
-        check_known_names(names, _OFFLINE_NAMES, source,
-                          'umbrella_node --help and in msg_docs/parameters.md (the umbrella '
-                          "of N ribs': msg_docs/umbrella3d_parameters.md)")
+        check_known_names(names, _OFFLINE_NAMES, source)
 
 
 def params_file_warnings(params_file: str) -> list[str]:
