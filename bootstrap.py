@@ -21,12 +21,16 @@ Set up a local virtualenv (.venv) with every dependency, then run the main job o
                                   # runs/umbrella_YYYY_MM_DD-HH_MM_SS/, the node's own name
                                   # (Ctrl-C stops and finalises it)
     python3 bootstrap.py test     # the test suite and examples/
+    python3 bootstrap.py setup    # the venv alone
 
 Arguments after run go to the node, which runs in the runs directory; a relative path they
 give (--params-file FILE, -p record_path:=DIR; a leading ~ the home directory) is the
 working directory's, as a user means it (a record_path written inside a params file is the
 node's own: relative, it is under the runs directory):
 python3 bootstrap.py run -p v0:=-0.5 --params-file my.yaml
+Arguments after test go to pytest; test files or directories among them (tests/test_modes.py,
+tests/test_node.py::test_x, the working directory's) are what it runs, else tests/ and examples/:
+python3 bootstrap.py test tests/test_modes.py -q
 ROS_AUTOMATIC_DISCOVERY_RANGE is LOCALHOST unless the environment sets it (a node on another
 host sees nothing then: export ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET for that).
 Environment: UMBRELLA_VENV (default ./.venv), UMBRELLA_RUNS_DIR (default ./runs).
@@ -78,6 +82,8 @@ def setup() -> None:
 def main(argv) -> int:
     if len(argv) < 1 or argv[0] not in ('run', 'test', 'setup'):
         print(__doc__, file=sys.stderr)
+        said = f'unknown command {argv[0]!r}' if argv else 'no command'
+        print(f'bootstrap.py: {said}: give run, test or setup', file=sys.stderr)
         return 2
     setup()
     env = dict(os.environ, AMENT_PREFIX_PATH=VENV)
@@ -95,7 +101,9 @@ def main(argv) -> int:
         cwd = ROOT
         paths = [os.path.join(ROOT, 'tests'), os.path.join(ROOT, 'examples')]
         if argv[1:]:
-            return run_tests([[PY, '-m', 'pytest', '-q'] + paths + argv[1:]], cwd, env)
+            args, given = given_test_paths(argv[1:])
+            return run_tests([[PY, '-m', 'pytest', '-q'] + ([] if given else paths) + args],
+                             cwd, env)
         print('the whole suite: ~10 min on a quiet 2-core machine, in two parts: what starts no '
               'ROS node, then what talks over DDS, each on two processes (pytest-xdist, each '
               'file on one; each process its own ROS domain); the fast subset (no ROS node, '
@@ -128,6 +136,33 @@ def node_paths(args):
         if sep and name == 'record_path' and value:
             out[i] = f'{name}:={callers(value)}'
     return out
+
+
+#: pytest's options whose value is the next argument and may name an existing file or
+#: directory that is not a test to run
+PYTEST_PATH_VALUED = ('--ignore', '--ignore-glob', '--deselect', '--basetemp', '--rootdir',
+                      '-c', '--confcutdir', '--junitxml', '--junit-xml', '--log-file',
+                      '--result-log', '-p', '-k', '-m', '-o', '--override-ini')
+
+
+def given_test_paths(args):
+    """
+    Return pytest's arguments with the test paths among them made absolute, and whether any.
+
+    A test path is an argument that names an existing .py file or a directory, as given from
+    the working directory (with a ::node id after a file), and is not the value of an option:
+    pytest runs in the repository, and with one it runs that and not the whole suite.
+    """
+    out, given = list(args), False
+    for i, arg in enumerate(out):
+        if arg.startswith('-') or (i > 0 and out[i - 1] in PYTEST_PATH_VALUED):
+            continue
+        path, sep, node = arg.partition('::')
+        path = os.path.expanduser(path)
+        if (path.endswith('.py') and os.path.isfile(path)) or (not sep and os.path.isdir(path)):
+            out[i] = os.path.abspath(path) + sep + node
+            given = True
+    return out, given
 
 
 #: the suite in two parts: the tests that start no ROS node (CPU-bound physics, formats, tools)

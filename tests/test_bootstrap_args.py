@@ -13,10 +13,11 @@
 # limitations under the License.
 
 
-"""`bootstrap.py`: the node's relative paths are the caller's; its note on the test suite."""
+"""`bootstrap.py`: the relative paths of the node and of pytest are the caller's; its notes."""
 import os
 
 from bootstrap import node_paths
+import pytest
 
 
 def test_relative_paths_are_the_working_directorys(tmp_path, monkeypatch):
@@ -66,3 +67,50 @@ def test_the_suite_note_says_what_the_readme_says(monkeypatch, capsys):
     assert re.search(quiet, note)[1] == re.search(quiet, readme)[1], (note, readme)
     fast = re.search(r'python3 bootstrap\.py test -m "[^"]+" -n \d', note)[0]
     assert f'`{fast}`' in readme, fast
+
+
+def test_a_test_file_given_is_what_pytest_runs(tmp_path, monkeypatch):
+    """
+    `bootstrap.py test tests/test_modes.py` runs that file, not the whole suite beside it.
+
+    The paths are the working directory's (pytest runs in the repository), a node id is kept,
+    an option's value that names a file (--ignore) stays a value, and without a path the
+    suite's tests/ and examples/ are the paths, as before.
+    """
+    import bootstrap
+
+    ran = []
+    monkeypatch.setattr(bootstrap, 'setup', lambda: None)
+    monkeypatch.setattr(bootstrap, 'run_tests', lambda commands, cwd, env: ran.append(commands))
+    (tmp_path / 'mine').mkdir()
+    for name in ('test_a.py', 'test_b.py'):
+        (tmp_path / 'mine' / name).write_text('')
+    monkeypatch.chdir(tmp_path)
+    bootstrap.main(['test', 'mine/test_a.py::test_one', '-q', '--ignore', 'mine/test_b.py',
+                    '-k', 'one'])
+    (command,), = ran
+    assert command[command.index('pytest') + 1:] == [
+        '-q', f'{tmp_path}/mine/test_a.py::test_one', '-q', '--ignore', 'mine/test_b.py',
+        '-k', 'one']
+    ran.clear()
+    bootstrap.main(['test', 'mine'])
+    assert ran[0][0][-1] == f'{tmp_path}/mine'
+    assert os.path.join(bootstrap.ROOT, 'tests') not in ran[0][0]
+    ran.clear()
+    bootstrap.main(['test', '-m', 'not ros and not slow', '-n', '2'])
+    (command,), = ran
+    assert command[-6:] == [os.path.join(bootstrap.ROOT, 'tests'),
+                            os.path.join(bootstrap.ROOT, 'examples'),
+                            '-m', 'not ros and not slow', '-n', '2']
+
+
+def test_an_unknown_command_is_named(monkeypatch, capsys):
+    """A misspelt command (`bootstrap.py rn`) says which word it did not take, exit 2."""
+    import bootstrap
+
+    monkeypatch.setattr(bootstrap, 'setup', lambda: pytest.fail('set up for a bad command'))
+    assert bootstrap.main(['rn']) == 2
+    err = capsys.readouterr().err
+    assert err.rstrip().endswith("bootstrap.py: unknown command 'rn': give run, test or setup")
+    assert bootstrap.main([]) == 2
+    assert 'bootstrap.py: no command' in capsys.readouterr().err
