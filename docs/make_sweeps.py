@@ -19,7 +19,7 @@ Regenerate the Table 6.1 section of docs/sweeps.md and docs/sweeps/*.png in one 
 
     .venv/bin/python docs/make_sweeps.py [--workers N]
 
-Runs config/sweeps/table_6_1.yaml with `umbrella-sim sweep`'s own code on a local Dask
+Runs config/sweeps/table_6_1.yaml with `umbrella_sim sweep`'s own code on a local Dask
 cluster, then writes its table beside the thesis's numbers (Hu, McGill 2006, Table 6.1) and
 the sweep's plots with the thesis's deployment times as markers.  The text depends on the
 code only (no wall-clock time, no revision), so regenerating it with unchanged code changes
@@ -73,7 +73,7 @@ def main():
         return None
 
     lines = [BEGIN, '',
-             f'`umbrella-sim sweep config/sweeps/table_6_1.yaml`: {len(rows)} cases.', '',
+             f'`umbrella_sim sweep config/sweeps/table_6_1.yaml`: {len(rows)} cases.', '',
              'Deployment time (s). Thesis: Hu (McGill, 2006), Table 6.1 (deformable and rigid '
              'FEA, 3-element mesh) and §6.1 (V0 = −0.2 m/s); exact: the rigid mechanism by '
              'energy quadrature.', '',
