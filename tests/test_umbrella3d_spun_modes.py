@@ -34,9 +34,10 @@ from umbrella_sim.core.rotating_beam import (rotating_cantilever_chordwise,
 from umbrella_sim.core.summary import oscillation_period
 from umbrella_sim.core.umbrella3d.integrator3d import MidpointUmbrella
 from umbrella_sim.core.umbrella3d.model3d import UmbrellaModel3D
-from umbrella_sim.core.umbrella3d.modes3d import locked_modes
+from umbrella_sim.core.umbrella3d.modes3d import deployed_configuration, locked_modes
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
-from umbrella_sim.core.umbrella3d.spun_modes3d import spun_locked_modes, spun_model
+from umbrella_sim.core.umbrella3d.spun_modes3d import (_newton, JOINT_ROWS, spun_locked_modes,
+                                                       spun_model)
 from umbrella_sim.core.umbrella3d.state3d import State3D
 
 
@@ -194,4 +195,22 @@ def test_a_kicked_spun_rib_rings_at_its_reported_frequency(mode):
     assert measured == pytest.approx(reported, rel=RINGING_TOLERANCE)
     still = spun_locked_modes(params, 0.0).omega[::2][mode]
     assert abs(reported / still - 1.0) > 10 * RINGING_TOLERANCE
+    assert drift < 1e-3 * 1e-4           # (a thousandth of the kick's amplitude)
+
+
+def test_a_fast_spin_past_newtons_basin_is_continued_to_the_steps_equilibrium():
+    """
+    At 45 rad/s Newton from the undeformed ribs does not converge; the equilibrium exists.
+
+    `umbrella_sim modes` said 'no steady spun equilibrium' from 36 rad/s on (the thesis's
+    section), yet the ribs, deflected outward by the centrifugal load, stay put there: the
+    spin raised from rest in steps, each solved from the last, finds it, and it is the
+    time-domain step's own (unkicked, the umbrella stays at it) with a mode the step rings at.
+    """
+    params = spun(2, base_spin_rate=45.0, base_spin_ramp=1e-3, model='flexible-nonlinear')
+    model = spun_model(params)
+    rest = deployed_configuration(model)[0]
+    assert _newton(model, 45.0, rest, np.zeros((model.n_ribs, JOINT_ROWS.stop))) is None
+    reported, measured, drift = rib_in_its_mode(params, 0, 2e-4, 6.0)
+    assert measured == pytest.approx(reported, rel=RINGING_TOLERANCE)
     assert drift < 1e-3 * 1e-4           # (a thousandth of the kick's amplitude)

@@ -76,6 +76,12 @@ EQUILIBRIUM_ITERATIONS = 60
 #: Newton's matrix is kept while each update shrinks by this factor at least, else formed
 #: anew at the iterate (modified Newton: the matrix's differences are its cost)
 KEEP_TANGENT = 0.05
+#: where Newton from the undeformed ribs does not converge (its basin shrinks as the spin
+#: deflects them: 36 rad/s and up with the thesis's section), the spin is raised from rest in
+#: this many steps, each solved from the last; a step that fails is halved, at most
+#: CONTINUATION_HALVINGS times
+CONTINUATION_STEPS = 8
+CONTINUATION_HALVINGS = 10
 #: the locked rib rows: every joint but the stuck-hinge slot (model3d.N_RIB_ROWS - 1)
 JOINT_ROWS = slice(0, 8)
 
@@ -186,42 +192,75 @@ def _tangent(model, qr, lam, centrifugal, step):
     return 0.5 * (k + k.transpose(0, 2, 1))
 
 
-def spun_equilibrium(model, spin: float) -> SpunEquilibrium:
-    """
-    Return the locked ribs' equilibrium in the frame spinning at `spin` about Y (Newton).
-
-    From the undeformed deployed ribs; ValueError naming base_spin_rate if Newton does not
-    converge (a spin past a rib's stability).
-    """
-    from .modes3d import deployed_configuration
-
-    qr, _ = deployed_configuration(model)
+def _newton(model, spin: float, qr: np.ndarray, lam: np.ndarray) -> SpunEquilibrium | None:
+    """Return the spun equilibrium Newton finds from (qr, lam), or None if it does not."""
     qs, vs = _state(model, spin)
     span = _span(model)
     step = DIFFERENCE_STEP * span
     nr, n = model.n_ribs, model.n_rib
-    lam = np.zeros((nr, JOINT_ROWS.stop))
     centrifugal = _centrifugal(model, qs, vs)
     matrix, last, contraction = None, np.inf, 1.0
-    for it in range(1, EQUILIBRIUM_ITERATIONS + 1):
-        phi, jac = _joints(model, qr, qs)
-        resid = (centrifugal(qr) - model.elastic_force(qr)
-                 - np.einsum('rin,ri->rn', jac, lam))
-        if matrix is None or contraction > KEEP_TANGENT:
-            k = _tangent(model, qr, lam, centrifugal, step)
-            top = np.concatenate([k, jac.transpose(0, 2, 1)], 2)
-            bottom = np.concatenate([jac, np.zeros((nr, jac.shape[1], jac.shape[1]))], 2)
-            matrix = np.concatenate([top, bottom], 1)
-        rhs = np.concatenate([resid, -phi], 1)
-        delta = np.linalg.solve(matrix, rhs[..., None])[..., 0]
-        qr, lam = qr + delta[:, :n], lam + delta[:, n:]
-        size = float(np.max(np.abs(delta[:, :n]) / span[:, None]))
-        contraction, last = size / last, size
-        if (size < EQUILIBRIUM_TOLERANCE
-                and np.max(np.abs(phi) / span[:, None]) < EQUILIBRIUM_TOLERANCE):
-            return SpunEquilibrium(spin, qr, qs, vs, lam, it)
-    raise ValueError(f'base_spin_rate {spin:g} rad/s: no steady spun equilibrium of the locked '
-                     f'ribs (Newton did not converge in {EQUILIBRIUM_ITERATIONS} iterations)')
+    with np.errstate(invalid='ignore', over='ignore', divide='ignore'):  # (a diverging iterate)
+        for it in range(1, EQUILIBRIUM_ITERATIONS + 1):
+            phi, jac = _joints(model, qr, qs)
+            resid = (centrifugal(qr) - model.elastic_force(qr)
+                     - np.einsum('rin,ri->rn', jac, lam))
+            if matrix is None or contraction > KEEP_TANGENT:
+                k = _tangent(model, qr, lam, centrifugal, step)
+                top = np.concatenate([k, jac.transpose(0, 2, 1)], 2)
+                bottom = np.concatenate([jac, np.zeros((nr, jac.shape[1], jac.shape[1]))], 2)
+                matrix = np.concatenate([top, bottom], 1)
+            rhs = np.concatenate([resid, -phi], 1)
+            try:
+                delta = np.linalg.solve(matrix, rhs[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                return None
+            if not np.all(np.isfinite(delta)):
+                return None
+            qr, lam = qr + delta[:, :n], lam + delta[:, n:]
+            size = float(np.max(np.abs(delta[:, :n]) / span[:, None]))
+            contraction, last = size / last, size
+            if (size < EQUILIBRIUM_TOLERANCE
+                    and np.max(np.abs(phi) / span[:, None]) < EQUILIBRIUM_TOLERANCE):
+                return SpunEquilibrium(spin, qr, qs, vs, lam, it)
+    return None
+
+
+def spun_equilibrium(model, spin: float) -> SpunEquilibrium:
+    """
+    Return the locked ribs' equilibrium in the frame spinning at `spin` about Y (Newton).
+
+    From the undeformed deployed ribs (the equilibrium at rest); where Newton does not
+    converge from there, by continuation in the spin from rest (CONTINUATION_STEPS), the
+    branch the lower spins are on. ValueError naming base_spin_rate and the highest spin
+    reached if that fails too (a spin past a rib's stability).
+    """
+    from .modes3d import deployed_configuration
+
+    rest, _ = deployed_configuration(model)
+    lam0 = np.zeros((model.n_ribs, JOINT_ROWS.stop))
+    eq = _newton(model, spin, rest, lam0)
+    if eq is not None:
+        return eq
+    reached, qr, lam, iterations = 0.0, rest, lam0, 0
+    increment = spin / CONTINUATION_STEPS
+    while True:
+        target = spin if abs(spin - reached) <= abs(increment) * (1 + 1e-12) else (
+            reached + increment)
+        eq = _newton(model, target, qr, lam)
+        if eq is None:
+            increment /= 2
+            if abs(increment) < abs(spin) / CONTINUATION_STEPS / 2 ** CONTINUATION_HALVINGS:
+                raise ValueError(
+                    f'base_spin_rate {spin:g} rad/s: no steady spun equilibrium of the locked '
+                    f'ribs (Newton did not converge in {EQUILIBRIUM_ITERATIONS} iterations, '
+                    f'from rest nor continued in the spin: the last found at {reached:g} '
+                    'rad/s)')
+            continue
+        iterations += eq.iterations
+        if target == spin:
+            return replace(eq, iterations=iterations)
+        reached, qr, lam = target, eq.qr, eq.lam
 
 
 def spun_matrices(model, eq: SpunEquilibrium):
