@@ -499,6 +499,11 @@ class UmbrellaRibsParams:
         return self.planar.sleeve_force
 
     @functools.cached_property
+    def _link_limits(self) -> tuple[float, ...]:
+        """Return each rib's link's load limit (its planar record's sleeve_force_limit)."""
+        return tuple(rib.planar.sleeve_force_limit for rib in self.ribs_list())
+
+    @property
     def sleeve_force_limit(self) -> float:
         """
         Return the largest F per rib: the least a rib's link carries (each carries ~F).
@@ -506,12 +511,12 @@ class UmbrellaRibsParams:
         A rib of its own section or length has its own limit (its planar record's, which
         refuses a larger ``sleeve_force`` at start): a command is held to the same bound.
         """
-        return min(rib.planar.sleeve_force_limit for rib in self.ribs_list())
+        return min(self._link_limits)
 
     @property
     def weakest_link(self) -> str:
         """Say whose link sets sleeve_force_limit: 'rib k's link' where the ribs' differ."""
-        limits = [rib.planar.sleeve_force_limit for rib in self.ribs_list()]
+        limits = self._link_limits
         if min(limits) == max(limits):
             return 'the link'
         return f"rib {limits.index(min(limits))}'s link"
