@@ -164,7 +164,8 @@ def checked_profile(rows: Iterable[Any], params: UmbrellaParams,
     against the model (params: the planar record, or the umbrella of N ribs, whose bound is
     its weakest link's), its refusal prefixed with ``row_name(i)`` of the row (i from 0):
     where the row came from, a CSV's 'force profile f.csv:12' (its line) or a list's
-    'force profile row 3 (0.1, 80.0)'.  No rows is refused too.
+    'force profile row 3 (0.1, 80.0)'.  An empty profile is returned empty: a caller
+    refuses it in its own words (the file's, the list's).
     """
     out: list[tuple[float, float]] = []
     for i, row in enumerate(rows):

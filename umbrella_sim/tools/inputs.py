@@ -221,10 +221,9 @@ SHARED_NAMES = tuple(CONTROLLER_PARAMETERS)
 UMBRELLA_NAMES = umbrella_parameter_names()
 #: an offline run's parameter names: the planar model's and the umbrella's
 _OFFLINE_NAMES = frozenset(SPECS) | UMBRELLA_NAMES
-_KNOWN_IN_FILES = (frozenset(SPECS) | frozenset(NODE_ONLY_PARAMS) | frozenset(SHARED_NAMES)
-                   | UMBRELLA_NAMES)
 #: a params file's names that are not the planar record's (the nodes' and the umbrella's)
 _NOT_PLANAR_NAMES = frozenset(NODE_ONLY_PARAMS) | frozenset(SHARED_NAMES) | UMBRELLA_NAMES
+_KNOWN_IN_FILES = frozenset(SPECS) | _NOT_PLANAR_NAMES
 
 
 def check_offline_names(names, source: str) -> None:
