@@ -104,7 +104,7 @@ def main(argv) -> int:
             args, given = given_test_paths(argv[1:])
             return run_tests([[PY, '-m', 'pytest', '-q'] + ([] if given else paths) + args],
                              cwd, env)
-        print('the whole suite: ~10 min on a quiet 2-core machine, in two parts: what starts no '
+        print('the whole suite: ~9 min on a quiet 2-core machine, in two parts: what starts no '
               'ROS node, then what talks over DDS, each on two processes (pytest-xdist, each '
               'file on one; each process its own ROS domain); the fast subset (no ROS node, '
               'nothing slow): python3 bootstrap.py test -m "not ros and not slow" -n 2',
