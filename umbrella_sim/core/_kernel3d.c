@@ -54,6 +54,12 @@
  * it serves at most Model3D.carry_steps steps, and is factored anew at the iterate after an
  * iteration that contracted the update by less than REFRESH_RATE */
 #define REFRESH_RATE 0.1
+/* a kept projection's passes at most, and the correction of v (relative to its largest
+ * component) that ends them (integrator3d.PROJECTION_PASSES, PROJECTION_TOLERANCE) */
+#define PROJECTION_PASSES 4
+#define PROJECTION_TOLERANCE 1e-12
+/* the Newton tolerance from which stage 2 keeps its projection (PROJECTION_KEPT_FROM) */
+#define PROJECTION_KEPT_FROM 1e-10
 /* Gonzalez's discrepancies within this many ulps of their terms' scale are their round-off:
  * no correction (integrator3d.GONZALEZ_NOISE, gonzalez_discrepancy, says why) */
 #define GONZALEZ_NOISE 32.0
@@ -126,8 +132,10 @@ struct Ctx3D {
     int R, n, ns, cs, s, mb;
     double *mass;                      /* R x n x n: M(q1) */
     /* the iteration matrix's two slots (a step factors into the one not kept, so a step not
-     * committed leaves the kept one intact) and the projection's mass matrix */
-    Fact slot[2], pm;
+     * committed leaves the kept one intact), the projection factored at the end of the step
+     * that factored each (kept_pm: the hub fixed; project), and a projection's scratch */
+    Fact slot[2], kept_pm[2], pm;
+    int kept_pm_ok[2];                 /* kept_pm[k] is of the step that factored slot k */
     double E[MAXS * MAXS];
     /* the kept iteration matrix: its slot, and the end of the committed step that used it
      * (q, v, length, lock, the stuck hinges); a step that starts there takes it */
@@ -137,6 +145,7 @@ struct Ctx3D {
     double *jm, *jr;                   /* R x 9 x n: J(q_m), J(q) */
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
+    double *v_in;                      /* the velocity a kept projection started from */
     double *w0, *sp0, *sp1, *fitc;     /* the mode fit's: w0 = S^-1 v0, S^T p0, S^T p1;
                                         * modal sums, then a rib's (n + n: a rib has n
                                         * modes at most) */
@@ -249,13 +258,14 @@ void umbrella3d_free(Ctx3D *x) {
         rows_free(&x->b[j].c_rows); rows_free(&x->b[j].d_rows); rows_free(&x->b[j].d_cols);
     }
     fact_free(&x->slot[0]); fact_free(&x->slot[1]); fact_free(&x->pm);
+    fact_free(&x->kept_pm[0]); fact_free(&x->kept_pm[1]);
     rows_free(&x->mrows); rows_free(&x->krows); rows_free(&x->jrows);
     free(x->kept_q); free(x->kept_v); free(x->kept_stuck);
     double *bufs[] = {x->mass, x->jm, x->jr,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
                       x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp0, x->sp1, x->fitc,
-                      x->damp};
+                      x->damp, x->v_in};
     for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
     free(x);
 }
@@ -481,7 +491,8 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         ok &= invariants(&x->b[j], R);
     int mb = x->mb, N = R * n;
 #define ALLOC(f, k) (x->f = calloc((size_t)(k), sizeof(double))) != NULL
-    ok = ok && fact_alloc(&x->slot[0], x) && fact_alloc(&x->slot[1], x) && fact_alloc(&x->pm, x);
+    ok = ok && fact_alloc(&x->slot[0], x) && fact_alloc(&x->slot[1], x) && fact_alloc(&x->pm, x)
+        && fact_alloc(&x->kept_pm[0], x) && fact_alloc(&x->kept_pm[1], x);
     ok = ok && ALLOC(mass, R * n * n) && ALLOC(jm, R * ROWS * n)
         && ALLOC(kept_q, N + MAXS) && ALLOC(kept_v, N + MAXS)
         && ALLOC(jr, R * ROWS * n) && ALLOC(q0, N + MAXS) && ALLOC(v0, N + MAXS)
@@ -493,7 +504,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
         && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R)
         && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS)
-        && ALLOC(fitc, 2 * n) && ALLOC(damp, N + MAXS);
+        && ALLOC(fitc, 2 * n) && ALLOC(damp, N + MAXS) && ALLOC(v_in, N + MAXS);
 #undef ALLOC
     if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
     const double *pattern = m->nl_elements ? m->nl_pattern : m->stiffness;
@@ -506,7 +517,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
     if (ok && m->nl_elements) ok = (x->nl = nl_starts_new(x)) != NULL;
     if (!ok || !x->kept_stuck) { umbrella3d_free(x); return NULL; }
     x->pend_slot = -1;
-    x->pm.elastic_first = 1;
+    x->pm.elastic_first = x->kept_pm[0].elastic_first = x->kept_pm[1].elastic_first = 1;
     x->slot[0].elastic_first = x->slot[1].elastic_first = 2;
     return x;
 }
@@ -1037,11 +1048,11 @@ static void friction(const Ctx3D *x, int r, double dq_a1, double h, double *torq
     if (slope) *slope = -(m->viscous[r] + m->coulomb[r] * secant / eps) / h;
 }
 
-/* v projected onto J v = 0 in the mass metric (M = x->mass at q) */
-static int project(Ctx3D *x, const double *q, double *v, const double *stuck, int locked) {
+/* v's correction onto J v = 0 by the factored projection f ([[M, J^T], [J, 0]] of some
+ * q): v += dv, M dv = -J^T mu, J (v + dv) = 0 with f's M and J, the residual J v of x->jr;
+ * returns max |dv| */
+static double projection_pass(Ctx3D *x, const Fact *f, double *v, int locked) {
     int R = x->R, n = x->n, mb = x->mb, ns = x->ns;
-    jacobian(x, q, stuck, x->jr);
-    if (arrow_factor(x, &x->pm, NULL, x->jr, x->jr, stuck, locked, 1.0) != OK) return SINGULAR;
     for (int r = 0; r < R; r++) {
         double *rr = x->rr + r * mb;
         const double *J = x->jr + r * ROWS * n;
@@ -1056,10 +1067,41 @@ static int project(Ctx3D *x, const double *q, double *v, const double *stuck, in
     }
     double rs[MAXS] = {0.0};
     rs[ns] = locked ? -v[R * n] : 0.0;
-    arrow_solve(x, &x->pm, x->rr, rs, 1.0, 1);     /* (M dv = -J^T mu: no top) */
+    arrow_solve(x, f, x->rr, rs, 1.0, 1);     /* (M dv = -J^T mu: no top) */
+    double largest = fabs(rs[0]);
     for (int r = 0; r < R; r++)
-        for (int a = 0; a < n; a++) v[r * n + a] += x->rr[r * mb + a];
+        for (int a = 0; a < n; a++) {
+            double d = x->rr[r * mb + a];
+            v[r * n + a] += d;
+            if (fabs(d) > largest) largest = fabs(d);
+        }
     v[R * n] += rs[0];
+    return largest;
+}
+
+/* v projected onto J(q) v = 0 (M = x->mass at q): in the mass metric, one pass of the
+ * projection factored at q; or, kept (the projection factored at the end of the step that
+ * factored the iteration matrix kept: integrator3d.MidpointUmbrella.project_kept's rule),
+ * passes of the kept factor until the correction is below PROJECTION_TOLERANCE of v (each
+ * pass's residual J(q) v: the limit holds J(q) v = 0, its correction in the kept M's
+ * metric), at most PROJECTION_PASSES, else v as it came projected by a pass of the
+ * projection factored at q; store: the projection factored at q into it */
+static int project(Ctx3D *x, const double *q, double *v, const double *stuck, int locked,
+                   const Fact *kept, Fact *store) {
+    int N = x->R * x->n + x->ns;
+    jacobian(x, q, stuck, x->jr);
+    if (kept) {
+        double size = max_abs(N, v);
+        memcpy(x->v_in, v, sizeof(double) * N);
+        for (int pass = 0; pass < PROJECTION_PASSES; pass++) {
+            if (!(projection_pass(x, kept, v, locked) > PROJECTION_TOLERANCE * size))
+                return OK;
+        }
+        memcpy(v, x->v_in, sizeof(double) * N);
+    }
+    Fact *f = store ? store : &x->pm;
+    if (arrow_factor(x, f, NULL, x->jr, x->jr, stuck, locked, 1.0) != OK) return SINGULAR;
+    projection_pass(x, f, v, locked);
     return OK;
 }
 
@@ -1373,7 +1415,13 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     x->strain = strain_energy(x, q);
     x->work_damp = damped ? damping_work(x, fit, h) : 0.0;
     double t_target = t0 + strain0 - x->strain + x->work_force + w_fric - x->work_damp;
-    if (project(x, q, v, stuck, locked) != OK) return SINGULAR;
+    /* (stage 2's projection kept with the iteration matrix: a step that factored it factors
+     * the projection at its end, the steps it serves take that) */
+    int keeps = locked && tol >= PROJECTION_KEPT_FROM, slot = x->pend_slot;
+    if (refactored) x->kept_pm_ok[slot] = keeps;
+    Fact *pk = keeps && x->kept_pm_ok[slot] ? &x->kept_pm[slot] : NULL;
+    if (project(x, q, v, stuck, locked, refactored ? NULL : pk, refactored ? pk : NULL) != OK)
+        return SINGULAR;
     matvec(x, v, x->p);
     double t_after = 0.0;
     for (int i = 0; i < N + ns; i++) t_after += v[i] * x->p[i];

@@ -93,11 +93,14 @@ def newton_tolerance(h: float) -> float:
 #: revisions became the mode fit; the umbrella's moving bases, which took no fit and the
 #: unfitted step before; a step whose joints did not hold after the update that converged in
 #: q, which took a whole iteration more before the joints' correction: within the Newton
-#: tolerance, above --resimulate's), not in round-off
+#: tolerance, above --resimulate's; the umbrella's stage-2 velocity projected in the metric
+#: of M(q) at every step before its projection was kept with the iteration matrix: ~1e-6 of
+#: the stage-2 tips and peaks), not in round-off
 INTEGRATOR_REVISION = ('midpoint-dae, stage-2 locked-mode fit (on a moving base too), stage-2 '
                        'substeps past the coupling deflection (the umbrella of N ribs too), '
                        "a correction of the joints alone after Newton's convergence in q (the "
-                       'hub fixed)')
+                       "hub fixed), the umbrella's stage-2 projection kept with its iteration "
+                       'matrix (the hub fixed)')
 
 #: modes the stage-2 fit makes exact: omega h at most this, i.e. modes the step samples at
 #: least ~4 times a period (pi / 2 = 1.57).  Beyond, the scheme's modal mass s^2 that makes

@@ -78,6 +78,26 @@ from ..kernel import kernel_error, kernel_refusal, LIBRARY, load_kernel, STATUS
 #: 52.2/50.3/50.2/50.5 (2.07-3.04 iterations a step), ribs 12 x 2 314/255/234/214/214/223.
 CARRY_STEPS = 8
 REFRESH_RATE = 0.1
+#: stage 2's velocity projection kept with the iteration matrix (the hub fixed:
+#: project_kept): a locked step that factors the iteration matrix factors the projection
+#: [[M, J^T], [J, 0]] at its end; the steps the matrix serves correct v with that factor, in
+#: passes each taking the residual J(q) v at their own q, until a pass's correction is below
+#: PROJECTION_TOLERANCE of v's largest component (the residual left then is its contraction,
+#: ~1e-3, times that: the round-off of J v = 0), PROJECTION_PASSES at most, else v as it
+#: came projected by a pass of a projection factored at q (_kernel3d.c's constants).  The
+#: correction of v then lies in the kept M's metric, not M(q)'s: ~1e-7 of v apart (a
+#: correction ~3e-5 of v, M ~1e-3 from its value up to CARRY_STEPS steps before), an error of
+#: the kept iteration matrix's order at Newton's default tolerance (test_umbrella3d_newton:
+#: a 30 ms tip series 0.92 um from the one with both factored every step, 0.91 with the
+#: projection factored every step; the energy is scaled to its balance after), so only from
+#: a tolerance of PROJECTION_KEPT_FROM (the floor of newton_tolerance): a run asking for
+#: Newton's iterates tighter than that takes M(q)'s metric every step (the identities with
+#: the planar model hold to 1e-10 at tolerances 1e-12 to 1e-14).  Measured (ribs 6 x 1,
+#: stage 2 at 0.1 ms, the compiled step alone, interleaved): 51.6 -> 48.2 us a step, 3.8
+#: passes a step the matrix served, none falling back.
+PROJECTION_PASSES = 4
+PROJECTION_TOLERANCE = 1e-12
+PROJECTION_KEPT_FROM = 1e-10
 #: below this |rate| / hinge_regularisation a hinge's Coulomb secant is its tangent, 1
 #: (_kernel3d.c's FRICTION_AT_REST)
 FRICTION_AT_REST = 1e-6
@@ -329,21 +349,47 @@ class MidpointUmbrella:
         -J_ss^T mu: on the bus, -mu[1:] with a prescribed base).
         """
         m = self.model
-        j_rr, j_rs, j_ss, active = m.constraint_jacobian(qr, stuck, locked)
-        jac = (j_rr, j_rs, j_ss)
-        blocks = self._blocks(mass, jac, jac, stuck, active, sign=1.0)
+        jac = m.constraint_jacobian(qr, stuck, locked)
+        f = arrow.factor(*self._blocks(mass, jac[:3], jac[:3], stuck, jac[3], sign=1.0))
+        vr1, vs1, mu = self._projection_pass(f, jac, vr, vs, target_vs)
+        return (vr1, vs1, mu) if multipliers else (vr1, vs1)
+
+    def _projection_pass(self, f, jac, vr, vs, target_vs=None):
+        """Return (vr, vs, mu) corrected by the factored projection f (J: jac's at q)."""
+        j_rr, j_rs, j_ss, active = jac
         rib_res = -(np.einsum('rij,rj->ri', j_rr, vr) + j_rs @ vs)
         sh_res = -(j_ss @ vs)
         if target_vs is not None:
             sh_res[1:] += target_vs
         sh_res[~active] = 0.0
-        f = arrow.factor(*blocks)
-        n, ns = m.n_rib, m.n_shared
+        n, ns = self.model.n_rib, self.model.n_shared
         rr = np.concatenate([np.zeros_like(vr), rib_res], 1)
         xs_r, xs_s = f.solve(rr, np.concatenate([np.zeros(ns), sh_res]))
-        if multipliers:
-            return vr + xs_r[:, :n], vs + xs_s[:ns], xs_s[ns:]
-        return vr + xs_r[:, :n], vs + xs_s[:ns]
+        return vr + xs_r[:, :n], vs + xs_s[:ns], xs_s[ns:]
+
+    def project_kept(self, mass, qr, vr, vs, stuck, locked, kept):
+        """
+        Return (vr, vs) projected onto J(q) v = 0 and the projection to keep (the hub fixed).
+
+        kept None: in the mass metric of M(q) (mass), one pass of the projection factored
+        at q, which is kept; else passes of the kept projection (PROJECTION_PASSES'
+        rule), or if they do not end, the velocity given projected by a pass of one
+        factored at q (not kept).
+        """
+        m = self.model
+        jac = m.constraint_jacobian(qr, stuck, locked)
+        if kept is not None:
+            size = max(float(np.max(np.abs(vr))), float(np.max(np.abs(vs))))
+            wr, ws = vr, vs
+            for _ in range(PROJECTION_PASSES):
+                wr0, ws0 = wr, ws
+                wr, ws, _ = self._projection_pass(kept, jac, wr, ws)
+                step = max(float(np.max(np.abs(wr - wr0))), float(np.max(np.abs(ws - ws0))))
+                if not step > PROJECTION_TOLERANCE * size:
+                    return wr, ws, kept
+        f = arrow.factor(*self._blocks(mass, jac[:3], jac[:3], stuck, jac[3], sign=1.0))
+        vr, vs, _ = self._projection_pass(f, jac, vr, vs)
+        return vr, vs, kept if kept is not None else f
 
     def consistent(self, s: State3D, force: float, locked: bool) -> State3D:
         """Return s with the multipliers of its consistent accelerations."""
@@ -386,13 +432,13 @@ class MidpointUmbrella:
         kept = self._kept
         if kept is None:
             return None
-        factor, uses, qr, qs, vr, vs, h_kept, locked_kept, stuck = kept
+        factor, uses, qr, qs, vr, vs, h_kept, locked_kept, stuck, projection = kept
         if (uses >= self.carry_steps or locked_kept != locked or abs(h_kept - h) > 1e-9 * h
                 or not np.array_equal(stuck, np.isnan(s.stuck))):
             return None
         pairs = ((qr, s.qr), (qs, s.qs), (vr, s.vr), (vs, s.vs))
         same = all(np.array_equal(a, b) for a, b in pairs)
-        return (factor, uses) if same else None
+        return (factor, uses, projection) if same else None
 
     def _step(self, s: State3D, h: float, force: float, locked: bool):
         m = self.model
@@ -418,7 +464,7 @@ class MidpointUmbrella:
         half_h2 = 0.5 * h * h
         beta = self.damping_beta
         kept = self._kept_factor(s, h, locked)
-        factored, uses = kept if kept is not None else (None, 0)
+        factored, uses, projection = kept if kept is not None else (None, 0, None)
         self._kept = None
         factorisations = 0
         last = np.inf
@@ -549,7 +595,16 @@ class MidpointUmbrella:
             # translation velocity removes (p_X is m_total X' + terms without X')
             vs = vs.copy()
             vs[1:4] += (ps0[1:4] - m.matvec(mass1, vr, vs)[1][1:4]) / m.total_mass
-        if drive is None:
+        keeps = not m.moving_base and locked and self.tolerance >= PROJECTION_KEPT_FROM
+        if factorisations:          # (a projection is kept with the matrix factored with it)
+            projection = None
+        if keeps:
+            vr, vs, factored_here = self.project_kept(mass1, qr, vr, vs, stuck, locked,
+                                                      projection)
+            projection = factored_here if factorisations else projection
+        elif not m.moving_base:
+            vr, vs = self.project(kin1, mass1, qr, vr, vs, stuck, locked)
+        elif drive is None:
             vr, vs = self.project(kin1, mass1, qr, vr, vs, stuck, locked)
         else:
             # the drive's impulse (-mu on the bus coordinates) that puts the bus at its rates
@@ -572,7 +627,8 @@ class MidpointUmbrella:
                 vr, vs = vr * scale, (vs - drift) * scale + drift
                 pr1, ps1 = m.matvec(mass1, vr, vs)
         state = State3D(s.t + h, qr, qs, vr, vs, lam_r, lam_s, stuck, pr1, ps1)
-        self._kept = (factored, uses + 1, qr, qs, vr, vs, h, locked, np.isnan(stuck))
+        self._kept = (factored, uses + 1, qr, qs, vr, vs, h, locked, np.isnan(stuck),
+                      projection)
         return state, StepWork(w_force, w_fric, w_drive, it, factorisations, w_damp)
 
     def _damped(self, applied_r, applied_s, tangent, dqr, dqs, h, fit):
