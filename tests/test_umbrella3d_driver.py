@@ -25,16 +25,19 @@ exactly (the same arithmetic in the same order), the running sums of work to rou
 record (the same rules, fed in parts), and the physics it reports: the energy balance with
 the hinges' friction work, a stuck rib held at its angle until its release time.
 """
+import json
 import math
 
 import numpy as np
 import pytest
 
 from umbrella_sim.core.driver import RunDriver
-from umbrella_sim.core.umbrella3d.driven3d import DrivenSimulator3D, RibPeaks
+from umbrella_sim.core.umbrella3d.blocks3d import RibPeaks
+from umbrella_sim.core.umbrella3d.driven3d import DrivenSimulator3D
 from umbrella_sim.core.umbrella3d.outputs3d import deployment_spread, first_reach, STRESS_NAMES
 from umbrella_sim.core.umbrella3d.params3d import UmbrellaRibsParams
 from umbrella_sim.core.umbrella3d.simulator3d import UmbrellaSimulator3D
+from umbrella_sim.core.umbrella3d.summary3d import SUMMARY_BATCH_ROWS
 
 #: rib 1 stuck for 20 ms and rubbing in its hinge, from rest, pushed hard (locks at ~0.21 s)
 STUCK = {'ribs': 2, 'sleeve_force': 60.0, 'time_step': 2e-4, 'v0': 0.0,
@@ -383,3 +386,28 @@ def test_a_large_out_of_plane_tip_is_named_as_the_in_plane_one(kick, warned):
                      f'{100 * w:.3g} % of the leaf length 1 m (limit 10 %): small-deformation '
                      'theory no longer holds (compare model flexible-nonlinear)'] if warned
                     else [])
+
+
+def test_stage2_blocks_taken_in_batches_give_the_figures_of_whole_chunks():
+    """
+    Stage 2 in a 1 kHz node's chunks (5 rows each), which the summary takes 50 rows at once.
+
+    Summary3D takes stage-2 blocks SUMMARY_BATCH_ROWS rows at a time: every figure, the
+    stage-2 tip amplitudes and periods of every physics step included, is that of the same
+    run in the driver's own chunks (64 rows, each taken as it comes), read mid-batch; the
+    warnings said along the run (new_warnings) are said by its end.
+    """
+    params = UmbrellaRibsParams.from_mapping({'ribs': 3, 'rib1.tip_mass': 0.05,
+                                              'rib2.out_of_plane_rate': 0.3})
+    whole, _, _ = driven(params, 1.0, after_lock=0.2033)
+    fine, chunks, _ = driven(params, 1.0, after_lock=0.2033, period_steps=5)
+    rows = [len(c.block) for c in chunks if len(c.block) and c.block.rows['locked'][0]]
+    assert max(rows) == 5 and sum(rows) > 10 * SUMMARY_BATCH_ROWS
+    assert fine.summary._waiting                    # (read mid-batch)
+    said = fine.summary.new_warnings()
+    got, want = fine.summary.figures(), whole.summary.figures()
+    assert not fine.summary._waiting
+    assert all(p > 0.0 for p in got['stage2_tip_period'])
+    assert got['stage2_tip_w_amplitude'][2] > 1e-3
+    assert json.dumps(got, sort_keys=True) == json.dumps(want, sort_keys=True)
+    assert set(said + fine.summary.new_warnings()) == set(whole.summary.warnings())

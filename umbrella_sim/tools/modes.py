@@ -28,7 +28,7 @@ from .arguments import add_parameter_options
 from .inputs import build_params
 from ..core.modal import base_spin, BEAM_MODELS, deployed_modes
 from ..core.summary import parameter_warnings
-from ..core.umbrella3d.driven3d import rib_parameter_warnings
+from ..core.umbrella3d.summary3d import rib_parameter_warnings
 
 #: rows printed by default
 DEFAULT_COUNT = 12

@@ -81,7 +81,7 @@ class Record3D:
         #: qr, vr, locked, 'state'): the channels computed from them when needed
         self._last_stress = None
         #: each rib's largest of every stress channel over the steps added since the last
-        #: ``take`` (value, at, when: driven3d.RibPeaks' arrays; None: no steps), and those
+        #: ``take`` (value, at, when: blocks3d.RibPeaks' arrays; None: no steps), and those
         #: of the rows the last ``take`` returned (``taken_peaks``)
         self._held = None
         self.taken_peaks = None
@@ -378,7 +378,7 @@ class Record3D:
 
         ``taken_peaks`` is then their peaks: each rib's largest of every stress channel, the
         first step holding it (value and where, (ribs, 5) and (ribs, 5, 2), and when, s;
-        None: no steps), driven3d.RibPeaks.of_rows' of the rows; ``taken_tips`` their
+        None: no steps), blocks3d.RibPeaks.of_rows' of the rows; ``taken_tips`` their
         physics steps' tips where they fold substeps (physics_tips3d), else None.
         """
         # (one block of steps: its own arrays, which nothing else holds)

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .driven3d import StepBlock3D
+from .blocks3d import StepBlock3D
 from .outputs3d import (BODIES, deployment_spread, first_reach, largest_leaf_angle_spread,
                         largest_out_of_plane_tip, STRESS_NAMES)
 
