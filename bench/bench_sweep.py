@@ -15,7 +15,7 @@
 # limitations under the License.
 
 """
-Throughput of `umbrella-sim sweep`: cases/s with 1 and 2 local Dask workers, overhead per case.
+Throughput of `umbrella_sim sweep`: cases/s with 1 and 2 local Dask workers, overhead per case.
 
 The sweep: --cases flexible cases (N = 1, V0 spread over -0.3 .. -1.5 m/s), each run for
 --duration simulated seconds.  For each worker count, a fresh local cluster runs the whole

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """
-umbrella-sim sweep: SPEC checks, local and distributed Dask runs, failures and re-runs.
+umbrella_sim sweep: SPEC checks, local and distributed Dask runs, failures and re-runs.
 
 The distributed run is real: `dask scheduler` and two `dask worker` processes on 127.0.0.1; a
 worker is killed mid-sweep, a sweep is interrupted as by Ctrl-C and re-run.
@@ -481,7 +481,7 @@ def test_local_sweep_table_physics_and_plots(local_run):
         assert t_flex == pytest.approx(THESIS_TABLE_6_1[v0][0], rel=5e-3)
     assert float(by[(-2.0, 'rigid-fe')]['deploy_time']) == pytest.approx(
         deployment_time_by_quadrature(UmbrellaParams(), -2.0), rel=1e-3)
-    # each row is the summary `umbrella-sim simulate` gives for the same case
+    # each row is the summary `umbrella_sim simulate` gives for the same case
     ref = simulate(UmbrellaParams(v0=-2.0), 0.1, stop_after_lock=0.01).summary()
     row = by[(-2.0, 'flexible')]
     for key, value in ref.items():

@@ -13,10 +13,10 @@
 # limitations under the License.
 
 """
-``umbrella-sim sweep SPEC.yaml --out DIR``: parameter sweeps on a Dask cluster.
+``umbrella_sim sweep SPEC.yaml --out DIR``: parameter sweeps on a Dask cluster.
 
 A SPEC (YAML) names the cases; each case is one offline run (the same path and the same JSON
-summary as ``umbrella-sim simulate --json``), executed as a Dask task: on a local cluster with
+summary as ``umbrella_sim simulate --json``), executed as a Dask task: on a local cluster with
 one worker process per core, or on an existing cluster (``--scheduler tcp://HOST:PORT``)
 started the usual way with ``dask scheduler`` and ``dask worker``.
 
@@ -74,7 +74,7 @@ def worker_version() -> str:
 
 def run_case(task: dict) -> dict:
     """
-    Run one case offline, as ``umbrella-sim simulate`` does.
+    Run one case offline, as ``umbrella_sim simulate`` does.
 
     Never raises: an exception becomes the case's error so the other cases go on.
     """
@@ -187,7 +187,7 @@ def _client(workers: int | None, scheduler: str | None, log: Callable[[str], Non
     try:
         from distributed import Client, LocalCluster
     except ImportError as exc:
-        raise SpecError(f'umbrella-sim sweep needs dask and distributed ({exc}); '
+        raise SpecError(f'umbrella_sim sweep needs dask and distributed ({exc}); '
                         'install requirements.txt') from None
 
     if scheduler:

@@ -54,7 +54,7 @@ SPEC_KEYS = ('params', 'base', 'grid', 'cases', 'duration', 'stop_after_lock', '
              'force_profile', 'long_run')
 
 
-DEFAULT_DURATION = 1.0      # s, as `umbrella-sim simulate`
+DEFAULT_DURATION = 1.0      # s, as `umbrella_sim simulate`
 
 
 class SpecError(ValueError):
