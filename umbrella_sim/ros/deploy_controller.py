@@ -131,7 +131,8 @@ def _make_node_class():
             try:
                 # the umbrella of N ribs (ribs >= 2, each rib's own values): planned whole
                 umbrella = declare_umbrella(self)
-                self.ribs = umbrella.get('ribs', 1)
+                # (the ribs the plan is for; _node_ribs: those the node's states show)
+                self.planned_ribs = umbrella.get('ribs', 1)
                 cfg = ControllerConfig(**values).validated()
                 self.law = DeployLaw(umbrella_model(
                     UmbrellaParams.from_mapping(model).validated(), umbrella), cfg)
@@ -152,7 +153,7 @@ def _make_node_class():
             self._last_stamp: float | None = None
             self._period: float | None = None
             self._last_effort = 0.0
-            self._ribs = 1            # the node's ribs (its joint states say): effort N F
+            self._node_ribs = 1       # the node's ribs (its joint states say): effort N F
             self._last_wall: float | None = None
             self._sent: collections.deque = collections.deque(maxlen=400)  # (stamp, F)
             self._delays: collections.deque = collections.deque(maxlen=15)
@@ -161,8 +162,8 @@ def _make_node_class():
             # the last command and its wall time, until a state answers it or it is resent
             self._unanswered: tuple | None = None
             self.create_timer(RESEND_S / 2, self._resend_unanswered)
-            planned = (f'planned on the umbrella of {self.ribs} ribs, each its own'
-                       if self.ribs > 1 else 'planned on one rib (N identical ribs alike)')
+            planned = (f'planned on the umbrella of {self.planned_ribs} ribs, each its own'
+                       if self.planned_ribs > 1 else 'planned on one rib (N identical ribs alike)')
             self.get_logger().info(
                 f'target {cfg.target_time:g} s, force in [{cfg.min_force:g}, '
                 f'{cfg.max_force:g}] N a rib, lock rate {self.law.lock_rate:.4g} rad/s, '
@@ -219,7 +220,7 @@ def _make_node_class():
                 self._period = min(self._period or math.inf, t - self._last_stamp)
             self._last_stamp = t
             state = drive_state(msg)
-            self._ribs, effort = state['ribs'], state['sleeve_force']
+            self._node_ribs, effort = state['ribs'], state['sleeve_force']
             if effort != self._last_effort and self._period:
                 self._measure_delay(t, effort)
             self._last_effort = effort
@@ -248,13 +249,13 @@ def _make_node_class():
             number of ribs is another umbrella.  Not given, it is one rib's, which N identical
             ribs each follow.
             """
-            if self.ribs < 2 or ribs == self.ribs:
+            if self.planned_ribs < 2 or ribs == self.planned_ribs:
                 return True
             self.get_logger().error(
                 f'the node runs {ribs} rib{"s" if ribs > 1 else ""} (its joint_states at '
-                f't = {t:.6f} s) and the plan is for the umbrella of ribs:={self.ribs}: give '
-                'both nodes the same ribs and rib values (one params file); not commanding '
-                'this run')
+                f't = {t:.6f} s) and the plan is for the umbrella of '
+                f'ribs:={self.planned_ribs}: give both nodes the same ribs and rib values (one '
+                'params file); not commanding this run')
             return False
 
         def _at_rest(self, t: float, state: dict) -> bool:
@@ -306,10 +307,10 @@ def _make_node_class():
             ours = {self._echo(f) for ts, f in self._sent if ts >= t - window - 1e-9}
             self._not_ours = 0 if effort in ours else self._not_ours + 1
             if self._not_ours >= 3:
-                rib = ' a rib' if self._ribs > 1 else ''
+                rib = ' a rib' if self._node_ribs > 1 else ''
                 self.get_logger().warn(
-                    f'the node applies {effort / self._ribs:.6g} N{rib} at t = {t:.6f} s, none '
-                    f'of our commands of the last {window:g} s (latest '
+                    f'the node applies {effort / self._node_ribs:.6g} N{rib} at t = {t:.6f} s, '
+                    f'none of our commands of the last {window:g} s (latest '
                     f'{self._sent[-1][1]:.6g} N{rib}): it refuses them (its sleeve_force_min / '
                     'sleeve_force_limit; see its log) or another node commands it',
                     throttle_duration_sec=2.0)
@@ -345,7 +346,7 @@ def _make_node_class():
 
         def _echo(self, force: float) -> float:
             """Return the sleeve's effort the node echoes for our command (N F of N ribs)."""
-            return force * self._ribs
+            return force * self._node_ribs
 
         def lead(self) -> float:
             """How long after a state its command acts, on average over its hold."""
