@@ -477,6 +477,8 @@ def physics_tips_of(parts: list) -> np.ndarray | None:
 
 def substep_ends(steps: int, m: int) -> np.ndarray:
     """Return each grid step's last physics step of `steps` taken m a grid step (fold)."""
+    if steps % m == 0:          # (whole grid steps, the usual run: no shorter last group)
+        return np.arange(m - 1, steps, m)
     return np.minimum(np.arange(m - 1, steps + m - 1, m), steps - 1)
 
 

@@ -139,6 +139,9 @@ class CompiledStep3D:
                     'lam_r': np.zeros((nr, N_RIB_ROWS)), 'lam_s': np.zeros(m.n_shared_rows),
                     'pr': np.zeros((nr, n)), 'ps': np.zeros(m.n_shared),
                     'stuck': np.zeros(nr)}
+        #: the buffers of a State3D's arrays, in its fields' order (_state)
+        self._state_buffers = [self.buf[k] for k in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s',
+                                                     'stuck', 'pr', 'ps')]
         #: the State3D the buffers hold (the last call's, as _state returned it), else None
         self._in_buffers = None
         self.call = Advance3DCall(max_iter=max_iterations, tol=tolerance,
@@ -325,9 +328,7 @@ class CompiledStep3D:
 
     def _state(self) -> State3D:
         """Return the state the buffers hold after a call (copies; a next call starts there)."""
-        b = self.buf
-        self._in_buffers = state = State3D(self.call.t, *(b[k].copy() for k in (
-            'qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s', 'stuck', 'pr', 'ps')))
+        self._in_buffers = state = State3D(self.call.t, *[a.copy() for a in self._state_buffers])
         return state
 
     def rows(self, count: int) -> dict:

@@ -278,7 +278,7 @@ class UmbrellaSimulator3D:
                 work = work_hit.plus(work2)
             else:
                 s1, work = s_locked, work_hit
-        s1 = replace(s1, t=t_next)
+        s1 = s1.at(t_next)
         s1 = self._release(s1)
         self.state = s1
         self.k += 1
@@ -315,13 +315,15 @@ class UmbrellaSimulator3D:
                 self.model.note_state(rows['qr'])
                 times = None
                 if sub > 1:     # (grid rows the kernel folded, at the grid's times)
-                    times = (self.k + 1 + np.arange(-(-done // sub))) * self.h
+                    first = self.k + 1
+                    times = np.arange(first, first - (-done // sub)) * self.h
                     if done % sub:          # (a fault's last grid step: its own time)
                         times[-1] = state.t
-                    state = replace(state, t=float(times[-1]))
+                    state = state.at(float(times[-1]))
                 tips = None        # (every physics step's, where the kernel folded them)
                 if fold > 1:       # (a grid step's last at its row's time)
-                    tips = ((self.k * sub + 1 + np.arange(done)) * (self.h / sub),
+                    first = self.k * sub + 1
+                    tips = (np.arange(first, first + done) * (self.h / sub),
                             compiled.physics_tips(done).copy())
                     tips[0][substep_ends(done, sub)] = times
                 self.record.add_steps(rows, self.locked, self.force, self.lock_loss,
@@ -395,7 +397,7 @@ class UmbrellaSimulator3D:
             s = self._release(s)
             states.append(s)
             works.append(work)
-        states[-1] = s = replace(s, t=t_next)
+        states[-1] = s = s.at(t_next)
         self.state = s
         self.k += 1
         self.record.add_substeps(states, works, True, self.force, self.lock_loss)

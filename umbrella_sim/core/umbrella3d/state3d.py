@@ -39,6 +39,11 @@ class State3D:
     pr: np.ndarray | None = None
     ps: np.ndarray | None = None
 
+    def at(self, t: float) -> 'State3D':
+        """Return this state at the time t, the same arrays (dataclasses.replace, directly)."""
+        return State3D(t, self.qr, self.qs, self.vr, self.vs, self.lam_r, self.lam_s,
+                       self.stuck, self.pr, self.ps)
+
 
 @dataclass(frozen=True)
 class StepWork:

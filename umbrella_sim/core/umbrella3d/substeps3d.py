@@ -147,6 +147,8 @@ def physics_tips3d(blocks: list[dict], tips: list) -> tuple | None:
     2)) at the end of every physics step its rows fold.  None if no block folds substeps;
     else (t, tips) of every block's physics steps, in order.
     """
+    if len(tips) == 1:      # (one block, the usual take: its own, which nothing else holds)
+        return tips[0]
     if all(t is None for t in tips):
         return None
     parts = [(b['time'], b['tip'][:, :, 1:]) if t is None else t for b, t in zip(blocks, tips)]
