@@ -95,6 +95,7 @@ class Record3D:
         #: the rows of a constant figure (locked, sleeve_force, lock_energy_loss) by (name,
         #: steps, value): shared by the blocks, read-only
         self._constant_rows: dict = {}
+        self._block_constants: dict = {}    # (_constants': a block's rows of them)
 
     @property
     def peak(self) -> dict:
@@ -218,6 +219,23 @@ class Record3D:
             rows.flags.writeable = False
         return rows
 
+    def _constants(self, k: int, locked: bool, force: float, lock_loss: float) -> tuple:
+        """Return k steps' locked, sleeve_force, lock_energy_loss, holding_torque, stuck rows."""
+        key = (k, locked, force, lock_loss, math.copysign(1.0, force),
+               math.copysign(1.0, lock_loss), type(locked), type(force), type(lock_loss))
+        rows = self._block_constants.get(key)
+        if rows is None:    # (_constant's, once a block alike; the last two None where a
+            # hinge may stick: its own rows)
+            c, ribs = self._constant, (k, len(self.friction))
+            rows = (c('locked', k, locked), c('sleeve_force', k, force),
+                    c('lock_energy_loss', k, lock_loss),
+                    *((c('holding_torque', ribs, 0.0), c('stuck', ribs, False))
+                      if self._never_stuck else (None, None)))
+            if len(self._block_constants) > 64:      # (values change seldom: a few at once)
+                self._block_constants.clear()
+            self._block_constants[key] = rows
+        return rows
+
     def _put_steps(self, t, st, kinetic, strain, work, friction, drive, damping, locked,
                    force, lock_loss, figures=None, tips=None) -> dict:
         """
@@ -232,11 +250,9 @@ class Record3D:
         m = self.model
         k = len(t)
         qr, vr = st['qr'], st['vr']
-        constant = self._constant
-        if self._never_stuck:       # (every hinge free at every step)
-            holding, stuck = (constant('holding_torque', qr.shape[:2], 0.0),
-                              constant('stuck', qr.shape[:2], False))
-        else:
+        locked_rows, force_rows, loss_rows, holding, stuck = self._constants(
+            k, locked, force, lock_loss)
+        if holding is None:         # (a hinge that sticks: its own rows)
             free = np.isnan(st['stuck'])
             holding, stuck = np.where(free, 0.0, st['lam_r'][:, :, -1]), ~free
         i_a1, i_a2 = m.i_a1, m.i_a2
@@ -249,9 +265,7 @@ class Record3D:
             top, at = figures[0].copy(), figures[1].copy()
             self._last_stress = (float(t[-1]), qr[-1].copy(), vr[-1].copy(), locked, 'state')
         block = {      # (copies: the rows' buffers are reused)
-            'locked': constant('locked', k, locked),
-            'sleeve_force': constant('sleeve_force', k, force),
-            'lock_energy_loss': constant('lock_energy_loss', k, lock_loss),
+            'locked': locked_rows, 'sleeve_force': force_rows, 'lock_energy_loss': loss_rows,
             'time': t.copy(), 'sleeve_position': st['qs'][:, 0].copy(),
             'sleeve_velocity': st['vs'][:, 0].copy(), 'alpha1': qr[:, :, i_a1].copy(),
             'alpha2': qr[:, :, i_a2].copy(), 'alpha1_rate': vr[:, :, i_a1].copy(),
@@ -261,9 +275,10 @@ class Record3D:
             'work': work, 'friction_work': friction, 'drive_work': drive,
             'damping_dissipation': damping, 'holding_torque': holding, 'stuck': stuck,
             'stop_reaction': st['lam_s'][:, 0].copy()}
-        for j, (name, name_at) in enumerate(STRESS_ROWS):
-            block[name] = top[:, :, j]
-            block[name_at] = at[:, :, j]
+        # (each channel's value and place: views of top and at, the channels' axis first)
+        for (name, name_at), value, where in zip(STRESS_ROWS, top.transpose(2, 0, 1),
+                                                 at.transpose(2, 0, 1, 3)):
+            block[name], block[name_at] = value, where
         block['von_mises'] = np.maximum(top[:, :, -1], 0.0)
         self._blocks.append(block)
         self._tips.append(tips)
