@@ -50,8 +50,8 @@ from .messages import (clock_msg, group_starts, INERTIAL_FRAME, marker_every, pa
                        RELIABLE, stamp, stamp_parts, Topic, TOPICS)
 from .robot_description import joint_names
 from ..core.registry import NODE_PARAMETERS
-from ..core.umbrella3d.outputs3d import (bus_odometry, energy_balance3d, STRESS_NAMES,
-                                         STRESS_ROWS)
+from ..core.umbrella3d.blocks3d import VON_MISES
+from ..core.umbrella3d.outputs3d import bus_odometry, energy_balance3d, STRESS_NAMES
 
 #: the topics of the umbrella's ribs (besides messages.TOPICS' joint_states, energy, clock)
 RIB_TOPICS = {
@@ -126,13 +126,12 @@ def rib_joint_values(s) -> tuple[list, list, list]:
 
 def rib_stress_values(s, yield_strength: float, out: np.ndarray | None = None) -> np.ndarray:
     """Return rib_peak_stress's data of a Sample3D: (ribs, STRESS_FIELDS) (into out if given)."""
-    v = s.fields()
+    value, at = s.stress_figures()                   # (ribs, components), (.., 2)
     if out is None:
-        out = np.empty((len(v['alpha1']), len(STRESS_FIELDS)))
-    for j, (name, _) in enumerate(STRESS_ROWS):
-        out[:, j] = v[name]
-    out[:, -3:-1] = v['stress_von_mises_at']
-    np.divide(v['stress_von_mises'], yield_strength, out=out[:, -1])
+        out = np.empty((len(value), len(STRESS_FIELDS)))
+    out[:, :len(STRESS_NAMES)] = value
+    out[:, -3:-1] = at[:, VON_MISES]
+    np.divide(value[:, VON_MISES], yield_strength, out=out[:, -1])
     return out
 
 

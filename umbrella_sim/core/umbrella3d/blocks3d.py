@@ -41,10 +41,12 @@ class Sample3D:
     the momenta of a free bus).
     """
 
-    __slots__ = ('_values',)
+    __slots__ = ('_values', '_held')
 
-    def __init__(self, values: dict):
+    def __init__(self, values: dict, held: 'RibPeaks | None' = None):
         object.__setattr__(self, '_values', values)
+        #: the RibPeaks its stress figures are (with_peaks), else None: the rows' own
+        object.__setattr__(self, '_held', held)
 
     def __getattr__(self, name: str):
         try:
@@ -80,7 +82,20 @@ class Sample3D:
         # (a component's values and places: the rows of the held arrays turned)
         for (name, name_at), value, at in zip(STRESS_ROWS, hold.value.T, hold.at.swapaxes(0, 1)):
             values[name], values[name_at] = value, at
-        return Sample3D(values)
+        return Sample3D(values, hold)
+
+    def stress_figures(self) -> tuple[np.ndarray, np.ndarray]:
+        """
+        Return each rib's stress figures as arrays: values (ribs, 5) and where (ribs, 5, 2).
+
+        The components in STRESS_NAMES' order, stress_<component> and stress_<component>_at
+        (the held RibPeaks' own arrays where with_peaks made the sample: not to be written).
+        """
+        if self._held is not None:
+            return self._held.value, self._held.at
+        v = self._values
+        return (np.stack([v[name] for name, _ in STRESS_ROWS], -1),
+                np.stack([v[name_at] for _, name_at in STRESS_ROWS], -2))
 
 
 #: the stress components' columns, and von Mises's
