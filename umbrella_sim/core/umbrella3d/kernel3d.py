@@ -139,10 +139,10 @@ class CompiledStep3D:
                     'lam_r': np.zeros((nr, N_RIB_ROWS)), 'lam_s': np.zeros(m.n_shared_rows),
                     'pr': np.zeros((nr, n)), 'ps': np.zeros(m.n_shared),
                     'stuck': np.zeros(nr)}
-        #: the buffers of a State3D's arrays, in its fields' order (_state)
+        #: the buffers of a State3D's arrays, in its fields' order (reached)
         self._state_buffers = [self.buf[k] for k in ('qr', 'qs', 'vr', 'vs', 'lam_r', 'lam_s',
                                                      'stuck', 'pr', 'ps')]
-        #: the State3D the buffers hold (the last call's, as _state returned it), else None
+        #: the State3D the buffers hold (the last call's, as reached returned it), else None
         self._in_buffers = None
         self.call = Advance3DCall(max_iter=max_iterations, tol=tolerance,
                                   phi_tol=phi_tolerance,
@@ -326,9 +326,15 @@ class CompiledStep3D:
         c = self.call
         c.have_p, c.t, c.h, c.force, c.locked = int(s.pr is not None), s.t, h, force, int(locked)
 
-    def _state(self) -> State3D:
-        """Return the state the buffers hold after a call (copies; a next call starts there)."""
-        self._in_buffers = state = State3D(self.call.t, *[a.copy() for a in self._state_buffers])
+    def reached(self, t: float | None = None) -> State3D:
+        """
+        Return the state the buffers hold after a call (copies; a next call starts there).
+
+        t: its time (the grid's, of a call's substeps: UmbrellaSimulator3D.advance); None:
+        the call's own.
+        """
+        self._in_buffers = state = State3D(self.call.t if t is None else t,
+                                           *[a.copy() for a in self._state_buffers])
         return state
 
     def rows(self, count: int) -> dict:
@@ -355,12 +361,23 @@ class CompiledStep3D:
                         float(row['work_drive'][0]),
                         int(row['iterations'][0]), int(row['factorisations'][0]),
                         float(row['work_damping'][0]))
-        return self._state(), work
+        return self.reached(), work
 
     def advance(self, s: State3D, k0: int, h: float, n_steps: int, force: float,
                 locked: bool, crest_from_state: bool = False, fold: int = 1):
         """
-        Take up to n_steps grid steps t_k -> (k + 1) h from s at t_k0.
+        Take up to n_steps grid steps t_k -> (k + 1) h from s at t_k0 (``advance_rows``).
+
+        Return (status, steps done, rows (dict of the steps' figures), the state reached).
+        """
+        status, done, rows = self.advance_rows(s, k0, h, n_steps, force, locked,
+                                               crest_from_state, fold)
+        return status, done, rows, (self.reached() if done else s)
+
+    def advance_rows(self, s: State3D, k0: int, h: float, n_steps: int, force: float,
+                     locked: bool, crest_from_state: bool = False, fold: int = 1):
+        """
+        Take up to n_steps grid steps t_k -> (k + 1) h from s at t_k0; the state: ``reached``.
 
         crest_from_state: the first step's stress figures take their crests from s (the
         record continues in the same stage: Record3D.crest_continues), else its own values.
@@ -368,9 +385,9 @@ class CompiledStep3D:
         substeps3d.fold_substeps3d's rule, in the kernel), a last shorter run its own; every
         step's tips then kept apart (``physics_tips``).
 
-        Return (status, steps done, rows (dict of the steps' figures), the state reached).
-        Status 'ok', 'crossing' (the next step reaches the stop unlocked: not taken), or a
-        failure code (kernel.STATUS) of the step not taken.
+        Return (status, steps done, rows (dict of the steps' figures)).  Status 'ok',
+        'crossing' (the next step reaches the stop unlocked: not taken), or a failure code
+        (kernel.STATUS) of the step not taken.
         """
         if n_steps > self.capacity:
             self._set_capacity(max(n_steps, 2 * self.capacity))
@@ -383,7 +400,7 @@ class CompiledStep3D:
         c.tips = self._tips_ptr if fold > 1 else None
         status = self.lib.umbrella3d_advance(self._ctx, self._call_ref)
         done = c.n_done
-        return status, done, self.rows(-(-done // fold)), (self._state() if done else s)
+        return status, done, self.rows(-(-done // fold))
 
     def physics_tips(self, count: int) -> np.ndarray:
         """

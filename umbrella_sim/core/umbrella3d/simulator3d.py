@@ -305,7 +305,7 @@ class UmbrellaSimulator3D:
             grid = min(target - self.k, max(1, ADVANCE_BLOCK // sub))   # (physics steps a call)
             # (the kernel folds the substeps' rows where it gives their stress figures)
             fold = sub if compiled.figures else 1
-            status, done, rows, state = compiled.advance(
+            status, done, rows = compiled.advance_rows(
                 self.state, self.k * sub, self.h / sub, grid * sub, self.force, self.locked,
                 self.record.crest_continues(self.locked), fold=fold)
             if done:
@@ -313,13 +313,14 @@ class UmbrellaSimulator3D:
                 self.integrator.iterations += int(total(rows['iterations']))
                 self.integrator.factorisations += int(total(rows['factorisations']))
                 self.model.note_state(rows['qr'])
-                times = None
+                times = t = None        # (t: the state's time; None, the call's own)
                 if sub > 1:     # (grid rows the kernel folded, at the grid's times)
                     first = self.k + 1
                     times = np.arange(first, first - (-done // sub)) * self.h
                     if done % sub:          # (a fault's last grid step: its own time)
-                        times[-1] = state.t
-                    state = state.at(float(times[-1]))
+                        times[-1] = compiled.call.t
+                    t = float(times[-1])
+                state = compiled.reached(t)
                 tips = None        # (every physics step's, where the kernel folded them)
                 if fold > 1:       # (a grid step's last at its row's time)
                     first = self.k * sub + 1
