@@ -172,6 +172,43 @@ def test_each_chunks_peaks_are_those_of_its_rows(kernel, monkeypatch):
             np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize('grow', [False, True])
+def test_peaks_merged_at_once_are_those_merged_one_by_one(grow):
+    """
+    RibPeaks.merged_all (the summary's blocks at once) is merged block after block.
+
+    Each rib's and component's first largest, the held one's on a tie, a NaN never larger
+    (nor a value larger than a held NaN): with blocks of ties, NaNs and smaller values only,
+    and with one of them larger somewhere (grow).
+    """
+    rng = np.random.default_rng(3)
+    ribs, parts = 4, len(STRESS_NAMES)
+
+    def peaks(value):
+        return RibPeaks(value, rng.random((ribs, parts, 2)), rng.random((ribs, parts)))
+
+    held = peaks(rng.random((ribs, parts)) + 1.0)
+    held.value[0, 0] = np.nan
+    news = []
+    for k in range(5):
+        value = held.value - rng.random((ribs, parts))
+        value[1, k] = held.value[1, k]                 # (a tie)
+        value[2, k] = np.nan
+        news.append(peaks(value))
+    if grow:
+        news[1].value[3, 2] = news[3].value[3, 2] = held.value[3, 2] + 1.0
+        news[2].value[0, 0] = 5.0                      # (past a held NaN: not larger)
+    want = held
+    for new in news:
+        want = want.merged(new)
+    got = held.merged_all(news)
+    assert (got is held) is not grow
+    for a, b in ((got.value, want.value), (got.at, want.at), (got.when, want.when)):
+        np.testing.assert_array_equal(a, b)
+    if grow:        # (the first block holding the larger value)
+        np.testing.assert_array_equal(got.at[3, 2], news[1].at[3, 2])
+
+
 @pytest.mark.parametrize('kernel', ['compiled', pytest.param('numpy', marks=pytest.mark.slow)])
 def test_the_runs_peaks_are_the_first_largest_of_every_step(kernel, monkeypatch):
     """

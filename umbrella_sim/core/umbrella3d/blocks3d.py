@@ -149,6 +149,21 @@ class RibPeaks:
                         np.where(better[..., None], new.at, self.at),
                         np.where(better, new.when, self.when))
 
+    def merged_all(self, news: list) -> 'RibPeaks':
+        """
+        Return these merged with each of news (RibPeaks) in turn, as ``merged`` one by one.
+
+        Where none of news holds a larger value (their largest, a NaN never larger, is no
+        larger anywhere: a run's peaks past their growth), these, at once.
+        """
+        if len(news) > 1 and not any_of(
+                np.fmax.reduce(np.stack([new.value for new in news])) > self.value, axis=None):
+            return self
+        out = self
+        for new in news:
+            out = out.merged(new)
+        return out
+
 
 class StepBlock3D:
     """

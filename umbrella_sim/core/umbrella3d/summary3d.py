@@ -244,8 +244,7 @@ class Summary3D:
         if largest(np.abs(tip[:, :, 2]), axis=None) > self._oop[0]:
             self._oop = largest_out_of_plane_tip(t, tip)
         self._in_plane = np.maximum(self._in_plane, largest(np.abs(tip[:, :, 1])))
-        for each in peaks:
-            self._peaks = each.merge_peaks(self._peaks)
+        self._peaks = self._peaks.merged_all([b.peaks for b in peaks if b.peaks is not None])
         self.steps += len(block)
         self.final_time = float(t[-1])
         self._final = block.last
