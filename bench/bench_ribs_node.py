@@ -157,7 +157,7 @@ def timed_parts(driver) -> dict:
     """
     sim = driver.sim
     parts = {'compiled steps': 0.0, 'Record3D': 0.0, 'Summary3D': 0.0, 'publication': 0.0}
-    for name, owner, method in (('compiled steps', sim.integrator.compiled, 'advance'),
+    for name, owner, method in (('compiled steps', sim.integrator.compiled, 'advance_rows'),
                                 ('Record3D', sim.record, 'add_steps'),
                                 ('Summary3D', driver.summary, 'add'),
                                 ('publication', driver, 'publication')):
