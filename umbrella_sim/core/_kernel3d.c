@@ -146,7 +146,7 @@ struct Ctx3D {
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
     double *v_in;                      /* the velocity a kept projection started from */
-    double *w0, *sp0, *sp1, *fitc;     /* the mode fit's: w0 = S^-1 v0, S^T p0, S^T p1;
+    double *w0, *sp1, *fitc;           /* the mode fit's: w0 = S^-1 v0, S^T (M(q1) v1 - p0);
                                         * modal sums, then a rib's (n + n: a rib has n
                                         * modes at most) */
     double work_force, *work_fric, strain;   /* the last step's works, V(q1) */
@@ -264,7 +264,7 @@ void umbrella3d_free(Ctx3D *x) {
     double *bufs[] = {x->mass, x->jm, x->jr,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
-                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp0, x->sp1, x->fitc,
+                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp1, x->fitc,
                       x->damp, x->v_in};
     for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
     free(x);
@@ -503,7 +503,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(tmp, N + MAXS) && ALLOC(phi0, R * ROWS + MAXS) && ALLOC(phi, R * ROWS + MAXS)
         && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
         && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R)
-        && ALLOC(w0, N + MAXS) && ALLOC(sp0, N + MAXS) && ALLOC(sp1, N + MAXS)
+        && ALLOC(w0, N + MAXS) && ALLOC(sp1, N + MAXS)
         && ALLOC(fitc, 2 * n) && ALLOC(damp, N + MAXS) && ALLOC(v_in, N + MAXS);
 #undef ALLOC
     if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
@@ -1332,15 +1332,12 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     const double half_h2 = 0.5 * h * h;
     const int damped = m->damping_beta != 0.0;
     double *q = x->q, *q0 = x->q0, *v0 = x->v0, *p0 = x->p0;
-    /* the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0) */
-    const double *w0 = v0, *sp0 = p0;
+    /* the scheme's velocity w0 (the mode fit; else v0) */
+    const double *w0 = v0;
     if (fit) {
         memcpy(x->w0, v0, sizeof(double) * (N + ns));
         fit_map(x, fit, TO_SCHEME, x->w0, n);
-        memcpy(x->sp0, p0, sizeof(double) * (N + ns));
-        fit_map(x, fit, TRANSPOSE, x->sp0, n);
         w0 = x->w0;
-        sp0 = x->sp0;
     }
     constraints(x, q0, stuck, locked, x->phi0);
     for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * w0[i];
@@ -1362,12 +1359,10 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         if (fit) fit_map(x, fit, TO_PHYSICAL, x->v1, n);
         mass_matrix(x, q);
         matvec2(x, x->v1, x->p1, v0, x->tmp);     /* (M(q1) v0: Gonzalez's, below) */
-        const double *sp1 = x->p1;        /* the scheme's momentum S^T M(q1) v1 */
-        if (fit) {
-            memcpy(x->sp1, x->p1, sizeof(double) * (N + ns));
-            fit_map(x, fit, TRANSPOSE, x->sp1, n);
-            sp1 = x->sp1;
-        }
+        /* the scheme's momentum change S^T (M(q1) v1 - p0) (S^T M(q1) v1 - S^T p0: one map) */
+        double *sp1 = x->sp1;
+        for (int i = 0; i < N + ns; i++) sp1[i] = x->p1[i] - p0[i];
+        if (fit) fit_map(x, fit, TRANSPOSE, sp1, n);
         kinetic_gradient(x, x->qm, v0, x->v1, x->gt);
         /* Gonzalez along the rib coordinates: dq . G_T = f(q1) - f(q0) */
         double delta = 0.0, dd = 0.0, gdq = 0.0, scale = 0.0;
@@ -1415,12 +1410,11 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             for (int a = 0; a < n; a++) {
                 double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
-                x->res[r * n + a] = sp1[r * n + a] - sp0[r * n + a]
-                    - h * (x->gt[r * n + a] + applied + cons);
+                x->res[r * n + a] = sp1[r * n + a] - h * (x->gt[r * n + a] + applied + cons);
             }
             cons_s -= lam[7];
         }
-        x->res[N] = x->p1[N] - p0[N] - h * (x->gt[N] - force + cons_s);
+        x->res[N] = sp1[N] - h * (x->gt[N] - force + cons_s);
         if (!factored) {
             iteration_blocks(x, q, stuck, h);
             if ((m->nl_elements ? nl_iteration_elastic(x) : iteration_elastic(x, h)) != OK

@@ -657,15 +657,12 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
     const double half_h2 = 0.5 * h * h;
     const int damped = m->damping_beta != 0.0;
     double *q = x->q, *q0 = x->q0, *v0 = x->v0, *p0 = x->p0;
-    /* the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0) */
-    const double *w0 = v0, *sp0 = p0;
+    /* the scheme's velocity w0 (the mode fit; else v0) */
+    const double *w0 = v0;
     if (fit) {
         memcpy(x->w0, v0, sizeof(double) * (N + ns));
         base_fit_map(x, fit, TO_SCHEME, x->w0, n, x->w0 + N);
-        memcpy(x->sp0, p0, sizeof(double) * (N + ns));
-        base_fit_map(x, fit, TRANSPOSE, x->sp0, n, x->sp0 + N);
         w0 = x->w0;
-        sp0 = x->sp0;
     }
     base_constraints(x, q0, stuck, locked, x->phi0);
     for (int i = 0; i < N + ns; i++) q[i] = q0[i] + h * w0[i];
@@ -685,12 +682,10 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
         if (fit) base_fit_map(x, fit, TO_PHYSICAL, x->v1, n, x->v1 + N);
         base_mass_matrix(x, q);
         base_matvec(x, x->v1, x->p1);
-        const double *sp1 = x->p1;        /* the scheme's momentum S^T M(q1) v1 */
-        if (fit) {
-            memcpy(x->sp1, x->p1, sizeof(double) * (N + ns));
-            base_fit_map(x, fit, TRANSPOSE, x->sp1, n, x->sp1 + N);
-            sp1 = x->sp1;
-        }
+        /* the scheme's momentum change S^T (M(q1) v1 - p0) (S^T M(q1) v1 - S^T p0: one map) */
+        double *sp1 = x->sp1;
+        for (int i = 0; i < N + ns; i++) sp1[i] = x->p1[i] - p0[i];
+        if (fit) base_fit_map(x, fit, TRANSPOSE, sp1, n, sp1 + N);
         base_kinetic_gradient(x, x->qm, v0, x->v1, x->gt);
         /* Gonzalez over the whole dq, the correction along the ribs' and the sleeve's */
         base_matvec(x, v0, x->tmp);
@@ -742,13 +737,12 @@ static int base_step(Ctx3D *x, const double *stuck, int locked, double h, double
             for (int a = 0; a < n; a++) {
                 double applied = -x->ycol[a], cons = jl[a] + dq[a] * flam;
                 if (a == m->i_a1) applied += x->fric[r];
-                x->res[r * n + a] = sp1[r * n + a] - sp0[r * n + a]
-                    - h * (x->gt[r * n + a] + applied + cons);
+                x->res[r * n + a] = sp1[r * n + a] - h * (x->gt[r * n + a] + applied + cons);
             }
             cons_s[0] -= lam[7];
         }
         for (int i = 0; i < ns; i++)
-            x->res[N + i] = sp1[N + i] - sp0[N + i]
+            x->res[N + i] = sp1[N + i]
                 - h * (x->gt[N + i] + (i == 0 ? -force : 0.0) + cons_s[i]
                        - (damped ? x->damp[N + i] : 0.0));
         if (!factored) {

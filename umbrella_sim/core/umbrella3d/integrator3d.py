@@ -453,12 +453,11 @@ class MidpointUmbrella:
             drive = self.drive(s.t + h)
         phi_r0, phi_s0 = m.constraints(qr0, qs0, stuck, locked,
                                        None if drive is None else drive[0])
-        # the scheme's velocity w0 and momentum S^T p0 (the mode fit; else v0, p0)
+        # the scheme's velocity w0 (the mode fit; else v0)
         fit = self.stage2_fits(locked)
-        wr0, ws0, spr0, sps0 = vr0, vs0, pr0, ps0
+        wr0, ws0 = vr0, vs0
         if fit is not None:
             wr0, ws0 = fit.to_scheme(vr0, vs0)
-            spr0, sps0 = fit.transpose(pr0, ps0)
         qr, qs = qr0 + h * wr0, qs0 + h * ws0
         lam_r, lam_s = s.lam_r.copy(), s.lam_s.copy()
         half_h2 = 0.5 * h * h
@@ -518,9 +517,13 @@ class MidpointUmbrella:
                                                     h, fit)
             cons_r = np.einsum('rji,rj->ri', jg_rr, lam_r)
             cons_s = np.einsum('rji,rj->i', jm_rs, lam_r) + jm_ss.T @ lam_s
-            scheme_pr1, scheme_ps1 = (pr1, ps1) if fit is None else fit.transpose(pr1, ps1)
-            res_r = scheme_pr1 - spr0 - h * (gtr + applied_r + cons_r)
-            res_s = scheme_ps1 - sps0 - h * (gts + applied_s + cons_s)
+            # the scheme's momentum change S^T (M(q1) v1 - p0) (S^T M(q1) v1 - S^T p0: a
+            # map a step less)
+            dpr, dps = pr1 - pr0, ps1 - ps0
+            if fit is not None:
+                dpr, dps = fit.transpose(dpr, dps)
+            res_r = dpr - h * (gtr + applied_r + cons_r)
+            res_s = dps - h * (gts + applied_s + cons_s)
             if not (np.isfinite(res_r).all() and np.isfinite(res_s).all()):
                 raise _non_finite(s.t + h)      # (the iterate left the law's domain)
             if factored is None:
