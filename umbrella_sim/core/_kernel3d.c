@@ -146,6 +146,8 @@ struct Ctx3D {
     double *q0, *v0, *p0, *l0, *q, *v, *lam, *p, *dq, *qm, *v1, *p1, *gt, *res, *tmp;
     double *phi0, *phi, *rr, *x, *gyro, *ycol, *fric;
     double *v_in;                      /* the velocity a kept projection started from */
+    double *mw0, *mdq;                 /* the hub fixed: the modal coordinates U^T w0, U^T dq
+                                        * (R x n: a rib's r; fit_start, fit_newton) */
     double *w0, *sp1, *fitc;           /* the mode fit's: w0 = S^-1 v0, S^T (M(q1) v1 - p0);
                                         * modal sums, then a rib's (n + n: a rib has n
                                         * modes at most) */
@@ -264,7 +266,7 @@ void umbrella3d_free(Ctx3D *x) {
     double *bufs[] = {x->mass, x->jm, x->jr,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
-                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp1, x->fitc,
+                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp1, x->fitc, x->mw0, x->mdq,
                       x->damp, x->v_in};
     for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
     free(x);
@@ -503,7 +505,7 @@ Ctx3D *umbrella3d_new(const Model3D *m) {
         && ALLOC(tmp, N + MAXS) && ALLOC(phi0, R * ROWS + MAXS) && ALLOC(phi, R * ROWS + MAXS)
         && ALLOC(rr, R * mb + MAXS) && ALLOC(x, R * mb + MAXS) && ALLOC(gyro, R * n * n)
         && ALLOC(ycol, mb) && ALLOC(fric, 2 * R) && ALLOC(work_fric, R)
-        && ALLOC(w0, N + MAXS) && ALLOC(sp1, N + MAXS)
+        && ALLOC(w0, N + MAXS) && ALLOC(sp1, N + MAXS) && ALLOC(mw0, N) && ALLOC(mdq, N)
         && ALLOC(fitc, 2 * n) && ALLOC(damp, N + MAXS) && ALLOC(v_in, N + MAXS);
 #undef ALLOC
     if (ok) memcpy(x->mass, m->const_mass, sizeof(double) * R * n * n);
@@ -1239,6 +1241,66 @@ static void fit_map(const Ctx3D *x, const Fit3D *f, int kind, double *v, int str
     }
 }
 
+/* The hub fixed's maps of the iterates' velocities at half a map each: the step tracks the
+ * modal coordinates U^T dq of its dq (the predictor's h U^T w0, then each Newton update's
+ * U^T N x = (1 - shrink) U^T x, U^T Phi = I: Phi mass-normalised), so S (2 dq / h - w0) =
+ * (2 dq / h - w0) + Phi diag(s - 1) (2 U^T dq / h - U^T w0) takes no projection of its own
+ * (fit_velocity); the same velocity as fit_map's TO_PHYSICAL to round-off (the tracked
+ * coordinates leave out q's rounding, weighted by s - 1). */
+
+/* w0 = S^-1 v0 (fit_map's TO_SCHEME), U^T w0 = U^T v0 / s into x->mw0 and the
+ * predictor's U^T dq = h U^T w0 into x->mdq */
+static void fit_start(Ctx3D *x, const Fit3D *f, const double *v0, double *w0, double h) {
+    int n = x->n, r = f->r;
+    double *c = x->fitc, *acc = x->fitc + n;
+    for (int k = 0; k < x->R; k++) {
+        size_t rib = (size_t)k * r;
+        const double *sc = f->sc + rib;
+        double *mw = x->mw0 + rib, *md = x->mdq + rib;
+        modal_sums(f->u_t + rib * n, r, n, v0 + k * n, c);
+        for (int j = 0; j < r; j++) {
+            mw[j] = c[j] / sc[j];
+            md[j] = h * mw[j];
+            c[j] *= 1.0 / sc[j] - 1.0;
+        }
+        modal_expansion(f->phi + rib * n, c, r, n, acc);
+        for (int a = 0; a < n; a++) w0[k * n + a] = v0[k * n + a] + acc[a];
+    }
+}
+
+/* v (R x n: 2 dq / h - w0) mapped to S v by the tracked modal coordinates (fit_start) */
+static void fit_velocity(const Ctx3D *x, const Fit3D *f, double *v, double h) {
+    int n = x->n, r = f->r;
+    double *c = x->fitc, *acc = x->fitc + n;
+    for (int k = 0; k < x->R; k++) {
+        size_t rib = (size_t)k * r;
+        const double *sc = f->sc + rib, *mw = x->mw0 + rib, *md = x->mdq + rib;
+        for (int j = 0; j < r; j++) c[j] = (sc[j] - 1.0) * (2.0 * md[j] / h - mw[j]);
+        modal_expansion(f->phi + rib * n, c, r, n, acc);
+        for (int a = 0; a < n; a++) v[k * n + a] += acc[a];
+    }
+}
+
+/* fit_map's NEWTON of the update v (each rib's block at stride apart), its modal
+ * coordinates (1 - shrink) U^T v added to x->mdq */
+static void fit_newton(Ctx3D *x, const Fit3D *f, double *v, int stride) {
+    int n = x->n, r = f->r;
+    double *c = x->fitc, *acc = x->fitc + n;
+    for (int k = 0; k < x->R; k++) {
+        double *vk = v + (size_t)k * stride;
+        size_t rib = (size_t)k * r;
+        const double *shrink = f->shrink + rib;
+        double *md = x->mdq + rib;
+        modal_sums(f->u_t + rib * n, r, n, vk, c);
+        for (int j = 0; j < r; j++) {
+            md[j] += c[j] - shrink[j] * c[j];
+            c[j] *= -shrink[j];
+        }
+        modal_expansion(f->phi + rib * n, c, r, n, acc);
+        for (int a = 0; a < n; a++) vk[a] += acc[a];
+    }
+}
+
 /* Whether the kept iteration matrix serves a step of length h from (q0, v0): the step
  * starts where the committed step that used it ended, with the same length (to 1e-9), lock
  * and stuck hinges, and the matrix has served fewer than carry_steps steps.  A rule of the
@@ -1336,7 +1398,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     const double *w0 = v0;
     if (fit) {
         memcpy(x->w0, v0, sizeof(double) * (N + ns));
-        fit_map(x, fit, TO_SCHEME, x->w0, n);
+        fit_start(x, fit, v0, x->w0, h);
         w0 = x->w0;
     }
     constraints(x, q0, stuck, locked, x->phi0);
@@ -1356,7 +1418,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             x->qm[i] = q0[i] + 0.5 * x->dq[i];
             x->v1[i] = 2.0 * x->dq[i] / h - w0[i];
         }
-        if (fit) fit_map(x, fit, TO_PHYSICAL, x->v1, n);
+        if (fit) fit_velocity(x, fit, x->v1, h);
         mass_matrix(x, q);
         matvec2(x, x->v1, x->p1, v0, x->tmp);     /* (M(q1) v0: Gonzalez's, below) */
         /* the scheme's momentum change S^T (M(q1) v1 - p0) (S^T M(q1) v1 - S^T p0: one map) */
@@ -1432,7 +1494,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
         rs[0] = -0.5 * h * x->res[N];
         rs[ns] = locked ? -x->phi[R * ROWS] : 0.0;
         arrow_solve(x, ff, x->rr, rs, -1.0, 0);
-        if (fit) fit_map(x, fit, NEWTON, x->rr, mb);
+        if (fit) fit_newton(x, fit, x->rr, mb);
         int finite = 1;
         double norm = rib_update(x, q, mb, half_h2, &finite);
         q[N] += rs[0];
@@ -1449,7 +1511,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
             rs[0] = 0.0;
             rs[ns] = locked ? -x->phi[R * ROWS] : 0.0;
             arrow_solve(x, ff, x->rr, rs, -1.0, 1);
-            if (fit) fit_map(x, fit, NEWTON, x->rr, mb);
+            if (fit) fit_newton(x, fit, x->rr, mb);
             rib_update(x, q, mb, half_h2, &finite);
             q[N] += rs[0];
             x->lam[R * ROWS] += rs[ns] / half_h2;
@@ -1468,7 +1530,7 @@ static int step(Ctx3D *x, const double *stuck, int locked, double h, double forc
     /* velocities, works, the energy target */
     double *v = x->v;
     for (int i = 0; i < N + ns; i++) { x->dq[i] = q[i] - q0[i]; v[i] = 2.0 * x->dq[i] / h - w0[i]; }
-    if (fit) fit_map(x, fit, TO_PHYSICAL, v, n);
+    if (fit) fit_velocity(x, fit, v, h);
     mass_matrix(x, q);
     double w_fric = friction_works(x, h);
     x->work_force = force * (q0[N] - q[N]);
