@@ -108,6 +108,7 @@ enum { INV_M = 0, INV_C = 1, INV_I0 = 4, INV_SB = 5 };
 typedef struct {
     double *Af, *W, *T, *Jf, *Y;       /* R x (nb0^2 + nb1^2), R x n x 9, R x 81, R x 9 x n,
                                         * R x mb x s */
+    double *Wt;                        /* W's ribs transposed (R x 9 x n: rib_solve's) */
     int *apiv, *tpiv;                  /* R x n, R x 9 */
     double S[MAXS * MAXS];
     int spiv[MAXS];
@@ -231,19 +232,20 @@ static int invariants(Body *b, int R) {
 }
 
 static void fact_free(Fact *f) {
-    free(f->Af); free(f->W); free(f->T); free(f->Jf); free(f->Y); free(f->apiv); free(f->tpiv);
+    free(f->Af); free(f->W); free(f->Wt); free(f->T); free(f->Jf); free(f->Y); free(f->apiv); free(f->tpiv);
 }
 
 static int fact_alloc(Fact *f, const Ctx3D *x) {
     int R = x->R, n = x->n, nb0 = x->b[0].nb, nb1 = x->b[1].nb;
     f->Af = calloc((size_t)R * (nb0 * nb0 + nb1 * nb1), sizeof(double));
     f->W = calloc((size_t)R * n * ROWS, sizeof(double));
+    f->Wt = calloc((size_t)R * n * ROWS, sizeof(double));
     f->T = calloc((size_t)R * ROWS * ROWS, sizeof(double));
     f->Jf = calloc((size_t)R * ROWS * n, sizeof(double));
     f->Y = calloc((size_t)R * x->mb * x->s, sizeof(double));
     f->apiv = calloc((size_t)R * n, sizeof(int));
     f->tpiv = calloc((size_t)R * ROWS, sizeof(int));
-    return f->Af && f->W && f->T && f->Jf && f->Y && f->apiv && f->tpiv;
+    return f->Af && f->W && f->Wt && f->T && f->Jf && f->Y && f->apiv && f->tpiv;
 }
 
 void umbrella3d_free(Ctx3D *x) {
@@ -842,6 +844,60 @@ static double max_abs(int k, const double *a) {
     return best;
 }
 
+/* ------------------------------------------------------------------ row combinations */
+/* out (len) = sum_i w[i] rows[i] (rows: count rows of len, contiguous), each sum in i's
+ * order from 0.0: the mode fit's modal sums and expansions, a rib's W lambda.  Blocked: a
+ * block of sums held in vector registers across the loop over the rows (GNU C's vector
+ * extension, lanes of COMBINE_LANES doubles: plain multiplies and adds, lane by lane), the
+ * rest one by one; the same figures as the plain loop to the last bit (which a compiler
+ * without the extension takes), at a fraction of its loads and stores.  (4 lanes where
+ * the build does not enable AVX go through memory: twice the plain loop's time.) */
+#if defined(__GNUC__)
+#define COMBINE_LANES 2
+typedef double CombineVec __attribute__((vector_size(COMBINE_LANES * sizeof(double))));
+static inline CombineVec combine_load(const double *p) {
+    CombineVec v;
+    memcpy(&v, p, sizeof v);
+    return v;
+}
+static inline void combine_store(double *p, CombineVec v) { memcpy(p, &v, sizeof v); }
+#else
+#define COMBINE_LANES 0
+#endif
+
+static void combine_rows(const double *restrict rows, const double *restrict w, int count,
+                         int len, double *restrict out) {
+    int k = 0;
+#if COMBINE_LANES
+    const int L = COMBINE_LANES;
+    for (; k + 4 * L <= len; k += 4 * L) {
+        CombineVec s0 = {0.0}, s1 = {0.0}, s2 = {0.0}, s3 = {0.0};
+        for (int i = 0; i < count; i++) {
+            const double *row = rows + (size_t)i * len + k;
+            double wi = w[i];
+            s0 += combine_load(row) * wi;
+            s1 += combine_load(row + L) * wi;
+            s2 += combine_load(row + 2 * L) * wi;
+            s3 += combine_load(row + 3 * L) * wi;
+        }
+        combine_store(out + k, s0);
+        combine_store(out + k + L, s1);
+        combine_store(out + k + 2 * L, s2);
+        combine_store(out + k + 3 * L, s3);
+    }
+    for (; k + L <= len; k += L) {
+        CombineVec s0 = {0.0};
+        for (int i = 0; i < count; i++) s0 += combine_load(rows + (size_t)i * len + k) * w[i];
+        combine_store(out + k, s0);
+    }
+#endif
+    for (; k < len; k++) {
+        double acc = 0.0;
+        for (int i = 0; i < count; i++) acc += rows[(size_t)i * len + k] * w[i];
+        out[k] = acc;
+    }
+}
+
 /* ------------------------------------------------------------------ arrow algebra */
 /* X = A^-1 X for the ROWS right-hand sides of X (N x ROWS, row-major), with lu_factor's A
  * and piv (lu_solve's substitutions, a row of X at a time) */
@@ -869,6 +925,21 @@ static void lu_solve_rows(int N, const double *A, const int *piv, double *X) {
     }
 }
 
+/* lu_solve's b = A^-1 b (a rib's ROWS x ROWS joint block T) by columns: each unknown, once
+ * final, taken out of the rows after it (back substituting: before it), so each row's sum
+ * takes lu_solve's terms in lu_solve's order (the same figures) while the rows' chains run
+ * side by side, not one after another */
+static inline void joint_solve(const double *A, const int *piv, double *b) {
+    for (int k = 0; k < ROWS; k++)
+        if (piv[k] != k) { double t = b[k]; b[k] = b[piv[k]]; b[piv[k]] = t; }
+    for (int j = 0; j < ROWS; j++)
+        for (int i = j + 1; i < ROWS; i++) b[i] -= A[i * ROWS + j] * b[j];
+    for (int j = ROWS - 1; j >= 0; j--) {
+        b[j] *= A[j * ROWS + j];
+        for (int i = 0; i < j; i++) b[i] -= A[i * ROWS + j] * b[j];
+    }
+}
+
 /* rib r's block, factored (arrow_factor), solved for v (mb) in place:
  * x = A^-1 v_top, lambda = T^-1 (v_bottom - Jr x), x -= W lambda (top_zero: v_top = 0, so
  * x = 0 and Jr x = 0: the bodies' solves left out) */
@@ -890,21 +961,17 @@ static void rib_solve(const Ctx3D *x, const Fact *f, int r, double *v, int top_z
         }
         A += b->nb * b->nb;
     }
-    const double *J = f->Jf + (size_t)r * ROWS * n, *W = f->W + (size_t)r * n * ROWS;
+    const double *J = f->Jf + (size_t)r * ROWS * n, *Wt = f->Wt + (size_t)r * n * ROWS;
     const Rows *jp = &x->jrows;
     for (int i = 0; i < ROWS && !top_zero; i++) {
         double acc = 0.0;
         for (int k = jp->ptr[i]; k < jp->ptr[i + 1]; k++) acc += J[i * n + jp->col[k]] * v[jp->col[k]];
         v[n + i] -= acc;
     }
-    lu_solve(ROWS, f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
-    const double *lam = v + n;
-    for (int a = 0; a < n; a++) {              /* W lambda: a row's sum, in i's order */
-        const double *Wa = W + a * ROWS;
-        double acc = 0.0;
-        for (int i = 0; i < ROWS; i++) acc += Wa[i] * lam[i];
-        v[a] -= acc;
-    }
+    joint_solve(f->T + r * ROWS * ROWS, f->tpiv + r * ROWS, v + n);
+    double acc[n];                             /* W lambda: a row's sum, in i's order */
+    combine_rows(Wt, v + n, ROWS, n, acc);
+    for (int a = 0; a < n; a++) v[a] -= acc[a];
 }
 
 /* Factor rib r's block [[M + extra, sign Jc^T], [Jr, Z]] through its bodies (rib_solve):
@@ -967,6 +1034,9 @@ static int rib_factor(Ctx3D *x, Fact *f, int r, const double *extra, const doubl
             }
         T[ROW_STICK * ROWS + ROW_STICK] += 1.0 - stuck_on(stuck[r]);
         if (lu_factor(ROWS, T, f->tpiv + r * ROWS) != OK) return SINGULAR;
+        double *Wt = f->Wt + (size_t)r * n * ROWS;
+        for (int a = 0; a < n; a++)
+            for (int i = 0; i < ROWS; i++) Wt[i * n + a] = W[a * ROWS + i];
         memcpy(f->Jf + (size_t)r * ROWS * n, Jr, sizeof(double) * ROWS * n);
     }
     return OK;
@@ -1012,11 +1082,11 @@ static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double 
     }
     lu_solve(s, f->S, f->spiv, z);
     memcpy(rs, z, sizeof(double) * s);
-    for (int r = 0; r < R; r++) {
+    for (int r = 0; r < R; r++) {     /* (Y's columns of the shared rows: 0, arrow_factor) */
         const double *Y = f->Y + (size_t)r * mb * s;
         for (int a = 0; a < mb; a++) {
             double acc = 0.0;
-            for (int c = 0; c < s; c++) acc += Y[a * s + c] * z[c];
+            for (int c = 0; c < x->ns; c++) acc += Y[a * s + c] * z[c];
             rr[r * mb + a] -= acc;
         }
     }
@@ -1123,96 +1193,16 @@ enum { TO_SCHEME, TO_PHYSICAL, TRANSPOSE, NEWTON };
 
 #include "_kernel3d_damping.h"
 
-/* The modal sums of the fit's maps, blocked: a block of sums held in vector registers across
- * the loop over their terms (GNU C's vector extension, lanes of MODAL_LANES doubles: plain
- * multiplies and adds, lane by lane), the rest one by one.  Each sum in order from 0.0, as
- * the plain loops (the same figures to the last bit), at a fraction of their loads and
- * stores; a compiler without the extension takes the plain loops. */
-#if defined(__GNUC__)
-#define MODAL_LANES 2
-typedef double ModalVec __attribute__((vector_size(MODAL_LANES * sizeof(double))));
-static inline ModalVec modal_load(const double *p) { ModalVec v; memcpy(&v, p, sizeof v); return v; }
-static inline void modal_store(double *p, ModalVec v) { memcpy(p, &v, sizeof v); }
-#else
-#define MODAL_LANES 0
-#endif
-
-/* c (r) = in_t^T v: c[j] = sum_a in_t[a][j] v[a] (in_t: L rows of r) */
-static void modal_sums(const double *restrict in_t, int r, int L, const double *restrict v,
-                       double *restrict c) {
-    int j = 0;
-#if MODAL_LANES
-    for (; j + 4 * MODAL_LANES <= r; j += 4 * MODAL_LANES) {
-        ModalVec s0 = {0.0}, s1 = {0.0}, s2 = {0.0}, s3 = {0.0};
-        for (int a = 0; a < L; a++) {
-            const double *row = in_t + (size_t)a * r + j;
-            double va = v[a];
-            s0 += modal_load(row) * va;
-            s1 += modal_load(row + MODAL_LANES) * va;
-            s2 += modal_load(row + 2 * MODAL_LANES) * va;
-            s3 += modal_load(row + 3 * MODAL_LANES) * va;
-        }
-        modal_store(c + j, s0);
-        modal_store(c + j + MODAL_LANES, s1);
-        modal_store(c + j + 2 * MODAL_LANES, s2);
-        modal_store(c + j + 3 * MODAL_LANES, s3);
-    }
-    for (; j + MODAL_LANES <= r; j += MODAL_LANES) {
-        ModalVec s0 = {0.0};
-        for (int a = 0; a < L; a++) s0 += modal_load(in_t + (size_t)a * r + j) * v[a];
-        modal_store(c + j, s0);
-    }
-#endif
-    for (; j < r; j++) {
-        double s = 0.0;
-        for (int a = 0; a < L; a++) s += in_t[(size_t)a * r + j] * v[a];
-        c[j] = s;
-    }
-}
-
-/* acc (L) = out^T f: acc[a] = sum_j out[j][a] f[j] (out: r rows of L) */
-static void modal_expansion(const double *restrict out, const double *restrict f, int r, int L,
-                            double *restrict acc) {
-    int a = 0;
-#if MODAL_LANES
-    for (; a + 4 * MODAL_LANES <= L; a += 4 * MODAL_LANES) {
-        ModalVec s0 = {0.0}, s1 = {0.0}, s2 = {0.0}, s3 = {0.0};
-        for (int j = 0; j < r; j++) {
-            const double *o = out + (size_t)j * L + a;
-            s0 += modal_load(o) * f[j];
-            s1 += modal_load(o + MODAL_LANES) * f[j];
-            s2 += modal_load(o + 2 * MODAL_LANES) * f[j];
-            s3 += modal_load(o + 3 * MODAL_LANES) * f[j];
-        }
-        modal_store(acc + a, s0);
-        modal_store(acc + a + MODAL_LANES, s1);
-        modal_store(acc + a + 2 * MODAL_LANES, s2);
-        modal_store(acc + a + 3 * MODAL_LANES, s3);
-    }
-    for (; a + MODAL_LANES <= L; a += MODAL_LANES) {
-        ModalVec s0 = {0.0};
-        for (int j = 0; j < r; j++) s0 += modal_load(out + (size_t)j * L + a) * f[j];
-        modal_store(acc + a, s0);
-    }
-#endif
-    for (; a < L; a++) {
-        double s = 0.0;
-        for (int j = 0; j < r; j++) s += out[(size_t)j * L + a] * f[j];
-        acc[a] = s;
-    }
-}
-
 /* acc = out^T diag(factor) in^T v over L coordinates: the mode fit's correction of v for the
  * map `kind` (fit_map), the r modes' projection rows `in` given transposed (in_t: L rows of
  * r) and their shapes `out` (r rows of L), their scales sc and Newton shrinks shrink (sc
  * NULL: a low-rank map's, factor -1 to the scheme, else 1); c: r doubles of scratch.  Each
- * sum in order (c[j] over the coordinates, acc[a] over the modes): modal_sums,
- * modal_expansion. */
+ * sum in order (c[j] over the coordinates, acc[a] over the modes): combine_rows. */
 static void modal_correction(const double *restrict in_t, const double *restrict out,
                              const double *sc, const double *shrink, int r, int L, int kind,
                              const double *restrict v, double *restrict c,
                              double *restrict acc) {
-    modal_sums(in_t, r, L, v, c);
+    combine_rows(in_t, v, L, r, c);
     for (int j = 0; j < r; j++) {
         if (!sc) {
             if (kind == TO_SCHEME) c[j] = -c[j];
@@ -1221,7 +1211,7 @@ static void modal_correction(const double *restrict in_t, const double *restrict
         double s = sc[j];
         c[j] *= kind == TO_SCHEME ? 1.0 / s - 1.0 : kind == NEWTON ? -shrink[j] : s - 1.0;
     }
-    modal_expansion(out, c, r, L, acc);
+    combine_rows(out, c, r, L, acc);
 }
 
 /* v (the rib coordinates, R x n) mapped in place, rib by rib, as LockedModeFit's maps:
@@ -1257,13 +1247,13 @@ static void fit_start(Ctx3D *x, const Fit3D *f, const double *v0, double *w0, do
         size_t rib = (size_t)k * r;
         const double *sc = f->sc + rib;
         double *mw = x->mw0 + rib, *md = x->mdq + rib;
-        modal_sums(f->u_t + rib * n, r, n, v0 + k * n, c);
+        combine_rows(f->u_t + rib * n, v0 + k * n, n, r, c);
         for (int j = 0; j < r; j++) {
             mw[j] = c[j] / sc[j];
             md[j] = h * mw[j];
             c[j] *= 1.0 / sc[j] - 1.0;
         }
-        modal_expansion(f->phi + rib * n, c, r, n, acc);
+        combine_rows(f->phi + rib * n, c, r, n, acc);
         for (int a = 0; a < n; a++) w0[k * n + a] = v0[k * n + a] + acc[a];
     }
 }
@@ -1276,7 +1266,7 @@ static void fit_velocity(const Ctx3D *x, const Fit3D *f, double *v, double h) {
         size_t rib = (size_t)k * r;
         const double *sc = f->sc + rib, *mw = x->mw0 + rib, *md = x->mdq + rib;
         for (int j = 0; j < r; j++) c[j] = (sc[j] - 1.0) * (2.0 * md[j] / h - mw[j]);
-        modal_expansion(f->phi + rib * n, c, r, n, acc);
+        combine_rows(f->phi + rib * n, c, r, n, acc);
         for (int a = 0; a < n; a++) v[k * n + a] += acc[a];
     }
 }
@@ -1291,12 +1281,12 @@ static void fit_newton(Ctx3D *x, const Fit3D *f, double *v, int stride) {
         size_t rib = (size_t)k * r;
         const double *shrink = f->shrink + rib;
         double *md = x->mdq + rib;
-        modal_sums(f->u_t + rib * n, r, n, vk, c);
+        combine_rows(f->u_t + rib * n, vk, n, r, c);
         for (int j = 0; j < r; j++) {
             md[j] += c[j] - shrink[j] * c[j];
             c[j] *= -shrink[j];
         }
-        modal_expansion(f->phi + rib * n, c, r, n, acc);
+        combine_rows(f->phi + rib * n, c, r, n, acc);
         for (int a = 0; a < n; a++) vk[a] += acc[a];
     }
 }
