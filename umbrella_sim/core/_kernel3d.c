@@ -885,10 +885,23 @@ static void combine_rows(const double *restrict rows, const double *restrict w, 
         combine_store(out + k + 2 * L, s2);
         combine_store(out + k + 3 * L, s3);
     }
-    for (; k + L <= len; k += L) {
-        CombineVec s0 = {0.0};
-        for (int i = 0; i < count; i++) s0 += combine_load(rows + (size_t)i * len + k) * w[i];
-        combine_store(out + k, s0);
+    if (k < len) {                     /* the rest's vectors and odd sum: one pass */
+        int nv = (len - k) / L, odd = len - k - nv * L;
+        CombineVec s0 = {0.0}, s1 = {0.0}, s2 = {0.0};
+        double t = 0.0;
+        for (int i = 0; i < count; i++) {
+            const double *row = rows + (size_t)i * len + k;
+            double wi = w[i];
+            if (nv > 0) s0 += combine_load(row) * wi;
+            if (nv > 1) s1 += combine_load(row + L) * wi;
+            if (nv > 2) s2 += combine_load(row + 2 * L) * wi;
+            if (odd) t += row[nv * L] * wi;
+        }
+        if (nv > 0) combine_store(out + k, s0);
+        if (nv > 1) combine_store(out + k + L, s1);
+        if (nv > 2) combine_store(out + k + 2 * L, s2);
+        if (odd) out[k + nv * L] = t;
+        k = len;
     }
 #endif
     for (; k < len; k++) {
@@ -932,12 +945,19 @@ static void lu_solve_rows(int N, const double *A, const int *piv, double *X) {
 static inline void joint_solve(const double *A, const int *piv, double *b) {
     for (int k = 0; k < ROWS; k++)
         if (piv[k] != k) { double t = b[k]; b[k] = b[piv[k]]; b[piv[k]] = t; }
+    double y[ROWS];                    /* (unrolled whole: y in registers) */
+    memcpy(y, b, sizeof y);
+#pragma GCC unroll 9
     for (int j = 0; j < ROWS; j++)
-        for (int i = j + 1; i < ROWS; i++) b[i] -= A[i * ROWS + j] * b[j];
+#pragma GCC unroll 9
+        for (int i = j + 1; i < ROWS; i++) y[i] -= A[i * ROWS + j] * y[j];
+#pragma GCC unroll 9
     for (int j = ROWS - 1; j >= 0; j--) {
-        b[j] *= A[j * ROWS + j];
-        for (int i = 0; i < j; i++) b[i] -= A[i * ROWS + j] * b[j];
+        y[j] *= A[j * ROWS + j];
+#pragma GCC unroll 9
+        for (int i = 0; i < j; i++) y[i] -= A[i * ROWS + j] * y[j];
     }
+    memcpy(b, y, sizeof y);
 }
 
 /* rib r's block, factored (arrow_factor), solved for v (mb) in place:
