@@ -1093,7 +1093,7 @@ static int arrow_factor(Ctx3D *x, Fact *f, const double *extra, const double *jc
  * first n right-hand sides are 0, rib_solve's) */
 static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double sign,
                         int top_zero) {
-    int R = x->R, n = x->n, mb = x->mb, s = x->s;
+    int R = x->R, n = x->n, mb = x->mb, s = x->s, ns = x->ns;
     double z[MAXS];
     memcpy(z, rs, sizeof(double) * s);
     for (int r = 0; r < R; r++) {
@@ -1106,7 +1106,7 @@ static void arrow_solve(Ctx3D *x, const Fact *f, double *rr, double *rs, double 
         const double *Y = f->Y + (size_t)r * mb * s;
         for (int a = 0; a < mb; a++) {
             double acc = 0.0;
-            for (int c = 0; c < x->ns; c++) acc += Y[a * s + c] * z[c];
+            for (int c = 0; c < ns; c++) acc += Y[a * s + c] * z[c];
             rr[r * mb + a] -= acc;
         }
     }
