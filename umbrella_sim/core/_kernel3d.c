@@ -33,7 +33,8 @@
  * elastic coordinates first from its elastic block's LU, which no motion changes (of M once,
  * of the iteration matrix once a step length), and solved over that LU's nonzeros (ef_solve);
  * the joint Jacobian's products run over its nonzeros (jrows).  Pivoting, summation order and
- * so round-off differ from the numpy reference's dense algebra.
+ * so round-off differ from the numpy reference's dense algebra; so does, with the hub fixed,
+ * the mode fit's map of each iterate's velocity, from tracked modal coordinates (fit_start).
  * The iteration matrix is kept across steps (kept_serves: the numpy reference's rule).
  * Model flexible-nonlinear (the co-rotational ribs): _kernel3d_nonlinear.h, whose hooks
  * here act under Model3D.nl_elements only.
