@@ -63,7 +63,11 @@ rest of a step is).  Since, a stage-2 step whose joints do not hold after the up
 converges in q takes a correction of the joints alone (integrators.newton_converged):
 (--no-numpy --ribs 1 --elements 1 2 --kernel-ribs 6 12 --repeat 3, interleaved, load 0.5-1.3)
 stage 2 at 1 element 6 x 1 47.5-47.9 -> 41.4-41.5 us (2.81 -> 2.09 iterations), 12 x 1
-93.5-93.8 -> 82.1-82.3; at 2 elements and in stage 1 unchanged.
+93.5-93.8 -> 82.1-82.3; at 2 elements and in stage 1 unchanged.  Since, the projection kept
+with the iteration matrix, fewer and vectorised fit maps and the joint solve by columns
+(docs/umbrella3d.md, what made the step cheaper): (--no-numpy --ribs 6 --kernel-ribs 6 12,
+best of four runs, load ~1) 6 x 1 34.9 / 37.6 us (0.17 / 0.38 core), 12 x 2 120.3 / 147.7
+(0.60 / 4.43 cores), the same iterations and factorisations a step.
 
     python bench/bench_umbrella3d.py [--ribs 1 2 4 8 16] [--elements 1 2] [--steps 40]
                                      [--repeat 2] [--duration 0.05] [--no-numpy]

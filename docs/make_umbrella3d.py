@@ -103,8 +103,10 @@ def section_a(lines):
               "1`), every rib's in-plane tip is the planar tip to round-off (6 ribs, the "
               f'default run, 0.5 s: {same[0]:.1e} m in stage 1, {same[1]:.1e} m in stage 2). '
               'At the defaults the 3D step keeps its iteration matrix over up to 8 steps '
-              '(modified Newton: cheaper, the same solution to the Newton tolerance), and the '
-              f"two differ by that tolerance's share: {kept[0]:.1e} m in stage 1 and "
+              '(modified Newton: cheaper, the same solution to the Newton tolerance), in '
+              "stage 2 with its velocity projection (its metric's error the kept matrix's "
+              'order: `integrator3d.PROJECTION_PASSES`); the two differ by that '
+              f"tolerance's share: {kept[0]:.1e} m in stage 1 and "
               f'{kept[1]:.1e} m in stage 2 ({kept[1] / kept[2]:.1e} of the '
               f'{1e3 * kept[2]:.0f} mm amplitude, grown through the lock instant), the ribs '
               'equal among themselves.', '',
@@ -938,8 +940,8 @@ command act one period later than msg_docs/topic_sleeve_force.md promises (from 
 period) and publish sleeve_force/applied before the joint_states it follows, so it was not done.
 
 What a cheaper stage 2 would take. Stage 2 costs what its step count costs (6 x 1: ten 0.1 ms
-steps a simulated ms, 0.6-0.7 core of the step alone this day; the live node at 1 kHz with
-recording 1.12 CPU s a simulated second, 0.92 x real time, deploying 0.93 core and real time),
+steps a simulated ms, 0.38 core of the step alone at its cheapest, below; the live node at 1 kHz
+with recording ~1 core in stage 2 on this shared machine, 0.8-1.0 x real time),
 and each way of taking fewer steps measured so far fails a target (the thesis's frame, 0.5 s of
 stage 2 against a 2.5 us run; the step study's targets):
 - the mode fit up to omega h 2.5 instead of 1.5 (the step's Hermite crest sees a lone mode's
@@ -970,14 +972,28 @@ runs of each in turn at load 1.2-1.6): 0.78 / 0.78 / 0.94 x real time with it ag
 against 0.93-1.17) and the new thread took 0.125-0.143 core more: what left the physics
 thread came back to it, most likely as waits for the GIL the publishing thread held (rclpy's
 publish and publish_raw call rcl_publish without releasing it).
-Where it stands, on a quiet machine (load 0.16-0.36; bench/bench_umbrella3d.py, the compiled
-step alone at the step the run takes, CPU us a step, stage 1 / stage 2, the better of two
-runs): 6 x 1 35.5 / 51.7 (0.18 / 0.52 core), 12 x 1 72.9 / 102.9, 6 x 2 63.7 / 108.3, 12 x 2
-122.4 / 217.1 (0.61 / 6.51 cores at stage 2's 33 us); linear in the ribs, 6.06 / 8.66 us a
-rib at 1 element, 10.61 / 18.08 at 2. The live node (bench_ribs_node --live, 6 x 1, 1 kHz,
-recording, a subscriber, load 0.35-0.72): deploying 1.000 x real time at 0.779 core; in
-stage 2 0.950 x at 0.986 core and 1.015 x at 1.024 core (two runs). Neither target is met:
-6 x 1 needs half that core, 12 x 2 six times fewer stage-2 steps or cheaper ones.
+What made the step cheaper, the same scheme (6 x 1, stage 2, the compiled step alone, CPU us a
+step, interleaved with the code before, load 1-3): 51.6 -> 48.2-49.3 with the projection kept
+with the iteration matrix (integrator3d.PROJECTION_PASSES: passes of the kept factor hold
+J v = 0 to round-off; its metric's ~1e-7 of v is the kept matrix's order, so only from a Newton
+tolerance of 1e-10); -> 37.4-37.6 with the mode fit's sums in vector registers, one map a step
+less (the residual's S^T (M(q1) v1 - p0)), the iterates' velocities from tracked modal
+coordinates (half a map each; round-off from the reference's maps) and a rib's joint solve by
+columns (12 x 2: 191-201 -> 148-150). Iterations and factorisations a step are unchanged (2.09,
+0.125). Beside the step, a 1 kHz publication's Python (bench_ribs_node's 1 ms block without the
+compiled call): 133 -> 112 us (the summary taking stage 2's 5-row blocks 50 rows at once,
+summary3d.SUMMARY_BATCH_ROWS; the compiled call's state built once at the grid's time; a block's
+constant rows in one look-up; the stress figures of a publication from the held peaks' arrays),
+every figure, row and message byte the same.
+Where it stands (bench/bench_umbrella3d.py, the compiled step alone at the step the run takes,
+CPU us a step, stage 1 / stage 2, the best of four runs at load ~1; single runs read up to 1.6
+times that while the machine's other users ran): 6 x 1 34.9 / 37.6 (0.17 / 0.38 core), 12 x 1
+67.7 / 74.3, 6 x 2 60.9 / 72.1, 12 x 2 120.3 / 147.7 (0.60 / 4.43 cores at stage 2's 33 us);
+linear in the ribs, 6.2 us a rib at 1 element and 12.4 at 2 in stage 2. Neither target is
+met: at 6 x 1 the step alone is 0.38 of the 0.5 core the node may use, whose publications'
+Python, DDS writes and recording take 0.3-0.5 core more at 1 kHz; 12 x 2 needs its 4.4 cores
+of stage 2 cut about five times, a stage-2 integration of higher order (above), not a cheaper
+step.
 """
 
 
