@@ -209,6 +209,9 @@ def test_a_remapped_node_s_recording_serves_every_tool(tmp_path):
             node.wait_for_log('recording to')
             pub = probe.publisher('/cmd', Float64)
             probe.wait_for_subscribers(pub)
+            # (the push after the start, so that its instant, found on the remapped applied
+            # topic, is not the 0 of a push acting from the first publication)
+            probe.wait_for('/r1/js', lambda m: stamp(m) > 0.01, what='a state past 0.01 s')
             pub.publish(Float64(data=20.0))
             probe.wait_for('/r1/deployment_phase', lambda m: m.data == 'locked', timeout=30)
             lock = float(node.wait_for_log(r'locked at t = ([0-9.]+) s').group(1))
