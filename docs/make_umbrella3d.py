@@ -941,7 +941,8 @@ period) and publish sleeve_force/applied before the joint_states it follows, so 
 
 What a cheaper stage 2 would take. Stage 2 costs what its step count costs (6 x 1: ten 0.1 ms
 steps a simulated ms, 0.38 core of the step alone at its cheapest, below; the live node at 1 kHz
-with recording ~1 core in stage 2 on this shared machine, 0.8-1.0 x real time),
+with recording 1.0-1.4 CPU s a simulated second in stage 2 on this shared machine, 0.76-0.98
+x real time in six runs; deploying 0.92 core and real time),
 and each way of taking fewer steps measured so far fails a target (the thesis's frame, 0.5 s of
 stage 2 against a 2.5 us run; the step study's targets):
 - the mode fit up to omega h 2.5 instead of 1.5 (the step's Hermite crest sees a lone mode's
