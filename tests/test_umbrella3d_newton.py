@@ -109,7 +109,8 @@ def test_a_kept_projection_ends_in_its_passes_or_falls_back_on_the_mass_metric()
     alike) does not contract at full deployment: the velocity as it came is projected in
     M(q)'s metric (a fresh step's projection), and the kept one stays the one kept.
     """
-    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(VALUES), kernel='numpy')
+    # (the numpy reference's projection; the run to its states by the compiled step, ~0.1 s)
+    sim = UmbrellaSimulator3D(UmbrellaRibsParams.from_mapping(VALUES))
     m, integrator = sim.model, sim.integrator
 
     def factor(s):
