@@ -991,8 +991,11 @@ CPU us a step, stage 1 / stage 2, the best of four runs at load ~1; single runs 
 times that while the machine's other users ran): 6 x 1 34.9 / 37.6 (0.17 / 0.38 core), 12 x 1
 67.7 / 74.3, 6 x 2 60.9 / 72.1, 12 x 2 120.3 / 147.7 (0.60 / 4.43 cores at stage 2's 33 us);
 linear in the ribs, 6.2 us a rib at 1 element and 12.4 at 2 in stage 2. Neither target is
-met: at 6 x 1 the step alone is 0.38 of the 0.5 core the node may use, whose publications'
-Python, DDS writes and recording take 0.3-0.5 core more at 1 kHz; 12 x 2 needs its 4.4 cores
+met: at 6 x 1 the step alone is 0.38 of the 0.5 core the node may use, whose publications
+take 0.6-1.0 core more live at 1 kHz on this machine (their Python 0.15-0.2 core of it
+offline: the run driver and the encoding 523-576 us of CPU a simulated ms of stage 2, the
+step 376; the rest, DDS's writes, the recording, the loop and what else the live process pays,
+not all accounted for); 12 x 2 needs its 4.4 cores
 of stage 2 cut about five times, a stage-2 integration of higher order (above), not a cheaper
 step.
 """
