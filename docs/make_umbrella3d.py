@@ -992,10 +992,11 @@ times that while the machine's other users ran): 6 x 1 34.9 / 37.6 (0.17 / 0.38 
 67.7 / 74.3, 6 x 2 60.9 / 72.1, 12 x 2 120.3 / 147.7 (0.60 / 4.43 cores at stage 2's 33 us);
 linear in the ribs, 6.2 us a rib at 1 element and 12.4 at 2 in stage 2. Neither target is
 met: at 6 x 1 the step alone is 0.38 of the 0.5 core the node may use, whose publications
-take 0.6-1.0 core more live at 1 kHz on this machine (their Python 0.15-0.2 core of it
-offline: the run driver and the encoding 523-576 us of CPU a simulated ms of stage 2, the
-step 376; the rest, DDS's writes, the recording, the loop and what else the live process pays,
-not all accounted for); 12 x 2 needs its 4.4 cores
+take 0.6-1.0 core more live at 1 kHz on this machine (offline, the run driver and the
+encoding take 523-706 us of CPU a simulated ms of stage 2 at different hours, the step 379 of
+it in calls of 10 steps; live, the node alone, recording, 0.95-1.06 CPU s a simulated second,
+its step ~52 % of that: the same code runs ~1.3-1.7 times slower in the node's process, not
+accounted for); 12 x 2 needs its 4.4 cores
 of stage 2 cut about five times, a stage-2 integration of higher order (above), not a cheaper
 step.
 """
