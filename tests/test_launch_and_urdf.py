@@ -60,6 +60,22 @@ def test_urdf_joints_are_the_published_joint_names():
     assert len(children) == len(set(children)) == len(links) - 1      # a tree from the base
 
 
+def _urdf_frames_along(p: UmbrellaParams, duration: float, steps_between: int):
+    """
+    Yield (simulator, sample, frames) every steps_between steps of the planar run up to duration.
+
+    frames: _forward_kinematics of the URDF of p from the sample's published joint_states.
+    """
+    robot = ET.fromstring(rd.urdf(p))
+    sim = UmbrellaSimulator(p)
+    while sim.time < duration:
+        s = sim.sample()
+        msg = joint_state_msg(s)
+        yield sim, s, _forward_kinematics(robot, dict(zip(msg.name, msg.position)))
+        for _ in range(steps_between):
+            sim.step(record=False)
+
+
 def _forward_kinematics(robot, positions: dict) -> dict:
     """Return 3x3 planar homogeneous transforms base <- link from the URDF's joints."""
     joints = {j.find('child').get('link'): j for j in robot.iter('joint')}
@@ -96,13 +112,8 @@ def test_urdf_with_published_joint_states_closes_the_loop(model):
     model.  At every publication through the deployment and the lock.
     """
     p = UmbrellaParams(model=model, v0=-0.5)
-    robot = ET.fromstring(rd.urdf(p))
-    sim = UmbrellaSimulator(p)
     checked = 0
-    while sim.time < 0.12:
-        s = sim.sample()
-        msg = joint_state_msg(s)
-        frames = _forward_kinematics(robot, dict(zip(msg.name, msg.position)))
+    for sim, s, frames in _urdf_frames_along(p, 0.12, 5):
         rigid = sim.model.node_positions(s.q, 0.0)         # floating frames, undeformed
         (leaf, link) = sim.model.node_positions(s.q, 1.0)   # deformed
         elastic = max(float(np.abs(d - r).max()) for d, r in zip((leaf, link), rigid))
@@ -114,8 +125,6 @@ def test_urdf_with_published_joint_states_closes_the_loop(model):
         assert np.abs(link_end - link[-1]).max() <= 2 * elastic + 1e-9, (sim.time, link_end)
         assert np.abs(tip - leaf[-1]).max() <= elastic + 1e-9, (sim.time, tip)
         checked += 1
-        for _ in range(5):
-            sim.step(record=False)
     assert checked > 10 and sim.lock_event is not None     # through the lock
 
 
@@ -132,22 +141,15 @@ def test_tip_deflection_is_the_deformed_tip_in_its_header_frame():
     from umbrella_sim.ros.messages import sample_messages, tip_deflection_msg
 
     p = UmbrellaParams(v0=-0.5)
-    robot = ET.fromstring(rd.urdf(p))
-    links = {link.get('name') for link in robot.iter('link')}
-    sim = UmbrellaSimulator(p)
+    links = {link.get('name') for link in ET.fromstring(rd.urdf(p)).iter('link')}
     largest = 0.0
-    while sim.time < 0.3:
-        s = sim.sample()
-        joints = joint_state_msg(s)
-        frames = _forward_kinematics(robot, dict(zip(joints.name, joints.position)))
+    for sim, s, frames in _urdf_frames_along(p, 0.3, 10):
         tip = tip_deflection_msg(s)
         assert tip.point.z == 0.0
         drawn = (frames[tip.header.frame_id] @ np.array([tip.point.x, tip.point.y, 1.0]))[:2]
         leaf, _ = sim.model.node_positions(s.q, 1.0)        # deformed, G its last node
         assert np.abs(drawn - leaf[-1]).max() < 1e-12, (sim.time, drawn, leaf[-1])
         largest = max(largest, math.hypot(tip.point.x, tip.point.y))
-        for _ in range(10):
-            sim.step(record=False)
     assert sim.lock_event is not None and largest > 1e-3   # stage 2's vibration included
     messages = sample_messages(s, p, [leaf], 'a1', 0.0, 'a1/')
     headers = [m.header for m in messages.values() if hasattr(m, 'header')]
