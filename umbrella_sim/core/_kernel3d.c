@@ -233,7 +233,8 @@ static int invariants(Body *b, int R) {
 }
 
 static void fact_free(Fact *f) {
-    free(f->Af); free(f->W); free(f->Wt); free(f->T); free(f->Jf); free(f->Y); free(f->apiv); free(f->tpiv);
+    free(f->Af); free(f->W); free(f->Wt); free(f->T); free(f->Jf); free(f->Y);
+    free(f->apiv); free(f->tpiv);
 }
 
 static int fact_alloc(Fact *f, const Ctx3D *x) {
@@ -269,8 +270,8 @@ void umbrella3d_free(Ctx3D *x) {
     double *bufs[] = {x->mass, x->jm, x->jr,
                       x->q0, x->v0, x->p0, x->l0, x->q, x->v, x->lam, x->p, x->dq, x->qm,
                       x->v1, x->p1, x->gt, x->res, x->tmp, x->phi0, x->phi, x->rr, x->x,
-                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp1, x->fitc, x->mw0, x->mdq,
-                      x->damp, x->v_in};
+                      x->gyro, x->ycol, x->fric, x->work_fric, x->w0, x->sp1, x->fitc, x->mw0,
+                      x->mdq, x->damp, x->v_in};
     for (size_t k = 0; k < sizeof(bufs) / sizeof(bufs[0]); k++) free(bufs[k]);
     free(x);
 }

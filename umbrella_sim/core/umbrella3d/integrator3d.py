@@ -605,9 +605,7 @@ class MidpointUmbrella:
             vr, vs, factored_here = self.project_kept(mass1, qr, vr, vs, stuck, locked,
                                                       projection)
             projection = factored_here if factorisations else projection
-        elif not m.moving_base:
-            vr, vs = self.project(kin1, mass1, qr, vr, vs, stuck, locked)
-        elif drive is None:
+        elif drive is None:        # (the hub fixed, or a free bus)
             vr, vs = self.project(kin1, mass1, qr, vr, vs, stuck, locked)
         else:
             # the drive's impulse (-mu on the bus coordinates) that puts the bus at its rates
